@@ -1,0 +1,1 @@
+//! The model-based distance formation controller (the expert) and demonstration collection.

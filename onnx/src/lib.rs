@@ -1,0 +1,1 @@
+//! ONNX Runtime policies through ort: model loading, contract validation, inference.

@@ -1,0 +1,14 @@
+//! Types shared by every part of formation.
+//!
+//! * [`types`]: plain values that cross crate boundaries (poses, wheel commands, the goal a robot
+//!   is given, LIDAR and occupancy settings). They carry no behaviour beyond validation.
+//! * [`wire`]: the fixed-size `#[repr(C)]` messages that travel over iceoryx2 shared memory
+//!   between the world process and the robot-agent processes, and the per-run service names.
+//!
+//! Nothing here knows about physics, policies or ONNX; both the world and the agents depend on
+//! this crate so that neither depends on the other.
+
+pub mod types;
+pub mod wire;
+
+pub use types::*;

@@ -1,0 +1,157 @@
+//! Plain values shared across crates: poses, wheel commands, goals and sensor settings.
+
+use serde::{Deserialize, Serialize};
+
+/// Planar pose of a robot's wheel-axle centre in the world frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Pose {
+    /// x position [m].
+    pub x: f64,
+    /// y position [m].
+    pub y: f64,
+    /// Heading [rad], counter-clockwise from +x. Kept wrapped to (-pi, pi].
+    pub theta: f64,
+}
+
+/// Left and right wheel rim speeds [m/s] of a differential-drive robot.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct WheelCmd {
+    /// Left wheel rim speed [m/s].
+    pub left: f64,
+    /// Right wheel rim speed [m/s].
+    pub right: f64,
+}
+
+impl WheelCmd {
+    /// Both wheels stopped: what the watchdog applies to a robot without a valid command.
+    pub const BRAKE: WheelCmd = WheelCmd { left: 0.0, right: 0.0 };
+
+    /// True when both wheel speeds are finite numbers.
+    pub fn is_finite(&self) -> bool {
+        self.left.is_finite() && self.right.is_finite()
+    }
+}
+
+/// The goal every robot is given at one instant: common heading, speed and pairwise distance.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Goal {
+    /// Desired common heading phi* [rad] at this instant.
+    pub phi_star: f64,
+    /// Desired pairwise distance d* [m].
+    pub d_star: f64,
+    /// Desired speed v* [m/s].
+    pub v_star: f64,
+}
+
+/// Settings of the simulated planar LIDAR ring.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LidarSpec {
+    /// Number of beams evenly spread over 360 degrees, beam 0 pointing along the robot's +x axis
+    /// and beams advancing counter-clockwise.
+    pub beams: usize,
+    /// Maximum range [m]; a beam that hits nothing reports this value.
+    pub max_range: f64,
+    /// Standard deviation of additive Gaussian range noise [m] on beams that hit something.
+    pub noise_std: f64,
+}
+
+impl Default for LidarSpec {
+    fn default() -> Self {
+        LidarSpec { beams: 900, max_range: 10.0, noise_std: 0.0 }
+    }
+}
+
+/// What the occupancy renderer does with a LIDAR hit that falls outside the image window.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BeyondWindow {
+    /// Discard it (the paper's setting).
+    Drop,
+    /// Draw it on the window's border cell in its true bearing, so a far neighbour stays visible.
+    Border,
+}
+
+impl BeyondWindow {
+    /// Stable name used in dataset headers and model metadata.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            BeyondWindow::Drop => "drop",
+            BeyondWindow::Border => "border",
+        }
+    }
+
+    /// Parses the name written by [`BeyondWindow::as_str`].
+    pub fn parse(s: &str) -> Option<BeyondWindow> {
+        match s {
+            "drop" => Some(BeyondWindow::Drop),
+            "border" => Some(BeyondWindow::Border),
+            _ => None,
+        }
+    }
+}
+
+/// Settings of the occupancy image a robot renders from its own scan.
+///
+/// The image is `size_px x size_px`, centred on the robot, in its body frame (x forward, y left),
+/// covering `size_px * resolution_m` metres on a side. These settings travel in dataset headers
+/// and model metadata so an agent renders exactly what its model was trained on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OccupancySpec {
+    /// Cells on a side. The paper's network needs 50.
+    pub size_px: usize,
+    /// Cell edge length [m].
+    pub resolution_m: f64,
+    /// What happens to hits beyond the window.
+    pub beyond: BeyondWindow,
+}
+
+impl OccupancySpec {
+    /// The paper's exact setting: 50 x 50 cells of 0.1 m (5 x 5 m), hits beyond dropped.
+    pub const PAPER: OccupancySpec =
+        OccupancySpec { size_px: 50, resolution_m: 0.1, beyond: BeyondWindow::Drop };
+
+    /// Side length of the window [m].
+    pub fn window_m(&self) -> f64 {
+        self.size_px as f64 * self.resolution_m
+    }
+}
+
+impl Default for OccupancySpec {
+    fn default() -> Self {
+        OccupancySpec::PAPER
+    }
+}
+
+/// Wraps an angle to (-pi, pi].
+pub fn wrap_angle(a: f64) -> f64 {
+    use std::f64::consts::PI;
+    let mut r = a.rem_euclid(2.0 * PI);
+    if r > PI {
+        r -= 2.0 * PI;
+    }
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    #[test]
+    fn wrap_angle_stays_in_half_open_interval() {
+        assert!((wrap_angle(3.0 * PI) - PI).abs() < 1e-12);
+        assert!((wrap_angle(-PI) - PI).abs() < 1e-12);
+        assert!((wrap_angle(0.5) - 0.5).abs() < 1e-15);
+        assert!((wrap_angle(-0.5 - 4.0 * PI) + 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn beyond_window_names_round_trip() {
+        for b in [BeyondWindow::Drop, BeyondWindow::Border] {
+            assert_eq!(BeyondWindow::parse(b.as_str()), Some(b));
+        }
+        assert_eq!(BeyondWindow::parse("clamp"), None);
+    }
+}
