@@ -1,1 +1,50 @@
-//! The formation command-line tool: collect, train, dagger, eval, run, profile, swap, report.
+//! The `formation` command-line tool, as a library so integration tests can drive it.
+//!
+//! Every subcommand is a thin layer over the library crates: it parses arguments, loads inputs
+//! with errors that name the file and the fix, calls the pure logic, and writes outputs.
+//!
+//! * [`eval`]: in-process (or, with `--processes`, multi-process) evaluation with the paper's metrics.
+//! * [`collect`]: expert demonstrations into a dataset.
+//! * [`learn`]: `train` (runs the PyTorch trainer) and `dagger` (policy drives, expert labels, retrain).
+//! * [`runtime`]: the iceoryx2 multi-process runtime launcher (`run`, `profile`, `swap`).
+//! * [`report`]: the HTML report with the paper's figures.
+//! * [`demo`]: the README's main job: the paper's cases and Table I with the shipped model, then a report.
+
+pub mod args;
+pub mod collect;
+pub mod demo;
+pub mod eval;
+pub mod learn;
+pub mod paths;
+pub mod report;
+pub mod runtime;
+
+use clap::Parser;
+
+/// Parses the command line and runs the chosen subcommand.
+pub fn main_with_args() -> anyhow::Result<()> {
+    let cli = args::Cli::parse();
+    init_tracing(cli.verbose);
+    match cli.command {
+        args::Command::Eval(a) => eval::eval_command(&a),
+        args::Command::Collect(a) => collect::collect_command(&a),
+        args::Command::Train(a) => learn::train_command(&a),
+        args::Command::Dagger(a) => learn::dagger_command(&a),
+        args::Command::Run(a) => runtime::run_command(&a),
+        args::Command::Profile(a) => runtime::profile_command(&a),
+        args::Command::Swap(a) => runtime::swap_command(&a),
+        args::Command::Report(a) => report::report_command(&a),
+        args::Command::Demo(a) => demo::demo_command(&a),
+    }
+}
+
+fn init_tracing(verbose: u8) {
+    let level = match verbose {
+        0 => "warn",
+        1 => "info",
+        _ => "debug",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+}

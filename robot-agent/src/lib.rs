@@ -1,1 +1,10 @@
-//! One robot's decision: its own scan to an occupancy image to the policy to wheel commands; and the agent process.
+//! One robot's side of formation: everything a robot does with its own sensor data only.
+//!
+//! * [`occupancy`]: renders the occupancy image from one raw LIDAR scan. The single function used
+//!   both when collecting demonstrations and by the running agent, so both see the same pixels.
+//! * [`decision`]: the agent's decision `act(own scan, own heading, goal) -> wheel command`, a pure
+//!   function of one robot's own inputs and its policy, and an in-process [`formation_world::Controller`]
+//!   that runs it for every robot independently.
+
+pub mod decision;
+pub mod occupancy;

@@ -1,1 +1,22 @@
-//! The simulated world: differential-drive robots, LIDAR ray casting, scenarios, episodes and the paper's metrics.
+//! The simulated world of formation, as a pure library.
+//!
+//! * [`robot`]: P3-DX-like differential-drive kinematics and wheel limits.
+//! * [`lidar`]: the planar LIDAR ring, ray-cast against the other robots' bodies with parry2d.
+//! * [`world`]: [`World`], which owns the robots' state and advances it by [`World::step`], taking the
+//!   wheel commands and no clock, and doing no I/O.
+//! * [`scenario`]: scenarios read from TOML (unknown keys are errors), heading schedules, seeded
+//!   initial conditions, and the fully resolved [`RunSpec`] of one run.
+//! * [`episode`]: the in-process loop of one run over a [`Controller`], producing a [`Trajectory`].
+//! * [`metrics`]: the paper's Table I and Fig. 9 metrics, made exact, over a set of formation edges.
+
+pub mod episode;
+pub mod lidar;
+pub mod metrics;
+pub mod robot;
+pub mod scenario;
+pub mod world;
+
+pub use episode::{Controller, Observation, Trajectory, run_episode};
+pub use robot::RobotParams;
+pub use scenario::{HeadingSchedule, RunSpec, Scenario};
+pub use world::{StepReport, World, WorldConfig};

@@ -1,0 +1,217 @@
+//! Command-line arguments of every `formation` subcommand (clap derive).
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use crate::runtime::{ProfileArgs, RunArgs, SwapArgs};
+
+/// Learned decentralized multi-robot formation control.
+#[derive(Debug, Parser)]
+#[command(name = "formation", version, about, propagate_version = true)]
+pub struct Cli {
+    /// More log output on stderr (-v info, -vv debug); FORMATION_LOG overrides.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    pub verbose: u8,
+    /// The subcommand.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Evaluate a controller over a scenario's runs and print Table I figures.
+    Eval(EvalArgs),
+    /// Record expert demonstrations into a dataset.
+    Collect(CollectArgs),
+    /// Train the paper's CNN on a dataset (PyTorch) and export it to ONNX.
+    Train(TrainArgs),
+    /// DAgger: the policy drives, the expert labels, the dataset grows, the policy is retrained.
+    Dagger(DaggerArgs),
+    /// Launch the world and one agent process per robot over iceoryx2.
+    Run(RunArgs),
+    /// Per-stage latency profile of the multi-process runtime.
+    Profile(ProfileArgs),
+    /// Swap the ONNX model of one running agent.
+    Swap(SwapArgs),
+    /// Build the HTML report (Table I, Figs. 6-9) from eval/run output directories.
+    Report(ReportArgs),
+    /// The main job: the paper's three cases and Table I with the shipped model over real
+    /// processes, ending in a report.
+    Demo(DemoArgs),
+}
+
+/// Which controller drives the robots.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ControllerKind {
+    /// The model-based expert (sees every robot's pose).
+    Expert,
+    /// The learned policy, one independent agent per robot (own scan and heading only).
+    Policy,
+}
+
+/// `formation eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Scenario TOML file.
+    #[arg(long)]
+    pub scenario: PathBuf,
+    /// Controller to evaluate.
+    #[arg(long, value_enum, default_value_t = ControllerKind::Policy)]
+    pub controller: ControllerKind,
+    /// ONNX model for `--controller policy` (default: the shipped model).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Number of runs (default: the scenario's `runs`).
+    #[arg(long)]
+    pub runs: Option<usize>,
+    /// Base seed (default: the scenario's `seed`).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Write the summary JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write report data (summary, per-run metrics, trajectories) into this directory.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Save the trajectories of at most this many runs under `--out` (default: all when there
+    /// are at most 5 runs, else none).
+    #[arg(long)]
+    pub save_trajectories: Option<usize>,
+    /// Run every robot's policy in its own OS process over iceoryx2 (policy controller only).
+    #[arg(long)]
+    pub processes: bool,
+    /// Worker threads for in-process evaluation (default: available cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// `formation collect`.
+#[derive(Debug, Args)]
+pub struct CollectArgs {
+    /// Scenario TOML describing the demonstration runs.
+    #[arg(long)]
+    pub scenario: PathBuf,
+    /// Output dataset directory (must not exist, or be empty).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Number of runs (default: the scenario's `runs`).
+    #[arg(long)]
+    pub runs: Option<usize>,
+    /// Base seed (default: the scenario's `seed`).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Occupancy window side in cells.
+    #[arg(long, default_value_t = 50)]
+    pub size_px: usize,
+    /// Occupancy cell size [m].
+    #[arg(long, default_value_t = 0.1)]
+    pub resolution: f64,
+    /// What to draw for hits beyond the window: `drop` (the paper) or `border`.
+    #[arg(long, default_value = "drop")]
+    pub beyond: String,
+}
+
+/// `formation train`.
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// Dataset directory (repeat to train on several).
+    #[arg(long, required = true)]
+    pub data: Vec<PathBuf>,
+    /// Output ONNX file (a `.pt` checkpoint, loss CSV/PNG are written beside it).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Epochs.
+    #[arg(long, default_value_t = 10)]
+    pub epochs: usize,
+    /// Mini-batch size (the paper: 32).
+    #[arg(long, default_value_t = 32)]
+    pub batch_size: usize,
+    /// Adam learning rate (the paper: 1e-4).
+    #[arg(long, default_value_t = 1e-4)]
+    pub lr: f64,
+    /// `auto`, `cpu` or `cuda`.
+    #[arg(long, default_value = "auto")]
+    pub device: String,
+    /// Warm start from this checkpoint (`.pt`).
+    #[arg(long)]
+    pub init_from: Option<PathBuf>,
+    /// Training seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+/// `formation dagger`.
+#[derive(Debug, Args)]
+pub struct DaggerArgs {
+    /// The expert dataset to start from; DAgger samples are appended to it.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Scenario the policy drives in to visit states (default: scenarios/collect.toml).
+    #[arg(long, default_value = "scenarios/collect.toml")]
+    pub scenario: PathBuf,
+    /// DAgger iterations.
+    #[arg(long, default_value_t = 2)]
+    pub iterations: usize,
+    /// Output ONNX file of the final policy; each iteration's model is kept beside it.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Start from this model (default: train one on the dataset first).
+    #[arg(long)]
+    pub init_model: Option<PathBuf>,
+    /// Closed-loop runs per iteration (default: the scenario's `runs`).
+    #[arg(long)]
+    pub runs: Option<usize>,
+    /// Probability that the expert drives a run in iteration 1; it decays as beta^k.
+    #[arg(long, default_value_t = 0.0)]
+    pub beta: f64,
+    /// Training epochs per iteration.
+    #[arg(long, default_value_t = 8)]
+    pub epochs: usize,
+    /// Mini-batch size.
+    #[arg(long, default_value_t = 64)]
+    pub batch_size: usize,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// `auto`, `cpu` or `cuda`.
+    #[arg(long, default_value = "auto")]
+    pub device: String,
+    /// Scenario for each iteration's closed-loop Table I figures.
+    #[arg(long, default_value = "scenarios/table1.toml")]
+    pub eval_scenario: PathBuf,
+    /// Runs of that evaluation.
+    #[arg(long, default_value_t = 100)]
+    pub eval_runs: usize,
+    /// Base seed of the DAgger rollouts.
+    #[arg(long, default_value_t = 1000)]
+    pub seed: u64,
+}
+
+/// `formation report`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// Directory holding eval/run outputs (searched recursively for `summary.json` and run logs).
+    pub dir: PathBuf,
+    /// Output HTML file.
+    #[arg(long, default_value = "report.html")]
+    pub out: PathBuf,
+}
+
+/// `formation demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// ONNX model (default: the shipped model).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Output directory for run data and the report.
+    #[arg(long, default_value = "reports/demo")]
+    pub out: PathBuf,
+    /// Table I runs.
+    #[arg(long, default_value_t = 100)]
+    pub runs: usize,
+    /// Run in-process instead of one OS process per robot.
+    #[arg(long)]
+    pub in_process: bool,
+}

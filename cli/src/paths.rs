@@ -1,0 +1,54 @@
+//! Where things are: the repository root, the shipped default model, and output files.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+
+/// The shipped default model, relative to the repository root.
+pub const DEFAULT_MODEL: &str = "onnx/models/policy.onnx";
+
+/// The repository root: the nearest ancestor of the current directory whose `Cargo.toml` declares
+/// the workspace, else the directory this crate was built from.
+pub fn repo_root() -> PathBuf {
+    let from_cwd = std::env::current_dir().ok().and_then(|cwd| {
+        cwd.ancestors()
+            .find(|dir| {
+                std::fs::read_to_string(dir.join("Cargo.toml"))
+                    .map(|text| text.contains("[workspace]"))
+                    .unwrap_or(false)
+            })
+            .map(Path::to_path_buf)
+    });
+    from_cwd.unwrap_or_else(|| {
+        Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_default()
+    })
+}
+
+/// The model to use: the one given, or the shipped default. A missing file is an error that
+/// names the path and the fix.
+pub fn resolve_model(given: Option<&Path>) -> anyhow::Result<PathBuf> {
+    let path = match given {
+        Some(p) => p.to_path_buf(),
+        None => repo_root().join(DEFAULT_MODEL),
+    };
+    if !path.is_file() {
+        anyhow::bail!(
+            "model {} not found: pass --model PATH to an ONNX file exported by `formation train`{}",
+            path.display(),
+            if given.is_none() { " (the shipped default should be in onnx/models/)" } else { "" }
+        );
+    }
+    Ok(path)
+}
+
+/// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename),
+/// creating parent directories.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).with_context(|| format!("creating directory {}", dir.display()))?;
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming into {}", path.display()))?;
+    Ok(())
+}

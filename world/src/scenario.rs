@@ -1,0 +1,793 @@
+//! Scenarios: what a run is asked to do, read from TOML, and the fully resolved [`RunSpec`] of one run.
+//!
+//! A [`Scenario`] describes a family of runs (team size, goal, heading schedule, how initial poses are
+//! drawn, sensor and robot settings). [`Scenario::run_spec`] turns it into the [`RunSpec`] of run `i`,
+//! drawing everything random from a seed derived from `(base_seed, i)` alone, so any run can be replayed
+//! on its own, bit for bit, in any order and on any machine.
+//!
+//! # File format
+//!
+//! Every table rejects unknown keys, so a typo is an error that names the key rather than a silently
+//! ignored setting. After parsing, every value is validated; errors name the file and the field, e.g.
+//! `scenarios/x.toml: goal.d_star must be > 0 (got -1)`. NaN and infinities are rejected everywhere.
+//!
+//! ```toml
+//! name = "case1"          # required, non-empty
+//! robots = 3              # required, >= 2 (a formation needs at least one pair)
+//! duration_s = 60.0       # required, > 0: simulated seconds per run
+//! dt = 0.05               # optional, default 0.05 s (20 Hz); ticks per run = round(duration_s / dt)
+//! seed = 1                # required: base seed of the scenario's runs
+//! runs = 1                # optional, default 1: how many runs an evaluation of this scenario makes
+//!
+//! [goal]                  # required
+//! v_star = 0.7            # desired speed [m/s], >= 0 and <= robot.max_wheel_speed
+//! d_star = 2.0            # desired pairwise distance [m], > 0 ...
+//! # d_star_choices = [1.0, 1.5, 2.0]   # ... or drawn uniformly per run from these (exactly one of the two)
+//!
+//! [heading]               # required: the desired common heading phi*(t)
+//! schedule = "constant"   # "constant" | "random" | "ramp" | "sine"
+//! phi = 3.76              # constant: phi* = phi (required)
+//! # random:  phi* constant per run, drawn uniformly in [0, 2 pi); takes no parameters
+//! # ramp:    phi*(t) = phi0 + omega t            (omega required; phi0 default 0)
+//! # sine:    phi*(t) = phi0 + amplitude sin(omega t)  (omega required; amplitude default 1; phi0 default 0)
+//!
+//! [init]                  # optional: initial poses as in the paper
+//! disc_radius = 3.0       # positions uniform in a disc of this radius [m] centred at the origin
+//! min_spacing = 0.6       # minimum distance between any two robots [m], >= 2 * robot.body_radius
+//!
+//! [lidar]                 # optional; each key defaults to LidarSpec::default()
+//! beams = 900             # >= 1
+//! max_range = 10.0        # > 0 [m]
+//! noise_std = 0.0         # >= 0 [m]
+//!
+//! [robot]                 # optional; each key defaults to RobotParams::default()
+//! wheel_separation = 0.331
+//! wheel_radius = 0.0975
+//! body_radius = 0.25
+//! max_wheel_speed = 0.9
+//! # max_wheel_accel = 2.0 # optional [m/s^2]; absent = unlimited
+//!
+//! [[agent]]               # optional, repeatable: a per-robot model for mixed teams
+//! robot = 1               # < robots, at most one entry per robot
+//! model = "models/other.onnx"   # relative paths are relative to the scenario file's directory
+//! ```
+//!
+//! The `[heading]` table is one flat table with a `schedule` key rather than a serde-tagged enum: serde's
+//! internally tagged enums do not combine reliably with `deny_unknown_fields`, and the flat form lets
+//! validation say precisely which parameter a schedule is missing or does not use.
+//!
+//! # Randomness of one run
+//!
+//! The run seed is `splitmix64`-mixed from `(base_seed, run_index)`; a `ChaCha8Rng` seeded with it draws,
+//! in this order: d* (only with `d_star_choices`), phi* (only with `schedule = "random"`), the positions of
+//! robots `0..n` (each uniform in the disc, redrawn until it keeps `min_spacing` from those already
+//! placed), then the headings of robots `0..n` (uniform over the circle, stored wrapped to (-pi, pi] like
+//! every [`Pose`]). The world's noise seed is mixed from the run seed in a separate domain, so it does not
+//! depend on how many numbers the draws above consumed.
+
+use std::f64::consts::TAU;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use formation_proto::{Goal, LidarSpec, Pose, wrap_angle};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::robot::RobotParams;
+use crate::world::{World, WorldConfig};
+
+/// Default simulation step [s]: the LIDAR's 20 Hz.
+pub const DEFAULT_DT: f64 = 0.05;
+/// Default radius [m] of the disc initial positions are drawn from (the paper's 3 m).
+pub const DEFAULT_DISC_RADIUS: f64 = 3.0;
+/// Default minimum distance [m] between any two initial positions.
+pub const DEFAULT_MIN_SPACING: f64 = 0.6;
+
+/// Draws allowed for one robot's position before the placement of the whole team starts over.
+const POSITION_ATTEMPTS_PER_ROBOT: usize = 1_000;
+/// Restarts of the whole team's placement before falling back to lattice sites.
+const PLACEMENT_RESTARTS: usize = 20;
+
+/// Why a scenario could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// The file could not be read.
+    #[error("cannot read scenario file {}: {source}", path.display())]
+    Read {
+        /// The path that was asked for.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The text is not valid TOML or does not fit the schema (unknown or missing key, wrong type).
+    #[error("{origin}: {source}")]
+    Parse {
+        /// Where the text came from (usually the file path).
+        origin: String,
+        /// The parser's error, with line, column and the offending key.
+        source: toml::de::Error,
+    },
+    /// A value parsed but is not acceptable.
+    #[error("{origin}: {field} {problem}")]
+    Invalid {
+        /// Where the text came from (usually the file path).
+        origin: String,
+        /// Dotted path of the offending key, e.g. `goal.d_star`.
+        field: String,
+        /// What is wrong with it and, where it helps, what was found.
+        problem: String,
+    },
+}
+
+/// The desired common heading phi*(t) of a run.
+///
+/// The value is not wrapped (a ramp keeps growing); consumers compare headings with
+/// [`wrap_angle`] of the difference.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "schedule", rename_all = "snake_case")]
+pub enum HeadingSchedule {
+    /// phi*(t) = phi.
+    Constant {
+        /// The heading [rad].
+        phi: f64,
+    },
+    /// phi*(t) = phi0 + omega t (the paper's case 2: omega = 0.1, phi0 = 0).
+    Ramp {
+        /// Turn rate [rad/s].
+        omega: f64,
+        /// Heading at t = 0 [rad].
+        phi0: f64,
+    },
+    /// phi*(t) = phi0 + amplitude sin(omega t) (the paper's case 3: omega = 0.2, amplitude = 1, phi0 = 0).
+    Sine {
+        /// Angular frequency [rad/s].
+        omega: f64,
+        /// Amplitude [rad].
+        amplitude: f64,
+        /// Mean heading [rad].
+        phi0: f64,
+    },
+}
+
+impl HeadingSchedule {
+    /// The desired heading [rad] at time `t` [s], not wrapped.
+    pub fn phi_star(&self, t: f64) -> f64 {
+        match *self {
+            HeadingSchedule::Constant { phi } => phi,
+            HeadingSchedule::Ramp { omega, phi0 } => phi0 + omega * t,
+            HeadingSchedule::Sine { omega, amplitude, phi0 } => phi0 + amplitude * (omega * t).sin(),
+        }
+    }
+}
+
+/// How a scenario chooses the heading schedule of each run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HeadingPlan {
+    /// Every run uses this schedule.
+    Fixed(HeadingSchedule),
+    /// Every run holds a constant phi* drawn uniformly in [0, 2 pi) (the paper's data collection and Table I).
+    RandomConstant,
+}
+
+/// How a scenario chooses the desired distance d* of each run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DStarPlan {
+    /// Every run uses this distance [m].
+    Fixed(f64),
+    /// Each run draws one of these distances [m] uniformly.
+    Choices(Vec<f64>),
+}
+
+/// How the initial poses of a run are drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InitialConditions {
+    /// Radius [m] of the disc, centred at the origin, that positions are drawn from uniformly.
+    pub disc_radius: f64,
+    /// Minimum distance [m] between any two initial positions.
+    pub min_spacing: f64,
+}
+
+impl Default for InitialConditions {
+    fn default() -> Self {
+        InitialConditions { disc_radius: DEFAULT_DISC_RADIUS, min_spacing: DEFAULT_MIN_SPACING }
+    }
+}
+
+/// A per-robot model override, for teams that mix policies.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AgentModel {
+    /// Index of the robot, `< robots`.
+    pub robot: usize,
+    /// The ONNX model this robot runs. [`Scenario::from_path`] resolves a relative path against the
+    /// scenario file's directory.
+    pub model: PathBuf,
+}
+
+/// A validated scenario. Build it with [`Scenario::from_path`] or [`Scenario::from_toml_str`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Scenario {
+    name: String,
+    n_robots: usize,
+    duration_s: f64,
+    seed: u64,
+    runs: usize,
+    v_star: f64,
+    d_star: DStarPlan,
+    heading: HeadingPlan,
+    init: InitialConditions,
+    world: WorldConfig,
+    agents: Vec<AgentModel>,
+}
+
+/// Everything one run needs, resolved: no randomness is left except the world's sensor noise, which
+/// is fixed by `noise_seed`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunSpec {
+    /// Index of the run within its scenario.
+    pub index: usize,
+    /// The run's own seed, mixed from the base seed and the index.
+    pub seed: u64,
+    /// Team size.
+    pub n_robots: usize,
+    /// Desired pairwise distance [m].
+    pub d_star: f64,
+    /// Desired speed [m/s].
+    pub v_star: f64,
+    /// Desired heading over time.
+    pub heading: HeadingSchedule,
+    /// Simulated duration [s].
+    pub duration_s: f64,
+    /// Robot, sensor and time-step settings of the world.
+    pub world: WorldConfig,
+    /// Initial pose of each robot.
+    pub initial: Vec<Pose>,
+    /// Seed of the world's sensor-noise generator.
+    pub noise_seed: u64,
+    /// Formation edges `(i, j)`, `i < j`, that the metrics score: all pairs.
+    pub edges: Vec<(usize, usize)>,
+}
+
+impl RunSpec {
+    /// Number of control ticks: `round(duration_s / dt)`.
+    pub fn ticks(&self) -> u64 {
+        (self.duration_s / self.world.dt).round() as u64
+    }
+
+    /// The goal every robot is given at time `t` [s].
+    pub fn goal_at(&self, t: f64) -> Goal {
+        Goal { phi_star: self.heading.phi_star(t), d_star: self.d_star, v_star: self.v_star }
+    }
+
+    /// A fresh world in this run's initial state.
+    pub fn make_world(&self) -> World {
+        World::new(self.world, self.initial.clone(), self.noise_seed)
+    }
+}
+
+impl Scenario {
+    /// Reads and validates the scenario file at `path`. Relative `[[agent]].model` paths are resolved
+    /// against the file's directory.
+    pub fn from_path(path: &Path) -> Result<Scenario, ScenarioError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ScenarioError::Read { path: path.to_path_buf(), source })?;
+        let mut scenario = Scenario::from_toml_str(&text, &path.display().to_string())?;
+        let base = path.parent().unwrap_or_else(|| Path::new(""));
+        for agent in &mut scenario.agents {
+            if agent.model.is_relative() {
+                agent.model = base.join(&agent.model);
+            }
+        }
+        Ok(scenario)
+    }
+
+    /// Parses and validates scenario text; `origin` names its source in error messages.
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError> {
+        let raw: ScenarioToml = toml::from_str(text)
+            .map_err(|source| ScenarioError::Parse { origin: origin.to_string(), source })?;
+        raw.validate(&Checker { origin })
+    }
+
+    /// The scenario's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Team size.
+    pub fn n_robots(&self) -> usize {
+        self.n_robots
+    }
+
+    /// How many runs an evaluation of this scenario makes by default.
+    pub fn runs(&self) -> usize {
+        self.runs
+    }
+
+    /// The base seed of this scenario's runs.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// Simulated duration of each run [s].
+    pub fn duration_s(&self) -> f64 {
+        self.duration_s
+    }
+
+    /// Desired speed [m/s].
+    pub fn v_star(&self) -> f64 {
+        self.v_star
+    }
+
+    /// How d* is chosen per run.
+    pub fn d_star(&self) -> &DStarPlan {
+        &self.d_star
+    }
+
+    /// How the heading schedule is chosen per run.
+    pub fn heading(&self) -> &HeadingPlan {
+        &self.heading
+    }
+
+    /// How initial poses are drawn.
+    pub fn initial_conditions(&self) -> &InitialConditions {
+        &self.init
+    }
+
+    /// Robot, sensor and time-step settings shared by all runs.
+    pub fn world_config(&self) -> &WorldConfig {
+        &self.world
+    }
+
+    /// Per-robot model overrides, each with `robot < n_robots()` and at most one per robot.
+    pub fn agent_models(&self) -> &[AgentModel] {
+        &self.agents
+    }
+
+    /// The resolved spec of run `run_index`, a pure function of `(self, base_seed, run_index)`.
+    pub fn run_spec(&self, base_seed: u64, run_index: usize) -> RunSpec {
+        let seed = run_seed(base_seed, run_index);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let d_star = match &self.d_star {
+            DStarPlan::Fixed(d) => *d,
+            DStarPlan::Choices(choices) => choices[rng.random_range(0..choices.len())],
+        };
+        let heading = match self.heading {
+            HeadingPlan::Fixed(schedule) => schedule,
+            HeadingPlan::RandomConstant => HeadingSchedule::Constant { phi: rng.random_range(0.0..TAU) },
+        };
+        let positions = place_robots(&mut rng, self.n_robots, &self.init);
+        // All positions are drawn before any heading.
+        let initial = positions
+            .into_iter()
+            .map(|(x, y)| Pose { x, y, theta: wrap_angle(rng.random_range(0.0..TAU)) })
+            .collect();
+        RunSpec {
+            index: run_index,
+            seed,
+            n_robots: self.n_robots,
+            d_star,
+            v_star: self.v_star,
+            heading,
+            duration_s: self.duration_s,
+            world: self.world,
+            initial,
+            noise_seed: splitmix64(seed ^ NOISE_DOMAIN),
+            edges: all_pairs(self.n_robots),
+        }
+    }
+}
+
+/// All pairs `(i, j)` with `i < j < n`, in lexicographic order.
+pub fn all_pairs(n: usize) -> Vec<(usize, usize)> {
+    (0..n).flat_map(|i| (i + 1..n).map(move |j| (i, j))).collect()
+}
+
+/// Domain-separation constants so the run seed and the noise seed are independent streams.
+const RUN_DOMAIN: u64 = 0x5EED_0F0F_2A2A_0001;
+const NOISE_DOMAIN: u64 = 0xA5A5_5A5A_C3C3_3C3C;
+
+/// The seed of run `run_index` of a scenario with `base_seed`.
+fn run_seed(base_seed: u64, run_index: usize) -> u64 {
+    splitmix64(splitmix64(base_seed ^ RUN_DOMAIN) ^ splitmix64(run_index as u64))
+}
+
+/// SplitMix64's output function (Steele, Lea & Flood 2014) applied to `x + golden gamma`: a bijective,
+/// well-avalanched mix of 64 bits.
+fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Positions of `n` robots uniform in the disc, each at least `min_spacing` from the others.
+///
+/// Sequential rejection: each robot is redrawn until it keeps its distance from those already placed;
+/// if one cannot be placed in [`POSITION_ATTEMPTS_PER_ROBOT`] draws the whole team starts over. For a
+/// crowded disc where this keeps failing (validation guarantees only that a spacing-`min_spacing`
+/// hexagonal lattice has `n` sites in the disc), `n` lattice sites are chosen at random instead, so the
+/// function always succeeds. The paper's settings accept nearly every draw.
+fn place_robots(rng: &mut ChaCha8Rng, n: usize, init: &InitialConditions) -> Vec<(f64, f64)> {
+    let spacing_sq = init.min_spacing * init.min_spacing;
+    let mut placed: Vec<(f64, f64)> = Vec::with_capacity(n);
+    for _ in 0..PLACEMENT_RESTARTS {
+        placed.clear();
+        'robots: for _ in 0..n {
+            for _ in 0..POSITION_ATTEMPTS_PER_ROBOT {
+                let r = init.disc_radius * rng.random::<f64>().sqrt();
+                let angle = rng.random_range(0.0..TAU);
+                let candidate = (r * angle.cos(), r * angle.sin());
+                let clear = placed.iter().all(|&(x, y)| {
+                    let (dx, dy) = (candidate.0 - x, candidate.1 - y);
+                    dx * dx + dy * dy >= spacing_sq
+                });
+                if clear {
+                    placed.push(candidate);
+                    continue 'robots;
+                }
+            }
+            break;
+        }
+        if placed.len() == n {
+            return placed;
+        }
+    }
+    let mut sites = lattice_sites(init.disc_radius, init.min_spacing, usize::MAX);
+    for k in 0..n.min(sites.len()) {
+        let pick = rng.random_range(k..sites.len());
+        sites.swap(k, pick);
+    }
+    sites.truncate(n);
+    sites
+}
+
+/// Sites of a hexagonal lattice with spacing `spacing`, centred at the origin, inside a disc of
+/// `radius`; stops after `limit` sites.
+fn lattice_sites(radius: f64, spacing: f64, limit: usize) -> Vec<(f64, f64)> {
+    let row_height = spacing * 3f64.sqrt() / 2.0;
+    let rows = (radius / row_height).floor() as i64;
+    let columns = (radius / spacing).ceil() as i64 + 1;
+    let mut sites = Vec::new();
+    for row in -rows..=rows {
+        let y = row as f64 * row_height;
+        let shift = if row.rem_euclid(2) == 1 { 0.5 } else { 0.0 };
+        for column in -columns..=columns {
+            let x = (column as f64 + shift) * spacing;
+            if x * x + y * y <= radius * radius {
+                sites.push((x, y));
+                if sites.len() >= limit {
+                    return sites;
+                }
+            }
+        }
+    }
+    sites
+}
+
+// ---------------------------------------------------------------------------------------------
+// The TOML schema, as parsed before validation.
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ScenarioToml {
+    name: String,
+    robots: usize,
+    duration_s: f64,
+    #[serde(default = "default_dt")]
+    dt: f64,
+    seed: u64,
+    #[serde(default = "default_runs")]
+    runs: usize,
+    goal: GoalToml,
+    heading: HeadingToml,
+    #[serde(default)]
+    init: InitialConditions,
+    #[serde(default)]
+    lidar: LidarToml,
+    #[serde(default)]
+    robot: RobotParams,
+    #[serde(default)]
+    agent: Vec<AgentModel>,
+}
+
+fn default_dt() -> f64 {
+    DEFAULT_DT
+}
+
+fn default_runs() -> usize {
+    1
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GoalToml {
+    v_star: f64,
+    d_star: Option<f64>,
+    d_star_choices: Option<Vec<f64>>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+enum ScheduleKind {
+    Constant,
+    Random,
+    Ramp,
+    Sine,
+}
+
+impl ScheduleKind {
+    fn as_str(self) -> &'static str {
+        match self {
+            ScheduleKind::Constant => "constant",
+            ScheduleKind::Random => "random",
+            ScheduleKind::Ramp => "ramp",
+            ScheduleKind::Sine => "sine",
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HeadingToml {
+    schedule: ScheduleKind,
+    phi: Option<f64>,
+    omega: Option<f64>,
+    amplitude: Option<f64>,
+    phi0: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct LidarToml {
+    beams: usize,
+    max_range: f64,
+    noise_std: f64,
+}
+
+impl Default for LidarToml {
+    fn default() -> Self {
+        let spec = LidarSpec::default();
+        LidarToml { beams: spec.beams, max_range: spec.max_range, noise_std: spec.noise_std }
+    }
+}
+
+/// Builds [`ScenarioError::Invalid`] values that name the origin.
+struct Checker<'a> {
+    origin: &'a str,
+}
+
+impl Checker<'_> {
+    fn invalid(&self, field: impl fmt::Display, problem: impl fmt::Display) -> ScenarioError {
+        ScenarioError::Invalid {
+            origin: self.origin.to_string(),
+            field: field.to_string(),
+            problem: problem.to_string(),
+        }
+    }
+
+    fn finite(&self, field: &str, value: f64) -> Result<f64, ScenarioError> {
+        if value.is_finite() {
+            Ok(value)
+        } else {
+            Err(self.invalid(field, format_args!("must be a finite number (got {value})")))
+        }
+    }
+
+    fn positive(&self, field: &str, value: f64) -> Result<f64, ScenarioError> {
+        self.finite(field, value)?;
+        if value > 0.0 {
+            Ok(value)
+        } else {
+            Err(self.invalid(field, format_args!("must be > 0 (got {value})")))
+        }
+    }
+
+    fn non_negative(&self, field: &str, value: f64) -> Result<f64, ScenarioError> {
+        self.finite(field, value)?;
+        if value >= 0.0 {
+            Ok(value)
+        } else {
+            Err(self.invalid(field, format_args!("must be >= 0 (got {value})")))
+        }
+    }
+}
+
+impl ScenarioToml {
+    fn validate(self, check: &Checker<'_>) -> Result<Scenario, ScenarioError> {
+        if self.name.trim().is_empty() {
+            return Err(check.invalid("name", "must not be empty"));
+        }
+        if self.robots < 2 {
+            return Err(check.invalid(
+                "robots",
+                format_args!("must be >= 2, a formation needs at least one pair (got {})", self.robots),
+            ));
+        }
+        let duration_s = check.positive("duration_s", self.duration_s)?;
+        let dt = check.positive("dt", self.dt)?;
+        if dt > duration_s {
+            return Err(check.invalid(
+                "dt",
+                format_args!("must be <= duration_s ({duration_s}) so a run has at least one tick (got {dt})"),
+            ));
+        }
+        if self.runs == 0 {
+            return Err(check.invalid("runs", "must be >= 1 (got 0)"));
+        }
+
+        let robot = validate_robot(check, self.robot)?;
+        let lidar = LidarSpec {
+            beams: self.lidar.beams,
+            max_range: check.positive("lidar.max_range", self.lidar.max_range)?,
+            noise_std: check.non_negative("lidar.noise_std", self.lidar.noise_std)?,
+        };
+        if lidar.beams == 0 {
+            return Err(check.invalid("lidar.beams", "must be >= 1 (got 0)"));
+        }
+
+        let v_star = check.non_negative("goal.v_star", self.goal.v_star)?;
+        if v_star > robot.max_wheel_speed {
+            return Err(check.invalid(
+                "goal.v_star",
+                format_args!(
+                    "must be <= robot.max_wheel_speed ({}) or the robots cannot reach it (got {v_star})",
+                    robot.max_wheel_speed
+                ),
+            ));
+        }
+        let d_star = match (self.goal.d_star, self.goal.d_star_choices) {
+            (Some(d), None) => DStarPlan::Fixed(check.positive("goal.d_star", d)?),
+            (None, Some(choices)) => {
+                if choices.is_empty() {
+                    return Err(check.invalid("goal.d_star_choices", "must not be empty"));
+                }
+                for (k, &d) in choices.iter().enumerate() {
+                    check.positive(&format!("goal.d_star_choices[{k}]"), d)?;
+                }
+                DStarPlan::Choices(choices)
+            }
+            (Some(_), Some(_)) => {
+                return Err(check.invalid(
+                    "goal.d_star",
+                    "and goal.d_star_choices are both set; give exactly one of them",
+                ));
+            }
+            (None, None) => {
+                return Err(check.invalid(
+                    "goal.d_star",
+                    "is missing; give goal.d_star (fixed) or goal.d_star_choices (drawn per run)",
+                ));
+            }
+        };
+
+        let heading = validate_heading(check, &self.heading)?;
+        let init = validate_init(check, self.init, self.robots, &robot)?;
+
+        let mut agents = self.agent;
+        let mut seen = vec![false; self.robots];
+        for (k, agent) in agents.iter_mut().enumerate() {
+            if agent.robot >= self.robots {
+                return Err(check.invalid(
+                    format_args!("agent[{k}].robot"),
+                    format_args!("must be < robots ({}) (got {})", self.robots, agent.robot),
+                ));
+            }
+            if std::mem::replace(&mut seen[agent.robot], true) {
+                return Err(check.invalid(
+                    format_args!("agent[{k}].robot"),
+                    format_args!("gives robot {} a model a second time", agent.robot),
+                ));
+            }
+            if agent.model.as_os_str().is_empty() {
+                return Err(check.invalid(format_args!("agent[{k}].model"), "must not be empty"));
+            }
+        }
+
+        Ok(Scenario {
+            name: self.name,
+            n_robots: self.robots,
+            duration_s,
+            seed: self.seed,
+            runs: self.runs,
+            v_star,
+            d_star,
+            heading,
+            init,
+            world: WorldConfig { robot, lidar, dt },
+            agents,
+        })
+    }
+}
+
+fn validate_robot(check: &Checker<'_>, robot: RobotParams) -> Result<RobotParams, ScenarioError> {
+    check.positive("robot.wheel_separation", robot.wheel_separation)?;
+    check.positive("robot.wheel_radius", robot.wheel_radius)?;
+    check.positive("robot.body_radius", robot.body_radius)?;
+    check.positive("robot.max_wheel_speed", robot.max_wheel_speed)?;
+    if let Some(accel) = robot.max_wheel_accel {
+        check.positive("robot.max_wheel_accel", accel)?;
+    }
+    Ok(robot)
+}
+
+fn validate_heading(check: &Checker<'_>, heading: &HeadingToml) -> Result<HeadingPlan, ScenarioError> {
+    let kind = heading.schedule;
+    let params = [
+        ("phi", heading.phi, kind == ScheduleKind::Constant),
+        ("omega", heading.omega, matches!(kind, ScheduleKind::Ramp | ScheduleKind::Sine)),
+        ("amplitude", heading.amplitude, kind == ScheduleKind::Sine),
+        ("phi0", heading.phi0, matches!(kind, ScheduleKind::Ramp | ScheduleKind::Sine)),
+    ];
+    for (name, value, used) in params {
+        match value {
+            Some(_) if !used => {
+                return Err(check.invalid(
+                    format_args!("heading.{name}"),
+                    format_args!("is not a parameter of schedule \"{}\"; remove it", kind.as_str()),
+                ));
+            }
+            Some(v) => {
+                check.finite(&format!("heading.{name}"), v)?;
+            }
+            None => {}
+        }
+    }
+    let required = |name: &str, value: Option<f64>| {
+        value.ok_or_else(|| {
+            check.invalid(
+                format_args!("heading.{name}"),
+                format_args!("is required by schedule \"{}\"", kind.as_str()),
+            )
+        })
+    };
+    Ok(match kind {
+        ScheduleKind::Constant => {
+            HeadingPlan::Fixed(HeadingSchedule::Constant { phi: required("phi", heading.phi)? })
+        }
+        ScheduleKind::Random => HeadingPlan::RandomConstant,
+        ScheduleKind::Ramp => HeadingPlan::Fixed(HeadingSchedule::Ramp {
+            omega: required("omega", heading.omega)?,
+            phi0: heading.phi0.unwrap_or(0.0),
+        }),
+        ScheduleKind::Sine => HeadingPlan::Fixed(HeadingSchedule::Sine {
+            omega: required("omega", heading.omega)?,
+            amplitude: heading.amplitude.unwrap_or(1.0),
+            phi0: heading.phi0.unwrap_or(0.0),
+        }),
+    })
+}
+
+fn validate_init(
+    check: &Checker<'_>,
+    init: InitialConditions,
+    robots: usize,
+    robot: &RobotParams,
+) -> Result<InitialConditions, ScenarioError> {
+    let disc_radius = check.positive("init.disc_radius", init.disc_radius)?;
+    let min_spacing = check.positive("init.min_spacing", init.min_spacing)?;
+    let body_diameter = 2.0 * robot.body_radius;
+    if min_spacing < body_diameter {
+        return Err(check.invalid(
+            "init.min_spacing",
+            format_args!(
+                "must be >= 2 * robot.body_radius ({body_diameter}) so robots do not start overlapping \
+                 (got {min_spacing})"
+            ),
+        ));
+    }
+    let sites = lattice_sites(disc_radius, min_spacing, robots).len();
+    if sites < robots {
+        return Err(check.invalid(
+            "init.disc_radius",
+            format_args!(
+                "is too small to place {robots} robots {min_spacing} m apart (room for about {sites}); \
+                 enlarge init.disc_radius or reduce init.min_spacing (got {disc_radius})"
+            ),
+        ));
+    }
+    Ok(InitialConditions { disc_radius, min_spacing })
+}
