@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use formation_expert::ExpertGains;
-use formation_expert::collect::label_observation;
+use formation_expert::collect::Labeller;
 use formation_world::{Controller, Scenario, run_episode};
 use rand::{Rng, SeedableRng};
 use robot_agent::decision::PolicyController;
@@ -163,6 +163,7 @@ fn rollout_and_label(
     let mut writer = DatasetWriter::append(&args.data, k as u32)
         .with_context(|| format!("opening {} to append DAgger samples", args.data.display()))?;
     let occupancy = writer.header().occupancy;
+    let labeller = Labeller::new(gains, robot, lidar, occupancy)?;
     let models = eval::models_per_robot(scenario, model)?;
     let threads = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     let next = AtomicUsize::new(0);
@@ -188,12 +189,18 @@ fn rollout_and_label(
                         let driver: &mut dyn Controller =
                             if expert_drives { &mut expert } else { &mut policy };
                         let mut samples = Vec::new();
+                        let mut failure = None;
                         run_episode(&spec, driver, &mut |obs, _| {
-                            label_observation(obs, &gains, &robot, &occupancy, k as u32, i as u32, &mut |s| {
-                                samples.push(s)
-                            });
+                            if failure.is_none() {
+                                failure = labeller
+                                    .label_observation(obs, k as u32, i as u32, &mut |s| samples.push(s))
+                                    .err();
+                            }
                         })
                         .with_context(|| format!("DAgger rollout {i}"))?;
+                        if let Some(e) = failure {
+                            return Err(e).with_context(|| format!("labelling DAgger rollout {i}"));
+                        }
                         per_run.lock().map_err(|_| anyhow::anyhow!("poisoned"))?.push((i, samples));
                         bar.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
                     }

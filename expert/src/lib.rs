@@ -1,1 +1,15 @@
 //! The model-based distance formation controller (the expert) and demonstration collection.
+//!
+//! * [`controller`]: [`expert_commands`], the paper's distance-based formation controller as a pure
+//!   function of all robots' poses and the goal, with its [`ExpertGains`], and [`ExpertController`],
+//!   the same as a [`formation_world::Controller`].
+//! * [`collect`]: demonstration collection into the training data set, and the expert labelling of
+//!   any observation that DAgger uses while the learned policy drives.
+//!
+//! The expert reads ground truth that no agent has; it exists to teach and to compare with, never to
+//! run inside a robot.
+
+pub mod collect;
+pub mod controller;
+
+pub use controller::{ExpertController, ExpertGains, InvalidGains, expert_commands};

@@ -1,2 +1,1006 @@
-//! Zero-copy messages exchanged between the world process and the robot-agent processes over
-//! iceoryx2, and the per-run service names. (Filled in by the runtime work.)
+//! Zero-copy messages exchanged between the world process and the robot-agent processes, the
+//! per-run service names, and the per-run iceoryx2 namespace (file prefix and root directory).
+//!
+//! Every message is a fixed-size `#[repr(C)]` value that iceoryx2 places in shared memory as it
+//! is, so nothing is serialised. Wire structs are deliberately dumb (plain numbers and fixed byte
+//! arrays); each has a typed Rust view ([`ControlRequest`], [`AgentStatus`], [`CmdStatus`]) and a
+//! checked constructor, so a malformed message turns into a [`WireError`] instead of a panic.
+//!
+//! Per robot `i` of a run `<run>` there are four publish-subscribe services, each paired with an
+//! event service of the same name (publishing wakes nobody in iceoryx2; the paired event does):
+//!
+//! | service | payload | publisher → subscriber |
+//! |---|---|---|
+//! | `formation/<run>/robot/<i>/scan` | [`ScanMsg`] | world → agent `i` |
+//! | `formation/<run>/robot/<i>/cmd` | [`CmdMsg`] | agent `i` → world |
+//! | `formation/<run>/robot/<i>/control` | [`ControlMsg`] | world → agent `i` |
+//! | `formation/<run>/robot/<i>/status` | [`StatusMsg`] | agent `i` → world |
+//!
+//! Each of them admits at most one publisher and one subscriber ([`ServiceLimits::ROBOT`]), which
+//! is how decentralisation is enforced by the transport itself: once agent `i` holds its scan
+//! subscription no other process can read robot `i`'s scan, and once it holds its command
+//! publisher no other process can command robot `i`.
+//!
+//! Every file iceoryx2 creates for a run carries the run's own prefix (`fm_<run>_` in the
+//! shared-memory folder) and lives under the run's own root directory (see [`RunNamespace`]), so
+//! parallel runs and tests never collide and a run's leftovers can be listed and removed exactly.
+
+use std::path::{Path, PathBuf};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use iceoryx2::prelude::*;
+
+use crate::types::{Goal, LidarSpec, WheelCmd};
+
+/// Most LIDAR beams a [`ScanMsg`] can carry (the paper's sensor: 900 beams over 360 degrees).
+pub const MAX_BEAMS: usize = 900;
+/// Bytes of a model id on the wire (UTF-8, zero padded).
+pub const MODEL_ID_LEN: usize = 64;
+/// Bytes of a model path in a swap request (UTF-8, zero padded).
+pub const MODEL_PATH_LEN: usize = 512;
+/// Bytes of a refusal reason in a status message (UTF-8, zero padded, truncated at a char boundary).
+pub const REASON_LEN: usize = 256;
+/// Longest accepted run id.
+pub const MAX_RUN_ID_LEN: usize = 24;
+
+/// Why a message, a name or a namespace could not be built or read.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum WireError {
+    /// A run id with characters other than ASCII letters, digits, `-` and `_`, or of bad length.
+    #[error(
+        "run id {run:?} is not valid: use 1 to {MAX_RUN_ID_LEN} ASCII letters, digits, '-' or '_'"
+    )]
+    InvalidRunId {
+        /// The rejected id.
+        run: String,
+    },
+    /// A scan longer than a [`ScanMsg`] can carry.
+    #[error("a scan of {beams} beams does not fit the wire message (at most {MAX_BEAMS} beams)")]
+    TooManyBeams {
+        /// Beams in the scan.
+        beams: usize,
+    },
+    /// A text field (model id, model path) longer than its fixed wire field.
+    #[error("{field} is {len} bytes long; the wire field holds at most {max} bytes")]
+    TextTooLong {
+        /// Which field.
+        field: &'static str,
+        /// Its length in bytes.
+        len: usize,
+        /// The field's capacity.
+        max: usize,
+    },
+    /// A message whose kind code is not known to this version.
+    #[error("unknown {message} kind {kind}: world and agent binaries are from different builds")]
+    UnknownKind {
+        /// Which message type.
+        message: &'static str,
+        /// The code received.
+        kind: u32,
+    },
+    /// A message field that does not hold a valid value.
+    #[error("malformed {message}: {reason}")]
+    Malformed {
+        /// Which message type.
+        message: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+// ---------------------------------------------------------------------------------------------
+// Run ids, service names, namespaces
+// ---------------------------------------------------------------------------------------------
+
+/// The id of one launch of the runtime. It namespaces service names and iceoryx2 files.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct RunId(String);
+
+impl RunId {
+    /// Validates an id: 1 to [`MAX_RUN_ID_LEN`] ASCII letters, digits, `-` or `_`.
+    pub fn new(id: &str) -> Result<RunId, WireError> {
+        let ok = !id.is_empty()
+            && id.len() <= MAX_RUN_ID_LEN
+            && id.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
+        if ok { Ok(RunId(id.to_owned())) } else { Err(WireError::InvalidRunId { run: id.to_owned() }) }
+    }
+
+    /// A fresh id, unique on this machine: the process id and the wall-clock nanoseconds, in base 36.
+    pub fn generate() -> RunId {
+        let nanos = wall_clock_ns();
+        RunId(format!("{}{}", base36(u64::from(std::process::id())), base36(nanos % (36u64.pow(8)))))
+    }
+
+    /// The id as text.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl std::fmt::Display for RunId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+fn base36(mut n: u64) -> String {
+    const DIGITS: &[u8; 36] = b"0123456789abcdefghijklmnopqrstuvwxyz";
+    let mut out = Vec::new();
+    loop {
+        out.push(DIGITS[(n % 36) as usize]);
+        n /= 36;
+        if n == 0 {
+            break;
+        }
+    }
+    out.reverse();
+    String::from_utf8(out).unwrap_or_default()
+}
+
+/// The channels of one robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RobotChannel {
+    /// World → agent: the robot's own scan, heading and goal ([`ScanMsg`]).
+    Scan,
+    /// Agent → world: the robot's wheel command ([`CmdMsg`]).
+    Cmd,
+    /// World → agent: episode begin, shutdown, model swap ([`ControlMsg`]).
+    Control,
+    /// Agent → world: hello, ready, refusals, swap acknowledgements ([`StatusMsg`]).
+    Status,
+}
+
+impl RobotChannel {
+    /// Every channel.
+    pub const ALL: [RobotChannel; 4] =
+        [RobotChannel::Scan, RobotChannel::Cmd, RobotChannel::Control, RobotChannel::Status];
+
+    /// The last segment of the service name.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            RobotChannel::Scan => "scan",
+            RobotChannel::Cmd => "cmd",
+            RobotChannel::Control => "control",
+            RobotChannel::Status => "status",
+        }
+    }
+}
+
+/// `formation/<run>/robot/<robot>/<channel>`: the name of both the publish-subscribe service and
+/// its paired event service.
+pub fn robot_service_name(run: &RunId, robot: usize, channel: RobotChannel) -> String {
+    format!("formation/{run}/robot/{robot}/{}", channel.as_str())
+}
+
+/// Node name of the world process of a run.
+pub const WORLD_NODE_NAME: &str = "formation-world";
+
+/// Node name of robot `robot`'s agent process.
+pub fn agent_node_name(robot: usize) -> String {
+    format!("formation-agent-{robot}")
+}
+
+/// Sizes of a robot service, shared by both sides so that opening never disagrees with creating.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ServiceLimits {
+    /// Publishers allowed on the service.
+    pub max_publishers: usize,
+    /// Subscribers allowed on the service.
+    pub max_subscribers: usize,
+    /// Samples a subscriber can hold unread before the oldest is overwritten.
+    pub subscriber_buffer: usize,
+    /// Nodes that may open the service (the two ends and a dead predecessor awaiting cleanup).
+    pub max_nodes: usize,
+}
+
+impl ServiceLimits {
+    /// Every robot channel: one writer, one reader. A buffer of 8 samples: in lockstep at most one
+    /// message per tick is in flight; in realtime the reader takes the newest of what arrived, and
+    /// 8 x 50 ms of backlog is more than any stale-command limit, so overwriting the oldest is right.
+    pub const ROBOT: ServiceLimits =
+        ServiceLimits { max_publishers: 1, max_subscribers: 1, subscriber_buffer: 8, max_nodes: 4 };
+}
+
+/// The iceoryx2 namespace of one run: a file prefix for the shared-memory folder and a root
+/// directory for everything else iceoryx2 writes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RunNamespace {
+    run: RunId,
+    root: PathBuf,
+}
+
+/// Where POSIX shared-memory objects live on Linux.
+pub const SHM_DIR: &str = "/dev/shm";
+
+impl RunNamespace {
+    /// The namespace of `run` under the system temp directory: `<tmp>/iceoryx2-formation/<run>/`.
+    pub fn new(run: &RunId) -> RunNamespace {
+        RunNamespace::with_base(run, &std::env::temp_dir().join("iceoryx2-formation"))
+    }
+
+    /// The namespace of `run` with its root directory under `base`.
+    pub fn with_base(run: &RunId, base: &Path) -> RunNamespace {
+        RunNamespace { run: run.clone(), root: base.join(run.as_str()) }
+    }
+
+    /// The run id.
+    pub fn run(&self) -> &RunId {
+        &self.run
+    }
+
+    /// Prefix of every file iceoryx2 creates for this run.
+    pub fn file_prefix(&self) -> String {
+        format!("fm_{}_", self.run)
+    }
+
+    /// The root directory of iceoryx2's non-shared-memory files for this run.
+    pub fn root_dir(&self) -> &Path {
+        &self.root
+    }
+
+    /// An iceoryx2 configuration confined to this namespace. Building it reads no config file.
+    pub fn iceoryx_config(&self) -> Result<iceoryx2::config::Config, WireError> {
+        let mut config = iceoryx2::config::Config::default();
+        let prefix = self.file_prefix();
+        config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|e| WireError::Malformed {
+            message: "namespace",
+            reason: format!("file prefix {prefix:?} rejected by iceoryx2 ({e:?})"),
+        })?;
+        let mut root = self.root.display().to_string();
+        if !root.ends_with('/') {
+            root.push('/');
+        }
+        let root_path =
+            iceoryx2::prelude::Path::new(root.as_bytes()).map_err(|e| WireError::Malformed {
+                message: "namespace",
+                reason: format!("root path {root:?} rejected by iceoryx2 ({e:?})"),
+            })?;
+        config.global.set_root_path(&root_path);
+        Ok(config)
+    }
+
+    /// Every file and directory this run has left: shared-memory objects with the run's prefix and
+    /// the root directory itself when it exists. Empty after a clean shutdown and
+    /// [`RunNamespace::remove_all`].
+    pub fn leftovers(&self) -> Vec<PathBuf> {
+        let mut found = list_with_prefix(Path::new(SHM_DIR), &self.file_prefix());
+        if self.root.exists() {
+            found.push(self.root.clone());
+        }
+        found
+    }
+
+    /// Removes everything [`RunNamespace::leftovers`] lists. Returns how many entries were removed.
+    /// Call it only when no process of the run is alive.
+    pub fn remove_all(&self) -> std::io::Result<usize> {
+        let mut removed = 0;
+        for path in list_with_prefix(Path::new(SHM_DIR), &self.file_prefix()) {
+            match std::fs::remove_file(&path) {
+                Ok(()) => removed += 1,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e),
+            }
+        }
+        if self.root.exists() {
+            std::fs::remove_dir_all(&self.root)?;
+            removed += 1;
+        }
+        Ok(removed)
+    }
+}
+
+fn list_with_prefix(dir: &Path, prefix: &str) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else { return Vec::new() };
+    let mut found: Vec<PathBuf> = entries
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
+        .map(|e| e.path())
+        .collect();
+    found.sort();
+    found
+}
+
+/// Nanoseconds since the Unix epoch on the system clock: the one clock every process of a run
+/// shares, used only to measure one-way latencies between processes.
+pub fn wall_clock_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+        .unwrap_or(0)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Fixed text fields
+// ---------------------------------------------------------------------------------------------
+
+fn encode_text<const N: usize>(field: &'static str, text: &str) -> Result<[u8; N], WireError> {
+    if text.len() > N {
+        return Err(WireError::TextTooLong { field, len: text.len(), max: N });
+    }
+    let mut out = [0u8; N];
+    out[..text.len()].copy_from_slice(text.as_bytes());
+    Ok(out)
+}
+
+/// Like [`encode_text`] but cuts an over-long text at a character boundary (for human messages).
+fn encode_text_lossy<const N: usize>(text: &str) -> [u8; N] {
+    let mut end = text.len().min(N);
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    let mut out = [0u8; N];
+    out[..end].copy_from_slice(&text.as_bytes()[..end]);
+    out
+}
+
+fn decode_text<'a>(message: &'static str, bytes: &'a [u8]) -> Result<&'a str, WireError> {
+    let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
+    std::str::from_utf8(&bytes[..end])
+        .map_err(|e| WireError::Malformed { message, reason: format!("text field is not UTF-8 ({e})") })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scan: world -> agent
+// ---------------------------------------------------------------------------------------------
+
+/// One robot's observation at one tick: its own scan, its own compass heading and the goal.
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+#[type_name("formation.ScanMsg.v1")]
+pub struct ScanMsg {
+    /// Episode generation: increases with every episode the world begins; stale messages of an
+    /// earlier episode are recognised by it.
+    pub generation: u64,
+    /// Tick index `k` within the episode.
+    pub tick: u64,
+    /// Simulated time `k dt` [s].
+    pub sim_time: f64,
+    /// The robot's own heading [rad] (its compass).
+    pub heading: f64,
+    /// Desired heading phi* at this tick [rad].
+    pub phi_star: f64,
+    /// Desired pairwise distance d* [m].
+    pub d_star: f64,
+    /// Desired speed v* [m/s].
+    pub v_star: f64,
+    /// [`wall_clock_ns`] when the world published this scan.
+    pub published_wall_ns: u64,
+    /// Valid entries of `ranges`.
+    pub n_beams: u32,
+    /// Keeps the layout explicit; always 0.
+    pub reserved: u32,
+    /// Ranges [m], beam `k` at body-frame bearing `2 pi k / n_beams`; entries past `n_beams` are 0.
+    pub ranges: [f32; MAX_BEAMS],
+}
+
+impl ScanMsg {
+    /// A scan message. Fails when `ranges` has more than [`MAX_BEAMS`] entries.
+    pub fn new(
+        generation: u64,
+        tick: u64,
+        sim_time: f64,
+        heading: f64,
+        goal: &Goal,
+        ranges: &[f32],
+    ) -> Result<ScanMsg, WireError> {
+        if ranges.len() > MAX_BEAMS {
+            return Err(WireError::TooManyBeams { beams: ranges.len() });
+        }
+        let mut fixed = [0.0f32; MAX_BEAMS];
+        fixed[..ranges.len()].copy_from_slice(ranges);
+        Ok(ScanMsg {
+            generation,
+            tick,
+            sim_time,
+            heading,
+            phi_star: goal.phi_star,
+            d_star: goal.d_star,
+            v_star: goal.v_star,
+            published_wall_ns: wall_clock_ns(),
+            n_beams: ranges.len() as u32,
+            reserved: 0,
+            ranges: fixed,
+        })
+    }
+
+    /// The valid ranges. Fails on an `n_beams` beyond [`MAX_BEAMS`].
+    pub fn ranges(&self) -> Result<&[f32], WireError> {
+        let n = self.n_beams as usize;
+        self.ranges.get(..n).ok_or_else(|| WireError::Malformed {
+            message: "scan",
+            reason: format!("n_beams {n} exceeds the {MAX_BEAMS} the message holds"),
+        })
+    }
+
+    /// The goal carried by the scan.
+    pub fn goal(&self) -> Goal {
+        Goal { phi_star: self.phi_star, d_star: self.d_star, v_star: self.v_star }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Command: agent -> world
+// ---------------------------------------------------------------------------------------------
+
+/// Status bits an agent attaches to a command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct CmdStatus(pub u32);
+
+impl CmdStatus {
+    /// A normal decision.
+    pub const OK: CmdStatus = CmdStatus(0);
+    /// The agent could not decide (bad scan or goal, policy failure) and asks for a brake.
+    pub const DECISION_FAILED: CmdStatus = CmdStatus(1);
+    /// A fault-injection mode altered this command (testing only).
+    pub const FAULT_INJECTED: CmdStatus = CmdStatus(1 << 1);
+    /// A new model took over at this tick.
+    pub const MODEL_SWAPPED: CmdStatus = CmdStatus(1 << 2);
+
+    /// True when every bit of `other` is set.
+    pub fn contains(self, other: CmdStatus) -> bool {
+        self.0 & other.0 == other.0
+    }
+
+    /// Both sets of bits.
+    pub fn with(self, other: CmdStatus) -> CmdStatus {
+        CmdStatus(self.0 | other.0)
+    }
+}
+
+/// One robot's wheel command for one tick, with the agent's own timings.
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+#[type_name("formation.CmdMsg.v1")]
+pub struct CmdMsg {
+    /// Episode generation of the scan this answers.
+    pub generation: u64,
+    /// Tick of the scan this answers.
+    pub tick: u64,
+    /// Left wheel rim speed [m/s].
+    pub left: f64,
+    /// Right wheel rim speed [m/s].
+    pub right: f64,
+    /// [`wall_clock_ns`] when the agent took the scan from its subscriber.
+    pub received_wall_ns: u64,
+    /// Time spent rendering the occupancy image [ns].
+    pub occupancy_ns: u64,
+    /// Time spent in the policy, including speed scaling [ns].
+    pub inference_ns: u64,
+    /// [`wall_clock_ns`] just before the agent published this command.
+    pub published_wall_ns: u64,
+    /// [`CmdStatus`] bits.
+    pub status: u32,
+    /// Keeps the layout explicit; always 0.
+    pub reserved: u32,
+    /// Id of the model that decided (UTF-8, zero padded).
+    pub model_id: [u8; MODEL_ID_LEN],
+}
+
+/// Timings an agent measured for one command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct AgentTimings {
+    /// [`wall_clock_ns`] when the scan was taken from the subscriber.
+    pub received_wall_ns: u64,
+    /// Occupancy rendering [ns].
+    pub occupancy_ns: u64,
+    /// Policy inference [ns].
+    pub inference_ns: u64,
+}
+
+impl CmdMsg {
+    /// A command message; `published_wall_ns` is stamped now. Fails on a model id longer than
+    /// [`MODEL_ID_LEN`] bytes.
+    pub fn new(
+        generation: u64,
+        tick: u64,
+        cmd: WheelCmd,
+        model_id: &str,
+        timings: AgentTimings,
+        status: CmdStatus,
+    ) -> Result<CmdMsg, WireError> {
+        Ok(CmdMsg {
+            generation,
+            tick,
+            left: cmd.left,
+            right: cmd.right,
+            received_wall_ns: timings.received_wall_ns,
+            occupancy_ns: timings.occupancy_ns,
+            inference_ns: timings.inference_ns,
+            published_wall_ns: wall_clock_ns(),
+            status: status.0,
+            reserved: 0,
+            model_id: encode_text("model id", model_id)?,
+        })
+    }
+
+    /// The wheel command.
+    pub fn wheels(&self) -> WheelCmd {
+        WheelCmd { left: self.left, right: self.right }
+    }
+
+    /// The status bits.
+    pub fn status(&self) -> CmdStatus {
+        CmdStatus(self.status)
+    }
+
+    /// The model id.
+    pub fn model_id(&self) -> Result<&str, WireError> {
+        decode_text("command", &self.model_id)
+    }
+
+    /// The agent's timings.
+    pub fn timings(&self) -> AgentTimings {
+        AgentTimings {
+            received_wall_ns: self.received_wall_ns,
+            occupancy_ns: self.occupancy_ns,
+            inference_ns: self.inference_ns,
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Control: world -> agent
+// ---------------------------------------------------------------------------------------------
+
+/// What the world asks of an agent, outside the per-tick exchange.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ControlRequest {
+    /// A new episode starts: answer [`AgentStatus::Ready`] (or [`AgentStatus::Refused`] when the
+    /// model does not fit this sensor) with the same generation, then expect its scans.
+    BeginEpisode {
+        /// The episode's generation.
+        generation: u64,
+        /// The robot's LIDAR settings this episode.
+        lidar: LidarSpec,
+    },
+    /// Load another model off the hot path and let it drive from the first tick `>= at_tick`.
+    SwapModel {
+        /// Request id echoed in the acknowledgement.
+        request_id: u64,
+        /// First tick the new model may drive.
+        at_tick: u64,
+        /// The ONNX model file.
+        path: PathBuf,
+    },
+    /// The run is over: exit cleanly.
+    Shutdown,
+}
+
+/// The wire form of a [`ControlRequest`].
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+#[type_name("formation.ControlMsg.v1")]
+pub struct ControlMsg {
+    /// 1 begin episode, 2 swap model, 3 shutdown.
+    pub kind: u32,
+    /// LIDAR beams (begin episode).
+    pub beams: u32,
+    /// Episode generation (begin episode).
+    pub generation: u64,
+    /// LIDAR maximum range [m] (begin episode).
+    pub max_range: f64,
+    /// LIDAR noise standard deviation [m] (begin episode).
+    pub noise_std: f64,
+    /// Request id (swap model).
+    pub request_id: u64,
+    /// First tick the new model may drive (swap model).
+    pub at_tick: u64,
+    /// Model path, UTF-8, zero padded (swap model).
+    pub path: [u8; MODEL_PATH_LEN],
+}
+
+const CONTROL_BEGIN: u32 = 1;
+const CONTROL_SWAP: u32 = 2;
+const CONTROL_SHUTDOWN: u32 = 3;
+
+impl ControlMsg {
+    /// Encodes a request. Fails on a model path longer than [`MODEL_PATH_LEN`] bytes or not UTF-8.
+    pub fn encode(request: &ControlRequest) -> Result<ControlMsg, WireError> {
+        let mut msg = ControlMsg {
+            kind: 0,
+            beams: 0,
+            generation: 0,
+            max_range: 0.0,
+            noise_std: 0.0,
+            request_id: 0,
+            at_tick: 0,
+            path: [0; MODEL_PATH_LEN],
+        };
+        match request {
+            ControlRequest::BeginEpisode { generation, lidar } => {
+                msg.kind = CONTROL_BEGIN;
+                msg.generation = *generation;
+                msg.beams = u32::try_from(lidar.beams)
+                    .map_err(|_| WireError::TooManyBeams { beams: lidar.beams })?;
+                msg.max_range = lidar.max_range;
+                msg.noise_std = lidar.noise_std;
+            }
+            ControlRequest::SwapModel { request_id, at_tick, path } => {
+                let text = path.to_str().ok_or_else(|| WireError::Malformed {
+                    message: "control",
+                    reason: format!("model path {} is not UTF-8", path.display()),
+                })?;
+                msg.kind = CONTROL_SWAP;
+                msg.request_id = *request_id;
+                msg.at_tick = *at_tick;
+                msg.path = encode_text("model path", text)?;
+            }
+            ControlRequest::Shutdown => msg.kind = CONTROL_SHUTDOWN,
+        }
+        Ok(msg)
+    }
+
+    /// Decodes the request.
+    pub fn decode(&self) -> Result<ControlRequest, WireError> {
+        match self.kind {
+            CONTROL_BEGIN => Ok(ControlRequest::BeginEpisode {
+                generation: self.generation,
+                lidar: LidarSpec {
+                    beams: self.beams as usize,
+                    max_range: self.max_range,
+                    noise_std: self.noise_std,
+                },
+            }),
+            CONTROL_SWAP => Ok(ControlRequest::SwapModel {
+                request_id: self.request_id,
+                at_tick: self.at_tick,
+                path: PathBuf::from(decode_text("control", &self.path)?),
+            }),
+            CONTROL_SHUTDOWN => Ok(ControlRequest::Shutdown),
+            kind => Err(WireError::UnknownKind { message: "control", kind }),
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Status: agent -> world
+// ---------------------------------------------------------------------------------------------
+
+/// What an agent tells the world, outside the per-tick exchange.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum AgentStatus {
+    /// The agent is up (its ports exist) with this model; sent once at start.
+    Hello {
+        /// The agent's process id.
+        pid: u32,
+        /// The model it loaded.
+        model_id: String,
+    },
+    /// Ready for the episode of this generation.
+    Ready {
+        /// The episode's generation.
+        generation: u64,
+        /// The model that will drive.
+        model_id: String,
+    },
+    /// Cannot take part in the episode of this generation (e.g. the model does not fit the sensor).
+    Refused {
+        /// The episode's generation.
+        generation: u64,
+        /// Why, phrased for the user.
+        reason: String,
+    },
+    /// The model of swap request `request_id` drives from tick `tick` on.
+    SwapDone {
+        /// The request.
+        request_id: u64,
+        /// First tick decided by the new model.
+        tick: u64,
+        /// The new model's id.
+        model_id: String,
+    },
+    /// Swap request `request_id` was refused; the old model keeps driving.
+    SwapRefused {
+        /// The request.
+        request_id: u64,
+        /// Why, phrased for the user.
+        reason: String,
+    },
+}
+
+/// The wire form of an [`AgentStatus`].
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+#[type_name("formation.StatusMsg.v1")]
+pub struct StatusMsg {
+    /// 1 hello, 2 ready, 3 refused, 4 swap done, 5 swap refused.
+    pub kind: u32,
+    /// Process id (hello).
+    pub pid: u32,
+    /// Episode generation (ready, refused).
+    pub generation: u64,
+    /// Swap request id (swap done, swap refused).
+    pub request_id: u64,
+    /// First tick of the new model (swap done).
+    pub tick: u64,
+    /// Model id, UTF-8, zero padded (hello, ready, swap done).
+    pub model_id: [u8; MODEL_ID_LEN],
+    /// Reason, UTF-8, zero padded, possibly truncated (refused, swap refused).
+    pub reason: [u8; REASON_LEN],
+}
+
+const STATUS_HELLO: u32 = 1;
+const STATUS_READY: u32 = 2;
+const STATUS_REFUSED: u32 = 3;
+const STATUS_SWAP_DONE: u32 = 4;
+const STATUS_SWAP_REFUSED: u32 = 5;
+
+impl StatusMsg {
+    /// Encodes a status. Fails on a model id longer than [`MODEL_ID_LEN`] bytes; reasons longer
+    /// than [`REASON_LEN`] bytes are truncated.
+    pub fn encode(status: &AgentStatus) -> Result<StatusMsg, WireError> {
+        let mut msg = StatusMsg {
+            kind: 0,
+            pid: 0,
+            generation: 0,
+            request_id: 0,
+            tick: 0,
+            model_id: [0; MODEL_ID_LEN],
+            reason: [0; REASON_LEN],
+        };
+        match status {
+            AgentStatus::Hello { pid, model_id } => {
+                msg.kind = STATUS_HELLO;
+                msg.pid = *pid;
+                msg.model_id = encode_text("model id", model_id)?;
+            }
+            AgentStatus::Ready { generation, model_id } => {
+                msg.kind = STATUS_READY;
+                msg.generation = *generation;
+                msg.model_id = encode_text("model id", model_id)?;
+            }
+            AgentStatus::Refused { generation, reason } => {
+                msg.kind = STATUS_REFUSED;
+                msg.generation = *generation;
+                msg.reason = encode_text_lossy(reason);
+            }
+            AgentStatus::SwapDone { request_id, tick, model_id } => {
+                msg.kind = STATUS_SWAP_DONE;
+                msg.request_id = *request_id;
+                msg.tick = *tick;
+                msg.model_id = encode_text("model id", model_id)?;
+            }
+            AgentStatus::SwapRefused { request_id, reason } => {
+                msg.kind = STATUS_SWAP_REFUSED;
+                msg.request_id = *request_id;
+                msg.reason = encode_text_lossy(reason);
+            }
+        }
+        Ok(msg)
+    }
+
+    /// Decodes the status.
+    pub fn decode(&self) -> Result<AgentStatus, WireError> {
+        let model_id = || decode_text("status", &self.model_id).map(str::to_owned);
+        let reason = || decode_text("status", &self.reason).map(str::to_owned);
+        Ok(match self.kind {
+            STATUS_HELLO => AgentStatus::Hello { pid: self.pid, model_id: model_id()? },
+            STATUS_READY => AgentStatus::Ready { generation: self.generation, model_id: model_id()? },
+            STATUS_REFUSED => AgentStatus::Refused { generation: self.generation, reason: reason()? },
+            STATUS_SWAP_DONE => AgentStatus::SwapDone {
+                request_id: self.request_id,
+                tick: self.tick,
+                model_id: model_id()?,
+            },
+            STATUS_SWAP_REFUSED => {
+                AgentStatus::SwapRefused { request_id: self.request_id, reason: reason()? }
+            }
+            kind => return Err(WireError::UnknownKind { message: "status", kind }),
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Timing log: written by the world per run, read by `formation profile` and the report
+// ---------------------------------------------------------------------------------------------
+
+/// What the world's watchdog made of one robot's command at one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TickOutcome {
+    /// The agent's command for this tick arrived in time and was applied.
+    Fresh,
+    /// No command of this episode arrived: braked.
+    Missing,
+    /// Only an older command arrived (lockstep), or the newest is too old (realtime): braked.
+    Stale,
+    /// The command was not a finite number: braked.
+    NonFinite,
+    /// The agent flagged a failed decision: braked.
+    AgentFailed,
+}
+
+/// One robot's per-tick record of a run, stored column-wise (one entry per tick in every column)
+/// so a 1200-tick run stays small. Durations are nanoseconds; 0 where no command was used.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RobotTiming {
+    /// Distinct model ids in order of first use.
+    pub model_ids: Vec<String>,
+    /// Per tick: index into `model_ids` of the model that decided, or -1 when no command was used.
+    pub model: Vec<i16>,
+    /// Per tick: what the watchdog made of the command.
+    pub outcome: Vec<TickOutcome>,
+    /// Per tick: scan published → command received by the world (the world's own clock).
+    pub round_trip_ns: Vec<u64>,
+    /// Per tick: scan published by the world → taken by the agent (system clock of both).
+    pub uplink_ns: Vec<u64>,
+    /// Per tick: occupancy rendering in the agent.
+    pub occupancy_ns: Vec<u64>,
+    /// Per tick: policy inference in the agent.
+    pub inference_ns: Vec<u64>,
+}
+
+impl RobotTiming {
+    /// Appends one tick: the outcome, the command used (if any) and its round trip.
+    pub fn record(
+        &mut self,
+        outcome: TickOutcome,
+        used: Option<&CmdMsg>,
+        round_trip: Option<std::time::Duration>,
+        scan_published_wall_ns: u64,
+    ) {
+        self.outcome.push(outcome);
+        let Some(msg) = used else {
+            self.model.push(-1);
+            self.round_trip_ns.push(0);
+            self.uplink_ns.push(0);
+            self.occupancy_ns.push(0);
+            self.inference_ns.push(0);
+            return;
+        };
+        let id = msg.model_id().unwrap_or("<malformed>");
+        let index = match self.model_ids.iter().position(|m| m == id) {
+            Some(i) => i,
+            None => {
+                self.model_ids.push(id.to_owned());
+                self.model_ids.len() - 1
+            }
+        };
+        self.model.push(i16::try_from(index).unwrap_or(i16::MAX));
+        let ns = |d: std::time::Duration| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
+        self.round_trip_ns.push(round_trip.map_or(0, ns));
+        self.uplink_ns.push(msg.received_wall_ns.saturating_sub(scan_published_wall_ns));
+        self.occupancy_ns.push(msg.occupancy_ns);
+        self.inference_ns.push(msg.inference_ns);
+    }
+
+    /// Ticks recorded.
+    pub fn ticks(&self) -> usize {
+        self.outcome.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_ids_are_validated_and_generated_ids_are_valid() {
+        assert!(RunId::new("abc-1_X").is_ok());
+        for bad in ["", "a/b", "has space", "ü", &"x".repeat(MAX_RUN_ID_LEN + 1)] {
+            assert!(matches!(RunId::new(bad), Err(WireError::InvalidRunId { .. })), "{bad:?}");
+        }
+        let generated = RunId::generate();
+        assert_eq!(RunId::new(generated.as_str()).as_ref(), Ok(&generated));
+    }
+
+    #[test]
+    fn service_names_are_namespaced_by_run_robot_and_channel() {
+        let run = RunId::new("t1").unwrap();
+        assert_eq!(robot_service_name(&run, 2, RobotChannel::Scan), "formation/t1/robot/2/scan");
+        assert_eq!(robot_service_name(&run, 0, RobotChannel::Status), "formation/t1/robot/0/status");
+        let names: std::collections::HashSet<_> =
+            RobotChannel::ALL.iter().map(|&c| robot_service_name(&run, 0, c)).collect();
+        assert_eq!(names.len(), 4);
+    }
+
+    #[test]
+    fn scan_keeps_ranges_and_goal_and_rejects_oversized_scans() {
+        let goal = Goal { phi_star: 1.0, d_star: 2.0, v_star: 0.7 };
+        let ranges: Vec<f32> = (0..360).map(|k| k as f32 * 0.01).collect();
+        let msg = ScanMsg::new(3, 7, 0.35, -0.5, &goal, &ranges).unwrap();
+        assert_eq!(msg.ranges().unwrap(), &ranges[..]);
+        assert_eq!(msg.goal(), goal);
+        assert!(msg.ranges[360..].iter().all(|&r| r == 0.0));
+        let too_many = vec![1.0; MAX_BEAMS + 1];
+        assert_eq!(
+            ScanMsg::new(0, 0, 0.0, 0.0, &goal, &too_many).unwrap_err(),
+            WireError::TooManyBeams { beams: MAX_BEAMS + 1 }
+        );
+        let mut corrupt = msg;
+        corrupt.n_beams = MAX_BEAMS as u32 + 5;
+        assert!(matches!(corrupt.ranges(), Err(WireError::Malformed { .. })));
+    }
+
+    #[test]
+    fn command_round_trips_and_refuses_a_long_model_id() {
+        let timings = AgentTimings { received_wall_ns: 5, occupancy_ns: 6, inference_ns: 7 };
+        let cmd = WheelCmd { left: 0.25, right: -0.5 };
+        let status = CmdStatus::OK.with(CmdStatus::MODEL_SWAPPED);
+        let msg = CmdMsg::new(1, 2, cmd, "policy-abc123", timings, status).unwrap();
+        assert_eq!(msg.wheels(), cmd);
+        assert_eq!(msg.model_id().unwrap(), "policy-abc123");
+        assert_eq!(msg.timings(), timings);
+        assert!(msg.status().contains(CmdStatus::MODEL_SWAPPED));
+        assert!(!msg.status().contains(CmdStatus::DECISION_FAILED));
+        let long = "m".repeat(MODEL_ID_LEN + 1);
+        assert!(matches!(
+            CmdMsg::new(1, 2, cmd, &long, timings, status),
+            Err(WireError::TextTooLong { field: "model id", .. })
+        ));
+    }
+
+    #[test]
+    fn control_requests_round_trip() {
+        let requests = [
+            ControlRequest::BeginEpisode {
+                generation: 9,
+                lidar: LidarSpec { beams: 900, max_range: 10.0, noise_std: 0.03 },
+            },
+            ControlRequest::SwapModel { request_id: 4, at_tick: 100, path: "/m/policy.onnx".into() },
+            ControlRequest::Shutdown,
+        ];
+        for request in requests {
+            assert_eq!(ControlMsg::encode(&request).unwrap().decode().unwrap(), request);
+        }
+        let mut unknown = ControlMsg::encode(&ControlRequest::Shutdown).unwrap();
+        unknown.kind = 77;
+        assert_eq!(unknown.decode().unwrap_err(), WireError::UnknownKind { message: "control", kind: 77 });
+    }
+
+    #[test]
+    fn statuses_round_trip_and_long_reasons_are_cut_at_a_char_boundary() {
+        let statuses = [
+            AgentStatus::Hello { pid: 42, model_id: "a".into() },
+            AgentStatus::Ready { generation: 3, model_id: "b".into() },
+            AgentStatus::Refused { generation: 3, reason: "beams differ".into() },
+            AgentStatus::SwapDone { request_id: 1, tick: 50, model_id: "c".into() },
+            AgentStatus::SwapRefused { request_id: 2, reason: "no such file".into() },
+        ];
+        for status in statuses {
+            assert_eq!(StatusMsg::encode(&status).unwrap().decode().unwrap(), status);
+        }
+        let long = "é".repeat(REASON_LEN);
+        let msg = StatusMsg::encode(&AgentStatus::Refused { generation: 0, reason: long }).unwrap();
+        match msg.decode().unwrap() {
+            AgentStatus::Refused { reason, .. } => {
+                assert!(reason.len() <= REASON_LEN && reason.chars().all(|c| c == 'é'));
+                assert_eq!(reason.len(), REASON_LEN);
+            }
+            other => panic!("decoded {other:?}"),
+        }
+    }
+
+    #[test]
+    fn timing_log_records_used_commands_and_gaps() {
+        let timings = AgentTimings { received_wall_ns: 1_500, occupancy_ns: 20, inference_ns: 30 };
+        let a = CmdMsg::new(1, 0, WheelCmd::BRAKE, "a", timings, CmdStatus::OK).unwrap();
+        let b = CmdMsg::new(1, 2, WheelCmd::BRAKE, "b", timings, CmdStatus::OK).unwrap();
+        let mut log = RobotTiming::default();
+        log.record(TickOutcome::Fresh, Some(&a), Some(std::time::Duration::from_nanos(900)), 1_000);
+        log.record(TickOutcome::Missing, None, None, 2_000);
+        log.record(TickOutcome::Fresh, Some(&b), Some(std::time::Duration::from_nanos(800)), 1_200);
+        log.record(TickOutcome::Fresh, Some(&a), Some(std::time::Duration::from_nanos(700)), 1_000);
+        assert_eq!(log.ticks(), 4);
+        assert_eq!(log.model_ids, vec!["a".to_owned(), "b".to_owned()]);
+        assert_eq!(log.model, vec![0, -1, 1, 0]);
+        assert_eq!(log.round_trip_ns, vec![900, 0, 800, 700]);
+        assert_eq!(log.uplink_ns, vec![500, 0, 300, 500]);
+    }
+
+    #[test]
+    fn namespace_confines_files_to_the_run() {
+        let run = RunId::new("nsunit").unwrap();
+        let base = std::env::temp_dir().join(format!("formation-wire-test-{}", std::process::id()));
+        let ns = RunNamespace::with_base(&run, &base);
+        assert_eq!(ns.file_prefix(), "fm_nsunit_");
+        let config = ns.iceoryx_config().unwrap();
+        assert_eq!(config.global.prefix.to_string(), "fm_nsunit_");
+        assert!(config.global.root_path().to_string().starts_with(&base.display().to_string()));
+        std::fs::create_dir_all(ns.root_dir()).unwrap();
+        assert_eq!(ns.leftovers(), vec![ns.root_dir().to_path_buf()]);
+        assert_eq!(ns.remove_all().unwrap(), 1);
+        assert!(ns.leftovers().is_empty());
+        let _ = std::fs::remove_dir_all(&base);
+    }
+}

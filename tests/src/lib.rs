@@ -1,1 +1,371 @@
-//! Helpers shared by the multi-process integration tests: unique iceoryx2 namespaces, process fixtures and shared-memory leak checks.
+//! Helpers shared by the multi-process integration tests: unique iceoryx2 namespaces, a
+//! shared-memory leak check, a watchdog against hung tests, the runtime executables, a test
+//! model, and a process fixture that prints the command, stdout and stderr when a check fails.
+//!
+//! How the tests get the executables: integration tests can only name binaries of their own
+//! package (`CARGO_BIN_EXE_*`), and `formation-world`, `formation-agent` and `formation` live in
+//! other packages. [`binaries`] therefore runs `cargo build` for those three binaries once per
+//! test process, in the same profile as the test itself (a no-op when they are up to date), and
+//! takes them from `target/<profile>/`, the directory above the test executable. Set
+//! `FORMATION_TESTS_NO_BUILD=1` to skip the build (e.g. when the binaries were built beforehand).
+//!
+//! How the tests get a model: `FORMATION_TEST_MODEL` if set; else `tests/fixtures/tiny_policy.py`
+//! writes a contract-conforming ONNX model with seeded random weights, run with
+//! `FORMATION_PYTHON` or `<repo>/.venv/bin/python` (it needs the `onnx` package only).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use formation_proto::wire::{RunId, RunNamespace};
+
+/// The repository root (the parent of this crate's directory).
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_default()
+}
+
+/// A run id no other test (in this or a parallel test process) uses.
+pub fn unique_run_id(tag: &str) -> RunId {
+    static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let tag: String = tag.chars().filter(|c| c.is_ascii_alphanumeric()).take(6).collect();
+    let id = format!("t{tag}{}x{n}", std::process::id());
+    RunId::new(&id).unwrap_or_else(|e| panic!("test run id {id:?}: {e}"))
+}
+
+/// A scratch directory removed on drop.
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    /// A fresh directory under the system temp directory.
+    pub fn new(tag: &str) -> TempDir {
+        let id = unique_run_id(tag);
+        let dir = std::env::temp_dir().join(format!("formation-tests-{id}"));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("creating {}: {e}", dir.display()));
+        TempDir(dir)
+    }
+
+    /// Its path.
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Checks that a run leaves no iceoryx2 files behind: asserts nothing of the run exists when
+/// created, and [`LeakCheck::assert_clean`] asserts the same at the end. The check is exact
+/// because every file of a run carries the run's own prefix or lives under its own root.
+pub struct LeakCheck {
+    namespace: RunNamespace,
+}
+
+impl LeakCheck {
+    /// Starts the check for `run`.
+    pub fn new(run: &RunId) -> LeakCheck {
+        let namespace = RunNamespace::new(run);
+        let before = namespace.leftovers();
+        assert!(before.is_empty(), "run {run} has files before it started: {before:?}");
+        LeakCheck { namespace }
+    }
+
+    /// The run's namespace.
+    pub fn namespace(&self) -> &RunNamespace {
+        &self.namespace
+    }
+
+    /// What the run has left now.
+    pub fn leftovers(&self) -> Vec<PathBuf> {
+        self.namespace.leftovers()
+    }
+
+    /// Panics listing the run's files if any exist.
+    pub fn assert_clean(&self) {
+        let left = self.leftovers();
+        assert!(left.is_empty(), "run {} left files behind: {left:#?}", self.namespace.run());
+    }
+}
+
+impl Drop for LeakCheck {
+    fn drop(&mut self) {
+        // Never leak into other tests, even when this one failed.
+        let _ = self.namespace.remove_all();
+    }
+}
+
+/// Aborts the whole test process if the guarded test is still running after `limit`: a hung
+/// multi-process test must fail loudly instead of blocking the suite.
+pub struct Watchdog {
+    done: mpsc::Sender<()>,
+}
+
+impl Watchdog {
+    /// Arms the watchdog for test `name`.
+    pub fn arm(name: &'static str, limit: Duration) -> Watchdog {
+        let (done, rx) = mpsc::channel::<()>();
+        std::thread::spawn(move || {
+            if let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(limit) {
+                eprintln!("watchdog: test {name} still running after {limit:?}; aborting the test process");
+                std::process::abort();
+            }
+        });
+        Watchdog { done }
+    }
+}
+
+impl Drop for Watchdog {
+    fn drop(&mut self) {
+        let _ = self.done.send(());
+    }
+}
+
+/// Paths of the three executables the runtime tests start.
+#[derive(Debug, Clone)]
+pub struct Binaries {
+    /// `formation`.
+    pub cli: PathBuf,
+    /// `formation-world`.
+    pub world: PathBuf,
+    /// `formation-agent`.
+    pub agent: PathBuf,
+}
+
+/// The executables, built once per test process (see the module docs).
+pub fn binaries() -> &'static Binaries {
+    static BINARIES: OnceLock<Binaries> = OnceLock::new();
+    BINARIES.get_or_init(|| {
+        let exe = std::env::current_exe().expect("test executable path");
+        let deps = exe.parent().expect("test executable directory");
+        let profile_dir = deps.parent().expect("target/<profile> directory").to_path_buf();
+        if std::env::var_os("FORMATION_TESTS_NO_BUILD").is_none() {
+            build_binaries(&profile_dir);
+        }
+        let bin = |name: &str| {
+            let path = profile_dir.join(name);
+            assert!(
+                path.is_file(),
+                "{} is missing: build it with `cargo build -p formation-world -p formation-agent -p formation-cli`",
+                path.display()
+            );
+            path
+        };
+        Binaries { cli: bin("formation"), world: bin("formation-world"), agent: bin("formation-agent") }
+    })
+}
+
+fn build_binaries(profile_dir: &Path) {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let profile = profile_dir.file_name().and_then(|n| n.to_str()).unwrap_or("debug");
+    let mut command = Command::new(cargo);
+    command.current_dir(repo_root()).args([
+        "build",
+        "--bin",
+        "formation-world",
+        "--bin",
+        "formation-agent",
+        "--bin",
+        "formation",
+        "-p",
+        "formation-world",
+        "-p",
+        "formation-agent",
+        "-p",
+        "formation-cli",
+    ]);
+    match profile {
+        "debug" => {}
+        "release" => {
+            command.arg("--release");
+        }
+        other => {
+            command.args(["--profile", other]);
+        }
+    }
+    let output = command.output().expect("running cargo build for the runtime binaries");
+    assert!(
+        output.status.success(),
+        "building the runtime binaries failed:\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
+/// The ONNX model the runtime tests use (see the module docs), created once per test process.
+pub fn test_model() -> &'static Path {
+    static MODEL: OnceLock<PathBuf> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        if let Some(path) = std::env::var_os("FORMATION_TEST_MODEL") {
+            return PathBuf::from(path);
+        }
+        let exe = std::env::current_exe().expect("test executable path");
+        let target = exe.ancestors().nth(3).map(Path::to_path_buf).unwrap_or_else(std::env::temp_dir);
+        let dir = target.join("formation-test-models");
+        std::fs::create_dir_all(&dir).expect("creating the test model directory");
+        let path = dir.join("tiny-seed0.onnx");
+        write_tiny_model(&path, 0);
+        path
+    })
+}
+
+/// Writes a contract-conforming ONNX model with seeded random weights to `path`.
+pub fn write_tiny_model(path: &Path, seed: u64) {
+    let python = python();
+    let script = repo_root().join("tests/fixtures/tiny_policy.py");
+    let tmp = path.with_extension(format!("tmp-{}.onnx", std::process::id()));
+    let output = Command::new(&python)
+        .arg(&script)
+        .arg(&tmp)
+        .arg("--seed")
+        .arg(seed.to_string())
+        .output()
+        .unwrap_or_else(|e| panic!("running {} {}: {e}", python.display(), script.display()));
+    assert!(
+        output.status.success(),
+        "writing the test model failed ({}):\n{}\nset FORMATION_PYTHON to a python with the `onnx` \
+         package, or FORMATION_TEST_MODEL to an ONNX policy",
+        python.display(),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    std::fs::rename(&tmp, path).expect("moving the test model into place");
+}
+
+fn python() -> PathBuf {
+    if let Some(p) = std::env::var_os("FORMATION_PYTHON") {
+        return PathBuf::from(p);
+    }
+    let venv = repo_root().join(".venv/bin/python");
+    if venv.is_file() { venv } else { PathBuf::from("python3") }
+}
+
+/// The paper's case 1 shortened to `duration_s`, as a scenario file in `dir`.
+pub fn case1_scenario(dir: &Path, duration_s: f64) -> PathBuf {
+    let text = std::fs::read_to_string(repo_root().join("scenarios/case1.toml")).expect("reading case1.toml");
+    let text: String = text
+        .lines()
+        .map(|line| {
+            if line.trim_start().starts_with("duration_s") {
+                format!("duration_s = {duration_s:?}")
+            } else {
+                line.to_owned()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let path = dir.join("case1-short.toml");
+    std::fs::write(&path, text).expect("writing the scenario");
+    path
+}
+
+/// A finished child process, with what it printed.
+pub struct Finished {
+    /// The command line, for messages.
+    pub command: String,
+    /// Its output.
+    pub output: Output,
+    /// How long it ran.
+    pub elapsed: Duration,
+}
+
+impl Finished {
+    /// Its stdout as text.
+    pub fn stdout(&self) -> String {
+        String::from_utf8_lossy(&self.output.stdout).into_owned()
+    }
+
+    /// Its stderr as text.
+    pub fn stderr(&self) -> String {
+        String::from_utf8_lossy(&self.output.stderr).into_owned()
+    }
+
+    /// Everything needed to understand a failure.
+    pub fn describe(&self) -> String {
+        format!(
+            "command: {}\nstatus: {} after {:.2} s\n--- stdout ---\n{}\n--- stderr ---\n{}",
+            self.command,
+            self.output.status,
+            self.elapsed.as_secs_f64(),
+            self.stdout(),
+            self.stderr()
+        )
+    }
+
+    /// Panics with [`Finished::describe`] unless it exited with success.
+    pub fn assert_success(&self) -> &Self {
+        assert!(self.output.status.success(), "expected success\n{}", self.describe());
+        self
+    }
+
+    /// Panics with [`Finished::describe`] unless it failed with stderr containing `needle`.
+    pub fn assert_failure_mentioning(&self, needle: &str) -> &Self {
+        assert!(!self.output.status.success(), "expected failure\n{}", self.describe());
+        assert!(self.stderr().contains(needle), "stderr should mention {needle:?}\n{}", self.describe());
+        self
+    }
+}
+
+/// Runs `command` to completion (killing it after `limit`) and captures its output.
+pub fn run(mut command: Command, limit: Duration) -> Finished {
+    let text = format!("{command:?}");
+    command.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    let started = Instant::now();
+    let child = command.spawn().unwrap_or_else(|e| panic!("starting {text}: {e}"));
+    let id = child.id();
+    let timed_out = std::sync::Arc::new(AtomicBool::new(false));
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(child.wait_with_output());
+    });
+    let output = match rx.recv_timeout(limit) {
+        Ok(result) => result.unwrap_or_else(|e| panic!("waiting for {text}: {e}")),
+        Err(_) => {
+            timed_out.store(true, Ordering::Relaxed);
+            let _ = Command::new("kill").arg("-KILL").arg(id.to_string()).status();
+            let output = rx.recv().expect("reaping the killed child").expect("child output");
+            panic!(
+                "{}",
+                Finished { command: text, output, elapsed: started.elapsed() }.describe()
+                    + &format!("\n(killed after {limit:?})")
+            );
+        }
+    };
+    Finished { command: text, output, elapsed: started.elapsed() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_ids_are_unique_and_valid() {
+        let a = unique_run_id("same");
+        let b = unique_run_id("same");
+        assert_ne!(a, b);
+        assert!(RunId::new(a.as_str()).is_ok());
+    }
+
+    #[test]
+    fn leak_check_sees_and_removes_a_runs_files() {
+        let run = unique_run_id("leak");
+        let check = LeakCheck::new(&run);
+        std::fs::create_dir_all(check.namespace().root_dir()).unwrap();
+        assert_eq!(check.leftovers().len(), 1);
+        drop(check);
+        assert!(RunNamespace::new(&run).leftovers().is_empty());
+    }
+
+    #[test]
+    fn run_captures_output_and_status() {
+        let mut command = Command::new("sh");
+        command.args(["-c", "echo out; echo err >&2; exit 3"]);
+        let finished = run(command, Duration::from_secs(10));
+        assert_eq!(finished.output.status.code(), Some(3));
+        assert_eq!(finished.stdout(), "out\n");
+        assert!(finished.describe().contains("err"));
+    }
+}

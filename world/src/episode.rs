@@ -32,7 +32,11 @@ pub struct Observation<'a> {
 pub trait Controller {
     /// Writes one command per robot into `out` (len n_robots, pre-filled with [`WheelCmd::BRAKE`]).
     /// Decentralised controllers must read only `scans[i]` and `poses[i].theta` for robot i.
-    fn commands(&mut self, obs: &Observation<'_>, out: &mut [WheelCmd]) -> Result<(), ControllerError>;
+    fn commands(
+        &mut self,
+        obs: &Observation<'_>,
+        out: &mut [WheelCmd],
+    ) -> Result<(), ControllerError>;
 }
 
 /// A controller could not produce commands; the episode stops with this error.
@@ -46,7 +50,9 @@ pub struct ControllerError {
 impl ControllerError {
     /// An error with this message.
     pub fn new(message: impl Into<String>) -> ControllerError {
-        ControllerError { message: message.into() }
+        ControllerError {
+            message: message.into(),
+        }
     }
 }
 
@@ -105,7 +111,7 @@ pub fn run_episode(
         commands: Vec::with_capacity(capacity),
         collisions: Vec::new(),
     };
-    let mut record_state = |trajectory: &mut Trajectory, time: f64, poses: &[Pose]| {
+    let record_state = |trajectory: &mut Trajectory, time: f64, poses: &[Pose]| {
         trajectory.times.push(time);
         trajectory.phi_star.push(spec.heading.phi_star(time));
         trajectory.poses.push(poses.to_vec());
@@ -119,16 +125,185 @@ pub fn run_episode(
         let time = world.time();
         world.scan_all(&mut scans);
         commands.fill(WheelCmd::BRAKE);
-        let observation =
-            Observation { tick, time, goal: spec.goal_at(time), poses: world.poses(), scans: &scans };
+        let observation = Observation {
+            tick,
+            time,
+            goal: spec.goal_at(time),
+            poses: world.poses(),
+            scans: &scans,
+        };
         controller.commands(&observation, &mut commands)?;
         on_tick(&observation, &commands);
 
         let report = world.step(&commands);
         trajectory.commands.push(report.applied);
         let sample = world.tick();
-        trajectory.collisions.extend(report.collisions.into_iter().map(|(i, j)| (sample, i, j)));
+        trajectory
+            .collisions
+            .extend(report.collisions.into_iter().map(|(i, j)| (sample, i, j)));
         record_state(&mut trajectory, world.time(), world.poses());
     }
     Ok(trajectory)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::robot::integrate;
+    use crate::scenario::Scenario;
+
+    fn short_spec(noise_std: f64) -> RunSpec {
+        let text = format!(
+            r#"
+name = "episode-test"
+robots = 3
+duration_s = 1.0
+seed = 11
+[goal]
+v_star = 0.5
+d_star = 1.5
+[heading]
+schedule = "ramp"
+omega = 0.3
+[lidar]
+beams = 90
+noise_std = {noise_std}
+"#
+        );
+        Scenario::from_toml_str(&text, "episode-test")
+            .unwrap()
+            .run_spec(11, 0)
+    }
+
+    /// Drives every robot with the same wheel speeds; optionally fails at one tick.
+    struct ConstantWheels {
+        cmd: WheelCmd,
+        fail_at: Option<u64>,
+    }
+
+    impl Controller for ConstantWheels {
+        fn commands(
+            &mut self,
+            obs: &Observation<'_>,
+            out: &mut [WheelCmd],
+        ) -> Result<(), ControllerError> {
+            if self.fail_at == Some(obs.tick) {
+                return Err(ControllerError::new(format!("refusing tick {}", obs.tick)));
+            }
+            out.fill(self.cmd);
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn episode_records_every_tick_and_matches_manual_integration() {
+        let spec = short_spec(0.0);
+        let cmd = WheelCmd {
+            left: 0.3,
+            right: 0.5,
+        };
+        let mut controller = ConstantWheels { cmd, fail_at: None };
+        let mut seen_ticks = Vec::new();
+        let traj = run_episode(&spec, &mut controller, &mut |obs, cmds| {
+            assert_eq!(obs.goal, spec.goal_at(obs.time));
+            assert_eq!(obs.scans.len(), 3);
+            assert!(obs.scans.iter().all(|scan| scan.len() == 90));
+            assert_eq!(cmds, [cmd; 3]);
+            seen_ticks.push(obs.tick);
+        })
+        .unwrap();
+
+        let ticks = spec.ticks();
+        assert_eq!(ticks, 20);
+        assert_eq!(seen_ticks, (0..ticks).collect::<Vec<_>>());
+        assert_eq!(traj.times.len(), 21);
+        assert_eq!(traj.phi_star.len(), 21);
+        assert_eq!(traj.poses.len(), 21);
+        assert_eq!(traj.commands, vec![vec![cmd; 3]; 20]);
+        assert_eq!(traj.poses[0], spec.initial);
+        assert_eq!(traj.edges, spec.edges);
+        for (k, (&t, &phi)) in traj.times.iter().zip(&traj.phi_star).enumerate() {
+            assert_eq!(t, k as f64 * spec.world.dt);
+            assert_eq!(phi, spec.heading.phi_star(t));
+        }
+
+        for (robot, start) in spec.initial.iter().enumerate() {
+            let manual = (0..ticks).fold(*start, |pose, _| {
+                integrate(pose, cmd, &spec.world.robot, spec.world.dt)
+            });
+            let recorded = traj.poses[ticks as usize][robot];
+            assert!(
+                (manual.x - recorded.x).abs() < 1e-12
+                    && (manual.y - recorded.y).abs() < 1e-12
+                    && (manual.theta - recorded.theta).abs() < 1e-12,
+                "robot {robot}: manual {manual:?} recorded {recorded:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn non_finite_commands_are_recorded_as_the_brake_the_world_applied() {
+        let spec = short_spec(0.0);
+        let mut controller = ConstantWheels {
+            cmd: WheelCmd {
+                left: f64::NAN,
+                right: 0.2,
+            },
+            fail_at: None,
+        };
+        let traj = run_episode(&spec, &mut controller, &mut |_, _| {}).unwrap();
+        assert!(
+            traj.commands
+                .iter()
+                .flatten()
+                .all(|c| *c == WheelCmd::BRAKE)
+        );
+        assert_eq!(traj.poses.last(), traj.poses.first());
+    }
+
+    #[test]
+    fn a_controller_error_stops_the_episode() {
+        let spec = short_spec(0.0);
+        let mut controller = ConstantWheels {
+            cmd: WheelCmd::BRAKE,
+            fail_at: Some(3),
+        };
+        let mut calls = 0;
+        let error = run_episode(&spec, &mut controller, &mut |_, _| calls += 1).unwrap_err();
+        assert_eq!(error.to_string(), "refusing tick 3");
+        assert_eq!(calls, 3);
+    }
+
+    #[test]
+    fn episodes_replay_bit_for_bit_with_sensor_noise() {
+        let spec = short_spec(0.05);
+        let mut scans_a = Vec::new();
+        let mut scans_b = Vec::new();
+        let cmd = WheelCmd {
+            left: 0.4,
+            right: 0.1,
+        };
+        let a = run_episode(
+            &spec,
+            &mut ConstantWheels { cmd, fail_at: None },
+            &mut |obs, _| scans_a.push(obs.scans.to_vec()),
+        )
+        .unwrap();
+        let b = run_episode(
+            &spec,
+            &mut ConstantWheels { cmd, fail_at: None },
+            &mut |obs, _| scans_b.push(obs.scans.to_vec()),
+        )
+        .unwrap();
+        assert_eq!(a, b);
+        let bits = |scans: &Vec<Vec<Vec<f32>>>| -> Vec<u32> {
+            scans
+                .iter()
+                .flatten()
+                .flatten()
+                .map(|r| r.to_bits())
+                .collect()
+        };
+        assert_eq!(bits(&scans_a), bits(&scans_b));
+    }
 }

@@ -41,7 +41,10 @@ pub struct MetricsConfig {
 
 impl Default for MetricsConfig {
     fn default() -> Self {
-        MetricsConfig { window_s: 20.0, tolerances: (0.05, 0.10) }
+        MetricsConfig {
+            window_s: 20.0,
+            tolerances: (0.05, 0.10),
+        }
     }
 }
 
@@ -78,7 +81,9 @@ pub fn run_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
             traj.edges
                 .iter()
                 .map(|&(i, j)| match (poses.get(i), poses.get(j)) {
-                    (Some(a), Some(b)) => ((a.x - b.x).hypot(a.y - b.y) - traj.d_star).abs() / traj.d_star,
+                    (Some(a), Some(b)) => {
+                        ((a.x - b.x).hypot(a.y - b.y) - traj.d_star).abs() / traj.d_star
+                    }
                     _ => f64::NAN,
                 })
                 .collect()
@@ -88,20 +93,29 @@ pub fn run_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
     let edge_window_means: Vec<f64> = (0..traj.edges.len())
         .map(|e| mean(errors[window.clone()].iter().map(|row| row[e])))
         .collect();
-    let passes = |tolerance: f64| edge_window_means.iter().all(|&m| m < tolerance) && !window.is_empty();
+    let passes =
+        |tolerance: f64| edge_window_means.iter().all(|&m| m < tolerance) && !window.is_empty();
     let (rel_formation_error, max_edge_window_error) = if traj.edges.is_empty() {
         (0.0, 0.0)
     } else {
-        (mean(edge_window_means.iter().copied()), max_propagating_nan(edge_window_means.iter().copied()))
+        (
+            mean(edge_window_means.iter().copied()),
+            max_propagating_nan(edge_window_means.iter().copied()),
+        )
     };
 
-    let max_error_per_sample: Vec<f64> =
-        errors.iter().map(|row| max_propagating_nan(row.iter().copied())).collect();
-    let convergence = |tolerance: f64| convergence_time(&traj.times[..samples], &max_error_per_sample, tolerance);
+    let max_error_per_sample: Vec<f64> = errors
+        .iter()
+        .map(|row| max_propagating_nan(row.iter().copied()))
+        .collect();
+    let convergence =
+        |tolerance: f64| convergence_time(&traj.times[..samples], &max_error_per_sample, tolerance);
 
     let orientation_error_rad = mean(window.clone().flat_map(|k| {
         let phi_star = traj.phi_star.get(k).copied().unwrap_or(f64::NAN);
-        traj.poses[k].iter().map(move |pose| wrap_angle(pose.theta - phi_star).abs())
+        traj.poses[k]
+            .iter()
+            .map(move |pose| wrap_angle(pose.theta - phi_star).abs())
     }));
 
     let (tol_5, tol_10) = cfg.tolerances;
@@ -146,12 +160,22 @@ fn collision_events(collisions: &[(u64, usize, usize)]) -> usize {
 /// Arithmetic mean; NaN for no values.
 fn mean(values: impl Iterator<Item = f64>) -> f64 {
     let (sum, count) = values.fold((0.0, 0_usize), |(sum, count), v| (sum + v, count + 1));
-    if count == 0 { f64::NAN } else { sum / count as f64 }
+    if count == 0 {
+        f64::NAN
+    } else {
+        sum / count as f64
+    }
 }
 
 /// Maximum that returns NaN if any value is NaN (and for no values, `-inf`).
 fn max_propagating_nan(values: impl Iterator<Item = f64>) -> f64 {
-    values.fold(f64::NEG_INFINITY, |acc, v| if acc.is_nan() || v.is_nan() { f64::NAN } else { acc.max(v) })
+    values.fold(f64::NEG_INFINITY, |acc, v| {
+        if acc.is_nan() || v.is_nan() {
+            f64::NAN
+        } else {
+            acc.max(v)
+        }
+    })
 }
 
 /// Order statistics of a sample.
@@ -230,7 +254,13 @@ pub struct Summary {
 
 /// Aggregates runs: success rates over all runs, Fig. 9 statistics over the runs that succeed at 10 %.
 pub fn summarize(runs: &[RunMetrics]) -> Summary {
-    let fraction = |count: usize| if runs.is_empty() { 0.0 } else { count as f64 / runs.len() as f64 };
+    let fraction = |count: usize| {
+        if runs.is_empty() {
+            0.0
+        } else {
+            count as f64 / runs.len() as f64
+        }
+    };
     let successful: Vec<&RunMetrics> = runs.iter().filter(|r| r.success_10).collect();
     let convergence_s = Quantiles::of(successful.iter().filter_map(|r| r.convergence_s_10));
     let rel_formation_error = Quantiles::of(successful.iter().map(|r| r.rel_formation_error));
@@ -246,5 +276,261 @@ pub fn summarize(runs: &[RunMetrics]) -> Summary {
         convergence_s,
         rel_formation_error,
         orientation_error_rad,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_proto::Pose;
+
+    const DT: f64 = 0.05;
+    const D_STAR: f64 = 2.0;
+    const PHI_STAR: f64 = 3.76;
+
+    /// Three robots on an equilateral triangle of side `side(t)`, headings `PHI_STAR + offsets`, sampled
+    /// every `DT` for `duration_s`.
+    fn triangle_run(
+        duration_s: f64,
+        side: impl Fn(usize, f64) -> f64,
+        offsets: [f64; 3],
+    ) -> Trajectory {
+        let ticks = (duration_s / DT).round() as usize;
+        let times: Vec<f64> = (0..=ticks).map(|k| k as f64 * DT).collect();
+        let poses = times
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| {
+                let s = side(k, t);
+                let corners = [(0.0, 0.0), (s, 0.0), (s / 2.0, s * 3f64.sqrt() / 2.0)];
+                corners
+                    .iter()
+                    .zip(offsets)
+                    .map(|(&(x, y), offset)| Pose {
+                        x: x + 5.0,
+                        y: y - 1.0,
+                        theta: wrap_angle(PHI_STAR + offset),
+                    })
+                    .collect()
+            })
+            .collect();
+        Trajectory {
+            dt: DT,
+            d_star: D_STAR,
+            v_star: 0.7,
+            edges: vec![(0, 1), (0, 2), (1, 2)],
+            phi_star: vec![PHI_STAR; times.len()],
+            times,
+            poses,
+            commands: vec![vec![formation_proto::WheelCmd::BRAKE; 3]; ticks],
+            collisions: Vec::new(),
+        }
+    }
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() < 1e-9
+    }
+
+    #[test]
+    fn a_step_onto_the_formation_converges_at_the_step() {
+        let traj = triangle_run(
+            60.0,
+            |_, t| if t < 4.0 - 1e-9 { 1.5 } else { D_STAR },
+            [0.0; 3],
+        );
+        let m = run_metrics(&traj, &MetricsConfig::default());
+        assert!(m.success_5 && m.success_10);
+        assert_eq!(m.convergence_s_5, Some(traj.times[80]));
+        assert!(close(m.convergence_s_10.unwrap(), 4.0));
+        assert!(m.rel_formation_error.abs() < 1e-12 && m.max_edge_window_error.abs() < 1e-12);
+        assert!(m.orientation_error_rad < 1e-12);
+        assert_eq!(m.collisions, 0);
+    }
+
+    #[test]
+    fn a_linear_approach_converges_where_it_crosses_each_tolerance() {
+        // e(t) = 0.3 (1 - t/4) until t = 4: below 10 % after t = 8/3 s, below 5 % after t = 10/3 s.
+        let traj = triangle_run(
+            30.0,
+            |_, t| if t < 4.0 { 1.4 + 0.15 * t } else { D_STAR },
+            [0.0; 3],
+        );
+        let m = run_metrics(&traj, &MetricsConfig::default());
+        assert!(close(m.convergence_s_10.unwrap(), 2.7), "{m:?}");
+        assert!(close(m.convergence_s_5.unwrap(), 3.35), "{m:?}");
+    }
+
+    #[test]
+    fn a_steady_seven_percent_error_fails_five_and_passes_ten() {
+        let traj = triangle_run(
+            60.0,
+            |k, _| {
+                if k % 2 == 0 {
+                    1.07 * D_STAR
+                } else {
+                    0.93 * D_STAR
+                }
+            },
+            [0.0; 3],
+        );
+        let m = run_metrics(&traj, &MetricsConfig::default());
+        assert!(!m.success_5 && m.success_10, "{m:?}");
+        assert!(close(m.rel_formation_error, 0.07) && close(m.max_edge_window_error, 0.07));
+        assert_eq!(m.convergence_s_5, None);
+        assert_eq!(m.convergence_s_10, Some(0.0));
+    }
+
+    #[test]
+    fn only_the_final_window_decides_success() {
+        // 50 % error until t = 40 s, exact afterwards: the last 20 s are perfect.
+        let late = triangle_run(
+            60.0,
+            |k, _| if k < 800 { 1.5 * D_STAR } else { D_STAR },
+            [0.0; 3],
+        );
+        let m = run_metrics(&late, &MetricsConfig::default());
+        assert!(m.success_5 && close(m.convergence_s_5.unwrap(), 40.0));
+        // The same with the error lasting one more sample: that sample (t = 40 s) is inside the window.
+        let one_more = triangle_run(
+            60.0,
+            |k, _| if k <= 800 { 1.5 * D_STAR } else { D_STAR },
+            [0.0; 3],
+        );
+        let m = run_metrics(&one_more, &MetricsConfig::default());
+        assert!(close(m.rel_formation_error, 0.5 / 401.0), "{m:?}");
+        // A 30 s window reaches back into the bad part.
+        let m = run_metrics(
+            &late,
+            &MetricsConfig {
+                window_s: 30.0,
+                ..MetricsConfig::default()
+            },
+        );
+        assert!(!m.success_10 && close(m.rel_formation_error, 0.5 * 200.0 / 601.0));
+    }
+
+    #[test]
+    fn window_start_includes_the_boundary_sample_and_clamps_to_the_run() {
+        let times: Vec<f64> = (0..=1200).map(|k| k as f64 * DT).collect();
+        assert_eq!(window_start(&times, DT, 20.0), 800);
+        assert_eq!(window_start(&times, DT, 100.0), 0);
+        assert_eq!(window_start(&times, DT, 0.0), 1200);
+        assert_eq!(window_start(&[], DT, 20.0), 0);
+    }
+
+    #[test]
+    fn orientation_error_is_the_wrapped_mean_absolute_heading_error() {
+        let traj = triangle_run(60.0, |_, _| D_STAR, [0.1, -0.2, 2.0 * std::f64::consts::PI]);
+        let m = run_metrics(&traj, &MetricsConfig::default());
+        assert!(
+            close(m.orientation_error_rad, 0.1),
+            "{}",
+            m.orientation_error_rad
+        );
+    }
+
+    #[test]
+    fn collision_events_count_onsets_not_overlapping_samples() {
+        let overlaps = [(5, 0, 1), (6, 0, 1), (7, 0, 1), (10, 0, 1), (6, 1, 2)];
+        assert_eq!(collision_events(&overlaps), 3);
+        let mut traj = triangle_run(10.0, |_, _| D_STAR, [0.0; 3]);
+        traj.collisions = overlaps.to_vec();
+        assert_eq!(run_metrics(&traj, &MetricsConfig::default()).collisions, 3);
+    }
+
+    #[test]
+    fn malformed_or_edgeless_trajectories_do_not_panic() {
+        let mut bad_edge = triangle_run(10.0, |_, _| D_STAR, [0.0; 3]);
+        bad_edge.edges.push((0, 5));
+        let m = run_metrics(&bad_edge, &MetricsConfig::default());
+        assert!(!m.success_10 && m.convergence_s_10.is_none() && m.rel_formation_error.is_nan());
+
+        let mut no_edges = triangle_run(10.0, |_, _| 1.0, [0.0; 3]);
+        no_edges.edges.clear();
+        let m = run_metrics(&no_edges, &MetricsConfig::default());
+        assert!(m.success_5 && m.rel_formation_error == 0.0 && m.convergence_s_5 == Some(0.0));
+
+        let mut empty = triangle_run(10.0, |_, _| D_STAR, [0.0; 3]);
+        empty.times.clear();
+        empty.poses.clear();
+        let m = run_metrics(&empty, &MetricsConfig::default());
+        assert!(!m.success_10 && m.convergence_s_10.is_none());
+    }
+
+    #[test]
+    fn quantiles_interpolate_linearly_between_order_statistics() {
+        let q = Quantiles::of([4.0, 1.0, 3.0, 2.0]).unwrap();
+        assert_eq!(
+            (q.min, q.q1, q.median, q.q3, q.max, q.count),
+            (1.0, 1.75, 2.5, 3.25, 4.0, 4)
+        );
+        let q = Quantiles::of([50.0, 10.0, 40.0, 20.0, 30.0, f64::NAN]).unwrap();
+        assert_eq!((q.q1, q.median, q.q3, q.count), (20.0, 30.0, 40.0, 5));
+        let q = Quantiles::of([7.0]).unwrap();
+        assert_eq!(
+            (q.min, q.q1, q.median, q.q3, q.max),
+            (7.0, 7.0, 7.0, 7.0, 7.0)
+        );
+        assert!(Quantiles::of([]).is_none());
+    }
+
+    fn run(
+        success_5: bool,
+        success_10: bool,
+        convergence: Option<f64>,
+        error: f64,
+        collisions: usize,
+    ) -> RunMetrics {
+        RunMetrics {
+            success_5,
+            success_10,
+            convergence_s_5: None,
+            convergence_s_10: convergence,
+            rel_formation_error: error,
+            max_edge_window_error: error,
+            orientation_error_rad: error / 10.0,
+            collisions,
+        }
+    }
+
+    #[test]
+    fn summarize_rates_over_all_runs_and_statistics_over_runs_successful_at_ten_percent() {
+        let runs = [
+            run(true, true, Some(4.0), 0.01, 0),
+            run(false, true, Some(1.0), 0.04, 2),
+            run(true, true, Some(3.0), 0.02, 0),
+            run(false, true, Some(2.0), 0.03, 0),
+            run(false, true, None, 0.09, 0),
+            run(false, false, Some(0.5), 0.50, 1),
+        ];
+        let s = summarize(&runs);
+        assert_eq!(s.runs, 6);
+        assert!(close(s.success_rate_5, 2.0 / 6.0) && close(s.success_rate_10, 5.0 / 6.0));
+        assert_eq!(s.collisions, 2);
+        let convergence = s.convergence_s.unwrap();
+        assert_eq!(
+            (
+                convergence.count,
+                convergence.q1,
+                convergence.median,
+                convergence.q3
+            ),
+            (4, 1.75, 2.5, 3.25)
+        );
+        assert_eq!(s.median_convergence_s, Some(2.5));
+        let error = s.rel_formation_error.unwrap();
+        assert_eq!((error.count, error.median, error.max), (5, 0.03, 0.09));
+        assert_eq!(s.median_rel_formation_error, Some(0.03));
+        assert!(close(s.median_orientation_error_rad.unwrap(), 0.003));
+
+        let empty = summarize(&[]);
+        assert_eq!(
+            (
+                empty.runs,
+                empty.success_rate_10,
+                empty.median_convergence_s
+            ),
+            (0, 0.0, None)
+        );
     }
 }

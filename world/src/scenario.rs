@@ -101,7 +101,7 @@ pub enum ScenarioError {
         source: std::io::Error,
     },
     /// The text is not valid TOML or does not fit the schema (unknown or missing key, wrong type).
-    #[error("{origin}: {source}")]
+    #[error("{origin}: {}", source.to_string().trim_end())]
     Parse {
         /// Where the text came from (usually the file path).
         origin: String,
@@ -156,7 +156,11 @@ impl HeadingSchedule {
         match *self {
             HeadingSchedule::Constant { phi } => phi,
             HeadingSchedule::Ramp { omega, phi0 } => phi0 + omega * t,
-            HeadingSchedule::Sine { omega, amplitude, phi0 } => phi0 + amplitude * (omega * t).sin(),
+            HeadingSchedule::Sine {
+                omega,
+                amplitude,
+                phi0,
+            } => phi0 + amplitude * (omega * t).sin(),
         }
     }
 }
@@ -193,7 +197,10 @@ pub struct InitialConditions {
 
 impl Default for InitialConditions {
     fn default() -> Self {
-        InitialConditions { disc_radius: DEFAULT_DISC_RADIUS, min_spacing: DEFAULT_MIN_SPACING }
+        InitialConditions {
+            disc_radius: DEFAULT_DISC_RADIUS,
+            min_spacing: DEFAULT_MIN_SPACING,
+        }
     }
 }
 
@@ -209,6 +216,8 @@ pub struct AgentModel {
 }
 
 /// A validated scenario. Build it with [`Scenario::from_path`] or [`Scenario::from_toml_str`].
+///
+/// It serializes as a record of its resolved settings (for run logs and reports), not as scenario TOML.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Scenario {
     name: String,
@@ -260,7 +269,11 @@ impl RunSpec {
 
     /// The goal every robot is given at time `t` [s].
     pub fn goal_at(&self, t: f64) -> Goal {
-        Goal { phi_star: self.heading.phi_star(t), d_star: self.d_star, v_star: self.v_star }
+        Goal {
+            phi_star: self.heading.phi_star(t),
+            d_star: self.d_star,
+            v_star: self.v_star,
+        }
     }
 
     /// A fresh world in this run's initial state.
@@ -273,8 +286,10 @@ impl Scenario {
     /// Reads and validates the scenario file at `path`. Relative `[[agent]].model` paths are resolved
     /// against the file's directory.
     pub fn from_path(path: &Path) -> Result<Scenario, ScenarioError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ScenarioError::Read { path: path.to_path_buf(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
         let mut scenario = Scenario::from_toml_str(&text, &path.display().to_string())?;
         let base = path.parent().unwrap_or_else(|| Path::new(""));
         for agent in &mut scenario.agents {
@@ -287,8 +302,10 @@ impl Scenario {
 
     /// Parses and validates scenario text; `origin` names its source in error messages.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError> {
-        let raw: ScenarioToml = toml::from_str(text)
-            .map_err(|source| ScenarioError::Parse { origin: origin.to_string(), source })?;
+        let raw: ScenarioToml = toml::from_str(text).map_err(|source| ScenarioError::Parse {
+            origin: origin.to_string(),
+            source,
+        })?;
         raw.validate(&Checker { origin })
     }
 
@@ -357,13 +374,19 @@ impl Scenario {
         };
         let heading = match self.heading {
             HeadingPlan::Fixed(schedule) => schedule,
-            HeadingPlan::RandomConstant => HeadingSchedule::Constant { phi: rng.random_range(0.0..TAU) },
+            HeadingPlan::RandomConstant => HeadingSchedule::Constant {
+                phi: rng.random_range(0.0..TAU),
+            },
         };
         let positions = place_robots(&mut rng, self.n_robots, &self.init);
         // All positions are drawn before any heading.
         let initial = positions
             .into_iter()
-            .map(|(x, y)| Pose { x, y, theta: wrap_angle(rng.random_range(0.0..TAU)) })
+            .map(|(x, y)| Pose {
+                x,
+                y,
+                theta: wrap_angle(rng.random_range(0.0..TAU)),
+            })
             .collect();
         RunSpec {
             index: run_index,
@@ -383,7 +406,9 @@ impl Scenario {
 
 /// All pairs `(i, j)` with `i < j < n`, in lexicographic order.
 pub fn all_pairs(n: usize) -> Vec<(usize, usize)> {
-    (0..n).flat_map(|i| (i + 1..n).map(move |j| (i, j))).collect()
+    (0..n)
+        .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+        .collect()
 }
 
 /// Domain-separation constants so the run seed and the noise seed are independent streams.
@@ -551,7 +576,11 @@ struct LidarToml {
 impl Default for LidarToml {
     fn default() -> Self {
         let spec = LidarSpec::default();
-        LidarToml { beams: spec.beams, max_range: spec.max_range, noise_std: spec.noise_std }
+        LidarToml {
+            beams: spec.beams,
+            max_range: spec.max_range,
+            noise_std: spec.noise_std,
+        }
     }
 }
 
@@ -604,7 +633,10 @@ impl ScenarioToml {
         if self.robots < 2 {
             return Err(check.invalid(
                 "robots",
-                format_args!("must be >= 2, a formation needs at least one pair (got {})", self.robots),
+                format_args!(
+                    "must be >= 2, a formation needs at least one pair (got {})",
+                    self.robots
+                ),
             ));
         }
         let duration_s = check.positive("duration_s", self.duration_s)?;
@@ -612,7 +644,18 @@ impl ScenarioToml {
         if dt > duration_s {
             return Err(check.invalid(
                 "dt",
-                format_args!("must be <= duration_s ({duration_s}) so a run has at least one tick (got {dt})"),
+                format_args!(
+                    "must be <= duration_s ({duration_s}) so a run has at least one tick (got {dt})"
+                ),
+            ));
+        }
+        let steps = duration_s / dt;
+        if (steps - steps.round()).abs() > 1e-6 {
+            return Err(check.invalid(
+                "dt",
+                format_args!(
+                    "must divide duration_s ({duration_s}) into whole steps (got {dt}: {steps:.3} steps)"
+                ),
             ));
         }
         if self.runs == 0 {
@@ -714,20 +757,34 @@ fn validate_robot(check: &Checker<'_>, robot: RobotParams) -> Result<RobotParams
     Ok(robot)
 }
 
-fn validate_heading(check: &Checker<'_>, heading: &HeadingToml) -> Result<HeadingPlan, ScenarioError> {
+fn validate_heading(
+    check: &Checker<'_>,
+    heading: &HeadingToml,
+) -> Result<HeadingPlan, ScenarioError> {
     let kind = heading.schedule;
     let params = [
         ("phi", heading.phi, kind == ScheduleKind::Constant),
-        ("omega", heading.omega, matches!(kind, ScheduleKind::Ramp | ScheduleKind::Sine)),
+        (
+            "omega",
+            heading.omega,
+            matches!(kind, ScheduleKind::Ramp | ScheduleKind::Sine),
+        ),
         ("amplitude", heading.amplitude, kind == ScheduleKind::Sine),
-        ("phi0", heading.phi0, matches!(kind, ScheduleKind::Ramp | ScheduleKind::Sine)),
+        (
+            "phi0",
+            heading.phi0,
+            matches!(kind, ScheduleKind::Ramp | ScheduleKind::Sine),
+        ),
     ];
     for (name, value, used) in params {
         match value {
             Some(_) if !used => {
                 return Err(check.invalid(
                     format_args!("heading.{name}"),
-                    format_args!("is not a parameter of schedule \"{}\"; remove it", kind.as_str()),
+                    format_args!(
+                        "is not a parameter of schedule \"{}\"; remove it",
+                        kind.as_str()
+                    ),
                 ));
             }
             Some(v) => {
@@ -745,9 +802,9 @@ fn validate_heading(check: &Checker<'_>, heading: &HeadingToml) -> Result<Headin
         })
     };
     Ok(match kind {
-        ScheduleKind::Constant => {
-            HeadingPlan::Fixed(HeadingSchedule::Constant { phi: required("phi", heading.phi)? })
-        }
+        ScheduleKind::Constant => HeadingPlan::Fixed(HeadingSchedule::Constant {
+            phi: required("phi", heading.phi)?,
+        }),
         ScheduleKind::Random => HeadingPlan::RandomConstant,
         ScheduleKind::Ramp => HeadingPlan::Fixed(HeadingSchedule::Ramp {
             omega: required("omega", heading.omega)?,
@@ -789,5 +846,477 @@ fn validate_init(
             ),
         ));
     }
-    Ok(InitialConditions { disc_radius, min_spacing })
+    Ok(InitialConditions {
+        disc_radius,
+        min_spacing,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SHIPPED: [(&str, &str); 5] = [
+        ("case1", include_str!("../../scenarios/case1.toml")),
+        ("case2", include_str!("../../scenarios/case2.toml")),
+        ("case3", include_str!("../../scenarios/case3.toml")),
+        ("table1", include_str!("../../scenarios/table1.toml")),
+        ("collect", include_str!("../../scenarios/collect.toml")),
+    ];
+
+    const MINIMAL: &str = r#"
+name = "t"
+robots = 3
+duration_s = 10.0
+seed = 5
+[goal]
+v_star = 0.7
+d_star = 2.0
+[heading]
+schedule = "constant"
+phi = 1.0
+"#;
+
+    fn parse(text: &str) -> Result<Scenario, ScenarioError> {
+        Scenario::from_toml_str(text, "scenarios/x.toml")
+    }
+
+    fn error_text(text: &str) -> String {
+        match parse(text) {
+            Ok(scenario) => panic!("expected an error, parsed {scenario:?}"),
+            Err(error) => error.to_string(),
+        }
+    }
+
+    /// `MINIMAL` with `old` replaced by `new` (asserting `old` is there).
+    fn edited(old: &str, new: &str) -> String {
+        assert!(MINIMAL.contains(old), "{old:?} not in the minimal scenario");
+        MINIMAL.replacen(old, new, 1)
+    }
+
+    fn invalid_field(text: &str) -> (String, String) {
+        match parse(text) {
+            Err(ScenarioError::Invalid {
+                origin,
+                field,
+                problem,
+            }) => {
+                assert_eq!(origin, "scenarios/x.toml");
+                (field, problem)
+            }
+            other => panic!("expected ScenarioError::Invalid, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn every_shipped_scenario_parses_with_the_papers_settings() {
+        for (name, text) in SHIPPED {
+            let scenario = Scenario::from_toml_str(text, name).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(scenario.name(), name);
+            assert_eq!(scenario.n_robots(), 3);
+            assert_eq!(scenario.v_star(), 0.7);
+            assert_eq!(scenario.world_config().dt, DEFAULT_DT);
+            assert_eq!(scenario.world_config().lidar, LidarSpec::default());
+            assert_eq!(*scenario.initial_conditions(), InitialConditions::default());
+        }
+        let case1 = parse(SHIPPED[0].1).unwrap();
+        assert_eq!(
+            *case1.heading(),
+            HeadingPlan::Fixed(HeadingSchedule::Constant { phi: 3.76 })
+        );
+        assert_eq!(*case1.d_star(), DStarPlan::Fixed(2.0));
+        assert_eq!((case1.seed(), case1.duration_s()), (1, 60.0));
+        let case2 = parse(SHIPPED[1].1).unwrap();
+        assert_eq!(
+            *case2.heading(),
+            HeadingPlan::Fixed(HeadingSchedule::Ramp {
+                omega: 0.1,
+                phi0: 0.0
+            })
+        );
+        assert_eq!(*case2.d_star(), DStarPlan::Fixed(1.0));
+        let case3 = parse(SHIPPED[2].1).unwrap();
+        assert_eq!(
+            *case3.heading(),
+            HeadingPlan::Fixed(HeadingSchedule::Sine {
+                omega: 0.2,
+                amplitude: 1.0,
+                phi0: 0.0
+            })
+        );
+        assert_eq!(*case3.d_star(), DStarPlan::Fixed(1.5));
+        let table1 = parse(SHIPPED[3].1).unwrap();
+        assert_eq!(
+            (table1.runs(), table1.seed(), table1.duration_s()),
+            (100, 7, 60.0)
+        );
+        assert_eq!(*table1.heading(), HeadingPlan::RandomConstant);
+        assert_eq!(*table1.d_star(), DStarPlan::Choices(vec![1.0, 1.5, 2.0]));
+        let collect = parse(SHIPPED[4].1).unwrap();
+        assert_eq!(*collect.heading(), HeadingPlan::RandomConstant);
+        assert_eq!(collect.d_star(), table1.d_star());
+        assert_ne!(
+            collect.seed(),
+            table1.seed(),
+            "training runs must not replay evaluation runs"
+        );
+        let spec = collect.run_spec(collect.seed(), 0);
+        let samples = collect.runs() as u64 * spec.ticks() * collect.n_robots() as u64;
+        assert_eq!(samples, 110_160, "the paper's data set size");
+    }
+
+    #[test]
+    fn defaults_fill_optional_keys_and_partial_tables() {
+        let scenario = parse(&format!(
+            "{MINIMAL}[lidar]\nnoise_std = 0.03\n[robot]\nmax_wheel_speed = 0.8\n"
+        ))
+        .unwrap();
+        let lidar = scenario.world_config().lidar;
+        assert_eq!(
+            (lidar.beams, lidar.max_range, lidar.noise_std),
+            (900, 10.0, 0.03)
+        );
+        let robot = scenario.world_config().robot;
+        assert_eq!(robot.max_wheel_speed, 0.8);
+        assert_eq!(robot.body_radius, RobotParams::default().body_radius);
+        assert_eq!(scenario.runs(), 1);
+        assert!(scenario.agent_models().is_empty());
+    }
+
+    #[test]
+    fn unknown_keys_are_rejected_by_name_at_every_level() {
+        let cases = [
+            (edited("seed = 5", "seed = 5\nsed = 6"), "sed"),
+            (edited("d_star = 2.0", "d_star = 2.0\ndstar = 2.0"), "dstar"),
+            (edited("phi = 1.0", "phi = 1.0\nphy = 2.0"), "phy"),
+            (
+                format!("{MINIMAL}[init]\ndisc_radius = 3.0\nspacing = 1.0\n"),
+                "spacing",
+            ),
+            (format!("{MINIMAL}[lidar]\nbeam = 360\n"), "beam"),
+            (format!("{MINIMAL}[robot]\nmax_speed = 1.0\n"), "max_speed"),
+            (
+                format!("{MINIMAL}[[agent]]\nrobot = 0\nmodel = \"a.onnx\"\nweights = 1\n"),
+                "weights",
+            ),
+            (format!("{MINIMAL}[extra]\nx = 1\n"), "extra"),
+        ];
+        for (text, key) in cases {
+            let error = parse(&text).expect_err(key);
+            assert!(
+                matches!(error, ScenarioError::Parse { .. }),
+                "{key}: {error:?}"
+            );
+            let message = error.to_string();
+            assert!(message.starts_with("scenarios/x.toml: "), "{message}");
+            assert!(
+                message.contains(&format!("unknown field `{key}`")),
+                "{key}: {message}"
+            );
+        }
+    }
+
+    #[test]
+    fn unknown_schedule_is_rejected_with_the_valid_names() {
+        let message = error_text(&edited("\"constant\"", "\"spiral\""));
+        assert!(
+            message.contains("spiral") && message.contains("ramp"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn invalid_values_name_the_field_and_the_value() {
+        let (field, problem) = invalid_field(&edited("d_star = 2.0", "d_star = -1"));
+        assert_eq!(
+            (field.as_str(), problem.as_str()),
+            ("goal.d_star", "must be > 0 (got -1)")
+        );
+        assert_eq!(
+            error_text(&edited("d_star = 2.0", "d_star = -1")),
+            "scenarios/x.toml: goal.d_star must be > 0 (got -1)"
+        );
+
+        let cases = [
+            (
+                edited("d_star = 2.0", "d_star = nan"),
+                "goal.d_star",
+                "finite",
+            ),
+            (edited("d_star = 2.0", "d_star = 0.0"), "goal.d_star", "> 0"),
+            (
+                edited("d_star = 2.0", "d_star_choices = [1.0, inf]"),
+                "goal.d_star_choices[1]",
+                "finite",
+            ),
+            (
+                edited("d_star = 2.0", "d_star_choices = []"),
+                "goal.d_star_choices",
+                "empty",
+            ),
+            (
+                edited("d_star = 2.0", "d_star = 2.0\nd_star_choices = [1.0]"),
+                "goal.d_star",
+                "exactly one",
+            ),
+            (edited("d_star = 2.0", ""), "goal.d_star", "missing"),
+            (edited("robots = 3", "robots = 0"), "robots", "(got 0)"),
+            (edited("robots = 3", "robots = 1"), "robots", "(got 1)"),
+            (
+                edited("duration_s = 10.0", "duration_s = inf"),
+                "duration_s",
+                "finite",
+            ),
+            (
+                edited("duration_s = 10.0", "duration_s = 10.0\ndt = 20.0"),
+                "dt",
+                "<= duration_s",
+            ),
+            (
+                edited("duration_s = 10.0", "duration_s = 10.0\ndt = 0.3"),
+                "dt",
+                "whole steps",
+            ),
+            (
+                edited("duration_s = 10.0", "duration_s = 10.0\nruns = 0"),
+                "runs",
+                ">= 1",
+            ),
+            (
+                edited("v_star = 0.7", "v_star = 1.5"),
+                "goal.v_star",
+                "max_wheel_speed",
+            ),
+            (
+                edited("v_star = 0.7", "v_star = -nan"),
+                "goal.v_star",
+                "finite",
+            ),
+            (edited("phi = 1.0", "phi = nan"), "heading.phi", "finite"),
+            (edited("phi = 1.0", ""), "heading.phi", "required"),
+            (
+                edited("phi = 1.0", "phi = 1.0\nomega = 0.1"),
+                "heading.omega",
+                "not a parameter",
+            ),
+            (
+                edited("schedule = \"constant\"\nphi = 1.0", "schedule = \"ramp\""),
+                "heading.omega",
+                "required",
+            ),
+            (
+                edited(
+                    "schedule = \"constant\"\nphi = 1.0",
+                    "schedule = \"random\"\nphi = 1.0",
+                ),
+                "heading.phi",
+                "not a parameter",
+            ),
+            (
+                format!("{MINIMAL}[init]\nmin_spacing = 0.3\n"),
+                "init.min_spacing",
+                "body_radius",
+            ),
+            (
+                format!("{MINIMAL}[init]\ndisc_radius = 0.5\n"),
+                "init.disc_radius",
+                "too small",
+            ),
+            (
+                format!("{MINIMAL}[lidar]\nbeams = 0\n"),
+                "lidar.beams",
+                ">= 1",
+            ),
+            (
+                format!("{MINIMAL}[lidar]\nnoise_std = -0.1\n"),
+                "lidar.noise_std",
+                ">= 0",
+            ),
+            (
+                format!("{MINIMAL}[robot]\nmax_wheel_accel = 0.0\n"),
+                "robot.max_wheel_accel",
+                "> 0",
+            ),
+            (
+                format!("{MINIMAL}[robot]\nwheel_separation = nan\n"),
+                "robot.wheel_separation",
+                "finite",
+            ),
+            (
+                format!("{MINIMAL}[[agent]]\nrobot = 3\nmodel = \"a.onnx\"\n"),
+                "agent[0].robot",
+                "< robots (3)",
+            ),
+            (
+                format!(
+                    "{MINIMAL}[[agent]]\nrobot = 1\nmodel = \"a.onnx\"\n[[agent]]\nrobot = 1\nmodel = \"b.onnx\"\n"
+                ),
+                "agent[1].robot",
+                "second time",
+            ),
+            (
+                format!("{MINIMAL}[[agent]]\nrobot = 1\nmodel = \"\"\n"),
+                "agent[0].model",
+                "empty",
+            ),
+            (edited("name = \"t\"", "name = \" \""), "name", "empty"),
+        ];
+        for (text, expected_field, expected_problem) in cases {
+            let (field, problem) = invalid_field(&text);
+            assert_eq!(field, expected_field, "{problem}");
+            assert!(
+                problem.contains(expected_problem),
+                "{field}: {problem:?} lacks {expected_problem:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn missing_file_error_names_the_path() {
+        let path = Path::new("scenarios/does-not-exist-7f3a.toml");
+        let error = Scenario::from_path(path).expect_err("missing file");
+        assert!(matches!(&error, ScenarioError::Read { path: p, .. } if p == path));
+        assert!(
+            error
+                .to_string()
+                .contains("scenarios/does-not-exist-7f3a.toml"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn agent_models_are_exposed() {
+        let scenario = parse(&format!(
+            "{MINIMAL}[[agent]]\nrobot = 2\nmodel = \"models/b.onnx\"\n"
+        ))
+        .unwrap();
+        assert_eq!(
+            scenario.agent_models(),
+            [AgentModel {
+                robot: 2,
+                model: PathBuf::from("models/b.onnx")
+            }]
+        );
+    }
+
+    #[test]
+    fn heading_schedules_follow_their_formulas() {
+        let ramp = HeadingSchedule::Ramp {
+            omega: 0.1,
+            phi0: 0.5,
+        };
+        assert_eq!(ramp.phi_star(0.0), 0.5);
+        assert!((ramp.phi_star(40.0) - 4.5).abs() < 1e-12);
+        let sine = HeadingSchedule::Sine {
+            omega: 0.2,
+            amplitude: 1.0,
+            phi0: 0.0,
+        };
+        assert!((sine.phi_star(7.0) - 1.4f64.sin()).abs() < 1e-15);
+        assert_eq!(
+            HeadingSchedule::Constant { phi: 3.76 }.phi_star(123.0),
+            3.76
+        );
+    }
+
+    fn pose_bits(spec: &RunSpec) -> Vec<[u64; 3]> {
+        spec.initial
+            .iter()
+            .map(|p| [p.x.to_bits(), p.y.to_bits(), p.theta.to_bits()])
+            .collect()
+    }
+
+    #[test]
+    fn run_spec_is_a_deterministic_function_of_seed_and_index() {
+        let table1 = parse(SHIPPED[3].1).unwrap();
+        let a = table1.run_spec(7, 3);
+        let b = table1.run_spec(7, 3);
+        assert_eq!(a, b);
+        assert_eq!(pose_bits(&a), pose_bits(&b));
+        assert_eq!(a.d_star.to_bits(), b.d_star.to_bits());
+        assert_eq!((a.seed, a.noise_seed, a.index), (b.seed, b.noise_seed, 3));
+        assert_ne!(a.seed, a.noise_seed);
+
+        let other_seed = table1.run_spec(8, 3);
+        let other_index = table1.run_spec(7, 4);
+        for other in [&other_seed, &other_index] {
+            assert_ne!(other.seed, a.seed);
+            assert_ne!(other.noise_seed, a.noise_seed);
+            assert_ne!(pose_bits(other), pose_bits(&a));
+        }
+    }
+
+    #[test]
+    fn run_spec_draws_cover_the_configured_ranges() {
+        let table1 = parse(SHIPPED[3].1).unwrap();
+        let mut d_seen = [false; 3];
+        let mut theta_signs = [false; 2];
+        for index in 0..200 {
+            let spec = table1.run_spec(table1.seed(), index);
+            assert_eq!(spec.initial.len(), 3);
+            assert_eq!(spec.edges, vec![(0, 1), (0, 2), (1, 2)]);
+            assert_eq!(spec.ticks(), 1200);
+            let k = [1.0, 1.5, 2.0]
+                .iter()
+                .position(|&d| d == spec.d_star)
+                .expect("d* from the choices");
+            d_seen[k] = true;
+            let HeadingSchedule::Constant { phi } = spec.heading else {
+                panic!("{:?}", spec.heading)
+            };
+            assert!((0.0..TAU).contains(&phi), "phi* = {phi}");
+            assert_eq!(
+                spec.goal_at(30.0),
+                Goal {
+                    phi_star: phi,
+                    d_star: spec.d_star,
+                    v_star: 0.7
+                }
+            );
+            for (i, pose) in spec.initial.iter().enumerate() {
+                assert!(
+                    pose.x.hypot(pose.y) <= 3.0,
+                    "robot {i} outside the disc: {pose:?}"
+                );
+                assert!(pose.theta > -std::f64::consts::PI && pose.theta <= std::f64::consts::PI);
+                theta_signs[usize::from(pose.theta >= 0.0)] = true;
+                for other in &spec.initial[i + 1..] {
+                    assert!(
+                        (pose.x - other.x).hypot(pose.y - other.y) >= 0.6,
+                        "spacing violated"
+                    );
+                }
+            }
+        }
+        assert_eq!(d_seen, [true; 3]);
+        assert_eq!(theta_signs, [true; 2]);
+    }
+
+    #[test]
+    fn crowded_discs_still_place_every_robot_apart() {
+        // 19 sites of a 1 m hexagonal lattice fit in a 2 m disc; random draws rarely place 19 robots.
+        let text =
+            edited("robots = 3", "robots = 19") + "[init]\ndisc_radius = 2.0\nmin_spacing = 1.0\n";
+        let scenario = parse(&text).unwrap();
+        assert_eq!(lattice_sites(2.0, 1.0, usize::MAX).len(), 19);
+        let spec = scenario.run_spec(1, 0);
+        assert_eq!(spec.initial.len(), 19);
+        for (i, a) in spec.initial.iter().enumerate() {
+            assert!(a.x.hypot(a.y) <= 2.0 + 1e-12);
+            for b in &spec.initial[i + 1..] {
+                assert!((a.x - b.x).hypot(a.y - b.y) >= 1.0 - 1e-9);
+            }
+        }
+        let too_many =
+            edited("robots = 3", "robots = 20") + "[init]\ndisc_radius = 2.0\nmin_spacing = 1.0\n";
+        assert_eq!(invalid_field(&too_many).0, "init.disc_radius");
+    }
+
+    #[test]
+    fn splitmix64_matches_the_reference_sequence() {
+        // Reference: the first outputs of SplitMix64 seeded with 0 (state advanced by the golden gamma).
+        let gamma = 0x9E37_79B9_7F4A_7C15_u64;
+        assert_eq!(splitmix64(0), 0xE220_A839_7B1D_CDAF);
+        assert_eq!(splitmix64(gamma), 0x6E78_9E6A_A1B9_65F4);
+    }
 }

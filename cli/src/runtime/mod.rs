@@ -1,47 +1,320 @@
-//! The multi-process runtime launcher (placeholder until the runtime lands).
+//! The multi-process runtime launcher: `formation run`, `formation profile`, and the engine of
+//! `formation eval --processes`.
+//!
+//! One world process (`formation-world`) and one agent process per robot (`formation-agent`)
+//! exchange scans and wheel commands over iceoryx2 shared memory in a namespace of their own
+//! (see [`formation_proto::wire`]). This module plans a launch (models per robot, run id, output
+//! directory), hands it to the [`supervisor`], and reads back the run logs the world wrote.
+//!
+//! * [`binaries`]: finding the two executables next to the running one.
+//! * [`supervisor`]: spawning, supervising, restarting, stopping and cleaning up (tokio).
+//! * [`profile`]: per-stage latency statistics from the world's timing logs.
 
-use clap::Args;
+pub mod binaries;
+pub mod profile;
+pub mod supervisor;
 
-/// `formation run`.
-#[derive(Debug, Args)]
-pub struct RunArgs {}
-/// `formation profile`.
-#[derive(Debug, Args)]
-pub struct ProfileArgs {}
-/// `formation swap`.
-#[derive(Debug, Args)]
-pub struct SwapArgs {}
+use std::path::{Path, PathBuf};
 
-/// `formation run`.
-pub fn run_command(_args: &RunArgs) -> anyhow::Result<()> {
-    anyhow::bail!("not yet available")
-}
-/// `formation profile`.
-pub fn profile_command(_args: &ProfileArgs) -> anyhow::Result<()> {
-    anyhow::bail!("not yet available")
-}
-/// `formation swap`.
-pub fn swap_command(_args: &SwapArgs) -> anyhow::Result<()> {
-    anyhow::bail!("not yet available")
-}
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+use formation_proto::wire::RunId;
+use formation_world::{RunSpec, Scenario, Trajectory};
 
-/// Clock mode of the world process.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+use crate::paths;
+use supervisor::{LaunchPlan, WorldEvent};
+
+/// How the world process paces ticks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ClockMode {
-    /// Wait for every agent's command each tick.
+    /// Wait for every live agent's command each tick (with a timeout), then step. Deterministic:
+    /// bit-identical to the in-process loop for the same scenario, seed and models.
     Lockstep,
-    /// Fixed 20 Hz wall clock.
+    /// Step at 20 Hz (the scenario's dt) on the wall clock with each robot's newest fresh command.
     Realtime,
 }
 
-/// Evaluates runs over real processes.
+impl ClockMode {
+    /// The name the world process takes on its command line.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            ClockMode::Lockstep => "lockstep",
+            ClockMode::Realtime => "realtime",
+        }
+    }
+}
+
+/// `formation run`.
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// Scenario TOML file.
+    #[arg(long)]
+    pub scenario: PathBuf,
+    /// ONNX model for every robot the scenario does not assign one to.
+    #[arg(long, default_value = paths::DEFAULT_MODEL)]
+    pub model: PathBuf,
+    /// Clock mode of the world.
+    #[arg(long, value_enum, default_value_t = ClockMode::Lockstep)]
+    pub clock: ClockMode,
+    /// Output directory for the run logs (`runs/`, `timing/`) and `latency.json`.
+    #[arg(long, default_value = "out/run")]
+    pub out: PathBuf,
+    /// Number of runs (default: 1).
+    #[arg(long, default_value_t = 1)]
+    pub runs: usize,
+    /// Index of the first run.
+    #[arg(long, default_value_t = 0)]
+    pub first_run: usize,
+    /// Base seed (default: the scenario's).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Lockstep: how long the world waits for a robot's command before braking it [ms].
+    #[arg(long, default_value_t = 2000)]
+    pub timeout_ms: u64,
+    /// Realtime: a command older than this brakes its robot [ms].
+    #[arg(long, default_value_t = 150)]
+    pub stale_ms: u64,
+    /// Run id (namespaces the iceoryx2 services, e.g. for `formation swap`; default: generated).
+    #[arg(long)]
+    pub run_id: Option<String>,
+    /// How many times, in total, a crashed agent is restarted.
+    #[arg(long, default_value_t = 3)]
+    pub restarts: u32,
+    /// Testing only: make an agent misbehave, `ROBOT:MODE` with MODE one of crash-after=N,
+    /// hang-after=N, late-ms=X, nan-after=N (repeatable).
+    #[arg(long = "fault", value_name = "ROBOT:MODE")]
+    pub faults: Vec<String>,
+}
+
+/// `formation profile`: a run whose per-stage latency histograms are written as JSON.
+#[derive(Debug, Clone, Args)]
+pub struct ProfileArgs {
+    /// The run to profile.
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// `formation swap` (not implemented yet).
+#[derive(Debug, Clone, Args)]
+pub struct SwapArgs {
+    /// Run id of the running launch.
+    #[arg(long)]
+    pub run: String,
+    /// Robot whose model to swap.
+    #[arg(long)]
+    pub robot: usize,
+    /// The new ONNX model.
+    #[arg(long)]
+    pub model: PathBuf,
+}
+
+/// The model path of every robot: the scenario's per-robot models, else `default`. Missing files
+/// and robots out of range are errors naming the fix.
+pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let mut models = vec![default.to_path_buf(); scenario.n_robots()];
+    for assigned in scenario.agent_models() {
+        let slot = models.get_mut(assigned.robot).with_context(|| {
+            format!(
+                "the scenario assigns a model to robot {}, but it has only {} robots (0..{})",
+                assigned.robot,
+                scenario.n_robots(),
+                scenario.n_robots()
+            )
+        })?;
+        *slot = assigned.model.clone();
+    }
+    for (robot, model) in models.iter().enumerate() {
+        if !model.is_file() {
+            anyhow::bail!(
+                "model {} of robot {robot} not found: pass --model PATH to an ONNX file exported by \
+                 `formation train` (the shipped default is {})",
+                model.display(),
+                paths::DEFAULT_MODEL
+            );
+        }
+    }
+    Ok(models)
+}
+
+/// Parses `ROBOT:MODE` fault flags into one optional mode per robot.
+pub fn faults_per_robot(flags: &[String], n_robots: usize) -> anyhow::Result<Vec<Option<String>>> {
+    let mut faults = vec![None; n_robots];
+    for flag in flags {
+        let (robot, mode) = flag
+            .split_once(':')
+            .with_context(|| format!("--fault {flag:?}: expected ROBOT:MODE, e.g. 1:crash-after=100"))?;
+        let robot: usize = robot.parse().with_context(|| format!("--fault {flag:?}: {robot:?} is not a robot index"))?;
+        let slot = faults
+            .get_mut(robot)
+            .with_context(|| format!("--fault {flag:?}: robot {robot} out of range (0..{n_robots})"))?;
+        *slot = Some(mode.to_owned());
+    }
+    Ok(faults)
+}
+
+fn block_on<T>(future: impl std::future::Future<Output = T>) -> anyhow::Result<T> {
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the launcher's async runtime")?;
+    Ok(runtime.block_on(future))
+}
+
+/// Resolves the run specs of runs `first..first + runs` and writes them where the world reads them.
+fn write_run_specs(
+    scenario: &Scenario,
+    base_seed: u64,
+    first: usize,
+    runs: usize,
+    path: &Path,
+) -> anyhow::Result<()> {
+    let specs: Vec<RunSpec> = (first..first + runs).map(|i| scenario.run_spec(base_seed, i)).collect();
+    paths::write_atomic(path, &serde_json::to_vec(&specs)?)
+}
+
+fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario)> {
+    let scenario = Scenario::from_path(&args.scenario)?;
+    if args.runs == 0 {
+        anyhow::bail!("--runs must be at least 1");
+    }
+    let default_model = if args.model.is_relative() && !args.model.exists() {
+        paths::repo_root().join(&args.model)
+    } else {
+        args.model.clone()
+    };
+    let models = models_per_robot(&scenario, &default_model)?;
+    let run_id = match &args.run_id {
+        Some(id) => RunId::new(id)?,
+        None => RunId::generate(),
+    };
+    let run_specs = args.out.join("run-specs.json");
+    let base_seed = args.seed.unwrap_or_else(|| scenario.seed());
+    write_run_specs(&scenario, base_seed, args.first_run, args.runs, &run_specs)?;
+    let plan = LaunchPlan {
+        run_id,
+        run_specs,
+        clock: args.clock,
+        out: args.out.clone(),
+        faults: faults_per_robot(&args.faults, models.len())?,
+        models,
+        command_timeout_ms: args.timeout_ms,
+        stale_ms: args.stale_ms,
+        restart_budget: args.restarts,
+    };
+    Ok((plan, scenario))
+}
+
+/// `formation run`: launches the world and one agent per robot, plays the runs, writes the logs
+/// and a latency summary, and cleans up.
+pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
+    let (plan, scenario) = plan_from_args(args)?;
+    println!(
+        "formation run {}: {} robots, {} run(s) of {}, {} clock",
+        plan.run_id,
+        plan.models.len(),
+        args.runs,
+        scenario.name(),
+        plan.clock.as_str()
+    );
+    let report = block_on(supervisor::launch(&plan, &mut |event| {
+        if let WorldEvent::RunDone { index, log } = event {
+            println!("run {index} done: {}", log.display());
+        }
+    }))??;
+    let latency = profile::profile_dir(&plan.out)?;
+    let path = plan.out.join("latency.json");
+    paths::write_atomic(&path, &serde_json::to_vec_pretty(&latency)?)?;
+    print!("{}", profile::summary_text(&latency));
+    println!(
+        "logs in {}; {} agent restart(s); removed {} iceoryx2 file(s)",
+        plan.out.display(),
+        report.restarts,
+        report.cleaned_up
+    );
+    Ok(())
+}
+
+/// `formation profile`: `formation run` whose latency statistics are the point.
+pub fn profile_command(args: &ProfileArgs) -> anyhow::Result<()> {
+    run_command(&args.run)
+}
+
+/// `formation swap`: not implemented yet.
+pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
+    anyhow::bail!(
+        "formation swap (run {}, robot {}, model {}) is not implemented yet: the agents accept swap \
+         requests, but the world does not yet take them from outside",
+        args.run,
+        args.robot,
+        args.model.display()
+    )
+}
+
+/// Evaluates `runs` runs of `scenario` (base seed `base_seed`) with every robot's policy in its
+/// own process, and returns the trajectories in run order. Robots the scenario assigns a model to
+/// run that model, the others `default_model`. `on_run_done(n)` is called after each finished run
+/// with the number finished so far. In lockstep the trajectories are bit-identical to in-process
+/// evaluation.
 pub fn eval_over_processes(
-    _scenario: &formation_world::Scenario,
-    _base_seed: u64,
-    _runs: usize,
-    _default_model: &std::path::Path,
-    _clock: ClockMode,
-    _on_run_done: &mut dyn FnMut(usize),
-) -> anyhow::Result<Vec<formation_world::Trajectory>> {
-    anyhow::bail!("not yet available")
+    scenario: &Scenario,
+    base_seed: u64,
+    runs: usize,
+    default_model: &Path,
+    clock: ClockMode,
+    on_run_done: &mut dyn FnMut(usize),
+) -> anyhow::Result<Vec<Trajectory>> {
+    let models = models_per_robot(scenario, default_model)?;
+    let run_id = RunId::generate();
+    let work = std::env::temp_dir().join(format!("formation-eval-{run_id}"));
+    let run_specs = work.join("run-specs.json");
+    write_run_specs(scenario, base_seed, 0, runs, &run_specs)?;
+    let plan = LaunchPlan {
+        run_id,
+        run_specs,
+        clock,
+        out: work.join("out"),
+        faults: vec![None; models.len()],
+        models,
+        command_timeout_ms: 5000,
+        stale_ms: 150,
+        restart_budget: 0,
+    };
+    let result = (|| {
+        let mut done = 0;
+        let report = block_on(supervisor::launch(&plan, &mut |event| {
+            if matches!(event, WorldEvent::RunDone { .. }) {
+                done += 1;
+                on_run_done(done);
+            }
+        }))??;
+        report.run_logs.iter().map(|log| read_trajectory(log)).collect::<anyhow::Result<Vec<_>>>()
+    })();
+    let _ = std::fs::remove_dir_all(&work);
+    result
+}
+
+/// The trajectory of one run log written by the world.
+pub fn read_trajectory(log: &Path) -> anyhow::Result<Trajectory> {
+    #[derive(serde::Deserialize)]
+    struct TrajectoryOnly {
+        trajectory: Trajectory,
+    }
+    let bytes = std::fs::read(log).with_context(|| format!("reading run log {}", log.display()))?;
+    let parsed: TrajectoryOnly =
+        serde_json::from_slice(&bytes).with_context(|| format!("parsing run log {}", log.display()))?;
+    Ok(parsed.trajectory)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fault_flags_map_to_robots_and_bad_flags_are_explained() {
+        let faults = faults_per_robot(&["2:crash-after=5".into(), "0:late-ms=30".into()], 3).unwrap();
+        assert_eq!(faults, vec![Some("late-ms=30".into()), None, Some("crash-after=5".into())]);
+        let err = faults_per_robot(&["5:nan-after=1".into()], 3).unwrap_err();
+        assert!(err.to_string().contains("out of range"), "{err}");
+        assert!(faults_per_robot(&["crash".into()], 3).is_err());
+    }
 }

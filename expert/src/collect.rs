@@ -1,0 +1,549 @@
+//! Demonstration collection: the expert drives, every robot's view is recorded with the expert's command.
+//!
+//! [`collect`] runs a scenario's runs with the [`ExpertController`] and turns every recorded tick into one
+//! [`Sample`] per robot: the occupancy image rendered from that robot's own scan (by
+//! [`robot_agent::occupancy::render`], the function the agents run), `delta_phi = wrap(phi* - theta_i)`,
+//! `d*`, and the wheel command the expert chose for that robot. Samples go to a [`DatasetWriter`].
+//!
+//! [`Labeller::label_observation`] labels any observation with the expert's commands whoever drives;
+//! DAgger uses it with the learned policy driving, so the data set covers the states the policy visits.
+//!
+//! Nothing here reads a clock except to report throughput, and nothing does I/O but the writer.
+
+use std::time::{Duration, Instant};
+
+use formation_proto::{LidarSpec, OccupancySpec, WheelCmd, wrap_angle};
+use formation_world::episode::{Observation, run_episode};
+use formation_world::{RobotParams, RunSpec, Scenario};
+use robot_agent::occupancy;
+use trainer_bridge::dataset::{DatasetError, DatasetWriter, Sample};
+
+use crate::controller::{
+    ExpertController, ExpertGains, InvalidGains, check_inputs, expert_commands,
+};
+
+/// Why a collection stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum CollectError {
+    /// `record_every` must be at least 1.
+    #[error("record_every must be >= 1 (1 records every tick), got 0")]
+    RecordEveryZero,
+    /// The expert's gains are unusable.
+    #[error(transparent)]
+    Gains(#[from] InvalidGains),
+    /// Sample fields are narrow (`robot: u8`, `run: u32`); the team or the run index does not fit.
+    #[error("{what} = {value} does not fit the dataset's {field} field (at most {max})")]
+    FieldOverflow {
+        /// What overflowed, e.g. "robot index".
+        what: &'static str,
+        /// The value.
+        value: usize,
+        /// The sample field.
+        field: &'static str,
+        /// Its largest value.
+        max: usize,
+    },
+    /// The occupancy settings cannot be rendered.
+    #[error(
+        "occupancy size_px must be >= 1 and resolution_m finite and > 0, got {size_px} px of {resolution_m} m"
+    )]
+    Occupancy {
+        /// Cells on a side.
+        size_px: usize,
+        /// Cell size [m].
+        resolution_m: f64,
+    },
+    /// A scan did not have the configured number of beams.
+    #[error(
+        "robot {robot}'s scan has {actual} ranges but the LIDAR is configured for {expected} beams"
+    )]
+    ScanLength {
+        /// Robot index.
+        robot: usize,
+        /// Configured beams.
+        expected: usize,
+        /// Ranges received.
+        actual: usize,
+    },
+    /// The expert refused an observation (bad goal or non-finite pose).
+    #[error("run {run}: {message}")]
+    Expert {
+        /// Run index.
+        run: usize,
+        /// The expert's reason.
+        message: String,
+    },
+    /// Writing the dataset failed.
+    #[error("writing demonstrations of run {run}: {source}")]
+    Dataset {
+        /// Run index whose samples were being written.
+        run: usize,
+        /// The dataset error.
+        source: DatasetError,
+    },
+}
+
+/// What to collect.
+#[derive(Debug, Clone, Copy)]
+pub struct CollectOptions<'a> {
+    /// The scenario whose runs are driven by the expert.
+    pub scenario: &'a Scenario,
+    /// Runs to collect: run indices `0..runs` of the scenario.
+    pub runs: usize,
+    /// Base seed of the runs (normally `scenario.seed()`); run `i` is `scenario.run_spec(base_seed, i)`.
+    pub base_seed: u64,
+    /// How each robot's scan is rendered; recorded in the dataset header by the caller.
+    pub occupancy: OccupancySpec,
+    /// Record every `record_every`-th tick (1 = every tick, the paper's 20 Hz).
+    pub record_every: u32,
+    /// The expert's gains.
+    pub gains: ExpertGains,
+}
+
+impl<'a> CollectOptions<'a> {
+    /// The scenario's own runs and seed, the paper's occupancy window, every tick, default gains.
+    pub fn for_scenario(scenario: &'a Scenario) -> CollectOptions<'a> {
+        CollectOptions {
+            scenario,
+            runs: scenario.runs(),
+            base_seed: scenario.seed(),
+            occupancy: OccupancySpec::PAPER,
+            record_every: 1,
+            gains: ExpertGains::default(),
+        }
+    }
+}
+
+/// What a collection produced.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CollectReport {
+    /// Samples written (one per robot per recorded tick).
+    pub samples: usize,
+    /// Runs completed.
+    pub runs: usize,
+    /// Wall-clock time spent.
+    pub elapsed: Duration,
+    /// Throughput, `samples / elapsed`.
+    pub samples_per_sec: f64,
+}
+
+/// Runs `opts.runs` expert-driven runs and writes one [`Sample`] per robot per recorded tick to
+/// `writer` (iteration 0). `progress(runs_done, samples_written)` is called after every run.
+///
+/// A run's samples are rendered while it runs and written when it ends, so a failure leaves the
+/// dataset with whole runs only, as far as the writer's own shards allow.
+pub fn collect(
+    opts: &CollectOptions<'_>,
+    writer: &mut DatasetWriter,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<CollectReport, CollectError> {
+    if opts.record_every == 0 {
+        return Err(CollectError::RecordEveryZero);
+    }
+    opts.gains.validate()?;
+    check_occupancy(&opts.occupancy)?;
+    let started = Instant::now();
+    let mut samples_written = 0;
+    let mut run_samples = Vec::new();
+    for run in 0..opts.runs {
+        let spec = opts.scenario.run_spec(opts.base_seed, run);
+        run_samples.clear();
+        collect_run(&spec, opts, &mut run_samples)?;
+        for sample in run_samples.drain(..) {
+            writer
+                .push(sample)
+                .map_err(|source| CollectError::Dataset { run, source })?;
+            samples_written += 1;
+        }
+        progress(run + 1, samples_written);
+    }
+    let elapsed = started.elapsed();
+    let seconds = elapsed.as_secs_f64();
+    Ok(CollectReport {
+        samples: samples_written,
+        runs: opts.runs,
+        elapsed,
+        samples_per_sec: if seconds > 0.0 {
+            samples_written as f64 / seconds
+        } else {
+            0.0
+        },
+    })
+}
+
+/// Drives one run with the expert and appends its samples to `samples`.
+fn collect_run(
+    spec: &RunSpec,
+    opts: &CollectOptions<'_>,
+    samples: &mut Vec<Sample>,
+) -> Result<(), CollectError> {
+    let labeller = Labeller::new(
+        opts.gains,
+        spec.world.robot,
+        spec.world.lidar,
+        opts.occupancy,
+    )?;
+    let run = narrow_run(spec.index)?;
+    narrow_robot(spec.n_robots.saturating_sub(1))?;
+    let mut expert = ExpertController::new(opts.gains, spec.world.robot);
+    let mut failure = None;
+    let mut on_tick = |obs: &Observation<'_>, commands: &[WheelCmd]| {
+        if failure.is_some() || obs.tick % u64::from(opts.record_every) != 0 {
+            return;
+        }
+        if let Err(e) = labeller.emit(obs, commands, 0, run, &mut |sample| samples.push(sample)) {
+            failure = Some(e);
+        }
+    };
+    run_episode(spec, &mut expert, &mut on_tick).map_err(|e| CollectError::Expert {
+        run: spec.index,
+        message: e.message,
+    })?;
+    failure.map_or(Ok(()), Err)
+}
+
+/// Labels observations with the expert's commands: everything needed to turn one robot's view into a
+/// [`Sample`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Labeller {
+    gains: ExpertGains,
+    robot: RobotParams,
+    lidar: LidarSpec,
+    occupancy: OccupancySpec,
+}
+
+impl Labeller {
+    /// A labeller for robots with these parameters and LIDAR, rendering with `occupancy`.
+    pub fn new(
+        gains: ExpertGains,
+        robot: RobotParams,
+        lidar: LidarSpec,
+        occupancy: OccupancySpec,
+    ) -> Result<Labeller, CollectError> {
+        gains.validate()?;
+        check_occupancy(&occupancy)?;
+        Ok(Labeller {
+            gains,
+            robot,
+            lidar,
+            occupancy,
+        })
+    }
+
+    /// A labeller for the robots and LIDAR of `spec`.
+    pub fn for_run(
+        spec: &RunSpec,
+        gains: ExpertGains,
+        occupancy: OccupancySpec,
+    ) -> Result<Labeller, CollectError> {
+        Labeller::new(gains, spec.world.robot, spec.world.lidar, occupancy)
+    }
+
+    /// Sends `sink` one sample per robot of `obs`, labelled with the EXPERT's command for that robot,
+    /// whatever controller is driving (DAgger: the policy drives, the expert labels).
+    pub fn label_observation(
+        &self,
+        obs: &Observation<'_>,
+        iteration: u32,
+        run: u32,
+        sink: &mut dyn FnMut(Sample),
+    ) -> Result<(), CollectError> {
+        let mut commands = vec![WheelCmd::BRAKE; obs.poses.len()];
+        check_inputs(obs.poses, &obs.goal, commands.len()).map_err(|e| CollectError::Expert {
+            run: run as usize,
+            message: e.message,
+        })?;
+        expert_commands(
+            obs.poses,
+            &obs.goal,
+            &self.gains,
+            &self.robot,
+            &mut commands,
+        );
+        self.emit(obs, &commands, iteration, run, sink)
+    }
+
+    /// One sample per robot with the given labels `commands[i]`.
+    fn emit(
+        &self,
+        obs: &Observation<'_>,
+        commands: &[WheelCmd],
+        iteration: u32,
+        run: u32,
+        sink: &mut dyn FnMut(Sample),
+    ) -> Result<(), CollectError> {
+        let cells = self.occupancy.size_px * self.occupancy.size_px;
+        for (robot, ((pose, scan), command)) in
+            obs.poses.iter().zip(obs.scans).zip(commands).enumerate()
+        {
+            if scan.len() != self.lidar.beams {
+                return Err(CollectError::ScanLength {
+                    robot,
+                    expected: self.lidar.beams,
+                    actual: scan.len(),
+                });
+            }
+            let mut image = vec![0; cells];
+            occupancy::render(scan, &self.lidar, &self.occupancy, &mut image);
+            sink(Sample {
+                occupancy: image,
+                delta_phi: wrap_angle(obs.goal.phi_star - pose.theta) as f32,
+                d_star: obs.goal.d_star as f32,
+                wheels: [command.left as f32, command.right as f32],
+                iteration,
+                run,
+                robot: narrow_robot(robot)?,
+            });
+        }
+        Ok(())
+    }
+}
+
+fn check_occupancy(spec: &OccupancySpec) -> Result<(), CollectError> {
+    if spec.size_px == 0 || !(spec.resolution_m.is_finite() && spec.resolution_m > 0.0) {
+        return Err(CollectError::Occupancy {
+            size_px: spec.size_px,
+            resolution_m: spec.resolution_m,
+        });
+    }
+    Ok(())
+}
+
+fn narrow_robot(robot: usize) -> Result<u8, CollectError> {
+    u8::try_from(robot).map_err(|_| CollectError::FieldOverflow {
+        what: "robot index",
+        value: robot,
+        field: "robot (u8)",
+        max: usize::from(u8::MAX),
+    })
+}
+
+fn narrow_run(run: usize) -> Result<u32, CollectError> {
+    u32::try_from(run).map_err(|_| CollectError::FieldOverflow {
+        what: "run index",
+        value: run,
+        field: "run (u32)",
+        max: u32::MAX as usize,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_proto::{Goal, Pose};
+
+    const TINY: &str = r#"
+        name = "tiny"
+        robots = 3
+        duration_s = 1.0
+        seed = 5
+        runs = 2
+        [goal]
+        v_star = 0.7
+        d_star = 1.5
+        [heading]
+        schedule = "constant"
+        phi = 2.0
+    "#;
+
+    fn tiny() -> Scenario {
+        Scenario::from_toml_str(TINY, "tiny.toml").expect("valid test scenario")
+    }
+
+    /// A scan whose only hit is beam `beam` at `range`.
+    fn scan_with_hit(lidar: &LidarSpec, beam: usize, range: f32) -> Vec<f32> {
+        let mut scan = vec![lidar.max_range as f32; lidar.beams];
+        scan[beam] = range;
+        scan
+    }
+
+    #[test]
+    fn label_observation_uses_the_experts_commands_and_each_robots_own_view() {
+        let lidar = LidarSpec::default();
+        let robot = RobotParams::default();
+        let gains = ExpertGains::default();
+        let labeller = Labeller::new(gains, robot, lidar, OccupancySpec::PAPER).expect("valid");
+        let poses = [
+            Pose {
+                x: 0.0,
+                y: 0.0,
+                theta: 3.0,
+            },
+            Pose {
+                x: 2.0,
+                y: 0.5,
+                theta: -3.0,
+            },
+            Pose {
+                x: 0.5,
+                y: 3.0,
+                theta: 0.2,
+            },
+        ];
+        let scans = vec![
+            scan_with_hit(&lidar, 0, 1.0),
+            scan_with_hit(&lidar, 225, 1.0),
+            scan_with_hit(&lidar, 450, 4.0),
+        ];
+        let goal = Goal {
+            phi_star: -3.0,
+            d_star: 1.5,
+            v_star: 0.7,
+        };
+        let obs = Observation {
+            tick: 4,
+            time: 0.2,
+            goal,
+            poses: &poses,
+            scans: &scans,
+        };
+
+        let mut samples = Vec::new();
+        labeller
+            .label_observation(&obs, 3, 17, &mut |s| samples.push(s))
+            .expect("labels");
+
+        let mut expected = [WheelCmd::BRAKE; 3];
+        expert_commands(&poses, &goal, &gains, &robot, &mut expected);
+        assert_eq!(samples.len(), 3);
+        for (i, sample) in samples.iter().enumerate() {
+            assert_eq!(usize::from(sample.robot), i);
+            assert_eq!((sample.iteration, sample.run), (3, 17));
+            assert_eq!(
+                sample.wheels,
+                [expected[i].left as f32, expected[i].right as f32]
+            );
+            assert_eq!(sample.d_star, 1.5);
+            let delta = f64::from(sample.delta_phi);
+            assert!(delta > -std::f64::consts::PI && delta <= std::f64::consts::PI);
+            assert!((delta - wrap_angle(-3.0 - poses[i].theta)).abs() < 1e-6);
+            let mut image = vec![0; 2500];
+            occupancy::render(&scans[i], &lidar, &OccupancySpec::PAPER, &mut image);
+            assert_eq!(sample.occupancy, image, "robot {i} sees its own scan");
+        }
+        // Robot 0's phi* - theta = -6 rad wraps to 0.28 rad.
+        assert!((f64::from(samples[0].delta_phi) - (-6.0 + std::f64::consts::TAU)).abs() < 1e-6);
+        assert_eq!(
+            samples[0].occupancy[25 * 50 + 35],
+            1,
+            "robot 0's hit 1 m ahead"
+        );
+        assert_eq!(
+            samples[1].occupancy[15 * 50 + 25],
+            1,
+            "robot 1's hit 1 m to the left"
+        );
+        assert!(
+            samples[2].occupancy.iter().all(|&c| c == 0),
+            "robot 2's only hit is beyond the window"
+        );
+    }
+
+    #[test]
+    fn label_observation_refuses_bad_observations() {
+        let lidar = LidarSpec::default();
+        let labeller = Labeller::new(
+            ExpertGains::default(),
+            RobotParams::default(),
+            lidar,
+            OccupancySpec::PAPER,
+        )
+        .expect("valid");
+        let poses = [
+            Pose {
+                x: 0.0,
+                y: 0.0,
+                theta: 0.0,
+            },
+            Pose {
+                x: 1.0,
+                y: 0.0,
+                theta: 0.0,
+            },
+        ];
+        let short = vec![vec![10.0_f32; 900], vec![10.0_f32; 10]];
+        let goal = Goal {
+            phi_star: 0.0,
+            d_star: 1.0,
+            v_star: 0.7,
+        };
+        let obs = Observation {
+            tick: 0,
+            time: 0.0,
+            goal,
+            poses: &poses,
+            scans: &short,
+        };
+        let mut sink = |_| {};
+        assert!(matches!(
+            labeller.label_observation(&obs, 0, 0, &mut sink),
+            Err(CollectError::ScanLength {
+                robot: 1,
+                expected: 900,
+                actual: 10
+            })
+        ));
+        let bad_goal = Observation {
+            goal: Goal {
+                d_star: -1.0,
+                ..goal
+            },
+            ..obs
+        };
+        assert!(matches!(
+            labeller.label_observation(&bad_goal, 0, 4, &mut sink),
+            Err(CollectError::Expert { run: 4, .. })
+        ));
+        let bad_occupancy = OccupancySpec {
+            resolution_m: 0.0,
+            ..OccupancySpec::PAPER
+        };
+        assert!(matches!(
+            Labeller::new(
+                ExpertGains::default(),
+                RobotParams::default(),
+                lidar,
+                bad_occupancy
+            ),
+            Err(CollectError::Occupancy { .. })
+        ));
+    }
+
+    #[test]
+    fn a_collected_run_records_every_nth_tick_for_every_robot_with_the_driving_commands() {
+        let scenario = tiny();
+        let opts = CollectOptions {
+            record_every: 3,
+            ..CollectOptions::for_scenario(&scenario)
+        };
+        let spec = scenario.run_spec(opts.base_seed, 1);
+        let mut samples = Vec::new();
+        collect_run(&spec, &opts, &mut samples).expect("collects");
+
+        // 20 ticks, recorded at 0, 3, ..., 18: 7 ticks x 3 robots.
+        assert_eq!(samples.len(), 7 * 3);
+        assert!(
+            samples
+                .iter()
+                .all(|s| s.run == 1 && s.iteration == 0 && s.d_star == 1.5)
+        );
+        assert_eq!(
+            samples
+                .iter()
+                .map(|s| usize::from(s.robot))
+                .collect::<Vec<_>>()[..3],
+            [0, 1, 2]
+        );
+
+        // The labels are the commands the expert drove with: replay the run and compare tick 3.
+        let mut expert = ExpertController::new(opts.gains, spec.world.robot);
+        let trajectory = run_episode(&spec, &mut expert, &mut |_, _| {}).expect("runs");
+        for robot in 0..3 {
+            let applied = trajectory.commands[3][robot];
+            assert_eq!(
+                samples[3 + robot].wheels,
+                [applied.left as f32, applied.right as f32]
+            );
+        }
+    }
+}

@@ -1,0 +1,93 @@
+//! Errors of building a report: every variant names the file or directory at fault and says how to
+//! fix it.
+
+use std::path::PathBuf;
+
+/// Why a report could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// The input directory does not exist.
+    #[error(
+        "input directory {} does not exist: pass the directory that `formation eval --out DIR/...` or `formation demo --out DIR` wrote",
+        dir.display()
+    )]
+    MissingInputDir {
+        /// The directory given.
+        dir: PathBuf,
+    },
+    /// The input path is not a directory.
+    #[error(
+        "{} is not a directory: pass the directory holding the eval outputs (each with a summary.json)",
+        path.display()
+    )]
+    NotADirectory {
+        /// The path given.
+        path: PathBuf,
+    },
+    /// No `summary.json` anywhere under the input directory.
+    #[error(
+        "no eval or run output under {}: run `formation eval --out {}/...` or `formation demo` first",
+        dir.display(),
+        dir.display()
+    )]
+    NoEvalOutput {
+        /// The directory searched.
+        dir: PathBuf,
+    },
+    /// A file or directory could not be read.
+    #[error("could not read {}: {source}", path.display())]
+    Read {
+        /// The file or directory.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A JSON input is not valid JSON of the expected shape (often a truncated file).
+    #[error(
+        "could not parse {}: {source} (is the file truncated? re-run the command that wrote it)",
+        path.display()
+    )]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The parser's error, with line and column.
+        source: serde_json::Error,
+    },
+    /// A JSON input parsed but holds values the report cannot draw.
+    #[error("{} holds invalid data: {reason}", path.display())]
+    InvalidData {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A training loss CSV is malformed.
+    #[error(
+        "{} line {line}: {reason} (expected a header `epoch,train_loss,val_loss[,seconds]` and one row of numbers per epoch)",
+        path.display()
+    )]
+    LossCsv {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// An output file or directory could not be written.
+    #[error("could not write {}: {source}", path.display())]
+    Write {
+        /// The file or directory.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// Plotting a figure failed.
+    #[error("could not draw figure {figure}: {message}")]
+    Plot {
+        /// The figure's id.
+        figure: String,
+        /// The plotting library's message.
+        message: String,
+    },
+}

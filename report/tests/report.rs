@@ -1,0 +1,163 @@
+//! `build_report` end to end on synthetic eval output: what it writes, that the page shows the
+//! data it read, and its errors on bad input.
+
+mod common;
+
+use std::fs;
+
+use formation_report::{ReportError, build_report};
+
+fn polyline_point_counts(svg: &str) -> Vec<usize> {
+    svg.split("<polyline")
+        .skip(1)
+        .filter_map(|tag| {
+            let start = tag.find("points=\"")? + 8;
+            let end = start + tag[start..].find('"')?;
+            Some(tag[start..end].split_whitespace().count())
+        })
+        .collect()
+}
+
+#[test]
+fn writes_html_and_every_figure() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dir.path().join("demo");
+    common::write_demo_dir(&data, 30.0);
+    let out = dir.path().join("site/report.html");
+    let summary = build_report(&data, &out).expect("report");
+
+    assert_eq!(summary.html, out);
+    assert_eq!(summary.evaluations, 4);
+    assert_eq!(summary.runs_drawn, 3);
+    assert_eq!((summary.loss_curves, summary.latency_profiles), (1, 1));
+    // Fig. 9, three panels per case, the loss curve and the latency profile.
+    assert_eq!(summary.figures.len(), 1 + 3 * 3 + 1 + 1);
+    assert_eq!(summary.figures_dir, dir.path().join("site/report-figures"));
+    let html = fs::read_to_string(&out).expect("html");
+    for figure in &summary.figures {
+        let svg = fs::read_to_string(figure).expect("svg file");
+        assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"), "{}", figure.display());
+        let stem = figure.file_stem().expect("stem").to_string_lossy().into_owned();
+        assert!(html.contains(&format!("data-figure=\"{stem}\"")), "{stem} is inline in the page");
+    }
+
+    // Table I: 19 of 20 runs succeed at 10 %; the paper's numbers beside ours.
+    assert!(html.contains("<td>95.0 %</td>"), "success at 10 %");
+    assert!(html.contains("<td>90.0 %</td>") && html.contains("<td>96.0 %</td>"), "paper row");
+    let summary_json: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(data.join("table1/summary.json")).expect("read")).expect("json");
+    let median_conv = summary_json["median_convergence_s"].as_f64().expect("median");
+    assert!(html.contains(&format!("<td>{median_conv:.2} s</td>")), "median convergence {median_conv:.2}");
+    let rate5 = summary_json["success_rate_5"].as_f64().expect("rate");
+    assert!(html.contains(&format!("<td>{:.1} %</td>", 100.0 * rate5)));
+
+    // Each case's error panel: one line per edge with one point per sample (30 s at 20 Hz).
+    let errors = fs::read_to_string(summary.figures_dir.join("case1-run0-errors.svg")).expect("svg");
+    let long_lines = polyline_point_counts(&errors).into_iter().filter(|&n| n == 601).count();
+    assert_eq!(long_lines, 3 + 3, "3 edges and 3 robots");
+    assert!(html.contains("constant desired orientation φ* = 3.76 rad"));
+    assert!(html.contains("(cf. paper Fig. 7)"));
+    assert!(html.contains("time-varying desired orientation"));
+
+    // Self-contained: nothing is loaded from elsewhere.
+    for forbidden in [" src=", "href=\"http", "url(", "@import", "@font-face"] {
+        assert!(!html.contains(forbidden), "{forbidden}");
+    }
+}
+
+#[test]
+fn the_figures_follow_the_data() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    common::write_demo_dir(dir.path(), 12.0);
+    let first = build_report(dir.path(), &dir.path().join("a.html")).expect("report");
+    let log_path = dir.path().join("case2/runs/run-0000.json");
+    let mut log: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(&log_path).expect("read")).expect("json");
+    log["trajectory"]["poses"][100][1]["x"] = serde_json::json!(25.0);
+    common::write_json(&log_path, &log);
+    let second = build_report(dir.path(), &dir.path().join("b.html")).expect("report");
+    let read = |s: &formation_report::ReportSummary, name: &str| {
+        fs::read_to_string(s.figures_dir.join(name)).expect("svg")
+    };
+    assert_ne!(read(&first, "case2-run0-trajectory.svg"), read(&second, "case2-run0-trajectory.svg"));
+    assert_ne!(read(&first, "case2-run0-errors.svg"), read(&second, "case2-run0-errors.svg"));
+    assert_eq!(read(&first, "case1-run0-trajectory.svg"), read(&second, "case1-run0-trajectory.svg"));
+    assert_eq!(read(&first, "case2-run0-wheels.svg"), read(&second, "case2-run0-wheels.svg"));
+}
+
+#[test]
+fn stale_figures_are_removed() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    common::write_demo_dir(dir.path(), 6.0);
+    let out = dir.path().join("r.html");
+    build_report(dir.path(), &out).expect("report");
+    fs::remove_dir_all(dir.path().join("case3")).expect("rm");
+    let summary = build_report(dir.path(), &out).expect("report");
+    let on_disk = fs::read_dir(&summary.figures_dir).expect("dir").count();
+    assert_eq!(on_disk, summary.figures.len());
+    assert!(!summary.figures_dir.join("case3-run0-errors.svg").exists());
+}
+
+#[test]
+fn missing_and_empty_directories_are_explained() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let missing = dir.path().join("nowhere");
+    let err = build_report(&missing, &dir.path().join("r.html")).expect_err("missing dir");
+    assert!(matches!(err, ReportError::MissingInputDir { .. }), "{err}");
+    assert!(err.to_string().contains("nowhere"), "{err}");
+
+    fs::write(dir.path().join("notes.txt"), "hello").expect("write");
+    let err = build_report(dir.path(), &dir.path().join("r.html")).expect_err("no summary");
+    let message = err.to_string();
+    assert!(message.starts_with("no eval or run output under"), "{message}");
+    assert!(message.contains("formation eval --out") && message.contains("formation demo"), "{message}");
+    assert!(!dir.path().join("r.html").exists(), "nothing written on error");
+
+    let err = build_report(&dir.path().join("notes.txt"), &dir.path().join("r.html")).expect_err("a file");
+    assert!(matches!(err, ReportError::NotADirectory { .. }), "{err}");
+}
+
+#[test]
+fn truncated_inputs_name_the_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    common::write_demo_dir(dir.path(), 6.0);
+    let out = dir.path().join("r.html");
+
+    let log = dir.path().join("case1/runs/run-0000.json");
+    let text = fs::read(&log).expect("read");
+    fs::write(&log, &text[..text.len() / 2]).expect("truncate");
+    let err = build_report(dir.path(), &out).expect_err("truncated run log");
+    assert!(matches!(err, ReportError::Json { .. }), "{err}");
+    assert!(err.to_string().contains("run-0000.json"), "{err}");
+    fs::write(&log, &text).expect("restore");
+
+    let summary = dir.path().join("table1/summary.json");
+    fs::write(&summary, "{\"runs\": 3, \"success_rate_5\": 0.5").expect("truncate");
+    let err = build_report(dir.path(), &out).expect_err("truncated summary");
+    assert!(err.to_string().contains("table1/summary.json"), "{err}");
+
+    fs::write(&summary, "{}").expect("empty object");
+    let err = build_report(dir.path(), &out).expect_err("no Table I keys");
+    assert!(err.to_string().contains("missing field `runs`"), "{err}");
+
+    common::write_json(&summary, &common::summary("table1", &[common::run_metrics(1, true)]));
+    fs::write(dir.path().join("policy-loss.csv"), "epoch,train_loss\n1,oops\n").expect("csv");
+    let err = build_report(dir.path(), &out).expect_err("bad csv");
+    assert!(err.to_string().contains("policy-loss.csv line 2"), "{err}");
+}
+
+#[test]
+fn optional_sections_are_omitted_when_absent() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    common::write_json(
+        &dir.path().join("summary.json"),
+        &common::summary("table1", &[common::run_metrics(1, true), common::run_metrics(2, false)]),
+    );
+    let out = dir.path().join("report.html");
+    let summary = build_report(dir.path(), &out).expect("report");
+    assert_eq!(summary.figures.len(), 1, "Fig. 9 only");
+    let html = fs::read_to_string(&out).expect("html");
+    assert!(!html.contains("id=\"training\"") && !html.contains("id=\"latency\""));
+    assert!(html.contains("No run logs were found"));
+    assert!(html.contains("<td>50.0 %</td>"), "1 of 2 runs succeed at 10 %");
+}

@@ -1,0 +1,314 @@
+//! The agent's side of the transport: what an agent needs from a message bus ([`AgentLink`]),
+//! and its iceoryx2 implementation ([`IceoryxAgentLink`]).
+//!
+//! An agent opens only its own robot's services. The world creates them with room for one
+//! subscriber on the scan and one publisher on the command, so while this agent runs no other
+//! process can read its scan or command its robot.
+
+use std::time::{Duration, Instant};
+
+use formation_proto::wire::{
+    AgentStatus, CmdMsg, ControlMsg, ControlRequest, RobotChannel, RunNamespace, ScanMsg,
+    ServiceLimits, StatusMsg, WORLD_NODE_NAME, WireError, agent_node_name, robot_service_name,
+};
+use iceoryx2::node::NodeView;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+
+/// A transport failure, or a request to stop.
+#[derive(Debug, thiserror::Error)]
+pub enum TransportError {
+    /// The run's services did not appear in time.
+    #[error(
+        "robot {robot}'s services do not exist in run {run} after {waited_s:.1} s: is the world \
+         running with this run id, and does the scenario have more than {robot} robots?"
+    )]
+    WorldNotFound {
+        /// The robot.
+        robot: usize,
+        /// The run id.
+        run: String,
+        /// How long the agent waited.
+        waited_s: f64,
+    },
+    /// Another live process holds this robot's port.
+    #[error(
+        "robot {robot}'s {port} port is held by another process (only one agent may drive a robot): {detail}"
+    )]
+    PortTaken {
+        /// The robot.
+        robot: usize,
+        /// Which port.
+        port: &'static str,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// iceoryx2 refused an operation.
+    #[error("iceoryx2 could not {action} ({detail})")]
+    Iceoryx {
+        /// What the agent was doing.
+        action: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// A message could not be encoded or decoded.
+    #[error(transparent)]
+    Wire(#[from] WireError),
+}
+
+fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> TransportError {
+    let action = action.into();
+    move |e| TransportError::Iceoryx { action, detail: format!("{e:?}") }
+}
+
+/// Why a wait ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// Something may have arrived.
+    Activity,
+    /// The timeout passed with nothing arriving.
+    Idle,
+    /// SIGINT or SIGTERM arrived.
+    Terminated,
+}
+
+/// What an agent needs from a transport: its own robot's four channels.
+pub trait AgentLink {
+    /// Blocks until the world may have sent something, `timeout` passes, or a signal arrives.
+    fn wait(&mut self, timeout: Duration) -> Result<Wake, TransportError>;
+    /// Every control request since the last call, oldest first.
+    fn drain_control(&mut self, sink: &mut dyn FnMut(ControlRequest)) -> Result<(), TransportError>;
+    /// The newest scan since the last call (older ones are dropped: only the newest matters).
+    fn newest_scan(&mut self) -> Result<Option<ScanMsg>, TransportError>;
+    /// Publishes a command and wakes the world.
+    fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), TransportError>;
+    /// Publishes a status and wakes the world.
+    fn publish_status(&mut self, status: &AgentStatus) -> Result<(), TransportError>;
+    /// False once the world process is gone (exited or died).
+    fn world_alive(&mut self) -> Result<bool, TransportError>;
+}
+
+/// The agent's iceoryx2 ports on its own robot's services.
+pub struct IceoryxAgentLink {
+    node: Node<ipc::Service>,
+    scan: Subscriber<ipc::Service, ScanMsg, ()>,
+    scan_wake: Listener<ipc::Service>,
+    control: Subscriber<ipc::Service, ControlMsg, ()>,
+    control_wake: Listener<ipc::Service>,
+    cmd: Publisher<ipc::Service, CmdMsg, ()>,
+    cmd_wake: Notifier<ipc::Service>,
+    status: Publisher<ipc::Service, StatusMsg, ()>,
+    status_wake: Notifier<ipc::Service>,
+    waitset: WaitSet<ipc::Service>,
+}
+
+const RETRY_PERIOD: Duration = Duration::from_millis(20);
+
+impl IceoryxAgentLink {
+    /// Opens robot `robot`'s services in `namespace`, waiting up to `timeout` for the world to
+    /// create them and for a dead predecessor's ports to be cleaned up.
+    pub fn connect(
+        namespace: &RunNamespace,
+        robot: usize,
+        timeout: Duration,
+    ) -> Result<Self, TransportError> {
+        let config = namespace.iceoryx_config()?;
+        let name = NodeName::new(&agent_node_name(robot)).map_err(|e| iox("name the agent node")(&e))?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .config(&config)
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<ipc::Service>()
+            .map_err(|e| iox("create the agent node")(&e))?;
+        let started = Instant::now();
+        let deadline = started + timeout;
+        loop {
+            match try_open(&node, namespace, robot) {
+                Ok(ports) => {
+                    let waitset = WaitSetBuilder::new()
+                        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+                        .create::<ipc::Service>()
+                        .map_err(|e| iox("create the agent's wait set")(&e))?;
+                    let (scan, scan_wake, control, control_wake, cmd, cmd_wake, status, status_wake) =
+                        ports;
+                    return Ok(IceoryxAgentLink {
+                        node,
+                        scan,
+                        scan_wake,
+                        control,
+                        control_wake,
+                        cmd,
+                        cmd_wake,
+                        status,
+                        status_wake,
+                        waitset,
+                    });
+                }
+                Err(OpenFailure::NotYet) if Instant::now() < deadline => {}
+                Err(OpenFailure::Taken { port, detail }) if Instant::now() < deadline => {
+                    // Maybe a dead predecessor still holds it: clean up and retry.
+                    let _ = node.try_cleanup_dead_nodes();
+                    tracing::debug!("robot {robot}: {port} port busy ({detail}); retrying");
+                }
+                Err(OpenFailure::NotYet) => {
+                    return Err(TransportError::WorldNotFound {
+                        robot,
+                        run: namespace.run().to_string(),
+                        waited_s: started.elapsed().as_secs_f64(),
+                    });
+                }
+                Err(OpenFailure::Taken { port, detail }) => {
+                    return Err(TransportError::PortTaken { robot, port, detail });
+                }
+                Err(OpenFailure::Fatal(e)) => return Err(e),
+            }
+            std::thread::sleep(RETRY_PERIOD);
+        }
+    }
+}
+
+enum OpenFailure {
+    /// The world has not created the services yet.
+    NotYet,
+    /// A port this agent needs is held by someone else.
+    Taken { port: &'static str, detail: String },
+    Fatal(TransportError),
+}
+
+type Ports = (
+    Subscriber<ipc::Service, ScanMsg, ()>,
+    Listener<ipc::Service>,
+    Subscriber<ipc::Service, ControlMsg, ()>,
+    Listener<ipc::Service>,
+    Publisher<ipc::Service, CmdMsg, ()>,
+    Notifier<ipc::Service>,
+    Publisher<ipc::Service, StatusMsg, ()>,
+    Notifier<ipc::Service>,
+);
+
+fn try_open(node: &Node<ipc::Service>, namespace: &RunNamespace, robot: usize) -> Result<Ports, OpenFailure> {
+    let limits = ServiceLimits::ROBOT;
+    let name = |channel| {
+        let text = robot_service_name(namespace.run(), robot, channel);
+        ServiceName::new(&text).map_err(|e| OpenFailure::Fatal(iox(format!("name service {text}"))(&e)))
+    };
+    let open_event = |channel| -> Result<_, OpenFailure> {
+        let service = name(channel)?;
+        node.service_builder(&service)
+            .event()
+            .max_notifiers(limits.max_publishers)
+            .max_listeners(limits.max_subscribers)
+            .open()
+            .map_err(|_| OpenFailure::NotYet)
+    };
+    let taken = |port: &'static str| move |e: &dyn std::fmt::Debug| OpenFailure::Taken { port, detail: format!("{e:?}") };
+    macro_rules! open_pubsub {
+        ($payload:ty, $channel:expr) => {
+            node.service_builder(&name($channel)?)
+                .publish_subscribe::<$payload>()
+                .max_publishers(limits.max_publishers)
+                .max_subscribers(limits.max_subscribers)
+                .subscriber_max_buffer_size(limits.subscriber_buffer)
+                .open()
+                .map_err(|_| OpenFailure::NotYet)?
+        };
+    }
+    let scan = open_pubsub!(ScanMsg, RobotChannel::Scan);
+    let control = open_pubsub!(ControlMsg, RobotChannel::Control);
+    let cmd = open_pubsub!(CmdMsg, RobotChannel::Cmd);
+    let status = open_pubsub!(StatusMsg, RobotChannel::Status);
+    Ok((
+        scan.subscriber_builder().buffer_size(limits.subscriber_buffer).create().map_err(|e| taken("scan")(&e))?,
+        open_event(RobotChannel::Scan)?.listener_builder().create().map_err(|e| taken("scan event")(&e))?,
+        control
+            .subscriber_builder()
+            .buffer_size(limits.subscriber_buffer)
+            .create()
+            .map_err(|e| taken("control")(&e))?,
+        open_event(RobotChannel::Control)?.listener_builder().create().map_err(|e| taken("control event")(&e))?,
+        cmd.publisher_builder().create().map_err(|e| taken("command")(&e))?,
+        open_event(RobotChannel::Cmd)?.notifier_builder().create().map_err(|e| taken("command event")(&e))?,
+        status.publisher_builder().create().map_err(|e| taken("status")(&e))?,
+        open_event(RobotChannel::Status)?.notifier_builder().create().map_err(|e| taken("status event")(&e))?,
+    ))
+}
+
+impl AgentLink for IceoryxAgentLink {
+    fn wait(&mut self, timeout: Duration) -> Result<Wake, TransportError> {
+        let scan_guard =
+            self.waitset.attach_notification(&self.scan_wake).map_err(|e| iox("attach the scan wake-up")(&e))?;
+        let control_guard = self
+            .waitset
+            .attach_notification(&self.control_wake)
+            .map_err(|e| iox("attach the control wake-up")(&e))?;
+        let mut activity = false;
+        let result = self
+            .waitset
+            .wait_and_process_once_with_timeout(
+                |_| {
+                    activity = true;
+                    CallbackProgression::Continue
+                },
+                timeout,
+            )
+            .map_err(|e| iox("wait for the world")(&e))?;
+        drop((scan_guard, control_guard));
+        let _ = self.scan_wake.try_wait(|_| {});
+        let _ = self.control_wake.try_wait(|_| {});
+        Ok(match result {
+            WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => Wake::Terminated,
+            _ if activity => Wake::Activity,
+            _ => Wake::Idle,
+        })
+    }
+
+    fn drain_control(&mut self, sink: &mut dyn FnMut(ControlRequest)) -> Result<(), TransportError> {
+        while let Some(sample) = self.control.receive().map_err(|e| iox("receive a control request")(&e))? {
+            match sample.payload().decode() {
+                Ok(request) => sink(request),
+                Err(e) => tracing::warn!("ignoring a malformed control request: {e}"),
+            }
+        }
+        Ok(())
+    }
+
+    fn newest_scan(&mut self) -> Result<Option<ScanMsg>, TransportError> {
+        let mut newest = None;
+        while let Some(sample) = self.scan.receive().map_err(|e| iox("receive a scan")(&e))? {
+            newest = Some(*sample.payload());
+        }
+        Ok(newest)
+    }
+
+    fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), TransportError> {
+        self.cmd.send_copy(*msg).map_err(|e| iox("send a command")(&e))?;
+        let _ = self.cmd_wake.notify();
+        Ok(())
+    }
+
+    fn publish_status(&mut self, status: &AgentStatus) -> Result<(), TransportError> {
+        let msg = StatusMsg::encode(status)?;
+        self.status.send_copy(msg).map_err(|e| iox("send a status")(&e))?;
+        let _ = self.status_wake.notify();
+        Ok(())
+    }
+
+    fn world_alive(&mut self) -> Result<bool, TransportError> {
+        let mut alive = false;
+        Node::<ipc::Service>::list(self.node.config(), |state| {
+            if let NodeState::Alive(view) = &state
+                && view.details().as_ref().is_some_and(|d| d.name().as_str() == WORLD_NODE_NAME)
+            {
+                alive = true;
+                return CallbackProgression::Stop;
+            }
+            CallbackProgression::Continue
+        })
+        .map_err(|e| iox("list the run's nodes")(&e))?;
+        Ok(alive)
+    }
+}

@@ -1,0 +1,171 @@
+//! `formation-world`: the world process of the multi-process runtime.
+//!
+//! It creates every robot's iceoryx2 services in the run's namespace, waits for one agent per
+//! robot, then plays the given runs (resolved run specs, written by the launcher) one after another with the agents staying alive: each run
+//! begins with a begin-episode request (agents answer ready), then the unchanged in-process episode
+//! loop steps the world while [`exchange::AgentsController`] trades scans for commands. After each
+//! run it writes the run logs ([`runlog`]) and prints a progress event on stdout. At the end, or on
+//! SIGINT/SIGTERM, or when the launcher closes its standard input, it asks the agents to exit.
+//!
+//! Usually started by `formation run` / `formation eval --processes`, not by hand.
+
+mod exchange;
+mod runlog;
+mod transport;
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::Parser;
+use formation_proto::wire::{RunId, RunNamespace};
+use formation_world::metrics::{MetricsConfig, run_metrics};
+use formation_world::{RunSpec, run_episode};
+
+use crate::exchange::{AgentsController, ClockMode, ExchangeSettings, StopReason};
+use crate::runlog::{Event, RunLog, TimingLog, emit, log_paths, write_atomic};
+use crate::transport::IceoryxWorldLink;
+
+/// The world process of formation's multi-process runtime.
+#[derive(Debug, Parser)]
+#[command(name = "formation-world", version)]
+struct Args {
+    /// Run id: namespaces the iceoryx2 services and files (letters, digits, '-', '_').
+    #[arg(long)]
+    run_id: String,
+    /// JSON file with the runs to play: an array of fully resolved run specs, as
+    /// `Scenario::run_spec` makes them (the launcher writes it).
+    #[arg(long)]
+    run_specs: PathBuf,
+    /// Directory for the run logs (`runs/`, `timing/`).
+    #[arg(long)]
+    out: PathBuf,
+    /// Clock mode.
+    #[arg(long, value_enum, default_value_t = ClockMode::Lockstep)]
+    clock: ClockMode,
+    /// Lockstep: wait at most this long for a robot's command before braking it [ms].
+    #[arg(long, default_value_t = 2000)]
+    command_timeout_ms: u64,
+    /// Realtime: a command older than this brakes its robot [ms].
+    #[arg(long, default_value_t = 150)]
+    stale_ms: u64,
+    /// How long to wait for every agent to connect [ms].
+    #[arg(long, default_value_t = 30_000)]
+    startup_timeout_ms: u64,
+    /// How long agents may take to get ready for an episode [ms].
+    #[arg(long, default_value_t = 10_000)]
+    ready_timeout_ms: u64,
+    /// Stop when standard input closes (set by the launcher, so the world never outlives it).
+    #[arg(long)]
+    exit_on_stdin_close: bool,
+}
+
+fn main() -> ExitCode {
+    let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    let args = Args::parse();
+    match run(&args) {
+        Ok(None) => ExitCode::SUCCESS,
+        Ok(Some(reason)) => {
+            eprintln!("formation-world: stopped ({reason:?}); agents asked to exit");
+            ExitCode::from(130)
+        }
+        Err(e) => {
+            eprintln!("formation-world: error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
+    let specs = read_run_specs(&args.run_specs)?;
+    let run_id = RunId::new(&args.run_id)?;
+    let namespace = RunNamespace::new(&run_id);
+    let n_robots = specs[0].n_robots;
+    let lidar = specs[0].world.lidar;
+
+    let stop = Arc::new(AtomicBool::new(false));
+    if args.exit_on_stdin_close {
+        let stop = Arc::clone(&stop);
+        std::thread::spawn(move || {
+            let mut sink = [0u8; 256];
+            let mut stdin = std::io::stdin();
+            while matches!(stdin.read(&mut sink), Ok(n) if n > 0) {}
+            stop.store(true, Ordering::Relaxed);
+        });
+    }
+
+    let mut link = IceoryxWorldLink::create(&namespace, n_robots)
+        .with_context(|| format!("setting up run {run_id}'s services"))?;
+    emit(&Event::Listening { robots: n_robots });
+    let settings = ExchangeSettings {
+        clock: args.clock,
+        command_timeout: Duration::from_millis(args.command_timeout_ms),
+        stale_after: Duration::from_millis(args.stale_ms),
+        ready_timeout: Duration::from_millis(args.ready_timeout_ms),
+        liveness_period: Duration::from_millis(100),
+        stop,
+    };
+    let mut agents = AgentsController::new(&mut link, settings, lidar);
+    let result = play(args, &specs, &mut agents);
+    agents.shutdown_agents();
+    match (result, agents.stopped()) {
+        (_, Some(reason)) => Ok(Some(reason)),
+        (Ok(()), None) => {
+            emit(&Event::Finished);
+            Ok(None)
+        }
+        (Err(e), None) => Err(e),
+    }
+}
+
+/// Reads the run specs; all must have the same team size.
+fn read_run_specs(path: &Path) -> anyhow::Result<Vec<RunSpec>> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading run specs {}", path.display()))?;
+    let specs: Vec<RunSpec> =
+        serde_json::from_slice(&bytes).with_context(|| format!("parsing run specs {}", path.display()))?;
+    let Some(first) = specs.first() else {
+        anyhow::bail!("{} holds no runs", path.display());
+    };
+    if let Some(other) = specs.iter().find(|s| s.n_robots != first.n_robots || s.n_robots == 0) {
+        anyhow::bail!(
+            "{}: run {} has {} robots but run {} has {}; one world serves one team size",
+            path.display(),
+            other.index,
+            other.n_robots,
+            first.index,
+            first.n_robots
+        );
+    }
+    Ok(specs)
+}
+
+fn play(args: &Args, specs: &[RunSpec], agents: &mut AgentsController<'_>) -> anyhow::Result<()> {
+    agents.await_agents(Duration::from_millis(args.startup_timeout_ms))?;
+    emit(&Event::AgentsConnected);
+    let metrics_config = MetricsConfig::default();
+    for spec in specs {
+        let index = spec.index;
+        agents.begin_episode(spec.world.dt, spec.world.lidar).with_context(|| format!("run {index}"))?;
+        let trajectory =
+            run_episode(spec, agents, &mut |_, _| {}).with_context(|| format!("run {index}"))?;
+        let timing = TimingLog { index, clock: args.clock.as_str().into(), robots: agents.take_timings() };
+        let log = RunLog {
+            index,
+            metrics: run_metrics(&trajectory, &metrics_config),
+            trajectory,
+            clock: args.clock.as_str().into(),
+            models: agents.model_ids().to_vec(),
+        };
+        let (log_path, timing_path) = log_paths(&args.out, index);
+        write_atomic(&log_path, &serde_json::to_vec(&log)?)?;
+        write_atomic(&timing_path, &serde_json::to_vec(&timing)?)?;
+        emit(&Event::RunDone { index, log: &log_path });
+    }
+    Ok(())
+}

@@ -1,0 +1,314 @@
+//! The world's side of the transport: what the world needs from a message bus ([`WorldLink`]),
+//! and its iceoryx2 implementation ([`IceoryxWorldLink`]).
+//!
+//! The exchange logic ([`crate::exchange`]) talks only to [`WorldLink`], so another transport
+//! (Zenoh, for agents on other hosts) can be added without touching it. The world watches command
+//! ages itself, so its watchdog does not depend on the transport's own liveness reports; those
+//! ([`WorldLink::dead_agents`]) only speed up noticing a crashed agent and clean up after it.
+
+use std::time::{Duration, Instant};
+
+use formation_proto::wire::{
+    AgentStatus, CmdMsg, ControlMsg, ControlRequest, RobotChannel, RunNamespace, ScanMsg,
+    ServiceLimits, StatusMsg, WORLD_NODE_NAME, WireError, agent_node_name, robot_service_name,
+};
+use iceoryx2::node::NodeView;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+
+/// A transport failure, or a request to stop.
+#[derive(Debug, thiserror::Error)]
+pub enum TransportError {
+    /// iceoryx2 refused an operation.
+    #[error("iceoryx2 could not {action} ({detail}); is another world running with this run id?")]
+    Iceoryx {
+        /// What the world was doing.
+        action: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// A message could not be encoded or decoded.
+    #[error(transparent)]
+    Wire(#[from] WireError),
+    /// SIGINT or SIGTERM arrived.
+    #[error("stopped by a termination signal")]
+    Terminated,
+}
+
+fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> TransportError {
+    let action = action.into();
+    move |e| TransportError::Iceoryx { action, detail: format!("{e:?}") }
+}
+
+/// What the world needs from a transport: per-robot channels to and from the agents.
+pub trait WorldLink {
+    /// Number of robots the link serves.
+    fn n_robots(&self) -> usize;
+    /// Publishes robot `robot`'s scan and wakes its agent.
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), TransportError>;
+    /// Sends a control request to robot `robot`'s agent and wakes it.
+    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> Result<(), TransportError>;
+    /// Blocks until an agent may have sent something, or `timeout` passes.
+    fn wait(&mut self, timeout: Duration) -> Result<(), TransportError>;
+    /// Hands every command robot `robot`'s agent sent since the last call to `sink`, oldest first.
+    fn drain_commands(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(CmdMsg, Instant),
+    ) -> Result<(), TransportError>;
+    /// Hands every status robot `robot`'s agent sent since the last call to `sink`, oldest first.
+    fn drain_statuses(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(AgentStatus),
+    ) -> Result<(), TransportError>;
+    /// Robots whose agent process the transport knows to be dead; cleans up after them so a
+    /// restarted agent can take their place.
+    fn dead_agents(&mut self) -> Result<Vec<usize>, TransportError>;
+}
+
+/// One robot's ports on the world side.
+struct RobotPorts {
+    scan: Publisher<ipc::Service, ScanMsg, ()>,
+    scan_wake: Notifier<ipc::Service>,
+    control: Publisher<ipc::Service, ControlMsg, ()>,
+    control_wake: Notifier<ipc::Service>,
+    cmd: Subscriber<ipc::Service, CmdMsg, ()>,
+    cmd_wake: Listener<ipc::Service>,
+    status: Subscriber<ipc::Service, StatusMsg, ()>,
+    status_wake: Listener<ipc::Service>,
+}
+
+/// The world's iceoryx2 ports: it creates every robot service of the run and holds the world end.
+pub struct IceoryxWorldLink {
+    node: Node<ipc::Service>,
+    robots: Vec<RobotPorts>,
+    waitset: WaitSet<ipc::Service>,
+}
+
+impl IceoryxWorldLink {
+    /// Creates the world's node and every robot's services in `namespace`.
+    pub fn create(namespace: &RunNamespace, n_robots: usize) -> Result<Self, TransportError> {
+        let config = namespace.iceoryx_config()?;
+        let name = NodeName::new(WORLD_NODE_NAME).map_err(|e| iox("name the world node")(&e))?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .config(&config)
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<ipc::Service>()
+            .map_err(|e| iox("create the world node")(&e))?;
+        let robots = (0..n_robots)
+            .map(|robot| create_robot_ports(&node, namespace, robot))
+            .collect::<Result<Vec<_>, _>>()?;
+        let waitset = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<ipc::Service>()
+            .map_err(|e| iox("create the world's wait set")(&e))?;
+        Ok(IceoryxWorldLink { node, robots, waitset })
+    }
+
+    fn ports(&self, robot: usize) -> Result<&RobotPorts, TransportError> {
+        self.robots.get(robot).ok_or_else(|| TransportError::Iceoryx {
+            action: format!("reach robot {robot}"),
+            detail: format!("the run has {} robots", self.robots.len()),
+        })
+    }
+}
+
+fn service_name(
+    namespace: &RunNamespace,
+    robot: usize,
+    channel: RobotChannel,
+) -> Result<ServiceName, TransportError> {
+    let name = robot_service_name(namespace.run(), robot, channel);
+    ServiceName::new(&name).map_err(|e| iox(format!("name service {name}"))(&e))
+}
+
+fn create_robot_ports(
+    node: &Node<ipc::Service>,
+    namespace: &RunNamespace,
+    robot: usize,
+) -> Result<RobotPorts, TransportError> {
+    let limits = ServiceLimits::ROBOT;
+    let pubsub = |channel| -> Result<_, TransportError> { service_name(namespace, robot, channel) };
+    let event = |channel: RobotChannel| -> Result<_, TransportError> {
+        let name = service_name(namespace, robot, channel)?;
+        node.service_builder(&name)
+            .event()
+            .max_notifiers(limits.max_publishers)
+            .max_listeners(limits.max_subscribers)
+            .max_nodes(limits.max_nodes)
+            .open_or_create()
+            .map_err(|e| iox(format!("create event service {name}"))(&e))
+    };
+    macro_rules! pubsub_service {
+        ($payload:ty, $channel:expr) => {{
+            let name = pubsub($channel)?;
+            node.service_builder(&name)
+                .publish_subscribe::<$payload>()
+                .max_publishers(limits.max_publishers)
+                .max_subscribers(limits.max_subscribers)
+                .subscriber_max_buffer_size(limits.subscriber_buffer)
+                .max_nodes(limits.max_nodes)
+                .history_size(0)
+                .enable_safe_overflow(true)
+                .open_or_create()
+                .map_err(|e| iox(format!("create service {name}"))(&e))?
+        }};
+    }
+    let scan = pubsub_service!(ScanMsg, RobotChannel::Scan);
+    let cmd = pubsub_service!(CmdMsg, RobotChannel::Cmd);
+    let control = pubsub_service!(ControlMsg, RobotChannel::Control);
+    let status = pubsub_service!(StatusMsg, RobotChannel::Status);
+    let what = |port: &str| format!("create the world's {port} port of robot {robot}");
+    Ok(RobotPorts {
+        scan: scan.publisher_builder().create().map_err(|e| iox(what("scan"))(&e))?,
+        scan_wake: event(RobotChannel::Scan)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| iox(what("scan event"))(&e))?,
+        control: control.publisher_builder().create().map_err(|e| iox(what("control"))(&e))?,
+        control_wake: event(RobotChannel::Control)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| iox(what("control event"))(&e))?,
+        cmd: cmd
+            .subscriber_builder()
+            .buffer_size(limits.subscriber_buffer)
+            .create()
+            .map_err(|e| iox(what("cmd"))(&e))?,
+        cmd_wake: event(RobotChannel::Cmd)?
+            .listener_builder()
+            .create()
+            .map_err(|e| iox(what("cmd event"))(&e))?,
+        status: status
+            .subscriber_builder()
+            .buffer_size(limits.subscriber_buffer)
+            .create()
+            .map_err(|e| iox(what("status"))(&e))?,
+        status_wake: event(RobotChannel::Status)?
+            .listener_builder()
+            .create()
+            .map_err(|e| iox(what("status event"))(&e))?,
+    })
+}
+
+impl WorldLink for IceoryxWorldLink {
+    fn n_robots(&self) -> usize {
+        self.robots.len()
+    }
+
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), TransportError> {
+        let ports = self.ports(robot)?;
+        ports.scan.send_copy(*msg).map_err(|e| iox(format!("send robot {robot}'s scan"))(&e))?;
+        // A wake-up nobody listens to (agent restarting) is not an error.
+        let _ = ports.scan_wake.notify();
+        Ok(())
+    }
+
+    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> Result<(), TransportError> {
+        let msg = ControlMsg::encode(request)?;
+        let ports = self.ports(robot)?;
+        ports
+            .control
+            .send_copy(msg)
+            .map_err(|e| iox(format!("send robot {robot}'s control request"))(&e))?;
+        let _ = ports.control_wake.notify();
+        Ok(())
+    }
+
+    fn wait(&mut self, timeout: Duration) -> Result<(), TransportError> {
+        let waitset = &self.waitset;
+        let mut guards = Vec::with_capacity(2 * self.robots.len());
+        for ports in &self.robots {
+            for listener in [&ports.cmd_wake, &ports.status_wake] {
+                guards.push(
+                    waitset
+                        .attach_notification(listener)
+                        .map_err(|e| iox("attach an agent's wake-up to the wait set")(&e))?,
+                );
+            }
+        }
+        let result = waitset
+            .wait_and_process_once_with_timeout(|_| CallbackProgression::Stop, timeout)
+            .map_err(|e| iox("wait for the agents")(&e))?;
+        drop(guards);
+        for ports in &self.robots {
+            // Consume the wake-ups; the samples themselves are drained by the caller.
+            let _ = ports.cmd_wake.try_wait(|_| {});
+            let _ = ports.status_wake.try_wait(|_| {});
+        }
+        match result {
+            WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => {
+                Err(TransportError::Terminated)
+            }
+            _ => Ok(()),
+        }
+    }
+
+    fn drain_commands(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(CmdMsg, Instant),
+    ) -> Result<(), TransportError> {
+        let ports = self.ports(robot)?;
+        while let Some(sample) =
+            ports.cmd.receive().map_err(|e| iox(format!("receive robot {robot}'s command"))(&e))?
+        {
+            sink(*sample.payload(), Instant::now());
+        }
+        Ok(())
+    }
+
+    fn drain_statuses(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(AgentStatus),
+    ) -> Result<(), TransportError> {
+        let ports = self.ports(robot)?;
+        while let Some(sample) =
+            ports.status.receive().map_err(|e| iox(format!("receive robot {robot}'s status"))(&e))?
+        {
+            match sample.payload().decode() {
+                Ok(status) => sink(status),
+                Err(e) => tracing::warn!("robot {robot}: ignoring a malformed status: {e}"),
+            }
+        }
+        Ok(())
+    }
+
+    fn dead_agents(&mut self) -> Result<Vec<usize>, TransportError> {
+        let names: Vec<String> = (0..self.robots.len()).map(agent_node_name).collect();
+        let mut dead = Vec::new();
+        Node::<ipc::Service>::list(self.node.config(), |state| {
+            if let NodeState::Dead(view) = &state
+                && let Some(details) = view.details()
+                && let Some(robot) = names.iter().position(|n| n == details.name().as_str())
+            {
+                dead.push(robot);
+            }
+            CallbackProgression::Continue
+        })
+        .map_err(|e| iox("list the run's nodes")(&e))?;
+        if !dead.is_empty() {
+            let cleaned = self.node.try_cleanup_dead_nodes();
+            tracing::info!(
+                "agents of robots {dead:?} died; cleaned up {} dead node(s)",
+                cleaned.cleanups
+            );
+            for ports in &self.robots {
+                let _ = ports.scan.update_connections();
+                let _ = ports.control.update_connections();
+                let _ = ports.cmd.update_connections();
+                let _ = ports.status.update_connections();
+            }
+        }
+        dead.sort_unstable();
+        dead.dedup();
+        Ok(dead)
+    }
+}
