@@ -122,11 +122,11 @@ pub fn controller_factory<'a>(
 ) -> Box<ControllerFactory<'a>> {
     match kind {
         ControllerKind::Expert => Box::new(move || {
-            let robot = scenario.run_spec(0, 0).world.robot;
+            let robot = scenario.world_config().robot;
             Ok(Box::new(ExpertController::new(ExpertGains::default(), robot)) as Box<dyn Controller>)
         }),
         ControllerKind::Policy => Box::new(move || {
-            let lidar = scenario.run_spec(0, 0).world.lidar;
+            let lidar = scenario.world_config().lidar;
             let refs: Vec<&Path> = models.iter().map(PathBuf::as_path).collect();
             Ok(Box::new(PolicyController::from_model_paths(&refs, lidar)?) as Box<dyn Controller>)
         }),

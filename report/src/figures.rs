@@ -20,8 +20,8 @@ use crate::input::{Quartiles, RunTrajectory};
 use crate::loss::LossCurve;
 use crate::profile::StageLatency;
 use crate::series::{
-    Series, Wheel, equal_aspect, formation_error_percent, heading_triangle, jitter, orientation_error,
-    padded_range, paths, robot_label, snapshot_indices, wheel_commands,
+    Series, Wheel, equal_aspect, formation_error_percent, heading_triangle, jitter,
+    orientation_error, padded_range, paths, robot_label, snapshot_indices, wheel_commands,
 };
 
 /// The font family of all figure text (a generic family: nothing is loaded).
@@ -84,8 +84,15 @@ type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
 type DrawResult = Result<(), Box<dyn Error>>;
 
 /// Draws a figure of `size` pixels on a white background.
-fn render(id: &str, size: (u32, u32), draw: impl FnOnce(&Area<'_>) -> DrawResult) -> Result<Figure, ReportError> {
-    let plot_error = |e: &dyn std::fmt::Display| ReportError::Plot { figure: id.to_owned(), message: e.to_string() };
+fn render(
+    id: &str,
+    size: (u32, u32),
+    draw: impl FnOnce(&Area<'_>) -> DrawResult,
+) -> Result<Figure, ReportError> {
+    let plot_error = |e: &dyn std::fmt::Display| ReportError::Plot {
+        figure: id.to_owned(),
+        message: e.to_string(),
+    };
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
@@ -93,7 +100,10 @@ fn render(id: &str, size: (u32, u32), draw: impl FnOnce(&Area<'_>) -> DrawResult
         draw(&root).map_err(|e| plot_error(&e))?;
         root.present().map_err(|e| plot_error(&e))?;
     }
-    Ok(Figure { id: id.to_owned(), svg })
+    Ok(Figure {
+        id: id.to_owned(),
+        svg,
+    })
 }
 
 fn text_style(size: f64) -> TextStyle<'static> {
@@ -104,6 +114,7 @@ fn text_style(size: f64) -> TextStyle<'static> {
 #[derive(Debug, Clone, Copy)]
 enum Mark {
     Line(RGBColor),
+    Thin(RGBColor),
     Dashed(RGBColor),
     Triangle(RGBColor),
     Dot(RGBColor),
@@ -117,17 +128,34 @@ fn draw_legend(area: &Area<'_>, top: i32, entries: &[(Mark, String)]) -> DrawRes
         let y = top + 20 * k as i32;
         let (x0, x1) = (6, 28);
         match *mark {
-            Mark::Line(color) => area.draw(&PathElement::new(vec![(x0, y), (x1, y)], color.stroke_width(2)))?,
-            Mark::Dashed(color) => {
-                area.draw(&DashedPathElement::new(vec![(x0, y), (x1, y)], 5, 3, color.stroke_width(1)))?
-            }
-            Mark::Triangle(color) => {
-                area.draw(&Polygon::new(vec![(x0 + 16, y), (x0 + 5, y - 6), (x0 + 5, y + 6)], color.filled()))?
-            }
+            Mark::Line(color) => area.draw(&PathElement::new(
+                vec![(x0, y), (x1, y)],
+                color.stroke_width(2),
+            ))?,
+            Mark::Thin(color) => area.draw(&PathElement::new(
+                vec![(x0, y), (x1, y)],
+                color.stroke_width(1),
+            ))?,
+            Mark::Dashed(color) => area.draw(&DashedPathElement::new(
+                vec![(x0, y), (x1, y)],
+                5,
+                3,
+                color.stroke_width(1),
+            ))?,
+            Mark::Triangle(color) => area.draw(&Polygon::new(
+                vec![(x0 + 16, y), (x0 + 5, y - 6), (x0 + 5, y + 6)],
+                color.filled(),
+            ))?,
             Mark::Dot(color) => area.draw(&Circle::new((x0 + 11, y), 4, color.filled()))?,
             Mark::Box => {
-                area.draw(&Rectangle::new([(x0, y - 6), (x1, y + 6)], BOX.mix(0.25).filled()))?;
-                area.draw(&Rectangle::new([(x0, y - 6), (x1, y + 6)], BOX.stroke_width(1)))?;
+                area.draw(&Rectangle::new(
+                    [(x0, y - 6), (x1, y + 6)],
+                    BOX.mix(0.25).filled(),
+                ))?;
+                area.draw(&Rectangle::new(
+                    [(x0, y - 6), (x1, y + 6)],
+                    BOX.stroke_width(1),
+                ))?;
             }
         }
         area.draw(&Text::new(label.clone(), (x1 + 6, y), label_style.clone()))?;
@@ -180,17 +208,28 @@ fn time_panel(
         ))?;
     }
     for line in lines {
-        chart.draw_series(LineSeries::new(line.series.points.iter().copied(), line.color.stroke_width(2)))?;
+        chart.draw_series(LineSeries::new(
+            line.series.points.iter().copied(),
+            line.color.stroke_width(2),
+        ))?;
     }
     let entries: Vec<(Mark, String)> = lines
         .iter()
         .map(|l| (Mark::Line(l.color), l.series.label.clone()))
-        .chain(references.iter().map(|r| (Mark::Dashed(REFERENCE), r.label.clone())))
+        .chain(
+            references
+                .iter()
+                .map(|r| (Mark::Dashed(REFERENCE), r.label.clone())),
+        )
         .collect();
     draw_legend(&legend, 44, &entries)
 }
 
-fn configure_mesh<X, Y>(chart: &mut ChartContext<'_, SVGBackend<'_>, Cartesian2d<X, Y>>, x_desc: &str, y_desc: &str) -> DrawResult
+fn configure_mesh<X, Y>(
+    chart: &mut ChartContext<'_, SVGBackend<'_>, Cartesian2d<X, Y>>,
+    x_desc: &str,
+    y_desc: &str,
+) -> DrawResult
 where
     X: Ranged<ValueType = f64> + ValueFormatter<f64>,
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
@@ -223,8 +262,14 @@ pub fn errors_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportErr
     let orientation = orientation_error(traj);
     render(id, (640, 600), |root| {
         let (top, bottom) = root.split_vertically(300);
-        let edge_lines: Vec<Line<'_>> =
-            formation.iter().enumerate().map(|(k, s)| Line { series: s, color: edge_color(k) }).collect();
+        let edge_lines: Vec<Line<'_>> = formation
+            .iter()
+            .enumerate()
+            .map(|(k, s)| Line {
+                series: s,
+                color: edge_color(k),
+            })
+            .collect();
         time_panel(
             &top,
             "(a) formation error eᵢⱼ = |dᵢⱼ − d*| / d*",
@@ -232,20 +277,35 @@ pub fn errors_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportErr
             time_range(traj),
             &edge_lines,
             &[
-                Reference { y: 10.0, label: "10 % tolerance".into() },
-                Reference { y: 5.0, label: "5 % tolerance".into() },
+                Reference {
+                    y: 10.0,
+                    label: "10 % tolerance".into(),
+                },
+                Reference {
+                    y: 5.0,
+                    label: "5 % tolerance".into(),
+                },
             ],
             true,
         )?;
-        let robot_lines: Vec<Line<'_>> =
-            orientation.iter().enumerate().map(|(i, s)| Line { series: s, color: robot_color(i) }).collect();
+        let robot_lines: Vec<Line<'_>> = orientation
+            .iter()
+            .enumerate()
+            .map(|(i, s)| Line {
+                series: s,
+                color: robot_color(i),
+            })
+            .collect();
         time_panel(
             &bottom,
             "orientation error θᵢ − φ* (wrapped)",
             "orientation error [rad]",
             time_range(traj),
             &robot_lines,
-            &[Reference { y: 0.0, label: "zero".into() }],
+            &[Reference {
+                y: 0.0,
+                label: "zero".into(),
+            }],
             false,
         )
     })
@@ -256,18 +316,36 @@ pub fn wheels_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportErr
     let left = wheel_commands(traj, Wheel::Left);
     let right = wheel_commands(traj, Wheel::Right);
     let references: Vec<Reference> = if traj.v_star.is_finite() {
-        vec![Reference { y: traj.v_star, label: format!("v* = {} m/s", trim_number(traj.v_star)) }]
+        vec![Reference {
+            y: traj.v_star,
+            label: format!("v* = {} m/s", trim_number(traj.v_star)),
+        }]
     } else {
         Vec::new()
     };
     render(id, (640, 600), |root| {
         let (top, bottom) = root.split_vertically(300);
-        for (area, series, title) in
-            [(&top, &left, "(b) left wheel command"), (&bottom, &right, "right wheel command")]
-        {
-            let lines: Vec<Line<'_>> =
-                series.iter().enumerate().map(|(i, s)| Line { series: s, color: robot_color(i) }).collect();
-            time_panel(area, title, "wheel speed [m/s]", time_range(traj), &lines, &references, false)?;
+        for (area, series, title) in [
+            (&top, &left, "(b) left wheel command"),
+            (&bottom, &right, "right wheel command"),
+        ] {
+            let lines: Vec<Line<'_>> = series
+                .iter()
+                .enumerate()
+                .map(|(i, s)| Line {
+                    series: s,
+                    color: robot_color(i),
+                })
+                .collect();
+            time_panel(
+                area,
+                title,
+                "wheel speed [m/s]",
+                time_range(traj),
+                &lines,
+                &references,
+                false,
+            )?;
         }
         Ok(())
     })
@@ -287,10 +365,18 @@ pub fn trajectory_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, Repor
         let (plot_w, plot_h) = plot.dim_in_pixel();
         let inner_w = f64::from(plot_w.saturating_sub(2 * margin + y_label_area).max(1));
         let inner_h = f64::from(plot_h.saturating_sub(2 * margin + x_label_area).max(1));
-        let xs = robot_paths.iter().flat_map(|s| s.points.iter().map(|p| p.0));
-        let ys = robot_paths.iter().flat_map(|s| s.points.iter().map(|p| p.1));
-        let (x_range, y_range) =
-            equal_aspect(padded_range(xs, 0.06, false), padded_range(ys, 0.06, false), inner_w, inner_h);
+        let xs = robot_paths
+            .iter()
+            .flat_map(|s| s.points.iter().map(|p| p.0));
+        let ys = robot_paths
+            .iter()
+            .flat_map(|s| s.points.iter().map(|p| p.1));
+        let (x_range, y_range) = equal_aspect(
+            padded_range(xs, 0.06, false),
+            padded_range(ys, 0.06, false),
+            inner_w,
+            inner_h,
+        );
         let marker = 0.03 * (x_range.end - x_range.start).max(y_range.end - y_range.start);
         let mut chart = ChartBuilder::on(&plot)
             .margin(margin)
@@ -299,7 +385,10 @@ pub fn trajectory_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, Repor
             .build_cartesian_2d(x_range, y_range)?;
         configure_mesh(&mut chart, "x [m]", "y [m]")?;
         for (i, path) in robot_paths.iter().enumerate() {
-            chart.draw_series(LineSeries::new(path.points.iter().copied(), robot_color(i).mix(0.8).stroke_width(2)))?;
+            chart.draw_series(LineSeries::new(
+                path.points.iter().copied(),
+                robot_color(i).mix(0.8).stroke_width(2),
+            ))?;
         }
         for &k in &snapshots {
             let poses = &traj.poses[k];
@@ -317,7 +406,10 @@ pub fn trajectory_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, Repor
             for (i, pose) in poses.iter().enumerate() {
                 if [pose.x, pose.y, pose.theta].iter().all(|v| v.is_finite()) {
                     let triangle = heading_triangle(pose.x, pose.y, pose.theta, marker);
-                    chart.draw_series(std::iter::once(Polygon::new(triangle.to_vec(), robot_color(i).filled())))?;
+                    chart.draw_series(std::iter::once(Polygon::new(
+                        triangle.to_vec(),
+                        robot_color(i).filled(),
+                    )))?;
                 }
             }
         }
@@ -331,10 +423,15 @@ pub fn trajectory_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, Repor
             })
             .filter(|(x, y)| x.is_finite() && y.is_finite())
             .collect();
-        chart.draw_series(collision_points.iter().map(|&p| Circle::new(p, 7, PAPER.stroke_width(2))))?;
+        chart.draw_series(
+            collision_points
+                .iter()
+                .map(|&p| Circle::new(p, 7, PAPER.stroke_width(2))),
+        )?;
 
-        let mut entries: Vec<(Mark, String)> =
-            (0..traj.n_robots()).map(|i| (Mark::Triangle(robot_color(i)), robot_label(i))).collect();
+        let mut entries: Vec<(Mark, String)> = (0..traj.n_robots())
+            .map(|i| (Mark::Triangle(robot_color(i)), robot_label(i)))
+            .collect();
         entries.push((Mark::Dashed(REFERENCE), "formation".into()));
         if !collision_points.is_empty() {
             entries.push((Mark::Dot(PAPER), "collision".into()));
@@ -396,7 +493,12 @@ fn box_panel(area: &Area<'_>, panel: &BoxPanel) -> DrawResult {
     let values = panel
         .groups
         .iter()
-        .flat_map(|g| g.dots.iter().copied().chain(g.stats.iter().flat_map(|q| [q.min, q.max])))
+        .flat_map(|g| {
+            g.dots
+                .iter()
+                .copied()
+                .chain(g.stats.iter().flat_map(|q| [q.min, q.max]))
+        })
         .chain(panel.paper_median);
     let y_range = padded_range(values, 0.08, false);
     let x_range = -0.6..n as f64 - 0.4;
@@ -425,7 +527,12 @@ fn box_panel(area: &Area<'_>, panel: &BoxPanel) -> DrawResult {
         let x = g as f64;
         let count = group.stats.map_or(0, |q| q.count);
         chart.draw_series(std::iter::once(
-            EmptyElement::at((x, y_range.start)) + Text::new(format!("{} (n = {count})", group.label), (0, 8), label_style.clone()),
+            EmptyElement::at((x, y_range.start))
+                + Text::new(
+                    format!("{} (n = {count})", group.label),
+                    (0, 8),
+                    label_style.clone(),
+                ),
         ))?;
         let Some(q) = group.stats else {
             chart.draw_series(std::iter::once(Text::new(
@@ -443,9 +550,18 @@ fn box_panel(area: &Area<'_>, panel: &BoxPanel) -> DrawResult {
         chart.draw_series([
             PathElement::new(vec![(x, q.q3), (x, q.max)], INK.stroke_width(1)),
             PathElement::new(vec![(x, q.min), (x, q.q1)], INK.stroke_width(1)),
-            PathElement::new(vec![(x - half / 2.0, q.max), (x + half / 2.0, q.max)], INK.stroke_width(1)),
-            PathElement::new(vec![(x - half / 2.0, q.min), (x + half / 2.0, q.min)], INK.stroke_width(1)),
-            PathElement::new(vec![(x - half, q.median), (x + half, q.median)], INK.stroke_width(3)),
+            PathElement::new(
+                vec![(x - half / 2.0, q.max), (x + half / 2.0, q.max)],
+                INK.stroke_width(1),
+            ),
+            PathElement::new(
+                vec![(x - half / 2.0, q.min), (x + half / 2.0, q.min)],
+                INK.stroke_width(1),
+            ),
+            PathElement::new(
+                vec![(x - half, q.median), (x + half, q.median)],
+                INK.stroke_width(3),
+            ),
         ])?;
         chart.draw_series(
             group
@@ -483,8 +599,14 @@ pub fn loss_figure(id: &str, curve: &LossCurve) -> Result<Figure, ReportError> {
             .y_label_area_size(70)
             .build_cartesian_2d(x_range, (lo..hi).log_scale())?;
         configure_mesh(&mut chart, "epoch", "loss (MSE) [(m/s)²]")?;
-        chart.draw_series(LineSeries::new(train.iter().copied(), robot_color(0).stroke_width(2)))?;
-        chart.draw_series(LineSeries::new(val.iter().copied(), robot_color(1).stroke_width(2)))?;
+        chart.draw_series(LineSeries::new(
+            train.iter().copied(),
+            robot_color(0).stroke_width(2),
+        ))?;
+        chart.draw_series(LineSeries::new(
+            val.iter().copied(),
+            robot_color(1).stroke_width(2),
+        ))?;
         let mut entries = vec![(Mark::Line(robot_color(0)), "training".to_owned())];
         if !val.is_empty() {
             entries.push((Mark::Line(robot_color(1)), "validation".to_owned()));
@@ -495,7 +617,11 @@ pub fn loss_figure(id: &str, curve: &LossCurve) -> Result<Figure, ReportError> {
 
 /// Per-stage latency: a box from p50 to p90, a whisker to p99, a dot at the maximum, on a log
 /// scale in microseconds; the paper's inference time as a dashed line.
-pub fn latency_figure(id: &str, stages: &[StageLatency], paper_ms: Option<f64>) -> Result<Figure, ReportError> {
+pub fn latency_figure(
+    id: &str,
+    stages: &[StageLatency],
+    paper_ms: Option<f64>,
+) -> Result<Figure, ReportError> {
     let width = (200 + 110 * stages.len() as u32).max(560) + LEGEND_WIDTH;
     render(id, (width, 440), |root| {
         let (plot, legend) = root.split_horizontally(width - LEGEND_WIDTH);
@@ -533,7 +659,8 @@ pub fn latency_figure(id: &str, stages: &[StageLatency], paper_ms: Option<f64>) 
             let p50 = stage.p50_us.max(floor);
             let p90 = stage.p90_us.unwrap_or(p50).max(floor);
             chart.draw_series(std::iter::once(
-                EmptyElement::at((x, lo)) + Text::new(stage.name.clone(), (0, 8), label_style.clone()),
+                EmptyElement::at((x, lo))
+                    + Text::new(stage.name.clone(), (0, 8), label_style.clone()),
             ))?;
             chart.draw_series([
                 Rectangle::new([(x - half, p50), (x + half, p90)], BOX.mix(0.22).filled()),
@@ -547,11 +674,18 @@ pub fn latency_figure(id: &str, stages: &[StageLatency], paper_ms: Option<f64>) 
                 let p99 = p99.max(floor);
                 chart.draw_series([
                     PathElement::new(vec![(x, p90), (x, p99)], INK.stroke_width(1)),
-                    PathElement::new(vec![(x - half / 2.0, p99), (x + half / 2.0, p99)], INK.stroke_width(1)),
+                    PathElement::new(
+                        vec![(x - half / 2.0, p99), (x + half / 2.0, p99)],
+                        INK.stroke_width(1),
+                    ),
                 ])?;
             }
             if let Some(max) = stage.max_us {
-                chart.draw_series(std::iter::once(Circle::new((x, max.max(floor)), 4, PAPER.filled())))?;
+                chart.draw_series(std::iter::once(Circle::new(
+                    (x, max.max(floor)),
+                    4,
+                    PAPER.filled(),
+                )))?;
             }
         }
         if let Some(ms) = paper_ms {
@@ -565,7 +699,7 @@ pub fn latency_figure(id: &str, stages: &[StageLatency], paper_ms: Option<f64>) 
         let mut entries = vec![
             (Mark::Line(INK), "median (p50)".to_owned()),
             (Mark::Box, "p50 – p90".to_owned()),
-            (Mark::Line(INK), "p99 whisker".to_owned()),
+            (Mark::Thin(INK), "p90 – p99".to_owned()),
             (Mark::Dot(PAPER), "maximum".to_owned()),
         ];
         if let Some(ms) = paper_ms {
@@ -587,7 +721,9 @@ fn positive_points(xs: &[f64], ys: &[f64]) -> Vec<(f64, f64)> {
 fn log_bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values
         .filter(|v| v.is_finite() && *v > 0.0)
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
     if lo > hi {
         return (1.0, 10.0);
     }
@@ -602,14 +738,22 @@ pub fn tick_label(value: f64) -> String {
     }
     let text = format!("{value:.6}");
     let text = text.trim_end_matches('0').trim_end_matches('.');
-    if text == "-0" { "0".to_owned() } else { text.to_owned() }
+    if text == "-0" {
+        "0".to_owned()
+    } else {
+        text.to_owned()
+    }
 }
 
 /// A number without trailing zeros (`0.7`, `2`, `2.15`).
 pub fn trim_number(value: f64) -> String {
     let text = format!("{value:.3}");
     let text = text.trim_end_matches('0').trim_end_matches('.');
-    if text == "-0" { "0".to_owned() } else { text.to_owned() }
+    if text == "-0" {
+        "0".to_owned()
+    } else {
+        text.to_owned()
+    }
 }
 
 #[cfg(test)]
@@ -626,9 +770,21 @@ mod tests {
             .map(|&t| {
                 let s = 1.0 + 0.5 * (-t).exp();
                 vec![
-                    Pose { x: t, y: 0.0, theta: 0.1 },
-                    Pose { x: t + s, y: 0.0, theta: 0.0 },
-                    Pose { x: t + 0.5 * s, y: 0.8 * s, theta: -0.1 },
+                    Pose {
+                        x: t,
+                        y: 0.0,
+                        theta: 0.1,
+                    },
+                    Pose {
+                        x: t + s,
+                        y: 0.0,
+                        theta: 0.0,
+                    },
+                    Pose {
+                        x: t + 0.5 * s,
+                        y: 0.8 * s,
+                        theta: -0.1,
+                    },
                 ]
             })
             .collect();
@@ -640,7 +796,16 @@ mod tests {
             times: times.clone(),
             phi_star: vec![0.0; samples],
             poses,
-            commands: vec![vec![WheelCmd { left: 0.6, right: 0.8 }; 3]; samples - 1],
+            commands: vec![
+                vec![
+                    WheelCmd {
+                        left: 0.6,
+                        right: 0.8
+                    };
+                    3
+                ];
+                samples - 1
+            ],
             collisions: vec![],
         }
     }
@@ -668,12 +833,20 @@ mod tests {
         let t = traj(101);
         let errors = errors_figure("e", &t).expect("draws");
         for k in 0..3 {
-            assert_eq!(polyline_lengths(&errors.svg, edge_color(k)), vec![101, 2], "edge {k}");
+            assert_eq!(
+                polyline_lengths(&errors.svg, edge_color(k)),
+                vec![101, 2],
+                "edge {k}"
+            );
         }
         let wheels = wheels_figure("w", &t).expect("draws");
         // Left and right panels: one line per robot each, one point per command.
         for i in 0..3 {
-            assert_eq!(polyline_lengths(&wheels.svg, robot_color(i)), vec![100, 2, 100, 2], "robot {i}");
+            assert_eq!(
+                polyline_lengths(&wheels.svg, robot_color(i)),
+                vec![100, 2, 100, 2],
+                "robot {i}"
+            );
         }
         assert!(wheels.svg.contains("v* = 0.7 m/s"));
         let paths = trajectory_figure("t", &t).expect("draws");
@@ -691,13 +864,24 @@ mod tests {
         let polygons: Vec<&str> = svg.split("<polygon").skip(1).collect();
         for i in 0..3 {
             // 4 snapshots, plus the legend marker.
-            assert_eq!(polygons.iter().filter(|p| p.contains(&fill(robot_color(i)))).count(), 5);
+            assert_eq!(
+                polygons
+                    .iter()
+                    .filter(|p| p.contains(&fill(robot_color(i))))
+                    .count(),
+                5
+            );
         }
         assert!(svg.contains("robot 3") && svg.contains("formation"));
         assert!(!svg.contains("collision"));
         let mut hit = t.clone();
         hit.collisions.push((5, 0, 1));
-        assert!(trajectory_figure("t", &hit).expect("draws").svg.contains("collision"));
+        assert!(
+            trajectory_figure("t", &hit)
+                .expect("draws")
+                .svg
+                .contains("collision")
+        );
     }
 
     #[test]
@@ -705,12 +889,24 @@ mod tests {
         let t = traj(60);
         let mut moved = t.clone();
         moved.poses[30][1].x += 2.0;
-        assert_ne!(trajectory_figure("t", &t).expect("draws").svg, trajectory_figure("t", &moved).expect("draws").svg);
-        assert_ne!(errors_figure("e", &t).expect("draws").svg, errors_figure("e", &moved).expect("draws").svg);
+        assert_ne!(
+            trajectory_figure("t", &t).expect("draws").svg,
+            trajectory_figure("t", &moved).expect("draws").svg
+        );
+        assert_ne!(
+            errors_figure("e", &t).expect("draws").svg,
+            errors_figure("e", &moved).expect("draws").svg
+        );
         let mut faster = t.clone();
         faster.commands[10][0].left = 0.9;
-        assert_ne!(wheels_figure("w", &t).expect("draws").svg, wheels_figure("w", &faster).expect("draws").svg);
-        assert_eq!(wheels_figure("w", &t).expect("draws").svg, wheels_figure("w", &t.clone()).expect("draws").svg);
+        assert_ne!(
+            wheels_figure("w", &t).expect("draws").svg,
+            wheels_figure("w", &faster).expect("draws").svg
+        );
+        assert_eq!(
+            wheels_figure("w", &t).expect("draws").svg,
+            wheels_figure("w", &t.clone()).expect("draws").svg
+        );
     }
 
     #[test]
@@ -721,7 +917,10 @@ mod tests {
         // t = 10 s (s ~ 1): compare pixel distances per metre on the two axes.
         let points = |c: RGBColor| -> Vec<(f64, f64)> {
             let stroke = format!("stroke=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
-            let tag = svg.split("<polyline").find(|t| t.contains(&stroke)).expect("path");
+            let tag = svg
+                .split("<polyline")
+                .find(|t| t.contains(&stroke))
+                .expect("path");
             let start = tag.find("points=\"").expect("points") + 8;
             let end = start + tag[start..].find('"').expect("end");
             tag[start..end]
@@ -737,23 +936,39 @@ mod tests {
         let px_per_m_x = (r1[100].0 - r1[0].0) / 10.0;
         let last = &t.poses[100];
         let px_per_m_y = (r1[100].1 - r3[100].1) / (last[2].y - last[0].y);
-        assert!((px_per_m_x / px_per_m_y - 1.0).abs() < 0.05, "x {px_per_m_x} px/m, y {px_per_m_y} px/m");
+        assert!(
+            (px_per_m_x / px_per_m_y - 1.0).abs() < 0.05,
+            "x {px_per_m_x} px/m, y {px_per_m_y} px/m"
+        );
     }
 
     #[test]
     fn box_figure_places_quartiles() {
-        let q = Quartiles { min: 1.0, q1: 2.0, median: 3.0, q3: 4.0, max: 5.0, count: 4 };
+        let q = Quartiles {
+            min: 1.0,
+            q1: 2.0,
+            median: 3.0,
+            q3: 4.0,
+            max: 5.0,
+            count: 4,
+        };
         let panel = |stats| BoxPanel {
             title: "convergence time".into(),
             y_desc: "time [s]".into(),
-            groups: vec![BoxGroup { label: "table1".into(), stats, dots: vec![1.0, 2.5, 3.5, 5.0] }],
+            groups: vec![BoxGroup {
+                label: "table1".into(),
+                stats,
+                dots: vec![1.0, 2.5, 3.5, 5.0],
+            }],
             paper_median: Some(10.0),
         };
         let svg = box_figure("b", &[panel(Some(q))]).expect("draws").svg;
         assert!(svg.contains("table1 (n = 4)"));
         let blue_dots = svg.matches("<circle").count();
         assert_eq!(blue_dots, 4 + 1, "one dot per run and the legend's");
-        let moved = box_figure("b", &[panel(Some(Quartiles { median: 3.5, ..q }))]).expect("draws").svg;
+        let moved = box_figure("b", &[panel(Some(Quartiles { median: 3.5, ..q }))])
+            .expect("draws")
+            .svg;
         assert_ne!(svg, moved);
         let empty = box_figure("b", &[panel(None)]).expect("draws").svg;
         assert!(empty.contains("no successful run"));
@@ -768,14 +983,35 @@ mod tests {
             val_loss: vec![0.2, 0.1, 0.08, 0.07],
         };
         let svg = loss_figure("l", &curve).expect("draws").svg;
-        assert_eq!(polyline_lengths(&svg, robot_color(0)), vec![3, 2], "the zero loss is left out");
+        assert_eq!(
+            polyline_lengths(&svg, robot_color(0)),
+            vec![3, 2],
+            "the zero loss is left out"
+        );
         assert_eq!(polyline_lengths(&svg, robot_color(1)), vec![4, 2]);
         let stages = vec![
-            StageLatency { name: "scan".into(), p50_us: 50.0, p90_us: Some(70.0), p99_us: Some(90.0), max_us: Some(200.0) },
-            StageLatency { name: "inference".into(), p50_us: 900.0, p90_us: None, p99_us: None, max_us: None },
+            StageLatency {
+                name: "scan".into(),
+                p50_us: 50.0,
+                p90_us: Some(70.0),
+                p99_us: Some(90.0),
+                max_us: Some(200.0),
+                count: None,
+            },
+            StageLatency {
+                name: "inference".into(),
+                p50_us: 900.0,
+                p90_us: None,
+                p99_us: None,
+                max_us: None,
+                count: Some(3),
+            },
         ];
         let svg = latency_figure("p", &stages, Some(2.1)).expect("draws").svg;
-        assert!(svg.contains(">\nscan\n") && svg.contains(">\ninference\n"), "stage labels");
+        assert!(
+            svg.contains(">\nscan\n") && svg.contains(">\ninference\n"),
+            "stage labels"
+        );
         assert!(svg.contains("paper 2.1 ms"));
     }
 

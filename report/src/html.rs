@@ -119,7 +119,10 @@ pub fn percent(fraction: f64) -> String {
 
 /// An optional value, or an en dash.
 pub fn or_dash(value: Option<f64>, format: impl Fn(f64) -> String) -> String {
-    value.filter(|v| v.is_finite()).map(format).unwrap_or_else(|| "–".to_owned())
+    value
+        .filter(|v| v.is_finite())
+        .map(format)
+        .unwrap_or_else(|| "–".to_owned())
 }
 
 const STYLE: &str = r#"
@@ -169,9 +172,22 @@ ul.inputs { columns: 2; font-size: 0.88rem; }
 @media print { body { background: #fff; } .card { border: none; padding: 0; } nav, .svg-link { display: none; } }
 "#;
 
-/// Checks every figure in the browser and records the result on `<body>` for the browser test.
+/// Runs in `<head>`: records page errors and blocked loads in `data-page-errors` on `<html>`, and
+/// once the document is parsed checks every figure and records the result on `<body>` (and in the
+/// console), for the browser test.
 const CHECK_SCRIPT: &str = r#"
 (function () {
+  var problems = [];
+  function record(problem) {
+    problems.push(problem);
+    document.documentElement.setAttribute('data-page-errors', problems.join(' | '));
+  }
+  window.addEventListener('error', function (event) {
+    record('error: ' + (event.message || (event.target && event.target.outerHTML) || 'unknown'));
+  }, true);
+  document.addEventListener('securitypolicyviolation', function (event) {
+    record('blocked: ' + event.blockedURI);
+  });
   function check() {
     var figures = document.querySelectorAll('figure.plot');
     var ok = 0, bad = [];
@@ -191,11 +207,7 @@ const CHECK_SCRIPT: &str = r#"
     document.body.setAttribute('data-figures-bad', bad.join(' '));
     console.log('formation-report: ' + ok + '/' + figures.length + ' figures drawn');
   }
-  if (document.readyState === 'loading') {
-    document.addEventListener('DOMContentLoaded', check);
-  } else {
-    check();
-  }
+  document.addEventListener('DOMContentLoaded', check);
 })();
 "#;
 
@@ -222,7 +234,9 @@ pub fn render_page(page: &ReportPage) -> String {
     html.push_str(
         "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; style-src 'unsafe-inline'; script-src 'unsafe-inline'; img-src data:\">\n",
     );
-    html.push_str("<title>Formation control report</title>\n<style>");
+    html.push_str("<title>Formation control report</title>\n<script>");
+    html.push_str(CHECK_SCRIPT);
+    html.push_str("</script>\n<style>");
     html.push_str(STYLE);
     html.push_str("</style>\n</head>\n<body>\n<header><div class=\"wrap\">\n");
     html.push_str("<h1>Decentralised formation control: evaluation report</h1>\n");
@@ -258,12 +272,20 @@ pub fn render_page(page: &ReportPage) -> String {
     }
     for (anchor, title, figures) in [
         ("training", "Training (cf. paper Fig. 5)", &page.training),
-        ("latency", "Latency profile (paper: 2.1 ms per inference)", &page.latency),
+        (
+            "latency",
+            "Latency profile (paper: 2.1 ms per inference)",
+            &page.latency,
+        ),
     ] {
         if figures.is_empty() {
             continue;
         }
-        let _ = writeln!(html, "<section id=\"{anchor}\">\n<h2>{}</h2>", escape(title));
+        let _ = writeln!(
+            html,
+            "<section id=\"{anchor}\">\n<h2>{}</h2>",
+            escape(title)
+        );
         for figure in figures {
             html.push_str("<div class=\"card\">\n");
             write_captioned(&mut html, figure);
@@ -279,9 +301,7 @@ pub fn render_page(page: &ReportPage) -> String {
     html.push_str(
         "<footer>Written by <code>formation report</code>. Self-contained: every figure is inline SVG and the page loads nothing else.</footer>\n",
     );
-    html.push_str("<script>");
-    html.push_str(CHECK_SCRIPT);
-    html.push_str("</script>\n</body>\n</html>\n");
+    html.push_str("</body>\n</html>\n");
     html
 }
 
@@ -321,7 +341,10 @@ fn write_table(html: &mut String, page: &ReportPage) {
             percent(row.success_rate_5),
             percent(row.success_rate_10),
             or_dash(row.median_convergence_s, |s| format!("{s:.2} s")),
-            or_dash(row.median_rel_formation_error, |e| format!("{:.2} %", 100.0 * e)),
+            or_dash(row.median_rel_formation_error, |e| format!(
+                "{:.2} %",
+                100.0 * e
+            )),
             or_dash(row.median_orientation_error_rad, |r| format!("{r:.3} rad")),
             row.collisions,
         );
@@ -338,7 +361,11 @@ fn write_placed(html: &mut String, placed: &PlacedFigure, caption: Option<&str>)
         &format!("<svg role=\"img\" aria-label=\"{}\" ", escape(&placed.alt)),
         1,
     );
-    let _ = writeln!(html, "<figure class=\"plot\" data-figure=\"{}\">", escape(&placed.figure.id));
+    let _ = writeln!(
+        html,
+        "<figure class=\"plot\" data-figure=\"{}\">",
+        escape(&placed.figure.id)
+    );
     html.push_str(&svg);
     html.push('\n');
     if let Some(caption) = caption {
@@ -349,7 +376,11 @@ fn write_placed(html: &mut String, placed: &PlacedFigure, caption: Option<&str>)
             escape(&placed.href)
         );
     } else {
-        let _ = writeln!(html, "<a class=\"svg-link\" href=\"{}\">[SVG]</a>", escape(&placed.href));
+        let _ = writeln!(
+            html,
+            "<a class=\"svg-link\" href=\"{}\">[SVG]</a>",
+            escape(&placed.href)
+        );
     }
     html.push_str("</figure>\n");
 }
@@ -369,8 +400,16 @@ fn bold_figure_number(caption: &str) -> String {
 }
 
 fn write_run(html: &mut String, run: &RunSection) {
-    let _ = writeln!(html, "<article class=\"card\" id=\"{}\">", escape(&run.anchor));
-    let _ = writeln!(html, "<h3>{}</h3>\n<div class=\"panels\">", escape(&run.heading));
+    let _ = writeln!(
+        html,
+        "<article class=\"card\" id=\"{}\">",
+        escape(&run.anchor)
+    );
+    let _ = writeln!(
+        html,
+        "<h3>{}</h3>\n<div class=\"panels\">",
+        escape(&run.heading)
+    );
     for panel in &run.panels {
         write_placed(html, panel, None);
     }
@@ -381,10 +420,19 @@ fn write_run(html: &mut String, run: &RunSection) {
             "no" => " class=\"fail\"",
             _ => "",
         };
-        let _ = writeln!(html, "<dt>{}</dt><dd{class}>{}</dd>", escape(label), escape(value));
+        let _ = writeln!(
+            html,
+            "<dt>{}</dt><dd{class}>{}</dd>",
+            escape(label),
+            escape(value)
+        );
     }
     html.push_str("</dl>\n</div>\n");
-    let _ = writeln!(html, "<p class=\"caption\">{}</p>\n</article>", bold_figure_number(&run.caption));
+    let _ = writeln!(
+        html,
+        "<p class=\"caption\">{}</p>\n</article>",
+        bold_figure_number(&run.caption)
+    );
 }
 
 #[cfg(test)]
@@ -393,7 +441,10 @@ mod tests {
 
     fn placed(id: &str) -> PlacedFigure {
         PlacedFigure {
-            figure: Figure { id: id.into(), svg: "<svg width=\"10\" height=\"10\"><rect/></svg>".into() },
+            figure: Figure {
+                id: id.into(),
+                svg: "<svg width=\"10\" height=\"10\"><rect/></svg>".into(),
+            },
             href: format!("r-figures/{id}.svg"),
             alt: "a <figure>".into(),
         }
@@ -424,7 +475,10 @@ mod tests {
                     collisions: 2,
                 },
             }],
-            fig9: Some(CaptionedFigure { placed: placed("fig9"), caption: "Figure 1: boxes".into() }),
+            fig9: Some(CaptionedFigure {
+                placed: placed("fig9"),
+                caption: "Figure 1: boxes".into(),
+            }),
             runs: vec![RunSection {
                 heading: "case1 · run 0".into(),
                 anchor: "run-case1-0".into(),
@@ -436,7 +490,15 @@ mod tests {
         };
         let html = render_page(&page);
         assert!(html.contains("<td>table1<div class=\"detail\">policy · table1</div></td>"));
-        for cell in ["85.0 %", "95.0 %", "11.25 s", "3.12 %", "<td>–</td>", "90.0 %", "96.0 %"] {
+        for cell in [
+            "85.0 %",
+            "95.0 %",
+            "11.25 s",
+            "3.12 %",
+            "<td>–</td>",
+            "90.0 %",
+            "96.0 %",
+        ] {
             assert!(html.contains(cell), "{cell}");
         }
         assert!(html.contains("out/&lt;demo&gt;"));

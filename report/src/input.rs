@@ -41,7 +41,8 @@ pub struct Inputs {
 /// One eval output directory.
 #[derive(Debug, Clone)]
 pub struct EvalData {
-    /// Its path relative to the input directory (`.` for the input directory itself).
+    /// Its path relative to the input directory (the directory's own name for the input directory
+    /// itself).
     pub name: String,
     /// Its `summary.json`.
     pub source: PathBuf,
@@ -278,15 +279,25 @@ impl From<RawRunMetrics> for RunScores {
 /// Parses a `summary.json` (the `formation eval` output). `name` is how the report labels it.
 pub fn parse_summary(text: &str, source: &Path, name: &str) -> Result<EvalData, ReportError> {
     let raw: RawSummary = parse_json(text, source)?;
-    for (key, rate) in [("success_rate_5", raw.success_rate_5), ("success_rate_10", raw.success_rate_10)] {
+    for (key, rate) in [
+        ("success_rate_5", raw.success_rate_5),
+        ("success_rate_10", raw.success_rate_10),
+    ] {
         if !(0.0..=1.0).contains(&rate) {
-            return Err(invalid(source, format!("{key} is {rate}, expected a fraction in 0..1")));
+            return Err(invalid(
+                source,
+                format!("{key} is {rate}, expected a fraction in 0..1"),
+            ));
         }
     }
     if !raw.per_run.is_empty() && raw.per_run.len() != raw.runs {
         return Err(invalid(
             source,
-            format!("`runs` is {} but `per_run` lists {} runs", raw.runs, raw.per_run.len()),
+            format!(
+                "`runs` is {} but `per_run` lists {} runs",
+                raw.runs,
+                raw.per_run.len()
+            ),
         ));
     }
     Ok(EvalData {
@@ -319,7 +330,8 @@ pub fn parse_summary(text: &str, source: &Path, name: &str) -> Result<EvalData, 
 /// Parses and validates one run log (`runs/run-NNNN.json`).
 pub fn parse_run_log(text: &str, source: &Path) -> Result<RunData, ReportError> {
     let raw: RawRunLog = parse_json(text, source)?;
-    let trajectory = validate_trajectory(raw.trajectory).map_err(|reason| invalid(source, reason))?;
+    let trajectory =
+        validate_trajectory(raw.trajectory).map_err(|reason| invalid(source, reason))?;
     Ok(RunData {
         source: source.to_path_buf(),
         index: raw.index,
@@ -330,28 +342,45 @@ pub fn parse_run_log(text: &str, source: &Path) -> Result<RunData, ReportError> 
 
 fn validate_trajectory(raw: RawTrajectory) -> Result<RunTrajectory, String> {
     if !(raw.d_star.is_finite() && raw.d_star > 0.0) {
-        return Err(format!("trajectory.d_star is {}, expected a positive distance", raw.d_star));
+        return Err(format!(
+            "trajectory.d_star is {}, expected a positive distance",
+            raw.d_star
+        ));
     }
     let samples = raw.times.len().min(raw.poses.len()).min(raw.phi_star.len());
     if samples == 0 {
-        return Err("the trajectory has no samples (times, phi_star and poses must be non-empty)".into());
+        return Err(
+            "the trajectory has no samples (times, phi_star and poses must be non-empty)".into(),
+        );
     }
     let n_robots = raw.poses[0].len();
     if n_robots == 0 {
         return Err("trajectory.poses[0] lists no robots".into());
     }
-    if let Some(k) = raw.poses[..samples].iter().position(|row| row.len() != n_robots) {
+    if let Some(k) = raw.poses[..samples]
+        .iter()
+        .position(|row| row.len() != n_robots)
+    {
         return Err(format!(
             "trajectory.poses[{k}] has {} poses, but poses[0] has {n_robots}",
             raw.poses[k].len()
         ));
     }
-    if let Some(&(i, j)) = raw.edges.iter().find(|&&(i, j)| i >= n_robots || j >= n_robots || i == j) {
-        return Err(format!("trajectory.edges has ({i}, {j}), but there are {n_robots} robots"));
+    if let Some(&(i, j)) = raw
+        .edges
+        .iter()
+        .find(|&&(i, j)| i >= n_robots || j >= n_robots || i == j)
+    {
+        return Err(format!(
+            "trajectory.edges has ({i}, {j}), but there are {n_robots} robots"
+        ));
     }
     // `commands` normally has one entry fewer than the samples; more than `samples` cannot be timed.
     let ticks = raw.commands.len().min(samples);
-    if let Some(k) = raw.commands[..ticks].iter().position(|row| row.len() != n_robots) {
+    if let Some(k) = raw.commands[..ticks]
+        .iter()
+        .position(|row| row.len() != n_robots)
+    {
         return Err(format!(
             "trajectory.commands[{k}] has {} commands, but there are {n_robots} robots",
             raw.commands[k].len()
@@ -370,7 +399,11 @@ fn validate_trajectory(raw: RawTrajectory) -> Result<RunTrajectory, String> {
             .take(samples)
             .map(|row| {
                 row.into_iter()
-                    .map(|p| Pose { x: or_nan(p.x), y: or_nan(p.y), theta: or_nan(p.theta) })
+                    .map(|p| Pose {
+                        x: or_nan(p.x),
+                        y: or_nan(p.y),
+                        theta: or_nan(p.theta),
+                    })
                     .collect()
             })
             .collect(),
@@ -380,7 +413,10 @@ fn validate_trajectory(raw: RawTrajectory) -> Result<RunTrajectory, String> {
             .take(ticks)
             .map(|row| {
                 row.into_iter()
-                    .map(|c| WheelCmd { left: or_nan(c.left), right: or_nan(c.right) })
+                    .map(|c| WheelCmd {
+                        left: or_nan(c.left),
+                        right: or_nan(c.right),
+                    })
                     .collect()
             })
             .collect(),
@@ -389,11 +425,17 @@ fn validate_trajectory(raw: RawTrajectory) -> Result<RunTrajectory, String> {
 }
 
 fn parse_json<T: serde::de::DeserializeOwned>(text: &str, source: &Path) -> Result<T, ReportError> {
-    serde_json::from_str(text).map_err(|e| ReportError::Json { path: source.to_path_buf(), source: e })
+    serde_json::from_str(text).map_err(|e| ReportError::Json {
+        path: source.to_path_buf(),
+        source: e,
+    })
 }
 
 fn invalid(source: &Path, reason: String) -> ReportError {
-    ReportError::InvalidData { path: source.to_path_buf(), reason }
+    ReportError::InvalidData {
+        path: source.to_path_buf(),
+        reason,
+    }
 }
 
 // ---- discovery (I/O) -----------------------------------------------------------------------
@@ -415,20 +457,33 @@ pub fn is_loss_csv(file_name: &str) -> bool {
 pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
     let meta = fs::metadata(root).map_err(|source| {
         if source.kind() == std::io::ErrorKind::NotFound {
-            ReportError::MissingInputDir { dir: root.to_path_buf() }
+            ReportError::MissingInputDir {
+                dir: root.to_path_buf(),
+            }
         } else {
-            ReportError::Read { path: root.to_path_buf(), source }
+            ReportError::Read {
+                path: root.to_path_buf(),
+                source,
+            }
         }
     })?;
     if !meta.is_dir() {
-        return Err(ReportError::NotADirectory { path: root.to_path_buf() });
+        return Err(ReportError::NotADirectory {
+            path: root.to_path_buf(),
+        });
     }
     let mut found = Found::default();
     search(root, 0, &mut found)?;
     if found.summaries.is_empty() {
-        return Err(ReportError::NoEvalOutput { dir: root.to_path_buf() });
+        return Err(ReportError::NoEvalOutput {
+            dir: root.to_path_buf(),
+        });
     }
-    for list in [&mut found.summaries, &mut found.loss_csvs, &mut found.profiles] {
+    for list in [
+        &mut found.summaries,
+        &mut found.loss_csvs,
+        &mut found.profiles,
+    ] {
         list.sort();
     }
     let evals = found
@@ -446,19 +501,32 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
         .iter()
         .map(|path| parse_profile(&read_text(path)?, path))
         .collect::<Result<Vec<_>, _>>()?;
-    Ok(Inputs { root: root.to_path_buf(), evals, loss_curves, profiles })
+    Ok(Inputs {
+        root: root.to_path_buf(),
+        evals,
+        loss_curves,
+        profiles,
+    })
 }
 
 fn search(dir: &Path, depth: usize, found: &mut Found) -> Result<(), ReportError> {
-    let read_error = |source| ReportError::Read { path: dir.to_path_buf(), source };
-    let mut entries: Vec<fs::DirEntry> =
-        fs::read_dir(dir).map_err(read_error)?.collect::<Result<_, _>>().map_err(read_error)?;
+    let read_error = |source| ReportError::Read {
+        path: dir.to_path_buf(),
+        source,
+    };
+    let mut entries: Vec<fs::DirEntry> = fs::read_dir(dir)
+        .map_err(read_error)?
+        .collect::<Result<_, _>>()
+        .map_err(read_error)?;
     entries.sort_by_key(fs::DirEntry::file_name);
     for entry in entries {
         let path = entry.path();
         let name = entry.file_name().to_string_lossy().into_owned();
         // `file_type` does not follow symbolic links, so a link cycle cannot recurse forever.
-        let file_type = entry.file_type().map_err(|source| ReportError::Read { path: path.clone(), source })?;
+        let file_type = entry.file_type().map_err(|source| ReportError::Read {
+            path: path.clone(),
+            source,
+        })?;
         if file_type.is_dir() {
             if depth < MAX_SEARCH_DEPTH && !name.starts_with('.') && name != "target" {
                 search(&path, depth + 1, found)?;
@@ -477,7 +545,12 @@ fn search(dir: &Path, depth: usize, found: &mut Found) -> Result<(), ReportError
 fn load_eval(root: &Path, summary: &Path) -> Result<EvalData, ReportError> {
     let dir = summary.parent().unwrap_or(root);
     let name = match dir.strip_prefix(root) {
-        Ok(rel) if rel.as_os_str().is_empty() => ".".to_owned(),
+        // The input directory itself: its own name (`.` when it has none, like `/`).
+        Ok(rel) if rel.as_os_str().is_empty() => root
+            .canonicalize()
+            .ok()
+            .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .unwrap_or_else(|| ".".to_owned()),
         Ok(rel) => rel.to_string_lossy().into_owned(),
         Err(_) => dir.to_string_lossy().into_owned(),
     };
@@ -498,11 +571,19 @@ fn run_log_paths(runs_dir: &Path) -> Result<Vec<PathBuf>, ReportError> {
     let entries = match fs::read_dir(runs_dir) {
         Ok(entries) => entries,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(source) => return Err(ReportError::Read { path: runs_dir.to_path_buf(), source }),
+        Err(source) => {
+            return Err(ReportError::Read {
+                path: runs_dir.to_path_buf(),
+                source,
+            });
+        }
     };
     let mut paths: BTreeMap<String, PathBuf> = BTreeMap::new();
     for entry in entries {
-        let entry = entry.map_err(|source| ReportError::Read { path: runs_dir.to_path_buf(), source })?;
+        let entry = entry.map_err(|source| ReportError::Read {
+            path: runs_dir.to_path_buf(),
+            source,
+        })?;
         let name = entry.file_name().to_string_lossy().into_owned();
         if name.starts_with("run-") && name.ends_with(".json") {
             paths.insert(name, entry.path());
@@ -512,7 +593,10 @@ fn run_log_paths(runs_dir: &Path) -> Result<Vec<PathBuf>, ReportError> {
 }
 
 fn read_text(path: &Path) -> Result<String, ReportError> {
-    fs::read_to_string(path).map_err(|source| ReportError::Read { path: path.to_path_buf(), source })
+    fs::read_to_string(path).map_err(|source| ReportError::Read {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 #[cfg(test)]
@@ -544,15 +628,22 @@ mod tests {
         assert_eq!(eval.fig9.convergence_s.map(|q| q.q3), Some(9.75));
         assert_eq!(eval.fig9.rel_formation_error, None);
         assert_eq!(eval.per_run.len(), 2);
-        assert!(eval.per_run[1].rel_formation_error.is_nan(), "null is read as NaN");
+        assert!(
+            eval.per_run[1].rel_formation_error.is_nan(),
+            "null is read as NaN"
+        );
         assert_eq!(eval.per_run[1].collisions, 1);
         assert_eq!(eval.seed, Some(7));
     }
 
     #[test]
     fn truncated_summary_is_an_error_naming_the_file() {
-        let err = parse_summary(&SUMMARY[..SUMMARY.len() / 2], Path::new("evals/a/summary.json"), "a")
-            .expect_err("truncated JSON");
+        let err = parse_summary(
+            &SUMMARY[..SUMMARY.len() / 2],
+            Path::new("evals/a/summary.json"),
+            "a",
+        )
+        .expect_err("truncated JSON");
         let message = err.to_string();
         assert!(matches!(err, ReportError::Json { .. }), "{message}");
         assert!(message.contains("evals/a/summary.json"), "{message}");
@@ -561,7 +652,8 @@ mod tests {
     #[test]
     fn inconsistent_run_count_is_rejected() {
         let text = SUMMARY.replace("\"runs\": 2", "\"runs\": 3");
-        let err = parse_summary(&text, Path::new("s.json"), "s").expect_err("runs != per_run.len()");
+        let err =
+            parse_summary(&text, Path::new("s.json"), "s").expect_err("runs != per_run.len()");
         assert!(err.to_string().contains("`per_run` lists 2 runs"), "{err}");
     }
 
@@ -596,7 +688,8 @@ mod tests {
             r#"[[{"x":0,"y":0,"theta":0},{"x":1,"y":0,"theta":0}],[{"x":0.1,"y":0,"theta":0}]]"#,
             "[[0, 1]]",
         );
-        let err = parse_run_log(&ragged, Path::new("runs/run-0004.json")).expect_err("ragged poses");
+        let err =
+            parse_run_log(&ragged, Path::new("runs/run-0004.json")).expect_err("ragged poses");
         assert!(err.to_string().contains("poses[1] has 1 poses"), "{err}");
         assert!(err.to_string().contains("runs/run-0004.json"), "{err}");
 
@@ -604,7 +697,8 @@ mod tests {
             r#"[[{"x":0,"y":0,"theta":0},{"x":1,"y":0,"theta":0}],[{"x":0.1,"y":0,"theta":0},{"x":1,"y":0,"theta":0}]]"#,
             "[[0, 2]]",
         );
-        let err = parse_run_log(&bad_edge, Path::new("r.json")).expect_err("edge to a missing robot");
+        let err =
+            parse_run_log(&bad_edge, Path::new("r.json")).expect_err("edge to a missing robot");
         assert!(err.to_string().contains("(0, 2)"), "{err}");
     }
 

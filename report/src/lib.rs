@@ -63,14 +63,23 @@ pub struct ReportSummary {
 pub fn build_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError> {
     let inputs = input::load_inputs(dir)?;
     let figures_dir = figures_dir_for(out);
-    let href_dir = figures_dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let href_dir = figures_dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let (page, figures) = assemble(&inputs, &href_dir)?;
     let html = html::render_page(&page);
 
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        fs::create_dir_all(parent).map_err(|source| ReportError::Write { path: parent.to_path_buf(), source })?;
+        fs::create_dir_all(parent).map_err(|source| ReportError::Write {
+            path: parent.to_path_buf(),
+            source,
+        })?;
     }
-    fs::create_dir_all(&figures_dir).map_err(|source| ReportError::Write { path: figures_dir.clone(), source })?;
+    fs::create_dir_all(&figures_dir).map_err(|source| ReportError::Write {
+        path: figures_dir.clone(),
+        source,
+    })?;
     remove_stale_svgs(&figures_dir)?;
     let mut written = Vec::with_capacity(figures.len());
     for figure in &figures {
@@ -92,37 +101,66 @@ pub fn build_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError
 
 /// `report.html` → `report-figures/` in the same directory.
 pub fn figures_dir_for(out: &Path) -> PathBuf {
-    let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "report".into());
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "report".into());
     out.with_file_name(format!("{stem}-figures"))
 }
 
 /// Lays out the page and draws its figures (no I/O).
 pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figure>), ReportError> {
-    let mut numbering = FigureNumbering { next: 1, href_dir: href_dir.to_owned(), figures: Vec::new() };
-    let mut page = ReportPage { source_dir: inputs.root.display().to_string(), ..ReportPage::default() };
+    let mut numbering = FigureNumbering {
+        next: 1,
+        href_dir: href_dir.to_owned(),
+        figures: Vec::new(),
+    };
+    let mut page = ReportPage {
+        source_dir: inputs.root.display().to_string(),
+        ..ReportPage::default()
+    };
 
     let mut table_evals: Vec<&EvalData> = inputs.evals.iter().collect();
     // Multi-run evaluations (Table I proper) first, then the single-run cases.
     table_evals.sort_by_key(|e| (e.table.runs <= 1, e.name.clone()));
     page.table = table_evals
         .iter()
-        .map(|e| TableEntry { name: e.name.clone(), detail: eval_detail(e), row: e.table.clone() })
+        .map(|e| TableEntry {
+            name: e.name.clone(),
+            detail: eval_detail(e),
+            row: e.table.clone(),
+        })
         .collect();
 
-    let multi_run: Vec<&EvalData> = table_evals.iter().copied().filter(|e| e.table.runs > 1).collect();
-    let fig9_evals = if multi_run.is_empty() { table_evals.clone() } else { multi_run };
+    let multi_run: Vec<&EvalData> = table_evals
+        .iter()
+        .copied()
+        .filter(|e| e.table.runs > 1)
+        .collect();
+    let fig9_evals = if multi_run.is_empty() {
+        table_evals.clone()
+    } else {
+        multi_run
+    };
     let panels = fig9_panels(&fig9_evals);
     let figure = figures::box_figure("fig9-statistics", &panels)?;
     let number = numbering.take();
     page.fig9 = Some(CaptionedFigure {
-        placed: numbering.place(figure, "Box plots of convergence time, formation error and orientation error"),
+        placed: numbering.place(
+            figure,
+            "Box plots of convergence time, formation error and orientation error",
+        ),
         caption: format!(
             "Figure {number}: Box plot of convergence time, relative formation error and orientation error over the last 20 s, over the runs that succeed at 10 % (cf. paper Fig. 9). The thick line is the median, the box spans the 25th to 75th percentiles, the whiskers extend to the minimum and maximum, dots are single runs; the dashed line is the paper's median."
         ),
     });
     page.fig9_note = format!(
         "Evaluations: {}.{}",
-        fig9_evals.iter().map(|e| format!("{} ({} runs)", e.name, e.table.runs)).collect::<Vec<_>>().join(", "),
+        fig9_evals
+            .iter()
+            .map(|e| format!("{} ({} runs)", e.name, e.table.runs))
+            .collect::<Vec<_>>()
+            .join(", "),
         if fig9_evals.len() < table_evals.len() {
             " Single-run evaluations (the cases below) are left out of the statistics."
         } else {
@@ -162,13 +200,17 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
         });
     }
     for (k, profile) in inputs.profiles.iter().enumerate() {
-        let figure =
-            figures::latency_figure(&format!("latency-{}", k + 1), &profile.stages, profile.inference_paper_ms)?;
+        let figure = figures::latency_figure(
+            &format!("latency-{}", k + 1),
+            &profile.stages,
+            profile.inference_paper_ms,
+        )?;
         let number = numbering.take();
         page.latency.push(CaptionedFigure {
             placed: numbering.place(figure, "Latency per runtime stage"),
             caption: format!(
-                "Figure {number}: Latency per stage of the multi-process runtime, log scale: the box spans the median to the 90th percentile, the whisker reaches the 99th, the dot is the maximum, from {}.",
+                "Figure {number}: Latency per stage of the multi-process runtime, log scale: the box spans the median to the 90th percentile, the whisker reaches the 99th, the dot is the maximum{}, from {}.",
+                profile_counts(profile),
                 relative(&inputs.root, &profile.source)
             ),
         });
@@ -183,6 +225,30 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
         .map(|path| relative(&inputs.root, path))
         .collect();
     Ok((page, numbering.figures))
+}
+
+/// `; 3 runs, 1200 commands used, braked: late 3` from what a profile records.
+fn profile_counts(profile: &profile::LatencyProfile) -> String {
+    let mut parts = Vec::new();
+    if let Some(runs) = profile.runs {
+        parts.push(format!("{runs} runs"));
+    }
+    if let Some(used) = profile.used_commands {
+        parts.push(format!("{used} commands used"));
+    }
+    if !profile.braked.is_empty() {
+        let braked: Vec<String> = profile
+            .braked
+            .iter()
+            .map(|(why, n)| format!("{why} {n}"))
+            .collect();
+        parts.push(format!("braked by the watchdog: {}", braked.join(", ")));
+    }
+    if parts.is_empty() {
+        String::new()
+    } else {
+        format!("; {}", parts.join(", "))
+    }
 }
 
 /// Hands out figure numbers and collects the figures in page order.
@@ -205,12 +271,20 @@ impl FigureNumbering {
         } else {
             format!("{}/{}.svg", self.href_dir, figure.id)
         };
-        PlacedFigure { figure, href, alt: alt.to_owned() }
+        PlacedFigure {
+            figure,
+            href,
+            alt: alt.to_owned(),
+        }
     }
 }
 
 fn eval_detail(eval: &EvalData) -> String {
-    let mut parts = vec![if eval.controller.is_empty() { "?".to_owned() } else { eval.controller.clone() }];
+    let mut parts = vec![if eval.controller.is_empty() {
+        "?".to_owned()
+    } else {
+        eval.controller.clone()
+    }];
     if !eval.scenario.is_empty() {
         parts.push(eval.scenario.clone());
     }
@@ -245,17 +319,24 @@ pub fn fig9_panels(evals: &[&EvalData]) -> Vec<BoxPanel> {
         let orient_dots: Vec<f64> = runs.iter().map(|r| r.orientation_error_rad).collect();
         convergence.push(BoxGroup {
             label: eval.name.clone(),
-            stats: eval.fig9.convergence_s.or_else(|| quartiles(conv_dots.iter().copied())),
+            stats: eval
+                .fig9
+                .convergence_s
+                .or_else(|| quartiles(conv_dots.iter().copied())),
             dots: conv_dots,
         });
         formation.push(BoxGroup {
             label: eval.name.clone(),
-            stats: scaled(eval.fig9.rel_formation_error, 100.0).or_else(|| quartiles(form_dots.iter().copied())),
+            stats: scaled(eval.fig9.rel_formation_error, 100.0)
+                .or_else(|| quartiles(form_dots.iter().copied())),
             dots: form_dots,
         });
         orientation.push(BoxGroup {
             label: eval.name.clone(),
-            stats: eval.fig9.orientation_error_rad.or_else(|| quartiles(orient_dots.iter().copied())),
+            stats: eval
+                .fig9
+                .orientation_error_rad
+                .or_else(|| quartiles(orient_dots.iter().copied())),
             dots: orient_dots,
         });
     }
@@ -291,44 +372,78 @@ fn paper_figure(scenario: &str) -> Option<&'static str> {
     }
 }
 
-fn run_section(eval: &EvalData, run: &RunData, numbering: &mut FigureNumbering) -> Result<RunSection, ReportError> {
+fn run_section(
+    eval: &EvalData,
+    run: &RunData,
+    numbering: &mut FigureNumbering,
+) -> Result<RunSection, ReportError> {
     let traj = &run.trajectory;
     let stem = format!("{}-run{}", sanitize(&eval.name), run.index);
     let number = numbering.take();
     let panels = vec![
-        numbering.place(figures::errors_figure(&format!("{stem}-errors"), traj)?, "Formation and orientation error over time"),
-        numbering.place(figures::wheels_figure(&format!("{stem}-wheels"), traj)?, "Left and right wheel commands over time"),
+        numbering.place(
+            figures::errors_figure(&format!("{stem}-errors"), traj)?,
+            "Formation and orientation error over time",
+        ),
+        numbering.place(
+            figures::wheels_figure(&format!("{stem}-wheels"), traj)?,
+            "Left and right wheel commands over time",
+        ),
         numbering.place(
             figures::trajectory_figure(&format!("{stem}-trajectory"), traj)?,
             "Robot trajectories with the formation every 3 s",
         ),
     ];
     let heading = heading_description(&traj.phi_star);
-    let cf = paper_figure(&eval.scenario).map(|f| format!(" (cf. paper {f})")).unwrap_or_default();
+    let cf = paper_figure(&eval.scenario)
+        .map(|f| format!(" (cf. paper {f})"))
+        .unwrap_or_default();
     let caption = format!(
         "Figure {number}: {} run {}{cf} with {heading} and desired formation distance d* = {} m: (a) formation and orientation error; (b) robot control (left and right wheel); (c) robot trajectories, the triangles and dashed lines showing the robots and the formation every 3 s.",
         eval.name,
         run.index,
         figures::trim_number(traj.d_star),
     );
-    let duration = traj.times.last().copied().unwrap_or(0.0) - traj.times.first().copied().unwrap_or(0.0);
+    let duration =
+        traj.times.last().copied().unwrap_or(0.0) - traj.times.first().copied().unwrap_or(0.0);
     let yes_no = |b: bool| if b { "yes" } else { "no" }.to_owned();
     let facts = vec![
-        ("scenario".to_owned(), if eval.scenario.is_empty() { "–".to_owned() } else { eval.scenario.clone() }),
+        (
+            "scenario".to_owned(),
+            if eval.scenario.is_empty() {
+                "–".to_owned()
+            } else {
+                eval.scenario.clone()
+            },
+        ),
         ("controller".to_owned(), eval_detail(eval)),
         ("robots".to_owned(), traj.n_robots().to_string()),
         ("duration".to_owned(), format!("{duration:.1} s")),
-        ("d*, v*".to_owned(), format!("{} m, {} m/s", figures::trim_number(traj.d_star), figures::trim_number(traj.v_star))),
+        (
+            "d*, v*".to_owned(),
+            format!(
+                "{} m, {} m/s",
+                figures::trim_number(traj.d_star),
+                figures::trim_number(traj.v_star)
+            ),
+        ),
         ("success at 5 %".to_owned(), yes_no(run.scores.success_5)),
         ("success at 10 %".to_owned(), yes_no(run.scores.success_10)),
-        ("convergence (10 %)".to_owned(), html::or_dash(run.scores.convergence_s_10, |s| format!("{s:.2} s"))),
+        (
+            "convergence (10 %)".to_owned(),
+            html::or_dash(run.scores.convergence_s_10, |s| format!("{s:.2} s")),
+        ),
         (
             "formation error, last 20 s".to_owned(),
-            html::or_dash(Some(run.scores.rel_formation_error), |e| format!("{:.2} %", 100.0 * e)),
+            html::or_dash(Some(run.scores.rel_formation_error), |e| {
+                format!("{:.2} %", 100.0 * e)
+            }),
         ),
         (
             "orientation error, last 20 s".to_owned(),
-            html::or_dash(Some(run.scores.orientation_error_rad), |r| format!("{r:.3} rad")),
+            html::or_dash(Some(run.scores.orientation_error_rad), |r| {
+                format!("{r:.3} rad")
+            }),
         ),
         ("collisions".to_owned(), run.scores.collisions.to_string()),
     ];
@@ -345,11 +460,18 @@ fn run_section(eval: &EvalData, run: &RunData, numbering: &mut FigureNumbering) 
 /// a to b rad`.
 pub fn heading_description(phi_star: &[f64]) -> String {
     let finite: Vec<f64> = phi_star.iter().copied().filter(|p| p.is_finite()).collect();
-    let (lo, hi) = finite.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let (lo, hi) = finite
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
     if finite.is_empty() {
         "no recorded desired orientation".to_owned()
     } else if hi - lo < 1e-9 {
-        format!("constant desired orientation φ* = {} rad", figures::trim_number(lo))
+        format!(
+            "constant desired orientation φ* = {} rad",
+            figures::trim_number(lo)
+        )
     } else {
         format!(
             "time-varying desired orientation φ*(t) between {} and {} rad",
@@ -361,22 +483,43 @@ pub fn heading_description(phi_star: &[f64]) -> String {
 
 /// A figure id from a directory name: path separators and anything unusual become `-`.
 fn sanitize(name: &str) -> String {
-    let cleaned: String =
-        name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '-' }).collect();
+    let cleaned: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect();
     let trimmed = cleaned.trim_matches('-');
-    if trimmed.is_empty() { "eval".to_owned() } else { trimmed.to_owned() }
+    if trimmed.is_empty() {
+        "eval".to_owned()
+    } else {
+        trimmed.to_owned()
+    }
 }
 
 fn relative(root: &Path, path: &Path) -> String {
-    path.strip_prefix(root).unwrap_or(path).display().to_string()
+    path.strip_prefix(root)
+        .unwrap_or(path)
+        .display()
+        .to_string()
 }
 
 fn remove_stale_svgs(dir: &Path) -> Result<(), ReportError> {
-    let read_error = |source| ReportError::Read { path: dir.to_path_buf(), source };
+    let read_error = |source| ReportError::Read {
+        path: dir.to_path_buf(),
+        source,
+    };
     for entry in fs::read_dir(dir).map_err(read_error)? {
         let path = entry.map_err(read_error)?.path();
         if path.extension().is_some_and(|e| e == "svg") {
-            fs::remove_file(&path).map_err(|source| ReportError::Write { path: path.clone(), source })?;
+            fs::remove_file(&path).map_err(|source| ReportError::Write {
+                path: path.clone(),
+                source,
+            })?;
         }
     }
     Ok(())
@@ -384,10 +527,19 @@ fn remove_stale_svgs(dir: &Path) -> Result<(), ReportError> {
 
 /// Writes `bytes` to a temporary file beside `path` and renames it over `path`.
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let tmp = path.with_file_name(format!(".{name}.tmp"));
-    fs::write(&tmp, bytes).map_err(|source| ReportError::Write { path: tmp.clone(), source })?;
-    fs::rename(&tmp, path).map_err(|source| ReportError::Write { path: path.to_path_buf(), source })
+    fs::write(&tmp, bytes).map_err(|source| ReportError::Write {
+        path: tmp.clone(),
+        source,
+    })?;
+    fs::rename(&tmp, path).map_err(|source| ReportError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 #[cfg(test)]
@@ -396,7 +548,10 @@ mod tests {
 
     #[test]
     fn figure_dir_and_ids() {
-        assert_eq!(figures_dir_for(Path::new("out/report.html")), Path::new("out/report-figures"));
+        assert_eq!(
+            figures_dir_for(Path::new("out/report.html")),
+            Path::new("out/report-figures")
+        );
         assert_eq!(figures_dir_for(Path::new("r.html")), Path::new("r-figures"));
         assert_eq!(sanitize("demo/case 1"), "demo-case-1");
         assert_eq!(sanitize("."), "eval");
@@ -404,7 +559,10 @@ mod tests {
 
     #[test]
     fn heading_descriptions() {
-        assert_eq!(heading_description(&[3.76, 3.76]), "constant desired orientation φ* = 3.76 rad");
+        assert_eq!(
+            heading_description(&[3.76, 3.76]),
+            "constant desired orientation φ* = 3.76 rad"
+        );
         assert_eq!(
             heading_description(&[0.0, 0.5, f64::NAN]),
             "time-varying desired orientation φ*(t) between 0 and 0.5 rad"

@@ -21,15 +21,24 @@ pub struct LossCurve {
 /// Parses a loss CSV. Columns are found by header name (`epoch`, `train_loss`, `val_loss`; other
 /// columns are ignored); `val_loss` is optional and may have empty cells.
 pub fn parse_loss_csv(text: &str, source: &Path) -> Result<LossCurve, ReportError> {
-    let error = |line: usize, reason: String| ReportError::LossCsv { path: source.to_path_buf(), line, reason };
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+    let error = |line: usize, reason: String| ReportError::LossCsv {
+        path: source.to_path_buf(),
+        line,
+        reason,
+    };
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
     let Some((_, header)) = lines.next() else {
         return Err(error(1, "the file is empty".into()));
     };
     let columns: Vec<&str> = header.split(',').map(str::trim).collect();
     let column = |name: &str| columns.iter().position(|c| *c == name);
-    let epoch_col = column("epoch").ok_or_else(|| error(1, "no `epoch` column in the header".into()))?;
-    let train_col = column("train_loss").ok_or_else(|| error(1, "no `train_loss` column in the header".into()))?;
+    let epoch_col =
+        column("epoch").ok_or_else(|| error(1, "no `epoch` column in the header".into()))?;
+    let train_col = column("train_loss")
+        .ok_or_else(|| error(1, "no `train_loss` column in the header".into()))?;
     let val_col = column("val_loss");
 
     let mut curve = LossCurve {
@@ -51,7 +60,9 @@ pub fn parse_loss_csv(text: &str, source: &Path) -> Result<LossCurve, ReportErro
             }
         };
         curve.epochs.push(number(epoch_col, "epoch", true)?);
-        curve.train_loss.push(number(train_col, "train_loss", true)?);
+        curve
+            .train_loss
+            .push(number(train_col, "train_loss", true)?);
         curve.val_loss.push(match val_col {
             Some(col) => number(col, "val_loss", false)?,
             None => f64::NAN,
@@ -79,7 +90,8 @@ mod tests {
 
     #[test]
     fn bad_cells_name_file_and_line() {
-        let err = parse_loss_csv("epoch,train_loss\n1,0.3\n2,abc\n", Path::new("m-loss.csv")).expect_err("abc");
+        let err = parse_loss_csv("epoch,train_loss\n1,0.3\n2,abc\n", Path::new("m-loss.csv"))
+            .expect_err("abc");
         let message = err.to_string();
         assert!(message.contains("m-loss.csv line 3"), "{message}");
         assert!(message.contains("`abc`"), "{message}");

@@ -19,7 +19,12 @@ pub struct Series {
 
 impl Series {
     fn from_samples(label: String, samples: impl Iterator<Item = (f64, f64)>) -> Series {
-        Series { label, points: samples.filter(|(x, y)| x.is_finite() && y.is_finite()).collect() }
+        Series {
+            label,
+            points: samples
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .collect(),
+        }
     }
 }
 
@@ -57,7 +62,10 @@ pub fn formation_error_percent(traj: &RunTrajectory) -> Vec<Series> {
                 edge_label(i, j),
                 traj.times.iter().zip(&traj.poses).map(|(&t, poses)| {
                     let (a, b) = (poses[i], poses[j]);
-                    (t, 100.0 * ((a.x - b.x).hypot(a.y - b.y) - traj.d_star).abs() / traj.d_star)
+                    (
+                        t,
+                        100.0 * ((a.x - b.x).hypot(a.y - b.y) - traj.d_star).abs() / traj.d_star,
+                    )
                 }),
             )
         })
@@ -88,7 +96,14 @@ pub fn wheel_commands(traj: &RunTrajectory, wheel: Wheel) -> Vec<Series> {
                 robot_label(i),
                 traj.times.iter().zip(&traj.commands).map(|(&t, cmds)| {
                     let cmd = cmds[i];
-                    (t, if wheel == Wheel::Left { cmd.left } else { cmd.right })
+                    (
+                        t,
+                        if wheel == Wheel::Left {
+                            cmd.left
+                        } else {
+                            cmd.right
+                        },
+                    )
                 }),
             )
         })
@@ -98,14 +113,21 @@ pub fn wheel_commands(traj: &RunTrajectory, wheel: Wheel) -> Vec<Series> {
 /// Every robot's path `(x, y)` [m].
 pub fn paths(traj: &RunTrajectory) -> Vec<Series> {
     (0..traj.n_robots())
-        .map(|i| Series::from_samples(robot_label(i), traj.poses.iter().map(|poses| (poses[i].x, poses[i].y))))
+        .map(|i| {
+            Series::from_samples(
+                robot_label(i),
+                traj.poses.iter().map(|poses| (poses[i].x, poses[i].y)),
+            )
+        })
         .collect()
 }
 
 /// Indices of the samples at `0, every_s, 2 every_s, ...` (the first sample at or after each
 /// instant, within a thousandth of a step), as the paper draws the formation every 3 s.
 pub fn snapshot_indices(times: &[f64], every_s: f64) -> Vec<usize> {
-    let (Some(&start), Some(&end)) = (times.first(), times.last()) else { return Vec::new() };
+    let (Some(&start), Some(&end)) = (times.first(), times.last()) else {
+        return Vec::new();
+    };
     if !(every_s > 0.0 && start.is_finite() && end.is_finite()) {
         return Vec::new();
     }
@@ -134,23 +156,42 @@ pub fn snapshot_indices(times: &[f64], every_s: f64) -> Vec<usize> {
 
 /// A range covering the finite `values`, padded by `pad` of its span on both sides; `zero_based`
 /// starts it at 0 when every value is non-negative. A constant (or empty) input gets a unit span.
-pub fn padded_range(values: impl IntoIterator<Item = f64>, pad: f64, zero_based: bool) -> Range<f64> {
+pub fn padded_range(
+    values: impl IntoIterator<Item = f64>,
+    pad: f64,
+    zero_based: bool,
+) -> Range<f64> {
     let (lo, hi) = values
         .into_iter()
         .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
     if lo > hi {
         return 0.0..1.0;
     }
-    let (lo, hi) = if hi - lo < 1e-12 { (lo - 0.5, hi + 0.5) } else { (lo, hi) };
+    let (lo, hi) = if hi - lo < 1e-12 {
+        (lo - 0.5, hi + 0.5)
+    } else {
+        (lo, hi)
+    };
     let span = hi - lo;
-    let lo = if zero_based && lo >= 0.0 { 0.0 } else { lo - pad * span };
+    let lo = if zero_based && lo >= 0.0 {
+        0.0
+    } else {
+        lo - pad * span
+    };
     lo..hi + pad * span
 }
 
 /// Ranges that show `x` and `y` at the same scale in a plot of `width_px` by `height_px`: the
 /// tighter axis is widened about its centre.
-pub fn equal_aspect(x: Range<f64>, y: Range<f64>, width_px: f64, height_px: f64) -> (Range<f64>, Range<f64>) {
+pub fn equal_aspect(
+    x: Range<f64>,
+    y: Range<f64>,
+    width_px: f64,
+    height_px: f64,
+) -> (Range<f64>, Range<f64>) {
     let (w, h) = (x.end - x.start, y.end - y.start);
     let metres_per_px = (w / width_px).max(h / height_px);
     let widen = |r: Range<f64>, px: f64| {
@@ -166,7 +207,11 @@ pub fn equal_aspect(x: Range<f64>, y: Range<f64>, width_px: f64, height_px: f64)
 pub fn heading_triangle(x: f64, y: f64, theta: f64, size: f64) -> [(f64, f64); 3] {
     let at = |angle: f64, r: f64| (x + r * angle.cos(), y + r * angle.sin());
     let back = std::f64::consts::PI * 0.8;
-    [at(theta, size * 0.6), at(theta + back, size * 0.45), at(theta - back, size * 0.45)]
+    [
+        at(theta, size * 0.6),
+        at(theta + back, size * 0.45),
+        at(theta - back, size * 0.45),
+    ]
 }
 
 /// Type-7 quartiles (as `formation-world` computes them) of the finite values; `None` if none.
@@ -214,13 +259,37 @@ mod tests {
             times: vec![0.0, 1.0, 2.0],
             phi_star: vec![0.0, 0.0, 3.0],
             poses: vec![
-                vec![pose(0.0, 0.0, 0.1), pose(3.0, 0.0, 0.0), pose(0.0, 1.0, 0.0)],
-                vec![pose(0.0, 0.0, 0.1), pose(2.0, 0.0, 0.0), pose(0.0, f64::NAN, 0.0)],
-                vec![pose(0.0, 0.0, -3.0), pose(2.5, 0.0, 0.0), pose(0.0, 2.0, 0.0)],
+                vec![
+                    pose(0.0, 0.0, 0.1),
+                    pose(3.0, 0.0, 0.0),
+                    pose(0.0, 1.0, 0.0),
+                ],
+                vec![
+                    pose(0.0, 0.0, 0.1),
+                    pose(2.0, 0.0, 0.0),
+                    pose(0.0, f64::NAN, 0.0),
+                ],
+                vec![
+                    pose(0.0, 0.0, -3.0),
+                    pose(2.5, 0.0, 0.0),
+                    pose(0.0, 2.0, 0.0),
+                ],
             ],
             commands: vec![
-                vec![WheelCmd { left: 0.1, right: 0.2 }; 3],
-                vec![WheelCmd { left: 0.3, right: f64::NAN }; 3],
+                vec![
+                    WheelCmd {
+                        left: 0.1,
+                        right: 0.2
+                    };
+                    3
+                ],
+                vec![
+                    WheelCmd {
+                        left: 0.3,
+                        right: f64::NAN
+                    };
+                    3
+                ],
             ],
             collisions: vec![],
         }
@@ -252,7 +321,10 @@ mod tests {
         assert_eq!(left[2].points, vec![(0.0, 0.1), (1.0, 0.3)]);
         let right = wheel_commands(&t, Wheel::Right);
         assert_eq!(right[0].points, vec![(0.0, 0.2)], "NaN command left out");
-        assert_eq!(paths(&t)[1].points, vec![(3.0, 0.0), (2.0, 0.0), (2.5, 0.0)]);
+        assert_eq!(
+            paths(&t)[1].points,
+            vec![(3.0, 0.0), (2.0, 0.0), (2.5, 0.0)]
+        );
     }
 
     #[test]
@@ -275,7 +347,10 @@ mod tests {
         assert_eq!(padded_range([], 0.1, false), 0.0..1.0);
         let (x, y) = equal_aspect(0.0..10.0, 0.0..1.0, 500.0, 250.0);
         assert_eq!(x, 0.0..10.0);
-        assert!((y.start + 2.0).abs() < 1e-12 && (y.end - 3.0).abs() < 1e-12, "{y:?}");
+        assert!(
+            (y.start + 2.0).abs() < 1e-12 && (y.end - 3.0).abs() < 1e-12,
+            "{y:?}"
+        );
         assert!(((x.end - x.start) / 500.0 - (y.end - y.start) / 250.0).abs() < 1e-12);
     }
 
@@ -289,7 +364,10 @@ mod tests {
     #[test]
     fn quartiles_type7() {
         let q = quartiles([4.0, 1.0, 3.0, 2.0, f64::NAN]).expect("values");
-        assert_eq!((q.min, q.q1, q.median, q.q3, q.max, q.count), (1.0, 1.75, 2.5, 3.25, 4.0, 4));
+        assert_eq!(
+            (q.min, q.q1, q.median, q.q3, q.max, q.count),
+            (1.0, 1.75, 2.5, 3.25, 4.0, 4)
+        );
         assert!(quartiles([f64::NAN]).is_none());
     }
 

@@ -20,13 +20,18 @@ use formation_report::build_report;
 const BROWSER_TIMEOUT: Duration = Duration::from_secs(120);
 
 fn find_chromium() -> Option<PathBuf> {
-    if let Some(path) = std::env::var_os("FORMATION_CHROMIUM") {
-        return Some(PathBuf::from(path));
-    }
-    ["/usr/bin/chromium", "/usr/bin/chromium-browser", "/usr/bin/google-chrome"]
+    let candidates: Vec<PathBuf> = match std::env::var_os("FORMATION_CHROMIUM") {
+        Some(path) => vec![PathBuf::from(path)],
+        None => [
+            "/usr/bin/chromium",
+            "/usr/bin/chromium-browser",
+            "/usr/bin/google-chrome",
+        ]
         .into_iter()
         .map(PathBuf::from)
-        .find(|p| p.exists())
+        .collect(),
+    };
+    candidates.into_iter().find(|p| p.is_file())
 }
 
 /// Output of one headless Chromium run.
@@ -81,8 +86,14 @@ fn run_chromium(browser: &Path, profile: &Path, args: &[String], url: &str) -> B
         std::thread::sleep(Duration::from_millis(100));
     }
     BrowserRun {
-        stdout: stdout_reader.join().expect("stdout reader").unwrap_or_default(),
-        stderr: stderr_reader.join().expect("stderr reader").unwrap_or_default(),
+        stdout: stdout_reader
+            .join()
+            .expect("stdout reader")
+            .unwrap_or_default(),
+        stderr: stderr_reader
+            .join()
+            .expect("stderr reader")
+            .unwrap_or_default(),
     }
 }
 
@@ -95,31 +106,46 @@ fn body_attribute(dom: &str, name: &str) -> Option<String> {
     Some(tag[start..end].to_owned())
 }
 
-/// Console errors, uncaught exceptions and blocked loads in Chromium's log.
-fn error_lines(stderr: &str) -> Vec<&str> {
+/// Console messages other than the page's own check line (Chromium logs `console.error`, uncaught
+/// exceptions and blocked loads all as `CONSOLE` lines), and uncaught exceptions.
+fn unexpected_console_lines(stderr: &str) -> Vec<&str> {
     stderr
         .lines()
         .filter(|line| {
-            let console_error = line.contains("CONSOLE") && (line.contains(":ERROR:") || line.contains("Error"));
-            console_error
+            (line.contains("CONSOLE") && !line.contains("\"formation-report: "))
                 || line.contains("Uncaught")
-                || line.contains("Refused to")
-                || line.contains("Failed to load resource")
         })
         .collect()
 }
 
-#[test]
-fn report_loads_in_headless_chromium_with_every_figure_drawn() {
+/// The value of attribute `name` on the dumped `<html>` tag.
+fn html_attribute(dom: &str, name: &str) -> Option<String> {
+    let html = &dom[dom.find("<html")?..];
+    let tag = &html[..html.find('>')?];
+    let start = tag.find(&format!("{name}=\""))? + name.len() + 2;
+    let end = start + tag[start..].find('"')?;
+    Some(tag[start..end].to_owned())
+}
+
+fn chromium_or_skip() -> Option<PathBuf> {
     if std::env::var_os("FORMATION_SKIP_BROWSER").is_some_and(|v| v == "1") {
         eprintln!("browser test skipped: FORMATION_SKIP_BROWSER=1");
-        return;
+        return None;
     }
     let Some(browser) = find_chromium() else {
         panic!(
-            "headless Chromium is needed for the report's browser test but /usr/bin/chromium is missing: \
-             run `.ci/run` (installs it) or `apt-get install -y chromium`, or set FORMATION_SKIP_BROWSER=1 to skip"
+            "headless Chromium is needed for the report's browser test but /usr/bin/chromium (or \
+             $FORMATION_CHROMIUM) is missing: run `.ci/run` (installs it) or `apt-get install -y chromium`, \
+             or set FORMATION_SKIP_BROWSER=1 to skip"
         );
+    };
+    Some(browser)
+}
+
+#[test]
+fn report_loads_in_headless_chromium_with_every_figure_drawn() {
+    let Some(browser) = chromium_or_skip() else {
+        return;
     };
     let dir = tempfile::tempdir().expect("tempdir");
     let data = dir.path().join("data");
@@ -128,7 +154,12 @@ fn report_loads_in_headless_chromium_with_every_figure_drawn() {
     let summary = build_report(&data, &out).expect("report");
     let url = format!("file://{}", out.display());
 
-    let run = run_chromium(&browser, &dir.path().join("profile-dom"), &["--dump-dom".to_owned()], &url);
+    let run = run_chromium(
+        &browser,
+        &dir.path().join("profile-dom"),
+        &["--dump-dom".to_owned()],
+        &url,
+    );
     let total = body_attribute(&run.stdout, "data-figures-total");
     let ok = body_attribute(&run.stdout, "data-figures-ok");
     let expected = summary.figures.len().to_string();
@@ -144,11 +175,18 @@ fn report_loads_in_headless_chromium_with_every_figure_drawn() {
         "blank or missing figures: {:?}",
         body_attribute(&run.stdout, "data-figures-bad")
     );
-    let errors = error_lines(&run.stderr);
-    assert!(errors.is_empty(), "browser errors:\n{}", errors.join("\n"));
+    let errors = unexpected_console_lines(&run.stderr);
+    assert!(errors.is_empty(), "browser console:\n{}", errors.join("\n"));
+    assert_eq!(
+        html_attribute(&run.stdout, "data-page-errors"),
+        None,
+        "errors recorded by the page"
+    );
     // The console is captured (so the absence of errors above means something).
     assert!(
-        run.stderr.contains(&format!("formation-report: {expected}/{expected} figures drawn")),
+        run.stderr.contains(&format!(
+            "formation-report: {expected}/{expected} figures drawn"
+        )),
         "the page's console message is missing from Chromium's log:\n{}",
         run.stderr
     );
@@ -158,9 +196,75 @@ fn report_loads_in_headless_chromium_with_every_figure_drawn() {
         run_chromium(
             &browser,
             &dir.path().join("profile-shot"),
-            &[format!("--screenshot={}", shot.display()), "--window-size=1280,8000".to_owned(), "--hide-scrollbars".to_owned()],
+            &[
+                format!("--screenshot={}", shot.display()),
+                "--window-size=1280,8000".to_owned(),
+                "--hide-scrollbars".to_owned(),
+            ],
             &url,
         );
         assert!(shot.exists(), "no screenshot at {}", shot.display());
     }
+}
+
+/// The checks above can fail: a page with a blank figure, a script error and a blocked network
+/// load is caught by each of them.
+#[test]
+fn the_browser_checks_catch_a_broken_page() {
+    let Some(browser) = chromium_or_skip() else {
+        return;
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dir.path().join("data");
+    common::write_demo_dir(&data, 6.0);
+    let out = dir.path().join("report.html");
+    let summary = build_report(&data, &out).expect("report");
+    let html = std::fs::read_to_string(&out).expect("html");
+    // Blank the first figure's drawing, load an image from the network, throw.
+    let first_svg = html.find("<svg ").expect("an svg");
+    let first_svg_end =
+        first_svg + html[first_svg..].find("</svg>").expect("svg end") + "</svg>".len();
+    let broken = format!(
+        "{}<svg width=\"10\" height=\"10\"></svg>{}",
+        &html[..first_svg],
+        &html[first_svg_end..]
+    )
+    .replace(
+        "</main>",
+        "<img src=\"https://example.invalid/x.png\"><script>throw new Error('boom')</script></main>",
+    );
+    let broken_path = dir.path().join("broken.html");
+    std::fs::write(&broken_path, broken).expect("write");
+    let run = run_chromium(
+        &browser,
+        &dir.path().join("profile-broken"),
+        &["--dump-dom".to_owned()],
+        &format!("file://{}", broken_path.display()),
+    );
+    let total = summary.figures.len();
+    assert_eq!(
+        body_attribute(&run.stdout, "data-figures-total"),
+        Some(total.to_string())
+    );
+    assert_eq!(
+        body_attribute(&run.stdout, "data-figures-ok"),
+        Some((total - 1).to_string()),
+        "blank figure found"
+    );
+    let console = unexpected_console_lines(&run.stderr).join("\n");
+    assert!(
+        console.contains("boom"),
+        "uncaught error logged:\n{}",
+        run.stderr
+    );
+    assert!(
+        console.contains("example.invalid"),
+        "blocked load logged:\n{}",
+        run.stderr
+    );
+    let page_errors = html_attribute(&run.stdout, "data-page-errors").unwrap_or_default();
+    assert!(
+        page_errors.contains("boom") && page_errors.contains("example.invalid"),
+        "{page_errors}"
+    );
 }

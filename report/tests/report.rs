@@ -36,24 +36,48 @@ fn writes_html_and_every_figure() {
     let html = fs::read_to_string(&out).expect("html");
     for figure in &summary.figures {
         let svg = fs::read_to_string(figure).expect("svg file");
-        assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"), "{}", figure.display());
-        let stem = figure.file_stem().expect("stem").to_string_lossy().into_owned();
-        assert!(html.contains(&format!("data-figure=\"{stem}\"")), "{stem} is inline in the page");
+        assert!(
+            svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"),
+            "{}",
+            figure.display()
+        );
+        let stem = figure
+            .file_stem()
+            .expect("stem")
+            .to_string_lossy()
+            .into_owned();
+        assert!(
+            html.contains(&format!("data-figure=\"{stem}\"")),
+            "{stem} is inline in the page"
+        );
     }
 
     // Table I: 19 of 20 runs succeed at 10 %; the paper's numbers beside ours.
     assert!(html.contains("<td>95.0 %</td>"), "success at 10 %");
-    assert!(html.contains("<td>90.0 %</td>") && html.contains("<td>96.0 %</td>"), "paper row");
+    assert!(
+        html.contains("<td>90.0 %</td>") && html.contains("<td>96.0 %</td>"),
+        "paper row"
+    );
     let summary_json: serde_json::Value =
-        serde_json::from_str(&fs::read_to_string(data.join("table1/summary.json")).expect("read")).expect("json");
-    let median_conv = summary_json["median_convergence_s"].as_f64().expect("median");
-    assert!(html.contains(&format!("<td>{median_conv:.2} s</td>")), "median convergence {median_conv:.2}");
+        serde_json::from_str(&fs::read_to_string(data.join("table1/summary.json")).expect("read"))
+            .expect("json");
+    let median_conv = summary_json["median_convergence_s"]
+        .as_f64()
+        .expect("median");
+    assert!(
+        html.contains(&format!("<td>{median_conv:.2} s</td>")),
+        "median convergence {median_conv:.2}"
+    );
     let rate5 = summary_json["success_rate_5"].as_f64().expect("rate");
     assert!(html.contains(&format!("<td>{:.1} %</td>", 100.0 * rate5)));
 
     // Each case's error panel: one line per edge with one point per sample (30 s at 20 Hz).
-    let errors = fs::read_to_string(summary.figures_dir.join("case1-run0-errors.svg")).expect("svg");
-    let long_lines = polyline_point_counts(&errors).into_iter().filter(|&n| n == 601).count();
+    let errors =
+        fs::read_to_string(summary.figures_dir.join("case1-run0-errors.svg")).expect("svg");
+    let long_lines = polyline_point_counts(&errors)
+        .into_iter()
+        .filter(|&n| n == 601)
+        .count();
     assert_eq!(long_lines, 3 + 3, "3 edges and 3 robots");
     assert!(html.contains("constant desired orientation φ* = 3.76 rad"));
     assert!(html.contains("(cf. paper Fig. 7)"));
@@ -79,10 +103,22 @@ fn the_figures_follow_the_data() {
     let read = |s: &formation_report::ReportSummary, name: &str| {
         fs::read_to_string(s.figures_dir.join(name)).expect("svg")
     };
-    assert_ne!(read(&first, "case2-run0-trajectory.svg"), read(&second, "case2-run0-trajectory.svg"));
-    assert_ne!(read(&first, "case2-run0-errors.svg"), read(&second, "case2-run0-errors.svg"));
-    assert_eq!(read(&first, "case1-run0-trajectory.svg"), read(&second, "case1-run0-trajectory.svg"));
-    assert_eq!(read(&first, "case2-run0-wheels.svg"), read(&second, "case2-run0-wheels.svg"));
+    assert_ne!(
+        read(&first, "case2-run0-trajectory.svg"),
+        read(&second, "case2-run0-trajectory.svg")
+    );
+    assert_ne!(
+        read(&first, "case2-run0-errors.svg"),
+        read(&second, "case2-run0-errors.svg")
+    );
+    assert_eq!(
+        read(&first, "case1-run0-trajectory.svg"),
+        read(&second, "case1-run0-trajectory.svg")
+    );
+    assert_eq!(
+        read(&first, "case2-run0-wheels.svg"),
+        read(&second, "case2-run0-wheels.svg")
+    );
 }
 
 #[test]
@@ -109,11 +145,21 @@ fn missing_and_empty_directories_are_explained() {
     fs::write(dir.path().join("notes.txt"), "hello").expect("write");
     let err = build_report(dir.path(), &dir.path().join("r.html")).expect_err("no summary");
     let message = err.to_string();
-    assert!(message.starts_with("no eval or run output under"), "{message}");
-    assert!(message.contains("formation eval --out") && message.contains("formation demo"), "{message}");
-    assert!(!dir.path().join("r.html").exists(), "nothing written on error");
+    assert!(
+        message.starts_with("no eval or run output under"),
+        "{message}"
+    );
+    assert!(
+        message.contains("formation eval --out") && message.contains("formation demo"),
+        "{message}"
+    );
+    assert!(
+        !dir.path().join("r.html").exists(),
+        "nothing written on error"
+    );
 
-    let err = build_report(&dir.path().join("notes.txt"), &dir.path().join("r.html")).expect_err("a file");
+    let err = build_report(&dir.path().join("notes.txt"), &dir.path().join("r.html"))
+        .expect_err("a file");
     assert!(matches!(err, ReportError::NotADirectory { .. }), "{err}");
 }
 
@@ -140,8 +186,15 @@ fn truncated_inputs_name_the_file() {
     let err = build_report(dir.path(), &out).expect_err("no Table I keys");
     assert!(err.to_string().contains("missing field `runs`"), "{err}");
 
-    common::write_json(&summary, &common::summary("table1", &[common::run_metrics(1, true)]));
-    fs::write(dir.path().join("policy-loss.csv"), "epoch,train_loss\n1,oops\n").expect("csv");
+    common::write_json(
+        &summary,
+        &common::summary("table1", &[common::run_metrics(1, true)]),
+    );
+    fs::write(
+        dir.path().join("policy-loss.csv"),
+        "epoch,train_loss\n1,oops\n",
+    )
+    .expect("csv");
     let err = build_report(dir.path(), &out).expect_err("bad csv");
     assert!(err.to_string().contains("policy-loss.csv line 2"), "{err}");
 }
@@ -151,7 +204,10 @@ fn optional_sections_are_omitted_when_absent() {
     let dir = tempfile::tempdir().expect("tempdir");
     common::write_json(
         &dir.path().join("summary.json"),
-        &common::summary("table1", &[common::run_metrics(1, true), common::run_metrics(2, false)]),
+        &common::summary(
+            "table1",
+            &[common::run_metrics(1, true), common::run_metrics(2, false)],
+        ),
     );
     let out = dir.path().join("report.html");
     let summary = build_report(dir.path(), &out).expect("report");
@@ -159,5 +215,8 @@ fn optional_sections_are_omitted_when_absent() {
     let html = fs::read_to_string(&out).expect("html");
     assert!(!html.contains("id=\"training\"") && !html.contains("id=\"latency\""));
     assert!(html.contains("No run logs were found"));
-    assert!(html.contains("<td>50.0 %</td>"), "1 of 2 runs succeed at 10 %");
+    assert!(
+        html.contains("<td>50.0 %</td>"),
+        "1 of 2 runs succeed at 10 %"
+    );
 }

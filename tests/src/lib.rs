@@ -16,7 +16,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::sync::OnceLock;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -316,7 +316,6 @@ pub fn run(mut command: Command, limit: Duration) -> Finished {
     let started = Instant::now();
     let child = command.spawn().unwrap_or_else(|e| panic!("starting {text}: {e}"));
     let id = child.id();
-    let timed_out = std::sync::Arc::new(AtomicBool::new(false));
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
         let _ = tx.send(child.wait_with_output());
@@ -324,7 +323,6 @@ pub fn run(mut command: Command, limit: Duration) -> Finished {
     let output = match rx.recv_timeout(limit) {
         Ok(result) => result.unwrap_or_else(|e| panic!("waiting for {text}: {e}")),
         Err(_) => {
-            timed_out.store(true, Ordering::Relaxed);
             let _ = Command::new("kill").arg("-KILL").arg(id.to_string()).status();
             let output = rx.recv().expect("reaping the killed child").expect("child output");
             panic!(

@@ -1,1 +1,12 @@
 //! The dataset format shared by the Rust collector and the PyTorch trainer, and the bridge that runs the trainer.
+//!
+//! - [`dataset`] writes and reads the on-disk dataset: a directory with a `manifest.json` and
+//!   `shard-NNNNNN.safetensors` files, every file written atomically, so an interrupted collection
+//!   leaves a valid dataset of its finished shards. The Python package `formation_trainer` (in
+//!   `trainer-bridge/python`) reads the same format with numpy and safetensors only.
+//! - [`train`] runs `python -m formation_trainer train` as a subprocess, streams its progress and
+//!   parses its final report; the trainer writes the ONNX model, a `.pt` checkpoint and the loss curve.
+
+pub mod dataset;
+mod digest;
+pub mod train;

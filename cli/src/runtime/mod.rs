@@ -56,7 +56,7 @@ pub struct RunArgs {
     /// Clock mode of the world.
     #[arg(long, value_enum, default_value_t = ClockMode::Lockstep)]
     pub clock: ClockMode,
-    /// Output directory for the run logs (`runs/`, `timing/`) and `latency.json`.
+    /// Output directory for the run logs (`runs/`, `timing/`) and the latency profile `profile.json`.
     #[arg(long, default_value = "out/run")]
     pub out: PathBuf,
     /// Number of runs (default: 1).
@@ -222,7 +222,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         }
     }))??;
     let latency = profile::profile_dir(&plan.out)?;
-    let path = plan.out.join("latency.json");
+    let path = plan.out.join("profile.json");
     paths::write_atomic(&path, &serde_json::to_vec_pretty(&latency)?)?;
     print!("{}", profile::summary_text(&latency));
     println!(

@@ -1,5 +1,6 @@
 //! Per-stage latency statistics of a multi-process run, from the world's timing logs
-//! (`<out>/timing/run-NNNN.json`, one [`RobotTiming`] per robot).
+//! (`<out>/timing/run-NNNN.json`, one [`RobotTiming`] per robot), written as `<out>/profile.json`
+//! in the schema the report draws.
 //!
 //! Stages: `round_trip` (scan published → command received by the world, the tick loop's
 //! latency, on the world's clock), `uplink` (scan published → taken by the agent, system clock),
@@ -40,7 +41,12 @@ pub struct LatencyProfile {
     pub braked: BTreeMap<String, usize>,
     /// Per-stage statistics, by stage name.
     pub stages: BTreeMap<String, StageStats>,
+    /// The paper's single-sample inference time [ms], for comparison in the report.
+    pub inference_paper_ms: f64,
 }
+
+/// The paper's reported inference time [ms].
+pub const PAPER_INFERENCE_MS: f64 = 2.1;
 
 /// Quantile by nearest rank of sorted samples.
 fn quantile(sorted: &[u64], q: f64) -> u64 {
@@ -107,6 +113,7 @@ pub fn profile(runs: &[Vec<RobotTiming>]) -> LatencyProfile {
         used_commands: used,
         braked,
         stages: columns.into_iter().map(|(k, v)| (k.to_owned(), stage_stats(v))).collect(),
+        inference_paper_ms: PAPER_INFERENCE_MS,
     }
 }
 

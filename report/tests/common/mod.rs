@@ -36,7 +36,9 @@ pub fn trajectory(heading: Heading, d_star: f64, seconds: f64, seed: u64) -> Val
     let v_star = 0.7;
     let ticks = (seconds / dt).round() as usize;
     let wobble = |k: u64| ((seed * 7919 + k * 104_729) % 1000) as f64 / 1000.0 - 0.5;
-    let initial: Vec<(f64, f64)> = (0..3).map(|i| (3.0 * wobble(2 * i), 3.0 * wobble(2 * i + 1))).collect();
+    let initial: Vec<(f64, f64)> = (0..3)
+        .map(|i| (3.0 * wobble(2 * i), 3.0 * wobble(2 * i + 1)))
+        .collect();
     let heading_offsets: Vec<f64> = (0..3).map(|i| 2.0 * wobble(10 + i)).collect();
     let target = |phi: f64, i: usize| {
         let r = d_star / 3f64.sqrt();
@@ -103,7 +105,9 @@ pub fn run_metrics(k: u64, success_10: bool) -> Value {
 
 fn quantile_json(values: impl Iterator<Item = f64>) -> Value {
     match quartiles(values) {
-        Some(q) => json!({"min": q.min, "q1": q.q1, "median": q.median, "q3": q.q3, "max": q.max, "count": q.count}),
+        Some(q) => {
+            json!({"min": q.min, "q1": q.q1, "median": q.median, "q3": q.q3, "max": q.max, "count": q.count})
+        }
         None => Value::Null,
     }
 }
@@ -111,11 +115,19 @@ fn quantile_json(values: impl Iterator<Item = f64>) -> Value {
 /// A summary.json over `per_run` (computed as `formation_world::metrics::summarize` does).
 pub fn summary(scenario: &str, per_run: &[Value]) -> Value {
     let runs = per_run.len();
-    let frac = |key: &str| per_run.iter().filter(|r| r[key] == json!(true)).count() as f64 / runs.max(1) as f64;
-    let ok: Vec<&Value> = per_run.iter().filter(|r| r["success_10"] == json!(true)).collect();
+    let frac = |key: &str| {
+        per_run.iter().filter(|r| r[key] == json!(true)).count() as f64 / runs.max(1) as f64
+    };
+    let ok: Vec<&Value> = per_run
+        .iter()
+        .filter(|r| r["success_10"] == json!(true))
+        .collect();
     let conv = quantile_json(ok.iter().filter_map(|r| r["convergence_s_10"].as_f64()));
     let form = quantile_json(ok.iter().filter_map(|r| r["rel_formation_error"].as_f64()));
-    let orient = quantile_json(ok.iter().filter_map(|r| r["orientation_error_rad"].as_f64()));
+    let orient = quantile_json(
+        ok.iter()
+            .filter_map(|r| r["orientation_error_rad"].as_f64()),
+    );
     json!({
         "controller": "policy", "models": ["policy-abc123"], "scenario": scenario, "seed": 42,
         "runs": runs, "success_rate_5": frac("success_5"), "success_rate_10": frac("success_10"),
@@ -135,7 +147,10 @@ pub fn write_json(path: &Path, value: &Value) {
 /// curve and a latency profile. Returns the number of runs in `table1`.
 pub fn write_demo_dir(root: &Path, case_seconds: f64) -> usize {
     let per_run: Vec<Value> = (0..20).map(|k| run_metrics(k, k != 7)).collect();
-    write_json(&root.join("table1/summary.json"), &summary("table1", &per_run));
+    write_json(
+        &root.join("table1/summary.json"),
+        &summary("table1", &per_run),
+    );
     let cases = [
         ("case1", Heading::Constant(3.76), 2.0),
         ("case2", Heading::Ramp(0.1), 1.0),
@@ -143,14 +158,22 @@ pub fn write_demo_dir(root: &Path, case_seconds: f64) -> usize {
     ];
     for (seed, (name, heading, d_star)) in cases.into_iter().enumerate() {
         let metrics = run_metrics(seed as u64, true);
-        write_json(&root.join(name).join("summary.json"), &summary(name, std::slice::from_ref(&metrics)));
+        write_json(
+            &root.join(name).join("summary.json"),
+            &summary(name, std::slice::from_ref(&metrics)),
+        );
         let log = json!({"index": 0, "metrics": metrics, "trajectory": trajectory(heading, d_star, case_seconds, seed as u64)});
         write_json(&root.join(name).join("runs/run-0000.json"), &log);
     }
     let mut csv = String::from("epoch,train_loss,val_loss,seconds\n");
     for epoch in 1..=40 {
         let e = f64::from(epoch);
-        csv.push_str(&format!("{epoch},{},{},{}\n", 0.2 * (-e / 8.0).exp() + 0.009, 0.22 * (-e / 9.0).exp() + 0.011, 1.5 * e));
+        csv.push_str(&format!(
+            "{epoch},{},{},{}\n",
+            0.2 * (-e / 8.0).exp() + 0.009,
+            0.22 * (-e / 9.0).exp() + 0.011,
+            1.5 * e
+        ));
     }
     fs::write(root.join("policy-loss.csv"), csv).expect("write csv");
     write_json(

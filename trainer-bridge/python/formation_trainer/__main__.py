@@ -1,0 +1,112 @@
+"""Command line: ``python -m formation_trainer train ...`` and ``python -m formation_trainer export ...``.
+
+Exit status: 0 on success, 2 for a usage or data problem (message on stderr), 3 when a Python
+dependency (PyTorch, ONNX, ...) is missing, so the Rust bridge can say how to install it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+MISSING_DEPENDENCY_EXIT = 3
+USAGE_EXIT = 2
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m formation_trainer", description=__doc__.splitlines()[0])
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    train = commands.add_parser("train", help="train the policy CNN and export it to ONNX")
+    train.add_argument("--data", type=Path, action="append", required=True, help="dataset directory (repeatable)")
+    train.add_argument("--out", type=Path, required=True, help="ONNX model to write (.pt, .loss.csv, .loss.png beside it)")
+    train.add_argument("--epochs", type=int, default=10)
+    train.add_argument("--batch-size", type=int, default=32)
+    train.add_argument("--lr", type=float, default=1e-4)
+    train.add_argument("--device", choices=["auto", "cpu", "cuda"], default="auto")
+    train.add_argument("--val-fraction", type=float, default=0.1, help="share of runs held out for validation")
+    train.add_argument("--seed", type=int, default=0)
+    train.add_argument("--init-from", type=Path, help="warm start from this .pt checkpoint")
+    train.add_argument("--parity-out", type=Path, help="write a few inputs with torch outputs as JSON")
+
+    exp = commands.add_parser("export", help="export a .pt checkpoint to ONNX (with the parity check)")
+    exp.add_argument("--checkpoint", type=Path, required=True)
+    exp.add_argument("--out", type=Path, required=True, help="ONNX model to write")
+    exp.add_argument("--data", type=Path, action="append", help="dataset(s) whose samples feed the parity check")
+    exp.add_argument("--parity-out", type=Path, help="write a few inputs with torch outputs as JSON")
+    exp.add_argument("--seed", type=int, default=0)
+    return parser
+
+
+def _train(args) -> None:
+    from . import train
+
+    config = train.TrainConfig(
+        data=args.data,
+        out=args.out,
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        device=args.device,
+        val_fraction=args.val_fraction,
+        seed=args.seed,
+        init_from=args.init_from,
+        parity_out=args.parity_out,
+    )
+    report = train.run(config, log=lambda line: print(line, flush=True))
+    print(train.report_line(report), flush=True)
+
+
+def _export(args) -> None:
+    import numpy as np
+
+    from . import dataset, export, train
+
+    checkpoint = train.load_checkpoint(args.checkpoint)
+    model = train.model_from_checkpoint(checkpoint)
+    size = model.size_px
+    if args.data:
+        samples = dataset.load(args.data)
+        if samples.size_px != size:
+            raise train.TrainError(f"the data has {samples.size_px} px images, the checkpoint {size} px")
+        pick = np.random.default_rng(args.seed).permutation(len(samples))[: train.PARITY_SAMPLES]
+        occupancy = samples.occupancy[pick][:, None].astype(np.float32)
+        aux = samples.aux[pick]
+    else:
+        rng = np.random.default_rng(args.seed)
+        occupancy = (rng.random((train.PARITY_SAMPLES, 1, size, size)) < 0.02).astype(np.float32)
+        aux = np.stack([rng.uniform(-np.pi, np.pi, train.PARITY_SAMPLES), rng.uniform(0.5, 3.0, train.PARITY_SAMPLES)], 1)
+        aux = aux.astype(np.float32)
+    export.export_onnx(model, args.out, checkpoint["metadata"])
+    parity = export.check_parity(model, args.out, occupancy, aux)
+    if args.parity_out:
+        n = train.PARITY_FILE_SAMPLES
+        export.write_parity_file(args.parity_out, model, occupancy[:n], aux[:n])
+    print(f"wrote {args.out} (onnxruntime parity {parity:.2e} on {len(aux)} samples)", flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "train":
+            _train(args)
+        else:
+            _export(args)
+    except ModuleNotFoundError as e:
+        print(f"missing Python dependency: {e}", file=sys.stderr)
+        return MISSING_DEPENDENCY_EXIT
+    except Exception as e:
+        from .dataset import DatasetError
+        from .export import ParityError
+        from .train import TrainError
+
+        if isinstance(e, (DatasetError, TrainError, ParityError)):
+            print(f"error: {e}", file=sys.stderr)
+            return USAGE_EXIT
+        raise
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

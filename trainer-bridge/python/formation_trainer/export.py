@@ -1,0 +1,184 @@
+"""ONNX export with the formation model contract, and the torch/onnxruntime parity check.
+
+The exported graph has inputs ``occupancy`` f32 [B, 1, S, S] and ``aux`` f32 [B, 2], output
+``wheels`` f32 [B, 2], with a dynamic batch B, and carries ``formation.*`` metadata_props (all
+strings) that the Rust ``formation_onnx`` crate validates against the agent's sensor. After
+export the same held-out inputs are run through torch and onnxruntime; a difference above
+:data:`PARITY_TOLERANCE` fails the export.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import math
+import os
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from . import CREATED_BY
+from .model import PolicyNet
+
+MODEL_FORMAT = "formation-policy/1"
+INPUT_NAMES = ("occupancy", "aux")
+OUTPUT_NAME = "wheels"
+OPSET = 20
+PARITY_TOLERANCE = 1e-4
+
+
+class ParityError(Exception):
+    """onnxruntime and torch disagree on the exported model."""
+
+
+def number_text(value: float) -> str:
+    """A metadata number: integral values without a fraction ("50", "10"), others as Python repr ("0.1")."""
+    value = float(value)
+    if not math.isfinite(value):
+        return repr(value)
+    return str(int(value)) if value.is_integer() else repr(value)
+
+
+def model_metadata(
+    *,
+    occupancy: dict,
+    lidar: dict,
+    v_train: float,
+    dataset_id: str,
+    epochs: int,
+    final_train_loss: float,
+    final_val_loss: float,
+    samples: int,
+    dagger_iteration: int,
+    extra: dict | None = None,
+) -> dict[str, str]:
+    """The ``formation.*`` metadata_props of a model (all values strings)."""
+    meta = {
+        "formation.format": MODEL_FORMAT,
+        "formation.occupancy.size_px": str(int(occupancy["size_px"])),
+        "formation.occupancy.resolution_m": number_text(occupancy["resolution_m"]),
+        "formation.occupancy.beyond": str(occupancy["beyond"]),
+        "formation.lidar.beams": str(int(lidar["beams"])),
+        "formation.lidar.max_range": number_text(lidar["max_range"]),
+        "formation.lidar.noise_std": number_text(lidar["noise_std"]),
+        "formation.v_train": number_text(v_train),
+        "formation.dataset_id": dataset_id,
+        "formation.train.epochs": str(int(epochs)),
+        "formation.train.final_train_loss": repr(float(final_train_loss)),
+        "formation.train.final_val_loss": repr(float(final_val_loss)),
+        "formation.train.samples": str(int(samples)),
+        "formation.dagger.iteration": str(int(dagger_iteration)),
+        "formation.created_by": CREATED_BY,
+    }
+    for key, value in (extra or {}).items():
+        meta.setdefault(f"formation.{key}", str(value))
+    return meta
+
+
+@contextlib.contextmanager
+def _quiet_exporter():
+    """Keeps the exporter's chatter off stdout (which carries the trainer's progress lines)."""
+    with contextlib.redirect_stdout(sys.stderr), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        previous = logging.getLogger("torch").level
+        logging.getLogger("torch").setLevel(logging.ERROR)
+        try:
+            yield
+        finally:
+            logging.getLogger("torch").setLevel(previous)
+
+
+def export_onnx(model: PolicyNet, path: str | Path, metadata: dict[str, str]) -> None:
+    """Exports ``model`` (on CPU, eval mode) to ``path`` atomically, with ``metadata`` as metadata_props."""
+    import onnx
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    model = model.to("cpu").eval()
+    size = model.size_px
+    example = (torch.zeros(2, 1, size, size), torch.zeros(2, 2))
+    batch = torch.export.Dim("batch")
+    try:
+        with _quiet_exporter():
+            torch.onnx.export(
+                model,
+                example,
+                str(temp),
+                input_names=list(INPUT_NAMES),
+                output_names=[OUTPUT_NAME],
+                dynamic_shapes={"occupancy": {0: batch}, "aux": {0: batch}},
+                opset_version=OPSET,
+                dynamo=True,
+                external_data=False,
+            )
+        proto = onnx.load(str(temp))
+        names = ([i.name for i in proto.graph.input], [o.name for o in proto.graph.output])
+        if names != (list(INPUT_NAMES), [OUTPUT_NAME]):
+            raise RuntimeError(f"the exporter produced inputs/outputs {names}, expected {INPUT_NAMES} -> {OUTPUT_NAME}")
+        del proto.metadata_props[:]
+        for key, value in sorted(metadata.items()):
+            entry = proto.metadata_props.add()
+            entry.key, entry.value = key, value
+        onnx.checker.check_model(proto)
+        onnx.save(proto, str(temp))
+        os.replace(temp, path)
+    finally:
+        temp.unlink(missing_ok=True)
+
+
+def torch_outputs(model: PolicyNet, occupancy: np.ndarray, aux: np.ndarray) -> np.ndarray:
+    """The model's outputs for float32 inputs, on CPU."""
+    model = model.to("cpu").eval()
+    with torch.no_grad():
+        return model(torch.from_numpy(occupancy), torch.from_numpy(aux)).numpy()
+
+
+def check_parity(
+    model: PolicyNet, onnx_path: str | Path, occupancy: np.ndarray, aux: np.ndarray, tolerance: float = PARITY_TOLERANCE
+) -> float:
+    """Runs the same inputs through torch and onnxruntime; returns the largest |difference|.
+
+    Raises :class:`ParityError` when it exceeds ``tolerance``.
+    """
+    import onnxruntime as ort
+
+    occupancy = np.ascontiguousarray(occupancy, dtype=np.float32)
+    aux = np.ascontiguousarray(aux, dtype=np.float32)
+    expected = torch_outputs(model, occupancy, aux)
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    session = ort.InferenceSession(str(onnx_path), options, providers=["CPUExecutionProvider"])
+    (actual,) = session.run([OUTPUT_NAME], {"occupancy": occupancy, "aux": aux})
+    diff = float(np.max(np.abs(actual - expected))) if expected.size else 0.0
+    if not diff <= tolerance:
+        raise ParityError(
+            f"{onnx_path}: onnxruntime and torch differ by {diff:.3g} (> {tolerance:g}) on {len(aux)} samples; "
+            "the export is wrong: do not deploy this model"
+        )
+    return diff
+
+
+def write_parity_file(
+    path: str | Path, model: PolicyNet, occupancy: np.ndarray, aux: np.ndarray, tolerance: float = PARITY_TOLERANCE
+) -> None:
+    """Writes inputs and torch outputs as JSON for Rust-side parity tests.
+
+    ``{"tolerance", "size_px", "cases": [{"occupancy": [S*S floats, row-major], "aux": [2], "wheels": [2]}]}``
+    """
+    occupancy = np.ascontiguousarray(occupancy, dtype=np.float32)
+    aux = np.ascontiguousarray(aux, dtype=np.float32)
+    outputs = torch_outputs(model, occupancy, aux)
+    cases = [
+        {"occupancy": o.reshape(-1).tolist(), "aux": a.tolist(), "wheels": w.tolist()}
+        for o, a, w in zip(occupancy, aux, outputs)
+    ]
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    temp.write_text(json.dumps({"tolerance": tolerance, "size_px": model.size_px, "cases": cases}))
+    os.replace(temp, path)

@@ -1,0 +1,311 @@
+"""Behaviour cloning of the expert: MSE on (left, right) wheel speeds, Adam, seeded.
+
+Validation holds out whole runs (every sample of a run is in the same split: consecutive ticks are
+nearly identical, so a per-sample split would measure memorisation). Images stay uint8 in memory
+and become float per batch. After training, beside ``out`` (``<stem>.onnx``) it writes:
+
+- ``<stem>.pt``: checkpoint (weights, optimiser state, metadata) for warm starts (``--init-from``)
+  and for ``python -m formation_trainer export``;
+- ``<stem>.loss.csv`` (epoch, train_loss, val_loss, seconds) and ``<stem>.loss.png``;
+- ``<stem>.onnx``: the model with its metadata, checked against onnxruntime on held-out samples.
+
+The last stdout line is ``FORMATION_TRAIN_REPORT {json}``, parsed by the Rust bridge.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+from torch import nn
+
+from . import dataset as ds
+from . import export
+from .model import PolicyNet
+
+CHECKPOINT_FORMAT = "formation-checkpoint/1"
+REPORT_PREFIX = "FORMATION_TRAIN_REPORT "
+#: Held-out samples run through torch and onnxruntime after export.
+PARITY_SAMPLES = 64
+#: Samples written to ``--parity-out``.
+PARITY_FILE_SAMPLES = 8
+#: Batch size for evaluation passes (no gradients).
+EVAL_BATCH = 1024
+
+
+class TrainError(Exception):
+    """Training cannot run with these options."""
+
+
+@dataclass
+class TrainConfig:
+    data: list
+    out: Path
+    epochs: int = 10
+    batch_size: int = 32
+    lr: float = 1e-4
+    device: str = "auto"
+    val_fraction: float = 0.1
+    seed: int = 0
+    init_from: Path | None = None
+    parity_out: Path | None = None
+
+
+def artifact_paths(out: Path) -> dict[str, Path]:
+    """The files written for model ``out`` (``<dir>/<stem>.onnx``)."""
+    out = Path(out)
+    return {
+        "model": out,
+        "checkpoint": out.with_suffix(".pt"),
+        "loss_csv": out.with_name(out.stem + ".loss.csv"),
+        "loss_png": out.with_name(out.stem + ".loss.png"),
+    }
+
+
+def resolve_device(name: str) -> torch.device:
+    """``auto`` picks CUDA when available; ``cuda`` without a GPU is an error, not a silent fallback."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cpu":
+        return torch.device("cpu")
+    if name == "cuda":
+        if not torch.cuda.is_available():
+            raise TrainError("--device cuda was asked for but PyTorch sees no CUDA device: use --device cpu or auto")
+        return torch.device("cuda")
+    raise TrainError(f"--device must be auto, cpu or cuda, got {name!r}")
+
+
+def split_by_episode(keys: np.ndarray, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sample indices of the (train, validation) splits, holding out ``val_fraction`` of the episodes.
+
+    With a single episode the split falls back to samples. Both splits are sorted.
+    """
+    n = len(keys)
+    if not 0.0 <= val_fraction < 1.0:
+        raise TrainError(f"--val-fraction must be in [0, 1), got {val_fraction}")
+    rng = np.random.default_rng(seed)
+    if val_fraction == 0.0 or n < 2:
+        return np.arange(n), np.arange(0)
+    groups, inverse = np.unique(keys, return_inverse=True)
+    if len(groups) >= 2:
+        n_val = min(max(1, round(val_fraction * len(groups))), len(groups) - 1)
+        val_groups = np.zeros(len(groups), dtype=bool)
+        val_groups[rng.permutation(len(groups))[:n_val]] = True
+        is_val = val_groups[inverse]
+    else:
+        n_val = min(max(1, round(val_fraction * n)), n - 1)
+        is_val = np.zeros(n, dtype=bool)
+        is_val[rng.permutation(n)[:n_val]] = True
+    return np.flatnonzero(~is_val), np.flatnonzero(is_val)
+
+
+def load_checkpoint(path: Path) -> dict:
+    """Reads a checkpoint written by :func:`save_checkpoint`, with a clear error if it is not one."""
+    path = Path(path)
+    if not path.is_file():
+        raise TrainError(f"checkpoint {path} does not exist: train a model first (it is written beside the .onnx)")
+    try:
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:
+        raise TrainError(f"{path} is not a readable checkpoint ({e}): retrain, or pass the .pt written beside a model") from e
+    if not isinstance(checkpoint, dict) or checkpoint.get("format") != CHECKPOINT_FORMAT:
+        raise TrainError(f"{path} is not a formation checkpoint ({CHECKPOINT_FORMAT}): pass the .pt written beside a model")
+    return checkpoint
+
+
+def save_checkpoint(path: Path, model: PolicyNet, optimizer, metadata: dict[str, str]) -> None:
+    temp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    torch.save(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "size_px": model.size_px,
+            "model_state": model.state_dict(),
+            "optimizer_state": optimizer.state_dict(),
+            "metadata": metadata,
+        },
+        temp,
+    )
+    os.replace(temp, path)
+
+
+def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> PolicyNet:
+    """A model with the checkpoint's weights; ``size_px`` (if given) must match the checkpoint's."""
+    if size_px is not None and checkpoint["size_px"] != size_px:
+        raise TrainError(
+            f"the checkpoint was trained on {checkpoint['size_px']} px images but the data has {size_px} px: "
+            "warm-start only from a model trained on the same occupancy settings"
+        )
+    model = PolicyNet(checkpoint["size_px"])
+    model.load_state_dict(checkpoint["model_state"])
+    return model
+
+
+def _batch(tensors: dict, index: torch.Tensor):
+    occupancy = tensors["occupancy"].index_select(0, index).unsqueeze(1).float()
+    return occupancy, tensors["aux"].index_select(0, index), tensors["wheels"].index_select(0, index)
+
+
+def mean_loss(model: PolicyNet, tensors: dict, indices: torch.Tensor) -> float:
+    """Mean squared error over ``indices`` (no gradients)."""
+    if len(indices) == 0:
+        return math.nan
+    model.eval()
+    total = 0.0
+    with torch.no_grad():
+        for start in range(0, len(indices), EVAL_BATCH):
+            occupancy, aux, wheels = _batch(tensors, indices[start : start + EVAL_BATCH])
+            total += nn.functional.mse_loss(model(occupancy, aux), wheels, reduction="sum").item()
+    return total / (2 * len(indices))
+
+
+def write_loss_curve(paths: dict[str, Path], history: list[dict]) -> None:
+    """Writes the loss CSV and PNG."""
+    with paths["loss_csv"].open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["epoch", "train_loss", "val_loss", "seconds"])
+        for row in history:
+            val = "" if math.isnan(row["val_loss"]) else f"{row['val_loss']:.8g}"
+            writer.writerow([row["epoch"], f"{row['train_loss']:.8g}", val, f"{row['seconds']:.3f}"])
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    epochs = [r["epoch"] for r in history]
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    ax.plot(epochs, [r["train_loss"] for r in history], marker="o", label="train")
+    if not all(math.isnan(r["val_loss"]) for r in history):
+        ax.plot(epochs, [r["val_loss"] for r in history], marker="s", label="validation")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("MSE [(m/s)^2]")
+    if all(r["train_loss"] > 0 for r in history):
+        ax.set_yscale("log")
+    ax.set_title(paths["model"].stem)
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(paths["loss_png"])
+    plt.close(fig)
+
+
+def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
+    """Trains, writes every artefact and returns the report (also printed by the CLI)."""
+    if cfg.epochs < 1 or cfg.batch_size < 1 or not (cfg.lr > 0 and math.isfinite(cfg.lr)):
+        raise TrainError(f"epochs and batch size must be >= 1 and lr > 0 (got {cfg.epochs}, {cfg.batch_size}, {cfg.lr})")
+    out = Path(cfg.out)
+    if out.suffix != ".onnx":
+        raise TrainError(f"--out must end in .onnx, got {out}")
+    paths = artifact_paths(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    device = resolve_device(cfg.device)
+    torch.set_num_threads(os.cpu_count() or 1)
+    torch.manual_seed(cfg.seed)
+
+    samples = ds.load(cfg.data)
+    train_idx, val_idx = split_by_episode(samples.episode_keys(), cfg.val_fraction, cfg.seed)
+    model = PolicyNet(samples.size_px)
+    if cfg.init_from is not None:
+        model = model_from_checkpoint(load_checkpoint(cfg.init_from), samples.size_px)
+        log(f"warm start from {cfg.init_from}")
+    model.to(device)
+    tensors = {
+        "occupancy": torch.from_numpy(samples.occupancy).to(device),
+        "aux": torch.from_numpy(samples.aux).to(device),
+        "wheels": torch.from_numpy(samples.wheels).to(device),
+    }
+    train_t = torch.from_numpy(train_idx).to(device)
+    val_t = torch.from_numpy(val_idx).to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    shuffle = torch.Generator().manual_seed(cfg.seed)
+    log(
+        f"training on {len(samples)} samples ({len(train_idx)} train / {len(val_idx)} validation) "
+        f"from {', '.join(str(d) for d in cfg.data)} on {device} ({torch.get_num_threads()} threads); "
+        f"batch {cfg.batch_size}, lr {cfg.lr:g}, {cfg.epochs} epochs"
+    )
+
+    history = []
+    started = time.perf_counter()
+    for epoch in range(1, cfg.epochs + 1):
+        epoch_start = time.perf_counter()
+        model.train()
+        order = train_t[torch.randperm(len(train_t), generator=shuffle).to(device)]
+        total = 0.0
+        for start in range(0, len(order), cfg.batch_size):
+            occupancy, aux, wheels = _batch(tensors, order[start : start + cfg.batch_size])
+            loss = nn.functional.mse_loss(model(occupancy, aux), wheels)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            total += loss.item() * len(aux)
+        train_loss = total / max(1, len(order))
+        val_loss = mean_loss(model, tensors, val_t)
+        seconds = time.perf_counter() - epoch_start
+        history.append({"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss, "seconds": seconds})
+        val_text = "-" if math.isnan(val_loss) else f"{val_loss:.6f}"
+        log(
+            f"epoch {epoch}/{cfg.epochs}  train_loss {train_loss:.6f}  val_loss {val_text}  "
+            f"{seconds:.1f} s ({len(order) / max(seconds, 1e-9):.0f} samples/s)"
+        )
+    train_seconds = time.perf_counter() - started
+    final_train = history[-1]["train_loss"]
+    final_val = history[-1]["val_loss"]
+    reported_val = final_train if math.isnan(final_val) else final_val
+
+    model.to("cpu").eval()
+    manifest = samples.manifests[0]
+    metadata = export.model_metadata(
+        occupancy=manifest.occupancy,
+        lidar=manifest.lidar,
+        v_train=manifest.v_train,
+        dataset_id=samples.dataset_id,
+        epochs=cfg.epochs,
+        final_train_loss=final_train,
+        final_val_loss=reported_val,
+        samples=len(samples),
+        dagger_iteration=samples.max_iteration,
+        extra={
+            "train.batch_size": cfg.batch_size,
+            "train.lr": repr(float(cfg.lr)),
+            "train.seed": cfg.seed,
+            "train.val_samples": len(val_idx),
+            "train.init_from": cfg.init_from.name if cfg.init_from else "",
+        },
+    )
+    save_checkpoint(paths["checkpoint"], model, optimizer, metadata)
+    write_loss_curve(paths, history)
+    export.export_onnx(model, out, metadata)
+
+    held_out = val_idx if len(val_idx) else train_idx
+    pick = np.random.default_rng(cfg.seed).permutation(held_out)[:PARITY_SAMPLES]
+    occupancy = samples.occupancy[pick][:, None].astype(np.float32)
+    aux = samples.aux[pick]
+    parity = export.check_parity(model, out, occupancy, aux)
+    if cfg.parity_out is not None:
+        export.write_parity_file(cfg.parity_out, model, occupancy[:PARITY_FILE_SAMPLES], aux[:PARITY_FILE_SAMPLES])
+    log(f"wrote {out} (onnxruntime parity {parity:.2e} on {len(pick)} held-out samples), {paths['checkpoint'].name}, "
+        f"{paths['loss_csv'].name}, {paths['loss_png'].name}")
+    return {
+        "epochs": cfg.epochs,
+        "samples": len(samples),
+        "train_samples": int(len(train_idx)),
+        "val_samples": int(len(val_idx)),
+        "final_train_loss": final_train,
+        "final_val_loss": reported_val,
+        "seconds": train_seconds,
+        "device": str(device),
+        "dataset_id": samples.dataset_id,
+        "parity_max_abs_diff": parity,
+        **{name: str(path) for name, path in paths.items()},
+    }
+
+
+def report_line(report: dict) -> str:
+    return REPORT_PREFIX + json.dumps(report, sort_keys=True)

@@ -1,0 +1,73 @@
+"""Shared test helpers: synthetic datasets written in the documented on-disk format.
+
+The writer here is deliberately independent of the Rust one: it writes what the format
+description in ``trainer-bridge/src/dataset.rs`` says, so the reader is tested against the spec.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from safetensors.numpy import save_file
+
+
+def synthetic_arrays(samples: int, size_px: int = 50, seed: int = 0, runs: int = 8, iteration: int = 0):
+    """Random sparse images and labels that depend on them (so a model can learn something)."""
+    rng = np.random.default_rng(seed)
+    occupancy = (rng.random((samples, size_px, size_px)) < 0.02).astype(np.uint8)
+    aux = np.stack([rng.uniform(-np.pi, np.pi, samples), rng.uniform(0.5, 3.0, samples)], 1).astype(np.float32)
+    left_mass = occupancy[:, :, : size_px // 2].mean(axis=(1, 2))
+    wheels = np.stack([0.3 * np.sin(aux[:, 0]) + 5 * left_mass, 0.3 * np.cos(aux[:, 0]) - 0.1 * aux[:, 1]], 1)
+    return {
+        "occupancy": occupancy,
+        "aux": aux,
+        "wheels": wheels.astype(np.float32),
+        "iteration": np.full(samples, iteration, dtype=np.uint32),
+        "run": (np.arange(samples) * runs // max(samples, 1)).astype(np.uint32),
+        "robot": (np.arange(samples) % 3).astype(np.uint8),
+    }
+
+
+def write_dataset(
+    directory: Path,
+    samples: int = 96,
+    size_px: int = 50,
+    shard_size: int = 40,
+    seed: int = 0,
+    v_train: float = 0.7,
+    iteration: int = 0,
+) -> Path:
+    """Writes a dataset of ``samples`` synthetic samples in shards of ``shard_size``."""
+    directory.mkdir(parents=True)
+    arrays = synthetic_arrays(samples, size_px, seed, iteration=iteration)
+    shards = []
+    for index, start in enumerate(range(0, samples, shard_size)):
+        part = {k: np.ascontiguousarray(v[start : start + shard_size]) for k, v in arrays.items()}
+        n = len(part["robot"])
+        name = f"shard-{index:06d}.safetensors"
+        meta = {"format": "formation-dataset", "version": "1", "iteration": str(iteration), "samples": str(n)}
+        save_file(part, str(directory / name), metadata=meta)
+        shards.append({"file": name, "samples": n, "iteration": iteration, "checksum": "0" * 16})
+    manifest = {
+        "format": "formation-dataset",
+        "version": 1,
+        "dataset_id": f"synthetic{seed:07d}",
+        "occupancy": {"size_px": size_px, "resolution_m": 0.1, "beyond": "drop"},
+        "lidar": {"beams": 900, "max_range": 10.0, "noise_std": 0.0},
+        "v_train": v_train,
+        "seed": seed,
+        "scenario": "synthetic",
+        "shards": shards,
+        "samples": samples,
+    }
+    (directory / "manifest.json").write_text(json.dumps(manifest, indent=2))
+    return directory
+
+
+@pytest.fixture
+def make_dataset(tmp_path):
+    """``make_dataset(name, **kwargs)`` writes a synthetic dataset under the test's temp dir."""
+    return lambda name="data", **kwargs: write_dataset(tmp_path / name, **kwargs)

@@ -1,0 +1,111 @@
+"""Reading the on-disk format, and the errors for damaged or mismatched datasets."""
+
+import json
+
+import numpy as np
+import pytest
+
+from formation_trainer import dataset as ds
+from formation_trainer.train import split_by_episode
+
+from conftest import synthetic_arrays
+
+
+def test_load_concatenates_shards_in_manifest_order(make_dataset):
+    directory = make_dataset(samples=96, shard_size=40)
+    samples = ds.load([directory])
+    expected = synthetic_arrays(96)
+    assert len(samples) == 96
+    assert samples.occupancy.shape == (96, 50, 50) and samples.occupancy.dtype == np.uint8
+    for name in ("occupancy", "aux", "wheels", "iteration", "run", "robot"):
+        np.testing.assert_array_equal(getattr(samples, name), expected[name])
+    assert samples.dataset_id == "synthetic0000000"
+    assert samples.size_px == 50
+
+
+def test_several_datasets_are_combined_with_their_ids(make_dataset):
+    a = make_dataset("a", samples=30, seed=1)
+    b = make_dataset("b", samples=20, seed=2, iteration=1)
+    samples = ds.load([a, b])
+    assert len(samples) == 50
+    assert samples.dataset_id == "synthetic0000001+synthetic0000002"
+    assert samples.max_iteration == 1
+    assert set(samples.source.tolist()) == {0, 1}
+
+
+def test_datasets_with_other_settings_cannot_be_mixed(make_dataset):
+    a = make_dataset("a", v_train=0.7)
+    b = make_dataset("b", v_train=0.5)
+    with pytest.raises(ds.DatasetError, match="cannot be trained together: their v_train differ"):
+        ds.load([a, b])
+
+
+def test_a_truncated_shard_names_the_file_and_the_fix(make_dataset):
+    directory = make_dataset(samples=96, shard_size=40)
+    shard = directory / "shard-000001.safetensors"
+    shard.write_bytes(shard.read_bytes()[:-100])
+    with pytest.raises(ds.DatasetError, match=r"shard-000001\.safetensors is truncated.*formation collect"):
+        ds.load([directory])
+
+
+def test_a_missing_shard_is_reported(make_dataset):
+    directory = make_dataset(samples=96, shard_size=40)
+    (directory / "shard-000002.safetensors").unlink()
+    with pytest.raises(ds.DatasetError, match=r"shard-000002\.safetensors is listed in the manifest but missing"):
+        ds.load([directory])
+
+
+def test_an_unknown_manifest_version_is_reported(make_dataset):
+    directory = make_dataset()
+    manifest = json.loads((directory / "manifest.json").read_text())
+    manifest["version"] = 2
+    (directory / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(ds.DatasetError, match="format version 2, but this trainer reads version 1"):
+        ds.load([directory])
+
+
+def test_an_unknown_shard_version_is_reported(make_dataset, tmp_path):
+    from safetensors.numpy import save_file
+
+    directory = make_dataset(samples=10, shard_size=10)
+    arrays = synthetic_arrays(10)
+    save_file(arrays, str(directory / "shard-000000.safetensors"),
+              metadata={"format": "formation-dataset", "version": "9", "iteration": "0"})
+    with pytest.raises(ds.DatasetError, match=r"shard-000000\.safetensors has dataset format version 9"):
+        ds.load([directory])
+
+
+def test_a_shard_whose_shape_disagrees_with_the_manifest_is_corrupt(make_dataset):
+    directory = make_dataset(samples=10, shard_size=10)
+    manifest = json.loads((directory / "manifest.json").read_text())
+    manifest["shards"][0]["samples"] = 11
+    manifest["samples"] = 11
+    (directory / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(ds.DatasetError, match="is corrupt .*`occupancy`"):
+        ds.load([directory])
+
+
+def test_not_a_dataset_and_empty_datasets_are_reported(tmp_path, make_dataset):
+    with pytest.raises(ds.DatasetError, match="not a formation dataset"):
+        ds.load([tmp_path])
+    with pytest.raises(ds.DatasetError, match="holds no samples"):
+        ds.load([make_dataset("empty", samples=0)])
+
+
+def test_validation_holds_out_whole_runs():
+    keys = np.repeat(np.arange(10), 7)
+    train, val = split_by_episode(keys, 0.2, seed=3)
+    assert len(train) + len(val) == 70
+    assert set(train.tolist()).isdisjoint(val.tolist())
+    assert len(np.unique(keys[val])) == 2
+    assert set(keys[train].tolist()).isdisjoint(keys[val].tolist())
+    again_train, again_val = split_by_episode(keys, 0.2, seed=3)
+    np.testing.assert_array_equal(val, again_val)
+
+
+def test_a_single_run_is_split_by_sample_and_zero_fraction_keeps_everything():
+    keys = np.zeros(20, dtype=np.int64)
+    train, val = split_by_episode(keys, 0.25, seed=0)
+    assert (len(train), len(val)) == (15, 5)
+    train, val = split_by_episode(keys, 0.0, seed=0)
+    assert (len(train), len(val)) == (20, 0)

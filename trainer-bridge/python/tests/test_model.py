@@ -1,0 +1,47 @@
+"""The network has the paper's exact shapes."""
+
+import pytest
+import torch
+
+from formation_trainer.model import PAPER_FLATTEN, PolicyNet, conv_output_side
+
+
+def test_a_50px_image_flattens_to_144_features():
+    model = PolicyNet(50)
+    assert conv_output_side(50) == 3
+    assert model.flatten_width == PAPER_FLATTEN
+    features = model.features(torch.zeros(4, 1, 50, 50))
+    assert features.shape == (4, 144)
+
+
+def test_layers_match_the_paper():
+    model = PolicyNet(50)
+    convs = [m for m in model.features if isinstance(m, torch.nn.Conv2d)]
+    assert [(c.in_channels, c.out_channels, c.kernel_size, c.stride, c.padding) for c in convs] == [
+        (1, 32, (8, 8), (4, 4), (1, 1)),
+        (32, 16, (4, 4), (2, 2), (0, 0)),
+        (16, 16, (3, 3), (1, 1), (0, 0)),
+    ]
+    linears = [m for m in model.head if isinstance(m, torch.nn.Linear)]
+    assert [(l.in_features, l.out_features) for l in linears] == [(146, 32), (32, 2)]
+
+
+def test_forward_maps_a_batch_to_two_wheel_speeds():
+    model = PolicyNet(50)
+    out = model(torch.rand(5, 1, 50, 50), torch.rand(5, 2))
+    assert out.shape == (5, 2)
+    assert out.dtype == torch.float32
+
+
+def test_aux_reaches_the_output():
+    torch.manual_seed(0)
+    model = PolicyNet(50)
+    image = torch.zeros(1, 1, 50, 50)
+    a = model(image, torch.tensor([[0.0, 1.0]]))
+    b = model(image, torch.tensor([[1.0, 1.0]]))
+    assert not torch.allclose(a, b)
+
+
+def test_too_small_images_are_refused():
+    with pytest.raises(ValueError, match="too small"):
+        PolicyNet(10)

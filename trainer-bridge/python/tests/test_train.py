@@ -1,0 +1,154 @@
+"""Training end to end on a tiny synthetic dataset: artefacts, ONNX contract, parity, warm start, CLI."""
+
+import csv
+import json
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+import pytest
+import torch
+
+from formation_trainer import __main__ as cli
+from formation_trainer import export, train
+
+from conftest import write_dataset
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    root = tmp_path_factory.mktemp("trained")
+    data = write_dataset(root / "data", samples=160, shard_size=64)
+    out = root / "models" / "bc.onnx"
+    config = train.TrainConfig(
+        data=[data], out=out, epochs=2, batch_size=16, lr=1e-3, device="cpu", parity_out=root / "parity.json"
+    )
+    lines = []
+    report = train.run(config, log=lines.append)
+    return {"root": root, "data": data, "out": out, "report": report, "lines": lines}
+
+
+def test_training_writes_every_artefact_beside_the_model(trained):
+    out = trained["out"]
+    for suffix in (".onnx", ".pt", ".loss.csv", ".loss.png"):
+        path = out.with_name("bc" + suffix)
+        assert path.is_file() and path.stat().st_size > 0, path
+    assert out.with_name("bc.loss.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rows = list(csv.DictReader(out.with_name("bc.loss.csv").open()))
+    assert [r["epoch"] for r in rows] == ["1", "2"]
+    assert set(rows[0]) == {"epoch", "train_loss", "val_loss", "seconds"}
+    assert float(rows[-1]["train_loss"]) == pytest.approx(trained["report"]["final_train_loss"], rel=1e-6)
+    assert not list(out.parent.glob(".*tmp*")), "temporary files left behind"
+
+
+def test_report_and_progress_lines(trained):
+    report, lines = trained["report"], trained["lines"]
+    assert report["epochs"] == 2 and report["samples"] == 160
+    assert report["train_samples"] + report["val_samples"] == 160 and report["val_samples"] > 0
+    assert report["device"] == "cpu"
+    assert report["parity_max_abs_diff"] <= export.PARITY_TOLERANCE
+    assert sum(line.startswith("epoch ") for line in lines) == 2
+    parsed = json.loads(train.report_line(report).removeprefix(train.REPORT_PREFIX))
+    assert parsed["model"] == str(trained["out"])
+
+
+def test_onnx_has_the_contract_metadata(trained):
+    model = onnx.load(str(trained["out"]))
+    meta = {p.key: p.value for p in model.metadata_props}
+    assert meta["formation.format"] == "formation-policy/1"
+    assert meta["formation.occupancy.size_px"] == "50"
+    assert meta["formation.occupancy.resolution_m"] == "0.1"
+    assert meta["formation.occupancy.beyond"] == "drop"
+    assert meta["formation.lidar.beams"] == "900"
+    assert meta["formation.lidar.max_range"] == "10"
+    assert meta["formation.v_train"] == "0.7"
+    assert meta["formation.dataset_id"] == "synthetic0000000"
+    assert meta["formation.train.epochs"] == "2"
+    assert meta["formation.train.samples"] == "160"
+    assert meta["formation.dagger.iteration"] == "0"
+    assert meta["formation.created_by"].startswith("formation_trainer ")
+    assert float(meta["formation.train.final_train_loss"]) == trained["report"]["final_train_loss"]
+    assert float(meta["formation.train.final_val_loss"]) == trained["report"]["final_val_loss"]
+
+
+def test_onnx_batch_is_dynamic_and_matches_torch(trained):
+    session = ort.InferenceSession(str(trained["out"]), providers=["CPUExecutionProvider"])
+    assert [i.name for i in session.get_inputs()] == ["occupancy", "aux"]
+    assert [o.name for o in session.get_outputs()] == ["wheels"]
+    checkpoint = train.load_checkpoint(trained["out"].with_suffix(".pt"))
+    model = train.model_from_checkpoint(checkpoint).eval()
+    rng = np.random.default_rng(1)
+    for batch in (1, 5):
+        occupancy = (rng.random((batch, 1, 50, 50)) < 0.05).astype(np.float32)
+        aux = rng.uniform(-1, 1, (batch, 2)).astype(np.float32)
+        (wheels,) = session.run(None, {"occupancy": occupancy, "aux": aux})
+        assert wheels.shape == (batch, 2)
+        with torch.no_grad():
+            expected = model(torch.from_numpy(occupancy), torch.from_numpy(aux)).numpy()
+        np.testing.assert_allclose(wheels, expected, atol=1e-5)
+
+
+def test_parity_file_holds_inputs_and_torch_outputs(trained):
+    parity = json.loads((trained["root"] / "parity.json").read_text())
+    assert parity["size_px"] == 50 and parity["tolerance"] == export.PARITY_TOLERANCE
+    assert len(parity["cases"]) == train.PARITY_FILE_SAMPLES
+    session = ort.InferenceSession(str(trained["out"]), providers=["CPUExecutionProvider"])
+    case = parity["cases"][0]
+    occupancy = np.asarray(case["occupancy"], dtype=np.float32).reshape(1, 1, 50, 50)
+    (wheels,) = session.run(None, {"occupancy": occupancy, "aux": np.asarray([case["aux"]], dtype=np.float32)})
+    np.testing.assert_allclose(wheels[0], case["wheels"], atol=1e-4)
+
+
+def test_parity_check_fails_on_a_model_that_differs(trained):
+    checkpoint = train.load_checkpoint(trained["out"].with_suffix(".pt"))
+    model = train.model_from_checkpoint(checkpoint)
+    with torch.no_grad():
+        model.head[-1].bias += 0.01
+    occupancy = np.zeros((3, 1, 50, 50), dtype=np.float32)
+    aux = np.zeros((3, 2), dtype=np.float32)
+    with pytest.raises(export.ParityError, match="differ by"):
+        export.check_parity(model, trained["out"], occupancy, aux)
+
+
+def test_warm_start_begins_from_the_checkpoint(trained, tmp_path):
+    checkpoint_path = trained["out"].with_suffix(".pt")
+    base = train.model_from_checkpoint(train.load_checkpoint(checkpoint_path))
+    config = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "warm.onnx", epochs=1, batch_size=16, lr=1e-12,
+        device="cpu", init_from=checkpoint_path,
+    )
+    lines = []
+    train.run(config, log=lines.append)
+    warm = train.model_from_checkpoint(train.load_checkpoint(tmp_path / "warm.pt"))
+    # With a negligible learning rate the weights stay those of the checkpoint, not a fresh init.
+    for a, b in zip(base.state_dict().values(), warm.state_dict().values()):
+        torch.testing.assert_close(a, b, atol=1e-6, rtol=0)
+    assert any(line.startswith("warm start from") for line in lines)
+    meta = {p.key: p.value for p in onnx.load(str(tmp_path / "warm.onnx")).metadata_props}
+    assert meta["formation.train.init_from"] == "bc.pt"
+
+
+def test_export_command_rebuilds_the_model_from_its_checkpoint(trained, tmp_path, capsys):
+    out = tmp_path / "again.onnx"
+    code = cli.main(["export", "--checkpoint", str(trained["out"].with_suffix(".pt")), "--out", str(out),
+                     "--data", str(trained["data"])])
+    assert code == 0, capsys.readouterr().err
+    original = {p.key: p.value for p in onnx.load(str(trained["out"])).metadata_props}
+    again = {p.key: p.value for p in onnx.load(str(out)).metadata_props}
+    assert again == original
+
+
+def test_cli_reports_data_problems_with_exit_status_2(tmp_path, capsys):
+    data = write_dataset(tmp_path / "data", samples=20)
+    manifest = json.loads((data / "manifest.json").read_text())
+    manifest["version"] = 5
+    (data / "manifest.json").write_text(json.dumps(manifest))
+    code = cli.main(["train", "--data", str(data), "--out", str(tmp_path / "m.onnx"), "--device", "cpu"])
+    assert code == cli.USAGE_EXIT
+    assert "format version 5" in capsys.readouterr().err
+    assert not (tmp_path / "m.onnx").exists()
+
+
+def test_a_missing_checkpoint_is_a_clear_error(tmp_path):
+    with pytest.raises(train.TrainError, match="does not exist"):
+        train.load_checkpoint(tmp_path / "nope.pt")

@@ -1,0 +1,1214 @@
+//! The on-disk dataset of (occupancy image, delta_phi, d*) -> wheel command samples.
+//!
+//! A dataset is a directory holding `manifest.json` and shards `shard-NNNNNN.safetensors`:
+//!
+//! - The manifest carries [`DATASET_FORMAT`], the format version [`DATASET_VERSION`], the
+//!   [`DatasetHeader`] (occupancy settings, LIDAR, `v_train`, seed, scenario, `dataset_id`), one
+//!   [`ShardEntry`] per shard (file, samples, DAgger iteration, byte size, FNV-1a checksum) and the
+//!   total sample count.
+//! - A shard holds `occupancy` U8 `[N, S, S]`, `aux` F32 `[N, 2]` (delta_phi, d*), `wheels` F32
+//!   `[N, 2]` (left, right), `iteration` U32 `[N]`, `run` U32 `[N]` and `robot` U8 `[N]`; its
+//!   safetensors `__metadata__` repeats the format, version, dataset id and iteration.
+//!
+//! Every file is written under a temporary name in the same directory, synced and renamed, and the
+//! manifest is rewritten after each shard, so an interrupted collection leaves a valid dataset of
+//! the shards it finished. DAgger appends shards with a new iteration number to an existing dataset
+//! ([`DatasetWriter::append`]). The Python trainer reads the same files with numpy and safetensors.
+//!
+//! [`DatasetReader::open`] checks the manifest and every shard's size cheaply; reading a shard also
+//! checks its checksum, tensor names, dtypes and shapes. Every failure names the file and the fix.
+
+use std::collections::HashMap;
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use formation_proto::{LidarSpec, OccupancySpec};
+use safetensors::tensor::{Dtype, SafeTensorError, SafeTensors, TensorView};
+use serde::{Deserialize, Serialize};
+
+use crate::digest::Fnv1a64;
+
+/// The `format` string of every dataset manifest.
+pub const DATASET_FORMAT: &str = "formation-dataset";
+/// The manifest/shard layout version this build writes and reads.
+pub const DATASET_VERSION: u32 = 1;
+/// Samples per shard unless [`DatasetWriter::with_shard_size`] says otherwise (~41 MB of images).
+pub const DEFAULT_SHARD_SIZE: usize = 16384;
+/// The manifest's file name inside a dataset directory.
+pub const MANIFEST_FILE: &str = "manifest.json";
+
+/// What produced a dataset: the settings every sample shares. Appending checks it matches.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DatasetHeader {
+    /// Layout version ([`DATASET_VERSION`]); `version` in the manifest.
+    pub format_version: u32,
+    /// How the occupancy images were rendered.
+    pub occupancy: OccupancySpec,
+    /// The LIDAR the scans came from.
+    pub lidar: LidarSpec,
+    /// The speed v* [m/s] the wheel labels were produced at (deployment scales by v*/v_train).
+    pub v_train: f64,
+    /// Base seed of the collection.
+    pub seed: u64,
+    /// Name of the scenario the samples came from.
+    pub scenario: String,
+    /// Deterministic id of the settings above (16 hex digits); see [`DatasetHeader::new`].
+    pub dataset_id: String,
+}
+
+impl DatasetHeader {
+    /// A header for the current format version whose `dataset_id` is a stable hash of every
+    /// other field, so the same collection settings always give the same id.
+    pub fn new(
+        occupancy: OccupancySpec,
+        lidar: LidarSpec,
+        v_train: f64,
+        seed: u64,
+        scenario: impl Into<String>,
+    ) -> DatasetHeader {
+        let mut header = DatasetHeader {
+            format_version: DATASET_VERSION,
+            occupancy,
+            lidar,
+            v_train,
+            seed,
+            scenario: scenario.into(),
+            dataset_id: String::new(),
+        };
+        header.dataset_id = header.settings_hash();
+        header
+    }
+
+    /// Cells in one occupancy image (`size_px^2`).
+    pub fn cells(&self) -> usize {
+        self.occupancy.size_px * self.occupancy.size_px
+    }
+
+    fn settings_hash(&self) -> String {
+        let mut hash = Fnv1a64::new();
+        hash.update_field(DATASET_FORMAT.as_bytes());
+        hash.update_field(&self.format_version.to_le_bytes());
+        hash.update_field(&(self.occupancy.size_px as u64).to_le_bytes());
+        hash.update_field(&self.occupancy.resolution_m.to_le_bytes());
+        hash.update_field(self.occupancy.beyond.as_str().as_bytes());
+        hash.update_field(&(self.lidar.beams as u64).to_le_bytes());
+        hash.update_field(&self.lidar.max_range.to_le_bytes());
+        hash.update_field(&self.lidar.noise_std.to_le_bytes());
+        hash.update_field(&self.v_train.to_le_bytes());
+        hash.update_field(&self.seed.to_le_bytes());
+        hash.update_field(self.scenario.as_bytes());
+        hash.hex()
+    }
+
+    /// The first field in which `self` and `other` differ, with both values, if any.
+    fn first_difference(&self, other: &DatasetHeader) -> Option<(&'static str, String, String)> {
+        let fields: [(&'static str, String, String); 7] = [
+            (
+                "format version",
+                self.format_version.to_string(),
+                other.format_version.to_string(),
+            ),
+            (
+                "occupancy settings",
+                format!("{:?}", self.occupancy),
+                format!("{:?}", other.occupancy),
+            ),
+            (
+                "LIDAR",
+                format!("{:?}", self.lidar),
+                format!("{:?}", other.lidar),
+            ),
+            (
+                "v_train",
+                self.v_train.to_string(),
+                other.v_train.to_string(),
+            ),
+            ("seed", self.seed.to_string(), other.seed.to_string()),
+            ("scenario", self.scenario.clone(), other.scenario.clone()),
+            (
+                "dataset_id",
+                self.dataset_id.clone(),
+                other.dataset_id.clone(),
+            ),
+        ];
+        fields.into_iter().find(|(_, a, b)| a != b)
+    }
+}
+
+/// One training sample: what one robot saw at one tick and the command the expert gave it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// `size_px * size_px` occupancy cells, row-major (1 = occupied).
+    pub occupancy: Vec<u8>,
+    /// `wrap(phi* - theta)` [rad], in (-pi, pi].
+    pub delta_phi: f32,
+    /// Desired pairwise distance d* [m].
+    pub d_star: f32,
+    /// Label: (left, right) wheel speeds [m/s] at `v_train`.
+    pub wheels: [f32; 2],
+    /// DAgger iteration (0 = expert demonstrations).
+    pub iteration: u32,
+    /// Run index within its iteration.
+    pub run: u32,
+    /// Robot index within its run.
+    pub robot: u8,
+}
+
+/// One shard as listed in the manifest.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ShardEntry {
+    /// File name inside the dataset directory.
+    pub file: String,
+    /// Samples it holds.
+    pub samples: usize,
+    /// DAgger iteration of all its samples.
+    pub iteration: u32,
+    /// Exact file size in bytes.
+    pub bytes: u64,
+    /// FNV-1a 64 of the whole file, 16 hex digits.
+    pub fnv1a64: String,
+}
+
+/// The content of `manifest.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`DATASET_FORMAT`].
+    pub format: String,
+    /// Layout version ([`DATASET_VERSION`]).
+    pub version: u32,
+    /// See [`DatasetHeader::dataset_id`].
+    pub dataset_id: String,
+    /// See [`DatasetHeader::occupancy`].
+    pub occupancy: OccupancySpec,
+    /// See [`DatasetHeader::lidar`].
+    pub lidar: LidarSpec,
+    /// See [`DatasetHeader::v_train`].
+    pub v_train: f64,
+    /// See [`DatasetHeader::seed`].
+    pub seed: u64,
+    /// See [`DatasetHeader::scenario`].
+    pub scenario: String,
+    /// Shards in the order they were written.
+    pub shards: Vec<ShardEntry>,
+    /// Total samples over all shards.
+    pub samples: usize,
+}
+
+impl Manifest {
+    fn empty(header: &DatasetHeader) -> Manifest {
+        Manifest {
+            format: DATASET_FORMAT.to_owned(),
+            version: header.format_version,
+            dataset_id: header.dataset_id.clone(),
+            occupancy: header.occupancy,
+            lidar: header.lidar,
+            v_train: header.v_train,
+            seed: header.seed,
+            scenario: header.scenario.clone(),
+            shards: Vec::new(),
+            samples: 0,
+        }
+    }
+
+    /// The settings every sample shares.
+    pub fn header(&self) -> DatasetHeader {
+        DatasetHeader {
+            format_version: self.version,
+            occupancy: self.occupancy,
+            lidar: self.lidar,
+            v_train: self.v_train,
+            seed: self.seed,
+            scenario: self.scenario.clone(),
+            dataset_id: self.dataset_id.clone(),
+        }
+    }
+
+    /// The largest DAgger iteration present (0 for an empty dataset).
+    pub fn last_iteration(&self) -> u32 {
+        self.shards.iter().map(|s| s.iteration).max().unwrap_or(0)
+    }
+}
+
+/// Why a dataset could not be written or read. Every message names the file and the fix.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// A file-system operation failed.
+    #[error("{action} {path}: {source}")]
+    Io {
+        /// What was being done, e.g. "reading".
+        action: &'static str,
+        /// The file or directory.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The directory has no manifest.
+    #[error(
+        "{dir} is not a dataset (no {MANIFEST_FILE}); collect one with `formation collect --out {dir}`"
+    )]
+    NotADataset {
+        /// The directory.
+        dir: PathBuf,
+    },
+    /// `create` was pointed at an existing dataset.
+    #[error(
+        "{dir} already holds a dataset; choose another output directory or delete it (DAgger appends to it instead)"
+    )]
+    AlreadyExists {
+        /// The directory.
+        dir: PathBuf,
+    },
+    /// `create` was pointed at a directory with other files in it.
+    #[error("{dir} exists and is not empty; choose a new or empty directory for the dataset")]
+    DirectoryNotEmpty {
+        /// The directory.
+        dir: PathBuf,
+    },
+    /// The manifest is not valid JSON of the expected shape.
+    #[error(
+        "{path} is not a valid dataset manifest ({reason}); restore it or re-run `formation collect`"
+    )]
+    BadManifest {
+        /// The manifest file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The manifest's `format` is not [`DATASET_FORMAT`].
+    #[error("{path} has format `{found}`, not `{DATASET_FORMAT}`: this is not a formation dataset")]
+    WrongFormat {
+        /// The manifest file.
+        path: PathBuf,
+        /// The format it declares.
+        found: String,
+    },
+    /// The manifest's version is not one this build reads.
+    #[error(
+        "{path} is dataset format version {found}, but this build reads version {DATASET_VERSION}; re-collect it with `formation collect` (or use the formation release that wrote it)"
+    )]
+    UnsupportedVersion {
+        /// The manifest file.
+        path: PathBuf,
+        /// The version it declares.
+        found: u64,
+    },
+    /// A shard listed in the manifest does not exist.
+    #[error(
+        "{path} is listed in the manifest but missing; restore it, or delete its manifest entry, or re-run `formation collect`"
+    )]
+    MissingShard {
+        /// The shard file.
+        path: PathBuf,
+    },
+    /// A shard's size on disk differs from the manifest.
+    #[error(
+        "{path} is {} (expected {samples} samples in {expected_bytes} bytes, found {actual_bytes} bytes); delete it and its manifest entry or re-run `formation collect`",
+        size_verdict(*.actual_bytes, *.expected_bytes)
+    )]
+    ShardSize {
+        /// The shard file.
+        path: PathBuf,
+        /// Samples the manifest says it holds.
+        samples: usize,
+        /// Size the manifest records.
+        expected_bytes: u64,
+        /// Size on disk.
+        actual_bytes: u64,
+    },
+    /// A shard's content does not match the manifest or the layout.
+    #[error(
+        "{path} is corrupt ({reason}); delete it and its manifest entry or re-run `formation collect`"
+    )]
+    CorruptShard {
+        /// The shard file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// Appending with settings that differ from the dataset's.
+    #[error(
+        "cannot append to {dir}: its {field} is {existing} but the new samples' is {requested}; collect into a new dataset directory instead"
+    )]
+    HeaderMismatch {
+        /// The dataset directory.
+        dir: PathBuf,
+        /// The first differing field.
+        field: &'static str,
+        /// The dataset's value.
+        existing: String,
+        /// The value asked for.
+        requested: String,
+    },
+    /// A sample's image has the wrong number of cells.
+    #[error(
+        "a sample's occupancy image has {actual} cells but the dataset's {size_px}x{size_px} images have {expected}; render with the dataset's occupancy settings"
+    )]
+    SampleImageSize {
+        /// Cells on a side.
+        size_px: usize,
+        /// `size_px^2`.
+        expected: usize,
+        /// Cells in the sample.
+        actual: usize,
+    },
+    /// A sample's iteration differs from the iteration being written.
+    #[error(
+        "a sample is labelled DAgger iteration {actual} but this writer writes iteration {expected}; open the writer with the sample's iteration"
+    )]
+    SampleIteration {
+        /// The writer's iteration.
+        expected: u32,
+        /// The sample's iteration.
+        actual: u32,
+    },
+    /// A sample holds NaN or infinity.
+    #[error(
+        "a sample's {field} is not finite (run {run}, robot {robot}); the labeller produced an invalid value"
+    )]
+    NonFiniteSample {
+        /// Which field.
+        field: &'static str,
+        /// Its run.
+        run: u32,
+        /// Its robot.
+        robot: u8,
+    },
+    /// `with_shard_size(0)`.
+    #[error("the shard size must be at least 1 sample")]
+    ZeroShardSize,
+    /// The safetensors encoder refused the tensors (a bug: the shapes are built here).
+    #[error("encoding shard {path}: {source}")]
+    Encode {
+        /// The shard file.
+        path: PathBuf,
+        /// The encoder's error.
+        source: SafeTensorError,
+    },
+}
+
+fn size_verdict(actual: u64, expected: u64) -> &'static str {
+    if actual < expected {
+        "truncated"
+    } else {
+        "larger than recorded"
+    }
+}
+
+fn io_error<'a>(
+    action: &'static str,
+    path: &'a Path,
+) -> impl FnOnce(std::io::Error) -> DatasetError + 'a {
+    move |source| DatasetError::Io {
+        action,
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// `shard-NNNNNN.safetensors`.
+fn shard_file_name(index: usize) -> String {
+    format!("shard-{index:06}.safetensors")
+}
+
+/// The index in a `shard-NNNNNN.safetensors` name, if it is one.
+fn shard_index(file: &str) -> Option<usize> {
+    file.strip_prefix("shard-")?
+        .strip_suffix(".safetensors")?
+        .parse()
+        .ok()
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same directory, synced, renamed.
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), DatasetError> {
+    let file_name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let temp = path.with_file_name(format!(".{file_name}.tmp"));
+    let mut file = fs::File::create(&temp).map_err(io_error("creating", &temp))?;
+    file.write_all(bytes).map_err(io_error("writing", &temp))?;
+    file.sync_all().map_err(io_error("syncing", &temp))?;
+    drop(file);
+    fs::rename(&temp, path).map_err(io_error("renaming into place", path))
+}
+
+fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<(), DatasetError> {
+    let path = dir.join(MANIFEST_FILE);
+    let mut text = serde_json::to_vec_pretty(manifest).map_err(|e| DatasetError::BadManifest {
+        path: path.clone(),
+        reason: e.to_string(),
+    })?;
+    text.push(b'\n');
+    write_atomic(&path, &text)
+}
+
+/// Reads and validates `dir/manifest.json`: format, then version, then the full shape.
+fn read_manifest(dir: &Path) -> Result<Manifest, DatasetError> {
+    let path = dir.join(MANIFEST_FILE);
+    let text = match fs::read(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(DatasetError::NotADataset {
+                dir: dir.to_path_buf(),
+            });
+        }
+        Err(e) => return Err(io_error("reading", &path)(e)),
+    };
+    let bad = |reason: String| DatasetError::BadManifest {
+        path: path.clone(),
+        reason,
+    };
+    let value: serde_json::Value = serde_json::from_slice(&text).map_err(|e| bad(e.to_string()))?;
+    let format = value.get("format").and_then(serde_json::Value::as_str);
+    if format != Some(DATASET_FORMAT) {
+        return Err(DatasetError::WrongFormat {
+            path,
+            found: format.unwrap_or("<missing>").to_owned(),
+        });
+    }
+    let version = value
+        .get("version")
+        .and_then(serde_json::Value::as_u64)
+        .ok_or_else(|| bad("no numeric `version`".into()))?;
+    if version != u64::from(DATASET_VERSION) {
+        return Err(DatasetError::UnsupportedVersion {
+            path,
+            found: version,
+        });
+    }
+    let manifest: Manifest = serde_json::from_value(value).map_err(|e| bad(e.to_string()))?;
+    let listed: usize = manifest.shards.iter().map(|s| s.samples).sum();
+    if listed != manifest.samples {
+        return Err(bad(format!(
+            "`samples` is {} but the shards hold {listed}",
+            manifest.samples
+        )));
+    }
+    if let Some(entry) = manifest
+        .shards
+        .iter()
+        .find(|s| shard_index(&s.file).is_none())
+    {
+        return Err(bad(format!(
+            "shard file name `{}` is not shard-NNNNNN.safetensors",
+            entry.file
+        )));
+    }
+    Ok(manifest)
+}
+
+/// Column buffers of the shard being filled.
+#[derive(Debug, Default)]
+struct PendingShard {
+    occupancy: Vec<u8>,
+    aux: Vec<u8>,
+    wheels: Vec<u8>,
+    iteration: Vec<u8>,
+    run: Vec<u8>,
+    robot: Vec<u8>,
+    samples: usize,
+}
+
+impl PendingShard {
+    fn push(&mut self, sample: &Sample) {
+        self.occupancy.extend_from_slice(&sample.occupancy);
+        for value in [sample.delta_phi, sample.d_star] {
+            self.aux.extend_from_slice(&value.to_le_bytes());
+        }
+        for value in sample.wheels {
+            self.wheels.extend_from_slice(&value.to_le_bytes());
+        }
+        self.iteration
+            .extend_from_slice(&sample.iteration.to_le_bytes());
+        self.run.extend_from_slice(&sample.run.to_le_bytes());
+        self.robot.push(sample.robot);
+        self.samples += 1;
+    }
+
+    /// The safetensors file for these samples.
+    fn encode(
+        &self,
+        header: &DatasetHeader,
+        iteration: u32,
+        path: &Path,
+    ) -> Result<Vec<u8>, DatasetError> {
+        let n = self.samples;
+        let size = header.occupancy.size_px;
+        let encode_error = |source| DatasetError::Encode {
+            path: path.to_path_buf(),
+            source,
+        };
+        let tensors = [
+            (
+                "occupancy",
+                TensorView::new(Dtype::U8, vec![n, size, size], &self.occupancy),
+            ),
+            ("aux", TensorView::new(Dtype::F32, vec![n, 2], &self.aux)),
+            (
+                "wheels",
+                TensorView::new(Dtype::F32, vec![n, 2], &self.wheels),
+            ),
+            (
+                "iteration",
+                TensorView::new(Dtype::U32, vec![n], &self.iteration),
+            ),
+            ("run", TensorView::new(Dtype::U32, vec![n], &self.run)),
+            ("robot", TensorView::new(Dtype::U8, vec![n], &self.robot)),
+        ];
+        let mut views = Vec::with_capacity(tensors.len());
+        for (name, view) in tensors {
+            views.push((name, view.map_err(encode_error)?));
+        }
+        let metadata = HashMap::from([
+            ("format".to_owned(), DATASET_FORMAT.to_owned()),
+            ("version".to_owned(), DATASET_VERSION.to_string()),
+            ("dataset_id".to_owned(), header.dataset_id.clone()),
+            ("iteration".to_owned(), iteration.to_string()),
+        ]);
+        safetensors::serialize(views, Some(metadata)).map_err(encode_error)
+    }
+}
+
+/// Writes samples into a new dataset, or appends a new DAgger iteration to an existing one.
+///
+/// Samples are buffered and written as a shard every `shard_size` samples; the manifest is
+/// rewritten after each shard. Call [`DatasetWriter::finish`] to write the last, partial shard.
+#[derive(Debug)]
+pub struct DatasetWriter {
+    dir: PathBuf,
+    header: DatasetHeader,
+    manifest: Manifest,
+    iteration: u32,
+    shard_size: usize,
+    next_shard: usize,
+    pending: PendingShard,
+}
+
+impl DatasetWriter {
+    /// Creates the dataset directory `dir` (which must not exist or be empty) with an empty
+    /// manifest, and a writer of iteration 0.
+    pub fn create(dir: &Path, header: DatasetHeader) -> Result<DatasetWriter, DatasetError> {
+        if dir.join(MANIFEST_FILE).exists() {
+            return Err(DatasetError::AlreadyExists {
+                dir: dir.to_path_buf(),
+            });
+        }
+        if dir.exists() {
+            let mut entries = fs::read_dir(dir).map_err(io_error("listing", dir))?;
+            if entries.next().is_some() {
+                return Err(DatasetError::DirectoryNotEmpty {
+                    dir: dir.to_path_buf(),
+                });
+            }
+        }
+        fs::create_dir_all(dir).map_err(io_error("creating", dir))?;
+        let manifest = Manifest::empty(&header);
+        write_manifest(dir, &manifest)?;
+        Ok(DatasetWriter {
+            dir: dir.to_path_buf(),
+            header,
+            manifest,
+            iteration: 0,
+            shard_size: DEFAULT_SHARD_SIZE,
+            next_shard: 0,
+            pending: PendingShard::default(),
+        })
+    }
+
+    /// Opens the existing dataset `dir` to add shards of DAgger iteration `iteration`, with the
+    /// dataset's own settings.
+    pub fn append(dir: &Path, iteration: u32) -> Result<DatasetWriter, DatasetError> {
+        let manifest = read_manifest(dir)?;
+        let next_shard = manifest
+            .shards
+            .iter()
+            .filter_map(|s| shard_index(&s.file))
+            .max()
+            .map_or(0, |last| last + 1);
+        Ok(DatasetWriter {
+            dir: dir.to_path_buf(),
+            header: manifest.header(),
+            manifest,
+            iteration,
+            shard_size: DEFAULT_SHARD_SIZE,
+            next_shard,
+            pending: PendingShard::default(),
+        })
+    }
+
+    /// Like [`DatasetWriter::append`], but refuses unless the dataset was written with `expected`
+    /// settings (the error names the first differing field).
+    pub fn append_matching(
+        dir: &Path,
+        expected: &DatasetHeader,
+        iteration: u32,
+    ) -> Result<DatasetWriter, DatasetError> {
+        let writer = DatasetWriter::append(dir, iteration)?;
+        if let Some((field, existing, requested)) = writer.header().first_difference(expected) {
+            return Err(DatasetError::HeaderMismatch {
+                dir: dir.to_path_buf(),
+                field,
+                existing,
+                requested,
+            });
+        }
+        Ok(writer)
+    }
+
+    /// Writes a shard every `samples` samples instead of [`DEFAULT_SHARD_SIZE`].
+    pub fn with_shard_size(mut self, samples: usize) -> Result<DatasetWriter, DatasetError> {
+        if samples == 0 {
+            return Err(DatasetError::ZeroShardSize);
+        }
+        self.shard_size = samples;
+        Ok(self)
+    }
+
+    /// The dataset's settings.
+    pub fn header(&self) -> &DatasetHeader {
+        &self.header
+    }
+
+    /// The DAgger iteration this writer writes.
+    pub fn iteration(&self) -> u32 {
+        self.iteration
+    }
+
+    /// Samples in the dataset so far, including buffered ones not yet in a shard.
+    pub fn samples(&self) -> usize {
+        self.manifest.samples + self.pending.samples
+    }
+
+    /// Adds one sample; writes a shard when `shard_size` samples are buffered.
+    pub fn push(&mut self, sample: Sample) -> Result<(), DatasetError> {
+        let expected = self.header().cells();
+        if sample.occupancy.len() != expected {
+            return Err(DatasetError::SampleImageSize {
+                size_px: self.header().occupancy.size_px,
+                expected,
+                actual: sample.occupancy.len(),
+            });
+        }
+        if sample.iteration != self.iteration {
+            return Err(DatasetError::SampleIteration {
+                expected: self.iteration,
+                actual: sample.iteration,
+            });
+        }
+        let non_finite = |field| DatasetError::NonFiniteSample {
+            field,
+            run: sample.run,
+            robot: sample.robot,
+        };
+        if !(sample.delta_phi.is_finite() && sample.d_star.is_finite()) {
+            return Err(non_finite("delta_phi or d_star"));
+        }
+        if !sample.wheels.iter().all(|w| w.is_finite()) {
+            return Err(non_finite("wheels label"));
+        }
+        self.pending.push(&sample);
+        if self.pending.samples >= self.shard_size {
+            self.flush_shard()?;
+        }
+        Ok(())
+    }
+
+    /// Writes the buffered samples (if any) as one shard and rewrites the manifest.
+    fn flush_shard(&mut self) -> Result<(), DatasetError> {
+        if self.pending.samples == 0 {
+            return Ok(());
+        }
+        let file = shard_file_name(self.next_shard);
+        let path = self.dir.join(&file);
+        let bytes = self.pending.encode(&self.header, self.iteration, &path)?;
+        write_atomic(&path, &bytes)?;
+        let mut checksum = Fnv1a64::new();
+        checksum.update(&bytes);
+        self.manifest.shards.push(ShardEntry {
+            file,
+            samples: self.pending.samples,
+            iteration: self.iteration,
+            bytes: bytes.len() as u64,
+            fnv1a64: checksum.hex(),
+        });
+        self.manifest.samples += self.pending.samples;
+        self.next_shard += 1;
+        self.pending = PendingShard::default();
+        write_manifest(&self.dir, &self.manifest)
+    }
+
+    /// Writes the last shard and returns the final manifest.
+    pub fn finish(mut self) -> Result<Manifest, DatasetError> {
+        self.flush_shard()?;
+        Ok(self.manifest)
+    }
+}
+
+/// Reads a dataset written by [`DatasetWriter`].
+#[derive(Debug, Clone)]
+pub struct DatasetReader {
+    dir: PathBuf,
+    header: DatasetHeader,
+    manifest: Manifest,
+}
+
+impl DatasetReader {
+    /// Opens `dir`: checks the manifest's format, version and shape, and that every listed shard
+    /// exists with the recorded size. Shard contents are checked when read.
+    pub fn open(dir: &Path) -> Result<DatasetReader, DatasetError> {
+        let manifest = read_manifest(dir)?;
+        for entry in &manifest.shards {
+            let path = dir.join(&entry.file);
+            let actual_bytes = match fs::metadata(&path) {
+                Ok(meta) => meta.len(),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                    return Err(DatasetError::MissingShard { path });
+                }
+                Err(e) => return Err(io_error("inspecting", &path)(e)),
+            };
+            if actual_bytes != entry.bytes {
+                return Err(DatasetError::ShardSize {
+                    path,
+                    samples: entry.samples,
+                    expected_bytes: entry.bytes,
+                    actual_bytes,
+                });
+            }
+        }
+        Ok(DatasetReader {
+            dir: dir.to_path_buf(),
+            header: manifest.header(),
+            manifest,
+        })
+    }
+
+    /// The dataset directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The manifest.
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
+    }
+
+    /// The shared settings.
+    pub fn header(&self) -> &DatasetHeader {
+        &self.header
+    }
+
+    /// Total samples.
+    pub fn samples(&self) -> usize {
+        self.manifest.samples
+    }
+
+    /// Reads and validates shard `index` (manifest order) into samples.
+    pub fn read_shard(&self, index: usize) -> Result<Vec<Sample>, DatasetError> {
+        let Some(entry) = self.manifest.shards.get(index) else {
+            return Ok(Vec::new());
+        };
+        let path = self.dir.join(&entry.file);
+        let bytes = fs::read(&path).map_err(io_error("reading", &path))?;
+        decode_shard(&bytes, entry, &self.header, &path)
+    }
+
+    /// Every sample, shard by shard, in write order; stops at the first bad shard.
+    pub fn iter(&self) -> impl Iterator<Item = Result<Sample, DatasetError>> + '_ {
+        (0..self.manifest.shards.len()).flat_map(move |index| match self.read_shard(index) {
+            Ok(samples) => samples.into_iter().map(Ok).collect::<Vec<_>>(),
+            Err(e) => vec![Err(e)],
+        })
+    }
+
+    /// Every sample in memory.
+    pub fn load_all(&self) -> Result<Vec<Sample>, DatasetError> {
+        let mut all = Vec::with_capacity(self.manifest.samples);
+        for index in 0..self.manifest.shards.len() {
+            all.extend(self.read_shard(index)?);
+        }
+        Ok(all)
+    }
+}
+
+/// Checks a shard file's bytes against its manifest entry and the layout, and decodes it.
+fn decode_shard(
+    bytes: &[u8],
+    entry: &ShardEntry,
+    header: &DatasetHeader,
+    path: &Path,
+) -> Result<Vec<Sample>, DatasetError> {
+    let corrupt = |reason: String| DatasetError::CorruptShard {
+        path: path.to_path_buf(),
+        reason,
+    };
+    if bytes.len() as u64 != entry.bytes {
+        return Err(DatasetError::ShardSize {
+            path: path.to_path_buf(),
+            samples: entry.samples,
+            expected_bytes: entry.bytes,
+            actual_bytes: bytes.len() as u64,
+        });
+    }
+    let mut checksum = Fnv1a64::new();
+    checksum.update(bytes);
+    if checksum.hex() != entry.fnv1a64 {
+        return Err(corrupt(format!(
+            "checksum {} differs from the manifest's {}",
+            checksum.hex(),
+            entry.fnv1a64
+        )));
+    }
+    let tensors = SafeTensors::deserialize(bytes).map_err(|e| corrupt(e.to_string()))?;
+    let n = entry.samples;
+    let size = header.occupancy.size_px;
+    let column = |name: &str, dtype: Dtype, shape: &[usize]| -> Result<&[u8], DatasetError> {
+        let view = tensors
+            .tensor(name)
+            .map_err(|_| corrupt(format!("no `{name}` tensor")))?;
+        if view.dtype() != dtype || view.shape() != shape {
+            return Err(corrupt(format!(
+                "`{name}` is {:?} {:?}, expected {dtype:?} {shape:?}",
+                view.dtype(),
+                view.shape()
+            )));
+        }
+        Ok(view.data())
+    };
+    let occupancy = column("occupancy", Dtype::U8, &[n, size, size])?;
+    let aux = column("aux", Dtype::F32, &[n, 2])?;
+    let wheels = column("wheels", Dtype::F32, &[n, 2])?;
+    let iteration = column("iteration", Dtype::U32, &[n])?;
+    let run = column("run", Dtype::U32, &[n])?;
+    let robot = column("robot", Dtype::U8, &[n])?;
+
+    let f32_at = |data: &[u8], i: usize| {
+        f32::from_le_bytes([
+            data[4 * i],
+            data[4 * i + 1],
+            data[4 * i + 2],
+            data[4 * i + 3],
+        ])
+    };
+    let u32_at = |data: &[u8], i: usize| {
+        u32::from_le_bytes([
+            data[4 * i],
+            data[4 * i + 1],
+            data[4 * i + 2],
+            data[4 * i + 3],
+        ])
+    };
+    let cells = size * size;
+    Ok((0..n)
+        .map(|i| Sample {
+            occupancy: occupancy[i * cells..(i + 1) * cells].to_vec(),
+            delta_phi: f32_at(aux, 2 * i),
+            d_star: f32_at(aux, 2 * i + 1),
+            wheels: [f32_at(wheels, 2 * i), f32_at(wheels, 2 * i + 1)],
+            iteration: u32_at(iteration, i),
+            run: u32_at(run, i),
+            robot: robot[i],
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_proto::BeyondWindow;
+
+    const SIZE: usize = 6;
+
+    fn header(seed: u64) -> DatasetHeader {
+        DatasetHeader::new(
+            OccupancySpec {
+                size_px: SIZE,
+                resolution_m: 0.1,
+                beyond: BeyondWindow::Drop,
+            },
+            LidarSpec::default(),
+            0.7,
+            seed,
+            "unit".to_owned(),
+        )
+    }
+
+    /// A sample whose every field depends on `k`, so mix-ups show.
+    fn sample(k: u32, iteration: u32) -> Sample {
+        let mut occupancy = vec![0u8; SIZE * SIZE];
+        occupancy[k as usize % (SIZE * SIZE)] = 1;
+        Sample {
+            occupancy,
+            delta_phi: -1.5 + 0.01 * k as f32,
+            d_star: 1.0 + 0.5 * (k % 3) as f32,
+            wheels: [0.1 * k as f32, -0.2 * k as f32],
+            iteration,
+            run: k / 4,
+            robot: (k % 4) as u8,
+        }
+    }
+
+    fn write(dir: &Path, count: u32, shard_size: usize) -> Manifest {
+        let mut writer = DatasetWriter::create(dir, header(7))
+            .expect("create")
+            .with_shard_size(shard_size)
+            .expect("shard size");
+        for k in 0..count {
+            writer.push(sample(k, 0)).expect("push");
+        }
+        writer.finish().expect("finish")
+    }
+
+    #[test]
+    fn dataset_id_is_deterministic_and_depends_on_the_settings() {
+        assert_eq!(header(7).dataset_id, header(7).dataset_id);
+        assert_eq!(header(7).dataset_id.len(), 16);
+        assert_ne!(header(7).dataset_id, header(8).dataset_id);
+        let mut border = header(7);
+        border.occupancy.beyond = BeyondWindow::Border;
+        let border = DatasetHeader::new(border.occupancy, border.lidar, 0.7, 7, "unit");
+        assert_ne!(header(7).dataset_id, border.dataset_id);
+    }
+
+    #[test]
+    fn samples_round_trip_through_shards_in_order() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let manifest = write(dir.path(), 10, 4);
+        assert_eq!(manifest.samples, 10);
+        let sizes: Vec<usize> = manifest.shards.iter().map(|s| s.samples).collect();
+        assert_eq!(sizes, [4, 4, 2]);
+        assert_eq!(manifest.shards[2].file, "shard-000002.safetensors");
+
+        let reader = DatasetReader::open(dir.path()).expect("open");
+        assert_eq!(reader.header(), &header(7));
+        assert_eq!(reader.manifest(), &manifest);
+        let expected: Vec<Sample> = (0..10).map(|k| sample(k, 0)).collect();
+        assert_eq!(reader.load_all().expect("load"), expected);
+        let iterated: Vec<Sample> = reader.iter().collect::<Result<_, _>>().expect("iter");
+        assert_eq!(iterated, expected);
+        let leftovers: Vec<_> = fs::read_dir(dir.path())
+            .expect("list")
+            .filter_map(Result::ok)
+            .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+            .collect();
+        assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
+    }
+
+    #[test]
+    fn the_manifest_uses_the_documented_keys() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 3, 8);
+        let text = fs::read_to_string(dir.path().join(MANIFEST_FILE)).expect("manifest");
+        let value: serde_json::Value = serde_json::from_str(&text).expect("json");
+        assert_eq!(value["format"], "formation-dataset");
+        assert_eq!(value["version"], 1);
+        assert_eq!(value["occupancy"]["size_px"], SIZE);
+        assert_eq!(value["occupancy"]["beyond"], "drop");
+        assert_eq!(value["lidar"]["beams"], 900);
+        assert_eq!(value["samples"], 3);
+        assert_eq!(value["shards"][0]["file"], "shard-000000.safetensors");
+        assert_eq!(value["shards"][0]["iteration"], 0);
+    }
+
+    #[test]
+    fn appending_adds_shards_of_a_new_iteration() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 5, 4);
+        let mut writer = DatasetWriter::append_matching(dir.path(), &header(7), 1)
+            .expect("append")
+            .with_shard_size(4)
+            .expect("shard size");
+        assert_eq!(writer.samples(), 5);
+        for k in 100..103 {
+            writer.push(sample(k, 1)).expect("push");
+        }
+        let manifest = writer.finish().expect("finish");
+        assert_eq!(manifest.samples, 8);
+        assert_eq!(manifest.last_iteration(), 1);
+        let files: Vec<(&str, u32)> = manifest
+            .shards
+            .iter()
+            .map(|s| (s.file.as_str(), s.iteration))
+            .collect();
+        assert_eq!(
+            files,
+            [
+                ("shard-000000.safetensors", 0),
+                ("shard-000001.safetensors", 0),
+                ("shard-000002.safetensors", 1)
+            ]
+        );
+        let all = DatasetReader::open(dir.path())
+            .expect("open")
+            .load_all()
+            .expect("load");
+        assert_eq!(all.len(), 8);
+        assert_eq!(all[4], sample(4, 0));
+        assert_eq!(all[5], sample(100, 1));
+    }
+
+    #[test]
+    fn appending_with_different_settings_is_refused_naming_the_field() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 2, 4);
+        let err = DatasetWriter::append_matching(dir.path(), &header(99), 1).expect_err("mismatch");
+        assert!(
+            matches!(&err, DatasetError::HeaderMismatch { field: "seed", existing, requested, .. }
+                if existing == "7" && requested == "99"),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("new dataset directory"), "{err}");
+    }
+
+    #[test]
+    fn a_sample_from_another_iteration_or_image_size_is_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut writer = DatasetWriter::create(dir.path(), header(7)).expect("create");
+        assert!(matches!(
+            writer.push(sample(0, 2)),
+            Err(DatasetError::SampleIteration {
+                expected: 0,
+                actual: 2
+            })
+        ));
+        let small = Sample {
+            occupancy: vec![0; 5],
+            ..sample(0, 0)
+        };
+        assert!(matches!(
+            writer.push(small),
+            Err(DatasetError::SampleImageSize {
+                expected: 36,
+                actual: 5,
+                ..
+            })
+        ));
+        let nan = Sample {
+            wheels: [f32::NAN, 0.0],
+            ..sample(0, 0)
+        };
+        assert!(matches!(
+            writer.push(nan),
+            Err(DatasetError::NonFiniteSample { .. })
+        ));
+        assert_eq!(writer.finish().expect("finish").samples, 0);
+    }
+
+    #[test]
+    fn creating_over_an_existing_dataset_is_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 1, 4);
+        assert!(matches!(
+            DatasetWriter::create(dir.path(), header(7)),
+            Err(DatasetError::AlreadyExists { .. })
+        ));
+        let other = tempfile::tempdir().expect("tempdir");
+        fs::write(other.path().join("notes.txt"), "x").expect("write");
+        assert!(matches!(
+            DatasetWriter::create(other.path(), header(7)),
+            Err(DatasetError::DirectoryNotEmpty { .. })
+        ));
+    }
+
+    #[test]
+    fn a_truncated_shard_is_named_with_its_sample_count_and_the_fix() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 6, 4);
+        let shard = dir.path().join("shard-000001.safetensors");
+        let bytes = fs::read(&shard).expect("read");
+        fs::write(&shard, &bytes[..bytes.len() - 10]).expect("truncate");
+        let err = DatasetReader::open(dir.path()).expect_err("truncated");
+        let message = err.to_string();
+        assert!(
+            matches!(err, DatasetError::ShardSize { samples: 2, .. }),
+            "{err:?}"
+        );
+        assert!(
+            message.contains("shard-000001.safetensors is truncated (expected 2 samples"),
+            "{message}"
+        );
+        assert!(
+            message.contains("delete it and its manifest entry or re-run `formation collect`"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn a_corrupted_shard_fails_its_checksum_when_read() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 3, 4);
+        let shard = dir.path().join("shard-000000.safetensors");
+        let mut bytes = fs::read(&shard).expect("read");
+        let last = bytes.len() - 1;
+        bytes[last] ^= 0xff;
+        fs::write(&shard, &bytes).expect("write");
+        let reader = DatasetReader::open(dir.path()).expect("sizes still match");
+        let err = reader.load_all().expect_err("corrupt");
+        assert!(matches!(err, DatasetError::CorruptShard { .. }), "{err:?}");
+        assert!(err.to_string().contains("checksum"), "{err}");
+    }
+
+    #[test]
+    fn a_missing_shard_is_reported() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 3, 4);
+        fs::remove_file(dir.path().join("shard-000000.safetensors")).expect("remove");
+        assert!(matches!(
+            DatasetReader::open(dir.path()),
+            Err(DatasetError::MissingShard { .. })
+        ));
+    }
+
+    #[test]
+    fn an_unknown_version_or_format_is_refused_before_anything_else() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 1, 4);
+        let path = dir.path().join(MANIFEST_FILE);
+        let text = fs::read_to_string(&path).expect("read");
+        let mut value: serde_json::Value = serde_json::from_str(&text).expect("json");
+        value["version"] = 2.into();
+        fs::write(&path, value.to_string()).expect("write");
+        let err = DatasetReader::open(dir.path()).expect_err("version");
+        assert!(
+            matches!(err, DatasetError::UnsupportedVersion { found: 2, .. }),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("reads version 1"), "{err}");
+
+        fs::write(&path, r#"{"format": "something-else", "version": 1}"#).expect("write");
+        assert!(matches!(
+            DatasetReader::open(dir.path()),
+            Err(DatasetError::WrongFormat { found, .. }) if found == "something-else"
+        ));
+        fs::write(&path, "{ not json").expect("write");
+        assert!(matches!(
+            DatasetReader::open(dir.path()),
+            Err(DatasetError::BadManifest { .. })
+        ));
+    }
+
+    #[test]
+    fn a_directory_without_a_manifest_is_not_a_dataset() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let err = DatasetReader::open(dir.path()).expect_err("no manifest");
+        assert!(matches!(err, DatasetError::NotADataset { .. }));
+        assert!(err.to_string().contains("formation collect --out"), "{err}");
+    }
+
+    #[test]
+    fn a_zero_shard_size_is_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let writer = DatasetWriter::create(dir.path(), header(1)).expect("create");
+        assert!(matches!(
+            writer.with_shard_size(0),
+            Err(DatasetError::ZeroShardSize)
+        ));
+    }
+
+    #[test]
+    fn shard_names_parse_back_to_their_index() {
+        assert_eq!(shard_index(&shard_file_name(42)), Some(42));
+        assert_eq!(shard_index("manifest.json"), None);
+        assert_eq!(shard_index("shard-x.safetensors"), None);
+    }
+}

@@ -1,0 +1,132 @@
+//! The Rust writer and the Python trainer agree: a dataset written by `DatasetWriter` trains
+//! through `train()` into an ONNX model, a checkpoint and a loss curve.
+//!
+//! Needs the trainer's Python environment (`bash .ci/setup-python`); without PyTorch the test
+//! says so and passes, since the Rust side's own behaviour is covered by the unit tests.
+
+use std::num::NonZeroUsize;
+
+use formation_proto::{LidarSpec, OccupancySpec};
+use trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter, Sample};
+use trainer_bridge::train::{TrainError, TrainOptions, train};
+
+fn sample(i: u32, iteration: u32) -> Sample {
+    let mut occupancy = vec![0_u8; 2500];
+    for k in 0..40 {
+        occupancy[(i as usize * 37 + k * 61) % 2500] = 1;
+    }
+    let delta_phi = ((i % 60) as f32 - 30.0) / 10.0;
+    Sample {
+        occupancy,
+        delta_phi,
+        d_star: 1.5,
+        wheels: [0.3 * delta_phi.sin(), 0.3 * delta_phi.cos()],
+        iteration,
+        run: i / 20,
+        robot: (i % 3) as u8,
+    }
+}
+
+#[test]
+fn a_rust_written_dataset_trains_into_an_onnx_model() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let data = tmp.path().join("data");
+    let header = DatasetHeader::new(OccupancySpec::PAPER, LidarSpec::default(), 0.7, 3, "e2e");
+    let mut writer = DatasetWriter::create(&data, header)
+        .expect("create")
+        .with_shard_size(NonZeroUsize::new(64).expect("non-zero"));
+    for i in 0..150 {
+        writer.push(sample(i, 0)).expect("push");
+    }
+    writer.finish().expect("finish");
+    let mut dagger = DatasetWriter::append(&data, 1).expect("append");
+    for i in 0..40 {
+        dagger.push(sample(1000 + i, 1)).expect("push");
+    }
+    let manifest = dagger.finish().expect("finish");
+    assert_eq!(DatasetReader::open(&data).expect("open").samples(), 190);
+
+    let out = tmp.path().join("models").join("bc.onnx");
+    let mut lines = Vec::new();
+    let result = train(
+        &TrainOptions {
+            data: vec![data.clone()],
+            out: out.clone(),
+            epochs: 2,
+            batch_size: 16,
+            lr: 1e-3,
+            device: "cpu".into(),
+            ..TrainOptions::default()
+        },
+        &mut |line| lines.push(line.to_owned()),
+    );
+    let report = match result {
+        Err(e @ (TrainError::TorchMissing { .. } | TrainError::PythonNotFound { .. })) => {
+            eprintln!("skipping: the trainer's Python environment is not installed: {e}");
+            return;
+        }
+        other => other.expect("training succeeds"),
+    };
+    assert_eq!(report.epochs, 2);
+    assert_eq!(report.samples, 190);
+    assert_eq!(report.train_samples + report.val_samples, 190);
+    assert!(report.val_samples > 0, "whole runs are held out");
+    assert_eq!(report.dataset_id, manifest.dataset_id);
+    assert!(report.final_train_loss.is_finite() && report.final_val_loss.is_finite());
+    assert!(report.parity_max_abs_diff <= 1e-4);
+    for path in [
+        &report.model,
+        &report.checkpoint,
+        &report.loss_csv,
+        &report.loss_png,
+    ] {
+        assert!(path.is_file(), "{} missing", path.display());
+    }
+    assert_eq!(report.checkpoint, out.with_extension("pt"));
+    assert_eq!(
+        lines.iter().filter(|l| l.starts_with("epoch ")).count(),
+        2,
+        "{lines:?}"
+    );
+    assert!(
+        !lines
+            .iter()
+            .any(|l| l.starts_with("FORMATION_TRAIN_REPORT"))
+    );
+}
+
+#[test]
+fn a_python_failure_carries_its_last_messages() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let data = tmp.path().join("data");
+    let header = DatasetHeader::new(OccupancySpec::PAPER, LidarSpec::default(), 0.7, 3, "e2e");
+    let mut writer = DatasetWriter::create(&data, header).expect("create");
+    writer.push(sample(0, 0)).expect("push");
+    writer.finish().expect("finish");
+    // A checkpoint that is not one: the trainer refuses it after loading the data.
+    let bogus = tmp.path().join("bogus.pt");
+    std::fs::write(&bogus, b"not a checkpoint").expect("write");
+    let result = train(
+        &TrainOptions {
+            data: vec![data],
+            out: tmp.path().join("m.onnx"),
+            epochs: 1,
+            device: "cpu".into(),
+            init_from: Some(bogus),
+            ..TrainOptions::default()
+        },
+        &mut |_| {},
+    );
+    match result {
+        Err(TrainError::TorchMissing { .. } | TrainError::PythonNotFound { .. }) => {
+            eprintln!("skipping: the trainer's Python environment is not installed");
+        }
+        Err(TrainError::Failed { stderr_tail, .. }) => {
+            assert!(
+                stderr_tail.contains("bogus.pt is not a readable checkpoint"),
+                "{stderr_tail}"
+            );
+        }
+        other => panic!("expected a trainer failure, got {other:?}"),
+    }
+}
