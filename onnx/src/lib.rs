@@ -1,1 +1,22 @@
-//! ONNX Runtime policies through ort: model loading, contract validation, inference.
+//! ONNX Runtime policies through ort: finding the runtime library, loading a model, checking it
+//! against the formation-policy/1 contract, and single-sample inference.
+//!
+//! ```no_run
+//! # fn main() -> Result<(), formation_onnx::PolicyError> {
+//! let mut policy = formation_onnx::OnnxPolicy::load(std::path::Path::new("onnx/models/policy.onnx"))?;
+//! let cells = policy.metadata().occupancy.size_px.pow(2);
+//! let [left, right] = policy.infer(&vec![0.0; cells], [0.3, 1.5])?;
+//! # let _ = (left, right);
+//! # Ok(())
+//! # }
+//! ```
+
+pub mod contract;
+mod error;
+mod policy;
+mod runtime;
+
+pub use contract::{ContractViolation, ModelMetadata};
+pub use error::{LIBRARY_FIX, PolicyError};
+pub use policy::OnnxPolicy;
+pub use runtime::{ORT_DYLIB_PATH, init_runtime, ort_library_path};

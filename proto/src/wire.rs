@@ -101,14 +101,24 @@ impl RunId {
     pub fn new(id: &str) -> Result<RunId, WireError> {
         let ok = !id.is_empty()
             && id.len() <= MAX_RUN_ID_LEN
-            && id.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
-        if ok { Ok(RunId(id.to_owned())) } else { Err(WireError::InvalidRunId { run: id.to_owned() }) }
+            && id
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
+        if ok {
+            Ok(RunId(id.to_owned()))
+        } else {
+            Err(WireError::InvalidRunId { run: id.to_owned() })
+        }
     }
 
     /// A fresh id, unique on this machine: the process id and the wall-clock nanoseconds, in base 36.
     pub fn generate() -> RunId {
         let nanos = wall_clock_ns();
-        RunId(format!("{}{}", base36(u64::from(std::process::id())), base36(nanos % (36u64.pow(8)))))
+        RunId(format!(
+            "{}{}",
+            base36(u64::from(std::process::id())),
+            base36(nanos % (36u64.pow(8)))
+        ))
     }
 
     /// The id as text.
@@ -152,8 +162,12 @@ pub enum RobotChannel {
 
 impl RobotChannel {
     /// Every channel.
-    pub const ALL: [RobotChannel; 4] =
-        [RobotChannel::Scan, RobotChannel::Cmd, RobotChannel::Control, RobotChannel::Status];
+    pub const ALL: [RobotChannel; 4] = [
+        RobotChannel::Scan,
+        RobotChannel::Cmd,
+        RobotChannel::Control,
+        RobotChannel::Status,
+    ];
 
     /// The last segment of the service name.
     pub fn as_str(&self) -> &'static str {
@@ -197,8 +211,12 @@ impl ServiceLimits {
     /// Every robot channel: one writer, one reader. A buffer of 8 samples: in lockstep at most one
     /// message per tick is in flight; in realtime the reader takes the newest of what arrived, and
     /// 8 x 50 ms of backlog is more than any stale-command limit, so overwriting the oldest is right.
-    pub const ROBOT: ServiceLimits =
-        ServiceLimits { max_publishers: 1, max_subscribers: 1, subscriber_buffer: 8, max_nodes: 4 };
+    pub const ROBOT: ServiceLimits = ServiceLimits {
+        max_publishers: 1,
+        max_subscribers: 1,
+        subscriber_buffer: 8,
+        max_nodes: 4,
+    };
 }
 
 /// The iceoryx2 namespace of one run: a file prefix for the shared-memory folder and a root
@@ -220,7 +238,10 @@ impl RunNamespace {
 
     /// The namespace of `run` with its root directory under `base`.
     pub fn with_base(run: &RunId, base: &Path) -> RunNamespace {
-        RunNamespace { run: run.clone(), root: base.join(run.as_str()) }
+        RunNamespace {
+            run: run.clone(),
+            root: base.join(run.as_str()),
+        }
     }
 
     /// The run id.
@@ -242,10 +263,11 @@ impl RunNamespace {
     pub fn iceoryx_config(&self) -> Result<iceoryx2::config::Config, WireError> {
         let mut config = iceoryx2::config::Config::default();
         let prefix = self.file_prefix();
-        config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|e| WireError::Malformed {
-            message: "namespace",
-            reason: format!("file prefix {prefix:?} rejected by iceoryx2 ({e:?})"),
-        })?;
+        config.global.prefix =
+            FileName::new(prefix.as_bytes()).map_err(|e| WireError::Malformed {
+                message: "namespace",
+                reason: format!("file prefix {prefix:?} rejected by iceoryx2 ({e:?})"),
+            })?;
         let mut root = self.root.display().to_string();
         if !root.ends_with('/') {
             root.push('/');
@@ -290,7 +312,9 @@ impl RunNamespace {
 }
 
 fn list_with_prefix(dir: &Path, prefix: &str) -> Vec<PathBuf> {
-    let Ok(entries) = std::fs::read_dir(dir) else { return Vec::new() };
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
     let mut found: Vec<PathBuf> = entries
         .flatten()
         .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
@@ -315,7 +339,11 @@ pub fn wall_clock_ns() -> u64 {
 
 fn encode_text<const N: usize>(field: &'static str, text: &str) -> Result<[u8; N], WireError> {
     if text.len() > N {
-        return Err(WireError::TextTooLong { field, len: text.len(), max: N });
+        return Err(WireError::TextTooLong {
+            field,
+            len: text.len(),
+            max: N,
+        });
     }
     let mut out = [0u8; N];
     out[..text.len()].copy_from_slice(text.as_bytes());
@@ -335,8 +363,10 @@ fn encode_text_lossy<const N: usize>(text: &str) -> [u8; N] {
 
 fn decode_text<'a>(message: &'static str, bytes: &'a [u8]) -> Result<&'a str, WireError> {
     let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
-    std::str::from_utf8(&bytes[..end])
-        .map_err(|e| WireError::Malformed { message, reason: format!("text field is not UTF-8 ({e})") })
+    std::str::from_utf8(&bytes[..end]).map_err(|e| WireError::Malformed {
+        message,
+        reason: format!("text field is not UTF-8 ({e})"),
+    })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -384,7 +414,9 @@ impl ScanMsg {
         ranges: &[f32],
     ) -> Result<ScanMsg, WireError> {
         if ranges.len() > MAX_BEAMS {
-            return Err(WireError::TooManyBeams { beams: ranges.len() });
+            return Err(WireError::TooManyBeams {
+                beams: ranges.len(),
+            });
         }
         let mut fixed = [0.0f32; MAX_BEAMS];
         fixed[..ranges.len()].copy_from_slice(ranges);
@@ -414,7 +446,11 @@ impl ScanMsg {
 
     /// The goal carried by the scan.
     pub fn goal(&self) -> Goal {
-        Goal { phi_star: self.phi_star, d_star: self.d_star, v_star: self.v_star }
+        Goal {
+            phi_star: self.phi_star,
+            d_star: self.d_star,
+            v_star: self.v_star,
+        }
     }
 }
 
@@ -515,7 +551,10 @@ impl CmdMsg {
 
     /// The wheel command.
     pub fn wheels(&self) -> WheelCmd {
-        WheelCmd { left: self.left, right: self.right }
+        WheelCmd {
+            left: self.left,
+            right: self.right,
+        }
     }
 
     /// The status bits.
@@ -615,7 +654,11 @@ impl ControlMsg {
                 msg.max_range = lidar.max_range;
                 msg.noise_std = lidar.noise_std;
             }
-            ControlRequest::SwapModel { request_id, at_tick, path } => {
+            ControlRequest::SwapModel {
+                request_id,
+                at_tick,
+                path,
+            } => {
                 let text = path.to_str().ok_or_else(|| WireError::Malformed {
                     message: "control",
                     reason: format!("model path {} is not UTF-8", path.display()),
@@ -647,7 +690,10 @@ impl ControlMsg {
                 path: PathBuf::from(decode_text("control", &self.path)?),
             }),
             CONTROL_SHUTDOWN => Ok(ControlRequest::Shutdown),
-            kind => Err(WireError::UnknownKind { message: "control", kind }),
+            kind => Err(WireError::UnknownKind {
+                message: "control",
+                kind,
+            }),
         }
     }
 }
@@ -744,7 +790,10 @@ impl StatusMsg {
                 msg.pid = *pid;
                 msg.model_id = encode_text("model id", model_id)?;
             }
-            AgentStatus::Ready { generation, model_id } => {
+            AgentStatus::Ready {
+                generation,
+                model_id,
+            } => {
                 msg.kind = STATUS_READY;
                 msg.generation = *generation;
                 msg.model_id = encode_text("model id", model_id)?;
@@ -754,7 +803,11 @@ impl StatusMsg {
                 msg.generation = *generation;
                 msg.reason = encode_text_lossy(reason);
             }
-            AgentStatus::SwapDone { request_id, tick, model_id } => {
+            AgentStatus::SwapDone {
+                request_id,
+                tick,
+                model_id,
+            } => {
                 msg.kind = STATUS_SWAP_DONE;
                 msg.request_id = *request_id;
                 msg.tick = *tick;
@@ -774,18 +827,33 @@ impl StatusMsg {
         let model_id = || decode_text("status", &self.model_id).map(str::to_owned);
         let reason = || decode_text("status", &self.reason).map(str::to_owned);
         Ok(match self.kind {
-            STATUS_HELLO => AgentStatus::Hello { pid: self.pid, model_id: model_id()? },
-            STATUS_READY => AgentStatus::Ready { generation: self.generation, model_id: model_id()? },
-            STATUS_REFUSED => AgentStatus::Refused { generation: self.generation, reason: reason()? },
+            STATUS_HELLO => AgentStatus::Hello {
+                pid: self.pid,
+                model_id: model_id()?,
+            },
+            STATUS_READY => AgentStatus::Ready {
+                generation: self.generation,
+                model_id: model_id()?,
+            },
+            STATUS_REFUSED => AgentStatus::Refused {
+                generation: self.generation,
+                reason: reason()?,
+            },
             STATUS_SWAP_DONE => AgentStatus::SwapDone {
                 request_id: self.request_id,
                 tick: self.tick,
                 model_id: model_id()?,
             },
-            STATUS_SWAP_REFUSED => {
-                AgentStatus::SwapRefused { request_id: self.request_id, reason: reason()? }
+            STATUS_SWAP_REFUSED => AgentStatus::SwapRefused {
+                request_id: self.request_id,
+                reason: reason()?,
+            },
+            kind => {
+                return Err(WireError::UnknownKind {
+                    message: "status",
+                    kind,
+                });
             }
-            kind => return Err(WireError::UnknownKind { message: "status", kind }),
         })
     }
 }
@@ -859,7 +927,8 @@ impl RobotTiming {
         self.model.push(i16::try_from(index).unwrap_or(i16::MAX));
         let ns = |d: std::time::Duration| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
         self.round_trip_ns.push(round_trip.map_or(0, ns));
-        self.uplink_ns.push(msg.received_wall_ns.saturating_sub(scan_published_wall_ns));
+        self.uplink_ns
+            .push(msg.received_wall_ns.saturating_sub(scan_published_wall_ns));
         self.occupancy_ns.push(msg.occupancy_ns);
         self.inference_ns.push(msg.inference_ns);
     }
@@ -878,7 +947,10 @@ mod tests {
     fn run_ids_are_validated_and_generated_ids_are_valid() {
         assert!(RunId::new("abc-1_X").is_ok());
         for bad in ["", "a/b", "has space", "ü", &"x".repeat(MAX_RUN_ID_LEN + 1)] {
-            assert!(matches!(RunId::new(bad), Err(WireError::InvalidRunId { .. })), "{bad:?}");
+            assert!(
+                matches!(RunId::new(bad), Err(WireError::InvalidRunId { .. })),
+                "{bad:?}"
+            );
         }
         let generated = RunId::generate();
         assert_eq!(RunId::new(generated.as_str()).as_ref(), Ok(&generated));
@@ -887,16 +959,28 @@ mod tests {
     #[test]
     fn service_names_are_namespaced_by_run_robot_and_channel() {
         let run = RunId::new("t1").unwrap();
-        assert_eq!(robot_service_name(&run, 2, RobotChannel::Scan), "formation/t1/robot/2/scan");
-        assert_eq!(robot_service_name(&run, 0, RobotChannel::Status), "formation/t1/robot/0/status");
-        let names: std::collections::HashSet<_> =
-            RobotChannel::ALL.iter().map(|&c| robot_service_name(&run, 0, c)).collect();
+        assert_eq!(
+            robot_service_name(&run, 2, RobotChannel::Scan),
+            "formation/t1/robot/2/scan"
+        );
+        assert_eq!(
+            robot_service_name(&run, 0, RobotChannel::Status),
+            "formation/t1/robot/0/status"
+        );
+        let names: std::collections::HashSet<_> = RobotChannel::ALL
+            .iter()
+            .map(|&c| robot_service_name(&run, 0, c))
+            .collect();
         assert_eq!(names.len(), 4);
     }
 
     #[test]
     fn scan_keeps_ranges_and_goal_and_rejects_oversized_scans() {
-        let goal = Goal { phi_star: 1.0, d_star: 2.0, v_star: 0.7 };
+        let goal = Goal {
+            phi_star: 1.0,
+            d_star: 2.0,
+            v_star: 0.7,
+        };
         let ranges: Vec<f32> = (0..360).map(|k| k as f32 * 0.01).collect();
         let msg = ScanMsg::new(3, 7, 0.35, -0.5, &goal, &ranges).unwrap();
         assert_eq!(msg.ranges().unwrap(), &ranges[..]);
@@ -905,7 +989,9 @@ mod tests {
         let too_many = vec![1.0; MAX_BEAMS + 1];
         assert_eq!(
             ScanMsg::new(0, 0, 0.0, 0.0, &goal, &too_many).unwrap_err(),
-            WireError::TooManyBeams { beams: MAX_BEAMS + 1 }
+            WireError::TooManyBeams {
+                beams: MAX_BEAMS + 1
+            }
         );
         let mut corrupt = msg;
         corrupt.n_beams = MAX_BEAMS as u32 + 5;
@@ -914,8 +1000,15 @@ mod tests {
 
     #[test]
     fn command_round_trips_and_refuses_a_long_model_id() {
-        let timings = AgentTimings { received_wall_ns: 5, occupancy_ns: 6, inference_ns: 7 };
-        let cmd = WheelCmd { left: 0.25, right: -0.5 };
+        let timings = AgentTimings {
+            received_wall_ns: 5,
+            occupancy_ns: 6,
+            inference_ns: 7,
+        };
+        let cmd = WheelCmd {
+            left: 0.25,
+            right: -0.5,
+        };
         let status = CmdStatus::OK.with(CmdStatus::MODEL_SWAPPED);
         let msg = CmdMsg::new(1, 2, cmd, "policy-abc123", timings, status).unwrap();
         assert_eq!(msg.wheels(), cmd);
@@ -926,7 +1019,10 @@ mod tests {
         let long = "m".repeat(MODEL_ID_LEN + 1);
         assert!(matches!(
             CmdMsg::new(1, 2, cmd, &long, timings, status),
-            Err(WireError::TextTooLong { field: "model id", .. })
+            Err(WireError::TextTooLong {
+                field: "model id",
+                ..
+            })
         ));
     }
 
@@ -935,33 +1031,73 @@ mod tests {
         let requests = [
             ControlRequest::BeginEpisode {
                 generation: 9,
-                lidar: LidarSpec { beams: 900, max_range: 10.0, noise_std: 0.03 },
+                lidar: LidarSpec {
+                    beams: 900,
+                    max_range: 10.0,
+                    noise_std: 0.03,
+                },
             },
-            ControlRequest::SwapModel { request_id: 4, at_tick: 100, path: "/m/policy.onnx".into() },
+            ControlRequest::SwapModel {
+                request_id: 4,
+                at_tick: 100,
+                path: "/m/policy.onnx".into(),
+            },
             ControlRequest::Shutdown,
         ];
         for request in requests {
-            assert_eq!(ControlMsg::encode(&request).unwrap().decode().unwrap(), request);
+            assert_eq!(
+                ControlMsg::encode(&request).unwrap().decode().unwrap(),
+                request
+            );
         }
         let mut unknown = ControlMsg::encode(&ControlRequest::Shutdown).unwrap();
         unknown.kind = 77;
-        assert_eq!(unknown.decode().unwrap_err(), WireError::UnknownKind { message: "control", kind: 77 });
+        assert_eq!(
+            unknown.decode().unwrap_err(),
+            WireError::UnknownKind {
+                message: "control",
+                kind: 77
+            }
+        );
     }
 
     #[test]
     fn statuses_round_trip_and_long_reasons_are_cut_at_a_char_boundary() {
         let statuses = [
-            AgentStatus::Hello { pid: 42, model_id: "a".into() },
-            AgentStatus::Ready { generation: 3, model_id: "b".into() },
-            AgentStatus::Refused { generation: 3, reason: "beams differ".into() },
-            AgentStatus::SwapDone { request_id: 1, tick: 50, model_id: "c".into() },
-            AgentStatus::SwapRefused { request_id: 2, reason: "no such file".into() },
+            AgentStatus::Hello {
+                pid: 42,
+                model_id: "a".into(),
+            },
+            AgentStatus::Ready {
+                generation: 3,
+                model_id: "b".into(),
+            },
+            AgentStatus::Refused {
+                generation: 3,
+                reason: "beams differ".into(),
+            },
+            AgentStatus::SwapDone {
+                request_id: 1,
+                tick: 50,
+                model_id: "c".into(),
+            },
+            AgentStatus::SwapRefused {
+                request_id: 2,
+                reason: "no such file".into(),
+            },
         ];
         for status in statuses {
-            assert_eq!(StatusMsg::encode(&status).unwrap().decode().unwrap(), status);
+            assert_eq!(
+                StatusMsg::encode(&status).unwrap().decode().unwrap(),
+                status
+            );
         }
         let long = "é".repeat(REASON_LEN);
-        let msg = StatusMsg::encode(&AgentStatus::Refused { generation: 0, reason: long }).unwrap();
+        let msg = StatusMsg::encode(&AgentStatus::Refused {
+            generation: 0,
+            reason: long,
+        })
+        .unwrap();
         match msg.decode().unwrap() {
             AgentStatus::Refused { reason, .. } => {
                 assert!(reason.len() <= REASON_LEN && reason.chars().all(|c| c == 'é'));
@@ -973,14 +1109,33 @@ mod tests {
 
     #[test]
     fn timing_log_records_used_commands_and_gaps() {
-        let timings = AgentTimings { received_wall_ns: 1_500, occupancy_ns: 20, inference_ns: 30 };
+        let timings = AgentTimings {
+            received_wall_ns: 1_500,
+            occupancy_ns: 20,
+            inference_ns: 30,
+        };
         let a = CmdMsg::new(1, 0, WheelCmd::BRAKE, "a", timings, CmdStatus::OK).unwrap();
         let b = CmdMsg::new(1, 2, WheelCmd::BRAKE, "b", timings, CmdStatus::OK).unwrap();
         let mut log = RobotTiming::default();
-        log.record(TickOutcome::Fresh, Some(&a), Some(std::time::Duration::from_nanos(900)), 1_000);
+        log.record(
+            TickOutcome::Fresh,
+            Some(&a),
+            Some(std::time::Duration::from_nanos(900)),
+            1_000,
+        );
         log.record(TickOutcome::Missing, None, None, 2_000);
-        log.record(TickOutcome::Fresh, Some(&b), Some(std::time::Duration::from_nanos(800)), 1_200);
-        log.record(TickOutcome::Fresh, Some(&a), Some(std::time::Duration::from_nanos(700)), 1_000);
+        log.record(
+            TickOutcome::Fresh,
+            Some(&b),
+            Some(std::time::Duration::from_nanos(800)),
+            1_200,
+        );
+        log.record(
+            TickOutcome::Fresh,
+            Some(&a),
+            Some(std::time::Duration::from_nanos(700)),
+            1_000,
+        );
         assert_eq!(log.ticks(), 4);
         assert_eq!(log.model_ids, vec!["a".to_owned(), "b".to_owned()]);
         assert_eq!(log.model, vec![0, -1, 1, 0]);
@@ -996,7 +1151,13 @@ mod tests {
         assert_eq!(ns.file_prefix(), "fm_nsunit_");
         let config = ns.iceoryx_config().unwrap();
         assert_eq!(config.global.prefix.to_string(), "fm_nsunit_");
-        assert!(config.global.root_path().to_string().starts_with(&base.display().to_string()));
+        assert!(
+            config
+                .global
+                .root_path()
+                .to_string()
+                .starts_with(&base.display().to_string())
+        );
         std::fs::create_dir_all(ns.root_dir()).unwrap();
         assert_eq!(ns.leftovers(), vec![ns.root_dir().to_path_buf()]);
         assert_eq!(ns.remove_all().unwrap(), 1);

@@ -24,14 +24,21 @@ use formation_proto::wire::{RunId, RunNamespace};
 
 /// The repository root (the parent of this crate's directory).
 pub fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_default()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default()
 }
 
 /// A run id no other test (in this or a parallel test process) uses.
 pub fn unique_run_id(tag: &str) -> RunId {
     static COUNTER: AtomicUsize = AtomicUsize::new(0);
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-    let tag: String = tag.chars().filter(|c| c.is_ascii_alphanumeric()).take(6).collect();
+    let tag: String = tag
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric())
+        .take(6)
+        .collect();
     let id = format!("t{tag}{}x{n}", std::process::id());
     RunId::new(&id).unwrap_or_else(|e| panic!("test run id {id:?}: {e}"))
 }
@@ -72,7 +79,10 @@ impl LeakCheck {
     pub fn new(run: &RunId) -> LeakCheck {
         let namespace = RunNamespace::new(run);
         let before = namespace.leftovers();
-        assert!(before.is_empty(), "run {run} has files before it started: {before:?}");
+        assert!(
+            before.is_empty(),
+            "run {run} has files before it started: {before:?}"
+        );
         LeakCheck { namespace }
     }
 
@@ -89,7 +99,11 @@ impl LeakCheck {
     /// Panics listing the run's files if any exist.
     pub fn assert_clean(&self) {
         let left = self.leftovers();
-        assert!(left.is_empty(), "run {} left files behind: {left:#?}", self.namespace.run());
+        assert!(
+            left.is_empty(),
+            "run {} left files behind: {left:#?}",
+            self.namespace.run()
+        );
     }
 }
 
@@ -112,7 +126,9 @@ impl Watchdog {
         let (done, rx) = mpsc::channel::<()>();
         std::thread::spawn(move || {
             if let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(limit) {
-                eprintln!("watchdog: test {name} still running after {limit:?}; aborting the test process");
+                eprintln!(
+                    "watchdog: test {name} still running after {limit:?}; aborting the test process"
+                );
                 std::process::abort();
             }
         });
@@ -162,7 +178,10 @@ pub fn binaries() -> &'static Binaries {
 
 fn build_binaries(profile_dir: &Path) {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let profile = profile_dir.file_name().and_then(|n| n.to_str()).unwrap_or("debug");
+    let profile = profile_dir
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or("debug");
     let mut command = Command::new(cargo);
     command.current_dir(repo_root()).args([
         "build",
@@ -188,7 +207,9 @@ fn build_binaries(profile_dir: &Path) {
             command.args(["--profile", other]);
         }
     }
-    let output = command.output().expect("running cargo build for the runtime binaries");
+    let output = command
+        .output()
+        .expect("running cargo build for the runtime binaries");
     assert!(
         output.status.success(),
         "building the runtime binaries failed:\n{}",
@@ -204,7 +225,11 @@ pub fn test_model() -> &'static Path {
             return PathBuf::from(path);
         }
         let exe = std::env::current_exe().expect("test executable path");
-        let target = exe.ancestors().nth(3).map(Path::to_path_buf).unwrap_or_else(std::env::temp_dir);
+        let target = exe
+            .ancestors()
+            .nth(3)
+            .map(Path::to_path_buf)
+            .unwrap_or_else(std::env::temp_dir);
         let dir = target.join("formation-test-models");
         std::fs::create_dir_all(&dir).expect("creating the test model directory");
         let path = dir.join("tiny-seed0.onnx");
@@ -240,12 +265,17 @@ fn python() -> PathBuf {
         return PathBuf::from(p);
     }
     let venv = repo_root().join(".venv/bin/python");
-    if venv.is_file() { venv } else { PathBuf::from("python3") }
+    if venv.is_file() {
+        venv
+    } else {
+        PathBuf::from("python3")
+    }
 }
 
 /// The paper's case 1 shortened to `duration_s`, as a scenario file in `dir`.
 pub fn case1_scenario(dir: &Path, duration_s: f64) -> PathBuf {
-    let text = std::fs::read_to_string(repo_root().join("scenarios/case1.toml")).expect("reading case1.toml");
+    let text = std::fs::read_to_string(repo_root().join("scenarios/case1.toml"))
+        .expect("reading case1.toml");
     let text: String = text
         .lines()
         .map(|line| {
@@ -297,14 +327,26 @@ impl Finished {
 
     /// Panics with [`Finished::describe`] unless it exited with success.
     pub fn assert_success(&self) -> &Self {
-        assert!(self.output.status.success(), "expected success\n{}", self.describe());
+        assert!(
+            self.output.status.success(),
+            "expected success\n{}",
+            self.describe()
+        );
         self
     }
 
     /// Panics with [`Finished::describe`] unless it failed with stderr containing `needle`.
     pub fn assert_failure_mentioning(&self, needle: &str) -> &Self {
-        assert!(!self.output.status.success(), "expected failure\n{}", self.describe());
-        assert!(self.stderr().contains(needle), "stderr should mention {needle:?}\n{}", self.describe());
+        assert!(
+            !self.output.status.success(),
+            "expected failure\n{}",
+            self.describe()
+        );
+        assert!(
+            self.stderr().contains(needle),
+            "stderr should mention {needle:?}\n{}",
+            self.describe()
+        );
         self
     }
 }
@@ -312,9 +354,14 @@ impl Finished {
 /// Runs `command` to completion (killing it after `limit`) and captures its output.
 pub fn run(mut command: Command, limit: Duration) -> Finished {
     let text = format!("{command:?}");
-    command.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    command
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
     let started = Instant::now();
-    let child = command.spawn().unwrap_or_else(|e| panic!("starting {text}: {e}"));
+    let child = command
+        .spawn()
+        .unwrap_or_else(|e| panic!("starting {text}: {e}"));
     let id = child.id();
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
@@ -323,16 +370,31 @@ pub fn run(mut command: Command, limit: Duration) -> Finished {
     let output = match rx.recv_timeout(limit) {
         Ok(result) => result.unwrap_or_else(|e| panic!("waiting for {text}: {e}")),
         Err(_) => {
-            let _ = Command::new("kill").arg("-KILL").arg(id.to_string()).status();
-            let output = rx.recv().expect("reaping the killed child").expect("child output");
+            let _ = Command::new("kill")
+                .arg("-KILL")
+                .arg(id.to_string())
+                .status();
+            let output = rx
+                .recv()
+                .expect("reaping the killed child")
+                .expect("child output");
             panic!(
                 "{}",
-                Finished { command: text, output, elapsed: started.elapsed() }.describe()
+                Finished {
+                    command: text,
+                    output,
+                    elapsed: started.elapsed()
+                }
+                .describe()
                     + &format!("\n(killed after {limit:?})")
             );
         }
     };
-    Finished { command: text, output, elapsed: started.elapsed() }
+    Finished {
+        command: text,
+        output,
+        elapsed: started.elapsed(),
+    }
 }
 
 #[cfg(test)]

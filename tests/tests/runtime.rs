@@ -8,9 +8,7 @@ use std::time::{Duration, Instant};
 
 use formation::runtime::{ClockMode, eval_over_processes};
 use formation_proto::WheelCmd;
-use formation_proto::wire::{
-    CmdMsg, RobotChannel, ScanMsg, ServiceLimits, robot_service_name,
-};
+use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, ServiceLimits, robot_service_name};
 use formation_tests::{
     LeakCheck, TempDir, Watchdog, binaries, case1_scenario, run, test_model, unique_run_id,
 };
@@ -24,13 +22,21 @@ fn assert_bit_identical(a: &Trajectory, b: &Trajectory) {
     assert_eq!(a.poses.len(), b.poses.len(), "sample counts differ");
     for (k, (pa, pb)) in a.poses.iter().zip(&b.poses).enumerate() {
         for (i, (x, y)) in pa.iter().zip(pb).enumerate() {
-            let bits = |p: &formation_proto::Pose| (p.x.to_bits(), p.y.to_bits(), p.theta.to_bits());
-            assert_eq!(bits(x), bits(y), "pose of robot {i} at sample {k}: {x:?} vs {y:?}");
+            let bits =
+                |p: &formation_proto::Pose| (p.x.to_bits(), p.y.to_bits(), p.theta.to_bits());
+            assert_eq!(
+                bits(x),
+                bits(y),
+                "pose of robot {i} at sample {k}: {x:?} vs {y:?}"
+            );
         }
     }
     let cmd_bits = |c: &WheelCmd| (c.left.to_bits(), c.right.to_bits());
     for (k, (ca, cb)) in a.commands.iter().zip(&b.commands).enumerate() {
-        let (ca, cb): (Vec<_>, Vec<_>) = (ca.iter().map(cmd_bits).collect(), cb.iter().map(cmd_bits).collect());
+        let (ca, cb): (Vec<_>, Vec<_>) = (
+            ca.iter().map(cmd_bits).collect(),
+            cb.iter().map(cmd_bits).collect(),
+        );
         assert_eq!(ca, cb, "commands at tick {k}");
     }
     assert_eq!(a.collisions, b.collisions);
@@ -51,18 +57,25 @@ fn lockstep_over_processes_is_bit_identical_to_in_process() {
     // in target/<profile>/deps, and the launcher also searches the directory above it.
     assert!(bins.world.is_file() && bins.agent.is_file());
     let mut progress = Vec::new();
-    let over_processes =
-        eval_over_processes(&scenario, scenario.seed(), 2, model, ClockMode::Lockstep, &mut |n| progress.push(n))
-            .expect("runs over processes");
+    let over_processes = eval_over_processes(
+        &scenario,
+        scenario.seed(),
+        2,
+        model,
+        ClockMode::Lockstep,
+        &mut |n| progress.push(n),
+    )
+    .expect("runs over processes");
     assert_eq!(progress, vec![1, 2]);
     assert_eq!(over_processes.len(), 2);
 
     for (index, from_processes) in over_processes.iter().enumerate() {
         let spec = scenario.run_spec(scenario.seed(), index);
         let lidar = spec.world.lidar;
-        let mut controller =
-            PolicyController::from_model_paths(&[model, model, model], lidar).expect("in-process agents");
-        let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
+        let mut controller = PolicyController::from_model_paths(&[model, model, model], lidar)
+            .expect("in-process agents");
+        let in_process =
+            run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
         assert_eq!(in_process.poses.len(), 201, "10 s at 20 Hz");
         assert_bit_identical(from_processes, &in_process);
     }
@@ -78,10 +91,20 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
     let leaks = LeakCheck::new(&run_id);
     let scenario = Scenario::from_path(&case1_scenario(dir.path(), 5.0)).expect("scenario");
     let specs = dir.path().join("specs.json");
-    std::fs::write(&specs, serde_json::to_vec(&[scenario.run_spec(1, 0)]).unwrap()).unwrap();
+    std::fs::write(
+        &specs,
+        serde_json::to_vec(&[scenario.run_spec(1, 0)]).unwrap(),
+    )
+    .unwrap();
 
     let mut world = Command::new(&bins.world)
-        .args(["--run-id", run_id.as_str(), "--exit-on-stdin-close", "--startup-timeout-ms", "60000"])
+        .args([
+            "--run-id",
+            run_id.as_str(),
+            "--exit-on-stdin-close",
+            "--startup-timeout-ms",
+            "60000",
+        ])
         .arg("--run-specs")
         .arg(&specs)
         .arg("--out")
@@ -95,7 +118,13 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
     world_out.read_line(&mut line).unwrap();
     assert!(line.contains("listening"), "world said {line:?}");
     let mut agent = Command::new(&bins.agent)
-        .args(["--run-id", run_id.as_str(), "--robot", "0", "--exit-on-stdin-close"])
+        .args([
+            "--run-id",
+            run_id.as_str(),
+            "--robot",
+            "0",
+            "--exit-on-stdin-close",
+        ])
         .arg("--model")
         .arg(test_model())
         .stdin(Stdio::piped())
@@ -103,23 +132,44 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
         .expect("starting agent 0");
 
     let config = leaks.namespace().iceoryx_config().unwrap();
-    let node = NodeBuilder::new().config(&config).create::<ipc::Service>().unwrap();
+    let node = NodeBuilder::new()
+        .config(&config)
+        .create::<ipc::Service>()
+        .unwrap();
     let limits = ServiceLimits::ROBOT;
     let open = |channel| ServiceName::new(&robot_service_name(&run_id, 0, channel)).unwrap();
-    let scan = node.service_builder(&open(RobotChannel::Scan)).publish_subscribe::<ScanMsg>().open().unwrap();
-    let cmd = node.service_builder(&open(RobotChannel::Cmd)).publish_subscribe::<CmdMsg>().open().unwrap();
+    let scan = node
+        .service_builder(&open(RobotChannel::Scan))
+        .publish_subscribe::<ScanMsg>()
+        .open()
+        .unwrap();
+    let cmd = node
+        .service_builder(&open(RobotChannel::Cmd))
+        .publish_subscribe::<CmdMsg>()
+        .open()
+        .unwrap();
     // Wait until agent 0 holds its ports.
     let deadline = Instant::now() + Duration::from_secs(30);
-    while (scan.dynamic_config().number_of_subscribers() < 1 || cmd.dynamic_config().number_of_publishers() < 1)
+    while (scan.dynamic_config().number_of_subscribers() < 1
+        || cmd.dynamic_config().number_of_publishers() < 1)
         && Instant::now() < deadline
     {
         std::thread::sleep(Duration::from_millis(20));
     }
-    assert_eq!(scan.dynamic_config().number_of_subscribers(), limits.max_subscribers);
+    assert_eq!(
+        scan.dynamic_config().number_of_subscribers(),
+        limits.max_subscribers
+    );
     let second_reader = scan.subscriber_builder().create();
-    assert!(second_reader.is_err(), "a second subscriber on robot 0's scan was admitted");
+    assert!(
+        second_reader.is_err(),
+        "a second subscriber on robot 0's scan was admitted"
+    );
     let second_writer = cmd.publisher_builder().create();
-    assert!(second_writer.is_err(), "a second publisher on robot 0's commands was admitted");
+    assert!(
+        second_writer.is_err(),
+        "a second publisher on robot 0's commands was admitted"
+    );
     drop((second_reader, second_writer, scan, cmd, node));
 
     drop(agent.stdin.take());
@@ -127,7 +177,11 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
     let started = Instant::now();
     assert!(agent.wait().unwrap().success());
     assert!(world.wait().is_ok());
-    assert!(started.elapsed() < Duration::from_secs(5), "shutdown took {:?}", started.elapsed());
+    assert!(
+        started.elapsed() < Duration::from_secs(5),
+        "shutdown took {:?}",
+        started.elapsed()
+    );
     // Both exited cleanly: iceoryx2 removed every service and port segment itself. Only its
     // global management segment stays (by design, across nodes); the launcher removes it.
     let shm: Vec<_> = leaks
@@ -135,7 +189,10 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
         .into_iter()
         .filter(|p| p.starts_with("/dev/shm") && !p.to_string_lossy().ends_with(".global_mgmt"))
         .collect();
-    assert!(shm.is_empty(), "shared memory left after a clean exit: {shm:#?}");
+    assert!(
+        shm.is_empty(),
+        "shared memory left after a clean exit: {shm:#?}"
+    );
 }
 
 /// Issue 4 (c): `formation run` leaves nothing in /dev/shm or iceoryx2's directory.
@@ -157,7 +214,11 @@ fn formation_run_leaves_no_shared_memory_behind() {
         .arg(dir.path().join("out"));
     let finished = run(command, LIMIT);
     finished.assert_success();
-    assert!(finished.stdout().contains("round_trip"), "{}", finished.describe());
+    assert!(
+        finished.stdout().contains("round_trip"),
+        "{}",
+        finished.describe()
+    );
     assert!(dir.path().join("out/runs/run-0000.json").is_file());
     leaks.assert_clean();
 }
@@ -172,7 +233,13 @@ fn a_missing_model_is_a_clear_error() {
     let leaks = LeakCheck::new(&run_id);
     let mut command = Command::new(&bins.cli);
     command
-        .args(["run", "--run-id", run_id.as_str(), "--model", "/nonexistent/policy.onnx"])
+        .args([
+            "run",
+            "--run-id",
+            run_id.as_str(),
+            "--model",
+            "/nonexistent/policy.onnx",
+        ])
         .arg("--scenario")
         .arg(case1_scenario(dir.path(), 1.0))
         .arg("--out")
@@ -202,8 +269,16 @@ fn an_agent_that_exits_at_start_stops_the_launch_cleanly() {
         .arg(dir.path().join("out"));
     let finished = run(command, LIMIT);
     finished.assert_failure_mentioning("exit code 1");
-    assert!(finished.stderr().contains("restart budget"), "{}", finished.describe());
-    assert!(finished.elapsed < Duration::from_secs(15), "{}", finished.describe());
+    assert!(
+        finished.stderr().contains("restart budget"),
+        "{}",
+        finished.describe()
+    );
+    assert!(
+        finished.elapsed < Duration::from_secs(15),
+        "{}",
+        finished.describe()
+    );
     leaks.assert_clean();
 }
 
@@ -214,19 +289,33 @@ fn robot_indices_out_of_range_are_clear_errors() {
     let _watchdog = Watchdog::arm("robot_out_of_range", LIMIT);
     let bins = binaries();
     let dir = TempDir::new("range");
-    let run_id = unique_run_id("range");
-    let leaks = LeakCheck::new(&run_id);
+    // A lone agent leaves iceoryx2's global management segment of its namespace behind (no
+    // launcher runs to remove it); its own run id keeps that out of the launcher check below.
+    let lone_run = unique_run_id("lone");
+    let _lone_cleanup = LeakCheck::new(&lone_run);
     let mut agent = Command::new(&bins.agent);
     agent
-        .args(["--run-id", run_id.as_str(), "--robot", "7", "--connect-timeout-ms", "300"])
+        .args([
+            "--run-id",
+            lone_run.as_str(),
+            "--robot",
+            "7",
+            "--connect-timeout-ms",
+            "300",
+        ])
         .arg("--model")
         .arg(test_model());
     run(agent, LIMIT).assert_failure_mentioning("robot 7's services do not exist");
 
     let scenario = case1_scenario(dir.path(), 1.0);
     let mut text = std::fs::read_to_string(&scenario).unwrap();
-    text.push_str(&format!("\n[[agent]]\nrobot = 5\nmodel = {:?}\n", test_model().display().to_string()));
+    text.push_str(&format!(
+        "\n[[agent]]\nrobot = 5\nmodel = {:?}\n",
+        test_model().display().to_string()
+    ));
     std::fs::write(&scenario, text).unwrap();
+    let run_id = unique_run_id("range");
+    let leaks = LeakCheck::new(&run_id);
     let mut command = Command::new(&bins.cli);
     command
         .args(["run", "--run-id", run_id.as_str()])

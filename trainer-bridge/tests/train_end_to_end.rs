@@ -4,7 +4,6 @@
 //! Needs the trainer's Python environment (`bash .ci/setup-python`); without PyTorch the test
 //! says so and passes, since the Rust side's own behaviour is covered by the unit tests.
 
-use std::num::NonZeroUsize;
 
 use formation_proto::{LidarSpec, OccupancySpec};
 use trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter, Sample};
@@ -34,7 +33,8 @@ fn a_rust_written_dataset_trains_into_an_onnx_model() {
     let header = DatasetHeader::new(OccupancySpec::PAPER, LidarSpec::default(), 0.7, 3, "e2e");
     let mut writer = DatasetWriter::create(&data, header)
         .expect("create")
-        .with_shard_size(NonZeroUsize::new(64).expect("non-zero"));
+        .with_shard_size(64)
+        .expect("shard size");
     for i in 0..150 {
         writer.push(sample(i, 0)).expect("push");
     }

@@ -67,14 +67,25 @@ fn locate(
     override_value: Option<PathBuf>,
 ) -> Result<PathBuf, BinaryError> {
     if let Some(path) = override_value {
-        return if path.is_file() { Ok(path) } else { Err(BinaryError::BadOverride { env, path }) };
+        return if path.is_file() {
+            Ok(path)
+        } else {
+            Err(BinaryError::BadOverride { env, path })
+        };
     }
     let file = format!("{name}{}", std::env::consts::EXE_SUFFIX);
-    dirs.iter().map(|d| d.join(&file)).find(|p| p.is_file()).ok_or_else(|| BinaryError::NotFound {
-        name,
-        searched: dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>().join(", "),
-        env,
-    })
+    dirs.iter()
+        .map(|d| d.join(&file))
+        .find(|p| p.is_file())
+        .ok_or_else(|| BinaryError::NotFound {
+            name,
+            searched: dirs
+                .iter()
+                .map(|d| d.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+            env,
+        })
 }
 
 impl RuntimeBinaries {
@@ -84,8 +95,18 @@ impl RuntimeBinaries {
         let dirs = search_dirs(&exe);
         let var = |name| std::env::var_os(name).map(PathBuf::from);
         Ok(RuntimeBinaries {
-            world: locate("formation-world", "FORMATION_WORLD_BIN", &dirs, var("FORMATION_WORLD_BIN"))?,
-            agent: locate("formation-agent", "FORMATION_AGENT_BIN", &dirs, var("FORMATION_AGENT_BIN"))?,
+            world: locate(
+                "formation-world",
+                "FORMATION_WORLD_BIN",
+                &dirs,
+                var("FORMATION_WORLD_BIN"),
+            )?,
+            agent: locate(
+                "formation-agent",
+                "FORMATION_AGENT_BIN",
+                &dirs,
+                var("FORMATION_AGENT_BIN"),
+            )?,
         })
     }
 }
@@ -97,19 +118,37 @@ mod tests {
     #[test]
     fn test_binaries_in_deps_also_search_the_profile_directory() {
         let dirs = search_dirs(Path::new("/t/target/debug/deps/formation-abc"));
-        assert_eq!(dirs, vec![PathBuf::from("/t/target/debug/deps"), PathBuf::from("/t/target/debug")]);
-        assert_eq!(search_dirs(Path::new("/t/target/release/formation")), vec![PathBuf::from("/t/target/release")]);
+        assert_eq!(
+            dirs,
+            vec![
+                PathBuf::from("/t/target/debug/deps"),
+                PathBuf::from("/t/target/debug")
+            ]
+        );
+        assert_eq!(
+            search_dirs(Path::new("/t/target/release/formation")),
+            vec![PathBuf::from("/t/target/release")]
+        );
     }
 
     #[test]
     fn missing_binaries_name_the_build_command_and_bad_overrides_are_refused() {
         let dir = std::env::temp_dir().join(format!("formation-bin-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let err = locate("formation-world", "FORMATION_WORLD_BIN", std::slice::from_ref(&dir), None).unwrap_err();
+        let err = locate(
+            "formation-world",
+            "FORMATION_WORLD_BIN",
+            std::slice::from_ref(&dir),
+            None,
+        )
+        .unwrap_err();
         assert!(err.to_string().contains("cargo build --release"), "{err}");
         let present = dir.join("formation-world");
         std::fs::write(&present, b"").unwrap();
-        assert_eq!(locate("formation-world", "X", std::slice::from_ref(&dir), None).unwrap(), present);
+        assert_eq!(
+            locate("formation-world", "X", std::slice::from_ref(&dir), None).unwrap(),
+            present
+        );
         let missing = dir.join("nope");
         assert!(matches!(
             locate("formation-world", "X", &[], Some(missing)),

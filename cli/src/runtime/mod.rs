@@ -140,13 +140,15 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
 pub fn faults_per_robot(flags: &[String], n_robots: usize) -> anyhow::Result<Vec<Option<String>>> {
     let mut faults = vec![None; n_robots];
     for flag in flags {
-        let (robot, mode) = flag
-            .split_once(':')
-            .with_context(|| format!("--fault {flag:?}: expected ROBOT:MODE, e.g. 1:crash-after=100"))?;
-        let robot: usize = robot.parse().with_context(|| format!("--fault {flag:?}: {robot:?} is not a robot index"))?;
-        let slot = faults
-            .get_mut(robot)
-            .with_context(|| format!("--fault {flag:?}: robot {robot} out of range (0..{n_robots})"))?;
+        let (robot, mode) = flag.split_once(':').with_context(|| {
+            format!("--fault {flag:?}: expected ROBOT:MODE, e.g. 1:crash-after=100")
+        })?;
+        let robot: usize = robot
+            .parse()
+            .with_context(|| format!("--fault {flag:?}: {robot:?} is not a robot index"))?;
+        let slot = faults.get_mut(robot).with_context(|| {
+            format!("--fault {flag:?}: robot {robot} out of range (0..{n_robots})")
+        })?;
         *slot = Some(mode.to_owned());
     }
     Ok(faults)
@@ -168,7 +170,9 @@ fn write_run_specs(
     runs: usize,
     path: &Path,
 ) -> anyhow::Result<()> {
-    let specs: Vec<RunSpec> = (first..first + runs).map(|i| scenario.run_spec(base_seed, i)).collect();
+    let specs: Vec<RunSpec> = (first..first + runs)
+        .map(|i| scenario.run_spec(base_seed, i))
+        .collect();
     paths::write_atomic(path, &serde_json::to_vec(&specs)?)
 }
 
@@ -287,7 +291,11 @@ pub fn eval_over_processes(
                 on_run_done(done);
             }
         }))??;
-        report.run_logs.iter().map(|log| read_trajectory(log)).collect::<anyhow::Result<Vec<_>>>()
+        report
+            .run_logs
+            .iter()
+            .map(|log| read_trajectory(log))
+            .collect::<anyhow::Result<Vec<_>>>()
     })();
     let _ = std::fs::remove_dir_all(&work);
     result
@@ -300,8 +308,8 @@ pub fn read_trajectory(log: &Path) -> anyhow::Result<Trajectory> {
         trajectory: Trajectory,
     }
     let bytes = std::fs::read(log).with_context(|| format!("reading run log {}", log.display()))?;
-    let parsed: TrajectoryOnly =
-        serde_json::from_slice(&bytes).with_context(|| format!("parsing run log {}", log.display()))?;
+    let parsed: TrajectoryOnly = serde_json::from_slice(&bytes)
+        .with_context(|| format!("parsing run log {}", log.display()))?;
     Ok(parsed.trajectory)
 }
 
@@ -311,8 +319,16 @@ mod tests {
 
     #[test]
     fn fault_flags_map_to_robots_and_bad_flags_are_explained() {
-        let faults = faults_per_robot(&["2:crash-after=5".into(), "0:late-ms=30".into()], 3).unwrap();
-        assert_eq!(faults, vec![Some("late-ms=30".into()), None, Some("crash-after=5".into())]);
+        let faults =
+            faults_per_robot(&["2:crash-after=5".into(), "0:late-ms=30".into()], 3).unwrap();
+        assert_eq!(
+            faults,
+            vec![
+                Some("late-ms=30".into()),
+                None,
+                Some("crash-after=5".into())
+            ]
+        );
         let err = faults_per_robot(&["5:nan-after=1".into()], 3).unwrap_err();
         assert!(err.to_string().contains("out of range"), "{err}");
         assert!(faults_per_robot(&["crash".into()], 3).is_err());

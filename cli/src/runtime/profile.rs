@@ -112,7 +112,10 @@ pub fn profile(runs: &[Vec<RobotTiming>]) -> LatencyProfile {
         runs: runs.len(),
         used_commands: used,
         braked,
-        stages: columns.into_iter().map(|(k, v)| (k.to_owned(), stage_stats(v))).collect(),
+        stages: columns
+            .into_iter()
+            .map(|(k, v)| (k.to_owned(), stage_stats(v)))
+            .collect(),
         inference_paper_ms: PAPER_INFERENCE_MS,
     }
 }
@@ -134,9 +137,10 @@ pub fn profile_dir(out: &Path) -> anyhow::Result<LatencyProfile> {
     let runs = files
         .iter()
         .map(|path| {
-            let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-            let log: TimingLog =
-                serde_json::from_slice(&bytes).with_context(|| format!("parsing {}", path.display()))?;
+            let bytes =
+                std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+            let log: TimingLog = serde_json::from_slice(&bytes)
+                .with_context(|| format!("parsing {}", path.display()))?;
             Ok(log.robots)
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
@@ -149,7 +153,11 @@ pub fn summary_text(profile: &LatencyProfile) -> String {
         "latency over {} run(s), {} commands used{}\n",
         profile.runs,
         profile.used_commands,
-        if profile.braked.is_empty() { String::new() } else { format!(", braked: {:?}", profile.braked) }
+        if profile.braked.is_empty() {
+            String::new()
+        } else {
+            format!(", braked: {:?}", profile.braked)
+        }
     );
     for (stage, s) in &profile.stages {
         text.push_str(&format!(
@@ -168,7 +176,10 @@ mod tests {
     fn quantiles_use_nearest_rank() {
         let samples: Vec<u64> = (1..=100).map(|k| k * 1000).collect();
         let stats = stage_stats(samples);
-        assert_eq!((stats.count, stats.p50_us, stats.p99_us, stats.max_us), (100, 50.0, 99.0, 100.0));
+        assert_eq!(
+            (stats.count, stats.p50_us, stats.p99_us, stats.max_us),
+            (100, 50.0, 99.0, 100.0)
+        );
         assert_eq!(stats.histogram.iter().map(|(_, n)| n).sum::<usize>(), 100);
         assert_eq!(stage_stats(Vec::new()).p50_us, 0.0);
     }

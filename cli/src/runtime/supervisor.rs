@@ -103,7 +103,9 @@ pub enum LaunchError {
         files: String,
     },
     /// An agent died and the restart budget is spent.
-    #[error("the agent of robot {robot} exited ({status}) and the restart budget ({budget}) is spent; see its error above")]
+    #[error(
+        "the agent of robot {robot} exited ({status}) and the restart budget ({budget}) is spent; see its error above"
+    )]
     AgentFailed {
         /// The robot.
         robot: usize,
@@ -158,14 +160,21 @@ pub async fn launch(
     if !leftovers.is_empty() {
         return Err(LaunchError::RunIdInUse {
             run: plan.run_id.to_string(),
-            files: leftovers.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "),
+            files: leftovers
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
         });
     }
     let mut report = LaunchReport::default();
     let outcome = supervise(plan, &binaries, on_event, &mut report).await;
     let removed = namespace
         .remove_all()
-        .map_err(|source| LaunchError::Cleanup { run: plan.run_id.to_string(), source })?;
+        .map_err(|source| LaunchError::Cleanup {
+            run: plan.run_id.to_string(),
+            source,
+        })?;
     report.cleaned_up = removed;
     outcome.map(|()| report)
 }
@@ -178,7 +187,10 @@ async fn supervise(
 ) -> Result<(), LaunchError> {
     let mut world = spawn_world(plan, binaries)?;
     let mut world_stdin = world.stdin.take();
-    let world_stdout = world.stdout.take().ok_or_else(|| std::io::Error::other("world stdout not piped"))?;
+    let world_stdout = world
+        .stdout
+        .take()
+        .ok_or_else(|| std::io::Error::other("world stdout not piped"))?;
     let mut lines = BufReader::new(world_stdout).lines();
 
     let (exit_tx, mut exit_rx) = mpsc::unbounded_channel::<(usize, ExitStatus)>();
@@ -344,11 +356,20 @@ fn spawn_agent(
             let _ = exits.send((robot, status));
         }
     });
-    Ok(AgentHandle { stdin, kill: Some(kill_tx), reaper: Some(reaper), restarts: 0 })
+    Ok(AgentHandle {
+        stdin,
+        kill: Some(kill_tx),
+        reaper: Some(reaper),
+        restarts: 0,
+    })
 }
 
 /// Closes every child's input, waits up to [`GRACE`] for them to exit, kills the rest, reaps all.
-async fn shutdown(world: &mut Child, world_stdin: &mut Option<ChildStdin>, agents: &mut [AgentHandle]) {
+async fn shutdown(
+    world: &mut Child,
+    world_stdin: &mut Option<ChildStdin>,
+    agents: &mut [AgentHandle],
+) {
     drop(world_stdin.take());
     for agent in agents.iter_mut() {
         drop(agent.stdin.take());
@@ -360,8 +381,13 @@ async fn shutdown(world: &mut Child, world_stdin: &mut Option<ChildStdin>, agent
     // Agents: their reaper tasks wait for the exit; give them the grace period, then kill.
     let deadline = tokio::time::Instant::now() + GRACE;
     for agent in agents.iter_mut() {
-        let Some(mut reaper) = agent.reaper.take() else { continue };
-        if tokio::time::timeout_at(deadline, &mut reaper).await.is_err() {
+        let Some(mut reaper) = agent.reaper.take() else {
+            continue;
+        };
+        if tokio::time::timeout_at(deadline, &mut reaper)
+            .await
+            .is_err()
+        {
             if let Some(kill) = agent.kill.take() {
                 let _ = kill.send(());
             }
@@ -377,10 +403,16 @@ mod tests {
 
     #[test]
     fn world_events_are_parsed_and_other_lines_ignored() {
-        assert_eq!(parse_event(r#"{"event":"agents_connected"}"#), Some(WorldEvent::AgentsConnected));
+        assert_eq!(
+            parse_event(r#"{"event":"agents_connected"}"#),
+            Some(WorldEvent::AgentsConnected)
+        );
         assert_eq!(
             parse_event(r#"{"event":"run_done","index":3,"log":"/o/runs/run-0003.json"}"#),
-            Some(WorldEvent::RunDone { index: 3, log: PathBuf::from("/o/runs/run-0003.json") })
+            Some(WorldEvent::RunDone {
+                index: 3,
+                log: PathBuf::from("/o/runs/run-0003.json")
+            })
         );
         assert_eq!(parse_event(r#"{"event":"listening","robots":3}"#), None);
         assert_eq!(parse_event("not json"), None);

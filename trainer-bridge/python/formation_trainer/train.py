@@ -174,8 +174,11 @@ def write_loss_curve(paths: dict[str, Path], history: list[dict]) -> None:
         for row in history:
             val = "" if math.isnan(row["val_loss"]) else f"{row['val_loss']:.8g}"
             writer.writerow([row["epoch"], f"{row['train_loss']:.8g}", val, f"{row['seconds']:.3f}"])
-    import matplotlib
-
+    try:
+        import matplotlib
+    except ImportError:  # the PNG is a convenience; the CSV holds the data
+        print("matplotlib is not installed: skipping the loss PNG (the CSV has the curve)", flush=True)
+        return
     matplotlib.use("Agg")
     from matplotlib import pyplot as plt
 

@@ -32,7 +32,9 @@ impl std::str::FromStr for Fault {
     type Err = FaultSpecError;
 
     fn from_str(spec: &str) -> Result<Fault, FaultSpecError> {
-        let error = || FaultSpecError { spec: spec.to_owned() };
+        let error = || FaultSpecError {
+            spec: spec.to_owned(),
+        };
         let (mode, value) = spec.split_once('=').ok_or_else(error)?;
         let n: u64 = value.trim().parse().map_err(|_| error())?;
         match mode.trim() {
@@ -80,7 +82,10 @@ mod tests {
     #[test]
     fn specs_parse_and_bad_ones_are_refused() {
         assert_eq!("crash-after=5".parse(), Ok(Fault::CrashAfter(5)));
-        assert_eq!("late-ms=80".parse(), Ok(Fault::LateBy(Duration::from_millis(80))));
+        assert_eq!(
+            "late-ms=80".parse(),
+            Ok(Fault::LateBy(Duration::from_millis(80)))
+        );
         for bad in ["crash", "crash-after=x", "explode=3", "nan-after=-1"] {
             assert!(bad.parse::<Fault>().is_err(), "{bad}");
         }
@@ -93,6 +98,9 @@ mod tests {
         assert_eq!(crash.action(3), FaultAction::Crash);
         assert_eq!(Fault::NanAfter(0).action(0), FaultAction::Nan);
         assert_eq!(Fault::HangAfter(1).action(0), FaultAction::None);
-        assert_eq!(Fault::LateBy(Duration::from_millis(5)).action(0), FaultAction::Delay(Duration::from_millis(5)));
+        assert_eq!(
+            Fault::LateBy(Duration::from_millis(5)).action(0),
+            FaultAction::Delay(Duration::from_millis(5))
+        );
     }
 }

@@ -65,7 +65,10 @@ const IDLE_CHECK: Duration = Duration::from_millis(250);
 fn main() -> ExitCode {
     let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
     let args = Args::parse();
     let who = format!("formation-agent (robot {})", args.robot);
     match run(&args) {
@@ -81,7 +84,8 @@ fn main() -> ExitCode {
 }
 
 fn load_policy(path: &Path) -> anyhow::Result<Box<dyn PolicyBackend>> {
-    let policy = OnnxPolicy::load(path).with_context(|| format!("loading model {}", path.display()))?;
+    let policy =
+        OnnxPolicy::load(path).with_context(|| format!("loading model {}", path.display()))?;
     Ok(Box::new(policy))
 }
 
@@ -100,9 +104,15 @@ fn run(args: &Args) -> anyhow::Result<String> {
             flag.store(true, Ordering::Relaxed);
         });
     }
-    let mut link =
-        IceoryxAgentLink::connect(&namespace, args.robot, Duration::from_millis(args.connect_timeout_ms))?;
-    link.publish_status(&AgentStatus::Hello { pid: std::process::id(), model_id })?;
+    let mut link = IceoryxAgentLink::connect(
+        &namespace,
+        args.robot,
+        Duration::from_millis(args.connect_timeout_ms),
+    )?;
+    link.publish_status(&AgentStatus::Hello {
+        pid: std::process::id(),
+        model_id,
+    })?;
     let mut robot = RobotAgent::new(args.model.clone(), policy, args.fault);
     loop {
         if stdin_closed.load(Ordering::Relaxed) {
@@ -174,18 +184,33 @@ impl RobotAgent {
             ControlRequest::BeginEpisode { generation, lidar } => {
                 self.generation = generation;
                 let status = match self.prepare(lidar) {
-                    Ok(model_id) => AgentStatus::Ready { generation, model_id },
-                    Err(e) => AgentStatus::Refused { generation, reason: format!("{e:#}") },
+                    Ok(model_id) => AgentStatus::Ready {
+                        generation,
+                        model_id,
+                    },
+                    Err(e) => AgentStatus::Refused {
+                        generation,
+                        reason: format!("{e:#}"),
+                    },
                 };
                 link.publish_status(&status)?;
             }
-            ControlRequest::SwapModel { request_id, at_tick, path } => {
+            ControlRequest::SwapModel {
+                request_id,
+                at_tick,
+                path,
+            } => {
                 let (tx, rx) = mpsc::channel();
                 let load_path = path.clone();
                 std::thread::spawn(move || {
                     let _ = tx.send(load_policy(&load_path));
                 });
-                if let Some(previous) = self.pending_swap.replace(PendingSwap { request_id, at_tick, path, loaded: rx }) {
+                if let Some(previous) = self.pending_swap.replace(PendingSwap {
+                    request_id,
+                    at_tick,
+                    path,
+                    loaded: rx,
+                }) {
                     link.publish_status(&AgentStatus::SwapRefused {
                         request_id: previous.request_id,
                         reason: format!("superseded by swap request {request_id}"),
@@ -207,8 +232,12 @@ impl RobotAgent {
             Some(policy) => policy,
             None => load_policy(&self.model_path)?,
         };
-        let agent = Agent::new(policy, lidar)
-            .with_context(|| format!("model {} does not fit this robot", self.model_path.display()))?;
+        let agent = Agent::new(policy, lidar).with_context(|| {
+            format!(
+                "model {} does not fit this robot",
+                self.model_path.display()
+            )
+        })?;
         let id = agent.model_id().to_owned();
         self.agent = Some((agent, lidar));
         Ok(id)
@@ -218,7 +247,9 @@ impl RobotAgent {
     /// for the load at that tick (so a lockstep run swaps at exactly that tick); `at_tick == 0`
     /// swaps as soon as the model is ready.
     fn apply_swap(&mut self, tick: u64, link: &mut dyn AgentLink) -> anyhow::Result<bool> {
-        let Some(pending) = &self.pending_swap else { return Ok(false) };
+        let Some(pending) = &self.pending_swap else {
+            return Ok(false);
+        };
         if tick < pending.at_tick {
             return Ok(false);
         }
@@ -227,8 +258,12 @@ impl RobotAgent {
         } else {
             pending.loaded.try_recv().ok()
         };
-        let Some(loaded) = loaded else { return Ok(false) };
-        let Some(pending) = self.pending_swap.take() else { return Ok(false) };
+        let Some(loaded) = loaded else {
+            return Ok(false);
+        };
+        let Some(pending) = self.pending_swap.take() else {
+            return Ok(false);
+        };
         let outcome = loaded.and_then(|policy| match &mut self.agent {
             Some((agent, _)) => agent.swap_policy(policy).map_err(anyhow::Error::from),
             None => anyhow::bail!("no episode has begun yet"),
@@ -236,8 +271,16 @@ impl RobotAgent {
         match outcome {
             Ok(()) => {
                 self.model_path = pending.path;
-                let model_id = self.agent.as_ref().map(|(a, _)| a.model_id().to_owned()).unwrap_or_default();
-                link.publish_status(&AgentStatus::SwapDone { request_id: pending.request_id, tick, model_id })?;
+                let model_id = self
+                    .agent
+                    .as_ref()
+                    .map(|(a, _)| a.model_id().to_owned())
+                    .unwrap_or_default();
+                link.publish_status(&AgentStatus::SwapDone {
+                    request_id: pending.request_id,
+                    tick,
+                    model_id,
+                })?;
                 Ok(true)
             }
             Err(e) => {
@@ -257,9 +300,14 @@ impl RobotAgent {
             return Ok(()); // a scan of an episode this agent is not (yet) part of
         }
         let swapped = self.apply_swap(scan.tick, link)?;
-        let Some((agent, _)) = &mut self.agent else { return Ok(()) };
+        let Some((agent, _)) = &mut self.agent else {
+            return Ok(());
+        };
         let started = Instant::now();
-        let perceived = scan.ranges().map_err(anyhow::Error::from).and_then(|r| Ok(agent.perceive(r)?));
+        let perceived = scan
+            .ranges()
+            .map_err(anyhow::Error::from)
+            .and_then(|r| Ok(agent.perceive(r)?));
         let perceived_at = Instant::now();
         let decided = perceived.and_then(|()| Ok(agent.decide(scan.heading, &scan.goal())?));
         let decided_at = Instant::now();
@@ -268,11 +316,18 @@ impl RobotAgent {
             occupancy_ns: nanos(perceived_at - started),
             inference_ns: nanos(decided_at - perceived_at),
         };
-        let mut status = if swapped { CmdStatus::MODEL_SWAPPED } else { CmdStatus::OK };
+        let mut status = if swapped {
+            CmdStatus::MODEL_SWAPPED
+        } else {
+            CmdStatus::OK
+        };
         let mut cmd = match decided {
             Ok(cmd) => cmd,
             Err(e) => {
-                tracing::warn!("tick {}: cannot decide ({e:#}); asking for a brake", scan.tick);
+                tracing::warn!(
+                    "tick {}: cannot decide ({e:#}); asking for a brake",
+                    scan.tick
+                );
                 status = status.with(CmdStatus::DECISION_FAILED);
                 WheelCmd::BRAKE
             }
@@ -281,11 +336,17 @@ impl RobotAgent {
             match fault.action(self.answered) {
                 FaultAction::None => {}
                 FaultAction::Crash => {
-                    eprintln!("formation-agent: injected crash after {} commands", self.answered);
+                    eprintln!(
+                        "formation-agent: injected crash after {} commands",
+                        self.answered
+                    );
                     std::process::abort();
                 }
                 FaultAction::Hang => {
-                    eprintln!("formation-agent: injected hang after {} commands", self.answered);
+                    eprintln!(
+                        "formation-agent: injected hang after {} commands",
+                        self.answered
+                    );
                     loop {
                         std::thread::sleep(Duration::from_secs(3600));
                     }
@@ -295,12 +356,22 @@ impl RobotAgent {
                     status = status.with(CmdStatus::FAULT_INJECTED);
                 }
                 FaultAction::Nan => {
-                    cmd = WheelCmd { left: f64::NAN, right: f64::NAN };
+                    cmd = WheelCmd {
+                        left: f64::NAN,
+                        right: f64::NAN,
+                    };
                     status = status.with(CmdStatus::FAULT_INJECTED);
                 }
             }
         }
-        let msg = CmdMsg::new(scan.generation, scan.tick, cmd, agent.model_id(), timings, status)?;
+        let msg = CmdMsg::new(
+            scan.generation,
+            scan.tick,
+            cmd,
+            agent.model_id(),
+            timings,
+            status,
+        )?;
         link.publish_command(&msg)?;
         self.answered += 1;
         Ok(())

@@ -62,7 +62,10 @@ pub enum TransportError {
 
 fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> TransportError {
     let action = action.into();
-    move |e| TransportError::Iceoryx { action, detail: format!("{e:?}") }
+    move |e| TransportError::Iceoryx {
+        action,
+        detail: format!("{e:?}"),
+    }
 }
 
 /// Why a wait ended.
@@ -81,7 +84,8 @@ pub trait AgentLink {
     /// Blocks until the world may have sent something, `timeout` passes, or a signal arrives.
     fn wait(&mut self, timeout: Duration) -> Result<Wake, TransportError>;
     /// Every control request since the last call, oldest first.
-    fn drain_control(&mut self, sink: &mut dyn FnMut(ControlRequest)) -> Result<(), TransportError>;
+    fn drain_control(&mut self, sink: &mut dyn FnMut(ControlRequest))
+    -> Result<(), TransportError>;
     /// The newest scan since the last call (older ones are dropped: only the newest matters).
     fn newest_scan(&mut self) -> Result<Option<ScanMsg>, TransportError>;
     /// Publishes a command and wakes the world.
@@ -117,7 +121,8 @@ impl IceoryxAgentLink {
         timeout: Duration,
     ) -> Result<Self, TransportError> {
         let config = namespace.iceoryx_config()?;
-        let name = NodeName::new(&agent_node_name(robot)).map_err(|e| iox("name the agent node")(&e))?;
+        let name =
+            NodeName::new(&agent_node_name(robot)).map_err(|e| iox("name the agent node")(&e))?;
         let node = NodeBuilder::new()
             .name(&name)
             .config(&config)
@@ -133,8 +138,16 @@ impl IceoryxAgentLink {
                         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
                         .create::<ipc::Service>()
                         .map_err(|e| iox("create the agent's wait set")(&e))?;
-                    let (scan, scan_wake, control, control_wake, cmd, cmd_wake, status, status_wake) =
-                        ports;
+                    let (
+                        scan,
+                        scan_wake,
+                        control,
+                        control_wake,
+                        cmd,
+                        cmd_wake,
+                        status,
+                        status_wake,
+                    ) = ports;
                     return Ok(IceoryxAgentLink {
                         node,
                         scan,
@@ -162,7 +175,11 @@ impl IceoryxAgentLink {
                     });
                 }
                 Err(OpenFailure::Taken { port, detail }) => {
-                    return Err(TransportError::PortTaken { robot, port, detail });
+                    return Err(TransportError::PortTaken {
+                        robot,
+                        port,
+                        detail,
+                    });
                 }
                 Err(OpenFailure::Fatal(e)) => return Err(e),
             }
@@ -175,7 +192,10 @@ enum OpenFailure {
     /// The world has not created the services yet.
     NotYet,
     /// A port this agent needs is held by someone else.
-    Taken { port: &'static str, detail: String },
+    Taken {
+        port: &'static str,
+        detail: String,
+    },
     Fatal(TransportError),
 }
 
@@ -190,11 +210,16 @@ type Ports = (
     Notifier<ipc::Service>,
 );
 
-fn try_open(node: &Node<ipc::Service>, namespace: &RunNamespace, robot: usize) -> Result<Ports, OpenFailure> {
+fn try_open(
+    node: &Node<ipc::Service>,
+    namespace: &RunNamespace,
+    robot: usize,
+) -> Result<Ports, OpenFailure> {
     let limits = ServiceLimits::ROBOT;
     let name = |channel| {
         let text = robot_service_name(namespace.run(), robot, channel);
-        ServiceName::new(&text).map_err(|e| OpenFailure::Fatal(iox(format!("name service {text}"))(&e)))
+        ServiceName::new(&text)
+            .map_err(|e| OpenFailure::Fatal(iox(format!("name service {text}"))(&e)))
     };
     let open_event = |channel| -> Result<_, OpenFailure> {
         let service = name(channel)?;
@@ -205,7 +230,12 @@ fn try_open(node: &Node<ipc::Service>, namespace: &RunNamespace, robot: usize) -
             .open()
             .map_err(|_| OpenFailure::NotYet)
     };
-    let taken = |port: &'static str| move |e: &dyn std::fmt::Debug| OpenFailure::Taken { port, detail: format!("{e:?}") };
+    let taken = |port: &'static str| {
+        move |e: &dyn std::fmt::Debug| OpenFailure::Taken {
+            port,
+            detail: format!("{e:?}"),
+        }
+    };
     macro_rules! open_pubsub {
         ($payload:ty, $channel:expr) => {
             node.service_builder(&name($channel)?)
@@ -222,25 +252,47 @@ fn try_open(node: &Node<ipc::Service>, namespace: &RunNamespace, robot: usize) -
     let cmd = open_pubsub!(CmdMsg, RobotChannel::Cmd);
     let status = open_pubsub!(StatusMsg, RobotChannel::Status);
     Ok((
-        scan.subscriber_builder().buffer_size(limits.subscriber_buffer).create().map_err(|e| taken("scan")(&e))?,
-        open_event(RobotChannel::Scan)?.listener_builder().create().map_err(|e| taken("scan event")(&e))?,
+        scan.subscriber_builder()
+            .buffer_size(limits.subscriber_buffer)
+            .create()
+            .map_err(|e| taken("scan")(&e))?,
+        open_event(RobotChannel::Scan)?
+            .listener_builder()
+            .create()
+            .map_err(|e| taken("scan event")(&e))?,
         control
             .subscriber_builder()
             .buffer_size(limits.subscriber_buffer)
             .create()
             .map_err(|e| taken("control")(&e))?,
-        open_event(RobotChannel::Control)?.listener_builder().create().map_err(|e| taken("control event")(&e))?,
-        cmd.publisher_builder().create().map_err(|e| taken("command")(&e))?,
-        open_event(RobotChannel::Cmd)?.notifier_builder().create().map_err(|e| taken("command event")(&e))?,
-        status.publisher_builder().create().map_err(|e| taken("status")(&e))?,
-        open_event(RobotChannel::Status)?.notifier_builder().create().map_err(|e| taken("status event")(&e))?,
+        open_event(RobotChannel::Control)?
+            .listener_builder()
+            .create()
+            .map_err(|e| taken("control event")(&e))?,
+        cmd.publisher_builder()
+            .create()
+            .map_err(|e| taken("command")(&e))?,
+        open_event(RobotChannel::Cmd)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| taken("command event")(&e))?,
+        status
+            .publisher_builder()
+            .create()
+            .map_err(|e| taken("status")(&e))?,
+        open_event(RobotChannel::Status)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| taken("status event")(&e))?,
     ))
 }
 
 impl AgentLink for IceoryxAgentLink {
     fn wait(&mut self, timeout: Duration) -> Result<Wake, TransportError> {
-        let scan_guard =
-            self.waitset.attach_notification(&self.scan_wake).map_err(|e| iox("attach the scan wake-up")(&e))?;
+        let scan_guard = self
+            .waitset
+            .attach_notification(&self.scan_wake)
+            .map_err(|e| iox("attach the scan wake-up")(&e))?;
         let control_guard = self
             .waitset
             .attach_notification(&self.control_wake)
@@ -266,8 +318,15 @@ impl AgentLink for IceoryxAgentLink {
         })
     }
 
-    fn drain_control(&mut self, sink: &mut dyn FnMut(ControlRequest)) -> Result<(), TransportError> {
-        while let Some(sample) = self.control.receive().map_err(|e| iox("receive a control request")(&e))? {
+    fn drain_control(
+        &mut self,
+        sink: &mut dyn FnMut(ControlRequest),
+    ) -> Result<(), TransportError> {
+        while let Some(sample) = self
+            .control
+            .receive()
+            .map_err(|e| iox("receive a control request")(&e))?
+        {
             match sample.payload().decode() {
                 Ok(request) => sink(request),
                 Err(e) => tracing::warn!("ignoring a malformed control request: {e}"),
@@ -285,14 +344,18 @@ impl AgentLink for IceoryxAgentLink {
     }
 
     fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), TransportError> {
-        self.cmd.send_copy(*msg).map_err(|e| iox("send a command")(&e))?;
+        self.cmd
+            .send_copy(*msg)
+            .map_err(|e| iox("send a command")(&e))?;
         let _ = self.cmd_wake.notify();
         Ok(())
     }
 
     fn publish_status(&mut self, status: &AgentStatus) -> Result<(), TransportError> {
         let msg = StatusMsg::encode(status)?;
-        self.status.send_copy(msg).map_err(|e| iox("send a status")(&e))?;
+        self.status
+            .send_copy(msg)
+            .map_err(|e| iox("send a status")(&e))?;
         let _ = self.status_wake.notify();
         Ok(())
     }
@@ -301,7 +364,10 @@ impl AgentLink for IceoryxAgentLink {
         let mut alive = false;
         Node::<ipc::Service>::list(self.node.config(), |state| {
             if let NodeState::Alive(view) = &state
-                && view.details().as_ref().is_some_and(|d| d.name().as_str() == WORLD_NODE_NAME)
+                && view
+                    .details()
+                    .as_ref()
+                    .is_some_and(|d| d.name().as_str() == WORLD_NODE_NAME)
             {
                 alive = true;
                 return CallbackProgression::Stop;

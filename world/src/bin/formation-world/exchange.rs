@@ -14,10 +14,10 @@ use std::time::{Duration, Instant};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use formation_proto::{LidarSpec, WheelCmd};
 use formation_proto::wire::{
     AgentStatus, CmdMsg, CmdStatus, ControlRequest, RobotTiming, ScanMsg, TickOutcome,
 };
+use formation_proto::{LidarSpec, WheelCmd};
 use formation_world::episode::{Controller, ControllerError, Observation};
 
 use crate::transport::{TransportError, WorldLink};
@@ -149,11 +149,7 @@ pub enum StopReason {
 
 impl<'l> AgentsController<'l> {
     /// A controller over `link`; no agent is known yet.
-    pub fn new(
-        link: &'l mut dyn WorldLink,
-        settings: ExchangeSettings,
-        lidar: LidarSpec,
-    ) -> Self {
+    pub fn new(link: &'l mut dyn WorldLink, settings: ExchangeSettings, lidar: LidarSpec) -> Self {
         let n = link.n_robots();
         AgentsController {
             link,
@@ -244,7 +240,9 @@ impl<'l> AgentsController<'l> {
 
     /// The per-robot timing logs of the episode that just ended.
     pub fn take_timings(&mut self) -> Vec<RobotTiming> {
-        let fresh = (0..self.states.len()).map(|_| RobotTiming::default()).collect();
+        let fresh = (0..self.states.len())
+            .map(|_| RobotTiming::default())
+            .collect();
         std::mem::replace(&mut self.timings, fresh)
     }
 
@@ -259,12 +257,19 @@ impl<'l> AgentsController<'l> {
     }
 
     fn robots_in(&self, state: AgentState) -> Vec<usize> {
-        (0..self.states.len()).filter(|&i| self.states[i] == state).collect()
+        (0..self.states.len())
+            .filter(|&i| self.states[i] == state)
+            .collect()
     }
 
     fn send_begin(&mut self, robot: usize) -> Result<(), ControllerError> {
-        let request = ControlRequest::BeginEpisode { generation: self.generation, lidar: self.lidar };
-        self.link.send_control(robot, &request).map_err(transport_error)
+        let request = ControlRequest::BeginEpisode {
+            generation: self.generation,
+            lidar: self.lidar,
+        };
+        self.link
+            .send_control(robot, &request)
+            .map_err(transport_error)
     }
 
     fn wait(&mut self, timeout: Duration) -> Result<(), ControllerError> {
@@ -281,18 +286,24 @@ impl<'l> AgentsController<'l> {
     fn poll(&mut self) -> Result<(), ControllerError> {
         if self.settings.stop.load(Ordering::Relaxed) {
             self.stopped = Some(StopReason::ParentGone);
-            return Err(ControllerError::new("stopped: the launcher closed the world's input"));
+            return Err(ControllerError::new(
+                "stopped: the launcher closed the world's input",
+            ));
         }
         for robot in 0..self.states.len() {
             let mut statuses = Vec::new();
-            self.link.drain_statuses(robot, &mut |s| statuses.push(s)).map_err(transport_error)?;
+            self.link
+                .drain_statuses(robot, &mut |s| statuses.push(s))
+                .map_err(transport_error)?;
             for status in statuses {
                 self.on_status(robot, status)?;
             }
             let newest = &mut self.newest[robot];
             self.link
                 .drain_commands(robot, &mut |msg, at| {
-                    if newest.is_none_or(|n| (msg.generation, msg.tick) >= (n.msg.generation, n.msg.tick)) {
+                    if newest.is_none_or(|n| {
+                        (msg.generation, msg.tick) >= (n.msg.generation, n.msg.tick)
+                    }) {
                         *newest = Some(Arrival { msg, at });
                     }
                 })
@@ -321,7 +332,10 @@ impl<'l> AgentsController<'l> {
                     self.send_begin(robot)?;
                 }
             }
-            AgentStatus::Ready { generation, model_id } if generation == self.generation => {
+            AgentStatus::Ready {
+                generation,
+                model_id,
+            } if generation == self.generation => {
                 self.model_ids[robot] = model_id;
                 self.states[robot] = AgentState::Live;
             }
@@ -332,7 +346,11 @@ impl<'l> AgentsController<'l> {
                 )));
             }
             AgentStatus::Refused { .. } => {}
-            AgentStatus::SwapDone { request_id, tick, model_id } => {
+            AgentStatus::SwapDone {
+                request_id,
+                tick,
+                model_id,
+            } => {
                 tracing::info!("robot {robot}: swap {request_id} done at tick {tick}: {model_id}");
                 self.model_ids[robot] = model_id;
             }
@@ -357,19 +375,34 @@ fn transport_error(e: TransportError) -> ControllerError {
 }
 
 impl Controller for AgentsController<'_> {
-    fn commands(&mut self, obs: &Observation<'_>, out: &mut [WheelCmd]) -> Result<(), ControllerError> {
+    fn commands(
+        &mut self,
+        obs: &Observation<'_>,
+        out: &mut [WheelCmd],
+    ) -> Result<(), ControllerError> {
         let entered = Instant::now();
         let schedule_start = *self.schedule_start.get_or_insert(entered);
         for (robot, scan) in obs.scans.iter().enumerate() {
-            let msg = ScanMsg::new(self.generation, obs.tick, obs.time, obs.poses[robot].theta, &obs.goal, scan)
-                .map_err(|e| ControllerError::new(e.to_string()))?;
-            self.link.publish_scan(robot, &msg).map_err(transport_error)?;
+            let msg = ScanMsg::new(
+                self.generation,
+                obs.tick,
+                obs.time,
+                obs.poses[robot].theta,
+                &obs.goal,
+                scan,
+            )
+            .map_err(|e| ControllerError::new(e.to_string()))?;
+            self.link
+                .publish_scan(robot, &msg)
+                .map_err(transport_error)?;
             self.published_at[robot] = Instant::now();
             self.published_wall_ns[robot] = msg.published_wall_ns;
         }
         let deadline = match self.settings.clock {
             ClockMode::Lockstep => entered + self.settings.command_timeout,
-            ClockMode::Realtime => schedule_start + self.dt * u32::try_from(obs.tick + 1).unwrap_or(u32::MAX),
+            ClockMode::Realtime => {
+                schedule_start + self.dt * u32::try_from(obs.tick + 1).unwrap_or(u32::MAX)
+            }
         };
         loop {
             self.poll()?;
@@ -399,7 +432,10 @@ impl Controller for AgentsController<'_> {
                 (AgentState::Live, TickOutcome::Missing | TickOutcome::Stale)
                     if self.settings.clock == ClockMode::Lockstep =>
                 {
-                    tracing::warn!("robot {robot}: no command for tick {} in time; braking it", obs.tick);
+                    tracing::warn!(
+                        "robot {robot}: no command for tick {} in time; braking it",
+                        obs.tick
+                    );
                     self.states[robot] = AgentState::Lagging;
                 }
                 (AgentState::Lagging, TickOutcome::Fresh) => self.states[robot] = AgentState::Live,
@@ -435,11 +471,26 @@ mod tests {
         let ok = arrival(2, 5, 0.3, CmdStatus::OK, now);
         assert_eq!(
             choose_command(ClockMode::Lockstep, Some(&ok), 2, 5, now, stale),
-            (WheelCmd { left: 0.3, right: 0.1 }, TickOutcome::Fresh)
+            (
+                WheelCmd {
+                    left: 0.3,
+                    right: 0.1
+                },
+                TickOutcome::Fresh
+            )
         );
-        assert_eq!(choose_command(ClockMode::Lockstep, Some(&ok), 2, 6, now, stale).1, TickOutcome::Stale);
-        assert_eq!(choose_command(ClockMode::Lockstep, Some(&ok), 3, 5, now, stale).1, TickOutcome::Missing);
-        assert_eq!(choose_command(ClockMode::Lockstep, None, 2, 5, now, stale).1, TickOutcome::Missing);
+        assert_eq!(
+            choose_command(ClockMode::Lockstep, Some(&ok), 2, 6, now, stale).1,
+            TickOutcome::Stale
+        );
+        assert_eq!(
+            choose_command(ClockMode::Lockstep, Some(&ok), 3, 5, now, stale).1,
+            TickOutcome::Missing
+        );
+        assert_eq!(
+            choose_command(ClockMode::Lockstep, None, 2, 5, now, stale).1,
+            TickOutcome::Missing
+        );
     }
 
     #[test]
@@ -447,11 +498,23 @@ mod tests {
         let then = Instant::now();
         let stale = Duration::from_millis(150);
         let older_tick = arrival(1, 3, 0.2, CmdStatus::OK, then);
-        let (cmd, outcome) =
-            choose_command(ClockMode::Realtime, Some(&older_tick), 1, 5, then + Duration::from_millis(100), stale);
+        let (cmd, outcome) = choose_command(
+            ClockMode::Realtime,
+            Some(&older_tick),
+            1,
+            5,
+            then + Duration::from_millis(100),
+            stale,
+        );
         assert_eq!((cmd.left, outcome), (0.2, TickOutcome::Fresh));
-        let (cmd, outcome) =
-            choose_command(ClockMode::Realtime, Some(&older_tick), 1, 5, then + Duration::from_millis(200), stale);
+        let (cmd, outcome) = choose_command(
+            ClockMode::Realtime,
+            Some(&older_tick),
+            1,
+            5,
+            then + Duration::from_millis(200),
+            stale,
+        );
         assert_eq!((cmd, outcome), (WheelCmd::BRAKE, TickOutcome::Stale));
     }
 

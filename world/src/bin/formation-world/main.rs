@@ -67,7 +67,10 @@ struct Args {
 fn main() -> ExitCode {
     let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
     let args = Args::parse();
     match run(&args) {
         Ok(None) => ExitCode::SUCCESS,
@@ -126,13 +129,17 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
 
 /// Reads the run specs; all must have the same team size.
 fn read_run_specs(path: &Path) -> anyhow::Result<Vec<RunSpec>> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading run specs {}", path.display()))?;
-    let specs: Vec<RunSpec> =
-        serde_json::from_slice(&bytes).with_context(|| format!("parsing run specs {}", path.display()))?;
+    let bytes =
+        std::fs::read(path).with_context(|| format!("reading run specs {}", path.display()))?;
+    let specs: Vec<RunSpec> = serde_json::from_slice(&bytes)
+        .with_context(|| format!("parsing run specs {}", path.display()))?;
     let Some(first) = specs.first() else {
         anyhow::bail!("{} holds no runs", path.display());
     };
-    if let Some(other) = specs.iter().find(|s| s.n_robots != first.n_robots || s.n_robots == 0) {
+    if let Some(other) = specs
+        .iter()
+        .find(|s| s.n_robots != first.n_robots || s.n_robots == 0)
+    {
         anyhow::bail!(
             "{}: run {} has {} robots but run {} has {}; one world serves one team size",
             path.display(),
@@ -151,10 +158,16 @@ fn play(args: &Args, specs: &[RunSpec], agents: &mut AgentsController<'_>) -> an
     let metrics_config = MetricsConfig::default();
     for spec in specs {
         let index = spec.index;
-        agents.begin_episode(spec.world.dt, spec.world.lidar).with_context(|| format!("run {index}"))?;
+        agents
+            .begin_episode(spec.world.dt, spec.world.lidar)
+            .with_context(|| format!("run {index}"))?;
         let trajectory =
             run_episode(spec, agents, &mut |_, _| {}).with_context(|| format!("run {index}"))?;
-        let timing = TimingLog { index, clock: args.clock.as_str().into(), robots: agents.take_timings() };
+        let timing = TimingLog {
+            index,
+            clock: args.clock.as_str().into(),
+            robots: agents.take_timings(),
+        };
         let log = RunLog {
             index,
             metrics: run_metrics(&trajectory, &metrics_config),
@@ -165,7 +178,10 @@ fn play(args: &Args, specs: &[RunSpec], agents: &mut AgentsController<'_>) -> an
         let (log_path, timing_path) = log_paths(&args.out, index);
         write_atomic(&log_path, &serde_json::to_vec(&log)?)?;
         write_atomic(&timing_path, &serde_json::to_vec(&timing)?)?;
-        emit(&Event::RunDone { index, log: &log_path });
+        emit(&Event::RunDone {
+            index,
+            log: &log_path,
+        });
     }
     Ok(())
 }

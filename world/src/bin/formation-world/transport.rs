@@ -42,7 +42,10 @@ pub enum TransportError {
 
 fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> TransportError {
     let action = action.into();
-    move |e| TransportError::Iceoryx { action, detail: format!("{e:?}") }
+    move |e| TransportError::Iceoryx {
+        action,
+        detail: format!("{e:?}"),
+    }
 }
 
 /// What the world needs from a transport: per-robot channels to and from the agents.
@@ -52,7 +55,11 @@ pub trait WorldLink {
     /// Publishes robot `robot`'s scan and wakes its agent.
     fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), TransportError>;
     /// Sends a control request to robot `robot`'s agent and wakes it.
-    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> Result<(), TransportError>;
+    fn send_control(
+        &mut self,
+        robot: usize,
+        request: &ControlRequest,
+    ) -> Result<(), TransportError>;
     /// Blocks until an agent may have sent something, or `timeout` passes.
     fn wait(&mut self, timeout: Duration) -> Result<(), TransportError>;
     /// Hands every command robot `robot`'s agent sent since the last call to `sink`, oldest first.
@@ -109,14 +116,20 @@ impl IceoryxWorldLink {
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<ipc::Service>()
             .map_err(|e| iox("create the world's wait set")(&e))?;
-        Ok(IceoryxWorldLink { node, robots, waitset })
+        Ok(IceoryxWorldLink {
+            node,
+            robots,
+            waitset,
+        })
     }
 
     fn ports(&self, robot: usize) -> Result<&RobotPorts, TransportError> {
-        self.robots.get(robot).ok_or_else(|| TransportError::Iceoryx {
-            action: format!("reach robot {robot}"),
-            detail: format!("the run has {} robots", self.robots.len()),
-        })
+        self.robots
+            .get(robot)
+            .ok_or_else(|| TransportError::Iceoryx {
+                action: format!("reach robot {robot}"),
+                detail: format!("the run has {} robots", self.robots.len()),
+            })
     }
 }
 
@@ -167,12 +180,18 @@ fn create_robot_ports(
     let status = pubsub_service!(StatusMsg, RobotChannel::Status);
     let what = |port: &str| format!("create the world's {port} port of robot {robot}");
     Ok(RobotPorts {
-        scan: scan.publisher_builder().create().map_err(|e| iox(what("scan"))(&e))?,
+        scan: scan
+            .publisher_builder()
+            .create()
+            .map_err(|e| iox(what("scan"))(&e))?,
         scan_wake: event(RobotChannel::Scan)?
             .notifier_builder()
             .create()
             .map_err(|e| iox(what("scan event"))(&e))?,
-        control: control.publisher_builder().create().map_err(|e| iox(what("control"))(&e))?,
+        control: control
+            .publisher_builder()
+            .create()
+            .map_err(|e| iox(what("control"))(&e))?,
         control_wake: event(RobotChannel::Control)?
             .notifier_builder()
             .create()
@@ -205,13 +224,20 @@ impl WorldLink for IceoryxWorldLink {
 
     fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), TransportError> {
         let ports = self.ports(robot)?;
-        ports.scan.send_copy(*msg).map_err(|e| iox(format!("send robot {robot}'s scan"))(&e))?;
+        ports
+            .scan
+            .send_copy(*msg)
+            .map_err(|e| iox(format!("send robot {robot}'s scan"))(&e))?;
         // A wake-up nobody listens to (agent restarting) is not an error.
         let _ = ports.scan_wake.notify();
         Ok(())
     }
 
-    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> Result<(), TransportError> {
+    fn send_control(
+        &mut self,
+        robot: usize,
+        request: &ControlRequest,
+    ) -> Result<(), TransportError> {
         let msg = ControlMsg::encode(request)?;
         let ports = self.ports(robot)?;
         ports
@@ -257,8 +283,10 @@ impl WorldLink for IceoryxWorldLink {
         sink: &mut dyn FnMut(CmdMsg, Instant),
     ) -> Result<(), TransportError> {
         let ports = self.ports(robot)?;
-        while let Some(sample) =
-            ports.cmd.receive().map_err(|e| iox(format!("receive robot {robot}'s command"))(&e))?
+        while let Some(sample) = ports
+            .cmd
+            .receive()
+            .map_err(|e| iox(format!("receive robot {robot}'s command"))(&e))?
         {
             sink(*sample.payload(), Instant::now());
         }
@@ -271,8 +299,10 @@ impl WorldLink for IceoryxWorldLink {
         sink: &mut dyn FnMut(AgentStatus),
     ) -> Result<(), TransportError> {
         let ports = self.ports(robot)?;
-        while let Some(sample) =
-            ports.status.receive().map_err(|e| iox(format!("receive robot {robot}'s status"))(&e))?
+        while let Some(sample) = ports
+            .status
+            .receive()
+            .map_err(|e| iox(format!("receive robot {robot}'s status"))(&e))?
         {
             match sample.payload().decode() {
                 Ok(status) => sink(status),

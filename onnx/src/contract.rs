@@ -1,0 +1,455 @@
+//! The formation-policy/1 model contract, as pure checks over plain data.
+//!
+//! The Python exporter writes it and [`crate::OnnxPolicy::load`] enforces it:
+//!
+//! - inputs exactly `occupancy` f32 `[B, 1, S, S]` and `aux` f32 `[B, 2]` (`delta_phi`, `d*`);
+//! - one output, `wheels` f32 `[B, 2]` (left, right) m/s at `v_train`; `B` dynamic;
+//! - string metadata (`formation.*` keys, see [`keys`]) with the occupancy rendering, the LIDAR
+//!   and `v_train`, where `S` equals `formation.occupancy.size_px`.
+//!
+//! Nothing here touches ONNX Runtime: the session's inputs and outputs are first described as
+//! [`TensorSignature`]s, so every rule is unit-tested without a model file.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use formation_proto::{BeyondWindow, OccupancySpec};
+
+/// The value of [`keys::FORMAT`] this crate understands.
+pub const MODEL_FORMAT: &str = "formation-policy/1";
+/// Name of the image input.
+pub const OCCUPANCY_INPUT: &str = "occupancy";
+/// Name of the `(delta_phi, d*)` input.
+pub const AUX_INPUT: &str = "aux";
+/// Name of the wheel-speed output.
+pub const WHEELS_OUTPUT: &str = "wheels";
+
+/// ONNX `metadata_props` keys of the contract (all values are strings).
+pub mod keys {
+    /// Contract version, [`super::MODEL_FORMAT`].
+    pub const FORMAT: &str = "formation.format";
+    /// Image side in cells (`S`).
+    pub const SIZE_PX: &str = "formation.occupancy.size_px";
+    /// Cell edge length [m].
+    pub const RESOLUTION_M: &str = "formation.occupancy.resolution_m";
+    /// `drop` or `border`.
+    pub const BEYOND: &str = "formation.occupancy.beyond";
+    /// LIDAR beams the model was trained with.
+    pub const BEAMS: &str = "formation.lidar.beams";
+    /// LIDAR maximum range [m].
+    pub const MAX_RANGE: &str = "formation.lidar.max_range";
+    /// Training speed [m/s]: outputs are wheel speeds at this speed.
+    pub const V_TRAIN: &str = "formation.v_train";
+    /// Id of the dataset the model was trained on.
+    pub const DATASET_ID: &str = "formation.dataset_id";
+}
+
+/// What a model's metadata says about how it was trained, parsed and checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelMetadata {
+    /// The occupancy rendering the model was trained on.
+    pub occupancy: OccupancySpec,
+    /// LIDAR beams of the training sensor.
+    pub beams: usize,
+    /// LIDAR maximum range of the training sensor [m].
+    pub max_range: f64,
+    /// Training speed [m/s]; deployed commands are scaled by `v* / v_train`.
+    pub v_train: f64,
+    /// Id of the training dataset.
+    pub dataset_id: String,
+    /// Every other metadata entry (training figures, DAgger iteration, creator, ...), by full key.
+    pub extra: BTreeMap<String, String>,
+}
+
+/// Element type of a model input or output, as far as the contract cares.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ElementKind {
+    /// A 32-bit float tensor, the only kind the contract accepts.
+    F32,
+    /// A tensor of another element type (its name, for the message).
+    OtherTensor(String),
+    /// Not a tensor at all (sequence, map, optional).
+    NotTensor(String),
+}
+
+/// One model input or output: name, element kind and dimensions (`-1` = dynamic).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TensorSignature {
+    /// Input or output name.
+    pub name: String,
+    /// Element type.
+    pub element: ElementKind,
+    /// Dimensions; `-1` for a dynamic (symbolic) one.
+    pub dims: Vec<i64>,
+}
+
+/// How a model breaks the contract: expected versus found.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ContractViolation {
+    /// The model's inputs are not exactly `occupancy` and `aux`.
+    #[error("inputs are [{}], expected exactly [occupancy, aux]", .found.join(", "))]
+    InputNames {
+        /// Input names found.
+        found: Vec<String>,
+    },
+    /// The model's outputs are not exactly `wheels`.
+    #[error("outputs are [{}], expected exactly [wheels]", .found.join(", "))]
+    OutputNames {
+        /// Output names found.
+        found: Vec<String>,
+    },
+    /// An input or output is not an f32 tensor.
+    #[error("`{name}` is {found}, expected a float32 tensor")]
+    ElementType {
+        /// Input or output name.
+        name: String,
+        /// What it is.
+        found: String,
+    },
+    /// An input or output has the wrong shape.
+    #[error("`{name}` has shape {}, expected {expected}", DimsDisplay(.found))]
+    Shape {
+        /// Input or output name.
+        name: String,
+        /// The expected shape, e.g. `[batch, 1, 50, 50]`.
+        expected: String,
+        /// Dimensions found (`-1` = dynamic).
+        found: Vec<i64>,
+    },
+    /// A required metadata key is absent.
+    #[error("metadata key `{key}` is missing")]
+    MissingMetadata {
+        /// The key.
+        key: &'static str,
+    },
+    /// A metadata value does not parse or is out of range.
+    #[error("metadata `{key}` = {value:?} is not {expected}")]
+    BadMetadata {
+        /// The key.
+        key: &'static str,
+        /// Its value.
+        value: String,
+        /// What it should be.
+        expected: &'static str,
+    },
+}
+
+/// Formats dimensions with `batch` for dynamic ones: `[batch, 1, 40, 40]`.
+struct DimsDisplay<'a>(&'a [i64]);
+
+impl fmt::Display for DimsDisplay<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("[")?;
+        for (i, d) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str(", ")?;
+            }
+            if *d < 0 { f.write_str("batch")? } else { write!(f, "{d}")? }
+        }
+        f.write_str("]")
+    }
+}
+
+/// Parses and checks the `formation.*` metadata. Keys other than the required ones go to
+/// [`ModelMetadata::extra`].
+pub fn parse_metadata(entries: &BTreeMap<String, String>) -> Result<ModelMetadata, ContractViolation> {
+    let format = required(entries, keys::FORMAT)?;
+    if format != MODEL_FORMAT {
+        return Err(ContractViolation::BadMetadata {
+            key: keys::FORMAT,
+            value: format.to_owned(),
+            expected: "\"formation-policy/1\"",
+        });
+    }
+    let size_px: usize = parse_positive_int(entries, keys::SIZE_PX)?;
+    let resolution_m = parse_positive_real(entries, keys::RESOLUTION_M)?;
+    let beyond_text = required(entries, keys::BEYOND)?;
+    let beyond = BeyondWindow::parse(beyond_text).ok_or_else(|| ContractViolation::BadMetadata {
+        key: keys::BEYOND,
+        value: beyond_text.to_owned(),
+        expected: "\"drop\" or \"border\"",
+    })?;
+    let beams = parse_positive_int(entries, keys::BEAMS)?;
+    let max_range = parse_positive_real(entries, keys::MAX_RANGE)?;
+    let v_train = parse_positive_real(entries, keys::V_TRAIN)?;
+    let dataset_id = required(entries, keys::DATASET_ID)?.to_owned();
+
+    const PARSED: [&str; 8] = [
+        keys::FORMAT,
+        keys::SIZE_PX,
+        keys::RESOLUTION_M,
+        keys::BEYOND,
+        keys::BEAMS,
+        keys::MAX_RANGE,
+        keys::V_TRAIN,
+        keys::DATASET_ID,
+    ];
+    let extra = entries
+        .iter()
+        .filter(|(key, _)| !PARSED.contains(&key.as_str()))
+        .map(|(key, value)| (key.clone(), value.clone()))
+        .collect();
+    Ok(ModelMetadata {
+        occupancy: OccupancySpec { size_px, resolution_m, beyond },
+        beams,
+        max_range,
+        v_train,
+        dataset_id,
+        extra,
+    })
+}
+
+fn required<'a>(entries: &'a BTreeMap<String, String>, key: &'static str) -> Result<&'a str, ContractViolation> {
+    entries.get(key).map(String::as_str).ok_or(ContractViolation::MissingMetadata { key })
+}
+
+fn parse_positive_int(entries: &BTreeMap<String, String>, key: &'static str) -> Result<usize, ContractViolation> {
+    let text = required(entries, key)?;
+    match text.trim().parse::<usize>() {
+        Ok(n) if n > 0 => Ok(n),
+        _ => Err(ContractViolation::BadMetadata {
+            key,
+            value: text.to_owned(),
+            expected: "a positive integer",
+        }),
+    }
+}
+
+fn parse_positive_real(entries: &BTreeMap<String, String>, key: &'static str) -> Result<f64, ContractViolation> {
+    let text = required(entries, key)?;
+    match text.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(ContractViolation::BadMetadata {
+            key,
+            value: text.to_owned(),
+            expected: "a finite number > 0",
+        }),
+    }
+}
+
+/// One dimension of an expected shape.
+#[derive(Debug, Clone, Copy)]
+enum Dim {
+    /// The batch dimension: must be dynamic.
+    Batch,
+    /// A fixed size.
+    Exact(i64),
+}
+
+/// Checks the model's inputs and outputs against the contract for `size_px x size_px` images.
+///
+/// Input order does not matter (inputs are bound by name); names, element types and shapes do.
+pub fn check_signature(
+    inputs: &[TensorSignature],
+    outputs: &[TensorSignature],
+    size_px: usize,
+) -> Result<(), ContractViolation> {
+    let names = |list: &[TensorSignature]| list.iter().map(|t| t.name.clone()).collect::<Vec<_>>();
+    let find = |name: &str| inputs.iter().find(|t| t.name == name);
+    let (Some(occupancy), Some(aux), 2) = (find(OCCUPANCY_INPUT), find(AUX_INPUT), inputs.len()) else {
+        return Err(ContractViolation::InputNames { found: names(inputs) });
+    };
+    let [wheels] = outputs else {
+        return Err(ContractViolation::OutputNames { found: names(outputs) });
+    };
+    if wheels.name != WHEELS_OUTPUT {
+        return Err(ContractViolation::OutputNames { found: names(outputs) });
+    }
+    let side = i64::try_from(size_px).unwrap_or(i64::MAX);
+    check_tensor(occupancy, &[Dim::Batch, Dim::Exact(1), Dim::Exact(side), Dim::Exact(side)])?;
+    check_tensor(aux, &[Dim::Batch, Dim::Exact(2)])?;
+    check_tensor(wheels, &[Dim::Batch, Dim::Exact(2)])
+}
+
+fn check_tensor(tensor: &TensorSignature, expected: &[Dim]) -> Result<(), ContractViolation> {
+    match &tensor.element {
+        ElementKind::F32 => {}
+        ElementKind::OtherTensor(ty) => {
+            return Err(ContractViolation::ElementType {
+                name: tensor.name.clone(),
+                found: format!("a {ty} tensor"),
+            });
+        }
+        ElementKind::NotTensor(kind) => {
+            return Err(ContractViolation::ElementType { name: tensor.name.clone(), found: kind.clone() });
+        }
+    }
+    let matches = tensor.dims.len() == expected.len()
+        && tensor.dims.iter().zip(expected).all(|(&found, want)| match want {
+            Dim::Batch => found < 0,
+            Dim::Exact(n) => found == *n,
+        });
+    if matches {
+        return Ok(());
+    }
+    let expected_text = expected
+        .iter()
+        .map(|d| match d {
+            Dim::Batch => "batch (dynamic)".to_owned(),
+            Dim::Exact(n) => n.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    Err(ContractViolation::Shape {
+        name: tensor.name.clone(),
+        expected: format!("[{expected_text}]"),
+        found: tensor.dims.clone(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn paper_metadata() -> BTreeMap<String, String> {
+        [
+            (keys::FORMAT, "formation-policy/1"),
+            (keys::SIZE_PX, "50"),
+            (keys::RESOLUTION_M, "0.1"),
+            (keys::BEYOND, "border"),
+            (keys::BEAMS, "900"),
+            (keys::MAX_RANGE, "10"),
+            (keys::V_TRAIN, "0.7"),
+            (keys::DATASET_ID, "ds-1234"),
+            ("formation.train.epochs", "40"),
+            ("formation.dagger.iteration", "2"),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_owned(), v.to_owned()))
+        .collect()
+    }
+
+    fn tensor(name: &str, dims: &[i64]) -> TensorSignature {
+        TensorSignature { name: name.to_owned(), element: ElementKind::F32, dims: dims.to_vec() }
+    }
+
+    fn paper_inputs() -> Vec<TensorSignature> {
+        vec![tensor("occupancy", &[-1, 1, 50, 50]), tensor("aux", &[-1, 2])]
+    }
+
+    fn paper_outputs() -> Vec<TensorSignature> {
+        vec![tensor("wheels", &[-1, 2])]
+    }
+
+    #[test]
+    fn paper_metadata_parses_with_extras_kept() {
+        let meta = parse_metadata(&paper_metadata()).expect("valid metadata");
+        assert_eq!(
+            meta.occupancy,
+            OccupancySpec { size_px: 50, resolution_m: 0.1, beyond: BeyondWindow::Border }
+        );
+        assert_eq!((meta.beams, meta.max_range, meta.v_train), (900, 10.0, 0.7));
+        assert_eq!(meta.dataset_id, "ds-1234");
+        let extra: Vec<&str> = meta.extra.keys().map(String::as_str).collect();
+        assert_eq!(extra, ["formation.dagger.iteration", "formation.train.epochs"]);
+    }
+
+    #[test]
+    fn each_missing_required_key_is_named() {
+        for key in [
+            keys::FORMAT,
+            keys::SIZE_PX,
+            keys::RESOLUTION_M,
+            keys::BEYOND,
+            keys::BEAMS,
+            keys::MAX_RANGE,
+            keys::V_TRAIN,
+            keys::DATASET_ID,
+        ] {
+            let mut entries = paper_metadata();
+            entries.remove(key);
+            assert_eq!(parse_metadata(&entries), Err(ContractViolation::MissingMetadata { key }));
+        }
+    }
+
+    #[test]
+    fn bad_metadata_values_are_refused_with_the_value() {
+        for (key, value) in [
+            (keys::FORMAT, "formation-policy/2"),
+            (keys::SIZE_PX, "0"),
+            (keys::SIZE_PX, "fifty"),
+            (keys::RESOLUTION_M, "-0.1"),
+            (keys::BEYOND, "clip"),
+            (keys::BEAMS, "9.5"),
+            (keys::MAX_RANGE, "inf"),
+            (keys::V_TRAIN, "NaN"),
+        ] {
+            let mut entries = paper_metadata();
+            entries.insert(key.to_owned(), value.to_owned());
+            match parse_metadata(&entries) {
+                Err(ContractViolation::BadMetadata { key: k, value: v, .. }) => {
+                    assert_eq!((k, v.as_str()), (key, value));
+                }
+                other => panic!("{key} = {value}: expected BadMetadata, got {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn paper_signature_passes_in_any_input_order() {
+        check_signature(&paper_inputs(), &paper_outputs(), 50).expect("paper contract");
+        let mut swapped = paper_inputs();
+        swapped.reverse();
+        check_signature(&swapped, &paper_outputs(), 50).expect("order does not matter");
+    }
+
+    #[test]
+    fn wrong_or_extra_names_are_refused() {
+        let renamed = vec![tensor("image", &[-1, 1, 50, 50]), tensor("aux", &[-1, 2])];
+        assert_eq!(
+            check_signature(&renamed, &paper_outputs(), 50),
+            Err(ContractViolation::InputNames { found: vec!["image".into(), "aux".into()] })
+        );
+        let mut extra = paper_inputs();
+        extra.push(tensor("speed", &[-1, 1]));
+        assert!(matches!(
+            check_signature(&extra, &paper_outputs(), 50),
+            Err(ContractViolation::InputNames { .. })
+        ));
+        let outputs = vec![tensor("wheels", &[-1, 2]), tensor("value", &[-1, 1])];
+        assert!(matches!(
+            check_signature(&paper_inputs(), &outputs, 50),
+            Err(ContractViolation::OutputNames { .. })
+        ));
+        assert!(matches!(
+            check_signature(&paper_inputs(), &[tensor("cmd", &[-1, 2])], 50),
+            Err(ContractViolation::OutputNames { .. })
+        ));
+    }
+
+    #[test]
+    fn image_side_must_match_size_px_and_batch_must_be_dynamic() {
+        let small = vec![tensor("occupancy", &[-1, 1, 40, 40]), tensor("aux", &[-1, 2])];
+        let err = check_signature(&small, &paper_outputs(), 50).expect_err("40 px image for size_px 50");
+        assert_eq!(
+            err.to_string(),
+            "`occupancy` has shape [batch, 1, 40, 40], expected [batch (dynamic), 1, 50, 50]"
+        );
+        let fixed_batch = vec![tensor("occupancy", &[1, 1, 50, 50]), tensor("aux", &[1, 2])];
+        assert!(matches!(
+            check_signature(&fixed_batch, &paper_outputs(), 50),
+            Err(ContractViolation::Shape { .. })
+        ));
+        let flat_aux = vec![tensor("occupancy", &[-1, 1, 50, 50]), tensor("aux", &[-1, 3])];
+        assert!(matches!(
+            check_signature(&flat_aux, &paper_outputs(), 50),
+            Err(ContractViolation::Shape { name, .. }) if name == "aux"
+        ));
+    }
+
+    #[test]
+    fn non_f32_tensors_are_refused() {
+        let mut inputs = paper_inputs();
+        inputs[0].element = ElementKind::OtherTensor("Float64".into());
+        assert_eq!(
+            check_signature(&inputs, &paper_outputs(), 50),
+            Err(ContractViolation::ElementType { name: "occupancy".into(), found: "a Float64 tensor".into() })
+        );
+        let mut outputs = paper_outputs();
+        outputs[0].element = ElementKind::NotTensor("a sequence".into());
+        assert!(matches!(
+            check_signature(&paper_inputs(), &outputs, 50),
+            Err(ContractViolation::ElementType { .. })
+        ));
+    }
+}

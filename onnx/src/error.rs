@@ -1,0 +1,117 @@
+//! Why a policy could not be loaded, validated or run: one error type for the whole crate, each
+//! variant naming the cause and how to fix it.
+
+use std::path::PathBuf;
+
+use crate::contract::ContractViolation;
+
+/// How to obtain the ONNX Runtime library; appended to every "library not found" message.
+pub const LIBRARY_FIX: &str = "install it with `bash .ci/setup-python` (pip onnxruntime==1.31.1 into .venv) \
+                               or set ORT_DYLIB_PATH=/path/to/libonnxruntime.so.1.31.1";
+
+/// Everything that can go wrong between a model file on disk and a pair of wheel speeds.
+#[derive(Debug, thiserror::Error)]
+pub enum PolicyError {
+    /// `ORT_DYLIB_PATH` is set but names no file.
+    #[error(
+        "ORT_DYLIB_PATH is set to {path:?}, which does not exist; point it at libonnxruntime.so.1.31.1 \
+         or unset it to use the one in .venv"
+    )]
+    LibraryPathMissing {
+        /// The value of `ORT_DYLIB_PATH`.
+        path: PathBuf,
+    },
+    /// No ONNX Runtime shared library was found anywhere it is looked for.
+    #[error("ONNX Runtime library not found (looked in {}); {LIBRARY_FIX}", .searched.join(", "))]
+    LibraryNotFound {
+        /// The places searched, in order, for the message.
+        searched: Vec<String>,
+    },
+    /// The library file exists but ONNX Runtime could not be started from it.
+    #[error(
+        "could not start ONNX Runtime from {path:?}: {reason}; it must be the onnxruntime 1.31 shared \
+         library: {LIBRARY_FIX}"
+    )]
+    RuntimeLoad {
+        /// The library that was tried.
+        path: PathBuf,
+        /// What ort or the dynamic loader reported.
+        reason: String,
+    },
+    /// The model file does not exist.
+    #[error(
+        "model {path:?} not found; train one with `formation train` (or `formation learn`), or pass the \
+         path of an existing .onnx file"
+    )]
+    ModelNotFound {
+        /// The path given.
+        path: PathBuf,
+    },
+    /// The model file exists but could not be read.
+    #[error("could not read model {path:?}: {source}")]
+    ModelRead {
+        /// The path given.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// ONNX Runtime refused to build a session from the file (not an ONNX model, or a broken one).
+    #[error("ONNX Runtime could not open model {path:?}: {reason}; re-export it with `formation train`")]
+    Session {
+        /// The model file.
+        path: PathBuf,
+        /// ONNX Runtime's message.
+        reason: String,
+    },
+    /// The model opens but does not follow the formation-policy/1 contract.
+    #[error("model {path:?} breaks the formation-policy/1 contract: {reason}; re-export it with `formation train`")]
+    Contract {
+        /// The model file.
+        path: PathBuf,
+        /// What is wrong, expected versus found.
+        reason: ContractViolation,
+    },
+    /// The model was trained for a different sensor than the one it is asked to drive.
+    #[error(
+        "model {model} was trained with LIDAR {field} {expected} but this robot's LIDAR has {actual}; \
+         use a model trained with the scenario's sensor settings (formation collect/train)"
+    )]
+    SensorMismatch {
+        /// Model id.
+        model: String,
+        /// Which setting differs (`beams`, `max_range`).
+        field: &'static str,
+        /// The model's value.
+        expected: String,
+        /// The sensor's value.
+        actual: String,
+    },
+    /// An input buffer of the wrong size was passed to [`crate::OnnxPolicy::infer`].
+    #[error("model {model}: the occupancy image has {actual} cells, the model takes {expected} (size_px^2)")]
+    InputLength {
+        /// Model id.
+        model: String,
+        /// `size_px * size_px`.
+        expected: usize,
+        /// Cells given.
+        actual: usize,
+    },
+    /// ONNX Runtime failed while running the model.
+    #[error("model {model}: inference failed: {reason}")]
+    Inference {
+        /// Model id.
+        model: String,
+        /// ONNX Runtime's message.
+        reason: String,
+    },
+    /// The model produced NaN or infinity.
+    #[error("model {model} returned a non-finite command ({left}, {right}); the model is broken, retrain it")]
+    NonFiniteOutput {
+        /// Model id.
+        model: String,
+        /// Left wheel output.
+        left: f32,
+        /// Right wheel output.
+        right: f32,
+    },
+}
