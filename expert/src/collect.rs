@@ -50,7 +50,7 @@ pub enum CollectError {
     Occupancy {
         /// Cells on a side.
         size_px: usize,
-        /// Cell size [m].
+        /// Cell size, in metres.
         resolution_m: f64,
     },
     /// A scan did not have the configured number of beams.
@@ -72,6 +72,19 @@ pub enum CollectError {
         run: usize,
         /// The expert's reason.
         message: String,
+    },
+    /// The dataset was created for other settings than this collection's.
+    #[error(
+        "the dataset's {what} is {dataset} but this collection produces {collection}; \
+         write to a dataset created with the collection's settings"
+    )]
+    WriterMismatch {
+        /// Which setting differs ("occupancy settings", "LIDAR", "v_train").
+        what: &'static str,
+        /// The dataset header's value.
+        dataset: String,
+        /// The collection's value.
+        collection: String,
     },
     /// Writing the dataset failed.
     #[error("writing demonstrations of run {run}: {source}")]
@@ -128,7 +141,11 @@ pub struct CollectReport {
 }
 
 /// Runs `opts.runs` expert-driven runs and writes one [`Sample`] per robot per recorded tick to
-/// `writer` (iteration 0). `progress(runs_done, samples_written)` is called after every run.
+/// `writer`, labelled with the writer's iteration (0 for a new dataset). `progress(runs_done,
+/// samples_written)` is called after every run.
+///
+/// Each run's occupancy settings, LIDAR and speed v* must match the dataset header; a mismatch is
+/// refused before anything is written for that run.
 ///
 /// A run's samples are rendered while it runs and written when it ends, so a failure leaves the
 /// dataset with whole runs only, as far as the writer's own shards allow.
@@ -147,8 +164,9 @@ pub fn collect(
     let mut run_samples = Vec::new();
     for run in 0..opts.runs {
         let spec = opts.scenario.run_spec(opts.base_seed, run);
+        check_writer(writer, &spec, &opts.occupancy)?;
         run_samples.clear();
-        collect_run(&spec, opts, &mut run_samples)?;
+        collect_run(&spec, opts, writer.iteration(), &mut run_samples)?;
         for sample in run_samples.drain(..) {
             writer
                 .push(sample)
@@ -171,10 +189,37 @@ pub fn collect(
     })
 }
 
-/// Drives one run with the expert and appends its samples to `samples`.
+/// The dataset header must describe what this run records.
+fn check_writer(
+    writer: &DatasetWriter,
+    spec: &RunSpec,
+    occupancy: &OccupancySpec,
+) -> Result<(), CollectError> {
+    let header = writer.header();
+    let mismatch = |what, dataset: &dyn std::fmt::Debug, collection: &dyn std::fmt::Debug| {
+        Err(CollectError::WriterMismatch {
+            what,
+            dataset: format!("{dataset:?}"),
+            collection: format!("{collection:?}"),
+        })
+    };
+    if header.occupancy != *occupancy {
+        return mismatch("occupancy settings", &header.occupancy, occupancy);
+    }
+    if header.lidar != spec.world.lidar {
+        return mismatch("LIDAR", &header.lidar, &spec.world.lidar);
+    }
+    if header.v_train != spec.v_star {
+        return mismatch("v_train", &header.v_train, &spec.v_star);
+    }
+    Ok(())
+}
+
+/// Drives one run with the expert and appends its samples, labelled `iteration`, to `samples`.
 fn collect_run(
     spec: &RunSpec,
     opts: &CollectOptions<'_>,
+    iteration: u32,
     samples: &mut Vec<Sample>,
 ) -> Result<(), CollectError> {
     let labeller = Labeller::new(
@@ -188,10 +233,12 @@ fn collect_run(
     let mut expert = ExpertController::new(opts.gains, spec.world.robot);
     let mut failure = None;
     let mut on_tick = |obs: &Observation<'_>, commands: &[WheelCmd]| {
-        if failure.is_some() || obs.tick % u64::from(opts.record_every) != 0 {
+        if failure.is_some() || !obs.tick.is_multiple_of(u64::from(opts.record_every)) {
             return;
         }
-        if let Err(e) = labeller.emit(obs, commands, 0, run, &mut |sample| samples.push(sample)) {
+        if let Err(e) = labeller.emit(obs, commands, iteration, run, &mut |sample| {
+            samples.push(sample)
+        }) {
             failure = Some(e);
         }
     };
@@ -518,7 +565,7 @@ mod tests {
         };
         let spec = scenario.run_spec(opts.base_seed, 1);
         let mut samples = Vec::new();
-        collect_run(&spec, &opts, &mut samples).expect("collects");
+        collect_run(&spec, &opts, 0, &mut samples).expect("collects");
 
         // 20 ticks, recorded at 0, 3, ..., 18: 7 ticks x 3 robots.
         assert_eq!(samples.len(), 7 * 3);

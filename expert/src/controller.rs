@@ -1,6 +1,6 @@
 //! The expert: the distance-based formation controller, a pure function of every robot's pose and the goal.
 //!
-//! Re-derived from the paper's equations (see `/work/shared/design.md` section 4 and `ARCHITECTURE.md`):
+//! Re-derived from the paper's equations:
 //!
 //! * **Point offset.** Each robot is controlled through the point `p_i = (x_i + c cos th_i, y_i + c sin th_i)`
 //!   a distance `c` ahead of its axle, whose velocity a differential drive can set freely.
@@ -29,14 +29,17 @@ const MIN_PAIR_DISTANCE: f64 = 1e-9;
 /// The expert's gains.
 ///
 /// The defaults are the paper's `K3 = 0.15`, `c = l/2` for the P3-DX (`l = 0.331 m`) and the paper's
-/// 0.7 m/s cap on the reference velocity. They reach the acceptance target on `scenarios/table1.toml`
-/// unchanged (see `ARCHITECTURE.md` for the measured Table I figures of the expert).
+/// 0.7 m/s cap on the reference velocity. They need no tuning: over the 100 runs of 60 s of
+/// `scenarios/table1.toml` (noiseless LIDAR, 0.9 m/s wheel limit) the expert succeeds in 100 % of runs
+/// at both 5 % and 10 %, converges (10 %) in 2.9 s median (0.7-5.9 s), holds the formation to
+/// about 1e-15 relative error and the heading to about 1e-14 rad, without a collision. Reproduce with
+/// `cargo run -p formation-expert --release --example expert_table1`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ExpertGains {
     /// Formation gain `K3` [1/(m s)]: scales the gradient of the pair potentials into a velocity.
     pub k_formation: f64,
-    /// Distance `c` [m] from the axle centre to the controlled point, along the heading. Must be > 0.
+    /// Distance `c`, in metres, from the axle centre to the controlled point, along the heading. Must be > 0.
     pub point_offset: f64,
     /// Upper bound [m/s] on the norm of the reference velocity `v* (cos phi*, sin phi*)`.
     pub max_reference_speed: f64,

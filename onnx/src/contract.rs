@@ -144,7 +144,11 @@ impl fmt::Display for DimsDisplay<'_> {
             if i > 0 {
                 f.write_str(", ")?;
             }
-            if *d < 0 { f.write_str("batch")? } else { write!(f, "{d}")? }
+            if *d < 0 {
+                f.write_str("batch")?
+            } else {
+                write!(f, "{d}")?
+            }
         }
         f.write_str("]")
     }
@@ -152,7 +156,9 @@ impl fmt::Display for DimsDisplay<'_> {
 
 /// Parses and checks the `formation.*` metadata. Keys other than the required ones go to
 /// [`ModelMetadata::extra`].
-pub fn parse_metadata(entries: &BTreeMap<String, String>) -> Result<ModelMetadata, ContractViolation> {
+pub fn parse_metadata(
+    entries: &BTreeMap<String, String>,
+) -> Result<ModelMetadata, ContractViolation> {
     let format = required(entries, keys::FORMAT)?;
     if format != MODEL_FORMAT {
         return Err(ContractViolation::BadMetadata {
@@ -164,11 +170,12 @@ pub fn parse_metadata(entries: &BTreeMap<String, String>) -> Result<ModelMetadat
     let size_px: usize = parse_positive_int(entries, keys::SIZE_PX)?;
     let resolution_m = parse_positive_real(entries, keys::RESOLUTION_M)?;
     let beyond_text = required(entries, keys::BEYOND)?;
-    let beyond = BeyondWindow::parse(beyond_text).ok_or_else(|| ContractViolation::BadMetadata {
-        key: keys::BEYOND,
-        value: beyond_text.to_owned(),
-        expected: "\"drop\" or \"border\"",
-    })?;
+    let beyond =
+        BeyondWindow::parse(beyond_text).ok_or_else(|| ContractViolation::BadMetadata {
+            key: keys::BEYOND,
+            value: beyond_text.to_owned(),
+            expected: "\"drop\" or \"border\"",
+        })?;
     let beams = parse_positive_int(entries, keys::BEAMS)?;
     let max_range = parse_positive_real(entries, keys::MAX_RANGE)?;
     let v_train = parse_positive_real(entries, keys::V_TRAIN)?;
@@ -190,7 +197,11 @@ pub fn parse_metadata(entries: &BTreeMap<String, String>) -> Result<ModelMetadat
         .map(|(key, value)| (key.clone(), value.clone()))
         .collect();
     Ok(ModelMetadata {
-        occupancy: OccupancySpec { size_px, resolution_m, beyond },
+        occupancy: OccupancySpec {
+            size_px,
+            resolution_m,
+            beyond,
+        },
         beams,
         max_range,
         v_train,
@@ -199,11 +210,20 @@ pub fn parse_metadata(entries: &BTreeMap<String, String>) -> Result<ModelMetadat
     })
 }
 
-fn required<'a>(entries: &'a BTreeMap<String, String>, key: &'static str) -> Result<&'a str, ContractViolation> {
-    entries.get(key).map(String::as_str).ok_or(ContractViolation::MissingMetadata { key })
+fn required<'a>(
+    entries: &'a BTreeMap<String, String>,
+    key: &'static str,
+) -> Result<&'a str, ContractViolation> {
+    entries
+        .get(key)
+        .map(String::as_str)
+        .ok_or(ContractViolation::MissingMetadata { key })
 }
 
-fn parse_positive_int(entries: &BTreeMap<String, String>, key: &'static str) -> Result<usize, ContractViolation> {
+fn parse_positive_int(
+    entries: &BTreeMap<String, String>,
+    key: &'static str,
+) -> Result<usize, ContractViolation> {
     let text = required(entries, key)?;
     match text.trim().parse::<usize>() {
         Ok(n) if n > 0 => Ok(n),
@@ -215,7 +235,10 @@ fn parse_positive_int(entries: &BTreeMap<String, String>, key: &'static str) -> 
     }
 }
 
-fn parse_positive_real(entries: &BTreeMap<String, String>, key: &'static str) -> Result<f64, ContractViolation> {
+fn parse_positive_real(
+    entries: &BTreeMap<String, String>,
+    key: &'static str,
+) -> Result<f64, ContractViolation> {
     let text = required(entries, key)?;
     match text.trim().parse::<f64>() {
         Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
@@ -246,17 +269,32 @@ pub fn check_signature(
 ) -> Result<(), ContractViolation> {
     let names = |list: &[TensorSignature]| list.iter().map(|t| t.name.clone()).collect::<Vec<_>>();
     let find = |name: &str| inputs.iter().find(|t| t.name == name);
-    let (Some(occupancy), Some(aux), 2) = (find(OCCUPANCY_INPUT), find(AUX_INPUT), inputs.len()) else {
-        return Err(ContractViolation::InputNames { found: names(inputs) });
+    let (Some(occupancy), Some(aux), 2) = (find(OCCUPANCY_INPUT), find(AUX_INPUT), inputs.len())
+    else {
+        return Err(ContractViolation::InputNames {
+            found: names(inputs),
+        });
     };
     let [wheels] = outputs else {
-        return Err(ContractViolation::OutputNames { found: names(outputs) });
+        return Err(ContractViolation::OutputNames {
+            found: names(outputs),
+        });
     };
     if wheels.name != WHEELS_OUTPUT {
-        return Err(ContractViolation::OutputNames { found: names(outputs) });
+        return Err(ContractViolation::OutputNames {
+            found: names(outputs),
+        });
     }
     let side = i64::try_from(size_px).unwrap_or(i64::MAX);
-    check_tensor(occupancy, &[Dim::Batch, Dim::Exact(1), Dim::Exact(side), Dim::Exact(side)])?;
+    check_tensor(
+        occupancy,
+        &[
+            Dim::Batch,
+            Dim::Exact(1),
+            Dim::Exact(side),
+            Dim::Exact(side),
+        ],
+    )?;
     check_tensor(aux, &[Dim::Batch, Dim::Exact(2)])?;
     check_tensor(wheels, &[Dim::Batch, Dim::Exact(2)])
 }
@@ -271,14 +309,21 @@ fn check_tensor(tensor: &TensorSignature, expected: &[Dim]) -> Result<(), Contra
             });
         }
         ElementKind::NotTensor(kind) => {
-            return Err(ContractViolation::ElementType { name: tensor.name.clone(), found: kind.clone() });
+            return Err(ContractViolation::ElementType {
+                name: tensor.name.clone(),
+                found: kind.clone(),
+            });
         }
     }
     let matches = tensor.dims.len() == expected.len()
-        && tensor.dims.iter().zip(expected).all(|(&found, want)| match want {
-            Dim::Batch => found < 0,
-            Dim::Exact(n) => found == *n,
-        });
+        && tensor
+            .dims
+            .iter()
+            .zip(expected)
+            .all(|(&found, want)| match want {
+                Dim::Batch => found < 0,
+                Dim::Exact(n) => found == *n,
+            });
     if matches {
         return Ok(());
     }
@@ -320,11 +365,18 @@ mod tests {
     }
 
     fn tensor(name: &str, dims: &[i64]) -> TensorSignature {
-        TensorSignature { name: name.to_owned(), element: ElementKind::F32, dims: dims.to_vec() }
+        TensorSignature {
+            name: name.to_owned(),
+            element: ElementKind::F32,
+            dims: dims.to_vec(),
+        }
     }
 
     fn paper_inputs() -> Vec<TensorSignature> {
-        vec![tensor("occupancy", &[-1, 1, 50, 50]), tensor("aux", &[-1, 2])]
+        vec![
+            tensor("occupancy", &[-1, 1, 50, 50]),
+            tensor("aux", &[-1, 2]),
+        ]
     }
 
     fn paper_outputs() -> Vec<TensorSignature> {
@@ -336,12 +388,19 @@ mod tests {
         let meta = parse_metadata(&paper_metadata()).expect("valid metadata");
         assert_eq!(
             meta.occupancy,
-            OccupancySpec { size_px: 50, resolution_m: 0.1, beyond: BeyondWindow::Border }
+            OccupancySpec {
+                size_px: 50,
+                resolution_m: 0.1,
+                beyond: BeyondWindow::Border
+            }
         );
         assert_eq!((meta.beams, meta.max_range, meta.v_train), (900, 10.0, 0.7));
         assert_eq!(meta.dataset_id, "ds-1234");
         let extra: Vec<&str> = meta.extra.keys().map(String::as_str).collect();
-        assert_eq!(extra, ["formation.dagger.iteration", "formation.train.epochs"]);
+        assert_eq!(
+            extra,
+            ["formation.dagger.iteration", "formation.train.epochs"]
+        );
     }
 
     #[test]
@@ -358,7 +417,10 @@ mod tests {
         ] {
             let mut entries = paper_metadata();
             entries.remove(key);
-            assert_eq!(parse_metadata(&entries), Err(ContractViolation::MissingMetadata { key }));
+            assert_eq!(
+                parse_metadata(&entries),
+                Err(ContractViolation::MissingMetadata { key })
+            );
         }
     }
 
@@ -377,7 +439,9 @@ mod tests {
             let mut entries = paper_metadata();
             entries.insert(key.to_owned(), value.to_owned());
             match parse_metadata(&entries) {
-                Err(ContractViolation::BadMetadata { key: k, value: v, .. }) => {
+                Err(ContractViolation::BadMetadata {
+                    key: k, value: v, ..
+                }) => {
                     assert_eq!((k, v.as_str()), (key, value));
                 }
                 other => panic!("{key} = {value}: expected BadMetadata, got {other:?}"),
@@ -398,7 +462,9 @@ mod tests {
         let renamed = vec![tensor("image", &[-1, 1, 50, 50]), tensor("aux", &[-1, 2])];
         assert_eq!(
             check_signature(&renamed, &paper_outputs(), 50),
-            Err(ContractViolation::InputNames { found: vec!["image".into(), "aux".into()] })
+            Err(ContractViolation::InputNames {
+                found: vec!["image".into(), "aux".into()]
+            })
         );
         let mut extra = paper_inputs();
         extra.push(tensor("speed", &[-1, 1]));
@@ -419,8 +485,12 @@ mod tests {
 
     #[test]
     fn image_side_must_match_size_px_and_batch_must_be_dynamic() {
-        let small = vec![tensor("occupancy", &[-1, 1, 40, 40]), tensor("aux", &[-1, 2])];
-        let err = check_signature(&small, &paper_outputs(), 50).expect_err("40 px image for size_px 50");
+        let small = vec![
+            tensor("occupancy", &[-1, 1, 40, 40]),
+            tensor("aux", &[-1, 2]),
+        ];
+        let err =
+            check_signature(&small, &paper_outputs(), 50).expect_err("40 px image for size_px 50");
         assert_eq!(
             err.to_string(),
             "`occupancy` has shape [batch, 1, 40, 40], expected [batch (dynamic), 1, 50, 50]"
@@ -430,7 +500,10 @@ mod tests {
             check_signature(&fixed_batch, &paper_outputs(), 50),
             Err(ContractViolation::Shape { .. })
         ));
-        let flat_aux = vec![tensor("occupancy", &[-1, 1, 50, 50]), tensor("aux", &[-1, 3])];
+        let flat_aux = vec![
+            tensor("occupancy", &[-1, 1, 50, 50]),
+            tensor("aux", &[-1, 3]),
+        ];
         assert!(matches!(
             check_signature(&flat_aux, &paper_outputs(), 50),
             Err(ContractViolation::Shape { name, .. }) if name == "aux"
@@ -443,7 +516,10 @@ mod tests {
         inputs[0].element = ElementKind::OtherTensor("Float64".into());
         assert_eq!(
             check_signature(&inputs, &paper_outputs(), 50),
-            Err(ContractViolation::ElementType { name: "occupancy".into(), found: "a Float64 tensor".into() })
+            Err(ContractViolation::ElementType {
+                name: "occupancy".into(),
+                found: "a Float64 tensor".into()
+            })
         );
         let mut outputs = paper_outputs();
         outputs[0].element = ElementKind::NotTensor("a sequence".into());

@@ -56,7 +56,9 @@ pub enum PolicyError {
         source: std::io::Error,
     },
     /// ONNX Runtime refused to build a session from the file (not an ONNX model, or a broken one).
-    #[error("ONNX Runtime could not open model {path:?}: {reason}; re-export it with `formation train`")]
+    #[error(
+        "ONNX Runtime could not open model {path:?}: {reason}; re-export it with `formation train`"
+    )]
     Session {
         /// The model file.
         path: PathBuf,
@@ -64,7 +66,9 @@ pub enum PolicyError {
         reason: String,
     },
     /// The model opens but does not follow the formation-policy/1 contract.
-    #[error("model {path:?} breaks the formation-policy/1 contract: {reason}; re-export it with `formation train`")]
+    #[error(
+        "model {path:?} breaks the formation-policy/1 contract: {reason}; re-export it with `formation train`"
+    )]
     Contract {
         /// The model file.
         path: PathBuf,
@@ -87,7 +91,9 @@ pub enum PolicyError {
         actual: String,
     },
     /// An input buffer of the wrong size was passed to [`crate::OnnxPolicy::infer`].
-    #[error("model {model}: the occupancy image has {actual} cells, the model takes {expected} (size_px^2)")]
+    #[error(
+        "model {model}: the occupancy image has {actual} cells, the model takes {expected} (size_px^2)"
+    )]
     InputLength {
         /// Model id.
         model: String,
@@ -105,7 +111,9 @@ pub enum PolicyError {
         reason: String,
     },
     /// The model produced NaN or infinity.
-    #[error("model {model} returned a non-finite command ({left}, {right}); the model is broken, retrain it")]
+    #[error(
+        "model {model} returned a non-finite command ({left}, {right}); the model is broken, retrain it"
+    )]
     NonFiniteOutput {
         /// Model id.
         model: String,

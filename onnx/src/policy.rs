@@ -5,12 +5,12 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use formation_proto::LidarSpec;
+use ort::environment::Environment;
 use ort::session::Session;
-use ort::session::builder::SessionBuilder;
 use ort::value::{Tensor, TensorElementType, ValueType};
 
 use crate::contract::{
-    AUX_INPUT, ElementKind, ModelMetadata, OCCUPANCY_INPUT, TensorSignature, WHEELS_OUTPUT, check_signature,
+    ElementKind, ModelMetadata, OCCUPANCY_INPUT, TensorSignature, WHEELS_OUTPUT, check_signature,
     parse_metadata,
 };
 use crate::error::PolicyError;
@@ -33,7 +33,10 @@ pub struct OnnxPolicy {
 
 impl std::fmt::Debug for OnnxPolicy {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("OnnxPolicy").field("model_id", &self.model_id).field("metadata", &self.metadata).finish()
+        f.debug_struct("OnnxPolicy")
+            .field("model_id", &self.model_id)
+            .field("metadata", &self.metadata)
+            .finish()
     }
 }
 
@@ -42,25 +45,37 @@ impl OnnxPolicy {
     /// checks its inputs, output and metadata against the contract.
     pub fn load(path: &Path) -> Result<OnnxPolicy, PolicyError> {
         if !path.is_file() {
-            return Err(PolicyError::ModelNotFound { path: path.to_path_buf() });
+            return Err(PolicyError::ModelNotFound {
+                path: path.to_path_buf(),
+            });
         }
-        let bytes =
-            std::fs::read(path).map_err(|source| PolicyError::ModelRead { path: path.to_path_buf(), source })?;
+        let bytes = std::fs::read(path).map_err(|source| PolicyError::ModelRead {
+            path: path.to_path_buf(),
+            source,
+        })?;
         let env = environment()?;
-        let session_error = |reason: String| PolicyError::Session { path: path.to_path_buf(), reason };
-        let session = Session::builder(env)
-            .map_err(|e| session_error(e.to_string()))?
-            .with_intra_threads(1)
-            .and_then(|b| b.with_inter_threads(1))
-            .map_err(|e| session_error(e.to_string()))
-            .and_then(|mut b: SessionBuilder| b.commit_from_memory(&bytes).map_err(|e| session_error(e.to_string())))?;
+        let session_error = |reason: String| PolicyError::Session {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let session = single_threaded_session(env, &bytes).map_err(session_error)?;
 
-        let contract = |reason| PolicyError::Contract { path: path.to_path_buf(), reason };
-        let metadata = parse_metadata(&metadata_entries(&session).map_err(session_error)?).map_err(contract)?;
-        let inputs: Vec<TensorSignature> =
-            session.inputs().iter().map(|o| signature(o.name(), o.dtype())).collect();
-        let outputs: Vec<TensorSignature> =
-            session.outputs().iter().map(|o| signature(o.name(), o.dtype())).collect();
+        let contract = |reason| PolicyError::Contract {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let metadata = parse_metadata(&metadata_entries(&session).map_err(session_error)?)
+            .map_err(contract)?;
+        let inputs: Vec<TensorSignature> = session
+            .inputs()
+            .iter()
+            .map(|o| signature(o.name(), o.dtype()))
+            .collect();
+        let outputs: Vec<TensorSignature> = session
+            .outputs()
+            .iter()
+            .map(|o| signature(o.name(), o.dtype()))
+            .collect();
         let size_px = metadata.occupancy.size_px;
         check_signature(&inputs, &outputs, size_px).map_err(contract)?;
 
@@ -68,8 +83,19 @@ impl OnnxPolicy {
         let cells = size_px * size_px;
         let occupancy = zeros(vec![1, 1, size_px, size_px]).map_err(session_error)?;
         let aux = zeros(vec![1, 2]).map_err(session_error)?;
-        let inputs = if occupancy_slot == 0 { [occupancy, aux] } else { [aux, occupancy] };
-        Ok(OnnxPolicy { session, metadata, model_id: model_id(path, &bytes), inputs, occupancy_slot, cells })
+        let inputs = if occupancy_slot == 0 {
+            [occupancy, aux]
+        } else {
+            [aux, occupancy]
+        };
+        Ok(OnnxPolicy {
+            session,
+            metadata,
+            model_id: model_id(path, &bytes),
+            inputs,
+            occupancy_slot,
+            cells,
+        })
     }
 
     /// What the model's metadata says about its training.
@@ -91,7 +117,11 @@ impl OnnxPolicy {
             actual,
         };
         if lidar.beams != self.metadata.beams {
-            return Err(mismatch("beams", self.metadata.beams.to_string(), lidar.beams.to_string()));
+            return Err(mismatch(
+                "beams",
+                self.metadata.beams.to_string(),
+                lidar.beams.to_string(),
+            ));
         }
         if (lidar.max_range - self.metadata.max_range).abs() > 1e-9 * self.metadata.max_range {
             return Err(mismatch(
@@ -114,44 +144,83 @@ impl OnnxPolicy {
             });
         }
         let model = &self.model_id;
-        let failed = |reason: String| PolicyError::Inference { model: model.clone(), reason };
+        let failed = |reason: String| PolicyError::Inference {
+            model: model.clone(),
+            reason,
+        };
         let aux_slot = 1 - self.occupancy_slot;
-        let (_, image) = self.inputs[self.occupancy_slot].try_extract_tensor_mut().map_err(|e| failed(e.to_string()))?;
+        let (_, image) = self.inputs[self.occupancy_slot]
+            .try_extract_tensor_mut()
+            .map_err(|e| failed(e.to_string()))?;
         image.copy_from_slice(occupancy);
-        let (_, aux_cells) = self.inputs[aux_slot].try_extract_tensor_mut().map_err(|e| failed(e.to_string()))?;
+        let (_, aux_cells) = self.inputs[aux_slot]
+            .try_extract_tensor_mut()
+            .map_err(|e| failed(e.to_string()))?;
         aux_cells.copy_from_slice(&aux);
 
         let outputs = self
             .session
             .run(ort::inputs![&self.inputs[0], &self.inputs[1]])
             .map_err(|e| failed(e.to_string()))?;
-        let wheels = outputs.get(WHEELS_OUTPUT).ok_or_else(|| failed(format!("no `{WHEELS_OUTPUT}` output")))?;
-        let (_, values) = wheels.try_extract_tensor::<f32>().map_err(|e| failed(e.to_string()))?;
+        let wheels = outputs
+            .get(WHEELS_OUTPUT)
+            .ok_or_else(|| failed(format!("no `{WHEELS_OUTPUT}` output")))?;
+        let (_, values) = wheels
+            .try_extract_tensor::<f32>()
+            .map_err(|e| failed(e.to_string()))?;
         let &[left, right] = values else {
-            return Err(failed(format!("`{WHEELS_OUTPUT}` has {} values, expected 2", values.len())));
+            return Err(failed(format!(
+                "`{WHEELS_OUTPUT}` has {} values, expected 2",
+                values.len()
+            )));
         };
         if !(left.is_finite() && right.is_finite()) {
-            return Err(PolicyError::NonFiniteOutput { model: model.clone(), left, right });
+            return Err(PolicyError::NonFiniteOutput {
+                model: model.clone(),
+                left,
+                right,
+            });
         }
         Ok([left, right])
     }
+}
+
+/// A session for the model bytes with one intra-op and one inter-op thread.
+fn single_threaded_session(env: &Environment, bytes: &[u8]) -> Result<Session, String> {
+    let builder = Session::builder(env).map_err(|e| e.to_string())?;
+    let builder = builder.with_intra_threads(1).map_err(|e| e.to_string())?;
+    let mut builder = builder.with_inter_threads(1).map_err(|e| e.to_string())?;
+    builder.commit_from_memory(bytes).map_err(|e| e.to_string())
 }
 
 /// The model's custom metadata (`metadata_props`) as a map.
 fn metadata_entries(session: &Session) -> Result<BTreeMap<String, String>, String> {
     let metadata = session.metadata().map_err(|e| e.to_string())?;
     let keys = metadata.custom_keys().map_err(|e| e.to_string())?;
-    Ok(keys.into_iter().filter_map(|key| metadata.custom(&key).map(|value| (key, value))).collect())
+    Ok(keys
+        .into_iter()
+        .filter_map(|key| metadata.custom(&key).map(|value| (key, value)))
+        .collect())
 }
 
 /// Describes an ort input/output for the contract checks.
 fn signature(name: &str, dtype: &ValueType) -> TensorSignature {
     let (element, dims) = match dtype {
-        ValueType::Tensor { ty: TensorElementType::Float32, shape, .. } => (ElementKind::F32, shape.to_vec()),
-        ValueType::Tensor { ty, shape, .. } => (ElementKind::OtherTensor(ty.to_string()), shape.to_vec()),
+        ValueType::Tensor {
+            ty: TensorElementType::Float32,
+            shape,
+            ..
+        } => (ElementKind::F32, shape.to_vec()),
+        ValueType::Tensor { ty, shape, .. } => {
+            (ElementKind::OtherTensor(ty.to_string()), shape.to_vec())
+        }
         other => (ElementKind::NotTensor(other.to_string()), Vec::new()),
     };
-    TensorSignature { name: name.to_owned(), element, dims }
+    TensorSignature {
+        name: name.to_owned(),
+        element,
+        dims,
+    }
 }
 
 fn zeros(shape: Vec<usize>) -> Result<Tensor<f32>, String> {
@@ -162,13 +231,17 @@ fn zeros(shape: Vec<usize>) -> Result<Tensor<f32>, String> {
 /// `<file stem>-<8 hex digits of FNV-1a over the bytes>`: the same file always gets the same id,
 /// a retrained model with the same name a different one.
 fn model_id(path: &Path, bytes: &[u8]) -> String {
-    let stem = path.file_stem().map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
+    let stem = path
+        .file_stem()
+        .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
     format!("{stem}-{:08x}", fnv1a_32(bytes))
 }
 
 /// 32-bit FNV-1a: a short content fingerprint, not a security hash.
 fn fnv1a_32(bytes: &[u8]) -> u32 {
-    bytes.iter().fold(0x811c_9dc5_u32, |hash, &b| (hash ^ u32::from(b)).wrapping_mul(0x0100_0193))
+    bytes.iter().fold(0x811c_9dc5_u32, |hash, &b| {
+        (hash ^ u32::from(b)).wrapping_mul(0x0100_0193)
+    })
 }
 
 /// Keeps [`OnnxPolicy`] movable to an agent thread: a compile error if it stops being `Send`.
@@ -200,7 +273,10 @@ mod tests {
         let path = Path::new("/nonexistent/policy.onnx");
         match OnnxPolicy::load(path) {
             Err(err @ PolicyError::ModelNotFound { .. }) => {
-                assert!(err.to_string().contains("/nonexistent/policy.onnx"), "{err}");
+                assert!(
+                    err.to_string().contains("/nonexistent/policy.onnx"),
+                    "{err}"
+                );
                 assert!(err.to_string().contains("formation train"), "{err}");
             }
             other => panic!("expected ModelNotFound, got {other:?}"),

@@ -56,10 +56,15 @@ fn runtime_from(library: &Path) -> Result<&'static Environment, PolicyError> {
     as_policy_result(RUNTIME.get_or_init(|| start_runtime(library)))
 }
 
-fn as_policy_result(started: &'static Result<Environment, (PathBuf, String)>) -> Result<&'static Environment, PolicyError> {
+fn as_policy_result(
+    started: &'static Result<Environment, (PathBuf, String)>,
+) -> Result<&'static Environment, PolicyError> {
     started
         .as_ref()
-        .map_err(|(path, reason)| PolicyError::RuntimeLoad { path: path.clone(), reason: reason.clone() })
+        .map_err(|(path, reason)| PolicyError::RuntimeLoad {
+            path: path.clone(),
+            reason: reason.clone(),
+        })
 }
 
 fn start_runtime(library: &Path) -> Result<Environment, (PathBuf, String)> {
@@ -100,12 +105,20 @@ fn locate_library(
 ) -> Result<PathBuf, PolicyError> {
     if let Some(value) = from_env.filter(|v| !v.is_empty()) {
         let path = PathBuf::from(value);
-        return if path.is_file() { Ok(path) } else { Err(PolicyError::LibraryPathMissing { path }) };
+        return if path.is_file() {
+            Ok(path)
+        } else {
+            Err(PolicyError::LibraryPathMissing { path })
+        };
     }
     let venv_lib = repo_root.join(".venv").join("lib");
-    let mut searched = vec![format!(
-        "{ORT_DYLIB_PATH} (unset)"
-    ), format!("{}/python3*/site-packages/onnxruntime/capi", venv_lib.display())];
+    let mut searched = vec![
+        format!("{ORT_DYLIB_PATH} (unset)"),
+        format!(
+            "{}/python3*/site-packages/onnxruntime/capi",
+            venv_lib.display()
+        ),
+    ];
     if let Some(found) = venv_site_packages(&venv_lib)
         .into_iter()
         .find_map(|site| library_in_package(&site.join("onnxruntime")))
@@ -114,7 +127,10 @@ fn locate_library(
     }
     match python_package_dir() {
         Some(package) => {
-            searched.push(format!("{}/capi (python3's onnxruntime)", package.display()));
+            searched.push(format!(
+                "{}/capi (python3's onnxruntime)",
+                package.display()
+            ));
             if let Some(found) = library_in_package(&package) {
                 return Ok(found);
             }
@@ -169,7 +185,8 @@ fn repo_root() -> PathBuf {
     };
     cwd.ancestors()
         .find(|dir| {
-            std::fs::read_to_string(dir.join("Cargo.toml")).is_ok_and(|text| text.contains("[workspace]"))
+            std::fs::read_to_string(dir.join("Cargo.toml"))
+                .is_ok_and(|text| text.contains("[workspace]"))
         })
         .map_or_else(build_root, Path::to_path_buf)
 }
@@ -177,7 +194,10 @@ fn repo_root() -> PathBuf {
 /// The directory of the `onnxruntime` package of the `python3` on `PATH`, if it imports.
 fn python_onnxruntime_dir() -> Option<PathBuf> {
     let output = Command::new("python3")
-        .args(["-c", "import onnxruntime,os;print(os.path.dirname(onnxruntime.__file__))"])
+        .args([
+            "-c",
+            "import onnxruntime,os;print(os.path.dirname(onnxruntime.__file__))",
+        ])
         .stdin(Stdio::null())
         .stderr(Stdio::null())
         .output()
@@ -204,7 +224,9 @@ mod tests {
         assert!(is_runtime_library_name("libonnxruntime.so.1.31.1"));
         assert!(is_runtime_library_name("libonnxruntime.so"));
         assert!(is_runtime_library_name("libonnxruntime.1.31.1.dylib"));
-        assert!(!is_runtime_library_name("libonnxruntime_providers_shared.so"));
+        assert!(!is_runtime_library_name(
+            "libonnxruntime_providers_shared.so"
+        ));
         assert!(!is_runtime_library_name("onnxruntime_pybind11_state.so"));
     }
 
@@ -213,7 +235,9 @@ mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         let lib = dir.path().join("custom.so");
         touch(&lib);
-        let found = locate_library(Some(lib.as_os_str()), dir.path(), || panic!("python not asked"));
+        let found = locate_library(Some(lib.as_os_str()), dir.path(), || {
+            panic!("python not asked")
+        });
         assert_eq!(found.expect("env path exists"), lib);
 
         let missing = dir.path().join("nope.so");
@@ -226,11 +250,18 @@ mod tests {
     #[test]
     fn venv_library_is_found_and_empty_env_is_ignored() {
         let root = tempfile::tempdir().expect("tempdir");
-        let capi = root.path().join(".venv/lib/python3.11/site-packages/onnxruntime/capi");
+        let capi = root
+            .path()
+            .join(".venv/lib/python3.11/site-packages/onnxruntime/capi");
         touch(&capi.join("libonnxruntime_providers_shared.so"));
         touch(&capi.join("libonnxruntime.so.1.31.1"));
-        let found = locate_library(Some(OsStr::new("")), root.path(), || panic!("python not asked"));
-        assert_eq!(found.expect("venv library"), capi.join("libonnxruntime.so.1.31.1"));
+        let found = locate_library(Some(OsStr::new("")), root.path(), || {
+            panic!("python not asked")
+        });
+        assert_eq!(
+            found.expect("venv library"),
+            capi.join("libonnxruntime.so.1.31.1")
+        );
     }
 
     #[test]
@@ -239,13 +270,21 @@ mod tests {
         let package = root.path().join("elsewhere/onnxruntime");
         touch(&package.join("capi/libonnxruntime.so.1.31.1"));
         let found = locate_library(None, root.path(), || Some(package.clone()));
-        assert_eq!(found.expect("python's library"), package.join("capi/libonnxruntime.so.1.31.1"));
+        assert_eq!(
+            found.expect("python's library"),
+            package.join("capi/libonnxruntime.so.1.31.1")
+        );
 
         let err = locate_library(None, root.path(), || None).expect_err("nothing anywhere");
-        assert!(matches!(err, PolicyError::LibraryNotFound { ref searched } if searched.len() == 3));
+        assert!(
+            matches!(err, PolicyError::LibraryNotFound { ref searched } if searched.len() == 3)
+        );
         let message = err.to_string();
         assert!(message.contains("bash .ci/setup-python"), "{message}");
-        assert!(message.contains("ORT_DYLIB_PATH=/path/to/libonnxruntime.so.1.31.1"), "{message}");
+        assert!(
+            message.contains("ORT_DYLIB_PATH=/path/to/libonnxruntime.so.1.31.1"),
+            "{message}"
+        );
     }
 
     #[test]

@@ -896,16 +896,20 @@ pub struct RobotTiming {
     pub occupancy_ns: Vec<u64>,
     /// Per tick: policy inference in the agent.
     pub inference_ns: Vec<u64>,
+    /// Per tick: command published by the agent → taken by the world (system clock of both).
+    pub downlink_ns: Vec<u64>,
 }
 
 impl RobotTiming {
-    /// Appends one tick: the outcome, the command used (if any) and its round trip.
+    /// Appends one tick: the outcome, the command used (if any), its round trip, when the world
+    /// published the scan and when it took the command (both [`wall_clock_ns`]).
     pub fn record(
         &mut self,
         outcome: TickOutcome,
         used: Option<&CmdMsg>,
         round_trip: Option<std::time::Duration>,
         scan_published_wall_ns: u64,
+        cmd_taken_wall_ns: u64,
     ) {
         self.outcome.push(outcome);
         let Some(msg) = used else {
@@ -914,6 +918,7 @@ impl RobotTiming {
             self.uplink_ns.push(0);
             self.occupancy_ns.push(0);
             self.inference_ns.push(0);
+            self.downlink_ns.push(0);
             return;
         };
         let id = msg.model_id().unwrap_or("<malformed>");
@@ -931,6 +936,8 @@ impl RobotTiming {
             .push(msg.received_wall_ns.saturating_sub(scan_published_wall_ns));
         self.occupancy_ns.push(msg.occupancy_ns);
         self.inference_ns.push(msg.inference_ns);
+        self.downlink_ns
+            .push(cmd_taken_wall_ns.saturating_sub(msg.published_wall_ns));
     }
 
     /// Ticks recorded.
@@ -1114,33 +1121,22 @@ mod tests {
             occupancy_ns: 20,
             inference_ns: 30,
         };
-        let a = CmdMsg::new(1, 0, WheelCmd::BRAKE, "a", timings, CmdStatus::OK).unwrap();
-        let b = CmdMsg::new(1, 2, WheelCmd::BRAKE, "b", timings, CmdStatus::OK).unwrap();
+        let mut a = CmdMsg::new(1, 0, WheelCmd::BRAKE, "a", timings, CmdStatus::OK).unwrap();
+        let mut b = CmdMsg::new(1, 2, WheelCmd::BRAKE, "b", timings, CmdStatus::OK).unwrap();
+        a.published_wall_ns = 1_600;
+        b.published_wall_ns = 1_650;
         let mut log = RobotTiming::default();
-        log.record(
-            TickOutcome::Fresh,
-            Some(&a),
-            Some(std::time::Duration::from_nanos(900)),
-            1_000,
-        );
-        log.record(TickOutcome::Missing, None, None, 2_000);
-        log.record(
-            TickOutcome::Fresh,
-            Some(&b),
-            Some(std::time::Duration::from_nanos(800)),
-            1_200,
-        );
-        log.record(
-            TickOutcome::Fresh,
-            Some(&a),
-            Some(std::time::Duration::from_nanos(700)),
-            1_000,
-        );
+        let ns = std::time::Duration::from_nanos;
+        log.record(TickOutcome::Fresh, Some(&a), Some(ns(900)), 1_000, 1_900);
+        log.record(TickOutcome::Missing, None, None, 2_000, 0);
+        log.record(TickOutcome::Fresh, Some(&b), Some(ns(800)), 1_200, 2_000);
+        log.record(TickOutcome::Fresh, Some(&a), Some(ns(700)), 1_000, 1_700);
         assert_eq!(log.ticks(), 4);
         assert_eq!(log.model_ids, vec!["a".to_owned(), "b".to_owned()]);
         assert_eq!(log.model, vec![0, -1, 1, 0]);
         assert_eq!(log.round_trip_ns, vec![900, 0, 800, 700]);
         assert_eq!(log.uplink_ns, vec![500, 0, 300, 500]);
+        assert_eq!(log.downlink_ns, vec![300, 0, 350, 100]);
     }
 
     #[test]

@@ -72,7 +72,7 @@ pub fn render(scan: &[f32], lidar: &LidarSpec, spec: &OccupancySpec, out: &mut [
     }
 }
 
-/// The `(row, col)` of the cell holding body-frame point `(x, y)` [m], or `None` if the point lies
+/// The `(row, col)` of the cell holding the body-frame point `(x, y)`, in metres, or `None` if the point lies
 /// outside the window (or is not finite). See the module documentation for the formula.
 pub fn cell_of(x: f64, y: f64, spec: &OccupancySpec) -> Option<(usize, usize)> {
     let half = spec.size_px as f64 / 2.0;

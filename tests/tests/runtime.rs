@@ -326,3 +326,110 @@ fn robot_indices_out_of_range_are_clear_errors() {
     run(command, LIMIT).assert_failure_mentioning("robot");
     leaks.assert_clean();
 }
+
+/// Reads robot `robot`'s watchdog outcomes of run 0 from a `formation run` output directory.
+fn outcomes(out: &std::path::Path, robot: usize) -> Vec<String> {
+    let text = std::fs::read_to_string(out.join("timing/run-0000.json")).expect("timing log");
+    let log: serde_json::Value = serde_json::from_str(&text).expect("timing JSON");
+    log["robots"][robot]["outcome"]
+        .as_array()
+        .expect("outcome column")
+        .iter()
+        .map(|v| v.as_str().unwrap_or_default().to_owned())
+        .collect()
+}
+
+/// Issue 5 (fault injection): an agent that crashes mid-run in lockstep is braked, restarted by
+/// the launcher and rejoins; the run completes and leaves nothing behind.
+#[test]
+fn a_crashed_agent_is_braked_restarted_and_rejoins() {
+    let _watchdog = Watchdog::arm("crash_rejoin", LIMIT);
+    let bins = binaries();
+    let dir = TempDir::new("crash");
+    let run_id = unique_run_id("crash");
+    let leaks = LeakCheck::new(&run_id);
+    let out = dir.path().join("out");
+    let mut command = Command::new(&bins.cli);
+    command
+        .args([
+            "run",
+            "--run-id",
+            run_id.as_str(),
+            "--restarts",
+            "1",
+            "--timeout-ms",
+            "500",
+        ])
+        .args(["--fault", "1:crash-after=40"])
+        .arg("--scenario")
+        .arg(case1_scenario(dir.path(), 5.0))
+        .arg("--model")
+        .arg(test_model())
+        .arg("--out")
+        .arg(&out);
+    let finished = run(command, LIMIT);
+    finished.assert_success();
+    assert!(
+        finished.stdout().contains("1 agent restart(s)"),
+        "{}",
+        finished.describe()
+    );
+    let robot1 = outcomes(&out, 1);
+    assert_eq!(robot1.len(), 100);
+    assert!(robot1[..40].iter().all(|o| o == "fresh"), "{robot1:?}");
+    assert!(
+        robot1[40] != "fresh",
+        "the tick after the crash must be braked: {robot1:?}"
+    );
+    assert_eq!(
+        robot1.last().map(String::as_str),
+        Some("fresh"),
+        "the restarted agent rejoined: {robot1:?}"
+    );
+    assert!(outcomes(&out, 0).iter().all(|o| o == "fresh"));
+    leaks.assert_clean();
+}
+
+/// Issue 5 (fault injection): NaN commands are braked by the world's watchdog, tick by tick.
+#[test]
+fn nan_commands_are_braked() {
+    let _watchdog = Watchdog::arm("nan_braked", LIMIT);
+    let bins = binaries();
+    let dir = TempDir::new("nan");
+    let run_id = unique_run_id("nan");
+    let leaks = LeakCheck::new(&run_id);
+    let out = dir.path().join("out");
+    let mut command = Command::new(&bins.cli);
+    command
+        .args([
+            "run",
+            "--run-id",
+            run_id.as_str(),
+            "--fault",
+            "2:nan-after=10",
+        ])
+        .arg("--scenario")
+        .arg(case1_scenario(dir.path(), 2.0))
+        .arg("--model")
+        .arg(test_model())
+        .arg("--out")
+        .arg(&out);
+    run(command, LIMIT).assert_success();
+    let robot2 = outcomes(&out, 2);
+    assert!(
+        robot2[..10].iter().all(|o| o == "fresh") && robot2[10..].iter().all(|o| o == "non_finite"),
+        "{robot2:?}"
+    );
+    let log: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("runs/run-0000.json")).unwrap())
+            .unwrap();
+    for tick in 10..40 {
+        let cmd = &log["trajectory"]["commands"][tick][2];
+        assert_eq!(
+            (cmd["left"].as_f64(), cmd["right"].as_f64()),
+            (Some(0.0), Some(0.0)),
+            "tick {tick}"
+        );
+    }
+    leaks.assert_clean();
+}

@@ -81,7 +81,8 @@ pub struct RunArgs {
     #[arg(long, default_value_t = 3)]
     pub restarts: u32,
     /// Testing only: make an agent misbehave, `ROBOT:MODE` with MODE one of crash-after=N,
-    /// hang-after=N, late-ms=X, nan-after=N (repeatable).
+    /// hang-after=N, late-ms=X, nan-after=N (repeatable). Applies to the agent's first start; a
+    /// restarted agent behaves.
     #[arg(long = "fault", value_name = "ROBOT:MODE")]
     pub faults: Vec<String>,
 }

@@ -4,7 +4,8 @@
 //!
 //! Stages: `round_trip` (scan published → command received by the world, the tick loop's
 //! latency, on the world's clock), `uplink` (scan published → taken by the agent, system clock),
-//! `occupancy` and `inference` (measured inside the agent). Only ticks whose command was used count.
+//! `occupancy` and `inference` (measured inside the agent), `downlink` (command published → taken
+//! by the world, system clock). Only ticks whose command was used count.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -105,6 +106,7 @@ pub fn profile(runs: &[Vec<RobotTiming>]) -> LatencyProfile {
                 push("uplink", &robot.uplink_ns);
                 push("occupancy", &robot.occupancy_ns);
                 push("inference", &robot.inference_ns);
+                push("downlink", &robot.downlink_ns);
             }
         }
     }
@@ -194,6 +196,7 @@ mod tests {
             uplink_ns: vec![500, 0, 700],
             occupancy_ns: vec![10, 0, 20],
             inference_ns: vec![30, 0, 40],
+            downlink_ns: vec![100, 0, 200],
         };
         let p = profile(&[vec![robot]]);
         assert_eq!(p.used_commands, 2);

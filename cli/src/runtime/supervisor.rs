@@ -196,7 +196,7 @@ async fn supervise(
     let (exit_tx, mut exit_rx) = mpsc::unbounded_channel::<(usize, ExitStatus)>();
     let mut agents = Vec::with_capacity(plan.models.len());
     for robot in 0..plan.models.len() {
-        match spawn_agent(plan, binaries, robot, exit_tx.clone()) {
+        match spawn_agent(plan, binaries, robot, true, exit_tx.clone()) {
             Ok(handle) => agents.push(handle),
             Err(e) => {
                 shutdown(&mut world, &mut world_stdin, &mut agents).await;
@@ -248,7 +248,7 @@ async fn supervise(
                 tokio::time::sleep(backoff).await;
                 let restarts = handle.restarts + 1;
                 report.restarts += 1;
-                match spawn_agent(plan, binaries, robot, exit_tx.clone()) {
+                match spawn_agent(plan, binaries, robot, false, exit_tx.clone()) {
                     Ok(mut new_handle) => {
                         new_handle.restarts = restarts;
                         agents[robot] = new_handle;
@@ -313,10 +313,13 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
     })
 }
 
+/// Starts robot `robot`'s agent. Its fault-injection mode (if any) applies to the first start
+/// only, so a restarted agent behaves and a crash test sees the robot rejoin.
 fn spawn_agent(
     plan: &LaunchPlan,
     binaries: &RuntimeBinaries,
     robot: usize,
+    first_start: bool,
     exits: mpsc::UnboundedSender<(usize, ExitStatus)>,
 ) -> Result<AgentHandle, LaunchError> {
     let mut command = Command::new(&binaries.agent);
@@ -333,7 +336,7 @@ fn spawn_agent(
         .stdout(Stdio::null())
         .stderr(Stdio::inherit())
         .kill_on_drop(true);
-    if let Some(Some(fault)) = plan.faults.get(robot) {
+    if let Some(Some(fault)) = plan.faults.get(robot).filter(|_| first_start) {
         command.arg("--fault").arg(fault);
     }
     let mut child = command.spawn().map_err(|source| LaunchError::Spawn {

@@ -16,6 +16,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use formation_proto::wire::{
     AgentStatus, CmdMsg, CmdStatus, ControlRequest, RobotTiming, ScanMsg, TickOutcome,
+    wall_clock_ns,
 };
 use formation_proto::{LidarSpec, WheelCmd};
 use formation_world::episode::{Controller, ControllerError, Observation};
@@ -70,6 +71,8 @@ pub struct Arrival {
     pub msg: CmdMsg,
     /// When the world took it from its subscriber.
     pub at: Instant,
+    /// The same instant on the system clock ([`wall_clock_ns`]), for the downlink latency.
+    pub wall_ns: u64,
 }
 
 /// Picks robot `i`'s command for tick `tick` of episode `generation` from the newest arrival.
@@ -304,7 +307,11 @@ impl<'l> AgentsController<'l> {
                     if newest.is_none_or(|n| {
                         (msg.generation, msg.tick) >= (n.msg.generation, n.msg.tick)
                     }) {
-                        *newest = Some(Arrival { msg, at });
+                        *newest = Some(Arrival {
+                            msg,
+                            at,
+                            wall_ns: wall_clock_ns(),
+                        });
                     }
                 })
                 .map_err(transport_error)?;
@@ -447,6 +454,7 @@ impl Controller for AgentsController<'_> {
                 arrival.map(|a| &a.msg),
                 arrival.map(|a| a.at.saturating_duration_since(self.published_at[robot])),
                 self.published_wall_ns[robot],
+                arrival.map_or(0, |a| a.wall_ns),
             );
         }
         Ok(())
@@ -461,7 +469,11 @@ mod tests {
     fn arrival(generation: u64, tick: u64, left: f64, status: CmdStatus, at: Instant) -> Arrival {
         let cmd = WheelCmd { left, right: 0.1 };
         let msg = CmdMsg::new(generation, tick, cmd, "m", AgentTimings::default(), status).unwrap();
-        Arrival { msg, at }
+        Arrival {
+            msg,
+            at,
+            wall_ns: 0,
+        }
     }
 
     #[test]

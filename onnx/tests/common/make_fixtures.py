@@ -1,0 +1,102 @@
+"""Writes the ONNX fixtures of formation-onnx's tests and bench into a directory.
+
+Usage: python make_fixtures.py OUT_DIR CASES
+
+Builds the paper's policy network (exact layers) with seeded random weights, exports it with the
+TorchScript exporter (dynamo=False) with a dynamic batch and the contract's names, adds the
+formation.* metadata with the `onnx` package, and writes torch's own outputs for random inputs:
+
+- policy.onnx        the contract, S = 50
+- wrong_name.onnx    input `image` instead of `occupancy`
+- small_image.onnx   a 40 x 40 input while the metadata says size_px 50
+- no_metadata.onnx   no metadata_props at all
+- nan_output.onnx    valid contract, but a NaN bias makes every output NaN
+- cases.f32          CASES records of little-endian f32: occupancy (2500), aux (2), torch wheels (2)
+"""
+
+import sys
+import warnings
+
+import numpy as np
+import onnx
+import torch
+from torch import nn
+
+SIZE = 50
+METADATA = {
+    "formation.format": "formation-policy/1",
+    "formation.occupancy.size_px": "50",
+    "formation.occupancy.resolution_m": "0.1",
+    "formation.occupancy.beyond": "drop",
+    "formation.lidar.beams": "900",
+    "formation.lidar.max_range": "10",
+    "formation.lidar.noise_std": "0",
+    "formation.v_train": "0.7",
+    "formation.dataset_id": "parity-fixture",
+    "formation.train.epochs": "0",
+    "formation.train.final_train_loss": "nan",
+    "formation.train.final_val_loss": "nan",
+    "formation.train.samples": "0",
+    "formation.dagger.iteration": "0",
+    "formation.created_by": "formation-onnx tests",
+}
+
+
+class PolicyNet(nn.Module):
+    def __init__(self, size):
+        super().__init__()
+        side = (size + 2 - 8) // 4 + 1
+        side = (side - 4) // 2 + 1
+        side = side - 3 + 1
+        self.features = nn.Sequential(
+            nn.Conv2d(1, 32, 8, stride=4, padding=1), nn.ReLU(),
+            nn.Conv2d(32, 16, 4, stride=2), nn.ReLU(),
+            nn.Conv2d(16, 16, 3, stride=1), nn.ReLU(),
+            nn.Flatten(),
+        )
+        self.head = nn.Sequential(nn.Linear(16 * side * side + 2, 32), nn.ReLU(), nn.Linear(32, 2))
+
+    def forward(self, occupancy, aux):
+        return self.head(torch.cat([self.features(occupancy), aux], dim=1))
+
+
+def export(model, path, size, input_names, metadata):
+    example = (torch.zeros(2, 1, size, size), torch.zeros(2, 2))
+    dynamic = {name: {0: "batch"} for name in [*input_names, "wheels"]}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(model.eval(), example, path, input_names=input_names, output_names=["wheels"],
+                          dynamic_axes=dynamic, opset_version=17, dynamo=False)
+    proto = onnx.load(path)
+    del proto.metadata_props[:]
+    for key, value in metadata.items():
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = key, value
+    onnx.checker.check_model(proto)
+    onnx.save(proto, path)
+
+
+def main():
+    out, cases = sys.argv[1], int(sys.argv[2])
+    torch.manual_seed(20261122)
+    model = PolicyNet(SIZE).eval()
+    export(model, f"{out}/policy.onnx", SIZE, ["occupancy", "aux"], METADATA)
+    export(model, f"{out}/wrong_name.onnx", SIZE, ["image", "aux"], METADATA)
+    export(model, f"{out}/no_metadata.onnx", SIZE, ["occupancy", "aux"], {})
+    export(PolicyNet(40), f"{out}/small_image.onnx", 40, ["occupancy", "aux"], METADATA)
+    broken = PolicyNet(SIZE)
+    with torch.no_grad():
+        broken.head[2].bias.fill_(float("nan"))
+    export(broken, f"{out}/nan_output.onnx", SIZE, ["occupancy", "aux"], METADATA)
+
+    rng = np.random.default_rng(7)
+    occupancy = (rng.random((cases, 1, SIZE, SIZE)) < 0.08).astype(np.float32)
+    aux = np.stack([rng.uniform(-np.pi, np.pi, cases), rng.uniform(0.5, 3.0, cases)], axis=1).astype(np.float32)
+    with torch.no_grad():
+        wheels = model(torch.from_numpy(occupancy), torch.from_numpy(aux)).numpy()
+    records = np.concatenate([occupancy.reshape(cases, -1), aux, wheels], axis=1).astype("<f4")
+    records.tofile(f"{out}/cases.f32")
+
+
+if __name__ == "__main__":
+    main()

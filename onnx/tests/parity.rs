@@ -1,0 +1,232 @@
+//! ONNX Runtime through `OnnxPolicy` against PyTorch on the same random network, and the
+//! contract refusals on real ONNX files.
+
+mod common;
+
+use std::path::Path;
+
+use formation_onnx::contract::keys;
+use formation_onnx::{ContractViolation, OnnxPolicy, PolicyError};
+use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec};
+
+use common::{CASES, SIZE_PX, fixtures};
+
+/// Largest allowed |onnxruntime - torch| per wheel.
+const TOLERANCE: f32 = 1e-4;
+
+#[test]
+fn outputs_match_torch_and_metadata_is_read() {
+    let Some(fx) = fixtures("parity") else { return };
+    let mut policy =
+        OnnxPolicy::load(&fx.model("policy.onnx")).expect("fixture follows the contract");
+
+    let meta = policy.metadata();
+    assert_eq!(
+        meta.occupancy,
+        OccupancySpec {
+            size_px: 50,
+            resolution_m: 0.1,
+            beyond: BeyondWindow::Drop
+        }
+    );
+    assert_eq!((meta.beams, meta.max_range, meta.v_train), (900, 10.0, 0.7));
+    assert_eq!(meta.dataset_id, "parity-fixture");
+    assert_eq!(
+        meta.extra
+            .get("formation.dagger.iteration")
+            .map(String::as_str),
+        Some("0")
+    );
+    assert!(
+        !meta.extra.contains_key(keys::V_TRAIN),
+        "parsed keys are not repeated in extra"
+    );
+    assert!(
+        policy.model_id().starts_with("policy-"),
+        "{}",
+        policy.model_id()
+    );
+    assert_eq!(policy.model_id().len(), "policy-".len() + 8);
+
+    let cases = fx.cases();
+    assert_eq!(cases.len(), CASES);
+    let mut largest_output = 0.0_f32;
+    for (i, (image, aux, torch)) in cases.iter().enumerate() {
+        let ours = policy.infer(image, *aux).expect("inference");
+        for wheel in 0..2 {
+            let diff = (ours[wheel] - torch[wheel]).abs();
+            assert!(
+                diff <= TOLERANCE,
+                "case {i} wheel {wheel}: ort {} vs torch {} (|diff| {diff})",
+                ours[wheel],
+                torch[wheel]
+            );
+            largest_output = largest_output.max(torch[wheel].abs());
+        }
+    }
+    assert!(
+        largest_output > 1e-3,
+        "the reference outputs are not all ~0, so the comparison means something"
+    );
+}
+
+#[test]
+fn repeated_inference_is_deterministic_and_buffers_do_not_leak_between_calls() {
+    let Some(fx) = fixtures("parity") else { return };
+    let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
+    let cases = fx.cases();
+    let (first_image, first_aux, _) = &cases[0];
+    let first = policy.infer(first_image, *first_aux).expect("infer");
+    let (other_image, other_aux, _) = &cases[1];
+    let other = policy.infer(other_image, *other_aux).expect("infer");
+    assert_ne!(first, other, "different inputs give different outputs");
+    assert_eq!(policy.infer(first_image, *first_aux).expect("infer"), first);
+}
+
+#[test]
+fn policy_moves_to_another_thread() {
+    let Some(fx) = fixtures("parity") else { return };
+    let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
+    let (image, aux, torch) = fx.cases().swap_remove(2);
+    let ours = std::thread::spawn(move || policy.infer(&image, aux))
+        .join()
+        .expect("thread")
+        .expect("infer");
+    assert!((ours[0] - torch[0]).abs() <= TOLERANCE && (ours[1] - torch[1]).abs() <= TOLERANCE);
+}
+
+fn contract_violation(path: &Path) -> (ContractViolation, String) {
+    match OnnxPolicy::load(path) {
+        Err(err @ PolicyError::Contract { .. }) => {
+            let message = err.to_string();
+            assert!(
+                message.contains("formation train"),
+                "the message says how to fix it: {message}"
+            );
+            let PolicyError::Contract { reason, .. } = err else {
+                unreachable!()
+            };
+            (reason, message)
+        }
+        other => panic!(
+            "{}: expected a contract error, got {other:?}",
+            path.display()
+        ),
+    }
+}
+
+#[test]
+fn wrong_input_name_is_refused_naming_it() {
+    let Some(fx) = fixtures("parity") else { return };
+    let (reason, message) = contract_violation(&fx.model("wrong_name.onnx"));
+    assert!(
+        matches!(reason, ContractViolation::InputNames { ref found } if found.contains(&"image".to_owned()))
+    );
+    assert!(
+        message.contains("image") && message.contains("[occupancy, aux]"),
+        "{message}"
+    );
+}
+
+#[test]
+fn image_side_different_from_size_px_is_refused() {
+    let Some(fx) = fixtures("parity") else { return };
+    let (reason, message) = contract_violation(&fx.model("small_image.onnx"));
+    assert_eq!(
+        reason,
+        ContractViolation::Shape {
+            name: "occupancy".into(),
+            expected: "[batch (dynamic), 1, 50, 50]".into(),
+            found: vec![-1, 1, 40, 40]
+        }
+    );
+    assert!(message.contains("[batch, 1, 40, 40]"), "{message}");
+}
+
+#[test]
+fn missing_metadata_is_refused_naming_the_key() {
+    let Some(fx) = fixtures("parity") else { return };
+    let (reason, message) = contract_violation(&fx.model("no_metadata.onnx"));
+    assert_eq!(
+        reason,
+        ContractViolation::MissingMetadata { key: keys::FORMAT }
+    );
+    assert!(message.contains("formation.format"), "{message}");
+}
+
+#[test]
+fn non_finite_output_is_an_error() {
+    let Some(fx) = fixtures("parity") else { return };
+    let mut policy =
+        OnnxPolicy::load(&fx.model("nan_output.onnx")).expect("the contract itself is fine");
+    let (image, aux, _) = fx.cases().swap_remove(0);
+    assert!(
+        matches!(policy.infer(&image, aux), Err(PolicyError::NonFiniteOutput { left, right, .. }) if left.is_nan() && right.is_nan())
+    );
+}
+
+#[test]
+fn wrong_image_length_is_an_error() {
+    let Some(fx) = fixtures("parity") else { return };
+    let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
+    let short = vec![0.0; 40 * 40];
+    match policy.infer(&short, [0.0, 1.0]) {
+        Err(PolicyError::InputLength {
+            expected, actual, ..
+        }) => assert_eq!((expected, actual), (SIZE_PX * SIZE_PX, 1600)),
+        other => panic!("expected InputLength, got {other:?}"),
+    }
+    policy
+        .infer(&vec![0.0; SIZE_PX * SIZE_PX], [0.0, 1.0])
+        .expect("still usable after a refused call");
+}
+
+#[test]
+fn sensor_check_compares_beams_and_range() {
+    let Some(fx) = fixtures("parity") else { return };
+    let policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
+    policy
+        .check_sensor(&LidarSpec::default())
+        .expect("trained with the default 900-beam, 10 m LIDAR");
+    let fewer_beams = LidarSpec {
+        beams: 360,
+        ..LidarSpec::default()
+    };
+    assert!(matches!(
+        policy.check_sensor(&fewer_beams),
+        Err(PolicyError::SensorMismatch { field: "beams", .. })
+    ));
+    let longer = LidarSpec {
+        max_range: 20.0,
+        ..LidarSpec::default()
+    };
+    assert!(matches!(
+        policy.check_sensor(&longer),
+        Err(PolicyError::SensorMismatch {
+            field: "max_range",
+            ..
+        })
+    ));
+}
+
+#[test]
+fn missing_model_file_is_reported_with_the_fix() {
+    let path = Path::new(env!("CARGO_TARGET_TMPDIR")).join("no-such-model.onnx");
+    let err = OnnxPolicy::load(&path).expect_err("no file");
+    assert!(matches!(err, PolicyError::ModelNotFound { path: ref p } if *p == path));
+    assert!(err.to_string().contains("formation train"), "{err}");
+}
+
+#[test]
+fn a_file_that_is_not_onnx_is_a_session_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("garbage.onnx");
+    std::fs::write(&path, b"this is not a protobuf").expect("write");
+    match OnnxPolicy::load(&path) {
+        Err(PolicyError::Session { path: p, reason }) => {
+            assert_eq!(p, path);
+            assert!(!reason.is_empty());
+        }
+        other => panic!("expected a Session error, got {other:?}"),
+    }
+}
