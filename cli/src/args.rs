@@ -105,7 +105,7 @@ pub struct CollectArgs {
     /// Occupancy window side in cells.
     #[arg(long, default_value_t = 50)]
     pub size_px: usize,
-    /// Occupancy cell size [m].
+    /// Occupancy cell size \[m\].
     #[arg(long, default_value_t = 0.1)]
     pub resolution: f64,
     /// What to draw for hits beyond the window: `drop` (the paper) or `border`.

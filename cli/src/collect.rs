@@ -11,16 +11,28 @@ use crate::args::CollectArgs;
 use crate::eval::progress_bar;
 
 /// The occupancy settings named on the command line, validated.
-pub fn occupancy_from_args(size_px: usize, resolution: f64, beyond: &str) -> anyhow::Result<OccupancySpec> {
+pub fn occupancy_from_args(
+    size_px: usize,
+    resolution: f64,
+    beyond: &str,
+) -> anyhow::Result<OccupancySpec> {
     let beyond = BeyondWindow::parse(beyond)
         .with_context(|| format!("--beyond must be `drop` or `border`, got `{beyond}`"))?;
     if size_px != 50 {
-        anyhow::bail!("--size-px must be 50: the paper's network takes 50 x 50 images (got {size_px})");
+        anyhow::bail!(
+            "--size-px must be 50: the paper's network takes 50 x 50 images (got {size_px})"
+        );
     }
     if !(resolution.is_finite() && resolution > 0.0) {
-        anyhow::bail!("--resolution must be a positive number of metres per cell (got {resolution})");
+        anyhow::bail!(
+            "--resolution must be a positive number of metres per cell (got {resolution})"
+        );
     }
-    Ok(OccupancySpec { size_px, resolution_m: resolution, beyond })
+    Ok(OccupancySpec {
+        size_px,
+        resolution_m: resolution,
+        beyond,
+    })
 }
 
 /// `formation collect`.
@@ -39,7 +51,9 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
         anyhow::bail!("--runs must be at least 1");
     }
     let spec0 = scenario.run_spec(opts.base_seed, 0);
-    if occupancy.beyond == BeyondWindow::Border && spec0.world.lidar.max_range <= occupancy.window_m() / 2.0 {
+    if occupancy.beyond == BeyondWindow::Border
+        && spec0.world.lidar.max_range <= occupancy.window_m() / 2.0
+    {
         anyhow::bail!(
             "border rendering needs a LIDAR range beyond the window: lidar.max_range is {} m, the window half-side {} m",
             spec0.world.lidar.max_range,
@@ -56,7 +70,9 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
     let mut writer = DatasetWriter::create(&args.out, header)
         .with_context(|| format!("creating dataset {}", args.out.display()))?;
     let bar = progress_bar(opts.runs, "collect");
-    let report = collect(&opts, &mut writer, &mut |runs, _| bar.set_position(runs as u64))?;
+    let report = collect(&opts, &mut writer, &mut |runs, _| {
+        bar.set_position(runs as u64)
+    })?;
     bar.finish_and_clear();
     let manifest = writer.finish()?;
     println!(

@@ -16,19 +16,42 @@ const CASES: [&str; 3] = ["case1", "case2", "case3"];
 pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
     let root = paths::repo_root();
     let model = paths::resolve_model(args.model.as_deref())?;
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    let mode = if args.in_process { "in-process" } else { "one process per robot" };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let mode = if args.in_process {
+        "in-process"
+    } else {
+        "one process per robot"
+    };
     println!("formation demo: model {} ({mode})", model.display());
     for case in CASES {
-        let (out, _) = run_eval(args, &root.join(format!("scenarios/{case}.toml")), &model, 1, case)?;
+        let (out, _) = run_eval(
+            args,
+            &root.join(format!("scenarios/{case}.toml")),
+            &model,
+            1,
+            case,
+        )?;
         let s = &out.summary;
         println!(
             "{case}: {} at 5 %, convergence {}",
-            if s.success_rate_5 > 0.5 { "converged" } else { "did NOT converge" },
-            s.median_convergence_s.map(|c| format!("{c:.1} s")).unwrap_or_else(|| "-".into())
+            if s.success_rate_5 > 0.5 {
+                "converged"
+            } else {
+                "did NOT converge"
+            },
+            s.median_convergence_s
+                .map(|c| format!("{c:.1} s"))
+                .unwrap_or_else(|| "-".into())
         );
     }
-    let (table, _) = run_eval(args, &root.join("scenarios/table1.toml"), &model, args.runs, "table1")?;
+    let (table, _) = run_eval(
+        args,
+        &root.join("scenarios/table1.toml"),
+        &model,
+        args.runs,
+        "table1",
+    )?;
     print!("{}", eval::table_text(&table));
     copy_training_curve(&model, &args.out)?;
     let html = args.out.join("report.html");
@@ -58,7 +81,8 @@ fn run_eval(
         processes: !args.in_process,
         threads: None,
     };
-    let (out, results) = eval::evaluate(&eval_args).with_context(|| format!("evaluating {name}"))?;
+    let (out, results) =
+        eval::evaluate(&eval_args).with_context(|| format!("evaluating {name}"))?;
     eval::write_eval_dir(&dir, &out, &results)?;
     Ok((out, results))
 }
@@ -66,9 +90,16 @@ fn run_eval(
 /// Copies the model's training loss curve (written beside it by the trainer) into the report
 /// directory, when there is one.
 fn copy_training_curve(model: &Path, out: &Path) -> anyhow::Result<()> {
-    let Some(dir) = model.parent() else { return Ok(()) };
-    let stem = model.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let Ok(entries) = std::fs::read_dir(dir) else { return Ok(()) };
+    let Some(dir) = model.parent() else {
+        return Ok(());
+    };
+    let stem = model
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
     for entry in entries.flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();
         if name.starts_with(&stem) && name.ends_with(".csv") && name.contains("loss") {

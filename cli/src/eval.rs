@@ -86,18 +86,25 @@ pub fn evaluate_in_process(
                         results
                             .lock()
                             .map_err(|_| anyhow::anyhow!("a worker panicked"))?
-                            .push(RunResult { index: i, metrics, trajectory });
+                            .push(RunResult {
+                                index: i,
+                                metrics,
+                                trajectory,
+                            });
                         progress(done.fetch_add(1, Ordering::Relaxed) + 1);
                     }
                 })
             })
             .collect();
         for w in workers {
-            w.join().map_err(|_| anyhow::anyhow!("an evaluation worker panicked"))??;
+            w.join()
+                .map_err(|_| anyhow::anyhow!("an evaluation worker panicked"))??;
         }
         Ok(())
     })?;
-    let mut results = results.into_inner().map_err(|_| anyhow::anyhow!("a worker panicked"))?;
+    let mut results = results
+        .into_inner()
+        .map_err(|_| anyhow::anyhow!("a worker panicked"))?;
     results.sort_by_key(|r| r.index);
     Ok(results)
 }
@@ -107,7 +114,11 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
     let mut models = vec![default.to_path_buf(); scenario.n_robots()];
     for m in scenario.agent_models() {
         let slot = models.get_mut(m.robot).with_context(|| {
-            format!("scenario assigns a model to robot {}, but it has {} robots", m.robot, scenario.n_robots())
+            format!(
+                "scenario assigns a model to robot {}, but it has {} robots",
+                m.robot,
+                scenario.n_robots()
+            )
         })?;
         *slot = paths::resolve_model(Some(&m.model))?;
     }
@@ -123,7 +134,10 @@ pub fn controller_factory<'a>(
     match kind {
         ControllerKind::Expert => Box::new(move || {
             let robot = scenario.world_config().robot;
-            Ok(Box::new(ExpertController::new(ExpertGains::default(), robot)) as Box<dyn Controller>)
+            Ok(
+                Box::new(ExpertController::new(ExpertGains::default(), robot))
+                    as Box<dyn Controller>,
+            )
         }),
         ControllerKind::Policy => Box::new(move || {
             let lidar = scenario.world_config().lidar;
@@ -174,7 +188,10 @@ pub fn table_text(out: &EvalOutput) -> String {
         pct(s.success_rate_5),
         pct(s.success_rate_10),
         opt(s.median_convergence_s, &|x| format!("{x:.2} s")),
-        opt(s.median_rel_formation_error, &|x| format!("{:.2} %", 100.0 * x)),
+        opt(s.median_rel_formation_error, &|x| format!(
+            "{:.2} %",
+            100.0 * x
+        )),
         opt(s.median_orientation_error_rad, &|x| format!("{x:.3} rad")),
         s.collisions,
     )
@@ -185,7 +202,11 @@ pub fn write_eval_dir(dir: &Path, out: &EvalOutput, results: &[RunResult]) -> an
     paths::write_atomic(&dir.join("summary.json"), &serde_json::to_vec_pretty(out)?)?;
     for r in results {
         if let Some(traj) = &r.trajectory {
-            let log = RunLog { index: r.index, metrics: r.metrics.clone(), trajectory: traj.clone() };
+            let log = RunLog {
+                index: r.index,
+                metrics: r.metrics.clone(),
+                trajectory: traj.clone(),
+            };
             paths::write_atomic(
                 &dir.join("runs").join(format!("run-{:04}.json", r.index)),
                 &serde_json::to_vec(&log)?,
@@ -214,12 +235,16 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         anyhow::bail!("--runs must be at least 1");
     }
     let seed = args.seed.unwrap_or_else(|| scenario.seed());
-    let keep_n = args.save_trajectories.unwrap_or(if runs <= 5 { runs } else { 0 });
+    let keep_n = args
+        .save_trajectories
+        .unwrap_or(if runs <= 5 { runs } else { 0 });
     let keep = move |i: usize| i < keep_n;
     let (models, model_ids) = match args.controller {
         ControllerKind::Expert => {
             if args.processes {
-                anyhow::bail!("--processes runs learned agents; the expert sees every robot and runs in-process only");
+                anyhow::bail!(
+                    "--processes runs learned agents; the expert sees every robot and runs in-process only"
+                );
             }
             (Vec::new(), Vec::new())
         }
@@ -253,13 +278,21 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
             })
             .collect()
     } else {
-        let threads = args
-            .threads
-            .unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+        let threads = args.threads.unwrap_or_else(|| {
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1)
+        });
         let factory = controller_factory(args.controller, &scenario, &models);
-        evaluate_in_process(&scenario, seed, runs, factory.as_ref(), threads, &keep, &|n| {
-            bar.set_position(n as u64)
-        })?
+        evaluate_in_process(
+            &scenario,
+            seed,
+            runs,
+            factory.as_ref(),
+            threads,
+            &keep,
+            &|n| bar.set_position(n as u64),
+        )?
     };
     bar.finish_and_clear();
     let elapsed = started.elapsed().as_secs_f64();
@@ -275,7 +308,10 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         summary: summarize(&per_run),
         per_run,
     };
-    eprintln!("evaluated {runs} runs in {elapsed:.1} s ({:.2} s per run)", elapsed / runs as f64);
+    eprintln!(
+        "evaluated {runs} runs in {elapsed:.1} s ({:.2} s per run)",
+        elapsed / runs as f64
+    );
     Ok((out, results))
 }
 

@@ -58,9 +58,17 @@ fn run_training(opts: &TrainOptions) -> anyhow::Result<TrainReport> {
 pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
     let scenario = Scenario::from_path(&args.scenario)?;
     let runs = args.runs.unwrap_or_else(|| scenario.runs());
-    let out_dir = args.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let out_dir = args
+        .out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
-    let stem = args.out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or("policy".into());
+    let stem = args
+        .out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or("policy".into());
     let train_opts = |out: PathBuf, init_from: Option<PathBuf>| TrainOptions {
         data: vec![args.data.clone()],
         out,
@@ -76,7 +84,10 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
         Some(m) => m.clone(),
         None => {
             let m0 = out_dir.join(format!("{stem}-dagger0.onnx"));
-            eprintln!("DAgger iteration 0: behaviour cloning on {}", args.data.display());
+            eprintln!(
+                "DAgger iteration 0: behaviour cloning on {}",
+                args.data.display()
+            );
             run_training(&train_opts(m0.clone(), None))?;
             m0
         }
@@ -103,7 +114,11 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
         std::fs::copy(&model, &args.out)
             .with_context(|| format!("copying {} to {}", model.display(), args.out.display()))?;
     }
-    println!("DAgger curve (closed loop on {}, {} runs):", args.eval_scenario.display(), args.eval_runs);
+    println!(
+        "DAgger curve (closed loop on {}, {} runs):",
+        args.eval_scenario.display(),
+        args.eval_runs
+    );
     println!("  iter  success@5%  success@10%  median err  collisions");
     for (k, s) in curve.iter().enumerate() {
         println!(
@@ -128,7 +143,11 @@ fn checkpoint_of(model: &Path) -> PathBuf {
     model.with_extension("pt")
 }
 
-fn iteration_figures(args: &DaggerArgs, k: usize, model: &Path) -> anyhow::Result<eval::EvalOutput> {
+fn iteration_figures(
+    args: &DaggerArgs,
+    k: usize,
+    model: &Path,
+) -> anyhow::Result<eval::EvalOutput> {
     let eval_args = EvalArgs {
         scenario: args.eval_scenario.clone(),
         controller: ControllerKind::Policy,
@@ -142,7 +161,10 @@ fn iteration_figures(args: &DaggerArgs, k: usize, model: &Path) -> anyhow::Resul
         threads: None,
     };
     let (out, _) = eval::evaluate(&eval_args)?;
-    eprintln!("DAgger iteration {k} closed loop:\n{}", eval::table_text(&out));
+    eprintln!(
+        "DAgger iteration {k} closed loop:\n{}",
+        eval::table_text(&out)
+    );
     Ok(out)
 }
 
@@ -165,7 +187,9 @@ fn rollout_and_label(
     let occupancy = writer.header().occupancy;
     let labeller = Labeller::new(gains, robot, lidar, occupancy)?;
     let models = eval::models_per_robot(scenario, model)?;
-    let threads = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    let threads = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
     let next = AtomicUsize::new(0);
     let per_run: Mutex<Vec<(usize, Vec<Sample>)>> = Mutex::new(Vec::new());
     let bar = eval::progress_bar(runs, &format!("dagger {k}"));
@@ -186,14 +210,19 @@ fn rollout_and_label(
                         let spec = scenario.run_spec(iteration_seed, i);
                         let mut coin = rand_chacha::ChaCha8Rng::seed_from_u64(spec.seed ^ 0xDA66E5);
                         let expert_drives = beta > 0.0 && coin.random::<f64>() < beta;
-                        let driver: &mut dyn Controller =
-                            if expert_drives { &mut expert } else { &mut policy };
+                        let driver: &mut dyn Controller = if expert_drives {
+                            &mut expert
+                        } else {
+                            &mut policy
+                        };
                         let mut samples = Vec::new();
                         let mut failure = None;
                         run_episode(&spec, driver, &mut |obs, _| {
                             if failure.is_none() {
                                 failure = labeller
-                                    .label_observation(obs, k as u32, i as u32, &mut |s| samples.push(s))
+                                    .label_observation(obs, k as u32, i as u32, &mut |s| {
+                                        samples.push(s)
+                                    })
                                     .err();
                             }
                         })
@@ -201,19 +230,25 @@ fn rollout_and_label(
                         if let Some(e) = failure {
                             return Err(e).with_context(|| format!("labelling DAgger rollout {i}"));
                         }
-                        per_run.lock().map_err(|_| anyhow::anyhow!("poisoned"))?.push((i, samples));
+                        per_run
+                            .lock()
+                            .map_err(|_| anyhow::anyhow!("poisoned"))?
+                            .push((i, samples));
                         bar.set_position(done.fetch_add(1, Ordering::Relaxed) as u64 + 1);
                     }
                 })
             })
             .collect();
         for w in workers {
-            w.join().map_err(|_| anyhow::anyhow!("a DAgger worker panicked"))??;
+            w.join()
+                .map_err(|_| anyhow::anyhow!("a DAgger worker panicked"))??;
         }
         Ok(())
     })?;
     bar.finish_and_clear();
-    let mut per_run = per_run.into_inner().map_err(|_| anyhow::anyhow!("poisoned"))?;
+    let mut per_run = per_run
+        .into_inner()
+        .map_err(|_| anyhow::anyhow!("poisoned"))?;
     per_run.sort_by_key(|(i, _)| *i);
     let mut added = 0;
     for (_, samples) in per_run {

@@ -20,7 +20,10 @@ pub fn repo_root() -> PathBuf {
             .map(Path::to_path_buf)
     });
     from_cwd.unwrap_or_else(|| {
-        Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_default()
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default()
     })
 }
 
@@ -35,7 +38,11 @@ pub fn resolve_model(given: Option<&Path>) -> anyhow::Result<PathBuf> {
         anyhow::bail!(
             "model {} not found: pass --model PATH to an ONNX file exported by `formation train`{}",
             path.display(),
-            if given.is_none() { " (the shipped default should be in onnx/models/)" } else { "" }
+            if given.is_none() {
+                " (the shipped default should be in onnx/models/)"
+            } else {
+                ""
+            }
         );
     }
     Ok(path)
@@ -44,9 +51,16 @@ pub fn resolve_model(given: Option<&Path>) -> anyhow::Result<PathBuf> {
 /// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename),
 /// creating parent directories.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating directory {}", dir.display()))?;
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("creating directory {}", dir.display()))?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
     std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("renaming into {}", path.display()))?;

@@ -22,7 +22,7 @@ use formation_world::RobotParams;
 use formation_world::episode::{Controller, ControllerError, Observation};
 use serde::{Deserialize, Serialize};
 
-/// Below this distance [m] between two offset points the pair's direction is undefined and the pair
+/// Below this distance \[m\] between two offset points the pair's direction is undefined and the pair
 /// contributes nothing (the bodies, 0.5 m across, would overlap long before).
 const MIN_PAIR_DISTANCE: f64 = 1e-9;
 
@@ -41,7 +41,7 @@ pub struct ExpertGains {
     pub k_formation: f64,
     /// Distance `c`, in metres, from the axle centre to the controlled point, along the heading. Must be > 0.
     pub point_offset: f64,
-    /// Upper bound [m/s] on the norm of the reference velocity `v* (cos phi*, sin phi*)`.
+    /// Upper bound \[m/s\] on the norm of the reference velocity `v* (cos phi*, sin phi*)`.
     pub max_reference_speed: f64,
 }
 

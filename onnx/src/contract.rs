@@ -30,15 +30,15 @@ pub mod keys {
     pub const FORMAT: &str = "formation.format";
     /// Image side in cells (`S`).
     pub const SIZE_PX: &str = "formation.occupancy.size_px";
-    /// Cell edge length [m].
+    /// Cell edge length \[m\].
     pub const RESOLUTION_M: &str = "formation.occupancy.resolution_m";
     /// `drop` or `border`.
     pub const BEYOND: &str = "formation.occupancy.beyond";
     /// LIDAR beams the model was trained with.
     pub const BEAMS: &str = "formation.lidar.beams";
-    /// LIDAR maximum range [m].
+    /// LIDAR maximum range \[m\].
     pub const MAX_RANGE: &str = "formation.lidar.max_range";
-    /// Training speed [m/s]: outputs are wheel speeds at this speed.
+    /// Training speed \[m/s\]: outputs are wheel speeds at this speed.
     pub const V_TRAIN: &str = "formation.v_train";
     /// Id of the dataset the model was trained on.
     pub const DATASET_ID: &str = "formation.dataset_id";
@@ -51,9 +51,9 @@ pub struct ModelMetadata {
     pub occupancy: OccupancySpec,
     /// LIDAR beams of the training sensor.
     pub beams: usize,
-    /// LIDAR maximum range of the training sensor [m].
+    /// LIDAR maximum range of the training sensor \[m\].
     pub max_range: f64,
-    /// Training speed [m/s]; deployed commands are scaled by `v* / v_train`.
+    /// Training speed \[m/s\]; deployed commands are scaled by `v* / v_train`.
     pub v_train: f64,
     /// Id of the training dataset.
     pub dataset_id: String,

@@ -5,26 +5,29 @@ use serde::{Deserialize, Serialize};
 /// Planar pose of a robot's wheel-axle centre in the world frame.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Pose {
-    /// x position [m].
+    /// x position \[m\].
     pub x: f64,
-    /// y position [m].
+    /// y position \[m\].
     pub y: f64,
-    /// Heading [rad], counter-clockwise from +x. Kept wrapped to (-pi, pi].
+    /// Heading \[rad\], counter-clockwise from +x. Kept wrapped to (-pi, pi].
     pub theta: f64,
 }
 
-/// Left and right wheel rim speeds [m/s] of a differential-drive robot.
+/// Left and right wheel rim speeds \[m/s\] of a differential-drive robot.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct WheelCmd {
-    /// Left wheel rim speed [m/s].
+    /// Left wheel rim speed \[m/s\].
     pub left: f64,
-    /// Right wheel rim speed [m/s].
+    /// Right wheel rim speed \[m/s\].
     pub right: f64,
 }
 
 impl WheelCmd {
     /// Both wheels stopped: what the watchdog applies to a robot without a valid command.
-    pub const BRAKE: WheelCmd = WheelCmd { left: 0.0, right: 0.0 };
+    pub const BRAKE: WheelCmd = WheelCmd {
+        left: 0.0,
+        right: 0.0,
+    };
 
     /// True when both wheel speeds are finite numbers.
     pub fn is_finite(&self) -> bool {
@@ -35,11 +38,11 @@ impl WheelCmd {
 /// The goal every robot is given at one instant: common heading, speed and pairwise distance.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Goal {
-    /// Desired common heading phi* [rad] at this instant.
+    /// Desired common heading phi* \[rad\] at this instant.
     pub phi_star: f64,
-    /// Desired pairwise distance d* [m].
+    /// Desired pairwise distance d* \[m\].
     pub d_star: f64,
-    /// Desired speed v* [m/s].
+    /// Desired speed v* \[m/s\].
     pub v_star: f64,
 }
 
@@ -50,15 +53,19 @@ pub struct LidarSpec {
     /// Number of beams evenly spread over 360 degrees, beam 0 pointing along the robot's +x axis
     /// and beams advancing counter-clockwise.
     pub beams: usize,
-    /// Maximum range [m]; a beam that hits nothing reports this value.
+    /// Maximum range \[m\]; a beam that hits nothing reports this value.
     pub max_range: f64,
-    /// Standard deviation of additive Gaussian range noise [m] on beams that hit something.
+    /// Standard deviation of additive Gaussian range noise \[m\] on beams that hit something.
     pub noise_std: f64,
 }
 
 impl Default for LidarSpec {
     fn default() -> Self {
-        LidarSpec { beams: 900, max_range: 10.0, noise_std: 0.0 }
+        LidarSpec {
+            beams: 900,
+            max_range: 10.0,
+            noise_std: 0.0,
+        }
     }
 }
 
@@ -101,7 +108,7 @@ impl BeyondWindow {
 pub struct OccupancySpec {
     /// Cells on a side. The paper's network needs 50.
     pub size_px: usize,
-    /// Cell edge length [m].
+    /// Cell edge length \[m\].
     pub resolution_m: f64,
     /// What happens to hits beyond the window.
     pub beyond: BeyondWindow,
@@ -109,10 +116,13 @@ pub struct OccupancySpec {
 
 impl OccupancySpec {
     /// The paper's exact setting: 50 x 50 cells of 0.1 m (5 x 5 m), hits beyond dropped.
-    pub const PAPER: OccupancySpec =
-        OccupancySpec { size_px: 50, resolution_m: 0.1, beyond: BeyondWindow::Drop };
+    pub const PAPER: OccupancySpec = OccupancySpec {
+        size_px: 50,
+        resolution_m: 0.1,
+        beyond: BeyondWindow::Drop,
+    };
 
-    /// Side length of the window [m].
+    /// Side length of the window \[m\].
     pub fn window_m(&self) -> f64 {
         self.size_px as f64 * self.resolution_m
     }

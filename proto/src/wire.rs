@@ -383,15 +383,15 @@ pub struct ScanMsg {
     pub generation: u64,
     /// Tick index `k` within the episode.
     pub tick: u64,
-    /// Simulated time `k dt` [s].
+    /// Simulated time `k dt` \[s\].
     pub sim_time: f64,
-    /// The robot's own heading [rad] (its compass).
+    /// The robot's own heading \[rad\] (its compass).
     pub heading: f64,
-    /// Desired heading phi* at this tick [rad].
+    /// Desired heading phi* at this tick \[rad\].
     pub phi_star: f64,
-    /// Desired pairwise distance d* [m].
+    /// Desired pairwise distance d* \[m\].
     pub d_star: f64,
-    /// Desired speed v* [m/s].
+    /// Desired speed v* \[m/s\].
     pub v_star: f64,
     /// [`wall_clock_ns`] when the world published this scan.
     pub published_wall_ns: u64,
@@ -399,7 +399,7 @@ pub struct ScanMsg {
     pub n_beams: u32,
     /// Keeps the layout explicit; always 0.
     pub reserved: u32,
-    /// Ranges [m], beam `k` at body-frame bearing `2 pi k / n_beams`; entries past `n_beams` are 0.
+    /// Ranges \[m\], beam `k` at body-frame bearing `2 pi k / n_beams`; entries past `n_beams` are 0.
     pub ranges: [f32; MAX_BEAMS],
 }
 
@@ -492,15 +492,15 @@ pub struct CmdMsg {
     pub generation: u64,
     /// Tick of the scan this answers.
     pub tick: u64,
-    /// Left wheel rim speed [m/s].
+    /// Left wheel rim speed \[m/s\].
     pub left: f64,
-    /// Right wheel rim speed [m/s].
+    /// Right wheel rim speed \[m/s\].
     pub right: f64,
     /// [`wall_clock_ns`] when the agent took the scan from its subscriber.
     pub received_wall_ns: u64,
-    /// Time spent rendering the occupancy image [ns].
+    /// Time spent rendering the occupancy image \[ns\].
     pub occupancy_ns: u64,
-    /// Time spent in the policy, including speed scaling [ns].
+    /// Time spent in the policy, including speed scaling \[ns\].
     pub inference_ns: u64,
     /// [`wall_clock_ns`] just before the agent published this command.
     pub published_wall_ns: u64,
@@ -517,9 +517,9 @@ pub struct CmdMsg {
 pub struct AgentTimings {
     /// [`wall_clock_ns`] when the scan was taken from the subscriber.
     pub received_wall_ns: u64,
-    /// Occupancy rendering [ns].
+    /// Occupancy rendering \[ns\].
     pub occupancy_ns: u64,
-    /// Policy inference [ns].
+    /// Policy inference \[ns\].
     pub inference_ns: u64,
 }
 
@@ -616,9 +616,9 @@ pub struct ControlMsg {
     pub beams: u32,
     /// Episode generation (begin episode).
     pub generation: u64,
-    /// LIDAR maximum range [m] (begin episode).
+    /// LIDAR maximum range \[m\] (begin episode).
     pub max_range: f64,
-    /// LIDAR noise standard deviation [m] (begin episode).
+    /// LIDAR noise standard deviation \[m\] (begin episode).
     pub noise_std: f64,
     /// Request id (swap model).
     pub request_id: u64,

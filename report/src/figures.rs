@@ -56,7 +56,7 @@ pub const EDGE_COLORS: [RGBColor; 6] = [
     RGBColor(0xE3, 0x1A, 0x1C),
     RGBColor(0x1F, 0x78, 0xB4),
 ];
-/// Width [px] of the legend strip right of every plot.
+/// Width \[px\] of the legend strip right of every plot.
 const LEGEND_WIDTH: u32 = 140;
 /// Seconds between the formation snapshots of the trajectory panel (the paper's 3 s).
 pub const SNAPSHOT_EVERY_S: f64 = 3.0;
@@ -175,7 +175,7 @@ struct Reference {
     label: String,
 }
 
-/// One time-series panel: lines over `time [s]` with a legend strip on the right.
+/// One time-series panel: lines over `time \[s\]` with a legend strip on the right.
 fn time_panel(
     area: &Area<'_>,
     title: &str,
@@ -256,7 +256,7 @@ fn time_range(traj: &RunTrajectory) -> Range<f64> {
     padded_range(traj.times.iter().copied(), 0.0, false)
 }
 
-/// Figs. 6a-8a: formation error `e_ij(t)` [%] (top) and orientation error [rad] (bottom).
+/// Figs. 6a-8a: formation error `e_ij(t)` [%] (top) and orientation error \[rad\] (bottom).
 pub fn errors_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportError> {
     let formation = formation_error_percent(traj);
     let orientation = orientation_error(traj);
@@ -311,7 +311,7 @@ pub fn errors_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportErr
     })
 }
 
-/// Figs. 6b-8b: left (top) and right (bottom) wheel commands of every robot [m/s], with v*.
+/// Figs. 6b-8b: left (top) and right (bottom) wheel commands of every robot \[m/s\], with v*.
 pub fn wheels_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportError> {
     let left = wheel_commands(traj, Wheel::Left);
     let right = wheel_commands(traj, Wheel::Right);

@@ -17,11 +17,11 @@ pub mod paper {
     pub const SUCCESS_RATE_5: f64 = 0.90;
     /// Success rate at the 10 % tolerance.
     pub const SUCCESS_RATE_10: f64 = 0.96;
-    /// Median convergence time [s] ("about 10 s").
+    /// Median convergence time \[s\] ("about 10 s").
     pub const MEDIAN_CONVERGENCE_S: f64 = 10.0;
     /// Median relative formation error (fraction).
     pub const MEDIAN_REL_FORMATION_ERROR: f64 = 0.025;
-    /// Median orientation error [rad].
+    /// Median orientation error \[rad\].
     pub const MEDIAN_ORIENTATION_ERROR_RAD: f64 = 0.031;
     /// Runs in Table I.
     pub const RUNS: usize = 100;

@@ -75,11 +75,11 @@ pub struct TableRow {
     pub success_rate_5: f64,
     /// Fraction (0..1) of runs successful at 10 %.
     pub success_rate_10: f64,
-    /// Median convergence time [s] over runs successful at 10 %.
+    /// Median convergence time \[s\] over runs successful at 10 %.
     pub median_convergence_s: Option<f64>,
     /// Median relative formation error (fraction) over runs successful at 10 %.
     pub median_rel_formation_error: Option<f64>,
-    /// Median orientation error [rad] over runs successful at 10 %.
+    /// Median orientation error \[rad\] over runs successful at 10 %.
     pub median_orientation_error_rad: Option<f64>,
     /// Runs with at least one collision.
     pub collisions: usize,
@@ -105,11 +105,11 @@ pub struct Quartiles {
 /// The three Fig. 9 quantities.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Fig9Stats {
-    /// Convergence time [s].
+    /// Convergence time \[s\].
     pub convergence_s: Option<Quartiles>,
     /// Relative formation error (fraction).
     pub rel_formation_error: Option<Quartiles>,
-    /// Orientation error [rad].
+    /// Orientation error \[rad\].
     pub orientation_error_rad: Option<Quartiles>,
 }
 
@@ -120,11 +120,11 @@ pub struct RunScores {
     pub success_5: bool,
     /// Success at 10 %.
     pub success_10: bool,
-    /// Convergence time [s] at 10 %.
+    /// Convergence time \[s\] at 10 %.
     pub convergence_s_10: Option<f64>,
     /// Relative formation error over the final window (fraction).
     pub rel_formation_error: f64,
-    /// Orientation error over the final window [rad].
+    /// Orientation error over the final window \[rad\].
     pub orientation_error_rad: f64,
     /// Collision events.
     pub collisions: usize,
@@ -147,17 +147,17 @@ pub struct RunData {
 /// one command per robot, every edge names existing robots.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunTrajectory {
-    /// Time step [s].
+    /// Time step \[s\].
     pub dt: f64,
-    /// Desired pairwise distance [m] (finite, positive).
+    /// Desired pairwise distance \[m\] (finite, positive).
     pub d_star: f64,
-    /// Desired speed [m/s] (NaN when not recorded).
+    /// Desired speed \[m/s\] (NaN when not recorded).
     pub v_star: f64,
     /// Formation edges `(i, j)`, 0-based robot indices.
     pub edges: Vec<(usize, usize)>,
-    /// Sample times [s].
+    /// Sample times \[s\].
     pub times: Vec<f64>,
-    /// Desired heading at each sample [rad].
+    /// Desired heading at each sample \[rad\].
     pub phi_star: Vec<f64>,
     /// Poses of every robot at each sample.
     pub poses: Vec<Vec<Pose>>,

@@ -28,7 +28,7 @@ pub struct LatencyProfile {
     pub source: PathBuf,
     /// Stages, in drawing order.
     pub stages: Vec<StageLatency>,
-    /// The paper's reference inference time [ms], if given.
+    /// The paper's reference inference time \[ms\], if given.
     pub inference_paper_ms: Option<f64>,
     /// Runs the profile covers, if given.
     pub runs: Option<u64>,

@@ -72,7 +72,7 @@ pub fn formation_error_percent(traj: &RunTrajectory) -> Vec<Series> {
         .collect()
 }
 
-/// Signed orientation error `wrap(theta_i(t) - phi*(t))` of every robot [rad].
+/// Signed orientation error `wrap(theta_i(t) - phi*(t))` of every robot \[rad\].
 pub fn orientation_error(traj: &RunTrajectory) -> Vec<Series> {
     (0..traj.n_robots())
         .map(|i| {
@@ -88,7 +88,7 @@ pub fn orientation_error(traj: &RunTrajectory) -> Vec<Series> {
         .collect()
 }
 
-/// One wheel's applied command of every robot over time [m/s]; command `k` is drawn at `t_k`.
+/// One wheel's applied command of every robot over time \[m/s\]; command `k` is drawn at `t_k`.
 pub fn wheel_commands(traj: &RunTrajectory, wheel: Wheel) -> Vec<Series> {
     (0..traj.n_robots())
         .map(|i| {
@@ -110,7 +110,7 @@ pub fn wheel_commands(traj: &RunTrajectory, wheel: Wheel) -> Vec<Series> {
         .collect()
 }
 
-/// Every robot's path `(x, y)` [m].
+/// Every robot's path `(x, y)` \[m\].
 pub fn paths(traj: &RunTrajectory) -> Vec<Series> {
     (0..traj.n_robots())
         .map(|i| {

@@ -74,7 +74,7 @@ pub trait PolicyBackend: Send {
     fn occupancy_spec(&self) -> OccupancySpec;
     /// LIDAR beams the policy was trained with, if it records them.
     fn beams(&self) -> Option<usize>;
-    /// Training speed `v_train` [m/s]; deployed commands are scaled by `v* / v_train`.
+    /// Training speed `v_train` \[m/s\]; deployed commands are scaled by `v* / v_train`.
     fn v_train(&self) -> f64;
     /// A short id naming the model (logged with every command).
     fn model_id(&self) -> &str;
@@ -111,7 +111,12 @@ impl Agent {
     pub fn new(policy: Box<dyn PolicyBackend>, lidar: LidarSpec) -> Result<Agent, DecisionError> {
         check_policy(policy.as_ref(), &lidar)?;
         let cells = cells(&policy.occupancy_spec());
-        Ok(Agent { policy, lidar, image: vec![0; cells], image_f32: vec![0.0; cells] })
+        Ok(Agent {
+            policy,
+            lidar,
+            image: vec![0; cells],
+            image_f32: vec![0.0; cells],
+        })
     }
 
     /// Loads an ONNX model (validating its contract) and wraps it.
@@ -123,7 +128,10 @@ impl Agent {
     /// Renders this robot's occupancy image from its own scan.
     pub fn perceive(&mut self, scan: &[f32]) -> Result<(), DecisionError> {
         if scan.len() != self.lidar.beams {
-            return Err(DecisionError::ScanLength { expected: self.lidar.beams, actual: scan.len() });
+            return Err(DecisionError::ScanLength {
+                expected: self.lidar.beams,
+                actual: scan.len(),
+            });
         }
         let spec = self.policy.occupancy_spec();
         occupancy::render(scan, &self.lidar, &spec, &mut self.image);
@@ -145,11 +153,19 @@ impl Agent {
             });
         }
         let k = goal.v_star / self.policy.v_train();
-        Ok(WheelCmd { left: k * f64::from(left), right: k * f64::from(right) })
+        Ok(WheelCmd {
+            left: k * f64::from(left),
+            right: k * f64::from(right),
+        })
     }
 
     /// The whole decision: [`Agent::perceive`] then [`Agent::decide`].
-    pub fn act(&mut self, scan: &[f32], heading: f64, goal: &Goal) -> Result<WheelCmd, DecisionError> {
+    pub fn act(
+        &mut self,
+        scan: &[f32],
+        heading: f64,
+        goal: &Goal,
+    ) -> Result<WheelCmd, DecisionError> {
         self.perceive(scan)?;
         self.decide(heading, goal)
     }
@@ -178,7 +194,9 @@ impl Agent {
 /// The policy's auxiliary input `(delta_phi, d*)` for a robot with this heading and goal.
 pub fn policy_aux(heading: f64, goal: &Goal) -> Result<[f32; 2], DecisionError> {
     if !(goal.d_star.is_finite() && goal.d_star > 0.0) {
-        return Err(DecisionError::Goal { reason: format!("d* must be > 0, got {}", goal.d_star) });
+        return Err(DecisionError::Goal {
+            reason: format!("d* must be > 0, got {}", goal.d_star),
+        });
     }
     if !(goal.phi_star.is_finite() && heading.is_finite() && goal.v_star.is_finite()) {
         return Err(DecisionError::Goal {
@@ -188,7 +206,10 @@ pub fn policy_aux(heading: f64, goal: &Goal) -> Result<[f32; 2], DecisionError> 
             ),
         });
     }
-    Ok([wrap_angle(goal.phi_star - heading) as f32, goal.d_star as f32])
+    Ok([
+        wrap_angle(goal.phi_star - heading) as f32,
+        goal.d_star as f32,
+    ])
 }
 
 fn cells(spec: &OccupancySpec) -> usize {
@@ -219,9 +240,14 @@ impl PolicyController {
     }
 
     /// Loads `models[i]` for robot `i`.
-    pub fn from_model_paths(models: &[&Path], lidar: LidarSpec) -> Result<PolicyController, DecisionError> {
-        let agents =
-            models.iter().map(|m| Agent::from_model_path(m, lidar)).collect::<Result<Vec<_>, _>>()?;
+    pub fn from_model_paths(
+        models: &[&Path],
+        lidar: LidarSpec,
+    ) -> Result<PolicyController, DecisionError> {
+        let agents = models
+            .iter()
+            .map(|m| Agent::from_model_path(m, lidar))
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(PolicyController::new(agents))
     }
 
@@ -232,7 +258,11 @@ impl PolicyController {
 }
 
 impl Controller for PolicyController {
-    fn commands(&mut self, obs: &Observation<'_>, out: &mut [WheelCmd]) -> Result<(), ControllerError> {
+    fn commands(
+        &mut self,
+        obs: &Observation<'_>,
+        out: &mut [WheelCmd],
+    ) -> Result<(), ControllerError> {
         if self.agents.len() != out.len() {
             return Err(ControllerError {
                 message: format!(
@@ -245,7 +275,9 @@ impl Controller for PolicyController {
         for (i, (agent, cmd)) in self.agents.iter_mut().zip(out.iter_mut()).enumerate() {
             *cmd = agent
                 .act(&obs.scans[i], obs.poses[i].theta, &obs.goal)
-                .map_err(|e| ControllerError { message: format!("robot {i}: {e}") })?;
+                .map_err(|e| ControllerError {
+                    message: format!("robot {i}: {e}"),
+                })?;
         }
         Ok(())
     }
@@ -285,7 +317,11 @@ mod tests {
 
     fn probe() -> Box<Probe> {
         Box::new(Probe {
-            spec: OccupancySpec { size_px: 50, resolution_m: 0.1, beyond: BeyondWindow::Drop },
+            spec: OccupancySpec {
+                size_px: 50,
+                resolution_m: 0.1,
+                beyond: BeyondWindow::Drop,
+            },
             seen: None,
         })
     }
@@ -296,25 +332,48 @@ mod tests {
         let mut agent = Agent::new(probe(), lidar).expect("probe matches the sensor");
         let mut scan = vec![lidar.max_range as f32; lidar.beams];
         scan[0] = 1.0; // one hit straight ahead
-        let goal = Goal { phi_star: 3.0, d_star: 1.5, v_star: 0.7 };
+        let goal = Goal {
+            phi_star: 3.0,
+            d_star: 1.5,
+            v_star: 0.7,
+        };
         let cmd = agent.act(&scan, -3.0, &goal).expect("decides");
         let delta = wrap_angle(6.0);
         let k = 0.7 / 0.5;
         assert!((cmd.left - k * f64::from(delta as f32)).abs() < 1e-12);
-        assert!((cmd.right - k * 1.0).abs() < 1e-12, "exactly one occupied cell reached the policy");
+        assert!(
+            (cmd.right - k * 1.0).abs() < 1e-12,
+            "exactly one occupied cell reached the policy"
+        );
     }
 
     #[test]
     fn sensor_mismatch_and_bad_goal_are_refused() {
-        let lidar = LidarSpec { beams: 360, ..LidarSpec::default() };
-        assert!(matches!(Agent::new(probe(), lidar), Err(DecisionError::SensorMismatch { .. })));
+        let lidar = LidarSpec {
+            beams: 360,
+            ..LidarSpec::default()
+        };
+        assert!(matches!(
+            Agent::new(probe(), lidar),
+            Err(DecisionError::SensorMismatch { .. })
+        ));
         let mut agent = Agent::new(probe(), LidarSpec::default()).expect("matches");
         let scan = vec![10.0; 900];
-        let bad = Goal { phi_star: 0.0, d_star: 0.0, v_star: 0.7 };
-        assert!(matches!(agent.act(&scan, 0.0, &bad), Err(DecisionError::Goal { .. })));
+        let bad = Goal {
+            phi_star: 0.0,
+            d_star: 0.0,
+            v_star: 0.7,
+        };
+        assert!(matches!(
+            agent.act(&scan, 0.0, &bad),
+            Err(DecisionError::Goal { .. })
+        ));
         assert!(matches!(
             agent.act(&scan[..10], 0.0, &Goal { d_star: 1.0, ..bad }),
-            Err(DecisionError::ScanLength { expected: 900, actual: 10 })
+            Err(DecisionError::ScanLength {
+                expected: 900,
+                actual: 10
+            })
         ));
     }
 }

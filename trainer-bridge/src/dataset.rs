@@ -47,7 +47,7 @@ pub struct DatasetHeader {
     pub occupancy: OccupancySpec,
     /// The LIDAR the scans came from.
     pub lidar: LidarSpec,
-    /// The speed v* [m/s] the wheel labels were produced at (deployment scales by v*/v_train).
+    /// The speed v* \[m/s\] the wheel labels were produced at (deployment scales by v*/v_train).
     pub v_train: f64,
     /// Base seed of the collection.
     pub seed: u64,
@@ -141,11 +141,11 @@ impl DatasetHeader {
 pub struct Sample {
     /// `size_px * size_px` occupancy cells, row-major (1 = occupied).
     pub occupancy: Vec<u8>,
-    /// `wrap(phi* - theta)` [rad], in (-pi, pi].
+    /// `wrap(phi* - theta)` \[rad\], in (-pi, pi].
     pub delta_phi: f32,
-    /// Desired pairwise distance d* [m].
+    /// Desired pairwise distance d* \[m\].
     pub d_star: f32,
-    /// Label: (left, right) wheel speeds [m/s] at `v_train`.
+    /// Label: (left, right) wheel speeds \[m/s\] at `v_train`.
     pub wheels: [f32; 2],
     /// DAgger iteration (0 = expert demonstrations).
     pub iteration: u32,

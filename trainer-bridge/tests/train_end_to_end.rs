@@ -4,7 +4,6 @@
 //! Needs the trainer's Python environment (`bash .ci/setup-python`); without PyTorch the test
 //! says so and passes, since the Rust side's own behaviour is covered by the unit tests.
 
-
 use formation_proto::{LidarSpec, OccupancySpec};
 use trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter, Sample};
 use trainer_bridge::train::{TrainError, TrainOptions, train};

@@ -17,7 +17,7 @@ use crate::scenario::RunSpec;
 pub struct Observation<'a> {
     /// Tick index `k`, starting at 0.
     pub tick: u64,
-    /// Simulated time `k * dt` [s].
+    /// Simulated time `k * dt` \[s\].
     pub time: f64,
     /// The goal at this instant.
     pub goal: Goal,
@@ -63,17 +63,17 @@ impl ControllerError {
 /// commands, wheel saturation and any acceleration limit), which take the state from `k` to `k + 1`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Trajectory {
-    /// Time step [s].
+    /// Time step \[s\].
     pub dt: f64,
-    /// Desired pairwise distance [m].
+    /// Desired pairwise distance \[m\].
     pub d_star: f64,
-    /// Desired speed [m/s].
+    /// Desired speed \[m/s\].
     pub v_star: f64,
     /// Formation edges the metrics score.
     pub edges: Vec<(usize, usize)>,
-    /// Sample times [s].
+    /// Sample times \[s\].
     pub times: Vec<f64>,
-    /// Desired heading at each sample time [rad], not wrapped.
+    /// Desired heading at each sample time \[rad\], not wrapped.
     pub phi_star: Vec<f64>,
     /// Poses of all robots at each sample time.
     pub poses: Vec<Vec<Pose>>,

@@ -19,7 +19,7 @@ use parry2d::shape::Ball;
 
 use crate::robot::RobotParams;
 
-/// Writes the noiseless ranges [m] of robot `own`'s LIDAR ring into `out`, given every robot's
+/// Writes the noiseless ranges \[m\] of robot `own`'s LIDAR ring into `out`, given every robot's
 /// pose; all bodies are discs of `params.body_radius` centred at their poses.
 ///
 /// Beams that hit nothing within `lidar.max_range` read exactly `lidar.max_range as f32`. If `own`'s

@@ -32,7 +32,7 @@ use crate::episode::Trajectory;
 /// Settings of [`run_metrics`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MetricsConfig {
-    /// Length [s] of the final window the success test and the error means use (the paper's 20 s).
+    /// Length \[s\] of the final window the success test and the error means use (the paper's 20 s).
     pub window_s: f64,
     /// The two tolerances on the relative formation error (the paper's 5 % and 10 %), reported as
     /// `*_5` and `*_10`.
@@ -55,15 +55,15 @@ pub struct RunMetrics {
     pub success_5: bool,
     /// Success at the second tolerance (10 %).
     pub success_10: bool,
-    /// Convergence time [s] at the first tolerance.
+    /// Convergence time \[s\] at the first tolerance.
     pub convergence_s_5: Option<f64>,
-    /// Convergence time [s] at the second tolerance.
+    /// Convergence time \[s\] at the second tolerance.
     pub convergence_s_10: Option<f64>,
     /// Mean over edges of each edge's mean relative error over the window.
     pub rel_formation_error: f64,
     /// The largest of the edges' window means.
     pub max_edge_window_error: f64,
-    /// Mean over robots and window samples of the wrapped heading error [rad].
+    /// Mean over robots and window samples of the wrapped heading error \[rad\].
     pub orientation_error_rad: f64,
     /// Number of collision events.
     pub collisions: usize,
@@ -235,20 +235,20 @@ pub struct Summary {
     pub success_rate_5: f64,
     /// Fraction (0..1) of runs that succeed at the second tolerance (10 %); 0 for no runs.
     pub success_rate_10: f64,
-    /// Median convergence time [s] at 10 % over the runs that succeed at 10 %.
+    /// Median convergence time \[s\] at 10 % over the runs that succeed at 10 %.
     pub median_convergence_s: Option<f64>,
     /// Median relative formation error over the runs that succeed at 10 %.
     pub median_rel_formation_error: Option<f64>,
-    /// Median orientation error [rad] over the runs that succeed at 10 %.
+    /// Median orientation error \[rad\] over the runs that succeed at 10 %.
     pub median_orientation_error_rad: Option<f64>,
     /// Number of runs with at least one collision.
     pub collisions: usize,
-    /// Convergence time [s] at 10 % over the runs that succeed at 10 % and converge (a run can succeed
+    /// Convergence time \[s\] at 10 % over the runs that succeed at 10 % and converge (a run can succeed
     /// on the window mean without its maximum error staying below 10 % to the end).
     pub convergence_s: Option<Quantiles>,
     /// Relative formation error over the runs that succeed at 10 %.
     pub rel_formation_error: Option<Quantiles>,
-    /// Orientation error [rad] over the runs that succeed at 10 %.
+    /// Orientation error \[rad\] over the runs that succeed at 10 %.
     pub orientation_error_rad: Option<Quantiles>,
 }
 

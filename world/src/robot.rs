@@ -13,15 +13,15 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RobotParams {
-    /// Distance between the two wheels' contact points, `l` [m].
+    /// Distance between the two wheels' contact points, `l` \[m\].
     pub wheel_separation: f64,
-    /// Wheel radius [m]; converts rim speeds to wheel angular speeds (rad/s = rim / radius).
+    /// Wheel radius \[m\]; converts rim speeds to wheel angular speeds (rad/s = rim / radius).
     pub wheel_radius: f64,
-    /// Radius of the disc that stands for the body in ray casts and collision tests [m].
+    /// Radius of the disc that stands for the body in ray casts and collision tests \[m\].
     pub body_radius: f64,
-    /// Largest rim speed either wheel can reach, forwards or backwards [m/s].
+    /// Largest rim speed either wheel can reach, forwards or backwards \[m/s\].
     pub max_wheel_speed: f64,
-    /// Largest change of a wheel's rim speed per second [m/s^2]; `None` means the wheels reach a
+    /// Largest change of a wheel's rim speed per second \[m/s^2\]; `None` means the wheels reach a
     /// commanded speed within one step.
     pub max_wheel_accel: Option<f64>,
 }
@@ -66,7 +66,7 @@ impl RobotParams {
     }
 }
 
-/// Forward speed `v` [m/s] and turn rate `w` [rad/s] of a robot whose wheels run at `cmd`.
+/// Forward speed `v` \[m/s\] and turn rate `w` \[rad/s\] of a robot whose wheels run at `cmd`.
 pub fn body_velocity(cmd: WheelCmd, params: &RobotParams) -> (f64, f64) {
     let forward = 0.5 * (cmd.right + cmd.left);
     let turn_rate = (cmd.right - cmd.left) / params.wheel_separation;

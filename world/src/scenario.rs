@@ -20,8 +20,8 @@
 //! runs = 1                # optional, default 1: how many runs an evaluation of this scenario makes
 //!
 //! [goal]                  # required
-//! v_star = 0.7            # desired speed [m/s], >= 0 and <= robot.max_wheel_speed
-//! d_star = 2.0            # desired pairwise distance [m], > 0 ...
+//! v_star = 0.7            # desired speed \[m/s\], >= 0 and <= robot.max_wheel_speed
+//! d_star = 2.0            # desired pairwise distance \[m\], > 0 ...
 //! # d_star_choices = [1.0, 1.5, 2.0]   # ... or drawn uniformly per run from these (exactly one of the two)
 //!
 //! [heading]               # required: the desired common heading phi*(t)
@@ -32,20 +32,20 @@
 //! # sine:    phi*(t) = phi0 + amplitude sin(omega t)  (omega required; amplitude default 1; phi0 default 0)
 //!
 //! [init]                  # optional: initial poses as in the paper
-//! disc_radius = 3.0       # positions uniform in a disc of this radius [m] centred at the origin
-//! min_spacing = 0.6       # minimum distance between any two robots [m], >= 2 * robot.body_radius
+//! disc_radius = 3.0       # positions uniform in a disc of this radius \[m\] centred at the origin
+//! min_spacing = 0.6       # minimum distance between any two robots \[m\], >= 2 * robot.body_radius
 //!
 //! [lidar]                 # optional; each key defaults to LidarSpec::default()
 //! beams = 900             # >= 1
-//! max_range = 10.0        # > 0 [m]
-//! noise_std = 0.0         # >= 0 [m]
+//! max_range = 10.0        # > 0 \[m\]
+//! noise_std = 0.0         # >= 0 \[m\]
 //!
 //! [robot]                 # optional; each key defaults to RobotParams::default()
 //! wheel_separation = 0.331
 //! wheel_radius = 0.0975
 //! body_radius = 0.25
 //! max_wheel_speed = 0.9
-//! # max_wheel_accel = 2.0 # optional [m/s^2]; absent = unlimited
+//! # max_wheel_accel = 2.0 # optional \[m/s^2\]; absent = unlimited
 //!
 //! [[agent]]               # optional, repeatable: a per-robot model for mixed teams
 //! robot = 1               # < robots, at most one entry per robot
@@ -77,11 +77,11 @@ use serde::{Deserialize, Serialize};
 use crate::robot::RobotParams;
 use crate::world::{World, WorldConfig};
 
-/// Default simulation step [s]: the LIDAR's 20 Hz.
+/// Default simulation step \[s\]: the LIDAR's 20 Hz.
 pub const DEFAULT_DT: f64 = 0.05;
-/// Default radius [m] of the disc initial positions are drawn from (the paper's 3 m).
+/// Default radius \[m\] of the disc initial positions are drawn from (the paper's 3 m).
 pub const DEFAULT_DISC_RADIUS: f64 = 3.0;
-/// Default minimum distance [m] between any two initial positions.
+/// Default minimum distance \[m\] between any two initial positions.
 pub const DEFAULT_MIN_SPACING: f64 = 0.6;
 
 /// Draws allowed for one robot's position before the placement of the whole team starts over.
@@ -129,29 +129,29 @@ pub enum ScenarioError {
 pub enum HeadingSchedule {
     /// phi*(t) = phi.
     Constant {
-        /// The heading [rad].
+        /// The heading \[rad\].
         phi: f64,
     },
     /// phi*(t) = phi0 + omega t (the paper's case 2: omega = 0.1, phi0 = 0).
     Ramp {
-        /// Turn rate [rad/s].
+        /// Turn rate \[rad/s\].
         omega: f64,
-        /// Heading at t = 0 [rad].
+        /// Heading at t = 0 \[rad\].
         phi0: f64,
     },
     /// phi*(t) = phi0 + amplitude sin(omega t) (the paper's case 3: omega = 0.2, amplitude = 1, phi0 = 0).
     Sine {
-        /// Angular frequency [rad/s].
+        /// Angular frequency \[rad/s\].
         omega: f64,
-        /// Amplitude [rad].
+        /// Amplitude \[rad\].
         amplitude: f64,
-        /// Mean heading [rad].
+        /// Mean heading \[rad\].
         phi0: f64,
     },
 }
 
 impl HeadingSchedule {
-    /// The desired heading [rad] at time `t` [s], not wrapped.
+    /// The desired heading \[rad\] at time `t` \[s\], not wrapped.
     pub fn phi_star(&self, t: f64) -> f64 {
         match *self {
             HeadingSchedule::Constant { phi } => phi,
@@ -179,9 +179,9 @@ pub enum HeadingPlan {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DStarPlan {
-    /// Every run uses this distance [m].
+    /// Every run uses this distance \[m\].
     Fixed(f64),
-    /// Each run draws one of these distances [m] uniformly.
+    /// Each run draws one of these distances \[m\] uniformly.
     Choices(Vec<f64>),
 }
 
@@ -189,9 +189,9 @@ pub enum DStarPlan {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct InitialConditions {
-    /// Radius [m] of the disc, centred at the origin, that positions are drawn from uniformly.
+    /// Radius \[m\] of the disc, centred at the origin, that positions are drawn from uniformly.
     pub disc_radius: f64,
-    /// Minimum distance [m] between any two initial positions.
+    /// Minimum distance \[m\] between any two initial positions.
     pub min_spacing: f64,
 }
 
@@ -243,13 +243,13 @@ pub struct RunSpec {
     pub seed: u64,
     /// Team size.
     pub n_robots: usize,
-    /// Desired pairwise distance [m].
+    /// Desired pairwise distance \[m\].
     pub d_star: f64,
-    /// Desired speed [m/s].
+    /// Desired speed \[m/s\].
     pub v_star: f64,
     /// Desired heading over time.
     pub heading: HeadingSchedule,
-    /// Simulated duration [s].
+    /// Simulated duration \[s\].
     pub duration_s: f64,
     /// Robot, sensor and time-step settings of the world.
     pub world: WorldConfig,
@@ -267,7 +267,7 @@ impl RunSpec {
         (self.duration_s / self.world.dt).round() as u64
     }
 
-    /// The goal every robot is given at time `t` [s].
+    /// The goal every robot is given at time `t` \[s\].
     pub fn goal_at(&self, t: f64) -> Goal {
         Goal {
             phi_star: self.heading.phi_star(t),
@@ -329,12 +329,12 @@ impl Scenario {
         self.seed
     }
 
-    /// Simulated duration of each run [s].
+    /// Simulated duration of each run \[s\].
     pub fn duration_s(&self) -> f64 {
         self.duration_s
     }
 
-    /// Desired speed [m/s].
+    /// Desired speed \[m/s\].
     pub fn v_star(&self) -> f64 {
         self.v_star
     }

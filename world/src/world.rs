@@ -28,7 +28,7 @@ pub struct WorldConfig {
     pub robot: RobotParams,
     /// The LIDAR ring every robot carries.
     pub lidar: LidarSpec,
-    /// Time step [s] of one [`World::step`].
+    /// Time step \[s\] of one [`World::step`].
     pub dt: f64,
 }
 
@@ -104,7 +104,7 @@ impl World {
         self.tick
     }
 
-    /// Simulated time [s]: `tick * dt`.
+    /// Simulated time \[s\]: `tick * dt`.
     pub fn time(&self) -> f64 {
         self.tick as f64 * self.config.dt
     }

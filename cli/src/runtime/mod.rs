@@ -68,10 +68,10 @@ pub struct RunArgs {
     /// Base seed (default: the scenario's).
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Lockstep: how long the world waits for a robot's command before braking it [ms].
+    /// Lockstep: how long the world waits for a robot's command before braking it \[ms\].
     #[arg(long, default_value_t = 2000)]
     pub timeout_ms: u64,
-    /// Realtime: a command older than this brakes its robot [ms].
+    /// Realtime: a command older than this brakes its robot \[ms\].
     #[arg(long, default_value_t = 150)]
     pub stale_ms: u64,
     /// Run id (namespaces the iceoryx2 services, e.g. for `formation swap`; default: generated).

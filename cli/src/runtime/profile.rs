@@ -19,15 +19,15 @@ use serde::{Deserialize, Serialize};
 pub struct StageStats {
     /// Samples.
     pub count: usize,
-    /// Median [us].
+    /// Median \[us\].
     pub p50_us: f64,
-    /// 90th percentile [us].
+    /// 90th percentile \[us\].
     pub p90_us: f64,
-    /// 99th percentile [us].
+    /// 99th percentile \[us\].
     pub p99_us: f64,
-    /// Largest [us].
+    /// Largest \[us\].
     pub max_us: f64,
-    /// Histogram: upper bucket edges [us] (powers of two) and counts.
+    /// Histogram: upper bucket edges \[us\] (powers of two) and counts.
     pub histogram: Vec<(f64, usize)>,
 }
 
@@ -42,11 +42,11 @@ pub struct LatencyProfile {
     pub braked: BTreeMap<String, usize>,
     /// Per-stage statistics, by stage name.
     pub stages: BTreeMap<String, StageStats>,
-    /// The paper's single-sample inference time [ms], for comparison in the report.
+    /// The paper's single-sample inference time \[ms\], for comparison in the report.
     pub inference_paper_ms: f64,
 }
 
-/// The paper's reported inference time [ms].
+/// The paper's reported inference time \[ms\].
 pub const PAPER_INFERENCE_MS: f64 = 2.1;
 
 /// Quantile by nearest rank of sorted samples.

@@ -38,9 +38,9 @@ pub struct LaunchPlan {
     pub out: PathBuf,
     /// Model of each robot, in robot order.
     pub models: Vec<PathBuf>,
-    /// Lockstep command timeout [ms].
+    /// Lockstep command timeout \[ms\].
     pub command_timeout_ms: u64,
-    /// Realtime staleness limit [ms].
+    /// Realtime staleness limit \[ms\].
     pub stale_ms: u64,
     /// Agent restarts allowed over the whole launch.
     pub restart_budget: u32,

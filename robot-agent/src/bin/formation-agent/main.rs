@@ -48,7 +48,7 @@ struct Args {
     /// ONNX policy model.
     #[arg(long)]
     model: PathBuf,
-    /// How long to wait for the world's services [ms].
+    /// How long to wait for the world's services \[ms\].
     #[arg(long, default_value_t = 10_000)]
     connect_timeout_ms: u64,
     /// Testing only: misbehave (crash-after=N, hang-after=N, late-ms=X, nan-after=N).

@@ -47,16 +47,16 @@ struct Args {
     /// Clock mode.
     #[arg(long, value_enum, default_value_t = ClockMode::Lockstep)]
     clock: ClockMode,
-    /// Lockstep: wait at most this long for a robot's command before braking it [ms].
+    /// Lockstep: wait at most this long for a robot's command before braking it \[ms\].
     #[arg(long, default_value_t = 2000)]
     command_timeout_ms: u64,
-    /// Realtime: a command older than this brakes its robot [ms].
+    /// Realtime: a command older than this brakes its robot \[ms\].
     #[arg(long, default_value_t = 150)]
     stale_ms: u64,
-    /// How long to wait for every agent to connect [ms].
+    /// How long to wait for every agent to connect \[ms\].
     #[arg(long, default_value_t = 30_000)]
     startup_timeout_ms: u64,
-    /// How long agents may take to get ready for an episode [ms].
+    /// How long agents may take to get ready for an episode \[ms\].
     #[arg(long, default_value_t = 10_000)]
     ready_timeout_ms: u64,
     /// Stop when standard input closes (set by the launcher, so the world never outlives it).
