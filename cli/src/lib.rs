@@ -25,6 +25,7 @@ use clap::Parser;
 pub fn main_with_args() -> anyhow::Result<()> {
     let cli = args::Cli::parse();
     init_tracing(cli.verbose);
+    formation_proto::wire::quiet_iceoryx_logs();
     match cli.command {
         args::Command::Eval(a) => eval::eval_command(&a),
         args::Command::Collect(a) => collect::collect_command(&a),

@@ -186,12 +186,57 @@ pub fn robot_service_name(run: &RunId, robot: usize, channel: RobotChannel) -> S
     format!("formation/{run}/robot/{robot}/{}", channel.as_str())
 }
 
+/// The two services of a run's swap channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SwapChannel {
+    /// `formation swap` → world ([`SwapRequestMsg`]).
+    Request,
+    /// World → `formation swap` ([`SwapReplyMsg`]).
+    Reply,
+}
+
+impl SwapChannel {
+    /// The sizes of this service, shared by creator and openers.
+    pub fn limits(&self) -> ServiceLimits {
+        match self {
+            SwapChannel::Request => ServiceLimits::SWAP_REQUEST,
+            SwapChannel::Reply => ServiceLimits::SWAP_REPLY,
+        }
+    }
+}
+
+/// `formation/<run>/swap/request` or `formation/<run>/swap/reply`: the name of both the
+/// publish-subscribe service and its paired event service.
+pub fn swap_service_name(run: &RunId, channel: SwapChannel) -> String {
+    match channel {
+        SwapChannel::Request => format!("formation/{run}/swap/request"),
+        SwapChannel::Reply => format!("formation/{run}/swap/reply"),
+    }
+}
+
+/// Node name of a `formation swap` process.
+pub const SWAP_NODE_NAME: &str = "formation-swap";
+
+/// Limits iceoryx2's own logging to errors unless `IOX2_LOG_LEVEL` asks for more. Its warnings
+/// (e.g. that it cleaned up after a dead agent, which the runtime does on purpose) would otherwise
+/// bury the runtime's messages. Every formation process that uses iceoryx2 calls this first.
+pub fn quiet_iceoryx_logs() {
+    set_log_level_from_env_or(LogLevel::Error);
+}
+
 /// Node name of the world process of a run.
 pub const WORLD_NODE_NAME: &str = "formation-world";
 
-/// Node name of robot `robot`'s agent process.
-pub fn agent_node_name(robot: usize) -> String {
-    format!("formation-agent-{robot}")
+/// Node name of robot `robot`'s agent process `pid`. The pid makes a restarted agent's node
+/// distinguishable from its dead predecessor's, so a late death report never hits the new agent.
+pub fn agent_node_name(robot: usize, pid: u32) -> String {
+    format!("formation-agent-{robot}-{pid}")
+}
+
+/// The robot and pid of an agent node name made by [`agent_node_name`]; `None` for other names.
+pub fn parse_agent_node_name(name: &str) -> Option<(usize, u32)> {
+    let (robot, pid) = name.strip_prefix("formation-agent-")?.split_once('-')?;
+    Some((robot.parse().ok()?, pid.parse().ok()?))
 }
 
 /// Sizes of a robot service, shared by both sides so that opening never disagrees with creating.
@@ -216,6 +261,24 @@ impl ServiceLimits {
         max_subscribers: 1,
         subscriber_buffer: 8,
         max_nodes: 4,
+    };
+
+    /// Swap requests: any number of `formation swap` processes (up to 8 at once) write, only the
+    /// world reads.
+    pub const SWAP_REQUEST: ServiceLimits = ServiceLimits {
+        max_publishers: 8,
+        max_subscribers: 1,
+        subscriber_buffer: 16,
+        max_nodes: 16,
+    };
+
+    /// Swap replies: only the world writes; every waiting `formation swap` reads and keeps the
+    /// reply with its own request id.
+    pub const SWAP_REPLY: ServiceLimits = ServiceLimits {
+        max_publishers: 1,
+        max_subscribers: 8,
+        subscriber_buffer: 16,
+        max_nodes: 16,
     };
 }
 
@@ -859,6 +922,171 @@ impl StatusMsg {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Swap: `formation swap` -> world -> agent, and the world's reply
+// ---------------------------------------------------------------------------------------------
+
+/// A user's request, sent by `formation swap` to the world of a run, to change the model of one
+/// robot's agent. The world forwards it to that agent as a [`ControlRequest::SwapModel`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SwapRequest {
+    /// Id chosen by the requester; the reply carries it back.
+    pub request_id: u64,
+    /// The robot whose agent should swap.
+    pub robot: usize,
+    /// First tick the new model may drive (0: as soon as it is loaded).
+    pub at_tick: u64,
+    /// The ONNX model file (absolute, so that the agent resolves it as the user meant).
+    pub path: PathBuf,
+}
+
+/// The wire form of a [`SwapRequest`].
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+#[type_name("formation.SwapRequestMsg.v1")]
+pub struct SwapRequestMsg {
+    /// Request id.
+    pub request_id: u64,
+    /// Robot index.
+    pub robot: u64,
+    /// First tick the new model may drive.
+    pub at_tick: u64,
+    /// Model path, UTF-8, zero padded.
+    pub path: [u8; MODEL_PATH_LEN],
+}
+
+impl SwapRequestMsg {
+    /// Encodes a request. Fails on a model path that is not UTF-8 or longer than
+    /// [`MODEL_PATH_LEN`] bytes.
+    pub fn encode(request: &SwapRequest) -> Result<SwapRequestMsg, WireError> {
+        let text = request.path.to_str().ok_or_else(|| WireError::Malformed {
+            message: "swap request",
+            reason: format!("model path {} is not UTF-8", request.path.display()),
+        })?;
+        Ok(SwapRequestMsg {
+            request_id: request.request_id,
+            robot: request.robot as u64,
+            at_tick: request.at_tick,
+            path: encode_text("model path", text)?,
+        })
+    }
+
+    /// Decodes the request.
+    pub fn decode(&self) -> Result<SwapRequest, WireError> {
+        Ok(SwapRequest {
+            request_id: self.request_id,
+            robot: usize::try_from(self.robot).unwrap_or(usize::MAX),
+            at_tick: self.at_tick,
+            path: PathBuf::from(decode_text("swap request", &self.path)?),
+        })
+    }
+}
+
+/// How a [`SwapRequest`] ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SwapOutcome {
+    /// The new model drives robot `robot` from tick `tick` on.
+    Done {
+        /// First tick decided by the new model.
+        tick: u64,
+        /// The new model's id.
+        model_id: String,
+    },
+    /// Refused by the world (unknown robot, no agent) or by the agent (the model failed to load
+    /// or validate); the old model keeps driving.
+    Refused {
+        /// Why, phrased for the user.
+        reason: String,
+    },
+}
+
+/// The world's answer to a [`SwapRequest`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SwapReply {
+    /// The request this answers.
+    pub request_id: u64,
+    /// The robot of the request.
+    pub robot: usize,
+    /// What happened.
+    pub outcome: SwapOutcome,
+}
+
+/// The wire form of a [`SwapReply`].
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+#[type_name("formation.SwapReplyMsg.v1")]
+pub struct SwapReplyMsg {
+    /// Request id.
+    pub request_id: u64,
+    /// Robot index.
+    pub robot: u64,
+    /// 1 done, 2 refused.
+    pub kind: u32,
+    /// Keeps the layout explicit; always 0.
+    pub reserved: u32,
+    /// First tick of the new model (done).
+    pub tick: u64,
+    /// Model id, UTF-8, zero padded (done).
+    pub model_id: [u8; MODEL_ID_LEN],
+    /// Reason, UTF-8, zero padded, possibly truncated (refused).
+    pub reason: [u8; REASON_LEN],
+}
+
+const SWAP_DONE: u32 = 1;
+const SWAP_REFUSED: u32 = 2;
+
+impl SwapReplyMsg {
+    /// Encodes a reply. Fails on a model id longer than [`MODEL_ID_LEN`] bytes; reasons longer
+    /// than [`REASON_LEN`] bytes are truncated.
+    pub fn encode(reply: &SwapReply) -> Result<SwapReplyMsg, WireError> {
+        let mut msg = SwapReplyMsg {
+            request_id: reply.request_id,
+            robot: reply.robot as u64,
+            kind: 0,
+            reserved: 0,
+            tick: 0,
+            model_id: [0; MODEL_ID_LEN],
+            reason: [0; REASON_LEN],
+        };
+        match &reply.outcome {
+            SwapOutcome::Done { tick, model_id } => {
+                msg.kind = SWAP_DONE;
+                msg.tick = *tick;
+                msg.model_id = encode_text("model id", model_id)?;
+            }
+            SwapOutcome::Refused { reason } => {
+                msg.kind = SWAP_REFUSED;
+                msg.reason = encode_text_lossy(reason);
+            }
+        }
+        Ok(msg)
+    }
+
+    /// Decodes the reply.
+    pub fn decode(&self) -> Result<SwapReply, WireError> {
+        let outcome = match self.kind {
+            SWAP_DONE => SwapOutcome::Done {
+                tick: self.tick,
+                model_id: decode_text("swap reply", &self.model_id)?.to_owned(),
+            },
+            SWAP_REFUSED => SwapOutcome::Refused {
+                reason: decode_text("swap reply", &self.reason)?.to_owned(),
+            },
+            kind => {
+                return Err(WireError::UnknownKind {
+                    message: "swap reply",
+                    kind,
+                });
+            }
+        };
+        Ok(SwapReply {
+            request_id: self.request_id,
+            robot: usize::try_from(self.robot).unwrap_or(usize::MAX),
+            outcome,
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Timing log: written by the world per run, read by `formation profile` and the report
 // ---------------------------------------------------------------------------------------------
 
@@ -1003,6 +1231,68 @@ mod tests {
         let mut corrupt = msg;
         corrupt.n_beams = MAX_BEAMS as u32 + 5;
         assert!(matches!(corrupt.ranges(), Err(WireError::Malformed { .. })));
+    }
+
+    #[test]
+    fn agent_node_names_carry_robot_and_pid() {
+        assert_eq!(
+            parse_agent_node_name(&agent_node_name(2, 4711)),
+            Some((2, 4711))
+        );
+        assert_eq!(parse_agent_node_name(WORLD_NODE_NAME), None);
+        assert_eq!(parse_agent_node_name("formation-agent-x-1"), None);
+    }
+
+    #[test]
+    fn swap_request_and_reply_round_trip() {
+        let request = SwapRequest {
+            request_id: 77,
+            robot: 2,
+            at_tick: 40,
+            path: PathBuf::from("/models/new.onnx"),
+        };
+        assert_eq!(
+            SwapRequestMsg::encode(&request).unwrap().decode().unwrap(),
+            request
+        );
+        let long = SwapRequest {
+            path: PathBuf::from("m".repeat(MODEL_PATH_LEN + 1)),
+            ..request
+        };
+        assert!(matches!(
+            SwapRequestMsg::encode(&long),
+            Err(WireError::TextTooLong { .. })
+        ));
+        for outcome in [
+            SwapOutcome::Done {
+                tick: 41,
+                model_id: "policy-1234".into(),
+            },
+            SwapOutcome::Refused {
+                reason: "wrong input shape".into(),
+            },
+        ] {
+            let reply = SwapReply {
+                request_id: 77,
+                robot: 2,
+                outcome,
+            };
+            assert_eq!(
+                SwapReplyMsg::encode(&reply).unwrap().decode().unwrap(),
+                reply
+            );
+        }
+        let mut unknown = SwapReplyMsg::encode(&SwapReply {
+            request_id: 1,
+            robot: 0,
+            outcome: SwapOutcome::Refused { reason: "x".into() },
+        })
+        .unwrap();
+        unknown.kind = 9;
+        assert!(matches!(
+            unknown.decode(),
+            Err(WireError::UnknownKind { .. })
+        ));
     }
 
     #[test]

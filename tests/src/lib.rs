@@ -21,6 +21,7 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use formation_proto::wire::{RunId, RunNamespace};
+use formation_world::Trajectory;
 
 /// The repository root (the parent of this crate's directory).
 pub fn repo_root() -> PathBuf {
@@ -240,6 +241,12 @@ pub fn test_model() -> &'static Path {
 
 /// Writes a contract-conforming ONNX model with seeded random weights to `path`.
 pub fn write_tiny_model(path: &Path, seed: u64) {
+    write_tiny_model_with(path, seed, &[]);
+}
+
+/// Like [`write_tiny_model`], with extra arguments for `tiny_policy.py` (e.g. `--aux-width 3`
+/// for a model of the wrong input shape, `--beams 450` for one made for another sensor).
+pub fn write_tiny_model_with(path: &Path, seed: u64, extra: &[&str]) {
     let python = python();
     let script = repo_root().join("tests/fixtures/tiny_policy.py");
     let tmp = path.with_extension(format!("tmp-{}.onnx", std::process::id()));
@@ -248,6 +255,7 @@ pub fn write_tiny_model(path: &Path, seed: u64) {
         .arg(&tmp)
         .arg("--seed")
         .arg(seed.to_string())
+        .args(extra)
         .output()
         .unwrap_or_else(|e| panic!("running {} {}: {e}", python.display(), script.display()));
     assert!(
@@ -395,6 +403,206 @@ pub fn run(mut command: Command, limit: Duration) -> Finished {
         output,
         elapsed: started.elapsed(),
     }
+}
+
+/// Panics unless two trajectories agree bit for bit: every pose, every command, the collisions.
+pub fn assert_bit_identical(a: &Trajectory, b: &Trajectory) {
+    assert_eq!(a.poses.len(), b.poses.len(), "sample counts differ");
+    for (k, (pa, pb)) in a.poses.iter().zip(&b.poses).enumerate() {
+        for (i, (x, y)) in pa.iter().zip(pb).enumerate() {
+            let bits =
+                |p: &formation_proto::Pose| (p.x.to_bits(), p.y.to_bits(), p.theta.to_bits());
+            assert_eq!(
+                bits(x),
+                bits(y),
+                "pose of robot {i} at sample {k}: {x:?} vs {y:?}"
+            );
+        }
+    }
+    let cmd_bits = |c: &formation_proto::WheelCmd| (c.left.to_bits(), c.right.to_bits());
+    for (k, (ca, cb)) in a.commands.iter().zip(&b.commands).enumerate() {
+        let (ca, cb): (Vec<_>, Vec<_>) = (
+            ca.iter().map(cmd_bits).collect(),
+            cb.iter().map(cmd_bits).collect(),
+        );
+        assert_eq!(ca, cb, "commands at tick {k}");
+    }
+    assert_eq!(a.collisions, b.collisions);
+}
+
+/// A child process whose stdout lines are read as they come, for tests that act on a running
+/// launch (kill an agent once it has joined, swap a model once the agents are connected).
+pub struct LiveProcess {
+    command: String,
+    child: std::process::Child,
+    lines: mpsc::Receiver<String>,
+    seen: Vec<String>,
+    stderr: std::sync::Arc<std::sync::Mutex<String>>,
+    started: Instant,
+}
+
+impl LiveProcess {
+    /// Starts `command` with stdout and stderr captured.
+    pub fn spawn(mut command: Command) -> LiveProcess {
+        use std::io::{BufRead, BufReader, Read};
+        let text = format!("{command:?}");
+        command
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        let mut child = command
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting {text}: {e}"));
+        let stdout = child.stdout.take().expect("piped stdout");
+        let mut stderr_pipe = child.stderr.take().expect("piped stderr");
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let stderr = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+        let sink = std::sync::Arc::clone(&stderr);
+        std::thread::spawn(move || {
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = stderr_pipe.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                if let Ok(mut text) = sink.lock() {
+                    text.push_str(&String::from_utf8_lossy(&buf[..n]));
+                }
+            }
+        });
+        LiveProcess {
+            command: text,
+            child,
+            lines,
+            seen: Vec::new(),
+            stderr,
+            started: Instant::now(),
+        }
+    }
+
+    /// The process id.
+    pub fn id(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Waits up to `limit` for a stdout line for which `matches` is true and returns it; `None`
+    /// when the output ended or the time ran out first.
+    pub fn wait_for_line(
+        &mut self,
+        limit: Duration,
+        mut matches: impl FnMut(&str) -> bool,
+    ) -> Option<String> {
+        let deadline = Instant::now() + limit;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) => {
+                    self.seen.push(line.clone());
+                    if matches(&line) {
+                        return Some(line);
+                    }
+                }
+                Err(_) => return None,
+            }
+        }
+    }
+
+    /// Everything printed so far, for failure messages.
+    pub fn describe(&mut self) -> String {
+        while let Ok(line) = self.lines.try_recv() {
+            self.seen.push(line);
+        }
+        format!(
+            "command: {}\nrunning for {:.2} s\n--- stdout ---\n{}\n--- stderr ---\n{}",
+            self.command,
+            self.started.elapsed().as_secs_f64(),
+            self.seen.join("\n"),
+            self.stderr.lock().map(|s| s.clone()).unwrap_or_default()
+        )
+    }
+
+    /// Waits up to `limit` for the process to exit (killing it past that) and returns what it
+    /// printed, including the lines already read.
+    pub fn finish(mut self, limit: Duration) -> Finished {
+        let deadline = Instant::now() + limit;
+        let status = loop {
+            match self.child.try_wait() {
+                Ok(Some(status)) => break status,
+                Ok(None) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                _ => {
+                    let _ = self.child.kill();
+                    let status = self.child.wait().expect("reaping the killed child");
+                    let text = self.describe();
+                    panic!("{text}\n(killed after {limit:?}, status {status})");
+                }
+            }
+        };
+        // The reader threads end with the pipes; collect the rest.
+        while let Ok(line) = self.lines.recv_timeout(Duration::from_secs(5)) {
+            self.seen.push(line);
+        }
+        let stdout = self.seen.join("\n") + "\n";
+        let stderr = self.stderr.lock().map(|s| s.clone()).unwrap_or_default();
+        Finished {
+            command: self.command.clone(),
+            output: Output {
+                status,
+                stdout: stdout.into_bytes(),
+                stderr: stderr.into_bytes(),
+            },
+            elapsed: self.started.elapsed(),
+        }
+    }
+}
+
+impl Drop for LiveProcess {
+    fn drop(&mut self) {
+        if matches!(self.child.try_wait(), Ok(None)) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// Process ids of the running `formation-agent` processes of run `run` serving robot `robot`,
+/// found through /proc.
+pub fn agent_pids(run: &RunId, robot: usize) -> Vec<u32> {
+    let mut pids = Vec::new();
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return pids;
+    };
+    for entry in entries.flatten() {
+        let Some(pid) = entry
+            .file_name()
+            .to_str()
+            .and_then(|n| n.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let Ok(raw) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let args: Vec<&[u8]> = raw.split(|&b| b == 0).collect();
+        let is_agent = args
+            .first()
+            .is_some_and(|a| a.ends_with(b"formation-agent"));
+        let has = |flag: &str, value: &str| {
+            args.windows(2)
+                .any(|w| w[0] == flag.as_bytes() && w[1] == value.as_bytes())
+        };
+        if is_agent && has("--run-id", run.as_str()) && has("--robot", &robot.to_string()) {
+            pids.push(pid);
+        }
+    }
+    pids
 }
 
 #[cfg(test)]

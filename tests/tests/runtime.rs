@@ -7,40 +7,16 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use formation::runtime::{ClockMode, eval_over_processes};
-use formation_proto::WheelCmd;
 use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, ServiceLimits, robot_service_name};
 use formation_tests::{
-    LeakCheck, TempDir, Watchdog, binaries, case1_scenario, run, test_model, unique_run_id,
+    LeakCheck, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario, run, test_model,
+    unique_run_id,
 };
-use formation_world::{Scenario, Trajectory, run_episode};
+use formation_world::{Scenario, run_episode};
 use iceoryx2::prelude::*;
 use robot_agent::decision::PolicyController;
 
 const LIMIT: Duration = Duration::from_secs(120);
-
-fn assert_bit_identical(a: &Trajectory, b: &Trajectory) {
-    assert_eq!(a.poses.len(), b.poses.len(), "sample counts differ");
-    for (k, (pa, pb)) in a.poses.iter().zip(&b.poses).enumerate() {
-        for (i, (x, y)) in pa.iter().zip(pb).enumerate() {
-            let bits =
-                |p: &formation_proto::Pose| (p.x.to_bits(), p.y.to_bits(), p.theta.to_bits());
-            assert_eq!(
-                bits(x),
-                bits(y),
-                "pose of robot {i} at sample {k}: {x:?} vs {y:?}"
-            );
-        }
-    }
-    let cmd_bits = |c: &WheelCmd| (c.left.to_bits(), c.right.to_bits());
-    for (k, (ca, cb)) in a.commands.iter().zip(&b.commands).enumerate() {
-        let (ca, cb): (Vec<_>, Vec<_>) = (
-            ca.iter().map(cmd_bits).collect(),
-            cb.iter().map(cmd_bits).collect(),
-        );
-        assert_eq!(ca, cb, "commands at tick {k}");
-    }
-    assert_eq!(a.collisions, b.collisions);
-}
 
 /// Issue 4 (a): world + 3 agents in lockstep on case 1 with a real ONNX model reproduce the
 /// in-process run bit for bit (and the run id's files are gone afterwards).

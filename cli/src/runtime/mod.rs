@@ -9,12 +9,15 @@
 //! * [`binaries`]: finding the two executables next to the running one.
 //! * [`supervisor`]: spawning, supervising, restarting, stopping and cleaning up (tokio).
 //! * [`profile`]: per-stage latency statistics from the world's timing logs.
+//! * [`swap`]: `formation swap`, a model change requested of a running launch.
 
 pub mod binaries;
 pub mod profile;
 pub mod supervisor;
+pub mod swap;
 
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
@@ -77,9 +80,21 @@ pub struct RunArgs {
     /// Run id (namespaces the iceoryx2 services, e.g. for `formation swap`; default: generated).
     #[arg(long)]
     pub run_id: Option<String>,
-    /// How many times, in total, a crashed agent is restarted.
-    #[arg(long, default_value_t = 3)]
+    /// Restart budget: at most this many agent restarts (all robots together) within any
+    /// `--restart-window-s`; past it the launch fails. Restarts back off exponentially per robot.
+    #[arg(long, default_value_t = 5)]
     pub restarts: u32,
+    /// The restart budget's sliding window \[s\].
+    #[arg(long, default_value_t = 60.0)]
+    pub restart_window_s: f64,
+    /// Delay before restarting a dead agent \[ms\]; doubles with each further restart of the same
+    /// robot within the window (at most 5 s).
+    #[arg(long, default_value_t = 50)]
+    pub restart_delay_ms: u64,
+    /// Lockstep: each tick takes at least this long \[ms\] (0: as fast as the agents answer),
+    /// e.g. 50 to watch a deterministic run at the speed of the real clock.
+    #[arg(long, default_value_t = 0)]
+    pub pace_ms: u64,
     /// Testing only: make an agent misbehave, `ROBOT:MODE` with MODE one of crash-after=N,
     /// hang-after=N, late-ms=X, nan-after=N (repeatable). Applies to the agent's first start; a
     /// restarted agent behaves.
@@ -95,10 +110,10 @@ pub struct ProfileArgs {
     pub run: RunArgs,
 }
 
-/// `formation swap` (not implemented yet).
+/// `formation swap`: change one running robot's model.
 #[derive(Debug, Clone, Args)]
 pub struct SwapArgs {
-    /// Run id of the running launch.
+    /// Run id of the running launch (`formation run` prints it; set it with `--run-id`).
     #[arg(long)]
     pub run: String,
     /// Robot whose model to swap.
@@ -107,6 +122,12 @@ pub struct SwapArgs {
     /// The new ONNX model.
     #[arg(long)]
     pub model: PathBuf,
+    /// First tick the new model may drive (default: as soon as the agent has loaded it).
+    #[arg(long, default_value_t = 0)]
+    pub at_tick: u64,
+    /// How long to wait for the agent's answer \[s\].
+    #[arg(long, default_value_t = 30.0)]
+    pub timeout_s: f64,
 }
 
 /// The model path of every robot: the scenario's per-robot models, else `default`. Missing files
@@ -135,6 +156,15 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
         }
     }
     Ok(models)
+}
+
+/// `value` seconds as a duration, or an error naming `flag` when it is not a positive number.
+fn positive_seconds(flag: &str, value: f64) -> anyhow::Result<Duration> {
+    if value.is_finite() && value > 0.0 {
+        Ok(Duration::from_secs_f64(value))
+    } else {
+        anyhow::bail!("{flag} must be a positive number of seconds, got {value}")
+    }
 }
 
 /// Parses `ROBOT:MODE` fault flags into one optional mode per robot.
@@ -205,6 +235,9 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario)> {
         command_timeout_ms: args.timeout_ms,
         stale_ms: args.stale_ms,
         restart_budget: args.restarts,
+        restart_window: positive_seconds("--restart-window-s", args.restart_window_s)?,
+        restart_delay: Duration::from_millis(args.restart_delay_ms),
+        pace: Duration::from_millis(args.pace_ms),
     };
     Ok((plan, scenario))
 }
@@ -221,10 +254,16 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         scenario.name(),
         plan.clock.as_str()
     );
-    let report = block_on(supervisor::launch(&plan, &mut |event| {
-        if let WorldEvent::RunDone { index, log } = event {
-            println!("run {index} done: {}", log.display());
+    let report = block_on(supervisor::launch(&plan, &mut |event| match event {
+        WorldEvent::AgentsConnected => println!("all {} agents connected", plan.models.len()),
+        WorldEvent::RunDone { index, log } => println!("run {index} done: {}", log.display()),
+        WorldEvent::AgentLost { robot, tick } => {
+            println!("robot {robot}: agent lost at tick {tick}; braking it")
         }
+        WorldEvent::AgentRejoined { robot, pid, tick } => {
+            println!("robot {robot}: agent pid {pid} rejoined, driving from tick {tick}")
+        }
+        WorldEvent::Finished => {}
     }))??;
     let latency = profile::profile_dir(&plan.out)?;
     let path = plan.out.join("profile.json");
@@ -244,15 +283,16 @@ pub fn profile_command(args: &ProfileArgs) -> anyhow::Result<()> {
     run_command(&args.run)
 }
 
-/// `formation swap`: not implemented yet.
+/// `formation swap`: asks a running launch to change one robot's model and reports the tick from
+/// which the new model drives.
 pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
-    anyhow::bail!(
-        "formation swap (run {}, robot {}, model {}) is not implemented yet: the agents accept swap \
-         requests, but the world does not yet take them from outside",
-        args.run,
-        args.robot,
-        args.model.display()
-    )
+    let timeout = positive_seconds("--timeout-s", args.timeout_s)?;
+    let done = swap::request_swap(&args.run, args.robot, &args.model, args.at_tick, timeout)?;
+    println!(
+        "robot {} of run {} drives with model {} from tick {}",
+        args.robot, args.run, done.model_id, done.tick
+    );
+    Ok(())
 }
 
 /// Evaluates `runs` runs of `scenario` (base seed `base_seed`) with every robot's policy in its
@@ -283,6 +323,9 @@ pub fn eval_over_processes(
         command_timeout_ms: 5000,
         stale_ms: 150,
         restart_budget: 0,
+        restart_window: Duration::from_secs(60),
+        restart_delay: Duration::from_millis(50),
+        pace: Duration::ZERO,
     };
     let result = (|| {
         let mut done = 0;

@@ -13,9 +13,10 @@
 //!
 //! Tokio drives only this supervision; the hot loops live in the world and agent processes.
 
+use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::process::{ExitStatus, Stdio};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use formation_proto::wire::{RunId, RunNamespace};
 use tokio::io::{AsyncBufReadExt, BufReader};
@@ -42,8 +43,14 @@ pub struct LaunchPlan {
     pub command_timeout_ms: u64,
     /// Realtime staleness limit \[ms\].
     pub stale_ms: u64,
-    /// Agent restarts allowed over the whole launch.
+    /// Agent restarts allowed within any [`LaunchPlan::restart_window`] (all robots together).
     pub restart_budget: u32,
+    /// The sliding window of the restart budget.
+    pub restart_window: Duration,
+    /// Delay before a robot's first restart in the window; doubles with each further one.
+    pub restart_delay: Duration,
+    /// Lockstep: the least time a tick takes (zero: as fast as the agents answer).
+    pub pace: Duration,
     /// Fault-injection mode per robot (testing only).
     pub faults: Vec<Option<String>>,
 }
@@ -59,6 +66,22 @@ pub enum WorldEvent {
         index: usize,
         /// Its trajectory log.
         log: PathBuf,
+    },
+    /// Robot `robot`'s agent died at tick `tick`; its robot brakes until an agent rejoins.
+    AgentLost {
+        /// The robot.
+        robot: usize,
+        /// The last tick the world published.
+        tick: u64,
+    },
+    /// A restarted agent (process `pid`) drives robot `robot` again from tick `tick` on.
+    AgentRejoined {
+        /// The robot.
+        robot: usize,
+        /// The new agent's process id.
+        pid: u32,
+        /// The first tick it drove.
+        tick: u64,
     },
     /// All runs finished.
     Finished,
@@ -104,7 +127,8 @@ pub enum LaunchError {
     },
     /// An agent died and the restart budget is spent.
     #[error(
-        "the agent of robot {robot} exited ({status}) and the restart budget ({budget}) is spent; see its error above"
+        "the agent of robot {robot} exited ({status}) and the restart budget ({budget} restarts in \
+         {window_s} s) is spent; see its error above, or raise --restarts / --restart-window-s"
     )]
     AgentFailed {
         /// The robot.
@@ -113,6 +137,8 @@ pub enum LaunchError {
         status: String,
         /// The budget.
         budget: u32,
+        /// The budget's window \[s\].
+        window_s: f64,
     },
     /// The world failed.
     #[error("the world process exited ({status}); see its error above")]
@@ -138,15 +164,54 @@ pub enum LaunchError {
 
 /// How long children get to exit on their own before they are killed.
 const GRACE: Duration = Duration::from_secs(3);
-/// First restart delay; doubles with every restart of the same robot.
-const FIRST_BACKOFF: Duration = Duration::from_millis(100);
+/// The longest restart delay.
+const MAX_BACKOFF: Duration = Duration::from_secs(5);
 
 /// A running agent: its input (closing it asks the agent to exit) and a way to kill it.
 struct AgentHandle {
     stdin: Option<ChildStdin>,
     kill: Option<oneshot::Sender<()>>,
     reaper: Option<tokio::task::JoinHandle<()>>,
-    restarts: u32,
+}
+
+/// The sliding-window restart budget: at most `budget` restarts within any `window`, and a delay
+/// before each that doubles with the robot's own recent restarts.
+#[derive(Debug)]
+struct RestartBudget {
+    budget: u32,
+    window: Duration,
+    first_delay: Duration,
+    /// When each restart in the window happened, and of which robot.
+    recent: VecDeque<(Instant, usize)>,
+}
+
+impl RestartBudget {
+    fn new(budget: u32, window: Duration, first_delay: Duration) -> RestartBudget {
+        RestartBudget {
+            budget,
+            window,
+            first_delay,
+            recent: VecDeque::new(),
+        }
+    }
+
+    /// Books a restart of `robot` at `now` and returns its delay, or `None` when the budget is spent.
+    fn book(&mut self, robot: usize, now: Instant) -> Option<Duration> {
+        while self
+            .recent
+            .front()
+            .is_some_and(|&(at, _)| now.duration_since(at) >= self.window)
+        {
+            self.recent.pop_front();
+        }
+        if self.recent.len() >= self.budget as usize {
+            return None;
+        }
+        let own = self.recent.iter().filter(|&&(_, r)| r == robot).count();
+        self.recent.push_back((now, robot));
+        let factor = 2u32.saturating_pow(u32::try_from(own.min(16)).unwrap_or(16));
+        Some((self.first_delay * factor).min(MAX_BACKOFF.max(self.first_delay)))
+    }
 }
 
 /// Runs the plan to the end (or failure) and cleans up. `on_event` sees the world's progress.
@@ -194,6 +259,9 @@ async fn supervise(
     let mut lines = BufReader::new(world_stdout).lines();
 
     let (exit_tx, mut exit_rx) = mpsc::unbounded_channel::<(usize, ExitStatus)>();
+    let (restart_tx, mut restart_rx) = mpsc::unbounded_channel::<usize>();
+    let mut budget =
+        RestartBudget::new(plan.restart_budget, plan.restart_window, plan.restart_delay);
     let mut agents = Vec::with_capacity(plan.models.len());
     for robot in 0..plan.models.len() {
         match spawn_agent(plan, binaries, robot, true, exit_tx.clone()) {
@@ -239,20 +307,30 @@ async fn supervise(
                     // Agents exit with success only when asked to (shutdown, signal, world gone).
                     continue;
                 }
-                if report.restarts >= plan.restart_budget {
-                    break Err(LaunchError::AgentFailed { robot, status: describe(status), budget: plan.restart_budget });
-                }
-                let backoff = FIRST_BACKOFF * 2u32.saturating_pow(handle.restarts.min(6));
+                let Some(backoff) = budget.book(robot, Instant::now()) else {
+                    break Err(LaunchError::AgentFailed {
+                        robot,
+                        status: describe(status),
+                        budget: plan.restart_budget,
+                        window_s: plan.restart_window.as_secs_f64(),
+                    });
+                };
                 eprintln!("formation: agent of robot {robot} exited ({}); restarting in {} ms",
                     describe(status), backoff.as_millis());
-                tokio::time::sleep(backoff).await;
-                let restarts = handle.restarts + 1;
                 report.restarts += 1;
+                // The delay runs on its own task, so the world's progress is still read meanwhile.
+                let restart_tx = restart_tx.clone();
+                tokio::spawn(async move {
+                    tokio::time::sleep(backoff).await;
+                    let _ = restart_tx.send(robot);
+                });
+            }
+            Some(robot) = restart_rx.recv() => {
+                if finished {
+                    continue;
+                }
                 match spawn_agent(plan, binaries, robot, false, exit_tx.clone()) {
-                    Ok(mut new_handle) => {
-                        new_handle.restarts = restarts;
-                        agents[robot] = new_handle;
-                    }
+                    Ok(new_handle) => agents[robot] = new_handle,
                     Err(e) => break Err(e),
                 }
             }
@@ -273,6 +351,15 @@ fn parse_event(line: &str) -> Option<WorldEvent> {
             log: PathBuf::from(value.get("log")?.as_str()?),
         }),
         "finished" => Some(WorldEvent::Finished),
+        "agent_lost" => Some(WorldEvent::AgentLost {
+            robot: usize::try_from(value.get("robot")?.as_u64()?).ok()?,
+            tick: value.get("tick")?.as_u64()?,
+        }),
+        "agent_rejoined" => Some(WorldEvent::AgentRejoined {
+            robot: usize::try_from(value.get("robot")?.as_u64()?).ok()?,
+            pid: u32::try_from(value.get("pid")?.as_u64()?).ok()?,
+            tick: value.get("tick")?.as_u64()?,
+        }),
         _ => None,
     }
 }
@@ -301,6 +388,8 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
         .arg(plan.command_timeout_ms.to_string())
         .arg("--stale-ms")
         .arg(plan.stale_ms.to_string())
+        .arg("--pace-ms")
+        .arg(plan.pace.as_millis().to_string())
         .arg("--exit-on-stdin-close")
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
@@ -363,7 +452,6 @@ fn spawn_agent(
         stdin,
         kill: Some(kill_tx),
         reaper: Some(reaper),
-        restarts: 0,
     })
 }
 
@@ -417,7 +505,40 @@ mod tests {
                 log: PathBuf::from("/o/runs/run-0003.json")
             })
         );
+        assert_eq!(
+            parse_event(r#"{"event":"agent_rejoined","robot":1,"pid":42,"tick":57}"#),
+            Some(WorldEvent::AgentRejoined {
+                robot: 1,
+                pid: 42,
+                tick: 57
+            })
+        );
         assert_eq!(parse_event(r#"{"event":"listening","robots":3}"#), None);
         assert_eq!(parse_event("not json"), None);
+    }
+
+    #[test]
+    fn the_restart_budget_slides_and_backs_off_per_robot() {
+        let t0 = Instant::now();
+        const FIRST_BACKOFF: Duration = Duration::from_millis(50);
+        let mut budget = RestartBudget::new(3, Duration::from_secs(10), FIRST_BACKOFF);
+        assert_eq!(budget.book(1, t0), Some(FIRST_BACKOFF));
+        assert_eq!(budget.book(1, t0), Some(FIRST_BACKOFF * 2));
+        assert_eq!(
+            budget.book(2, t0),
+            Some(FIRST_BACKOFF),
+            "another robot starts afresh"
+        );
+        assert_eq!(
+            budget.book(0, t0 + Duration::from_secs(5)),
+            None,
+            "3 in 10 s: spent"
+        );
+        let later = t0 + Duration::from_secs(11);
+        assert_eq!(
+            budget.book(1, later),
+            Some(FIRST_BACKOFF),
+            "old restarts left the window"
+        );
     }
 }

@@ -63,6 +63,7 @@ struct Args {
 const IDLE_CHECK: Duration = Duration::from_millis(250);
 
 fn main() -> ExitCode {
+    formation_proto::wire::quiet_iceoryx_logs();
     let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
     let _ = tracing_subscriber::fmt()
@@ -146,6 +147,8 @@ struct PendingSwap {
     at_tick: u64,
     path: PathBuf,
     loaded: mpsc::Receiver<anyhow::Result<Box<dyn PolicyBackend>>>,
+    /// The loader's result once taken from `loaded`.
+    result: Option<anyhow::Result<Box<dyn PolicyBackend>>>,
 }
 
 /// The agent's state between messages.
@@ -210,6 +213,7 @@ impl RobotAgent {
                     at_tick,
                     path,
                     loaded: rx,
+                    result: None,
                 }) {
                     link.publish_status(&AgentStatus::SwapRefused {
                         request_id: previous.request_id,
@@ -245,26 +249,45 @@ impl RobotAgent {
 
     /// Puts a loaded swap model in place when its tick has come. A swap with `at_tick > 0` waits
     /// for the load at that tick (so a lockstep run swaps at exactly that tick); `at_tick == 0`
-    /// swaps as soon as the model is ready.
+    /// swaps as soon as the model is ready. A model that fails to load or validate is refused as
+    /// soon as that is known, and the current model keeps driving.
     fn apply_swap(&mut self, tick: u64, link: &mut dyn AgentLink) -> anyhow::Result<bool> {
-        let Some(pending) = &self.pending_swap else {
+        let Some(pending) = &mut self.pending_swap else {
             return Ok(false);
         };
-        if tick < pending.at_tick {
+        if pending.result.is_none() {
+            let must_have_it = pending.at_tick > 0 && tick >= pending.at_tick;
+            pending.result = if must_have_it {
+                Some(pending.loaded.recv().unwrap_or_else(|_| {
+                    Err(anyhow::anyhow!(
+                        "the model loader thread stopped unexpectedly"
+                    ))
+                }))
+            } else {
+                match pending.loaded.try_recv() {
+                    Ok(result) => Some(result),
+                    Err(mpsc::TryRecvError::Empty) => None,
+                    Err(mpsc::TryRecvError::Disconnected) => Some(Err(anyhow::anyhow!(
+                        "the model loader thread stopped unexpectedly"
+                    ))),
+                }
+            };
+        }
+        let ready = match &pending.result {
+            None => return Ok(false),
+            Some(Ok(_)) => tick >= pending.at_tick,
+            Some(Err(_)) => true,
+        };
+        if !ready {
             return Ok(false);
         }
-        let loaded = if pending.at_tick > 0 {
-            pending.loaded.recv().ok()
-        } else {
-            pending.loaded.try_recv().ok()
-        };
-        let Some(loaded) = loaded else {
-            return Ok(false);
-        };
         let Some(pending) = self.pending_swap.take() else {
             return Ok(false);
         };
-        let outcome = loaded.and_then(|policy| match &mut self.agent {
+        let outcome = pending
+            .result
+            .unwrap_or_else(|| Err(anyhow::anyhow!("the model was not loaded")));
+        let outcome = outcome.and_then(|policy| match &mut self.agent {
             Some((agent, _)) => agent.swap_policy(policy).map_err(anyhow::Error::from),
             None => anyhow::bail!("no episode has begun yet"),
         });
@@ -286,7 +309,7 @@ impl RobotAgent {
             Err(e) => {
                 link.publish_status(&AgentStatus::SwapRefused {
                     request_id: pending.request_id,
-                    reason: format!("{e:#}; the previous model keeps driving"),
+                    reason: format!("{e:#}"),
                 })?;
                 Ok(false)
             }

@@ -121,8 +121,8 @@ impl IceoryxAgentLink {
         timeout: Duration,
     ) -> Result<Self, TransportError> {
         let config = namespace.iceoryx_config()?;
-        let name =
-            NodeName::new(&agent_node_name(robot)).map_err(|e| iox("name the agent node")(&e))?;
+        let name = NodeName::new(&agent_node_name(robot, std::process::id()))
+            .map_err(|e| iox("name the agent node")(&e))?;
         let node = NodeBuilder::new()
             .name(&name)
             .config(&config)

@@ -9,18 +9,20 @@
 //! The choice of each robot's command ([`choose_command`]) is a pure function of what arrived and
 //! when; the watchdog is part of it: a missing, stale, non-finite or failed command brakes the robot.
 
+use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use formation_proto::wire::{
-    AgentStatus, CmdMsg, CmdStatus, ControlRequest, RobotTiming, ScanMsg, TickOutcome,
-    wall_clock_ns,
+    AgentStatus, CmdMsg, CmdStatus, ControlRequest, RobotTiming, ScanMsg, SwapOutcome, SwapReply,
+    SwapRequest, TickOutcome, wall_clock_ns,
 };
 use formation_proto::{LidarSpec, WheelCmd};
 use formation_world::episode::{Controller, ControllerError, Observation};
 
+use crate::runlog::{Event, emit};
 use crate::transport::{TransportError, WorldLink};
 
 /// How the world paces ticks.
@@ -53,6 +55,8 @@ pub struct ExchangeSettings {
     pub command_timeout: Duration,
     /// Realtime: a command older than this is stale and brakes its robot.
     pub stale_after: Duration,
+    /// Lockstep: the least time a tick takes (zero: as fast as the agents answer).
+    pub pace: Duration,
     /// How long agents may take to answer a begin-episode request.
     pub ready_timeout: Duration,
     /// How often to ask the transport which agents died.
@@ -60,6 +64,9 @@ pub struct ExchangeSettings {
     /// Set from outside (the launcher went away) to stop at the next wake-up.
     pub stop: Arc<AtomicBool>,
 }
+
+/// Ticks whose publish time is remembered for realtime staleness (12.8 s at 20 Hz).
+const TICK_HISTORY: usize = 256;
 
 /// Longest single wait, so a stop request is seen promptly.
 const MAX_WAIT: Duration = Duration::from_millis(250);
@@ -78,8 +85,9 @@ pub struct Arrival {
 /// Picks robot `i`'s command for tick `tick` of episode `generation` from the newest arrival.
 ///
 /// Lockstep accepts only this tick's command; realtime accepts the newest command of this episode
-/// that is at most `stale_after` old. Anything else, a non-finite command or a command flagged as a
-/// failed decision, brakes the robot.
+/// while the scan it answers (published at `answered_scan_at`, `None` when unknown) is at most
+/// `stale_after` old: a command that arrives late is as stale as the scan it was computed from.
+/// Anything else, a non-finite command or a command flagged as a failed decision, brakes the robot.
 pub fn choose_command(
     clock: ClockMode,
     newest: Option<&Arrival>,
@@ -87,6 +95,7 @@ pub fn choose_command(
     tick: u64,
     now: Instant,
     stale_after: Duration,
+    answered_scan_at: Option<Instant>,
 ) -> (WheelCmd, TickOutcome) {
     let Some(arrival) = newest.filter(|a| a.msg.generation == generation) else {
         return (WheelCmd::BRAKE, TickOutcome::Missing);
@@ -94,7 +103,9 @@ pub fn choose_command(
     let usable = match clock {
         ClockMode::Lockstep => arrival.msg.tick == tick,
         ClockMode::Realtime => {
-            arrival.msg.tick <= tick && now.saturating_duration_since(arrival.at) <= stale_after
+            arrival.msg.tick <= tick
+                && answered_scan_at
+                    .is_some_and(|at| now.saturating_duration_since(at) <= stale_after)
         }
     };
     if !usable {
@@ -119,7 +130,7 @@ pub enum AgentState {
     Connected,
     /// Ready for the current episode and answering in time.
     Live,
-    /// Ready, but missed a lockstep deadline: no longer waited for until it answers in time again.
+    /// Ready, but missed a lockstep deadline: not waited for until it answers again.
     Lagging,
 }
 
@@ -132,6 +143,8 @@ pub struct AgentsController<'l> {
     states: Vec<AgentState>,
     newest: Vec<Option<Arrival>>,
     published_at: Vec<Instant>,
+    /// When the scans of the last ticks were published (realtime staleness), oldest first.
+    tick_published: VecDeque<(u64, Instant)>,
     published_wall_ns: Vec<u64>,
     timings: Vec<RobotTiming>,
     model_ids: Vec<String>,
@@ -139,6 +152,14 @@ pub struct AgentsController<'l> {
     last_liveness_check: Instant,
     dt: Duration,
     stopped: Option<StopReason>,
+    /// Swap requests forwarded to an agent and not answered yet: request id → robot.
+    pending_swaps: Vec<(u64, usize)>,
+    /// Per robot: the pid of an agent that said hello during an episode and has not driven yet.
+    rejoining: Vec<Option<u32>>,
+    /// Per robot: the pid of the agent that last said hello.
+    agent_pids: Vec<Option<u32>>,
+    /// The last tick published.
+    tick: u64,
 }
 
 /// Why the world stopped before finishing its runs.
@@ -162,6 +183,7 @@ impl<'l> AgentsController<'l> {
             states: vec![AgentState::Absent; n],
             newest: vec![None; n],
             published_at: vec![Instant::now(); n],
+            tick_published: VecDeque::with_capacity(TICK_HISTORY),
             published_wall_ns: vec![0; n],
             timings: (0..n).map(|_| RobotTiming::default()).collect(),
             model_ids: vec![String::new(); n],
@@ -169,6 +191,10 @@ impl<'l> AgentsController<'l> {
             last_liveness_check: Instant::now(),
             dt: Duration::from_millis(50),
             stopped: None,
+            pending_swaps: Vec::new(),
+            rejoining: vec![None; n],
+            agent_pids: vec![None; n],
+            tick: 0,
         }
     }
 
@@ -202,6 +228,8 @@ impl<'l> AgentsController<'l> {
         self.dt = Duration::from_secs_f64(dt);
         self.schedule_start = None;
         self.newest.fill(None);
+        self.tick_published.clear();
+        self.tick = 0;
         for timing in &mut self.timings {
             *timing = RobotTiming::default();
         }
@@ -302,8 +330,11 @@ impl<'l> AgentsController<'l> {
                 self.on_status(robot, status)?;
             }
             let newest = &mut self.newest[robot];
+            let generation = self.generation;
+            let mut answered = false;
             self.link
                 .drain_commands(robot, &mut |msg, at| {
+                    answered |= msg.generation == generation;
                     if newest.is_none_or(|n| {
                         (msg.generation, msg.tick) >= (n.msg.generation, n.msg.tick)
                     }) {
@@ -315,15 +346,113 @@ impl<'l> AgentsController<'l> {
                     }
                 })
                 .map_err(transport_error)?;
+            if answered && self.states[robot] == AgentState::Lagging {
+                // It answers again (late, or a slow first inference after a restart): wait for
+                // it from the next tick on, so it can catch up instead of lagging behind forever.
+                self.states[robot] = AgentState::Live;
+            }
+        }
+        let mut requests = Vec::new();
+        self.link
+            .drain_swap_requests(&mut |r| requests.push(r))
+            .map_err(transport_error)?;
+        for request in requests {
+            self.on_swap_request(request)?;
         }
         if self.last_liveness_check.elapsed() >= self.settings.liveness_period {
             self.last_liveness_check = Instant::now();
-            for robot in self.link.dead_agents().map_err(transport_error)? {
+            for (robot, pid) in self.link.dead_agents().map_err(transport_error)? {
+                if self.agent_pids[robot].is_some_and(|current| current != pid) {
+                    // A dead predecessor; its successor already said hello.
+                    continue;
+                }
                 if self.states[robot] != AgentState::Absent {
                     tracing::warn!("robot {robot}'s agent died; braking it until an agent rejoins");
                     self.states[robot] = AgentState::Absent;
+                    emit(&Event::AgentLost {
+                        robot,
+                        tick: self.tick,
+                    });
                 }
+                self.fail_pending_swaps(robot, "its agent died before answering")?;
             }
+        }
+        Ok(())
+    }
+
+    /// A user asked (through `formation swap`) for robot `request.robot` to change its model:
+    /// forward it to that robot's agent, or refuse it at once when there is no such agent.
+    fn on_swap_request(&mut self, request: SwapRequest) -> Result<(), ControllerError> {
+        let n = self.states.len();
+        let refusal = if request.robot >= n {
+            Some(format!(
+                "robot {} does not exist: this run has {n} robots (0..={})",
+                request.robot,
+                n.saturating_sub(1)
+            ))
+        } else if self.states[request.robot] == AgentState::Absent {
+            Some(format!(
+                "robot {} has no agent connected right now (it died or has not started); \
+                 try again once it has rejoined",
+                request.robot
+            ))
+        } else {
+            None
+        };
+        if let Some(reason) = refusal {
+            return self.reply_swap(
+                request.request_id,
+                request.robot,
+                SwapOutcome::Refused { reason },
+            );
+        }
+        tracing::info!(
+            "robot {}: forwarding swap request {} to {}",
+            request.robot,
+            request.request_id,
+            request.path.display()
+        );
+        let control = ControlRequest::SwapModel {
+            request_id: request.request_id,
+            at_tick: request.at_tick,
+            path: request.path,
+        };
+        self.link
+            .send_control(request.robot, &control)
+            .map_err(transport_error)?;
+        self.pending_swaps.push((request.request_id, request.robot));
+        Ok(())
+    }
+
+    /// Sends the reply to a swap request; a reply nobody waits for any more is not an error.
+    fn reply_swap(
+        &mut self,
+        request_id: u64,
+        robot: usize,
+        outcome: SwapOutcome,
+    ) -> Result<(), ControllerError> {
+        self.pending_swaps.retain(|&(id, _)| id != request_id);
+        let reply = SwapReply {
+            request_id,
+            robot,
+            outcome,
+        };
+        if let Err(e) = self.link.publish_swap_reply(&reply) {
+            tracing::warn!("could not answer swap request {request_id}: {e}");
+        }
+        Ok(())
+    }
+
+    fn fail_pending_swaps(&mut self, robot: usize, why: &str) -> Result<(), ControllerError> {
+        let failed: Vec<u64> = self
+            .pending_swaps
+            .iter()
+            .filter(|&&(_, r)| r == robot)
+            .map(|&(id, _)| id)
+            .collect();
+        for request_id in failed {
+            let reason = format!("robot {robot}'s swap was not done: {why}");
+            self.reply_swap(request_id, robot, SwapOutcome::Refused { reason })?;
         }
         Ok(())
     }
@@ -333,9 +462,11 @@ impl<'l> AgentsController<'l> {
             AgentStatus::Hello { pid, model_id } => {
                 tracing::info!("robot {robot}: agent pid {pid} connected with model {model_id}");
                 self.model_ids[robot] = model_id;
+                self.agent_pids[robot] = Some(pid);
                 self.states[robot] = AgentState::Connected;
                 if self.generation > 0 {
                     // A (re)started agent joins the episode under way.
+                    self.rejoining[robot] = Some(pid);
                     self.send_begin(robot)?;
                 }
             }
@@ -359,10 +490,12 @@ impl<'l> AgentsController<'l> {
                 model_id,
             } => {
                 tracing::info!("robot {robot}: swap {request_id} done at tick {tick}: {model_id}");
-                self.model_ids[robot] = model_id;
+                self.model_ids[robot] = model_id.clone();
+                self.reply_swap(request_id, robot, SwapOutcome::Done { tick, model_id })?;
             }
             AgentStatus::SwapRefused { request_id, reason } => {
                 tracing::warn!("robot {robot}: swap {request_id} refused: {reason}");
+                self.reply_swap(request_id, robot, SwapOutcome::Refused { reason })?;
             }
         }
         Ok(())
@@ -388,6 +521,7 @@ impl Controller for AgentsController<'_> {
         out: &mut [WheelCmd],
     ) -> Result<(), ControllerError> {
         let entered = Instant::now();
+        self.tick = obs.tick;
         let schedule_start = *self.schedule_start.get_or_insert(entered);
         for (robot, scan) in obs.scans.iter().enumerate() {
             let msg = ScanMsg::new(
@@ -405,8 +539,13 @@ impl Controller for AgentsController<'_> {
             self.published_at[robot] = Instant::now();
             self.published_wall_ns[robot] = msg.published_wall_ns;
         }
+        if self.tick_published.len() == TICK_HISTORY {
+            self.tick_published.pop_front();
+        }
+        self.tick_published.push_back((obs.tick, entered));
+        let paced_until = entered + self.settings.pace;
         let deadline = match self.settings.clock {
-            ClockMode::Lockstep => entered + self.settings.command_timeout,
+            ClockMode::Lockstep => entered + self.settings.command_timeout.max(self.settings.pace),
             ClockMode::Realtime => {
                 schedule_start + self.dt * u32::try_from(obs.tick + 1).unwrap_or(u32::MAX)
             }
@@ -414,18 +553,25 @@ impl Controller for AgentsController<'_> {
         loop {
             self.poll()?;
             let now = Instant::now();
-            let done = match self.settings.clock {
+            let answered = match self.settings.clock {
                 ClockMode::Lockstep => self.all_answered(obs.tick),
                 ClockMode::Realtime => false,
             };
-            if done || now >= deadline {
+            if (answered && now >= paced_until) || now >= deadline {
                 break;
             }
-            self.wait(deadline - now)?;
+            self.wait(if answered { paced_until } else { deadline } - now)?;
         }
         let now = Instant::now();
         for (robot, slot) in out.iter_mut().enumerate() {
             let newest = self.newest[robot].as_ref();
+            let answered_scan_at = newest.and_then(|a| {
+                self.tick_published
+                    .iter()
+                    .rev()
+                    .find(|&&(tick, _)| tick == a.msg.tick)
+                    .map(|&(_, at)| at)
+            });
             let (cmd, outcome) = choose_command(
                 self.settings.clock,
                 newest,
@@ -433,6 +579,7 @@ impl Controller for AgentsController<'_> {
                 obs.tick,
                 now,
                 self.settings.stale_after,
+                answered_scan_at,
             );
             *slot = cmd;
             match (self.states[robot], outcome) {
@@ -447,6 +594,15 @@ impl Controller for AgentsController<'_> {
                 }
                 (AgentState::Lagging, TickOutcome::Fresh) => self.states[robot] = AgentState::Live,
                 _ => {}
+            }
+            if outcome == TickOutcome::Fresh
+                && let Some(pid) = self.rejoining[robot].take()
+            {
+                emit(&Event::AgentRejoined {
+                    robot,
+                    pid,
+                    tick: obs.tick,
+                });
             }
             let arrival = newest.filter(|_| outcome == TickOutcome::Fresh);
             self.timings[robot].record(
@@ -482,7 +638,7 @@ mod tests {
         let stale = Duration::from_millis(150);
         let ok = arrival(2, 5, 0.3, CmdStatus::OK, now);
         assert_eq!(
-            choose_command(ClockMode::Lockstep, Some(&ok), 2, 5, now, stale),
+            choose_command(ClockMode::Lockstep, Some(&ok), 2, 5, now, stale, None),
             (
                 WheelCmd {
                     left: 0.3,
@@ -492,42 +648,61 @@ mod tests {
             )
         );
         assert_eq!(
-            choose_command(ClockMode::Lockstep, Some(&ok), 2, 6, now, stale).1,
+            choose_command(ClockMode::Lockstep, Some(&ok), 2, 6, now, stale, None).1,
             TickOutcome::Stale
         );
         assert_eq!(
-            choose_command(ClockMode::Lockstep, Some(&ok), 3, 5, now, stale).1,
+            choose_command(ClockMode::Lockstep, Some(&ok), 3, 5, now, stale, None).1,
             TickOutcome::Missing
         );
         assert_eq!(
-            choose_command(ClockMode::Lockstep, None, 2, 5, now, stale).1,
+            choose_command(ClockMode::Lockstep, None, 2, 5, now, stale, None).1,
             TickOutcome::Missing
         );
     }
 
     #[test]
-    fn realtime_uses_the_newest_command_while_it_is_fresh() {
+    fn realtime_uses_the_newest_command_while_the_scan_it_answers_is_fresh() {
         let then = Instant::now();
         let stale = Duration::from_millis(150);
-        let older_tick = arrival(1, 3, 0.2, CmdStatus::OK, then);
-        let (cmd, outcome) = choose_command(
-            ClockMode::Realtime,
-            Some(&older_tick),
-            1,
-            5,
-            then + Duration::from_millis(100),
-            stale,
+        let older_tick = arrival(1, 3, 0.2, CmdStatus::OK, then + Duration::from_millis(20));
+        let at = |ms| then + Duration::from_millis(ms);
+        let choose = |now, scan_at| {
+            choose_command(
+                ClockMode::Realtime,
+                Some(&older_tick),
+                1,
+                5,
+                now,
+                stale,
+                scan_at,
+            )
+        };
+        assert_eq!(
+            choose(at(100), Some(then)),
+            (older_tick.msg.wheels(), TickOutcome::Fresh)
         );
-        assert_eq!((cmd.left, outcome), (0.2, TickOutcome::Fresh));
-        let (cmd, outcome) = choose_command(
-            ClockMode::Realtime,
-            Some(&older_tick),
-            1,
-            5,
-            then + Duration::from_millis(200),
-            stale,
+        assert_eq!(
+            choose(at(200), Some(then)),
+            (WheelCmd::BRAKE, TickOutcome::Stale)
         );
-        assert_eq!((cmd, outcome), (WheelCmd::BRAKE, TickOutcome::Stale));
+        // A command that just arrived but answers a scan 300 ms old is stale too (a late agent).
+        let late = arrival(1, 3, 0.2, CmdStatus::OK, at(300));
+        assert_eq!(
+            choose_command(
+                ClockMode::Realtime,
+                Some(&late),
+                1,
+                5,
+                at(301),
+                stale,
+                Some(then)
+            )
+            .1,
+            TickOutcome::Stale
+        );
+        // A scan too old to be remembered is stale.
+        assert_eq!(choose(at(1), None).1, TickOutcome::Stale);
     }
 
     #[test]
@@ -536,12 +711,20 @@ mod tests {
         let stale = Duration::from_millis(150);
         let nan = arrival(1, 0, f64::NAN, CmdStatus::OK, now);
         assert_eq!(
-            choose_command(ClockMode::Lockstep, Some(&nan), 1, 0, now, stale),
+            choose_command(ClockMode::Lockstep, Some(&nan), 1, 0, now, stale, None),
             (WheelCmd::BRAKE, TickOutcome::NonFinite)
         );
         let failed = arrival(1, 0, 0.4, CmdStatus::DECISION_FAILED, now);
         assert_eq!(
-            choose_command(ClockMode::Realtime, Some(&failed), 1, 0, now, stale),
+            choose_command(
+                ClockMode::Realtime,
+                Some(&failed),
+                1,
+                0,
+                now,
+                stale,
+                Some(now)
+            ),
             (WheelCmd::BRAKE, TickOutcome::AgentFailed)
         );
     }

@@ -53,6 +53,9 @@ struct Args {
     /// Realtime: a command older than this brakes its robot \[ms\].
     #[arg(long, default_value_t = 150)]
     stale_ms: u64,
+    /// Lockstep: each tick takes at least this long \[ms\] (0: as fast as the agents answer).
+    #[arg(long, default_value_t = 0)]
+    pace_ms: u64,
     /// How long to wait for every agent to connect \[ms\].
     #[arg(long, default_value_t = 30_000)]
     startup_timeout_ms: u64,
@@ -65,6 +68,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
+    formation_proto::wire::quiet_iceoryx_logs();
     let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
     let _ = tracing_subscriber::fmt()
@@ -110,6 +114,7 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
         clock: args.clock,
         command_timeout: Duration::from_millis(args.command_timeout_ms),
         stale_after: Duration::from_millis(args.stale_ms),
+        pace: Duration::from_millis(args.pace_ms),
         ready_timeout: Duration::from_millis(args.ready_timeout_ms),
         liveness_period: Duration::from_millis(100),
         stop,

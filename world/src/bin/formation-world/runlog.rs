@@ -56,6 +56,22 @@ pub enum Event<'a> {
         /// The trajectory log.
         log: &'a Path,
     },
+    /// A robot's agent died (or stopped answering and its process is gone); the robot brakes.
+    AgentLost {
+        /// The robot.
+        robot: usize,
+        /// The last tick the world published.
+        tick: u64,
+    },
+    /// A restarted agent joined the episode under way and drives its robot again.
+    AgentRejoined {
+        /// The robot.
+        robot: usize,
+        /// The new agent's process id.
+        pid: u32,
+        /// The first tick it drove.
+        tick: u64,
+    },
     /// All runs finished.
     Finished,
 }

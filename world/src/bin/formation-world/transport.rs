@@ -10,7 +10,8 @@ use std::time::{Duration, Instant};
 
 use formation_proto::wire::{
     AgentStatus, CmdMsg, ControlMsg, ControlRequest, RobotChannel, RunNamespace, ScanMsg,
-    ServiceLimits, StatusMsg, WORLD_NODE_NAME, WireError, agent_node_name, robot_service_name,
+    ServiceLimits, StatusMsg, SwapChannel, SwapReply, SwapReplyMsg, SwapRequest, SwapRequestMsg,
+    WORLD_NODE_NAME, WireError, parse_agent_node_name, robot_service_name, swap_service_name,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
@@ -74,9 +75,16 @@ pub trait WorldLink {
         robot: usize,
         sink: &mut dyn FnMut(AgentStatus),
     ) -> Result<(), TransportError>;
-    /// Robots whose agent process the transport knows to be dead; cleans up after them so a
-    /// restarted agent can take their place.
-    fn dead_agents(&mut self) -> Result<Vec<usize>, TransportError>;
+    /// `(robot, pid)` of agent processes the transport knows to be dead; cleans up after them so
+    /// a restarted agent can take their place.
+    fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, TransportError>;
+    /// Hands every swap request that users sent since the last call to `sink`, oldest first.
+    fn drain_swap_requests(
+        &mut self,
+        sink: &mut dyn FnMut(SwapRequest),
+    ) -> Result<(), TransportError>;
+    /// Answers a swap request.
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), TransportError>;
 }
 
 /// One robot's ports on the world side.
@@ -91,10 +99,19 @@ struct RobotPorts {
     status_wake: Listener<ipc::Service>,
 }
 
+/// The world's ends of the run's swap channel.
+struct SwapPorts {
+    requests: Subscriber<ipc::Service, SwapRequestMsg, ()>,
+    request_wake: Listener<ipc::Service>,
+    replies: Publisher<ipc::Service, SwapReplyMsg, ()>,
+    reply_wake: Notifier<ipc::Service>,
+}
+
 /// The world's iceoryx2 ports: it creates every robot service of the run and holds the world end.
 pub struct IceoryxWorldLink {
     node: Node<ipc::Service>,
     robots: Vec<RobotPorts>,
+    swap: SwapPorts,
     waitset: WaitSet<ipc::Service>,
 }
 
@@ -112,6 +129,7 @@ impl IceoryxWorldLink {
         let robots = (0..n_robots)
             .map(|robot| create_robot_ports(&node, namespace, robot))
             .collect::<Result<Vec<_>, _>>()?;
+        let swap = create_swap_ports(&node, namespace)?;
         let waitset = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<ipc::Service>()
@@ -119,6 +137,7 @@ impl IceoryxWorldLink {
         Ok(IceoryxWorldLink {
             node,
             robots,
+            swap,
             waitset,
         })
     }
@@ -217,6 +236,65 @@ fn create_robot_ports(
     })
 }
 
+fn create_swap_ports(
+    node: &Node<ipc::Service>,
+    namespace: &RunNamespace,
+) -> Result<SwapPorts, TransportError> {
+    let name = |channel: SwapChannel| -> Result<ServiceName, TransportError> {
+        let text = swap_service_name(namespace.run(), channel);
+        ServiceName::new(&text).map_err(|e| iox(format!("name service {text}"))(&e))
+    };
+    let event = |channel: SwapChannel| -> Result<_, TransportError> {
+        let limits = channel.limits();
+        let service = name(channel)?;
+        node.service_builder(&service)
+            .event()
+            .max_notifiers(limits.max_publishers)
+            .max_listeners(limits.max_subscribers)
+            .max_nodes(limits.max_nodes)
+            .open_or_create()
+            .map_err(|e| iox(format!("create event service {service}"))(&e))
+    };
+    macro_rules! pubsub_service {
+        ($payload:ty, $channel:expr) => {{
+            let limits = $channel.limits();
+            let service = name($channel)?;
+            node.service_builder(&service)
+                .publish_subscribe::<$payload>()
+                .max_publishers(limits.max_publishers)
+                .max_subscribers(limits.max_subscribers)
+                .subscriber_max_buffer_size(limits.subscriber_buffer)
+                .max_nodes(limits.max_nodes)
+                .history_size(0)
+                .enable_safe_overflow(true)
+                .open_or_create()
+                .map_err(|e| iox(format!("create service {service}"))(&e))?
+        }};
+    }
+    let requests = pubsub_service!(SwapRequestMsg, SwapChannel::Request);
+    let replies = pubsub_service!(SwapReplyMsg, SwapChannel::Reply);
+    let what = |port: &str| format!("create the world's swap {port} port");
+    Ok(SwapPorts {
+        requests: requests
+            .subscriber_builder()
+            .buffer_size(SwapChannel::Request.limits().subscriber_buffer)
+            .create()
+            .map_err(|e| iox(what("request"))(&e))?,
+        request_wake: event(SwapChannel::Request)?
+            .listener_builder()
+            .create()
+            .map_err(|e| iox(what("request event"))(&e))?,
+        replies: replies
+            .publisher_builder()
+            .create()
+            .map_err(|e| iox(what("reply"))(&e))?,
+        reply_wake: event(SwapChannel::Reply)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| iox(what("reply event"))(&e))?,
+    })
+}
+
 impl WorldLink for IceoryxWorldLink {
     fn n_robots(&self) -> usize {
         self.robots.len()
@@ -250,7 +328,12 @@ impl WorldLink for IceoryxWorldLink {
 
     fn wait(&mut self, timeout: Duration) -> Result<(), TransportError> {
         let waitset = &self.waitset;
-        let mut guards = Vec::with_capacity(2 * self.robots.len());
+        let mut guards = Vec::with_capacity(2 * self.robots.len() + 1);
+        guards.push(
+            waitset
+                .attach_notification(&self.swap.request_wake)
+                .map_err(|e| iox("attach the swap wake-up to the wait set")(&e))?,
+        );
         for ports in &self.robots {
             for listener in [&ports.cmd_wake, &ports.status_wake] {
                 guards.push(
@@ -264,6 +347,7 @@ impl WorldLink for IceoryxWorldLink {
             .wait_and_process_once_with_timeout(|_| CallbackProgression::Stop, timeout)
             .map_err(|e| iox("wait for the agents")(&e))?;
         drop(guards);
+        let _ = self.swap.request_wake.try_wait(|_| {});
         for ports in &self.robots {
             // Consume the wake-ups; the samples themselves are drained by the caller.
             let _ = ports.cmd_wake.try_wait(|_| {});
@@ -312,15 +396,16 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn dead_agents(&mut self) -> Result<Vec<usize>, TransportError> {
-        let names: Vec<String> = (0..self.robots.len()).map(agent_node_name).collect();
+    fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, TransportError> {
+        let n_robots = self.robots.len();
         let mut dead = Vec::new();
         Node::<ipc::Service>::list(self.node.config(), |state| {
             if let NodeState::Dead(view) = &state
                 && let Some(details) = view.details()
-                && let Some(robot) = names.iter().position(|n| n == details.name().as_str())
+                && let Some((robot, pid)) = parse_agent_node_name(details.name().as_str())
+                && robot < n_robots
             {
-                dead.push(robot);
+                dead.push((robot, pid));
             }
             CallbackProgression::Continue
         })
@@ -341,5 +426,33 @@ impl WorldLink for IceoryxWorldLink {
         dead.sort_unstable();
         dead.dedup();
         Ok(dead)
+    }
+
+    fn drain_swap_requests(
+        &mut self,
+        sink: &mut dyn FnMut(SwapRequest),
+    ) -> Result<(), TransportError> {
+        while let Some(sample) = self
+            .swap
+            .requests
+            .receive()
+            .map_err(|e| iox("receive a swap request")(&e))?
+        {
+            match sample.payload().decode() {
+                Ok(request) => sink(request),
+                Err(e) => tracing::warn!("ignoring a malformed swap request: {e}"),
+            }
+        }
+        Ok(())
+    }
+
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), TransportError> {
+        let msg = SwapReplyMsg::encode(reply)?;
+        self.swap
+            .replies
+            .send_copy(msg)
+            .map_err(|e| iox("send a swap reply")(&e))?;
+        let _ = self.swap.reply_wake.notify();
+        Ok(())
     }
 }

@@ -1,0 +1,320 @@
+//! Fault injection on real processes: agents SIGKILLed at random ticks in lockstep and in realtime
+//! runs, a hung agent, a late agent. The world must keep ticking, brake every orphaned robot, take
+//! back every restarted agent, and leave nothing in shared memory.
+
+use std::process::Command;
+use std::time::Duration;
+
+use formation_proto::wire::RunId;
+use formation_tests::{
+    LeakCheck, LiveProcess, TempDir, Watchdog, agent_pids, binaries, case1_scenario, run,
+    test_model, unique_run_id,
+};
+use rand::{Rng, SeedableRng};
+
+/// The watchdog limit of each test: generous, it only stops a hung test.
+const LIMIT: Duration = Duration::from_secs(300);
+
+/// One robot's per-tick columns of run 0, from a `formation run` output directory.
+struct RobotLog {
+    outcomes: Vec<String>,
+    commands: Vec<(f64, f64)>,
+}
+
+fn robot_log(out: &std::path::Path, robot: usize) -> RobotLog {
+    let read = |path: std::path::PathBuf| -> serde_json::Value {
+        let text = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+        serde_json::from_str(&text).expect("JSON log")
+    };
+    let timing = read(out.join("timing/run-0000.json"));
+    let runlog = read(out.join("runs/run-0000.json"));
+    let outcomes = timing["robots"][robot]["outcome"]
+        .as_array()
+        .expect("outcome column")
+        .iter()
+        .map(|v| v.as_str().unwrap_or_default().to_owned())
+        .collect();
+    let commands = runlog["trajectory"]["commands"]
+        .as_array()
+        .expect("commands")
+        .iter()
+        .map(|tick| {
+            let c = &tick[robot];
+            (
+                c["left"].as_f64().expect("left"),
+                c["right"].as_f64().expect("right"),
+            )
+        })
+        .collect();
+    RobotLog { outcomes, commands }
+}
+
+impl RobotLog {
+    /// Maximal runs of ticks whose command was not applied, as (first, last) tick.
+    fn braked_stretches(&self) -> Vec<(usize, usize)> {
+        let mut stretches = Vec::new();
+        let mut start = None;
+        for (tick, outcome) in self.outcomes.iter().enumerate() {
+            match (outcome == "fresh", start) {
+                (false, None) => start = Some(tick),
+                (true, Some(first)) => {
+                    stretches.push((first, tick - 1));
+                    start = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(first) = start {
+            stretches.push((first, self.outcomes.len() - 1));
+        }
+        stretches
+    }
+
+    /// Every tick the watchdog refused is a full brake.
+    fn assert_braked_whenever_refused(&self, robot: usize) {
+        for (tick, (outcome, cmd)) in self.outcomes.iter().zip(&self.commands).enumerate() {
+            if outcome != "fresh" {
+                assert_eq!(
+                    *cmd,
+                    (0.0, 0.0),
+                    "robot {robot} tick {tick} ({outcome}) must be braked"
+                );
+            }
+        }
+    }
+}
+
+fn launch(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> LiveProcess {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["run", "--run-id", run_id.as_str()])
+        .args(extra)
+        .arg("--scenario")
+        .arg(case1_scenario(dir.path(), duration_s))
+        .arg("--model")
+        .arg(test_model())
+        .arg("--out")
+        .arg(dir.path().join("out"));
+    LiveProcess::spawn(command)
+}
+
+/// Sends SIGKILL to robot `robot`'s current agent and returns its pid.
+fn kill_agent(run_id: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
+    let pids = agent_pids(run_id, robot);
+    assert_eq!(
+        pids.len(),
+        1,
+        "exactly one agent of robot {robot} should run: {pids:?}\n{}",
+        launch.describe()
+    );
+    let status = Command::new("kill")
+        .args(["-KILL", &pids[0].to_string()])
+        .status()
+        .expect("running kill");
+    assert!(status.success(), "kill -KILL {}", pids[0]);
+    pids[0]
+}
+
+/// Waits for the launcher to report that a new agent (not `old_pid`) of `robot` rejoined, and
+/// returns the first tick it drove.
+fn await_rejoin(launch: &mut LiveProcess, robot: usize, old_pid: u32) -> usize {
+    let prefix = format!("robot {robot}: agent pid ");
+    let line = launch.wait_for_line(Duration::from_secs(60), |line| {
+        line.starts_with(&prefix) && line.contains("rejoined")
+    });
+    let Some(line) = line else {
+        panic!(
+            "robot {robot}'s agent did not rejoin after a kill\n{}",
+            launch.describe()
+        );
+    };
+    assert!(
+        !line.contains(&format!("pid {old_pid} ")),
+        "the killed agent cannot rejoin: {line}"
+    );
+    line.rsplit(' ')
+        .next()
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no tick in {line:?}"))
+}
+
+/// Issue 5: twenty SIGKILLs of random agents at random ticks of one lockstep run. Every kill is
+/// followed by a restart and a rejoin, every orphaned tick is braked, the run completes, and the
+/// run's shared memory is gone afterwards.
+#[test]
+fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
+    let _watchdog = Watchdog::arm("twenty_kills_lockstep", LIMIT);
+    let dir = TempDir::new("kills");
+    let run_id = unique_run_id("kills");
+    let leaks = LeakCheck::new(&run_id);
+    let kills = 20;
+    // 150 s at >= 20 ms per tick: at least 60 s of run, far more than 20 kill-restart cycles take.
+    let mut launch = launch(
+        &run_id,
+        &dir,
+        150.0,
+        &[
+            "--timeout-ms",
+            "300",
+            "--pace-ms",
+            "20",
+            "--restarts",
+            "10",
+            "--restart-window-s",
+            "3",
+        ],
+    );
+    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(20);
+    let mut rejoins: [Vec<usize>; 3] = Default::default();
+    for _ in 0..kills {
+        // A random moment, hence a random tick, then a random robot.
+        std::thread::sleep(Duration::from_millis(rng.random_range(100..600)));
+        let robot = rng.random_range(0..3);
+        let pid = kill_agent(&run_id, robot, &mut launch);
+        rejoins[robot].push(await_rejoin(&mut launch, robot, pid));
+    }
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    assert!(
+        finished
+            .stdout()
+            .contains(&format!("{kills} agent restart(s)")),
+        "{}",
+        finished.describe()
+    );
+    let out = dir.path().join("out");
+    let mut orphaned_ticks = 0;
+    for (robot, rejoined_at) in rejoins.iter().enumerate() {
+        let log = robot_log(&out, robot);
+        assert_eq!(log.outcomes.len(), 3000, "the world ticked to the end");
+        // Every tick without a usable command of a live agent is a full brake ...
+        log.assert_braked_whenever_refused(robot);
+        orphaned_ticks += log.outcomes.iter().filter(|o| *o != "fresh").count();
+        // ... and every rejoin is the new agent's first fresh command.
+        for &tick in rejoined_at {
+            assert_eq!(
+                log.outcomes[tick],
+                "fresh",
+                "robot {robot} rejoined at tick {tick}: {:?}",
+                log.braked_stretches()
+            );
+        }
+        assert_eq!(
+            log.outcomes.last().map(String::as_str),
+            Some("fresh"),
+            "robot {robot} drives at the end"
+        );
+    }
+    // A kill usually orphans at least the next tick (a kill between an answer and the next
+    // tick can be healed while the world waits for another robot, so not always).
+    assert!(orphaned_ticks > 0, "no tick was ever braked");
+    leaks.assert_clean();
+}
+
+/// Issue 5: a kill in a realtime run: the world never waits for the dead agent, the robot brakes
+/// once its newest command is stale, and the restarted agent drives it again.
+#[test]
+fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
+    let _watchdog = Watchdog::arm("kill_realtime", LIMIT);
+    let dir = TempDir::new("kill-rt");
+    let run_id = unique_run_id("killrt");
+    let leaks = LeakCheck::new(&run_id);
+    let mut launch = launch(
+        &run_id,
+        &dir,
+        12.0,
+        // The restart waits 600 ms (12 ticks), so the orphan is seen braking meanwhile.
+        &[
+            "--clock",
+            "realtime",
+            "--restarts",
+            "2",
+            "--restart-delay-ms",
+            "600",
+        ],
+    );
+    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+    std::thread::sleep(Duration::from_secs(3));
+    let pid = kill_agent(&run_id, 1, &mut launch);
+    await_rejoin(&mut launch, 1, pid);
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    assert!(
+        finished.stdout().contains("1 agent restart(s)"),
+        "{}",
+        finished.describe()
+    );
+    let out = dir.path().join("out");
+    let robot1 = robot_log(&out, 1);
+    assert_eq!(robot1.outcomes.len(), 240, "12 s at 20 Hz, every tick");
+    robot1.assert_braked_whenever_refused(1);
+    let stretches = robot1.braked_stretches();
+    assert!(
+        stretches
+            .iter()
+            .any(|&(first, last)| first > 0 && last + 1 < 240 && last - first >= 5),
+        "a braked stretch of the restart's length in mid-run, then fresh commands: {stretches:?}"
+    );
+    assert_eq!(robot1.outcomes.last().map(String::as_str), Some("fresh"));
+    for robot in [0, 2] {
+        let log = robot_log(&out, robot);
+        log.assert_braked_whenever_refused(robot);
+        let fresh = log.outcomes.iter().filter(|o| *o == "fresh").count();
+        assert!(
+            fresh > 200,
+            "robot {robot}'s live agent kept driving: {fresh} fresh ticks"
+        );
+    }
+    leaks.assert_clean();
+}
+
+/// Issue 5: an agent that hangs is braked from its first missed tick on and the run completes
+/// without it; an agent that answers later than the realtime staleness limit is never obeyed.
+#[test]
+fn hung_and_late_agents_are_braked() {
+    let _watchdog = Watchdog::arm("hung_and_late", LIMIT);
+    let dir = TempDir::new("hang");
+    let run_id = unique_run_id("hang");
+    let leaks = LeakCheck::new(&run_id);
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["run", "--run-id", run_id.as_str(), "--clock", "realtime"])
+        .args(["--fault", "1:hang-after=20", "--fault", "2:late-ms=400"])
+        .arg("--scenario")
+        .arg(case1_scenario(dir.path(), 5.0))
+        .arg("--model")
+        .arg(test_model())
+        .arg("--out")
+        .arg(dir.path().join("out"));
+    run(command, LIMIT).assert_success();
+    let out = dir.path().join("out");
+    let hung = robot_log(&out, 1);
+    hung.assert_braked_whenever_refused(1);
+    // Realtime reuses the newest command while it is fresh (150 ms = 3 ticks), then brakes.
+    let first_braked = hung.outcomes.iter().position(|o| o != "fresh");
+    assert!(
+        first_braked.is_some_and(|t| (20..=24).contains(&t)),
+        "braked from tick 20-24: {:?}",
+        hung.outcomes
+    );
+    let from = first_braked.unwrap_or(0);
+    assert!(
+        hung.outcomes[from..].iter().all(|o| o != "fresh"),
+        "a hung agent never drives again: {:?}",
+        hung.outcomes
+    );
+    let late = robot_log(&out, 2);
+    late.assert_braked_whenever_refused(2);
+    assert!(
+        late.outcomes.iter().all(|o| o != "fresh"),
+        "commands computed from 400 ms old scans are stale: {:?}",
+        late.outcomes
+    );
+    let healthy = robot_log(&out, 0);
+    assert!(healthy.outcomes.iter().filter(|o| *o == "fresh").count() > 90);
+    leaks.assert_clean();
+}

@@ -1,0 +1,190 @@
+//! ONNX hot swap on real processes: `formation swap` changes one running robot's model at a tick
+//! boundary, bad swaps are refused with the reason while the old model keeps driving, and a swap
+//! to an unknown robot, an unknown run or a missing file is a clear error that disturbs nothing.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use formation::runtime::read_trajectory;
+use formation_tests::{
+    LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario, run,
+    test_model, unique_run_id, write_tiny_model, write_tiny_model_with,
+};
+use formation_world::episode::{Controller, ControllerError, Observation};
+use formation_world::{Scenario, run_episode};
+use robot_agent::decision::{Agent, PolicyController};
+
+const LIMIT: Duration = Duration::from_secs(240);
+const SWAP_TICK: u64 = 400;
+const SWAPPED_ROBOT: usize = 1;
+
+/// The in-process reference: every robot runs `first`, and robot `robot` switches to `second`
+/// from tick `at` on, exactly as the agent process does.
+struct SwapAt {
+    inner: PolicyController,
+    robot: usize,
+    at: u64,
+    second: Option<Agent>,
+}
+
+impl Controller for SwapAt {
+    fn commands(
+        &mut self,
+        obs: &Observation<'_>,
+        out: &mut [formation_proto::WheelCmd],
+    ) -> Result<(), ControllerError> {
+        if obs.tick == self.at
+            && let Some(agent) = self.second.take()
+        {
+            self.inner.agents_mut()[self.robot] = agent;
+        }
+        self.inner.commands(obs, out)
+    }
+}
+
+fn swap(run_id: &str, robot: &str, model: &Path, extra: &[&str]) -> formation_tests::Finished {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["swap", "--run", run_id, "--robot", robot, "--model"])
+        .arg(model)
+        .args(extra);
+    run(command, LIMIT)
+}
+
+/// Robot `robot`'s model per tick of run 0 (from the timing log), as model ids.
+fn models_per_tick(out: &Path, robot: usize) -> Vec<String> {
+    let text = std::fs::read_to_string(out.join("timing/run-0000.json")).expect("timing log");
+    let log: serde_json::Value = serde_json::from_str(&text).expect("timing JSON");
+    let ids: Vec<String> = log["robots"][robot]["model_ids"]
+        .as_array()
+        .expect("model ids")
+        .iter()
+        .map(|v| v.as_str().unwrap_or_default().to_owned())
+        .collect();
+    log["robots"][robot]["model"]
+        .as_array()
+        .expect("model column")
+        .iter()
+        .map(|v| {
+            let index = v.as_i64().expect("model index");
+            usize::try_from(index)
+                .ok()
+                .and_then(|i| ids.get(i).cloned())
+                .unwrap_or_else(|| "<none>".into())
+        })
+        .collect()
+}
+
+/// Issue 5: in lockstep, bad swaps are refused (the old model keeps driving), then a good swap at
+/// tick 400 makes every later command of that robot exactly what the new model gives in-process.
+#[test]
+fn a_lockstep_swap_matches_the_new_model_in_process_and_bad_swaps_are_refused() {
+    let _watchdog = Watchdog::arm("swap_lockstep", LIMIT);
+    let dir = TempDir::new("swap");
+    let run_id = unique_run_id("swap");
+    let leaks = LeakCheck::new(&run_id);
+    let first = test_model();
+    let second = dir.path().join("second.onnx");
+    write_tiny_model(&second, 1);
+    let wrong_shape = dir.path().join("wrong-shape.onnx");
+    write_tiny_model_with(&wrong_shape, 2, &["--aux-width", "3"]);
+    let wrong_sensor = dir.path().join("wrong-sensor.onnx");
+    write_tiny_model_with(&wrong_sensor, 3, &["--beams", "450"]);
+    let not_onnx = dir.path().join("not-a-model.onnx");
+    std::fs::write(&not_onnx, b"this is not an ONNX file").expect("writing a bad file");
+
+    let scenario_path = case1_scenario(dir.path(), 30.0);
+    let out = dir.path().join("out");
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["run", "--run-id", run_id.as_str(), "--pace-ms", "10"])
+        .arg("--scenario")
+        .arg(&scenario_path)
+        .arg("--model")
+        .arg(first)
+        .arg("--out")
+        .arg(&out);
+    let mut launch = LiveProcess::spawn(command);
+    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+
+    let robot = SWAPPED_ROBOT.to_string();
+    for (bad, why) in [
+        (&wrong_shape, "aux"),
+        (&wrong_sensor, "450"),
+        (&not_onnx, "not-a-model.onnx"),
+    ] {
+        swap(run_id.as_str(), &robot, bad, &[])
+            .assert_failure_mentioning("refused")
+            .assert_failure_mentioning(why)
+            .assert_failure_mentioning("old model keeps driving");
+    }
+    swap(run_id.as_str(), "7", &second, &[]).assert_failure_mentioning("robot 7 does not exist");
+    swap(
+        run_id.as_str(),
+        &robot,
+        &dir.path().join("missing.onnx"),
+        &[],
+    )
+    .assert_failure_mentioning("not found");
+    swap("no-such-run", &robot, &second, &[]).assert_failure_mentioning("no run");
+
+    let done = swap(
+        run_id.as_str(),
+        &robot,
+        &second,
+        &["--at-tick", &SWAP_TICK.to_string()],
+    );
+    done.assert_success();
+    assert!(
+        done.stdout().contains(&format!("from tick {SWAP_TICK}")),
+        "{}",
+        done.describe()
+    );
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+
+    // The command log says which model decided each tick.
+    let models = models_per_tick(&out, SWAPPED_ROBOT);
+    assert_eq!(models.len(), 600);
+    let swap_tick = usize::try_from(SWAP_TICK).expect("tick");
+    assert!(models[..swap_tick].iter().all(|m| *m == models[0]));
+    assert!(models[swap_tick..].iter().all(|m| *m == models[swap_tick]));
+    assert_ne!(
+        models[0], models[swap_tick],
+        "the model id changed at the swap"
+    );
+    for other in [0, 2] {
+        let theirs = models_per_tick(&out, other);
+        assert!(theirs.iter().all(|m| *m == models[0]), "robot {other}");
+    }
+
+    // Bit for bit what the two models give in-process, with the swap at the same tick.
+    let scenario = Scenario::from_path(&scenario_path).expect("scenario");
+    let spec = scenario.run_spec(scenario.seed(), 0);
+    let lidar = spec.world.lidar;
+    let mut reference = SwapAt {
+        inner: PolicyController::from_model_paths(&[first, first, first], lidar).expect("agents"),
+        robot: SWAPPED_ROBOT,
+        at: SWAP_TICK,
+        second: Some(Agent::from_model_path(&second, lidar).expect("second model")),
+    };
+    let in_process = run_episode(&spec, &mut reference, &mut |_, _| {}).expect("in-process run");
+    let over_processes = read_trajectory(&out.join("runs/run-0000.json")).expect("run log");
+    assert_bit_identical(&over_processes, &in_process);
+
+    // And the swap mattered: without it robot 1's later commands differ.
+    let mut unswapped =
+        PolicyController::from_model_paths(&[first, first, first], lidar).expect("agents");
+    let without = run_episode(&spec, &mut unswapped, &mut |_, _| {}).expect("in-process run");
+    assert_eq!(
+        without.commands[..swap_tick],
+        in_process.commands[..swap_tick]
+    );
+    assert_ne!(
+        without.commands[swap_tick][SWAPPED_ROBOT],
+        in_process.commands[swap_tick][SWAPPED_ROBOT]
+    );
+    leaks.assert_clean();
+}
