@@ -259,7 +259,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
     let started = Instant::now();
     let results = if args.processes {
         let default = models.first().cloned().context("no robots")?;
-        let trajectories = crate::runtime::eval_over_processes(
+        let evaluated = crate::runtime::eval_over_processes(
             &scenario,
             seed,
             runs,
@@ -267,8 +267,16 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
             crate::runtime::ClockMode::Lockstep,
             &mut |n| bar.set_position(n as u64),
         )?;
+        if let Some(dir) = &args.out {
+            // The report shows it as the latency profile.
+            paths::write_atomic(
+                &dir.join("profile.json"),
+                &serde_json::to_vec_pretty(&evaluated.latency)?,
+            )?;
+        }
         let cfg = MetricsConfig::default();
-        trajectories
+        evaluated
+            .trajectories
             .into_iter()
             .enumerate()
             .map(|(index, traj)| RunResult {

@@ -318,3 +318,113 @@ fn hung_and_late_agents_are_braked() {
     assert!(healthy.outcomes.iter().filter(|o| *o == "fresh").count() > 90);
     leaks.assert_clean();
 }
+
+/// Issue 5: when the world dies, every agent notices on its own (no launcher involved) and exits
+/// cleanly with a message naming the cause. (iceoryx2 keeps the dead world's node-management
+/// segment until someone removes the run's namespace, which the launcher does: see
+/// [`a_killed_world_ends_the_launch_cleanly`].)
+#[test]
+fn agents_exit_cleanly_when_the_world_dies() {
+    use std::time::Instant;
+    let _watchdog = Watchdog::arm("world_dies", LIMIT);
+    let bins = binaries();
+    let dir = TempDir::new("world-dies");
+    let run_id = unique_run_id("wdies");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario_path = case1_scenario(dir.path(), 600.0);
+    let scenario = formation_world::Scenario::from_path(&scenario_path).expect("scenario");
+    let specs = dir.path().join("run-specs.json");
+    let spec = scenario.run_spec(scenario.seed(), 0);
+    std::fs::write(&specs, serde_json::to_vec(&[spec]).expect("specs JSON")).expect("specs");
+
+    let mut world = Command::new(&bins.world);
+    world
+        .args(["--run-id", run_id.as_str(), "--pace-ms", "20"])
+        .arg("--run-specs")
+        .arg(&specs)
+        .arg("--out")
+        .arg(dir.path().join("out"));
+    let mut world = LiveProcess::spawn(world);
+    let mut agents: Vec<LiveProcess> = (0..3)
+        .map(|robot| {
+            let mut agent = Command::new(&bins.agent);
+            agent
+                .args(["--run-id", run_id.as_str(), "--robot", &robot.to_string()])
+                .arg("--model")
+                .arg(test_model());
+            LiveProcess::spawn(agent)
+        })
+        .collect();
+    let connected = world.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    assert!(connected.is_some(), "{}", world.describe());
+    std::thread::sleep(Duration::from_millis(500));
+
+    let killed_at = Instant::now();
+    let status = Command::new("kill")
+        .args(["-KILL", &world.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(status.success());
+    let _ = world.finish(LIMIT);
+    for (robot, agent) in agents.drain(..).enumerate() {
+        let finished = agent.finish(LIMIT);
+        finished.assert_success();
+        assert!(
+            finished.stderr().contains("world process of run")
+                && finished.stderr().contains("went away"),
+            "robot {robot}: {}",
+            finished.describe()
+        );
+        eprintln!(
+            "robot {robot}'s agent exited {:.0} ms after the world was killed",
+            killed_at.elapsed().as_secs_f64() * 1e3
+        );
+    }
+    drop(leaks); // removes the dead world's leftovers
+}
+
+/// Issue 5: a world killed under `formation run` fails the launch with the reason, the agents are
+/// stopped, and nothing of the run is left in shared memory.
+#[test]
+fn a_killed_world_ends_the_launch_cleanly() {
+    let _watchdog = Watchdog::arm("world_killed_launch", LIMIT);
+    let dir = TempDir::new("world-killed");
+    let run_id = unique_run_id("wkill");
+    let leaks = LeakCheck::new(&run_id);
+    let mut launch = launch(&run_id, &dir, 600.0, &["--pace-ms", "20"]);
+    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+    std::thread::sleep(Duration::from_millis(300));
+    let world = world_pid(&run_id).expect("the world process runs");
+    let status = Command::new("kill")
+        .args(["-KILL", &world.to_string()])
+        .status()
+        .expect("kill");
+    assert!(status.success());
+    let finished = launch.finish(LIMIT);
+    finished.assert_failure_mentioning("world process exited (killed by signal 9)");
+    for robot in 0..3 {
+        assert!(
+            agent_pids(&run_id, robot).is_empty(),
+            "robot {robot}'s agent still runs"
+        );
+    }
+    leaks.assert_clean();
+}
+
+/// The pid of run `run`'s world process, found through /proc.
+fn world_pid(run: &RunId) -> Option<u32> {
+    std::fs::read_dir("/proc")
+        .ok()?
+        .flatten()
+        .find_map(|entry| {
+            let pid: u32 = entry.file_name().to_str()?.parse().ok()?;
+            let raw = std::fs::read(entry.path().join("cmdline")).ok()?;
+            let args: Vec<&[u8]> = raw.split(|&b| b == 0).collect();
+            let is_world = args.first()?.ends_with(b"formation-world");
+            let ours = args
+                .windows(2)
+                .any(|w| w[0] == b"--run-id" && w[1] == run.as_str().as_bytes());
+            (is_world && ours).then_some(pid)
+        })
+}

@@ -41,7 +41,8 @@ fn lockstep_over_processes_is_bit_identical_to_in_process() {
         ClockMode::Lockstep,
         &mut |n| progress.push(n),
     )
-    .expect("runs over processes");
+    .expect("runs over processes")
+    .trajectories;
     assert_eq!(progress, vec![1, 2]);
     assert_eq!(over_processes.len(), 2);
 

@@ -295,11 +295,20 @@ pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What an evaluation over processes gives: the trajectories in run order and the latency
+/// profile of all its ticks.
+#[derive(Debug)]
+pub struct ProcessEval {
+    /// One trajectory per run, in run order.
+    pub trajectories: Vec<Trajectory>,
+    /// Per-stage latency over every run.
+    pub latency: profile::LatencyProfile,
+}
+
 /// Evaluates `runs` runs of `scenario` (base seed `base_seed`) with every robot's policy in its
-/// own process, and returns the trajectories in run order. Robots the scenario assigns a model to
-/// run that model, the others `default_model`. `on_run_done(n)` is called after each finished run
-/// with the number finished so far. In lockstep the trajectories are bit-identical to in-process
-/// evaluation.
+/// own process. Robots the scenario assigns a model to run that model, the others
+/// `default_model`. `on_run_done(n)` is called after each finished run with the number finished so
+/// far. In lockstep the trajectories are bit-identical to in-process evaluation.
 pub fn eval_over_processes(
     scenario: &Scenario,
     base_seed: u64,
@@ -307,7 +316,7 @@ pub fn eval_over_processes(
     default_model: &Path,
     clock: ClockMode,
     on_run_done: &mut dyn FnMut(usize),
-) -> anyhow::Result<Vec<Trajectory>> {
+) -> anyhow::Result<ProcessEval> {
     let models = models_per_robot(scenario, default_model)?;
     let run_id = RunId::generate();
     let work = std::env::temp_dir().join(format!("formation-eval-{run_id}"));
@@ -335,11 +344,16 @@ pub fn eval_over_processes(
                 on_run_done(done);
             }
         }))??;
-        report
+        let trajectories = report
             .run_logs
             .iter()
             .map(|log| read_trajectory(log))
-            .collect::<anyhow::Result<Vec<_>>>()
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let latency = profile::profile_dir(&plan.out)?;
+        Ok(ProcessEval {
+            trajectories,
+            latency,
+        })
     })();
     let _ = std::fs::remove_dir_all(&work);
     result

@@ -59,6 +59,9 @@ struct Args {
     exit_on_stdin_close: bool,
 }
 
+/// Why an agent exits at the normal end of a run.
+const ASKED_TO_SHUT_DOWN: &str = "the world asked us to shut down";
+
 /// How long the agent waits with nothing arriving before checking that the world still exists.
 const IDLE_CHECK: Duration = Duration::from_millis(250);
 
@@ -73,6 +76,11 @@ fn main() -> ExitCode {
     let args = Args::parse();
     let who = format!("formation-agent (robot {})", args.robot);
     match run(&args) {
+        Ok(reason) if reason == ASKED_TO_SHUT_DOWN => {
+            // The normal end of a run: nothing worth a line on the terminal.
+            tracing::info!("{who}: exiting: {reason}");
+            ExitCode::SUCCESS
+        }
         Ok(reason) => {
             eprintln!("{who}: exiting: {reason}");
             ExitCode::SUCCESS
@@ -123,7 +131,11 @@ fn run(args: &Args) -> anyhow::Result<String> {
             Wake::Terminated => return Ok("termination signal".into()),
             Wake::Idle => {
                 if !link.world_alive()? {
-                    return Ok("the world process went away".into());
+                    return Ok(format!(
+                        "the world process of run {} went away (it exited, crashed or was \
+                         killed); nothing left to drive",
+                        args.run_id
+                    ));
                 }
             }
             Wake::Activity => {}
@@ -183,7 +195,7 @@ impl RobotAgent {
         link: &mut dyn AgentLink,
     ) -> anyhow::Result<Option<String>> {
         match request {
-            ControlRequest::Shutdown => return Ok(Some("the world asked us to shut down".into())),
+            ControlRequest::Shutdown => return Ok(Some(ASKED_TO_SHUT_DOWN.into())),
             ControlRequest::BeginEpisode { generation, lidar } => {
                 self.generation = generation;
                 let status = match self.prepare(lidar) {

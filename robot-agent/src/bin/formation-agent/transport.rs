@@ -375,6 +375,11 @@ impl AgentLink for IceoryxAgentLink {
             CallbackProgression::Continue
         })
         .map_err(|e| iox("list the run's nodes")(&e))?;
+        if !alive {
+            // The world died without cleaning up: release what it left, so the last process of
+            // the run leaves nothing behind.
+            let _ = self.node.try_cleanup_dead_nodes();
+        }
         Ok(alive)
     }
 }
