@@ -16,7 +16,11 @@
 //! | `formation/<run>/robot/<i>/control` | [`ControlMsg`] | world → agent `i` |
 //! | `formation/<run>/robot/<i>/status` | [`StatusMsg`] | agent `i` → world |
 //!
-//! Each of them admits at most one publisher and one subscriber ([`ServiceLimits::ROBOT`]), which
+//! Per run there is also a swap channel, through which `formation swap` asks the world to change one
+//! robot's model: `formation/<run>/swap/request` ([`SwapRequestMsg`], tools → world) and
+//! `formation/<run>/swap/reply` ([`SwapReplyMsg`], world → tools).
+//!
+//! Each robot service admits at most one publisher and one subscriber ([`ServiceLimits::ROBOT`]), which
 //! is how decentralisation is enforced by the transport itself: once agent `i` holds its scan
 //! subscription no other process can read robot `i`'s scan, and once it holds its command
 //! publisher no other process can command robot `i`.

@@ -268,6 +268,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
     let latency = profile::profile_dir(&plan.out)?;
     let path = plan.out.join("profile.json");
     paths::write_atomic(&path, &serde_json::to_vec_pretty(&latency)?)?;
+    profile::profile_svg(&latency, &plan.out.join("profile.svg"))?;
     print!("{}", profile::summary_text(&latency));
     println!(
         "logs in {}; {} agent restart(s); removed {} iceoryx2 file(s)",

@@ -2,10 +2,13 @@
 //! (`<out>/timing/run-NNNN.json`, one [`RobotTiming`] per robot), written as `<out>/profile.json`
 //! in the schema the report draws.
 //!
-//! Stages: `round_trip` (scan published → command received by the world, the tick loop's
-//! latency, on the world's clock), `uplink` (scan published → taken by the agent, system clock),
-//! `occupancy` and `inference` (measured inside the agent), `downlink` (command published → taken
-//! by the world, system clock). Only ticks whose command was used count.
+//! Stages per command: `round_trip` (scan published → command received by the world, the tick
+//! loop's latency, on the world's clock), `uplink` (scan published → taken by the agent, system
+//! clock), `occupancy` and `inference` (measured inside the agent), `downlink` (command published
+//! → taken by the world, system clock); only ticks whose command was used count. They are given
+//! overall and per agent. Stages per tick: `tick` (from one tick's start to the next: the exchange,
+//! the world step and, in realtime or paced lockstep, the wait for the clock) and, in realtime,
+//! `tick_jitter` (how late each tick started against the 20 Hz schedule).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -36,14 +39,34 @@ pub struct StageStats {
 pub struct LatencyProfile {
     /// Runs read.
     pub runs: usize,
+    /// `lockstep` or `realtime` (of the first run; empty when unknown).
+    pub clock: String,
     /// Robot-ticks whose command was used.
     pub used_commands: usize,
     /// Robot-ticks braked by the watchdog, by reason.
     pub braked: BTreeMap<String, usize>,
-    /// Per-stage statistics, by stage name.
+    /// Per-stage statistics over every agent and tick, by stage name.
     pub stages: BTreeMap<String, StageStats>,
+    /// Per agent (robot index): its per-command stages.
+    pub per_agent: Vec<BTreeMap<String, StageStats>>,
     /// The paper's single-sample inference time \[ms\], for comparison in the report.
     pub inference_paper_ms: f64,
+}
+
+/// One run's timing log as the world writes it (`timing/run-NNNN.json`).
+#[derive(Debug, Clone, Default, Deserialize)]
+pub struct RunTiming {
+    /// `lockstep` or `realtime`.
+    #[serde(default)]
+    pub clock: String,
+    /// Tick period \[s\].
+    #[serde(default)]
+    pub dt_s: f64,
+    /// Per tick: when it began, since the first tick began \[ns\].
+    #[serde(default)]
+    pub tick_start_ns: Vec<u64>,
+    /// Per robot.
+    pub robots: Vec<RobotTiming>,
 }
 
 /// The paper's reported inference time \[ms\].
@@ -80,13 +103,47 @@ pub fn stage_stats(mut samples_ns: Vec<u64>) -> StageStats {
     }
 }
 
+/// The per-command stage columns of a robot timing log, by stage name.
+const COMMAND_STAGES: [&str; 5] = ["round_trip", "uplink", "occupancy", "inference", "downlink"];
+
+fn column<'a>(robot: &'a RobotTiming, stage: &str) -> &'a [u64] {
+    match stage {
+        "round_trip" => &robot.round_trip_ns,
+        "uplink" => &robot.uplink_ns,
+        "occupancy" => &robot.occupancy_ns,
+        "inference" => &robot.inference_ns,
+        _ => &robot.downlink_ns,
+    }
+}
+
 /// The profile of in-memory timing logs.
-pub fn profile(runs: &[Vec<RobotTiming>]) -> LatencyProfile {
-    let mut columns: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
+pub fn profile(runs: &[RunTiming]) -> LatencyProfile {
+    let mut overall: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
+    let mut per_agent: Vec<BTreeMap<&str, Vec<u64>>> = Vec::new();
     let mut braked: BTreeMap<String, usize> = BTreeMap::new();
     let mut used = 0;
-    for robots in runs {
-        for robot in robots {
+    for run in runs {
+        let starts = &run.tick_start_ns;
+        for pair in starts.windows(2) {
+            overall
+                .entry("tick")
+                .or_default()
+                .push(pair[1].saturating_sub(pair[0]));
+        }
+        if run.clock == "realtime" && run.dt_s > 0.0 {
+            let dt_ns = run.dt_s * 1e9;
+            for (k, &start) in starts.iter().enumerate() {
+                let scheduled = (k as f64 * dt_ns).round() as u64;
+                overall
+                    .entry("tick_jitter")
+                    .or_default()
+                    .push(start.abs_diff(scheduled));
+            }
+        }
+        if per_agent.len() < run.robots.len() {
+            per_agent.resize_with(run.robots.len(), BTreeMap::new);
+        }
+        for (index, robot) in run.robots.iter().enumerate() {
             for tick in 0..robot.ticks() {
                 if robot.outcome[tick] != TickOutcome::Fresh {
                     let name = serde_json::to_value(robot.outcome[tick])
@@ -97,37 +154,34 @@ pub fn profile(runs: &[Vec<RobotTiming>]) -> LatencyProfile {
                     continue;
                 }
                 used += 1;
-                let mut push = |stage, column: &[u64]| {
-                    if let Some(&v) = column.get(tick) {
-                        columns.entry(stage).or_default().push(v);
+                for stage in COMMAND_STAGES {
+                    if let Some(&v) = column(robot, stage).get(tick) {
+                        overall.entry(stage).or_default().push(v);
+                        per_agent[index].entry(stage).or_default().push(v);
                     }
-                };
-                push("round_trip", &robot.round_trip_ns);
-                push("uplink", &robot.uplink_ns);
-                push("occupancy", &robot.occupancy_ns);
-                push("inference", &robot.inference_ns);
-                push("downlink", &robot.downlink_ns);
+                }
             }
         }
     }
-    LatencyProfile {
-        runs: runs.len(),
-        used_commands: used,
-        braked,
-        stages: columns
+    let stats = |columns: BTreeMap<&str, Vec<u64>>| -> BTreeMap<String, StageStats> {
+        columns
             .into_iter()
             .map(|(k, v)| (k.to_owned(), stage_stats(v)))
-            .collect(),
+            .collect()
+    };
+    LatencyProfile {
+        runs: runs.len(),
+        clock: runs.first().map(|r| r.clock.clone()).unwrap_or_default(),
+        used_commands: used,
+        braked,
+        stages: stats(overall),
+        per_agent: per_agent.into_iter().map(stats).collect(),
         inference_paper_ms: PAPER_INFERENCE_MS,
     }
 }
 
 /// Reads every timing log under `<out>/timing/` and profiles them.
 pub fn profile_dir(out: &Path) -> anyhow::Result<LatencyProfile> {
-    #[derive(Deserialize)]
-    struct TimingLog {
-        robots: Vec<RobotTiming>,
-    }
     let dir = out.join("timing");
     let mut files: Vec<_> = std::fs::read_dir(&dir)
         .with_context(|| format!("reading timing logs in {}", dir.display()))?
@@ -141,9 +195,8 @@ pub fn profile_dir(out: &Path) -> anyhow::Result<LatencyProfile> {
         .map(|path| {
             let bytes =
                 std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-            let log: TimingLog = serde_json::from_slice(&bytes)
-                .with_context(|| format!("parsing {}", path.display()))?;
-            Ok(log.robots)
+            serde_json::from_slice::<RunTiming>(&bytes)
+                .with_context(|| format!("parsing {}", path.display()))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     Ok(profile(&runs))
@@ -167,7 +220,43 @@ pub fn summary_text(profile: &LatencyProfile) -> String {
             s.p50_us, s.p90_us, s.p99_us, s.max_us
         ));
     }
+    if let Some(inference) = profile.stages.get("inference") {
+        text.push_str(&format!(
+            "  inference p50 {:.3} ms vs the paper's {} ms\n",
+            inference.p50_us / 1000.0,
+            profile.inference_paper_ms
+        ));
+    }
+    if profile.per_agent.len() > 1 {
+        text.push_str("  per agent (us):  round_trip p50 / p99    inference p50 / p99\n");
+        for (robot, stages) in profile.per_agent.iter().enumerate() {
+            let pair = |stage: &str| {
+                stages
+                    .get(stage)
+                    .map(|s| format!("{:>8.1} / {:>8.1}", s.p50_us, s.p99_us))
+                    .unwrap_or_else(|| format!("{:>19}", "-"))
+            };
+            text.push_str(&format!(
+                "    robot {robot:<3}     {}    {}\n",
+                pair("round_trip"),
+                pair("inference")
+            ));
+        }
+    }
     text
+}
+
+/// Draws the profile's stages (per-stage percentile glyphs beside the paper's inference time) as
+/// an SVG, with the same drawing as the report.
+pub fn profile_svg(profile: &LatencyProfile, path: &Path) -> anyhow::Result<()> {
+    let json = serde_json::to_string(profile)?;
+    let parsed = formation_report::profile::parse_profile(&json, path)?;
+    let figure = formation_report::figures::latency_figure(
+        "latency",
+        &parsed.stages,
+        parsed.inference_paper_ms,
+    )?;
+    crate::paths::write_atomic(path, figure.svg.as_bytes())
 }
 
 #[cfg(test)]
@@ -198,10 +287,22 @@ mod tests {
             inference_ns: vec![30, 0, 40],
             downlink_ns: vec![100, 0, 200],
         };
-        let p = profile(&[vec![robot]]);
-        assert_eq!(p.used_commands, 2);
-        assert_eq!(p.braked.get("missing"), Some(&1));
+        let run = RunTiming {
+            clock: "realtime".into(),
+            dt_s: 0.05,
+            tick_start_ns: vec![0, 50_000_000, 101_000_000],
+            robots: vec![robot.clone(), robot],
+        };
+        let p = profile(&[run]);
+        assert_eq!(p.used_commands, 4);
+        assert_eq!(p.braked.get("missing"), Some(&2));
         assert_eq!(p.stages["round_trip"].max_us, 4.0);
-        assert_eq!(p.stages["round_trip"].count, 2);
+        assert_eq!(p.stages["round_trip"].count, 4);
+        assert_eq!(p.per_agent.len(), 2);
+        assert_eq!(p.per_agent[1]["inference"].count, 2);
+        assert_eq!(p.stages["tick"].count, 2);
+        assert_eq!(p.stages["tick"].max_us, 51_000.0);
+        // The third tick started 1 ms late against the 50 ms schedule.
+        assert_eq!(p.stages["tick_jitter"].max_us, 1000.0);
     }
 }

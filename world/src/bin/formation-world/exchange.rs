@@ -160,6 +160,8 @@ pub struct AgentsController<'l> {
     agent_pids: Vec<Option<u32>>,
     /// The last tick published.
     tick: u64,
+    /// Per tick of this episode: when it began, since the first tick began \[ns\].
+    tick_start_ns: Vec<u64>,
 }
 
 /// Why the world stopped before finishing its runs.
@@ -194,6 +196,7 @@ impl<'l> AgentsController<'l> {
             pending_swaps: Vec::new(),
             rejoining: vec![None; n],
             agent_pids: vec![None; n],
+            tick_start_ns: Vec::new(),
             tick: 0,
         }
     }
@@ -229,6 +232,7 @@ impl<'l> AgentsController<'l> {
         self.schedule_start = None;
         self.newest.fill(None);
         self.tick_published.clear();
+        self.tick_start_ns.clear();
         self.tick = 0;
         for timing in &mut self.timings {
             *timing = RobotTiming::default();
@@ -275,6 +279,11 @@ impl<'l> AgentsController<'l> {
             .map(|_| RobotTiming::default())
             .collect();
         std::mem::replace(&mut self.timings, fresh)
+    }
+
+    /// When each tick of the episode that just ended began, since its first tick began \[ns\].
+    pub fn take_tick_starts(&mut self) -> Vec<u64> {
+        std::mem::take(&mut self.tick_start_ns)
     }
 
     /// Set when a signal or the launcher stopped the exchange.
@@ -523,6 +532,9 @@ impl Controller for AgentsController<'_> {
         let entered = Instant::now();
         self.tick = obs.tick;
         let schedule_start = *self.schedule_start.get_or_insert(entered);
+        self.tick_start_ns.push(
+            u64::try_from(entered.duration_since(schedule_start).as_nanos()).unwrap_or(u64::MAX),
+        );
         for (robot, scan) in obs.scans.iter().enumerate() {
             let msg = ScanMsg::new(
                 self.generation,

@@ -171,6 +171,8 @@ fn play(args: &Args, specs: &[RunSpec], agents: &mut AgentsController<'_>) -> an
         let timing = TimingLog {
             index,
             clock: args.clock.as_str().into(),
+            dt_s: spec.world.dt,
+            tick_start_ns: agents.take_tick_starts(),
             robots: agents.take_timings(),
         };
         let log = RunLog {

@@ -34,6 +34,10 @@ pub struct TimingLog {
     pub index: usize,
     /// `lockstep` or `realtime`.
     pub clock: String,
+    /// The tick period the world steps with \[s\].
+    pub dt_s: f64,
+    /// Per tick: when the world began it (published the scans), since the first tick began \[ns\].
+    pub tick_start_ns: Vec<u64>,
     /// One column-wise record per robot.
     pub robots: Vec<RobotTiming>,
 }
