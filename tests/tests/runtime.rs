@@ -410,3 +410,62 @@ fn nan_commands_are_braked() {
     }
     leaks.assert_clean();
 }
+
+/// Issue 4: `formation eval --processes` and in-process `formation eval` write byte-identical JSON
+/// for the same scenario, seed and models, here for a mixed team (robot 1 runs another model,
+/// assigned in the scenario).
+#[test]
+fn eval_over_processes_writes_the_same_json_as_in_process_for_a_mixed_team() {
+    let _watchdog = Watchdog::arm("eval_json_identical", LIMIT);
+    let bins = binaries();
+    let dir = TempDir::new("evaljson");
+    let other = dir.path().join("other.onnx");
+    formation_tests::write_tiny_model(&other, 5);
+    let base = std::fs::read_to_string(case1_scenario(dir.path(), 4.0)).expect("scenario");
+    let scenario = dir.path().join("mixed.toml");
+    std::fs::write(
+        &scenario,
+        format!(
+            "{base}\n\n[[agent]]\nrobot = 1\nmodel = {:?}\n",
+            other.display().to_string()
+        ),
+    )
+    .expect("writing the scenario");
+    let eval = |processes: bool, json: &str| {
+        let mut command = Command::new(&bins.cli);
+        command
+            .args([
+                "eval",
+                "--controller",
+                "policy",
+                "--runs",
+                "2",
+                "--seed",
+                "11",
+            ])
+            .arg("--scenario")
+            .arg(&scenario)
+            .arg("--model")
+            .arg(test_model())
+            .arg("--json")
+            .arg(dir.path().join(json));
+        if processes {
+            command.arg("--processes");
+        }
+        run(command, LIMIT).assert_success();
+        std::fs::read(dir.path().join(json)).expect("eval JSON")
+    };
+    let in_process = eval(false, "in-process.json");
+    let over_processes = eval(true, "processes.json");
+    assert!(
+        in_process == over_processes,
+        "JSON differs:\n{}\n---\n{}",
+        String::from_utf8_lossy(&in_process),
+        String::from_utf8_lossy(&over_processes)
+    );
+    let summary: serde_json::Value = serde_json::from_slice(&in_process).expect("JSON");
+    let models = summary["models"].as_array().expect("models per robot");
+    assert_eq!(models.len(), 3);
+    assert_ne!(models[0], models[1], "robot 1 runs its own model");
+    assert_eq!(models[0], models[2]);
+}
