@@ -1091,6 +1091,61 @@ impl SwapReplyMsg {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Progress events: world stdout -> launcher
+// ---------------------------------------------------------------------------------------------
+
+/// A progress event the world prints on its stdout, one JSON object per line
+/// (`{"event":"run_done","index":3,"log":"..."}`), for the launcher to follow.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum WorldEvent {
+    /// The world's services exist; agents may connect.
+    Listening {
+        /// Robots served.
+        robots: usize,
+    },
+    /// Every agent said hello.
+    AgentsConnected,
+    /// A run finished and its logs are written.
+    RunDone {
+        /// Run index.
+        index: usize,
+        /// The trajectory log.
+        log: PathBuf,
+    },
+    /// Robot `robot`'s agent died; its robot brakes until an agent rejoins.
+    AgentLost {
+        /// The robot.
+        robot: usize,
+        /// The last tick the world published.
+        tick: u64,
+    },
+    /// A restarted agent (process `pid`) drives robot `robot` again from tick `tick` on.
+    AgentRejoined {
+        /// The robot.
+        robot: usize,
+        /// The new agent's process id.
+        pid: u32,
+        /// The first tick it drove.
+        tick: u64,
+    },
+    /// All runs finished.
+    Finished,
+}
+
+impl WorldEvent {
+    /// The event on one line of the world's stdout; `None` for any other line.
+    pub fn parse(line: &str) -> Option<WorldEvent> {
+        serde_json::from_str(line).ok()
+    }
+
+    /// The event as one line of JSON (without the newline).
+    pub fn to_line(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Timing log: written by the world per run, read by `formation profile` and the report
 // ---------------------------------------------------------------------------------------------
 
@@ -1235,6 +1290,30 @@ mod tests {
         let mut corrupt = msg;
         corrupt.n_beams = MAX_BEAMS as u32 + 5;
         assert!(matches!(corrupt.ranges(), Err(WireError::Malformed { .. })));
+    }
+
+    #[test]
+    fn world_events_round_trip_as_json_lines() {
+        let event = WorldEvent::RunDone {
+            index: 3,
+            log: PathBuf::from("/o/runs/run-0003.json"),
+        };
+        let line = event.to_line();
+        assert_eq!(
+            line,
+            r#"{"event":"run_done","index":3,"log":"/o/runs/run-0003.json"}"#
+        );
+        assert_eq!(WorldEvent::parse(&line), Some(event));
+        assert_eq!(
+            WorldEvent::parse(r#"{"event":"agent_rejoined","robot":1,"pid":42,"tick":57}"#),
+            Some(WorldEvent::AgentRejoined {
+                robot: 1,
+                pid: 42,
+                tick: 57
+            })
+        );
+        assert_eq!(WorldEvent::parse("not json"), None);
+        assert_eq!(WorldEvent::parse(r#"{"event":"unknown"}"#), None);
     }
 
     #[test]

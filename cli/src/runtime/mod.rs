@@ -25,7 +25,8 @@ use formation_proto::wire::RunId;
 use formation_world::{RunSpec, Scenario, Trajectory};
 
 use crate::paths;
-use supervisor::{LaunchPlan, WorldEvent};
+use formation_proto::wire::WorldEvent;
+use supervisor::LaunchPlan;
 
 /// How the world process paces ticks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -263,7 +264,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         WorldEvent::AgentRejoined { robot, pid, tick } => {
             println!("robot {robot}: agent pid {pid} rejoined, driving from tick {tick}")
         }
-        WorldEvent::Finished => {}
+        WorldEvent::Listening { .. } | WorldEvent::Finished => {}
     }))??;
     let latency = profile::profile_dir(&plan.out)?;
     let path = plan.out.join("profile.json");

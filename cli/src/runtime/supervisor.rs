@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use std::process::{ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-use formation_proto::wire::{RunId, RunNamespace};
+use formation_proto::wire::{RunId, RunNamespace, WorldEvent};
 use tokio::io::{AsyncBufReadExt, BufReader};
 use tokio::process::{Child, ChildStdin, Command};
 use tokio::sync::{mpsc, oneshot};
@@ -53,38 +53,6 @@ pub struct LaunchPlan {
     pub pace: Duration,
     /// Fault-injection mode per robot (testing only).
     pub faults: Vec<Option<String>>,
-}
-
-/// A progress event from the world.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum WorldEvent {
-    /// Every agent connected.
-    AgentsConnected,
-    /// Run `index` finished; its log is at `log`.
-    RunDone {
-        /// Run index.
-        index: usize,
-        /// Its trajectory log.
-        log: PathBuf,
-    },
-    /// Robot `robot`'s agent died at tick `tick`; its robot brakes until an agent rejoins.
-    AgentLost {
-        /// The robot.
-        robot: usize,
-        /// The last tick the world published.
-        tick: u64,
-    },
-    /// A restarted agent (process `pid`) drives robot `robot` again from tick `tick` on.
-    AgentRejoined {
-        /// The robot.
-        robot: usize,
-        /// The new agent's process id.
-        pid: u32,
-        /// The first tick it drove.
-        tick: u64,
-    },
-    /// All runs finished.
-    Finished,
 }
 
 /// What a launch did.
@@ -280,7 +248,7 @@ async fn supervise(
         tokio::select! {
             line = lines.next_line(), if stdout_open => match line? {
                 Some(line) => {
-                    if let Some(event) = parse_event(&line) {
+                    if let Some(event) = WorldEvent::parse(&line) {
                         if let WorldEvent::RunDone { log, .. } = &event {
                             report.run_logs.push(log.clone());
                         }
@@ -340,28 +308,6 @@ async fn supervise(
     };
     shutdown(&mut world, &mut world_stdin, &mut agents).await;
     result
-}
-
-fn parse_event(line: &str) -> Option<WorldEvent> {
-    let value: serde_json::Value = serde_json::from_str(line).ok()?;
-    match value.get("event")?.as_str()? {
-        "agents_connected" => Some(WorldEvent::AgentsConnected),
-        "run_done" => Some(WorldEvent::RunDone {
-            index: usize::try_from(value.get("index")?.as_u64()?).ok()?,
-            log: PathBuf::from(value.get("log")?.as_str()?),
-        }),
-        "finished" => Some(WorldEvent::Finished),
-        "agent_lost" => Some(WorldEvent::AgentLost {
-            robot: usize::try_from(value.get("robot")?.as_u64()?).ok()?,
-            tick: value.get("tick")?.as_u64()?,
-        }),
-        "agent_rejoined" => Some(WorldEvent::AgentRejoined {
-            robot: usize::try_from(value.get("robot")?.as_u64()?).ok()?,
-            pid: u32::try_from(value.get("pid")?.as_u64()?).ok()?,
-            tick: value.get("tick")?.as_u64()?,
-        }),
-        _ => None,
-    }
 }
 
 fn describe(status: ExitStatus) -> String {
@@ -491,31 +437,6 @@ async fn shutdown(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn world_events_are_parsed_and_other_lines_ignored() {
-        assert_eq!(
-            parse_event(r#"{"event":"agents_connected"}"#),
-            Some(WorldEvent::AgentsConnected)
-        );
-        assert_eq!(
-            parse_event(r#"{"event":"run_done","index":3,"log":"/o/runs/run-0003.json"}"#),
-            Some(WorldEvent::RunDone {
-                index: 3,
-                log: PathBuf::from("/o/runs/run-0003.json")
-            })
-        );
-        assert_eq!(
-            parse_event(r#"{"event":"agent_rejoined","robot":1,"pid":42,"tick":57}"#),
-            Some(WorldEvent::AgentRejoined {
-                robot: 1,
-                pid: 42,
-                tick: 57
-            })
-        );
-        assert_eq!(parse_event(r#"{"event":"listening","robots":3}"#), None);
-        assert_eq!(parse_event("not json"), None);
-    }
 
     #[test]
     fn the_restart_budget_slides_and_backs_off_per_robot() {

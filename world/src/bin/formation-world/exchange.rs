@@ -22,8 +22,9 @@ use formation_proto::wire::{
 use formation_proto::{LidarSpec, WheelCmd};
 use formation_world::episode::{Controller, ControllerError, Observation};
 
-use crate::runlog::{Event, emit};
+use crate::runlog::emit;
 use crate::transport::{TransportError, WorldLink};
+use formation_proto::wire::WorldEvent;
 
 /// How the world paces ticks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -378,7 +379,7 @@ impl<'l> AgentsController<'l> {
                 if self.states[robot] != AgentState::Absent {
                     tracing::warn!("robot {robot}'s agent died; braking it until an agent rejoins");
                     self.states[robot] = AgentState::Absent;
-                    emit(&Event::AgentLost {
+                    emit(&WorldEvent::AgentLost {
                         robot,
                         tick: self.tick,
                     });
@@ -610,7 +611,7 @@ impl Controller for AgentsController<'_> {
             if outcome == TickOutcome::Fresh
                 && let Some(pid) = self.rejoining[robot].take()
             {
-                emit(&Event::AgentRejoined {
+                emit(&WorldEvent::AgentRejoined {
                     robot,
                     pid,
                     tick: obs.tick,

@@ -27,8 +27,9 @@ use formation_world::metrics::{MetricsConfig, run_metrics};
 use formation_world::{RunSpec, run_episode};
 
 use crate::exchange::{AgentsController, ClockMode, ExchangeSettings, StopReason};
-use crate::runlog::{Event, RunLog, TimingLog, emit, log_paths, write_atomic};
+use crate::runlog::{RunLog, TimingLog, emit, log_paths, write_atomic};
 use crate::transport::IceoryxWorldLink;
+use formation_proto::wire::WorldEvent;
 
 /// The world process of formation's multi-process runtime.
 #[derive(Debug, Parser)]
@@ -109,7 +110,7 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
 
     let mut link = IceoryxWorldLink::create(&namespace, n_robots)
         .with_context(|| format!("setting up run {run_id}'s services"))?;
-    emit(&Event::Listening { robots: n_robots });
+    emit(&WorldEvent::Listening { robots: n_robots });
     let settings = ExchangeSettings {
         clock: args.clock,
         command_timeout: Duration::from_millis(args.command_timeout_ms),
@@ -125,7 +126,7 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
     match (result, agents.stopped()) {
         (_, Some(reason)) => Ok(Some(reason)),
         (Ok(()), None) => {
-            emit(&Event::Finished);
+            emit(&WorldEvent::Finished);
             Ok(None)
         }
         (Err(e), None) => Err(e),
@@ -159,7 +160,7 @@ fn read_run_specs(path: &Path) -> anyhow::Result<Vec<RunSpec>> {
 
 fn play(args: &Args, specs: &[RunSpec], agents: &mut AgentsController<'_>) -> anyhow::Result<()> {
     agents.await_agents(Duration::from_millis(args.startup_timeout_ms))?;
-    emit(&Event::AgentsConnected);
+    emit(&WorldEvent::AgentsConnected);
     let metrics_config = MetricsConfig::default();
     for spec in specs {
         let index = spec.index;
@@ -185,9 +186,9 @@ fn play(args: &Args, specs: &[RunSpec], agents: &mut AgentsController<'_>) -> an
         let (log_path, timing_path) = log_paths(&args.out, index);
         write_atomic(&log_path, &serde_json::to_vec(&log)?)?;
         write_atomic(&timing_path, &serde_json::to_vec(&timing)?)?;
-        emit(&Event::RunDone {
+        emit(&WorldEvent::RunDone {
             index,
-            log: &log_path,
+            log: log_path,
         });
     }
     Ok(())

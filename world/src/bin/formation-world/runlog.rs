@@ -3,11 +3,11 @@
 //!
 //! Layout under the output directory: `runs/run-NNNN.json` and `timing/run-NNNN.json`. Every file
 //! is written to a temporary name in the same directory and renamed, so a reader never sees half a
-//! file. Progress goes to stdout as one JSON object per line ([`Event`]), for the launcher.
+//! file. Progress goes to stdout as one JSON object per line ([`WorldEvent`]), for the launcher.
 
 use std::path::{Path, PathBuf};
 
-use formation_proto::wire::RobotTiming;
+use formation_proto::wire::{RobotTiming, WorldEvent};
 use formation_world::Trajectory;
 use formation_world::metrics::RunMetrics;
 use serde::{Deserialize, Serialize};
@@ -42,50 +42,9 @@ pub struct TimingLog {
     pub robots: Vec<RobotTiming>,
 }
 
-/// A progress event on stdout.
-#[derive(Debug, Serialize)]
-#[serde(tag = "event", rename_all = "snake_case")]
-pub enum Event<'a> {
-    /// The world's services exist; agents may connect.
-    Listening {
-        /// Robots served.
-        robots: usize,
-    },
-    /// Every agent said hello.
-    AgentsConnected,
-    /// A run finished and its logs are written.
-    RunDone {
-        /// Run index.
-        index: usize,
-        /// The trajectory log.
-        log: &'a Path,
-    },
-    /// A robot's agent died (or stopped answering and its process is gone); the robot brakes.
-    AgentLost {
-        /// The robot.
-        robot: usize,
-        /// The last tick the world published.
-        tick: u64,
-    },
-    /// A restarted agent joined the episode under way and drives its robot again.
-    AgentRejoined {
-        /// The robot.
-        robot: usize,
-        /// The new agent's process id.
-        pid: u32,
-        /// The first tick it drove.
-        tick: u64,
-    },
-    /// All runs finished.
-    Finished,
-}
-
-/// Prints one event line on stdout.
-pub fn emit(event: &Event<'_>) {
-    match serde_json::to_string(event) {
-        Ok(line) => println!("{line}"),
-        Err(e) => tracing::warn!("could not format a progress event: {e}"),
-    }
+/// Prints one progress event line on stdout, for the launcher.
+pub fn emit(event: &WorldEvent) {
+    println!("{}", event.to_line());
 }
 
 /// Paths of run `index`'s logs under `out`.

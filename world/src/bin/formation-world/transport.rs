@@ -152,13 +152,44 @@ impl IceoryxWorldLink {
     }
 }
 
-fn service_name(
-    namespace: &RunNamespace,
-    robot: usize,
-    channel: RobotChannel,
-) -> Result<ServiceName, TransportError> {
-    let name = robot_service_name(namespace.run(), robot, channel);
-    ServiceName::new(&name).map_err(|e| iox(format!("name service {name}"))(&e))
+type PubSubService<T> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
+type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
+
+/// Creates (or opens) the publish-subscribe service `name` with `limits`, keeping no history and
+/// overwriting the oldest unread sample when a reader falls behind.
+fn pubsub_service<T: std::fmt::Debug + ZeroCopySend + IceoryxSend>(
+    node: &Node<ipc::Service>,
+    name: &str,
+    limits: ServiceLimits,
+) -> Result<PubSubService<T>, TransportError> {
+    let service = ServiceName::new(name).map_err(|e| iox(format!("name service {name}"))(&e))?;
+    node.service_builder(&service)
+        .publish_subscribe::<T>()
+        .max_publishers(limits.max_publishers)
+        .max_subscribers(limits.max_subscribers)
+        .subscriber_max_buffer_size(limits.subscriber_buffer)
+        .max_nodes(limits.max_nodes)
+        .history_size(0)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| iox(format!("create service {name}"))(&e))
+}
+
+/// Creates (or opens) the event service `name` paired with a publish-subscribe service of `limits`.
+fn event_service(
+    node: &Node<ipc::Service>,
+    name: &str,
+    limits: ServiceLimits,
+) -> Result<EventService, TransportError> {
+    let service = ServiceName::new(name).map_err(|e| iox(format!("name service {name}"))(&e))?;
+    node.service_builder(&service)
+        .event()
+        .max_notifiers(limits.max_publishers)
+        .max_listeners(limits.max_subscribers)
+        .max_nodes(limits.max_nodes)
+        .open_or_create()
+        .map_err(|e| iox(format!("create event service {name}"))(&e))
 }
 
 fn create_robot_ports(
@@ -167,31 +198,12 @@ fn create_robot_ports(
     robot: usize,
 ) -> Result<RobotPorts, TransportError> {
     let limits = ServiceLimits::ROBOT;
-    let pubsub = |channel| -> Result<_, TransportError> { service_name(namespace, robot, channel) };
-    let event = |channel: RobotChannel| -> Result<_, TransportError> {
-        let name = service_name(namespace, robot, channel)?;
-        node.service_builder(&name)
-            .event()
-            .max_notifiers(limits.max_publishers)
-            .max_listeners(limits.max_subscribers)
-            .max_nodes(limits.max_nodes)
-            .open_or_create()
-            .map_err(|e| iox(format!("create event service {name}"))(&e))
-    };
+    let name = |channel| robot_service_name(namespace.run(), robot, channel);
+    let event = |channel| event_service(node, &name(channel), limits);
     macro_rules! pubsub_service {
-        ($payload:ty, $channel:expr) => {{
-            let name = pubsub($channel)?;
-            node.service_builder(&name)
-                .publish_subscribe::<$payload>()
-                .max_publishers(limits.max_publishers)
-                .max_subscribers(limits.max_subscribers)
-                .subscriber_max_buffer_size(limits.subscriber_buffer)
-                .max_nodes(limits.max_nodes)
-                .history_size(0)
-                .enable_safe_overflow(true)
-                .open_or_create()
-                .map_err(|e| iox(format!("create service {name}"))(&e))?
-        }};
+        ($payload:ty, $channel:expr) => {
+            pubsub_service::<$payload>(node, &name($channel), limits)?
+        };
     }
     let scan = pubsub_service!(ScanMsg, RobotChannel::Scan);
     let cmd = pubsub_service!(CmdMsg, RobotChannel::Cmd);
@@ -240,36 +252,12 @@ fn create_swap_ports(
     node: &Node<ipc::Service>,
     namespace: &RunNamespace,
 ) -> Result<SwapPorts, TransportError> {
-    let name = |channel: SwapChannel| -> Result<ServiceName, TransportError> {
-        let text = swap_service_name(namespace.run(), channel);
-        ServiceName::new(&text).map_err(|e| iox(format!("name service {text}"))(&e))
-    };
-    let event = |channel: SwapChannel| -> Result<_, TransportError> {
-        let limits = channel.limits();
-        let service = name(channel)?;
-        node.service_builder(&service)
-            .event()
-            .max_notifiers(limits.max_publishers)
-            .max_listeners(limits.max_subscribers)
-            .max_nodes(limits.max_nodes)
-            .open_or_create()
-            .map_err(|e| iox(format!("create event service {service}"))(&e))
-    };
+    let name = |channel| swap_service_name(namespace.run(), channel);
+    let event = |channel: SwapChannel| event_service(node, &name(channel), channel.limits());
     macro_rules! pubsub_service {
-        ($payload:ty, $channel:expr) => {{
-            let limits = $channel.limits();
-            let service = name($channel)?;
-            node.service_builder(&service)
-                .publish_subscribe::<$payload>()
-                .max_publishers(limits.max_publishers)
-                .max_subscribers(limits.max_subscribers)
-                .subscriber_max_buffer_size(limits.subscriber_buffer)
-                .max_nodes(limits.max_nodes)
-                .history_size(0)
-                .enable_safe_overflow(true)
-                .open_or_create()
-                .map_err(|e| iox(format!("create service {service}"))(&e))?
-        }};
+        ($payload:ty, $channel:expr) => {
+            pubsub_service::<$payload>(node, &name($channel), $channel.limits())?
+        };
     }
     let requests = pubsub_service!(SwapRequestMsg, SwapChannel::Request);
     let replies = pubsub_service!(SwapReplyMsg, SwapChannel::Reply);
