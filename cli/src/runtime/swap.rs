@@ -36,7 +36,7 @@ pub enum SwapError {
         run: String,
     },
     /// The world or the agent refused; the old model keeps driving.
-    #[error("swap refused for robot {robot}: {reason} (the old model keeps driving)")]
+    #[error("swap refused for robot {robot}: {reason}")]
     Refused {
         /// The robot of the request.
         robot: usize,

@@ -321,7 +321,7 @@ impl RobotAgent {
             Err(e) => {
                 link.publish_status(&AgentStatus::SwapRefused {
                     request_id: pending.request_id,
-                    reason: format!("{e:#}"),
+                    reason: format!("the old model keeps driving; the new one failed: {e:#}"),
                 })?;
                 Ok(false)
             }
