@@ -198,6 +198,30 @@ fn formation_run_leaves_no_shared_memory_behind() {
     );
     assert!(dir.path().join("out/runs/run-0000.json").is_file());
     leaks.assert_clean();
+
+    // The run directory holds what the report needs (issue 6): its Table I summary, the run log,
+    // the latency profile and its plot; `formation report` reads it as it is.
+    let out = dir.path().join("out");
+    for file in ["summary.json", "profile.json", "profile.svg"] {
+        assert!(out.join(file).is_file(), "{file} missing");
+    }
+    let profile: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("profile.json")).expect("profile"))
+            .expect("profile JSON");
+    assert_eq!(profile["per_agent"].as_array().map(Vec::len), Some(3));
+    assert_eq!(
+        profile["stages"]["tick"]["count"].as_u64(),
+        Some(39),
+        "40 ticks"
+    );
+    let mut report = Command::new(&bins.cli);
+    report
+        .arg("report")
+        .arg(&out)
+        .arg("--out")
+        .arg(dir.path().join("report.html"));
+    run(report, LIMIT).assert_success();
+    assert!(dir.path().join("report.html").is_file());
 }
 
 /// Issue 4 (d): a missing model is refused before anything starts.

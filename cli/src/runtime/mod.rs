@@ -266,6 +266,16 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         }
         WorldEvent::Listening { .. } | WorldEvent::Finished => {}
     }))??;
+    let table = run_summary(
+        &report.run_logs,
+        scenario.name(),
+        plan_seed(args, &scenario),
+    )?;
+    paths::write_atomic(
+        &plan.out.join("summary.json"),
+        &serde_json::to_vec_pretty(&table)?,
+    )?;
+    print!("{}", crate::eval::table_text(&table));
     let latency = profile::profile_dir(&plan.out)?;
     let path = plan.out.join("profile.json");
     paths::write_atomic(&path, &serde_json::to_vec_pretty(&latency)?)?;
@@ -278,6 +288,44 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         report.cleaned_up
     );
     Ok(())
+}
+
+fn plan_seed(args: &RunArgs, scenario: &Scenario) -> u64 {
+    args.seed.unwrap_or_else(|| scenario.seed())
+}
+
+/// The Table I summary of a launch's run logs, in the schema `formation eval` writes, so that
+/// `formation report` reads a run directory like an eval directory.
+fn run_summary(
+    run_logs: &[PathBuf],
+    scenario: &str,
+    seed: u64,
+) -> anyhow::Result<crate::eval::EvalOutput> {
+    #[derive(serde::Deserialize)]
+    struct MetricsOnly {
+        metrics: formation_world::metrics::RunMetrics,
+        #[serde(default)]
+        models: Vec<String>,
+    }
+    let mut logs = run_logs
+        .iter()
+        .map(|path| {
+            let bytes = std::fs::read(path)
+                .with_context(|| format!("reading run log {}", path.display()))?;
+            serde_json::from_slice::<MetricsOnly>(&bytes)
+                .with_context(|| format!("parsing run log {}", path.display()))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let models = logs.first_mut().map(|l| std::mem::take(&mut l.models));
+    let per_run: Vec<_> = logs.into_iter().map(|l| l.metrics).collect();
+    Ok(crate::eval::EvalOutput {
+        controller: "policy".into(),
+        models: models.unwrap_or_default(),
+        scenario: scenario.to_owned(),
+        seed,
+        summary: formation_world::metrics::summarize(&per_run),
+        per_run,
+    })
 }
 
 /// `formation profile`: `formation run` whose latency statistics are the point.
