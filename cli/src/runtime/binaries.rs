@@ -21,9 +21,9 @@ pub struct RuntimeBinaries {
 pub enum BinaryError {
     /// Not next to the running executable.
     #[error(
-        "{name} was not found in {searched}; build the runtime binaries with \
-         `cargo build --release -p formation-world -p formation-agent` (or `cargo build --workspace`), \
-         or point {env} at it"
+        "{name} was not found in {searched}; build the runtime executables with \
+         `cargo build --release --workspace --bins` (a plain `cargo run`/`cargo build` builds only \
+         the `formation` command), or point {env} at it"
     )]
     NotFound {
         /// Executable name.
