@@ -40,6 +40,26 @@ pub struct EvalOutput {
     pub per_run: Vec<RunMetrics>,
 }
 
+impl EvalOutput {
+    /// The output of runs with these per-run metrics: the Table I and Fig. 9 summary over them.
+    pub fn from_runs(
+        controller: &str,
+        models: Vec<String>,
+        scenario: &str,
+        seed: u64,
+        per_run: Vec<RunMetrics>,
+    ) -> EvalOutput {
+        EvalOutput {
+            controller: controller.to_owned(),
+            models,
+            scenario: scenario.to_owned(),
+            seed,
+            summary: summarize(&per_run),
+            per_run,
+        }
+    }
+}
+
 /// One evaluated run.
 pub struct RunResult {
     /// Run index.
@@ -305,17 +325,11 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
     bar.finish_and_clear();
     let elapsed = started.elapsed().as_secs_f64();
     let per_run: Vec<RunMetrics> = results.iter().map(|r| r.metrics.clone()).collect();
-    let out = EvalOutput {
-        controller: match args.controller {
-            ControllerKind::Expert => "expert".into(),
-            ControllerKind::Policy => "policy".into(),
-        },
-        models: model_ids,
-        scenario: scenario.name().to_owned(),
-        seed,
-        summary: summarize(&per_run),
-        per_run,
+    let controller = match args.controller {
+        ControllerKind::Expert => "expert",
+        ControllerKind::Policy => "policy",
     };
+    let out = EvalOutput::from_runs(controller, model_ids, scenario.name(), seed, per_run);
     eprintln!(
         "evaluated {runs} runs in {elapsed:.1} s ({:.2} s per run)",
         elapsed / runs as f64

@@ -575,34 +575,134 @@ impl Drop for LiveProcess {
 /// Process ids of the running `formation-agent` processes of run `run` serving robot `robot`,
 /// found through /proc.
 pub fn agent_pids(run: &RunId, robot: usize) -> Vec<u32> {
-    let mut pids = Vec::new();
+    pids_of("formation-agent", run, Some(robot))
+}
+
+/// The pid of run `run`'s `formation-world` process, found through /proc.
+pub fn world_pid(run: &RunId) -> Option<u32> {
+    pids_of("formation-world", run, None).first().copied()
+}
+
+/// Running processes of executable `exe` whose command line has `--run-id <run>` (and
+/// `--robot <robot>` when given).
+fn pids_of(exe: &str, run: &RunId, robot: Option<usize>) -> Vec<u32> {
     let Ok(entries) = std::fs::read_dir("/proc") else {
-        return pids;
+        return Vec::new();
     };
-    for entry in entries.flatten() {
-        let Some(pid) = entry
-            .file_name()
-            .to_str()
-            .and_then(|n| n.parse::<u32>().ok())
-        else {
-            continue;
+    let robot = robot.map(|r| r.to_string());
+    entries
+        .flatten()
+        .filter_map(|entry| {
+            let pid: u32 = entry.file_name().to_str()?.parse().ok()?;
+            let raw = std::fs::read(entry.path().join("cmdline")).ok()?;
+            let args: Vec<&[u8]> = raw.split(|&b| b == 0).collect();
+            let has = |flag: &str, value: &str| {
+                args.windows(2)
+                    .any(|w| w[0] == flag.as_bytes() && w[1] == value.as_bytes())
+            };
+            let ours = args.first()?.ends_with(exe.as_bytes())
+                && has("--run-id", run.as_str())
+                && robot.as_deref().is_none_or(|r| has("--robot", r));
+            ours.then_some(pid)
+        })
+        .collect()
+}
+
+/// One robot's per-tick columns of run 0 of a `formation run` output directory: the watchdog's
+/// outcome, the command applied and the model that decided (`<none>` when none was used).
+pub struct RobotLog {
+    /// Per tick: `fresh`, `missing`, `stale`, `non_finite` or `agent_failed`.
+    pub outcomes: Vec<String>,
+    /// Per tick: the (left, right) command the world applied.
+    pub commands: Vec<(f64, f64)>,
+    /// Per tick: the id of the model whose command was applied.
+    pub models: Vec<String>,
+}
+
+impl RobotLog {
+    /// Reads robot `robot`'s columns from `out/timing/run-0000.json` and `out/runs/run-0000.json`.
+    pub fn read(out: &Path, robot: usize) -> RobotLog {
+        let read = |path: PathBuf| -> serde_json::Value {
+            let text = std::fs::read_to_string(&path)
+                .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+            serde_json::from_str(&text).expect("JSON log")
         };
-        let Ok(raw) = std::fs::read(entry.path().join("cmdline")) else {
-            continue;
+        let timing = read(out.join("timing/run-0000.json"));
+        let runlog = read(out.join("runs/run-0000.json"));
+        let column = |name: &str| -> Vec<serde_json::Value> {
+            timing["robots"][robot][name]
+                .as_array()
+                .unwrap_or_else(|| panic!("{name} column"))
+                .clone()
         };
-        let args: Vec<&[u8]> = raw.split(|&b| b == 0).collect();
-        let is_agent = args
-            .first()
-            .is_some_and(|a| a.ends_with(b"formation-agent"));
-        let has = |flag: &str, value: &str| {
-            args.windows(2)
-                .any(|w| w[0] == flag.as_bytes() && w[1] == value.as_bytes())
-        };
-        if is_agent && has("--run-id", run.as_str()) && has("--robot", &robot.to_string()) {
-            pids.push(pid);
+        let outcomes = column("outcome")
+            .iter()
+            .map(|v| v.as_str().unwrap_or_default().to_owned())
+            .collect();
+        let ids: Vec<String> = column("model_ids")
+            .iter()
+            .map(|v| v.as_str().unwrap_or_default().to_owned())
+            .collect();
+        let models = column("model")
+            .iter()
+            .map(|v| {
+                usize::try_from(v.as_i64().expect("model index"))
+                    .ok()
+                    .and_then(|i| ids.get(i).cloned())
+                    .unwrap_or_else(|| "<none>".into())
+            })
+            .collect();
+        let commands = runlog["trajectory"]["commands"]
+            .as_array()
+            .expect("commands")
+            .iter()
+            .map(|tick| {
+                let c = &tick[robot];
+                (
+                    c["left"].as_f64().expect("left"),
+                    c["right"].as_f64().expect("right"),
+                )
+            })
+            .collect();
+        RobotLog {
+            outcomes,
+            commands,
+            models,
         }
     }
-    pids
+
+    /// Maximal runs of ticks whose command was not applied, as (first, last) tick.
+    pub fn braked_stretches(&self) -> Vec<(usize, usize)> {
+        let mut stretches = Vec::new();
+        let mut start = None;
+        for (tick, outcome) in self.outcomes.iter().enumerate() {
+            match (outcome == "fresh", start) {
+                (false, None) => start = Some(tick),
+                (true, Some(first)) => {
+                    stretches.push((first, tick - 1));
+                    start = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(first) = start {
+            stretches.push((first, self.outcomes.len() - 1));
+        }
+        stretches
+    }
+
+    /// Panics unless every tick the watchdog refused is a full brake.
+    pub fn assert_braked_whenever_refused(&self, robot: usize) {
+        for (tick, (outcome, cmd)) in self.outcomes.iter().zip(&self.commands).enumerate() {
+            if outcome != "fresh" {
+                assert_eq!(
+                    *cmd,
+                    (0.0, 0.0),
+                    "robot {robot} tick {tick} ({outcome}) must be braked"
+                );
+            }
+        }
+    }
 }
 
 #[cfg(test)]

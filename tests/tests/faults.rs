@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, agent_pids, binaries, case1_scenario, run,
-    test_model, unique_run_id,
+    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, binaries, case1_scenario, run,
+    test_model, unique_run_id, world_pid,
 };
 use rand::{Rng, SeedableRng};
 
@@ -23,76 +23,6 @@ fn exclusive() -> std::sync::MutexGuard<'static, ()> {
     ONE_AT_A_TIME
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
-/// One robot's per-tick columns of run 0, from a `formation run` output directory.
-struct RobotLog {
-    outcomes: Vec<String>,
-    commands: Vec<(f64, f64)>,
-}
-
-fn robot_log(out: &std::path::Path, robot: usize) -> RobotLog {
-    let read = |path: std::path::PathBuf| -> serde_json::Value {
-        let text = std::fs::read_to_string(&path)
-            .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
-        serde_json::from_str(&text).expect("JSON log")
-    };
-    let timing = read(out.join("timing/run-0000.json"));
-    let runlog = read(out.join("runs/run-0000.json"));
-    let outcomes = timing["robots"][robot]["outcome"]
-        .as_array()
-        .expect("outcome column")
-        .iter()
-        .map(|v| v.as_str().unwrap_or_default().to_owned())
-        .collect();
-    let commands = runlog["trajectory"]["commands"]
-        .as_array()
-        .expect("commands")
-        .iter()
-        .map(|tick| {
-            let c = &tick[robot];
-            (
-                c["left"].as_f64().expect("left"),
-                c["right"].as_f64().expect("right"),
-            )
-        })
-        .collect();
-    RobotLog { outcomes, commands }
-}
-
-impl RobotLog {
-    /// Maximal runs of ticks whose command was not applied, as (first, last) tick.
-    fn braked_stretches(&self) -> Vec<(usize, usize)> {
-        let mut stretches = Vec::new();
-        let mut start = None;
-        for (tick, outcome) in self.outcomes.iter().enumerate() {
-            match (outcome == "fresh", start) {
-                (false, None) => start = Some(tick),
-                (true, Some(first)) => {
-                    stretches.push((first, tick - 1));
-                    start = None;
-                }
-                _ => {}
-            }
-        }
-        if let Some(first) = start {
-            stretches.push((first, self.outcomes.len() - 1));
-        }
-        stretches
-    }
-
-    /// Every tick the watchdog refused is a full brake.
-    fn assert_braked_whenever_refused(&self, robot: usize) {
-        for (tick, (outcome, cmd)) in self.outcomes.iter().zip(&self.commands).enumerate() {
-            if outcome != "fresh" {
-                assert_eq!(
-                    *cmd,
-                    (0.0, 0.0),
-                    "robot {robot} tick {tick} ({outcome}) must be braked"
-                );
-            }
-        }
-    }
 }
 
 fn launch(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> LiveProcess {
@@ -199,7 +129,7 @@ fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
     let out = dir.path().join("out");
     let mut orphaned_ticks = 0;
     for (robot, rejoined_at) in rejoins.iter().enumerate() {
-        let log = robot_log(&out, robot);
+        let log = RobotLog::read(&out, robot);
         assert_eq!(log.outcomes.len(), 3000, "the world ticked to the end");
         // Every tick without a usable command of a live agent is a full brake ...
         log.assert_braked_whenever_refused(robot);
@@ -261,7 +191,7 @@ fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
         finished.describe()
     );
     let out = dir.path().join("out");
-    let robot1 = robot_log(&out, 1);
+    let robot1 = RobotLog::read(&out, 1);
     assert_eq!(robot1.outcomes.len(), 240, "12 s at 20 Hz, every tick");
     robot1.assert_braked_whenever_refused(1);
     let stretches = robot1.braked_stretches();
@@ -273,7 +203,7 @@ fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
     );
     assert_eq!(robot1.outcomes.last().map(String::as_str), Some("fresh"));
     for robot in [0, 2] {
-        let log = robot_log(&out, robot);
+        let log = RobotLog::read(&out, robot);
         log.assert_braked_whenever_refused(robot);
         let fresh = log.outcomes.iter().filter(|o| *o == "fresh").count();
         assert!(
@@ -305,7 +235,7 @@ fn hung_and_late_agents_are_braked() {
         .arg(dir.path().join("out"));
     run(command, LIMIT).assert_success();
     let out = dir.path().join("out");
-    let hung = robot_log(&out, 1);
+    let hung = RobotLog::read(&out, 1);
     hung.assert_braked_whenever_refused(1);
     // It answered 20 times (so at least up to tick 19; realtime reuses a command while the scan it
     // answers is under 150 ms old), then never again: braked from then to the end of the run.
@@ -315,14 +245,14 @@ fn hung_and_late_agents_are_braked() {
         "driven until about tick 20, then braked: {:?}",
         hung.outcomes
     );
-    let late = robot_log(&out, 2);
+    let late = RobotLog::read(&out, 2);
     late.assert_braked_whenever_refused(2);
     assert!(
         late.outcomes.iter().all(|o| o != "fresh"),
         "commands computed from 400 ms old scans are stale: {:?}",
         late.outcomes
     );
-    let healthy = robot_log(&out, 0);
+    let healthy = RobotLog::read(&out, 0);
     assert!(healthy.outcomes.iter().filter(|o| *o == "fresh").count() > 80);
     leaks.assert_clean();
 }
@@ -420,21 +350,4 @@ fn a_killed_world_ends_the_launch_cleanly() {
         );
     }
     leaks.assert_clean();
-}
-
-/// The pid of run `run`'s world process, found through /proc.
-fn world_pid(run: &RunId) -> Option<u32> {
-    std::fs::read_dir("/proc")
-        .ok()?
-        .flatten()
-        .find_map(|entry| {
-            let pid: u32 = entry.file_name().to_str()?.parse().ok()?;
-            let raw = std::fs::read(entry.path().join("cmdline")).ok()?;
-            let args: Vec<&[u8]> = raw.split(|&b| b == 0).collect();
-            let is_world = args.first()?.ends_with(b"formation-world");
-            let ours = args
-                .windows(2)
-                .any(|w| w[0] == b"--run-id" && w[1] == run.as_str().as_bytes());
-            (is_world && ours).then_some(pid)
-        })
 }

@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use formation::runtime::{ClockMode, eval_over_processes};
 use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, ServiceLimits, robot_service_name};
 use formation_tests::{
-    LeakCheck, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario, run, test_model,
-    unique_run_id,
+    LeakCheck, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario, run,
+    test_model, unique_run_id,
 };
 use formation_world::{Scenario, run_episode};
 use iceoryx2::prelude::*;
@@ -328,18 +328,6 @@ fn robot_indices_out_of_range_are_clear_errors() {
     leaks.assert_clean();
 }
 
-/// Reads robot `robot`'s watchdog outcomes of run 0 from a `formation run` output directory.
-fn outcomes(out: &std::path::Path, robot: usize) -> Vec<String> {
-    let text = std::fs::read_to_string(out.join("timing/run-0000.json")).expect("timing log");
-    let log: serde_json::Value = serde_json::from_str(&text).expect("timing JSON");
-    log["robots"][robot]["outcome"]
-        .as_array()
-        .expect("outcome column")
-        .iter()
-        .map(|v| v.as_str().unwrap_or_default().to_owned())
-        .collect()
-}
-
 /// Issue 5 (fault injection): an agent that crashes mid-run in lockstep is braked, restarted by
 /// the launcher and rejoins; the run completes and leaves nothing behind.
 #[test]
@@ -375,7 +363,7 @@ fn a_crashed_agent_is_braked_restarted_and_rejoins() {
         "{}",
         finished.describe()
     );
-    let robot1 = outcomes(&out, 1);
+    let robot1 = RobotLog::read(&out, 1).outcomes;
     assert_eq!(robot1.len(), 100);
     assert!(robot1[..40].iter().all(|o| o == "fresh"), "{robot1:?}");
     assert!(
@@ -387,7 +375,12 @@ fn a_crashed_agent_is_braked_restarted_and_rejoins() {
         Some("fresh"),
         "the restarted agent rejoined: {robot1:?}"
     );
-    assert!(outcomes(&out, 0).iter().all(|o| o == "fresh"));
+    assert!(
+        RobotLog::read(&out, 0)
+            .outcomes
+            .iter()
+            .all(|o| o == "fresh")
+    );
     leaks.assert_clean();
 }
 
@@ -416,21 +409,15 @@ fn nan_commands_are_braked() {
         .arg("--out")
         .arg(&out);
     run(command, LIMIT).assert_success();
-    let robot2 = outcomes(&out, 2);
+    let robot2 = RobotLog::read(&out, 2);
     assert!(
-        robot2[..10].iter().all(|o| o == "fresh") && robot2[10..].iter().all(|o| o == "non_finite"),
-        "{robot2:?}"
+        robot2.outcomes[..10].iter().all(|o| o == "fresh")
+            && robot2.outcomes[10..].iter().all(|o| o == "non_finite"),
+        "{:?}",
+        robot2.outcomes
     );
-    let log: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("runs/run-0000.json")).unwrap())
-            .unwrap();
     for tick in 10..40 {
-        let cmd = &log["trajectory"]["commands"][tick][2];
-        assert_eq!(
-            (cmd["left"].as_f64(), cmd["right"].as_f64()),
-            (Some(0.0), Some(0.0)),
-            "tick {tick}"
-        );
+        assert_eq!(robot2.commands[tick], (0.0, 0.0), "tick {tick}");
     }
     leaks.assert_clean();
 }

@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use formation::runtime::read_trajectory;
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario, run,
-    test_model, unique_run_id, write_tiny_model, write_tiny_model_with,
+    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries,
+    case1_scenario, run, test_model, unique_run_id, write_tiny_model, write_tiny_model_with,
 };
 use formation_world::episode::{Controller, ControllerError, Observation};
 use formation_world::{Scenario, run_episode};
@@ -50,30 +50,6 @@ fn swap(run_id: &str, robot: &str, model: &Path, extra: &[&str]) -> formation_te
         .arg(model)
         .args(extra);
     run(command, LIMIT)
-}
-
-/// Robot `robot`'s model per tick of run 0 (from the timing log), as model ids.
-fn models_per_tick(out: &Path, robot: usize) -> Vec<String> {
-    let text = std::fs::read_to_string(out.join("timing/run-0000.json")).expect("timing log");
-    let log: serde_json::Value = serde_json::from_str(&text).expect("timing JSON");
-    let ids: Vec<String> = log["robots"][robot]["model_ids"]
-        .as_array()
-        .expect("model ids")
-        .iter()
-        .map(|v| v.as_str().unwrap_or_default().to_owned())
-        .collect();
-    log["robots"][robot]["model"]
-        .as_array()
-        .expect("model column")
-        .iter()
-        .map(|v| {
-            let index = v.as_i64().expect("model index");
-            usize::try_from(index)
-                .ok()
-                .and_then(|i| ids.get(i).cloned())
-                .unwrap_or_else(|| "<none>".into())
-        })
-        .collect()
 }
 
 /// Issue 5: in lockstep, bad swaps are refused (the old model keeps driving), then a good swap at
@@ -146,7 +122,7 @@ fn a_lockstep_swap_matches_the_new_model_in_process_and_bad_swaps_are_refused() 
     finished.assert_success();
 
     // The command log says which model decided each tick.
-    let models = models_per_tick(&out, SWAPPED_ROBOT);
+    let models = RobotLog::read(&out, SWAPPED_ROBOT).models;
     assert_eq!(models.len(), 600);
     let swap_tick = usize::try_from(SWAP_TICK).expect("tick");
     assert!(models[..swap_tick].iter().all(|m| *m == models[0]));
@@ -156,7 +132,7 @@ fn a_lockstep_swap_matches_the_new_model_in_process_and_bad_swaps_are_refused() 
         "the model id changed at the swap"
     );
     for other in [0, 2] {
-        let theirs = models_per_tick(&out, other);
+        let theirs = RobotLog::read(&out, other).models;
         assert!(theirs.iter().all(|m| *m == models[0]), "robot {other}");
     }
 

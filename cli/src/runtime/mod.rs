@@ -208,7 +208,8 @@ fn write_run_specs(
     paths::write_atomic(path, &serde_json::to_vec(&specs)?)
 }
 
-fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario)> {
+/// The launch plan of `args`, its scenario and the base seed of its runs.
+fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)> {
     let scenario = Scenario::from_path(&args.scenario)?;
     if args.runs == 0 {
         anyhow::bail!("--runs must be at least 1");
@@ -240,13 +241,13 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario)> {
         restart_delay: Duration::from_millis(args.restart_delay_ms),
         pace: Duration::from_millis(args.pace_ms),
     };
-    Ok((plan, scenario))
+    Ok((plan, scenario, base_seed))
 }
 
 /// `formation run`: launches the world and one agent per robot, plays the runs, writes the logs
 /// and a latency summary, and cleans up.
 pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
-    let (plan, scenario) = plan_from_args(args)?;
+    let (plan, scenario, base_seed) = plan_from_args(args)?;
     println!(
         "formation run {}: {} robots, {} run(s) of {}, {} clock",
         plan.run_id,
@@ -266,11 +267,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         }
         WorldEvent::Listening { .. } | WorldEvent::Finished => {}
     }))??;
-    let table = run_summary(
-        &report.run_logs,
-        scenario.name(),
-        plan_seed(args, &scenario),
-    )?;
+    let table = run_summary(&report.run_logs, scenario.name(), base_seed)?;
     paths::write_atomic(
         &plan.out.join("summary.json"),
         &serde_json::to_vec_pretty(&table)?,
@@ -288,10 +285,6 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         report.cleaned_up
     );
     Ok(())
-}
-
-fn plan_seed(args: &RunArgs, scenario: &Scenario) -> u64 {
-    args.seed.unwrap_or_else(|| scenario.seed())
 }
 
 /// The Table I summary of a launch's run logs, in the schema `formation eval` writes, so that
@@ -316,16 +309,14 @@ fn run_summary(
                 .with_context(|| format!("parsing run log {}", path.display()))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let models = logs.first_mut().map(|l| std::mem::take(&mut l.models));
-    let per_run: Vec<_> = logs.into_iter().map(|l| l.metrics).collect();
-    Ok(crate::eval::EvalOutput {
-        controller: "policy".into(),
-        models: models.unwrap_or_default(),
-        scenario: scenario.to_owned(),
-        seed,
-        summary: formation_world::metrics::summarize(&per_run),
-        per_run,
-    })
+    let models = logs
+        .first_mut()
+        .map(|l| std::mem::take(&mut l.models))
+        .unwrap_or_default();
+    let per_run = logs.into_iter().map(|l| l.metrics).collect();
+    Ok(crate::eval::EvalOutput::from_runs(
+        "policy", models, scenario, seed, per_run,
+    ))
 }
 
 /// `formation profile`: `formation run` whose latency statistics are the point.

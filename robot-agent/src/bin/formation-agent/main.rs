@@ -59,8 +59,13 @@ struct Args {
     exit_on_stdin_close: bool,
 }
 
-/// Why an agent exits at the normal end of a run.
-const ASKED_TO_SHUT_DOWN: &str = "the world asked us to shut down";
+/// Why the agent's loop ended.
+enum Exit {
+    /// The world ended the run: the normal way out, nothing to tell the user.
+    Shutdown,
+    /// Anything else, told to the user.
+    Because(String),
+}
 
 /// How long the agent waits with nothing arriving before checking that the world still exists.
 const IDLE_CHECK: Duration = Duration::from_millis(250);
@@ -76,12 +81,11 @@ fn main() -> ExitCode {
     let args = Args::parse();
     let who = format!("formation-agent (robot {})", args.robot);
     match run(&args) {
-        Ok(reason) if reason == ASKED_TO_SHUT_DOWN => {
-            // The normal end of a run: nothing worth a line on the terminal.
-            tracing::info!("{who}: exiting: {reason}");
+        Ok(Exit::Shutdown) => {
+            tracing::info!("{who}: exiting: the world asked us to shut down");
             ExitCode::SUCCESS
         }
-        Ok(reason) => {
+        Ok(Exit::Because(reason)) => {
             eprintln!("{who}: exiting: {reason}");
             ExitCode::SUCCESS
         }
@@ -98,7 +102,7 @@ fn load_policy(path: &Path) -> anyhow::Result<Box<dyn PolicyBackend>> {
     Ok(Box::new(policy))
 }
 
-fn run(args: &Args) -> anyhow::Result<String> {
+fn run(args: &Args) -> anyhow::Result<Exit> {
     let policy = load_policy(&args.model)?;
     let model_id = policy.model_id().to_owned();
     let run_id = RunId::new(&args.run_id)?;
@@ -125,17 +129,17 @@ fn run(args: &Args) -> anyhow::Result<String> {
     let mut robot = RobotAgent::new(args.model.clone(), policy, args.fault);
     loop {
         if stdin_closed.load(Ordering::Relaxed) {
-            return Ok("the launcher closed our input".into());
+            return Ok(Exit::Because("the launcher closed our input".into()));
         }
         match link.wait(IDLE_CHECK)? {
-            Wake::Terminated => return Ok("termination signal".into()),
+            Wake::Terminated => return Ok(Exit::Because("termination signal".into())),
             Wake::Idle => {
                 if !link.world_alive()? {
-                    return Ok(format!(
+                    return Ok(Exit::Because(format!(
                         "the world process of run {} went away (it exited, crashed or was \
                          killed); nothing left to drive",
                         args.run_id
-                    ));
+                    )));
                 }
             }
             Wake::Activity => {}
@@ -143,8 +147,8 @@ fn run(args: &Args) -> anyhow::Result<String> {
         let mut requests = Vec::new();
         link.drain_control(&mut |r| requests.push(r))?;
         for request in requests {
-            if let Some(reason) = robot.on_control(request, &mut link)? {
-                return Ok(reason);
+            if let Some(exit) = robot.on_control(request, &mut link)? {
+                return Ok(exit);
             }
         }
         if let Some(scan) = link.newest_scan()? {
@@ -188,14 +192,14 @@ impl RobotAgent {
         }
     }
 
-    /// Handles one control request; `Some(reason)` means exit.
+    /// Handles one control request; `Some(exit)` means exit.
     fn on_control(
         &mut self,
         request: ControlRequest,
         link: &mut dyn AgentLink,
-    ) -> anyhow::Result<Option<String>> {
+    ) -> anyhow::Result<Option<Exit>> {
         match request {
-            ControlRequest::Shutdown => return Ok(Some(ASKED_TO_SHUT_DOWN.into())),
+            ControlRequest::Shutdown => return Ok(Some(Exit::Shutdown)),
             ControlRequest::BeginEpisode { generation, lidar } => {
                 self.generation = generation;
                 let status = match self.prepare(lidar) {

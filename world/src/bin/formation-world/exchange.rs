@@ -9,7 +9,6 @@
 //! The choice of each robot's command ([`choose_command`]) is a pure function of what arrived and
 //! when; the watchdog is part of it: a missing, stale, non-finite or failed command brakes the robot.
 
-use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use std::sync::Arc;
@@ -65,9 +64,6 @@ pub struct ExchangeSettings {
     /// Set from outside (the launcher went away) to stop at the next wake-up.
     pub stop: Arc<AtomicBool>,
 }
-
-/// Ticks whose publish time is remembered for realtime staleness (12.8 s at 20 Hz).
-const TICK_HISTORY: usize = 256;
 
 /// Longest single wait, so a stop request is seen promptly.
 const MAX_WAIT: Duration = Duration::from_millis(250);
@@ -144,8 +140,6 @@ pub struct AgentsController<'l> {
     states: Vec<AgentState>,
     newest: Vec<Option<Arrival>>,
     published_at: Vec<Instant>,
-    /// When the scans of the last ticks were published (realtime staleness), oldest first.
-    tick_published: VecDeque<(u64, Instant)>,
     published_wall_ns: Vec<u64>,
     timings: Vec<RobotTiming>,
     model_ids: Vec<String>,
@@ -161,7 +155,8 @@ pub struct AgentsController<'l> {
     agent_pids: Vec<Option<u32>>,
     /// The last tick published.
     tick: u64,
-    /// Per tick of this episode: when it began, since the first tick began \[ns\].
+    /// Per tick of this episode: when it began (published its scans), since the first tick
+    /// began \[ns\]; also what realtime staleness measures a command's scan age from.
     tick_start_ns: Vec<u64>,
 }
 
@@ -186,7 +181,6 @@ impl<'l> AgentsController<'l> {
             states: vec![AgentState::Absent; n],
             newest: vec![None; n],
             published_at: vec![Instant::now(); n],
-            tick_published: VecDeque::with_capacity(TICK_HISTORY),
             published_wall_ns: vec![0; n],
             timings: (0..n).map(|_| RobotTiming::default()).collect(),
             model_ids: vec![String::new(); n],
@@ -232,7 +226,6 @@ impl<'l> AgentsController<'l> {
         self.dt = Duration::from_secs_f64(dt);
         self.schedule_start = None;
         self.newest.fill(None);
-        self.tick_published.clear();
         self.tick_start_ns.clear();
         self.tick = 0;
         for timing in &mut self.timings {
@@ -552,10 +545,6 @@ impl Controller for AgentsController<'_> {
             self.published_at[robot] = Instant::now();
             self.published_wall_ns[robot] = msg.published_wall_ns;
         }
-        if self.tick_published.len() == TICK_HISTORY {
-            self.tick_published.pop_front();
-        }
-        self.tick_published.push_back((obs.tick, entered));
         let paced_until = entered + self.settings.pace;
         let deadline = match self.settings.clock {
             ClockMode::Lockstep => entered + self.settings.command_timeout.max(self.settings.pace),
@@ -579,11 +568,8 @@ impl Controller for AgentsController<'_> {
         for (robot, slot) in out.iter_mut().enumerate() {
             let newest = self.newest[robot].as_ref();
             let answered_scan_at = newest.and_then(|a| {
-                self.tick_published
-                    .iter()
-                    .rev()
-                    .find(|&&(tick, _)| tick == a.msg.tick)
-                    .map(|&(_, at)| at)
+                let began = self.tick_start_ns.get(usize::try_from(a.msg.tick).ok()?)?;
+                Some(schedule_start + Duration::from_nanos(*began))
             });
             let (cmd, outcome) = choose_command(
                 self.settings.clock,
