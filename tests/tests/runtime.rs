@@ -183,6 +183,7 @@ fn formation_run_leaves_no_shared_memory_behind() {
     let mut command = Command::new(&bins.cli);
     command
         .args(["run", "--run-id", run_id.as_str(), "--clock", "lockstep"])
+        .args(["--pace-ms", "10"])
         .arg("--scenario")
         .arg(case1_scenario(dir.path(), 2.0))
         .arg("--model")
@@ -213,6 +214,14 @@ fn formation_run_leaves_no_shared_memory_behind() {
         profile["stages"]["tick"]["count"].as_u64(),
         Some(39),
         "40 ticks"
+    );
+    // `--pace-ms 10`: the median tick takes at least 10 ms and even the shortest lands in the
+    // histogram bucket (8.192, 16.384] ms (unpaced, ticks take well under 1 ms).
+    let tick = &profile["stages"]["tick"];
+    assert!(
+        tick["p50_us"].as_f64() >= Some(10_000.0)
+            && tick["histogram"][0][0].as_f64() >= Some(16_000.0),
+        "{tick}"
     );
     let mut report = Command::new(&bins.cli);
     report
