@@ -38,6 +38,10 @@ pub struct EvalOutput {
     pub summary: Summary,
     /// Per-run metrics, in run order.
     pub per_run: Vec<RunMetrics>,
+    /// Multi-process runs only: per robot, the ticks its watchdog braked, by reason (`missing`,
+    /// `stale`, `non_finite`, `agent_failed`); an empty map for a robot never braked.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub braked_ticks: Vec<std::collections::BTreeMap<String, usize>>,
 }
 
 impl EvalOutput {
@@ -56,6 +60,7 @@ impl EvalOutput {
             seed,
             summary: summarize(&per_run),
             per_run,
+            braked_ticks: Vec::new(),
         }
     }
 }

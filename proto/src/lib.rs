@@ -2,12 +2,14 @@
 //!
 //! * [`types`]: plain values that cross crate boundaries (poses, wheel commands, the goal a robot
 //!   is given, LIDAR and occupancy settings). They carry no behaviour beyond validation.
+//! * [`auth`]: the launch secret, with which an agent proves that its own launch started it.
 //! * [`wire`]: the fixed-size `#[repr(C)]` messages that travel over iceoryx2 shared memory
 //!   between the world process and the robot-agent processes, and the per-run service names.
 //!
 //! Nothing here knows about physics, policies or ONNX; both the world and the agents depend on
 //! this crate so that neither depends on the other.
 
+pub mod auth;
 pub mod types;
 pub mod wire;
 

@@ -6,15 +6,28 @@
 //! arrays); each has a typed Rust view ([`ControlRequest`], [`AgentStatus`], [`CmdStatus`]) and a
 //! checked constructor, so a malformed message turns into a [`WireError`] instead of a panic.
 //!
-//! Per robot `i` of a run `<run>` there are four publish-subscribe services, each paired with an
-//! event service of the same name (publishing wakes nobody in iceoryx2; the paired event does):
+//! Per robot `i` of a run `<run>` there is a *lobby*, where an agent asks to drive the robot and
+//! proves with the launch secret (see [`crate::auth`]) that its launch started it:
 //!
 //! | service | payload | publisher → subscriber |
 //! |---|---|---|
-//! | `formation/<run>/robot/<i>/scan` | [`ScanMsg`] | world → agent `i` |
-//! | `formation/<run>/robot/<i>/cmd` | [`CmdMsg`] | agent `i` → world |
-//! | `formation/<run>/robot/<i>/control` | [`ControlMsg`] | world → agent `i` |
-//! | `formation/<run>/robot/<i>/status` | [`StatusMsg`] | agent `i` → world |
+//! | `formation/<run>/robot/<i>/hello` | [`HelloMsg`] | candidate agents (up to 8) → world |
+//! | `formation/<run>/robot/<i>/welcome` | [`WelcomeMsg`] | world → candidate agents |
+//!
+//! and, per accepted agent (an *incarnation*, named by the agent's nonce `<n>` in 16 hex digits),
+//! four publish-subscribe services, each paired with an event service of the same name
+//! (publishing wakes nobody in iceoryx2; the paired event does):
+//!
+//! | service | payload | publisher → subscriber |
+//! |---|---|---|
+//! | `formation/<run>/robot/<i>/<n>/scan` | [`ScanMsg`] | world → agent `i` |
+//! | `formation/<run>/robot/<i>/<n>/cmd` | [`CmdMsg`] | agent `i` → world |
+//! | `formation/<run>/robot/<i>/<n>/control` | [`ControlMsg`] | world → agent `i` |
+//! | `formation/<run>/robot/<i>/<n>/status` | [`StatusMsg`] | agent `i` → world |
+//!
+//! The world creates an incarnation's services only after it checked the agent's proof, and drops
+//! them when the agent is gone, so a process that squats on a dead agent's ports blocks nothing:
+//! the next agent of the launch gets services of its own.
 //!
 //! Per run there is also a swap channel, through which `formation swap` asks the world to change one
 //! robot's model: `formation/<run>/swap/request` ([`SwapRequestMsg`], tools → world) and
@@ -42,8 +55,9 @@ pub const MAX_BEAMS: usize = 900;
 pub const MODEL_ID_LEN: usize = 64;
 /// Bytes of a model path in a swap request (UTF-8, zero padded).
 pub const MODEL_PATH_LEN: usize = 512;
-/// Bytes of a refusal reason in a status message (UTF-8, zero padded, truncated at a char boundary).
-pub const REASON_LEN: usize = 256;
+/// Bytes of a refusal reason in a status message (UTF-8, zero padded; a longer reason is cut at a
+/// word boundary and ends in `…`).
+pub const REASON_LEN: usize = 1024;
 /// Longest accepted run id.
 pub const MAX_RUN_ID_LEN: usize = 24;
 
@@ -184,10 +198,35 @@ impl RobotChannel {
     }
 }
 
-/// `formation/<run>/robot/<robot>/<channel>`: the name of both the publish-subscribe service and
-/// its paired event service.
-pub fn robot_service_name(run: &RunId, robot: usize, channel: RobotChannel) -> String {
-    format!("formation/{run}/robot/{robot}/{}", channel.as_str())
+/// `formation/<run>/robot/<robot>/<incarnation>/<channel>`, the incarnation in 16 hex digits: the
+/// name of both the publish-subscribe service and its paired event service of one accepted agent.
+pub fn robot_service_name(
+    run: &RunId,
+    robot: usize,
+    incarnation: u64,
+    channel: RobotChannel,
+) -> String {
+    format!(
+        "formation/{run}/robot/{robot}/{incarnation:016x}/{}",
+        channel.as_str()
+    )
+}
+
+/// The two services of a robot's lobby.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LobbyChannel {
+    /// Candidate agents → world ([`HelloMsg`]); paired with an event service.
+    Hello,
+    /// World → candidate agents ([`WelcomeMsg`]); polled, no event.
+    Welcome,
+}
+
+/// `formation/<run>/robot/<robot>/hello` or `.../welcome`.
+pub fn lobby_service_name(run: &RunId, robot: usize, channel: LobbyChannel) -> String {
+    match channel {
+        LobbyChannel::Hello => format!("formation/{run}/robot/{robot}/hello"),
+        LobbyChannel::Welcome => format!("formation/{run}/robot/{robot}/welcome"),
+    }
 }
 
 /// The two services of a run's swap channel.
@@ -265,6 +304,23 @@ impl ServiceLimits {
         max_subscribers: 1,
         subscriber_buffer: 8,
         max_nodes: 4,
+    };
+
+    /// A robot's hello service: up to 8 candidate agents at once write, only the world reads.
+    pub const HELLO: ServiceLimits = ServiceLimits {
+        max_publishers: 8,
+        max_subscribers: 1,
+        subscriber_buffer: 16,
+        max_nodes: 16,
+    };
+
+    /// A robot's welcome service: only the world writes; every candidate reads and keeps the
+    /// answer to its own nonce.
+    pub const WELCOME: ServiceLimits = ServiceLimits {
+        max_publishers: 1,
+        max_subscribers: 8,
+        subscriber_buffer: 16,
+        max_nodes: 16,
     };
 
     /// Swap requests: any number of `formation swap` processes (up to 8 at once) write, only the
@@ -378,6 +434,254 @@ impl RunNamespace {
     }
 }
 
+/// Why a run's namespace could not be claimed or made private.
+#[derive(Debug, thiserror::Error)]
+pub enum NamespaceError {
+    /// Another live launch holds the run id.
+    #[error(
+        "run id {run} is in use by another live launch (it holds {lock}); pick another --run-id, \
+         or stop that launch first"
+    )]
+    InUse {
+        /// The run id.
+        run: String,
+        /// The lock file.
+        lock: PathBuf,
+    },
+    /// The folder holding every run's namespace belongs to another user.
+    #[error(
+        "{dir} belongs to user id {owner}, not to us ({us}); another user could tamper with our \
+         runs there: remove it, or point TMPDIR at a directory of your own"
+    )]
+    ForeignBase {
+        /// The folder.
+        dir: PathBuf,
+        /// Its owner.
+        owner: u32,
+        /// Our user id.
+        us: u32,
+    },
+    /// A file system operation failed.
+    #[error("{action} {path}: {source}")]
+    Io {
+        /// What was being done.
+        action: &'static str,
+        /// On what.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// The claim of one launch on a run id: an exclusive lock on `<base>/<run>.lock`, held for as
+/// long as this value lives (the OS drops it when the process dies, however it dies). Dropping it
+/// removes the lock file.
+#[derive(Debug)]
+pub struct RunLock {
+    file: std::fs::File,
+    path: PathBuf,
+}
+
+impl RunLock {
+    /// The lock file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for RunLock {
+    fn drop(&mut self) {
+        // Unlink while still holding the lock: a launch that opened the old file before the unlink
+        // sees (after locking it) that the path no longer names its file, and tries again.
+        let _ = std::fs::remove_file(&self.path);
+        let _ = self.file.unlock();
+    }
+}
+
+impl RunNamespace {
+    /// The folder that holds every run's root directory (and their lock files).
+    pub fn base_dir(&self) -> &Path {
+        self.root.parent().unwrap_or(&self.root)
+    }
+
+    /// Makes sure the base folder exists, is ours and is private (0700).
+    fn private_base(&self) -> Result<&Path, NamespaceError> {
+        use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+        let base = self.base_dir();
+        let io = |action, source| NamespaceError::Io {
+            action,
+            path: base.to_path_buf(),
+            source,
+        };
+        match std::fs::DirBuilder::new()
+            .recursive(true)
+            .mode(0o700)
+            .create(base)
+        {
+            Ok(()) => {}
+            Err(e) => return Err(io("creating", e)),
+        }
+        let meta = std::fs::metadata(base).map_err(|e| io("inspecting", e))?;
+        let us = current_uid();
+        if meta.uid() != us {
+            return Err(NamespaceError::ForeignBase {
+                dir: base.to_path_buf(),
+                owner: meta.uid(),
+                us,
+            });
+        }
+        if meta.mode() & 0o077 != 0 {
+            std::fs::set_permissions(base, std::fs::Permissions::from_mode(0o700))
+                .map_err(|e| io("making private", e))?;
+        }
+        Ok(base)
+    }
+
+    /// Claims the run id for this process, atomically: of two launches that try at the same
+    /// instant exactly one gets the lock, and the other gets [`NamespaceError::InUse`] without
+    /// having touched anything of the winner's.
+    pub fn lock(&self) -> Result<RunLock, NamespaceError> {
+        use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
+        let base = self.private_base()?;
+        let path = base.join(format!("{}.lock", self.run));
+        for _ in 0..8 {
+            let file = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(false)
+                .mode(0o600)
+                .open(&path)
+                .map_err(|source| NamespaceError::Io {
+                    action: "opening the run lock",
+                    path: path.clone(),
+                    source,
+                })?;
+            match file.try_lock() {
+                Ok(()) => {}
+                Err(std::fs::TryLockError::WouldBlock) => {
+                    return Err(NamespaceError::InUse {
+                        run: self.run.to_string(),
+                        lock: path,
+                    });
+                }
+                Err(std::fs::TryLockError::Error(source)) => {
+                    return Err(NamespaceError::Io {
+                        action: "locking",
+                        path,
+                        source,
+                    });
+                }
+            }
+            // The winner of a race may have unlinked the file we opened: then ours is stale.
+            let ours = file.metadata().map(|m| (m.dev(), m.ino()));
+            let named = std::fs::metadata(&path).map(|m| (m.dev(), m.ino()));
+            if let (Ok(ours), Ok(named)) = (ours, named)
+                && ours == named
+            {
+                return Ok(RunLock { file, path });
+            }
+        }
+        Err(NamespaceError::InUse {
+            run: self.run.to_string(),
+            lock: path,
+        })
+    }
+
+    /// Makes every file of the run private to its user: shared-memory objects 0600, the root
+    /// directory and its folders 0700, its files 0600. iceoryx2 0.10 creates its node-management
+    /// segment readable and writable by everyone; every process of a run calls this right after
+    /// creating its iceoryx2 node. Returns how many entries had their mode changed.
+    pub fn restrict_permissions(&self) -> Result<usize, NamespaceError> {
+        let mut changed = 0;
+        for path in list_with_prefix(Path::new(SHM_DIR), &self.file_prefix()) {
+            changed += restrict(&path, 0o600)?;
+        }
+        if self.root.exists() {
+            changed += restrict_tree(&self.root)?;
+        }
+        Ok(changed)
+    }
+
+    /// Every entry of the run with permission bits for group or others: empty once
+    /// [`RunNamespace::restrict_permissions`] ran after the last file was made.
+    pub fn shared_entries(&self) -> Vec<(PathBuf, u32)> {
+        use std::os::unix::fs::PermissionsExt;
+        let mut found = Vec::new();
+        let mut visit = vec![];
+        visit.extend(list_with_prefix(Path::new(SHM_DIR), &self.file_prefix()));
+        if self.root.exists() {
+            visit.push(self.root.clone());
+        }
+        while let Some(path) = visit.pop() {
+            let Ok(meta) = std::fs::symlink_metadata(&path) else {
+                continue;
+            };
+            let mode = meta.permissions().mode() & 0o777;
+            if mode & 0o077 != 0 {
+                found.push((path.clone(), mode));
+            }
+            if meta.is_dir()
+                && let Ok(entries) = std::fs::read_dir(&path)
+            {
+                visit.extend(entries.flatten().map(|e| e.path()));
+            }
+        }
+        found.sort();
+        found
+    }
+}
+
+fn restrict(path: &Path, mode: u32) -> Result<usize, NamespaceError> {
+    use std::os::unix::fs::PermissionsExt;
+    let meta = match std::fs::symlink_metadata(path) {
+        Ok(meta) => meta,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+        Err(source) => {
+            return Err(NamespaceError::Io {
+                action: "inspecting",
+                path: path.to_path_buf(),
+                source,
+            });
+        }
+    };
+    if meta.file_type().is_symlink() || meta.permissions().mode() & 0o077 == 0 {
+        return Ok(0);
+    }
+    match std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)) {
+        Ok(()) => Ok(1),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(0),
+        Err(source) => Err(NamespaceError::Io {
+            action: "making private",
+            path: path.to_path_buf(),
+            source,
+        }),
+    }
+}
+
+fn restrict_tree(dir: &Path) -> Result<usize, NamespaceError> {
+    let mut changed = restrict(dir, 0o700)?;
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(changed);
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        match entry.file_type() {
+            Ok(t) if t.is_dir() => changed += restrict_tree(&path)?,
+            Ok(t) if t.is_file() => changed += restrict(&path, 0o600)?,
+            _ => {}
+        }
+    }
+    Ok(changed)
+}
+
+/// The real user id of this process, read from /proc (no unsafe call needed).
+pub fn current_uid() -> u32 {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata("/proc/self").map_or(u32::MAX, |m| m.uid())
+}
+
 fn list_with_prefix(dir: &Path, prefix: &str) -> Vec<PathBuf> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Vec::new();
@@ -417,14 +721,27 @@ fn encode_text<const N: usize>(field: &'static str, text: &str) -> Result<[u8; N
     Ok(out)
 }
 
-/// Like [`encode_text`] but cuts an over-long text at a character boundary (for human messages).
+/// Like [`encode_text`] but for human messages: an over-long text is cut at the last word
+/// boundary that leaves room for a closing `…`, so a reader sees that something was cut and
+/// never half a word.
 fn encode_text_lossy<const N: usize>(text: &str) -> [u8; N] {
-    let mut end = text.len().min(N);
+    const ELLIPSIS: &str = " …";
+    let mut out = [0u8; N];
+    if text.len() <= N {
+        out[..text.len()].copy_from_slice(text.as_bytes());
+        return out;
+    }
+    let mut end = N.saturating_sub(ELLIPSIS.len());
     while !text.is_char_boundary(end) {
         end -= 1;
     }
-    let mut out = [0u8; N];
-    out[..end].copy_from_slice(&text.as_bytes()[..end]);
+    let cut = text[..end]
+        .rfind(char::is_whitespace)
+        .filter(|&at| at > end / 2)
+        .unwrap_or(end);
+    let kept = text[..cut].trim_end();
+    out[..kept.len()].copy_from_slice(kept.as_bytes());
+    out[kept.len()..kept.len() + ELLIPSIS.len()].copy_from_slice(ELLIPSIS.as_bytes());
     out
 }
 
@@ -434,6 +751,83 @@ fn decode_text<'a>(message: &'static str, bytes: &'a [u8]) -> Result<&'a str, Wi
         message,
         reason: format!("text field is not UTF-8 ({e})"),
     })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Lobby: candidate agent -> world, and the world's answer
+// ---------------------------------------------------------------------------------------------
+
+/// An agent's request to drive one robot: its pid, a fresh nonce (which also names the
+/// incarnation's services if the world accepts) and its proof of the launch secret.
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+#[type_name("formation.HelloMsg.v1")]
+pub struct HelloMsg {
+    /// The candidate's process id.
+    pub pid: u32,
+    /// Keeps the layout explicit; always 0.
+    pub reserved: u32,
+    /// A fresh random number, never used twice.
+    pub nonce: u64,
+    /// [`crate::auth::LaunchSecret::prove`] over the run, the robot, `pid` and `nonce`.
+    pub proof: [u8; crate::auth::PROOF_LEN],
+}
+
+/// The world's answer to one [`HelloMsg`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Welcome {
+    /// The incarnation's services exist now: open them and drive.
+    Accepted,
+    /// Refused; the reason is phrased for the user.
+    Refused(String),
+}
+
+/// The wire form of a [`Welcome`], tagged with the nonce of the hello it answers.
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+#[type_name("formation.WelcomeMsg.v1")]
+pub struct WelcomeMsg {
+    /// The nonce of the hello this answers.
+    pub nonce: u64,
+    /// 1 accepted, 2 refused.
+    pub kind: u32,
+    /// Keeps the layout explicit; always 0.
+    pub reserved: u32,
+    /// Why (refused), UTF-8, zero padded, possibly cut.
+    pub reason: [u8; REASON_LEN],
+}
+
+const WELCOME_ACCEPTED: u32 = 1;
+const WELCOME_REFUSED: u32 = 2;
+
+impl WelcomeMsg {
+    /// Encodes the answer to the hello with `nonce`.
+    pub fn encode(nonce: u64, welcome: &Welcome) -> WelcomeMsg {
+        let (kind, reason) = match welcome {
+            Welcome::Accepted => (WELCOME_ACCEPTED, [0; REASON_LEN]),
+            Welcome::Refused(reason) => (WELCOME_REFUSED, encode_text_lossy(reason)),
+        };
+        WelcomeMsg {
+            nonce,
+            kind,
+            reserved: 0,
+            reason,
+        }
+    }
+
+    /// Decodes the answer.
+    pub fn decode(&self) -> Result<Welcome, WireError> {
+        match self.kind {
+            WELCOME_ACCEPTED => Ok(Welcome::Accepted),
+            WELCOME_REFUSED => Ok(Welcome::Refused(
+                decode_text("welcome", &self.reason)?.to_owned(),
+            )),
+            kind => Err(WireError::UnknownKind {
+                message: "welcome",
+                kind,
+            }),
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -814,7 +1208,7 @@ pub enum AgentStatus {
 /// The wire form of an [`AgentStatus`].
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
 #[repr(C)]
-#[type_name("formation.StatusMsg.v1")]
+#[type_name("formation.StatusMsg.v2")]
 pub struct StatusMsg {
     /// 1 hello, 2 ready, 3 refused, 4 swap done, 5 swap refused.
     pub kind: u32,
@@ -1017,7 +1411,7 @@ pub struct SwapReply {
 /// The wire form of a [`SwapReply`].
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
 #[repr(C)]
-#[type_name("formation.SwapReplyMsg.v1")]
+#[type_name("formation.SwapReplyMsg.v2")]
 pub struct SwapReplyMsg {
     /// Request id.
     pub request_id: u64,
@@ -1117,8 +1511,20 @@ pub enum WorldEvent {
     AgentLost {
         /// The robot.
         robot: usize,
-        /// The last tick the world published.
+        /// The last tick the world published when it noticed.
         tick: u64,
+        /// The last tick whose command from the dead agent the world applied, if any.
+        last_fresh_tick: Option<u64>,
+    },
+    /// A process asked to drive robot `robot` and was refused; the robot keeps its agent, or keeps
+    /// braking if it has none.
+    AgentRefused {
+        /// The robot.
+        robot: usize,
+        /// The process id it gave.
+        pid: u32,
+        /// Why, phrased for the user.
+        reason: String,
     },
     /// A restarted agent (process `pid`) drives robot `robot` again from tick `tick` on.
     AgentRejoined {
@@ -1251,21 +1657,53 @@ mod tests {
     }
 
     #[test]
-    fn service_names_are_namespaced_by_run_robot_and_channel() {
+    fn service_names_are_namespaced_by_run_robot_incarnation_and_channel() {
         let run = RunId::new("t1").unwrap();
         assert_eq!(
-            robot_service_name(&run, 2, RobotChannel::Scan),
-            "formation/t1/robot/2/scan"
+            robot_service_name(&run, 2, 0xab, RobotChannel::Scan),
+            "formation/t1/robot/2/00000000000000ab/scan"
         );
         assert_eq!(
-            robot_service_name(&run, 0, RobotChannel::Status),
-            "formation/t1/robot/0/status"
+            lobby_service_name(&run, 0, LobbyChannel::Hello),
+            "formation/t1/robot/0/hello"
         );
         let names: std::collections::HashSet<_> = RobotChannel::ALL
             .iter()
-            .map(|&c| robot_service_name(&run, 0, c))
+            .flat_map(|&c| {
+                [
+                    robot_service_name(&run, 0, 1, c),
+                    robot_service_name(&run, 0, 2, c),
+                ]
+            })
+            .chain([
+                lobby_service_name(&run, 0, LobbyChannel::Hello),
+                lobby_service_name(&run, 0, LobbyChannel::Welcome),
+            ])
             .collect();
-        assert_eq!(names.len(), 4);
+        assert_eq!(names.len(), 10, "every incarnation has services of its own");
+    }
+
+    #[test]
+    fn welcome_round_trips() {
+        for welcome in [
+            Welcome::Accepted,
+            Welcome::Refused("robot 1 is taken".into()),
+        ] {
+            let msg = WelcomeMsg::encode(7, &welcome);
+            assert_eq!(msg.nonce, 7);
+            assert_eq!(msg.decode().unwrap(), welcome);
+        }
+    }
+
+    #[test]
+    fn long_reasons_are_cut_at_a_word_and_say_so() {
+        let reason = "word ".repeat(REASON_LEN);
+        let bytes: [u8; REASON_LEN] = encode_text_lossy(&reason);
+        let text = decode_text("test", &bytes).unwrap();
+        assert!(text.ends_with("word …"), "{text:?}");
+        assert!(text.len() <= REASON_LEN);
+        let short: [u8; REASON_LEN] = encode_text_lossy("fits");
+        assert_eq!(decode_text("test", &short).unwrap(), "fits");
     }
 
     #[test]
@@ -1480,8 +1918,9 @@ mod tests {
         .unwrap();
         match msg.decode().unwrap() {
             AgentStatus::Refused { reason, .. } => {
-                assert!(reason.len() <= REASON_LEN && reason.chars().all(|c| c == 'é'));
-                assert_eq!(reason.len(), REASON_LEN);
+                assert!(reason.len() <= REASON_LEN, "{}", reason.len());
+                assert!(reason.ends_with(" …"), "a cut reason says so");
+                assert!(reason.trim_end_matches(" …").chars().all(|c| c == 'é'));
             }
             other => panic!("decoded {other:?}"),
         }

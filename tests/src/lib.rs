@@ -20,6 +20,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+pub use formation_proto::auth::LaunchSecret;
 use formation_proto::wire::{RunId, RunNamespace};
 use formation_world::Trajectory;
 
@@ -360,16 +361,35 @@ impl Finished {
 }
 
 /// Runs `command` to completion (killing it after `limit`) and captures its output.
-pub fn run(mut command: Command, limit: Duration) -> Finished {
+pub fn run(command: Command, limit: Duration) -> Finished {
+    run_with_input(command, None, limit)
+}
+
+/// A launch secret for tests that start `formation-world` or `formation-agent` by hand: write
+/// [`LaunchSecret::to_line`] as the first line of their standard input.
+pub fn launch_secret() -> LaunchSecret {
+    LaunchSecret::generate().expect("a launch secret")
+}
+
+/// [`run`] with `input` written to the command's standard input (then closed).
+pub fn run_with_input(mut command: Command, input: Option<&str>, limit: Duration) -> Finished {
+    use std::io::Write;
     let text = format!("{command:?}");
     command
-        .stdin(Stdio::null())
+        .stdin(if input.is_some() {
+            Stdio::piped()
+        } else {
+            Stdio::null()
+        })
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     let started = Instant::now();
-    let child = command
+    let mut child = command
         .spawn()
         .unwrap_or_else(|e| panic!("starting {text}: {e}"));
+    if let (Some(input), Some(mut stdin)) = (input, child.stdin.take()) {
+        let _ = stdin.write_all(input.as_bytes());
+    }
     let id = child.id();
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
@@ -435,6 +455,8 @@ pub fn assert_bit_identical(a: &Trajectory, b: &Trajectory) {
 pub struct LiveProcess {
     command: String,
     child: std::process::Child,
+    /// Kept open (when piped) so the process does not see its input end.
+    stdin: Option<std::process::ChildStdin>,
     lines: mpsc::Receiver<String>,
     seen: Vec<String>,
     stderr: std::sync::Arc<std::sync::Mutex<String>>,
@@ -442,17 +464,38 @@ pub struct LiveProcess {
 }
 
 impl LiveProcess {
-    /// Starts `command` with stdout and stderr captured.
-    pub fn spawn(mut command: Command) -> LiveProcess {
-        use std::io::{BufRead, BufReader, Read};
+    /// Starts `command` with stdout and stderr captured and no input.
+    pub fn spawn(command: Command) -> LiveProcess {
+        LiveProcess::spawn_with_input(command, None)
+    }
+
+    /// Starts `command` with `secret` as the first line of its standard input, which then stays
+    /// open until [`LiveProcess::close_input`] or the end: how the launcher starts the world
+    /// and the agents.
+    pub fn spawn_with_secret(command: Command, secret: &LaunchSecret) -> LiveProcess {
+        LiveProcess::spawn_with_input(command, Some(&secret.to_line()))
+    }
+
+    /// Starts `command` with `input` (if any) written to its standard input, kept open.
+    pub fn spawn_with_input(mut command: Command, input: Option<&str>) -> LiveProcess {
+        use std::io::{BufRead, BufReader, Read, Write};
         let text = format!("{command:?}");
         command
-            .stdin(Stdio::null())
+            .stdin(if input.is_some() {
+                Stdio::piped()
+            } else {
+                Stdio::null()
+            })
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
         let mut child = command
             .spawn()
             .unwrap_or_else(|e| panic!("starting {text}: {e}"));
+        let mut stdin = child.stdin.take();
+        if let (Some(input), Some(pipe)) = (input, stdin.as_mut()) {
+            let _ = pipe.write_all(input.as_bytes());
+            let _ = pipe.flush();
+        }
         let stdout = child.stdout.take().expect("piped stdout");
         let mut stderr_pipe = child.stderr.take().expect("piped stderr");
         let (tx, lines) = mpsc::channel();
@@ -479,6 +522,7 @@ impl LiveProcess {
         LiveProcess {
             command: text,
             child,
+            stdin,
             lines,
             seen: Vec::new(),
             stderr,
@@ -489,6 +533,11 @@ impl LiveProcess {
     /// The process id.
     pub fn id(&self) -> u32 {
         self.child.id()
+    }
+
+    /// Closes the process's standard input (a launcher that goes away).
+    pub fn close_input(&mut self) {
+        self.stdin = None;
     }
 
     /// Waits up to `limit` for a stdout line for which `matches` is true and returns it; `None`
@@ -736,4 +785,28 @@ mod tests {
         assert_eq!(finished.stdout(), "out\n");
         assert!(finished.describe().contains("err"));
     }
+}
+
+/// The incarnations (16-hex-digit nonces) whose services exist for robot `robot` of `run`, in no
+/// particular order: how a test finds the services the world made for an accepted agent.
+pub fn incarnations(run: &RunId, robot: usize) -> Vec<u64> {
+    use iceoryx2::prelude::*;
+    let Ok(config) = RunNamespace::new(run).iceoryx_config() else {
+        return Vec::new();
+    };
+    let prefix = format!("formation/{run}/robot/{robot}/");
+    let mut found = Vec::new();
+    let _ = ipc::Service::list(&config, |details| {
+        let name = details.static_details.name().to_string();
+        if let Some(rest) = name.strip_prefix(&prefix)
+            && let Some(hex) = rest.strip_suffix("/scan")
+            && hex.len() == 16
+            && let Ok(n) = u64::from_str_radix(hex, 16)
+            && !found.contains(&n)
+        {
+            found.push(n);
+        }
+        CallbackProgression::Continue
+    });
+    found
 }

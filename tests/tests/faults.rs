@@ -283,7 +283,8 @@ fn agents_exit_cleanly_when_the_world_dies() {
         .arg(&specs)
         .arg("--out")
         .arg(dir.path().join("out"));
-    let mut world = LiveProcess::spawn(world);
+    let secret = formation_tests::launch_secret();
+    let mut world = LiveProcess::spawn_with_secret(world, &secret);
     let mut agents: Vec<LiveProcess> = (0..3)
         .map(|robot| {
             let mut agent = Command::new(&bins.agent);
@@ -291,7 +292,7 @@ fn agents_exit_cleanly_when_the_world_dies() {
                 .args(["--run-id", run_id.as_str(), "--robot", &robot.to_string()])
                 .arg("--model")
                 .arg(test_model());
-            LiveProcess::spawn(agent)
+            LiveProcess::spawn_with_secret(agent, &secret)
         })
         .collect();
     let connected = world.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));

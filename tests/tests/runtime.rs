@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use formation::runtime::{ClockMode, eval_over_processes};
 use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, ServiceLimits, robot_service_name};
 use formation_tests::{
-    LeakCheck, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario, run,
-    test_model, unique_run_id,
+    LeakCheck, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
+    incarnations, launch_secret, run, run_with_input, test_model, unique_run_id,
 };
 use formation_world::{Scenario, run_episode};
 use iceoryx2::prelude::*;
@@ -90,6 +90,14 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
         .stdout(Stdio::piped())
         .spawn()
         .expect("starting the world");
+    let secret = launch_secret();
+    let hand_secret = |child: &mut std::process::Child| {
+        use std::io::Write;
+        let stdin = child.stdin.as_mut().expect("piped stdin");
+        stdin.write_all(secret.to_line().as_bytes()).unwrap();
+        stdin.flush().unwrap();
+    };
+    hand_secret(&mut world);
     let mut world_out = BufReader::new(world.stdout.take().unwrap());
     let mut line = String::new();
     world_out.read_line(&mut line).unwrap();
@@ -107,6 +115,7 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
         .stdin(Stdio::piped())
         .spawn()
         .expect("starting agent 0");
+    hand_secret(&mut agent);
 
     let config = leaks.namespace().iceoryx_config().unwrap();
     let node = NodeBuilder::new()
@@ -114,7 +123,17 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
         .create::<ipc::Service>()
         .unwrap();
     let limits = ServiceLimits::ROBOT;
-    let open = |channel| ServiceName::new(&robot_service_name(&run_id, 0, channel)).unwrap();
+    // The world makes robot 0's services once it accepted the agent's proof.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let incarnation = loop {
+        match incarnations(&run_id, 0).as_slice() {
+            [one] => break *one,
+            [] if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(20)),
+            other => panic!("robot 0 should have exactly one incarnation, found {other:x?}"),
+        }
+    };
+    let open =
+        |channel| ServiceName::new(&robot_service_name(&run_id, 0, incarnation, channel)).unwrap();
     let scan = node
         .service_builder(&open(RobotChannel::Scan))
         .publish_subscribe::<ScanMsg>()
@@ -315,7 +334,9 @@ fn robot_indices_out_of_range_are_clear_errors() {
         ])
         .arg("--model")
         .arg(test_model());
-    run(agent, LIMIT).assert_failure_mentioning("robot 7's services do not exist");
+    let secret = launch_secret().to_line();
+    run_with_input(agent, Some(&secret), LIMIT)
+        .assert_failure_mentioning("robot 7's services do not exist");
 
     let scenario = case1_scenario(dir.path(), 1.0);
     let mut text = std::fs::read_to_string(&scenario).unwrap();

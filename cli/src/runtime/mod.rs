@@ -259,21 +259,27 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
     let report = block_on(supervisor::launch(&plan, &mut |event| match event {
         WorldEvent::AgentsConnected => println!("all {} agents connected", plan.models.len()),
         WorldEvent::RunDone { index, log } => println!("run {index} done: {}", log.display()),
-        WorldEvent::AgentLost { robot, tick } => {
-            println!("robot {robot}: agent lost at tick {tick}; braking it")
+        WorldEvent::AgentLost {
+            robot,
+            tick,
+            last_fresh_tick,
+        } => println!("{}", lost_message(*robot, *tick, *last_fresh_tick)),
+        WorldEvent::AgentRefused { robot, pid, reason } => {
+            eprintln!("formation: robot {robot}: refused process {pid}: {reason}")
         }
         WorldEvent::AgentRejoined { robot, pid, tick } => {
             println!("robot {robot}: agent pid {pid} rejoined, driving from tick {tick}")
         }
         WorldEvent::Listening { .. } | WorldEvent::Finished => {}
     }))??;
-    let table = run_summary(&report.run_logs, scenario.name(), base_seed)?;
+    let latency = profile::profile_dir(&plan.out)?;
+    let mut table = run_summary(&report.run_logs, scenario.name(), base_seed)?;
+    table.braked_ticks = latency.braked_per_robot.clone();
     paths::write_atomic(
         &plan.out.join("summary.json"),
         &serde_json::to_vec_pretty(&table)?,
     )?;
     print!("{}", crate::eval::table_text(&table));
-    let latency = profile::profile_dir(&plan.out)?;
     let path = plan.out.join("profile.json");
     paths::write_atomic(&path, &serde_json::to_vec_pretty(&latency)?)?;
     profile::profile_svg(&latency, &plan.out.join("profile.svg"))?;
@@ -284,7 +290,36 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         report.restarts,
         report.cleaned_up
     );
+    if !report.lost_for_good.is_empty() {
+        let lost: Vec<String> = report
+            .lost_for_good
+            .iter()
+            .map(|(run, robot, tick)| format!("run {run}: robot {robot} (lost at tick {tick})"))
+            .collect();
+        anyhow::bail!(
+            "runs ended with robots that had lost their agent for good, so their results are not \
+             the policy's: {}; see braked_ticks in {}",
+            lost.join(", "),
+            plan.out.join("summary.json").display()
+        );
+    }
     Ok(())
+}
+
+/// What `formation run` says when the world lost a robot's agent: from which tick the robot is
+/// braked, and whether the dead agent's last command still drove it up to then.
+fn lost_message(robot: usize, tick: u64, last_fresh_tick: Option<u64>) -> String {
+    match last_fresh_tick {
+        Some(last) => format!(
+            "robot {robot}: agent lost (noticed at tick {tick}; its last command drove tick \
+             {last}); braking it from tick {} until an agent rejoins",
+            last + 1
+        ),
+        None => format!(
+            "robot {robot}: agent lost (noticed at tick {tick}, before it drove this run); \
+             braking it until an agent rejoins"
+        ),
+    }
 }
 
 /// The Table I summary of a launch's run logs, in the schema `formation eval` writes, so that

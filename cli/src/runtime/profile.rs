@@ -45,6 +45,10 @@ pub struct LatencyProfile {
     pub used_commands: usize,
     /// Robot-ticks braked by the watchdog, by reason.
     pub braked: BTreeMap<String, usize>,
+    /// Per robot: its ticks braked by the watchdog, by reason (empty maps for robots never
+    /// braked).
+    #[serde(default)]
+    pub braked_per_robot: Vec<BTreeMap<String, usize>>,
     /// Per-stage statistics over every agent and tick, by stage name.
     pub stages: BTreeMap<String, StageStats>,
     /// Per agent (robot index): its per-command stages.
@@ -121,6 +125,7 @@ pub fn profile(runs: &[RunTiming]) -> LatencyProfile {
     let mut overall: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
     let mut per_agent: Vec<BTreeMap<&str, Vec<u64>>> = Vec::new();
     let mut braked: BTreeMap<String, usize> = BTreeMap::new();
+    let mut braked_per_robot: Vec<BTreeMap<String, usize>> = Vec::new();
     let mut used = 0;
     for run in runs {
         let starts = &run.tick_start_ns;
@@ -142,6 +147,7 @@ pub fn profile(runs: &[RunTiming]) -> LatencyProfile {
         }
         if per_agent.len() < run.robots.len() {
             per_agent.resize_with(run.robots.len(), BTreeMap::new);
+            braked_per_robot.resize_with(run.robots.len(), BTreeMap::new);
         }
         for (index, robot) in run.robots.iter().enumerate() {
             for tick in 0..robot.ticks() {
@@ -150,6 +156,7 @@ pub fn profile(runs: &[RunTiming]) -> LatencyProfile {
                         .ok()
                         .and_then(|v| v.as_str().map(str::to_owned))
                         .unwrap_or_default();
+                    *braked_per_robot[index].entry(name.clone()).or_default() += 1;
                     *braked.entry(name).or_default() += 1;
                     continue;
                 }
@@ -174,6 +181,7 @@ pub fn profile(runs: &[RunTiming]) -> LatencyProfile {
         clock: runs.first().map(|r| r.clock.clone()).unwrap_or_default(),
         used_commands: used,
         braked,
+        braked_per_robot,
         stages: stats(overall),
         per_agent: per_agent.into_iter().map(stats).collect(),
         inference_paper_ms: PAPER_INFERENCE_MS,
@@ -296,6 +304,8 @@ mod tests {
         let p = profile(&[run]);
         assert_eq!(p.used_commands, 4);
         assert_eq!(p.braked.get("missing"), Some(&2));
+        assert_eq!(p.braked_per_robot.len(), 2);
+        assert_eq!(p.braked_per_robot[1].get("missing"), Some(&1));
         assert_eq!(p.stages["round_trip"].max_us, 4.0);
         assert_eq!(p.stages["round_trip"].count, 4);
         assert_eq!(p.per_agent.len(), 2);

@@ -2,9 +2,13 @@
 //! and tears everything down.
 //!
 //! * Progress comes from the world's stdout (one JSON event per line).
-//! * An agent that dies while the world runs is restarted with exponential backoff while the
-//!   restart budget lasts (the world brakes its robot meanwhile and lets the new agent rejoin);
-//!   past the budget the launch fails naming the robot and its exit status.
+//! * The launch first claims its run id with a lock (of two launches with one id exactly one
+//!   wins), removes what a dead launch of the same id left (only when none of its processes
+//!   lives), and draws the launch secret, which it writes as the first line of every child's
+//!   standard input: only agents that prove it may drive a robot.
+//! * An agent that exits while the world runs, however it exits, is restarted with exponential
+//!   backoff while the restart budget lasts (the world brakes its robot meanwhile and lets the new
+//!   agent rejoin); past the budget the launch fails naming the robot and its exit status.
 //! * Ctrl-C / SIGTERM, a failure, or the end of the runs all lead to the same shutdown: the
 //!   children's standard input is closed (world and agents watch it and exit cleanly), stragglers
 //!   are killed after a grace period, every child is reaped, and the run's iceoryx2 files are
@@ -18,8 +22,9 @@ use std::path::PathBuf;
 use std::process::{ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-use formation_proto::wire::{RunId, RunNamespace, WorldEvent};
-use tokio::io::{AsyncBufReadExt, BufReader};
+use formation_proto::auth::LaunchSecret;
+use formation_proto::wire::{NamespaceError, RunId, RunNamespace, WorldEvent};
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::process::{Child, ChildStdin, Command};
 use tokio::sync::{mpsc, oneshot};
 
@@ -64,6 +69,11 @@ pub struct LaunchReport {
     pub restarts: u32,
     /// Iceoryx2 files and directories removed after the children exited.
     pub cleaned_up: usize,
+    /// Leftover files of a dead earlier launch of this run id that were removed first.
+    pub stale_removed: usize,
+    /// Per finished run: the robots that had no agent when it ended (lost and never rejoined),
+    /// as `(run index, robot, tick the agent was lost at)`.
+    pub lost_for_good: Vec<(usize, usize, u64)>,
 }
 
 /// Why a launch failed.
@@ -82,17 +92,23 @@ pub enum LaunchError {
         /// The OS error.
         source: std::io::Error,
     },
-    /// Files of this run id already exist.
+    /// The run id could not be claimed (another live launch holds it) or made private.
+    #[error(transparent)]
+    Namespace(#[from] NamespaceError),
+    /// Files of this run id exist and processes of it are alive, though no launch holds its lock.
     #[error(
-        "iceoryx2 files of run {run} already exist ({files}); another launch uses this run id, or a \
-         crashed one left them: pick another --run-id or remove them"
+        "run {run} has live processes ({nodes}) that no launch supervises; stop them (or pick \
+         another --run-id) before reusing this run id"
     )]
     RunIdInUse {
         /// The run id.
         run: String,
-        /// The files found.
-        files: String,
+        /// The live iceoryx2 nodes found.
+        nodes: String,
     },
+    /// The launch secret could not be made or handed over.
+    #[error("the launch secret: {0}")]
+    Secret(String),
     /// An agent died and the restart budget is spent.
     #[error(
         "the agent of robot {robot} exited ({status}) and the restart budget ({budget} restarts in \
@@ -189,37 +205,103 @@ pub async fn launch(
 ) -> Result<LaunchReport, LaunchError> {
     let binaries = RuntimeBinaries::locate()?;
     let namespace = RunNamespace::new(&plan.run_id);
-    let leftovers = namespace.leftovers();
-    if !leftovers.is_empty() {
-        return Err(LaunchError::RunIdInUse {
-            run: plan.run_id.to_string(),
-            files: leftovers
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", "),
-        });
+    // Held until the end: while it lives no other launch can use this run id, and nothing
+    // below touches a file of the run before it is ours.
+    let lock = namespace.lock()?;
+    let mut report = LaunchReport {
+        stale_removed: remove_dead_launch_leftovers(&namespace)?,
+        ..LaunchReport::default()
+    };
+    if report.stale_removed > 0 {
+        eprintln!(
+            "formation: removed {} file(s) that a dead launch of run {} left behind (none of its \
+             processes is alive)",
+            report.stale_removed, plan.run_id
+        );
     }
-    let mut report = LaunchReport::default();
-    let outcome = supervise(plan, &binaries, on_event, &mut report).await;
+    let secret = LaunchSecret::generate().map_err(|e| LaunchError::Secret(e.to_string()))?;
+    let outcome = supervise(plan, &binaries, &secret, on_event, &mut report).await;
     let removed = namespace
         .remove_all()
         .map_err(|source| LaunchError::Cleanup {
             run: plan.run_id.to_string(),
             source,
         })?;
+    drop(lock);
     report.cleaned_up = removed;
     outcome.map(|()| report)
+}
+
+/// With the run's lock held: the files an earlier launch of this run id left are a dead
+/// launch's, unless one of its processes still lives (say, a stopped world). Removes them when
+/// none does and returns how many; refuses, naming the live processes, otherwise.
+fn remove_dead_launch_leftovers(namespace: &RunNamespace) -> Result<usize, LaunchError> {
+    use iceoryx2::node::NodeView;
+    use iceoryx2::prelude::*;
+    if namespace.leftovers().is_empty() {
+        return Ok(0);
+    }
+    let mut alive = Vec::new();
+    if let Ok(config) = namespace.iceoryx_config() {
+        let _ = Node::<ipc::Service>::list(&config, |state| {
+            if let NodeState::Alive(view) = &state {
+                let name = view
+                    .details()
+                    .as_ref()
+                    .map(|d| d.name().as_str().to_owned())
+                    .unwrap_or_else(|| "unnamed node".into());
+                alive.push(name);
+            }
+            CallbackProgression::Continue
+        });
+    }
+    if !alive.is_empty() {
+        return Err(LaunchError::RunIdInUse {
+            run: namespace.run().to_string(),
+            nodes: alive.join(", "),
+        });
+    }
+    namespace
+        .remove_all()
+        .map_err(|source| LaunchError::Cleanup {
+            run: namespace.run().to_string(),
+            source,
+        })
+}
+
+/// Writes the launch secret as the first line of a child's standard input.
+async fn hand_secret(
+    stdin: &mut Option<ChildStdin>,
+    secret: &LaunchSecret,
+) -> Result<(), LaunchError> {
+    let Some(stdin) = stdin.as_mut() else {
+        return Err(LaunchError::Secret(
+            "a child's standard input is not piped".into(),
+        ));
+    };
+    stdin
+        .write_all(secret.to_line().as_bytes())
+        .await
+        .map_err(|e| LaunchError::Secret(format!("writing it to a child's standard input: {e}")))?;
+    stdin
+        .flush()
+        .await
+        .map_err(|e| LaunchError::Secret(format!("writing it to a child's standard input: {e}")))
 }
 
 async fn supervise(
     plan: &LaunchPlan,
     binaries: &RuntimeBinaries,
+    secret: &LaunchSecret,
     on_event: &mut dyn FnMut(&WorldEvent),
     report: &mut LaunchReport,
 ) -> Result<(), LaunchError> {
     let mut world = spawn_world(plan, binaries)?;
     let mut world_stdin = world.stdin.take();
+    if let Err(e) = hand_secret(&mut world_stdin, secret).await {
+        // The world is gone already (it failed to start): its exit status tells why.
+        tracing::debug!("the world did not take the launch secret: {e}");
+    }
     let world_stdout = world
         .stdout
         .take()
@@ -232,7 +314,7 @@ async fn supervise(
         RestartBudget::new(plan.restart_budget, plan.restart_window, plan.restart_delay);
     let mut agents = Vec::with_capacity(plan.models.len());
     for robot in 0..plan.models.len() {
-        match spawn_agent(plan, binaries, robot, true, exit_tx.clone()) {
+        match spawn_agent(plan, binaries, secret, robot, true, exit_tx.clone()).await {
             Ok(handle) => agents.push(handle),
             Err(e) => {
                 shutdown(&mut world, &mut world_stdin, &mut agents).await;
@@ -244,13 +326,27 @@ async fn supervise(
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut finished = false;
     let mut stdout_open = true;
+    // Robots whose agent the world reported lost and that have not rejoined: robot → tick.
+    let mut lost: std::collections::BTreeMap<usize, u64> = std::collections::BTreeMap::new();
     let result = loop {
         tokio::select! {
             line = lines.next_line(), if stdout_open => match line? {
                 Some(line) => {
                     if let Some(event) = WorldEvent::parse(&line) {
-                        if let WorldEvent::RunDone { log, .. } = &event {
-                            report.run_logs.push(log.clone());
+                        match &event {
+                            WorldEvent::RunDone { index, log } => {
+                                report.run_logs.push(log.clone());
+                                report.lost_for_good.extend(
+                                    lost.iter().map(|(&robot, &tick)| (*index, robot, tick)),
+                                );
+                            }
+                            WorldEvent::AgentLost { robot, tick, .. } => {
+                                lost.insert(*robot, *tick);
+                            }
+                            WorldEvent::AgentRejoined { robot, .. } => {
+                                lost.remove(robot);
+                            }
+                            _ => {}
                         }
                         finished |= event == WorldEvent::Finished;
                         on_event(&event);
@@ -271,10 +367,11 @@ async fn supervise(
                 handle.kill = None;
                 handle.stdin = None;
                 handle.reaper = None;
-                if finished || status.success() {
-                    // Agents exit with success only when asked to (shutdown, signal, world gone).
+                if finished {
                     continue;
                 }
+                // While the runs are under way an agent has no reason to exit, whatever its exit
+                // code says (a stray SIGTERM, a refusal, a crash): restart it within the budget.
                 let Some(backoff) = budget.book(robot, Instant::now()) else {
                     break Err(LaunchError::AgentFailed {
                         robot,
@@ -297,7 +394,7 @@ async fn supervise(
                 if finished {
                     continue;
                 }
-                match spawn_agent(plan, binaries, robot, false, exit_tx.clone()) {
+                match spawn_agent(plan, binaries, secret, robot, false, exit_tx.clone()).await {
                     Ok(new_handle) => agents[robot] = new_handle,
                     Err(e) => break Err(e),
                 }
@@ -348,11 +445,13 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
     })
 }
 
-/// Starts robot `robot`'s agent. Its fault-injection mode (if any) applies to the first start
-/// only, so a restarted agent behaves and a crash test sees the robot rejoin.
-fn spawn_agent(
+/// Starts robot `robot`'s agent and hands it the launch secret. Its fault-injection mode (if any)
+/// applies to the first start only, so a restarted agent behaves and a crash test sees the robot
+/// rejoin.
+async fn spawn_agent(
     plan: &LaunchPlan,
     binaries: &RuntimeBinaries,
+    secret: &LaunchSecret,
     robot: usize,
     first_start: bool,
     exits: mpsc::UnboundedSender<(usize, ExitStatus)>,
@@ -379,7 +478,12 @@ fn spawn_agent(
         path: binaries.agent.clone(),
         source,
     })?;
-    let stdin = child.stdin.take();
+    let mut stdin = child.stdin.take();
+    if let Err(e) = hand_secret(&mut stdin, secret).await {
+        // The agent is gone already (it failed to start): its exit status, reported below,
+        // tells why.
+        tracing::debug!("robot {robot}'s agent did not take the launch secret: {e}");
+    }
     let (kill_tx, kill_rx) = oneshot::channel::<()>();
     let reaper = tokio::spawn(async move {
         let status = tokio::select! {

@@ -1,15 +1,18 @@
 //! `formation-agent`: one robot's decision maker as its own OS process.
 //!
-//! It loads its ONNX model (refusing a bad one before connecting), opens only its own robot's
-//! services, says hello, and then blocks on a wait set: each scan it receives becomes one command
+//! It reads the launch secret from the first line of its standard input, loads its ONNX model
+//! (refusing a bad one before connecting), asks the world to drive its robot (proving the
+//! secret), opens only the services the world made for it, says hello, and then blocks on a wait
+//! set: each scan it receives becomes one command
 //! through [`robot_agent::decision::Agent`] (occupancy rendering, then inference and speed
 //! scaling, each timed), published with those timings. Control requests begin episodes (the
 //! agent stays alive across runs), swap the model (loaded on a helper thread, off the hot path,
 //! and put in place at a tick boundary), or shut it down.
 //!
-//! It exits cleanly, with a message saying why, on a shutdown request, on SIGINT/SIGTERM, when its
-//! standard input closes (with `--exit-on-stdin-close`: the launcher is gone), or within about a
-//! second of the world process going away.
+//! It exits cleanly, with a message saying why, on a shutdown request, on SIGINT/SIGTERM (SIGHUP
+//! ends it by default), when its standard input closes (with `--exit-on-stdin-close`: the
+//! launcher is gone), or within about a second of the world process going away. Other signals
+//! (SIGCONT after a stop, SIGUSR1, SIGURG, ...) only interrupt a wait, which it simply resumes.
 
 mod faults;
 mod transport;
@@ -25,6 +28,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::Parser;
 use formation_onnx::OnnxPolicy;
+use formation_proto::auth::LaunchSecret;
 use formation_proto::wire::{
     AgentStatus, AgentTimings, CmdMsg, CmdStatus, ControlRequest, RunId, RunNamespace, ScanMsg,
     wall_clock_ns,
@@ -63,6 +67,8 @@ struct Args {
 enum Exit {
     /// The world ended the run: the normal way out, nothing to tell the user.
     Shutdown,
+    /// SIGINT or SIGTERM.
+    Signal,
     /// Anything else, told to the user.
     Because(String),
 }
@@ -84,6 +90,10 @@ fn main() -> ExitCode {
         Ok(Exit::Shutdown) => {
             tracing::info!("{who}: exiting: the world asked us to shut down");
             ExitCode::SUCCESS
+        }
+        Ok(Exit::Signal) => {
+            eprintln!("{who}: exiting: termination signal (SIGINT or SIGTERM)");
+            ExitCode::from(130)
         }
         Ok(Exit::Because(reason)) => {
             eprintln!("{who}: exiting: {reason}");
@@ -107,21 +117,33 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
     let model_id = policy.model_id().to_owned();
     let run_id = RunId::new(&args.run_id)?;
     let namespace = RunNamespace::new(&run_id);
+    let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
     let stdin_closed = Arc::new(AtomicBool::new(false));
     if args.exit_on_stdin_close {
         let flag = Arc::clone(&stdin_closed);
         std::thread::spawn(move || {
             let mut sink = [0u8; 256];
             let mut stdin = std::io::stdin();
-            while matches!(stdin.read(&mut sink), Ok(n) if n > 0) {}
+            // Only end of file (or a real error) means the launcher is gone: a read that a
+            // signal interrupted (EINTR) is simply retried.
+            loop {
+                match stdin.read(&mut sink) {
+                    Ok(0) => break,
+                    Ok(_) => {}
+                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                    Err(_) => break,
+                }
+            }
             flag.store(true, Ordering::Relaxed);
         });
     }
     let mut link = IceoryxAgentLink::connect(
         &namespace,
         args.robot,
+        &secret,
         Duration::from_millis(args.connect_timeout_ms),
     )?;
+    drop(secret);
     link.publish_status(&AgentStatus::Hello {
         pid: std::process::id(),
         model_id,
@@ -132,7 +154,7 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
             return Ok(Exit::Because("the launcher closed our input".into()));
         }
         match link.wait(IDLE_CHECK)? {
-            Wake::Terminated => return Ok(Exit::Because("termination signal".into())),
+            Wake::Terminated => return Ok(Exit::Signal),
             Wake::Idle => {
                 if !link.world_alive()? {
                     return Ok(Exit::Because(format!(

@@ -1,15 +1,19 @@
 //! The agent's side of the transport: what an agent needs from a message bus ([`AgentLink`]),
 //! and its iceoryx2 implementation ([`IceoryxAgentLink`]).
 //!
-//! An agent opens only its own robot's services. The world creates them with room for one
-//! subscriber on the scan and one publisher on the command, so while this agent runs no other
-//! process can read its scan or command its robot.
+//! An agent first asks in its robot's lobby to drive the robot, proving with the launch secret
+//! that its own launch started it; the world then creates the services of this agent's
+//! *incarnation* (named by the agent's fresh nonce) and the agent opens only those. They have
+//! room for one subscriber on the scan and one publisher on the command, so while this agent runs
+//! no other process can read its scan or command its robot.
 
 use std::time::{Duration, Instant};
 
+use formation_proto::auth::{LaunchSecret, SecretError, fresh_nonce};
 use formation_proto::wire::{
-    AgentStatus, CmdMsg, ControlMsg, ControlRequest, RobotChannel, RunNamespace, ScanMsg,
-    ServiceLimits, StatusMsg, WORLD_NODE_NAME, WireError, agent_node_name, robot_service_name,
+    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, NamespaceError,
+    RobotChannel, RunNamespace, ScanMsg, ServiceLimits, StatusMsg, WORLD_NODE_NAME, Welcome,
+    WelcomeMsg, WireError, agent_node_name, lobby_service_name, robot_service_name,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
@@ -55,9 +59,36 @@ pub enum TransportError {
         /// iceoryx2's error.
         detail: String,
     },
+    /// The world refused this agent.
+    #[error("the world refused to let this agent drive robot {robot}: {reason}")]
+    Refused {
+        /// The robot.
+        robot: usize,
+        /// The world's reason.
+        reason: String,
+    },
+    /// The world did not answer the greeting.
+    #[error(
+        "the world of run {run} did not answer robot {robot}'s greeting within {waited_s:.1} s; \
+         is it running (and not stopped)?"
+    )]
+    NoWelcome {
+        /// The robot.
+        robot: usize,
+        /// The run id.
+        run: String,
+        /// How long the agent waited.
+        waited_s: f64,
+    },
     /// A message could not be encoded or decoded.
     #[error(transparent)]
     Wire(#[from] WireError),
+    /// No nonce could be drawn.
+    #[error(transparent)]
+    Secret(#[from] SecretError),
+    /// The run's files could not be made private.
+    #[error(transparent)]
+    Namespace(#[from] NamespaceError),
 }
 
 fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> TransportError {
@@ -113,15 +144,19 @@ pub struct IceoryxAgentLink {
 const RETRY_PERIOD: Duration = Duration::from_millis(20);
 
 impl IceoryxAgentLink {
-    /// Opens robot `robot`'s services in `namespace`, waiting up to `timeout` for the world to
-    /// create them and for a dead predecessor's ports to be cleaned up.
+    /// Asks to drive robot `robot` of the run in `namespace`, proving `secret`, and opens the
+    /// services the world then creates for this agent. Waits up to `timeout` for the world's
+    /// lobby to exist and for its answer; a refusal (the robot is taken, the proof is wrong) is
+    /// an error at once.
     pub fn connect(
         namespace: &RunNamespace,
         robot: usize,
+        secret: &LaunchSecret,
         timeout: Duration,
     ) -> Result<Self, TransportError> {
         let config = namespace.iceoryx_config()?;
-        let name = NodeName::new(&agent_node_name(robot, std::process::id()))
+        let pid = std::process::id();
+        let name = NodeName::new(&agent_node_name(robot, pid))
             .map_err(|e| iox("name the agent node")(&e))?;
         let node = NodeBuilder::new()
             .name(&name)
@@ -129,62 +164,183 @@ impl IceoryxAgentLink {
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<ipc::Service>()
             .map_err(|e| iox("create the agent node")(&e))?;
+        // iceoryx2 makes its node-management segment world-writable (this agent may be the first
+        // process of the run to create it): close it at once.
+        namespace.restrict_permissions()?;
         let started = Instant::now();
         let deadline = started + timeout;
-        loop {
-            match try_open(&node, namespace, robot) {
-                Ok(ports) => {
-                    let waitset = WaitSetBuilder::new()
-                        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-                        .create::<ipc::Service>()
-                        .map_err(|e| iox("create the agent's wait set")(&e))?;
-                    let (
-                        scan,
-                        scan_wake,
-                        control,
-                        control_wake,
-                        cmd,
-                        cmd_wake,
-                        status,
-                        status_wake,
-                    ) = ports;
-                    return Ok(IceoryxAgentLink {
-                        node,
-                        scan,
-                        scan_wake,
-                        control,
-                        control_wake,
-                        cmd,
-                        cmd_wake,
-                        status,
-                        status_wake,
-                        waitset,
-                    });
-                }
-                Err(OpenFailure::NotYet) if Instant::now() < deadline => {}
-                Err(OpenFailure::Taken { port, detail }) if Instant::now() < deadline => {
-                    // Maybe a dead predecessor still holds it: clean up and retry.
-                    let _ = node.try_cleanup_dead_nodes();
-                    tracing::debug!("robot {robot}: {port} port busy ({detail}); retrying");
-                }
-                Err(OpenFailure::NotYet) => {
-                    return Err(TransportError::WorldNotFound {
+        let not_found = || TransportError::WorldNotFound {
+            robot,
+            run: namespace.run().to_string(),
+            waited_s: started.elapsed().as_secs_f64(),
+        };
+        let lobby = loop {
+            match open_lobby(&node, namespace, robot) {
+                Ok(lobby) => break lobby,
+                Err(OpenFailure::Fatal(e)) => return Err(e),
+                Err(_) if Instant::now() >= deadline => return Err(not_found()),
+                Err(_) => std::thread::sleep(RETRY_PERIOD),
+            }
+        };
+        // A squatter may race us to the new services; a fresh greeting gets fresh ones.
+        const ATTEMPTS: usize = 3;
+        let mut last_taken = None;
+        for _ in 0..ATTEMPTS {
+            let nonce = fresh_nonce()?;
+            let hello = HelloMsg {
+                pid,
+                reserved: 0,
+                nonce,
+                proof: secret.prove(namespace.run(), robot, pid, nonce),
+            };
+            lobby
+                .hello
+                .send_copy(hello)
+                .map_err(|e| iox("send the greeting")(&e))?;
+            let _ = lobby.hello_wake.notify();
+            match await_welcome(&lobby, nonce, deadline)? {
+                None => {
+                    return Err(TransportError::NoWelcome {
                         robot,
                         run: namespace.run().to_string(),
                         waited_s: started.elapsed().as_secs_f64(),
                     });
                 }
-                Err(OpenFailure::Taken { port, detail }) => {
-                    return Err(TransportError::PortTaken {
-                        robot,
-                        port,
-                        detail,
-                    });
+                Some(Welcome::Refused(reason)) => {
+                    return Err(TransportError::Refused { robot, reason });
                 }
-                Err(OpenFailure::Fatal(e)) => return Err(e),
+                Some(Welcome::Accepted) => {}
             }
-            std::thread::sleep(RETRY_PERIOD);
+            match try_open(&node, namespace, robot, nonce) {
+                Ok(ports) => return IceoryxAgentLink::from_ports(node, ports),
+                Err(OpenFailure::Fatal(e)) => return Err(e),
+                Err(OpenFailure::NotYet) => return Err(not_found()),
+                Err(OpenFailure::Taken { port, detail }) => {
+                    tracing::warn!(
+                        "robot {robot}: another process took this agent's new {port} port; \
+                         greeting again"
+                    );
+                    last_taken = Some((port, detail));
+                }
+            }
         }
+        let (port, detail) = last_taken.unwrap_or(("scan", String::new()));
+        Err(TransportError::PortTaken {
+            robot,
+            port,
+            detail,
+        })
+    }
+
+    fn from_ports(node: Node<ipc::Service>, ports: Ports) -> Result<Self, TransportError> {
+        let waitset = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<ipc::Service>()
+            .map_err(|e| iox("create the agent's wait set")(&e))?;
+        let (scan, scan_wake, control, control_wake, cmd, cmd_wake, status, status_wake) = ports;
+        Ok(IceoryxAgentLink {
+            node,
+            scan,
+            scan_wake,
+            control,
+            control_wake,
+            cmd,
+            cmd_wake,
+            status,
+            status_wake,
+            waitset,
+        })
+    }
+}
+
+/// The candidate's ends of a robot's lobby.
+struct Lobby {
+    hello: Publisher<ipc::Service, HelloMsg, ()>,
+    hello_wake: Notifier<ipc::Service>,
+    welcome: Subscriber<ipc::Service, WelcomeMsg, ()>,
+}
+
+fn open_lobby(
+    node: &Node<ipc::Service>,
+    namespace: &RunNamespace,
+    robot: usize,
+) -> Result<Lobby, OpenFailure> {
+    let service = |channel| {
+        let text = lobby_service_name(namespace.run(), robot, channel);
+        ServiceName::new(&text)
+            .map_err(|e| OpenFailure::Fatal(iox(format!("name service {text}"))(&e)))
+    };
+    let hello_limits = ServiceLimits::HELLO;
+    let welcome_limits = ServiceLimits::WELCOME;
+    let busy = |port: &'static str| {
+        move |e: &dyn std::fmt::Debug| OpenFailure::Taken {
+            port,
+            detail: format!("{e:?}"),
+        }
+    };
+    // The subscriber exists before the greeting goes out, so the answer cannot be missed.
+    let welcome = node
+        .service_builder(&service(LobbyChannel::Welcome)?)
+        .publish_subscribe::<WelcomeMsg>()
+        .max_publishers(welcome_limits.max_publishers)
+        .max_subscribers(welcome_limits.max_subscribers)
+        .subscriber_max_buffer_size(welcome_limits.subscriber_buffer)
+        .open()
+        .map_err(|_| OpenFailure::NotYet)?
+        .subscriber_builder()
+        .buffer_size(welcome_limits.subscriber_buffer)
+        .create()
+        .map_err(|e| busy("welcome")(&e))?;
+    let hello_service = service(LobbyChannel::Hello)?;
+    let hello = node
+        .service_builder(&hello_service)
+        .publish_subscribe::<HelloMsg>()
+        .max_publishers(hello_limits.max_publishers)
+        .max_subscribers(hello_limits.max_subscribers)
+        .subscriber_max_buffer_size(hello_limits.subscriber_buffer)
+        .open()
+        .map_err(|_| OpenFailure::NotYet)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| busy("hello")(&e))?;
+    let hello_wake = node
+        .service_builder(&hello_service)
+        .event()
+        .max_notifiers(hello_limits.max_publishers)
+        .max_listeners(hello_limits.max_subscribers)
+        .open()
+        .map_err(|_| OpenFailure::NotYet)?
+        .notifier_builder()
+        .create()
+        .map_err(|e| busy("hello event")(&e))?;
+    Ok(Lobby {
+        hello,
+        hello_wake,
+        welcome,
+    })
+}
+
+/// Polls the welcome service for the answer to `nonce` until `deadline`.
+fn await_welcome(
+    lobby: &Lobby,
+    nonce: u64,
+    deadline: Instant,
+) -> Result<Option<Welcome>, TransportError> {
+    const POLL: Duration = Duration::from_millis(2);
+    loop {
+        while let Some(sample) = lobby
+            .welcome
+            .receive()
+            .map_err(|e| iox("receive the world's answer")(&e))?
+        {
+            if sample.payload().nonce == nonce {
+                return Ok(Some(sample.payload().decode()?));
+            }
+        }
+        if Instant::now() >= deadline {
+            return Ok(None);
+        }
+        std::thread::sleep(POLL);
     }
 }
 
@@ -214,10 +370,11 @@ fn try_open(
     node: &Node<ipc::Service>,
     namespace: &RunNamespace,
     robot: usize,
+    incarnation: u64,
 ) -> Result<Ports, OpenFailure> {
     let limits = ServiceLimits::ROBOT;
     let name = |channel| {
-        let text = robot_service_name(namespace.run(), robot, channel);
+        let text = robot_service_name(namespace.run(), robot, incarnation, channel);
         ServiceName::new(&text)
             .map_err(|e| OpenFailure::Fatal(iox(format!("name service {text}"))(&e)))
     };
@@ -312,7 +469,10 @@ impl AgentLink for IceoryxAgentLink {
         let _ = self.scan_wake.try_wait(|_| {});
         let _ = self.control_wake.try_wait(|_| {});
         Ok(match result {
-            WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => Wake::Terminated,
+            WaitSetRunResult::TerminationRequest => Wake::Terminated,
+            // An interrupted wait (EINTR: SIGCONT after a stop, SIGUSR1, SIGURG, ...) is not a
+            // termination: look again.
+            WaitSetRunResult::Interrupt => Wake::Activity,
             _ if activity => Wake::Activity,
             _ => Wake::Idle,
         })

@@ -14,15 +14,16 @@ use std::time::{Duration, Instant};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use formation_proto::auth::LaunchSecret;
 use formation_proto::wire::{
-    AgentStatus, CmdMsg, CmdStatus, ControlRequest, RobotTiming, ScanMsg, SwapOutcome, SwapReply,
-    SwapRequest, TickOutcome, wall_clock_ns,
+    AgentStatus, CmdMsg, CmdStatus, ControlRequest, RobotTiming, RunId, ScanMsg, SwapOutcome,
+    SwapReply, SwapRequest, TickOutcome, Welcome, wall_clock_ns,
 };
 use formation_proto::{LidarSpec, WheelCmd};
 use formation_world::episode::{Controller, ControllerError, Observation};
 
 use crate::runlog::emit;
-use crate::transport::{TransportError, WorldLink};
+use crate::transport::{Hello, TransportError, WorldLink};
 use formation_proto::wire::WorldEvent;
 
 /// How the world paces ticks.
@@ -63,7 +64,19 @@ pub struct ExchangeSettings {
     pub liveness_period: Duration,
     /// Set from outside (the launcher went away) to stop at the next wake-up.
     pub stop: Arc<AtomicBool>,
+    /// The run id, part of what an agent's proof covers.
+    pub run: RunId,
+    /// The launch secret every agent must prove.
+    pub secret: LaunchSecret,
 }
+
+/// How long an accepted agent may take to open its incarnation's services and say hello before
+/// another candidate may take its place.
+const ADMISSION_WINDOW: Duration = Duration::from_secs(10);
+
+/// Realtime: when a tick starts this many periods late (the world was stopped, e.g. SIGSTOP then
+/// SIGCONT), the 20 Hz schedule starts afresh from now instead of rushing through missed ticks.
+const PAUSE_TICKS: u32 = 4;
 
 /// Longest single wait, so a stop request is seen promptly.
 const MAX_WAIT: Duration = Duration::from_millis(250);
@@ -153,6 +166,17 @@ pub struct AgentsController<'l> {
     rejoining: Vec<Option<u32>>,
     /// Per robot: the pid of the agent that last said hello.
     agent_pids: Vec<Option<u32>>,
+    /// Per robot: an agent whose proof was accepted and that has not said hello yet, and when.
+    admitted: Vec<Option<(u32, Instant)>>,
+    /// Every nonce seen in a hello: a nonce is good for one greeting only.
+    used_nonces: std::collections::HashSet<u64>,
+    /// Per robot: the last tick of this episode whose command was applied.
+    last_fresh_tick: Vec<Option<u64>>,
+    /// Realtime: how far the schedule was moved on after pauses.
+    schedule_shift: Duration,
+    /// Lockstep, per robot: its agent was just lost, so the current tick waits (up to the command
+    /// timeout) for a restarted agent to be ready before moving on without it.
+    rejoin_grace: Vec<bool>,
     /// The last tick published.
     tick: u64,
     /// Per tick of this episode: when it began (published its scans), since the first tick
@@ -191,6 +215,11 @@ impl<'l> AgentsController<'l> {
             pending_swaps: Vec::new(),
             rejoining: vec![None; n],
             agent_pids: vec![None; n],
+            admitted: vec![None; n],
+            used_nonces: std::collections::HashSet::new(),
+            last_fresh_tick: vec![None; n],
+            schedule_shift: Duration::ZERO,
+            rejoin_grace: vec![false; n],
             tick_start_ns: Vec::new(),
             tick: 0,
         }
@@ -225,6 +254,8 @@ impl<'l> AgentsController<'l> {
         self.lidar = lidar;
         self.dt = Duration::from_secs_f64(dt);
         self.schedule_start = None;
+        self.schedule_shift = Duration::ZERO;
+        self.last_fresh_tick.fill(None);
         self.newest.fill(None);
         self.tick_start_ns.clear();
         self.tick = 0;
@@ -325,6 +356,13 @@ impl<'l> AgentsController<'l> {
             ));
         }
         for robot in 0..self.states.len() {
+            let mut hellos = Vec::new();
+            self.link
+                .drain_hellos(robot, &mut |h| hellos.push(h))
+                .map_err(transport_error)?;
+            for hello in hellos {
+                self.on_hello(robot, hello)?;
+            }
             let mut statuses = Vec::new();
             self.link
                 .drain_statuses(robot, &mut |s| statuses.push(s))
@@ -363,24 +401,108 @@ impl<'l> AgentsController<'l> {
             self.on_swap_request(request)?;
         }
         if self.last_liveness_check.elapsed() >= self.settings.liveness_period {
-            self.last_liveness_check = Instant::now();
-            for (robot, pid) in self.link.dead_agents().map_err(transport_error)? {
-                if self.agent_pids[robot].is_some_and(|current| current != pid) {
-                    // A dead predecessor; its successor already said hello.
-                    continue;
+            self.check_liveness()?;
+        }
+        Ok(())
+    }
+
+    /// Asks the transport which agents died, and lets their robots go.
+    fn check_liveness(&mut self) -> Result<(), ControllerError> {
+        self.last_liveness_check = Instant::now();
+        for (robot, pid) in self.link.dead_agents().map_err(transport_error)? {
+            self.agent_gone(robot, pid)?;
+        }
+        Ok(())
+    }
+
+    /// Agent process `pid` of `robot` is gone: if it was the robot's agent (or the one just
+    /// admitted), the robot brakes until another agent is accepted.
+    fn agent_gone(&mut self, robot: usize, pid: u32) -> Result<(), ControllerError> {
+        if self.admitted[robot].is_some_and(|(admitted, _)| admitted == pid) {
+            // Accepted, then gone before it said hello.
+            self.admitted[robot] = None;
+            self.link.close_incarnation(robot);
+            return Ok(());
+        }
+        if self.agent_pids[robot] != Some(pid) {
+            // A dead predecessor (its successor already said hello), or a process that never
+            // drove this robot.
+            return Ok(());
+        }
+        if self.states[robot] != AgentState::Absent {
+            tracing::warn!("robot {robot}'s agent died; braking it until an agent rejoins");
+            self.states[robot] = AgentState::Absent;
+            self.rejoin_grace[robot] =
+                self.settings.clock == ClockMode::Lockstep && self.generation > 0;
+            emit(&WorldEvent::AgentLost {
+                robot,
+                tick: self.tick,
+                last_fresh_tick: self.last_fresh_tick[robot],
+            });
+        }
+        self.link.close_incarnation(robot);
+        self.fail_pending_swaps(robot, "its agent died before answering")
+    }
+
+    /// A candidate asked to drive `robot`: accept it (create its incarnation's services) when it
+    /// proved the launch secret with a fresh nonce and the robot has no agent, else refuse it
+    /// with the reason, which the launcher prints with the candidate's pid.
+    fn on_hello(&mut self, robot: usize, hello: Hello) -> Result<(), ControllerError> {
+        let mut current = self.current_agent(robot);
+        if let Some(pid) = current
+            && !self.link.agent_alive(robot, pid).map_err(transport_error)?
+        {
+            // A restarted agent can greet before the world noticed its predecessor's death
+            // (the new agent's own start may even have cleaned the dead one up already).
+            self.agent_gone(robot, pid)?;
+            current = self.current_agent(robot);
+        }
+        let verdict = admit(
+            &self.settings.secret,
+            &self.settings.run,
+            robot,
+            &hello,
+            &mut self.used_nonces,
+            current,
+        );
+        match verdict {
+            Ok(()) => {
+                tracing::info!("robot {robot}: admitting agent pid {}", hello.pid);
+                self.link
+                    .open_incarnation(robot, hello.nonce)
+                    .map_err(transport_error)?;
+                self.admitted[robot] = Some((hello.pid, Instant::now()));
+                self.link
+                    .answer_hello(robot, hello.nonce, &Welcome::Accepted)
+                    .map_err(transport_error)?;
+            }
+            Err(reason) => {
+                tracing::warn!("robot {robot}: refused pid {}: {reason}", hello.pid);
+                if let Err(e) =
+                    self.link
+                        .answer_hello(robot, hello.nonce, &Welcome::Refused(reason.clone()))
+                {
+                    tracing::warn!("could not answer a refused hello: {e}");
                 }
-                if self.states[robot] != AgentState::Absent {
-                    tracing::warn!("robot {robot}'s agent died; braking it until an agent rejoins");
-                    self.states[robot] = AgentState::Absent;
-                    emit(&WorldEvent::AgentLost {
-                        robot,
-                        tick: self.tick,
-                    });
-                }
-                self.fail_pending_swaps(robot, "its agent died before answering")?;
+                emit(&WorldEvent::AgentRefused {
+                    robot,
+                    pid: hello.pid,
+                    reason,
+                });
             }
         }
         Ok(())
+    }
+
+    /// The pid of the agent that holds `robot` now: one that drives it, or one admitted a moment
+    /// ago that is still opening its services.
+    fn current_agent(&self, robot: usize) -> Option<u32> {
+        if self.states[robot] != AgentState::Absent {
+            return self.agent_pids[robot];
+        }
+        self.admitted[robot]
+            .filter(|(_, at)| at.elapsed() < ADMISSION_WINDOW)
+            .map(|(pid, _)| pid)
     }
 
     /// A user asked (through `formation swap`) for robot `request.robot` to change its model:
@@ -464,6 +586,7 @@ impl<'l> AgentsController<'l> {
         match status {
             AgentStatus::Hello { pid, model_id } => {
                 tracing::info!("robot {robot}: agent pid {pid} connected with model {model_id}");
+                self.admitted[robot] = None;
                 self.model_ids[robot] = model_id;
                 self.agent_pids[robot] = Some(pid);
                 self.states[robot] = AgentState::Connected;
@@ -506,11 +629,51 @@ impl<'l> AgentsController<'l> {
 
     fn all_answered(&self, tick: u64) -> bool {
         (0..self.states.len()).all(|i| {
+            if self.rejoin_grace[i] {
+                // Waited for until a restarted agent is ready (it cannot answer this tick's
+                // scan, published before it joined, but it answers the next one).
+                return self.states[i] == AgentState::Live;
+            }
             self.states[i] != AgentState::Live
                 || self.newest[i]
                     .is_some_and(|a| a.msg.generation == self.generation && a.msg.tick == tick)
         })
     }
+}
+
+/// Whether a candidate may drive `robot`: its nonce is fresh, its proof holds, and the robot has
+/// no agent (`current`). The error is the reason, phrased for the user.
+fn admit(
+    secret: &LaunchSecret,
+    run: &RunId,
+    robot: usize,
+    hello: &Hello,
+    used_nonces: &mut std::collections::HashSet<u64>,
+    current: Option<u32>,
+) -> Result<(), String> {
+    if !used_nonces.insert(hello.nonce) {
+        return Err(format!(
+            "process {} sent a greeting whose nonce was used before (a copied greeting); \
+             robot {robot} keeps its agent or keeps braking",
+            hello.pid
+        ));
+    }
+    if !secret.verify(run, robot, hello.pid, hello.nonce, &hello.proof) {
+        return Err(format!(
+            "process {} did not prove this launch's secret, so this launch did not start it; \
+             it may not drive robot {robot}, which keeps its agent or keeps braking (only \
+             `formation run` starts the agents of run {run})",
+            hello.pid
+        ));
+    }
+    if let Some(pid) = current {
+        return Err(format!(
+            "robot {robot} is already driven by agent pid {pid} of this launch; one agent per \
+             robot, so process {} is refused",
+            hello.pid
+        ));
+    }
+    Ok(())
 }
 
 fn transport_error(e: TransportError) -> ControllerError {
@@ -549,7 +712,22 @@ impl Controller for AgentsController<'_> {
         let deadline = match self.settings.clock {
             ClockMode::Lockstep => entered + self.settings.command_timeout.max(self.settings.pace),
             ClockMode::Realtime => {
-                schedule_start + self.dt * u32::try_from(obs.tick + 1).unwrap_or(u32::MAX)
+                let periods = |tick: u64| self.dt * u32::try_from(tick).unwrap_or(u32::MAX);
+                let due = schedule_start + self.schedule_shift + periods(obs.tick);
+                if entered > due + self.dt * PAUSE_TICKS {
+                    // The world did not run for a while (stopped and continued): start the
+                    // schedule afresh rather than rush through the ticks it missed.
+                    let late = entered - due;
+                    tracing::warn!(
+                        "tick {} started {:.2} s late (was the world stopped?); resuming the \
+                         {:.0} Hz schedule from now",
+                        obs.tick,
+                        late.as_secs_f64(),
+                        1.0 / self.dt.as_secs_f64()
+                    );
+                    self.schedule_shift += late;
+                }
+                schedule_start + self.schedule_shift + periods(obs.tick + 1)
             }
         };
         loop {
@@ -564,6 +742,7 @@ impl Controller for AgentsController<'_> {
             }
             self.wait(if answered { paced_until } else { deadline } - now)?;
         }
+        self.rejoin_grace.fill(false);
         let now = Instant::now();
         for (robot, slot) in out.iter_mut().enumerate() {
             let newest = self.newest[robot].as_ref();
@@ -593,6 +772,9 @@ impl Controller for AgentsController<'_> {
                 }
                 (AgentState::Lagging, TickOutcome::Fresh) => self.states[robot] = AgentState::Live,
                 _ => {}
+            }
+            if outcome == TickOutcome::Fresh {
+                self.last_fresh_tick[robot] = Some(obs.tick);
             }
             if outcome == TickOutcome::Fresh
                 && let Some(pid) = self.rejoining[robot].take()
@@ -702,6 +884,49 @@ mod tests {
         );
         // A scan too old to be remembered is stale.
         assert_eq!(choose(at(1), None).1, TickOutcome::Stale);
+    }
+
+    #[test]
+    fn only_a_fresh_proof_of_the_secret_for_a_free_robot_is_admitted() {
+        let secret = LaunchSecret::generate().unwrap();
+        let run = RunId::new("r").unwrap();
+        let mut used = std::collections::HashSet::new();
+        let hello = |pid, nonce, secret: &LaunchSecret| Hello {
+            pid,
+            nonce,
+            proof: secret.prove(&run, 1, pid, nonce),
+        };
+        assert_eq!(
+            admit(&secret, &run, 1, &hello(10, 1, &secret), &mut used, None),
+            Ok(())
+        );
+        let replay = admit(&secret, &run, 1, &hello(10, 1, &secret), &mut used, None);
+        assert!(replay.unwrap_err().contains("used before"));
+        let stranger = LaunchSecret::generate().unwrap();
+        let foreign = admit(&secret, &run, 1, &hello(11, 2, &stranger), &mut used, None);
+        let reason = foreign.unwrap_err();
+        assert!(
+            reason.contains("process 11") && reason.contains("secret"),
+            "{reason}"
+        );
+        let other_robot = admit(&secret, &run, 2, &hello(12, 3, &secret), &mut used, None);
+        assert!(
+            other_robot.is_err(),
+            "a proof for robot 1 does not open robot 2"
+        );
+        let taken = admit(
+            &secret,
+            &run,
+            1,
+            &hello(13, 4, &secret),
+            &mut used,
+            Some(10),
+        );
+        assert!(
+            taken
+                .unwrap_err()
+                .contains("already driven by agent pid 10")
+        );
     }
 
     #[test]

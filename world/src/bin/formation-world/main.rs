@@ -7,6 +7,9 @@
 //! run it writes the run logs ([`runlog`]) and prints a progress event on stdout. At the end, or on
 //! SIGINT/SIGTERM, or when the launcher closes its standard input, it asks the agents to exit.
 //!
+//! The first line of its standard input is the launch secret (see [`formation_proto::auth`]): only
+//! agents that prove it are let drive a robot.
+//!
 //! Usually started by `formation run` / `formation eval --processes`, not by hand.
 
 mod exchange;
@@ -22,6 +25,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::Parser;
+use formation_proto::auth::LaunchSecret;
 use formation_proto::wire::{RunId, RunNamespace};
 use formation_world::metrics::{MetricsConfig, run_metrics};
 use formation_world::{RunSpec, run_episode};
@@ -97,13 +101,23 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
     let n_robots = specs[0].n_robots;
     let lidar = specs[0].world.lidar;
 
+    let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
     let stop = Arc::new(AtomicBool::new(false));
     if args.exit_on_stdin_close {
         let stop = Arc::clone(&stop);
         std::thread::spawn(move || {
             let mut sink = [0u8; 256];
             let mut stdin = std::io::stdin();
-            while matches!(stdin.read(&mut sink), Ok(n) if n > 0) {}
+            // Only end of file (or a real error) means the launcher is gone: a read that a
+            // signal interrupted (EINTR) is simply retried.
+            loop {
+                match stdin.read(&mut sink) {
+                    Ok(0) => break,
+                    Ok(_) => {}
+                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                    Err(_) => break,
+                }
+            }
             stop.store(true, Ordering::Relaxed);
         });
     }
@@ -119,6 +133,8 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
         ready_timeout: Duration::from_millis(args.ready_timeout_ms),
         liveness_period: Duration::from_millis(100),
         stop,
+        run: run_id.clone(),
+        secret,
     };
     let mut agents = AgentsController::new(&mut link, settings, lidar);
     let result = play(args, &specs, &mut agents);

@@ -5,13 +5,20 @@
 //! (Zenoh, for agents on other hosts) can be added without touching it. The world watches command
 //! ages itself, so its watchdog does not depend on the transport's own liveness reports; those
 //! ([`WorldLink::dead_agents`]) only speed up noticing a crashed agent and clean up after it.
+//!
+//! Per robot the world holds a lobby (the hello and welcome services) from the start, and the
+//! four services of the robot's current *incarnation* only once the exchange has accepted an
+//! agent's proof of the launch secret ([`WorldLink::open_incarnation`]). Until then, and after
+//! the agent is gone ([`WorldLink::close_incarnation`]), publishing to the robot is a no-op and
+//! nothing arrives from it.
 
 use std::time::{Duration, Instant};
 
 use formation_proto::wire::{
-    AgentStatus, CmdMsg, ControlMsg, ControlRequest, RobotChannel, RunNamespace, ScanMsg,
-    ServiceLimits, StatusMsg, SwapChannel, SwapReply, SwapReplyMsg, SwapRequest, SwapRequestMsg,
-    WORLD_NODE_NAME, WireError, parse_agent_node_name, robot_service_name, swap_service_name,
+    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, NamespaceError,
+    RobotChannel, RunNamespace, ScanMsg, ServiceLimits, StatusMsg, SwapChannel, SwapReply,
+    SwapReplyMsg, SwapRequest, SwapRequestMsg, WORLD_NODE_NAME, Welcome, WelcomeMsg, WireError,
+    lobby_service_name, parse_agent_node_name, robot_service_name, swap_service_name,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
@@ -39,6 +46,9 @@ pub enum TransportError {
     /// SIGINT or SIGTERM arrived.
     #[error("stopped by a termination signal")]
     Terminated,
+    /// The run's files could not be made private.
+    #[error(transparent)]
+    Namespace(#[from] NamespaceError),
 }
 
 fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> TransportError {
@@ -49,10 +59,39 @@ fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> Transp
     }
 }
 
+/// An agent's request to drive a robot, as it arrived in the robot's lobby.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Hello {
+    /// The pid the candidate gave.
+    pub pid: u32,
+    /// Its nonce: names the incarnation if accepted.
+    pub nonce: u64,
+    /// Its proof of the launch secret.
+    pub proof: [u8; formation_proto::auth::PROOF_LEN],
+}
+
 /// What the world needs from a transport: per-robot channels to and from the agents.
 pub trait WorldLink {
     /// Number of robots the link serves.
     fn n_robots(&self) -> usize;
+    /// Hands every hello that candidates for robot `robot` sent since the last call to `sink`.
+    fn drain_hellos(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(Hello),
+    ) -> Result<(), TransportError>;
+    /// Answers the hello with `nonce` in robot `robot`'s lobby.
+    fn answer_hello(
+        &mut self,
+        robot: usize,
+        nonce: u64,
+        welcome: &Welcome,
+    ) -> Result<(), TransportError>;
+    /// Creates the services of robot `robot`'s new incarnation and takes the world's ends,
+    /// dropping those of the previous incarnation.
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), TransportError>;
+    /// Drops the world's ends of robot `robot`'s current incarnation (its agent is gone).
+    fn close_incarnation(&mut self, robot: usize);
     /// Publishes robot `robot`'s scan and wakes its agent.
     fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), TransportError>;
     /// Sends a control request to robot `robot`'s agent and wakes it.
@@ -75,6 +114,9 @@ pub trait WorldLink {
         robot: usize,
         sink: &mut dyn FnMut(AgentStatus),
     ) -> Result<(), TransportError>;
+    /// Whether agent process `pid` of robot `robot` is still alive, as far as the transport can
+    /// tell (a stopped process is alive).
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, TransportError>;
     /// `(robot, pid)` of agent processes the transport knows to be dead; cleans up after them so
     /// a restarted agent can take their place.
     fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, TransportError>;
@@ -99,6 +141,13 @@ struct RobotPorts {
     status_wake: Listener<ipc::Service>,
 }
 
+/// One robot's lobby on the world side.
+struct LobbyPorts {
+    hellos: Subscriber<ipc::Service, HelloMsg, ()>,
+    hello_wake: Listener<ipc::Service>,
+    welcome: Publisher<ipc::Service, WelcomeMsg, ()>,
+}
+
 /// The world's ends of the run's swap channel.
 struct SwapPorts {
     requests: Subscriber<ipc::Service, SwapRequestMsg, ()>,
@@ -107,16 +156,20 @@ struct SwapPorts {
     reply_wake: Notifier<ipc::Service>,
 }
 
-/// The world's iceoryx2 ports: it creates every robot service of the run and holds the world end.
+/// The world's iceoryx2 ports: it creates every service of the run and holds the world's ends.
 pub struct IceoryxWorldLink {
     node: Node<ipc::Service>,
-    robots: Vec<RobotPorts>,
+    namespace: RunNamespace,
+    lobbies: Vec<LobbyPorts>,
+    /// Per robot: its current incarnation's ports, if an agent was accepted and is not gone.
+    robots: Vec<Option<RobotPorts>>,
     swap: SwapPorts,
     waitset: WaitSet<ipc::Service>,
 }
 
 impl IceoryxWorldLink {
-    /// Creates the world's node and every robot's services in `namespace`.
+    /// Creates the world's node, every robot's lobby and the swap channel in `namespace`, and
+    /// makes the run's files private to this user.
     pub fn create(namespace: &RunNamespace, n_robots: usize) -> Result<Self, TransportError> {
         let config = namespace.iceoryx_config()?;
         let name = NodeName::new(WORLD_NODE_NAME).map_err(|e| iox("name the world node")(&e))?;
@@ -126,29 +179,42 @@ impl IceoryxWorldLink {
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<ipc::Service>()
             .map_err(|e| iox("create the world node")(&e))?;
-        let robots = (0..n_robots)
-            .map(|robot| create_robot_ports(&node, namespace, robot))
+        // iceoryx2 makes its node-management segment world-writable: close it at once.
+        namespace.restrict_permissions()?;
+        let lobbies = (0..n_robots)
+            .map(|robot| create_lobby_ports(&node, namespace, robot))
             .collect::<Result<Vec<_>, _>>()?;
         let swap = create_swap_ports(&node, namespace)?;
         let waitset = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<ipc::Service>()
             .map_err(|e| iox("create the world's wait set")(&e))?;
+        namespace.restrict_permissions()?;
         Ok(IceoryxWorldLink {
             node,
-            robots,
+            namespace: namespace.clone(),
+            lobbies,
+            robots: (0..n_robots).map(|_| None).collect(),
             swap,
             waitset,
         })
     }
 
-    fn ports(&self, robot: usize) -> Result<&RobotPorts, TransportError> {
-        self.robots
-            .get(robot)
-            .ok_or_else(|| TransportError::Iceoryx {
+    fn check_robot(&self, robot: usize) -> Result<(), TransportError> {
+        if robot < self.lobbies.len() {
+            Ok(())
+        } else {
+            Err(TransportError::Iceoryx {
                 action: format!("reach robot {robot}"),
-                detail: format!("the run has {} robots", self.robots.len()),
+                detail: format!("the run has {} robots", self.lobbies.len()),
             })
+        }
+    }
+
+    /// Robot `robot`'s current incarnation, if any.
+    fn ports(&self, robot: usize) -> Result<Option<&RobotPorts>, TransportError> {
+        self.check_robot(robot)?;
+        Ok(self.robots[robot].as_ref())
     }
 }
 
@@ -192,13 +258,40 @@ fn event_service(
         .map_err(|e| iox(format!("create event service {name}"))(&e))
 }
 
+fn create_lobby_ports(
+    node: &Node<ipc::Service>,
+    namespace: &RunNamespace,
+    robot: usize,
+) -> Result<LobbyPorts, TransportError> {
+    let hello_name = lobby_service_name(namespace.run(), robot, LobbyChannel::Hello);
+    let welcome_name = lobby_service_name(namespace.run(), robot, LobbyChannel::Welcome);
+    let what = |port: &str| format!("create the world's {port} port of robot {robot}");
+    let hello_limits = ServiceLimits::HELLO;
+    Ok(LobbyPorts {
+        hellos: pubsub_service::<HelloMsg>(node, &hello_name, hello_limits)?
+            .subscriber_builder()
+            .buffer_size(hello_limits.subscriber_buffer)
+            .create()
+            .map_err(|e| iox(what("hello"))(&e))?,
+        hello_wake: event_service(node, &hello_name, hello_limits)?
+            .listener_builder()
+            .create()
+            .map_err(|e| iox(what("hello event"))(&e))?,
+        welcome: pubsub_service::<WelcomeMsg>(node, &welcome_name, ServiceLimits::WELCOME)?
+            .publisher_builder()
+            .create()
+            .map_err(|e| iox(what("welcome"))(&e))?,
+    })
+}
+
 fn create_robot_ports(
     node: &Node<ipc::Service>,
     namespace: &RunNamespace,
     robot: usize,
+    incarnation: u64,
 ) -> Result<RobotPorts, TransportError> {
     let limits = ServiceLimits::ROBOT;
-    let name = |channel| robot_service_name(namespace.run(), robot, channel);
+    let name = |channel| robot_service_name(namespace.run(), robot, incarnation, channel);
     let event = |channel| event_service(node, &name(channel), limits);
     macro_rules! pubsub_service {
         ($payload:ty, $channel:expr) => {
@@ -285,11 +378,63 @@ fn create_swap_ports(
 
 impl WorldLink for IceoryxWorldLink {
     fn n_robots(&self) -> usize {
-        self.robots.len()
+        self.lobbies.len()
+    }
+
+    fn drain_hellos(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(Hello),
+    ) -> Result<(), TransportError> {
+        self.check_robot(robot)?;
+        while let Some(sample) = self.lobbies[robot]
+            .hellos
+            .receive()
+            .map_err(|e| iox(format!("receive a hello for robot {robot}"))(&e))?
+        {
+            let msg = sample.payload();
+            sink(Hello {
+                pid: msg.pid,
+                nonce: msg.nonce,
+                proof: msg.proof,
+            });
+        }
+        Ok(())
+    }
+
+    fn answer_hello(
+        &mut self,
+        robot: usize,
+        nonce: u64,
+        welcome: &Welcome,
+    ) -> Result<(), TransportError> {
+        self.check_robot(robot)?;
+        self.lobbies[robot]
+            .welcome
+            .send_copy(WelcomeMsg::encode(nonce, welcome))
+            .map_err(|e| iox(format!("answer a hello for robot {robot}"))(&e))?;
+        Ok(())
+    }
+
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), TransportError> {
+        self.check_robot(robot)?;
+        self.robots[robot] = None;
+        let ports = create_robot_ports(&self.node, &self.namespace, robot, incarnation)?;
+        self.robots[robot] = Some(ports);
+        self.namespace.restrict_permissions()?;
+        Ok(())
+    }
+
+    fn close_incarnation(&mut self, robot: usize) {
+        if let Some(slot) = self.robots.get_mut(robot) {
+            *slot = None;
+        }
     }
 
     fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), TransportError> {
-        let ports = self.ports(robot)?;
+        let Some(ports) = self.ports(robot)? else {
+            return Ok(());
+        };
         ports
             .scan
             .send_copy(*msg)
@@ -305,7 +450,9 @@ impl WorldLink for IceoryxWorldLink {
         request: &ControlRequest,
     ) -> Result<(), TransportError> {
         let msg = ControlMsg::encode(request)?;
-        let ports = self.ports(robot)?;
+        let Some(ports) = self.ports(robot)? else {
+            return Ok(());
+        };
         ports
             .control
             .send_copy(msg)
@@ -316,13 +463,20 @@ impl WorldLink for IceoryxWorldLink {
 
     fn wait(&mut self, timeout: Duration) -> Result<(), TransportError> {
         let waitset = &self.waitset;
-        let mut guards = Vec::with_capacity(2 * self.robots.len() + 1);
+        let mut guards = Vec::with_capacity(3 * self.lobbies.len() + 1);
         guards.push(
             waitset
                 .attach_notification(&self.swap.request_wake)
                 .map_err(|e| iox("attach the swap wake-up to the wait set")(&e))?,
         );
-        for ports in &self.robots {
+        for lobby in &self.lobbies {
+            guards.push(
+                waitset
+                    .attach_notification(&lobby.hello_wake)
+                    .map_err(|e| iox("attach a lobby's wake-up to the wait set")(&e))?,
+            );
+        }
+        for ports in self.robots.iter().flatten() {
             for listener in [&ports.cmd_wake, &ports.status_wake] {
                 guards.push(
                     waitset
@@ -336,15 +490,18 @@ impl WorldLink for IceoryxWorldLink {
             .map_err(|e| iox("wait for the agents")(&e))?;
         drop(guards);
         let _ = self.swap.request_wake.try_wait(|_| {});
-        for ports in &self.robots {
+        for lobby in &self.lobbies {
+            let _ = lobby.hello_wake.try_wait(|_| {});
+        }
+        for ports in self.robots.iter().flatten() {
             // Consume the wake-ups; the samples themselves are drained by the caller.
             let _ = ports.cmd_wake.try_wait(|_| {});
             let _ = ports.status_wake.try_wait(|_| {});
         }
         match result {
-            WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => {
-                Err(TransportError::Terminated)
-            }
+            WaitSetRunResult::TerminationRequest => Err(TransportError::Terminated),
+            // An interrupted wait (EINTR: SIGCONT after a stop, SIGUSR1, SIGURG, ...) is not a
+            // termination; the caller simply looks again.
             _ => Ok(()),
         }
     }
@@ -354,7 +511,9 @@ impl WorldLink for IceoryxWorldLink {
         robot: usize,
         sink: &mut dyn FnMut(CmdMsg, Instant),
     ) -> Result<(), TransportError> {
-        let ports = self.ports(robot)?;
+        let Some(ports) = self.ports(robot)? else {
+            return Ok(());
+        };
         while let Some(sample) = ports
             .cmd
             .receive()
@@ -370,7 +529,9 @@ impl WorldLink for IceoryxWorldLink {
         robot: usize,
         sink: &mut dyn FnMut(AgentStatus),
     ) -> Result<(), TransportError> {
-        let ports = self.ports(robot)?;
+        let Some(ports) = self.ports(robot)? else {
+            return Ok(());
+        };
         while let Some(sample) = ports
             .status
             .receive()
@@ -384,8 +545,27 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, TransportError> {
+        let wanted = formation_proto::wire::agent_node_name(robot, pid);
+        let mut alive = false;
+        Node::<ipc::Service>::list(self.node.config(), |state| {
+            if let NodeState::Alive(view) = &state
+                && view
+                    .details()
+                    .as_ref()
+                    .is_some_and(|d| d.name().as_str() == wanted)
+            {
+                alive = true;
+                return CallbackProgression::Stop;
+            }
+            CallbackProgression::Continue
+        })
+        .map_err(|e| iox("list the run's nodes")(&e))?;
+        Ok(alive)
+    }
+
     fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, TransportError> {
-        let n_robots = self.robots.len();
+        let n_robots = self.lobbies.len();
         let mut dead = Vec::new();
         Node::<ipc::Service>::list(self.node.config(), |state| {
             if let NodeState::Dead(view) = &state
@@ -404,7 +584,7 @@ impl WorldLink for IceoryxWorldLink {
                 "agents of robots {dead:?} died; cleaned up {} dead node(s)",
                 cleaned.cleanups
             );
-            for ports in &self.robots {
+            for ports in self.robots.iter().flatten() {
                 let _ = ports.scan.update_connections();
                 let _ = ports.control.update_connections();
                 let _ = ports.cmd.update_connections();
