@@ -538,13 +538,18 @@ impl RunNamespace {
         Ok(base)
     }
 
+    /// The lock file a launch holds while it uses this run id.
+    pub fn lock_path(&self) -> PathBuf {
+        self.base_dir().join(format!("{}.lock", self.run))
+    }
+
     /// Claims the run id for this process, atomically: of two launches that try at the same
     /// instant exactly one gets the lock, and the other gets [`NamespaceError::InUse`] without
     /// having touched anything of the winner's.
     pub fn lock(&self) -> Result<RunLock, NamespaceError> {
         use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
-        let base = self.private_base()?;
-        let path = base.join(format!("{}.lock", self.run));
+        self.private_base()?;
+        let path = self.lock_path();
         for _ in 0..8 {
             let file = std::fs::OpenOptions::new()
                 .read(true)
@@ -1591,6 +1596,10 @@ pub struct RobotTiming {
     pub inference_ns: Vec<u64>,
     /// Per tick: command published by the agent → taken by the world (system clock of both).
     pub downlink_ns: Vec<u64>,
+    /// Per tick: how many ticks older than this one the scan was that the used command answered
+    /// (0 in lockstep; realtime uses a command while its scan is within the stale window).
+    #[serde(default)]
+    pub lag_ticks: Vec<u32>,
 }
 
 impl RobotTiming {
@@ -1605,6 +1614,10 @@ impl RobotTiming {
         cmd_taken_wall_ns: u64,
     ) {
         self.outcome.push(outcome);
+        let tick = self.outcome.len() as u64 - 1;
+        self.lag_ticks.push(used.map_or(0, |msg| {
+            u32::try_from(tick.saturating_sub(msg.tick)).unwrap_or(u32::MAX)
+        }));
         let Some(msg) = used else {
             self.model.push(-1);
             self.round_trip_ns.push(0);

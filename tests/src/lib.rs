@@ -98,9 +98,13 @@ impl LeakCheck {
         self.namespace.leftovers()
     }
 
-    /// Panics listing the run's files if any exist.
+    /// Panics listing the run's files if any exist (its lock file included).
     pub fn assert_clean(&self) {
-        let left = self.leftovers();
+        let mut left = self.leftovers();
+        let lock = self.namespace.lock_path();
+        if lock.exists() {
+            left.push(lock);
+        }
         assert!(
             left.is_empty(),
             "run {} left files behind: {left:#?}",

@@ -294,6 +294,7 @@ mod tests {
             occupancy_ns: vec![10, 0, 20],
             inference_ns: vec![30, 0, 40],
             downlink_ns: vec![100, 0, 200],
+            lag_ticks: vec![0, 0, 0],
         };
         let run = RunTiming {
             clock: "realtime".into(),

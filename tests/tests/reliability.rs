@@ -1,0 +1,492 @@
+//! The runtime against a hostile user and a hostile local process (the reliability issue):
+//! harmless signals, stopped and continued processes, a process that was not started by the
+//! launch, two launches with one run id, a dead launch's leftovers, private shared memory, an
+//! agent that exits on its own, a robot that loses its agent for good, and a 100-kill realtime
+//! drill. Every test runs real `formation`, `formation-world` and `formation-agent` processes.
+
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use formation_proto::wire::{RunId, RunNamespace};
+use formation_tests::{
+    LaunchSecret, LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, binaries,
+    case1_scenario, incarnations, run, test_model, unique_run_id, world_pid,
+};
+use rand::{Rng, SeedableRng};
+
+/// The watchdog limit of each test: generous, it only stops a hung test.
+const LIMIT: Duration = Duration::from_secs(400);
+
+/// These tests time real processes against the wall clock: one at a time.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn exclusive() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+fn run_command(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> Command {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["run", "--run-id", run_id.as_str()])
+        .args(extra)
+        .arg("--scenario")
+        .arg(case1_scenario(dir.path(), duration_s))
+        .arg("--model")
+        .arg(test_model())
+        .arg("--out")
+        .arg(dir.path().join("out"));
+    command
+}
+
+fn launch(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> LiveProcess {
+    LiveProcess::spawn(run_command(run_id, dir, duration_s, extra))
+}
+
+fn signal(pid: u32, name: &str) {
+    let status = Command::new("kill")
+        .args([&format!("-{name}"), &pid.to_string()])
+        .status()
+        .expect("running kill");
+    assert!(status.success(), "kill -{name} {pid}");
+}
+
+fn the_agent(run_id: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
+    let pids = agent_pids(run_id, robot);
+    assert_eq!(
+        pids.len(),
+        1,
+        "one agent of robot {robot}: {pids:?}\n{}",
+        launch.describe()
+    );
+    pids[0]
+}
+
+fn alive(pid: u32) -> bool {
+    std::path::Path::new(&format!("/proc/{pid}")).exists()
+}
+
+fn connected(launch: &mut LiveProcess) {
+    let line = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("agents connected"));
+    assert!(line.is_some(), "{}", launch.describe());
+}
+
+/// SIGCONT, SIGUSR1 and SIGURG to an agent interrupt its wait and nothing else: the same process
+/// keeps driving, nobody restarts it, the run succeeds.
+#[test]
+fn harmless_signals_to_an_agent_do_not_end_it() {
+    let _watchdog = Watchdog::arm("harmless_signals", LIMIT);
+    let _one = exclusive();
+    let dir = TempDir::new("sig");
+    let run_id = unique_run_id("sig");
+    let leaks = LeakCheck::new(&run_id);
+    let mut launch = launch(&run_id, &dir, 8.0, &["--clock", "realtime"]);
+    connected(&mut launch);
+    std::thread::sleep(Duration::from_millis(1500));
+    let agent = the_agent(&run_id, 1, &mut launch);
+    for name in ["CONT", "USR1", "URG", "CONT", "USR1"] {
+        signal(agent, name);
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert!(alive(agent), "robot 1's agent died of a harmless signal");
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    assert!(
+        finished.stdout().contains("0 agent restart(s)"),
+        "{}",
+        finished.describe()
+    );
+    assert!(
+        !finished.stderr().contains("termination signal"),
+        "{}",
+        finished.describe()
+    );
+    let out = dir.path().join("out");
+    let robot1 = RobotLog::read(&out, 1).outcomes;
+    let fresh = robot1.iter().filter(|o| *o == "fresh").count();
+    assert!(
+        fresh * 10 >= robot1.len() * 9,
+        "robot 1 drove only {fresh} of {} ticks: {robot1:?}",
+        robot1.len()
+    );
+    leaks.assert_clean();
+}
+
+/// SIGSTOP then SIGCONT of the world, and of an agent: both are survived. The stopped agent's robot
+/// brakes while it is stopped and drives again afterwards; nothing is restarted.
+#[test]
+fn stopped_and_continued_processes_are_survived() {
+    let _watchdog = Watchdog::arm("stop_continue", LIMIT);
+    let _one = exclusive();
+    let dir = TempDir::new("stop");
+    let run_id = unique_run_id("stop");
+    let leaks = LeakCheck::new(&run_id);
+    let mut launch = launch(&run_id, &dir, 12.0, &["--clock", "realtime"]);
+    connected(&mut launch);
+    std::thread::sleep(Duration::from_millis(1000));
+    let world = world_pid(&run_id).expect("the world's pid");
+    signal(world, "STOP");
+    std::thread::sleep(Duration::from_millis(1000));
+    signal(world, "CONT");
+    std::thread::sleep(Duration::from_millis(1000));
+    let agent = the_agent(&run_id, 2, &mut launch);
+    signal(agent, "STOP");
+    std::thread::sleep(Duration::from_millis(1000));
+    signal(agent, "CONT");
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    assert!(
+        finished.stdout().contains("0 agent restart(s)"),
+        "{}",
+        finished.describe()
+    );
+    let log = RobotLog::read(&dir.path().join("out"), 2);
+    let robot2 = &log.outcomes;
+    let braked = robot2.iter().filter(|o| *o != "fresh").count();
+    assert!(
+        braked >= 10,
+        "robot 2 should brake while its agent is stopped (1 s = 20 ticks): {robot2:?}"
+    );
+    for (k, outcome) in robot2.iter().enumerate() {
+        if outcome != "fresh" {
+            assert_eq!(log.commands[k], (0.0, 0.0), "tick {k} was braked");
+        }
+    }
+    assert!(
+        robot2.iter().rev().take(20).all(|o| o == "fresh"),
+        "robot 2 drives again after SIGCONT: {robot2:?}"
+    );
+    leaks.assert_clean();
+}
+
+/// An agent that exits on its own mid-run (here SIGTERM, exit code 130) is restarted and rejoins.
+#[test]
+fn an_agent_that_exits_mid_run_is_restarted() {
+    let _watchdog = Watchdog::arm("exit_restart", LIMIT);
+    let _one = exclusive();
+    let dir = TempDir::new("term");
+    let run_id = unique_run_id("term");
+    let leaks = LeakCheck::new(&run_id);
+    let mut launch = launch(&run_id, &dir, 8.0, &["--clock", "realtime"]);
+    connected(&mut launch);
+    std::thread::sleep(Duration::from_millis(1000));
+    let old = the_agent(&run_id, 0, &mut launch);
+    signal(old, "TERM");
+    let rejoined = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.starts_with("robot 0: agent pid") && l.contains("rejoined")
+    });
+    assert!(rejoined.is_some(), "{}", launch.describe());
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    assert!(
+        finished.stdout().contains("1 agent restart(s)"),
+        "{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+}
+
+/// A robot whose agent died and had not come back when its run ended: `formation run` fails and
+/// its summary counts the braked ticks of that robot.
+#[test]
+fn a_robot_that_lost_its_agent_for_good_fails_the_run() {
+    let _watchdog = Watchdog::arm("lost_for_good", LIMIT);
+    let _one = exclusive();
+    let dir = TempDir::new("lost");
+    let run_id = unique_run_id("lost");
+    let leaks = LeakCheck::new(&run_id);
+    // 100 ticks; robot 1 crashes after 90 and is restarted only after 5 s, past the end.
+    let command = run_command(
+        &run_id,
+        &dir,
+        5.0,
+        &[
+            "--fault",
+            "1:crash-after=90",
+            "--restart-delay-ms",
+            "5000",
+            "--timeout-ms",
+            "300",
+        ],
+    );
+    let finished = run(command, LIMIT);
+    finished.assert_failure_mentioning("lost their agent for good");
+    assert!(
+        finished.stderr().contains("run 0: robot 1"),
+        "{}",
+        finished.describe()
+    );
+    let summary: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.path().join("out/summary.json")).expect("summary.json"),
+    )
+    .expect("summary JSON");
+    let braked = &summary["braked_ticks"];
+    let robot1: u64 = braked[1]
+        .as_object()
+        .expect("robot 1's braked ticks")
+        .values()
+        .filter_map(serde_json::Value::as_u64)
+        .sum();
+    assert_eq!(robot1, 10, "ticks 90..100 braked: {braked}");
+    assert_eq!(braked[0].as_object().map(|m| m.len()), Some(0), "{braked}");
+    leaks.assert_clean();
+}
+
+/// A process that does not hold the launch's secret (here a real agent of another "launch") is
+/// refused by pid, drives nothing, and blocks nothing: the launch's own restarted agent rejoins
+/// on fresh services of its own, and the run ends with the launch's model on every robot.
+#[test]
+fn a_process_without_the_launch_secret_drives_no_robot() {
+    let _watchdog = Watchdog::arm("impostor", LIMIT);
+    let _one = exclusive();
+    let bins = binaries();
+    let dir = TempDir::new("squat");
+    let run_id = unique_run_id("squat");
+    let leaks = LeakCheck::new(&run_id);
+    let mut launch = launch(
+        &run_id,
+        &dir,
+        20.0,
+        &["--pace-ms", "25", "--restart-delay-ms", "400"],
+    );
+    connected(&mut launch);
+    let before = incarnations(&run_id, 0);
+    assert_eq!(before.len(), 1, "{before:x?}");
+    let old = the_agent(&run_id, 0, &mut launch);
+    signal(old, "KILL");
+    // While the launch waits to restart robot 0's agent, an impostor asks for robot 0.
+    let mut impostor = Command::new(&bins.agent);
+    impostor
+        .args(["--run-id", run_id.as_str(), "--robot", "0"])
+        .args(["--connect-timeout-ms", "60000"])
+        .arg("--model")
+        .arg(test_model());
+    let impostor = LiveProcess::spawn_with_secret(impostor, &LaunchSecret::generate().unwrap());
+    let impostor_pid = impostor.id();
+    let refused = impostor.finish(LIMIT);
+    assert!(!refused.output.status.success(), "{}", refused.describe());
+    assert!(
+        refused.stderr().contains("did not prove this launch's secret"),
+        "{}",
+        refused.describe()
+    );
+    let rejoined = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.starts_with("robot 0: agent pid") && l.contains("rejoined")
+    });
+    assert!(rejoined.is_some(), "{}", launch.describe());
+    let after = incarnations(&run_id, 0);
+    assert!(
+        after.iter().all(|i| !before.contains(i)) && !after.is_empty(),
+        "the restarted agent has services of its own: before {before:x?}, after {after:x?}"
+    );
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    assert!(
+        finished
+            .stderr()
+            .contains(&format!("refused process {impostor_pid}")),
+        "the launcher names the impostor's pid\n{}",
+        finished.describe()
+    );
+    let log = RobotLog::read(&dir.path().join("out"), 0);
+    let used: std::collections::BTreeSet<&String> =
+        log.models.iter().filter(|m| *m != "<none>").collect();
+    assert_eq!(used.len(), 1, "one model drove robot 0: {used:?}");
+    leaks.assert_clean();
+}
+
+/// Two launches started at the same instant with one run id: exactly one wins, the other is
+/// refused without touching the winner's files, and the winner completes.
+#[test]
+fn two_launches_with_one_run_id_exactly_one_wins() {
+    let _watchdog = Watchdog::arm("same_run_id", LIMIT);
+    let _one = exclusive();
+    for attempt in 0..3 {
+        let run_id = unique_run_id("twin");
+        let leaks = LeakCheck::new(&run_id);
+        let dirs = [TempDir::new("twin-a"), TempDir::new("twin-b")];
+        let commands: Vec<Command> = dirs
+            .iter()
+            .map(|dir| run_command(&run_id, dir, 3.0, &["--pace-ms", "25"]))
+            .collect();
+        let children: Vec<LiveProcess> = commands.into_iter().map(LiveProcess::spawn).collect();
+        let finished: Vec<_> = children.into_iter().map(|c| c.finish(LIMIT)).collect();
+        let winners: Vec<usize> = (0..2)
+            .filter(|&i| finished[i].output.status.success())
+            .collect();
+        assert_eq!(
+            winners.len(),
+            1,
+            "attempt {attempt}: exactly one launch wins\n{}\n{}",
+            finished[0].describe(),
+            finished[1].describe()
+        );
+        let loser = &finished[1 - winners[0]];
+        assert!(
+            loser.stderr().contains("in use by another live launch"),
+            "{}",
+            loser.describe()
+        );
+        let winner_out = dirs[winners[0]].path().join("out");
+        assert_eq!(RobotLog::read(&winner_out, 0).outcomes.len(), 60);
+        assert!(winner_out.join("summary.json").is_file());
+        leaks.assert_clean();
+    }
+}
+
+/// Every file of a running launch is private to its user (0600 files, 0700 folders), including
+/// iceoryx2's node-management segment, which iceoryx2 itself makes world-writable.
+#[test]
+fn the_runs_shared_memory_is_private_to_its_user() {
+    use std::os::unix::fs::PermissionsExt;
+    let _watchdog = Watchdog::arm("file_modes", LIMIT);
+    let _one = exclusive();
+    let dir = TempDir::new("modes");
+    let run_id = unique_run_id("modes");
+    let leaks = LeakCheck::new(&run_id);
+    let mut launch = launch(&run_id, &dir, 10.0, &["--pace-ms", "20"]);
+    connected(&mut launch);
+    std::thread::sleep(Duration::from_millis(300));
+    let namespace = RunNamespace::new(&run_id);
+    let files = namespace.leftovers();
+    assert!(
+        files
+            .iter()
+            .any(|p| p.to_string_lossy().ends_with(".global_mgmt")),
+        "the run's management segment exists: {files:#?}"
+    );
+    let shared = namespace.shared_entries();
+    assert!(
+        shared.is_empty(),
+        "files of the run readable or writable by others: {shared:#?}"
+    );
+    let base = std::fs::metadata(namespace.base_dir()).expect("base folder");
+    assert_eq!(base.permissions().mode() & 0o077, 0, "base folder is private");
+    launch.finish(LIMIT).assert_success();
+    leaks.assert_clean();
+}
+
+/// A launcher SIGKILLed mid-run leaves iceoryx2 files behind; the next launch of the same run id
+/// removes them (none of the dead launch's processes lives) and says so.
+#[test]
+fn a_dead_launchs_leftovers_are_removed_by_the_next_launch() {
+    let _watchdog = Watchdog::arm("leftovers", LIMIT);
+    let _one = exclusive();
+    let dir = TempDir::new("dead");
+    let run_id = unique_run_id("dead");
+    let leaks = LeakCheck::new(&run_id);
+    let mut first = launch(&run_id, &dir, 60.0, &["--pace-ms", "20"]);
+    connected(&mut first);
+    let world = world_pid(&run_id).expect("the world's pid");
+    signal(first.id(), "KILL");
+    let _ = first.finish(LIMIT);
+    // The children see their input close and exit on their own.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while (alive(world) || !agent_pids(&run_id, 0).is_empty()) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(!alive(world), "the orphaned world exited");
+    assert!(
+        !leaks.leftovers().is_empty(),
+        "a killed launcher leaves its files (else this test proves nothing)"
+    );
+    let again = TempDir::new("dead-2");
+    let second = run(run_command(&run_id, &again, 2.0, &[]), LIMIT);
+    second.assert_success();
+    assert!(
+        second.stderr().contains("that a dead launch of run"),
+        "{}",
+        second.describe()
+    );
+    leaks.assert_clean();
+}
+
+/// The realtime drill: 100 SIGKILLs of random agents at random moments, the restart budget raised
+/// to match. Every kill is followed by a rejoin; every braked tick applied (0, 0); no command was
+/// used beyond the stale window; nothing is left in /dev/shm or the iceoryx2 root.
+#[test]
+fn a_hundred_sigkills_in_realtime_each_end_in_a_rejoin() {
+    let _watchdog = Watchdog::arm("hundred_kills", Duration::from_secs(900));
+    let _one = exclusive();
+    const KILLS: usize = 100;
+    const STALE_MS: u64 = 150;
+    let dir = TempDir::new("drill");
+    let run_id = unique_run_id("drill");
+    let leaks = LeakCheck::new(&run_id);
+    let stale = STALE_MS.to_string();
+    let mut launch = launch(
+        &run_id,
+        &dir,
+        240.0,
+        &[
+            "--clock",
+            "realtime",
+            "--stale-ms",
+            &stale,
+            "--restarts",
+            "200",
+            "--restart-window-s",
+            "2",
+            "--restart-delay-ms",
+            "20",
+        ],
+    );
+    connected(&mut launch);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(100);
+    let started = Instant::now();
+    for kill in 0..KILLS {
+        std::thread::sleep(Duration::from_millis(rng.random_range(0..300)));
+        let robot = rng.random_range(0..3);
+        let old = the_agent(&run_id, robot, &mut launch);
+        signal(old, "KILL");
+        let prefix = format!("robot {robot}: agent pid");
+        let rejoined = launch.wait_for_line(Duration::from_secs(60), |l| {
+            l.starts_with(&prefix) && l.contains("rejoined") && !l.contains(&format!(" {old} "))
+        });
+        assert!(
+            rejoined.is_some(),
+            "kill {kill} (robot {robot}, pid {old}) was not followed by a rejoin\n{}",
+            launch.describe()
+        );
+    }
+    eprintln!(
+        "{KILLS} kills and rejoins in {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    assert!(
+        finished
+            .stdout()
+            .contains(&format!("{KILLS} agent restart(s)")),
+        "{}",
+        finished.describe()
+    );
+    let out = dir.path().join("out");
+    let timing: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("timing/run-0000.json")).unwrap()).unwrap();
+    let dt_ms = timing["dt_s"].as_f64().unwrap() * 1e3;
+    let mut braked = 0;
+    for robot in 0..3 {
+        let log = RobotLog::read(&out, robot);
+        let lags = &timing["robots"][robot]["lag_ticks"];
+        for (k, outcome) in log.outcomes.iter().enumerate() {
+            if outcome == "fresh" {
+                let lag = lags[k].as_u64().expect("lag_ticks per tick");
+                assert!(
+                    lag as f64 * dt_ms <= STALE_MS as f64,
+                    "robot {robot} tick {k}: a command {lag} ticks old was used"
+                );
+            } else {
+                braked += 1;
+                assert_eq!(log.commands[k], (0.0, 0.0), "robot {robot} tick {k}");
+            }
+        }
+    }
+    assert!(
+        braked >= KILLS,
+        "each kill brakes at least one tick: {braked}"
+    );
+    leaks.assert_clean();
+}
