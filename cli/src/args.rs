@@ -63,8 +63,8 @@ pub struct EvalArgs {
     /// ONNX model for `--controller policy` (default: the shipped model).
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Number of runs (default: the scenario's `runs`).
-    #[arg(long)]
+    /// Number of runs (default: the scenario's `runs`; at most 10000).
+    #[arg(long, value_parser = run_count)]
     pub runs: Option<usize>,
     /// Base seed (default: the scenario's `seed`).
     #[arg(long)]
@@ -96,8 +96,8 @@ pub struct CollectArgs {
     /// Output dataset directory (must not exist, or be empty).
     #[arg(long)]
     pub out: PathBuf,
-    /// Number of runs (default: the scenario's `runs`).
-    #[arg(long)]
+    /// Number of runs (default: the scenario's `runs`; at most 10000).
+    #[arg(long, value_parser = run_count)]
     pub runs: Option<usize>,
     /// Base seed (default: the scenario's `seed`).
     #[arg(long)]
@@ -160,8 +160,8 @@ pub struct DaggerArgs {
     /// Start from this model (default: train one on the dataset first).
     #[arg(long)]
     pub init_model: Option<PathBuf>,
-    /// Closed-loop runs per iteration (default: the scenario's `runs`).
-    #[arg(long)]
+    /// Closed-loop runs per iteration (default: the scenario's `runs`; at most 10000).
+    #[arg(long, value_parser = run_count)]
     pub runs: Option<usize>,
     /// Probability that the expert drives a run in iteration 1; it decays as beta^k.
     #[arg(long, default_value_t = 0.0)]
@@ -181,8 +181,8 @@ pub struct DaggerArgs {
     /// Scenario for each iteration's closed-loop Table I figures.
     #[arg(long, default_value = "scenarios/table1.toml")]
     pub eval_scenario: PathBuf,
-    /// Runs of that evaluation.
-    #[arg(long, default_value_t = 100)]
+    /// Runs of that evaluation (at most 10000).
+    #[arg(long, default_value_t = 100, value_parser = run_count)]
     pub eval_runs: usize,
     /// Base seed of the DAgger rollouts.
     #[arg(long, default_value_t = 1000)]
@@ -208,10 +208,37 @@ pub struct DemoArgs {
     /// Output directory for run data and the report.
     #[arg(long, default_value = "reports/demo")]
     pub out: PathBuf,
-    /// Table I runs.
-    #[arg(long, default_value_t = 100)]
+    /// Table I runs (at most 10000).
+    #[arg(long, default_value_t = 100, value_parser = run_count)]
     pub runs: usize,
     /// Run in-process instead of one OS process per robot.
     #[arg(long)]
     pub in_process: bool,
+}
+
+/// Parses a `--runs` count: a whole number from 1 to the scenario limit
+/// ([`formation_world::scenario::limits::MAX_RUNS`]), so a typo cannot ask for a billion runs.
+pub fn run_count(text: &str) -> Result<usize, String> {
+    let max = formation_world::scenario::limits::MAX_RUNS;
+    match text.trim().parse::<usize>() {
+        Ok(n) if (1..=max).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "expected a number of runs from 1 to {max}, got {text:?}"
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_counts_are_bounded() {
+        assert_eq!(run_count("1"), Ok(1));
+        assert_eq!(run_count("10000"), Ok(10_000));
+        for bad in ["0", "10001", "1e12", "-1", "many", "18446744073709551616"] {
+            let err = run_count(bad).expect_err(bad);
+            assert!(err.contains("1 to 10000"), "{err}");
+        }
+    }
 }

@@ -13,6 +13,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use formation_expert::{ExpertController, ExpertGains};
+use formation_proto::LidarSpec;
 use formation_world::metrics::{MetricsConfig, RunMetrics, Summary, run_metrics, summarize};
 use formation_world::{Controller, Scenario, Trajectory, run_episode};
 use robot_agent::decision::PolicyController;
@@ -172,12 +173,10 @@ pub fn controller_factory<'a>(
     }
 }
 
-/// Model ids of the given files, as the agents would report them.
-pub fn model_ids(models: &[PathBuf]) -> anyhow::Result<Vec<String>> {
-    models
-        .iter()
-        .map(|m| Ok(formation_onnx::OnnxPolicy::load(m)?.model_id().to_owned()))
-        .collect()
+/// Model ids of the given files, as the agents would report them, after checking each model
+/// against the contract and this LIDAR (beams, range, window) before anything runs.
+pub fn model_ids(models: &[PathBuf], lidar: &LidarSpec) -> anyhow::Result<Vec<String>> {
+    Ok(robot_agent::decision::check_team_models(models, lidar)?)
 }
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).
@@ -276,7 +275,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         ControllerKind::Policy => {
             let default = paths::resolve_model(args.model.as_deref())?;
             let models = models_per_robot(&scenario, &default)?;
-            let ids = model_ids(&models)?;
+            let ids = model_ids(&models, &scenario.world_config().lidar)?;
             (models, ids)
         }
     };

@@ -27,23 +27,22 @@ pub fn repo_root() -> PathBuf {
     })
 }
 
-/// The model to use: the one given, or the shipped default. A missing file is an error that
-/// names the path and the fix.
+/// The model to use: the one given, or the shipped default. A missing path, one that is not a
+/// regular file and an oversized file are each an error that names the path and the fix
+/// ([`formation_onnx::check_model_file`]); nothing is read.
 pub fn resolve_model(given: Option<&Path>) -> anyhow::Result<PathBuf> {
     let path = match given {
         Some(p) => p.to_path_buf(),
         None => repo_root().join(DEFAULT_MODEL),
     };
-    if !path.is_file() {
-        anyhow::bail!(
-            "model {} not found: pass --model PATH to an ONNX file exported by `formation train`{}",
-            path.display(),
-            if given.is_none() {
-                " (the shipped default should be in onnx/models/)"
-            } else {
-                ""
-            }
-        );
+    if let Err(err) = formation_onnx::check_model_file(&path) {
+        let err = anyhow::Error::new(err);
+        return Err(match given {
+            Some(_) => err,
+            None => err.context(format!(
+                "the shipped default model {DEFAULT_MODEL} is unusable; pass --model PATH"
+            )),
+        });
     }
     Ok(path)
 }

@@ -13,7 +13,7 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-use formation_proto::{BeyondWindow, OccupancySpec};
+use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec};
 
 /// The value of [`keys::FORMAT`] this crate understands.
 pub const MODEL_FORMAT: &str = "formation-policy/1";
@@ -23,6 +23,10 @@ pub const OCCUPANCY_INPUT: &str = "occupancy";
 pub const AUX_INPUT: &str = "aux";
 /// Name of the wheel-speed output.
 pub const WHEELS_OUTPUT: &str = "wheels";
+
+/// Largest image side `S` a model may declare \[cells\] (the paper's network takes 50). It bounds
+/// the input buffers an agent allocates from the model's metadata.
+pub const MAX_SIZE_PX: usize = 1024;
 
 /// ONNX `metadata_props` keys of the contract (all values are strings).
 pub mod keys {
@@ -168,6 +172,13 @@ pub fn parse_metadata(
         });
     }
     let size_px: usize = parse_positive_int(entries, keys::SIZE_PX)?;
+    if size_px > MAX_SIZE_PX {
+        return Err(ContractViolation::BadMetadata {
+            key: keys::SIZE_PX,
+            value: size_px.to_string(),
+            expected: "an image side of at most 1024 cells",
+        });
+    }
     let resolution_m = parse_positive_real(entries, keys::RESOLUTION_M)?;
     let beyond_text = required(entries, keys::BEYOND)?;
     let beyond =
@@ -248,6 +259,109 @@ fn parse_positive_real(
             expected: "a finite number > 0",
         }),
     }
+}
+
+/// The sensor side of the contract: what a policy was trained for, as far as it records it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorContract {
+    /// LIDAR beams of the training sensor, if recorded.
+    pub beams: Option<usize>,
+    /// LIDAR maximum range of the training sensor \[m\], if recorded.
+    pub max_range: Option<f64>,
+    /// The occupancy image the policy takes (its window is `size_px * resolution_m` on a side).
+    pub occupancy: OccupancySpec,
+}
+
+impl From<&ModelMetadata> for SensorContract {
+    fn from(meta: &ModelMetadata) -> SensorContract {
+        SensorContract {
+            beams: Some(meta.beams),
+            max_range: Some(meta.max_range),
+            occupancy: meta.occupancy,
+        }
+    }
+}
+
+/// How a robot's LIDAR differs from the one a policy was trained for: the model's value and the
+/// sensor's. Each message reads after "model `id` ".
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SensorViolation {
+    /// Another beam count: the image is drawn from a different ray pattern.
+    #[error("was trained with {trained} LIDAR beams, but this robot's LIDAR has {actual}")]
+    Beams {
+        /// The model's beams.
+        trained: usize,
+        /// The sensor's beams.
+        actual: usize,
+    },
+    /// Another maximum range: obstacles appear where the model never saw any, or vanish.
+    #[error(
+        "was trained with a LIDAR max_range of {trained} m, but this robot's LIDAR has max_range \
+         {actual} m"
+    )]
+    MaxRange {
+        /// The model's range \[m\].
+        trained: f64,
+        /// The sensor's range \[m\].
+        actual: f64,
+    },
+    /// The sensor cannot see as far as the edge of the model's image window.
+    #[error(
+        "takes a {window_m} m wide image window (its edge {reach_m} m away), but this robot's \
+         LIDAR reaches only {actual} m"
+    )]
+    Window {
+        /// Side of the image window \[m\].
+        window_m: f64,
+        /// Distance from the robot to the window's edge \[m\].
+        reach_m: f64,
+        /// The sensor's range \[m\].
+        actual: f64,
+    },
+}
+
+/// Relative tolerance of the range comparison: metadata stores the range as decimal text.
+const RANGE_TOLERANCE: f64 = 1e-9;
+
+/// Checks a robot's LIDAR against the sensor a policy was trained for, in this order:
+///
+/// 1. beams: equal to the recorded count;
+/// 2. range: equal to the recorded maximum range (to a relative 1e-9);
+/// 3. window: the sensor reaches the edge of the image window (half its side). A recorded range
+///    is checked on the range itself in step 2, which also fixes what the window showed in
+///    training (a model trained with a range short of its window saw that band empty, and still
+///    does); this step therefore constrains policies that do not record their range.
+pub fn check_sensor(trained: &SensorContract, lidar: &LidarSpec) -> Result<(), SensorViolation> {
+    if let Some(beams) = trained.beams
+        && beams != lidar.beams
+    {
+        return Err(SensorViolation::Beams {
+            trained: beams,
+            actual: lidar.beams,
+        });
+    }
+    if let Some(range) = trained.max_range {
+        let close = (lidar.max_range - range).abs() <= RANGE_TOLERANCE * range;
+        // A NaN range is not close to anything.
+        if !close {
+            return Err(SensorViolation::MaxRange {
+                trained: range,
+                actual: lidar.max_range,
+            });
+        }
+    } else {
+        let window_m = trained.occupancy.window_m();
+        let reach_m = window_m / 2.0;
+        let reaches = lidar.max_range >= reach_m * (1.0 - RANGE_TOLERANCE);
+        if !reaches {
+            return Err(SensorViolation::Window {
+                window_m,
+                reach_m,
+                actual: lidar.max_range,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// One dimension of an expected shape.
@@ -447,6 +561,105 @@ mod tests {
                 other => panic!("{key} = {value}: expected BadMetadata, got {other:?}"),
             }
         }
+    }
+
+    #[test]
+    fn an_oversized_image_side_is_refused() {
+        let mut entries = paper_metadata();
+        entries.insert(keys::SIZE_PX.to_owned(), "1025".to_owned());
+        assert!(matches!(
+            parse_metadata(&entries),
+            Err(ContractViolation::BadMetadata {
+                key: keys::SIZE_PX,
+                ..
+            })
+        ));
+        entries.insert(keys::SIZE_PX.to_owned(), "1024".to_owned());
+        parse_metadata(&entries).expect("1024 is the largest allowed side");
+    }
+
+    #[test]
+    fn the_sensor_check_covers_beams_range_and_window() {
+        let meta = parse_metadata(&paper_metadata()).expect("valid");
+        let trained = SensorContract::from(&meta);
+        let paper = LidarSpec::default();
+        check_sensor(&trained, &paper).expect("the paper's sensor");
+        check_sensor(
+            &trained,
+            &LidarSpec {
+                noise_std: 0.05,
+                ..paper
+            },
+        )
+        .expect("noise is not part of the contract");
+        assert_eq!(
+            check_sensor(
+                &trained,
+                &LidarSpec {
+                    beams: 360,
+                    ..paper
+                }
+            ),
+            Err(SensorViolation::Beams {
+                trained: 900,
+                actual: 360
+            })
+        );
+        for range in [5.0, 1e-9, 10.5, f64::NAN] {
+            let err = check_sensor(
+                &trained,
+                &LidarSpec {
+                    max_range: range,
+                    ..paper
+                },
+            )
+            .expect_err("another range");
+            assert!(
+                matches!(err, SensorViolation::MaxRange { trained, .. } if trained == 10.0),
+                "{err:?}"
+            );
+        }
+        let message = check_sensor(
+            &trained,
+            &LidarSpec {
+                max_range: 5.0,
+                ..paper
+            },
+        )
+        .expect_err("another range")
+        .to_string();
+        assert!(
+            message.contains("max_range of 10 m") && message.contains("max_range 5 m"),
+            "{message}"
+        );
+
+        // Without a recorded range, the sensor must reach the 5 m window's edge, 2.5 m away.
+        let unrecorded = SensorContract {
+            max_range: None,
+            ..trained
+        };
+        check_sensor(
+            &unrecorded,
+            &LidarSpec {
+                max_range: 2.5,
+                ..paper
+            },
+        )
+        .expect("reaches the edge");
+        let short = LidarSpec {
+            max_range: 1.0,
+            ..paper
+        };
+        let err = check_sensor(&unrecorded, &short).expect_err("short of the window");
+        assert_eq!(
+            err,
+            SensorViolation::Window {
+                window_m: 5.0,
+                reach_m: 2.5,
+                actual: 1.0
+            }
+        );
+        assert!(err.to_string().contains("5 m wide"), "{err}");
     }
 
     #[test]

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use crate::contract::ContractViolation;
+use crate::contract::{ContractViolation, SensorViolation};
 
 /// How to obtain the ONNX Runtime library; appended to every "library not found" message.
 pub const LIBRARY_FIX: &str = "install it with `bash .ci/setup-python` (pip onnxruntime==1.31.1 into .venv) \
@@ -47,6 +47,31 @@ pub enum PolicyError {
         /// The path given.
         path: PathBuf,
     },
+    /// The model path names something other than a regular file (a directory, a FIFO, a device).
+    #[error(
+        "model {path:?} is {kind}, not a regular file; pass the path of an .onnx file exported by \
+         `formation train`"
+    )]
+    ModelNotAFile {
+        /// The path given.
+        path: PathBuf,
+        /// What it is instead, e.g. `a directory`.
+        kind: &'static str,
+    },
+    /// The model file is larger than any policy this project loads.
+    #[error(
+        "model {path:?} is {size} bytes, over the {limit}-byte ({mib} MiB) limit of a model file; \
+         the formation policies are well under 1 MiB, so check that the path names the right file",
+        size = crate::model_file::SizeText(*.size),
+        limit = crate::model_file::MAX_MODEL_BYTES,
+        mib = crate::model_file::MAX_MODEL_BYTES >> 20
+    )]
+    ModelTooLarge {
+        /// The path given.
+        path: PathBuf,
+        /// Its size in bytes, or `None` when it grew past the limit while being read.
+        size: Option<u64>,
+    },
     /// The model file exists but could not be read.
     #[error("could not read model {path:?}: {source}")]
     ModelRead {
@@ -77,18 +102,14 @@ pub enum PolicyError {
     },
     /// The model was trained for a different sensor than the one it is asked to drive.
     #[error(
-        "model {model} was trained with LIDAR {field} {expected} but this robot's LIDAR has {actual}; \
-         use a model trained with the scenario's sensor settings (formation collect/train)"
+        "model {model} {reason}; use a model trained with the scenario's sensor settings \
+         (formation collect/train) or set the scenario's [lidar] to the model's"
     )]
     SensorMismatch {
         /// Model id.
         model: String,
-        /// Which setting differs (`beams`, `max_range`).
-        field: &'static str,
-        /// The model's value.
-        expected: String,
-        /// The sensor's value.
-        actual: String,
+        /// Which setting differs, with the model's value and the sensor's.
+        reason: SensorViolation,
     },
     /// An input buffer of the wrong size was passed to [`crate::OnnxPolicy::infer`].
     #[error(

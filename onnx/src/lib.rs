@@ -1,5 +1,6 @@
-//! ONNX Runtime policies through ort: finding the runtime library, loading a model, checking it
-//! against the formation-policy/1 contract, and single-sample inference.
+//! ONNX Runtime policies through ort: finding the runtime library, loading a model (a regular file
+//! of at most [`MAX_MODEL_BYTES`], checked before it is read), checking it against the
+//! formation-policy/1 contract and a robot's sensor, and single-sample inference.
 //!
 //! ```no_run
 //! # fn main() -> Result<(), formation_onnx::PolicyError> {
@@ -13,10 +14,12 @@
 
 pub mod contract;
 mod error;
+mod model_file;
 mod policy;
 mod runtime;
 
-pub use contract::{ContractViolation, ModelMetadata};
+pub use contract::{ContractViolation, ModelMetadata, SensorContract, SensorViolation};
 pub use error::{LIBRARY_FIX, PolicyError};
+pub use model_file::{MAX_MODEL_BYTES, check_model_file};
 pub use policy::OnnxPolicy;
 pub use runtime::{ORT_DYLIB_PATH, init_runtime, ort_library_path};

@@ -10,10 +10,11 @@ use ort::session::Session;
 use ort::value::{Tensor, TensorElementType, ValueType};
 
 use crate::contract::{
-    ElementKind, ModelMetadata, OCCUPANCY_INPUT, TensorSignature, WHEELS_OUTPUT, check_signature,
-    parse_metadata,
+    ElementKind, ModelMetadata, OCCUPANCY_INPUT, SensorContract, TensorSignature, WHEELS_OUTPUT,
+    check_sensor, check_signature, parse_metadata,
 };
 use crate::error::PolicyError;
+use crate::model_file::read_model_file;
 use crate::runtime::environment;
 
 /// A policy network loaded from an ONNX file that follows the formation-policy/1 contract.
@@ -43,16 +44,12 @@ impl std::fmt::Debug for OnnxPolicy {
 impl OnnxPolicy {
     /// Loads a model, starting ONNX Runtime on first use (see [`crate::ort_library_path`]), and
     /// checks its inputs, output and metadata against the contract.
+    ///
+    /// The file must be a regular file of at most [`crate::MAX_MODEL_BYTES`]; a missing path, a
+    /// directory, a FIFO, a device or an oversized file is refused before it is read (see
+    /// [`crate::check_model_file`]).
     pub fn load(path: &Path) -> Result<OnnxPolicy, PolicyError> {
-        if !path.is_file() {
-            return Err(PolicyError::ModelNotFound {
-                path: path.to_path_buf(),
-            });
-        }
-        let bytes = std::fs::read(path).map_err(|source| PolicyError::ModelRead {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let bytes = read_model_file(path)?;
         let env = environment()?;
         let session_error = |reason: String| PolicyError::Session {
             path: path.to_path_buf(),
@@ -108,29 +105,15 @@ impl OnnxPolicy {
         &self.model_id
     }
 
-    /// Checks that the model was trained for this LIDAR (beam count and maximum range).
+    /// Checks that the model was trained for this LIDAR: beam count, maximum range and image
+    /// window (see [`crate::contract::check_sensor`]).
     pub fn check_sensor(&self, lidar: &LidarSpec) -> Result<(), PolicyError> {
-        let mismatch = |field, expected: String, actual: String| PolicyError::SensorMismatch {
-            model: self.model_id.clone(),
-            field,
-            expected,
-            actual,
-        };
-        if lidar.beams != self.metadata.beams {
-            return Err(mismatch(
-                "beams",
-                self.metadata.beams.to_string(),
-                lidar.beams.to_string(),
-            ));
-        }
-        if (lidar.max_range - self.metadata.max_range).abs() > 1e-9 * self.metadata.max_range {
-            return Err(mismatch(
-                "max_range",
-                format!("{} m", self.metadata.max_range),
-                format!("{} m", lidar.max_range),
-            ));
-        }
-        Ok(())
+        check_sensor(&SensorContract::from(&self.metadata), lidar).map_err(|reason| {
+            PolicyError::SensorMismatch {
+                model: self.model_id.clone(),
+                reason,
+            }
+        })
     }
 
     /// One forward pass: `occupancy` has `size_px * size_px` cells, row-major; `aux` is

@@ -6,7 +6,7 @@ mod common;
 use std::path::Path;
 
 use formation_onnx::contract::keys;
-use formation_onnx::{ContractViolation, OnnxPolicy, PolicyError};
+use formation_onnx::{ContractViolation, OnnxPolicy, PolicyError, SensorViolation};
 use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec};
 
 use common::{CASES, SIZE_PX, fixtures};
@@ -194,19 +194,34 @@ fn sensor_check_compares_beams_and_range() {
     };
     assert!(matches!(
         policy.check_sensor(&fewer_beams),
-        Err(PolicyError::SensorMismatch { field: "beams", .. })
+        Err(PolicyError::SensorMismatch {
+            reason: SensorViolation::Beams {
+                trained: 900,
+                actual: 360
+            },
+            ..
+        })
     ));
     let longer = LidarSpec {
         max_range: 20.0,
         ..LidarSpec::default()
     };
-    assert!(matches!(
-        policy.check_sensor(&longer),
-        Err(PolicyError::SensorMismatch {
-            field: "max_range",
-            ..
-        })
-    ));
+    let err = policy.check_sensor(&longer).expect_err("another range");
+    assert!(
+        matches!(
+            err,
+            PolicyError::SensorMismatch {
+                reason: SensorViolation::MaxRange { .. },
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    let message = err.to_string();
+    assert!(
+        message.contains("10 m") && message.contains("20 m"),
+        "{message}"
+    );
 }
 
 #[test]

@@ -12,9 +12,19 @@
 //! The steps are exposed separately ([`Agent::perceive`], [`Agent::decide`]) so the agent process
 //! can time them, and together as [`Agent::act`]. [`PolicyController`] runs one independent `Agent`
 //! per robot inside one process: the in-process twin of the multi-process runtime.
+//!
+//! # Contracts checked
+//!
+//! A policy drives a robot only if it was trained for that robot's sensor: beams, maximum range
+//! and image window ([`formation_onnx::contract::check_sensor`]), checked by [`Agent::new`] and
+//! again by [`Agent::swap_policy`]. [`check_team_models`] runs the same check for every robot of
+//! a launch before any process starts. A swap candidate must also give a finite command on the
+//! agent's last observation before it may drive; otherwise the current policy keeps driving.
 
-use std::path::Path;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
+use formation_onnx::contract::{SensorContract, SensorViolation, check_sensor};
 use formation_onnx::{OnnxPolicy, PolicyError};
 use formation_proto::{Goal, LidarSpec, OccupancySpec, WheelCmd, wrap_angle};
 use formation_world::episode::{Controller, ControllerError, Observation};
@@ -29,16 +39,40 @@ pub enum DecisionError {
     Policy(#[from] PolicyError),
     /// The model was trained for another sensor than this robot's.
     #[error(
-        "model {model} expects {expected} LIDAR beams but this robot's scan has {actual}; \
-         use a model trained with the scenario's sensor settings (formation collect/train)"
+        "model {model} {reason}; use a model trained with the scenario's sensor settings \
+         (formation collect/train) or set the scenario's [lidar] to the model's"
     )]
     SensorMismatch {
         /// Model id.
         model: String,
-        /// Beams in the model's metadata.
-        expected: usize,
-        /// Beams of this robot's LIDAR.
-        actual: usize,
+        /// Which setting differs, with the model's value and the sensor's.
+        reason: SensorViolation,
+    },
+    /// A swap candidate gave a non-finite command on its trial observation; it was not swapped in.
+    #[error(
+        "candidate model {model} gives a non-finite command ({left}, {right}) on {observation}; \
+         it was not swapped in: retrain or re-export it"
+    )]
+    SwapNonFinite {
+        /// The candidate's model id.
+        model: String,
+        /// Which observation it was tried on.
+        observation: TrialObservation,
+        /// Left wheel output.
+        left: f32,
+        /// Right wheel output.
+        right: f32,
+    },
+    /// A swap candidate failed to run on its trial observation; it was not swapped in.
+    #[error("candidate model {model} failed its trial run on {observation}; it was not swapped in")]
+    SwapTrialFailed {
+        /// The candidate's model id.
+        model: String,
+        /// Which observation it was tried on.
+        observation: TrialObservation,
+        /// Why it failed.
+        #[source]
+        source: Box<DecisionError>,
     },
     /// A scan of the wrong length reached the agent.
     #[error("scan has {actual} ranges, the LIDAR is configured for {expected}")]
@@ -66,6 +100,29 @@ pub enum DecisionError {
     },
 }
 
+/// What a swap candidate was tried on before it could drive.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TrialObservation {
+    /// The scan and `(delta_phi, d*)` the agent last decided on, the image rendered for the
+    /// candidate.
+    Last,
+    /// No decision yet: an empty image (nothing in sight) and `(0, 1 m)`, see [`TRIAL_AUX`].
+    Empty,
+}
+
+impl std::fmt::Display for TrialObservation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            TrialObservation::Last => "the last observation",
+            TrialObservation::Empty => "an empty observation",
+        })
+    }
+}
+
+/// The `(delta_phi, d*)` a swap candidate is tried on before the agent has decided anything:
+/// on heading and a 1 m distance.
+pub const TRIAL_AUX: [f32; 2] = [0.0, 1.0];
+
 /// A policy an [`Agent`] can run: maps one occupancy image and `(delta_phi, d*)` to wheel speeds.
 pub trait PolicyBackend: Send {
     /// One forward pass. `occupancy` has `size_px * size_px` cells (0.0 or 1.0), row-major.
@@ -74,6 +131,8 @@ pub trait PolicyBackend: Send {
     fn occupancy_spec(&self) -> OccupancySpec;
     /// LIDAR beams the policy was trained with, if it records them.
     fn beams(&self) -> Option<usize>;
+    /// LIDAR maximum range \[m\] the policy was trained with, if it records it.
+    fn max_range(&self) -> Option<f64>;
     /// Training speed `v_train` \[m/s\]; deployed commands are scaled by `v* / v_train`.
     fn v_train(&self) -> f64;
     /// A short id naming the model (logged with every command).
@@ -90,6 +149,9 @@ impl PolicyBackend for OnnxPolicy {
     fn beams(&self) -> Option<usize> {
         Some(self.metadata().beams)
     }
+    fn max_range(&self) -> Option<f64> {
+        Some(self.metadata().max_range)
+    }
     fn v_train(&self) -> f64 {
         self.metadata().v_train
     }
@@ -98,16 +160,22 @@ impl PolicyBackend for OnnxPolicy {
     }
 }
 
-/// One robot's decision maker: its policy, its sensor settings and reusable image buffers.
+/// One robot's decision maker: its policy, its sensor settings, reusable image buffers, and the
+/// last observation it decided on (a swap candidate's trial input).
 pub struct Agent {
     policy: Box<dyn PolicyBackend>,
     lidar: LidarSpec,
     image: Vec<u8>,
     image_f32: Vec<f32>,
+    /// The scan of the last [`Agent::perceive`]; empty before the first.
+    last_scan: Vec<f32>,
+    /// The `(delta_phi, d*)` of the last [`Agent::decide`]; `None` before the first.
+    last_aux: Option<[f32; 2]>,
 }
 
 impl Agent {
-    /// Wraps a policy after checking that it was trained for this robot's LIDAR.
+    /// Wraps a policy after checking that it was trained for this robot's LIDAR (beams, range
+    /// and image window).
     pub fn new(policy: Box<dyn PolicyBackend>, lidar: LidarSpec) -> Result<Agent, DecisionError> {
         check_policy(policy.as_ref(), &lidar)?;
         let cells = cells(&policy.occupancy_spec());
@@ -116,6 +184,8 @@ impl Agent {
             lidar,
             image: vec![0; cells],
             image_f32: vec![0.0; cells],
+            last_scan: Vec::with_capacity(lidar.beams),
+            last_aux: None,
         })
     }
 
@@ -138,12 +208,15 @@ impl Agent {
         for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
             *dst = f32::from(src);
         }
+        self.last_scan.clear();
+        self.last_scan.extend_from_slice(scan);
         Ok(())
     }
 
     /// Runs the policy on the last perceived image and scales its output to the goal's speed.
     pub fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, DecisionError> {
         let aux = policy_aux(heading, goal)?;
+        self.last_aux = Some(aux);
         let [left, right] = self.policy.infer(&self.image_f32, aux)?;
         if !(left.is_finite() && right.is_finite()) {
             return Err(DecisionError::NonFinite {
@@ -181,13 +254,63 @@ impl Agent {
     }
 
     /// Replaces the policy after validating the new one; on error the old policy keeps driving.
-    pub fn swap_policy(&mut self, policy: Box<dyn PolicyBackend>) -> Result<(), DecisionError> {
+    ///
+    /// The candidate must fit this robot's sensor (as in [`Agent::new`]) and must give a finite
+    /// command when run once on the last observation this agent decided on: its scan, rendered
+    /// with the candidate's occupancy settings, and its `(delta_phi, d*)`. Before the first
+    /// decision it is run on an empty image with [`TRIAL_AUX`]. A model whose output is NaN or
+    /// infinite is refused here rather than braking its robot on every tick.
+    pub fn swap_policy(&mut self, mut policy: Box<dyn PolicyBackend>) -> Result<(), DecisionError> {
         check_policy(policy.as_ref(), &self.lidar)?;
-        let n = cells(&policy.occupancy_spec());
+        let spec = policy.occupancy_spec();
+        let n = cells(&spec);
+        let mut image = vec![0u8; n];
+        let (aux, observation) = match self.last_aux {
+            Some(aux) if self.last_scan.len() == self.lidar.beams => {
+                occupancy::render(&self.last_scan, &self.lidar, &spec, &mut image);
+                (aux, TrialObservation::Last)
+            }
+            _ => (TRIAL_AUX, TrialObservation::Empty),
+        };
+        let image: Vec<f32> = image.into_iter().map(f32::from).collect();
+        trial_run(policy.as_mut(), &image, aux, observation)?;
         self.image.resize(n, 0);
         self.image_f32.resize(n, 0.0);
         self.policy = policy;
         Ok(())
+    }
+}
+
+/// Runs a swap candidate once on its trial observation; a non-finite command or a failure is a
+/// refusal naming the candidate and the observation.
+fn trial_run(
+    policy: &mut dyn PolicyBackend,
+    image: &[f32],
+    aux: [f32; 2],
+    observation: TrialObservation,
+) -> Result<(), DecisionError> {
+    let outcome = policy.infer(image, aux);
+    let model = policy.model_id().to_owned();
+    let non_finite = |left, right| DecisionError::SwapNonFinite {
+        model: model.clone(),
+        observation,
+        left,
+        right,
+    };
+    match outcome {
+        Ok([left, right]) if !(left.is_finite() && right.is_finite()) => {
+            Err(non_finite(left, right))
+        }
+        Ok(_) => Ok(()),
+        Err(
+            DecisionError::Policy(PolicyError::NonFiniteOutput { left, right, .. })
+            | DecisionError::NonFinite { left, right, .. },
+        ) => Err(non_finite(left, right)),
+        Err(source) => Err(DecisionError::SwapTrialFailed {
+            model: model.clone(),
+            observation,
+            source: Box::new(source),
+        }),
     }
 }
 
@@ -216,15 +339,64 @@ fn cells(spec: &OccupancySpec) -> usize {
     spec.size_px * spec.size_px
 }
 
+/// The full sensor contract of `policy` against this robot's LIDAR: beams, range and window.
 fn check_policy(policy: &dyn PolicyBackend, lidar: &LidarSpec) -> Result<(), DecisionError> {
-    match policy.beams() {
-        Some(beams) if beams != lidar.beams => Err(DecisionError::SensorMismatch {
-            model: policy.model_id().to_owned(),
-            expected: beams,
-            actual: lidar.beams,
-        }),
-        _ => Ok(()),
+    let trained = SensorContract {
+        beams: policy.beams(),
+        max_range: policy.max_range(),
+        occupancy: policy.occupancy_spec(),
+    };
+    check_sensor(&trained, lidar).map_err(|reason| DecisionError::SensorMismatch {
+        model: policy.model_id().to_owned(),
+        reason,
+    })
+}
+
+/// Why a launch's models cannot drive its robots: the first robot whose model fails.
+#[derive(Debug, thiserror::Error)]
+#[error("robot {robot}: model {} cannot drive this scenario's robots", path.display())]
+pub struct TeamModelError {
+    /// The robot.
+    pub robot: usize,
+    /// Its model file.
+    pub path: PathBuf,
+    /// What is wrong: the file, the contract or the sensor.
+    #[source]
+    pub source: Box<DecisionError>,
+}
+
+/// Loads robot `i`'s model `models[i]` for every robot and checks it against the contract and
+/// this LIDAR (beams, range, window), as each agent will when its episode begins; returns each
+/// robot's model id. Each distinct file is loaded once.
+///
+/// The launcher calls this before any process starts, so a model that cannot drive the scenario
+/// is an error naming the robot, the file, the model's value and the scenario's, instead of a
+/// team of agents that all refuse (or, for a range mismatch, drive blind).
+pub fn check_team_models(
+    models: &[PathBuf],
+    lidar: &LidarSpec,
+) -> Result<Vec<String>, TeamModelError> {
+    let mut checked: BTreeMap<&Path, String> = BTreeMap::new();
+    let mut ids = Vec::with_capacity(models.len());
+    for (robot, path) in models.iter().enumerate() {
+        let id = match checked.get(path.as_path()) {
+            Some(id) => id.clone(),
+            None => {
+                let fail = |source| TeamModelError {
+                    robot,
+                    path: path.clone(),
+                    source: Box::new(source),
+                };
+                let policy = OnnxPolicy::load(path).map_err(|e| fail(e.into()))?;
+                check_policy(&policy, lidar).map_err(fail)?;
+                let id = policy.model_id().to_owned();
+                checked.insert(path, id.clone());
+                id
+            }
+        };
+        ids.push(id);
     }
+    Ok(ids)
 }
 
 /// Runs one independent [`Agent`] per robot in-process. Robot `i`'s agent reads only
@@ -307,6 +479,9 @@ mod tests {
         fn beams(&self) -> Option<usize> {
             Some(900)
         }
+        fn max_range(&self) -> Option<f64> {
+            Some(10.0)
+        }
         fn v_train(&self) -> f64 {
             0.5
         }
@@ -355,7 +530,13 @@ mod tests {
         };
         assert!(matches!(
             Agent::new(probe(), lidar),
-            Err(DecisionError::SensorMismatch { .. })
+            Err(DecisionError::SensorMismatch {
+                reason: SensorViolation::Beams {
+                    trained: 900,
+                    actual: 360
+                },
+                ..
+            })
         ));
         let mut agent = Agent::new(probe(), LidarSpec::default()).expect("matches");
         let scan = vec![10.0; 900];
@@ -375,5 +556,238 @@ mod tests {
                 actual: 10
             })
         ));
+    }
+
+    /// Every input a [`Fake`] was run on: (aux, occupied cells).
+    type CallLog = std::sync::Arc<std::sync::Mutex<Vec<([f32; 2], f32)>>>;
+
+    /// A configurable policy: fixed output, recorded sensor settings, and a shared log of every
+    /// input it was run on (aux, occupied cells), readable after it was moved into an agent.
+    struct Fake {
+        id: &'static str,
+        beams: Option<usize>,
+        max_range: Option<f64>,
+        output: Result<[f32; 2], fn() -> DecisionError>,
+        seen: CallLog,
+    }
+
+    impl Fake {
+        fn new(id: &'static str, output: [f32; 2]) -> Fake {
+            Fake {
+                id,
+                beams: Some(900),
+                max_range: Some(10.0),
+                output: Ok(output),
+                seen: Default::default(),
+            }
+        }
+
+        fn calls(&self) -> CallLog {
+            std::sync::Arc::clone(&self.seen)
+        }
+    }
+
+    impl PolicyBackend for Fake {
+        fn infer(&mut self, occupancy: &[f32], aux: [f32; 2]) -> Result<[f32; 2], DecisionError> {
+            let occupied = occupancy.iter().sum();
+            self.seen.lock().expect("log").push((aux, occupied));
+            self.output.map_err(|make| make())
+        }
+        fn occupancy_spec(&self) -> OccupancySpec {
+            OccupancySpec::PAPER
+        }
+        fn beams(&self) -> Option<usize> {
+            self.beams
+        }
+        fn max_range(&self) -> Option<f64> {
+            self.max_range
+        }
+        fn v_train(&self) -> f64 {
+            0.7
+        }
+        fn model_id(&self) -> &str {
+            self.id
+        }
+    }
+
+    fn goal() -> Goal {
+        Goal {
+            phi_star: 1.0,
+            d_star: 1.5,
+            v_star: 0.7,
+        }
+    }
+
+    /// A scan with one hit 1 m straight ahead.
+    fn one_hit(lidar: &LidarSpec) -> Vec<f32> {
+        let mut scan = vec![lidar.max_range as f32; lidar.beams];
+        scan[0] = 1.0;
+        scan
+    }
+
+    #[test]
+    fn the_full_sensor_contract_is_checked_range_and_window_too() {
+        // Issue: lidar.max_range = 1e-9 ran a model trained for 10 m; only beams were compared.
+        let short = LidarSpec {
+            max_range: 5.0,
+            ..LidarSpec::default()
+        };
+        match Agent::new(Box::new(Fake::new("ten-metres", [0.1, 0.1])), short) {
+            Err(err @ DecisionError::SensorMismatch { .. }) => {
+                let DecisionError::SensorMismatch { reason, .. } = &err else {
+                    unreachable!()
+                };
+                assert_eq!(
+                    *reason,
+                    SensorViolation::MaxRange {
+                        trained: 10.0,
+                        actual: 5.0
+                    }
+                );
+                let message = err.to_string();
+                assert!(message.contains("ten-metres"), "{message}");
+                assert!(
+                    message.contains("10 m") && message.contains("5 m"),
+                    "{message}"
+                );
+            }
+            Err(other) => panic!("expected a range mismatch, got {other}"),
+            Ok(_) => panic!("a 10 m model must not drive a 5 m sensor"),
+        }
+
+        // A policy that does not record its range must still see its whole 5 m window.
+        let unrecorded = || Fake {
+            max_range: None,
+            ..Fake::new("no-range", [0.1, 0.1])
+        };
+        let blind = LidarSpec {
+            max_range: 1.0,
+            ..LidarSpec::default()
+        };
+        assert!(matches!(
+            Agent::new(Box::new(unrecorded()), blind),
+            Err(DecisionError::SensorMismatch {
+                reason: SensorViolation::Window { .. },
+                ..
+            })
+        ));
+        Agent::new(Box::new(unrecorded()), LidarSpec::default()).expect("10 m covers the window");
+
+        // And a swap candidate is held to the same contract.
+        let mut agent = Agent::new(
+            Box::new(Fake::new("current", [0.2, 0.2])),
+            LidarSpec::default(),
+        )
+        .expect("fits");
+        let wrong = Fake {
+            max_range: Some(20.0),
+            ..Fake::new("twenty-metres", [0.1, 0.1])
+        };
+        assert!(matches!(
+            agent.swap_policy(Box::new(wrong)),
+            Err(DecisionError::SensorMismatch {
+                reason: SensorViolation::MaxRange { trained, .. },
+                ..
+            }) if trained == 20.0
+        ));
+        assert_eq!(agent.model_id(), "current");
+    }
+
+    #[test]
+    fn a_nan_swap_candidate_is_refused_on_the_last_observation_and_the_old_policy_drives_on() {
+        let lidar = LidarSpec::default();
+        let current = Fake::new("current", [0.35, 0.35]);
+        let mut agent = Agent::new(Box::new(current), lidar).expect("fits");
+        let scan = one_hit(&lidar);
+        let before = agent.act(&scan, 0.25, &goal()).expect("decides");
+        let last_aux = policy_aux(0.25, &goal()).expect("aux");
+
+        for output in [[f32::NAN, 0.1], [0.1, f32::INFINITY], [f32::NAN, f32::NAN]] {
+            let candidate = Fake::new("broken", output);
+            let calls = candidate.calls();
+            let err = agent
+                .swap_policy(Box::new(candidate))
+                .expect_err("a non-finite candidate must be refused");
+            match &err {
+                DecisionError::SwapNonFinite {
+                    model,
+                    observation,
+                    left,
+                    right,
+                } => {
+                    assert_eq!(model, "broken");
+                    assert_eq!(*observation, TrialObservation::Last);
+                    assert_eq!(left.to_bits(), output[0].to_bits());
+                    assert_eq!(right.to_bits(), output[1].to_bits());
+                }
+                other => panic!("expected SwapNonFinite, got {other:?}"),
+            }
+            let message = err.to_string();
+            assert!(message.contains("non-finite"), "{message}");
+            assert!(message.contains("the last observation"), "{message}");
+            // Tried exactly once, on what the agent last decided on: the aux and the one hit.
+            assert_eq!(*calls.lock().expect("log"), vec![(last_aux, 1.0)]);
+            // The old policy keeps driving, with the same command for the same input.
+            assert_eq!(agent.model_id(), "current");
+            assert_eq!(agent.act(&scan, 0.25, &goal()).expect("decides"), before);
+        }
+
+        // A backend that reports the non-finite output as an error is refused the same way.
+        let reporting = Fake {
+            output: Err(|| DecisionError::NonFinite {
+                model: "reporting".into(),
+                left: f32::NAN,
+                right: 0.0,
+            }),
+            ..Fake::new("reporting", [0.0, 0.0])
+        };
+        assert!(matches!(
+            agent.swap_policy(Box::new(reporting)),
+            Err(DecisionError::SwapNonFinite { .. })
+        ));
+        // Any other failure of the trial run is refused with its cause kept.
+        let failing = Fake {
+            output: Err(|| DecisionError::Goal {
+                reason: "boom".into(),
+            }),
+            ..Fake::new("failing", [0.0, 0.0])
+        };
+        match agent.swap_policy(Box::new(failing)) {
+            Err(err @ DecisionError::SwapTrialFailed { .. }) => {
+                let cause = std::error::Error::source(&err).expect("cause kept");
+                assert!(cause.to_string().contains("boom"), "{cause}");
+            }
+            other => panic!("expected SwapTrialFailed, got {other:?}"),
+        }
+        assert_eq!(agent.model_id(), "current");
+
+        // A finite candidate is swapped in and drives from the next decision.
+        agent
+            .swap_policy(Box::new(Fake::new("next", [0.5, 0.0])))
+            .expect("a finite candidate is accepted");
+        assert_eq!(agent.model_id(), "next");
+        let after = agent.act(&scan, 0.25, &goal()).expect("decides");
+        assert_eq!(
+            (after.left, after.right),
+            (0.5, 0.0),
+            "v* = v_train: unscaled"
+        );
+    }
+
+    #[test]
+    fn before_any_decision_a_candidate_is_tried_on_an_empty_observation() {
+        let lidar = LidarSpec::default();
+        let mut agent =
+            Agent::new(Box::new(Fake::new("current", [0.1, 0.1])), lidar).expect("fits");
+        let candidate = Fake::new("broken", [f32::NAN, f32::NAN]);
+        let calls = candidate.calls();
+        match agent.swap_policy(Box::new(candidate)) {
+            Err(DecisionError::SwapNonFinite { observation, .. }) => {
+                assert_eq!(observation, TrialObservation::Empty);
+            }
+            other => panic!("expected SwapNonFinite, got {other:?}"),
+        }
+        assert_eq!(*calls.lock().expect("log"), vec![(TRIAL_AUX, 0.0)]);
+        assert_eq!(agent.model_id(), "current");
     }
 }

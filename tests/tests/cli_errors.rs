@@ -5,12 +5,14 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{TempDir, Watchdog, binaries, repo_root, run, test_model};
+use formation_tests::{
+    Finished, LeakCheck, TempDir, Watchdog, binaries, repo_root, run, test_model, unique_run_id,
+};
 
 const LIMIT: Duration = Duration::from_secs(240);
 
 /// Runs `formation <args>` and checks a clean failure whose stderr contains every needle.
-fn fails_cleanly(args: &[&str], env: &[(&str, &str)], needles: &[&str]) {
+fn fails_cleanly(args: &[&str], env: &[(&str, &str)], needles: &[&str]) -> Finished {
     let mut command = Command::new(&binaries().cli);
     command.args(args);
     for (key, value) in env {
@@ -31,6 +33,7 @@ fn fails_cleanly(args: &[&str], env: &[(&str, &str)], needles: &[&str]) {
         "{}",
         finished.describe()
     );
+    finished
 }
 
 /// case1.toml with `edit` applied to its text, written to `dir/name`.
@@ -132,4 +135,218 @@ fn a_truncated_dataset_is_refused_before_training() {
         !dir.path().join("m/policy.onnx").exists(),
         "no model from bad data"
     );
+}
+
+/// Issue (bounded inputs): `formation run --scenario /dev/zero` grew to 5.9 GB. A scenario that is
+/// not a regular file, or is over 1 MiB, is refused by its metadata before it is read.
+#[test]
+fn scenarios_that_are_not_small_regular_files_are_refused_before_reading() {
+    let _watchdog = Watchdog::arm("scenario_files", LIMIT);
+    let dir = TempDir::new("scenfile");
+    let big = dir.path().join("big.toml");
+    // Sparse: 2 MiB that take no disk space.
+    std::fs::File::create(&big)
+        .and_then(|f| f.set_len(2 << 20))
+        .expect("a sparse file");
+    let big = big.display().to_string();
+    let directory = dir.path().display().to_string();
+    for (path, needles) in [
+        (
+            "/dev/zero",
+            &["/dev/zero", "a character device, not a regular file"][..],
+        ),
+        (directory.as_str(), &["a directory, not a regular file"][..]),
+        (
+            big.as_str(),
+            &["big.toml", "over the 1048576-byte limit"][..],
+        ),
+    ] {
+        fails_cleanly(&["run", "--scenario", path], &[], needles);
+        fails_cleanly(
+            &["eval", "--controller", "expert", "--scenario", path],
+            &[],
+            needles,
+        );
+    }
+}
+
+/// Issue (bounded inputs, f32 range): `duration_s = 1e12` made a run that never ends, and
+/// `d_star = 1e308` overflowed to infinity in f32. Out-of-range numbers and an oversized name are
+/// refused with the field, the allowed range and the value.
+#[test]
+fn out_of_range_scenario_values_are_refused_with_the_field_and_the_range() {
+    let _watchdog = Watchdog::arm("scenario_limits", LIMIT);
+    let dir = TempDir::new("scenlim");
+    let long_name = "n".repeat(5000);
+    let cases = [
+        (
+            scenario_with(dir.path(), "long.toml", |t| {
+                t.replace("duration_s = 60.0", "duration_s = 1e12")
+            }),
+            vec!["duration_s", "[0.001, 3600] s", "(got 1e12)"],
+        ),
+        (
+            scenario_with(dir.path(), "far.toml", |t| {
+                t.replace("d_star = 2.0", "d_star = 1e308")
+            }),
+            vec!["goal.d_star", "[0.01, 100] m", "(got 1e308)"],
+        ),
+        (
+            scenario_with(dir.path(), "blind.toml", |t| {
+                format!("{t}\n[lidar]\nmax_range = 1e-9\n")
+            }),
+            vec!["lidar.max_range", "[0.1, 1000] m", "(got 1e-9)"],
+        ),
+        (
+            scenario_with(dir.path(), "beams.toml", |t| {
+                format!("{t}\n[lidar]\nbeams = 4096\n")
+            }),
+            vec!["lidar.beams", "[8, 900]", "(got 4096)"],
+        ),
+        (
+            scenario_with(dir.path(), "name.toml", |t| {
+                t.replace("name = \"case1\"", &format!("name = \"{long_name}\""))
+            }),
+            vec!["name", "at most 128 characters"],
+        ),
+    ];
+    for (path, needles) in &cases {
+        for args in [
+            vec!["run", "--scenario", path.as_str()],
+            vec![
+                "eval",
+                "--controller",
+                "expert",
+                "--scenario",
+                path.as_str(),
+            ],
+        ] {
+            let finished = fails_cleanly(&args, &[], needles);
+            let echoed = finished.stdout() + &finished.stderr();
+            assert!(
+                !echoed.contains(&long_name[..200]),
+                "the name was echoed\n{}",
+                finished.describe()
+            );
+        }
+    }
+    let case1 = repo_root()
+        .join("scenarios/case1.toml")
+        .display()
+        .to_string();
+    for command in ["run", "eval"] {
+        fails_cleanly(
+            &[command, "--scenario", &case1, "--runs", "1000000000"],
+            &[],
+            &["--runs", "1 to 10000"],
+        );
+    }
+}
+
+/// Issue (contracts checked): `lidar.max_range` other than the model's ran to rc 0 with 0 %
+/// success. The command line loads every robot's model and checks it against the scenario's LIDAR
+/// before any process starts, naming the model's range and the scenario's.
+#[test]
+fn a_lidar_range_the_model_was_not_trained_for_is_refused_before_any_process_starts() {
+    let _watchdog = Watchdog::arm("range_mismatch", LIMIT);
+    let dir = TempDir::new("range");
+    let scenario = scenario_with(dir.path(), "short-range.toml", |t| {
+        format!("{t}\n[lidar]\nmax_range = 5.0\n")
+    });
+    let model = test_model().display().to_string();
+    let needles = ["robot 0", "max_range of 10 m", "max_range 5 m"];
+
+    let run_id = unique_run_id("range");
+    let leaks = LeakCheck::new(&run_id);
+    let out = dir.path().join("out");
+    let out_arg = out.display().to_string();
+    let finished = fails_cleanly(
+        &[
+            "run",
+            "--run-id",
+            run_id.as_str(),
+            "--scenario",
+            &scenario,
+            "--model",
+            &model,
+            "--out",
+            &out_arg,
+        ],
+        &[],
+        &needles,
+    );
+    assert!(
+        !finished.stdout().contains("formation run") && !finished.stdout().contains("connected"),
+        "nothing may be launched\n{}",
+        finished.describe()
+    );
+    assert!(!out.exists(), "no run specs or logs may be written");
+    leaks.assert_clean();
+
+    for extra in [&[][..], &["--processes"][..]] {
+        let mut args = vec!["eval", "--scenario", &scenario, "--model", &model];
+        args.extend_from_slice(extra);
+        fails_cleanly(&args, &[], &needles);
+    }
+}
+
+/// Issue (bounded inputs): a directory, a FIFO or /dev/zero given as a model was reported as "not
+/// found", and a 4 GB file given to `formation swap` was read whole before it was refused.
+#[test]
+fn a_model_that_is_not_a_small_regular_file_is_named_for_what_it_is() {
+    let _watchdog = Watchdog::arm("model_files", LIMIT);
+    let dir = TempDir::new("modelfile");
+    let case1 = repo_root()
+        .join("scenarios/case1.toml")
+        .display()
+        .to_string();
+    let directory = dir.path().display().to_string();
+    for model in [directory.as_str(), "/dev/zero"] {
+        for args in [
+            vec!["eval", "--scenario", case1.as_str(), "--model", model],
+            vec!["run", "--scenario", case1.as_str(), "--model", model],
+            vec![
+                "swap",
+                "--run",
+                "nosuchrun",
+                "--robot",
+                "0",
+                "--model",
+                model,
+            ],
+        ] {
+            let finished = fails_cleanly(&args, &[], &[model, "not a regular file"]);
+            assert!(
+                !finished.stderr().contains("not found"),
+                "{}",
+                finished.describe()
+            );
+        }
+    }
+    let huge = dir.path().join("huge.onnx");
+    // Sparse: 4 GiB that take no disk space; the refusal must come from the size, not a read.
+    std::fs::File::create(&huge)
+        .and_then(|f| f.set_len(4 << 30))
+        .expect("a sparse file");
+    let huge = huge.display().to_string();
+    for args in [
+        vec![
+            "swap",
+            "--run",
+            "nosuchrun",
+            "--robot",
+            "0",
+            "--model",
+            huge.as_str(),
+        ],
+        vec![
+            "eval",
+            "--scenario",
+            case1.as_str(),
+            "--model",
+            huge.as_str(),
+        ],
+    ] {
+        fails_cleanly(&args, &[], &["huge.onnx", "4294967296 bytes", "64 MiB"]);
+    }
 }

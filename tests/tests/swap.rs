@@ -164,3 +164,67 @@ fn a_lockstep_swap_matches_the_new_model_in_process_and_bad_swaps_are_refused() 
     );
     leaks.assert_clean();
 }
+
+/// Issue (contracts checked): a model whose output is NaN passed swap validation and then braked
+/// its robot every tick. The agent runs the candidate once on its last observation and refuses it;
+/// the robot keeps driving with the old model, every tick.
+#[test]
+fn a_swap_to_a_model_with_nan_output_is_refused_and_the_old_model_keeps_driving() {
+    let _watchdog = Watchdog::arm("swap_nan", LIMIT);
+    let dir = TempDir::new("swapnan");
+    let run_id = unique_run_id("swapnan");
+    let leaks = LeakCheck::new(&run_id);
+    let first = test_model();
+    let nan = dir.path().join("nan-output.onnx");
+    write_tiny_model_with(&nan, 4, &["--nan-output"]);
+
+    let scenario_path = case1_scenario(dir.path(), 30.0);
+    let out = dir.path().join("out");
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["run", "--run-id", run_id.as_str(), "--pace-ms", "10"])
+        .arg("--scenario")
+        .arg(&scenario_path)
+        .arg("--model")
+        .arg(first)
+        .arg("--out")
+        .arg(&out);
+    let mut launch = LiveProcess::spawn(command);
+    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+
+    let robot = SWAPPED_ROBOT.to_string();
+    swap(run_id.as_str(), &robot, &nan, &[])
+        .assert_failure_mentioning("refused")
+        .assert_failure_mentioning("non-finite")
+        .assert_failure_mentioning("nan-output")
+        .assert_failure_mentioning("old model keeps driving");
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+
+    // Every tick of the robot was decided by the old model and applied: never braked.
+    let log = RobotLog::read(&out, SWAPPED_ROBOT);
+    assert_eq!(log.models.len(), 600);
+    let reference = RobotLog::read(&out, 0).models[0].clone();
+    assert!(
+        log.models.iter().all(|m| *m == reference),
+        "only the old model may decide: {:?}",
+        log.models.iter().find(|m| **m != reference)
+    );
+    assert!(
+        log.outcomes.iter().all(|o| o == "fresh"),
+        "the robot was braked: {:?}",
+        log.braked_stretches()
+    );
+    assert!(
+        log.commands
+            .iter()
+            .all(|&(l, r)| l.is_finite() && r.is_finite()),
+        "every applied command is finite"
+    );
+    assert!(
+        log.commands.iter().any(|&c| c != (0.0, 0.0)),
+        "the robot drove"
+    );
+    leaks.assert_clean();
+}

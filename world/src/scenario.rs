@@ -7,45 +7,57 @@
 //!
 //! # File format
 //!
+//! The complete reference, with every key's meaning, default and limits, is `scenarios/README.md`;
+//! the limits themselves are the constants of [`limits`].
+//!
+//! A scenario file must be a regular file of at most [`limits::MAX_FILE_BYTES`] (1 MiB): anything
+//! else (a directory, a FIFO, a device such as `/dev/zero`, an oversized file) is refused by its
+//! metadata before it is read, and the read itself stops one byte past the limit.
+//!
 //! Every table rejects unknown keys, so a typo is an error that names the key rather than a silently
-//! ignored setting. After parsing, every value is validated; errors name the file and the field, e.g.
-//! `scenarios/x.toml: goal.d_star must be > 0 (got -1)`. NaN and infinities are rejected everywhere.
+//! ignored setting. After parsing, every value is validated against its documented range; errors name
+//! the file, the field, the allowed range and the value found, e.g.
+//! `scenarios/x.toml: goal.d_star must be in [0.01, 100] m (got -1)`. NaN and infinities are
+//! rejected everywhere. Every bound lies well inside what an `f32` carries, so a value that passes
+//! validation survives the `f32` conversions of the wire and the policy input unchanged in kind
+//! (finite, and non-zero where it must be).
 //!
 //! ```toml
-//! name = "case1"          # required, non-empty
-//! robots = 3              # required, >= 2 (a formation needs at least one pair)
-//! duration_s = 60.0       # required, > 0: simulated seconds per run
-//! dt = 0.05               # optional, default 0.05 s (20 Hz); ticks per run = round(duration_s / dt)
+//! name = "case1"          # required: 1 to 128 characters, no control characters
+//! robots = 3              # required, 2 ..= 1024 (a formation needs at least one pair)
+//! duration_s = 60.0       # required, 0.001 ..= 3600: simulated seconds per run
+//! dt = 0.05               # optional, default 0.05 s (20 Hz), 0.001 ..= 1; ticks = round(duration_s / dt)
 //! seed = 1                # required: base seed of the scenario's runs
-//! runs = 1                # optional, default 1: how many runs an evaluation of this scenario makes
+//! runs = 1                # optional, default 1, 1 ..= 10000: runs an evaluation of this scenario makes
+//!                         # robots * ticks <= 10,000,000 (a run's trajectory is held in memory)
 //!
 //! [goal]                  # required
-//! v_star = 0.7            # desired speed \[m/s\], >= 0 and <= robot.max_wheel_speed
-//! d_star = 2.0            # desired pairwise distance \[m\], > 0 ...
-//! # d_star_choices = [1.0, 1.5, 2.0]   # ... or drawn uniformly per run from these (exactly one of the two)
+//! v_star = 0.7            # desired speed \[m/s\], 0 ..= robot.max_wheel_speed
+//! d_star = 2.0            # desired pairwise distance \[m\], 0.01 ..= 100 ...
+//! # d_star_choices = [1.0, 1.5, 2.0]   # ... or 1 to 256 distances drawn per run (exactly one of the two)
 //!
 //! [heading]               # required: the desired common heading phi*(t)
 //! schedule = "constant"   # "constant" | "random" | "ramp" | "sine"
-//! phi = 3.76              # constant: phi* = phi (required)
+//! phi = 3.76              # constant: phi* = phi (required); angles in -1000 ..= 1000 rad
 //! # random:  phi* constant per run, drawn uniformly in [0, 2 pi); takes no parameters
-//! # ramp:    phi*(t) = phi0 + omega t            (omega required; phi0 default 0)
+//! # ramp:    phi*(t) = phi0 + omega t            (omega required, -100 ..= 100 rad/s; phi0 default 0)
 //! # sine:    phi*(t) = phi0 + amplitude sin(omega t)  (omega required; amplitude default 1; phi0 default 0)
 //!
 //! [init]                  # optional: initial poses as in the paper
-//! disc_radius = 3.0       # positions uniform in a disc of this radius \[m\] centred at the origin
-//! min_spacing = 0.6       # minimum distance between any two robots \[m\], >= 2 * robot.body_radius
+//! disc_radius = 3.0       # positions uniform in a disc of this radius \[m\] centred at the origin, 0.01 ..= 1000
+//! min_spacing = 0.6       # minimum distance between any two robots \[m\], 2 * robot.body_radius ..= 1000
 //!
 //! [lidar]                 # optional; each key defaults to LidarSpec::default()
-//! beams = 900             # >= 1
-//! max_range = 10.0        # > 0 \[m\]
-//! noise_std = 0.0         # >= 0 \[m\]
+//! beams = 900             # 8 ..= 900 (the most a scan message carries)
+//! max_range = 10.0        # 0.1 ..= 1000 \[m\]; must match the model's (checked before a run starts)
+//! noise_std = 0.0         # 0 ..= 10 \[m\]
 //!
 //! [robot]                 # optional; each key defaults to RobotParams::default()
-//! wheel_separation = 0.331
-//! wheel_radius = 0.0975
-//! body_radius = 0.25
-//! max_wheel_speed = 0.9
-//! # max_wheel_accel = 2.0 # optional \[m/s^2\]; absent = unlimited
+//! wheel_separation = 0.331  # 0.01 ..= 10 \[m\]
+//! wheel_radius = 0.0975     # 0.001 ..= 10 \[m\]
+//! body_radius = 0.25        # 0.01 ..= 10 \[m\]
+//! max_wheel_speed = 0.9     # 0.01 ..= 10 \[m/s\]
+//! # max_wheel_accel = 2.0   # optional, 0.01 ..= 1000 \[m/s^2\]; absent = unlimited
 //!
 //! [[agent]]               # optional, repeatable: a per-robot model for mixed teams
 //! robot = 1               # < robots, at most one entry per robot
@@ -74,6 +86,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use self::limits::{Bounds, Num};
 use crate::robot::RobotParams;
 use crate::world::{World, WorldConfig};
 
@@ -93,12 +106,38 @@ const PLACEMENT_RESTARTS: usize = 20;
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
     /// The file could not be read.
-    #[error("cannot read scenario file {}: {source}", path.display())]
+    #[error("cannot read scenario file {}: {source}; check the path", path.display())]
     Read {
         /// The path that was asked for.
         path: PathBuf,
         /// The I/O error.
         source: std::io::Error,
+    },
+    /// The path names something other than a regular file (a directory, a FIFO, a device).
+    #[error(
+        "scenario {} is {kind}, not a regular file; pass the path of a scenario .toml file \
+         (see scenarios/README.md)",
+        path.display()
+    )]
+    NotAFile {
+        /// The path that was asked for.
+        path: PathBuf,
+        /// What it is instead, e.g. `a directory`.
+        kind: &'static str,
+    },
+    /// The file is larger than any scenario can be.
+    #[error(
+        "scenario {} is {size} bytes, over the {limit}-byte limit of a scenario file; a scenario is \
+         a few dozen lines of TOML, so check that the path names the right file",
+        path.display(),
+        size = FileSize(*.size),
+        limit = limits::MAX_FILE_BYTES
+    )]
+    TooLarge {
+        /// The path that was asked for.
+        path: PathBuf,
+        /// Its size in bytes, or `None` when it grew past the limit while being read.
+        size: Option<u64>,
     },
     /// The text is not valid TOML or does not fit the schema (unknown or missing key, wrong type).
     #[error("{origin}: {}", source.to_string().trim_end())]
@@ -285,11 +324,11 @@ impl RunSpec {
 impl Scenario {
     /// Reads and validates the scenario file at `path`. Relative `[[agent]].model` paths are resolved
     /// against the file's directory.
+    ///
+    /// Only a regular file of at most [`limits::MAX_FILE_BYTES`] is read; anything else is refused
+    /// by its metadata before a byte is read (see [`read_scenario_text`]).
     pub fn from_path(path: &Path) -> Result<Scenario, ScenarioError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = read_scenario_text(path)?;
         let mut scenario = Scenario::from_toml_str(&text, &path.display().to_string())?;
         let base = path.parent().unwrap_or_else(|| Path::new(""));
         for agent in &mut scenario.agents {
@@ -400,6 +439,196 @@ impl Scenario {
             initial,
             noise_seed: splitmix64(seed ^ NOISE_DOMAIN),
             edges: all_pairs(self.n_robots),
+        }
+    }
+}
+
+/// The text of the scenario file at `path`, read only if it is a regular file of at most
+/// [`limits::MAX_FILE_BYTES`].
+///
+/// The file's metadata is checked before it is opened (so a FIFO is never opened and `/dev/zero`
+/// never read), checked again on the opened file (it may have been replaced in between), and the
+/// read stops one byte past the limit whatever the metadata said.
+pub fn read_scenario_text(path: &Path) -> Result<String, ScenarioError> {
+    use std::io::Read as _;
+    let io_error = |source| ScenarioError::Read {
+        path: path.to_path_buf(),
+        source,
+    };
+    let check = |meta: &std::fs::Metadata| {
+        if !meta.is_file() {
+            return Err(ScenarioError::NotAFile {
+                path: path.to_path_buf(),
+                kind: file_kind(meta),
+            });
+        }
+        if meta.len() > limits::MAX_FILE_BYTES {
+            return Err(ScenarioError::TooLarge {
+                path: path.to_path_buf(),
+                size: Some(meta.len()),
+            });
+        }
+        Ok(())
+    };
+    check(&std::fs::metadata(path).map_err(io_error)?)?;
+    let file = std::fs::File::open(path).map_err(io_error)?;
+    check(&file.metadata().map_err(io_error)?)?;
+    let mut bytes = Vec::new();
+    file.take(limits::MAX_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(io_error)?;
+    if bytes.len() as u64 > limits::MAX_FILE_BYTES {
+        return Err(ScenarioError::TooLarge {
+            path: path.to_path_buf(),
+            size: None,
+        });
+    }
+    String::from_utf8(bytes)
+        .map_err(|e| io_error(std::io::Error::new(std::io::ErrorKind::InvalidData, e)))
+}
+
+/// What a non-regular file is, for messages.
+fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    use std::os::unix::fs::FileTypeExt as _;
+    let kind = meta.file_type();
+    if kind.is_dir() {
+        "a directory"
+    } else if kind.is_fifo() {
+        "a FIFO (named pipe)"
+    } else if kind.is_char_device() {
+        "a character device"
+    } else if kind.is_block_device() {
+        "a block device"
+    } else if kind.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// A byte count in messages: the number, or "more than the limit" when it is not known.
+struct FileSize(Option<u64>);
+
+impl fmt::Display for FileSize {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.0 {
+            Some(size) => write!(f, "{size}"),
+            None => write!(f, "more than {}", limits::MAX_FILE_BYTES),
+        }
+    }
+}
+
+/// The documented limits of every scenario value (the reference is `scenarios/README.md`).
+///
+/// They keep a scenario's cost bounded (memory and time grow with robots, ticks and runs) and its
+/// numbers inside what the rest of the system carries: every real-valued bound is far inside the
+/// `f32` range, so a value that passes stays finite and non-zero through the `f32` conversions of
+/// the wire (LIDAR ranges) and the policy input (`d*`).
+pub mod limits {
+    use std::fmt;
+
+    /// Largest scenario file that is read \[bytes\]: 1 MiB (the shipped ones are under 1 KiB).
+    pub const MAX_FILE_BYTES: u64 = 1 << 20;
+    /// Longest scenario name \[characters\]; it is echoed into logs, stdout and `summary.json`.
+    pub const MAX_NAME_CHARS: usize = 128;
+    /// Fewest robots: a formation needs at least one pair.
+    pub const MIN_ROBOTS: usize = 2;
+    /// Most robots. The runtime starts one OS process per robot and every tick ray-casts every
+    /// robot's LIDAR against every other robot and scores all `n (n - 1) / 2` pairs.
+    pub const MAX_ROBOTS: usize = 1024;
+    /// Most runs of one evaluation (the scenario's `runs` and the `--runs` flag).
+    pub const MAX_RUNS: usize = 10_000;
+    /// Most `robots x ticks` of one run: a run's trajectory (about 40 bytes per robot and tick) is
+    /// held in memory and written as a log, so this caps it near 400 MB.
+    pub const MAX_ROBOT_TICKS: u64 = 10_000_000;
+    /// Most LIDAR beams: what a scan message carries ([`formation_proto::wire::MAX_BEAMS`]).
+    pub const MAX_BEAMS: usize = formation_proto::wire::MAX_BEAMS;
+    /// Fewest LIDAR beams.
+    pub const MIN_BEAMS: usize = 8;
+    /// Most entries of `goal.d_star_choices`.
+    pub const MAX_D_STAR_CHOICES: usize = 256;
+
+    /// An inclusive range `[min, max]` of a real-valued setting, with its unit for messages.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct Bounds {
+        /// Smallest allowed value.
+        pub min: f64,
+        /// Largest allowed value.
+        pub max: f64,
+        /// Unit, e.g. `m`, `s`, `rad/s`.
+        pub unit: &'static str,
+    }
+
+    impl fmt::Display for Bounds {
+        fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            write!(f, "[{}, {}] {}", Num(self.min), Num(self.max), self.unit)
+        }
+    }
+
+    const fn bounds(min: f64, max: f64, unit: &'static str) -> Bounds {
+        Bounds { min, max, unit }
+    }
+
+    /// `duration_s`: simulated seconds per run (at most an hour).
+    pub const DURATION_S: Bounds = bounds(1e-3, 3600.0, "s");
+    /// `dt`: the simulation step (1 kHz to 1 Hz).
+    pub const DT: Bounds = bounds(1e-3, 1.0, "s");
+    /// `goal.d_star` and each of `goal.d_star_choices`.
+    pub const D_STAR: Bounds = bounds(0.01, 100.0, "m");
+    /// `heading.phi`, `heading.phi0` and `heading.amplitude`.
+    pub const ANGLE: Bounds = bounds(-1000.0, 1000.0, "rad");
+    /// `heading.omega`: the heading's turn rate or angular frequency.
+    pub const HEADING_RATE: Bounds = bounds(-100.0, 100.0, "rad/s");
+    /// `init.disc_radius`.
+    pub const DISC_RADIUS: Bounds = bounds(0.01, 1000.0, "m");
+    /// `init.min_spacing` (and at least `2 * robot.body_radius`).
+    pub const MIN_SPACING: Bounds = bounds(0.02, 1000.0, "m");
+    /// `lidar.max_range`.
+    pub const MAX_RANGE: Bounds = bounds(0.1, 1000.0, "m");
+    /// `lidar.noise_std`.
+    pub const NOISE_STD: Bounds = bounds(0.0, 10.0, "m");
+    /// `robot.wheel_separation`.
+    pub const WHEEL_SEPARATION: Bounds = bounds(0.01, 10.0, "m");
+    /// `robot.wheel_radius`.
+    pub const WHEEL_RADIUS: Bounds = bounds(0.001, 10.0, "m");
+    /// `robot.body_radius`.
+    pub const BODY_RADIUS: Bounds = bounds(0.01, 10.0, "m");
+    /// `robot.max_wheel_speed` (`goal.v_star` must lie in `[0, max_wheel_speed]`).
+    pub const MAX_WHEEL_SPEED: Bounds = bounds(0.01, 10.0, "m/s");
+    /// `robot.max_wheel_accel`.
+    pub const MAX_WHEEL_ACCEL: Bounds = bounds(0.01, 1000.0, "m/s^2");
+
+    /// Every real-valued bound, by the keys it applies to (for tests and documentation).
+    pub const ALL: [(&str, Bounds); 14] = [
+        ("duration_s", DURATION_S),
+        ("dt", DT),
+        ("goal.d_star, goal.d_star_choices", D_STAR),
+        ("heading.phi, heading.phi0, heading.amplitude", ANGLE),
+        ("heading.omega", HEADING_RATE),
+        ("init.disc_radius", DISC_RADIUS),
+        ("init.min_spacing", MIN_SPACING),
+        ("lidar.max_range", MAX_RANGE),
+        ("lidar.noise_std", NOISE_STD),
+        ("robot.wheel_separation", WHEEL_SEPARATION),
+        ("robot.wheel_radius", WHEEL_RADIUS),
+        ("robot.body_radius", BODY_RADIUS),
+        ("robot.max_wheel_speed", MAX_WHEEL_SPEED),
+        ("robot.max_wheel_accel", MAX_WHEEL_ACCEL),
+    ];
+
+    /// A number in messages: plain for everyday magnitudes, scientific for huge or tiny ones (so
+    /// `1e308` is not printed as 309 digits).
+    pub(crate) struct Num(pub f64);
+
+    impl fmt::Display for Num {
+        fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            let x = self.0;
+            let magnitude = x.abs();
+            if x.is_finite() && x != 0.0 && !(1e-4..1e7).contains(&magnitude) {
+                write!(f, "{x:e}")
+            } else {
+                write!(f, "{x}")
+            }
         }
     }
 }
@@ -598,49 +827,55 @@ impl Checker<'_> {
         }
     }
 
-    fn finite(&self, field: &str, value: f64) -> Result<f64, ScenarioError> {
-        if value.is_finite() {
-            Ok(value)
-        } else {
-            Err(self.invalid(field, format_args!("must be a finite number (got {value})")))
+    /// `value`, if it is a finite number within `bounds`.
+    fn bounded(&self, field: &str, value: f64, bounds: Bounds) -> Result<f64, ScenarioError> {
+        if !value.is_finite() {
+            return Err(self.invalid(
+                field,
+                format_args!("must be a finite number in {bounds} (got {})", Num(value)),
+            ));
         }
+        if !(bounds.min..=bounds.max).contains(&value) {
+            return Err(self.invalid(
+                field,
+                format_args!("must be in {bounds} (got {})", Num(value)),
+            ));
+        }
+        Ok(value)
     }
 
-    fn positive(&self, field: &str, value: f64) -> Result<f64, ScenarioError> {
-        self.finite(field, value)?;
-        if value > 0.0 {
+    /// `value`, if it is a whole number in `min..=max`; `why` explains the bounds.
+    fn count(
+        &self,
+        field: &str,
+        value: usize,
+        min: usize,
+        max: usize,
+        why: &str,
+    ) -> Result<usize, ScenarioError> {
+        if (min..=max).contains(&value) {
             Ok(value)
         } else {
-            Err(self.invalid(field, format_args!("must be > 0 (got {value})")))
-        }
-    }
-
-    fn non_negative(&self, field: &str, value: f64) -> Result<f64, ScenarioError> {
-        self.finite(field, value)?;
-        if value >= 0.0 {
-            Ok(value)
-        } else {
-            Err(self.invalid(field, format_args!("must be >= 0 (got {value})")))
+            Err(self.invalid(
+                field,
+                format_args!("must be in [{min}, {max}]{why} (got {value})"),
+            ))
         }
     }
 }
 
 impl ScenarioToml {
     fn validate(self, check: &Checker<'_>) -> Result<Scenario, ScenarioError> {
-        if self.name.trim().is_empty() {
-            return Err(check.invalid("name", "must not be empty"));
-        }
-        if self.robots < 2 {
-            return Err(check.invalid(
-                "robots",
-                format_args!(
-                    "must be >= 2, a formation needs at least one pair (got {})",
-                    self.robots
-                ),
-            ));
-        }
-        let duration_s = check.positive("duration_s", self.duration_s)?;
-        let dt = check.positive("dt", self.dt)?;
+        let name = validate_name(check, self.name)?;
+        let robots = check.count(
+            "robots",
+            self.robots,
+            limits::MIN_ROBOTS,
+            limits::MAX_ROBOTS,
+            ", a formation needs at least one pair",
+        )?;
+        let duration_s = check.bounded("duration_s", self.duration_s, limits::DURATION_S)?;
+        let dt = check.bounded("dt", self.dt, limits::DT)?;
         if dt > duration_s {
             return Err(check.invalid(
                 "dt",
@@ -658,21 +893,43 @@ impl ScenarioToml {
                 ),
             ));
         }
-        if self.runs == 0 {
-            return Err(check.invalid("runs", "must be >= 1 (got 0)"));
+        // Both factors are bounded above, so the product cannot overflow.
+        let robot_ticks = steps.round() as u64 * robots as u64;
+        if robot_ticks > limits::MAX_ROBOT_TICKS {
+            return Err(check.invalid(
+                "duration_s",
+                format_args!(
+                    "with dt = {dt} gives {} ticks, and robots x ticks = {robot_ticks} is over the \
+                     limit of {} (a run's trajectory is held in memory); shorten duration_s, \
+                     enlarge dt or use fewer robots",
+                    steps.round(),
+                    limits::MAX_ROBOT_TICKS
+                ),
+            ));
         }
+        let runs = check.count("runs", self.runs, 1, limits::MAX_RUNS, "")?;
 
         let robot = validate_robot(check, self.robot)?;
         let lidar = LidarSpec {
-            beams: self.lidar.beams,
-            max_range: check.positive("lidar.max_range", self.lidar.max_range)?,
-            noise_std: check.non_negative("lidar.noise_std", self.lidar.noise_std)?,
+            beams: check.count(
+                "lidar.beams",
+                self.lidar.beams,
+                limits::MIN_BEAMS,
+                limits::MAX_BEAMS,
+                " (a scan message carries at most 900 ranges)",
+            )?,
+            max_range: check.bounded("lidar.max_range", self.lidar.max_range, limits::MAX_RANGE)?,
+            noise_std: check.bounded("lidar.noise_std", self.lidar.noise_std, limits::NOISE_STD)?,
         };
-        if lidar.beams == 0 {
-            return Err(check.invalid("lidar.beams", "must be >= 1 (got 0)"));
-        }
 
-        let v_star = check.non_negative("goal.v_star", self.goal.v_star)?;
+        let v_star = check.bounded(
+            "goal.v_star",
+            self.goal.v_star,
+            Bounds {
+                min: 0.0,
+                ..limits::MAX_WHEEL_SPEED
+            },
+        )?;
         if v_star > robot.max_wheel_speed {
             return Err(check.invalid(
                 "goal.v_star",
@@ -683,13 +940,23 @@ impl ScenarioToml {
             ));
         }
         let d_star = match (self.goal.d_star, self.goal.d_star_choices) {
-            (Some(d), None) => DStarPlan::Fixed(check.positive("goal.d_star", d)?),
+            (Some(d), None) => DStarPlan::Fixed(check.bounded("goal.d_star", d, limits::D_STAR)?),
             (None, Some(choices)) => {
                 if choices.is_empty() {
                     return Err(check.invalid("goal.d_star_choices", "must not be empty"));
                 }
+                if choices.len() > limits::MAX_D_STAR_CHOICES {
+                    return Err(check.invalid(
+                        "goal.d_star_choices",
+                        format_args!(
+                            "has {} entries, more than the {} allowed",
+                            choices.len(),
+                            limits::MAX_D_STAR_CHOICES
+                        ),
+                    ));
+                }
                 for (k, &d) in choices.iter().enumerate() {
-                    check.positive(&format!("goal.d_star_choices[{k}]"), d)?;
+                    check.bounded(&format!("goal.d_star_choices[{k}]"), d, limits::D_STAR)?;
                 }
                 DStarPlan::Choices(choices)
             }
@@ -708,15 +975,15 @@ impl ScenarioToml {
         };
 
         let heading = validate_heading(check, &self.heading)?;
-        let init = validate_init(check, self.init, self.robots, &robot)?;
+        let init = validate_init(check, self.init, robots, &robot)?;
 
         let mut agents = self.agent;
-        let mut seen = vec![false; self.robots];
+        let mut seen = vec![false; robots];
         for (k, agent) in agents.iter_mut().enumerate() {
-            if agent.robot >= self.robots {
+            if agent.robot >= robots {
                 return Err(check.invalid(
                     format_args!("agent[{k}].robot"),
-                    format_args!("must be < robots ({}) (got {})", self.robots, agent.robot),
+                    format_args!("must be < robots ({robots}) (got {})", agent.robot),
                 ));
             }
             if std::mem::replace(&mut seen[agent.robot], true) {
@@ -731,11 +998,11 @@ impl ScenarioToml {
         }
 
         Ok(Scenario {
-            name: self.name,
-            n_robots: self.robots,
+            name,
+            n_robots: robots,
             duration_s,
             seed: self.seed,
-            runs: self.runs,
+            runs,
             v_star,
             d_star,
             heading,
@@ -746,13 +1013,52 @@ impl ScenarioToml {
     }
 }
 
+/// The name, if it is 1 to [`limits::MAX_NAME_CHARS`] characters without control characters.
+fn validate_name(check: &Checker<'_>, name: String) -> Result<String, ScenarioError> {
+    if name.trim().is_empty() {
+        return Err(check.invalid("name", "must not be empty"));
+    }
+    let chars = name.chars().count();
+    if chars > limits::MAX_NAME_CHARS {
+        return Err(check.invalid(
+            "name",
+            format_args!(
+                "must be at most {} characters (got {chars}); it is echoed into logs and reports",
+                limits::MAX_NAME_CHARS
+            ),
+        ));
+    }
+    if let Some(bad) = name.chars().find(|c| c.is_control()) {
+        return Err(check.invalid(
+            "name",
+            format_args!(
+                "must be printable, without control characters (found {:?})",
+                bad
+            ),
+        ));
+    }
+    Ok(name)
+}
+
 fn validate_robot(check: &Checker<'_>, robot: RobotParams) -> Result<RobotParams, ScenarioError> {
-    check.positive("robot.wheel_separation", robot.wheel_separation)?;
-    check.positive("robot.wheel_radius", robot.wheel_radius)?;
-    check.positive("robot.body_radius", robot.body_radius)?;
-    check.positive("robot.max_wheel_speed", robot.max_wheel_speed)?;
+    check.bounded(
+        "robot.wheel_separation",
+        robot.wheel_separation,
+        limits::WHEEL_SEPARATION,
+    )?;
+    check.bounded(
+        "robot.wheel_radius",
+        robot.wheel_radius,
+        limits::WHEEL_RADIUS,
+    )?;
+    check.bounded("robot.body_radius", robot.body_radius, limits::BODY_RADIUS)?;
+    check.bounded(
+        "robot.max_wheel_speed",
+        robot.max_wheel_speed,
+        limits::MAX_WHEEL_SPEED,
+    )?;
     if let Some(accel) = robot.max_wheel_accel {
-        check.positive("robot.max_wheel_accel", accel)?;
+        check.bounded("robot.max_wheel_accel", accel, limits::MAX_WHEEL_ACCEL)?;
     }
     Ok(robot)
 }
@@ -763,20 +1069,32 @@ fn validate_heading(
 ) -> Result<HeadingPlan, ScenarioError> {
     let kind = heading.schedule;
     let params = [
-        ("phi", heading.phi, kind == ScheduleKind::Constant),
+        (
+            "phi",
+            heading.phi,
+            kind == ScheduleKind::Constant,
+            limits::ANGLE,
+        ),
         (
             "omega",
             heading.omega,
             matches!(kind, ScheduleKind::Ramp | ScheduleKind::Sine),
+            limits::HEADING_RATE,
         ),
-        ("amplitude", heading.amplitude, kind == ScheduleKind::Sine),
+        (
+            "amplitude",
+            heading.amplitude,
+            kind == ScheduleKind::Sine,
+            limits::ANGLE,
+        ),
         (
             "phi0",
             heading.phi0,
             matches!(kind, ScheduleKind::Ramp | ScheduleKind::Sine),
+            limits::ANGLE,
         ),
     ];
-    for (name, value, used) in params {
+    for (name, value, used, bounds) in params {
         match value {
             Some(_) if !used => {
                 return Err(check.invalid(
@@ -788,7 +1106,7 @@ fn validate_heading(
                 ));
             }
             Some(v) => {
-                check.finite(&format!("heading.{name}"), v)?;
+                check.bounded(&format!("heading.{name}"), v, bounds)?;
             }
             None => {}
         }
@@ -824,8 +1142,8 @@ fn validate_init(
     robots: usize,
     robot: &RobotParams,
 ) -> Result<InitialConditions, ScenarioError> {
-    let disc_radius = check.positive("init.disc_radius", init.disc_radius)?;
-    let min_spacing = check.positive("init.min_spacing", init.min_spacing)?;
+    let disc_radius = check.bounded("init.disc_radius", init.disc_radius, limits::DISC_RADIUS)?;
+    let min_spacing = check.bounded("init.min_spacing", init.min_spacing, limits::MIN_SPACING)?;
     let body_diameter = 2.0 * robot.body_radius;
     if min_spacing < body_diameter {
         return Err(check.invalid(
@@ -1030,11 +1348,11 @@ phi = 1.0
         let (field, problem) = invalid_field(&edited("d_star = 2.0", "d_star = -1"));
         assert_eq!(
             (field.as_str(), problem.as_str()),
-            ("goal.d_star", "must be > 0 (got -1)")
+            ("goal.d_star", "must be in [0.01, 100] m (got -1)")
         );
         assert_eq!(
             error_text(&edited("d_star = 2.0", "d_star = -1")),
-            "scenarios/x.toml: goal.d_star must be > 0 (got -1)"
+            "scenarios/x.toml: goal.d_star must be in [0.01, 100] m (got -1)"
         );
 
         let cases = [
@@ -1043,7 +1361,11 @@ phi = 1.0
                 "goal.d_star",
                 "finite",
             ),
-            (edited("d_star = 2.0", "d_star = 0.0"), "goal.d_star", "> 0"),
+            (
+                edited("d_star = 2.0", "d_star = 0.0"),
+                "goal.d_star",
+                "[0.01, 100] m",
+            ),
             (
                 edited("d_star = 2.0", "d_star_choices = [1.0, inf]"),
                 "goal.d_star_choices[1]",
@@ -1068,7 +1390,7 @@ phi = 1.0
                 "finite",
             ),
             (
-                edited("duration_s = 10.0", "duration_s = 10.0\ndt = 20.0"),
+                edited("duration_s = 10.0", "duration_s = 0.5\ndt = 1.0"),
                 "dt",
                 "<= duration_s",
             ),
@@ -1080,7 +1402,7 @@ phi = 1.0
             (
                 edited("duration_s = 10.0", "duration_s = 10.0\nruns = 0"),
                 "runs",
-                ">= 1",
+                "[1, 10000] (got 0)",
             ),
             (
                 edited("v_star = 0.7", "v_star = 1.5"),
@@ -1125,17 +1447,17 @@ phi = 1.0
             (
                 format!("{MINIMAL}[lidar]\nbeams = 0\n"),
                 "lidar.beams",
-                ">= 1",
+                "[8, 900]",
             ),
             (
                 format!("{MINIMAL}[lidar]\nnoise_std = -0.1\n"),
                 "lidar.noise_std",
-                ">= 0",
+                "[0, 10] m",
             ),
             (
                 format!("{MINIMAL}[robot]\nmax_wheel_accel = 0.0\n"),
                 "robot.max_wheel_accel",
-                "> 0",
+                "[0.01, 1000] m/s^2",
             ),
             (
                 format!("{MINIMAL}[robot]\nwheel_separation = nan\n"),
@@ -1169,6 +1491,296 @@ phi = 1.0
                 "{field}: {problem:?} lacks {expected_problem:?}"
             );
         }
+    }
+
+    /// Asserts that `text` is refused at `field` with a problem containing every needle.
+    fn refused(text: &str, field: &str, needles: &[&str]) {
+        let (found, problem) = invalid_field(text);
+        assert_eq!(found, field, "{problem}");
+        for needle in needles {
+            assert!(
+                problem.contains(needle),
+                "{field}: {problem:?} lacks {needle:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn run_size_limits_are_enforced_with_the_allowed_range() {
+        // Issue: duration_s = 1e12 was accepted and a run never ended.
+        refused(
+            &edited("duration_s = 10.0", "duration_s = 1e12"),
+            "duration_s",
+            &["[0.001, 3600] s", "(got 1e12)"],
+        );
+        refused(
+            &edited("duration_s = 10.0", "duration_s = 3600.5"),
+            "duration_s",
+            &["[0.001, 3600] s"],
+        );
+        parse(&edited("duration_s = 10.0", "duration_s = 3600.0")).expect("an hour is allowed");
+        refused(
+            &edited("duration_s = 10.0", "duration_s = 10.0\ndt = 1e-4"),
+            "dt",
+            &["[0.001, 1] s", "(got 0.0001)"],
+        );
+        refused(
+            &edited("duration_s = 10.0", "duration_s = 10.0\ndt = 2.0"),
+            "dt",
+            &["[0.001, 1] s", "(got 2)"],
+        );
+        refused(
+            &edited("robots = 3", "robots = 1025"),
+            "robots",
+            &["[2, 1024]", "(got 1025)"],
+        );
+        refused(
+            &edited("duration_s = 10.0", "duration_s = 10.0\nruns = 10001"),
+            "runs",
+            &["[1, 10000]", "(got 10001)"],
+        );
+        refused(
+            &format!("{MINIMAL}[lidar]\nbeams = 901\n"),
+            "lidar.beams",
+            &["[8, 900]", "(got 901)"],
+        );
+        refused(
+            &format!("{MINIMAL}[lidar]\nbeams = 7\n"),
+            "lidar.beams",
+            &["[8, 900]"],
+        );
+        // Each factor within its limit, the product over it: 1000 robots x 72,000 ticks.
+        let crowd = edited("robots = 3", "robots = 1000")
+            .replace("duration_s = 10.0", "duration_s = 3600.0")
+            + "[init]\ndisc_radius = 100.0\n";
+        refused(
+            &crowd,
+            "duration_s",
+            &["robots x ticks", "72000000", "10000000"],
+        );
+        refused(
+            &edited(
+                "d_star = 2.0",
+                &format!("d_star_choices = [{}]", ["1.0"; 257].join(", ")),
+            ),
+            "goal.d_star_choices",
+            &["257 entries", "256"],
+        );
+    }
+
+    #[test]
+    fn numbers_must_fit_their_range_and_an_f32() {
+        // Issue: d_star = 1e308 was accepted and overflowed to infinity in the f32 policy input.
+        let cases: [(String, &str, &[&str]); 11] = [
+            (
+                edited("d_star = 2.0", "d_star = 1e308"),
+                "goal.d_star",
+                &["[0.01, 100] m", "(got 1e308)"],
+            ),
+            (
+                edited("d_star = 2.0", "d_star = 1e-50"),
+                "goal.d_star",
+                &["[0.01, 100] m", "(got 1e-50)"],
+            ),
+            (
+                edited("d_star = 2.0", "d_star_choices = [1.0, 1e39]"),
+                "goal.d_star_choices[1]",
+                &["[0.01, 100] m", "(got 1e39)"],
+            ),
+            (
+                edited("v_star = 0.7", "v_star = -0.1"),
+                "goal.v_star",
+                &["[0, 10] m/s", "(got -0.1)"],
+            ),
+            (
+                edited("phi = 1.0", "phi = 1e20"),
+                "heading.phi",
+                &["[-1000, 1000] rad", "(got 1e20)"],
+            ),
+            (
+                edited(
+                    "schedule = \"constant\"\nphi = 1.0",
+                    "schedule = \"ramp\"\nomega = 1e300",
+                ),
+                "heading.omega",
+                &["[-100, 100] rad/s", "(got 1e300)"],
+            ),
+            (
+                edited(
+                    "schedule = \"constant\"\nphi = 1.0",
+                    "schedule = \"sine\"\nomega = 0.2\namplitude = -inf",
+                ),
+                "heading.amplitude",
+                &["finite", "[-1000, 1000] rad", "(got -inf)"],
+            ),
+            (
+                format!("{MINIMAL}[lidar]\nmax_range = 1e-9\n"),
+                "lidar.max_range",
+                &["[0.1, 1000] m", "(got 1e-9)"],
+            ),
+            (
+                format!("{MINIMAL}[lidar]\nnoise_std = 1e40\n"),
+                "lidar.noise_std",
+                &["[0, 10] m", "(got 1e40)"],
+            ),
+            (
+                format!("{MINIMAL}[robot]\nbody_radius = 1e-30\n"),
+                "robot.body_radius",
+                &["[0.01, 10] m"],
+            ),
+            (
+                format!("{MINIMAL}[init]\ndisc_radius = 1e300\n"),
+                "init.disc_radius",
+                &["[0.01, 1000] m"],
+            ),
+        ];
+        for (text, field, needles) in cases {
+            refused(&text, field, needles);
+        }
+        let message = error_text(&edited("d_star = 2.0", "d_star = 1e308"));
+        assert_eq!(
+            message,
+            "scenarios/x.toml: goal.d_star must be in [0.01, 100] m (got 1e308)"
+        );
+    }
+
+    #[test]
+    fn every_limit_survives_the_f32_conversion() {
+        let fits = |x: f64| {
+            let narrow = x as f32;
+            narrow.is_finite() && (x == 0.0) == (narrow == 0.0)
+        };
+        for (keys, bounds) in limits::ALL {
+            assert!(bounds.min <= bounds.max, "{keys}: {bounds}");
+            assert!(
+                fits(bounds.min) && fits(bounds.max),
+                "{keys}: {bounds} must be finite and keep its sign in f32"
+            );
+        }
+        assert_eq!(limits::MAX_BEAMS, formation_proto::wire::MAX_BEAMS);
+    }
+
+    #[test]
+    fn names_are_short_and_printable() {
+        let named = |name: &str| edited("name = \"t\"", &format!("name = {name:?}"));
+        parse(&named(&"n".repeat(limits::MAX_NAME_CHARS))).expect("128 characters are allowed");
+        parse(&named("Fall 2026 — table I, ü")).expect("printable Unicode is allowed");
+        refused(
+            &named(&"n".repeat(limits::MAX_NAME_CHARS + 1)),
+            "name",
+            &["at most 128 characters", "(got 129)"],
+        );
+        refused(
+            &named("two\nlines"),
+            "name",
+            &["control characters", "'\\n'"],
+        );
+        refused(
+            &edited("name = \"t\"", "name = \"bell\\u0007\""),
+            "name",
+            &["control characters"],
+        );
+        // A huge name is refused without being echoed back.
+        let huge = named(&"x".repeat(100_000));
+        let message = error_text(&huge);
+        assert!(
+            message.len() < 300,
+            "the name was echoed: {} bytes",
+            message.len()
+        );
+    }
+
+    /// A scratch directory under the system temp directory, removed on drop.
+    struct Scratch(PathBuf);
+
+    impl Scratch {
+        fn new(tag: &str) -> Scratch {
+            use std::sync::atomic::{AtomicUsize, Ordering};
+            static N: AtomicUsize = AtomicUsize::new(0);
+            let dir = std::env::temp_dir().join(format!(
+                "formation-scenario-{tag}-{}-{}",
+                std::process::id(),
+                N.fetch_add(1, Ordering::Relaxed)
+            ));
+            std::fs::create_dir_all(&dir).expect("scratch dir");
+            Scratch(dir)
+        }
+    }
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    #[test]
+    fn an_oversized_file_is_refused_by_its_size() {
+        let dir = Scratch::new("big");
+        let path = dir.0.join("big.toml");
+        let file = std::fs::File::create(&path).expect("create");
+        // Sparse: no disk space used, and a whole read would allocate over a MiB.
+        file.set_len(limits::MAX_FILE_BYTES + 1).expect("set_len");
+        match Scenario::from_path(&path) {
+            Err(ref error @ ScenarioError::TooLarge { size, .. }) => {
+                assert_eq!(size, Some(limits::MAX_FILE_BYTES + 1));
+                let message = error.to_string();
+                assert!(message.contains("big.toml"), "{message}");
+                assert!(message.contains("1048577 bytes"), "{message}");
+                assert!(message.contains("1048576-byte limit"), "{message}");
+            }
+            other => panic!("expected TooLarge, got {other:?}"),
+        }
+        // Exactly at the limit it is read (and then fails to parse as TOML: all NUL bytes).
+        file.set_len(limits::MAX_FILE_BYTES).expect("set_len");
+        assert!(matches!(
+            Scenario::from_path(&path),
+            Err(ScenarioError::Parse { .. })
+        ));
+    }
+
+    #[test]
+    fn devices_directories_and_fifos_are_refused_before_reading() {
+        let dir = Scratch::new("kinds");
+        let fifo = dir.0.join("pipe.toml");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .expect("running mkfifo");
+        assert!(made.success(), "mkfifo failed");
+        for (path, kind) in [
+            (Path::new("/dev/zero"), "a character device"),
+            (dir.0.as_path(), "a directory"),
+            (fifo.as_path(), "a FIFO"),
+        ] {
+            // Reading /dev/zero or opening the FIFO would never return: the refusal must come first.
+            match Scenario::from_path(path) {
+                Err(ref error @ ScenarioError::NotAFile { kind: found, .. }) => {
+                    assert!(found.starts_with(kind), "{path:?}: {found}");
+                    let message = error.to_string();
+                    assert!(message.contains("not a regular file"), "{message}");
+                    assert!(message.contains(&path.display().to_string()), "{message}");
+                }
+                other => panic!("{path:?}: expected NotAFile, got {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn a_scenario_file_is_read_and_its_agent_paths_resolved() {
+        let dir = Scratch::new("ok");
+        let path = dir.0.join("ok.toml");
+        std::fs::write(
+            &path,
+            format!("{MINIMAL}[[agent]]\nrobot = 1\nmodel = \"m/b.onnx\"\n"),
+        )
+        .expect("write");
+        let scenario = Scenario::from_path(&path).expect("valid");
+        assert_eq!(scenario.agent_models()[0].model, dir.0.join("m/b.onnx"));
+        std::fs::write(&path, b"name = \"\xff\"\n").expect("write");
+        assert!(matches!(
+            Scenario::from_path(&path),
+            Err(ScenarioError::Read { .. })
+        ));
     }
 
     #[test]

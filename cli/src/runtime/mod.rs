@@ -63,8 +63,8 @@ pub struct RunArgs {
     /// Output directory for the run logs (`runs/`, `timing/`) and the latency profile `profile.json`.
     #[arg(long, default_value = "out/run")]
     pub out: PathBuf,
-    /// Number of runs (default: 1).
-    #[arg(long, default_value_t = 1)]
+    /// Number of runs (default: 1; at most 10000).
+    #[arg(long, default_value_t = 1, value_parser = crate::args::run_count)]
     pub runs: usize,
     /// Index of the first run.
     #[arg(long, default_value_t = 0)]
@@ -131,8 +131,11 @@ pub struct SwapArgs {
     pub timeout_s: f64,
 }
 
-/// The model path of every robot: the scenario's per-robot models, else `default`. Missing files
-/// and robots out of range are errors naming the fix.
+/// The model path of every robot: the scenario's per-robot models, else `default`. Each model is
+/// loaded and checked against the contract and the scenario's LIDAR (beams, range, window) here,
+/// before any process starts ([`robot_agent::decision::check_team_models`]); a missing or
+/// unusable file, a model trained for another sensor and a robot out of range are errors naming
+/// the robot, the file and the fix.
 pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let mut models = vec![default.to_path_buf(); scenario.n_robots()];
     for assigned in scenario.agent_models() {
@@ -146,16 +149,7 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
         })?;
         *slot = assigned.model.clone();
     }
-    for (robot, model) in models.iter().enumerate() {
-        if !model.is_file() {
-            anyhow::bail!(
-                "model {} of robot {robot} not found: pass --model PATH to an ONNX file exported by \
-                 `formation train` (the shipped default is {})",
-                model.display(),
-                paths::DEFAULT_MODEL
-            );
-        }
-    }
+    robot_agent::decision::check_team_models(&models, &scenario.world_config().lidar)?;
     Ok(models)
 }
 

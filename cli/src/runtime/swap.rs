@@ -6,8 +6,13 @@
 //! model on a helper thread and swaps it in at a tick boundary, and the world relays the agent's
 //! answer ([`SwapReply`]) back here. Everything this process creates in the run's iceoryx2
 //! namespace is removed when it returns.
+//!
+//! The model file is checked here first by its metadata ([`formation_onnx::check_model_file`]): a
+//! missing path, a directory, a FIFO, a device or a file over the size limit is refused before
+//! any request is sent, and the agent refuses a candidate that does not fit the robot's sensor or
+//! gives a non-finite command on its last observation.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
@@ -20,12 +25,6 @@ use iceoryx2::prelude::*;
 /// Why a swap did not happen.
 #[derive(Debug, thiserror::Error)]
 pub enum SwapError {
-    /// The model file is not there.
-    #[error(
-        "model {} not found: pass --model PATH to an ONNX file exported by `formation train`",
-        .0.display()
-    )]
-    MissingModel(PathBuf),
     /// No world with this run id is running.
     #[error(
         "no run {run:?} is running (its swap service does not exist): `formation run` prints the \
@@ -90,9 +89,9 @@ pub fn request_swap(
     timeout: Duration,
 ) -> anyhow::Result<SwapDone> {
     let run_id = RunId::new(run)?;
-    if !model.is_file() {
-        return Err(SwapError::MissingModel(model.to_path_buf()).into());
-    }
+    // Refused here by its metadata (missing, not a regular file, over the size limit) rather
+    // than by the agent after it has read the file.
+    formation_onnx::check_model_file(model)?;
     let path = std::fs::canonicalize(model)
         .with_context(|| format!("resolving model path {}", model.display()))?;
     let namespace = RunNamespace::new(&run_id);

@@ -1,0 +1,204 @@
+//! Model files on disk: what may be loaded, checked by metadata before anything is read, and a
+//! bounded read.
+//!
+//! A model must be a regular file of at most [`MAX_MODEL_BYTES`]. A missing path, a directory, a
+//! FIFO, a device (`/dev/zero`) and an oversized file are each refused with their own
+//! [`PolicyError`] naming the path and the fix, before a byte is read: a FIFO is never opened and a
+//! 4 GB file never read. Tools that only pass a path on (`formation swap`, the launch planner) call
+//! [`check_model_file`] for the same refusal without reading.
+
+use std::fmt;
+use std::io::Read as _;
+use std::path::Path;
+
+use crate::error::PolicyError;
+
+/// Largest model file that is loaded \[bytes\]: 64 MiB. The paper's network exports to 87 KB; the
+/// limit leaves room for much larger policies while refusing a wrong path before it is read whole.
+pub const MAX_MODEL_BYTES: u64 = 64 << 20;
+
+/// Checks by its metadata alone that `path` is a model file that may be loaded: it exists, is a
+/// regular file (symbolic links followed) and holds at most [`MAX_MODEL_BYTES`]. Returns its size.
+pub fn check_model_file(path: &Path) -> Result<u64, PolicyError> {
+    let meta = std::fs::metadata(path).map_err(|source| io_error(path, source))?;
+    check_metadata(path, &meta)
+}
+
+/// The bytes of the model file at `path`, read only after [`check_model_file`] passed, checked
+/// again on the opened file (it may have been replaced in between), and stopping one byte past
+/// [`MAX_MODEL_BYTES`] whatever the metadata said.
+pub(crate) fn read_model_file(path: &Path) -> Result<Vec<u8>, PolicyError> {
+    check_model_file(path)?;
+    let file = std::fs::File::open(path).map_err(|source| io_error(path, source))?;
+    let size = check_metadata(
+        path,
+        &file.metadata().map_err(|source| io_error(path, source))?,
+    )?;
+    // The size was checked, so the capacity is bounded; the read is bounded regardless.
+    let mut bytes = Vec::with_capacity(usize::try_from(size).unwrap_or(0));
+    file.take(MAX_MODEL_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|source| io_error(path, source))?;
+    if bytes.len() as u64 > MAX_MODEL_BYTES {
+        return Err(PolicyError::ModelTooLarge {
+            path: path.to_path_buf(),
+            size: None,
+        });
+    }
+    Ok(bytes)
+}
+
+fn check_metadata(path: &Path, meta: &std::fs::Metadata) -> Result<u64, PolicyError> {
+    if !meta.is_file() {
+        return Err(PolicyError::ModelNotAFile {
+            path: path.to_path_buf(),
+            kind: file_kind(meta),
+        });
+    }
+    if meta.len() > MAX_MODEL_BYTES {
+        return Err(PolicyError::ModelTooLarge {
+            path: path.to_path_buf(),
+            size: Some(meta.len()),
+        });
+    }
+    Ok(meta.len())
+}
+
+/// A missing path is [`PolicyError::ModelNotFound`]; any other I/O failure keeps its cause.
+fn io_error(path: &Path, source: std::io::Error) -> PolicyError {
+    if source.kind() == std::io::ErrorKind::NotFound {
+        PolicyError::ModelNotFound {
+            path: path.to_path_buf(),
+        }
+    } else {
+        PolicyError::ModelRead {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}
+
+/// What a non-regular file is, for messages.
+fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    use std::os::unix::fs::FileTypeExt as _;
+    let kind = meta.file_type();
+    if kind.is_dir() {
+        "a directory"
+    } else if kind.is_fifo() {
+        "a FIFO (named pipe)"
+    } else if kind.is_char_device() {
+        "a character device"
+    } else if kind.is_block_device() {
+        "a block device"
+    } else if kind.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// A file size in messages: the number, or "more than the limit" when it is not known.
+pub(crate) struct SizeText(pub Option<u64>);
+
+impl fmt::Display for SizeText {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.0 {
+            Some(size) => write!(f, "{size}"),
+            None => write!(f, "more than {MAX_MODEL_BYTES}"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_path_is_not_found() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("nothing.onnx");
+        match read_model_file(&path) {
+            Err(ref err @ PolicyError::ModelNotFound { path: ref p }) => {
+                assert_eq!(*p, path);
+                assert!(err.to_string().contains("not found"), "{err}");
+            }
+            other => panic!("expected ModelNotFound, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn directories_fifos_and_devices_are_not_regular_files() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let fifo = dir.path().join("pipe.onnx");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .expect("running mkfifo");
+        assert!(made.success(), "mkfifo failed");
+        for (path, kind) in [
+            (dir.path(), "a directory"),
+            (fifo.as_path(), "a FIFO (named pipe)"),
+            (Path::new("/dev/zero"), "a character device"),
+        ] {
+            // Opening the FIFO or reading /dev/zero would block or never end: refused first.
+            for result in [
+                check_model_file(path).map(|_| ()),
+                read_model_file(path).map(|_| ()),
+            ] {
+                match result {
+                    Err(ref err @ PolicyError::ModelNotAFile { kind: k, .. }) => {
+                        assert_eq!(k, kind);
+                        let message = err.to_string();
+                        assert!(message.contains("not a regular file"), "{message}");
+                        assert!(!message.contains("not found"), "{message}");
+                        assert!(message.contains(&path.display().to_string()), "{message}");
+                    }
+                    other => panic!("{path:?}: expected ModelNotAFile, got {other:?}"),
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn an_oversized_file_is_refused_by_its_size() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("huge.onnx");
+        let file = std::fs::File::create(&path).expect("create");
+        // Sparse: 4 GiB that take no disk space; reading them whole is what must not happen.
+        file.set_len(4 << 30).expect("set_len");
+        for result in [
+            check_model_file(&path).map(|_| ()),
+            read_model_file(&path).map(|_| ()),
+        ] {
+            match result {
+                Err(ref err @ PolicyError::ModelTooLarge { size, .. }) => {
+                    assert_eq!(size, Some(4 << 30));
+                    let message = err.to_string();
+                    assert!(message.contains("4294967296 bytes"), "{message}");
+                    assert!(message.contains("64 MiB"), "{message}");
+                    assert!(message.contains("huge.onnx"), "{message}");
+                }
+                other => panic!("expected ModelTooLarge, got {other:?}"),
+            }
+        }
+        file.set_len(MAX_MODEL_BYTES + 1).expect("set_len");
+        assert!(matches!(
+            check_model_file(&path),
+            Err(PolicyError::ModelTooLarge { .. })
+        ));
+        file.set_len(MAX_MODEL_BYTES).expect("set_len");
+        assert_eq!(
+            check_model_file(&path).expect("at the limit"),
+            MAX_MODEL_BYTES
+        );
+    }
+
+    #[test]
+    fn a_small_regular_file_is_read_whole() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("small.onnx");
+        std::fs::write(&path, b"0123456789").expect("write");
+        assert_eq!(check_model_file(&path).expect("a model file"), 10);
+        assert_eq!(read_model_file(&path).expect("readable"), b"0123456789");
+    }
+}
