@@ -55,7 +55,7 @@ pub const MAX_LINE_BYTES: usize = 64 << 20;
 pub const FLUSH_PERIOD: Duration = Duration::from_secs(1);
 /// ... and whenever this much is buffered \[bytes\].
 const FLUSH_BYTES: usize = 64 << 10;
-/// Directory levels [`find_journal_dirs`] searches.
+/// Directory levels [`find_run_dirs`] searches.
 const MAX_SEARCH_DEPTH: usize = 12;
 
 /// One run's trajectory log (`runs/run-NNNN.json`).
@@ -182,6 +182,12 @@ pub enum RunLogError {
         path.display()
     )]
     NoSamples {
+        /// The journal.
+        path: PathBuf,
+    },
+    /// A running world still writes the journal.
+    #[error("{} is being written by a running world; left alone", path.display())]
+    InUse {
         /// The journal.
         path: PathBuf,
     },
@@ -770,24 +776,19 @@ pub struct RecoveredRun {
 /// Turns every journal in `out/runs/` that no running world holds into an incomplete
 /// `runs/run-NNNN.json` (written atomically, `stop_reason` set to `stop_reason`) and removes the
 /// journal. A journal whose run log cannot be written stays, to be recovered later; one that
-/// records no state is removed ([`RunLogError::NoSamples`]). Journals still locked by a live
-/// writer are skipped. A missing `runs/` directory recovers nothing.
+/// records no state is removed ([`RunLogError::NoSamples`]); one a running world still holds is
+/// left alone ([`RunLogError::InUse`]). A missing `runs/` directory recovers nothing.
 pub fn recover_journals(out: &Path, stop_reason: &str) -> Vec<JournalRecovery> {
-    let runs = out.join("runs");
-    let Ok(entries) = fs::read_dir(&runs) else {
-        return Vec::new();
-    };
-    let mut journals: Vec<PathBuf> = entries
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| is_journal(p))
-        .collect();
-    journals.sort();
-    journals
+    journals_in(out)
         .into_iter()
-        .filter(|journal| !held_by_a_writer(journal))
         .map(|journal| {
-            let outcome = recover_one(&journal, stop_reason);
+            let outcome = if held_by_a_writer(&journal) {
+                Err(RunLogError::InUse {
+                    path: journal.clone(),
+                })
+            } else {
+                recover_one(&journal, stop_reason)
+            };
             JournalRecovery { journal, outcome }
         })
         .collect()
@@ -830,38 +831,77 @@ fn held_by_a_writer(journal: &Path) -> bool {
     }
 }
 
-/// The directories under `root` (itself included) whose `runs/` holds a journal, sorted.
+/// The directories under `root` (itself included) whose `runs/` holds a run journal
+/// (`run-*.journal`) or a run log (`run-*.json`), sorted: the output directories of runs.
 /// Hidden directories and `target` are not searched; symbolic links are not followed.
-pub fn find_journal_dirs(root: &Path) -> Vec<PathBuf> {
+pub fn find_run_dirs(root: &Path) -> Vec<PathBuf> {
     let mut found = Vec::new();
-    search_journals(root, 0, &mut found);
+    search_runs(root, 0, &mut found);
     found.sort();
     found.dedup();
     found
 }
 
-fn search_journals(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) {
+fn search_runs(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) {
     let Ok(entries) = fs::read_dir(dir) else {
         return;
     };
+    let in_runs = dir.file_name().is_some_and(|n| n == "runs");
     for entry in entries.flatten() {
         let Ok(file_type) = entry.file_type() else {
             continue;
         };
-        let path = entry.path();
         let name = entry.file_name().to_string_lossy().into_owned();
         if file_type.is_dir() {
             if depth < MAX_SEARCH_DEPTH && !name.starts_with('.') && name != "target" {
-                search_journals(&path, depth + 1, found);
+                search_runs(&entry.path(), depth + 1, found);
             }
         } else if file_type.is_file()
-            && is_journal(&path)
-            && dir.file_name().is_some_and(|n| n == "runs")
+            && in_runs
+            && name.starts_with("run-")
+            && (name.ends_with(".journal") || name.ends_with(".json"))
             && let Some(out) = dir.parent()
         {
             found.push(out.to_path_buf());
         }
     }
+}
+
+/// The run journals in `out/runs/`, sorted.
+pub fn journals_in(out: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = fs::read_dir(out.join("runs")) else {
+        return Vec::new();
+    };
+    let mut journals: Vec<PathBuf> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| is_journal(p))
+        .collect();
+    journals.sort();
+    journals
+}
+
+/// The run logs `out/runs/run-NNNN.json` with their index, sorted by index.
+pub fn run_logs_in(out: &Path) -> Vec<(usize, PathBuf)> {
+    let Ok(entries) = fs::read_dir(out.join("runs")) else {
+        return Vec::new();
+    };
+    let mut logs: Vec<(usize, PathBuf)> = entries
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name();
+            let index = name
+                .to_str()?
+                .strip_prefix("run-")?
+                .strip_suffix(".json")?
+                .parse()
+                .ok()?;
+            Some((index, e.path()))
+        })
+        .filter(|(_, p)| p.is_file())
+        .collect();
+    logs.sort();
+    logs
 }
 
 #[cfg(test)]
@@ -1283,9 +1323,14 @@ noise_std = 0.01
         let live_path = journal_path(&out, 7);
         let live = RunJournal::create(&live_path, &header(&live_spec)).unwrap();
 
-        assert_eq!(find_journal_dirs(&dir), vec![out.clone()]);
+        assert_eq!(find_run_dirs(&dir), vec![out.clone()]);
+        assert_eq!(journals_in(&out), vec![orphan.clone(), live_path.clone()]);
         let recovered = recover_journals(&out, "the world was killed");
-        assert_eq!(recovered.len(), 1, "{recovered:?}");
+        assert_eq!(recovered.len(), 2, "{recovered:?}");
+        assert!(
+            matches!(recovered[1].outcome, Err(RunLogError::InUse { .. })),
+            "{recovered:?}"
+        );
         let run = recovered[0].outcome.as_ref().unwrap();
         assert_eq!(run.index, 2);
         assert_eq!(run.ticks, 10);
@@ -1305,7 +1350,9 @@ noise_std = 0.01
             "{recovered:?}"
         );
         assert!(!live_path.exists());
-        assert!(find_journal_dirs(&dir).is_empty());
+        assert!(journals_in(&out).is_empty());
+        assert_eq!(run_logs_in(&out), vec![(2, out.join("runs/run-0002.json"))]);
+        assert_eq!(find_run_dirs(&dir), vec![out.clone()]);
         fs::remove_dir_all(&dir).unwrap();
     }
 
