@@ -22,7 +22,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use formation_proto::wire::RunId;
-use formation_world::{RunSpec, Scenario, Trajectory};
+use formation_world::{RunLog, RunSpec, Scenario, Trajectory};
 
 use crate::paths;
 use formation_proto::wire::WorldEvent;
@@ -256,7 +256,8 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         scenario.name(),
         plan.clock.as_str()
     );
-    let report = block_on(supervisor::launch(&plan, &mut |event| match event {
+    let started = std::time::SystemTime::now();
+    let launched = block_on(supervisor::launch(&plan, &mut |event| match event {
         WorldEvent::AgentsConnected => println!("all {} agents connected", plan.models.len()),
         WorldEvent::RunDone { index, log } => println!("run {index} done: {}", log.display()),
         WorldEvent::AgentLost { robot, tick } => {
@@ -266,11 +267,27 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
             println!("robot {robot}: agent pid {pid} rejoined, driving from tick {tick}")
         }
         WorldEvent::Listening { .. } | WorldEvent::Finished => {}
-    }))??;
-    let table = run_summary(&report.run_logs, scenario.name(), base_seed)?;
-    paths::write_atomic(
-        &plan.out.join("summary.json"),
-        &serde_json::to_vec_pretty(&table)?,
+    }))?;
+    let report = match launched {
+        Ok(report) => {
+            // Journals an earlier, killed launch left in this directory.
+            report_recovered(&recover_journals(
+                &plan.out,
+                "an earlier launch ended before its world saved the run",
+            ));
+            report
+        }
+        Err(error) => {
+            let runs = args.first_run..args.first_run + args.runs;
+            keep_partial_runs(&plan.out, runs, started, &error, scenario.name(), base_seed);
+            return Err(error.into());
+        }
+    };
+    let table = write_summary(
+        &plan.out,
+        &report.run_logs,
+        scenario.name(),
+        Some(base_seed),
     )?;
     print!("{}", crate::eval::table_text(&table));
     let latency = profile::profile_dir(&plan.out)?;
@@ -288,35 +305,204 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
 }
 
 /// The Table I summary of a launch's run logs, in the schema `formation eval` writes, so that
-/// `formation report` reads a run directory like an eval directory.
+/// `formation report` reads a run directory like an eval directory. Runs that stopped early are
+/// listed in `incomplete_runs`. Without a `seed` (unknown) the key is left out.
 fn run_summary(
     run_logs: &[PathBuf],
     scenario: &str,
-    seed: u64,
-) -> anyhow::Result<crate::eval::EvalOutput> {
-    #[derive(serde::Deserialize)]
-    struct MetricsOnly {
-        metrics: formation_world::metrics::RunMetrics,
-        #[serde(default)]
-        models: Vec<String>,
-    }
+    seed: Option<u64>,
+) -> anyhow::Result<serde_json::Value> {
     let mut logs = run_logs
         .iter()
         .map(|path| {
-            let bytes = std::fs::read(path)
-                .with_context(|| format!("reading run log {}", path.display()))?;
-            serde_json::from_slice::<MetricsOnly>(&bytes)
-                .with_context(|| format!("parsing run log {}", path.display()))
+            RunLog::read(path).with_context(|| format!("reading run log {}", path.display()))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let models = logs
-        .first_mut()
-        .map(|l| std::mem::take(&mut l.models))
-        .unwrap_or_default();
+    logs.sort_by_key(|log| log.index);
+    let models = logs.first().map(|l| l.models.clone()).unwrap_or_default();
+    let incomplete_runs = logs
+        .iter()
+        .filter(|log| !log.complete)
+        .map(|log| crate::eval::IncompleteRun {
+            index: log.index,
+            ticks: log.ticks(),
+            planned_ticks: log.planned_ticks,
+            stop_reason: log.stop_reason.clone(),
+        })
+        .collect();
     let per_run = logs.into_iter().map(|l| l.metrics).collect();
-    Ok(crate::eval::EvalOutput::from_runs(
-        "policy", models, scenario, seed, per_run,
-    ))
+    let mut table = crate::eval::EvalOutput::from_runs(
+        "policy",
+        models,
+        scenario,
+        seed.unwrap_or_default(),
+        per_run,
+    );
+    table.incomplete_runs = incomplete_runs;
+    let mut json = serde_json::to_value(&table)?;
+    if seed.is_none()
+        && let Some(fields) = json.as_object_mut()
+    {
+        fields.remove("seed");
+    }
+    Ok(json)
+}
+
+/// Writes `out/summary.json` over `run_logs` (see [`run_summary`]) and returns it.
+fn write_summary(
+    out: &Path,
+    run_logs: &[PathBuf],
+    scenario: &str,
+    seed: Option<u64>,
+) -> anyhow::Result<crate::eval::EvalOutput> {
+    let json = run_summary(run_logs, scenario, seed)?;
+    paths::write_atomic(
+        &out.join("summary.json"),
+        &serde_json::to_vec_pretty(&json)?,
+    )?;
+    let mut json = json;
+    if let Some(fields) = json.as_object_mut() {
+        fields.entry("seed").or_insert(0.into());
+    }
+    Ok(serde_json::from_value(json)?)
+}
+
+/// Why a launch stopped, as an incomplete run log records it.
+fn stop_reason(error: &supervisor::LaunchError) -> String {
+    use supervisor::LaunchError;
+    match error {
+        LaunchError::Interrupted(what) => format!("interrupted by {what}"),
+        LaunchError::AgentFailed { robot, status, .. } => {
+            format!("the agent of robot {robot} exited ({status}) and the restart budget was spent")
+        }
+        LaunchError::WorldFailed { status } => format!("the world process exited ({status})"),
+        other => other.to_string(),
+    }
+}
+
+/// After a launch that ended abnormally, keeps what it played: turns the journals a killed world
+/// left into incomplete run logs, marks the runs the launcher stopped (Ctrl-C, SIGTERM, a spent
+/// restart budget) with the launcher's reason, and writes `summary.json` over this launch's run
+/// logs (those of `runs` written since `started`), the incomplete ones listed as such. Problems
+/// are reported on stderr; the launch's own error stays the one returned.
+fn keep_partial_runs(
+    out: &Path,
+    runs: std::ops::Range<usize>,
+    started: std::time::SystemTime,
+    error: &supervisor::LaunchError,
+    scenario: &str,
+    seed: u64,
+) {
+    let reason = stop_reason(error);
+    report_recovered(&recover_journals(
+        out,
+        &format!("{reason} before the world saved the run"),
+    ));
+    // File times are coarse; a log written just after the launch began may look a little older.
+    let since = started - Duration::from_secs(2);
+    let logs: Vec<PathBuf> = formation_world::runlog::run_logs_in(out)
+        .into_iter()
+        .filter(|(index, path)| {
+            runs.contains(index)
+                && std::fs::metadata(path)
+                    .and_then(|m| m.modified())
+                    .is_ok_and(|at| at >= since)
+        })
+        .map(|(_, path)| path)
+        .collect();
+    if logs.is_empty() {
+        eprintln!(
+            "formation: no run had started; nothing to keep in {}",
+            out.display()
+        );
+        return;
+    }
+    let launcher_stopped = matches!(
+        error,
+        supervisor::LaunchError::Interrupted(_) | supervisor::LaunchError::AgentFailed { .. }
+    );
+    if launcher_stopped {
+        // The world only saw its input close (or a signal); the launcher knows why.
+        for path in &logs {
+            if let Ok(mut log) = RunLog::read(path)
+                && !log.complete
+            {
+                log.stop_reason = Some(reason.clone());
+                if let Err(e) = formation_world::runlog::write_json_atomic(path, &log) {
+                    eprintln!(
+                        "formation: could not record why run {} stopped: {e}",
+                        log.index
+                    );
+                }
+            }
+        }
+    }
+    match write_summary(out, &logs, scenario, Some(seed)) {
+        Ok(table) => {
+            print!("{}", crate::eval::table_text(&table));
+            eprintln!(
+                "formation: kept {} run(s) in {} ({} incomplete, stopped early: {reason})",
+                logs.len(),
+                out.display(),
+                table.incomplete_runs.len()
+            );
+        }
+        Err(e) => eprintln!("formation: could not write the summary of the partial runs: {e:#}"),
+    }
+}
+
+/// Turns the journals in `out/runs/` into incomplete run logs ([`formation_world::recover_journals`]).
+fn recover_journals(out: &Path, reason: &str) -> Vec<formation_world::runlog::JournalRecovery> {
+    formation_world::recover_journals(out, reason)
+}
+
+/// Says on stderr what journal recovery did.
+pub fn report_recovered(recovered: &[formation_world::runlog::JournalRecovery]) {
+    for recovery in recovered {
+        match &recovery.outcome {
+            Ok(run) => eprintln!(
+                "formation: recovered run {} ({} ticks, incomplete) from its journal {} into {}",
+                run.index,
+                run.ticks,
+                recovery.journal.display(),
+                run.log.display()
+            ),
+            Err(e) => eprintln!("formation: {e}"),
+        }
+    }
+}
+
+/// Recovers the journals in every run directory under `dir` and writes the `summary.json` a
+/// run directory lacks (its launcher was killed, or could not write it), so `formation report`
+/// shows those runs. Says on stderr what it did.
+pub fn recover_run_dirs(dir: &Path) {
+    use formation_world::runlog::{RunLogError, find_run_dirs, run_logs_in};
+    for out in find_run_dirs(dir) {
+        let recovered = recover_journals(
+            &out,
+            "the world and its launcher were killed before the run was saved",
+        );
+        report_recovered(&recovered);
+        let in_use = recovered
+            .iter()
+            .any(|r| matches!(r.outcome, Err(RunLogError::InUse { .. })));
+        if in_use || out.join("summary.json").exists() {
+            continue;
+        }
+        let logs: Vec<PathBuf> = run_logs_in(&out).into_iter().map(|(_, p)| p).collect();
+        match write_summary(&out, &logs, "", None) {
+            Ok(table) => eprintln!(
+                "formation: wrote {} over {} run log(s) that had none ({} incomplete)",
+                out.join("summary.json").display(),
+                logs.len(),
+                table.incomplete_runs.len()
+            ),
+            Err(e) => eprintln!(
+                "formation: could not summarize the run logs in {}: {e:#}",
+                out.display()
+            ),
+        }
+    }
 }
 
 /// `formation profile`: `formation run` whose latency statistics are the point.
