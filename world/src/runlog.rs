@@ -254,13 +254,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RunLogError> {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    // Errors name the file the caller asked for, not the temporary one.
     let written = (|| {
         let mut file = File::create(&tmp)?;
         file.write_all(bytes)?;
-        file.sync_data()
+        file.sync_data()?;
+        fs::rename(&tmp, path)
     })()
-    .map_err(write_error(&tmp))
-    .and_then(|()| fs::rename(&tmp, path).map_err(write_error(path)));
+    .map_err(write_error(path));
     if written.is_err() {
         let _ = fs::remove_file(&tmp);
     }

@@ -411,10 +411,16 @@ fn keep_partial_runs(
         .map(|(_, path)| path)
         .collect();
     if logs.is_empty() {
-        eprintln!(
-            "formation: no run had started; nothing to keep in {}",
-            out.display()
-        );
+        let journals = formation_world::runlog::journals_in(out);
+        if journals.is_empty() {
+            eprintln!("formation: no run log was written in {}", out.display());
+        } else {
+            eprintln!(
+                "formation: {} run journal(s) kept in {}; `formation report` turns them into run logs once they can be written",
+                journals.len(),
+                out.join("runs").display()
+            );
+        }
         return;
     }
     let launcher_stopped = matches!(
@@ -601,6 +607,137 @@ pub fn read_trajectory(log: &Path) -> anyhow::Result<Trajectory> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use formation_world::runlog::{JournalHeader, RunJournal, journal_path, log_paths};
+    use formation_world::{Controller, Observation, run_episode_recorded};
+
+    struct Forward;
+
+    impl Controller for Forward {
+        fn commands(
+            &mut self,
+            _: &Observation<'_>,
+            out: &mut [formation_proto::WheelCmd],
+        ) -> Result<(), formation_world::episode::ControllerError> {
+            out.fill(formation_proto::WheelCmd {
+                left: 0.3,
+                right: 0.35,
+            });
+            Ok(())
+        }
+    }
+
+    fn spec(index: usize) -> RunSpec {
+        let text = "name = \"t\"\nrobots = 3\nduration_s = 2.0\nseed = 3\n[goal]\nv_star = 0.7\nd_star = 2.0\n[heading]\nschedule = \"constant\"\nphi = 1.0\n[lidar]\nbeams = 36\n";
+        Scenario::from_toml_str(text, "t")
+            .expect("scenario")
+            .run_spec(3, index)
+    }
+
+    /// Journals run `index` of [`spec`] into `out`, stopping after `ticks` ticks.
+    fn journal(out: &Path, index: usize, ticks: usize) {
+        let spec = spec(index);
+        let header = JournalHeader::new(&spec, "lockstep", &vec!["m".to_owned(); 3]);
+        let mut journal = RunJournal::create(&journal_path(out, index), &header).expect("journal");
+        let _ = run_episode_recorded(&spec, &mut Forward, &mut |_, _| {}, &mut |t| {
+            journal.append(t).map_err(|e| e.to_string())?;
+            if t.commands.len() == ticks {
+                Err("stop".to_owned())
+            } else {
+                Ok(())
+            }
+        });
+        journal.close().expect("close");
+    }
+
+    #[test]
+    fn partial_runs_are_summarized_and_marked_incomplete() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("run");
+        // Run 0 finished; run 1 was journaled by a world that was killed after 12 ticks.
+        let full =
+            formation_world::run_episode(&spec(0), &mut Forward, &mut |_, _| {}).expect("episode");
+        let log = RunLog {
+            index: 0,
+            metrics: formation_world::metrics::run_metrics(&full, &Default::default()),
+            trajectory: full,
+            clock: "lockstep".into(),
+            models: vec!["m".into(); 3],
+            complete: true,
+            stop_reason: None,
+            planned_ticks: Some(40),
+        };
+        formation_world::runlog::write_json_atomic(&log_paths(&out, 0).0, &log).expect("log");
+        journal(&out, 1, 12);
+
+        let error = supervisor::LaunchError::WorldFailed {
+            status: "killed by signal 9".into(),
+        };
+        keep_partial_runs(&out, 0..2, std::time::SystemTime::now(), &error, "t", 3);
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("summary.json")).expect("summary.json"))
+                .expect("json");
+        assert_eq!(summary["runs"], 2);
+        assert_eq!(summary["seed"], 3);
+        let incomplete = summary["incomplete_runs"].as_array().expect("listed");
+        assert_eq!(incomplete.len(), 1, "{summary}");
+        assert_eq!(incomplete[0]["index"], 1);
+        assert_eq!(incomplete[0]["ticks"], 12);
+        assert_eq!(
+            incomplete[0]["stop_reason"],
+            "the world process exited (killed by signal 9) before the world saved the run"
+        );
+        assert!(
+            !journal_path(&out, 1).exists(),
+            "the journal became a run log"
+        );
+        let recovered = RunLog::read(&log_paths(&out, 1).0).expect("recovered log");
+        assert!(!recovered.complete);
+
+        // A launcher stop rewrites the reason the world gave.
+        let mut log = recovered;
+        log.stop_reason = Some("stopped: the launcher closed the world's input".into());
+        formation_world::runlog::write_json_atomic(&log_paths(&out, 1).0, &log).expect("log");
+        keep_partial_runs(
+            &out,
+            0..2,
+            std::time::SystemTime::now(),
+            &supervisor::LaunchError::Interrupted("SIGTERM"),
+            "t",
+            3,
+        );
+        let log = RunLog::read(&log_paths(&out, 1).0).expect("log");
+        assert_eq!(log.stop_reason.as_deref(), Some("interrupted by SIGTERM"));
+    }
+
+    #[test]
+    fn orphan_journals_get_a_run_log_and_a_summary() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("nested").join("run");
+        journal(&out, 0, 7);
+        recover_run_dirs(dir.path());
+        let summary: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(out.join("summary.json")).expect("summary.json written"),
+        )
+        .expect("json");
+        assert!(
+            summary.get("seed").is_none(),
+            "the seed is unknown: {summary}"
+        );
+        assert_eq!(summary["incomplete_runs"][0]["ticks"], 7);
+        assert!(log_paths(&out, 0).0.is_file());
+        // A directory with a summary is left as it is.
+        journal(&out, 1, 3);
+        std::fs::write(out.join("summary.json"), b"{}").expect("write");
+        recover_run_dirs(dir.path());
+        assert_eq!(
+            std::fs::read(out.join("summary.json")).expect("summary"),
+            b"{}"
+        );
+        assert!(
+            log_paths(&out, 1).0.is_file(),
+            "the journal is still recovered"
+        );
+    }
 
     #[test]
     fn fault_flags_map_to_robots_and_bad_flags_are_explained() {
