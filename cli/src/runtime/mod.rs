@@ -22,7 +22,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use formation_proto::wire::RunId;
-use formation_world::{RunLog, RunSpec, Scenario, Trajectory};
+use formation_world::{RunLog, RunSpec, Scenario, Trajectory, recover_journals};
 
 use crate::paths;
 use formation_proto::wire::WorldEvent;
@@ -306,12 +306,12 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
 
 /// The Table I summary of a launch's run logs, in the schema `formation eval` writes, so that
 /// `formation report` reads a run directory like an eval directory. Runs that stopped early are
-/// listed in `incomplete_runs`. Without a `seed` (unknown) the key is left out.
+/// listed in `incomplete_runs`.
 fn run_summary(
     run_logs: &[PathBuf],
     scenario: &str,
-    seed: Option<u64>,
-) -> anyhow::Result<serde_json::Value> {
+    seed: u64,
+) -> anyhow::Result<crate::eval::EvalOutput> {
     let mut logs = run_logs
         .iter()
         .map(|path| {
@@ -331,40 +331,33 @@ fn run_summary(
         })
         .collect();
     let per_run = logs.into_iter().map(|l| l.metrics).collect();
-    let mut table = crate::eval::EvalOutput::from_runs(
-        "policy",
-        models,
-        scenario,
-        seed.unwrap_or_default(),
-        per_run,
-    );
+    let mut table = crate::eval::EvalOutput::from_runs("policy", models, scenario, seed, per_run);
     table.incomplete_runs = incomplete_runs;
-    let mut json = serde_json::to_value(&table)?;
-    if seed.is_none()
-        && let Some(fields) = json.as_object_mut()
-    {
-        fields.remove("seed");
-    }
-    Ok(json)
+    Ok(table)
 }
 
-/// Writes `out/summary.json` over `run_logs` (see [`run_summary`]) and returns it.
+/// Writes `out/summary.json` over `run_logs` (see [`run_summary`]) and returns it. Without a
+/// seed (unknown, for runs recovered after their launcher was killed) the key is left out, as
+/// the report allows.
 fn write_summary(
     out: &Path,
     run_logs: &[PathBuf],
     scenario: &str,
     seed: Option<u64>,
 ) -> anyhow::Result<crate::eval::EvalOutput> {
-    let json = run_summary(run_logs, scenario, seed)?;
-    paths::write_atomic(
-        &out.join("summary.json"),
-        &serde_json::to_vec_pretty(&json)?,
-    )?;
-    let mut json = json;
-    if let Some(fields) = json.as_object_mut() {
-        fields.entry("seed").or_insert(0.into());
-    }
-    Ok(serde_json::from_value(json)?)
+    let table = run_summary(run_logs, scenario, seed.unwrap_or_default())?;
+    let bytes = match seed {
+        Some(_) => serde_json::to_vec_pretty(&table)?,
+        None => {
+            let mut json = serde_json::to_value(&table)?;
+            if let Some(fields) = json.as_object_mut() {
+                fields.remove("seed");
+            }
+            serde_json::to_vec_pretty(&json)?
+        }
+    };
+    paths::write_atomic(&out.join("summary.json"), &bytes)?;
+    Ok(table)
 }
 
 /// Why a launch stopped, as an incomplete run log records it.
@@ -399,7 +392,9 @@ fn keep_partial_runs(
         &format!("{reason} before the world saved the run"),
     ));
     // File times are coarse; a log written just after the launch began may look a little older.
-    let since = started - Duration::from_secs(2);
+    let since = started
+        .checked_sub(Duration::from_secs(2))
+        .unwrap_or(started);
     let logs: Vec<PathBuf> = formation_world::runlog::run_logs_in(out)
         .into_iter()
         .filter(|(index, path)| {
@@ -455,11 +450,6 @@ fn keep_partial_runs(
         }
         Err(e) => eprintln!("formation: could not write the summary of the partial runs: {e:#}"),
     }
-}
-
-/// Turns the journals in `out/runs/` into incomplete run logs ([`formation_world::recover_journals`]).
-fn recover_journals(out: &Path, reason: &str) -> Vec<formation_world::runlog::JournalRecovery> {
-    formation_world::recover_journals(out, reason)
 }
 
 /// Says on stderr what journal recovery did.

@@ -32,17 +32,19 @@ pub enum RunError {
     #[error(transparent)]
     Start(RunLogError),
     /// The agents exchange stopped the episode (a signal, the launcher, an agent refusing).
-    #[error("{cause}{}", saved_note(saved))]
+    #[error("the run stopped early{}", saved_note(saved))]
     Stopped {
         /// What stopped it.
+        #[source]
         cause: ControllerError,
         /// What became of the partial run.
         saved: Saved,
     },
     /// The journal or a final log could not be written.
-    #[error("{cause}{}", saved_note(saved))]
+    #[error("the run could not be saved{}", saved_note(saved))]
     Write {
         /// The failed write.
+        #[source]
         cause: RunLogError,
         /// What became of the run.
         saved: Saved,
@@ -60,14 +62,15 @@ pub enum Saved {
     Lost(RunLogError),
 }
 
+/// `; <what was kept>`; the cause follows as the error's source.
 fn saved_note(saved: &Saved) -> String {
     match saved {
-        Saved::Partial(path) => format!(" (the partial run is kept in {})", path.display()),
+        Saved::Partial(path) => format!("; the partial run is kept in {}", path.display()),
         Saved::Journal(path) => format!(
-            " (the run is kept in its journal {}; `formation report` recovers it)",
+            "; it is kept in its journal {} (`formation report` recovers it once there is room)",
             path.display()
         ),
-        Saved::Lost(e) => format!(" (the partial run could not be kept: {e})"),
+        Saved::Lost(e) => format!("; nothing could be kept ({e})"),
     }
 }
 
