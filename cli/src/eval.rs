@@ -43,6 +43,26 @@ pub struct EvalOutput {
     /// `stale`, `non_finite`, `agent_failed`); an empty map for a robot never braked.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub braked_ticks: Vec<std::collections::BTreeMap<String, usize>>,
+    /// Runs that stopped before their last tick (a `formation run` that ended abnormally), in
+    /// run order; their metrics above are over the ticks they played. Absent when every run
+    /// finished, so evaluations write the same JSON as before.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub incomplete_runs: Vec<IncompleteRun>,
+}
+
+/// A run that stopped before its last tick.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IncompleteRun {
+    /// Run index.
+    pub index: usize,
+    /// Ticks it played.
+    pub ticks: usize,
+    /// Ticks it was to play, when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub planned_ticks: Option<u64>,
+    /// Why it stopped, when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stop_reason: Option<String>,
 }
 
 impl EvalOutput {
@@ -62,6 +82,7 @@ impl EvalOutput {
             summary: summarize(&per_run),
             per_run,
             braked_ticks: Vec::new(),
+            incomplete_runs: Vec::new(),
         }
     }
 }
@@ -191,8 +212,25 @@ pub fn progress_bar(len: usize, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
-/// Formats Table I and the Fig. 9 medians as text.
+/// Formats Table I and the Fig. 9 medians as text (and the incomplete runs, if any).
 pub fn table_text(out: &EvalOutput) -> String {
+    let mut text = table_i_text(out);
+    if !out.incomplete_runs.is_empty() {
+        text.push_str(&format!(
+            "incomplete runs: {} of {} (stopped early{})\n",
+            out.incomplete_runs.len(),
+            out.summary.runs,
+            out.incomplete_runs
+                .first()
+                .and_then(|r| r.stop_reason.as_deref())
+                .map(|reason| format!(": {reason}"))
+                .unwrap_or_default()
+        ));
+    }
+    text
+}
+
+fn table_i_text(out: &EvalOutput) -> String {
     let s = &out.summary;
     let pct = |x: f64| format!("{:.1} %", 100.0 * x);
     let opt = |x: Option<f64>, f: &dyn Fn(f64) -> String| x.map(f).unwrap_or_else(|| "-".into());

@@ -48,7 +48,7 @@ pub fn resolve_model(given: Option<&Path>) -> anyhow::Result<PathBuf> {
 }
 
 /// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename),
-/// creating parent directories.
+/// creating parent directories. A failed write (e.g. a full disk) removes its temporary file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     let dir = path
         .parent()
@@ -61,7 +61,18 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming into {}", path.display()))?;
-    Ok(())
+    let written = std::fs::write(&tmp, bytes)
+        .with_context(|| {
+            format!(
+                "writing {} (is the disk full? free some space or choose another output directory)",
+                tmp.display()
+            )
+        })
+        .and_then(|()| {
+            std::fs::rename(&tmp, path).with_context(|| format!("renaming into {}", path.display()))
+        });
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
 }

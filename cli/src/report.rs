@@ -1,8 +1,15 @@
 //! `formation report`: builds the self-contained HTML report (Table I, Figs. 6-9, training and
 //! latency when present) from eval and run output directories, with `formation-report`.
+//!
+//! It first recovers what abnormally ended launches left: run journals whose world and launcher
+//! were both killed become incomplete run logs, and a run directory without a `summary.json` gets
+//! one, so those runs appear in the report marked incomplete (said on stderr).
 
 /// `formation report`.
 pub fn report_command(args: &crate::args::ReportArgs) -> anyhow::Result<()> {
+    if args.dir.is_dir() {
+        crate::runtime::recover_run_dirs(&args.dir);
+    }
     let summary = formation_report::build_report(&args.dir, &args.out)?;
     println!(
         "wrote {} ({} evaluations, {} runs drawn, {} figures in {})",

@@ -60,6 +60,8 @@ pub struct RunSection {
     pub panels: Vec<PlacedFigure>,
     /// The caption of the three panels together.
     pub caption: String,
+    /// True when the run stopped before its last tick.
+    pub incomplete: bool,
 }
 
 /// One Table I row of ours.
@@ -71,6 +73,8 @@ pub struct TableEntry {
     pub detail: String,
     /// The numbers.
     pub row: TableRow,
+    /// `N of M runs incomplete (stopped early: reason)` when some runs stopped early.
+    pub incomplete: Option<String>,
 }
 
 /// Everything on the page.
@@ -166,6 +170,8 @@ dl.facts dd { margin: 0; }
 .note { font-size: 0.9rem; color: var(--muted); }
 .ok { color: #1e7b34; font-weight: 600; }
 .fail { color: var(--paper); font-weight: 600; }
+.incomplete { color: var(--paper); font-weight: 600; font-size: 0.82rem; white-space: normal; }
+.badge { display: inline-block; margin-left: 8px; padding: 0 6px; border: 1px solid var(--paper); border-radius: 3px; color: var(--paper); font-size: 0.75rem; font-weight: 600; vertical-align: middle; text-transform: uppercase; letter-spacing: 0.04em; }
 footer { color: var(--muted); font-size: 0.85rem; padding: 24px 32px 40px; text-align: center; }
 ul.inputs { columns: 2; font-size: 0.88rem; }
 @media (max-width: 900px) { .panels { grid-template-columns: 1fr; } ul.inputs { columns: 1; } .wrap { padding: 0 14px; } }
@@ -332,9 +338,14 @@ fn write_table(html: &mut String, page: &ReportPage) {
     );
     for entry in &page.table {
         let row = &entry.row;
+        let incomplete = entry
+            .incomplete
+            .as_deref()
+            .map(|note| format!("<div class=\"incomplete\">{}</div>", escape(note)))
+            .unwrap_or_default();
         let _ = writeln!(
             html,
-            "<tr><td>{}<div class=\"detail\">{}</div></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr><td>{}<div class=\"detail\">{}</div>{incomplete}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             escape(&entry.name),
             escape(&entry.detail),
             row.runs,
@@ -350,6 +361,16 @@ fn write_table(html: &mut String, page: &ReportPage) {
         );
     }
     html.push_str("</tbody>\n</table>\n</div>\n");
+    for entry in &page.table {
+        if let Some(note) = &entry.incomplete {
+            let _ = writeln!(
+                html,
+                "<p class=\"note incomplete\">{}: {}. The metrics of an incomplete run are over the ticks it played.</p>",
+                escape(&entry.name),
+                escape(note)
+            );
+        }
+    }
     html.push_str(
         "<p class=\"note\">A run succeeds at tolerance τ when, for every pair of robots, the mean of the relative formation error |dᵢⱼ − d*| / d* over the last 20 s is below τ. Medians are over the runs that succeed at 10 %; the convergence time is when the largest pairwise error falls below 10 % for good.</p>\n</div>\n</section>\n",
     );
@@ -405,9 +426,14 @@ fn write_run(html: &mut String, run: &RunSection) {
         "<article class=\"card\" id=\"{}\">",
         escape(&run.anchor)
     );
+    let badge = if run.incomplete {
+        "<span class=\"badge\">incomplete</span>"
+    } else {
+        ""
+    };
     let _ = writeln!(
         html,
-        "<h3>{}</h3>\n<div class=\"panels\">",
+        "<h3>{}{badge}</h3>\n<div class=\"panels\">",
         escape(&run.heading)
     );
     for panel in &run.panels {
@@ -418,6 +444,7 @@ fn write_run(html: &mut String, run: &RunSection) {
         let class = match value.as_str() {
             "yes" => " class=\"ok\"",
             "no" => " class=\"fail\"",
+            v if v.starts_with("no, ") => " class=\"fail\"",
             _ => "",
         };
         let _ = writeln!(
@@ -474,6 +501,7 @@ mod tests {
                     median_orientation_error_rad: None,
                     collisions: 2,
                 },
+                incomplete: Some("1 of 20 runs incomplete (stopped early: <Ctrl-C>)".into()),
             }],
             fig9: Some(CaptionedFigure {
                 placed: placed("fig9"),
@@ -485,11 +513,12 @@ mod tests {
                 facts: vec![("success at 5 %".into(), "yes".into())],
                 panels: vec![placed("a"), placed("b"), placed("c")],
                 caption: "Figure 2: case".into(),
+                incomplete: true,
             }],
             ..ReportPage::default()
         };
         let html = render_page(&page);
-        assert!(html.contains("<td>table1<div class=\"detail\">policy · table1</div></td>"));
+        assert!(html.contains("<td>table1<div class=\"detail\">policy · table1</div>"));
         for cell in [
             "85.0 %",
             "95.0 %",
@@ -502,6 +531,10 @@ mod tests {
             assert!(html.contains(cell), "{cell}");
         }
         assert!(html.contains("out/&lt;demo&gt;"));
+        assert!(html.contains(
+            "<div class=\"incomplete\">1 of 20 runs incomplete (stopped early: &lt;Ctrl-C&gt;)</div>"
+        ));
+        assert!(html.contains("case1 · run 0<span class=\"badge\">incomplete</span>"));
         assert_eq!(html.matches("<figure class=\"plot\"").count(), 4);
         assert!(html.contains("aria-label=\"a &lt;figure&gt;\""));
         assert!(html.contains("<b>Figure 2:</b> case"));

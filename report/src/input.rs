@@ -64,6 +64,24 @@ pub struct EvalData {
     pub runs: Vec<RunData>,
     /// Run logs present but not drawn.
     pub runs_not_drawn: usize,
+    /// Runs that stopped before their last tick (from the summary and the run logs), by index.
+    pub incomplete: Vec<IncompleteRun>,
+}
+
+/// A run that stopped before its last tick.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct IncompleteRun {
+    /// Run index.
+    pub index: usize,
+    /// Ticks it played, when recorded.
+    #[serde(default)]
+    pub ticks: Option<usize>,
+    /// Ticks it was to play, when recorded.
+    #[serde(default)]
+    pub planned_ticks: Option<u64>,
+    /// Why it stopped, when recorded.
+    #[serde(default)]
+    pub stop_reason: Option<String>,
 }
 
 /// The Table I keys of one evaluation.
@@ -141,6 +159,13 @@ pub struct RunData {
     pub scores: RunScores,
     /// Its trajectory.
     pub trajectory: RunTrajectory,
+    /// False when the run stopped before its last tick (older logs, without the key, are
+    /// complete).
+    pub complete: bool,
+    /// Why an incomplete run stopped, when recorded.
+    pub stop_reason: Option<String>,
+    /// The ticks the run was to play, when recorded.
+    pub planned_ticks: Option<u64>,
 }
 
 /// A run's recorded trajectory, validated: every sample has one pose per robot, every command row
@@ -205,6 +230,8 @@ struct RawSummary {
     orientation_error_rad: Option<Quartiles>,
     #[serde(default)]
     per_run: Vec<RawRunMetrics>,
+    #[serde(default)]
+    incomplete_runs: Vec<IncompleteRun>,
 }
 
 #[derive(Deserialize)]
@@ -226,6 +253,16 @@ struct RawRunLog {
     index: usize,
     metrics: RawRunMetrics,
     trajectory: RawTrajectory,
+    #[serde(default = "complete_by_default")]
+    complete: bool,
+    #[serde(default)]
+    stop_reason: Option<String>,
+    #[serde(default)]
+    planned_ticks: Option<u64>,
+}
+
+fn complete_by_default() -> bool {
+    true
 }
 
 #[derive(Deserialize)]
@@ -324,6 +361,7 @@ pub fn parse_summary(text: &str, source: &Path, name: &str) -> Result<EvalData, 
         per_run: raw.per_run.into_iter().map(RunScores::from).collect(),
         runs: Vec::new(),
         runs_not_drawn: 0,
+        incomplete: raw.incomplete_runs,
     })
 }
 
@@ -337,6 +375,9 @@ pub fn parse_run_log(text: &str, source: &Path) -> Result<RunData, ReportError> 
         index: raw.index,
         scores: raw.metrics.into(),
         trajectory,
+        complete: raw.complete,
+        stop_reason: raw.stop_reason,
+        planned_ticks: raw.planned_ticks,
     })
 }
 
@@ -563,6 +604,18 @@ fn load_eval(root: &Path, summary: &Path) -> Result<EvalData, ReportError> {
         .map(|path| parse_run_log(&read_text(path)?, path))
         .collect::<Result<_, _>>()?;
     eval.runs.sort_by_key(|r| r.index);
+    // A run log marked incomplete that the summary does not list (e.g. an older summary).
+    for run in eval.runs.iter().filter(|r| !r.complete) {
+        if !eval.incomplete.iter().any(|i| i.index == run.index) {
+            eval.incomplete.push(IncompleteRun {
+                index: run.index,
+                ticks: Some(run.trajectory.commands.len()),
+                planned_ticks: run.planned_ticks,
+                stop_reason: run.stop_reason.clone(),
+            });
+        }
+    }
+    eval.incomplete.sort_by_key(|i| i.index);
     Ok(eval)
 }
 
@@ -700,6 +753,44 @@ mod tests {
         let err =
             parse_run_log(&bad_edge, Path::new("r.json")).expect_err("edge to a missing robot");
         assert!(err.to_string().contains("(0, 2)"), "{err}");
+    }
+
+    #[test]
+    fn incomplete_runs_are_read_and_older_files_are_complete() {
+        let poses = r#"[[{"x":0,"y":0,"theta":0},{"x":1,"y":0,"theta":0}],[{"x":0.1,"y":0,"theta":0},{"x":1.1,"y":0,"theta":0}]]"#;
+        let old = run_log(poses, "[[0, 1]]");
+        let run = parse_run_log(&old, Path::new("runs/run-0004.json")).expect("older run log");
+        assert!(run.complete, "a log without `complete` is complete");
+        assert_eq!(run.stop_reason, None);
+
+        let partial = old.replacen(
+            "\"index\": 4,",
+            "\"index\": 4, \"complete\": false, \"stop_reason\": \"interrupted by Ctrl-C\", \"planned_ticks\": 1200,",
+            1,
+        );
+        assert_ne!(partial, old);
+        let run = parse_run_log(&partial, Path::new("runs/run-0004.json")).expect("partial log");
+        assert!(!run.complete);
+        assert_eq!(run.stop_reason.as_deref(), Some("interrupted by Ctrl-C"));
+        assert_eq!(run.planned_ticks, Some(1200));
+
+        let eval = parse_summary(SUMMARY, Path::new("s.json"), "s").expect("summary");
+        assert!(eval.incomplete.is_empty(), "an older summary lists none");
+        let marked = SUMMARY.replacen(
+            "\"some_future_key\": 1",
+            r#""incomplete_runs": [{"index": 1, "ticks": 80, "planned_ticks": 1200, "stop_reason": "interrupted by SIGTERM"}]"#,
+            1,
+        );
+        let eval = parse_summary(&marked, Path::new("s.json"), "s").expect("summary");
+        assert_eq!(
+            eval.incomplete,
+            vec![IncompleteRun {
+                index: 1,
+                ticks: Some(80),
+                planned_ticks: Some(1200),
+                stop_reason: Some("interrupted by SIGTERM".into()),
+            }]
+        );
     }
 
     #[test]

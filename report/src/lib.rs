@@ -129,6 +129,7 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
             name: e.name.clone(),
             detail: eval_detail(e),
             row: e.table.clone(),
+            incomplete: incomplete_note(e),
         })
         .collect();
 
@@ -277,6 +278,34 @@ impl FigureNumbering {
             alt: alt.to_owned(),
         }
     }
+}
+
+/// `N of M runs incomplete (stopped early: reason)`, when some runs of `eval` stopped early.
+pub fn incomplete_note(eval: &EvalData) -> Option<String> {
+    if eval.incomplete.is_empty() {
+        return None;
+    }
+    let mut reasons: Vec<&str> = Vec::new();
+    for reason in eval
+        .incomplete
+        .iter()
+        .filter_map(|i| i.stop_reason.as_deref())
+    {
+        if !reasons.contains(&reason) {
+            reasons.push(reason);
+        }
+    }
+    let runs = eval.table.runs.max(eval.incomplete.len());
+    Some(format!(
+        "{} of {runs} run{} incomplete (stopped early{})",
+        eval.incomplete.len(),
+        if runs == 1 { "" } else { "s" },
+        if reasons.is_empty() {
+            String::new()
+        } else {
+            format!(": {}", reasons.join("; "))
+        }
+    ))
 }
 
 fn eval_detail(eval: &EvalData) -> String {
@@ -447,12 +476,36 @@ fn run_section(
         ),
         ("collisions".to_owned(), run.scores.collisions.to_string()),
     ];
+    let mut facts = facts;
+    let mut caption = caption;
+    if !run.complete {
+        let planned = run
+            .planned_ticks
+            .map(|ticks| format!(" of {:.1} s", ticks as f64 * traj.dt))
+            .unwrap_or_default();
+        let reason = run
+            .stop_reason
+            .as_deref()
+            .map(|r| format!(": {r}"))
+            .unwrap_or_default();
+        facts.insert(
+            0,
+            (
+                "complete".to_owned(),
+                format!("no, stopped early after {duration:.1} s{planned}{reason}"),
+            ),
+        );
+        caption.push_str(&format!(
+            " Incomplete run: it stopped early after {duration:.1} s{planned}{reason}; its metrics are over the ticks it played."
+        ));
+    }
     Ok(RunSection {
         heading: format!("{} · run {}", eval.name, run.index),
         anchor: format!("run-{stem}"),
         facts,
         panels,
         caption,
+        incomplete: !run.complete,
     })
 }
 

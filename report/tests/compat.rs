@@ -181,3 +181,45 @@ fn non_finite_metrics_written_as_null_are_read() {
         formation_report::build_report(dir.path(), &dir.path().join("r.html")).expect("report");
     assert_eq!(report.evaluations, 1);
 }
+
+/// A run the runtime stopped early: its log, written with the world's own `RunLog` type
+/// (`complete: false`), and a summary listing it, appear in the report marked incomplete.
+#[test]
+fn an_incomplete_run_written_by_the_world_is_marked_in_the_report() {
+    use formation_world::runlog::RunLog;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let run_dir = dir.path().join("run");
+    let trajectory = trajectory(4.2, 2.0, 0.5);
+    let metrics = run_metrics(&trajectory, &MetricsConfig::default());
+    let log = RunLog {
+        index: 0,
+        metrics: metrics.clone(),
+        trajectory,
+        clock: "realtime".into(),
+        models: vec!["m-1".into(); 3],
+        complete: false,
+        stop_reason: Some("interrupted by Ctrl-C".into()),
+        planned_ticks: Some(1200),
+    };
+    fs::create_dir_all(run_dir.join("runs")).expect("mkdir");
+    fs::write(
+        run_dir.join("runs/run-0000.json"),
+        serde_json::to_vec(&log).expect("json"),
+    )
+    .expect("write");
+    // An older summary without `incomplete_runs`: the run log alone marks the run.
+    let mut summary = serde_json::to_value(summarize(&[metrics])).expect("summary");
+    summary["per_run"] = json!([log.metrics]);
+    summary["scenario"] = json!("case1");
+    fs::write(run_dir.join("summary.json"), summary.to_string()).expect("write");
+
+    let out = dir.path().join("report.html");
+    formation_report::build_report(dir.path(), &out).expect("report");
+    let html = fs::read_to_string(&out).expect("html");
+    assert!(
+        html.contains("1 of 1 run incomplete (stopped early: interrupted by Ctrl-C)"),
+        "Table I marks it"
+    );
+    assert!(html.contains("<span class=\"badge\">incomplete</span>"));
+    assert!(html.contains("no, stopped early after 4.2 s of 60.0 s: interrupted by Ctrl-C"));
+}

@@ -267,7 +267,9 @@ fn a_process_without_the_launch_secret_drives_no_robot() {
     let refused = impostor.finish(LIMIT);
     assert!(!refused.output.status.success(), "{}", refused.describe());
     assert!(
-        refused.stderr().contains("did not prove this launch's secret"),
+        refused
+            .stderr()
+            .contains("did not prove this launch's secret"),
         "{}",
         refused.describe()
     );
@@ -362,7 +364,11 @@ fn the_runs_shared_memory_is_private_to_its_user() {
         "files of the run readable or writable by others: {shared:#?}"
     );
     let base = std::fs::metadata(namespace.base_dir()).expect("base folder");
-    assert_eq!(base.permissions().mode() & 0o077, 0, "base folder is private");
+    assert_eq!(
+        base.permissions().mode() & 0o077,
+        0,
+        "base folder is private"
+    );
     launch.finish(LIMIT).assert_success();
     leaks.assert_clean();
 }

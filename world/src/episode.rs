@@ -88,12 +88,42 @@ pub struct Trajectory {
 ///
 /// Per tick `k` in `0..ticks`: goal = `spec.goal_at(t_k)`; every robot's scan; `controller.commands`;
 /// `on_tick(observation, commands)` (used by DAgger and data collection to record samples); `World::step`;
-/// record. Stops at the first controller error.
+/// record. Stops at the first controller error. [`run_episode_recorded`] also hands the trajectory
+/// to a recorder as it grows.
 pub fn run_episode(
     spec: &RunSpec,
     controller: &mut dyn Controller,
     on_tick: &mut dyn FnMut(&Observation<'_>, &[WheelCmd]),
 ) -> Result<Trajectory, ControllerError> {
+    run_episode_recorded(spec, controller, on_tick, &mut |_| {
+        Ok::<(), std::convert::Infallible>(())
+    })
+    .map_err(|e| match e {
+        EpisodeError::Controller(e) => e,
+        EpisodeError::Record(never) => match never {},
+    })
+}
+
+/// Why [`run_episode_recorded`] stopped before the end.
+#[derive(Debug, thiserror::Error)]
+pub enum EpisodeError<E> {
+    /// The controller could not produce commands.
+    #[error(transparent)]
+    Controller(#[from] ControllerError),
+    /// The recorder failed (e.g. the run journal could not be written).
+    #[error(transparent)]
+    Record(E),
+}
+
+/// [`run_episode`], handing the trajectory recorded so far to `on_record` once after the initial
+/// state is recorded and then after every step (so it sees `k + 1` samples, `k` command rows and
+/// the collisions up to sample `k`). An error of `on_record` stops the episode at once.
+pub fn run_episode_recorded<E>(
+    spec: &RunSpec,
+    controller: &mut dyn Controller,
+    on_tick: &mut dyn FnMut(&Observation<'_>, &[WheelCmd]),
+    on_record: &mut dyn FnMut(&Trajectory) -> Result<(), E>,
+) -> Result<Trajectory, EpisodeError<E>> {
     let mut world = spec.make_world();
     let n_robots = world.n_robots();
     let ticks = spec.ticks();
@@ -117,6 +147,7 @@ pub fn run_episode(
         trajectory.poses.push(poses.to_vec());
     };
     record_state(&mut trajectory, world.time(), world.poses());
+    on_record(&trajectory).map_err(EpisodeError::Record)?;
 
     let mut scans = vec![vec![0.0_f32; spec.world.lidar.beams]; n_robots];
     let mut commands = vec![WheelCmd::BRAKE; n_robots];
@@ -142,6 +173,7 @@ pub fn run_episode(
             .collisions
             .extend(report.collisions.into_iter().map(|(i, j)| (sample, i, j)));
         record_state(&mut trajectory, world.time(), world.poses());
+        on_record(&trajectory).map_err(EpisodeError::Record)?;
     }
     Ok(trajectory)
 }
@@ -305,5 +337,51 @@ noise_std = {noise_std}
                 .collect()
         };
         assert_eq!(bits(&scans_a), bits(&scans_b));
+    }
+
+    #[test]
+    fn the_recorder_sees_the_trajectory_grow_and_can_stop_the_episode() {
+        let spec = short_spec(0.0);
+        let cmd = WheelCmd {
+            left: 0.2,
+            right: 0.3,
+        };
+        let mut seen = Vec::new();
+        let full = run_episode_recorded(
+            &spec,
+            &mut ConstantWheels { cmd, fail_at: None },
+            &mut |_, _| {},
+            &mut |traj| {
+                seen.push((traj.poses.len(), traj.commands.len(), traj.times.len()));
+                Ok::<(), String>(())
+            },
+        )
+        .unwrap();
+        let expected: Vec<_> = (0..=20).map(|k| (k + 1, k, k + 1)).collect();
+        assert_eq!(seen, expected);
+        assert_eq!(
+            full,
+            run_episode(
+                &spec,
+                &mut ConstantWheels { cmd, fail_at: None },
+                &mut |_, _| {}
+            )
+            .unwrap()
+        );
+
+        let error = run_episode_recorded(
+            &spec,
+            &mut ConstantWheels { cmd, fail_at: None },
+            &mut |_, _| {},
+            &mut |traj| {
+                if traj.commands.len() == 5 {
+                    Err("disk full".to_owned())
+                } else {
+                    Ok(())
+                }
+            },
+        )
+        .unwrap_err();
+        assert!(matches!(error, EpisodeError::Record(ref m) if m == "disk full"));
     }
 }

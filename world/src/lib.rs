@@ -8,15 +8,21 @@
 //!   initial conditions, and the fully resolved [`RunSpec`] of one run.
 //! * [`episode`]: the in-process loop of one run over a [`Controller`], producing a [`Trajectory`].
 //! * [`metrics`]: the paper's Table I and Fig. 9 metrics, made exact, over a set of formation edges.
+//! * [`runlog`]: the run logs the multi-process runtime writes, and the run journal that keeps a
+//!   run that ends abnormally.
 
 pub mod episode;
 pub mod lidar;
 pub mod metrics;
 pub mod robot;
+pub mod runlog;
 pub mod scenario;
 pub mod world;
 
-pub use episode::{Controller, Observation, Trajectory, run_episode};
+pub use episode::{
+    Controller, EpisodeError, Observation, Trajectory, run_episode, run_episode_recorded,
+};
 pub use robot::RobotParams;
+pub use runlog::{RunJournal, RunLog, TimingLog, recover_journal, recover_journals};
 pub use scenario::{HeadingSchedule, RunSpec, Scenario};
 pub use world::{StepReport, World, WorldConfig};

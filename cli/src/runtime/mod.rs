@@ -22,7 +22,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use formation_proto::wire::RunId;
-use formation_world::{RunSpec, Scenario, Trajectory};
+use formation_world::{RunLog, RunSpec, Scenario, Trajectory, recover_journals};
 
 use crate::paths;
 use formation_proto::wire::WorldEvent;
@@ -208,6 +208,13 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)>
     if args.runs == 0 {
         anyhow::bail!("--runs must be at least 1");
     }
+    if args.first_run.checked_add(args.runs).is_none() {
+        anyhow::bail!(
+            "--first-run {} plus --runs {} overflows the run index; use a smaller --first-run",
+            args.first_run,
+            args.runs
+        );
+    }
     let default_model = if args.model.is_relative() && !args.model.exists() {
         paths::repo_root().join(&args.model)
     } else {
@@ -250,7 +257,8 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         scenario.name(),
         plan.clock.as_str()
     );
-    let report = block_on(supervisor::launch(&plan, &mut |event| match event {
+    let started = std::time::SystemTime::now();
+    let launched = block_on(supervisor::launch(&plan, &mut |event| match event {
         WorldEvent::AgentsConnected => println!("all {} agents connected", plan.models.len()),
         WorldEvent::RunDone { index, log } => println!("run {index} done: {}", log.display()),
         WorldEvent::AgentLost {
@@ -265,13 +273,29 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
             println!("robot {robot}: agent pid {pid} rejoined, driving from tick {tick}")
         }
         WorldEvent::Listening { .. } | WorldEvent::Finished => {}
-    }))??;
+    }))?;
+    let report = match launched {
+        Ok(report) => {
+            // Journals an earlier, killed launch left in this directory.
+            report_recovered(&recover_journals(
+                &plan.out,
+                "an earlier launch ended before its world saved the run",
+            ));
+            report
+        }
+        Err(error) => {
+            let runs = args.first_run..args.first_run + args.runs;
+            keep_partial_runs(&plan.out, runs, started, &error, scenario.name(), base_seed);
+            return Err(error.into());
+        }
+    };
     let latency = profile::profile_dir(&plan.out)?;
-    let mut table = run_summary(&report.run_logs, scenario.name(), base_seed)?;
-    table.braked_ticks = latency.braked_per_robot.clone();
-    paths::write_atomic(
-        &plan.out.join("summary.json"),
-        &serde_json::to_vec_pretty(&table)?,
+    let table = write_summary(
+        &plan.out,
+        &report.run_logs,
+        scenario.name(),
+        Some(base_seed),
+        latency.braked_per_robot.clone(),
     )?;
     print!("{}", crate::eval::table_text(&table));
     let path = plan.out.join("profile.json");
@@ -317,35 +341,205 @@ fn lost_message(robot: usize, tick: u64, last_fresh_tick: Option<u64>) -> String
 }
 
 /// The Table I summary of a launch's run logs, in the schema `formation eval` writes, so that
-/// `formation report` reads a run directory like an eval directory.
+/// `formation report` reads a run directory like an eval directory. Runs that stopped early are
+/// listed in `incomplete_runs`.
 fn run_summary(
     run_logs: &[PathBuf],
     scenario: &str,
     seed: u64,
 ) -> anyhow::Result<crate::eval::EvalOutput> {
-    #[derive(serde::Deserialize)]
-    struct MetricsOnly {
-        metrics: formation_world::metrics::RunMetrics,
-        #[serde(default)]
-        models: Vec<String>,
-    }
     let mut logs = run_logs
         .iter()
         .map(|path| {
-            let bytes = std::fs::read(path)
-                .with_context(|| format!("reading run log {}", path.display()))?;
-            serde_json::from_slice::<MetricsOnly>(&bytes)
-                .with_context(|| format!("parsing run log {}", path.display()))
+            RunLog::read(path).with_context(|| format!("reading run log {}", path.display()))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let models = logs
-        .first_mut()
-        .map(|l| std::mem::take(&mut l.models))
-        .unwrap_or_default();
+    logs.sort_by_key(|log| log.index);
+    let models = logs.first().map(|l| l.models.clone()).unwrap_or_default();
+    let incomplete_runs = logs
+        .iter()
+        .filter(|log| !log.complete)
+        .map(|log| crate::eval::IncompleteRun {
+            index: log.index,
+            ticks: log.ticks(),
+            planned_ticks: log.planned_ticks,
+            stop_reason: log.stop_reason.clone(),
+        })
+        .collect();
     let per_run = logs.into_iter().map(|l| l.metrics).collect();
-    Ok(crate::eval::EvalOutput::from_runs(
-        "policy", models, scenario, seed, per_run,
-    ))
+    let mut table = crate::eval::EvalOutput::from_runs("policy", models, scenario, seed, per_run);
+    table.incomplete_runs = incomplete_runs;
+    Ok(table)
+}
+
+/// Writes `out/summary.json` over `run_logs` (see [`run_summary`]) and returns it. Without a
+/// seed (unknown, for runs recovered after their launcher was killed) the key is left out, as
+/// the report allows.
+fn write_summary(
+    out: &Path,
+    run_logs: &[PathBuf],
+    scenario: &str,
+    seed: Option<u64>,
+    braked_ticks: Vec<std::collections::BTreeMap<String, usize>>,
+) -> anyhow::Result<crate::eval::EvalOutput> {
+    let mut table = run_summary(run_logs, scenario, seed.unwrap_or_default())?;
+    table.braked_ticks = braked_ticks;
+    let bytes = match seed {
+        Some(_) => serde_json::to_vec_pretty(&table)?,
+        None => {
+            let mut json = serde_json::to_value(&table)?;
+            if let Some(fields) = json.as_object_mut() {
+                fields.remove("seed");
+            }
+            serde_json::to_vec_pretty(&json)?
+        }
+    };
+    paths::write_atomic(&out.join("summary.json"), &bytes)?;
+    Ok(table)
+}
+
+/// Why a launch stopped, as an incomplete run log records it.
+fn stop_reason(error: &supervisor::LaunchError) -> String {
+    use supervisor::LaunchError;
+    match error {
+        LaunchError::Interrupted(what) => format!("interrupted by {what}"),
+        LaunchError::AgentFailed { robot, status, .. } => {
+            format!("the agent of robot {robot} exited ({status}) and the restart budget was spent")
+        }
+        LaunchError::WorldFailed { status } => format!("the world process exited ({status})"),
+        other => other.to_string(),
+    }
+}
+
+/// After a launch that ended abnormally, keeps what it played: turns the journals a killed world
+/// left into incomplete run logs, marks the runs the launcher stopped (Ctrl-C, SIGTERM, a spent
+/// restart budget) with the launcher's reason, and writes `summary.json` over this launch's run
+/// logs (those of `runs` written since `started`), the incomplete ones listed as such. Problems
+/// are reported on stderr; the launch's own error stays the one returned.
+fn keep_partial_runs(
+    out: &Path,
+    runs: std::ops::Range<usize>,
+    started: std::time::SystemTime,
+    error: &supervisor::LaunchError,
+    scenario: &str,
+    seed: u64,
+) {
+    let reason = stop_reason(error);
+    report_recovered(&recover_journals(
+        out,
+        &format!("{reason} before the world saved the run"),
+    ));
+    // File times are coarse; a log written just after the launch began may look a little older.
+    let since = started
+        .checked_sub(Duration::from_secs(2))
+        .unwrap_or(started);
+    let logs: Vec<PathBuf> = formation_world::runlog::run_logs_in(out)
+        .into_iter()
+        .filter(|(index, path)| {
+            runs.contains(index)
+                && std::fs::metadata(path)
+                    .and_then(|m| m.modified())
+                    .is_ok_and(|at| at >= since)
+        })
+        .map(|(_, path)| path)
+        .collect();
+    if logs.is_empty() {
+        let journals = formation_world::runlog::journals_in(out);
+        if journals.is_empty() {
+            eprintln!("formation: no run log was written in {}", out.display());
+        } else {
+            eprintln!(
+                "formation: {} run journal(s) kept in {}; `formation report` turns them into run logs once they can be written",
+                journals.len(),
+                out.join("runs").display()
+            );
+        }
+        return;
+    }
+    let launcher_stopped = matches!(
+        error,
+        supervisor::LaunchError::Interrupted(_) | supervisor::LaunchError::AgentFailed { .. }
+    );
+    if launcher_stopped {
+        // The world only saw its input close (or a signal); the launcher knows why.
+        for path in &logs {
+            if let Ok(mut log) = RunLog::read(path)
+                && !log.complete
+            {
+                log.stop_reason = Some(reason.clone());
+                if let Err(e) = formation_world::runlog::write_json_atomic(path, &log) {
+                    eprintln!(
+                        "formation: could not record why run {} stopped: {e}",
+                        log.index
+                    );
+                }
+            }
+        }
+    }
+    let braked = profile::profile_dir(out)
+        .map(|p| p.braked_per_robot)
+        .unwrap_or_default();
+    match write_summary(out, &logs, scenario, Some(seed), braked) {
+        Ok(table) => {
+            print!("{}", crate::eval::table_text(&table));
+            eprintln!(
+                "formation: kept {} run(s) in {} ({} incomplete, stopped early: {reason})",
+                logs.len(),
+                out.display(),
+                table.incomplete_runs.len()
+            );
+        }
+        Err(e) => eprintln!("formation: could not write the summary of the partial runs: {e:#}"),
+    }
+}
+
+/// Says on stderr what journal recovery did.
+pub fn report_recovered(recovered: &[formation_world::runlog::JournalRecovery]) {
+    for recovery in recovered {
+        match &recovery.outcome {
+            Ok(run) => eprintln!(
+                "formation: recovered run {} ({} ticks, incomplete) from its journal {} into {}",
+                run.index,
+                run.ticks,
+                recovery.journal.display(),
+                run.log.display()
+            ),
+            Err(e) => eprintln!("formation: {e}"),
+        }
+    }
+}
+
+/// Recovers the journals in every run directory under `dir` and writes the `summary.json` a
+/// run directory lacks (its launcher was killed, or could not write it), so `formation report`
+/// shows those runs. Says on stderr what it did.
+pub fn recover_run_dirs(dir: &Path) {
+    use formation_world::runlog::{RunLogError, find_run_dirs, run_logs_in};
+    for out in find_run_dirs(dir) {
+        let recovered = recover_journals(
+            &out,
+            "the world and its launcher were killed before the run was saved",
+        );
+        report_recovered(&recovered);
+        let in_use = recovered
+            .iter()
+            .any(|r| matches!(r.outcome, Err(RunLogError::InUse { .. })));
+        if in_use || out.join("summary.json").exists() {
+            continue;
+        }
+        let logs: Vec<PathBuf> = run_logs_in(&out).into_iter().map(|(_, p)| p).collect();
+        match write_summary(&out, &logs, "", None, Vec::new()) {
+            Ok(table) => eprintln!(
+                "formation: wrote {} over {} run log(s) that had none ({} incomplete)",
+                out.join("summary.json").display(),
+                logs.len(),
+                table.incomplete_runs.len()
+            ),
+            Err(e) => eprintln!(
+                "formation: could not summarize the run logs in {}: {e:#}",
+                out.display()
+            ),
+        }
+    }
 }
 
 /// `formation profile`: `formation run` whose latency statistics are the point.
@@ -444,6 +638,137 @@ pub fn read_trajectory(log: &Path) -> anyhow::Result<Trajectory> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use formation_world::runlog::{JournalHeader, RunJournal, journal_path, log_paths};
+    use formation_world::{Controller, Observation, run_episode_recorded};
+
+    struct Forward;
+
+    impl Controller for Forward {
+        fn commands(
+            &mut self,
+            _: &Observation<'_>,
+            out: &mut [formation_proto::WheelCmd],
+        ) -> Result<(), formation_world::episode::ControllerError> {
+            out.fill(formation_proto::WheelCmd {
+                left: 0.3,
+                right: 0.35,
+            });
+            Ok(())
+        }
+    }
+
+    fn spec(index: usize) -> RunSpec {
+        let text = "name = \"t\"\nrobots = 3\nduration_s = 2.0\nseed = 3\n[goal]\nv_star = 0.7\nd_star = 2.0\n[heading]\nschedule = \"constant\"\nphi = 1.0\n[lidar]\nbeams = 36\n";
+        Scenario::from_toml_str(text, "t")
+            .expect("scenario")
+            .run_spec(3, index)
+    }
+
+    /// Journals run `index` of [`spec`] into `out`, stopping after `ticks` ticks.
+    fn journal(out: &Path, index: usize, ticks: usize) {
+        let spec = spec(index);
+        let header = JournalHeader::new(&spec, "lockstep", &vec!["m".to_owned(); 3]);
+        let mut journal = RunJournal::create(&journal_path(out, index), &header).expect("journal");
+        let _ = run_episode_recorded(&spec, &mut Forward, &mut |_, _| {}, &mut |t| {
+            journal.append(t).map_err(|e| e.to_string())?;
+            if t.commands.len() == ticks {
+                Err("stop".to_owned())
+            } else {
+                Ok(())
+            }
+        });
+        journal.close().expect("close");
+    }
+
+    #[test]
+    fn partial_runs_are_summarized_and_marked_incomplete() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("run");
+        // Run 0 finished; run 1 was journaled by a world that was killed after 12 ticks.
+        let full =
+            formation_world::run_episode(&spec(0), &mut Forward, &mut |_, _| {}).expect("episode");
+        let log = RunLog {
+            index: 0,
+            metrics: formation_world::metrics::run_metrics(&full, &Default::default()),
+            trajectory: full,
+            clock: "lockstep".into(),
+            models: vec!["m".into(); 3],
+            complete: true,
+            stop_reason: None,
+            planned_ticks: Some(40),
+        };
+        formation_world::runlog::write_json_atomic(&log_paths(&out, 0).0, &log).expect("log");
+        journal(&out, 1, 12);
+
+        let error = supervisor::LaunchError::WorldFailed {
+            status: "killed by signal 9".into(),
+        };
+        keep_partial_runs(&out, 0..2, std::time::SystemTime::now(), &error, "t", 3);
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("summary.json")).expect("summary.json"))
+                .expect("json");
+        assert_eq!(summary["runs"], 2);
+        assert_eq!(summary["seed"], 3);
+        let incomplete = summary["incomplete_runs"].as_array().expect("listed");
+        assert_eq!(incomplete.len(), 1, "{summary}");
+        assert_eq!(incomplete[0]["index"], 1);
+        assert_eq!(incomplete[0]["ticks"], 12);
+        assert_eq!(
+            incomplete[0]["stop_reason"],
+            "the world process exited (killed by signal 9) before the world saved the run"
+        );
+        assert!(
+            !journal_path(&out, 1).exists(),
+            "the journal became a run log"
+        );
+        let recovered = RunLog::read(&log_paths(&out, 1).0).expect("recovered log");
+        assert!(!recovered.complete);
+
+        // A launcher stop rewrites the reason the world gave.
+        let mut log = recovered;
+        log.stop_reason = Some("stopped: the launcher closed the world's input".into());
+        formation_world::runlog::write_json_atomic(&log_paths(&out, 1).0, &log).expect("log");
+        keep_partial_runs(
+            &out,
+            0..2,
+            std::time::SystemTime::now(),
+            &supervisor::LaunchError::Interrupted("SIGTERM"),
+            "t",
+            3,
+        );
+        let log = RunLog::read(&log_paths(&out, 1).0).expect("log");
+        assert_eq!(log.stop_reason.as_deref(), Some("interrupted by SIGTERM"));
+    }
+
+    #[test]
+    fn orphan_journals_get_a_run_log_and_a_summary() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("nested").join("run");
+        journal(&out, 0, 7);
+        recover_run_dirs(dir.path());
+        let summary: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(out.join("summary.json")).expect("summary.json written"),
+        )
+        .expect("json");
+        assert!(
+            summary.get("seed").is_none(),
+            "the seed is unknown: {summary}"
+        );
+        assert_eq!(summary["incomplete_runs"][0]["ticks"], 7);
+        assert!(log_paths(&out, 0).0.is_file());
+        // A directory with a summary is left as it is.
+        journal(&out, 1, 3);
+        std::fs::write(out.join("summary.json"), b"{}").expect("write");
+        recover_run_dirs(dir.path());
+        assert_eq!(
+            std::fs::read(out.join("summary.json")).expect("summary"),
+            b"{}"
+        );
+        assert!(
+            log_paths(&out, 1).0.is_file(),
+            "the journal is still recovered"
+        );
+    }
 
     #[test]
     fn fault_flags_map_to_robots_and_bad_flags_are_explained() {

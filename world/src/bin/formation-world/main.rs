@@ -4,8 +4,10 @@
 //! robot, then plays the given runs (resolved run specs, written by the launcher) one after another with the agents staying alive: each run
 //! begins with a begin-episode request (agents answer ready), then the unchanged in-process episode
 //! loop steps the world while [`exchange::AgentsController`] trades scans for commands. After each
-//! run it writes the run logs ([`runlog`]) and prints a progress event on stdout. At the end, or on
-//! SIGINT/SIGTERM, or when the launcher closes its standard input, it asks the agents to exit.
+//! run it writes the run logs ([`runlog`]) and prints a progress event on stdout; while a run plays
+//! it journals every tick, and a run that ends early (a signal, the launcher, an error) is kept as
+//! an incomplete run log. At the end, or on SIGINT/SIGTERM, or when the launcher closes its
+//! standard input, it asks the agents to exit.
 //!
 //! The first line of its standard input is the launch secret (see [`formation_proto::auth`]): only
 //! agents that prove it are let drive a robot.
@@ -27,11 +29,10 @@ use anyhow::Context;
 use clap::Parser;
 use formation_proto::auth::LaunchSecret;
 use formation_proto::wire::{RunId, RunNamespace};
-use formation_world::metrics::{MetricsConfig, run_metrics};
-use formation_world::{RunSpec, run_episode};
+use formation_world::RunSpec;
 
 use crate::exchange::{AgentsController, ClockMode, ExchangeSettings, StopReason};
-use crate::runlog::{RunLog, TimingLog, emit, log_paths, write_atomic};
+use crate::runlog::{emit, play_journaled};
 use crate::transport::IceoryxWorldLink;
 use formation_proto::wire::WorldEvent;
 
@@ -177,35 +178,14 @@ fn read_run_specs(path: &Path) -> anyhow::Result<Vec<RunSpec>> {
 fn play(args: &Args, specs: &[RunSpec], agents: &mut AgentsController<'_>) -> anyhow::Result<()> {
     agents.await_agents(Duration::from_millis(args.startup_timeout_ms))?;
     emit(&WorldEvent::AgentsConnected);
-    let metrics_config = MetricsConfig::default();
     for spec in specs {
         let index = spec.index;
         agents
             .begin_episode(spec.world.dt, spec.world.lidar)
             .with_context(|| format!("run {index}"))?;
-        let trajectory =
-            run_episode(spec, agents, &mut |_, _| {}).with_context(|| format!("run {index}"))?;
-        let timing = TimingLog {
-            index,
-            clock: args.clock.as_str().into(),
-            dt_s: spec.world.dt,
-            tick_start_ns: agents.take_tick_starts(),
-            robots: agents.take_timings(),
-        };
-        let log = RunLog {
-            index,
-            metrics: run_metrics(&trajectory, &metrics_config),
-            trajectory,
-            clock: args.clock.as_str().into(),
-            models: agents.model_ids().to_vec(),
-        };
-        let (log_path, timing_path) = log_paths(&args.out, index);
-        write_atomic(&log_path, &serde_json::to_vec(&log)?)?;
-        write_atomic(&timing_path, &serde_json::to_vec(&timing)?)?;
-        emit(&WorldEvent::RunDone {
-            index,
-            log: log_path,
-        });
+        let log = play_journaled(&args.out, args.clock.as_str(), spec, agents)
+            .with_context(|| format!("run {index}"))?;
+        emit(&WorldEvent::RunDone { index, log });
     }
     Ok(())
 }

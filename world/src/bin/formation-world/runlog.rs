@@ -1,69 +1,186 @@
-//! The run logs the world writes: per run, the trajectory with its metrics (the same shape as
-//! `formation eval --out` writes, so the report reads both) and the per-tick timing log.
+//! Writing one run's logs as it plays: the run journal while it goes, the final run and timing
+//! logs at the end, and an incomplete run log when it ends early. The formats themselves are
+//! defined once, in [`formation_world::runlog`].
 //!
-//! Layout under the output directory: `runs/run-NNNN.json` and `timing/run-NNNN.json`. Every file
-//! is written to a temporary name in the same directory and renamed, so a reader never sees half a
-//! file. Progress goes to stdout as one JSON object per line ([`WorldEvent`]), for the launcher.
+//! Layout under the output directory: `runs/run-NNNN.journal` while a run plays, then
+//! `runs/run-NNNN.json` and `timing/run-NNNN.json`. Progress goes to stdout as one JSON object
+//! per line ([`WorldEvent`]), for the launcher.
 
 use std::path::{Path, PathBuf};
 
-use formation_proto::wire::{RobotTiming, WorldEvent};
-use formation_world::Trajectory;
-use formation_world::metrics::RunMetrics;
-use serde::{Deserialize, Serialize};
+use formation_proto::wire::WorldEvent;
+use formation_world::episode::ControllerError;
+use formation_world::metrics::{MetricsConfig, run_metrics};
+use formation_world::runlog::{
+    JournalHeader, RunJournal, RunLogError, journal_path, recover_journal, write_json_atomic,
+};
+#[allow(unused_imports)] // the rest of the binary names them from here
+pub use formation_world::runlog::{RunLog, TimingLog, log_paths, write_atomic};
+use formation_world::{EpisodeError, RunSpec, run_episode_recorded};
 
-/// One run's trajectory log.
-#[derive(Debug, Serialize, Deserialize)]
-pub struct RunLog {
-    /// Run index within the scenario.
-    pub index: usize,
-    /// The paper's metrics of the run.
-    pub metrics: RunMetrics,
-    /// The full trajectory, exactly as the world recorded it.
-    pub trajectory: Trajectory,
-    /// `lockstep` or `realtime`.
-    pub clock: String,
-    /// The model each robot's agent last reported.
-    pub models: Vec<String>,
-}
-
-/// One run's per-tick timing log.
-#[derive(Debug, Serialize, Deserialize)]
-pub struct TimingLog {
-    /// Run index within the scenario.
-    pub index: usize,
-    /// `lockstep` or `realtime`.
-    pub clock: String,
-    /// The tick period the world steps with \[s\].
-    pub dt_s: f64,
-    /// Per tick: when the world began it (published the scans), since the first tick began \[ns\].
-    pub tick_start_ns: Vec<u64>,
-    /// One column-wise record per robot.
-    pub robots: Vec<RobotTiming>,
-}
+use crate::exchange::AgentsController;
 
 /// Prints one progress event line on stdout, for the launcher.
 pub fn emit(event: &WorldEvent) {
     println!("{}", event.to_line());
 }
 
-/// Paths of run `index`'s logs under `out`.
-pub fn log_paths(out: &Path, index: usize) -> (PathBuf, PathBuf) {
-    let name = format!("run-{index:04}.json");
-    (out.join("runs").join(&name), out.join("timing").join(name))
+/// Why a journaled run ended without its final logs.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// The run journal could not be created; nothing was played.
+    #[error(transparent)]
+    Start(RunLogError),
+    /// The agents exchange stopped the episode (a signal, the launcher, an agent refusing).
+    #[error("the run stopped early{}", saved_note(saved))]
+    Stopped {
+        /// What stopped it.
+        #[source]
+        cause: ControllerError,
+        /// What became of the partial run.
+        saved: Saved,
+    },
+    /// The journal or a final log could not be written.
+    #[error("the run could not be saved{}", saved_note(saved))]
+    Write {
+        /// The failed write.
+        #[source]
+        cause: RunLogError,
+        /// What became of the run.
+        saved: Saved,
+    },
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same directory.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    use anyhow::Context;
-    let dir = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming into {}", path.display()))?;
-    Ok(())
+/// What became of a run that ended without its final logs.
+#[derive(Debug)]
+pub enum Saved {
+    /// Written as an incomplete run log.
+    Partial(PathBuf),
+    /// Left in its journal, which `formation report` (or the launcher) turns into a run log.
+    Journal(PathBuf),
+    /// Nothing could be kept: why.
+    Lost(RunLogError),
+}
+
+/// `; <what was kept>`; the cause follows as the error's source.
+fn saved_note(saved: &Saved) -> String {
+    match saved {
+        Saved::Partial(path) => format!("; the partial run is kept in {}", path.display()),
+        Saved::Journal(path) => format!(
+            "; it is kept in its journal {} (`formation report` recovers it once there is room)",
+            path.display()
+        ),
+        Saved::Lost(e) => format!("; nothing could be kept ({e})"),
+    }
+}
+
+/// Plays `spec` with the agents, journaling every step to `out/runs/run-NNNN.journal`. On success
+/// writes `runs/run-NNNN.json` and the timing log atomically, removes the journal and returns the
+/// run log's path. When the episode ends early (the exchange stopped it, or a write failed) it
+/// writes an incomplete run log recovered from the journal plus the timing log it has, and
+/// returns the error saying what was kept.
+pub fn play_journaled(
+    out: &Path,
+    clock: &str,
+    spec: &RunSpec,
+    agents: &mut AgentsController<'_>,
+) -> Result<PathBuf, RunError> {
+    let index = spec.index;
+    let (log_path, timing_path) = log_paths(out, index);
+    let header = JournalHeader::new(spec, clock, agents.model_ids());
+    let mut journal =
+        RunJournal::create(&journal_path(out, index), &header).map_err(RunError::Start)?;
+    let played = run_episode_recorded(spec, agents, &mut |_, _| {}, &mut |trajectory| {
+        journal.append(trajectory)
+    });
+    let mut timing = || TimingLog {
+        index,
+        clock: clock.to_owned(),
+        dt_s: spec.world.dt,
+        tick_start_ns: agents.take_tick_starts(),
+        robots: agents.take_timings(),
+    };
+    match played {
+        Ok(trajectory) => {
+            let timing = timing();
+            let log = RunLog {
+                index,
+                metrics: run_metrics(&trajectory, &MetricsConfig::default()),
+                trajectory,
+                clock: clock.to_owned(),
+                models: agents.model_ids().to_vec(),
+                complete: true,
+                stop_reason: None,
+                planned_ticks: Some(spec.ticks()),
+            };
+            let written = write_json_atomic(&log_path, &log)
+                .and_then(|()| write_json_atomic(&timing_path, &timing));
+            match written {
+                Ok(()) => {
+                    let journal_file = journal.path().to_path_buf();
+                    drop(journal);
+                    let _ = std::fs::remove_file(&journal_file);
+                    Ok(log_path)
+                }
+                Err(cause) => {
+                    let saved = match journal.close() {
+                        Ok(path) => Saved::Journal(path),
+                        Err(e) => Saved::Lost(e),
+                    };
+                    Err(RunError::Write { cause, saved })
+                }
+            }
+        }
+        Err(EpisodeError::Controller(cause)) => {
+            let reason = cause.to_string();
+            let saved = keep_partial(journal, &log_path, &timing_path, &reason, timing());
+            Err(RunError::Stopped { cause, saved })
+        }
+        Err(EpisodeError::Record(cause)) => {
+            let reason = format!("the run journal could not be written: {cause}");
+            let saved = keep_partial(journal, &log_path, &timing_path, &reason, timing());
+            Err(RunError::Write { cause, saved })
+        }
+    }
+}
+
+/// Closes the journal, writes the incomplete run log recovered from it and the timing log, and
+/// removes the journal once the run log is written.
+fn keep_partial(
+    journal: RunJournal,
+    log_path: &Path,
+    timing_path: &Path,
+    reason: &str,
+    timing: TimingLog,
+) -> Saved {
+    let journal_file = journal.path().to_path_buf();
+    // A journal whose write failed is already cut back to its whole lines and closed.
+    let _ = journal.close();
+    let kept = recover_journal(&journal_file).and_then(|mut log| {
+        if log.trajectory.poses.is_empty() {
+            return Err(RunLogError::NoSamples {
+                path: journal_file.clone(),
+            });
+        }
+        log.stop_reason = Some(reason.to_owned());
+        write_json_atomic(log_path, &log)
+    });
+    match kept {
+        Ok(()) => {
+            let _ = std::fs::remove_file(&journal_file);
+            if let Err(e) = write_json_atomic(timing_path, &timing) {
+                tracing::warn!("{e}");
+            }
+            Saved::Partial(log_path.to_path_buf())
+        }
+        Err(e @ RunLogError::NoSamples { .. }) => {
+            let _ = std::fs::remove_file(&journal_file);
+            Saved::Lost(e)
+        }
+        Err(e) if journal_file.is_file() => {
+            tracing::warn!("{e}");
+            Saved::Journal(journal_file)
+        }
+        Err(e) => Saved::Lost(e),
+    }
 }

@@ -1,0 +1,337 @@
+//! A run that ends abnormally keeps what it played: Ctrl-C on the launcher, a SIGKILLed world
+//! and a full disk each leave an incomplete run log (or, on the full disk, the journal cut back
+//! to whole lines and no temporary file), a non-zero exit, and a report that says "incomplete".
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use formation_proto::wire::RunId;
+use formation_tests::{
+    LeakCheck, LiveProcess, TempDir, Watchdog, binaries, case1_scenario, repo_root, run,
+    test_model, unique_run_id, world_pid,
+};
+
+/// The watchdog limit of each test: generous, it only stops a hung test.
+const LIMIT: Duration = Duration::from_secs(300);
+
+/// These tests time real processes; one at a time keeps a 2-core machine from starving one
+/// test's agents with another's.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn exclusive() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// `formation run` of `scenario` into `out`, with `extra` flags.
+fn launch(run_id: &RunId, scenario: &Path, out: &Path, extra: &[&str]) -> LiveProcess {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["run", "--run-id", run_id.as_str()])
+        .args(extra)
+        .arg("--scenario")
+        .arg(scenario)
+        .arg("--model")
+        .arg(test_model())
+        .arg("--out")
+        .arg(out);
+    LiveProcess::spawn(command)
+}
+
+fn await_connected(launch: &mut LiveProcess) {
+    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+}
+
+fn signal(pid: u32, signal: &str) {
+    let status = Command::new("kill")
+        .args([signal, &pid.to_string()])
+        .status()
+        .expect("running kill");
+    assert!(status.success(), "kill {signal} {pid}");
+}
+
+fn read_json(path: &Path) -> serde_json::Value {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("parsing {}: {e}", path.display()))
+}
+
+/// Every file under `dir`, recursively.
+fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+            let path = entry.path();
+            if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                stack.push(path);
+            } else {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+/// Checks the incomplete run 0 in `out`: its log, the summary that lists it, no journal left,
+/// and a report that says so. Returns the run log.
+fn assert_kept_incomplete(out: &Path, min_ticks: usize, describe: &str) -> serde_json::Value {
+    let log = read_json(&out.join("runs/run-0000.json"));
+    assert_eq!(log["complete"], false, "{describe}");
+    let ticks = log["trajectory"]["commands"].as_array().map_or(0, Vec::len);
+    assert!(
+        ticks >= min_ticks,
+        "{ticks} ticks kept, expected at least {min_ticks}\n{describe}"
+    );
+    assert!(ticks < 1200, "the run stopped early: {ticks} ticks");
+    assert_eq!(
+        log["trajectory"]["poses"].as_array().map(Vec::len),
+        Some(ticks + 1)
+    );
+    assert!(
+        !out.join("runs/run-0000.journal").exists(),
+        "the journal became the run log"
+    );
+    let summary = read_json(&out.join("summary.json"));
+    assert_eq!(summary["runs"], 1, "{summary}");
+    let incomplete = summary["incomplete_runs"]
+        .as_array()
+        .unwrap_or_else(|| panic!("summary.json lists the incomplete run: {summary}"));
+    assert_eq!(incomplete.len(), 1);
+    assert_eq!(incomplete[0]["index"], 0);
+    assert_eq!(incomplete[0]["ticks"], ticks);
+
+    let html_path = out.with_file_name("report.html");
+    let mut report = Command::new(&binaries().cli);
+    report.arg("report").arg(out).arg("--out").arg(&html_path);
+    run(report, LIMIT).assert_success();
+    let html = std::fs::read_to_string(&html_path).expect("report.html");
+    assert!(
+        html.contains("1 of 1 run incomplete (stopped early"),
+        "Table I marks the run incomplete"
+    );
+    assert!(html.contains("<span class=\"badge\">incomplete</span>"));
+    log
+}
+
+/// Ctrl-C (SIGINT to the launcher) four seconds into a 60 s realtime run: the launcher exits
+/// non-zero, and the run played so far is kept, marked incomplete, in the run log, the summary
+/// and the report.
+#[test]
+fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
+    let _watchdog = Watchdog::arm("ctrl_c_partial", LIMIT);
+    let _one = exclusive();
+    let dir = TempDir::new("ctrlc");
+    let run_id = unique_run_id("ctrlc");
+    let leaks = LeakCheck::new(&run_id);
+    let out = dir.path().join("out");
+    let scenario = repo_root().join("scenarios/case1.toml");
+    let mut launch = launch(&run_id, &scenario, &out, &["--clock", "realtime"]);
+    await_connected(&mut launch);
+    std::thread::sleep(Duration::from_secs(4));
+    signal(launch.id(), "-INT");
+    let finished = launch.finish(LIMIT);
+    assert!(
+        !finished.output.status.success(),
+        "an interrupted run fails\n{}",
+        finished.describe()
+    );
+    assert!(
+        finished.stderr().contains("interrupted by Ctrl-C"),
+        "{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+    // 4 s at 20 Hz is 80 ticks; allow for a slow start on a loaded machine.
+    let log = assert_kept_incomplete(&out, 40, &finished.describe());
+    assert_eq!(log["stop_reason"], "interrupted by Ctrl-C");
+    assert_eq!(log["planned_ticks"], 1200);
+    assert!(
+        out.join("timing/run-0000.json").is_file(),
+        "the world keeps its timing log too"
+    );
+}
+
+/// A world SIGKILLed mid-run cannot save anything itself: the launcher turns the journal it
+/// left into an incomplete run log once the world is gone.
+#[test]
+fn a_sigkilled_world_leaves_a_journal_the_launcher_recovers() {
+    let _watchdog = Watchdog::arm("killed_world", LIMIT);
+    let _one = exclusive();
+    let dir = TempDir::new("killw");
+    let run_id = unique_run_id("killw");
+    let leaks = LeakCheck::new(&run_id);
+    let out = dir.path().join("out");
+    let scenario = repo_root().join("scenarios/case1.toml");
+    let mut launch = launch(&run_id, &scenario, &out, &["--clock", "realtime"]);
+    await_connected(&mut launch);
+    // Past the journal's one-second flush period, twice over.
+    std::thread::sleep(Duration::from_secs(3));
+    let journal = out.join("runs/run-0000.journal");
+    assert!(journal.is_file(), "the world journals the run as it goes");
+    let Some(world) = world_pid(&run_id) else {
+        panic!("no world process\n{}", launch.describe());
+    };
+    signal(world, "-KILL");
+    let finished = launch.finish(LIMIT);
+    assert!(
+        !finished.output.status.success(),
+        "a killed world fails the launch\n{}",
+        finished.describe()
+    );
+    assert!(
+        finished.stderr().contains("recovered run 0"),
+        "{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+    let log = assert_kept_incomplete(&out, 20, &finished.describe());
+    let reason = log["stop_reason"].as_str().unwrap_or_default();
+    assert!(
+        reason.contains("the world process exited (killed by signal 9)"),
+        "{reason}"
+    );
+}
+
+/// An agent that crashes with no restart left: the launcher stops the world, which keeps the
+/// run played so far; the run log says why it stopped.
+#[test]
+fn a_spent_restart_budget_keeps_the_partial_run() {
+    let _watchdog = Watchdog::arm("budget_partial", LIMIT);
+    let _one = exclusive();
+    let dir = TempDir::new("budget");
+    let run_id = unique_run_id("budget");
+    let leaks = LeakCheck::new(&run_id);
+    let out = dir.path().join("out");
+    let scenario = repo_root().join("scenarios/case1.toml");
+    let finished = launch(
+        &run_id,
+        &scenario,
+        &out,
+        &[
+            "--clock",
+            "lockstep",
+            "--pace-ms",
+            "5",
+            "--restarts",
+            "0",
+            "--fault",
+            "1:crash-after=60",
+        ],
+    )
+    .finish(LIMIT);
+    finished.assert_failure_mentioning("restart budget");
+    leaks.assert_clean();
+    let log = assert_kept_incomplete(&out, 60, &finished.describe());
+    let reason = log["stop_reason"].as_str().unwrap_or_default();
+    assert!(
+        reason.starts_with("the agent of robot 1 exited") && reason.contains("restart budget"),
+        "{reason}"
+    );
+}
+
+/// A small tmpfs mounted for one test, unmounted when dropped (also when the test fails).
+struct Tmpfs {
+    dir: PathBuf,
+}
+
+impl Tmpfs {
+    /// Mounts a tmpfs of `size` (e.g. `256k`) on `dir`; `None` (with a message) when this
+    /// machine does not allow it.
+    fn mount(dir: &Path, size: &str) -> Option<Tmpfs> {
+        std::fs::create_dir_all(dir).expect("mount point");
+        let output = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+            .arg(dir)
+            .output();
+        match output {
+            Ok(output) if output.status.success() => Some(Tmpfs {
+                dir: dir.to_path_buf(),
+            }),
+            Ok(output) => {
+                eprintln!(
+                    "skipping: cannot mount a tmpfs here ({}); run as root to test a full disk",
+                    String::from_utf8_lossy(&output.stderr).trim()
+                );
+                None
+            }
+            Err(e) => {
+                eprintln!("skipping: cannot run mount ({e})");
+                None
+            }
+        }
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let unmounted = Command::new("umount")
+            .arg(&self.dir)
+            .status()
+            .is_ok_and(|s| s.success());
+        if !unmounted {
+            // Still busy (a straggler holds a file): detach it now, it goes when released.
+            let _ = Command::new("umount").arg("-l").arg(&self.dir).status();
+        }
+    }
+}
+
+/// `--out` on a 256 KiB disk and a run whose journal needs about 1 MB: the world fails as soon
+/// as the disk is full, with an error that names the file and the full disk, leaves the journal
+/// cut back to whole lines (far short of the scenario's ticks) and no temporary file, and the
+/// launcher exits non-zero.
+#[test]
+fn a_full_disk_fails_the_run_promptly_and_leaves_no_temporary_file() {
+    let _watchdog = Watchdog::arm("full_disk", LIMIT);
+    let _one = exclusive();
+    let dir = TempDir::new("full");
+    let Some(disk) = Tmpfs::mount(&dir.path().join("disk"), "256k") else {
+        return;
+    };
+    let run_id = unique_run_id("full");
+    let leaks = LeakCheck::new(&run_id);
+    let out = disk.dir.join("out");
+    let ticks = 2400;
+    let scenario = case1_scenario(dir.path(), 120.0);
+    let finished = launch(&run_id, &scenario, &out, &["--clock", "lockstep"]).finish(LIMIT);
+    assert!(
+        !finished.output.status.success(),
+        "a run that cannot be written fails\n{}",
+        finished.describe()
+    );
+    let stderr = finished.stderr();
+    assert!(
+        stderr.contains("run-0000.journal") && stderr.contains("the disk is full"),
+        "the error names the file and the full disk\n{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+
+    let files = files_under(&disk.dir);
+    let temporary: Vec<&PathBuf> = files
+        .iter()
+        .filter(|p| p.to_string_lossy().contains(".tmp"))
+        .collect();
+    assert!(
+        temporary.is_empty(),
+        "temporary files left: {temporary:?}\n{}",
+        finished.describe()
+    );
+    // The run stopped when the disk filled: the journal holds whole lines, far fewer than the
+    // scenario's ticks (it does not play on and fail only at the end).
+    let journal = out.join("runs/run-0000.journal");
+    let (header, trajectory) = formation_world::runlog::read_journal(&journal)
+        .unwrap_or_else(|e| panic!("{e}\n{}", finished.describe()));
+    assert_eq!(header.ticks, ticks);
+    let journaled = trajectory.commands.len() as u64;
+    assert!(
+        journaled > 0 && journaled < ticks,
+        "{journaled} of {ticks} ticks journaled"
+    );
+    let text = std::fs::read(&journal).expect("journal");
+    assert_eq!(text.last(), Some(&b'\n'), "cut back to whole lines");
+    drop(disk);
+}
