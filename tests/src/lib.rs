@@ -758,6 +758,30 @@ impl RobotLog {
     }
 }
 
+/// The incarnations (16-hex-digit nonces) whose services exist for robot `robot` of `run`, in no
+/// particular order: how a test finds the services the world made for an accepted agent.
+pub fn incarnations(run: &RunId, robot: usize) -> Vec<u64> {
+    use iceoryx2::prelude::*;
+    let Ok(config) = RunNamespace::new(run).iceoryx_config() else {
+        return Vec::new();
+    };
+    let prefix = format!("formation/{run}/robot/{robot}/");
+    let mut found = Vec::new();
+    let _ = ipc::Service::list(&config, |details| {
+        let name = details.static_details.name().to_string();
+        if let Some(rest) = name.strip_prefix(&prefix)
+            && let Some(hex) = rest.strip_suffix("/scan")
+            && hex.len() == 16
+            && let Ok(n) = u64::from_str_radix(hex, 16)
+            && !found.contains(&n)
+        {
+            found.push(n);
+        }
+        CallbackProgression::Continue
+    });
+    found
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -789,28 +813,4 @@ mod tests {
         assert_eq!(finished.stdout(), "out\n");
         assert!(finished.describe().contains("err"));
     }
-}
-
-/// The incarnations (16-hex-digit nonces) whose services exist for robot `robot` of `run`, in no
-/// particular order: how a test finds the services the world made for an accepted agent.
-pub fn incarnations(run: &RunId, robot: usize) -> Vec<u64> {
-    use iceoryx2::prelude::*;
-    let Ok(config) = RunNamespace::new(run).iceoryx_config() else {
-        return Vec::new();
-    };
-    let prefix = format!("formation/{run}/robot/{robot}/");
-    let mut found = Vec::new();
-    let _ = ipc::Service::list(&config, |details| {
-        let name = details.static_details.name().to_string();
-        if let Some(rest) = name.strip_prefix(&prefix)
-            && let Some(hex) = rest.strip_suffix("/scan")
-            && hex.len() == 16
-            && let Ok(n) = u64::from_str_radix(hex, 16)
-            && !found.contains(&n)
-        {
-            found.push(n);
-        }
-        CallbackProgression::Continue
-    });
-    found
 }

@@ -143,7 +143,6 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
         &secret,
         Duration::from_millis(args.connect_timeout_ms),
     )?;
-    drop(secret);
     link.publish_status(&AgentStatus::Hello {
         pid: std::process::id(),
         model_id,
