@@ -122,7 +122,7 @@ fn stopped_and_continued_processes_are_survived() {
     let dir = TempDir::new("stop");
     let run_id = unique_run_id("stop");
     let leaks = LeakCheck::new(&run_id);
-    let mut launch = launch(&run_id, &dir, 12.0, &["--clock", "realtime"]);
+    let mut launch = launch(&run_id, &dir, 14.0, &["--clock", "realtime"]);
     connected(&mut launch);
     std::thread::sleep(Duration::from_millis(1000));
     let world = world_pid(&run_id).expect("the world's pid");
@@ -134,6 +134,20 @@ fn stopped_and_continued_processes_are_survived() {
     signal(agent, "STOP");
     std::thread::sleep(Duration::from_millis(1000));
     signal(agent, "CONT");
+    std::thread::sleep(Duration::from_millis(1000));
+    // Ctrl-Z and `fg` on the whole launch: SIGTSTP then SIGCONT to every process of it (one by
+    // one, since the launch shares this test's process group).
+    let everyone: Vec<u32> = [launch.id(), world]
+        .into_iter()
+        .chain((0..3).flat_map(|robot| agent_pids(&run_id, robot)))
+        .collect();
+    for &pid in &everyone {
+        signal(pid, "TSTP");
+    }
+    std::thread::sleep(Duration::from_millis(700));
+    for &pid in &everyone {
+        signal(pid, "CONT");
+    }
     let finished = launch.finish(LIMIT);
     finished.assert_success();
     assert!(
@@ -406,6 +420,45 @@ fn a_dead_launchs_leftovers_are_removed_by_the_next_launch() {
         second.describe()
     );
     leaks.assert_clean();
+}
+
+/// Files of a run id whose processes are alive, though no launch holds the run's lock (a world
+/// started by hand), are not touched: the launch is refused naming the live process.
+#[test]
+fn leftovers_with_live_processes_are_not_touched() {
+    let _watchdog = Watchdog::arm("live_leftovers", LIMIT);
+    let _one = exclusive();
+    let bins = binaries();
+    let dir = TempDir::new("live");
+    let run_id = unique_run_id("live");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = formation_world::Scenario::from_path(&case1_scenario(dir.path(), 5.0))
+        .expect("scenario");
+    let specs = dir.path().join("run-specs.json");
+    std::fs::write(
+        &specs,
+        serde_json::to_vec(&[scenario.run_spec(1, 0)]).expect("specs JSON"),
+    )
+    .expect("specs");
+    let mut world = Command::new(&bins.world);
+    world
+        .args(["--run-id", run_id.as_str(), "--exit-on-stdin-close"])
+        .args(["--startup-timeout-ms", "600000"])
+        .arg("--run-specs")
+        .arg(&specs)
+        .arg("--out")
+        .arg(dir.path().join("world-out"));
+    let mut world = LiveProcess::spawn_with_secret(world, &LaunchSecret::generate().unwrap());
+    let listening = world.wait_for_line(Duration::from_secs(60), |l| l.contains("listening"));
+    assert!(listening.is_some(), "{}", world.describe());
+    let before = leaks.leftovers();
+    let refused = run(run_command(&run_id, &dir, 2.0, &[]), LIMIT);
+    refused.assert_failure_mentioning("has live processes (formation-world");
+    assert_eq!(leaks.leftovers(), before, "the live run's files are untouched");
+    assert!(alive(world.id()), "the live world still runs");
+    world.close_input();
+    let _ = world.finish(LIMIT);
+    drop(leaks);
 }
 
 /// The realtime drill: 100 SIGKILLs of random agents at random moments, the restart budget raised

@@ -168,6 +168,17 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
     );
     drop((second_reader, second_writer, scan, cmd, node));
 
+    // A second agent of the same launch for robot 0 is told at once that the robot is taken
+    // (its generous connect timeout is never waited out).
+    let mut second = Command::new(&bins.agent);
+    second
+        .args(["--run-id", run_id.as_str(), "--robot", "0"])
+        .args(["--connect-timeout-ms", "600000"])
+        .arg("--model")
+        .arg(test_model());
+    run_with_input(second, Some(&secret.to_line()), LIMIT)
+        .assert_failure_mentioning("robot 0 is already driven by agent pid");
+
     drop(agent.stdin.take());
     drop(world.stdin.take());
     let started = Instant::now();

@@ -771,6 +771,20 @@ mod tests {
     }
 
     #[test]
+    fn a_lost_agent_is_reported_with_the_tick_its_robot_brakes_from() {
+        let used_to_the_end = lost_message(1, 40, Some(40));
+        assert!(
+            used_to_the_end.contains("its last command drove tick 40")
+                && used_to_the_end.contains("braking it from tick 41"),
+            "{used_to_the_end}"
+        );
+        let earlier = lost_message(1, 40, Some(38));
+        assert!(earlier.contains("braking it from tick 39"), "{earlier}");
+        let never = lost_message(2, 5, None);
+        assert!(never.contains("before it drove this run"), "{never}");
+    }
+
+    #[test]
     fn fault_flags_map_to_robots_and_bad_flags_are_explained() {
         let faults =
             faults_per_robot(&["2:crash-after=5".into(), "0:late-ms=30".into()], 3).unwrap();
