@@ -8,8 +8,9 @@
 //! [`check_model_file`] for the same refusal without reading.
 
 use std::fmt;
-use std::io::Read as _;
 use std::path::Path;
+
+use formation_proto::files::{FileRefusal, check_regular_file, read_bounded};
 
 use crate::error::PolicyError;
 
@@ -20,80 +21,26 @@ pub const MAX_MODEL_BYTES: u64 = 64 << 20;
 /// Checks by its metadata alone that `path` is a model file that may be loaded: it exists, is a
 /// regular file (symbolic links followed) and holds at most [`MAX_MODEL_BYTES`]. Returns its size.
 pub fn check_model_file(path: &Path) -> Result<u64, PolicyError> {
-    let meta = std::fs::metadata(path).map_err(|source| io_error(path, source))?;
-    check_metadata(path, &meta)
+    check_regular_file(path, MAX_MODEL_BYTES).map_err(|refusal| model_error(path, refusal))
 }
 
 /// The bytes of the model file at `path`, read only after [`check_model_file`] passed, checked
 /// again on the opened file (it may have been replaced in between), and stopping one byte past
 /// [`MAX_MODEL_BYTES`] whatever the metadata said.
 pub(crate) fn read_model_file(path: &Path) -> Result<Vec<u8>, PolicyError> {
-    check_model_file(path)?;
-    let file = std::fs::File::open(path).map_err(|source| io_error(path, source))?;
-    let size = check_metadata(
-        path,
-        &file.metadata().map_err(|source| io_error(path, source))?,
-    )?;
-    // The size was checked, so the capacity is bounded; the read is bounded regardless.
-    let mut bytes = Vec::with_capacity(usize::try_from(size).unwrap_or(0));
-    file.take(MAX_MODEL_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|source| io_error(path, source))?;
-    if bytes.len() as u64 > MAX_MODEL_BYTES {
-        return Err(PolicyError::ModelTooLarge {
-            path: path.to_path_buf(),
-            size: None,
-        });
-    }
-    Ok(bytes)
+    read_bounded(path, MAX_MODEL_BYTES).map_err(|refusal| model_error(path, refusal))
 }
 
-fn check_metadata(path: &Path, meta: &std::fs::Metadata) -> Result<u64, PolicyError> {
-    if !meta.is_file() {
-        return Err(PolicyError::ModelNotAFile {
-            path: path.to_path_buf(),
-            kind: file_kind(meta),
-        });
-    }
-    if meta.len() > MAX_MODEL_BYTES {
-        return Err(PolicyError::ModelTooLarge {
-            path: path.to_path_buf(),
-            size: Some(meta.len()),
-        });
-    }
-    Ok(meta.len())
-}
-
-/// A missing path is [`PolicyError::ModelNotFound`]; any other I/O failure keeps its cause.
-fn io_error(path: &Path, source: std::io::Error) -> PolicyError {
-    if source.kind() == std::io::ErrorKind::NotFound {
-        PolicyError::ModelNotFound {
-            path: path.to_path_buf(),
+/// The model error for a refused file; a missing path is [`PolicyError::ModelNotFound`].
+fn model_error(path: &Path, refusal: FileRefusal) -> PolicyError {
+    let path = path.to_path_buf();
+    match refusal {
+        FileRefusal::NotAFile { kind } => PolicyError::ModelNotAFile { path, kind },
+        FileRefusal::TooLarge { size } => PolicyError::ModelTooLarge { path, size },
+        FileRefusal::Io(source) if source.kind() == std::io::ErrorKind::NotFound => {
+            PolicyError::ModelNotFound { path }
         }
-    } else {
-        PolicyError::ModelRead {
-            path: path.to_path_buf(),
-            source,
-        }
-    }
-}
-
-/// What a non-regular file is, for messages.
-fn file_kind(meta: &std::fs::Metadata) -> &'static str {
-    use std::os::unix::fs::FileTypeExt as _;
-    let kind = meta.file_type();
-    if kind.is_dir() {
-        "a directory"
-    } else if kind.is_fifo() {
-        "a FIFO (named pipe)"
-    } else if kind.is_char_device() {
-        "a character device"
-    } else if kind.is_block_device() {
-        "a block device"
-    } else if kind.is_socket() {
-        "a socket"
-    } else {
-        "not a regular file"
+        FileRefusal::Io(source) => PolicyError::ModelRead { path, source },
     }
 }
 

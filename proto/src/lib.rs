@@ -2,6 +2,7 @@
 //!
 //! * [`types`]: plain values that cross crate boundaries (poses, wheel commands, the goal a robot
 //!   is given, LIDAR and occupancy settings). They carry no behaviour beyond validation.
+//! * [`files`]: reading a user's file only if it is a regular file within a size limit.
 //! * [`auth`]: the launch secret, with which an agent proves that its own launch started it.
 //! * [`wire`]: the fixed-size `#[repr(C)]` messages that travel over iceoryx2 shared memory
 //!   between the world process and the robot-agent processes, and the per-run service names.
@@ -10,6 +11,7 @@
 //! this crate so that neither depends on the other.
 
 pub mod auth;
+pub mod files;
 pub mod types;
 pub mod wire;
 

@@ -758,6 +758,49 @@ impl RobotLog {
     }
 }
 
+/// Multi-process tests time real processes against the wall clock; holding this guard runs them
+/// one at a time within a test binary, so a 2-core machine never starves one test's agents with
+/// another's.
+pub fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// `formation run --run-id RUN EXTRA --scenario SCENARIO --model <test model> --out OUT`.
+pub fn formation_run(run: &RunId, scenario: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["run", "--run-id", run.as_str()])
+        .args(extra)
+        .arg("--scenario")
+        .arg(scenario)
+        .arg("--model")
+        .arg(test_model())
+        .arg("--out")
+        .arg(out);
+    command
+}
+
+/// Sends signal `name` (`KILL`, `STOP`, `USR1`, ...) to process `pid` with kill(1).
+pub fn send_signal(pid: u32, name: &str) {
+    let status = Command::new("kill")
+        .args([
+            &format!("-{}", name.trim_start_matches('-')),
+            &pid.to_string(),
+        ])
+        .status()
+        .expect("running kill");
+    assert!(status.success(), "kill -{name} {pid}");
+}
+
+/// Waits until a launch prints that all its agents connected.
+pub fn await_connected(launch: &mut LiveProcess) {
+    let line = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("agents connected"));
+    assert!(line.is_some(), "{}", launch.describe());
+}
+
 /// The incarnations (16-hex-digit nonces) whose services exist for robot `robot` of `run`, in no
 /// particular order: how a test finds the services the world made for an accepted agent.
 pub fn incarnations(run: &RunId, robot: usize) -> Vec<u64> {

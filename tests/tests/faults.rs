@@ -7,36 +7,22 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, binaries, case1_scenario, run,
-    test_model, unique_run_id, world_pid,
+    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, binaries, case1_scenario,
+    formation_run, one_at_a_time, run, test_model, unique_run_id, world_pid,
 };
 use rand::{Rng, SeedableRng};
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
 
-/// These tests time real processes against wall-clock deadlines; running them one at a time keeps
-/// a 2-core machine from starving one test's agents with another's.
-static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn exclusive() -> std::sync::MutexGuard<'static, ()> {
-    ONE_AT_A_TIME
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
 fn launch(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> LiveProcess {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args(["run", "--run-id", run_id.as_str()])
-        .args(extra)
-        .arg("--scenario")
-        .arg(case1_scenario(dir.path(), duration_s))
-        .arg("--model")
-        .arg(test_model())
-        .arg("--out")
-        .arg(dir.path().join("out"));
-    LiveProcess::spawn(command)
+    let scenario = case1_scenario(dir.path(), duration_s);
+    LiveProcess::spawn(formation_run(
+        run_id,
+        &scenario,
+        &dir.path().join("out"),
+        extra,
+    ))
 }
 
 /// Sends SIGKILL to robot `robot`'s current agent and returns its pid.
@@ -85,7 +71,7 @@ fn await_rejoin(launch: &mut LiveProcess, robot: usize, old_pid: u32) -> usize {
 #[test]
 fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
     let _watchdog = Watchdog::arm("twenty_kills_lockstep", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("kills");
     let run_id = unique_run_id("kills");
     let leaks = LeakCheck::new(&run_id);
@@ -160,7 +146,7 @@ fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
 #[test]
 fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
     let _watchdog = Watchdog::arm("kill_realtime", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("kill-rt");
     let run_id = unique_run_id("killrt");
     let leaks = LeakCheck::new(&run_id);
@@ -219,7 +205,7 @@ fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
 #[test]
 fn hung_and_late_agents_are_braked() {
     let _watchdog = Watchdog::arm("hung_and_late", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("hang");
     let run_id = unique_run_id("hang");
     let leaks = LeakCheck::new(&run_id);
@@ -265,7 +251,7 @@ fn hung_and_late_agents_are_braked() {
 fn agents_exit_cleanly_when_the_world_dies() {
     use std::time::Instant;
     let _watchdog = Watchdog::arm("world_dies", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let bins = binaries();
     let dir = TempDir::new("world-dies");
     let run_id = unique_run_id("wdies");
@@ -328,7 +314,7 @@ fn agents_exit_cleanly_when_the_world_dies() {
 #[test]
 fn a_killed_world_ends_the_launch_cleanly() {
     let _watchdog = Watchdog::arm("world_killed_launch", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("world-killed");
     let run_id = unique_run_id("wkill");
     let leaks = LeakCheck::new(&run_id);

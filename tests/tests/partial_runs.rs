@@ -8,49 +8,16 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, binaries, case1_scenario, repo_root, run,
-    test_model, unique_run_id, world_pid,
+    LeakCheck, LiveProcess, TempDir, Watchdog, await_connected, binaries, case1_scenario,
+    formation_run, one_at_a_time, repo_root, run, send_signal, unique_run_id, world_pid,
 };
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
 
-/// These tests time real processes; one at a time keeps a 2-core machine from starving one
-/// test's agents with another's.
-static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn exclusive() -> std::sync::MutexGuard<'static, ()> {
-    ONE_AT_A_TIME
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
 /// `formation run` of `scenario` into `out`, with `extra` flags.
 fn launch(run_id: &RunId, scenario: &Path, out: &Path, extra: &[&str]) -> LiveProcess {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args(["run", "--run-id", run_id.as_str()])
-        .args(extra)
-        .arg("--scenario")
-        .arg(scenario)
-        .arg("--model")
-        .arg(test_model())
-        .arg("--out")
-        .arg(out);
-    LiveProcess::spawn(command)
-}
-
-fn await_connected(launch: &mut LiveProcess) {
-    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
-}
-
-fn signal(pid: u32, signal: &str) {
-    let status = Command::new("kill")
-        .args([signal, &pid.to_string()])
-        .status()
-        .expect("running kill");
-    assert!(status.success(), "kill {signal} {pid}");
+    LiveProcess::spawn(formation_run(run_id, scenario, out, extra))
 }
 
 fn read_json(path: &Path) -> serde_json::Value {
@@ -123,7 +90,7 @@ fn assert_kept_incomplete(out: &Path, min_ticks: usize, describe: &str) -> serde
 #[test]
 fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
     let _watchdog = Watchdog::arm("ctrl_c_partial", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("ctrlc");
     let run_id = unique_run_id("ctrlc");
     let leaks = LeakCheck::new(&run_id);
@@ -132,7 +99,7 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
     let mut launch = launch(&run_id, &scenario, &out, &["--clock", "realtime"]);
     await_connected(&mut launch);
     std::thread::sleep(Duration::from_secs(4));
-    signal(launch.id(), "-INT");
+    send_signal(launch.id(), "-INT");
     let finished = launch.finish(LIMIT);
     assert!(
         !finished.output.status.success(),
@@ -160,7 +127,7 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
 #[test]
 fn a_sigkilled_world_leaves_a_journal_the_launcher_recovers() {
     let _watchdog = Watchdog::arm("killed_world", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("killw");
     let run_id = unique_run_id("killw");
     let leaks = LeakCheck::new(&run_id);
@@ -175,7 +142,7 @@ fn a_sigkilled_world_leaves_a_journal_the_launcher_recovers() {
     let Some(world) = world_pid(&run_id) else {
         panic!("no world process\n{}", launch.describe());
     };
-    signal(world, "-KILL");
+    send_signal(world, "-KILL");
     let finished = launch.finish(LIMIT);
     assert!(
         !finished.output.status.success(),
@@ -201,7 +168,7 @@ fn a_sigkilled_world_leaves_a_journal_the_launcher_recovers() {
 #[test]
 fn a_spent_restart_budget_keeps_the_partial_run() {
     let _watchdog = Watchdog::arm("budget_partial", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("budget");
     let run_id = unique_run_id("budget");
     let leaks = LeakCheck::new(&run_id);
@@ -286,7 +253,7 @@ impl Drop for Tmpfs {
 #[test]
 fn a_full_disk_fails_the_run_promptly_and_leaves_no_temporary_file() {
     let _watchdog = Watchdog::arm("full_disk", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("full");
     let Some(disk) = Tmpfs::mount(&dir.path().join("disk"), "256k") else {
         return;

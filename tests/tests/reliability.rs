@@ -9,47 +9,22 @@ use std::time::{Duration, Instant};
 
 use formation_proto::wire::{RunId, RunNamespace};
 use formation_tests::{
-    LaunchSecret, LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, binaries,
-    case1_scenario, incarnations, run, test_model, unique_run_id, world_pid,
+    LaunchSecret, LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, await_connected,
+    binaries, case1_scenario, formation_run, incarnations, one_at_a_time, run, send_signal,
+    test_model, unique_run_id, world_pid,
 };
 use rand::{Rng, SeedableRng};
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(400);
 
-/// These tests time real processes against the wall clock: one at a time.
-static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn exclusive() -> std::sync::MutexGuard<'static, ()> {
-    ONE_AT_A_TIME
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
 fn run_command(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> Command {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args(["run", "--run-id", run_id.as_str()])
-        .args(extra)
-        .arg("--scenario")
-        .arg(case1_scenario(dir.path(), duration_s))
-        .arg("--model")
-        .arg(test_model())
-        .arg("--out")
-        .arg(dir.path().join("out"));
-    command
+    let scenario = case1_scenario(dir.path(), duration_s);
+    formation_run(run_id, &scenario, &dir.path().join("out"), extra)
 }
 
 fn launch(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> LiveProcess {
     LiveProcess::spawn(run_command(run_id, dir, duration_s, extra))
-}
-
-fn signal(pid: u32, name: &str) {
-    let status = Command::new("kill")
-        .args([&format!("-{name}"), &pid.to_string()])
-        .status()
-        .expect("running kill");
-    assert!(status.success(), "kill -{name} {pid}");
 }
 
 fn the_agent(run_id: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
@@ -67,26 +42,21 @@ fn alive(pid: u32) -> bool {
     std::path::Path::new(&format!("/proc/{pid}")).exists()
 }
 
-fn connected(launch: &mut LiveProcess) {
-    let line = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("agents connected"));
-    assert!(line.is_some(), "{}", launch.describe());
-}
-
 /// SIGCONT, SIGUSR1 and SIGURG to an agent interrupt its wait and nothing else: the same process
 /// keeps driving, nobody restarts it, the run succeeds.
 #[test]
 fn harmless_signals_to_an_agent_do_not_end_it() {
     let _watchdog = Watchdog::arm("harmless_signals", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("sig");
     let run_id = unique_run_id("sig");
     let leaks = LeakCheck::new(&run_id);
     let mut launch = launch(&run_id, &dir, 8.0, &["--clock", "realtime"]);
-    connected(&mut launch);
+    await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(1500));
     let agent = the_agent(&run_id, 1, &mut launch);
     for name in ["CONT", "USR1", "URG", "CONT", "USR1"] {
-        signal(agent, name);
+        send_signal(agent, name);
         std::thread::sleep(Duration::from_millis(200));
     }
     assert!(alive(agent), "robot 1's agent died of a harmless signal");
@@ -118,22 +88,22 @@ fn harmless_signals_to_an_agent_do_not_end_it() {
 #[test]
 fn stopped_and_continued_processes_are_survived() {
     let _watchdog = Watchdog::arm("stop_continue", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("stop");
     let run_id = unique_run_id("stop");
     let leaks = LeakCheck::new(&run_id);
     let mut launch = launch(&run_id, &dir, 14.0, &["--clock", "realtime"]);
-    connected(&mut launch);
+    await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(1000));
     let world = world_pid(&run_id).expect("the world's pid");
-    signal(world, "STOP");
+    send_signal(world, "STOP");
     std::thread::sleep(Duration::from_millis(1000));
-    signal(world, "CONT");
+    send_signal(world, "CONT");
     std::thread::sleep(Duration::from_millis(1000));
     let agent = the_agent(&run_id, 2, &mut launch);
-    signal(agent, "STOP");
+    send_signal(agent, "STOP");
     std::thread::sleep(Duration::from_millis(1000));
-    signal(agent, "CONT");
+    send_signal(agent, "CONT");
     std::thread::sleep(Duration::from_millis(1000));
     // Ctrl-Z and `fg` on the whole launch: SIGTSTP then SIGCONT to every process of it (one by
     // one, since the launch shares this test's process group).
@@ -142,11 +112,11 @@ fn stopped_and_continued_processes_are_survived() {
         .chain((0..3).flat_map(|robot| agent_pids(&run_id, robot)))
         .collect();
     for &pid in &everyone {
-        signal(pid, "TSTP");
+        send_signal(pid, "TSTP");
     }
     std::thread::sleep(Duration::from_millis(700));
     for &pid in &everyone {
-        signal(pid, "CONT");
+        send_signal(pid, "CONT");
     }
     let finished = launch.finish(LIMIT);
     finished.assert_success();
@@ -178,15 +148,15 @@ fn stopped_and_continued_processes_are_survived() {
 #[test]
 fn an_agent_that_exits_mid_run_is_restarted() {
     let _watchdog = Watchdog::arm("exit_restart", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("term");
     let run_id = unique_run_id("term");
     let leaks = LeakCheck::new(&run_id);
     let mut launch = launch(&run_id, &dir, 8.0, &["--clock", "realtime"]);
-    connected(&mut launch);
+    await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(1000));
     let old = the_agent(&run_id, 0, &mut launch);
-    signal(old, "TERM");
+    send_signal(old, "TERM");
     let rejoined = launch.wait_for_line(Duration::from_secs(60), |l| {
         l.starts_with("robot 0: agent pid") && l.contains("rejoined")
     });
@@ -206,7 +176,7 @@ fn an_agent_that_exits_mid_run_is_restarted() {
 #[test]
 fn a_robot_that_lost_its_agent_for_good_fails_the_run() {
     let _watchdog = Watchdog::arm("lost_for_good", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("lost");
     let run_id = unique_run_id("lost");
     let leaks = LeakCheck::new(&run_id);
@@ -253,7 +223,7 @@ fn a_robot_that_lost_its_agent_for_good_fails_the_run() {
 #[test]
 fn a_process_without_the_launch_secret_drives_no_robot() {
     let _watchdog = Watchdog::arm("impostor", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let bins = binaries();
     let dir = TempDir::new("squat");
     let run_id = unique_run_id("squat");
@@ -264,11 +234,11 @@ fn a_process_without_the_launch_secret_drives_no_robot() {
         20.0,
         &["--pace-ms", "25", "--restart-delay-ms", "400"],
     );
-    connected(&mut launch);
+    await_connected(&mut launch);
     let before = incarnations(&run_id, 0);
     assert_eq!(before.len(), 1, "{before:x?}");
     let old = the_agent(&run_id, 0, &mut launch);
-    signal(old, "KILL");
+    send_signal(old, "KILL");
     // While the launch waits to restart robot 0's agent, an impostor asks for robot 0.
     let mut impostor = Command::new(&bins.agent);
     impostor
@@ -317,7 +287,7 @@ fn a_process_without_the_launch_secret_drives_no_robot() {
 #[test]
 fn two_launches_with_one_run_id_exactly_one_wins() {
     let _watchdog = Watchdog::arm("same_run_id", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     for attempt in 0..3 {
         let run_id = unique_run_id("twin");
         let leaks = LeakCheck::new(&run_id);
@@ -357,12 +327,12 @@ fn two_launches_with_one_run_id_exactly_one_wins() {
 fn the_runs_shared_memory_is_private_to_its_user() {
     use std::os::unix::fs::PermissionsExt;
     let _watchdog = Watchdog::arm("file_modes", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("modes");
     let run_id = unique_run_id("modes");
     let leaks = LeakCheck::new(&run_id);
     let mut launch = launch(&run_id, &dir, 10.0, &["--pace-ms", "20"]);
-    connected(&mut launch);
+    await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(300));
     let namespace = RunNamespace::new(&run_id);
     let files = namespace.leftovers();
@@ -392,14 +362,14 @@ fn the_runs_shared_memory_is_private_to_its_user() {
 #[test]
 fn a_dead_launchs_leftovers_are_removed_by_the_next_launch() {
     let _watchdog = Watchdog::arm("leftovers", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let dir = TempDir::new("dead");
     let run_id = unique_run_id("dead");
     let leaks = LeakCheck::new(&run_id);
     let mut first = launch(&run_id, &dir, 60.0, &["--pace-ms", "20"]);
-    connected(&mut first);
+    await_connected(&mut first);
     let world = world_pid(&run_id).expect("the world's pid");
-    signal(first.id(), "KILL");
+    send_signal(first.id(), "KILL");
     let _ = first.finish(LIMIT);
     // The children see their input close and exit on their own.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -427,13 +397,13 @@ fn a_dead_launchs_leftovers_are_removed_by_the_next_launch() {
 #[test]
 fn leftovers_with_live_processes_are_not_touched() {
     let _watchdog = Watchdog::arm("live_leftovers", LIMIT);
-    let _one = exclusive();
+    let _one = one_at_a_time();
     let bins = binaries();
     let dir = TempDir::new("live");
     let run_id = unique_run_id("live");
     let leaks = LeakCheck::new(&run_id);
-    let scenario = formation_world::Scenario::from_path(&case1_scenario(dir.path(), 5.0))
-        .expect("scenario");
+    let scenario =
+        formation_world::Scenario::from_path(&case1_scenario(dir.path(), 5.0)).expect("scenario");
     let specs = dir.path().join("run-specs.json");
     std::fs::write(
         &specs,
@@ -454,7 +424,11 @@ fn leftovers_with_live_processes_are_not_touched() {
     let before = leaks.leftovers();
     let refused = run(run_command(&run_id, &dir, 2.0, &[]), LIMIT);
     refused.assert_failure_mentioning("has live processes (formation-world");
-    assert_eq!(leaks.leftovers(), before, "the live run's files are untouched");
+    assert_eq!(
+        leaks.leftovers(),
+        before,
+        "the live run's files are untouched"
+    );
     assert!(alive(world.id()), "the live world still runs");
     world.close_input();
     let _ = world.finish(LIMIT);
@@ -467,7 +441,7 @@ fn leftovers_with_live_processes_are_not_touched() {
 #[test]
 fn a_hundred_sigkills_in_realtime_each_end_in_a_rejoin() {
     let _watchdog = Watchdog::arm("hundred_kills", Duration::from_secs(900));
-    let _one = exclusive();
+    let _one = one_at_a_time();
     const KILLS: usize = 100;
     const STALE_MS: u64 = 150;
     let dir = TempDir::new("drill");
@@ -492,14 +466,14 @@ fn a_hundred_sigkills_in_realtime_each_end_in_a_rejoin() {
             "20",
         ],
     );
-    connected(&mut launch);
+    await_connected(&mut launch);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(100);
     let started = Instant::now();
     for kill in 0..KILLS {
         std::thread::sleep(Duration::from_millis(rng.random_range(0..300)));
         let robot = rng.random_range(0..3);
         let old = the_agent(&run_id, robot, &mut launch);
-        signal(old, "KILL");
+        send_signal(old, "KILL");
         let prefix = format!("robot {robot}: agent pid");
         let rejoined = launch.wait_for_line(Duration::from_secs(60), |l| {
             l.starts_with(&prefix) && l.contains("rejoined") && !l.contains(&format!(" {old} "))

@@ -81,6 +81,7 @@ use std::f64::consts::TAU;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use formation_proto::files::{FileRefusal, read_bounded};
 use formation_proto::{Goal, LidarSpec, Pose, wrap_angle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -450,60 +451,18 @@ impl Scenario {
 /// never read), checked again on the opened file (it may have been replaced in between), and the
 /// read stops one byte past the limit whatever the metadata said.
 pub fn read_scenario_text(path: &Path) -> Result<String, ScenarioError> {
-    use std::io::Read as _;
-    let io_error = |source| ScenarioError::Read {
+    let bytes = read_bounded(path, limits::MAX_FILE_BYTES).map_err(|refusal| {
+        let path = path.to_path_buf();
+        match refusal {
+            FileRefusal::NotAFile { kind } => ScenarioError::NotAFile { path, kind },
+            FileRefusal::TooLarge { size } => ScenarioError::TooLarge { path, size },
+            FileRefusal::Io(source) => ScenarioError::Read { path, source },
+        }
+    })?;
+    String::from_utf8(bytes).map_err(|e| ScenarioError::Read {
         path: path.to_path_buf(),
-        source,
-    };
-    let check = |meta: &std::fs::Metadata| {
-        if !meta.is_file() {
-            return Err(ScenarioError::NotAFile {
-                path: path.to_path_buf(),
-                kind: file_kind(meta),
-            });
-        }
-        if meta.len() > limits::MAX_FILE_BYTES {
-            return Err(ScenarioError::TooLarge {
-                path: path.to_path_buf(),
-                size: Some(meta.len()),
-            });
-        }
-        Ok(())
-    };
-    check(&std::fs::metadata(path).map_err(io_error)?)?;
-    let file = std::fs::File::open(path).map_err(io_error)?;
-    check(&file.metadata().map_err(io_error)?)?;
-    let mut bytes = Vec::new();
-    file.take(limits::MAX_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(io_error)?;
-    if bytes.len() as u64 > limits::MAX_FILE_BYTES {
-        return Err(ScenarioError::TooLarge {
-            path: path.to_path_buf(),
-            size: None,
-        });
-    }
-    String::from_utf8(bytes)
-        .map_err(|e| io_error(std::io::Error::new(std::io::ErrorKind::InvalidData, e)))
-}
-
-/// What a non-regular file is, for messages.
-fn file_kind(meta: &std::fs::Metadata) -> &'static str {
-    use std::os::unix::fs::FileTypeExt as _;
-    let kind = meta.file_type();
-    if kind.is_dir() {
-        "a directory"
-    } else if kind.is_fifo() {
-        "a FIFO (named pipe)"
-    } else if kind.is_char_device() {
-        "a character device"
-    } else if kind.is_block_device() {
-        "a block device"
-    } else if kind.is_socket() {
-        "a socket"
-    } else {
-        "not a regular file"
-    }
+        source: std::io::Error::new(std::io::ErrorKind::InvalidData, e),
+    })
 }
 
 /// A byte count in messages: the number, or "more than the limit" when it is not known.

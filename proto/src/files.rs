@@ -1,0 +1,116 @@
+//! Reading a user's file safely: only a regular file, only up to a size limit, checked by its
+//! metadata before anything is read (so a FIFO is never opened and `/dev/zero` never read), checked
+//! again on the opened file (it may have been replaced in between), and read with a bound whatever
+//! the metadata said. Scenarios and models both go through here; each caller turns a
+//! [`FileRefusal`] into its own typed error that names the path and the fix.
+
+use std::io::Read as _;
+use std::path::Path;
+
+/// Why a file was not read.
+#[derive(Debug)]
+pub enum FileRefusal {
+    /// Not a regular file: what it is instead, for messages (`"a directory"`, `"a FIFO (named
+    /// pipe)"`, ...).
+    NotAFile {
+        /// What the path is.
+        kind: &'static str,
+    },
+    /// Larger than the limit; `None` when the size grew past the limit during the read.
+    TooLarge {
+        /// Its size in bytes, when known.
+        size: Option<u64>,
+    },
+    /// The operating system refused (missing path, permissions, ...).
+    Io(std::io::Error),
+}
+
+/// Checks by its metadata alone (symbolic links followed) that `path` is a regular file of at most
+/// `limit` bytes. Returns its size.
+pub fn check_regular_file(path: &Path, limit: u64) -> Result<u64, FileRefusal> {
+    check(&std::fs::metadata(path).map_err(FileRefusal::Io)?, limit)
+}
+
+/// The bytes of the regular file at `path`, at most `limit` of them (see the module docs).
+pub fn read_bounded(path: &Path, limit: u64) -> Result<Vec<u8>, FileRefusal> {
+    check_regular_file(path, limit)?;
+    let file = std::fs::File::open(path).map_err(FileRefusal::Io)?;
+    let size = check(&file.metadata().map_err(FileRefusal::Io)?, limit)?;
+    // The size was checked, so the capacity is bounded; the read is bounded regardless.
+    let mut bytes = Vec::with_capacity(usize::try_from(size).unwrap_or(0));
+    file.take(limit.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(FileRefusal::Io)?;
+    if bytes.len() as u64 > limit {
+        return Err(FileRefusal::TooLarge { size: None });
+    }
+    Ok(bytes)
+}
+
+fn check(meta: &std::fs::Metadata, limit: u64) -> Result<u64, FileRefusal> {
+    if !meta.is_file() {
+        return Err(FileRefusal::NotAFile {
+            kind: file_kind(meta),
+        });
+    }
+    if meta.len() > limit {
+        return Err(FileRefusal::TooLarge {
+            size: Some(meta.len()),
+        });
+    }
+    Ok(meta.len())
+}
+
+/// What a non-regular file is, for messages.
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    use std::os::unix::fs::FileTypeExt as _;
+    let kind = meta.file_type();
+    if kind.is_dir() {
+        "a directory"
+    } else if kind.is_fifo() {
+        "a FIFO (named pipe)"
+    } else if kind.is_char_device() {
+        "a character device"
+    } else if kind.is_block_device() {
+        "a block device"
+    } else if kind.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_small_regular_files_are_read() {
+        let dir = std::env::temp_dir().join(format!("formation-files-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let small = dir.join("small");
+        std::fs::write(&small, b"hello").unwrap();
+        assert_eq!(read_bounded(&small, 5).unwrap(), b"hello");
+        assert!(matches!(
+            read_bounded(&small, 4),
+            Err(FileRefusal::TooLarge { size: Some(5) })
+        ));
+        assert!(matches!(
+            read_bounded(&dir, 1 << 20),
+            Err(FileRefusal::NotAFile {
+                kind: "a directory"
+            })
+        ));
+        assert!(matches!(
+            read_bounded(Path::new("/dev/zero"), 1 << 20),
+            Err(FileRefusal::NotAFile {
+                kind: "a character device"
+            })
+        ));
+        assert!(matches!(
+            read_bounded(&dir.join("missing"), 1),
+            Err(FileRefusal::Io(e)) if e.kind() == std::io::ErrorKind::NotFound
+        ));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
