@@ -2,6 +2,8 @@
 //!
 //! * [`robot`]: P3-DX-like differential-drive kinematics and wheel limits.
 //! * [`lidar`]: the planar LIDAR ring, ray-cast against the other robots' bodies with parry2d.
+//! * [`grid`]: uniform grid hashing of the robots' positions, so that scans and collision tests look
+//!   only at nearby robots.
 //! * [`world`]: [`World`], which owns the robots' state and advances it by [`World::step`], taking the
 //!   wheel commands and no clock, and doing no I/O.
 //! * [`scenario`]: scenarios read from TOML (unknown keys are errors), heading schedules, seeded
@@ -10,6 +12,7 @@
 //! * [`metrics`]: the paper's Table I and Fig. 9 metrics, made exact, over a set of formation edges.
 
 pub mod episode;
+pub mod grid;
 pub mod lidar;
 pub mod metrics;
 pub mod robot;
