@@ -2,6 +2,8 @@
 //!
 //! * [`robot`]: P3-DX-like differential-drive kinematics and wheel limits.
 //! * [`lidar`]: the planar LIDAR ring, ray-cast against the other robots' bodies with parry2d.
+//! * [`grid`]: uniform grid hashing of the robots' positions, so that scans and collision tests look
+//!   only at nearby robots.
 //! * [`world`]: [`World`], which owns the robots' state and advances it by [`World::step`], taking the
 //!   wheel commands and no clock, and doing no I/O.
 //! * [`scenario`]: scenarios read from TOML (unknown keys are errors), heading schedules, seeded
@@ -12,6 +14,7 @@
 //!   run that ends abnormally.
 
 pub mod episode;
+pub mod grid;
 pub mod lidar;
 pub mod metrics;
 pub mod robot;

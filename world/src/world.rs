@@ -14,7 +14,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use crate::lidar::cast_scan;
+use crate::grid::SpatialGrid;
+use crate::lidar::{TeamScanner, cast_scan};
 use crate::robot::{RobotParams, integrate};
 
 /// Control period of the paper's setting: 20 Hz.
@@ -62,6 +63,10 @@ pub struct World {
     tick: u64,
     noise_rng: ChaCha8Rng,
     collisions_total: u64,
+    /// Buffers reused from tick to tick; they hold no state that outlives a call.
+    scanner: TeamScanner,
+    contact_grid: SpatialGrid,
+    contact_partners: Vec<usize>,
 }
 
 impl World {
@@ -76,6 +81,9 @@ impl World {
             tick: 0,
             noise_rng: ChaCha8Rng::seed_from_u64(noise_seed),
             collisions_total: 0,
+            scanner: TeamScanner::new(),
+            contact_grid: SpatialGrid::new(),
+            contact_partners: Vec::new(),
         }
     }
 
@@ -125,20 +133,13 @@ impl World {
     pub fn scan_into(&mut self, robot: usize, out: &mut [f32]) {
         let lidar = self.config.lidar;
         cast_scan(&self.poses, robot, &self.config.robot, &lidar, out);
-        let adds_noise = lidar.noise_std > 0.0; // false for NaN too
-        if !adds_noise {
-            return;
-        }
-        let no_hit = lidar.max_range as f32;
-        for range in out.iter_mut().filter(|range| **range < no_hit) {
-            let deviation: f64 = StandardNormal.sample(&mut self.noise_rng);
-            let noisy = *range as f64 + lidar.noise_std * deviation;
-            *range = noisy.clamp(0.0, lidar.max_range) as f32;
-        }
+        add_range_noise(out, &lidar, &mut self.noise_rng);
     }
 
     /// Scans every robot in order `0..n_robots()` (which fixes the order noise is drawn in), each into
-    /// `out[i]`, resized to the beam count.
+    /// `out[i]`, resized to the beam count: the same bits as [`World::scan_into`] robot after robot,
+    /// but looking only at the bodies within each robot's range (see [`TeamScanner`]), so a tick
+    /// costs `O(N)` rather than `O(N^2)` in the team's size.
     ///
     /// # Panics
     ///
@@ -151,10 +152,16 @@ impl World {
             out.len(),
             self.n_robots()
         );
-        let beams = self.config.lidar.beams;
-        for (robot, scan) in out.iter_mut().enumerate() {
-            scan.resize(beams, 0.0);
-            self.scan_into(robot, scan);
+        let lidar = self.config.lidar;
+        for scan in out.iter_mut() {
+            scan.resize(lidar.beams, 0.0);
+        }
+        self.scanner
+            .scan_all(&self.poses, &self.config.robot, &lidar, out);
+        // The noiseless casts draw nothing, so adding each robot's noise after all the casts draws
+        // the same numbers in the same order as scanning and noising robot after robot.
+        for scan in out.iter_mut() {
+            add_range_noise(scan, &lidar, &mut self.noise_rng);
         }
     }
 
@@ -186,7 +193,12 @@ impl World {
             *pose = integrate(*pose, *speeds, &robot, dt);
             applied.push(*speeds);
         }
-        let collisions = overlapping_pairs(&self.poses, robot.body_radius);
+        let collisions = overlapping_pairs_in_grid(
+            &mut self.contact_grid,
+            &mut self.contact_partners,
+            &self.poses,
+            robot.body_radius,
+        );
         self.collisions_total += collisions.len() as u64;
         self.tick += 1;
         StepReport {
@@ -196,9 +208,63 @@ impl World {
     }
 }
 
+/// Adds Gaussian noise of `lidar.noise_std` from `rng` to every range of `ranges` that hit something
+/// (below `max_range`), in beam order, clamped to `[0, max_range]`; draws nothing when the spread is
+/// not positive.
+fn add_range_noise(ranges: &mut [f32], lidar: &LidarSpec, rng: &mut ChaCha8Rng) {
+    let adds_noise = lidar.noise_std > 0.0; // false for NaN too
+    if !adds_noise {
+        return;
+    }
+    let no_hit = lidar.max_range as f32;
+    for range in ranges.iter_mut().filter(|range| **range < no_hit) {
+        let deviation: f64 = StandardNormal.sample(rng);
+        let noisy = *range as f64 + lidar.noise_std * deviation;
+        *range = noisy.clamp(0.0, lidar.max_range) as f32;
+    }
+}
+
+/// [`overlapping_pairs`], finding each robot's possible partners in `grid` (rebuilt here, cells of
+/// one body diameter) instead of testing all pairs: the same pairs in the same order, in `O(N)` for a
+/// team without crowds. `partners` is scratch.
+fn overlapping_pairs_in_grid(
+    grid: &mut SpatialGrid,
+    partners: &mut Vec<usize>,
+    poses: &[Pose],
+    body_radius: f64,
+) -> Vec<(usize, usize)> {
+    let body = Ball::new(body_radius as f32);
+    let reach = 2.0 * body_radius;
+    grid.rebuild(poses, reach);
+    let mut pairs = Vec::new();
+    for (i, a) in poses.iter().enumerate() {
+        partners.clear();
+        // The grid visits every robot whose offsets are within `reach`, which the box test below
+        // requires (a NaN offset passes the box test but never parry's ball test).
+        grid.for_each_near(a.x, a.y, reach, |j, b_x, b_y| {
+            if j <= i {
+                return;
+            }
+            // From here on, overlapping_pairs's test, operation for operation.
+            let (dx, dy) = (b_x - a.x, b_y - a.y);
+            if dx.abs() > reach || dy.abs() > reach {
+                return;
+            }
+            if intersection_test_ball_ball(&Point::new(dx as f32, dy as f32), &body, &body) {
+                partners.push(j);
+            }
+        });
+        partners.sort_unstable();
+        pairs.extend(partners.iter().map(|&j| (i, j)));
+    }
+    pairs
+}
+
 /// Pairs `(i, j)`, `i < j`, of discs of radius `body_radius` centred at `poses` that overlap or
 /// touch, in increasing order. A cheap box test in f64 culls far pairs before parry's ball test,
-/// which gets the centres' offset computed in f64.
+/// which gets the centres' offset computed in f64. Tests all pairs: the reference
+/// [`World::step`]'s grid search is checked against.
+#[cfg(test)]
 fn overlapping_pairs(poses: &[Pose], body_radius: f64) -> Vec<(usize, usize)> {
     let body = Ball::new(body_radius as f32);
     let reach = 2.0 * body_radius;
@@ -461,5 +527,179 @@ mod tests {
         assert_eq!(back, config);
         let extra = text.replacen('{', "{\"gravity\":9.81,", 1);
         assert!(serde_json::from_str::<WorldConfig>(&extra).is_err());
+    }
+
+    /// Seeded random layouts: `n` robots uniform in a disc of `radius` around `(cx, cy)`, at least
+    /// `min_spacing` apart (0 allows overlaps), headings uniform.
+    fn random_layout(
+        rng: &mut ChaCha8Rng,
+        n: usize,
+        (cx, cy): (f64, f64),
+        radius: f64,
+        min_spacing: f64,
+    ) -> Vec<Pose> {
+        use rand::Rng;
+        let mut poses: Vec<Pose> = Vec::with_capacity(n);
+        while poses.len() < n {
+            let r = radius * rng.random::<f64>().sqrt();
+            let (s, c) = (std::f64::consts::TAU * rng.random::<f64>()).sin_cos();
+            let (x, y) = (cx + r * c, cy + r * s);
+            if poses
+                .iter()
+                .all(|p| (p.x - x).hypot(p.y - y) >= min_spacing)
+            {
+                poses.push(pose(x, y, std::f64::consts::TAU * rng.random::<f64>()));
+            }
+        }
+        poses
+    }
+
+    /// Layouts for the equivalence tests: the paper's density for teams of 2 to 300, dense crowds
+    /// with overlapping bodies, and a team far from the origin.
+    fn equivalence_layouts() -> Vec<Vec<Pose>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut layouts = Vec::new();
+        for n in [2, 3, 7, 20, 64, 150, 300] {
+            let radius = 3.0 * (n as f64 / 3.0).sqrt();
+            layouts.push(random_layout(&mut rng, n, (0.0, 0.0), radius, 0.6));
+        }
+        for (n, radius) in [(5, 0.4), (60, 2.0), (200, 4.0), (300, 12.0)] {
+            layouts.push(random_layout(&mut rng, n, (-4.0, 9.0), radius, 0.0));
+        }
+        layouts.push(random_layout(&mut rng, 80, (5e8, -5e8), 6.0, 0.0));
+        layouts
+    }
+
+    fn scan_bits(scans: &[Vec<f32>]) -> Vec<u32> {
+        scans.iter().flatten().map(|r| r.to_bits()).collect()
+    }
+
+    #[test]
+    fn scan_all_gives_the_bits_of_scan_into_robot_by_robot_with_and_without_noise() {
+        for noise_std in [0.0, 0.03, 2.0] {
+            for poses in equivalence_layouts() {
+                let n = poses.len();
+                let mut grid_world = World::new(noisy_config(noise_std), poses.clone(), 5);
+                let mut reference_world = World::new(noisy_config(noise_std), poses, 5);
+                // Two rounds: the second checks that both consumed the noise stream alike.
+                for _ in 0..2 {
+                    let mut from_scan_all = vec![Vec::new(); n];
+                    grid_world.scan_all(&mut from_scan_all);
+                    let from_scan_into: Vec<Vec<f32>> = (0..n)
+                        .map(|robot| {
+                            let mut scan = vec![0.0; 900];
+                            reference_world.scan_into(robot, &mut scan);
+                            scan
+                        })
+                        .collect();
+                    assert_eq!(
+                        scan_bits(&from_scan_all),
+                        scan_bits(&from_scan_into),
+                        "{n} robots, noise {noise_std}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn grid_collisions_are_the_all_pairs_collisions() {
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        let mut grid = SpatialGrid::new();
+        let mut partners = Vec::new();
+        let mut layouts = equivalence_layouts();
+        // Bodies exactly touching (centres one diameter apart), a few ulps either side of it, on
+        // both axes and diagonally, across cell boundaries (cells are one diameter wide).
+        let diameter = 2.0 * RobotParams::default().body_radius;
+        let mut touching = Vec::new();
+        for k in 0..40_i64 {
+            let (x, y) = (k as f64 * 3.0 * diameter, (k % 5) as f64 * diameter);
+            let nudged = f64::from_bits((diameter.to_bits() as i64 + k % 3 - 1) as u64);
+            touching.push(pose(x, y, 0.0));
+            touching.push(pose(x + nudged, y, 0.0));
+            touching.push(pose(x, y + diameter, 0.0));
+            touching.push(pose(
+                x + diameter * 0.5_f64.sqrt(),
+                y - diameter * 0.5_f64.sqrt(),
+                0.0,
+            ));
+        }
+        layouts.push(touching);
+        // Non-finite and huge coordinates among ordinary robots.
+        let mut odd = random_layout(&mut rng, 50, (0.0, 0.0), 2.0, 0.0);
+        odd.extend([
+            pose(f64::NAN, 0.0, 0.0),
+            pose(f64::NAN, 0.0, 0.0),
+            pose(f64::INFINITY, 1.0, 0.0),
+            pose(f64::INFINITY, 1.0, 0.0),
+            pose(2e9, 0.0, 0.0),
+            pose(2e9 + 0.3, 0.0, 0.0),
+            pose(1e9 - 0.1, 0.0, 0.0),
+            pose(1e9 + 0.1, 0.0, 0.0),
+        ]);
+        layouts.push(odd);
+        let mut pairs_seen = 0;
+        for poses in &layouts {
+            for body_radius in [0.25, 0.05, 1.0, 0.0, -0.1, f64::NAN] {
+                let expected = overlapping_pairs(poses, body_radius);
+                let found = overlapping_pairs_in_grid(&mut grid, &mut partners, poses, body_radius);
+                assert_eq!(
+                    found,
+                    expected,
+                    "{} robots, radius {body_radius}",
+                    poses.len()
+                );
+                pairs_seen += expected.len();
+            }
+        }
+        assert!(pairs_seen > 1000, "only {pairs_seen} colliding pairs");
+    }
+
+    #[test]
+    fn a_moving_crowd_scans_and_collides_as_the_reference_does_tick_after_tick() {
+        // 120 robots in a 6 m disc driving with scan-dependent commands for 60 ticks: each tick's
+        // scans must match scan_into robot by robot, and each step's collisions the all-pairs test.
+        let mut rng = ChaCha8Rng::seed_from_u64(13);
+        let poses = random_layout(&mut rng, 120, (1.0, 1.0), 6.0, 0.0);
+        let n = poses.len();
+        let mut world = World::new(noisy_config(0.03), poses.clone(), 9);
+        let mut reference = World::new(noisy_config(0.03), poses, 9);
+        let mut scans = vec![Vec::new(); n];
+        let mut reference_scan = vec![0.0; 900];
+        let mut cmds = vec![WheelCmd::BRAKE; n];
+        let mut collisions = 0;
+        for tick in 0..60 {
+            world.scan_all(&mut scans);
+            for (robot, scan) in scans.iter().enumerate() {
+                reference.scan_into(robot, &mut reference_scan);
+                let same = scan
+                    .iter()
+                    .zip(&reference_scan)
+                    .all(|(a, b)| a.to_bits() == b.to_bits());
+                assert!(same, "tick {tick}, robot {robot}");
+            }
+            for (cmd, scan) in cmds.iter_mut().zip(&scans) {
+                let ahead = scan[..40]
+                    .iter()
+                    .chain(&scan[860..])
+                    .copied()
+                    .fold(10.0, f32::min);
+                let turn = if ahead < 1.0 { 0.4 } else { 0.0 };
+                *cmd = WheelCmd {
+                    left: 0.5 - turn,
+                    right: 0.5 + turn,
+                };
+            }
+            let report = world.step(&cmds);
+            let reference_report = reference.step(&cmds);
+            assert_eq!(report, reference_report);
+            assert_eq!(
+                report.collisions,
+                overlapping_pairs(world.poses(), world.config().robot.body_radius)
+            );
+            collisions += report.collisions.len();
+        }
+        assert!(collisions > 0);
+        assert_eq!(world.collisions_total(), reference.collisions_total());
     }
 }
