@@ -594,40 +594,71 @@ impl RunNamespace {
         })
     }
 
-    /// Makes every file of the run private to its user: shared-memory objects 0600, the root
-    /// directory and its folders 0700, its files 0600. iceoryx2 0.10 creates its node-management
-    /// segment readable and writable by everyone; every process of a run calls this right after
-    /// creating its iceoryx2 node. Returns how many entries had their mode changed.
+    /// Creates the base folder and the run's root folder owner-only (0700) if they do not exist
+    /// yet, before iceoryx2 puts anything in them; a base folder of another user is refused.
+    /// iceoryx2 creates some folders inside the root with group and other bits (0755), which is
+    /// harmless behind the private root. Every process of a run calls this before it creates its
+    /// iceoryx2 node.
+    pub fn prepare(&self) -> Result<(), NamespaceError> {
+        use std::os::unix::fs::DirBuilderExt;
+        self.private_base()?;
+        match std::fs::DirBuilder::new().mode(0o700).create(&self.root) {
+            Ok(()) => Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                restrict(&self.root, 0o700).map(|_| ())
+            }
+            Err(source) => Err(NamespaceError::Io {
+                action: "creating",
+                path: self.root.clone(),
+                source,
+            }),
+        }
+    }
+
+    /// Makes what others could reach of the run private to its user: its shared-memory objects
+    /// 0600 and its root folder 0700 (what lies inside the root is out of reach behind it).
+    /// iceoryx2 0.10 creates its node-management segment readable and writable by everyone; every
+    /// process of a run calls this right after creating its iceoryx2 node. Returns how many
+    /// entries had their mode changed.
     pub fn restrict_permissions(&self) -> Result<usize, NamespaceError> {
         let mut changed = 0;
         for path in list_with_prefix(Path::new(SHM_DIR), &self.file_prefix()) {
             changed += restrict(&path, 0o600)?;
         }
         if self.root.exists() {
-            changed += restrict_tree(&self.root)?;
+            changed += restrict(&self.root, 0o700)?;
         }
         Ok(changed)
     }
 
-    /// Every entry of the run with permission bits for group or others: empty once
-    /// [`RunNamespace::restrict_permissions`] ran after the last file was made.
+    /// Every entry of the run that another user could reach with permission bits for group or
+    /// others: its shared-memory objects, the base folder and the root folder, and inside the
+    /// root only what a reachable folder exposes. Empty for a private run.
     pub fn shared_entries(&self) -> Vec<(PathBuf, u32)> {
         use std::os::unix::fs::PermissionsExt;
+        let mode_of = |path: &Path| {
+            std::fs::symlink_metadata(path)
+                .ok()
+                .map(|m| (m.permissions().mode() & 0o777, m.is_dir()))
+        };
         let mut found = Vec::new();
-        let mut visit = vec![];
-        visit.extend(list_with_prefix(Path::new(SHM_DIR), &self.file_prefix()));
+        let mut visit: Vec<PathBuf> = list_with_prefix(Path::new(SHM_DIR), &self.file_prefix());
+        visit.push(self.base_dir().to_path_buf());
         if self.root.exists() {
             visit.push(self.root.clone());
         }
         while let Some(path) = visit.pop() {
-            let Ok(meta) = std::fs::symlink_metadata(&path) else {
+            let Some((mode, is_dir)) = mode_of(&path) else {
                 continue;
             };
-            let mode = meta.permissions().mode() & 0o777;
             if mode & 0o077 != 0 {
                 found.push((path.clone(), mode));
             }
-            if meta.is_dir()
+            // A folder others cannot enter hides what it holds; the base folder's other entries
+            // are other runs'.
+            if is_dir
+                && mode & 0o011 != 0
+                && path != self.base_dir()
                 && let Ok(entries) = std::fs::read_dir(&path)
             {
                 visit.extend(entries.flatten().map(|e| e.path()));
@@ -663,22 +694,6 @@ fn restrict(path: &Path, mode: u32) -> Result<usize, NamespaceError> {
             source,
         }),
     }
-}
-
-fn restrict_tree(dir: &Path) -> Result<usize, NamespaceError> {
-    let mut changed = restrict(dir, 0o700)?;
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Ok(changed);
-    };
-    for entry in entries.flatten() {
-        let path = entry.path();
-        match entry.file_type() {
-            Ok(t) if t.is_dir() => changed += restrict_tree(&path)?,
-            Ok(t) if t.is_file() => changed += restrict(&path, 0o600)?,
-            _ => {}
-        }
-    }
-    Ok(changed)
 }
 
 /// The real user id of this process, read from /proc (no unsafe call needed).

@@ -146,6 +146,18 @@ pub enum LaunchError {
     Io(#[from] std::io::Error),
 }
 
+/// How long an agent may take to be admitted: a team starts all its agents at once, and on a
+/// small host each one's start (loading ONNX Runtime and its model) queues behind the others', so
+/// the wait grows with the team: 10 s plus 150 ms per robot (256 robots: 48 s).
+pub fn connect_timeout(robots: usize) -> Duration {
+    Duration::from_millis(10_000 + 150 * robots as u64)
+}
+
+/// How long the world waits for every agent: the agents' own limit plus 20 s.
+pub fn startup_timeout(robots: usize) -> Duration {
+    connect_timeout(robots) + Duration::from_secs(20)
+}
+
 /// How long children get to exit on their own before they are killed.
 const GRACE: Duration = Duration::from_secs(3);
 /// The longest restart delay.
@@ -433,6 +445,8 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
         .arg(plan.stale_ms.to_string())
         .arg("--pace-ms")
         .arg(plan.pace.as_millis().to_string())
+        .arg("--startup-timeout-ms")
+        .arg(startup_timeout(plan.models.len()).as_millis().to_string())
         .arg("--exit-on-stdin-close")
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
@@ -464,6 +478,8 @@ async fn spawn_agent(
         .arg(robot.to_string())
         .arg("--model")
         .arg(&plan.models[robot])
+        .arg("--connect-timeout-ms")
+        .arg(connect_timeout(plan.models.len()).as_millis().to_string())
         .arg("--exit-on-stdin-close")
         .env_remove("FORMATION_AGENT_FAULT")
         .stdin(Stdio::piped())

@@ -154,6 +154,7 @@ impl IceoryxAgentLink {
         secret: &LaunchSecret,
         timeout: Duration,
     ) -> Result<Self, TransportError> {
+        namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
         let pid = std::process::id();
         let name = NodeName::new(&agent_node_name(robot, pid))

@@ -171,6 +171,7 @@ impl IceoryxWorldLink {
     /// Creates the world's node, every robot's lobby and the swap channel in `namespace`, and
     /// makes the run's files private to this user.
     pub fn create(namespace: &RunNamespace, n_robots: usize) -> Result<Self, TransportError> {
+        namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
         let name = NodeName::new(WORLD_NODE_NAME).map_err(|e| iox("name the world node")(&e))?;
         let node = NodeBuilder::new()
@@ -189,7 +190,6 @@ impl IceoryxWorldLink {
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<ipc::Service>()
             .map_err(|e| iox("create the world's wait set")(&e))?;
-        namespace.restrict_permissions()?;
         Ok(IceoryxWorldLink {
             node,
             namespace: namespace.clone(),
@@ -421,7 +421,6 @@ impl WorldLink for IceoryxWorldLink {
         self.robots[robot] = None;
         let ports = create_robot_ports(&self.node, &self.namespace, robot, incarnation)?;
         self.robots[robot] = Some(ports);
-        self.namespace.restrict_permissions()?;
         Ok(())
     }
 
