@@ -29,3 +29,6 @@ pub mod process;
 pub mod settings;
 
 pub use settings::{ClockMode, RuntimeSettings};
+
+#[cfg(test)]
+mod tests;
