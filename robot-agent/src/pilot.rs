@@ -1,6 +1,6 @@
 //! The agent's decision as the runtime's agent loop drives it: [`OnnxPilots`] loads ONNX models
 //! and makes an [`Agent`] of each, and [`Agent`] is the loop's
-//! [`Pilot`](formation_runtime::agent::Pilot).
+//! [`Pilot`].
 
 use std::path::Path;
 
