@@ -432,8 +432,8 @@ fn leftovers_with_live_processes_are_not_touched() {
     let dir = TempDir::new("live");
     let run_id = unique_run_id("live");
     let leaks = LeakCheck::new(&run_id);
-    let scenario = formation_world::Scenario::from_path(&case1_scenario(dir.path(), 5.0))
-        .expect("scenario");
+    let scenario =
+        formation_world::Scenario::from_path(&case1_scenario(dir.path(), 5.0)).expect("scenario");
     let specs = dir.path().join("run-specs.json");
     std::fs::write(
         &specs,
@@ -454,7 +454,11 @@ fn leftovers_with_live_processes_are_not_touched() {
     let before = leaks.leftovers();
     let refused = run(run_command(&run_id, &dir, 2.0, &[]), LIMIT);
     refused.assert_failure_mentioning("has live processes (formation-world");
-    assert_eq!(leaks.leftovers(), before, "the live run's files are untouched");
+    assert_eq!(
+        leaks.leftovers(),
+        before,
+        "the live run's files are untouched"
+    );
     assert!(alive(world.id()), "the live world still runs");
     world.close_input();
     let _ = world.finish(LIMIT);
