@@ -3,6 +3,8 @@
 //! * [`types`]: plain values that cross crate boundaries (poses, wheel commands, the goal a robot
 //!   is given, LIDAR and occupancy settings). They carry no behaviour beyond validation.
 //! * [`files`]: reading a user's file only if it is a regular file within a size limit.
+//! * [`control`]: the [`control::Controller`] seam between an episode loop and what decides the
+//!   wheel commands, with its [`control::Observation`] and [`control::ControllerError`].
 //! * [`auth`]: the launch secret, with which an agent proves that its own launch started it.
 //! * [`wire`]: the fixed-size `#[repr(C)]` messages that travel over iceoryx2 shared memory
 //!   between the world process and the robot-agent processes, and the per-run service names.
@@ -11,6 +13,7 @@
 //! this crate so that neither depends on the other.
 
 pub mod auth;
+pub mod control;
 pub mod files;
 pub mod types;
 pub mod wire;

@@ -26,8 +26,8 @@ use std::path::{Path, PathBuf};
 
 use formation_onnx::contract::{SensorContract, SensorViolation, check_sensor};
 use formation_onnx::{OnnxPolicy, PolicyError};
+use formation_proto::control::{Controller, ControllerError, Observation};
 use formation_proto::{Goal, LidarSpec, OccupancySpec, WheelCmd, wrap_angle};
-use formation_world::episode::{Controller, ControllerError, Observation};
 
 use crate::occupancy;
 

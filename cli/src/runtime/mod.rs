@@ -20,33 +20,17 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::Context;
-use clap::{Args, ValueEnum};
+use clap::Args;
 use formation_proto::wire::RunId;
+use formation_runtime::RuntimeSettings;
 use formation_world::{RunLog, RunSpec, Scenario, Trajectory, recover_journals};
 
 use crate::paths;
 use formation_proto::wire::WorldEvent;
 use supervisor::LaunchPlan;
 
-/// How the world process paces ticks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ClockMode {
-    /// Wait for every live agent's command each tick (with a timeout), then step. Deterministic:
-    /// bit-identical to the in-process loop for the same scenario, seed and models.
-    Lockstep,
-    /// Step at 20 Hz (the scenario's dt) on the wall clock with each robot's newest fresh command.
-    Realtime,
-}
-
-impl ClockMode {
-    /// The name the world process takes on its command line.
-    pub fn as_str(&self) -> &'static str {
-        match self {
-            ClockMode::Lockstep => "lockstep",
-            ClockMode::Realtime => "realtime",
-        }
-    }
-}
+/// How the world process paces ticks (defined once, in the runtime library).
+pub use formation_runtime::ClockMode;
 
 /// `formation run`.
 #[derive(Debug, Clone, Args)]
@@ -58,7 +42,7 @@ pub struct RunArgs {
     #[arg(long, default_value = paths::DEFAULT_MODEL)]
     pub model: PathBuf,
     /// Clock mode of the world.
-    #[arg(long, value_enum, default_value_t = ClockMode::Lockstep)]
+    #[arg(long, value_enum, default_value_t = RuntimeSettings::DEFAULT.clock)]
     pub clock: ClockMode,
     /// Output directory for the run logs (`runs/`, `timing/`) and the latency profile `profile.json`.
     #[arg(long, default_value = "out/run")]
@@ -73,10 +57,10 @@ pub struct RunArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Lockstep: how long the world waits for a robot's command before braking it \[ms\].
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.command_timeout_ms)]
     pub timeout_ms: u64,
     /// Realtime: a command older than this brakes its robot \[ms\].
-    #[arg(long, default_value_t = 150)]
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.stale_ms)]
     pub stale_ms: u64,
     /// Run id (namespaces the iceoryx2 services, e.g. for `formation swap`; default: generated).
     #[arg(long)]
@@ -94,7 +78,7 @@ pub struct RunArgs {
     pub restart_delay_ms: u64,
     /// Lockstep: each tick takes at least this long \[ms\] (0: as fast as the agents answer),
     /// e.g. 50 to watch a deterministic run at the speed of the real clock.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.pace_ms)]
     pub pace_ms: u64,
     /// Testing only: make an agent misbehave, `ROBOT:MODE` with MODE one of crash-after=N,
     /// hang-after=N, late-ms=X, nan-after=N (repeatable). Applies to the agent's first start; a
@@ -231,16 +215,19 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)>
     let plan = LaunchPlan {
         run_id,
         run_specs,
-        clock: args.clock,
+        settings: RuntimeSettings {
+            clock: args.clock,
+            command_timeout_ms: args.timeout_ms,
+            stale_ms: args.stale_ms,
+            pace_ms: args.pace_ms,
+            ..RuntimeSettings::DEFAULT
+        },
         out: args.out.clone(),
         faults: faults_per_robot(&args.faults, models.len())?,
         models,
-        command_timeout_ms: args.timeout_ms,
-        stale_ms: args.stale_ms,
         restart_budget: args.restarts,
         restart_window: positive_seconds("--restart-window-s", args.restart_window_s)?,
         restart_delay: Duration::from_millis(args.restart_delay_ms),
-        pace: Duration::from_millis(args.pace_ms),
     };
     Ok((plan, scenario, base_seed))
 }
@@ -255,7 +242,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         plan.models.len(),
         args.runs,
         scenario.name(),
-        plan.clock.as_str()
+        plan.settings.clock.as_str()
     );
     let started = std::time::SystemTime::now();
     let launched = block_on(supervisor::launch(&plan, &mut |event| match event {
@@ -569,6 +556,11 @@ pub struct ProcessEval {
     pub latency: profile::LatencyProfile,
 }
 
+/// The lockstep command timeout of an evaluation over processes \[ms\], longer than
+/// [`RuntimeSettings::DEFAULT`]'s: an evaluation has no restarts and must not brake a robot
+/// because one inference was slow on a loaded machine, which would change its trajectory.
+const EVAL_COMMAND_TIMEOUT_MS: u64 = 5000;
+
 /// Evaluates `runs` runs of `scenario` (base seed `base_seed`) with every robot's policy in its
 /// own process. Robots the scenario assigns a model to run that model, the others
 /// `default_model`. `on_run_done(n)` is called after each finished run with the number finished so
@@ -589,16 +581,17 @@ pub fn eval_over_processes(
     let plan = LaunchPlan {
         run_id,
         run_specs,
-        clock,
+        settings: RuntimeSettings {
+            clock,
+            command_timeout_ms: EVAL_COMMAND_TIMEOUT_MS,
+            ..RuntimeSettings::DEFAULT
+        },
         out: work.join("out"),
         faults: vec![None; models.len()],
         models,
-        command_timeout_ms: 5000,
-        stale_ms: 150,
         restart_budget: 0,
         restart_window: Duration::from_secs(60),
         restart_delay: Duration::from_millis(50),
-        pace: Duration::ZERO,
     };
     let result = (|| {
         let mut done = 0;

@@ -28,7 +28,9 @@ use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::process::{Child, ChildStdin, Command};
 use tokio::sync::{mpsc, oneshot};
 
-use super::ClockMode;
+use formation_runtime::RuntimeSettings;
+use formation_runtime::settings::SettingsError;
+
 use super::binaries::RuntimeBinaries;
 
 /// Everything one launch needs.
@@ -38,26 +40,29 @@ pub struct LaunchPlan {
     pub run_id: RunId,
     /// JSON file with the resolved run specs (`Vec<RunSpec>`) the world plays, in order.
     pub run_specs: PathBuf,
-    /// Clock mode.
-    pub clock: ClockMode,
+    /// The world's clock mode and timeouts, handed to it whole as a JSON file next to
+    /// `run_specs` ([`LaunchPlan::settings_path`]).
+    pub settings: RuntimeSettings,
     /// Where the world writes its run logs.
     pub out: PathBuf,
     /// Model of each robot, in robot order.
     pub models: Vec<PathBuf>,
-    /// Lockstep command timeout \[ms\].
-    pub command_timeout_ms: u64,
-    /// Realtime staleness limit \[ms\].
-    pub stale_ms: u64,
     /// Agent restarts allowed within any [`LaunchPlan::restart_window`] (all robots together).
     pub restart_budget: u32,
     /// The sliding window of the restart budget.
     pub restart_window: Duration,
     /// Delay before a robot's first restart in the window; doubles with each further one.
     pub restart_delay: Duration,
-    /// Lockstep: the least time a tick takes (zero: as fast as the agents answer).
-    pub pace: Duration,
     /// Fault-injection mode per robot (testing only).
     pub faults: Vec<Option<String>>,
+}
+
+impl LaunchPlan {
+    /// Where the launch writes [`LaunchPlan::settings`] for the world: `runtime-settings.json`
+    /// next to the run specs.
+    pub fn settings_path(&self) -> PathBuf {
+        self.run_specs.with_file_name("runtime-settings.json")
+    }
 }
 
 /// What a launch did.
@@ -106,6 +111,9 @@ pub enum LaunchError {
         /// The live iceoryx2 nodes found.
         nodes: String,
     },
+    /// The world's settings file could not be written.
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
     /// The launch secret could not be made or handed over.
     #[error("the launch secret: {0}")]
     Secret(String),
@@ -429,6 +437,14 @@ fn describe(status: ExitStatus) -> String {
 }
 
 fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, LaunchError> {
+    let settings = plan.settings_path();
+    // The world waits for a team whose agents all start at once: longer for a larger team, and
+    // never less than the plan asks for.
+    let mut world_settings = plan.settings;
+    world_settings.startup_timeout_ms = world_settings
+        .startup_timeout_ms
+        .max(startup_timeout(plan.models.len()).as_millis() as u64);
+    world_settings.write(&settings)?;
     let mut command = Command::new(&binaries.world);
     command
         .arg("--run-id")
@@ -437,16 +453,8 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
         .arg(&plan.run_specs)
         .arg("--out")
         .arg(&plan.out)
-        .arg("--clock")
-        .arg(plan.clock.as_str())
-        .arg("--command-timeout-ms")
-        .arg(plan.command_timeout_ms.to_string())
-        .arg("--stale-ms")
-        .arg(plan.stale_ms.to_string())
-        .arg("--pace-ms")
-        .arg(plan.pace.as_millis().to_string())
-        .arg("--startup-timeout-ms")
-        .arg(startup_timeout(plan.models.len()).as_millis().to_string())
+        .arg("--settings")
+        .arg(&settings)
         .arg("--exit-on-stdin-close")
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())

@@ -3,7 +3,7 @@
 //! It creates every robot's iceoryx2 services in the run's namespace, waits for one agent per
 //! robot, then plays the given runs (resolved run specs, written by the launcher) one after another with the agents staying alive: each run
 //! begins with a begin-episode request (agents answer ready), then the unchanged in-process episode
-//! loop steps the world while [`exchange::AgentsController`] trades scans for commands. After each
+//! loop steps the world while [`AgentsController`] trades scans for commands. After each
 //! run it writes the run logs ([`runlog`]) and prints a progress event on stdout; while a run plays
 //! it journals every tick, and a run that ends early (a signal, the launcher, an error) is kept as
 //! an incomplete run log. At the end, or on SIGINT/SIGTERM, or when the launcher closes its
@@ -14,27 +14,35 @@
 //!
 //! Usually started by `formation run` / `formation eval --processes`, not by hand.
 
-mod exchange;
 mod runlog;
-mod transport;
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::sync::atomic::AtomicBool;
 
 use anyhow::Context;
 use clap::Parser;
 use formation_proto::auth::LaunchSecret;
-use formation_proto::wire::{RunId, RunNamespace};
+use formation_proto::wire::{RunId, RunNamespace, WorldEvent};
+use formation_runtime::clock::SystemClock;
+use formation_runtime::exchange::{AgentsController, ExchangeSettings, StopReason};
+use formation_runtime::iceoryx::IceoryxWorldLink;
+use formation_runtime::process::flag_when_stdin_closes;
+use formation_runtime::{ClockMode, RuntimeSettings};
 use formation_world::RunSpec;
 
-use crate::exchange::{AgentsController, ClockMode, ExchangeSettings, StopReason};
 use crate::runlog::{emit, play_journaled};
-use crate::transport::IceoryxWorldLink;
-use formation_proto::wire::WorldEvent;
+
+/// The flags a settings file replaces.
+const SETTING_FLAGS: [&str; 6] = [
+    "clock",
+    "command_timeout_ms",
+    "stale_ms",
+    "pace_ms",
+    "startup_timeout_ms",
+    "ready_timeout_ms",
+];
 
 /// The world process of formation's multi-process runtime.
 #[derive(Debug, Parser)]
@@ -50,27 +58,49 @@ struct Args {
     /// Directory for the run logs (`runs/`, `timing/`).
     #[arg(long)]
     out: PathBuf,
+    /// JSON file with the runtime settings (`RuntimeSettings`, every field; the launcher
+    /// writes it). Replaces the setting flags below, which may then not be given.
+    #[arg(long, conflicts_with_all = SETTING_FLAGS)]
+    settings: Option<PathBuf>,
     /// Clock mode.
-    #[arg(long, value_enum, default_value_t = ClockMode::Lockstep)]
+    #[arg(long, value_enum, default_value_t = RuntimeSettings::DEFAULT.clock)]
     clock: ClockMode,
     /// Lockstep: wait at most this long for a robot's command before braking it \[ms\].
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.command_timeout_ms)]
     command_timeout_ms: u64,
     /// Realtime: a command older than this brakes its robot \[ms\].
-    #[arg(long, default_value_t = 150)]
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.stale_ms)]
     stale_ms: u64,
     /// Lockstep: each tick takes at least this long \[ms\] (0: as fast as the agents answer).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.pace_ms)]
     pace_ms: u64,
     /// How long to wait for every agent to connect \[ms\].
-    #[arg(long, default_value_t = 30_000)]
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.startup_timeout_ms)]
     startup_timeout_ms: u64,
     /// How long agents may take to get ready for an episode \[ms\].
-    #[arg(long, default_value_t = 10_000)]
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.ready_timeout_ms)]
     ready_timeout_ms: u64,
     /// Stop when standard input closes (set by the launcher, so the world never outlives it).
     #[arg(long)]
     exit_on_stdin_close: bool,
+}
+
+impl Args {
+    /// The settings file's, or else the flags' (with the defaults of [`RuntimeSettings`]).
+    fn runtime_settings(&self) -> anyhow::Result<RuntimeSettings> {
+        if let Some(path) = &self.settings {
+            return Ok(RuntimeSettings::read(path)?);
+        }
+        Ok(RuntimeSettings {
+            clock: self.clock,
+            command_timeout_ms: self.command_timeout_ms,
+            stale_ms: self.stale_ms,
+            pace_ms: self.pace_ms,
+            startup_timeout_ms: self.startup_timeout_ms,
+            ready_timeout_ms: self.ready_timeout_ms,
+            ..RuntimeSettings::DEFAULT
+        })
+    }
 }
 
 fn main() -> ExitCode {
@@ -102,43 +132,31 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
     let n_robots = specs[0].n_robots;
     let lidar = specs[0].world.lidar;
 
+    let runtime = args.runtime_settings()?;
     let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
-    let stop = Arc::new(AtomicBool::new(false));
-    if args.exit_on_stdin_close {
-        let stop = Arc::clone(&stop);
-        std::thread::spawn(move || {
-            let mut sink = [0u8; 256];
-            let mut stdin = std::io::stdin();
-            // Only end of file (or a real error) means the launcher is gone: a read that a
-            // signal interrupted (EINTR) is simply retried.
-            loop {
-                match stdin.read(&mut sink) {
-                    Ok(0) => break,
-                    Ok(_) => {}
-                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                    Err(_) => break,
-                }
-            }
-            stop.store(true, Ordering::Relaxed);
-        });
-    }
+    let stop = if args.exit_on_stdin_close {
+        flag_when_stdin_closes()
+    } else {
+        Arc::new(AtomicBool::new(false))
+    };
 
     let mut link = IceoryxWorldLink::create(&namespace, n_robots)
         .with_context(|| format!("setting up run {run_id}'s services"))?;
     emit(&WorldEvent::Listening { robots: n_robots });
     let settings = ExchangeSettings {
-        clock: args.clock,
-        command_timeout: Duration::from_millis(args.command_timeout_ms),
-        stale_after: Duration::from_millis(args.stale_ms),
-        pace: Duration::from_millis(args.pace_ms),
-        ready_timeout: Duration::from_millis(args.ready_timeout_ms),
-        liveness_period: Duration::from_millis(100),
+        runtime,
         stop,
         run: run_id.clone(),
         secret,
     };
-    let mut agents = AgentsController::new(&mut link, settings, lidar);
-    let result = play(args, &specs, &mut agents);
+    let mut agents = AgentsController::new(
+        &mut link,
+        settings,
+        lidar,
+        Arc::new(SystemClock),
+        Box::new(emit),
+    );
+    let result = play(args, &runtime, &specs, &mut agents);
     agents.shutdown_agents();
     match (result, agents.stopped()) {
         (_, Some(reason)) => Ok(Some(reason)),
@@ -175,15 +193,20 @@ fn read_run_specs(path: &Path) -> anyhow::Result<Vec<RunSpec>> {
     Ok(specs)
 }
 
-fn play(args: &Args, specs: &[RunSpec], agents: &mut AgentsController<'_>) -> anyhow::Result<()> {
-    agents.await_agents(Duration::from_millis(args.startup_timeout_ms))?;
+fn play(
+    args: &Args,
+    runtime: &RuntimeSettings,
+    specs: &[RunSpec],
+    agents: &mut AgentsController<'_>,
+) -> anyhow::Result<()> {
+    agents.await_agents(runtime.startup_timeout())?;
     emit(&WorldEvent::AgentsConnected);
     for spec in specs {
         let index = spec.index;
         agents
             .begin_episode(spec.world.dt, spec.world.lidar)
             .with_context(|| format!("run {index}"))?;
-        let log = play_journaled(&args.out, args.clock.as_str(), spec, agents)
+        let log = play_journaled(&args.out, runtime.clock.as_str(), spec, agents)
             .with_context(|| format!("run {index}"))?;
         emit(&WorldEvent::RunDone { index, log });
     }

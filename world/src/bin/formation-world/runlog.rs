@@ -8,8 +8,8 @@
 
 use std::path::{Path, PathBuf};
 
+use formation_proto::control::ControllerError;
 use formation_proto::wire::WorldEvent;
-use formation_world::episode::ControllerError;
 use formation_world::metrics::{MetricsConfig, run_metrics};
 use formation_world::runlog::{
     JournalHeader, RunJournal, RunLogError, journal_path, recover_journal, write_json_atomic,
@@ -18,7 +18,7 @@ use formation_world::runlog::{
 pub use formation_world::runlog::{RunLog, TimingLog, log_paths, write_atomic};
 use formation_world::{EpisodeError, RunSpec, run_episode_recorded};
 
-use crate::exchange::AgentsController;
+use formation_runtime::exchange::AgentsController;
 
 /// Prints one progress event line on stdout, for the launcher.
 pub fn emit(event: &WorldEvent) {

@@ -1,24 +1,18 @@
-//! The world's side of the transport: what the world needs from a message bus ([`WorldLink`]),
-//! and its iceoryx2 implementation ([`IceoryxWorldLink`]).
+//! The world's iceoryx2 link ([`IceoryxWorldLink`]): it creates every service of the run in its
+//! namespace and holds the world's ends (see the crate's [`WorldLink`] for what each does).
 //!
-//! The exchange logic ([`crate::exchange`]) talks only to [`WorldLink`], so another transport
-//! (Zenoh, for agents on other hosts) can be added without touching it. The world watches command
-//! ages itself, so its watchdog does not depend on the transport's own liveness reports; those
-//! ([`WorldLink::dead_agents`]) only speed up noticing a crashed agent and clean up after it.
-//!
-//! Per robot the world holds a lobby (the hello and welcome services) from the start, and the
-//! four services of the robot's current *incarnation* only once the exchange has accepted an
-//! agent's proof of the launch secret ([`WorldLink::open_incarnation`]). Until then, and after
-//! the agent is gone ([`WorldLink::close_incarnation`]), publishing to the robot is a no-op and
-//! nothing arrives from it.
+//! Each robot's lobby exists from the start; an incarnation's four services (scan, command,
+//! control, status) are created when the exchange admits an agent, and dropped when it is gone.
+//! Every publish-subscribe service is paired with an event service of the same name, because
+//! publishing wakes nobody in iceoryx2.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use formation_proto::wire::{
-    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, NamespaceError,
-    RobotChannel, RunNamespace, ScanMsg, ServiceLimits, StatusMsg, SwapChannel, SwapReply,
-    SwapReplyMsg, SwapRequest, SwapRequestMsg, WORLD_NODE_NAME, Welcome, WelcomeMsg, WireError,
-    lobby_service_name, parse_agent_node_name, robot_service_name, swap_service_name,
+    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, RobotChannel,
+    RunNamespace, ScanMsg, ServiceLimits, StatusMsg, SwapChannel, SwapReply, SwapReplyMsg,
+    SwapRequest, SwapRequestMsg, WORLD_NODE_NAME, Welcome, WelcomeMsg, lobby_service_name,
+    parse_agent_node_name, robot_service_name, swap_service_name,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
@@ -29,104 +23,14 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 
-/// A transport failure, or a request to stop.
-#[derive(Debug, thiserror::Error)]
-pub enum TransportError {
-    /// iceoryx2 refused an operation.
-    #[error("iceoryx2 could not {action} ({detail}); is another world running with this run id?")]
-    Iceoryx {
-        /// What the world was doing.
-        action: String,
-        /// iceoryx2's error.
-        detail: String,
-    },
-    /// A message could not be encoded or decoded.
-    #[error(transparent)]
-    Wire(#[from] WireError),
-    /// SIGINT or SIGTERM arrived.
-    #[error("stopped by a termination signal")]
-    Terminated,
-    /// The run's files could not be made private.
-    #[error(transparent)]
-    Namespace(#[from] NamespaceError),
-}
+use crate::link::{Hello, WorldLink, WorldLinkError};
 
-fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> TransportError {
+fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> WorldLinkError {
     let action = action.into();
-    move |e| TransportError::Iceoryx {
+    move |e| WorldLinkError::Iceoryx {
         action,
         detail: format!("{e:?}"),
     }
-}
-
-/// An agent's request to drive a robot, as it arrived in the robot's lobby.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Hello {
-    /// The pid the candidate gave.
-    pub pid: u32,
-    /// Its nonce: names the incarnation if accepted.
-    pub nonce: u64,
-    /// Its proof of the launch secret.
-    pub proof: [u8; formation_proto::auth::PROOF_LEN],
-}
-
-/// What the world needs from a transport: per-robot channels to and from the agents.
-pub trait WorldLink {
-    /// Number of robots the link serves.
-    fn n_robots(&self) -> usize;
-    /// Hands every hello that candidates for robot `robot` sent since the last call to `sink`.
-    fn drain_hellos(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(Hello),
-    ) -> Result<(), TransportError>;
-    /// Answers the hello with `nonce` in robot `robot`'s lobby.
-    fn answer_hello(
-        &mut self,
-        robot: usize,
-        nonce: u64,
-        welcome: &Welcome,
-    ) -> Result<(), TransportError>;
-    /// Creates the services of robot `robot`'s new incarnation and takes the world's ends,
-    /// dropping those of the previous incarnation.
-    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), TransportError>;
-    /// Drops the world's ends of robot `robot`'s current incarnation (its agent is gone).
-    fn close_incarnation(&mut self, robot: usize);
-    /// Publishes robot `robot`'s scan and wakes its agent.
-    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), TransportError>;
-    /// Sends a control request to robot `robot`'s agent and wakes it.
-    fn send_control(
-        &mut self,
-        robot: usize,
-        request: &ControlRequest,
-    ) -> Result<(), TransportError>;
-    /// Blocks until an agent may have sent something, or `timeout` passes.
-    fn wait(&mut self, timeout: Duration) -> Result<(), TransportError>;
-    /// Hands every command robot `robot`'s agent sent since the last call to `sink`, oldest first.
-    fn drain_commands(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(CmdMsg, Instant),
-    ) -> Result<(), TransportError>;
-    /// Hands every status robot `robot`'s agent sent since the last call to `sink`, oldest first.
-    fn drain_statuses(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(AgentStatus),
-    ) -> Result<(), TransportError>;
-    /// Whether agent process `pid` of robot `robot` is still alive, as far as the transport can
-    /// tell (a stopped process is alive).
-    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, TransportError>;
-    /// `(robot, pid)` of agent processes the transport knows to be dead; cleans up after them so
-    /// a restarted agent can take their place.
-    fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, TransportError>;
-    /// Hands every swap request that users sent since the last call to `sink`, oldest first.
-    fn drain_swap_requests(
-        &mut self,
-        sink: &mut dyn FnMut(SwapRequest),
-    ) -> Result<(), TransportError>;
-    /// Answers a swap request.
-    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), TransportError>;
 }
 
 /// One robot's ports on the world side.
@@ -170,7 +74,7 @@ pub struct IceoryxWorldLink {
 impl IceoryxWorldLink {
     /// Creates the world's node, every robot's lobby and the swap channel in `namespace`, and
     /// makes the run's files private to this user.
-    pub fn create(namespace: &RunNamespace, n_robots: usize) -> Result<Self, TransportError> {
+    pub fn create(namespace: &RunNamespace, n_robots: usize) -> Result<Self, WorldLinkError> {
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
         let name = NodeName::new(WORLD_NODE_NAME).map_err(|e| iox("name the world node")(&e))?;
@@ -200,11 +104,11 @@ impl IceoryxWorldLink {
         })
     }
 
-    fn check_robot(&self, robot: usize) -> Result<(), TransportError> {
+    fn check_robot(&self, robot: usize) -> Result<(), WorldLinkError> {
         if robot < self.lobbies.len() {
             Ok(())
         } else {
-            Err(TransportError::Iceoryx {
+            Err(WorldLinkError::Iceoryx {
                 action: format!("reach robot {robot}"),
                 detail: format!("the run has {} robots", self.lobbies.len()),
             })
@@ -212,7 +116,7 @@ impl IceoryxWorldLink {
     }
 
     /// Robot `robot`'s current incarnation, if any.
-    fn ports(&self, robot: usize) -> Result<Option<&RobotPorts>, TransportError> {
+    fn ports(&self, robot: usize) -> Result<Option<&RobotPorts>, WorldLinkError> {
         self.check_robot(robot)?;
         Ok(self.robots[robot].as_ref())
     }
@@ -228,7 +132,7 @@ fn pubsub_service<T: std::fmt::Debug + ZeroCopySend + IceoryxSend>(
     node: &Node<ipc::Service>,
     name: &str,
     limits: ServiceLimits,
-) -> Result<PubSubService<T>, TransportError> {
+) -> Result<PubSubService<T>, WorldLinkError> {
     let service = ServiceName::new(name).map_err(|e| iox(format!("name service {name}"))(&e))?;
     node.service_builder(&service)
         .publish_subscribe::<T>()
@@ -247,7 +151,7 @@ fn event_service(
     node: &Node<ipc::Service>,
     name: &str,
     limits: ServiceLimits,
-) -> Result<EventService, TransportError> {
+) -> Result<EventService, WorldLinkError> {
     let service = ServiceName::new(name).map_err(|e| iox(format!("name service {name}"))(&e))?;
     node.service_builder(&service)
         .event()
@@ -262,7 +166,7 @@ fn create_lobby_ports(
     node: &Node<ipc::Service>,
     namespace: &RunNamespace,
     robot: usize,
-) -> Result<LobbyPorts, TransportError> {
+) -> Result<LobbyPorts, WorldLinkError> {
     let hello_name = lobby_service_name(namespace.run(), robot, LobbyChannel::Hello);
     let welcome_name = lobby_service_name(namespace.run(), robot, LobbyChannel::Welcome);
     let what = |port: &str| format!("create the world's {port} port of robot {robot}");
@@ -289,7 +193,7 @@ fn create_robot_ports(
     namespace: &RunNamespace,
     robot: usize,
     incarnation: u64,
-) -> Result<RobotPorts, TransportError> {
+) -> Result<RobotPorts, WorldLinkError> {
     let limits = ServiceLimits::ROBOT;
     let name = |channel| robot_service_name(namespace.run(), robot, incarnation, channel);
     let event = |channel| event_service(node, &name(channel), limits);
@@ -344,7 +248,7 @@ fn create_robot_ports(
 fn create_swap_ports(
     node: &Node<ipc::Service>,
     namespace: &RunNamespace,
-) -> Result<SwapPorts, TransportError> {
+) -> Result<SwapPorts, WorldLinkError> {
     let name = |channel| swap_service_name(namespace.run(), channel);
     let event = |channel: SwapChannel| event_service(node, &name(channel), channel.limits());
     macro_rules! pubsub_service {
@@ -385,7 +289,7 @@ impl WorldLink for IceoryxWorldLink {
         &mut self,
         robot: usize,
         sink: &mut dyn FnMut(Hello),
-    ) -> Result<(), TransportError> {
+    ) -> Result<(), WorldLinkError> {
         self.check_robot(robot)?;
         while let Some(sample) = self.lobbies[robot]
             .hellos
@@ -407,7 +311,7 @@ impl WorldLink for IceoryxWorldLink {
         robot: usize,
         nonce: u64,
         welcome: &Welcome,
-    ) -> Result<(), TransportError> {
+    ) -> Result<(), WorldLinkError> {
         self.check_robot(robot)?;
         self.lobbies[robot]
             .welcome
@@ -416,7 +320,7 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), TransportError> {
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
         self.check_robot(robot)?;
         self.robots[robot] = None;
         let ports = create_robot_ports(&self.node, &self.namespace, robot, incarnation)?;
@@ -430,7 +334,7 @@ impl WorldLink for IceoryxWorldLink {
         }
     }
 
-    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), TransportError> {
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError> {
         let Some(ports) = self.ports(robot)? else {
             return Ok(());
         };
@@ -447,7 +351,7 @@ impl WorldLink for IceoryxWorldLink {
         &mut self,
         robot: usize,
         request: &ControlRequest,
-    ) -> Result<(), TransportError> {
+    ) -> Result<(), WorldLinkError> {
         let msg = ControlMsg::encode(request)?;
         let Some(ports) = self.ports(robot)? else {
             return Ok(());
@@ -460,7 +364,7 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn wait(&mut self, timeout: Duration) -> Result<(), TransportError> {
+    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
         let waitset = &self.waitset;
         let mut guards = Vec::with_capacity(3 * self.lobbies.len() + 1);
         guards.push(
@@ -498,7 +402,7 @@ impl WorldLink for IceoryxWorldLink {
             let _ = ports.status_wake.try_wait(|_| {});
         }
         match result {
-            WaitSetRunResult::TerminationRequest => Err(TransportError::Terminated),
+            WaitSetRunResult::TerminationRequest => Err(WorldLinkError::Terminated),
             // An interrupted wait (EINTR: SIGCONT after a stop, SIGUSR1, SIGURG, ...) is not a
             // termination; the caller simply looks again.
             _ => Ok(()),
@@ -508,8 +412,8 @@ impl WorldLink for IceoryxWorldLink {
     fn drain_commands(
         &mut self,
         robot: usize,
-        sink: &mut dyn FnMut(CmdMsg, Instant),
-    ) -> Result<(), TransportError> {
+        sink: &mut dyn FnMut(CmdMsg),
+    ) -> Result<(), WorldLinkError> {
         let Some(ports) = self.ports(robot)? else {
             return Ok(());
         };
@@ -518,7 +422,7 @@ impl WorldLink for IceoryxWorldLink {
             .receive()
             .map_err(|e| iox(format!("receive robot {robot}'s command"))(&e))?
         {
-            sink(*sample.payload(), Instant::now());
+            sink(*sample.payload());
         }
         Ok(())
     }
@@ -527,7 +431,7 @@ impl WorldLink for IceoryxWorldLink {
         &mut self,
         robot: usize,
         sink: &mut dyn FnMut(AgentStatus),
-    ) -> Result<(), TransportError> {
+    ) -> Result<(), WorldLinkError> {
         let Some(ports) = self.ports(robot)? else {
             return Ok(());
         };
@@ -544,7 +448,7 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, TransportError> {
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
         let wanted = formation_proto::wire::agent_node_name(robot, pid);
         let mut alive = false;
         Node::<ipc::Service>::list(self.node.config(), |state| {
@@ -563,7 +467,7 @@ impl WorldLink for IceoryxWorldLink {
         Ok(alive)
     }
 
-    fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, TransportError> {
+    fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError> {
         let n_robots = self.lobbies.len();
         let mut dead = Vec::new();
         Node::<ipc::Service>::list(self.node.config(), |state| {
@@ -598,7 +502,7 @@ impl WorldLink for IceoryxWorldLink {
     fn drain_swap_requests(
         &mut self,
         sink: &mut dyn FnMut(SwapRequest),
-    ) -> Result<(), TransportError> {
+    ) -> Result<(), WorldLinkError> {
         while let Some(sample) = self
             .swap
             .requests
@@ -613,7 +517,7 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), TransportError> {
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), WorldLinkError> {
         let msg = SwapReplyMsg::encode(reply)?;
         self.swap
             .replies

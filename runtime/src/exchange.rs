@@ -2,66 +2,42 @@
 //!
 //! [`AgentsController`] publishes every robot's own scan, waits for the agents' commands under the
 //! clock mode's rule, and hands the chosen commands to the unchanged in-process episode loop
-//! ([`formation_world::run_episode`]). Because the world is stepped by the very same code in the
+//! (`formation_world::run_episode`). Because the world is stepped by the very same code in the
 //! very same order as in-process, a lockstep run is bit-identical to an in-process run with the
 //! same model, seed and scenario.
 //!
 //! The choice of each robot's command ([`choose_command`]) is a pure function of what arrived and
 //! when; the watchdog is part of it: a missing, stale, non-finite or failed command brakes the robot.
-
-use std::time::{Duration, Instant};
+//!
+//! Around it the exchange keeps each robot's agent state: admission of candidates by the launch
+//! secret (one agent per robot, each nonce once), lockstep lagging and rejoining (and the grace
+//! a lost agent's successor gets), the realtime schedule with its re-anchoring after a pause, and
+//! the forwarding of swap requests. It reads time only from its [`Clock`] and talks only to a
+//! [`WorldLink`], so all of it runs in unit tests on an in-memory link and a fake clock.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 use formation_proto::auth::LaunchSecret;
+use formation_proto::control::{Controller, ControllerError, Observation};
+use formation_proto::wire::WorldEvent;
 use formation_proto::wire::{
     AgentStatus, CmdMsg, CmdStatus, ControlRequest, RobotTiming, RunId, ScanMsg, SwapOutcome,
     SwapReply, SwapRequest, TickOutcome, Welcome, wall_clock_ns,
 };
 use formation_proto::{LidarSpec, WheelCmd};
-use formation_world::episode::{Controller, ControllerError, Observation};
 
-use crate::runlog::emit;
-use crate::transport::{Hello, TransportError, WorldLink};
-use formation_proto::wire::WorldEvent;
+use crate::clock::Clock;
+use crate::link::{Hello, WorldLink, WorldLinkError};
+use crate::settings::{ClockMode, RuntimeSettings};
 
-/// How the world paces ticks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum ClockMode {
-    /// Wait for every live agent's command of this tick (up to a timeout), then step.
-    /// Deterministic: equal bit for bit to the in-process loop.
-    Lockstep,
-    /// Step at the simulation's own rate (20 Hz for dt = 50 ms) on the wall clock, with the
-    /// newest fresh command of each robot.
-    Realtime,
-}
-
-impl ClockMode {
-    /// The name used on the command line and in logs.
-    pub fn as_str(&self) -> &'static str {
-        match self {
-            ClockMode::Lockstep => "lockstep",
-            ClockMode::Realtime => "realtime",
-        }
-    }
-}
-
-/// Timing and watchdog settings of the exchange.
+/// What the exchange is told: the launch's timing and watchdog settings, and what admits and
+/// stops agents.
 #[derive(Debug, Clone)]
 pub struct ExchangeSettings {
-    /// Clock mode.
-    pub clock: ClockMode,
-    /// Lockstep: how long to wait for a robot's command before braking it and moving on.
-    pub command_timeout: Duration,
-    /// Realtime: a command older than this is stale and brakes its robot.
-    pub stale_after: Duration,
-    /// Lockstep: the least time a tick takes (zero: as fast as the agents answer).
-    pub pace: Duration,
-    /// How long agents may take to answer a begin-episode request.
-    pub ready_timeout: Duration,
-    /// How often to ask the transport which agents died.
-    pub liveness_period: Duration,
+    /// Clock mode, timeouts, stale window, pace, liveness period.
+    pub runtime: RuntimeSettings,
     /// Set from outside (the launcher went away) to stop at the next wake-up.
     pub stop: Arc<AtomicBool>,
     /// The run id, part of what an agent's proof covers.
@@ -144,10 +120,16 @@ pub enum AgentState {
     Lagging,
 }
 
+/// Where the exchange reports progress (agents lost, rejoined, refused): the world process
+/// prints each event as a line on stdout for the launcher; tests collect them.
+pub type EventSink = Box<dyn FnMut(&WorldEvent)>;
+
 /// The world's end of the exchange for one episode after another, over any [`WorldLink`].
 pub struct AgentsController<'l> {
     link: &'l mut dyn WorldLink,
     settings: ExchangeSettings,
+    clock: Arc<dyn Clock>,
+    events: EventSink,
     generation: u64,
     lidar: LidarSpec,
     states: Vec<AgentState>,
@@ -194,22 +176,32 @@ pub enum StopReason {
 }
 
 impl<'l> AgentsController<'l> {
-    /// A controller over `link`; no agent is known yet.
-    pub fn new(link: &'l mut dyn WorldLink, settings: ExchangeSettings, lidar: LidarSpec) -> Self {
+    /// A controller over `link`, reading time from `clock` and reporting to `events`; no agent
+    /// is known yet.
+    pub fn new(
+        link: &'l mut dyn WorldLink,
+        settings: ExchangeSettings,
+        lidar: LidarSpec,
+        clock: Arc<dyn Clock>,
+        events: EventSink,
+    ) -> Self {
         let n = link.n_robots();
+        let now = clock.now();
         AgentsController {
             link,
             settings,
+            clock,
+            events,
             generation: 0,
             lidar,
             states: vec![AgentState::Absent; n],
             newest: vec![None; n],
-            published_at: vec![Instant::now(); n],
+            published_at: vec![now; n],
             published_wall_ns: vec![0; n],
             timings: (0..n).map(|_| RobotTiming::default()).collect(),
             model_ids: vec![String::new(); n],
             schedule_start: None,
-            last_liveness_check: Instant::now(),
+            last_liveness_check: now,
             dt: Duration::from_millis(50),
             stopped: None,
             pending_swaps: Vec::new(),
@@ -228,14 +220,14 @@ impl<'l> AgentsController<'l> {
     /// Waits until every robot's agent has said hello, or fails after `timeout` naming the
     /// robots still missing.
     pub fn await_agents(&mut self, timeout: Duration) -> Result<(), ControllerError> {
-        let deadline = Instant::now() + timeout;
+        let deadline = self.clock.now() + timeout;
         loop {
             self.poll()?;
             let missing: Vec<usize> = self.robots_in(AgentState::Absent);
             if missing.is_empty() {
                 return Ok(());
             }
-            let now = Instant::now();
+            let now = self.clock.now();
             if now >= deadline {
                 return Err(ControllerError::new(format!(
                     "the agents of robots {missing:?} did not connect within {:.1} s; \
@@ -268,7 +260,7 @@ impl<'l> AgentsController<'l> {
                 self.send_begin(robot)?;
             }
         }
-        let deadline = Instant::now() + self.settings.ready_timeout;
+        let deadline = self.clock.now() + self.settings.runtime.ready_timeout();
         loop {
             self.poll()?;
             let waiting = self.robots_in(AgentState::Connected);
@@ -276,13 +268,13 @@ impl<'l> AgentsController<'l> {
             if waiting.is_empty() && absent.is_empty() {
                 return Ok(());
             }
-            let now = Instant::now();
+            let now = self.clock.now();
             if now >= deadline {
                 return Err(ControllerError::new(format!(
                     "agents of robots {:?} were not ready for episode {} within {:.1} s",
                     [waiting, absent].concat(),
                     self.generation,
-                    self.settings.ready_timeout.as_secs_f64()
+                    self.settings.runtime.ready_timeout().as_secs_f64()
                 )));
             }
             self.wait(deadline - now)?;
@@ -339,7 +331,7 @@ impl<'l> AgentsController<'l> {
 
     fn wait(&mut self, timeout: Duration) -> Result<(), ControllerError> {
         match self.link.wait(timeout.min(MAX_WAIT)) {
-            Err(TransportError::Terminated) => {
+            Err(WorldLinkError::Terminated) => {
                 self.stopped = Some(StopReason::Signal);
                 Err(ControllerError::new("stopped by a termination signal"))
             }
@@ -372,9 +364,11 @@ impl<'l> AgentsController<'l> {
             }
             let newest = &mut self.newest[robot];
             let generation = self.generation;
+            let clock = &self.clock;
             let mut answered = false;
             self.link
-                .drain_commands(robot, &mut |msg, at| {
+                .drain_commands(robot, &mut |msg| {
+                    let at = clock.now();
                     answered |= msg.generation == generation;
                     if newest.is_none_or(|n| {
                         (msg.generation, msg.tick) >= (n.msg.generation, n.msg.tick)
@@ -400,7 +394,12 @@ impl<'l> AgentsController<'l> {
         for request in requests {
             self.on_swap_request(request)?;
         }
-        if self.last_liveness_check.elapsed() >= self.settings.liveness_period {
+        if self
+            .clock
+            .now()
+            .saturating_duration_since(self.last_liveness_check)
+            >= self.settings.runtime.liveness_period()
+        {
             self.check_liveness()?;
         }
         Ok(())
@@ -408,7 +407,7 @@ impl<'l> AgentsController<'l> {
 
     /// Asks the transport which agents died, and lets their robots go.
     fn check_liveness(&mut self) -> Result<(), ControllerError> {
-        self.last_liveness_check = Instant::now();
+        self.last_liveness_check = self.clock.now();
         for (robot, pid) in self.link.dead_agents().map_err(transport_error)? {
             self.agent_gone(robot, pid)?;
         }
@@ -433,8 +432,8 @@ impl<'l> AgentsController<'l> {
             tracing::warn!("robot {robot}'s agent died; braking it until an agent rejoins");
             self.states[robot] = AgentState::Absent;
             self.rejoin_grace[robot] =
-                self.settings.clock == ClockMode::Lockstep && self.generation > 0;
-            emit(&WorldEvent::AgentLost {
+                self.settings.runtime.clock == ClockMode::Lockstep && self.generation > 0;
+            (self.events)(&WorldEvent::AgentLost {
                 robot,
                 tick: self.tick,
                 last_fresh_tick: self.last_fresh_tick[robot],
@@ -471,7 +470,7 @@ impl<'l> AgentsController<'l> {
                 self.link
                     .open_incarnation(robot, hello.nonce)
                     .map_err(transport_error)?;
-                self.admitted[robot] = Some((hello.pid, Instant::now()));
+                self.admitted[robot] = Some((hello.pid, self.clock.now()));
                 self.link
                     .answer_hello(robot, hello.nonce, &Welcome::Accepted)
                     .map_err(transport_error)?;
@@ -484,7 +483,7 @@ impl<'l> AgentsController<'l> {
                 {
                     tracing::warn!("could not answer a refused hello: {e}");
                 }
-                emit(&WorldEvent::AgentRefused {
+                (self.events)(&WorldEvent::AgentRefused {
                     robot,
                     pid: hello.pid,
                     reason,
@@ -501,7 +500,7 @@ impl<'l> AgentsController<'l> {
             return self.agent_pids[robot];
         }
         self.admitted[robot]
-            .filter(|(_, at)| at.elapsed() < ADMISSION_WINDOW)
+            .filter(|(_, at)| self.clock.now().saturating_duration_since(*at) < ADMISSION_WINDOW)
             .map(|(pid, _)| pid)
     }
 
@@ -676,7 +675,7 @@ fn admit(
     Ok(())
 }
 
-fn transport_error(e: TransportError) -> ControllerError {
+fn transport_error(e: WorldLinkError) -> ControllerError {
     ControllerError::new(e.to_string())
 }
 
@@ -686,7 +685,7 @@ impl Controller for AgentsController<'_> {
         obs: &Observation<'_>,
         out: &mut [WheelCmd],
     ) -> Result<(), ControllerError> {
-        let entered = Instant::now();
+        let entered = self.clock.now();
         self.tick = obs.tick;
         let schedule_start = *self.schedule_start.get_or_insert(entered);
         self.tick_start_ns.push(
@@ -705,12 +704,19 @@ impl Controller for AgentsController<'_> {
             self.link
                 .publish_scan(robot, &msg)
                 .map_err(transport_error)?;
-            self.published_at[robot] = Instant::now();
+            self.published_at[robot] = self.clock.now();
             self.published_wall_ns[robot] = msg.published_wall_ns;
         }
-        let paced_until = entered + self.settings.pace;
-        let deadline = match self.settings.clock {
-            ClockMode::Lockstep => entered + self.settings.command_timeout.max(self.settings.pace),
+        let paced_until = entered + self.settings.runtime.pace();
+        let deadline = match self.settings.runtime.clock {
+            ClockMode::Lockstep => {
+                entered
+                    + self
+                        .settings
+                        .runtime
+                        .command_timeout()
+                        .max(self.settings.runtime.pace())
+            }
             ClockMode::Realtime => {
                 let periods = |tick: u64| self.dt * u32::try_from(tick).unwrap_or(u32::MAX);
                 let due = schedule_start + self.schedule_shift + periods(obs.tick);
@@ -732,8 +738,8 @@ impl Controller for AgentsController<'_> {
         };
         loop {
             self.poll()?;
-            let now = Instant::now();
-            let answered = match self.settings.clock {
+            let now = self.clock.now();
+            let answered = match self.settings.runtime.clock {
                 ClockMode::Lockstep => self.all_answered(obs.tick),
                 ClockMode::Realtime => false,
             };
@@ -743,7 +749,7 @@ impl Controller for AgentsController<'_> {
             self.wait(if answered { paced_until } else { deadline } - now)?;
         }
         self.rejoin_grace.fill(false);
-        let now = Instant::now();
+        let now = self.clock.now();
         for (robot, slot) in out.iter_mut().enumerate() {
             let newest = self.newest[robot].as_ref();
             let answered_scan_at = newest.and_then(|a| {
@@ -751,18 +757,18 @@ impl Controller for AgentsController<'_> {
                 Some(schedule_start + Duration::from_nanos(*began))
             });
             let (cmd, outcome) = choose_command(
-                self.settings.clock,
+                self.settings.runtime.clock,
                 newest,
                 self.generation,
                 obs.tick,
                 now,
-                self.settings.stale_after,
+                self.settings.runtime.stale_after(),
                 answered_scan_at,
             );
             *slot = cmd;
             match (self.states[robot], outcome) {
                 (AgentState::Live, TickOutcome::Missing | TickOutcome::Stale)
-                    if self.settings.clock == ClockMode::Lockstep =>
+                    if self.settings.runtime.clock == ClockMode::Lockstep =>
                 {
                     tracing::warn!(
                         "robot {robot}: no command for tick {} in time; braking it",
@@ -779,7 +785,7 @@ impl Controller for AgentsController<'_> {
             if outcome == TickOutcome::Fresh
                 && let Some(pid) = self.rejoining[robot].take()
             {
-                emit(&WorldEvent::AgentRejoined {
+                (self.events)(&WorldEvent::AgentRejoined {
                     robot,
                     pid,
                     tick: obs.tick,

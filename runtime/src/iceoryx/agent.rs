@@ -1,5 +1,4 @@
-//! The agent's side of the transport: what an agent needs from a message bus ([`AgentLink`]),
-//! and its iceoryx2 implementation ([`IceoryxAgentLink`]).
+//! An agent's iceoryx2 link ([`IceoryxAgentLink`]).
 //!
 //! An agent first asks in its robot's lobby to drive the robot, proving with the launch secret
 //! that its own launch started it; the world then creates the services of this agent's
@@ -9,11 +8,11 @@
 
 use std::time::{Duration, Instant};
 
-use formation_proto::auth::{LaunchSecret, SecretError, fresh_nonce};
+use formation_proto::auth::{LaunchSecret, fresh_nonce};
 use formation_proto::wire::{
-    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, NamespaceError,
-    RobotChannel, RunNamespace, ScanMsg, ServiceLimits, StatusMsg, WORLD_NODE_NAME, Welcome,
-    WelcomeMsg, WireError, agent_node_name, lobby_service_name, robot_service_name,
+    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, RobotChannel,
+    RunNamespace, ScanMsg, ServiceLimits, StatusMsg, WORLD_NODE_NAME, Welcome, WelcomeMsg,
+    agent_node_name, lobby_service_name, robot_service_name,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
@@ -23,108 +22,14 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 
-/// A transport failure, or a request to stop.
-#[derive(Debug, thiserror::Error)]
-pub enum TransportError {
-    /// The run's services did not appear in time.
-    #[error(
-        "robot {robot}'s services do not exist in run {run} after {waited_s:.1} s: is the world \
-         running with this run id, and does the scenario have more than {robot} robots?"
-    )]
-    WorldNotFound {
-        /// The robot.
-        robot: usize,
-        /// The run id.
-        run: String,
-        /// How long the agent waited.
-        waited_s: f64,
-    },
-    /// Another live process holds this robot's port.
-    #[error(
-        "robot {robot}'s {port} port is held by another process (only one agent may drive a robot): {detail}"
-    )]
-    PortTaken {
-        /// The robot.
-        robot: usize,
-        /// Which port.
-        port: &'static str,
-        /// iceoryx2's error.
-        detail: String,
-    },
-    /// iceoryx2 refused an operation.
-    #[error("iceoryx2 could not {action} ({detail})")]
-    Iceoryx {
-        /// What the agent was doing.
-        action: String,
-        /// iceoryx2's error.
-        detail: String,
-    },
-    /// The world refused this agent.
-    #[error("the world refused to let this agent drive robot {robot}: {reason}")]
-    Refused {
-        /// The robot.
-        robot: usize,
-        /// The world's reason.
-        reason: String,
-    },
-    /// The world did not answer the greeting.
-    #[error(
-        "the world of run {run} did not answer robot {robot}'s greeting within {waited_s:.1} s; \
-         is it running (and not stopped)?"
-    )]
-    NoWelcome {
-        /// The robot.
-        robot: usize,
-        /// The run id.
-        run: String,
-        /// How long the agent waited.
-        waited_s: f64,
-    },
-    /// A message could not be encoded or decoded.
-    #[error(transparent)]
-    Wire(#[from] WireError),
-    /// No nonce could be drawn.
-    #[error(transparent)]
-    Secret(#[from] SecretError),
-    /// The run's files could not be made private.
-    #[error(transparent)]
-    Namespace(#[from] NamespaceError),
-}
+use crate::link::{AgentLink, AgentLinkError, Wake};
 
-fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> TransportError {
+fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> AgentLinkError {
     let action = action.into();
-    move |e| TransportError::Iceoryx {
+    move |e| AgentLinkError::Iceoryx {
         action,
         detail: format!("{e:?}"),
     }
-}
-
-/// Why a wait ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Wake {
-    /// Something may have arrived.
-    Activity,
-    /// The timeout passed with nothing arriving.
-    Idle,
-    /// SIGINT or SIGTERM arrived.
-    Terminated,
-}
-
-/// What an agent needs from a transport: its own robot's four channels.
-pub trait AgentLink {
-    /// Blocks until the world may have sent something, `timeout` passes, or a signal arrives.
-    fn wait(&mut self, timeout: Duration) -> Result<Wake, TransportError>;
-    /// Every control request since the last call, oldest first.
-    fn drain_control(&mut self, sink: &mut dyn FnMut(ControlRequest))
-    -> Result<(), TransportError>;
-    /// The newest scan since the last call (older ones are dropped: only the newest matters).
-    fn newest_scan(&mut self) -> Result<Option<ScanMsg>, TransportError>;
-    /// Publishes a command and wakes the world.
-    fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), TransportError>;
-    /// Publishes a status and wakes the world.
-    fn publish_status(&mut self, status: &AgentStatus) -> Result<(), TransportError>;
-    /// False once the world process is gone (exited or died).
-    fn world_alive(&mut self) -> Result<bool, TransportError>;
 }
 
 /// The agent's iceoryx2 ports on its own robot's services.
@@ -153,7 +58,7 @@ impl IceoryxAgentLink {
         robot: usize,
         secret: &LaunchSecret,
         timeout: Duration,
-    ) -> Result<Self, TransportError> {
+    ) -> Result<Self, AgentLinkError> {
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
         let pid = std::process::id();
@@ -170,7 +75,7 @@ impl IceoryxAgentLink {
         namespace.restrict_permissions()?;
         let started = Instant::now();
         let deadline = started + timeout;
-        let not_found = || TransportError::WorldNotFound {
+        let not_found = || AgentLinkError::WorldNotFound {
             robot,
             run: namespace.run().to_string(),
             waited_s: started.elapsed().as_secs_f64(),
@@ -201,14 +106,14 @@ impl IceoryxAgentLink {
             let _ = lobby.hello_wake.notify();
             match await_welcome(&lobby, nonce, deadline)? {
                 None => {
-                    return Err(TransportError::NoWelcome {
+                    return Err(AgentLinkError::NoWelcome {
                         robot,
                         run: namespace.run().to_string(),
                         waited_s: started.elapsed().as_secs_f64(),
                     });
                 }
                 Some(Welcome::Refused(reason)) => {
-                    return Err(TransportError::Refused { robot, reason });
+                    return Err(AgentLinkError::Refused { robot, reason });
                 }
                 Some(Welcome::Accepted) => {}
             }
@@ -226,14 +131,14 @@ impl IceoryxAgentLink {
             }
         }
         let (port, detail) = last_taken.unwrap_or(("scan", String::new()));
-        Err(TransportError::PortTaken {
+        Err(AgentLinkError::PortTaken {
             robot,
             port,
             detail,
         })
     }
 
-    fn from_ports(node: Node<ipc::Service>, ports: Ports) -> Result<Self, TransportError> {
+    fn from_ports(node: Node<ipc::Service>, ports: Ports) -> Result<Self, AgentLinkError> {
         let waitset = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<ipc::Service>()
@@ -326,7 +231,7 @@ fn await_welcome(
     lobby: &Lobby,
     nonce: u64,
     deadline: Instant,
-) -> Result<Option<Welcome>, TransportError> {
+) -> Result<Option<Welcome>, AgentLinkError> {
     const POLL: Duration = Duration::from_millis(2);
     loop {
         while let Some(sample) = lobby
@@ -353,7 +258,7 @@ enum OpenFailure {
         port: &'static str,
         detail: String,
     },
-    Fatal(TransportError),
+    Fatal(AgentLinkError),
 }
 
 type Ports = (
@@ -446,7 +351,7 @@ fn try_open(
 }
 
 impl AgentLink for IceoryxAgentLink {
-    fn wait(&mut self, timeout: Duration) -> Result<Wake, TransportError> {
+    fn wait(&mut self, timeout: Duration) -> Result<Wake, AgentLinkError> {
         let scan_guard = self
             .waitset
             .attach_notification(&self.scan_wake)
@@ -482,7 +387,7 @@ impl AgentLink for IceoryxAgentLink {
     fn drain_control(
         &mut self,
         sink: &mut dyn FnMut(ControlRequest),
-    ) -> Result<(), TransportError> {
+    ) -> Result<(), AgentLinkError> {
         while let Some(sample) = self
             .control
             .receive()
@@ -496,7 +401,7 @@ impl AgentLink for IceoryxAgentLink {
         Ok(())
     }
 
-    fn newest_scan(&mut self) -> Result<Option<ScanMsg>, TransportError> {
+    fn newest_scan(&mut self) -> Result<Option<ScanMsg>, AgentLinkError> {
         let mut newest = None;
         while let Some(sample) = self.scan.receive().map_err(|e| iox("receive a scan")(&e))? {
             newest = Some(*sample.payload());
@@ -504,7 +409,7 @@ impl AgentLink for IceoryxAgentLink {
         Ok(newest)
     }
 
-    fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), TransportError> {
+    fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), AgentLinkError> {
         self.cmd
             .send_copy(*msg)
             .map_err(|e| iox("send a command")(&e))?;
@@ -512,7 +417,7 @@ impl AgentLink for IceoryxAgentLink {
         Ok(())
     }
 
-    fn publish_status(&mut self, status: &AgentStatus) -> Result<(), TransportError> {
+    fn publish_status(&mut self, status: &AgentStatus) -> Result<(), AgentLinkError> {
         let msg = StatusMsg::encode(status)?;
         self.status
             .send_copy(msg)
@@ -521,7 +426,7 @@ impl AgentLink for IceoryxAgentLink {
         Ok(())
     }
 
-    fn world_alive(&mut self) -> Result<bool, TransportError> {
+    fn world_alive(&mut self) -> Result<bool, AgentLinkError> {
         let mut alive = false;
         Node::<ipc::Service>::list(self.node.config(), |state| {
             if let NodeState::Alive(view) = &state

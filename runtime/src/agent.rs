@@ -1,0 +1,467 @@
+//! The agent's loop: one robot's decision maker between its link and its pilot.
+//!
+//! [`AgentLoop`] waits on its [`AgentLink`], answers control requests (begin an episode: get
+//! ready or refuse with the reason; swap the model: load it on a helper thread, off the hot path,
+//! and put it in place at a tick boundary; shut down), and turns each scan of the current episode
+//! into one command through its [`Pilot`] (perceive, then decide, each timed), optionally altered
+//! by an injected [`Fault`]. It knows nothing of ONNX: a [`PilotMaker`] loads models and makes
+//! pilots of them (the `formation-agent` binary's is ONNX, unit tests use a double). It reads time
+//! only from its [`Clock`].
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use formation_proto::wire::{
+    AgentStatus, AgentTimings, CmdMsg, CmdStatus, ControlRequest, ScanMsg, WireError, wall_clock_ns,
+};
+use formation_proto::{Goal, LidarSpec, WheelCmd};
+
+use crate::clock::Clock;
+use crate::faults::{Fault, FaultAction};
+use crate::link::{AgentLink, AgentLinkError, Wake};
+
+/// Any error a pilot or a model loader gives; its chain of sources is kept and shown.
+pub type BoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// One robot's decision maker, as the agent loop drives it.
+pub trait Pilot {
+    /// The model it runs (loaded off the hot path for a swap).
+    type Model: Send + 'static;
+    /// The id of the model now driving (logged with every command).
+    fn model_id(&self) -> &str;
+    /// Takes in this robot's own scan (the occupancy rendering).
+    fn perceive(&mut self, ranges: &[f32]) -> Result<(), BoxError>;
+    /// Decides the wheel command from the last perceived scan, the own heading and the goal.
+    fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, BoxError>;
+    /// Puts another model in place after validating it; on error the old one keeps driving.
+    fn swap(&mut self, model: Self::Model) -> Result<(), BoxError>;
+}
+
+/// Loads models and makes pilots of them for a robot's sensor.
+pub trait PilotMaker: Send + Sync + 'static {
+    /// The model type.
+    type Model: Send + 'static;
+    /// The pilot type.
+    type Pilot: Pilot<Model = Self::Model>;
+    /// Loads and validates the model at `path` (runs on a helper thread for swaps).
+    fn load(&self, path: &Path) -> Result<Self::Model, BoxError>;
+    /// The id of a loaded model.
+    fn model_id<'m>(&self, model: &'m Self::Model) -> &'m str;
+    /// A pilot running `model` on a robot with this LIDAR; refuses a model made for another
+    /// sensor.
+    fn pilot(&self, model: Self::Model, lidar: LidarSpec) -> Result<Self::Pilot, BoxError>;
+}
+
+/// Why a model could not drive.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    /// It could not be loaded or validated.
+    #[error("loading model {}", path.display())]
+    Load {
+        /// The model file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: BoxError,
+    },
+    /// It was made for another sensor.
+    #[error("model {} does not fit this robot", path.display())]
+    Unfit {
+        /// The model file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: BoxError,
+    },
+    /// The helper thread loading a swap model ended without an answer.
+    #[error("the model loader thread stopped unexpectedly")]
+    LoaderGone,
+    /// A swap arrived before any episode gave the sensor settings.
+    #[error("no episode has begun yet")]
+    NoEpisode,
+    /// The pilot refused the loaded model.
+    #[error(transparent)]
+    Refused(BoxError),
+}
+
+/// Why the agent's loop failed.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentError {
+    /// The link failed.
+    #[error(transparent)]
+    Link(#[from] AgentLinkError),
+    /// A command could not be encoded.
+    #[error(transparent)]
+    Wire(#[from] WireError),
+}
+
+/// Why the agent's loop ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum AgentExit {
+    /// The world ended the run: the normal way out, nothing to tell the user.
+    Shutdown,
+    /// SIGINT or SIGTERM.
+    Signal,
+    /// Anything else, told to the user.
+    Because(String),
+}
+
+/// How long the agent waits with nothing arriving before checking that the world still exists.
+pub const IDLE_CHECK: Duration = Duration::from_millis(250);
+
+/// `error: source: source of source ...`, the whole chain on one line.
+pub fn error_chain(error: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = error.to_string();
+    let mut source = error.source();
+    while let Some(cause) = source {
+        text.push_str(": ");
+        text.push_str(&cause.to_string());
+        source = cause.source();
+    }
+    text
+}
+
+/// Loads the model at `path` with `maker`, naming the file on error.
+pub fn load_model<M: PilotMaker>(maker: &M, path: &Path) -> Result<M::Model, ModelError> {
+    maker.load(path).map_err(|source| ModelError::Load {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// A model being loaded on a helper thread for a swap request.
+struct PendingSwap<T> {
+    request_id: u64,
+    at_tick: u64,
+    path: PathBuf,
+    loaded: mpsc::Receiver<Result<T, ModelError>>,
+    /// The loader's result once taken from `loaded`.
+    result: Option<Result<T, ModelError>>,
+}
+
+/// One robot's agent between messages: its pilot, its episode, a swap under way.
+pub struct AgentLoop<M: PilotMaker> {
+    maker: Arc<M>,
+    clock: Arc<dyn Clock>,
+    model_path: PathBuf,
+    /// The loaded model before the first episode gives the sensor settings.
+    idle_model: Option<M::Model>,
+    pilot: Option<(M::Pilot, LidarSpec)>,
+    generation: u64,
+    pending_swap: Option<PendingSwap<M::Model>>,
+    fault: Option<Fault>,
+    answered: u64,
+}
+
+impl<M: PilotMaker> AgentLoop<M> {
+    /// An agent that will drive with `model` (loaded from `model_path` by `maker`), misbehaving
+    /// as `fault` says (testing only), reading time from `clock`.
+    pub fn new(
+        maker: Arc<M>,
+        model_path: PathBuf,
+        model: M::Model,
+        fault: Option<Fault>,
+        clock: Arc<dyn Clock>,
+    ) -> Self {
+        AgentLoop {
+            maker,
+            clock,
+            model_path,
+            idle_model: Some(model),
+            pilot: None,
+            generation: 0,
+            pending_swap: None,
+            fault,
+            answered: 0,
+        }
+    }
+
+    /// Says hello on a freshly connected link: this process (`pid`) is up with its model.
+    pub fn greet(&mut self, link: &mut dyn AgentLink, pid: u32) -> Result<(), AgentError> {
+        let model_id = match (&self.idle_model, &self.pilot) {
+            (Some(model), _) => self.maker.model_id(model).to_owned(),
+            (None, Some((pilot, _))) => pilot.model_id().to_owned(),
+            (None, None) => String::new(),
+        };
+        link.publish_status(&AgentStatus::Hello { pid, model_id })?;
+        Ok(())
+    }
+
+    /// Runs until the world shuts the agent down, a signal arrives, `stop` is set (the launcher
+    /// closed the agent's input), or the world of run `run` goes away (checked whenever nothing
+    /// arrived for [`IDLE_CHECK`]).
+    pub fn run(
+        &mut self,
+        link: &mut dyn AgentLink,
+        stop: &AtomicBool,
+        run: &str,
+    ) -> Result<AgentExit, AgentError> {
+        loop {
+            if stop.load(Ordering::Relaxed) {
+                return Ok(AgentExit::Because("the launcher closed our input".into()));
+            }
+            match link.wait(IDLE_CHECK)? {
+                Wake::Terminated => return Ok(AgentExit::Signal),
+                Wake::Idle => {
+                    if !link.world_alive()? {
+                        return Ok(AgentExit::Because(format!(
+                            "the world process of run {run} went away (it exited, crashed or \
+                             was killed); nothing left to drive"
+                        )));
+                    }
+                }
+                Wake::Activity => {}
+            }
+            if let Some(exit) = self.handle(link)? {
+                return Ok(exit);
+            }
+        }
+    }
+
+    /// Handles everything that arrived: control requests first, then the newest scan.
+    /// `Some(exit)` means exit.
+    pub fn handle(&mut self, link: &mut dyn AgentLink) -> Result<Option<AgentExit>, AgentError> {
+        let mut requests = Vec::new();
+        link.drain_control(&mut |r| requests.push(r))?;
+        for request in requests {
+            if let Some(exit) = self.on_control(request, link)? {
+                return Ok(Some(exit));
+            }
+        }
+        if let Some(scan) = link.newest_scan()? {
+            self.on_scan(&scan, link)?;
+        }
+        Ok(None)
+    }
+
+    /// Handles one control request; `Some(exit)` means exit.
+    fn on_control(
+        &mut self,
+        request: ControlRequest,
+        link: &mut dyn AgentLink,
+    ) -> Result<Option<AgentExit>, AgentError> {
+        match request {
+            ControlRequest::Shutdown => return Ok(Some(AgentExit::Shutdown)),
+            ControlRequest::BeginEpisode { generation, lidar } => {
+                self.generation = generation;
+                let status = match self.prepare(lidar) {
+                    Ok(model_id) => AgentStatus::Ready {
+                        generation,
+                        model_id,
+                    },
+                    Err(e) => AgentStatus::Refused {
+                        generation,
+                        reason: error_chain(&e),
+                    },
+                };
+                link.publish_status(&status)?;
+            }
+            ControlRequest::SwapModel {
+                request_id,
+                at_tick,
+                path,
+            } => {
+                let (tx, rx) = mpsc::channel();
+                let load_path = path.clone();
+                let maker = Arc::clone(&self.maker);
+                std::thread::spawn(move || {
+                    let _ = tx.send(load_model(&*maker, &load_path));
+                });
+                if let Some(previous) = self.pending_swap.replace(PendingSwap {
+                    request_id,
+                    at_tick,
+                    path,
+                    loaded: rx,
+                    result: None,
+                }) {
+                    link.publish_status(&AgentStatus::SwapRefused {
+                        request_id: previous.request_id,
+                        reason: format!("superseded by swap request {request_id}"),
+                    })?;
+                }
+            }
+        }
+        Ok(None)
+    }
+
+    /// Makes the agent ready for an episode with this sensor; returns the model id.
+    fn prepare(&mut self, lidar: LidarSpec) -> Result<String, ModelError> {
+        if let Some((pilot, current)) = &self.pilot
+            && *current == lidar
+        {
+            return Ok(pilot.model_id().to_owned());
+        }
+        let model = match self.idle_model.take() {
+            Some(model) => model,
+            None => load_model(&*self.maker, &self.model_path)?,
+        };
+        let pilot = self
+            .maker
+            .pilot(model, lidar)
+            .map_err(|source| ModelError::Unfit {
+                path: self.model_path.clone(),
+                source,
+            })?;
+        let id = pilot.model_id().to_owned();
+        self.pilot = Some((pilot, lidar));
+        Ok(id)
+    }
+
+    /// Puts a loaded swap model in place when its tick has come. A swap with `at_tick > 0` waits
+    /// for the load at that tick (so a lockstep run swaps at exactly that tick); `at_tick == 0`
+    /// swaps as soon as the model is ready. A model that fails to load or validate is refused as
+    /// soon as that is known, and the current model keeps driving.
+    fn apply_swap(&mut self, tick: u64, link: &mut dyn AgentLink) -> Result<bool, AgentError> {
+        let Some(pending) = &mut self.pending_swap else {
+            return Ok(false);
+        };
+        if pending.result.is_none() {
+            let must_have_it = pending.at_tick > 0 && tick >= pending.at_tick;
+            pending.result = if must_have_it {
+                Some(pending.loaded.recv().unwrap_or(Err(ModelError::LoaderGone)))
+            } else {
+                match pending.loaded.try_recv() {
+                    Ok(result) => Some(result),
+                    Err(mpsc::TryRecvError::Empty) => None,
+                    Err(mpsc::TryRecvError::Disconnected) => Some(Err(ModelError::LoaderGone)),
+                }
+            };
+        }
+        let ready = match &pending.result {
+            None => return Ok(false),
+            Some(Ok(_)) => tick >= pending.at_tick,
+            Some(Err(_)) => true,
+        };
+        if !ready {
+            return Ok(false);
+        }
+        let Some(pending) = self.pending_swap.take() else {
+            return Ok(false);
+        };
+        let outcome = pending
+            .result
+            .unwrap_or(Err(ModelError::LoaderGone))
+            .and_then(|model| match &mut self.pilot {
+                Some((pilot, _)) => pilot.swap(model).map_err(ModelError::Refused),
+                None => Err(ModelError::NoEpisode),
+            });
+        match outcome {
+            Ok(()) => {
+                self.model_path = pending.path;
+                let model_id = self
+                    .pilot
+                    .as_ref()
+                    .map(|(p, _)| p.model_id().to_owned())
+                    .unwrap_or_default();
+                link.publish_status(&AgentStatus::SwapDone {
+                    request_id: pending.request_id,
+                    tick,
+                    model_id,
+                })?;
+                Ok(true)
+            }
+            Err(e) => {
+                link.publish_status(&AgentStatus::SwapRefused {
+                    request_id: pending.request_id,
+                    reason: format!(
+                        "the old model keeps driving; the new one failed: {}",
+                        error_chain(&e)
+                    ),
+                })?;
+                Ok(false)
+            }
+        }
+    }
+
+    /// Decides and publishes the command for one scan of the current episode.
+    fn on_scan(&mut self, scan: &ScanMsg, link: &mut dyn AgentLink) -> Result<(), AgentError> {
+        let received_wall_ns = wall_clock_ns();
+        if scan.generation != self.generation || self.pilot.is_none() {
+            return Ok(()); // a scan of an episode this agent is not (yet) part of
+        }
+        let swapped = self.apply_swap(scan.tick, link)?;
+        let Some((pilot, _)) = &mut self.pilot else {
+            return Ok(());
+        };
+        let started = self.clock.now();
+        let perceived = scan
+            .ranges()
+            .map_err(BoxError::from)
+            .and_then(|r| pilot.perceive(r));
+        let perceived_at = self.clock.now();
+        let decided = perceived.and_then(|()| pilot.decide(scan.heading, &scan.goal()));
+        let decided_at = self.clock.now();
+        let timings = AgentTimings {
+            received_wall_ns,
+            occupancy_ns: nanos(perceived_at - started),
+            inference_ns: nanos(decided_at - perceived_at),
+        };
+        let mut status = if swapped {
+            CmdStatus::MODEL_SWAPPED
+        } else {
+            CmdStatus::OK
+        };
+        let mut cmd = match decided {
+            Ok(cmd) => cmd,
+            Err(e) => {
+                tracing::warn!(
+                    "tick {}: cannot decide ({}); asking for a brake",
+                    scan.tick,
+                    error_chain(e.as_ref())
+                );
+                status = status.with(CmdStatus::DECISION_FAILED);
+                WheelCmd::BRAKE
+            }
+        };
+        if let Some(fault) = self.fault {
+            match fault.action(self.answered) {
+                FaultAction::None => {}
+                FaultAction::Crash => {
+                    eprintln!(
+                        "formation-agent: injected crash after {} commands",
+                        self.answered
+                    );
+                    std::process::abort();
+                }
+                FaultAction::Hang => {
+                    eprintln!(
+                        "formation-agent: injected hang after {} commands",
+                        self.answered
+                    );
+                    loop {
+                        std::thread::sleep(Duration::from_secs(3600));
+                    }
+                }
+                FaultAction::Delay(d) => {
+                    self.clock.sleep(d);
+                    status = status.with(CmdStatus::FAULT_INJECTED);
+                }
+                FaultAction::Nan => {
+                    cmd = WheelCmd {
+                        left: f64::NAN,
+                        right: f64::NAN,
+                    };
+                    status = status.with(CmdStatus::FAULT_INJECTED);
+                }
+            }
+        }
+        let msg = CmdMsg::new(
+            scan.generation,
+            scan.tick,
+            cmd,
+            pilot.model_id(),
+            timings,
+            status,
+        )?;
+        link.publish_command(&msg)?;
+        self.answered += 1;
+        Ok(())
+    }
+}
+
+fn nanos(d: Duration) -> u64 {
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)
+}

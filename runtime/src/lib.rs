@@ -1,0 +1,34 @@
+//! The multi-process runtime as a library, independent of the transport.
+//!
+//! * [`exchange`]: the world's side, [`exchange::AgentsController`], a
+//!   [`Controller`](formation_proto::control::Controller) that trades each robot's scan for its
+//!   command under the clock mode's rule, with the watchdog, admission by the launch secret,
+//!   lagging and rejoining, the realtime schedule and swap forwarding.
+//! * [`agent`]: an agent's side, [`agent::AgentLoop`]: control requests, swaps at a tick
+//!   boundary, one command per scan through a [`agent::Pilot`], and injected [`faults`].
+//! * [`link`]: the seams both talk through, [`link::WorldLink`] and [`link::AgentLink`].
+//! * [`iceoryx`]: the links over iceoryx2 shared memory, used by the `formation-world` and
+//!   `formation-agent` processes.
+//! * [`memory`]: both links over channels in one process, for tests.
+//! * [`clock`]: the injected [`clock::Clock`] (system, or fake for tests).
+//! * [`settings`]: [`settings::ClockMode`] and [`settings::RuntimeSettings`], shared by the
+//!   launcher and the world.
+//! * [`process`]: what both processes do about the launcher going away.
+//!
+//! Dependencies point one way: this crate depends only on `formation-proto`; the world's binary,
+//! the agent's binary and the launcher depend on it, and it knows neither physics nor ONNX.
+
+pub mod agent;
+pub mod clock;
+pub mod exchange;
+pub mod faults;
+pub mod iceoryx;
+pub mod link;
+pub mod memory;
+pub mod process;
+pub mod settings;
+
+pub use settings::{ClockMode, RuntimeSettings};
+
+#[cfg(test)]
+mod tests;

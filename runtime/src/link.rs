@@ -1,0 +1,213 @@
+//! The transport seams: what the world needs from a message bus ([`WorldLink`]) and what an agent
+//! needs ([`AgentLink`]), with their errors.
+//!
+//! The exchange ([`crate::exchange`]) and the agent loop ([`crate::agent`]) talk only to these
+//! traits, so a transport is one implementation among others: iceoryx2 shared memory
+//! ([`crate::iceoryx`]) for the processes, channels in one process ([`crate::memory`]) for tests,
+//! and later Zenoh for agents on other hosts. The world watches command ages itself, so its
+//! watchdog does not depend on the transport's own liveness reports; those
+//! ([`WorldLink::dead_agents`]) only speed up noticing a crashed agent and clean up after it.
+//!
+//! Per robot the world holds a lobby (hellos in, welcomes out) from the start, and the channels of
+//! the robot's current *incarnation* only once the exchange has accepted an agent's proof of the
+//! launch secret ([`WorldLink::open_incarnation`]). Until then, and after the agent is gone
+//! ([`WorldLink::close_incarnation`]), publishing to the robot is a no-op and nothing arrives
+//! from it.
+
+use std::time::Duration;
+
+use formation_proto::auth::SecretError;
+use formation_proto::wire::{
+    AgentStatus, CmdMsg, ControlRequest, NamespaceError, ScanMsg, SwapReply, SwapRequest, Welcome,
+    WireError,
+};
+
+/// A failure of the world's transport, or a request to stop.
+#[derive(Debug, thiserror::Error)]
+pub enum WorldLinkError {
+    /// iceoryx2 refused an operation.
+    #[error("iceoryx2 could not {action} ({detail}); is another world running with this run id?")]
+    Iceoryx {
+        /// What the world was doing.
+        action: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// A message could not be encoded or decoded.
+    #[error(transparent)]
+    Wire(#[from] WireError),
+    /// SIGINT or SIGTERM arrived.
+    #[error("stopped by a termination signal")]
+    Terminated,
+    /// The run's files could not be made private.
+    #[error(transparent)]
+    Namespace(#[from] NamespaceError),
+}
+
+/// An agent's request to drive a robot, as it arrived in the robot's lobby.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Hello {
+    /// The pid the candidate gave.
+    pub pid: u32,
+    /// Its nonce: names the incarnation if accepted.
+    pub nonce: u64,
+    /// Its proof of the launch secret.
+    pub proof: [u8; formation_proto::auth::PROOF_LEN],
+}
+
+/// What the world needs from a transport: per-robot channels to and from the agents.
+pub trait WorldLink {
+    /// Number of robots the link serves.
+    fn n_robots(&self) -> usize;
+    /// Hands every hello that candidates for robot `robot` sent since the last call to `sink`.
+    fn drain_hellos(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(Hello),
+    ) -> Result<(), WorldLinkError>;
+    /// Answers the hello with `nonce` in robot `robot`'s lobby.
+    fn answer_hello(
+        &mut self,
+        robot: usize,
+        nonce: u64,
+        welcome: &Welcome,
+    ) -> Result<(), WorldLinkError>;
+    /// Creates the channels of robot `robot`'s new incarnation and takes the world's ends,
+    /// dropping those of the previous incarnation.
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError>;
+    /// Drops the world's ends of robot `robot`'s current incarnation (its agent is gone).
+    fn close_incarnation(&mut self, robot: usize);
+    /// Publishes robot `robot`'s scan and wakes its agent.
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError>;
+    /// Sends a control request to robot `robot`'s agent and wakes it.
+    fn send_control(
+        &mut self,
+        robot: usize,
+        request: &ControlRequest,
+    ) -> Result<(), WorldLinkError>;
+    /// Blocks until an agent may have sent something, or `timeout` passes. An interrupted wait
+    /// (EINTR) returns `Ok`; SIGINT/SIGTERM is [`WorldLinkError::Terminated`].
+    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError>;
+    /// Hands every command robot `robot`'s agent sent since the last call to `sink`, oldest
+    /// first, at once as it takes each (the exchange stamps its arrival time in `sink`).
+    fn drain_commands(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(CmdMsg),
+    ) -> Result<(), WorldLinkError>;
+    /// Hands every status robot `robot`'s agent sent since the last call to `sink`, oldest first.
+    fn drain_statuses(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(AgentStatus),
+    ) -> Result<(), WorldLinkError>;
+    /// Whether agent process `pid` of robot `robot` is still alive, as far as the transport can
+    /// tell (a stopped process is alive).
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError>;
+    /// `(robot, pid)` of agent processes the transport knows to be dead; cleans up after them so
+    /// a restarted agent can take their place.
+    fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError>;
+    /// Hands every swap request that users sent since the last call to `sink`, oldest first.
+    fn drain_swap_requests(
+        &mut self,
+        sink: &mut dyn FnMut(SwapRequest),
+    ) -> Result<(), WorldLinkError>;
+    /// Answers a swap request.
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), WorldLinkError>;
+}
+
+/// A failure of an agent's transport.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentLinkError {
+    /// The run's services did not appear in time.
+    #[error(
+        "robot {robot}'s services do not exist in run {run} after {waited_s:.1} s: is the world \
+         running with this run id, and does the scenario have more than {robot} robots?"
+    )]
+    WorldNotFound {
+        /// The robot.
+        robot: usize,
+        /// The run id.
+        run: String,
+        /// How long the agent waited.
+        waited_s: f64,
+    },
+    /// Another live process holds this robot's port.
+    #[error(
+        "robot {robot}'s {port} port is held by another process (only one agent may drive a robot): {detail}"
+    )]
+    PortTaken {
+        /// The robot.
+        robot: usize,
+        /// Which port.
+        port: &'static str,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// iceoryx2 refused an operation.
+    #[error("iceoryx2 could not {action} ({detail})")]
+    Iceoryx {
+        /// What the agent was doing.
+        action: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// The world refused this agent.
+    #[error("the world refused to let this agent drive robot {robot}: {reason}")]
+    Refused {
+        /// The robot.
+        robot: usize,
+        /// The world's reason.
+        reason: String,
+    },
+    /// The world did not answer the greeting.
+    #[error(
+        "the world of run {run} did not answer robot {robot}'s greeting within {waited_s:.1} s; \
+         is it running (and not stopped)?"
+    )]
+    NoWelcome {
+        /// The robot.
+        robot: usize,
+        /// The run id.
+        run: String,
+        /// How long the agent waited.
+        waited_s: f64,
+    },
+    /// A message could not be encoded or decoded.
+    #[error(transparent)]
+    Wire(#[from] WireError),
+    /// No nonce could be drawn.
+    #[error(transparent)]
+    Secret(#[from] SecretError),
+    /// The run's files could not be made private.
+    #[error(transparent)]
+    Namespace(#[from] NamespaceError),
+}
+
+/// Why an agent's wait ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// Something may have arrived (or a signal interrupted the wait: look again).
+    Activity,
+    /// The timeout passed with nothing arriving.
+    Idle,
+    /// SIGINT or SIGTERM arrived.
+    Terminated,
+}
+
+/// What an agent needs from a transport: its own robot's four channels.
+pub trait AgentLink {
+    /// Blocks until the world may have sent something, `timeout` passes, or a signal arrives.
+    fn wait(&mut self, timeout: Duration) -> Result<Wake, AgentLinkError>;
+    /// Every control request since the last call, oldest first.
+    fn drain_control(&mut self, sink: &mut dyn FnMut(ControlRequest))
+    -> Result<(), AgentLinkError>;
+    /// The newest scan since the last call (older ones are dropped: only the newest matters).
+    fn newest_scan(&mut self) -> Result<Option<ScanMsg>, AgentLinkError>;
+    /// Publishes a command and wakes the world.
+    fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), AgentLinkError>;
+    /// Publishes a status and wakes the world.
+    fn publish_status(&mut self, status: &AgentStatus) -> Result<(), AgentLinkError>;
+    /// False once the world process is gone (exited or died).
+    fn world_alive(&mut self) -> Result<bool, AgentLinkError>;
+}

@@ -1,0 +1,437 @@
+//! Both links over channels in one process ([`MemoryBus`]), for tests of the exchange and the
+//! agent loop without processes or shared memory.
+//!
+//! A [`MemoryBus`] holds every queue of one run: per robot a lobby (hellos, welcomes) and the
+//! channels of its current incarnation, and the swap channel. [`MemoryBus::world_link`] is the
+//! world's end ([`WorldLink`]), [`MemoryBus::agent_link`] an agent's end on the incarnation its
+//! accepted greeting named ([`AgentLink`]). As over iceoryx2, what an agent of a closed
+//! incarnation sends reaches nobody, and the world's messages reach only the current one.
+//!
+//! The bus also plays the operating system: [`MemoryBus::kill`] makes an agent process dead (the
+//! world learns it from [`WorldLink::agent_alive`] and once from [`WorldLink::dead_agents`]),
+//! [`MemoryBus::terminate_world`] a termination signal, [`MemoryBus::end_world`] the world's exit.
+//!
+//! Waits never block on other threads: a wait with nothing queued first runs the world link's
+//! wait hook ([`MemoryWorldLink::on_wait`], where a test runs its agents), then lets the timeout
+//! pass on the bus's [`Clock`], which for a [`FakeClock`](crate::clock::FakeClock) is instant. So a
+//! whole run is one deterministic thread.
+
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use formation_proto::auth::LaunchSecret;
+use formation_proto::wire::{
+    AgentStatus, CmdMsg, ControlRequest, RunId, ScanMsg, SwapReply, SwapRequest, Welcome,
+};
+
+use crate::clock::Clock;
+use crate::link::{AgentLink, AgentLinkError, Hello, Wake, WorldLink, WorldLinkError};
+
+/// The queues of one incarnation of a robot.
+#[derive(Debug, Default)]
+struct Incarnation {
+    id: u64,
+    scans: VecDeque<ScanMsg>,
+    control: VecDeque<ControlRequest>,
+    cmds: VecDeque<CmdMsg>,
+    statuses: VecDeque<AgentStatus>,
+}
+
+#[derive(Debug, Default)]
+struct Lobby {
+    hellos: VecDeque<Hello>,
+    welcomes: HashMap<u64, Welcome>,
+}
+
+#[derive(Debug)]
+struct BusState {
+    lobbies: Vec<Lobby>,
+    robots: Vec<Option<Incarnation>>,
+    swap_requests: VecDeque<SwapRequest>,
+    swap_replies: Vec<SwapReply>,
+    /// Agent processes that died and the world has not been told of yet.
+    unreported_dead: Vec<(usize, u32)>,
+    /// Every agent process that died.
+    dead: HashSet<(usize, u32)>,
+    world_alive: bool,
+    terminate_world: bool,
+    next_nonce: u64,
+}
+
+impl BusState {
+    fn incarnation(&mut self, robot: usize, id: u64) -> Option<&mut Incarnation> {
+        self.robots
+            .get_mut(robot)?
+            .as_mut()
+            .filter(|incarnation| incarnation.id == id)
+    }
+
+    fn world_has_mail(&self) -> bool {
+        self.lobbies.iter().any(|l| !l.hellos.is_empty())
+            || !self.swap_requests.is_empty()
+            || self
+                .robots
+                .iter()
+                .flatten()
+                .any(|i| !i.cmds.is_empty() || !i.statuses.is_empty())
+    }
+}
+
+/// Every queue of one in-memory run, shared by the world's link and the agents' links.
+#[derive(Clone)]
+pub struct MemoryBus {
+    state: Arc<Mutex<BusState>>,
+    clock: Arc<dyn Clock>,
+}
+
+impl MemoryBus {
+    /// A bus for `n_robots` robots whose waits let time pass on `clock`.
+    pub fn new(n_robots: usize, clock: Arc<dyn Clock>) -> MemoryBus {
+        let state = BusState {
+            lobbies: (0..n_robots).map(|_| Lobby::default()).collect(),
+            robots: (0..n_robots).map(|_| None).collect(),
+            swap_requests: VecDeque::new(),
+            swap_replies: Vec::new(),
+            unreported_dead: Vec::new(),
+            dead: HashSet::new(),
+            world_alive: true,
+            terminate_world: false,
+            next_nonce: 1,
+        };
+        MemoryBus {
+            state: Arc::new(Mutex::new(state)),
+            clock,
+        }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, BusState> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The world's end.
+    pub fn world_link(&self) -> MemoryWorldLink {
+        MemoryWorldLink {
+            bus: self.clone(),
+            hook: None,
+        }
+    }
+
+    /// Sends a hello in robot `robot`'s lobby as it is (a test may forge one).
+    pub fn send_hello(&self, robot: usize, hello: Hello) {
+        if let Some(lobby) = self.lock().lobbies.get_mut(robot) {
+            lobby.hellos.push_back(hello);
+        }
+    }
+
+    /// Asks to drive robot `robot` of run `run` as process `pid`, proving `secret` with a fresh
+    /// nonce; returns the nonce, which names the incarnation if the world accepts.
+    pub fn greet(&self, robot: usize, pid: u32, run: &RunId, secret: &LaunchSecret) -> u64 {
+        let nonce = {
+            let mut state = self.lock();
+            state.next_nonce += 1;
+            state.next_nonce
+        };
+        self.send_hello(
+            robot,
+            Hello {
+                pid,
+                nonce,
+                proof: secret.prove(run, robot, pid, nonce),
+            },
+        );
+        nonce
+    }
+
+    /// The world's answer to the hello with `nonce` in robot `robot`'s lobby, once it gave one.
+    pub fn welcome(&self, robot: usize, nonce: u64) -> Option<Welcome> {
+        self.lock().lobbies.get_mut(robot)?.welcomes.remove(&nonce)
+    }
+
+    /// An agent's end on robot `robot`'s incarnation `nonce` (its accepted greeting's nonce).
+    pub fn agent_link(&self, robot: usize, nonce: u64) -> MemoryAgentLink {
+        MemoryAgentLink {
+            bus: self.clone(),
+            robot,
+            incarnation: nonce,
+        }
+    }
+
+    /// Agent process `pid` of robot `robot` dies.
+    pub fn kill(&self, robot: usize, pid: u32) {
+        let mut state = self.lock();
+        if state.dead.insert((robot, pid)) {
+            state.unreported_dead.push((robot, pid));
+        }
+    }
+
+    /// The world receives a termination signal: its next wait ends with
+    /// [`WorldLinkError::Terminated`].
+    pub fn terminate_world(&self) {
+        self.lock().terminate_world = true;
+    }
+
+    /// The world process is gone: agents see it in [`AgentLink::world_alive`].
+    pub fn end_world(&self) {
+        self.lock().world_alive = false;
+    }
+
+    /// A user's swap request (what `formation swap` sends).
+    pub fn request_swap(&self, request: SwapRequest) {
+        self.lock().swap_requests.push_back(request);
+    }
+
+    /// The swap replies the world sent since the last call.
+    pub fn take_swap_replies(&self) -> Vec<SwapReply> {
+        std::mem::take(&mut self.lock().swap_replies)
+    }
+}
+
+/// The world's end of a [`MemoryBus`].
+pub struct MemoryWorldLink {
+    bus: MemoryBus,
+    hook: Option<Box<dyn FnMut()>>,
+}
+
+impl MemoryWorldLink {
+    /// Runs `hook` whenever the world would wait with nothing queued, before time passes: a
+    /// test runs its agents there, so one thread plays the whole launch.
+    pub fn on_wait(&mut self, hook: impl FnMut() + 'static) {
+        self.hook = Some(Box::new(hook));
+    }
+}
+
+fn no_robot(robot: usize) -> WorldLinkError {
+    WorldLinkError::Iceoryx {
+        action: format!("reach robot {robot}"),
+        detail: "no such robot on the in-memory bus".into(),
+    }
+}
+
+impl WorldLink for MemoryWorldLink {
+    fn n_robots(&self) -> usize {
+        self.bus.lock().lobbies.len()
+    }
+
+    fn drain_hellos(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(Hello),
+    ) -> Result<(), WorldLinkError> {
+        let hellos: Vec<Hello> = {
+            let mut state = self.bus.lock();
+            let lobby = state
+                .lobbies
+                .get_mut(robot)
+                .ok_or_else(|| no_robot(robot))?;
+            lobby.hellos.drain(..).collect()
+        };
+        hellos.into_iter().for_each(sink);
+        Ok(())
+    }
+
+    fn answer_hello(
+        &mut self,
+        robot: usize,
+        nonce: u64,
+        welcome: &Welcome,
+    ) -> Result<(), WorldLinkError> {
+        let mut state = self.bus.lock();
+        let lobby = state
+            .lobbies
+            .get_mut(robot)
+            .ok_or_else(|| no_robot(robot))?;
+        lobby.welcomes.insert(nonce, welcome.clone());
+        Ok(())
+    }
+
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
+        let mut state = self.bus.lock();
+        let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
+        *slot = Some(Incarnation {
+            id: incarnation,
+            ..Incarnation::default()
+        });
+        Ok(())
+    }
+
+    fn close_incarnation(&mut self, robot: usize) {
+        if let Some(slot) = self.bus.lock().robots.get_mut(robot) {
+            *slot = None;
+        }
+    }
+
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError> {
+        let mut state = self.bus.lock();
+        let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
+        if let Some(incarnation) = slot {
+            incarnation.scans.push_back(*msg);
+        }
+        Ok(())
+    }
+
+    fn send_control(
+        &mut self,
+        robot: usize,
+        request: &ControlRequest,
+    ) -> Result<(), WorldLinkError> {
+        let mut state = self.bus.lock();
+        let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
+        if let Some(incarnation) = slot {
+            incarnation.control.push_back(request.clone());
+        }
+        Ok(())
+    }
+
+    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
+        let ready = |bus: &MemoryBus| -> Result<bool, WorldLinkError> {
+            let state = bus.lock();
+            if state.terminate_world {
+                return Err(WorldLinkError::Terminated);
+            }
+            Ok(state.world_has_mail())
+        };
+        if ready(&self.bus)? {
+            return Ok(());
+        }
+        if let Some(hook) = &mut self.hook {
+            hook();
+            if ready(&self.bus)? {
+                return Ok(());
+            }
+        }
+        self.bus.clock.sleep(timeout);
+        Ok(())
+    }
+
+    fn drain_commands(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(CmdMsg),
+    ) -> Result<(), WorldLinkError> {
+        let cmds: Vec<CmdMsg> = {
+            let mut state = self.bus.lock();
+            let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
+            slot.as_mut()
+                .map(|i| i.cmds.drain(..).collect())
+                .unwrap_or_default()
+        };
+        cmds.into_iter().for_each(sink);
+        Ok(())
+    }
+
+    fn drain_statuses(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(AgentStatus),
+    ) -> Result<(), WorldLinkError> {
+        let statuses: Vec<AgentStatus> = {
+            let mut state = self.bus.lock();
+            let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
+            slot.as_mut()
+                .map(|i| i.statuses.drain(..).collect())
+                .unwrap_or_default()
+        };
+        statuses.into_iter().for_each(sink);
+        Ok(())
+    }
+
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
+        Ok(!self.bus.lock().dead.contains(&(robot, pid)))
+    }
+
+    fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError> {
+        let mut dead = std::mem::take(&mut self.bus.lock().unreported_dead);
+        dead.sort_unstable();
+        dead.dedup();
+        Ok(dead)
+    }
+
+    fn drain_swap_requests(
+        &mut self,
+        sink: &mut dyn FnMut(SwapRequest),
+    ) -> Result<(), WorldLinkError> {
+        let requests: Vec<SwapRequest> = self.bus.lock().swap_requests.drain(..).collect();
+        requests.into_iter().for_each(sink);
+        Ok(())
+    }
+
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), WorldLinkError> {
+        self.bus.lock().swap_replies.push(reply.clone());
+        Ok(())
+    }
+}
+
+/// An agent's end of a [`MemoryBus`]: its robot's incarnation named by its accepted greeting.
+pub struct MemoryAgentLink {
+    bus: MemoryBus,
+    robot: usize,
+    incarnation: u64,
+}
+
+impl MemoryAgentLink {
+    fn has_mail(&self) -> bool {
+        let mut state = self.bus.lock();
+        state
+            .incarnation(self.robot, self.incarnation)
+            .is_some_and(|i| !i.scans.is_empty() || !i.control.is_empty())
+    }
+}
+
+impl AgentLink for MemoryAgentLink {
+    fn wait(&mut self, timeout: Duration) -> Result<Wake, AgentLinkError> {
+        if self.has_mail() {
+            return Ok(Wake::Activity);
+        }
+        self.bus.clock.sleep(timeout);
+        Ok(if self.has_mail() {
+            Wake::Activity
+        } else {
+            Wake::Idle
+        })
+    }
+
+    fn drain_control(
+        &mut self,
+        sink: &mut dyn FnMut(ControlRequest),
+    ) -> Result<(), AgentLinkError> {
+        let requests: Vec<ControlRequest> = {
+            let mut state = self.bus.lock();
+            state
+                .incarnation(self.robot, self.incarnation)
+                .map(|i| i.control.drain(..).collect())
+                .unwrap_or_default()
+        };
+        requests.into_iter().for_each(sink);
+        Ok(())
+    }
+
+    fn newest_scan(&mut self) -> Result<Option<ScanMsg>, AgentLinkError> {
+        let mut state = self.bus.lock();
+        Ok(state
+            .incarnation(self.robot, self.incarnation)
+            .and_then(|i| {
+                let newest = i.scans.pop_back();
+                i.scans.clear();
+                newest
+            }))
+    }
+
+    fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), AgentLinkError> {
+        if let Some(i) = self.bus.lock().incarnation(self.robot, self.incarnation) {
+            i.cmds.push_back(*msg);
+        }
+        Ok(())
+    }
+
+    fn publish_status(&mut self, status: &AgentStatus) -> Result<(), AgentLinkError> {
+        if let Some(i) = self.bus.lock().incarnation(self.robot, self.incarnation) {
+            i.statuses.push_back(status.clone());
+        }
+        Ok(())
+    }
+
+    fn world_alive(&mut self) -> Result<bool, AgentLinkError> {
+        Ok(self.bus.lock().world_alive)
+    }
+}
