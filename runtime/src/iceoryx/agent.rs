@@ -44,6 +44,39 @@ pub struct IceoryxAgentLink {
     status: Publisher<ipc::Service, StatusMsg, ()>,
     status_wake: Notifier<ipc::Service>,
     waitset: WaitSet<ipc::Service>,
+    /// The world's process, once found: watched through /proc, so that checking it costs the
+    /// same whatever the team size (listing every node of a 256-robot run from every idle agent
+    /// four times a second would keep two cores busy).
+    world: Option<ProcessWatch>,
+}
+
+/// A process known by its pid and its start time (which tells a reused pid from the original).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct ProcessWatch {
+    pid: i32,
+    started: u64,
+}
+
+impl ProcessWatch {
+    /// The process `pid` as it runs now; `None` when it does not exist or has exited (a zombie).
+    fn of(pid: i32) -> Option<ProcessWatch> {
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+        // The command name (field 2) may hold spaces and parentheses: fields after it follow
+        // the last ')'. Field 3 is the state, field 22 the start time.
+        let rest = stat.get(stat.rfind(')')? + 1..)?;
+        let mut fields = rest.split_whitespace();
+        let state = fields.next()?;
+        if state == "Z" || state == "X" {
+            return None;
+        }
+        let started = fields.nth(18)?.parse().ok()?;
+        Some(ProcessWatch { pid, started })
+    }
+
+    /// Whether the same process still runs (a stopped one does).
+    fn alive(&self) -> bool {
+        ProcessWatch::of(self.pid) == Some(*self)
+    }
 }
 
 const RETRY_PERIOD: Duration = Duration::from_millis(20);
@@ -155,8 +188,44 @@ impl IceoryxAgentLink {
             status,
             status_wake,
             waitset,
+            world: None,
         })
     }
+
+    /// Lists the run's nodes: whether the world's is alive, and its process when it is.
+    fn find_world(&self) -> Result<Option<ProcessWatch>, AgentLinkError> {
+        let mut found = None;
+        let mut alive = false;
+        Node::<ipc::Service>::list(self.node.config(), |state| {
+            if let NodeState::Alive(view) = &state
+                && view
+                    .details()
+                    .as_ref()
+                    .is_some_and(|d| d.name().as_str() == WORLD_NODE_NAME)
+            {
+                alive = true;
+                found = view
+                    .id()
+                    .pid::<ipc::Service>()
+                    .ok()
+                    .and_then(|pid| ProcessWatch::of(pid.value()));
+                return CallbackProgression::Stop;
+            }
+            CallbackProgression::Continue
+        })
+        .map_err(|e| iox("list the run's nodes")(&e))?;
+        Ok(match (alive, found) {
+            (false, _) => None,
+            (true, Some(world)) => Some(world),
+            // Alive, but its process could not be read: list the nodes again next time.
+            (true, None) => Some(ProcessWatch::UNKNOWN),
+        })
+    }
+}
+
+impl ProcessWatch {
+    /// A live world whose process could not be read: checked by listing nodes each time.
+    const UNKNOWN: ProcessWatch = ProcessWatch { pid: 0, started: 0 };
 }
 
 /// The candidate's ends of a robot's lobby.
@@ -427,25 +496,37 @@ impl AgentLink for IceoryxAgentLink {
     }
 
     fn world_alive(&mut self) -> Result<bool, AgentLinkError> {
-        let mut alive = false;
-        Node::<ipc::Service>::list(self.node.config(), |state| {
-            if let NodeState::Alive(view) = &state
-                && view
-                    .details()
-                    .as_ref()
-                    .is_some_and(|d| d.name().as_str() == WORLD_NODE_NAME)
-            {
-                alive = true;
-                return CallbackProgression::Stop;
-            }
-            CallbackProgression::Continue
-        })
-        .map_err(|e| iox("list the run's nodes")(&e))?;
+        if let Some(world) = self.world
+            && world != ProcessWatch::UNKNOWN
+            && world.alive()
+        {
+            return Ok(true);
+        }
+        // First check, or the watched process is gone: iceoryx2's node list decides.
+        self.world = self.find_world()?;
+        let alive = self.world.is_some();
         if !alive {
             // The world died without cleaning up: release what it left, so the last process of
             // the run leaves nothing behind.
             let _ = self.node.try_cleanup_dead_nodes();
         }
         Ok(alive)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ProcessWatch;
+
+    #[test]
+    fn a_process_is_watched_by_pid_and_start_time() {
+        let me = ProcessWatch::of(std::process::id() as i32).expect("this process");
+        assert!(me.alive());
+        let reused = ProcessWatch {
+            started: me.started + 1,
+            ..me
+        };
+        assert!(!reused.alive(), "a pid whose start time differs is another process");
+        assert!(ProcessWatch::of(i32::MAX).is_none(), "no such process");
     }
 }
