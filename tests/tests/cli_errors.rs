@@ -350,3 +350,41 @@ fn a_model_that_is_not_a_small_regular_file_is_named_for_what_it_is() {
         fails_cleanly(&args, &[], &["huge.onnx", "4294967296 bytes", "64 MiB"]);
     }
 }
+
+/// A team larger than the host can start (here: more robots than the open-files limit lets the
+/// world serve) is refused up front with the reason and the fix, before any process starts.
+#[test]
+fn a_team_too_large_for_the_hosts_limits_is_refused_before_anything_starts() {
+    let _watchdog = Watchdog::arm("team_too_large", LIMIT);
+    let dir = TempDir::new("toolarge");
+    let scenario = dir.path().join("swarm.toml");
+    let text =
+        std::fs::read_to_string(repo_root().join("scenarios/swarm32.toml")).expect("swarm32.toml");
+    std::fs::write(&scenario, text).expect("scenario");
+    let run_id = unique_run_id("toolarge");
+    let leaks = LeakCheck::new(&run_id);
+    let out = dir.path().join("out");
+    // 32 robots need about 1,900 descriptors in the world; allow 512, hard limit included, so
+    // the launcher cannot raise it.
+    let mut command = Command::new("bash");
+    command
+        .arg("-c")
+        .arg("ulimit -Sn 512 && ulimit -Hn 512 && exec \"$@\"")
+        .arg("bash")
+        .arg(&binaries().cli)
+        .args(["run", "--run-id", run_id.as_str(), "--scenario"])
+        .arg(&scenario)
+        .arg("--model")
+        .arg(test_model())
+        .arg("--out")
+        .arg(&out);
+    let finished = run(command, LIMIT);
+    finished.assert_failure_mentioning("open files in the world process");
+    finished.assert_failure_mentioning("limit here is 512");
+    assert!(
+        !finished.stdout().contains("agents connected"),
+        "{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+}

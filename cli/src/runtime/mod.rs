@@ -7,11 +7,13 @@
 //! directory), hands it to the [`supervisor`], and reads back the run logs the world wrote.
 //!
 //! * [`binaries`]: finding the two executables next to the running one.
+//! * [`capacity`]: refusing, before anything starts, a team the host cannot run.
 //! * [`supervisor`]: spawning, supervising, restarting, stopping and cleaning up (tokio).
 //! * [`profile`]: per-stage latency statistics from the world's timing logs.
 //! * [`swap`]: `formation swap`, a model change requested of a running launch.
 
 pub mod binaries;
+pub mod capacity;
 pub mod profile;
 pub mod supervisor;
 pub mod swap;

@@ -114,6 +114,9 @@ pub enum LaunchError {
     /// The world's settings file could not be written.
     #[error(transparent)]
     Settings(#[from] SettingsError),
+    /// The host cannot run a team this large.
+    #[error(transparent)]
+    Capacity(#[from] super::capacity::CapacityError),
     /// The launch secret could not be made or handed over.
     #[error("the launch secret: {0}")]
     Secret(String),
@@ -224,6 +227,7 @@ pub async fn launch(
     on_event: &mut dyn FnMut(&WorldEvent),
 ) -> Result<LaunchReport, LaunchError> {
     let binaries = RuntimeBinaries::locate()?;
+    super::capacity::check(plan.models.len(), &super::capacity::Host::read())?;
     let namespace = RunNamespace::new(&plan.run_id);
     // Held until the end: while it lives no other launch can use this run id, and nothing
     // below touches a file of the run before it is ours.

@@ -526,7 +526,10 @@ mod tests {
             started: me.started + 1,
             ..me
         };
-        assert!(!reused.alive(), "a pid whose start time differs is another process");
+        assert!(
+            !reused.alive(),
+            "a pid whose start time differs is another process"
+        );
         assert!(ProcessWatch::of(i32::MAX).is_none(), "no such process");
     }
 }
