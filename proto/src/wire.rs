@@ -1518,6 +1518,15 @@ pub enum WorldEvent {
         /// Robots served.
         robots: usize,
     },
+    /// Before the first run: robot `robot`'s agent said hello, `connected` of `robots` so far.
+    AgentConnected {
+        /// The robot.
+        robot: usize,
+        /// Agents connected so far.
+        connected: usize,
+        /// Robots in the team.
+        robots: usize,
+    },
     /// Every agent said hello.
     AgentsConnected,
     /// A run finished and its logs are written.

@@ -589,6 +589,18 @@ impl<'l> AgentsController<'l> {
                 self.model_ids[robot] = model_id;
                 self.agent_pids[robot] = Some(pid);
                 self.states[robot] = AgentState::Connected;
+                if self.generation == 0 {
+                    let connected = self
+                        .states
+                        .iter()
+                        .filter(|&&s| s != AgentState::Absent)
+                        .count();
+                    (self.events)(&WorldEvent::AgentConnected {
+                        robot,
+                        connected,
+                        robots: self.states.len(),
+                    });
+                }
                 if self.generation > 0 {
                     // A (re)started agent joins the episode under way.
                     self.rejoining[robot] = Some(pid);

@@ -247,8 +247,17 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         plan.settings.clock.as_str()
     );
     let started = std::time::SystemTime::now();
+    // Readiness of a large team on a terminal (hidden when stderr is not one).
+    let readiness = indicatif::ProgressBar::new(plan.models.len() as u64).with_style(
+        indicatif::ProgressStyle::with_template("agents ready {bar:40} {pos}/{len} ({elapsed})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
     let launched = block_on(supervisor::launch(&plan, &mut |event| match event {
-        WorldEvent::AgentsConnected => println!("all {} agents connected", plan.models.len()),
+        WorldEvent::AgentConnected { connected, .. } => readiness.set_position(*connected as u64),
+        WorldEvent::AgentsConnected => {
+            readiness.finish_and_clear();
+            println!("all {} agents connected", plan.models.len())
+        }
         WorldEvent::RunDone { index, log } => println!("run {index} done: {}", log.display()),
         WorldEvent::AgentLost {
             robot,
