@@ -374,6 +374,24 @@ fn lockstep_waits_for_a_late_agent_once_then_stops_waiting_until_it_answers_agai
             .iter()
             .all(|e| !matches!(e, WorldEvent::AgentLost { .. }))
     );
+    let readiness: Vec<usize> = sim
+        .events()
+        .iter()
+        .filter_map(|e| match e {
+            WorldEvent::AgentConnected {
+                connected, robots, ..
+            } => {
+                assert_eq!(*robots, 3);
+                Some(*connected)
+            }
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        readiness,
+        vec![1, 2, 3],
+        "readiness counts every agent's hello once"
+    );
 }
 
 #[test]
