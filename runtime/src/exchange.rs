@@ -748,6 +748,13 @@ impl Controller for AgentsController<'_> {
                 schedule_start + self.schedule_shift + periods(obs.tick + 1)
             }
         };
+        // The spin is bounded on the machine's own clock (it is about this core's time, not the
+        // simulation's), so a fake clock in tests never turns it into an endless loop.
+        let spin = match self.settings.runtime.clock {
+            ClockMode::Lockstep => Duration::from_micros(self.settings.runtime.spin_us),
+            ClockMode::Realtime => Duration::ZERO,
+        };
+        let spin_until = std::time::Instant::now() + spin;
         loop {
             self.poll()?;
             let now = self.clock.now();
@@ -757,6 +764,11 @@ impl Controller for AgentsController<'_> {
             };
             if (answered && now >= paced_until) || now >= deadline {
                 break;
+            }
+            if !answered && std::time::Instant::now() < spin_until {
+                // A short bounded poll before blocking (lockstep only, `spin_us`).
+                std::hint::spin_loop();
+                continue;
             }
             self.wait(if answered { paced_until } else { deadline } - now)?;
         }

@@ -52,6 +52,12 @@ pub struct RuntimeSettings {
     pub ready_timeout_ms: u64,
     /// How often the world asks the transport which agents died \[ms\].
     pub liveness_period_ms: u64,
+    /// Lockstep: after publishing a tick's scans the world polls for the commands this long
+    /// before it blocks \[µs\] (0: block at once). Polling sees a command in about a microsecond
+    /// where a blocking wake-up costs tens; it costs the world's core for at most this long per
+    /// tick, and never touches the agents' cores or the order of anything.
+    #[serde(default)]
+    pub spin_us: u64,
 }
 
 /// Why the settings file could not be read or written.
@@ -89,6 +95,7 @@ impl RuntimeSettings {
         startup_timeout_ms: 30_000,
         ready_timeout_ms: 10_000,
         liveness_period_ms: 100,
+        spin_us: 0,
     };
 
     /// [`RuntimeSettings::command_timeout_ms`] as a duration.

@@ -695,3 +695,25 @@ fn a_stopped_realtime_world_restarts_its_schedule_instead_of_rushing() {
         "tick 8 is back on schedule"
     );
 }
+
+#[test]
+fn a_lockstep_spin_before_blocking_changes_no_outcome() {
+    let sim = Sim::new(3);
+    let mut link = sim.world_link();
+    let spinning = RuntimeSettings {
+        spin_us: 300,
+        ..settings(ClockMode::Lockstep)
+    };
+    let mut world = connected_with(&sim, &mut link, spinning, &[]);
+    for tick in 0..3 {
+        assert_eq!(sim.tick(&mut world, tick), vec![SLOW; 3]);
+    }
+    sim.pause(11);
+    let before = sim.now();
+    assert_eq!(sim.tick(&mut world, 3), vec![SLOW, WheelCmd::BRAKE, SLOW]);
+    assert_eq!(
+        sim.now() - before,
+        Duration::from_millis(2000),
+        "a spin does not shorten the command timeout"
+    );
+}
