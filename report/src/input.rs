@@ -123,7 +123,11 @@ pub struct RunData {
 
 /// Parses a `summary.json` (the `formation eval` output). `name` is how the report labels it.
 pub fn parse_summary(text: &str, source: &Path, name: &str) -> Result<EvalData, ReportError> {
-    eval_data(formation_schema::from_json(text.as_bytes(), source)?, source, name)
+    eval_data(
+        formation_schema::from_json(text.as_bytes(), source)?,
+        source,
+        name,
+    )
 }
 
 /// Checks a summary read from `source` and makes it the report's [`EvalData`] (without its run
@@ -190,12 +194,16 @@ pub fn eval_data(summary: EvalOutput, source: &Path, name: &str) -> Result<EvalD
 
 /// Parses and validates one run log (`runs/run-NNNN.json`).
 pub fn parse_run_log(text: &str, source: &Path) -> Result<RunData, ReportError> {
-    run_data(formation_schema::from_json(text.as_bytes(), source)?, source)
+    run_data(
+        formation_schema::from_json(text.as_bytes(), source)?,
+        source,
+    )
 }
 
 /// Validates a run log read from `source` and makes it the report's [`RunData`].
 pub fn run_data(log: RunLog, source: &Path) -> Result<RunData, ReportError> {
-    let trajectory = validate_trajectory(log.trajectory).map_err(|reason| invalid(source, reason))?;
+    let trajectory =
+        validate_trajectory(log.trajectory).map_err(|reason| invalid(source, reason))?;
     Ok(RunData {
         source: source.to_path_buf(),
         index: log.index,

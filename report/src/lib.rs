@@ -347,9 +347,7 @@ pub fn fig9_panels(evals: &[&EvalData]) -> Vec<BoxPanel> {
         let orient_dots: Vec<f64> = runs.iter().map(|r| r.orientation_error_rad).collect();
         convergence.push(BoxGroup {
             label: eval.name.clone(),
-            stats: eval
-                .fig9
-                .convergence_s,
+            stats: eval.fig9.convergence_s,
             dots: conv_dots,
         });
         formation.push(BoxGroup {
@@ -359,9 +357,7 @@ pub fn fig9_panels(evals: &[&EvalData]) -> Vec<BoxPanel> {
         });
         orientation.push(BoxGroup {
             label: eval.name.clone(),
-            stats: eval
-                .fig9
-                .orientation_error_rad,
+            stats: eval.fig9.orientation_error_rad,
             dots: orient_dots,
         });
     }

@@ -59,7 +59,10 @@ pub struct StageLatency {
 
 /// Parses a latency profile.
 pub fn parse_profile(text: &str, source: &Path) -> Result<LatencyProfile, ReportError> {
-    profile_view(&formation_schema::from_json(text.as_bytes(), source)?, source)
+    profile_view(
+        &formation_schema::from_json(text.as_bytes(), source)?,
+        source,
+    )
 }
 
 /// The stages of `profile` (read from `source`) in drawing order, checked.

@@ -203,7 +203,10 @@ fn a_timing_log_a_summary_and_a_profile_read_back() {
         ..summary()
     };
     let text = round_trip(&unknown_seed, read_summary);
-    assert!(!text.contains("seed"), "an unknown seed is left out: {text}");
+    assert!(
+        !text.contains("seed"),
+        "an unknown seed is left out: {text}"
+    );
     round_trip(&profile(), read_profile);
 }
 
@@ -262,7 +265,10 @@ fn refuses_another_version<F: SchemaFile + std::fmt::Debug>(value: &F, what: &st
         matches!(err, SchemaError::Version { found: 0, .. }),
         "{err}"
     );
-    assert!(err.to_string().contains("without a schema version"), "{err}");
+    assert!(
+        err.to_string().contains("without a schema version"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -333,8 +339,8 @@ fn files_written_before_the_schema_version_read_as_version_1() {
 #[test]
 fn broken_and_unreadable_files_are_errors_naming_them() {
     let text = to_json(&summary()).unwrap();
-    let err = from_json::<EvalOutput>(&text[..text.len() / 2], Path::new("a/summary.json"))
-        .unwrap_err();
+    let err =
+        from_json::<EvalOutput>(&text[..text.len() / 2], Path::new("a/summary.json")).unwrap_err();
     assert!(matches!(err, SchemaError::Parse { .. }), "{err}");
     assert!(err.to_string().contains("a/summary.json"), "{err}");
     let dir = tempdir("unreadable");

@@ -1,6 +1,7 @@
 //! Per-stage latency statistics of a multi-process run, from the world's timing logs
-//! (`<out>/timing/run-NNNN.json`, one [`RobotTiming`] per robot), written as `<out>/profile.json`
-//! in the schema the report draws.
+//! (`<out>/timing/run-NNNN.json`, a [`TimingLog`] with one [`RobotTiming`] per robot), written as
+//! `<out>/profile.json` (a [`LatencyProfile`]), which the report draws. Percentiles are computed
+//! here only, by [`stage_stats`] (an HDR histogram, 3 significant digits).
 //!
 //! Stages per command: `round_trip` (scan published → command received by the world, the tick
 //! loop's latency, on the world's clock), `uplink` (scan published → taken by the agent, system
@@ -227,7 +228,11 @@ mod tests {
         let samples: Vec<u64> = (1..=100).rev().map(|k| k * 1000).collect();
         let stats = stage_stats(&samples);
         assert_eq!((stats.count, stats.max_us), (100, 100.0));
-        for (got, exact) in [(stats.p50_us, 50.0), (stats.p90_us, 90.0), (stats.p99_us, 99.0)] {
+        for (got, exact) in [
+            (stats.p50_us, 50.0),
+            (stats.p90_us, 90.0),
+            (stats.p99_us, 99.0),
+        ] {
             assert!((got - exact).abs() <= exact * 1e-3, "{got} vs {exact}");
         }
         assert!(stats.p50_us <= stats.p90_us && stats.p99_us <= stats.max_us);
@@ -236,7 +241,10 @@ mod tests {
         assert_eq!(stats.histogram.last(), Some(&(128.0, 36)), "65..=100 us");
         // Small values are exact; the percentiles never exceed the largest sample.
         let small = stage_stats(&[3, 1500, 1999, 1999]);
-        assert_eq!((small.p50_us, small.p99_us, small.max_us), (1.5, 1.999, 1.999));
+        assert_eq!(
+            (small.p50_us, small.p99_us, small.max_us),
+            (1.5, 1.999, 1.999)
+        );
         let one = stage_stats(&[123_456_789]);
         assert_eq!(one.p50_us, one.max_us);
         assert_eq!(stage_stats(&[]).p50_us, 0.0);

@@ -208,7 +208,10 @@ pub fn write_demo_dir(root: &Path, case_seconds: f64) -> usize {
         ("scan".to_owned(), stage(45.0, 60.0, 95.0, 310.0)),
         ("occupancy".to_owned(), stage(30.0, 41.0, 70.0, 150.0)),
         ("inference".to_owned(), stage(820.0, 990.0, 1500.0, 4100.0)),
-        ("round trip".to_owned(), stage(1100.0, 1400.0, 2100.0, 6000.0)),
+        (
+            "round trip".to_owned(),
+            stage(1100.0, 1400.0, 2100.0, 6000.0),
+        ),
     ]);
     write_file(
         &root.join("profile/profile.json"),
