@@ -14,76 +14,34 @@ use std::time::Instant;
 use anyhow::Context;
 use formation_expert::{ExpertController, ExpertGains};
 use formation_proto::LidarSpec;
-use formation_world::metrics::{MetricsConfig, RunMetrics, Summary, run_metrics, summarize};
-use formation_world::{Controller, Scenario, Trajectory, run_episode};
+use formation_world::metrics::{MetricsConfig, RunMetrics, run_metrics, summarize};
+use formation_world::{Controller, RunLog, Scenario, Trajectory, run_episode};
 use robot_agent::decision::PolicyController;
-use serde::{Deserialize, Serialize};
 
 use crate::args::{ControllerKind, EvalArgs};
 use crate::paths;
 
-/// What `formation eval` writes as JSON: the Table I keys at the top level, Fig. 9 quantiles and
-/// the per-run metrics. Nothing in it depends on wall-clock time or on the execution mode.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct EvalOutput {
-    /// `expert` or `policy`.
-    pub controller: String,
-    /// Model ids per robot (policy only).
-    pub models: Vec<String>,
-    /// Scenario name.
-    pub scenario: String,
-    /// Base seed.
-    pub seed: u64,
-    /// Table I and Fig. 9 figures.
-    #[serde(flatten)]
-    pub summary: Summary,
-    /// Per-run metrics, in run order.
-    pub per_run: Vec<RunMetrics>,
-    /// Multi-process runs only: per robot, the ticks its watchdog braked, by reason (`missing`,
-    /// `stale`, `non_finite`, `agent_failed`); an empty map for a robot never braked.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub braked_ticks: Vec<std::collections::BTreeMap<String, usize>>,
-    /// Runs that stopped before their last tick (a `formation run` that ended abnormally), in
-    /// run order; their metrics above are over the ticks they played. Absent when every run
-    /// finished, so evaluations write the same JSON as before.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub incomplete_runs: Vec<IncompleteRun>,
-}
+/// What `formation eval` writes as JSON, and a run that stopped early: defined in
+/// [`formation_schema`].
+pub use formation_schema::{EvalOutput, IncompleteRun};
 
-/// A run that stopped before its last tick.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct IncompleteRun {
-    /// Run index.
-    pub index: usize,
-    /// Ticks it played.
-    pub ticks: usize,
-    /// Ticks it was to play, when known.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub planned_ticks: Option<u64>,
-    /// Why it stopped, when known.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub stop_reason: Option<String>,
-}
-
-impl EvalOutput {
-    /// The output of runs with these per-run metrics: the Table I and Fig. 9 summary over them.
-    pub fn from_runs(
-        controller: &str,
-        models: Vec<String>,
-        scenario: &str,
-        seed: u64,
-        per_run: Vec<RunMetrics>,
-    ) -> EvalOutput {
-        EvalOutput {
-            controller: controller.to_owned(),
-            models,
-            scenario: scenario.to_owned(),
-            seed,
-            summary: summarize(&per_run),
-            per_run,
-            braked_ticks: Vec::new(),
-            incomplete_runs: Vec::new(),
-        }
+/// The output of runs with these per-run metrics: the Table I and Fig. 9 summary over them.
+pub fn eval_output(
+    controller: &str,
+    models: Vec<String>,
+    scenario: &str,
+    seed: Option<u64>,
+    per_run: Vec<RunMetrics>,
+) -> EvalOutput {
+    EvalOutput {
+        controller: controller.to_owned(),
+        models,
+        scenario: scenario.to_owned(),
+        seed,
+        summary: summarize(&per_run),
+        per_run,
+        braked_ticks: Vec::new(),
+        incomplete_runs: Vec::new(),
     }
 }
 
@@ -95,6 +53,8 @@ pub struct RunResult {
     pub metrics: RunMetrics,
     /// Its trajectory, when it was asked to be kept.
     pub trajectory: Option<Trajectory>,
+    /// How it was clocked: `in-process`, or `lockstep` over processes.
+    pub clock: &'static str,
 }
 
 /// Builds a fresh controller for one worker thread.
@@ -137,6 +97,7 @@ pub fn evaluate_in_process(
                                 index: i,
                                 metrics,
                                 trajectory,
+                                clock: "in-process",
                             });
                         progress(done.fetch_add(1, Ordering::Relaxed) + 1);
                     }
@@ -246,7 +207,8 @@ fn table_i_text(out: &EvalOutput) -> String {
         out.controller,
         s.runs,
         out.scenario,
-        out.seed,
+        out.seed
+            .map_or_else(|| "unknown".to_owned(), |seed| seed.to_string()),
         pct(s.success_rate_5),
         pct(s.success_rate_10),
         opt(s.median_convergence_s, &|x| format!("{x:.2} s")),
@@ -259,34 +221,32 @@ fn table_i_text(out: &EvalOutput) -> String {
     )
 }
 
-/// Writes the eval output directory the report reads: `summary.json` and `runs/run-NNNN.json`.
+/// Writes the eval output directory the report reads: `summary.json` and, for the runs whose
+/// trajectory was kept, `runs/run-NNNN.json` in the run-log format the world writes.
 pub fn write_eval_dir(dir: &Path, out: &EvalOutput, results: &[RunResult]) -> anyhow::Result<()> {
-    paths::write_atomic(&dir.join("summary.json"), &serde_json::to_vec_pretty(out)?)?;
+    paths::write_atomic(
+        &dir.join("summary.json"),
+        &formation_schema::to_json_pretty(out)?,
+    )?;
     for r in results {
         if let Some(traj) = &r.trajectory {
             let log = RunLog {
                 index: r.index,
                 metrics: r.metrics.clone(),
                 trajectory: traj.clone(),
+                clock: r.clock.to_owned(),
+                models: out.models.clone(),
+                complete: true,
+                stop_reason: None,
+                planned_ticks: Some(traj.commands.len() as u64),
             };
             paths::write_atomic(
-                &dir.join("runs").join(format!("run-{:04}.json", r.index)),
-                &serde_json::to_vec(&log)?,
+                &formation_world::runlog::log_paths(dir, r.index).0,
+                &formation_schema::to_json(&log)?,
             )?;
         }
     }
     Ok(())
-}
-
-/// One run's log as the report reads it.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct RunLog {
-    /// Run index.
-    pub index: usize,
-    /// Its metrics.
-    pub metrics: RunMetrics,
-    /// The full trajectory.
-    pub trajectory: Trajectory,
 }
 
 /// Evaluates and returns the output and the per-run results (shared by `eval` and `demo`).
@@ -333,7 +293,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
             // The report shows it as the latency profile.
             paths::write_atomic(
                 &dir.join("profile.json"),
-                &serde_json::to_vec_pretty(&evaluated.latency)?,
+                &formation_schema::to_json_pretty(&evaluated.latency)?,
             )?;
         }
         let cfg = MetricsConfig::default();
@@ -345,6 +305,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
                 index,
                 metrics: run_metrics(&traj, &cfg),
                 trajectory: keep(index).then_some(traj),
+                clock: crate::runtime::ClockMode::Lockstep.as_str(),
             })
             .collect()
     } else {
@@ -371,7 +332,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         ControllerKind::Expert => "expert",
         ControllerKind::Policy => "policy",
     };
-    let out = EvalOutput::from_runs(controller, model_ids, scenario.name(), seed, per_run);
+    let out = eval_output(controller, model_ids, scenario.name(), Some(seed), per_run);
     eprintln!(
         "evaluated {runs} runs in {elapsed:.1} s ({:.2} s per run)",
         elapsed / runs as f64
@@ -384,7 +345,7 @@ pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
     let (out, results) = evaluate(args)?;
     print!("{}", table_text(&out));
     if let Some(json) = &args.json {
-        paths::write_atomic(json, &serde_json::to_vec_pretty(&out)?)?;
+        paths::write_atomic(json, &formation_schema::to_json_pretty(&out)?)?;
         println!("wrote {}", json.display());
     }
     if let Some(dir) = &args.out {

@@ -42,17 +42,10 @@ pub enum ReportError {
         /// The I/O error.
         source: std::io::Error,
     },
-    /// A JSON input is not valid JSON of the expected shape (often a truncated file).
-    #[error(
-        "could not parse {}: {source} (is the file truncated? re-run the command that wrote it)",
-        path.display()
-    )]
-    Json {
-        /// The file.
-        path: PathBuf,
-        /// The parser's error, with line and column.
-        source: serde_json::Error,
-    },
+    /// A run log, summary or profile could not be read: another format or schema version, not
+    /// JSON of its shape, too large, or unreadable (the error names the file).
+    #[error(transparent)]
+    Schema(#[from] formation_schema::SchemaError),
     /// A JSON input parsed but holds values the report cannot draw.
     #[error("{} holds invalid data: {reason}", path.display())]
     InvalidData {

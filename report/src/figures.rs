@@ -16,7 +16,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::error::ReportError;
-use crate::input::{Quartiles, RunTrajectory};
+use crate::input::{Quantiles, Trajectory};
 use crate::loss::LossCurve;
 use crate::profile::StageLatency;
 use crate::series::{
@@ -252,12 +252,12 @@ where
 }
 
 /// The time axis of a run: its first to last sample.
-fn time_range(traj: &RunTrajectory) -> Range<f64> {
+fn time_range(traj: &Trajectory) -> Range<f64> {
     padded_range(traj.times.iter().copied(), 0.0, false)
 }
 
 /// Figs. 6a-8a: formation error `e_ij(t)` [%] (top) and orientation error \[rad\] (bottom).
-pub fn errors_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportError> {
+pub fn errors_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError> {
     let formation = formation_error_percent(traj);
     let orientation = orientation_error(traj);
     render(id, (640, 600), |root| {
@@ -312,7 +312,7 @@ pub fn errors_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportErr
 }
 
 /// Figs. 6b-8b: left (top) and right (bottom) wheel commands of every robot \[m/s\], with v*.
-pub fn wheels_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportError> {
+pub fn wheels_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError> {
     let left = wheel_commands(traj, Wheel::Left);
     let right = wheel_commands(traj, Wheel::Right);
     let references: Vec<Reference> = if traj.v_star.is_finite() {
@@ -354,7 +354,7 @@ pub fn wheels_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportErr
 /// Figs. 6c-8c: every robot's path, and every [`SNAPSHOT_EVERY_S`] the robots as triangles
 /// pointing along their heading with the formation (dashed lines along the edges) between them.
 /// Both axes have the same scale. Collisions are marked with a red ring.
-pub fn trajectory_figure(id: &str, traj: &RunTrajectory) -> Result<Figure, ReportError> {
+pub fn trajectory_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError> {
     let robot_paths = paths(traj);
     let snapshots = snapshot_indices(&traj.times, SNAPSHOT_EVERY_S);
     let (width, height) = (640_u32, 600_u32);
@@ -446,7 +446,7 @@ pub struct BoxGroup {
     /// Category label (the evaluation's name).
     pub label: String,
     /// Its order statistics, already in the panel's unit; `None` when no run succeeded.
-    pub stats: Option<Quartiles>,
+    pub stats: Option<Quantiles>,
     /// Every successful run's value, drawn as dots over the box.
     pub dots: Vec<f64>,
 }
@@ -762,7 +762,7 @@ mod tests {
     use formation_proto::{Pose, WheelCmd};
 
     /// Three robots moving along +x, the formation shrinking towards `d*`.
-    fn traj(samples: usize) -> RunTrajectory {
+    fn traj(samples: usize) -> Trajectory {
         let dt = 0.1;
         let times: Vec<f64> = (0..samples).map(|k| k as f64 * dt).collect();
         let poses = times
@@ -788,7 +788,7 @@ mod tests {
                 ]
             })
             .collect();
-        RunTrajectory {
+        Trajectory {
             dt,
             d_star: 1.0,
             v_star: 0.7,
@@ -944,7 +944,7 @@ mod tests {
 
     #[test]
     fn box_figure_places_quartiles() {
-        let q = Quartiles {
+        let q = Quantiles {
             min: 1.0,
             q1: 2.0,
             median: 3.0,
@@ -966,7 +966,7 @@ mod tests {
         assert!(svg.contains("table1 (n = 4)"));
         let blue_dots = svg.matches("<circle").count();
         assert_eq!(blue_dots, 4 + 1, "one dot per run and the legend's");
-        let moved = box_figure("b", &[panel(Some(Quartiles { median: 3.5, ..q }))])
+        let moved = box_figure("b", &[panel(Some(Quantiles { median: 3.5, ..q }))])
             .expect("draws")
             .svg;
         assert_ne!(svg, moved);

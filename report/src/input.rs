@@ -1,23 +1,20 @@
 //! Finding and reading the report's inputs: eval output directories (`summary.json` plus
 //! `runs/run-NNNN.json`), training loss curves (`*loss*.csv`) and latency profiles (`profile.json`).
 //!
-//! The JSON is read with the report's own structs, which mirror what `formation eval` writes
-//! (`EvalOutput` and `RunLog` in the CLI, `Trajectory`/`RunMetrics`/`Summary` in `formation-world`)
-//! but are lenient where the writer can legitimately emit `null` (serde_json writes NaN as `null`)
-//! and ignore keys they do not use, so that a report can still be drawn from older or newer
-//! outputs. What cannot be drawn (no samples, a pose row of the wrong length) is an error naming
-//! the file.
+//! The JSON files are read with their one definition in [`formation_schema`] (the types their
+//! writers serialise), which checks each file's format and schema version and reads `null` back
+//! as NaN where the writer may have written one. What cannot be drawn (no samples, a pose row
+//! of the wrong length) is an error naming the file.
 
 use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use formation_proto::{Pose, WheelCmd};
-use serde::Deserialize;
+use formation_schema::{EvalOutput, RunLog};
 
 use crate::error::ReportError;
 use crate::loss::{LossCurve, parse_loss_csv};
-use crate::profile::{LatencyProfile, parse_profile};
+use crate::profile::{LatencyProfile, profile_view};
 
 /// At most this many run logs per eval directory are drawn (the rest are counted and mentioned).
 pub const MAX_RUNS_PLOTTED_PER_EVAL: usize = 3;
@@ -59,7 +56,7 @@ pub struct EvalData {
     /// Fig. 9 statistics over the runs that succeed at 10 %.
     pub fig9: Fig9Stats,
     /// Per-run metrics, in run order.
-    pub per_run: Vec<RunScores>,
+    pub per_run: Vec<RunMetrics>,
     /// Run logs drawn (at most [`MAX_RUNS_PLOTTED_PER_EVAL`]), in run order.
     pub runs: Vec<RunData>,
     /// Run logs present but not drawn.
@@ -68,21 +65,9 @@ pub struct EvalData {
     pub incomplete: Vec<IncompleteRun>,
 }
 
-/// A run that stopped before its last tick.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub struct IncompleteRun {
-    /// Run index.
-    pub index: usize,
-    /// Ticks it played, when recorded.
-    #[serde(default)]
-    pub ticks: Option<usize>,
-    /// Ticks it was to play, when recorded.
-    #[serde(default)]
-    pub planned_ticks: Option<u64>,
-    /// Why it stopped, when recorded.
-    #[serde(default)]
-    pub stop_reason: Option<String>,
-}
+/// A run that stopped before its last tick, the metrics of one run (NaN where the writer could
+/// not compute a value), the order statistics of a Fig. 9 quantity, and a run's trajectory.
+pub use formation_schema::{IncompleteRun, Quantiles, RunMetrics, Trajectory};
 
 /// The Table I keys of one evaluation.
 #[derive(Debug, Clone, PartialEq)]
@@ -103,49 +88,15 @@ pub struct TableRow {
     pub collisions: usize,
 }
 
-/// Order statistics of one Fig. 9 quantity.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-pub struct Quartiles {
-    /// Smallest value.
-    pub min: f64,
-    /// First quartile.
-    pub q1: f64,
-    /// Median.
-    pub median: f64,
-    /// Third quartile.
-    pub q3: f64,
-    /// Largest value.
-    pub max: f64,
-    /// Number of values.
-    pub count: usize,
-}
-
 /// The three Fig. 9 quantities.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Fig9Stats {
     /// Convergence time \[s\].
-    pub convergence_s: Option<Quartiles>,
+    pub convergence_s: Option<Quantiles>,
     /// Relative formation error (fraction).
-    pub rel_formation_error: Option<Quartiles>,
+    pub rel_formation_error: Option<Quantiles>,
     /// Orientation error \[rad\].
-    pub orientation_error_rad: Option<Quartiles>,
-}
-
-/// The metrics of one run; NaN where the writer could not compute a value.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RunScores {
-    /// Success at 5 %.
-    pub success_5: bool,
-    /// Success at 10 %.
-    pub success_10: bool,
-    /// Convergence time \[s\] at 10 %.
-    pub convergence_s_10: Option<f64>,
-    /// Relative formation error over the final window (fraction).
-    pub rel_formation_error: f64,
-    /// Orientation error over the final window \[rad\].
-    pub orientation_error_rad: f64,
-    /// Collision events.
-    pub collisions: usize,
+    pub orientation_error_rad: Option<Quantiles>,
 }
 
 /// One run log.
@@ -156,9 +107,9 @@ pub struct RunData {
     /// Run index.
     pub index: usize,
     /// Its metrics.
-    pub scores: RunScores,
+    pub scores: RunMetrics,
     /// Its trajectory.
-    pub trajectory: RunTrajectory,
+    pub trajectory: Trajectory,
     /// False when the run stopped before its last tick (older logs, without the key, are
     /// complete).
     pub complete: bool,
@@ -168,157 +119,33 @@ pub struct RunData {
     pub planned_ticks: Option<u64>,
 }
 
-/// A run's recorded trajectory, validated: every sample has one pose per robot, every command row
-/// one command per robot, every edge names existing robots.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RunTrajectory {
-    /// Time step \[s\].
-    pub dt: f64,
-    /// Desired pairwise distance \[m\] (finite, positive).
-    pub d_star: f64,
-    /// Desired speed \[m/s\] (NaN when not recorded).
-    pub v_star: f64,
-    /// Formation edges `(i, j)`, 0-based robot indices.
-    pub edges: Vec<(usize, usize)>,
-    /// Sample times \[s\].
-    pub times: Vec<f64>,
-    /// Desired heading at each sample \[rad\].
-    pub phi_star: Vec<f64>,
-    /// Poses of every robot at each sample.
-    pub poses: Vec<Vec<Pose>>,
-    /// Applied wheel commands of every robot at each tick (at most one fewer than samples).
-    pub commands: Vec<Vec<WheelCmd>>,
-    /// Collision records `(sample, i, j)`.
-    pub collisions: Vec<(u64, usize, usize)>,
-}
-
-impl RunTrajectory {
-    /// Number of robots.
-    pub fn n_robots(&self) -> usize {
-        self.poses.first().map_or(0, Vec::len)
-    }
-}
-
-// ---- raw JSON shapes -------------------------------------------------------------------------
-
-#[derive(Deserialize)]
-struct RawSummary {
-    #[serde(default)]
-    controller: String,
-    #[serde(default)]
-    models: Vec<String>,
-    #[serde(default)]
-    scenario: String,
-    #[serde(default)]
-    seed: Option<u64>,
-    runs: usize,
-    success_rate_5: f64,
-    success_rate_10: f64,
-    #[serde(default)]
-    median_convergence_s: Option<f64>,
-    #[serde(default)]
-    median_rel_formation_error: Option<f64>,
-    #[serde(default)]
-    median_orientation_error_rad: Option<f64>,
-    #[serde(default)]
-    collisions: usize,
-    #[serde(default)]
-    convergence_s: Option<Quartiles>,
-    #[serde(default)]
-    rel_formation_error: Option<Quartiles>,
-    #[serde(default)]
-    orientation_error_rad: Option<Quartiles>,
-    #[serde(default)]
-    per_run: Vec<RawRunMetrics>,
-    #[serde(default)]
-    incomplete_runs: Vec<IncompleteRun>,
-}
-
-#[derive(Deserialize)]
-struct RawRunMetrics {
-    success_5: bool,
-    success_10: bool,
-    #[serde(default)]
-    convergence_s_10: Option<f64>,
-    #[serde(default)]
-    rel_formation_error: Option<f64>,
-    #[serde(default)]
-    orientation_error_rad: Option<f64>,
-    #[serde(default)]
-    collisions: usize,
-}
-
-#[derive(Deserialize)]
-struct RawRunLog {
-    index: usize,
-    metrics: RawRunMetrics,
-    trajectory: RawTrajectory,
-    #[serde(default = "complete_by_default")]
-    complete: bool,
-    #[serde(default)]
-    stop_reason: Option<String>,
-    #[serde(default)]
-    planned_ticks: Option<u64>,
-}
-
-fn complete_by_default() -> bool {
-    true
-}
-
-#[derive(Deserialize)]
-struct RawTrajectory {
-    dt: f64,
-    d_star: f64,
-    #[serde(default)]
-    v_star: Option<f64>,
-    edges: Vec<(usize, usize)>,
-    times: Vec<Option<f64>>,
-    phi_star: Vec<Option<f64>>,
-    poses: Vec<Vec<RawPose>>,
-    #[serde(default)]
-    commands: Vec<Vec<RawWheelCmd>>,
-    #[serde(default)]
-    collisions: Vec<(u64, usize, usize)>,
-}
-
-#[derive(Deserialize)]
-struct RawPose {
-    x: Option<f64>,
-    y: Option<f64>,
-    theta: Option<f64>,
-}
-
-#[derive(Deserialize)]
-struct RawWheelCmd {
-    left: Option<f64>,
-    right: Option<f64>,
-}
-
-fn or_nan(value: Option<f64>) -> f64 {
-    value.unwrap_or(f64::NAN)
-}
-
-impl From<RawRunMetrics> for RunScores {
-    fn from(raw: RawRunMetrics) -> RunScores {
-        RunScores {
-            success_5: raw.success_5,
-            success_10: raw.success_10,
-            convergence_s_10: raw.convergence_s_10,
-            rel_formation_error: or_nan(raw.rel_formation_error),
-            orientation_error_rad: or_nan(raw.orientation_error_rad),
-            collisions: raw.collisions,
-        }
-    }
-}
-
 // ---- parsing (pure) ------------------------------------------------------------------------
 
 /// Parses a `summary.json` (the `formation eval` output). `name` is how the report labels it.
 pub fn parse_summary(text: &str, source: &Path, name: &str) -> Result<EvalData, ReportError> {
-    let raw: RawSummary = parse_json(text, source)?;
+    eval_data(
+        formation_schema::from_json(text.as_bytes(), source)?,
+        source,
+        name,
+    )
+}
+
+/// Checks a summary read from `source` and makes it the report's [`EvalData`] (without its run
+/// logs).
+pub fn eval_data(summary: EvalOutput, source: &Path, name: &str) -> Result<EvalData, ReportError> {
+    let EvalOutput {
+        controller,
+        models,
+        scenario,
+        seed,
+        summary,
+        per_run,
+        incomplete_runs,
+        ..
+    } = summary;
     for (key, rate) in [
-        ("success_rate_5", raw.success_rate_5),
-        ("success_rate_10", raw.success_rate_10),
+        ("success_rate_5", summary.success_rate_5),
+        ("success_rate_10", summary.success_rate_10),
     ] {
         if !(0.0..=1.0).contains(&rate) {
             return Err(invalid(
@@ -327,87 +154,100 @@ pub fn parse_summary(text: &str, source: &Path, name: &str) -> Result<EvalData, 
             ));
         }
     }
-    if !raw.per_run.is_empty() && raw.per_run.len() != raw.runs {
+    if !per_run.is_empty() && per_run.len() != summary.runs {
         return Err(invalid(
             source,
             format!(
                 "`runs` is {} but `per_run` lists {} runs",
-                raw.runs,
-                raw.per_run.len()
+                summary.runs,
+                per_run.len()
             ),
         ));
     }
     Ok(EvalData {
         name: name.to_owned(),
         source: source.to_path_buf(),
-        controller: raw.controller,
-        models: raw.models,
-        scenario: raw.scenario,
-        seed: raw.seed,
+        controller,
+        models,
+        scenario,
+        seed,
         table: TableRow {
-            runs: raw.runs,
-            success_rate_5: raw.success_rate_5,
-            success_rate_10: raw.success_rate_10,
-            median_convergence_s: raw.median_convergence_s,
-            median_rel_formation_error: raw.median_rel_formation_error,
-            median_orientation_error_rad: raw.median_orientation_error_rad,
-            collisions: raw.collisions,
+            runs: summary.runs,
+            success_rate_5: summary.success_rate_5,
+            success_rate_10: summary.success_rate_10,
+            median_convergence_s: summary.median_convergence_s,
+            median_rel_formation_error: summary.median_rel_formation_error,
+            median_orientation_error_rad: summary.median_orientation_error_rad,
+            collisions: summary.collisions,
         },
         fig9: Fig9Stats {
-            convergence_s: raw.convergence_s,
-            rel_formation_error: raw.rel_formation_error,
-            orientation_error_rad: raw.orientation_error_rad,
+            convergence_s: summary.convergence_s,
+            rel_formation_error: summary.rel_formation_error,
+            orientation_error_rad: summary.orientation_error_rad,
         },
-        per_run: raw.per_run.into_iter().map(RunScores::from).collect(),
+        per_run,
         runs: Vec::new(),
         runs_not_drawn: 0,
-        incomplete: raw.incomplete_runs,
+        incomplete: incomplete_runs,
     })
 }
 
 /// Parses and validates one run log (`runs/run-NNNN.json`).
 pub fn parse_run_log(text: &str, source: &Path) -> Result<RunData, ReportError> {
-    let raw: RawRunLog = parse_json(text, source)?;
+    run_data(
+        formation_schema::from_json(text.as_bytes(), source)?,
+        source,
+    )
+}
+
+/// Validates a run log read from `source` and makes it the report's [`RunData`].
+pub fn run_data(log: RunLog, source: &Path) -> Result<RunData, ReportError> {
     let trajectory =
-        validate_trajectory(raw.trajectory).map_err(|reason| invalid(source, reason))?;
+        validate_trajectory(log.trajectory).map_err(|reason| invalid(source, reason))?;
     Ok(RunData {
         source: source.to_path_buf(),
-        index: raw.index,
-        scores: raw.metrics.into(),
+        index: log.index,
+        scores: log.metrics,
         trajectory,
-        complete: raw.complete,
-        stop_reason: raw.stop_reason,
-        planned_ticks: raw.planned_ticks,
+        complete: log.complete,
+        stop_reason: log.stop_reason,
+        planned_ticks: log.planned_ticks,
     })
 }
 
-fn validate_trajectory(raw: RawTrajectory) -> Result<RunTrajectory, String> {
-    if !(raw.d_star.is_finite() && raw.d_star > 0.0) {
+/// Checks that every sample has one pose per robot, every command row one command per robot and
+/// every edge names existing robots; keeps the samples that have a time, a heading and poses.
+fn validate_trajectory(mut traj: Trajectory) -> Result<Trajectory, String> {
+    if !(traj.d_star.is_finite() && traj.d_star > 0.0) {
         return Err(format!(
             "trajectory.d_star is {}, expected a positive distance",
-            raw.d_star
+            traj.d_star
         ));
     }
-    let samples = raw.times.len().min(raw.poses.len()).min(raw.phi_star.len());
+    let samples = traj
+        .times
+        .len()
+        .min(traj.poses.len())
+        .min(traj.phi_star.len());
     if samples == 0 {
         return Err(
             "the trajectory has no samples (times, phi_star and poses must be non-empty)".into(),
         );
     }
-    let n_robots = raw.poses[0].len();
+    let n_robots = traj.poses[0].len();
     if n_robots == 0 {
         return Err("trajectory.poses[0] lists no robots".into());
     }
-    if let Some(k) = raw.poses[..samples]
+    if let Some(k) = traj.poses[..samples]
         .iter()
         .position(|row| row.len() != n_robots)
     {
         return Err(format!(
             "trajectory.poses[{k}] has {} poses, but poses[0] has {n_robots}",
-            raw.poses[k].len()
+            traj.poses[k].len()
         ));
     }
-    if let Some(&(i, j)) = raw
+    if let Some(&(i, j)) = traj
         .edges
         .iter()
         .find(|&&(i, j)| i >= n_robots || j >= n_robots || i == j)
@@ -417,59 +257,21 @@ fn validate_trajectory(raw: RawTrajectory) -> Result<RunTrajectory, String> {
         ));
     }
     // `commands` normally has one entry fewer than the samples; more than `samples` cannot be timed.
-    let ticks = raw.commands.len().min(samples);
-    if let Some(k) = raw.commands[..ticks]
+    let ticks = traj.commands.len().min(samples);
+    if let Some(k) = traj.commands[..ticks]
         .iter()
         .position(|row| row.len() != n_robots)
     {
         return Err(format!(
             "trajectory.commands[{k}] has {} commands, but there are {n_robots} robots",
-            raw.commands[k].len()
+            traj.commands[k].len()
         ));
     }
-    Ok(RunTrajectory {
-        dt: raw.dt,
-        d_star: raw.d_star,
-        v_star: or_nan(raw.v_star),
-        edges: raw.edges,
-        times: raw.times[..samples].iter().map(|&t| or_nan(t)).collect(),
-        phi_star: raw.phi_star[..samples].iter().map(|&p| or_nan(p)).collect(),
-        poses: raw
-            .poses
-            .into_iter()
-            .take(samples)
-            .map(|row| {
-                row.into_iter()
-                    .map(|p| Pose {
-                        x: or_nan(p.x),
-                        y: or_nan(p.y),
-                        theta: or_nan(p.theta),
-                    })
-                    .collect()
-            })
-            .collect(),
-        commands: raw
-            .commands
-            .into_iter()
-            .take(ticks)
-            .map(|row| {
-                row.into_iter()
-                    .map(|c| WheelCmd {
-                        left: or_nan(c.left),
-                        right: or_nan(c.right),
-                    })
-                    .collect()
-            })
-            .collect(),
-        collisions: raw.collisions,
-    })
-}
-
-fn parse_json<T: serde::de::DeserializeOwned>(text: &str, source: &Path) -> Result<T, ReportError> {
-    serde_json::from_str(text).map_err(|e| ReportError::Json {
-        path: source.to_path_buf(),
-        source: e,
-    })
+    traj.times.truncate(samples);
+    traj.phi_star.truncate(samples);
+    traj.poses.truncate(samples);
+    traj.commands.truncate(ticks);
+    Ok(traj)
 }
 
 fn invalid(source: &Path, reason: String) -> ReportError {
@@ -540,7 +342,7 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
     let profiles = found
         .profiles
         .iter()
-        .map(|path| parse_profile(&read_text(path)?, path))
+        .map(|path| profile_view(&formation_schema::read_profile(path)?, path))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(Inputs {
         root: root.to_path_buf(),
@@ -595,13 +397,13 @@ fn load_eval(root: &Path, summary: &Path) -> Result<EvalData, ReportError> {
         Ok(rel) => rel.to_string_lossy().into_owned(),
         Err(_) => dir.to_string_lossy().into_owned(),
     };
-    let mut eval = parse_summary(&read_text(summary)?, summary, &name)?;
+    let mut eval = eval_data(formation_schema::read_summary(summary)?, summary, &name)?;
     let logs = run_log_paths(&dir.join("runs"))?;
     eval.runs_not_drawn = logs.len().saturating_sub(MAX_RUNS_PLOTTED_PER_EVAL);
     eval.runs = logs
         .iter()
         .take(MAX_RUNS_PLOTTED_PER_EVAL)
-        .map(|path| parse_run_log(&read_text(path)?, path))
+        .map(|path| run_data(formation_schema::read_run_log(path)?, path))
         .collect::<Result<_, _>>()?;
     eval.runs.sort_by_key(|r| r.index);
     // A run log marked incomplete that the summary does not list (e.g. an older summary).
@@ -609,7 +411,7 @@ fn load_eval(root: &Path, summary: &Path) -> Result<EvalData, ReportError> {
         if !eval.incomplete.iter().any(|i| i.index == run.index) {
             eval.incomplete.push(IncompleteRun {
                 index: run.index,
-                ticks: Some(run.trajectory.commands.len()),
+                ticks: run.trajectory.commands.len(),
                 planned_ticks: run.planned_ticks,
                 stop_reason: run.stop_reason.clone(),
             });
@@ -655,26 +457,61 @@ fn read_text(path: &Path) -> Result<String, ReportError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use formation_proto::{Pose, WheelCmd};
+    use formation_schema::{Summary, to_json};
 
-    const SUMMARY: &str = r#"{
-      "controller": "policy", "models": ["m-1234"], "scenario": "table1", "seed": 7,
-      "runs": 2, "success_rate_5": 0.5, "success_rate_10": 1.0,
-      "median_convergence_s": 9.5, "median_rel_formation_error": 0.025, "median_orientation_error_rad": 0.03,
-      "collisions": 0,
-      "convergence_s": {"min": 9.0, "q1": 9.25, "median": 9.5, "q3": 9.75, "max": 10.0, "count": 2},
-      "rel_formation_error": null, "orientation_error_rad": null,
-      "per_run": [
-        {"success_5": true, "success_10": true, "convergence_s_5": 9.0, "convergence_s_10": 9.0,
-         "rel_formation_error": 0.02, "max_edge_window_error": 0.03, "orientation_error_rad": 0.03, "collisions": 0},
-        {"success_5": false, "success_10": true, "convergence_s_5": null, "convergence_s_10": 10.0,
-         "rel_formation_error": null, "max_edge_window_error": null, "orientation_error_rad": 0.04, "collisions": 1}
-      ],
-      "some_future_key": 1
-    }"#;
+    fn metrics(success_5: bool, convergence_s_10: f64, rel_formation_error: f64) -> RunMetrics {
+        RunMetrics {
+            success_5,
+            success_10: true,
+            convergence_s_5: success_5.then_some(convergence_s_10),
+            convergence_s_10: Some(convergence_s_10),
+            rel_formation_error,
+            max_edge_window_error: 0.03,
+            orientation_error_rad: 0.03,
+            collisions: usize::from(!success_5),
+        }
+    }
+
+    fn summary() -> EvalOutput {
+        EvalOutput {
+            controller: "policy".into(),
+            models: vec!["m-1234".into()],
+            scenario: "table1".into(),
+            seed: Some(7),
+            summary: Summary {
+                runs: 2,
+                success_rate_5: 0.5,
+                success_rate_10: 1.0,
+                median_convergence_s: Some(9.5),
+                median_rel_formation_error: Some(0.025),
+                median_orientation_error_rad: Some(0.03),
+                collisions: 1,
+                convergence_s: Some(Quantiles {
+                    min: 9.0,
+                    q1: 9.25,
+                    median: 9.5,
+                    q3: 9.75,
+                    max: 10.0,
+                    count: 2,
+                }),
+                rel_formation_error: None,
+                orientation_error_rad: None,
+            },
+            per_run: vec![metrics(true, 9.0, 0.02), metrics(false, 10.0, f64::NAN)],
+            braked_ticks: Vec::new(),
+            incomplete_runs: Vec::new(),
+        }
+    }
+
+    fn text<F: formation_schema::SchemaFile>(value: &F) -> String {
+        String::from_utf8(to_json(value).expect("json")).expect("utf-8")
+    }
 
     #[test]
     fn summary_keys_and_nulls_are_read() {
-        let eval = parse_summary(SUMMARY, Path::new("x/summary.json"), "x").expect("valid summary");
+        let eval = parse_summary(&text(&summary()), Path::new("x/summary.json"), "x")
+            .expect("valid summary");
         assert_eq!(eval.table.runs, 2);
         assert_eq!(eval.table.success_rate_5, 0.5);
         assert_eq!(eval.table.median_convergence_s, Some(9.5));
@@ -683,7 +520,7 @@ mod tests {
         assert_eq!(eval.per_run.len(), 2);
         assert!(
             eval.per_run[1].rel_formation_error.is_nan(),
-            "null is read as NaN"
+            "NaN, written as null, is read as NaN"
         );
         assert_eq!(eval.per_run[1].collisions, 1);
         assert_eq!(eval.seed, Some(7));
@@ -691,43 +528,79 @@ mod tests {
 
     #[test]
     fn truncated_summary_is_an_error_naming_the_file() {
+        let text = text(&summary());
         let err = parse_summary(
-            &SUMMARY[..SUMMARY.len() / 2],
+            &text[..text.len() / 2],
             Path::new("evals/a/summary.json"),
             "a",
         )
         .expect_err("truncated JSON");
         let message = err.to_string();
-        assert!(matches!(err, ReportError::Json { .. }), "{message}");
+        assert!(
+            matches!(
+                err,
+                ReportError::Schema(formation_schema::SchemaError::Parse { .. })
+            ),
+            "{message}"
+        );
         assert!(message.contains("evals/a/summary.json"), "{message}");
     }
 
     #[test]
     fn inconsistent_run_count_is_rejected() {
-        let text = SUMMARY.replace("\"runs\": 2", "\"runs\": 3");
-        let err =
-            parse_summary(&text, Path::new("s.json"), "s").expect_err("runs != per_run.len()");
+        let mut three = summary();
+        three.summary.runs = 3;
+        let err = parse_summary(&text(&three), Path::new("s.json"), "s")
+            .expect_err("runs != per_run.len()");
         assert!(err.to_string().contains("`per_run` lists 2 runs"), "{err}");
     }
 
-    fn run_log(poses: &str, edges: &str) -> String {
-        format!(
-            r#"{{"index": 4, "metrics": {{"success_5": true, "success_10": true, "rel_formation_error": 0.01,
-               "orientation_error_rad": 0.02, "collisions": 0}},
-               "trajectory": {{"dt": 0.5, "d_star": 1.0, "v_star": 0.7, "edges": {edges},
-                 "times": [0.0, 0.5], "phi_star": [0.1, null],
-                 "poses": {poses},
-                 "commands": [[{{"left": 0.1, "right": 0.2}}, {{"left": 0.3, "right": 0.4}}]],
-                 "collisions": [[1, 0, 1]]}}}}"#
-        )
+    fn pose(x: f64, theta: f64) -> Pose {
+        Pose { x, y: 0.0, theta }
+    }
+
+    fn run_log(poses: Vec<Vec<Pose>>, edges: Vec<(usize, usize)>) -> RunLog {
+        RunLog {
+            index: 4,
+            metrics: metrics(true, 9.0, 0.01),
+            trajectory: Trajectory {
+                dt: 0.5,
+                d_star: 1.0,
+                v_star: 0.7,
+                edges,
+                times: vec![0.0, 0.5],
+                phi_star: vec![0.1, f64::NAN],
+                poses,
+                commands: vec![vec![
+                    WheelCmd {
+                        left: 0.1,
+                        right: 0.2,
+                    },
+                    WheelCmd {
+                        left: 0.3,
+                        right: 0.4,
+                    },
+                ]],
+                collisions: vec![(1, 0, 1)],
+            },
+            clock: "in-process".into(),
+            models: Vec::new(),
+            complete: true,
+            stop_reason: None,
+            planned_ticks: None,
+        }
+    }
+
+    fn two_robots() -> Vec<Vec<Pose>> {
+        vec![
+            vec![pose(0.0, 0.0), pose(1.0, 0.0)],
+            vec![pose(0.1, 0.0), pose(1.1, f64::NAN)],
+        ]
     }
 
     #[test]
     fn run_log_is_read_and_validated() {
-        let ok = run_log(
-            r#"[[{"x":0,"y":0,"theta":0},{"x":1,"y":0,"theta":0}],[{"x":0.1,"y":0,"theta":0},{"x":1.1,"y":0,"theta":null}]]"#,
-            "[[0, 1]]",
-        );
+        let ok = text(&run_log(two_robots(), vec![(0, 1)]));
         let run = parse_run_log(&ok, Path::new("runs/run-0004.json")).expect("valid run log");
         assert_eq!(run.index, 4);
         assert_eq!(run.trajectory.n_robots(), 2);
@@ -737,19 +610,15 @@ mod tests {
         assert_eq!(run.trajectory.commands[0][1].right, 0.4);
         assert_eq!(run.trajectory.collisions, vec![(1, 0, 1)]);
 
-        let ragged = run_log(
-            r#"[[{"x":0,"y":0,"theta":0},{"x":1,"y":0,"theta":0}],[{"x":0.1,"y":0,"theta":0}]]"#,
-            "[[0, 1]]",
-        );
+        let mut poses = two_robots();
+        poses[1].pop();
+        let ragged = text(&run_log(poses, vec![(0, 1)]));
         let err =
             parse_run_log(&ragged, Path::new("runs/run-0004.json")).expect_err("ragged poses");
         assert!(err.to_string().contains("poses[1] has 1 poses"), "{err}");
         assert!(err.to_string().contains("runs/run-0004.json"), "{err}");
 
-        let bad_edge = run_log(
-            r#"[[{"x":0,"y":0,"theta":0},{"x":1,"y":0,"theta":0}],[{"x":0.1,"y":0,"theta":0},{"x":1,"y":0,"theta":0}]]"#,
-            "[[0, 2]]",
-        );
+        let bad_edge = text(&run_log(two_robots(), vec![(0, 2)]));
         let err =
             parse_run_log(&bad_edge, Path::new("r.json")).expect_err("edge to a missing robot");
         assert!(err.to_string().contains("(0, 2)"), "{err}");
@@ -757,40 +626,41 @@ mod tests {
 
     #[test]
     fn incomplete_runs_are_read_and_older_files_are_complete() {
-        let poses = r#"[[{"x":0,"y":0,"theta":0},{"x":1,"y":0,"theta":0}],[{"x":0.1,"y":0,"theta":0},{"x":1.1,"y":0,"theta":0}]]"#;
-        let old = run_log(poses, "[[0, 1]]");
-        let run = parse_run_log(&old, Path::new("runs/run-0004.json")).expect("older run log");
+        // A run log from before `complete` and the schema version existed.
+        let mut old: serde_json::Value =
+            serde_json::to_value(run_log(two_robots(), vec![(0, 1)])).expect("json");
+        old.as_object_mut().expect("object").remove("complete");
+        let run = parse_run_log(&old.to_string(), Path::new("runs/run-0004.json"))
+            .expect("older run log");
         assert!(run.complete, "a log without `complete` is complete");
         assert_eq!(run.stop_reason, None);
 
-        let partial = old.replacen(
-            "\"index\": 4,",
-            "\"index\": 4, \"complete\": false, \"stop_reason\": \"interrupted by Ctrl-C\", \"planned_ticks\": 1200,",
-            1,
-        );
-        assert_ne!(partial, old);
-        let run = parse_run_log(&partial, Path::new("runs/run-0004.json")).expect("partial log");
+        let partial = RunLog {
+            complete: false,
+            stop_reason: Some("interrupted by Ctrl-C".into()),
+            planned_ticks: Some(1200),
+            ..run_log(two_robots(), vec![(0, 1)])
+        };
+        let run =
+            parse_run_log(&text(&partial), Path::new("runs/run-0004.json")).expect("partial log");
         assert!(!run.complete);
         assert_eq!(run.stop_reason.as_deref(), Some("interrupted by Ctrl-C"));
         assert_eq!(run.planned_ticks, Some(1200));
 
-        let eval = parse_summary(SUMMARY, Path::new("s.json"), "s").expect("summary");
-        assert!(eval.incomplete.is_empty(), "an older summary lists none");
-        let marked = SUMMARY.replacen(
-            "\"some_future_key\": 1",
-            r#""incomplete_runs": [{"index": 1, "ticks": 80, "planned_ticks": 1200, "stop_reason": "interrupted by SIGTERM"}]"#,
-            1,
-        );
-        let eval = parse_summary(&marked, Path::new("s.json"), "s").expect("summary");
-        assert_eq!(
-            eval.incomplete,
-            vec![IncompleteRun {
-                index: 1,
-                ticks: Some(80),
-                planned_ticks: Some(1200),
-                stop_reason: Some("interrupted by SIGTERM".into()),
-            }]
-        );
+        let eval = parse_summary(&text(&summary()), Path::new("s.json"), "s").expect("summary");
+        assert!(eval.incomplete.is_empty());
+        let stopped = IncompleteRun {
+            index: 1,
+            ticks: 80,
+            planned_ticks: Some(1200),
+            stop_reason: Some("interrupted by SIGTERM".into()),
+        };
+        let marked = EvalOutput {
+            incomplete_runs: vec![stopped.clone()],
+            ..summary()
+        };
+        let eval = parse_summary(&text(&marked), Path::new("s.json"), "s").expect("summary");
+        assert_eq!(eval.incomplete, vec![stopped]);
     }
 
     #[test]

@@ -34,7 +34,6 @@ pub use error::ReportError;
 use figures::{BoxGroup, BoxPanel, Figure};
 use html::{CaptionedFigure, PlacedFigure, ReportPage, RunSection, TableEntry, paper};
 use input::{EvalData, Inputs, RunData};
-use series::quartiles;
 
 /// What [`build_report`] wrote.
 #[derive(Debug, Clone, PartialEq)]
@@ -325,11 +324,11 @@ fn eval_detail(eval: &EvalData) -> String {
 
 /// The three Fig. 9 panels, one box per evaluation, in the panels' units (s, %, rad).
 pub fn fig9_panels(evals: &[&EvalData]) -> Vec<BoxPanel> {
-    let successful = |e: &EvalData| -> Vec<input::RunScores> {
+    let successful = |e: &EvalData| -> Vec<input::RunMetrics> {
         e.per_run.iter().filter(|r| r.success_10).cloned().collect()
     };
-    let scaled = |q: Option<input::Quartiles>, factor: f64| {
-        q.map(|q| input::Quartiles {
+    let scaled = |q: Option<input::Quantiles>, factor: f64| {
+        q.map(|q| input::Quantiles {
             min: q.min * factor,
             q1: q.q1 * factor,
             median: q.median * factor,
@@ -348,24 +347,17 @@ pub fn fig9_panels(evals: &[&EvalData]) -> Vec<BoxPanel> {
         let orient_dots: Vec<f64> = runs.iter().map(|r| r.orientation_error_rad).collect();
         convergence.push(BoxGroup {
             label: eval.name.clone(),
-            stats: eval
-                .fig9
-                .convergence_s
-                .or_else(|| quartiles(conv_dots.iter().copied())),
+            stats: eval.fig9.convergence_s,
             dots: conv_dots,
         });
         formation.push(BoxGroup {
             label: eval.name.clone(),
-            stats: scaled(eval.fig9.rel_formation_error, 100.0)
-                .or_else(|| quartiles(form_dots.iter().copied())),
+            stats: scaled(eval.fig9.rel_formation_error, 100.0),
             dots: form_dots,
         });
         orientation.push(BoxGroup {
             label: eval.name.clone(),
-            stats: eval
-                .fig9
-                .orientation_error_rad
-                .or_else(|| quartiles(orient_dots.iter().copied())),
+            stats: eval.fig9.orientation_error_rad,
             dots: orient_dots,
         });
     }

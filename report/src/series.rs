@@ -1,12 +1,12 @@
 //! The numbers the figures draw, computed from run data without any plotting: formation and
 //! orientation errors over time, wheel commands, paths, formation snapshots, equal-aspect ranges
-//! and quartiles. Everything here is pure and unit-tested; `figures` only maps it to pixels.
+//! and strip-plot jitter (the Fig. 9 quartiles come from `summary.json`). Everything here is pure and unit-tested; `figures` only maps it to pixels.
 
 use std::ops::Range;
 
 use formation_proto::wrap_angle;
 
-use crate::input::{Quartiles, RunTrajectory};
+use crate::input::Trajectory;
 
 /// One line of a figure: a label and its finite `(x, y)` points, in data order.
 #[derive(Debug, Clone, PartialEq)]
@@ -54,7 +54,7 @@ pub fn edge_label(i: usize, j: usize) -> String {
 }
 
 /// Relative formation error `e_ij(t) = |d_ij(t) - d*| / d*` of every edge, in percent.
-pub fn formation_error_percent(traj: &RunTrajectory) -> Vec<Series> {
+pub fn formation_error_percent(traj: &Trajectory) -> Vec<Series> {
     traj.edges
         .iter()
         .map(|&(i, j)| {
@@ -73,7 +73,7 @@ pub fn formation_error_percent(traj: &RunTrajectory) -> Vec<Series> {
 }
 
 /// Signed orientation error `wrap(theta_i(t) - phi*(t))` of every robot \[rad\].
-pub fn orientation_error(traj: &RunTrajectory) -> Vec<Series> {
+pub fn orientation_error(traj: &Trajectory) -> Vec<Series> {
     (0..traj.n_robots())
         .map(|i| {
             Series::from_samples(
@@ -89,7 +89,7 @@ pub fn orientation_error(traj: &RunTrajectory) -> Vec<Series> {
 }
 
 /// One wheel's applied command of every robot over time \[m/s\]; command `k` is drawn at `t_k`.
-pub fn wheel_commands(traj: &RunTrajectory, wheel: Wheel) -> Vec<Series> {
+pub fn wheel_commands(traj: &Trajectory, wheel: Wheel) -> Vec<Series> {
     (0..traj.n_robots())
         .map(|i| {
             Series::from_samples(
@@ -111,7 +111,7 @@ pub fn wheel_commands(traj: &RunTrajectory, wheel: Wheel) -> Vec<Series> {
 }
 
 /// Every robot's path `(x, y)` \[m\].
-pub fn paths(traj: &RunTrajectory) -> Vec<Series> {
+pub fn paths(traj: &Trajectory) -> Vec<Series> {
     (0..traj.n_robots())
         .map(|i| {
             Series::from_samples(
@@ -214,29 +214,6 @@ pub fn heading_triangle(x: f64, y: f64, theta: f64, size: f64) -> [(f64, f64); 3
     ]
 }
 
-/// Type-7 quartiles (as `formation-world` computes them) of the finite values; `None` if none.
-pub fn quartiles(values: impl IntoIterator<Item = f64>) -> Option<Quartiles> {
-    let mut sorted: Vec<f64> = values.into_iter().filter(|v| v.is_finite()).collect();
-    if sorted.is_empty() {
-        return None;
-    }
-    sorted.sort_by(f64::total_cmp);
-    let at = |p: f64| {
-        let h = (sorted.len() - 1) as f64 * p;
-        let lower = h.floor() as usize;
-        let upper = (lower + 1).min(sorted.len() - 1);
-        sorted[lower] + (h - lower as f64) * (sorted[upper] - sorted[lower])
-    };
-    Some(Quartiles {
-        min: sorted[0],
-        q1: at(0.25),
-        median: at(0.5),
-        q3: at(0.75),
-        max: sorted[sorted.len() - 1],
-        count: sorted.len(),
-    })
-}
-
 /// A deterministic horizontal offset in `[-0.5, 0.5)` for the `i`-th dot of a strip plot (a
 /// low-discrepancy sequence, so dots spread evenly and a report is reproducible).
 pub fn jitter(i: usize) -> f64 {
@@ -249,9 +226,9 @@ mod tests {
     use super::*;
     use formation_proto::{Pose, WheelCmd};
 
-    fn traj() -> RunTrajectory {
+    fn traj() -> Trajectory {
         let pose = |x: f64, y: f64, theta: f64| Pose { x, y, theta };
-        RunTrajectory {
+        Trajectory {
             dt: 1.0,
             d_star: 2.0,
             v_star: 0.7,
@@ -359,16 +336,6 @@ mod tests {
         let [tip, a, b] = heading_triangle(1.0, 1.0, std::f64::consts::FRAC_PI_2, 1.0);
         assert!((tip.0 - 1.0).abs() < 1e-12 && (tip.1 - 1.6).abs() < 1e-12);
         assert!(a.1 < 1.0 && b.1 < 1.0);
-    }
-
-    #[test]
-    fn quartiles_type7() {
-        let q = quartiles([4.0, 1.0, 3.0, 2.0, f64::NAN]).expect("values");
-        assert_eq!(
-            (q.min, q.q1, q.median, q.q3, q.max, q.count),
-            (1.0, 1.75, 2.5, 3.25, 4.0, 4)
-        );
-        assert!(quartiles([f64::NAN]).is_none());
     }
 
     #[test]

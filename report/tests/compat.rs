@@ -1,14 +1,18 @@
-//! The report reads what `formation eval --out` writes: run data built and serialised with
-//! `formation-world`'s own types (`Trajectory`, `RunMetrics`, `summarize`), laid out as the CLI's
-//! `EvalOutput` (summary keys flattened) and `RunLog`, is drawn with the writer's numbers.
+//! The report reads what the writers write: run data computed by `formation-world`
+//! (`run_metrics`, `summarize`) and written as the writers do, with the one definition of each
+//! file in `formation-schema` (`EvalOutput` for `summary.json`, `RunLog` through the world's
+//! `write_json_atomic`, `LatencyProfile` for `profile.json`), is drawn with the writer's numbers.
+//! No JSON is built by hand, so a field renamed on the writer's side breaks this test.
 
+use std::collections::BTreeMap;
 use std::fs;
 use std::path::Path;
 
 use formation_proto::{Pose, WheelCmd};
+use formation_schema::{EvalOutput, IncompleteRun, LatencyProfile, RunLog, StageStats};
 use formation_world::Trajectory;
 use formation_world::metrics::{MetricsConfig, RunMetrics, run_metrics, summarize};
-use serde_json::{Value, json};
+use formation_world::runlog::{log_paths, write_json_atomic};
 
 /// Three robots settling into a triangle of side `d_star` while driving along +x.
 fn trajectory(seconds: f64, d_star: f64, spread: f64) -> Trajectory {
@@ -61,37 +65,51 @@ fn trajectory(seconds: f64, d_star: f64, spread: f64) -> Trajectory {
     }
 }
 
-/// Writes an eval output directory the way `formation eval --out` does.
+/// Writes an eval output directory the way `formation eval --out` does: the summary through
+/// `formation_schema`, the run logs through the world's writer, both of the writers' own types.
 fn write_eval_dir(dir: &Path, scenario: &str, runs: &[(Trajectory, bool)]) -> Vec<RunMetrics> {
     let cfg = MetricsConfig::default();
     let metrics: Vec<RunMetrics> = runs.iter().map(|(t, _)| run_metrics(t, &cfg)).collect();
-    let mut summary = serde_json::to_value(summarize(&metrics)).expect("summary");
-    let fields = summary.as_object_mut().expect("object");
-    fields.insert("controller".into(), json!("expert"));
-    fields.insert("models".into(), json!([]));
-    fields.insert("scenario".into(), json!(scenario));
-    fields.insert("seed".into(), json!(7));
-    fields.insert(
-        "per_run".into(),
-        serde_json::to_value(&metrics).expect("metrics"),
-    );
-    fs::create_dir_all(dir.join("runs")).expect("mkdir");
-    fs::write(
-        dir.join("summary.json"),
-        serde_json::to_vec_pretty(&summary).expect("json"),
-    )
-    .expect("write");
+    write_summary(dir, &eval_output(scenario, &metrics));
     for (index, ((trajectory, keep), m)) in runs.iter().zip(&metrics).enumerate() {
         if *keep {
-            let log = json!({"index": index, "metrics": m, "trajectory": trajectory});
-            fs::write(
-                dir.join(format!("runs/run-{index:04}.json")),
-                serde_json::to_vec(&log).expect("json"),
-            )
-            .expect("write");
+            let log = RunLog {
+                index,
+                metrics: m.clone(),
+                trajectory: trajectory.clone(),
+                clock: "in-process".into(),
+                models: Vec::new(),
+                complete: true,
+                stop_reason: None,
+                planned_ticks: Some(trajectory.commands.len() as u64),
+            };
+            write_json_atomic(&log_paths(dir, index).0, &log).expect("run log");
         }
     }
     metrics
+}
+
+/// The summary `formation eval` writes over these runs.
+fn eval_output(scenario: &str, per_run: &[RunMetrics]) -> EvalOutput {
+    EvalOutput {
+        controller: "expert".into(),
+        models: Vec::new(),
+        scenario: scenario.into(),
+        seed: Some(7),
+        summary: summarize(per_run),
+        per_run: per_run.to_vec(),
+        braked_ticks: Vec::new(),
+        incomplete_runs: Vec::new(),
+    }
+}
+
+fn write_summary(dir: &Path, summary: &EvalOutput) {
+    fs::create_dir_all(dir).expect("mkdir");
+    fs::write(
+        dir.join("summary.json"),
+        formation_schema::to_json_pretty(summary).expect("json"),
+    )
+    .expect("write");
 }
 
 #[test]
@@ -169,57 +187,103 @@ fn non_finite_metrics_written_as_null_are_read() {
     ];
     metrics[1].rel_formation_error = f64::NAN;
     metrics[1].orientation_error_rad = f64::NAN;
-    let mut summary = serde_json::to_value(summarize(&metrics)).expect("summary");
-    summary["per_run"] = serde_json::to_value(&metrics).expect("metrics");
+    let summary = eval_output("table1", &metrics);
+    let json: serde_json::Value =
+        serde_json::from_slice(&formation_schema::to_json(&summary).expect("json")).expect("json");
     assert_eq!(
-        summary["per_run"][1]["rel_formation_error"],
-        Value::Null,
+        json["per_run"][1]["rel_formation_error"],
+        serde_json::Value::Null,
         "serde_json writes NaN as null"
     );
-    fs::write(dir.path().join("summary.json"), summary.to_string()).expect("write");
+    write_summary(dir.path(), &summary);
     let report =
         formation_report::build_report(dir.path(), &dir.path().join("r.html")).expect("report");
     assert_eq!(report.evaluations, 1);
 }
 
-/// A run the runtime stopped early: its log, written with the world's own `RunLog` type
-/// (`complete: false`), and a summary listing it, appear in the report marked incomplete.
+/// A run the runtime stopped early: its log, written by the world's writer (`complete: false`),
+/// appears in the report marked incomplete, whether or not the summary lists it.
 #[test]
 fn an_incomplete_run_written_by_the_world_is_marked_in_the_report() {
-    use formation_world::runlog::RunLog;
+    for listed in [false, true] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let run_dir = dir.path().join("run");
+        let trajectory = trajectory(4.2, 2.0, 0.5);
+        let metrics = run_metrics(&trajectory, &MetricsConfig::default());
+        let log = RunLog {
+            index: 0,
+            metrics: metrics.clone(),
+            trajectory,
+            clock: "realtime".into(),
+            models: vec!["m-1".into(); 3],
+            complete: false,
+            stop_reason: Some("interrupted by Ctrl-C".into()),
+            planned_ticks: Some(1200),
+        };
+        write_json_atomic(&log_paths(&run_dir, 0).0, &log).expect("run log");
+        let mut summary = eval_output("case1", &[metrics]);
+        if listed {
+            summary.incomplete_runs = vec![IncompleteRun {
+                index: 0,
+                ticks: log.ticks(),
+                planned_ticks: log.planned_ticks,
+                stop_reason: log.stop_reason.clone(),
+            }];
+        }
+        write_summary(&run_dir, &summary);
+
+        let out = dir.path().join("report.html");
+        formation_report::build_report(dir.path(), &out).expect("report");
+        let html = fs::read_to_string(&out).expect("html");
+        assert!(
+            html.contains("1 of 1 run incomplete (stopped early: interrupted by Ctrl-C)"),
+            "Table I marks it (listed in the summary: {listed})"
+        );
+        assert!(html.contains("<span class=\"badge\">incomplete</span>"));
+        assert!(html.contains("no, stopped early after 4.2 s of 60.0 s: interrupted by Ctrl-C"));
+    }
+}
+
+/// A latency profile of the writer's type is drawn with its numbers.
+#[test]
+fn a_profile_written_by_the_runtime_is_drawn() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let run_dir = dir.path().join("run");
-    let trajectory = trajectory(4.2, 2.0, 0.5);
-    let metrics = run_metrics(&trajectory, &MetricsConfig::default());
-    let log = RunLog {
-        index: 0,
-        metrics: metrics.clone(),
-        trajectory,
-        clock: "realtime".into(),
-        models: vec!["m-1".into(); 3],
-        complete: false,
-        stop_reason: Some("interrupted by Ctrl-C".into()),
-        planned_ticks: Some(1200),
+    let data = dir.path().join("out");
+    write_eval_dir(&data, "case1", &[(trajectory(6.0, 2.0, 0.5), false)]);
+    let stage = |p50_us: f64| StageStats {
+        count: 1200,
+        p50_us,
+        p90_us: 1.5 * p50_us,
+        p99_us: 2.0 * p50_us,
+        max_us: 9.0 * p50_us,
+        histogram: vec![(1024.0, 1200)],
     };
-    fs::create_dir_all(run_dir.join("runs")).expect("mkdir");
+    let stages = BTreeMap::from([
+        ("round_trip".to_owned(), stage(900.0)),
+        ("inference".to_owned(), stage(700.0)),
+        ("tick".to_owned(), stage(50_000.0)),
+    ]);
+    let profile = LatencyProfile {
+        runs: 2,
+        clock: "lockstep".into(),
+        used_commands: 1200,
+        braked: BTreeMap::from([("missing".to_owned(), 3)]),
+        braked_per_robot: vec![BTreeMap::from([("missing".to_owned(), 3)])],
+        stages: stages.clone(),
+        per_agent: vec![stages],
+        inference_paper_ms: 2.1,
+    };
     fs::write(
-        run_dir.join("runs/run-0000.json"),
-        serde_json::to_vec(&log).expect("json"),
+        data.join("profile.json"),
+        formation_schema::to_json_pretty(&profile).expect("json"),
     )
     .expect("write");
-    // An older summary without `incomplete_runs`: the run log alone marks the run.
-    let mut summary = serde_json::to_value(summarize(&[metrics])).expect("summary");
-    summary["per_run"] = json!([log.metrics]);
-    summary["scenario"] = json!("case1");
-    fs::write(run_dir.join("summary.json"), summary.to_string()).expect("write");
-
     let out = dir.path().join("report.html");
-    formation_report::build_report(dir.path(), &out).expect("report");
+    let summary = formation_report::build_report(&data, &out).expect("report");
+    assert_eq!(summary.latency_profiles, 1);
     let html = fs::read_to_string(&out).expect("html");
     assert!(
-        html.contains("1 of 1 run incomplete (stopped early: interrupted by Ctrl-C)"),
-        "Table I marks it"
+        html.contains("2 runs, 1200 commands used, braked by the watchdog: missing 3"),
+        "the caption shows the profile's counts"
     );
-    assert!(html.contains("<span class=\"badge\">incomplete</span>"));
-    assert!(html.contains("no, stopped early after 4.2 s of 60.0 s: interrupted by Ctrl-C"));
 }

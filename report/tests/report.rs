@@ -6,6 +6,7 @@ mod common;
 use std::fs;
 
 use formation_report::{ReportError, build_report};
+use formation_schema::SchemaError;
 
 fn polyline_point_counts(svg: &str) -> Vec<usize> {
     svg.split("<polyline")
@@ -173,7 +174,10 @@ fn truncated_inputs_name_the_file() {
     let text = fs::read(&log).expect("read");
     fs::write(&log, &text[..text.len() / 2]).expect("truncate");
     let err = build_report(dir.path(), &out).expect_err("truncated run log");
-    assert!(matches!(err, ReportError::Json { .. }), "{err}");
+    assert!(
+        matches!(err, ReportError::Schema(SchemaError::Parse { .. })),
+        "{err}"
+    );
     assert!(err.to_string().contains("run-0000.json"), "{err}");
     fs::write(&log, &text).expect("restore");
 
@@ -184,9 +188,26 @@ fn truncated_inputs_name_the_file() {
 
     fs::write(&summary, "{}").expect("empty object");
     let err = build_report(dir.path(), &out).expect_err("no Table I keys");
-    assert!(err.to_string().contains("missing field `runs`"), "{err}");
+    assert!(err.to_string().contains("missing field"), "{err}");
 
-    common::write_json(
+    // A summary of another schema version is refused, saying which.
+    let mut newer: serde_json::Value = serde_json::from_slice(
+        &formation_schema::to_json(&common::summary("table1", &[common::run_metrics(1, true)]))
+            .expect("json"),
+    )
+    .expect("json");
+    newer["schema_version"] = serde_json::json!(2);
+    common::write_json(&summary, &newer);
+    let err = build_report(dir.path(), &out).expect_err("another version");
+    assert!(
+        err.to_string().contains(&format!(
+            "{} is a formation evaluation summary of schema version 2; this build reads version 1",
+            summary.display()
+        )),
+        "{err}"
+    );
+
+    common::write_file(
         &summary,
         &common::summary("table1", &[common::run_metrics(1, true)]),
     );
@@ -202,7 +223,7 @@ fn truncated_inputs_name_the_file() {
 #[test]
 fn optional_sections_are_omitted_when_absent() {
     let dir = tempfile::tempdir().expect("tempdir");
-    common::write_json(
+    common::write_file(
         &dir.path().join("summary.json"),
         &common::summary(
             "table1",

@@ -9,37 +9,11 @@
 
 pub use formation_proto::control::{Controller, ControllerError, Observation};
 use formation_proto::{Pose, WheelCmd};
-use serde::{Deserialize, Serialize};
 
 use crate::scenario::RunSpec;
 
-/// The record of one run.
-///
-/// `times`, `phi_star` and `poses` have `ticks + 1` entries: the state at `t = k dt`, `k = 0..=ticks`.
-/// `commands` has `ticks` entries: the commands the world applied at tick `k` (after braking non-finite
-/// commands, wheel saturation and any acceleration limit), which take the state from `k` to `k + 1`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Trajectory {
-    /// Time step \[s\].
-    pub dt: f64,
-    /// Desired pairwise distance \[m\].
-    pub d_star: f64,
-    /// Desired speed \[m/s\].
-    pub v_star: f64,
-    /// Formation edges the metrics score.
-    pub edges: Vec<(usize, usize)>,
-    /// Sample times \[s\].
-    pub times: Vec<f64>,
-    /// Desired heading at each sample time \[rad\], not wrapped.
-    pub phi_star: Vec<f64>,
-    /// Poses of all robots at each sample time.
-    pub poses: Vec<Vec<Pose>>,
-    /// Applied wheel commands of all robots at each tick.
-    pub commands: Vec<Vec<WheelCmd>>,
-    /// Robot-robot overlaps `(k, i, j)`, `i < j`, found in the state at sample `k` (so `k >= 1`), as the
-    /// world reported them after each step.
-    pub collisions: Vec<(u64, usize, usize)>,
-}
+/// The record of one run: defined with the run log in [`formation_schema`].
+pub use formation_schema::Trajectory;
 
 /// Runs `spec` to the end with `controller`.
 ///

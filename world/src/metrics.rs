@@ -48,26 +48,8 @@ impl Default for MetricsConfig {
     }
 }
 
-/// The metrics of one run.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RunMetrics {
-    /// Success at the first tolerance (5 %).
-    pub success_5: bool,
-    /// Success at the second tolerance (10 %).
-    pub success_10: bool,
-    /// Convergence time \[s\] at the first tolerance.
-    pub convergence_s_5: Option<f64>,
-    /// Convergence time \[s\] at the second tolerance.
-    pub convergence_s_10: Option<f64>,
-    /// Mean over edges of each edge's mean relative error over the window.
-    pub rel_formation_error: f64,
-    /// The largest of the edges' window means.
-    pub max_edge_window_error: f64,
-    /// Mean over robots and window samples of the wrapped heading error \[rad\].
-    pub orientation_error_rad: f64,
-    /// Number of collision events.
-    pub collisions: usize,
-}
+/// The metrics of one run, as the run log and `summary.json` hold them.
+pub use formation_schema::RunMetrics;
 
 /// Scores one run.
 pub fn run_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
@@ -178,44 +160,28 @@ fn max_propagating_nan(values: impl Iterator<Item = f64>) -> f64 {
     })
 }
 
-/// Order statistics of a sample.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Quantiles {
-    /// Smallest value.
-    pub min: f64,
-    /// First quartile.
-    pub q1: f64,
-    /// Median.
-    pub median: f64,
-    /// Third quartile.
-    pub q3: f64,
-    /// Largest value.
-    pub max: f64,
-    /// Number of values.
-    pub count: usize,
-}
+/// Order statistics of a sample and the Table I summary, as `summary.json` holds them.
+pub use formation_schema::{Quantiles, Summary};
 
-impl Quantiles {
-    /// Quartiles of the finite values in `values`, `None` if there are none.
-    ///
-    /// The `p`-quantile of the sorted values `x_0 <= .. <= x_{n-1}` interpolates linearly between order
-    /// statistics at the fractional index `h = (n - 1) p`: `x_floor(h) + (h - floor(h)) (x_floor(h)+1 -
-    /// x_floor(h))` (Hyndman & Fan type 7, the default of R and NumPy).
-    pub fn of(values: impl IntoIterator<Item = f64>) -> Option<Quantiles> {
-        let mut sorted: Vec<f64> = values.into_iter().filter(|v| v.is_finite()).collect();
-        if sorted.is_empty() {
-            return None;
-        }
-        sorted.sort_by(f64::total_cmp);
-        Some(Quantiles {
-            min: sorted[0],
-            q1: quantile_sorted(&sorted, 0.25),
-            median: quantile_sorted(&sorted, 0.5),
-            q3: quantile_sorted(&sorted, 0.75),
-            max: sorted[sorted.len() - 1],
-            count: sorted.len(),
-        })
+/// Quartiles of the finite values in `values`, `None` if there are none.
+///
+/// The `p`-quantile of the sorted values `x_0 <= .. <= x_{n-1}` interpolates linearly between order
+/// statistics at the fractional index `h = (n - 1) p`: `x_floor(h) + (h - floor(h)) (x_floor(h)+1 -
+/// x_floor(h))` (Hyndman & Fan type 7, the default of R and NumPy).
+pub fn quantiles(values: impl IntoIterator<Item = f64>) -> Option<Quantiles> {
+    let mut sorted: Vec<f64> = values.into_iter().filter(|v| v.is_finite()).collect();
+    if sorted.is_empty() {
+        return None;
     }
+    sorted.sort_by(f64::total_cmp);
+    Some(Quantiles {
+        min: sorted[0],
+        q1: quantile_sorted(&sorted, 0.25),
+        median: quantile_sorted(&sorted, 0.5),
+        q3: quantile_sorted(&sorted, 0.75),
+        max: sorted[sorted.len() - 1],
+        count: sorted.len(),
+    })
 }
 
 /// Type-7 quantile of non-empty sorted values.
@@ -224,32 +190,6 @@ fn quantile_sorted(sorted: &[f64], p: f64) -> f64 {
     let lower = h.floor() as usize;
     let upper = (lower + 1).min(sorted.len() - 1);
     sorted[lower] + (h - lower as f64) * (sorted[upper] - sorted[lower])
-}
-
-/// Table I and Fig. 9 over a set of runs.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Summary {
-    /// Number of runs.
-    pub runs: usize,
-    /// Fraction (0..1) of runs that succeed at the first tolerance (5 %); 0 for no runs.
-    pub success_rate_5: f64,
-    /// Fraction (0..1) of runs that succeed at the second tolerance (10 %); 0 for no runs.
-    pub success_rate_10: f64,
-    /// Median convergence time \[s\] at 10 % over the runs that succeed at 10 %.
-    pub median_convergence_s: Option<f64>,
-    /// Median relative formation error over the runs that succeed at 10 %.
-    pub median_rel_formation_error: Option<f64>,
-    /// Median orientation error \[rad\] over the runs that succeed at 10 %.
-    pub median_orientation_error_rad: Option<f64>,
-    /// Number of runs with at least one collision.
-    pub collisions: usize,
-    /// Convergence time \[s\] at 10 % over the runs that succeed at 10 % and converge (a run can succeed
-    /// on the window mean without its maximum error staying below 10 % to the end).
-    pub convergence_s: Option<Quantiles>,
-    /// Relative formation error over the runs that succeed at 10 %.
-    pub rel_formation_error: Option<Quantiles>,
-    /// Orientation error \[rad\] over the runs that succeed at 10 %.
-    pub orientation_error_rad: Option<Quantiles>,
 }
 
 /// Aggregates runs: success rates over all runs, Fig. 9 statistics over the runs that succeed at 10 %.
@@ -262,9 +202,9 @@ pub fn summarize(runs: &[RunMetrics]) -> Summary {
         }
     };
     let successful: Vec<&RunMetrics> = runs.iter().filter(|r| r.success_10).collect();
-    let convergence_s = Quantiles::of(successful.iter().filter_map(|r| r.convergence_s_10));
-    let rel_formation_error = Quantiles::of(successful.iter().map(|r| r.rel_formation_error));
-    let orientation_error_rad = Quantiles::of(successful.iter().map(|r| r.orientation_error_rad));
+    let convergence_s = quantiles(successful.iter().filter_map(|r| r.convergence_s_10));
+    let rel_formation_error = quantiles(successful.iter().map(|r| r.rel_formation_error));
+    let orientation_error_rad = quantiles(successful.iter().map(|r| r.orientation_error_rad));
     Summary {
         runs: runs.len(),
         success_rate_5: fraction(runs.iter().filter(|r| r.success_5).count()),
@@ -459,19 +399,19 @@ mod tests {
 
     #[test]
     fn quantiles_interpolate_linearly_between_order_statistics() {
-        let q = Quantiles::of([4.0, 1.0, 3.0, 2.0]).unwrap();
+        let q = quantiles([4.0, 1.0, 3.0, 2.0]).unwrap();
         assert_eq!(
             (q.min, q.q1, q.median, q.q3, q.max, q.count),
             (1.0, 1.75, 2.5, 3.25, 4.0, 4)
         );
-        let q = Quantiles::of([50.0, 10.0, 40.0, 20.0, 30.0, f64::NAN]).unwrap();
+        let q = quantiles([50.0, 10.0, 40.0, 20.0, 30.0, f64::NAN]).unwrap();
         assert_eq!((q.q1, q.median, q.q3, q.count), (20.0, 30.0, 40.0, 5));
-        let q = Quantiles::of([7.0]).unwrap();
+        let q = quantiles([7.0]).unwrap();
         assert_eq!(
             (q.min, q.q1, q.median, q.q3, q.max),
             (7.0, 7.0, 7.0, 7.0, 7.0)
         );
-        assert!(Quantiles::of([]).is_none());
+        assert!(quantiles([]).is_none());
     }
 
     fn run(

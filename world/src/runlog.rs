@@ -3,10 +3,14 @@
 //!
 //! Layout under an output directory:
 //!
-//! * `runs/run-NNNN.json`: a [`RunLog`], the trajectory with its metrics (the shape
-//!   `formation eval --out` writes, so the report reads both). `complete` is false for a run that
-//!   stopped early (its metrics are over the ticks it played), with the reason in `stop_reason`.
+//! * `runs/run-NNNN.json`: a [`RunLog`], the trajectory with its metrics (the format
+//!   `formation eval --out` writes too, so the report reads both). `complete` is false for a run
+//!   that stopped early (its metrics are over the ticks it played), with the reason in
+//!   `stop_reason`.
 //! * `timing/run-NNNN.json`: a [`TimingLog`], the per-tick timing of one run.
+//!
+//!   Both are defined, with their format names and schema versions, in [`formation_schema`],
+//!   which reads them ([`formation_schema::read_run_log`]); [`write_json_atomic`] writes them.
 //! * `runs/run-NNNN.journal`: the run journal, present only while a run plays (or after a world
 //!   that was killed). It is JSON Lines, written as the run goes by [`RunJournal`]:
 //!
@@ -35,19 +39,19 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use formation_proto::wire::RobotTiming;
 use formation_proto::{Pose, WheelCmd};
+use formation_schema::SchemaFile;
 use serde::{Deserialize, Serialize};
 
 use crate::episode::Trajectory;
-use crate::metrics::{MetricsConfig, RunMetrics, run_metrics};
+use crate::metrics::{MetricsConfig, run_metrics};
 use crate::scenario::RunSpec;
 
 /// The `format` of a run journal's header line.
 pub const JOURNAL_FORMAT: &str = "formation-run-journal";
 /// The journal version this build writes and reads.
 pub const JOURNAL_VERSION: u32 = 1;
-/// The largest run log, timing log or journal read \[bytes\].
+/// The largest journal read \[bytes\].
 pub const MAX_FILE_BYTES: u64 = 2 << 30;
 /// The longest journal line read \[bytes\].
 pub const MAX_LINE_BYTES: usize = 64 << 20;
@@ -58,66 +62,9 @@ const FLUSH_BYTES: usize = 64 << 10;
 /// Directory levels [`find_run_dirs`] searches.
 const MAX_SEARCH_DEPTH: usize = 12;
 
-/// One run's trajectory log (`runs/run-NNNN.json`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RunLog {
-    /// Run index within the scenario.
-    pub index: usize,
-    /// The paper's metrics of the run (over the ticks played, for an incomplete run).
-    pub metrics: RunMetrics,
-    /// The trajectory, exactly as the world recorded it.
-    pub trajectory: Trajectory,
-    /// `lockstep` or `realtime`.
-    pub clock: String,
-    /// The model each robot's agent last reported.
-    pub models: Vec<String>,
-    /// False when the run stopped before its last tick. Files written before this field existed
-    /// read as complete.
-    #[serde(default = "complete_by_default")]
-    pub complete: bool,
-    /// Why an incomplete run stopped.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub stop_reason: Option<String>,
-    /// The ticks the run was to play, when known.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub planned_ticks: Option<u64>,
-}
-
-fn complete_by_default() -> bool {
-    true
-}
-
-impl RunLog {
-    /// Reads a run log (bounded by [`MAX_FILE_BYTES`]).
-    pub fn read(path: &Path) -> Result<RunLog, RunLogError> {
-        let bytes = read_bounded(path)?;
-        serde_json::from_slice(&bytes).map_err(|source| RunLogError::Parse {
-            path: path.to_path_buf(),
-            line: None,
-            source,
-        })
-    }
-
-    /// Ticks played (command rows recorded).
-    pub fn ticks(&self) -> usize {
-        self.trajectory.commands.len()
-    }
-}
-
-/// One run's per-tick timing log (`timing/run-NNNN.json`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TimingLog {
-    /// Run index within the scenario.
-    pub index: usize,
-    /// `lockstep` or `realtime`.
-    pub clock: String,
-    /// The tick period the world steps with \[s\].
-    pub dt_s: f64,
-    /// Per tick: when the world began it (published the scans), since the first tick began \[ns\].
-    pub tick_start_ns: Vec<u64>,
-    /// One column-wise record per robot.
-    pub robots: Vec<RobotTiming>,
-}
+/// The run log (`runs/run-NNNN.json`) and the timing log (`timing/run-NNNN.json`), defined in
+/// [`formation_schema`].
+pub use formation_schema::{RunLog, TimingLog};
 
 /// Why a run log or journal could not be written or read.
 #[derive(Debug, thiserror::Error)]
@@ -268,32 +215,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RunLogError> {
     written
 }
 
-/// Writes `value` as JSON with [`write_atomic`].
-pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<(), RunLogError> {
-    let bytes = serde_json::to_vec(value).map_err(|source| RunLogError::Write {
+/// Writes a file of one of [`formation_schema`]'s formats (a run or timing log) as JSON, with its
+/// format name and schema version, with [`write_atomic`].
+pub fn write_json_atomic<F: SchemaFile>(path: &Path, value: &F) -> Result<(), RunLogError> {
+    let bytes = formation_schema::to_json(value).map_err(|source| RunLogError::Write {
         path: path.to_path_buf(),
         source: std::io::Error::other(source),
     })?;
     write_atomic(path, &bytes)
-}
-
-fn read_bounded(path: &Path) -> Result<Vec<u8>, RunLogError> {
-    let read_error = |source| RunLogError::Read {
-        path: path.to_path_buf(),
-        source,
-    };
-    let file = File::open(path).map_err(read_error)?;
-    let mut bytes = Vec::new();
-    file.take(MAX_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(read_error)?;
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(RunLogError::TooLarge {
-            path: path.to_path_buf(),
-            limit: MAX_FILE_BYTES,
-        });
-    }
-    Ok(bytes)
 }
 
 // ---- the journal format ----------------------------------------------------------------------

@@ -303,7 +303,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
     )?;
     print!("{}", crate::eval::table_text(&table));
     let path = plan.out.join("profile.json");
-    paths::write_atomic(&path, &serde_json::to_vec_pretty(&latency)?)?;
+    paths::write_atomic(&path, &formation_schema::to_json_pretty(&latency)?)?;
     profile::profile_svg(&latency, &plan.out.join("profile.svg"))?;
     print!("{}", profile::summary_text(&latency));
     println!(
@@ -350,14 +350,12 @@ fn lost_message(robot: usize, tick: u64, last_fresh_tick: Option<u64>) -> String
 fn run_summary(
     run_logs: &[PathBuf],
     scenario: &str,
-    seed: u64,
+    seed: Option<u64>,
 ) -> anyhow::Result<crate::eval::EvalOutput> {
     let mut logs = run_logs
         .iter()
-        .map(|path| {
-            RunLog::read(path).with_context(|| format!("reading run log {}", path.display()))
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .map(|path| RunLog::read(path))
+        .collect::<Result<Vec<_>, _>>()?;
     logs.sort_by_key(|log| log.index);
     let models = logs.first().map(|l| l.models.clone()).unwrap_or_default();
     let incomplete_runs = logs
@@ -371,7 +369,7 @@ fn run_summary(
         })
         .collect();
     let per_run = logs.into_iter().map(|l| l.metrics).collect();
-    let mut table = crate::eval::EvalOutput::from_runs("policy", models, scenario, seed, per_run);
+    let mut table = crate::eval::eval_output("policy", models, scenario, seed, per_run);
     table.incomplete_runs = incomplete_runs;
     Ok(table)
 }
@@ -386,19 +384,12 @@ fn write_summary(
     seed: Option<u64>,
     braked_ticks: Vec<std::collections::BTreeMap<String, usize>>,
 ) -> anyhow::Result<crate::eval::EvalOutput> {
-    let mut table = run_summary(run_logs, scenario, seed.unwrap_or_default())?;
+    let mut table = run_summary(run_logs, scenario, seed)?;
     table.braked_ticks = braked_ticks;
-    let bytes = match seed {
-        Some(_) => serde_json::to_vec_pretty(&table)?,
-        None => {
-            let mut json = serde_json::to_value(&table)?;
-            if let Some(fields) = json.as_object_mut() {
-                fields.remove("seed");
-            }
-            serde_json::to_vec_pretty(&json)?
-        }
-    };
-    paths::write_atomic(&out.join("summary.json"), &bytes)?;
+    paths::write_atomic(
+        &out.join("summary.json"),
+        &formation_schema::to_json_pretty(&table)?,
+    )?;
     Ok(table)
 }
 
@@ -635,14 +626,7 @@ pub fn eval_over_processes(
 
 /// The trajectory of one run log written by the world.
 pub fn read_trajectory(log: &Path) -> anyhow::Result<Trajectory> {
-    #[derive(serde::Deserialize)]
-    struct TrajectoryOnly {
-        trajectory: Trajectory,
-    }
-    let bytes = std::fs::read(log).with_context(|| format!("reading run log {}", log.display()))?;
-    let parsed: TrajectoryOnly = serde_json::from_slice(&bytes)
-        .with_context(|| format!("parsing run log {}", log.display()))?;
-    Ok(parsed.trajectory)
+    Ok(formation_schema::read_run_log(log)?.trajectory)
 }
 
 #[cfg(test)]

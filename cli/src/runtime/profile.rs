@@ -1,6 +1,7 @@
 //! Per-stage latency statistics of a multi-process run, from the world's timing logs
-//! (`<out>/timing/run-NNNN.json`, one [`RobotTiming`] per robot), written as `<out>/profile.json`
-//! in the schema the report draws.
+//! (`<out>/timing/run-NNNN.json`, a [`TimingLog`] with one [`RobotTiming`] per robot), written as
+//! `<out>/profile.json` (a [`LatencyProfile`]), which the report draws. Percentiles are computed
+//! here only, by [`stage_stats`] (an HDR histogram, 3 significant digits).
 //!
 //! Stages per command: `round_trip` (scan published → command received by the world, the tick
 //! loop's latency, on the world's clock), `uplink` (scan published → taken by the agent, system
@@ -13,97 +14,54 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use anyhow::Context;
 use formation_proto::wire::{RobotTiming, TickOutcome};
-use serde::{Deserialize, Serialize};
+use hdrhistogram::Histogram;
 
-/// Statistics of one stage, in microseconds.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct StageStats {
-    /// Samples.
-    pub count: usize,
-    /// Median \[us\].
-    pub p50_us: f64,
-    /// 90th percentile \[us\].
-    pub p90_us: f64,
-    /// 99th percentile \[us\].
-    pub p99_us: f64,
-    /// Largest \[us\].
-    pub max_us: f64,
-    /// Histogram: upper bucket edges \[us\] (powers of two) and counts.
-    pub histogram: Vec<(f64, usize)>,
-}
-
-/// The latency profile of a run directory.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LatencyProfile {
-    /// Runs read.
-    pub runs: usize,
-    /// `lockstep` or `realtime` (of the first run; empty when unknown).
-    pub clock: String,
-    /// Robot-ticks whose command was used.
-    pub used_commands: usize,
-    /// Robot-ticks braked by the watchdog, by reason.
-    pub braked: BTreeMap<String, usize>,
-    /// Per robot: its ticks braked by the watchdog, by reason (empty maps for robots never
-    /// braked).
-    #[serde(default)]
-    pub braked_per_robot: Vec<BTreeMap<String, usize>>,
-    /// Per-stage statistics over every agent and tick, by stage name.
-    pub stages: BTreeMap<String, StageStats>,
-    /// Per agent (robot index): its per-command stages.
-    pub per_agent: Vec<BTreeMap<String, StageStats>>,
-    /// The paper's single-sample inference time \[ms\], for comparison in the report.
-    pub inference_paper_ms: f64,
-}
-
-/// One run's timing log as the world writes it (`timing/run-NNNN.json`).
-#[derive(Debug, Clone, Default, Deserialize)]
-pub struct RunTiming {
-    /// `lockstep` or `realtime`.
-    #[serde(default)]
-    pub clock: String,
-    /// Tick period \[s\].
-    #[serde(default)]
-    pub dt_s: f64,
-    /// Per tick: when it began, since the first tick began \[ns\].
-    #[serde(default)]
-    pub tick_start_ns: Vec<u64>,
-    /// Per robot.
-    pub robots: Vec<RobotTiming>,
-}
+/// The profile and the timing logs it is computed from: defined in [`formation_schema`].
+pub use formation_schema::{LatencyProfile, StageStats, TimingLog};
 
 /// The paper's reported inference time \[ms\].
 pub const PAPER_INFERENCE_MS: f64 = 2.1;
 
-/// Quantile by nearest rank of sorted samples.
-fn quantile(sorted: &[u64], q: f64) -> u64 {
-    if sorted.is_empty() {
-        return 0;
-    }
-    let rank = (q * sorted.len() as f64).ceil() as usize;
-    sorted[rank.clamp(1, sorted.len()) - 1]
-}
+/// Significant digits the percentiles keep: within 0.1 % of the exact nearest-rank value.
+const SIGNIFICANT_DIGITS: u8 = 3;
 
-/// Statistics of nanosecond samples.
-pub fn stage_stats(mut samples_ns: Vec<u64>) -> StageStats {
-    samples_ns.sort_unstable();
+/// Statistics of nanosecond samples: the percentiles from an HDR histogram (within 0.1 % of the
+/// nearest-rank value, never above the largest sample), the exact largest sample, and counts in
+/// power-of-two microsecond buckets. This is the one place percentiles of the runtime are
+/// computed; the report reads them from `profile.json`.
+pub fn stage_stats(samples_ns: &[u64]) -> StageStats {
     let us = |ns: u64| ns as f64 / 1000.0;
-    let mut histogram: Vec<(f64, usize)> = Vec::new();
-    for &ns in &samples_ns {
-        let edge_us = (us(ns).max(1.0)).log2().ceil().exp2();
-        match histogram.last_mut() {
-            Some((edge, count)) if *edge == edge_us => *count += 1,
-            _ => histogram.push((edge_us, 1)),
+    let max = samples_ns.iter().copied().max().unwrap_or(0);
+    let mut hdr = Histogram::<u64>::new(SIGNIFICANT_DIGITS)
+        .expect("3 significant digits are within hdrhistogram's range");
+    let mut buckets: BTreeMap<i32, usize> = BTreeMap::new();
+    for &ns in samples_ns {
+        // The histogram grows to hold the value; only one past its largest trackable value (far
+        // beyond any latency) is clamped.
+        if hdr.record(ns).is_err() {
+            hdr.saturating_record(ns);
         }
+        let exponent = us(ns).max(1.0).log2().ceil() as i32;
+        *buckets.entry(exponent).or_default() += 1;
     }
+    let percentile = |q: f64| {
+        if samples_ns.is_empty() {
+            0.0
+        } else {
+            us(hdr.value_at_quantile(q).min(max))
+        }
+    };
     StageStats {
         count: samples_ns.len(),
-        p50_us: us(quantile(&samples_ns, 0.50)),
-        p90_us: us(quantile(&samples_ns, 0.90)),
-        p99_us: us(quantile(&samples_ns, 0.99)),
-        max_us: us(samples_ns.last().copied().unwrap_or(0)),
-        histogram,
+        p50_us: percentile(0.50),
+        p90_us: percentile(0.90),
+        p99_us: percentile(0.99),
+        max_us: us(max),
+        histogram: buckets
+            .into_iter()
+            .map(|(exponent, count)| (f64::from(exponent).exp2(), count))
+            .collect(),
     }
 }
 
@@ -121,7 +79,7 @@ fn column<'a>(robot: &'a RobotTiming, stage: &str) -> &'a [u64] {
 }
 
 /// The profile of in-memory timing logs.
-pub fn profile(runs: &[RunTiming]) -> LatencyProfile {
+pub fn profile(runs: &[TimingLog]) -> LatencyProfile {
     let mut overall: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
     let mut per_agent: Vec<BTreeMap<&str, Vec<u64>>> = Vec::new();
     let mut braked: BTreeMap<String, usize> = BTreeMap::new();
@@ -173,7 +131,7 @@ pub fn profile(runs: &[RunTiming]) -> LatencyProfile {
     let stats = |columns: BTreeMap<&str, Vec<u64>>| -> BTreeMap<String, StageStats> {
         columns
             .into_iter()
-            .map(|(k, v)| (k.to_owned(), stage_stats(v)))
+            .map(|(k, v)| (k.to_owned(), stage_stats(&v)))
             .collect()
     };
     LatencyProfile {
@@ -192,7 +150,7 @@ pub fn profile(runs: &[RunTiming]) -> LatencyProfile {
 pub fn profile_dir(out: &Path) -> anyhow::Result<LatencyProfile> {
     let dir = out.join("timing");
     let mut files: Vec<_> = std::fs::read_dir(&dir)
-        .with_context(|| format!("reading timing logs in {}", dir.display()))?
+        .map_err(|e| anyhow::anyhow!("reading timing logs in {}: {e}", dir.display()))?
         .flatten()
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|e| e == "json"))
@@ -200,13 +158,8 @@ pub fn profile_dir(out: &Path) -> anyhow::Result<LatencyProfile> {
     files.sort();
     let runs = files
         .iter()
-        .map(|path| {
-            let bytes =
-                std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-            serde_json::from_slice::<RunTiming>(&bytes)
-                .with_context(|| format!("parsing {}", path.display()))
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .map(|path| formation_schema::read_timing_log(path))
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(profile(&runs))
 }
 
@@ -257,8 +210,7 @@ pub fn summary_text(profile: &LatencyProfile) -> String {
 /// Draws the profile's stages (per-stage percentile glyphs beside the paper's inference time) as
 /// an SVG, with the same drawing as the report.
 pub fn profile_svg(profile: &LatencyProfile, path: &Path) -> anyhow::Result<()> {
-    let json = serde_json::to_string(profile)?;
-    let parsed = formation_report::profile::parse_profile(&json, path)?;
+    let parsed = formation_report::profile::profile_view(profile, path)?;
     let figure = formation_report::figures::latency_figure(
         "latency",
         &parsed.stages,
@@ -272,15 +224,30 @@ mod tests {
     use super::*;
 
     #[test]
-    fn quantiles_use_nearest_rank() {
-        let samples: Vec<u64> = (1..=100).map(|k| k * 1000).collect();
-        let stats = stage_stats(samples);
-        assert_eq!(
-            (stats.count, stats.p50_us, stats.p99_us, stats.max_us),
-            (100, 50.0, 99.0, 100.0)
-        );
+    fn percentiles_are_nearest_rank_within_a_thousandth() {
+        let samples: Vec<u64> = (1..=100).rev().map(|k| k * 1000).collect();
+        let stats = stage_stats(&samples);
+        assert_eq!((stats.count, stats.max_us), (100, 100.0));
+        for (got, exact) in [
+            (stats.p50_us, 50.0),
+            (stats.p90_us, 90.0),
+            (stats.p99_us, 99.0),
+        ] {
+            assert!((got - exact).abs() <= exact * 1e-3, "{got} vs {exact}");
+        }
+        assert!(stats.p50_us <= stats.p90_us && stats.p99_us <= stats.max_us);
         assert_eq!(stats.histogram.iter().map(|(_, n)| n).sum::<usize>(), 100);
-        assert_eq!(stage_stats(Vec::new()).p50_us, 0.0);
+        assert_eq!(stats.histogram.first(), Some(&(1.0, 1)), "1 us");
+        assert_eq!(stats.histogram.last(), Some(&(128.0, 36)), "65..=100 us");
+        // Small values are exact; the percentiles never exceed the largest sample.
+        let small = stage_stats(&[3, 1500, 1999, 1999]);
+        assert_eq!(
+            (small.p50_us, small.p99_us, small.max_us),
+            (1.5, 1.999, 1.999)
+        );
+        let one = stage_stats(&[123_456_789]);
+        assert_eq!(one.p50_us, one.max_us);
+        assert_eq!(stage_stats(&[]).p50_us, 0.0);
     }
 
     #[test]
@@ -296,7 +263,8 @@ mod tests {
             downlink_ns: vec![100, 0, 200],
             lag_ticks: vec![0, 0, 0],
         };
-        let run = RunTiming {
+        let run = TimingLog {
+            index: 0,
             clock: "realtime".into(),
             dt_s: 0.05,
             tick_start_ns: vec![0, 50_000_000, 101_000_000],

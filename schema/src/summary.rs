@@ -1,0 +1,103 @@
+//! The evaluation summary (`summary.json`, and what `formation eval --json` writes): Table I and
+//! the Fig. 9 statistics over a set of runs, and the runs' metrics.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::{RunMetrics, SchemaFile};
+
+/// Order statistics of a sample (computed by `formation_world::metrics::quantiles`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Quantiles {
+    /// Smallest value.
+    pub min: f64,
+    /// First quartile.
+    pub q1: f64,
+    /// Median.
+    pub median: f64,
+    /// Third quartile.
+    pub q3: f64,
+    /// Largest value.
+    pub max: f64,
+    /// Number of values.
+    pub count: usize,
+}
+
+/// Table I and Fig. 9 over a set of runs (computed by `formation_world::metrics::summarize`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Number of runs.
+    pub runs: usize,
+    /// Fraction (0..1) of runs that succeed at the first tolerance (5 %); 0 for no runs.
+    pub success_rate_5: f64,
+    /// Fraction (0..1) of runs that succeed at the second tolerance (10 %); 0 for no runs.
+    pub success_rate_10: f64,
+    /// Median convergence time \[s\] at 10 % over the runs that succeed at 10 %.
+    pub median_convergence_s: Option<f64>,
+    /// Median relative formation error over the runs that succeed at 10 %.
+    pub median_rel_formation_error: Option<f64>,
+    /// Median orientation error \[rad\] over the runs that succeed at 10 %.
+    pub median_orientation_error_rad: Option<f64>,
+    /// Number of runs with at least one collision.
+    pub collisions: usize,
+    /// Convergence time \[s\] at 10 % over the runs that succeed at 10 % and converge (a run can succeed
+    /// on the window mean without its maximum error staying below 10 % to the end).
+    pub convergence_s: Option<Quantiles>,
+    /// Relative formation error over the runs that succeed at 10 %.
+    pub rel_formation_error: Option<Quantiles>,
+    /// Orientation error \[rad\] over the runs that succeed at 10 %.
+    pub orientation_error_rad: Option<Quantiles>,
+}
+
+/// What `formation eval` writes as JSON (`--json`, and `summary.json` under `--out`), and what
+/// `formation run` writes as `summary.json`: the Table I keys at the top level, Fig. 9 quantiles
+/// and the per-run metrics. Nothing in it depends on wall-clock time or on the execution mode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EvalOutput {
+    /// `expert` or `policy`.
+    pub controller: String,
+    /// Model ids per robot (policy only).
+    pub models: Vec<String>,
+    /// Scenario name (empty when unknown: runs recovered after their launcher was killed).
+    pub scenario: String,
+    /// Base seed; absent when unknown (runs recovered after their launcher was killed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// Table I and Fig. 9 figures.
+    #[serde(flatten)]
+    pub summary: Summary,
+    /// Per-run metrics, in run order.
+    pub per_run: Vec<RunMetrics>,
+    /// Multi-process runs only: per robot, the ticks its watchdog braked, by reason (`missing`,
+    /// `stale`, `non_finite`, `agent_failed`); an empty map for a robot never braked.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub braked_ticks: Vec<BTreeMap<String, usize>>,
+    /// Runs that stopped before their last tick (a `formation run` that ended abnormally), in
+    /// run order; their metrics above are over the ticks they played. Absent when every run
+    /// finished.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub incomplete_runs: Vec<IncompleteRun>,
+}
+
+/// A run that stopped before its last tick.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IncompleteRun {
+    /// Run index.
+    pub index: usize,
+    /// Ticks it played.
+    pub ticks: usize,
+    /// Ticks it was to play, when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub planned_ticks: Option<u64>,
+    /// Why it stopped, when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stop_reason: Option<String>,
+}
+
+impl SchemaFile for EvalOutput {
+    const FORMAT: &'static str = "formation-eval-summary";
+    const VERSION: u32 = 1;
+    const WHAT: &'static str = "formation evaluation summary";
+    const MAX_BYTES: u64 = 256 << 20;
+}

@@ -1,0 +1,353 @@
+//! Round trips, version and format mismatches, and files written before the schema version, for
+//! every format.
+
+use std::collections::BTreeMap;
+
+use formation_proto::wire::{RobotTiming, TickOutcome};
+use formation_proto::{Pose, WheelCmd};
+
+use super::*;
+
+fn trajectory() -> Trajectory {
+    let pose = |x: f64| Pose {
+        x,
+        y: 0.1 + 0.2,
+        theta: -3.0e-300,
+    };
+    Trajectory {
+        dt: 0.05,
+        d_star: 2.0,
+        v_star: 0.7,
+        edges: vec![(0, 1)],
+        times: vec![0.0, 0.05],
+        phi_star: vec![std::f64::consts::PI, 1.0 / 3.0],
+        poses: vec![vec![pose(0.0), pose(2.0)], vec![pose(0.035), pose(2.035)]],
+        commands: vec![vec![
+            WheelCmd {
+                left: 0.7,
+                right: 0.7 + f64::EPSILON,
+            };
+            2
+        ]],
+        collisions: vec![(1, 0, 1)],
+    }
+}
+
+fn metrics() -> RunMetrics {
+    RunMetrics {
+        success_5: false,
+        success_10: true,
+        convergence_s_5: None,
+        convergence_s_10: Some(9.95),
+        rel_formation_error: 0.0625,
+        max_edge_window_error: 0.07,
+        orientation_error_rad: 0.031,
+        collisions: 1,
+    }
+}
+
+fn run_log() -> RunLog {
+    RunLog {
+        index: 3,
+        metrics: metrics(),
+        trajectory: trajectory(),
+        clock: "lockstep".into(),
+        models: vec!["m-1".into(), "m-2".into()],
+        complete: false,
+        stop_reason: Some("interrupted by Ctrl-C".into()),
+        planned_ticks: Some(1200),
+    }
+}
+
+fn timing_log() -> TimingLog {
+    TimingLog {
+        index: 3,
+        clock: "realtime".into(),
+        dt_s: 0.05,
+        tick_start_ns: vec![0, 50_000_123],
+        robots: vec![RobotTiming {
+            model_ids: vec!["m-1".into()],
+            model: vec![0, -1],
+            outcome: vec![TickOutcome::Fresh, TickOutcome::Stale],
+            round_trip_ns: vec![1500, 0],
+            uplink_ns: vec![200, 0],
+            occupancy_ns: vec![30, 0],
+            inference_ns: vec![900, 0],
+            downlink_ns: vec![100, 0],
+            lag_ticks: vec![0, 0],
+        }],
+    }
+}
+
+fn summary() -> EvalOutput {
+    let q = Quantiles {
+        min: 9.0,
+        q1: 9.25,
+        median: 9.5,
+        q3: 9.75,
+        max: 10.0,
+        count: 2,
+    };
+    EvalOutput {
+        controller: "policy".into(),
+        models: vec!["m-1".into()],
+        scenario: "table1".into(),
+        seed: Some(7),
+        summary: Summary {
+            runs: 2,
+            success_rate_5: 0.5,
+            success_rate_10: 1.0,
+            median_convergence_s: Some(9.5),
+            median_rel_formation_error: None,
+            median_orientation_error_rad: Some(0.03),
+            collisions: 1,
+            convergence_s: Some(q),
+            rel_formation_error: None,
+            orientation_error_rad: Some(q),
+        },
+        per_run: vec![metrics(), metrics()],
+        braked_ticks: vec![BTreeMap::from([("missing".to_owned(), 4)]), BTreeMap::new()],
+        incomplete_runs: vec![IncompleteRun {
+            index: 1,
+            ticks: 80,
+            planned_ticks: Some(1200),
+            stop_reason: None,
+        }],
+    }
+}
+
+fn profile() -> LatencyProfile {
+    let stats = StageStats {
+        count: 600,
+        p50_us: 900.0,
+        p90_us: 1000.0,
+        p99_us: 1500.0,
+        max_us: 3000.0,
+        histogram: vec![(1024.0, 500), (2048.0, 90), (4096.0, 10)],
+    };
+    let stages = BTreeMap::from([("round_trip".to_owned(), stats)]);
+    LatencyProfile {
+        runs: 2,
+        clock: "lockstep".into(),
+        used_commands: 600,
+        braked: BTreeMap::from([("missing".to_owned(), 3)]),
+        braked_per_robot: vec![BTreeMap::from([("missing".to_owned(), 3)])],
+        stages: stages.clone(),
+        per_agent: vec![stages],
+        inference_paper_ms: 2.1,
+    }
+}
+
+/// Writes `value` to a file, reads it back with `read`, and returns the file's text.
+fn round_trip<F: SchemaFile + PartialEq + std::fmt::Debug>(
+    value: &F,
+    read: fn(&Path) -> Result<F, SchemaError>,
+) -> String {
+    let dir = tempdir("round-trip");
+    let path = dir.join("file.json");
+    for bytes in [to_json(value).unwrap(), to_json_pretty(value).unwrap()] {
+        std::fs::write(&path, &bytes).unwrap();
+        assert_eq!(&read(&path).unwrap(), value);
+    }
+    let text = String::from_utf8(to_json(value).unwrap()).unwrap();
+    assert!(
+        text.starts_with(&format!(
+            "{{\"format\":\"{}\",\"schema_version\":{},",
+            F::FORMAT,
+            F::VERSION
+        )),
+        "{text}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+    text
+}
+
+fn tempdir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "formation-schema-{tag}-{}-{:?}",
+        std::process::id(),
+        std::thread::current().id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn a_run_log_reads_back_bit_for_bit() {
+    let log = run_log();
+    round_trip(&log, read_run_log);
+    let read: RunLog = from_json(&to_json(&log).unwrap(), Path::new("r.json")).unwrap();
+    let bits = |t: &Trajectory| -> Vec<u64> {
+        t.poses
+            .iter()
+            .flatten()
+            .flat_map(|p| [p.x, p.y, p.theta])
+            .chain(t.times.iter().chain(&t.phi_star).copied())
+            .chain(t.commands.iter().flatten().flat_map(|c| [c.left, c.right]))
+            .map(f64::to_bits)
+            .collect()
+    };
+    assert_eq!(bits(&read.trajectory), bits(&log.trajectory));
+}
+
+#[test]
+fn a_timing_log_a_summary_and_a_profile_read_back() {
+    round_trip(&timing_log(), read_timing_log);
+    let text = round_trip(&summary(), read_summary);
+    assert!(
+        text.contains("\"success_rate_5\":0.5"),
+        "the summary keys are at the top level: {text}"
+    );
+    let unknown_seed = EvalOutput {
+        seed: None,
+        ..summary()
+    };
+    let text = round_trip(&unknown_seed, read_summary);
+    assert!(
+        !text.contains("seed"),
+        "an unknown seed is left out: {text}"
+    );
+    round_trip(&profile(), read_profile);
+}
+
+#[test]
+fn nan_is_written_as_null_and_read_back_as_nan() {
+    let mut log = run_log();
+    log.metrics.rel_formation_error = f64::NAN;
+    log.trajectory.poses[1][0].theta = f64::NAN;
+    log.trajectory.phi_star[1] = f64::NAN;
+    log.trajectory.commands[0][1].left = f64::INFINITY;
+    let text = String::from_utf8(to_json(&log).unwrap()).unwrap();
+    assert!(text.contains("\"rel_formation_error\":null"), "{text}");
+    let read: RunLog = from_json(text.as_bytes(), Path::new("r.json")).unwrap();
+    assert!(read.metrics.rel_formation_error.is_nan());
+    assert!(read.trajectory.poses[1][0].theta.is_nan());
+    assert!(read.trajectory.phi_star[1].is_nan());
+    assert!(read.trajectory.commands[0][1].left.is_nan());
+    assert_eq!(read.trajectory.poses[1][1], log.trajectory.poses[1][1]);
+}
+
+/// The file of `value` with `schema_version` 3 is refused with the message that says so.
+fn refuses_another_version<F: SchemaFile + std::fmt::Debug>(value: &F, what: &str) {
+    let text = String::from_utf8(to_json(value).unwrap()).unwrap();
+    let newer = text.replacen(
+        &format!("\"schema_version\":{}", F::VERSION),
+        "\"schema_version\":3",
+        1,
+    );
+    assert_ne!(newer, text);
+    let dir = tempdir("version");
+    let path = dir.join("runs").join("run-0003.json");
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    std::fs::write(&path, newer).unwrap();
+    let err = read::<F>(&path).unwrap_err();
+    assert!(
+        matches!(err, SchemaError::Version { found: 3, .. }),
+        "{err}"
+    );
+    assert_eq!(
+        err.to_string(),
+        format!(
+            "{} is a {what} of schema version 3; this build reads version {}: re-run it or use the matching formation version",
+            path.display(),
+            F::VERSION
+        )
+    );
+    // A version without a format is not this format; a format without a version is refused too.
+    let no_format = text.replacen(&format!("\"format\":\"{}\",", F::FORMAT), "", 1);
+    assert!(matches!(
+        from_json::<F>(no_format.as_bytes(), &path),
+        Err(SchemaError::Format { .. })
+    ));
+    let no_version = text.replacen(&format!("\"schema_version\":{},", F::VERSION), "", 1);
+    let err = from_json::<F>(no_version.as_bytes(), &path).unwrap_err();
+    assert!(
+        matches!(err, SchemaError::Version { found: 0, .. }),
+        "{err}"
+    );
+    assert!(
+        err.to_string().contains("without a schema version"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_run_log_of_another_version_is_refused() {
+    refuses_another_version(&run_log(), "formation run log");
+}
+
+#[test]
+fn a_timing_log_of_another_version_is_refused() {
+    refuses_another_version(&timing_log(), "formation timing log");
+}
+
+#[test]
+fn a_summary_of_another_version_is_refused() {
+    refuses_another_version(&summary(), "formation evaluation summary");
+}
+
+#[test]
+fn a_profile_of_another_version_is_refused() {
+    refuses_another_version(&profile(), "formation latency profile");
+}
+
+#[test]
+fn a_file_of_another_format_is_refused_naming_both() {
+    let timing = to_json(&timing_log()).unwrap();
+    let err = from_json::<RunLog>(&timing, Path::new("runs/run-0003.json")).unwrap_err();
+    assert!(matches!(err, SchemaError::Format { .. }), "{err}");
+    assert_eq!(
+        err.to_string(),
+        "runs/run-0003.json is not a formation run log: its format is `formation-timing-log`, expected `formation-run-log`"
+    );
+}
+
+/// The file of `value` without the two keys, as written before they existed.
+fn unversioned<F: SchemaFile>(value: &F) -> Vec<u8> {
+    serde_json::to_vec(value).unwrap()
+}
+
+#[test]
+fn files_written_before_the_schema_version_read_as_version_1() {
+    let path = Path::new("old.json");
+    assert_eq!(
+        from_json::<RunLog>(&unversioned(&run_log()), path).unwrap(),
+        run_log()
+    );
+    assert_eq!(
+        from_json::<TimingLog>(&unversioned(&timing_log()), path).unwrap(),
+        timing_log()
+    );
+    assert_eq!(
+        from_json::<EvalOutput>(&unversioned(&summary()), path).unwrap(),
+        summary()
+    );
+    assert_eq!(
+        from_json::<LatencyProfile>(&unversioned(&profile()), path).unwrap(),
+        profile()
+    );
+    // The run logs `formation eval --out` wrote had no clock, no models and no `complete`.
+    let old_eval_log = serde_json::json!({
+        "index": 0, "metrics": metrics(), "trajectory": trajectory()
+    });
+    let log: RunLog = from_json(old_eval_log.to_string().as_bytes(), path).unwrap();
+    assert!(log.complete && log.clock.is_empty() && log.models.is_empty());
+    assert_eq!(log.trajectory, trajectory());
+}
+
+#[test]
+fn broken_and_unreadable_files_are_errors_naming_them() {
+    let text = to_json(&summary()).unwrap();
+    let err =
+        from_json::<EvalOutput>(&text[..text.len() / 2], Path::new("a/summary.json")).unwrap_err();
+    assert!(matches!(err, SchemaError::Parse { .. }), "{err}");
+    assert!(err.to_string().contains("a/summary.json"), "{err}");
+    let dir = tempdir("unreadable");
+    let err = read_summary(&dir).unwrap_err();
+    assert!(matches!(err, SchemaError::NotAFile { .. }), "{err}");
+    assert!(err.to_string().contains("is a directory"), "{err}");
+    let err = read_profile(&dir.join("missing.json")).unwrap_err();
+    assert!(matches!(err, SchemaError::Read { .. }), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
