@@ -801,6 +801,29 @@ pub fn await_connected(launch: &mut LiveProcess) {
     assert!(line.is_some(), "{}", launch.describe());
 }
 
+/// Waits for the launcher to report that a new agent (not `old_pid`) of `robot` rejoined, and
+/// returns the first tick it drove.
+pub fn await_rejoin(launch: &mut LiveProcess, robot: usize, old_pid: u32) -> usize {
+    let prefix = format!("robot {robot}: agent pid ");
+    let line = launch.wait_for_line(Duration::from_secs(60), |line| {
+        line.starts_with(&prefix) && line.contains("rejoined")
+    });
+    let Some(line) = line else {
+        panic!(
+            "robot {robot}'s agent did not rejoin after a kill\n{}",
+            launch.describe()
+        );
+    };
+    assert!(
+        !line.contains(&format!("pid {old_pid} ")),
+        "the killed agent cannot rejoin: {line}"
+    );
+    line.rsplit(' ')
+        .next()
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no tick in {line:?}"))
+}
+
 /// The incarnations (16-hex-digit nonces) whose services exist for robot `robot` of `run`, in no
 /// particular order: how a test finds the services the world made for an accepted agent.
 pub fn incarnations(run: &RunId, robot: usize) -> Vec<u64> {

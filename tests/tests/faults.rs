@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, binaries, case1_scenario,
-    formation_run, one_at_a_time, run, test_model, unique_run_id, world_pid,
+    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, await_rejoin, binaries,
+    case1_scenario, formation_run, one_at_a_time, run, test_model, unique_run_id, world_pid,
 };
 use rand::{Rng, SeedableRng};
 
@@ -40,29 +40,6 @@ fn kill_agent(run_id: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
         .expect("running kill");
     assert!(status.success(), "kill -KILL {}", pids[0]);
     pids[0]
-}
-
-/// Waits for the launcher to report that a new agent (not `old_pid`) of `robot` rejoined, and
-/// returns the first tick it drove.
-fn await_rejoin(launch: &mut LiveProcess, robot: usize, old_pid: u32) -> usize {
-    let prefix = format!("robot {robot}: agent pid ");
-    let line = launch.wait_for_line(Duration::from_secs(60), |line| {
-        line.starts_with(&prefix) && line.contains("rejoined")
-    });
-    let Some(line) = line else {
-        panic!(
-            "robot {robot}'s agent did not rejoin after a kill\n{}",
-            launch.describe()
-        );
-    };
-    assert!(
-        !line.contains(&format!("pid {old_pid} ")),
-        "the killed agent cannot rejoin: {line}"
-    );
-    line.rsplit(' ')
-        .next()
-        .and_then(|t| t.parse().ok())
-        .unwrap_or_else(|| panic!("no tick in {line:?}"))
 }
 
 /// Issue 5: twenty SIGKILLs of random agents at random ticks of one lockstep run. Every kill is

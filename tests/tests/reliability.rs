@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 use formation_proto::wire::{RunId, RunNamespace};
 use formation_tests::{
     LaunchSecret, LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, await_connected,
-    binaries, case1_scenario, formation_run, incarnations, one_at_a_time, run, send_signal,
-    test_model, unique_run_id, world_pid,
+    await_rejoin, binaries, case1_scenario, formation_run, incarnations, one_at_a_time, run,
+    send_signal, test_model, unique_run_id, world_pid,
 };
 use rand::{Rng, SeedableRng};
 
@@ -157,10 +157,7 @@ fn an_agent_that_exits_mid_run_is_restarted() {
     std::thread::sleep(Duration::from_millis(1000));
     let old = the_agent(&run_id, 0, &mut launch);
     send_signal(old, "TERM");
-    let rejoined = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.starts_with("robot 0: agent pid") && l.contains("rejoined")
-    });
-    assert!(rejoined.is_some(), "{}", launch.describe());
+    await_rejoin(&mut launch, 0, old);
     let finished = launch.finish(LIMIT);
     finished.assert_success();
     assert!(
@@ -257,10 +254,7 @@ fn a_process_without_the_launch_secret_drives_no_robot() {
         "{}",
         refused.describe()
     );
-    let rejoined = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.starts_with("robot 0: agent pid") && l.contains("rejoined")
-    });
-    assert!(rejoined.is_some(), "{}", launch.describe());
+    await_rejoin(&mut launch, 0, old);
     let after = incarnations(&run_id, 0);
     assert!(
         after.iter().all(|i| !before.contains(i)) && !after.is_empty(),
@@ -469,20 +463,12 @@ fn a_hundred_sigkills_in_realtime_each_end_in_a_rejoin() {
     await_connected(&mut launch);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(100);
     let started = Instant::now();
-    for kill in 0..KILLS {
+    for _ in 0..KILLS {
         std::thread::sleep(Duration::from_millis(rng.random_range(0..300)));
         let robot = rng.random_range(0..3);
         let old = the_agent(&run_id, robot, &mut launch);
         send_signal(old, "KILL");
-        let prefix = format!("robot {robot}: agent pid");
-        let rejoined = launch.wait_for_line(Duration::from_secs(60), |l| {
-            l.starts_with(&prefix) && l.contains("rejoined") && !l.contains(&format!(" {old} "))
-        });
-        assert!(
-            rejoined.is_some(),
-            "kill {kill} (robot {robot}, pid {old}) was not followed by a rejoin\n{}",
-            launch.describe()
-        );
+        await_rejoin(&mut launch, robot, old);
     }
     eprintln!(
         "{KILLS} kills and rejoins in {:.1} s",
