@@ -182,9 +182,11 @@ fn lockstep_case1_across_namespaces_equals_in_process() {
     run(eval, LIMIT).assert_success();
     let in_process = json(&eval_json);
     let over = json(&rig.out().join("summary.json"));
-    for key in ["summary", "per_run"] {
+    let keys = in_process.as_object().expect("eval JSON is an object");
+    assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
+    for (key, value) in keys {
         assert_eq!(
-            over[key], in_process[key],
+            &over[key], value,
             "{key} differs between the network and in-process"
         );
     }
@@ -225,7 +227,8 @@ fn realtime_case1_converges_with_delay_and_loss() {
         relay.describe()
     );
     let model = repo_root().join("onnx/models/policy.onnx");
-    let scenario = case1_scenario(rig.dir.path(), 15.0);
+    // Success is judged on the final 20 s (the paper's window), so the run is longer than that.
+    let scenario = case1_scenario(rig.dir.path(), 30.0);
     let launch = rig.launch(&scenario, &model, &["--clock", "realtime"]);
     let agents = rig.agents(&format!("tcp/127.0.0.1:{relay_port}"), &model);
     let finished = launch.finish(LIMIT);
@@ -234,15 +237,16 @@ fn realtime_case1_converges_with_delay_and_loss() {
     relay.close_input();
     let summary = json(&rig.out().join("summary.json"));
     assert_eq!(
-        summary["summary"]["success_rate_5"].as_f64(),
+        summary["success_rate_5"].as_f64(),
         Some(1.0),
         "case 1 converges within 5 % despite delay and loss\n{}\n{summary:#}",
         finished.describe()
     );
     let profile = json(&rig.out().join("profile.json"));
+    let round_trip = &profile["stages"]["round_trip"];
     eprintln!(
-        "round trip with 20 ± 5 ms each way and 1 % loss: {}",
-        profile["overall"]["round_trip_us"]
+        "round trip with 20 ± 5 ms each way and 1 % loss: p50 {} us, p99 {} us",
+        round_trip["p50_us"], round_trip["p99_us"]
     );
     rig.leaks.assert_clean();
 }
