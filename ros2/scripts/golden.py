@@ -125,9 +125,18 @@ def cdr(message, typename):
     return bytes(ts.serialize_cdr(message, typename, little_endian=True))
 
 
+def rust_const(name, text):
+    """A `&str` constant laid out as rustfmt (max width 100) lays it out."""
+    one_line = f'pub const {name}: &str = "{text}";'
+    wrapped = f'    "{text}";'
+    if len(one_line) <= 100 or len(wrapped) > 100:
+        return one_line
+    return f"pub const {name}: &str =\n{wrapped}"
+
+
 def emit(name, data, source):
     print(f"/// {source}")
-    print(f'pub const {name}: &str = "{data.hex()}";')
+    print(rust_const(name, data.hex()))
 
 
 print("//! Golden byte strings and type hashes for the wire-format tests.")
@@ -152,4 +161,4 @@ for const, typename in [
     ("FLOAT64_HASH", "std_msgs/msg/Float64"),
 ]:
     print(f"/// rosbags hash_rihs01(\"{typename}\")")
-    print(f'pub const {const}: &str = "{ts.hash_rihs01(typename)}";')
+    print(rust_const(const, ts.hash_rihs01(typename)))
