@@ -43,13 +43,12 @@ pub trait RosMessage: Sized {
         Self::read_fields(&mut r)
     }
 
+    /// [`RosMessage::TYPE_HASH`] parsed at compile time (a malformed constant does not build).
+    const TYPE_HASH_BYTES: TypeHash = TypeHash::from_constant(Self::TYPE_HASH);
+
     /// The parsed [`RosMessage::TYPE_HASH`].
     fn type_hash() -> TypeHash {
-        match TypeHash::parse(Self::TYPE_HASH) {
-            Ok(hash) => hash,
-            // The constants are checked by this crate's tests; an unparsable one is a typo here.
-            Err(e) => unreachable!("{} has a malformed TYPE_HASH constant: {e}", Self::ROS_NAME),
-        }
+        Self::TYPE_HASH_BYTES
     }
 }
 

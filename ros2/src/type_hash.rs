@@ -61,7 +61,38 @@ impl TypeHash {
     }
 }
 
-fn lower_hex_value(digit: u8) -> Option<u8> {
+impl TypeHash {
+    /// Parses a hash in a constant: a malformed one stops compilation (const evaluation panics),
+    /// so no malformed constant can reach run time. Crate-private: run-time text goes through
+    /// [`TypeHash::parse`].
+    pub(crate) const fn from_constant(text: &str) -> TypeHash {
+        let bytes = text.as_bytes();
+        let prefix = RIHS01_PREFIX.as_bytes();
+        assert!(
+            bytes.len() == prefix.len() + 64,
+            "a RIHS01 hash is `RIHS01_` and 64 hexadecimal digits"
+        );
+        let mut i = 0;
+        while i < prefix.len() {
+            assert!(bytes[i] == prefix[i], "a RIHS01 hash starts with `RIHS01_`");
+            i += 1;
+        }
+        let mut out = [0u8; 32];
+        let mut k = 0;
+        while k < 32 {
+            let high = lower_hex_value(bytes[prefix.len() + 2 * k]);
+            let low = lower_hex_value(bytes[prefix.len() + 2 * k + 1]);
+            match (high, low) {
+                (Some(high), Some(low)) => out[k] = high << 4 | low,
+                _ => panic!("a RIHS01 hash has lowercase hexadecimal digits"),
+            }
+            k += 1;
+        }
+        TypeHash(out)
+    }
+}
+
+const fn lower_hex_value(digit: u8) -> Option<u8> {
     match digit {
         b'0'..=b'9' => Some(digit - b'0'),
         b'a'..=b'f' => Some(digit - b'a' + 10),
@@ -120,6 +151,15 @@ mod tests {
         assert_eq!(hash.0[0], 0x9c);
         assert_eq!(hash.0[31], 0x2a);
         assert_eq!(hash.to_string(), text);
+    }
+
+    #[test]
+    fn constant_parsing_agrees_with_run_time_parsing() {
+        let text = "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828";
+        const SCAN: TypeHash = TypeHash::from_constant(
+            "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828",
+        );
+        assert_eq!(Ok(SCAN), TypeHash::parse(text));
     }
 
     #[test]
