@@ -414,6 +414,7 @@ mod tests {
         );
         let message = err.to_string();
         assert!(message.contains("full 360°"), "{message}");
+        assert!(message.contains("allow a partial scan"), "{message}");
         assert!(
             message.contains("counter-clockwise from the robot's +x axis"),
             "{message}"
@@ -424,7 +425,7 @@ mod tests {
         assert_eq!(out.ranges[4], 10.0, "the beam at 180° has no reading");
         assert_eq!(
             out.ranges[3], 1.0,
-            "the beam at 135° is the scan's first reading"
+            "the beam at 135° is the scan's last reading"
         );
     }
 
