@@ -4,12 +4,13 @@
 The CDR payloads and RIHS01 type hashes come from `rosbags` (pure-Python ROS 2 message types,
 `Stores.ROS2_JAZZY`); the rmw_zenoh attachment comes from `eclipse-zenoh`'s own serializer
 (`zenoh.ext.z_serialize`), which implements the same Zenoh serialization format as the
-`zenoh::ext::Serializer` that rmw_zenoh_cpp's `AttachmentData::serialize_to_zbytes` uses.
+`zenoh::ext::Serializer` that rmw_zenoh_cpp's `AttachmentData::serialize_to_zbytes` uses; the
+XXH3-128 digests behind entity GIDs come from the `xxhash` package (the reference C library).
 
 The output is Rust source: regenerate the test constants with
 
     python3 -m venv /tmp/ros2venv
-    /tmp/ros2venv/bin/pip install rosbags==0.11.9 eclipse-zenoh==1.10.2
+    /tmp/ros2venv/bin/pip install rosbags==0.11.9 eclipse-zenoh==1.10.2 xxhash==3.5.0
     /tmp/ros2venv/bin/python ros2/scripts/golden.py > ros2/tests/golden/mod.rs
 
 The message values below are mirrored by the Rust tests that use these constants.
@@ -18,6 +19,7 @@ The message values below are mirrored by the Rust tests that use these constants
 import math
 
 import numpy as np
+import xxhash
 from rosbags.typesys import Stores, get_typestore
 from zenoh.ext import Int64, UInt8, z_serialize
 
@@ -162,3 +164,24 @@ for const, typename in [
 ]:
     print(f"/// rosbags hash_rihs01(\"{typename}\")")
     print(rust_const(const, ts.hash_rihs01(typename)))
+
+# XXH3-128 (seed 0) of the byte pattern (31 i + 7) mod 251, over every length class of the
+# algorithm and the block boundaries of the long path; and the GID of one liveliness token
+# (low 64 bits then high 64 bits, little-endian, as rmw_zenoh stores it).
+XXH3_LENGTHS = [0, 1, 2, 3, 4, 5, 7, 8, 9, 15, 16, 17, 31, 32, 33, 63, 64, 65, 96, 97, 127, 128,
+                129, 130, 159, 160, 200, 239, 240, 241, 255, 256, 500, 1023, 1024, 1025, 1100,
+                2047, 2048, 2049, 3000]
+print()
+print("/// `(length, xxhash.xxh3_128(pattern(length)).intdigest())` with `pattern(n)[i] = (31 i + 7) % 251`.")
+print("pub const XXH3_128: &[(usize, u128)] = &[")
+for n in XXH3_LENGTHS:
+    data = bytes((31 * i + 7) % 251 for i in range(n))
+    print(f"    ({n}, 0x{xxhash.xxh3_128(data).intdigest():032x}),")
+print("];")
+GID_TOKEN = ("@ros2_lv/0/7c4e5f0a1b2c3d4e5f60718293a4b5c6/0/3/MP/%/%robot_0/formation_agent/%cmd_vel/"
+             "geometry_msgs::msg::dds_::Twist_/" + ts.hash_rihs01("geometry_msgs/msg/Twist") + "/::,10:,:,:,,")
+digest = xxhash.xxh3_128(GID_TOKEN.encode()).intdigest()
+print(f"/// The liveliness token whose GID follows (`xxhash.xxh3_128`, low half then high half, LE).")
+print(rust_const("GID_TOKEN", GID_TOKEN))
+print("/// rmw_zenoh's GID of `GID_TOKEN`.")
+print(rust_const("GID", digest.to_bytes(16, "little").hex()))

@@ -4,7 +4,8 @@
 //! Zenoh session: the CDR payloads of the messages it exchanges ([`msg`], [`cdr`]), their DDS type
 //! names and RIHS01 hashes ([`msg::RosMessage`], [`type_hash`]), the key expressions samples travel
 //! on ([`key_expr`]), the attachment every sample must carry ([`attachment`]), the liveliness
-//! tokens that make it visible to `ros2 node list` and `ros2 topic info` ([`liveliness`]), valid
+//! tokens that make it visible to `ros2 node list` and `ros2 topic info` ([`liveliness`]) and the
+//! GIDs rmw_zenoh derives from them ([`gid`]), valid
 //! ROS names ([`names`]), and the conversions between those messages and the agent's sensor and
 //! command contract ([`convert`]).
 //!
@@ -18,6 +19,7 @@
 pub mod attachment;
 pub mod cdr;
 pub mod convert;
+pub mod gid;
 pub mod key_expr;
 pub mod liveliness;
 pub mod msg;

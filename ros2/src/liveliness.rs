@@ -522,6 +522,14 @@ impl LivelinessToken {
     }
 }
 
+impl LivelinessToken {
+    /// The entity's GID as every rmw_zenoh process computes it from this token: what a publisher
+    /// puts in its [attachments](crate::attachment::Attachment::source_gid).
+    pub fn gid(&self) -> [u8; crate::attachment::GID_LEN] {
+        crate::gid::entity_gid(&self.to_string())
+    }
+}
+
 impl fmt::Display for LivelinessToken {
     /// The token's key expression.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

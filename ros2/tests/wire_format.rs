@@ -10,9 +10,11 @@ mod golden;
 use std::f64::consts::PI;
 
 use formation_ros2::cdr::CdrError;
+use formation_ros2::gid::{entity_gid, xxh3_128};
 use formation_ros2::msg::{Pose, Quaternion, Vector3};
 use formation_ros2::{
-    Attachment, DecodeLimits, Float64, Header, Imu, LaserScan, Odometry, RosMessage, Time, Twist,
+    Attachment, DecodeLimits, Float64, Header, Imu, LaserScan, LivelinessToken, Odometry,
+    RosMessage, Time, Twist,
 };
 
 fn hex(text: &str) -> Vec<u8> {
@@ -253,4 +255,21 @@ fn a_big_endian_payload_is_refused() {
         }
     );
     assert!(err.to_string().contains("little-endian"));
+}
+
+#[test]
+fn xxh3_128_matches_the_reference_library_over_every_length_class() {
+    for &(len, expected) in golden::XXH3_128 {
+        let pattern: Vec<u8> = (0..len).map(|i| ((31 * i + 7) % 251) as u8).collect();
+        assert_eq!(xxh3_128(&pattern), expected, "length {len}");
+    }
+}
+
+#[test]
+fn publisher_gid_matches_rmw_zenohs_derivation() {
+    let gid = hex(golden::GID);
+    assert_eq!(entity_gid(golden::GID_TOKEN).to_vec(), gid);
+    let token = LivelinessToken::parse(golden::GID_TOKEN).unwrap();
+    assert_eq!(token.to_string(), golden::GID_TOKEN);
+    assert_eq!(token.gid().to_vec(), gid);
 }

@@ -34,3 +34,52 @@ pub const ODOMETRY_HASH: &str =
 /// rosbags hash_rihs01("std_msgs/msg/Float64")
 pub const FLOAT64_HASH: &str =
     "RIHS01_705ba9c3d1a09df43737eb67095534de36fd426c0587779bda2bc51fe790182a";
+
+/// `(length, xxhash.xxh3_128(pattern(length)).intdigest())` with `pattern(n)[i] = (31 i + 7) % 251`.
+pub const XXH3_128: &[(usize, u128)] = &[
+    (0, 0x99aa06d3014798d86001c324468d497f),
+    (1, 0x495b62073ef70ca44c5cca45d0f4811f),
+    (2, 0x12b2847aa0de5aaaa7e250c97710ff27),
+    (3, 0x46f66cb93538156515f7093b173d005c),
+    (4, 0x7fefeeffb4d0eab3b987ca5d9241572a),
+    (5, 0x2fbb16712b4bf1d5752a86982353f4f3),
+    (7, 0x9194efbddb0d752c90d8d40e8b5ca9c4),
+    (8, 0x803c675a846cc6c256bb836ceb6d4baa),
+    (9, 0x365644c233ffe5c213af585c9bf5827d),
+    (15, 0xce9e595b016b4b3541572a54e4cdea57),
+    (16, 0xda917c385cc874c00d463cb04ceffbaf),
+    (17, 0xd443578f2c4e2fb495c34448580e19c8),
+    (31, 0xdeb01d8ab3a909306841d88c0d471a16),
+    (32, 0x7e6bb3a654986c3373367e068a010989),
+    (33, 0x97fbf3ce109f139623a0b885a7dac302),
+    (63, 0x0d1ff0ca9aa9ba0e0d81652c4d7253ff),
+    (64, 0x3515800f003ddbd064524fe2047012df),
+    (65, 0x7fd00229a220a25b3b589ad4300ec5d5),
+    (96, 0x0f5fdafe3c60a2ba6aaa14172a8f6957),
+    (97, 0x203fb0b6f9a8419aaedfb1405f779a9d),
+    (127, 0x659e0a0b25c7075a72400e87372440e9),
+    (128, 0x22c34350373a38ae5b77925b2c683a12),
+    (129, 0xc4a7d8f7893f2090d6d9e73553568be1),
+    (130, 0xecaf69fb815b73def805e2b48cc55a96),
+    (159, 0x17f6464a68a4263ef9870ba424c5db9c),
+    (160, 0x3c1fd79640cf3c229df001f621092150),
+    (200, 0x7d5b21c921158e644ec0706f02ef2a5b),
+    (239, 0x9a032056470c2a3686bba9345dc34ac3),
+    (240, 0xe29d70b8920fd24bc6ed4333f79384f8),
+    (241, 0xf91b3cb8ed0fa91a07525dbc14902c7f),
+    (255, 0x95bf93be894101733e64256196c9377b),
+    (256, 0x6e4ce5e0d8c8f76fa49b06aa88ab05e1),
+    (500, 0x8f54717132f6993e821bfabe31bf88ff),
+    (1023, 0x0789e58514a0668bfe4f1eaedb87b59b),
+    (1024, 0xf53a1b1e9f1efedfe2898655db7bc9ee),
+    (1025, 0xa906cca0f6e772a7134c652ba3d6fb9e),
+    (1100, 0xdb2976179047a62201c6c2f2c212a059),
+    (2047, 0xf2fde42d5c7fd7712c2cbae270fe8aec),
+    (2048, 0xaceedd29e1caaad363a78a59658d80f4),
+    (2049, 0xaa660af6b116a0d40bfdaada21607d33),
+    (3000, 0x7f30bf741f8b32824b4d4c38d3c7d2b6),
+];
+/// The liveliness token whose GID follows (`xxhash.xxh3_128`, low half then high half, LE).
+pub const GID_TOKEN: &str = "@ros2_lv/0/7c4e5f0a1b2c3d4e5f60718293a4b5c6/0/3/MP/%/%robot_0/formation_agent/%cmd_vel/geometry_msgs::msg::dds_::Twist_/RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a/::,10:,:,:,,";
+/// rmw_zenoh's GID of `GID_TOKEN`.
+pub const GID: &str = "5d04aaef08d282befd6e9117330ee298";
