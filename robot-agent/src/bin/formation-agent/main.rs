@@ -67,6 +67,12 @@ struct Args {
     /// login and the launch secret, which then is not read from standard input.
     #[arg(long, value_name = "FILE")]
     credentials: Option<PathBuf>,
+    /// Rehearse the last decision this long before the next scan is due \[µs\] (0: never), so
+    /// that an agent idling between realtime ticks decides with warm caches (measured on 2
+    /// cores, realtime case 1: inference p50 from 140–166 µs down to 72–88 µs, for one extra
+    /// decision per tick, about 0.3 % of a core).
+    #[arg(long, env = "FORMATION_AGENT_REHEARSE_US", default_value_t = 2_000)]
+    rehearse_us: u64,
 }
 
 fn main() -> ExitCode {
@@ -140,7 +146,8 @@ fn run(args: &Args) -> anyhow::Result<AgentExit> {
         model,
         args.fault,
         Arc::new(SystemClock),
-    );
+    )
+    .with_rehearsal(Duration::from_micros(args.rehearse_us));
     agent.greet(link.as_mut(), std::process::id())?;
     Ok(agent.run(link.as_mut(), &stop, &args.run_id)?)
 }
