@@ -324,3 +324,92 @@ fn a_remote_agent_that_never_comes_is_named() {
         .assert_failure_mentioning("remote agents of robots [1] did not connect");
     leaks.assert_clean();
 }
+
+/// Issue 13 (swap over the network): `formation swap --transport zenoh` sends the model's bytes
+/// (as user operator) and the agent drives with it; a model that is not ONNX is refused by the
+/// agent and the old one keeps driving; a model over the 32 MiB limit is refused before it is
+/// sent; the operator's credentials are needed.
+#[test]
+fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_swap", LIMIT);
+    let bins = binaries();
+    let dir = TempDir::new("zswap");
+    let run_id = unique_run_id("zswap");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 8.0);
+    let out = dir.path().join("out");
+    let creds = dir.path().join("creds");
+    let mut credentials = Command::new(&bins.cli);
+    credentials
+        .args(["credentials", "--robots", "3", "--out"])
+        .arg(&creds);
+    run(credentials, LIMIT).assert_success();
+    let listen = endpoint(free_tcp_port());
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &[
+            "--transport",
+            "zenoh",
+            "--listen",
+            &listen,
+            "--clock",
+            "realtime",
+        ],
+    );
+    command.arg("--credentials").arg(&creds);
+    let mut launch = LiveProcess::spawn(command);
+    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+
+    let swap = |model: &Path, login: Option<&Path>| {
+        let mut command = Command::new(&bins.cli);
+        command
+            .args(["swap", "--transport", "zenoh", "--connect", &listen])
+            .args([
+                "--run",
+                run_id.as_str(),
+                "--robot",
+                "1",
+                "--timeout-s",
+                "30",
+            ])
+            .arg("--model")
+            .arg(model);
+        if let Some(login) = login {
+            command.arg("--credentials").arg(login);
+        }
+        run(command, LIMIT)
+    };
+    let operator = creds.join("operator.json");
+    let other = dir.path().join("other.onnx");
+    formation_tests::write_tiny_model(&other, 99);
+    let done = swap(&other, Some(&operator));
+    done.assert_success();
+    assert!(
+        done.stdout().contains("robot 1 of run") && done.stdout().contains("drives with model"),
+        "{}",
+        done.describe()
+    );
+    let junk = dir.path().join("junk.onnx");
+    std::fs::write(&junk, b"this is not an ONNX model").unwrap();
+    swap(&junk, Some(&operator)).assert_failure_mentioning("swap refused for robot 1");
+    let huge = dir.path().join("huge.onnx");
+    std::fs::File::create(&huge)
+        .and_then(|f| f.set_len(33 << 20))
+        .expect("a sparse 33 MiB file");
+    swap(&huge, Some(&operator)).assert_failure_mentioning("at most 33554432 bytes (32 MiB)");
+    swap(&other, None).assert_failure_mentioning("cannot reach the world at");
+
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    let robot1 = formation_tests::RobotLog::read(&out, 1);
+    let models: std::collections::BTreeSet<&String> = robot1.models.iter().collect();
+    assert!(
+        models.len() >= 2,
+        "robot 1 drove with the old model, then the one sent over the network: {models:?}"
+    );
+    leaks.assert_clean();
+}

@@ -139,6 +139,15 @@ pub struct SwapArgs {
     /// How long to wait for the agent's answer \[s\].
     #[arg(long, default_value_t = 30.0)]
     pub timeout_s: f64,
+    /// How to reach the run: iceoryx2 (this host) or Zenoh (sends the model's bytes).
+    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    pub transport: Transport,
+    /// Zenoh: the world's endpoint, tcp/ADDR:PORT.
+    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    pub connect: Option<String>,
+    /// Zenoh: the operator's login file (operator.json from `formation credentials`).
+    #[arg(long, value_name = "FILE")]
+    pub credentials: Option<PathBuf>,
 }
 
 /// `formation credentials`: Zenoh logins for a team.
@@ -700,12 +709,57 @@ pub fn profile_command(args: &ProfileArgs) -> anyhow::Result<()> {
 /// which the new model drives.
 pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
     let timeout = positive_seconds("--timeout-s", args.timeout_s)?;
-    let done = swap::request_swap(&args.run, args.robot, &args.model, args.at_tick, timeout)?;
+    let done = match args.transport {
+        Transport::Iceoryx2 => {
+            for (given, flag) in [
+                (args.connect.is_some(), "--connect"),
+                (args.credentials.is_some(), "--credentials"),
+            ] {
+                if given {
+                    return Err(TransportError::FlagNeedsZenoh {
+                        flag,
+                        transport: args.transport,
+                    }
+                    .into());
+                }
+            }
+            swap::request_swap(&args.run, args.robot, &args.model, args.at_tick, timeout)?
+        }
+        Transport::Zenoh => swap_over_zenoh(args, timeout)?,
+    };
     println!(
         "robot {} of run {} drives with model {} from tick {}",
         args.robot, args.run, done.model_id, done.tick
     );
     Ok(())
+}
+
+/// `formation swap --transport zenoh`.
+#[cfg(feature = "zenoh")]
+fn swap_over_zenoh(args: &SwapArgs, timeout: Duration) -> anyhow::Result<swap::SwapDone> {
+    let connect = args
+        .connect
+        .as_deref()
+        .ok_or(TransportError::MissingEndpoint { flag: "--connect" })?;
+    swap::request_swap_over_zenoh(
+        connect,
+        args.credentials.as_deref(),
+        &args.run,
+        args.robot,
+        &args.model,
+        args.at_tick,
+        timeout,
+    )
+}
+
+/// Without Zenoh.
+#[cfg(not(feature = "zenoh"))]
+fn swap_over_zenoh(_args: &SwapArgs, _timeout: Duration) -> anyhow::Result<swap::SwapDone> {
+    Err(TransportError::NotBuilt {
+        program: "formation".into(),
+        transport: Transport::Zenoh,
+    }
+    .into())
 }
 
 /// What an evaluation over processes gives: the trajectories in run order and the latency

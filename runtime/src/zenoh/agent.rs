@@ -22,6 +22,7 @@ use formation_proto::wire::{
     robot_service_name,
 };
 
+use super::model::split_model;
 use super::{Bell, Endpoint, Login, Queue, Ring, SignalWatch, keys};
 use crate::link::{AgentLink, AgentLinkError, Wake};
 
@@ -43,6 +44,8 @@ struct Inbox {
     control: Queue<ControlRequest>,
     welcomes: Queue<(u64, Welcome)>,
     world_present: Mutex<bool>,
+    /// Swaps refused on arrival (damaged model bytes): request id and reason, to answer.
+    refusals: Queue<(u64, String)>,
 }
 
 impl Inbox {
@@ -63,6 +66,88 @@ pub struct ZenohAgentLink {
     _world: Subscriber<()>,
     _token: LivelinessToken,
     _signals: SignalWatch,
+    _models: Arc<ModelFolder>,
+}
+
+/// Where an agent keeps the models that came over the network: a folder of its own (0700),
+/// removed with the link.
+#[derive(Debug)]
+struct ModelFolder {
+    dir: std::path::PathBuf,
+}
+
+impl ModelFolder {
+    fn new(pid: u32, incarnation: u64) -> ModelFolder {
+        ModelFolder {
+            dir: std::env::temp_dir().join(format!("formation-agent-{pid}-{incarnation:016x}")),
+        }
+    }
+
+    /// Writes request `request_id`'s model, owner-only, and returns its path.
+    fn store(&self, request_id: u64, model: &[u8]) -> std::io::Result<std::path::PathBuf> {
+        use std::io::Write;
+        use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt};
+        std::fs::DirBuilder::new()
+            .recursive(true)
+            .mode(0o700)
+            .create(&self.dir)?;
+        let path = self.dir.join(format!("swap-{request_id}.onnx"));
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .mode(0o600)
+            .open(&path)?;
+        file.write_all(model)?;
+        Ok(path)
+    }
+}
+
+impl Drop for ModelFolder {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+enum ControlFailure {
+    Malformed(String),
+    Refused { request_id: u64, reason: String },
+}
+
+/// A control request from its payload; a swap's model bytes, when they follow, are checked and
+/// stored, and the request then names the stored file.
+fn decode_control(payload: &[u8], models: &ModelFolder) -> Result<ControlRequest, ControlFailure> {
+    let size = std::mem::size_of::<ControlMsg>();
+    let head = payload.get(..size).unwrap_or(payload);
+    let request = message_from_bytes::<ControlMsg>("control", head)
+        .and_then(|msg| msg.decode())
+        .map_err(|e| ControlFailure::Malformed(e.to_string()))?;
+    let ControlRequest::SwapModel {
+        request_id,
+        at_tick,
+        ..
+    } = request
+    else {
+        return Ok(request);
+    };
+    let refused = |reason: String| ControlFailure::Refused { request_id, reason };
+    match split_model(payload, size) {
+        Ok((_, None)) => Ok(request),
+        Ok((_, Some(model))) => {
+            let path = models.store(request_id, model).map_err(|e| {
+                refused(format!(
+                    "the agent could not store the model in {}: {e}",
+                    models.dir.display()
+                ))
+            })?;
+            Ok(ControlRequest::SwapModel {
+                request_id,
+                at_tick,
+                path,
+            })
+        }
+        Err(e) => Err(refused(e.to_string())),
+    }
 }
 
 impl ZenohAgentLink {
@@ -95,6 +180,7 @@ impl ZenohAgentLink {
             control: Queue::new(CONTROL_QUEUE),
             welcomes: Queue::new(8),
             world_present: Mutex::new(false),
+            refusals: Queue::new(CONTROL_QUEUE),
         });
         let world = {
             let inbox = Arc::clone(&inbox);
@@ -214,25 +300,31 @@ impl ZenohAgentLink {
                 .wait()
                 .map_err(|e| zenoh_error("subscribe to the scans")(e.to_string()))?
         };
+        let models = Arc::new(ModelFolder::new(pid, incarnation));
         let control = {
             let inbox = Arc::clone(&inbox);
             let bell = Arc::clone(&bell);
+            let models = Arc::clone(&models);
             session
                 .declare_subscriber(name(RobotChannel::Control))
                 .callback(move |sample| {
-                    let decoded =
-                        message_from_bytes::<ControlMsg>("control", &sample.payload().to_bytes())
-                            .and_then(|msg| msg.decode());
-                    match decoded {
+                    let payload = sample.payload().to_bytes();
+                    match decode_control(&payload, &models) {
                         Ok(request) => {
                             tracing::debug!("control request arrived: {request:?}");
                             if !inbox.control.push(request) {
                                 tracing::warn!("control requests overflowed; dropped the oldest");
                             }
-                            bell.ring();
                         }
-                        Err(e) => tracing::warn!("ignoring a malformed control request: {e}"),
+                        Err(ControlFailure::Malformed(e)) => {
+                            tracing::warn!("ignoring a malformed control request: {e}");
+                            return;
+                        }
+                        Err(ControlFailure::Refused { request_id, reason }) => {
+                            inbox.refusals.push((request_id, reason));
+                        }
                     }
+                    bell.ring();
                 })
                 .wait()
                 .map_err(|e| zenoh_error("subscribe to the control requests")(e.to_string()))?
@@ -257,6 +349,7 @@ impl ZenohAgentLink {
             _world: world,
             _token: token,
             _signals: signals,
+            _models: models,
         })
     }
 }
@@ -274,6 +367,9 @@ impl AgentLink for ZenohAgentLink {
         &mut self,
         sink: &mut dyn FnMut(ControlRequest),
     ) -> Result<(), AgentLinkError> {
+        for (request_id, reason) in self.inbox.refusals.drain() {
+            self.publish_status(&AgentStatus::SwapRefused { request_id, reason })?;
+        }
         self.inbox.control.drain().into_iter().for_each(sink);
         Ok(())
     }

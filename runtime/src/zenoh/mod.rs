@@ -30,6 +30,8 @@ pub mod access;
 mod agent;
 pub mod credentials;
 pub mod keys;
+pub mod model;
+pub mod swap;
 mod world;
 
 use std::collections::VecDeque;

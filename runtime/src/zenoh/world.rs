@@ -7,7 +7,7 @@
 //! the exchange admits an agent and undeclared when it is gone; what its subscribers receive
 //! goes to queues of that incarnation only, so a predecessor's late messages never count.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -23,6 +23,7 @@ use formation_proto::wire::{
     swap_service_name,
 };
 
+use super::model::split_model;
 use super::{Bell, Endpoint, Queue, Ring, SignalWatch, WorldAccess, keys};
 use crate::link::{Hello, WorldLink, WorldLinkError};
 
@@ -72,6 +73,10 @@ pub struct ZenohWorldLink {
     lobbies: Vec<Lobby>,
     robots: Vec<Option<Incarnation>>,
     swap_requests: Arc<Queue<SwapRequest>>,
+    /// Swap requests refused on arrival (damaged model bytes), to answer.
+    swap_refusals: Arc<Queue<SwapReply>>,
+    /// Model bytes that came with a swap request, by request id, until forwarded to the agent.
+    swap_models: Arc<Mutex<HashMap<u64, Vec<u8>>>>,
     _swap_subscriber: Subscriber<()>,
     swap_replies: Publisher<'static>,
     liveness: Arc<Mutex<Liveness>>,
@@ -182,17 +187,63 @@ impl ZenohWorldLink {
             });
         }
         let swap_requests = Arc::new(Queue::new(SWAP_QUEUE));
-        let swap_subscriber = queue_subscriber(
-            &session,
-            swap_service_name(run, SwapChannel::Request),
-            &bell,
-            &swap_requests,
-            |sample| {
-                let msg: SwapRequestMsg = message_from_bytes("swap request", &bytes(sample))
-                    .map_err(|e| e.to_string())?;
-                msg.decode().map_err(|e| e.to_string())
-            },
-        )?;
+        let swap_refusals = Arc::new(Queue::new(SWAP_QUEUE));
+        let swap_models: Arc<Mutex<HashMap<u64, Vec<u8>>>> = Arc::default();
+        let swap_subscriber = {
+            let key = swap_service_name(run, SwapChannel::Request);
+            let (bell, requests, refusals, models) = (
+                Arc::clone(&bell),
+                Arc::clone(&swap_requests),
+                Arc::clone(&swap_refusals),
+                Arc::clone(&swap_models),
+            );
+            session
+                .declare_subscriber(key.clone())
+                .callback(move |sample| {
+                    let payload = bytes(&sample);
+                    let size = std::mem::size_of::<SwapRequestMsg>();
+                    let head = payload.get(..size).unwrap_or(&payload);
+                    let request = match message_from_bytes::<SwapRequestMsg>("swap request", head)
+                        .and_then(|msg| msg.decode())
+                    {
+                        Ok(request) => request,
+                        Err(e) => {
+                            tracing::warn!("ignoring a malformed swap request: {e}");
+                            return;
+                        }
+                    };
+                    match split_model(&payload, size) {
+                        Ok((_, Some(model))) => {
+                            let mut models = models.lock().unwrap_or_else(|e| e.into_inner());
+                            if models.len() >= SWAP_QUEUE {
+                                // Requests forwarded long ago whose agent never took them.
+                                let oldest = models.keys().min().copied();
+                                if let Some(oldest) = oldest {
+                                    models.remove(&oldest);
+                                }
+                            }
+                            models.insert(request.request_id, model.to_vec());
+                            drop(models);
+                            requests.push(request);
+                        }
+                        Ok((_, None)) => {
+                            requests.push(request);
+                        }
+                        Err(e) => {
+                            refusals.push(SwapReply {
+                                request_id: request.request_id,
+                                robot: request.robot,
+                                outcome: formation_proto::wire::SwapOutcome::Refused {
+                                    reason: e.to_string(),
+                                },
+                            });
+                        }
+                    }
+                    bell.ring();
+                })
+                .wait()
+                .map_err(|e| zenoh_error(format!("subscribe to {key}"))(e.to_string()))?
+        };
         let swap_replies = publisher(&session, swap_service_name(run, SwapChannel::Reply), false)?;
         let liveness = Arc::new(Mutex::new(Liveness::default()));
         let agents = {
@@ -237,6 +288,8 @@ impl ZenohWorldLink {
             lobbies,
             robots: (0..n_robots).map(|_| None).collect(),
             swap_requests,
+            swap_refusals,
+            swap_models,
             _swap_subscriber: swap_subscriber,
             swap_replies,
             liveness,
@@ -364,10 +417,24 @@ impl WorldLink for ZenohWorldLink {
         request: &ControlRequest,
     ) -> Result<(), WorldLinkError> {
         let msg = ControlMsg::encode(request)?;
+        let model = match request {
+            ControlRequest::SwapModel { request_id, .. } => self
+                .swap_models
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .remove(request_id),
+            _ => None,
+        };
         let Some(ports) = self.incarnation(robot)? else {
             return Ok(());
         };
-        Self::put(&ports.control, message_bytes(&msg), || {
+        let mut payload = message_bytes(&msg).to_vec();
+        if let Some(model) = model {
+            super::model::append_model(&mut payload, &model).map_err(|e| {
+                zenoh_error(format!("forward robot {robot}'s swap model"))(e.to_string())
+            })?;
+        }
+        Self::put(&ports.control, &payload, || {
             format!("send robot {robot}'s control request")
         })
     }
@@ -425,6 +492,9 @@ impl WorldLink for ZenohWorldLink {
         &mut self,
         sink: &mut dyn FnMut(SwapRequest),
     ) -> Result<(), WorldLinkError> {
+        for refusal in self.swap_refusals.drain() {
+            self.publish_swap_reply(&refusal)?;
+        }
         self.swap_requests.drain().into_iter().for_each(sink);
         Ok(())
     }
