@@ -529,6 +529,100 @@ mod tests {
         assert!(!m.success_10 && close(m.rel_formation_error, 0.5 * 200.0 / 601.0));
     }
 
+    /// Four robots: two equilateral triangles sharing the edge (1, 2), scaled by `scale(k)`,
+    /// under the default Gabriel rule, for `duration_s`.
+    fn lattice_run(duration_s: f64, scale: impl Fn(usize) -> f64) -> Trajectory {
+        use crate::neighbours::GabrielRule;
+        let mut traj = triangle_run(duration_s, |_, _| D_STAR, [0.0; 3]);
+        let h = 3f64.sqrt() / 2.0;
+        for (k, poses) in traj.poses.iter_mut().enumerate() {
+            let s = D_STAR * scale(k);
+            *poses = [(0.0, 0.0), (s, 0.0), (s / 2.0, s * h), (1.5 * s, s * h)]
+                .iter()
+                .map(|&(x, y)| Pose {
+                    x,
+                    y,
+                    theta: PHI_STAR,
+                })
+                .collect();
+        }
+        traj.neighbours = NeighbourRule::Gabriel(GabrielRule::with_range(10.0));
+        traj.edges = Vec::new();
+        traj
+    }
+
+    #[test]
+    fn a_formed_lattice_succeeds_on_its_changing_edges_with_team_figures() {
+        let traj = lattice_run(60.0, |k| if k < 100 { 1.2 } else { 1.0 });
+        let m = run_metrics(&traj, &MetricsConfig::default());
+        assert!(m.success_5 && m.success_10, "{m:?}");
+        assert!(close(m.convergence_s_10.unwrap(), 5.0));
+        let team = m.team.expect("team figures under a changing graph");
+        // 5 unit edges; the long diagonal (0, 3) is no edge.
+        assert_eq!(team.edges_scored, 5);
+        assert!(team.connected && team.anchor_success);
+        assert!(team.final_mean_edge_error < 1e-12 && close(team.final_min_distance, D_STAR));
+    }
+
+    #[test]
+    fn the_strict_check_fails_a_collision_or_one_bad_edge_that_the_anchor_check_passes() {
+        let mut collided = lattice_run(30.0, |_| 1.0);
+        collided.collisions = vec![(3, 0, 1)];
+        let m = run_metrics(&collided, &MetricsConfig::default());
+        assert!(!m.success_5 && !m.success_10 && m.team.unwrap().anchor_success);
+
+        // A 7 % error on the whole lattice in the window, then exact for the last sample only:
+        // strict fails at 5 %, the anchor check (last sample) passes.
+        let samples = collided.times.len();
+        let late = lattice_run(30.0, |k| if k + 1 < samples { 1.07 } else { 1.0 });
+        let m = run_metrics(&late, &MetricsConfig::default());
+        assert!(!m.success_5 && m.success_10, "{m:?}");
+        assert!(m.team.unwrap().anchor_success);
+    }
+
+    #[test]
+    fn a_team_split_in_two_fails_the_strict_check_however_well_each_part_is_formed() {
+        let mut traj = lattice_run(30.0, |_| 1.0);
+        for poses in &mut traj.poses {
+            // Move robot 3 and a new robot 4 far away: a pair of its own, 2 m apart.
+            poses[3].x += 50.0;
+            poses.push(Pose {
+                x: poses[3].x + D_STAR,
+                ..poses[3]
+            });
+        }
+        let m = run_metrics(&traj, &MetricsConfig::default());
+        let team = m.team.clone().unwrap();
+        assert!(!team.connected && !m.success_10, "{m:?}");
+        assert!(m.max_edge_window_error < 1e-12);
+    }
+
+    #[test]
+    fn all_pairs_runs_keep_the_papers_form_unless_team_figures_are_asked() {
+        let traj = triangle_run(30.0, |_, _| D_STAR, [0.0; 3]);
+        let plain = run_metrics(&traj, &MetricsConfig::default());
+        assert_eq!(plain.team, None);
+        let with_team = run_metrics(
+            &traj,
+            &MetricsConfig {
+                team_figures: true,
+                ..MetricsConfig::default()
+            },
+        );
+        assert_eq!(
+            RunMetrics {
+                team: None,
+                ..with_team.clone()
+            },
+            plain
+        );
+        let team = with_team.team.clone().unwrap();
+        assert!(team.connected && team.anchor_success && team.edges_scored == 3);
+        let summary = summarize(&[with_team]);
+        assert_eq!(summary.anchor_success_rate, Some(1.0));
+        assert_eq!(summarize(&[plain]).anchor_success_rate, None);
+    }
+
     #[test]
     fn window_start_includes_the_boundary_sample_and_clamps_to_the_run() {
         let times: Vec<f64> = (0..=1200).map(|k| k as f64 * DT).collect();

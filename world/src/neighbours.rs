@@ -104,6 +104,10 @@ impl NeighbourTracker {
         };
         let n = self.n.min(positions.len());
         let range_sq = rule.sensing_range * rule.sensing_range;
+        // A witness of a pair lies within sqrt(max(threshold, 1)) times the pair's length of both
+        // robots: Gabriel pairs are sought only that much inside sensing range, so every witness
+        // is sensed.
+        let pair_range_sq = range_sq / rule.threshold.max(1.0);
         let d2 = |a: usize, b: usize| {
             let (dx, dy) = (
                 positions[a].0 - positions[b].0,
@@ -129,7 +133,7 @@ impl NeighbourTracker {
         self.next.fill(false);
         for i in 0..n {
             for &(dij, j) in &self.in_range[i] {
-                if j < i {
+                if j < i || dij > pair_range_sq {
                     continue;
                 }
                 let was = self.gabriel[i * self.n + j];
@@ -138,11 +142,12 @@ impl NeighbourTracker {
                 } else {
                     rule.threshold
                 };
-                // A witness below `needed` has d_ik^2 < needed d_ij^2 <= d_ij^2: look only at the
-                // robots nearer to i than j, nearest first.
+                // A witness below `needed` has d_ik^2 < needed d_ij^2: look only at those robots,
+                // nearest first.
+                let reach = needed.max(1.0) * dij;
                 let vetoed = self.in_range[i]
                     .iter()
-                    .take_while(|&&(dik, _)| dik < dij)
+                    .take_while(|&&(dik, _)| dik < reach)
                     .any(|&(dik, k)| k != j && (dik + d2(j, k)) < needed * dij);
                 if !vetoed && dij > 0.0 {
                     self.next[i * self.n + j] = true;
@@ -191,7 +196,10 @@ impl NeighbourTracker {
 }
 
 /// The edges of a run's first sample under `rule` (a tracker that has seen only these poses).
-pub fn first_sample_edges(rule: NeighbourRule, poses: &[formation_proto::Pose]) -> Vec<(usize, usize)> {
+pub fn first_sample_edges(
+    rule: NeighbourRule,
+    poses: &[formation_proto::Pose],
+) -> Vec<(usize, usize)> {
     let mut tracker = NeighbourTracker::new(rule, poses.len());
     let positions: Vec<(f64, f64)> = poses.iter().map(|p| (p.x, p.y)).collect();
     tracker.update(&positions);
@@ -293,10 +301,7 @@ mod tests {
             vec![(0, 1), (1, 2)]
         );
         // With 2 nearest, every robot of three holds both others.
-        assert_eq!(
-            edges_of(gabriel(), &obtuse),
-            vec![(0, 1), (0, 2), (1, 2)]
-        );
+        assert_eq!(edges_of(gabriel(), &obtuse), vec![(0, 1), (0, 2), (1, 2)]);
     }
 
     #[test]
@@ -318,34 +323,45 @@ mod tests {
         assert!(is_connected(p.len(), &edges));
     }
 
+    /// A rhombus of unit sides whose diagonal (1, 3) has witness ratio `rho` (0 and 2 are its
+    /// witnesses): short diagonal S with 2 / S^2 = rho, long diagonal L with S^2 + L^2 = 4.
+    fn rhombus(rho: f64) -> [(f64, f64); 4] {
+        let short = (2.0 / rho).sqrt();
+        let long = (4.0 - short * short).sqrt();
+        [
+            (0.0, 0.0),
+            (long / 2.0, -short / 2.0),
+            (long, 0.0),
+            (long / 2.0, short / 2.0),
+        ]
+    }
+
     #[test]
-    fn a_square_holds_both_diagonals_until_one_folds_below_the_keep_threshold() {
-        // A perfect square: rho = 1 for both diagonals, above the 0.9 threshold.
+    fn a_square_has_no_diagonal_and_a_folding_rhombus_keeps_its_short_one_by_hysteresis() {
+        // A perfect square: rho = 1 for both diagonals, on the Gabriel boundary, below 1.3.
         let square = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)];
+        assert_eq!(
+            edges_of(gabriel(), &square),
+            vec![(0, 1), (0, 3), (1, 2), (2, 3)]
+        );
+        // The short diagonal becomes an edge at rho >= 1.3 ...
         let mut tracker = NeighbourTracker::new(gabriel(), 4);
-        tracker.update(&square);
-        assert_eq!(tracker.edges().len(), 6, "{:?}", tracker.edges());
-        // Fold into a rhombus whose long diagonal (0, 2) has rho = 0.8: between the keep
-        // threshold (0.75) and the add threshold (0.9), so it stays by hysteresis...
-        let rhombus = |rho: f64| {
-            // sides 1, long diagonal L with 2 / L^2 = rho, short diagonal S with S^2 + L^2 = 4.
-            let long = (2.0 / rho).sqrt();
-            let short = (4.0 - long * long).sqrt();
-            [(0.0, 0.0), (long / 2.0, -short / 2.0), (long, 0.0), (long / 2.0, short / 2.0)]
-        };
-        tracker.update(&rhombus(0.8));
-        assert!(tracker.edges().contains(&(0, 2)));
-        // ... but a fresh tracker does not add it at 0.8.
-        assert!(!edges_of(gabriel(), &rhombus(0.8)).contains(&(0, 2)));
-        // Below 0.75 it goes.
-        tracker.update(&rhombus(0.7));
-        assert!(!tracker.edges().contains(&(0, 2)), "{:?}", tracker.edges());
+        tracker.update(&rhombus(1.35));
         assert!(tracker.edges().contains(&(1, 3)));
+        // ... stays one down to 0.9 ...
+        tracker.update(&rhombus(1.0));
+        assert!(tracker.edges().contains(&(1, 3)));
+        // ... which a fresh tracker does not add ...
+        assert!(!edges_of(gabriel(), &rhombus(1.0)).contains(&(1, 3)));
+        // ... and goes below 0.9.
+        tracker.update(&rhombus(0.85));
+        assert!(!tracker.edges().contains(&(1, 3)), "{:?}", tracker.edges());
         // reset forgets the history.
-        tracker.update(&rhombus(0.8));
+        tracker.update(&rhombus(1.35));
         tracker.reset();
-        tracker.update(&rhombus(0.8));
-        assert!(!tracker.edges().contains(&(0, 2)));
+        tracker.update(&rhombus(1.0));
+        assert!(!tracker.edges().contains(&(1, 3)));
+        assert_eq!(tracker.samples(), 1);
     }
 
     #[test]
@@ -374,7 +390,9 @@ mod tests {
             }
         }
         for &(i, j) in tracker.edges() {
-            assert!(tracker.own_neighbours(i).contains(&j) || tracker.own_neighbours(j).contains(&i));
+            assert!(
+                tracker.own_neighbours(i).contains(&j) || tracker.own_neighbours(j).contains(&i)
+            );
         }
         // The witness 1 lies inside the circle on 0-2, so 0-2 is no Gabriel edge.
         assert!(!tracker.edges().contains(&(0, 2)));

@@ -594,7 +594,7 @@ pub mod limits {
     /// Most `formation.nearest`.
     pub const MAX_NEAREST: usize = 16;
     /// `formation.threshold`: at most 1, so every witness lies within sensing range.
-    pub const GABRIEL_THRESHOLD: Bounds = bounds(0.05, 1.0, "");
+    pub const GABRIEL_THRESHOLD: Bounds = bounds(0.05, 4.0, "");
     /// Fewest LIDAR beams.
     pub const MIN_BEAMS: usize = 8;
     /// Most entries of `goal.d_star_choices`.
@@ -2160,6 +2160,134 @@ phi = 1.0
         let too_many =
             edited("robots = 3", "robots = 20") + "[init]\ndisc_radius = 2.0\nmin_spacing = 1.0\n";
         assert_eq!(invalid_field(&too_many).0, "init.disc_radius");
+    }
+
+    #[test]
+    fn eleven_robots_just_work_with_the_gabriel_rule_a_grown_disc_and_a_connected_start() {
+        let scenario = parse(&edited("robots = 3", "robots = 11")).unwrap();
+        let NeighbourRule::Gabriel(rule) = *scenario.neighbours() else {
+            panic!("{:?}", scenario.neighbours())
+        };
+        assert_eq!(rule, GabrielRule::with_range(10.0));
+        let radius = 3.0 * (11.0_f64 / 3.0).sqrt();
+        assert_eq!(scenario.initial_conditions().disc_radius, radius);
+        for index in 0..20 {
+            let spec = scenario.run_spec(5, index);
+            assert_eq!(spec.neighbours, *scenario.neighbours());
+            let positions: Vec<(f64, f64)> = spec.initial.iter().map(|p| (p.x, p.y)).collect();
+            assert!(positions.iter().all(|p| p.0.hypot(p.1) <= radius));
+            assert!(connected_within(&positions, rule.sensing_range));
+        }
+        // Three robots keep the paper's triangle and disc.
+        let three = parse(MINIMAL).unwrap();
+        assert_eq!(*three.neighbours(), NeighbourRule::AllPairs);
+        assert_eq!(three.initial_conditions().disc_radius, 3.0);
+    }
+
+    #[test]
+    fn the_formation_table_names_its_rule_and_refuses_a_wrong_one_with_the_valid_names() {
+        let gabriel3 = parse(&format!(
+            "{MINIMAL}[formation]\nneighbours = \"gabriel\"\nsensing_range = 4.0\nnearest = 1\n"
+        ))
+        .unwrap();
+        assert_eq!(
+            *gabriel3.neighbours(),
+            NeighbourRule::Gabriel(GabrielRule {
+                sensing_range: 4.0,
+                nearest: 1,
+                ..GabrielRule::with_range(4.0)
+            })
+        );
+        let all = parse(
+            &(edited("robots = 3", "robots = 6") + "[formation]\nneighbours = \"all_pairs\"\n"),
+        )
+        .unwrap();
+        assert_eq!(*all.neighbours(), NeighbourRule::AllPairs);
+        let (field, problem) = invalid_field(&format!(
+            "{MINIMAL}[formation]\nneighbours = \"delaunay\"\n"
+        ));
+        assert_eq!(field, "formation.neighbours");
+        assert!(
+            problem.contains("\"all_pairs\", \"gabriel\"") && problem.contains("delaunay"),
+            "{problem}"
+        );
+        let (field, problem) = invalid_field(&format!(
+            "{MINIMAL}[formation]\nneighbours = \"all_pairs\"\nnearest = 2\n"
+        ));
+        assert_eq!(field, "formation.nearest");
+        assert!(
+            problem.contains("only to neighbours = \"gabriel\""),
+            "{problem}"
+        );
+        let (field, _) = invalid_field(&format!(
+            "{MINIMAL}[formation]\nneighbours = \"gabriel\"\nsensing_range = 11.0\n"
+        ));
+        assert_eq!(field, "formation.sensing_range");
+        let (field, _) = invalid_field(&format!(
+            "{MINIMAL}[formation]\nneighbours = \"gabriel\"\nhysteresis = 1.3\n"
+        ));
+        assert_eq!(field, "formation.hysteresis");
+        assert!(
+            error_text(&format!("{MINIMAL}[formation]\nrule = \"gabriel\"\n")).contains("rule"),
+            "unknown keys are refused"
+        );
+    }
+
+    #[test]
+    fn a_team_too_large_for_its_disc_or_too_spread_for_its_range_is_a_clear_error() {
+        let crowded = edited("robots = 3", "robots = 200") + "[init]\ndisc_radius = 3.0\n";
+        let (field, problem) = invalid_field(&crowded);
+        assert_eq!(field, "init.disc_radius");
+        assert!(
+            problem.contains("too small to place 200 robots"),
+            "{problem}"
+        );
+        let spread = MINIMAL.to_owned() + "[lidar]\nmax_range = 1.0\n[init]\nmin_spacing = 1.5\n";
+        let (field, problem) = invalid_field(&spread);
+        assert_eq!(field, "init.min_spacing");
+        assert!(problem.contains("cannot start connected"), "{problem}");
+    }
+
+    #[test]
+    fn a_wide_disc_with_a_short_range_still_starts_connected_in_bounded_time() {
+        // A 30 m disc and a 2 m sensing range: random draws are almost never connected, so the
+        // placement ends on the connected lattice patch.
+        let text = edited("robots = 3", "robots = 12")
+            + "[init]\ndisc_radius = 30.0\nmin_spacing = 1.0\n[lidar]\nmax_range = 2.0\n";
+        let scenario = parse(&text).unwrap();
+        let spec = scenario.run_spec(1, 0);
+        let positions: Vec<(f64, f64)> = spec.initial.iter().map(|p| (p.x, p.y)).collect();
+        assert_eq!(positions.len(), 12);
+        assert!(connected_within(&positions, 2.0));
+        for (i, a) in positions.iter().enumerate() {
+            for b in &positions[i + 1..] {
+                assert!((a.0 - b.0).hypot(a.1 - b.1) >= 1.0 - 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn with_robots_keeps_what_the_file_gave_and_resizes_the_rest() {
+        let file = edited("robots = 3", "robots = 4") + "[init]\nmin_spacing = 0.8\n";
+        let scenario = parse(&file).unwrap();
+        let big = scenario.with_robots(16).unwrap();
+        assert_eq!(big.n_robots(), 16);
+        assert_eq!(big.initial_conditions().min_spacing, 0.8);
+        assert_eq!(
+            big.initial_conditions().disc_radius,
+            default_disc_radius(16)
+        );
+        assert_eq!(big.neighbours().name(), "gabriel");
+        let three = scenario.with_robots(3).unwrap();
+        assert_eq!(*three.neighbours(), NeighbourRule::AllPairs);
+        assert_eq!(three.initial_conditions().disc_radius, 3.0);
+        assert_eq!(three.with_robots(4).unwrap(), scenario);
+        let fixed = parse(&(file + "[formation]\nneighbours = \"all_pairs\"\n")).unwrap();
+        assert_eq!(
+            *fixed.with_robots(8).unwrap().neighbours(),
+            NeighbourRule::AllPairs
+        );
+        assert!(scenario.with_robots(1).is_err() && scenario.with_robots(5000).is_err());
     }
 
     #[test]
