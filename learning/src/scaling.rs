@@ -205,7 +205,7 @@ mod tests {
             ),
             (0.0, 0.5, 0.75)
         );
-        assert_eq!(row.rel_formation_error.unwrap().median, 0.02);
+        assert!((row.rel_formation_error.unwrap().median - 0.02).abs() < 1e-12);
         assert_eq!(row.max_edge_window_error.unwrap().max, 0.8);
         assert_eq!(row.convergence_s.unwrap().count, 2);
         let text = scaling_text(&ScalingTable {

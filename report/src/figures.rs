@@ -793,6 +793,7 @@ mod tests {
             d_star: 1.0,
             v_star: 0.7,
             edges: vec![(0, 1), (0, 2), (1, 2)],
+            neighbours: formation_proto::NeighbourRule::AllPairs,
             times: times.clone(),
             phi_star: vec![0.0; samples],
             poses,

@@ -470,6 +470,7 @@ mod tests {
             max_edge_window_error: 0.03,
             orientation_error_rad: 0.03,
             collisions: usize::from(!success_5),
+            team: None,
         }
     }
 
@@ -497,6 +498,8 @@ mod tests {
                 }),
                 rel_formation_error: None,
                 orientation_error_rad: None,
+                anchor_success_rate: None,
+                connected_rate: None,
             },
             per_run: vec![metrics(true, 9.0, 0.02), metrics(false, 10.0, f64::NAN)],
             braked_ticks: Vec::new(),
@@ -568,6 +571,7 @@ mod tests {
                 d_star: 1.0,
                 v_star: 0.7,
                 edges,
+                neighbours: formation_proto::NeighbourRule::AllPairs,
                 times: vec![0.0, 0.5],
                 phi_star: vec![0.1, f64::NAN],
                 poses,

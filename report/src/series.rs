@@ -233,6 +233,7 @@ mod tests {
             d_star: 2.0,
             v_star: 0.7,
             edges: vec![(0, 1), (0, 2), (1, 2)],
+            neighbours: formation_proto::NeighbourRule::AllPairs,
             times: vec![0.0, 1.0, 2.0],
             phi_star: vec![0.0, 0.0, 3.0],
             poses: vec![
