@@ -713,10 +713,13 @@ impl Controller for AgentsController<'_> {
                 scan,
             )
             .map_err(|e| ControllerError::new(e.to_string()))?;
+            // Stamped before the hand-over: publishing wakes the agent, which may run on this
+            // very core before the world resumes, and a stamp taken afterwards would hide that
+            // agent's whole answer from the round trip.
+            self.published_at[robot] = self.clock.now();
             self.link
                 .publish_scan(robot, &msg)
                 .map_err(transport_error)?;
-            self.published_at[robot] = self.clock.now();
             self.published_wall_ns[robot] = msg.published_wall_ns;
         }
         let paced_until = entered + self.settings.runtime.pace();
@@ -766,8 +769,9 @@ impl Controller for AgentsController<'_> {
                 break;
             }
             if !answered && std::time::Instant::now() < spin_until {
-                // A short bounded poll before blocking (lockstep only, `spin_us`).
-                std::hint::spin_loop();
+                // A short bounded poll before blocking (lockstep only, `spin_us`); every empty
+                // poll yields the core, so an agent that is ready runs first.
+                std::thread::yield_now();
                 continue;
             }
             self.wait(if answered { paced_until } else { deadline } - now)?;

@@ -134,16 +134,30 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
     };
     let open =
         |channel| ServiceName::new(&robot_service_name(&run_id, 0, incarnation, channel)).unwrap();
-    let scan = node
-        .service_builder(&open(RobotChannel::Scan))
-        .publish_subscribe::<ScanMsg>()
-        .open()
-        .unwrap();
-    let cmd = node
-        .service_builder(&open(RobotChannel::Cmd))
-        .publish_subscribe::<CmdMsg>()
-        .open()
-        .unwrap();
+    // The service is listed as soon as the world starts creating it, but opens only once the
+    // world has finished: retry until then.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let (scan, cmd) = loop {
+        let scan = node
+            .service_builder(&open(RobotChannel::Scan))
+            .publish_subscribe::<ScanMsg>()
+            .open();
+        let cmd = node
+            .service_builder(&open(RobotChannel::Cmd))
+            .publish_subscribe::<CmdMsg>()
+            .open();
+        match (scan, cmd) {
+            (Ok(scan), Ok(cmd)) => break (scan, cmd),
+            (scan, cmd) if Instant::now() >= deadline => {
+                panic!(
+                    "robot 0's services never opened: scan {:?}, cmd {:?}",
+                    scan.err(),
+                    cmd.err()
+                )
+            }
+            _ => std::thread::sleep(Duration::from_millis(20)),
+        }
+    };
     // Wait until agent 0 holds its ports.
     let deadline = Instant::now() + Duration::from_secs(30);
     while (scan.dynamic_config().number_of_subscribers() < 1

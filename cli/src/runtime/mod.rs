@@ -83,9 +83,9 @@ pub struct RunArgs {
     #[arg(long, default_value_t = RuntimeSettings::DEFAULT.pace_ms)]
     pub pace_ms: u64,
     /// Lockstep: the world polls for the agents' commands this long after publishing a tick's
-    /// scans before it blocks \[µs\] (0: block at once). Lowers the round trip by about one
-    /// wake-up at the cost of at most this much of the world's core per tick.
-    #[arg(long, default_value_t = 0)]
+    /// scans before it blocks \[µs\] (0: block at once). Each empty poll yields the core, so
+    /// agents ready to run go first. Lowers the round trip by about one wake-up.
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.spin_us)]
     pub spin_us: u64,
     /// Testing only: make an agent misbehave, `ROBOT:MODE` with MODE one of crash-after=N,
     /// hang-after=N, late-ms=X, nan-after=N (repeatable). Applies to the agent's first start; a
