@@ -60,6 +60,18 @@ pub const EDGE_COLORS: [RGBColor; 6] = [
 const LEGEND_WIDTH: u32 = 140;
 /// Seconds between the formation snapshots of the trajectory panel (the paper's 3 s).
 pub const SNAPSHOT_EVERY_S: f64 = 3.0;
+/// Seconds between snapshots of a team larger than the paper's three (their graph would
+/// otherwise cover the paths).
+pub const TEAM_SNAPSHOT_EVERY_S: f64 = 10.0;
+
+/// Seconds between the snapshots of `traj`'s trajectory figure.
+pub fn snapshot_every_s(traj: &Trajectory) -> f64 {
+    if traj.n_robots() > 3 {
+        TEAM_SNAPSHOT_EVERY_S
+    } else {
+        SNAPSHOT_EVERY_S
+    }
+}
 
 /// One figure: a file stem and an SVG document.
 #[derive(Debug, Clone, PartialEq)]
@@ -351,17 +363,22 @@ pub fn wheels_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError>
     })
 }
 
-/// Figs. 6c-8c: every robot's path, and every [`SNAPSHOT_EVERY_S`] the robots as triangles
-/// pointing along their heading with the formation (dashed lines along the edges) between them.
+/// Figs. 6c-8c: every robot's path, and every [`SNAPSHOT_EVERY_S`] ([`TEAM_SNAPSHOT_EVERY_S`]
+/// for a team larger than three) the robots as triangles
+/// pointing along their heading with the formation (dashed lines along the edges of that moment,
+/// the neighbour graph for a team) between them.
 /// Both axes have the same scale. Collisions are marked with a red ring.
 pub fn trajectory_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError> {
     let robot_paths = paths(traj);
-    let snapshots = snapshot_indices(&traj.times, SNAPSHOT_EVERY_S);
+    let every_s = snapshot_every_s(traj);
+    let snapshots = snapshot_indices(&traj.times, every_s);
+    let edges = crate::series::edges_per_sample(traj);
     let (width, height) = (640_u32, 600_u32);
     let (margin, x_label_area, y_label_area) = (8_u32, 46_u32, 66_u32);
     render(id, (width, height), |root| {
         let (plot, legend) = root.split_horizontally(width - LEGEND_WIDTH);
-        let plot = plot.titled("(c) trajectories and formation every 3 s", text_style(19.0))?;
+        let title = format!("(c) trajectories and formation every {every_s} s");
+        let plot = plot.titled(title.as_str(), text_style(19.0))?;
         let (plot_w, plot_h) = plot.dim_in_pixel();
         let inner_w = f64::from(plot_w.saturating_sub(2 * margin + y_label_area).max(1));
         let inner_h = f64::from(plot_h.saturating_sub(2 * margin + x_label_area).max(1));
@@ -392,7 +409,7 @@ pub fn trajectory_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportEr
         }
         for &k in &snapshots {
             let poses = &traj.poses[k];
-            for &(i, j) in &traj.edges {
+            for &(i, j) in edges.get(k).map_or(&[][..], Vec::as_slice) {
                 let (a, b) = (poses[i], poses[j]);
                 if [a.x, a.y, b.x, b.y].iter().all(|v| v.is_finite()) {
                     chart.draw_series(std::iter::once(DashedPathElement::new(

@@ -9,7 +9,9 @@
 //! * Fig. 9: box plots of convergence time, relative formation error and orientation error over
 //!   the runs that succeed at 10 %;
 //! * for each run log (the paper's cases, Figs. 6-8): formation and orientation error over time,
-//!   wheel commands, and the trajectories with the formation drawn every 3 s;
+//!   wheel commands, and the trajectories with the formation drawn every 3 s; for a team whose
+//!   edges follow a neighbour graph, the median and worst edge error instead of one line per
+//!   pair, and the graph of each snapshot (every 10 s);
 //! * the training loss curve and the latency profile, when present.
 //!
 //! Every figure is also written as a standalone SVG file in `<out stem>-figures/` next to the
@@ -412,18 +414,32 @@ fn run_section(
         ),
         numbering.place(
             figures::trajectory_figure(&format!("{stem}-trajectory"), traj)?,
-            "Robot trajectories with the formation every 3 s",
+            &format!(
+                "Robot trajectories with the formation every {} s",
+                figures::snapshot_every_s(traj)
+            ),
         ),
     ];
+    let team_note = if traj.neighbours == formation_proto::NeighbourRule::AllPairs {
+        String::new()
+    } else {
+        format!(
+            " The formation's edges follow the {} neighbour rule and change with the robots' \
+             positions: (a) shows the median and the worst edge error over the edges of each \
+             instant, (c) the neighbour graph of each snapshot.",
+            traj.neighbours.name()
+        )
+    };
     let heading = heading_description(&traj.phi_star);
     let cf = paper_figure(&eval.scenario)
         .map(|f| format!(" (cf. paper {f})"))
         .unwrap_or_default();
     let caption = format!(
-        "Figure {number}: {} run {}{cf} with {heading} and desired formation distance d* = {} m: (a) formation and orientation error; (b) robot control (left and right wheel); (c) robot trajectories, the triangles and dashed lines showing the robots and the formation every 3 s.",
+        "Figure {number}: {} run {}{cf} with {heading} and desired formation distance d* = {} m: (a) formation and orientation error; (b) robot control (left and right wheel); (c) robot trajectories, the triangles and dashed lines showing the robots and the formation every {} s.{team_note}",
         eval.name,
         run.index,
         figures::trim_number(traj.d_star),
+        figures::snapshot_every_s(traj),
     );
     let duration =
         traj.times.last().copied().unwrap_or(0.0) - traj.times.first().copied().unwrap_or(0.0);

@@ -2180,8 +2180,14 @@ phi = 1.0
         }
         // The shipped teams scenario is exactly that, for 8 robots.
         let teams = parse(include_str!("../../scenarios/teams.toml")).unwrap();
-        assert_eq!((teams.n_robots(), teams.neighbours().name()), (8, "gabriel"));
-        assert_eq!(teams.initial_conditions().disc_radius, default_disc_radius(8));
+        assert_eq!(
+            (teams.n_robots(), teams.neighbours().name()),
+            (8, "gabriel")
+        );
+        assert_eq!(
+            teams.initial_conditions().disc_radius,
+            default_disc_radius(8)
+        );
         // Three robots keep the paper's triangle and disc.
         let three = parse(MINIMAL).unwrap();
         assert_eq!(*three.neighbours(), NeighbourRule::AllPairs);
