@@ -12,6 +12,8 @@
 //!   wheel commands, and the trajectories with the formation drawn every 3 s; for a team whose
 //!   edges follow a neighbour graph, the median and worst edge error instead of one line per
 //!   pair, and the graph of each snapshot (every 10 s);
+//! * the scaling over team sizes (`scaling*.json` from `formation eval --robots ...`): the table
+//!   and success and convergence against the team size;
 //! * the training loss curve and the latency profile, when present.
 //!
 //! Every figure is also written as a standalone SVG file in `<out stem>-figures/` next to the
@@ -144,31 +146,33 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
     } else {
         multi_run
     };
-    let panels = fig9_panels(&fig9_evals);
-    let figure = figures::box_figure("fig9-statistics", &panels)?;
-    let number = numbering.take();
-    page.fig9 = Some(CaptionedFigure {
-        placed: numbering.place(
-            figure,
-            "Box plots of convergence time, formation error and orientation error",
-        ),
-        caption: format!(
-            "Figure {number}: Box plot of convergence time, relative formation error and orientation error over the last 20 s, over the runs that succeed at 10 % (cf. paper Fig. 9). The thick line is the median, the box spans the 25th to 75th percentiles, the whiskers extend to the minimum and maximum, dots are single runs; the dashed line is the paper's median."
-        ),
-    });
-    page.fig9_note = format!(
-        "Evaluations: {}.{}",
-        fig9_evals
-            .iter()
-            .map(|e| format!("{} ({} runs)", e.name, e.table.runs))
-            .collect::<Vec<_>>()
-            .join(", "),
-        if fig9_evals.len() < table_evals.len() {
-            " Single-run evaluations (the cases below) are left out of the statistics."
-        } else {
-            ""
-        }
-    );
+    if !table_evals.is_empty() {
+        let panels = fig9_panels(&fig9_evals);
+        let figure = figures::box_figure("fig9-statistics", &panels)?;
+        let number = numbering.take();
+        page.fig9 = Some(CaptionedFigure {
+            placed: numbering.place(
+                figure,
+                "Box plots of convergence time, formation error and orientation error",
+            ),
+            caption: format!(
+                "Figure {number}: Box plot of convergence time, relative formation error and orientation error over the last 20 s, over the runs that succeed at 10 % (cf. paper Fig. 9). The thick line is the median, the box spans the 25th to 75th percentiles, the whiskers extend to the minimum and maximum, dots are single runs; the dashed line is the paper's median."
+            ),
+        });
+        page.fig9_note = format!(
+            "Evaluations: {}.{}",
+            fig9_evals
+                .iter()
+                .map(|e| format!("{} ({} runs)", e.name, e.table.runs))
+                .collect::<Vec<_>>()
+                .join(", "),
+            if fig9_evals.len() < table_evals.len() {
+                " Single-run evaluations (the cases below) are left out of the statistics."
+            } else {
+                ""
+            }
+        );
+    }
 
     for eval in &inputs.evals {
         for run in &eval.runs {
@@ -190,6 +194,21 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
         );
     }
 
+    for (k, scaling) in inputs.scalings.iter().enumerate() {
+        let figure = figures::scaling_figure(&format!("scaling-{}", k + 1), &scaling.table)?;
+        let number = numbering.take();
+        page.scaling.push(html::ScalingSection {
+            source: relative(&inputs.root, &scaling.source),
+            rows: scaling.table.rows.clone(),
+            figure: CaptionedFigure {
+                placed: numbering.place(figure, "Success and convergence against team size"),
+                caption: format!(
+                    "Figure {number}: (a) success at 10 % (thick) and 5 % (thin) and (b) median convergence time at 10 % against the team size ({}, seed {}, {} s per run).",
+                    scaling.table.scenario, scaling.table.seed, scaling.table.duration_s
+                ),
+            },
+        });
+    }
     for (k, curve) in inputs.loss_curves.iter().enumerate() {
         let figure = figures::loss_figure(&format!("training-loss-{}", k + 1), curve)?;
         let number = numbering.take();
@@ -224,6 +243,7 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
         .flat_map(|e| std::iter::once(&e.source).chain(e.runs.iter().map(|r| &r.source)))
         .chain(inputs.loss_curves.iter().map(|c| &c.source))
         .chain(inputs.profiles.iter().map(|p| &p.source))
+        .chain(inputs.scalings.iter().map(|s| &s.source))
         .map(|path| relative(&inputs.root, path))
         .collect();
     Ok((page, numbering.figures))
