@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
-use crate::runtime::{ProfileArgs, RunArgs, SwapArgs};
+use crate::runtime::{CredentialsArgs, ProfileArgs, RunArgs, SwapArgs};
 
 /// Learned decentralized multi-robot formation control.
 #[derive(Debug, Parser)]
@@ -29,12 +29,16 @@ pub enum Command {
     Train(TrainArgs),
     /// DAgger: the policy drives, the expert labels, the dataset grows, the policy is retrained.
     Dagger(DaggerArgs),
-    /// Launch the world and one agent process per robot over iceoryx2.
+    /// Launch the world and one agent process per robot (iceoryx2, or Zenoh for agents on other
+    /// hosts).
     Run(RunArgs),
     /// Per-stage latency profile of the multi-process runtime.
     Profile(ProfileArgs),
     /// Swap the ONNX model of one running agent.
     Swap(SwapArgs),
+    /// Create Zenoh credentials for a team: one login per robot (plus the launch secret) and
+    /// one for `formation swap`, for agents on other hosts.
+    Credentials(CredentialsArgs),
     /// Build the HTML report (Table I, Figs. 6-9) from eval/run output directories.
     Report(ReportArgs),
     /// The main job: the paper's three cases and Table I with the shipped model over real

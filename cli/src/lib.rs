@@ -6,7 +6,7 @@
 //! * [`eval`]: in-process (or, with `--processes`, multi-process) evaluation with the paper's metrics.
 //! * [`collect`]: expert demonstrations into a dataset.
 //! * [`learn`]: `train` (runs the PyTorch trainer) and `dagger` (policy drives, expert labels, retrain).
-//! * [`runtime`]: the iceoryx2 multi-process runtime launcher (`run`, `profile`, `swap`).
+//! * [`runtime`]: the multi-process runtime launcher (`run`, `profile`, `swap`, `credentials`).
 //! * [`report`]: the HTML report with the paper's figures.
 //! * [`demo`]: the README's main job: the paper's cases and Table I with the shipped model, then a report.
 
@@ -34,6 +34,7 @@ pub fn main_with_args() -> anyhow::Result<()> {
         args::Command::Run(a) => runtime::run_command(&a),
         args::Command::Profile(a) => runtime::profile_command(&a),
         args::Command::Swap(a) => runtime::swap_command(&a),
+        args::Command::Credentials(a) => runtime::credentials_command(&a),
         args::Command::Report(a) => report::report_command(&a),
         args::Command::Demo(a) => demo::demo_command(&a),
     }

@@ -38,6 +38,12 @@
 //! subscription no other process can read robot `i`'s scan, and once it holds its command
 //! publisher no other process can command robot `i`.
 //!
+//! Transports that carry bytes rather than shared memory (Zenoh, between hosts) send each message's
+//! own bytes: every wire struct is [`bytemuck::Pod`] (no padding, checked when it compiles), so
+//! [`message_bytes`] views it and [`message_from_bytes`] takes it back, refusing a payload of the
+//! wrong size. The bytes are in the host's byte order: every host of one run must share it (every
+//! supported target is little-endian).
+//!
 //! Every file iceoryx2 creates for a run carries the run's own prefix (`fm_<run>_` in the
 //! shared-memory folder) and lives under the run's own root directory (see [`RunNamespace`]), so
 //! parallel runs and tests never collide and a run's leftovers can be listed and removed exactly.
@@ -104,6 +110,28 @@ pub enum WireError {
         /// What is wrong.
         reason: String,
     },
+}
+
+/// The bytes of a wire message, as a transport between hosts sends them.
+pub fn message_bytes<T: bytemuck::Pod>(msg: &T) -> &[u8] {
+    bytemuck::bytes_of(msg)
+}
+
+/// A wire message back from the bytes [`message_bytes`] gave; a payload of another size (a
+/// different build, a stray publisher) is [`WireError::Malformed`].
+pub fn message_from_bytes<T: bytemuck::Pod>(
+    message: &'static str,
+    bytes: &[u8],
+) -> Result<T, WireError> {
+    bytemuck::try_pod_read_unaligned(bytes).map_err(|_| WireError::Malformed {
+        message,
+        reason: format!(
+            "{} bytes arrived, the message has {}: world and agent binaries are from different \
+             builds, or another process publishes on this key",
+            bytes.len(),
+            std::mem::size_of::<T>()
+        ),
+    })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -779,7 +807,7 @@ fn decode_text<'a>(message: &'static str, bytes: &'a [u8]) -> Result<&'a str, Wi
 
 /// An agent's request to drive one robot: its pid, a fresh nonce (which also names the
 /// incarnation's services if the world accepts) and its proof of the launch secret.
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 #[type_name("formation.HelloMsg.v1")]
 pub struct HelloMsg {
@@ -803,7 +831,7 @@ pub enum Welcome {
 }
 
 /// The wire form of a [`Welcome`], tagged with the nonce of the hello it answers.
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 #[type_name("formation.WelcomeMsg.v1")]
 pub struct WelcomeMsg {
@@ -855,7 +883,7 @@ impl WelcomeMsg {
 // ---------------------------------------------------------------------------------------------
 
 /// One robot's observation at one tick: its own scan, its own compass heading and the goal.
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 #[type_name("formation.ScanMsg.v1")]
 pub struct ScanMsg {
@@ -965,7 +993,7 @@ impl CmdStatus {
 }
 
 /// One robot's wheel command for one tick, with the agent's own timings.
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 #[type_name("formation.CmdMsg.v1")]
 pub struct CmdMsg {
@@ -1087,7 +1115,7 @@ pub enum ControlRequest {
 }
 
 /// The wire form of a [`ControlRequest`].
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 #[type_name("formation.ControlMsg.v1")]
 pub struct ControlMsg {
@@ -1226,7 +1254,7 @@ pub enum AgentStatus {
 }
 
 /// The wire form of an [`AgentStatus`].
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 #[type_name("formation.StatusMsg.v2")]
 pub struct StatusMsg {
@@ -1358,7 +1386,7 @@ pub struct SwapRequest {
 }
 
 /// The wire form of a [`SwapRequest`].
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 #[type_name("formation.SwapRequestMsg.v1")]
 pub struct SwapRequestMsg {
@@ -1429,7 +1457,7 @@ pub struct SwapReply {
 }
 
 /// The wire form of a [`SwapReply`].
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 #[type_name("formation.SwapReplyMsg.v2")]
 pub struct SwapReplyMsg {
@@ -1718,6 +1746,30 @@ mod tests {
             ])
             .collect();
         assert_eq!(names.len(), 10, "every incarnation has services of its own");
+    }
+
+    #[test]
+    fn messages_round_trip_through_their_bytes_and_a_wrong_size_is_refused() {
+        let goal = Goal {
+            phi_star: 1.0,
+            d_star: 2.0,
+            v_star: 0.3,
+        };
+        let scan = ScanMsg::new(3, 17, 0.85, -0.5, &goal, &[1.5, f32::INFINITY, 0.25]).unwrap();
+        let bytes = message_bytes(&scan).to_vec();
+        assert_eq!(bytes.len(), std::mem::size_of::<ScanMsg>());
+        let back: ScanMsg = message_from_bytes("scan", &bytes).unwrap();
+        assert_eq!(message_bytes(&back), &bytes[..], "bit for bit");
+        assert_eq!(back.ranges().unwrap(), &[1.5, f32::INFINITY, 0.25]);
+        let short = message_from_bytes::<ScanMsg>("scan", &bytes[1..]);
+        assert!(
+            matches!(&short, Err(WireError::Malformed { message: "scan", reason })
+                if reason.contains("different builds")),
+            "{short:?}"
+        );
+        let welcome = WelcomeMsg::encode(9, &Welcome::Refused("taken".into()));
+        let back: WelcomeMsg = message_from_bytes("welcome", message_bytes(&welcome)).unwrap();
+        assert_eq!(back.decode().unwrap(), Welcome::Refused("taken".into()));
     }
 
     #[test]

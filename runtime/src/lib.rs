@@ -9,10 +9,12 @@
 //! * [`link`]: the seams both talk through, [`link::WorldLink`] and [`link::AgentLink`].
 //! * [`iceoryx`]: the links over iceoryx2 shared memory, used by the `formation-world` and
 //!   `formation-agent` processes.
+//! * `zenoh` (with the `zenoh` feature): the links over Zenoh, for agents on other hosts.
 //! * [`memory`]: both links over channels in one process, for tests.
 //! * [`clock`]: the injected [`clock::Clock`] (system, or fake for tests).
 //! * [`settings`]: [`settings::ClockMode`] and [`settings::RuntimeSettings`], shared by the
 //!   launcher and the world.
+//! * [`transport`]: [`transport::Transport`], which link the processes use.
 //! * [`process`]: what both processes do about the launcher going away.
 //!
 //! Dependencies point one way: this crate depends only on `formation-proto`; the world's binary,
@@ -27,6 +29,9 @@ pub mod link;
 pub mod memory;
 pub mod process;
 pub mod settings;
+pub mod transport;
+#[cfg(feature = "zenoh")]
+pub mod zenoh;
 
 pub use settings::{ClockMode, RuntimeSettings};
 

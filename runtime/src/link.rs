@@ -4,7 +4,7 @@
 //! The exchange ([`crate::exchange`]) and the agent loop ([`crate::agent`]) talk only to these
 //! traits, so a transport is one implementation among others: iceoryx2 shared memory
 //! ([`crate::iceoryx`]) for the processes, channels in one process ([`crate::memory`]) for tests,
-//! and later Zenoh for agents on other hosts. The world watches command ages itself, so its
+//! and Zenoh ([`crate::zenoh`], with the `zenoh` feature) for agents on other hosts. The world watches command ages itself, so its
 //! watchdog does not depend on the transport's own liveness reports; those
 //! ([`WorldLink::dead_agents`]) only speed up noticing a crashed agent and clean up after it.
 //!
@@ -31,6 +31,14 @@ pub enum WorldLinkError {
         /// What the world was doing.
         action: String,
         /// iceoryx2's error.
+        detail: String,
+    },
+    /// Zenoh refused an operation.
+    #[error("zenoh could not {action} ({detail})")]
+    Zenoh {
+        /// What the world was doing.
+        action: String,
+        /// Zenoh's error.
         detail: String,
     },
     /// A message could not be encoded or decoded.
@@ -151,6 +159,40 @@ pub enum AgentLinkError {
         action: String,
         /// iceoryx2's error.
         detail: String,
+    },
+    /// Zenoh refused an operation.
+    #[error("zenoh could not {action} ({detail})")]
+    Zenoh {
+        /// What the agent was doing.
+        action: String,
+        /// Zenoh's error.
+        detail: String,
+    },
+    /// The world's endpoint could not be reached.
+    #[error(
+        "cannot reach the world at {endpoint}: {detail}; is `formation-world --transport zenoh \
+         --listen {endpoint}` (or `formation run --transport zenoh --listen {endpoint}`) running, \
+         and is that address reachable from this host?"
+    )]
+    Unreachable {
+        /// The endpoint given with `--connect`.
+        endpoint: String,
+        /// Zenoh's error.
+        detail: String,
+    },
+    /// A world answers at the endpoint, but not for this run.
+    #[error(
+        "no world of run {run} at {endpoint} after {waited_s:.1} s: the endpoint answers, but the \
+         world there plays another run, or the credentials do not allow this robot's keys; check \
+         --run-id and the credentials file"
+    )]
+    NoWorldAt {
+        /// The endpoint given with `--connect`.
+        endpoint: String,
+        /// The run id.
+        run: String,
+        /// How long the agent waited.
+        waited_s: f64,
     },
     /// The world refused this agent.
     #[error("the world refused to let this agent drive robot {robot}: {reason}")]

@@ -9,9 +9,14 @@
 //! takes them from `target/<profile>/`, the directory above the test executable. Set
 //! `FORMATION_TESTS_NO_BUILD=1` to skip the build (e.g. when the binaries were built beforehand).
 //!
+//! [`netns`] makes network namespaces for the Zenoh tests across a network; the `delay-relay`
+//! binary of this package delays TCP between them.
+//!
 //! How the tests get a model: `FORMATION_TEST_MODEL` if set; else `tests/fixtures/tiny_policy.py`
 //! writes a contract-conforming ONNX model with seeded random weights, run with
 //! `FORMATION_PYTHON` or `<repo>/.venv/bin/python` (it needs the `onnx` package only).
+
+pub mod netns;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -846,6 +851,13 @@ pub fn incarnations(run: &RunId, robot: usize) -> Vec<u64> {
         CallbackProgression::Continue
     });
     found
+}
+
+/// A TCP port on 127.0.0.1 that nothing listens on right now: the operating system picks a free
+/// one for a listener that is closed at once, so every Zenoh test gets a port of its own.
+pub fn free_tcp_port() -> u16 {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("binding 127.0.0.1:0");
+    listener.local_addr().expect("the bound address").port()
 }
 
 #[cfg(test)]

@@ -25,11 +25,12 @@ use anyhow::Context;
 use clap::Args;
 use formation_proto::wire::RunId;
 use formation_runtime::RuntimeSettings;
+use formation_runtime::transport::{Transport, TransportError};
 use formation_world::{RunLog, RunSpec, Scenario, Trajectory, recover_journals};
 
 use crate::paths;
 use formation_proto::wire::WorldEvent;
-use supervisor::LaunchPlan;
+use supervisor::{LaunchPlan, Network, ZenohPlan};
 
 /// How the world process paces ticks (defined once, in the runtime library).
 pub use formation_runtime::ClockMode;
@@ -92,6 +93,24 @@ pub struct RunArgs {
     /// restarted agent behaves.
     #[arg(long = "fault", value_name = "ROBOT:MODE")]
     pub faults: Vec<String>,
+    /// How the agents reach the world: iceoryx2 shared memory (this host), or Zenoh over TCP
+    /// (agents on this host or others; needs --listen).
+    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    pub transport: Transport,
+    /// Zenoh: where the world listens, tcp/ADDR:PORT (tcp/0.0.0.0:7447 for every interface).
+    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    pub listen: Option<String>,
+    /// Zenoh: robots whose agents are started by hand, on other hosts (comma separated, e.g.
+    /// 1,2); the launcher starts the others and waits for these.
+    #[arg(long, value_delimiter = ',', value_name = "ROBOTS")]
+    pub remote: Vec<usize>,
+    /// Zenoh: the credentials folder (`formation credentials`); default: fresh credentials in
+    /// `<out>/credentials/<run id>/`.
+    #[arg(long, value_name = "DIR")]
+    pub credentials: Option<PathBuf>,
+    /// Zenoh: how long the world waits for the remote agents to connect \[s\].
+    #[arg(long, default_value_t = 300.0)]
+    pub remote_timeout_s: f64,
 }
 
 /// `formation profile`: a run whose per-stage latency histograms are written as JSON.
@@ -120,6 +139,41 @@ pub struct SwapArgs {
     /// How long to wait for the agent's answer \[s\].
     #[arg(long, default_value_t = 30.0)]
     pub timeout_s: f64,
+    /// How to reach the run: iceoryx2 (this host) or Zenoh (sends the model's bytes).
+    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    pub transport: Transport,
+    /// Zenoh: the world's endpoint, tcp/ADDR:PORT.
+    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    pub connect: Option<String>,
+    /// Zenoh: the operator's login file (operator.json from `formation credentials`).
+    #[arg(long, value_name = "FILE")]
+    pub credentials: Option<PathBuf>,
+}
+
+/// `formation credentials`: Zenoh logins for a team.
+#[derive(Debug, Clone, Args)]
+pub struct CredentialsArgs {
+    /// Robots of the team (logins robot-0 .. robot-(N-1)).
+    #[arg(long)]
+    pub robots: usize,
+    /// Folder to create (owner-only); it must not hold credentials yet.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// `formation credentials`: writes the folder and says what goes where.
+pub fn credentials_command(args: &CredentialsArgs) -> anyhow::Result<()> {
+    create_credentials(&args.out, args.robots)?;
+    let dir = args.out.display();
+    println!(
+        "credentials for robots 0..{} in {dir} (owner-only):\n  \
+         passwords, launch-secret: stay with the world (formation run --transport zenoh \
+         --credentials {dir})\n  robot-I.json: copy privately (scp) to robot I's host \
+         (formation-agent --credentials robot-I.json)\n  operator.json: for formation swap \
+         --credentials",
+        args.robots.saturating_sub(1)
+    );
+    Ok(())
 }
 
 /// The model path of every robot: the scenario's per-robot models, else `default`. Each model is
@@ -216,9 +270,15 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)>
         Some(id) => RunId::new(id)?,
         None => RunId::generate(),
     };
+    let network = network_from_args(args, &run_id, models.len())?;
     let run_specs = args.out.join("run-specs.json");
     let base_seed = args.seed.unwrap_or_else(|| scenario.seed());
     write_run_specs(&scenario, base_seed, args.first_run, args.runs, &run_specs)?;
+    let mut startup_timeout_ms = RuntimeSettings::DEFAULT.startup_timeout_ms;
+    if network.zenoh().is_some_and(|z| !z.remote.is_empty()) {
+        let wait = positive_seconds("--remote-timeout-s", args.remote_timeout_s)?;
+        startup_timeout_ms = wait.as_millis().clamp(1, u64::MAX as u128) as u64;
+    }
     let plan = LaunchPlan {
         run_id,
         run_specs,
@@ -228,8 +288,10 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)>
             stale_ms: args.stale_ms,
             pace_ms: args.pace_ms,
             spin_us: args.spin_us,
+            startup_timeout_ms,
             ..RuntimeSettings::DEFAULT
         },
+        network,
         out: args.out.clone(),
         faults: faults_per_robot(&args.faults, models.len())?,
         models,
@@ -238,6 +300,104 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)>
         restart_delay: Duration::from_millis(args.restart_delay_ms),
     };
     Ok((plan, scenario, base_seed))
+}
+
+/// How the launch's processes reach each other, from `--transport`, `--listen`, `--remote` and
+/// `--credentials`: flags of Zenoh need it, a remote robot must exist in the scenario, and a
+/// Zenoh launch without `--credentials` gets fresh ones in `<out>/credentials/<run id>/`.
+fn network_from_args(args: &RunArgs, run_id: &RunId, n_robots: usize) -> anyhow::Result<Network> {
+    if args.transport != Transport::Zenoh {
+        for (given, flag) in [
+            (args.listen.is_some(), "--listen"),
+            (!args.remote.is_empty(), "--remote"),
+            (args.credentials.is_some(), "--credentials"),
+        ] {
+            if given {
+                return Err(TransportError::FlagNeedsZenoh {
+                    flag,
+                    transport: args.transport,
+                }
+                .into());
+            }
+        }
+        return Ok(Network::SharedMemory);
+    }
+    args.transport.check_built_in("formation")?;
+    let listen = args
+        .listen
+        .clone()
+        .ok_or(TransportError::MissingEndpoint { flag: "--listen" })?;
+    #[cfg(feature = "zenoh")]
+    formation_runtime::zenoh::Endpoint::parse(&listen)?;
+    if let Some(&robot) = args.remote.iter().find(|&&r| r >= n_robots) {
+        anyhow::bail!(
+            "--remote {robot}: the scenario has {n_robots} robots (0..{}); remote robots must be \
+             among them",
+            n_robots.saturating_sub(1)
+        );
+    }
+    let mut remote = args.remote.clone();
+    remote.sort_unstable();
+    remote.dedup();
+    if remote.len() == n_robots && n_robots > 0 {
+        tracing::info!("every robot is remote: the launcher starts only the world");
+    }
+    let credentials = match &args.credentials {
+        Some(dir) => dir.clone(),
+        None => {
+            let dir = args.out.join("credentials").join(run_id.as_str());
+            create_credentials(&dir, n_robots)?;
+            dir
+        }
+    };
+    Ok(Network::Zenoh(ZenohPlan {
+        listen,
+        credentials,
+        remote,
+    }))
+}
+
+/// `formation credentials`: writes logins for robots `0..robots` and the operator, and a launch
+/// secret, into `dir` (owner-only).
+#[cfg(feature = "zenoh")]
+pub fn create_credentials(dir: &Path, robots: usize) -> anyhow::Result<()> {
+    formation_runtime::zenoh::credentials::create(dir, robots)?;
+    Ok(())
+}
+
+/// Without Zenoh there are no credentials to make.
+#[cfg(not(feature = "zenoh"))]
+pub fn create_credentials(_dir: &Path, _robots: usize) -> anyhow::Result<()> {
+    Err(TransportError::NotBuilt {
+        program: "formation".into(),
+        transport: Transport::Zenoh,
+    }
+    .into())
+}
+
+/// What the user must do for each remote robot: copy its credentials, start its agent.
+fn remote_instructions(plan: &LaunchPlan) -> Option<String> {
+    let zenoh = plan.network.zenoh().filter(|z| !z.remote.is_empty())?;
+    let endpoint = if zenoh.listen.contains("0.0.0.0") || zenoh.listen.contains("[::]") {
+        "tcp/<this host's address>:<port>".to_string()
+    } else {
+        zenoh.listen.clone()
+    };
+    let mut text = format!(
+        "waiting for the remote agents of robots {:?}; on each robot's host, with robot-I.json \
+         copied privately (scp) from {}:\n",
+        zenoh.remote,
+        zenoh.credentials.display()
+    );
+    for &robot in &zenoh.remote {
+        text.push_str(&format!(
+            "  formation-agent --transport zenoh --connect {endpoint} --run-id {} --robot {robot} \
+             --model {} --credentials robot-{robot}.json\n",
+            plan.run_id,
+            plan.models[robot].display()
+        ));
+    }
+    Some(text)
 }
 
 /// `formation run`: launches the world and one agent per robot, plays the runs, writes the logs
@@ -252,6 +412,9 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         scenario.name(),
         plan.settings.clock.as_str()
     );
+    if let Some(text) = remote_instructions(&plan) {
+        print!("{text}");
+    }
     let started = std::time::SystemTime::now();
     // Readiness of a large team on a terminal (hidden when stderr is not one).
     let readiness = indicatif::ProgressBar::new(plan.models.len() as u64).with_style(
@@ -546,12 +709,57 @@ pub fn profile_command(args: &ProfileArgs) -> anyhow::Result<()> {
 /// which the new model drives.
 pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
     let timeout = positive_seconds("--timeout-s", args.timeout_s)?;
-    let done = swap::request_swap(&args.run, args.robot, &args.model, args.at_tick, timeout)?;
+    let done = match args.transport {
+        Transport::Iceoryx2 => {
+            for (given, flag) in [
+                (args.connect.is_some(), "--connect"),
+                (args.credentials.is_some(), "--credentials"),
+            ] {
+                if given {
+                    return Err(TransportError::FlagNeedsZenoh {
+                        flag,
+                        transport: args.transport,
+                    }
+                    .into());
+                }
+            }
+            swap::request_swap(&args.run, args.robot, &args.model, args.at_tick, timeout)?
+        }
+        Transport::Zenoh => swap_over_zenoh(args, timeout)?,
+    };
     println!(
         "robot {} of run {} drives with model {} from tick {}",
         args.robot, args.run, done.model_id, done.tick
     );
     Ok(())
+}
+
+/// `formation swap --transport zenoh`.
+#[cfg(feature = "zenoh")]
+fn swap_over_zenoh(args: &SwapArgs, timeout: Duration) -> anyhow::Result<swap::SwapDone> {
+    let connect = args
+        .connect
+        .as_deref()
+        .ok_or(TransportError::MissingEndpoint { flag: "--connect" })?;
+    swap::request_swap_over_zenoh(
+        connect,
+        args.credentials.as_deref(),
+        &args.run,
+        args.robot,
+        &args.model,
+        args.at_tick,
+        timeout,
+    )
+}
+
+/// Without Zenoh.
+#[cfg(not(feature = "zenoh"))]
+fn swap_over_zenoh(_args: &SwapArgs, _timeout: Duration) -> anyhow::Result<swap::SwapDone> {
+    Err(TransportError::NotBuilt {
+        program: "formation".into(),
+        transport: Transport::Zenoh,
+    }
+    .into())
 }
 
 /// What an evaluation over processes gives: the trajectories in run order and the latency
@@ -600,6 +808,7 @@ pub fn eval_over_processes(
         restart_budget: 0,
         restart_window: Duration::from_secs(60),
         restart_delay: Duration::from_millis(50),
+        network: Network::SharedMemory,
     };
     let result = (|| {
         let mut done = 0;

@@ -55,6 +55,60 @@ pub struct LaunchPlan {
     pub restart_delay: Duration,
     /// Fault-injection mode per robot (testing only).
     pub faults: Vec<Option<String>>,
+    /// How the world and the agents reach each other.
+    pub network: Network,
+}
+
+/// How the processes of a launch reach each other.
+#[derive(Debug, Clone, Default)]
+pub enum Network {
+    /// iceoryx2 shared memory: every process on this host.
+    #[default]
+    SharedMemory,
+    /// Zenoh over TCP: the world listens, agents (here or on other hosts) connect.
+    Zenoh(ZenohPlan),
+}
+
+/// A launch over Zenoh.
+#[derive(Debug, Clone)]
+pub struct ZenohPlan {
+    /// Where the world listens, `tcp/ADDR:PORT`.
+    pub listen: String,
+    /// The credentials folder (`formation credentials`): the world checks its logins, every
+    /// agent logs in with its robot's, and its launch secret is the launch's.
+    pub credentials: PathBuf,
+    /// Robots whose agents are started by hand (on other hosts): the launcher neither starts nor
+    /// restarts them.
+    pub remote: Vec<usize>,
+}
+
+impl ZenohPlan {
+    /// Where an agent on this host connects: the listen address, with an any-address
+    /// (`0.0.0.0`, `[::]`) replaced by loopback.
+    pub fn local_connect(&self) -> String {
+        self.listen
+            .replacen("tcp/0.0.0.0:", "tcp/127.0.0.1:", 1)
+            .replacen("tcp/[::]:", "tcp/[::1]:", 1)
+    }
+
+    /// Whether robot `robot`'s agent is started by hand.
+    pub fn is_remote(&self, robot: usize) -> bool {
+        self.remote.contains(&robot)
+    }
+}
+
+impl Network {
+    /// The Zenoh plan, if the launch uses Zenoh.
+    pub fn zenoh(&self) -> Option<&ZenohPlan> {
+        match self {
+            Network::Zenoh(plan) => Some(plan),
+            Network::SharedMemory => None,
+        }
+    }
+
+    fn is_remote(&self, robot: usize) -> bool {
+        self.zenoh().is_some_and(|z| z.is_remote(robot))
+    }
 }
 
 impl LaunchPlan {
@@ -134,6 +188,23 @@ pub enum LaunchError {
         budget: u32,
         /// The budget's window \[s\].
         window_s: f64,
+    },
+    /// Remote agents did not come.
+    #[error(
+        "the remote agents of robots {robots:?} did not connect to {endpoint} in time; start \
+         `formation-agent --transport zenoh --connect {endpoint} --run-id {run} --robot I \
+         --model M --credentials robot-I.json` on each robot's host (robot-I.json from \
+         {credentials}), and check that the host reaches {endpoint}"
+    )]
+    RemoteMissing {
+        /// The robots whose agents never said hello.
+        robots: Vec<usize>,
+        /// Where the world listened.
+        endpoint: String,
+        /// The run id.
+        run: String,
+        /// The credentials folder.
+        credentials: String,
     },
     /// The world failed.
     #[error("the world process exited ({status}); see its error above")]
@@ -243,7 +314,10 @@ pub async fn launch(
             report.stale_removed, plan.run_id
         );
     }
-    let secret = LaunchSecret::generate().map_err(|e| LaunchError::Secret(e.to_string()))?;
+    let secret = match plan.network.zenoh() {
+        Some(zenoh) => launch_secret_of(&zenoh.credentials)?,
+        None => LaunchSecret::generate().map_err(|e| LaunchError::Secret(e.to_string()))?,
+    };
     let outcome = supervise(plan, &binaries, &secret, on_event, &mut report).await;
     let removed = namespace
         .remove_all()
@@ -254,6 +328,25 @@ pub async fn launch(
     drop(lock);
     report.cleaned_up = removed;
     outcome.map(|()| report)
+}
+
+/// The launch secret of a credentials folder, which remote agents hold too.
+#[cfg(feature = "zenoh")]
+fn launch_secret_of(dir: &std::path::Path) -> Result<LaunchSecret, LaunchError> {
+    formation_runtime::zenoh::credentials::read_secret(dir)
+        .map_err(|e| LaunchError::Secret(e.to_string()))
+}
+
+/// Without Zenoh there are no credentials folders.
+#[cfg(not(feature = "zenoh"))]
+fn launch_secret_of(_dir: &std::path::Path) -> Result<LaunchSecret, LaunchError> {
+    Err(LaunchError::Secret(
+        formation_runtime::transport::TransportError::NotBuilt {
+            program: "formation".into(),
+            transport: formation_runtime::transport::Transport::Zenoh,
+        }
+        .to_string(),
+    ))
 }
 
 /// With the run's lock held: the files an earlier launch of this run id left are a dead
@@ -338,6 +431,14 @@ async fn supervise(
         RestartBudget::new(plan.restart_budget, plan.restart_window, plan.restart_delay);
     let mut agents = Vec::with_capacity(plan.models.len());
     for robot in 0..plan.models.len() {
+        if plan.network.is_remote(robot) {
+            agents.push(AgentHandle {
+                stdin: None,
+                kill: None,
+                reaper: None,
+            });
+            continue;
+        }
         match spawn_agent(plan, binaries, secret, robot, true, exit_tx.clone()).await {
             Ok(handle) => agents.push(handle),
             Err(e) => {
@@ -352,6 +453,12 @@ async fn supervise(
     let mut stdout_open = true;
     // Robots whose agent the world reported lost and that have not rejoined: robot → tick.
     let mut lost: std::collections::BTreeMap<usize, u64> = std::collections::BTreeMap::new();
+    // Remote robots whose agent has not said hello yet.
+    let mut remote_waiting: Vec<usize> = plan
+        .network
+        .zenoh()
+        .map(|z| z.remote.clone())
+        .unwrap_or_default();
     let result = loop {
         tokio::select! {
             line = lines.next_line(), if stdout_open => match line? {
@@ -366,6 +473,18 @@ async fn supervise(
                             }
                             WorldEvent::AgentLost { robot, tick, .. } => {
                                 lost.insert(*robot, *tick);
+                                if let Some(zenoh) = plan.network.zenoh().filter(|z| z.is_remote(*robot)) {
+                                    eprintln!(
+                                        "formation: robot {robot}'s agent is remote: the launcher \
+                                         cannot restart it; start it again on its host \
+                                         (formation-agent --transport zenoh --connect {} \
+                                         --run-id {} --robot {robot} ...) and it rejoins",
+                                        zenoh.listen, plan.run_id
+                                    );
+                                }
+                            }
+                            WorldEvent::AgentConnected { robot, .. } => {
+                                remote_waiting.retain(|r| r != robot);
                             }
                             WorldEvent::AgentRejoined { robot, .. } => {
                                 lost.remove(robot);
@@ -382,6 +501,13 @@ async fn supervise(
                 let status = status?;
                 break if status.success() && finished {
                     Ok(())
+                } else if let Some(zenoh) = plan.network.zenoh().filter(|_| !remote_waiting.is_empty()) {
+                    Err(LaunchError::RemoteMissing {
+                        robots: remote_waiting.clone(),
+                        endpoint: zenoh.listen.clone(),
+                        run: plan.run_id.to_string(),
+                        credentials: zenoh.credentials.display().to_string(),
+                    })
                 } else {
                     Err(LaunchError::WorldFailed { status: describe(status) })
                 };
@@ -444,12 +570,24 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
     let settings = plan.settings_path();
     // The world waits for a team whose agents all start at once: longer for a larger team, and
     // never less than the plan asks for.
+    // With remote agents the plan's wait (--remote-timeout-s) is the user's and stands.
     let mut world_settings = plan.settings;
-    world_settings.startup_timeout_ms = world_settings
-        .startup_timeout_ms
-        .max(startup_timeout(plan.models.len()).as_millis() as u64);
+    if plan.network.zenoh().is_none_or(|z| z.remote.is_empty()) {
+        world_settings.startup_timeout_ms = world_settings
+            .startup_timeout_ms
+            .max(startup_timeout(plan.models.len()).as_millis() as u64);
+    }
     world_settings.write(&settings)?;
     let mut command = Command::new(&binaries.world);
+    if let Some(zenoh) = plan.network.zenoh() {
+        command
+            .arg("--transport")
+            .arg("zenoh")
+            .arg("--listen")
+            .arg(&zenoh.listen)
+            .arg("--credentials")
+            .arg(&zenoh.credentials);
+    }
     command
         .arg("--run-id")
         .arg(plan.run_id.as_str())
@@ -483,6 +621,17 @@ async fn spawn_agent(
     exits: mpsc::UnboundedSender<(usize, ExitStatus)>,
 ) -> Result<AgentHandle, LaunchError> {
     let mut command = Command::new(&binaries.agent);
+    if let Some(zenoh) = plan.network.zenoh() {
+        // The agent reads the launch secret from its credentials file; the launcher still writes
+        // it on standard input, which the agent then leaves unread.
+        command
+            .arg("--transport")
+            .arg("zenoh")
+            .arg("--connect")
+            .arg(zenoh.local_connect())
+            .arg("--credentials")
+            .arg(zenoh.credentials.join(format!("robot-{robot}.json")));
+    }
     command
         .arg("--run-id")
         .arg(plan.run_id.as_str())

@@ -7,6 +7,10 @@
 //! answer ([`SwapReply`]) back here. Everything this process creates in the run's iceoryx2
 //! namespace is removed when it returns.
 //!
+//! With `--transport zenoh` ([`request_swap_over_zenoh`]) the request goes to the world's
+//! Zenoh router instead, and carries the model's bytes (at most 32 MiB, with a SHA-256), since a
+//! remote agent cannot open this host's path.
+//!
 //! The model file is checked here first by its metadata ([`formation_onnx::check_model_file`]): a
 //! missing path, a directory, a FIFO, a device or a file over the size limit is refused before
 //! any request is sent, and the agent refuses a candidate that does not fit the robot's sensor or
@@ -105,6 +109,58 @@ pub fn request_swap(
         path,
     };
     let reply = exchange(&namespace, &request, timeout)?;
+    match reply.outcome {
+        SwapOutcome::Done { tick, model_id } => Ok(SwapDone { tick, model_id }),
+        SwapOutcome::Refused { reason } => Err(SwapError::Refused { robot, reason }.into()),
+    }
+}
+
+/// [`request_swap`] over Zenoh: sends the model's bytes to run `run`'s world at `connect`
+/// (logging in with the login file `credentials`, the operator's), since a remote agent cannot
+/// open this host's path.
+#[cfg(feature = "zenoh")]
+pub fn request_swap_over_zenoh(
+    connect: &str,
+    credentials: Option<&Path>,
+    run: &str,
+    robot: usize,
+    model: &Path,
+    at_tick: u64,
+    timeout: Duration,
+) -> anyhow::Result<SwapDone> {
+    use formation_runtime::zenoh::{Endpoint, credentials as creds, model, swap};
+    let run_id = RunId::new(run)?;
+    let endpoint = Endpoint::parse(connect)?;
+    let size = formation_onnx::check_model_file(model)?;
+    if size > model::MAX_MODEL_BYTES as u64 {
+        anyhow::bail!(
+            "{}: {}",
+            model.display(),
+            model::ModelPayloadError::TooLarge { size }
+        );
+    }
+    let bytes = formation_proto::files::read_bounded(model, model::MAX_MODEL_BYTES as u64)
+        .map_err(|e| anyhow::anyhow!("reading model {}: {e:?}", model.display()))?;
+    let login = credentials.map(creds::read_login).transpose()?;
+    let name = model
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "model.onnx".into());
+    let request = SwapRequest {
+        request_id: request_id(),
+        robot,
+        at_tick,
+        // Informative only: the agent stores the bytes and loads its own copy.
+        path: std::path::PathBuf::from(format!("sent-over-zenoh/{name}")),
+    };
+    let reply = swap::request_swap(
+        &endpoint,
+        login.as_ref(),
+        &run_id,
+        &request,
+        &bytes,
+        timeout,
+    )?;
     match reply.outcome {
         SwapOutcome::Done { tick, model_id } => Ok(SwapDone { tick, model_id }),
         SwapOutcome::Refused { reason } => Err(SwapError::Refused { robot, reason }.into()),

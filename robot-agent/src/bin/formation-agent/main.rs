@@ -8,6 +8,10 @@
 //! stays alive across runs), swap the model (loaded off the hot path, put in place at a tick
 //! boundary), or shut it down.
 //!
+//! With `--transport zenoh --connect tcp/ADDR:PORT` it reaches the world over Zenoh instead,
+//! from this host or another; `--credentials robot-<i>.json` (from `formation credentials`) then
+//! gives its login and the launch secret, in place of standard input.
+//!
 //! It exits cleanly, with a message saying why, on a shutdown request, on SIGINT/SIGTERM (SIGHUP
 //! ends it by default), when its standard input closes (with `--exit-on-stdin-close`: the
 //! launcher is gone), or within about a second of the world process going away. Other signals
@@ -26,7 +30,9 @@ use formation_runtime::agent::{AgentExit, AgentLoop, load_model};
 use formation_runtime::clock::SystemClock;
 use formation_runtime::faults::Fault;
 use formation_runtime::iceoryx::IceoryxAgentLink;
+use formation_runtime::link::AgentLink;
 use formation_runtime::process::flag_when_stdin_closes;
+use formation_runtime::transport::{Transport, TransportError};
 use robot_agent::pilot::OnnxPilots;
 
 /// One robot's agent process of formation's multi-process runtime.
@@ -51,6 +57,16 @@ struct Args {
     /// Exit when standard input closes (set by the launcher, so agents never outlive it).
     #[arg(long)]
     exit_on_stdin_close: bool,
+    /// How to reach the world: iceoryx2 shared memory on this host, or Zenoh over TCP.
+    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    transport: Transport,
+    /// Zenoh: the world's endpoint, tcp/ADDR:PORT.
+    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    connect: Option<String>,
+    /// Zenoh: this robot's credentials file (robot-<i>.json from `formation credentials`): its
+    /// login and the launch secret, which then is not read from standard input.
+    #[arg(long, value_name = "FILE")]
+    credentials: Option<PathBuf>,
     /// Rehearse the last decision this long before the next scan is due \[µs\] (0: never), so
     /// that an agent idling between realtime ticks decides with warm caches (measured on 2
     /// cores, realtime case 1: inference p50 from 140–166 µs down to 72–88 µs, for one extra
@@ -93,19 +109,37 @@ fn run(args: &Args) -> anyhow::Result<AgentExit> {
     let pilots = Arc::new(OnnxPilots);
     let model = load_model(&*pilots, &args.model)?;
     let run_id = RunId::new(&args.run_id)?;
-    let namespace = RunNamespace::new(&run_id);
-    let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
+    args.transport.check_built_in("formation-agent")?;
+    if args.transport != Transport::Zenoh {
+        for (given, flag) in [
+            (args.connect.is_some(), "--connect"),
+            (args.credentials.is_some(), "--credentials"),
+        ] {
+            if given {
+                return Err(TransportError::FlagNeedsZenoh {
+                    flag,
+                    transport: args.transport,
+                }
+                .into());
+            }
+        }
+    }
+    let timeout = Duration::from_millis(args.connect_timeout_ms);
+    let mut link: Box<dyn AgentLink> = match args.transport {
+        Transport::Iceoryx2 => {
+            let namespace = RunNamespace::new(&run_id);
+            let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
+            Box::new(IceoryxAgentLink::connect(
+                &namespace, args.robot, &secret, timeout,
+            )?)
+        }
+        Transport::Zenoh => zenoh_link(args, &run_id, timeout)?,
+    };
     let stop = if args.exit_on_stdin_close {
         flag_when_stdin_closes()
     } else {
         Arc::new(AtomicBool::new(false))
     };
-    let mut link = IceoryxAgentLink::connect(
-        &namespace,
-        args.robot,
-        &secret,
-        Duration::from_millis(args.connect_timeout_ms),
-    )?;
     let mut agent = AgentLoop::new(
         pilots,
         args.model.clone(),
@@ -114,6 +148,51 @@ fn run(args: &Args) -> anyhow::Result<AgentExit> {
         Arc::new(SystemClock),
     )
     .with_rehearsal(Duration::from_micros(args.rehearse_us));
-    agent.greet(&mut link, std::process::id())?;
-    Ok(agent.run(&mut link, &stop, &args.run_id)?)
+    agent.greet(link.as_mut(), std::process::id())?;
+    Ok(agent.run(link.as_mut(), &stop, &args.run_id)?)
+}
+
+/// The Zenoh link to the world at `--connect`, logged in with `--credentials` when given.
+#[cfg(feature = "zenoh")]
+fn zenoh_link(
+    args: &Args,
+    run_id: &RunId,
+    timeout: Duration,
+) -> anyhow::Result<Box<dyn AgentLink>> {
+    use formation_runtime::zenoh::{Endpoint, ZenohAgentLink, credentials};
+    let connect = args
+        .connect
+        .as_deref()
+        .ok_or(TransportError::MissingEndpoint { flag: "--connect" })?;
+    let endpoint = Endpoint::parse(connect)?;
+    let (login, secret) = match &args.credentials {
+        Some(path) => {
+            let found = credentials::read_robot(path, args.robot)?;
+            (Some(found.login), found.secret)
+        }
+        None => (None, LaunchSecret::read_line(&mut std::io::stdin().lock())?),
+    };
+    let link = ZenohAgentLink::connect(
+        &endpoint,
+        login.as_ref(),
+        run_id,
+        args.robot,
+        &secret,
+        timeout,
+    )?;
+    Ok(Box::new(link))
+}
+
+/// This build has no Zenoh.
+#[cfg(not(feature = "zenoh"))]
+fn zenoh_link(
+    _args: &Args,
+    _run_id: &RunId,
+    _timeout: Duration,
+) -> anyhow::Result<Box<dyn AgentLink>> {
+    Err(TransportError::NotBuilt {
+        program: "formation-agent".into(),
+        transport: Transport::Zenoh,
+    }
+    .into())
 }

@@ -12,6 +12,10 @@
 //! The first line of its standard input is the launch secret (see [`formation_proto::auth`]): only
 //! agents that prove it are let drive a robot.
 //!
+//! With `--transport zenoh` the agents reach it over Zenoh instead: the world listens on
+//! `--listen tcp/ADDR:PORT` as a Zenoh router (see [`formation_runtime::zenoh`]), checking the
+//! logins of a credentials folder (`--credentials DIR`, from `formation credentials`) when given.
+//!
 //! Usually started by `formation run` / `formation eval --processes`, not by hand.
 
 mod runlog;
@@ -28,7 +32,9 @@ use formation_proto::wire::{RunId, RunNamespace, WorldEvent};
 use formation_runtime::clock::SystemClock;
 use formation_runtime::exchange::{AgentsController, ExchangeSettings, StopReason};
 use formation_runtime::iceoryx::IceoryxWorldLink;
+use formation_runtime::link::WorldLink;
 use formation_runtime::process::flag_when_stdin_closes;
+use formation_runtime::transport::{Transport, TransportError};
 use formation_runtime::{ClockMode, RuntimeSettings};
 use formation_world::RunSpec;
 
@@ -83,6 +89,17 @@ struct Args {
     /// Stop when standard input closes (set by the launcher, so the world never outlives it).
     #[arg(long)]
     exit_on_stdin_close: bool,
+    /// How the agents reach the world: iceoryx2 shared memory on this host, or Zenoh over TCP
+    /// (agents on this host or others).
+    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    transport: Transport,
+    /// Zenoh: the endpoint to listen on, tcp/ADDR:PORT (agents connect to it).
+    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    listen: Option<String>,
+    /// Zenoh: a credentials folder (`formation credentials`); only its users may connect, each to
+    /// its own robot's keys. Without it, any process that reaches the endpoint may.
+    #[arg(long, value_name = "DIR")]
+    credentials: Option<PathBuf>,
 }
 
 impl Args {
@@ -133,6 +150,21 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
     let lidar = specs[0].world.lidar;
 
     let runtime = args.runtime_settings()?;
+    args.transport.check_built_in("formation-world")?;
+    if args.transport != Transport::Zenoh {
+        for (given, flag) in [
+            (args.listen.is_some(), "--listen"),
+            (args.credentials.is_some(), "--credentials"),
+        ] {
+            if given {
+                return Err(TransportError::FlagNeedsZenoh {
+                    flag,
+                    transport: args.transport,
+                }
+                .into());
+            }
+        }
+    }
     let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
     let stop = if args.exit_on_stdin_close {
         flag_when_stdin_closes()
@@ -140,8 +172,13 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
         Arc::new(AtomicBool::new(false))
     };
 
-    let mut link = IceoryxWorldLink::create(&namespace, n_robots)
-        .with_context(|| format!("setting up run {run_id}'s services"))?;
+    let mut link: Box<dyn WorldLink> = match args.transport {
+        Transport::Iceoryx2 => Box::new(
+            IceoryxWorldLink::create(&namespace, n_robots)
+                .with_context(|| format!("setting up run {run_id}'s services"))?,
+        ),
+        Transport::Zenoh => zenoh_link(args, &run_id, n_robots)?,
+    };
     emit(&WorldEvent::Listening { robots: n_robots });
     let settings = ExchangeSettings {
         runtime,
@@ -150,7 +187,7 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
         secret,
     };
     let mut agents = AgentsController::new(
-        &mut link,
+        link.as_mut(),
         settings,
         lidar,
         Arc::new(SystemClock),
@@ -166,6 +203,48 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
         }
         (Err(e), None) => Err(e),
     }
+}
+
+/// The Zenoh link: a router on `--listen`, with the credentials folder's logins and rules.
+#[cfg(feature = "zenoh")]
+fn zenoh_link(args: &Args, run_id: &RunId, n_robots: usize) -> anyhow::Result<Box<dyn WorldLink>> {
+    use formation_runtime::zenoh::{Endpoint, WorldAccess, ZenohWorldLink, credentials};
+    let listen = args
+        .listen
+        .as_deref()
+        .ok_or(TransportError::MissingEndpoint { flag: "--listen" })?;
+    let listen = Endpoint::parse(listen)?;
+    let access = match &args.credentials {
+        Some(dir) => Some(WorldAccess {
+            dictionary_file: credentials::check_passwords(dir)?,
+            run: run_id.clone(),
+            n_robots,
+        }),
+        None => {
+            eprintln!(
+                "formation-world: warning: no --credentials: any process that reaches {listen} \
+                 can read the scans and command the robots"
+            );
+            None
+        }
+    };
+    let link = ZenohWorldLink::create(run_id, n_robots, &listen, access.as_ref())
+        .with_context(|| format!("setting up run {run_id}'s Zenoh router on {listen}"))?;
+    Ok(Box::new(link))
+}
+
+/// This build has no Zenoh.
+#[cfg(not(feature = "zenoh"))]
+fn zenoh_link(
+    _args: &Args,
+    _run_id: &RunId,
+    _n_robots: usize,
+) -> anyhow::Result<Box<dyn WorldLink>> {
+    Err(TransportError::NotBuilt {
+        program: "formation-world".into(),
+        transport: Transport::Zenoh,
+    }
+    .into())
 }
 
 /// Reads the run specs; all must have the same team size.

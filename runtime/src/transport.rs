@@ -1,0 +1,108 @@
+//! Which transport joins the world and its agents ([`Transport`]): iceoryx2 shared memory on one
+//! host (the default), or Zenoh over TCP for agents on other hosts, which a build may leave out
+//! (the `zenoh` cargo feature, on by default in the binaries' packages).
+
+use std::fmt;
+
+/// The transport between the world and its agents.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Transport {
+    /// iceoryx2 shared memory: every process on this host.
+    #[default]
+    #[value(name = "iceoryx2")]
+    Iceoryx2,
+    /// Zenoh over TCP: the world listens (`--listen`), agents connect (`--connect`), from this
+    /// host or others.
+    #[value(name = "zenoh")]
+    Zenoh,
+}
+
+impl Transport {
+    /// The name the flags use.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Transport::Iceoryx2 => "iceoryx2",
+            Transport::Zenoh => "zenoh",
+        }
+    }
+
+    /// Whether this build carries the transport.
+    pub fn built_in(self) -> bool {
+        match self {
+            Transport::Iceoryx2 => true,
+            Transport::Zenoh => cfg!(feature = "zenoh"),
+        }
+    }
+
+    /// `Ok` when this build carries the transport, else the error naming it and how to build it.
+    pub fn check_built_in(self, program: &str) -> Result<(), TransportError> {
+        if self.built_in() {
+            Ok(())
+        } else {
+            Err(TransportError::NotBuilt {
+                program: program.to_string(),
+                transport: self,
+            })
+        }
+    }
+}
+
+impl fmt::Display for Transport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A transport that cannot be used as asked.
+#[derive(Debug, thiserror::Error)]
+pub enum TransportError {
+    /// The binary was built without it.
+    #[error(
+        "{program} was built without the {transport} transport; rebuild it with the `zenoh` \
+         feature (on by default: `cargo build --release --workspace --bins`, or add \
+         `--features zenoh` where default features are off)"
+    )]
+    NotBuilt {
+        /// The binary.
+        program: String,
+        /// The transport asked for.
+        transport: Transport,
+    },
+    /// A flag that needs another transport.
+    #[error("{flag} needs --transport zenoh (the transport is {transport})")]
+    FlagNeedsZenoh {
+        /// The flag given.
+        flag: &'static str,
+        /// The transport in use.
+        transport: Transport,
+    },
+    /// Zenoh without the endpoint it needs.
+    #[error("--transport zenoh needs {flag} tcp/HOST:PORT")]
+    MissingEndpoint {
+        /// `--listen` or `--connect`.
+        flag: &'static str,
+    },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn iceoryx2_is_the_default_and_a_missing_transport_names_the_fix() {
+        assert_eq!(Transport::default(), Transport::Iceoryx2);
+        let e = TransportError::NotBuilt {
+            program: "formation-agent".into(),
+            transport: Transport::Zenoh,
+        }
+        .to_string();
+        assert!(
+            e.contains("formation-agent") && e.contains("zenoh") && e.contains("--features zenoh")
+        );
+        assert!(Transport::Iceoryx2.check_built_in("x").is_ok());
+        assert_eq!(
+            Transport::Zenoh.check_built_in("x").is_ok(),
+            cfg!(feature = "zenoh")
+        );
+    }
+}

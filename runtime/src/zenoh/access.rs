@@ -1,0 +1,262 @@
+//! Who may connect to the world's router, and which keys each may use: Zenoh's own user/password
+//! authentication (`auth_usrpwd`) and access control (`access_control`), configured here, never
+//! written by hand.
+//!
+//! Robot `i`'s agent logs in as user `robot-<i>` ([`robot_user`]); `formation swap` logs in as
+//! [`OPERATOR_USER`]. The world's router holds the password dictionary ([`WorldAccess`]), refuses
+//! a connection whose login fails, and denies by default every message not allowed by these
+//! rules (`<r>` is the run, ingress is what a client sends the router, egress what the router
+//! sends a client):
+//!
+//! | user | may send | may receive | may subscribe |
+//! |---|---|---|---|
+//! | `robot-<i>` | `robot/<i>/hello`, `robot/<i>/*/cmd`, `robot/<i>/*/status`, its token `robot/<i>/*/agent/*` | `robot/<i>/welcome`, `robot/<i>/*/scan`, `robot/<i>/*/control`, the world's token | the same keys, the world's token |
+//! | `operator` | `swap/request` | `swap/reply`, the world's token | the same keys, the world's token |
+//!
+//! so only robot `i`'s credentials receive robot `i`'s scan or command robot `i`, as the
+//! one-publisher/one-subscriber limits guarantee on one host.
+
+use std::path::PathBuf;
+
+use formation_proto::wire::RunId;
+use serde_json::json;
+
+/// The user name of robot `robot`'s agent.
+pub fn robot_user(robot: usize) -> String {
+    format!("robot-{robot}")
+}
+
+/// The user name of `formation swap`.
+pub const OPERATOR_USER: &str = "operator";
+
+/// Credentials that could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum AccessError {
+    /// A user name or password with characters the dictionary cannot hold.
+    #[error(
+        "{what} {value:?} is not usable: use 1 to 128 ASCII letters, digits, '-' or '_' \
+         (create credentials with `formation credentials`)"
+    )]
+    Invalid {
+        /// Which field.
+        what: &'static str,
+        /// The value (a password is not shown).
+        value: String,
+    },
+}
+
+fn check(what: &'static str, value: &str, shown: &str) -> Result<(), AccessError> {
+    let ok = !value.is_empty()
+        && value.len() <= 128
+        && value
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
+    if ok {
+        Ok(())
+    } else {
+        Err(AccessError::Invalid {
+            what,
+            value: shown.to_string(),
+        })
+    }
+}
+
+/// A client's login: user and password.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Login {
+    user: String,
+    password: String,
+}
+
+impl std::fmt::Debug for Login {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Login")
+            .field("user", &self.user)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Login {
+    /// A login; both parts are letters, digits, '-' or '_'.
+    pub fn new(user: &str, password: &str) -> Result<Login, AccessError> {
+        check("user", user, user)?;
+        check("password", password, "(hidden)")?;
+        Ok(Login {
+            user: user.to_string(),
+            password: password.to_string(),
+        })
+    }
+
+    /// The user name.
+    pub fn user(&self) -> &str {
+        &self.user
+    }
+
+    /// The password.
+    pub fn password(&self) -> &str {
+        &self.password
+    }
+
+    pub(super) fn apply(&self, config: &mut ::zenoh::Config) -> Result<(), String> {
+        let value = json!({ "user": self.user, "password": self.password }).to_string();
+        config
+            .insert_json5("transport/auth/usrpwd", &value)
+            .map_err(|e| format!("setting the login of user {}: {e}", self.user))
+    }
+}
+
+/// The world's side: the password dictionary and the run's access rules.
+#[derive(Debug, Clone)]
+pub struct WorldAccess {
+    /// A file of `user:password` lines (Zenoh reads it), private to this user.
+    pub dictionary_file: PathBuf,
+    /// The run whose keys the rules name.
+    pub run: RunId,
+    /// Robots `0..n_robots` get a rule set each.
+    pub n_robots: usize,
+}
+
+impl WorldAccess {
+    pub(super) fn apply(&self, config: &mut ::zenoh::Config) -> Result<(), String> {
+        let file = self.dictionary_file.to_str().ok_or_else(|| {
+            format!(
+                "the password file {} is not a UTF-8 path",
+                self.dictionary_file.display()
+            )
+        })?;
+        config
+            .insert_json5(
+                "transport/auth/usrpwd",
+                &json!({ "dictionary_file": file }).to_string(),
+            )
+            .map_err(|e| format!("setting the password file {file}: {e}"))?;
+        let acl = self.rules().to_string();
+        config
+            .insert_json5("access_control", &acl)
+            .map_err(|e| format!("setting the access rules: {e}"))
+    }
+
+    /// The `access_control` section: deny by default, allow each user its own keys.
+    pub fn rules(&self) -> serde_json::Value {
+        let run = &self.run;
+        let world = format!("formation/{run}/world");
+        let mut rules = Vec::new();
+        let mut subjects = Vec::new();
+        let mut policies = Vec::new();
+        let mut user_rules = |id: String,
+                              user: String,
+                              sends: Vec<String>,
+                              receives: Vec<String>,
+                              token: Option<String>| {
+            let mut ids = Vec::new();
+            let mut rule = |suffix: &str, messages: &[&str], flow: &str, keys: Vec<String>| {
+                let rule_id = format!("{id}-{suffix}");
+                rules.push(json!({
+                    "id": rule_id,
+                    "messages": messages,
+                    "flows": [flow],
+                    "permission": "allow",
+                    "key_exprs": keys,
+                }));
+                ids.push(rule_id);
+            };
+            rule("send", &["put"], "ingress", sends);
+            rule(
+                "subscribe",
+                &["declare_subscriber"],
+                "ingress",
+                receives.clone(),
+            );
+            rule("receive", &["put"], "egress", receives);
+            rule(
+                "watch-world",
+                &["declare_liveliness_subscriber", "liveliness_query"],
+                "ingress",
+                vec![world.clone()],
+            );
+            rule(
+                "see-world",
+                &["liveliness_token", "reply"],
+                "egress",
+                vec![world.clone()],
+            );
+            if let Some(token) = token {
+                rule("token", &["liveliness_token"], "ingress", vec![token]);
+            }
+            subjects.push(json!({ "id": id, "usernames": [user] }));
+            policies.push(json!({ "rules": ids, "subjects": [id] }));
+        };
+        for robot in 0..self.n_robots {
+            let base = format!("formation/{run}/robot/{robot}");
+            user_rules(
+                robot_user(robot),
+                robot_user(robot),
+                vec![
+                    format!("{base}/hello"),
+                    format!("{base}/*/cmd"),
+                    format!("{base}/*/status"),
+                ],
+                vec![
+                    format!("{base}/welcome"),
+                    format!("{base}/*/scan"),
+                    format!("{base}/*/control"),
+                ],
+                Some(format!("{base}/*/agent/*")),
+            );
+        }
+        user_rules(
+            OPERATOR_USER.to_string(),
+            OPERATOR_USER.to_string(),
+            vec![format!("formation/{run}/swap/request")],
+            vec![format!("formation/{run}/swap/reply")],
+            None,
+        );
+        json!({
+            "enabled": true,
+            "default_permission": "deny",
+            "rules": rules,
+            "subjects": subjects,
+            "policies": policies,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn logins_are_checked_and_rules_name_each_robot_s_own_keys_only() {
+        assert!(Login::new("robot-1", "abcDEF012_-").is_ok());
+        let e = Login::new("robot-1", "with space").unwrap_err().to_string();
+        assert!(
+            e.contains("password") && !e.contains("with space"),
+            "the password is not shown: {e}"
+        );
+        assert!(Login::new("", "x").is_err());
+        let access = WorldAccess {
+            dictionary_file: PathBuf::from("/nonexistent"),
+            run: RunId::new("r1").unwrap(),
+            n_robots: 2,
+        };
+        let rules = access.rules();
+        assert_eq!(rules["default_permission"], "deny");
+        let text = rules.to_string();
+        assert!(text.contains("formation/r1/robot/1/*/scan"));
+        let policies = rules["policies"].as_array().unwrap();
+        assert_eq!(policies.len(), 3, "two robots and the operator");
+        // Robot 0's rules never name robot 1's keys.
+        let robot0: Vec<&serde_json::Value> = rules["rules"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["id"].as_str().unwrap().starts_with("robot-0-"))
+            .collect();
+        assert!(!robot0.is_empty());
+        for rule in robot0 {
+            assert!(!rule.to_string().contains("robot/1"), "{rule}");
+        }
+        let mut config = ::zenoh::Config::default();
+        access.apply(&mut config).expect("zenoh takes the rules");
+    }
+}

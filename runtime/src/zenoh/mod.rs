@@ -1,0 +1,361 @@
+//! The Zenoh links: the world's ([`ZenohWorldLink`]) and an agent's ([`ZenohAgentLink`]), for
+//! agents on other hosts.
+//!
+//! The world listens on one TCP endpoint as a Zenoh router (`--listen tcp/ADDR:PORT`) and every
+//! agent connects to it as a client (`--connect tcp/ADDR:PORT`): a star, since Zenoh 1.9 peers no
+//! longer relay for each other. Multicast scouting and Zenoh's own shared memory are off, so
+//! every byte travels over the network, also between network namespaces of one host.
+//!
+//! The channels are those of the iceoryx2 link, under the run's key space ([`keys`]): each
+//! robot's lobby (hello, welcome), the four channels of each admitted agent's incarnation (scan,
+//! command, control, status) and the run's swap channel. Each message is the bytes of its
+//! `#[repr(C)]` wire value ([`formation_proto::wire::message_bytes`]). Scans and commands are
+//! express, of real-time priority and dropped under congestion (a late one is worthless and the
+//! world's watchdog brakes its robot); lobby, control, status and swap messages are reliable and
+//! block under congestion (they are rare and must arrive).
+//!
+//! Liveliness tokens tell who is there: the world declares `formation/<run>/world` once its
+//! subscribers exist (an agent greets only when it sees it, and exits when it goes), and each
+//! agent declares `formation/<run>/robot/<i>/<n>/agent/<pid>` for its incarnation (the world
+//! reports its removal as a dead agent). A cut link is seen by liveliness only after the link
+//! lease (10 s and more), so the world's command-age watchdog, not liveliness, brakes the robots.
+//!
+//! Subscriber callbacks run on Zenoh's threads: they decode, queue (bounded) and ring a [`Bell`];
+//! a link's `wait` blocks on the bell's condition variable, which SIGINT/SIGTERM ring too.
+//!
+//! Who may connect, and which keys each may use, is Zenoh's own user/password authentication
+//! and access control ([`access`]).
+
+pub mod access;
+mod agent;
+pub mod credentials;
+pub mod keys;
+pub mod model;
+pub mod swap;
+mod world;
+
+use std::collections::VecDeque;
+use std::fmt;
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::Duration;
+
+use ::zenoh::Wait;
+use ::zenoh::config::EndPoint;
+
+pub use access::{AccessError, Login, WorldAccess};
+pub use agent::ZenohAgentLink;
+pub use world::ZenohWorldLink;
+
+/// The most bytes one Zenoh message may carry here (a model sent for a swap is the largest).
+pub const MAX_MESSAGE_BYTES: usize = 64 << 20;
+
+/// The link lease: a peer silent this long is dropped (Zenoh's default).
+pub const LINK_LEASE: Duration = Duration::from_secs(10);
+
+/// A Zenoh TCP endpoint, `tcp/HOST:PORT`, checked.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Endpoint(String);
+
+/// An endpoint that is not `tcp/HOST:PORT`.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "{given:?} is not a Zenoh TCP endpoint: {reason}; write tcp/HOST:PORT, e.g. \
+     tcp/192.168.1.10:7447 or tcp/[::1]:7447"
+)]
+pub struct EndpointError {
+    /// What was given.
+    pub given: String,
+    /// What is wrong with it.
+    pub reason: String,
+}
+
+impl Endpoint {
+    /// Checks `text` is `tcp/HOST:PORT` with a port from 1 to 65535.
+    pub fn parse(text: &str) -> Result<Endpoint, EndpointError> {
+        let fail = |reason: &str| EndpointError {
+            given: text.to_string(),
+            reason: reason.to_string(),
+        };
+        let Some(address) = text.strip_prefix("tcp/") else {
+            return Err(fail("only tcp/ is built in"));
+        };
+        let (host, port) = address
+            .rsplit_once(':')
+            .ok_or_else(|| fail("the port is missing"))?;
+        if host.is_empty() {
+            return Err(fail("the host is missing"));
+        }
+        match port.parse::<u16>() {
+            Ok(p) if p > 0 => {}
+            _ => return Err(fail("the port must be a number from 1 to 65535")),
+        }
+        EndPoint::try_from(text.to_string()).map_err(|e| fail(&e.to_string()))?;
+        Ok(Endpoint(text.to_string()))
+    }
+
+    /// The endpoint as Zenoh writes it.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::str::FromStr for Endpoint {
+    type Err = EndpointError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Endpoint::parse(s)
+    }
+}
+
+/// Settings both ends share: no scouting, no shared memory, bounded messages.
+fn base_config(mode: &str) -> Result<::zenoh::Config, String> {
+    let mut config = ::zenoh::Config::default();
+    let entries = [
+        ("mode", format!("{mode:?}")),
+        ("scouting/multicast/enabled", "false".into()),
+        ("scouting/gossip/enabled", "false".into()),
+        ("transport/shared_memory/enabled", "false".into()),
+        (
+            "transport/link/rx/max_message_size",
+            MAX_MESSAGE_BYTES.to_string(),
+        ),
+        (
+            "transport/link/tx/lease",
+            LINK_LEASE.as_millis().to_string(),
+        ),
+        ("adminspace/enabled", "false".into()),
+    ];
+    for (key, value) in entries {
+        config
+            .insert_json5(key, &value)
+            .map_err(|e| format!("setting {key} = {value}: {e}"))?;
+    }
+    Ok(config)
+}
+
+/// The world's configuration: a router listening on `listen`, checking logins and key
+/// permissions when `access` is given.
+fn world_config(
+    listen: &Endpoint,
+    access: Option<&WorldAccess>,
+) -> Result<::zenoh::Config, String> {
+    let mut config = base_config("router")?;
+    config
+        .insert_json5("listen/endpoints", &format!("[{:?}]", listen.as_str()))
+        .map_err(|e| format!("listening on {listen}: {e}"))?;
+    if let Some(access) = access {
+        access.apply(&mut config)?;
+    }
+    Ok(config)
+}
+
+/// An agent's (or a tool's) configuration: a client of the world's router at `connect`, within
+/// `timeout`, logging in when `login` is given.
+fn client_config(
+    connect: &Endpoint,
+    timeout: Duration,
+    login: Option<&Login>,
+) -> Result<::zenoh::Config, String> {
+    let mut config = base_config("client")?;
+    let timeout_ms = timeout.as_millis().clamp(1, i64::MAX as u128);
+    let entries = [
+        ("connect/endpoints", format!("[{:?}]", connect.as_str())),
+        ("connect/timeout_ms", timeout_ms.to_string()),
+        ("connect/exit_on_failure", "true".into()),
+        (
+            "connect/retry",
+            "{ period_init_ms: 100, period_max_ms: 1000, period_increase_factor: 2 }".into(),
+        ),
+    ];
+    for (key, value) in entries {
+        config
+            .insert_json5(key, &value)
+            .map_err(|e| format!("setting {key} = {value}: {e}"))?;
+    }
+    if let Some(login) = login {
+        login.apply(&mut config)?;
+    }
+    Ok(config)
+}
+
+/// Opens a session, mapping Zenoh's error to text.
+fn open(config: ::zenoh::Config) -> Result<::zenoh::Session, String> {
+    ::zenoh::open(config).wait().map_err(|e| e.to_string())
+}
+
+/// What a link's waits block on: rung by subscriber callbacks (something arrived) and by
+/// SIGINT/SIGTERM.
+#[derive(Debug, Default)]
+pub(crate) struct Bell {
+    state: Mutex<BellState>,
+    rung: Condvar,
+}
+
+#[derive(Debug, Default)]
+struct BellState {
+    pending: bool,
+    terminated: bool,
+}
+
+/// How a wait on a [`Bell`] ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Ring {
+    Activity,
+    Idle,
+    Terminated,
+}
+
+impl Bell {
+    fn lock(&self) -> MutexGuard<'_, BellState> {
+        // A callback that panicked while holding the lock left plain flags behind: keep going.
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Something arrived.
+    pub(crate) fn ring(&self) {
+        self.lock().pending = true;
+        self.rung.notify_all();
+    }
+
+    /// SIGINT or SIGTERM arrived.
+    fn terminate(&self) {
+        self.lock().terminated = true;
+        self.rung.notify_all();
+    }
+
+    /// Blocks until the bell rings or `timeout` passes; a ring that came since the last wait
+    /// ends it at once.
+    pub(crate) fn wait(&self, timeout: Duration) -> Ring {
+        let guard = self.lock();
+        let (mut guard, _) = self
+            .rung
+            .wait_timeout_while(guard, timeout, |s| !s.pending && !s.terminated)
+            .unwrap_or_else(|e| e.into_inner());
+        if guard.terminated {
+            return Ring::Terminated;
+        }
+        if std::mem::take(&mut guard.pending) {
+            Ring::Activity
+        } else {
+            Ring::Idle
+        }
+    }
+}
+
+/// Rings a [`Bell`] as terminated on SIGINT and SIGTERM, on a thread of its own, until dropped.
+pub(crate) struct SignalWatch {
+    handle: signal_hook::iterator::Handle,
+}
+
+impl SignalWatch {
+    pub(crate) fn start(bell: Arc<Bell>) -> std::io::Result<SignalWatch> {
+        use signal_hook::consts::{SIGINT, SIGTERM};
+        let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM])?;
+        let handle = signals.handle();
+        std::thread::Builder::new()
+            .name("formation-signals".into())
+            .spawn(move || {
+                if signals.forever().next().is_some() {
+                    bell.terminate();
+                }
+            })?;
+        Ok(SignalWatch { handle })
+    }
+}
+
+impl Drop for SignalWatch {
+    fn drop(&mut self) {
+        self.handle.close();
+    }
+}
+
+/// A bounded first-in-first-out queue filled by a subscriber callback: when full, the oldest
+/// entry goes (and is counted), so a flooding publisher costs bounded memory.
+#[derive(Debug)]
+pub(crate) struct Queue<T> {
+    items: Mutex<VecDeque<T>>,
+    capacity: usize,
+}
+
+impl<T> Queue<T> {
+    pub(crate) fn new(capacity: usize) -> Self {
+        Queue {
+            items: Mutex::new(VecDeque::with_capacity(capacity.min(64))),
+            capacity,
+        }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, VecDeque<T>> {
+        self.items.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Adds `item`; returns false when the oldest entry had to go to make room.
+    pub(crate) fn push(&self, item: T) -> bool {
+        let mut items = self.lock();
+        let room = items.len() < self.capacity;
+        if !room {
+            items.pop_front();
+        }
+        items.push_back(item);
+        room
+    }
+
+    /// Takes every entry, oldest first.
+    pub(crate) fn drain(&self) -> VecDeque<T> {
+        std::mem::take(&mut *self.lock())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn endpoints_must_be_tcp_host_and_port() {
+        for good in [
+            "tcp/127.0.0.1:7447",
+            "tcp/[::1]:1",
+            "tcp/robot-host.local:65535",
+        ] {
+            assert_eq!(Endpoint::parse(good).unwrap().as_str(), good);
+        }
+        for (bad, why) in [
+            ("127.0.0.1:7447", "only tcp/"),
+            ("udp/127.0.0.1:7447", "only tcp/"),
+            ("tcp/127.0.0.1", "port is missing"),
+            ("tcp/:7447", "host is missing"),
+            ("tcp/127.0.0.1:0", "from 1 to 65535"),
+            ("tcp/127.0.0.1:99999", "from 1 to 65535"),
+        ] {
+            let e = Endpoint::parse(bad).unwrap_err().to_string();
+            assert!(e.contains(why) && e.contains("tcp/HOST:PORT"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_bell_wakes_a_wait_once_per_ring_and_a_full_queue_drops_the_oldest() {
+        let bell = Arc::new(Bell::default());
+        assert_eq!(bell.wait(Duration::from_millis(1)), Ring::Idle);
+        bell.ring();
+        assert_eq!(bell.wait(Duration::from_secs(60)), Ring::Activity);
+        assert_eq!(bell.wait(Duration::from_millis(1)), Ring::Idle);
+        let ringer = Arc::clone(&bell);
+        let thread = std::thread::spawn(move || ringer.ring());
+        assert_eq!(bell.wait(Duration::from_secs(60)), Ring::Activity);
+        thread.join().unwrap();
+        bell.terminate();
+        assert_eq!(bell.wait(Duration::from_secs(60)), Ring::Terminated);
+
+        let queue = Queue::new(2);
+        assert!(queue.push(1) && queue.push(2));
+        assert!(!queue.push(3), "full: the oldest goes");
+        assert_eq!(queue.drain(), [2, 3]);
+        assert!(queue.drain().is_empty());
+    }
+}

@@ -1,0 +1,508 @@
+//! The world's Zenoh link ([`ZenohWorldLink`]): a router listening on one endpoint, holding the
+//! world's ends of every channel of the run (see the crate's [`WorldLink`] for what each does).
+//!
+//! Each robot's lobby subscriber and welcome publisher exist from the start, then the swap
+//! channel, then the world's liveliness token (so an agent that sees the token can greet). An
+//! incarnation's publishers (scan, control) and subscribers (command, status) are declared when
+//! the exchange admits an agent and undeclared when it is gone; what its subscribers receive
+//! goes to queues of that incarnation only, so a predecessor's late messages never count.
+
+use std::collections::{HashMap, HashSet};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use ::zenoh::Wait;
+use ::zenoh::liveliness::LivelinessToken;
+use ::zenoh::pubsub::{Publisher, Subscriber};
+use ::zenoh::qos::{CongestionControl, Priority};
+use ::zenoh::sample::{Sample, SampleKind};
+use formation_proto::wire::{
+    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, RobotChannel, RunId,
+    ScanMsg, StatusMsg, SwapChannel, SwapReply, SwapReplyMsg, SwapRequest, SwapRequestMsg, Welcome,
+    WelcomeMsg, lobby_service_name, message_bytes, message_from_bytes, robot_service_name,
+    swap_service_name,
+};
+
+use super::model::split_model;
+use super::{Bell, Endpoint, Queue, Ring, SignalWatch, WorldAccess, keys};
+use crate::link::{Hello, WorldLink, WorldLinkError};
+
+fn zenoh_error(action: impl Into<String>) -> impl FnOnce(String) -> WorldLinkError {
+    let action = action.into();
+    move |detail| WorldLinkError::Zenoh { action, detail }
+}
+
+/// Queued hellos per robot (as many as iceoryx2's hello service buffers).
+const HELLO_QUEUE: usize = 8;
+/// Queued commands and statuses per incarnation: far more than a tick produces.
+const AGENT_QUEUE: usize = 64;
+/// Queued swap requests.
+const SWAP_QUEUE: usize = 8;
+
+/// One robot's lobby on the world side.
+struct Lobby {
+    hellos: Arc<Queue<Hello>>,
+    _subscriber: Subscriber<()>,
+    welcome: Publisher<'static>,
+}
+
+/// The world's ends of one admitted agent's channels.
+struct Incarnation {
+    scan: Publisher<'static>,
+    control: Publisher<'static>,
+    commands: Arc<Queue<CmdMsg>>,
+    statuses: Arc<Queue<AgentStatus>>,
+    _cmd: Subscriber<()>,
+    _status: Subscriber<()>,
+}
+
+/// What the agents' liveliness tokens said.
+#[derive(Debug, Default)]
+struct Liveness {
+    /// `(robot, pid)` of agents whose token went, not yet reported.
+    dead: Vec<(usize, u32)>,
+    /// `(robot, pid)` of agents whose token went (and no token of that robot and pid came since).
+    gone: HashSet<(usize, u32)>,
+}
+
+/// The world's Zenoh session and its ends of every channel of the run.
+pub struct ZenohWorldLink {
+    session: ::zenoh::Session,
+    run: RunId,
+    bell: Arc<Bell>,
+    lobbies: Vec<Lobby>,
+    robots: Vec<Option<Incarnation>>,
+    swap_requests: Arc<Queue<SwapRequest>>,
+    /// Swap requests refused on arrival (damaged model bytes), to answer.
+    swap_refusals: Arc<Queue<SwapReply>>,
+    /// Model bytes that came with a swap request, by request id, until forwarded to the agent.
+    swap_models: Arc<Mutex<HashMap<u64, Vec<u8>>>>,
+    _swap_subscriber: Subscriber<()>,
+    swap_replies: Publisher<'static>,
+    liveness: Arc<Mutex<Liveness>>,
+    _agents: Subscriber<()>,
+    _token: LivelinessToken,
+    _signals: SignalWatch,
+}
+
+/// A subscriber on `key` whose samples `decode` turns into items of `queue`, ringing `bell`.
+fn queue_subscriber<T: Send + Sync + 'static>(
+    session: &::zenoh::Session,
+    key: String,
+    bell: &Arc<Bell>,
+    queue: &Arc<Queue<T>>,
+    decode: impl Fn(&Sample) -> Result<T, String> + Send + Sync + 'static,
+) -> Result<Subscriber<()>, WorldLinkError> {
+    let bell = Arc::clone(bell);
+    let queue = Arc::clone(queue);
+    let what = key.clone();
+    session
+        .declare_subscriber(key.clone())
+        .callback(move |sample| match decode(&sample) {
+            Ok(item) => {
+                if !queue.push(item) {
+                    tracing::warn!("{what}: the world fell behind; dropped the oldest message");
+                }
+                bell.ring();
+            }
+            Err(e) => tracing::warn!("{what}: ignoring a malformed message: {e}"),
+        })
+        .wait()
+        .map_err(|e| zenoh_error(format!("subscribe to {key}"))(e.to_string()))
+}
+
+/// A publisher on `key`: scans are express, real-time and dropped under congestion; the rest
+/// blocks under congestion.
+fn publisher(
+    session: &::zenoh::Session,
+    key: String,
+    realtime: bool,
+) -> Result<Publisher<'static>, WorldLinkError> {
+    let builder = session.declare_publisher(key.clone());
+    let builder = if realtime {
+        builder
+            .congestion_control(CongestionControl::Drop)
+            .priority(Priority::RealTime)
+            .express(true)
+    } else {
+        builder.congestion_control(CongestionControl::Block)
+    };
+    builder
+        .wait()
+        .map_err(|e| zenoh_error(format!("declare a publisher on {key}"))(e.to_string()))
+}
+
+fn bytes(sample: &Sample) -> std::borrow::Cow<'_, [u8]> {
+    sample.payload().to_bytes()
+}
+
+impl ZenohWorldLink {
+    /// Listens on `listen` as a Zenoh router (checking logins and key permissions when `access`
+    /// is given), declares every robot's lobby and the swap channel, and then the world's
+    /// liveliness token.
+    pub fn create(
+        run: &RunId,
+        n_robots: usize,
+        listen: &Endpoint,
+        access: Option<&WorldAccess>,
+    ) -> Result<Self, WorldLinkError> {
+        let config = super::world_config(listen, access).map_err(zenoh_error(format!(
+            "configure the world's router on {listen}"
+        )))?;
+        let session = super::open(config).map_err(|e| {
+            zenoh_error(format!(
+                "listen on {listen} (is the port free, and is the address one of this host's?)"
+            ))(e)
+        })?;
+        let bell = Arc::new(Bell::default());
+        let signals = SignalWatch::start(Arc::clone(&bell))
+            .map_err(|e| zenoh_error("watch for SIGINT and SIGTERM")(e.to_string()))?;
+        let mut lobbies = Vec::with_capacity(n_robots);
+        for robot in 0..n_robots {
+            let hellos = Arc::new(Queue::new(HELLO_QUEUE));
+            let subscriber = queue_subscriber(
+                &session,
+                lobby_service_name(run, robot, LobbyChannel::Hello),
+                &bell,
+                &hellos,
+                |sample| {
+                    let msg: HelloMsg =
+                        message_from_bytes("hello", &bytes(sample)).map_err(|e| e.to_string())?;
+                    Ok(Hello {
+                        pid: msg.pid,
+                        nonce: msg.nonce,
+                        proof: msg.proof,
+                    })
+                },
+            )?;
+            let welcome = publisher(
+                &session,
+                lobby_service_name(run, robot, LobbyChannel::Welcome),
+                false,
+            )?;
+            lobbies.push(Lobby {
+                hellos,
+                _subscriber: subscriber,
+                welcome,
+            });
+        }
+        let swap_requests = Arc::new(Queue::new(SWAP_QUEUE));
+        let swap_refusals = Arc::new(Queue::new(SWAP_QUEUE));
+        let swap_models: Arc<Mutex<HashMap<u64, Vec<u8>>>> = Arc::default();
+        let swap_subscriber = {
+            let key = swap_service_name(run, SwapChannel::Request);
+            let (bell, requests, refusals, models) = (
+                Arc::clone(&bell),
+                Arc::clone(&swap_requests),
+                Arc::clone(&swap_refusals),
+                Arc::clone(&swap_models),
+            );
+            session
+                .declare_subscriber(key.clone())
+                .callback(move |sample| {
+                    let payload = bytes(&sample);
+                    let size = std::mem::size_of::<SwapRequestMsg>();
+                    let head = payload.get(..size).unwrap_or(&payload);
+                    let request = match message_from_bytes::<SwapRequestMsg>("swap request", head)
+                        .and_then(|msg| msg.decode())
+                    {
+                        Ok(request) => request,
+                        Err(e) => {
+                            tracing::warn!("ignoring a malformed swap request: {e}");
+                            return;
+                        }
+                    };
+                    match split_model(&payload, size) {
+                        Ok((_, Some(model))) => {
+                            let mut models = models.lock().unwrap_or_else(|e| e.into_inner());
+                            if models.len() >= SWAP_QUEUE {
+                                // Requests forwarded long ago whose agent never took them.
+                                let oldest = models.keys().min().copied();
+                                if let Some(oldest) = oldest {
+                                    models.remove(&oldest);
+                                }
+                            }
+                            models.insert(request.request_id, model.to_vec());
+                            drop(models);
+                            requests.push(request);
+                        }
+                        Ok((_, None)) => {
+                            requests.push(request);
+                        }
+                        Err(e) => {
+                            refusals.push(SwapReply {
+                                request_id: request.request_id,
+                                robot: request.robot,
+                                outcome: formation_proto::wire::SwapOutcome::Refused {
+                                    reason: e.to_string(),
+                                },
+                            });
+                        }
+                    }
+                    bell.ring();
+                })
+                .wait()
+                .map_err(|e| zenoh_error(format!("subscribe to {key}"))(e.to_string()))?
+        };
+        let swap_replies = publisher(&session, swap_service_name(run, SwapChannel::Reply), false)?;
+        let liveness = Arc::new(Mutex::new(Liveness::default()));
+        let agents = {
+            let liveness = Arc::clone(&liveness);
+            let bell = Arc::clone(&bell);
+            let run = run.clone();
+            session
+                .liveliness()
+                .declare_subscriber(keys::agent_tokens(&run))
+                .history(true)
+                .callback(move |sample| {
+                    let Some((robot, _, pid)) =
+                        keys::parse_agent_token(&run, sample.key_expr().as_str())
+                    else {
+                        return;
+                    };
+                    let mut liveness = liveness.lock().unwrap_or_else(|e| e.into_inner());
+                    match sample.kind() {
+                        SampleKind::Put => {
+                            liveness.gone.remove(&(robot, pid));
+                        }
+                        SampleKind::Delete => {
+                            liveness.gone.insert((robot, pid));
+                            liveness.dead.push((robot, pid));
+                            drop(liveness);
+                            bell.ring();
+                        }
+                    }
+                })
+                .wait()
+                .map_err(|e| zenoh_error("watch the agents' liveliness")(e.to_string()))?
+        };
+        let token = session
+            .liveliness()
+            .declare_token(keys::world_token(run))
+            .wait()
+            .map_err(|e| zenoh_error("declare the world's liveliness token")(e.to_string()))?;
+        Ok(ZenohWorldLink {
+            session,
+            run: run.clone(),
+            bell,
+            lobbies,
+            robots: (0..n_robots).map(|_| None).collect(),
+            swap_requests,
+            swap_refusals,
+            swap_models,
+            _swap_subscriber: swap_subscriber,
+            swap_replies,
+            liveness,
+            _agents: agents,
+            _token: token,
+            _signals: signals,
+        })
+    }
+
+    fn check_robot(&self, robot: usize) -> Result<(), WorldLinkError> {
+        if robot < self.lobbies.len() {
+            Ok(())
+        } else {
+            Err(WorldLinkError::Zenoh {
+                action: format!("reach robot {robot}"),
+                detail: format!("the run has {} robots", self.lobbies.len()),
+            })
+        }
+    }
+
+    fn incarnation(&self, robot: usize) -> Result<Option<&Incarnation>, WorldLinkError> {
+        self.check_robot(robot)?;
+        Ok(self.robots[robot].as_ref())
+    }
+
+    fn put(
+        publisher: &Publisher<'static>,
+        bytes: &[u8],
+        what: impl FnOnce() -> String,
+    ) -> Result<(), WorldLinkError> {
+        publisher
+            .put(bytes.to_vec())
+            .wait()
+            .map_err(|e| zenoh_error(what())(e.to_string()))
+    }
+}
+
+impl WorldLink for ZenohWorldLink {
+    fn n_robots(&self) -> usize {
+        self.lobbies.len()
+    }
+
+    fn drain_hellos(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(Hello),
+    ) -> Result<(), WorldLinkError> {
+        self.check_robot(robot)?;
+        self.lobbies[robot]
+            .hellos
+            .drain()
+            .into_iter()
+            .for_each(sink);
+        Ok(())
+    }
+
+    fn answer_hello(
+        &mut self,
+        robot: usize,
+        nonce: u64,
+        welcome: &Welcome,
+    ) -> Result<(), WorldLinkError> {
+        self.check_robot(robot)?;
+        let msg = WelcomeMsg::encode(nonce, welcome);
+        Self::put(&self.lobbies[robot].welcome, message_bytes(&msg), || {
+            format!("answer a hello for robot {robot}")
+        })
+    }
+
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
+        self.check_robot(robot)?;
+        self.robots[robot] = None;
+        let name = |channel| robot_service_name(&self.run, robot, incarnation, channel);
+        let commands = Arc::new(Queue::new(AGENT_QUEUE));
+        let statuses = Arc::new(Queue::new(AGENT_QUEUE));
+        let cmd = queue_subscriber(
+            &self.session,
+            name(RobotChannel::Cmd),
+            &self.bell,
+            &commands,
+            |sample| {
+                message_from_bytes::<CmdMsg>("command", &bytes(sample)).map_err(|e| e.to_string())
+            },
+        )?;
+        let status = queue_subscriber(
+            &self.session,
+            name(RobotChannel::Status),
+            &self.bell,
+            &statuses,
+            |sample| {
+                let msg: StatusMsg =
+                    message_from_bytes("status", &bytes(sample)).map_err(|e| e.to_string())?;
+                msg.decode().map_err(|e| e.to_string())
+            },
+        )?;
+        self.robots[robot] = Some(Incarnation {
+            scan: publisher(&self.session, name(RobotChannel::Scan), true)?,
+            control: publisher(&self.session, name(RobotChannel::Control), false)?,
+            commands,
+            statuses,
+            _cmd: cmd,
+            _status: status,
+        });
+        Ok(())
+    }
+
+    fn close_incarnation(&mut self, robot: usize) {
+        if let Some(slot) = self.robots.get_mut(robot) {
+            *slot = None;
+        }
+    }
+
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError> {
+        let Some(ports) = self.incarnation(robot)? else {
+            return Ok(());
+        };
+        Self::put(&ports.scan, message_bytes(msg), || {
+            format!("send robot {robot}'s scan")
+        })
+    }
+
+    fn send_control(
+        &mut self,
+        robot: usize,
+        request: &ControlRequest,
+    ) -> Result<(), WorldLinkError> {
+        let msg = ControlMsg::encode(request)?;
+        let model = match request {
+            ControlRequest::SwapModel { request_id, .. } => self
+                .swap_models
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .remove(request_id),
+            _ => None,
+        };
+        let Some(ports) = self.incarnation(robot)? else {
+            return Ok(());
+        };
+        let mut payload = message_bytes(&msg).to_vec();
+        if let Some(model) = model {
+            super::model::append_model(&mut payload, &model).map_err(|e| {
+                zenoh_error(format!("forward robot {robot}'s swap model"))(e.to_string())
+            })?;
+        }
+        Self::put(&ports.control, &payload, || {
+            format!("send robot {robot}'s control request")
+        })
+    }
+
+    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
+        match self.bell.wait(timeout) {
+            Ring::Terminated => Err(WorldLinkError::Terminated),
+            Ring::Activity | Ring::Idle => Ok(()),
+        }
+    }
+
+    fn drain_commands(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(CmdMsg),
+    ) -> Result<(), WorldLinkError> {
+        if let Some(ports) = self.incarnation(robot)? {
+            ports.commands.drain().into_iter().for_each(sink);
+        }
+        Ok(())
+    }
+
+    fn drain_statuses(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(AgentStatus),
+    ) -> Result<(), WorldLinkError> {
+        if let Some(ports) = self.incarnation(robot)? {
+            ports.statuses.drain().into_iter().for_each(sink);
+        }
+        Ok(())
+    }
+
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
+        // An agent is alive until its token goes: one admitted a moment ago may not have
+        // declared it yet.
+        let liveness = self.liveness.lock().unwrap_or_else(|e| e.into_inner());
+        Ok(!liveness.gone.contains(&(robot, pid)))
+    }
+
+    fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError> {
+        let n_robots = self.lobbies.len();
+        let mut dead =
+            std::mem::take(&mut self.liveness.lock().unwrap_or_else(|e| e.into_inner()).dead);
+        dead.retain(|&(robot, _)| robot < n_robots);
+        if !dead.is_empty() {
+            tracing::info!("the liveliness tokens of agents {dead:?} went");
+        }
+        dead.sort_unstable();
+        dead.dedup();
+        Ok(dead)
+    }
+
+    fn drain_swap_requests(
+        &mut self,
+        sink: &mut dyn FnMut(SwapRequest),
+    ) -> Result<(), WorldLinkError> {
+        for refusal in self.swap_refusals.drain() {
+            self.publish_swap_reply(&refusal)?;
+        }
+        self.swap_requests.drain().into_iter().for_each(sink);
+        Ok(())
+    }
+
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), WorldLinkError> {
+        let msg = SwapReplyMsg::encode(reply)?;
+        Self::put(&self.swap_replies, message_bytes(&msg), || {
+            "send a swap reply".to_string()
+        })
+    }
+}

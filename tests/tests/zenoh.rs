@@ -1,0 +1,415 @@
+//! The Zenoh transport (issue 13) with real processes and real Zenoh on 127.0.0.1: lockstep over
+//! Zenoh equals in-process bit for bit, remote agents join a launch with their credentials, an
+//! impostor without them gets nothing, and bad input (an unreachable endpoint, a remote robot the
+//! scenario lacks, a flag of another transport, missing credentials) ends in a clear error.
+//!
+//! Every test uses its own run id, its own free TCP port and its own scratch folder, and runs
+//! alone within this binary ([`one_at_a_time`]).
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use formation::runtime::read_trajectory;
+use formation_tests::{
+    LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
+    formation_run, free_tcp_port, launch_secret, one_at_a_time, run, run_with_input, test_model,
+    unique_run_id,
+};
+use formation_world::{Scenario, run_episode};
+use robot_agent::decision::PolicyController;
+
+const LIMIT: Duration = Duration::from_secs(180);
+
+fn endpoint(port: u16) -> String {
+    format!("tcp/127.0.0.1:{port}")
+}
+
+/// The in-process run `index` of `scenario` with the test model on every robot.
+fn in_process(scenario: &Scenario, index: usize) -> formation_world::Trajectory {
+    let spec = scenario.run_spec(scenario.seed(), index);
+    let model = test_model();
+    let mut controller =
+        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
+            .expect("in-process agents");
+    run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run")
+}
+
+fn run_log(out: &Path, index: usize) -> std::path::PathBuf {
+    out.join("runs").join(format!("run-{index:04}.json"))
+}
+
+/// Issue 13: lockstep case 1 over Zenoh (world, three agents, 127.0.0.1, credentials made by the
+/// launcher) reproduces the in-process run bit for bit.
+#[test]
+fn lockstep_case1_over_zenoh_is_bit_identical_to_in_process() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_lockstep_bit_identical", LIMIT);
+    let dir = TempDir::new("zlock");
+    let run_id = unique_run_id("zlock");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario_path = case1_scenario(dir.path(), 10.0);
+    let scenario = Scenario::from_path(&scenario_path).expect("scenario");
+    let out = dir.path().join("out");
+    let listen = endpoint(free_tcp_port());
+    let finished = run(
+        formation_run(
+            &run_id,
+            &scenario_path,
+            &out,
+            &[
+                "--transport",
+                "zenoh",
+                "--listen",
+                &listen,
+                "--clock",
+                "lockstep",
+            ],
+        ),
+        LIMIT,
+    );
+    finished.assert_success();
+    let over_zenoh = read_trajectory(&run_log(&out, 0)).expect("the run log");
+    let reference = in_process(&scenario, 0);
+    assert_eq!(reference.poses.len(), 201, "10 s at 20 Hz");
+    assert_bit_identical(&over_zenoh, &reference);
+    let credentials = out.join("credentials").join(run_id.as_str());
+    assert!(
+        credentials.join("robot-0.json").is_file(),
+        "the launcher made the run's credentials\n{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+}
+
+/// An agent pointed at an endpoint where nothing listens fails, naming the endpoint.
+#[test]
+fn an_agent_with_an_unreachable_endpoint_names_it() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_unreachable", LIMIT);
+    let run_id = unique_run_id("zunre");
+    let nowhere = endpoint(free_tcp_port());
+    let mut agent = Command::new(&binaries().agent);
+    agent
+        .args(["--transport", "zenoh", "--connect", &nowhere])
+        .args(["--run-id", run_id.as_str(), "--robot", "0"])
+        .args(["--connect-timeout-ms", "1500", "--model"])
+        .arg(test_model());
+    run_with_input(agent, Some(&launch_secret().to_line()), LIMIT)
+        .assert_failure_mentioning(&format!("cannot reach the world at {nowhere}"));
+}
+
+/// `--remote` naming a robot the scenario lacks is refused before anything starts; so are Zenoh's
+/// flags on the iceoryx2 transport and an endpoint that is not tcp/HOST:PORT.
+#[test]
+fn bad_zenoh_flags_are_refused_with_the_reason() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_bad_flags", LIMIT);
+    let dir = TempDir::new("zflag");
+    let scenario = case1_scenario(dir.path(), 1.0);
+    let out = dir.path().join("out");
+    let listen = endpoint(free_tcp_port());
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &[
+                "--transport",
+                "zenoh",
+                "--listen",
+                &listen,
+                "--remote",
+                "1,7",
+            ],
+            "--remote 7: the scenario has 3 robots",
+        ),
+        (&["--remote", "1"], "--remote needs --transport zenoh"),
+        (
+            &["--transport", "zenoh"],
+            "--transport zenoh needs --listen",
+        ),
+        (
+            &[
+                "--transport",
+                "zenoh",
+                "--listen",
+                "127.0.0.1:7447",
+                "--remote",
+                "1",
+            ],
+            "not a Zenoh TCP endpoint",
+        ),
+    ];
+    for (flags, needle) in cases {
+        let run_id = unique_run_id("zflag");
+        let _leaks = LeakCheck::new(&run_id);
+        run(formation_run(&run_id, &scenario, &out, flags), LIMIT)
+            .assert_failure_mentioning(needle);
+    }
+    let mut agent = Command::new(&binaries().agent);
+    agent
+        .args([
+            "--connect",
+            &listen,
+            "--run-id",
+            "x1",
+            "--robot",
+            "0",
+            "--model",
+        ])
+        .arg(test_model());
+    run(agent, LIMIT).assert_failure_mentioning("--connect needs --transport zenoh");
+}
+
+/// A raw Zenoh client of the world at `endpoint`, logged in as `login` (`None`: no login).
+fn raw_client(endpoint: &str, login: Option<(&str, &str)>) -> zenoh::Result<zenoh::Session> {
+    use zenoh::Wait;
+    let mut config = zenoh::Config::default();
+    config.insert_json5("mode", "\"client\"")?;
+    config.insert_json5("scouting/multicast/enabled", "false")?;
+    config.insert_json5("connect/endpoints", &format!("[{endpoint:?}]"))?;
+    config.insert_json5("connect/timeout_ms", "3000")?;
+    config.insert_json5("connect/exit_on_failure", "true")?;
+    if let Some((user, password)) = login {
+        config.insert_json5(
+            "transport/auth/usrpwd",
+            &format!("{{ user: {user:?}, password: {password:?} }}"),
+        )?;
+    }
+    zenoh::open(config).wait()
+}
+
+/// Counts the samples a subscriber on `key` receives.
+fn count_samples(
+    session: &zenoh::Session,
+    key: String,
+) -> (
+    zenoh::pubsub::Subscriber<()>,
+    std::sync::Arc<std::sync::atomic::AtomicUsize>,
+) {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use zenoh::Wait;
+    let count = std::sync::Arc::new(AtomicUsize::new(0));
+    let seen = std::sync::Arc::clone(&count);
+    let subscriber = session
+        .declare_subscriber(key)
+        .callback(move |_| {
+            seen.fetch_add(1, Ordering::Relaxed);
+        })
+        .wait()
+        .expect("declaring a subscriber");
+    (subscriber, count)
+}
+
+/// Issue 13 (remote agents, access control): with `formation credentials`, a launch whose robot 2
+/// is remote waits for it; meanwhile a client without a login is refused, and a client holding
+/// robot 1's login receives robot 1's scans but none of robot 2's and cannot greet as robot 2;
+/// then the remote agent, started by hand with robot-2.json, joins and the run completes.
+#[test]
+fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
+    use std::sync::atomic::Ordering;
+    use zenoh::Wait;
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_remote_and_impostor", LIMIT);
+    let bins = binaries();
+    let dir = TempDir::new("zremo");
+    let run_id = unique_run_id("zremo");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 4.0);
+    let out = dir.path().join("out");
+    let creds = dir.path().join("creds");
+    let mut credentials = Command::new(&bins.cli);
+    credentials
+        .args(["credentials", "--robots", "3", "--out"])
+        .arg(&creds);
+    run(credentials, LIMIT).assert_success();
+    let listen = endpoint(free_tcp_port());
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &["--transport", "zenoh", "--listen", &listen, "--remote", "2"],
+    );
+    command
+        .args(["--clock", "realtime", "--credentials"])
+        .arg(&creds);
+    let mut launch = LiveProcess::spawn(command);
+    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains("waiting for the remote agents of robots [2]")
+    });
+    assert!(waiting.is_some(), "{}", launch.describe());
+    // Robots 0 and 1 are local and connect; give them time to be admitted.
+    std::thread::sleep(Duration::from_secs(3));
+
+    // No login: the router refuses the connection.
+    assert!(
+        raw_client(&listen, None).is_err(),
+        "a client without credentials must be refused"
+    );
+    // Robot 1's login: its own robot's keys only.
+    let robot1 = formation_runtime::zenoh::credentials::read_login(&creds.join("robot-1.json"))
+        .expect("robot 1's login");
+    let impostor = raw_client(&listen, Some((robot1.user(), robot1.password())))
+        .expect("robot 1's login is a valid login");
+    let (_own, own_scans) = count_samples(&impostor, format!("formation/{run_id}/robot/1/*/scan"));
+    let (_other, others) = count_samples(&impostor, format!("formation/{run_id}/robot/2/**"));
+    let (_all, everything) = count_samples(&impostor, format!("formation/{run_id}/robot/0/**"));
+    // A greeting for robot 2 from robot 1's login, from a session of its own (a session hands
+    // its own puts to its own subscribers): the router drops it, so the world never even
+    // refuses it.
+    let forger = raw_client(&listen, Some((robot1.user(), robot1.password())))
+        .expect("robot 1's login is a valid login");
+    forger
+        .put(format!("formation/{run_id}/robot/2/hello"), vec![0u8; 48])
+        .wait()
+        .expect("the put leaves the client");
+
+    // The remote agent, started by hand as on another host, with robot 2's credentials only.
+    let mut agent = Command::new(&bins.agent);
+    agent
+        .args(["--transport", "zenoh", "--connect", &listen])
+        .args(["--run-id", run_id.as_str(), "--robot", "2", "--model"])
+        .arg(test_model())
+        .arg("--credentials")
+        .arg(creds.join("robot-2.json"));
+    let remote = LiveProcess::spawn_with_input(agent, None);
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    let remote = remote.finish(Duration::from_secs(30));
+    assert!(remote.output.status.success(), "{}", remote.describe());
+    assert!(
+        own_scans.load(Ordering::Relaxed) > 0,
+        "robot 1's login may read robot 1's scans (so the subscription works)\n{}",
+        finished.describe()
+    );
+    assert_eq!(
+        others.load(Ordering::Relaxed),
+        0,
+        "robot 1's login received robot 2's traffic"
+    );
+    assert_eq!(
+        everything.load(Ordering::Relaxed),
+        0,
+        "robot 1's login received robot 0's traffic"
+    );
+    assert!(
+        !finished.stderr().contains("refused process"),
+        "nobody greeted as robot 2 but its agent\n{}",
+        finished.describe()
+    );
+    drop((impostor, forger));
+    leaks.assert_clean();
+}
+
+/// A remote robot whose agent never comes is named when the wait runs out.
+#[test]
+fn a_remote_agent_that_never_comes_is_named() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_remote_missing", LIMIT);
+    let dir = TempDir::new("zmiss");
+    let run_id = unique_run_id("zmiss");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 2.0);
+    let out = dir.path().join("out");
+    let listen = endpoint(free_tcp_port());
+    let flags = [
+        "--transport",
+        "zenoh",
+        "--listen",
+        &listen,
+        "--remote",
+        "1",
+        "--remote-timeout-s",
+        "8",
+    ];
+    run(formation_run(&run_id, &scenario, &out, &flags), LIMIT)
+        .assert_failure_mentioning("remote agents of robots [1] did not connect");
+    leaks.assert_clean();
+}
+
+/// Issue 13 (swap over the network): `formation swap --transport zenoh` sends the model's bytes
+/// (as user operator) and the agent drives with it; a model that is not ONNX is refused by the
+/// agent and the old one keeps driving; a model over the 32 MiB limit is refused before it is
+/// sent; the operator's credentials are needed.
+#[test]
+fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_swap", LIMIT);
+    let bins = binaries();
+    let dir = TempDir::new("zswap");
+    let run_id = unique_run_id("zswap");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 8.0);
+    let out = dir.path().join("out");
+    let creds = dir.path().join("creds");
+    let mut credentials = Command::new(&bins.cli);
+    credentials
+        .args(["credentials", "--robots", "3", "--out"])
+        .arg(&creds);
+    run(credentials, LIMIT).assert_success();
+    let listen = endpoint(free_tcp_port());
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &[
+            "--transport",
+            "zenoh",
+            "--listen",
+            &listen,
+            "--clock",
+            "realtime",
+        ],
+    );
+    command.arg("--credentials").arg(&creds);
+    let mut launch = LiveProcess::spawn(command);
+    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+
+    let swap = |model: &Path, login: Option<&Path>| {
+        let mut command = Command::new(&bins.cli);
+        command
+            .args(["swap", "--transport", "zenoh", "--connect", &listen])
+            .args([
+                "--run",
+                run_id.as_str(),
+                "--robot",
+                "1",
+                "--timeout-s",
+                "30",
+            ])
+            .arg("--model")
+            .arg(model);
+        if let Some(login) = login {
+            command.arg("--credentials").arg(login);
+        }
+        run(command, LIMIT)
+    };
+    let operator = creds.join("operator.json");
+    let other = dir.path().join("other.onnx");
+    formation_tests::write_tiny_model(&other, 99);
+    let done = swap(&other, Some(&operator));
+    done.assert_success();
+    assert!(
+        done.stdout().contains("robot 1 of run") && done.stdout().contains("drives with model"),
+        "{}",
+        done.describe()
+    );
+    let junk = dir.path().join("junk.onnx");
+    std::fs::write(&junk, b"this is not an ONNX model").unwrap();
+    swap(&junk, Some(&operator)).assert_failure_mentioning("swap refused for robot 1");
+    let huge = dir.path().join("huge.onnx");
+    std::fs::File::create(&huge)
+        .and_then(|f| f.set_len(33 << 20))
+        .expect("a sparse 33 MiB file");
+    swap(&huge, Some(&operator)).assert_failure_mentioning("at most 33554432 bytes (32 MiB)");
+    swap(&other, None).assert_failure_mentioning("cannot reach the world at");
+
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    let robot1 = formation_tests::RobotLog::read(&out, 1);
+    let models: std::collections::BTreeSet<&String> = robot1.models.iter().collect();
+    assert!(
+        models.len() >= 2,
+        "robot 1 drove with the old model, then the one sent over the network: {models:?}"
+    );
+    leaks.assert_clean();
+}
