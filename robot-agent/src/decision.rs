@@ -274,6 +274,24 @@ impl Agent {
         })
     }
 
+    /// Runs the last decision again and throws its answer away: the occupancy rendering of the
+    /// last scan and the policy on it, changing no state (the image is rendered from the same
+    /// scan into the same cells). An agent idling between realtime ticks rehearses just before
+    /// its next scan is due, so that the real decision finds caches warm. Does nothing before
+    /// the first decision.
+    pub fn rehearse(&mut self) -> Result<(), DecisionError> {
+        let Some(aux) = self.last_aux else {
+            return Ok(());
+        };
+        let spec = self.policy.occupancy_spec();
+        occupancy::render(&self.last_scan, &self.lidar, &spec, &mut self.image);
+        for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
+            *dst = f32::from(src);
+        }
+        self.policy.infer(&self.image_f32, aux)?;
+        Ok(())
+    }
+
     /// The whole decision: [`Agent::perceive`] then [`Agent::decide`].
     pub fn act(
         &mut self,
@@ -608,6 +626,29 @@ mod tests {
             (cmd.right - k * 1.0).abs() < 1e-12,
             "exactly one occupied cell reached the policy"
         );
+    }
+
+    #[test]
+    fn a_rehearsal_runs_the_last_decision_again_and_changes_nothing() {
+        let lidar = LidarSpec::default();
+        let mut agent = Agent::new(probe(), lidar).expect("probe matches the sensor");
+        agent
+            .rehearse()
+            .expect("nothing to rehearse before the first decision");
+        let mut scan = vec![lidar.max_range as f32; lidar.beams];
+        scan[0] = 1.0;
+        scan[450] = 2.0;
+        let goal = Goal {
+            phi_star: 1.0,
+            d_star: 1.5,
+            v_star: 0.7,
+        };
+        let first = agent.act(&scan, 0.5, &goal).expect("decides");
+        let image = agent.image().to_vec();
+        agent.rehearse().expect("rehearses");
+        assert_eq!(agent.image(), image, "the same image");
+        let again = agent.decide(0.5, &goal).expect("decides again");
+        assert_eq!(first, again, "the same command after a rehearsal");
     }
 
     #[test]

@@ -50,4 +50,8 @@ impl Pilot for Agent {
     fn swap(&mut self, model: Box<dyn PolicyBackend>) -> Result<(), BoxError> {
         Ok(self.swap_policy(model)?)
     }
+
+    fn rehearse(&mut self) -> Result<(), BoxError> {
+        Ok(Agent::rehearse(self)?)
+    }
 }

@@ -38,6 +38,11 @@ pub trait Pilot {
     fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, BoxError>;
     /// Puts another model in place after validating it; on error the old one keeps driving.
     fn swap(&mut self, model: Self::Model) -> Result<(), BoxError>;
+    /// Runs the last decision again, changing nothing and answering nothing, to warm the caches
+    /// before the next scan is due (see [`AgentLoop::with_rehearsal`]). By default a no-op.
+    fn rehearse(&mut self) -> Result<(), BoxError> {
+        Ok(())
+    }
 }
 
 /// Loads models and makes pilots of them for a robot's sensor.
@@ -124,6 +129,24 @@ pub fn error_chain(error: &(dyn std::error::Error + 'static)) -> String {
     text
 }
 
+/// When to rehearse before the scan after one of simulation time `sim_time` answered at `now`:
+/// `ahead` before one scan period (the simulation time since the `previous` answered scan)
+/// from now. `None` without a previous scan, for a period that is not positive, or one of at
+/// least [`IDLE_CHECK`] (no agent idles that long between ticks of a live run).
+pub fn rehearsal_due(
+    previous: Option<(f64, std::time::Instant)>,
+    sim_time: f64,
+    now: std::time::Instant,
+    ahead: Duration,
+) -> Option<std::time::Instant> {
+    let (previous_time, _) = previous?;
+    let period = sim_time - previous_time;
+    if !(period.is_finite() && period > 0.0 && period < IDLE_CHECK.as_secs_f64()) {
+        return None;
+    }
+    (now + Duration::from_secs_f64(period)).checked_sub(ahead)
+}
+
 /// Loads the model at `path` with `maker`, naming the file on error.
 pub fn load_model<M: PilotMaker>(maker: &M, path: &Path) -> Result<M::Model, ModelError> {
     maker.load(path).map_err(|source| ModelError::Load {
@@ -154,6 +177,12 @@ pub struct AgentLoop<M: PilotMaker> {
     pending_swap: Option<PendingSwap<M::Model>>,
     fault: Option<Fault>,
     answered: u64,
+    /// How long before the next scan is due the pilot rehearses (zero: never).
+    rehearse_ahead: Duration,
+    /// When the next scan is due, from the scan period seen so far, while not yet rehearsed.
+    rehearse_at: Option<std::time::Instant>,
+    /// Simulation time of the last answered scan, and when it was answered.
+    last_answer: Option<(f64, std::time::Instant)>,
 }
 
 impl<M: PilotMaker> AgentLoop<M> {
@@ -176,7 +205,20 @@ impl<M: PilotMaker> AgentLoop<M> {
             pending_swap: None,
             fault,
             answered: 0,
+            rehearse_ahead: Duration::ZERO,
+            rehearse_at: None,
+            last_answer: None,
         }
+    }
+
+    /// Makes the pilot rehearse its last decision `ahead` before the next scan is due (zero:
+    /// never). The next scan is expected one scan period (the simulation time between the last
+    /// two scans) after the last one was answered, so this acts only when the agent idles
+    /// between ticks, as in realtime; in an unpaced lockstep run the next scan always comes
+    /// first. It costs one extra decision per tick and changes no command.
+    pub fn with_rehearsal(mut self, ahead: Duration) -> Self {
+        self.rehearse_ahead = ahead;
+        self
     }
 
     /// Says hello on a freshly connected link: this process (`pid`) is up with its model.
@@ -203,8 +245,20 @@ impl<M: PilotMaker> AgentLoop<M> {
             if stop.load(Ordering::Relaxed) {
                 return Ok(AgentExit::Because("the launcher closed our input".into()));
             }
-            match link.wait(IDLE_CHECK)? {
+            let now = self.clock.now();
+            let wait = self.rehearse_at.map_or(IDLE_CHECK, |at| {
+                at.saturating_duration_since(now).min(IDLE_CHECK)
+            });
+            match link.wait(wait)? {
                 Wake::Terminated => return Ok(AgentExit::Signal),
+                Wake::Idle if wait < IDLE_CHECK => {
+                    self.rehearse_at = None;
+                    if let Some((pilot, _)) = &mut self.pilot
+                        && let Err(e) = pilot.rehearse()
+                    {
+                        tracing::debug!("rehearsal failed: {}", error_chain(e.as_ref()));
+                    }
+                }
                 Wake::Idle => {
                     if !link.world_alive()? {
                         return Ok(AgentExit::Because(format!(
@@ -387,6 +441,15 @@ impl<M: PilotMaker> AgentLoop<M> {
             return Ok(());
         };
         let started = self.clock.now();
+        if !self.rehearse_ahead.is_zero() {
+            self.rehearse_at = rehearsal_due(
+                self.last_answer,
+                scan.sim_time,
+                started,
+                self.rehearse_ahead,
+            );
+            self.last_answer = Some((scan.sim_time, started));
+        }
         let perceived = scan
             .ranges()
             .map_err(BoxError::from)

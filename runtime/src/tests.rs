@@ -717,3 +717,24 @@ fn a_lockstep_spin_before_blocking_changes_no_outcome() {
         "a spin does not shorten the command timeout"
     );
 }
+
+#[test]
+fn a_rehearsal_is_due_ahead_of_the_next_scan_only_once_the_period_is_known() {
+    use crate::agent::rehearsal_due;
+    let now = std::time::Instant::now();
+    let ahead = Duration::from_millis(2);
+    assert_eq!(rehearsal_due(None, 0.05, now, ahead), None, "no period yet");
+    assert_eq!(
+        rehearsal_due(Some((0.05, now)), 0.10, now, ahead),
+        Some(now + Duration::from_millis(48)),
+        "one 50 ms period from now, 2 ms early"
+    );
+    for (previous, time) in [(0.10, 0.10), (0.10, 0.05), (0.0, 1.0), (0.0, f64::NAN)] {
+        assert_eq!(
+            rehearsal_due(Some((previous, now)), time, now, ahead),
+            None,
+            "period {}",
+            time - previous
+        );
+    }
+}

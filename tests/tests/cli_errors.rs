@@ -301,7 +301,15 @@ fn a_model_that_is_not_a_small_regular_file_is_named_for_what_it_is() {
         .display()
         .to_string();
     let directory = dir.path().display().to_string();
-    for model in [directory.as_str(), "/dev/zero"] {
+    let fifo = dir.path().join("model.fifo");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .expect("running mkfifo");
+    assert!(made.success(), "mkfifo {}", fifo.display());
+    // A FIFO with no writer blocks a reader for ever: it must be refused from its metadata.
+    let fifo = fifo.display().to_string();
+    for model in [directory.as_str(), "/dev/zero", fifo.as_str()] {
         for args in [
             vec!["eval", "--scenario", case1.as_str(), "--model", model],
             vec!["run", "--scenario", case1.as_str(), "--model", model],

@@ -51,6 +51,12 @@ struct Args {
     /// Exit when standard input closes (set by the launcher, so agents never outlive it).
     #[arg(long)]
     exit_on_stdin_close: bool,
+    /// Rehearse the last decision this long before the next scan is due \[µs\] (0: never), so
+    /// that an agent idling between realtime ticks decides with warm caches (measured on 2
+    /// cores, realtime case 1: inference p50 from 140–166 µs down to 72–88 µs, for one extra
+    /// decision per tick, about 0.3 % of a core).
+    #[arg(long, env = "FORMATION_AGENT_REHEARSE_US", default_value_t = 2_000)]
+    rehearse_us: u64,
 }
 
 fn main() -> ExitCode {
@@ -106,7 +112,8 @@ fn run(args: &Args) -> anyhow::Result<AgentExit> {
         model,
         args.fault,
         Arc::new(SystemClock),
-    );
+    )
+    .with_rehearsal(Duration::from_micros(args.rehearse_us));
     agent.greet(&mut link, std::process::id())?;
     Ok(agent.run(&mut link, &stop, &args.run_id)?)
 }
