@@ -16,7 +16,6 @@ use formation_expert::ExpertGains;
 use formation_learning::Driver;
 use formation_learning::rollout::with_threads;
 use formation_learning::scaling::{ScalingDriver, evaluate_scaling, scaling_text};
-use formation_proto::LidarSpec;
 use formation_world::metrics::{MetricsConfig, RunMetrics, run_metrics};
 use formation_world::{RunLog, Scenario, Trajectory};
 
@@ -59,9 +58,22 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
 }
 
 /// Model ids of the given files, as the agents would report them, after checking each model
-/// against the contract and this LIDAR (beams, range, window) before anything runs.
-pub fn model_ids(models: &[PathBuf], lidar: &LidarSpec) -> anyhow::Result<Vec<String>> {
-    Ok(robot_agent::decision::check_team_models(models, lidar)?)
+/// against the contract and the scenario's LIDAR (beams, range, window), and the scenario's d*
+/// against each model's trained d* range (its envelope), before anything runs.
+pub fn model_ids(models: &[PathBuf], scenario: &Scenario) -> anyhow::Result<Vec<String>> {
+    Ok(robot_agent::decision::check_team_models_for(
+        models,
+        &scenario.world_config().lidar,
+        &scenario_d_stars(scenario),
+    )?)
+}
+
+/// Every d* a scenario's runs can be given: its fixed d*, or each of its choices.
+pub fn scenario_d_stars(scenario: &Scenario) -> Vec<f64> {
+    match scenario.d_star() {
+        formation_world::scenario::DStarPlan::Fixed(d) => vec![*d],
+        formation_world::scenario::DStarPlan::Choices(choices) => choices.clone(),
+    }
 }
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).
@@ -176,7 +188,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         ControllerKind::Policy => {
             let default = paths::resolve_model(args.model.as_deref())?;
             let models = models_per_robot(&scenario, &default)?;
-            let ids = model_ids(&models, &scenario.world_config().lidar)?;
+            let ids = model_ids(&models, &scenario)?;
             (models, ids)
         }
     };
@@ -267,7 +279,7 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
     let mut drivers = vec![ScalingDriver::Expert(ExpertGains::default())];
     if args.model.is_some() {
         let model = paths::resolve_model(args.model.as_deref())?;
-        let id = model_ids(std::slice::from_ref(&model), &base.world_config().lidar)?
+        let id = model_ids(std::slice::from_ref(&model), &base)?
             .pop()
             .unwrap_or_default();
         drivers.push(ScalingDriver::Policy { model, id });

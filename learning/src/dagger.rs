@@ -292,3 +292,93 @@ fn rollout_and_label(
     writer.finish().map_err(dataset)?;
     Ok(added)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_proto::OccupancySpec;
+    use trainer_bridge::dataset::{DatasetHeader, DatasetReader};
+
+    fn scenario(robots: usize) -> Scenario {
+        let text = format!(
+            "name = \"dagger-test\"\nrobots = {robots}\nduration_s = 1.0\nseed = 5\nruns = 4\n\
+             [goal]\nv_star = 0.7\nd_star_choices = [1.0, 2.0]\n[heading]\nschedule = \"random\"\n"
+        );
+        Scenario::from_toml_str(&text, "dagger-test").unwrap()
+    }
+
+    fn empty_dataset(dir: &Path, scenario: &Scenario) -> PathBuf {
+        let spec = scenario.run_spec(scenario.seed(), 0);
+        let header = DatasetHeader::new(
+            OccupancySpec::PAPER,
+            spec.world.lidar,
+            spec.v_star,
+            scenario.seed(),
+            scenario.name(),
+        );
+        let path = dir.join("data");
+        DatasetWriter::create(&path, header)
+            .unwrap()
+            .finish()
+            .unwrap();
+        path
+    }
+
+    fn options(data: PathBuf, base: &Scenario) -> DaggerOptions {
+        DaggerOptions {
+            data,
+            scenario: base.clone(),
+            team_sizes: vec![3, 5],
+            iterations: 1,
+            out: PathBuf::from("unused.onnx"),
+            init_model: None,
+            runs: 4,
+            beta: 0.5,
+            training: TrainOptions::default(),
+            eval_scenario: base.clone(),
+            eval_runs: 1,
+            seed: 9,
+        }
+    }
+
+    #[test]
+    fn rollouts_over_team_sizes_label_every_robots_view_in_run_order_and_replay() {
+        let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
+        let base = scenario(3);
+        let scenarios = [base.with_robots(3).unwrap(), base.with_robots(5).unwrap()];
+        let dir = tempfile::tempdir().unwrap();
+        let mut read = Vec::new();
+        for copy in ["a", "b"] {
+            let data = empty_dataset(&dir.path().join(copy), &base);
+            let opts = options(data.clone(), &base);
+            let added = rollout_and_label(&opts, &scenarios, 1, 0.5, &model, &|_| {}).unwrap();
+            // Runs 0..4 use teams of 3, 5, 3, 5 robots, 20 ticks each, one sample per robot.
+            assert_eq!(added, 20 * (3 + 5 + 3 + 5));
+            let samples = DatasetReader::open(&data).unwrap().load_all().unwrap();
+            assert_eq!(samples.len(), added);
+            assert!(samples.iter().all(|s| s.iteration == 1));
+            let robots_of_run = |run: u32| {
+                samples
+                    .iter()
+                    .filter(|s| s.run == run)
+                    .map(|s| usize::from(s.robot) + 1)
+                    .max()
+            };
+            assert_eq!(
+                (0..4).map(robots_of_run).collect::<Vec<_>>(),
+                [Some(3), Some(5), Some(3), Some(5)]
+            );
+            read.push(samples);
+        }
+        assert_eq!(read[0], read[1], "the same settings give the same samples");
+    }
+
+    #[test]
+    fn a_beta_outside_zero_to_one_is_refused() {
+        let base = scenario(3);
+        let mut opts = options(PathBuf::from("/nonexistent"), &base);
+        opts.beta = 1.5;
+        let err = run_dagger(&opts, &|_| {}).unwrap_err();
+        assert!(err.to_string().contains("--beta"), "{err}");
+    }
+}

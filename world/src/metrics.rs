@@ -5,7 +5,7 @@
 //! Under [`NeighbourRule::AllPairs`] the edges are the trajectory's `edges` at every sample (the paper's
 //! three robots: every pair); under a rule whose edges change ([`NeighbourRule::Gabriel`]) they are
 //! recomputed at every sample from the true positions by a
-//! [`NeighbourTracker`](crate::neighbours::NeighbourTracker), `E_k` being the edges at sample `k`:
+//! [`NeighbourTracker`], `E_k` being the edges at sample `k`:
 //!
 //! * relative formation error of an edge: `e_ij(t) = |d_ij(t) - d*| / d*`, `d_ij` the distance between the
 //!   two robots' positions;
