@@ -263,7 +263,8 @@ impl<M: PilotMaker> AgentLoop<M> {
                     if !link.world_alive()? {
                         return Ok(AgentExit::Because(format!(
                             "the world process of run {run} went away (it exited, crashed or \
-                             was killed); nothing left to drive"
+                             was killed, or, over a network, its link was down past the lease); \
+                             nothing left to drive"
                         )));
                     }
                 }

@@ -413,3 +413,67 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
     );
     leaks.assert_clean();
 }
+
+/// A `formation-agent` built without the `zenoh` feature, asked for `--transport zenoh`, names
+/// the transport and how to build it. The test builds that agent (cargo keeps both builds'
+/// artifacts apart by their features) and then restores the default one in `target/`.
+#[test]
+fn an_agent_built_without_zenoh_says_how_to_build_it() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_not_built", Duration::from_secs(900));
+    let bins = binaries();
+    let profile = bins
+        .agent
+        .parent()
+        .and_then(Path::file_name)
+        .and_then(|n| n.to_str())
+        .unwrap_or("debug")
+        .to_string();
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let build = |default_features: bool| -> std::path::PathBuf {
+        let mut command = Command::new(&cargo);
+        command
+            .current_dir(formation_tests::repo_root())
+            .args(["build", "-p", "formation-agent", "--bin", "formation-agent"])
+            .args(["--message-format", "json-render-diagnostics"]);
+        if !default_features {
+            command.arg("--no-default-features");
+        }
+        match profile.as_str() {
+            "debug" => {}
+            "release" => {
+                command.arg("--release");
+            }
+            other => {
+                command.args(["--profile", other]);
+            }
+        }
+        let output = command.output().expect("running cargo build");
+        assert!(
+            output.status.success(),
+            "building formation-agent failed:\n{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        String::from_utf8_lossy(&output.stdout)
+            .lines()
+            .filter_map(|line| serde_json::from_str::<serde_json::Value>(line).ok())
+            .filter_map(|message| message["executable"].as_str().map(Into::into))
+            .next_back()
+            .expect("cargo names the executable it built")
+    };
+    let without = build(false);
+    // Cargo's copy in target/<profile>/ is now the build without Zenoh; keep a copy of that
+    // one and put the default one back before anything else runs an agent.
+    let kept = TempDir::new("znobuild");
+    let agent = kept.path().join("formation-agent");
+    std::fs::copy(&without, &agent).expect("copying the agent built without zenoh");
+    build(true);
+    let mut command = Command::new(&agent);
+    command
+        .args(["--transport", "zenoh", "--connect", "tcp/127.0.0.1:9"])
+        .args(["--run-id", "x1", "--robot", "0", "--model"])
+        .arg(test_model());
+    run_with_input(command, Some(&launch_secret().to_line()), LIMIT)
+        .assert_failure_mentioning("built without the zenoh transport")
+        .assert_failure_mentioning("--features zenoh");
+}

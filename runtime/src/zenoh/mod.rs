@@ -20,7 +20,7 @@
 //! reports its removal as a dead agent). A cut link is seen by liveliness only after the link
 //! lease (10 s and more), so the world's command-age watchdog, not liveliness, brakes the robots.
 //!
-//! Subscriber callbacks run on Zenoh's threads: they decode, queue (bounded) and ring a [`Bell`];
+//! Subscriber callbacks run on Zenoh's threads: they decode, queue (bounded) and ring a bell (a condition variable);
 //! a link's `wait` blocks on the bell's condition variable, which SIGINT/SIGTERM ring too.
 //!
 //! Who may connect, and which keys each may use, is Zenoh's own user/password authentication

@@ -63,7 +63,7 @@ struct Args {
     /// Zenoh: the world's endpoint, tcp/ADDR:PORT.
     #[arg(long, value_name = "tcp/ADDR:PORT")]
     connect: Option<String>,
-    /// Zenoh: this robot's credentials file (robot-<i>.json from `formation credentials`): its
+    /// Zenoh: this robot's credentials file (`robot-<i>.json` from `formation credentials`): its
     /// login and the launch secret, which then is not read from standard input.
     #[arg(long, value_name = "FILE")]
     credentials: Option<PathBuf>,
