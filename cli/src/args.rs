@@ -89,6 +89,11 @@ pub struct EvalArgs {
     /// Worker threads for in-process evaluation (default: available cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Evaluate over these team sizes (e.g. `3,5,8,13,16,32`): the scenario resized to each, the
+    /// expert always and the policy when `--model` is given; prints the scaling table and writes
+    /// it with `--json`.
+    #[arg(long, value_delimiter = ',', value_parser = team_size)]
+    pub robots: Option<Vec<usize>>,
 }
 
 /// `formation collect`.
@@ -191,6 +196,9 @@ pub struct DaggerArgs {
     /// Base seed of the DAgger rollouts.
     #[arg(long, default_value_t = 1000)]
     pub seed: u64,
+    /// Team sizes of the rollouts, used in turn (e.g. `3,5,7`; default: the scenario's).
+    #[arg(long, value_delimiter = ',', value_parser = team_size)]
+    pub team_sizes: Vec<usize>,
 }
 
 /// `formation report`.
@@ -232,9 +240,49 @@ pub fn run_count(text: &str) -> Result<usize, String> {
     }
 }
 
+/// Parses a team size: a whole number from 2 to the scenario limit
+/// ([`formation_world::scenario::limits::MAX_ROBOTS`]).
+pub fn team_size(text: &str) -> Result<usize, String> {
+    let (min, max) = (
+        formation_world::scenario::limits::MIN_ROBOTS,
+        formation_world::scenario::limits::MAX_ROBOTS,
+    );
+    match text.trim().parse::<usize>() {
+        Ok(n) if (min..=max).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "expected a team size from {min} to {max}, got {text:?}"
+        )),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn team_sizes_are_bounded_and_lists_parse() {
+        assert_eq!(team_size("16"), Ok(16));
+        for bad in ["1", "0", "1025", "x"] {
+            assert!(team_size(bad).unwrap_err().contains("2 to 1024"), "{bad}");
+        }
+        let cli = Cli::try_parse_from([
+            "formation",
+            "eval",
+            "--scenario",
+            "s.toml",
+            "--robots",
+            "3,5,8",
+        ])
+        .unwrap();
+        let Command::Eval(args) = cli.command else {
+            panic!()
+        };
+        assert_eq!(args.robots, Some(vec![3, 5, 8]));
+        assert!(
+            Cli::try_parse_from(["formation", "eval", "--scenario", "s", "--robots", "3,1"])
+                .is_err()
+        );
+    }
 
     #[test]
     fn run_counts_are_bounded() {

@@ -80,6 +80,7 @@ fn run_eval(
         save_trajectories: None,
         processes: !args.in_process,
         threads: None,
+        robots: None,
     };
     let (out, results) =
         eval::evaluate(&eval_args).with_context(|| format!("evaluating {name}"))?;

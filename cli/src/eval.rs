@@ -1,22 +1,23 @@
 //! `formation eval`: runs a controller over a scenario's runs and reports the paper's Table I and
 //! Fig. 9 figures.
 //!
-//! In-process evaluation runs independent runs on worker threads; every run is a pure function of
-//! (scenario, base seed, run index, model), so the result does not depend on the thread count and
-//! the same seed gives byte-identical JSON. `--processes` runs every robot's policy in its own OS
-//! process over iceoryx2 and must give the same JSON.
+//! In-process evaluation is `formation_learning::evaluate_runs` (rayon); every run is a pure
+//! function of (scenario, base seed, run index, model), so the result does not depend on the
+//! thread count and the same seed gives byte-identical JSON. `--processes` runs every robot's
+//! policy in its own OS process over iceoryx2 and must give the same JSON. `--robots 3,5,8`
+//! evaluates the expert (and the policy, when `--model` is given) over team sizes and writes the
+//! scaling table (`formation_learning::scaling`).
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use anyhow::Context;
-use formation_expert::{ExpertController, ExpertGains};
-use formation_proto::LidarSpec;
-use formation_world::metrics::{MetricsConfig, RunMetrics, run_metrics, summarize};
-use formation_world::{Controller, RunLog, Scenario, Trajectory, run_episode};
-use robot_agent::decision::PolicyController;
+use formation_expert::ExpertGains;
+use formation_learning::Driver;
+use formation_learning::rollout::with_threads;
+use formation_learning::scaling::{ScalingDriver, evaluate_scaling, scaling_text};
+use formation_world::metrics::{MetricsConfig, RunMetrics, run_metrics};
+use formation_world::{RunLog, Scenario, Trajectory};
 
 use crate::args::{ControllerKind, EvalArgs};
 use crate::paths;
@@ -26,24 +27,7 @@ use crate::paths;
 pub use formation_schema::{EvalOutput, IncompleteRun};
 
 /// The output of runs with these per-run metrics: the Table I and Fig. 9 summary over them.
-pub fn eval_output(
-    controller: &str,
-    models: Vec<String>,
-    scenario: &str,
-    seed: Option<u64>,
-    per_run: Vec<RunMetrics>,
-) -> EvalOutput {
-    EvalOutput {
-        controller: controller.to_owned(),
-        models,
-        scenario: scenario.to_owned(),
-        seed,
-        summary: summarize(&per_run),
-        per_run,
-        braked_ticks: Vec::new(),
-        incomplete_runs: Vec::new(),
-    }
-}
+pub use formation_learning::eval_output;
 
 /// One evaluated run.
 pub struct RunResult {
@@ -55,66 +39,6 @@ pub struct RunResult {
     pub trajectory: Option<Trajectory>,
     /// How it was clocked: `in-process`, or `lockstep` over processes.
     pub clock: &'static str,
-}
-
-/// Builds a fresh controller for one worker thread.
-pub type ControllerFactory<'a> = dyn Fn() -> anyhow::Result<Box<dyn Controller>> + Sync + 'a;
-
-/// Runs `runs` runs of `scenario` in-process on `threads` workers. `keep(i)` says whether run i's
-/// trajectory is returned. `progress` is called after each finished run with the count so far.
-pub fn evaluate_in_process(
-    scenario: &Scenario,
-    base_seed: u64,
-    runs: usize,
-    make_controller: &ControllerFactory<'_>,
-    threads: usize,
-    keep: &(dyn Fn(usize) -> bool + Sync),
-    progress: &(dyn Fn(usize) + Sync),
-) -> anyhow::Result<Vec<RunResult>> {
-    let next = AtomicUsize::new(0);
-    let done = AtomicUsize::new(0);
-    let results: Mutex<Vec<RunResult>> = Mutex::new(Vec::with_capacity(runs));
-    let cfg = MetricsConfig::default();
-    std::thread::scope(|s| -> anyhow::Result<()> {
-        let workers: Vec<_> = (0..threads.clamp(1, runs.max(1)))
-            .map(|_| {
-                s.spawn(|| -> anyhow::Result<()> {
-                    let mut controller = make_controller()?;
-                    loop {
-                        let i = next.fetch_add(1, Ordering::Relaxed);
-                        if i >= runs {
-                            return Ok(());
-                        }
-                        let spec = scenario.run_spec(base_seed, i);
-                        let traj = run_episode(&spec, controller.as_mut(), &mut |_, _| {})
-                            .with_context(|| format!("run {i}"))?;
-                        let metrics = run_metrics(&traj, &cfg);
-                        let trajectory = keep(i).then_some(traj);
-                        results
-                            .lock()
-                            .map_err(|_| anyhow::anyhow!("a worker panicked"))?
-                            .push(RunResult {
-                                index: i,
-                                metrics,
-                                trajectory,
-                                clock: "in-process",
-                            });
-                        progress(done.fetch_add(1, Ordering::Relaxed) + 1);
-                    }
-                })
-            })
-            .collect();
-        for w in workers {
-            w.join()
-                .map_err(|_| anyhow::anyhow!("an evaluation worker panicked"))??;
-        }
-        Ok(())
-    })?;
-    let mut results = results
-        .into_inner()
-        .map_err(|_| anyhow::anyhow!("a worker panicked"))?;
-    results.sort_by_key(|r| r.index);
-    Ok(results)
 }
 
 /// The model path for each robot: the scenario's per-robot overrides, else `default`.
@@ -133,32 +57,23 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
     Ok(models)
 }
 
-/// A controller factory for the chosen controller kind.
-pub fn controller_factory<'a>(
-    kind: ControllerKind,
-    scenario: &'a Scenario,
-    models: &'a [PathBuf],
-) -> Box<ControllerFactory<'a>> {
-    match kind {
-        ControllerKind::Expert => Box::new(move || {
-            let robot = scenario.world_config().robot;
-            Ok(
-                Box::new(ExpertController::new(ExpertGains::default(), robot))
-                    as Box<dyn Controller>,
-            )
-        }),
-        ControllerKind::Policy => Box::new(move || {
-            let lidar = scenario.world_config().lidar;
-            let refs: Vec<&Path> = models.iter().map(PathBuf::as_path).collect();
-            Ok(Box::new(PolicyController::from_model_paths(&refs, lidar)?) as Box<dyn Controller>)
-        }),
-    }
+/// Model ids of the given files, as the agents would report them, after checking each model
+/// against the contract and the scenario's LIDAR (beams, range, window), and the scenario's d*
+/// against each model's trained d* range (its envelope), before anything runs.
+pub fn model_ids(models: &[PathBuf], scenario: &Scenario) -> anyhow::Result<Vec<String>> {
+    Ok(robot_agent::decision::check_team_models_for(
+        models,
+        &scenario.world_config().lidar,
+        &scenario_d_stars(scenario),
+    )?)
 }
 
-/// Model ids of the given files, as the agents would report them, after checking each model
-/// against the contract and this LIDAR (beams, range, window) before anything runs.
-pub fn model_ids(models: &[PathBuf], lidar: &LidarSpec) -> anyhow::Result<Vec<String>> {
-    Ok(robot_agent::decision::check_team_models(models, lidar)?)
+/// Every d* a scenario's runs can be given: its fixed d*, or each of its choices.
+pub fn scenario_d_stars(scenario: &Scenario) -> Vec<f64> {
+    match scenario.d_star() {
+        formation_world::scenario::DStarPlan::Fixed(d) => vec![*d],
+        formation_world::scenario::DStarPlan::Choices(choices) => choices.clone(),
+    }
 }
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).
@@ -273,13 +188,13 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         ControllerKind::Policy => {
             let default = paths::resolve_model(args.model.as_deref())?;
             let models = models_per_robot(&scenario, &default)?;
-            let ids = model_ids(&models, &scenario.world_config().lidar)?;
+            let ids = model_ids(&models, &scenario)?;
             (models, ids)
         }
     };
     let bar = progress_bar(runs, "eval");
     let started = Instant::now();
-    let results = if args.processes {
+    let results: Vec<RunResult> = if args.processes {
         let default = models.first().cloned().context("no robots")?;
         let evaluated = crate::runtime::eval_over_processes(
             &scenario,
@@ -309,21 +224,31 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
             })
             .collect()
     } else {
-        let threads = args.threads.unwrap_or_else(|| {
-            std::thread::available_parallelism()
-                .map(|n| n.get())
-                .unwrap_or(1)
-        });
-        let factory = controller_factory(args.controller, &scenario, &models);
-        evaluate_in_process(
-            &scenario,
-            seed,
-            runs,
-            factory.as_ref(),
-            threads,
-            &keep,
-            &|n| bar.set_position(n as u64),
-        )?
+        let driver = match args.controller {
+            ControllerKind::Expert => Driver::Expert(ExpertGains::default()),
+            ControllerKind::Policy => Driver::Policy {
+                models: models.clone(),
+            },
+        };
+        with_threads(args.threads, || {
+            formation_learning::evaluate_runs(
+                &scenario,
+                seed,
+                runs,
+                &driver,
+                &MetricsConfig::default(),
+                &keep,
+                &|n| bar.set_position(n as u64),
+            )
+        })??
+        .into_iter()
+        .map(|r| RunResult {
+            index: r.index,
+            metrics: r.metrics,
+            trajectory: r.trajectory,
+            clock: "in-process",
+        })
+        .collect()
     };
     bar.finish_and_clear();
     let elapsed = started.elapsed().as_secs_f64();
@@ -340,8 +265,51 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
     Ok((out, results))
 }
 
+/// `formation eval --robots ...`: the scaling table over team sizes.
+pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
+    if args.processes || args.out.is_some() || args.save_trajectories.is_some() {
+        anyhow::bail!(
+            "--robots evaluates in-process and writes a table (print and --json); drop \
+             --processes, --out and --save-trajectories, or evaluate one team size at a time"
+        );
+    }
+    let base = Scenario::from_path(&args.scenario)?;
+    let runs = args.runs.unwrap_or_else(|| base.runs());
+    let seed = args.seed.unwrap_or_else(|| base.seed());
+    let mut drivers = vec![ScalingDriver::Expert(ExpertGains::default())];
+    if args.model.is_some() {
+        let model = paths::resolve_model(args.model.as_deref())?;
+        let id = model_ids(std::slice::from_ref(&model), &base)?
+            .pop()
+            .unwrap_or_default();
+        drivers.push(ScalingDriver::Policy { model, id });
+    }
+    let bar = progress_bar(runs * sizes.len() * drivers.len(), "scaling");
+    let started = Instant::now();
+    let table = with_threads(args.threads, || {
+        evaluate_scaling(&base, sizes, seed, runs, &drivers, &|row, done| {
+            bar.set_position((row * runs + done) as u64)
+        })
+    })??;
+    bar.finish_and_clear();
+    eprintln!(
+        "evaluated {} runs in {:.1} s",
+        runs * table.rows.len(),
+        started.elapsed().as_secs_f64()
+    );
+    print!("{}", scaling_text(&table));
+    if let Some(json) = &args.json {
+        paths::write_atomic(json, &formation_schema::to_json_pretty(&table)?)?;
+        println!("wrote {}", json.display());
+    }
+    Ok(())
+}
+
 /// `formation eval`.
 pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
+    if let Some(sizes) = &args.robots {
+        return scaling_command(args, sizes);
+    }
     let (out, results) = evaluate(args)?;
     print!("{}", table_text(&out));
     if let Some(json) = &args.json {

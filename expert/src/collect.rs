@@ -12,15 +12,13 @@
 
 use std::time::{Duration, Instant};
 
-use formation_proto::{LidarSpec, OccupancySpec, WheelCmd, wrap_angle};
+use formation_proto::{LidarSpec, NeighbourRule, OccupancySpec, WheelCmd, wrap_angle};
 use formation_world::episode::{Observation, run_episode};
 use formation_world::{RobotParams, RunSpec, Scenario};
 use robot_agent::occupancy;
 use trainer_bridge::dataset::{DatasetError, DatasetWriter, Sample};
 
-use crate::controller::{
-    ExpertController, ExpertGains, InvalidGains, check_inputs, expert_commands,
-};
+use crate::controller::{ExpertController, ExpertGains, InvalidGains, check_inputs};
 
 /// Why a collection stopped.
 #[derive(Debug, thiserror::Error)]
@@ -230,7 +228,8 @@ fn collect_run(
     )?;
     let run = narrow_run(spec.index)?;
     narrow_robot(spec.n_robots.saturating_sub(1))?;
-    let mut expert = ExpertController::new(opts.gains, spec.world.robot);
+    let mut expert =
+        ExpertController::new(opts.gains, spec.world.robot).with_neighbours(spec.neighbours);
     let mut failure = None;
     let mut on_tick = |obs: &Observation<'_>, commands: &[WheelCmd]| {
         if failure.is_some() || !obs.tick.is_multiple_of(u64::from(opts.record_every)) {
@@ -251,12 +250,14 @@ fn collect_run(
 
 /// Labels observations with the expert's commands: everything needed to turn one robot's view into a
 /// [`Sample`].
-#[derive(Debug, Clone, PartialEq)]
+///
+/// It holds an [`ExpertController`], so under a neighbour rule with hysteresis it must see a run's
+/// observations in tick order (tick 0 starts afresh); give each concurrent run its own clone.
+#[derive(Debug, Clone)]
 pub struct Labeller {
-    gains: ExpertGains,
-    robot: RobotParams,
     lidar: LidarSpec,
     occupancy: OccupancySpec,
+    expert: ExpertController,
 }
 
 impl Labeller {
@@ -270,11 +271,17 @@ impl Labeller {
         gains.validate()?;
         check_occupancy(&occupancy)?;
         Ok(Labeller {
-            gains,
-            robot,
             lidar,
             occupancy,
+            expert: ExpertController::new(gains, robot),
         })
+    }
+
+    /// The same labeller, labelling with the expert that holds each robot's own neighbours under
+    /// `rule`.
+    pub fn with_neighbours(mut self, rule: NeighbourRule) -> Labeller {
+        self.expert = self.expert.with_neighbours(rule);
+        self
     }
 
     /// A labeller for the robots and LIDAR of `spec`.
@@ -283,13 +290,16 @@ impl Labeller {
         gains: ExpertGains,
         occupancy: OccupancySpec,
     ) -> Result<Labeller, CollectError> {
-        Labeller::new(gains, spec.world.robot, spec.world.lidar, occupancy)
+        Ok(
+            Labeller::new(gains, spec.world.robot, spec.world.lidar, occupancy)?
+                .with_neighbours(spec.neighbours),
+        )
     }
 
     /// Sends `sink` one sample per robot of `obs`, labelled with the EXPERT's command for that robot,
     /// whatever controller is driving (DAgger: the policy drives, the expert labels).
     pub fn label_observation(
-        &self,
+        &mut self,
         obs: &Observation<'_>,
         iteration: u32,
         run: u32,
@@ -300,13 +310,8 @@ impl Labeller {
             run: run as usize,
             message: e.message,
         })?;
-        expert_commands(
-            obs.poses,
-            &obs.goal,
-            &self.gains,
-            &self.robot,
-            &mut commands,
-        );
+        self.expert
+            .compute(obs.tick, obs.poses, &obs.goal, &mut commands);
         self.emit(obs, &commands, iteration, run, sink)
     }
 
@@ -409,7 +414,7 @@ mod tests {
         let lidar = LidarSpec::default();
         let robot = RobotParams::default();
         let gains = ExpertGains::default();
-        let labeller = Labeller::new(gains, robot, lidar, OccupancySpec::PAPER).expect("valid");
+        let mut labeller = Labeller::new(gains, robot, lidar, OccupancySpec::PAPER).expect("valid");
         let poses = [
             Pose {
                 x: 0.0,
@@ -451,7 +456,7 @@ mod tests {
             .expect("labels");
 
         let mut expected = [WheelCmd::BRAKE; 3];
-        expert_commands(&poses, &goal, &gains, &robot, &mut expected);
+        crate::expert_commands(&poses, &goal, &gains, &robot, &mut expected);
         assert_eq!(samples.len(), 3);
         for (i, sample) in samples.iter().enumerate() {
             assert_eq!(usize::from(sample.robot), i);
@@ -489,7 +494,7 @@ mod tests {
     #[test]
     fn label_observation_refuses_bad_observations() {
         let lidar = LidarSpec::default();
-        let labeller = Labeller::new(
+        let mut labeller = Labeller::new(
             ExpertGains::default(),
             RobotParams::default(),
             lidar,

@@ -12,4 +12,6 @@
 pub mod collect;
 pub mod controller;
 
-pub use controller::{ExpertController, ExpertGains, InvalidGains, expert_commands};
+pub use controller::{
+    ExpertController, ExpertGains, InvalidGains, expert_commands, expert_commands_among,
+};

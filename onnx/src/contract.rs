@@ -46,6 +46,115 @@ pub mod keys {
     pub const V_TRAIN: &str = "formation.v_train";
     /// Id of the dataset the model was trained on.
     pub const DATASET_ID: &str = "formation.dataset_id";
+    /// Smallest d* \[m\] of the training data (optional, with [`D_STAR_MAX`]).
+    pub const D_STAR_MIN: &str = "formation.envelope.d_star_min";
+    /// Largest d* \[m\] of the training data (optional, with [`D_STAR_MIN`]).
+    pub const D_STAR_MAX: &str = "formation.envelope.d_star_max";
+    /// Team sizes of the training data, comma-separated (optional).
+    pub const TEAM_SIZES: &str = "formation.envelope.team_sizes";
+    /// LIDAR range noise \[m\] of the training data (optional).
+    pub const NOISE_STD: &str = "formation.lidar.noise_std";
+}
+
+/// What a model was trained on beyond its sensor contract: the range of d*, the team sizes and
+/// the LIDAR noise, when its metadata records them (models exported before the envelope existed
+/// record none, and nothing is refused for them).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ModelEnvelope {
+    /// Smallest and largest d* \[m\] of the training data.
+    pub d_star: Option<(f64, f64)>,
+    /// Team sizes of the training data, ascending.
+    pub team_sizes: Vec<usize>,
+    /// LIDAR range noise \[m\] of the training data.
+    pub noise_std: Option<f64>,
+}
+
+impl ModelEnvelope {
+    /// Relative slack on the d* range: the range is recorded from `f32` samples, so a scenario's
+    /// `0.8` must match a recorded `0.800000011920929`.
+    pub const D_STAR_SLACK: f64 = 1e-6;
+
+    /// Whether `d_star` lies in the recorded d* range (true when none is recorded).
+    pub fn admits_d_star(&self, d_star: f64) -> bool {
+        self.d_star.is_none_or(|(lo, hi)| {
+            d_star >= lo * (1.0 - Self::D_STAR_SLACK) && d_star <= hi * (1.0 + Self::D_STAR_SLACK)
+        })
+    }
+}
+
+impl ModelMetadata {
+    /// The envelope the metadata records ([`parse_metadata`] has checked it parses).
+    pub fn envelope(&self) -> ModelEnvelope {
+        parse_envelope(&self.extra).unwrap_or_default()
+    }
+}
+
+/// The optional envelope keys, checked.
+fn parse_envelope(entries: &BTreeMap<String, String>) -> Result<ModelEnvelope, ContractViolation> {
+    let optional_real = |key: &'static str| -> Result<Option<f64>, ContractViolation> {
+        entries
+            .get(key)
+            .map_or(Ok(None), |_| parse_positive_real(entries, key).map(Some))
+    };
+    let d_star = match (
+        optional_real(keys::D_STAR_MIN)?,
+        optional_real(keys::D_STAR_MAX)?,
+    ) {
+        (None, None) => None,
+        (Some(lo), Some(hi)) if lo <= hi => Some((lo, hi)),
+        (Some(_), Some(_)) => {
+            return Err(ContractViolation::BadMetadata {
+                key: keys::D_STAR_MAX,
+                value: entries[keys::D_STAR_MAX].clone(),
+                expected: "at least formation.envelope.d_star_min",
+            });
+        }
+        (None, Some(_)) => {
+            return Err(ContractViolation::MissingMetadata {
+                key: keys::D_STAR_MIN,
+            });
+        }
+        (Some(_), None) => {
+            return Err(ContractViolation::MissingMetadata {
+                key: keys::D_STAR_MAX,
+            });
+        }
+    };
+    let team_sizes = match entries.get(keys::TEAM_SIZES) {
+        None => Vec::new(),
+        Some(text) => {
+            let mut sizes = text
+                .split(',')
+                .map(|n| n.trim().parse::<usize>().ok().filter(|&n| n > 0))
+                .collect::<Option<Vec<usize>>>()
+                .ok_or_else(|| ContractViolation::BadMetadata {
+                    key: keys::TEAM_SIZES,
+                    value: text.clone(),
+                    expected: "a comma-separated list of positive team sizes",
+                })?;
+            sizes.sort_unstable();
+            sizes.dedup();
+            sizes
+        }
+    };
+    let noise_std = match entries.get(keys::NOISE_STD) {
+        None => None,
+        Some(text) => match text.trim().parse::<f64>() {
+            Ok(x) if x.is_finite() && x >= 0.0 => Some(x),
+            _ => {
+                return Err(ContractViolation::BadMetadata {
+                    key: keys::NOISE_STD,
+                    value: text.clone(),
+                    expected: "a finite number >= 0",
+                });
+            }
+        },
+    };
+    Ok(ModelEnvelope {
+        d_star,
+        team_sizes,
+        noise_std,
+    })
 }
 
 /// What a model's metadata says about how it was trained, parsed and checked.
@@ -202,6 +311,7 @@ pub fn parse_metadata(
         keys::V_TRAIN,
         keys::DATASET_ID,
     ];
+    parse_envelope(entries)?;
     let extra = entries
         .iter()
         .filter(|(key, _)| !PARSED.contains(&key.as_str()))
@@ -739,6 +849,49 @@ mod tests {
         assert!(matches!(
             check_signature(&paper_inputs(), &outputs, 50),
             Err(ContractViolation::ElementType { .. })
+        ));
+    }
+
+    #[test]
+    fn the_envelope_is_read_when_recorded_and_refused_when_malformed() {
+        let mut entries = paper_metadata();
+        assert_eq!(
+            parse_metadata(&entries).unwrap().envelope(),
+            ModelEnvelope::default()
+        );
+        entries.insert(keys::D_STAR_MIN.into(), "0.800000011920929".into());
+        entries.insert(keys::D_STAR_MAX.into(), "2.5".into());
+        entries.insert(keys::TEAM_SIZES.into(), "5, 3,7".into());
+        entries.insert(keys::NOISE_STD.into(), "0.03".into());
+        let envelope = parse_metadata(&entries).unwrap().envelope();
+        assert_eq!(envelope.d_star, Some((0.800000011920929, 2.5)));
+        assert_eq!(envelope.team_sizes, [3, 5, 7]);
+        assert_eq!(envelope.noise_std, Some(0.03));
+        assert!(envelope.admits_d_star(0.8) && envelope.admits_d_star(2.5));
+        assert!(!envelope.admits_d_star(3.0) && !envelope.admits_d_star(0.7));
+        assert!(ModelEnvelope::default().admits_d_star(50.0));
+
+        for (key, value) in [
+            (keys::D_STAR_MAX, "0.5"),
+            (keys::D_STAR_MIN, "-1"),
+            (keys::TEAM_SIZES, "3,x"),
+            (keys::NOISE_STD, "nan"),
+        ] {
+            let mut bad = entries.clone();
+            bad.insert(key.into(), value.into());
+            assert!(
+                matches!(
+                    parse_metadata(&bad),
+                    Err(ContractViolation::BadMetadata { .. })
+                ),
+                "{key} = {value}"
+            );
+        }
+        let mut half = entries.clone();
+        half.remove(keys::D_STAR_MAX);
+        assert!(matches!(
+            parse_metadata(&half),
+            Err(ContractViolation::MissingMetadata { key }) if key == keys::D_STAR_MAX
         ));
     }
 }

@@ -18,7 +18,9 @@ mod model_file;
 mod policy;
 mod runtime;
 
-pub use contract::{ContractViolation, ModelMetadata, SensorContract, SensorViolation};
+pub use contract::{
+    ContractViolation, ModelEnvelope, ModelMetadata, SensorContract, SensorViolation,
+};
 pub use error::{LIBRARY_FIX, PolicyError};
 pub use model_file::{MAX_MODEL_BYTES, check_model_file};
 pub use policy::OnnxPolicy;

@@ -2,6 +2,7 @@
 //!
 //! * [`types`]: plain values that cross crate boundaries (poses, wheel commands, the goal a robot
 //!   is given, LIDAR and occupancy settings). They carry no behaviour beyond validation.
+//! * [`neighbours`]: the formation's neighbour rule as a value (its computation is the world's).
 //! * [`files`]: reading a user's file only if it is a regular file within a size limit.
 //! * [`control`]: the [`control::Controller`] seam between an episode loop and what decides the
 //!   wheel commands, with its [`control::Observation`] and [`control::ControllerError`].
@@ -15,7 +16,9 @@
 pub mod auth;
 pub mod control;
 pub mod files;
+pub mod neighbours;
 pub mod types;
 pub mod wire;
 
+pub use neighbours::{GabrielRule, NeighbourRule};
 pub use types::*;

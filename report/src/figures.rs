@@ -60,6 +60,18 @@ pub const EDGE_COLORS: [RGBColor; 6] = [
 const LEGEND_WIDTH: u32 = 140;
 /// Seconds between the formation snapshots of the trajectory panel (the paper's 3 s).
 pub const SNAPSHOT_EVERY_S: f64 = 3.0;
+/// Seconds between snapshots of a team larger than the paper's three (their graph would
+/// otherwise cover the paths).
+pub const TEAM_SNAPSHOT_EVERY_S: f64 = 10.0;
+
+/// Seconds between the snapshots of `traj`'s trajectory figure.
+pub fn snapshot_every_s(traj: &Trajectory) -> f64 {
+    if traj.n_robots() > 3 {
+        TEAM_SNAPSHOT_EVERY_S
+    } else {
+        SNAPSHOT_EVERY_S
+    }
+}
 
 /// One figure: a file stem and an SVG document.
 #[derive(Debug, Clone, PartialEq)]
@@ -351,17 +363,22 @@ pub fn wheels_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError>
     })
 }
 
-/// Figs. 6c-8c: every robot's path, and every [`SNAPSHOT_EVERY_S`] the robots as triangles
-/// pointing along their heading with the formation (dashed lines along the edges) between them.
+/// Figs. 6c-8c: every robot's path, and every [`SNAPSHOT_EVERY_S`] ([`TEAM_SNAPSHOT_EVERY_S`]
+/// for a team larger than three) the robots as triangles
+/// pointing along their heading with the formation (dashed lines along the edges of that moment,
+/// the neighbour graph for a team) between them.
 /// Both axes have the same scale. Collisions are marked with a red ring.
 pub fn trajectory_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError> {
     let robot_paths = paths(traj);
-    let snapshots = snapshot_indices(&traj.times, SNAPSHOT_EVERY_S);
+    let every_s = snapshot_every_s(traj);
+    let snapshots = snapshot_indices(&traj.times, every_s);
+    let edges = crate::series::edges_per_sample(traj);
     let (width, height) = (640_u32, 600_u32);
     let (margin, x_label_area, y_label_area) = (8_u32, 46_u32, 66_u32);
     render(id, (width, height), |root| {
         let (plot, legend) = root.split_horizontally(width - LEGEND_WIDTH);
-        let plot = plot.titled("(c) trajectories and formation every 3 s", text_style(19.0))?;
+        let title = format!("(c) trajectories and formation every {every_s} s");
+        let plot = plot.titled(title.as_str(), text_style(19.0))?;
         let (plot_w, plot_h) = plot.dim_in_pixel();
         let inner_w = f64::from(plot_w.saturating_sub(2 * margin + y_label_area).max(1));
         let inner_h = f64::from(plot_h.saturating_sub(2 * margin + x_label_area).max(1));
@@ -392,7 +409,7 @@ pub fn trajectory_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportEr
         }
         for &k in &snapshots {
             let poses = &traj.poses[k];
-            for &(i, j) in &traj.edges {
+            for &(i, j) in edges.get(k).map_or(&[][..], Vec::as_slice) {
                 let (a, b) = (poses[i], poses[j]);
                 if [a.x, a.y, b.x, b.y].iter().all(|v| v.is_finite()) {
                     chart.draw_series(std::iter::once(DashedPathElement::new(
@@ -615,6 +632,94 @@ pub fn loss_figure(id: &str, curve: &LossCurve) -> Result<Figure, ReportError> {
     })
 }
 
+/// The scaling figure: (a) success at 10 % (solid) and 5 % (thin) against the team size, and
+/// (b) the median convergence time at 10 % against the team size, one colour per controller
+/// (and model) of the table.
+pub fn scaling_figure(
+    id: &str,
+    table: &formation_schema::ScalingTable,
+) -> Result<Figure, ReportError> {
+    let mut drivers: Vec<String> = Vec::new();
+    for row in &table.rows {
+        let who = scaling_driver(row);
+        if !drivers.contains(&who) {
+            drivers.push(who);
+        }
+    }
+    let sizes = || table.rows.iter().map(|r| r.robots as f64);
+    let x_range = padded_range(sizes(), 0.06, false);
+    let (width, height) = (960_u32, 400_u32);
+    render(id, (width, height), |root| {
+        let (plots, legend) = root.split_horizontally(width - LEGEND_WIDTH);
+        let (left, right) = plots.split_horizontally((width - LEGEND_WIDTH) / 2);
+        let mut success = ChartBuilder::on(&left)
+            .caption("(a) success against team size", text_style(19.0))
+            .margin(8)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x_range.clone(), 0.0..105.0)?;
+        configure_mesh(&mut success, "robots", "success [%]")?;
+        let convergence_max = table
+            .rows
+            .iter()
+            .filter_map(|r| r.convergence_s.map(|q| q.median))
+            .fold(1.0_f64, f64::max);
+        let mut convergence = ChartBuilder::on(&right)
+            .caption("(b) median convergence (10 %)", text_style(19.0))
+            .margin(8)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x_range.clone(), 0.0..1.1 * convergence_max)?;
+        configure_mesh(&mut convergence, "robots", "convergence [s]")?;
+        let mut entries = Vec::new();
+        for (k, who) in drivers.iter().enumerate() {
+            let rows: Vec<&formation_schema::ScalingRow> = table
+                .rows
+                .iter()
+                .filter(|r| scaling_driver(r) == *who)
+                .collect();
+            let color = robot_color(k);
+            let at = |f: &dyn Fn(&formation_schema::ScalingRow) -> Option<f64>| -> Vec<(f64, f64)> {
+                rows.iter()
+                    .filter_map(|r| f(r).map(|y| (r.robots as f64, y)))
+                    .collect()
+            };
+            let s10 = at(&|r| Some(100.0 * r.success_rate_10));
+            let s5 = at(&|r| Some(100.0 * r.success_rate_5));
+            let conv = at(&|r| r.convergence_s.map(|q| q.median));
+            success.draw_series(LineSeries::new(s10.iter().copied(), color.stroke_width(2)))?;
+            success.draw_series(s10.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
+            success.draw_series(LineSeries::new(s5.iter().copied(), color.stroke_width(1)))?;
+            convergence
+                .draw_series(LineSeries::new(conv.iter().copied(), color.stroke_width(2)))?;
+            convergence.draw_series(conv.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
+            // The legend is narrow: the controller, numbered when several models share it (the
+            // table names each model).
+            let controller = rows.first().map_or("", |r| r.controller.as_str());
+            let same = drivers
+                .iter()
+                .filter(|d| d.split(' ').next() == Some(controller))
+                .count();
+            let label = if same > 1 {
+                format!("{controller} {}", k + 1)
+            } else {
+                controller.to_owned()
+            };
+            entries.push((Mark::Line(color), format!("{label} @ 10 %")));
+            entries.push((Mark::Thin(color), format!("{label} @ 5 %")));
+        }
+        draw_legend(&legend, 44, &entries)
+    })
+}
+
+/// `expert`, or `policy <model id>`.
+fn scaling_driver(row: &formation_schema::ScalingRow) -> String {
+    match &row.model {
+        Some(id) => format!("{} {id}", row.controller),
+        None => row.controller.clone(),
+    }
+}
+
 /// Per-stage latency: a box from p50 to p90, a whisker to p99, a dot at the maximum, on a log
 /// scale in microseconds; the paper's inference time as a dashed line.
 pub fn latency_figure(
@@ -793,6 +898,7 @@ mod tests {
             d_star: 1.0,
             v_star: 0.7,
             edges: vec![(0, 1), (0, 2), (1, 2)],
+            neighbours: formation_proto::NeighbourRule::AllPairs,
             times: times.clone(),
             phi_star: vec![0.0; samples],
             poses,

@@ -47,6 +47,17 @@ pub struct CaptionedFigure {
     pub caption: String,
 }
 
+/// One scaling table: its rows and its figure.
+#[derive(Debug, Clone)]
+pub struct ScalingSection {
+    /// Where it came from, relative to the input directory.
+    pub source: String,
+    /// The rows.
+    pub rows: Vec<formation_schema::ScalingRow>,
+    /// Success and convergence against the team size.
+    pub figure: CaptionedFigure,
+}
+
 /// One case run: three panels and a fact sheet.
 #[derive(Debug, Clone)]
 pub struct RunSection {
@@ -96,6 +107,8 @@ pub struct ReportPage {
     pub training: Vec<CaptionedFigure>,
     /// Latency profiles.
     pub latency: Vec<CaptionedFigure>,
+    /// Scaling tables over team sizes.
+    pub scaling: Vec<ScalingSection>,
     /// Input files, relative to the input directory.
     pub inputs: Vec<String>,
 }
@@ -227,6 +240,9 @@ pub fn render_page(page: &ReportPage) -> String {
     if !page.runs.is_empty() {
         sections.push(("runs", "Case runs"));
     }
+    if !page.scaling.is_empty() {
+        sections.push(("scaling", "Scaling"));
+    }
     if !page.training.is_empty() {
         sections.push(("training", "Training"));
     }
@@ -273,6 +289,13 @@ pub fn render_page(page: &ReportPage) -> String {
         }
         for note in &page.run_notes {
             let _ = writeln!(html, "<p class=\"note\">{}</p>", escape(note));
+        }
+        html.push_str("</section>\n");
+    }
+    if !page.scaling.is_empty() {
+        html.push_str("<section id=\"scaling\">\n<h2>Scaling over team sizes</h2>\n");
+        for section in &page.scaling {
+            write_scaling(&mut html, section);
         }
         html.push_str("</section>\n");
     }
@@ -404,6 +427,59 @@ fn write_placed(html: &mut String, placed: &PlacedFigure, caption: Option<&str>)
         );
     }
     html.push_str("</figure>\n");
+}
+
+fn write_scaling(html: &mut String, section: &ScalingSection) {
+    html.push_str("<div class=\"card\">\n<div class=\"table-scroll\">\n<table class=\"results\">\n<thead><tr>");
+    for head in [
+        "Controller",
+        "Robots",
+        "Neighbour rule",
+        "Runs",
+        "Success at 5 %",
+        "Success at 10 %",
+        "Anchor-compatible",
+        "Median convergence (IQR)",
+        "Median formation error",
+        "Runs with collisions",
+    ] {
+        let _ = write!(html, "<th>{head}</th>");
+    }
+    html.push_str("</tr></thead>\n<tbody>\n");
+    for row in &section.rows {
+        let who = match &row.model {
+            Some(id) => format!("{} <code>{}</code>", escape(&row.controller), escape(id)),
+            None => escape(&row.controller),
+        };
+        let convergence = row.convergence_s.map_or_else(
+            || "–".to_owned(),
+            |q| format!("{:.1} s ({:.1}–{:.1})", q.median, q.q1, q.q3),
+        );
+        let error = row
+            .rel_formation_error
+            .map_or_else(|| "–".to_owned(), |q| percent(q.median));
+        let _ = writeln!(
+            html,
+            "<tr><td>{who}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            row.robots,
+            escape(&row.neighbours),
+            row.runs,
+            percent(row.success_rate_5),
+            percent(row.success_rate_10),
+            percent(row.anchor_success_rate),
+            convergence,
+            error,
+            row.collisions
+        );
+    }
+    html.push_str("</tbody>\n</table>\n</div>\n");
+    let _ = writeln!(
+        html,
+        "<p class=\"note\">From <code>{}</code>. Success is the strict check: every edge of the neighbour graph within the tolerance over the last 20 s, the graph connected and no collision (the paper's check for all pairs); anchor-compatible: mean edge error at most 10 % at the end and no two robots closer than 0.2 m.</p>",
+        escape(&section.source)
+    );
+    write_captioned(html, &section.figure);
+    html.push_str("</div>\n");
 }
 
 fn write_captioned(html: &mut String, figure: &CaptionedFigure) {

@@ -33,6 +33,22 @@ pub struct Inputs {
     pub loss_curves: Vec<LossCurve>,
     /// Latency profiles.
     pub profiles: Vec<LatencyProfile>,
+    /// Scaling tables (`scaling*.json`, written by `formation eval --robots ... --json`).
+    pub scalings: Vec<ScalingData>,
+}
+
+/// One scaling table and where it came from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScalingData {
+    /// The file.
+    pub source: PathBuf,
+    /// Its rows.
+    pub table: formation_schema::ScalingTable,
+}
+
+/// True for a scaling table's file name: `scaling*.json`.
+pub fn is_scaling_json(file_name: &str) -> bool {
+    file_name.starts_with("scaling") && file_name.ends_with(".json")
 }
 
 /// One eval output directory.
@@ -289,6 +305,7 @@ struct Found {
     summaries: Vec<PathBuf>,
     loss_csvs: Vec<PathBuf>,
     profiles: Vec<PathBuf>,
+    scalings: Vec<PathBuf>,
 }
 
 /// True for a training loss curve file name: `*loss*.csv`.
@@ -317,7 +334,7 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
     }
     let mut found = Found::default();
     search(root, 0, &mut found)?;
-    if found.summaries.is_empty() {
+    if found.summaries.is_empty() && found.scalings.is_empty() {
         return Err(ReportError::NoEvalOutput {
             dir: root.to_path_buf(),
         });
@@ -326,6 +343,7 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
         &mut found.summaries,
         &mut found.loss_csvs,
         &mut found.profiles,
+        &mut found.scalings,
     ] {
         list.sort();
     }
@@ -344,11 +362,22 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
         .iter()
         .map(|path| profile_view(&formation_schema::read_profile(path)?, path))
         .collect::<Result<Vec<_>, _>>()?;
+    let scalings = found
+        .scalings
+        .iter()
+        .map(|path| {
+            Ok(ScalingData {
+                source: path.clone(),
+                table: formation_schema::read_scaling(path)?,
+            })
+        })
+        .collect::<Result<Vec<_>, ReportError>>()?;
     Ok(Inputs {
         root: root.to_path_buf(),
         evals,
         loss_curves,
         profiles,
+        scalings,
     })
 }
 
@@ -378,6 +407,8 @@ fn search(dir: &Path, depth: usize, found: &mut Found) -> Result<(), ReportError
             found.summaries.push(path);
         } else if name == "profile.json" {
             found.profiles.push(path);
+        } else if is_scaling_json(&name) {
+            found.scalings.push(path);
         } else if is_loss_csv(&name) {
             found.loss_csvs.push(path);
         }
@@ -470,6 +501,7 @@ mod tests {
             max_edge_window_error: 0.03,
             orientation_error_rad: 0.03,
             collisions: usize::from(!success_5),
+            team: None,
         }
     }
 
@@ -497,6 +529,8 @@ mod tests {
                 }),
                 rel_formation_error: None,
                 orientation_error_rad: None,
+                anchor_success_rate: None,
+                connected_rate: None,
             },
             per_run: vec![metrics(true, 9.0, 0.02), metrics(false, 10.0, f64::NAN)],
             braked_ticks: Vec::new(),
@@ -568,6 +602,7 @@ mod tests {
                 d_star: 1.0,
                 v_star: 0.7,
                 edges,
+                neighbours: formation_proto::NeighbourRule::AllPairs,
                 times: vec![0.0, 0.5],
                 phi_star: vec![0.1, f64::NAN],
                 poses,

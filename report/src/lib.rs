@@ -9,7 +9,11 @@
 //! * Fig. 9: box plots of convergence time, relative formation error and orientation error over
 //!   the runs that succeed at 10 %;
 //! * for each run log (the paper's cases, Figs. 6-8): formation and orientation error over time,
-//!   wheel commands, and the trajectories with the formation drawn every 3 s;
+//!   wheel commands, and the trajectories with the formation drawn every 3 s; for a team whose
+//!   edges follow a neighbour graph, the median and worst edge error instead of one line per
+//!   pair, and the graph of each snapshot (every 10 s);
+//! * the scaling over team sizes (`scaling*.json` from `formation eval --robots ...`): the table
+//!   and success and convergence against the team size;
 //! * the training loss curve and the latency profile, when present.
 //!
 //! Every figure is also written as a standalone SVG file in `<out stem>-figures/` next to the
@@ -142,31 +146,33 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
     } else {
         multi_run
     };
-    let panels = fig9_panels(&fig9_evals);
-    let figure = figures::box_figure("fig9-statistics", &panels)?;
-    let number = numbering.take();
-    page.fig9 = Some(CaptionedFigure {
-        placed: numbering.place(
-            figure,
-            "Box plots of convergence time, formation error and orientation error",
-        ),
-        caption: format!(
-            "Figure {number}: Box plot of convergence time, relative formation error and orientation error over the last 20 s, over the runs that succeed at 10 % (cf. paper Fig. 9). The thick line is the median, the box spans the 25th to 75th percentiles, the whiskers extend to the minimum and maximum, dots are single runs; the dashed line is the paper's median."
-        ),
-    });
-    page.fig9_note = format!(
-        "Evaluations: {}.{}",
-        fig9_evals
-            .iter()
-            .map(|e| format!("{} ({} runs)", e.name, e.table.runs))
-            .collect::<Vec<_>>()
-            .join(", "),
-        if fig9_evals.len() < table_evals.len() {
-            " Single-run evaluations (the cases below) are left out of the statistics."
-        } else {
-            ""
-        }
-    );
+    if !table_evals.is_empty() {
+        let panels = fig9_panels(&fig9_evals);
+        let figure = figures::box_figure("fig9-statistics", &panels)?;
+        let number = numbering.take();
+        page.fig9 = Some(CaptionedFigure {
+            placed: numbering.place(
+                figure,
+                "Box plots of convergence time, formation error and orientation error",
+            ),
+            caption: format!(
+                "Figure {number}: Box plot of convergence time, relative formation error and orientation error over the last 20 s, over the runs that succeed at 10 % (cf. paper Fig. 9). The thick line is the median, the box spans the 25th to 75th percentiles, the whiskers extend to the minimum and maximum, dots are single runs; the dashed line is the paper's median."
+            ),
+        });
+        page.fig9_note = format!(
+            "Evaluations: {}.{}",
+            fig9_evals
+                .iter()
+                .map(|e| format!("{} ({} runs)", e.name, e.table.runs))
+                .collect::<Vec<_>>()
+                .join(", "),
+            if fig9_evals.len() < table_evals.len() {
+                " Single-run evaluations (the cases below) are left out of the statistics."
+            } else {
+                ""
+            }
+        );
+    }
 
     for eval in &inputs.evals {
         for run in &eval.runs {
@@ -188,6 +194,21 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
         );
     }
 
+    for (k, scaling) in inputs.scalings.iter().enumerate() {
+        let figure = figures::scaling_figure(&format!("scaling-{}", k + 1), &scaling.table)?;
+        let number = numbering.take();
+        page.scaling.push(html::ScalingSection {
+            source: relative(&inputs.root, &scaling.source),
+            rows: scaling.table.rows.clone(),
+            figure: CaptionedFigure {
+                placed: numbering.place(figure, "Success and convergence against team size"),
+                caption: format!(
+                    "Figure {number}: (a) success at 10 % (thick) and 5 % (thin) and (b) median convergence time at 10 % against the team size ({}, seed {}, {} s per run).",
+                    scaling.table.scenario, scaling.table.seed, scaling.table.duration_s
+                ),
+            },
+        });
+    }
     for (k, curve) in inputs.loss_curves.iter().enumerate() {
         let figure = figures::loss_figure(&format!("training-loss-{}", k + 1), curve)?;
         let number = numbering.take();
@@ -222,6 +243,7 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
         .flat_map(|e| std::iter::once(&e.source).chain(e.runs.iter().map(|r| &r.source)))
         .chain(inputs.loss_curves.iter().map(|c| &c.source))
         .chain(inputs.profiles.iter().map(|p| &p.source))
+        .chain(inputs.scalings.iter().map(|s| &s.source))
         .map(|path| relative(&inputs.root, path))
         .collect();
     Ok((page, numbering.figures))
@@ -412,18 +434,32 @@ fn run_section(
         ),
         numbering.place(
             figures::trajectory_figure(&format!("{stem}-trajectory"), traj)?,
-            "Robot trajectories with the formation every 3 s",
+            &format!(
+                "Robot trajectories with the formation every {} s",
+                figures::snapshot_every_s(traj)
+            ),
         ),
     ];
+    let team_note = if traj.neighbours == formation_proto::NeighbourRule::AllPairs {
+        String::new()
+    } else {
+        format!(
+            " The formation's edges follow the {} neighbour rule and change with the robots' \
+             positions: (a) shows the median and the worst edge error over the edges of each \
+             instant, (c) the neighbour graph of each snapshot.",
+            traj.neighbours.name()
+        )
+    };
     let heading = heading_description(&traj.phi_star);
     let cf = paper_figure(&eval.scenario)
         .map(|f| format!(" (cf. paper {f})"))
         .unwrap_or_default();
     let caption = format!(
-        "Figure {number}: {} run {}{cf} with {heading} and desired formation distance d* = {} m: (a) formation and orientation error; (b) robot control (left and right wheel); (c) robot trajectories, the triangles and dashed lines showing the robots and the formation every 3 s.",
+        "Figure {number}: {} run {}{cf} with {heading} and desired formation distance d* = {} m: (a) formation and orientation error; (b) robot control (left and right wheel); (c) robot trajectories, the triangles and dashed lines showing the robots and the formation every {} s.{team_note}",
         eval.name,
         run.index,
         figures::trim_number(traj.d_star),
+        figures::snapshot_every_s(traj),
     );
     let duration =
         traj.times.last().copied().unwrap_or(0.0) - traj.times.first().copied().unwrap_or(0.0);

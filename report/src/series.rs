@@ -4,7 +4,8 @@
 
 use std::ops::Range;
 
-use formation_proto::wrap_angle;
+use formation_proto::{NeighbourRule, wrap_angle};
+use formation_world::neighbours::NeighbourTracker;
 
 use crate::input::Trajectory;
 
@@ -53,8 +54,32 @@ pub fn edge_label(i: usize, j: usize) -> String {
     }
 }
 
-/// Relative formation error `e_ij(t) = |d_ij(t) - d*| / d*` of every edge, in percent.
+/// The formation's edges at every sample: the trajectory's `edges` under all pairs, else the
+/// run's neighbour rule applied sample after sample (as the metrics do).
+pub fn edges_per_sample(traj: &Trajectory) -> Vec<Vec<(usize, usize)>> {
+    match traj.neighbours {
+        NeighbourRule::AllPairs => vec![traj.edges.clone(); traj.poses.len()],
+        rule => {
+            let mut tracker = NeighbourTracker::new(rule, traj.n_robots());
+            traj.poses
+                .iter()
+                .map(|poses| {
+                    let positions: Vec<(f64, f64)> = poses.iter().map(|p| (p.x, p.y)).collect();
+                    tracker.update(&positions);
+                    tracker.edges().to_vec()
+                })
+                .collect()
+        }
+    }
+}
+
+/// Relative formation error `e_ij(t) = |d_ij(t) - d*| / d*` in percent: one line per edge for the
+/// paper's all-pairs formation; for a team whose edges change, two lines that aggregate over the
+/// edges of each sample, the median and the maximum edge error.
 pub fn formation_error_percent(traj: &Trajectory) -> Vec<Series> {
+    if traj.neighbours != NeighbourRule::AllPairs {
+        return aggregated_edge_error_percent(traj);
+    }
     traj.edges
         .iter()
         .map(|&(i, j)| {
@@ -70,6 +95,39 @@ pub fn formation_error_percent(traj: &Trajectory) -> Vec<Series> {
             )
         })
         .collect()
+}
+
+/// The median and the maximum over the edges of each sample of the edge error, in percent.
+fn aggregated_edge_error_percent(traj: &Trajectory) -> Vec<Series> {
+    let edges = edges_per_sample(traj);
+    let mut median = Vec::with_capacity(edges.len());
+    let mut max = Vec::with_capacity(edges.len());
+    for ((&t, poses), edges) in traj.times.iter().zip(&traj.poses).zip(&edges) {
+        let mut errors: Vec<f64> = edges
+            .iter()
+            .map(|&(i, j)| {
+                let (a, b) = (poses[i], poses[j]);
+                100.0 * ((a.x - b.x).hypot(a.y - b.y) - traj.d_star).abs() / traj.d_star
+            })
+            .filter(|e| e.is_finite())
+            .collect();
+        if errors.is_empty() {
+            continue;
+        }
+        errors.sort_by(f64::total_cmp);
+        let n = errors.len();
+        let mid = if n % 2 == 1 {
+            errors[n / 2]
+        } else {
+            0.5 * (errors[n / 2 - 1] + errors[n / 2])
+        };
+        median.push((t, mid));
+        max.push((t, errors[n - 1]));
+    }
+    vec![
+        Series::from_samples("median edge".to_owned(), median.into_iter()),
+        Series::from_samples("worst edge".to_owned(), max.into_iter()),
+    ]
 }
 
 /// Signed orientation error `wrap(theta_i(t) - phi*(t))` of every robot \[rad\].
@@ -226,6 +284,43 @@ mod tests {
     use super::*;
     use formation_proto::{Pose, WheelCmd};
 
+    /// A team of four under the Gabriel rule: two equilateral triangles of side `scale(k) d*`.
+    fn team(scale: impl Fn(usize) -> f64) -> Trajectory {
+        let mut t = traj();
+        let h = 3f64.sqrt() / 2.0;
+        for (k, poses) in t.poses.iter_mut().enumerate() {
+            let s = t.d_star * scale(k);
+            *poses = [(0.0, 0.0), (s, 0.0), (s / 2.0, s * h), (1.5 * s, s * h)]
+                .iter()
+                .map(|&(x, y)| Pose { x, y, theta: 0.0 })
+                .collect();
+        }
+        t.commands = vec![vec![WheelCmd::default(); 4]; 2];
+        t.neighbours =
+            NeighbourRule::Gabriel(formation_world::neighbours::GabrielRule::with_range(10.0));
+        t.edges = Vec::new();
+        t
+    }
+
+    #[test]
+    fn a_teams_edge_error_is_drawn_as_its_median_and_worst_edge_over_the_changing_edges() {
+        let t = team(|k| [1.1, 1.0, 1.0][k]);
+        let edges = edges_per_sample(&t);
+        assert_eq!(edges.len(), 3);
+        assert_eq!(edges[0], vec![(0, 1), (0, 2), (1, 2), (1, 3), (2, 3)]);
+        let series = formation_error_percent(&t);
+        let labels: Vec<&str> = series.iter().map(|s| s.label.as_str()).collect();
+        assert_eq!(labels, ["median edge", "worst edge"]);
+        for s in &series {
+            assert!(
+                (s.points[0].1 - 10.0).abs() < 1e-9 && s.points[2].1.abs() < 1e-9,
+                "{s:?}"
+            );
+        }
+        // All pairs keeps one line per edge.
+        assert_eq!(formation_error_percent(&traj()).len(), 3);
+    }
+
     fn traj() -> Trajectory {
         let pose = |x: f64, y: f64, theta: f64| Pose { x, y, theta };
         Trajectory {
@@ -233,6 +328,7 @@ mod tests {
             d_star: 2.0,
             v_star: 0.7,
             edges: vec![(0, 1), (0, 2), (1, 2)],
+            neighbours: formation_proto::NeighbourRule::AllPairs,
             times: vec![0.0, 1.0, 2.0],
             phi_star: vec![0.0, 0.0, 3.0],
             poses: vec![

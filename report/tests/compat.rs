@@ -48,6 +48,7 @@ fn trajectory(seconds: f64, d_star: f64, spread: f64) -> Trajectory {
         d_star,
         v_star: 0.7,
         edges: vec![(0, 1), (0, 2), (1, 2)],
+        neighbours: formation_proto::NeighbourRule::AllPairs,
         phi_star: vec![0.0; times.len()],
         commands: vec![
             vec![

@@ -241,3 +241,59 @@ fn optional_sections_are_omitted_when_absent() {
         "1 of 2 runs succeed at 10 %"
     );
 }
+
+#[test]
+fn a_scaling_table_gets_its_section_with_the_rows_and_the_figure() {
+    use formation_schema::{Quantiles, ScalingRow, ScalingTable};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dir.path().join("teams");
+    fs::create_dir_all(&data).expect("dir");
+    let q = |median: f64| Quantiles {
+        min: median,
+        q1: median,
+        median,
+        q3: median,
+        max: median,
+        count: 10,
+    };
+    let row = |controller: &str, robots: usize, success: f64| ScalingRow {
+        controller: controller.into(),
+        model: (controller == "policy").then(|| "policy-1234".to_owned()),
+        robots,
+        neighbours: if robots == 3 { "all_pairs" } else { "gabriel" }.into(),
+        runs: 10,
+        success_rate_5: success - 0.1,
+        success_rate_10: success,
+        anchor_success_rate: 1.0,
+        convergence_s: Some(q(robots as f64)),
+        rel_formation_error: Some(q(0.01)),
+        max_edge_window_error: Some(q(0.02)),
+        collisions: 0,
+    };
+    let table = ScalingTable {
+        scenario: "teams".into(),
+        seed: 7,
+        duration_s: 60.0,
+        rows: vec![
+            row("expert", 3, 1.0),
+            row("policy", 3, 0.9),
+            row("expert", 16, 0.98),
+            row("policy", 16, 0.5),
+        ],
+    };
+    fs::write(
+        data.join("scaling.json"),
+        formation_schema::to_json_pretty(&table).expect("json"),
+    )
+    .expect("write");
+    let out = dir.path().join("report.html");
+    let summary = build_report(&data, &out).expect("a scaling table alone makes a report");
+    assert_eq!(summary.evaluations, 0);
+    assert_eq!(summary.figures.len(), 1);
+    let html = fs::read_to_string(&out).expect("html");
+    assert!(html.contains("Scaling over team sizes"));
+    assert!(html.contains("<td>16</td><td>gabriel</td><td>10</td><td>88.0 %</td><td>98.0 %</td>"));
+    assert!(html.contains("policy-1234"));
+    let svg = fs::read_to_string(&summary.figures[0]).expect("svg");
+    assert!(svg.contains("expert @ 10 %") && svg.contains("policy @ 5 %"));
+}

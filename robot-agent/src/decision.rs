@@ -92,6 +92,21 @@ pub enum DecisionError {
         /// Right wheel output.
         right: f32,
     },
+    /// The goal's d* lies outside the range the model was trained on.
+    #[error(
+        "goal d* = {d_star} m is outside the d* range [{min}, {max}] m that model {model} was \
+         trained on; give a d* inside it or use a model trained for this d*"
+    )]
+    OutsideEnvelope {
+        /// Model id.
+        model: String,
+        /// The goal's d* \[m\].
+        d_star: f64,
+        /// Smallest trained d* \[m\].
+        min: f64,
+        /// Largest trained d* \[m\].
+        max: f64,
+    },
     /// The goal cannot be acted on.
     #[error("invalid goal: {reason}")]
     Goal {
@@ -137,6 +152,27 @@ pub trait PolicyBackend: Send {
     fn v_train(&self) -> f64;
     /// A short id naming the model (logged with every command).
     fn model_id(&self) -> &str;
+    /// What the model was trained on beyond its sensor (d* range, team sizes, noise); empty
+    /// when it records nothing.
+    fn envelope(&self) -> formation_onnx::ModelEnvelope {
+        formation_onnx::ModelEnvelope::default()
+    }
+}
+
+/// Refuses a goal d* outside `policy`'s trained d* range.
+pub fn check_goal_envelope(policy: &dyn PolicyBackend, d_star: f64) -> Result<(), DecisionError> {
+    let envelope = policy.envelope();
+    match envelope.d_star {
+        Some((min, max)) if !envelope.admits_d_star(d_star) => {
+            Err(DecisionError::OutsideEnvelope {
+                model: policy.model_id().to_owned(),
+                d_star,
+                min,
+                max,
+            })
+        }
+        _ => Ok(()),
+    }
 }
 
 impl PolicyBackend for OnnxPolicy {
@@ -154,6 +190,9 @@ impl PolicyBackend for OnnxPolicy {
     }
     fn v_train(&self) -> f64 {
         self.metadata().v_train
+    }
+    fn envelope(&self) -> formation_onnx::ModelEnvelope {
+        self.metadata().envelope()
     }
     fn model_id(&self) -> &str {
         OnnxPolicy::model_id(self)
@@ -214,8 +253,11 @@ impl Agent {
     }
 
     /// Runs the policy on the last perceived image and scales its output to the goal's speed.
+    ///
+    /// A goal whose d* lies outside the model's trained d* range (its envelope) is refused.
     pub fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, DecisionError> {
         let aux = policy_aux(heading, goal)?;
+        check_goal_envelope(self.policy.as_ref(), goal.d_star)?;
         self.last_aux = Some(aux);
         let [left, right] = self.policy.infer(&self.image_f32, aux)?;
         if !(left.is_finite() && right.is_finite()) {
@@ -394,6 +436,16 @@ pub fn check_team_models(
     models: &[PathBuf],
     lidar: &LidarSpec,
 ) -> Result<Vec<String>, TeamModelError> {
+    check_team_models_for(models, lidar, &[])
+}
+
+/// [`check_team_models`], and every d* of `d_stars` (the scenario's) must lie in each model's
+/// trained d* range, when the model records one.
+pub fn check_team_models_for(
+    models: &[PathBuf],
+    lidar: &LidarSpec,
+    d_stars: &[f64],
+) -> Result<Vec<String>, TeamModelError> {
     let mut checked: BTreeMap<&Path, String> = BTreeMap::new();
     let mut ids = Vec::with_capacity(models.len());
     for (robot, path) in models.iter().enumerate() {
@@ -407,6 +459,9 @@ pub fn check_team_models(
                 };
                 let policy = OnnxPolicy::load(path).map_err(|e| fail(e.into()))?;
                 check_policy(&policy, lidar).map_err(fail)?;
+                for &d_star in d_stars {
+                    check_goal_envelope(&policy, d_star).map_err(fail)?;
+                }
                 let id = policy.model_id().to_owned();
                 checked.insert(path, id.clone());
                 id
@@ -483,6 +538,7 @@ mod tests {
     struct Probe {
         spec: OccupancySpec,
         seen: Option<([f32; 2], f32)>,
+        d_star: Option<(f64, f64)>,
     }
 
     impl PolicyBackend for Probe {
@@ -506,6 +562,12 @@ mod tests {
         fn model_id(&self) -> &str {
             "probe"
         }
+        fn envelope(&self) -> formation_onnx::ModelEnvelope {
+            formation_onnx::ModelEnvelope {
+                d_star: self.d_star,
+                ..formation_onnx::ModelEnvelope::default()
+            }
+        }
     }
 
     fn probe() -> Box<Probe> {
@@ -516,7 +578,33 @@ mod tests {
                 beyond: BeyondWindow::Drop,
             },
             seen: None,
+            d_star: None,
         })
+    }
+
+    #[test]
+    fn a_goal_outside_the_models_d_star_range_is_refused_naming_the_range_and_the_model() {
+        let lidar = LidarSpec::default();
+        let mut probe = probe();
+        probe.d_star = Some((0.8, 2.5));
+        let mut agent = Agent::new(probe, lidar).expect("probe matches the sensor");
+        let scan = vec![lidar.max_range as f32; lidar.beams];
+        let goal = |d_star| Goal {
+            phi_star: 0.0,
+            d_star,
+            v_star: 0.7,
+        };
+        agent.act(&scan, 0.0, &goal(2.5)).expect("inside the range");
+        let err = agent.act(&scan, 0.0, &goal(3.0)).unwrap_err();
+        assert!(
+            matches!(err, DecisionError::OutsideEnvelope { .. }),
+            "{err}"
+        );
+        let text = err.to_string();
+        assert!(
+            text.contains("d* = 3 m") && text.contains("[0.8, 2.5] m") && text.contains("probe"),
+            "{text}"
+        );
     }
 
     #[test]

@@ -7,6 +7,12 @@
 //! | `timing/run-NNNN.json` | [`TimingLog`] | [`TimingLog::FORMAT`] | [`TimingLog::VERSION`] |
 //! | `summary.json`, `formation eval --json` | [`EvalOutput`] | [`EvalOutput::FORMAT`] | [`EvalOutput::VERSION`] |
 //! | `profile.json` | [`LatencyProfile`] | [`LatencyProfile::FORMAT`] | [`LatencyProfile::VERSION`] |
+//! | `formation eval --robots ... --json` | [`ScalingTable`] | [`ScalingTable::FORMAT`] | [`ScalingTable::VERSION`] |
+//!
+//! A format may read older versions than it writes ([`SchemaFile::OLDEST_VERSION`]): the run log
+//! is written as version 2 (its trajectory names its neighbour rule) and version 1 files still
+//! read, as the all-pairs formation they were; a build that reads only version 1 refuses a
+//! version 2 file with the message that says which versions it reads.
 //!
 //! Every file is one JSON object whose first two keys are `format` and `schema_version`, followed
 //! by the type's own fields: [`to_json`] and [`to_json_pretty`] write them, [`from_json`] and the
@@ -27,6 +33,7 @@
 mod nan;
 mod profile;
 mod run;
+mod scaling;
 mod summary;
 mod timing;
 
@@ -38,7 +45,8 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 pub use profile::{LatencyProfile, StageStats};
-pub use run::{RunLog, RunMetrics, Trajectory};
+pub use run::{RunLog, RunMetrics, TeamMetrics, Trajectory};
+pub use scaling::{ScalingRow, ScalingTable};
 pub use summary::{EvalOutput, IncompleteRun, Quantiles, Summary};
 pub use timing::TimingLog;
 
@@ -46,8 +54,10 @@ pub use timing::TimingLog;
 pub trait SchemaFile: Serialize + DeserializeOwned {
     /// The `format` key of every file of this kind.
     const FORMAT: &'static str;
-    /// The `schema_version` this build writes and reads.
+    /// The `schema_version` this build writes (and the newest it reads).
     const VERSION: u32;
+    /// The oldest `schema_version` this build still reads (by default only [`Self::VERSION`]).
+    const OLDEST_VERSION: u32 = Self::VERSION;
     /// What the file is, for messages (`"formation run log"`).
     const WHAT: &'static str;
     /// The largest file read \[bytes\].
@@ -85,10 +95,11 @@ pub fn from_json<F: SchemaFile>(bytes: &[u8], path: &Path) -> Result<F, SchemaEr
             found: format,
         });
     }
-    if version != u64::from(F::VERSION) {
+    if !(u64::from(F::OLDEST_VERSION)..=u64::from(F::VERSION)).contains(&version) {
         return Err(SchemaError::Version {
             path: path.to_path_buf(),
             what: F::WHAT,
+            oldest: F::OLDEST_VERSION,
             expected: F::VERSION,
             found: version,
         });
@@ -130,6 +141,11 @@ pub fn read_timing_log(path: &Path) -> Result<TimingLog, SchemaError> {
 
 /// Reads an evaluation summary (`summary.json`, or what `formation eval --json` wrote).
 pub fn read_summary(path: &Path) -> Result<EvalOutput, SchemaError> {
+    read(path)
+}
+
+/// Reads a scaling table (what `formation eval --robots ... --json` wrote).
+pub fn read_scaling(path: &Path) -> Result<ScalingTable, SchemaError> {
     read(path)
 }
 
@@ -222,7 +238,9 @@ pub enum SchemaError {
         path: PathBuf,
         /// What it is.
         what: &'static str,
-        /// The version this build reads.
+        /// The oldest version this build reads.
+        oldest: u32,
+        /// The newest version this build reads (the one it writes).
         expected: u32,
         /// Its `schema_version` (0 when it has none).
         found: u64,
@@ -281,23 +299,36 @@ impl fmt::Display for SchemaError {
             ),
             SchemaError::Version {
                 what,
+                oldest,
                 expected,
                 found: 0,
                 ..
             } => write!(
                 f,
-                "{path} is a {what} without a schema version; this build reads version {expected}: re-run it or use the matching formation version"
+                "{path} is a {what} without a schema version; this build reads {}: re-run it or use the matching formation version",
+                versions(*oldest, *expected)
             ),
             SchemaError::Version {
                 what,
+                oldest,
                 expected,
                 found,
                 ..
             } => write!(
                 f,
-                "{path} is a {what} of schema version {found}; this build reads version {expected}: re-run it or use the matching formation version"
+                "{path} is a {what} of schema version {found}; this build reads {}: re-run it or use the matching formation version",
+                versions(*oldest, *expected)
             ),
         }
+    }
+}
+
+/// `version N` or `versions A to B`.
+pub fn versions(oldest: u32, newest: u32) -> String {
+    if oldest == newest {
+        format!("version {newest}")
+    } else {
+        format!("versions {oldest} to {newest}")
     }
 }
 

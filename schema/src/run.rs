@@ -1,6 +1,6 @@
 //! The run log (`runs/run-NNNN.json`) and what it embeds: a run's trajectory and its metrics.
 
-use formation_proto::{Pose, WheelCmd};
+use formation_proto::{NeighbourRule, Pose, WheelCmd};
 use serde::{Deserialize, Serialize};
 
 use crate::{SchemaFile, nan};
@@ -19,8 +19,13 @@ pub struct Trajectory {
     /// Desired speed \[m/s\].
     #[serde(deserialize_with = "nan::float")]
     pub v_star: f64,
-    /// Formation edges the metrics score.
+    /// Formation edges: under [`NeighbourRule::AllPairs`] every pair, the edges the metrics
+    /// score; under a rule whose edges change, the edges at the last sample (for drawing), the
+    /// metrics recomputing them at every sample from `neighbours` and the poses.
     pub edges: Vec<(usize, usize)>,
+    /// The neighbour rule of the run (schema version 2; files of version 1 read as all pairs).
+    #[serde(default = "all_pairs")]
+    pub neighbours: NeighbourRule,
     /// Sample times \[s\].
     #[serde(deserialize_with = "nan::floats")]
     pub times: Vec<f64>,
@@ -36,6 +41,10 @@ pub struct Trajectory {
     /// Robot-robot overlaps `(k, i, j)`, `i < j`, found in the state at sample `k` (so `k >= 1`), as the
     /// world reported them after each step.
     pub collisions: Vec<(u64, usize, usize)>,
+}
+
+fn all_pairs() -> NeighbourRule {
+    NeighbourRule::AllPairs
 }
 
 impl Trajectory {
@@ -68,6 +77,34 @@ pub struct RunMetrics {
     pub orientation_error_rad: f64,
     /// Number of collision events.
     pub collisions: usize,
+    /// The team figures: present for runs whose edges follow a changing neighbour graph, and
+    /// whenever the writer was asked for them; absent for the paper's all-pairs runs, whose
+    /// metrics keep their original form.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub team: Option<TeamMetrics>,
+}
+
+/// What a team's run adds to the paper's metrics (computed by
+/// `formation_world::metrics::run_metrics`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TeamMetrics {
+    /// Whether the neighbour graph connected the whole team at every sample of the window.
+    pub connected: bool,
+    /// The pairs scored: those that were edges at some sample of the window.
+    pub edges_scored: usize,
+    /// Median over the scored edges of each edge's mean relative error over the samples of the
+    /// window at which it was an edge.
+    #[serde(deserialize_with = "nan::float")]
+    pub median_edge_window_error: f64,
+    /// Mean relative error over the edges of the last sample.
+    #[serde(deserialize_with = "nan::float")]
+    pub final_mean_edge_error: f64,
+    /// Smallest distance \[m\] between two robots at the last sample.
+    #[serde(deserialize_with = "nan::float")]
+    pub final_min_distance: f64,
+    /// The anchor-compatible check (Huang, Yang and Guo, ICRA 2026): the mean edge error at the
+    /// last sample is at most 10 % and no two robots are closer than 0.2 m there.
+    pub anchor_success: bool,
 }
 
 /// One run's log (`runs/run-NNNN.json`), written by the world process for `formation run` and
@@ -118,7 +155,8 @@ impl RunLog {
 
 impl SchemaFile for RunLog {
     const FORMAT: &'static str = "formation-run-log";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
+    const OLDEST_VERSION: u32 = 1;
     const WHAT: &'static str = "formation run log";
     const MAX_BYTES: u64 = 2 << 30;
 }

@@ -48,6 +48,14 @@ pub struct Summary {
     pub rel_formation_error: Option<Quantiles>,
     /// Orientation error \[rad\] over the runs that succeed at 10 %.
     pub orientation_error_rad: Option<Quantiles>,
+    /// Fraction (0..1) of runs that pass the anchor-compatible check ([`crate::TeamMetrics`]);
+    /// present when every run has team figures.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub anchor_success_rate: Option<f64>,
+    /// Fraction (0..1) of runs whose neighbour graph stayed connected over the window; present
+    /// when every run has team figures.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub connected_rate: Option<f64>,
 }
 
 /// What `formation eval` writes as JSON (`--json`, and `summary.json` under `--out`), and what

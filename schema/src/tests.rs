@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use formation_proto::wire::{RobotTiming, TickOutcome};
-use formation_proto::{Pose, WheelCmd};
+use formation_proto::{GabrielRule, NeighbourRule, Pose, WheelCmd};
 
 use super::*;
 
@@ -19,6 +19,7 @@ fn trajectory() -> Trajectory {
         d_star: 2.0,
         v_star: 0.7,
         edges: vec![(0, 1)],
+        neighbours: NeighbourRule::AllPairs,
         times: vec![0.0, 0.05],
         phi_star: vec![std::f64::consts::PI, 1.0 / 3.0],
         poses: vec![vec![pose(0.0), pose(2.0)], vec![pose(0.035), pose(2.035)]],
@@ -43,6 +44,7 @@ fn metrics() -> RunMetrics {
         max_edge_window_error: 0.07,
         orientation_error_rad: 0.031,
         collisions: 1,
+        team: None,
     }
 }
 
@@ -104,6 +106,8 @@ fn summary() -> EvalOutput {
             convergence_s: Some(q),
             rel_formation_error: None,
             orientation_error_rad: Some(q),
+            anchor_success_rate: Some(1.0),
+            connected_rate: None,
         },
         per_run: vec![metrics(), metrics()],
         braked_ticks: vec![BTreeMap::from([("missing".to_owned(), 4)]), BTreeMap::new()],
@@ -248,9 +252,9 @@ fn refuses_another_version<F: SchemaFile + std::fmt::Debug>(value: &F, what: &st
     assert_eq!(
         err.to_string(),
         format!(
-            "{} is a {what} of schema version 3; this build reads version {}: re-run it or use the matching formation version",
+            "{} is a {what} of schema version 3; this build reads {}: re-run it or use the matching formation version",
             path.display(),
-            F::VERSION
+            versions(F::OLDEST_VERSION, F::VERSION)
         )
     );
     // A version without a format is not this format; a format without a version is refused too.
@@ -350,4 +354,65 @@ fn broken_and_unreadable_files_are_errors_naming_them() {
     let err = read_profile(&dir.join("missing.json")).unwrap_err();
     assert!(matches!(err, SchemaError::Read { .. }), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_version_1_run_log_reads_as_the_all_pairs_formation_and_version_2_keeps_its_rule() {
+    let path = Path::new("runs/run-0003.json");
+    let mut log = run_log();
+    // Version 1 had no `neighbours`.
+    let text = String::from_utf8(to_json(&log).unwrap()).unwrap();
+    assert!(text.contains("\"schema_version\":2,"));
+    let v1 = text
+        .replacen("\"schema_version\":2,", "\"schema_version\":1,", 1)
+        .replacen(",\"neighbours\":\"all_pairs\"", "", 1);
+    assert!(!v1.contains("neighbours"), "{v1}");
+    assert_eq!(from_json::<RunLog>(v1.as_bytes(), path).unwrap(), log);
+
+    log.trajectory.neighbours = NeighbourRule::Gabriel(GabrielRule::with_range(7.5));
+    log.metrics.team = Some(TeamMetrics {
+        connected: true,
+        edges_scored: 1,
+        median_edge_window_error: 0.01,
+        final_mean_edge_error: 0.02,
+        final_min_distance: 1.9,
+        anchor_success: true,
+    });
+    let read = from_json::<RunLog>(&to_json(&log).unwrap(), path).unwrap();
+    assert_eq!(read, log);
+    assert_eq!(versions(1, 2), "versions 1 to 2");
+    assert_eq!(versions(1, 1), "version 1");
+}
+
+fn scaling() -> ScalingTable {
+    ScalingTable {
+        scenario: "table1".into(),
+        seed: 7,
+        duration_s: 60.0,
+        rows: vec![ScalingRow {
+            controller: "expert".into(),
+            model: None,
+            robots: 5,
+            neighbours: "gabriel".into(),
+            runs: 10,
+            success_rate_5: 0.9,
+            success_rate_10: 1.0,
+            anchor_success_rate: 1.0,
+            convergence_s: None,
+            rel_formation_error: None,
+            max_edge_window_error: None,
+            collisions: 0,
+        }],
+    }
+}
+
+#[test]
+fn a_scaling_table_round_trips_and_refuses_another_version() {
+    let table = scaling();
+    let path = Path::new("scaling.json");
+    assert_eq!(
+        from_json::<ScalingTable>(&to_json_pretty(&table).unwrap(), path).unwrap(),
+        table
+    );
+    refuses_another_version(&table, "formation scaling table");
 }

@@ -396,3 +396,86 @@ fn a_team_too_large_for_the_hosts_limits_is_refused_before_anything_starts() {
     );
     leaks.assert_clean();
 }
+
+/// Issue 10: a goal outside the model's trained d* range, a neighbour rule named wrongly and a team
+/// too large for its disc are refused before anything runs, each naming the cause and the fix.
+#[test]
+fn teams_and_envelopes_bad_input_is_refused_with_a_clear_error() {
+    let _watchdog = Watchdog::arm("teams_bad_input", LIMIT);
+    let dir = TempDir::new("teams");
+    let narrow = dir.path().join("narrow.onnx");
+    formation_tests::write_tiny_model_with(&narrow, 3, &["--d-star-range", "0.8,1.5"]);
+    let narrow_arg = narrow.display().to_string();
+    // case1's d* = 2 m is outside [0.8, 1.5] m.
+    let case1 = repo_root()
+        .join("scenarios/case1.toml")
+        .display()
+        .to_string();
+    let needles = ["d* = 2 m", "[0.8, 1.5] m", "robot 0", "narrow.onnx"];
+    for extra in [&[][..], &["--processes"][..]] {
+        let mut args = vec!["eval", "--scenario", &case1, "--model", &narrow_arg];
+        args.extend_from_slice(extra);
+        fails_cleanly(&args, &[], &needles);
+    }
+    let run_id = unique_run_id("envelope");
+    let leaks = LeakCheck::new(&run_id);
+    fails_cleanly(
+        &[
+            "run",
+            "--run-id",
+            run_id.as_str(),
+            "--scenario",
+            &case1,
+            "--model",
+            &narrow_arg,
+        ],
+        &[],
+        &needles,
+    );
+    leaks.assert_clean();
+    // Inside the range the same model is accepted.
+    let inside = scenario_with(dir.path(), "inside.toml", |t| {
+        t.replace("d_star = 2.0", "d_star = 1.5")
+            .replace("duration_s = 60.0", "duration_s = 1.0")
+    });
+    let mut ok = Command::new(&binaries().cli);
+    ok.args(["eval", "--scenario", &inside, "--model", &narrow_arg]);
+    run(ok, LIMIT).assert_success();
+
+    let wrong_rule = scenario_with(dir.path(), "rule.toml", |t| {
+        format!("{t}\n[formation]\nneighbours = \"delaunay\"\n")
+    });
+    fails_cleanly(
+        &["eval", "--controller", "expert", "--scenario", &wrong_rule],
+        &[],
+        &[
+            "formation.neighbours",
+            "\"all_pairs\", \"gabriel\"",
+            "delaunay",
+        ],
+    );
+    let crowded = scenario_with(dir.path(), "crowded.toml", |t| {
+        format!(
+            "{}\n[init]\ndisc_radius = 3.0\n",
+            t.replace("robots = 3", "robots = 200")
+        )
+    });
+    fails_cleanly(
+        &["eval", "--controller", "expert", "--scenario", &crowded],
+        &[],
+        &["init.disc_radius", "too small to place 200 robots"],
+    );
+    fails_cleanly(
+        &[
+            "eval",
+            "--controller",
+            "expert",
+            "--scenario",
+            &case1,
+            "--robots",
+            "3,1",
+        ],
+        &[],
+        &["team size from 2 to 1024"],
+    );
+}

@@ -65,7 +65,8 @@ pub fn run_episode_recorded<E>(
         dt: spec.world.dt,
         d_star: spec.d_star,
         v_star: spec.v_star,
-        edges: spec.edges.clone(),
+        edges: crate::neighbours::first_sample_edges(spec.neighbours, &spec.initial),
+        neighbours: spec.neighbours,
         times: Vec::with_capacity(capacity),
         phi_star: Vec::with_capacity(capacity),
         poses: Vec::with_capacity(capacity),
@@ -184,7 +185,8 @@ noise_std = {noise_std}
         assert_eq!(traj.poses.len(), 21);
         assert_eq!(traj.commands, vec![vec![cmd; 3]; 20]);
         assert_eq!(traj.poses[0], spec.initial);
-        assert_eq!(traj.edges, spec.edges);
+        assert_eq!(traj.edges, vec![(0, 1), (0, 2), (1, 2)]);
+        assert_eq!(traj.neighbours, crate::neighbours::NeighbourRule::AllPairs);
         for (k, (&t, &phi)) in traj.times.iter().zip(&traj.phi_star).enumerate() {
             assert_eq!(t, k as f64 * spec.world.dt);
             assert_eq!(phi, spec.heading.phi_star(t));

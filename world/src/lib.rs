@@ -9,7 +9,10 @@
 //! * [`scenario`]: scenarios read from TOML (unknown keys are errors), heading schedules, seeded
 //!   initial conditions, and the fully resolved [`RunSpec`] of one run.
 //! * [`episode`]: the in-process loop of one run over a [`Controller`], producing a [`Trajectory`].
-//! * [`metrics`]: the paper's Table I and Fig. 9 metrics, made exact, over a set of formation edges.
+//! * [`neighbours`]: the formation's neighbour rule (all pairs, or the Gabriel rule each robot can
+//!   apply from its own LIDAR), recomputed sample after sample.
+//! * [`metrics`]: the paper's Table I and Fig. 9 metrics, made exact, over formation edges that may
+//!   change from sample to sample.
 //! * [`runlog`]: the run logs the multi-process runtime writes, and the run journal that keeps a
 //!   run that ends abnormally.
 
@@ -17,6 +20,7 @@ pub mod episode;
 pub mod grid;
 pub mod lidar;
 pub mod metrics;
+pub mod neighbours;
 pub mod robot;
 pub mod runlog;
 pub mod scenario;

@@ -1,20 +1,36 @@
-//! The paper's evaluation metrics (Table I and Fig. 9), made exact, over a set of formation edges.
+//! The paper's evaluation metrics (Table I and Fig. 9), made exact, over formation edges that may
+//! change from sample to sample.
 //!
-//! Definitions, for a [`Trajectory`] with samples `t_0 .. t_K` (the state at every tick) and edges `(i, j)`:
+//! Definitions, for a [`Trajectory`] with samples `t_0 .. t_K` (the state at every tick) and edges `(i, j)`.
+//! Under [`NeighbourRule::AllPairs`] the edges are the trajectory's `edges` at every sample (the paper's
+//! three robots: every pair); under a rule whose edges change ([`NeighbourRule::Gabriel`]) they are
+//! recomputed at every sample from the true positions by a
+//! [`NeighbourTracker`], `E_k` being the edges at sample `k`:
 //!
 //! * relative formation error of an edge: `e_ij(t) = |d_ij(t) - d*| / d*`, `d_ij` the distance between the
 //!   two robots' positions;
 //! * the evaluation window: the samples with `t >= t_K - window_s` (20 s in the paper), the bound taken with
 //!   a tolerance of `1e-6 dt` so that the sample at exactly `t_K - window_s` is in whatever the rounding of
 //!   `k dt`; a run shorter than the window is scored over all its samples;
-//! * success at tolerance `tau`: for EVERY edge, the mean of `e_ij` over the window is `< tau`;
-//! * convergence time at `tau`: the first sample time `t_k` such that `max_ij e_ij(t_m) < tau` for every
-//!   `m >= k`; `None` when the last sample is not below `tau`;
-//! * relative formation error of a run: the mean over edges of the window means; the largest window mean
-//!   is reported too;
+//! * an edge's window mean: the mean of `e_ij` over the samples of the window at which `(i, j)` is an edge;
+//!   the *scored* edges are those that are edges at some sample of the window (all pairs: every pair);
+//! * success at tolerance `tau` (all pairs, the paper's): for EVERY edge, the window mean is `< tau`;
+//! * success at tolerance `tau` (a changing graph, the strict check): every scored edge's window mean is
+//!   `< tau`, the graph `E_k` connects the whole team at every sample of the window, and the run has no
+//!   collision;
+//! * convergence time at `tau`: the first sample time `t_k` such that `max_{ij in E_m} e_ij(t_m) < tau` for
+//!   every `m >= k`; `None` when the last sample is not below `tau`;
+//! * relative formation error of a run: the mean over scored edges of the window means; the largest
+//!   window mean is reported too;
 //! * orientation error: the mean over robots and window samples of `|wrap(theta_i(t) - phi*(t))|`;
 //! * collisions: the number of collision events, an event being a pair that overlaps at a sample and did
 //!   not at the previous sample (so a lasting contact counts once).
+//!
+//! * team figures ([`TeamMetrics`], always under a changing graph, and under all pairs when
+//!   [`MetricsConfig::team_figures`] asks): whether the graph stayed connected over the window, the
+//!   number of scored edges, the median of their window means, and the anchor-compatible check of
+//!   Huang, Yang and Guo (ICRA 2026) beside ours: at the last sample, the mean of `e_ij` over `E_K` is
+//!   `<= 10 %` ([`ANCHOR_TOLERANCE`]) and no two robots are closer than 0.2 m ([`ANCHOR_MIN_DISTANCE`]).
 //!
 //! A trajectory with no edges succeeds trivially (there is no pair to fail) with zero formation error.
 //! Malformed trajectories (read back from a file) do not panic: a value that cannot be computed (an edge
@@ -22,12 +38,19 @@
 //!
 //! [`summarize`] aggregates runs as Table I and Fig. 9 do.
 
-use std::collections::HashSet;
+use std::collections::{BTreeMap, HashSet};
 
-use formation_proto::wrap_angle;
+use formation_proto::{NeighbourRule, wrap_angle};
 use serde::{Deserialize, Serialize};
 
 use crate::episode::Trajectory;
+use crate::neighbours::{NeighbourTracker, is_connected};
+
+/// The anchor-compatible check's tolerance on the mean edge error at the last sample.
+pub const ANCHOR_TOLERANCE: f64 = 0.10;
+/// The anchor-compatible check's smallest allowed distance \[m\] between two robots at the last
+/// sample.
+pub const ANCHOR_MIN_DISTANCE: f64 = 0.2;
 
 /// Settings of [`run_metrics`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -37,6 +60,10 @@ pub struct MetricsConfig {
     /// The two tolerances on the relative formation error (the paper's 5 % and 10 %), reported as
     /// `*_5` and `*_10`.
     pub tolerances: (f64, f64),
+    /// Compute [`TeamMetrics`] for all-pairs runs too (they are always computed for a changing
+    /// graph). Off by default, so the paper's runs keep their metrics' original form.
+    #[serde(default)]
+    pub team_figures: bool,
 }
 
 impl Default for MetricsConfig {
@@ -44,15 +71,27 @@ impl Default for MetricsConfig {
         MetricsConfig {
             window_s: 20.0,
             tolerances: (0.05, 0.10),
+            team_figures: false,
         }
     }
 }
+
+/// What a team's run adds to the paper's metrics.
+pub use formation_schema::TeamMetrics;
 
 /// The metrics of one run, as the run log and `summary.json` hold them.
 pub use formation_schema::RunMetrics;
 
 /// Scores one run.
 pub fn run_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
+    match traj.neighbours {
+        NeighbourRule::AllPairs => fixed_edge_metrics(traj, cfg),
+        rule => changing_edge_metrics(traj, cfg, rule),
+    }
+}
+
+/// The metrics over the trajectory's fixed `edges`: the paper's definition.
+fn fixed_edge_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
     let samples = traj.times.len().min(traj.poses.len());
     let window = window_start(&traj.times[..samples], traj.dt, cfg.window_s)..samples;
 
@@ -93,12 +132,18 @@ pub fn run_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
     let convergence =
         |tolerance: f64| convergence_time(&traj.times[..samples], &max_error_per_sample, tolerance);
 
-    let orientation_error_rad = mean(window.clone().flat_map(|k| {
-        let phi_star = traj.phi_star.get(k).copied().unwrap_or(f64::NAN);
-        traj.poses[k]
-            .iter()
-            .map(move |pose| wrap_angle(pose.theta - phi_star).abs())
-    }));
+    let orientation_error_rad = orientation_error(traj, window.clone());
+
+    let team = cfg.team_figures.then(|| {
+        let last = errors.last().map(|row| mean(row.iter().copied()));
+        team_figures(
+            traj,
+            samples,
+            is_connected(traj.n_robots(), &traj.edges),
+            &edge_window_means,
+            last.unwrap_or(f64::NAN),
+        )
+    });
 
     let (tol_5, tol_10) = cfg.tolerances;
     RunMetrics {
@@ -110,6 +155,132 @@ pub fn run_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
         max_edge_window_error,
         orientation_error_rad,
         collisions: collision_events(&traj.collisions),
+        team,
+    }
+}
+
+/// The metrics over edges recomputed at every sample by `rule`: the strict check.
+fn changing_edge_metrics(
+    traj: &Trajectory,
+    cfg: &MetricsConfig,
+    rule: NeighbourRule,
+) -> RunMetrics {
+    let samples = traj.times.len().min(traj.poses.len());
+    let window = window_start(&traj.times[..samples], traj.dt, cfg.window_s)..samples;
+    let n = traj.n_robots();
+    let mut tracker = NeighbourTracker::new(rule, n);
+    let mut positions = Vec::with_capacity(n);
+    // Per scored edge: (sum, count) of its errors over the window samples where it is an edge.
+    let mut window_sums: BTreeMap<(usize, usize), (f64, usize)> = BTreeMap::new();
+    let mut max_error_per_sample = Vec::with_capacity(samples);
+    let mut connected = true;
+    let mut last_mean = f64::NAN;
+    for (k, poses) in traj.poses[..samples].iter().enumerate() {
+        positions.clear();
+        positions.extend(poses.iter().map(|p| (p.x, p.y)));
+        tracker.update(&positions);
+        let edges = tracker.edges();
+        let error = |&(i, j): &(usize, usize)| {
+            let (a, b) = (&poses[i], &poses[j]);
+            ((a.x - b.x).hypot(a.y - b.y) - traj.d_star).abs() / traj.d_star
+        };
+        max_error_per_sample.push(max_propagating_nan(edges.iter().map(error)));
+        if window.contains(&k) {
+            connected &= is_connected(n, edges);
+            for edge in edges {
+                let entry = window_sums.entry(*edge).or_insert((0.0, 0));
+                entry.0 += error(edge);
+                entry.1 += 1;
+            }
+        }
+        if k + 1 == samples {
+            last_mean = mean(edges.iter().map(error));
+        }
+    }
+    let edge_window_means: Vec<f64> = window_sums
+        .values()
+        .map(|&(sum, count)| sum / count as f64)
+        .collect();
+    let collisions = collision_events(&traj.collisions);
+    let passes = |tolerance: f64| {
+        !window.is_empty()
+            && connected
+            && collisions == 0
+            && edge_window_means.iter().all(|&m| m < tolerance)
+    };
+    let (rel_formation_error, max_edge_window_error) = if edge_window_means.is_empty() {
+        (0.0, 0.0)
+    } else {
+        (
+            mean(edge_window_means.iter().copied()),
+            max_propagating_nan(edge_window_means.iter().copied()),
+        )
+    };
+    let convergence =
+        |tolerance: f64| convergence_time(&traj.times[..samples], &max_error_per_sample, tolerance);
+    let (tol_5, tol_10) = cfg.tolerances;
+    RunMetrics {
+        success_5: passes(tol_5),
+        success_10: passes(tol_10),
+        convergence_s_5: convergence(tol_5),
+        convergence_s_10: convergence(tol_10),
+        rel_formation_error,
+        max_edge_window_error,
+        orientation_error_rad: orientation_error(traj, window),
+        collisions,
+        team: Some(team_figures(
+            traj,
+            samples,
+            connected,
+            &edge_window_means,
+            last_mean,
+        )),
+    }
+}
+
+/// Mean over robots and window samples of the wrapped heading error.
+fn orientation_error(traj: &Trajectory, window: std::ops::Range<usize>) -> f64 {
+    mean(window.flat_map(|k| {
+        let phi_star = traj.phi_star.get(k).copied().unwrap_or(f64::NAN);
+        traj.poses[k]
+            .iter()
+            .map(move |pose| wrap_angle(pose.theta - phi_star).abs())
+    }))
+}
+
+/// The team figures, from the window means and the last sample's mean edge error.
+fn team_figures(
+    traj: &Trajectory,
+    samples: usize,
+    connected: bool,
+    edge_window_means: &[f64],
+    final_mean_edge_error: f64,
+) -> TeamMetrics {
+    let final_min_distance = samples
+        .checked_sub(1)
+        .map(|k| {
+            let poses = &traj.poses[k];
+            let mut smallest = f64::NAN;
+            for (i, a) in poses.iter().enumerate() {
+                for b in &poses[i + 1..] {
+                    let d = (a.x - b.x).hypot(a.y - b.y);
+                    if smallest.is_nan() || d < smallest || d.is_nan() {
+                        smallest = d;
+                    }
+                }
+            }
+            smallest
+        })
+        .unwrap_or(f64::NAN);
+    TeamMetrics {
+        connected,
+        edges_scored: edge_window_means.len(),
+        median_edge_window_error: quantiles(edge_window_means.iter().copied())
+            .map_or(f64::NAN, |q| q.median),
+        final_mean_edge_error,
+        final_min_distance,
+        anchor_success: final_mean_edge_error <= ANCHOR_TOLERANCE
+            && final_min_distance >= ANCHOR_MIN_DISTANCE,
     }
 }
 
@@ -205,7 +376,15 @@ pub fn summarize(runs: &[RunMetrics]) -> Summary {
     let convergence_s = quantiles(successful.iter().filter_map(|r| r.convergence_s_10));
     let rel_formation_error = quantiles(successful.iter().map(|r| r.rel_formation_error));
     let orientation_error_rad = quantiles(successful.iter().map(|r| r.orientation_error_rad));
+    let team: Option<Vec<&TeamMetrics>> = runs.iter().map(|r| r.team.as_ref()).collect();
+    let team = team.filter(|t| !t.is_empty());
     Summary {
+        anchor_success_rate: team
+            .as_ref()
+            .map(|t| fraction(t.iter().filter(|m| m.anchor_success).count())),
+        connected_rate: team
+            .as_ref()
+            .map(|t| fraction(t.iter().filter(|m| m.connected).count())),
         runs: runs.len(),
         success_rate_5: fraction(runs.iter().filter(|r| r.success_5).count()),
         success_rate_10: fraction(successful.len()),
@@ -259,6 +438,7 @@ mod tests {
             d_star: D_STAR,
             v_star: 0.7,
             edges: vec![(0, 1), (0, 2), (1, 2)],
+            neighbours: NeighbourRule::AllPairs,
             phi_star: vec![PHI_STAR; times.len()],
             times,
             poses,
@@ -349,6 +529,100 @@ mod tests {
         assert!(!m.success_10 && close(m.rel_formation_error, 0.5 * 200.0 / 601.0));
     }
 
+    /// Four robots: two equilateral triangles sharing the edge (1, 2), scaled by `scale(k)`,
+    /// under the default Gabriel rule, for `duration_s`.
+    fn lattice_run(duration_s: f64, scale: impl Fn(usize) -> f64) -> Trajectory {
+        use crate::neighbours::GabrielRule;
+        let mut traj = triangle_run(duration_s, |_, _| D_STAR, [0.0; 3]);
+        let h = 3f64.sqrt() / 2.0;
+        for (k, poses) in traj.poses.iter_mut().enumerate() {
+            let s = D_STAR * scale(k);
+            *poses = [(0.0, 0.0), (s, 0.0), (s / 2.0, s * h), (1.5 * s, s * h)]
+                .iter()
+                .map(|&(x, y)| Pose {
+                    x,
+                    y,
+                    theta: PHI_STAR,
+                })
+                .collect();
+        }
+        traj.neighbours = NeighbourRule::Gabriel(GabrielRule::with_range(10.0));
+        traj.edges = Vec::new();
+        traj
+    }
+
+    #[test]
+    fn a_formed_lattice_succeeds_on_its_changing_edges_with_team_figures() {
+        let traj = lattice_run(60.0, |k| if k < 100 { 1.2 } else { 1.0 });
+        let m = run_metrics(&traj, &MetricsConfig::default());
+        assert!(m.success_5 && m.success_10, "{m:?}");
+        assert!(close(m.convergence_s_10.unwrap(), 5.0));
+        let team = m.team.expect("team figures under a changing graph");
+        // 5 unit edges; the long diagonal (0, 3) is no edge.
+        assert_eq!(team.edges_scored, 5);
+        assert!(team.connected && team.anchor_success);
+        assert!(team.final_mean_edge_error < 1e-12 && close(team.final_min_distance, D_STAR));
+    }
+
+    #[test]
+    fn the_strict_check_fails_a_collision_or_one_bad_edge_that_the_anchor_check_passes() {
+        let mut collided = lattice_run(30.0, |_| 1.0);
+        collided.collisions = vec![(3, 0, 1)];
+        let m = run_metrics(&collided, &MetricsConfig::default());
+        assert!(!m.success_5 && !m.success_10 && m.team.unwrap().anchor_success);
+
+        // A 7 % error on the whole lattice in the window, then exact for the last sample only:
+        // strict fails at 5 %, the anchor check (last sample) passes.
+        let samples = collided.times.len();
+        let late = lattice_run(30.0, |k| if k + 1 < samples { 1.07 } else { 1.0 });
+        let m = run_metrics(&late, &MetricsConfig::default());
+        assert!(!m.success_5 && m.success_10, "{m:?}");
+        assert!(m.team.unwrap().anchor_success);
+    }
+
+    #[test]
+    fn a_team_split_in_two_fails_the_strict_check_however_well_each_part_is_formed() {
+        let mut traj = lattice_run(30.0, |_| 1.0);
+        for poses in &mut traj.poses {
+            // Move robot 3 and a new robot 4 far away: a pair of its own, 2 m apart.
+            poses[3].x += 50.0;
+            poses.push(Pose {
+                x: poses[3].x + D_STAR,
+                ..poses[3]
+            });
+        }
+        let m = run_metrics(&traj, &MetricsConfig::default());
+        let team = m.team.clone().unwrap();
+        assert!(!team.connected && !m.success_10, "{m:?}");
+        assert!(m.max_edge_window_error < 1e-12);
+    }
+
+    #[test]
+    fn all_pairs_runs_keep_the_papers_form_unless_team_figures_are_asked() {
+        let traj = triangle_run(30.0, |_, _| D_STAR, [0.0; 3]);
+        let plain = run_metrics(&traj, &MetricsConfig::default());
+        assert_eq!(plain.team, None);
+        let with_team = run_metrics(
+            &traj,
+            &MetricsConfig {
+                team_figures: true,
+                ..MetricsConfig::default()
+            },
+        );
+        assert_eq!(
+            RunMetrics {
+                team: None,
+                ..with_team.clone()
+            },
+            plain
+        );
+        let team = with_team.team.clone().unwrap();
+        assert!(team.connected && team.anchor_success && team.edges_scored == 3);
+        let summary = summarize(&[with_team]);
+        assert_eq!(summary.anchor_success_rate, Some(1.0));
+        assert_eq!(summarize(&[plain]).anchor_success_rate, None);
+    }
+
     #[test]
     fn window_start_includes_the_boundary_sample_and_clamps_to_the_run() {
         let times: Vec<f64> = (0..=1200).map(|k| k as f64 * DT).collect();
@@ -430,6 +704,7 @@ mod tests {
             max_edge_window_error: error,
             orientation_error_rad: error / 10.0,
             collisions,
+            team: None,
         }
     }
 

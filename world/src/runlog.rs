@@ -39,7 +39,7 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use formation_proto::{Pose, WheelCmd};
+use formation_proto::{NeighbourRule, Pose, WheelCmd};
 use formation_schema::SchemaFile;
 use serde::{Deserialize, Serialize};
 
@@ -227,6 +227,10 @@ pub fn write_json_atomic<F: SchemaFile>(path: &Path, value: &F) -> Result<(), Ru
 
 // ---- the journal format ----------------------------------------------------------------------
 
+fn all_pairs_rule() -> NeighbourRule {
+    NeighbourRule::AllPairs
+}
+
 /// The first line of a run journal: what identifies the format and the run's static data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct JournalHeader {
@@ -244,8 +248,11 @@ pub struct JournalHeader {
     pub d_star: f64,
     /// Desired speed \[m/s\].
     pub v_star: f64,
-    /// Formation edges the metrics score.
+    /// Formation edges of the first sample (all pairs for the paper's formation).
     pub edges: Vec<(usize, usize)>,
+    /// The neighbour rule (journals written before it existed were all pairs).
+    #[serde(default = "all_pairs_rule")]
+    pub neighbours: NeighbourRule,
     /// Team size.
     pub n_robots: usize,
     /// Ticks the run is to play.
@@ -267,7 +274,8 @@ impl JournalHeader {
             dt: spec.world.dt,
             d_star: spec.d_star,
             v_star: spec.v_star,
-            edges: spec.edges.clone(),
+            edges: crate::neighbours::first_sample_edges(spec.neighbours, &spec.initial),
+            neighbours: spec.neighbours,
             n_robots: spec.n_robots,
             ticks: spec.ticks(),
             seed: spec.seed,
@@ -579,6 +587,7 @@ pub fn read_journal(path: &Path) -> Result<(JournalHeader, Trajectory), RunLogEr
         d_star: header.d_star,
         v_star: header.v_star,
         edges: header.edges.clone(),
+        neighbours: header.neighbours,
         times: Vec::new(),
         phi_star: Vec::new(),
         poses: Vec::new(),

@@ -44,8 +44,17 @@
 //! # sine:    phi*(t) = phi0 + amplitude sin(omega t)  (omega required; amplitude default 1; phi0 default 0)
 //!
 //! [init]                  # optional: initial poses as in the paper
-//! disc_radius = 3.0       # positions uniform in a disc of this radius \[m\] centred at the origin, 0.01 ..= 1000
+//! disc_radius = 3.0       # positions uniform in a disc of this radius \[m\] centred at the origin, 0.01 ..= 1000;
+//!                         # default 3 m for up to 3 robots, 3 * sqrt(robots / 3) m beyond (the paper's density)
 //! min_spacing = 0.6       # minimum distance between any two robots \[m\], 2 * robot.body_radius ..= 1000
+//!                         # (and <= the sensing range, so the team can start connected)
+//!
+//! [formation]             # optional: which pairs are formation edges
+//! neighbours = "gabriel"  # "all_pairs" | "gabriel"; default all_pairs up to 3 robots, gabriel beyond
+//! sensing_range = 10.0    # gabriel only: default lidar.max_range; 0.1 ..= lidar.max_range \[m\]
+//! nearest = 2             # gabriel only: nearest robots each robot always holds, 0 ..= 16
+//! threshold = 0.9         # gabriel only: witness ratio that makes a pair an edge, 0.05 ..= 1
+//! hysteresis = 0.15       # gabriel only: how far below threshold an edge is kept, 0 ..= threshold - 0.01
 //!
 //! [lidar]                 # optional; each key defaults to LidarSpec::default()
 //! beams = 900             # 8 ..= 900 (the most a scan message carries)
@@ -73,8 +82,9 @@
 //! The run seed is `splitmix64`-mixed from `(base_seed, run_index)`; a `ChaCha8Rng` seeded with it draws,
 //! in this order: d* (only with `d_star_choices`), phi* (only with `schedule = "random"`), the positions of
 //! robots `0..n` (each uniform in the disc, redrawn until it keeps `min_spacing` from those already
-//! placed), then the headings of robots `0..n` (uniform over the circle, stored wrapped to (-pi, pi] like
-//! every [`Pose`]). The world's noise seed is mixed from the run seed in a separate domain, so it does not
+//! placed; the whole team is drawn again, up to a bounded number of times, until it is connected through
+//! sensing range, and then taken from lattice sites grown as a connected patch), then the headings of
+//! robots `0..n` (uniform over the circle, stored wrapped to (-pi, pi] like every [`Pose`]). The world's noise seed is mixed from the run seed in a separate domain, so it does not
 //! depend on how many numbers the draws above consumed.
 
 use std::f64::consts::TAU;
@@ -88,6 +98,8 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use self::limits::{Bounds, Num};
+pub use crate::neighbours::all_pairs;
+use crate::neighbours::{GabrielRule, NeighbourRule, connected_within};
 use crate::robot::RobotParams;
 use crate::world::{World, WorldConfig};
 
@@ -95,6 +107,16 @@ use crate::world::{World, WorldConfig};
 pub const DEFAULT_DT: f64 = 0.05;
 /// Default radius \[m\] of the disc initial positions are drawn from (the paper's 3 m).
 pub const DEFAULT_DISC_RADIUS: f64 = 3.0;
+/// The default disc radius \[m\] of a team of `n_robots`: the paper's 3 m for up to three robots,
+/// grown with `sqrt(n / 3)` beyond, so the team starts at the paper's density.
+pub fn default_disc_radius(n_robots: usize) -> f64 {
+    if n_robots <= 3 {
+        DEFAULT_DISC_RADIUS
+    } else {
+        DEFAULT_DISC_RADIUS * (n_robots as f64 / 3.0).sqrt()
+    }
+}
+
 /// Default minimum distance \[m\] between any two initial positions.
 pub const DEFAULT_MIN_SPACING: f64 = 0.6;
 
@@ -269,8 +291,22 @@ pub struct Scenario {
     d_star: DStarPlan,
     heading: HeadingPlan,
     init: InitialConditions,
+    neighbours: NeighbourRule,
     world: WorldConfig,
     agents: Vec<AgentModel>,
+    /// What the file said, for [`Scenario::with_robots`]: the disc radius and the formation
+    /// table as given (absent keys take team-size-dependent defaults).
+    #[serde(skip)]
+    given: Given,
+}
+
+/// The team-size-dependent settings as the file gave them.
+#[derive(Debug, Clone, Default, PartialEq)]
+struct Given {
+    disc_radius: Option<f64>,
+    min_spacing: Option<f64>,
+    formation: FormationToml,
+    origin: String,
 }
 
 /// Everything one run needs, resolved: no randomness is left except the world's sensor noise, which
@@ -297,8 +333,9 @@ pub struct RunSpec {
     pub initial: Vec<Pose>,
     /// Seed of the world's sensor-noise generator.
     pub noise_seed: u64,
-    /// Formation edges `(i, j)`, `i < j`, that the metrics score: all pairs.
-    pub edges: Vec<(usize, usize)>,
+    /// Which pairs are formation edges: the expert holds them at d* and the metrics score them,
+    /// recomputed every tick from the robots' positions.
+    pub neighbours: NeighbourRule,
 }
 
 impl RunSpec {
@@ -404,6 +441,57 @@ impl Scenario {
         &self.agents
     }
 
+    /// The neighbour rule of the formation.
+    pub fn neighbours(&self) -> &NeighbourRule {
+        &self.neighbours
+    }
+
+    /// The same scenario for a team of `robots`: every setting the file gave is kept, and the
+    /// team-size-dependent defaults (the disc radius, the neighbour rule) are those of the new
+    /// size. Per-robot models (`[[agent]]`) must name robots of the new team.
+    pub fn with_robots(&self, robots: usize) -> Result<Scenario, ScenarioError> {
+        let check = Checker {
+            origin: &self.given.origin,
+        };
+        let robots = check.count(
+            "robots",
+            robots,
+            limits::MIN_ROBOTS,
+            limits::MAX_ROBOTS,
+            ", a formation needs at least one pair",
+        )?;
+        let ticks = (self.duration_s / self.world.dt).round() as u64;
+        check_robot_ticks(&check, robots, ticks, self.world.dt)?;
+        let neighbours = validate_formation(&check, &self.given.formation, robots, &self.world)?;
+        let init = validate_init(
+            &check,
+            InitToml {
+                disc_radius: self.given.disc_radius,
+                min_spacing: self.given.min_spacing,
+            },
+            robots,
+            &self.world.robot,
+            sensing_range(&neighbours, &self.world),
+        )?;
+        if let Some((k, agent)) = self
+            .agents
+            .iter()
+            .enumerate()
+            .find(|(_, a)| a.robot >= robots)
+        {
+            return Err(check.invalid(
+                format_args!("agent[{k}].robot"),
+                format_args!("must be < robots ({robots}) (got {})", agent.robot),
+            ));
+        }
+        Ok(Scenario {
+            n_robots: robots,
+            init,
+            neighbours,
+            ..self.clone()
+        })
+    }
+
     /// The resolved spec of run `run_index`, a pure function of `(self, base_seed, run_index)`.
     pub fn run_spec(&self, base_seed: u64, run_index: usize) -> RunSpec {
         let seed = run_seed(base_seed, run_index);
@@ -418,7 +506,8 @@ impl Scenario {
                 phi: rng.random_range(0.0..TAU),
             },
         };
-        let positions = place_robots(&mut rng, self.n_robots, &self.init);
+        let range = sensing_range(&self.neighbours, &self.world);
+        let positions = place_robots(&mut rng, self.n_robots, &self.init, range);
         // All positions are drawn before any heading.
         let initial = positions
             .into_iter()
@@ -439,7 +528,7 @@ impl Scenario {
             world: self.world,
             initial,
             noise_seed: splitmix64(seed ^ NOISE_DOMAIN),
-            edges: all_pairs(self.n_robots),
+            neighbours: self.neighbours,
         }
     }
 }
@@ -502,6 +591,10 @@ pub mod limits {
     pub const MAX_ROBOT_TICKS: u64 = 10_000_000;
     /// Most LIDAR beams: what a scan message carries ([`formation_proto::wire::MAX_BEAMS`]).
     pub const MAX_BEAMS: usize = formation_proto::wire::MAX_BEAMS;
+    /// Most `formation.nearest`.
+    pub const MAX_NEAREST: usize = 16;
+    /// `formation.threshold`: at most 1, so every witness lies within sensing range.
+    pub const GABRIEL_THRESHOLD: Bounds = bounds(0.05, 4.0, "");
     /// Fewest LIDAR beams.
     pub const MIN_BEAMS: usize = 8;
     /// Most entries of `goal.d_star_choices`.
@@ -592,11 +685,13 @@ pub mod limits {
     }
 }
 
-/// All pairs `(i, j)` with `i < j < n`, in lexicographic order.
-pub fn all_pairs(n: usize) -> Vec<(usize, usize)> {
-    (0..n)
-        .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
-        .collect()
+/// How far a robot senses its team mates \[m\]: the Gabriel rule's sensing range, else the
+/// LIDAR's range.
+fn sensing_range(rule: &NeighbourRule, world: &WorldConfig) -> f64 {
+    match rule {
+        NeighbourRule::AllPairs => world.lidar.max_range,
+        NeighbourRule::Gabriel(g) => g.sensing_range,
+    }
 }
 
 /// Domain-separation constants so the run seed and the noise seed are independent streams.
@@ -617,14 +712,24 @@ fn splitmix64(x: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// Positions of `n` robots uniform in the disc, each at least `min_spacing` from the others.
+/// Positions of `n` robots uniform in the disc, each at least `min_spacing` from the others, the
+/// team connected through `range` (every robot reaches every other through robots at most `range`
+/// apart).
 ///
 /// Sequential rejection: each robot is redrawn until it keeps its distance from those already placed;
-/// if one cannot be placed in [`POSITION_ATTEMPTS_PER_ROBOT`] draws the whole team starts over. For a
-/// crowded disc where this keeps failing (validation guarantees only that a spacing-`min_spacing`
-/// hexagonal lattice has `n` sites in the disc), `n` lattice sites are chosen at random instead, so the
-/// function always succeeds. The paper's settings accept nearly every draw.
-fn place_robots(rng: &mut ChaCha8Rng, n: usize, init: &InitialConditions) -> Vec<(f64, f64)> {
+/// if one cannot be placed in [`POSITION_ATTEMPTS_PER_ROBOT`] draws, or the team is not connected, the
+/// whole team starts over, at most [`PLACEMENT_RESTARTS`] times. For a crowded or a wide disc where this
+/// keeps failing (validation guarantees that a spacing-`min_spacing` hexagonal lattice has `n` sites in
+/// the disc, and that `min_spacing <= range`), `n` lattice sites are grown at random as a connected patch
+/// instead, so the function always ends. The paper's settings accept nearly every draw, and a team
+/// that fits in a disc of diameter `range` is always connected, so the paper's runs draw exactly what
+/// they drew before teams had to be connected.
+fn place_robots(
+    rng: &mut ChaCha8Rng,
+    n: usize,
+    init: &InitialConditions,
+    range: f64,
+) -> Vec<(f64, f64)> {
     let spacing_sq = init.min_spacing * init.min_spacing;
     let mut placed: Vec<(f64, f64)> = Vec::with_capacity(n);
     for _ in 0..PLACEMENT_RESTARTS {
@@ -645,17 +750,44 @@ fn place_robots(rng: &mut ChaCha8Rng, n: usize, init: &InitialConditions) -> Vec
             }
             break;
         }
-        if placed.len() == n {
+        if placed.len() == n && connected_within(&placed, range) {
             return placed;
         }
     }
-    let mut sites = lattice_sites(init.disc_radius, init.min_spacing, usize::MAX);
-    for k in 0..n.min(sites.len()) {
-        let pick = rng.random_range(k..sites.len());
-        sites.swap(k, pick);
+    connected_lattice_patch(rng, n, init, range)
+}
+
+/// `n` sites of the spacing-`min_spacing` hexagonal lattice in the disc, grown from a random site by
+/// adding random sites within `range` of the patch, so the patch is connected through `range`.
+fn connected_lattice_patch(
+    rng: &mut ChaCha8Rng,
+    n: usize,
+    init: &InitialConditions,
+    range: f64,
+) -> Vec<(f64, f64)> {
+    let mut free = lattice_sites(init.disc_radius, init.min_spacing, usize::MAX);
+    let mut placed: Vec<(f64, f64)> = Vec::with_capacity(n);
+    let range_sq = range * range;
+    while placed.len() < n && !free.is_empty() {
+        let reachable: Vec<usize> = (0..free.len())
+            .filter(|&s| {
+                placed.is_empty()
+                    || placed.iter().any(|&(x, y)| {
+                        let (dx, dy) = (free[s].0 - x, free[s].1 - y);
+                        dx * dx + dy * dy <= range_sq
+                    })
+            })
+            .collect();
+        // A lattice in a disc is connected at its spacing, which validation keeps <= range; should
+        // it not be, any free site keeps the function total.
+        let pick = if reachable.is_empty() {
+            rng.random_range(0..free.len())
+        } else {
+            reachable[rng.random_range(0..reachable.len())]
+        };
+        placed.push(free.swap_remove(pick));
     }
-    sites.truncate(n);
-    sites
+    placed
 }
 
 /// Sites of a hexagonal lattice with spacing `spacing`, centred at the origin, inside a disc of
@@ -698,7 +830,9 @@ struct ScenarioToml {
     goal: GoalToml,
     heading: HeadingToml,
     #[serde(default)]
-    init: InitialConditions,
+    init: InitToml,
+    #[serde(default)]
+    formation: FormationToml,
     #[serde(default)]
     lidar: LidarToml,
     #[serde(default)]
@@ -713,6 +847,23 @@ fn default_dt() -> f64 {
 
 fn default_runs() -> usize {
     1
+}
+
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct InitToml {
+    disc_radius: Option<f64>,
+    min_spacing: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FormationToml {
+    neighbours: Option<String>,
+    sensing_range: Option<f64>,
+    nearest: Option<usize>,
+    threshold: Option<f64>,
+    hysteresis: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -852,20 +1003,7 @@ impl ScenarioToml {
                 ),
             ));
         }
-        // Both factors are bounded above, so the product cannot overflow.
-        let robot_ticks = steps.round() as u64 * robots as u64;
-        if robot_ticks > limits::MAX_ROBOT_TICKS {
-            return Err(check.invalid(
-                "duration_s",
-                format_args!(
-                    "with dt = {dt} gives {} ticks, and robots x ticks = {robot_ticks} is over the \
-                     limit of {} (a run's trajectory is held in memory); shorten duration_s, \
-                     enlarge dt or use fewer robots",
-                    steps.round(),
-                    limits::MAX_ROBOT_TICKS
-                ),
-            ));
-        }
+        check_robot_ticks(check, robots, steps.round() as u64, dt)?;
         let runs = check.count("runs", self.runs, 1, limits::MAX_RUNS, "")?;
 
         let robot = validate_robot(check, self.robot)?;
@@ -934,7 +1072,15 @@ impl ScenarioToml {
         };
 
         let heading = validate_heading(check, &self.heading)?;
-        let init = validate_init(check, self.init, robots, &robot)?;
+        let world = WorldConfig { robot, lidar, dt };
+        let neighbours = validate_formation(check, &self.formation, robots, &world)?;
+        let init = validate_init(
+            check,
+            self.init,
+            robots,
+            &robot,
+            sensing_range(&neighbours, &world),
+        )?;
 
         let mut agents = self.agent;
         let mut seen = vec![false; robots];
@@ -966,8 +1112,15 @@ impl ScenarioToml {
             d_star,
             heading,
             init,
-            world: WorldConfig { robot, lidar, dt },
+            neighbours,
+            world,
             agents,
+            given: Given {
+                disc_radius: self.init.disc_radius,
+                min_spacing: self.init.min_spacing,
+                formation: self.formation,
+                origin: check.origin.to_string(),
+            },
         })
     }
 }
@@ -1095,14 +1248,140 @@ fn validate_heading(
     })
 }
 
+/// Refuses a run whose trajectory would not fit in memory.
+fn check_robot_ticks(
+    check: &Checker<'_>,
+    robots: usize,
+    ticks: u64,
+    dt: f64,
+) -> Result<(), ScenarioError> {
+    // Both factors are bounded above, so the product cannot overflow.
+    let robot_ticks = ticks * robots as u64;
+    if robot_ticks > limits::MAX_ROBOT_TICKS {
+        return Err(check.invalid(
+            "duration_s",
+            format_args!(
+                "with dt = {dt} gives {ticks} ticks, and robots x ticks = {robot_ticks} is over the \
+                 limit of {} (a run's trajectory is held in memory); shorten duration_s, \
+                 enlarge dt or use fewer robots",
+                limits::MAX_ROBOT_TICKS
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The neighbour rule the `[formation]` table asks for, with its team-size defaults.
+fn validate_formation(
+    check: &Checker<'_>,
+    formation: &FormationToml,
+    robots: usize,
+    world: &WorldConfig,
+) -> Result<NeighbourRule, ScenarioError> {
+    let default = NeighbourRule::default_for(robots, world.lidar.max_range);
+    let name = formation.neighbours.as_deref().unwrap_or(default.name());
+    let gabriel_keys = [
+        ("formation.sensing_range", formation.sensing_range.is_some()),
+        ("formation.nearest", formation.nearest.is_some()),
+        ("formation.threshold", formation.threshold.is_some()),
+        ("formation.hysteresis", formation.hysteresis.is_some()),
+    ];
+    match name {
+        "all_pairs" => {
+            if let Some((key, _)) = gabriel_keys.iter().find(|(_, given)| *given) {
+                return Err(check.invalid(
+                    key,
+                    "applies only to neighbours = \"gabriel\"; remove it or choose the gabriel rule",
+                ));
+            }
+            Ok(NeighbourRule::AllPairs)
+        }
+        "gabriel" => {
+            let max_range = world.lidar.max_range;
+            let sensing_range = match formation.sensing_range {
+                None => max_range,
+                Some(r) => check.bounded(
+                    "formation.sensing_range",
+                    r,
+                    Bounds {
+                        max: max_range,
+                        ..limits::MAX_RANGE
+                    },
+                )?,
+            };
+            let nearest = check.count(
+                "formation.nearest",
+                formation.nearest.unwrap_or(GabrielRule::DEFAULT_NEAREST),
+                0,
+                limits::MAX_NEAREST,
+                "",
+            )?;
+            let threshold = check.bounded(
+                "formation.threshold",
+                formation
+                    .threshold
+                    .unwrap_or(GabrielRule::DEFAULT_THRESHOLD),
+                limits::GABRIEL_THRESHOLD,
+            )?;
+            let hysteresis = check.bounded(
+                "formation.hysteresis",
+                formation
+                    .hysteresis
+                    .unwrap_or(GabrielRule::DEFAULT_HYSTERESIS),
+                Bounds {
+                    min: 0.0,
+                    max: threshold - 0.01,
+                    unit: "",
+                },
+            )?;
+            Ok(NeighbourRule::Gabriel(GabrielRule {
+                sensing_range,
+                nearest,
+                threshold,
+                hysteresis,
+            }))
+        }
+        other => Err(check.invalid(
+            "formation.neighbours",
+            format_args!(
+                "must be one of {} (got {other:?})",
+                NeighbourRule::NAMES
+                    .iter()
+                    .map(|n| format!("\"{n}\""))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )),
+    }
+}
+
 fn validate_init(
     check: &Checker<'_>,
-    init: InitialConditions,
+    init: InitToml,
     robots: usize,
     robot: &RobotParams,
+    sensing_range: f64,
 ) -> Result<InitialConditions, ScenarioError> {
-    let disc_radius = check.bounded("init.disc_radius", init.disc_radius, limits::DISC_RADIUS)?;
-    let min_spacing = check.bounded("init.min_spacing", init.min_spacing, limits::MIN_SPACING)?;
+    let disc_radius = check.bounded(
+        "init.disc_radius",
+        init.disc_radius
+            .unwrap_or_else(|| default_disc_radius(robots)),
+        limits::DISC_RADIUS,
+    )?;
+    let min_spacing = check.bounded(
+        "init.min_spacing",
+        init.min_spacing.unwrap_or(DEFAULT_MIN_SPACING),
+        limits::MIN_SPACING,
+    )?;
+    if min_spacing > sensing_range {
+        return Err(check.invalid(
+            "init.min_spacing",
+            format_args!(
+                "must be <= the sensing range ({sensing_range} m) or the team cannot start \
+                 connected; reduce init.min_spacing or raise lidar.max_range (got {min_spacing})"
+            ),
+        ));
+    }
     let body_diameter = 2.0 * robot.body_radius;
     if min_spacing < body_diameter {
         return Err(check.invalid(
@@ -1825,7 +2104,7 @@ phi = 1.0
         for index in 0..200 {
             let spec = table1.run_spec(table1.seed(), index);
             assert_eq!(spec.initial.len(), 3);
-            assert_eq!(spec.edges, vec![(0, 1), (0, 2), (1, 2)]);
+            assert_eq!(spec.neighbours, NeighbourRule::AllPairs);
             assert_eq!(spec.ticks(), 1200);
             let k = [1.0, 1.5, 2.0]
                 .iter()
@@ -1881,6 +2160,144 @@ phi = 1.0
         let too_many =
             edited("robots = 3", "robots = 20") + "[init]\ndisc_radius = 2.0\nmin_spacing = 1.0\n";
         assert_eq!(invalid_field(&too_many).0, "init.disc_radius");
+    }
+
+    #[test]
+    fn eleven_robots_just_work_with_the_gabriel_rule_a_grown_disc_and_a_connected_start() {
+        let scenario = parse(&edited("robots = 3", "robots = 11")).unwrap();
+        let NeighbourRule::Gabriel(rule) = *scenario.neighbours() else {
+            panic!("{:?}", scenario.neighbours())
+        };
+        assert_eq!(rule, GabrielRule::with_range(10.0));
+        let radius = 3.0 * (11.0_f64 / 3.0).sqrt();
+        assert_eq!(scenario.initial_conditions().disc_radius, radius);
+        for index in 0..20 {
+            let spec = scenario.run_spec(5, index);
+            assert_eq!(spec.neighbours, *scenario.neighbours());
+            let positions: Vec<(f64, f64)> = spec.initial.iter().map(|p| (p.x, p.y)).collect();
+            assert!(positions.iter().all(|p| p.0.hypot(p.1) <= radius));
+            assert!(connected_within(&positions, rule.sensing_range));
+        }
+        // The shipped teams scenario is exactly that, for 8 robots.
+        let teams = parse(include_str!("../../scenarios/teams.toml")).unwrap();
+        assert_eq!(
+            (teams.n_robots(), teams.neighbours().name()),
+            (8, "gabriel")
+        );
+        assert_eq!(
+            teams.initial_conditions().disc_radius,
+            default_disc_radius(8)
+        );
+        // Three robots keep the paper's triangle and disc.
+        let three = parse(MINIMAL).unwrap();
+        assert_eq!(*three.neighbours(), NeighbourRule::AllPairs);
+        assert_eq!(three.initial_conditions().disc_radius, 3.0);
+    }
+
+    #[test]
+    fn the_formation_table_names_its_rule_and_refuses_a_wrong_one_with_the_valid_names() {
+        let gabriel3 = parse(&format!(
+            "{MINIMAL}[formation]\nneighbours = \"gabriel\"\nsensing_range = 4.0\nnearest = 1\n"
+        ))
+        .unwrap();
+        assert_eq!(
+            *gabriel3.neighbours(),
+            NeighbourRule::Gabriel(GabrielRule {
+                sensing_range: 4.0,
+                nearest: 1,
+                ..GabrielRule::with_range(4.0)
+            })
+        );
+        let all = parse(
+            &(edited("robots = 3", "robots = 6") + "[formation]\nneighbours = \"all_pairs\"\n"),
+        )
+        .unwrap();
+        assert_eq!(*all.neighbours(), NeighbourRule::AllPairs);
+        let (field, problem) = invalid_field(&format!(
+            "{MINIMAL}[formation]\nneighbours = \"delaunay\"\n"
+        ));
+        assert_eq!(field, "formation.neighbours");
+        assert!(
+            problem.contains("\"all_pairs\", \"gabriel\"") && problem.contains("delaunay"),
+            "{problem}"
+        );
+        let (field, problem) = invalid_field(&format!(
+            "{MINIMAL}[formation]\nneighbours = \"all_pairs\"\nnearest = 2\n"
+        ));
+        assert_eq!(field, "formation.nearest");
+        assert!(
+            problem.contains("only to neighbours = \"gabriel\""),
+            "{problem}"
+        );
+        let (field, _) = invalid_field(&format!(
+            "{MINIMAL}[formation]\nneighbours = \"gabriel\"\nsensing_range = 11.0\n"
+        ));
+        assert_eq!(field, "formation.sensing_range");
+        let (field, _) = invalid_field(&format!(
+            "{MINIMAL}[formation]\nneighbours = \"gabriel\"\nhysteresis = 1.3\n"
+        ));
+        assert_eq!(field, "formation.hysteresis");
+        assert!(
+            error_text(&format!("{MINIMAL}[formation]\nrule = \"gabriel\"\n")).contains("rule"),
+            "unknown keys are refused"
+        );
+    }
+
+    #[test]
+    fn a_team_too_large_for_its_disc_or_too_spread_for_its_range_is_a_clear_error() {
+        let crowded = edited("robots = 3", "robots = 200") + "[init]\ndisc_radius = 3.0\n";
+        let (field, problem) = invalid_field(&crowded);
+        assert_eq!(field, "init.disc_radius");
+        assert!(
+            problem.contains("too small to place 200 robots"),
+            "{problem}"
+        );
+        let spread = MINIMAL.to_owned() + "[lidar]\nmax_range = 1.0\n[init]\nmin_spacing = 1.5\n";
+        let (field, problem) = invalid_field(&spread);
+        assert_eq!(field, "init.min_spacing");
+        assert!(problem.contains("cannot start connected"), "{problem}");
+    }
+
+    #[test]
+    fn a_wide_disc_with_a_short_range_still_starts_connected_in_bounded_time() {
+        // A 30 m disc and a 2 m sensing range: random draws are almost never connected, so the
+        // placement ends on the connected lattice patch.
+        let text = edited("robots = 3", "robots = 12")
+            + "[init]\ndisc_radius = 30.0\nmin_spacing = 1.0\n[lidar]\nmax_range = 2.0\n";
+        let scenario = parse(&text).unwrap();
+        let spec = scenario.run_spec(1, 0);
+        let positions: Vec<(f64, f64)> = spec.initial.iter().map(|p| (p.x, p.y)).collect();
+        assert_eq!(positions.len(), 12);
+        assert!(connected_within(&positions, 2.0));
+        for (i, a) in positions.iter().enumerate() {
+            for b in &positions[i + 1..] {
+                assert!((a.0 - b.0).hypot(a.1 - b.1) >= 1.0 - 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn with_robots_keeps_what_the_file_gave_and_resizes_the_rest() {
+        let file = edited("robots = 3", "robots = 4") + "[init]\nmin_spacing = 0.8\n";
+        let scenario = parse(&file).unwrap();
+        let big = scenario.with_robots(16).unwrap();
+        assert_eq!(big.n_robots(), 16);
+        assert_eq!(big.initial_conditions().min_spacing, 0.8);
+        assert_eq!(
+            big.initial_conditions().disc_radius,
+            default_disc_radius(16)
+        );
+        assert_eq!(big.neighbours().name(), "gabriel");
+        let three = scenario.with_robots(3).unwrap();
+        assert_eq!(*three.neighbours(), NeighbourRule::AllPairs);
+        assert_eq!(three.initial_conditions().disc_radius, 3.0);
+        assert_eq!(three.with_robots(4).unwrap(), scenario);
+        let fixed = parse(&(file + "[formation]\nneighbours = \"all_pairs\"\n")).unwrap();
+        assert_eq!(
+            *fixed.with_robots(8).unwrap().neighbours(),
+            NeighbourRule::AllPairs
+        );
+        assert!(scenario.with_robots(1).is_err() && scenario.with_robots(5000).is_err());
     }
 
     #[test]

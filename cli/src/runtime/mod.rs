@@ -178,9 +178,9 @@ pub fn credentials_command(args: &CredentialsArgs) -> anyhow::Result<()> {
 
 /// The model path of every robot: the scenario's per-robot models, else `default`. Each model is
 /// loaded and checked against the contract and the scenario's LIDAR (beams, range, window) here,
-/// before any process starts ([`robot_agent::decision::check_team_models`]); a missing or
-/// unusable file, a model trained for another sensor and a robot out of range are errors naming
-/// the robot, the file and the fix.
+/// before any process starts ([`robot_agent::decision::check_team_models_for`]); a missing or
+/// unusable file, a model trained for another sensor or for another d* range than the
+/// scenario's, and a robot out of range are errors naming the robot, the file and the fix.
 pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let mut models = vec![default.to_path_buf(); scenario.n_robots()];
     for assigned in scenario.agent_models() {
@@ -194,7 +194,11 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
         })?;
         *slot = assigned.model.clone();
     }
-    robot_agent::decision::check_team_models(&models, &scenario.world_config().lidar)?;
+    robot_agent::decision::check_team_models_for(
+        &models,
+        &scenario.world_config().lidar,
+        &crate::eval::scenario_d_stars(scenario),
+    )?;
     Ok(models)
 }
 

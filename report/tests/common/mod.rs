@@ -93,6 +93,7 @@ pub fn trajectory(heading: Heading, d_star: f64, seconds: f64, seed: u64) -> Tra
         d_star,
         v_star,
         edges: vec![(0, 1), (0, 2), (1, 2)],
+        neighbours: formation_proto::NeighbourRule::AllPairs,
         times,
         phi_star,
         poses,
@@ -113,6 +114,7 @@ pub fn run_metrics(k: u64, success_10: bool) -> RunMetrics {
         max_edge_window_error: 0.02 + 0.05 * u,
         orientation_error_rad: 0.02 + 0.03 * u,
         collisions: 0,
+        team: None,
     }
 }
 

@@ -199,6 +199,23 @@ def write_loss_curve(paths: dict[str, Path], history: list[dict]) -> None:
     plt.close(fig)
 
 
+def envelope_metadata(samples) -> dict[str, str]:
+    """The model's envelope (``formation.envelope.*``): the d* range of the training data and its
+    team sizes (the robots of each (dataset, iteration, run)). ``formation eval/run`` and the agents
+    refuse a goal whose d* lies outside the range."""
+    if len(samples) == 0:
+        return {}
+    d_star = samples.aux[:, 1].astype(np.float64)
+    _, episode = np.unique(samples.episode_keys(), return_inverse=True)
+    robots = np.zeros(int(episode.max()) + 1, dtype=np.int64)
+    np.maximum.at(robots, episode, samples.robot.astype(np.int64) + 1)
+    return {
+        "envelope.d_star_min": export.number_text(float(d_star.min())),
+        "envelope.d_star_max": export.number_text(float(d_star.max())),
+        "envelope.team_sizes": ",".join(str(int(n)) for n in sorted(set(robots.tolist()))),
+    }
+
+
 def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     """Trains, writes every artefact and returns the report (also printed by the CLI)."""
     if cfg.epochs < 1 or cfg.batch_size < 1 or not (cfg.lr > 0 and math.isfinite(cfg.lr)):
@@ -280,6 +297,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             "train.seed": cfg.seed,
             "train.val_samples": len(val_idx),
             "train.init_from": cfg.init_from.name if cfg.init_from else "",
+            **envelope_metadata(samples),
         },
     )
     save_checkpoint(paths["checkpoint"], model, optimizer, metadata)

@@ -66,6 +66,9 @@ def test_onnx_has_the_contract_metadata(trained):
     assert meta["formation.train.epochs"] == "2"
     assert meta["formation.train.samples"] == "160"
     assert meta["formation.dagger.iteration"] == "0"
+    # The envelope: d* drawn in [0.5, 3) by the synthetic data, every run of 3 robots.
+    assert 0.5 <= float(meta["formation.envelope.d_star_min"]) < float(meta["formation.envelope.d_star_max"]) < 3.0
+    assert meta["formation.envelope.team_sizes"] == "3"
     assert meta["formation.created_by"].startswith("formation_trainer ")
     assert float(meta["formation.train.final_train_loss"]) == trained["report"]["final_train_loss"]
     assert float(meta["formation.train.final_val_loss"]) == trained["report"]["final_val_loss"]

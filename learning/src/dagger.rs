@@ -1,0 +1,384 @@
+//! DAgger over teams: the policy drives (or, with probability `beta^k`, the expert), the expert
+//! labels every robot's view at every tick, the samples are appended to the dataset as a new
+//! iteration, the policy is retrained from its previous checkpoint, and each iteration's model is
+//! evaluated in closed loop (the DAgger curve).
+//!
+//! Rollouts run in parallel with rayon. Run `i` of iteration `k` uses team size
+//! `team_sizes[i % team_sizes.len()]` and the run spec `(seed + 1,000,003 k, i)` of the rollout
+//! scenario resized to that team, so the samples are a pure function of the settings and the
+//! model, written in run order.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use formation_expert::collect::Labeller;
+use formation_expert::{ExpertController, ExpertGains};
+use formation_schema::EvalOutput;
+use formation_world::metrics::{MetricsConfig, RunMetrics};
+use formation_world::{Controller, Scenario, run_episode};
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+use trainer_bridge::dataset::{DatasetWriter, Sample};
+use trainer_bridge::train::{TrainOptions, TrainReport, train};
+
+use crate::LearningError;
+use crate::rollout::{Driver, eval_output, evaluate_runs};
+
+/// Everything one DAgger session needs.
+#[derive(Debug, Clone)]
+pub struct DaggerOptions {
+    /// The dataset DAgger appends to (it must exist: the expert demonstrations).
+    pub data: PathBuf,
+    /// The scenario the rollouts are drawn from.
+    pub scenario: Scenario,
+    /// Team sizes of the rollouts, used in turn (empty: the scenario's own size).
+    pub team_sizes: Vec<usize>,
+    /// DAgger iterations.
+    pub iterations: usize,
+    /// The final model; every iteration's model is kept beside it (`<stem>-dagger<k>.onnx`).
+    pub out: PathBuf,
+    /// Start from this model instead of training one on the dataset first.
+    pub init_model: Option<PathBuf>,
+    /// Rollouts per iteration.
+    pub runs: usize,
+    /// Probability that the expert drives a run in iteration 1; it decays as `beta^k`.
+    pub beta: f64,
+    /// Training settings of every iteration (`data`, `out` and `init_from` are set per iteration).
+    pub training: TrainOptions,
+    /// The scenario of each iteration's closed-loop evaluation.
+    pub eval_scenario: Scenario,
+    /// Runs of that evaluation.
+    pub eval_runs: usize,
+    /// Base seed of the rollouts.
+    pub seed: u64,
+}
+
+/// What one iteration did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DaggerEvent {
+    /// Behaviour cloning on the dataset (iteration 0) started.
+    Cloning,
+    /// Iteration `k`'s rollouts appended `samples` samples from `runs` runs.
+    Labelled {
+        /// Iteration.
+        k: usize,
+        /// Samples appended.
+        samples: usize,
+        /// Rollouts.
+        runs: usize,
+        /// The expert's share.
+        beta: f64,
+    },
+    /// A rollout finished (`done` of the iteration's runs).
+    Rollout {
+        /// Runs done so far.
+        done: usize,
+    },
+    /// A line from the trainer.
+    Trainer(String),
+    /// Iteration `k`'s model was evaluated.
+    Evaluated {
+        /// Iteration.
+        k: usize,
+        /// Its closed-loop figures.
+        figures: Box<EvalOutput>,
+    },
+}
+
+/// Runs DAgger; returns the DAgger curve (the closed-loop figures of iteration 0, 1, ...), which is
+/// also written as `<stem>-dagger-curve.json` beside `out`.
+pub fn run_dagger(
+    opts: &DaggerOptions,
+    on_event: &(dyn Fn(DaggerEvent) + Sync),
+) -> Result<Vec<EvalOutput>, LearningError> {
+    if !(0.0..=1.0).contains(&opts.beta) {
+        return Err(LearningError::Setting {
+            setting: "--beta",
+            problem: format!("must be in [0, 1] (got {})", opts.beta),
+        });
+    }
+    let sizes = if opts.team_sizes.is_empty() {
+        vec![opts.scenario.n_robots()]
+    } else {
+        opts.team_sizes.clone()
+    };
+    let scenarios = sizes
+        .iter()
+        .map(|&n| opts.scenario.with_robots(n))
+        .collect::<Result<Vec<_>, _>>()?;
+    let out_dir = opts
+        .out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+        .to_path_buf();
+    std::fs::create_dir_all(&out_dir).map_err(|source| LearningError::Io {
+        what: "creating",
+        path: out_dir.clone(),
+        source,
+    })?;
+    let stem = opts
+        .out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or("policy".into());
+    let train_to =
+        |out: PathBuf, init_from: Option<PathBuf>| -> Result<TrainReport, LearningError> {
+            let options = TrainOptions {
+                data: vec![opts.data.clone()],
+                out: out.clone(),
+                init_from,
+                ..opts.training.clone()
+            };
+            train(&options, &mut |line| {
+                on_event(DaggerEvent::Trainer(line.to_owned()))
+            })
+            .map_err(|source| LearningError::Train { out, source })
+        };
+
+    let mut model = match &opts.init_model {
+        Some(m) => m.clone(),
+        None => {
+            let m0 = out_dir.join(format!("{stem}-dagger0.onnx"));
+            on_event(DaggerEvent::Cloning);
+            train_to(m0.clone(), None)?;
+            m0
+        }
+    };
+    let mut curve = vec![evaluate_iteration(opts, 0, &model, on_event)?];
+    for k in 1..=opts.iterations {
+        let beta = opts.beta.powi(k as i32);
+        let samples = rollout_and_label(opts, &scenarios, k, beta, &model, on_event)?;
+        on_event(DaggerEvent::Labelled {
+            k,
+            samples,
+            runs: opts.runs,
+            beta,
+        });
+        let next = if k == opts.iterations {
+            opts.out.clone()
+        } else {
+            out_dir.join(format!("{stem}-dagger{k}.onnx"))
+        };
+        train_to(next.clone(), Some(model.with_extension("pt")))?;
+        model = next;
+        curve.push(evaluate_iteration(opts, k, &model, on_event)?);
+    }
+    if opts.iterations == 0 && model != opts.out {
+        std::fs::copy(&model, &opts.out).map_err(|source| LearningError::Io {
+            what: "copying to",
+            path: opts.out.clone(),
+            source,
+        })?;
+    }
+    let curve_path = out_dir.join(format!("{stem}-dagger-curve.json"));
+    let json = serde_json::to_vec_pretty(&curve).map_err(|e| LearningError::Io {
+        what: "writing",
+        path: curve_path.clone(),
+        source: e.into(),
+    })?;
+    std::fs::write(&curve_path, json).map_err(|source| LearningError::Io {
+        what: "writing",
+        path: curve_path,
+        source,
+    })?;
+    Ok(curve)
+}
+
+/// Iteration `k`'s closed-loop figures on the evaluation scenario.
+fn evaluate_iteration(
+    opts: &DaggerOptions,
+    k: usize,
+    model: &Path,
+    on_event: &(dyn Fn(DaggerEvent) + Sync),
+) -> Result<EvalOutput, LearningError> {
+    let scenario = &opts.eval_scenario;
+    let driver = Driver::policy_for(scenario, model)?;
+    let results = evaluate_runs(
+        scenario,
+        scenario.seed(),
+        opts.eval_runs,
+        &driver,
+        &MetricsConfig::default(),
+        &|_| false,
+        &|_| {},
+    )?;
+    let per_run: Vec<RunMetrics> = results.into_iter().map(|r| r.metrics).collect();
+    let figures = eval_output(
+        "policy",
+        vec![model.display().to_string()],
+        scenario.name(),
+        Some(scenario.seed()),
+        per_run,
+    );
+    on_event(DaggerEvent::Evaluated {
+        k,
+        figures: Box::new(figures.clone()),
+    });
+    Ok(figures)
+}
+
+/// Rolls out `model` (or the expert, with probability `beta` per run) over `opts.runs` runs of
+/// the team sizes in turn and appends every robot's expert-labelled view at every tick as
+/// iteration `k`; returns the number of samples appended.
+fn rollout_and_label(
+    opts: &DaggerOptions,
+    scenarios: &[Scenario],
+    k: usize,
+    beta: f64,
+    model: &Path,
+    on_event: &(dyn Fn(DaggerEvent) + Sync),
+) -> Result<usize, LearningError> {
+    let dataset = |source| LearningError::Dataset {
+        path: opts.data.clone(),
+        source,
+    };
+    let mut writer = DatasetWriter::append(&opts.data, k as u32).map_err(dataset)?;
+    let occupancy = writer.header().occupancy;
+    let gains = ExpertGains::default();
+    let drivers = scenarios
+        .iter()
+        .map(|s| Driver::policy_for(s, model))
+        .collect::<Result<Vec<_>, _>>()?;
+    // One policy per team size, built on each worker the first time it needs it.
+    let iteration_seed = opts.seed.wrapping_add(1_000_003 * k as u64);
+    let done = AtomicUsize::new(0);
+    let per_run: Vec<Vec<Sample>> = (0..opts.runs)
+        .into_par_iter()
+        .map_init(
+            || (0..scenarios.len()).map(|_| None).collect::<Vec<_>>(),
+            |policies: &mut Vec<Option<Box<dyn Controller>>>, i| {
+                let size = i % scenarios.len();
+                let scenario = &scenarios[size];
+                let spec = scenario.run_spec(iteration_seed, i);
+                let mut coin = rand_chacha::ChaCha8Rng::seed_from_u64(spec.seed ^ 0xDA66E5);
+                let expert_drives = beta > 0.0 && coin.random::<f64>() < beta;
+                let mut expert =
+                    ExpertController::new(gains, spec.world.robot).with_neighbours(spec.neighbours);
+                if policies[size].is_none() && !expert_drives {
+                    policies[size] = Some(drivers[size].controller(scenario)?);
+                }
+                let driver: &mut dyn Controller = match &mut policies[size] {
+                    Some(policy) if !expert_drives => policy.as_mut(),
+                    _ => &mut expert,
+                };
+                let mut labeller = Labeller::for_run(&spec, gains, occupancy)
+                    .map_err(|source| LearningError::Label { run: i, source })?;
+                let mut samples = Vec::new();
+                let mut failure = None;
+                run_episode(&spec, driver, &mut |obs, _| {
+                    if failure.is_none() {
+                        failure = labeller
+                            .label_observation(obs, k as u32, i as u32, &mut |s| samples.push(s))
+                            .err();
+                    }
+                })
+                .map_err(|source| LearningError::Run { run: i, source })?;
+                if let Some(source) = failure {
+                    return Err(LearningError::Label { run: i, source });
+                }
+                on_event(DaggerEvent::Rollout {
+                    done: done.fetch_add(1, Ordering::Relaxed) + 1,
+                });
+                Ok(samples)
+            },
+        )
+        .collect::<Result<_, LearningError>>()?;
+    let mut added = 0;
+    for sample in per_run.into_iter().flatten() {
+        writer.push(sample).map_err(dataset)?;
+        added += 1;
+    }
+    writer.finish().map_err(dataset)?;
+    Ok(added)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_proto::OccupancySpec;
+    use trainer_bridge::dataset::{DatasetHeader, DatasetReader};
+
+    fn scenario(robots: usize) -> Scenario {
+        let text = format!(
+            "name = \"dagger-test\"\nrobots = {robots}\nduration_s = 1.0\nseed = 5\nruns = 4\n\
+             [goal]\nv_star = 0.7\nd_star_choices = [1.0, 2.0]\n[heading]\nschedule = \"random\"\n"
+        );
+        Scenario::from_toml_str(&text, "dagger-test").unwrap()
+    }
+
+    fn empty_dataset(dir: &Path, scenario: &Scenario) -> PathBuf {
+        let spec = scenario.run_spec(scenario.seed(), 0);
+        let header = DatasetHeader::new(
+            OccupancySpec::PAPER,
+            spec.world.lidar,
+            spec.v_star,
+            scenario.seed(),
+            scenario.name(),
+        );
+        let path = dir.join("data");
+        DatasetWriter::create(&path, header)
+            .unwrap()
+            .finish()
+            .unwrap();
+        path
+    }
+
+    fn options(data: PathBuf, base: &Scenario) -> DaggerOptions {
+        DaggerOptions {
+            data,
+            scenario: base.clone(),
+            team_sizes: vec![3, 5],
+            iterations: 1,
+            out: PathBuf::from("unused.onnx"),
+            init_model: None,
+            runs: 4,
+            beta: 0.5,
+            training: TrainOptions::default(),
+            eval_scenario: base.clone(),
+            eval_runs: 1,
+            seed: 9,
+        }
+    }
+
+    #[test]
+    fn rollouts_over_team_sizes_label_every_robots_view_in_run_order_and_replay() {
+        let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
+        let base = scenario(3);
+        let scenarios = [base.with_robots(3).unwrap(), base.with_robots(5).unwrap()];
+        let dir = tempfile::tempdir().unwrap();
+        let mut read = Vec::new();
+        for copy in ["a", "b"] {
+            let data = empty_dataset(&dir.path().join(copy), &base);
+            let opts = options(data.clone(), &base);
+            let added = rollout_and_label(&opts, &scenarios, 1, 0.5, &model, &|_| {}).unwrap();
+            // Runs 0..4 use teams of 3, 5, 3, 5 robots, 20 ticks each, one sample per robot.
+            assert_eq!(added, 20 * (3 + 5 + 3 + 5));
+            let samples = DatasetReader::open(&data).unwrap().load_all().unwrap();
+            assert_eq!(samples.len(), added);
+            assert!(samples.iter().all(|s| s.iteration == 1));
+            let robots_of_run = |run: u32| {
+                samples
+                    .iter()
+                    .filter(|s| s.run == run)
+                    .map(|s| usize::from(s.robot) + 1)
+                    .max()
+            };
+            assert_eq!(
+                (0..4).map(robots_of_run).collect::<Vec<_>>(),
+                [Some(3), Some(5), Some(3), Some(5)]
+            );
+            read.push(samples);
+        }
+        assert_eq!(read[0], read[1], "the same settings give the same samples");
+    }
+
+    #[test]
+    fn a_beta_outside_zero_to_one_is_refused() {
+        let base = scenario(3);
+        let mut opts = options(PathBuf::from("/nonexistent"), &base);
+        opts.beta = 1.5;
+        let err = run_dagger(&opts, &|_| {}).unwrap_err();
+        assert!(err.to_string().contains("--beta"), "{err}");
+    }
+}
