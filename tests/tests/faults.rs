@@ -258,7 +258,9 @@ fn agents_exit_cleanly_when_the_world_dies() {
             LiveProcess::spawn_with_secret(agent, &secret)
         })
         .collect();
-    let connected = world.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    // The world's own events: wait for all agents (`agent_connected` comes per agent).
+    let connected =
+        world.wait_for_line(Duration::from_secs(120), |l| l.contains("agents_connected"));
     assert!(connected.is_some(), "{}", world.describe());
     std::thread::sleep(Duration::from_millis(500));
 
