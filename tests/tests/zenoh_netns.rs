@@ -193,6 +193,62 @@ fn lockstep_case1_across_namespaces_equals_in_process() {
     rig.leaks.assert_clean();
 }
 
+/// Issue 13: ten table1 runs of the shipped model in lockstep, the world in one namespace and the
+/// three agents in the other, give the same Table I JSON as `formation eval` in-process.
+#[test]
+fn ten_table1_runs_across_namespaces_give_the_in_process_table() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("netns_table1", LIMIT);
+    let Some(rig) = Rig::new("nstab") else {
+        return;
+    };
+    let scenario = repo_root().join("scenarios/table1.toml");
+    let model = repo_root().join("onnx/models/policy.onnx");
+    let launch = rig.launch(
+        &scenario,
+        &model,
+        &["--clock", "lockstep", "--runs", "10", "--seed", "7"],
+    );
+    let agents = rig.agents(&rig.listen, &model);
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    finish_agents(agents);
+
+    let eval_json = rig.dir.path().join("in-process.json");
+    let mut eval = Command::new(&binaries().cli);
+    eval.args([
+        "eval",
+        "--controller",
+        "policy",
+        "--runs",
+        "10",
+        "--seed",
+        "7",
+    ])
+    .arg("--scenario")
+    .arg(&scenario)
+    .arg("--model")
+    .arg(&model)
+    .arg("--json")
+    .arg(&eval_json);
+    run(eval, LIMIT).assert_success();
+    let in_process = json(&eval_json);
+    let over = json(&rig.out().join("summary.json"));
+    let keys = in_process.as_object().expect("eval JSON is an object");
+    assert_eq!(
+        in_process["per_run"].as_array().map(Vec::len),
+        Some(10),
+        "ten runs in process"
+    );
+    for (key, value) in keys {
+        assert_eq!(
+            &over[key], value,
+            "{key} differs between the network and in-process"
+        );
+    }
+    rig.leaks.assert_clean();
+}
+
 /// Issue 13: with 20 ± 5 ms of delay each way and 1 % of the agents' TCP packets dropped, a
 /// realtime case-1 run with the shipped model still converges.
 #[test]
