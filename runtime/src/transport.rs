@@ -45,6 +45,21 @@ impl Transport {
             })
         }
     }
+
+    /// `Ok` unless one of Zenoh's own flags (`(given, "--flag")`) was given with another
+    /// transport, which is then the error naming the first such flag.
+    pub fn refuse_zenoh_flags(self, flags: &[(bool, &'static str)]) -> Result<(), TransportError> {
+        if self == Transport::Zenoh {
+            return Ok(());
+        }
+        match flags.iter().find(|(given, _)| *given) {
+            Some(&(_, flag)) => Err(TransportError::FlagNeedsZenoh {
+                flag,
+                transport: self,
+            }),
+            None => Ok(()),
+        }
+    }
 }
 
 impl fmt::Display for Transport {
@@ -87,6 +102,26 @@ pub enum TransportError {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn zenoh_flags_with_another_transport_name_the_first_flag_given() {
+        let flags = [
+            (false, "--listen"),
+            (true, "--remote"),
+            (true, "--credentials"),
+        ];
+        assert!(Transport::Zenoh.refuse_zenoh_flags(&flags).is_ok());
+        assert!(
+            Transport::Iceoryx2
+                .refuse_zenoh_flags(&[(false, "--listen")])
+                .is_ok()
+        );
+        let refused = Transport::Iceoryx2.refuse_zenoh_flags(&flags).unwrap_err();
+        assert_eq!(
+            refused.to_string(),
+            "--remote needs --transport zenoh (the transport is iceoryx2)"
+        );
+    }
 
     #[test]
     fn iceoryx2_is_the_default_and_a_missing_transport_names_the_fix() {

@@ -310,20 +310,12 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)>
 /// `--credentials`: flags of Zenoh need it, a remote robot must exist in the scenario, and a
 /// Zenoh launch without `--credentials` gets fresh ones in `<out>/credentials/<run id>/`.
 fn network_from_args(args: &RunArgs, run_id: &RunId, n_robots: usize) -> anyhow::Result<Network> {
+    args.transport.refuse_zenoh_flags(&[
+        (args.listen.is_some(), "--listen"),
+        (!args.remote.is_empty(), "--remote"),
+        (args.credentials.is_some(), "--credentials"),
+    ])?;
     if args.transport != Transport::Zenoh {
-        for (given, flag) in [
-            (args.listen.is_some(), "--listen"),
-            (!args.remote.is_empty(), "--remote"),
-            (args.credentials.is_some(), "--credentials"),
-        ] {
-            if given {
-                return Err(TransportError::FlagNeedsZenoh {
-                    flag,
-                    transport: args.transport,
-                }
-                .into());
-            }
-        }
         return Ok(Network::SharedMemory);
     }
     args.transport.check_built_in("formation")?;
@@ -715,18 +707,10 @@ pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
     let timeout = positive_seconds("--timeout-s", args.timeout_s)?;
     let done = match args.transport {
         Transport::Iceoryx2 => {
-            for (given, flag) in [
+            args.transport.refuse_zenoh_flags(&[
                 (args.connect.is_some(), "--connect"),
                 (args.credentials.is_some(), "--credentials"),
-            ] {
-                if given {
-                    return Err(TransportError::FlagNeedsZenoh {
-                        flag,
-                        transport: args.transport,
-                    }
-                    .into());
-                }
-            }
+            ])?;
             swap::request_swap(&args.run, args.robot, &args.model, args.at_tick, timeout)?
         }
         Transport::Zenoh => swap_over_zenoh(args, timeout)?,

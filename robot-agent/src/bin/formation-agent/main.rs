@@ -110,20 +110,10 @@ fn run(args: &Args) -> anyhow::Result<AgentExit> {
     let model = load_model(&*pilots, &args.model)?;
     let run_id = RunId::new(&args.run_id)?;
     args.transport.check_built_in("formation-agent")?;
-    if args.transport != Transport::Zenoh {
-        for (given, flag) in [
-            (args.connect.is_some(), "--connect"),
-            (args.credentials.is_some(), "--credentials"),
-        ] {
-            if given {
-                return Err(TransportError::FlagNeedsZenoh {
-                    flag,
-                    transport: args.transport,
-                }
-                .into());
-            }
-        }
-    }
+    args.transport.refuse_zenoh_flags(&[
+        (args.connect.is_some(), "--connect"),
+        (args.credentials.is_some(), "--credentials"),
+    ])?;
     let timeout = Duration::from_millis(args.connect_timeout_ms);
     let mut link: Box<dyn AgentLink> = match args.transport {
         Transport::Iceoryx2 => {

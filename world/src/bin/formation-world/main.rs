@@ -151,20 +151,10 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
 
     let runtime = args.runtime_settings()?;
     args.transport.check_built_in("formation-world")?;
-    if args.transport != Transport::Zenoh {
-        for (given, flag) in [
-            (args.listen.is_some(), "--listen"),
-            (args.credentials.is_some(), "--credentials"),
-        ] {
-            if given {
-                return Err(TransportError::FlagNeedsZenoh {
-                    flag,
-                    transport: args.transport,
-                }
-                .into());
-            }
-        }
-    }
+    args.transport.refuse_zenoh_flags(&[
+        (args.listen.is_some(), "--listen"),
+        (args.credentials.is_some(), "--credentials"),
+    ])?;
     let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
     let stop = if args.exit_on_stdin_close {
         flag_when_stdin_closes()
