@@ -109,10 +109,7 @@ pub fn request_swap(
         path,
     };
     let reply = exchange(&namespace, &request, timeout)?;
-    match reply.outcome {
-        SwapOutcome::Done { tick, model_id } => Ok(SwapDone { tick, model_id }),
-        SwapOutcome::Refused { reason } => Err(SwapError::Refused { robot, reason }.into()),
-    }
+    swap_done(reply.outcome, robot)
 }
 
 /// [`request_swap`] over Zenoh: sends the model's bytes to run `run`'s world at `connect`
@@ -161,7 +158,12 @@ pub fn request_swap_over_zenoh(
         &bytes,
         timeout,
     )?;
-    match reply.outcome {
+    swap_done(reply.outcome, robot)
+}
+
+/// The world's answer about robot `robot` as the swap command's result.
+fn swap_done(outcome: SwapOutcome, robot: usize) -> anyhow::Result<SwapDone> {
+    match outcome {
         SwapOutcome::Done { tick, model_id } => Ok(SwapDone { tick, model_id }),
         SwapOutcome::Refused { reason } => Err(SwapError::Refused { robot, reason }.into()),
     }
