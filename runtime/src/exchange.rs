@@ -757,7 +757,12 @@ impl Controller for AgentsController<'_> {
             ClockMode::Lockstep => Duration::from_micros(self.settings.runtime.spin_us),
             ClockMode::Realtime => Duration::ZERO,
         };
-        let spin_until = std::time::Instant::now() + spin;
+        // A poll longer than the command timeout would outlast the tick it serves (and a huge
+        // `spin_us` would overflow the instant).
+        let polled_from = std::time::Instant::now();
+        let spin_until = polled_from
+            .checked_add(spin.min(self.settings.runtime.command_timeout()))
+            .unwrap_or(polled_from);
         loop {
             self.poll()?;
             let now = self.clock.now();

@@ -719,6 +719,21 @@ fn a_lockstep_spin_before_blocking_changes_no_outcome() {
 }
 
 #[test]
+fn an_absurd_spin_setting_is_bounded_and_does_not_overflow() {
+    let sim = Sim::new(3);
+    let mut link = sim.world_link();
+    let spinning = RuntimeSettings {
+        spin_us: u64::MAX,
+        command_timeout_ms: 50,
+        ..settings(ClockMode::Lockstep)
+    };
+    let mut world = connected_with(&sim, &mut link, spinning, &[]);
+    for tick in 0..3 {
+        assert_eq!(sim.tick(&mut world, tick), vec![SLOW; 3]);
+    }
+}
+
+#[test]
 fn a_rehearsal_is_due_ahead_of_the_next_scan_only_once_the_period_is_known() {
     use crate::agent::rehearsal_due;
     let now = std::time::Instant::now();
