@@ -313,6 +313,11 @@ impl Agent {
         self.policy.model_id()
     }
 
+    /// The policy now driving.
+    pub fn policy(&self) -> &dyn PolicyBackend {
+        self.policy.as_ref()
+    }
+
     /// Replaces the policy after validating the new one; on error the old policy keeps driving.
     ///
     /// The candidate must fit this robot's sensor (as in [`Agent::new`]) and must give a finite

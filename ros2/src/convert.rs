@@ -307,6 +307,26 @@ pub fn twist_from_wheels(
     })
 }
 
+/// The wheel rim speeds \[m/s\] a differential-drive base runs for a Twist, as
+/// ros2_controllers' `diff_drive_controller` computes them: `left = linear.x − angular.z · l / 2`,
+/// `right = linear.x + angular.z · l / 2`. The other components (a diff-drive base cannot move
+/// sideways or roll) are ignored. The inverse of [`twist_from_wheels`] up to rounding.
+pub fn wheels_from_twist(twist: &Twist, wheel_separation: f64) -> (f64, f64) {
+    let half_turn = twist.angular.z * wheel_separation / 2.0;
+    (twist.linear.x - half_turn, twist.linear.x + half_turn)
+}
+
+/// The orientation of a heading `yaw` \[rad\] about +z: `(0, 0, sin(yaw / 2), cos(yaw / 2))`.
+pub fn quaternion_from_yaw(yaw: f64) -> Quaternion {
+    let (sin, cos) = (yaw / 2.0).sin_cos();
+    Quaternion {
+        x: 0.0,
+        y: 0.0,
+        z: sin,
+        w: cos,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -560,5 +580,19 @@ mod tests {
             twist_from_wheels(0.1, 0.1, 0.0),
             Err(TwistError::BadWheelSeparation(0.0))
         );
+    }
+
+    #[test]
+    fn wheels_and_twists_round_trip_and_yaw_survives_a_quaternion() {
+        let l = 0.331;
+        for (left, right) in [(0.3, 0.5), (-0.2, 0.2), (0.7, 0.7), (0.0, -0.9)] {
+            let twist = twist_from_wheels(left, right, l).unwrap();
+            let (l2, r2) = wheels_from_twist(&twist, l);
+            assert!((l2 - left).abs() < 1e-12 && (r2 - right).abs() < 1e-12);
+        }
+        for yaw in [0.0, 1.0, -2.5, PI - 1e-9, -PI + 1e-9] {
+            let back = yaw_from_quaternion(&quaternion_from_yaw(yaw)).unwrap();
+            assert!((back - yaw).abs() < 1e-12, "{yaw} -> {back}");
+        }
     }
 }

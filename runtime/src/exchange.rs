@@ -713,6 +713,9 @@ impl Controller for AgentsController<'_> {
                 scan,
             )
             .map_err(|e| ControllerError::new(e.to_string()))?;
+            self.link
+                .publish_pose(robot, &obs.poses[robot])
+                .map_err(transport_error)?;
             // Stamped before the hand-over: publishing wakes the agent, which may run on this
             // very core before the world resumes, and a stamp taken afterwards would hide that
             // agent's whole answer from the round trip.

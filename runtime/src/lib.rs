@@ -10,6 +10,8 @@
 //! * [`iceoryx`]: the links over iceoryx2 shared memory, used by the `formation-world` and
 //!   `formation-agent` processes.
 //! * `zenoh` (with the `zenoh` feature): the links over Zenoh, for agents on other hosts.
+//! * `ros2` (with the `zenoh` feature): ROS 2 over rmw_zenoh: an agent that drives a ROS 2
+//!   robot, and the world as a team of ROS 2 robots.
 //! * [`memory`]: both links over channels in one process, for tests.
 //! * [`clock`]: the injected [`clock::Clock`] (system, or fake for tests).
 //! * [`settings`]: [`settings::ClockMode`] and [`settings::RuntimeSettings`], shared by the
@@ -17,7 +19,8 @@
 //! * [`transport`]: [`transport::Transport`], which link the processes use.
 //! * [`process`]: what both processes do about the launcher going away.
 //!
-//! Dependencies point one way: this crate depends only on `formation-proto`; the world's binary,
+//! Dependencies point one way: this crate depends only on `formation-proto` (and, for ROS 2,
+//! the I/O-free `formation-ros2`); the world's binary,
 //! the agent's binary and the launcher depend on it, and it knows neither physics nor ONNX.
 
 pub mod agent;
@@ -28,6 +31,8 @@ pub mod iceoryx;
 pub mod link;
 pub mod memory;
 pub mod process;
+#[cfg(feature = "zenoh")]
+pub mod ros2;
 pub mod settings;
 pub mod transport;
 #[cfg(feature = "zenoh")]

@@ -85,6 +85,16 @@ pub trait WorldLink {
     fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError>;
     /// Drops the world's ends of robot `robot`'s current incarnation (its agent is gone).
     fn close_incarnation(&mut self, robot: usize);
+    /// Hands the link robot `robot`'s true pose of the tick whose scan comes next, for a link
+    /// that publishes odometry like a real robot (the ROS 2 team); agents of the other links see
+    /// only their scan and heading, so by default this does nothing.
+    fn publish_pose(
+        &mut self,
+        _robot: usize,
+        _pose: &formation_proto::Pose,
+    ) -> Result<(), WorldLinkError> {
+        Ok(())
+    }
     /// Publishes robot `robot`'s scan and wakes its agent.
     fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError>;
     /// Sends a control request to robot `robot`'s agent and wakes it.

@@ -1,6 +1,7 @@
 //! Which transport joins the world and its agents ([`Transport`]): iceoryx2 shared memory on one
-//! host (the default), or Zenoh over TCP for agents on other hosts, which a build may leave out
-//! (the `zenoh` cargo feature, on by default in the binaries' packages).
+//! host (the default), Zenoh over TCP for agents on other hosts, or ROS 2 over rmw_zenoh (agents
+//! that drive ROS 2 robots, the world as a ROS 2 team). A build may leave the last two out (the
+//! `zenoh` cargo feature, on by default in the binaries' packages).
 
 use std::fmt;
 
@@ -15,6 +16,10 @@ pub enum Transport {
     /// host or others.
     #[value(name = "zenoh")]
     Zenoh,
+    /// ROS 2 over rmw_zenoh: LaserScan and orientation in, Twist out, through a Zenoh router
+    /// (the robot's `rmw_zenohd`, or the world's `--listen`).
+    #[value(name = "ros2")]
+    Ros2,
 }
 
 impl Transport {
@@ -23,6 +28,7 @@ impl Transport {
         match self {
             Transport::Iceoryx2 => "iceoryx2",
             Transport::Zenoh => "zenoh",
+            Transport::Ros2 => "ros2",
         }
     }
 
@@ -30,7 +36,7 @@ impl Transport {
     pub fn built_in(self) -> bool {
         match self {
             Transport::Iceoryx2 => true,
-            Transport::Zenoh => cfg!(feature = "zenoh"),
+            Transport::Zenoh | Transport::Ros2 => cfg!(feature = "zenoh"),
         }
     }
 
@@ -49,16 +55,48 @@ impl Transport {
     /// `Ok` unless one of Zenoh's own flags (`(given, "--flag")`) was given with another
     /// transport, which is then the error naming the first such flag.
     pub fn refuse_zenoh_flags(self, flags: &[(bool, &'static str)]) -> Result<(), TransportError> {
-        if self == Transport::Zenoh {
+        self.refuse_flags_unless(self == Transport::Zenoh, "zenoh", flags)
+    }
+
+    /// `Ok` unless one of ROS 2's own flags (`(given, "--flag")`) was given with another
+    /// transport, which is then the error naming the first such flag.
+    pub fn refuse_ros2_flags(self, flags: &[(bool, &'static str)]) -> Result<(), TransportError> {
+        self.refuse_flags_unless(self == Transport::Ros2, "ros2", flags)
+    }
+
+    /// `Ok` when `fits`, else the error naming the first flag given (`(given, "--flag")`), which
+    /// works only with `needs`.
+    fn refuse_flags_unless(
+        self,
+        fits: bool,
+        needs: &'static str,
+        flags: &[(bool, &'static str)],
+    ) -> Result<(), TransportError> {
+        if fits {
             return Ok(());
         }
         match flags.iter().find(|(given, _)| *given) {
-            Some(&(_, flag)) => Err(TransportError::FlagNeedsZenoh {
+            Some(&(_, flag)) => Err(TransportError::FlagNeedsTransport {
                 flag,
+                needs,
                 transport: self,
             }),
             None => Ok(()),
         }
+    }
+
+    /// Whether the transport runs over a Zenoh session (and so takes `--listen`/`--connect`).
+    pub fn over_zenoh(self) -> bool {
+        matches!(self, Transport::Zenoh | Transport::Ros2)
+    }
+
+    /// `Ok` unless one of the network flags (`--listen`, `--connect`) was given with a transport
+    /// that is not over Zenoh.
+    pub fn refuse_network_flags(
+        self,
+        flags: &[(bool, &'static str)],
+    ) -> Result<(), TransportError> {
+        self.refuse_flags_unless(self.over_zenoh(), "zenoh or ros2", flags)
     }
 }
 
@@ -84,18 +122,22 @@ pub enum TransportError {
         transport: Transport,
     },
     /// A flag that needs another transport.
-    #[error("{flag} needs --transport zenoh (the transport is {transport})")]
-    FlagNeedsZenoh {
+    #[error("{flag} needs --transport {needs} (the transport is {transport})")]
+    FlagNeedsTransport {
         /// The flag given.
         flag: &'static str,
+        /// The transports it works with, e.g. `zenoh or ros2`.
+        needs: &'static str,
         /// The transport in use.
         transport: Transport,
     },
     /// Zenoh without the endpoint it needs.
-    #[error("--transport zenoh needs {flag} tcp/HOST:PORT")]
+    #[error("--transport {transport} needs {flag} tcp/HOST:PORT")]
     MissingEndpoint {
         /// `--listen` or `--connect`.
         flag: &'static str,
+        /// The transport.
+        transport: Transport,
     },
 }
 
@@ -120,6 +162,26 @@ mod tests {
         assert_eq!(
             refused.to_string(),
             "--remote needs --transport zenoh (the transport is iceoryx2)"
+        );
+        let refused = Transport::Ros2.refuse_zenoh_flags(&flags).unwrap_err();
+        assert_eq!(
+            refused.to_string(),
+            "--remote needs --transport zenoh (the transport is ros2)"
+        );
+        assert!(Transport::Ros2.refuse_network_flags(&flags).is_ok());
+        let refused = Transport::Iceoryx2
+            .refuse_network_flags(&[(true, "--connect")])
+            .unwrap_err();
+        assert_eq!(
+            refused.to_string(),
+            "--connect needs --transport zenoh or ros2 (the transport is iceoryx2)"
+        );
+        let refused = Transport::Zenoh
+            .refuse_ros2_flags(&[(true, "--scan")])
+            .unwrap_err();
+        assert_eq!(
+            refused.to_string(),
+            "--scan needs --transport ros2 (the transport is zenoh)"
         );
     }
 

@@ -141,7 +141,7 @@ fn base_config(mode: &str) -> Result<::zenoh::Config, String> {
 
 /// The world's configuration: a router listening on `listen`, checking logins and key
 /// permissions when `access` is given.
-fn world_config(
+pub(crate) fn world_config(
     listen: &Endpoint,
     access: Option<&WorldAccess>,
 ) -> Result<::zenoh::Config, String> {
@@ -157,7 +157,7 @@ fn world_config(
 
 /// An agent's (or a tool's) configuration: a client of the world's router at `connect`, within
 /// `timeout`, logging in when `login` is given.
-fn client_config(
+pub(crate) fn client_config(
     connect: &Endpoint,
     timeout: Duration,
     login: Option<&Login>,
@@ -185,7 +185,7 @@ fn client_config(
 }
 
 /// Opens a session, mapping Zenoh's error to text.
-fn open(config: ::zenoh::Config) -> Result<::zenoh::Session, String> {
+pub(crate) fn open(config: ::zenoh::Config) -> Result<::zenoh::Session, String> {
     ::zenoh::open(config).wait().map_err(|e| e.to_string())
 }
 

@@ -12,10 +12,16 @@
 //! from this host or another; `--credentials robot-<i>.json` (from `formation credentials`) then
 //! gives its login and the launch secret, in place of standard input.
 //!
+//! With `--transport ros2 --connect tcp/ROUTER:7447` it is a ROS 2 node instead
+//! (`formation_runtime::ros2`): it takes a robot's LaserScan and orientation and publishes its
+//! Twist, with no world and no ROS installation; see [`ros2`] for its flags.
+//!
 //! It exits cleanly, with a message saying why, on a shutdown request, on SIGINT/SIGTERM (SIGHUP
 //! ends it by default), when its standard input closes (with `--exit-on-stdin-close`: the
 //! launcher is gone), or within about a second of the world process going away. Other signals
 //! (SIGCONT after a stop, SIGUSR1, SIGURG, ...) only interrupt a wait, which it simply resumes.
+
+mod ros2;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -39,12 +45,13 @@ use robot_agent::pilot::OnnxPilots;
 #[derive(Debug, Parser)]
 #[command(name = "formation-agent", version)]
 struct Args {
-    /// Run id of the world to join.
+    /// Run id of the world to join (iceoryx2 and zenoh).
     #[arg(long)]
-    run_id: String,
-    /// Index of the robot this agent drives.
+    run_id: Option<String>,
+    /// Index of the robot this agent drives. With ROS 2: the simulated team's robot whose topics
+    /// (`/robot_<i>/scan`, `/robot_<i>/odom`, `/robot_<i>/cmd_vel`) are the defaults.
     #[arg(long)]
-    robot: usize,
+    robot: Option<usize>,
     /// ONNX policy model.
     #[arg(long)]
     model: PathBuf,
@@ -57,10 +64,12 @@ struct Args {
     /// Exit when standard input closes (set by the launcher, so agents never outlive it).
     #[arg(long)]
     exit_on_stdin_close: bool,
-    /// How to reach the world: iceoryx2 shared memory on this host, or Zenoh over TCP.
+    /// How to reach the world: iceoryx2 shared memory on this host, or Zenoh over TCP; or, with
+    /// ros2, drive a ROS 2 robot through its Zenoh router (rmw_zenoh).
     #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
     transport: Transport,
-    /// Zenoh: the world's endpoint, tcp/ADDR:PORT.
+    /// Zenoh: the world's endpoint, tcp/ADDR:PORT; ROS 2: the robot's router (rmw_zenohd
+    /// listens on tcp/ADDR:7447).
     #[arg(long, value_name = "tcp/ADDR:PORT")]
     connect: Option<String>,
     /// Zenoh: this robot's credentials file (`robot-<i>.json` from `formation credentials`): its
@@ -73,6 +82,9 @@ struct Args {
     /// decision per tick, about 0.3 % of a core).
     #[arg(long, env = "FORMATION_AGENT_REHEARSE_US", default_value_t = 2_000)]
     rehearse_us: u64,
+    /// ROS 2 mode's flags.
+    #[command(flatten)]
+    ros2: ros2::Ros2Args,
 }
 
 fn main() -> ExitCode {
@@ -84,7 +96,10 @@ fn main() -> ExitCode {
         .with_writer(std::io::stderr)
         .try_init();
     let args = Args::parse();
-    let who = format!("formation-agent (robot {})", args.robot);
+    let who = match args.robot {
+        Some(robot) => format!("formation-agent (robot {robot})"),
+        None => "formation-agent".to_string(),
+    };
     match run(&args) {
         Ok(AgentExit::Shutdown) => {
             tracing::info!("{who}: exiting: the world asked us to shut down");
@@ -108,27 +123,38 @@ fn main() -> ExitCode {
 fn run(args: &Args) -> anyhow::Result<AgentExit> {
     let pilots = Arc::new(OnnxPilots);
     let model = load_model(&*pilots, &args.model)?;
-    let run_id = RunId::new(&args.run_id)?;
     args.transport.check_built_in("formation-agent")?;
-    args.transport.refuse_zenoh_flags(&[
-        (args.connect.is_some(), "--connect"),
-        (args.credentials.is_some(), "--credentials"),
-    ])?;
+    args.transport
+        .refuse_network_flags(&[(args.connect.is_some(), "--connect")])?;
+    args.transport
+        .refuse_zenoh_flags(&[(args.credentials.is_some(), "--credentials")])?;
+    args.transport.refuse_ros2_flags(&args.ros2.given())?;
+    let stop = if args.exit_on_stdin_close {
+        flag_when_stdin_closes()
+    } else {
+        Arc::new(AtomicBool::new(false))
+    };
+    if args.transport == Transport::Ros2 {
+        return ros2::run(args, model, &stop);
+    }
+    let (Some(run_id), Some(robot)) = (&args.run_id, args.robot) else {
+        anyhow::bail!(
+            "--transport {} needs --run-id and --robot (the run and robot to join)",
+            args.transport
+        );
+    };
+    let run_id = RunId::new(run_id)?;
     let timeout = Duration::from_millis(args.connect_timeout_ms);
     let mut link: Box<dyn AgentLink> = match args.transport {
         Transport::Iceoryx2 => {
             let namespace = RunNamespace::new(&run_id);
             let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
             Box::new(IceoryxAgentLink::connect(
-                &namespace, args.robot, &secret, timeout,
+                &namespace, robot, &secret, timeout,
             )?)
         }
-        Transport::Zenoh => zenoh_link(args, &run_id, timeout)?,
-    };
-    let stop = if args.exit_on_stdin_close {
-        flag_when_stdin_closes()
-    } else {
-        Arc::new(AtomicBool::new(false))
+        Transport::Zenoh => zenoh_link(args, &run_id, robot, timeout)?,
+        Transport::Ros2 => unreachable!("handled above"),
     };
     let mut agent = AgentLoop::new(
         pilots,
@@ -139,7 +165,7 @@ fn run(args: &Args) -> anyhow::Result<AgentExit> {
     )
     .with_rehearsal(Duration::from_micros(args.rehearse_us));
     agent.greet(link.as_mut(), std::process::id())?;
-    Ok(agent.run(link.as_mut(), &stop, &args.run_id)?)
+    Ok(agent.run(link.as_mut(), &stop, run_id.as_str())?)
 }
 
 /// The Zenoh link to the world at `--connect`, logged in with `--credentials` when given.
@@ -147,29 +173,26 @@ fn run(args: &Args) -> anyhow::Result<AgentExit> {
 fn zenoh_link(
     args: &Args,
     run_id: &RunId,
+    robot: usize,
     timeout: Duration,
 ) -> anyhow::Result<Box<dyn AgentLink>> {
     use formation_runtime::zenoh::{Endpoint, ZenohAgentLink, credentials};
     let connect = args
         .connect
         .as_deref()
-        .ok_or(TransportError::MissingEndpoint { flag: "--connect" })?;
+        .ok_or(TransportError::MissingEndpoint {
+            flag: "--connect",
+            transport: Transport::Zenoh,
+        })?;
     let endpoint = Endpoint::parse(connect)?;
     let (login, secret) = match &args.credentials {
         Some(path) => {
-            let found = credentials::read_robot(path, args.robot)?;
+            let found = credentials::read_robot(path, robot)?;
             (Some(found.login), found.secret)
         }
         None => (None, LaunchSecret::read_line(&mut std::io::stdin().lock())?),
     };
-    let link = ZenohAgentLink::connect(
-        &endpoint,
-        login.as_ref(),
-        run_id,
-        args.robot,
-        &secret,
-        timeout,
-    )?;
+    let link = ZenohAgentLink::connect(&endpoint, login.as_ref(), run_id, robot, &secret, timeout)?;
     Ok(Box::new(link))
 }
 
@@ -178,6 +201,7 @@ fn zenoh_link(
 fn zenoh_link(
     _args: &Args,
     _run_id: &RunId,
+    _robot: usize,
     _timeout: Duration,
 ) -> anyhow::Result<Box<dyn AgentLink>> {
     Err(TransportError::NotBuilt {

@@ -89,13 +89,18 @@ struct Args {
     /// Stop when standard input closes (set by the launcher, so the world never outlives it).
     #[arg(long)]
     exit_on_stdin_close: bool,
-    /// How the agents reach the world: iceoryx2 shared memory on this host, or Zenoh over TCP
-    /// (agents on this host or others).
+    /// How the agents reach the world: iceoryx2 shared memory on this host, Zenoh over TCP
+    /// (agents on this host or others), or ROS 2 over rmw_zenoh (the world as a team of ROS 2
+    /// robots: `/robot_<i>/scan`, `/robot_<i>/odom`, `/robot_<i>/cmd_vel`).
     #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
     transport: Transport,
-    /// Zenoh: the endpoint to listen on, tcp/ADDR:PORT (agents connect to it).
+    /// Zenoh and ROS 2: the endpoint to listen on, tcp/ADDR:PORT, as a Zenoh router (agents, and
+    /// ROS 2 tools, connect to it).
     #[arg(long, value_name = "tcp/ADDR:PORT")]
     listen: Option<String>,
+    /// ROS 2: the ROS domain id of the team's topics (default 0).
+    #[arg(long, value_name = "ID", value_parser = clap::value_parser!(u32).range(0..=232))]
+    ros_domain_id: Option<u32>,
     /// Zenoh: a credentials folder (`formation credentials`); only its users may connect, each to
     /// its own robot's keys. Without it, any process that reaches the endpoint may.
     #[arg(long, value_name = "DIR")]
@@ -151,10 +156,12 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
 
     let runtime = args.runtime_settings()?;
     args.transport.check_built_in("formation-world")?;
-    args.transport.refuse_zenoh_flags(&[
-        (args.listen.is_some(), "--listen"),
-        (args.credentials.is_some(), "--credentials"),
-    ])?;
+    args.transport
+        .refuse_network_flags(&[(args.listen.is_some(), "--listen")])?;
+    args.transport
+        .refuse_zenoh_flags(&[(args.credentials.is_some(), "--credentials")])?;
+    args.transport
+        .refuse_ros2_flags(&[(args.ros_domain_id.is_some(), "--ros-domain-id")])?;
     let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
     let stop = if args.exit_on_stdin_close {
         flag_when_stdin_closes()
@@ -168,6 +175,7 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
                 .with_context(|| format!("setting up run {run_id}'s services"))?,
         ),
         Transport::Zenoh => zenoh_link(args, &run_id, n_robots)?,
+        Transport::Ros2 => ros2_link(args, &run_id, &specs[0], secret.clone())?,
     };
     emit(&WorldEvent::Listening { robots: n_robots });
     let settings = ExchangeSettings {
@@ -202,7 +210,10 @@ fn zenoh_link(args: &Args, run_id: &RunId, n_robots: usize) -> anyhow::Result<Bo
     let listen = args
         .listen
         .as_deref()
-        .ok_or(TransportError::MissingEndpoint { flag: "--listen" })?;
+        .ok_or(TransportError::MissingEndpoint {
+            flag: "--listen",
+            transport: Transport::Zenoh,
+        })?;
     let listen = Endpoint::parse(listen)?;
     let access = match &args.credentials {
         Some(dir) => Some(WorldAccess {
@@ -233,6 +244,51 @@ fn zenoh_link(
     Err(TransportError::NotBuilt {
         program: "formation-world".into(),
         transport: Transport::Zenoh,
+    }
+    .into())
+}
+
+/// The world as a ROS 2 team: a Zenoh router on `--listen` serving each robot's LaserScan,
+/// Odometry and cmd_vel.
+#[cfg(feature = "zenoh")]
+fn ros2_link(
+    args: &Args,
+    run_id: &RunId,
+    spec: &RunSpec,
+    secret: LaunchSecret,
+) -> anyhow::Result<Box<dyn WorldLink>> {
+    use formation_runtime::ros2::{Ros2Team, Ros2WorldLink};
+    use formation_runtime::zenoh::Endpoint;
+    let listen = args
+        .listen
+        .as_deref()
+        .ok_or(TransportError::MissingEndpoint {
+            flag: "--listen",
+            transport: Transport::Ros2,
+        })?;
+    let listen = Endpoint::parse(listen)?;
+    let team = Ros2Team {
+        n_robots: spec.n_robots,
+        domain_id: args.ros_domain_id.unwrap_or(0),
+        wheel_separation: spec.world.robot.wheel_separation,
+        max_range: spec.world.lidar.max_range,
+    };
+    let link = Ros2WorldLink::create(run_id, team, &listen, secret)
+        .with_context(|| format!("setting up the ROS 2 team of run {run_id} on {listen}"))?;
+    Ok(Box::new(link))
+}
+
+/// This build has no Zenoh.
+#[cfg(not(feature = "zenoh"))]
+fn ros2_link(
+    _args: &Args,
+    _run_id: &RunId,
+    _spec: &RunSpec,
+    _secret: LaunchSecret,
+) -> anyhow::Result<Box<dyn WorldLink>> {
+    Err(TransportError::NotBuilt {
+        program: "formation-world".into(),
+        transport: Transport::Ros2,
     }
     .into())
 }

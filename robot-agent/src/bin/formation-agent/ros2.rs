@@ -1,0 +1,298 @@
+//! `formation-agent --transport ros2`: the flags of the ROS 2 mode and how they become the
+//! runtime's [`Ros2AgentSettings`].
+//!
+//! Topic defaults: with `--robot I`, the simulated team's (`/robot_I/scan`, `/robot_I/odom` as
+//! Odometry, `/robot_I/cmd_vel`, node `/robot_I/formation_agent`); without it, a single robot's
+//! (`/scan`, `/odom` as Odometry, `/cmd_vel`, node `/formation_agent`). Each goal component is a
+//! fixed value when its flag is given (`--phi-star`, `--d-star`, `--v-star`), else the newest
+//! `std_msgs/Float64` on its topic (`/formation/goal/heading`, `/distance`, `/speed` by default).
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::Args;
+use formation_proto::LidarSpec;
+use formation_runtime::agent::{AgentExit, PilotMaker};
+use formation_runtime::transport::{Transport, TransportError};
+use robot_agent::decision::PolicyBackend;
+use robot_agent::pilot::OnnxPilots;
+
+#[cfg(feature = "zenoh")]
+use formation_runtime::ros2::{
+    DeciderSettings, GoalValue, OrientationKind, Ros2AgentSettings, TeamTopics,
+};
+
+/// The P3-DX's wheel separation \[m\], the robot the shipped models were trained for.
+const P3DX_WHEEL_SEPARATION: f64 = 0.331;
+
+/// Which message carries the orientation (mirrors the runtime's, so the flag exists in every
+/// build).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OrientationType {
+    /// `sensor_msgs/msg/Imu`.
+    Imu,
+    /// `nav_msgs/msg/Odometry`.
+    Odometry,
+}
+
+/// Flags of the ROS 2 mode.
+#[derive(Debug, Args)]
+pub struct Ros2Args {
+    /// ROS 2: the ROS domain id (default: $ROS_DOMAIN_ID, else 0).
+    #[arg(long, env = "ROS_DOMAIN_ID", value_name = "ID",
+          value_parser = clap::value_parser!(u32).range(0..=232))]
+    ros_domain_id: Option<u32>,
+    /// ROS 2: the robot's `sensor_msgs/LaserScan` topic.
+    #[arg(long, value_name = "TOPIC")]
+    scan: Option<String>,
+    /// ROS 2: the robot's orientation topic (its type: --orientation-type).
+    #[arg(long, value_name = "TOPIC")]
+    orientation: Option<String>,
+    /// ROS 2: the orientation topic's type.
+    #[arg(long, value_enum, value_name = "TYPE")]
+    orientation_type: Option<OrientationType>,
+    /// ROS 2: where the `geometry_msgs/Twist` commands go.
+    #[arg(long, value_name = "TOPIC")]
+    cmd_vel: Option<String>,
+    /// ROS 2: a fixed goal heading φ* \[rad\] (else the heading topic's newest value).
+    #[arg(long, value_name = "RAD", allow_negative_numbers = true)]
+    phi_star: Option<f64>,
+    /// ROS 2: a fixed goal distance d* \[m\] (else the distance topic's newest value).
+    #[arg(long, value_name = "M")]
+    d_star: Option<f64>,
+    /// ROS 2: a fixed goal speed v* \[m/s\] (else the speed topic's newest value).
+    #[arg(long, value_name = "M/S")]
+    v_star: Option<f64>,
+    /// ROS 2: the `std_msgs/Float64` topic of the goal heading φ* \[rad\].
+    #[arg(long, value_name = "TOPIC")]
+    heading_topic: Option<String>,
+    /// ROS 2: the `std_msgs/Float64` topic of the goal distance d* \[m\].
+    #[arg(long, value_name = "TOPIC")]
+    distance_topic: Option<String>,
+    /// ROS 2: the `std_msgs/Float64` topic of the goal speed v* \[m/s\].
+    #[arg(long, value_name = "TOPIC")]
+    speed_topic: Option<String>,
+    /// ROS 2: the robot's wheel separation \[m\], to turn wheel speeds into a Twist (default:
+    /// the P3-DX's 0.331 m, the robot the shipped models were trained for).
+    #[arg(long, value_name = "M")]
+    wheel_separation: Option<f64>,
+    /// ROS 2: an input older than this brakes the robot \[ms\].
+    #[arg(long, value_name = "MS")]
+    stale_ms: Option<u64>,
+    /// ROS 2: accept a LaserScan that does not cover the full circle, reading the bearings it
+    /// misses as no return (the model was trained on a full ring: expect worse formations).
+    #[arg(long)]
+    allow_partial_scan: bool,
+    /// ROS 2: the node's name.
+    #[arg(long, value_name = "NAME")]
+    node_name: Option<String>,
+}
+
+impl Ros2Args {
+    /// `(given, "--flag")` of every ROS 2 flag, for refusing them with another transport.
+    pub fn given(&self) -> [(bool, &'static str); 15] {
+        [
+            // The environment variable alone is not a flag given by mistake.
+            (false, "--ros-domain-id"),
+            (self.scan.is_some(), "--scan"),
+            (self.orientation.is_some(), "--orientation"),
+            (self.orientation_type.is_some(), "--orientation-type"),
+            (self.cmd_vel.is_some(), "--cmd-vel"),
+            (self.phi_star.is_some(), "--phi-star"),
+            (self.d_star.is_some(), "--d-star"),
+            (self.v_star.is_some(), "--v-star"),
+            (self.heading_topic.is_some(), "--heading-topic"),
+            (self.distance_topic.is_some(), "--distance-topic"),
+            (self.speed_topic.is_some(), "--speed-topic"),
+            (self.wheel_separation.is_some(), "--wheel-separation"),
+            (self.stale_ms.is_some(), "--stale-ms"),
+            (self.allow_partial_scan, "--allow-partial-scan"),
+            (self.node_name.is_some(), "--node-name"),
+        ]
+    }
+}
+
+/// The LIDAR ring the model was trained on, from its metadata.
+fn model_ring(model: &dyn PolicyBackend, path: &Path) -> anyhow::Result<LidarSpec> {
+    match (model.beams(), model.max_range()) {
+        (Some(beams), Some(max_range)) => Ok(LidarSpec {
+            beams,
+            max_range,
+            noise_std: 0.0,
+        }),
+        _ => anyhow::bail!(
+            "model {} does not record the LIDAR it was trained on (formation.lidar.beams and \
+             formation.lidar.max_range), which ROS 2 mode needs to resample the robot's \
+             LaserScan; export it with `formation train`",
+            path.display()
+        ),
+    }
+}
+
+/// Runs the ROS 2 mode until a signal or `stop`.
+#[cfg(feature = "zenoh")]
+pub fn run(
+    args: &super::Args,
+    model: Box<dyn PolicyBackend>,
+    stop: &AtomicBool,
+) -> anyhow::Result<AgentExit> {
+    use formation_ros2::{Namespace, NodeName, PartialScan, RingContract, TopicName};
+    use formation_runtime::zenoh::Endpoint;
+
+    let flags = &args.ros2;
+    if args.fault.is_some() {
+        anyhow::bail!("--fault is for the iceoryx2 and zenoh transports, not ros2");
+    }
+    if args.run_id.is_some() {
+        anyhow::bail!(
+            "--run-id is for the iceoryx2 and zenoh transports; a ROS 2 agent joins the robot's \
+             ROS graph, not a run (drop --run-id)"
+        );
+    }
+    let connect = args
+        .connect
+        .as_deref()
+        .ok_or(TransportError::MissingEndpoint {
+            flag: "--connect",
+            transport: Transport::Ros2,
+        })?;
+    let connect = Endpoint::parse(connect)?;
+    let lidar = model_ring(model.as_ref(), &args.model)?;
+    let mut pilot = OnnxPilots
+        .pilot(model, lidar)
+        .map_err(|e| anyhow::anyhow!("{}", formation_runtime::agent::error_chain(&*e)))?;
+
+    let topic = |flag: &str, given: &Option<String>, default: String| {
+        let name = given.clone().unwrap_or(default);
+        TopicName::new(&name).with_context(|| format!("{flag} {name:?}"))
+    };
+    let team = args.robot.map(TeamTopics::robot);
+    let default = |pick: fn(&TeamTopics) -> &TopicName, single: &str| match &team {
+        Some(topics) => pick(topics).as_str().to_owned(),
+        None => single.to_owned(),
+    };
+    let scan = topic("--scan", &flags.scan, default(|t| &t.scan, "/scan"))?;
+    let orientation = topic(
+        "--orientation",
+        &flags.orientation,
+        default(|t| &t.odometry, "/odom"),
+    )?;
+    let cmd_vel = topic(
+        "--cmd-vel",
+        &flags.cmd_vel,
+        default(|t| &t.cmd_vel, "/cmd_vel"),
+    )?;
+    let goal_topics = TeamTopics::goal();
+    let goal_value = |fixed: Option<f64>,
+                      flag: &str,
+                      topic_flag: &str,
+                      given: &Option<String>,
+                      default: &TopicName|
+     -> anyhow::Result<GoalValue> {
+        match fixed {
+            Some(value) if value.is_finite() => Ok(GoalValue::Fixed(value)),
+            Some(value) => anyhow::bail!("{flag} must be a finite number, got {value}"),
+            None => Ok(GoalValue::Topic(topic(
+                topic_flag,
+                given,
+                default.as_str().to_owned(),
+            )?)),
+        }
+    };
+    let goal = [
+        goal_value(
+            flags.phi_star,
+            "--phi-star",
+            "--heading-topic",
+            &flags.heading_topic,
+            &goal_topics[0],
+        )?,
+        goal_value(
+            flags.d_star,
+            "--d-star",
+            "--distance-topic",
+            &flags.distance_topic,
+            &goal_topics[1],
+        )?,
+        goal_value(
+            flags.v_star,
+            "--v-star",
+            "--speed-topic",
+            &flags.speed_topic,
+            &goal_topics[2],
+        )?,
+    ];
+    if let GoalValue::Fixed(d_star) = goal[1] {
+        // Refused at once, as an agent refuses a goal outside its model's envelope at episode
+        // start.
+        robot_agent::decision::check_goal_envelope(pilot.policy(), d_star)
+            .with_context(|| format!("--d-star {d_star}"))?;
+    }
+    let wheel_separation = flags.wheel_separation.unwrap_or(P3DX_WHEEL_SEPARATION);
+    if !(wheel_separation.is_finite() && wheel_separation > 0.0 && wheel_separation < 10.0) {
+        anyhow::bail!(
+            "--wheel-separation must be a length in metres between 0 and 10, got {wheel_separation}"
+        );
+    }
+    let stale_ms = flags
+        .stale_ms
+        .unwrap_or(formation_runtime::RuntimeSettings::DEFAULT.stale_ms);
+    if stale_ms == 0 || stale_ms > 60_000 {
+        anyhow::bail!("--stale-ms must be from 1 to 60000, got {stale_ms}");
+    }
+    let namespace = match args.robot {
+        Some(robot) => Namespace::new(&format!("/robot_{robot}"))?,
+        None => Namespace::root(),
+    };
+    let node_name = NodeName::new(flags.node_name.as_deref().unwrap_or("formation_agent"))
+        .context("--node-name")?;
+    let settings = Ros2AgentSettings {
+        connect,
+        connect_timeout: Duration::from_millis(args.connect_timeout_ms),
+        domain_id: flags.ros_domain_id.unwrap_or(0),
+        namespace,
+        node_name,
+        orientation_kind: match flags.orientation_type {
+            Some(OrientationType::Imu) => OrientationKind::Imu,
+            Some(OrientationType::Odometry) | None => OrientationKind::Odometry,
+        },
+        decider: DeciderSettings {
+            scan_topic: scan.as_str().to_owned(),
+            orientation_topic: orientation.as_str().to_owned(),
+            goal,
+            contract: RingContract {
+                beams: lidar.beams,
+                max_range: lidar.max_range,
+            },
+            partial: if flags.allow_partial_scan {
+                PartialScan::AllowAsNoReturn
+            } else {
+                PartialScan::Refuse
+            },
+            stale: Duration::from_millis(stale_ms),
+            wheel_separation,
+        },
+        scan,
+        orientation,
+        cmd_vel,
+    };
+    Ok(formation_runtime::ros2::run_agent(
+        &settings, &mut pilot, stop,
+    )?)
+}
+
+/// This build has no Zenoh, so no ROS 2.
+#[cfg(not(feature = "zenoh"))]
+pub fn run(
+    _args: &super::Args,
+    _model: Box<dyn PolicyBackend>,
+    _stop: &AtomicBool,
+) -> anyhow::Result<AgentExit> {
+    Err(TransportError::NotBuilt {
+        program: "formation-agent".into(),
+        transport: Transport::Ros2,
+    }
+    .into())
+}

@@ -1,0 +1,428 @@
+//! What a ROS 2 agent does with what it received, without I/O: [`Decider`] turns each LaserScan,
+//! with the newest orientation and goal, into one Twist for the robot's `cmd_vel`, or into a
+//! brake with the reason; and it notices when the scans stop.
+//!
+//! The rules (the robot brakes, and the reason is told once, on each of these):
+//! - a scan that cannot be put on the model's ring ([`formation_ros2::resample_scan`]: a partial
+//!   circle unless allowed, bad angles or limits), or one where more than a quarter of the
+//!   readings are NaN (REP-117: an erroneous measurement, unlike ±inf, which is no return; a few
+//!   NaNs are taken as no return, as ROS drivers emit them for glass and dust);
+//! - no orientation yet, an orientation older than the stale window (measured on this host's
+//!   clock, at the scan's arrival), or one without a heading;
+//! - a goal value not received yet;
+//! - a decision the pilot refuses (a goal outside the model's envelope, a non-finite output);
+//! - no scan for the stale window ([`Decider::check_stale`]).
+//!
+//! Every scan gets exactly one answer, stamped with the scan's own stamp, so a tool, or the
+//! simulated team in lockstep, can tell which scan a Twist answers.
+
+use std::time::{Duration, Instant};
+
+use formation_proto::Goal;
+use formation_ros2::{
+    LaserScan, PartialScan, RingContract, Twist, resample_scan, twist_from_wheels,
+};
+
+use crate::agent::{Pilot, error_chain};
+
+/// Where a goal component comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum GoalValue {
+    /// A fixed value given on the command line.
+    Fixed(f64),
+    /// The newest `std_msgs/Float64` on this topic.
+    Topic(formation_ros2::TopicName),
+}
+
+/// The newest inputs besides the scan, as the subscriptions left them.
+#[derive(Debug, Clone, Default)]
+pub struct Inputs {
+    /// The newest heading \[rad\] (or why the newest orientation had none) and when it arrived.
+    pub orientation: Option<(Result<f64, String>, Instant)>,
+    /// φ\*, d\*, v\* as far as known.
+    pub goal: [Option<f64>; 3],
+}
+
+/// The goal components' names, for messages.
+pub const GOAL_NAMES: [&str; 3] = [
+    "the goal heading φ*",
+    "the goal distance d*",
+    "the goal speed v*",
+];
+
+/// What to send for a scan.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Answer {
+    /// Drive with this Twist.
+    Drive(Twist),
+    /// Brake (a zero Twist), for this reason.
+    Brake(String),
+}
+
+/// Fixed facts of the agent: its topics (for messages), the model's ring, the robot.
+#[derive(Debug, Clone)]
+pub struct DeciderSettings {
+    /// The scan topic.
+    pub scan_topic: String,
+    /// The orientation topic.
+    pub orientation_topic: String,
+    /// Where each goal component comes from, in [`GOAL_NAMES`] order.
+    pub goal: [GoalValue; 3],
+    /// The model's LIDAR ring.
+    pub contract: RingContract,
+    /// Whether a scan that does not cover the full circle is allowed (uncovered bearings read as
+    /// no return).
+    pub partial: PartialScan,
+    /// An input older than this brakes the robot.
+    pub stale: Duration,
+    /// The robot's wheel separation \[m\].
+    pub wheel_separation: f64,
+}
+
+/// The agent's decision state: the last reason it braked for, and when the last scan came.
+#[derive(Debug)]
+pub struct Decider {
+    settings: DeciderSettings,
+    braking_for: Option<String>,
+    last_scan_at: Option<Instant>,
+    started_at: Instant,
+    warned_partial: bool,
+}
+
+/// More than this share of NaN readings marks a scan as erroneous.
+const NAN_SHARE_LIMIT: f64 = 0.25;
+
+impl Decider {
+    /// A decider that starts waiting at `now`.
+    pub fn new(settings: DeciderSettings, now: Instant) -> Decider {
+        Decider {
+            settings,
+            braking_for: None,
+            last_scan_at: None,
+            started_at: now,
+            warned_partial: false,
+        }
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &DeciderSettings {
+        &self.settings
+    }
+
+    /// The goal from the fixed values and the inputs, or the first missing component.
+    fn goal(&self, inputs: &Inputs) -> Result<Goal, String> {
+        let mut values = [0.0; 3];
+        for (i, value) in values.iter_mut().enumerate() {
+            *value = match (&self.settings.goal[i], inputs.goal[i]) {
+                (GoalValue::Fixed(v), _) => *v,
+                (GoalValue::Topic(_), Some(v)) => v,
+                (GoalValue::Topic(topic), None) => {
+                    return Err(format!(
+                        "waiting for {} on {topic} (std_msgs/msg/Float64)",
+                        GOAL_NAMES[i]
+                    ));
+                }
+            };
+        }
+        Ok(Goal {
+            phi_star: values[0],
+            d_star: values[1],
+            v_star: values[2],
+        })
+    }
+
+    /// The heading to decide with, from the newest orientation.
+    fn heading(&self, inputs: &Inputs, now: Instant) -> Result<f64, String> {
+        let topic = &self.settings.orientation_topic;
+        match &inputs.orientation {
+            None => Err(format!("no orientation received on {topic} yet")),
+            Some((_, at)) if now.saturating_duration_since(*at) > self.settings.stale => {
+                Err(format!(
+                    "the newest orientation on {topic} is {:.2} s old (the stale window is {:.2} s); is its publisher alive?",
+                    now.saturating_duration_since(*at).as_secs_f64(),
+                    self.settings.stale.as_secs_f64()
+                ))
+            }
+            Some((Err(reason), _)) => Err(format!("the orientation on {topic}: {reason}")),
+            Some((Ok(yaw), _)) => Ok(*yaw),
+        }
+    }
+
+    /// The answer to `scan`, arrived at `now`.
+    pub fn on_scan<P: Pilot>(
+        &mut self,
+        scan: &LaserScan,
+        inputs: &Inputs,
+        now: Instant,
+        pilot: &mut P,
+    ) -> Answer {
+        self.last_scan_at = Some(now);
+        let answer = self.decide(scan, inputs, now, pilot);
+        match &answer {
+            Answer::Drive(_) => self.braking_for = None,
+            Answer::Brake(reason) => self.braking_for = Some(reason.clone()),
+        }
+        answer
+    }
+
+    fn decide<P: Pilot>(
+        &mut self,
+        scan: &LaserScan,
+        inputs: &Inputs,
+        now: Instant,
+        pilot: &mut P,
+    ) -> Answer {
+        let topic = &self.settings.scan_topic;
+        let nans = scan.ranges.iter().filter(|r| r.is_nan()).count();
+        if !scan.ranges.is_empty() && nans as f64 > NAN_SHARE_LIMIT * scan.ranges.len() as f64 {
+            return Answer::Brake(format!(
+                "the LaserScan on {topic} has {nans} NaN readings of {} (NaN marks an erroneous \
+                 measurement; more than a quarter means the sensor is failing)",
+                scan.ranges.len()
+            ));
+        }
+        let resampled = match resample_scan(scan, self.settings.contract, self.settings.partial) {
+            Ok(resampled) => resampled,
+            Err(e) => return Answer::Brake(format!("the LaserScan on {topic}: {e}")),
+        };
+        if resampled.uncovered_beams > 0 && !self.warned_partial {
+            self.warned_partial = true;
+            tracing::warn!(
+                "the LaserScan on {topic} leaves {} of the model's {} bearings uncovered; they \
+                 read as no return",
+                resampled.uncovered_beams,
+                self.settings.contract.beams
+            );
+        }
+        let heading = match self.heading(inputs, now) {
+            Ok(heading) => heading,
+            Err(reason) => return Answer::Brake(reason),
+        };
+        let goal = match self.goal(inputs) {
+            Ok(goal) => goal,
+            Err(reason) => return Answer::Brake(reason),
+        };
+        if let Err(e) = pilot.perceive(&resampled.ranges) {
+            return Answer::Brake(format!("the decision failed: {}", error_chain(&*e)));
+        }
+        let wheels = match pilot.decide(heading, &goal) {
+            Ok(wheels) => wheels,
+            Err(e) => return Answer::Brake(format!("the decision failed: {}", error_chain(&*e))),
+        };
+        match twist_from_wheels(wheels.left, wheels.right, self.settings.wheel_separation) {
+            Ok(twist) => Answer::Drive(twist),
+            Err(e) => Answer::Brake(format!("the decision failed: {e}")),
+        }
+    }
+
+    /// At `now`: the reason to brake when no scan came for the stale window and the robot was
+    /// not braked already (once per stall), else `None`.
+    pub fn check_stale(&mut self, now: Instant) -> Option<String> {
+        let since = self.last_scan_at.unwrap_or(self.started_at);
+        let silent = now.saturating_duration_since(since);
+        if silent <= self.settings.stale {
+            return None;
+        }
+        let reason = match self.last_scan_at {
+            Some(_) => format!(
+                "no LaserScan on {} for {:.2} s (the stale window is {:.2} s)",
+                self.settings.scan_topic,
+                silent.as_secs_f64(),
+                self.settings.stale.as_secs_f64()
+            ),
+            None => format!(
+                "no LaserScan received on {} yet; is the topic right and its publisher up?",
+                self.settings.scan_topic
+            ),
+        };
+        // A stall is told once, and so is a stall right after a braking answer.
+        if self
+            .braking_for
+            .as_ref()
+            .is_some_and(|current| current.starts_with("no LaserScan"))
+        {
+            return None;
+        }
+        self.braking_for = Some(reason.clone());
+        Some(reason)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::agent::BoxError;
+    use formation_proto::WheelCmd;
+    use formation_ros2::TopicName;
+    use std::f64::consts::TAU;
+
+    /// A pilot that drives both wheels at d* m/s and records what it was given.
+    #[derive(Default)]
+    struct Recorder {
+        ranges: Vec<f32>,
+        heading: Option<f64>,
+        refuse: bool,
+    }
+
+    impl Pilot for Recorder {
+        type Model = ();
+        fn model_id(&self) -> &str {
+            "recorder"
+        }
+        fn perceive(&mut self, ranges: &[f32]) -> Result<(), BoxError> {
+            self.ranges = ranges.to_vec();
+            Ok(())
+        }
+        fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, BoxError> {
+            if self.refuse {
+                return Err("d* 3 m is outside the model's range 0.8–2.5 m".into());
+            }
+            self.heading = Some(heading);
+            Ok(WheelCmd {
+                left: goal.d_star,
+                right: goal.d_star + 0.1,
+            })
+        }
+        fn swap(&mut self, _model: ()) -> Result<(), BoxError> {
+            Ok(())
+        }
+    }
+
+    fn settings(partial: PartialScan) -> DeciderSettings {
+        DeciderSettings {
+            scan_topic: "/scan".into(),
+            orientation_topic: "/imu".into(),
+            goal: [
+                GoalValue::Fixed(0.5),
+                GoalValue::Topic(TopicName::new("/formation/goal/distance").unwrap()),
+                GoalValue::Fixed(0.7),
+            ],
+            contract: RingContract {
+                beams: 8,
+                max_range: 10.0,
+            },
+            partial,
+            stale: Duration::from_millis(500),
+            wheel_separation: 0.331,
+        }
+    }
+
+    fn scan(n: usize, span: f64, reading: impl Fn(usize) -> f32) -> LaserScan {
+        let increment = (span / n as f64) as f32;
+        LaserScan {
+            angle_increment: increment,
+            angle_max: increment * (n - 1) as f32,
+            range_max: 30.0,
+            ranges: (0..n).map(reading).collect(),
+            ..LaserScan::default()
+        }
+    }
+
+    fn fresh(now: Instant) -> Inputs {
+        Inputs {
+            orientation: Some((Ok(0.25), now)),
+            goal: [None, Some(1.5), None],
+        }
+    }
+
+    #[test]
+    fn a_full_scan_with_fresh_inputs_drives_with_the_pilots_wheels() {
+        let now = Instant::now();
+        let mut decider = Decider::new(settings(PartialScan::Refuse), now);
+        let mut pilot = Recorder::default();
+        let answer = decider.on_scan(&scan(16, TAU, |i| i as f32), &fresh(now), now, &mut pilot);
+        let expected = twist_from_wheels(1.5, 1.6, 0.331).unwrap();
+        assert_eq!(answer, Answer::Drive(expected));
+        assert_eq!(pilot.heading, Some(0.25));
+        assert_eq!(pilot.ranges, [0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 10.0, 10.0]);
+    }
+
+    #[test]
+    fn missing_stale_or_broken_inputs_brake_with_the_reason() {
+        let now = Instant::now();
+        let mut decider = Decider::new(settings(PartialScan::Refuse), now);
+        let mut pilot = Recorder::default();
+        let full = scan(16, TAU, |_| 3.0);
+        let brake = |answer: Answer| match answer {
+            Answer::Brake(reason) => reason,
+            other => panic!("expected a brake, got {other:?}"),
+        };
+
+        let no_goal = Inputs {
+            goal: [None; 3],
+            ..fresh(now)
+        };
+        let reason = brake(decider.on_scan(&full, &no_goal, now, &mut pilot));
+        assert!(reason.contains("/formation/goal/distance"), "{reason}");
+
+        let no_orientation = Inputs {
+            orientation: None,
+            ..fresh(now)
+        };
+        let reason = brake(decider.on_scan(&full, &no_orientation, now, &mut pilot));
+        assert!(
+            reason.contains("no orientation received on /imu"),
+            "{reason}"
+        );
+
+        let later = now + Duration::from_secs(2);
+        let reason = brake(decider.on_scan(&full, &fresh(now), later, &mut pilot));
+        assert!(reason.contains("2.00 s old"), "{reason}");
+
+        let half = scan(8, TAU / 2.0, |_| 3.0);
+        let reason = brake(decider.on_scan(&half, &fresh(now), now, &mut pilot));
+        assert!(reason.contains("needs the full 360°"), "{reason}");
+
+        let nan = scan(16, TAU, |i| if i % 2 == 0 { f32::NAN } else { 3.0 });
+        let reason = brake(decider.on_scan(&nan, &fresh(now), now, &mut pilot));
+        assert!(reason.contains("8 NaN readings of 16"), "{reason}");
+
+        pilot.refuse = true;
+        let reason = brake(decider.on_scan(&full, &fresh(now), now, &mut pilot));
+        assert!(reason.contains("outside the model's range"), "{reason}");
+    }
+
+    #[test]
+    fn a_partial_scan_may_be_allowed_and_a_few_nans_read_as_no_return() {
+        let now = Instant::now();
+        let mut decider = Decider::new(settings(PartialScan::AllowAsNoReturn), now);
+        let mut pilot = Recorder::default();
+        let half = scan(8, TAU / 2.0, |i| if i == 2 { f32::NAN } else { 3.0 });
+        assert!(matches!(
+            decider.on_scan(&half, &fresh(now), now, &mut pilot),
+            Answer::Drive(_)
+        ));
+        assert_eq!(pilot.ranges, [3.0, 10.0, 3.0, 3.0, 10.0, 10.0, 10.0, 10.0]);
+    }
+
+    #[test]
+    fn a_stall_brakes_once_until_scans_come_again() {
+        let start = Instant::now();
+        let mut decider = Decider::new(settings(PartialScan::Refuse), start);
+        assert_eq!(
+            decider.check_stale(start + Duration::from_millis(400)),
+            None
+        );
+        let first = decider.check_stale(start + Duration::from_secs(1)).unwrap();
+        assert!(
+            first.contains("no LaserScan received on /scan yet"),
+            "{first}"
+        );
+        assert_eq!(decider.check_stale(start + Duration::from_secs(2)), None);
+
+        let mut pilot = Recorder::default();
+        let at = start + Duration::from_secs(3);
+        let full = scan(16, TAU, |_| 3.0);
+        assert!(matches!(
+            decider.on_scan(&full, &fresh(at), at, &mut pilot),
+            Answer::Drive(_)
+        ));
+        assert_eq!(decider.check_stale(at + Duration::from_millis(100)), None);
+        let stall = decider.check_stale(at + Duration::from_secs(1)).unwrap();
+        assert!(
+            stall.contains("no LaserScan on /scan for 1.00 s"),
+            "{stall}"
+        );
+        assert_eq!(decider.check_stale(at + Duration::from_secs(5)), None);
+    }
+}

@@ -1,0 +1,619 @@
+//! The world as a team of ROS 2 robots ([`Ros2WorldLink`]): each simulated robot publishes its
+//! LaserScan and Odometry and takes Twists on its `cmd_vel`, exactly as a real robot's driver
+//! does, so that ROS 2 agents (`formation-agent --transport ros2`) and any ROS 2 tool can drive
+//! and watch the team. The world is the Zenoh router they connect to.
+//!
+//! Behind the [`WorldLink`] seam the exchange still runs its protocol: admission, episodes,
+//! lockstep. This link translates it from what the ROS graph says:
+//! - **Who drives robot i** is the node whose publisher on `/robot_<i>/cmd_vel` appears in the
+//!   graph (its `MP` liveliness token). The link greets for it (with a proof of the launch
+//!   secret, which it holds), so the exchange admits one driver per robot as for other
+//!   transports; Twists from any other publisher on that topic (told apart by the GID in their
+//!   attachments) are ignored. When the token goes, the agent is reported dead.
+//! - **Episodes:** ROS 2 agents need no episode handshake (their decision keeps no state across
+//!   scans), so a begin-episode request is answered "ready" at once; a swap is refused (restart
+//!   the agent with another model instead).
+//! - **Which tick a Twist answers:** every tick's scans carry a stamp on a simulated clock that
+//!   never goes back (each episode starts a second after the last stamp of the previous one),
+//!   and a ROS 2 agent stamps each Twist's attachment with the stamp of the scan it answers.
+//!   A Twist whose stamp is no tick's of the current episode (e.g. an agent's brake on stale
+//!   input) is not a command for any tick; the exchange's watchdog brakes robots without one.
+//! - **The goal** is published on the team's goal topics before each tick's sensors
+//!   ([`super::TeamTopics`]). Every message is express and of one priority, so an agent receives
+//!   a tick's goal and odometry before its scan.
+//!
+//! A Twist becomes wheel speeds as `diff_drive_controller` makes them
+//! ([`formation_ros2::wheels_from_twist`]), which is the inverse of the agent's conversion only up
+//! to rounding: a ROS 2 team's trajectories match in-process ones to about 1e-15 m per step, not
+//! bit for bit (a Twist carries v and ω, not the wheel speeds).
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use ::zenoh::Wait;
+use ::zenoh::pubsub::Subscriber;
+use ::zenoh::sample::SampleKind;
+use formation_proto::auth::LaunchSecret;
+use formation_proto::wire::{
+    AgentStatus, AgentTimings, CmdMsg, CmdStatus, ControlRequest, RunId, ScanMsg, SwapReply,
+    SwapRequest, Welcome,
+};
+use formation_proto::{Pose, WheelCmd};
+use formation_ros2::liveliness::domain_wildcard;
+use formation_ros2::msg::Vector3;
+use formation_ros2::{
+    EntityKind, Float64, Header, LaserScan, LivelinessToken, Namespace, NodeName, Odometry, Qos,
+    Time, Twist, quaternion_from_yaw, wheels_from_twist,
+};
+
+use super::node::{Delivery, Node, NodeError, RosPublisher, RosSubscription};
+use super::{Ros2Team, TeamTopics};
+use crate::link::{Hello, WorldLink, WorldLinkError};
+use crate::zenoh::{Bell, Endpoint, Ring, SignalWatch};
+
+/// Stamps of the current episode's ticks kept per robot, to match Twists to ticks.
+const STAMPS_KEPT: usize = 64;
+/// Twists queued per robot: far more than a tick produces.
+const TWIST_QUEUE: usize = 64;
+/// The model id the exchange logs for a ROS 2 agent's commands.
+const ROS2_MODEL_ID: &str = "ros2";
+
+fn node_error(e: NodeError) -> WorldLinkError {
+    WorldLinkError::Zenoh {
+        action: "set up the ROS 2 team".into(),
+        detail: crate::agent::error_chain(&e),
+    }
+}
+
+/// A driver of a robot as the ROS graph shows it: the node publishing on its `cmd_vel`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Driver {
+    /// Stands in for the pid in the exchange's bookkeeping (ROS 2 does not tell pids).
+    pid: u32,
+    /// The publisher's GID: only its Twists count.
+    gid: [u8; 16],
+    /// `<namespace>/<name>` of its node, for the logs.
+    node: String,
+}
+
+/// What the liveliness subscriber and the Twist subscribers fill.
+#[derive(Debug, Default)]
+struct Graph {
+    /// Live `cmd_vel` publishers per robot, by token key.
+    drivers: Vec<HashMap<String, Driver>>,
+    /// Drivers that appeared and were not greeted for yet.
+    new_drivers: Vec<VecDeque<Driver>>,
+    /// `(robot, pid)` of drivers whose token went, not yet reported.
+    gone: Vec<(usize, u32)>,
+    /// Twists received per robot: `(source stamp, gid, twist, arrival wall ns)`.
+    twists: Vec<VecDeque<(i64, [u8; 16], Twist, u64)>>,
+    next_pid: u32,
+}
+
+/// One simulated robot's ROS 2 side.
+struct RobotPorts {
+    _node: Node,
+    scan: RosPublisher<LaserScan>,
+    odom: RosPublisher<Odometry>,
+    _cmd_vel: RosSubscription,
+    /// The pose to publish with the next scan (given by [`WorldLink::publish_pose`]).
+    pose: Option<Pose>,
+    /// The previous published pose and its stamp, for the odometry's velocity.
+    previous: Option<(Pose, i64)>,
+    /// Stamp (ns) → (generation, tick) of this episode's latest ticks.
+    stamps: VecDeque<(i64, u64, u64)>,
+}
+
+/// The world's ROS 2 link: a Zenoh router, one node per simulated robot, the team's goal topics.
+pub struct Ros2WorldLink {
+    session: Arc<::zenoh::Session>,
+    run: RunId,
+    secret: LaunchSecret,
+    team: Ros2Team,
+    bell: Arc<Bell>,
+    graph: Arc<Mutex<Graph>>,
+    robots: Vec<RobotPorts>,
+    _goal_node: Node,
+    goal: [RosPublisher<Float64>; 3],
+    /// (generation, tick) whose goal was published last.
+    goal_published: Option<(u64, u64)>,
+    /// Admitted driver per robot (by the hello's nonce until the incarnation opens).
+    admitted: Vec<Option<Driver>>,
+    pending: Vec<HashMap<u64, Driver>>,
+    statuses: Vec<VecDeque<AgentStatus>>,
+    /// The simulated clock: stamp of tick 0 of the current episode, and the generation.
+    episode: Option<(u64, i64)>,
+    last_stamp: i64,
+    _graph_watch: Subscriber<()>,
+    _signals: SignalWatch,
+}
+
+fn lock(graph: &Mutex<Graph>) -> MutexGuard<'_, Graph> {
+    graph.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+impl Ros2WorldLink {
+    /// Listens on `listen` as a Zenoh router and sets up `team`'s robots for run `run`.
+    pub fn create(
+        run: &RunId,
+        team: Ros2Team,
+        listen: &Endpoint,
+        secret: LaunchSecret,
+    ) -> Result<Ros2WorldLink, WorldLinkError> {
+        let config =
+            crate::zenoh::world_config(listen, None).map_err(|detail| WorldLinkError::Zenoh {
+                action: format!("configure a router on {listen}"),
+                detail,
+            })?;
+        let session =
+            Arc::new(
+                crate::zenoh::open(config).map_err(|detail| WorldLinkError::Zenoh {
+                    action: format!("listen on {listen} (is the port free?)"),
+                    detail,
+                })?,
+            );
+        let bell = Arc::new(Bell::default());
+        let n = team.n_robots;
+        let graph = Arc::new(Mutex::new(Graph {
+            drivers: vec![HashMap::new(); n],
+            new_drivers: vec![VecDeque::new(); n],
+            twists: vec![VecDeque::new(); n],
+            ..Graph::default()
+        }));
+        let mut robots = Vec::with_capacity(n);
+        for robot in 0..n {
+            let topics = TeamTopics::robot(robot);
+            let namespace =
+                Namespace::new(&format!("/robot_{robot}")).map_err(|e| WorldLinkError::Zenoh {
+                    action: "name the robot's namespace".into(),
+                    detail: e.to_string(),
+                })?;
+            let node = Node::new(
+                Arc::clone(&session),
+                team.domain_id,
+                namespace,
+                NodeName::new("formation_sim").expect("a valid node name"),
+                robot as u64 + 1,
+            )
+            .map_err(node_error)?;
+            let scan = node
+                .publisher::<LaserScan>(&topics.scan, Qos::SENSOR_DATA, Delivery::Realtime)
+                .map_err(node_error)?;
+            let odom = node
+                .publisher::<Odometry>(&topics.odometry, Qos::ROS_DEFAULT, Delivery::Realtime)
+                .map_err(node_error)?;
+            let cmd_vel = {
+                let graph = Arc::clone(&graph);
+                let bell = Arc::clone(&bell);
+                node.subscription::<Twist>(&topics.cmd_vel, Qos::ROS_DEFAULT, move |sample| {
+                    match sample {
+                        Ok(received) => {
+                            let mut graph = lock(&graph);
+                            let queue = &mut graph.twists[robot];
+                            if queue.len() == TWIST_QUEUE {
+                                queue.pop_front();
+                            }
+                            queue.push_back((
+                                received.attachment.source_timestamp_ns,
+                                received.attachment.source_gid,
+                                received.message,
+                                formation_proto::wire::wall_clock_ns(),
+                            ));
+                            drop(graph);
+                            bell.ring();
+                        }
+                        Err(e) => tracing::warn!("robot {robot}: ignoring a cmd_vel sample: {e}"),
+                    }
+                })
+                .map_err(node_error)?
+            };
+            robots.push(RobotPorts {
+                _node: node,
+                scan,
+                odom,
+                _cmd_vel: cmd_vel,
+                pose: None,
+                previous: None,
+                stamps: VecDeque::with_capacity(STAMPS_KEPT),
+            });
+        }
+        let goal_node = Node::new(
+            Arc::clone(&session),
+            team.domain_id,
+            Namespace::new("/formation").expect("a valid namespace"),
+            NodeName::new("goal").expect("a valid node name"),
+            0,
+        )
+        .map_err(node_error)?;
+        let goal_topics = TeamTopics::goal();
+        let goal_publisher = |topic| {
+            goal_node
+                .publisher::<Float64>(topic, Qos::ROS_DEFAULT, Delivery::Reliable)
+                .map_err(node_error)
+        };
+        let goal = [
+            goal_publisher(&goal_topics[0])?,
+            goal_publisher(&goal_topics[1])?,
+            goal_publisher(&goal_topics[2])?,
+        ];
+        let graph_watch = {
+            let graph = Arc::clone(&graph);
+            let bell = Arc::clone(&bell);
+            session
+                .liveliness()
+                .declare_subscriber(domain_wildcard(team.domain_id))
+                .history(true)
+                .callback(move |sample| {
+                    let key = sample.key_expr().as_str();
+                    let Ok(token) = LivelinessToken::parse(key) else {
+                        return;
+                    };
+                    let Some(robot) = driven_robot(&token, n) else {
+                        return;
+                    };
+                    let mut graph = lock(&graph);
+                    match sample.kind() {
+                        SampleKind::Put => {
+                            if graph.drivers[robot].contains_key(key) {
+                                return;
+                            }
+                            graph.next_pid = graph.next_pid.wrapping_add(1).max(1);
+                            let driver = Driver {
+                                pid: graph.next_pid,
+                                gid: token.gid(),
+                                node: format!(
+                                    "{}/{}",
+                                    token.node.namespace.as_str().trim_end_matches('/'),
+                                    token.node.name.as_str()
+                                ),
+                            };
+                            graph.drivers[robot].insert(key.to_owned(), driver.clone());
+                            graph.new_drivers[robot].push_back(driver);
+                        }
+                        SampleKind::Delete => {
+                            if let Some(driver) = graph.drivers[robot].remove(key) {
+                                graph.gone.push((robot, driver.pid));
+                            }
+                        }
+                    }
+                    drop(graph);
+                    bell.ring();
+                })
+                .wait()
+                .map_err(|e| WorldLinkError::Zenoh {
+                    action: "watch the ROS graph".into(),
+                    detail: e.to_string(),
+                })?
+        };
+        let signals = SignalWatch::start(Arc::clone(&bell)).map_err(|e| WorldLinkError::Zenoh {
+            action: "watch for termination signals".into(),
+            detail: e.to_string(),
+        })?;
+        Ok(Ros2WorldLink {
+            session,
+            run: run.clone(),
+            secret,
+            bell,
+            graph,
+            robots,
+            _goal_node: goal_node,
+            goal,
+            goal_published: None,
+            admitted: vec![None; n],
+            pending: vec![HashMap::new(); n],
+            statuses: vec![VecDeque::new(); n],
+            episode: None,
+            last_stamp: 0,
+            team,
+            _graph_watch: graph_watch,
+            _signals: signals,
+        })
+    }
+
+    /// The stamp \[ns\] of `msg`'s tick on the team's simulated clock, starting an episode's
+    /// clock a second after the last stamp when its generation is new.
+    fn stamp(&mut self, msg: &ScanMsg) -> i64 {
+        let base = match self.episode {
+            Some((generation, base)) if generation == msg.generation => base,
+            _ => {
+                let base = if self.last_stamp == 0 {
+                    0
+                } else {
+                    (self.last_stamp / 1_000_000_000 + 1) * 1_000_000_000
+                };
+                self.episode = Some((msg.generation, base));
+                for robot in &mut self.robots {
+                    robot.stamps.clear();
+                    robot.previous = None;
+                }
+                base
+            }
+        };
+        let stamp = base.saturating_add((msg.sim_time * 1e9).round() as i64);
+        self.last_stamp = self.last_stamp.max(stamp);
+        stamp
+    }
+
+    fn publish_goal(&mut self, msg: &ScanMsg, stamp: i64) -> Result<(), WorldLinkError> {
+        if self.goal_published == Some((msg.generation, msg.tick)) {
+            return Ok(());
+        }
+        for (publisher, data) in self.goal.iter().zip([msg.phi_star, msg.d_star, msg.v_star]) {
+            publisher
+                .publish(&Float64 { data }, stamp)
+                .map_err(node_error)?;
+        }
+        self.goal_published = Some((msg.generation, msg.tick));
+        Ok(())
+    }
+}
+
+/// The robot whose `cmd_vel` a publisher token announces, if it is one of the team's.
+fn driven_robot(token: &LivelinessToken, n_robots: usize) -> Option<usize> {
+    if token.kind != EntityKind::Publisher {
+        return None;
+    }
+    let endpoint = token.endpoint.as_ref()?;
+    if endpoint.type_name != <Twist as formation_ros2::RosMessage>::DDS_TYPE_NAME {
+        return None;
+    }
+    (0..n_robots).find(|&robot| TeamTopics::robot(robot).cmd_vel == endpoint.topic)
+}
+
+impl WorldLink for Ros2WorldLink {
+    fn n_robots(&self) -> usize {
+        self.team.n_robots
+    }
+
+    fn drain_hellos(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(Hello),
+    ) -> Result<(), WorldLinkError> {
+        let drivers: Vec<Driver> = lock(&self.graph).new_drivers[robot].drain(..).collect();
+        for driver in drivers {
+            let nonce =
+                formation_proto::auth::fresh_nonce().map_err(|e| WorldLinkError::Zenoh {
+                    action: "draw a nonce".into(),
+                    detail: e.to_string(),
+                })?;
+            tracing::info!(
+                "robot {robot}: ROS 2 node {} publishes on its cmd_vel",
+                driver.node
+            );
+            let proof = self.secret.prove(&self.run, robot, driver.pid, nonce);
+            let pid = driver.pid;
+            self.pending[robot].insert(nonce, driver);
+            sink(Hello { pid, nonce, proof });
+        }
+        Ok(())
+    }
+
+    fn answer_hello(
+        &mut self,
+        robot: usize,
+        nonce: u64,
+        welcome: &Welcome,
+    ) -> Result<(), WorldLinkError> {
+        let driver = self.pending[robot].remove(&nonce);
+        if let (Welcome::Refused(reason), Some(driver)) = (welcome, driver) {
+            eprintln!(
+                "formation-world: robot {robot}: ignoring the Twists of ROS 2 node {}: {reason}",
+                driver.node
+            );
+        }
+        Ok(())
+    }
+
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
+        let Some(driver) = self.pending[robot].get(&incarnation).cloned() else {
+            return Ok(());
+        };
+        lock(&self.graph).twists[robot].clear();
+        self.statuses[robot].push_back(AgentStatus::Hello {
+            pid: driver.pid,
+            model_id: format!("{ROS2_MODEL_ID}:{}", driver.node),
+        });
+        self.admitted[robot] = Some(driver);
+        self.bell.ring();
+        Ok(())
+    }
+
+    fn close_incarnation(&mut self, robot: usize) {
+        self.admitted[robot] = None;
+        self.statuses[robot].clear();
+    }
+
+    fn publish_pose(&mut self, robot: usize, pose: &Pose) -> Result<(), WorldLinkError> {
+        self.robots[robot].pose = Some(*pose);
+        Ok(())
+    }
+
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError> {
+        let stamp = self.stamp(msg);
+        self.publish_goal(msg, stamp)?;
+        let ports = &mut self.robots[robot];
+        let header = |frame: &str| Header {
+            stamp: Time::from_nanos(stamp),
+            frame_id: format!("robot_{robot}/{frame}"),
+        };
+        if let Some(pose) = ports.pose.take() {
+            let twist = match ports.previous {
+                Some((before, at)) if stamp > at => {
+                    let dt = (stamp - at) as f64 * 1e-9;
+                    let (dx, dy) = (pose.x - before.x, pose.y - before.y);
+                    let forward = dx * pose.theta.cos() + dy * pose.theta.sin();
+                    let turn = formation_proto::wrap_angle(pose.theta - before.theta);
+                    Twist {
+                        linear: Vector3 {
+                            x: forward / dt,
+                            ..Vector3::default()
+                        },
+                        angular: Vector3 {
+                            z: turn / dt,
+                            ..Vector3::default()
+                        },
+                    }
+                }
+                _ => Twist::default(),
+            };
+            ports.previous = Some((pose, stamp));
+            let odometry = Odometry {
+                header: header("odom"),
+                child_frame_id: format!("robot_{robot}/base_link"),
+                pose: formation_ros2::msg::Pose {
+                    position: Vector3 {
+                        x: pose.x,
+                        y: pose.y,
+                        z: 0.0,
+                    },
+                    orientation: quaternion_from_yaw(msg.heading),
+                },
+                twist,
+                ..Odometry::default()
+            };
+            ports.odom.publish(&odometry, stamp).map_err(node_error)?;
+        }
+        let beams = msg.n_beams as usize;
+        let max_range = self.team.max_range as f32;
+        let increment = (std::f64::consts::TAU / beams.max(1) as f64) as f32;
+        let scan = LaserScan {
+            header: header("laser"),
+            angle_min: 0.0,
+            angle_max: increment * beams.saturating_sub(1) as f32,
+            angle_increment: increment,
+            time_increment: 0.0,
+            scan_time: 0.0,
+            range_min: 0.0,
+            range_max: max_range,
+            // REP-117: a beam without a return reads +inf.
+            ranges: msg.ranges[..beams]
+                .iter()
+                .map(|&r| if r >= max_range { f32::INFINITY } else { r })
+                .collect(),
+            intensities: Vec::new(),
+        };
+        ports.scan.publish(&scan, stamp).map_err(node_error)?;
+        if ports.stamps.len() == STAMPS_KEPT {
+            ports.stamps.pop_front();
+        }
+        ports.stamps.push_back((stamp, msg.generation, msg.tick));
+        Ok(())
+    }
+
+    fn send_control(
+        &mut self,
+        robot: usize,
+        request: &ControlRequest,
+    ) -> Result<(), WorldLinkError> {
+        if self.admitted[robot].is_none() {
+            return Ok(());
+        }
+        match request {
+            ControlRequest::BeginEpisode { generation, .. } => {
+                self.statuses[robot].push_back(AgentStatus::Ready {
+                    generation: *generation,
+                    model_id: ROS2_MODEL_ID.into(),
+                });
+            }
+            ControlRequest::SwapModel { request_id, .. } => {
+                self.statuses[robot].push_back(AgentStatus::SwapRefused {
+                    request_id: *request_id,
+                    reason: "a ROS 2 agent cannot be swapped through the world; restart it with \
+                             the other --model"
+                        .into(),
+                });
+            }
+            ControlRequest::Shutdown => {}
+        }
+        self.bell.ring();
+        Ok(())
+    }
+
+    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
+        match self.bell.wait(timeout) {
+            Ring::Terminated => Err(WorldLinkError::Terminated),
+            Ring::Activity | Ring::Idle => Ok(()),
+        }
+    }
+
+    fn drain_commands(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(CmdMsg),
+    ) -> Result<(), WorldLinkError> {
+        let twists: Vec<_> = lock(&self.graph).twists[robot].drain(..).collect();
+        let Some(driver) = &self.admitted[robot] else {
+            return Ok(());
+        };
+        let ports = &self.robots[robot];
+        for (stamp, gid, twist, arrived_ns) in twists {
+            if gid != driver.gid {
+                continue;
+            }
+            let Some(&(_, generation, tick)) = ports.stamps.iter().find(|(s, ..)| *s == stamp)
+            else {
+                continue;
+            };
+            let (left, right) = wheels_from_twist(&twist, self.team.wheel_separation);
+            let timings = AgentTimings {
+                received_wall_ns: arrived_ns,
+                ..AgentTimings::default()
+            };
+            let cmd = CmdMsg::new(
+                generation,
+                tick,
+                WheelCmd { left, right },
+                ROS2_MODEL_ID,
+                timings,
+                CmdStatus::OK,
+            )?;
+            sink(CmdMsg {
+                published_wall_ns: arrived_ns,
+                ..cmd
+            });
+        }
+        Ok(())
+    }
+
+    fn drain_statuses(
+        &mut self,
+        robot: usize,
+        sink: &mut dyn FnMut(AgentStatus),
+    ) -> Result<(), WorldLinkError> {
+        for status in self.statuses[robot].drain(..) {
+            sink(status);
+        }
+        Ok(())
+    }
+
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
+        Ok(lock(&self.graph).drivers[robot]
+            .values()
+            .any(|d| d.pid == pid))
+    }
+
+    fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError> {
+        Ok(std::mem::take(&mut lock(&self.graph).gone))
+    }
+
+    fn drain_swap_requests(
+        &mut self,
+        _sink: &mut dyn FnMut(SwapRequest),
+    ) -> Result<(), WorldLinkError> {
+        Ok(())
+    }
+
+    fn publish_swap_reply(&mut self, _reply: &SwapReply) -> Result<(), WorldLinkError> {
+        Ok(())
+    }
+}
+
+impl Drop for Ros2WorldLink {
+    fn drop(&mut self) {
+        // Undeclare everything before the session goes, so agents see the team leave.
+        self.robots.clear();
+        let _ = self.session.close().wait();
+    }
+}
