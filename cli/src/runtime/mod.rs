@@ -93,11 +93,13 @@ pub struct RunArgs {
     /// restarted agent behaves.
     #[arg(long = "fault", value_name = "ROBOT:MODE")]
     pub faults: Vec<String>,
-    /// How the agents reach the world: iceoryx2 shared memory (this host), or Zenoh over TCP
-    /// (agents on this host or others; needs --listen).
+    /// How the agents reach the world: iceoryx2 shared memory (this host), Zenoh over TCP
+    /// (agents on this host or others; needs --listen), or ROS 2 over rmw_zenoh (the world as a
+    /// team of ROS 2 robots that ROS 2 agents drive; needs --listen).
     #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
     pub transport: Transport,
-    /// Zenoh: where the world listens, tcp/ADDR:PORT (tcp/0.0.0.0:7447 for every interface).
+    /// Zenoh and ROS 2: where the world listens, tcp/ADDR:PORT (tcp/0.0.0.0:7447 for every
+    /// interface).
     #[arg(long, value_name = "tcp/ADDR:PORT")]
     pub listen: Option<String>,
     /// Zenoh: robots whose agents are started by hand, on other hosts (comma separated, e.g.
@@ -111,6 +113,9 @@ pub struct RunArgs {
     /// Zenoh: how long the world waits for the remote agents to connect \[s\].
     #[arg(long, default_value_t = 300.0)]
     pub remote_timeout_s: f64,
+    /// ROS 2: the ROS domain id of the team's topics (default 0).
+    #[arg(long, value_name = "ID", value_parser = clap::value_parser!(u32).range(0..=232))]
+    pub ros_domain_id: Option<u32>,
 }
 
 /// `formation profile`: a run whose per-stage latency histograms are written as JSON.
@@ -310,19 +315,24 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)>
 /// `--credentials`: flags of Zenoh need it, a remote robot must exist in the scenario, and a
 /// Zenoh launch without `--credentials` gets fresh ones in `<out>/credentials/<run id>/`.
 fn network_from_args(args: &RunArgs, run_id: &RunId, n_robots: usize) -> anyhow::Result<Network> {
+    args.transport
+        .refuse_network_flags(&[(args.listen.is_some(), "--listen")])?;
     args.transport.refuse_zenoh_flags(&[
-        (args.listen.is_some(), "--listen"),
         (!args.remote.is_empty(), "--remote"),
         (args.credentials.is_some(), "--credentials"),
     ])?;
-    if args.transport != Transport::Zenoh {
-        return Ok(Network::SharedMemory);
+    args.transport
+        .refuse_ros2_flags(&[(args.ros_domain_id.is_some(), "--ros-domain-id")])?;
+    match args.transport {
+        Transport::Iceoryx2 => return Ok(Network::SharedMemory),
+        Transport::Ros2 => return ros2_network(args),
+        Transport::Zenoh => {}
     }
     args.transport.check_built_in("formation")?;
-    let listen = args
-        .listen
-        .clone()
-        .ok_or(TransportError::MissingEndpoint { flag: "--listen" })?;
+    let listen = args.listen.clone().ok_or(TransportError::MissingEndpoint {
+        flag: "--listen",
+        transport: Transport::Zenoh,
+    })?;
     #[cfg(feature = "zenoh")]
     formation_runtime::zenoh::Endpoint::parse(&listen)?;
     if let Some(&robot) = args.remote.iter().find(|&&r| r >= n_robots) {
@@ -350,6 +360,28 @@ fn network_from_args(args: &RunArgs, run_id: &RunId, n_robots: usize) -> anyhow:
         listen,
         credentials,
         remote,
+    }))
+}
+
+/// A ROS 2 launch: the world's router on `--listen`, every agent local; fault injection is the
+/// other transports' (a ROS 2 agent takes no `--fault`).
+fn ros2_network(args: &RunArgs) -> anyhow::Result<Network> {
+    args.transport.check_built_in("formation")?;
+    let listen = args.listen.clone().ok_or(TransportError::MissingEndpoint {
+        flag: "--listen",
+        transport: Transport::Ros2,
+    })?;
+    #[cfg(feature = "zenoh")]
+    formation_runtime::zenoh::Endpoint::parse(&listen)?;
+    if !args.faults.is_empty() {
+        anyhow::bail!(
+            "--fault injects faults into agents of the iceoryx2 and zenoh transports; a ROS 2 \
+             agent takes none (stop or kill it instead)"
+        );
+    }
+    Ok(Network::Ros2(supervisor::Ros2Plan {
+        listen,
+        domain_id: args.ros_domain_id.unwrap_or(0),
     }))
 }
 
@@ -714,6 +746,11 @@ pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
             swap::request_swap(&args.run, args.robot, &args.model, args.at_tick, timeout)?
         }
         Transport::Zenoh => swap_over_zenoh(args, timeout)?,
+        Transport::Ros2 => anyhow::bail!(
+            "a ROS 2 agent cannot be swapped through the world: stop it and start \
+             `formation-agent --transport ros2` with the other --model (the robot brakes \
+             meanwhile)"
+        ),
     };
     println!(
         "robot {} of run {} drives with model {} from tick {}",
@@ -728,7 +765,10 @@ fn swap_over_zenoh(args: &SwapArgs, timeout: Duration) -> anyhow::Result<swap::S
     let connect = args
         .connect
         .as_deref()
-        .ok_or(TransportError::MissingEndpoint { flag: "--connect" })?;
+        .ok_or(TransportError::MissingEndpoint {
+            flag: "--connect",
+            transport: Transport::Zenoh,
+        })?;
     swap::request_swap_over_zenoh(
         connect,
         args.credentials.as_deref(),

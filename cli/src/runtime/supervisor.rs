@@ -67,6 +67,26 @@ pub enum Network {
     SharedMemory,
     /// Zenoh over TCP: the world listens, agents (here or on other hosts) connect.
     Zenoh(ZenohPlan),
+    /// ROS 2 over rmw_zenoh: the world is a team of ROS 2 robots on a Zenoh router, every agent a
+    /// ROS 2 node that drives one of them.
+    Ros2(Ros2Plan),
+}
+
+/// A launch over ROS 2.
+#[derive(Debug, Clone)]
+pub struct Ros2Plan {
+    /// Where the world's router listens, `tcp/ADDR:PORT`.
+    pub listen: String,
+    /// The ROS domain id.
+    pub domain_id: u32,
+}
+
+/// Where a process on this host connects to a router listening on `listen`: the address, with an
+/// any-address (`0.0.0.0`, `[::]`) replaced by loopback.
+fn local_endpoint(listen: &str) -> String {
+    listen
+        .replacen("tcp/0.0.0.0:", "tcp/127.0.0.1:", 1)
+        .replacen("tcp/[::]:", "tcp/[::1]:", 1)
 }
 
 /// A launch over Zenoh.
@@ -86,9 +106,7 @@ impl ZenohPlan {
     /// Where an agent on this host connects: the listen address, with an any-address
     /// (`0.0.0.0`, `[::]`) replaced by loopback.
     pub fn local_connect(&self) -> String {
-        self.listen
-            .replacen("tcp/0.0.0.0:", "tcp/127.0.0.1:", 1)
-            .replacen("tcp/[::]:", "tcp/[::1]:", 1)
+        local_endpoint(&self.listen)
     }
 
     /// Whether robot `robot`'s agent is started by hand.
@@ -102,7 +120,7 @@ impl Network {
     pub fn zenoh(&self) -> Option<&ZenohPlan> {
         match self {
             Network::Zenoh(plan) => Some(plan),
-            Network::SharedMemory => None,
+            Network::SharedMemory | Network::Ros2(_) => None,
         }
     }
 
@@ -588,6 +606,11 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
             .arg("--credentials")
             .arg(&zenoh.credentials);
     }
+    if let Network::Ros2(ros2) = &plan.network {
+        command
+            .args(["--transport", "ros2", "--listen", &ros2.listen])
+            .args(["--ros-domain-id", &ros2.domain_id.to_string()]);
+    }
     command
         .arg("--run-id")
         .arg(plan.run_id.as_str())
@@ -632,9 +655,18 @@ async fn spawn_agent(
             .arg("--credentials")
             .arg(zenoh.credentials.join(format!("robot-{robot}.json")));
     }
+    if let Network::Ros2(ros2) = &plan.network {
+        // A ROS 2 agent joins the team's ROS graph, not the run: it takes its robot's topics,
+        // the team's goal topics and the stale window, and needs no secret.
+        command
+            .args(["--transport", "ros2", "--connect"])
+            .arg(local_endpoint(&ros2.listen))
+            .args(["--ros-domain-id", &ros2.domain_id.to_string()])
+            .args(["--stale-ms", &plan.settings.stale_ms.to_string()]);
+    } else {
+        command.arg("--run-id").arg(plan.run_id.as_str());
+    }
     command
-        .arg("--run-id")
-        .arg(plan.run_id.as_str())
         .arg("--robot")
         .arg(robot.to_string())
         .arg("--model")

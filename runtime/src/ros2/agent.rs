@@ -134,9 +134,6 @@ pub fn run_agent<P: Pilot>(
     let bell = Arc::new(Bell::default());
     let inbox = Arc::new(Mutex::new(Inbox::default()));
     let _signals = SignalWatch::start(Arc::clone(&bell)).map_err(Ros2AgentError::Signals)?;
-    let cmd_vel =
-        node.publisher::<Twist>(&settings.cmd_vel, Qos::ROS_DEFAULT, Delivery::Realtime)?;
-
     let mut subscriptions: Vec<RosSubscription> = Vec::new();
     subscriptions.push({
         let (inbox, bell) = (Arc::clone(&inbox), Arc::clone(&bell));
@@ -210,6 +207,11 @@ pub fn run_agent<P: Pilot>(
         )?);
     }
 
+    // The publisher comes last: its token tells the graph (and the simulated team) that this
+    // node drives the robot, and by then every subscription is in place. Twists are reliable
+    // (one per scan, tiny): a dropped one would leave the robot on its previous command.
+    let cmd_vel =
+        node.publisher::<Twist>(&settings.cmd_vel, Qos::ROS_DEFAULT, Delivery::Reliable)?;
     let brake = |stamp: i64| {
         if let Err(e) = cmd_vel.publish(&Twist::default(), stamp) {
             tracing::warn!("could not publish a zero Twist: {e}");

@@ -35,6 +35,9 @@ pub struct Ros2Team {
     pub wheel_separation: f64,
     /// The LIDAR's maximum range \[m\] (readings at it are published as +inf, no return).
     pub max_range: f64,
+    /// Whether every sensor message must arrive (lockstep: a dropped scan would brake its robot
+    /// and change the run); in realtime a late one is worthless and is dropped under congestion.
+    pub lossless: bool,
 }
 
 /// One simulated robot's topics.

@@ -161,6 +161,11 @@ impl Ros2WorldLink {
             twists: vec![VecDeque::new(); n],
             ..Graph::default()
         }));
+        let sensors = if team.lossless {
+            Delivery::Reliable
+        } else {
+            Delivery::Realtime
+        };
         let mut robots = Vec::with_capacity(n);
         for robot in 0..n {
             let topics = TeamTopics::robot(robot);
@@ -178,10 +183,10 @@ impl Ros2WorldLink {
             )
             .map_err(node_error)?;
             let scan = node
-                .publisher::<LaserScan>(&topics.scan, Qos::SENSOR_DATA, Delivery::Realtime)
+                .publisher::<LaserScan>(&topics.scan, Qos::SENSOR_DATA, sensors)
                 .map_err(node_error)?;
             let odom = node
-                .publisher::<Odometry>(&topics.odometry, Qos::ROS_DEFAULT, Delivery::Realtime)
+                .publisher::<Odometry>(&topics.odometry, Qos::ROS_DEFAULT, sensors)
                 .map_err(node_error)?;
             let cmd_vel = {
                 let graph = Arc::clone(&graph);

@@ -175,7 +175,7 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
                 .with_context(|| format!("setting up run {run_id}'s services"))?,
         ),
         Transport::Zenoh => zenoh_link(args, &run_id, n_robots)?,
-        Transport::Ros2 => ros2_link(args, &run_id, &specs[0], secret.clone())?,
+        Transport::Ros2 => ros2_link(args, &run_id, &specs[0], &runtime, secret.clone())?,
     };
     emit(&WorldEvent::Listening { robots: n_robots });
     let settings = ExchangeSettings {
@@ -255,6 +255,7 @@ fn ros2_link(
     args: &Args,
     run_id: &RunId,
     spec: &RunSpec,
+    runtime: &RuntimeSettings,
     secret: LaunchSecret,
 ) -> anyhow::Result<Box<dyn WorldLink>> {
     use formation_runtime::ros2::{Ros2Team, Ros2WorldLink};
@@ -272,6 +273,7 @@ fn ros2_link(
         domain_id: args.ros_domain_id.unwrap_or(0),
         wheel_separation: spec.world.robot.wheel_separation,
         max_range: spec.world.lidar.max_range,
+        lossless: runtime.clock == ClockMode::Lockstep,
     };
     let link = Ros2WorldLink::create(run_id, team, &listen, secret)
         .with_context(|| format!("setting up the ROS 2 team of run {run_id} on {listen}"))?;
@@ -284,6 +286,7 @@ fn ros2_link(
     _args: &Args,
     _run_id: &RunId,
     _spec: &RunSpec,
+    _runtime: &RuntimeSettings,
     _secret: LaunchSecret,
 ) -> anyhow::Result<Box<dyn WorldLink>> {
     Err(TransportError::NotBuilt {
