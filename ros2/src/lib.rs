@@ -29,8 +29,8 @@ pub mod type_hash;
 pub use attachment::{Attachment, AttachmentError};
 pub use cdr::{CdrEncodeError, CdrError, DecodeLimits};
 pub use convert::{
-    PartialScan, ResampledScan, RingContract, ScanError, exact_twist_for_wheels,
-    quaternion_from_yaw, resample_scan, twist_from_wheels, wheels_from_twist, yaw_from_quaternion,
+    PartialScan, ResampledScan, RingContract, ScanError, quaternion_from_yaw, resample_scan,
+    twist_from_wheels, wheels_from_twist, yaw_from_quaternion,
 };
 pub use key_expr::{HashConvention, KeyExprError, TopicKey};
 pub use liveliness::{EntityKind, LivelinessToken, NodeIdentity, Qos, TopicEndpoint};
