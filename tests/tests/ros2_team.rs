@@ -1,0 +1,247 @@
+//! A team through the ROS 2 path (issue 14): `formation run --transport ros2` makes the world a
+//! team of ROS 2 robots (`/robot_<i>/scan`, `/robot_<i>/odom`, `/robot_<i>/cmd_vel`, the goal on
+//! `/formation/goal/*`) on a Zenoh router, and starts one `formation-agent --transport ros2` per
+//! robot, which sees nothing of the run but those topics.
+//!
+//! In lockstep the Table I JSON equals in-process evaluation's: the success flags, convergence
+//! times and collisions exactly, the continuous figures to 1e-9 relative. Bit-identity is not
+//! promised: a Twist carries v and ω, not the wheel speeds, and turning one into the other and
+//! back is exact only up to rounding (about 1e-17 m/s). In realtime case 1 converges.
+//!
+//! Every test uses its own run id, port and folder.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use formation::runtime::read_trajectory;
+use formation_tests::{
+    LeakCheck, TempDir, Watchdog, binaries, case1_scenario, free_tcp_port, one_at_a_time,
+    repo_root, run, test_model, unique_run_id,
+};
+
+const LIMIT: Duration = Duration::from_secs(300);
+
+fn endpoint(port: u16) -> String {
+    format!("tcp/127.0.0.1:{port}")
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    let text =
+        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    serde_json::from_str(&text).expect("JSON")
+}
+
+/// Equal, with numbers that are not integers compared to `1e-9` relative.
+fn assert_json_close(over: &serde_json::Value, reference: &serde_json::Value, at: &str) {
+    use serde_json::Value;
+    match (over, reference) {
+        (Value::Number(a), Value::Number(b)) if a.is_f64() || b.is_f64() => {
+            let (a, b) = (a.as_f64().unwrap(), b.as_f64().unwrap());
+            assert!(
+                (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1.0),
+                "{at}: {a} over ROS 2, {b} in-process"
+            );
+        }
+        (Value::Array(a), Value::Array(b)) => {
+            assert_eq!(a.len(), b.len(), "{at}: lengths");
+            for (i, (x, y)) in a.iter().zip(b).enumerate() {
+                assert_json_close(x, y, &format!("{at}[{i}]"));
+            }
+        }
+        (Value::Object(a), Value::Object(b)) => {
+            for (key, y) in b {
+                let x = a
+                    .get(key)
+                    .unwrap_or_else(|| panic!("{at}.{key} is missing over ROS 2"));
+                assert_json_close(x, y, &format!("{at}.{key}"));
+            }
+        }
+        _ => assert_eq!(over, reference, "{at}"),
+    }
+}
+
+/// The shipped model, which makes case 1 converge.
+fn shipped_model() -> std::path::PathBuf {
+    repo_root().join("onnx/models/policy.onnx")
+}
+
+/// `formation run --run-id RUN EXTRA --scenario SCENARIO --model <shipped> --out OUT`.
+fn formation_run(
+    run_id: &formation_proto::wire::RunId,
+    scenario: &Path,
+    out: &Path,
+    extra: &[&str],
+) -> Command {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["run", "--run-id", run_id.as_str()])
+        .args(extra)
+        .arg("--scenario")
+        .arg(scenario)
+        .arg("--model")
+        .arg(shipped_model())
+        .arg("--out")
+        .arg(out);
+    command
+}
+
+/// `formation eval` in-process of `scenario`'s first run, its summary JSON.
+fn in_process_summary(dir: &Path, scenario: &Path) -> serde_json::Value {
+    let path = dir.join("in-process.json");
+    let mut eval = Command::new(&binaries().cli);
+    eval.args(["eval", "--controller", "policy", "--runs", "1", "--scenario"])
+        .arg(scenario)
+        .arg("--model")
+        .arg(shipped_model())
+        .arg("--json")
+        .arg(&path);
+    run(eval, LIMIT).assert_success();
+    json(&path)
+}
+
+/// Issue 14 acceptance: lockstep case 1 through the ROS 2 path (the world as a ROS 2 team, three
+/// ROS 2 agents) converges and gives in-process evaluation's Table I JSON.
+#[test]
+fn lockstep_case1_through_ros2_gives_the_in_process_table() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("ros2_team_lockstep", LIMIT);
+    let dir = TempDir::new("r2lock");
+    let run_id = unique_run_id("r2lock");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 25.0);
+    let out = dir.path().join("out");
+    let listen = endpoint(free_tcp_port());
+    let finished = run(
+        formation_run(
+            &run_id,
+            &scenario,
+            &out,
+            &[
+                "--transport",
+                "ros2",
+                "--listen",
+                &listen,
+                "--clock",
+                "lockstep",
+            ],
+        ),
+        LIMIT,
+    );
+    finished.assert_success();
+    let over_ros2 = json(&out.join("summary.json"));
+    let reference = in_process_summary(dir.path(), &scenario);
+    assert_eq!(
+        reference["per_run"][0]["success_10"],
+        serde_json::Value::Bool(true),
+        "case 1 converges in-process: {reference}"
+    );
+    let keys = reference.as_object().expect("eval JSON is an object");
+    assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
+    for (key, value) in keys {
+        if key == "models" {
+            // In-process names the ONNX model; over ROS 2 the world knows only its drivers.
+            continue;
+        }
+        assert_json_close(&over_ros2[key], value, key);
+    }
+    // Every tick of every robot was answered: nothing braked.
+    let log = read_trajectory(&out.join("runs/run-0000.json")).expect("the run log");
+    assert_eq!(log.poses.len(), 501, "25 s at 20 Hz");
+    assert_eq!(
+        over_ros2["braked_ticks"],
+        serde_json::json!([{}, {}, {}]),
+        "{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+}
+
+/// Issue 14 acceptance: realtime case 1 through the ROS 2 path converges.
+#[test]
+fn realtime_case1_through_ros2_converges() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("ros2_team_realtime", LIMIT);
+    let dir = TempDir::new("r2real");
+    let run_id = unique_run_id("r2real");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 25.0);
+    let out = dir.path().join("out");
+    let listen = endpoint(free_tcp_port());
+    let finished = run(
+        formation_run(
+            &run_id,
+            &scenario,
+            &out,
+            &[
+                "--transport",
+                "ros2",
+                "--listen",
+                &listen,
+                "--clock",
+                "realtime",
+            ],
+        ),
+        LIMIT,
+    );
+    finished.assert_success();
+    let summary = json(&out.join("summary.json"));
+    assert_eq!(
+        summary["per_run"][0]["success_10"],
+        serde_json::Value::Bool(true),
+        "{summary}\n{}",
+        finished.describe()
+    );
+    assert_eq!(summary["per_run"][0]["collisions"], serde_json::json!(0));
+    leaks.assert_clean();
+}
+
+/// Flags that make no sense for a ROS 2 team are refused with the reason.
+#[test]
+fn bad_ros2_launches_are_refused_with_the_reason() {
+    let dir = TempDir::new("r2bad");
+    let run_id = unique_run_id("r2bad");
+    let scenario = case1_scenario(dir.path(), 5.0);
+    let out = dir.path().join("out");
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["--transport", "ros2"],
+            "--transport ros2 needs --listen tcp/HOST:PORT",
+        ),
+        (
+            &[
+                "--transport",
+                "ros2",
+                "--listen",
+                "tcp/127.0.0.1:7447",
+                "--fault",
+                "0:crash-after=3",
+            ],
+            "a ROS 2 agent takes none",
+        ),
+        (
+            &[
+                "--transport",
+                "ros2",
+                "--listen",
+                "tcp/127.0.0.1:7447",
+                "--remote",
+                "1",
+            ],
+            "--remote needs --transport zenoh (the transport is ros2)",
+        ),
+        (
+            &["--ros-domain-id", "3"],
+            "--ros-domain-id needs --transport ros2 (the transport is iceoryx2)",
+        ),
+    ];
+    for (extra, message) in cases {
+        run(formation_run(&run_id, &scenario, &out, extra), LIMIT)
+            .assert_failure_mentioning(message);
+    }
+    let mut swap = Command::new(&binaries().cli);
+    swap.args(["swap", "--transport", "ros2", "--run", "r", "--robot", "0"])
+        .arg("--model")
+        .arg(test_model());
+    run(swap, LIMIT).assert_failure_mentioning("a ROS 2 agent cannot be swapped");
+}
