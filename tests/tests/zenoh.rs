@@ -1,7 +1,9 @@
 //! The Zenoh transport (issue 13) with real processes and real Zenoh on 127.0.0.1: lockstep over
-//! Zenoh equals in-process bit for bit, remote agents join a launch with their credentials, an
-//! impostor without them gets nothing, and bad input (an unreachable endpoint, a remote robot the
-//! scenario lacks, a flag of another transport, missing credentials) ends in a clear error.
+//! Zenoh equals in-process bit for bit (`formation run` and `formation eval --processes`), remote
+//! agents join a launch with their credentials, an impostor without them gets nothing, and bad
+//! input (an unreachable endpoint, a remote robot the scenario lacks, a flag of another transport,
+//! wrong or missing credentials, a swap over the size limit, a binary built without Zenoh) ends
+//! in a clear error.
 //!
 //! Every test uses its own run id, its own free TCP port and its own scratch folder, and runs
 //! alone within this binary ([`one_at_a_time`]).
@@ -82,6 +84,102 @@ fn lockstep_case1_over_zenoh_is_bit_identical_to_in_process() {
     leaks.assert_clean();
 }
 
+/// Reads a JSON file.
+fn json(path: &Path) -> serde_json::Value {
+    let text =
+        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    serde_json::from_str(&text).expect("JSON")
+}
+
+/// Issue 13 (`--transport` on `formation eval`): one lockstep run of case 1 with
+/// `formation eval --processes --transport zenoh --listen E` (the world listening on E, three
+/// local agents connecting with fresh credentials) writes the same `--json` as in-process
+/// `formation eval`, key for key; the same evaluation with E's port taken fails to listen there
+/// (so the flags are used); and the evaluations leave nothing in their temporary folder
+/// (`TMPDIR`, where the work folder, its credentials and the run's lock live).
+#[test]
+fn eval_over_zenoh_writes_the_same_json_as_in_process() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_eval_json", LIMIT);
+    let dir = TempDir::new("zeval");
+    let scenario = case1_scenario(dir.path(), 10.0);
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir_all(&tmp).expect("the evaluation's TMPDIR");
+    let listen = endpoint(free_tcp_port());
+    let eval = |extra: &[&str], json: &Path| {
+        let mut command = Command::new(&binaries().cli);
+        command
+            .env("TMPDIR", &tmp)
+            .args(["eval", "--controller", "policy", "--runs", "1"])
+            .arg("--scenario")
+            .arg(&scenario)
+            .arg("--model")
+            .arg(test_model())
+            .arg("--json")
+            .arg(json)
+            .args(extra);
+        run(command, LIMIT)
+    };
+    let in_process_json = dir.path().join("in-process.json");
+    eval(&[], &in_process_json).assert_success();
+    let zenoh_json = dir.path().join("zenoh.json");
+    let over_zenoh = eval(
+        &["--processes", "--transport", "zenoh", "--listen", &listen],
+        &zenoh_json,
+    );
+    over_zenoh.assert_success();
+    let in_process = json(&in_process_json);
+    let over = json(&zenoh_json);
+    let keys = in_process.as_object().expect("eval JSON is an object");
+    assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
+    assert_eq!(
+        in_process["per_run"].as_array().map(Vec::len),
+        Some(1),
+        "one run"
+    );
+    for (key, value) in keys {
+        assert_eq!(
+            &over[key],
+            value,
+            "{key} differs between Zenoh and in-process\n{}",
+            over_zenoh.describe()
+        );
+    }
+    // The flags are not ignored: with its port taken, the same evaluation cannot listen there.
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("binding a port");
+    let busy = endpoint(taken.local_addr().expect("its address").port());
+    eval(
+        &["--processes", "--transport", "zenoh", "--listen", &busy],
+        &dir.path().join("busy.json"),
+    )
+    .assert_failure_mentioning(&format!("zenoh could not listen on {busy}"));
+    drop(taken);
+    let over_keys: Vec<&String> = over.as_object().expect("an object").keys().collect();
+    assert_eq!(
+        over_keys,
+        keys.keys().collect::<Vec<_>>(),
+        "the same keys in both"
+    );
+    // What is left: at most the folder that holds every run's iceoryx2 root and lock, which
+    // stays, empty.
+    let files_in = |dir: &Path| -> Vec<std::path::PathBuf> {
+        std::fs::read_dir(dir)
+            .unwrap_or_else(|e| panic!("reading {}: {e}", dir.display()))
+            .flatten()
+            .map(|entry| entry.path())
+            .collect()
+    };
+    let base = tmp.join("iceoryx2-formation");
+    let mut left: Vec<_> = files_in(&tmp).into_iter().filter(|p| *p != base).collect();
+    if base.is_dir() {
+        left.extend(files_in(&base));
+    }
+    assert!(
+        left.is_empty(),
+        "the evaluation left files behind: {left:?}"
+    );
+}
+
 /// An agent pointed at an endpoint where nothing listens fails, naming the endpoint.
 #[test]
 fn an_agent_with_an_unreachable_endpoint_names_it() {
@@ -100,7 +198,9 @@ fn an_agent_with_an_unreachable_endpoint_names_it() {
 }
 
 /// `--remote` naming a robot the scenario lacks is refused before anything starts; so are Zenoh's
-/// flags on the iceoryx2 transport and an endpoint that is not tcp/HOST:PORT.
+/// flags on the iceoryx2 transport and an endpoint that is not tcp/HOST:PORT; `formation eval`
+/// refuses `--transport zenoh` without `--processes`, `--listen` without `--transport zenoh`,
+/// and Zenoh without `--listen`.
 #[test]
 fn bad_zenoh_flags_are_refused_with_the_reason() {
     let _one = one_at_a_time();
@@ -143,6 +243,30 @@ fn bad_zenoh_flags_are_refused_with_the_reason() {
         let _leaks = LeakCheck::new(&run_id);
         run(formation_run(&run_id, &scenario, &out, flags), LIMIT)
             .assert_failure_mentioning(needle);
+    }
+    let eval_cases: [(&[&str], &str); 3] = [
+        (
+            &["--transport", "zenoh", "--listen", &listen],
+            "--transport zenoh joins the world and agent processes, and an evaluation without \
+             --processes runs every robot in this process: add --processes",
+        ),
+        (
+            &["--processes", "--listen", &listen],
+            "--listen needs --transport zenoh (the transport is iceoryx2)",
+        ),
+        (
+            &["--processes", "--transport", "zenoh"],
+            "--transport zenoh needs --listen",
+        ),
+    ];
+    for (flags, needle) in eval_cases {
+        let mut eval = Command::new(&binaries().cli);
+        eval.args(["eval", "--runs", "1", "--scenario"])
+            .arg(&scenario)
+            .arg("--model")
+            .arg(test_model())
+            .args(flags);
+        run(eval, LIMIT).assert_failure_mentioning(needle);
     }
     let mut agent = Command::new(&binaries().agent);
     agent
