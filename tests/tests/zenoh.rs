@@ -15,8 +15,8 @@ use std::time::Duration;
 use formation::runtime::read_trajectory;
 use formation_tests::{
     LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
-    formation_run, free_tcp_port, launch_secret, one_at_a_time, run, run_with_input, test_model,
-    unique_run_id,
+    count_samples, formation_run, free_tcp_port, launch_secret, one_at_a_time, raw_client, run,
+    run_with_input, test_model, unique_run_id,
 };
 use formation_world::{Scenario, run_episode};
 use robot_agent::decision::PolicyController;
@@ -281,46 +281,6 @@ fn bad_zenoh_flags_are_refused_with_the_reason() {
         ])
         .arg(test_model());
     run(agent, LIMIT).assert_failure_mentioning("--connect needs --transport zenoh");
-}
-
-/// A raw Zenoh client of the world at `endpoint`, logged in as `login` (`None`: no login).
-fn raw_client(endpoint: &str, login: Option<(&str, &str)>) -> zenoh::Result<zenoh::Session> {
-    use zenoh::Wait;
-    let mut config = zenoh::Config::default();
-    config.insert_json5("mode", "\"client\"")?;
-    config.insert_json5("scouting/multicast/enabled", "false")?;
-    config.insert_json5("connect/endpoints", &format!("[{endpoint:?}]"))?;
-    config.insert_json5("connect/timeout_ms", "3000")?;
-    config.insert_json5("connect/exit_on_failure", "true")?;
-    if let Some((user, password)) = login {
-        config.insert_json5(
-            "transport/auth/usrpwd",
-            &format!("{{ user: {user:?}, password: {password:?} }}"),
-        )?;
-    }
-    zenoh::open(config).wait()
-}
-
-/// Counts the samples a subscriber on `key` receives.
-fn count_samples(
-    session: &zenoh::Session,
-    key: String,
-) -> (
-    zenoh::pubsub::Subscriber<()>,
-    std::sync::Arc<std::sync::atomic::AtomicUsize>,
-) {
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    use zenoh::Wait;
-    let count = std::sync::Arc::new(AtomicUsize::new(0));
-    let seen = std::sync::Arc::clone(&count);
-    let subscriber = session
-        .declare_subscriber(key)
-        .callback(move |_| {
-            seen.fetch_add(1, Ordering::Relaxed);
-        })
-        .wait()
-        .expect("declaring a subscriber");
-    (subscriber, count)
 }
 
 /// Issue 13 (remote agents, access control): with `formation credentials`, a launch whose robot 2
