@@ -383,6 +383,100 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
     leaks.assert_clean();
 }
 
+/// Issue 13 (bad input: wrong or missing credentials): against a launch whose robot 2 is remote,
+/// an agent for robot 2 without `--credentials`, or with another run's robot-2.json, is refused
+/// by the world's router and says it cannot reach the world, naming the endpoint and the
+/// credentials file to use; robot 1's file is refused naming the right one; a missing file is
+/// named. Then the agent with the run's robot-2.json joins and the run completes, so the world
+/// was reachable all along and the refusals were the logins'.
+#[test]
+fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_bad_credentials", LIMIT);
+    let bins = binaries();
+    let dir = TempDir::new("zcred");
+    let run_id = unique_run_id("zcred");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 2.0);
+    let out = dir.path().join("out");
+    let make_credentials = |folder: &Path| {
+        let mut credentials = Command::new(&bins.cli);
+        credentials
+            .args(["credentials", "--robots", "3", "--out"])
+            .arg(folder);
+        run(credentials, LIMIT).assert_success();
+    };
+    let creds = dir.path().join("creds");
+    let others = dir.path().join("other-run");
+    make_credentials(&creds);
+    make_credentials(&others);
+    let listen = endpoint(free_tcp_port());
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &["--transport", "zenoh", "--listen", &listen, "--remote", "2"],
+    );
+    command
+        .args(["--clock", "lockstep", "--remote-timeout-s", "120"])
+        .arg("--credentials")
+        .arg(&creds);
+    let mut launch = LiveProcess::spawn(command);
+    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains("waiting for the remote agents of robots [2]")
+    });
+    assert!(waiting.is_some(), "{}", launch.describe());
+    let agent = |credentials: Option<&Path>| {
+        let mut agent = Command::new(&bins.agent);
+        agent
+            .args(["--transport", "zenoh", "--connect", &listen])
+            .args(["--run-id", run_id.as_str(), "--robot", "2"])
+            .args(["--connect-timeout-ms", "5000", "--model"])
+            .arg(test_model());
+        match credentials {
+            Some(file) => {
+                agent.arg("--credentials").arg(file);
+                agent
+            }
+            None => agent,
+        }
+    };
+    let unreachable = format!("cannot reach the world at {listen}");
+    let use_robot2 = "is --credentials this run's robot-2.json?";
+    // No login (the launch secret on standard input, as a local agent gets it).
+    run_with_input(agent(None), Some(&launch_secret().to_line()), LIMIT)
+        .assert_failure_mentioning(&unreachable)
+        .assert_failure_mentioning(use_robot2);
+    // Another run's login for robot 2: its password is not in this world's dictionary.
+    run(agent(Some(&others.join("robot-2.json"))), LIMIT)
+        .assert_failure_mentioning(&unreachable)
+        .assert_failure_mentioning(use_robot2);
+    // Robot 1's file for robot 2.
+    let robot1 = creds.join("robot-1.json");
+    run(agent(Some(&robot1)), LIMIT).assert_failure_mentioning(&format!(
+        "{} holds the credentials of robot-1, not of robot 2: use robot-2.json",
+        robot1.display()
+    ));
+    // A file that is not there.
+    let missing = creds.join("robot-7.json");
+    run(agent(Some(&missing)), LIMIT).assert_failure_mentioning(&format!(
+        "cannot read credentials file {}",
+        missing.display()
+    ));
+    // The run's own file: the agent joins and the run completes.
+    let joined = LiveProcess::spawn_with_input(agent(Some(&creds.join("robot-2.json"))), None);
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    let joined = joined.finish(Duration::from_secs(30));
+    assert!(joined.output.status.success(), "{}", joined.describe());
+    assert!(
+        !finished.stderr().contains("refused process"),
+        "the refused logins never reached the world\n{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+}
+
 /// A remote robot whose agent never comes is named when the wait runs out.
 #[test]
 fn a_remote_agent_that_never_comes_is_named() {
