@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use formation_runtime::transport::Transport;
 
 use crate::runtime::{CredentialsArgs, ProfileArgs, RunArgs, SwapArgs};
 
@@ -83,9 +84,18 @@ pub struct EvalArgs {
     /// are at most 5 runs, else none).
     #[arg(long)]
     pub save_trajectories: Option<usize>,
-    /// Run every robot's policy in its own OS process over iceoryx2 (policy controller only).
+    /// Run every robot's policy in its own OS process (policy controller only), over
+    /// `--transport`.
     #[arg(long)]
     pub processes: bool,
+    /// With `--processes`: how the agents reach the world, iceoryx2 shared memory, Zenoh over
+    /// TCP (needs --listen; every agent runs on this host, with fresh credentials), or ROS 2
+    /// (needs --listen; the world as a ROS 2 team, ROS 2 agents).
+    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    pub transport: Transport,
+    /// Zenoh and ROS 2: where the world listens, tcp/ADDR:PORT.
+    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    pub listen: Option<String>,
     /// Worker threads for in-process evaluation (default: available cores).
     #[arg(long)]
     pub threads: Option<usize>,

@@ -79,6 +79,8 @@ fn run_eval(
         out: Some(dir.clone()),
         save_trajectories: None,
         processes: !args.in_process,
+        transport: Default::default(),
+        listen: None,
         threads: None,
         robots: None,
     };

@@ -4,7 +4,8 @@
 //! In-process evaluation is `formation_learning::evaluate_runs` (rayon); every run is a pure
 //! function of (scenario, base seed, run index, model), so the result does not depend on the
 //! thread count and the same seed gives byte-identical JSON. `--processes` runs every robot's
-//! policy in its own OS process over iceoryx2 and must give the same JSON. `--robots 3,5,8`
+//! policy in its own OS process, over iceoryx2 or (`--transport zenoh --listen E`) Zenoh, and
+//! must give the same JSON. `--robots 3,5,8`
 //! evaluates the expert (and the policy, when `--model` is given) over team sizes and writes the
 //! scaling table (`formation_learning::scaling`).
 
@@ -16,6 +17,7 @@ use formation_expert::ExpertGains;
 use formation_learning::Driver;
 use formation_learning::rollout::with_threads;
 use formation_learning::scaling::{ScalingDriver, evaluate_scaling, scaling_text};
+use formation_runtime::transport::Transport;
 use formation_world::metrics::{MetricsConfig, RunMetrics, run_metrics};
 use formation_world::{RunLog, Scenario, Trajectory};
 
@@ -164,8 +166,29 @@ pub fn write_eval_dir(dir: &Path, out: &EvalOutput, results: &[RunResult]) -> an
     Ok(())
 }
 
+/// The transport flags of `eval`: Zenoh's flags need `--transport zenoh`, and a transport is
+/// something only processes have, so `--transport zenoh` needs `--processes`.
+pub fn network_flags(args: &EvalArgs) -> anyhow::Result<crate::runtime::NetworkFlags> {
+    let flags = crate::runtime::NetworkFlags {
+        transport: args.transport,
+        listen: args.listen.clone(),
+        ..Default::default()
+    };
+    flags.refuse_misplaced()?;
+    if args.transport != Transport::Iceoryx2 && !args.processes {
+        anyhow::bail!(
+            "--transport {} joins the world and agent processes, and an evaluation without \
+             --processes runs every robot in this process: add --processes (e.g. `formation \
+             eval --processes --transport zenoh --listen tcp/127.0.0.1:7447`)",
+            args.transport
+        );
+    }
+    Ok(flags)
+}
+
 /// Evaluates and returns the output and the per-run results (shared by `eval` and `demo`).
 pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)> {
+    let network = network_flags(args)?;
     let scenario = Scenario::from_path(&args.scenario)?;
     let runs = args.runs.unwrap_or_else(|| scenario.runs());
     if runs == 0 {
@@ -202,6 +225,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
             runs,
             &default,
             crate::runtime::ClockMode::Lockstep,
+            &network,
             &mut |n| bar.set_position(n as u64),
         )?;
         if let Some(dir) = &args.out {
@@ -307,6 +331,7 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
 
 /// `formation eval`.
 pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
+    network_flags(args)?;
     if let Some(sizes) = &args.robots {
         return scaling_command(args, sizes);
     }

@@ -117,6 +117,17 @@ pub enum AgentExit {
 /// How long the agent waits with nothing arriving before checking that the world still exists.
 pub const IDLE_CHECK: Duration = Duration::from_millis(250);
 
+/// Why an agent of run `run` exits when the world is gone, and what to do about it: the agent
+/// does not wait for a world that may never come back, so the user starts it again (the
+/// launcher's own agents go with their launcher, which says why).
+pub fn world_gone(run: &str) -> String {
+    format!(
+        "the world process of run {run} went away (it exited, crashed or was killed, or, over a \
+         network, its link was down past the lease), so there is nothing left to drive; start \
+         this agent again, with the same command, once the world of run {run} is back"
+    )
+}
+
 /// `error: source: source of source ...`, the whole chain on one line.
 pub fn error_chain(error: &(dyn std::error::Error + 'static)) -> String {
     let mut text = error.to_string();
@@ -261,11 +272,7 @@ impl<M: PilotMaker> AgentLoop<M> {
                 }
                 Wake::Idle => {
                     if !link.world_alive()? {
-                        return Ok(AgentExit::Because(format!(
-                            "the world process of run {run} went away (it exited, crashed or \
-                             was killed, or, over a network, its link was down past the lease); \
-                             nothing left to drive"
-                        )));
+                        return Ok(AgentExit::Because(world_gone(run)));
                     }
                 }
                 Wake::Activity => {}

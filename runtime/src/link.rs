@@ -178,15 +178,18 @@ pub enum AgentLinkError {
         /// Zenoh's error.
         detail: String,
     },
-    /// The world's endpoint could not be reached.
+    /// The world's endpoint could not be reached, or its router refused the login.
     #[error(
         "cannot reach the world at {endpoint}: {detail}; is `formation-world --transport zenoh \
          --listen {endpoint}` (or `formation run --transport zenoh --listen {endpoint}`) running, \
-         and is that address reachable from this host?"
+         is that address reachable from this host, and is --credentials this run's \
+         robot-{robot}.json? (the world's router refuses a connection without a login it knows)"
     )]
     Unreachable {
         /// The endpoint given with `--connect`.
         endpoint: String,
+        /// The robot the agent would drive.
+        robot: usize,
         /// Zenoh's error.
         detail: String,
     },

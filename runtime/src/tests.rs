@@ -655,7 +655,8 @@ fn an_agent_exits_when_its_world_goes_away_or_its_input_closes() {
         panic!("the agent should say why it exits");
     };
     assert!(
-        reason.contains("world process of run r went away"),
+        reason.contains("world process of run r went away")
+            && reason.contains("start this agent again, with the same command"),
         "{reason}"
     );
     assert_eq!(

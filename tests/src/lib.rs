@@ -860,6 +860,49 @@ pub fn free_tcp_port() -> u16 {
     listener.local_addr().expect("the bound address").port()
 }
 
+/// A raw Zenoh client of the world at `endpoint`, logged in as `login` (`None`: no login): an
+/// impostor that speaks Zenoh but is no `formation-agent`. Its connection is refused when the
+/// router does not admit the login (within the 3 s connect timeout).
+pub fn raw_client(endpoint: &str, login: Option<(&str, &str)>) -> zenoh::Result<zenoh::Session> {
+    use zenoh::Wait;
+    let mut config = zenoh::Config::default();
+    config.insert_json5("mode", "\"client\"")?;
+    config.insert_json5("scouting/multicast/enabled", "false")?;
+    config.insert_json5("connect/endpoints", &format!("[{endpoint:?}]"))?;
+    config.insert_json5("connect/timeout_ms", "3000")?;
+    config.insert_json5("connect/exit_on_failure", "true")?;
+    if let Some((user, password)) = login {
+        config.insert_json5(
+            "transport/auth/usrpwd",
+            &format!("{{ user: {user:?}, password: {password:?} }}"),
+        )?;
+    }
+    zenoh::open(config).wait()
+}
+
+/// A subscriber of `session` on `key` that counts the samples it receives: keep the
+/// subscriber alive while counting.
+pub fn count_samples(
+    session: &zenoh::Session,
+    key: String,
+) -> (
+    zenoh::pubsub::Subscriber<()>,
+    std::sync::Arc<std::sync::atomic::AtomicUsize>,
+) {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use zenoh::Wait;
+    let count = std::sync::Arc::new(AtomicUsize::new(0));
+    let seen = std::sync::Arc::clone(&count);
+    let subscriber = session
+        .declare_subscriber(key)
+        .callback(move |_| {
+            seen.fetch_add(1, Ordering::Relaxed);
+        })
+        .wait()
+        .expect("declaring a subscriber");
+    (subscriber, count)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

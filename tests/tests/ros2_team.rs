@@ -90,12 +90,19 @@ fn formation_run(
 fn in_process_summary(dir: &Path, scenario: &Path) -> serde_json::Value {
     let path = dir.join("in-process.json");
     let mut eval = Command::new(&binaries().cli);
-    eval.args(["eval", "--controller", "policy", "--runs", "1", "--scenario"])
-        .arg(scenario)
-        .arg("--model")
-        .arg(shipped_model())
-        .arg("--json")
-        .arg(&path);
+    eval.args([
+        "eval",
+        "--controller",
+        "policy",
+        "--runs",
+        "1",
+        "--scenario",
+    ])
+    .arg(scenario)
+    .arg("--model")
+    .arg(shipped_model())
+    .arg("--json")
+    .arg(&path);
     run(eval, LIMIT).assert_success();
     json(&path)
 }

@@ -6,7 +6,7 @@ use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use formation::runtime::{ClockMode, eval_over_processes};
+use formation::runtime::{ClockMode, NetworkFlags, eval_over_processes};
 use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, ServiceLimits, robot_service_name};
 use formation_tests::{
     LeakCheck, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
@@ -39,6 +39,7 @@ fn lockstep_over_processes_is_bit_identical_to_in_process() {
         2,
         model,
         ClockMode::Lockstep,
+        &NetworkFlags::default(),
         &mut |n| progress.push(n),
     )
     .expect("runs over processes")

@@ -1,7 +1,9 @@
 //! The Zenoh transport (issue 13) with real processes and real Zenoh on 127.0.0.1: lockstep over
-//! Zenoh equals in-process bit for bit, remote agents join a launch with their credentials, an
-//! impostor without them gets nothing, and bad input (an unreachable endpoint, a remote robot the
-//! scenario lacks, a flag of another transport, missing credentials) ends in a clear error.
+//! Zenoh equals in-process bit for bit (`formation run` and `formation eval --processes`), remote
+//! agents join a launch with their credentials, an impostor without them gets nothing, and bad
+//! input (an unreachable endpoint, a remote robot the scenario lacks, a flag of another transport,
+//! wrong or missing credentials, a swap over the size limit, a binary built without Zenoh) ends
+//! in a clear error.
 //!
 //! Every test uses its own run id, its own free TCP port and its own scratch folder, and runs
 //! alone within this binary ([`one_at_a_time`]).
@@ -13,8 +15,8 @@ use std::time::Duration;
 use formation::runtime::read_trajectory;
 use formation_tests::{
     LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
-    formation_run, free_tcp_port, launch_secret, one_at_a_time, run, run_with_input, test_model,
-    unique_run_id,
+    count_samples, formation_run, free_tcp_port, launch_secret, one_at_a_time, raw_client, run,
+    run_with_input, test_model, unique_run_id,
 };
 use formation_world::{Scenario, run_episode};
 use robot_agent::decision::PolicyController;
@@ -82,6 +84,102 @@ fn lockstep_case1_over_zenoh_is_bit_identical_to_in_process() {
     leaks.assert_clean();
 }
 
+/// Reads a JSON file.
+fn json(path: &Path) -> serde_json::Value {
+    let text =
+        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    serde_json::from_str(&text).expect("JSON")
+}
+
+/// Issue 13 (`--transport` on `formation eval`): one lockstep run of case 1 with
+/// `formation eval --processes --transport zenoh --listen E` (the world listening on E, three
+/// local agents connecting with fresh credentials) writes the same `--json` as in-process
+/// `formation eval`, key for key; the same evaluation with E's port taken fails to listen there
+/// (so the flags are used); and the evaluations leave nothing in their temporary folder
+/// (`TMPDIR`, where the work folder, its credentials and the run's lock live).
+#[test]
+fn eval_over_zenoh_writes_the_same_json_as_in_process() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_eval_json", LIMIT);
+    let dir = TempDir::new("zeval");
+    let scenario = case1_scenario(dir.path(), 10.0);
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir_all(&tmp).expect("the evaluation's TMPDIR");
+    let listen = endpoint(free_tcp_port());
+    let eval = |extra: &[&str], json: &Path| {
+        let mut command = Command::new(&binaries().cli);
+        command
+            .env("TMPDIR", &tmp)
+            .args(["eval", "--controller", "policy", "--runs", "1"])
+            .arg("--scenario")
+            .arg(&scenario)
+            .arg("--model")
+            .arg(test_model())
+            .arg("--json")
+            .arg(json)
+            .args(extra);
+        run(command, LIMIT)
+    };
+    let in_process_json = dir.path().join("in-process.json");
+    eval(&[], &in_process_json).assert_success();
+    let zenoh_json = dir.path().join("zenoh.json");
+    let over_zenoh = eval(
+        &["--processes", "--transport", "zenoh", "--listen", &listen],
+        &zenoh_json,
+    );
+    over_zenoh.assert_success();
+    let in_process = json(&in_process_json);
+    let over = json(&zenoh_json);
+    let keys = in_process.as_object().expect("eval JSON is an object");
+    assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
+    assert_eq!(
+        in_process["per_run"].as_array().map(Vec::len),
+        Some(1),
+        "one run"
+    );
+    for (key, value) in keys {
+        assert_eq!(
+            &over[key],
+            value,
+            "{key} differs between Zenoh and in-process\n{}",
+            over_zenoh.describe()
+        );
+    }
+    // The flags are not ignored: with its port taken, the same evaluation cannot listen there.
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("binding a port");
+    let busy = endpoint(taken.local_addr().expect("its address").port());
+    eval(
+        &["--processes", "--transport", "zenoh", "--listen", &busy],
+        &dir.path().join("busy.json"),
+    )
+    .assert_failure_mentioning(&format!("zenoh could not listen on {busy}"));
+    drop(taken);
+    let over_keys: Vec<&String> = over.as_object().expect("an object").keys().collect();
+    assert_eq!(
+        over_keys,
+        keys.keys().collect::<Vec<_>>(),
+        "the same keys in both"
+    );
+    // What is left: at most the folder that holds every run's iceoryx2 root and lock, which
+    // stays, empty.
+    let files_in = |dir: &Path| -> Vec<std::path::PathBuf> {
+        std::fs::read_dir(dir)
+            .unwrap_or_else(|e| panic!("reading {}: {e}", dir.display()))
+            .flatten()
+            .map(|entry| entry.path())
+            .collect()
+    };
+    let base = tmp.join("iceoryx2-formation");
+    let mut left: Vec<_> = files_in(&tmp).into_iter().filter(|p| *p != base).collect();
+    if base.is_dir() {
+        left.extend(files_in(&base));
+    }
+    assert!(
+        left.is_empty(),
+        "the evaluation left files behind: {left:?}"
+    );
+}
+
 /// An agent pointed at an endpoint where nothing listens fails, naming the endpoint.
 #[test]
 fn an_agent_with_an_unreachable_endpoint_names_it() {
@@ -100,7 +198,9 @@ fn an_agent_with_an_unreachable_endpoint_names_it() {
 }
 
 /// `--remote` naming a robot the scenario lacks is refused before anything starts; so are Zenoh's
-/// flags on the iceoryx2 transport and an endpoint that is not tcp/HOST:PORT.
+/// flags on the iceoryx2 transport and an endpoint that is not tcp/HOST:PORT; `formation eval`
+/// refuses `--transport zenoh` without `--processes`, `--listen` without `--transport zenoh`,
+/// and Zenoh without `--listen`.
 #[test]
 fn bad_zenoh_flags_are_refused_with_the_reason() {
     let _one = one_at_a_time();
@@ -144,6 +244,30 @@ fn bad_zenoh_flags_are_refused_with_the_reason() {
         run(formation_run(&run_id, &scenario, &out, flags), LIMIT)
             .assert_failure_mentioning(needle);
     }
+    let eval_cases: [(&[&str], &str); 3] = [
+        (
+            &["--transport", "zenoh", "--listen", &listen],
+            "--transport zenoh joins the world and agent processes, and an evaluation without \
+             --processes runs every robot in this process: add --processes",
+        ),
+        (
+            &["--processes", "--listen", &listen],
+            "--listen needs --transport zenoh (the transport is iceoryx2)",
+        ),
+        (
+            &["--processes", "--transport", "zenoh"],
+            "--transport zenoh needs --listen",
+        ),
+    ];
+    for (flags, needle) in eval_cases {
+        let mut eval = Command::new(&binaries().cli);
+        eval.args(["eval", "--runs", "1", "--scenario"])
+            .arg(&scenario)
+            .arg("--model")
+            .arg(test_model())
+            .args(flags);
+        run(eval, LIMIT).assert_failure_mentioning(needle);
+    }
     let mut agent = Command::new(&binaries().agent);
     agent
         .args([
@@ -157,46 +281,6 @@ fn bad_zenoh_flags_are_refused_with_the_reason() {
         ])
         .arg(test_model());
     run(agent, LIMIT).assert_failure_mentioning("--connect needs --transport zenoh");
-}
-
-/// A raw Zenoh client of the world at `endpoint`, logged in as `login` (`None`: no login).
-fn raw_client(endpoint: &str, login: Option<(&str, &str)>) -> zenoh::Result<zenoh::Session> {
-    use zenoh::Wait;
-    let mut config = zenoh::Config::default();
-    config.insert_json5("mode", "\"client\"")?;
-    config.insert_json5("scouting/multicast/enabled", "false")?;
-    config.insert_json5("connect/endpoints", &format!("[{endpoint:?}]"))?;
-    config.insert_json5("connect/timeout_ms", "3000")?;
-    config.insert_json5("connect/exit_on_failure", "true")?;
-    if let Some((user, password)) = login {
-        config.insert_json5(
-            "transport/auth/usrpwd",
-            &format!("{{ user: {user:?}, password: {password:?} }}"),
-        )?;
-    }
-    zenoh::open(config).wait()
-}
-
-/// Counts the samples a subscriber on `key` receives.
-fn count_samples(
-    session: &zenoh::Session,
-    key: String,
-) -> (
-    zenoh::pubsub::Subscriber<()>,
-    std::sync::Arc<std::sync::atomic::AtomicUsize>,
-) {
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    use zenoh::Wait;
-    let count = std::sync::Arc::new(AtomicUsize::new(0));
-    let seen = std::sync::Arc::clone(&count);
-    let subscriber = session
-        .declare_subscriber(key)
-        .callback(move |_| {
-            seen.fetch_add(1, Ordering::Relaxed);
-        })
-        .wait()
-        .expect("declaring a subscriber");
-    (subscriber, count)
 }
 
 /// Issue 13 (remote agents, access control): with `formation credentials`, a launch whose robot 2
@@ -296,6 +380,100 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
         finished.describe()
     );
     drop((impostor, forger));
+    leaks.assert_clean();
+}
+
+/// Issue 13 (bad input: wrong or missing credentials): against a launch whose robot 2 is remote,
+/// an agent for robot 2 without `--credentials`, or with another run's robot-2.json, is refused
+/// by the world's router and says it cannot reach the world, naming the endpoint and the
+/// credentials file to use; robot 1's file is refused naming the right one; a missing file is
+/// named. Then the agent with the run's robot-2.json joins and the run completes, so the world
+/// was reachable all along and the refusals were the logins'.
+#[test]
+fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_bad_credentials", LIMIT);
+    let bins = binaries();
+    let dir = TempDir::new("zcred");
+    let run_id = unique_run_id("zcred");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 2.0);
+    let out = dir.path().join("out");
+    let make_credentials = |folder: &Path| {
+        let mut credentials = Command::new(&bins.cli);
+        credentials
+            .args(["credentials", "--robots", "3", "--out"])
+            .arg(folder);
+        run(credentials, LIMIT).assert_success();
+    };
+    let creds = dir.path().join("creds");
+    let others = dir.path().join("other-run");
+    make_credentials(&creds);
+    make_credentials(&others);
+    let listen = endpoint(free_tcp_port());
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &["--transport", "zenoh", "--listen", &listen, "--remote", "2"],
+    );
+    command
+        .args(["--clock", "lockstep", "--remote-timeout-s", "120"])
+        .arg("--credentials")
+        .arg(&creds);
+    let mut launch = LiveProcess::spawn(command);
+    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains("waiting for the remote agents of robots [2]")
+    });
+    assert!(waiting.is_some(), "{}", launch.describe());
+    let agent = |credentials: Option<&Path>| {
+        let mut agent = Command::new(&bins.agent);
+        agent
+            .args(["--transport", "zenoh", "--connect", &listen])
+            .args(["--run-id", run_id.as_str(), "--robot", "2"])
+            .args(["--connect-timeout-ms", "5000", "--model"])
+            .arg(test_model());
+        match credentials {
+            Some(file) => {
+                agent.arg("--credentials").arg(file);
+                agent
+            }
+            None => agent,
+        }
+    };
+    let unreachable = format!("cannot reach the world at {listen}");
+    let use_robot2 = "is --credentials this run's robot-2.json?";
+    // No login (the launch secret on standard input, as a local agent gets it).
+    run_with_input(agent(None), Some(&launch_secret().to_line()), LIMIT)
+        .assert_failure_mentioning(&unreachable)
+        .assert_failure_mentioning(use_robot2);
+    // Another run's login for robot 2: its password is not in this world's dictionary.
+    run(agent(Some(&others.join("robot-2.json"))), LIMIT)
+        .assert_failure_mentioning(&unreachable)
+        .assert_failure_mentioning(use_robot2);
+    // Robot 1's file for robot 2.
+    let robot1 = creds.join("robot-1.json");
+    run(agent(Some(&robot1)), LIMIT).assert_failure_mentioning(&format!(
+        "{} holds the credentials of robot-1, not of robot 2: use robot-2.json",
+        robot1.display()
+    ));
+    // A file that is not there.
+    let missing = creds.join("robot-7.json");
+    run(agent(Some(&missing)), LIMIT).assert_failure_mentioning(&format!(
+        "cannot read credentials file {}",
+        missing.display()
+    ));
+    // The run's own file: the agent joins and the run completes.
+    let joined = LiveProcess::spawn_with_input(agent(Some(&creds.join("robot-2.json"))), None);
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    let joined = joined.finish(Duration::from_secs(30));
+    assert!(joined.output.status.success(), "{}", joined.describe());
+    assert!(
+        !finished.stderr().contains("refused process"),
+        "the refused logins never reached the world\n{}",
+        finished.describe()
+    );
     leaks.assert_clean();
 }
 

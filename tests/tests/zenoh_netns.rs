@@ -3,7 +3,9 @@
 //! loss from nftables. The cases: lockstep case 1 gives the in-process Table I and trajectory;
 //! 20 ± 5 ms of delay with 1 % loss still converges in realtime; a SIGKILLed remote agent's robot
 //! brakes and a restarted agent rejoins; a cut link brakes every robot and, once the link is back,
-//! they drive again and the run completes.
+//! they drive again and the run completes; an impostor (a raw Zenoh client, `zenoh-impostor` of
+//! this package) gets nothing and moves no robot; and when the world's side is SIGKILLed, every
+//! remote agent exits on its own with a message saying so and what to do.
 //!
 //! Creating namespaces needs root: where `ip netns add` fails, each test says why and passes
 //! without checking anything (CI runs as root, so there they run). Every test makes its own pair
@@ -16,9 +18,9 @@ use std::time::{Duration, Instant};
 use formation::runtime::read_trajectory;
 use formation_tests::netns::{NetPair, WORLD_IP};
 use formation_tests::{
-    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries,
-    case1_scenario, free_tcp_port, one_at_a_time, repo_root, run, send_signal, test_model,
-    unique_run_id,
+    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, assert_bit_identical,
+    binaries, case1_scenario, free_tcp_port, one_at_a_time, repo_root, run, send_signal,
+    test_model, unique_run_id, world_pid,
 };
 use formation_world::{Scenario, run_episode};
 use robot_agent::decision::PolicyController;
@@ -130,6 +132,16 @@ fn finish_agents(agents: Vec<LiveProcess>) {
     }
 }
 
+/// Run 0 of the scenario at `scenario` in-process, `model` on every robot.
+fn in_process(scenario: &Path, model: &Path) -> formation_world::Trajectory {
+    let scenario = Scenario::from_path(scenario).expect("scenario");
+    let spec = scenario.run_spec(scenario.seed(), 0);
+    let mut controller =
+        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
+            .expect("in-process agents");
+    run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process")
+}
+
 /// Reads a JSON file.
 fn json(path: &Path) -> serde_json::Value {
     let text =
@@ -155,14 +167,8 @@ fn lockstep_case1_across_namespaces_equals_in_process() {
     finished.assert_success();
     finish_agents(agents);
 
-    let scenario = Scenario::from_path(&scenario_path).expect("scenario");
-    let spec = scenario.run_spec(scenario.seed(), 0);
-    let mut controller =
-        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
-            .expect("in-process agents");
-    let reference = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process");
     let over_network = read_trajectory(&rig.out().join("runs/run-0000.json")).expect("the run log");
-    assert_bit_identical(&over_network, &reference);
+    assert_bit_identical(&over_network, &in_process(&scenario_path, model));
 
     let eval_json = rig.dir.path().join("in-process.json");
     let mut eval = Command::new(&binaries().cli);
@@ -400,5 +406,202 @@ fn a_cut_link_brakes_every_robot_and_they_drive_again_when_it_is_back() {
         let stale = log.outcomes.iter().filter(|o| *o != "fresh").count();
         eprintln!("robot {robot}: {stale} braked ticks of {ticks} around a 2 s cut");
     }
+    rig.leaks.assert_clean();
+}
+
+/// Issue 13 (an impostor without credentials gets no scan and moves no robot), across the
+/// network: the world in its namespace with every robot remote; from the agents' namespace a
+/// raw Zenoh client (`zenoh-impostor`) without a login is refused, and one logged in as robot 1
+/// receives robot 1's scans (so its subscriptions work) but nothing of robots 0 and 2, and its
+/// hellos forged for robots 0 and 2 never reach the world, while the one for robot 1, which the
+/// access rules let through, is refused by the world for its wrong proof (so a forged hello that
+/// got through would show). Then the three real agents join, and the lockstep run is
+/// bit-identical to in-process: the impostor moved no robot.
+#[test]
+fn an_impostor_across_namespaces_gets_nothing_and_moves_no_robot() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("netns_impostor", LIMIT);
+    let Some(rig) = Rig::new("nsimp") else {
+        return;
+    };
+    let scenario_path = case1_scenario(rig.dir.path(), 6.0);
+    let model = test_model();
+    let launch = rig.launch(&scenario_path, model, &["--clock", "lockstep"]);
+    let mut impostor = rig
+        .pair
+        .in_agents(Path::new(env!("CARGO_BIN_EXE_zenoh-impostor")));
+    impostor
+        .arg(&rig.listen)
+        .arg(rig.run_id.as_str())
+        .arg(rig.creds.join("robot-1.json"))
+        .args(["1", &ROBOTS.to_string()]);
+    let mut impostor = LiveProcess::spawn_with_input(impostor, Some(""));
+    let admitted = impostor.wait_for_line(Duration::from_secs(90), |l| l == "login admitted");
+    assert!(admitted.is_some(), "{}", impostor.describe());
+    let without_login =
+        impostor.wait_for_line(Duration::from_secs(30), |l| l.starts_with("no-login"));
+    assert!(
+        without_login
+            .as_deref()
+            .is_some_and(|l| l.starts_with("no-login refused")),
+        "a client without a login must be refused: {without_login:?}\n{}",
+        impostor.describe()
+    );
+    let ready = impostor
+        .wait_for_line(Duration::from_secs(30), |l| l.starts_with("ready pid "))
+        .unwrap_or_else(|| panic!("{}", impostor.describe()));
+    let impostor_pid = ready.trim_start_matches("ready pid ").to_string();
+
+    let agents = rig.agents(&rig.listen, model);
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    finish_agents(agents);
+    impostor.close_input();
+    let impostor = impostor.finish(Duration::from_secs(30));
+    assert!(impostor.output.status.success(), "{}", impostor.describe());
+    eprintln!("the impostor saw:\n{}", impostor.stdout().trim_end());
+    let counted = |prefix: &str| -> usize {
+        impostor
+            .stdout()
+            .lines()
+            .find_map(|l| l.strip_prefix(prefix))
+            .and_then(|rest| rest.split(' ').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("no {prefix:?} line\n{}", impostor.describe()))
+    };
+    assert!(
+        counted("own scans ") > 0,
+        "robot 1's login may read robot 1's scans\n{}",
+        impostor.describe()
+    );
+    assert_eq!(
+        counted("robot 0: "),
+        0,
+        "robot 1's login received robot 0's traffic"
+    );
+    assert_eq!(
+        counted("robot 2: "),
+        0,
+        "robot 1's login received robot 2's traffic"
+    );
+    let stderr = finished.stderr();
+    assert!(
+        stderr.contains(&format!("robot 1: refused process {impostor_pid}")),
+        "the hello robot 1's login may send reaches the world, which refuses it\n{}",
+        finished.describe()
+    );
+    for robot in [0, 2] {
+        assert!(
+            !stderr.contains(&format!("robot {robot}: refused process")),
+            "robot 1's login greeted as robot {robot}\n{}",
+            finished.describe()
+        );
+    }
+    let over_network = read_trajectory(&rig.out().join("runs/run-0000.json")).expect("the run log");
+    assert_bit_identical(&over_network, &in_process(&scenario_path, model));
+    rig.leaks.assert_clean();
+}
+
+/// The exact message of an agent whose world went away (`formation_runtime::agent::world_gone`).
+fn world_gone_message(robot: usize, run: &str) -> String {
+    format!(
+        "formation-agent (robot {robot}): exiting: the world process of run {run} went away (it \
+         exited, crashed or was killed, or, over a network, its link was down past the lease), so \
+         there is nothing left to drive; start this agent again, with the same command, once the \
+         world of run {run} is back"
+    )
+}
+
+/// Issue 13 (a remote agent that loses the world exits with a message): the world's side,
+/// `formation run` and its `formation-world` child, SIGKILLed at once mid-run (the launcher
+/// stopped first, so it cannot react) while the three remote agents drive from the other
+/// namespace. Every agent notices on its own that the world's liveliness token is gone and exits
+/// cleanly, saying the world went away and to start it again once the world is back; no process
+/// of the run is left, no agent left a model folder, and the run's only leftover, the dead
+/// launcher's lock file, is free, so the next launch of the run id removes it (as this test
+/// does, by claiming it).
+#[test]
+fn remote_agents_exit_with_a_message_when_the_world_is_killed() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("netns_world_killed", LIMIT);
+    let Some(rig) = Rig::new("nswkill") else {
+        return;
+    };
+    let model = test_model();
+    let scenario = case1_scenario(rig.dir.path(), 300.0);
+    let mut launch = rig.launch(&scenario, model, &["--clock", "realtime"]);
+    let agents = rig.agents(&rig.listen, model);
+    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+    std::thread::sleep(Duration::from_secs(2));
+    let world = world_pid(&rig.run_id).expect("the world process runs");
+    // `ip netns exec` execs the launcher in its own process.
+    let launcher = launch.id();
+    let comm = std::fs::read_to_string(format!("/proc/{launcher}/comm")).unwrap_or_default();
+    assert_eq!(comm.trim(), "formation", "the launcher's pid");
+    send_signal(launcher, "STOP");
+    send_signal(world, "KILL");
+    send_signal(launcher, "KILL");
+    let killed_at = Instant::now();
+    let launcher_status = launch.finish(Duration::from_secs(30));
+    assert_eq!(
+        std::os::unix::process::ExitStatusExt::signal(&launcher_status.output.status),
+        Some(9),
+        "{}",
+        launcher_status.describe()
+    );
+    let agent_pids_seen: Vec<u32> = agents.iter().map(LiveProcess::id).collect();
+    for (robot, agent) in agents.into_iter().enumerate() {
+        let finished = agent.finish(Duration::from_secs(60));
+        assert!(
+            finished.output.status.success(),
+            "robot {robot}'s agent exits cleanly\n{}",
+            finished.describe()
+        );
+        let expected = world_gone_message(robot, rig.run_id.as_str());
+        assert!(
+            finished.stderr().lines().any(|l| l == expected),
+            "robot {robot}'s agent says why it exits and what to do:\n{expected}\n{}",
+            finished.describe()
+        );
+        eprintln!(
+            "robot {robot}'s remote agent exited within {:.0} ms of the world's kill",
+            killed_at.elapsed().as_secs_f64() * 1e3
+        );
+    }
+    assert!(world_pid(&rig.run_id).is_none(), "the world still runs");
+    for robot in 0..ROBOTS {
+        assert!(
+            agent_pids(&rig.run_id, robot).is_empty(),
+            "robot {robot}'s agent still runs"
+        );
+    }
+    let tmp = std::env::temp_dir();
+    let folders: Vec<_> = std::fs::read_dir(&tmp)
+        .expect("the temporary folder")
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|name| {
+            agent_pids_seen
+                .iter()
+                .any(|pid| name.starts_with(&format!("formation-agent-{pid}-")))
+        })
+        .collect();
+    assert!(folders.is_empty(), "agents left folders: {folders:?}");
+    assert_eq!(
+        rig.leaks.leftovers(),
+        Vec::<PathBuf>::new(),
+        "a run over Zenoh makes no iceoryx2 files"
+    );
+    let namespace = rig.leaks.namespace();
+    assert!(
+        namespace.lock_path().exists(),
+        "the SIGKILLed launcher could not remove its lock"
+    );
+    drop(
+        namespace
+            .lock()
+            .expect("no live process holds the dead launch's lock"),
+    );
     rig.leaks.assert_clean();
 }

@@ -311,78 +311,119 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)>
     Ok((plan, scenario, base_seed))
 }
 
-/// How the launch's processes reach each other, from `--transport`, `--listen`, `--remote` and
-/// `--credentials`: flags of Zenoh need it, a remote robot must exist in the scenario, and a
-/// Zenoh launch without `--credentials` gets fresh ones in `<out>/credentials/<run id>/`.
-fn network_from_args(args: &RunArgs, run_id: &RunId, n_robots: usize) -> anyhow::Result<Network> {
-    args.transport
-        .refuse_network_flags(&[(args.listen.is_some(), "--listen")])?;
-    args.transport.refuse_zenoh_flags(&[
-        (!args.remote.is_empty(), "--remote"),
-        (args.credentials.is_some(), "--credentials"),
-    ])?;
-    args.transport
-        .refuse_ros2_flags(&[(args.ros_domain_id.is_some(), "--ros-domain-id")])?;
-    match args.transport {
-        Transport::Iceoryx2 => return Ok(Network::SharedMemory),
-        Transport::Ros2 => return ros2_network(args),
-        Transport::Zenoh => {}
-    }
-    args.transport.check_built_in("formation")?;
-    let listen = args.listen.clone().ok_or(TransportError::MissingEndpoint {
-        flag: "--listen",
-        transport: Transport::Zenoh,
-    })?;
-    #[cfg(feature = "zenoh")]
-    formation_runtime::zenoh::Endpoint::parse(&listen)?;
-    if let Some(&robot) = args.remote.iter().find(|&&r| r >= n_robots) {
-        anyhow::bail!(
-            "--remote {robot}: the scenario has {n_robots} robots (0..{}); remote robots must be \
-             among them",
-            n_robots.saturating_sub(1)
-        );
-    }
-    let mut remote = args.remote.clone();
-    remote.sort_unstable();
-    remote.dedup();
-    if remote.len() == n_robots && n_robots > 0 {
-        tracing::info!("every robot is remote: the launcher starts only the world");
-    }
-    let credentials = match &args.credentials {
-        Some(dir) => dir.clone(),
-        None => {
-            let dir = args.out.join("credentials").join(run_id.as_str());
-            create_credentials(&dir, n_robots)?;
-            dir
-        }
-    };
-    Ok(Network::Zenoh(ZenohPlan {
-        listen,
-        credentials,
-        remote,
-    }))
+/// How a launch's processes are to reach each other, as its flags give it: `--transport`, and
+/// for Zenoh `--listen`, `--remote` and `--credentials`. `formation run` and `profile` take all
+/// four; `formation eval --processes` the first two (its agents are all local, with fresh
+/// credentials).
+#[derive(Debug, Clone, Default)]
+pub struct NetworkFlags {
+    /// `--transport`.
+    pub transport: Transport,
+    /// `--listen tcp/ADDR:PORT`.
+    pub listen: Option<String>,
+    /// `--remote`: robots whose agents are started by hand.
+    pub remote: Vec<usize>,
+    /// `--credentials DIR`.
+    pub credentials: Option<PathBuf>,
+    /// `--ros-domain-id` (ROS 2).
+    pub ros_domain_id: Option<u32>,
 }
 
-/// A ROS 2 launch: the world's router on `--listen`, every agent local; fault injection is the
-/// other transports' (a ROS 2 agent takes no `--fault`).
-fn ros2_network(args: &RunArgs) -> anyhow::Result<Network> {
-    args.transport.check_built_in("formation")?;
-    let listen = args.listen.clone().ok_or(TransportError::MissingEndpoint {
-        flag: "--listen",
-        transport: Transport::Ros2,
-    })?;
-    #[cfg(feature = "zenoh")]
-    formation_runtime::zenoh::Endpoint::parse(&listen)?;
-    if !args.faults.is_empty() {
+impl NetworkFlags {
+    /// The flags of `formation run` / `profile`.
+    pub fn of_run(args: &RunArgs) -> NetworkFlags {
+        NetworkFlags {
+            transport: args.transport,
+            listen: args.listen.clone(),
+            remote: args.remote.clone(),
+            credentials: args.credentials.clone(),
+            ros_domain_id: args.ros_domain_id,
+        }
+    }
+
+    /// `Ok` unless a flag was given with a transport it is not for (the error names it):
+    /// `--listen` is Zenoh's and ROS 2's, `--remote` and `--credentials` Zenoh's,
+    /// `--ros-domain-id` ROS 2's.
+    pub fn refuse_misplaced(&self) -> Result<(), TransportError> {
+        self.transport
+            .refuse_network_flags(&[(self.listen.is_some(), "--listen")])?;
+        self.transport.refuse_zenoh_flags(&[
+            (!self.remote.is_empty(), "--remote"),
+            (self.credentials.is_some(), "--credentials"),
+        ])?;
+        self.transport
+            .refuse_ros2_flags(&[(self.ros_domain_id.is_some(), "--ros-domain-id")])
+    }
+
+    /// `--listen`, checked, for the transports over Zenoh.
+    fn listen(&self) -> anyhow::Result<String> {
+        let listen = self.listen.clone().ok_or(TransportError::MissingEndpoint {
+            flag: "--listen",
+            transport: self.transport,
+        })?;
+        #[cfg(feature = "zenoh")]
+        formation_runtime::zenoh::Endpoint::parse(&listen)?;
+        Ok(listen)
+    }
+
+    /// The launch's network for a team of `n_robots`: flags of Zenoh need it, the transport
+    /// must be built in, Zenoh needs `--listen` (a valid endpoint), a remote robot must exist in
+    /// the scenario, and a Zenoh launch without `--credentials` gets fresh ones in `fresh`.
+    pub fn network(&self, n_robots: usize, fresh: &Path) -> anyhow::Result<Network> {
+        self.refuse_misplaced()?;
+        self.transport.check_built_in("formation")?;
+        match self.transport {
+            Transport::Iceoryx2 => return Ok(Network::SharedMemory),
+            Transport::Ros2 => {
+                return Ok(Network::Ros2(supervisor::Ros2Plan {
+                    listen: self.listen()?,
+                    domain_id: self.ros_domain_id.unwrap_or(0),
+                }));
+            }
+            Transport::Zenoh => {}
+        }
+        let listen = self.listen()?;
+        if let Some(&robot) = self.remote.iter().find(|&&r| r >= n_robots) {
+            anyhow::bail!(
+                "--remote {robot}: the scenario has {n_robots} robots (0..{}); remote robots must \
+                 be among them",
+                n_robots.saturating_sub(1)
+            );
+        }
+        let mut remote = self.remote.clone();
+        remote.sort_unstable();
+        remote.dedup();
+        if remote.len() == n_robots && n_robots > 0 {
+            tracing::info!("every robot is remote: the launcher starts only the world");
+        }
+        let credentials = match &self.credentials {
+            Some(dir) => dir.clone(),
+            None => {
+                create_credentials(fresh, n_robots)?;
+                fresh.to_path_buf()
+            }
+        };
+        Ok(Network::Zenoh(ZenohPlan {
+            listen,
+            credentials,
+            remote,
+        }))
+    }
+}
+
+/// How the launch's processes reach each other ([`NetworkFlags::network`]); a Zenoh launch
+/// without `--credentials` gets fresh ones in `<out>/credentials/<run id>/`.
+/// A ROS 2 launch takes no `--fault` (fault injection is the other transports' agents').
+fn network_from_args(args: &RunArgs, run_id: &RunId, n_robots: usize) -> anyhow::Result<Network> {
+    let fresh = args.out.join("credentials").join(run_id.as_str());
+    let network = NetworkFlags::of_run(args).network(n_robots, &fresh)?;
+    if matches!(network, Network::Ros2(_)) && !args.faults.is_empty() {
         anyhow::bail!(
             "--fault injects faults into agents of the iceoryx2 and zenoh transports; a ROS 2 \
              agent takes none (stop or kill it instead)"
         );
     }
-    Ok(Network::Ros2(supervisor::Ros2Plan {
-        listen,
-        domain_id: args.ros_domain_id.unwrap_or(0),
-    }))
+    Ok(network)
 }
 
 /// `formation credentials`: writes logins for robots `0..robots` and the operator, and a launch
@@ -807,38 +848,51 @@ const EVAL_COMMAND_TIMEOUT_MS: u64 = 5000;
 
 /// Evaluates `runs` runs of `scenario` (base seed `base_seed`) with every robot's policy in its
 /// own process. Robots the scenario assigns a model to run that model, the others
-/// `default_model`. `on_run_done(n)` is called after each finished run with the number finished so
-/// far. In lockstep the trajectories are bit-identical to in-process evaluation.
+/// `default_model`. The agents reach the world as `network` says ([`NetworkFlags::network`]):
+/// over iceoryx2, or over Zenoh on the `listen` endpoint with fresh credentials made in the
+/// evaluation's temporary folder (every agent is local; `remote` and `credentials` must be
+/// unset). `on_run_done(n)` is called after each finished run with the number finished so far.
+/// In lockstep the trajectories are bit-identical to in-process evaluation, whatever the
+/// transport.
 pub fn eval_over_processes(
     scenario: &Scenario,
     base_seed: u64,
     runs: usize,
     default_model: &Path,
     clock: ClockMode,
+    network: &NetworkFlags,
     on_run_done: &mut dyn FnMut(usize),
 ) -> anyhow::Result<ProcessEval> {
+    if !network.remote.is_empty() || network.credentials.is_some() {
+        anyhow::bail!(
+            "an evaluation over processes starts every agent itself, with fresh credentials: \
+             drop --remote and --credentials"
+        );
+    }
+    network.refuse_misplaced()?;
     let models = models_per_robot(scenario, default_model)?;
     let run_id = RunId::generate();
     let work = std::env::temp_dir().join(format!("formation-eval-{run_id}"));
-    let run_specs = work.join("run-specs.json");
-    write_run_specs(scenario, base_seed, 0, runs, &run_specs)?;
-    let plan = LaunchPlan {
-        run_id,
-        run_specs,
-        settings: RuntimeSettings {
-            clock,
-            command_timeout_ms: EVAL_COMMAND_TIMEOUT_MS,
-            ..RuntimeSettings::DEFAULT
-        },
-        out: work.join("out"),
-        faults: vec![None; models.len()],
-        models,
-        restart_budget: 0,
-        restart_window: Duration::from_secs(60),
-        restart_delay: Duration::from_millis(50),
-        network: Network::SharedMemory,
-    };
     let result = (|| {
+        let network = network.network(models.len(), &work.join("credentials"))?;
+        let run_specs = work.join("run-specs.json");
+        write_run_specs(scenario, base_seed, 0, runs, &run_specs)?;
+        let plan = LaunchPlan {
+            run_id,
+            run_specs,
+            settings: RuntimeSettings {
+                clock,
+                command_timeout_ms: EVAL_COMMAND_TIMEOUT_MS,
+                ..RuntimeSettings::DEFAULT
+            },
+            out: work.join("out"),
+            faults: vec![None; models.len()],
+            models,
+            restart_budget: 0,
+            restart_window: Duration::from_secs(60),
+            restart_delay: Duration::from_millis(50),
+            network,
+        };
         let mut done = 0;
         let report = block_on(supervisor::launch(&plan, &mut |event| {
             if matches!(event, WorldEvent::RunDone { .. }) {

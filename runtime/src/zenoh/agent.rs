@@ -170,6 +170,7 @@ impl ZenohAgentLink {
         ))?;
         let session = super::open(config).map_err(|detail| AgentLinkError::Unreachable {
             endpoint: endpoint.to_string(),
+            robot,
             detail,
         })?;
         let bell = Arc::new(Bell::default());
