@@ -252,7 +252,7 @@ fn bad_zenoh_flags_are_refused_with_the_reason() {
         ),
         (
             &["--processes", "--listen", &listen],
-            "--listen needs --transport zenoh (the transport is iceoryx2)",
+            "--listen needs --transport zenoh or ros2 (the transport is iceoryx2)",
         ),
         (
             &["--processes", "--transport", "zenoh"],
