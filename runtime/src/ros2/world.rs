@@ -77,6 +77,18 @@ struct Driver {
     node: String,
 }
 
+/// A Twist as it arrived.
+#[derive(Debug, Clone, Copy)]
+struct ReceivedTwist {
+    /// The source timestamp of its attachment: the stamp of the scan it answers.
+    stamp: i64,
+    /// Its publisher's GID.
+    gid: [u8; 16],
+    twist: Twist,
+    /// When it arrived ([`formation_proto::wire::wall_clock_ns`]).
+    arrived_ns: u64,
+}
+
 /// What the liveliness subscriber and the Twist subscribers fill.
 #[derive(Debug, Default)]
 struct Graph {
@@ -86,8 +98,8 @@ struct Graph {
     new_drivers: Vec<VecDeque<Driver>>,
     /// `(robot, pid)` of drivers whose token went, not yet reported.
     gone: Vec<(usize, u32)>,
-    /// Twists received per robot: `(source stamp, gid, twist, arrival wall ns)`.
-    twists: Vec<VecDeque<(i64, [u8; 16], Twist, u64)>>,
+    /// Twists received per robot.
+    twists: Vec<VecDeque<ReceivedTwist>>,
     next_pid: u32,
 }
 
@@ -199,12 +211,12 @@ impl Ros2WorldLink {
                             if queue.len() == TWIST_QUEUE {
                                 queue.pop_front();
                             }
-                            queue.push_back((
-                                received.attachment.source_timestamp_ns,
-                                received.attachment.source_gid,
-                                received.message,
-                                formation_proto::wire::wall_clock_ns(),
-                            ));
+                            queue.push_back(ReceivedTwist {
+                                stamp: received.attachment.source_timestamp_ns,
+                                gid: received.attachment.source_gid,
+                                twist: received.message,
+                                arrived_ns: formation_proto::wire::wall_clock_ns(),
+                            });
                             drop(graph);
                             bell.ring();
                         }
@@ -553,7 +565,13 @@ impl WorldLink for Ros2WorldLink {
             return Ok(());
         };
         let ports = &self.robots[robot];
-        for (stamp, gid, twist, arrived_ns) in twists {
+        for ReceivedTwist {
+            stamp,
+            gid,
+            twist,
+            arrived_ns,
+        } in twists
+        {
             if gid != driver.gid {
                 continue;
             }
