@@ -70,12 +70,10 @@ pub fn model_ids(models: &[PathBuf], scenario: &Scenario) -> anyhow::Result<Vec<
     )?)
 }
 
-/// Every d* a scenario's runs can be given: its fixed d*, or each of its choices.
+/// The d* values that bound a scenario's runs: its fixed d*, each of its choices, or its
+/// range's ends.
 pub fn scenario_d_stars(scenario: &Scenario) -> Vec<f64> {
-    match scenario.d_star() {
-        formation_world::scenario::DStarPlan::Fixed(d) => vec![*d],
-        formation_world::scenario::DStarPlan::Choices(choices) => choices.clone(),
-    }
+    scenario.d_star().bounds()
 }
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).

@@ -34,7 +34,8 @@
 //! [goal]                  # required
 //! v_star = 0.7            # desired speed \[m/s\], 0 ..= robot.max_wheel_speed
 //! d_star = 2.0            # desired pairwise distance \[m\], 0.01 ..= 100 ...
-//! # d_star_choices = [1.0, 1.5, 2.0]   # ... or 1 to 256 distances drawn per run (exactly one of the two)
+//! # d_star_choices = [1.0, 1.5, 2.0]   # ... or 1 to 256 distances drawn per run
+//! # d_star_range = [0.8, 2.5]          # ... or drawn uniformly per run (exactly one of the three)
 //!
 //! [heading]               # required: the desired common heading phi*(t)
 //! schedule = "constant"   # "constant" | "random" | "ramp" | "sine"
@@ -80,7 +81,7 @@
 //! # Randomness of one run
 //!
 //! The run seed is `splitmix64`-mixed from `(base_seed, run_index)`; a `ChaCha8Rng` seeded with it draws,
-//! in this order: d* (only with `d_star_choices`), phi* (only with `schedule = "random"`), the positions of
+//! in this order: d* (only with `d_star_choices` or `d_star_range`), phi* (only with `schedule = "random"`), the positions of
 //! robots `0..n` (each uniform in the disc, redrawn until it keeps `min_spacing` from those already
 //! placed; the whole team is drawn again, up to a bounded number of times, until it is connected through
 //! sensing range, and then taken from lattice sites grown as a connected patch), then the headings of
@@ -245,6 +246,25 @@ pub enum DStarPlan {
     Fixed(f64),
     /// Each run draws one of these distances \[m\] uniformly.
     Choices(Vec<f64>),
+    /// Each run draws its distance \[m\] uniformly from `[min, max]`.
+    Range {
+        /// Smallest distance.
+        min: f64,
+        /// Largest distance.
+        max: f64,
+    },
+}
+
+impl DStarPlan {
+    /// The distances that bound every draw: the fixed one, each choice, or the range's ends
+    /// (what a model's trained d* range must hold).
+    pub fn bounds(&self) -> Vec<f64> {
+        match self {
+            DStarPlan::Fixed(d) => vec![*d],
+            DStarPlan::Choices(choices) => choices.clone(),
+            DStarPlan::Range { min, max } => vec![*min, *max],
+        }
+    }
 }
 
 /// How the initial poses of a run are drawn.
@@ -499,6 +519,7 @@ impl Scenario {
         let d_star = match &self.d_star {
             DStarPlan::Fixed(d) => *d,
             DStarPlan::Choices(choices) => choices[rng.random_range(0..choices.len())],
+            DStarPlan::Range { min, max } => rng.random_range(*min..=*max),
         };
         let heading = match self.heading {
             HeadingPlan::Fixed(schedule) => schedule,
@@ -654,7 +675,10 @@ pub mod limits {
     pub const ALL: [(&str, Bounds); 14] = [
         ("duration_s", DURATION_S),
         ("dt", DT),
-        ("goal.d_star, goal.d_star_choices", D_STAR),
+        (
+            "goal.d_star, goal.d_star_choices, goal.d_star_range",
+            D_STAR,
+        ),
         ("heading.phi, heading.phi0, heading.amplitude", ANGLE),
         ("heading.omega", HEADING_RATE),
         ("init.disc_radius", DISC_RADIUS),
@@ -872,6 +896,7 @@ struct GoalToml {
     v_star: f64,
     d_star: Option<f64>,
     d_star_choices: Option<Vec<f64>>,
+    d_star_range: Option<[f64; 2]>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -1036,9 +1061,28 @@ impl ScenarioToml {
                 ),
             ));
         }
-        let d_star = match (self.goal.d_star, self.goal.d_star_choices) {
-            (Some(d), None) => DStarPlan::Fixed(check.bounded("goal.d_star", d, limits::D_STAR)?),
-            (None, Some(choices)) => {
+        const ONE_OF: &str = "give exactly one of goal.d_star (fixed), goal.d_star_choices (one \
+                              of a list per run) and goal.d_star_range (uniform per run)";
+        let given = [
+            self.goal.d_star.is_some(),
+            self.goal.d_star_choices.is_some(),
+            self.goal.d_star_range.is_some(),
+        ];
+        let d_star = match (
+            self.goal.d_star,
+            self.goal.d_star_choices,
+            self.goal.d_star_range,
+        ) {
+            _ if given.iter().filter(|&&g| g).count() > 1 => {
+                return Err(check.invalid(
+                    "goal.d_star",
+                    format_args!("is given more than one way; {ONE_OF}"),
+                ));
+            }
+            (Some(d), None, None) => {
+                DStarPlan::Fixed(check.bounded("goal.d_star", d, limits::D_STAR)?)
+            }
+            (None, Some(choices), None) => {
                 if choices.is_empty() {
                     return Err(check.invalid("goal.d_star_choices", "must not be empty"));
                 }
@@ -1057,17 +1101,22 @@ impl ScenarioToml {
                 }
                 DStarPlan::Choices(choices)
             }
-            (Some(_), Some(_)) => {
-                return Err(check.invalid(
-                    "goal.d_star",
-                    "and goal.d_star_choices are both set; give exactly one of them",
-                ));
+            (None, None, Some([min, max])) => {
+                let min = check.bounded("goal.d_star_range[0]", min, limits::D_STAR)?;
+                let max = check.bounded("goal.d_star_range[1]", max, limits::D_STAR)?;
+                if min >= max {
+                    return Err(check.invalid(
+                        "goal.d_star_range",
+                        format_args!(
+                            "must be [smallest, largest] with smallest < largest (got [{min}, \
+                             {max}]); for one distance use goal.d_star"
+                        ),
+                    ));
+                }
+                DStarPlan::Range { min, max }
             }
-            (None, None) => {
-                return Err(check.invalid(
-                    "goal.d_star",
-                    "is missing; give goal.d_star (fixed) or goal.d_star_choices (drawn per run)",
-                ));
+            _ => {
+                return Err(check.invalid("goal.d_star", format_args!("is missing; {ONE_OF}")));
             }
         };
 
@@ -1450,6 +1499,27 @@ phi = 1.0
         MINIMAL.replacen(old, new, 1)
     }
 
+    #[test]
+    fn a_d_star_range_draws_every_run_uniformly_within_it() {
+        let scenario = parse(&edited("d_star = 2.0", "d_star_range = [0.8, 2.5]")).unwrap();
+        assert_eq!(*scenario.d_star(), DStarPlan::Range { min: 0.8, max: 2.5 });
+        assert_eq!(scenario.d_star().bounds(), [0.8, 2.5]);
+        let draws: Vec<f64> = (0..400).map(|i| scenario.run_spec(9, i).d_star).collect();
+        assert!(draws.iter().all(|d| (0.8..=2.5).contains(d)));
+        let below_middle = draws.iter().filter(|&&d| d < 1.65).count();
+        assert!(
+            (150..=250).contains(&below_middle),
+            "{below_middle} of 400 below the middle"
+        );
+        let distinct: std::collections::BTreeSet<u64> = draws.iter().map(|d| d.to_bits()).collect();
+        assert_eq!(distinct.len(), 400, "a continuous draw");
+        assert_eq!(
+            scenario.run_spec(9, 7).d_star,
+            draws[7],
+            "a pure function of the run"
+        );
+    }
+
     fn invalid_field(text: &str) -> (String, String) {
         match parse(text) {
             Err(ScenarioError::Invalid {
@@ -1620,6 +1690,21 @@ phi = 1.0
                 "exactly one",
             ),
             (edited("d_star = 2.0", ""), "goal.d_star", "missing"),
+            (
+                edited("d_star = 2.0", "d_star_range = [2.5, 0.8]"),
+                "goal.d_star_range",
+                "smallest < largest",
+            ),
+            (
+                edited("d_star = 2.0", "d_star_range = [0.8, nan]"),
+                "goal.d_star_range[1]",
+                "finite",
+            ),
+            (
+                edited("d_star = 2.0", "d_star_range = [0.8, 2.5]\nd_star = 1.0"),
+                "goal.d_star",
+                "exactly one",
+            ),
             (edited("robots = 3", "robots = 0"), "robots", "(got 0)"),
             (edited("robots = 3", "robots = 1"), "robots", "(got 1)"),
             (
