@@ -354,7 +354,8 @@ def discover(session, plan, port):
         domain_id=domain_id, router_ip="127.0.0.1", router_port=port, timeout=3.0
     )
     infos = {}
-    for topic in [plan["scan_topic"], plan["orientation_topic"], plan["cmd_vel_topic"]]:
+    topics_of_interest = [plan["scan_topic"], plan["orientation_topic"], plan["cmd_vel_topic"]]
+    for topic in topics_of_interest + list(plan.get("goal_topics") or []):
         info = zenoh_ros2_sdk.get_topic_info(
             topic, domain_id=domain_id, router_ip="127.0.0.1", router_port=port, timeout=3.0,
             verbose=True,
