@@ -399,9 +399,16 @@ class SdkGoals:
 
 
 def run(plan, listen):
+    session = open_router(listen)
+    try:
+        run_plan(session, plan, listen)
+    finally:
+        session.close()
+
+
+def run_plan(session, plan, listen):
     port = int(listen.rsplit(":", 1)[1])
     domain_id = plan["domain_id"]
-    session = open_router(listen)
     graph = Graph(session, domain_id)
     twists = Twists(session, domain_id, plan["cmd_vel_topic"])
     gid = bytes(range(0x10, 0x20))
@@ -477,7 +484,6 @@ def run(plan, listen):
     sys.stdin.read()
     # The agent has stopped: everything it sent has arrived.
     emit("summary", **twists.summary())
-    session.close()
 
 
 def run_stream(session, plan, stream, scans, twists, gid):
