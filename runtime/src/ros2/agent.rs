@@ -83,6 +83,10 @@ pub enum Ros2AgentError {
 #[derive(Default)]
 struct Inbox {
     scan: Option<(Received<LaserScan>, Instant)>,
+    /// Scans replaced by a newer one before the loop took them (newest wins).
+    superseded: u64,
+    /// Why the newest unusable sample on the scan topic was unusable.
+    scan_problem: Option<String>,
     inputs: Inputs,
     /// Inputs that were not usable messages, newest last (bounded).
     problems: Vec<String>,
@@ -139,8 +143,17 @@ pub fn run_agent<P: Pilot>(
         let (inbox, bell) = (Arc::clone(&inbox), Arc::clone(&bell));
         node.subscription::<LaserScan>(&settings.scan, Qos::SENSOR_DATA, move |sample| {
             match sample {
-                Ok(scan) => lock(&inbox).scan = Some((scan, Instant::now())),
-                Err(e) => note_problem(&inbox, crate::agent::error_chain(&e)),
+                Ok(scan) => {
+                    let mut inbox = lock(&inbox);
+                    if inbox.scan.replace((scan, Instant::now())).is_some() {
+                        inbox.superseded += 1;
+                    }
+                }
+                Err(e) => {
+                    let problem = crate::agent::error_chain(&e);
+                    lock(&inbox).scan_problem = Some(problem.clone());
+                    note_problem(&inbox, problem);
+                }
             }
             bell.ring();
         })?
@@ -219,6 +232,10 @@ pub fn run_agent<P: Pilot>(
     };
     let mut decider = Decider::new(settings.decider.clone(), Instant::now());
     let mut told: Option<String> = None;
+    let mut problems_told = ProblemLog::default();
+    let mut superseded_told = 0;
+    // Why the latest sample on the scan topic was unusable, until a usable scan comes.
+    let mut scan_unusable: Option<String> = None;
     let exit = loop {
         if stop.load(Ordering::Relaxed) {
             break AgentExit::Because("the launcher went away".into());
@@ -226,19 +243,32 @@ pub fn run_agent<P: Pilot>(
         if bell.wait(LOOK_EVERY) == Ring::Terminated {
             break AgentExit::Signal;
         }
-        let (scan, inputs, problems) = {
+        let (scan, inputs, problems, superseded, scan_problem) = {
             let mut inbox = lock(&inbox);
             (
                 inbox.scan.take(),
                 inbox.inputs.clone(),
                 std::mem::take(&mut inbox.problems),
+                inbox.superseded,
+                inbox.scan_problem.take(),
             )
         };
-        for problem in problems {
-            eprintln!("formation-agent: ignoring an input: {problem}");
-        }
         let now = Instant::now();
+        for problem in problems {
+            problems_told.tell(problem, now);
+        }
+        if superseded > superseded_told && superseded_told == 0 {
+            eprintln!(
+                "formation-agent: scans come faster than the agent decides: each decision takes \
+                 the newest scan and the older ones go unanswered (the robot acts on the newest)"
+            );
+        }
+        superseded_told = superseded;
+        if scan_problem.is_some() {
+            scan_unusable = scan_problem;
+        }
         if let Some((scan, arrived)) = scan {
+            scan_unusable = None;
             let stamp = scan.message.header.stamp.as_nanos();
             match decider.on_scan(&scan.message, &inputs, arrived, pilot) {
                 Answer::Drive(twist) => {
@@ -250,7 +280,10 @@ pub fn run_agent<P: Pilot>(
                     brake(stamp);
                 }
             }
-        } else if let Some(reason) = decider.check_stale(now) {
+        } else if let Some(mut reason) = decider.check_stale(now) {
+            if let Some(problem) = &scan_unusable {
+                reason.push_str(&format!("; the samples that came were unusable: {problem}"));
+            }
             tell(&mut told, &reason);
             brake(system_time_ns());
         }
@@ -258,6 +291,38 @@ pub fn run_agent<P: Pilot>(
     brake(system_time_ns());
     drop(subscriptions);
     Ok(exit)
+}
+
+/// How often the same unusable-input message is repeated at most.
+const PROBLEM_REPEAT: Duration = Duration::from_secs(5);
+
+/// Tells unusable inputs on stderr, each distinct message at most once per [`PROBLEM_REPEAT`]
+/// (a LIDAR at 40 Hz with the wrong type would otherwise write 40 lines a second).
+#[derive(Default)]
+struct ProblemLog {
+    told_at: std::collections::HashMap<String, (Instant, u64)>,
+}
+
+impl ProblemLog {
+    fn tell(&mut self, problem: String, now: Instant) {
+        if self.told_at.len() > 64 {
+            self.told_at.clear();
+        }
+        let entry = self.told_at.entry(problem.clone()).or_insert((now, 0));
+        let (at, unsaid) = entry;
+        if *unsaid == 0 || now.saturating_duration_since(*at) >= PROBLEM_REPEAT {
+            let repeats = if *unsaid > 1 {
+                format!(" ({} more like it since)", *unsaid - 1)
+            } else {
+                String::new()
+            };
+            eprintln!("formation-agent: ignoring an input: {problem}{repeats}");
+            *at = now;
+            *unsaid = 1;
+        } else {
+            *unsaid += 1;
+        }
+    }
 }
 
 /// Tells why the robot brakes, once per reason in a row.

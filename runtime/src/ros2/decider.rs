@@ -13,8 +13,11 @@
 //! - a decision the pilot refuses (a goal outside the model's envelope, a non-finite output);
 //! - no scan for the stale window ([`Decider::check_stale`]).
 //!
-//! Every scan gets exactly one answer, stamped with the scan's own stamp, so a tool, or the
-//! simulated team in lockstep, can tell which scan a Twist answers.
+//! Every scan the agent takes gets exactly one answer, stamped with the scan's own stamp, so a
+//! tool, or the simulated team in lockstep, can tell which scan a Twist answers. Scans that come
+//! faster than the agent decides are superseded: each decision takes the newest, and the older
+//! ones go unanswered (a robot must act on what it sees now). Staleness is measured on arrival
+//! at this host, so the robot's clock and this host's need not agree.
 
 use std::time::{Duration, Instant};
 
