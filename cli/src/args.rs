@@ -159,6 +159,11 @@ pub struct TrainArgs {
     /// Training seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// The d* range the model is declared for, `MIN,MAX` in metres (its envelope: `eval`, `run`
+    /// and the agents refuse goals outside it); it must hold every d* of the data. Default: the
+    /// data's own range.
+    #[arg(long, value_name = "MIN,MAX", value_parser = d_star_range)]
+    pub d_star_range: Option<(f64, f64)>,
 }
 
 /// `formation dagger`.
@@ -206,6 +211,10 @@ pub struct DaggerArgs {
     /// Base seed of the DAgger rollouts.
     #[arg(long, default_value_t = 1000)]
     pub seed: u64,
+    /// The d* range the models are declared for, `MIN,MAX` in metres (default: the rollout
+    /// scenario's `goal.d_star_range` when it has one, else the data's own range).
+    #[arg(long, value_name = "MIN,MAX", value_parser = d_star_range)]
+    pub d_star_range: Option<(f64, f64)>,
     /// Team sizes of the rollouts, used in turn (e.g. `3,5,7`; default: the scenario's).
     #[arg(long, value_delimiter = ',', value_parser = team_size)]
     pub team_sizes: Vec<usize>,
@@ -302,5 +311,20 @@ mod tests {
             let err = run_count(bad).expect_err(bad);
             assert!(err.contains("1 to 10000"), "{err}");
         }
+    }
+}
+
+/// `MIN,MAX` in metres, with `0 < MIN < MAX`, both finite.
+fn d_star_range(text: &str) -> Result<(f64, f64), String> {
+    let parsed = text
+        .split_once(',')
+        .and_then(|(a, b)| Some((a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?)));
+    match parsed {
+        Some((min, max)) if min.is_finite() && max.is_finite() && 0.0 < min && min < max => {
+            Ok((min, max))
+        }
+        _ => Err(format!(
+            "expected MIN,MAX in metres with 0 < MIN < MAX (e.g. 0.8,2.5), got {text:?}"
+        )),
     }
 }

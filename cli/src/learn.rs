@@ -29,6 +29,7 @@ pub fn train_command(args: &TrainArgs) -> anyhow::Result<()> {
         device: args.device.clone(),
         seed: args.seed,
         init_from: args.init_from.clone(),
+        d_star_range: args.d_star_range,
         ..TrainOptions::default()
     };
     let report = run_training(&opts)?;
@@ -53,6 +54,10 @@ fn run_training(opts: &TrainOptions) -> anyhow::Result<TrainReport> {
 pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
     let scenario = Scenario::from_path(&args.scenario)?;
     let eval_scenario = Scenario::from_path(&args.eval_scenario)?;
+    let d_star_range = args.d_star_range.or(match scenario.d_star() {
+        formation_world::scenario::DStarPlan::Range { min, max } => Some((*min, *max)),
+        _ => None,
+    });
     let opts = DaggerOptions {
         data: args.data.clone(),
         runs: args.runs.unwrap_or_else(|| scenario.runs()),
@@ -67,6 +72,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
             batch_size: args.batch_size,
             lr: args.lr,
             device: args.device.clone(),
+            d_star_range,
             ..TrainOptions::default()
         },
         eval_scenario,

@@ -55,6 +55,9 @@ pub struct TrainOptions {
     pub python: Option<PathBuf>,
     /// Also write a few held-out inputs with the torch outputs to this JSON file (for parity tests).
     pub parity_out: Option<PathBuf>,
+    /// The d* range \[m\] the model is declared for (its envelope, which must hold every d* of
+    /// the data); `None`: the data's own range.
+    pub d_star_range: Option<(f64, f64)>,
 }
 
 impl Default for TrainOptions {
@@ -71,6 +74,7 @@ impl Default for TrainOptions {
             init_from: None,
             python: None,
             parity_out: None,
+            d_star_range: None,
         }
     }
 }
@@ -308,6 +312,9 @@ fn trainer_args(opts: &TrainOptions) -> Vec<std::ffi::OsString> {
     if let Some(parity) = &opts.parity_out {
         push("--parity-out", parity.as_os_str().to_owned());
     }
+    if let Some((min, max)) = opts.d_star_range {
+        push("--d-star-range", format!("{min},{max}").into());
+    }
     args
 }
 
@@ -494,6 +501,7 @@ mod tests {
             data: vec!["a".into(), "b".into()],
             init_from: Some("prev.pt".into()),
             seed: 9,
+            d_star_range: Some((0.8, 2.5)),
             ..opts()
         })
         .into_iter()
@@ -511,6 +519,7 @@ mod tests {
             "--device auto",
             "--val-fraction 0.1",
             "--seed 9",
+            "--d-star-range 0.8,2.5",
             "--init-from prev.pt",
         ] {
             assert!(joined.contains(part), "{part} missing in {joined}");

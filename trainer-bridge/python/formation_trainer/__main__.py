@@ -29,6 +29,11 @@ def _parser() -> argparse.ArgumentParser:
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--init-from", type=Path, help="warm start from this .pt checkpoint")
     train.add_argument("--parity-out", type=Path, help="write a few inputs with torch outputs as JSON")
+    train.add_argument(
+        "--d-star-range",
+        type=_d_star_range,
+        help="MIN,MAX: the d* range the model is declared for (its envelope; must hold the data's)",
+    )
 
     exp = commands.add_parser("export", help="export a .pt checkpoint to ONNX (with the parity check)")
     exp.add_argument("--checkpoint", type=Path, required=True)
@@ -53,6 +58,7 @@ def _train(args) -> None:
         seed=args.seed,
         init_from=args.init_from,
         parity_out=args.parity_out,
+        d_star_range=args.d_star_range,
     )
     report = train.run(config, log=lambda line: print(line, flush=True))
     print(train.report_line(report), flush=True)
@@ -84,6 +90,14 @@ def _export(args) -> None:
         n = train.PARITY_FILE_SAMPLES
         export.write_parity_file(args.parity_out, model, occupancy[:n], aux[:n])
     print(f"wrote {args.out} (onnxruntime parity {parity:.2e} on {len(aux)} samples)", flush=True)
+
+
+def _d_star_range(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected MIN,MAX in metres, got {text!r}") from None
+    return lo, hi
 
 
 def main(argv: list[str] | None = None) -> int:

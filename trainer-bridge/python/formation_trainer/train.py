@@ -57,6 +57,8 @@ class TrainConfig:
     seed: int = 0
     init_from: Path | None = None
     parity_out: Path | None = None
+    # The d* range the model is declared for (its envelope); None: the data's own range.
+    d_star_range: tuple[float, float] | None = None
 
 
 def artifact_paths(out: Path) -> dict[str, Path]:
@@ -199,19 +201,32 @@ def write_loss_curve(paths: dict[str, Path], history: list[dict]) -> None:
     plt.close(fig)
 
 
-def envelope_metadata(samples) -> dict[str, str]:
-    """The model's envelope (``formation.envelope.*``): the d* range of the training data and its
-    team sizes (the robots of each (dataset, iteration, run)). ``formation eval/run`` and the agents
-    refuse a goal whose d* lies outside the range."""
+def envelope_metadata(samples, declared: tuple[float, float] | None = None) -> dict[str, str]:
+    """The model's envelope (``formation.envelope.*``): the d* range (``declared``, which must hold
+    every d* of the data, else the data's own range) and the team sizes of the training data (the
+    robots of each (dataset, iteration, run)). ``formation eval/run`` and the agents refuse a goal
+    whose d* lies outside the range."""
     if len(samples) == 0:
         return {}
     d_star = samples.aux[:, 1].astype(np.float64)
+    lo, hi = float(d_star.min()), float(d_star.max())
+    if declared is not None:
+        d_lo, d_hi = (float(x) for x in declared)
+        if not (math.isfinite(d_lo) and math.isfinite(d_hi) and 0 < d_lo < d_hi):
+            raise TrainError(f"--d-star-range must be two distances MIN,MAX with 0 < MIN < MAX (got {d_lo},{d_hi})")
+        slack = 1e-6
+        if lo < d_lo * (1 - slack) or hi > d_hi * (1 + slack):
+            raise TrainError(
+                f"--d-star-range {d_lo},{d_hi} does not hold the training data's d* range "
+                f"[{lo:.6g}, {hi:.6g}]: declare a range that covers the data"
+            )
+        lo, hi = d_lo, d_hi
     _, episode = np.unique(samples.episode_keys(), return_inverse=True)
     robots = np.zeros(int(episode.max()) + 1, dtype=np.int64)
     np.maximum.at(robots, episode, samples.robot.astype(np.int64) + 1)
     return {
-        "envelope.d_star_min": export.number_text(float(d_star.min())),
-        "envelope.d_star_max": export.number_text(float(d_star.max())),
+        "envelope.d_star_min": export.number_text(lo),
+        "envelope.d_star_max": export.number_text(hi),
         "envelope.team_sizes": ",".join(str(int(n)) for n in sorted(set(robots.tolist()))),
     }
 
@@ -297,7 +312,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             "train.seed": cfg.seed,
             "train.val_samples": len(val_idx),
             "train.init_from": cfg.init_from.name if cfg.init_from else "",
-            **envelope_metadata(samples),
+            **envelope_metadata(samples, cfg.d_star_range),
         },
     )
     save_checkpoint(paths["checkpoint"], model, optimizer, metadata)

@@ -155,3 +155,15 @@ def test_cli_reports_data_problems_with_exit_status_2(tmp_path, capsys):
 def test_a_missing_checkpoint_is_a_clear_error(tmp_path):
     with pytest.raises(train.TrainError, match="does not exist"):
         train.load_checkpoint(tmp_path / "nope.pt")
+
+
+def test_a_declared_d_star_range_becomes_the_envelope_if_it_holds_the_data(trained):
+    samples = train.ds.load([trained["data"]])
+    lo, hi = float(samples.aux[:, 1].min()), float(samples.aux[:, 1].max())
+    assert train.envelope_metadata(samples)["envelope.d_star_min"] == export.number_text(lo)
+    meta = train.envelope_metadata(samples, (0.5, 3.0))
+    assert (meta["envelope.d_star_min"], meta["envelope.d_star_max"]) == ("0.5", "3")
+    with pytest.raises(train.TrainError, match="does not hold the training data"):
+        train.envelope_metadata(samples, (lo + 0.01, hi))
+    with pytest.raises(train.TrainError, match="0 < MIN < MAX"):
+        train.envelope_metadata(samples, (2.0, 1.0))
