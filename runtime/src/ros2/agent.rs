@@ -238,10 +238,10 @@ pub fn run_agent<P: Pilot>(
     let mut scan_unusable: Option<String> = None;
     let exit = loop {
         if stop.load(Ordering::Relaxed) {
-            break AgentExit::Because("the launcher went away".into());
+            break Ok(AgentExit::Because("the launcher went away".into()));
         }
         if bell.wait(LOOK_EVERY) == Ring::Terminated {
-            break AgentExit::Signal;
+            break Ok(AgentExit::Signal);
         }
         let (scan, inputs, problems, superseded, scan_problem) = {
             let mut inbox = lock(&inbox);
@@ -273,7 +273,9 @@ pub fn run_agent<P: Pilot>(
             match decider.on_scan(&scan.message, &inputs, arrived, pilot) {
                 Answer::Drive(twist) => {
                     told = None;
-                    cmd_vel.publish(&twist, stamp)?;
+                    if let Err(e) = cmd_vel.publish(&twist, stamp) {
+                        break Err(Ros2AgentError::from(e));
+                    }
                 }
                 Answer::Brake(reason) => {
                     tell(&mut told, &reason);
@@ -288,9 +290,10 @@ pub fn run_agent<P: Pilot>(
             brake(system_time_ns());
         }
     };
+    // Whatever ended the loop (a signal, the launcher, an error), the robot is told to stop.
     brake(system_time_ns());
     drop(subscriptions);
-    Ok(exit)
+    exit
 }
 
 /// How often the same unusable-input message is repeated at most.
