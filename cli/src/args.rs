@@ -274,9 +274,34 @@ pub fn team_size(text: &str) -> Result<usize, String> {
     }
 }
 
+/// `MIN,MAX` in metres, with `0 < MIN < MAX`, both finite.
+fn d_star_range(text: &str) -> Result<(f64, f64), String> {
+    let parsed = text
+        .split_once(',')
+        .and_then(|(a, b)| Some((a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?)));
+    match parsed {
+        Some((min, max)) if min.is_finite() && max.is_finite() && 0.0 < min && min < max => {
+            Ok((min, max))
+        }
+        _ => Err(format!(
+            "expected MIN,MAX in metres with 0 < MIN < MAX (e.g. 0.8,2.5), got {text:?}"
+        )),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_d_star_range_is_two_increasing_positive_distances() {
+        assert_eq!(d_star_range("0.8,2.5"), Ok((0.8, 2.5)));
+        assert_eq!(d_star_range(" 1 , 2 "), Ok((1.0, 2.0)));
+        for bad in ["2.5,0.8", "0,1", "1", "1,nan", "a,b", "1,1"] {
+            let e = d_star_range(bad).unwrap_err();
+            assert!(e.contains("MIN,MAX") && e.contains(bad), "{bad}: {e}");
+        }
+    }
 
     #[test]
     fn team_sizes_are_bounded_and_lists_parse() {
@@ -311,20 +336,5 @@ mod tests {
             let err = run_count(bad).expect_err(bad);
             assert!(err.contains("1 to 10000"), "{err}");
         }
-    }
-}
-
-/// `MIN,MAX` in metres, with `0 < MIN < MAX`, both finite.
-fn d_star_range(text: &str) -> Result<(f64, f64), String> {
-    let parsed = text
-        .split_once(',')
-        .and_then(|(a, b)| Some((a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?)));
-    match parsed {
-        Some((min, max)) if min.is_finite() && max.is_finite() && 0.0 < min && min < max => {
-            Ok((min, max))
-        }
-        _ => Err(format!(
-            "expected MIN,MAX in metres with 0 < MIN < MAX (e.g. 0.8,2.5), got {text:?}"
-        )),
     }
 }

@@ -10,13 +10,16 @@ use formation::runtime::{ClockMode, NetworkFlags, eval_over_processes};
 use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, ServiceLimits, robot_service_name};
 use formation_tests::{
     LeakCheck, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
-    incarnations, launch_secret, run, run_with_input, test_model, unique_run_id,
+    incarnations, launch_secret, repo_root, run, run_with_input, test_model, unique_run_id,
 };
 use formation_world::{Scenario, run_episode};
 use iceoryx2::prelude::*;
 use robot_agent::decision::PolicyController;
 
 const LIMIT: Duration = Duration::from_secs(120);
+
+/// The generalist policy for teams of any size (issue 10), shipped beside the default.
+const GENERALIST_MODEL: &str = "onnx/models/generalist/policy.onnx";
 
 /// Issue 4 (a): world + 3 agents in lockstep on case 1 with a real ONNX model reproduce the
 /// in-process run bit for bit (and the run id's files are gone afterwards).
@@ -57,6 +60,46 @@ fn lockstep_over_processes_is_bit_identical_to_in_process() {
         assert_eq!(in_process.poses.len(), 201, "10 s at 20 Hz");
         assert_bit_identical(from_processes, &in_process);
     }
+}
+
+/// Issue 10: a team of 16 robots of the generalist policy (Gabriel neighbour rule, LIDAR noise
+/// σ = 3 cm, d* drawn from the declared range), every robot its own process, in lockstep
+/// reproduces the in-process run bit for bit.
+#[test]
+fn a_sixteen_robot_team_of_the_generalist_in_lockstep_is_bit_identical_to_in_process() {
+    let _watchdog = Watchdog::arm("sixteen_robots_lockstep", 3 * LIMIT);
+    let dir = TempDir::new("team16");
+    let text = std::fs::read_to_string(repo_root().join("scenarios/teams-generalist.toml"))
+        .expect("reading teams-generalist.toml");
+    let text = text
+        .replace("robots = 8", "robots = 16")
+        .replace("duration_s = 60.0", "duration_s = 4.0")
+        .replace("runs = 100", "runs = 1");
+    let scenario_path = dir.path().join("team16.toml");
+    std::fs::write(&scenario_path, text).expect("writing the scenario");
+    let scenario = Scenario::from_path(&scenario_path).expect("scenario");
+    assert_eq!(scenario.n_robots(), 16);
+    let model = repo_root().join(GENERALIST_MODEL);
+    let over_processes = eval_over_processes(
+        &scenario,
+        scenario.seed(),
+        1,
+        &model,
+        ClockMode::Lockstep,
+        &NetworkFlags::default(),
+        &mut |_| {},
+    )
+    .expect("runs over processes")
+    .trajectories;
+    let spec = scenario.run_spec(scenario.seed(), 0);
+    assert!(spec.world.lidar.noise_std > 0.0, "a noisy LIDAR");
+    let models = vec![model.as_path(); 16];
+    let mut controller =
+        PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
+    let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
+    assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
+    assert_eq!(in_process.poses[0].len(), 16);
+    assert_bit_identical(&over_processes[0], &in_process);
 }
 
 /// Issue 4 (b): with an agent on robot 0, nobody else can read robot 0's scan or command robot 0.

@@ -129,13 +129,8 @@ fn run(args: &Args) -> anyhow::Result<AgentExit> {
     args.transport
         .refuse_zenoh_flags(&[(args.credentials.is_some(), "--credentials")])?;
     args.transport.refuse_ros2_flags(&args.ros2.given())?;
-    let stop = if args.exit_on_stdin_close {
-        flag_when_stdin_closes()
-    } else {
-        Arc::new(AtomicBool::new(false))
-    };
     if args.transport == Transport::Ros2 {
-        return ros2::run(args, model, &stop);
+        return ros2::run(args, model, &stop_flag(args));
     }
     let (Some(run_id), Some(robot)) = (&args.run_id, args.robot) else {
         anyhow::bail!(
@@ -156,6 +151,9 @@ fn run(args: &Args) -> anyhow::Result<AgentExit> {
         Transport::Zenoh => zenoh_link(args, &run_id, robot, timeout)?,
         Transport::Ros2 => unreachable!("handled above"),
     };
+    // Only now: the launch secret has been read from standard input, and the watcher must not
+    // race that read.
+    let stop = stop_flag(args);
     let mut agent = AgentLoop::new(
         pilots,
         args.model.clone(),
@@ -166,6 +164,16 @@ fn run(args: &Args) -> anyhow::Result<AgentExit> {
     .with_rehearsal(Duration::from_micros(args.rehearse_us));
     agent.greet(link.as_mut(), std::process::id())?;
     Ok(agent.run(link.as_mut(), &stop, run_id.as_str())?)
+}
+
+/// Set when standard input closes (the launcher went away), with `--exit-on-stdin-close`. Its
+/// watcher reads standard input, so it starts only after the launch secret has been read.
+fn stop_flag(args: &Args) -> Arc<AtomicBool> {
+    if args.exit_on_stdin_close {
+        flag_when_stdin_closes()
+    } else {
+        Arc::new(AtomicBool::new(false))
+    }
 }
 
 /// The Zenoh link to the world at `--connect`, logged in with `--credentials` when given.
