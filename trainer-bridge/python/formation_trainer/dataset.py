@@ -195,6 +195,14 @@ class Samples:
         return self.manifests[0].size_px
 
     @property
+    def lidar(self) -> dict:
+        """The LIDAR of the data: beams and range (shared by every dataset) and the largest range
+        noise of any dataset (a model trained on several noise levels is trained up to it)."""
+        lidar = dict(self.manifests[0].lidar)
+        lidar["noise_std"] = max(float(m.lidar["noise_std"]) for m in self.manifests)
+        return lidar
+
+    @property
     def dataset_id(self) -> str:
         return "+".join(m.dataset_id for m in self.manifests)
 
@@ -211,10 +219,16 @@ class Samples:
         )
 
 
+def _sensor(lidar: dict) -> dict:
+    """What a model's sensor contract holds of a LIDAR: its beams and range, not its noise
+    (data of several noise levels train one model)."""
+    return {k: v for k, v in lidar.items() if k != "noise_std"}
+
+
 def _check_compatible(first: Manifest, other: Manifest) -> None:
     for name, a, b in (
         ("occupancy", first.occupancy, other.occupancy),
-        ("lidar", first.lidar, other.lidar),
+        ("lidar", _sensor(first.lidar), _sensor(other.lidar)),
         ("v_train", first.v_train, other.v_train),
     ):
         if a != b:

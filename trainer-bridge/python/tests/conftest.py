@@ -39,6 +39,7 @@ def write_dataset(
     seed: int = 0,
     v_train: float = 0.7,
     iteration: int = 0,
+    noise_std: float = 0.0,
 ) -> Path:
     """Writes a dataset of ``samples`` synthetic samples in shards of ``shard_size``."""
     directory.mkdir(parents=True)
@@ -56,7 +57,7 @@ def write_dataset(
         "version": 1,
         "dataset_id": f"synthetic{seed:07d}",
         "occupancy": {"size_px": size_px, "resolution_m": 0.1, "beyond": "drop"},
-        "lidar": {"beams": 900, "max_range": 10.0, "noise_std": 0.0},
+        "lidar": {"beams": 900, "max_range": 10.0, "noise_std": noise_std},
         "v_train": v_train,
         "seed": seed,
         "scenario": "synthetic",

@@ -40,6 +40,14 @@ def test_datasets_with_other_settings_cannot_be_mixed(make_dataset):
         ds.load([a, b])
 
 
+def test_datasets_of_other_noise_levels_train_together_up_to_the_largest(make_dataset):
+    clean = make_dataset("clean", noise_std=0.0, seed=1)
+    noisy = make_dataset("noisy", noise_std=0.03, seed=2)
+    samples = ds.load([clean, noisy])
+    assert samples.lidar == {"beams": 900, "max_range": 10.0, "noise_std": 0.03}
+    assert ds.load([clean]).lidar["noise_std"] == 0.0
+
+
 def test_a_truncated_shard_names_the_file_and_the_fix(make_dataset):
     directory = make_dataset(samples=96, shard_size=40)
     shard = directory / "shard-000001.safetensors"
