@@ -107,14 +107,20 @@ fn in_process_summary(dir: &Path, scenario: &Path) -> serde_json::Value {
     json(&path)
 }
 
-/// Issue 14 acceptance: lockstep case 1 through the ROS 2 path (the world as a ROS 2 team, three
-/// ROS 2 agents) converges and gives in-process evaluation's Table I JSON.
-#[test]
-fn lockstep_case1_through_ros2_gives_the_in_process_table() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_team_lockstep", LIMIT);
-    let dir = TempDir::new("r2lock");
-    let run_id = unique_run_id("r2lock");
+/// What one launch of a ROS 2 team left: its folder, scenario, output and the finished
+/// launcher, after the leak check passed.
+struct TeamRun {
+    dir: TempDir,
+    scenario: std::path::PathBuf,
+    out: std::path::PathBuf,
+    finished: formation_tests::Finished,
+}
+
+/// `formation run --transport ros2` of case 1 (25 s) with `clock`, on a free port; the launch
+/// must succeed and leave nothing behind.
+fn run_team(tag: &str, clock: &str) -> TeamRun {
+    let dir = TempDir::new(tag);
+    let run_id = unique_run_id(tag);
     let leaks = LeakCheck::new(&run_id);
     let scenario = case1_scenario(dir.path(), 25.0);
     let out = dir.path().join("out");
@@ -124,18 +130,32 @@ fn lockstep_case1_through_ros2_gives_the_in_process_table() {
             &run_id,
             &scenario,
             &out,
-            &[
-                "--transport",
-                "ros2",
-                "--listen",
-                &listen,
-                "--clock",
-                "lockstep",
-            ],
+            &["--transport", "ros2", "--listen", &listen, "--clock", clock],
         ),
         LIMIT,
     );
     finished.assert_success();
+    leaks.assert_clean();
+    TeamRun {
+        dir,
+        scenario,
+        out,
+        finished,
+    }
+}
+
+/// Issue 14 acceptance: lockstep case 1 through the ROS 2 path (the world as a ROS 2 team, three
+/// ROS 2 agents) converges and gives in-process evaluation's Table I JSON.
+#[test]
+fn lockstep_case1_through_ros2_gives_the_in_process_table() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("ros2_team_lockstep", LIMIT);
+    let TeamRun {
+        dir,
+        scenario,
+        out,
+        finished,
+    } = run_team("r2lock", "lockstep");
     let over_ros2 = json(&out.join("summary.json"));
     let reference = in_process_summary(dir.path(), &scenario);
     assert_eq!(
@@ -161,7 +181,6 @@ fn lockstep_case1_through_ros2_gives_the_in_process_table() {
         "{}",
         finished.describe()
     );
-    leaks.assert_clean();
 }
 
 /// Issue 14 acceptance: realtime case 1 through the ROS 2 path converges.
@@ -169,29 +188,13 @@ fn lockstep_case1_through_ros2_gives_the_in_process_table() {
 fn realtime_case1_through_ros2_converges() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("ros2_team_realtime", LIMIT);
-    let dir = TempDir::new("r2real");
-    let run_id = unique_run_id("r2real");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 25.0);
-    let out = dir.path().join("out");
-    let listen = endpoint(free_tcp_port());
-    let finished = run(
-        formation_run(
-            &run_id,
-            &scenario,
-            &out,
-            &[
-                "--transport",
-                "ros2",
-                "--listen",
-                &listen,
-                "--clock",
-                "realtime",
-            ],
-        ),
-        LIMIT,
-    );
-    finished.assert_success();
+    // The folder stays bound (`_dir`) until the end, so the output outlives the assertions.
+    let TeamRun {
+        dir: _dir,
+        out,
+        finished,
+        ..
+    } = run_team("r2real", "realtime");
     let summary = json(&out.join("summary.json"));
     assert_eq!(
         summary["per_run"][0]["success_10"],
@@ -200,7 +203,6 @@ fn realtime_case1_through_ros2_converges() {
         finished.describe()
     );
     assert_eq!(summary["per_run"][0]["collisions"], serde_json::json!(0));
-    leaks.assert_clean();
 }
 
 /// Flags that make no sense for a ROS 2 team are refused with the reason.

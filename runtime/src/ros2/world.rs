@@ -50,7 +50,7 @@ use formation_ros2::{
 use super::node::{Delivery, Node, NodeError, RosPublisher, RosSubscription};
 use super::{Ros2Team, TeamTopics};
 use crate::link::{Hello, WorldLink, WorldLinkError};
-use crate::zenoh::{Bell, Endpoint, Ring, SignalWatch};
+use crate::zenoh::{Bell, Endpoint, SignalWatch};
 
 /// Stamps of the current episode's ticks kept per robot, to match Twists to ticks.
 const STAMPS_KEPT: usize = 64;
@@ -549,10 +549,7 @@ impl WorldLink for Ros2WorldLink {
     }
 
     fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
-        match self.bell.wait(timeout) {
-            Ring::Terminated => Err(WorldLinkError::Terminated),
-            Ring::Activity | Ring::Idle => Ok(()),
-        }
+        self.bell.world_wait(timeout)
     }
 
     fn drain_commands(

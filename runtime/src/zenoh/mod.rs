@@ -248,6 +248,17 @@ impl Bell {
     }
 }
 
+impl Bell {
+    /// A world link's wait ([`crate::link::WorldLink::wait`]): `Ok` when something arrived or
+    /// the time passed, [`crate::link::WorldLinkError::Terminated`] on SIGINT/SIGTERM.
+    pub(crate) fn world_wait(&self, timeout: Duration) -> Result<(), crate::link::WorldLinkError> {
+        match self.wait(timeout) {
+            Ring::Terminated => Err(crate::link::WorldLinkError::Terminated),
+            Ring::Activity | Ring::Idle => Ok(()),
+        }
+    }
+}
+
 /// Rings a [`Bell`] as terminated on SIGINT and SIGTERM, on a thread of its own, until dropped.
 pub(crate) struct SignalWatch {
     handle: signal_hook::iterator::Handle,

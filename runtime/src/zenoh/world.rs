@@ -24,7 +24,7 @@ use formation_proto::wire::{
 };
 
 use super::model::split_model;
-use super::{Bell, Endpoint, Queue, Ring, SignalWatch, WorldAccess, keys};
+use super::{Bell, Endpoint, Queue, SignalWatch, WorldAccess, keys};
 use crate::link::{Hello, WorldLink, WorldLinkError};
 
 fn zenoh_error(action: impl Into<String>) -> impl FnOnce(String) -> WorldLinkError {
@@ -440,10 +440,7 @@ impl WorldLink for ZenohWorldLink {
     }
 
     fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
-        match self.bell.wait(timeout) {
-            Ring::Terminated => Err(WorldLinkError::Terminated),
-            Ring::Activity | Ring::Idle => Ok(()),
-        }
+        self.bell.world_wait(timeout)
     }
 
     fn drain_commands(
