@@ -229,6 +229,11 @@ fn session(python: &Path, dir: &TempDir, name: &str, plan: &Value, flags: &[&str
     let mut line = client.wait_for_line(CLIENT_WAIT, |l| is_event(l, wanted));
     let mut terminated = false;
     if holds && line.as_deref().is_some_and(|l| is_event(l, &["driving"])) {
+        // Stray signals first: they interrupt nothing and end nothing (the agent must still be
+        // there for SIGTERM, and exit 130 on it).
+        for stray in ["USR1", "USR2", "CONT", "ALRM"] {
+            send_signal(agent.id(), stray);
+        }
         send_signal(agent.id(), "TERM");
         terminated = true;
         line = client.wait_for_line(CLIENT_WAIT, |l| is_event(l, &["done", "error"]));
@@ -988,7 +993,8 @@ fn a_silent_orientation_topic_brakes_the_robot() {
 }
 
 /// On SIGTERM the agent publishes one zero Twist, and nothing after it, before it exits (with
-/// status 130). The stale window is a minute, so no other brake can come meanwhile.
+/// status 130); the stray signals sent before it (SIGUSR1, SIGUSR2, SIGCONT, SIGALRM) change
+/// nothing. The stale window is a minute, so no other brake can come meanwhile.
 #[test]
 fn on_sigterm_the_agent_publishes_one_zero_twist_before_exiting() {
     let _one = one_at_a_time();

@@ -260,20 +260,28 @@ impl Bell {
 }
 
 /// Rings a [`Bell`] as terminated on SIGINT and SIGTERM, on a thread of its own, until dropped.
+/// Stray signals whose default action would end the process (SIGUSR1, SIGUSR2, SIGALRM) are
+/// caught and ignored, as the iceoryx2 processes ignore them: a harmless signal never ends a
+/// Zenoh or ROS 2 process.
 pub(crate) struct SignalWatch {
     handle: signal_hook::iterator::Handle,
 }
 
 impl SignalWatch {
     pub(crate) fn start(bell: Arc<Bell>) -> std::io::Result<SignalWatch> {
-        use signal_hook::consts::{SIGINT, SIGTERM};
-        let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM])?;
+        use signal_hook::consts::{SIGALRM, SIGINT, SIGTERM, SIGUSR1, SIGUSR2};
+        let mut signals =
+            signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGUSR1, SIGUSR2, SIGALRM])?;
         let handle = signals.handle();
         std::thread::Builder::new()
             .name("formation-signals".into())
             .spawn(move || {
-                if signals.forever().next().is_some() {
-                    bell.terminate();
+                for signal in signals.forever() {
+                    if signal == SIGINT || signal == SIGTERM {
+                        bell.terminate();
+                        break;
+                    }
+                    tracing::debug!("ignoring signal {signal}");
                 }
             })?;
         Ok(SignalWatch { handle })
