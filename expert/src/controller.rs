@@ -441,6 +441,49 @@ mod tests {
         (a.x - b.x).hypot(a.y - b.y)
     }
 
+    /// The trainer's `--mirror` relies on this symmetry: reflecting the world about a line (here
+    /// the x axis: `y -> -y`, `theta -> -theta`, `phi* -> -phi*`) reflects every robot's view, and
+    /// the expert answers with the same wheel speeds, left and right swapped.
+    #[test]
+    fn the_expert_is_symmetric_under_reflection_with_its_wheels_swapped() {
+        let (gains, robot) = (ExpertGains::default(), RobotParams::default());
+        let poses: Vec<Pose> = (0..5)
+            .map(|k| {
+                let k = k as f64;
+                Pose {
+                    x: 1.3 * k - 0.4 * k * k,
+                    y: 0.7 + 0.9 * (1.7 * k).sin(),
+                    theta: 0.3 + 1.1 * k,
+                }
+            })
+            .collect();
+        let mirrored: Vec<Pose> = poses
+            .iter()
+            .map(|p| Pose {
+                x: p.x,
+                y: -p.y,
+                theta: -p.theta,
+            })
+            .collect();
+        let (mut wheels, mut mirror_wheels) =
+            (vec![WheelCmd::default(); 5], vec![WheelCmd::default(); 5]);
+        expert_commands(&poses, &goal(0.8, 1.4), &gains, &robot, &mut wheels);
+        expert_commands(
+            &mirrored,
+            &goal(-0.8, 1.4),
+            &gains,
+            &robot,
+            &mut mirror_wheels,
+        );
+        for (i, (a, b)) in wheels.iter().zip(&mirror_wheels).enumerate() {
+            assert!(a.left != a.right, "robot {i} turns, so the swap is visible");
+            assert!(
+                (a.left - b.right).abs() < 1e-12 && (a.right - b.left).abs() < 1e-12,
+                "robot {i}: {a:?} vs {b:?}"
+            );
+        }
+    }
+
     #[test]
     fn a_team_in_formation_drives_straight_at_v_star_and_stays_in_formation() {
         let (gains, robot) = (ExpertGains::default(), RobotParams::default());

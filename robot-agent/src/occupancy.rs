@@ -187,6 +187,42 @@ mod tests {
         assert_eq!(cell_of(f64::NAN, 0.0, &s), None);
     }
 
+    /// The trainer's `--mirror` (`formation_trainer.train.mirror_batch`) relies on this: the scan
+    /// reflected about the heading axis (beam `k` becomes beam `n - k`) renders the same image with
+    /// its rows in reverse order, in both window modes. The two beams at exactly +-90 degrees are
+    /// the exception: their end points lie on the column boundary `x = 0`, where the sign of the
+    /// rounding error of `cos(pi / 2)` (positive) and `cos(3 pi / 2)` (negative) picks the column.
+    #[test]
+    fn a_scan_reflected_about_the_heading_axis_renders_the_rows_reversed() {
+        let lidar = LidarSpec::default();
+        let n = lidar.beams;
+        // Irregular ranges, some beyond the window, some misses: robots, walls and nothing.
+        let scan: Vec<f32> = (0..n)
+            .map(|k| match k % 7 {
+                _ if 4 * k == n || 4 * k == 3 * n => lidar.max_range as f32,
+                0 => lidar.max_range as f32,
+                _ => 0.4 + ((k * 37) % 101) as f32 * 0.043,
+            })
+            .collect();
+        let reflected: Vec<f32> = (0..n).map(|k| scan[(n - k) % n]).collect();
+        for beyond in [BeyondWindow::Drop, BeyondWindow::Border] {
+            let spec = spec(beyond);
+            let side = spec.size_px;
+            let (mut image, mut mirror) = (vec![0; side * side], vec![0; side * side]);
+            render(&scan, &lidar, &spec, &mut image);
+            render(&reflected, &lidar, &spec, &mut mirror);
+            assert!(image.iter().filter(|&&c| c == OCCUPIED).count() > 100);
+            for row in 0..side {
+                assert_eq!(
+                    &mirror[row * side..(row + 1) * side],
+                    &image[(side - 1 - row) * side..(side - row) * side],
+                    "{beyond:?}: row {row} of the reflection is not row {} of the image",
+                    side - 1 - row
+                );
+            }
+        }
+    }
+
     #[test]
     fn a_single_hit_at_ninety_degrees_lights_exactly_its_cell() {
         // Beam 225 of 900 points at 90 degrees, i.e. straight left.

@@ -58,6 +58,52 @@ pub struct TrainOptions {
     /// The d* range \[m\] the model is declared for (its envelope, which must hold every d* of
     /// the data); `None`: the data's own range.
     pub d_star_range: Option<(f64, f64)>,
+    /// The network to train; `None`: the warm start's, or the paper's when training from scratch.
+    pub architecture: Option<Architecture>,
+    /// Also train on every sample reflected about the robot's heading axis (rows of the image
+    /// reversed, Δφ negated, wheels swapped): an exact symmetry of the task.
+    pub mirror: bool,
+}
+
+/// The policy networks the trainer can build (`formation_trainer.model.ARCHITECTURES`). Both take
+/// the same inputs and give the same outputs, so an agent runs either without knowing which.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Architecture {
+    /// The paper's CNN, with its exact layer sizes (a 32-unit head).
+    Paper,
+    /// The same convolutions with 64 channels in the last two and a head of two 256-unit layers:
+    /// about twice the arithmetic, for teams with many neighbours.
+    Wide,
+}
+
+impl Architecture {
+    /// Every architecture, in the order `--help` lists them.
+    pub const ALL: [Architecture; 2] = [Architecture::Paper, Architecture::Wide];
+
+    /// The name the trainer and the command line use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Architecture::Paper => "paper",
+            Architecture::Wide => "wide",
+        }
+    }
+}
+
+impl std::str::FromStr for Architecture {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        Architecture::ALL
+            .into_iter()
+            .find(|a| a.name() == text.trim())
+            .ok_or_else(|| {
+                let names: Vec<_> = Architecture::ALL.iter().map(|a| a.name()).collect();
+                format!(
+                    "unknown network architecture {text:?}: choose one of {}",
+                    names.join(", ")
+                )
+            })
+    }
 }
 
 impl Default for TrainOptions {
@@ -75,6 +121,8 @@ impl Default for TrainOptions {
             python: None,
             parity_out: None,
             d_star_range: None,
+            architecture: None,
+            mirror: false,
         }
     }
 }
@@ -315,6 +363,12 @@ fn trainer_args(opts: &TrainOptions) -> Vec<std::ffi::OsString> {
     if let Some((min, max)) = opts.d_star_range {
         push("--d-star-range", format!("{min},{max}").into());
     }
+    if let Some(architecture) = opts.architecture {
+        push("--architecture", architecture.name().into());
+    }
+    if opts.mirror {
+        args.push("--mirror".into());
+    }
     args
 }
 
@@ -502,6 +556,8 @@ mod tests {
             init_from: Some("prev.pt".into()),
             seed: 9,
             d_star_range: Some((0.8, 2.5)),
+            architecture: Some(Architecture::Wide),
+            mirror: true,
             ..opts()
         })
         .into_iter()
@@ -521,10 +577,30 @@ mod tests {
             "--seed 9",
             "--d-star-range 0.8,2.5",
             "--init-from prev.pt",
+            "--architecture wide",
+            " --mirror",
         ] {
             assert!(joined.contains(part), "{part} missing in {joined}");
         }
         assert!(!joined.contains("--parity-out"));
+    }
+
+    #[test]
+    fn architectures_parse_from_their_names_and_nothing_else() {
+        for architecture in Architecture::ALL {
+            assert_eq!(architecture.name().parse(), Ok(architecture));
+        }
+        let err = "wdie".parse::<Architecture>().unwrap_err();
+        assert!(
+            err.contains("\"wdie\"") && err.contains("paper, wide"),
+            "{err}"
+        );
+        let plain: Vec<String> = trainer_args(&opts())
+            .into_iter()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        assert!(!plain.contains(&"--architecture".to_owned()), "{plain:?}");
+        assert!(!plain.contains(&"--mirror".to_owned()), "{plain:?}");
     }
 
     #[test]

@@ -12,6 +12,8 @@ from pathlib import Path
 
 MISSING_DEPENDENCY_EXIT = 3
 USAGE_EXIT = 2
+#: The keys of ``model.ARCHITECTURES``, spelled out so that ``--help`` works without PyTorch.
+ARCHITECTURE_NAMES = ["paper", "wide"]
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -33,6 +35,17 @@ def _parser() -> argparse.ArgumentParser:
         "--d-star-range",
         type=_d_star_range,
         help="MIN,MAX: the d* range the model is declared for (its envelope; must hold the data's)",
+    )
+
+    train.add_argument(
+        "--architecture",
+        choices=ARCHITECTURE_NAMES,
+        help="the network: paper (the paper's CNN, the default) or wide (for teams); a warm start keeps its own",
+    )
+    train.add_argument(
+        "--mirror",
+        action="store_true",
+        help="also train on every sample reflected about the robot's heading axis (an exact symmetry of the task)",
     )
 
     exp = commands.add_parser("export", help="export a .pt checkpoint to ONNX (with the parity check)")
@@ -59,6 +72,8 @@ def _train(args) -> None:
         init_from=args.init_from,
         parity_out=args.parity_out,
         d_star_range=args.d_star_range,
+        architecture=args.architecture,
+        mirror=args.mirror,
     )
     report = train.run(config, log=lambda line: print(line, flush=True))
     print(train.report_line(report), flush=True)

@@ -1,7 +1,7 @@
-"""The paper's policy network, with its exact layer sizes.
+"""The policy networks: the paper's, with its exact layer sizes, and a wider one for teams.
 
 Input ``occupancy`` [B, 1, 50, 50] and ``aux`` [B, 2] = (delta_phi, d*); output ``wheels`` [B, 2] =
-(left, right) m/s at v_train::
+(left, right) m/s at v_train. The paper's network (``architecture="paper"``)::
 
     Conv2d(1, 32, 8, stride 4, padding 1) ReLU   -> 32 x 12 x 12
     Conv2d(32, 16, 4, stride 2) ReLU             -> 16 x 5 x 5
@@ -11,6 +11,19 @@ Input ``occupancy`` [B, 1, 50, 50] and ``aux`` [B, 2] = (delta_phi, d*); output 
 
 Without ``padding=1`` on the first convolution a 50 x 50 image gives 11 x 11 and a flatten of 64,
 not the paper's 144.
+
+``architecture="wide"`` keeps the same convolution geometry (so the same image sizes work) with
+64 channels in the second and third convolutions and a head of two 256-unit layers::
+
+    Conv2d(1, 32, 8, stride 4, padding 1) ReLU   -> 32 x 12 x 12
+    Conv2d(32, 64, 4, stride 2) ReLU             -> 64 x 5 x 5
+    Conv2d(64, 64, 3, stride 1) ReLU             -> 64 x 3 x 3 = 576
+    flatten 576, concat aux                      -> 578
+    Linear(578, 256) ReLU -> Linear(256, 256) ReLU -> Linear(256, 2)
+
+It costs about twice the paper's arithmetic per image. The paper's 32-unit head has to hold every
+neighbour's bearing and distance error at once; with teams of 5 to 16 robots it underfits (its
+training loss stops falling), which is what the wide head is for.
 """
 
 from __future__ import annotations
@@ -31,30 +44,45 @@ def conv_output_side(size_px: int) -> int:
     return side - 3 + 1
 
 
+#: Channels of the second and third convolutions, and the hidden layers of the head, per
+#: architecture name.
+ARCHITECTURES: dict[str, tuple[int, tuple[int, ...]]] = {
+    "paper": (16, (32,)),
+    "wide": (64, (256, 256)),
+}
+
+
 class PolicyNet(nn.Module):
     """The CNN mapping an occupancy image and (delta_phi, d*) to (left, right) wheel speeds."""
 
-    def __init__(self, size_px: int = PAPER_SIZE_PX):
+    def __init__(self, size_px: int = PAPER_SIZE_PX, architecture: str = "paper"):
         super().__init__()
+        if architecture not in ARCHITECTURES:
+            names = ", ".join(ARCHITECTURES)
+            raise ValueError(f"unknown network architecture {architecture!r}: choose one of {names}")
         side = conv_output_side(size_px)
         if side < 1:
             raise ValueError(f"a {size_px} x {size_px} image is too small for the network (needs >= 22 px)")
         self.size_px = size_px
+        self.architecture = architecture
+        channels, hidden = ARCHITECTURES[architecture]
         self.features = nn.Sequential(
             nn.Conv2d(1, 32, kernel_size=8, stride=4, padding=1),
             nn.ReLU(),
-            nn.Conv2d(32, 16, kernel_size=4, stride=2),
+            nn.Conv2d(32, channels, kernel_size=4, stride=2),
             nn.ReLU(),
-            nn.Conv2d(16, 16, kernel_size=3, stride=1),
+            nn.Conv2d(channels, channels, kernel_size=3, stride=1),
             nn.ReLU(),
             nn.Flatten(),
         )
-        self.flatten_width = 16 * side * side
-        self.head = nn.Sequential(
-            nn.Linear(self.flatten_width + 2, 32),
-            nn.ReLU(),
-            nn.Linear(32, 2),
-        )
+        self.flatten_width = channels * side * side
+        layers: list[nn.Module] = []
+        width = self.flatten_width + 2
+        for units in hidden:
+            layers += [nn.Linear(width, units), nn.ReLU()]
+            width = units
+        layers.append(nn.Linear(width, 2))
+        self.head = nn.Sequential(*layers)
 
     def forward(self, occupancy: torch.Tensor, aux: torch.Tensor) -> torch.Tensor:
         return self.head(torch.cat([self.features(occupancy), aux], dim=1))

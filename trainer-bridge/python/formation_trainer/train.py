@@ -59,6 +59,10 @@ class TrainConfig:
     parity_out: Path | None = None
     # The d* range the model is declared for (its envelope); None: the data's own range.
     d_star_range: tuple[float, float] | None = None
+    # The network (a key of model.ARCHITECTURES); None: the warm start's, else the paper's.
+    architecture: str | None = None
+    # Mirror half of every batch about the robot's heading axis (see mirror_batch).
+    mirror: bool = False
 
 
 def artifact_paths(out: Path) -> dict[str, Path]:
@@ -129,6 +133,7 @@ def save_checkpoint(path: Path, model: PolicyNet, optimizer, metadata: dict[str,
         {
             "format": CHECKPOINT_FORMAT,
             "size_px": model.size_px,
+            "architecture": model.architecture,
             "model_state": model.state_dict(),
             "optimizer_state": optimizer.state_dict(),
             "metadata": metadata,
@@ -145,7 +150,8 @@ def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> Polic
             f"the checkpoint was trained on {checkpoint['size_px']} px images but the data has {size_px} px: "
             "warm-start only from a model trained on the same occupancy settings"
         )
-    model = PolicyNet(checkpoint["size_px"])
+    # Checkpoints from before the architecture choice hold the paper's network.
+    model = PolicyNet(checkpoint["size_px"], checkpoint.get("architecture", "paper"))
     model.load_state_dict(checkpoint["model_state"])
     return model
 
@@ -153,6 +159,22 @@ def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> Polic
 def _batch(tensors: dict, index: torch.Tensor):
     occupancy = tensors["occupancy"].index_select(0, index).unsqueeze(1).float()
     return occupancy, tensors["aux"].index_select(0, index), tensors["wheels"].index_select(0, index)
+
+
+def mirror_batch(occupancy: torch.Tensor, aux: torch.Tensor, wheels: torch.Tensor, flip: torch.Tensor):
+    """Reflects the samples where ``flip`` is true about the robot's heading axis (y -> -y).
+
+    The task is symmetric under that reflection, exactly: the image's rows reverse (row ``r`` holds
+    ``y`` in ``[W/2 - (r+1) res, W/2 - r res)``, so ``-y`` falls in row ``size - 1 - r``, and a scan
+    of beams at ``2 pi k / n`` reflects onto itself), the heading error ``delta_phi`` changes sign,
+    d* stays, and the expert's turn reverses, which swaps the left and right wheel speeds. Training
+    on both halves doubles the distinct views and builds the symmetry into the policy.
+    """
+    occupancy = torch.where(flip[:, None, None, None], occupancy.flip(2), occupancy)
+    sign = torch.where(flip, -1.0, 1.0)
+    aux = torch.stack([aux[:, 0] * sign, aux[:, 1]], dim=1)
+    wheels = torch.where(flip[:, None], wheels.flip(1), wheels)
+    return occupancy, aux, wheels
 
 
 def mean_loss(model: PolicyNet, tensors: dict, indices: torch.Tensor) -> float:
@@ -246,10 +268,19 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
 
     samples = ds.load(cfg.data)
     train_idx, val_idx = split_by_episode(samples.episode_keys(), cfg.val_fraction, cfg.seed)
-    model = PolicyNet(samples.size_px)
     if cfg.init_from is not None:
         model = model_from_checkpoint(load_checkpoint(cfg.init_from), samples.size_px)
+        if cfg.architecture is not None and cfg.architecture != model.architecture:
+            raise TrainError(
+                f"{cfg.init_from} holds the {model.architecture!r} network, not {cfg.architecture!r}: "
+                f"warm-start from a checkpoint of the same architecture, or train {cfg.architecture!r} from scratch"
+            )
         log(f"warm start from {cfg.init_from}")
+    else:
+        try:
+            model = PolicyNet(samples.size_px, cfg.architecture or "paper")
+        except ValueError as e:
+            raise TrainError(str(e)) from e
     model.to(device)
     tensors = {
         "occupancy": torch.from_numpy(samples.occupancy).to(device),
@@ -263,7 +294,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     log(
         f"training on {len(samples)} samples ({len(train_idx)} train / {len(val_idx)} validation) "
         f"from {', '.join(str(d) for d in cfg.data)} on {device} ({torch.get_num_threads()} threads); "
-        f"batch {cfg.batch_size}, lr {cfg.lr:g}, {cfg.epochs} epochs"
+        f"{model.architecture} network{', mirrored' if cfg.mirror else ''}, batch {cfg.batch_size}, lr {cfg.lr:g}, {cfg.epochs} epochs"
     )
 
     history = []
@@ -275,6 +306,9 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         total = 0.0
         for start in range(0, len(order), cfg.batch_size):
             occupancy, aux, wheels = _batch(tensors, order[start : start + cfg.batch_size])
+            if cfg.mirror:
+                flip = torch.rand(len(aux), generator=shuffle) < 0.5
+                occupancy, aux, wheels = mirror_batch(occupancy, aux, wheels, flip.to(device))
             loss = nn.functional.mse_loss(model(occupancy, aux), wheels)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
@@ -312,6 +346,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             "train.seed": cfg.seed,
             "train.val_samples": len(val_idx),
             "train.init_from": cfg.init_from.name if cfg.init_from else "",
+            "train.architecture": model.architecture,
+            "train.mirror": "true" if cfg.mirror else "false",
             **envelope_metadata(samples, cfg.d_star_range),
         },
     )

@@ -45,3 +45,21 @@ def test_aux_reaches_the_output():
 def test_too_small_images_are_refused():
     with pytest.raises(ValueError, match="too small"):
         PolicyNet(10)
+
+
+def test_the_wide_network_keeps_the_convolution_geometry_and_widens_the_rest():
+    model = PolicyNet(50, "wide")
+    convs = [m for m in model.features if isinstance(m, torch.nn.Conv2d)]
+    assert [(c.in_channels, c.out_channels, c.kernel_size, c.stride) for c in convs] == [
+        (1, 32, (8, 8), (4, 4)),
+        (32, 64, (4, 4), (2, 2)),
+        (64, 64, (3, 3), (1, 1)),
+    ]
+    linears = [m for m in model.head if isinstance(m, torch.nn.Linear)]
+    assert [(l.in_features, l.out_features) for l in linears] == [(578, 256), (256, 256), (256, 2)]
+    assert model(torch.rand(3, 1, 50, 50), torch.rand(3, 2)).shape == (3, 2)
+
+
+def test_an_unknown_architecture_is_refused_by_name():
+    with pytest.raises(ValueError, match="unknown network architecture 'huge'"):
+        PolicyNet(50, "huge")

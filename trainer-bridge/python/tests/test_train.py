@@ -167,3 +167,76 @@ def test_a_declared_d_star_range_becomes_the_envelope_if_it_holds_the_data(train
         train.envelope_metadata(samples, (lo + 0.01, hi))
     with pytest.raises(train.TrainError, match="0 < MIN < MAX"):
         train.envelope_metadata(samples, (2.0, 1.0))
+
+
+def test_the_wide_network_trains_exports_and_warm_starts_as_itself(trained, tmp_path):
+    config = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "wide.onnx", epochs=1, batch_size=16, lr=1e-3,
+        device="cpu", architecture="wide",
+    )
+    report = train.run(config, log=lambda _: None)
+    assert report["parity_max_abs_diff"] <= export.PARITY_TOLERANCE
+    meta = {p.key: p.value for p in onnx.load(str(tmp_path / "wide.onnx")).metadata_props}
+    assert meta["formation.train.architecture"] == "wide"
+    paper_meta = {p.key: p.value for p in onnx.load(str(trained["out"])).metadata_props}
+    assert paper_meta["formation.train.architecture"] == "paper"
+    wide = train.model_from_checkpoint(train.load_checkpoint(tmp_path / "wide.pt"))
+    assert wide.architecture == "wide" and wide.flatten_width == 576
+    # A warm start keeps the checkpoint's network when none is named ...
+    again = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "again.onnx", epochs=1, batch_size=16, lr=1e-3,
+        device="cpu", init_from=tmp_path / "wide.pt",
+    )
+    train.run(again, log=lambda _: None)
+    assert train.model_from_checkpoint(train.load_checkpoint(tmp_path / "again.pt")).architecture == "wide"
+    # ... and refuses to turn it into another one.
+    clash = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "clash.onnx", epochs=1, batch_size=16, lr=1e-3,
+        device="cpu", init_from=tmp_path / "wide.pt", architecture="paper",
+    )
+    with pytest.raises(train.TrainError, match="holds the 'wide' network, not 'paper'"):
+        train.run(clash, log=lambda _: None)
+    assert not (tmp_path / "clash.onnx").exists()
+
+
+def test_an_unknown_architecture_is_a_usage_error(trained, tmp_path, capsys):
+    from formation_trainer.model import ARCHITECTURES
+
+    assert cli.ARCHITECTURE_NAMES == list(ARCHITECTURES)
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["train", "--data", str(trained["data"]), "--out", str(tmp_path / "m.onnx"), "--architecture", "wdie"])
+    assert exit_info.value.code == 2
+    assert "invalid choice: 'wdie'" in capsys.readouterr().err
+
+
+def test_mirroring_reverses_rows_negates_the_heading_error_and_swaps_wheels():
+    torch.manual_seed(3)
+    occupancy = (torch.rand(4, 1, 50, 50) < 0.05).float()
+    aux = torch.tensor([[0.3, 1.0], [-0.2, 1.5], [0.1, 2.0], [0.0, 0.8]])
+    wheels = torch.tensor([[0.1, 0.4], [0.5, -0.2], [0.3, 0.3], [-0.1, 0.2]])
+    flip = torch.tensor([True, False, True, False])
+    o, a, w = train.mirror_batch(occupancy, aux, wheels, flip)
+    for i in (0, 2):
+        assert torch.equal(o[i, 0], occupancy[i, 0].flip(0))
+        assert a[i].tolist() == pytest.approx([-aux[i, 0].item(), aux[i, 1].item()])
+        assert w[i].tolist() == pytest.approx([wheels[i, 1].item(), wheels[i, 0].item()])
+    for i in (1, 3):
+        assert torch.equal(o[i], occupancy[i]) and torch.equal(a[i], aux[i]) and torch.equal(w[i], wheels[i])
+    # A reflection undoes itself.
+    back = train.mirror_batch(o, a, w, flip)
+    for got, want in zip(back, (occupancy, aux, wheels)):
+        assert torch.equal(got, want)
+
+
+def test_mirrored_training_is_recorded_in_the_model(trained, tmp_path):
+    config = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "mirror.onnx", epochs=1, batch_size=16, lr=1e-3,
+        device="cpu", mirror=True,
+    )
+    lines = []
+    train.run(config, log=lines.append)
+    meta = {p.key: p.value for p in onnx.load(str(tmp_path / "mirror.onnx")).metadata_props}
+    assert meta["formation.train.mirror"] == "true"
+    assert any("mirrored" in line for line in lines)
+    plain = {p.key: p.value for p in onnx.load(str(trained["out"])).metadata_props}
+    assert plain["formation.train.mirror"] == "false"
