@@ -183,6 +183,36 @@ fn lockstep_case1_through_ros2_gives_the_in_process_table() {
     );
 }
 
+/// `formation eval --processes --transport ros2 --listen E` evaluates through the ROS 2 path too:
+/// its `--json` equals in-process evaluation's, key for key (to 1e-9 for continuous figures).
+#[test]
+fn eval_through_ros2_writes_the_in_process_json() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("ros2_eval_json", LIMIT);
+    let dir = TempDir::new("r2eval");
+    let scenario = case1_scenario(dir.path(), 10.0);
+    let reference = in_process_summary(dir.path(), &scenario);
+    let over_path = dir.path().join("ros2.json");
+    let listen = endpoint(free_tcp_port());
+    let mut eval = Command::new(&binaries().cli);
+    eval.args(["eval", "--controller", "policy", "--runs", "1"])
+        .arg("--scenario")
+        .arg(&scenario)
+        .arg("--model")
+        .arg(shipped_model())
+        .arg("--json")
+        .arg(&over_path)
+        .args(["--processes", "--transport", "ros2", "--listen", &listen]);
+    let finished = run(eval, LIMIT);
+    finished.assert_success();
+    let over_ros2 = json(&over_path);
+    let keys = reference.as_object().expect("eval JSON is an object");
+    assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
+    for (key, value) in keys {
+        assert_json_close(&over_ros2[key], value, &format!("{key}\n{}", finished.describe()));
+    }
+}
+
 /// Issue 14 acceptance: realtime case 1 through the ROS 2 path converges.
 #[test]
 fn realtime_case1_through_ros2_converges() {

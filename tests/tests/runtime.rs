@@ -18,8 +18,8 @@ use robot_agent::decision::PolicyController;
 
 const LIMIT: Duration = Duration::from_secs(120);
 
-/// The generalist policy for teams of any size (issue 10), shipped beside the default.
-const GENERALIST_MODEL: &str = "onnx/models/generalist/policy.onnx";
+/// The shipped default: one policy for teams of any size (issue 10).
+const SHIPPED_MODEL: &str = "onnx/models/policy.onnx";
 
 /// Issue 4 (a): world + 3 agents in lockstep on case 1 with a real ONNX model reproduce the
 /// in-process run bit for bit (and the run id's files are gone afterwards).
@@ -62,11 +62,11 @@ fn lockstep_over_processes_is_bit_identical_to_in_process() {
     }
 }
 
-/// Issue 10: a team of 16 robots of the generalist policy (Gabriel neighbour rule, LIDAR noise
+/// Issue 10: a team of 16 robots of the shipped teams policy (Gabriel neighbour rule, LIDAR noise
 /// σ = 3 cm, d* drawn from the declared range), every robot its own process, in lockstep
 /// reproduces the in-process run bit for bit.
 #[test]
-fn a_sixteen_robot_team_of_the_generalist_in_lockstep_is_bit_identical_to_in_process() {
+fn a_sixteen_robot_team_of_the_shipped_policy_in_lockstep_is_bit_identical_to_in_process() {
     let _watchdog = Watchdog::arm("sixteen_robots_lockstep", 3 * LIMIT);
     let dir = TempDir::new("team16");
     let text = std::fs::read_to_string(repo_root().join("scenarios/teams-generalist.toml"))
@@ -79,7 +79,7 @@ fn a_sixteen_robot_team_of_the_generalist_in_lockstep_is_bit_identical_to_in_pro
     std::fs::write(&scenario_path, text).expect("writing the scenario");
     let scenario = Scenario::from_path(&scenario_path).expect("scenario");
     assert_eq!(scenario.n_robots(), 16);
-    let model = repo_root().join(GENERALIST_MODEL);
+    let model = repo_root().join(SHIPPED_MODEL);
     let over_processes = eval_over_processes(
         &scenario,
         scenario.seed(),
