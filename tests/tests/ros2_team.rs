@@ -209,7 +209,11 @@ fn eval_through_ros2_writes_the_in_process_json() {
     let keys = reference.as_object().expect("eval JSON is an object");
     assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
     for (key, value) in keys {
-        assert_json_close(&over_ros2[key], value, &format!("{key}\n{}", finished.describe()));
+        assert_json_close(
+            &over_ros2[key],
+            value,
+            &format!("{key}\n{}", finished.describe()),
+        );
     }
 }
 
