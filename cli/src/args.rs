@@ -165,8 +165,16 @@ pub struct TrainArgs {
     /// data's own range.
     #[arg(long, value_name = "MIN,MAX", value_parser = d_star_range)]
     pub d_star_range: Option<(f64, f64)>,
-    /// The network: `paper` (the paper's CNN) or `wide` (for teams). Default: the warm start's,
-    /// else `paper`.
+    /// Which network, and whether to mirror the data.
+    #[command(flatten)]
+    pub network: NetworkArgs,
+}
+
+/// The network `formation train` and `formation dagger` train, and its data augmentation.
+#[derive(Debug, Args)]
+pub struct NetworkArgs {
+    /// The network: `paper` (the paper's CNN) or `wide` (for teams). Default: the warm start's
+    /// (`--init-from`, or `--init-model`'s checkpoint), else `paper`.
     #[arg(long, value_parser = architecture)]
     pub architecture: Option<Architecture>,
     /// Also train on every sample reflected about the robot's heading axis (an exact symmetry
@@ -227,14 +235,9 @@ pub struct DaggerArgs {
     /// Team sizes of the rollouts, used in turn (e.g. `3,5,7`; default: the scenario's).
     #[arg(long, value_delimiter = ',', value_parser = team_size)]
     pub team_sizes: Vec<usize>,
-    /// The network of a model trained from scratch: `paper` or `wide` (default: the one of
-    /// `--init-model`'s checkpoint, else `paper`).
-    #[arg(long, value_parser = architecture)]
-    pub architecture: Option<Architecture>,
-    /// Also train on every sample reflected about the robot's heading axis (an exact symmetry
-    /// of the task: the image's rows reversed, Δφ negated, the wheels swapped).
-    #[arg(long)]
-    pub mirror: bool,
+    /// Which network, and whether to mirror the data.
+    #[command(flatten)]
+    pub network: NetworkArgs,
 }
 
 /// `formation report`.
@@ -291,11 +294,12 @@ pub fn team_size(text: &str) -> Result<usize, String> {
     }
 }
 
-/// `MIN,MAX` in metres, with `0 < MIN < MAX`, both finite.
+/// A network architecture by its name (`paper` or `wide`).
 fn architecture(text: &str) -> Result<Architecture, String> {
     text.parse()
 }
 
+/// `MIN,MAX` in metres, with `0 < MIN < MAX`, both finite.
 fn d_star_range(text: &str) -> Result<(f64, f64), String> {
     let parsed = text
         .split_once(',')

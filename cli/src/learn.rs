@@ -30,8 +30,8 @@ pub fn train_command(args: &TrainArgs) -> anyhow::Result<()> {
         seed: args.seed,
         init_from: args.init_from.clone(),
         d_star_range: args.d_star_range,
-        architecture: args.architecture,
-        mirror: args.mirror,
+        architecture: args.network.architecture,
+        mirror: args.network.mirror,
         ..TrainOptions::default()
     };
     let report = run_training(&opts)?;
@@ -75,8 +75,8 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
             lr: args.lr,
             device: args.device.clone(),
             d_star_range,
-            architecture: args.architecture,
-            mirror: args.mirror,
+            architecture: args.network.architecture,
+            mirror: args.network.mirror,
             ..TrainOptions::default()
         },
         eval_scenario,
