@@ -775,6 +775,17 @@ pub fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
 
 /// `formation run --run-id RUN EXTRA --scenario SCENARIO --model <test model> --out OUT`.
 pub fn formation_run(run: &RunId, scenario: &Path, out: &Path, extra: &[&str]) -> Command {
+    formation_run_with_model(run, scenario, test_model(), out, extra)
+}
+
+/// `formation run --run-id RUN EXTRA --scenario SCENARIO --model MODEL --out OUT`.
+pub fn formation_run_with_model(
+    run: &RunId,
+    scenario: &Path,
+    model: &Path,
+    out: &Path,
+    extra: &[&str],
+) -> Command {
     let mut command = Command::new(&binaries().cli);
     command
         .args(["run", "--run-id", run.as_str()])
@@ -782,9 +793,24 @@ pub fn formation_run(run: &RunId, scenario: &Path, out: &Path, extra: &[&str]) -
         .arg("--scenario")
         .arg(scenario)
         .arg("--model")
-        .arg(test_model())
+        .arg(model)
         .arg("--out")
         .arg(out);
+    command
+}
+
+/// `formation eval --controller policy --runs 1 --scenario SCENARIO --model MODEL --json JSON`:
+/// the first run of a scenario, evaluated in-process unless more flags are added.
+pub fn policy_eval(scenario: &Path, model: &Path, json: &Path) -> Command {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["eval", "--controller", "policy", "--runs", "1"])
+        .arg("--scenario")
+        .arg(scenario)
+        .arg("--model")
+        .arg(model)
+        .arg("--json")
+        .arg(json);
     command
 }
 

@@ -16,8 +16,8 @@ use std::time::Duration;
 
 use formation::runtime::read_trajectory;
 use formation_tests::{
-    LeakCheck, TempDir, Watchdog, binaries, case1_scenario, free_tcp_port, one_at_a_time,
-    repo_root, run, test_model, unique_run_id,
+    LeakCheck, TempDir, Watchdog, binaries, case1_scenario, formation_run_with_model,
+    free_tcp_port, one_at_a_time, policy_eval, repo_root, run, test_model, unique_run_id,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -66,43 +66,10 @@ fn shipped_model() -> std::path::PathBuf {
     repo_root().join("onnx/models/policy.onnx")
 }
 
-/// `formation run --run-id RUN EXTRA --scenario SCENARIO --model <shipped> --out OUT`.
-fn formation_run(
-    run_id: &formation_proto::wire::RunId,
-    scenario: &Path,
-    out: &Path,
-    extra: &[&str],
-) -> Command {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args(["run", "--run-id", run_id.as_str()])
-        .args(extra)
-        .arg("--scenario")
-        .arg(scenario)
-        .arg("--model")
-        .arg(shipped_model())
-        .arg("--out")
-        .arg(out);
-    command
-}
-
 /// `formation eval` in-process of `scenario`'s first run, its summary JSON.
 fn in_process_summary(dir: &Path, scenario: &Path) -> serde_json::Value {
     let path = dir.join("in-process.json");
-    let mut eval = Command::new(&binaries().cli);
-    eval.args([
-        "eval",
-        "--controller",
-        "policy",
-        "--runs",
-        "1",
-        "--scenario",
-    ])
-    .arg(scenario)
-    .arg("--model")
-    .arg(shipped_model())
-    .arg("--json")
-    .arg(&path);
+    let eval = policy_eval(scenario, &shipped_model(), &path);
     run(eval, LIMIT).assert_success();
     json(&path)
 }
@@ -126,9 +93,10 @@ fn run_team(tag: &str, clock: &str) -> TeamRun {
     let out = dir.path().join("out");
     let listen = endpoint(free_tcp_port());
     let finished = run(
-        formation_run(
+        formation_run_with_model(
             &run_id,
             &scenario,
+            &shipped_model(),
             &out,
             &["--transport", "ros2", "--listen", &listen, "--clock", clock],
         ),
@@ -194,15 +162,8 @@ fn eval_through_ros2_writes_the_in_process_json() {
     let reference = in_process_summary(dir.path(), &scenario);
     let over_path = dir.path().join("ros2.json");
     let listen = endpoint(free_tcp_port());
-    let mut eval = Command::new(&binaries().cli);
-    eval.args(["eval", "--controller", "policy", "--runs", "1"])
-        .arg("--scenario")
-        .arg(&scenario)
-        .arg("--model")
-        .arg(shipped_model())
-        .arg("--json")
-        .arg(&over_path)
-        .args(["--processes", "--transport", "ros2", "--listen", &listen]);
+    let mut eval = policy_eval(&scenario, &shipped_model(), &over_path);
+    eval.args(["--processes", "--transport", "ros2", "--listen", &listen]);
     let finished = run(eval, LIMIT);
     finished.assert_success();
     let over_ros2 = json(&over_path);
@@ -279,8 +240,11 @@ fn bad_ros2_launches_are_refused_with_the_reason() {
         ),
     ];
     for (extra, message) in cases {
-        run(formation_run(&run_id, &scenario, &out, extra), LIMIT)
-            .assert_failure_mentioning(message);
+        run(
+            formation_run_with_model(&run_id, &scenario, &shipped_model(), &out, extra),
+            LIMIT,
+        )
+        .assert_failure_mentioning(message);
     }
     let mut swap = Command::new(&binaries().cli);
     swap.args(["swap", "--transport", "ros2", "--run", "r", "--robot", "0"])

@@ -15,8 +15,8 @@ use std::time::Duration;
 use formation::runtime::read_trajectory;
 use formation_tests::{
     LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
-    count_samples, formation_run, free_tcp_port, launch_secret, one_at_a_time, raw_client, run,
-    run_with_input, test_model, unique_run_id,
+    count_samples, formation_run, free_tcp_port, launch_secret, one_at_a_time, policy_eval,
+    raw_client, run, run_with_input, test_model, unique_run_id,
 };
 use formation_world::{Scenario, run_episode};
 use robot_agent::decision::PolicyController;
@@ -107,17 +107,8 @@ fn eval_over_zenoh_writes_the_same_json_as_in_process() {
     std::fs::create_dir_all(&tmp).expect("the evaluation's TMPDIR");
     let listen = endpoint(free_tcp_port());
     let eval = |extra: &[&str], json: &Path| {
-        let mut command = Command::new(&binaries().cli);
-        command
-            .env("TMPDIR", &tmp)
-            .args(["eval", "--controller", "policy", "--runs", "1"])
-            .arg("--scenario")
-            .arg(&scenario)
-            .arg("--model")
-            .arg(test_model())
-            .arg("--json")
-            .arg(json)
-            .args(extra);
+        let mut command = policy_eval(&scenario, test_model(), json);
+        command.env("TMPDIR", &tmp).args(extra);
         run(command, LIMIT)
     };
     let in_process_json = dir.path().join("in-process.json");
