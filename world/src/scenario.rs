@@ -1534,6 +1534,46 @@ phi = 1.0
         }
     }
 
+    /// Every file in `scenarios/` parses, under the name of its file; the generalisation variants
+    /// of table1 differ from it only where their names say.
+    #[test]
+    fn every_file_in_the_scenarios_folder_parses_under_its_own_name() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let mut parsed = std::collections::BTreeMap::new();
+        for entry in std::fs::read_dir(&dir).expect("the scenarios folder") {
+            let path = entry.expect("a folder entry").path();
+            if path.extension().and_then(|e| e.to_str()) != Some("toml") {
+                continue;
+            }
+            let stem = path
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .expect("a file name");
+            let scenario = Scenario::from_path(&path).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(scenario.name(), stem, "{}", path.display());
+            parsed.insert(stem.to_owned(), scenario);
+        }
+        assert!(parsed.len() >= 13, "{:?}", parsed.keys());
+        let table1 = &parsed["table1"];
+        for (name, d_star, noise) in [
+            ("table1-d125", Some(1.25), 0.0),
+            ("table1-d175", Some(1.75), 0.0),
+            ("table1-noise", None, 0.03),
+        ] {
+            let variant = &parsed[name];
+            assert_eq!(variant.world_config().lidar.noise_std, noise, "{name}");
+            match d_star {
+                Some(d) => assert_eq!(*variant.d_star(), DStarPlan::Fixed(d), "{name}"),
+                None => assert_eq!(variant.d_star(), table1.d_star(), "{name}"),
+            }
+            assert_eq!(
+                (variant.n_robots(), variant.runs(), variant.seed()),
+                (table1.n_robots(), table1.runs(), table1.seed()),
+                "{name}"
+            );
+        }
+    }
+
     #[test]
     fn every_shipped_scenario_parses_with_the_papers_settings() {
         for (name, text) in SHIPPED {
