@@ -154,7 +154,8 @@ pub struct TrainArgs {
     /// `auto`, `cpu` or `cuda`.
     #[arg(long, default_value = "auto")]
     pub device: String,
-    /// Warm start from this checkpoint (`.pt`).
+    /// Warm start from this checkpoint (`.pt`), or from the weights of a policy `.onnx` written by
+    /// formation's trainer (a shipped model, for instance).
     #[arg(long)]
     pub init_from: Option<PathBuf>,
     /// Training seed.

@@ -160,7 +160,7 @@ pub fn run_dagger(
         } else {
             out_dir.join(format!("{stem}-dagger{k}.onnx"))
         };
-        train_to(next.clone(), Some(model.with_extension("pt")))?;
+        train_to(next.clone(), Some(warm_start_of(&model)))?;
         model = next;
         curve.push(evaluate_iteration(opts, k, &model, on_event)?);
     }
@@ -183,6 +183,18 @@ pub fn run_dagger(
         source,
     })?;
     Ok(curve)
+}
+
+/// What the next iteration trains on from: the checkpoint written beside `model` when there is
+/// one (it was trained here), else the `.onnx` itself, whose weights the trainer imports (a
+/// shipped model has no checkpoint beside it).
+fn warm_start_of(model: &Path) -> PathBuf {
+    let checkpoint = model.with_extension("pt");
+    if checkpoint.is_file() {
+        checkpoint
+    } else {
+        model.to_path_buf()
+    }
 }
 
 /// Iteration `k`'s closed-loop figures on the evaluation scenario.

@@ -49,7 +49,8 @@ pub struct TrainOptions {
     pub val_fraction: f64,
     /// Seeds the split, the shuffling and the initial weights.
     pub seed: u64,
-    /// Warm start from this checkpoint (`.pt` written by an earlier training).
+    /// Warm start from this checkpoint (`.pt` written by an earlier training), or from the weights
+    /// of a policy `.onnx` written by the trainer.
     pub init_from: Option<PathBuf>,
     /// The Python interpreter; `None` discovers one (see the module docs).
     pub python: Option<PathBuf>,

@@ -1,6 +1,6 @@
 //! The formation's neighbour rule, computed: who holds whom at d*, from positions alone.
 //!
-//! [`NeighbourTracker`] applies a [`NeighbourRule`] sample after sample (the Gabriel rule has
+//! [`NeighbourTracker`] applies a [`NeighbourRule`] sample after sample (the Gabriel rule may have
 //! hysteresis, so it remembers the previous sample's Gabriel edges) and yields, per sample, the
 //! formation's edges (what the metrics score) and each robot's own neighbours (what the expert
 //! holds at d*). The exact definition is [`GabrielRule`]'s. Everything here is pure: positions
@@ -344,8 +344,12 @@ mod tests {
             edges_of(gabriel(), &square),
             vec![(0, 1), (0, 3), (1, 2), (2, 3)]
         );
-        // The short diagonal becomes an edge at rho >= 1.3 ...
-        let mut tracker = NeighbourTracker::new(gabriel(), 4);
+        // With a hysteresis band of 0.4, the short diagonal becomes an edge at rho >= 1.3 ...
+        let banded = NeighbourRule::Gabriel(GabrielRule {
+            hysteresis: 0.4,
+            ..GabrielRule::with_range(10.0)
+        });
+        let mut tracker = NeighbourTracker::new(banded, 4);
         tracker.update(&rhombus(1.35));
         assert!(tracker.edges().contains(&(1, 3)));
         // ... stays one down to 0.9 ...
@@ -362,6 +366,17 @@ mod tests {
         tracker.update(&rhombus(1.0));
         assert!(!tracker.edges().contains(&(1, 3)));
         assert_eq!(tracker.samples(), 1);
+    }
+
+    #[test]
+    fn the_default_rule_is_memoryless_a_samples_edges_follow_from_its_positions_alone() {
+        // What one scan cannot show (the past) must not decide an edge: the policy sees one scan.
+        let mut tracker = NeighbourTracker::new(gabriel(), 4);
+        for rho in [1.35, 1.29, 1.0, 1.31, 2.0, 1.2, 0.85, 1.3] {
+            tracker.update(&rhombus(rho));
+            assert_eq!(tracker.edges(), edges_of(gabriel(), &rhombus(rho)), "rho {rho}");
+            assert_eq!(tracker.edges().contains(&(1, 3)), rho >= 1.3, "rho {rho}");
+        }
     }
 
     #[test]

@@ -54,8 +54,8 @@
 //! neighbours = "gabriel"  # "all_pairs" | "gabriel"; default all_pairs up to 3 robots, gabriel beyond
 //! sensing_range = 10.0    # gabriel only: default lidar.max_range; 0.1 ..= lidar.max_range \[m\]
 //! nearest = 2             # gabriel only: nearest robots each robot always holds, 0 ..= 16
-//! threshold = 0.9         # gabriel only: witness ratio that makes a pair an edge, 0.05 ..= 1
-//! hysteresis = 0.15       # gabriel only: how far below threshold an edge is kept, 0 ..= threshold - 0.01
+//! threshold = 1.3         # gabriel only: witness ratio that makes a pair an edge, 0.05 ..= 4
+//! hysteresis = 0.0        # gabriel only: how far below threshold an edge is kept (0: memoryless), 0 ..= threshold - 0.01
 //!
 //! [lidar]                 # optional; each key defaults to LidarSpec::default()
 //! beams = 900             # 8 ..= 900 (the most a scan message carries)

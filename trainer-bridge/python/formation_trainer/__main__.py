@@ -29,7 +29,7 @@ def _parser() -> argparse.ArgumentParser:
     train.add_argument("--device", choices=["auto", "cpu", "cuda"], default="auto")
     train.add_argument("--val-fraction", type=float, default=0.1, help="share of runs held out for validation")
     train.add_argument("--seed", type=int, default=0)
-    train.add_argument("--init-from", type=Path, help="warm start from this .pt checkpoint")
+    train.add_argument("--init-from", type=Path, help="warm start from this .pt checkpoint, or from a policy .onnx written by this trainer")
     train.add_argument("--parity-out", type=Path, help="write a few inputs with torch outputs as JSON")
     train.add_argument(
         "--d-star-range",

@@ -114,10 +114,16 @@ def split_by_episode(keys: np.ndarray, val_fraction: float, seed: int) -> tuple[
 
 
 def load_checkpoint(path: Path) -> dict:
-    """Reads a checkpoint written by :func:`save_checkpoint`, with a clear error if it is not one."""
+    """Reads a checkpoint written by :func:`save_checkpoint`, with a clear error if it is not one.
+
+    A ``.onnx`` policy written by this trainer is accepted too (see :func:`checkpoint_from_onnx`),
+    so a shipped model can be fine-tuned without the ``.pt`` it was trained beside.
+    """
     path = Path(path)
     if not path.is_file():
         raise TrainError(f"checkpoint {path} does not exist: train a model first (it is written beside the .onnx)")
+    if path.suffix == ".onnx":
+        return checkpoint_from_onnx(path)
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:
@@ -125,6 +131,50 @@ def load_checkpoint(path: Path) -> dict:
     if not isinstance(checkpoint, dict) or checkpoint.get("format") != CHECKPOINT_FORMAT:
         raise TrainError(f"{path} is not a formation checkpoint ({CHECKPOINT_FORMAT}): pass the .pt written beside a model")
     return checkpoint
+
+
+def checkpoint_from_onnx(path: Path) -> dict:
+    """The weights of a formation policy ``.onnx`` as a checkpoint without optimizer state.
+
+    The exporter keeps the PyTorch parameter names as the graph's initializers, and the metadata
+    names the architecture and the image size; every parameter must be there with its shape.
+    """
+    import onnx
+    from onnx import numpy_helper
+
+    def foreign(why: str) -> TrainError:
+        return TrainError(
+            f"{path} cannot seed training: {why}; warm-start from a policy written by formation's trainer, or its .pt"
+        )
+
+    try:
+        graph = onnx.load(str(path))
+    except Exception as e:
+        raise foreign(f"it is not a readable ONNX file ({e})") from e
+    meta = {p.key: p.value for p in graph.metadata_props}
+    if meta.get("formation.format") != export.MODEL_FORMAT:
+        raise foreign(f"its formation.format is {meta.get('formation.format')!r}, not {export.MODEL_FORMAT!r}")
+    architecture = meta.get("formation.train.architecture", "paper")
+    try:
+        size_px = int(meta["formation.occupancy.size_px"])
+        model = PolicyNet(size_px, architecture)
+    except (KeyError, ValueError) as e:
+        raise foreign(f"its metadata does not describe a network this trainer builds ({e})") from e
+    weights = {init.name: numpy_helper.to_array(init) for init in graph.graph.initializer}
+    state = {}
+    for name, param in model.state_dict().items():
+        if name not in weights:
+            raise foreign(f"it has no weights named {name!r}")
+        if tuple(weights[name].shape) != tuple(param.shape):
+            raise foreign(f"{name!r} has shape {tuple(weights[name].shape)}, the {architecture!r} network needs {tuple(param.shape)}")
+        state[name] = torch.from_numpy(weights[name].copy())
+    return {
+        "format": CHECKPOINT_FORMAT,
+        "size_px": size_px,
+        "architecture": architecture,
+        "model_state": state,
+        "metadata": meta,
+    }
 
 
 def save_checkpoint(path: Path, model: PolicyNet, optimizer, metadata: dict[str, str]) -> None:

@@ -240,3 +240,42 @@ def test_mirrored_training_is_recorded_in_the_model(trained, tmp_path):
     assert any("mirrored" in line for line in lines)
     plain = {p.key: p.value for p in onnx.load(str(trained["out"])).metadata_props}
     assert plain["formation.train.mirror"] == "false"
+
+
+def test_a_policy_onnx_seeds_training_with_its_own_weights(trained, tmp_path):
+    from_pt = train.model_from_checkpoint(train.load_checkpoint(trained["out"].with_suffix(".pt")))
+    from_onnx = train.model_from_checkpoint(train.load_checkpoint(trained["out"]))
+    assert from_onnx.architecture == from_pt.architecture == "paper"
+    for (name, a), (_, b) in zip(from_pt.state_dict().items(), from_onnx.state_dict().items()):
+        torch.testing.assert_close(a, b, atol=0, rtol=0, msg=name)
+    # A warm start from the .onnx alone (no .pt beside it) trains on from those weights.
+    alone = tmp_path / "shipped.onnx"
+    alone.write_bytes(trained["out"].read_bytes())
+    config = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "tuned.onnx", epochs=1, batch_size=16, lr=1e-12,
+        device="cpu", init_from=alone,
+    )
+    train.run(config, log=lambda _: None)
+    tuned = train.model_from_checkpoint(train.load_checkpoint(tmp_path / "tuned.pt"))
+    for a, b in zip(from_pt.state_dict().values(), tuned.state_dict().values()):
+        torch.testing.assert_close(a, b, atol=1e-6, rtol=0)
+
+
+def test_an_onnx_not_written_by_the_trainer_cannot_seed_training(trained, tmp_path):
+    model = onnx.load(str(trained["out"]))
+    del model.metadata_props[:]
+    foreign = tmp_path / "foreign.onnx"
+    onnx.save(model, str(foreign))
+    with pytest.raises(train.TrainError, match="cannot seed training: its formation.format is None"):
+        train.load_checkpoint(foreign)
+    model = onnx.load(str(trained["out"]))
+    (first,) = [init for init in model.graph.initializer if init.name == "features.0.weight"]
+    model.graph.initializer.remove(first)
+    pruned = tmp_path / "pruned.onnx"
+    onnx.save(model, str(pruned))
+    with pytest.raises(train.TrainError, match="has no weights named"):
+        train.load_checkpoint(pruned)
+    garbage = tmp_path / "garbage.onnx"
+    garbage.write_bytes(b"not a model")
+    with pytest.raises(train.TrainError, match="not a readable ONNX file"):
+        train.load_checkpoint(garbage)
