@@ -110,10 +110,16 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
             bar.reset();
         }
         DaggerEvent::Trainer(line) => eprintln!("  {line}"),
-        DaggerEvent::Evaluated { k, figures } => eprintln!(
-            "DAgger iteration {k} closed loop:\n{}",
-            eval::table_text(&figures)
-        ),
+        DaggerEvent::Evaluated { k, figures } => {
+            eprintln!(
+                "DAgger iteration {k} closed loop:\n{}",
+                eval::table_text(&figures)
+            );
+            // The next rollouts start now: the time reported with them is theirs alone.
+            if let Ok(mut t) = started.lock() {
+                *t = Instant::now();
+            }
+        }
     })?;
     println!(
         "DAgger curve (closed loop on {}, {} runs):",

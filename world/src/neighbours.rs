@@ -374,7 +374,11 @@ mod tests {
         let mut tracker = NeighbourTracker::new(gabriel(), 4);
         for rho in [1.35, 1.29, 1.0, 1.31, 2.0, 1.2, 0.85, 1.3] {
             tracker.update(&rhombus(rho));
-            assert_eq!(tracker.edges(), edges_of(gabriel(), &rhombus(rho)), "rho {rho}");
+            assert_eq!(
+                tracker.edges(),
+                edges_of(gabriel(), &rhombus(rho)),
+                "rho {rho}"
+            );
             assert_eq!(tracker.edges().contains(&(1, 3)), rho >= 1.3, "rho {rho}");
         }
     }
