@@ -354,6 +354,17 @@ mod tests {
     }
 
     #[test]
+    fn the_next_iteration_warm_starts_from_the_checkpoint_beside_a_model_else_from_the_model() {
+        let dir = tempfile::tempdir().unwrap();
+        let model = dir.path().join("shipped.onnx");
+        std::fs::write(&model, b"onnx").unwrap();
+        assert_eq!(warm_start_of(&model), model);
+        let checkpoint = dir.path().join("shipped.pt");
+        std::fs::write(&checkpoint, b"pt").unwrap();
+        assert_eq!(warm_start_of(&model), checkpoint);
+    }
+
+    #[test]
     fn rollouts_over_team_sizes_label_every_robots_view_in_run_order_and_replay() {
         let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
         let base = scenario(3);
