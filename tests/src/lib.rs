@@ -8,6 +8,12 @@
 //! test process, in the same profile as the test itself (a no-op when they are up to date), and
 //! takes them from `target/<profile>/`, the directory above the test executable. Set
 //! `FORMATION_TESTS_NO_BUILD=1` to skip the build (e.g. when the binaries were built beforehand).
+//! That build is not a no-op on a cold target directory even after `cargo test` compiled
+//! everything: a plain build of the three packages resolves dependency features without the
+//! workspace's dev-dependencies (`bitflags`, `zerocopy`, `regex-automata` differ), so much of the
+//! dependency graph is compiled a second time. `scripts/test-all` therefore builds them first,
+//! and no [`Watchdog`] counts the time a test waits for this one-time setup (or for the test
+//! model): a slow build is not a hung test.
 //!
 //! [`netns`] makes network namespaces for the Zenoh tests across a network; the `delay-relay`
 //! binary of this package delays TCP between them.
@@ -21,7 +27,7 @@ pub mod netns;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::sync::OnceLock;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -126,7 +132,8 @@ impl Drop for LeakCheck {
 }
 
 /// Aborts the whole test process if the guarded test is still running after `limit`: a hung
-/// multi-process test must fail loudly instead of blocking the suite.
+/// multi-process test must fail loudly instead of blocking the suite. Time spent in the one-time
+/// shared setup ([`binaries`], [`test_model`]) while the watchdog is armed is added to the limit.
 pub struct Watchdog {
     done: mpsc::Sender<()>,
 }
@@ -135,15 +142,69 @@ impl Watchdog {
     /// Arms the watchdog for test `name`.
     pub fn arm(name: &'static str, limit: Duration) -> Watchdog {
         let (done, rx) = mpsc::channel::<()>();
+        let armed = Instant::now();
+        let setup_before = SharedSetup::time_spent();
         std::thread::spawn(move || {
-            if let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(limit) {
-                eprintln!(
-                    "watchdog: test {name} still running after {limit:?}; aborting the test process"
-                );
-                std::process::abort();
+            loop {
+                let deadline =
+                    armed + limit + SharedSetup::time_spent().saturating_sub(setup_before);
+                let wait = if SharedSetup::running() {
+                    Duration::from_secs(1)
+                } else {
+                    deadline.saturating_duration_since(Instant::now())
+                };
+                match rx.recv_timeout(wait) {
+                    Err(mpsc::RecvTimeoutError::Timeout) => {
+                        if SharedSetup::running() || Instant::now() < deadline {
+                            continue;
+                        }
+                        eprintln!(
+                            "watchdog: test {name} still running after {limit:?} (not counting \
+                             the shared setup); aborting the test process"
+                        );
+                        std::process::abort();
+                    }
+                    // Done, or the test's thread is gone.
+                    _ => return,
+                }
             }
         });
         Watchdog { done }
+    }
+}
+
+/// The one-time setup that every test of a process waits for (building the runtime binaries,
+/// writing the test model): how many are running now, and how long the finished ones took.
+struct SharedSetup {
+    started: Instant,
+}
+
+static SHARED_SETUP_RUNNING: AtomicUsize = AtomicUsize::new(0);
+static SHARED_SETUP_MILLIS: AtomicU64 = AtomicU64::new(0);
+
+impl SharedSetup {
+    /// Marks a setup step as running until the returned guard is dropped (also on a panic).
+    fn begin() -> SharedSetup {
+        SHARED_SETUP_RUNNING.fetch_add(1, Ordering::SeqCst);
+        SharedSetup {
+            started: Instant::now(),
+        }
+    }
+
+    fn running() -> bool {
+        SHARED_SETUP_RUNNING.load(Ordering::SeqCst) > 0
+    }
+
+    fn time_spent() -> Duration {
+        Duration::from_millis(SHARED_SETUP_MILLIS.load(Ordering::SeqCst))
+    }
+}
+
+impl Drop for SharedSetup {
+    fn drop(&mut self) {
+        let millis = u64::try_from(self.started.elapsed().as_millis()).unwrap_or(u64::MAX);
+        SHARED_SETUP_MILLIS.fetch_add(millis, Ordering::SeqCst);
+        SHARED_SETUP_RUNNING.fetch_sub(1, Ordering::SeqCst);
     }
 }
 
@@ -168,6 +229,7 @@ pub struct Binaries {
 pub fn binaries() -> &'static Binaries {
     static BINARIES: OnceLock<Binaries> = OnceLock::new();
     BINARIES.get_or_init(|| {
+        let _setup = SharedSetup::begin();
         let exe = std::env::current_exe().expect("test executable path");
         let deps = exe.parent().expect("test executable directory");
         let profile_dir = deps.parent().expect("target/<profile> directory").to_path_buf();
@@ -244,6 +306,7 @@ pub fn test_model() -> &'static Path {
         let dir = target.join("formation-test-models");
         std::fs::create_dir_all(&dir).expect("creating the test model directory");
         let path = dir.join("tiny-seed0.onnx");
+        let _setup = SharedSetup::begin();
         write_tiny_model(&path, 0);
         path
     })
@@ -932,6 +995,22 @@ pub fn count_samples(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A test that waits for a slow one-time setup (a cold `cargo build`) longer than its limit
+    /// is not hung: its watchdog must not abort the process (which would fail this test binary).
+    #[test]
+    fn the_watchdog_does_not_count_time_spent_in_the_shared_setup() {
+        let limit = Duration::from_millis(200);
+        let watchdog = Watchdog::arm("shared_setup", limit);
+        {
+            let _setup = SharedSetup::begin();
+            std::thread::sleep(limit * 3);
+        }
+        std::thread::sleep(limit / 2);
+        drop(watchdog);
+        assert!(SharedSetup::time_spent() >= limit * 3);
+        assert!(!SharedSetup::running());
+    }
 
     #[test]
     fn run_ids_are_unique_and_valid() {
