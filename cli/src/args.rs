@@ -166,12 +166,13 @@ pub struct TrainArgs {
     /// data's own range.
     #[arg(long, value_name = "MIN,MAX", value_parser = d_star_range)]
     pub d_star_range: Option<(f64, f64)>,
-    /// Which network, and whether to mirror the data.
+    /// Which network, whether to mirror the data, how many samples an epoch draws.
     #[command(flatten)]
     pub network: NetworkArgs,
 }
 
-/// The network `formation train` and `formation dagger` train, and its data augmentation.
+/// The network `formation train` and `formation dagger` train, its data augmentation, and how
+/// much of the data each epoch draws.
 #[derive(Debug, Args)]
 pub struct NetworkArgs {
     /// The network: `paper` (the paper's CNN) or `wide` (for teams). Default: the warm start's
@@ -182,6 +183,18 @@ pub struct NetworkArgs {
     /// of the task: the image's rows reversed, Δφ negated, the wheels swapped).
     #[arg(long)]
     pub mirror: bool,
+    /// Train each epoch on this many training samples drawn at random, not all of them: an
+    /// epoch then costs the same however large the data (a DAgger dataset) grows.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub samples_per_epoch: Option<u64>,
+}
+
+impl NetworkArgs {
+    /// `--samples-per-epoch` as a count (more than memory can hold means every sample).
+    pub fn samples_per_epoch(&self) -> Option<usize> {
+        self.samples_per_epoch
+            .map(|count| usize::try_from(count).unwrap_or(usize::MAX))
+    }
 }
 
 /// `formation dagger`.
@@ -236,7 +249,7 @@ pub struct DaggerArgs {
     /// Team sizes of the rollouts, used in turn (e.g. `3,5,7`; default: the scenario's).
     #[arg(long, value_delimiter = ',', value_parser = team_size)]
     pub team_sizes: Vec<usize>,
-    /// Which network, and whether to mirror the data.
+    /// Which network, whether to mirror the data, how many samples an epoch draws.
     #[command(flatten)]
     pub network: NetworkArgs,
 }

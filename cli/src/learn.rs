@@ -32,6 +32,7 @@ pub fn train_command(args: &TrainArgs) -> anyhow::Result<()> {
         d_star_range: args.d_star_range,
         architecture: args.network.architecture,
         mirror: args.network.mirror,
+        samples_per_epoch: args.network.samples_per_epoch(),
         ..TrainOptions::default()
     };
     let report = run_training(&opts)?;
@@ -77,6 +78,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
             d_star_range,
             architecture: args.network.architecture,
             mirror: args.network.mirror,
+            samples_per_epoch: args.network.samples_per_epoch(),
             ..TrainOptions::default()
         },
         eval_scenario,

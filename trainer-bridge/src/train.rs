@@ -64,6 +64,10 @@ pub struct TrainOptions {
     /// Also train on every sample reflected about the robot's heading axis (rows of the image
     /// reversed, Δφ negated, wheels swapped): an exact symmetry of the task.
     pub mirror: bool,
+    /// Train each epoch on this many training samples, drawn afresh at random without
+    /// replacement; `None`: every training sample. Keeps an epoch's cost fixed as a DAgger
+    /// dataset grows, while every sample keeps the same chance of being drawn.
+    pub samples_per_epoch: Option<usize>,
 }
 
 /// The policy networks the trainer can build (`formation_trainer.model.ARCHITECTURES`). Both take
@@ -124,6 +128,7 @@ impl Default for TrainOptions {
             d_star_range: None,
             architecture: None,
             mirror: false,
+            samples_per_epoch: None,
         }
     }
 }
@@ -139,6 +144,8 @@ pub struct TrainReport {
     pub train_samples: usize,
     /// Samples in the validation split.
     pub val_samples: usize,
+    /// Training samples drawn per epoch (all of the training split unless capped).
+    pub samples_per_epoch: usize,
     /// Mean squared error over the training split in the last epoch.
     pub final_train_loss: f64,
     /// Mean squared error over the validation split after the last epoch (NaN-free; equals the
@@ -309,6 +316,13 @@ fn validate(opts: &TrainOptions) -> Result<(), TrainError> {
     if opts.batch_size == 0 {
         return invalid("batch_size", "0".into(), "must be at least 1");
     }
+    if opts.samples_per_epoch == Some(0) {
+        return invalid(
+            "samples_per_epoch",
+            "0".into(),
+            "must be at least 1 (leave it out to use every sample)",
+        );
+    }
     if !(opts.lr.is_finite() && opts.lr > 0.0) {
         return invalid("lr", opts.lr.to_string(), "must be finite and > 0");
     }
@@ -366,6 +380,9 @@ fn trainer_args(opts: &TrainOptions) -> Vec<std::ffi::OsString> {
     }
     if let Some(architecture) = opts.architecture {
         push("--architecture", architecture.name().into());
+    }
+    if let Some(count) = opts.samples_per_epoch {
+        push("--samples-per-epoch", count.to_string().into());
     }
     if opts.mirror {
         args.push("--mirror".into());
@@ -489,7 +506,7 @@ mod tests {
 
     #[test]
     fn options_are_validated_before_python_starts() {
-        let cases: [(TrainOptions, &str); 7] = [
+        let cases: [(TrainOptions, &str); 8] = [
             (
                 TrainOptions {
                     data: vec![],
@@ -539,6 +556,13 @@ mod tests {
                 },
                 "out",
             ),
+            (
+                TrainOptions {
+                    samples_per_epoch: Some(0),
+                    ..opts()
+                },
+                "samples_per_epoch",
+            ),
         ];
         for (case, field) in cases {
             let err = validate(&case).expect_err(field);
@@ -559,6 +583,7 @@ mod tests {
             d_star_range: Some((0.8, 2.5)),
             architecture: Some(Architecture::Wide),
             mirror: true,
+            samples_per_epoch: Some(200_000),
             ..opts()
         })
         .into_iter()
@@ -579,6 +604,7 @@ mod tests {
             "--d-star-range 0.8,2.5",
             "--init-from prev.pt",
             "--architecture wide",
+            "--samples-per-epoch 200000",
             " --mirror",
         ] {
             assert!(joined.contains(part), "{part} missing in {joined}");
@@ -602,6 +628,10 @@ mod tests {
             .collect();
         assert!(!plain.contains(&"--architecture".to_owned()), "{plain:?}");
         assert!(!plain.contains(&"--mirror".to_owned()), "{plain:?}");
+        assert!(
+            !plain.contains(&"--samples-per-epoch".to_owned()),
+            "{plain:?}"
+        );
     }
 
     #[test]

@@ -70,6 +70,10 @@ fn a_rust_written_dataset_trains_into_an_onnx_model() {
     assert_eq!(report.samples, 190);
     assert_eq!(report.train_samples + report.val_samples, 190);
     assert!(report.val_samples > 0, "whole runs are held out");
+    assert_eq!(
+        report.samples_per_epoch, report.train_samples,
+        "every sample, unless capped"
+    );
     assert_eq!(report.dataset_id, manifest.dataset_id);
     assert!(report.final_train_loss.is_finite() && report.final_val_loss.is_finite());
     assert!(report.parity_max_abs_diff <= 1e-4);

@@ -48,6 +48,12 @@ def _parser() -> argparse.ArgumentParser:
         help="also train on every sample reflected about the robot's heading axis (an exact symmetry of the task)",
     )
 
+    train.add_argument(
+        "--samples-per-epoch",
+        type=int,
+        help="train each epoch on this many training samples drawn at random (default: all of them)",
+    )
+
     exp = commands.add_parser("export", help="export a .pt checkpoint to ONNX (with the parity check)")
     exp.add_argument("--checkpoint", type=Path, required=True)
     exp.add_argument("--out", type=Path, required=True, help="ONNX model to write")
@@ -74,6 +80,7 @@ def _train(args) -> None:
         d_star_range=args.d_star_range,
         architecture=args.architecture,
         mirror=args.mirror,
+        samples_per_epoch=args.samples_per_epoch,
     )
     report = train.run(config, log=lambda line: print(line, flush=True))
     print(train.report_line(report), flush=True)

@@ -63,6 +63,10 @@ class TrainConfig:
     architecture: str | None = None
     # Mirror half of every batch about the robot's heading axis (see mirror_batch).
     mirror: bool = False
+    # Train each epoch on this many training samples drawn afresh at random (without
+    # replacement); None: every training sample. Keeps an epoch's cost fixed as a DAgger
+    # dataset grows, while every sample keeps the same chance of being drawn.
+    samples_per_epoch: int | None = None
 
 
 def artifact_paths(out: Path) -> dict[str, Path]:
@@ -307,6 +311,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     """Trains, writes every artefact and returns the report (also printed by the CLI)."""
     if cfg.epochs < 1 or cfg.batch_size < 1 or not (cfg.lr > 0 and math.isfinite(cfg.lr)):
         raise TrainError(f"epochs and batch size must be >= 1 and lr > 0 (got {cfg.epochs}, {cfg.batch_size}, {cfg.lr})")
+    if cfg.samples_per_epoch is not None and cfg.samples_per_epoch < 1:
+        raise TrainError(f"--samples-per-epoch must be >= 1 (got {cfg.samples_per_epoch}); leave it out to use every sample")
     out = Path(cfg.out)
     if out.suffix != ".onnx":
         raise TrainError(f"--out must end in .onnx, got {out}")
@@ -341,10 +347,13 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     val_t = torch.from_numpy(val_idx).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     shuffle = torch.Generator().manual_seed(cfg.seed)
+    per_epoch = len(train_t) if cfg.samples_per_epoch is None else min(cfg.samples_per_epoch, len(train_t))
+    drawn = "" if per_epoch == len(train_t) else f" of {per_epoch} samples drawn at random"
     log(
         f"training on {len(samples)} samples ({len(train_idx)} train / {len(val_idx)} validation) "
         f"from {', '.join(str(d) for d in cfg.data)} on {device} ({torch.get_num_threads()} threads); "
-        f"{model.architecture} network{', mirrored' if cfg.mirror else ''}, batch {cfg.batch_size}, lr {cfg.lr:g}, {cfg.epochs} epochs"
+        f"{model.architecture} network{', mirrored' if cfg.mirror else ''}, batch {cfg.batch_size}, lr {cfg.lr:g}, "
+        f"{cfg.epochs} epochs{drawn}"
     )
 
     history = []
@@ -352,7 +361,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     for epoch in range(1, cfg.epochs + 1):
         epoch_start = time.perf_counter()
         model.train()
-        order = train_t[torch.randperm(len(train_t), generator=shuffle).to(device)]
+        order = train_t[torch.randperm(len(train_t), generator=shuffle)[:per_epoch].to(device)]
         total = 0.0
         for start in range(0, len(order), cfg.batch_size):
             occupancy, aux, wheels = _batch(tensors, order[start : start + cfg.batch_size])
@@ -398,6 +407,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             "train.init_from": cfg.init_from.name if cfg.init_from else "",
             "train.architecture": model.architecture,
             "train.mirror": "true" if cfg.mirror else "false",
+            "train.samples_per_epoch": per_epoch,
             **envelope_metadata(samples, cfg.d_star_range),
         },
     )
@@ -418,6 +428,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         "epochs": cfg.epochs,
         "samples": len(samples),
         "train_samples": int(len(train_idx)),
+        "samples_per_epoch": int(per_epoch),
         "val_samples": int(len(val_idx)),
         "final_train_loss": final_train,
         "final_val_loss": reported_val,

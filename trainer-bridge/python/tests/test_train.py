@@ -279,3 +279,32 @@ def test_an_onnx_not_written_by_the_trainer_cannot_seed_training(trained, tmp_pa
     garbage.write_bytes(b"not a model")
     with pytest.raises(train.TrainError, match="not a readable ONNX file"):
         train.load_checkpoint(garbage)
+
+
+def test_an_epoch_can_draw_a_fixed_number_of_samples(trained, tmp_path):
+    train_samples = trained["report"]["train_samples"]
+    config = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "drawn.onnx", epochs=2, batch_size=16, lr=1e-3,
+        device="cpu", samples_per_epoch=40,
+    )
+    lines = []
+    report = train.run(config, log=lines.append)
+    assert report["samples_per_epoch"] == 40 < train_samples
+    assert any("2 epochs of 40 samples drawn at random" in line for line in lines)
+    meta = {p.key: p.value for p in onnx.load(str(tmp_path / "drawn.onnx")).metadata_props}
+    assert meta["formation.train.samples_per_epoch"] == "40"
+    # More than the training split holds is every sample; the full run records its own size.
+    more = train.run(
+        train.TrainConfig(data=[trained["data"]], out=tmp_path / "all.onnx", epochs=1, batch_size=16,
+                          lr=1e-3, device="cpu", samples_per_epoch=10**9),
+        log=lambda _: None,
+    )
+    assert more["samples_per_epoch"] == train_samples == trained["report"]["samples_per_epoch"]
+
+
+def test_a_zero_sample_epoch_is_a_usage_error(trained, tmp_path):
+    config = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "none.onnx", epochs=1, device="cpu", samples_per_epoch=0,
+    )
+    with pytest.raises(train.TrainError, match="samples-per-epoch must be >= 1"):
+        train.run(config, log=lambda _: None)
