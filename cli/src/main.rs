@@ -7,7 +7,10 @@ fn main() -> ExitCode {
     match formation::main_with_args() {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("error: {err:#}");
+            eprintln!(
+                "error: {}",
+                formation_proto::errors::chain_text(err.as_ref())
+            );
             ExitCode::from(2)
         }
     }

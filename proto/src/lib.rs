@@ -4,6 +4,7 @@
 //!   is given, LIDAR and occupancy settings). They carry no behaviour beyond validation.
 //! * [`neighbours`]: the formation's neighbour rule as a value (its computation is the world's).
 //! * [`files`]: reading a user's file only if it is a regular file within a size limit.
+//! * [`errors`]: an error and its sources as one line, each cause printed once.
 //! * [`control`]: the [`control::Controller`] seam between an episode loop and what decides the
 //!   wheel commands, with its [`control::Observation`] and [`control::ControllerError`].
 //! * [`auth`]: the launch secret, with which an agent proves that its own launch started it.
@@ -15,6 +16,7 @@
 
 pub mod auth;
 pub mod control;
+pub mod errors;
 pub mod files;
 pub mod neighbours;
 pub mod types;

@@ -102,6 +102,38 @@ fn bad_models_and_a_missing_runtime_library_are_explained() {
         fails_cleanly(&args, env, needles);
     };
     eval(&dir.path().join("missing.onnx"), &[], &["not found"]);
+    // A cause that a message already names is printed once, not once per layer of the chain.
+    let missing = dir.path().join("missing.onnx").display().to_string();
+    let nodata = dir.path().join("nodata").display().to_string();
+    let out = dir.path().join("dagger.onnx").display().to_string();
+    let scenario = repo_root()
+        .join("scenarios/collect.toml")
+        .display()
+        .to_string();
+    let eval_scenario = repo_root()
+        .join("scenarios/table1.toml")
+        .display()
+        .to_string();
+    let args = [
+        "dagger",
+        "--scenario",
+        scenario.as_str(),
+        "--eval-scenario",
+        eval_scenario.as_str(),
+        "--data",
+        nodata.as_str(),
+        "--init-model",
+        missing.as_str(),
+        "--out",
+        out.as_str(),
+    ];
+    let finished = fails_cleanly(&args, &[], &["missing.onnx", "not found"]);
+    assert_eq!(
+        finished.stderr().matches("not found").count(),
+        1,
+        "{}",
+        finished.describe()
+    );
     eval(&wrong_shape, &[], &["aux"]);
     eval(&garbage, &[], &["garbage.onnx"]);
     eval(

@@ -716,7 +716,10 @@ fn keep_partial_runs(
                 table.incomplete_runs.len()
             );
         }
-        Err(e) => eprintln!("formation: could not write the summary of the partial runs: {e:#}"),
+        Err(e) => eprintln!(
+            "formation: could not write the summary of the partial runs: {}",
+            formation_proto::errors::chain_text(e.as_ref())
+        ),
     }
 }
 
@@ -762,8 +765,9 @@ pub fn recover_run_dirs(dir: &Path) {
                 table.incomplete_runs.len()
             ),
             Err(e) => eprintln!(
-                "formation: could not summarize the run logs in {}: {e:#}",
-                out.display()
+                "formation: could not summarize the run logs in {}: {}",
+                out.display(),
+                formation_proto::errors::chain_text(e.as_ref())
             ),
         }
     }

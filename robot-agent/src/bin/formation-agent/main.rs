@@ -114,7 +114,10 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Err(e) => {
-            eprintln!("{who}: error: {e:#}");
+            eprintln!(
+                "{who}: error: {}",
+                formation_proto::errors::chain_text(e.as_ref())
+            );
             ExitCode::from(2)
         }
     }

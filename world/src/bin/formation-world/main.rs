@@ -141,7 +141,10 @@ fn main() -> ExitCode {
             ExitCode::from(130)
         }
         Err(e) => {
-            eprintln!("formation-world: error: {e:#}");
+            eprintln!(
+                "formation-world: error: {}",
+                formation_proto::errors::chain_text(e.as_ref())
+            );
             ExitCode::from(2)
         }
     }
