@@ -185,16 +185,8 @@ pub struct NetworkArgs {
     pub mirror: bool,
     /// Train each epoch on this many training samples drawn at random, not all of them: an
     /// epoch then costs the same however large the data (a DAgger dataset) grows.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
-    pub samples_per_epoch: Option<u64>,
-}
-
-impl NetworkArgs {
-    /// `--samples-per-epoch` as a count (more than memory can hold means every sample).
-    pub fn samples_per_epoch(&self) -> Option<usize> {
-        self.samples_per_epoch
-            .map(|count| usize::try_from(count).unwrap_or(usize::MAX))
-    }
+    #[arg(long)]
+    pub samples_per_epoch: Option<std::num::NonZeroUsize>,
 }
 
 /// `formation dagger`.

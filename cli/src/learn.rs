@@ -32,7 +32,10 @@ pub fn train_command(args: &TrainArgs) -> anyhow::Result<()> {
         d_star_range: args.d_star_range,
         architecture: args.network.architecture,
         mirror: args.network.mirror,
-        samples_per_epoch: args.network.samples_per_epoch(),
+        samples_per_epoch: args
+            .network
+            .samples_per_epoch
+            .map(std::num::NonZeroUsize::get),
         ..TrainOptions::default()
     };
     let report = run_training(&opts)?;
@@ -78,7 +81,10 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
             d_star_range,
             architecture: args.network.architecture,
             mirror: args.network.mirror,
-            samples_per_epoch: args.network.samples_per_epoch(),
+            samples_per_epoch: args
+                .network
+                .samples_per_epoch
+                .map(std::num::NonZeroUsize::get),
             ..TrainOptions::default()
         },
         eval_scenario,

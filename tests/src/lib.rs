@@ -4,10 +4,11 @@
 //!
 //! How the tests get the executables: integration tests can only name binaries of their own
 //! package (`CARGO_BIN_EXE_*`), and `formation-world`, `formation-agent` and `formation` live in
-//! other packages. [`binaries`] therefore runs `cargo build` for those three binaries once per
+//! other packages. [`binaries`] therefore builds those three binaries once per
 //! test process, in the same profile as the test itself (a no-op when they are up to date), and
 //! takes them from `target/<profile>/`, the directory above the test executable. Set
 //! `FORMATION_TESTS_NO_BUILD=1` to skip the build (e.g. when the binaries were built beforehand).
+//! The build is `cargo runtime-bins`, an alias in `.cargo/config.toml`.
 //! That build is not a no-op on a cold target directory even after `cargo test` compiled
 //! everything: a plain build of the three packages resolves dependency features without the
 //! workspace's dev-dependencies (`bitflags`, `zerocopy`, `regex-automata` differ), so much of the
@@ -256,21 +257,8 @@ fn build_binaries(profile_dir: &Path) {
         .and_then(|n| n.to_str())
         .unwrap_or("debug");
     let mut command = Command::new(cargo);
-    command.current_dir(repo_root()).args([
-        "build",
-        "--bin",
-        "formation-world",
-        "--bin",
-        "formation-agent",
-        "--bin",
-        "formation",
-        "-p",
-        "formation-world",
-        "-p",
-        "formation-agent",
-        "-p",
-        "formation-cli",
-    ]);
+    // The alias is defined in `.cargo/config.toml`, shared with scripts/test-all.
+    command.current_dir(repo_root()).arg("runtime-bins");
     match profile {
         "debug" => {}
         "release" => {
