@@ -24,6 +24,12 @@ not the paper's 144.
 It costs about twice the paper's arithmetic per image. The paper's 32-unit head has to hold every
 neighbour's bearing and distance error at once; with teams of 5 to 16 robots it underfits (its
 training loss stops falling), which is what the wide head is for.
+
+``mirror_averaged=True`` (what ``--mirror`` trains) makes either network exactly symmetric under
+the task's reflection about the robot's heading axis: the output is the mean of the network on the
+input and, reflected back, on the reflected input (see :func:`mirror_inputs`). A policy that is
+only trained on reflected samples is symmetric only as far as it has learned to be; the average
+removes the asymmetric part of its error, at twice the arithmetic per image.
 """
 
 from __future__ import annotations
@@ -52,10 +58,17 @@ ARCHITECTURES: dict[str, tuple[int, tuple[int, ...]]] = {
 }
 
 
+def mirror_inputs(occupancy: torch.Tensor, aux: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Reflects inputs about the robot's heading axis (y -> -y): the image's rows reverse and the
+    heading error delta_phi changes sign; d* stays. The matching output reflection swaps the
+    left and right wheels."""
+    return occupancy.flip(2), torch.stack([-aux[:, 0], aux[:, 1]], dim=1)
+
+
 class PolicyNet(nn.Module):
     """The CNN mapping an occupancy image and (delta_phi, d*) to (left, right) wheel speeds."""
 
-    def __init__(self, size_px: int = PAPER_SIZE_PX, architecture: str = "paper"):
+    def __init__(self, size_px: int = PAPER_SIZE_PX, architecture: str = "paper", mirror_averaged: bool = False):
         super().__init__()
         if architecture not in ARCHITECTURES:
             names = ", ".join(ARCHITECTURES)
@@ -65,6 +78,7 @@ class PolicyNet(nn.Module):
             raise ValueError(f"a {size_px} x {size_px} image is too small for the network (needs >= 22 px)")
         self.size_px = size_px
         self.architecture = architecture
+        self.mirror_averaged = mirror_averaged
         channels, hidden = ARCHITECTURES[architecture]
         self.features = nn.Sequential(
             nn.Conv2d(1, 32, kernel_size=8, stride=4, padding=1),
@@ -84,5 +98,13 @@ class PolicyNet(nn.Module):
         layers.append(nn.Linear(width, 2))
         self.head = nn.Sequential(*layers)
 
-    def forward(self, occupancy: torch.Tensor, aux: torch.Tensor) -> torch.Tensor:
+    def raw(self, occupancy: torch.Tensor, aux: torch.Tensor) -> torch.Tensor:
+        """The network itself, without the mirror average."""
         return self.head(torch.cat([self.features(occupancy), aux], dim=1))
+
+    def forward(self, occupancy: torch.Tensor, aux: torch.Tensor) -> torch.Tensor:
+        wheels = self.raw(occupancy, aux)
+        if not self.mirror_averaged:
+            return wheels
+        reflected = self.raw(*mirror_inputs(occupancy, aux)).flip(1)
+        return 0.5 * (wheels + reflected)

@@ -29,7 +29,7 @@ from torch import nn
 
 from . import dataset as ds
 from . import export
-from .model import PolicyNet
+from .model import PolicyNet, mirror_inputs
 
 CHECKPOINT_FORMAT = "formation-checkpoint/1"
 REPORT_PREFIX = "FORMATION_TRAIN_REPORT "
@@ -61,7 +61,9 @@ class TrainConfig:
     d_star_range: tuple[float, float] | None = None
     # The network (a key of model.ARCHITECTURES); None: the warm start's, else the paper's.
     architecture: str | None = None
-    # Mirror half of every batch about the robot's heading axis (see mirror_batch).
+    # Use the task's mirror symmetry: mirror half of every batch about the robot's heading axis
+    # (see mirror_batch), and make the model average its output over the reflection
+    # (PolicyNet.mirror_averaged), so the exported policy is exactly symmetric.
     mirror: bool = False
     # Train each epoch on this many training samples drawn afresh at random (without
     # replacement); None: every training sample. Keeps an epoch's cost fixed as a DAgger
@@ -159,9 +161,10 @@ def checkpoint_from_onnx(path: Path) -> dict:
     if meta.get("formation.format") != export.MODEL_FORMAT:
         raise foreign(f"its formation.format is {meta.get('formation.format')!r}, not {export.MODEL_FORMAT!r}")
     architecture = meta.get("formation.train.architecture", "paper")
+    mirror_averaged = meta.get("formation.policy.mirror_averaged") == "true"
     try:
         size_px = int(meta["formation.occupancy.size_px"])
-        model = PolicyNet(size_px, architecture)
+        model = PolicyNet(size_px, architecture, mirror_averaged)
     except (KeyError, ValueError) as e:
         raise foreign(f"its metadata does not describe a network this trainer builds ({e})") from e
     weights = {init.name: numpy_helper.to_array(init) for init in graph.graph.initializer}
@@ -176,6 +179,7 @@ def checkpoint_from_onnx(path: Path) -> dict:
         "format": CHECKPOINT_FORMAT,
         "size_px": size_px,
         "architecture": architecture,
+        "mirror_averaged": mirror_averaged,
         "model_state": state,
         "metadata": meta,
     }
@@ -188,6 +192,7 @@ def save_checkpoint(path: Path, model: PolicyNet, optimizer, metadata: dict[str,
             "format": CHECKPOINT_FORMAT,
             "size_px": model.size_px,
             "architecture": model.architecture,
+            "mirror_averaged": model.mirror_averaged,
             "model_state": model.state_dict(),
             "optimizer_state": optimizer.state_dict(),
             "metadata": metadata,
@@ -204,8 +209,11 @@ def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> Polic
             f"the checkpoint was trained on {checkpoint['size_px']} px images but the data has {size_px} px: "
             "warm-start only from a model trained on the same occupancy settings"
         )
-    # Checkpoints from before the architecture choice hold the paper's network.
-    model = PolicyNet(checkpoint["size_px"], checkpoint.get("architecture", "paper"))
+    # Checkpoints from before the architecture choice hold the paper's network, and those from
+    # before the mirror average a network without it.
+    model = PolicyNet(
+        checkpoint["size_px"], checkpoint.get("architecture", "paper"), checkpoint.get("mirror_averaged", False)
+    )
     model.load_state_dict(checkpoint["model_state"])
     return model
 
@@ -224,9 +232,9 @@ def mirror_batch(occupancy: torch.Tensor, aux: torch.Tensor, wheels: torch.Tenso
     d* stays, and the expert's turn reverses, which swaps the left and right wheel speeds. Training
     on both halves doubles the distinct views and builds the symmetry into the policy.
     """
-    occupancy = torch.where(flip[:, None, None, None], occupancy.flip(2), occupancy)
-    sign = torch.where(flip, -1.0, 1.0)
-    aux = torch.stack([aux[:, 0] * sign, aux[:, 1]], dim=1)
+    mirrored_occupancy, mirrored_aux = mirror_inputs(occupancy, aux)
+    occupancy = torch.where(flip[:, None, None, None], mirrored_occupancy, occupancy)
+    aux = torch.where(flip[:, None], mirrored_aux, aux)
     wheels = torch.where(flip[:, None], wheels.flip(1), wheels)
     return occupancy, aux, wheels
 
@@ -337,6 +345,12 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             model = PolicyNet(samples.size_px, cfg.architecture or "paper")
         except ValueError as e:
             raise TrainError(str(e)) from e
+    if cfg.mirror:
+        model.mirror_averaged = True
+    # With mirrored batches the network itself is fitted to both halves of the reflection. Its
+    # expected loss bounds that of its mirror average from above (the square of a mean error is
+    # at most the mean of the squares), at half the arithmetic of fitting the average.
+    fitted = model.raw if cfg.mirror else model
     model.to(device)
     tensors = {
         "occupancy": torch.from_numpy(samples.occupancy).to(device),
@@ -352,7 +366,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     log(
         f"training on {len(samples)} samples ({len(train_idx)} train / {len(val_idx)} validation) "
         f"from {', '.join(str(d) for d in cfg.data)} on {device} ({torch.get_num_threads()} threads); "
-        f"{model.architecture} network{', mirrored' if cfg.mirror else ''}, batch {cfg.batch_size}, lr {cfg.lr:g}, "
+        f"{model.architecture} network{', mirrored' if cfg.mirror else ''}{', mirror-averaged' if model.mirror_averaged else ''}, batch {cfg.batch_size}, lr {cfg.lr:g}, "
         f"{cfg.epochs} epochs{drawn}"
     )
 
@@ -368,7 +382,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             if cfg.mirror:
                 flip = torch.rand(len(aux), generator=shuffle) < 0.5
                 occupancy, aux, wheels = mirror_batch(occupancy, aux, wheels, flip.to(device))
-            loss = nn.functional.mse_loss(model(occupancy, aux), wheels)
+            loss = nn.functional.mse_loss(fitted(occupancy, aux), wheels)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
@@ -407,6 +421,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             "train.init_from": cfg.init_from.name if cfg.init_from else "",
             "train.architecture": model.architecture,
             "train.mirror": "true" if cfg.mirror else "false",
+            "policy.mirror_averaged": "true" if model.mirror_averaged else "false",
             "train.samples_per_epoch": per_epoch,
             **envelope_metadata(samples, cfg.d_star_range),
         },

@@ -63,3 +63,26 @@ def test_the_wide_network_keeps_the_convolution_geometry_and_widens_the_rest():
 def test_an_unknown_architecture_is_refused_by_name():
     with pytest.raises(ValueError, match="unknown network architecture 'huge'"):
         PolicyNet(50, "huge")
+
+
+def _reflect(occupancy, aux):
+    return occupancy.flip(2), torch.stack([-aux[:, 0], aux[:, 1]], dim=1)
+
+
+@pytest.mark.parametrize("architecture", ["paper", "wide"])
+def test_the_mirror_average_makes_the_network_exactly_symmetric(architecture):
+    torch.manual_seed(1)
+    occupancy = (torch.rand(6, 1, 50, 50) < 0.05).float()
+    aux = torch.randn(6, 2)
+    plain = PolicyNet(50, architecture)
+    averaged = PolicyNet(50, architecture, mirror_averaged=True)
+    averaged.load_state_dict(plain.state_dict())
+    with torch.no_grad():
+        # Random weights are not symmetric by themselves ...
+        assert not torch.allclose(plain(*_reflect(occupancy, aux)), plain(occupancy, aux).flip(1), atol=1e-4)
+        # ... their mirror average is: reflecting the input swaps the wheels, and nothing else.
+        torch.testing.assert_close(averaged(*_reflect(occupancy, aux)), averaged(occupancy, aux).flip(1))
+        # It is the mean of the network and its reflection, with the same weights.
+        expected = 0.5 * (plain(occupancy, aux) + plain(*_reflect(occupancy, aux)).flip(1))
+        torch.testing.assert_close(averaged(occupancy, aux), expected)
+        torch.testing.assert_close(averaged.raw(occupancy, aux), plain(occupancy, aux))

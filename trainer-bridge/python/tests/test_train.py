@@ -308,3 +308,43 @@ def test_a_zero_sample_epoch_is_a_usage_error(trained, tmp_path):
     )
     with pytest.raises(train.TrainError, match="samples-per-epoch must be >= 1"):
         train.run(config, log=lambda _: None)
+
+
+def test_a_mirrored_model_is_exactly_symmetric_in_onnxruntime_and_stays_so_when_warm_started(trained, tmp_path):
+    config = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "mirror.onnx", epochs=1, batch_size=16, lr=1e-3,
+        device="cpu", mirror=True,
+    )
+    train.run(config, log=lambda _: None)
+    meta = {p.key: p.value for p in onnx.load(str(tmp_path / "mirror.onnx")).metadata_props}
+    assert meta["formation.policy.mirror_averaged"] == "true"
+    plain = {p.key: p.value for p in onnx.load(str(trained["out"])).metadata_props}
+    assert plain["formation.policy.mirror_averaged"] == "false"
+
+    rng = np.random.default_rng(3)
+    occupancy = (rng.random((8, 1, 50, 50)) < 0.05).astype(np.float32)
+    aux = np.stack([rng.uniform(-3, 3, 8), rng.uniform(0.8, 2.5, 8)], 1).astype(np.float32)
+    reflected = (np.ascontiguousarray(occupancy[:, :, ::-1, :]), aux * np.array([-1, 1], dtype=np.float32))
+
+    def wheels(path, occupancy, aux):
+        session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+        return session.run(["wheels"], {"occupancy": occupancy, "aux": aux})[0]
+
+    symmetric = tmp_path / "mirror.onnx"
+    np.testing.assert_allclose(wheels(symmetric, *reflected), wheels(symmetric, occupancy, aux)[:, ::-1], atol=1e-6)
+    # The plain model is not (one epoch on a tiny set does not teach the symmetry).
+    assert not np.allclose(wheels(trained["out"], *reflected), wheels(trained["out"], occupancy, aux)[:, ::-1], atol=1e-4)
+
+    # A warm start from the .onnx alone, without --mirror, keeps the average and its weights.
+    alone = tmp_path / "shipped.onnx"
+    alone.write_bytes(symmetric.read_bytes())
+    seeded = train.model_from_checkpoint(train.load_checkpoint(alone))
+    assert seeded.mirror_averaged
+    tuned_config = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "tuned.onnx", epochs=1, batch_size=16, lr=1e-3,
+        device="cpu", init_from=alone,
+    )
+    train.run(tuned_config, log=lambda _: None)
+    assert train.model_from_checkpoint(train.load_checkpoint(tmp_path / "tuned.pt")).mirror_averaged
+    tuned = tmp_path / "tuned.onnx"
+    np.testing.assert_allclose(wheels(tuned, *reflected), wheels(tuned, occupancy, aux)[:, ::-1], atol=1e-6)
