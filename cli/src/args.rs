@@ -179,8 +179,10 @@ pub struct NetworkArgs {
     /// (`--init-from`, or `--init-model`'s checkpoint), else `paper`.
     #[arg(long, value_parser = architecture)]
     pub architecture: Option<Architecture>,
-    /// Also train on every sample reflected about the robot's heading axis (an exact symmetry
-    /// of the task: the image's rows reversed, Δφ negated, the wheels swapped).
+    /// Use the task's exact symmetry under reflection about the robot's heading axis (the
+    /// image's rows reversed, Δφ negated, the wheels swapped): train on reflected samples too,
+    /// and export a policy whose output is averaged over the reflection, so it is exactly
+    /// symmetric.
     #[arg(long)]
     pub mirror: bool,
     /// Train each epoch on this many training samples drawn at random, not all of them: an

@@ -13,5 +13,5 @@ pub mod collect;
 pub mod controller;
 
 pub use controller::{
-    ExpertController, ExpertGains, InvalidGains, expert_commands, expert_commands_among,
+    ExpertController, ExpertGains, InvalidGains, PairPoints, expert_commands, expert_commands_among,
 };

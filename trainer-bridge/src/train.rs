@@ -61,8 +61,10 @@ pub struct TrainOptions {
     pub d_star_range: Option<(f64, f64)>,
     /// The network to train; `None`: the warm start's, or the paper's when training from scratch.
     pub architecture: Option<Architecture>,
-    /// Also train on every sample reflected about the robot's heading axis (rows of the image
-    /// reversed, Δφ negated, wheels swapped): an exact symmetry of the task.
+    /// Use the task's exact symmetry under reflection about the robot's heading axis (rows of
+    /// the image reversed, Δφ negated, wheels swapped): train on reflected samples too, and
+    /// export a network whose output is averaged over the reflection, so the policy is exactly
+    /// symmetric (metadata `formation.policy.mirror_averaged`).
     pub mirror: bool,
     /// Train each epoch on this many training samples, drawn afresh at random without
     /// replacement; `None`: every training sample. Keeps an epoch's cost fixed as a DAgger
