@@ -86,7 +86,8 @@ pub enum DaggerEvent {
 }
 
 /// Runs DAgger; returns the DAgger curve (the closed-loop figures of iteration 0, 1, ...), which is
-/// also written as `<stem>-dagger-curve.json` beside `out`.
+/// also written as `<stem>-dagger-curve.json` beside `out`, rewritten after every evaluation so
+/// that an interrupted run keeps the curve of the iterations it finished.
 pub fn run_dagger(
     opts: &DaggerOptions,
     on_event: &(dyn Fn(DaggerEvent) + Sync),
@@ -145,7 +146,9 @@ pub fn run_dagger(
             m0
         }
     };
+    let curve_path = out_dir.join(format!("{stem}-dagger-curve.json"));
     let mut curve = vec![evaluate_iteration(opts, 0, &model, on_event)?];
+    write_curve(&curve_path, &curve)?;
     for k in 1..=opts.iterations {
         let beta = opts.beta.powi(k as i32);
         let samples = rollout_and_label(opts, &scenarios, k, beta, &model, on_event)?;
@@ -163,6 +166,7 @@ pub fn run_dagger(
         train_to(next.clone(), Some(warm_start_of(&model)))?;
         model = next;
         curve.push(evaluate_iteration(opts, k, &model, on_event)?);
+        write_curve(&curve_path, &curve)?;
     }
     if opts.iterations == 0 && model != opts.out {
         std::fs::copy(&model, &opts.out).map_err(|source| LearningError::Io {
@@ -171,18 +175,20 @@ pub fn run_dagger(
             source,
         })?;
     }
-    let curve_path = out_dir.join(format!("{stem}-dagger-curve.json"));
-    let json = serde_json::to_vec_pretty(&curve).map_err(|e| LearningError::Io {
+    Ok(curve)
+}
+
+/// Writes the curve so far to `path`, atomically: a reader sees the previous curve or this one.
+fn write_curve(path: &Path, curve: &[EvalOutput]) -> Result<(), LearningError> {
+    let json = serde_json::to_vec_pretty(curve).map_err(|e| LearningError::Io {
         what: "writing",
-        path: curve_path.clone(),
+        path: path.to_path_buf(),
         source: e.into(),
     })?;
-    std::fs::write(&curve_path, json).map_err(|source| LearningError::Io {
-        what: "writing",
-        path: curve_path,
+    formation_world::runlog::write_atomic(path, &json).map_err(|source| LearningError::Curve {
+        path: path.to_path_buf(),
         source,
-    })?;
-    Ok(curve)
+    })
 }
 
 /// What the next iteration trains on from: the checkpoint written beside `model` when there is
@@ -394,6 +400,26 @@ mod tests {
             read.push(samples);
         }
         assert_eq!(read[0], read[1], "the same settings give the same samples");
+    }
+
+    #[test]
+    fn a_run_that_fails_in_training_keeps_the_curve_of_what_it_evaluated() {
+        let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
+        let base = scenario(3);
+        let dir = tempfile::tempdir().unwrap();
+        let data = empty_dataset(dir.path(), &base);
+        let mut opts = options(data, &base);
+        opts.init_model = Some(model);
+        opts.out = dir.path().join("models").join("m.onnx");
+        // Iteration 1's training cannot start: there is no such interpreter.
+        opts.training.python = Some(dir.path().join("no-such-python"));
+        let err = run_dagger(&opts, &|_| {}).unwrap_err();
+        assert!(matches!(err, LearningError::Train { .. }), "{err}");
+        let text = std::fs::read_to_string(dir.path().join("models").join("m-dagger-curve.json"))
+            .expect("the curve of iteration 0 was written before iteration 1 failed");
+        let curve: Vec<EvalOutput> = serde_json::from_str(&text).unwrap();
+        assert_eq!(curve.len(), 1);
+        assert_eq!(curve[0].summary.runs, 1);
     }
 
     #[test]

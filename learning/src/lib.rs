@@ -87,6 +87,15 @@ pub enum LearningError {
         #[source]
         source: std::io::Error,
     },
+    /// The DAgger curve could not be written.
+    #[error("cannot write the DAgger curve {}", path.display())]
+    Curve {
+        /// The curve's file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: formation_world::runlog::RunLogError,
+    },
     /// A setting is out of range.
     #[error("{setting} {problem}")]
     Setting {
