@@ -47,32 +47,13 @@ pub fn resolve_model(given: Option<&Path>) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
-/// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename),
-/// creating parent directories. A failed write (e.g. a full disk) removes its temporary file.
+/// Writes `bytes` to `path` atomically ([`formation_proto::files::write_atomic`]), creating
+/// parent directories. A failed write (e.g. a full disk) leaves the old file and no temporary one.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("creating directory {}", dir.display()))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    let written = std::fs::write(&tmp, bytes)
-        .with_context(|| {
-            format!(
-                "writing {} (is the disk full? free some space or choose another output directory)",
-                tmp.display()
-            )
-        })
-        .and_then(|()| {
-            std::fs::rename(&tmp, path).with_context(|| format!("renaming into {}", path.display()))
-        });
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    written
+    formation_proto::files::write_atomic(path, bytes).with_context(|| {
+        format!(
+            "writing {} (is the disk full? free some space or choose another output directory)",
+            path.display()
+        )
+    })
 }

@@ -3,6 +3,10 @@
 //! again on the opened file (it may have been replaced in between), and read with a bound whatever
 //! the metadata said. Scenarios and models both go through here; each caller turns a
 //! [`FileRefusal`] into its own typed error that names the path and the fix.
+//!
+//! Writing one: [`write_atomic`] writes through a synced temporary file renamed into place, so a
+//! reader (or a crash) sees the old file or the new one, never half of one. Every file formation
+//! writes whole (logs, summaries, datasets' manifests, curves, reports) goes through it.
 
 use std::io::Read as _;
 use std::path::Path;
@@ -80,6 +84,33 @@ pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
     }
 }
 
+/// Writes `bytes` to `path` atomically: a temporary file in the same directory (created if
+/// needed), synced, then renamed over `path`. On failure the temporary file is removed and `path`
+/// keeps what it held. The error is the operating system's; callers name `path` in their own.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write as _;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    let written = (|| {
+        let mut file = std::fs::File::create(&tmp)?;
+        file.write_all(bytes)?;
+        file.sync_data()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -111,6 +142,28 @@ mod tests {
             read_bounded(&dir.join("missing"), 1),
             Err(FileRefusal::Io(e)) if e.kind() == std::io::ErrorKind::NotFound
         ));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn an_atomic_write_replaces_the_whole_file_or_leaves_it_and_no_temporary_behind() {
+        let dir = std::env::temp_dir().join(format!("formation-write-{}", std::process::id()));
+        let path = dir.join("nested").join("out.json");
+        write_atomic(&path, b"first").unwrap();
+        write_atomic(&path, b"second").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"second");
+        // A directory where the file should go: the rename fails, the directory stays, and the
+        // temporary file is gone.
+        let blocked = dir.join("blocked");
+        std::fs::create_dir_all(blocked.join("inside")).unwrap();
+        assert!(write_atomic(&blocked, b"x").is_err());
+        assert!(blocked.join("inside").is_dir());
+        let leftovers: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".tmp-"))
+            .collect();
+        assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

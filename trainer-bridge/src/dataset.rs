@@ -20,7 +20,6 @@
 
 use std::collections::HashMap;
 use std::fs;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use formation_proto::{LidarSpec, OccupancySpec};
@@ -419,18 +418,9 @@ fn shard_index(file: &str) -> Option<usize> {
         .ok()
 }
 
-/// Writes `bytes` to `path` atomically: a temporary file in the same directory, synced, renamed.
+/// Writes `bytes` to `path` atomically ([`formation_proto::files::write_atomic`]).
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), DatasetError> {
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let temp = path.with_file_name(format!(".{file_name}.tmp"));
-    let mut file = fs::File::create(&temp).map_err(io_error("creating", &temp))?;
-    file.write_all(bytes).map_err(io_error("writing", &temp))?;
-    file.sync_all().map_err(io_error("syncing", &temp))?;
-    drop(file);
-    fs::rename(&temp, path).map_err(io_error("renaming into place", path))
+    formation_proto::files::write_atomic(path, bytes).map_err(io_error("writing", path))
 }
 
 fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<(), DatasetError> {

@@ -188,31 +188,10 @@ pub fn journal_path(out: &Path, index: usize) -> PathBuf {
     out.join("runs").join(format!("run-{index:04}.journal"))
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same directory (created if needed),
-/// renamed into place. On failure the temporary file is removed.
+/// Writes `bytes` to `path` with [`formation_proto::files::write_atomic`]: the whole file or,
+/// on failure, the old one and no temporary file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RunLogError> {
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    fs::create_dir_all(dir).map_err(write_error(dir))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    // Errors name the file the caller asked for, not the temporary one.
-    let written = (|| {
-        let mut file = File::create(&tmp)?;
-        file.write_all(bytes)?;
-        file.sync_data()?;
-        fs::rename(&tmp, path)
-    })()
-    .map_err(write_error(path));
-    if written.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    written
+    formation_proto::files::write_atomic(path, bytes).map_err(write_error(path))
 }
 
 /// Writes a file of one of [`formation_schema`]'s formats (a run or timing log) as JSON, with its
