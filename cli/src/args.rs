@@ -189,6 +189,10 @@ pub struct NetworkArgs {
     /// epoch then costs the same however large the data (a DAgger dataset) grows.
     #[arg(long)]
     pub samples_per_epoch: Option<std::num::NonZeroUsize>,
+    /// Weight each sample's squared error by `(d_ref / d*)²` (mean weight 1): the success check
+    /// judges distances relative to d*, so this fits small-d* teams as tightly as large ones.
+    #[arg(long)]
+    pub relative_loss: bool,
 }
 
 /// `formation dagger`.

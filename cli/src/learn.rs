@@ -32,6 +32,7 @@ pub fn train_command(args: &TrainArgs) -> anyhow::Result<()> {
         d_star_range: args.d_star_range,
         architecture: args.network.architecture,
         mirror: args.network.mirror,
+        relative_loss: args.network.relative_loss,
         samples_per_epoch: args
             .network
             .samples_per_epoch
@@ -81,6 +82,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
             d_star_range,
             architecture: args.network.architecture,
             mirror: args.network.mirror,
+            relative_loss: args.network.relative_loss,
             samples_per_epoch: args
                 .network
                 .samples_per_epoch

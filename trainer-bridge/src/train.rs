@@ -70,6 +70,11 @@ pub struct TrainOptions {
     /// replacement; `None`: every training sample. Keeps an epoch's cost fixed as a DAgger
     /// dataset grows, while every sample keeps the same chance of being drawn.
     pub samples_per_epoch: Option<usize>,
+    /// Weight each sample's squared error by `(d_ref / d*)²` (`d_ref` makes the mean weight 1),
+    /// so a team at small d* is fitted as tightly, relative to d*, as one at large d*: the
+    /// success check is relative, a wheel-speed error is in metres (metadata
+    /// `formation.train.relative_loss`).
+    pub relative_loss: bool,
 }
 
 /// The policy networks the trainer can build (`formation_trainer.model.ARCHITECTURES`). Both take
@@ -131,6 +136,7 @@ impl Default for TrainOptions {
             architecture: None,
             mirror: false,
             samples_per_epoch: None,
+            relative_loss: false,
         }
     }
 }
@@ -389,6 +395,9 @@ fn trainer_args(opts: &TrainOptions) -> Vec<std::ffi::OsString> {
     if opts.mirror {
         args.push("--mirror".into());
     }
+    if opts.relative_loss {
+        args.push("--relative-loss".into());
+    }
     args
 }
 
@@ -586,6 +595,7 @@ mod tests {
             architecture: Some(Architecture::Wide),
             mirror: true,
             samples_per_epoch: Some(200_000),
+            relative_loss: true,
             ..opts()
         })
         .into_iter()
@@ -608,6 +618,7 @@ mod tests {
             "--architecture wide",
             "--samples-per-epoch 200000",
             " --mirror",
+            " --relative-loss",
         ] {
             assert!(joined.contains(part), "{part} missing in {joined}");
         }

@@ -54,6 +54,12 @@ def _parser() -> argparse.ArgumentParser:
         help="train each epoch on this many training samples drawn at random (default: all of them)",
     )
 
+    train.add_argument(
+        "--relative-loss",
+        action="store_true",
+        help="weight each sample's squared error by (d_ref/d*)^2, so small d* is fitted as tightly, relative to d*, as large",
+    )
+
     exp = commands.add_parser("export", help="export a .pt checkpoint to ONNX (with the parity check)")
     exp.add_argument("--checkpoint", type=Path, required=True)
     exp.add_argument("--out", type=Path, required=True, help="ONNX model to write")
@@ -81,6 +87,7 @@ def _train(args) -> None:
         architecture=args.architecture,
         mirror=args.mirror,
         samples_per_epoch=args.samples_per_epoch,
+        relative_loss=args.relative_loss,
     )
     report = train.run(config, log=lambda line: print(line, flush=True))
     print(train.report_line(report), flush=True)

@@ -1,5 +1,11 @@
 """Behaviour cloning of the expert: MSE on (left, right) wheel speeds, Adam, seeded.
 
+With ``relative_loss`` each sample's squared error is weighted by ``(d_ref / d*)**2``, where
+``d_ref`` makes the training samples' mean weight 1 (see :func:`relative_weights`). The success
+check judges distances relative to d*, and a wheel-speed error moves a robot by the same metres
+whatever d* is, so without the weight a team at d* = 0.8 m is fitted 10 times less tightly, in the
+check's terms, than one at 2.5 m. Train and validation losses are then both weighted.
+
 Validation holds out whole runs (every sample of a run is in the same split: consecutive ticks are
 nearly identical, so a per-sample split would measure memorisation). Images stay uint8 in memory
 and become float per batch. After training, beside ``out`` (``<stem>.onnx``) it writes:
@@ -69,6 +75,8 @@ class TrainConfig:
     # replacement); None: every training sample. Keeps an epoch's cost fixed as a DAgger
     # dataset grows, while every sample keeps the same chance of being drawn.
     samples_per_epoch: int | None = None
+    # Weight each sample's squared error by (d_ref / d*)^2 (see relative_weights).
+    relative_loss: bool = False
 
 
 def artifact_paths(out: Path) -> dict[str, Path]:
@@ -239,16 +247,35 @@ def mirror_batch(occupancy: torch.Tensor, aux: torch.Tensor, wheels: torch.Tenso
     return occupancy, aux, wheels
 
 
+def relative_weights(d_star: np.ndarray, train_idx: np.ndarray) -> np.ndarray:
+    """Per-sample loss weights ``(d_ref / d*)**2``, ``d_ref`` chosen so that the training samples'
+    mean weight is 1 (the loss keeps its scale, and so does the learning rate's effect)."""
+    d_star = np.asarray(d_star, dtype=np.float64)
+    if len(d_star) == 0 or not np.all(np.isfinite(d_star)) or np.any(d_star <= 0):
+        raise TrainError("--relative-loss needs every sample's d* to be finite and > 0; the dataset has others")
+    inverse_square = 1.0 / d_star**2
+    scale = inverse_square[train_idx].mean() if len(train_idx) else inverse_square.mean()
+    return (inverse_square / scale).astype(np.float32)
+
+
+def squared_error(prediction: torch.Tensor, wheels: torch.Tensor, weights: torch.Tensor | None) -> torch.Tensor:
+    """Per-sample sum of squared wheel errors, times the sample's weight if there is one."""
+    error = (prediction - wheels).pow(2).sum(dim=1)
+    return error if weights is None else error * weights
+
+
 def mean_loss(model: PolicyNet, tensors: dict, indices: torch.Tensor) -> float:
-    """Mean squared error over ``indices`` (no gradients)."""
+    """Mean squared error over ``indices`` (no gradients), weighted if ``tensors`` has weights."""
     if len(indices) == 0:
         return math.nan
     model.eval()
     total = 0.0
     with torch.no_grad():
         for start in range(0, len(indices), EVAL_BATCH):
-            occupancy, aux, wheels = _batch(tensors, indices[start : start + EVAL_BATCH])
-            total += nn.functional.mse_loss(model(occupancy, aux), wheels, reduction="sum").item()
+            index = indices[start : start + EVAL_BATCH]
+            occupancy, aux, wheels = _batch(tensors, index)
+            weights = tensors["weights"].index_select(0, index) if "weights" in tensors else None
+            total += squared_error(model(occupancy, aux), wheels, weights).sum().item()
     return total / (2 * len(indices))
 
 
@@ -357,6 +384,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         "aux": torch.from_numpy(samples.aux).to(device),
         "wheels": torch.from_numpy(samples.wheels).to(device),
     }
+    if cfg.relative_loss:
+        tensors["weights"] = torch.from_numpy(relative_weights(samples.aux[:, 1], train_idx)).to(device)
     train_t = torch.from_numpy(train_idx).to(device)
     val_t = torch.from_numpy(val_idx).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
@@ -366,7 +395,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     log(
         f"training on {len(samples)} samples ({len(train_idx)} train / {len(val_idx)} validation) "
         f"from {', '.join(str(d) for d in cfg.data)} on {device} ({torch.get_num_threads()} threads); "
-        f"{model.architecture} network{', mirrored' if cfg.mirror else ''}{', mirror-averaged' if model.mirror_averaged else ''}, batch {cfg.batch_size}, lr {cfg.lr:g}, "
+        f"{model.architecture} network{', mirrored' if cfg.mirror else ''}{', mirror-averaged' if model.mirror_averaged else ''}"
+        f"{', loss relative to d*' if cfg.relative_loss else ''}, batch {cfg.batch_size}, lr {cfg.lr:g}, "
         f"{cfg.epochs} epochs{drawn}"
     )
 
@@ -378,11 +408,14 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         order = train_t[torch.randperm(len(train_t), generator=shuffle)[:per_epoch].to(device)]
         total = 0.0
         for start in range(0, len(order), cfg.batch_size):
-            occupancy, aux, wheels = _batch(tensors, order[start : start + cfg.batch_size])
+            index = order[start : start + cfg.batch_size]
+            occupancy, aux, wheels = _batch(tensors, index)
             if cfg.mirror:
                 flip = torch.rand(len(aux), generator=shuffle) < 0.5
                 occupancy, aux, wheels = mirror_batch(occupancy, aux, wheels, flip.to(device))
-            loss = nn.functional.mse_loss(fitted(occupancy, aux), wheels)
+            weights = tensors["weights"].index_select(0, index) if cfg.relative_loss else None
+            # The mean over samples and both wheels, as nn.functional.mse_loss computes it.
+            loss = squared_error(fitted(occupancy, aux), wheels, weights).mean() / 2
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
@@ -423,6 +456,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             "train.mirror": "true" if cfg.mirror else "false",
             "policy.mirror_averaged": "true" if model.mirror_averaged else "false",
             "train.samples_per_epoch": per_epoch,
+            "train.relative_loss": "true" if cfg.relative_loss else "false",
             **envelope_metadata(samples, cfg.d_star_range),
         },
     )

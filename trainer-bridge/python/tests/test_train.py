@@ -348,3 +348,42 @@ def test_a_mirrored_model_is_exactly_symmetric_in_onnxruntime_and_stays_so_when_
     assert train.model_from_checkpoint(train.load_checkpoint(tmp_path / "tuned.pt")).mirror_averaged
     tuned = tmp_path / "tuned.onnx"
     np.testing.assert_allclose(wheels(tuned, *reflected), wheels(tuned, occupancy, aux)[:, ::-1], atol=1e-6)
+
+
+def test_relative_weights_scale_with_the_inverse_square_of_d_star_and_average_one_over_training():
+    d_star = np.array([0.8, 1.6, 2.4, 0.8], dtype=np.float32)
+    weights = train.relative_weights(d_star, np.array([0, 1, 2]))
+    assert weights[:3].mean() == pytest.approx(1.0, rel=1e-6)
+    assert weights[0] / weights[1] == pytest.approx(4.0, rel=1e-6)
+    assert weights[0] / weights[2] == pytest.approx(9.0, rel=1e-6)
+    assert weights[3] == weights[0]
+    for bad in ([1.0, 0.0], [1.0, float("nan")], []):
+        with pytest.raises(train.TrainError, match="relative-loss"):
+            train.relative_weights(np.array(bad, dtype=np.float32), np.array([0]))
+
+
+def test_the_weighted_loss_is_each_samples_squared_error_times_its_weight():
+    class Constant(torch.nn.Module):
+        def forward(self, occupancy, aux):
+            return torch.zeros(len(aux), 2)
+
+    tensors = {
+        "occupancy": torch.zeros(3, 4, 4, dtype=torch.uint8),
+        "aux": torch.zeros(3, 2),
+        "wheels": torch.tensor([[1.0, 1.0], [2.0, 0.0], [0.0, 0.0]]),
+    }
+    indices = torch.arange(3)
+    assert train.mean_loss(Constant(), tensors, indices) == pytest.approx((2 + 4) / 6)
+    tensors["weights"] = torch.tensor([3.0, 0.5, 1.0])
+    assert train.mean_loss(Constant(), tensors, indices) == pytest.approx((3 * 2 + 0.5 * 4) / 6)
+
+
+def test_training_with_the_relative_loss_is_recorded_in_the_model(trained, tmp_path, capsys):
+    out = tmp_path / "relative.onnx"
+    cli.main(["train", "--data", str(trained["data"]), "--out", str(out), "--epochs", "1",
+              "--batch-size", "16", "--device", "cpu", "--relative-loss"])
+    assert "loss relative to d*" in capsys.readouterr().out
+    meta = {p.key: p.value for p in onnx.load(str(out)).metadata_props}
+    assert meta["formation.train.relative_loss"] == "true"
+    plain = {p.key: p.value for p in onnx.load(str(trained["out"])).metadata_props}
+    assert plain["formation.train.relative_loss"] == "false"
