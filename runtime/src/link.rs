@@ -50,6 +50,23 @@ pub enum WorldLinkError {
     /// The run's files could not be made private.
     #[error(transparent)]
     Namespace(#[from] NamespaceError),
+    /// A robot index past the end of the team.
+    #[error("there is no robot {robot}: the run has {robots} robots (0 to {last})", last = robots.saturating_sub(1))]
+    NoSuchRobot {
+        /// The index asked for.
+        robot: usize,
+        /// How many robots the run has.
+        robots: usize,
+    },
+}
+
+/// `Ok` if `robot` indexes one of a team of `robots`; the one bounds check every link uses.
+pub fn check_robot_index(robot: usize, robots: usize) -> Result<(), WorldLinkError> {
+    if robot < robots {
+        Ok(())
+    } else {
+        Err(WorldLinkError::NoSuchRobot { robot, robots })
+    }
 }
 
 /// An agent's request to drive a robot, as it arrived in the robot's lobby.
@@ -265,4 +282,26 @@ pub trait AgentLink {
     fn publish_status(&mut self, status: &AgentStatus) -> Result<(), AgentLinkError>;
     /// False once the world process is gone (exited or died).
     fn world_alive(&mut self) -> Result<bool, AgentLinkError>;
+}
+
+#[cfg(test)]
+mod index_tests {
+    use super::*;
+
+    #[test]
+    fn a_robot_past_the_team_is_refused_with_the_team_size() {
+        assert!(check_robot_index(2, 3).is_ok());
+        let err = check_robot_index(3, 3).unwrap_err();
+        assert!(matches!(
+            err,
+            WorldLinkError::NoSuchRobot {
+                robot: 3,
+                robots: 3
+            }
+        ));
+        assert_eq!(
+            err.to_string(),
+            "there is no robot 3: the run has 3 robots (0 to 2)"
+        );
+    }
 }

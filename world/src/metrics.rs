@@ -90,6 +90,23 @@ pub fn run_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
     }
 }
 
+/// The per-edge errors of one run, whichever way its edges were chosen: what [`RunMetrics`] is
+/// assembled from.
+struct EdgeErrors {
+    /// Samples scored (the shorter of the times and the poses).
+    samples: usize,
+    /// The final window's samples.
+    window: std::ops::Range<usize>,
+    /// Each scored edge's mean error over the window samples where it is an edge.
+    edge_window_means: Vec<f64>,
+    /// The largest edge error at each sample (what convergence is judged by).
+    max_error_per_sample: Vec<f64>,
+    /// The mean edge error at the last sample.
+    final_mean_edge_error: f64,
+    /// Whether the edges connected the team at every window sample.
+    connected: bool,
+}
+
 /// The metrics over the trajectory's fixed `edges`: the paper's definition.
 fn fixed_edge_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
     let samples = traj.times.len().min(traj.poses.len());
@@ -110,53 +127,23 @@ fn fixed_edge_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
                 .collect()
         })
         .collect();
-
-    let edge_window_means: Vec<f64> = (0..traj.edges.len())
-        .map(|e| mean(errors[window.clone()].iter().map(|row| row[e])))
-        .collect();
-    let passes =
-        |tolerance: f64| edge_window_means.iter().all(|&m| m < tolerance) && !window.is_empty();
-    let (rel_formation_error, max_edge_window_error) = if traj.edges.is_empty() {
-        (0.0, 0.0)
-    } else {
-        (
-            mean(edge_window_means.iter().copied()),
-            max_propagating_nan(edge_window_means.iter().copied()),
-        )
+    let edges = EdgeErrors {
+        samples,
+        edge_window_means: (0..traj.edges.len())
+            .map(|e| mean(errors[window.clone()].iter().map(|row| row[e])))
+            .collect(),
+        max_error_per_sample: errors
+            .iter()
+            .map(|row| max_propagating_nan(row.iter().copied()))
+            .collect(),
+        final_mean_edge_error: errors
+            .last()
+            .map_or(f64::NAN, |row| mean(row.iter().copied())),
+        connected: is_connected(traj.n_robots(), &traj.edges),
+        window,
     };
-
-    let max_error_per_sample: Vec<f64> = errors
-        .iter()
-        .map(|row| max_propagating_nan(row.iter().copied()))
-        .collect();
-    let convergence =
-        |tolerance: f64| convergence_time(&traj.times[..samples], &max_error_per_sample, tolerance);
-
-    let orientation_error_rad = orientation_error(traj, window.clone());
-
-    let team = cfg.team_figures.then(|| {
-        let last = errors.last().map(|row| mean(row.iter().copied()));
-        team_figures(
-            traj,
-            samples,
-            is_connected(traj.n_robots(), &traj.edges),
-            &edge_window_means,
-            last.unwrap_or(f64::NAN),
-        )
-    });
-
-    let (tol_5, tol_10) = cfg.tolerances;
-    RunMetrics {
-        success_5: passes(tol_5),
-        success_10: passes(tol_10),
-        convergence_s_5: convergence(tol_5),
-        convergence_s_10: convergence(tol_10),
-        rel_formation_error,
-        max_edge_window_error,
-        orientation_error_rad,
-        collisions: collision_events(&traj.collisions),
-        team,
-    }
+    // The paper's success looks at the edges alone.
+    assemble(traj, cfg, edges, Check::EdgesOnly, cfg.team_figures)
 }
 
 /// The metrics over edges recomputed at every sample by `rule`: the strict check.
@@ -174,7 +161,7 @@ fn changing_edge_metrics(
     let mut window_sums: BTreeMap<(usize, usize), (f64, usize)> = BTreeMap::new();
     let mut max_error_per_sample = Vec::with_capacity(samples);
     let mut connected = true;
-    let mut last_mean = f64::NAN;
+    let mut final_mean_edge_error = f64::NAN;
     for (k, poses) in traj.poses[..samples].iter().enumerate() {
         positions.clear();
         positions.extend(poses.iter().map(|p| (p.x, p.y)));
@@ -194,30 +181,58 @@ fn changing_edge_metrics(
             }
         }
         if k + 1 == samples {
-            last_mean = mean(edges.iter().map(error));
+            final_mean_edge_error = mean(edges.iter().map(error));
         }
     }
-    let edge_window_means: Vec<f64> = window_sums
-        .values()
-        .map(|&(sum, count)| sum / count as f64)
-        .collect();
-    let collisions = collision_events(&traj.collisions);
-    let passes = |tolerance: f64| {
-        !window.is_empty()
-            && connected
-            && collisions == 0
-            && edge_window_means.iter().all(|&m| m < tolerance)
+    let edges = EdgeErrors {
+        samples,
+        window,
+        edge_window_means: window_sums
+            .values()
+            .map(|&(sum, count)| sum / count as f64)
+            .collect(),
+        max_error_per_sample,
+        final_mean_edge_error,
+        connected,
     };
-    let (rel_formation_error, max_edge_window_error) = if edge_window_means.is_empty() {
+    assemble(traj, cfg, edges, Check::Strict, true)
+}
+
+/// What success at a tolerance requires besides every scored edge's window mean below it.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Check {
+    /// Nothing more: the paper's definition.
+    EdgesOnly,
+    /// A graph connected over the window and no collision.
+    Strict,
+}
+
+/// The one place a [`RunMetrics`] is built, from a run's edge errors.
+fn assemble(
+    traj: &Trajectory,
+    cfg: &MetricsConfig,
+    edges: EdgeErrors,
+    check: Check,
+    with_team_figures: bool,
+) -> RunMetrics {
+    let collisions = collision_events(&traj.collisions);
+    let means = &edges.edge_window_means;
+    let passes = |tolerance: f64| {
+        !edges.window.is_empty()
+            && means.iter().all(|&m| m < tolerance)
+            && (check == Check::EdgesOnly || (edges.connected && collisions == 0))
+    };
+    let (rel_formation_error, max_edge_window_error) = if means.is_empty() {
         (0.0, 0.0)
     } else {
         (
-            mean(edge_window_means.iter().copied()),
-            max_propagating_nan(edge_window_means.iter().copied()),
+            mean(means.iter().copied()),
+            max_propagating_nan(means.iter().copied()),
         )
     };
+    let times = &traj.times[..edges.samples];
     let convergence =
-        |tolerance: f64| convergence_time(&traj.times[..samples], &max_error_per_sample, tolerance);
+        |tolerance: f64| convergence_time(times, &edges.max_error_per_sample, tolerance);
     let (tol_5, tol_10) = cfg.tolerances;
     RunMetrics {
         success_5: passes(tol_5),
@@ -226,15 +241,17 @@ fn changing_edge_metrics(
         convergence_s_10: convergence(tol_10),
         rel_formation_error,
         max_edge_window_error,
-        orientation_error_rad: orientation_error(traj, window),
+        orientation_error_rad: orientation_error(traj, edges.window.clone()),
         collisions,
-        team: Some(team_figures(
-            traj,
-            samples,
-            connected,
-            &edge_window_means,
-            last_mean,
-        )),
+        team: with_team_figures.then(|| {
+            team_figures(
+                traj,
+                edges.samples,
+                edges.connected,
+                means,
+                edges.final_mean_edge_error,
+            )
+        }),
     }
 }
 

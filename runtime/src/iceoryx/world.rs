@@ -23,7 +23,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 
-use crate::link::{Hello, WorldLink, WorldLinkError};
+use crate::link::{Hello, WorldLink, WorldLinkError, check_robot_index};
 
 fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> WorldLinkError {
     let action = action.into();
@@ -105,14 +105,7 @@ impl IceoryxWorldLink {
     }
 
     fn check_robot(&self, robot: usize) -> Result<(), WorldLinkError> {
-        if robot < self.lobbies.len() {
-            Ok(())
-        } else {
-            Err(WorldLinkError::Iceoryx {
-                action: format!("reach robot {robot}"),
-                detail: format!("the run has {} robots", self.lobbies.len()),
-            })
-        }
+        check_robot_index(robot, self.lobbies.len())
     }
 
     /// Robot `robot`'s current incarnation, if any.

@@ -25,7 +25,7 @@ use formation_proto::wire::{
 
 use super::model::split_model;
 use super::{Bell, Endpoint, Queue, SignalWatch, WorldAccess, keys};
-use crate::link::{Hello, WorldLink, WorldLinkError};
+use crate::link::{Hello, WorldLink, WorldLinkError, check_robot_index};
 
 fn zenoh_error(action: impl Into<String>) -> impl FnOnce(String) -> WorldLinkError {
     let action = action.into();
@@ -300,14 +300,7 @@ impl ZenohWorldLink {
     }
 
     fn check_robot(&self, robot: usize) -> Result<(), WorldLinkError> {
-        if robot < self.lobbies.len() {
-            Ok(())
-        } else {
-            Err(WorldLinkError::Zenoh {
-                action: format!("reach robot {robot}"),
-                detail: format!("the run has {} robots", self.lobbies.len()),
-            })
-        }
+        check_robot_index(robot, self.lobbies.len())
     }
 
     fn incarnation(&self, robot: usize) -> Result<Option<&Incarnation>, WorldLinkError> {
