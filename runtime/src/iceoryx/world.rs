@@ -4,8 +4,11 @@
 //! Each robot's lobby exists from the start; an incarnation's four services (scan, command,
 //! control, status) are created when the exchange admits an agent, and dropped when it is gone.
 //! Every publish-subscribe service is paired with an event service of the same name, because
-//! publishing wakes nobody in iceoryx2.
+//! publishing wakes nobody in iceoryx2. The world's listeners stay attached to its wait set from
+//! one wait to the next ([`AttachedListeners`]): the lobbies' and the swap channel's for the whole
+//! run, an incarnation's from when it opens until it is dropped.
 
+use std::rc::Rc;
 use std::time::Duration;
 
 use formation_proto::wire::{
@@ -21,7 +24,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
+use iceoryx2::waitset::{WaitSetGuard, WaitSetRunResult};
 
 use crate::link::{Hello, WorldLink, WorldLinkError, check_robot_index};
 
@@ -40,22 +43,21 @@ struct RobotPorts {
     control: Publisher<ipc::Service, ControlMsg, ()>,
     control_wake: Notifier<ipc::Service>,
     cmd: Subscriber<ipc::Service, CmdMsg, ()>,
-    cmd_wake: Listener<ipc::Service>,
     status: Subscriber<ipc::Service, StatusMsg, ()>,
-    status_wake: Listener<ipc::Service>,
+    /// The command and status listeners, attached to the world's wait set while the
+    /// incarnation lives.
+    wakes: AttachedListeners,
 }
 
 /// One robot's lobby on the world side.
 struct LobbyPorts {
     hellos: Subscriber<ipc::Service, HelloMsg, ()>,
-    hello_wake: Listener<ipc::Service>,
     welcome: Publisher<ipc::Service, WelcomeMsg, ()>,
 }
 
 /// The world's ends of the run's swap channel.
 struct SwapPorts {
     requests: Subscriber<ipc::Service, SwapRequestMsg, ()>,
-    request_wake: Listener<ipc::Service>,
     replies: Publisher<ipc::Service, SwapReplyMsg, ()>,
     reply_wake: Notifier<ipc::Service>,
 }
@@ -68,7 +70,59 @@ pub struct IceoryxWorldLink {
     /// Per robot: its current incarnation's ports, if an agent was accepted and is not gone.
     robots: Vec<Option<RobotPorts>>,
     swap: SwapPorts,
-    waitset: WaitSet<ipc::Service>,
+    waitset: Rc<WaitSet<ipc::Service>>,
+    /// The swap channel's request listener and every lobby's hello listener.
+    run_wakes: AttachedListeners,
+}
+
+/// Listeners with the wait set they are attached to.
+struct Listeners {
+    waitset: Rc<WaitSet<ipc::Service>>,
+    listeners: Vec<Listener<ipc::Service>>,
+}
+
+type Attachments<'a> = Vec<WaitSetGuard<'a, 'a, ipc::Service>>;
+
+self_cell::self_cell!(
+    /// Listeners that stay attached to a wait set until they are dropped: the attachment guards
+    /// borrow the listeners and the wait set they are kept beside.
+    struct AttachedListeners {
+        owner: Listeners,
+        #[not_covariant]
+        dependent: Attachments,
+    }
+);
+
+impl AttachedListeners {
+    /// Attaches every one of `listeners` to `waitset`.
+    fn attach(
+        waitset: &Rc<WaitSet<ipc::Service>>,
+        listeners: Vec<Listener<ipc::Service>>,
+    ) -> Result<Self, WorldLinkError> {
+        let owner = Listeners {
+            waitset: Rc::clone(waitset),
+            listeners,
+        };
+        AttachedListeners::try_new(owner, |owner| {
+            owner
+                .listeners
+                .iter()
+                .map(|listener| {
+                    owner
+                        .waitset
+                        .attach_notification(listener)
+                        .map_err(|e| iox("attach a wake-up to the world's wait set")(&e))
+                })
+                .collect()
+        })
+    }
+
+    /// Consumes every pending wake-up (the samples themselves are drained by the caller).
+    fn consume(&self) {
+        for listener in &self.borrow_owner().listeners {
+            let _ = listener.try_wait(|_| {});
+        }
+    }
 }
 
 impl IceoryxWorldLink {
@@ -86,14 +140,22 @@ impl IceoryxWorldLink {
             .map_err(|e| iox("create the world node")(&e))?;
         // iceoryx2 makes its node-management segment world-writable: close it at once.
         namespace.restrict_permissions()?;
-        let lobbies = (0..n_robots)
+        let (lobbies, hello_wakes): (Vec<_>, Vec<_>) = (0..n_robots)
             .map(|robot| create_lobby_ports(&node, namespace, robot))
-            .collect::<Result<Vec<_>, _>>()?;
-        let swap = create_swap_ports(&node, namespace)?;
-        let waitset = WaitSetBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<ipc::Service>()
-            .map_err(|e| iox("create the world's wait set")(&e))?;
+            .collect::<Result<Vec<_>, _>>()?
+            .into_iter()
+            .unzip();
+        let (swap, request_wake) = create_swap_ports(&node, namespace)?;
+        let waitset = Rc::new(
+            WaitSetBuilder::new()
+                .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+                .create::<ipc::Service>()
+                .map_err(|e| iox("create the world's wait set")(&e))?,
+        );
+        let run_wakes = AttachedListeners::attach(
+            &waitset,
+            std::iter::once(request_wake).chain(hello_wakes).collect(),
+        )?;
         Ok(IceoryxWorldLink {
             node,
             namespace: namespace.clone(),
@@ -101,6 +163,7 @@ impl IceoryxWorldLink {
             robots: (0..n_robots).map(|_| None).collect(),
             swap,
             waitset,
+            run_wakes,
         })
     }
 
@@ -155,34 +218,37 @@ fn event_service(
         .map_err(|e| iox(format!("create event service {name}"))(&e))
 }
 
+/// Robot `robot`'s lobby ports and its hello listener.
 fn create_lobby_ports(
     node: &Node<ipc::Service>,
     namespace: &RunNamespace,
     robot: usize,
-) -> Result<LobbyPorts, WorldLinkError> {
+) -> Result<(LobbyPorts, Listener<ipc::Service>), WorldLinkError> {
     let hello_name = lobby_service_name(namespace.run(), robot, LobbyChannel::Hello);
     let welcome_name = lobby_service_name(namespace.run(), robot, LobbyChannel::Welcome);
     let what = |port: &str| format!("create the world's {port} port of robot {robot}");
     let hello_limits = ServiceLimits::HELLO;
-    Ok(LobbyPorts {
+    let ports = LobbyPorts {
         hellos: pubsub_service::<HelloMsg>(node, &hello_name, hello_limits)?
             .subscriber_builder()
             .buffer_size(hello_limits.subscriber_buffer)
             .create()
             .map_err(|e| iox(what("hello"))(&e))?,
-        hello_wake: event_service(node, &hello_name, hello_limits)?
-            .listener_builder()
-            .create()
-            .map_err(|e| iox(what("hello event"))(&e))?,
         welcome: pubsub_service::<WelcomeMsg>(node, &welcome_name, ServiceLimits::WELCOME)?
             .publisher_builder()
             .create()
             .map_err(|e| iox(what("welcome"))(&e))?,
-    })
+    };
+    let hello_wake = event_service(node, &hello_name, hello_limits)?
+        .listener_builder()
+        .create()
+        .map_err(|e| iox(what("hello event"))(&e))?;
+    Ok((ports, hello_wake))
 }
 
 fn create_robot_ports(
     node: &Node<ipc::Service>,
+    waitset: &Rc<WaitSet<ipc::Service>>,
     namespace: &RunNamespace,
     robot: usize,
     incarnation: u64,
@@ -222,26 +288,32 @@ fn create_robot_ports(
             .buffer_size(limits.subscriber_buffer)
             .create()
             .map_err(|e| iox(what("cmd"))(&e))?,
-        cmd_wake: event(RobotChannel::Cmd)?
-            .listener_builder()
-            .create()
-            .map_err(|e| iox(what("cmd event"))(&e))?,
         status: status
             .subscriber_builder()
             .buffer_size(limits.subscriber_buffer)
             .create()
             .map_err(|e| iox(what("status"))(&e))?,
-        status_wake: event(RobotChannel::Status)?
-            .listener_builder()
-            .create()
-            .map_err(|e| iox(what("status event"))(&e))?,
+        wakes: AttachedListeners::attach(
+            waitset,
+            vec![
+                event(RobotChannel::Cmd)?
+                    .listener_builder()
+                    .create()
+                    .map_err(|e| iox(what("cmd event"))(&e))?,
+                event(RobotChannel::Status)?
+                    .listener_builder()
+                    .create()
+                    .map_err(|e| iox(what("status event"))(&e))?,
+            ],
+        )?,
     })
 }
 
+/// The world's swap ports and the swap requests' listener.
 fn create_swap_ports(
     node: &Node<ipc::Service>,
     namespace: &RunNamespace,
-) -> Result<SwapPorts, WorldLinkError> {
+) -> Result<(SwapPorts, Listener<ipc::Service>), WorldLinkError> {
     let name = |channel| swap_service_name(namespace.run(), channel);
     let event = |channel: SwapChannel| event_service(node, &name(channel), channel.limits());
     macro_rules! pubsub_service {
@@ -252,16 +324,16 @@ fn create_swap_ports(
     let requests = pubsub_service!(SwapRequestMsg, SwapChannel::Request);
     let replies = pubsub_service!(SwapReplyMsg, SwapChannel::Reply);
     let what = |port: &str| format!("create the world's swap {port} port");
-    Ok(SwapPorts {
+    let request_wake = event(SwapChannel::Request)?
+        .listener_builder()
+        .create()
+        .map_err(|e| iox(what("request event"))(&e))?;
+    let ports = SwapPorts {
         requests: requests
             .subscriber_builder()
             .buffer_size(SwapChannel::Request.limits().subscriber_buffer)
             .create()
             .map_err(|e| iox(what("request"))(&e))?,
-        request_wake: event(SwapChannel::Request)?
-            .listener_builder()
-            .create()
-            .map_err(|e| iox(what("request event"))(&e))?,
         replies: replies
             .publisher_builder()
             .create()
@@ -270,7 +342,8 @@ fn create_swap_ports(
             .notifier_builder()
             .create()
             .map_err(|e| iox(what("reply event"))(&e))?,
-    })
+    };
+    Ok((ports, request_wake))
 }
 
 impl WorldLink for IceoryxWorldLink {
@@ -316,7 +389,13 @@ impl WorldLink for IceoryxWorldLink {
     fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
         self.check_robot(robot)?;
         self.robots[robot] = None;
-        let ports = create_robot_ports(&self.node, &self.namespace, robot, incarnation)?;
+        let ports = create_robot_ports(
+            &self.node,
+            &self.waitset,
+            &self.namespace,
+            robot,
+            incarnation,
+        )?;
         self.robots[robot] = Some(ports);
         Ok(())
     }
@@ -358,41 +437,15 @@ impl WorldLink for IceoryxWorldLink {
     }
 
     fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
-        let waitset = &self.waitset;
-        let mut guards = Vec::with_capacity(3 * self.lobbies.len() + 1);
-        guards.push(
-            waitset
-                .attach_notification(&self.swap.request_wake)
-                .map_err(|e| iox("attach the swap wake-up to the wait set")(&e))?,
-        );
-        for lobby in &self.lobbies {
-            guards.push(
-                waitset
-                    .attach_notification(&lobby.hello_wake)
-                    .map_err(|e| iox("attach a lobby's wake-up to the wait set")(&e))?,
-            );
-        }
-        for ports in self.robots.iter().flatten() {
-            for listener in [&ports.cmd_wake, &ports.status_wake] {
-                guards.push(
-                    waitset
-                        .attach_notification(listener)
-                        .map_err(|e| iox("attach an agent's wake-up to the wait set")(&e))?,
-                );
-            }
-        }
-        let result = waitset
+        // Every listener is already attached: the lobbies' and the swap channel's since the run
+        // began, each incarnation's since it opened.
+        let result = self
+            .waitset
             .wait_and_process_once_with_timeout(|_| CallbackProgression::Stop, timeout)
             .map_err(|e| iox("wait for the agents")(&e))?;
-        drop(guards);
-        let _ = self.swap.request_wake.try_wait(|_| {});
-        for lobby in &self.lobbies {
-            let _ = lobby.hello_wake.try_wait(|_| {});
-        }
+        self.run_wakes.consume();
         for ports in self.robots.iter().flatten() {
-            // Consume the wake-ups; the samples themselves are drained by the caller.
-            let _ = ports.cmd_wake.try_wait(|_| {});
-            let _ = ports.status_wake.try_wait(|_| {});
+            ports.wakes.consume();
         }
         match result {
             WaitSetRunResult::TerminationRequest => Err(WorldLinkError::Terminated),
