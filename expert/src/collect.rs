@@ -447,6 +447,7 @@ mod tests {
             time: 0.2,
             goal,
             poses: &poses,
+            wheel_speeds: &[],
             scans: &scans,
         };
 
@@ -524,6 +525,7 @@ mod tests {
             time: 0.0,
             goal,
             poses: &poses,
+            wheel_speeds: &[],
             scans: &short,
         };
         let mut sink = |_| {};

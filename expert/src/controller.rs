@@ -732,6 +732,7 @@ mod tests {
             time: 0.0,
             goal: goal(0.0, 0.0),
             poses: &poses,
+            wheel_speeds: &[],
             scans: &scans,
         };
         assert!(
@@ -805,6 +806,7 @@ mod tests {
                 time: 0.0,
                 goal: g,
                 poses,
+                wheel_speeds: &[],
                 scans: &scans,
             };
             expert.commands(&obs, out).expect("valid");
@@ -928,6 +930,7 @@ mod tests {
             time: 0.0,
             goal: spec.goal_at(0.0),
             poses: &spec.initial,
+            wheel_speeds: &[],
             scans: &scans,
         };
         let mut fresh = ExpertController::new(ExpertGains::default(), spec.world.robot)

@@ -20,6 +20,10 @@ pub struct Observation<'a> {
     /// Ground-truth poses of all robots. Decentralised controllers may read only `poses[i].theta`
     /// (the compass) for robot `i`.
     pub poses: &'a [Pose],
+    /// Each robot's wheel speeds over the last step, as its wheel encoders measure them (a real
+    /// robot's odometry; all zero before the first step, empty where the caller has none).
+    /// Decentralised controllers may read only their own.
+    pub wheel_speeds: &'a [WheelCmd],
     /// Each robot's LIDAR ranges this tick; `scans[i]` is robot `i`'s own scan.
     pub scans: &'a [Vec<f32>],
 }

@@ -714,7 +714,14 @@ impl Controller for AgentsController<'_> {
             )
             .map_err(|e| ControllerError::new(e.to_string()))?;
             self.link
-                .publish_pose(robot, &obs.poses[robot])
+                .publish_odometry(
+                    robot,
+                    &obs.poses[robot],
+                    obs.wheel_speeds
+                        .get(robot)
+                        .copied()
+                        .unwrap_or(WheelCmd::BRAKE),
+                )
                 .map_err(transport_error)?;
             // Stamped before the hand-over: publishing wakes the agent, which may run on this
             // very core before the world resumes, and a stamp taken afterwards would hide that

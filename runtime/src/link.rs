@@ -102,13 +102,15 @@ pub trait WorldLink {
     fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError>;
     /// Drops the world's ends of robot `robot`'s current incarnation (its agent is gone).
     fn close_incarnation(&mut self, robot: usize);
-    /// Hands the link robot `robot`'s true pose of the tick whose scan comes next, for a link
-    /// that publishes odometry like a real robot (the ROS 2 team); agents of the other links see
-    /// only their scan and heading, so by default this does nothing.
-    fn publish_pose(
+    /// Hands the link robot `robot`'s true pose of the tick whose scan comes next and the wheel
+    /// speeds it ran over the last step, for a link that publishes odometry like a real robot
+    /// (the ROS 2 team); agents of the other links see only their scan and heading, so by
+    /// default this does nothing.
+    fn publish_odometry(
         &mut self,
         _robot: usize,
         _pose: &formation_proto::Pose,
+        _wheels: formation_proto::WheelCmd,
     ) -> Result<(), WorldLinkError> {
         Ok(())
     }

@@ -274,6 +274,7 @@ impl Sim {
                 v_star: 0.1,
             },
             poses: &poses,
+            wheel_speeds: &[],
             scans: &scans,
         };
         let mut out = vec![WheelCmd::BRAKE; self.n_robots];
@@ -589,6 +590,7 @@ fn shutdown_stops_the_agents_and_a_closed_input_or_a_signal_stops_the_world() {
             v_star: 0.1,
         },
         poses: &poses,
+        wheel_speeds: &[],
         scans: &scans,
     };
     let mut out = vec![WheelCmd::BRAKE; 2];
@@ -631,6 +633,7 @@ fn obs_for(n: usize) -> Observation<'static> {
             v_star: 0.1,
         },
         poses,
+        wheel_speeds: &[],
         scans,
     }
 }

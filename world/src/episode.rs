@@ -93,6 +93,7 @@ pub fn run_episode_recorded<E>(
             time,
             goal: spec.goal_at(time),
             poses: world.poses(),
+            wheel_speeds: world.wheel_speeds(),
             scans: &scans,
         };
         controller.commands(&observation, &mut commands)?;

@@ -22,6 +22,10 @@
 //!   ([`super::TeamTopics`]). Every message is express and of one priority, so an agent receives
 //!   a tick's goal and odometry before its scan.
 //!
+//! - **Odometry** is what a real base's driver reports from its wheel encoders: the pose, and a
+//!   twist from the wheel speeds of the last step ([`odometry_message`]). No TF is published:
+//!   the odometry's frames name it (`robot_<i>/odom` to `robot_<i>/base_link`).
+//!
 //! A Twist becomes wheel speeds as `diff_drive_controller` makes them
 //! ([`formation_ros2::wheels_from_twist`]), which is the inverse of the agent's conversion only up
 //! to rounding: a ROS 2 team's trajectories match in-process ones to about 1e-15 m per step, not
@@ -44,7 +48,7 @@ use formation_ros2::liveliness::domain_wildcard;
 use formation_ros2::msg::Vector3;
 use formation_ros2::{
     EntityKind, Float64, Header, LaserScan, LivelinessToken, Namespace, NodeName, Odometry, Qos,
-    Time, Twist, quaternion_from_yaw, wheels_from_twist,
+    Time, Twist, quaternion_from_yaw, twist_from_wheels, wheels_from_twist,
 };
 
 use super::node::{Delivery, Node, NodeError, RosPublisher, RosSubscription};
@@ -109,10 +113,9 @@ struct RobotPorts {
     scan: RosPublisher<LaserScan>,
     odom: RosPublisher<Odometry>,
     _cmd_vel: RosSubscription,
-    /// The pose to publish with the next scan (given by [`WorldLink::publish_pose`]).
-    pose: Option<Pose>,
-    /// The previous published pose and its stamp, for the odometry's velocity.
-    previous: Option<(Pose, i64)>,
+    /// The pose and wheel speeds to publish with the next scan (given by
+    /// [`WorldLink::publish_odometry`]).
+    odometry: Option<(Pose, WheelCmd)>,
     /// Stamp (ns) → (generation, tick) of this episode's latest ticks.
     stamps: VecDeque<(i64, u64, u64)>,
 }
@@ -230,8 +233,7 @@ impl Ros2WorldLink {
                 scan,
                 odom,
                 _cmd_vel: cmd_vel,
-                pose: None,
-                previous: None,
+                odometry: None,
                 stamps: VecDeque::with_capacity(STAMPS_KEPT),
             });
         }
@@ -342,7 +344,6 @@ impl Ros2WorldLink {
                 self.episode = Some((msg.generation, base));
                 for robot in &mut self.robots {
                     robot.stamps.clear();
-                    robot.previous = None;
                 }
                 base
             }
@@ -442,8 +443,13 @@ impl WorldLink for Ros2WorldLink {
         self.statuses[robot].clear();
     }
 
-    fn publish_pose(&mut self, robot: usize, pose: &Pose) -> Result<(), WorldLinkError> {
-        self.robots[robot].pose = Some(*pose);
+    fn publish_odometry(
+        &mut self,
+        robot: usize,
+        pose: &Pose,
+        wheels: WheelCmd,
+    ) -> Result<(), WorldLinkError> {
+        self.robots[robot].odometry = Some((*pose, wheels));
         Ok(())
     }
 
@@ -455,41 +461,15 @@ impl WorldLink for Ros2WorldLink {
             stamp: Time::from_nanos(stamp),
             frame_id: format!("robot_{robot}/{frame}"),
         };
-        if let Some(pose) = ports.pose.take() {
-            let twist = match ports.previous {
-                Some((before, at)) if stamp > at => {
-                    let dt = (stamp - at) as f64 * 1e-9;
-                    let (dx, dy) = (pose.x - before.x, pose.y - before.y);
-                    let forward = dx * pose.theta.cos() + dy * pose.theta.sin();
-                    let turn = formation_proto::wrap_angle(pose.theta - before.theta);
-                    Twist {
-                        linear: Vector3 {
-                            x: forward / dt,
-                            ..Vector3::default()
-                        },
-                        angular: Vector3 {
-                            z: turn / dt,
-                            ..Vector3::default()
-                        },
-                    }
-                }
-                _ => Twist::default(),
-            };
-            ports.previous = Some((pose, stamp));
-            let odometry = Odometry {
-                header: header("odom"),
-                child_frame_id: format!("robot_{robot}/base_link"),
-                pose: formation_ros2::msg::Pose {
-                    position: Vector3 {
-                        x: pose.x,
-                        y: pose.y,
-                        z: 0.0,
-                    },
-                    orientation: quaternion_from_yaw(msg.heading),
-                },
-                twist,
-                ..Odometry::default()
-            };
+        if let Some((pose, wheels)) = ports.odometry.take() {
+            let odometry = odometry_message(
+                robot,
+                Time::from_nanos(stamp),
+                &pose,
+                msg.heading,
+                wheels,
+                self.team.wheel_separation,
+            );
             ports.odom.publish(&odometry, stamp).map_err(node_error)?;
         }
         let beams = msg.n_beams as usize;
@@ -635,5 +615,75 @@ impl Drop for Ros2WorldLink {
         // Undeclare everything before the session goes, so agents see the team leave.
         self.robots.clear();
         let _ = self.session.close().wait();
+    }
+}
+
+/// Robot `robot`'s Odometry at `stamp`: its pose (`heading` as the orientation, what its compass
+/// reads) and the twist of the wheel speeds it ran over the last step, as wheel encoders give it.
+/// Speeds that are not finite (never the world's) give a zero twist rather than no message.
+fn odometry_message(
+    robot: usize,
+    stamp: Time,
+    pose: &Pose,
+    heading: f64,
+    wheels: WheelCmd,
+    wheel_separation: f64,
+) -> Odometry {
+    Odometry {
+        header: Header {
+            stamp,
+            frame_id: format!("robot_{robot}/odom"),
+        },
+        child_frame_id: format!("robot_{robot}/base_link"),
+        pose: formation_ros2::msg::Pose {
+            position: Vector3 {
+                x: pose.x,
+                y: pose.y,
+                z: 0.0,
+            },
+            orientation: quaternion_from_yaw(heading),
+        },
+        twist: twist_from_wheels(wheels.left, wheels.right, wheel_separation).unwrap_or_default(),
+        ..Odometry::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_ros2::yaw_from_quaternion;
+
+    #[test]
+    fn odometry_twist_is_the_wheel_encoders_and_the_pose_is_the_robots() {
+        let pose = Pose {
+            x: 1.5,
+            y: -2.0,
+            theta: 0.3,
+        };
+        let wheels = WheelCmd {
+            left: 0.4,
+            right: 0.6,
+        };
+        let odometry =
+            odometry_message(7, Time::from_nanos(2_050_000_000), &pose, 0.3, wheels, 0.4);
+        assert_eq!(odometry.header.frame_id, "robot_7/odom");
+        assert_eq!(odometry.child_frame_id, "robot_7/base_link");
+        assert_eq!(odometry.header.stamp, Time::from_nanos(2_050_000_000));
+        assert_eq!(
+            (odometry.pose.position.x, odometry.pose.position.y),
+            (1.5, -2.0)
+        );
+        assert!(
+            (yaw_from_quaternion(&odometry.pose.orientation).expect("a unit quaternion") - 0.3)
+                .abs()
+                < 1e-12
+        );
+        // v = (right + left) / 2, omega = (right - left) / separation, as the agent's inverse.
+        assert!((odometry.twist.linear.x - 0.5).abs() < 1e-12);
+        assert!((odometry.twist.angular.z - 0.5).abs() < 1e-12);
+        let (left, right) = wheels_from_twist(&odometry.twist, 0.4);
+        assert!((left - 0.4).abs() < 1e-12 && (right - 0.6).abs() < 1e-12);
+        let still = odometry_message(0, Time::from_nanos(0), &pose, 0.3, WheelCmd::BRAKE, 0.4);
+        assert_eq!((still.twist.linear.x, still.twist.angular.z), (0.0, 0.0));
     }
 }
