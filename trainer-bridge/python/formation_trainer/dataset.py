@@ -246,20 +246,27 @@ def load(directories) -> Samples:
     manifests = [read_manifest(d) for d in directories]
     for m in manifests[1:]:
         _check_compatible(manifests[0], m)
-    columns = {name: [] for name in _TENSORS}
-    sources = []
+    total = sum(m.samples for m in manifests)
+    if total == 0:
+        names = ", ".join(str(d) for d in directories)
+        raise DatasetError(f"{names} holds no samples: collect some with `formation collect`")
+    # Every shard is checked before anything is allocated, and each one is copied into arrays
+    # sized once for all of them: memory peaks at the samples plus one shard, not twice the
+    # samples, so a dataset of more than half the machine's memory still loads.
+    for m in manifests:
+        for entry in m.shards:
+            check_shard(m.directory / entry["file"], entry, m.size_px)
+    size_px = manifests[0].size_px
+    arrays = {name: np.empty((total, *tail(size_px)), dtype) for name, (dtype, tail) in _TENSORS.items()}
+    source = np.empty(total, dtype=np.int32)
+    start = 0
     for index, m in enumerate(manifests):
         for entry in m.shards:
             tensors = load_shard(m.directory / entry["file"], entry, m.size_px)
+            end = start + entry["samples"]
             for name in _TENSORS:
-                columns[name].append(tensors[name])
-            sources.append(np.full(entry["samples"], index, dtype=np.int32))
-    if not sources or sum(len(s) for s in sources) == 0:
-        names = ", ".join(str(d) for d in directories)
-        raise DatasetError(f"{names} holds no samples: collect some with `formation collect`")
-    size_px = manifests[0].size_px
-    arrays = {
-        name: np.concatenate(columns[name]) if columns[name] else np.zeros((0, *tail(size_px)), dtype)
-        for name, (dtype, tail) in _TENSORS.items()
-    }
-    return Samples(source=np.concatenate(sources), manifests=manifests, **arrays)
+                arrays[name][start:end] = tensors[name]
+            source[start:end] = index
+            del tensors
+            start = end
+    return Samples(source=source, manifests=manifests, **arrays)

@@ -23,6 +23,23 @@ def test_load_concatenates_shards_in_manifest_order(make_dataset):
     assert samples.size_px == 50
 
 
+def test_loading_holds_the_samples_once_plus_one_shard_not_twice(make_dataset):
+    import tracemalloc
+
+    directory = make_dataset(samples=4000, shard_size=500)
+    tracemalloc.start()
+    try:
+        samples = ds.load([directory])
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    held = sum(getattr(samples, name).nbytes for name in ("occupancy", "aux", "wheels", "iteration", "run", "robot", "source"))
+    one_shard = held / 8
+    # Concatenating loaded shards peaked at twice the samples; filling arrays sized once does not.
+    assert peak < held + 2 * one_shard, f"peak {peak} bytes for {held} bytes of samples"
+    np.testing.assert_array_equal(samples.occupancy, synthetic_arrays(4000)["occupancy"])
+
+
 def test_several_datasets_are_combined_with_their_ids(make_dataset):
     a = make_dataset("a", samples=30, seed=1)
     b = make_dataset("b", samples=20, seed=2, iteration=1)
