@@ -5,7 +5,7 @@
 //! control, status) are created when the exchange admits an agent, and dropped when it is gone.
 //! Every publish-subscribe service is paired with an event service of the same name, because
 //! publishing wakes nobody in iceoryx2. The world's listeners stay attached to its wait set from
-//! one wait to the next ([`AttachedListeners`]): the lobbies' and the swap channel's for the whole
+//! one wait to the next (`AttachedListeners`): the lobbies' and the swap channel's for the whole
 //! run, an incarnation's from when it opens until it is dropped.
 
 use std::rc::Rc;

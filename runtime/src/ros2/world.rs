@@ -23,7 +23,7 @@
 //!   a tick's goal and odometry before its scan.
 //!
 //! - **Odometry** is what a real base's driver reports from its wheel encoders: the pose, and a
-//!   twist from the wheel speeds of the last step ([`odometry_message`]). No TF is published:
+//!   twist from the wheel speeds of the last step (`odometry_message`). No TF is published:
 //!   the odometry's frames name it (`robot_<i>/odom` to `robot_<i>/base_link`).
 //!
 //! A Twist becomes wheel speeds as `diff_drive_controller` makes them
