@@ -16,7 +16,7 @@ const CASES: [&str; 3] = ["case1", "case2", "case3"];
 pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
     let root = paths::repo_root();
     let model = paths::resolve_model(args.model.as_deref())?;
-    std::fs::create_dir_all(&args.out)
+    formation_proto::files::create_private_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let mode = if args.in_process {
         "in-process"

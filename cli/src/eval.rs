@@ -59,15 +59,49 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
     Ok(models)
 }
 
-/// Model ids of the given files, as the agents would report them, after checking each model
-/// against the contract and the scenario's LIDAR (beams, range, window), and the scenario's d*
-/// against each model's trained d* range (its envelope), before anything runs.
-pub fn model_ids(models: &[PathBuf], scenario: &Scenario) -> anyhow::Result<Vec<String>> {
-    Ok(robot_agent::decision::check_team_models_for(
+/// Model ids of the given files, as the agents would report them, beside each model's envelope,
+/// after checking each model against the contract and the scenario's LIDAR (beams, range,
+/// window), and the scenario's d* against each model's trained d* range (its envelope), before
+/// anything runs.
+pub fn checked_models(
+    models: &[PathBuf],
+    scenario: &Scenario,
+) -> anyhow::Result<Vec<(String, formation_onnx::ModelEnvelope)>> {
+    Ok(robot_agent::decision::check_team_models_with_envelopes(
         models,
         &scenario.world_config().lidar,
         &scenario_d_stars(scenario),
     )?)
+}
+
+/// Each distinct model of a team (by id, in first-use order) that records its trained team
+/// sizes, against the team's size `robots`.
+pub fn team_sizes_of(
+    models: &[(String, formation_onnx::ModelEnvelope)],
+    robots: usize,
+) -> Vec<formation_schema::ModelTeamSize> {
+    let mut seen = Vec::new();
+    let mut out = Vec::new();
+    for (id, envelope) in models {
+        if seen.contains(&id) {
+            continue;
+        }
+        seen.push(id);
+        out.extend(formation_schema::ModelTeamSize::new(
+            id,
+            &envelope.team_sizes,
+            robots,
+        ));
+    }
+    out
+}
+
+/// Prints, on stderr, a line for each model that never saw a team of this size: a note when
+/// the size is zero-shot, a warning when it is below every trained size.
+pub fn print_team_size_notes(team_size: &[formation_schema::ModelTeamSize]) {
+    for line in team_size.iter().filter_map(|t| t.describe()) {
+        eprintln!("formation: {line}");
+    }
 }
 
 /// The d* values that bound a scenario's runs: its fixed d*, each of its choices, or its
@@ -197,6 +231,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         .save_trajectories
         .unwrap_or(if runs <= 5 { runs } else { 0 });
     let keep = move |i: usize| i < keep_n;
+    let mut team_size = Vec::new();
     let (models, model_ids) = match args.controller {
         ControllerKind::Expert => {
             if args.processes {
@@ -209,8 +244,10 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         ControllerKind::Policy => {
             let default = paths::resolve_model(args.model.as_deref())?;
             let models = models_per_robot(&scenario, &default)?;
-            let ids = model_ids(&models, &scenario)?;
-            (models, ids)
+            let checked = checked_models(&models, &scenario)?;
+            team_size = team_sizes_of(&checked, scenario.n_robots());
+            print_team_size_notes(&team_size);
+            (models, checked.into_iter().map(|(id, _)| id).collect())
         }
     };
     let bar = progress_bar(runs, "eval");
@@ -279,7 +316,8 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         ControllerKind::Expert => "expert",
         ControllerKind::Policy => "policy",
     };
-    let out = eval_output(controller, model_ids, scenario.name(), Some(seed), per_run);
+    let mut out = eval_output(controller, model_ids, scenario.name(), Some(seed), per_run);
+    out.team_size = team_size;
     eprintln!(
         "evaluated {runs} runs in {elapsed:.1} s ({:.2} s per run)",
         elapsed / runs as f64
@@ -301,10 +339,17 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
     let mut drivers = vec![ScalingDriver::Expert(ExpertGains::default())];
     if args.model.is_some() {
         let model = paths::resolve_model(args.model.as_deref())?;
-        let id = model_ids(std::slice::from_ref(&model), &base)?
+        let (id, envelope) = checked_models(std::slice::from_ref(&model), &base)?
             .pop()
             .unwrap_or_default();
-        drivers.push(ScalingDriver::Policy { model, id });
+        for &robots in sizes {
+            print_team_size_notes(&team_sizes_of(&[(id.clone(), envelope.clone())], robots));
+        }
+        drivers.push(ScalingDriver::Policy {
+            model,
+            id,
+            trained_team_sizes: envelope.team_sizes,
+        });
     }
     let bar = progress_bar(runs * sizes.len() * drivers.len(), "scaling");
     let started = Instant::now();

@@ -8,7 +8,7 @@
 use std::path::PathBuf;
 
 use formation_expert::ExpertGains;
-use formation_schema::{ScalingRow, ScalingTable};
+use formation_schema::{ModelTeamSize, ScalingRow, ScalingTable};
 use formation_world::Scenario;
 use formation_world::metrics::{MetricsConfig, RunMetrics, quantiles, summarize};
 
@@ -26,6 +26,9 @@ pub enum ScalingDriver {
         model: PathBuf,
         /// Its model id, for the table.
         id: String,
+        /// The team sizes it was trained on (its envelope; empty when it records none), so
+        /// that a row for another size is marked zero-shot.
+        trained_team_sizes: Vec<usize>,
     },
 }
 
@@ -47,11 +50,17 @@ pub fn evaluate_scaling(
     for &robots in sizes {
         let scenario = base.with_robots(robots)?;
         for driver in drivers {
-            let (run_driver, model) = match driver {
-                ScalingDriver::Expert(gains) => (Driver::Expert(*gains), None),
-                ScalingDriver::Policy { model, id } => {
-                    (Driver::policy_for(&scenario, model)?, Some(id.clone()))
-                }
+            let (run_driver, model, team_size) = match driver {
+                ScalingDriver::Expert(gains) => (Driver::Expert(*gains), None, None),
+                ScalingDriver::Policy {
+                    model,
+                    id,
+                    trained_team_sizes,
+                } => (
+                    Driver::policy_for(&scenario, model)?,
+                    Some(id.clone()),
+                    ModelTeamSize::new(id, trained_team_sizes, robots),
+                ),
             };
             let row = rows.len();
             let results = evaluate_runs(
@@ -64,13 +73,16 @@ pub fn evaluate_scaling(
                 &|done| progress(row, done),
             )?;
             let metrics: Vec<RunMetrics> = results.into_iter().map(|r| r.metrics).collect();
-            rows.push(scaling_row(
-                run_driver.name(),
-                model,
-                robots,
-                scenario.neighbours().name(),
-                &metrics,
-            ));
+            rows.push(ScalingRow {
+                team_size,
+                ..scaling_row(
+                    run_driver.name(),
+                    model,
+                    robots,
+                    scenario.neighbours().name(),
+                    &metrics,
+                )
+            });
         }
     }
     Ok(ScalingTable {
@@ -111,6 +123,7 @@ pub fn scaling_row(
         rel_formation_error: summary.rel_formation_error,
         max_edge_window_error: quantiles(runs.iter().map(|r| r.max_edge_window_error)),
         collisions: summary.collisions,
+        team_size: None,
     }
 }
 
@@ -139,8 +152,13 @@ pub fn scaling_text(table: &ScalingTable) -> String {
         table.scenario, table.seed, table.duration_s
     );
     for row in &table.rows {
+        let zero_shot = if row.team_size.as_ref().is_some_and(|t| t.zero_shot) {
+            " (zero-shot)"
+        } else {
+            ""
+        };
         let who = match &row.model {
-            Some(id) => format!("{} `{id}`", row.controller),
+            Some(id) => format!("{} `{id}`{zero_shot}", row.controller),
             None => row.controller.clone(),
         };
         text.push_str(&format!(
@@ -220,6 +238,23 @@ mod tests {
         );
         let empty = scaling_row("policy", Some("m".into()), 3, "all_pairs", &[]);
         assert_eq!(empty.anchor_success_rate, 0.0);
+    }
+
+    #[test]
+    fn a_policy_row_for_a_size_the_model_never_saw_is_marked_zero_shot() {
+        let runs = [run(true, true, 0.01, 0)];
+        let row = |robots| ScalingRow {
+            team_size: ModelTeamSize::new("m", &[3, 5, 8], robots),
+            ..scaling_row("policy", Some("m".into()), robots, "gabriel", &runs)
+        };
+        let text = scaling_text(&ScalingTable {
+            scenario: "s".into(),
+            seed: 1,
+            duration_s: 60.0,
+            rows: vec![row(5), row(24)],
+        });
+        assert!(text.contains("| policy `m` | 5 |"), "{text}");
+        assert!(text.contains("| policy `m` (zero-shot) | 24 |"), "{text}");
     }
 
     #[test]

@@ -7,6 +7,12 @@
 //! Writing one: [`write_atomic`] writes through a synced temporary file renamed into place, so a
 //! reader (or a crash) sees the old file or the new one, never half of one. Every file formation
 //! writes whole (logs, summaries, datasets' manifests, curves, reports) goes through it.
+//!
+//! Every file and folder formation creates is private to its user, whatever the umask: files
+//! are created 0600 ([`create_private_file`]) and folders 0700 ([`create_private_dir_all`]). A
+//! run's logs hold its trajectories and timings, and a machine shared with other users is the
+//! common case in a lab; a user who wants to share a report copies or `chmod`s it. Folders that
+//! already exist keep their mode: they are the user's.
 
 use std::io::Read as _;
 use std::path::Path;
@@ -84,23 +90,57 @@ pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
     }
 }
 
+/// Mode of every file formation creates: read and write for its user only.
+pub const PRIVATE_FILE_MODE: u32 = 0o600;
+
+/// Mode of every folder formation creates: its user only.
+pub const PRIVATE_DIR_MODE: u32 = 0o700;
+
+/// Creates `dir` and any missing parents, each new one [`PRIVATE_DIR_MODE`] whatever the umask
+/// (the umask only clears bits, and 0700 has none it may clear but the user's own). Folders that
+/// exist keep their mode.
+pub fn create_private_dir_all(dir: &Path) -> std::io::Result<()> {
+    use std::os::unix::fs::DirBuilderExt as _;
+    std::fs::DirBuilder::new()
+        .recursive(true)
+        .mode(PRIVATE_DIR_MODE)
+        .create(dir)
+}
+
+/// Creates (or truncates) the file at `path` for writing, [`PRIVATE_FILE_MODE`] whatever the
+/// umask; a file that existed with a wider mode is narrowed to it.
+pub fn create_private_file(path: &Path) -> std::io::Result<std::fs::File> {
+    use std::os::unix::fs::{OpenOptionsExt as _, PermissionsExt as _};
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .mode(PRIVATE_FILE_MODE)
+        .open(path)?;
+    if file.metadata()?.permissions().mode() & 0o777 != PRIVATE_FILE_MODE {
+        file.set_permissions(std::fs::Permissions::from_mode(PRIVATE_FILE_MODE))?;
+    }
+    Ok(file)
+}
+
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory (created if
-/// needed), synced, then renamed over `path`. On failure the temporary file is removed and `path`
-/// keeps what it held. The error is the operating system's; callers name `path` in their own.
+/// needed, private), synced, then renamed over `path`. On failure the temporary file is removed
+/// and `path` keeps what it held. The file is private ([`PRIVATE_FILE_MODE`]). The error is the
+/// operating system's; callers name `path` in their own.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     use std::io::Write as _;
     let dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir)?;
+    create_private_dir_all(dir)?;
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
     let written = (|| {
-        let mut file = std::fs::File::create(&tmp)?;
+        let mut file = create_private_file(&tmp)?;
         file.write_all(bytes)?;
         file.sync_data()?;
         std::fs::rename(&tmp, path)
@@ -164,6 +204,32 @@ mod tests {
             .filter(|n| n.contains(".tmp-"))
             .collect();
         assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn created_files_and_folders_are_private_whatever_was_there() {
+        use std::os::unix::fs::PermissionsExt as _;
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        let dir = std::env::temp_dir().join(format!("formation-private-{}", std::process::id()));
+        let nested = dir.join("a").join("b");
+        let path = nested.join("out.json");
+        write_atomic(&path, b"x").unwrap();
+        assert_eq!(mode(&path), PRIVATE_FILE_MODE);
+        assert_eq!(mode(&dir), PRIVATE_DIR_MODE);
+        assert_eq!(mode(&dir.join("a")), PRIVATE_DIR_MODE);
+        assert_eq!(mode(&nested), PRIVATE_DIR_MODE);
+        // A file that was world-readable is narrowed when it is created again.
+        let wide = dir.join("wide.log");
+        std::fs::write(&wide, b"old").unwrap();
+        std::fs::set_permissions(&wide, std::fs::Permissions::from_mode(0o644)).unwrap();
+        drop(create_private_file(&wide).unwrap());
+        assert_eq!(mode(&wide), PRIVATE_FILE_MODE);
+        // A folder that exists keeps its mode: it is the user's.
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+        create_private_dir_all(&dir.join("c")).unwrap();
+        assert_eq!(mode(&dir), 0o755);
+        assert_eq!(mode(&dir.join("c")), PRIVATE_DIR_MODE);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -19,8 +19,10 @@ pub mod control;
 pub mod errors;
 pub mod files;
 pub mod neighbours;
+pub mod team_size;
 pub mod types;
 pub mod wire;
 
 pub use neighbours::{GabrielRule, NeighbourRule};
+pub use team_size::TeamSizeFit;
 pub use types::*;

@@ -535,6 +535,7 @@ mod tests {
             per_run: vec![metrics(true, 9.0, 0.02), metrics(false, 10.0, f64::NAN)],
             braked_ticks: Vec::new(),
             incomplete_runs: Vec::new(),
+            team_size: Vec::new(),
         }
     }
 
@@ -692,6 +693,7 @@ mod tests {
         };
         let marked = EvalOutput {
             incomplete_runs: vec![stopped.clone()],
+            team_size: Vec::new(),
             ..summary()
         };
         let eval = parse_summary(&text(&marked), Path::new("s.json"), "s").expect("summary");

@@ -74,12 +74,12 @@ pub fn build_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError
     let html = html::render_page(&page);
 
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        fs::create_dir_all(parent).map_err(|source| ReportError::Write {
+        formation_proto::files::create_private_dir_all(parent).map_err(|source| ReportError::Write {
             path: parent.to_path_buf(),
             source,
         })?;
     }
-    fs::create_dir_all(&figures_dir).map_err(|source| ReportError::Write {
+    formation_proto::files::create_private_dir_all(&figures_dir).map_err(|source| ReportError::Write {
         path: figures_dir.clone(),
         source,
     })?;

@@ -269,6 +269,7 @@ fn a_scaling_table_gets_its_section_with_the_rows_and_the_figure() {
         rel_formation_error: Some(q(0.01)),
         max_edge_window_error: Some(q(0.02)),
         collisions: 0,
+        team_size: None,
     };
     let table = ScalingTable {
         scenario: "teams".into(),

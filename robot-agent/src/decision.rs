@@ -451,7 +451,21 @@ pub fn check_team_models_for(
     lidar: &LidarSpec,
     d_stars: &[f64],
 ) -> Result<Vec<String>, TeamModelError> {
-    let mut checked: BTreeMap<&Path, String> = BTreeMap::new();
+    Ok(check_team_models_with_envelopes(models, lidar, d_stars)?
+        .into_iter()
+        .map(|(id, _)| id)
+        .collect())
+}
+
+/// [`check_team_models_for`], with each robot's model id beside the model's envelope (what it
+/// was trained on: its d* range and team sizes), for the launcher to report a team size the
+/// model never saw.
+pub fn check_team_models_with_envelopes(
+    models: &[PathBuf],
+    lidar: &LidarSpec,
+    d_stars: &[f64],
+) -> Result<Vec<(String, formation_onnx::ModelEnvelope)>, TeamModelError> {
+    let mut checked: BTreeMap<&Path, (String, formation_onnx::ModelEnvelope)> = BTreeMap::new();
     let mut ids = Vec::with_capacity(models.len());
     for (robot, path) in models.iter().enumerate() {
         let id = match checked.get(path.as_path()) {
@@ -467,7 +481,7 @@ pub fn check_team_models_for(
                 for &d_star in d_stars {
                     check_goal_envelope(&policy, d_star).map_err(fail)?;
                 }
-                let id = policy.model_id().to_owned();
+                let id = (policy.model_id().to_owned(), policy.metadata().envelope());
                 checked.insert(path, id.clone());
                 id
             }

@@ -159,7 +159,7 @@ impl RuntimeSettings {
 
     /// Writes the settings as JSON to `path`.
     pub fn write(&self, path: &Path) -> Result<(), SettingsError> {
-        std::fs::write(path, self.to_json()).map_err(|source| SettingsError::Io {
+        formation_proto::files::write_atomic(path, self.to_json().as_bytes()).map_err(|source| SettingsError::Io {
             action: "writing",
             path: path.to_owned(),
             source,

@@ -35,6 +35,7 @@ mod profile;
 mod run;
 mod scaling;
 mod summary;
+mod team_size;
 mod timing;
 
 use std::fmt;
@@ -48,6 +49,7 @@ pub use profile::{LatencyProfile, StageStats};
 pub use run::{RunLog, RunMetrics, TeamMetrics, Trajectory};
 pub use scaling::{ScalingRow, ScalingTable};
 pub use summary::{EvalOutput, IncompleteRun, Quantiles, Summary};
+pub use team_size::ModelTeamSize;
 pub use timing::TimingLog;
 
 /// A file format: its name, its version and how large a file of it may be.

@@ -34,6 +34,10 @@ pub struct ScalingRow {
     pub max_edge_window_error: Option<Quantiles>,
     /// Number of runs with at least one collision.
     pub collisions: usize,
+    /// Policy only: this team size against the model's trained team sizes (absent when the
+    /// model records none); `zero_shot` marks a size it never saw.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub team_size: Option<crate::ModelTeamSize>,
 }
 
 /// What `formation eval --robots` writes as JSON.

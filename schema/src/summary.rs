@@ -86,6 +86,10 @@ pub struct EvalOutput {
     /// finished.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub incomplete_runs: Vec<IncompleteRun>,
+    /// Policy only: each distinct model that records its trained team sizes, against this
+    /// team's size; `zero_shot` marks a size it never saw. Absent when no model records them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub team_size: Vec<crate::ModelTeamSize>,
 }
 
 /// A run that stopped before its last tick.

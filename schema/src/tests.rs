@@ -117,6 +117,9 @@ fn summary() -> EvalOutput {
             planned_ticks: Some(1200),
             stop_reason: None,
         }],
+        team_size: crate::ModelTeamSize::new("policy-1", &[3, 5], 2)
+            .into_iter()
+            .collect(),
     }
 }
 
@@ -402,6 +405,7 @@ fn scaling() -> ScalingTable {
             rel_formation_error: None,
             max_edge_window_error: None,
             collisions: 0,
+            team_size: None,
         }],
     }
 }

@@ -350,9 +350,9 @@ impl<C: JournalClock> RunJournal<C> {
         mut clock: C,
     ) -> Result<Self, RunLogError> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            fs::create_dir_all(dir).map_err(write_error(dir))?;
+            formation_proto::files::create_private_dir_all(dir).map_err(write_error(dir))?;
         }
-        let file = File::create(path).map_err(write_error(path))?;
+        let file = formation_proto::files::create_private_file(path).map_err(write_error(path))?;
         // Advisory only: a file system without locks still journals.
         let _ = file.lock();
         let mut journal = RunJournal {

@@ -187,6 +187,15 @@ pub fn credentials_command(args: &CredentialsArgs) -> anyhow::Result<()> {
 /// unusable file, a model trained for another sensor or for another d* range than the
 /// scenario's, and a robot out of range are errors naming the robot, the file and the fix.
 pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    Ok(checked_team_models(scenario, default)?.0)
+}
+
+/// [`models_per_robot`], with each distinct model's trained team sizes against the scenario's
+/// team size (for the terminal and `summary.json`).
+pub fn checked_team_models(
+    scenario: &Scenario,
+    default: &Path,
+) -> anyhow::Result<(Vec<PathBuf>, Vec<formation_schema::ModelTeamSize>)> {
     let mut models = vec![default.to_path_buf(); scenario.n_robots()];
     for assigned in scenario.agent_models() {
         let slot = models.get_mut(assigned.robot).with_context(|| {
@@ -199,12 +208,13 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
         })?;
         *slot = assigned.model.clone();
     }
-    robot_agent::decision::check_team_models_for(
+    let checked = robot_agent::decision::check_team_models_with_envelopes(
         &models,
         &scenario.world_config().lidar,
         &crate::eval::scenario_d_stars(scenario),
     )?;
-    Ok(models)
+    let team_size = crate::eval::team_sizes_of(&checked, scenario.n_robots());
+    Ok((models, team_size))
 }
 
 /// `value` seconds as a duration, or an error naming `flag` when it is not a positive number.
@@ -257,7 +267,16 @@ fn write_run_specs(
 }
 
 /// The launch plan of `args`, its scenario and the base seed of its runs.
-fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)> {
+/// What `formation run` launches: the plan, the scenario, the base seed, and the team size
+/// against each model's trained sizes.
+struct PlannedRun {
+    plan: LaunchPlan,
+    scenario: Scenario,
+    base_seed: u64,
+    team_size: Vec<formation_schema::ModelTeamSize>,
+}
+
+fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
     let scenario = Scenario::from_path(&args.scenario)?;
     if args.runs == 0 {
         anyhow::bail!("--runs must be at least 1");
@@ -274,7 +293,7 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)>
     } else {
         args.model.clone()
     };
-    let models = models_per_robot(&scenario, &default_model)?;
+    let (models, team_size) = checked_team_models(&scenario, &default_model)?;
     let run_id = match &args.run_id {
         Some(id) => RunId::new(id)?,
         None => RunId::generate(),
@@ -308,7 +327,12 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<(LaunchPlan, Scenario, u64)>
         restart_window: positive_seconds("--restart-window-s", args.restart_window_s)?,
         restart_delay: Duration::from_millis(args.restart_delay_ms),
     };
-    Ok((plan, scenario, base_seed))
+    Ok(PlannedRun {
+        plan,
+        scenario,
+        base_seed,
+        team_size,
+    })
 }
 
 /// How a launch's processes are to reach each other, as its flags give it: `--transport`, and
@@ -472,7 +496,13 @@ fn remote_instructions(plan: &LaunchPlan) -> Option<String> {
 /// `formation run`: launches the world and one agent per robot, plays the runs, writes the logs
 /// and a latency summary, and cleans up.
 pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
-    let (plan, scenario, base_seed) = plan_from_args(args)?;
+    let PlannedRun {
+        plan,
+        scenario,
+        base_seed,
+        team_size,
+    } = plan_from_args(args)?;
+    crate::eval::print_team_size_notes(&team_size);
     println!(
         "formation run {}: {} robots, {} run(s) of {}, {} clock",
         plan.run_id,
@@ -532,6 +562,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         scenario.name(),
         Some(base_seed),
         latency.braked_per_robot.clone(),
+        team_size,
     )?;
     print!("{}", crate::eval::table_text(&table));
     let path = plan.out.join("profile.json");
@@ -615,9 +646,11 @@ fn write_summary(
     scenario: &str,
     seed: Option<u64>,
     braked_ticks: Vec<std::collections::BTreeMap<String, usize>>,
+    team_size: Vec<formation_schema::ModelTeamSize>,
 ) -> anyhow::Result<crate::eval::EvalOutput> {
     let mut table = run_summary(run_logs, scenario, seed)?;
     table.braked_ticks = braked_ticks;
+    table.team_size = team_size;
     paths::write_atomic(
         &out.join("summary.json"),
         &formation_schema::to_json_pretty(&table)?,
@@ -706,7 +739,7 @@ fn keep_partial_runs(
     let braked = profile::profile_dir(out)
         .map(|p| p.braked_per_robot)
         .unwrap_or_default();
-    match write_summary(out, &logs, scenario, Some(seed), braked) {
+    match write_summary(out, &logs, scenario, Some(seed), braked, Vec::new()) {
         Ok(table) => {
             print!("{}", crate::eval::table_text(&table));
             eprintln!(
@@ -757,7 +790,7 @@ pub fn recover_run_dirs(dir: &Path) {
             continue;
         }
         let logs: Vec<PathBuf> = run_logs_in(&out).into_iter().map(|(_, p)| p).collect();
-        match write_summary(&out, &logs, "", None, Vec::new()) {
+        match write_summary(&out, &logs, "", None, Vec::new(), Vec::new()) {
             Ok(table) => eprintln!(
                 "formation: wrote {} over {} run log(s) that had none ({} incomplete)",
                 out.join("summary.json").display(),

@@ -82,6 +82,13 @@ pub struct DeciderSettings {
     pub wheel_separation: f64,
 }
 
+/// The stale window a ROS 2 agent uses unless told otherwise (`--stale-ms`): 500 ms, the
+/// `cmd_vel` timeout of ROS 2's `diff_drive_controller`, so the agent brakes no sooner than the
+/// robot's own controller would. Real LIDARs publish at 5–20 Hz: at 10 Hz a scan is 100 ms
+/// apart, and a window of one simulated tick (the launcher's 150 ms) would brake the robot on
+/// one late scan. The simulated team passes the launcher's window explicitly.
+pub const DEFAULT_STALE: Duration = Duration::from_millis(500);
+
 /// The agent's decision state: the last reason it braked for, and when the last scan came.
 #[derive(Debug)]
 pub struct Decider {
@@ -305,7 +312,7 @@ mod tests {
                 max_range: 10.0,
             },
             partial,
-            stale: Duration::from_millis(500),
+            stale: DEFAULT_STALE,
             wheel_separation: 0.331,
         }
     }
@@ -427,5 +434,35 @@ mod tests {
             "{stall}"
         );
         assert_eq!(decider.check_stale(at + Duration::from_secs(5)), None);
+    }
+
+    /// A 10 Hz LIDAR whose scans come late, by up to four periods, and a compass published with
+    /// them: under the default window the robot keeps driving; only a real stall brakes it.
+    #[test]
+    fn the_default_window_rides_out_late_scans_of_a_10_hz_lidar() {
+        let start = Instant::now();
+        let mut decider = Decider::new(settings(PartialScan::Refuse), start);
+        let mut pilot = Recorder::default();
+        let full = scan(16, TAU, |_| 3.0);
+        let mut at = start;
+        let mut orientation_at = start;
+        for gap_ms in [100, 100, 250, 100, 450, 100] {
+            at += Duration::from_millis(gap_ms);
+            assert_eq!(decider.check_stale(at), None, "after a gap of {gap_ms} ms");
+            // The orientation of the previous scan is the newest when this one arrives.
+            let inputs = Inputs {
+                orientation: Some((Ok(0.25), orientation_at)),
+                goal: [None, Some(1.5), None],
+            };
+            assert!(
+                matches!(
+                    decider.on_scan(&full, &inputs, at, &mut pilot),
+                    Answer::Drive(_)
+                ),
+                "a scan {gap_ms} ms after the last one drives"
+            );
+            orientation_at = at;
+        }
+        assert!(decider.check_stale(at + Duration::from_millis(600)).is_some());
     }
 }

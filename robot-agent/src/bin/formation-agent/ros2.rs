@@ -78,7 +78,8 @@ pub struct Ros2Args {
     /// the P3-DX's 0.331 m, the robot the shipped models were trained for).
     #[arg(long, value_name = "M")]
     wheel_separation: Option<f64>,
-    /// ROS 2: an input older than this brakes the robot \[ms\].
+    /// ROS 2: an input older than this brakes the robot \[ms\] (default: 500, the `cmd_vel`
+    /// timeout of ROS 2's diff_drive_controller).
     #[arg(long, value_name = "MS")]
     stale_ms: Option<u64>,
     /// ROS 2: accept a LaserScan that does not cover the full circle, reading the bearings it
@@ -236,9 +237,10 @@ pub fn run(
             "--wheel-separation must be a length in metres between 0 and 10, got {wheel_separation}"
         );
     }
-    let stale_ms = flags
-        .stale_ms
-        .unwrap_or(formation_runtime::RuntimeSettings::DEFAULT.stale_ms);
+    let stale_ms = flags.stale_ms.unwrap_or_else(|| {
+        u64::try_from(formation_runtime::ros2::decider::DEFAULT_STALE.as_millis())
+            .unwrap_or(u64::MAX)
+    });
     if stale_ms == 0 || stale_ms > 60_000 {
         anyhow::bail!("--stale-ms must be from 1 to 60000, got {stale_ms}");
     }
