@@ -153,7 +153,7 @@ pub fn eval_output(
         per_run,
         braked_ticks: Vec::new(),
         incomplete_runs: Vec::new(),
-            team_size: Vec::new(),
+        team_size: Vec::new(),
     }
 }
 

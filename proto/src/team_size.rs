@@ -75,11 +75,23 @@ mod tests {
     fn team_sizes_are_placed_against_the_trained_ones() {
         let trained = [3, 5, 8, 13, 16];
         assert_eq!(TeamSizeFit::of(&trained, 8), Some(TeamSizeFit::Trained));
-        assert_eq!(TeamSizeFit::of(&trained, 2), Some(TeamSizeFit::BelowTrained));
-        assert_eq!(TeamSizeFit::of(&trained, 1), Some(TeamSizeFit::BelowTrained));
+        assert_eq!(
+            TeamSizeFit::of(&trained, 2),
+            Some(TeamSizeFit::BelowTrained)
+        );
+        assert_eq!(
+            TeamSizeFit::of(&trained, 1),
+            Some(TeamSizeFit::BelowTrained)
+        );
         assert_eq!(TeamSizeFit::of(&trained, 11), Some(TeamSizeFit::ZeroShot));
-        assert_eq!(TeamSizeFit::of(&trained, 24), Some(TeamSizeFit::AboveTrained));
-        assert_eq!(TeamSizeFit::of(&trained, 300), Some(TeamSizeFit::AboveTrained));
+        assert_eq!(
+            TeamSizeFit::of(&trained, 24),
+            Some(TeamSizeFit::AboveTrained)
+        );
+        assert_eq!(
+            TeamSizeFit::of(&trained, 300),
+            Some(TeamSizeFit::AboveTrained)
+        );
         assert_eq!(TeamSizeFit::of(&[], 3), None);
         assert!(!TeamSizeFit::Trained.is_zero_shot());
         assert!(TeamSizeFit::AboveTrained.is_zero_shot());
@@ -89,10 +101,17 @@ mod tests {
     fn only_untrained_sizes_are_described_and_small_teams_are_warned_about() {
         let trained = [3, 5];
         assert_eq!(TeamSizeFit::Trained.describe("m", &trained, 3), None);
-        let above = TeamSizeFit::AboveTrained.describe("m", &trained, 24).unwrap();
-        assert!(above.starts_with("note: 24 robots is zero-shot for model m"), "{above}");
+        let above = TeamSizeFit::AboveTrained
+            .describe("m", &trained, 24)
+            .unwrap();
+        assert!(
+            above.starts_with("note: 24 robots is zero-shot for model m"),
+            "{above}"
+        );
         assert!(above.contains("teams of 3, 5"), "{above}");
-        let below = TeamSizeFit::BelowTrained.describe("m", &trained, 2).unwrap();
+        let below = TeamSizeFit::BelowTrained
+            .describe("m", &trained, 2)
+            .unwrap();
         assert!(below.starts_with("warning: 2 robots"), "{below}");
         assert!(below.contains("at least 3 robots"), "{below}");
     }

@@ -74,14 +74,18 @@ pub fn build_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError
     let html = html::render_page(&page);
 
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        formation_proto::files::create_private_dir_all(parent).map_err(|source| ReportError::Write {
-            path: parent.to_path_buf(),
-            source,
+        formation_proto::files::create_private_dir_all(parent).map_err(|source| {
+            ReportError::Write {
+                path: parent.to_path_buf(),
+                source,
+            }
         })?;
     }
-    formation_proto::files::create_private_dir_all(&figures_dir).map_err(|source| ReportError::Write {
-        path: figures_dir.clone(),
-        source,
+    formation_proto::files::create_private_dir_all(&figures_dir).map_err(|source| {
+        ReportError::Write {
+            path: figures_dir.clone(),
+            source,
+        }
     })?;
     remove_stale_svgs(&figures_dir)?;
     let mut written = Vec::with_capacity(figures.len());

@@ -101,7 +101,7 @@ fn eval_output(scenario: &str, per_run: &[RunMetrics]) -> EvalOutput {
         per_run: per_run.to_vec(),
         braked_ticks: Vec::new(),
         incomplete_runs: Vec::new(),
-            team_size: Vec::new(),
+        team_size: Vec::new(),
     }
 }
 

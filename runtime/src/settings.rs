@@ -159,10 +159,12 @@ impl RuntimeSettings {
 
     /// Writes the settings as JSON to `path`.
     pub fn write(&self, path: &Path) -> Result<(), SettingsError> {
-        formation_proto::files::write_atomic(path, self.to_json().as_bytes()).map_err(|source| SettingsError::Io {
-            action: "writing",
-            path: path.to_owned(),
-            source,
+        formation_proto::files::write_atomic(path, self.to_json().as_bytes()).map_err(|source| {
+            SettingsError::Io {
+                action: "writing",
+                path: path.to_owned(),
+                source,
+            }
         })
     }
 }

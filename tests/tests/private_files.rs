@@ -84,14 +84,24 @@ fn a_runs_files_are_private_under_umask_022() {
     let out = dir.path().join("out");
     let scenario = case1_scenario(dir.path(), 2.0);
     run(
-        under_umask_022(&formation_run(&run_id, &scenario, &out, &["--pace-ms", "5"])),
+        under_umask_022(&formation_run(
+            &run_id,
+            &scenario,
+            &out,
+            &["--pace-ms", "5"],
+        )),
         LIMIT,
     )
     .assert_success();
     leaks.assert_clean();
     assert_private(
         &out,
-        &["summary.json", "profile.json", "profile.svg", "runs/run-0000.json"],
+        &[
+            "summary.json",
+            "profile.json",
+            "profile.svg",
+            "runs/run-0000.json",
+        ],
     );
 
     let mut report = Command::new(&binaries().cli);

@@ -61,7 +61,12 @@ fn eval_flags_sizes_outside_the_trained_ones_and_warns_below_them() {
         (2, "below_trained", true, Some("warning: 2 robots is fewer")),
         (3, "trained", false, None),
         (4, "zero_shot", true, Some("note: 4 robots is zero-shot")),
-        (6, "above_trained", true, Some("note: 6 robots is zero-shot")),
+        (
+            6,
+            "above_trained",
+            true,
+            Some("note: 6 robots is zero-shot"),
+        ),
     ];
     for (robots, fit, zero_shot, line) in cases {
         let out = dir.path().join(format!("eval-{robots}.json"));
@@ -90,16 +95,24 @@ fn eval_flags_sizes_outside_the_trained_ones_and_warns_below_them() {
         &["--robots", "3,4"],
     );
     assert!(
-        finished.stdout().contains("(zero-shot) | 4 |") && !finished.stdout().contains("(zero-shot) | 3 |"),
+        finished.stdout().contains("(zero-shot) | 4 |")
+            && !finished.stdout().contains("(zero-shot) | 3 |"),
         "{}",
         finished.describe()
     );
     let rows = json(&table)["rows"].as_array().cloned().expect("rows");
-    let policy: Vec<_> = rows.iter().filter(|r| r["controller"] == "policy").collect();
+    let policy: Vec<_> = rows
+        .iter()
+        .filter(|r| r["controller"] == "policy")
+        .collect();
     assert_eq!(policy.len(), 2);
     assert_eq!(policy[0]["team_size"]["zero_shot"], false);
     assert_eq!(policy[1]["team_size"]["zero_shot"], true);
-    assert!(rows.iter().filter(|r| r["controller"] == "expert").all(|r| r.get("team_size").is_none()));
+    assert!(
+        rows.iter()
+            .filter(|r| r["controller"] == "expert")
+            .all(|r| r.get("team_size").is_none())
+    );
 }
 
 #[test]

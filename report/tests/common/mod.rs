@@ -129,7 +129,7 @@ pub fn summary(scenario: &str, per_run: &[RunMetrics]) -> EvalOutput {
         per_run: per_run.to_vec(),
         braked_ticks: Vec::new(),
         incomplete_runs: Vec::new(),
-            team_size: Vec::new(),
+        team_size: Vec::new(),
     }
 }
 

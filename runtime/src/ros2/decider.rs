@@ -463,6 +463,10 @@ mod tests {
             );
             orientation_at = at;
         }
-        assert!(decider.check_stale(at + Duration::from_millis(600)).is_some());
+        assert!(
+            decider
+                .check_stale(at + Duration::from_millis(600))
+                .is_some()
+        );
     }
 }
