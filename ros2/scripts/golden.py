@@ -39,6 +39,9 @@ LaserScan = T["sensor_msgs/msg/LaserScan"]
 Imu = T["sensor_msgs/msg/Imu"]
 Odometry = T["nav_msgs/msg/Odometry"]
 Float64 = T["std_msgs/msg/Float64"]
+Transform = T["geometry_msgs/msg/Transform"]
+TransformStamped = T["geometry_msgs/msg/TransformStamped"]
+TFMessage = T["tf2_msgs/msg/TFMessage"]
 
 
 def f64s(values):
@@ -107,6 +110,23 @@ ODOM = Odometry(
 
 HEADING = Float64(data=math.pi / 3)
 
+# Two robots on /tf: "world" (6 bytes with its NUL) and "robot_0/base_link" (18) leave the
+# float64 fields after them off an 8-byte boundary, so the layout needs padding in both places.
+TF = TFMessage(
+    transforms=[
+        TransformStamped(
+            header=Header(stamp=Time(sec=12, nanosec=500000000), frame_id="world"),
+            child_frame_id=f"robot_{i}/base_link",
+            transform=Transform(
+                translation=Vector3(1.5 * i - 0.25, -0.75 + i, 0.0),
+                rotation=Quaternion(0.0, 0.0, math.sin(0.3 * (i + 1)), math.cos(0.3 * (i + 1))),
+            ),
+        )
+        for i in range(2)
+    ]
+)
+TF_EMPTY = TFMessage(transforms=[])
+
 # rmw_zenoh_cpp AttachmentData: (int64 sequence_number, int64 source_timestamp,
 # std::array<uint8_t, 16> source_gid); a std::array is serialized as a sequence.
 ATTACHMENT_SEQUENCE = 7
@@ -153,6 +173,8 @@ emit("SCAN_EMPTY_CDR", cdr(SCAN_EMPTY, "sensor_msgs/msg/LaserScan"), "rosbags se
 emit("IMU_CDR", cdr(IMU, "sensor_msgs/msg/Imu"), "rosbags serialize_cdr of IMU")
 emit("ODOM_CDR", cdr(ODOM, "nav_msgs/msg/Odometry"), "rosbags serialize_cdr of ODOM")
 emit("HEADING_CDR", cdr(HEADING, "std_msgs/msg/Float64"), "rosbags serialize_cdr of HEADING")
+emit("TF_CDR", cdr(TF, "tf2_msgs/msg/TFMessage"), "rosbags serialize_cdr of TF")
+emit("TF_EMPTY_CDR", cdr(TF_EMPTY, "tf2_msgs/msg/TFMessage"), "rosbags serialize_cdr of TF_EMPTY")
 emit("ATTACHMENT", ATTACHMENT, "zenoh.ext.z_serialize of (Int64 7, Int64 1700000000123456789, [UInt8 0xa0..=0xaf])")
 print()
 for const, typename in [
@@ -161,6 +183,7 @@ for const, typename in [
     ("IMU_HASH", "sensor_msgs/msg/Imu"),
     ("ODOMETRY_HASH", "nav_msgs/msg/Odometry"),
     ("FLOAT64_HASH", "std_msgs/msg/Float64"),
+    ("TF_MESSAGE_HASH", "tf2_msgs/msg/TFMessage"),
 ]:
     print(f"/// rosbags hash_rihs01(\"{typename}\")")
     print(rust_const(const, ts.hash_rihs01(typename)))

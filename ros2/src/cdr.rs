@@ -227,6 +227,17 @@ impl CdrWriter {
         Ok(())
     }
 
+    /// Writes the `u32` element count of a sequence whose elements the caller writes next.
+    pub fn write_sequence_len(
+        &mut self,
+        field: &'static str,
+        len: usize,
+    ) -> Result<(), CdrEncodeError> {
+        let count = u32::try_from(len).map_err(|_| CdrEncodeError::TooLong { field, len })?;
+        self.write_u32(count);
+        Ok(())
+    }
+
     /// Writes a `sequence<float32>`: `u32` count, then the values.
     pub fn write_f32_sequence(
         &mut self,
@@ -359,6 +370,35 @@ impl<'a> CdrReader<'a> {
         std::str::from_utf8(text)
             .map(str::to_owned)
             .map_err(|source| CdrError::StringNotUtf8 { field, source })
+    }
+
+    /// Reads the `u32` element count of a sequence of messages whose elements take at least
+    /// `min_element_size` bytes each; the count is checked against the cap and the bytes present,
+    /// so the caller may allocate for it.
+    pub fn read_sequence_len(
+        &mut self,
+        field: &'static str,
+        min_element_size: usize,
+    ) -> Result<usize, CdrError> {
+        let declared = self.read_u32(field)?;
+        let cap = self.limits.max_sequence_len;
+        if declared > cap {
+            return Err(CdrError::SequenceTooLong {
+                field,
+                declared,
+                cap,
+            });
+        }
+        let remaining = self.remaining();
+        if (declared as usize).saturating_mul(min_element_size) > remaining {
+            return Err(CdrError::SequenceBeyondInput {
+                field,
+                declared,
+                element_size: min_element_size,
+                remaining,
+            });
+        }
+        Ok(declared as usize)
     }
 
     /// Reads a `sequence<float32>`; the count is checked against the cap and the bytes present

@@ -34,6 +34,9 @@ pub use convert::{
 };
 pub use key_expr::{HashConvention, KeyExprError, TopicKey};
 pub use liveliness::{EntityKind, LivelinessToken, NodeIdentity, Qos, TopicEndpoint};
-pub use msg::{Float64, Header, Imu, LaserScan, Odometry, RosMessage, Time, Twist};
+pub use msg::{
+    Float64, Header, Imu, LaserScan, Odometry, Quaternion, RosMessage, TfMessage, Time, Transform,
+    TransformStamped, Twist, Vector3,
+};
 pub use names::{NameError, Namespace, NodeName, TopicName};
 pub use type_hash::{TypeHash, TypeHashField};

@@ -413,6 +413,86 @@ impl RosMessage for Odometry {
     }
 }
 
+/// `geometry_msgs/msg/Transform`: where a child frame lies in its parent.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Transform {
+    /// The child frame's origin in the parent frame \[m\].
+    pub translation: Vector3,
+    /// The child frame's orientation in the parent frame.
+    pub rotation: Quaternion,
+}
+
+/// `geometry_msgs/msg/TransformStamped`: one edge of the TF tree at one time.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TransformStamped {
+    /// Stamp and the parent frame (`world`).
+    pub header: Header,
+    /// The child frame (`robot_0/base_link`).
+    pub child_frame_id: String,
+    /// The child in the parent.
+    pub transform: Transform,
+}
+
+impl TransformStamped {
+    /// The fewest bytes one element takes in a sequence: stamp, two empty strings, seven f64.
+    const MIN_CDR_SIZE: usize = 8 + 5 + 5 + 7 * 8;
+
+    fn write(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
+        self.header.write(w)?;
+        w.write_string("transforms.child_frame_id", &self.child_frame_id)?;
+        self.transform.translation.write(w);
+        self.transform.rotation.write(w);
+        Ok(())
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<TransformStamped, CdrError> {
+        Ok(TransformStamped {
+            header: Header::read(r)?,
+            child_frame_id: r.read_string("transforms.child_frame_id")?,
+            transform: Transform {
+                translation: Vector3::read(r, "transforms.transform.translation")?,
+                rotation: Quaternion::read(r, "transforms.transform.rotation")?,
+            },
+        })
+    }
+}
+
+/// `tf2_msgs/msg/TFMessage`: what `/tf` and `/tf_static` carry, so that `tf2_echo`, RViz,
+/// Foxglove and Rerun can place every robot.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TfMessage {
+    /// The transforms, one per frame that moved.
+    pub transforms: Vec<TransformStamped>,
+}
+
+impl RosMessage for TfMessage {
+    const ROS_NAME: &'static str = "tf2_msgs/msg/TFMessage";
+    const DDS_TYPE_NAME: &'static str = "tf2_msgs::msg::dds_::TFMessage_";
+    const TYPE_HASH: &'static str = TF_MESSAGE_HASH;
+
+    fn write_fields(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
+        w.write_sequence_len("transforms", self.transforms.len())?;
+        for transform in &self.transforms {
+            transform.write(w)?;
+        }
+        Ok(())
+    }
+
+    fn read_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        let count = r.read_sequence_len("transforms", TransformStamped::MIN_CDR_SIZE)?;
+        let mut transforms = Vec::with_capacity(count);
+        for _ in 0..count {
+            transforms.push(TransformStamped::read(r)?);
+        }
+        Ok(TfMessage { transforms })
+    }
+}
+
+/// The RIHS01 hash of `tf2_msgs/msg/TFMessage` in ROS 2 Jazzy (from rosbags, checked in
+/// `tests/wire_format.rs`).
+const TF_MESSAGE_HASH: &str =
+    "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087";
+
 /// `std_msgs/msg/Float64`: used for a heading goal φ* \[rad\].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Float64 {

@@ -14,7 +14,7 @@ use formation_ros2::gid::{entity_gid, xxh3_128};
 use formation_ros2::msg::{Pose, Quaternion, Vector3};
 use formation_ros2::{
     Attachment, DecodeLimits, Float64, Header, Imu, LaserScan, LivelinessToken, Odometry,
-    RosMessage, Time, Twist,
+    RosMessage, TfMessage, Time, Transform, TransformStamped, Twist,
 };
 
 fn hex(text: &str) -> Vec<u8> {
@@ -198,6 +198,70 @@ fn float64_matches_rosbags() {
         golden::HEADING_CDR,
         golden::FLOAT64_HASH,
     );
+}
+
+/// The two robots of `TF` in golden.py.
+fn tf() -> TfMessage {
+    TfMessage {
+        transforms: (0..2)
+            .map(|i| {
+                let half = 0.3 * f64::from(i + 1);
+                TransformStamped {
+                    header: Header {
+                        stamp: Time {
+                            sec: 12,
+                            nanosec: 500_000_000,
+                        },
+                        frame_id: "world".into(),
+                    },
+                    child_frame_id: format!("robot_{i}/base_link"),
+                    transform: Transform {
+                        translation: Vector3 {
+                            x: 1.5 * f64::from(i) - 0.25,
+                            y: -0.75 + f64::from(i),
+                            z: 0.0,
+                        },
+                        rotation: Quaternion {
+                            x: 0.0,
+                            y: 0.0,
+                            z: half.sin(),
+                            w: half.cos(),
+                        },
+                    },
+                }
+            })
+            .collect(),
+    }
+}
+
+#[test]
+fn tf_message_with_padding_after_frame_ids_matches_rosbags() {
+    check(&tf(), golden::TF_CDR, golden::TF_MESSAGE_HASH);
+    check(
+        &TfMessage::default(),
+        golden::TF_EMPTY_CDR,
+        golden::TF_MESSAGE_HASH,
+    );
+}
+
+#[test]
+fn a_tf_message_declaring_more_transforms_than_present_is_refused() {
+    let mut bytes = hex(golden::TF_CDR);
+    assert_eq!(&bytes[4..8], &2u32.to_le_bytes());
+    bytes[4..8].copy_from_slice(&3u32.to_le_bytes());
+    assert!(TfMessage::from_cdr(&bytes).is_err());
+    bytes[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
+    let limits = DecodeLimits {
+        max_sequence_len: u32::MAX,
+        ..DecodeLimits::default()
+    };
+    assert!(matches!(
+        TfMessage::from_cdr_with_limits(&bytes, limits),
+        Err(CdrError::SequenceBeyondInput {
+            field: "transforms",
+            ..
+        })
+    ));
 }
 
 #[test]
