@@ -252,3 +252,101 @@ fn bad_ros2_launches_are_refused_with_the_reason() {
         .arg(test_model());
     run(swap, LIMIT).assert_failure_mentioning("a ROS 2 agent cannot be swapped");
 }
+
+/// The interpreter with the independent clients: `FORMATION_PYTHON`, else `.venv/bin/python`.
+fn python() -> std::path::PathBuf {
+    std::env::var_os("FORMATION_PYTHON")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| repo_root().join(".venv/bin/python"))
+}
+
+/// A live ROS 2 team's `/tf` and `/tf_static`, read by an independent client (`eclipse-zenoh`
+/// subscribing on rmw_zenoh's keys, `rosbags` decoding `tf2_msgs/TFMessage`): every robot is
+/// placed in `world` at every tick it was seen, at exactly the pose of the run log, and each has
+/// its static `odom` and `laser` frames.
+#[test]
+fn a_live_teams_tf_is_read_by_an_independent_client() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("ros2_team_tf", LIMIT);
+    let dir = TempDir::new("r2tf");
+    let run_id = unique_run_id("r2tf");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 6.0);
+    let out = dir.path().join("out");
+    let port = free_tcp_port();
+    let team = formation_tests::LiveProcess::spawn(formation_run_with_model(
+        &run_id,
+        &scenario,
+        &shipped_model(),
+        &out,
+        &[
+            "--transport",
+            "ros2",
+            "--listen",
+            &endpoint(port),
+            "--clock",
+            "lockstep",
+            "--pace-ms",
+            "30",
+        ],
+    ));
+    let mut listener = Command::new(python());
+    listener
+        .arg(repo_root().join("tests/python/tf_listener.py"))
+        .args(["--connect", &endpoint(port), "--quiet-s", "3"]);
+    let heard = run(listener, LIMIT);
+    heard.assert_success();
+    team.finish(LIMIT).assert_success();
+    leaks.assert_clean();
+
+    let log = read_trajectory(&out.join("runs/run-0000.json")).expect("the run log");
+    let robots = log.n_robots();
+    let mut ticks_seen = vec![0usize; robots];
+    let mut static_children = std::collections::BTreeSet::new();
+    for line in heard.stdout().lines() {
+        let edge: serde_json::Value = serde_json::from_str(line).expect("a JSON line");
+        let child = edge["child"].as_str().expect("child").to_owned();
+        if edge["topic"] == "/tf_static" {
+            static_children.insert(child);
+            continue;
+        }
+        assert_eq!(edge["parent"], "world", "{line}");
+        let robot: usize = child
+            .strip_prefix("robot_")
+            .and_then(|rest| rest.strip_suffix("/base_link"))
+            .and_then(|i| i.parse().ok())
+            .unwrap_or_else(|| panic!("a robot's base_link: {line}"));
+        let stamp_ns =
+            edge["sec"].as_i64().unwrap() * 1_000_000_000 + edge["nanosec"].as_i64().unwrap();
+        let tick = usize::try_from((stamp_ns as f64 / (log.dt * 1e9)).round() as i64).unwrap();
+        let pose = log.poses[tick][robot];
+        let value = |key: &str| edge[key].as_f64().unwrap();
+        assert!(
+            (value("x") - pose.x).abs() <= 1e-6 && (value("y") - pose.y).abs() <= 1e-6,
+            "robot {robot} at tick {tick}: /tf {line}, run log {pose:?}"
+        );
+        let yaw = 2.0 * value("qz").atan2(value("qw"));
+        let turn = (yaw - pose.theta).rem_euclid(std::f64::consts::TAU);
+        assert!(
+            turn.min(std::f64::consts::TAU - turn) <= 1e-6,
+            "robot {robot} at tick {tick}: yaw {yaw}, run log {}",
+            pose.theta
+        );
+        ticks_seen[robot] += 1;
+    }
+    // The run is 120 ticks; the client connects while the team is starting, so it may miss the
+    // first ones, never most of them.
+    assert!(
+        ticks_seen.iter().all(|&n| n >= 60),
+        "/tf samples per robot: {ticks_seen:?}\n{}",
+        heard.describe()
+    );
+    for robot in 0..robots {
+        for frame in ["odom", "laser"] {
+            assert!(
+                static_children.contains(&format!("robot_{robot}/{frame}")),
+                "/tf_static lacks robot_{robot}/{frame}: {static_children:?}"
+            );
+        }
+    }
+}

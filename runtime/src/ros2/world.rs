@@ -48,7 +48,8 @@ use formation_ros2::liveliness::domain_wildcard;
 use formation_ros2::msg::Vector3;
 use formation_ros2::{
     EntityKind, Float64, Header, LaserScan, LivelinessToken, Namespace, NodeName, Odometry, Qos,
-    Time, Twist, quaternion_from_yaw, twist_from_wheels, wheels_from_twist,
+    TfMessage, Time, TopicName, Transform, TransformStamped, Twist, quaternion_from_yaw,
+    twist_from_wheels, wheels_from_twist,
 };
 
 use super::node::{Delivery, Node, NodeError, RosPublisher, RosSubscription};
@@ -62,6 +63,12 @@ const STAMPS_KEPT: usize = 64;
 const TWIST_QUEUE: usize = 64;
 /// The model id the exchange logs for a ROS 2 agent's commands.
 const ROS2_MODEL_ID: &str = "ros2";
+/// The fixed frame every robot is placed in on `/tf`.
+pub const WORLD_FRAME: &str = "world";
+/// How often `/tf_static` is sent again \[ns of the simulated clock\]: this link does not
+/// implement transient-local durability, so a viewer that joins later gets the static frames
+/// within a second instead of at once.
+const TF_STATIC_PERIOD_NS: i64 = 1_000_000_000;
 
 fn node_error(e: NodeError) -> WorldLinkError {
     WorldLinkError::Zenoh {
@@ -112,6 +119,10 @@ struct RobotPorts {
     _node: Node,
     scan: RosPublisher<LaserScan>,
     odom: RosPublisher<Odometry>,
+    tf: RosPublisher<TfMessage>,
+    tf_static: RosPublisher<TfMessage>,
+    /// Stamp of the last `/tf_static` sent.
+    tf_static_sent: Option<i64>,
     _cmd_vel: RosSubscription,
     /// The pose and wheel speeds to publish with the next scan (given by
     /// [`WorldLink::publish_odometry`]).
@@ -203,6 +214,16 @@ impl Ros2WorldLink {
             let odom = node
                 .publisher::<Odometry>(&topics.odometry, Qos::ROS_DEFAULT, sensors)
                 .map_err(node_error)?;
+            let tf = node
+                .publisher::<TfMessage>(&tf_topic("/tf"), Qos::ROS_DEFAULT, sensors)
+                .map_err(node_error)?;
+            let tf_static = node
+                .publisher::<TfMessage>(
+                    &tf_topic("/tf_static"),
+                    Qos::ROS_DEFAULT,
+                    Delivery::Reliable,
+                )
+                .map_err(node_error)?;
             let cmd_vel = {
                 let graph = Arc::clone(&graph);
                 let bell = Arc::clone(&bell);
@@ -232,6 +253,9 @@ impl Ros2WorldLink {
                 _node: node,
                 scan,
                 odom,
+                tf,
+                tf_static,
+                tf_static_sent: None,
                 _cmd_vel: cmd_vel,
                 odometry: None,
                 stamps: VecDeque::with_capacity(STAMPS_KEPT),
@@ -471,6 +495,20 @@ impl WorldLink for Ros2WorldLink {
                 self.team.wheel_separation,
             );
             ports.odom.publish(&odometry, stamp).map_err(node_error)?;
+            ports
+                .tf
+                .publish(&tf_message(robot, Time::from_nanos(stamp), &pose), stamp)
+                .map_err(node_error)?;
+            let due = ports.tf_static_sent.is_none_or(|sent| {
+                stamp < sent || stamp.saturating_sub(sent) >= TF_STATIC_PERIOD_NS
+            });
+            if due {
+                ports
+                    .tf_static
+                    .publish(&static_tf_message(robot, Time::from_nanos(stamp)), stamp)
+                    .map_err(node_error)?;
+                ports.tf_static_sent = Some(stamp);
+            }
         }
         let beams = msg.n_beams as usize;
         let max_range = self.team.max_range as f32;
@@ -618,6 +656,75 @@ impl Drop for Ros2WorldLink {
     }
 }
 
+/// `/tf` and `/tf_static` (absolute: one TF tree for the whole team, as ROS 2 tools expect).
+fn tf_topic(name: &str) -> TopicName {
+    TopicName::new(name).expect("a valid ROS topic name")
+}
+
+/// One TF edge at `stamp`.
+fn transform(
+    stamp: Time,
+    parent: &str,
+    child: String,
+    x: f64,
+    y: f64,
+    yaw: f64,
+) -> TransformStamped {
+    TransformStamped {
+        header: Header {
+            stamp,
+            frame_id: parent.to_owned(),
+        },
+        child_frame_id: child,
+        transform: Transform {
+            translation: Vector3 { x, y, z: 0.0 },
+            rotation: quaternion_from_yaw(yaw),
+        },
+    }
+}
+
+/// Robot `robot`'s `/tf` at `stamp`: `world` → `robot_<i>/base_link`, its true pose (the
+/// simulation's ground truth, for viewers; what the robot itself senses is in its scan and
+/// odometry).
+fn tf_message(robot: usize, stamp: Time, pose: &Pose) -> TfMessage {
+    TfMessage {
+        transforms: vec![transform(
+            stamp,
+            WORLD_FRAME,
+            format!("robot_{robot}/base_link"),
+            pose.x,
+            pose.y,
+            pose.theta,
+        )],
+    }
+}
+
+/// Robot `robot`'s `/tf_static`: `world` → `robot_<i>/odom` (the simulated odometry is the true
+/// pose, so its frame is the world's) and `robot_<i>/base_link` → `robot_<i>/laser` (the LIDAR
+/// sits on the axle centre, the origin of its rays).
+fn static_tf_message(robot: usize, stamp: Time) -> TfMessage {
+    TfMessage {
+        transforms: vec![
+            transform(
+                stamp,
+                WORLD_FRAME,
+                format!("robot_{robot}/odom"),
+                0.0,
+                0.0,
+                0.0,
+            ),
+            transform(
+                stamp,
+                &format!("robot_{robot}/base_link"),
+                format!("robot_{robot}/laser"),
+                0.0,
+                0.0,
+                0.0,
+            ),
+        ],
+    }
+}
+
 /// Robot `robot`'s Odometry at `stamp`: its pose (`heading` as the orientation, what its compass
 /// reads) and the twist of the wheel speeds it ran over the last step, as wheel encoders give it.
 /// Speeds that are not finite (never the world's) give a zero twist rather than no message.
@@ -652,6 +759,43 @@ fn odometry_message(
 mod tests {
     use super::*;
     use formation_ros2::yaw_from_quaternion;
+
+    #[test]
+    fn tf_places_each_robot_in_the_world_and_its_laser_on_it() {
+        let pose = Pose {
+            x: 1.5,
+            y: -2.0,
+            theta: 2.5,
+        };
+        let stamp = Time::from_nanos(1_250_000_000);
+        let tf = tf_message(3, stamp, &pose);
+        assert_eq!(tf.transforms.len(), 1);
+        let edge = &tf.transforms[0];
+        assert_eq!(
+            (edge.header.frame_id.as_str(), edge.child_frame_id.as_str()),
+            ("world", "robot_3/base_link")
+        );
+        assert_eq!(edge.header.stamp, stamp);
+        let t = edge.transform;
+        assert_eq!(
+            (t.translation.x, t.translation.y, t.translation.z),
+            (1.5, -2.0, 0.0)
+        );
+        let yaw = yaw_from_quaternion(&t.rotation).unwrap();
+        assert!((yaw - 2.5).abs() < 1e-12, "{yaw}");
+        let frames: Vec<(String, String)> = static_tf_message(3, stamp)
+            .transforms
+            .into_iter()
+            .map(|e| (e.header.frame_id, e.child_frame_id))
+            .collect();
+        assert_eq!(
+            frames,
+            [
+                ("world".to_owned(), "robot_3/odom".to_owned()),
+                ("robot_3/base_link".to_owned(), "robot_3/laser".to_owned())
+            ]
+        );
+    }
 
     #[test]
     fn odometry_twist_is_the_wheel_encoders_and_the_pose_is_the_robots() {
