@@ -8,9 +8,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use formation_onnx::OnnxPolicy;
 
 fn single_sample(c: &mut Criterion) {
-    let Some(fx) = common::fixtures("bench") else {
-        return;
-    };
+    let fx = common::fixtures("bench");
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("fixture loads");
     let cases = fx.cases();
     let mut next = 0;

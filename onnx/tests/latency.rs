@@ -14,9 +14,7 @@ const WARMUP: usize = 500;
 #[test]
 #[ignore = "measurement; run with --ignored --nocapture"]
 fn single_sample_latency_percentiles() {
-    let Some(fx) = common::fixtures("latency") else {
-        return;
-    };
+    let fx = common::fixtures("latency");
     let started = Instant::now();
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let load_ms = started.elapsed().as_secs_f64() * 1e3;

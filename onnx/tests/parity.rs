@@ -16,7 +16,7 @@ const TOLERANCE: f32 = 1e-4;
 
 #[test]
 fn outputs_match_torch_and_metadata_is_read() {
-    let Some(fx) = fixtures("parity") else { return };
+    let fx = fixtures("parity");
     let mut policy =
         OnnxPolicy::load(&fx.model("policy.onnx")).expect("fixture follows the contract");
 
@@ -72,7 +72,7 @@ fn outputs_match_torch_and_metadata_is_read() {
 
 #[test]
 fn repeated_inference_is_deterministic_and_buffers_do_not_leak_between_calls() {
-    let Some(fx) = fixtures("parity") else { return };
+    let fx = fixtures("parity");
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let cases = fx.cases();
     let (first_image, first_aux, _) = &cases[0];
@@ -85,7 +85,7 @@ fn repeated_inference_is_deterministic_and_buffers_do_not_leak_between_calls() {
 
 #[test]
 fn policy_moves_to_another_thread() {
-    let Some(fx) = fixtures("parity") else { return };
+    let fx = fixtures("parity");
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let (image, aux, torch) = fx.cases().swap_remove(2);
     let ours = std::thread::spawn(move || policy.infer(&image, aux))
@@ -117,7 +117,7 @@ fn contract_violation(path: &Path) -> (ContractViolation, String) {
 
 #[test]
 fn wrong_input_name_is_refused_naming_it() {
-    let Some(fx) = fixtures("parity") else { return };
+    let fx = fixtures("parity");
     let (reason, message) = contract_violation(&fx.model("wrong_name.onnx"));
     assert!(
         matches!(reason, ContractViolation::InputNames { ref found } if found.contains(&"image".to_owned()))
@@ -130,7 +130,7 @@ fn wrong_input_name_is_refused_naming_it() {
 
 #[test]
 fn image_side_different_from_size_px_is_refused() {
-    let Some(fx) = fixtures("parity") else { return };
+    let fx = fixtures("parity");
     let (reason, message) = contract_violation(&fx.model("small_image.onnx"));
     assert_eq!(
         reason,
@@ -145,7 +145,7 @@ fn image_side_different_from_size_px_is_refused() {
 
 #[test]
 fn missing_metadata_is_refused_naming_the_key() {
-    let Some(fx) = fixtures("parity") else { return };
+    let fx = fixtures("parity");
     let (reason, message) = contract_violation(&fx.model("no_metadata.onnx"));
     assert_eq!(
         reason,
@@ -156,7 +156,7 @@ fn missing_metadata_is_refused_naming_the_key() {
 
 #[test]
 fn non_finite_output_is_an_error() {
-    let Some(fx) = fixtures("parity") else { return };
+    let fx = fixtures("parity");
     let mut policy =
         OnnxPolicy::load(&fx.model("nan_output.onnx")).expect("the contract itself is fine");
     let (image, aux, _) = fx.cases().swap_remove(0);
@@ -167,7 +167,7 @@ fn non_finite_output_is_an_error() {
 
 #[test]
 fn wrong_image_length_is_an_error() {
-    let Some(fx) = fixtures("parity") else { return };
+    let fx = fixtures("parity");
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let short = vec![0.0; 40 * 40];
     match policy.infer(&short, [0.0, 1.0]) {
@@ -183,7 +183,7 @@ fn wrong_image_length_is_an_error() {
 
 #[test]
 fn sensor_check_compares_beams_and_range() {
-    let Some(fx) = fixtures("parity") else { return };
+    let fx = fixtures("parity");
     let policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     policy
         .check_sensor(&LidarSpec::default())

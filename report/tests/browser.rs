@@ -4,7 +4,7 @@
 //! dumped DOM).
 //!
 //! Needs Chromium (`/usr/bin/chromium`, or the path in `FORMATION_CHROMIUM`); CI installs it
-//! (`.ci/run`). `FORMATION_SKIP_BROWSER=1` skips the test with a message.
+//! (`.ci/run`); without it the test fails with the fix.
 //! `FORMATION_REPORT_SCREENSHOT=/path/shot.png` also saves a screenshot of the page.
 
 mod common;
@@ -127,26 +127,19 @@ fn html_attribute(dom: &str, name: &str) -> Option<String> {
     Some(tag[start..end].to_owned())
 }
 
-fn chromium_or_skip() -> Option<PathBuf> {
-    if std::env::var_os("FORMATION_SKIP_BROWSER").is_some_and(|v| v == "1") {
-        eprintln!("browser test skipped: FORMATION_SKIP_BROWSER=1");
-        return None;
-    }
-    let Some(browser) = find_chromium() else {
+/// Headless Chromium; its absence fails the test with the fix (no test passes by skipping).
+fn chromium() -> PathBuf {
+    find_chromium().unwrap_or_else(|| {
         panic!(
             "headless Chromium is needed for the report's browser test but /usr/bin/chromium (or \
-             $FORMATION_CHROMIUM) is missing: run `.ci/run` (installs it) or `apt-get install -y chromium`, \
-             or set FORMATION_SKIP_BROWSER=1 to skip"
-        );
-    };
-    Some(browser)
+             $FORMATION_CHROMIUM) is missing: run `.ci/run` (installs it) or `apt-get install -y chromium`"
+        )
+    })
 }
 
 #[test]
 fn report_loads_in_headless_chromium_with_every_figure_drawn() {
-    let Some(browser) = chromium_or_skip() else {
-        return;
-    };
+    let browser = chromium();
     let dir = tempfile::tempdir().expect("tempdir");
     let data = dir.path().join("data");
     common::write_demo_dir(&data, 40.0);
@@ -211,9 +204,7 @@ fn report_loads_in_headless_chromium_with_every_figure_drawn() {
 /// load is caught by each of them.
 #[test]
 fn the_browser_checks_catch_a_broken_page() {
-    let Some(browser) = chromium_or_skip() else {
-        return;
-    };
+    let browser = chromium();
     let dir = tempfile::tempdir().expect("tempdir");
     let data = dir.path().join("data");
     common::write_demo_dir(&data, 6.0);

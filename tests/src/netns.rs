@@ -3,7 +3,7 @@
 //! shared memory off, since `/dev/shm` is shared between namespaces).
 //!
 //! [`NetPair::create`] needs root and `ip netns`; where either is missing it returns the reason,
-//! and the tests skip with it. Every pair has names of its own and is deleted on drop (deleting
+//! and the tests fail with it. Every pair has names of its own and is deleted on drop (deleting
 //! a namespace deletes its end of the veth, and with it the other end).
 
 use std::path::Path;

@@ -11,8 +11,7 @@
 //! IEEE-754 bit patterns, so that both sides use exactly the same numbers.
 //!
 //! The Python packages come from `tests/python/requirements-ros2.txt` (`bash .ci/setup-python`
-//! installs them into `.venv`). Without them the tests that need them print `SKIPPED:` and pass,
-//! unless `CI` is set: in CI a missing package fails them.
+//! installs them into `.venv`). Without them the tests that need them fail with that fix.
 //!
 //! Every test uses its own free TCP port and scratch folder, runs alone within this binary
 //! ([`one_at_a_time`]), and stops every process it started.
@@ -67,10 +66,10 @@ fn python() -> PathBuf {
     }
 }
 
-/// The interpreter with the client's packages, or why there is none. Outside CI a missing
-/// package (or interpreter) skips the tests that need it; in CI it fails them; any other failure
-/// of `ros2_client.py check` (a broken script) fails them everywhere.
-fn clients() -> Option<&'static Path> {
+/// The interpreter with the client's packages. A missing package or interpreter fails the tests
+/// that need it with the fix (no test passes by skipping), as does any other failure of
+/// `ros2_client.py check` (a broken script).
+fn clients() -> &'static Path {
     static FOUND: OnceLock<Result<PathBuf, String>> = OnceLock::new();
     let found = FOUND.get_or_init(|| {
         let python = python();
@@ -100,14 +99,8 @@ fn clients() -> Option<&'static Path> {
         ))
     });
     match found {
-        Ok(python) => Some(python),
-        Err(why) if std::env::var_os("CI").is_some_and(|v| !v.is_empty()) => {
-            panic!("CI must run the ROS 2 client tests: {why}")
-        }
-        Err(why) => {
-            eprintln!("SKIPPED: {why}");
-            None
-        }
+        Ok(python) => python,
+        Err(why) => panic!("{why}"),
     }
 }
 
@@ -598,7 +591,7 @@ fn stamp(i: i64) -> i64 {
 fn twists_answer_laser_scans_and_imu_as_the_in_process_decision_does() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("ros2_twists_as_in_process", LIMIT);
-    let Some(python) = clients() else { return };
+    let python = clients();
     let dir = TempDir::new("r2dec");
     let half_turn = std::f32::consts::PI;
     let cases = [
@@ -652,7 +645,7 @@ fn twists_answer_laser_scans_and_imu_as_the_in_process_decision_does() {
 fn zenoh_ros2_sdk_discovers_the_agents_node_and_topics_through_liveliness() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("ros2_discovery", LIMIT);
-    let Some(python) = clients() else { return };
+    let python = clients();
     let dir = TempDir::new("r2dis");
     let node = "ros2_clients_agent";
     let scan = full_scan(stamp(0), 4, 0.0, true);
@@ -772,7 +765,7 @@ fn zenoh_ros2_sdk_discovers_the_agents_node_and_topics_through_liveliness() {
 fn a_laser_scan_with_another_type_hash_is_reported_and_the_robot_brakes() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("ros2_wrong_hash", LIMIT);
-    let Some(python) = clients() else { return };
+    let python = clients();
     let dir = TempDir::new("r2hash");
     let outcome = bad_stream(python, &dir, "wrong_hash");
     let brake = outcome.one("brake");
@@ -798,7 +791,7 @@ fn a_laser_scan_with_another_type_hash_is_reported_and_the_robot_brakes() {
 fn a_truncated_laser_scan_is_reported_and_the_robot_brakes() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("ros2_truncated", LIMIT);
-    let Some(python) = clients() else { return };
+    let python = clients();
     let dir = TempDir::new("r2trun");
     let outcome = bad_stream(python, &dir, "truncated");
     let brake = outcome.one("brake");
@@ -850,7 +843,7 @@ fn bad_stream(python: &Path, dir: &TempDir, bad: &str) -> Outcome {
 fn a_scan_of_mostly_nan_readings_brakes_the_robot_with_the_reason() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("ros2_nan", LIMIT);
-    let Some(python) = clients() else { return };
+    let python = clients();
     let dir = TempDir::new("r2nan");
     let good = full_scan(stamp(0), 7, 0.0, true);
     let mut nan = full_scan(stamp(1), 8, 0.0, true);
@@ -901,7 +894,7 @@ fn a_scan_of_mostly_nan_readings_brakes_the_robot_with_the_reason() {
 fn a_partial_circle_scan_brakes_unless_allowed_and_then_drives_as_in_process() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("ros2_partial", LIMIT);
-    let Some(python) = clients() else { return };
+    let python = clients();
     let dir = TempDir::new("r2part");
     let good = full_scan(stamp(0), 9, 0.0, true);
     let step_angle = (std::f64::consts::TAU / 720.0) as f32;
@@ -953,7 +946,7 @@ fn a_partial_circle_scan_brakes_unless_allowed_and_then_drives_as_in_process() {
 fn a_silent_orientation_topic_brakes_the_robot() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("ros2_silent_orientation", LIMIT);
-    let Some(python) = clients() else { return };
+    let python = clients();
     let dir = TempDir::new("r2imu");
     let blind = full_scan(stamp(0), 11, 0.0, true);
     let good = full_scan(stamp(1), 12, 0.0, true);
@@ -999,7 +992,7 @@ fn a_silent_orientation_topic_brakes_the_robot() {
 fn on_sigterm_the_agent_publishes_one_zero_twist_before_exiting() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("ros2_sigterm", LIMIT);
-    let Some(python) = clients() else { return };
+    let python = clients();
     let dir = TempDir::new("r2term");
     let scan = full_scan(stamp(0), 13, 0.0, true);
     let imu = Orientation::new(stamp(0), 0.0, 0.0, -1.1);

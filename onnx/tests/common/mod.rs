@@ -2,8 +2,7 @@
 //! written by `make_fixtures.py` (PyTorch + `onnx`), plus torch's outputs for random inputs.
 //!
 //! Python is `$FORMATION_PYTHON`, else the repository's `.venv/bin/python`. Without a Python that
-//! has torch and onnx the tests fail with the fix, unless `FORMATION_SKIP_PYTHON=1` (then
-//! [`fixtures`] returns `None` and the caller skips).
+//! has torch and onnx the tests fail with the fix.
 
 #![allow(dead_code)] // each test binary uses a different part
 
@@ -51,19 +50,15 @@ impl Fixtures {
 /// Number of torch reference cases written.
 pub const CASES: usize = 16;
 
-/// The fixtures of this test binary (regenerated once per process in `target/tmp/formation-onnx-<tag>`), or `None` when
-/// Python is unavailable and `FORMATION_SKIP_PYTHON=1`.
-pub fn fixtures(tag: &str) -> Option<&'static Fixtures> {
+/// The fixtures of this test binary (regenerated once per process in
+/// `target/tmp/formation-onnx-<tag>`); without Python, torch and onnx the test fails with the fix.
+pub fn fixtures(tag: &str) -> &'static Fixtures {
     static FIXTURES: OnceLock<Result<Fixtures, String>> = OnceLock::new();
     match FIXTURES.get_or_init(|| generate(tag)) {
-        Ok(fixtures) => Some(fixtures),
-        Err(_) if std::env::var("FORMATION_SKIP_PYTHON").is_ok_and(|v| v == "1") => {
-            eprintln!("skipped: no Python with torch and onnx (FORMATION_SKIP_PYTHON=1)");
-            None
-        }
+        Ok(fixtures) => fixtures,
         Err(why) => panic!(
             "{why}\nthese tests need Python with torch and onnx: run `bash .ci/setup-python`, or set \
-             FORMATION_PYTHON=/path/to/python, or FORMATION_SKIP_PYTHON=1 to skip them"
+             FORMATION_PYTHON=/path/to/python"
         ),
     }
 }
