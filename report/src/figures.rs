@@ -246,6 +246,20 @@ where
     X: Ranged<ValueType = f64> + ValueFormatter<f64>,
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
+    configure_mesh_labelled(chart, x_desc, y_desc, &|v| tick_label(*v))
+}
+
+/// [`configure_mesh`] with the x axis's labels made by `x_label`.
+fn configure_mesh_labelled<X, Y>(
+    chart: &mut ChartContext<'_, SVGBackend<'_>, Cartesian2d<X, Y>>,
+    x_desc: &str,
+    y_desc: &str,
+    x_label: &dyn Fn(&f64) -> String,
+) -> DrawResult
+where
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
     chart
         .configure_mesh()
         .x_desc(x_desc)
@@ -255,12 +269,35 @@ where
         .axis_style(RGBColor(0x66, 0x66, 0x66))
         .bold_line_style(RGBColor(0xE4, 0xE4, 0xE4))
         .light_line_style(RGBColor(0xF4, 0xF4, 0xF4))
-        .x_label_formatter(&|v| tick_label(*v))
+        .x_label_formatter(x_label)
         .y_label_formatter(&|v| tick_label(*v))
         .x_labels(8)
         .y_labels(6)
         .draw()?;
     Ok(())
+}
+
+/// The team-size axis of the scaling figure: whole team sizes, at least one robot either side of
+/// the sizes shown (one size alone would otherwise get a sliver such as 15.6–16.4 robots).
+pub fn team_size_range(sizes: impl IntoIterator<Item = usize>) -> Range<f64> {
+    let (lo, hi) = sizes
+        .into_iter()
+        .fold((usize::MAX, 0), |(lo, hi), n| (lo.min(n), hi.max(n)));
+    if lo > hi {
+        return 0.0..1.0;
+    }
+    let pad = ((hi - lo) as f64 * 0.06).max(1.0);
+    (lo as f64 - pad).max(0.0)..hi as f64 + pad
+}
+
+/// A team-size tick label: whole numbers only (a fractional tick is left unlabelled).
+pub fn team_size_label(value: f64) -> String {
+    let whole = value.round();
+    if (value - whole).abs() < 1e-9 && whole >= 0.0 {
+        format!("{whole:.0}")
+    } else {
+        String::new()
+    }
 }
 
 /// The time axis of a run: its first to last sample.
@@ -646,8 +683,7 @@ pub fn scaling_figure(
             drivers.push(who);
         }
     }
-    let sizes = || table.rows.iter().map(|r| r.robots as f64);
-    let x_range = padded_range(sizes(), 0.06, false);
+    let x_range = team_size_range(table.rows.iter().map(|r| r.robots));
     let (width, height) = (960_u32, 400_u32);
     render(id, (width, height), |root| {
         let (plots, legend) = root.split_horizontally(width - LEGEND_WIDTH);
@@ -658,7 +694,9 @@ pub fn scaling_figure(
             .x_label_area_size(40)
             .y_label_area_size(60)
             .build_cartesian_2d(x_range.clone(), 0.0..105.0)?;
-        configure_mesh(&mut success, "robots", "success [%]")?;
+        configure_mesh_labelled(&mut success, "robots", "success [%]", &|v| {
+            team_size_label(*v)
+        })?;
         let convergence_max = table
             .rows
             .iter()
@@ -670,7 +708,9 @@ pub fn scaling_figure(
             .x_label_area_size(40)
             .y_label_area_size(60)
             .build_cartesian_2d(x_range.clone(), 0.0..1.1 * convergence_max)?;
-        configure_mesh(&mut convergence, "robots", "convergence [s]")?;
+        configure_mesh_labelled(&mut convergence, "robots", "convergence [s]", &|v| {
+            team_size_label(*v)
+        })?;
         let mut entries = Vec::new();
         for (k, who) in drivers.iter().enumerate() {
             let rows: Vec<&formation_schema::ScalingRow> = table
@@ -865,6 +905,56 @@ pub fn trim_number(value: f64) -> String {
 mod tests {
     use super::*;
     use formation_proto::{Pose, WheelCmd};
+
+    #[test]
+    fn the_team_size_axis_holds_whole_sizes_around_one_size_or_many() {
+        assert_eq!(team_size_range([16]), 15.0..17.0);
+        assert_eq!(team_size_range([1]), 0.0..2.0);
+        let many = team_size_range([3, 5, 8, 13, 16, 32, 64]);
+        assert!(
+            many.start <= 3.0 - 1.0 && many.end >= 64.0 + 1.0,
+            "{many:?}"
+        );
+        assert_eq!(team_size_label(16.0), "16");
+        assert_eq!(team_size_label(15.6), "");
+        assert_eq!(team_size_label(16.4), "");
+        let row = formation_schema::ScalingRow {
+            controller: "expert".into(),
+            model: None,
+            robots: 16,
+            neighbours: "gabriel".into(),
+            runs: 2,
+            success_rate_5: 1.0,
+            success_rate_10: 1.0,
+            anchor_success_rate: 1.0,
+            convergence_s: None,
+            rel_formation_error: None,
+            max_edge_window_error: None,
+            collisions: 0,
+            team_size: None,
+        };
+        let table = formation_schema::ScalingTable {
+            scenario: "teams".into(),
+            seed: 1,
+            duration_s: 60.0,
+            rows: vec![row],
+        };
+        let figure = scaling_figure("scaling", &table).unwrap();
+        // Every text element's content (plotters writes it on the line after the tag).
+        let texts: Vec<&str> = figure
+            .svg
+            .split("<text")
+            .skip(1)
+            .filter_map(|t| Some(t[t.find('>')? + 1..t.find("</text>")?].trim()))
+            .collect();
+        assert!(texts.contains(&"16"), "the size is labelled: {texts:?}");
+        assert!(
+            !texts
+                .iter()
+                .any(|t| t.starts_with("15.") || t.starts_with("16.")),
+            "no fraction of a robot: {texts:?}"
+        );
+    }
 
     /// Three robots moving along +x, the formation shrinking towards `d*`.
     fn traj(samples: usize) -> Trajectory {
