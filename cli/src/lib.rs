@@ -20,6 +20,19 @@ pub mod report;
 pub mod runtime;
 
 use clap::Parser;
+use formation_proto::exit::ProcessExit;
+
+/// How `formation` exits after `error`: 130 or 143 when the user interrupted a launch with
+/// SIGINT (Ctrl-C) or SIGTERM, 2 for any other error. (Bad flags exit 2 through clap.)
+pub fn exit_for_error(error: &anyhow::Error) -> ProcessExit {
+    let interrupted = error.chain().find_map(|cause| {
+        match cause.downcast_ref::<runtime::supervisor::LaunchError>() {
+            Some(runtime::supervisor::LaunchError::Interrupted(signal)) => Some(*signal),
+            _ => None,
+        }
+    });
+    interrupted.map_or(ProcessExit::Failure, ProcessExit::stopped_by)
+}
 
 /// Parses the command line and runs the chosen subcommand.
 pub fn main_with_args() -> anyhow::Result<()> {

@@ -1,17 +1,21 @@
-//! `formation`: the command-line entry point. It only maps errors to messages and exit codes;
-//! everything else lives in the `formation` library.
+//! `formation`: the command-line entry point. It only maps errors to messages and exit codes
+//! ([`formation_proto::exit::ProcessExit`], through [`formation::exit_for_error`]); everything
+//! else lives in the `formation` library.
 
 use std::process::ExitCode;
 
+use formation_proto::exit::ProcessExit;
+
 fn main() -> ExitCode {
-    match formation::main_with_args() {
-        Ok(()) => ExitCode::SUCCESS,
+    let exit = match formation::main_with_args() {
+        Ok(()) => ProcessExit::Success,
         Err(err) => {
             eprintln!(
                 "error: {}",
                 formation_proto::errors::chain_text(err.as_ref())
             );
-            ExitCode::from(2)
+            formation::exit_for_error(&err)
         }
-    }
+    };
+    exit.into()
 }

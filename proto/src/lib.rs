@@ -5,6 +5,8 @@
 //! * [`neighbours`]: the formation's neighbour rule as a value (its computation is the world's).
 //! * [`files`]: reading a user's file only if it is a regular file within a size limit.
 //! * [`errors`]: an error and its sources as one line, each cause printed once.
+//! * [`exit`]: the exit codes of the three binaries and the termination signals behind two of
+//!   them.
 //! * [`control`]: the [`control::Controller`] seam between an episode loop and what decides the
 //!   wheel commands, with its [`control::Observation`] and [`control::ControllerError`].
 //! * [`auth`]: the launch secret, with which an agent proves that its own launch started it.
@@ -17,6 +19,7 @@
 pub mod auth;
 pub mod control;
 pub mod errors;
+pub mod exit;
 pub mod files;
 pub mod neighbours;
 pub mod team_size;

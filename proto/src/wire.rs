@@ -1592,9 +1592,32 @@ pub enum WorldEvent {
         /// The first tick it drove.
         tick: u64,
     },
+    /// Robot `robot`'s link is degraded: more than [`DEGRADED_SHARE_PERCENT`] % of its ticks in
+    /// the last `window_ticks` ticks (`window_ms` of the run's time) were braked. Sent while the
+    /// run goes on, at most once a second per robot.
+    LinkDegraded {
+        /// The robot.
+        robot: usize,
+        /// The tick at which the window ends.
+        tick: u64,
+        /// The window's length in the run's time \[ms\].
+        window_ms: u64,
+        /// The window's length in ticks.
+        window_ticks: u64,
+        /// Ticks of the window that were braked.
+        braked: u64,
+        /// Those braked ticks by reason ([`TickOutcome::name`]).
+        reasons: std::collections::BTreeMap<String, u64>,
+        /// The round trip of the newest command used in the window \[µs\], if one was used.
+        round_trip_us: Option<u64>,
+    },
     /// All runs finished.
     Finished,
 }
+
+/// The share of a robot's ticks, in percent, that may be braked within the degraded-link window
+/// before [`WorldEvent::LinkDegraded`] is sent.
+pub const DEGRADED_SHARE_PERCENT: u64 = 5;
 
 impl WorldEvent {
     /// The event on one line of the world's stdout; `None` for any other line.
@@ -1626,6 +1649,41 @@ pub enum TickOutcome {
     NonFinite,
     /// The agent flagged a failed decision: braked.
     AgentFailed,
+    /// No agent was ready to drive the robot: its agent died (or was lost) and no successor was
+    /// ready yet, so nothing could answer: braked. Distinct from [`TickOutcome::Stale`] (an agent
+    /// answered too late) and [`TickOutcome::AgentFailed`] (an agent answered that it could not
+    /// decide). Timing logs written before it existed never hold it.
+    AgentDown,
+}
+
+impl TickOutcome {
+    /// Every outcome, in declaration order.
+    pub const ALL: [TickOutcome; 6] = [
+        TickOutcome::Fresh,
+        TickOutcome::Missing,
+        TickOutcome::Stale,
+        TickOutcome::NonFinite,
+        TickOutcome::AgentFailed,
+        TickOutcome::AgentDown,
+    ];
+
+    /// The outcome's name in the files (`fresh`, `missing`, `stale`, `non_finite`,
+    /// `agent_failed`, `agent_down`), as serde writes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            TickOutcome::Fresh => "fresh",
+            TickOutcome::Missing => "missing",
+            TickOutcome::Stale => "stale",
+            TickOutcome::NonFinite => "non_finite",
+            TickOutcome::AgentFailed => "agent_failed",
+            TickOutcome::AgentDown => "agent_down",
+        }
+    }
+
+    /// Whether the watchdog braked the robot (everything but [`TickOutcome::Fresh`]).
+    pub fn braked(self) -> bool {
+        self != TickOutcome::Fresh
+    }
 }
 
 /// One robot's per-tick record of a run, stored column-wise (one entry per tick in every column)
@@ -1638,9 +1696,12 @@ pub struct RobotTiming {
     pub model: Vec<i16>,
     /// Per tick: what the watchdog made of the command.
     pub outcome: Vec<TickOutcome>,
-    /// Per tick: scan published → command received by the world (the world's own clock).
+    /// Per tick: the scan the used command answered published → that command received by the
+    /// world (the world's own clock). Under lag (`lag_ticks` > 0) this is the older scan's
+    /// publication, not the current tick's.
     pub round_trip_ns: Vec<u64>,
-    /// Per tick: scan published by the world → taken by the agent (system clock of both).
+    /// Per tick: the scan the used command answered published by the world → taken by the agent
+    /// (system clock of both).
     pub uplink_ns: Vec<u64>,
     /// Per tick: occupancy rendering in the agent.
     pub occupancy_ns: Vec<u64>,
@@ -1655,8 +1716,9 @@ pub struct RobotTiming {
 }
 
 impl RobotTiming {
-    /// Appends one tick: the outcome, the command used (if any), its round trip, when the world
-    /// published the scan and when it took the command (both [`wall_clock_ns`]).
+    /// Appends one tick: the outcome, the command used (if any), its round trip (from the
+    /// publication of the scan that command answered, tick `used.tick`, to its arrival), when the
+    /// world published that same scan and when it took the command (both [`wall_clock_ns`]).
     pub fn record(
         &mut self,
         outcome: TickOutcome,
@@ -2013,6 +2075,40 @@ mod tests {
             }
             other => panic!("decoded {other:?}"),
         }
+    }
+
+    #[test]
+    fn outcome_names_are_the_names_in_the_files_and_old_names_still_read() {
+        for outcome in TickOutcome::ALL {
+            assert_eq!(
+                serde_json::to_string(&outcome).unwrap(),
+                format!("\"{}\"", outcome.name())
+            );
+            assert_eq!(outcome.braked(), outcome != TickOutcome::Fresh);
+        }
+        let old: Vec<TickOutcome> =
+            serde_json::from_str(r#"["fresh","missing","stale","non_finite","agent_failed"]"#)
+                .unwrap();
+        assert_eq!(old, TickOutcome::ALL[..5]);
+    }
+
+    #[test]
+    fn a_degraded_link_event_is_one_json_line() {
+        let event = WorldEvent::LinkDegraded {
+            robot: 1,
+            tick: 205,
+            window_ms: 5000,
+            window_ticks: 100,
+            braked: 7,
+            reasons: std::collections::BTreeMap::from([("stale".to_owned(), 7)]),
+            round_trip_us: Some(101_000),
+        };
+        let line = event.to_line();
+        assert!(
+            line.starts_with(r#"{"event":"link_degraded","robot":1,"#),
+            "{line}"
+        );
+        assert_eq!(WorldEvent::parse(&line), Some(event));
     }
 
     #[test]

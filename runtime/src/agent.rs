@@ -19,6 +19,8 @@ use formation_proto::wire::{
 };
 use formation_proto::{Goal, LidarSpec, WheelCmd};
 
+use formation_proto::exit::TerminationSignal;
+
 use crate::clock::Clock;
 use crate::faults::{Fault, FaultAction};
 use crate::link::{AgentLink, AgentLinkError, Wake};
@@ -109,7 +111,7 @@ pub enum AgentExit {
     /// The world ended the run: the normal way out, nothing to tell the user.
     Shutdown,
     /// SIGINT or SIGTERM.
-    Signal,
+    Signal(TerminationSignal),
     /// Anything else, told to the user.
     Because(String),
 }
@@ -261,7 +263,7 @@ impl<M: PilotMaker> AgentLoop<M> {
                 at.saturating_duration_since(now).min(IDLE_CHECK)
             });
             match link.wait(wait)? {
-                Wake::Terminated => return Ok(AgentExit::Signal),
+                Wake::Terminated(signal) => return Ok(AgentExit::Signal(signal)),
                 Wake::Idle if wait < IDLE_CHECK => {
                     self.rehearse_at = None;
                     if let Some((pilot, _)) = &mut self.pilot

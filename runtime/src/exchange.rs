@@ -7,7 +7,12 @@
 //! same model, seed and scenario.
 //!
 //! The choice of each robot's command ([`choose_command`]) is a pure function of what arrived and
-//! when; the watchdog is part of it: a missing, stale, non-finite or failed command brakes the robot.
+//! when; the watchdog is part of it: a missing, stale, non-finite or failed command brakes the robot,
+//! and a robot with no agent ready to drive it brakes as [`TickOutcome::AgentDown`].
+//!
+//! Each used command is timed from the publication of the scan it answered ([`ScanStamps`]), so
+//! the round trip and the uplink of the timing log stay true under lag; each robot's outcomes
+//! feed a [`LinkMonitor`], whose degraded-link reports go out as events while the run goes on.
 //!
 //! Around it the exchange keeps each robot's agent state: admission of candidates by the launch
 //! secret (one agent per robot, each nonce once), lockstep lagging and rejoining (and the grace
@@ -21,6 +26,7 @@ use std::time::{Duration, Instant};
 
 use formation_proto::auth::LaunchSecret;
 use formation_proto::control::{Controller, ControllerError, Observation};
+use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::WorldEvent;
 use formation_proto::wire::{
     AgentStatus, CmdMsg, CmdStatus, ControlRequest, RobotTiming, RunId, ScanMsg, SwapOutcome,
@@ -30,7 +36,9 @@ use formation_proto::{LidarSpec, WheelCmd};
 
 use crate::clock::Clock;
 use crate::link::{Hello, WorldLink, WorldLinkError};
+use crate::link_health::LinkMonitor;
 use crate::settings::{ClockMode, RuntimeSettings};
+use crate::stamps::{ScanStamp, ScanStamps};
 
 /// What the exchange is told: the launch's timing and watchdog settings, and what admits and
 /// stops agents.
@@ -56,6 +64,9 @@ const PAUSE_TICKS: u32 = 4;
 
 /// Longest single wait, so a stop request is seen promptly.
 const MAX_WAIT: Duration = Duration::from_millis(250);
+
+/// The tick period assumed until an episode gives its own.
+const DEFAULT_DT: Duration = Duration::from_millis(50);
 
 /// A command as it reached the world.
 #[derive(Debug, Clone, Copy)]
@@ -107,6 +118,19 @@ pub fn choose_command(
     (cmd, TickOutcome::Fresh)
 }
 
+/// Why a robot whose command was not used brakes: a missing or stale command of a robot that has
+/// no agent ready to drive it ([`AgentState::Absent`]: its agent died and no successor said
+/// hello; [`AgentState::Connected`]: a successor said hello and is not ready yet) is
+/// [`TickOutcome::AgentDown`]; every other outcome stands.
+pub fn brake_reason(state: AgentState, outcome: TickOutcome) -> TickOutcome {
+    match (state, outcome) {
+        (AgentState::Absent | AgentState::Connected, TickOutcome::Missing | TickOutcome::Stale) => {
+            TickOutcome::AgentDown
+        }
+        _ => outcome,
+    }
+}
+
 /// Where one robot's agent stands, as far as the world knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum AgentState {
@@ -134,8 +158,10 @@ pub struct AgentsController<'l> {
     lidar: LidarSpec,
     states: Vec<AgentState>,
     newest: Vec<Option<Arrival>>,
-    published_at: Vec<Instant>,
-    published_wall_ns: Vec<u64>,
+    /// Per robot: when its recent scans were published, for timing the command that answers one.
+    scan_stamps: Vec<ScanStamps>,
+    /// Per robot: the degraded-link detector.
+    link_monitors: Vec<LinkMonitor>,
     timings: Vec<RobotTiming>,
     model_ids: Vec<String>,
     schedule_start: Option<Instant>,
@@ -170,7 +196,7 @@ pub struct AgentsController<'l> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StopReason {
     /// SIGINT or SIGTERM.
-    Signal,
+    Signal(TerminationSignal),
     /// The launcher closed the world's standard input (it exited or is shutting down).
     ParentGone,
 }
@@ -187,6 +213,8 @@ impl<'l> AgentsController<'l> {
     ) -> Self {
         let n = link.n_robots();
         let now = clock.now();
+        let scan_stamps =
+            vec![ScanStamps::for_window(settings.runtime.stale_after(), DEFAULT_DT); n];
         AgentsController {
             link,
             settings,
@@ -196,13 +224,13 @@ impl<'l> AgentsController<'l> {
             lidar,
             states: vec![AgentState::Absent; n],
             newest: vec![None; n],
-            published_at: vec![now; n],
-            published_wall_ns: vec![0; n],
+            scan_stamps,
+            link_monitors: (0..n).map(|i| LinkMonitor::new(i, DEFAULT_DT)).collect(),
             timings: (0..n).map(|_| RobotTiming::default()).collect(),
             model_ids: vec![String::new(); n],
             schedule_start: None,
             last_liveness_check: now,
-            dt: Duration::from_millis(50),
+            dt: DEFAULT_DT,
             stopped: None,
             pending_swaps: Vec::new(),
             rejoining: vec![None; n],
@@ -253,6 +281,13 @@ impl<'l> AgentsController<'l> {
         self.tick = 0;
         for timing in &mut self.timings {
             *timing = RobotTiming::default();
+        }
+        let stale_after = self.settings.runtime.stale_after();
+        for stamps in &mut self.scan_stamps {
+            *stamps = ScanStamps::for_window(stale_after, self.dt);
+        }
+        for monitor in &mut self.link_monitors {
+            monitor.begin_episode(self.dt);
         }
         for robot in 0..self.states.len() {
             if self.states[robot] != AgentState::Absent {
@@ -331,9 +366,11 @@ impl<'l> AgentsController<'l> {
 
     fn wait(&mut self, timeout: Duration) -> Result<(), ControllerError> {
         match self.link.wait(timeout.min(MAX_WAIT)) {
-            Err(WorldLinkError::Terminated) => {
-                self.stopped = Some(StopReason::Signal);
-                Err(ControllerError::new("stopped by a termination signal"))
+            Err(WorldLinkError::Terminated(signal)) => {
+                self.stopped = Some(StopReason::Signal(signal));
+                Err(ControllerError::new(format!(
+                    "stopped by a termination signal ({signal})"
+                )))
             }
             other => other.map_err(transport_error),
         }
@@ -726,11 +763,16 @@ impl Controller for AgentsController<'_> {
             // Stamped before the hand-over: publishing wakes the agent, which may run on this
             // very core before the world resumes, and a stamp taken afterwards would hide that
             // agent's whole answer from the round trip.
-            self.published_at[robot] = self.clock.now();
+            self.scan_stamps[robot].record(
+                obs.tick,
+                ScanStamp {
+                    at: self.clock.now(),
+                    wall_ns: msg.published_wall_ns,
+                },
+            );
             self.link
                 .publish_scan(robot, &msg)
                 .map_err(transport_error)?;
-            self.published_wall_ns[robot] = msg.published_wall_ns;
         }
         let paced_until = entered + self.settings.runtime.pace();
         let deadline = match self.settings.runtime.clock {
@@ -808,6 +850,7 @@ impl Controller for AgentsController<'_> {
                 self.settings.runtime.stale_after(),
                 answered_scan_at,
             );
+            let outcome = brake_reason(self.states[robot], outcome);
             *slot = cmd;
             match (self.states[robot], outcome) {
                 (AgentState::Live, TickOutcome::Missing | TickOutcome::Stale)
@@ -835,13 +878,23 @@ impl Controller for AgentsController<'_> {
                 });
             }
             let arrival = newest.filter(|_| outcome == TickOutcome::Fresh);
+            // Timed from the scan the command answered, which under lag is an older tick's.
+            let answered_scan = arrival.and_then(|a| self.scan_stamps[robot].of(a.msg.tick));
+            let round_trip = arrival
+                .zip(answered_scan)
+                .map(|(a, scan)| a.at.saturating_duration_since(scan.at));
             self.timings[robot].record(
                 outcome,
                 arrival.map(|a| &a.msg),
-                arrival.map(|a| a.at.saturating_duration_since(self.published_at[robot])),
-                self.published_wall_ns[robot],
+                round_trip,
+                answered_scan.map_or(0, |scan| scan.wall_ns),
                 arrival.map_or(0, |a| a.wall_ns),
             );
+            if let Some(report) =
+                self.link_monitors[robot].observe(obs.tick, outcome, round_trip, now)
+            {
+                (self.events)(&report);
+            }
         }
         Ok(())
     }
@@ -976,6 +1029,23 @@ mod tests {
                 .unwrap_err()
                 .contains("already driven by agent pid 10")
         );
+    }
+
+    #[test]
+    fn a_robot_without_a_ready_agent_brakes_as_agent_down_and_other_reasons_stand() {
+        use TickOutcome::{AgentDown, AgentFailed, Fresh, Missing, NonFinite, Stale};
+        for state in [AgentState::Absent, AgentState::Connected] {
+            assert_eq!(brake_reason(state, Missing), AgentDown);
+            assert_eq!(brake_reason(state, Stale), AgentDown);
+            for stands in [Fresh, NonFinite, AgentFailed] {
+                assert_eq!(brake_reason(state, stands), stands);
+            }
+        }
+        for state in [AgentState::Live, AgentState::Lagging] {
+            for outcome in [Fresh, Missing, Stale, NonFinite, AgentFailed] {
+                assert_eq!(brake_reason(state, outcome), outcome);
+            }
+        }
     }
 
     #[test]

@@ -7,6 +7,11 @@
 //! * [`agent`]: an agent's side, [`agent::AgentLoop`]: control requests, swaps at a tick
 //!   boundary, one command per scan through a [`agent::Pilot`], and injected [`faults`].
 //! * [`link`]: the seams both talk through, [`link::WorldLink`] and [`link::AgentLink`].
+//! * [`stamps`]: when each robot's recent scans were published, so a command is timed from the
+//!   scan it answered.
+//! * [`link_health`]: the degraded-link detector, whose reports the world sends while a run goes
+//!   on.
+//! * [`signals`]: which termination signal (SIGINT or SIGTERM) stopped an iceoryx2 process.
 //! * [`iceoryx`]: the links over iceoryx2 shared memory, used by the `formation-world` and
 //!   `formation-agent` processes.
 //! * `zenoh` (with the `zenoh` feature): the links over Zenoh, for agents on other hosts.
@@ -29,11 +34,14 @@ pub mod exchange;
 pub mod faults;
 pub mod iceoryx;
 pub mod link;
+pub mod link_health;
 pub mod memory;
 pub mod process;
 #[cfg(feature = "zenoh")]
 pub mod ros2;
 pub mod settings;
+pub mod signals;
+pub mod stamps;
 pub mod transport;
 #[cfg(feature = "zenoh")]
 pub mod zenoh;

@@ -17,6 +17,7 @@
 use std::time::Duration;
 
 use formation_proto::auth::SecretError;
+use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::{
     AgentStatus, CmdMsg, ControlRequest, NamespaceError, ScanMsg, SwapReply, SwapRequest, Welcome,
     WireError,
@@ -45,8 +46,8 @@ pub enum WorldLinkError {
     #[error(transparent)]
     Wire(#[from] WireError),
     /// SIGINT or SIGTERM arrived.
-    #[error("stopped by a termination signal")]
-    Terminated,
+    #[error("stopped by a termination signal ({0})")]
+    Terminated(TerminationSignal),
     /// The run's files could not be made private.
     #[error(transparent)]
     Namespace(#[from] NamespaceError),
@@ -226,6 +227,9 @@ pub enum AgentLinkError {
         /// How long the agent waited.
         waited_s: f64,
     },
+    /// SIGINT or SIGTERM arrived while the agent was connecting.
+    #[error("stopped by a termination signal ({0}) while connecting to the world")]
+    Terminated(TerminationSignal),
     /// The world refused this agent.
     #[error("the world refused to let this agent drive robot {robot}: {reason}")]
     Refused {
@@ -266,7 +270,7 @@ pub enum Wake {
     /// The timeout passed with nothing arriving.
     Idle,
     /// SIGINT or SIGTERM arrived.
-    Terminated,
+    Terminated(TerminationSignal),
 }
 
 /// What an agent needs from a transport: its own robot's four channels.

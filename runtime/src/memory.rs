@@ -21,6 +21,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 use formation_proto::auth::LaunchSecret;
+use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::{
     AgentStatus, CmdMsg, ControlRequest, RunId, ScanMsg, SwapReply, SwapRequest, Welcome,
 };
@@ -55,7 +56,7 @@ struct BusState {
     /// Every agent process that died.
     dead: HashSet<(usize, u32)>,
     world_alive: bool,
-    terminate_world: bool,
+    terminate_world: Option<TerminationSignal>,
     next_nonce: u64,
 }
 
@@ -96,7 +97,7 @@ impl MemoryBus {
             unreported_dead: Vec::new(),
             dead: HashSet::new(),
             world_alive: true,
-            terminate_world: false,
+            terminate_world: None,
             next_nonce: 1,
         };
         MemoryBus {
@@ -167,8 +168,8 @@ impl MemoryBus {
 
     /// The world receives a termination signal: its next wait ends with
     /// [`WorldLinkError::Terminated`].
-    pub fn terminate_world(&self) {
-        self.lock().terminate_world = true;
+    pub fn terminate_world(&self, signal: TerminationSignal) {
+        self.lock().terminate_world = Some(signal);
     }
 
     /// The world process is gone: agents see it in [`AgentLink::world_alive`].
@@ -286,8 +287,8 @@ impl WorldLink for MemoryWorldLink {
     fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
         let ready = |bus: &MemoryBus| -> Result<bool, WorldLinkError> {
             let state = bus.lock();
-            if state.terminate_world {
-                return Err(WorldLinkError::Terminated);
+            if let Some(signal) = state.terminate_world {
+                return Err(WorldLinkError::Terminated(signal));
             }
             Ok(state.world_has_mail())
         };

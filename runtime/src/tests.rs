@@ -12,6 +12,7 @@ use std::time::Duration;
 
 use formation_proto::auth::LaunchSecret;
 use formation_proto::control::{Controller, Observation};
+use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::{
     RunId, SwapOutcome, SwapReply, SwapRequest, TickOutcome, Welcome, WorldEvent,
 };
@@ -563,6 +564,87 @@ fn an_agent_lost_for_good_is_reported_and_its_robot_brakes() {
         tick: 1,
         last_fresh_tick: Some(0)
     }));
+    assert_eq!(
+        outcomes(&mut world, 1),
+        [
+            TickOutcome::Fresh,
+            TickOutcome::AgentDown,
+            TickOutcome::AgentDown
+        ],
+        "ticks braked for a dead agent have a reason of their own"
+    );
+}
+
+#[test]
+fn a_command_that_answers_an_older_scan_is_timed_from_that_scan() {
+    let sim = Sim::new(1);
+    let mut link = sim.world_link();
+    let mut world = connected(&sim, &mut link, ClockMode::Realtime);
+    // Tick 0's scan goes out; the agent takes it only 30 ms after tick 0 ended, so its answer
+    // arrives during tick 1, after tick 1's scan was published.
+    sim.pause(10);
+    sim.tick(&mut world, 0);
+    sim.clock.advance(Duration::from_millis(30));
+    sim.resume(10);
+    run_agents(&sim.agents, &sim.bus, &sim.clock);
+    sim.pause(10);
+    assert_eq!(
+        sim.tick(&mut world, 1),
+        vec![SLOW],
+        "within the stale window"
+    );
+    let timing = &world.take_timings()[0];
+    assert_eq!(timing.outcome, [TickOutcome::Missing, TickOutcome::Fresh]);
+    assert_eq!(timing.lag_ticks[1], 1, "the command answered tick 0");
+    assert_eq!(
+        Duration::from_nanos(timing.round_trip_ns[1]),
+        Duration::from_millis(80),
+        "from tick 0's scan (published at 0 ms) to the answer's arrival (80 ms), not from \
+         tick 1's scan"
+    );
+    assert!(
+        timing.uplink_ns[1] > 0,
+        "tick 0's scan was published before the agent took it; tick 1's only after: {:?}",
+        timing.uplink_ns
+    );
+}
+
+#[test]
+fn a_degraded_link_is_reported_while_the_run_goes_on() {
+    // One robot: in this one-threaded simulation a late agent's delay holds up every agent.
+    let sim = Sim::new(1);
+    let mut link = sim.world_link();
+    let late = Fault::LateBy(Duration::from_millis(200));
+    let mut world = connected_with(&sim, &mut link, settings(ClockMode::Realtime), &[(0, late)]);
+    for tick in 0..8 {
+        sim.tick(&mut world, tick);
+    }
+    let reports: Vec<WorldEvent> = sim
+        .events()
+        .into_iter()
+        .filter(|e| matches!(e, WorldEvent::LinkDegraded { .. }))
+        .collect();
+    let [
+        WorldEvent::LinkDegraded {
+            robot,
+            tick,
+            window_ms,
+            braked,
+            reasons,
+            round_trip_us,
+            ..
+        },
+    ] = reports.as_slice()
+    else {
+        panic!("one report (at most one a second): {reports:?}");
+    };
+    assert_eq!((*robot, *tick, *window_ms), (0, 5, 5000));
+    assert_eq!(*braked, 6, "more than 5 % of a 100-tick window");
+    assert_eq!(
+        reasons,
+        &std::collections::BTreeMap::from([("stale".to_owned(), 6)])
+    );
+    assert_eq!(*round_trip_us, None, "no command was used");
 }
 
 #[test]
@@ -605,10 +687,14 @@ fn shutdown_stops_the_agents_and_a_closed_input_or_a_signal_stops_the_world() {
     let sim = Sim::new(1);
     let mut link = sim.world_link();
     let mut world = connected(&sim, &mut link, ClockMode::Lockstep);
-    sim.bus.terminate_world();
+    sim.bus.terminate_world(TerminationSignal::Terminate);
     sim.pause(10);
     assert!(world.commands(&obs_for(1), &mut [WheelCmd::BRAKE]).is_err());
-    assert_eq!(world.stopped(), Some(StopReason::Signal));
+    assert_eq!(
+        world.stopped(),
+        Some(StopReason::Signal(TerminationSignal::Terminate)),
+        "the world knows which signal stopped it"
+    );
 }
 
 fn obs_for(n: usize) -> Observation<'static> {

@@ -78,7 +78,8 @@ pub struct EvalOutput {
     /// Per-run metrics, in run order.
     pub per_run: Vec<RunMetrics>,
     /// Multi-process runs only: per robot, the ticks its watchdog braked, by reason (`missing`,
-    /// `stale`, `non_finite`, `agent_failed`); an empty map for a robot never braked.
+    /// `stale`, `non_finite`, `agent_failed`, `agent_down`: no agent was ready to drive it, as
+    /// `TickOutcome::name` spells them); an empty map for a robot never braked.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub braked_ticks: Vec<BTreeMap<String, usize>>,
     /// Runs that stopped before their last tick (a `formation run` that ended abnormally), in

@@ -218,6 +218,19 @@ fn a_timing_log_a_summary_and_a_profile_read_back() {
 }
 
 #[test]
+fn a_version_1_timing_log_still_reads_and_agent_down_reads_back() {
+    let mut log = timing_log();
+    log.robots[0].outcome[1] = TickOutcome::AgentDown;
+    let text = round_trip(&log, read_timing_log);
+    assert!(text.contains("\"agent_down\""), "{text}");
+    let old = String::from_utf8(to_json(&timing_log()).unwrap())
+        .unwrap()
+        .replacen("\"schema_version\":2", "\"schema_version\":1", 1);
+    let read: TimingLog = from_json(old.as_bytes(), Path::new("timing/run-0003.json")).unwrap();
+    assert_eq!(read, timing_log());
+}
+
+#[test]
 fn nan_is_written_as_null_and_read_back_as_nan() {
     let mut log = run_log();
     log.metrics.rel_formation_error = f64::NAN;

@@ -23,9 +23,13 @@ pub struct TimingLog {
     pub robots: Vec<RobotTiming>,
 }
 
+/// Version 2 times each used command from the scan it answered (version 1 from the current
+/// tick's scan, which under lag understated the round trip) and may hold the outcome
+/// `agent_down`; version 1 files read unchanged.
 impl SchemaFile for TimingLog {
     const FORMAT: &'static str = "formation-timing-log";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
+    const OLDEST_VERSION: u32 = 1;
     const WHAT: &'static str = "formation timing log";
     const MAX_BYTES: u64 = 2 << 30;
 }

@@ -720,7 +720,7 @@ fn pids_of(exe: &str, run: &RunId, robot: Option<usize>) -> Vec<u32> {
 /// One robot's per-tick columns of run 0 of a `formation run` output directory: the watchdog's
 /// outcome, the command applied and the model that decided (`<none>` when none was used).
 pub struct RobotLog {
-    /// Per tick: `fresh`, `missing`, `stale`, `non_finite` or `agent_failed`.
+    /// Per tick: `fresh`, `missing`, `stale`, `non_finite`, `agent_failed` or `agent_down`.
     pub outcomes: Vec<String>,
     /// Per tick: the (left, right) command the world applied.
     pub commands: Vec<(f64, f64)>,

@@ -177,11 +177,11 @@ impl Outcome {
         assert_eq!(gids.len(), 1, "one publisher GID\n{}", self.describe());
         assert_eq!(
             self.agent.output.status.code(),
-            Some(130),
-            "the agent exits with 130 on SIGTERM\n{}",
+            Some(143),
+            "the agent exits with 143 on SIGTERM\n{}",
             self.describe()
         );
-        self.assert_agent_said("exiting: termination signal");
+        self.assert_agent_said("exiting: termination signal (SIGTERM)");
     }
 }
 

@@ -538,6 +538,11 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         WorldEvent::AgentRejoined { robot, pid, tick } => {
             println!("robot {robot}: agent pid {pid} rejoined, driving from tick {tick}")
         }
+        WorldEvent::LinkDegraded { .. } => {
+            if let Some(line) = degraded_link_message(event) {
+                eprintln!("formation: {line}");
+            }
+        }
         WorldEvent::Listening { .. } | WorldEvent::Finished => {}
     }))?;
     let report = match launched {
@@ -575,11 +580,26 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         report.restarts,
         report.cleaned_up
     );
+    for restarting in &report.restarting_at_end {
+        println!(
+            "run {}: robot {}'s agent (lost at tick {}) was being restarted when the run ended; \
+             counted as a restart, its braked ticks are in {}",
+            restarting.run,
+            restarting.robot,
+            restarting.lost_at_tick,
+            plan.out.join("summary.json").display()
+        );
+    }
     if !report.lost_for_good.is_empty() {
         let lost: Vec<String> = report
             .lost_for_good
             .iter()
-            .map(|(run, robot, tick)| format!("run {run}: robot {robot} (lost at tick {tick})"))
+            .map(|lost| {
+                format!(
+                    "run {}: robot {} (lost at tick {})",
+                    lost.run, lost.robot, lost.lost_at_tick
+                )
+            })
             .collect();
         anyhow::bail!(
             "runs ended with robots that had lost their agent for good, so their results are not \
@@ -589,6 +609,37 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The line the launcher prints for a [`WorldEvent::LinkDegraded`] (`None` for any other event):
+/// the robot, how many of the window's ticks were braked and why, and the newest round trip.
+pub fn degraded_link_message(event: &WorldEvent) -> Option<String> {
+    let WorldEvent::LinkDegraded {
+        robot,
+        tick,
+        window_ms,
+        window_ticks,
+        braked,
+        reasons,
+        round_trip_us,
+    } = event
+    else {
+        return None;
+    };
+    let reasons: Vec<String> = reasons
+        .iter()
+        .map(|(reason, count)| format!("{reason} {count}"))
+        .collect();
+    let round_trip = match round_trip_us {
+        Some(us) => format!("round trip {:.1} ms", *us as f64 / 1000.0),
+        None => "no command used in the window".to_owned(),
+    };
+    Some(format!(
+        "robot {robot}: degraded link at tick {tick}: {braked} of its last {window_ticks} ticks \
+         ({:.1} s) braked ({}); {round_trip}",
+        *window_ms as f64 / 1000.0,
+        reasons.join(", ")
+    ))
 }
 
 /// What `formation run` says when the world lost a robot's agent: from which tick the robot is
@@ -662,7 +713,9 @@ fn write_summary(
 fn stop_reason(error: &supervisor::LaunchError) -> String {
     use supervisor::LaunchError;
     match error {
-        LaunchError::Interrupted(what) => format!("interrupted by {what}"),
+        LaunchError::Interrupted(signal) => {
+            format!("interrupted by {}", supervisor::interruption_name(signal))
+        }
         LaunchError::AgentFailed { robot, status, .. } => {
             format!("the agent of robot {robot} exited ({status}) and the restart budget was spent")
         }
@@ -936,6 +989,9 @@ pub fn eval_over_processes(
                 done += 1;
                 on_run_done(done);
             }
+            if let Some(line) = degraded_link_message(event) {
+                eprintln!("formation: {line}");
+            }
         }))??;
         let trajectories = report
             .run_logs
@@ -1054,7 +1110,9 @@ mod tests {
             &out,
             0..2,
             std::time::SystemTime::now(),
-            &supervisor::LaunchError::Interrupted("SIGTERM"),
+            &supervisor::LaunchError::Interrupted(
+                formation_proto::exit::TerminationSignal::Terminate,
+            ),
             "t",
             3,
         );
@@ -1104,6 +1162,30 @@ mod tests {
         assert!(earlier.contains("braking it from tick 39"), "{earlier}");
         let never = lost_message(2, 5, None);
         assert!(never.contains("before it drove this run"), "{never}");
+    }
+
+    #[test]
+    fn a_degraded_link_is_one_line_naming_the_robot_the_reasons_and_the_round_trip() {
+        let event = WorldEvent::LinkDegraded {
+            robot: 2,
+            tick: 140,
+            window_ms: 5000,
+            window_ticks: 100,
+            braked: 12,
+            reasons: std::collections::BTreeMap::from([
+                ("missing".to_owned(), 2),
+                ("stale".to_owned(), 10),
+            ]),
+            round_trip_us: Some(102_500),
+        };
+        assert_eq!(
+            degraded_link_message(&event).as_deref(),
+            Some(
+                "robot 2: degraded link at tick 140: 12 of its last 100 ticks (5.0 s) braked \
+                 (missing 2, stale 10); round trip 102.5 ms"
+            )
+        );
+        assert_eq!(degraded_link_message(&WorldEvent::Finished), None);
     }
 
     #[test]

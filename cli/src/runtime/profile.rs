@@ -110,12 +110,9 @@ pub fn profile(runs: &[TimingLog]) -> LatencyProfile {
         for (index, robot) in run.robots.iter().enumerate() {
             for tick in 0..robot.ticks() {
                 if robot.outcome[tick] != TickOutcome::Fresh {
-                    let name = serde_json::to_value(robot.outcome[tick])
-                        .ok()
-                        .and_then(|v| v.as_str().map(str::to_owned))
-                        .unwrap_or_default();
-                    *braked_per_robot[index].entry(name.clone()).or_default() += 1;
-                    *braked.entry(name).or_default() += 1;
+                    let name = robot.outcome[tick].name();
+                    *braked_per_robot[index].entry(name.to_owned()).or_default() += 1;
+                    *braked.entry(name.to_owned()).or_default() += 1;
                     continue;
                 }
                 used += 1;

@@ -8,7 +8,10 @@
 //!   standard input: only agents that prove it may drive a robot.
 //! * An agent that exits while the world runs, however it exits, is restarted with exponential
 //!   backoff while the restart budget lasts (the world brakes its robot meanwhile and lets the new
-//!   agent rejoin); past the budget the launch fails naming the robot and its exit status.
+//!   agent rejoin); past the budget the launch fails naming the robot and its exit status. A run
+//!   that ends while a robot's restart is scheduled or under way counts it as a restart; only a
+//!   robot nobody restarts (a remote agent that was not started again) has lost its agent for
+//!   good ([`AgentRecovery`]).
 //! * Ctrl-C / SIGTERM, a failure, or the end of the runs all lead to the same shutdown: the
 //!   children's standard input is closed (world and agents watch it and exit cleanly), stragglers
 //!   are killed after a grace period, every child is reaped, and the run's iceoryx2 files are
@@ -23,6 +26,7 @@ use std::process::{ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use formation_proto::auth::LaunchSecret;
+use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::{NamespaceError, RunId, RunNamespace, WorldEvent};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::process::{Child, ChildStdin, Command};
@@ -148,9 +152,75 @@ pub struct LaunchReport {
     pub cleaned_up: usize,
     /// Leftover files of a dead earlier launch of this run id that were removed first.
     pub stale_removed: usize,
-    /// Per finished run: the robots that had no agent when it ended (lost and never rejoined),
-    /// as `(run index, robot, tick the agent was lost at)`.
-    pub lost_for_good: Vec<(usize, usize, u64)>,
+    /// Per finished run: the robots that had no agent when it ended and that nobody was
+    /// restarting (a remote agent not started again), as `(run index, robot, tick the agent was
+    /// lost at)`.
+    pub lost_for_good: Vec<LostAgent>,
+    /// Per finished run: the robots that had no agent when it ended but whose restart was
+    /// scheduled or under way; each counts as a restart, not as a loss.
+    pub restarting_at_end: Vec<LostAgent>,
+}
+
+/// A robot without an agent at the end of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LostAgent {
+    /// The run's index.
+    pub run: usize,
+    /// The robot.
+    pub robot: usize,
+    /// The tick at which the world reported the agent lost.
+    pub lost_at_tick: u64,
+}
+
+/// What the launcher knows of each robot whose agent the world reported lost: which of them a
+/// restart is scheduled for or under way (booked and not rejoined yet). At the end of a run, a
+/// lost robot is restarting if a restart was booked for it, or if its local agent process has
+/// exited and the launcher has not handled that exit yet (it is about to book one); any other is
+/// lost for good.
+#[derive(Debug, Default)]
+pub struct AgentRecovery {
+    /// Robot → the tick at which its agent was reported lost.
+    lost: std::collections::BTreeMap<usize, u64>,
+    /// Robots with a restart booked whose new agent has not rejoined yet.
+    restarting: std::collections::BTreeSet<usize>,
+}
+
+impl AgentRecovery {
+    /// The world reported robot `robot`'s agent lost at tick `tick`.
+    pub fn lost(&mut self, robot: usize, tick: u64) {
+        self.lost.insert(robot, tick);
+    }
+
+    /// A restart of robot `robot`'s agent was booked.
+    pub fn restart_booked(&mut self, robot: usize) {
+        self.restarting.insert(robot);
+    }
+
+    /// A new agent drives robot `robot` again.
+    pub fn rejoined(&mut self, robot: usize) {
+        self.lost.remove(&robot);
+        self.restarting.remove(&robot);
+    }
+
+    /// Run `run` ended: its lost robots, split into those lost for good and those being
+    /// restarted. `exited_unhandled(robot)` tells whether the robot's local agent process has
+    /// exited without the launcher having handled it yet.
+    pub fn at_run_end(
+        &self,
+        run: usize,
+        exited_unhandled: impl Fn(usize) -> bool,
+    ) -> (Vec<LostAgent>, Vec<LostAgent>) {
+        self.lost
+            .iter()
+            .map(|(&robot, &lost_at_tick)| LostAgent {
+                run,
+                robot,
+                lost_at_tick,
+            })
+            .partition(|lost| {
+                !(self.restarting.contains(&lost.robot) || exited_unhandled(lost.robot))
+            })
+    }
 }
 
 /// Why a launch failed.
@@ -230,9 +300,9 @@ pub enum LaunchError {
         /// Its exit status.
         status: String,
     },
-    /// Stopped by the user.
-    #[error("interrupted by {0}; all processes stopped and cleaned up")]
-    Interrupted(&'static str),
+    /// Stopped by the user: SIGINT (Ctrl-C) or SIGTERM.
+    #[error("interrupted by {}; all processes stopped and cleaned up", interruption_name(.0))]
+    Interrupted(TerminationSignal),
     /// Removing the run's files failed.
     #[error("could not remove run {run}'s iceoryx2 files: {source}")]
     Cleanup {
@@ -244,6 +314,14 @@ pub enum LaunchError {
     /// Supervision itself failed.
     #[error("supervising the runtime: {0}")]
     Io(#[from] std::io::Error),
+}
+
+/// How a user's interruption is named: `Ctrl-C` for SIGINT, `SIGTERM`.
+pub fn interruption_name(signal: &TerminationSignal) -> &'static str {
+    match signal {
+        TerminationSignal::Interrupt => "Ctrl-C",
+        TerminationSignal::Terminate => "SIGTERM",
+    }
 }
 
 /// How long an agent may take to be admitted: a team starts all its agents at once, and on a
@@ -469,8 +547,8 @@ async fn supervise(
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut finished = false;
     let mut stdout_open = true;
-    // Robots whose agent the world reported lost and that have not rejoined: robot → tick.
-    let mut lost: std::collections::BTreeMap<usize, u64> = std::collections::BTreeMap::new();
+    // Robots whose agent the world reported lost, and whose restarts are booked.
+    let mut recovery = AgentRecovery::default();
     // Remote robots whose agent has not said hello yet.
     let mut remote_waiting: Vec<usize> = plan
         .network
@@ -485,12 +563,17 @@ async fn supervise(
                         match &event {
                             WorldEvent::RunDone { index, log } => {
                                 report.run_logs.push(log.clone());
-                                report.lost_for_good.extend(
-                                    lost.iter().map(|(&robot, &tick)| (*index, robot, tick)),
-                                );
+                                let (gone, restarting) = recovery.at_run_end(*index, |robot| {
+                                    !plan.network.is_remote(robot)
+                                        && agents.get(robot).is_some_and(|a| {
+                                            a.reaper.as_ref().is_some_and(|r| r.is_finished())
+                                        })
+                                });
+                                report.lost_for_good.extend(gone);
+                                report.restarting_at_end.extend(restarting);
                             }
                             WorldEvent::AgentLost { robot, tick, .. } => {
-                                lost.insert(*robot, *tick);
+                                recovery.lost(*robot, *tick);
                                 if let Some(zenoh) = plan.network.zenoh().filter(|z| z.is_remote(*robot)) {
                                     eprintln!(
                                         "formation: robot {robot}'s agent is remote: the launcher \
@@ -505,7 +588,7 @@ async fn supervise(
                                 remote_waiting.retain(|r| r != robot);
                             }
                             WorldEvent::AgentRejoined { robot, .. } => {
-                                lost.remove(robot);
+                                recovery.rejoined(*robot);
                             }
                             _ => {}
                         }
@@ -551,6 +634,7 @@ async fn supervise(
                 eprintln!("formation: agent of robot {robot} exited ({}); restarting in {} ms",
                     describe(status), backoff.as_millis());
                 report.restarts += 1;
+                recovery.restart_booked(robot);
                 // The delay runs on its own task, so the world's progress is still read meanwhile.
                 let restart_tx = restart_tx.clone();
                 tokio::spawn(async move {
@@ -567,8 +651,10 @@ async fn supervise(
                     Err(e) => break Err(e),
                 }
             }
-            _ = tokio::signal::ctrl_c() => break Err(LaunchError::Interrupted("Ctrl-C")),
-            _ = sigterm.recv() => break Err(LaunchError::Interrupted("SIGTERM")),
+            _ = tokio::signal::ctrl_c() => {
+                break Err(LaunchError::Interrupted(TerminationSignal::Interrupt))
+            }
+            _ = sigterm.recv() => break Err(LaunchError::Interrupted(TerminationSignal::Terminate)),
         }
     };
     shutdown(&mut world, &mut world_stdin, &mut agents).await;
@@ -750,6 +836,35 @@ async fn shutdown(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_run_that_ends_during_a_restart_counts_it_as_a_restart_not_a_loss() {
+        let mut recovery = AgentRecovery::default();
+        let lost = |robot, lost_at_tick| LostAgent {
+            run: 3,
+            robot,
+            lost_at_tick,
+        };
+        // Robot 1: restart booked (its backoff still running at the end).
+        recovery.lost(1, 1190);
+        recovery.restart_booked(1);
+        // Robot 2: its process exited a moment ago; the launcher has not handled the exit yet.
+        recovery.lost(2, 1195);
+        // Robot 4: lost and nobody restarts it (a remote agent).
+        recovery.lost(4, 700);
+        // Robot 0: lost, restarted, rejoined.
+        recovery.lost(0, 10);
+        recovery.restart_booked(0);
+        recovery.rejoined(0);
+        let (gone, restarting) = recovery.at_run_end(3, |robot| robot == 2);
+        assert_eq!(gone, [lost(4, 700)]);
+        assert_eq!(restarting, [lost(1, 1190), lost(2, 1195)]);
+        // A restart booked before the world reported the loss counts too.
+        let mut early = AgentRecovery::default();
+        early.restart_booked(5);
+        early.lost(5, 40);
+        assert_eq!(early.at_run_end(0, |_| false).0, []);
+    }
 
     #[test]
     fn the_restart_budget_slides_and_backs_off_per_robot() {

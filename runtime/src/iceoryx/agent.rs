@@ -22,7 +22,9 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 
+use super::watch_termination_signals;
 use crate::link::{AgentLink, AgentLinkError, Wake};
+use crate::signals;
 
 fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> AgentLinkError {
     let action = action.into();
@@ -92,6 +94,7 @@ impl IceoryxAgentLink {
         secret: &LaunchSecret,
         timeout: Duration,
     ) -> Result<Self, AgentLinkError> {
+        watch_termination_signals();
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
         let pid = std::process::id();
@@ -114,6 +117,9 @@ impl IceoryxAgentLink {
             waited_s: started.elapsed().as_secs_f64(),
         };
         let lobby = loop {
+            if let Some(signal) = signals::received() {
+                return Err(AgentLinkError::Terminated(signal));
+            }
             match open_lobby(&node, namespace, robot) {
                 Ok(lobby) => break lobby,
                 Err(OpenFailure::Fatal(e)) => return Err(e),
@@ -312,6 +318,9 @@ fn await_welcome(
                 return Ok(Some(sample.payload().decode()?));
             }
         }
+        if let Some(signal) = signals::received() {
+            return Err(AgentLinkError::Terminated(signal));
+        }
         if Instant::now() >= deadline {
             return Ok(None);
         }
@@ -443,8 +452,13 @@ impl AgentLink for IceoryxAgentLink {
         drop((scan_guard, control_guard));
         let _ = self.scan_wake.try_wait(|_| {});
         let _ = self.control_wake.try_wait(|_| {});
+        if let Some(signal) = signals::received() {
+            return Ok(Wake::Terminated(signal));
+        }
         Ok(match result {
-            WaitSetRunResult::TerminationRequest => Wake::Terminated,
+            WaitSetRunResult::TerminationRequest => {
+                Wake::Terminated(signals::termination_requested())
+            }
             // An interrupted wait (EINTR: SIGCONT after a stop, SIGUSR1, SIGURG, ...) is not a
             // termination: look again.
             WaitSetRunResult::Interrupt => Wake::Activity,

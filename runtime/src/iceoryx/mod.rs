@@ -5,10 +5,24 @@
 //! Service names, payloads and limits are those of [`formation_proto::wire`]: the one-publisher /
 //! one-subscriber limits on an incarnation's scan and command services are how decentralisation
 //! is enforced. Waits run on iceoryx2 wait sets that handle termination requests (SIGINT,
-//! SIGTERM); any other signal only interrupts a wait, which the callers resume.
+//! SIGTERM); any other signal only interrupts a wait, which the callers resume. Which of the two
+//! came is read from [`crate::signals`], whose watch both links start before they create their
+//! node.
 
 mod agent;
 mod world;
+
+/// Starts recording which termination signal arrives ([`crate::signals`]); when that fails, a
+/// SIGTERM reads as SIGINT (the process then exits 130 instead of 143), which is worth a warning
+/// but not a failed start.
+fn watch_termination_signals() {
+    if let Err(e) = crate::signals::watch_termination_signals() {
+        tracing::warn!(
+            "{}; a SIGTERM will be reported as SIGINT",
+            formation_proto::errors::chain_text(&e)
+        );
+    }
+}
 
 pub use agent::IceoryxAgentLink;
 pub use world::IceoryxWorldLink;

@@ -26,7 +26,9 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{WaitSetGuard, WaitSetRunResult};
 
+use super::watch_termination_signals;
 use crate::link::{Hello, WorldLink, WorldLinkError, check_robot_index};
+use crate::signals;
 
 fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> WorldLinkError {
     let action = action.into();
@@ -129,6 +131,7 @@ impl IceoryxWorldLink {
     /// Creates the world's node, every robot's lobby and the swap channel in `namespace`, and
     /// makes the run's files private to this user.
     pub fn create(namespace: &RunNamespace, n_robots: usize) -> Result<Self, WorldLinkError> {
+        watch_termination_signals();
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
         let name = NodeName::new(WORLD_NODE_NAME).map_err(|e| iox("name the world node")(&e))?;
@@ -447,8 +450,13 @@ impl WorldLink for IceoryxWorldLink {
         for ports in self.robots.iter().flatten() {
             ports.wakes.consume();
         }
+        if let Some(signal) = signals::received() {
+            return Err(WorldLinkError::Terminated(signal));
+        }
         match result {
-            WaitSetRunResult::TerminationRequest => Err(WorldLinkError::Terminated),
+            WaitSetRunResult::TerminationRequest => {
+                Err(WorldLinkError::Terminated(signals::termination_requested()))
+            }
             // An interrupted wait (EINTR: SIGCONT after a stop, SIGUSR1, SIGURG, ...) is not a
             // termination; the caller simply looks again.
             _ => Ok(()),

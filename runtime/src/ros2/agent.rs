@@ -240,8 +240,8 @@ pub fn run_agent<P: Pilot>(
         if stop.load(Ordering::Relaxed) {
             break Ok(AgentExit::Because("the launcher went away".into()));
         }
-        if bell.wait(LOOK_EVERY) == Ring::Terminated {
-            break Ok(AgentExit::Signal);
+        if let Ring::Terminated(signal) = bell.wait(LOOK_EVERY) {
+            break Ok(AgentExit::Signal(signal));
         }
         let (scan, inputs, problems, superseded, scan_problem) = {
             let mut inbox = lock(&inbox);

@@ -224,9 +224,7 @@ impl ZenohAgentLink {
         let wait_until = |until: Instant| -> Result<(), AgentLinkError> {
             let left = until.saturating_duration_since(Instant::now());
             match bell.wait(left) {
-                Ring::Terminated => Err(zenoh_error("connect to the world")(
-                    "stopped by a termination signal".into(),
-                )),
+                Ring::Terminated(signal) => Err(AgentLinkError::Terminated(signal)),
                 _ => Ok(()),
             }
         };
@@ -360,7 +358,7 @@ impl AgentLink for ZenohAgentLink {
         Ok(match self.bell.wait(timeout) {
             Ring::Activity => Wake::Activity,
             Ring::Idle => Wake::Idle,
-            Ring::Terminated => Wake::Terminated,
+            Ring::Terminated(signal) => Wake::Terminated(signal),
         })
     }
 

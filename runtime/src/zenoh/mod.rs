@@ -41,6 +41,7 @@ use std::time::Duration;
 
 use ::zenoh::Wait;
 use ::zenoh::config::EndPoint;
+use formation_proto::exit::TerminationSignal;
 
 pub use access::{AccessError, Login, WorldAccess};
 pub use agent::ZenohAgentLink;
@@ -200,7 +201,7 @@ pub(crate) struct Bell {
 #[derive(Debug, Default)]
 struct BellState {
     pending: bool,
-    terminated: bool,
+    terminated: Option<TerminationSignal>,
 }
 
 /// How a wait on a [`Bell`] ended.
@@ -208,7 +209,7 @@ struct BellState {
 pub(crate) enum Ring {
     Activity,
     Idle,
-    Terminated,
+    Terminated(TerminationSignal),
 }
 
 impl Bell {
@@ -223,9 +224,9 @@ impl Bell {
         self.rung.notify_all();
     }
 
-    /// SIGINT or SIGTERM arrived.
-    fn terminate(&self) {
-        self.lock().terminated = true;
+    /// SIGINT or SIGTERM arrived (the first one stands).
+    fn terminate(&self, signal: TerminationSignal) {
+        self.lock().terminated.get_or_insert(signal);
         self.rung.notify_all();
     }
 
@@ -235,10 +236,10 @@ impl Bell {
         let guard = self.lock();
         let (mut guard, _) = self
             .rung
-            .wait_timeout_while(guard, timeout, |s| !s.pending && !s.terminated)
+            .wait_timeout_while(guard, timeout, |s| !s.pending && s.terminated.is_none())
             .unwrap_or_else(|e| e.into_inner());
-        if guard.terminated {
-            return Ring::Terminated;
+        if let Some(signal) = guard.terminated {
+            return Ring::Terminated(signal);
         }
         if std::mem::take(&mut guard.pending) {
             Ring::Activity
@@ -253,7 +254,7 @@ impl Bell {
     /// the time passed, [`crate::link::WorldLinkError::Terminated`] on SIGINT/SIGTERM.
     pub(crate) fn world_wait(&self, timeout: Duration) -> Result<(), crate::link::WorldLinkError> {
         match self.wait(timeout) {
-            Ring::Terminated => Err(crate::link::WorldLinkError::Terminated),
+            Ring::Terminated(signal) => Err(crate::link::WorldLinkError::Terminated(signal)),
             Ring::Activity | Ring::Idle => Ok(()),
         }
     }
@@ -277,8 +278,8 @@ impl SignalWatch {
             .name("formation-signals".into())
             .spawn(move || {
                 for signal in signals.forever() {
-                    if signal == SIGINT || signal == SIGTERM {
-                        bell.terminate();
+                    if let Some(termination) = TerminationSignal::from_number(signal) {
+                        bell.terminate(termination);
                         break;
                     }
                     tracing::debug!("ignoring signal {signal}");
@@ -368,8 +369,13 @@ mod tests {
         let thread = std::thread::spawn(move || ringer.ring());
         assert_eq!(bell.wait(Duration::from_secs(60)), Ring::Activity);
         thread.join().unwrap();
-        bell.terminate();
-        assert_eq!(bell.wait(Duration::from_secs(60)), Ring::Terminated);
+        bell.terminate(TerminationSignal::Terminate);
+        bell.terminate(TerminationSignal::Interrupt);
+        assert_eq!(
+            bell.wait(Duration::from_secs(60)),
+            Ring::Terminated(TerminationSignal::Terminate),
+            "the first signal stands"
+        );
 
         let queue = Queue::new(2);
         assert!(queue.push(1) && queue.push(2));

@@ -20,11 +20,16 @@
 //! ends it by default), when its standard input closes (with `--exit-on-stdin-close`: the
 //! launcher is gone), or within about a second of the world process going away. Other signals
 //! (SIGCONT after a stop, SIGUSR1, SIGURG, ...) only interrupt a wait, which it simply resumes.
+//! Its exit code is one of [`formation_proto::exit::ProcessExit`]: 0 when it leaves cleanly, 2 on
+//! an error, 130 on SIGINT, 143 on SIGTERM (in every mode, and while it connects too).
 
 mod ros2;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+
+use formation_proto::exit::ProcessExit;
+use formation_runtime::link::AgentLinkError;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
@@ -100,27 +105,34 @@ fn main() -> ExitCode {
         Some(robot) => format!("formation-agent (robot {robot})"),
         None => "formation-agent".to_string(),
     };
-    match run(&args) {
+    let exit = match run(&args) {
         Ok(AgentExit::Shutdown) => {
             tracing::info!("{who}: exiting: the world asked us to shut down");
-            ExitCode::SUCCESS
+            ProcessExit::Success
         }
-        Ok(AgentExit::Signal) => {
-            eprintln!("{who}: exiting: termination signal (SIGINT or SIGTERM)");
-            ExitCode::from(130)
+        Ok(AgentExit::Signal(signal)) => {
+            eprintln!("{who}: exiting: termination signal ({signal})");
+            ProcessExit::stopped_by(signal)
         }
         Ok(AgentExit::Because(reason)) => {
             eprintln!("{who}: exiting: {reason}");
-            ExitCode::SUCCESS
+            ProcessExit::Success
         }
-        Err(e) => {
-            eprintln!(
-                "{who}: error: {}",
-                formation_proto::errors::chain_text(e.as_ref())
-            );
-            ExitCode::from(2)
-        }
-    }
+        Err(e) => match e.downcast_ref::<AgentLinkError>() {
+            Some(AgentLinkError::Terminated(signal)) => {
+                eprintln!("{who}: exiting: termination signal ({signal}) while connecting");
+                ProcessExit::stopped_by(*signal)
+            }
+            _ => {
+                eprintln!(
+                    "{who}: error: {}",
+                    formation_proto::errors::chain_text(e.as_ref())
+                );
+                ProcessExit::Failure
+            }
+        },
+    };
+    exit.into()
 }
 
 fn run(args: &Args) -> anyhow::Result<AgentExit> {

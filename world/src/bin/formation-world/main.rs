@@ -7,7 +7,9 @@
 //! run it writes the run logs ([`runlog`]) and prints a progress event on stdout; while a run plays
 //! it journals every tick, and a run that ends early (a signal, the launcher, an error) is kept as
 //! an incomplete run log. At the end, or on SIGINT/SIGTERM, or when the launcher closes its
-//! standard input, it asks the agents to exit.
+//! standard input, it asks the agents to exit. Its exit code is one of
+//! [`formation_proto::exit::ProcessExit`]: 0 when every run was played, 2 on an error, 130 on
+//! SIGINT or a closed input, 143 on SIGTERM.
 //!
 //! The first line of its standard input is the launch secret (see [`formation_proto::auth`]): only
 //! agents that prove it are let drive a robot.
@@ -22,6 +24,8 @@ mod runlog;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+
+use formation_proto::exit::ProcessExit;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
@@ -134,20 +138,27 @@ fn main() -> ExitCode {
         .with_writer(std::io::stderr)
         .try_init();
     let args = Args::parse();
-    match run(&args) {
-        Ok(None) => ExitCode::SUCCESS,
-        Ok(Some(reason)) => {
-            eprintln!("formation-world: stopped ({reason:?}); agents asked to exit");
-            ExitCode::from(130)
+    let exit = match run(&args) {
+        Ok(None) => ProcessExit::Success,
+        Ok(Some(StopReason::Signal(signal))) => {
+            eprintln!("formation-world: stopped by {signal}; agents asked to exit");
+            ProcessExit::stopped_by(signal)
+        }
+        Ok(Some(StopReason::ParentGone)) => {
+            eprintln!(
+                "formation-world: stopped: the launcher closed its input; agents asked to exit"
+            );
+            ProcessExit::Interrupted
         }
         Err(e) => {
             eprintln!(
                 "formation-world: error: {}",
                 formation_proto::errors::chain_text(e.as_ref())
             );
-            ExitCode::from(2)
+            ProcessExit::Failure
         }
-    }
+    };
+    exit.into()
 }
 
 fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {

@@ -1,0 +1,185 @@
+//! Issue 26: the figures a run reports stay true under a slow link, and a degraded link is told
+//! while the run goes on. With real processes in realtime: an agent made late on purpose
+//! (`--fault 1:late-ms=120`) shows a round trip of at least its lateness in `profile.json`, and
+//! the launcher prints a degraded-link line for it; across the `delay-relay` of this package (a
+//! remote Zenoh agent on 127.0.0.1 whose traffic is held 70 ± 30 ms each way), the p50 round trip
+//! is the sum of both directions' delays to within a tick, and the degraded-link line names the
+//! robot. The exit code stays 0: the runs completed.
+//!
+//! Every test uses its own run id, port and scratch folder, and runs alone within this binary.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use formation_tests::{
+    LeakCheck, LiveProcess, TempDir, Watchdog, binaries, case1_scenario, formation_run,
+    free_tcp_port, one_at_a_time, run, test_model, unique_run_id,
+};
+
+const LIMIT: Duration = Duration::from_secs(240);
+
+/// One tick of the 20 Hz schedule \[µs\].
+const TICK_US: f64 = 50_000.0;
+
+fn json(path: &Path) -> serde_json::Value {
+    let text =
+        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("parsing {}: {e}", path.display()))
+}
+
+/// Robot `robot`'s p50 round trip in `profile.json` \[µs\].
+fn round_trip_p50_us(profile: &serde_json::Value, robot: usize) -> f64 {
+    profile["per_agent"][robot]["round_trip"]["p50_us"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("robot {robot}'s round trip in {profile:#}"))
+}
+
+/// An agent that publishes every command 120 ms late (between one 50 ms tick and the 150 ms stale
+/// window) shows a round trip of at least 120 ms for its robot, however soon after a later
+/// tick's scan its command arrives; its robot brakes often enough that the launcher reports the
+/// degraded link, and the run still exits 0.
+#[test]
+fn a_late_agent_shows_its_lateness_in_the_round_trip_and_a_degraded_link_is_told() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("late_agent_round_trip", LIMIT);
+    let dir = TempDir::new("lateRT");
+    let run_id = unique_run_id("lateRT");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 8.0);
+    let out = dir.path().join("out");
+    let command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &["--clock", "realtime", "--fault", "1:late-ms=120"],
+    );
+    let finished = run(command, LIMIT);
+    finished.assert_success();
+    let profile = json(&out.join("profile.json"));
+    let late = round_trip_p50_us(&profile, 1);
+    eprintln!("an agent 120 ms late: round trip p50 {late} us");
+    assert!(
+        late >= 120_000.0,
+        "robot 1's agent answers 120 ms late, so its round trip is at least that: p50 {late} us\n{}",
+        finished.describe()
+    );
+    let max = profile["per_agent"][1]["round_trip"]["max_us"]
+        .as_f64()
+        .unwrap_or_default();
+    assert!(
+        max < 150_000.0 + TICK_US,
+        "a used command answers a scan within the stale window: max {max} us"
+    );
+    let punctual = round_trip_p50_us(&profile, 0);
+    assert!(
+        punctual < TICK_US,
+        "robot 0's agent is not late: p50 {punctual} us"
+    );
+    assert!(
+        finished.stderr().contains("robot 1: degraded link"),
+        "the launcher tells the degraded link while the run goes on\n{}",
+        finished.describe()
+    );
+    assert!(
+        !finished.stderr().contains("robot 0: degraded link"),
+        "{}",
+        finished.describe()
+    );
+    let summary = json(&out.join("summary.json"));
+    let braked = summary["braked_ticks"][1]
+        .as_object()
+        .unwrap_or_else(|| panic!("robot 1's braked ticks in {summary:#}"));
+    assert!(
+        braked.get("stale").and_then(serde_json::Value::as_u64) > Some(8),
+        "summary.json gives the totals by reason: {braked:?}"
+    );
+    leaks.assert_clean();
+}
+
+/// Across the delaying relay (70 ± 30 ms each way; a remote Zenoh agent on 127.0.0.1), robot 1's
+/// p50 round trip is the sum of both directions' delays (140 ms) to within a tick, and the
+/// robot's link, which loses every command whose round trip outlasts the 150 ms stale window
+/// (about a third of them), is reported degraded while the run goes on; the run exits 0.
+#[test]
+fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_is_told() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("relay_round_trip", LIMIT);
+    let bins = binaries();
+    let dir = TempDir::new("relayRT");
+    let run_id = unique_run_id("relayRT");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 10.0);
+    let out = dir.path().join("out");
+    let creds = dir.path().join("creds");
+    let mut credentials = Command::new(&bins.cli);
+    credentials
+        .args(["credentials", "--robots", "3", "--out"])
+        .arg(&creds);
+    run(credentials, LIMIT).assert_success();
+    let world_port = free_tcp_port();
+    let listen = format!("tcp/127.0.0.1:{world_port}");
+    let relay_port = free_tcp_port();
+    let mut relay = Command::new(env!("CARGO_BIN_EXE_delay-relay"));
+    relay.args([
+        &format!("127.0.0.1:{relay_port}"),
+        &format!("127.0.0.1:{world_port}"),
+        "70",
+        "30",
+        "26",
+    ]);
+    let mut relay = LiveProcess::spawn_with_input(relay, Some(""));
+    assert!(
+        relay
+            .wait_for_line(Duration::from_secs(10), |l| l == "listening")
+            .is_some(),
+        "{}",
+        relay.describe()
+    );
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &["--transport", "zenoh", "--listen", &listen, "--remote", "1"],
+    );
+    command
+        .args(["--clock", "realtime", "--credentials"])
+        .arg(&creds);
+    let mut launch = LiveProcess::spawn(command);
+    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains("waiting for the remote agents of robots [1]")
+    });
+    assert!(waiting.is_some(), "{}", launch.describe());
+    let mut agent = Command::new(&bins.agent);
+    agent
+        .args(["--transport", "zenoh", "--connect"])
+        .arg(format!("tcp/127.0.0.1:{relay_port}"))
+        .args(["--run-id", run_id.as_str(), "--robot", "1", "--model"])
+        .arg(test_model())
+        .arg("--credentials")
+        .arg(creds.join("robot-1.json"));
+    let remote = LiveProcess::spawn_with_input(agent, None);
+    let finished = launch.finish(LIMIT);
+    let remote = remote.finish(Duration::from_secs(60));
+    relay.close_input();
+    finished.assert_success();
+    assert!(remote.output.status.success(), "{}", remote.describe());
+    let profile = json(&out.join("profile.json"));
+    let delayed = round_trip_p50_us(&profile, 1);
+    let summary = json(&out.join("summary.json"));
+    eprintln!(
+        "70 ± 30 ms each way: round trip p50 {delayed} us; braked ticks {}",
+        summary["braked_ticks"]
+    );
+    assert!(
+        (delayed - 140_000.0).abs() <= TICK_US,
+        "p50 round trip {delayed} us across 70 + 70 ms of delay\n{}",
+        finished.describe()
+    );
+    assert!(
+        finished.stderr().contains("robot 1: degraded link"),
+        "the launcher tells the degraded link while the run goes on\n{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+}
