@@ -405,26 +405,9 @@ impl<'a> CdrReader<'a> {
     /// before anything is allocated.
     pub fn read_f32_sequence(&mut self, field: &'static str) -> Result<Vec<f32>, CdrError> {
         const ELEMENT_SIZE: usize = 4;
-        let declared = self.read_u32(field)?;
-        let cap = self.limits.max_sequence_len;
-        if declared > cap {
-            return Err(CdrError::SequenceTooLong {
-                field,
-                declared,
-                cap,
-            });
-        }
         // After the u32 count the position is 4-aligned, so float32 elements need no padding.
-        let remaining = self.remaining();
-        if (declared as usize).saturating_mul(ELEMENT_SIZE) > remaining {
-            return Err(CdrError::SequenceBeyondInput {
-                field,
-                declared,
-                element_size: ELEMENT_SIZE,
-                remaining,
-            });
-        }
-        let bytes = self.take(field, ELEMENT_SIZE, declared as usize * ELEMENT_SIZE)?;
+        let declared = self.read_sequence_len(field, ELEMENT_SIZE)?;
+        let bytes = self.take(field, ELEMENT_SIZE, declared * ELEMENT_SIZE)?;
         Ok(bytes
             .chunks_exact(ELEMENT_SIZE)
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))

@@ -4,11 +4,10 @@
 //! smaller than every trained one gets a warning.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Duration;
 
 use formation_tests::{
-    Finished, LeakCheck, TempDir, Watchdog, binaries, case1_scenario, formation_run_with_model,
+    Finished, LeakCheck, TempDir, Watchdog, case1_scenario, formation_run_with_model, policy_eval,
     run, unique_run_id, write_tiny_model_with,
 };
 
@@ -33,16 +32,8 @@ fn model_of_3_and_5(dir: &Path) -> PathBuf {
 }
 
 fn eval(scenario: &Path, model: &Path, json: &Path, extra: &[&str]) -> Finished {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args(["eval", "--controller", "policy", "--runs", "1"])
-        .args(extra)
-        .arg("--scenario")
-        .arg(scenario)
-        .arg("--model")
-        .arg(model)
-        .arg("--json")
-        .arg(json);
+    let mut command = policy_eval(scenario, model, json);
+    command.args(extra);
     let finished = run(command, LIMIT);
     finished.assert_success();
     finished
