@@ -101,6 +101,8 @@ fn eval_output(scenario: &str, per_run: &[RunMetrics]) -> EvalOutput {
         per_run: per_run.to_vec(),
         braked_ticks: Vec::new(),
         incomplete_runs: Vec::new(),
+        run_logs: Vec::new(),
+        complete: true,
     }
 }
 
@@ -210,7 +212,7 @@ fn an_incomplete_run_written_by_the_world_is_marked_in_the_report() {
         let dir = tempfile::tempdir().expect("tempdir");
         let run_dir = dir.path().join("run");
         let trajectory = trajectory(4.2, 2.0, 0.5);
-        let metrics = run_metrics(&trajectory, &MetricsConfig::default());
+        let metrics = run_metrics(&trajectory, trajectory.commands.len() as u64, &MetricsConfig::default());
         let log = RunLog {
             index: 0,
             metrics: metrics.clone(),

@@ -45,6 +45,7 @@ fn metrics() -> RunMetrics {
         orientation_error_rad: 0.031,
         collisions: 1,
         team: None,
+        incomplete: None,
     }
 }
 
@@ -97,11 +98,29 @@ fn summary() -> EvalOutput {
         seed: Some(7),
         summary: Summary {
             runs: 2,
+            runs_incomplete: 1,
             success_rate_5: 0.5,
             success_rate_10: 1.0,
             median_convergence_s: Some(9.5),
             median_rel_formation_error: None,
             median_orientation_error_rad: Some(0.03),
+            medians_over: Some(MediansOver {
+                convergence_s: Coverage {
+                    rule: "runs successful at 10 % that converged".into(),
+                    runs: 1,
+                    of: 2,
+                },
+                rel_formation_error: Coverage {
+                    rule: "runs successful at 10 %".into(),
+                    runs: 2,
+                    of: 2,
+                },
+                orientation_error_rad: Coverage {
+                    rule: "runs successful at 10 %".into(),
+                    runs: 2,
+                    of: 2,
+                },
+            }),
             collisions: 1,
             convergence_s: Some(q),
             rel_formation_error: None,
@@ -117,6 +136,8 @@ fn summary() -> EvalOutput {
             planned_ticks: Some(1200),
             stop_reason: None,
         }],
+        run_logs: vec![0, 1],
+        complete: false,
     }
 }
 

@@ -508,7 +508,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         WorldEvent::AgentRejoined { robot, pid, tick } => {
             println!("robot {robot}: agent pid {pid} rejoined, driving from tick {tick}")
         }
-        WorldEvent::Listening { .. } | WorldEvent::Finished => {}
+        WorldEvent::Listening { .. } | WorldEvent::Finished | WorldEvent::Stopping { .. } => {}
     }))?;
     let report = match launched {
         Ok(report) => {
@@ -600,7 +600,10 @@ fn run_summary(
             stop_reason: log.stop_reason.clone(),
         })
         .collect();
-    let per_run = logs.into_iter().map(|l| l.metrics).collect();
+    let per_run = logs
+        .iter()
+        .map(formation_world::runlog::log_metrics)
+        .collect();
     let mut table = crate::eval::eval_output("policy", models, scenario, seed, per_run);
     table.incomplete_runs = incomplete_runs;
     Ok(table)
@@ -978,7 +981,7 @@ mod tests {
             formation_world::run_episode(&spec(0), &mut Forward, &mut |_, _| {}).expect("episode");
         let log = RunLog {
             index: 0,
-            metrics: formation_world::metrics::run_metrics(&full, &Default::default()),
+            metrics: formation_world::metrics::run_metrics(&full, full.commands.len() as u64, &Default::default()),
             trajectory: full,
             clock: "lockstep".into(),
             models: vec!["m".into(); 3],

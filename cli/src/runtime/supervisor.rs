@@ -468,6 +468,8 @@ async fn supervise(
 
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut finished = false;
+    // The world said it stops early (a failed write, a signal): agents exit because it asked.
+    let mut world_stopping = false;
     let mut stdout_open = true;
     // Robots whose agent the world reported lost and that have not rejoined: robot → tick.
     let mut lost: std::collections::BTreeMap<usize, u64> = std::collections::BTreeMap::new();
@@ -479,6 +481,8 @@ async fn supervise(
         .unwrap_or_default();
     let result = loop {
         tokio::select! {
+            // The world's lines first: it says that it stops before it asks the agents to exit.
+            biased;
             line = lines.next_line(), if stdout_open => match line? {
                 Some(line) => {
                     if let Some(event) = WorldEvent::parse(&line) {
@@ -510,6 +514,7 @@ async fn supervise(
                             _ => {}
                         }
                         finished |= event == WorldEvent::Finished;
+                        world_stopping |= matches!(event, WorldEvent::Stopping { .. });
                         on_event(&event);
                     }
                 }
@@ -535,7 +540,7 @@ async fn supervise(
                 handle.kill = None;
                 handle.stdin = None;
                 handle.reaper = None;
-                if finished {
+                if finished || world_stopping {
                     continue;
                 }
                 // While the runs are under way an agent has no reason to exit, whatever its exit
@@ -559,7 +564,7 @@ async fn supervise(
                 });
             }
             Some(robot) = restart_rx.recv() => {
-                if finished {
+                if finished || world_stopping {
                     continue;
                 }
                 match spawn_agent(plan, binaries, secret, robot, false, exit_tx.clone()).await {

@@ -135,11 +135,13 @@ fn main() -> ExitCode {
         .try_init();
     let args = Args::parse();
     match run(&args) {
-        Ok(None) => ExitCode::SUCCESS,
-        Ok(Some(reason)) => {
+        Ok(Ended::Finished) => ExitCode::SUCCESS,
+        Ok(Ended::Stopped(reason)) => {
             eprintln!("formation-world: stopped ({reason:?}); agents asked to exit");
             ExitCode::from(130)
         }
+        // Said already, before the agents were asked to exit.
+        Ok(Ended::Failed) => ExitCode::from(2),
         Err(e) => {
             eprintln!(
                 "formation-world: error: {}",
@@ -150,7 +152,17 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
+/// How the world's runs ended, once its agents were there.
+enum Ended {
+    /// Every run played.
+    Finished,
+    /// A signal or the launcher stopped them.
+    Stopped(StopReason),
+    /// An error stopped them; it is printed.
+    Failed,
+}
+
+fn run(args: &Args) -> anyhow::Result<Ended> {
     let specs = read_run_specs(&args.run_specs)?;
     let run_id = RunId::new(&args.run_id)?;
     let namespace = RunNamespace::new(&run_id);
@@ -195,15 +207,28 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
         Box::new(emit),
     );
     let result = play(args, &runtime, &specs, &mut agents);
-    agents.shutdown_agents();
-    match (result, agents.stopped()) {
-        (_, Some(reason)) => Ok(Some(reason)),
-        (Ok(()), None) => {
-            emit(&WorldEvent::Finished);
-            Ok(None)
+    // A world that stops early says why first, and tells the launcher before it asks the agents
+    // to exit, so that their exits are not taken for crashes (and restarted).
+    let ended = match (&result, agents.stopped()) {
+        (_, Some(reason)) => {
+            emit(&WorldEvent::Stopping {
+                reason: format!("{reason:?}"),
+            });
+            Ended::Stopped(reason)
         }
-        (Err(e), None) => Err(e),
+        (Ok(()), None) => Ended::Finished,
+        (Err(e), None) => {
+            let text = formation_proto::errors::chain_text(e.as_ref());
+            eprintln!("formation-world: error: {text}");
+            emit(&WorldEvent::Stopping { reason: text });
+            Ended::Failed
+        }
+    };
+    agents.shutdown_agents();
+    if matches!(ended, Ended::Finished) {
+        emit(&WorldEvent::Finished);
     }
+    Ok(ended)
 }
 
 /// The Zenoh link: a router on `--listen`, with the credentials folder's logins and rules.
