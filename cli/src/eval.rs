@@ -453,9 +453,7 @@ mod tests {
 
     #[test]
     fn the_table_says_which_runs_each_median_covers_and_how_many_were_incomplete() {
-        let mut runs: Vec<RunMetrics> = (0..7)
-            .map(|k| run(true, (k < 3).then_some(4.0)))
-            .collect();
+        let mut runs: Vec<RunMetrics> = (0..7).map(|k| run(true, (k < 3).then_some(4.0))).collect();
         let mut cut = run(false, Some(2.0));
         cut.incomplete = Some(TicksPlayed {
             ticks: 392,
@@ -479,8 +477,17 @@ mod tests {
         assert!(text.contains("success at 10 %:    87.5 %"), "{text}");
 
         // A complete evaluation whose successful runs all converged: no note.
-        let out = eval_output("expert", Vec::new(), "t", Some(7), vec![run(true, Some(3.0))]);
+        let out = eval_output(
+            "expert",
+            Vec::new(),
+            "t",
+            Some(7),
+            vec![run(true, Some(3.0))],
+        );
         let text = table_text(&out);
-        assert!(!text.contains(" over ") && !text.contains("incomplete"), "{text}");
+        assert!(
+            !text.contains(" over ") && !text.contains("incomplete"),
+            "{text}"
+        );
     }
 }

@@ -2,8 +2,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
-
 /// The shipped default model, relative to the repository root.
 pub const DEFAULT_MODEL: &str = "onnx/models/policy.onnx";
 

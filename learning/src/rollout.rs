@@ -194,7 +194,10 @@ mod tests {
         let spec = scenario.run_spec(3, 4);
         let mut expert = driver.controller(&scenario).unwrap();
         let traj = run_episode(&spec, expert.as_mut(), &mut |_, _| {}).unwrap();
-        assert_eq!(one[4].metrics, run_metrics(&traj, traj.commands.len() as u64, &cfg));
+        assert_eq!(
+            one[4].metrics,
+            run_metrics(&traj, traj.commands.len() as u64, &cfg)
+        );
     }
 
     #[test]

@@ -296,6 +296,20 @@ impl WriteError {
         }
     }
 
+    /// Explains `error`, the failure to create the folder `dir` (and its parents): the folder
+    /// itself being a file is in the way too.
+    pub fn creating_dir(dir: &Path, error: std::io::Error) -> WriteError {
+        let obstacle = match diagnose_write(&dir.join("file"), &error, &FileSystem) {
+            WriteObstacle::IsADirectory => WriteObstacle::Other,
+            obstacle => obstacle,
+        };
+        WriteError {
+            obstacle,
+            path: dir.to_path_buf(),
+            error,
+        }
+    }
+
     /// The path that could not be written.
     pub fn path(&self) -> &Path {
         &self.path
@@ -471,7 +485,10 @@ mod write_error_tests {
         // `create_dir_all("/etc/passwd")` says "File exists"; creating under it, "Not a directory".
         for (path, error) in [
             ("/etc/passwd/x.json", Error::from(ErrorKind::AlreadyExists)),
-            ("/etc/passwd/x/summary.json", Error::from(ErrorKind::NotADirectory)),
+            (
+                "/etc/passwd/x/summary.json",
+                Error::from(ErrorKind::NotADirectory),
+            ),
         ] {
             let (obstacle, text) = diagnose(path, error);
             assert_eq!(
@@ -491,7 +508,10 @@ mod write_error_tests {
 
     #[test]
     fn only_a_full_disk_or_quota_says_so() {
-        let (obstacle, text) = diagnose("/tmp/out/runs/run-0000.json", Error::from(ErrorKind::StorageFull));
+        let (obstacle, text) = diagnose(
+            "/tmp/out/runs/run-0000.json",
+            Error::from(ErrorKind::StorageFull),
+        );
         assert_eq!(
             obstacle,
             WriteObstacle::DiskFull {
@@ -517,7 +537,8 @@ mod write_error_tests {
         let (obstacle, text) = diagnose("/tmp/out", Error::from(ErrorKind::IsADirectory));
         assert_eq!(obstacle, WriteObstacle::IsADirectory);
         assert!(text.starts_with("/tmp/out is a directory"), "{text}");
-        let (obstacle, text) = diagnose("/etc/new/x.json", Error::from(ErrorKind::PermissionDenied));
+        let (obstacle, text) =
+            diagnose("/etc/new/x.json", Error::from(ErrorKind::PermissionDenied));
         assert_eq!(
             obstacle,
             WriteObstacle::NotWritable {
@@ -534,7 +555,10 @@ mod write_error_tests {
         );
         // Anything else keeps the operating system's words.
         let (obstacle, text) = diagnose("/tmp/x", Error::other("something odd"));
-        assert_eq!((obstacle, text.as_str()), (WriteObstacle::Other, "something odd"));
+        assert_eq!(
+            (obstacle, text.as_str()),
+            (WriteObstacle::Other, "something odd")
+        );
     }
 
     #[test]
@@ -553,9 +577,15 @@ mod write_error_tests {
             "{err}"
         );
         let err = check_output_dir(&file.join("out")).unwrap_err();
-        assert!(err.to_string().contains("is a file, not a directory"), "{err}");
+        assert!(
+            err.to_string().contains("is a file, not a directory"),
+            "{err}"
+        );
         let err = check_output_dir(&file).unwrap_err();
-        assert!(err.to_string().contains("is a file, not a directory"), "{err}");
+        assert!(
+            err.to_string().contains("is a file, not a directory"),
+            "{err}"
+        );
         let err = check_output_file(&dir).unwrap_err();
         assert!(err.to_string().contains("is a directory"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();

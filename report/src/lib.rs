@@ -78,9 +78,9 @@ pub fn build_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError
     let html = html::render_page(&page);
 
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        fs::create_dir_all(parent).map_err(|e| WriteError::new(parent, e))?;
+        fs::create_dir_all(parent).map_err(|e| WriteError::creating_dir(parent, e))?;
     }
-    fs::create_dir_all(&figures_dir).map_err(|e| WriteError::new(&figures_dir, e))?;
+    fs::create_dir_all(&figures_dir).map_err(|e| WriteError::creating_dir(&figures_dir, e))?;
     remove_stale_svgs(&figures_dir)?;
     let mut written = Vec::with_capacity(figures.len());
     for figure in &figures {
@@ -367,9 +367,21 @@ pub fn medians_note(eval: &EvalData) -> Option<String> {
     let over = eval.table.medians_over.as_ref()?;
     let mut parts = Vec::new();
     for (what, coverage, why) in [
-        ("the convergence median", &over.convergence_s, "did not converge: their largest edge error never stayed below 10 % to the end"),
-        ("the formation error median", &over.rel_formation_error, "have no value"),
-        ("the orientation error median", &over.orientation_error_rad, "have no value"),
+        (
+            "the convergence median",
+            &over.convergence_s,
+            "did not converge: their largest edge error never stayed below 10 % to the end",
+        ),
+        (
+            "the formation error median",
+            &over.rel_formation_error,
+            "have no value",
+        ),
+        (
+            "the orientation error median",
+            &over.orientation_error_rad,
+            "have no value",
+        ),
     ] {
         if coverage.runs < coverage.of {
             parts.push(format!(
@@ -388,9 +400,7 @@ pub fn input_warnings(inputs: &Inputs) -> Vec<String> {
     inputs
         .evals
         .iter()
-        .filter_map(|e| {
-            partial_note(e).map(|note| format!("{}: {note}", e.source.display()))
-        })
+        .filter_map(|e| partial_note(e).map(|note| format!("{}: {note}", e.source.display())))
         .collect()
 }
 
@@ -673,8 +683,7 @@ fn remove_stale_svgs(dir: &Path) -> Result<(), ReportError> {
 
 /// Writes `bytes` to `path` atomically ([`formation_proto::files::write_atomic`]).
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
-    formation_proto::files::write_atomic(path, bytes)
-        .map_err(|e| WriteError::new(path, e).into())
+    formation_proto::files::write_atomic(path, bytes).map_err(|e| WriteError::new(path, e).into())
 }
 
 #[cfg(test)]

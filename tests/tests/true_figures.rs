@@ -44,7 +44,14 @@ fn files_under(dir: &Path) -> Vec<PathBuf> {
 fn expert_eval(scenario: &Path, extra: &[&str]) -> Command {
     let mut command = Command::new(&binaries().cli);
     command
-        .args(["eval", "--controller", "expert", "--runs", "1", "--scenario"])
+        .args([
+            "eval",
+            "--controller",
+            "expert",
+            "--runs",
+            "1",
+            "--scenario",
+        ])
         .arg(scenario)
         .args(extra);
     command
@@ -164,9 +171,13 @@ fn a_full_disk_under_run_is_named_first_without_restart_lines() {
     let leaks = LeakCheck::new(&run_id);
     let out = disk.dir().join("out");
     let scenario = case1_scenario(dir.path(), 120.0);
-    let finished =
-        LiveProcess::spawn(formation_run(&run_id, &scenario, &out, &["--clock", "lockstep"]))
-            .finish(LIMIT);
+    let finished = LiveProcess::spawn(formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &["--clock", "lockstep"],
+    ))
+    .finish(LIMIT);
     assert!(
         !finished.output.status.success(),
         "a run that cannot be written fails\n{}",
@@ -213,10 +224,7 @@ fn an_output_path_under_a_file_names_that_file() {
         assert_no_panic(&finished);
         let stderr = finished.stderr();
         assert!(
-            stderr.contains(&format!(
-                "{} is a file, not a directory",
-                blocker.display()
-            )),
+            stderr.contains(&format!("{} is a file, not a directory", blocker.display())),
             "{}",
             finished.describe()
         );
@@ -270,7 +278,8 @@ fn a_full_disk_under_eval_out_leaves_an_output_marked_partial_that_report_names(
     assert_eq!(summary["complete"], false, "{summary}");
     assert_eq!(summary["run_logs"], serde_json::json!([0]), "{summary}");
     assert_eq!(
-        summary["medians_over"]["convergence_s"]["of"], summary["medians_over"]["rel_formation_error"]["of"],
+        summary["medians_over"]["convergence_s"]["of"],
+        summary["medians_over"]["rel_formation_error"]["of"],
         "each median states its runs: {summary}"
     );
 

@@ -421,7 +421,8 @@ pub const SUCCESSFUL_RULE: &str = "runs successful at 10 %";
 /// The rule of the convergence-time median: the runs successful at 10 % whose largest edge error
 /// stayed below 10 % from some sample to the end (a run can succeed on its window mean without
 /// that).
-pub const CONVERGED_RULE: &str = "runs successful at 10 % that converged (largest edge error below 10 % to the end)";
+pub const CONVERGED_RULE: &str =
+    "runs successful at 10 % that converged (largest edge error below 10 % to the end)";
 
 /// The statistics, rates and counts of a set of runs, and which runs each median covers.
 pub use formation_schema::{Coverage, MediansOver};
@@ -604,10 +605,16 @@ mod tests {
             |k, _| if k <= 800 { 1.5 * D_STAR } else { D_STAR },
             [0.0; 3],
         );
-        let m = run_metrics(&one_more, one_more.commands.len() as u64, &MetricsConfig::default());
+        let m = run_metrics(
+            &one_more,
+            one_more.commands.len() as u64,
+            &MetricsConfig::default(),
+        );
         assert!(close(m.rel_formation_error, 0.5 / 401.0), "{m:?}");
         // A 30 s window reaches back into the bad part.
-        let m = run_metrics(&late, late.commands.len() as u64,
+        let m = run_metrics(
+            &late,
+            late.commands.len() as u64,
             &MetricsConfig {
                 window_s: 30.0,
                 ..MetricsConfig::default()
@@ -655,7 +662,11 @@ mod tests {
     fn the_strict_check_fails_a_collision_or_one_bad_edge_that_the_anchor_check_passes() {
         let mut collided = lattice_run(30.0, |_| 1.0);
         collided.collisions = vec![(3, 0, 1)];
-        let m = run_metrics(&collided, collided.commands.len() as u64, &MetricsConfig::default());
+        let m = run_metrics(
+            &collided,
+            collided.commands.len() as u64,
+            &MetricsConfig::default(),
+        );
         assert!(!m.success_5 && !m.success_10 && m.team.unwrap().anchor_success);
 
         // A 7 % error on the whole lattice in the window, then exact for the last sample only:
@@ -689,7 +700,9 @@ mod tests {
         let traj = triangle_run(30.0, |_, _| D_STAR, [0.0; 3]);
         let plain = run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default());
         assert_eq!(plain.team, None);
-        let with_team = run_metrics(&traj, traj.commands.len() as u64,
+        let with_team = run_metrics(
+            &traj,
+            traj.commands.len() as u64,
             &MetricsConfig {
                 team_figures: true,
                 ..MetricsConfig::default()
@@ -735,25 +748,40 @@ mod tests {
         assert_eq!(collision_events(&overlaps), 3);
         let mut traj = triangle_run(10.0, |_, _| D_STAR, [0.0; 3]);
         traj.collisions = overlaps.to_vec();
-        assert_eq!(run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default()).collisions, 3);
+        assert_eq!(
+            run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default()).collisions,
+            3
+        );
     }
 
     #[test]
     fn malformed_or_edgeless_trajectories_do_not_panic() {
         let mut bad_edge = triangle_run(10.0, |_, _| D_STAR, [0.0; 3]);
         bad_edge.edges.push((0, 5));
-        let m = run_metrics(&bad_edge, bad_edge.commands.len() as u64, &MetricsConfig::default());
+        let m = run_metrics(
+            &bad_edge,
+            bad_edge.commands.len() as u64,
+            &MetricsConfig::default(),
+        );
         assert!(!m.success_10 && m.convergence_s_10.is_none() && m.rel_formation_error.is_nan());
 
         let mut no_edges = triangle_run(10.0, |_, _| 1.0, [0.0; 3]);
         no_edges.edges.clear();
-        let m = run_metrics(&no_edges, no_edges.commands.len() as u64, &MetricsConfig::default());
+        let m = run_metrics(
+            &no_edges,
+            no_edges.commands.len() as u64,
+            &MetricsConfig::default(),
+        );
         assert!(m.success_5 && m.rel_formation_error == 0.0 && m.convergence_s_5 == Some(0.0));
 
         let mut empty = triangle_run(10.0, |_, _| D_STAR, [0.0; 3]);
         empty.times.clear();
         empty.poses.clear();
-        let m = run_metrics(&empty, empty.commands.len() as u64, &MetricsConfig::default());
+        let m = run_metrics(
+            &empty,
+            empty.commands.len() as u64,
+            &MetricsConfig::default(),
+        );
         assert!(!m.success_10 && m.convergence_s_10.is_none());
     }
 

@@ -329,7 +329,8 @@ impl<C: JournalClock> RunJournal<C> {
         mut clock: C,
     ) -> Result<Self, RunLogError> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            fs::create_dir_all(dir).map_err(write_error(dir))?;
+            fs::create_dir_all(dir)
+                .map_err(|e| RunLogError::Write(WriteError::creating_dir(dir, e)))?;
         }
         let file = File::create(path).map_err(write_error(path))?;
         // Advisory only: a file system without locks still journals.
@@ -1156,10 +1157,8 @@ noise_std = 0.01
             .err()
             .expect("runs/ is a file");
         assert!(
-            err.to_string().contains(&format!(
-                "{} is a file, not a directory",
-                blocker.display()
-            )),
+            err.to_string()
+                .contains(&format!("{} is a file, not a directory", blocker.display())),
             "{err}"
         );
 

@@ -253,7 +253,7 @@ fn write_run_specs(
     let specs: Vec<RunSpec> = (first..first + runs)
         .map(|i| scenario.run_spec(base_seed, i))
         .collect();
-    paths::write_atomic(path, &serde_json::to_vec(&specs)?)
+    Ok(paths::write_atomic(path, &serde_json::to_vec(&specs)?)?)
 }
 
 /// The launch plan of `args`, its scenario and the base seed of its runs.
@@ -981,7 +981,11 @@ mod tests {
             formation_world::run_episode(&spec(0), &mut Forward, &mut |_, _| {}).expect("episode");
         let log = RunLog {
             index: 0,
-            metrics: formation_world::metrics::run_metrics(&full, full.commands.len() as u64, &Default::default()),
+            metrics: formation_world::metrics::run_metrics(
+                &full,
+                full.commands.len() as u64,
+                &Default::default(),
+            ),
             trajectory: full,
             clock: "lockstep".into(),
             models: vec!["m".into(); 3],
