@@ -486,7 +486,7 @@ mod tests {
         );
         let text = table_text(&out);
         assert!(
-            !text.contains(" over ") && !text.contains("incomplete"),
+            !text.contains(" of the ") && !text.contains("incomplete"),
             "{text}"
         );
     }
