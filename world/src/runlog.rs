@@ -71,7 +71,7 @@ pub use formation_schema::{RunLog, TimingLog};
 pub enum RunLogError {
     /// Writing failed: what stood in the way (a full disk, a file where a folder should be, ...).
     #[error(transparent)]
-    Write(WriteError),
+    Write(Box<WriteError>),
     /// Reading failed.
     #[error("could not read {}: {source}", path.display())]
     Read {
@@ -155,7 +155,7 @@ pub enum RunLogError {
 pub use formation_proto::files::WriteError;
 
 fn write_error(path: &Path) -> impl FnOnce(std::io::Error) -> RunLogError + '_ {
-    move |source| RunLogError::Write(WriteError::new(path, source))
+    move |source| RunLogError::Write(Box::new(WriteError::new(path, source)))
 }
 
 /// Paths of run `index`'s logs under `out`: `runs/run-NNNN.json` and `timing/run-NNNN.json`.
@@ -330,7 +330,7 @@ impl<C: JournalClock> RunJournal<C> {
     ) -> Result<Self, RunLogError> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             fs::create_dir_all(dir)
-                .map_err(|e| RunLogError::Write(WriteError::creating_dir(dir, e)))?;
+                .map_err(|e| RunLogError::Write(Box::new(WriteError::creating_dir(dir, e))))?;
         }
         let file = File::create(path).map_err(write_error(path))?;
         // Advisory only: a file system without locks still journals.
