@@ -17,7 +17,7 @@ pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
     let root = paths::repo_root();
     let model = paths::resolve_model(args.model.as_deref())?;
     formation_proto::files::create_private_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+        .map_err(|e| paths::WriteError::creating_dir(&args.out, e))?;
     let mode = if args.in_process {
         "in-process"
     } else {

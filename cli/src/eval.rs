@@ -122,13 +122,14 @@ pub fn progress_bar(len: usize, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
-/// Formats Table I and the Fig. 9 medians as text (and the incomplete runs, if any).
+/// Formats Table I and the Fig. 9 medians as text, with the runs each median covers when the
+/// rule leaves some out, and the incomplete runs, if any.
 pub fn table_text(out: &EvalOutput) -> String {
     let mut text = table_i_text(out);
-    if !out.incomplete_runs.is_empty() {
+    let incomplete = out.summary.runs_incomplete.max(out.incomplete_runs.len());
+    if incomplete > 0 {
         text.push_str(&format!(
-            "incomplete runs: {} of {} (stopped early{})\n",
-            out.incomplete_runs.len(),
+            "incomplete runs: {incomplete} of {}, counted as failures (stopped early{})\n",
             out.summary.runs,
             out.incomplete_runs
                 .first()
@@ -140,18 +141,33 @@ pub fn table_text(out: &EvalOutput) -> String {
     text
 }
 
+/// `  (over 3 of the 7: 4 succeeded without converging)` after a median whose rule leaves out
+/// some of the runs successful at 10 %; empty when it covers them all.
+fn coverage_note(coverage: Option<&formation_schema::Coverage>, left_out_because: &str) -> String {
+    match coverage {
+        Some(c) if c.runs < c.of => format!(
+            "   over {} of the {}: {} {left_out_because}",
+            c.runs,
+            c.of,
+            c.of - c.runs
+        ),
+        _ => String::new(),
+    }
+}
+
 fn table_i_text(out: &EvalOutput) -> String {
     let s = &out.summary;
     let pct = |x: f64| format!("{:.1} %", 100.0 * x);
     let opt = |x: Option<f64>, f: &dyn Fn(f64) -> String| x.map(f).unwrap_or_else(|| "-".into());
+    let over = s.medians_over.as_ref();
     format!(
         "Table I ({} controller, {} runs of {}, seed {})\n\
          \x20 success at 5 %:   {:>8}   (paper: 90 %)\n\
          \x20 success at 10 %:  {:>8}   (paper: 96 %)\n\
-         Fig. 9 medians over runs successful at 10 %\n\
-         \x20 convergence time: {:>8}   (paper: ~10 s)\n\
-         \x20 formation error:  {:>8}   (paper: 2.5 %)\n\
-         \x20 orientation err.: {:>8}   (paper: 0.031 rad)\n\
+         Fig. 9 medians over runs successful at 10 %{}\n\
+         \x20 convergence time: {:>8}   (paper: ~10 s){}\n\
+         \x20 formation error:  {:>8}   (paper: 2.5 %){}\n\
+         \x20 orientation err.: {:>8}   (paper: 0.031 rad){}\n\
          runs with collisions: {}\n",
         out.controller,
         s.runs,
@@ -160,23 +176,45 @@ fn table_i_text(out: &EvalOutput) -> String {
             .map_or_else(|| "unknown".to_owned(), |seed| seed.to_string()),
         pct(s.success_rate_5),
         pct(s.success_rate_10),
+        over.map(|o| format!(" ({} runs)", o.rel_formation_error.of))
+            .unwrap_or_default(),
         opt(s.median_convergence_s, &|x| format!("{x:.2} s")),
+        coverage_note(
+            over.map(|o| &o.convergence_s),
+            "never stayed below 10 % to the end (not converged)"
+        ),
         opt(s.median_rel_formation_error, &|x| format!(
             "{:.2} %",
             100.0 * x
         )),
+        coverage_note(over.map(|o| &o.rel_formation_error), "without a value"),
         opt(s.median_orientation_error_rad, &|x| format!("{x:.3} rad")),
+        coverage_note(over.map(|o| &o.orientation_error_rad), "without a value"),
         s.collisions,
     )
 }
 
-/// Writes the eval output directory the report reads: `summary.json` and, for the runs whose
-/// trajectory was kept, `runs/run-NNNN.json` in the run-log format the world writes.
+/// Writes the eval output directory the report reads: for the runs whose trajectory was kept,
+/// `runs/run-NNNN.json` in the run-log format the world writes, then `summary.json`, which lists
+/// them (`run_logs`). A summary already there is removed first and the new one comes last, so a
+/// summary never stands beside run logs it does not describe. When a run log cannot be written
+/// (a full disk), the summary is still written if it can be, marked `complete: false`, and the
+/// error says what failed and that the output is partial ([`PartialOutput`]).
 pub fn write_eval_dir(dir: &Path, out: &EvalOutput, results: &[RunResult]) -> anyhow::Result<()> {
-    paths::write_atomic(
-        &dir.join("summary.json"),
-        &formation_schema::to_json_pretty(out)?,
-    )?;
+    let summary_path = dir.join("summary.json");
+    match std::fs::remove_file(&summary_path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            return Err(paths::WriteError::new(&summary_path, e).into());
+        }
+        _ => {}
+    }
+    let mut summary = out.clone();
+    summary.run_logs = results
+        .iter()
+        .filter(|r| r.trajectory.is_some())
+        .map(|r| r.index)
+        .collect();
+    let mut failed = None;
     for r in results {
         if let Some(traj) = &r.trajectory {
             let log = RunLog {
@@ -185,17 +223,57 @@ pub fn write_eval_dir(dir: &Path, out: &EvalOutput, results: &[RunResult]) -> an
                 trajectory: traj.clone(),
                 clock: r.clock.to_owned(),
                 models: out.models.clone(),
-                complete: true,
+                complete: r.metrics.is_complete(),
                 stop_reason: None,
-                planned_ticks: Some(traj.commands.len() as u64),
+                planned_ticks: Some(
+                    r.metrics
+                        .incomplete
+                        .map_or(traj.commands.len() as u64, |p| p.planned_ticks),
+                ),
             };
-            paths::write_atomic(
+            let written = paths::write_atomic(
                 &formation_world::runlog::log_paths(dir, r.index).0,
                 &formation_schema::to_json(&log)?,
-            )?;
+            );
+            if let Err(e) = written {
+                failed = Some(e);
+                break;
+            }
         }
     }
-    Ok(())
+    let Some(cause) = failed else {
+        paths::write_atomic(&summary_path, &formation_schema::to_json_pretty(&summary)?)?;
+        return Ok(());
+    };
+    summary.complete = false;
+    let summary_written =
+        paths::write_atomic(&summary_path, &formation_schema::to_json_pretty(&summary)?).is_ok();
+    Err(PartialOutput {
+        dir: dir.to_path_buf(),
+        cause,
+        summary_written,
+    }
+    .into())
+}
+
+/// An `eval --out` whose files could not all be written.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "{cause}; the output in {} is partial: {}",
+    dir.display(),
+    if *summary_written {
+        "its summary.json is marked incomplete (`complete: false`), and `formation report` names the run logs it lacks"
+    } else {
+        "no summary.json could be written either, so `formation report` does not read it"
+    }
+)]
+pub struct PartialOutput {
+    /// The output directory.
+    pub dir: PathBuf,
+    /// The write that failed.
+    pub cause: paths::WriteError,
+    /// Whether the summary, marked incomplete, was written after all.
+    pub summary_written: bool,
 }
 
 /// The transport flags of `eval`: Zenoh's flags need `--transport zenoh`, and a transport is
@@ -277,7 +355,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
             .enumerate()
             .map(|(index, traj)| RunResult {
                 index,
-                metrics: run_metrics(&traj, &cfg),
+                metrics: run_metrics(&traj, scenario.run_spec(seed, index).ticks(), &cfg),
                 trajectory: keep(index).then_some(traj),
                 clock: crate::runtime::ClockMode::Lockstep.as_str(),
             })
@@ -375,6 +453,13 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
 /// `formation eval`.
 pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
     network_flags(args)?;
+    // A path that cannot be written is refused before hours of runs, not after.
+    if let Some(json) = &args.json {
+        formation_proto::files::check_output_file(json)?;
+    }
+    if let Some(dir) = &args.out {
+        formation_proto::files::check_output_dir(dir)?;
+    }
     if let Some(sizes) = &args.robots {
         return scaling_command(args, sizes);
     }
@@ -389,4 +474,65 @@ pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
         println!("wrote {}", dir.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_world::metrics::TicksPlayed;
+
+    fn run(success_10: bool, convergence_s_10: Option<f64>) -> RunMetrics {
+        RunMetrics {
+            success_5: success_10,
+            success_10,
+            convergence_s_5: convergence_s_10,
+            convergence_s_10,
+            rel_formation_error: 0.01,
+            max_edge_window_error: 0.02,
+            orientation_error_rad: 0.01,
+            collisions: 0,
+            team: None,
+            incomplete: None,
+        }
+    }
+
+    #[test]
+    fn the_table_says_which_runs_each_median_covers_and_how_many_were_incomplete() {
+        let mut runs: Vec<RunMetrics> = (0..7).map(|k| run(true, (k < 3).then_some(4.0))).collect();
+        let mut cut = run(false, Some(2.0));
+        cut.incomplete = Some(TicksPlayed {
+            ticks: 392,
+            planned_ticks: 1200,
+        });
+        runs.push(cut);
+        let out = eval_output("expert", Vec::new(), "accel", Some(7), runs);
+        let text = table_text(&out);
+        assert!(
+            text.contains("Fig. 9 medians over runs successful at 10 % (7 runs)"),
+            "{text}"
+        );
+        assert!(
+            text.contains("over 3 of the 7: 4 never stayed below 10 % to the end (not converged)"),
+            "{text}"
+        );
+        assert!(
+            text.contains("incomplete runs: 1 of 8, counted as failures"),
+            "{text}"
+        );
+        assert!(text.contains("success at 10 %:    87.5 %"), "{text}");
+
+        // A complete evaluation whose successful runs all converged: no note.
+        let out = eval_output(
+            "expert",
+            Vec::new(),
+            "t",
+            Some(7),
+            vec![run(true, Some(3.0))],
+        );
+        let text = table_text(&out);
+        assert!(
+            !text.contains(" of the ") && !text.contains("incomplete"),
+            "{text}"
+        );
+    }
 }

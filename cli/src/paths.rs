@@ -2,8 +2,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
-
 /// The shipped default model, relative to the repository root.
 pub const DEFAULT_MODEL: &str = "onnx/models/policy.onnx";
 
@@ -48,12 +46,12 @@ pub fn resolve_model(given: Option<&Path>) -> anyhow::Result<PathBuf> {
 }
 
 /// Writes `bytes` to `path` atomically ([`formation_proto::files::write_atomic`]), creating
-/// parent directories. A failed write (e.g. a full disk) leaves the old file and no temporary one.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    formation_proto::files::write_atomic(path, bytes).with_context(|| {
-        format!(
-            "writing {} (is the disk full? free some space or choose another output directory)",
-            path.display()
-        )
-    })
+/// parent directories. A failed write (e.g. a full disk) leaves the old file and no temporary one,
+/// and its error says what stood in the way ([`WriteError`]: a file where a folder should be, a
+/// full disk, ...).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
+    formation_proto::files::write_atomic(path, bytes).map_err(|e| WriteError::new(path, e))
 }
+
+/// A file the command line could not write, explained from its path.
+pub use formation_proto::files::WriteError;

@@ -11,6 +11,9 @@ pub fn report_command(args: &crate::args::ReportArgs) -> anyhow::Result<()> {
         crate::runtime::recover_run_dirs(&args.dir);
     }
     let summary = formation_report::build_report(&args.dir, &args.out)?;
+    for warning in &summary.warnings {
+        eprintln!("formation: warning: {warning}");
+    }
     println!(
         "wrote {} ({} evaluations, {} runs drawn, {} figures in {})",
         summary.html.display(),

@@ -41,7 +41,7 @@ fn main() -> ExitCode {
         let spec = scenario.run_spec(scenario.seed(), run);
         let mut expert = ExpertController::new(gains, spec.world.robot);
         match run_episode(&spec, &mut expert, &mut |_, _| {}) {
-            Ok(trajectory) => metrics.push(run_metrics(&trajectory, &config)),
+            Ok(trajectory) => metrics.push(run_metrics(&trajectory, spec.ticks(), &config)),
             Err(e) => {
                 eprintln!("run {run}: {e}");
                 return ExitCode::FAILURE;

@@ -42,7 +42,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                                     .with_neighbours(spec.neighbours);
                                 let traj = run_episode(&spec, &mut expert, &mut |_, _| {})
                                     .expect("expert");
-                                (i, run_metrics(&traj, &cfg))
+                                (i, run_metrics(&traj, spec.ticks(), &cfg))
                             })
                             .collect::<Vec<_>>()
                     })

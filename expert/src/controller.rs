@@ -909,7 +909,7 @@ mod tests {
                 let mut expert = ExpertController::new(ExpertGains::default(), spec.world.robot)
                     .with_neighbours(spec.neighbours);
                 let traj = run_episode(&spec, &mut expert, &mut |_, _| {}).expect("runs");
-                let m = run_metrics(&traj, &MetricsConfig::default());
+                let m = run_metrics(&traj, spec.ticks(), &MetricsConfig::default());
                 assert!(
                     m.success_5 && m.collisions == 0,
                     "{robots} robots, run {run}: {m:?}"

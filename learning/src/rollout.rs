@@ -108,7 +108,7 @@ pub fn evaluate_runs(
                 let spec = scenario.run_spec(base_seed, i);
                 let traj = run_episode(&spec, controller.as_mut(), &mut |_, _| {})
                     .map_err(|source| LearningError::Run { run: i, source })?;
-                let metrics = run_metrics(&traj, cfg);
+                let metrics = run_metrics(&traj, spec.ticks(), cfg);
                 progress(done.fetch_add(1, Ordering::Relaxed) + 1);
                 Ok(RunResult {
                     index: i,
@@ -154,6 +154,8 @@ pub fn eval_output(
         braked_ticks: Vec::new(),
         incomplete_runs: Vec::new(),
         team_size: Vec::new(),
+        run_logs: Vec::new(),
+        complete: true,
     }
 }
 
@@ -193,7 +195,10 @@ mod tests {
         let spec = scenario.run_spec(3, 4);
         let mut expert = driver.controller(&scenario).unwrap();
         let traj = run_episode(&spec, expert.as_mut(), &mut |_, _| {}).unwrap();
-        assert_eq!(one[4].metrics, run_metrics(&traj, &cfg));
+        assert_eq!(
+            one[4].metrics,
+            run_metrics(&traj, traj.commands.len() as u64, &cfg)
+        );
     }
 
     #[test]

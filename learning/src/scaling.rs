@@ -202,6 +202,7 @@ mod tests {
                 final_min_distance: 1.0,
                 anchor_success: anchor,
             }),
+            incomplete: None,
         }
     }
 

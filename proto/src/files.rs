@@ -13,9 +13,18 @@
 //! run's logs hold its trajectories and timings, and a machine shared with other users is the
 //! common case in a lab; a user who wants to share a report copies or `chmod`s it. Folders that
 //! already exist keep their mode: they are the user's.
+//!
+//! Explaining a failed write: the operating system's error names neither the path component in
+//! the way nor the real cause (`--json /etc/passwd/x.json` fails with "File exists", since
+//! `/etc/passwd` exists, as a file). [`WriteError`] looks at the path after the failure and
+//! says what stands in the way ([`diagnose_write`], pure over a [`PathProbe`]): a component that
+//! is a file, a target that is a directory, a full disk or quota (only for `ENOSPC` / `EDQUOT`), a
+//! folder that is not writable or on a read-only file system. Every writer of the command line
+//! builds its message with it.
 
+use std::fmt;
 use std::io::Read as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Why a file was not read.
 #[derive(Debug)]
@@ -151,6 +160,265 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     written
 }
 
+/// What a path is, as [`diagnose_write`] needs to know.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PathKind {
+    /// Nothing there (or it cannot be looked at).
+    Missing,
+    /// A directory.
+    Directory,
+    /// Something else: what it is, for messages (`"a file"`, `"a FIFO (named pipe)"`, ...).
+    Other(&'static str),
+}
+
+/// Looks at a path (symbolic links followed): the file system, or a table in tests.
+pub trait PathProbe {
+    /// What `path` is.
+    fn kind(&self, path: &Path) -> PathKind;
+}
+
+/// The file system.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FileSystem;
+
+impl PathProbe for FileSystem {
+    fn kind(&self, path: &Path) -> PathKind {
+        match std::fs::metadata(path) {
+            Err(_) => PathKind::Missing,
+            Ok(meta) if meta.is_dir() => PathKind::Directory,
+            Ok(meta) if meta.is_file() => PathKind::Other("a file"),
+            Ok(meta) => PathKind::Other(file_kind(&meta)),
+        }
+    }
+}
+
+/// What stands in the way of writing a file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum WriteObstacle {
+    /// A folder on the way to the file is something else (a file, a device, ...).
+    NotADirectory {
+        /// That component of the path.
+        component: PathBuf,
+        /// What it is instead.
+        what: &'static str,
+    },
+    /// The file to write is a directory.
+    IsADirectory,
+    /// No space is left on the disk (`ENOSPC`).
+    DiskFull {
+        /// The deepest existing folder of the path.
+        dir: PathBuf,
+    },
+    /// The user's disk quota is spent (`EDQUOT`).
+    QuotaExceeded {
+        /// The deepest existing folder of the path.
+        dir: PathBuf,
+    },
+    /// A folder this user may not write in (`EACCES`, `EPERM`).
+    NotWritable {
+        /// The deepest existing folder of the path.
+        dir: PathBuf,
+    },
+    /// A read-only file system (`EROFS`).
+    ReadOnly {
+        /// The deepest existing folder of the path.
+        dir: PathBuf,
+    },
+    /// None of the above: the operating system's own words say it.
+    Other,
+}
+
+/// Why writing `path` failed with `error`, found by looking at the path with `probe`. The
+/// error's kind decides a full disk, a quota, permissions and a read-only file system; any other
+/// error is laid on the first component of the path that is not a folder, or on the path itself
+/// when it is a folder.
+pub fn diagnose_write(path: &Path, error: &std::io::Error, probe: &dyn PathProbe) -> WriteObstacle {
+    use std::io::ErrorKind;
+    let folders: Vec<&Path> = path
+        .ancestors()
+        .skip(1)
+        .filter(|p| !p.as_os_str().is_empty())
+        .collect();
+    let deepest_existing = || {
+        folders
+            .iter()
+            .find(|p| probe.kind(p) == PathKind::Directory)
+            .map_or_else(|| PathBuf::from("."), |p| p.to_path_buf())
+    };
+    match error.kind() {
+        ErrorKind::StorageFull => {
+            return WriteObstacle::DiskFull {
+                dir: deepest_existing(),
+            };
+        }
+        ErrorKind::QuotaExceeded => {
+            return WriteObstacle::QuotaExceeded {
+                dir: deepest_existing(),
+            };
+        }
+        ErrorKind::ReadOnlyFilesystem => {
+            return WriteObstacle::ReadOnly {
+                dir: deepest_existing(),
+            };
+        }
+        _ => {}
+    }
+    // From the root down: the first folder on the way that is something else.
+    for folder in folders.iter().rev() {
+        if let PathKind::Other(what) = probe.kind(folder) {
+            return WriteObstacle::NotADirectory {
+                component: folder.to_path_buf(),
+                what,
+            };
+        }
+    }
+    if probe.kind(path) == PathKind::Directory {
+        return WriteObstacle::IsADirectory;
+    }
+    if error.kind() == ErrorKind::PermissionDenied {
+        return WriteObstacle::NotWritable {
+            dir: deepest_existing(),
+        };
+    }
+    WriteObstacle::Other
+}
+
+/// Checks, before anything is computed, that `path` could be written as a file: no component on
+/// the way is something other than a folder, and the path is not a folder. Nothing is created.
+pub fn check_output_file(path: &Path) -> Result<(), WriteError> {
+    check_output(path, false)
+}
+
+/// Checks, before anything is computed, that `dir` could be created or used as an output
+/// folder: no component of it is something other than a folder. Nothing is created.
+pub fn check_output_dir(dir: &Path) -> Result<(), WriteError> {
+    check_output(&dir.join("file"), true)
+}
+
+fn check_output(path: &Path, dir_wanted: bool) -> Result<(), WriteError> {
+    let probe = FileSystem;
+    let refused = std::io::Error::from(std::io::ErrorKind::NotADirectory);
+    match diagnose_write(path, &refused, &probe) {
+        WriteObstacle::Other => Ok(()),
+        WriteObstacle::IsADirectory if dir_wanted => Ok(()),
+        obstacle => Err(WriteError {
+            path: if dir_wanted {
+                path.parent().unwrap_or(path).to_path_buf()
+            } else {
+                path.to_path_buf()
+            },
+            obstacle,
+            error: refused,
+        }),
+    }
+}
+
+/// A file or folder that could not be written, with what stood in the way.
+///
+/// Its message replaces the operating system's words when they describe another path (the OS
+/// says "File exists" when a folder on the way is a file); the OS error is kept
+/// ([`WriteError::io_error`]) but not given as the error's source, so it is not printed after the
+/// explanation that replaces it.
+#[derive(Debug)]
+pub struct WriteError {
+    path: PathBuf,
+    obstacle: WriteObstacle,
+    error: std::io::Error,
+}
+
+impl WriteError {
+    /// Explains `error`, the failure to write `path`, by looking at the file system now.
+    pub fn new(path: &Path, error: std::io::Error) -> WriteError {
+        WriteError {
+            obstacle: diagnose_write(path, &error, &FileSystem),
+            path: path.to_path_buf(),
+            error,
+        }
+    }
+
+    /// Explains `error`, the failure to create the folder `dir` (and its parents): the folder
+    /// itself being a file is in the way too.
+    pub fn creating_dir(dir: &Path, error: std::io::Error) -> WriteError {
+        let obstacle = match diagnose_write(&dir.join("file"), &error, &FileSystem) {
+            WriteObstacle::IsADirectory => WriteObstacle::Other,
+            obstacle => obstacle,
+        };
+        WriteError {
+            obstacle,
+            path: dir.to_path_buf(),
+            error,
+        }
+    }
+
+    /// The path that could not be written.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// What stood in the way.
+    pub fn obstacle(&self) -> &WriteObstacle {
+        &self.obstacle
+    }
+
+    /// The operating system's error.
+    pub fn io_error(&self) -> &std::io::Error {
+        &self.error
+    }
+
+    /// True for a full disk or a spent quota.
+    pub fn is_out_of_space(&self) -> bool {
+        matches!(
+            self.obstacle,
+            WriteObstacle::DiskFull { .. } | WriteObstacle::QuotaExceeded { .. }
+        )
+    }
+}
+
+impl fmt::Display for WriteError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "could not write {}: {}",
+            self.path.display(),
+            explain(&self.path, &self.obstacle, &self.error)
+        )
+    }
+}
+
+impl std::error::Error for WriteError {}
+
+/// The reason and the fix, in words, for writing `path` against `obstacle`.
+pub fn explain(path: &Path, obstacle: &WriteObstacle, error: &std::io::Error) -> String {
+    match obstacle {
+        WriteObstacle::NotADirectory { component, what } => format!(
+            "{} is {what}, not a directory, so nothing can be written under it: choose a path under a directory",
+            component.display()
+        ),
+        WriteObstacle::IsADirectory => format!(
+            "{} is a directory: name a file (for example {})",
+            path.display(),
+            path.join("out.json").display()
+        ),
+        WriteObstacle::DiskFull { dir } => format!(
+            "the disk is full (no space left on the file system of {}): free some space or choose another output directory",
+            dir.display()
+        ),
+        WriteObstacle::QuotaExceeded { dir } => format!(
+            "the disk quota is spent (on the file system of {}): free some space or choose another output directory",
+            dir.display()
+        ),
+        WriteObstacle::NotWritable { dir } => format!(
+            "{} is not writable by this user: choose another output directory or change its permissions",
+            dir.display()
+        ),
+        WriteObstacle::ReadOnly { dir } => format!(
+            "{} is on a read-only file system: choose another output directory",
+            dir.display()
+        ),
+        WriteObstacle::Other => error.to_string(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -230,6 +498,162 @@ mod tests {
         create_private_dir_all(&dir.join("c")).unwrap();
         assert_eq!(mode(&dir), 0o755);
         assert_eq!(mode(&dir.join("c")), PRIVATE_DIR_MODE);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+#[cfg(test)]
+mod write_error_tests {
+    use std::collections::HashMap;
+    use std::io::{Error, ErrorKind};
+
+    use super::*;
+
+    /// A file system described by a table: every path not in it is missing.
+    struct Table(HashMap<PathBuf, PathKind>);
+
+    impl Table {
+        fn new(entries: &[(&str, PathKind)]) -> Table {
+            Table(
+                entries
+                    .iter()
+                    .map(|(p, k)| (PathBuf::from(p), *k))
+                    .collect(),
+            )
+        }
+    }
+
+    impl PathProbe for Table {
+        fn kind(&self, path: &Path) -> PathKind {
+            self.0.get(path).copied().unwrap_or(PathKind::Missing)
+        }
+    }
+
+    fn etc() -> Table {
+        Table::new(&[
+            ("/", PathKind::Directory),
+            ("/etc", PathKind::Directory),
+            ("/etc/passwd", PathKind::Other("a file")),
+            ("/tmp", PathKind::Directory),
+            ("/tmp/out", PathKind::Directory),
+        ])
+    }
+
+    fn diagnose(path: &str, error: Error) -> (WriteObstacle, String) {
+        let path = Path::new(path);
+        let obstacle = diagnose_write(path, &error, &etc());
+        let text = explain(path, &obstacle, &error);
+        (obstacle, text)
+    }
+
+    #[test]
+    fn a_file_on_the_way_is_named_whatever_the_os_said() {
+        // `create_dir_all("/etc/passwd")` says "File exists"; creating under it, "Not a directory".
+        for (path, error) in [
+            ("/etc/passwd/x.json", Error::from(ErrorKind::AlreadyExists)),
+            (
+                "/etc/passwd/x/summary.json",
+                Error::from(ErrorKind::NotADirectory),
+            ),
+        ] {
+            let (obstacle, text) = diagnose(path, error);
+            assert_eq!(
+                obstacle,
+                WriteObstacle::NotADirectory {
+                    component: PathBuf::from("/etc/passwd"),
+                    what: "a file"
+                }
+            );
+            assert!(
+                text.starts_with("/etc/passwd is a file, not a directory"),
+                "{text}"
+            );
+            assert!(!text.contains("disk") && !text.contains("exists"), "{text}");
+        }
+    }
+
+    #[test]
+    fn only_a_full_disk_or_quota_says_so() {
+        let (obstacle, text) = diagnose(
+            "/tmp/out/runs/run-0000.json",
+            Error::from(ErrorKind::StorageFull),
+        );
+        assert_eq!(
+            obstacle,
+            WriteObstacle::DiskFull {
+                dir: PathBuf::from("/tmp/out")
+            }
+        );
+        assert!(text.starts_with("the disk is full"), "{text}");
+        let (obstacle, _) = diagnose("/tmp/x", Error::from(ErrorKind::QuotaExceeded));
+        assert!(matches!(obstacle, WriteObstacle::QuotaExceeded { .. }));
+        for kind in [
+            ErrorKind::AlreadyExists,
+            ErrorKind::NotADirectory,
+            ErrorKind::PermissionDenied,
+            ErrorKind::Other,
+        ] {
+            let (_, text) = diagnose("/tmp/out/x.json", Error::from(kind));
+            assert!(!text.contains("disk"), "{kind:?}: {text}");
+        }
+    }
+
+    #[test]
+    fn a_directory_target_permissions_and_read_only_name_their_folder() {
+        let (obstacle, text) = diagnose("/tmp/out", Error::from(ErrorKind::IsADirectory));
+        assert_eq!(obstacle, WriteObstacle::IsADirectory);
+        assert!(text.starts_with("/tmp/out is a directory"), "{text}");
+        let (obstacle, text) =
+            diagnose("/etc/new/x.json", Error::from(ErrorKind::PermissionDenied));
+        assert_eq!(
+            obstacle,
+            WriteObstacle::NotWritable {
+                dir: PathBuf::from("/etc")
+            }
+        );
+        assert!(text.starts_with("/etc is not writable"), "{text}");
+        let (obstacle, _) = diagnose("/tmp/x", Error::from(ErrorKind::ReadOnlyFilesystem));
+        assert_eq!(
+            obstacle,
+            WriteObstacle::ReadOnly {
+                dir: PathBuf::from("/tmp")
+            }
+        );
+        // Anything else keeps the operating system's words.
+        let (obstacle, text) = diagnose("/tmp/x", Error::other("something odd"));
+        assert_eq!(
+            (obstacle, text.as_str()),
+            (WriteObstacle::Other, "something odd")
+        );
+    }
+
+    #[test]
+    fn output_paths_are_checked_before_anything_is_written() {
+        let dir = std::env::temp_dir().join(format!("formation-check-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("a-file");
+        std::fs::write(&file, b"x").unwrap();
+        assert!(check_output_file(&dir.join("new/x.json")).is_ok());
+        assert!(check_output_dir(&dir.join("new/out")).is_ok());
+        assert!(check_output_dir(&dir).is_ok());
+        let err = check_output_file(&file.join("x.json")).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains(&format!("{} is a file, not a directory", file.display())),
+            "{err}"
+        );
+        let err = check_output_dir(&file.join("out")).unwrap_err();
+        assert!(
+            err.to_string().contains("is a file, not a directory"),
+            "{err}"
+        );
+        let err = check_output_dir(&file).unwrap_err();
+        assert!(
+            err.to_string().contains("is a file, not a directory"),
+            "{err}"
+        );
+        let err = check_output_file(&dir).unwrap_err();
+        assert!(err.to_string().contains("is a directory"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

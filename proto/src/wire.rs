@@ -1613,6 +1613,13 @@ pub enum WorldEvent {
     },
     /// All runs finished.
     Finished,
+    /// The world stops before its runs are done (an error such as a full disk, a signal, its
+    /// input closed), said before it asks the agents to exit: the launcher then takes their
+    /// exits for what they are and restarts none of them.
+    Stopping {
+        /// Why, phrased for the user (the world prints its error on stderr too).
+        reason: String,
+    },
 }
 
 /// The share of a robot's ticks, in percent, that may be braked within the degraded-link window

@@ -67,7 +67,11 @@ pub enum ReportError {
         /// What is wrong.
         reason: String,
     },
-    /// An output file or directory could not be written.
+    /// The report or a figure could not be written: what stood in the way (a file where a
+    /// folder should be, a full disk, ...).
+    #[error(transparent)]
+    Output(#[from] formation_proto::files::WriteError),
+    /// A stale output file could not be removed.
     #[error("could not write {}: {source}", path.display())]
     Write {
         /// The file or directory.

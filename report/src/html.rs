@@ -86,6 +86,10 @@ pub struct TableEntry {
     pub row: TableRow,
     /// `N of M runs incomplete (stopped early: reason)` when some runs stopped early.
     pub incomplete: Option<String>,
+    /// The output is partial: what is missing.
+    pub partial: Option<String>,
+    /// Which runs a median covers, when its rule leaves some successful runs out.
+    pub medians: Option<String>,
 }
 
 /// Everything on the page.
@@ -385,17 +389,33 @@ fn write_table(html: &mut String, page: &ReportPage) {
     }
     html.push_str("</tbody>\n</table>\n</div>\n");
     for entry in &page.table {
+        if let Some(note) = &entry.partial {
+            let _ = writeln!(
+                html,
+                "<p class=\"note incomplete\">{}: {}.</p>",
+                escape(&entry.name),
+                escape(note)
+            );
+        }
         if let Some(note) = &entry.incomplete {
             let _ = writeln!(
                 html,
-                "<p class=\"note incomplete\">{}: {}. The metrics of an incomplete run are over the ticks it played.</p>",
+                "<p class=\"note incomplete\">{}: {}. An incomplete run has no final 20 s to judge: it counts as a run that did not succeed, and its other metrics are over the ticks it played.</p>",
+                escape(&entry.name),
+                escape(note)
+            );
+        }
+        if let Some(note) = &entry.medians {
+            let _ = writeln!(
+                html,
+                "<p class=\"note\">{}: {}.</p>",
                 escape(&entry.name),
                 escape(note)
             );
         }
     }
     html.push_str(
-        "<p class=\"note\">A run succeeds at tolerance τ when, for every pair of robots, the mean of the relative formation error |dᵢⱼ − d*| / d* over the last 20 s is below τ. Medians are over the runs that succeed at 10 %; the convergence time is when the largest pairwise error falls below 10 % for good.</p>\n</div>\n</section>\n",
+        "<p class=\"note\">A run succeeds at tolerance τ when, for every pair of robots, the mean of the relative formation error |dᵢⱼ − d*| / d* over the last 20 s is below τ. The error medians are over the runs that succeed at 10 %; the convergence time is when the largest pairwise error falls below 10 % for good, and its median is over the runs that succeed at 10 % and converged (a run can succeed on its 20 s mean without converging).</p>\n</div>\n</section>\n",
     );
 }
 
@@ -576,8 +596,12 @@ mod tests {
                     median_rel_formation_error: Some(0.0312),
                     median_orientation_error_rad: None,
                     collisions: 2,
+                    runs_incomplete: 1,
+                    medians_over: None,
                 },
                 incomplete: Some("1 of 20 runs incomplete (stopped early: <Ctrl-C>)".into()),
+                partial: None,
+                medians: None,
             }],
             fig9: Some(CaptionedFigure {
                 placed: placed("fig9"),

@@ -79,6 +79,13 @@ pub struct EvalData {
     pub runs_not_drawn: usize,
     /// Runs that stopped before their last tick (from the summary and the run logs), by index.
     pub incomplete: Vec<IncompleteRun>,
+    /// The runs whose logs the summary says belong beside it (`run_logs`; empty for summaries
+    /// that do not say).
+    pub expected_run_logs: Vec<usize>,
+    /// False when the summary says its writer could not write the whole output.
+    pub output_complete: bool,
+    /// The run logs the summary lists that are not there: a partial output.
+    pub missing_run_logs: Vec<PathBuf>,
 }
 
 /// A run that stopped before its last tick, the metrics of one run (NaN where the writer could
@@ -102,6 +109,10 @@ pub struct TableRow {
     pub median_orientation_error_rad: Option<f64>,
     /// Runs with at least one collision.
     pub collisions: usize,
+    /// Runs that stopped early (counted as runs that did not succeed).
+    pub runs_incomplete: usize,
+    /// Which runs each median covers, when the summary says.
+    pub medians_over: Option<formation_schema::MediansOver>,
 }
 
 /// The three Fig. 9 quantities.
@@ -157,6 +168,8 @@ pub fn eval_data(summary: EvalOutput, source: &Path, name: &str) -> Result<EvalD
         summary,
         per_run,
         incomplete_runs,
+        run_logs,
+        complete,
         ..
     } = summary;
     for (key, rate) in [
@@ -195,6 +208,8 @@ pub fn eval_data(summary: EvalOutput, source: &Path, name: &str) -> Result<EvalD
             median_rel_formation_error: summary.median_rel_formation_error,
             median_orientation_error_rad: summary.median_orientation_error_rad,
             collisions: summary.collisions,
+            runs_incomplete: summary.runs_incomplete,
+            medians_over: summary.medians_over,
         },
         fig9: Fig9Stats {
             convergence_s: summary.convergence_s,
@@ -205,6 +220,9 @@ pub fn eval_data(summary: EvalOutput, source: &Path, name: &str) -> Result<EvalD
         runs: Vec::new(),
         runs_not_drawn: 0,
         incomplete: incomplete_runs,
+        expected_run_logs: run_logs,
+        output_complete: complete,
+        missing_run_logs: Vec::new(),
     })
 }
 
@@ -429,6 +447,12 @@ fn load_eval(root: &Path, summary: &Path) -> Result<EvalData, ReportError> {
         Err(_) => dir.to_string_lossy().into_owned(),
     };
     let mut eval = eval_data(formation_schema::read_summary(summary)?, summary, &name)?;
+    eval.missing_run_logs = eval
+        .expected_run_logs
+        .iter()
+        .map(|&index| run_log_path(dir, index))
+        .filter(|path| !path.is_file())
+        .collect();
     let logs = run_log_paths(&dir.join("runs"))?;
     eval.runs_not_drawn = logs.len().saturating_sub(MAX_RUNS_PLOTTED_PER_EVAL);
     eval.runs = logs
@@ -450,6 +474,11 @@ fn load_eval(root: &Path, summary: &Path) -> Result<EvalData, ReportError> {
     }
     eval.incomplete.sort_by_key(|i| i.index);
     Ok(eval)
+}
+
+/// Where run `index`'s log lies under an output directory: `runs/run-NNNN.json`.
+fn run_log_path(dir: &Path, index: usize) -> PathBuf {
+    dir.join("runs").join(format!("run-{index:04}.json"))
 }
 
 /// `run-*.json` files in `runs_dir`, sorted; none when the directory does not exist.
@@ -502,6 +531,7 @@ mod tests {
             orientation_error_rad: 0.03,
             collisions: usize::from(!success_5),
             team: None,
+            incomplete: None,
         }
     }
 
@@ -513,11 +543,13 @@ mod tests {
             seed: Some(7),
             summary: Summary {
                 runs: 2,
+                runs_incomplete: 0,
                 success_rate_5: 0.5,
                 success_rate_10: 1.0,
                 median_convergence_s: Some(9.5),
                 median_rel_formation_error: Some(0.025),
                 median_orientation_error_rad: Some(0.03),
+                medians_over: None,
                 collisions: 1,
                 convergence_s: Some(Quantiles {
                     min: 9.0,
@@ -536,6 +568,8 @@ mod tests {
             braked_ticks: Vec::new(),
             incomplete_runs: Vec::new(),
             team_size: Vec::new(),
+            run_logs: Vec::new(),
+            complete: true,
         }
     }
 

@@ -34,6 +34,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 pub use error::ReportError;
+use formation_proto::files::WriteError;
 
 use figures::{BoxGroup, BoxPanel, Figure};
 use html::{CaptionedFigure, PlacedFigure, ReportPage, RunSection, TableEntry, paper};
@@ -56,6 +57,9 @@ pub struct ReportSummary {
     pub loss_curves: usize,
     /// Latency profiles drawn.
     pub latency_profiles: usize,
+    /// What the inputs lack (an eval output whose run logs are missing), for the command line to
+    /// print; the page says it too.
+    pub warnings: Vec<String>,
 }
 
 /// Builds the report from everything under `dir` and writes it to `out` (an HTML file), with the
@@ -74,19 +78,11 @@ pub fn build_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError
     let html = html::render_page(&page);
 
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        formation_proto::files::create_private_dir_all(parent).map_err(|source| {
-            ReportError::Write {
-                path: parent.to_path_buf(),
-                source,
-            }
-        })?;
+        formation_proto::files::create_private_dir_all(parent)
+            .map_err(|e| WriteError::creating_dir(parent, e))?;
     }
-    formation_proto::files::create_private_dir_all(&figures_dir).map_err(|source| {
-        ReportError::Write {
-            path: figures_dir.clone(),
-            source,
-        }
-    })?;
+    formation_proto::files::create_private_dir_all(&figures_dir)
+        .map_err(|e| WriteError::creating_dir(&figures_dir, e))?;
     remove_stale_svgs(&figures_dir)?;
     let mut written = Vec::with_capacity(figures.len());
     for figure in &figures {
@@ -103,6 +99,7 @@ pub fn build_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError
         runs_drawn: inputs.evals.iter().map(|e| e.runs.len()).sum(),
         loss_curves: inputs.loss_curves.len(),
         latency_profiles: inputs.profiles.len(),
+        warnings: input_warnings(&inputs),
     })
 }
 
@@ -137,6 +134,8 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
             detail: eval_detail(e),
             row: e.table.clone(),
             incomplete: incomplete_note(e),
+            partial: partial_note(e),
+            medians: medians_note(e),
         })
         .collect();
 
@@ -307,7 +306,8 @@ impl FigureNumbering {
 
 /// `N of M runs incomplete (stopped early: reason)`, when some runs of `eval` stopped early.
 pub fn incomplete_note(eval: &EvalData) -> Option<String> {
-    if eval.incomplete.is_empty() {
+    let count = eval.incomplete.len().max(eval.table.runs_incomplete);
+    if count == 0 {
         return None;
     }
     let mut reasons: Vec<&str> = Vec::new();
@@ -320,10 +320,9 @@ pub fn incomplete_note(eval: &EvalData) -> Option<String> {
             reasons.push(reason);
         }
     }
-    let runs = eval.table.runs.max(eval.incomplete.len());
+    let runs = eval.table.runs.max(count);
     Some(format!(
-        "{} of {runs} run{} incomplete (stopped early{})",
-        eval.incomplete.len(),
+        "{count} of {runs} run{} incomplete (stopped early{})",
         if runs == 1 { "" } else { "s" },
         if reasons.is_empty() {
             String::new()
@@ -331,6 +330,80 @@ pub fn incomplete_note(eval: &EvalData) -> Option<String> {
             format!(": {}", reasons.join("; "))
         }
     ))
+}
+
+/// `partial output: ... missing runs/run-0002.json, ...` when the writer of an eval output could
+/// not write all of it (a full disk) or its run logs have gone since.
+pub fn partial_note(eval: &EvalData) -> Option<String> {
+    if eval.output_complete && eval.missing_run_logs.is_empty() {
+        return None;
+    }
+    let mut note = String::from("partial output");
+    if !eval.output_complete {
+        note.push_str(
+            ": the eval that wrote it could not write all its files (its summary.json says `complete: false`)",
+        );
+    }
+    if !eval.missing_run_logs.is_empty() {
+        let names: Vec<String> = eval
+            .missing_run_logs
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        note.push_str(&format!(
+            "{} {} of the {} run logs its summary lists {} missing: {}",
+            if eval.output_complete { ":" } else { ";" },
+            names.len(),
+            eval.expected_run_logs.len(),
+            if names.len() == 1 { "is" } else { "are" },
+            names.join(", ")
+        ));
+    }
+    note.push_str("; re-run the eval to draw them");
+    Some(note)
+}
+
+/// `convergence median over 3 of the 7 runs successful at 10 % (4 did not converge)` when a
+/// median's rule leaves successful runs out.
+pub fn medians_note(eval: &EvalData) -> Option<String> {
+    let over = eval.table.medians_over.as_ref()?;
+    let mut parts = Vec::new();
+    for (what, coverage, why) in [
+        (
+            "the convergence median",
+            &over.convergence_s,
+            "did not converge: their largest edge error never stayed below 10 % to the end",
+        ),
+        (
+            "the formation error median",
+            &over.rel_formation_error,
+            "have no value",
+        ),
+        (
+            "the orientation error median",
+            &over.orientation_error_rad,
+            "have no value",
+        ),
+    ] {
+        if coverage.runs < coverage.of {
+            parts.push(format!(
+                "{what} is over {} of the {} runs successful at 10 % ({} {why})",
+                coverage.runs,
+                coverage.of,
+                coverage.of - coverage.runs
+            ));
+        }
+    }
+    (!parts.is_empty()).then(|| parts.join("; "))
+}
+
+/// Warnings about what the report's inputs lack (partial outputs), for the command line.
+pub fn input_warnings(inputs: &Inputs) -> Vec<String> {
+    inputs
+        .evals
+        .iter()
+        .filter_map(|e| partial_note(e).map(|note| format!("{}: {note}", e.source.display())))
+        .collect()
 }
 
 fn eval_detail(eval: &EvalData) -> String {
@@ -612,10 +685,7 @@ fn remove_stale_svgs(dir: &Path) -> Result<(), ReportError> {
 
 /// Writes `bytes` to `path` atomically ([`formation_proto::files::write_atomic`]).
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
-    formation_proto::files::write_atomic(path, bytes).map_err(|source| ReportError::Write {
-        path: path.to_path_buf(),
-        source,
-    })
+    formation_proto::files::write_atomic(path, bytes).map_err(|e| WriteError::new(path, e).into())
 }
 
 #[cfg(test)]

@@ -70,7 +70,10 @@ fn trajectory(seconds: f64, d_star: f64, spread: f64) -> Trajectory {
 /// `formation_schema`, the run logs through the world's writer, both of the writers' own types.
 fn write_eval_dir(dir: &Path, scenario: &str, runs: &[(Trajectory, bool)]) -> Vec<RunMetrics> {
     let cfg = MetricsConfig::default();
-    let metrics: Vec<RunMetrics> = runs.iter().map(|(t, _)| run_metrics(t, &cfg)).collect();
+    let metrics: Vec<RunMetrics> = runs
+        .iter()
+        .map(|(t, _)| run_metrics(t, t.commands.len() as u64, &cfg))
+        .collect();
     write_summary(dir, &eval_output(scenario, &metrics));
     for (index, ((trajectory, keep), m)) in runs.iter().zip(&metrics).enumerate() {
         if *keep {
@@ -102,6 +105,8 @@ fn eval_output(scenario: &str, per_run: &[RunMetrics]) -> EvalOutput {
         braked_ticks: Vec::new(),
         incomplete_runs: Vec::new(),
         team_size: Vec::new(),
+        run_logs: Vec::new(),
+        complete: true,
     }
 }
 
@@ -184,8 +189,8 @@ fn report_reads_what_the_writer_types_serialise() {
 fn non_finite_metrics_written_as_null_are_read() {
     let dir = tempfile::tempdir().expect("tempdir");
     let mut metrics = vec![
-        run_metrics(&trajectory(25.0, 1.0, 1.0), &MetricsConfig::default()),
-        run_metrics(&trajectory(25.0, 1.0, 1.0), &MetricsConfig::default()),
+        run_metrics(&trajectory(25.0, 1.0, 1.0), 500, &MetricsConfig::default()),
+        run_metrics(&trajectory(25.0, 1.0, 1.0), 500, &MetricsConfig::default()),
     ];
     metrics[1].rel_formation_error = f64::NAN;
     metrics[1].orientation_error_rad = f64::NAN;
@@ -211,7 +216,7 @@ fn an_incomplete_run_written_by_the_world_is_marked_in_the_report() {
         let dir = tempfile::tempdir().expect("tempdir");
         let run_dir = dir.path().join("run");
         let trajectory = trajectory(4.2, 2.0, 0.5);
-        let metrics = run_metrics(&trajectory, &MetricsConfig::default());
+        let metrics = run_metrics(&trajectory, 1200, &MetricsConfig::default());
         let log = RunLog {
             index: 0,
             metrics: metrics.clone(),

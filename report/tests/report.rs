@@ -298,3 +298,71 @@ fn a_scaling_table_gets_its_section_with_the_rows_and_the_figure() {
     let svg = fs::read_to_string(&summary.figures[0]).expect("svg");
     assert!(svg.contains("expert @ 10 %") && svg.contains("policy @ 5 %"));
 }
+
+/// An eval output whose writer could not write every run log (a full disk): the report builds,
+/// says on the page and in its warnings which run logs are missing, and an output whose run logs
+/// are all there says nothing of the kind.
+#[test]
+fn a_partial_eval_output_is_named_with_the_run_logs_it_lacks() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let metrics: Vec<_> = (0..3).map(|k| common::run_metrics(k, true)).collect();
+    let mut summary = common::summary("case1", &metrics);
+    summary.run_logs = vec![0, 1, 2];
+    let log = |k: usize| {
+        common::run_log(
+            k,
+            metrics[k].clone(),
+            common::trajectory(common::Heading::Constant(3.76), 2.0, 25.0, k as u64),
+        )
+    };
+    common::write_file(&dir.path().join("whole/summary.json"), &summary);
+    for k in 0..3 {
+        common::write_file(
+            &dir.path().join(format!("whole/runs/run-{k:04}.json")),
+            &log(k),
+        );
+    }
+    summary.complete = false;
+    common::write_file(&dir.path().join("partial/summary.json"), &summary);
+    common::write_file(&dir.path().join("partial/runs/run-0000.json"), &log(0));
+
+    let out = dir.path().join("report.html");
+    let built = build_report(dir.path(), &out).expect("report");
+    assert_eq!(built.warnings.len(), 1, "{:?}", built.warnings);
+    let warning = &built.warnings[0];
+    assert!(warning.contains("partial/summary.json"), "{warning}");
+    assert!(warning.contains("complete: false"), "{warning}");
+    assert!(
+        warning.contains("2 of the 3 run logs its summary lists are missing")
+            && warning.contains("run-0001.json")
+            && warning.contains("run-0002.json")
+            && !warning.contains("run-0000.json"),
+        "{warning}"
+    );
+    let html = fs::read_to_string(&out).expect("html");
+    assert!(html.contains("partial: partial output"), "the page says it");
+    assert!(!html.contains("whole: partial output"));
+}
+
+/// A median whose rule leaves successful runs out says over how many runs it is, on the page.
+#[test]
+fn the_page_states_which_runs_the_convergence_median_covers() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut metrics: Vec<_> = (0..7).map(|k| common::run_metrics(k, true)).collect();
+    for m in &mut metrics[3..] {
+        m.convergence_s_10 = None;
+    }
+    common::write_file(
+        &dir.path().join("accel/summary.json"),
+        &common::summary("accel", &metrics),
+    );
+    let out = dir.path().join("report.html");
+    build_report(dir.path(), &out).expect("report");
+    let html = fs::read_to_string(&out).expect("html");
+    assert!(
+        html.contains(
+            "accel: the convergence median is over 3 of the 7 runs successful at 10 % (4 did not converge"
+        ),
+        "the page states the median's runs"
+    );
+}

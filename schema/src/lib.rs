@@ -46,9 +46,9 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 pub use profile::{LatencyProfile, StageStats};
-pub use run::{RunLog, RunMetrics, TeamMetrics, Trajectory};
+pub use run::{RunLog, RunMetrics, TeamMetrics, TicksPlayed, Trajectory};
 pub use scaling::{ScalingRow, ScalingTable};
-pub use summary::{EvalOutput, IncompleteRun, Quantiles, Summary};
+pub use summary::{Coverage, EvalOutput, IncompleteRun, MediansOver, Quantiles, Summary};
 pub use team_size::ModelTeamSize;
 pub use timing::TimingLog;
 

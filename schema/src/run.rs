@@ -82,6 +82,29 @@ pub struct RunMetrics {
     /// metrics keep their original form.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub team: Option<TeamMetrics>,
+    /// Set for a run that stopped before its last tick: how many ticks it played of how many it
+    /// was to play. Such a run has no final window to judge, so it succeeds at no tolerance
+    /// (neither the strict check nor the anchor-compatible one); its other figures are over the
+    /// ticks it played. Absent for a complete run (files written before it existed read as
+    /// complete; their run log's `complete` says otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub incomplete: Option<TicksPlayed>,
+}
+
+impl RunMetrics {
+    /// Whether the run played every tick it was to play.
+    pub fn is_complete(&self) -> bool {
+        self.incomplete.is_none()
+    }
+}
+
+/// How far a run that stopped early got.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TicksPlayed {
+    /// Ticks it played.
+    pub ticks: u64,
+    /// Ticks it was to play.
+    pub planned_ticks: u64,
 }
 
 /// What a team's run adds to the paper's metrics (computed by

@@ -29,16 +29,25 @@ pub struct Quantiles {
 pub struct Summary {
     /// Number of runs.
     pub runs: usize,
+    /// How many of them stopped before their last tick: they count as runs, never as
+    /// successes ([`RunMetrics::incomplete`]). Absent when every run finished.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub runs_incomplete: usize,
     /// Fraction (0..1) of runs that succeed at the first tolerance (5 %); 0 for no runs.
     pub success_rate_5: f64,
     /// Fraction (0..1) of runs that succeed at the second tolerance (10 %); 0 for no runs.
     pub success_rate_10: f64,
-    /// Median convergence time \[s\] at 10 % over the runs that succeed at 10 %.
+    /// Median convergence time \[s\] at 10 % over the runs that succeed at 10 % and converge
+    /// ([`Summary::medians_over`] says how many that is).
     pub median_convergence_s: Option<f64>,
     /// Median relative formation error over the runs that succeed at 10 %.
     pub median_rel_formation_error: Option<f64>,
     /// Median orientation error \[rad\] over the runs that succeed at 10 %.
     pub median_orientation_error_rad: Option<f64>,
+    /// Which runs each median above (and each set of quantiles below) covers, with the rule
+    /// in words. Absent in files written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub medians_over: Option<MediansOver>,
     /// Number of runs with at least one collision.
     pub collisions: usize,
     /// Convergence time \[s\] at 10 % over the runs that succeed at 10 % and converge (a run can succeed
@@ -56,6 +65,32 @@ pub struct Summary {
     /// when every run has team figures.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub connected_rate: Option<f64>,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
+/// The runs each Fig. 9 median covers (computed by `formation_world::metrics::summarize`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MediansOver {
+    /// The convergence time's: the runs successful at 10 % that converged.
+    pub convergence_s: Coverage,
+    /// The relative formation error's: the runs successful at 10 %.
+    pub rel_formation_error: Coverage,
+    /// The orientation error's: the runs successful at 10 %.
+    pub orientation_error_rad: Coverage,
+}
+
+/// Which runs one median covers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Coverage {
+    /// The rule, in words (`"runs successful at 10 % that converged"`).
+    pub rule: String,
+    /// How many runs it covers.
+    pub runs: usize,
+    /// Of how many runs successful at 10 % (those it leaves out are `of - runs`).
+    pub of: usize,
 }
 
 /// What `formation eval` writes as JSON (`--json`, and `summary.json` under `--out`), and what
@@ -91,6 +126,24 @@ pub struct EvalOutput {
     /// team's size; `zero_shot` marks a size it never saw. Absent when no model records them.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub team_size: Vec<crate::ModelTeamSize>,
+    /// `formation eval --out`: the runs whose run logs (`runs/run-NNNN.json`) belong beside this
+    /// summary, in run order. A reader that misses one of them has a partial output (the eval
+    /// failed while writing it, say on a full disk) and says so. Absent when no run log was
+    /// written, and in files written before it existed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub run_logs: Vec<usize>,
+    /// `formation eval --out`: false when the eval could not write every file of its output;
+    /// `run_logs` then says which run logs belong here. Absent (true) for a whole output.
+    #[serde(default = "whole", skip_serializing_if = "is_whole")]
+    pub complete: bool,
+}
+
+fn whole() -> bool {
+    true
+}
+
+fn is_whole(complete: &bool) -> bool {
+    *complete
 }
 
 /// A run that stopped before its last tick.

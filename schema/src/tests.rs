@@ -45,6 +45,7 @@ fn metrics() -> RunMetrics {
         orientation_error_rad: 0.031,
         collisions: 1,
         team: None,
+        incomplete: None,
     }
 }
 
@@ -97,11 +98,29 @@ fn summary() -> EvalOutput {
         seed: Some(7),
         summary: Summary {
             runs: 2,
+            runs_incomplete: 1,
             success_rate_5: 0.5,
             success_rate_10: 1.0,
             median_convergence_s: Some(9.5),
             median_rel_formation_error: None,
             median_orientation_error_rad: Some(0.03),
+            medians_over: Some(MediansOver {
+                convergence_s: Coverage {
+                    rule: "runs successful at 10 % that converged".into(),
+                    runs: 1,
+                    of: 2,
+                },
+                rel_formation_error: Coverage {
+                    rule: "runs successful at 10 %".into(),
+                    runs: 2,
+                    of: 2,
+                },
+                orientation_error_rad: Coverage {
+                    rule: "runs successful at 10 %".into(),
+                    runs: 2,
+                    of: 2,
+                },
+            }),
             collisions: 1,
             convergence_s: Some(q),
             rel_formation_error: None,
@@ -120,6 +139,8 @@ fn summary() -> EvalOutput {
         team_size: crate::ModelTeamSize::new("policy-1", &[3, 5], 2)
             .into_iter()
             .collect(),
+        run_logs: vec![0, 1],
+        complete: false,
     }
 }
 
@@ -432,4 +453,43 @@ fn a_scaling_table_round_trips_and_refuses_another_version() {
         table
     );
     refuses_another_version(&table, "formation scaling table");
+}
+
+#[test]
+fn summaries_and_metrics_before_incomplete_runs_and_median_rules_still_read() {
+    let path = Path::new("summary.json");
+    let mut old = summary();
+    old.summary.runs_incomplete = 0;
+    old.summary.medians_over = None;
+    old.run_logs = Vec::new();
+    old.complete = true;
+    old.per_run[1].incomplete = Some(TicksPlayed {
+        ticks: 80,
+        planned_ticks: 1200,
+    });
+    let mut value: serde_json::Value = serde_json::from_slice(&to_json(&old).unwrap()).unwrap();
+    // A summary of before: none of the new keys.
+    let object = value.as_object_mut().unwrap();
+    for key in ["runs_incomplete", "medians_over", "run_logs", "complete"] {
+        assert!(!object.contains_key(key), "{key} is left out when empty");
+    }
+    object["per_run"][1]
+        .as_object_mut()
+        .unwrap()
+        .remove("incomplete")
+        .expect("an incomplete run's metrics say so");
+    let read: EvalOutput = from_json(value.to_string().as_bytes(), path).unwrap();
+    assert!(read.complete && read.run_logs.is_empty());
+    assert_eq!(read.summary.runs_incomplete, 0);
+    assert_eq!(read.summary.medians_over, None);
+    assert!(read.per_run.iter().all(RunMetrics::is_complete));
+    // The new keys round-trip.
+    assert_eq!(
+        from_json::<EvalOutput>(&to_json(&old).unwrap(), path).unwrap(),
+        old
+    );
+    assert_eq!(
+        from_json::<EvalOutput>(&to_json(&summary()).unwrap(), path).unwrap(),
+        summary()
+    );
 }

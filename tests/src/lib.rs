@@ -980,6 +980,52 @@ pub fn count_samples(
     (subscriber, count)
 }
 
+/// A small tmpfs mounted for one test: a disk of known size that a test fills, unmounted when
+/// dropped (also when the test fails). Mounting needs root, which CI has; without it the test
+/// fails, saying so, rather than passing unchecked.
+pub struct Tmpfs {
+    dir: PathBuf,
+}
+
+impl Tmpfs {
+    /// Mounts a tmpfs of `size` (e.g. `256k`) on `dir`, created if needed.
+    pub fn mount(dir: &Path, size: &str) -> Tmpfs {
+        std::fs::create_dir_all(dir).expect("mount point");
+        let output = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+            .arg(dir)
+            .output()
+            .unwrap_or_else(|e| panic!("cannot run mount ({e}); a full disk is tested on a tmpfs"));
+        assert!(
+            output.status.success(),
+            "cannot mount a {size} tmpfs on {} ({}): this test fills a small disk and needs root, as CI has",
+            dir.display(),
+            String::from_utf8_lossy(&output.stderr).trim()
+        );
+        Tmpfs {
+            dir: dir.to_path_buf(),
+        }
+    }
+
+    /// Where it is mounted.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let unmounted = Command::new("umount")
+            .arg(&self.dir)
+            .status()
+            .is_ok_and(|s| s.success());
+        if !unmounted {
+            // Still busy (a straggler holds a file): detach it now, it goes when released.
+            let _ = Command::new("umount").arg("-l").arg(&self.dir).status();
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

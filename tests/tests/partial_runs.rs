@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, await_connected, binaries, case1_scenario,
+    LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries, case1_scenario,
     formation_run, one_at_a_time, repo_root, run, send_signal, unique_run_id, world_pid,
 };
 
@@ -200,52 +200,6 @@ fn a_spent_restart_budget_keeps_the_partial_run() {
     );
 }
 
-/// A small tmpfs mounted for one test, unmounted when dropped (also when the test fails).
-struct Tmpfs {
-    dir: PathBuf,
-}
-
-impl Tmpfs {
-    /// Mounts a tmpfs of `size` (e.g. `256k`) on `dir`; `None` (with a message) when this
-    /// machine does not allow it.
-    fn mount(dir: &Path, size: &str) -> Option<Tmpfs> {
-        std::fs::create_dir_all(dir).expect("mount point");
-        let output = Command::new("mount")
-            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
-            .arg(dir)
-            .output();
-        match output {
-            Ok(output) if output.status.success() => Some(Tmpfs {
-                dir: dir.to_path_buf(),
-            }),
-            Ok(output) => {
-                eprintln!(
-                    "skipping: cannot mount a tmpfs here ({}); run as root to test a full disk",
-                    String::from_utf8_lossy(&output.stderr).trim()
-                );
-                None
-            }
-            Err(e) => {
-                eprintln!("skipping: cannot run mount ({e})");
-                None
-            }
-        }
-    }
-}
-
-impl Drop for Tmpfs {
-    fn drop(&mut self) {
-        let unmounted = Command::new("umount")
-            .arg(&self.dir)
-            .status()
-            .is_ok_and(|s| s.success());
-        if !unmounted {
-            // Still busy (a straggler holds a file): detach it now, it goes when released.
-            let _ = Command::new("umount").arg("-l").arg(&self.dir).status();
-        }
-    }
-}
-
 /// `--out` on a 256 KiB disk and a run whose journal needs about 1 MB: the world fails as soon
 /// as the disk is full, with an error that names the file and the full disk, leaves the journal
 /// cut back to whole lines (far short of the scenario's ticks) and no temporary file, and the
@@ -255,12 +209,10 @@ fn a_full_disk_fails_the_run_promptly_and_leaves_no_temporary_file() {
     let _watchdog = Watchdog::arm("full_disk", LIMIT);
     let _one = one_at_a_time();
     let dir = TempDir::new("full");
-    let Some(disk) = Tmpfs::mount(&dir.path().join("disk"), "256k") else {
-        return;
-    };
+    let disk = Tmpfs::mount(&dir.path().join("disk"), "256k");
     let run_id = unique_run_id("full");
     let leaks = LeakCheck::new(&run_id);
-    let out = disk.dir.join("out");
+    let out = disk.dir().join("out");
     let ticks = 2400;
     let scenario = case1_scenario(dir.path(), 120.0);
     let finished = launch(&run_id, &scenario, &out, &["--clock", "lockstep"]).finish(LIMIT);
@@ -277,7 +229,7 @@ fn a_full_disk_fails_the_run_promptly_and_leaves_no_temporary_file() {
     );
     leaks.assert_clean();
 
-    let files = files_under(&disk.dir);
+    let files = files_under(disk.dir());
     let temporary: Vec<&PathBuf> = files
         .iter()
         .filter(|p| p.to_string_lossy().contains(".tmp"))

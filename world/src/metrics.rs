@@ -32,11 +32,21 @@
 //!   Huang, Yang and Guo (ICRA 2026) beside ours: at the last sample, the mean of `e_ij` over `E_K` is
 //!   `<= 10 %` ([`ANCHOR_TOLERANCE`]) and no two robots are closer than 0.2 m ([`ANCHOR_MIN_DISTANCE`]).
 //!
+//! * an incomplete run: one that played fewer ticks than it was to play (a run stopped early by a
+//!   signal, a failure or a full disk). It has no final window to judge, so it succeeds at no
+//!   tolerance and fails the anchor-compatible check, whatever its last samples look like; its
+//!   other figures are over the ticks it played, and [`RunMetrics::incomplete`] says how many of
+//!   how many that was.
+//!
 //! A trajectory with no edges succeeds trivially (there is no pair to fail) with zero formation error.
 //! Malformed trajectories (read back from a file) do not panic: a value that cannot be computed (an edge
 //! naming a robot missing from a sample, no samples at all) is NaN, and NaN never passes a tolerance.
 //!
-//! [`summarize`] aggregates runs as Table I and Fig. 9 do.
+//! [`summarize`] aggregates runs as Table I and Fig. 9 do: success rates over all runs (an
+//! incomplete run counts as a run that did not succeed, and the number of incomplete runs is
+//! stated), the relative formation and orientation errors' statistics over the runs successful
+//! at 10 %, the convergence time's over those of them that converged ([`CONVERGED_RULE`]), each
+//! with the rule and the count it covers ([`MediansOver`]).
 
 use std::collections::{BTreeMap, HashSet};
 
@@ -79,15 +89,40 @@ impl Default for MetricsConfig {
 /// What a team's run adds to the paper's metrics.
 pub use formation_schema::TeamMetrics;
 
-/// The metrics of one run, as the run log and `summary.json` hold them.
-pub use formation_schema::RunMetrics;
+/// The metrics of one run, as the run log and `summary.json` hold them, and how far an
+/// incomplete run got.
+pub use formation_schema::{RunMetrics, TicksPlayed};
 
-/// Scores one run.
-pub fn run_metrics(traj: &Trajectory, cfg: &MetricsConfig) -> RunMetrics {
-    match traj.neighbours {
+/// Scores one run that was to play `planned_ticks` ticks (its scenario's duration over `dt`,
+/// [`crate::RunSpec::ticks`]): a trajectory with fewer ticks is an incomplete run, which never
+/// succeeds (see the module docs).
+pub fn run_metrics(traj: &Trajectory, planned_ticks: u64, cfg: &MetricsConfig) -> RunMetrics {
+    let mut metrics = match traj.neighbours {
         NeighbourRule::AllPairs => fixed_edge_metrics(traj, cfg),
         rule => changing_edge_metrics(traj, cfg, rule),
+    };
+    let played = traj.commands.len() as u64;
+    if played < planned_ticks {
+        mark_incomplete(
+            &mut metrics,
+            TicksPlayed {
+                ticks: played,
+                planned_ticks,
+            },
+        );
     }
+    metrics
+}
+
+/// Marks `metrics` as those of a run that stopped early, after `played`: it succeeds at no
+/// tolerance, strict or anchor-compatible.
+pub fn mark_incomplete(metrics: &mut RunMetrics, played: TicksPlayed) {
+    metrics.success_5 = false;
+    metrics.success_10 = false;
+    if let Some(team) = metrics.team.as_mut() {
+        team.anchor_success = false;
+    }
+    metrics.incomplete = Some(played);
 }
 
 /// The per-edge errors of one run, whichever way its edges were chosen: what [`RunMetrics`] is
@@ -252,6 +287,7 @@ fn assemble(
                 edges.final_mean_edge_error,
             )
         }),
+        incomplete: None,
     }
 }
 
@@ -380,7 +416,21 @@ fn quantile_sorted(sorted: &[f64], p: f64) -> f64 {
     sorted[lower] + (h - lower as f64) * (sorted[upper] - sorted[lower])
 }
 
-/// Aggregates runs: success rates over all runs, Fig. 9 statistics over the runs that succeed at 10 %.
+/// The rule of the error medians: the runs successful at 10 %.
+pub const SUCCESSFUL_RULE: &str = "runs successful at 10 %";
+/// The rule of the convergence-time median: the runs successful at 10 % whose largest edge error
+/// stayed below 10 % from some sample to the end (a run can succeed on its window mean without
+/// that).
+pub const CONVERGED_RULE: &str =
+    "runs successful at 10 % that converged (largest edge error below 10 % to the end)";
+
+/// The statistics, rates and counts of a set of runs, and which runs each median covers.
+pub use formation_schema::{Coverage, MediansOver};
+
+/// Aggregates runs: success rates over all runs (an incomplete run never succeeds), the error
+/// statistics over the runs that succeed at 10 %, the convergence time's over those of them that
+/// converged; [`Summary::medians_over`] states each rule and count, [`Summary::runs_incomplete`]
+/// the runs that stopped early.
 pub fn summarize(runs: &[RunMetrics]) -> Summary {
     let fraction = |count: usize| {
         if runs.is_empty() {
@@ -389,25 +439,47 @@ pub fn summarize(runs: &[RunMetrics]) -> Summary {
             count as f64 / runs.len() as f64
         }
     };
-    let successful: Vec<&RunMetrics> = runs.iter().filter(|r| r.success_10).collect();
+    // `run_metrics` never lets an incomplete run succeed; a file from elsewhere might.
+    let successful: Vec<&RunMetrics> = runs
+        .iter()
+        .filter(|r| r.success_10 && r.is_complete())
+        .collect();
     let convergence_s = quantiles(successful.iter().filter_map(|r| r.convergence_s_10));
     let rel_formation_error = quantiles(successful.iter().map(|r| r.rel_formation_error));
     let orientation_error_rad = quantiles(successful.iter().map(|r| r.orientation_error_rad));
+    let covered = |rule: &str, q: &Option<Quantiles>| Coverage {
+        rule: rule.to_owned(),
+        runs: q.as_ref().map_or(0, |q| q.count),
+        of: successful.len(),
+    };
+    let medians_over = MediansOver {
+        convergence_s: covered(CONVERGED_RULE, &convergence_s),
+        rel_formation_error: covered(SUCCESSFUL_RULE, &rel_formation_error),
+        orientation_error_rad: covered(SUCCESSFUL_RULE, &orientation_error_rad),
+    };
     let team: Option<Vec<&TeamMetrics>> = runs.iter().map(|r| r.team.as_ref()).collect();
     let team = team.filter(|t| !t.is_empty());
+    let anchor_passes = runs
+        .iter()
+        .filter(|r| r.is_complete() && r.team.as_ref().is_some_and(|t| t.anchor_success))
+        .count();
     Summary {
-        anchor_success_rate: team
-            .as_ref()
-            .map(|t| fraction(t.iter().filter(|m| m.anchor_success).count())),
+        anchor_success_rate: team.as_ref().map(|_| fraction(anchor_passes)),
         connected_rate: team
             .as_ref()
             .map(|t| fraction(t.iter().filter(|m| m.connected).count())),
         runs: runs.len(),
-        success_rate_5: fraction(runs.iter().filter(|r| r.success_5).count()),
+        runs_incomplete: runs.iter().filter(|r| !r.is_complete()).count(),
+        success_rate_5: fraction(
+            runs.iter()
+                .filter(|r| r.success_5 && r.is_complete())
+                .count(),
+        ),
         success_rate_10: fraction(successful.len()),
         median_convergence_s: convergence_s.as_ref().map(|q| q.median),
         median_rel_formation_error: rel_formation_error.as_ref().map(|q| q.median),
         median_orientation_error_rad: orientation_error_rad.as_ref().map(|q| q.median),
+        medians_over: Some(medians_over),
         collisions: runs.iter().filter(|r| r.collisions > 0).count(),
         convergence_s,
         rel_formation_error,
@@ -475,7 +547,7 @@ mod tests {
             |_, t| if t < 4.0 - 1e-9 { 1.5 } else { D_STAR },
             [0.0; 3],
         );
-        let m = run_metrics(&traj, &MetricsConfig::default());
+        let m = run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default());
         assert!(m.success_5 && m.success_10);
         assert_eq!(m.convergence_s_5, Some(traj.times[80]));
         assert!(close(m.convergence_s_10.unwrap(), 4.0));
@@ -492,7 +564,7 @@ mod tests {
             |_, t| if t < 4.0 { 1.4 + 0.15 * t } else { D_STAR },
             [0.0; 3],
         );
-        let m = run_metrics(&traj, &MetricsConfig::default());
+        let m = run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default());
         assert!(close(m.convergence_s_10.unwrap(), 2.7), "{m:?}");
         assert!(close(m.convergence_s_5.unwrap(), 3.35), "{m:?}");
     }
@@ -510,7 +582,7 @@ mod tests {
             },
             [0.0; 3],
         );
-        let m = run_metrics(&traj, &MetricsConfig::default());
+        let m = run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default());
         assert!(!m.success_5 && m.success_10, "{m:?}");
         assert!(close(m.rel_formation_error, 0.07) && close(m.max_edge_window_error, 0.07));
         assert_eq!(m.convergence_s_5, None);
@@ -525,7 +597,7 @@ mod tests {
             |k, _| if k < 800 { 1.5 * D_STAR } else { D_STAR },
             [0.0; 3],
         );
-        let m = run_metrics(&late, &MetricsConfig::default());
+        let m = run_metrics(&late, late.commands.len() as u64, &MetricsConfig::default());
         assert!(m.success_5 && close(m.convergence_s_5.unwrap(), 40.0));
         // The same with the error lasting one more sample: that sample (t = 40 s) is inside the window.
         let one_more = triangle_run(
@@ -533,11 +605,16 @@ mod tests {
             |k, _| if k <= 800 { 1.5 * D_STAR } else { D_STAR },
             [0.0; 3],
         );
-        let m = run_metrics(&one_more, &MetricsConfig::default());
+        let m = run_metrics(
+            &one_more,
+            one_more.commands.len() as u64,
+            &MetricsConfig::default(),
+        );
         assert!(close(m.rel_formation_error, 0.5 / 401.0), "{m:?}");
         // A 30 s window reaches back into the bad part.
         let m = run_metrics(
             &late,
+            late.commands.len() as u64,
             &MetricsConfig {
                 window_s: 30.0,
                 ..MetricsConfig::default()
@@ -571,7 +648,7 @@ mod tests {
     #[test]
     fn a_formed_lattice_succeeds_on_its_changing_edges_with_team_figures() {
         let traj = lattice_run(60.0, |k| if k < 100 { 1.2 } else { 1.0 });
-        let m = run_metrics(&traj, &MetricsConfig::default());
+        let m = run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default());
         assert!(m.success_5 && m.success_10, "{m:?}");
         assert!(close(m.convergence_s_10.unwrap(), 5.0));
         let team = m.team.expect("team figures under a changing graph");
@@ -585,14 +662,18 @@ mod tests {
     fn the_strict_check_fails_a_collision_or_one_bad_edge_that_the_anchor_check_passes() {
         let mut collided = lattice_run(30.0, |_| 1.0);
         collided.collisions = vec![(3, 0, 1)];
-        let m = run_metrics(&collided, &MetricsConfig::default());
+        let m = run_metrics(
+            &collided,
+            collided.commands.len() as u64,
+            &MetricsConfig::default(),
+        );
         assert!(!m.success_5 && !m.success_10 && m.team.unwrap().anchor_success);
 
         // A 7 % error on the whole lattice in the window, then exact for the last sample only:
         // strict fails at 5 %, the anchor check (last sample) passes.
         let samples = collided.times.len();
         let late = lattice_run(30.0, |k| if k + 1 < samples { 1.07 } else { 1.0 });
-        let m = run_metrics(&late, &MetricsConfig::default());
+        let m = run_metrics(&late, late.commands.len() as u64, &MetricsConfig::default());
         assert!(!m.success_5 && m.success_10, "{m:?}");
         assert!(m.team.unwrap().anchor_success);
     }
@@ -608,7 +689,7 @@ mod tests {
                 ..poses[3]
             });
         }
-        let m = run_metrics(&traj, &MetricsConfig::default());
+        let m = run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default());
         let team = m.team.clone().unwrap();
         assert!(!team.connected && !m.success_10, "{m:?}");
         assert!(m.max_edge_window_error < 1e-12);
@@ -617,10 +698,11 @@ mod tests {
     #[test]
     fn all_pairs_runs_keep_the_papers_form_unless_team_figures_are_asked() {
         let traj = triangle_run(30.0, |_, _| D_STAR, [0.0; 3]);
-        let plain = run_metrics(&traj, &MetricsConfig::default());
+        let plain = run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default());
         assert_eq!(plain.team, None);
         let with_team = run_metrics(
             &traj,
+            traj.commands.len() as u64,
             &MetricsConfig {
                 team_figures: true,
                 ..MetricsConfig::default()
@@ -652,7 +734,7 @@ mod tests {
     #[test]
     fn orientation_error_is_the_wrapped_mean_absolute_heading_error() {
         let traj = triangle_run(60.0, |_, _| D_STAR, [0.1, -0.2, 2.0 * std::f64::consts::PI]);
-        let m = run_metrics(&traj, &MetricsConfig::default());
+        let m = run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default());
         assert!(
             close(m.orientation_error_rad, 0.1),
             "{}",
@@ -666,25 +748,40 @@ mod tests {
         assert_eq!(collision_events(&overlaps), 3);
         let mut traj = triangle_run(10.0, |_, _| D_STAR, [0.0; 3]);
         traj.collisions = overlaps.to_vec();
-        assert_eq!(run_metrics(&traj, &MetricsConfig::default()).collisions, 3);
+        assert_eq!(
+            run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default()).collisions,
+            3
+        );
     }
 
     #[test]
     fn malformed_or_edgeless_trajectories_do_not_panic() {
         let mut bad_edge = triangle_run(10.0, |_, _| D_STAR, [0.0; 3]);
         bad_edge.edges.push((0, 5));
-        let m = run_metrics(&bad_edge, &MetricsConfig::default());
+        let m = run_metrics(
+            &bad_edge,
+            bad_edge.commands.len() as u64,
+            &MetricsConfig::default(),
+        );
         assert!(!m.success_10 && m.convergence_s_10.is_none() && m.rel_formation_error.is_nan());
 
         let mut no_edges = triangle_run(10.0, |_, _| 1.0, [0.0; 3]);
         no_edges.edges.clear();
-        let m = run_metrics(&no_edges, &MetricsConfig::default());
+        let m = run_metrics(
+            &no_edges,
+            no_edges.commands.len() as u64,
+            &MetricsConfig::default(),
+        );
         assert!(m.success_5 && m.rel_formation_error == 0.0 && m.convergence_s_5 == Some(0.0));
 
         let mut empty = triangle_run(10.0, |_, _| D_STAR, [0.0; 3]);
         empty.times.clear();
         empty.poses.clear();
-        let m = run_metrics(&empty, &MetricsConfig::default());
+        let m = run_metrics(
+            &empty,
+            empty.commands.len() as u64,
+            &MetricsConfig::default(),
+        );
         assert!(!m.success_10 && m.convergence_s_10.is_none());
     }
 
@@ -722,6 +819,7 @@ mod tests {
             orientation_error_rad: error / 10.0,
             collisions,
             team: None,
+            incomplete: None,
         }
     }
 
@@ -764,5 +862,84 @@ mod tests {
             ),
             (0, 0.0, None)
         );
+    }
+
+    #[test]
+    fn an_incomplete_run_never_succeeds_however_good_its_last_samples() {
+        // 30 s of a perfect formation, of the 60 s (1200 ticks) the run was to play.
+        let traj = triangle_run(30.0, |_, _| D_STAR, [0.0; 3]);
+        let with_team = MetricsConfig {
+            team_figures: true,
+            ..MetricsConfig::default()
+        };
+        let whole = run_metrics(&traj, 600, &with_team);
+        assert!(whole.success_5 && whole.success_10 && whole.is_complete());
+        assert!(whole.team.as_ref().unwrap().anchor_success);
+        let cut = run_metrics(&traj, 1200, &with_team);
+        assert!(!cut.success_5 && !cut.success_10, "{cut:?}");
+        assert!(!cut.team.as_ref().unwrap().anchor_success);
+        assert_eq!(
+            cut.incomplete,
+            Some(TicksPlayed {
+                ticks: 600,
+                planned_ticks: 1200
+            })
+        );
+        // Its other figures are over the ticks it played.
+        assert_eq!(cut.rel_formation_error, whole.rel_formation_error);
+        assert_eq!(cut.convergence_s_10, whole.convergence_s_10);
+        // More ticks than planned is no shortfall.
+        assert!(run_metrics(&traj, 100, &with_team).is_complete());
+
+        let summary = summarize(&[whole.clone(), cut.clone()]);
+        assert_eq!((summary.runs, summary.runs_incomplete), (2, 1));
+        assert_eq!(summary.success_rate_10, 0.5);
+        assert_eq!(summary.anchor_success_rate, Some(0.5));
+        assert_eq!(summary.rel_formation_error.unwrap().count, 1);
+
+        // A complete run's metrics and summary carry no trace of the new key.
+        let json = serde_json::to_string(&whole).unwrap();
+        assert!(!json.contains("incomplete"), "{json}");
+        let json = serde_json::to_string(&summarize(&[whole])).unwrap();
+        assert!(!json.contains("runs_incomplete"), "{json}");
+        // An incomplete run that a file says succeeded still does not count.
+        let forged = RunMetrics {
+            success_5: true,
+            success_10: true,
+            ..cut
+        };
+        assert_eq!(summarize(&[forged]).success_rate_10, 0.0);
+    }
+
+    #[test]
+    fn each_median_states_the_runs_it_covers() {
+        // Seven runs succeed at 10 %, four of them without converging; one run fails.
+        let mut runs: Vec<RunMetrics> = (0..7)
+            .map(|k| {
+                let converged = (k < 3).then_some(2.0 + k as f64);
+                run(false, true, converged, 0.01 * (k + 1) as f64, 0)
+            })
+            .collect();
+        runs.push(run(false, false, Some(1.0), 0.5, 0));
+        let s = summarize(&runs);
+        let over = s.medians_over.clone().expect("stated");
+        assert_eq!(
+            (over.convergence_s.runs, over.convergence_s.of),
+            (3, 7),
+            "{over:?}"
+        );
+        assert_eq!(over.convergence_s.rule, CONVERGED_RULE);
+        assert_eq!(s.median_convergence_s, Some(3.0));
+        assert_eq!(s.convergence_s.unwrap().count, 3);
+        for coverage in [&over.rel_formation_error, &over.orientation_error_rad] {
+            assert_eq!((coverage.runs, coverage.of), (7, 7));
+            assert_eq!(coverage.rule, SUCCESSFUL_RULE);
+        }
+        assert!(close(s.median_rel_formation_error.unwrap(), 0.04));
+        // No successful run: every median covers 0 of 0.
+        let none = summarize(&runs[7..]);
+        let over = none.medians_over.unwrap();
+        assert_eq!((over.convergence_s.runs, over.convergence_s.of), (0, 0));
+        assert_eq!(none.median_convergence_s, None);
     }
 }

@@ -69,14 +69,9 @@ pub use formation_schema::{RunLog, TimingLog};
 /// Why a run log or journal could not be written or read.
 #[derive(Debug, thiserror::Error)]
 pub enum RunLogError {
-    /// Writing failed (often a full disk).
-    #[error("could not write {}: {source}; {}", path.display(), write_hint(source))]
-    Write {
-        /// The file.
-        path: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
-    },
+    /// Writing failed: what stood in the way (a full disk, a file where a folder should be, ...).
+    #[error(transparent)]
+    Write(Box<WriteError>),
     /// Reading failed.
     #[error("could not read {}: {source}", path.display())]
     Read {
@@ -156,25 +151,11 @@ pub enum RunLogError {
     },
 }
 
-fn write_hint(source: &std::io::Error) -> &'static str {
-    match source.kind() {
-        std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded => {
-            "the disk is full: free some space or choose another --out directory"
-        }
-        std::io::ErrorKind::ReadOnlyFilesystem | std::io::ErrorKind::PermissionDenied => {
-            "the directory is not writable: choose another --out directory"
-        }
-        _ => {
-            "the disk may be full or not writable: free some space or choose another --out directory"
-        }
-    }
-}
+/// A file that could not be written, explained from its path.
+pub use formation_proto::files::WriteError;
 
 fn write_error(path: &Path) -> impl FnOnce(std::io::Error) -> RunLogError + '_ {
-    move |source| RunLogError::Write {
-        path: path.to_path_buf(),
-        source,
-    }
+    move |source| RunLogError::Write(Box::new(WriteError::new(path, source)))
 }
 
 /// Paths of run `index`'s logs under `out`: `runs/run-NNNN.json` and `timing/run-NNNN.json`.
@@ -197,10 +178,8 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RunLogError> {
 /// Writes a file of one of [`formation_schema`]'s formats (a run or timing log) as JSON, with its
 /// format name and schema version, with [`write_atomic`].
 pub fn write_json_atomic<F: SchemaFile>(path: &Path, value: &F) -> Result<(), RunLogError> {
-    let bytes = formation_schema::to_json(value).map_err(|source| RunLogError::Write {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(source),
-    })?;
+    let bytes = formation_schema::to_json(value)
+        .map_err(|source| write_error(path)(std::io::Error::other(source)))?;
     write_atomic(path, &bytes)
 }
 
@@ -350,7 +329,8 @@ impl<C: JournalClock> RunJournal<C> {
         mut clock: C,
     ) -> Result<Self, RunLogError> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            formation_proto::files::create_private_dir_all(dir).map_err(write_error(dir))?;
+            formation_proto::files::create_private_dir_all(dir)
+                .map_err(|e| RunLogError::Write(Box::new(WriteError::creating_dir(dir, e))))?;
         }
         let file = formation_proto::files::create_private_file(path).map_err(write_error(path))?;
         // Advisory only: a file system without locks still journals.
@@ -437,10 +417,7 @@ impl<C: JournalClock> RunJournal<C> {
         if !self.buffer.is_empty() {
             if let Err(source) = file.write_all(&self.buffer) {
                 self.fail();
-                return Err(RunLogError::Write {
-                    path: self.path.clone(),
-                    source,
-                });
+                return Err(write_error(&self.path)(source));
             }
             self.committed += self.buffer.len() as u64;
             self.buffer.clear();
@@ -460,10 +437,7 @@ impl<C: JournalClock> RunJournal<C> {
         let before = self.buffer.len();
         if let Err(source) = serde_json::to_writer(&mut self.buffer, value) {
             self.buffer.truncate(before);
-            return Err(RunLogError::Write {
-                path: self.path.clone(),
-                source: std::io::Error::other(source),
-            });
+            return Err(write_error(&self.path)(std::io::Error::other(source)));
         }
         self.buffer.push(b'\n');
         Ok(())
@@ -489,23 +463,43 @@ impl<C: JournalClock> RunJournal<C> {
 
 // ---- reading and recovering ------------------------------------------------------------------
 
-/// Rebuilds the run a journal records as an incomplete [`RunLog`]: `complete = false`, the
-/// trajectory up to the last whole line (a torn last line, as a killed writer leaves, is
-/// dropped), the metrics over the ticks recorded, the header's models. `stop_reason` is left
+/// Rebuilds the run a journal records as a [`RunLog`]: the trajectory up to the last whole line
+/// (a torn last line, as a killed writer leaves, is dropped), the metrics over the ticks recorded
+/// against the ticks the header planned, and so `complete = false` unless every tick was
+/// journaled; the header's models. `stop_reason` is left
 /// for the caller. Refuses files that are not journals, journals of another version, and damaged
 /// lines before the last.
 pub fn recover_journal(path: &Path) -> Result<RunLog, RunLogError> {
     let (header, trajectory) = read_journal(path)?;
+    let metrics = run_metrics(&trajectory, header.ticks, &MetricsConfig::default());
     Ok(RunLog {
         index: header.index,
-        metrics: run_metrics(&trajectory, &MetricsConfig::default()),
+        complete: metrics.is_complete(),
+        metrics,
         trajectory,
         clock: header.clock,
         models: header.models,
-        complete: false,
         stop_reason: None,
         planned_ticks: Some(header.ticks),
     })
+}
+
+/// The metrics of a run log, with an incomplete run never counted as a success: a log written
+/// before the metrics recorded it says so only by `complete = false` (the ticks it was to play
+/// taken as unknown, one more than it played, when the log lacks them).
+pub fn log_metrics(log: &RunLog) -> crate::metrics::RunMetrics {
+    let mut metrics = log.metrics.clone();
+    if !log.complete && metrics.is_complete() {
+        let ticks = log.ticks() as u64;
+        crate::metrics::mark_incomplete(
+            &mut metrics,
+            crate::metrics::TicksPlayed {
+                ticks,
+                planned_ticks: log.planned_ticks.unwrap_or(ticks + 1),
+            },
+        );
+    }
+    metrics
 }
 
 /// Reads a journal's header and the trajectory its whole lines record.
@@ -958,11 +952,15 @@ noise_std = 0.01
         assert_eq!(log.trajectory, full);
         assert_eq!(bits(&log.trajectory), bits(&full));
         assert_eq!(log.trajectory.collisions, full.collisions);
-        assert!(!log.complete);
+        // Every tick was journaled: the run is complete, though its world saved no run log.
+        assert!(log.complete && log.metrics.is_complete());
         assert_eq!(log.index, 2);
         assert_eq!(log.planned_ticks, Some(spec.ticks()));
         assert_eq!(log.models[1], "model-b");
-        assert_eq!(log.metrics, run_metrics(&full, &MetricsConfig::default()));
+        assert_eq!(
+            log.metrics,
+            run_metrics(&full, spec.ticks(), &MetricsConfig::default())
+        );
 
         // Stopped after 40 steps (the recorder fails the episode): the journal holds the prefix.
         let mut journal = RunJournal::create(&path, &header(&spec)).unwrap();
@@ -984,7 +982,7 @@ noise_std = 0.01
         assert_eq!(bits(&log.trajectory), bits(&prefix(&full, 41)));
         assert_eq!(
             log.metrics,
-            run_metrics(&prefix(&full, 41), &MetricsConfig::default())
+            run_metrics(&prefix(&full, 41), spec.ticks(), &MetricsConfig::default())
         );
         fs::remove_dir_all(&dir).unwrap();
     }
@@ -1147,7 +1145,7 @@ noise_std = 0.01
         assert!(matches!(err, RunLogError::Write { .. }), "{message}");
         assert!(message.contains("/dev/full"), "{message}");
         assert!(
-            message.contains("disk is full") && message.contains("--out"),
+            message.contains("disk is full") && message.contains("another output directory"),
             "{message}"
         );
 
@@ -1158,7 +1156,11 @@ noise_std = 0.01
         let err = RunJournal::create(&journal_path(&dir, 0), &header(&spec))
             .err()
             .expect("runs/ is a file");
-        assert!(err.to_string().contains("runs"), "{err}");
+        assert!(
+            err.to_string()
+                .contains(&format!("{} is a file, not a directory", blocker.display())),
+            "{err}"
+        );
 
         // An atomic write that fails leaves no temporary file behind.
         let target = dir.join("sub").join("x.json");
@@ -1234,7 +1236,15 @@ noise_std = 0.01
         let dir = dir("recover");
         let out = dir.join("a").join("out");
         let orphan = journal_path(&out, spec.index);
+        // A world killed before the last of its 12 ticks (the spec plays 10 here).
+        let mut planned = spec.clone();
+        planned.duration_s = 0.6;
         let full = journal_of(&spec, &orphan);
+        let mut rewritten = fs::read_to_string(&orphan).unwrap();
+        let header_end = rewritten.find('\n').unwrap();
+        let longer = serde_json::to_string(&header(&planned)).unwrap();
+        rewritten.replace_range(..header_end, &longer);
+        fs::write(&orphan, rewritten).unwrap();
 
         let mut live_spec = spec.clone();
         live_spec.index = 7;
@@ -1256,6 +1266,14 @@ noise_std = 0.01
         assert!(live_path.exists(), "a journal a writer holds is left alone");
         let log = RunLog::read(&run.log).unwrap();
         assert!(!log.complete);
+        assert_eq!(
+            log.metrics.incomplete,
+            Some(crate::metrics::TicksPlayed {
+                ticks: 10,
+                planned_ticks: 12
+            })
+        );
+        assert!(!log.metrics.success_5 && !log.metrics.success_10);
         assert_eq!(log.stop_reason.as_deref(), Some("the world was killed"));
         assert_eq!(log.trajectory, full);
 
@@ -1280,7 +1298,7 @@ noise_std = 0.01
         let traj = crate::run_episode(&spec, &mut Wobble, &mut |_, _| {}).unwrap();
         let log = RunLog {
             index: 1,
-            metrics: run_metrics(&traj, &MetricsConfig::default()),
+            metrics: run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default()),
             trajectory: traj,
             clock: "lockstep".into(),
             models: vec![],

@@ -263,7 +263,7 @@ fn write_run_specs(
     let specs: Vec<RunSpec> = (first..first + runs)
         .map(|i| scenario.run_spec(base_seed, i))
         .collect();
-    paths::write_atomic(path, &serde_json::to_vec(&specs)?)
+    Ok(paths::write_atomic(path, &serde_json::to_vec(&specs)?)?)
 }
 
 /// The launch plan of `args`, its scenario and the base seed of its runs.
@@ -543,7 +543,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
                 eprintln!("formation: {line}");
             }
         }
-        WorldEvent::Listening { .. } | WorldEvent::Finished => {}
+        WorldEvent::Listening { .. } | WorldEvent::Finished | WorldEvent::Stopping { .. } => {}
     }))?;
     let report = match launched {
         Ok(report) => {
@@ -682,7 +682,10 @@ fn run_summary(
             stop_reason: log.stop_reason.clone(),
         })
         .collect();
-    let per_run = logs.into_iter().map(|l| l.metrics).collect();
+    let per_run = logs
+        .iter()
+        .map(formation_world::runlog::log_metrics)
+        .collect();
     let mut table = crate::eval::eval_output("policy", models, scenario, seed, per_run);
     table.incomplete_runs = incomplete_runs;
     Ok(table)
@@ -1067,7 +1070,11 @@ mod tests {
             formation_world::run_episode(&spec(0), &mut Forward, &mut |_, _| {}).expect("episode");
         let log = RunLog {
             index: 0,
-            metrics: formation_world::metrics::run_metrics(&full, &Default::default()),
+            metrics: formation_world::metrics::run_metrics(
+                &full,
+                full.commands.len() as u64,
+                &Default::default(),
+            ),
             trajectory: full,
             clock: "lockstep".into(),
             models: vec!["m".into(); 3],

@@ -213,7 +213,7 @@ pub fn profile_svg(profile: &LatencyProfile, path: &Path) -> anyhow::Result<()> 
         &parsed.stages,
         parsed.inference_paper_ms,
     )?;
-    crate::paths::write_atomic(path, figure.svg.as_bytes())
+    Ok(crate::paths::write_atomic(path, figure.svg.as_bytes())?)
 }
 
 #[cfg(test)]

@@ -546,6 +546,8 @@ async fn supervise(
 
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut finished = false;
+    // The world said it stops early (a failed write, a signal): agents exit because it asked.
+    let mut world_stopping = false;
     let mut stdout_open = true;
     // Robots whose agent the world reported lost, and whose restarts are booked.
     let mut recovery = AgentRecovery::default();
@@ -557,6 +559,8 @@ async fn supervise(
         .unwrap_or_default();
     let result = loop {
         tokio::select! {
+            // The world's lines first: it says that it stops before it asks the agents to exit.
+            biased;
             line = lines.next_line(), if stdout_open => match line? {
                 Some(line) => {
                     if let Some(event) = WorldEvent::parse(&line) {
@@ -593,6 +597,7 @@ async fn supervise(
                             _ => {}
                         }
                         finished |= event == WorldEvent::Finished;
+                        world_stopping |= matches!(event, WorldEvent::Stopping { .. });
                         on_event(&event);
                     }
                 }
@@ -618,7 +623,7 @@ async fn supervise(
                 handle.kill = None;
                 handle.stdin = None;
                 handle.reaper = None;
-                if finished {
+                if finished || world_stopping {
                     continue;
                 }
                 // While the runs are under way an agent has no reason to exit, whatever its exit
@@ -643,7 +648,7 @@ async fn supervise(
                 });
             }
             Some(robot) = restart_rx.recv() => {
-                if finished {
+                if finished || world_stopping {
                     continue;
                 }
                 match spawn_agent(plan, binaries, secret, robot, false, exit_tx.clone()).await {

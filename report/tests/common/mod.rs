@@ -115,6 +115,7 @@ pub fn run_metrics(k: u64, success_10: bool) -> RunMetrics {
         orientation_error_rad: 0.02 + 0.03 * u,
         collisions: 0,
         team: None,
+        incomplete: None,
     }
 }
 
@@ -130,6 +131,8 @@ pub fn summary(scenario: &str, per_run: &[RunMetrics]) -> EvalOutput {
         braked_ticks: Vec::new(),
         incomplete_runs: Vec::new(),
         team_size: Vec::new(),
+        run_logs: Vec::new(),
+        complete: true,
     }
 }
 

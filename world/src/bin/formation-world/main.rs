@@ -139,17 +139,19 @@ fn main() -> ExitCode {
         .try_init();
     let args = Args::parse();
     let exit = match run(&args) {
-        Ok(None) => ProcessExit::Success,
-        Ok(Some(StopReason::Signal(signal))) => {
+        Ok(Ended::Finished) => ProcessExit::Success,
+        Ok(Ended::Stopped(StopReason::Signal(signal))) => {
             eprintln!("formation-world: stopped by {signal}; agents asked to exit");
             ProcessExit::stopped_by(signal)
         }
-        Ok(Some(StopReason::ParentGone)) => {
+        Ok(Ended::Stopped(StopReason::ParentGone)) => {
             eprintln!(
                 "formation-world: stopped: the launcher closed its input; agents asked to exit"
             );
             ProcessExit::Interrupted
         }
+        // Said already, before the agents were asked to exit.
+        Ok(Ended::Failed) => ProcessExit::Failure,
         Err(e) => {
             eprintln!(
                 "formation-world: error: {}",
@@ -161,7 +163,17 @@ fn main() -> ExitCode {
     exit.into()
 }
 
-fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
+/// How the world's runs ended, once its agents were there.
+enum Ended {
+    /// Every run played.
+    Finished,
+    /// A signal or the launcher stopped them.
+    Stopped(StopReason),
+    /// An error stopped them; it is printed.
+    Failed,
+}
+
+fn run(args: &Args) -> anyhow::Result<Ended> {
     let specs = read_run_specs(&args.run_specs)?;
     let run_id = RunId::new(&args.run_id)?;
     let namespace = RunNamespace::new(&run_id);
@@ -206,15 +218,28 @@ fn run(args: &Args) -> anyhow::Result<Option<StopReason>> {
         Box::new(emit),
     );
     let result = play(args, &runtime, &specs, &mut agents);
-    agents.shutdown_agents();
-    match (result, agents.stopped()) {
-        (_, Some(reason)) => Ok(Some(reason)),
-        (Ok(()), None) => {
-            emit(&WorldEvent::Finished);
-            Ok(None)
+    // A world that stops early says why first, and tells the launcher before it asks the agents
+    // to exit, so that their exits are not taken for crashes (and restarted).
+    let ended = match (&result, agents.stopped()) {
+        (_, Some(reason)) => {
+            emit(&WorldEvent::Stopping {
+                reason: format!("{reason:?}"),
+            });
+            Ended::Stopped(reason)
         }
-        (Err(e), None) => Err(e),
+        (Ok(()), None) => Ended::Finished,
+        (Err(e), None) => {
+            let text = formation_proto::errors::chain_text(e.as_ref());
+            eprintln!("formation-world: error: {text}");
+            emit(&WorldEvent::Stopping { reason: text });
+            Ended::Failed
+        }
+    };
+    agents.shutdown_agents();
+    if matches!(ended, Ended::Finished) {
+        emit(&WorldEvent::Finished);
     }
+    Ok(ended)
 }
 
 /// The Zenoh link: a router on `--listen`, with the credentials folder's logins and rules.

@@ -105,7 +105,7 @@ pub fn play_journaled(
             let timing = timing();
             let log = RunLog {
                 index,
-                metrics: run_metrics(&trajectory, &MetricsConfig::default()),
+                metrics: run_metrics(&trajectory, spec.ticks(), &MetricsConfig::default()),
                 trajectory,
                 clock: clock.to_owned(),
                 models: agents.model_ids().to_vec(),
