@@ -45,6 +45,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let duration: Option<f64> = std::env::var("DURATION").ok().map(|d| d.parse()).transpose()?;
     let threads: usize = std::env::var("THREADS").map_or(Ok(2), |t| t.parse())?;
     let verbose = std::env::var("VERBOSE").is_ok_and(|v| v == "1");
+    let dump: Option<usize> = std::env::var("DUMP").ok().map(|d| d.parse()).transpose()?;
     let base = Scenario::from_path(&path)?;
     let cfg = MetricsConfig {
         team_figures: true,
@@ -90,6 +91,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                                             total_w += 1;
                                             bound_w += usize::from(differs);
                                         }
+                                    }
+                                }
+                                if dump == Some(i) {
+                                    let k0 = requested.len().saturating_sub(60);
+                                    for k in k0..requested.len() {
+                                        let pose = traj.poses[k][0];
+                                        let phi = traj.phi_star[k];
+                                        let r = requested[k][0];
+                                        let a = traj.commands[k][0];
+                                        eprintln!(
+                                            "t={:.2} dtheta={:+.3} req=({:+.3},{:+.3}) applied=({:+.3},{:+.3})",
+                                            traj.times[k],
+                                            formation_proto::wrap_angle(pose.theta - phi),
+                                            r.left, r.right, a.left, a.right
+                                        );
                                     }
                                 }
                                 let metrics = run_metrics(&traj, &cfg);
