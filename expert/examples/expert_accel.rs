@@ -10,6 +10,7 @@
 //! * `DURATION`: the run length \[s\] (default: the scenario's);
 //! * `THREADS`: worker threads (default 2);
 //! * `VERBOSE=1`: one line per failed run (its window errors, how often the limit bound);
+//! * `DUMP=i`: robot 0's heading error and requested and applied wheels over run i's last 3 s;
 //! * `GAINS`: the expert's gains as JSON (`{"k_formation_graph": 0.4}`; default: the defaults).
 
 use std::path::PathBuf;
@@ -42,7 +43,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(a) => Some(Some(a.parse()?)),
         Err(_) => None,
     };
-    let duration: Option<f64> = std::env::var("DURATION").ok().map(|d| d.parse()).transpose()?;
+    let duration: Option<f64> = std::env::var("DURATION")
+        .ok()
+        .map(|d| d.parse())
+        .transpose()?;
     let threads: usize = std::env::var("THREADS").map_or(Ok(2), |t| t.parse())?;
     let verbose = std::env::var("VERBOSE").is_ok_and(|v| v == "1");
     let dump: Option<usize> = std::env::var("DUMP").ok().map(|d| d.parse()).transpose()?;
@@ -130,7 +134,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             all.into_iter().map(|(_, d)| d).collect()
         });
         if verbose {
-            for (i, d) in results.iter().enumerate().filter(|(_, d)| !d.metrics.success_10) {
+            for (i, d) in results
+                .iter()
+                .enumerate()
+                .filter(|(_, d)| !d.metrics.success_10)
+            {
                 let m = &d.metrics;
                 let t = m.team.as_ref();
                 eprintln!(
