@@ -99,10 +99,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                                 }
                                 if dump == Some(i) {
                                     let k0 = requested.len().saturating_sub(60);
-                                    for k in k0..requested.len() {
+                                    for (k, req) in requested.iter().enumerate().skip(k0) {
                                         let pose = traj.poses[k][0];
                                         let phi = traj.phi_star[k];
-                                        let r = requested[k][0];
+                                        let r = req[0];
                                         let a = traj.commands[k][0];
                                         eprintln!(
                                             "t={:.2} dtheta={:+.3} req=({:+.3},{:+.3}) applied=({:+.3},{:+.3})",
