@@ -32,6 +32,21 @@
 //! agree the two laws are the same, and over 100 runs of 16 robots (`teams-generalist.toml`) the
 //! centre law succeeded in 99 % / 99 % of runs at 5 % / 10 % against 97 % / 98 %.
 //!
+//! **Wheels with an acceleration limit.** The law commands a point velocity as if the wheels reached
+//! any speed within one tick. With a limit (`[robot] max_wheel_accel`, which the world applies to
+//! each wheel) they lag, and under a neighbour graph the lag sits in a loop that is already
+//! underdamped: a pair is measured between centres while the robot steers its offset point, and the
+//! centre trails the point like a trailer (time constant `c / v`, about 0.25 s at 0.7 m/s). With the
+//! team gain 0.5 (pair stiffness `8 K3` = 4/s per edge) that loop oscillates once the wheels lag:
+//! measured over `teams-generalist` at 1.0 m/s², formed teams weaved with headings swinging by up to
+//! ±1.4 rad, the limit bound in 70–85 % of the last 20 s, and strict success at 10 % fell to 64 %
+//! (5 robots) and 10 % (32 robots). So when a limit `a` is set, both formation gains are capped
+//! at [`ExpertGains::k_formation_per_accel`]` * a` (0.2 s/m² × 1.0 m/s² = 0.2, the team gain of
+//! 0.5 kept from 2.5 m/s² up): the law and its equilibrium are unchanged, the loop is slow enough
+//! for wheels that need about a second to reverse, and the command stays a function of what the
+//! robot senses (no wheel speeds, no memory), so a policy can still learn it. Without a limit
+//! nothing changes, bit for bit.
+//!
 //! The expert sees ground-truth poses of all robots. It exists to generate demonstrations and as the
 //! baseline the learned policy is compared with; it never runs inside an agent.
 
@@ -72,6 +87,17 @@ pub struct ExpertGains {
     /// measured (see the module documentation). The paper's all-pairs law always uses the offset
     /// points.
     pub graph_pair_points: PairPoints,
+    /// Formation gain per unit of wheel acceleration limit \[s/m²\]: when the robot's wheels have
+    /// a limit `a` (`RobotParams::max_wheel_accel`), both formation gains are capped at
+    /// `k_formation_per_accel * a`; without a limit it plays no part. The default 0.2 caps the team
+    /// gain at 0.2 for 1.0 m/s² and 0.3 for 1.5 m/s², and leaves the paper's 0.15 alone from
+    /// 0.75 m/s² up. Measured over 100 runs of `teams-generalist` at 1.0 m/s² (see the module
+    /// documentation for why), strict success at 10 % for 13 / 16 / 24 / 32 robots: 98 / 97 / 90 /
+    /// 82 % with 0.2, 92 / 91 / 79 / 66 % with 0.25 (some teams weave again), 64 / 34 / 14 / 10 %
+    /// uncapped; with 0.2 the limit no longer binds in the last 20 s (`ACCEL=1.0 cargo run -p
+    /// formation-expert --release --example expert_accel -- scenarios/teams-generalist.toml 100 13
+    /// 16 24 32`, `GAINS='{"k_formation_per_accel": 0.25}'` for the other).
+    pub k_formation_per_accel: f64,
 }
 
 /// The points of two robots between which the expert measures their distance and direction.
@@ -92,6 +118,7 @@ impl Default for ExpertGains {
             point_offset: 0.331 / 2.0,
             max_reference_speed: 0.7,
             graph_pair_points: PairPoints::Centres,
+            k_formation_per_accel: 0.2,
         }
     }
 }
@@ -109,7 +136,17 @@ pub struct InvalidGains {
 }
 
 impl ExpertGains {
-    /// Checks that every gain is finite and in range: `k_formation >= 0`, `point_offset > 0`,
+    /// The formation gain `k` to use for robots with these parameters: `k` itself without an
+    /// acceleration limit, else `min(k, k_formation_per_accel * max_wheel_accel)`.
+    pub fn formation_gain_for(&self, k: f64, robot: &RobotParams) -> f64 {
+        match robot.max_wheel_accel {
+            Some(accel) => k.min(self.k_formation_per_accel * accel),
+            None => k,
+        }
+    }
+
+    /// Checks that every gain is finite and in range: `k_formation >= 0`,
+    /// `k_formation_graph >= 0`, `k_formation_per_accel > 0`, `point_offset > 0`,
     /// `max_reference_speed >= 0`.
     pub fn validate(&self) -> Result<(), InvalidGains> {
         let checks = [
@@ -124,6 +161,12 @@ impl ExpertGains {
                 self.k_formation_graph,
                 self.k_formation_graph >= 0.0,
                 "finite and >= 0",
+            ),
+            (
+                "k_formation_per_accel",
+                self.k_formation_per_accel,
+                self.k_formation_per_accel > 0.0,
+                "finite and > 0",
             ),
             (
                 "point_offset",
@@ -153,7 +196,9 @@ impl ExpertGains {
 
 /// The expert's wheel command for every robot, written to `out[i]` for `poses[i]`.
 ///
-/// Every pair of robots is a formation edge (the paper's complete graph). Non-finite poses or goal
+/// Every pair of robots is a formation edge (the paper's complete graph). The formation gain is
+/// [`ExpertGains::k_formation`], capped when `robot` has an acceleration limit
+/// ([`ExpertGains::formation_gain_for`]). Non-finite poses or goal
 /// values give non-finite commands, which the world brakes; [`ExpertController`] refuses them up front.
 ///
 /// # Panics
@@ -181,7 +226,8 @@ pub fn expert_commands(
 
 /// The expert's wheel command for every robot when robot `i` holds only its own neighbours under
 /// `tracker`'s rule, at the sample the tracker last saw (which must be `poses`), with the formation
-/// gain [`ExpertGains::k_formation_graph`] and pairs measured between
+/// gain [`ExpertGains::k_formation_graph`] (capped under an acceleration limit, see
+/// [`ExpertGains::formation_gain_for`]) and pairs measured between
 /// [`ExpertGains::graph_pair_points`].
 ///
 /// # Panics
@@ -229,6 +275,7 @@ fn commands_among<I: Iterator<Item = usize>>(
     neighbours: impl Fn(usize) -> I,
 ) {
     let c = gains.point_offset;
+    let k_formation = gains.formation_gain_for(gains.k_formation, robot);
     let offset_point = |pose: &Pose| (pose.x + c * pose.theta.cos(), pose.y + c * pose.theta.sin());
     let reference = reference_velocity(goal, gains.max_reference_speed);
     let d4 = goal.d_star.powi(4);
@@ -254,8 +301,8 @@ fn commands_among<I: Iterator<Item = usize>>(
             gradient.1 += magnitude * dy / r;
         }
         let u = (
-            reference.0 - gains.k_formation * gradient.0,
-            reference.1 - gains.k_formation * gradient.1,
+            reference.0 - k_formation * gradient.0,
+            reference.1 - k_formation * gradient.1,
         );
         *cmd = point_velocity_to_wheels(u, pose.theta, c, robot);
     }
@@ -951,5 +998,122 @@ mod tests {
         }
         used.commands(&obs(0), &mut b).expect("valid");
         assert_eq!(a, b);
+    }
+
+    #[test]
+    fn an_acceleration_limit_caps_the_formation_gains_and_nothing_else() {
+        let gains = ExpertGains::default();
+        let free = RobotParams::default();
+        let limited = |accel| RobotParams {
+            max_wheel_accel: Some(accel),
+            ..free
+        };
+        assert_eq!(gains.formation_gain_for(0.5, &free), 0.5);
+        assert!((gains.formation_gain_for(0.5, &limited(1.0)) - 0.2).abs() < 1e-15);
+        assert!((gains.formation_gain_for(0.5, &limited(1.5)) - 0.3).abs() < 1e-15);
+        assert_eq!(gains.formation_gain_for(0.5, &limited(3.0)), 0.5);
+        assert_eq!(gains.formation_gain_for(0.15, &limited(1.0)), 0.15);
+
+        let poses: Vec<Pose> = (0..4)
+            .map(|k| {
+                let k = k as f64;
+                Pose {
+                    x: 1.1 * k,
+                    y: 0.4 * k * k - 0.5,
+                    theta: 0.7 * k - 1.0,
+                }
+            })
+            .collect();
+        let g = goal(0.4, 1.2);
+        let run = |gains: &ExpertGains, robot: &RobotParams| {
+            let mut out = vec![WheelCmd::BRAKE; poses.len()];
+            expert_commands(&poses, &g, gains, robot, &mut out);
+            out
+        };
+        // A limit too loose to cap the gain changes no bit of the command.
+        assert_eq!(run(&gains, &free), run(&gains, &limited(1000.0)));
+        // A binding limit is the law with the capped gain, on wheels without a limit.
+        let capped = ExpertGains {
+            k_formation: 0.2 * 0.5,
+            ..gains
+        };
+        assert_eq!(run(&gains, &limited(0.5)), run(&capped, &free));
+        assert_ne!(run(&gains, &limited(0.5)), run(&gains, &free));
+        // The graph law too.
+        use formation_world::neighbours::{GabrielRule, NeighbourRule, NeighbourTracker};
+        let mut tracker = NeighbourTracker::new(
+            NeighbourRule::Gabriel(GabrielRule::with_range(10.0)),
+            poses.len(),
+        );
+        let positions: Vec<(f64, f64)> = poses.iter().map(|p| (p.x, p.y)).collect();
+        tracker.update(&positions);
+        let among = |gains: &ExpertGains, robot: &RobotParams| {
+            let mut out = vec![WheelCmd::BRAKE; poses.len()];
+            expert_commands_among(&poses, &g, gains, robot, &tracker, &mut out);
+            out
+        };
+        let capped_graph = ExpertGains {
+            k_formation_graph: 0.2,
+            ..gains
+        };
+        assert_eq!(among(&gains, &limited(1.0)), among(&capped_graph, &free));
+        assert_ne!(among(&gains, &limited(1.0)), among(&gains, &free));
+
+        let bad = ExpertGains {
+            k_formation_per_accel: 0.0,
+            ..gains
+        };
+        assert_eq!(bad.validate().unwrap_err().field, "k_formation_per_accel");
+    }
+
+    /// Five robots whose wheels reach at most 1 m/s²: the capped law forms the team and holds it
+    /// without the world's limit binding in the last 20 s; the uncapped team gain (0.5) weaves, the
+    /// limit binding through most of the window and the team failing the strict check.
+    #[test]
+    fn a_team_of_five_under_an_acceleration_limit_converges_and_stops_straining_its_wheels() {
+        use formation_world::episode::run_episode;
+        use formation_world::metrics::{MetricsConfig, run_metrics};
+        let text = "name = \"accel\"\nrobots = 5\nduration_s = 60.0\nseed = 7\nruns = 3\n\
+                    [goal]\nv_star = 0.7\nd_star_range = [0.8, 2.5]\n[heading]\nschedule = \"random\"\n\
+                    [robot]\nmax_wheel_accel = 1.0\n";
+        let scenario = formation_world::Scenario::from_toml_str(text, "accel").expect("valid");
+        // (success at 10 %, share of robot-ticks of the last 20 s at which the limit bound)
+        let run = |gains: ExpertGains, index: usize| {
+            let spec = scenario.run_spec(scenario.seed(), index);
+            let mut expert =
+                ExpertController::new(gains, spec.world.robot).with_neighbours(spec.neighbours);
+            let mut requested: Vec<Vec<WheelCmd>> = Vec::new();
+            let traj = run_episode(&spec, &mut expert, &mut |_, cmds| {
+                requested.push(cmds.to_vec())
+            })
+            .expect("runs");
+            let m = run_metrics(&traj, &MetricsConfig::default());
+            let window = requested.len() - 400;
+            let (mut bound, mut total) = (0, 0);
+            for (req, applied) in requested[window..].iter().zip(&traj.commands[window..]) {
+                for (r, a) in req.iter().zip(applied) {
+                    total += 1;
+                    bound += usize::from(r != a);
+                }
+            }
+            (
+                m.success_10 && m.collisions == 0,
+                bound as f64 / total as f64,
+            )
+        };
+        let uncapped = ExpertGains {
+            k_formation_per_accel: 1.0,
+            ..ExpertGains::default()
+        };
+        let mut weaves = 0;
+        for index in 0..3 {
+            let (success, bound) = run(ExpertGains::default(), index);
+            assert!(success && bound == 0.0, "run {index}: {success}, {bound}");
+            let (success, bound) = run(uncapped, index);
+            if !success && bound > 0.3 {
+                weaves += 1;
+            }
+        }
+        assert!(weaves >= 1, "the uncapped gain was expected to weave");
     }
 }
