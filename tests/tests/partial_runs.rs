@@ -9,7 +9,8 @@ use std::time::Duration;
 use formation_proto::wire::RunId;
 use formation_tests::{
     LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries, case1_scenario,
-    formation_run, one_at_a_time, repo_root, run, send_signal, unique_run_id, world_pid,
+    files_under, formation_run, one_at_a_time, read_json, repo_root, run, send_signal,
+    unique_run_id, world_pid,
 };
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
@@ -18,29 +19,6 @@ const LIMIT: Duration = Duration::from_secs(300);
 /// `formation run` of `scenario` into `out`, with `extra` flags.
 fn launch(run_id: &RunId, scenario: &Path, out: &Path, extra: &[&str]) -> LiveProcess {
     LiveProcess::spawn(formation_run(run_id, scenario, out, extra))
-}
-
-fn read_json(path: &Path) -> serde_json::Value {
-    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
-    serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("parsing {}: {e}", path.display()))
-}
-
-/// Every file under `dir`, recursively.
-fn files_under(dir: &Path) -> Vec<PathBuf> {
-    let mut files = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
-            let path = entry.path();
-            if entry.file_type().is_ok_and(|t| t.is_dir()) {
-                stack.push(path);
-            } else {
-                files.push(path);
-            }
-        }
-    }
-    files.sort();
-    files
 }
 
 /// Checks the incomplete run 0 in `out`: its log, the summary that lists it, no journal left,

@@ -9,36 +9,13 @@ use std::time::{Duration, Instant};
 
 use formation_tests::{
     Finished, LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries,
-    case1_scenario, formation_run, formation_run_with_model, one_at_a_time, repo_root, run,
-    send_signal, unique_run_id, world_pid,
+    case1_scenario, files_under, formation_run, formation_run_with_model, one_at_a_time, read_json,
+    repo_root, run, send_signal, unique_run_id, world_pid,
 };
 use formation_world::metrics::{MetricsConfig, run_metrics};
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
-
-fn read_json(path: &Path) -> serde_json::Value {
-    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
-    serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("parsing {}: {e}", path.display()))
-}
-
-/// Every file under `dir`, recursively.
-fn files_under(dir: &Path) -> Vec<PathBuf> {
-    let mut files = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
-            let path = entry.path();
-            if entry.file_type().is_ok_and(|t| t.is_dir()) {
-                stack.push(path);
-            } else {
-                files.push(path);
-            }
-        }
-    }
-    files.sort();
-    files
-}
 
 /// `formation eval --controller expert --runs 1 --scenario SCENARIO EXTRA`.
 fn expert_eval(scenario: &Path, extra: &[&str]) -> Command {
