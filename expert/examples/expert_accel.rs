@@ -112,7 +112,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                                         );
                                     }
                                 }
-                                let metrics = run_metrics(&traj, &cfg);
+                                let metrics = run_metrics(&traj, spec.ticks(), &cfg);
                                 (
                                     i,
                                     Diagnosis {

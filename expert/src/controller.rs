@@ -1087,7 +1087,7 @@ mod tests {
                 requested.push(cmds.to_vec())
             })
             .expect("runs");
-            let m = run_metrics(&traj, &MetricsConfig::default());
+            let m = run_metrics(&traj, spec.ticks(), &MetricsConfig::default());
             let window = requested.len() - 400;
             let (mut bound, mut total) = (0, 0);
             for (req, applied) in requested[window..].iter().zip(&traj.commands[window..]) {
