@@ -4,9 +4,9 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use formation_runtime::transport::Transport;
-use trainer_bridge::train::Architecture;
+use formation_trainer_bridge::train::Architecture;
 
-use crate::runtime::{CredentialsArgs, ProfileArgs, RunArgs, SwapArgs};
+use crate::launch::{CredentialsArgs, ProfileArgs, RunArgs, SwapArgs};
 
 /// Learned decentralized multi-robot formation control.
 #[derive(Debug, Parser)]

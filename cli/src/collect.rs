@@ -4,8 +4,8 @@
 use anyhow::Context;
 use formation_expert::collect::{CollectOptions, collect};
 use formation_proto::{BeyondWindow, OccupancySpec};
+use formation_trainer_bridge::dataset::{DatasetHeader, DatasetWriter};
 use formation_world::Scenario;
-use trainer_bridge::dataset::{DatasetHeader, DatasetWriter};
 
 use crate::args::CollectArgs;
 use crate::eval::progress_bar;

@@ -67,11 +67,13 @@ pub fn checked_models(
     models: &[PathBuf],
     scenario: &Scenario,
 ) -> anyhow::Result<Vec<(String, formation_onnx::ModelEnvelope)>> {
-    Ok(robot_agent::decision::check_team_models_with_envelopes(
-        models,
-        &scenario.world_config().lidar,
-        &scenario_d_stars(scenario),
-    )?)
+    Ok(
+        formation_robot_agent::decision::check_team_models_with_envelopes(
+            models,
+            &scenario.world_config().lidar,
+            &scenario_d_stars(scenario),
+        )?,
+    )
 }
 
 /// Each distinct model of a team (by id, in first-use order) that records its trained team
@@ -278,8 +280,8 @@ pub struct PartialOutput {
 
 /// The transport flags of `eval`: Zenoh's flags need `--transport zenoh`, and a transport is
 /// something only processes have, so `--transport zenoh` needs `--processes`.
-pub fn network_flags(args: &EvalArgs) -> anyhow::Result<crate::runtime::NetworkFlags> {
-    let flags = crate::runtime::NetworkFlags {
+pub fn network_flags(args: &EvalArgs) -> anyhow::Result<crate::launch::NetworkFlags> {
+    let flags = crate::launch::NetworkFlags {
         transport: args.transport,
         listen: args.listen.clone(),
         ..Default::default()
@@ -332,12 +334,12 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
     let started = Instant::now();
     let results: Vec<RunResult> = if args.processes {
         let default = models.first().cloned().context("no robots")?;
-        let evaluated = crate::runtime::eval_over_processes(
+        let evaluated = crate::launch::eval_over_processes(
             &scenario,
             seed,
             runs,
             &default,
-            crate::runtime::ClockMode::Lockstep,
+            crate::launch::ClockMode::Lockstep,
             &network,
             &mut |n| bar.set_position(n as u64),
         )?;
@@ -357,7 +359,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
                 index,
                 metrics: run_metrics(&traj, scenario.run_spec(seed, index).ticks(), &cfg),
                 trajectory: keep(index).then_some(traj),
-                clock: crate::runtime::ClockMode::Lockstep.as_str(),
+                clock: crate::launch::ClockMode::Lockstep.as_str(),
             })
             .collect()
     } else {

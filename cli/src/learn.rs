@@ -1,6 +1,6 @@
 //! `formation train` and `formation dagger`: the learning pipeline's steps.
 //!
-//! Training itself is PyTorch, run by `trainer_bridge::train` as a subprocess. DAgger lives in
+//! Training itself is PyTorch, run by `formation_trainer_bridge::train` as a subprocess. DAgger lives in
 //! `formation_learning::dagger` (rollouts in parallel with rayon, over the team sizes asked): each
 //! iteration rolls out the current policy in closed loop (optionally letting the expert drive a
 //! decaying share of runs), labels every visited state of every robot with the expert's action,
@@ -12,8 +12,8 @@ use std::time::Instant;
 
 use anyhow::Context;
 use formation_learning::dagger::{DaggerEvent, DaggerOptions, run_dagger};
+use formation_trainer_bridge::train::{TrainOptions, TrainReport, train};
 use formation_world::Scenario;
-use trainer_bridge::train::{TrainOptions, TrainReport, train};
 
 use crate::args::{DaggerArgs, TrainArgs};
 use crate::eval;

@@ -6,7 +6,9 @@
 //! * [`eval`]: in-process (or, with `--processes`, multi-process) evaluation with the paper's metrics.
 //! * [`collect`]: expert demonstrations into a dataset.
 //! * [`learn`]: `train` (runs the PyTorch trainer) and `dagger` (policy drives, expert labels, retrain).
-//! * [`runtime`]: the multi-process runtime launcher (`run`, `profile`, `swap`, `credentials`).
+//! * [`launch`]: the multi-process launcher (`run`, `profile`, `swap`, `credentials`).
+//! * [`pilot`]: the robot's ONNX decision as the runtime's agent loop drives it (the
+//!   `formation-agent` binary).
 //! * [`report`]: the HTML report with the paper's figures.
 //! * [`demo`]: the README's main job: the paper's cases and Table I with the shipped model, then a report.
 
@@ -14,10 +16,11 @@ pub mod args;
 pub mod collect;
 pub mod demo;
 pub mod eval;
+pub mod launch;
 pub mod learn;
 pub mod paths;
+pub mod pilot;
 pub mod report;
-pub mod runtime;
 
 use clap::Parser;
 use formation_proto::exit::ProcessExit;
@@ -26,8 +29,8 @@ use formation_proto::exit::ProcessExit;
 /// SIGINT (Ctrl-C) or SIGTERM, 2 for any other error. (Bad flags exit 2 through clap.)
 pub fn exit_for_error(error: &anyhow::Error) -> ProcessExit {
     let interrupted = error.chain().find_map(|cause| {
-        match cause.downcast_ref::<runtime::supervisor::LaunchError>() {
-            Some(runtime::supervisor::LaunchError::Interrupted(signal)) => Some(*signal),
+        match cause.downcast_ref::<launch::supervisor::LaunchError>() {
+            Some(launch::supervisor::LaunchError::Interrupted(signal)) => Some(*signal),
             _ => None,
         }
     });
@@ -38,16 +41,16 @@ pub fn exit_for_error(error: &anyhow::Error) -> ProcessExit {
 pub fn main_with_args() -> anyhow::Result<()> {
     let cli = args::Cli::parse();
     init_tracing(cli.verbose);
-    formation_proto::wire::quiet_iceoryx_logs();
+    formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
     match cli.command {
         args::Command::Eval(a) => eval::eval_command(&a),
         args::Command::Collect(a) => collect::collect_command(&a),
         args::Command::Train(a) => learn::train_command(&a),
         args::Command::Dagger(a) => learn::dagger_command(&a),
-        args::Command::Run(a) => runtime::run_command(&a),
-        args::Command::Profile(a) => runtime::profile_command(&a),
-        args::Command::Swap(a) => runtime::swap_command(&a),
-        args::Command::Credentials(a) => runtime::credentials_command(&a),
+        args::Command::Run(a) => launch::run_command(&a),
+        args::Command::Profile(a) => launch::profile_command(&a),
+        args::Command::Swap(a) => launch::swap_command(&a),
+        args::Command::Credentials(a) => launch::credentials_command(&a),
         args::Command::Report(a) => report::report_command(&a),
         args::Command::Demo(a) => demo::demo_command(&a),
     }

@@ -1,5 +1,5 @@
 //! `formation`: the command-line entry point. It only maps errors to messages and exit codes
-//! ([`formation_proto::exit::ProcessExit`], through [`formation::exit_for_error`]); everything
+//! ([`formation_proto::exit::ProcessExit`], through [`formation_cli::exit_for_error`]); everything
 //! else lives in the `formation` library.
 
 use std::process::ExitCode;
@@ -7,14 +7,14 @@ use std::process::ExitCode;
 use formation_proto::exit::ProcessExit;
 
 fn main() -> ExitCode {
-    let exit = match formation::main_with_args() {
+    let exit = match formation_cli::main_with_args() {
         Ok(()) => ProcessExit::Success,
         Err(err) => {
             eprintln!(
                 "error: {}",
                 formation_proto::errors::chain_text(err.as_ref())
             );
-            formation::exit_for_error(&err)
+            formation_cli::exit_for_error(&err)
         }
     };
     exit.into()

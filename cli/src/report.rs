@@ -8,7 +8,7 @@
 /// `formation report`.
 pub fn report_command(args: &crate::args::ReportArgs) -> anyhow::Result<()> {
     if args.dir.is_dir() {
-        crate::runtime::recover_run_dirs(&args.dir);
+        crate::launch::recover_run_dirs(&args.dir);
     }
     let summary = formation_report::build_report(&args.dir, &args.out)?;
     for warning in &summary.warnings {

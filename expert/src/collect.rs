@@ -2,7 +2,7 @@
 //!
 //! [`collect`] runs a scenario's runs with the [`ExpertController`] and turns every recorded tick into one
 //! [`Sample`] per robot: the occupancy image rendered from that robot's own scan (by
-//! [`robot_agent::occupancy::render`], the function the agents run), `delta_phi = wrap(phi* - theta_i)`,
+//! [`formation_perception::occupancy::render`], the function the agents run), `delta_phi = wrap(phi* - theta_i)`,
 //! `d*`, and the wheel command the expert chose for that robot. Samples go to a [`DatasetWriter`].
 //!
 //! [`Labeller::label_observation`] labels any observation with the expert's commands whoever drives;
@@ -12,11 +12,11 @@
 
 use std::time::{Duration, Instant};
 
+use formation_perception::occupancy;
 use formation_proto::{LidarSpec, NeighbourRule, OccupancySpec, WheelCmd, wrap_angle};
+use formation_trainer_bridge::dataset::{DatasetError, DatasetWriter, Sample};
 use formation_world::episode::{Observation, run_episode};
 use formation_world::{RobotParams, RunSpec, Scenario};
-use robot_agent::occupancy;
-use trainer_bridge::dataset::{DatasetError, DatasetWriter, Sample};
 
 use crate::controller::{ExpertController, ExpertGains, InvalidGains, check_inputs};
 

@@ -3,8 +3,8 @@
 
 use formation_expert::collect::{CollectError, CollectOptions, collect};
 use formation_proto::{BeyondWindow, OccupancySpec};
+use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter};
 use formation_world::Scenario;
-use trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter};
 
 const TINY: &str = r#"
     name = "tiny"

@@ -14,12 +14,12 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use formation_expert::collect::Labeller;
 use formation_expert::{ExpertController, ExpertGains};
 use formation_schema::EvalOutput;
+use formation_trainer_bridge::dataset::{DatasetWriter, Sample};
+use formation_trainer_bridge::train::{TrainOptions, TrainReport, train};
 use formation_world::metrics::{MetricsConfig, RunMetrics};
 use formation_world::{Controller, Scenario, run_episode};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
-use trainer_bridge::dataset::{DatasetWriter, Sample};
-use trainer_bridge::train::{TrainOptions, TrainReport, train};
 
 use crate::LearningError;
 use crate::rollout::{Driver, eval_output, evaluate_runs};
@@ -315,7 +315,7 @@ fn rollout_and_label(
 mod tests {
     use super::*;
     use formation_proto::OccupancySpec;
-    use trainer_bridge::dataset::{DatasetHeader, DatasetReader};
+    use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader};
 
     fn scenario(robots: usize) -> Scenario {
         let text = format!(

@@ -27,11 +27,11 @@ pub enum LearningError {
     Policy {
         /// Why.
         #[source]
-        source: robot_agent::decision::DecisionError,
+        source: formation_robot_agent::decision::DecisionError,
     },
     /// The models cannot drive this scenario's robots (checked before anything runs).
     #[error(transparent)]
-    TeamModels(#[from] robot_agent::decision::TeamModelError),
+    TeamModels(#[from] formation_robot_agent::decision::TeamModelError),
     /// A scenario gives a robot a model that the team does not have.
     #[error("the scenario gives robot {robot} a model, but the team has {robots} robots")]
     AgentOutOfTeam {
@@ -65,7 +65,7 @@ pub enum LearningError {
         path: PathBuf,
         /// Why.
         #[source]
-        source: trainer_bridge::dataset::DatasetError,
+        source: formation_trainer_bridge::dataset::DatasetError,
     },
     /// Training failed.
     #[error("training {}: {source}", out.display())]
@@ -74,7 +74,7 @@ pub enum LearningError {
         out: PathBuf,
         /// Why.
         #[source]
-        source: trainer_bridge::train::TrainError,
+        source: formation_trainer_bridge::train::TrainError,
     },
     /// A file could not be written or copied.
     #[error("{what} {}: {source}", path.display())]

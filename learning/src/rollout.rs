@@ -4,11 +4,11 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use formation_expert::{ExpertController, ExpertGains};
+use formation_robot_agent::decision::PolicyController;
 use formation_schema::EvalOutput;
 use formation_world::metrics::{MetricsConfig, RunMetrics, run_metrics, summarize};
 use formation_world::{Controller, Scenario, Trajectory, run_episode};
 use rayon::prelude::*;
-use robot_agent::decision::PolicyController;
 
 use crate::LearningError;
 

@@ -9,14 +9,12 @@
 //!   them.
 //! * [`control`]: the [`control::Controller`] seam between an episode loop and what decides the
 //!   wheel commands, with its [`control::Observation`] and [`control::ControllerError`].
-//! * [`auth`]: the launch secret, with which an agent proves that its own launch started it.
-//! * [`wire`]: the fixed-size `#[repr(C)]` messages that travel over iceoryx2 shared memory
-//!   between the world process and the robot-agent processes, and the per-run service names.
+//! * [`wire`]: the fixed-size `#[repr(C)]` messages between the world process and the
+//!   robot-agent processes, whatever carries them, and the names of their channels.
 //!
 //! Nothing here knows about physics, policies or ONNX; both the world and the agents depend on
 //! this crate so that neither depends on the other.
 
-pub mod auth;
 pub mod control;
 pub mod errors;
 pub mod exit;

@@ -3,7 +3,7 @@
 //! An [`Agent`] holds one robot's policy and its reusable image buffers. Its decision reads nothing
 //! but that robot's own LIDAR scan, its own compass heading and the goal every robot is given:
 //!
-//! 1. render the occupancy image from the scan ([`crate::occupancy::render`], the same function the
+//! 1. render the occupancy image from the scan ([`formation_perception::occupancy::render`], the same function the
 //!    demonstration collector uses);
 //! 2. `delta_phi = wrap(phi* - theta)`, and `aux = (delta_phi, d*)`;
 //! 3. `u_hat = policy(image, aux)`, the wheel speeds at the training speed `v_train`;
@@ -29,7 +29,7 @@ use formation_onnx::{OnnxPolicy, PolicyError};
 use formation_proto::control::{Controller, ControllerError, Observation};
 use formation_proto::{Goal, LidarSpec, OccupancySpec, WheelCmd, wrap_angle};
 
-use crate::occupancy;
+use formation_perception::occupancy;
 
 /// Why an agent could not decide, or could not take a policy.
 #[derive(Debug, thiserror::Error)]

@@ -7,8 +7,8 @@
 use std::path::{Path, PathBuf};
 
 use formation_onnx::OnnxPolicy;
+use formation_perception::occupancy::{render, to_f32};
 use formation_proto::LidarSpec;
-use robot_agent::occupancy::{render, to_f32};
 
 fn model(relative: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use formation_onnx::{PolicyError, SensorViolation};
 use formation_proto::LidarSpec;
-use robot_agent::decision::{DecisionError, check_team_models};
+use formation_robot_agent::decision::{DecisionError, check_team_models};
 
 /// The shipped policy: 900 beams, 10 m.
 fn shipped() -> PathBuf {

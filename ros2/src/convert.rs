@@ -1,7 +1,7 @@
 //! Conversions between ROS messages and the agent's contract: a real LaserScan resampled onto the
 //! model's LIDAR ring, the heading from an Imu or Odometry quaternion, and a Twist from wheel speeds.
 //!
-//! The model's sensor contract (`formation_proto::LidarSpec`, `robot_agent::occupancy`): `beams`
+//! The model's sensor contract (`formation_proto::LidarSpec`, `formation_perception::occupancy`): `beams`
 //! ranges, beam `k` at bearing `2 pi k / beams` counter-clockwise from the robot's +x axis, and a
 //! beam that hits nothing reports exactly the maximum range (the renderer draws only ranges in
 //! `[0, max_range)`). A resampled scan keeps that contract: each model beam takes the reading

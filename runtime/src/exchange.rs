@@ -24,7 +24,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use formation_proto::auth::LaunchSecret;
+use crate::auth::LaunchSecret;
 use formation_proto::control::{Controller, ControllerError, Observation};
 use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::WorldEvent;

@@ -11,9 +11,11 @@
 //!   scan it answered.
 //! * [`link_health`]: the degraded-link detector, whose reports the world sends while a run goes
 //!   on.
+//! * [`auth`]: the launch secret, with which an agent proves that its own launch started it.
 //! * [`signals`]: which termination signal (SIGINT or SIGTERM) stopped an iceoryx2 process.
 //! * [`iceoryx`]: the links over iceoryx2 shared memory, used by the `formation-world` and
-//!   `formation-agent` processes.
+//!   `formation-agent` processes, with the run's iceoryx2 namespace, its lock and the service
+//!   limits (`iceoryx::naming`).
 //! * `zenoh` (with the `zenoh` feature): the links over Zenoh, for agents on other hosts.
 //! * `ros2` (with the `zenoh` feature): ROS 2 over rmw_zenoh: an agent that drives a ROS 2
 //!   robot, and the world as a team of ROS 2 robots.
@@ -29,6 +31,7 @@
 //! the agent's binary and the launcher depend on it, and it knows neither physics nor ONNX.
 
 pub mod agent;
+pub mod auth;
 pub mod clock;
 pub mod exchange;
 pub mod faults;

@@ -16,11 +16,11 @@
 
 use std::time::Duration;
 
-use formation_proto::auth::SecretError;
+use crate::auth::SecretError;
+use crate::iceoryx::naming::NamespaceError;
 use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::{
-    AgentStatus, CmdMsg, ControlRequest, NamespaceError, ScanMsg, SwapReply, SwapRequest, Welcome,
-    WireError,
+    AgentStatus, CmdMsg, ControlRequest, ScanMsg, SwapReply, SwapRequest, Welcome, WireError,
 };
 
 /// A failure of the world's transport, or a request to stop.
@@ -78,7 +78,7 @@ pub struct Hello {
     /// Its nonce: names the incarnation if accepted.
     pub nonce: u64,
     /// Its proof of the launch secret.
-    pub proof: [u8; formation_proto::auth::PROOF_LEN],
+    pub proof: [u8; crate::auth::PROOF_LEN],
 }
 
 /// What the world needs from a transport: per-robot channels to and from the agents.

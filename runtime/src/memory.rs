@@ -20,7 +20,7 @@ use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
-use formation_proto::auth::LaunchSecret;
+use crate::auth::LaunchSecret;
 use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::{
     AgentStatus, CmdMsg, ControlRequest, RunId, ScanMsg, SwapReply, SwapRequest, Welcome,

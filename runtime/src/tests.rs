@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use formation_proto::auth::LaunchSecret;
+use crate::auth::LaunchSecret;
 use formation_proto::control::{Controller, Observation};
 use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::{

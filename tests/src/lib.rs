@@ -4,13 +4,13 @@
 //!
 //! How the tests get the executables: integration tests can only name binaries of their own
 //! package (`CARGO_BIN_EXE_*`), and `formation-world`, `formation-agent` and `formation` live in
-//! other packages. [`binaries`] therefore builds those three binaries once per
+//! `formation-cli`. [`binaries`] therefore builds those three binaries once per
 //! test process, in the same profile as the test itself (a no-op when they are up to date), and
 //! takes them from `target/<profile>/`, the directory above the test executable. Set
 //! `FORMATION_TESTS_NO_BUILD=1` to skip the build (e.g. when the binaries were built beforehand).
 //! The build is `cargo runtime-bins`, an alias in `.cargo/config.toml`.
 //! That build is not a no-op on a cold target directory even after `cargo test` compiled
-//! everything: a plain build of the three packages resolves dependency features without the
+//! everything: a plain build of formation-cli resolves dependency features without the
 //! workspace's dev-dependencies (`bitflags`, `zerocopy`, `regex-automata` differ), so much of the
 //! dependency graph is compiled a second time. `scripts/test-all` therefore builds them first,
 //! and no [`Watchdog`] counts the time a test waits for this one-time setup (or for the test
@@ -32,8 +32,9 @@ use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-pub use formation_proto::auth::LaunchSecret;
-use formation_proto::wire::{RunId, RunNamespace};
+use formation_proto::wire::RunId;
+pub use formation_runtime::auth::LaunchSecret;
+use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_world::Trajectory;
 
 /// The repository root (the parent of this crate's directory).
@@ -233,7 +234,10 @@ pub fn binaries() -> &'static Binaries {
         let _setup = SharedSetup::begin();
         let exe = std::env::current_exe().expect("test executable path");
         let deps = exe.parent().expect("test executable directory");
-        let profile_dir = deps.parent().expect("target/<profile> directory").to_path_buf();
+        let profile_dir = deps
+            .parent()
+            .expect("target/<profile> directory")
+            .to_path_buf();
         if std::env::var_os("FORMATION_TESTS_NO_BUILD").is_none() {
             build_binaries(&profile_dir);
         }
@@ -241,12 +245,16 @@ pub fn binaries() -> &'static Binaries {
             let path = profile_dir.join(name);
             assert!(
                 path.is_file(),
-                "{} is missing: build it with `cargo build -p formation-world -p formation-agent -p formation-cli`",
+                "{} is missing: build it with `cargo runtime-bins`",
                 path.display()
             );
             path
         };
-        Binaries { cli: bin("formation"), world: bin("formation-world"), agent: bin("formation-agent") }
+        Binaries {
+            cli: bin("formation"),
+            world: bin("formation-world"),
+            agent: bin("formation-agent"),
+        }
     })
 }
 

@@ -7,7 +7,8 @@
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use formation_proto::wire::{RunId, RunNamespace};
+use formation_proto::wire::RunId;
+use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_tests::{
     LaunchSecret, LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, await_connected,
     await_rejoin, binaries, case1_scenario, formation_run, incarnations, one_at_a_time, run,

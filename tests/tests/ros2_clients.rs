@@ -21,7 +21,9 @@ use std::process::Command;
 use std::sync::OnceLock;
 use std::time::Duration;
 
+use formation_cli::pilot::OnnxPilots;
 use formation_proto::{Goal, LidarSpec};
+use formation_robot_agent::decision::Agent;
 use formation_ros2::msg::Quaternion;
 use formation_ros2::{
     Header, LaserScan, PartialScan, RingContract, Time, Twist, resample_scan, twist_from_wheels,
@@ -33,8 +35,6 @@ use formation_tests::{
     run, send_signal, test_model,
 };
 use rand::{Rng, SeedableRng};
-use robot_agent::decision::Agent;
-use robot_agent::pilot::OnnxPilots;
 use serde_json::{Value, json};
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -478,7 +478,7 @@ fn plan(steps: Vec<Value>) -> Value {
 
 /// The decision of the agent's model computed in this process: the scan resampled onto the
 /// model's ring (`formation_ros2::resample_scan`), the occupancy image and the policy
-/// (`robot_agent::decision::Agent`), and the Twist of the wheel speeds.
+/// (`formation_robot_agent::decision::Agent`), and the Twist of the wheel speeds.
 struct InProcess {
     agent: Agent,
     contract: RingContract,

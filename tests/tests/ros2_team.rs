@@ -14,7 +14,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation::runtime::read_trajectory;
+use formation_cli::launch::read_trajectory;
 use formation_tests::{
     LeakCheck, TempDir, Watchdog, binaries, case1_scenario, formation_run_with_model,
     free_tcp_port, one_at_a_time, policy_eval, repo_root, run, test_model, unique_run_id,

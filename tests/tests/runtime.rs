@@ -6,15 +6,16 @@ use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use formation::runtime::{ClockMode, NetworkFlags, eval_over_processes};
-use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, ServiceLimits, robot_service_name};
+use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
+use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, robot_service_name};
+use formation_robot_agent::decision::PolicyController;
+use formation_runtime::iceoryx::naming::ServiceLimits;
 use formation_tests::{
     LeakCheck, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
     incarnations, launch_secret, repo_root, run, run_with_input, test_model, unique_run_id,
 };
 use formation_world::{Scenario, run_episode};
 use iceoryx2::prelude::*;
-use robot_agent::decision::PolicyController;
 
 const LIMIT: Duration = Duration::from_secs(120);
 

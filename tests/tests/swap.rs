@@ -6,14 +6,14 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation::runtime::read_trajectory;
+use formation_cli::launch::read_trajectory;
+use formation_robot_agent::decision::{Agent, PolicyController};
 use formation_tests::{
     LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries,
     case1_scenario, run, test_model, unique_run_id, write_tiny_model, write_tiny_model_with,
 };
 use formation_world::episode::{Controller, ControllerError, Observation};
 use formation_world::{Scenario, run_episode};
-use robot_agent::decision::{Agent, PolicyController};
 
 const LIMIT: Duration = Duration::from_secs(240);
 const SWAP_TICK: u64 = 400;

@@ -12,14 +12,14 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation::runtime::read_trajectory;
+use formation_cli::launch::read_trajectory;
+use formation_robot_agent::decision::PolicyController;
 use formation_tests::{
     LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
     count_samples, formation_run, free_tcp_port, launch_secret, one_at_a_time, policy_eval,
     raw_client, run, run_with_input, test_model, unique_run_id,
 };
 use formation_world::{Scenario, run_episode};
-use robot_agent::decision::PolicyController;
 
 const LIMIT: Duration = Duration::from_secs(180);
 

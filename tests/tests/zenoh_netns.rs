@@ -15,7 +15,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use formation::runtime::read_trajectory;
+use formation_cli::launch::read_trajectory;
+use formation_robot_agent::decision::PolicyController;
 use formation_tests::netns::{NetPair, WORLD_IP};
 use formation_tests::{
     LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, assert_bit_identical,
@@ -23,7 +24,6 @@ use formation_tests::{
     test_model, unique_run_id, world_pid,
 };
 use formation_world::{Scenario, run_episode};
-use robot_agent::decision::PolicyController;
 
 const LIMIT: Duration = Duration::from_secs(240);
 const ROBOTS: usize = 3;

@@ -5,8 +5,8 @@
 //! says so and passes, since the Rust side's own behaviour is covered by the unit tests.
 
 use formation_proto::{LidarSpec, OccupancySpec};
-use trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter, Sample};
-use trainer_bridge::train::{TrainError, TrainOptions, train};
+use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter, Sample};
+use formation_trainer_bridge::train::{TrainError, TrainOptions, train};
 
 fn sample(i: u32, iteration: u32) -> Sample {
     let mut occupancy = vec![0_u8; 2500];

@@ -8,11 +8,11 @@
 
 use std::time::{Duration, Instant};
 
-use formation_proto::auth::{LaunchSecret, fresh_nonce};
+use crate::auth::{LaunchSecret, fresh_nonce};
+use crate::iceoryx::naming::{RunNamespace, ServiceLimits, WORLD_NODE_NAME, agent_node_name};
 use formation_proto::wire::{
-    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, RobotChannel,
-    RunNamespace, ScanMsg, ServiceLimits, StatusMsg, WORLD_NODE_NAME, Welcome, WelcomeMsg,
-    agent_node_name, lobby_service_name, robot_service_name,
+    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, RobotChannel, ScanMsg,
+    StatusMsg, Welcome, WelcomeMsg, lobby_service_name, robot_service_name,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;

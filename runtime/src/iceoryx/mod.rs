@@ -1,15 +1,16 @@
 //! The iceoryx2 links: the world's ([`IceoryxWorldLink`]) and an agent's ([`IceoryxAgentLink`]),
 //! over zero-copy shared memory in the run's namespace
-//! ([`formation_proto::wire::RunNamespace`]).
+//! ([`naming::RunNamespace`]).
 //!
-//! Service names, payloads and limits are those of [`formation_proto::wire`]: the one-publisher /
-//! one-subscriber limits on an incarnation's scan and command services are how decentralisation
-//! is enforced. Waits run on iceoryx2 wait sets that handle termination requests (SIGINT,
+//! Service names and payloads are those of [`formation_proto::wire`]; limits, node names and
+//! namespaces are [`naming`]'s. The one-publisher / one-subscriber limits on an incarnation's scan
+//! and command services are how decentralisation is enforced. Waits run on iceoryx2 wait sets that handle termination requests (SIGINT,
 //! SIGTERM); any other signal only interrupts a wait, which the callers resume. Which of the two
 //! came is read from [`crate::signals`], whose watch both links start before they create their
 //! node.
 
 mod agent;
+pub mod naming;
 mod world;
 
 /// Starts recording which termination signal arrives ([`crate::signals`]); when that fails, a

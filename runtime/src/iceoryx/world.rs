@@ -11,11 +11,13 @@
 use std::rc::Rc;
 use std::time::Duration;
 
+use crate::iceoryx::naming::{
+    RunNamespace, ServiceLimits, WORLD_NODE_NAME, parse_agent_node_name, swap_limits,
+};
 use formation_proto::wire::{
-    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, RobotChannel,
-    RunNamespace, ScanMsg, ServiceLimits, StatusMsg, SwapChannel, SwapReply, SwapReplyMsg,
-    SwapRequest, SwapRequestMsg, WORLD_NODE_NAME, Welcome, WelcomeMsg, lobby_service_name,
-    parse_agent_node_name, robot_service_name, swap_service_name,
+    AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, RobotChannel, ScanMsg,
+    StatusMsg, SwapChannel, SwapReply, SwapReplyMsg, SwapRequest, SwapRequestMsg, Welcome,
+    WelcomeMsg, lobby_service_name, robot_service_name, swap_service_name,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
@@ -318,10 +320,10 @@ fn create_swap_ports(
     namespace: &RunNamespace,
 ) -> Result<(SwapPorts, Listener<ipc::Service>), WorldLinkError> {
     let name = |channel| swap_service_name(namespace.run(), channel);
-    let event = |channel: SwapChannel| event_service(node, &name(channel), channel.limits());
+    let event = |channel: SwapChannel| event_service(node, &name(channel), swap_limits(channel));
     macro_rules! pubsub_service {
         ($payload:ty, $channel:expr) => {
-            pubsub_service::<$payload>(node, &name($channel), $channel.limits())?
+            pubsub_service::<$payload>(node, &name($channel), swap_limits($channel))?
         };
     }
     let requests = pubsub_service!(SwapRequestMsg, SwapChannel::Request);
@@ -334,7 +336,7 @@ fn create_swap_ports(
     let ports = SwapPorts {
         requests: requests
             .subscriber_builder()
-            .buffer_size(SwapChannel::Request.limits().subscriber_buffer)
+            .buffer_size(swap_limits(SwapChannel::Request).subscriber_buffer)
             .create()
             .map_err(|e| iox(what("request"))(&e))?,
         replies: replies
@@ -503,7 +505,7 @@ impl WorldLink for IceoryxWorldLink {
     }
 
     fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
-        let wanted = formation_proto::wire::agent_node_name(robot, pid);
+        let wanted = crate::iceoryx::naming::agent_node_name(robot, pid);
         let mut alive = false;
         Node::<ipc::Service>::list(self.node.config(), |state| {
             if let NodeState::Alive(view) = &state

@@ -35,10 +35,10 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
+use crate::auth::LaunchSecret;
 use ::zenoh::Wait;
 use ::zenoh::pubsub::Subscriber;
 use ::zenoh::sample::SampleKind;
-use formation_proto::auth::LaunchSecret;
 use formation_proto::wire::{
     AgentStatus, AgentTimings, CmdMsg, CmdStatus, ControlRequest, RunId, ScanMsg, SwapReply,
     SwapRequest, Welcome,
@@ -415,11 +415,10 @@ impl WorldLink for Ros2WorldLink {
     ) -> Result<(), WorldLinkError> {
         let drivers: Vec<Driver> = lock(&self.graph).new_drivers[robot].drain(..).collect();
         for driver in drivers {
-            let nonce =
-                formation_proto::auth::fresh_nonce().map_err(|e| WorldLinkError::Zenoh {
-                    action: "draw a nonce".into(),
-                    detail: e.to_string(),
-                })?;
+            let nonce = crate::auth::fresh_nonce().map_err(|e| WorldLinkError::Zenoh {
+                action: "draw a nonce".into(),
+                detail: e.to_string(),
+            })?;
             tracing::info!(
                 "robot {robot}: ROS 2 node {} publishes on its cmd_vel",
                 driver.node

@@ -10,12 +10,12 @@
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use crate::auth::{LaunchSecret, fresh_nonce};
 use ::zenoh::Wait;
 use ::zenoh::liveliness::LivelinessToken;
 use ::zenoh::pubsub::Subscriber;
 use ::zenoh::qos::{CongestionControl, Priority};
 use ::zenoh::sample::SampleKind;
-use formation_proto::auth::{LaunchSecret, fresh_nonce};
 use formation_proto::wire::{
     AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, RobotChannel, RunId,
     ScanMsg, StatusMsg, Welcome, WelcomeMsg, lobby_service_name, message_bytes, message_from_bytes,

@@ -16,7 +16,7 @@ use std::io::Write;
 use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 
-use formation_proto::auth::{LaunchSecret, SecretError};
+use crate::auth::{LaunchSecret, SecretError};
 use formation_proto::files::{FileRefusal, read_bounded};
 use serde::{Deserialize, Serialize};
 

@@ -103,7 +103,7 @@ fn run() -> Result<(), String> {
             pid,
             reserved: 0,
             nonce: 0x1bad_f00d_0000_0000 | robot as u64,
-            proof: [0x5a; formation_proto::auth::PROOF_LEN],
+            proof: [0x5a; formation_runtime::auth::PROOF_LEN],
         };
         forger
             .put(

@@ -1,8 +1,8 @@
 //! The occupancy image a robot renders from its own raw LIDAR scan.
 //!
 //! This is the single source of truth for the pixels: the demonstration collector
-//! (`formation_expert::collect`) and the running agent ([`crate::decision`]) both call [`render`], so a
-//! policy sees at run time exactly the images it was trained on.
+//! (`formation_expert::collect`) and the running agent (`formation_robot_agent::decision`) both
+//! call [`render`], so a policy sees at run time exactly the images it was trained on.
 //!
 //! # Geometry
 //!

@@ -17,12 +17,12 @@
 use hmac::{Hmac, Mac};
 use sha2::Sha256;
 
-use crate::wire::RunId;
+use formation_proto::wire::RunId;
 
 /// Bytes of a launch secret.
 pub const SECRET_LEN: usize = 32;
 /// Bytes of a proof (an HMAC-SHA256 tag).
-pub const PROOF_LEN: usize = 32;
+pub use formation_proto::wire::PROOF_LEN;
 
 /// Domain separation: a proof for this purpose is never valid for any other.
 const HELLO_CONTEXT: &[u8] = b"formation/hello/v1";

@@ -183,7 +183,7 @@ pub fn credentials_command(args: &CredentialsArgs) -> anyhow::Result<()> {
 
 /// The model path of every robot: the scenario's per-robot models, else `default`. Each model is
 /// loaded and checked against the contract and the scenario's LIDAR (beams, range, window) here,
-/// before any process starts ([`robot_agent::decision::check_team_models_for`]); a missing or
+/// before any process starts ([`formation_robot_agent::decision::check_team_models_for`]); a missing or
 /// unusable file, a model trained for another sensor or for another d* range than the
 /// scenario's, and a robot out of range are errors naming the robot, the file and the fix.
 pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
@@ -208,7 +208,7 @@ pub fn checked_team_models(
         })?;
         *slot = assigned.model.clone();
     }
-    let checked = robot_agent::decision::check_team_models_with_envelopes(
+    let checked = formation_robot_agent::decision::check_team_models_with_envelopes(
         &models,
         &scenario.world_config().lidar,
         &crate::eval::scenario_d_stars(scenario),

@@ -7,24 +7,28 @@
 //! fixed value when its flag is given (`--phi-star`, `--d-star`, `--v-star`), else the newest
 //! `std_msgs/Float64` on its topic (`/formation/goal/heading`, `/distance`, `/speed` by default).
 
-use std::path::Path;
 use std::sync::atomic::AtomicBool;
-use std::time::Duration;
 
-use anyhow::Context;
 use clap::Args;
-use formation_proto::LidarSpec;
-use formation_runtime::agent::{AgentExit, PilotMaker};
+use formation_robot_agent::decision::PolicyBackend;
+use formation_runtime::agent::AgentExit;
 use formation_runtime::transport::{Transport, TransportError};
-use robot_agent::decision::PolicyBackend;
-use robot_agent::pilot::OnnxPilots;
 
 #[cfg(feature = "zenoh")]
-use formation_runtime::ros2::{
-    DeciderSettings, GoalValue, OrientationKind, Ros2AgentSettings, TeamTopics,
+use {
+    anyhow::Context,
+    formation_cli::pilot::OnnxPilots,
+    formation_proto::LidarSpec,
+    formation_runtime::agent::PilotMaker,
+    formation_runtime::ros2::{
+        DeciderSettings, GoalValue, OrientationKind, Ros2AgentSettings, TeamTopics,
+    },
+    std::path::Path,
+    std::time::Duration,
 };
 
 /// The P3-DX's wheel separation \[m\], the robot the shipped models were trained for.
+#[cfg(feature = "zenoh")]
 const P3DX_WHEEL_SEPARATION: f64 = 0.331;
 
 /// Which message carries the orientation (mirrors the runtime's, so the flag exists in every
@@ -116,6 +120,7 @@ impl Ros2Args {
 }
 
 /// The LIDAR ring the model was trained on, from its metadata.
+#[cfg(feature = "zenoh")]
 fn model_ring(model: &dyn PolicyBackend, path: &Path) -> anyhow::Result<LidarSpec> {
     match (model.beams(), model.max_range()) {
         (Some(beams), Some(max_range)) => Ok(LidarSpec {
@@ -228,7 +233,7 @@ pub fn run(
     if let GoalValue::Fixed(d_star) = goal[1] {
         // Refused at once, as an agent refuses a goal outside its model's envelope at episode
         // start.
-        robot_agent::decision::check_goal_envelope(pilot.policy(), d_star)
+        formation_robot_agent::decision::check_goal_envelope(pilot.agent().policy(), d_star)
             .with_context(|| format!("--d-star {d_star}"))?;
     }
     let wheel_separation = flags.wheel_separation.unwrap_or(P3DX_WHEEL_SEPARATION);

@@ -4,7 +4,7 @@
 //! (refusing a bad one before connecting), asks the world to drive its robot (proving the
 //! secret), opens only the services the world made for it over iceoryx2, says hello, and then
 //! runs the runtime's agent loop ([`formation_runtime::agent::AgentLoop`]): each scan becomes one
-//! command through [`robot_agent::decision::Agent`]; control requests begin episodes (the agent
+//! command through [`formation_robot_agent::decision::Agent`]; control requests begin episodes (the agent
 //! stays alive across runs), swap the model (loaded off the hot path, put in place at a tick
 //! boundary), or shut it down.
 //!
@@ -35,16 +35,17 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use clap::Parser;
-use formation_proto::auth::LaunchSecret;
-use formation_proto::wire::{RunId, RunNamespace};
+use formation_cli::pilot::OnnxPilots;
+use formation_proto::wire::RunId;
 use formation_runtime::agent::{AgentExit, AgentLoop, load_model};
+use formation_runtime::auth::LaunchSecret;
 use formation_runtime::clock::SystemClock;
 use formation_runtime::faults::Fault;
 use formation_runtime::iceoryx::IceoryxAgentLink;
+use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_runtime::link::AgentLink;
 use formation_runtime::process::flag_when_stdin_closes;
 use formation_runtime::transport::{Transport, TransportError};
-use robot_agent::pilot::OnnxPilots;
 
 /// One robot's agent process of formation's multi-process runtime.
 #[derive(Debug, Parser)]
@@ -93,7 +94,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    formation_proto::wire::quiet_iceoryx_logs();
+    formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
     let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
     let _ = tracing_subscriber::fmt()

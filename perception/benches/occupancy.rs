@@ -4,10 +4,10 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use formation_perception::occupancy::render;
 use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec, Pose};
 use formation_world::RobotParams;
 use formation_world::lidar::cast_scan;
-use robot_agent::occupancy::render;
 
 /// Robot 0 at the origin with two neighbours inside the paper's 5 x 5 m window.
 fn scan_with_two_neighbours(lidar: &LidarSpec) -> Vec<f32> {

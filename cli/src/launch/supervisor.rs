@@ -25,9 +25,10 @@ use std::path::PathBuf;
 use std::process::{ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-use formation_proto::auth::LaunchSecret;
 use formation_proto::exit::TerminationSignal;
-use formation_proto::wire::{NamespaceError, RunId, RunNamespace, WorldEvent};
+use formation_proto::wire::{RunId, WorldEvent};
+use formation_runtime::auth::LaunchSecret;
+use formation_runtime::iceoryx::naming::{NamespaceError, RunNamespace};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::process::{Child, ChildStdin, Command};
 use tokio::sync::{mpsc, oneshot};

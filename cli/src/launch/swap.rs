@@ -21,9 +21,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use formation_proto::wire::{
-    RunId, RunNamespace, SWAP_NODE_NAME, SwapChannel, SwapOutcome, SwapReply, SwapReplyMsg,
-    SwapRequest, SwapRequestMsg, swap_service_name,
+    RunId, SwapChannel, SwapOutcome, SwapReply, SwapReplyMsg, SwapRequest, SwapRequestMsg,
+    swap_service_name,
 };
+use formation_runtime::iceoryx::naming::{RunNamespace, SWAP_NODE_NAME, swap_limits};
 use iceoryx2::prelude::*;
 
 /// Why a swap did not happen.
@@ -198,7 +199,7 @@ fn exchange(
         ServiceName::new(&swap_service_name(namespace.run(), channel))
             .map_err(|e| iox("name the swap service")(&e))
     };
-    let request_limits = SwapChannel::Request.limits();
+    let request_limits = swap_limits(SwapChannel::Request);
     let requests = node
         .service_builder(&service(SwapChannel::Request)?)
         .publish_subscribe::<SwapRequestMsg>()
@@ -207,7 +208,7 @@ fn exchange(
         .subscriber_max_buffer_size(request_limits.subscriber_buffer)
         .open()
         .map_err(|_| unknown())?;
-    let reply_limits = SwapChannel::Reply.limits();
+    let reply_limits = swap_limits(SwapChannel::Reply);
     let replies = node
         .service_builder(&service(SwapChannel::Reply)?)
         .publish_subscribe::<SwapReplyMsg>()
@@ -217,7 +218,7 @@ fn exchange(
         .open()
         .map_err(|_| unknown())?;
     let open_event = |channel: SwapChannel| {
-        let limits = channel.limits();
+        let limits = swap_limits(channel);
         node.service_builder(&service(channel)?)
             .event()
             .max_notifiers(limits.max_publishers)

@@ -11,7 +11,7 @@
 //! [`formation_proto::exit::ProcessExit`]: 0 when every run was played, 2 on an error, 130 on
 //! SIGINT or a closed input, 143 on SIGTERM.
 //!
-//! The first line of its standard input is the launch secret (see [`formation_proto::auth`]): only
+//! The first line of its standard input is the launch secret (see [`formation_runtime::auth`]): only
 //! agents that prove it are let drive a robot.
 //!
 //! With `--transport zenoh` the agents reach it over Zenoh instead: the world listens on
@@ -31,11 +31,12 @@ use std::sync::atomic::AtomicBool;
 
 use anyhow::Context;
 use clap::Parser;
-use formation_proto::auth::LaunchSecret;
-use formation_proto::wire::{RunId, RunNamespace, WorldEvent};
+use formation_proto::wire::{RunId, WorldEvent};
+use formation_runtime::auth::LaunchSecret;
 use formation_runtime::clock::SystemClock;
 use formation_runtime::exchange::{AgentsController, ExchangeSettings, StopReason};
 use formation_runtime::iceoryx::IceoryxWorldLink;
+use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_runtime::link::WorldLink;
 use formation_runtime::process::flag_when_stdin_closes;
 use formation_runtime::transport::{Transport, TransportError};
@@ -130,7 +131,7 @@ impl Args {
 }
 
 fn main() -> ExitCode {
-    formation_proto::wire::quiet_iceoryx_logs();
+    formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
     let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
     let _ = tracing_subscriber::fmt()

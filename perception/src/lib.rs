@@ -1,0 +1,12 @@
+//! What a robot makes of its own raw LIDAR scan before its policy sees it.
+//!
+//! * [`occupancy`]: the occupancy image of one scan, in the robot's body frame. The single
+//!   renderer used both when collecting demonstrations (`formation-expert`) and by the running
+//!   agent (`formation-robot-agent`), so a policy sees at run time exactly the pixels it was
+//!   trained on.
+//!
+//! Pure functions of one robot's own scan and the model's declared settings: no I/O, no ONNX, no
+//! transport, so the expert, the agent and the Python bindings share them without building any of
+//! those.
+
+pub mod occupancy;
