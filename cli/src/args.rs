@@ -6,7 +6,9 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use formation_runtime::transport::Transport;
 use formation_trainer_bridge::train::Architecture;
 
-use crate::launch::{CredentialsArgs, ProfileArgs, RunArgs, SwapArgs};
+use formation_runtime::{ClockMode, RuntimeSettings};
+
+use crate::paths;
 
 /// Learned decentralized multi-robot formation control.
 #[derive(Debug, Parser)]
@@ -374,4 +376,135 @@ mod tests {
             assert!(err.contains("1 to 10000"), "{err}");
         }
     }
+}
+
+/// `formation run`.
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// Scenario TOML file.
+    #[arg(long)]
+    pub scenario: PathBuf,
+    /// ONNX model for every robot the scenario does not assign one to.
+    #[arg(long, default_value = paths::DEFAULT_MODEL)]
+    pub model: PathBuf,
+    /// Clock mode of the world.
+    #[arg(long, value_enum, default_value_t = RuntimeSettings::DEFAULT.clock)]
+    pub clock: ClockMode,
+    /// Output directory for the run logs (`runs/`, `timing/`) and the latency profile `profile.json`.
+    #[arg(long, default_value = "out/run")]
+    pub out: PathBuf,
+    /// Number of runs (default: 1; at most 10000).
+    #[arg(long, default_value_t = 1, value_parser = run_count)]
+    pub runs: usize,
+    /// Index of the first run.
+    #[arg(long, default_value_t = 0)]
+    pub first_run: usize,
+    /// Base seed (default: the scenario's).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Lockstep: how long the world waits for a robot's command before braking it \[ms\].
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.command_timeout_ms)]
+    pub timeout_ms: u64,
+    /// Realtime: a command older than this brakes its robot \[ms\].
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.stale_ms)]
+    pub stale_ms: u64,
+    /// Run id (namespaces the iceoryx2 services, e.g. for `formation swap`; default: generated).
+    #[arg(long)]
+    pub run_id: Option<String>,
+    /// Restart budget: at most this many agent restarts (all robots together) within any
+    /// `--restart-window-s`; past it the launch fails. Restarts back off exponentially per robot.
+    #[arg(long, default_value_t = 5)]
+    pub restarts: u32,
+    /// The restart budget's sliding window \[s\].
+    #[arg(long, default_value_t = 60.0)]
+    pub restart_window_s: f64,
+    /// Delay before restarting a dead agent \[ms\]; doubles with each further restart of the same
+    /// robot within the window (at most 5 s).
+    #[arg(long, default_value_t = 50)]
+    pub restart_delay_ms: u64,
+    /// Lockstep: each tick takes at least this long \[ms\] (0: as fast as the agents answer),
+    /// e.g. 50 to watch a deterministic run at the speed of the real clock.
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.pace_ms)]
+    pub pace_ms: u64,
+    /// Lockstep: the world polls for the agents' commands this long after publishing a tick's
+    /// scans before it blocks \[µs\] (0: block at once). Each empty poll yields the core, so
+    /// agents ready to run go first. Lowers the round trip by about one wake-up.
+    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.spin_us)]
+    pub spin_us: u64,
+    /// Testing only: make an agent misbehave, `ROBOT:MODE` with MODE one of crash-after=N,
+    /// hang-after=N, late-ms=X, nan-after=N (repeatable). Applies to the agent's first start; a
+    /// restarted agent behaves.
+    #[arg(long = "fault", value_name = "ROBOT:MODE")]
+    pub faults: Vec<String>,
+    /// How the agents reach the world: iceoryx2 shared memory (this host), Zenoh over TCP
+    /// (agents on this host or others; needs --listen), or ROS 2 over rmw_zenoh (the world as a
+    /// team of ROS 2 robots that ROS 2 agents drive; needs --listen).
+    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    pub transport: Transport,
+    /// Zenoh and ROS 2: where the world listens, tcp/ADDR:PORT (tcp/0.0.0.0:7447 for every
+    /// interface).
+    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    pub listen: Option<String>,
+    /// Zenoh: robots whose agents are started by hand, on other hosts (comma separated, e.g.
+    /// 1,2); the launcher starts the others and waits for these.
+    #[arg(long, value_delimiter = ',', value_name = "ROBOTS")]
+    pub remote: Vec<usize>,
+    /// Zenoh: the credentials folder (`formation credentials`); default: fresh credentials in
+    /// `<out>/credentials/<run id>/`.
+    #[arg(long, value_name = "DIR")]
+    pub credentials: Option<PathBuf>,
+    /// Zenoh: how long the world waits for the remote agents to connect \[s\].
+    #[arg(long, default_value_t = 300.0)]
+    pub remote_timeout_s: f64,
+    /// ROS 2: the ROS domain id of the team's topics (default 0).
+    #[arg(long, value_name = "ID", value_parser = clap::value_parser!(u32).range(0..=232))]
+    pub ros_domain_id: Option<u32>,
+}
+
+/// `formation profile`: a run whose per-stage latency histograms are written as JSON.
+#[derive(Debug, Clone, Args)]
+pub struct ProfileArgs {
+    /// The run to profile.
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// `formation swap`: change one running robot's model.
+#[derive(Debug, Clone, Args)]
+pub struct SwapArgs {
+    /// Run id of the running launch (`formation run` prints it; set it with `--run-id`).
+    #[arg(long)]
+    pub run: String,
+    /// Robot whose model to swap.
+    #[arg(long)]
+    pub robot: usize,
+    /// The new ONNX model.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// First tick the new model may drive (default: as soon as the agent has loaded it).
+    #[arg(long, default_value_t = 0)]
+    pub at_tick: u64,
+    /// How long to wait for the agent's answer \[s\].
+    #[arg(long, default_value_t = 30.0)]
+    pub timeout_s: f64,
+    /// How to reach the run: iceoryx2 (this host) or Zenoh (sends the model's bytes).
+    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    pub transport: Transport,
+    /// Zenoh: the world's endpoint, tcp/ADDR:PORT.
+    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    pub connect: Option<String>,
+    /// Zenoh: the operator's login file (operator.json from `formation credentials`).
+    #[arg(long, value_name = "FILE")]
+    pub credentials: Option<PathBuf>,
+}
+
+/// `formation credentials`: Zenoh logins for a team.
+#[derive(Debug, Clone, Args)]
+pub struct CredentialsArgs {
+    /// Robots of the team (logins robot-0 .. robot-(N-1)).
+    #[arg(long)]
+    pub robots: usize,
+    /// Folder to create (owner-only); it must not hold credentials yet.
+    #[arg(long)]
+    pub out: PathBuf,
 }

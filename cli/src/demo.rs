@@ -52,7 +52,7 @@ pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
         args.runs,
         "table1",
     )?;
-    print!("{}", eval::table_text(&table));
+    print!("{}", crate::table::table_text(&table));
     copy_training_curve(&model, &args.out)?;
     let html = args.out.join("report.html");
     formation_report::build_report(&args.out, &html)

@@ -23,6 +23,10 @@ use formation_world::{RunLog, Scenario, Trajectory};
 
 use crate::args::{ControllerKind, EvalArgs};
 use crate::paths;
+use crate::table::table_text;
+use crate::team_models::{
+    checked_models, print_team_size_notes, resolved_models_per_robot, team_sizes_of,
+};
 
 /// What `formation eval` writes as JSON, and a run that stopped early: defined in
 /// [`formation_schema`].
@@ -43,75 +47,6 @@ pub struct RunResult {
     pub clock: &'static str,
 }
 
-/// The model path for each robot: the scenario's per-robot overrides, else `default`.
-pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    let mut models = vec![default.to_path_buf(); scenario.n_robots()];
-    for m in scenario.agent_models() {
-        let slot = models.get_mut(m.robot).with_context(|| {
-            format!(
-                "scenario assigns a model to robot {}, but it has {} robots",
-                m.robot,
-                scenario.n_robots()
-            )
-        })?;
-        *slot = paths::resolve_model(Some(&m.model))?;
-    }
-    Ok(models)
-}
-
-/// Model ids of the given files, as the agents would report them, beside each model's envelope,
-/// after checking each model against the contract and the scenario's LIDAR (beams, range,
-/// window), and the scenario's d* against each model's trained d* range (its envelope), before
-/// anything runs.
-pub fn checked_models(
-    models: &[PathBuf],
-    scenario: &Scenario,
-) -> anyhow::Result<Vec<(String, formation_onnx::ModelEnvelope)>> {
-    Ok(
-        formation_robot_agent::decision::check_team_models_with_envelopes(
-            models,
-            &scenario.world_config().lidar,
-            &scenario_d_stars(scenario),
-        )?,
-    )
-}
-
-/// Each distinct model of a team (by id, in first-use order) that records its trained team
-/// sizes, against the team's size `robots`.
-pub fn team_sizes_of(
-    models: &[(String, formation_onnx::ModelEnvelope)],
-    robots: usize,
-) -> Vec<formation_schema::ModelTeamSize> {
-    let mut seen = Vec::new();
-    let mut out = Vec::new();
-    for (id, envelope) in models {
-        if seen.contains(&id) {
-            continue;
-        }
-        seen.push(id);
-        out.extend(formation_schema::ModelTeamSize::new(
-            id,
-            &envelope.team_sizes,
-            robots,
-        ));
-    }
-    out
-}
-
-/// Prints, on stderr, a line for each model that never saw a team of this size: a note when
-/// the size is zero-shot, a warning when it is below every trained size.
-pub fn print_team_size_notes(team_size: &[formation_schema::ModelTeamSize]) {
-    for line in team_size.iter().filter_map(|t| t.describe()) {
-        eprintln!("formation: {line}");
-    }
-}
-
-/// The d* values that bound a scenario's runs: its fixed d*, each of its choices, or its
-/// range's ends.
-pub fn scenario_d_stars(scenario: &Scenario) -> Vec<f64> {
-    scenario.d_star().bounds()
-}
-
 /// A progress bar on stderr (hidden when stderr is not a terminal).
 pub fn progress_bar(len: usize, what: &str) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new(len as u64);
@@ -122,78 +57,6 @@ pub fn progress_bar(len: usize, what: &str) -> indicatif::ProgressBar {
     }
     bar.set_message(what.to_owned());
     bar
-}
-
-/// Formats Table I and the Fig. 9 medians as text, with the runs each median covers when the
-/// rule leaves some out, and the incomplete runs, if any.
-pub fn table_text(out: &EvalOutput) -> String {
-    let mut text = table_i_text(out);
-    let incomplete = out.summary.runs_incomplete.max(out.incomplete_runs.len());
-    if incomplete > 0 {
-        text.push_str(&format!(
-            "incomplete runs: {incomplete} of {}, counted as failures (stopped early{})\n",
-            out.summary.runs,
-            out.incomplete_runs
-                .first()
-                .and_then(|r| r.stop_reason.as_deref())
-                .map(|reason| format!(": {reason}"))
-                .unwrap_or_default()
-        ));
-    }
-    text
-}
-
-/// `  (over 3 of the 7: 4 succeeded without converging)` after a median whose rule leaves out
-/// some of the runs successful at 10 %; empty when it covers them all.
-fn coverage_note(coverage: Option<&formation_schema::Coverage>, left_out_because: &str) -> String {
-    match coverage {
-        Some(c) if c.runs < c.of => format!(
-            "   over {} of the {}: {} {left_out_because}",
-            c.runs,
-            c.of,
-            c.of - c.runs
-        ),
-        _ => String::new(),
-    }
-}
-
-fn table_i_text(out: &EvalOutput) -> String {
-    let s = &out.summary;
-    let pct = |x: f64| format!("{:.1} %", 100.0 * x);
-    let opt = |x: Option<f64>, f: &dyn Fn(f64) -> String| x.map(f).unwrap_or_else(|| "-".into());
-    let over = s.medians_over.as_ref();
-    format!(
-        "Table I ({} controller, {} runs of {}, seed {})\n\
-         \x20 success at 5 %:   {:>8}   (paper: 90 %)\n\
-         \x20 success at 10 %:  {:>8}   (paper: 96 %)\n\
-         Fig. 9 medians over runs successful at 10 %{}\n\
-         \x20 convergence time: {:>8}   (paper: ~10 s){}\n\
-         \x20 formation error:  {:>8}   (paper: 2.5 %){}\n\
-         \x20 orientation err.: {:>8}   (paper: 0.031 rad){}\n\
-         runs with collisions: {}\n",
-        out.controller,
-        s.runs,
-        out.scenario,
-        out.seed
-            .map_or_else(|| "unknown".to_owned(), |seed| seed.to_string()),
-        pct(s.success_rate_5),
-        pct(s.success_rate_10),
-        over.map(|o| format!(" ({} runs)", o.rel_formation_error.of))
-            .unwrap_or_default(),
-        opt(s.median_convergence_s, &|x| format!("{x:.2} s")),
-        coverage_note(
-            over.map(|o| &o.convergence_s),
-            "never stayed below 10 % to the end (not converged)"
-        ),
-        opt(s.median_rel_formation_error, &|x| format!(
-            "{:.2} %",
-            100.0 * x
-        )),
-        coverage_note(over.map(|o| &o.rel_formation_error), "without a value"),
-        opt(s.median_orientation_error_rad, &|x| format!("{x:.3} rad")),
-        coverage_note(over.map(|o| &o.orientation_error_rad), "without a value"),
-        s.collisions,
-    )
 }
 
 /// Writes the eval output directory the report reads: for the runs whose trajectory was kept,
@@ -323,7 +186,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         }
         ControllerKind::Policy => {
             let default = paths::resolve_model(args.model.as_deref())?;
-            let models = models_per_robot(&scenario, &default)?;
+            let models = resolved_models_per_robot(&scenario, &default)?;
             let checked = checked_models(&models, &scenario)?;
             team_size = team_sizes_of(&checked, scenario.n_robots());
             print_team_size_notes(&team_size);
@@ -476,65 +339,4 @@ pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
         println!("wrote {}", dir.display());
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use formation_world::metrics::TicksPlayed;
-
-    fn run(success_10: bool, convergence_s_10: Option<f64>) -> RunMetrics {
-        RunMetrics {
-            success_5: success_10,
-            success_10,
-            convergence_s_5: convergence_s_10,
-            convergence_s_10,
-            rel_formation_error: 0.01,
-            max_edge_window_error: 0.02,
-            orientation_error_rad: 0.01,
-            collisions: 0,
-            team: None,
-            incomplete: None,
-        }
-    }
-
-    #[test]
-    fn the_table_says_which_runs_each_median_covers_and_how_many_were_incomplete() {
-        let mut runs: Vec<RunMetrics> = (0..7).map(|k| run(true, (k < 3).then_some(4.0))).collect();
-        let mut cut = run(false, Some(2.0));
-        cut.incomplete = Some(TicksPlayed {
-            ticks: 392,
-            planned_ticks: 1200,
-        });
-        runs.push(cut);
-        let out = eval_output("expert", Vec::new(), "accel", Some(7), runs);
-        let text = table_text(&out);
-        assert!(
-            text.contains("Fig. 9 medians over runs successful at 10 % (7 runs)"),
-            "{text}"
-        );
-        assert!(
-            text.contains("over 3 of the 7: 4 never stayed below 10 % to the end (not converged)"),
-            "{text}"
-        );
-        assert!(
-            text.contains("incomplete runs: 1 of 8, counted as failures"),
-            "{text}"
-        );
-        assert!(text.contains("success at 10 %:    87.5 %"), "{text}");
-
-        // A complete evaluation whose successful runs all converged: no note.
-        let out = eval_output(
-            "expert",
-            Vec::new(),
-            "t",
-            Some(7),
-            vec![run(true, Some(3.0))],
-        );
-        let text = table_text(&out);
-        assert!(
-            !text.contains(" of the ") && !text.contains("incomplete"),
-            "{text}"
-        );
-    }
 }

@@ -123,7 +123,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
         DaggerEvent::Evaluated { k, figures } => {
             eprintln!(
                 "DAgger iteration {k} closed loop:\n{}",
-                eval::table_text(&figures)
+                crate::table::table_text(&figures)
             );
             // The next rollouts start now: the time reported with them is theirs alone.
             if let Ok(mut t) = started.lock() {

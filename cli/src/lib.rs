@@ -1,5 +1,9 @@
 //! The `formation` command-line tool, as a library so integration tests can drive it.
 //!
+//! [`args`] parses the command line; each command's module runs it; [`launch`] starts and
+//! supervises the runtime's processes. Dependencies point one way (arguments ← commands ←
+//! launcher helpers), with no module cycle.
+//!
 //! Every subcommand is a thin layer over the library crates: it parses arguments, loads inputs
 //! with errors that name the file and the fix, calls the pure logic, and writes outputs.
 //!
@@ -10,6 +14,8 @@
 //! * [`pilot`]: the robot's ONNX decision as the runtime's agent loop drives it (the
 //!   `formation-agent` binary).
 //! * [`report`]: the HTML report with the paper's figures.
+//! * [`table`] and [`team_models`]: Table I as text, and the checked models of a team, shared by
+//!   the evaluating commands and the launcher.
 //! * [`demo`]: the README's main job: the paper's cases and Table I with the shipped model, then a report.
 
 pub mod args;
@@ -21,6 +27,8 @@ pub mod learn;
 pub mod paths;
 pub mod pilot;
 pub mod report;
+pub mod table;
+pub mod team_models;
 
 use clap::Parser;
 use formation_proto::exit::ProcessExit;

@@ -62,15 +62,16 @@ pub enum PolicyError {
     #[error(
         "model {path:?} is {size} bytes, over the {limit}-byte ({mib} MiB) limit of a model file; \
          the formation policies are well under 1 MiB, so check that the path names the right file",
-        size = crate::model_file::SizeText(*.size),
-        limit = crate::model_file::MAX_MODEL_BYTES,
-        mib = crate::model_file::MAX_MODEL_BYTES >> 20
+        size = SizeText { size: *.size, limit: *.limit },
+        mib = .limit >> 20
     )]
     ModelTooLarge {
         /// The path given.
         path: PathBuf,
         /// Its size in bytes, or `None` when it grew past the limit while being read.
         size: Option<u64>,
+        /// The largest model file loaded, in bytes (`model_file::MAX_MODEL_BYTES`).
+        limit: u64,
     },
     /// The model file exists but could not be read.
     #[error("could not read model {path:?}: {source}")]
@@ -143,4 +144,20 @@ pub enum PolicyError {
         /// Right wheel output.
         right: f32,
     },
+}
+
+/// A model file's size for [`PolicyError::ModelTooLarge`]: the bytes, or "more than" the limit
+/// when the file grew past it while being read.
+struct SizeText {
+    size: Option<u64>,
+    limit: u64,
+}
+
+impl std::fmt::Display for SizeText {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.size {
+            Some(size) => write!(f, "{size}"),
+            None => write!(f, "more than {}", self.limit),
+        }
+    }
 }

@@ -7,7 +7,6 @@
 //! 4 GB file never read. Tools that only pass a path on (`formation swap`, the launch planner) call
 //! [`check_model_file`] for the same refusal without reading.
 
-use std::fmt;
 use std::path::Path;
 
 use formation_proto::files::{FileRefusal, check_regular_file, read_bounded};
@@ -36,7 +35,11 @@ fn model_error(path: &Path, refusal: FileRefusal) -> PolicyError {
     let path = path.to_path_buf();
     match refusal {
         FileRefusal::NotAFile { kind } => PolicyError::ModelNotAFile { path, kind },
-        FileRefusal::TooLarge { size } => PolicyError::ModelTooLarge { path, size },
+        FileRefusal::TooLarge { size } => PolicyError::ModelTooLarge {
+            path,
+            size,
+            limit: MAX_MODEL_BYTES,
+        },
         FileRefusal::Io(source) if source.kind() == std::io::ErrorKind::NotFound => {
             PolicyError::ModelNotFound { path }
         }
@@ -44,17 +47,6 @@ fn model_error(path: &Path, refusal: FileRefusal) -> PolicyError {
     }
 }
 
-/// A file size in messages: the number, or "more than the limit" when it is not known.
-pub(crate) struct SizeText(pub Option<u64>);
-
-impl fmt::Display for SizeText {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.0 {
-            Some(size) => write!(f, "{size}"),
-            None => write!(f, "more than {MAX_MODEL_BYTES}"),
-        }
-    }
-}
 
 #[cfg(test)]
 mod tests {

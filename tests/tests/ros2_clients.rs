@@ -10,7 +10,7 @@
 //! The scans, orientations and goals are made here and handed to the client in a JSON plan, as
 //! IEEE-754 bit patterns, so that both sides use exactly the same numbers.
 //!
-//! The Python packages come from `tests/python/requirements-ros2.txt` (`bash .ci/setup-python`
+//! The Python packages come from `tests/python/requirements-ros2.txt` (`bash .ci/setup-python --test`
 //! installs them into `.venv`). Without them the tests that need them fail with that fix.
 //!
 //! Every test uses its own free TCP port and scratch folder, runs alone within this binary
@@ -94,7 +94,7 @@ fn clients() -> &'static Path {
         };
         Err(format!(
             "the independent ROS 2 clients are not installed for {} ({missing}); install them \
-             with `bash .ci/setup-python` (tests/python/requirements-ros2.txt)",
+             with `bash .ci/setup-python --test` (tests/python/requirements-ros2.txt)",
             python.display()
         ))
     });

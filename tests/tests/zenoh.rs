@@ -583,9 +583,10 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
     leaks.assert_clean();
 }
 
-/// A `formation-agent` built without the `zenoh` feature, asked for `--transport zenoh`, names
-/// the transport and how to build it. The test builds that agent (cargo keeps both builds'
-/// artifacts apart by their features) and then restores the default one in `target/`.
+/// A `formation-agent` built without the `zenoh` feature (the demo's build), asked for
+/// `--transport zenoh`, names the transport and how to build it. The test builds that agent
+/// (cargo keeps both builds' artifacts apart by their features) and then restores the tests'
+/// build, with Zenoh, in `target/`.
 #[test]
 fn an_agent_built_without_zenoh_says_how_to_build_it() {
     let _one = one_at_a_time();
@@ -599,14 +600,16 @@ fn an_agent_built_without_zenoh_says_how_to_build_it() {
         .unwrap_or("debug")
         .to_string();
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let build = |default_features: bool| -> std::path::PathBuf {
+    // The agent as the demo builds it (formation-cli's default features: no Zenoh), then as
+    // `cargo runtime-bins` builds it (with Zenoh), which the other tests run.
+    let build = |with_zenoh: bool| -> std::path::PathBuf {
         let mut command = Command::new(&cargo);
         command
             .current_dir(formation_tests::repo_root())
-            .args(["build", "-p", "formation-agent", "--bin", "formation-agent"])
+            .args(["build", "-p", "formation-cli", "--bin", "formation-agent"])
             .args(["--message-format", "json-render-diagnostics"]);
-        if !default_features {
-            command.arg("--no-default-features");
+        if with_zenoh {
+            command.args(["--features", "zenoh"]);
         }
         match profile.as_str() {
             "debug" => {}
@@ -632,7 +635,7 @@ fn an_agent_built_without_zenoh_says_how_to_build_it() {
     };
     let without = build(false);
     // Cargo's copy in target/<profile>/ is now the build without Zenoh; keep a copy of that
-    // one and put the default one back before anything else runs an agent.
+    // one and put the tests' one back before anything else runs an agent.
     let kept = TempDir::new("znobuild");
     let agent = kept.path().join("formation-agent");
     std::fs::copy(&without, &agent).expect("copying the agent built without zenoh");

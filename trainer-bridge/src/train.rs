@@ -28,7 +28,8 @@ pub const PYTHON_ENV: &str = "FORMATION_PYTHON";
 /// How many trailing stderr lines an error carries.
 const STDERR_TAIL_LINES: usize = 20;
 /// The fix for a Python without the trainer's dependencies.
-const SETUP_HINT: &str = "run `bash .ci/setup-python` or set FORMATION_PYTHON";
+const SETUP_HINT: &str =
+    "install PyTorch and the trainer with `bash .ci/setup-python --train`, or set FORMATION_PYTHON";
 
 /// What to train.
 #[derive(Debug, Clone, PartialEq)]
@@ -655,10 +656,9 @@ mod tests {
         assert!(tail.starts_with("line 10\n") && tail.ends_with("line 29"));
     }
 
-    #[test]
-    fn a_missing_interpreter_is_a_typed_error() {
-        let tmp = tempfile::tempdir().expect("tempdir");
-        let data = tmp.path().join("d");
+    /// An empty dataset (a header and no shards) in `dir`/d.
+    fn empty_dataset(dir: &Path) -> PathBuf {
+        let data = dir.join("d");
         let header = crate::dataset::DatasetHeader::new(
             formation_proto::OccupancySpec::PAPER,
             formation_proto::LidarSpec::default(),
@@ -670,6 +670,13 @@ mod tests {
             .expect("create")
             .finish()
             .expect("finish");
+        data
+    }
+
+    #[test]
+    fn a_missing_interpreter_is_a_typed_error() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let data = empty_dataset(tmp.path());
         let err = train(
             &TrainOptions {
                 data: vec![data],
@@ -680,6 +687,32 @@ mod tests {
         )
         .expect_err("no interpreter");
         assert!(matches!(err, TrainError::PythonNotFound { .. }), "{err}");
-        assert!(err.to_string().contains("setup-python"), "{err}");
+        assert!(err.to_string().contains("setup-python --train"), "{err}");
+    }
+
+    /// The demo's `.venv` holds ONNX Runtime only; training from a Python without PyTorch says
+    /// how to install it. A fresh virtual environment (no system packages) is such a Python.
+    #[test]
+    fn a_python_without_pytorch_is_told_how_to_install_it() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let venv = tmp.path().join("venv");
+        let made = std::process::Command::new("python3")
+            .args(["-m", "venv", "--without-pip"])
+            .arg(&venv)
+            .status()
+            .expect("python3 -m venv (python3 is on every supported machine)");
+        assert!(made.success(), "python3 -m venv failed");
+        let data = empty_dataset(tmp.path());
+        let err = train(
+            &TrainOptions {
+                data: vec![data],
+                python: Some(venv.join("bin/python")),
+                ..opts()
+            },
+            &mut |_| {},
+        )
+        .expect_err("no PyTorch");
+        assert!(matches!(err, TrainError::TorchMissing { .. }), "{err}");
+        assert!(err.to_string().contains("setup-python --train"), "{err}");
     }
 }

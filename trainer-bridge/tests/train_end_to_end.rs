@@ -1,7 +1,7 @@
 //! The Rust writer and the Python trainer agree: a dataset written by `DatasetWriter` trains
 //! through `train()` into an ONNX model, a checkpoint and a loss curve.
 //!
-//! Needs the trainer's Python environment (`bash .ci/setup-python`); without PyTorch the test
+//! Needs the trainer's Python environment (`bash .ci/setup-python --train`); without PyTorch the test
 //! says so and passes, since the Rust side's own behaviour is covered by the unit tests.
 
 use formation_proto::{LidarSpec, OccupancySpec};

@@ -28,143 +28,14 @@ use formation_runtime::RuntimeSettings;
 use formation_runtime::transport::{Transport, TransportError};
 use formation_world::{RunLog, RunSpec, Scenario, Trajectory, recover_journals};
 
+use crate::args::{CredentialsArgs, ProfileArgs, RunArgs, SwapArgs};
 use crate::paths;
+use crate::team_models::{checked_team_models, models_per_robot};
 use formation_proto::wire::WorldEvent;
 use supervisor::{LaunchPlan, Network, ZenohPlan};
 
 /// How the world process paces ticks (defined once, in the runtime library).
 pub use formation_runtime::ClockMode;
-
-/// `formation run`.
-#[derive(Debug, Clone, Args)]
-pub struct RunArgs {
-    /// Scenario TOML file.
-    #[arg(long)]
-    pub scenario: PathBuf,
-    /// ONNX model for every robot the scenario does not assign one to.
-    #[arg(long, default_value = paths::DEFAULT_MODEL)]
-    pub model: PathBuf,
-    /// Clock mode of the world.
-    #[arg(long, value_enum, default_value_t = RuntimeSettings::DEFAULT.clock)]
-    pub clock: ClockMode,
-    /// Output directory for the run logs (`runs/`, `timing/`) and the latency profile `profile.json`.
-    #[arg(long, default_value = "out/run")]
-    pub out: PathBuf,
-    /// Number of runs (default: 1; at most 10000).
-    #[arg(long, default_value_t = 1, value_parser = crate::args::run_count)]
-    pub runs: usize,
-    /// Index of the first run.
-    #[arg(long, default_value_t = 0)]
-    pub first_run: usize,
-    /// Base seed (default: the scenario's).
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Lockstep: how long the world waits for a robot's command before braking it \[ms\].
-    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.command_timeout_ms)]
-    pub timeout_ms: u64,
-    /// Realtime: a command older than this brakes its robot \[ms\].
-    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.stale_ms)]
-    pub stale_ms: u64,
-    /// Run id (namespaces the iceoryx2 services, e.g. for `formation swap`; default: generated).
-    #[arg(long)]
-    pub run_id: Option<String>,
-    /// Restart budget: at most this many agent restarts (all robots together) within any
-    /// `--restart-window-s`; past it the launch fails. Restarts back off exponentially per robot.
-    #[arg(long, default_value_t = 5)]
-    pub restarts: u32,
-    /// The restart budget's sliding window \[s\].
-    #[arg(long, default_value_t = 60.0)]
-    pub restart_window_s: f64,
-    /// Delay before restarting a dead agent \[ms\]; doubles with each further restart of the same
-    /// robot within the window (at most 5 s).
-    #[arg(long, default_value_t = 50)]
-    pub restart_delay_ms: u64,
-    /// Lockstep: each tick takes at least this long \[ms\] (0: as fast as the agents answer),
-    /// e.g. 50 to watch a deterministic run at the speed of the real clock.
-    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.pace_ms)]
-    pub pace_ms: u64,
-    /// Lockstep: the world polls for the agents' commands this long after publishing a tick's
-    /// scans before it blocks \[µs\] (0: block at once). Each empty poll yields the core, so
-    /// agents ready to run go first. Lowers the round trip by about one wake-up.
-    #[arg(long, default_value_t = RuntimeSettings::DEFAULT.spin_us)]
-    pub spin_us: u64,
-    /// Testing only: make an agent misbehave, `ROBOT:MODE` with MODE one of crash-after=N,
-    /// hang-after=N, late-ms=X, nan-after=N (repeatable). Applies to the agent's first start; a
-    /// restarted agent behaves.
-    #[arg(long = "fault", value_name = "ROBOT:MODE")]
-    pub faults: Vec<String>,
-    /// How the agents reach the world: iceoryx2 shared memory (this host), Zenoh over TCP
-    /// (agents on this host or others; needs --listen), or ROS 2 over rmw_zenoh (the world as a
-    /// team of ROS 2 robots that ROS 2 agents drive; needs --listen).
-    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
-    pub transport: Transport,
-    /// Zenoh and ROS 2: where the world listens, tcp/ADDR:PORT (tcp/0.0.0.0:7447 for every
-    /// interface).
-    #[arg(long, value_name = "tcp/ADDR:PORT")]
-    pub listen: Option<String>,
-    /// Zenoh: robots whose agents are started by hand, on other hosts (comma separated, e.g.
-    /// 1,2); the launcher starts the others and waits for these.
-    #[arg(long, value_delimiter = ',', value_name = "ROBOTS")]
-    pub remote: Vec<usize>,
-    /// Zenoh: the credentials folder (`formation credentials`); default: fresh credentials in
-    /// `<out>/credentials/<run id>/`.
-    #[arg(long, value_name = "DIR")]
-    pub credentials: Option<PathBuf>,
-    /// Zenoh: how long the world waits for the remote agents to connect \[s\].
-    #[arg(long, default_value_t = 300.0)]
-    pub remote_timeout_s: f64,
-    /// ROS 2: the ROS domain id of the team's topics (default 0).
-    #[arg(long, value_name = "ID", value_parser = clap::value_parser!(u32).range(0..=232))]
-    pub ros_domain_id: Option<u32>,
-}
-
-/// `formation profile`: a run whose per-stage latency histograms are written as JSON.
-#[derive(Debug, Clone, Args)]
-pub struct ProfileArgs {
-    /// The run to profile.
-    #[command(flatten)]
-    pub run: RunArgs,
-}
-
-/// `formation swap`: change one running robot's model.
-#[derive(Debug, Clone, Args)]
-pub struct SwapArgs {
-    /// Run id of the running launch (`formation run` prints it; set it with `--run-id`).
-    #[arg(long)]
-    pub run: String,
-    /// Robot whose model to swap.
-    #[arg(long)]
-    pub robot: usize,
-    /// The new ONNX model.
-    #[arg(long)]
-    pub model: PathBuf,
-    /// First tick the new model may drive (default: as soon as the agent has loaded it).
-    #[arg(long, default_value_t = 0)]
-    pub at_tick: u64,
-    /// How long to wait for the agent's answer \[s\].
-    #[arg(long, default_value_t = 30.0)]
-    pub timeout_s: f64,
-    /// How to reach the run: iceoryx2 (this host) or Zenoh (sends the model's bytes).
-    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
-    pub transport: Transport,
-    /// Zenoh: the world's endpoint, tcp/ADDR:PORT.
-    #[arg(long, value_name = "tcp/ADDR:PORT")]
-    pub connect: Option<String>,
-    /// Zenoh: the operator's login file (operator.json from `formation credentials`).
-    #[arg(long, value_name = "FILE")]
-    pub credentials: Option<PathBuf>,
-}
-
-/// `formation credentials`: Zenoh logins for a team.
-#[derive(Debug, Clone, Args)]
-pub struct CredentialsArgs {
-    /// Robots of the team (logins robot-0 .. robot-(N-1)).
-    #[arg(long)]
-    pub robots: usize,
-    /// Folder to create (owner-only); it must not hold credentials yet.
-    #[arg(long)]
-    pub out: PathBuf,
-}
 
 /// `formation credentials`: writes the folder and says what goes where.
 pub fn credentials_command(args: &CredentialsArgs) -> anyhow::Result<()> {
@@ -179,42 +50,6 @@ pub fn credentials_command(args: &CredentialsArgs) -> anyhow::Result<()> {
         args.robots.saturating_sub(1)
     );
     Ok(())
-}
-
-/// The model path of every robot: the scenario's per-robot models, else `default`. Each model is
-/// loaded and checked against the contract and the scenario's LIDAR (beams, range, window) here,
-/// before any process starts ([`formation_robot_agent::decision::check_team_models_for`]); a missing or
-/// unusable file, a model trained for another sensor or for another d* range than the
-/// scenario's, and a robot out of range are errors naming the robot, the file and the fix.
-pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    Ok(checked_team_models(scenario, default)?.0)
-}
-
-/// [`models_per_robot`], with each distinct model's trained team sizes against the scenario's
-/// team size (for the terminal and `summary.json`).
-pub fn checked_team_models(
-    scenario: &Scenario,
-    default: &Path,
-) -> anyhow::Result<(Vec<PathBuf>, Vec<formation_schema::ModelTeamSize>)> {
-    let mut models = vec![default.to_path_buf(); scenario.n_robots()];
-    for assigned in scenario.agent_models() {
-        let slot = models.get_mut(assigned.robot).with_context(|| {
-            format!(
-                "the scenario assigns a model to robot {}, but it has only {} robots (0..{})",
-                assigned.robot,
-                scenario.n_robots(),
-                scenario.n_robots()
-            )
-        })?;
-        *slot = assigned.model.clone();
-    }
-    let checked = formation_robot_agent::decision::check_team_models_with_envelopes(
-        &models,
-        &scenario.world_config().lidar,
-        &crate::eval::scenario_d_stars(scenario),
-    )?;
-    let team_size = crate::eval::team_sizes_of(&checked, scenario.n_robots());
-    Ok((models, team_size))
 }
 
 /// `value` seconds as a duration, or an error naming `flag` when it is not a positive number.
@@ -502,7 +337,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         base_seed,
         team_size,
     } = plan_from_args(args)?;
-    crate::eval::print_team_size_notes(&team_size);
+    crate::team_models::print_team_size_notes(&team_size);
     println!(
         "formation run {}: {} robots, {} run(s) of {}, {} clock",
         plan.run_id,
@@ -569,7 +404,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         latency.braked_per_robot.clone(),
         team_size,
     )?;
-    print!("{}", crate::eval::table_text(&table));
+    print!("{}", crate::table::table_text(&table));
     let path = plan.out.join("profile.json");
     paths::write_atomic(&path, &formation_schema::to_json_pretty(&latency)?)?;
     profile::profile_svg(&latency, &plan.out.join("profile.svg"))?;
@@ -665,7 +500,7 @@ fn run_summary(
     run_logs: &[PathBuf],
     scenario: &str,
     seed: Option<u64>,
-) -> anyhow::Result<crate::eval::EvalOutput> {
+) -> anyhow::Result<formation_schema::EvalOutput> {
     let mut logs = run_logs
         .iter()
         .map(|path| RunLog::read(path))
@@ -675,7 +510,7 @@ fn run_summary(
     let incomplete_runs = logs
         .iter()
         .filter(|log| !log.complete)
-        .map(|log| crate::eval::IncompleteRun {
+        .map(|log| formation_schema::IncompleteRun {
             index: log.index,
             ticks: log.ticks(),
             planned_ticks: log.planned_ticks,
@@ -686,7 +521,7 @@ fn run_summary(
         .iter()
         .map(formation_world::runlog::log_metrics)
         .collect();
-    let mut table = crate::eval::eval_output("policy", models, scenario, seed, per_run);
+    let mut table = formation_learning::eval_output("policy", models, scenario, seed, per_run);
     table.incomplete_runs = incomplete_runs;
     Ok(table)
 }
@@ -701,7 +536,7 @@ fn write_summary(
     seed: Option<u64>,
     braked_ticks: Vec<std::collections::BTreeMap<String, usize>>,
     team_size: Vec<formation_schema::ModelTeamSize>,
-) -> anyhow::Result<crate::eval::EvalOutput> {
+) -> anyhow::Result<formation_schema::EvalOutput> {
     let mut table = run_summary(run_logs, scenario, seed)?;
     table.braked_ticks = braked_ticks;
     table.team_size = team_size;
@@ -797,7 +632,7 @@ fn keep_partial_runs(
         .unwrap_or_default();
     match write_summary(out, &logs, scenario, Some(seed), braked, Vec::new()) {
         Ok(table) => {
-            print!("{}", crate::eval::table_text(&table));
+            print!("{}", crate::table::table_text(&table));
             eprintln!(
                 "formation: kept {} run(s) in {} ({} incomplete, stopped early: {reason})",
                 logs.len(),

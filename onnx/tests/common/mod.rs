@@ -57,7 +57,7 @@ pub fn fixtures(tag: &str) -> &'static Fixtures {
     match FIXTURES.get_or_init(|| generate(tag)) {
         Ok(fixtures) => fixtures,
         Err(why) => panic!(
-            "{why}\nthese tests need Python with torch and onnx: run `bash .ci/setup-python`, or set \
+            "{why}\nthese tests need Python with torch and onnx: run `bash .ci/setup-python --train`, or set \
              FORMATION_PYTHON=/path/to/python"
         ),
     }

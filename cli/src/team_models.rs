@@ -1,0 +1,116 @@
+//! The models a team drives: each robot's model file, checked against the scenario before
+//! anything runs, and what each model's trained team sizes say about this team. Shared by
+//! `formation eval` and the launcher.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use formation_world::Scenario;
+
+use crate::paths;
+
+/// The model path for each robot: the scenario's per-robot overrides (resolved like `--model`),
+/// else `default`; nothing is loaded yet.
+pub fn resolved_models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let mut models = vec![default.to_path_buf(); scenario.n_robots()];
+    for m in scenario.agent_models() {
+        let slot = models.get_mut(m.robot).with_context(|| {
+            format!(
+                "scenario assigns a model to robot {}, but it has {} robots",
+                m.robot,
+                scenario.n_robots()
+            )
+        })?;
+        *slot = paths::resolve_model(Some(&m.model))?;
+    }
+    Ok(models)
+}
+
+/// Model ids of the given files, as the agents would report them, beside each model's envelope,
+/// after checking each model against the contract and the scenario's LIDAR (beams, range,
+/// window), and the scenario's d* against each model's trained d* range (its envelope), before
+/// anything runs.
+pub fn checked_models(
+    models: &[PathBuf],
+    scenario: &Scenario,
+) -> anyhow::Result<Vec<(String, formation_onnx::ModelEnvelope)>> {
+    Ok(
+        formation_robot_agent::decision::check_team_models_with_envelopes(
+            models,
+            &scenario.world_config().lidar,
+            &scenario_d_stars(scenario),
+        )?,
+    )
+}
+
+/// Each distinct model of a team (by id, in first-use order) that records its trained team
+/// sizes, against the team's size `robots`.
+pub fn team_sizes_of(
+    models: &[(String, formation_onnx::ModelEnvelope)],
+    robots: usize,
+) -> Vec<formation_schema::ModelTeamSize> {
+    let mut seen = Vec::new();
+    let mut out = Vec::new();
+    for (id, envelope) in models {
+        if seen.contains(&id) {
+            continue;
+        }
+        seen.push(id);
+        out.extend(formation_schema::ModelTeamSize::new(
+            id,
+            &envelope.team_sizes,
+            robots,
+        ));
+    }
+    out
+}
+
+/// Prints, on stderr, a line for each model that never saw a team of this size: a note when
+/// the size is zero-shot, a warning when it is below every trained size.
+pub fn print_team_size_notes(team_size: &[formation_schema::ModelTeamSize]) {
+    for line in team_size.iter().filter_map(|t| t.describe()) {
+        eprintln!("formation: {line}");
+    }
+}
+
+/// The d* values that bound a scenario's runs: its fixed d*, each of its choices, or its
+/// range's ends.
+pub fn scenario_d_stars(scenario: &Scenario) -> Vec<f64> {
+    scenario.d_star().bounds()
+}
+
+/// The model path of every robot: the scenario's per-robot models, else `default`. Each model is
+/// loaded and checked against the contract and the scenario's LIDAR (beams, range, window) here,
+/// before any process starts ([`formation_robot_agent::decision::check_team_models_for`]); a missing or
+/// unusable file, a model trained for another sensor or for another d* range than the
+/// scenario's, and a robot out of range are errors naming the robot, the file and the fix.
+pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    Ok(checked_team_models(scenario, default)?.0)
+}
+
+/// [`models_per_robot`], with each distinct model's trained team sizes against the scenario's
+/// team size (for the terminal and `summary.json`).
+pub fn checked_team_models(
+    scenario: &Scenario,
+    default: &Path,
+) -> anyhow::Result<(Vec<PathBuf>, Vec<formation_schema::ModelTeamSize>)> {
+    let mut models = vec![default.to_path_buf(); scenario.n_robots()];
+    for assigned in scenario.agent_models() {
+        let slot = models.get_mut(assigned.robot).with_context(|| {
+            format!(
+                "the scenario assigns a model to robot {}, but it has only {} robots (0..{})",
+                assigned.robot,
+                scenario.n_robots(),
+                scenario.n_robots()
+            )
+        })?;
+        *slot = assigned.model.clone();
+    }
+    let checked = formation_robot_agent::decision::check_team_models_with_envelopes(
+        &models,
+        &scenario.world_config().lidar,
+        &scenario_d_stars(scenario),
+    )?;
+    let team_size = team_sizes_of(&checked, scenario.n_robots());
+    Ok((models, team_size))
+}
