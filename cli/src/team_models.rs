@@ -11,7 +11,10 @@ use crate::paths;
 
 /// The model path for each robot: the scenario's per-robot overrides (resolved like `--model`),
 /// else `default`; nothing is loaded yet.
-pub fn resolved_models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
+pub fn resolved_models_per_robot(
+    scenario: &Scenario,
+    default: &Path,
+) -> anyhow::Result<Vec<PathBuf>> {
     let mut models = vec![default.to_path_buf(); scenario.n_robots()];
     for m in scenario.agent_models() {
         let slot = models.get_mut(m.robot).with_context(|| {

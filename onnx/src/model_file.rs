@@ -47,7 +47,6 @@ fn model_error(path: &Path, refusal: FileRefusal) -> PolicyError {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -22,7 +22,6 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::Context;
-use clap::Args;
 use formation_proto::wire::RunId;
 use formation_runtime::RuntimeSettings;
 use formation_runtime::transport::{Transport, TransportError};
