@@ -1,0 +1,564 @@
+//! The second phase: every parsed value checked against its documented range
+//! ([`super::limits`]), with errors that name the file, the field, the allowed range and the value
+//! found; the result is a [`Scenario`].
+
+use super::*;
+
+/// Builds [`ScenarioError::Invalid`] values that name the origin.
+pub(super) struct Checker<'a> {
+    pub(super) origin: &'a str,
+}
+
+impl Checker<'_> {
+    pub(super) fn invalid(
+        &self,
+        field: impl fmt::Display,
+        problem: impl fmt::Display,
+    ) -> ScenarioError {
+        ScenarioError::Invalid {
+            origin: self.origin.to_string(),
+            field: field.to_string(),
+            problem: problem.to_string(),
+        }
+    }
+
+    /// `value`, if it is a finite number within `bounds`.
+    pub(super) fn bounded(
+        &self,
+        field: &str,
+        value: f64,
+        bounds: Bounds,
+    ) -> Result<f64, ScenarioError> {
+        if !value.is_finite() {
+            return Err(self.invalid(
+                field,
+                format_args!("must be a finite number in {bounds} (got {})", Num(value)),
+            ));
+        }
+        if !(bounds.min..=bounds.max).contains(&value) {
+            return Err(self.invalid(
+                field,
+                format_args!("must be in {bounds} (got {})", Num(value)),
+            ));
+        }
+        Ok(value)
+    }
+
+    /// `value`, if it is a whole number in `min..=max`; `why` explains the bounds.
+    pub(super) fn count(
+        &self,
+        field: &str,
+        value: usize,
+        min: usize,
+        max: usize,
+        why: &str,
+    ) -> Result<usize, ScenarioError> {
+        if (min..=max).contains(&value) {
+            Ok(value)
+        } else {
+            Err(self.invalid(
+                field,
+                format_args!("must be in [{min}, {max}]{why} (got {value})"),
+            ))
+        }
+    }
+}
+
+impl ScenarioToml {
+    /// The validated [`Scenario`], each value checked in the order the file format lists them,
+    /// so the first error a file has is the one reported.
+    pub(super) fn validate(self, check: &Checker<'_>) -> Result<Scenario, ScenarioError> {
+        let name = validate_name(check, self.name)?;
+        let robots = check.count(
+            "robots",
+            self.robots,
+            limits::MIN_ROBOTS,
+            limits::MAX_ROBOTS,
+            ", a formation needs at least one pair",
+        )?;
+        let (duration_s, dt, steps) = validate_timing(check, self.duration_s, self.dt)?;
+        check_robot_ticks(check, robots, steps.round() as u64, dt)?;
+        let runs = check.count("runs", self.runs, 1, limits::MAX_RUNS, "")?;
+
+        let robot = validate_robot(check, self.robot)?;
+        let lidar = validate_lidar(check, &self.lidar)?;
+
+        let (v_star, d_star) = validate_goal(check, self.goal, &robot)?;
+
+        let heading = validate_heading(check, &self.heading)?;
+        let world = WorldConfig { robot, lidar, dt };
+        let neighbours = validate_formation(check, &self.formation, robots, &world)?;
+        let init = validate_init(
+            check,
+            self.init,
+            robots,
+            &robot,
+            sensing_range(&neighbours, &world),
+        )?;
+
+        let agents = validate_agents(check, self.agent, robots)?;
+
+        Ok(Scenario {
+            name,
+            n_robots: robots,
+            duration_s,
+            seed: self.seed,
+            runs,
+            v_star,
+            d_star,
+            heading,
+            init,
+            neighbours,
+            world,
+            agents,
+            given: Given {
+                disc_radius: self.init.disc_radius,
+                min_spacing: self.init.min_spacing,
+                formation: self.formation,
+                origin: check.origin.to_string(),
+            },
+        })
+    }
+}
+
+/// `duration_s` and `dt`, each in range, `dt` at most `duration_s` and dividing it into whole
+/// steps; returns both and the number of steps.
+pub(super) fn validate_timing(
+    check: &Checker<'_>,
+    duration_s: f64,
+    dt: f64,
+) -> Result<(f64, f64, f64), ScenarioError> {
+    let duration_s = check.bounded("duration_s", duration_s, limits::DURATION_S)?;
+    let dt = check.bounded("dt", dt, limits::DT)?;
+    if dt > duration_s {
+        return Err(check.invalid(
+            "dt",
+            format_args!(
+                "must be <= duration_s ({duration_s}) so a run has at least one tick (got {dt})"
+            ),
+        ));
+    }
+    let steps = duration_s / dt;
+    if (steps - steps.round()).abs() > 1e-6 {
+        return Err(check.invalid(
+            "dt",
+            format_args!(
+                "must divide duration_s ({duration_s}) into whole steps (got {dt}: {steps:.3} steps)"
+            ),
+        ));
+    }
+    Ok((duration_s, dt, steps))
+}
+
+/// The `[lidar]` table as a [`LidarSpec`], each value in range.
+pub(super) fn validate_lidar(
+    check: &Checker<'_>,
+    lidar: &LidarToml,
+) -> Result<LidarSpec, ScenarioError> {
+    Ok(LidarSpec {
+        beams: check.count(
+            "lidar.beams",
+            lidar.beams,
+            limits::MIN_BEAMS,
+            limits::MAX_BEAMS,
+            " (a scan message carries at most 900 ranges)",
+        )?,
+        max_range: check.bounded("lidar.max_range", lidar.max_range, limits::MAX_RANGE)?,
+        noise_std: check.bounded("lidar.noise_std", lidar.noise_std, limits::NOISE_STD)?,
+    })
+}
+
+/// `goal.v_star` (reachable by the wheels) and exactly one of `goal.d_star`,
+/// `goal.d_star_choices` and `goal.d_star_range`, each in range.
+pub(super) fn validate_goal(
+    check: &Checker<'_>,
+    goal: GoalToml,
+    robot: &RobotParams,
+) -> Result<(f64, DStarPlan), ScenarioError> {
+    let v_star = check.bounded(
+        "goal.v_star",
+        goal.v_star,
+        Bounds {
+            min: 0.0,
+            ..limits::MAX_WHEEL_SPEED
+        },
+    )?;
+    if v_star > robot.max_wheel_speed {
+        return Err(check.invalid(
+            "goal.v_star",
+            format_args!(
+                "must be <= robot.max_wheel_speed ({}) or the robots cannot reach it (got {v_star})",
+                robot.max_wheel_speed
+            ),
+        ));
+    }
+    const ONE_OF: &str = "give exactly one of goal.d_star (fixed), goal.d_star_choices (one \
+                          of a list per run) and goal.d_star_range (uniform per run)";
+    let given = [
+        goal.d_star.is_some(),
+        goal.d_star_choices.is_some(),
+        goal.d_star_range.is_some(),
+    ];
+    let d_star = match (goal.d_star, goal.d_star_choices, goal.d_star_range) {
+        _ if given.iter().filter(|&&g| g).count() > 1 => {
+            return Err(check.invalid(
+                "goal.d_star",
+                format_args!("is given more than one way; {ONE_OF}"),
+            ));
+        }
+        (Some(d), None, None) => {
+            DStarPlan::Fixed(check.bounded("goal.d_star", d, limits::D_STAR)?)
+        }
+        (None, Some(choices), None) => {
+            if choices.is_empty() {
+                return Err(check.invalid("goal.d_star_choices", "must not be empty"));
+            }
+            if choices.len() > limits::MAX_D_STAR_CHOICES {
+                return Err(check.invalid(
+                    "goal.d_star_choices",
+                    format_args!(
+                        "has {} entries, more than the {} allowed",
+                        choices.len(),
+                        limits::MAX_D_STAR_CHOICES
+                    ),
+                ));
+            }
+            for (k, &d) in choices.iter().enumerate() {
+                check.bounded(&format!("goal.d_star_choices[{k}]"), d, limits::D_STAR)?;
+            }
+            DStarPlan::Choices(choices)
+        }
+        (None, None, Some([min, max])) => {
+            let min = check.bounded("goal.d_star_range[0]", min, limits::D_STAR)?;
+            let max = check.bounded("goal.d_star_range[1]", max, limits::D_STAR)?;
+            if min >= max {
+                return Err(check.invalid(
+                    "goal.d_star_range",
+                    format_args!(
+                        "must be [smallest, largest] with smallest < largest (got [{min}, \
+                         {max}]); for one distance use goal.d_star"
+                    ),
+                ));
+            }
+            DStarPlan::Range { min, max }
+        }
+        _ => {
+            return Err(check.invalid("goal.d_star", format_args!("is missing; {ONE_OF}")));
+        }
+    };
+    Ok((v_star, d_star))
+}
+
+/// The `[[agent]]` entries: each names a robot of the team, at most once, and a model.
+pub(super) fn validate_agents(
+    check: &Checker<'_>,
+    agents: Vec<AgentModel>,
+    robots: usize,
+) -> Result<Vec<AgentModel>, ScenarioError> {
+    let mut agents = agents;
+    let mut seen = vec![false; robots];
+    for (k, agent) in agents.iter_mut().enumerate() {
+        if agent.robot >= robots {
+            return Err(check.invalid(
+                format_args!("agent[{k}].robot"),
+                format_args!("must be < robots ({robots}) (got {})", agent.robot),
+            ));
+        }
+        if std::mem::replace(&mut seen[agent.robot], true) {
+            return Err(check.invalid(
+                format_args!("agent[{k}].robot"),
+                format_args!("gives robot {} a model a second time", agent.robot),
+            ));
+        }
+        if agent.model.as_os_str().is_empty() {
+            return Err(check.invalid(format_args!("agent[{k}].model"), "must not be empty"));
+        }
+    }
+    Ok(agents)
+}
+
+/// The name, if it is 1 to [`limits::MAX_NAME_CHARS`] characters without control characters.
+pub(super) fn validate_name(check: &Checker<'_>, name: String) -> Result<String, ScenarioError> {
+    if name.trim().is_empty() {
+        return Err(check.invalid("name", "must not be empty"));
+    }
+    let chars = name.chars().count();
+    if chars > limits::MAX_NAME_CHARS {
+        return Err(check.invalid(
+            "name",
+            format_args!(
+                "must be at most {} characters (got {chars}); it is echoed into logs and reports",
+                limits::MAX_NAME_CHARS
+            ),
+        ));
+    }
+    if let Some(bad) = name.chars().find(|c| c.is_control()) {
+        return Err(check.invalid(
+            "name",
+            format_args!(
+                "must be printable, without control characters (found {:?})",
+                bad
+            ),
+        ));
+    }
+    Ok(name)
+}
+
+pub(super) fn validate_robot(
+    check: &Checker<'_>,
+    robot: RobotParams,
+) -> Result<RobotParams, ScenarioError> {
+    check.bounded(
+        "robot.wheel_separation",
+        robot.wheel_separation,
+        limits::WHEEL_SEPARATION,
+    )?;
+    check.bounded(
+        "robot.wheel_radius",
+        robot.wheel_radius,
+        limits::WHEEL_RADIUS,
+    )?;
+    check.bounded("robot.body_radius", robot.body_radius, limits::BODY_RADIUS)?;
+    check.bounded(
+        "robot.max_wheel_speed",
+        robot.max_wheel_speed,
+        limits::MAX_WHEEL_SPEED,
+    )?;
+    if let Some(accel) = robot.max_wheel_accel {
+        check.bounded("robot.max_wheel_accel", accel, limits::MAX_WHEEL_ACCEL)?;
+    }
+    Ok(robot)
+}
+
+pub(super) fn validate_heading(
+    check: &Checker<'_>,
+    heading: &HeadingToml,
+) -> Result<HeadingPlan, ScenarioError> {
+    let kind = heading.schedule;
+    let params = [
+        (
+            "phi",
+            heading.phi,
+            kind == ScheduleKind::Constant,
+            limits::ANGLE,
+        ),
+        (
+            "omega",
+            heading.omega,
+            matches!(kind, ScheduleKind::Ramp | ScheduleKind::Sine),
+            limits::HEADING_RATE,
+        ),
+        (
+            "amplitude",
+            heading.amplitude,
+            kind == ScheduleKind::Sine,
+            limits::ANGLE,
+        ),
+        (
+            "phi0",
+            heading.phi0,
+            matches!(kind, ScheduleKind::Ramp | ScheduleKind::Sine),
+            limits::ANGLE,
+        ),
+    ];
+    for (name, value, used, bounds) in params {
+        match value {
+            Some(_) if !used => {
+                return Err(check.invalid(
+                    format_args!("heading.{name}"),
+                    format_args!(
+                        "is not a parameter of schedule \"{}\"; remove it",
+                        kind.as_str()
+                    ),
+                ));
+            }
+            Some(v) => {
+                check.bounded(&format!("heading.{name}"), v, bounds)?;
+            }
+            None => {}
+        }
+    }
+    let required = |name: &str, value: Option<f64>| {
+        value.ok_or_else(|| {
+            check.invalid(
+                format_args!("heading.{name}"),
+                format_args!("is required by schedule \"{}\"", kind.as_str()),
+            )
+        })
+    };
+    Ok(match kind {
+        ScheduleKind::Constant => HeadingPlan::Fixed(HeadingSchedule::Constant {
+            phi: required("phi", heading.phi)?,
+        }),
+        ScheduleKind::Random => HeadingPlan::RandomConstant,
+        ScheduleKind::Ramp => HeadingPlan::Fixed(HeadingSchedule::Ramp {
+            omega: required("omega", heading.omega)?,
+            phi0: heading.phi0.unwrap_or(0.0),
+        }),
+        ScheduleKind::Sine => HeadingPlan::Fixed(HeadingSchedule::Sine {
+            omega: required("omega", heading.omega)?,
+            amplitude: heading.amplitude.unwrap_or(1.0),
+            phi0: heading.phi0.unwrap_or(0.0),
+        }),
+    })
+}
+
+/// Refuses a run whose trajectory would not fit in memory.
+pub(super) fn check_robot_ticks(
+    check: &Checker<'_>,
+    robots: usize,
+    ticks: u64,
+    dt: f64,
+) -> Result<(), ScenarioError> {
+    // Both factors are bounded above, so the product cannot overflow.
+    let robot_ticks = ticks * robots as u64;
+    if robot_ticks > limits::MAX_ROBOT_TICKS {
+        return Err(check.invalid(
+            "duration_s",
+            format_args!(
+                "with dt = {dt} gives {ticks} ticks, and robots x ticks = {robot_ticks} is over the \
+                 limit of {} (a run's trajectory is held in memory); shorten duration_s, \
+                 enlarge dt or use fewer robots",
+                limits::MAX_ROBOT_TICKS
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The neighbour rule the `[formation]` table asks for, with its team-size defaults.
+pub(super) fn validate_formation(
+    check: &Checker<'_>,
+    formation: &FormationToml,
+    robots: usize,
+    world: &WorldConfig,
+) -> Result<NeighbourRule, ScenarioError> {
+    let default = NeighbourRule::default_for(robots, world.lidar.max_range);
+    let name = formation.neighbours.as_deref().unwrap_or(default.name());
+    let gabriel_keys = [
+        ("formation.sensing_range", formation.sensing_range.is_some()),
+        ("formation.nearest", formation.nearest.is_some()),
+        ("formation.threshold", formation.threshold.is_some()),
+        ("formation.hysteresis", formation.hysteresis.is_some()),
+    ];
+    match name {
+        "all_pairs" => {
+            if let Some((key, _)) = gabriel_keys.iter().find(|(_, given)| *given) {
+                return Err(check.invalid(
+                    key,
+                    "applies only to neighbours = \"gabriel\"; remove it or choose the gabriel rule",
+                ));
+            }
+            Ok(NeighbourRule::AllPairs)
+        }
+        "gabriel" => {
+            let max_range = world.lidar.max_range;
+            let sensing_range = match formation.sensing_range {
+                None => max_range,
+                Some(r) => check.bounded(
+                    "formation.sensing_range",
+                    r,
+                    Bounds {
+                        max: max_range,
+                        ..limits::MAX_RANGE
+                    },
+                )?,
+            };
+            let nearest = check.count(
+                "formation.nearest",
+                formation.nearest.unwrap_or(GabrielRule::DEFAULT_NEAREST),
+                0,
+                limits::MAX_NEAREST,
+                "",
+            )?;
+            let threshold = check.bounded(
+                "formation.threshold",
+                formation
+                    .threshold
+                    .unwrap_or(GabrielRule::DEFAULT_THRESHOLD),
+                limits::GABRIEL_THRESHOLD,
+            )?;
+            let hysteresis = check.bounded(
+                "formation.hysteresis",
+                formation
+                    .hysteresis
+                    .unwrap_or(GabrielRule::DEFAULT_HYSTERESIS),
+                Bounds {
+                    min: 0.0,
+                    max: threshold - 0.01,
+                    unit: "",
+                },
+            )?;
+            Ok(NeighbourRule::Gabriel(GabrielRule {
+                sensing_range,
+                nearest,
+                threshold,
+                hysteresis,
+            }))
+        }
+        other => Err(check.invalid(
+            "formation.neighbours",
+            format_args!(
+                "must be one of {} (got {other:?})",
+                NeighbourRule::NAMES
+                    .iter()
+                    .map(|n| format!("\"{n}\""))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )),
+    }
+}
+
+pub(super) fn validate_init(
+    check: &Checker<'_>,
+    init: InitToml,
+    robots: usize,
+    robot: &RobotParams,
+    sensing_range: f64,
+) -> Result<InitialConditions, ScenarioError> {
+    let disc_radius = check.bounded(
+        "init.disc_radius",
+        init.disc_radius
+            .unwrap_or_else(|| default_disc_radius(robots)),
+        limits::DISC_RADIUS,
+    )?;
+    let min_spacing = check.bounded(
+        "init.min_spacing",
+        init.min_spacing.unwrap_or(DEFAULT_MIN_SPACING),
+        limits::MIN_SPACING,
+    )?;
+    if min_spacing > sensing_range {
+        return Err(check.invalid(
+            "init.min_spacing",
+            format_args!(
+                "must be <= the sensing range ({sensing_range} m) or the team cannot start \
+                 connected; reduce init.min_spacing or raise lidar.max_range (got {min_spacing})"
+            ),
+        ));
+    }
+    let body_diameter = 2.0 * robot.body_radius;
+    if min_spacing < body_diameter {
+        return Err(check.invalid(
+            "init.min_spacing",
+            format_args!(
+                "must be >= 2 * robot.body_radius ({body_diameter}) so robots do not start overlapping \
+                 (got {min_spacing})"
+            ),
+        ));
+    }
+    let sites = lattice_sites(disc_radius, min_spacing, robots).len();
+    if sites < robots {
+        return Err(check.invalid(
+            "init.disc_radius",
+            format_args!(
+                "is too small to place {robots} robots {min_spacing} m apart (room for about {sites}); \
+                 enlarge init.disc_radius or reduce init.min_spacing (got {disc_radius})"
+            ),
+        ));
+    }
+    Ok(InitialConditions {
+        disc_radius,
+        min_spacing,
+    })
+}
