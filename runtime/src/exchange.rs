@@ -728,18 +728,21 @@ fn transport_error(e: WorldLinkError) -> ControllerError {
     ControllerError::new(e.to_string())
 }
 
-impl Controller for AgentsController<'_> {
-    fn commands(
-        &mut self,
-        obs: &Observation<'_>,
-        out: &mut [WheelCmd],
-    ) -> Result<(), ControllerError> {
-        let entered = self.clock.now();
+impl AgentsController<'_> {
+    /// Starts tick `obs.tick` at `entered`: notes the tick, anchors the schedule at the first
+    /// tick, and records when this tick began since then. Returns the schedule's start.
+    fn begin_tick(&mut self, obs: &Observation<'_>, entered: Instant) -> Instant {
         self.tick = obs.tick;
         let schedule_start = *self.schedule_start.get_or_insert(entered);
         self.tick_start_ns.push(
             u64::try_from(entered.duration_since(schedule_start).as_nanos()).unwrap_or(u64::MAX),
         );
+        schedule_start
+    }
+
+    /// Publishes every robot's odometry and own scan of `obs`, stamping each scan's
+    /// publication just before its hand-over.
+    fn publish_scans(&mut self, obs: &Observation<'_>) -> Result<(), ControllerError> {
         for (robot, scan) in obs.scans.iter().enumerate() {
             let msg = ScanMsg::new(
                 self.generation,
@@ -774,8 +777,19 @@ impl Controller for AgentsController<'_> {
                 .publish_scan(robot, &msg)
                 .map_err(transport_error)?;
         }
-        let paced_until = entered + self.settings.runtime.pace();
-        let deadline = match self.settings.runtime.clock {
+        Ok(())
+    }
+
+    /// When tick `tick`, entered at `entered`, stops waiting for commands: lockstep waits the
+    /// command timeout (at least the pace); realtime waits until the next tick is due on the
+    /// schedule, which starts afresh from now when this tick started long after it was due.
+    fn command_deadline(
+        &mut self,
+        tick: u64,
+        entered: Instant,
+        schedule_start: Instant,
+    ) -> Instant {
+        match self.settings.runtime.clock {
             ClockMode::Lockstep => {
                 entered
                     + self
@@ -785,8 +799,8 @@ impl Controller for AgentsController<'_> {
                         .max(self.settings.runtime.pace())
             }
             ClockMode::Realtime => {
-                let periods = |tick: u64| self.dt * u32::try_from(tick).unwrap_or(u32::MAX);
-                let due = schedule_start + self.schedule_shift + periods(obs.tick);
+                let periods = |ticks: u64| self.dt * u32::try_from(ticks).unwrap_or(u32::MAX);
+                let due = schedule_start + self.schedule_shift + periods(tick);
                 if entered > due + self.dt * PAUSE_TICKS {
                     // The world did not run for a while (stopped and continued): start the
                     // schedule afresh rather than rush through the ticks it missed.
@@ -794,15 +808,26 @@ impl Controller for AgentsController<'_> {
                     tracing::warn!(
                         "tick {} started {:.2} s late (was the world stopped?); resuming the \
                          {:.0} Hz schedule from now",
-                        obs.tick,
+                        tick,
                         late.as_secs_f64(),
                         1.0 / self.dt.as_secs_f64()
                     );
                     self.schedule_shift += late;
                 }
-                schedule_start + self.schedule_shift + periods(obs.tick + 1)
+                schedule_start + self.schedule_shift + periods(tick + 1)
             }
-        };
+        }
+    }
+
+    /// Takes what the agents send until every awaited agent answered tick `tick` and the pace
+    /// (`paced_until`) is kept (lockstep), or until `deadline`; lockstep spins briefly before
+    /// blocking.
+    fn collect_commands(
+        &mut self,
+        tick: u64,
+        paced_until: Instant,
+        deadline: Instant,
+    ) -> Result<(), ControllerError> {
         // The spin is bounded on the machine's own clock (it is about this core's time, not the
         // simulation's), so a fake clock in tests never turns it into an endless loop.
         let spin = match self.settings.runtime.clock {
@@ -819,7 +844,7 @@ impl Controller for AgentsController<'_> {
             self.poll()?;
             let now = self.clock.now();
             let answered = match self.settings.runtime.clock {
-                ClockMode::Lockstep => self.all_answered(obs.tick),
+                ClockMode::Lockstep => self.all_answered(tick),
                 ClockMode::Realtime => false,
             };
             if (answered && now >= paced_until) || now >= deadline {
@@ -833,68 +858,101 @@ impl Controller for AgentsController<'_> {
             }
             self.wait(if answered { paced_until } else { deadline } - now)?;
         }
+        Ok(())
+    }
+
+    /// Robot `robot`'s command for tick `tick` at `now`, and why it is used or braked: the
+    /// watchdog's choice from its newest arrival, with the brake reason its agent's state gives.
+    fn choose_robot_command(
+        &self,
+        robot: usize,
+        tick: u64,
+        now: Instant,
+        schedule_start: Instant,
+    ) -> (WheelCmd, TickOutcome) {
+        let newest = self.newest[robot].as_ref();
+        let answered_scan_at = newest.and_then(|a| {
+            let began = self.tick_start_ns.get(usize::try_from(a.msg.tick).ok()?)?;
+            Some(schedule_start + Duration::from_nanos(*began))
+        });
+        let (cmd, outcome) = choose_command(
+            self.settings.runtime.clock,
+            newest,
+            self.generation,
+            tick,
+            now,
+            self.settings.runtime.stale_after(),
+            answered_scan_at,
+        );
+        (cmd, brake_reason(self.states[robot], outcome))
+    }
+
+    /// Moves robot `robot`'s agent state on by its `outcome` at tick `tick`: a live lockstep
+    /// agent without a command in time lags, a lagging one that answers is live again, a used
+    /// command is noted as the robot's last fresh tick, and a rejoining agent's first used
+    /// command is reported.
+    fn track_agent(&mut self, robot: usize, tick: u64, outcome: TickOutcome) {
+        match (self.states[robot], outcome) {
+            (AgentState::Live, TickOutcome::Missing | TickOutcome::Stale)
+                if self.settings.runtime.clock == ClockMode::Lockstep =>
+            {
+                tracing::warn!("robot {robot}: no command for tick {tick} in time; braking it");
+                self.states[robot] = AgentState::Lagging;
+            }
+            (AgentState::Lagging, TickOutcome::Fresh) => self.states[robot] = AgentState::Live,
+            _ => {}
+        }
+        if outcome == TickOutcome::Fresh {
+            self.last_fresh_tick[robot] = Some(tick);
+        }
+        if outcome == TickOutcome::Fresh
+            && let Some(pid) = self.rejoining[robot].take()
+        {
+            (self.events)(&WorldEvent::AgentRejoined { robot, pid, tick });
+        }
+    }
+
+    /// Records robot `robot`'s `outcome` at tick `tick` in its timing log (a used command timed
+    /// from the scan it answered) and its link monitor, reporting a degraded link as an event.
+    fn record_outcome(&mut self, robot: usize, tick: u64, outcome: TickOutcome, now: Instant) {
+        let arrival = self.newest[robot].filter(|_| outcome == TickOutcome::Fresh);
+        // Timed from the scan the command answered, which under lag is an older tick's.
+        let answered_scan = arrival.and_then(|a| self.scan_stamps[robot].of(a.msg.tick));
+        let round_trip = arrival
+            .zip(answered_scan)
+            .map(|(a, scan)| a.at.saturating_duration_since(scan.at));
+        self.timings[robot].record(
+            outcome,
+            arrival.as_ref().map(|a| &a.msg),
+            round_trip,
+            answered_scan.map_or(0, |scan| scan.wall_ns),
+            arrival.map_or(0, |a| a.wall_ns),
+        );
+        if let Some(report) = self.link_monitors[robot].observe(tick, outcome, round_trip, now) {
+            (self.events)(&report);
+        }
+    }
+}
+
+impl Controller for AgentsController<'_> {
+    fn commands(
+        &mut self,
+        obs: &Observation<'_>,
+        out: &mut [WheelCmd],
+    ) -> Result<(), ControllerError> {
+        let entered = self.clock.now();
+        let schedule_start = self.begin_tick(obs, entered);
+        self.publish_scans(obs)?;
+        let paced_until = entered + self.settings.runtime.pace();
+        let deadline = self.command_deadline(obs.tick, entered, schedule_start);
+        self.collect_commands(obs.tick, paced_until, deadline)?;
         self.rejoin_grace.fill(false);
         let now = self.clock.now();
         for (robot, slot) in out.iter_mut().enumerate() {
-            let newest = self.newest[robot].as_ref();
-            let answered_scan_at = newest.and_then(|a| {
-                let began = self.tick_start_ns.get(usize::try_from(a.msg.tick).ok()?)?;
-                Some(schedule_start + Duration::from_nanos(*began))
-            });
-            let (cmd, outcome) = choose_command(
-                self.settings.runtime.clock,
-                newest,
-                self.generation,
-                obs.tick,
-                now,
-                self.settings.runtime.stale_after(),
-                answered_scan_at,
-            );
-            let outcome = brake_reason(self.states[robot], outcome);
+            let (cmd, outcome) = self.choose_robot_command(robot, obs.tick, now, schedule_start);
             *slot = cmd;
-            match (self.states[robot], outcome) {
-                (AgentState::Live, TickOutcome::Missing | TickOutcome::Stale)
-                    if self.settings.runtime.clock == ClockMode::Lockstep =>
-                {
-                    tracing::warn!(
-                        "robot {robot}: no command for tick {} in time; braking it",
-                        obs.tick
-                    );
-                    self.states[robot] = AgentState::Lagging;
-                }
-                (AgentState::Lagging, TickOutcome::Fresh) => self.states[robot] = AgentState::Live,
-                _ => {}
-            }
-            if outcome == TickOutcome::Fresh {
-                self.last_fresh_tick[robot] = Some(obs.tick);
-            }
-            if outcome == TickOutcome::Fresh
-                && let Some(pid) = self.rejoining[robot].take()
-            {
-                (self.events)(&WorldEvent::AgentRejoined {
-                    robot,
-                    pid,
-                    tick: obs.tick,
-                });
-            }
-            let arrival = newest.filter(|_| outcome == TickOutcome::Fresh);
-            // Timed from the scan the command answered, which under lag is an older tick's.
-            let answered_scan = arrival.and_then(|a| self.scan_stamps[robot].of(a.msg.tick));
-            let round_trip = arrival
-                .zip(answered_scan)
-                .map(|(a, scan)| a.at.saturating_duration_since(scan.at));
-            self.timings[robot].record(
-                outcome,
-                arrival.map(|a| &a.msg),
-                round_trip,
-                answered_scan.map_or(0, |scan| scan.wall_ns),
-                arrival.map_or(0, |a| a.wall_ns),
-            );
-            if let Some(report) =
-                self.link_monitors[robot].observe(obs.tick, outcome, round_trip, now)
-            {
-                (self.events)(&report);
-            }
+            self.track_agent(robot, obs.tick, outcome);
+            self.record_outcome(robot, obs.tick, outcome, now);
         }
         Ok(())
     }

@@ -159,6 +159,213 @@ fn lock(graph: &Mutex<Graph>) -> MutexGuard<'_, Graph> {
     graph.lock().unwrap_or_else(|e| e.into_inner())
 }
 
+/// Opens the world's session: a Zenoh router listening on `listen`.
+fn open_router(listen: &Endpoint) -> Result<Arc<::zenoh::Session>, WorldLinkError> {
+    let config =
+        crate::zenoh::world_config(listen, None).map_err(|detail| WorldLinkError::Zenoh {
+            action: format!("configure a router on {listen}"),
+            detail,
+        })?;
+    Ok(Arc::new(crate::zenoh::open(config).map_err(|detail| {
+        WorldLinkError::Zenoh {
+            action: format!("listen on {listen} (is the port free?)"),
+            detail,
+        }
+    })?))
+}
+
+impl RobotPorts {
+    /// Declares simulated robot `robot`'s node in `team`'s domain with its publishers (scan and
+    /// odometry delivered as `sensors`, `/tf`, `/tf_static`) and its `cmd_vel` subscription,
+    /// whose Twists go to `graph` and ring `bell`.
+    fn declare(
+        session: &Arc<::zenoh::Session>,
+        team: &Ros2Team,
+        robot: usize,
+        sensors: Delivery,
+        graph: &Arc<Mutex<Graph>>,
+        bell: &Arc<Bell>,
+    ) -> Result<RobotPorts, WorldLinkError> {
+        let topics = TeamTopics::robot(robot);
+        let namespace =
+            Namespace::new(&format!("/robot_{robot}")).map_err(|e| WorldLinkError::Zenoh {
+                action: "name the robot's namespace".into(),
+                detail: e.to_string(),
+            })?;
+        let node = Node::new(
+            Arc::clone(session),
+            team.domain_id,
+            namespace,
+            NodeName::new("formation_sim").expect("a valid node name"),
+            robot as u64 + 1,
+        )
+        .map_err(node_error)?;
+        let scan = node
+            .publisher::<LaserScan>(&topics.scan, Qos::SENSOR_DATA, sensors)
+            .map_err(node_error)?;
+        let odom = node
+            .publisher::<Odometry>(&topics.odometry, Qos::ROS_DEFAULT, sensors)
+            .map_err(node_error)?;
+        let tf = node
+            .publisher::<TfMessage>(&tf_topic("/tf"), Qos::ROS_DEFAULT, sensors)
+            .map_err(node_error)?;
+        let tf_static = node
+            .publisher::<TfMessage>(
+                &tf_topic("/tf_static"),
+                Qos::ROS_DEFAULT,
+                Delivery::Reliable,
+            )
+            .map_err(node_error)?;
+        let cmd_vel = subscribe_cmd_vel(&node, &topics.cmd_vel, robot, graph, bell)?;
+        Ok(RobotPorts {
+            _node: node,
+            scan,
+            odom,
+            tf,
+            tf_static,
+            tf_static_sent: None,
+            _cmd_vel: cmd_vel,
+            odometry: None,
+            stamps: VecDeque::with_capacity(STAMPS_KEPT),
+        })
+    }
+}
+
+/// Subscribes `node` to robot `robot`'s `cmd_vel` `topic`: each Twist is queued in `graph`
+/// (at most [`TWIST_QUEUE`], the oldest goes) with its stamp, publisher and arrival, and rings
+/// `bell`; unusable samples are logged.
+fn subscribe_cmd_vel(
+    node: &Node,
+    topic: &TopicName,
+    robot: usize,
+    graph: &Arc<Mutex<Graph>>,
+    bell: &Arc<Bell>,
+) -> Result<RosSubscription, WorldLinkError> {
+    let graph = Arc::clone(graph);
+    let bell = Arc::clone(bell);
+    node.subscription::<Twist>(topic, Qos::ROS_DEFAULT, move |sample| match sample {
+        Ok(received) => {
+            let mut graph = lock(&graph);
+            let queue = &mut graph.twists[robot];
+            if queue.len() == TWIST_QUEUE {
+                queue.pop_front();
+            }
+            queue.push_back(ReceivedTwist {
+                stamp: received.attachment.source_timestamp_ns,
+                gid: received.attachment.source_gid,
+                twist: received.message,
+                arrived_ns: formation_proto::wire::wall_clock_ns(),
+            });
+            drop(graph);
+            bell.ring();
+        }
+        Err(e) => tracing::warn!("robot {robot}: ignoring a cmd_vel sample: {e}"),
+    })
+    .map_err(node_error)
+}
+
+/// Declares the team's goal node in ROS domain `domain_id` and its three goal publishers
+/// ([`TeamTopics::goal`]).
+fn declare_goal(
+    session: &Arc<::zenoh::Session>,
+    domain_id: u32,
+) -> Result<(Node, [RosPublisher<Float64>; 3]), WorldLinkError> {
+    let goal_node = Node::new(
+        Arc::clone(session),
+        domain_id,
+        Namespace::new("/formation").expect("a valid namespace"),
+        NodeName::new("goal").expect("a valid node name"),
+        0,
+    )
+    .map_err(node_error)?;
+    let goal_topics = TeamTopics::goal();
+    let goal_publisher = |topic| {
+        goal_node
+            .publisher::<Float64>(topic, Qos::ROS_DEFAULT, Delivery::Reliable)
+            .map_err(node_error)
+    };
+    let goal = [
+        goal_publisher(&goal_topics[0])?,
+        goal_publisher(&goal_topics[1])?,
+        goal_publisher(&goal_topics[2])?,
+    ];
+    Ok((goal_node, goal))
+}
+
+/// Notes in `graph` what liveliness token `key` (parsed as `token`, announcing a `cmd_vel`
+/// publisher of robot `robot`) says: a new driver when it comes, a gone one when it goes.
+/// Returns false when nothing changed (a token already known came again).
+fn note_driver_token(
+    graph: &mut Graph,
+    robot: usize,
+    key: &str,
+    token: &LivelinessToken,
+    kind: SampleKind,
+) -> bool {
+    match kind {
+        SampleKind::Put => {
+            if graph.drivers[robot].contains_key(key) {
+                return false;
+            }
+            graph.next_pid = graph.next_pid.wrapping_add(1).max(1);
+            let driver = Driver {
+                pid: graph.next_pid,
+                gid: token.gid(),
+                node: format!(
+                    "{}/{}",
+                    token.node.namespace.as_str().trim_end_matches('/'),
+                    token.node.name.as_str()
+                ),
+            };
+            graph.drivers[robot].insert(key.to_owned(), driver.clone());
+            graph.new_drivers[robot].push_back(driver);
+        }
+        SampleKind::Delete => {
+            if let Some(driver) = graph.drivers[robot].remove(key) {
+                graph.gone.push((robot, driver.pid));
+            }
+        }
+    }
+    true
+}
+
+/// Watches the ROS graph of domain `domain_id` (with history) for the drivers of the team's
+/// `n` robots: each change is noted in `graph` ([`note_driver_token`]) and rings `bell`.
+fn watch_graph(
+    session: &::zenoh::Session,
+    domain_id: u32,
+    n: usize,
+    graph: &Arc<Mutex<Graph>>,
+    bell: &Arc<Bell>,
+) -> Result<Subscriber<()>, WorldLinkError> {
+    let graph = Arc::clone(graph);
+    let bell = Arc::clone(bell);
+    session
+        .liveliness()
+        .declare_subscriber(domain_wildcard(domain_id))
+        .history(true)
+        .callback(move |sample| {
+            let key = sample.key_expr().as_str();
+            let Ok(token) = LivelinessToken::parse(key) else {
+                return;
+            };
+            let Some(robot) = driven_robot(&token, n) else {
+                return;
+            };
+            let mut graph = lock(&graph);
+            if !note_driver_token(&mut graph, robot, key, &token, sample.kind()) {
+                return;
+            }
+            drop(graph);
+            bell.ring();
+        })
+        .wait()
+        .map_err(|e| WorldLinkError::Zenoh {
+            action: "watch the ROS graph".into(),
+            detail: e.to_string(),
+        })
+}
+
 impl Ros2WorldLink {
     /// Listens on `listen` as a Zenoh router and sets up `team`'s robots for run `run`.
     pub fn create(
@@ -167,18 +374,7 @@ impl Ros2WorldLink {
         listen: &Endpoint,
         secret: LaunchSecret,
     ) -> Result<Ros2WorldLink, WorldLinkError> {
-        let config =
-            crate::zenoh::world_config(listen, None).map_err(|detail| WorldLinkError::Zenoh {
-                action: format!("configure a router on {listen}"),
-                detail,
-            })?;
-        let session =
-            Arc::new(
-                crate::zenoh::open(config).map_err(|detail| WorldLinkError::Zenoh {
-                    action: format!("listen on {listen} (is the port free?)"),
-                    detail,
-                })?,
-            );
+        let session = open_router(listen)?;
         let bell = Arc::new(Bell::default());
         let n = team.n_robots;
         let graph = Arc::new(Mutex::new(Graph {
@@ -194,141 +390,12 @@ impl Ros2WorldLink {
         };
         let mut robots = Vec::with_capacity(n);
         for robot in 0..n {
-            let topics = TeamTopics::robot(robot);
-            let namespace =
-                Namespace::new(&format!("/robot_{robot}")).map_err(|e| WorldLinkError::Zenoh {
-                    action: "name the robot's namespace".into(),
-                    detail: e.to_string(),
-                })?;
-            let node = Node::new(
-                Arc::clone(&session),
-                team.domain_id,
-                namespace,
-                NodeName::new("formation_sim").expect("a valid node name"),
-                robot as u64 + 1,
-            )
-            .map_err(node_error)?;
-            let scan = node
-                .publisher::<LaserScan>(&topics.scan, Qos::SENSOR_DATA, sensors)
-                .map_err(node_error)?;
-            let odom = node
-                .publisher::<Odometry>(&topics.odometry, Qos::ROS_DEFAULT, sensors)
-                .map_err(node_error)?;
-            let tf = node
-                .publisher::<TfMessage>(&tf_topic("/tf"), Qos::ROS_DEFAULT, sensors)
-                .map_err(node_error)?;
-            let tf_static = node
-                .publisher::<TfMessage>(
-                    &tf_topic("/tf_static"),
-                    Qos::ROS_DEFAULT,
-                    Delivery::Reliable,
-                )
-                .map_err(node_error)?;
-            let cmd_vel = {
-                let graph = Arc::clone(&graph);
-                let bell = Arc::clone(&bell);
-                node.subscription::<Twist>(&topics.cmd_vel, Qos::ROS_DEFAULT, move |sample| {
-                    match sample {
-                        Ok(received) => {
-                            let mut graph = lock(&graph);
-                            let queue = &mut graph.twists[robot];
-                            if queue.len() == TWIST_QUEUE {
-                                queue.pop_front();
-                            }
-                            queue.push_back(ReceivedTwist {
-                                stamp: received.attachment.source_timestamp_ns,
-                                gid: received.attachment.source_gid,
-                                twist: received.message,
-                                arrived_ns: formation_proto::wire::wall_clock_ns(),
-                            });
-                            drop(graph);
-                            bell.ring();
-                        }
-                        Err(e) => tracing::warn!("robot {robot}: ignoring a cmd_vel sample: {e}"),
-                    }
-                })
-                .map_err(node_error)?
-            };
-            robots.push(RobotPorts {
-                _node: node,
-                scan,
-                odom,
-                tf,
-                tf_static,
-                tf_static_sent: None,
-                _cmd_vel: cmd_vel,
-                odometry: None,
-                stamps: VecDeque::with_capacity(STAMPS_KEPT),
-            });
+            robots.push(RobotPorts::declare(
+                &session, &team, robot, sensors, &graph, &bell,
+            )?);
         }
-        let goal_node = Node::new(
-            Arc::clone(&session),
-            team.domain_id,
-            Namespace::new("/formation").expect("a valid namespace"),
-            NodeName::new("goal").expect("a valid node name"),
-            0,
-        )
-        .map_err(node_error)?;
-        let goal_topics = TeamTopics::goal();
-        let goal_publisher = |topic| {
-            goal_node
-                .publisher::<Float64>(topic, Qos::ROS_DEFAULT, Delivery::Reliable)
-                .map_err(node_error)
-        };
-        let goal = [
-            goal_publisher(&goal_topics[0])?,
-            goal_publisher(&goal_topics[1])?,
-            goal_publisher(&goal_topics[2])?,
-        ];
-        let graph_watch = {
-            let graph = Arc::clone(&graph);
-            let bell = Arc::clone(&bell);
-            session
-                .liveliness()
-                .declare_subscriber(domain_wildcard(team.domain_id))
-                .history(true)
-                .callback(move |sample| {
-                    let key = sample.key_expr().as_str();
-                    let Ok(token) = LivelinessToken::parse(key) else {
-                        return;
-                    };
-                    let Some(robot) = driven_robot(&token, n) else {
-                        return;
-                    };
-                    let mut graph = lock(&graph);
-                    match sample.kind() {
-                        SampleKind::Put => {
-                            if graph.drivers[robot].contains_key(key) {
-                                return;
-                            }
-                            graph.next_pid = graph.next_pid.wrapping_add(1).max(1);
-                            let driver = Driver {
-                                pid: graph.next_pid,
-                                gid: token.gid(),
-                                node: format!(
-                                    "{}/{}",
-                                    token.node.namespace.as_str().trim_end_matches('/'),
-                                    token.node.name.as_str()
-                                ),
-                            };
-                            graph.drivers[robot].insert(key.to_owned(), driver.clone());
-                            graph.new_drivers[robot].push_back(driver);
-                        }
-                        SampleKind::Delete => {
-                            if let Some(driver) = graph.drivers[robot].remove(key) {
-                                graph.gone.push((robot, driver.pid));
-                            }
-                        }
-                    }
-                    drop(graph);
-                    bell.ring();
-                })
-                .wait()
-                .map_err(|e| WorldLinkError::Zenoh {
-                    action: "watch the ROS graph".into(),
-                    detail: e.to_string(),
-                })?
-        };
+        let (goal_node, goal) = declare_goal(&session, team.domain_id)?;
+        let graph_watch = watch_graph(&session, team.domain_id, n, &graph, &bell)?;
         let signals = SignalWatch::start(Arc::clone(&bell)).map_err(|e| WorldLinkError::Zenoh {
             action: "watch for termination signals".into(),
             detail: e.to_string(),

@@ -49,6 +49,17 @@ struct Inbox {
 }
 
 impl Inbox {
+    /// An inbox with nothing in it yet, the world not seen.
+    fn empty() -> Inbox {
+        Inbox {
+            scan: Mutex::new(None),
+            control: Queue::new(CONTROL_QUEUE),
+            welcomes: Queue::new(8),
+            world_present: Mutex::new(false),
+            refusals: Queue::new(CONTROL_QUEUE),
+        }
+    }
+
     fn world_present(&self) -> bool {
         *self.world_present.lock().unwrap_or_else(|e| e.into_inner())
     }
@@ -165,169 +176,37 @@ impl ZenohAgentLink {
     ) -> Result<Self, AgentLinkError> {
         let started = Instant::now();
         let deadline = started + timeout;
-        let config = super::client_config(endpoint, timeout, login).map_err(zenoh_error(
-            format!("configure the connection to {endpoint}"),
-        ))?;
-        let session = super::open(config).map_err(|detail| AgentLinkError::Unreachable {
-            endpoint: endpoint.to_string(),
-            robot,
-            detail,
-        })?;
+        let session = open_session(endpoint, login, robot, timeout)?;
         let bell = Arc::new(Bell::default());
         let signals = SignalWatch::start(Arc::clone(&bell))
             .map_err(|e| zenoh_error("watch for SIGINT and SIGTERM")(e.to_string()))?;
-        let inbox = Arc::new(Inbox {
-            scan: Mutex::new(None),
-            control: Queue::new(CONTROL_QUEUE),
-            welcomes: Queue::new(8),
-            world_present: Mutex::new(false),
-            refusals: Queue::new(CONTROL_QUEUE),
-        });
-        let world = {
-            let inbox = Arc::clone(&inbox);
-            let bell = Arc::clone(&bell);
-            session
-                .liveliness()
-                .declare_subscriber(keys::world_token(run))
-                .history(true)
-                .callback(move |sample| {
-                    *inbox
-                        .world_present
-                        .lock()
-                        .unwrap_or_else(|e| e.into_inner()) = sample.kind() == SampleKind::Put;
-                    bell.ring();
-                })
-                .wait()
-                .map_err(|e| zenoh_error("watch the world's liveliness")(e.to_string()))?
+        let inbox = Arc::new(Inbox::empty());
+        let world = watch_world(&session, run, &inbox, &bell)?;
+        let welcomes = subscribe_welcomes(&session, run, robot, &inbox, &bell)?;
+        let rendezvous = Rendezvous {
+            session: &session,
+            inbox: &inbox,
+            bell: &bell,
+            endpoint,
+            run,
+            robot,
+            started,
+            deadline,
         };
-        let welcome_key = lobby_service_name(run, robot, LobbyChannel::Welcome);
-        let welcomes = {
-            let inbox = Arc::clone(&inbox);
-            let bell = Arc::clone(&bell);
-            session
-                .declare_subscriber(welcome_key.clone())
-                .callback(move |sample| {
-                    let decoded =
-                        message_from_bytes::<WelcomeMsg>("welcome", &sample.payload().to_bytes())
-                            .and_then(|msg| Ok((msg.nonce, msg.decode()?)));
-                    match decoded {
-                        Ok(welcome) => {
-                            inbox.welcomes.push(welcome);
-                            bell.ring();
-                        }
-                        Err(e) => tracing::warn!("ignoring a malformed welcome: {e}"),
-                    }
-                })
-                .wait()
-                .map_err(|e| zenoh_error(format!("subscribe to {welcome_key}"))(e.to_string()))?
-        };
-        let wait_until = |until: Instant| -> Result<(), AgentLinkError> {
-            let left = until.saturating_duration_since(Instant::now());
-            match bell.wait(left) {
-                Ring::Terminated(signal) => Err(AgentLinkError::Terminated(signal)),
-                _ => Ok(()),
-            }
-        };
-        while !inbox.world_present() {
-            if Instant::now() >= deadline {
-                return Err(AgentLinkError::NoWorldAt {
-                    endpoint: endpoint.to_string(),
-                    run: run.to_string(),
-                    waited_s: started.elapsed().as_secs_f64(),
-                });
-            }
-            wait_until(deadline)?;
-        }
+        rendezvous.wait_for_world()?;
         let pid = std::process::id();
-        let hello_key = lobby_service_name(run, robot, LobbyChannel::Hello);
-        let mut sent = Vec::new();
-        let incarnation = 'greeting: loop {
-            let now = Instant::now();
-            if now >= deadline {
-                return Err(AgentLinkError::NoWelcome {
-                    robot,
-                    run: run.to_string(),
-                    waited_s: started.elapsed().as_secs_f64(),
-                });
-            }
-            let nonce = fresh_nonce()?;
-            let hello = HelloMsg {
-                pid,
-                reserved: 0,
-                nonce,
-                proof: secret.prove(run, robot, pid, nonce),
-            };
-            session
-                .put(hello_key.clone(), message_bytes(&hello).to_vec())
-                .congestion_control(CongestionControl::Block)
-                .wait()
-                .map_err(|e| zenoh_error("send the greeting")(e.to_string()))?;
-            sent.push(nonce);
-            let retry_at = (now + GREETING_RETRY).min(deadline);
-            while Instant::now() < retry_at {
-                for (nonce, welcome) in inbox.welcomes.drain() {
-                    if !sent.contains(&nonce) {
-                        continue;
-                    }
-                    match welcome {
-                        Welcome::Accepted => break 'greeting nonce,
-                        Welcome::Refused(reason) => {
-                            return Err(AgentLinkError::Refused { robot, reason });
-                        }
-                    }
-                }
-                wait_until(retry_at)?;
-            }
-            tracing::info!("robot {robot}: no answer to the greeting yet; greeting again");
-        };
+        let incarnation = rendezvous.greet_until_welcomed(secret, pid)?;
         drop(welcomes);
         let name = |channel| robot_service_name(run, robot, incarnation, channel);
-        let scan = {
-            let inbox = Arc::clone(&inbox);
-            let bell = Arc::clone(&bell);
-            session
-                .declare_subscriber(name(RobotChannel::Scan))
-                .callback(move |sample| {
-                    match message_from_bytes::<ScanMsg>("scan", &sample.payload().to_bytes()) {
-                        Ok(scan) => {
-                            *inbox.scan.lock().unwrap_or_else(|e| e.into_inner()) = Some(scan);
-                            bell.ring();
-                        }
-                        Err(e) => tracing::warn!("ignoring a malformed scan: {e}"),
-                    }
-                })
-                .wait()
-                .map_err(|e| zenoh_error("subscribe to the scans")(e.to_string()))?
-        };
+        let scan = subscribe_scans(&session, name(RobotChannel::Scan), &inbox, &bell)?;
         let models = Arc::new(ModelFolder::new(pid, incarnation));
-        let control = {
-            let inbox = Arc::clone(&inbox);
-            let bell = Arc::clone(&bell);
-            let models = Arc::clone(&models);
-            session
-                .declare_subscriber(name(RobotChannel::Control))
-                .callback(move |sample| {
-                    let payload = sample.payload().to_bytes();
-                    match decode_control(&payload, &models) {
-                        Ok(request) => {
-                            tracing::debug!("control request arrived: {request:?}");
-                            if !inbox.control.push(request) {
-                                tracing::warn!("control requests overflowed; dropped the oldest");
-                            }
-                        }
-                        Err(ControlFailure::Malformed(e)) => {
-                            tracing::warn!("ignoring a malformed control request: {e}");
-                            return;
-                        }
-                        Err(ControlFailure::Refused { request_id, reason }) => {
-                            inbox.refusals.push((request_id, reason));
-                        }
-                    }
-                    bell.ring();
-                })
-                .wait()
-                .map_err(|e| zenoh_error("subscribe to the control requests")(e.to_string()))?
-        };
+        let control = subscribe_control(
+            &session,
+            name(RobotChannel::Control),
+            &inbox,
+            &bell,
+            &models,
+        )?;
         // Plain puts on the full key rather than declared publishers: the world's access control
         // checks each put's key, and a publisher's first put declares a numeric alias for it.
         let cmd = name(RobotChannel::Cmd);
@@ -350,6 +229,230 @@ impl ZenohAgentLink {
             _signals: signals,
             _models: models,
         })
+    }
+}
+
+/// Opens robot `robot`'s agent session: a client of the world's router at `endpoint`, logging
+/// in with `login` when given, connecting within `timeout`.
+fn open_session(
+    endpoint: &Endpoint,
+    login: Option<&Login>,
+    robot: usize,
+    timeout: Duration,
+) -> Result<::zenoh::Session, AgentLinkError> {
+    let config = super::client_config(endpoint, timeout, login).map_err(zenoh_error(format!(
+        "configure the connection to {endpoint}"
+    )))?;
+    super::open(config).map_err(|detail| AgentLinkError::Unreachable {
+        endpoint: endpoint.to_string(),
+        robot,
+        detail,
+    })
+}
+
+/// Watches the world's liveliness token of run `run` (with history, so a token declared before
+/// is seen): whether the world is there goes to `inbox`, and each change rings `bell`.
+fn watch_world(
+    session: &::zenoh::Session,
+    run: &RunId,
+    inbox: &Arc<Inbox>,
+    bell: &Arc<Bell>,
+) -> Result<Subscriber<()>, AgentLinkError> {
+    let inbox = Arc::clone(inbox);
+    let bell = Arc::clone(bell);
+    session
+        .liveliness()
+        .declare_subscriber(keys::world_token(run))
+        .history(true)
+        .callback(move |sample| {
+            *inbox
+                .world_present
+                .lock()
+                .unwrap_or_else(|e| e.into_inner()) = sample.kind() == SampleKind::Put;
+            bell.ring();
+        })
+        .wait()
+        .map_err(|e| zenoh_error("watch the world's liveliness")(e.to_string()))
+}
+
+/// Subscribes to robot `robot`'s welcome channel of run `run`: each well-formed welcome (with
+/// the nonce of the greeting it answers) is queued in `inbox` and rings `bell`; malformed ones
+/// are logged and dropped.
+fn subscribe_welcomes(
+    session: &::zenoh::Session,
+    run: &RunId,
+    robot: usize,
+    inbox: &Arc<Inbox>,
+    bell: &Arc<Bell>,
+) -> Result<Subscriber<()>, AgentLinkError> {
+    let welcome_key = lobby_service_name(run, robot, LobbyChannel::Welcome);
+    let inbox = Arc::clone(inbox);
+    let bell = Arc::clone(bell);
+    session
+        .declare_subscriber(welcome_key.clone())
+        .callback(move |sample| {
+            let decoded = message_from_bytes::<WelcomeMsg>("welcome", &sample.payload().to_bytes())
+                .and_then(|msg| Ok((msg.nonce, msg.decode()?)));
+            match decoded {
+                Ok(welcome) => {
+                    inbox.welcomes.push(welcome);
+                    bell.ring();
+                }
+                Err(e) => tracing::warn!("ignoring a malformed welcome: {e}"),
+            }
+        })
+        .wait()
+        .map_err(|e| zenoh_error(format!("subscribe to {welcome_key}"))(e.to_string()))
+}
+
+/// Subscribes to the incarnation's scan channel `key`: each well-formed scan replaces the one
+/// waiting in `inbox` and rings `bell`; malformed ones are logged and dropped.
+fn subscribe_scans(
+    session: &::zenoh::Session,
+    key: String,
+    inbox: &Arc<Inbox>,
+    bell: &Arc<Bell>,
+) -> Result<Subscriber<()>, AgentLinkError> {
+    let inbox = Arc::clone(inbox);
+    let bell = Arc::clone(bell);
+    session
+        .declare_subscriber(key)
+        .callback(move |sample| {
+            match message_from_bytes::<ScanMsg>("scan", &sample.payload().to_bytes()) {
+                Ok(scan) => {
+                    *inbox.scan.lock().unwrap_or_else(|e| e.into_inner()) = Some(scan);
+                    bell.ring();
+                }
+                Err(e) => tracing::warn!("ignoring a malformed scan: {e}"),
+            }
+        })
+        .wait()
+        .map_err(|e| zenoh_error("subscribe to the scans")(e.to_string()))
+}
+
+/// Subscribes to the incarnation's control channel `key`: requests (a swap's model stored in
+/// `models`) are queued in `inbox`, swaps refused on arrival are queued to be answered, and
+/// either rings `bell`; malformed requests are logged and dropped.
+fn subscribe_control(
+    session: &::zenoh::Session,
+    key: String,
+    inbox: &Arc<Inbox>,
+    bell: &Arc<Bell>,
+    models: &Arc<ModelFolder>,
+) -> Result<Subscriber<()>, AgentLinkError> {
+    let inbox = Arc::clone(inbox);
+    let bell = Arc::clone(bell);
+    let models = Arc::clone(models);
+    session
+        .declare_subscriber(key)
+        .callback(move |sample| {
+            let payload = sample.payload().to_bytes();
+            match decode_control(&payload, &models) {
+                Ok(request) => {
+                    tracing::debug!("control request arrived: {request:?}");
+                    if !inbox.control.push(request) {
+                        tracing::warn!("control requests overflowed; dropped the oldest");
+                    }
+                }
+                Err(ControlFailure::Malformed(e)) => {
+                    tracing::warn!("ignoring a malformed control request: {e}");
+                    return;
+                }
+                Err(ControlFailure::Refused { request_id, reason }) => {
+                    inbox.refusals.push((request_id, reason));
+                }
+            }
+            bell.ring();
+        })
+        .wait()
+        .map_err(|e| zenoh_error("subscribe to the control requests")(e.to_string()))
+}
+
+/// What an agent needs while it finds the world and greets it: the session, what the
+/// subscribers filled, and the time it may take (from `started` to `deadline`).
+struct Rendezvous<'a> {
+    session: &'a ::zenoh::Session,
+    inbox: &'a Inbox,
+    bell: &'a Bell,
+    endpoint: &'a Endpoint,
+    run: &'a RunId,
+    robot: usize,
+    started: Instant,
+    deadline: Instant,
+}
+
+impl Rendezvous<'_> {
+    /// Blocks until the bell rings or `until` passes; a SIGINT or SIGTERM is an error.
+    fn wait_until(&self, until: Instant) -> Result<(), AgentLinkError> {
+        let left = until.saturating_duration_since(Instant::now());
+        match self.bell.wait(left) {
+            Ring::Terminated(signal) => Err(AgentLinkError::Terminated(signal)),
+            _ => Ok(()),
+        }
+    }
+
+    /// Waits until the world's liveliness token of the run is seen, or fails at the deadline
+    /// naming the endpoint and run.
+    fn wait_for_world(&self) -> Result<(), AgentLinkError> {
+        while !self.inbox.world_present() {
+            if Instant::now() >= self.deadline {
+                return Err(AgentLinkError::NoWorldAt {
+                    endpoint: self.endpoint.to_string(),
+                    run: self.run.to_string(),
+                    waited_s: self.started.elapsed().as_secs_f64(),
+                });
+            }
+            self.wait_until(self.deadline)?;
+        }
+        Ok(())
+    }
+
+    /// Greets in the robot's lobby as process `pid` proving `secret`, with a fresh nonce every
+    /// [`GREETING_RETRY`], until a welcome answers one of the greetings sent: returns the
+    /// accepted greeting's nonce (the incarnation), or fails on a refusal or at the deadline.
+    fn greet_until_welcomed(&self, secret: &LaunchSecret, pid: u32) -> Result<u64, AgentLinkError> {
+        let (run, robot) = (self.run, self.robot);
+        let hello_key = lobby_service_name(run, robot, LobbyChannel::Hello);
+        let mut sent = Vec::new();
+        loop {
+            let now = Instant::now();
+            if now >= self.deadline {
+                return Err(AgentLinkError::NoWelcome {
+                    robot,
+                    run: run.to_string(),
+                    waited_s: self.started.elapsed().as_secs_f64(),
+                });
+            }
+            let nonce = fresh_nonce()?;
+            let hello = HelloMsg {
+                pid,
+                reserved: 0,
+                nonce,
+                proof: secret.prove(run, robot, pid, nonce),
+            };
+            self.session
+                .put(hello_key.clone(), message_bytes(&hello).to_vec())
+                .congestion_control(CongestionControl::Block)
+                .wait()
+                .map_err(|e| zenoh_error("send the greeting")(e.to_string()))?;
+            sent.push(nonce);
+            let retry_at = (now + GREETING_RETRY).min(self.deadline);
+            while Instant::now() < retry_at {
+                for (nonce, welcome) in self.inbox.welcomes.drain() {
+                    if !sent.contains(&nonce) {
+                        continue;
+                    }
+                    match welcome {
+                        Welcome::Accepted => return Ok(nonce),
+                        Welcome::Refused(reason) => {
+                            return Err(AgentLinkError::Refused { robot, reason });
+                        }
+                    }
+                }
+                self.wait_until(retry_at)?;
+            }
+            tracing::info!("robot {robot}: no answer to the greeting yet; greeting again");
+        }
     }
 }
 

@@ -136,6 +136,164 @@ fn bytes(sample: &Sample) -> std::borrow::Cow<'_, [u8]> {
     sample.payload().to_bytes()
 }
 
+/// Model bytes that came with swap requests, by request id, until forwarded to the agent.
+type SwapModels = Arc<Mutex<HashMap<u64, Vec<u8>>>>;
+
+impl Lobby {
+    /// Declares robot `robot`'s lobby of run `run`: the subscriber queueing its hellos (ringing
+    /// `bell`) and the publisher of its welcomes.
+    fn declare(
+        session: &::zenoh::Session,
+        run: &RunId,
+        robot: usize,
+        bell: &Arc<Bell>,
+    ) -> Result<Lobby, WorldLinkError> {
+        let hellos = Arc::new(Queue::new(HELLO_QUEUE));
+        let subscriber = queue_subscriber(
+            session,
+            lobby_service_name(run, robot, LobbyChannel::Hello),
+            bell,
+            &hellos,
+            |sample| {
+                let msg: HelloMsg =
+                    message_from_bytes("hello", &bytes(sample)).map_err(|e| e.to_string())?;
+                Ok(Hello {
+                    pid: msg.pid,
+                    nonce: msg.nonce,
+                    proof: msg.proof,
+                })
+            },
+        )?;
+        let welcome = publisher(
+            session,
+            lobby_service_name(run, robot, LobbyChannel::Welcome),
+            false,
+        )?;
+        Ok(Lobby {
+            hellos,
+            _subscriber: subscriber,
+            welcome,
+        })
+    }
+}
+
+/// Files one swap request's `payload`: a well-formed request goes to `requests` (its model
+/// bytes, when they follow, to `models`, which keeps at most [`SWAP_QUEUE`] of them), one whose
+/// model bytes are damaged to `refusals`. Returns false for a malformed request (logged and
+/// dropped), which is not worth a ring.
+fn file_swap_request(
+    payload: &[u8],
+    requests: &Queue<SwapRequest>,
+    refusals: &Queue<SwapReply>,
+    models: &Mutex<HashMap<u64, Vec<u8>>>,
+) -> bool {
+    let size = std::mem::size_of::<SwapRequestMsg>();
+    let head = payload.get(..size).unwrap_or(payload);
+    let request = match message_from_bytes::<SwapRequestMsg>("swap request", head)
+        .and_then(|msg| msg.decode())
+    {
+        Ok(request) => request,
+        Err(e) => {
+            tracing::warn!("ignoring a malformed swap request: {e}");
+            return false;
+        }
+    };
+    match split_model(payload, size) {
+        Ok((_, Some(model))) => {
+            let mut models = models.lock().unwrap_or_else(|e| e.into_inner());
+            if models.len() >= SWAP_QUEUE {
+                // Requests forwarded long ago whose agent never took them.
+                let oldest = models.keys().min().copied();
+                if let Some(oldest) = oldest {
+                    models.remove(&oldest);
+                }
+            }
+            models.insert(request.request_id, model.to_vec());
+            drop(models);
+            requests.push(request);
+        }
+        Ok((_, None)) => {
+            requests.push(request);
+        }
+        Err(e) => {
+            refusals.push(SwapReply {
+                request_id: request.request_id,
+                robot: request.robot,
+                outcome: formation_proto::wire::SwapOutcome::Refused {
+                    reason: e.to_string(),
+                },
+            });
+        }
+    }
+    true
+}
+
+/// Subscribes to run `run`'s swap requests: each is filed ([`file_swap_request`]) and a
+/// well-formed one rings `bell`.
+fn subscribe_swap_requests(
+    session: &::zenoh::Session,
+    run: &RunId,
+    bell: &Arc<Bell>,
+    requests: &Arc<Queue<SwapRequest>>,
+    refusals: &Arc<Queue<SwapReply>>,
+    models: &SwapModels,
+) -> Result<Subscriber<()>, WorldLinkError> {
+    let key = swap_service_name(run, SwapChannel::Request);
+    let (bell, requests, refusals, models) = (
+        Arc::clone(bell),
+        Arc::clone(requests),
+        Arc::clone(refusals),
+        Arc::clone(models),
+    );
+    session
+        .declare_subscriber(key.clone())
+        .callback(move |sample| {
+            let payload = bytes(&sample);
+            if file_swap_request(&payload, &requests, &refusals, &models) {
+                bell.ring();
+            }
+        })
+        .wait()
+        .map_err(|e| zenoh_error(format!("subscribe to {key}"))(e.to_string()))
+}
+
+/// Watches the agents' liveliness tokens of run `run` (with history): a token that comes takes
+/// its agent off the gone list; one that goes marks its agent gone and dead, and rings `bell`.
+fn watch_agents(
+    session: &::zenoh::Session,
+    run: &RunId,
+    liveness: &Arc<Mutex<Liveness>>,
+    bell: &Arc<Bell>,
+) -> Result<Subscriber<()>, WorldLinkError> {
+    let liveness = Arc::clone(liveness);
+    let bell = Arc::clone(bell);
+    let run = run.clone();
+    session
+        .liveliness()
+        .declare_subscriber(keys::agent_tokens(&run))
+        .history(true)
+        .callback(move |sample| {
+            let Some((robot, _, pid)) = keys::parse_agent_token(&run, sample.key_expr().as_str())
+            else {
+                return;
+            };
+            let mut liveness = liveness.lock().unwrap_or_else(|e| e.into_inner());
+            match sample.kind() {
+                SampleKind::Put => {
+                    liveness.gone.remove(&(robot, pid));
+                }
+                SampleKind::Delete => {
+                    liveness.gone.insert((robot, pid));
+                    liveness.dead.push((robot, pid));
+                    drop(liveness);
+                    bell.ring();
+                }
+            }
+        })
+        .wait()
+        .map_err(|e| zenoh_error("watch the agents' liveliness")(e.to_string()))
+}
+
 impl ZenohWorldLink {
     /// Listens on `listen` as a Zenoh router (checking logins and key permissions when `access`
     /// is given), declares every robot's lobby and the swap channel, and then the world's
@@ -159,123 +317,22 @@ impl ZenohWorldLink {
             .map_err(|e| zenoh_error("watch for SIGINT and SIGTERM")(e.to_string()))?;
         let mut lobbies = Vec::with_capacity(n_robots);
         for robot in 0..n_robots {
-            let hellos = Arc::new(Queue::new(HELLO_QUEUE));
-            let subscriber = queue_subscriber(
-                &session,
-                lobby_service_name(run, robot, LobbyChannel::Hello),
-                &bell,
-                &hellos,
-                |sample| {
-                    let msg: HelloMsg =
-                        message_from_bytes("hello", &bytes(sample)).map_err(|e| e.to_string())?;
-                    Ok(Hello {
-                        pid: msg.pid,
-                        nonce: msg.nonce,
-                        proof: msg.proof,
-                    })
-                },
-            )?;
-            let welcome = publisher(
-                &session,
-                lobby_service_name(run, robot, LobbyChannel::Welcome),
-                false,
-            )?;
-            lobbies.push(Lobby {
-                hellos,
-                _subscriber: subscriber,
-                welcome,
-            });
+            lobbies.push(Lobby::declare(&session, run, robot, &bell)?);
         }
         let swap_requests = Arc::new(Queue::new(SWAP_QUEUE));
         let swap_refusals = Arc::new(Queue::new(SWAP_QUEUE));
-        let swap_models: Arc<Mutex<HashMap<u64, Vec<u8>>>> = Arc::default();
-        let swap_subscriber = {
-            let key = swap_service_name(run, SwapChannel::Request);
-            let (bell, requests, refusals, models) = (
-                Arc::clone(&bell),
-                Arc::clone(&swap_requests),
-                Arc::clone(&swap_refusals),
-                Arc::clone(&swap_models),
-            );
-            session
-                .declare_subscriber(key.clone())
-                .callback(move |sample| {
-                    let payload = bytes(&sample);
-                    let size = std::mem::size_of::<SwapRequestMsg>();
-                    let head = payload.get(..size).unwrap_or(&payload);
-                    let request = match message_from_bytes::<SwapRequestMsg>("swap request", head)
-                        .and_then(|msg| msg.decode())
-                    {
-                        Ok(request) => request,
-                        Err(e) => {
-                            tracing::warn!("ignoring a malformed swap request: {e}");
-                            return;
-                        }
-                    };
-                    match split_model(&payload, size) {
-                        Ok((_, Some(model))) => {
-                            let mut models = models.lock().unwrap_or_else(|e| e.into_inner());
-                            if models.len() >= SWAP_QUEUE {
-                                // Requests forwarded long ago whose agent never took them.
-                                let oldest = models.keys().min().copied();
-                                if let Some(oldest) = oldest {
-                                    models.remove(&oldest);
-                                }
-                            }
-                            models.insert(request.request_id, model.to_vec());
-                            drop(models);
-                            requests.push(request);
-                        }
-                        Ok((_, None)) => {
-                            requests.push(request);
-                        }
-                        Err(e) => {
-                            refusals.push(SwapReply {
-                                request_id: request.request_id,
-                                robot: request.robot,
-                                outcome: formation_proto::wire::SwapOutcome::Refused {
-                                    reason: e.to_string(),
-                                },
-                            });
-                        }
-                    }
-                    bell.ring();
-                })
-                .wait()
-                .map_err(|e| zenoh_error(format!("subscribe to {key}"))(e.to_string()))?
-        };
+        let swap_models: SwapModels = Arc::default();
+        let swap_subscriber = subscribe_swap_requests(
+            &session,
+            run,
+            &bell,
+            &swap_requests,
+            &swap_refusals,
+            &swap_models,
+        )?;
         let swap_replies = publisher(&session, swap_service_name(run, SwapChannel::Reply), false)?;
         let liveness = Arc::new(Mutex::new(Liveness::default()));
-        let agents = {
-            let liveness = Arc::clone(&liveness);
-            let bell = Arc::clone(&bell);
-            let run = run.clone();
-            session
-                .liveliness()
-                .declare_subscriber(keys::agent_tokens(&run))
-                .history(true)
-                .callback(move |sample| {
-                    let Some((robot, _, pid)) =
-                        keys::parse_agent_token(&run, sample.key_expr().as_str())
-                    else {
-                        return;
-                    };
-                    let mut liveness = liveness.lock().unwrap_or_else(|e| e.into_inner());
-                    match sample.kind() {
-                        SampleKind::Put => {
-                            liveness.gone.remove(&(robot, pid));
-                        }
-                        SampleKind::Delete => {
-                            liveness.gone.insert((robot, pid));
-                            liveness.dead.push((robot, pid));
-                            drop(liveness);
-                            bell.ring();
-                        }
-                    }
-                })
-                .wait()
-                .map_err(|e| zenoh_error("watch the agents' liveliness")(e.to_string()))?
-        };
+        let agents = watch_agents(&session, run, &liveness, &bell)?;
         let token = session
             .liveliness()
             .declare_token(keys::world_token(run))
