@@ -173,7 +173,74 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
     let keep_n = args
         .save_trajectories
         .unwrap_or(if runs <= 5 { runs } else { 0 });
-    let keep = move |i: usize| i < keep_n;
+    let plan = EvalRuns {
+        scenario: &scenario,
+        seed,
+        runs,
+        keep_n,
+    };
+    let team = eval_team(args, &scenario)?;
+    let bar = progress_bar(runs, "eval");
+    let started = Instant::now();
+    let results: Vec<RunResult> = if args.processes {
+        results_over_processes(args, &plan, &team.models, &network, &bar)?
+    } else {
+        results_in_process(args, &plan, &team.models, &bar)?
+    };
+    bar.finish_and_clear();
+    let elapsed = started.elapsed().as_secs_f64();
+    let per_run: Vec<RunMetrics> = results.iter().map(|r| r.metrics.clone()).collect();
+    let controller = match args.controller {
+        ControllerKind::Expert => "expert",
+        ControllerKind::Policy => "policy",
+    };
+    let mut out = eval_output(
+        controller,
+        team.model_ids,
+        scenario.name(),
+        Some(seed),
+        per_run,
+    );
+    out.team_size = team.team_size;
+    eprintln!(
+        "evaluated {runs} runs in {elapsed:.1} s ({:.2} s per run)",
+        elapsed / runs as f64
+    );
+    Ok((out, results))
+}
+
+/// The runs an evaluation plays.
+struct EvalRuns<'a> {
+    /// The scenario.
+    scenario: &'a Scenario,
+    /// The base seed.
+    seed: u64,
+    /// How many runs.
+    runs: usize,
+    /// The first `keep_n` runs keep their trajectories.
+    keep_n: usize,
+}
+
+impl EvalRuns<'_> {
+    /// Whether run `i` keeps its trajectory.
+    fn keep(&self, i: usize) -> bool {
+        i < self.keep_n
+    }
+}
+
+/// The team an evaluation drives: no models for the expert, else each robot's model.
+struct EvalTeam {
+    /// Each robot's model file (empty for the expert).
+    models: Vec<PathBuf>,
+    /// Each robot's model id, for the output.
+    model_ids: Vec<String>,
+    /// The team-size notes of the models, for the output.
+    team_size: Vec<formation_schema::ModelTeamSize>,
+}
+
+/// Resolves and checks the team's models (printing their team-size notes); refuses
+/// `--processes` with the expert.
+fn eval_team(args: &EvalArgs, scenario: &Scenario) -> anyhow::Result<EvalTeam> {
     let mut team_size = Vec::new();
     let (models, model_ids) = match args.controller {
         ControllerKind::Expert => {
@@ -186,86 +253,97 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         }
         ControllerKind::Policy => {
             let default = paths::resolve_model(args.model.as_deref())?;
-            let models = resolved_models_per_robot(&scenario, &default)?;
-            let checked = checked_models(&models, &scenario)?;
+            let models = resolved_models_per_robot(scenario, &default)?;
+            let checked = checked_models(&models, scenario)?;
             team_size = team_sizes_of(&checked, scenario.n_robots());
             print_team_size_notes(&team_size);
             (models, checked.into_iter().map(|(id, _)| id).collect())
         }
     };
-    let bar = progress_bar(runs, "eval");
-    let started = Instant::now();
-    let results: Vec<RunResult> = if args.processes {
-        let default = models.first().cloned().context("no robots")?;
-        let evaluated = crate::launch::eval_over_processes(
-            &scenario,
-            seed,
-            runs,
-            &default,
-            crate::launch::ClockMode::Lockstep,
-            &network,
-            &mut |n| bar.set_position(n as u64),
+    Ok(EvalTeam {
+        models,
+        model_ids,
+        team_size,
+    })
+}
+
+/// `--processes`: plays the runs with every robot's agent in its own process (lockstep), writing
+/// the latency profile to `--out`.
+fn results_over_processes(
+    args: &EvalArgs,
+    plan: &EvalRuns<'_>,
+    models: &[PathBuf],
+    network: &crate::launch::NetworkFlags,
+    bar: &indicatif::ProgressBar,
+) -> anyhow::Result<Vec<RunResult>> {
+    let default = models.first().cloned().context("no robots")?;
+    let evaluated = crate::launch::eval_over_processes(
+        plan.scenario,
+        plan.seed,
+        plan.runs,
+        &default,
+        crate::launch::ClockMode::Lockstep,
+        network,
+        &mut |n| bar.set_position(n as u64),
+    )?;
+    if let Some(dir) = &args.out {
+        // The report shows it as the latency profile.
+        paths::write_atomic(
+            &dir.join("profile.json"),
+            &formation_schema::to_json_pretty(&evaluated.latency)?,
         )?;
-        if let Some(dir) = &args.out {
-            // The report shows it as the latency profile.
-            paths::write_atomic(
-                &dir.join("profile.json"),
-                &formation_schema::to_json_pretty(&evaluated.latency)?,
-            )?;
-        }
-        let cfg = MetricsConfig::default();
-        evaluated
-            .trajectories
-            .into_iter()
-            .enumerate()
-            .map(|(index, traj)| RunResult {
-                index,
-                metrics: run_metrics(&traj, scenario.run_spec(seed, index).ticks(), &cfg),
-                trajectory: keep(index).then_some(traj),
-                clock: crate::launch::ClockMode::Lockstep.as_str(),
-            })
-            .collect()
-    } else {
-        let driver = match args.controller {
-            ControllerKind::Expert => Driver::Expert(ExpertGains::default()),
-            ControllerKind::Policy => Driver::Policy {
-                models: models.clone(),
-            },
-        };
-        with_threads(args.threads, || {
-            formation_learning::evaluate_runs(
-                &scenario,
-                seed,
-                runs,
-                &driver,
-                &MetricsConfig::default(),
-                &keep,
-                &|n| bar.set_position(n as u64),
-            )
-        })??
+    }
+    let cfg = MetricsConfig::default();
+    Ok(evaluated
+        .trajectories
         .into_iter()
-        .map(|r| RunResult {
-            index: r.index,
-            metrics: r.metrics,
-            trajectory: r.trajectory,
-            clock: "in-process",
+        .enumerate()
+        .map(|(index, traj)| RunResult {
+            index,
+            metrics: run_metrics(
+                &traj,
+                plan.scenario.run_spec(plan.seed, index).ticks(),
+                &cfg,
+            ),
+            trajectory: plan.keep(index).then_some(traj),
+            clock: crate::launch::ClockMode::Lockstep.as_str(),
         })
-        .collect()
+        .collect())
+}
+
+/// Plays the runs in this process (on `--threads` threads) with the expert or the models.
+fn results_in_process(
+    args: &EvalArgs,
+    plan: &EvalRuns<'_>,
+    models: &[PathBuf],
+    bar: &indicatif::ProgressBar,
+) -> anyhow::Result<Vec<RunResult>> {
+    let driver = match args.controller {
+        ControllerKind::Expert => Driver::Expert(ExpertGains::default()),
+        ControllerKind::Policy => Driver::Policy {
+            models: models.to_vec(),
+        },
     };
-    bar.finish_and_clear();
-    let elapsed = started.elapsed().as_secs_f64();
-    let per_run: Vec<RunMetrics> = results.iter().map(|r| r.metrics.clone()).collect();
-    let controller = match args.controller {
-        ControllerKind::Expert => "expert",
-        ControllerKind::Policy => "policy",
-    };
-    let mut out = eval_output(controller, model_ids, scenario.name(), Some(seed), per_run);
-    out.team_size = team_size;
-    eprintln!(
-        "evaluated {runs} runs in {elapsed:.1} s ({:.2} s per run)",
-        elapsed / runs as f64
-    );
-    Ok((out, results))
+    let keep = |i: usize| plan.keep(i);
+    Ok(with_threads(args.threads, || {
+        formation_learning::evaluate_runs(
+            plan.scenario,
+            plan.seed,
+            plan.runs,
+            &driver,
+            &MetricsConfig::default(),
+            &keep,
+            &|n| bar.set_position(n as u64),
+        )
+    })??
+    .into_iter()
+    .map(|r| RunResult {
+        index: r.index,
+        metrics: r.metrics,
+        trajectory: r.trajectory,
+        clock: "in-process",
+    })
+    .collect())
 }
 
 /// `formation eval --robots ...`: the scaling table over team sizes.

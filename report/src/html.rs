@@ -237,6 +237,28 @@ const CHECK_SCRIPT: &str = r#"
 /// Renders the page.
 pub fn render_page(page: &ReportPage) -> String {
     let mut html = String::with_capacity(1 << 20);
+    write_head(&mut html, page, &nav_sections(page));
+    write_table(&mut html, page);
+    if let Some(fig9) = &page.fig9 {
+        write_fig9(&mut html, page, fig9);
+    }
+    if !page.runs.is_empty() || !page.run_notes.is_empty() {
+        write_runs(&mut html, page);
+    }
+    if !page.scaling.is_empty() {
+        html.push_str("<section id=\"scaling\">\n<h2>Scaling over team sizes</h2>\n");
+        for section in &page.scaling {
+            write_scaling(&mut html, section);
+        }
+        html.push_str("</section>\n");
+    }
+    write_figure_sections(&mut html, page);
+    write_inputs_and_footer(&mut html, page);
+    html
+}
+
+/// The navigation's (anchor, title) of every section the page has.
+fn nav_sections(page: &ReportPage) -> Vec<(&'static str, &'static str)> {
     let mut sections: Vec<(&str, &str)> = vec![("table-1", "Table I")];
     if page.fig9.is_some() {
         sections.push(("fig-9", "Statistics"));
@@ -254,7 +276,12 @@ pub fn render_page(page: &ReportPage) -> String {
         sections.push(("latency", "Latency"));
     }
     sections.push(("inputs", "Inputs"));
+    sections
+}
 
+/// The document's head (policy, check script, style) and the page header with its navigation,
+/// up to the opening of `<main>`.
+fn write_head(html: &mut String, page: &ReportPage, sections: &[(&str, &str)]) {
     html.push_str("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n");
     html.push_str("<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n");
     html.push_str(
@@ -272,37 +299,36 @@ pub fn render_page(page: &ReportPage) -> String {
         escape(&page.source_dir)
     );
     html.push_str("<nav>");
-    for (anchor, title) in &sections {
+    for (anchor, title) in sections {
         let _ = write!(html, "<a href=\"#{anchor}\">{title}</a>");
     }
     html.push_str("</nav>\n</div></header>\n<main class=\"wrap\">\n");
+}
 
-    write_table(&mut html, page);
-    if let Some(fig9) = &page.fig9 {
-        html.push_str("<section id=\"fig-9\">\n<h2>Statistics over successful runs (cf. paper Fig. 9)</h2>\n<div class=\"card\">\n");
-        write_captioned(&mut html, fig9);
-        if !page.fig9_note.is_empty() {
-            let _ = writeln!(html, "<p class=\"note\">{}</p>", escape(&page.fig9_note));
-        }
-        html.push_str("</div>\n</section>\n");
+/// The statistics section: Fig. 9 and its note.
+fn write_fig9(html: &mut String, page: &ReportPage, fig9: &CaptionedFigure) {
+    html.push_str("<section id=\"fig-9\">\n<h2>Statistics over successful runs (cf. paper Fig. 9)</h2>\n<div class=\"card\">\n");
+    write_captioned(html, fig9);
+    if !page.fig9_note.is_empty() {
+        let _ = writeln!(html, "<p class=\"note\">{}</p>", escape(&page.fig9_note));
     }
-    if !page.runs.is_empty() || !page.run_notes.is_empty() {
-        html.push_str("<section id=\"runs\">\n<h2>Case runs (cf. paper Figs. 6–8)</h2>\n");
-        for run in &page.runs {
-            write_run(&mut html, run);
-        }
-        for note in &page.run_notes {
-            let _ = writeln!(html, "<p class=\"note\">{}</p>", escape(note));
-        }
-        html.push_str("</section>\n");
+    html.push_str("</div>\n</section>\n");
+}
+
+/// The case runs section: every run, then the notes on runs.
+fn write_runs(html: &mut String, page: &ReportPage) {
+    html.push_str("<section id=\"runs\">\n<h2>Case runs (cf. paper Figs. 6–8)</h2>\n");
+    for run in &page.runs {
+        write_run(html, run);
     }
-    if !page.scaling.is_empty() {
-        html.push_str("<section id=\"scaling\">\n<h2>Scaling over team sizes</h2>\n");
-        for section in &page.scaling {
-            write_scaling(&mut html, section);
-        }
-        html.push_str("</section>\n");
+    for note in &page.run_notes {
+        let _ = writeln!(html, "<p class=\"note\">{}</p>", escape(note));
     }
+    html.push_str("</section>\n");
+}
+
+/// The training and latency sections, each only when it has figures.
+fn write_figure_sections(html: &mut String, page: &ReportPage) {
     for (anchor, title, figures) in [
         ("training", "Training (cf. paper Fig. 5)", &page.training),
         (
@@ -321,11 +347,15 @@ pub fn render_page(page: &ReportPage) -> String {
         );
         for figure in figures {
             html.push_str("<div class=\"card\">\n");
-            write_captioned(&mut html, figure);
+            write_captioned(html, figure);
             html.push_str("</div>\n");
         }
         html.push_str("</section>\n");
     }
+}
+
+/// The inputs section, the footer and the end of the document.
+fn write_inputs_and_footer(html: &mut String, page: &ReportPage) {
     html.push_str("<section id=\"inputs\">\n<h2>Inputs</h2>\n<ul class=\"inputs\">\n");
     for input in &page.inputs {
         let _ = writeln!(html, "<li><code>{}</code></li>", escape(input));
@@ -335,7 +365,6 @@ pub fn render_page(page: &ReportPage) -> String {
         "<footer>Written by <code>formation report</code>. Self-contained: every figure is inline SVG and the page loads nothing else.</footer>\n",
     );
     html.push_str("</body>\n</html>\n");
-    html
 }
 
 fn write_table(html: &mut String, page: &ReportPage) {

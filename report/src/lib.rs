@@ -38,7 +38,7 @@ use formation_proto::files::WriteError;
 
 use figures::{BoxGroup, BoxPanel, Figure};
 use html::{CaptionedFigure, PlacedFigure, ReportPage, RunSection, TableEntry, paper};
-use input::{EvalData, Inputs, RunData};
+use input::{EvalData, Inputs, RunData, Trajectory};
 
 /// What [`build_report`] wrote.
 #[derive(Debug, Clone, PartialEq)]
@@ -123,7 +123,22 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
         source_dir: inputs.root.display().to_string(),
         ..ReportPage::default()
     };
+    add_table_and_statistics(&mut page, inputs, &mut numbering)?;
+    add_runs(&mut page, inputs, &mut numbering)?;
+    add_scalings(&mut page, inputs, &mut numbering)?;
+    add_training(&mut page, inputs, &mut numbering)?;
+    add_latency(&mut page, inputs, &mut numbering)?;
+    page.inputs = input_list(inputs);
+    Ok((page, numbering.figures))
+}
 
+/// Table I's rows, and Fig. 9's box plots over the multi-run evaluations (over every evaluation
+/// when none has more than one run).
+fn add_table_and_statistics(
+    page: &mut ReportPage,
+    inputs: &Inputs,
+    numbering: &mut FigureNumbering,
+) -> Result<(), ReportError> {
     let mut table_evals: Vec<&EvalData> = inputs.evals.iter().collect();
     // Multi-run evaluations (Table I proper) first, then the single-run cases.
     table_evals.sort_by_key(|e| (e.table.runs <= 1, e.name.clone()));
@@ -176,10 +191,18 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
             }
         );
     }
+    Ok(())
+}
 
+/// One section per drawn run of every evaluation (Figs. 6-8), and notes on the runs not drawn.
+fn add_runs(
+    page: &mut ReportPage,
+    inputs: &Inputs,
+    numbering: &mut FigureNumbering,
+) -> Result<(), ReportError> {
     for eval in &inputs.evals {
         for run in &eval.runs {
-            page.runs.push(run_section(eval, run, &mut numbering)?);
+            page.runs.push(run_section(eval, run, numbering)?);
         }
         if eval.runs_not_drawn > 0 {
             page.run_notes.push(format!(
@@ -196,7 +219,15 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
                 .to_owned(),
         );
     }
+    Ok(())
+}
 
+/// One section per scaling table: its rows and its figure.
+fn add_scalings(
+    page: &mut ReportPage,
+    inputs: &Inputs,
+    numbering: &mut FigureNumbering,
+) -> Result<(), ReportError> {
     for (k, scaling) in inputs.scalings.iter().enumerate() {
         let figure = figures::scaling_figure(&format!("scaling-{}", k + 1), &scaling.table)?;
         let number = numbering.take();
@@ -212,6 +243,15 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
             },
         });
     }
+    Ok(())
+}
+
+/// One figure per training loss curve (cf. Fig. 5).
+fn add_training(
+    page: &mut ReportPage,
+    inputs: &Inputs,
+    numbering: &mut FigureNumbering,
+) -> Result<(), ReportError> {
     for (k, curve) in inputs.loss_curves.iter().enumerate() {
         let figure = figures::loss_figure(&format!("training-loss-{}", k + 1), curve)?;
         let number = numbering.take();
@@ -223,6 +263,15 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
             ),
         });
     }
+    Ok(())
+}
+
+/// One figure per latency profile.
+fn add_latency(
+    page: &mut ReportPage,
+    inputs: &Inputs,
+    numbering: &mut FigureNumbering,
+) -> Result<(), ReportError> {
     for (k, profile) in inputs.profiles.iter().enumerate() {
         let figure = figures::latency_figure(
             &format!("latency-{}", k + 1),
@@ -239,8 +288,13 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
             ),
         });
     }
+    Ok(())
+}
 
-    page.inputs = inputs
+/// Every input file, relative to the root: evaluations with their run logs, loss curves,
+/// profiles, scaling tables.
+fn input_list(inputs: &Inputs) -> Vec<String> {
+    inputs
         .evals
         .iter()
         .flat_map(|e| std::iter::once(&e.source).chain(e.runs.iter().map(|r| &r.source)))
@@ -248,8 +302,7 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
         .chain(inputs.profiles.iter().map(|p| &p.source))
         .chain(inputs.scalings.iter().map(|s| &s.source))
         .map(|path| relative(&inputs.root, path))
-        .collect();
-    Ok((page, numbering.figures))
+        .collect()
 }
 
 /// `; 3 runs, 1200 commands used, braked: late 3` from what a profile records.
@@ -492,6 +545,7 @@ fn paper_figure(scenario: &str) -> Option<&'static str> {
     }
 }
 
+/// A run's section (cf. Figs. 6-8): its three panels, its caption and its facts.
 fn run_section(
     eval: &EvalData,
     run: &RunData,
@@ -500,7 +554,49 @@ fn run_section(
     let traj = &run.trajectory;
     let stem = format!("{}-run{}", sanitize(&eval.name), run.index);
     let number = numbering.take();
-    let panels = vec![
+    let panels = run_panels(&stem, traj, numbering)?;
+    let mut caption = run_caption(eval, run, number);
+    let duration =
+        traj.times.last().copied().unwrap_or(0.0) - traj.times.first().copied().unwrap_or(0.0);
+    let mut facts = run_facts(eval, run, duration);
+    if !run.complete {
+        let planned = run
+            .planned_ticks
+            .map(|ticks| format!(" of {:.1} s", ticks as f64 * traj.dt))
+            .unwrap_or_default();
+        let reason = run
+            .stop_reason
+            .as_deref()
+            .map(|r| format!(": {r}"))
+            .unwrap_or_default();
+        facts.insert(
+            0,
+            (
+                "complete".to_owned(),
+                format!("no, stopped early after {duration:.1} s{planned}{reason}"),
+            ),
+        );
+        caption.push_str(&format!(
+            " Incomplete run: it stopped early after {duration:.1} s{planned}{reason}; its metrics are over the ticks it played."
+        ));
+    }
+    Ok(RunSection {
+        heading: format!("{} · run {}", eval.name, run.index),
+        anchor: format!("run-{stem}"),
+        facts,
+        panels,
+        caption,
+        incomplete: !run.complete,
+    })
+}
+
+/// A run's panels: (a) the errors, (b) the wheel commands, (c) the trajectories.
+fn run_panels(
+    stem: &str,
+    traj: &Trajectory,
+    numbering: &mut FigureNumbering,
+) -> Result<Vec<PlacedFigure>, ReportError> {
+    Ok(vec![
         numbering.place(
             figures::errors_figure(&format!("{stem}-errors"), traj)?,
             "Formation and orientation error over time",
@@ -516,7 +612,12 @@ fn run_section(
                 figures::snapshot_every_s(traj)
             ),
         ),
-    ];
+    ])
+}
+
+/// The caption of a run's figure `number`, before any note on an incomplete run.
+fn run_caption(eval: &EvalData, run: &RunData, number: usize) -> String {
+    let traj = &run.trajectory;
     let team_note = if traj.neighbours == formation_proto::NeighbourRule::AllPairs {
         String::new()
     } else {
@@ -531,17 +632,21 @@ fn run_section(
     let cf = paper_figure(&eval.scenario)
         .map(|f| format!(" (cf. paper {f})"))
         .unwrap_or_default();
-    let caption = format!(
+    format!(
         "Figure {number}: {} run {}{cf} with {heading} and desired formation distance d* = {} m: (a) formation and orientation error; (b) robot control (left and right wheel); (c) robot trajectories, the triangles and dashed lines showing the robots and the formation every {} s.{team_note}",
         eval.name,
         run.index,
         figures::trim_number(traj.d_star),
         figures::snapshot_every_s(traj),
-    );
-    let duration =
-        traj.times.last().copied().unwrap_or(0.0) - traj.times.first().copied().unwrap_or(0.0);
+    )
+}
+
+/// A run's facts (label, value), before any note on an incomplete run; `duration` \[s\] is the
+/// time it covers.
+fn run_facts(eval: &EvalData, run: &RunData, duration: f64) -> Vec<(String, String)> {
+    let traj = &run.trajectory;
     let yes_no = |b: bool| if b { "yes" } else { "no" }.to_owned();
-    let facts = vec![
+    vec![
         (
             "scenario".to_owned(),
             if eval.scenario.is_empty() {
@@ -580,38 +685,7 @@ fn run_section(
             }),
         ),
         ("collisions".to_owned(), run.scores.collisions.to_string()),
-    ];
-    let mut facts = facts;
-    let mut caption = caption;
-    if !run.complete {
-        let planned = run
-            .planned_ticks
-            .map(|ticks| format!(" of {:.1} s", ticks as f64 * traj.dt))
-            .unwrap_or_default();
-        let reason = run
-            .stop_reason
-            .as_deref()
-            .map(|r| format!(": {r}"))
-            .unwrap_or_default();
-        facts.insert(
-            0,
-            (
-                "complete".to_owned(),
-                format!("no, stopped early after {duration:.1} s{planned}{reason}"),
-            ),
-        );
-        caption.push_str(&format!(
-            " Incomplete run: it stopped early after {duration:.1} s{planned}{reason}; its metrics are over the ticks it played."
-        ));
-    }
-    Ok(RunSection {
-        heading: format!("{} · run {}", eval.name, run.index),
-        anchor: format!("run-{stem}"),
-        facts,
-        panels,
-        caption,
-        incomplete: !run.complete,
-    })
+    ]
 }
 
 /// `constant desired orientation φ* = 3.76 rad` or `time-varying desired orientation φ*(t) from

@@ -509,29 +509,61 @@ pub fn read_journal(path: &Path) -> Result<(JournalHeader, Trajectory), RunLogEr
         source,
     };
     let file = File::open(path).map_err(read_error)?;
-    let mut reader = BufReader::new(file.take(MAX_FILE_BYTES + 1));
-    let mut total: u64 = 0;
-    let mut line = Vec::new();
+    let mut lines = JournalLines {
+        reader: BufReader::new(file.take(MAX_FILE_BYTES + 1)),
+        line: Vec::new(),
+        path,
+        total: 0,
+    };
+    let header = read_journal_header(&mut lines)?;
+    let trajectory = read_journal_samples(&mut lines, &header)?;
+    Ok((header, trajectory))
+}
 
-    let Some(whole) = next_line(&mut reader, &mut line, path, &mut total)? else {
+/// A journal read line by line: the reader, the line last read and the bytes read so far.
+struct JournalLines<'a, R> {
+    reader: R,
+    line: Vec<u8>,
+    path: &'a Path,
+    total: u64,
+}
+
+impl<R: BufRead> JournalLines<'_, R> {
+    /// Reads the next line into `self.line`, as [`next_line`] does.
+    fn next(&mut self) -> Result<Option<bool>, RunLogError> {
+        next_line(&mut self.reader, &mut self.line, self.path, &mut self.total)
+    }
+}
+
+/// The error for line `line_no` of the journal at `path` that does not parse.
+fn journal_parse_error(
+    path: &Path,
+    line_no: usize,
+) -> impl FnOnce(serde_json::Error) -> RunLogError {
+    move |source| RunLogError::Parse {
+        path: path.to_path_buf(),
+        line: Some(line_no),
+        source,
+    }
+}
+
+/// Reads and checks a journal's first line: a journal of this version, and its header.
+fn read_journal_header<R: BufRead>(
+    lines: &mut JournalLines<'_, R>,
+) -> Result<JournalHeader, RunLogError> {
+    let path = lines.path;
+    let Some(whole) = lines.next()? else {
         return Err(RunLogError::NotAJournal {
             path: path.to_path_buf(),
         });
     };
-    let parse_error = |line_no: usize| {
-        move |source| RunLogError::Parse {
-            path: path.to_path_buf(),
-            line: Some(line_no),
-            source,
-        }
-    };
-    let probe: FormatProbe = serde_json::from_slice(&line).map_err(|e| {
+    let probe: FormatProbe = serde_json::from_slice(&lines.line).map_err(|e| {
         if whole {
             RunLogError::NotAJournal {
                 path: path.to_path_buf(),
             }
         } else {
-            parse_error(1)(e)
+            journal_parse_error(path, 1)(e)
         }
     })?;
     if probe.format.as_deref() != Some(JOURNAL_FORMAT) {
@@ -553,8 +585,14 @@ pub fn read_journal(path: &Path) -> Result<(JournalHeader, Trajectory), RunLogEr
             });
         }
     }
-    let header: JournalHeader = serde_json::from_slice(&line).map_err(parse_error(1))?;
+    serde_json::from_slice(&lines.line).map_err(journal_parse_error(path, 1))
+}
 
+/// Reads the samples after the header into a trajectory, up to the last whole line.
+fn read_journal_samples<R: BufRead>(
+    lines: &mut JournalLines<'_, R>,
+    header: &JournalHeader,
+) -> Result<Trajectory, RunLogError> {
     let mut trajectory = Trajectory {
         dt: header.dt,
         d_star: header.d_star,
@@ -568,62 +606,81 @@ pub fn read_journal(path: &Path) -> Result<(JournalHeader, Trajectory), RunLogEr
         collisions: Vec::new(),
     };
     let mut line_no = 1;
-    while let Some(whole) = next_line(&mut reader, &mut line, path, &mut total)? {
+    while let Some(whole) = lines.next()? {
         line_no += 1;
         // A line that parses is whole even without its newline (a JSON object ends with `}`).
-        let sample: JournalSample = match serde_json::from_slice(&line) {
+        let sample: JournalSample = match serde_json::from_slice(&lines.line) {
             Ok(sample) => sample,
             // A torn last line: the writer was stopped in the middle of it.
             Err(_) if !whole => break,
             Err(e) => {
-                if next_line(&mut reader, &mut line, path, &mut total)?.is_none() {
+                if lines.next()?.is_none() {
                     // The last line, ended but unparsable (e.g. zeros after a system crash).
                     break;
                 }
-                return Err(parse_error(line_no)(e));
+                return Err(journal_parse_error(lines.path, line_no)(e));
             }
         };
-        let inconsistent = |reason: String| RunLogError::Inconsistent {
-            path: path.to_path_buf(),
-            line: line_no,
-            reason,
-        };
-        let k = trajectory.poses.len();
-        if sample.k != k as u64 {
-            return Err(inconsistent(format!(
-                "expected sample {k}, found sample {}",
-                sample.k
-            )));
-        }
-        if sample.poses.len() != header.n_robots {
-            return Err(inconsistent(format!(
-                "{} poses for {} robots",
-                sample.poses.len(),
-                header.n_robots
-            )));
-        }
-        match (&sample.commands, k) {
-            (None, 0) => {}
-            (Some(commands), k) if k > 0 && commands.len() == header.n_robots => {
-                trajectory.commands.push(commands.clone());
-            }
-            (None, _) => return Err(inconsistent(format!("sample {k} lacks its commands"))),
-            (Some(commands), _) => {
-                return Err(inconsistent(format!(
-                    "{} commands at sample {k} for {} robots",
-                    commands.len(),
-                    header.n_robots
-                )));
-            }
-        }
-        trajectory.times.push(sample.time);
-        trajectory.phi_star.push(sample.phi_star);
-        trajectory.poses.push(sample.poses);
-        trajectory
-            .collisions
-            .extend(sample.collisions.into_iter().map(|(i, j)| (sample.k, i, j)));
+        push_sample(
+            &mut trajectory,
+            sample,
+            header.n_robots,
+            lines.path,
+            line_no,
+        )?;
     }
-    Ok((header, trajectory))
+    Ok(trajectory)
+}
+
+/// Checks that `sample` (journal line `line_no`) follows the trajectory so far with every
+/// robot's pose and commands, and appends it.
+fn push_sample(
+    trajectory: &mut Trajectory,
+    sample: JournalSample,
+    n_robots: usize,
+    path: &Path,
+    line_no: usize,
+) -> Result<(), RunLogError> {
+    let inconsistent = |reason: String| RunLogError::Inconsistent {
+        path: path.to_path_buf(),
+        line: line_no,
+        reason,
+    };
+    let k = trajectory.poses.len();
+    if sample.k != k as u64 {
+        return Err(inconsistent(format!(
+            "expected sample {k}, found sample {}",
+            sample.k
+        )));
+    }
+    if sample.poses.len() != n_robots {
+        return Err(inconsistent(format!(
+            "{} poses for {} robots",
+            sample.poses.len(),
+            n_robots
+        )));
+    }
+    match (&sample.commands, k) {
+        (None, 0) => {}
+        (Some(commands), k) if k > 0 && commands.len() == n_robots => {
+            trajectory.commands.push(commands.clone());
+        }
+        (None, _) => return Err(inconsistent(format!("sample {k} lacks its commands"))),
+        (Some(commands), _) => {
+            return Err(inconsistent(format!(
+                "{} commands at sample {k} for {} robots",
+                commands.len(),
+                n_robots
+            )));
+        }
+    }
+    trajectory.times.push(sample.time);
+    trajectory.phi_star.push(sample.phi_star);
+    trajectory.poses.push(sample.poses);
+    trajectory
+        .collisions
+        .extend(sample.collisions.into_iter().map(|(i, j)| (sample.k, i, j)));
+    Ok(())
 }
 
 /// Reads the next line into `line` (without its newline): `Some(true)` for a whole line,

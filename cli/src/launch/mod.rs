@@ -349,16 +349,48 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         print!("{text}");
     }
     let started = std::time::SystemTime::now();
+    let launched = launch_with_progress(&plan)?;
+    let report = match launched {
+        Ok(report) => {
+            // Journals an earlier, killed launch left in this directory.
+            report_recovered(&recover_journals(
+                &plan.out,
+                "an earlier launch ended before its world saved the run",
+            ));
+            report
+        }
+        Err(error) => {
+            let runs = args.first_run..args.first_run + args.runs;
+            keep_partial_runs(&plan.out, runs, started, &error, scenario.name(), base_seed);
+            return Err(error.into());
+        }
+    };
+    write_run_outputs(&plan, &report, scenario.name(), base_seed, team_size)?;
+    print_launch_outcome(&plan, &report)
+}
+
+/// Runs the launch, printing the world's events as they come and the agents' readiness on a
+/// terminal.
+fn launch_with_progress(
+    plan: &LaunchPlan,
+) -> anyhow::Result<Result<supervisor::LaunchReport, supervisor::LaunchError>> {
     // Readiness of a large team on a terminal (hidden when stderr is not one).
     let readiness = indicatif::ProgressBar::new(plan.models.len() as u64).with_style(
         indicatif::ProgressStyle::with_template("agents ready {bar:40} {pos}/{len} ({elapsed})")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    let launched = block_on(supervisor::launch(&plan, &mut |event| match event {
+    block_on(supervisor::launch(plan, &mut |event| {
+        print_world_event(event, &readiness, plan.models.len());
+    }))
+}
+
+/// What `formation run` prints for one of the world's events (`agents`: the team's size).
+fn print_world_event(event: &WorldEvent, readiness: &indicatif::ProgressBar, agents: usize) {
+    match event {
         WorldEvent::AgentConnected { connected, .. } => readiness.set_position(*connected as u64),
         WorldEvent::AgentsConnected => {
             readiness.finish_and_clear();
-            println!("all {} agents connected", plan.models.len())
+            println!("all {agents} agents connected")
         }
         WorldEvent::RunDone { index, log } => println!("run {index} done: {}", log.display()),
         WorldEvent::AgentLost {
@@ -378,27 +410,23 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
             }
         }
         WorldEvent::Listening { .. } | WorldEvent::Finished | WorldEvent::Stopping { .. } => {}
-    }))?;
-    let report = match launched {
-        Ok(report) => {
-            // Journals an earlier, killed launch left in this directory.
-            report_recovered(&recover_journals(
-                &plan.out,
-                "an earlier launch ended before its world saved the run",
-            ));
-            report
-        }
-        Err(error) => {
-            let runs = args.first_run..args.first_run + args.runs;
-            keep_partial_runs(&plan.out, runs, started, &error, scenario.name(), base_seed);
-            return Err(error.into());
-        }
-    };
+    }
+}
+
+/// After a launch that succeeded: writes and prints the summary (Table I) and the latency
+/// profile (`profile.json`, `profile.svg`).
+fn write_run_outputs(
+    plan: &LaunchPlan,
+    report: &supervisor::LaunchReport,
+    scenario: &str,
+    base_seed: u64,
+    team_size: Vec<formation_schema::ModelTeamSize>,
+) -> anyhow::Result<()> {
     let latency = profile::profile_dir(&plan.out)?;
     let table = write_summary(
         &plan.out,
         &report.run_logs,
-        scenario.name(),
+        scenario,
         Some(base_seed),
         latency.braked_per_robot.clone(),
         team_size,
@@ -408,6 +436,15 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
     paths::write_atomic(&path, &formation_schema::to_json_pretty(&latency)?)?;
     profile::profile_svg(&latency, &plan.out.join("profile.svg"))?;
     print!("{}", profile::summary_text(&latency));
+    Ok(())
+}
+
+/// Prints where the logs are, the restarts and the agents being restarted when a run ended;
+/// fails when a robot lost its agent for good.
+fn print_launch_outcome(
+    plan: &LaunchPlan,
+    report: &supervisor::LaunchReport,
+) -> anyhow::Result<()> {
     println!(
         "logs in {}; {} agent restart(s); removed {} iceoryx2 file(s)",
         plan.out.display(),

@@ -503,6 +503,8 @@ async fn hand_secret(
         .map_err(|e| LaunchError::Secret(format!("writing it to a child's standard input: {e}")))
 }
 
+/// Starts the world and the agents, supervises them (restarting lost agents within the budget)
+/// until the runs end, fail or are interrupted, and shuts everything down.
 async fn supervise(
     plan: &LaunchPlan,
     binaries: &RuntimeBinaries,
@@ -524,132 +526,35 @@ async fn supervise(
 
     let (exit_tx, mut exit_rx) = mpsc::unbounded_channel::<(usize, ExitStatus)>();
     let (restart_tx, mut restart_rx) = mpsc::unbounded_channel::<usize>();
-    let mut budget =
-        RestartBudget::new(plan.restart_budget, plan.restart_window, plan.restart_delay);
-    let mut agents = Vec::with_capacity(plan.models.len());
-    for robot in 0..plan.models.len() {
-        if plan.network.is_remote(robot) {
-            agents.push(AgentHandle {
-                stdin: None,
-                kill: None,
-                reaper: None,
-            });
-            continue;
-        }
-        match spawn_agent(plan, binaries, secret, robot, true, exit_tx.clone()).await {
-            Ok(handle) => agents.push(handle),
-            Err(e) => {
-                shutdown(&mut world, &mut world_stdin, &mut agents).await;
-                return Err(e);
-            }
-        }
-    }
+    let budget = RestartBudget::new(plan.restart_budget, plan.restart_window, plan.restart_delay);
+    let mut agents = spawn_local_agents(
+        plan,
+        binaries,
+        secret,
+        &exit_tx,
+        &mut world,
+        &mut world_stdin,
+    )
+    .await?;
 
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
-    let mut finished = false;
-    // The world said it stops early (a failed write, a signal): agents exit because it asked.
-    let mut world_stopping = false;
-    let mut stdout_open = true;
-    // Robots whose agent the world reported lost, and whose restarts are booked.
-    let mut recovery = AgentRecovery::default();
-    // Remote robots whose agent has not said hello yet.
-    let mut remote_waiting: Vec<usize> = plan
-        .network
-        .zenoh()
-        .map(|z| z.remote.clone())
-        .unwrap_or_default();
+    let mut state = Supervision::new(plan, budget, restart_tx);
     let result = loop {
         tokio::select! {
             // The world's lines first: it says that it stops before it asks the agents to exit.
             biased;
-            line = lines.next_line(), if stdout_open => match line? {
-                Some(line) => {
-                    if let Some(event) = WorldEvent::parse(&line) {
-                        match &event {
-                            WorldEvent::RunDone { index, log } => {
-                                report.run_logs.push(log.clone());
-                                let (gone, restarting) = recovery.at_run_end(*index, |robot| {
-                                    !plan.network.is_remote(robot)
-                                        && agents.get(robot).is_some_and(|a| {
-                                            a.reaper.as_ref().is_some_and(|r| r.is_finished())
-                                        })
-                                });
-                                report.lost_for_good.extend(gone);
-                                report.restarting_at_end.extend(restarting);
-                            }
-                            WorldEvent::AgentLost { robot, tick, .. } => {
-                                recovery.lost(*robot, *tick);
-                                if let Some(zenoh) = plan.network.zenoh().filter(|z| z.is_remote(*robot)) {
-                                    eprintln!(
-                                        "formation: robot {robot}'s agent is remote: the launcher \
-                                         cannot restart it; start it again on its host \
-                                         (formation-agent --transport zenoh --connect {} \
-                                         --run-id {} --robot {robot} ...) and it rejoins",
-                                        zenoh.listen, plan.run_id
-                                    );
-                                }
-                            }
-                            WorldEvent::AgentConnected { robot, .. } => {
-                                remote_waiting.retain(|r| r != robot);
-                            }
-                            WorldEvent::AgentRejoined { robot, .. } => {
-                                recovery.rejoined(*robot);
-                            }
-                            _ => {}
-                        }
-                        finished |= event == WorldEvent::Finished;
-                        world_stopping |= matches!(event, WorldEvent::Stopping { .. });
-                        on_event(&event);
-                    }
-                }
-                None => stdout_open = false,
+            line = lines.next_line(), if state.stdout_open => match line? {
+                Some(line) => state.on_world_line(&line, plan, &agents, report, on_event),
+                None => state.stdout_open = false,
             },
-            status = world.wait() => {
-                let status = status?;
-                break if status.success() && finished {
-                    Ok(())
-                } else if let Some(zenoh) = plan.network.zenoh().filter(|_| !remote_waiting.is_empty()) {
-                    Err(LaunchError::RemoteMissing {
-                        robots: remote_waiting.clone(),
-                        endpoint: zenoh.listen.clone(),
-                        run: plan.run_id.to_string(),
-                        credentials: zenoh.credentials.display().to_string(),
-                    })
-                } else {
-                    Err(LaunchError::WorldFailed { status: describe(status) })
-                };
-            }
+            status = world.wait() => break state.world_exited(status?, plan),
             Some((robot, status)) = exit_rx.recv() => {
-                let handle = &mut agents[robot];
-                handle.kill = None;
-                handle.stdin = None;
-                handle.reaper = None;
-                if finished || world_stopping {
-                    continue;
+                if let Err(e) = state.on_agent_exit(robot, status, plan, &mut agents[robot], report) {
+                    break Err(e);
                 }
-                // While the runs are under way an agent has no reason to exit, whatever its exit
-                // code says (a stray SIGTERM, a refusal, a crash): restart it within the budget.
-                let Some(backoff) = budget.book(robot, Instant::now()) else {
-                    break Err(LaunchError::AgentFailed {
-                        robot,
-                        status: describe(status),
-                        budget: plan.restart_budget,
-                        window_s: plan.restart_window.as_secs_f64(),
-                    });
-                };
-                eprintln!("formation: agent of robot {robot} exited ({}); restarting in {} ms",
-                    describe(status), backoff.as_millis());
-                report.restarts += 1;
-                recovery.restart_booked(robot);
-                // The delay runs on its own task, so the world's progress is still read meanwhile.
-                let restart_tx = restart_tx.clone();
-                tokio::spawn(async move {
-                    tokio::time::sleep(backoff).await;
-                    let _ = restart_tx.send(robot);
-                });
             }
             Some(robot) = restart_rx.recv() => {
-                if finished || world_stopping {
+                if state.winding_down() {
                     continue;
                 }
                 match spawn_agent(plan, binaries, secret, robot, false, exit_tx.clone()).await {
@@ -665,6 +570,198 @@ async fn supervise(
     };
     shutdown(&mut world, &mut world_stdin, &mut agents).await;
     result
+}
+
+/// Starts the agent of every local robot (a remote robot gets an empty handle); on a failure,
+/// shuts down the world and the agents started so far.
+async fn spawn_local_agents(
+    plan: &LaunchPlan,
+    binaries: &RuntimeBinaries,
+    secret: &LaunchSecret,
+    exit_tx: &mpsc::UnboundedSender<(usize, ExitStatus)>,
+    world: &mut Child,
+    world_stdin: &mut Option<ChildStdin>,
+) -> Result<Vec<AgentHandle>, LaunchError> {
+    let mut agents = Vec::with_capacity(plan.models.len());
+    for robot in 0..plan.models.len() {
+        if plan.network.is_remote(robot) {
+            agents.push(AgentHandle {
+                stdin: None,
+                kill: None,
+                reaper: None,
+            });
+            continue;
+        }
+        match spawn_agent(plan, binaries, secret, robot, true, exit_tx.clone()).await {
+            Ok(handle) => agents.push(handle),
+            Err(e) => {
+                shutdown(world, world_stdin, &mut agents).await;
+                return Err(e);
+            }
+        }
+    }
+    Ok(agents)
+}
+
+/// What [`supervise`] tracks of the world and the agents between events.
+struct Supervision {
+    /// The world said that every run is done.
+    finished: bool,
+    /// The world said it stops early (a failed write, a signal): agents exit because it asked.
+    world_stopping: bool,
+    /// The world's stdout is still open.
+    stdout_open: bool,
+    /// Robots whose agent the world reported lost, and whose restarts are booked.
+    recovery: AgentRecovery,
+    /// Remote robots whose agent has not said hello yet.
+    remote_waiting: Vec<usize>,
+    /// The agents' restart budget.
+    budget: RestartBudget,
+    /// Where a booked restart's robot is sent once its backoff is over.
+    restart_tx: mpsc::UnboundedSender<usize>,
+}
+
+impl Supervision {
+    /// Before the world said anything.
+    fn new(
+        plan: &LaunchPlan,
+        budget: RestartBudget,
+        restart_tx: mpsc::UnboundedSender<usize>,
+    ) -> Supervision {
+        Supervision {
+            finished: false,
+            world_stopping: false,
+            stdout_open: true,
+            recovery: AgentRecovery::default(),
+            remote_waiting: plan
+                .network
+                .zenoh()
+                .map(|z| z.remote.clone())
+                .unwrap_or_default(),
+            budget,
+            restart_tx,
+        }
+    }
+
+    /// Whether the runs are over or the world stops, so that agents exit because it asked.
+    fn winding_down(&self) -> bool {
+        self.finished || self.world_stopping
+    }
+
+    /// Handles one line of the world's stdout: an event updates the state and the report and is
+    /// passed on to `on_event`; any other line is ignored.
+    fn on_world_line(
+        &mut self,
+        line: &str,
+        plan: &LaunchPlan,
+        agents: &[AgentHandle],
+        report: &mut LaunchReport,
+        on_event: &mut dyn FnMut(&WorldEvent),
+    ) {
+        let Some(event) = WorldEvent::parse(line) else {
+            return;
+        };
+        match &event {
+            WorldEvent::RunDone { index, log } => {
+                report.run_logs.push(log.clone());
+                let (gone, restarting) = self.recovery.at_run_end(*index, |robot| {
+                    !plan.network.is_remote(robot)
+                        && agents
+                            .get(robot)
+                            .is_some_and(|a| a.reaper.as_ref().is_some_and(|r| r.is_finished()))
+                });
+                report.lost_for_good.extend(gone);
+                report.restarting_at_end.extend(restarting);
+            }
+            WorldEvent::AgentLost { robot, tick, .. } => {
+                self.recovery.lost(*robot, *tick);
+                if let Some(zenoh) = plan.network.zenoh().filter(|z| z.is_remote(*robot)) {
+                    eprintln!(
+                        "formation: robot {robot}'s agent is remote: the launcher \
+                         cannot restart it; start it again on its host \
+                         (formation-agent --transport zenoh --connect {} \
+                         --run-id {} --robot {robot} ...) and it rejoins",
+                        zenoh.listen, plan.run_id
+                    );
+                }
+            }
+            WorldEvent::AgentConnected { robot, .. } => {
+                self.remote_waiting.retain(|r| r != robot);
+            }
+            WorldEvent::AgentRejoined { robot, .. } => {
+                self.recovery.rejoined(*robot);
+            }
+            _ => {}
+        }
+        self.finished |= event == WorldEvent::Finished;
+        self.world_stopping |= matches!(event, WorldEvent::Stopping { .. });
+        on_event(&event);
+    }
+
+    /// The launch's outcome once the world exited with `status`.
+    fn world_exited(&self, status: ExitStatus, plan: &LaunchPlan) -> Result<(), LaunchError> {
+        if status.success() && self.finished {
+            Ok(())
+        } else if let Some(zenoh) = plan
+            .network
+            .zenoh()
+            .filter(|_| !self.remote_waiting.is_empty())
+        {
+            Err(LaunchError::RemoteMissing {
+                robots: self.remote_waiting.clone(),
+                endpoint: zenoh.listen.clone(),
+                run: plan.run_id.to_string(),
+                credentials: zenoh.credentials.display().to_string(),
+            })
+        } else {
+            Err(LaunchError::WorldFailed {
+                status: describe(status),
+            })
+        }
+    }
+
+    /// Robot `robot`'s agent exited with `status`: while the runs are under way, books its
+    /// restart (its robot sent on `restart_tx` after the backoff), or fails past the restart
+    /// budget.
+    fn on_agent_exit(
+        &mut self,
+        robot: usize,
+        status: ExitStatus,
+        plan: &LaunchPlan,
+        handle: &mut AgentHandle,
+        report: &mut LaunchReport,
+    ) -> Result<(), LaunchError> {
+        handle.kill = None;
+        handle.stdin = None;
+        handle.reaper = None;
+        if self.winding_down() {
+            return Ok(());
+        }
+        // While the runs are under way an agent has no reason to exit, whatever its exit
+        // code says (a stray SIGTERM, a refusal, a crash): restart it within the budget.
+        let Some(backoff) = self.budget.book(robot, Instant::now()) else {
+            return Err(LaunchError::AgentFailed {
+                robot,
+                status: describe(status),
+                budget: plan.restart_budget,
+                window_s: plan.restart_window.as_secs_f64(),
+            });
+        };
+        eprintln!(
+            "formation: agent of robot {robot} exited ({}); restarting in {} ms",
+            describe(status),
+            backoff.as_millis()
+        );
+        report.restarts += 1;
+        self.recovery.restart_booked(robot);
+        // The delay runs on its own task, so the world's progress is still read meanwhile.
+        let restart_tx = self.restart_tx.clone();
+        tokio::spawn(async move {
+            tokio::time::sleep(backoff).await;
+            let _ = restart_tx.send(robot);
+        });
+        Ok(())
+    }
 }
 
 fn describe(status: ExitStatus) -> String {

@@ -19,10 +19,12 @@ use {
     anyhow::Context,
     formation_cli::pilot::OnnxPilots,
     formation_proto::LidarSpec,
+    formation_ros2::{Namespace, NodeName, PartialScan, RingContract, TopicName},
     formation_runtime::agent::PilotMaker,
     formation_runtime::ros2::{
         DeciderSettings, GoalValue, OrientationKind, Ros2AgentSettings, TeamTopics,
     },
+    formation_runtime::zenoh::Endpoint,
     std::path::Path,
     std::time::Duration,
 };
@@ -144,117 +146,33 @@ pub fn run(
     model: Box<dyn PolicyBackend>,
     stop: &AtomicBool,
 ) -> anyhow::Result<AgentExit> {
-    use formation_ros2::{Namespace, NodeName, PartialScan, RingContract, TopicName};
-    use formation_runtime::zenoh::Endpoint;
-
     let flags = &args.ros2;
-    if args.fault.is_some() {
-        anyhow::bail!("--fault is for the iceoryx2 and zenoh transports, not ros2");
-    }
-    if args.run_id.is_some() {
-        anyhow::bail!(
-            "--run-id is for the iceoryx2 and zenoh transports; a ROS 2 agent joins the robot's \
-             ROS graph, not a run (drop --run-id)"
-        );
-    }
-    let connect = args
-        .connect
-        .as_deref()
-        .ok_or(TransportError::MissingEndpoint {
-            flag: "--connect",
-            transport: Transport::Ros2,
-        })?;
-    let connect = Endpoint::parse(connect)?;
+    let connect = check_ros2_flags(args)?;
     let lidar = model_ring(model.as_ref(), &args.model)?;
     let mut pilot = OnnxPilots
         .pilot(model, lidar)
         .map_err(|e| anyhow::anyhow!("{}", formation_runtime::agent::error_chain(&*e)))?;
-
-    let topic = |flag: &str, given: &Option<String>, default: String| {
-        let name = given.clone().unwrap_or(default);
-        TopicName::new(&name).with_context(|| format!("{flag} {name:?}"))
-    };
-    let team = args.robot.map(TeamTopics::robot);
-    let default = |pick: fn(&TeamTopics) -> &TopicName, single: &str| match &team {
-        Some(topics) => pick(topics).as_str().to_owned(),
-        None => single.to_owned(),
-    };
-    let scan = topic("--scan", &flags.scan, default(|t| &t.scan, "/scan"))?;
-    let orientation = topic(
-        "--orientation",
-        &flags.orientation,
-        default(|t| &t.odometry, "/odom"),
-    )?;
-    let cmd_vel = topic(
-        "--cmd-vel",
-        &flags.cmd_vel,
-        default(|t| &t.cmd_vel, "/cmd_vel"),
-    )?;
-    let goal_topics = TeamTopics::goal();
-    let goal_value = |fixed: Option<f64>,
-                      flag: &str,
-                      topic_flag: &str,
-                      given: &Option<String>,
-                      default: &TopicName|
-     -> anyhow::Result<GoalValue> {
-        match fixed {
-            Some(value) if value.is_finite() => Ok(GoalValue::Fixed(value)),
-            Some(value) => anyhow::bail!("{flag} must be a finite number, got {value}"),
-            None => Ok(GoalValue::Topic(topic(
-                topic_flag,
-                given,
-                default.as_str().to_owned(),
-            )?)),
-        }
-    };
-    let goal = [
-        goal_value(
-            flags.phi_star,
-            "--phi-star",
-            "--heading-topic",
-            &flags.heading_topic,
-            &goal_topics[0],
-        )?,
-        goal_value(
-            flags.d_star,
-            "--d-star",
-            "--distance-topic",
-            &flags.distance_topic,
-            &goal_topics[1],
-        )?,
-        goal_value(
-            flags.v_star,
-            "--v-star",
-            "--speed-topic",
-            &flags.speed_topic,
-            &goal_topics[2],
-        )?,
-    ];
+    let topics = robot_topics(args)?;
+    let goal = goal_values(flags)?;
     if let GoalValue::Fixed(d_star) = goal[1] {
         // Refused at once, as an agent refuses a goal outside its model's envelope at episode
         // start.
         formation_robot_agent::decision::check_goal_envelope(pilot.agent().policy(), d_star)
             .with_context(|| format!("--d-star {d_star}"))?;
     }
-    let wheel_separation = flags.wheel_separation.unwrap_or(P3DX_WHEEL_SEPARATION);
-    if !(wheel_separation.is_finite() && wheel_separation > 0.0 && wheel_separation < 10.0) {
-        anyhow::bail!(
-            "--wheel-separation must be a length in metres between 0 and 10, got {wheel_separation}"
-        );
-    }
-    let stale_ms = flags.stale_ms.unwrap_or_else(|| {
-        u64::try_from(formation_runtime::ros2::decider::DEFAULT_STALE.as_millis())
-            .unwrap_or(u64::MAX)
-    });
-    if stale_ms == 0 || stale_ms > 60_000 {
-        anyhow::bail!("--stale-ms must be from 1 to 60000, got {stale_ms}");
-    }
+    let wheel_separation = checked_wheel_separation(flags)?;
+    let stale_ms = checked_stale_ms(flags)?;
     let namespace = match args.robot {
         Some(robot) => Namespace::new(&format!("/robot_{robot}"))?,
         None => Namespace::root(),
     };
     let node_name = NodeName::new(flags.node_name.as_deref().unwrap_or("formation_agent"))
         .context("--node-name")?;
+    let RobotTopics {
+        scan,
+        orientation,
+        cmd_vel,
+    } = topics;
     let settings = Ros2AgentSettings {
         connect,
         connect_timeout: Duration::from_millis(args.connect_timeout_ms),
@@ -288,6 +206,148 @@ pub fn run(
     Ok(formation_runtime::ros2::run_agent(
         &settings, &mut pilot, stop,
     )?)
+}
+
+/// Refuses the flags of the other transports and returns the router to connect to.
+#[cfg(feature = "zenoh")]
+fn check_ros2_flags(args: &super::Args) -> anyhow::Result<Endpoint> {
+    if args.fault.is_some() {
+        anyhow::bail!("--fault is for the iceoryx2 and zenoh transports, not ros2");
+    }
+    if args.run_id.is_some() {
+        anyhow::bail!(
+            "--run-id is for the iceoryx2 and zenoh transports; a ROS 2 agent joins the robot's \
+             ROS graph, not a run (drop --run-id)"
+        );
+    }
+    let connect = args
+        .connect
+        .as_deref()
+        .ok_or(TransportError::MissingEndpoint {
+            flag: "--connect",
+            transport: Transport::Ros2,
+        })?;
+    Ok(Endpoint::parse(connect)?)
+}
+
+/// The topic `flag` names, else `default`, checked.
+#[cfg(feature = "zenoh")]
+fn topic_name(flag: &str, given: &Option<String>, default: String) -> anyhow::Result<TopicName> {
+    let name = given.clone().unwrap_or(default);
+    TopicName::new(&name).with_context(|| format!("{flag} {name:?}"))
+}
+
+/// The robot's own topics.
+#[cfg(feature = "zenoh")]
+struct RobotTopics {
+    /// Its `LaserScan`.
+    scan: TopicName,
+    /// Its orientation.
+    orientation: TopicName,
+    /// Where its commands go.
+    cmd_vel: TopicName,
+}
+
+/// The robot's topics: the flags', else the team's robot's (`--robot`) or a single robot's.
+#[cfg(feature = "zenoh")]
+fn robot_topics(args: &super::Args) -> anyhow::Result<RobotTopics> {
+    let flags = &args.ros2;
+    let team = args.robot.map(TeamTopics::robot);
+    let default = |pick: fn(&TeamTopics) -> &TopicName, single: &str| match &team {
+        Some(topics) => pick(topics).as_str().to_owned(),
+        None => single.to_owned(),
+    };
+    let scan = topic_name("--scan", &flags.scan, default(|t| &t.scan, "/scan"))?;
+    let orientation = topic_name(
+        "--orientation",
+        &flags.orientation,
+        default(|t| &t.odometry, "/odom"),
+    )?;
+    let cmd_vel = topic_name(
+        "--cmd-vel",
+        &flags.cmd_vel,
+        default(|t| &t.cmd_vel, "/cmd_vel"),
+    )?;
+    Ok(RobotTopics {
+        scan,
+        orientation,
+        cmd_vel,
+    })
+}
+
+/// One goal component: `fixed` when its flag `flag` is given (finite), else the newest value on
+/// the topic `topic_flag` names (or `default`).
+#[cfg(feature = "zenoh")]
+fn goal_value(
+    fixed: Option<f64>,
+    flag: &str,
+    topic_flag: &str,
+    given: &Option<String>,
+    default: &TopicName,
+) -> anyhow::Result<GoalValue> {
+    match fixed {
+        Some(value) if value.is_finite() => Ok(GoalValue::Fixed(value)),
+        Some(value) => anyhow::bail!("{flag} must be a finite number, got {value}"),
+        None => Ok(GoalValue::Topic(topic_name(
+            topic_flag,
+            given,
+            default.as_str().to_owned(),
+        )?)),
+    }
+}
+
+/// The goal's heading, distance and speed.
+#[cfg(feature = "zenoh")]
+fn goal_values(flags: &Ros2Args) -> anyhow::Result<[GoalValue; 3]> {
+    let goal_topics = TeamTopics::goal();
+    Ok([
+        goal_value(
+            flags.phi_star,
+            "--phi-star",
+            "--heading-topic",
+            &flags.heading_topic,
+            &goal_topics[0],
+        )?,
+        goal_value(
+            flags.d_star,
+            "--d-star",
+            "--distance-topic",
+            &flags.distance_topic,
+            &goal_topics[1],
+        )?,
+        goal_value(
+            flags.v_star,
+            "--v-star",
+            "--speed-topic",
+            &flags.speed_topic,
+            &goal_topics[2],
+        )?,
+    ])
+}
+
+/// `--wheel-separation` (default: the P3-DX's), refused outside (0, 10) m.
+#[cfg(feature = "zenoh")]
+fn checked_wheel_separation(flags: &Ros2Args) -> anyhow::Result<f64> {
+    let wheel_separation = flags.wheel_separation.unwrap_or(P3DX_WHEEL_SEPARATION);
+    if !(wheel_separation.is_finite() && wheel_separation > 0.0 && wheel_separation < 10.0) {
+        anyhow::bail!(
+            "--wheel-separation must be a length in metres between 0 and 10, got {wheel_separation}"
+        );
+    }
+    Ok(wheel_separation)
+}
+
+/// `--stale-ms` (default: the runtime's), refused outside 1..=60000.
+#[cfg(feature = "zenoh")]
+fn checked_stale_ms(flags: &Ros2Args) -> anyhow::Result<u64> {
+    let stale_ms = flags.stale_ms.unwrap_or_else(|| {
+        u64::try_from(formation_runtime::ros2::decider::DEFAULT_STALE.as_millis())
+            .unwrap_or(u64::MAX)
+    });
+    if stale_ms == 0 || stale_ms > 60_000 {
+        anyhow::bail!("--stale-ms must be from 1 to 60000, got {stale_ms}");
+    }
+    Ok(stale_ms)
 }
 
 /// This build has no Zenoh, so no ROS 2.
