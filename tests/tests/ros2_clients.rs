@@ -642,6 +642,10 @@ fn twists_answer_laser_scans_and_imu_as_the_in_process_decision_does() {
 /// by the SDK from the explicitly given `float64 data`) equals rosbags', and the agent drives on
 /// it exactly as in process.
 #[test]
+#[expect(
+    clippy::too_many_lines,
+    reason = "one scripted scenario against an independent client: its steps read in order"
+)]
 fn zenoh_ros2_sdk_discovers_the_agents_node_and_topics_through_liveliness() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("ros2_discovery", LIMIT);

@@ -234,6 +234,10 @@ fn unknown_schedule_is_rejected_with_the_valid_names() {
 }
 
 #[test]
+#[expect(
+    clippy::too_many_lines,
+    reason = "a table of every invalid value and its message, one case per line"
+)]
 fn invalid_values_name_the_field_and_the_value() {
     let (field, problem) = invalid_field(&edited("d_star = 2.0", "d_star = -1"));
     assert_eq!(
