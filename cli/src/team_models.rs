@@ -9,22 +9,32 @@ use formation_world::Scenario;
 
 use crate::paths;
 
-/// The model path for each robot: the scenario's per-robot overrides (resolved like `--model`),
-/// else `default`; nothing is loaded yet.
+/// The model path for each robot: the scenario's per-robot overrides (each checked like
+/// `--model`: a regular file within the size limit), else `default`; nothing is loaded yet.
 pub fn resolved_models_per_robot(
     scenario: &Scenario,
     default: &Path,
 ) -> anyhow::Result<Vec<PathBuf>> {
+    let models = assigned_models(scenario, default)?;
+    for assigned in scenario.agent_models() {
+        paths::resolve_model(Some(&assigned.model))?;
+    }
+    Ok(models)
+}
+
+/// The model path for each robot as the scenario assigns them, else `default`.
+fn assigned_models(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let mut models = vec![default.to_path_buf(); scenario.n_robots()];
-    for m in scenario.agent_models() {
-        let slot = models.get_mut(m.robot).with_context(|| {
+    for assigned in scenario.agent_models() {
+        let slot = models.get_mut(assigned.robot).with_context(|| {
             format!(
-                "scenario assigns a model to robot {}, but it has {} robots",
-                m.robot,
+                "the scenario assigns a model to robot {}, but it has only {} robots (0..{})",
+                assigned.robot,
+                scenario.n_robots(),
                 scenario.n_robots()
             )
         })?;
-        *slot = paths::resolve_model(Some(&m.model))?;
+        *slot = assigned.model.clone();
     }
     Ok(models)
 }
@@ -97,18 +107,7 @@ pub fn checked_team_models(
     scenario: &Scenario,
     default: &Path,
 ) -> anyhow::Result<(Vec<PathBuf>, Vec<formation_schema::ModelTeamSize>)> {
-    let mut models = vec![default.to_path_buf(); scenario.n_robots()];
-    for assigned in scenario.agent_models() {
-        let slot = models.get_mut(assigned.robot).with_context(|| {
-            format!(
-                "the scenario assigns a model to robot {}, but it has only {} robots (0..{})",
-                assigned.robot,
-                scenario.n_robots(),
-                scenario.n_robots()
-            )
-        })?;
-        *slot = assigned.model.clone();
-    }
+    let models = assigned_models(scenario, default)?;
     let checked = formation_robot_agent::decision::check_team_models_with_envelopes(
         &models,
         &scenario.world_config().lidar,
