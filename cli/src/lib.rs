@@ -21,6 +21,8 @@
 pub mod args;
 pub mod collect;
 pub mod demo;
+#[cfg(feature = "zenoh")]
+pub mod endpoint;
 pub mod eval;
 pub mod launch;
 pub mod learn;

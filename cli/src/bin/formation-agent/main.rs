@@ -45,7 +45,9 @@ use formation_runtime::iceoryx::IceoryxAgentLink;
 use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_runtime::link::AgentLink;
 use formation_runtime::process::flag_when_stdin_closes;
-use formation_runtime::transport::{Transport, TransportError};
+use formation_runtime::transport::Transport;
+#[cfg(not(feature = "zenoh"))]
+use formation_runtime::transport::TransportError;
 
 /// One robot's agent process of formation's multi-process runtime.
 #[derive(Debug, Parser)]
@@ -200,15 +202,12 @@ fn zenoh_link(
     robot: usize,
     timeout: Duration,
 ) -> anyhow::Result<Box<dyn AgentLink>> {
-    use formation_runtime::zenoh::{Endpoint, ZenohAgentLink, credentials};
-    let connect = args
-        .connect
-        .as_deref()
-        .ok_or(TransportError::MissingEndpoint {
-            flag: "--connect",
-            transport: Transport::Zenoh,
-        })?;
-    let endpoint = Endpoint::parse(connect)?;
+    use formation_runtime::zenoh::{ZenohAgentLink, credentials};
+    let endpoint = formation_cli::endpoint::required_endpoint(
+        args.connect.as_deref(),
+        "--connect",
+        Transport::Zenoh,
+    )?;
     let (login, secret) = match &args.credentials {
         Some(path) => {
             let found = credentials::read_robot(path, robot)?;

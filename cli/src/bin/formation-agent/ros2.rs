@@ -12,7 +12,9 @@ use std::sync::atomic::AtomicBool;
 use clap::Args;
 use formation_robot_agent::decision::PolicyBackend;
 use formation_runtime::agent::AgentExit;
-use formation_runtime::transport::{Transport, TransportError};
+use formation_runtime::transport::Transport;
+#[cfg(not(feature = "zenoh"))]
+use formation_runtime::transport::TransportError;
 
 #[cfg(feature = "zenoh")]
 use {
@@ -220,14 +222,11 @@ fn check_ros2_flags(args: &super::Args) -> anyhow::Result<Endpoint> {
              ROS graph, not a run (drop --run-id)"
         );
     }
-    let connect = args
-        .connect
-        .as_deref()
-        .ok_or(TransportError::MissingEndpoint {
-            flag: "--connect",
-            transport: Transport::Ros2,
-        })?;
-    Ok(Endpoint::parse(connect)?)
+    formation_cli::endpoint::required_endpoint(
+        args.connect.as_deref(),
+        "--connect",
+        Transport::Ros2,
+    )
 }
 
 /// The topic `flag` names, else `default`, checked.

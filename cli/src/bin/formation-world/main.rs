@@ -39,7 +39,9 @@ use formation_runtime::iceoryx::IceoryxWorldLink;
 use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_runtime::link::WorldLink;
 use formation_runtime::process::flag_when_stdin_closes;
-use formation_runtime::transport::{Transport, TransportError};
+use formation_runtime::transport::Transport;
+#[cfg(not(feature = "zenoh"))]
+use formation_runtime::transport::TransportError;
 use formation_runtime::{ClockMode, RuntimeSettings};
 use formation_world::RunSpec;
 
@@ -246,15 +248,12 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
 /// The Zenoh link: a router on `--listen`, with the credentials folder's logins and rules.
 #[cfg(feature = "zenoh")]
 fn zenoh_link(args: &Args, run_id: &RunId, n_robots: usize) -> anyhow::Result<Box<dyn WorldLink>> {
-    use formation_runtime::zenoh::{Endpoint, WorldAccess, ZenohWorldLink, credentials};
-    let listen = args
-        .listen
-        .as_deref()
-        .ok_or(TransportError::MissingEndpoint {
-            flag: "--listen",
-            transport: Transport::Zenoh,
-        })?;
-    let listen = Endpoint::parse(listen)?;
+    use formation_runtime::zenoh::{WorldAccess, ZenohWorldLink, credentials};
+    let listen = formation_cli::endpoint::required_endpoint(
+        args.listen.as_deref(),
+        "--listen",
+        Transport::Zenoh,
+    )?;
     let access = match &args.credentials {
         Some(dir) => Some(WorldAccess {
             dictionary_file: credentials::check_passwords(dir)?,
@@ -299,15 +298,11 @@ fn ros2_link(
     secret: LaunchSecret,
 ) -> anyhow::Result<Box<dyn WorldLink>> {
     use formation_runtime::ros2::{Ros2Team, Ros2WorldLink};
-    use formation_runtime::zenoh::Endpoint;
-    let listen = args
-        .listen
-        .as_deref()
-        .ok_or(TransportError::MissingEndpoint {
-            flag: "--listen",
-            transport: Transport::Ros2,
-        })?;
-    let listen = Endpoint::parse(listen)?;
+    let listen = formation_cli::endpoint::required_endpoint(
+        args.listen.as_deref(),
+        "--listen",
+        Transport::Ros2,
+    )?;
     let team = Ros2Team {
         n_robots: spec.n_robots,
         domain_id: args.ros_domain_id.unwrap_or(0),
