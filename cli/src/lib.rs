@@ -66,7 +66,9 @@ pub fn main_with_args() -> anyhow::Result<()> {
     }
 }
 
-fn init_tracing(verbose: u8) {
+/// Logs to stderr with `FORMATION_LOG`'s filter, else at the level `verbose` asks for (0: warn,
+/// 1: info, more: debug). The `formation` command and both runtime processes start with it.
+pub fn init_tracing(verbose: u8) {
     let level = match verbose {
         0 => "warn",
         1 => "info",

@@ -97,12 +97,7 @@ struct Args {
 
 fn main() -> ExitCode {
     formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
-    let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .try_init();
+    formation_cli::init_tracing(0);
     let args = Args::parse();
     let who = match args.robot {
         Some(robot) => format!("formation-agent (robot {robot})"),
