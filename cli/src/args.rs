@@ -133,6 +133,11 @@ pub struct CollectArgs {
     /// What to draw for hits beyond the window: `drop` (the paper) or `border`.
     #[arg(long, default_value = "drop")]
     pub beyond: String,
+    /// Scale the window with each run's d*: cells are `--resolution` wide at this d* \[m\] and
+    /// `resolution * d* / scale_d_star` at any other, so a neighbour at d* lies the same number
+    /// of cells away at every spacing (default: a fixed window, as in the paper).
+    #[arg(long, value_name = "D_STAR_REF_M")]
+    pub scale_d_star: Option<f64>,
 }
 
 /// `formation train`.

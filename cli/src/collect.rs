@@ -15,6 +15,7 @@ pub fn occupancy_from_args(
     size_px: usize,
     resolution: f64,
     beyond: &str,
+    scale_d_star: Option<f64>,
 ) -> anyhow::Result<OccupancySpec> {
     let beyond = BeyondWindow::parse(beyond)
         .with_context(|| format!("--beyond must be `drop` or `border`, got `{beyond}`"))?;
@@ -28,17 +29,31 @@ pub fn occupancy_from_args(
             "--resolution must be a positive number of metres per cell (got {resolution})"
         );
     }
+    if let Some(reference) = scale_d_star
+        && !(reference.is_finite() && reference > 0.0)
+    {
+        anyhow::bail!(
+            "--scale-d-star must be a positive d* in metres at which cells are --resolution wide \
+             (got {reference})"
+        );
+    }
     Ok(OccupancySpec {
         size_px,
         resolution_m: resolution,
         beyond,
+        d_star_ref_m: scale_d_star,
     })
 }
 
 /// `formation collect`.
 pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
     let scenario = Scenario::from_path(&args.scenario)?;
-    let occupancy = occupancy_from_args(args.size_px, args.resolution, &args.beyond)?;
+    let occupancy = occupancy_from_args(
+        args.size_px,
+        args.resolution,
+        &args.beyond,
+        args.scale_d_star,
+    )?;
     let mut opts = CollectOptions::for_scenario(&scenario);
     opts.occupancy = occupancy;
     if let Some(runs) = args.runs {

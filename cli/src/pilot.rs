@@ -59,8 +59,8 @@ impl Pilot for OnnxPilot {
         self.agent.model_id()
     }
 
-    fn perceive(&mut self, ranges: &[f32]) -> Result<(), BoxError> {
-        Ok(self.agent.perceive(ranges)?)
+    fn perceive(&mut self, ranges: &[f32], goal: &Goal) -> Result<(), BoxError> {
+        Ok(self.agent.perceive(ranges, goal.d_star)?)
     }
 
     fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, BoxError> {

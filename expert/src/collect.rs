@@ -41,6 +41,14 @@ pub enum CollectError {
         /// Its largest value.
         max: usize,
     },
+    /// The d* at which a scaled window has its nominal cells is not a positive length.
+    #[error(
+        "occupancy d_star_ref_m (the d* at which cells are resolution_m wide) must be finite and > 0, got {d_star_ref_m} m"
+    )]
+    WindowScale {
+        /// The d* given \[m\].
+        d_star_ref_m: f64,
+    },
     /// The occupancy settings cannot be rendered.
     #[error(
         "occupancy size_px must be >= 1 and resolution_m finite and > 0, got {size_px} px of {resolution_m} m"
@@ -336,7 +344,13 @@ impl Labeller {
                 });
             }
             let mut image = vec![0; cells];
-            occupancy::render(scan, &self.lidar, &self.occupancy, &mut image);
+            occupancy::render_at(
+                scan,
+                &self.lidar,
+                &self.occupancy,
+                obs.goal.d_star,
+                &mut image,
+            );
             sink(Sample {
                 occupancy: image,
                 delta_phi: wrap_angle(obs.goal.phi_star - pose.theta) as f32,
@@ -357,6 +371,11 @@ fn check_occupancy(spec: &OccupancySpec) -> Result<(), CollectError> {
             size_px: spec.size_px,
             resolution_m: spec.resolution_m,
         });
+    }
+    if let Some(d_star_ref_m) = spec.d_star_ref_m
+        && !(d_star_ref_m.is_finite() && d_star_ref_m > 0.0)
+    {
+        return Err(CollectError::WindowScale { d_star_ref_m });
     }
     Ok(())
 }
@@ -490,6 +509,22 @@ mod tests {
             samples[2].occupancy.iter().all(|&c| c == 0),
             "robot 2's only hit is beyond the window"
         );
+
+        // A window scaled with d* (0.1 m cells at d* = 1 m) is rendered for the goal's d*:
+        // at d* = 1.5 m its cells are 0.15 m, so the hit 1 m ahead lies 6.67 cells ahead.
+        let scaled = OccupancySpec {
+            d_star_ref_m: Some(1.0),
+            ..OccupancySpec::PAPER
+        };
+        let mut labeller = Labeller::new(gains, robot, lidar, scaled).expect("valid");
+        let mut samples = Vec::new();
+        labeller
+            .label_observation(&obs, 3, 17, &mut |s| samples.push(s))
+            .expect("labels");
+        let lit: Vec<usize> = (0..2500)
+            .filter(|&c| samples[0].occupancy[c] != 0)
+            .collect();
+        assert_eq!(lit, [25 * 50 + 31], "robot 0's hit 1 m ahead at d* = 1.5 m");
     }
 
     #[test]

@@ -24,6 +24,10 @@ pub const AUX_INPUT: &str = "aux";
 /// Name of the wheel-speed output.
 pub const WHEELS_OUTPUT: &str = "wheels";
 
+/// The one input kind agents feed today: the occupancy image rendered from the robot's own scan
+/// (the value of [`keys::INPUT`]).
+pub const INPUT_OCCUPANCY: &str = "occupancy";
+
 /// Largest image side `S` a model may declare \[cells\] (the paper's network takes 50). It bounds
 /// the input buffers an agent allocates from the model's metadata.
 pub const MAX_SIZE_PX: usize = 1024;
@@ -38,6 +42,11 @@ pub mod keys {
     pub const RESOLUTION_M: &str = "formation.occupancy.resolution_m";
     /// `drop` or `border`.
     pub const BEYOND: &str = "formation.occupancy.beyond";
+    /// The d* \[m\] at which cells are `resolution_m` wide, for a window that scales with d*
+    /// (optional; absent: a fixed window).
+    pub const D_STAR_REF_M: &str = "formation.occupancy.d_star_ref_m";
+    /// The kind of sensor input the model takes (optional; absent means [`super::INPUT_OCCUPANCY`]).
+    pub const INPUT: &str = "formation.input";
     /// LIDAR beams the model was trained with.
     pub const BEAMS: &str = "formation.lidar.beams";
     /// LIDAR maximum range \[m\].
@@ -199,6 +208,17 @@ pub struct TensorSignature {
 /// How a model breaks the contract: expected versus found.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ContractViolation {
+    /// The model declares a sensor input this agent cannot feed.
+    #[error(
+        "the model declares the input \"{input}\" ({key}), which this agent cannot feed: it \
+         renders only \"{INPUT_OCCUPANCY}\" (the occupancy image of its own scan); use a model \
+         trained on occupancy images, or a formation build that feeds \"{input}\"",
+        key = keys::INPUT
+    )]
+    UnsupportedInput {
+        /// The declared input kind.
+        input: String,
+    },
     /// The model's inputs are not exactly `occupancy` and `aux`.
     #[error("inputs are [{}], expected exactly [occupancy, aux]", .found.join(", "))]
     InputNames {
@@ -280,6 +300,13 @@ pub fn parse_metadata(
             expected: "\"formation-policy/1\"",
         });
     }
+    if let Some(input) = entries.get(keys::INPUT)
+        && input != INPUT_OCCUPANCY
+    {
+        return Err(ContractViolation::UnsupportedInput {
+            input: input.clone(),
+        });
+    }
     let size_px: usize = parse_positive_int(entries, keys::SIZE_PX)?;
     if size_px > MAX_SIZE_PX {
         return Err(ContractViolation::BadMetadata {
@@ -296,16 +323,21 @@ pub fn parse_metadata(
             value: beyond_text.to_owned(),
             expected: "\"drop\" or \"border\"",
         })?;
+    let d_star_ref_m = entries.get(keys::D_STAR_REF_M).map_or(Ok(None), |_| {
+        parse_positive_real(entries, keys::D_STAR_REF_M).map(Some)
+    })?;
     let beams = parse_positive_int(entries, keys::BEAMS)?;
     let max_range = parse_positive_real(entries, keys::MAX_RANGE)?;
     let v_train = parse_positive_real(entries, keys::V_TRAIN)?;
     let dataset_id = required(entries, keys::DATASET_ID)?.to_owned();
 
-    const PARSED: [&str; 8] = [
+    const PARSED: [&str; 10] = [
         keys::FORMAT,
         keys::SIZE_PX,
         keys::RESOLUTION_M,
         keys::BEYOND,
+        keys::D_STAR_REF_M,
+        keys::INPUT,
         keys::BEAMS,
         keys::MAX_RANGE,
         keys::V_TRAIN,
@@ -322,6 +354,7 @@ pub fn parse_metadata(
             size_px,
             resolution_m,
             beyond,
+            d_star_ref_m,
         },
         beams,
         max_range,
@@ -615,7 +648,8 @@ mod tests {
             OccupancySpec {
                 size_px: 50,
                 resolution_m: 0.1,
-                beyond: BeyondWindow::Border
+                beyond: BeyondWindow::Border,
+                d_star_ref_m: None,
             }
         );
         assert_eq!((meta.beams, meta.max_range, meta.v_train), (900, 10.0, 0.7));
@@ -659,6 +693,8 @@ mod tests {
             (keys::BEAMS, "9.5"),
             (keys::MAX_RANGE, "inf"),
             (keys::V_TRAIN, "NaN"),
+            (keys::D_STAR_REF_M, "0"),
+            (keys::D_STAR_REF_M, "one"),
         ] {
             let mut entries = paper_metadata();
             entries.insert(key.to_owned(), value.to_owned());
@@ -671,6 +707,34 @@ mod tests {
                 other => panic!("{key} = {value}: expected BadMetadata, got {other:?}"),
             }
         }
+    }
+
+    #[test]
+    fn a_window_scaled_with_d_star_is_declared_in_the_metadata() {
+        let mut entries = paper_metadata();
+        entries.insert(keys::D_STAR_REF_M.to_owned(), "1.25".to_owned());
+        entries.insert(keys::INPUT.to_owned(), INPUT_OCCUPANCY.to_owned());
+        let meta = parse_metadata(&entries).expect("valid metadata");
+        assert_eq!(meta.occupancy.d_star_ref_m, Some(1.25));
+        assert!(meta.extra.is_empty() || !meta.extra.contains_key(keys::D_STAR_REF_M));
+    }
+
+    #[test]
+    fn an_input_the_agent_cannot_feed_is_refused_by_name() {
+        let mut entries = paper_metadata();
+        entries.insert(keys::INPUT.to_owned(), "scan-ranges".to_owned());
+        let err = parse_metadata(&entries).expect_err("an agent renders only occupancy images");
+        assert_eq!(
+            err,
+            ContractViolation::UnsupportedInput {
+                input: "scan-ranges".into()
+            }
+        );
+        let text = err.to_string();
+        assert!(
+            text.contains("\"scan-ranges\"") && text.contains(keys::INPUT),
+            "{text}"
+        );
     }
 
     #[test]

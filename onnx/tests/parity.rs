@@ -26,7 +26,8 @@ fn outputs_match_torch_and_metadata_is_read() {
         OccupancySpec {
             size_px: 50,
             resolution_m: 0.1,
-            beyond: BeyondWindow::Drop
+            beyond: BeyondWindow::Drop,
+            d_star_ref_m: None,
         }
     );
     assert_eq!((meta.beams, meta.max_range, meta.v_train), (900, 10.0, 0.7));

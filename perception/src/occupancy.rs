@@ -72,6 +72,23 @@ pub fn render(scan: &[f32], lidar: &LidarSpec, spec: &OccupancySpec, out: &mut [
     }
 }
 
+/// Renders one raw scan for a goal spacing `d_star` \[m\]: [`render`] with the window
+/// [`OccupancySpec::at_d_star`] gives, which is `spec` itself unless the window scales with d*.
+/// Collection and agents render through this, so both scale the window the same way.
+///
+/// # Panics
+///
+/// As [`render`].
+pub fn render_at(
+    scan: &[f32],
+    lidar: &LidarSpec,
+    spec: &OccupancySpec,
+    d_star: f64,
+    out: &mut [u8],
+) {
+    render(scan, lidar, &spec.at_d_star(d_star), out);
+}
+
 /// The `(row, col)` of the cell holding the body-frame point `(x, y)`, in metres, or `None` if the point lies
 /// outside the window (or is not finite). See the module documentation for the formula.
 pub fn cell_of(x: f64, y: f64, spec: &OccupancySpec) -> Option<(usize, usize)> {
@@ -159,6 +176,29 @@ mod tests {
         let mut image = vec![7; spec.size_px * spec.size_px];
         render(&scan, &lidar, spec, &mut image);
         occupied_cells(&image, spec)
+    }
+
+    /// A neighbour held at d* lands the same number of cells ahead at every spacing when the
+    /// window scales with d*, and at a fixed distance in metres when it does not.
+    #[test]
+    fn a_scaled_window_puts_a_neighbour_at_d_star_in_the_same_cell() {
+        let lidar = LidarSpec::default();
+        let scaled = OccupancySpec {
+            d_star_ref_m: Some(1.0),
+            ..spec(BeyondWindow::Border)
+        };
+        let cells_at = |spec: &OccupancySpec, d_star: f64| {
+            let mut scan = no_hits(&lidar);
+            scan[0] = d_star as f32;
+            let mut image = vec![0; spec.size_px * spec.size_px];
+            render_at(&scan, &lidar, spec, d_star, &mut image);
+            occupied_cells(&image, spec)
+        };
+        for d_star in [0.8, 1.0, 1.7, 2.5] {
+            assert_eq!(cells_at(&scaled, d_star), vec![(25, 35)], "d* = {d_star}");
+        }
+        assert_eq!(cells_at(&OccupancySpec::PAPER, 0.8), vec![(25, 33)]);
+        assert_eq!(cells_at(&OccupancySpec::PAPER, 2.0), vec![(25, 45)]);
     }
 
     #[test]

@@ -103,15 +103,24 @@ impl BeyondWindow {
 /// The image is `size_px x size_px`, centred on the robot, in its body frame (x forward, y left),
 /// covering `size_px * resolution_m` metres on a side. These settings travel in dataset headers
 /// and model metadata so an agent renders exactly what its model was trained on.
+///
+/// With `d_star_ref_m` set, the window scales with the goal's spacing d*: at d* the cells are
+/// `resolution_m * d* / d_star_ref_m` wide ([`OccupancySpec::at_d_star`]), so a neighbour held at
+/// d* lies the same number of cells away at every spacing, and the image keeps the same precision
+/// relative to d* (the paper's fixed 0.1 m cell is 12.5 % of d* = 0.8 m and 4 % of 2.5 m).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OccupancySpec {
     /// Cells on a side. The paper's network needs 50.
     pub size_px: usize,
-    /// Cell edge length \[m\].
+    /// Cell edge length \[m\] (at `d* = d_star_ref_m` when the window scales with d*).
     pub resolution_m: f64,
     /// What happens to hits beyond the window.
     pub beyond: BeyondWindow,
+    /// When set, the spacing d* \[m\] at which cells are `resolution_m` wide; the window scales
+    /// linearly with d* from there. `None`: a fixed window, as in the paper.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub d_star_ref_m: Option<f64>,
 }
 
 impl OccupancySpec {
@@ -120,11 +129,37 @@ impl OccupancySpec {
         size_px: 50,
         resolution_m: 0.1,
         beyond: BeyondWindow::Drop,
+        d_star_ref_m: None,
     };
 
-    /// Side length of the window \[m\].
+    /// Side length of the window \[m\] (at `d* = d_star_ref_m` for a window that scales).
     pub fn window_m(&self) -> f64 {
         self.size_px as f64 * self.resolution_m
+    }
+
+    /// The fixed window an image is rendered with for a goal spacing `d_star`: this window itself
+    /// when it does not scale, else the one whose cells are `resolution_m * d_star /
+    /// d_star_ref_m` wide.
+    pub fn at_d_star(&self, d_star: f64) -> OccupancySpec {
+        match self.d_star_ref_m {
+            None => *self,
+            Some(reference) => OccupancySpec {
+                resolution_m: self.resolution_m * (d_star / reference),
+                d_star_ref_m: None,
+                ..*self
+            },
+        }
+    }
+
+    /// Whether the window scales with d*.
+    pub fn scales_with_d_star(&self) -> bool {
+        self.d_star_ref_m.is_some()
+    }
+
+    /// The largest window side \[m\] over goal spacings up to `d_star_max`: the window itself
+    /// when it is fixed.
+    pub fn widest_window_m(&self, d_star_max: f64) -> f64 {
+        self.at_d_star(d_star_max).window_m()
     }
 }
 
@@ -163,5 +198,32 @@ mod tests {
             assert_eq!(BeyondWindow::parse(b.as_str()), Some(b));
         }
         assert_eq!(BeyondWindow::parse("clamp"), None);
+    }
+
+    #[test]
+    fn a_scaled_window_keeps_its_cells_per_d_star() {
+        let scaled = OccupancySpec {
+            d_star_ref_m: Some(1.25),
+            ..OccupancySpec::PAPER
+        };
+        for d_star in [0.8, 1.25, 2.5] {
+            let at = scaled.at_d_star(d_star);
+            assert_eq!(at.d_star_ref_m, None);
+            assert!(
+                (d_star / at.resolution_m - 12.5).abs() < 1e-12,
+                "d* = {d_star}"
+            );
+        }
+        assert_eq!(scaled.at_d_star(1.25).resolution_m, 0.1);
+        assert_eq!(OccupancySpec::PAPER.at_d_star(0.8), OccupancySpec::PAPER);
+        assert!((scaled.widest_window_m(2.5) - 10.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_fixed_window_serialises_as_before() {
+        let text = serde_json::to_string(&OccupancySpec::PAPER).unwrap();
+        assert_eq!(text, r#"{"size_px":50,"resolution_m":0.1,"beyond":"drop"}"#);
+        let back: OccupancySpec = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, OccupancySpec::PAPER);
     }
 }

@@ -210,6 +210,8 @@ pub struct Agent {
     last_scan: Vec<f32>,
     /// The `(delta_phi, d*)` of the last [`Agent::decide`]; `None` before the first.
     last_aux: Option<[f32; 2]>,
+    /// The d* of the last [`Agent::perceive`] (the window of a model that scales with d*).
+    last_d_star: f64,
 }
 
 impl Agent {
@@ -225,6 +227,7 @@ impl Agent {
             image_f32: vec![0.0; cells],
             last_scan: Vec::with_capacity(lidar.beams),
             last_aux: None,
+            last_d_star: 1.0,
         })
     }
 
@@ -234,8 +237,9 @@ impl Agent {
         Agent::new(Box::new(policy), lidar)
     }
 
-    /// Renders this robot's occupancy image from its own scan.
-    pub fn perceive(&mut self, scan: &[f32]) -> Result<(), DecisionError> {
+    /// Renders this robot's occupancy image from its own scan, for the goal spacing `d_star`
+    /// (which sets the window of a model whose window scales with d*; a fixed window ignores it).
+    pub fn perceive(&mut self, scan: &[f32], d_star: f64) -> Result<(), DecisionError> {
         if scan.len() != self.lidar.beams {
             return Err(DecisionError::ScanLength {
                 expected: self.lidar.beams,
@@ -243,12 +247,20 @@ impl Agent {
             });
         }
         let spec = self.policy.occupancy_spec();
-        occupancy::render(scan, &self.lidar, &spec, &mut self.image);
+        if spec.scales_with_d_star() && !(d_star.is_finite() && d_star > 0.0) {
+            return Err(DecisionError::Goal {
+                reason: format!(
+                    "d* must be > 0 to size a window that scales with d*, got {d_star}"
+                ),
+            });
+        }
+        occupancy::render_at(scan, &self.lidar, &spec, d_star, &mut self.image);
         for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
             *dst = f32::from(src);
         }
         self.last_scan.clear();
         self.last_scan.extend_from_slice(scan);
+        self.last_d_star = d_star;
         Ok(())
     }
 
@@ -284,7 +296,13 @@ impl Agent {
             return Ok(());
         };
         let spec = self.policy.occupancy_spec();
-        occupancy::render(&self.last_scan, &self.lidar, &spec, &mut self.image);
+        occupancy::render_at(
+            &self.last_scan,
+            &self.lidar,
+            &spec,
+            self.last_d_star,
+            &mut self.image,
+        );
         for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
             *dst = f32::from(src);
         }
@@ -299,7 +317,7 @@ impl Agent {
         heading: f64,
         goal: &Goal,
     ) -> Result<WheelCmd, DecisionError> {
-        self.perceive(scan)?;
+        self.perceive(scan, goal.d_star)?;
         self.decide(heading, goal)
     }
 
@@ -332,7 +350,13 @@ impl Agent {
         let mut image = vec![0u8; n];
         let (aux, observation) = match self.last_aux {
             Some(aux) if self.last_scan.len() == self.lidar.beams => {
-                occupancy::render(&self.last_scan, &self.lidar, &spec, &mut image);
+                occupancy::render_at(
+                    &self.last_scan,
+                    &self.lidar,
+                    &spec,
+                    self.last_d_star,
+                    &mut image,
+                );
                 (aux, TrialObservation::Last)
             }
             _ => (TRIAL_AUX, TrialObservation::Empty),
@@ -595,6 +619,7 @@ mod tests {
                 size_px: 50,
                 resolution_m: 0.1,
                 beyond: BeyondWindow::Drop,
+                d_star_ref_m: None,
             },
             seen: None,
             d_star: None,
@@ -624,6 +649,41 @@ mod tests {
             text.contains("d* = 3 m") && text.contains("[0.8, 2.5] m") && text.contains("probe"),
             "{text}"
         );
+    }
+
+    /// A model whose window scales with d* sees a neighbour held at d* in the same cell at every
+    /// spacing: the agent renders with the goal's d*, as the collector did.
+    #[test]
+    fn a_window_scaled_with_d_star_is_rendered_for_the_goals_d_star() {
+        let lidar = LidarSpec::default();
+        let mut probe = probe();
+        probe.spec.d_star_ref_m = Some(1.0);
+        let mut agent = Agent::new(probe, lidar).expect("probe matches the sensor");
+        let lit_cells = |agent: &Agent| -> Vec<usize> {
+            let image = agent.image();
+            (0..image.len()).filter(|&i| image[i] != 0).collect()
+        };
+        let mut seen = Vec::new();
+        for d_star in [0.8, 1.6, 2.4] {
+            let mut scan = vec![lidar.max_range as f32; lidar.beams];
+            scan[0] = d_star as f32; // the neighbour ahead, at d*
+            let goal = Goal {
+                phi_star: 0.0,
+                d_star,
+                v_star: 0.7,
+            };
+            agent.act(&scan, 0.0, &goal).expect("decides");
+            seen.push(lit_cells(&agent));
+        }
+        assert_eq!(
+            seen,
+            vec![vec![25 * 50 + 35]; 3],
+            "10 cells ahead at every d*"
+        );
+        let err = agent
+            .perceive(&vec![1.0; lidar.beams], f64::NAN)
+            .expect_err("no window for a NaN d*");
+        assert!(err.to_string().contains("d* must be > 0"), "{err}");
     }
 
     #[test]

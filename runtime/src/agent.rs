@@ -34,8 +34,9 @@ pub trait Pilot {
     type Model: Send + 'static;
     /// The id of the model now driving (logged with every command).
     fn model_id(&self) -> &str;
-    /// Takes in this robot's own scan (the occupancy rendering).
-    fn perceive(&mut self, ranges: &[f32]) -> Result<(), BoxError>;
+    /// Takes in this robot's own scan (the occupancy rendering) under the goal it holds (whose
+    /// d* sizes the window of a model that scales with d*).
+    fn perceive(&mut self, ranges: &[f32], goal: &Goal) -> Result<(), BoxError>;
     /// Decides the wheel command from the last perceived scan, the own heading and the goal.
     fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, BoxError>;
     /// Puts another model in place after validating it; on error the old one keeps driving.
@@ -460,12 +461,13 @@ impl<M: PilotMaker> AgentLoop<M> {
             );
             self.last_answer = Some((scan.sim_time, started));
         }
+        let goal = scan.goal();
         let perceived = scan
             .ranges()
             .map_err(BoxError::from)
-            .and_then(|r| pilot.perceive(r));
+            .and_then(|r| pilot.perceive(r, &goal));
         let perceived_at = self.clock.now();
-        let decided = perceived.and_then(|()| pilot.decide(scan.heading, &scan.goal()));
+        let decided = perceived.and_then(|()| pilot.decide(scan.heading, &goal));
         let decided_at = self.clock.now();
         let timings = AgentTimings {
             received_wall_ns,

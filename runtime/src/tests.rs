@@ -75,7 +75,7 @@ impl Pilot for TestPilot {
         &self.model.id
     }
 
-    fn perceive(&mut self, ranges: &[f32]) -> Result<(), BoxError> {
+    fn perceive(&mut self, ranges: &[f32], _goal: &Goal) -> Result<(), BoxError> {
         if ranges.len() == BEAMS {
             Ok(())
         } else {

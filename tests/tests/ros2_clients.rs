@@ -508,7 +508,7 @@ impl InProcess {
         let resampled =
             resample_scan(&scan.message(), self.contract, partial).expect("a usable scan");
         self.agent
-            .perceive(&resampled.ranges)
+            .perceive(&resampled.ranges, GOAL.d_star)
             .expect("in-process perception");
         let wheels = self
             .agent

@@ -91,6 +91,10 @@ impl DatasetHeader {
         hash.update_field(&(self.occupancy.size_px as u64).to_le_bytes());
         hash.update_field(&self.occupancy.resolution_m.to_le_bytes());
         hash.update_field(self.occupancy.beyond.as_str().as_bytes());
+        // Only a scaled window adds a field, so a fixed window's dataset id is unchanged.
+        if let Some(reference) = self.occupancy.d_star_ref_m {
+            hash.update_field(&reference.to_le_bytes());
+        }
         hash.update_field(&(self.lidar.beams as u64).to_le_bytes());
         hash.update_field(&self.lidar.max_range.to_le_bytes());
         hash.update_field(&self.lidar.noise_std.to_le_bytes());
@@ -915,6 +919,7 @@ mod tests {
                 size_px: SIZE,
                 resolution_m: 0.1,
                 beyond: BeyondWindow::Drop,
+                d_star_ref_m: None,
             },
             LidarSpec::default(),
             0.7,

@@ -212,7 +212,7 @@ impl Decider {
             Ok(goal) => goal,
             Err(reason) => return Answer::Brake(reason),
         };
-        if let Err(e) = pilot.perceive(&resampled.ranges) {
+        if let Err(e) = pilot.perceive(&resampled.ranges, &goal) {
             return Answer::Brake(format!("the decision failed: {}", error_chain(&*e)));
         }
         let wheels = match pilot.decide(heading, &goal) {
@@ -279,7 +279,7 @@ mod tests {
         fn model_id(&self) -> &str {
             "recorder"
         }
-        fn perceive(&mut self, ranges: &[f32]) -> Result<(), BoxError> {
+        fn perceive(&mut self, ranges: &[f32], _goal: &Goal) -> Result<(), BoxError> {
             self.ranges = ranges.to_vec();
             Ok(())
         }

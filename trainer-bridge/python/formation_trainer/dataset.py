@@ -91,7 +91,7 @@ def read_manifest(directory: str | Path) -> Manifest:
         manifest = Manifest(
             directory=directory,
             dataset_id=str(raw["dataset_id"]),
-            occupancy={k: raw["occupancy"][k] for k in ("size_px", "resolution_m", "beyond")},
+            occupancy=_occupancy(raw["occupancy"]),
             lidar={k: raw["lidar"][k] for k in ("beams", "max_range", "noise_std")},
             v_train=float(raw["v_train"]),
             seed=int(raw["seed"]),
@@ -217,6 +217,15 @@ class Samples:
             | self.iteration.astype(np.int64) << 32
             | self.run.astype(np.int64)
         )
+
+
+def _occupancy(raw: dict) -> dict:
+    """The occupancy settings of a manifest: the window, and ``d_star_ref_m`` only for a window
+    that scales with d* (cells ``resolution_m * d* / d_star_ref_m`` wide)."""
+    occupancy = {k: raw[k] for k in ("size_px", "resolution_m", "beyond")}
+    if raw.get("d_star_ref_m") is not None:
+        occupancy["d_star_ref_m"] = float(raw["d_star_ref_m"])
+    return occupancy
 
 
 def _sensor(lidar: dict) -> dict:

@@ -62,6 +62,7 @@ def model_metadata(
         "formation.occupancy.size_px": str(int(occupancy["size_px"])),
         "formation.occupancy.resolution_m": number_text(occupancy["resolution_m"]),
         "formation.occupancy.beyond": str(occupancy["beyond"]),
+        "formation.input": "occupancy",
         "formation.lidar.beams": str(int(lidar["beams"])),
         "formation.lidar.max_range": number_text(lidar["max_range"]),
         "formation.lidar.noise_std": number_text(lidar["noise_std"]),
@@ -74,6 +75,8 @@ def model_metadata(
         "formation.dagger.iteration": str(int(dagger_iteration)),
         "formation.created_by": CREATED_BY,
     }
+    if occupancy.get("d_star_ref_m") is not None:
+        meta["formation.occupancy.d_star_ref_m"] = number_text(occupancy["d_star_ref_m"])
     for key, value in (extra or {}).items():
         meta.setdefault(f"formation.{key}", str(value))
     return meta

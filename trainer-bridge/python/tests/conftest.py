@@ -40,6 +40,7 @@ def write_dataset(
     v_train: float = 0.7,
     iteration: int = 0,
     noise_std: float = 0.0,
+    d_star_ref_m: float | None = None,
 ) -> Path:
     """Writes a dataset of ``samples`` synthetic samples in shards of ``shard_size``."""
     directory.mkdir(parents=True)
@@ -56,7 +57,8 @@ def write_dataset(
         "format": "formation-dataset",
         "version": 1,
         "dataset_id": f"synthetic{seed:07d}",
-        "occupancy": {"size_px": size_px, "resolution_m": 0.1, "beyond": "drop"},
+        "occupancy": {"size_px": size_px, "resolution_m": 0.1, "beyond": "drop"}
+        | ({} if d_star_ref_m is None else {"d_star_ref_m": d_star_ref_m}),
         "lidar": {"beams": 900, "max_range": 10.0, "noise_std": noise_std},
         "v_train": v_train,
         "seed": seed,

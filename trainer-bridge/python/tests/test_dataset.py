@@ -57,6 +57,15 @@ def test_datasets_with_other_settings_cannot_be_mixed(make_dataset):
         ds.load([a, b])
 
 
+def test_a_window_scaled_with_d_star_is_read_and_not_mixed_with_a_fixed_one(make_dataset):
+    scaled = make_dataset("scaled", d_star_ref_m=1.25, seed=1)
+    fixed = make_dataset("fixed", seed=2)
+    assert ds.load([scaled]).manifests[0].occupancy["d_star_ref_m"] == 1.25
+    assert "d_star_ref_m" not in ds.load([fixed]).manifests[0].occupancy
+    with pytest.raises(ds.DatasetError, match="cannot be trained together: their occupancy differ"):
+        ds.load([scaled, fixed])
+
+
 def test_datasets_of_other_noise_levels_train_together_up_to_the_largest(make_dataset):
     clean = make_dataset("clean", noise_std=0.0, seed=1)
     noisy = make_dataset("noisy", noise_std=0.03, seed=2)

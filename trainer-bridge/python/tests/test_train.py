@@ -74,6 +74,26 @@ def test_onnx_has_the_contract_metadata(trained):
     assert float(meta["formation.train.final_val_loss"]) == trained["report"]["final_val_loss"]
 
 
+def test_the_metadata_declares_the_input_and_a_window_scaled_with_d_star():
+    common = dict(
+        lidar={"beams": 900, "max_range": 10.0, "noise_std": 0.0},
+        v_train=0.7,
+        dataset_id="d",
+        epochs=1,
+        final_train_loss=0.1,
+        final_val_loss=0.1,
+        samples=1,
+        dagger_iteration=0,
+    )
+    fixed = export.model_metadata(occupancy={"size_px": 50, "resolution_m": 0.1, "beyond": "border"}, **common)
+    scaled = export.model_metadata(
+        occupancy={"size_px": 50, "resolution_m": 0.1, "beyond": "border", "d_star_ref_m": 1.25}, **common
+    )
+    assert fixed["formation.input"] == scaled["formation.input"] == "occupancy"
+    assert "formation.occupancy.d_star_ref_m" not in fixed
+    assert scaled["formation.occupancy.d_star_ref_m"] == "1.25"
+
+
 def test_onnx_batch_is_dynamic_and_matches_torch(trained):
     session = ort.InferenceSession(str(trained["out"]), providers=["CPUExecutionProvider"])
     assert [i.name for i in session.get_inputs()] == ["occupancy", "aux"]
