@@ -192,6 +192,11 @@ pub struct NetworkArgs {
     /// symmetric.
     #[arg(long)]
     pub mirror: bool,
+    /// Train on reflected samples as `--mirror` does, but export the network itself rather than
+    /// its average over the reflection: the symmetry lives in the weights, as far as it was
+    /// learned, and a decision costs one evaluation instead of two.
+    #[arg(long, conflicts_with = "mirror")]
+    pub mirror_augment_only: bool,
     /// Train each epoch on this many training samples drawn at random, not all of them: an
     /// epoch then costs the same however large the data (a DAgger dataset) grows.
     #[arg(long)]

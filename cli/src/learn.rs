@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use formation_learning::dagger::{DaggerEvent, DaggerOptions, run_dagger};
-use formation_trainer_bridge::train::{TrainOptions, TrainReport, train};
+use formation_trainer_bridge::train::{Mirror, TrainOptions, TrainReport, train};
 use formation_world::Scenario;
 
 use crate::args::{DaggerArgs, TrainArgs};
@@ -31,7 +31,7 @@ pub fn train_command(args: &TrainArgs) -> anyhow::Result<()> {
         init_from: args.init_from.clone(),
         d_star_range: args.d_star_range,
         architecture: args.network.architecture,
-        mirror: args.network.mirror,
+        mirror: Mirror::from_flags(args.network.mirror, args.network.mirror_augment_only),
         relative_loss: args.network.relative_loss,
         samples_per_epoch: args
             .network
@@ -81,7 +81,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
             device: args.device.clone(),
             d_star_range,
             architecture: args.network.architecture,
-            mirror: args.network.mirror,
+            mirror: Mirror::from_flags(args.network.mirror, args.network.mirror_augment_only),
             relative_loss: args.network.relative_loss,
             samples_per_epoch: args
                 .network

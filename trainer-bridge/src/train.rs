@@ -62,11 +62,9 @@ pub struct TrainOptions {
     pub d_star_range: Option<(f64, f64)>,
     /// The network to train; `None`: the warm start's, or the paper's when training from scratch.
     pub architecture: Option<Architecture>,
-    /// Use the task's exact symmetry under reflection about the robot's heading axis (rows of
-    /// the image reversed, Δφ negated, wheels swapped): train on reflected samples too, and
-    /// export a network whose output is averaged over the reflection, so the policy is exactly
-    /// symmetric (metadata `formation.policy.mirror_averaged`).
-    pub mirror: bool,
+    /// Whether and how to use the task's exact symmetry under reflection about the robot's
+    /// heading axis (rows of the image reversed, Δφ negated, wheels swapped).
+    pub mirror: Mirror,
     /// Train each epoch on this many training samples, drawn afresh at random without
     /// replacement; `None`: every training sample. Keeps an epoch's cost fixed as a DAgger
     /// dataset grows, while every sample keeps the same chance of being drawn.
@@ -135,9 +133,36 @@ impl Default for TrainOptions {
             parity_out: None,
             d_star_range: None,
             architecture: None,
-            mirror: false,
+            mirror: Mirror::Off,
             samples_per_epoch: None,
             relative_loss: false,
+        }
+    }
+}
+
+/// How training uses the task's exact symmetry under reflection about the robot's heading axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Mirror {
+    /// Not at all.
+    #[default]
+    Off,
+    /// Train on reflected samples too, and export the network itself: it is as symmetric as it
+    /// learned to be, at one evaluation per decision (`formation.train.mirror = true`).
+    Augment,
+    /// Train on reflected samples too, and export a network whose output is averaged over the
+    /// reflection, so the policy is exactly symmetric at twice the arithmetic
+    /// (`formation.policy.mirror_averaged = true`).
+    Average,
+}
+
+impl Mirror {
+    /// The mirror use the command line's two flags name (`--mirror` and
+    /// `--mirror-augment-only`, which exclude each other).
+    pub fn from_flags(average: bool, augment_only: bool) -> Mirror {
+        match (average, augment_only) {
+            (true, _) => Mirror::Average,
+            (false, true) => Mirror::Augment,
+            (false, false) => Mirror::Off,
         }
     }
 }
@@ -393,8 +418,10 @@ fn trainer_args(opts: &TrainOptions) -> Vec<std::ffi::OsString> {
     if let Some(count) = opts.samples_per_epoch {
         push("--samples-per-epoch", count.to_string().into());
     }
-    if opts.mirror {
-        args.push("--mirror".into());
+    match opts.mirror {
+        Mirror::Off => {}
+        Mirror::Augment => args.push("--mirror-augment-only".into()),
+        Mirror::Average => args.push("--mirror".into()),
     }
     if opts.relative_loss {
         args.push("--relative-loss".into());
@@ -594,7 +621,7 @@ mod tests {
             seed: 9,
             d_star_range: Some((0.8, 2.5)),
             architecture: Some(Architecture::Wide),
-            mirror: true,
+            mirror: Mirror::Average,
             samples_per_epoch: Some(200_000),
             relative_loss: true,
             ..opts()

@@ -45,7 +45,13 @@ def _parser() -> argparse.ArgumentParser:
     train.add_argument(
         "--mirror",
         action="store_true",
-        help="also train on every sample reflected about the robot's heading axis (an exact symmetry of the task)",
+        help="also train on every sample reflected about the robot's heading axis (an exact symmetry of the task), "
+        "and export the network averaged over the reflection",
+    )
+    train.add_argument(
+        "--mirror-augment-only",
+        action="store_true",
+        help="train on reflected samples as --mirror does, but export the network itself (one evaluation per decision)",
     )
 
     train.add_argument(
@@ -85,7 +91,8 @@ def _train(args) -> None:
         parity_out=args.parity_out,
         d_star_range=args.d_star_range,
         architecture=args.architecture,
-        mirror=args.mirror,
+        mirror=args.mirror or args.mirror_augment_only,
+        mirror_average=not args.mirror_augment_only,
         samples_per_epoch=args.samples_per_epoch,
         relative_loss=args.relative_loss,
     )

@@ -71,6 +71,9 @@ class TrainConfig:
     # (see mirror_batch), and make the model average its output over the reflection
     # (PolicyNet.mirror_averaged), so the exported policy is exactly symmetric.
     mirror: bool = False
+    # With mirror: export the mirror average (exactly symmetric, two evaluations per decision);
+    # False exports the fitted network itself (symmetric as far as it learned, one evaluation).
+    mirror_average: bool = True
     # Train each epoch on this many training samples drawn afresh at random (without
     # replacement); None: every training sample. Keeps an epoch's cost fixed as a DAgger
     # dataset grows, while every sample keeps the same chance of being drawn.
@@ -373,7 +376,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         except ValueError as e:
             raise TrainError(str(e)) from e
     if cfg.mirror:
-        model.mirror_averaged = True
+        model.mirror_averaged = cfg.mirror_average
     # With mirrored batches the network itself is fitted to both halves of the reflection. Its
     # expected loss bounds that of its mirror average from above (the square of a mean error is
     # at most the mean of the squares), at half the arithmetic of fitting the average.

@@ -258,8 +258,24 @@ def test_mirrored_training_is_recorded_in_the_model(trained, tmp_path):
     meta = {p.key: p.value for p in onnx.load(str(tmp_path / "mirror.onnx")).metadata_props}
     assert meta["formation.train.mirror"] == "true"
     assert any("mirrored" in line for line in lines)
+    assert meta["formation.policy.mirror_averaged"] == "true"
     plain = {p.key: p.value for p in onnx.load(str(trained["out"])).metadata_props}
     assert plain["formation.train.mirror"] == "false"
+
+
+def test_mirror_augmentation_alone_exports_the_network_itself(trained, tmp_path):
+    config = train.TrainConfig(
+        data=[trained["data"]], out=tmp_path / "augmented.onnx", epochs=1, batch_size=16, lr=1e-3,
+        device="cpu", mirror=True, mirror_average=False,
+    )
+    train.run(config, log=lambda _: None)
+    model = onnx.load(str(tmp_path / "augmented.onnx"))
+    meta = {p.key: p.value for p in model.metadata_props}
+    assert meta["formation.train.mirror"] == "true"
+    assert meta["formation.policy.mirror_averaged"] == "false"
+    # One evaluation: the graph holds each convolution once (an averaged graph holds it twice).
+    convs = sum(node.op_type == "Conv" for node in model.graph.node)
+    assert convs == 3, convs
 
 
 def test_a_policy_onnx_seeds_training_with_its_own_weights(trained, tmp_path):
