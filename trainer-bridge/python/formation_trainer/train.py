@@ -234,6 +234,23 @@ def _batch(tensors: dict, index: torch.Tensor):
     return occupancy, tensors["aux"].index_select(0, index), tensors["wheels"].index_select(0, index)
 
 
+def training_threads() -> int:
+    """CPU threads for training: ``FORMATION_TRAIN_THREADS`` when set, else every core. On a host
+    whose cores are busy with other work (a build, another training), one thread is often several
+    times faster than two: PyTorch's threads wait for each other at every operation, and a
+    descheduled one stalls them all."""
+    text = os.environ.get("FORMATION_TRAIN_THREADS", "").strip()
+    if not text:
+        return os.cpu_count() or 1
+    try:
+        threads = int(text)
+    except ValueError:
+        threads = 0
+    if threads < 1:
+        raise TrainError(f"FORMATION_TRAIN_THREADS must be a positive number of threads, got {text!r}")
+    return threads
+
+
 def mirror_batch(occupancy: torch.Tensor, aux: torch.Tensor, wheels: torch.Tensor, flip: torch.Tensor):
     """Reflects the samples where ``flip`` is true about the robot's heading axis (y -> -y).
 
@@ -357,7 +374,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     paths = artifact_paths(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     device = resolve_device(cfg.device)
-    torch.set_num_threads(os.cpu_count() or 1)
+    torch.set_num_threads(training_threads())
     torch.manual_seed(cfg.seed)
 
     samples = ds.load(cfg.data)

@@ -423,3 +423,13 @@ def test_training_with_the_relative_loss_is_recorded_in_the_model(trained, tmp_p
     assert meta["formation.train.relative_loss"] == "true"
     plain = {p.key: p.value for p in onnx.load(str(trained["out"])).metadata_props}
     assert plain["formation.train.relative_loss"] == "false"
+
+
+def test_training_threads_follow_the_environment(monkeypatch):
+    monkeypatch.setenv("FORMATION_TRAIN_THREADS", "1")
+    assert train.training_threads() == 1
+    monkeypatch.delenv("FORMATION_TRAIN_THREADS")
+    assert train.training_threads() >= 1
+    monkeypatch.setenv("FORMATION_TRAIN_THREADS", "two")
+    with pytest.raises(train.TrainError, match="FORMATION_TRAIN_THREADS must be a positive number"):
+        train.training_threads()
