@@ -64,6 +64,15 @@ pub struct LaunchPlan {
     pub network: Network,
 }
 
+impl LaunchPlan {
+    /// How many agents the launcher starts on this host (every robot but the remote ones).
+    pub fn local_agent_count(&self) -> usize {
+        (0..self.models.len())
+            .filter(|&robot| !self.network.is_remote(robot))
+            .count()
+    }
+}
+
 /// How the processes of a launch reach each other.
 #[derive(Debug, Clone, Default)]
 pub enum Network {
@@ -870,6 +879,13 @@ async fn spawn_agent(
         .kill_on_drop(true);
     if let Some(Some(fault)) = plan.faults.get(robot).filter(|_| first_start) {
         command.arg("--fault").arg(fault);
+    }
+    // Rehearsals cost a loaded host its deadlines; an explicit FORMATION_AGENT_REHEARSE_US wins.
+    let cores = std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get);
+    if std::env::var_os("FORMATION_AGENT_REHEARSE_US").is_none()
+        && !super::capacity::agents_should_rehearse(plan.local_agent_count(), cores)
+    {
+        command.arg("--rehearse-us").arg("0");
     }
     let mut child = command.spawn().map_err(|source| LaunchError::Spawn {
         what: format!("the agent of robot {robot}"),

@@ -87,7 +87,10 @@ struct Args {
     /// Rehearse the last decision this long before the next scan is due \[µs\] (0: never), so
     /// that an agent idling between realtime ticks decides with warm caches (measured on 2
     /// cores, realtime case 1: inference p50 from 140–166 µs down to 72–88 µs, for one extra
-    /// decision per tick, about 0.3 % of a core).
+    /// decision per tick, about 0.3 % of a core). The launcher turns it off (`--rehearse-us 0`)
+    /// for the agents it starts when more than 8 share a core of this host, where the burst of
+    /// rehearsals before each scan would cost the world its deadlines, unless
+    /// `FORMATION_AGENT_REHEARSE_US` is set.
     #[arg(long, env = "FORMATION_AGENT_REHEARSE_US", default_value_t = 2_000)]
     rehearse_us: u64,
     /// ROS 2 mode's flags.
