@@ -28,6 +28,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{WaitSetGuard, WaitSetRunResult};
 
+use super::services::{self, Access, EventService, PubSubService, ServiceError};
 use super::watch_termination_signals;
 use crate::link::{Hello, WorldLink, WorldLinkError, check_robot_index};
 use crate::signals;
@@ -183,44 +184,29 @@ impl IceoryxWorldLink {
     }
 }
 
-type PubSubService<T> =
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
-type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
-
-/// Creates (or opens) the publish-subscribe service `name` with `limits`, keeping no history and
-/// overwriting the oldest unread sample when a reader falls behind.
+/// The world creates every service of the run ([`Access::Create`]).
 fn pubsub_service<T: std::fmt::Debug + ZeroCopySend + IceoryxSend>(
     node: &Node<ipc::Service>,
     name: &str,
     limits: ServiceLimits,
 ) -> Result<PubSubService<T>, WorldLinkError> {
-    let service = ServiceName::new(name).map_err(|e| iox(format!("name service {name}"))(&e))?;
-    node.service_builder(&service)
-        .publish_subscribe::<T>()
-        .max_publishers(limits.max_publishers)
-        .max_subscribers(limits.max_subscribers)
-        .subscriber_max_buffer_size(limits.subscriber_buffer)
-        .max_nodes(limits.max_nodes)
-        .history_size(0)
-        .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| iox(format!("create service {name}"))(&e))
+    services::pubsub_service(node, name, limits, Access::Create).map_err(create_failed)
 }
 
-/// Creates (or opens) the event service `name` paired with a publish-subscribe service of `limits`.
+/// The event service paired with the publish-subscribe service `name` of `limits`, created.
 fn event_service(
     node: &Node<ipc::Service>,
     name: &str,
     limits: ServiceLimits,
 ) -> Result<EventService, WorldLinkError> {
-    let service = ServiceName::new(name).map_err(|e| iox(format!("name service {name}"))(&e))?;
-    node.service_builder(&service)
-        .event()
-        .max_notifiers(limits.max_publishers)
-        .max_listeners(limits.max_subscribers)
-        .max_nodes(limits.max_nodes)
-        .open_or_create()
-        .map_err(|e| iox(format!("create event service {name}"))(&e))
+    services::event_service(node, name, limits, Access::Create).map_err(create_failed)
+}
+
+fn create_failed(e: ServiceError) -> WorldLinkError {
+    WorldLinkError::Iceoryx {
+        action: e.action("create"),
+        detail: e.detail,
+    }
 }
 
 /// Robot `robot`'s lobby ports and its hello listener.
