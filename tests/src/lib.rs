@@ -111,6 +111,21 @@ impl LeakCheck {
         self.namespace.leftovers()
     }
 
+    /// Panics listing the run's shared-memory files if any exist but iceoryx2's management
+    /// segment of the namespace, which stays after every node of the run closed cleanly (by
+    /// design, across nodes) until the launcher removes the namespace.
+    pub fn assert_only_management_left(&self) {
+        let shm: Vec<_> = self
+            .leftovers()
+            .into_iter()
+            .filter(|p| p.starts_with("/dev/shm") && !p.to_string_lossy().ends_with(".global_mgmt"))
+            .collect();
+        assert!(
+            shm.is_empty(),
+            "shared memory left after a clean exit: {shm:#?}"
+        );
+    }
+
     /// Panics listing the run's files if any exist (its lock file included).
     pub fn assert_clean(&self) {
         let mut left = self.leftovers();

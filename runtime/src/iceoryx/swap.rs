@@ -99,15 +99,18 @@ pub fn request_swap(
         swap_limits(SwapChannel::Request),
         swap_limits(SwapChannel::Reply),
     );
+    let pubsub = |name: &str, limits| {
+        pubsub_service::<SwapReplyMsg>(&node, name, limits, Access::Open).map_err(&open_failed)
+    };
+    let event =
+        |name: &str, limits| event_service(&node, name, limits, Access::Open).map_err(&open_failed);
     // Subscribe to replies before asking, so the answer cannot be missed.
-    let replies = pubsub_service::<SwapReplyMsg>(&node, &reply_name, reply_limits, Access::Open)
-        .map_err(&open_failed)?
+    let replies = pubsub(&reply_name, reply_limits)?
         .subscriber_builder()
         .buffer_size(reply_limits.subscriber_buffer)
         .create()
         .map_err(|e| iox("subscribe to swap replies (8 swaps at once at most)")(&e))?;
-    let reply_wake = event_service(&node, &reply_name, reply_limits, Access::Open)
-        .map_err(&open_failed)?
+    let reply_wake = event(&reply_name, reply_limits)?
         .listener_builder()
         .create()
         .map_err(|e| iox("listen for swap replies")(&e))?;
@@ -117,8 +120,7 @@ pub fn request_swap(
             .publisher_builder()
             .create()
             .map_err(|e| iox("publish a swap request (8 swaps at once at most)")(&e))?;
-    let request_wake = event_service(&node, &request_name, request_limits, Access::Open)
-        .map_err(&open_failed)?
+    let request_wake = event(&request_name, request_limits)?
         .notifier_builder()
         .create()
         .map_err(|e| iox("wake the world")(&e))?;

@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use formation_proto::WheelCmd;
 use formation_proto::wire::{SwapOutcome, SwapReply, SwapRequest, TickOutcome, WorldEvent};
-use formation_runtime::ClockMode;
 use formation_runtime::agent::AgentExit;
+use formation_runtime::{ClockMode, RuntimeSettings};
 use formation_tests::{LaunchSecret, Watchdog, one_at_a_time};
 
 use crate::agent::Agent;
@@ -62,23 +62,49 @@ fn tick_until(world: &mut World<'_>, what: &str, done: impl FnMut(&World<'_>) ->
     );
 }
 
+/// Plays behaviour `name` on a fresh launch of `R` with two robots under `runtime`: the world's
+/// link, its exchange, a team of this launch connected and ready for the first episode, handed
+/// to `play`. The world and its link are gone when this returns the rig and what `play` gave.
+fn play<R: Rig, T>(
+    name: &'static str,
+    runtime: RuntimeSettings,
+    play: impl FnOnce(&R, &mut World<'_>, Vec<Agent>) -> T,
+) -> (R, T) {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm(name, LIMIT);
+    let rig = R::new(2);
+    let mut link = rig.world(runtime.clock);
+    let mut world = World::new(&rig, &mut link, runtime);
+    let team = team(&rig, 2);
+    world.connect();
+    let played = play(&rig, &mut world, team);
+    (rig, played)
+}
+
+/// Lockstep with at least `pace_ms` per tick.
+fn paced(pace_ms: u64) -> RuntimeSettings {
+    RuntimeSettings {
+        pace_ms,
+        ..settings(ClockMode::Lockstep)
+    }
+}
+
 /// Only an agent that proves this launch's secret drives a robot, one agent per robot: a second
 /// agent of the launch for a driven robot, and a stranger proving another launch's secret, are
 /// refused with the reason (and told, where the link can tell them), and neither ever drives.
 pub fn admission<R: Rig>() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("link_suite::admission", LIMIT);
-    let rig = R::new(2);
-    let mut link = rig.world(ClockMode::Lockstep);
-    let mut world = World::new(&rig, &mut link, settings(ClockMode::Lockstep));
-    let _team = team(&rig, 2);
-    world.connect();
+    play::<R, _>("admission", paced(0), |rig, world, _team| {
+        admit_only_the_launchs_agents(rig, world);
+    });
+}
+
+fn admit_only_the_launchs_agents<R: Rig>(rig: &R, world: &mut World<'_>) {
     world.ticks(2);
     // Both candidates drive the fast model, so a command of theirs would show.
     let second = rig.agent(0, suite_pid(10), rig.secret(), "fast");
     let stranger_secret = LaunchSecret::generate().expect("another launch's secret");
     let stranger = rig.agent(1, suite_pid(11), &stranger_secret, "fast");
-    tick_until(&mut world, "both candidates refused", |w| {
+    tick_until(world, "both candidates refused", |w| {
         w.refusals().len() >= 2
     });
     world.ticks(10);
@@ -93,7 +119,7 @@ pub fn admission<R: Rig>() {
     assert_eq!(refusals[1].0, 1);
     assert!(refusals[1].1.contains(R::STRANGER_REFUSAL), "{refusals:?}");
     for robot in 0..2 {
-        assert_drove(&world, robot, 0..world.played_ticks(), SLOW);
+        assert_drove(world, robot, 0..world.played_ticks(), SLOW);
     }
     for (candidate, reason) in [(second, &refusals[0].1), (stranger, &refusals[1].1)] {
         if R::REFUSAL_TOLD {
@@ -109,114 +135,105 @@ pub fn admission<R: Rig>() {
 /// meanwhile, and drives again as soon as it answers; the rest of the team drives throughout,
 /// and nobody reports the agent lost.
 pub fn lagging<R: Rig>() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("link_suite::lagging", LIMIT);
-    let rig = R::new(2);
-    let runtime = settings(ClockMode::Lockstep);
-    let mut link = rig.world(ClockMode::Lockstep);
-    let mut world = World::new(&rig, &mut link, runtime);
-    let team = team(&rig, 2);
-    world.connect();
-    world.ticks(3);
-    team[1].gate().hold();
-    let waited = world.ticks(1);
-    assert!(
-        waited >= runtime.command_timeout(),
-        "the first tick robot 1 misses waits the command timeout for it, waited {waited:?}"
-    );
-    world.ticks(2);
-    team[1].gate().release();
-    tick_until(&mut world, "robot 1 drives again", |w| {
-        w.played(1)
-            .last()
-            .is_some_and(|p| p.0 == TickOutcome::Fresh)
+    let runtime = paced(0);
+    play::<R, _>("lagging", runtime, |_, world, team| {
+        world.ticks(3);
+        team[1].gate().hold();
+        let waited = world.ticks(1);
+        assert!(
+            waited >= runtime.command_timeout(),
+            "the first tick robot 1 misses waits the command timeout for it, waited {waited:?}"
+        );
+        world.ticks(2);
+        team[1].gate().release();
+        tick_until(world, "robot 1 drives again", |w| {
+            w.played(1)
+                .last()
+                .is_some_and(|p| p.0 == TickOutcome::Fresh)
+        });
+        let back = world.played_ticks() - 1;
+        world.ticks(5);
+        let end = world.played_ticks();
+        assert_drove(world, 0, 0..end, SLOW);
+        assert_drove(world, 1, 0..3, SLOW);
+        assert_braked(world, 1, 3..back);
+        assert_drove(world, 1, back..end, SLOW);
+        let events = world.events();
+        assert!(
+            !events
+                .iter()
+                .any(|e| matches!(e, WorldEvent::AgentLost { .. })),
+            "a lagging agent is not lost: {events:?}"
+        );
     });
-    let back = world.next_tick() as usize - 1;
-    world.ticks(5);
-    let end = world.played_ticks();
-    assert_drove(&world, 0, 0..end, SLOW);
-    assert_drove(&world, 1, 0..3, SLOW);
-    assert_braked(&world, 1, 3..back);
-    assert_drove(&world, 1, back..end, SLOW);
-    assert!(
-        !world
-            .events()
-            .iter()
-            .any(|e| matches!(e, WorldEvent::AgentLost { .. })),
-        "a lagging agent is not lost: {:?}",
-        world.events()
-    );
 }
 
 /// An agent that goes (its process ends) leaves its robot braked; another agent of the launch
 /// for that robot is admitted as a new incarnation and drives it again from the first tick it
 /// answers, and the world reports the loss and the rejoin.
 pub fn rejoin<R: Rig>() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("link_suite::rejoin", LIMIT);
-    let rig = R::new(2);
-    let runtime = formation_runtime::RuntimeSettings {
-        pace_ms: 20,
-        ..settings(ClockMode::Lockstep)
-    };
-    let mut link = rig.world(ClockMode::Lockstep);
-    let mut world = World::new(&rig, &mut link, runtime);
-    let mut team = team(&rig, 2);
-    world.connect();
-    world.ticks(3);
-    let gone = team.pop().expect("robot 1's agent");
-    assert!(gone.stop().is_ok(), "a stopped agent ends cleanly");
+    play::<R, _>("rejoin", paced(20), |rig, world, mut team| {
+        world.ticks(3);
+        let gone = team.pop().expect("robot 1's agent");
+        assert!(gone.stop().is_ok(), "a stopped agent ends cleanly");
+        replace_robot_1s_agent(rig, world);
+    });
+}
+
+/// Whether the world reported robot 1's agent lost.
+fn lost(world: &World<'_>) -> bool {
+    world
+        .events()
+        .iter()
+        .any(|e| matches!(e, WorldEvent::AgentLost { robot: 1, .. }))
+}
+
+/// The tick from which robot 1's successor drove, once the world reported it.
+fn rejoined(world: &World<'_>) -> Option<usize> {
+    world.events().iter().find_map(|e| match e {
+        WorldEvent::AgentRejoined { robot: 1, tick, .. } => Some(*tick as usize),
+        _ => None,
+    })
+}
+
+/// Starts a successor for robot 1, whose agent went after tick 2, and checks that it drives
+/// from the tick the world reports it rejoined, robot 1 braked in between.
+fn replace_robot_1s_agent<R: Rig>(rig: &R, world: &mut World<'_>) {
     // A link that sees an agent's end reports it within a few ticks; over iceoryx2 a process
     // that closed its node cleanly is found gone only when its successor greets.
-    let lost = |w: &World<'_>| {
-        w.events()
-            .iter()
-            .any(|e| matches!(e, WorldEvent::AgentLost { robot: 1, .. }))
-    };
     world.tick_for(Duration::from_secs(2), lost);
     let _successor = rig.agent(1, suite_pid(21), rig.secret(), "slow");
-    let rejoined = |w: &World<'_>| {
-        w.events().iter().find_map(|e| match e {
-            WorldEvent::AgentRejoined { robot: 1, tick, .. } => Some(*tick as usize),
-            _ => None,
-        })
-    };
-    tick_until(&mut world, "robot 1's successor rejoins", |w| {
+    tick_until(world, "robot 1's successor rejoins", |w| {
         rejoined(w).is_some()
     });
     world.ticks(5);
-    let from = rejoined(&world).expect("the rejoin");
-    assert!(lost(&world), "the loss is reported: {:?}", world.events());
+    let from = rejoined(world).expect("the rejoin");
+    assert!(lost(world), "the loss is reported: {:?}", world.events());
     let end = world.played_ticks();
-    assert_drove(&world, 0, 0..end, SLOW);
-    assert_drove(&world, 1, 0..3, SLOW);
-    assert_braked(&world, 1, 3..from);
-    assert_drove(&world, 1, from..end, SLOW);
+    assert_drove(world, 0, 0..end, SLOW);
+    assert_drove(world, 1, 0..3, SLOW);
+    assert_braked(world, 1, 3..from);
+    assert_drove(world, 1, from..end, SLOW);
 }
 
 /// In realtime a command is used only while the scan it answers is within the stale window: an
 /// agent whose every answer comes later than that has its commands arrive and never used (its
 /// robot braked as stale), while the rest of the team drives.
 pub fn stale_command<R: Rig>() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("link_suite::stale_command", LIMIT);
-    let rig = R::new(2);
     let runtime = settings(ClockMode::Realtime);
-    let mut link = rig.world(ClockMode::Realtime);
-    let mut world = World::new(&rig, &mut link, runtime);
-    let team = team(&rig, 2);
-    world.connect();
-    team[1]
-        .gate()
-        .make_late(runtime.stale_after() + Duration::from_millis(600));
-    world.ticks(60);
-    let played = world.played(1);
-    assert!(
-        played.contains(&(TickOutcome::Stale, WheelCmd::BRAKE)),
-        "robot 1's late commands arrived and were refused as stale: {played:?}"
-    );
-    assert_braked(&world, 1, 0..played.len());
-    assert_drove(&world, 0, 2..played.len(), SLOW);
+    play::<R, _>("stale_command", runtime, |_, world, team| {
+        team[1]
+            .gate()
+            .make_late(runtime.stale_after() + Duration::from_millis(600));
+        world.ticks(60);
+        let played = world.played(1);
+        assert!(
+            played.contains(&(TickOutcome::Stale, WheelCmd::BRAKE)),
+            "robot 1's late commands arrived and were refused as stale: {played:?}"
+        );
+        assert_braked(world, 1, 0..played.len());
+        assert_drove(world, 0, 2..played.len(), SLOW);
+    });
 }
 
 /// What the world answered a swap request.
@@ -232,42 +249,38 @@ fn reply(handle: std::thread::JoinHandle<Result<SwapReply, String>>) -> SwapOutc
 /// than asked and says so; a model that does not load is refused and the old one keeps driving;
 /// a robot that does not exist is refused by the world.
 pub fn swap<R: SwapRig>() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("link_suite::swap", LIMIT);
-    let rig = R::new(2);
-    let runtime = formation_runtime::RuntimeSettings {
-        pace_ms: 10,
-        ..settings(ClockMode::Lockstep)
-    };
-    let mut link = rig.world(ClockMode::Lockstep);
-    let mut world = World::new(&rig, &mut link, runtime);
-    let _team = team(&rig, 2);
-    world.connect();
-    world.ticks(2);
-    let at = world.next_tick() + 40;
-    let request = |request_id, robot, model: &str| SwapRequest {
-        request_id,
-        robot,
-        at_tick: at,
-        path: rig.models().path(model),
-    };
-    let good = rig.swap(request(1, 0, "fast"));
-    let bad = rig.swap(request(2, 1, "bad"));
-    let nobody = rig.swap(request(3, 7, "fast"));
-    tick_until(&mut world, "every swap answered", |_| {
-        good.is_finished() && bad.is_finished() && nobody.is_finished()
+    play::<R, _>("swap", paced(10), |rig, world, _team| {
+        world.ticks(2);
+        let at = world.next_tick() + 40;
+        let request = |request_id, robot, model: &str| SwapRequest {
+            request_id,
+            robot,
+            at_tick: at,
+            path: rig.models().path(model),
+        };
+        let good = rig.swap(request(1, 0, "fast"));
+        let bad = rig.swap(request(2, 1, "bad"));
+        let nobody = rig.swap(request(3, 7, "fast"));
+        tick_until(world, "every swap answered", |_| {
+            good.is_finished() && bad.is_finished() && nobody.is_finished()
+        });
+        world.ticks(3);
+        check_swaps(world, at, [reply(good), reply(bad), reply(nobody)]);
     });
-    world.ticks(3);
-    let SwapOutcome::Done { tick, model_id } = reply(good) else {
-        panic!("robot 0's swap was refused")
+}
+
+/// Robot 0's swap to the fast model, asked for tick `at`, was done at a tick boundary; robot
+/// 1's to a model that does not load and robot 7's were refused.
+fn check_swaps(world: &World<'_>, at: u64, [good, bad, nobody]: [SwapOutcome; 3]) {
+    let SwapOutcome::Done { tick, model_id } = good else {
+        panic!("robot 0's swap was refused: {good:?}")
     };
     assert!(tick >= at, "swapped at tick {tick}, asked for {at}");
     assert_eq!(model_id, "fast");
-    let tick = tick as usize;
-    let end = world.played_ticks();
-    assert_drove(&world, 0, 0..tick, SLOW);
-    assert_drove(&world, 0, tick..end, FAST);
-    let SwapOutcome::Refused { reason } = reply(bad) else {
+    let (tick, end) = (tick as usize, world.played_ticks());
+    assert_drove(world, 0, 0..tick, SLOW);
+    assert_drove(world, 0, tick..end, FAST);
+    let SwapOutcome::Refused { reason } = bad else {
         panic!("a model that does not load was swapped in")
     };
     assert!(
@@ -275,8 +288,8 @@ pub fn swap<R: SwapRig>() {
             && reason.contains("bad is not a model"),
         "{reason}"
     );
-    assert_drove(&world, 1, 0..end, SLOW);
-    let SwapOutcome::Refused { reason } = reply(nobody) else {
+    assert_drove(world, 1, 0..end, SLOW);
+    let SwapOutcome::Refused { reason } = nobody else {
         panic!("robot 7 was swapped")
     };
     assert!(reason.contains("robot 7 does not exist"), "{reason}");
@@ -287,31 +300,25 @@ pub fn swap<R: SwapRig>() {
 /// belongs to its robot rather than to the run, runs on until its launcher stops it), and once
 /// the world and the agents are gone nothing of the run is left.
 pub fn shutdown<R: Rig>() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("link_suite::shutdown", LIMIT);
-    let rig = R::new(2);
-    let mut link = rig.world(ClockMode::Lockstep);
-    let mut world = World::new(&rig, &mut link, settings(ClockMode::Lockstep));
-    let team = team(&rig, 2);
-    world.connect();
-    world.ticks(3);
-    world.shut_down();
-    if R::SHUTDOWN_STOPS_AGENTS {
-        for agent in team {
-            assert_eq!(agent.finish(), Ok(AgentExit::Shutdown));
+    let (rig, team) = play::<R, _>("shutdown", paced(0), |_, world, team| {
+        world.ticks(3);
+        world.shut_down();
+        if R::SHUTDOWN_STOPS_AGENTS {
+            for agent in team {
+                assert_eq!(agent.finish(), Ok(AgentExit::Shutdown));
+            }
+            Vec::new()
+        } else {
+            team
         }
-        drop(world);
-        drop(link);
-    } else {
-        drop(world);
-        drop(link);
-        for agent in team {
-            assert!(!agent.ended(), "the agent outlives the world");
-            assert_eq!(
-                agent.stop(),
-                Ok(AgentExit::Because("the launcher went away".into()))
-            );
-        }
+    });
+    // The world and its link are gone.
+    for agent in team {
+        assert!(!agent.ended(), "the agent outlives the world");
+        assert_eq!(
+            agent.stop(),
+            Ok(AgentExit::Because("the launcher went away".into()))
+        );
     }
     rig.assert_nothing_left();
 }

@@ -24,37 +24,25 @@ mod pilot;
 mod rig;
 mod world;
 
-/// One module of `#[test]`s for the rig `$rig`, one per behaviour named.
+/// One module of `#[test]`s for the rig `$rig`: the behaviours every link has, and the `$extra`
+/// ones this link has too.
 macro_rules! instantiate {
-    ($module:ident, $rig:ty, [$($behaviour:ident),* $(,)?]) => {
+    ($module:ident, $rig:ty $(, $extra:ident)*) => {
         mod $module {
-            $(
-                #[test]
-                fn $behaviour() {
-                    crate::behaviours::$behaviour::<$rig>();
-                }
-            )*
+            instantiate!(@tests $rig; admission, lagging, rejoin, stale_command, shutdown $(, $extra)*);
         }
+    };
+    (@tests $rig:ty; $($behaviour:ident),*) => {
+        $(
+            #[test]
+            fn $behaviour() {
+                crate::behaviours::$behaviour::<$rig>();
+            }
+        )*
     };
 }
 
-instantiate!(
-    memory,
-    crate::rig::MemoryRig,
-    [admission, lagging, rejoin, stale_command, swap, shutdown]
-);
-instantiate!(
-    iceoryx2,
-    crate::rig::IceoryxRig,
-    [admission, lagging, rejoin, stale_command, swap, shutdown]
-);
-instantiate!(
-    zenoh,
-    crate::rig::ZenohRig,
-    [admission, lagging, rejoin, stale_command, swap, shutdown]
-);
-instantiate!(
-    ros2,
-    crate::rig::Ros2Rig,
-    [admission, lagging, rejoin, stale_command, shutdown]
-);
+instantiate!(memory, crate::rig::MemoryRig, swap);
+instantiate!(iceoryx2, crate::rig::IceoryxRig, swap);
+instantiate!(zenoh, crate::rig::ZenohRig, swap);
+instantiate!(ros2, crate::rig::Ros2Rig);

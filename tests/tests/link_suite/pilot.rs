@@ -48,11 +48,11 @@ impl Models {
     }
 }
 
-/// A loaded model: its id and the speed it drives at.
+/// A loaded model: its id and what it commands.
 #[derive(Debug, Clone)]
 pub struct Model {
     id: String,
-    speed: f64,
+    cmd: WheelCmd,
 }
 
 /// How a test holds an agent's decisions.
@@ -140,12 +140,8 @@ impl PilotMaker for SuitePilots {
         if id.starts_with("bad") {
             return Err(format!("{id} is not a model").into());
         }
-        let speed = if id.starts_with("fast") {
-            FAST.left
-        } else {
-            SLOW.left
-        };
-        Ok(Model { id, speed })
+        let cmd = if id.starts_with("fast") { FAST } else { SLOW };
+        Ok(Model { id, cmd })
     }
 
     fn model_id<'m>(&self, model: &'m Model) -> &'m str {
@@ -177,10 +173,7 @@ impl Pilot for SuitePilot {
 
     fn decide(&mut self, _: f64, _: &Goal) -> Result<WheelCmd, BoxError> {
         self.gate.pass();
-        Ok(WheelCmd {
-            left: self.model.speed,
-            right: self.model.speed,
-        })
+        Ok(self.model.cmd)
     }
 
     fn swap(&mut self, model: Model) -> Result<(), BoxError> {

@@ -7,7 +7,9 @@
 //! the pid the test gives it, since they all live in this process), and says at the end whether
 //! the run left anything behind.
 
+use std::path::PathBuf;
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 use formation_proto::wire::{RunId, SwapReply, SwapRequest};
 use formation_runtime::ClockMode;
@@ -16,10 +18,42 @@ use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_runtime::iceoryx::{IceoryxAgentLink, IceoryxWorldLink};
 use formation_runtime::link::WorldLink;
 use formation_runtime::memory::{MemoryBus, MemoryWorldLink};
+use formation_runtime::zenoh::{Endpoint, Login, WorldAccess, ZenohAgentLink, ZenohWorldLink};
 use formation_tests::{LaunchSecret, LeakCheck, TempDir, free_tcp_port, unique_run_id};
 
 use crate::agent::{Agent, CONNECT_TIMEOUT, loop_agent};
 use crate::pilot::Models;
+
+pub use ros2::Ros2Rig;
+
+/// What every rig's launch has: a run id, a launch secret, a team size and the suite's models.
+pub struct Launch {
+    run: RunId,
+    secret: LaunchSecret,
+    robots: usize,
+    models: Models,
+}
+
+impl Launch {
+    /// Run `run` of `robots` robots with a fresh secret.
+    fn new(run: RunId, robots: usize) -> Launch {
+        Launch::with_secret(
+            run,
+            robots,
+            LaunchSecret::generate().expect("a launch secret"),
+        )
+    }
+
+    /// Run `run` of `robots` robots with `secret`.
+    fn with_secret(run: RunId, robots: usize, secret: LaunchSecret) -> Launch {
+        Launch {
+            run,
+            secret,
+            robots,
+            models: Models::new(),
+        }
+    }
+}
 
 /// A transport as the behaviours use it.
 pub trait Rig {
@@ -28,76 +62,77 @@ pub trait Rig {
     /// Part of the reason the world gives a candidate that proves another launch's secret. Over
     /// ROS 2 the world proves the secret for the first publisher on a robot's `cmd_vel`, so
     /// there a stranger is simply a second driver.
-    const STRANGER_REFUSAL: &'static str;
+    const STRANGER_REFUSAL: &'static str = "did not prove this launch's secret";
     /// Whether a refused candidate is told (its connection fails with the reason). A ROS 2 node
     /// is never told: the team ignores its Twists.
-    const REFUSAL_TOLD: bool;
+    const REFUSAL_TOLD: bool = true;
     /// Whether the world's shutdown request stops the agents. A ROS 2 agent belongs to its
     /// robot, not to the run: its launcher stops it.
-    const SHUTDOWN_STOPS_AGENTS: bool;
+    const SHUTDOWN_STOPS_AGENTS: bool = true;
 
     /// A launch of `robots` robots, with a run id (and namespace or port) of its own.
     fn new(robots: usize) -> Self;
-    /// Its run id.
-    fn run(&self) -> &RunId;
-    /// Its launch secret.
-    fn secret(&self) -> &LaunchSecret;
+    /// Its run id, secret, team size and models.
+    fn launch(&self) -> &Launch;
     /// The world's link, for a run under `clock`.
     fn world(&self, clock: ClockMode) -> Self::World;
-    /// Starts an agent for `robot`, known as process `pid`, proving `secret`, driving with
-    /// model `model` (`slow`, `fast`).
-    fn agent(&self, robot: usize, pid: u32, secret: &LaunchSecret, model: &str) -> Agent;
+    /// Starts an agent for `robot`, known as process `pid`, proving `secret`, driving with the
+    /// model at `model`.
+    fn start(&self, robot: usize, pid: u32, secret: &LaunchSecret, model: PathBuf) -> Agent;
     /// Panics unless the run, its world and agents gone, left nothing behind.
     fn assert_nothing_left(&self);
+
+    /// The run id.
+    fn run(&self) -> &RunId {
+        &self.launch().run
+    }
+    /// The launch secret.
+    fn secret(&self) -> &LaunchSecret {
+        &self.launch().secret
+    }
+    /// The suite's models.
+    fn models(&self) -> &Models {
+        &self.launch().models
+    }
+    /// Starts an agent for `robot`, known as process `pid`, proving `secret`, driving with model
+    /// `model` (`slow`, `fast`).
+    fn agent(&self, robot: usize, pid: u32, secret: &LaunchSecret, model: &str) -> Agent {
+        self.start(robot, pid, secret, self.models().path(model))
+    }
 }
 
 /// A transport that carries swap requests, as `formation swap` sends them.
 pub trait SwapRig: Rig {
-    /// Sends `request` (its model one of the suite's, named by its path's file name) from a
-    /// thread of its own and waits there for the world's reply.
+    /// Sends `request` from a thread of its own and waits there for the world's reply.
     fn swap(&self, request: SwapRequest) -> JoinHandle<Result<SwapReply, String>>;
-    /// The suite's models.
-    fn models(&self) -> &Models;
 }
 
 /// The in-memory bus, with the world and every agent on threads of their own.
 pub struct MemoryRig {
     bus: MemoryBus,
-    run: RunId,
-    secret: LaunchSecret,
-    models: Models,
+    launch: Launch,
 }
 
 impl Rig for MemoryRig {
     type World = MemoryWorldLink;
-    const STRANGER_REFUSAL: &'static str = "did not prove this launch's secret";
-    const REFUSAL_TOLD: bool = true;
-    const SHUTDOWN_STOPS_AGENTS: bool = true;
 
     fn new(robots: usize) -> Self {
         MemoryRig {
             bus: MemoryBus::threaded(robots),
-            run: unique_run_id("mem"),
-            secret: LaunchSecret::generate().expect("a launch secret"),
-            models: Models::new(),
+            launch: Launch::new(unique_run_id("mem"), robots),
         }
     }
 
-    fn run(&self) -> &RunId {
-        &self.run
-    }
-
-    fn secret(&self) -> &LaunchSecret {
-        &self.secret
+    fn launch(&self) -> &Launch {
+        &self.launch
     }
 
     fn world(&self, _: ClockMode) -> MemoryWorldLink {
         self.bus.world_link()
     }
 
-    fn agent(&self, robot: usize, pid: u32, secret: &LaunchSecret, model: &str) -> Agent {
-        let (bus, run, secret) = (self.bus.clone(), self.run.clone(), secret.clone());
-        let model = self.models.path(model);
+    fn start(&self, robot: usize, pid: u32, secret: &LaunchSecret, model: PathBuf) -> Agent {
+        let (bus, run, secret) = (self.bus.clone(), self.run().clone(), secret.clone());
         Agent::spawn(move |gate, stop| {
             let connect = || bus.connect(robot, pid, (&run, &secret), CONNECT_TIMEOUT);
             let ending = loop_agent(connect, (&model, pid, run.as_str()), gate, &stop);
@@ -121,18 +156,12 @@ impl SwapRig for MemoryRig {
                 .ok_or_else(|| format!("no reply to swap request {id}"))
         })
     }
-
-    fn models(&self) -> &Models {
-        &self.models
-    }
 }
 
 /// iceoryx2 in a namespace of the test's own.
 pub struct IceoryxRig {
     leaks: LeakCheck,
-    robots: usize,
-    secret: LaunchSecret,
-    models: Models,
+    launch: Launch,
 }
 
 impl IceoryxRig {
@@ -143,34 +172,26 @@ impl IceoryxRig {
 
 impl Rig for IceoryxRig {
     type World = IceoryxWorldLink;
-    const STRANGER_REFUSAL: &'static str = "did not prove this launch's secret";
-    const REFUSAL_TOLD: bool = true;
-    const SHUTDOWN_STOPS_AGENTS: bool = true;
 
     fn new(robots: usize) -> Self {
+        let run = unique_run_id("iox");
         IceoryxRig {
-            leaks: LeakCheck::new(&unique_run_id("iox")),
-            robots,
-            secret: LaunchSecret::generate().expect("a launch secret"),
-            models: Models::new(),
+            leaks: LeakCheck::new(&run),
+            launch: Launch::new(run, robots),
         }
     }
 
-    fn run(&self) -> &RunId {
-        self.namespace().run()
-    }
-
-    fn secret(&self) -> &LaunchSecret {
-        &self.secret
+    fn launch(&self) -> &Launch {
+        &self.launch
     }
 
     fn world(&self, _: ClockMode) -> IceoryxWorldLink {
-        IceoryxWorldLink::create(self.namespace(), self.robots).expect("the world's iceoryx2 link")
+        IceoryxWorldLink::create(self.namespace(), self.launch.robots)
+            .expect("the world's iceoryx2 link")
     }
 
-    fn agent(&self, robot: usize, pid: u32, secret: &LaunchSecret, model: &str) -> Agent {
+    fn start(&self, robot: usize, pid: u32, secret: &LaunchSecret, model: PathBuf) -> Agent {
         let (namespace, secret) = (self.namespace().clone(), secret.clone());
-        let model = self.models.path(model);
         Agent::spawn(move |gate, stop| {
             let run = namespace.run().to_string();
             let connect =
@@ -183,16 +204,7 @@ impl Rig for IceoryxRig {
     /// of the namespace stays (by design, across nodes), which the launcher removes at the end,
     /// as this does.
     fn assert_nothing_left(&self) {
-        let shm: Vec<_> = self
-            .leaks
-            .leftovers()
-            .into_iter()
-            .filter(|p| p.starts_with("/dev/shm") && !p.to_string_lossy().ends_with(".global_mgmt"))
-            .collect();
-        assert!(
-            shm.is_empty(),
-            "shared memory left after a clean exit: {shm:#?}"
-        );
+        self.leaks.assert_only_management_left();
         self.namespace()
             .remove_all()
             .expect("removing the run's namespace");
@@ -208,33 +220,34 @@ impl SwapRig for IceoryxRig {
                 .map_err(|e| error_chain(&e))
         })
     }
-
-    fn models(&self) -> &Models {
-        &self.models
-    }
 }
 
 /// Zenoh on a free loopback port, the world's router checking the run's credentials.
 pub struct ZenohRig {
     credentials: TempDir,
-    run: RunId,
-    robots: usize,
-    endpoint: formation_runtime::zenoh::Endpoint,
-    secret: LaunchSecret,
-    models: Models,
+    endpoint: Endpoint,
+    launch: Launch,
 }
 
 impl ZenohRig {
-    fn login(&self, file: std::path::PathBuf) -> formation_runtime::zenoh::Login {
+    /// The run's credentials folder.
+    fn folder(&self) -> PathBuf {
+        self.credentials.path().join("credentials")
+    }
+
+    /// The login in the credentials file `file`.
+    fn login(&self, file: PathBuf) -> Login {
         formation_runtime::zenoh::credentials::read_login(&file).expect("a login of the run")
     }
 }
 
+/// `tcp/127.0.0.1:<a free port>`.
+fn loopback() -> Endpoint {
+    Endpoint::parse(&format!("tcp/127.0.0.1:{}", free_tcp_port())).expect("a loopback endpoint")
+}
+
 impl Rig for ZenohRig {
-    type World = formation_runtime::zenoh::ZenohWorldLink;
-    const STRANGER_REFUSAL: &'static str = "did not prove this launch's secret";
-    const REFUSAL_TOLD: bool = true;
-    const SHUTDOWN_STOPS_AGENTS: bool = true;
+    type World = ZenohWorldLink;
 
     fn new(robots: usize) -> Self {
         use formation_runtime::zenoh::credentials;
@@ -242,47 +255,37 @@ impl Rig for ZenohRig {
         let folder = dir.path().join("credentials");
         credentials::create(&folder, robots).expect("the run's credentials");
         let secret = credentials::read_secret(&folder).expect("the run's launch secret");
-        let endpoint = formation_runtime::zenoh::Endpoint::parse(&format!(
-            "tcp/127.0.0.1:{}",
-            free_tcp_port()
-        ))
-        .expect("a loopback endpoint");
         ZenohRig {
             credentials: dir,
-            run: unique_run_id("zen"),
-            robots,
-            endpoint,
-            secret,
-            models: Models::new(),
+            endpoint: loopback(),
+            launch: Launch::with_secret(unique_run_id("zen"), robots, secret),
         }
     }
 
-    fn run(&self) -> &RunId {
-        &self.run
+    fn launch(&self) -> &Launch {
+        &self.launch
     }
 
-    fn secret(&self) -> &LaunchSecret {
-        &self.secret
-    }
-
-    fn world(&self, _: ClockMode) -> Self::World {
-        use formation_runtime::zenoh::{WorldAccess, ZenohWorldLink, credentials};
-        let folder = self.credentials.path().join("credentials");
+    fn world(&self, _: ClockMode) -> ZenohWorldLink {
         let access = WorldAccess {
-            dictionary_file: credentials::check_passwords(&folder).expect("the passwords file"),
-            run: self.run.clone(),
-            n_robots: self.robots,
+            dictionary_file: formation_runtime::zenoh::credentials::check_passwords(&self.folder())
+                .expect("the passwords file"),
+            run: self.run().clone(),
+            n_robots: self.launch.robots,
         };
-        ZenohWorldLink::create(&self.run, self.robots, &self.endpoint, Some(&access))
-            .expect("the world's Zenoh link")
+        ZenohWorldLink::create(
+            self.run(),
+            self.launch.robots,
+            &self.endpoint,
+            Some(&access),
+        )
+        .expect("the world's Zenoh link")
     }
 
-    fn agent(&self, robot: usize, pid: u32, secret: &LaunchSecret, model: &str) -> Agent {
-        use formation_runtime::zenoh::{ZenohAgentLink, credentials};
-        let folder = self.credentials.path().join("credentials");
-        let login = self.login(credentials::robot_file(&folder, robot));
-        let (endpoint, run, secret) = (self.endpoint.clone(), self.run.clone(), secret.clone());
-        let model = self.models.path(model);
+    fn start(&self, robot: usize, pid: u32, secret: &LaunchSecret, model: PathBuf) -> Agent {
+        let robot_file = formation_runtime::zenoh::credentials::robot_file(&self.folder(), robot);
+        let login = self.login(robot_file);
+        let (endpoint, run, secret) = (self.endpoint.clone(), self.run().clone(), secret.clone());
         Agent::spawn(move |gate, stop| {
             let connect = || {
                 let to = (&run, robot);
@@ -302,11 +305,12 @@ impl Rig for ZenohRig {
     /// The world's port is free again, and no agent left a folder of models.
     fn assert_nothing_left(&self) {
         assert_port_free(&self.endpoint);
+        let prefix = format!("formation-agent-{SUITE_PID_PREFIX}");
         let left: Vec<_> = std::fs::read_dir(std::env::temp_dir())
             .expect("the temporary folder")
             .flatten()
             .map(|entry| entry.file_name().to_string_lossy().into_owned())
-            .filter(|name| name.starts_with(&format!("formation-agent-{}", SUITE_PID_PREFIX)))
+            .filter(|name| name.starts_with(&prefix))
             .collect();
         assert!(left.is_empty(), "model folders left behind: {left:?}");
     }
@@ -315,9 +319,8 @@ impl Rig for ZenohRig {
 impl SwapRig for ZenohRig {
     fn swap(&self, request: SwapRequest) -> JoinHandle<Result<SwapReply, String>> {
         use formation_runtime::zenoh::{credentials, swap};
-        let folder = self.credentials.path().join("credentials");
-        let operator = self.login(credentials::operator_file(&folder));
-        let (endpoint, run) = (self.endpoint.clone(), self.run.clone());
+        let operator = self.login(credentials::operator_file(&self.folder()));
+        let (endpoint, run) = (self.endpoint.clone(), self.run().clone());
         std::thread::spawn(move || {
             let model = std::fs::read(&request.path).map_err(|e| e.to_string())?;
             swap::request_swap(
@@ -331,10 +334,6 @@ impl SwapRig for ZenohRig {
             .map_err(|e| error_chain(&e))
         })
     }
-
-    fn models(&self) -> &Models {
-        &self.models
-    }
 }
 
 /// The pids the suite gives its agents begin with these digits (`formation-agent-<pid>-…` names
@@ -346,19 +345,22 @@ pub fn suite_pid(n: u32) -> u32 {
     SUITE_PID_PREFIX * 100 + n
 }
 
-/// Panics unless nothing listens on `endpoint`'s port any more.
-fn assert_port_free(endpoint: &formation_runtime::zenoh::Endpoint) {
+/// Panics unless nothing listens on `endpoint`'s port within a few seconds of its world going
+/// (a router closes its listener on a thread of its own).
+fn assert_port_free(endpoint: &Endpoint) {
     let address = endpoint
         .as_str()
         .strip_prefix("tcp/")
         .expect("a TCP endpoint");
-    assert!(
-        std::net::TcpListener::bind(address).is_ok(),
-        "{address} is still taken after the world went"
-    );
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while std::net::TcpListener::bind(address).is_err() {
+        assert!(
+            Instant::now() < deadline,
+            "{address} is still taken after the world went"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
-
-pub use ros2::Ros2Rig;
 
 mod ros2 {
     //! The world as a ROS 2 team, and ROS 2 agents (`formation_runtime::ros2::run_agent`) on
@@ -370,7 +372,6 @@ mod ros2 {
         DeciderSettings, GoalValue, OrientationKind, Ros2AgentSettings, Ros2Team, Ros2WorldLink,
         TeamTopics, run_agent,
     };
-    use formation_runtime::zenoh::Endpoint;
 
     use crate::pilot::SuitePilot;
     use crate::world::{BEAMS, MAX_RANGE};
@@ -380,11 +381,8 @@ mod ros2 {
 
     /// The team on a free loopback port.
     pub struct Ros2Rig {
-        run: RunId,
-        robots: usize,
         endpoint: Endpoint,
-        secret: LaunchSecret,
-        models: Models,
+        launch: Launch,
     }
 
     /// Robot `robot`'s ROS 2 agent at `endpoint`, its node named after `pid`. Its own stale
@@ -407,7 +405,7 @@ mod ros2 {
                     max_range: MAX_RANGE,
                 },
                 partial: PartialScan::Refuse,
-                stale: std::time::Duration::from_secs(30),
+                stale: Duration::from_secs(30),
                 wheel_separation: WHEEL_SEPARATION,
             },
             scan: topics.scan,
@@ -424,39 +422,30 @@ mod ros2 {
 
         fn new(robots: usize) -> Self {
             Ros2Rig {
-                run: unique_run_id("ros"),
-                robots,
-                endpoint: Endpoint::parse(&format!("tcp/127.0.0.1:{}", free_tcp_port()))
-                    .expect("a loopback endpoint"),
-                secret: LaunchSecret::generate().expect("a launch secret"),
-                models: Models::new(),
+                endpoint: loopback(),
+                launch: Launch::new(unique_run_id("ros"), robots),
             }
         }
 
-        fn run(&self) -> &RunId {
-            &self.run
-        }
-
-        fn secret(&self) -> &LaunchSecret {
-            &self.secret
+        fn launch(&self) -> &Launch {
+            &self.launch
         }
 
         fn world(&self, clock: ClockMode) -> Ros2WorldLink {
             let team = Ros2Team {
-                n_robots: self.robots,
+                n_robots: self.launch.robots,
                 domain_id: 0,
                 wheel_separation: WHEEL_SEPARATION,
                 max_range: MAX_RANGE,
                 lossless: clock == ClockMode::Lockstep,
             };
-            Ros2WorldLink::create(&self.run, team, &self.endpoint, self.secret.clone())
+            Ros2WorldLink::create(self.run(), team, &self.endpoint, self.secret().clone())
                 .expect("the world's ROS 2 team")
         }
 
         /// A ROS 2 agent proves nothing: `secret` is not used.
-        fn agent(&self, robot: usize, pid: u32, _secret: &LaunchSecret, model: &str) -> Agent {
+        fn start(&self, robot: usize, pid: u32, _secret: &LaunchSecret, model: PathBuf) -> Agent {
             let settings = settings(&self.endpoint, robot, pid);
-            let model = self.models.path(model);
             Agent::spawn(move |gate, stop| {
                 let mut pilot = SuitePilot::load(&model, gate).map_err(|e| e.to_string())?;
                 run_agent(&settings, &mut pilot, &stop).map_err(|e| error_chain(&e))

@@ -23,6 +23,12 @@ pub const BEAMS: usize = 90;
 pub const MAX_RANGE: f64 = 10.0;
 /// The tick \[s\].
 const DT: f64 = 0.05;
+/// The team's goal.
+const GOAL: Goal = Goal {
+    phi_star: 0.0,
+    d_star: 1.0,
+    v_star: 0.1,
+};
 
 /// The runtime settings of a suite run under `clock`: a command timeout and a stale window far
 /// beyond what an agent that keeps up needs on a busy machine, so that only the agents a test
@@ -95,23 +101,18 @@ impl<'l> World<'l> {
     /// Plays the next tick and returns the commands applied.
     pub fn tick(&mut self) -> Vec<WheelCmd> {
         let tick = self.next_tick;
-        let scans = vec![vec![5.0f32; BEAMS]; self.robots];
-        let poses = vec![
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0
-            };
-            self.robots
-        ];
+        // Every robot at the origin, seeing a wall 5 m away all round.
+        let origin = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+        };
+        let (poses, scans): (Vec<Pose>, Vec<Vec<f32>>) =
+            (0..self.robots).map(|_| (origin, vec![5.0; BEAMS])).unzip();
         let obs = Observation {
             tick,
             time: tick as f64 * DT,
-            goal: Goal {
-                phi_star: 0.0,
-                d_star: 1.0,
-                v_star: 0.1,
-            },
+            goal: GOAL,
             poses: &poses,
             wheel_speeds: &[],
             scans: &scans,
