@@ -352,7 +352,9 @@ pub fn write_tiny_model_with(path: &Path, seed: u64, extra: &[&str]) {
     std::fs::rename(&tmp, path).expect("moving the test model into place");
 }
 
-fn python() -> PathBuf {
+/// The interpreter the tests run Python with: `FORMATION_PYTHON`, else `<repo>/.venv/bin/python`,
+/// else `python3`.
+pub fn python() -> PathBuf {
     if let Some(p) = std::env::var_os("FORMATION_PYTHON") {
         return PathBuf::from(p);
     }
@@ -1047,6 +1049,32 @@ impl Drop for Tmpfs {
             let _ = Command::new("umount").arg("-l").arg(&self.dir).status();
         }
     }
+}
+
+/// `formation credentials --robots ROBOTS --out DIR/creds`: a Zenoh team's logins and launch
+/// secret, made by the launcher's own command; returns the folder.
+pub fn zenoh_credentials(dir: &Path, robots: usize) -> PathBuf {
+    let creds = dir.join("creds");
+    std::fs::create_dir_all(dir).unwrap_or_else(|e| panic!("creating {}: {e}", dir.display()));
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["credentials", "--robots", &robots.to_string(), "--out"])
+        .arg(&creds);
+    run(command, Duration::from_secs(120)).assert_success();
+    creds
+}
+
+/// Starts the `delay-relay` of `command` (its arguments given) and waits until it listens.
+pub fn start_relay(command: Command) -> LiveProcess {
+    let mut relay = LiveProcess::spawn_with_input(command, Some(""));
+    assert!(
+        relay
+            .wait_for_line(Duration::from_secs(10), |l| l == "listening")
+            .is_some(),
+        "{}",
+        relay.describe()
+    );
+    relay
 }
 
 /// The JSON file at `path`, parsed; a missing or malformed file fails the test naming it.
