@@ -31,7 +31,7 @@ use formation_proto::wire::{
 };
 
 use crate::clock::{Clock, SystemClock};
-use crate::link::{AgentLink, AgentLinkError, Hello, Wake, WorldLink, WorldLinkError};
+use crate::link::{AgentLink, AgentLinkError, Hello, Wake, WorldLink, WorldLinkError, WorldResult};
 
 /// The queues of one incarnation of a robot.
 #[derive(Debug, Default)]
@@ -334,11 +334,7 @@ impl WorldLink for MemoryWorldLink {
         self.bus.lock().lobbies.len()
     }
 
-    fn drain_hellos(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(Hello),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_hellos(&mut self, robot: usize, sink: &mut dyn FnMut(Hello)) -> WorldResult {
         let hellos: Vec<Hello> = {
             let mut state = self.bus.lock();
             let lobby = state
@@ -351,12 +347,7 @@ impl WorldLink for MemoryWorldLink {
         Ok(())
     }
 
-    fn answer_hello(
-        &mut self,
-        robot: usize,
-        nonce: u64,
-        welcome: &Welcome,
-    ) -> Result<(), WorldLinkError> {
+    fn answer_hello(&mut self, robot: usize, nonce: u64, welcome: &Welcome) -> WorldResult {
         let mut state = self.bus.lock();
         let lobby = state
             .lobbies
@@ -368,7 +359,7 @@ impl WorldLink for MemoryWorldLink {
         Ok(())
     }
 
-    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> WorldResult {
         let mut state = self.bus.lock();
         let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
         *slot = Some(Incarnation {
@@ -386,7 +377,7 @@ impl WorldLink for MemoryWorldLink {
         }
     }
 
-    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError> {
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult {
         let mut state = self.bus.lock();
         let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
         if let Some(incarnation) = slot {
@@ -397,11 +388,7 @@ impl WorldLink for MemoryWorldLink {
         Ok(())
     }
 
-    fn send_control(
-        &mut self,
-        robot: usize,
-        request: &ControlRequest,
-    ) -> Result<(), WorldLinkError> {
+    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> WorldResult {
         let mut state = self.bus.lock();
         let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
         if let Some(incarnation) = slot {
@@ -412,8 +399,8 @@ impl WorldLink for MemoryWorldLink {
         Ok(())
     }
 
-    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
-        let ready = |bus: &MemoryBus| -> Result<bool, WorldLinkError> {
+    fn wait(&mut self, timeout: Duration) -> WorldResult {
+        let ready = |bus: &MemoryBus| -> WorldResult<bool> {
             let state = bus.lock();
             if let Some(signal) = state.terminate_world {
                 return Err(WorldLinkError::Terminated(signal));
@@ -435,11 +422,7 @@ impl WorldLink for MemoryWorldLink {
         ready(&self.bus).map(|_| ())
     }
 
-    fn drain_commands(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(CmdMsg),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_commands(&mut self, robot: usize, sink: &mut dyn FnMut(CmdMsg)) -> WorldResult {
         let cmds: Vec<CmdMsg> = {
             let mut state = self.bus.lock();
             let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
@@ -451,11 +434,7 @@ impl WorldLink for MemoryWorldLink {
         Ok(())
     }
 
-    fn drain_statuses(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(AgentStatus),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_statuses(&mut self, robot: usize, sink: &mut dyn FnMut(AgentStatus)) -> WorldResult {
         let statuses: Vec<AgentStatus> = {
             let mut state = self.bus.lock();
             let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
@@ -467,7 +446,7 @@ impl WorldLink for MemoryWorldLink {
         Ok(())
     }
 
-    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
         Ok(!self.bus.lock().dead.contains(&(robot, pid)))
     }
 
@@ -478,16 +457,13 @@ impl WorldLink for MemoryWorldLink {
         Ok(dead)
     }
 
-    fn drain_swap_requests(
-        &mut self,
-        sink: &mut dyn FnMut(SwapRequest),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_swap_requests(&mut self, sink: &mut dyn FnMut(SwapRequest)) -> WorldResult {
         let requests: Vec<SwapRequest> = self.bus.lock().swap_requests.drain(..).collect();
         requests.into_iter().for_each(sink);
         Ok(())
     }
 
-    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), WorldLinkError> {
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> WorldResult {
         self.bus
             .update(|state| state.swap_replies.push(reply.clone()));
         Ok(())

@@ -22,7 +22,9 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 
-use super::services::{Access, ServiceError, ServiceErrorKind, event_service, pubsub_service};
+use super::services::{
+    Access, ServiceError, ServiceErrorKind, drain_decoded, event_service, pubsub_service,
+};
 use super::watch_termination_signals;
 use crate::link::{AgentLink, AgentLinkError, Wake};
 use crate::signals;
@@ -465,17 +467,13 @@ impl AgentLink for IceoryxAgentLink {
         &mut self,
         sink: &mut dyn FnMut(ControlRequest),
     ) -> Result<(), AgentLinkError> {
-        while let Some(sample) = self
-            .control
-            .receive()
-            .map_err(|e| iox("receive a control request")(&e))?
-        {
-            match sample.payload().decode() {
-                Ok(request) => sink(request),
-                Err(e) => tracing::warn!("ignoring a malformed control request: {e}"),
+        let decode = ControlMsg::decode;
+        drain_decoded(&self.control, "control request", decode, sink).map_err(|detail| {
+            AgentLinkError::Iceoryx {
+                action: "receive a control request".into(),
+                detail,
             }
-        }
-        Ok(())
+        })
     }
 
     fn newest_scan(&mut self) -> Result<Option<ScanMsg>, AgentLinkError> {

@@ -6,6 +6,7 @@
 //! reader falls behind; its event service of the same name (publishing wakes nobody in iceoryx2)
 //! has one notifier per publisher and one listener per subscriber.
 
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
 use crate::iceoryx::naming::ServiceLimits;
@@ -112,4 +113,25 @@ pub(crate) fn event_service(
         Access::Create => builder.open_or_create().map_err(|e| unavailable(name)(&e)),
         Access::Open => builder.open().map_err(|e| unavailable(name)(&e)),
     }
+}
+
+/// Hands every sample waiting on `subscriber`, decoded by `decode`, to `sink`, oldest first; a
+/// sample that does not decode is logged as a malformed `what` and skipped. The error is
+/// iceoryx2's, when receiving failed.
+pub(crate) fn drain_decoded<T, U, E: std::fmt::Display>(
+    subscriber: &Subscriber<ipc::Service, T, ()>,
+    what: &str,
+    decode: impl Fn(&T) -> Result<U, E>,
+    sink: &mut dyn FnMut(U),
+) -> Result<(), String>
+where
+    T: std::fmt::Debug + ZeroCopySend,
+{
+    while let Some(sample) = subscriber.receive().map_err(|e| format!("{e:?}"))? {
+        match decode(sample.payload()) {
+            Ok(decoded) => sink(decoded),
+            Err(e) => tracing::warn!("ignoring a malformed {what}: {e}"),
+        }
+    }
+    Ok(())
 }

@@ -28,9 +28,9 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{WaitSetGuard, WaitSetRunResult};
 
-use super::services::{self, Access, EventService, PubSubService, ServiceError};
+use super::services::{self, Access, EventService, PubSubService, ServiceError, drain_decoded};
 use super::watch_termination_signals;
-use crate::link::{Hello, WorldLink, WorldLinkError, check_robot_index};
+use crate::link::{Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index};
 use crate::signals;
 
 fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> WorldLinkError {
@@ -73,7 +73,7 @@ pub struct IceoryxWorldLink {
     namespace: RunNamespace,
     lobbies: Vec<LobbyPorts>,
     /// Per robot: its current incarnation's ports, if an agent was accepted and is not gone.
-    robots: Vec<Option<RobotPorts>>,
+    robots: Incarnations<RobotPorts>,
     swap: SwapPorts,
     waitset: Rc<WaitSet<ipc::Service>>,
     /// The swap channel's request listener and every lobby's hello listener.
@@ -103,7 +103,7 @@ impl AttachedListeners {
     fn attach(
         waitset: &Rc<WaitSet<ipc::Service>>,
         listeners: Vec<Listener<ipc::Service>>,
-    ) -> Result<Self, WorldLinkError> {
+    ) -> WorldResult<Self> {
         let owner = Listeners {
             waitset: Rc::clone(waitset),
             listeners,
@@ -133,7 +133,7 @@ impl AttachedListeners {
 impl IceoryxWorldLink {
     /// Creates the world's node, every robot's lobby and the swap channel in `namespace`, and
     /// makes the run's files private to this user.
-    pub fn create(namespace: &RunNamespace, n_robots: usize) -> Result<Self, WorldLinkError> {
+    pub fn create(namespace: &RunNamespace, n_robots: usize) -> WorldResult<Self> {
         watch_termination_signals();
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
@@ -166,21 +166,15 @@ impl IceoryxWorldLink {
             node,
             namespace: namespace.clone(),
             lobbies,
-            robots: (0..n_robots).map(|_| None).collect(),
+            robots: Incarnations::new(n_robots),
             swap,
             waitset,
             run_wakes,
         })
     }
 
-    fn check_robot(&self, robot: usize) -> Result<(), WorldLinkError> {
+    fn check_robot(&self, robot: usize) -> WorldResult {
         check_robot_index(robot, self.lobbies.len())
-    }
-
-    /// Robot `robot`'s current incarnation, if any.
-    fn ports(&self, robot: usize) -> Result<Option<&RobotPorts>, WorldLinkError> {
-        self.check_robot(robot)?;
-        Ok(self.robots[robot].as_ref())
     }
 }
 
@@ -198,7 +192,7 @@ fn event_service(
     node: &Node<ipc::Service>,
     name: &str,
     limits: ServiceLimits,
-) -> Result<EventService, WorldLinkError> {
+) -> WorldResult<EventService> {
     services::event_service(node, name, limits, Access::Create).map_err(create_failed)
 }
 
@@ -243,7 +237,7 @@ fn create_robot_ports(
     namespace: &RunNamespace,
     robot: usize,
     incarnation: u64,
-) -> Result<RobotPorts, WorldLinkError> {
+) -> WorldResult<RobotPorts> {
     let limits = ServiceLimits::ROBOT;
     let name = |channel| robot_service_name(namespace.run(), robot, incarnation, channel);
     let event = |channel| event_service(node, &name(channel), limits);
@@ -342,11 +336,7 @@ impl WorldLink for IceoryxWorldLink {
         self.lobbies.len()
     }
 
-    fn drain_hellos(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(Hello),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_hellos(&mut self, robot: usize, sink: &mut dyn FnMut(Hello)) -> WorldResult {
         self.check_robot(robot)?;
         while let Some(sample) = self.lobbies[robot]
             .hellos
@@ -363,12 +353,7 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn answer_hello(
-        &mut self,
-        robot: usize,
-        nonce: u64,
-        welcome: &Welcome,
-    ) -> Result<(), WorldLinkError> {
+    fn answer_hello(&mut self, robot: usize, nonce: u64, welcome: &Welcome) -> WorldResult {
         self.check_robot(robot)?;
         self.lobbies[robot]
             .welcome
@@ -377,28 +362,19 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
-        self.check_robot(robot)?;
-        self.robots[robot] = None;
-        let ports = create_robot_ports(
-            &self.node,
-            &self.waitset,
-            &self.namespace,
-            robot,
-            incarnation,
-        )?;
-        self.robots[robot] = Some(ports);
-        Ok(())
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> WorldResult {
+        let (node, waitset, namespace) = (&self.node, &self.waitset, &self.namespace);
+        self.robots.open(robot, || {
+            create_robot_ports(node, waitset, namespace, robot, incarnation)
+        })
     }
 
     fn close_incarnation(&mut self, robot: usize) {
-        if let Some(slot) = self.robots.get_mut(robot) {
-            *slot = None;
-        }
+        self.robots.close(robot);
     }
 
-    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError> {
-        let Some(ports) = self.ports(robot)? else {
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult {
+        let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
         ports
@@ -410,13 +386,9 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn send_control(
-        &mut self,
-        robot: usize,
-        request: &ControlRequest,
-    ) -> Result<(), WorldLinkError> {
+    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> WorldResult {
         let msg = ControlMsg::encode(request)?;
-        let Some(ports) = self.ports(robot)? else {
+        let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
         ports
@@ -427,7 +399,7 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
+    fn wait(&mut self, timeout: Duration) -> WorldResult {
         // Every listener is already attached: the lobbies' and the swap channel's since the run
         // began, each incarnation's since it opened.
         let result = self
@@ -435,7 +407,7 @@ impl WorldLink for IceoryxWorldLink {
             .wait_and_process_once_with_timeout(|_| CallbackProgression::Stop, timeout)
             .map_err(|e| iox("wait for the agents")(&e))?;
         self.run_wakes.consume();
-        for ports in self.robots.iter().flatten() {
+        for ports in self.robots.open_ones() {
             ports.wakes.consume();
         }
         if let Some(signal) = signals::received() {
@@ -451,12 +423,8 @@ impl WorldLink for IceoryxWorldLink {
         }
     }
 
-    fn drain_commands(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(CmdMsg),
-    ) -> Result<(), WorldLinkError> {
-        let Some(ports) = self.ports(robot)? else {
+    fn drain_commands(&mut self, robot: usize, sink: &mut dyn FnMut(CmdMsg)) -> WorldResult {
+        let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
         while let Some(sample) = ports
@@ -469,28 +437,20 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn drain_statuses(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(AgentStatus),
-    ) -> Result<(), WorldLinkError> {
-        let Some(ports) = self.ports(robot)? else {
+    fn drain_statuses(&mut self, robot: usize, sink: &mut dyn FnMut(AgentStatus)) -> WorldResult {
+        let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
-        while let Some(sample) = ports
-            .status
-            .receive()
-            .map_err(|e| iox(format!("receive robot {robot}'s status"))(&e))?
-        {
-            match sample.payload().decode() {
-                Ok(status) => sink(status),
-                Err(e) => tracing::warn!("robot {robot}: ignoring a malformed status: {e}"),
+        let what = format!("status of robot {robot}");
+        drain_decoded(&ports.status, &what, StatusMsg::decode, sink).map_err(|detail| {
+            WorldLinkError::Iceoryx {
+                action: format!("receive robot {robot}'s status"),
+                detail,
             }
-        }
-        Ok(())
+        })
     }
 
-    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
         let wanted = crate::iceoryx::naming::agent_node_name(robot, pid);
         let mut alive = false;
         Node::<ipc::Service>::list(self.node.config(), |state| {
@@ -529,7 +489,7 @@ impl WorldLink for IceoryxWorldLink {
                 "agents of robots {dead:?} died; cleaned up {} dead node(s)",
                 cleaned.cleanups
             );
-            for ports in self.robots.iter().flatten() {
+            for ports in self.robots.open_ones() {
                 let _ = ports.scan.update_connections();
                 let _ = ports.control.update_connections();
                 let _ = ports.cmd.update_connections();
@@ -541,25 +501,17 @@ impl WorldLink for IceoryxWorldLink {
         Ok(dead)
     }
 
-    fn drain_swap_requests(
-        &mut self,
-        sink: &mut dyn FnMut(SwapRequest),
-    ) -> Result<(), WorldLinkError> {
-        while let Some(sample) = self
-            .swap
-            .requests
-            .receive()
-            .map_err(|e| iox("receive a swap request")(&e))?
-        {
-            match sample.payload().decode() {
-                Ok(request) => sink(request),
-                Err(e) => tracing::warn!("ignoring a malformed swap request: {e}"),
+    fn drain_swap_requests(&mut self, sink: &mut dyn FnMut(SwapRequest)) -> WorldResult {
+        let decode = SwapRequestMsg::decode;
+        drain_decoded(&self.swap.requests, "swap request", decode, sink).map_err(|detail| {
+            WorldLinkError::Iceoryx {
+                action: "receive a swap request".into(),
+                detail,
             }
-        }
-        Ok(())
+        })
     }
 
-    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), WorldLinkError> {
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> WorldResult {
         let msg = SwapReplyMsg::encode(reply)?;
         self.swap
             .replies
