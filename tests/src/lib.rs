@@ -863,6 +863,18 @@ pub fn formation_run_with_model(
     extra: &[&str],
 ) -> Command {
     let mut command = Command::new(&binaries().cli);
+    formation_run_args(&mut command, run, (scenario, model, out), extra);
+    command
+}
+
+/// Adds `run --run-id RUN EXTRA --scenario SCENARIO --model MODEL --out OUT` to `command` (the
+/// `formation` binary, or a command that runs it, in a network namespace for example).
+pub fn formation_run_args(
+    command: &mut Command,
+    run: &RunId,
+    (scenario, model, out): (&Path, &Path, &Path),
+    extra: &[&str],
+) {
     command
         .args(["run", "--run-id", run.as_str()])
         .args(extra)
@@ -872,7 +884,6 @@ pub fn formation_run_with_model(
         .arg(model)
         .arg("--out")
         .arg(out);
-    command
 }
 
 /// `formation eval --controller policy --runs 1 --scenario SCENARIO --model MODEL --json JSON`:

@@ -20,8 +20,9 @@ use formation_robot_agent::decision::PolicyController;
 use formation_tests::netns::{NetPair, WORLD_IP};
 use formation_tests::{
     LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, assert_bit_identical,
-    binaries, case1_scenario, free_tcp_port, one_at_a_time, read_json, repo_root, run, send_signal,
-    start_relay, test_model, unique_run_id, world_pid, zenoh_credentials,
+    binaries, case1_scenario, formation_run_args, free_tcp_port, one_at_a_time, read_json,
+    repo_root, run, send_signal, start_relay, test_model, unique_run_id, world_pid,
+    zenoh_credentials,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -71,20 +72,17 @@ impl Rig {
 
     /// `formation run` in the world's namespace, every robot remote.
     fn launch(&self, scenario: &Path, model: &Path, extra: &[&str]) -> LiveProcess {
+        let creds = self.creds.to_string_lossy();
+        let flags = [
+            ["--transport", "zenoh", "--listen", &self.listen].as_slice(),
+            &["--remote", "0,1,2", "--remote-timeout-s", "120"],
+            &["--credentials", &creds],
+            extra,
+        ]
+        .concat();
         let mut command = self.pair.in_world(&binaries().cli);
-        command
-            .args(["run", "--run-id", self.run_id.as_str()])
-            .args(["--transport", "zenoh", "--listen", &self.listen])
-            .args(["--remote", "0,1,2", "--remote-timeout-s", "120"])
-            .arg("--credentials")
-            .arg(&self.creds)
-            .args(extra)
-            .arg("--scenario")
-            .arg(scenario)
-            .arg("--model")
-            .arg(model)
-            .arg("--out")
-            .arg(self.out());
+        let out = self.out();
+        formation_run_args(&mut command, &self.run_id, (scenario, model, &out), &flags);
         let mut launch = LiveProcess::spawn(command);
         let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
             l.contains("waiting for the remote agents")

@@ -23,7 +23,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 
 use super::services::{
-    Access, ServiceError, ServiceErrorKind, drain_decoded, event_service, pubsub_service,
+    Access, ServiceError, ServiceErrorKind, drain_decoded, event_service, pubsub_service, run_node,
 };
 use super::watch_termination_signals;
 use crate::link::{AgentLink, AgentLinkError, Wake};
@@ -113,14 +113,8 @@ impl IceoryxAgentLink {
         watch_termination_signals();
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
-        let name = NodeName::new(&agent_node_name(robot, pid))
-            .map_err(|e| iox("name the agent node")(&e))?;
-        let node = NodeBuilder::new()
-            .name(&name)
-            .config(&config)
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<ipc::Service>()
-            .map_err(|e| iox("create the agent node")(&e))?;
+        let node = run_node(&config, &agent_node_name(robot, pid))
+            .map_err(|(action, detail)| AgentLinkError::Iceoryx { action, detail })?;
         // iceoryx2 makes its node-management segment world-writable (this agent may be the first
         // process of the run to create it): close it at once.
         namespace.restrict_permissions()?;

@@ -135,3 +135,19 @@ where
     }
     Ok(())
 }
+
+/// A node of a run named `name` in iceoryx2's `config`, whose waits hand on termination requests
+/// (SIGINT, SIGTERM); the error is what failed and iceoryx2's detail.
+pub(crate) fn run_node(
+    config: &iceoryx2::config::Config,
+    name: &str,
+) -> Result<Node<ipc::Service>, (String, String)> {
+    let node_name =
+        NodeName::new(name).map_err(|e| (format!("name the node {name}"), format!("{e:?}")))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .config(config)
+        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        .create::<ipc::Service>()
+        .map_err(|e| (format!("create the node {name}"), format!("{e:?}")))
+}

@@ -28,7 +28,9 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{WaitSetGuard, WaitSetRunResult};
 
-use super::services::{self, Access, EventService, PubSubService, ServiceError, drain_decoded};
+use super::services::{
+    self, Access, EventService, PubSubService, ServiceError, drain_decoded, run_node,
+};
 use super::watch_termination_signals;
 use crate::link::{Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index};
 use crate::signals;
@@ -137,13 +139,8 @@ impl IceoryxWorldLink {
         watch_termination_signals();
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
-        let name = NodeName::new(WORLD_NODE_NAME).map_err(|e| iox("name the world node")(&e))?;
-        let node = NodeBuilder::new()
-            .name(&name)
-            .config(&config)
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<ipc::Service>()
-            .map_err(|e| iox("create the world node")(&e))?;
+        let node = run_node(&config, WORLD_NODE_NAME)
+            .map_err(|(action, detail)| WorldLinkError::Iceoryx { action, detail })?;
         // iceoryx2 makes its node-management segment world-writable: close it at once.
         namespace.restrict_permissions()?;
         let (lobbies, hello_wakes): (Vec<_>, Vec<_>) = (0..n_robots)
