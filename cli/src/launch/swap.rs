@@ -4,7 +4,7 @@
 //! this process publishes a [`SwapRequest`] to the world, the world forwards it to the robot's
 //! agent as a control request without pausing its tick loop, the agent loads and validates the
 //! model on a helper thread and swaps it in at a tick boundary, and the world relays the agent's
-//! answer ([`SwapReply`]) back here. The iceoryx2 client is the runtime's
+//! answer ([`formation_proto::wire::SwapReply`]) back here. The iceoryx2 client is the runtime's
 //! ([`formation_runtime::iceoryx::request_swap`]), which opens the swap channel with the world's
 //! own service definitions; everything it opens in the run's namespace goes when it returns.
 //!

@@ -2,7 +2,7 @@
 //! swap channel and waits for the world's reply with the same request id. It opens the services
 //! the world created (never creates one: a run that does not exist is
 //! [`SwapClientError::UnknownRun`]), with the same definitions as the world
-//! ([`super::services`]), and everything it opened goes when it returns.
+//! (`iceoryx::services`), and everything it opened goes when it returns.
 
 use std::time::{Duration, Instant};
 
