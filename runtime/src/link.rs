@@ -61,12 +61,59 @@ pub enum WorldLinkError {
     },
 }
 
+/// What a world link's operations return.
+pub type WorldResult<T = ()> = Result<T, WorldLinkError>;
+
 /// `Ok` if `robot` indexes one of a team of `robots`; the one bounds check every link uses.
-pub fn check_robot_index(robot: usize, robots: usize) -> Result<(), WorldLinkError> {
+pub fn check_robot_index(robot: usize, robots: usize) -> WorldResult {
     if robot < robots {
         Ok(())
     } else {
         Err(WorldLinkError::NoSuchRobot { robot, robots })
+    }
+}
+
+/// Per robot, the world's ends of its current incarnation's channels (`P`), if an agent was
+/// admitted and is not gone: what every transport's world link keeps, with the robot index
+/// checked once ([`check_robot_index`]).
+#[derive(Debug)]
+pub struct Incarnations<P> {
+    slots: Vec<Option<P>>,
+}
+
+impl<P> Incarnations<P> {
+    /// None open, for a team of `robots`.
+    pub fn new(robots: usize) -> Self {
+        Incarnations {
+            slots: (0..robots).map(|_| None).collect(),
+        }
+    }
+
+    /// Robot `robot`'s current incarnation, if one is open.
+    pub fn get(&self, robot: usize) -> Result<Option<&P>, WorldLinkError> {
+        check_robot_index(robot, self.slots.len())?;
+        Ok(self.slots[robot].as_ref())
+    }
+
+    /// Opens robot `robot`'s incarnation with the ends `open` makes, after dropping those of
+    /// the previous one (so a new incarnation never meets its predecessor's ports).
+    pub fn open(&mut self, robot: usize, open: impl FnOnce() -> WorldResult<P>) -> WorldResult {
+        check_robot_index(robot, self.slots.len())?;
+        self.slots[robot] = None;
+        self.slots[robot] = Some(open()?);
+        Ok(())
+    }
+
+    /// Drops robot `robot`'s current incarnation's ends, if any.
+    pub fn close(&mut self, robot: usize) {
+        if let Some(slot) = self.slots.get_mut(robot) {
+            *slot = None;
+        }
+    }
+
+    /// Every open incarnation's ends.
+    pub fn open_ones(&self) -> impl Iterator<Item = &P> {
+        self.slots.iter().flatten()
     }
 }
 
@@ -86,21 +133,12 @@ pub trait WorldLink {
     /// Number of robots the link serves.
     fn n_robots(&self) -> usize;
     /// Hands every hello that candidates for robot `robot` sent since the last call to `sink`.
-    fn drain_hellos(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(Hello),
-    ) -> Result<(), WorldLinkError>;
+    fn drain_hellos(&mut self, robot: usize, sink: &mut dyn FnMut(Hello)) -> WorldResult;
     /// Answers the hello with `nonce` in robot `robot`'s lobby.
-    fn answer_hello(
-        &mut self,
-        robot: usize,
-        nonce: u64,
-        welcome: &Welcome,
-    ) -> Result<(), WorldLinkError>;
+    fn answer_hello(&mut self, robot: usize, nonce: u64, welcome: &Welcome) -> WorldResult;
     /// Creates the channels of robot `robot`'s new incarnation and takes the world's ends,
     /// dropping those of the previous incarnation.
-    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError>;
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> WorldResult;
     /// Drops the world's ends of robot `robot`'s current incarnation (its agent is gone).
     fn close_incarnation(&mut self, robot: usize);
     /// Hands the link robot `robot`'s true pose of the tick whose scan comes next and the wheel
@@ -112,46 +150,31 @@ pub trait WorldLink {
         _robot: usize,
         _pose: &formation_proto::Pose,
         _wheels: formation_proto::WheelCmd,
-    ) -> Result<(), WorldLinkError> {
+    ) -> WorldResult {
         Ok(())
     }
     /// Publishes robot `robot`'s scan and wakes its agent.
-    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError>;
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult;
     /// Sends a control request to robot `robot`'s agent and wakes it.
-    fn send_control(
-        &mut self,
-        robot: usize,
-        request: &ControlRequest,
-    ) -> Result<(), WorldLinkError>;
+    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> WorldResult;
     /// Blocks until an agent may have sent something, or `timeout` passes. An interrupted wait
     /// (EINTR) returns `Ok`; SIGINT/SIGTERM is [`WorldLinkError::Terminated`].
-    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError>;
+    fn wait(&mut self, timeout: Duration) -> WorldResult;
     /// Hands every command robot `robot`'s agent sent since the last call to `sink`, oldest
     /// first, at once as it takes each (the exchange stamps its arrival time in `sink`).
-    fn drain_commands(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(CmdMsg),
-    ) -> Result<(), WorldLinkError>;
+    fn drain_commands(&mut self, robot: usize, sink: &mut dyn FnMut(CmdMsg)) -> WorldResult;
     /// Hands every status robot `robot`'s agent sent since the last call to `sink`, oldest first.
-    fn drain_statuses(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(AgentStatus),
-    ) -> Result<(), WorldLinkError>;
+    fn drain_statuses(&mut self, robot: usize, sink: &mut dyn FnMut(AgentStatus)) -> WorldResult;
     /// Whether agent process `pid` of robot `robot` is still alive, as far as the transport can
     /// tell (a stopped process is alive).
-    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError>;
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool>;
     /// `(robot, pid)` of agent processes the transport knows to be dead; cleans up after them so
     /// a restarted agent can take their place.
     fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError>;
     /// Hands every swap request that users sent since the last call to `sink`, oldest first.
-    fn drain_swap_requests(
-        &mut self,
-        sink: &mut dyn FnMut(SwapRequest),
-    ) -> Result<(), WorldLinkError>;
+    fn drain_swap_requests(&mut self, sink: &mut dyn FnMut(SwapRequest)) -> WorldResult;
     /// Answers a swap request.
-    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), WorldLinkError>;
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> WorldResult;
 }
 
 /// A failure of an agent's transport.

@@ -11,13 +11,17 @@
 //! world learns it from [`WorldLink::agent_alive`] and once from [`WorldLink::dead_agents`]),
 //! [`MemoryBus::terminate_world`] a termination signal, [`MemoryBus::end_world`] the world's exit.
 //!
-//! Waits never block on other threads: a wait with nothing queued first runs the world link's
-//! wait hook ([`MemoryWorldLink::on_wait`], where a test runs its agents), then lets the timeout
-//! pass on the bus's [`Clock`], which for a [`FakeClock`](crate::clock::FakeClock) is instant. So a
-//! whole run is one deterministic thread.
+//! A bus made with [`MemoryBus::new`] never blocks on other threads: a wait with nothing queued
+//! first runs the world link's wait hook ([`MemoryWorldLink::on_wait`], where a test runs its
+//! agents), then lets the timeout pass on the bus's [`Clock`], which for a
+//! [`FakeClock`](crate::clock::FakeClock) is instant. So a whole run is one deterministic thread.
+//! A bus made with [`MemoryBus::threaded`] is a transport like the others for a world and agents
+//! on threads of their own: its waits block until something arrives, and [`MemoryBus::connect`]
+//! greets and waits for the welcome as an agent's link does (the link suite of `formation-tests`
+//! runs on it).
 
 use std::collections::{HashMap, HashSet, VecDeque};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 
 use crate::auth::LaunchSecret;
@@ -26,8 +30,8 @@ use formation_proto::wire::{
     AgentStatus, CmdMsg, ControlRequest, RunId, ScanMsg, SwapReply, SwapRequest, Welcome,
 };
 
-use crate::clock::Clock;
-use crate::link::{AgentLink, AgentLinkError, Hello, Wake, WorldLink, WorldLinkError};
+use crate::clock::{Clock, SystemClock};
+use crate::link::{AgentLink, AgentLinkError, Hello, Wake, WorldLink, WorldLinkError, WorldResult};
 
 /// The queues of one incarnation of a robot.
 #[derive(Debug, Default)]
@@ -79,11 +83,20 @@ impl BusState {
     }
 }
 
+/// The bus's state and the condition variable every change rings.
+struct Shared {
+    state: Mutex<BusState>,
+    changed: Condvar,
+}
+
 /// Every queue of one in-memory run, shared by the world's link and the agents' links.
 #[derive(Clone)]
 pub struct MemoryBus {
-    state: Arc<Mutex<BusState>>,
+    shared: Arc<Shared>,
     clock: Arc<dyn Clock>,
+    /// Whether waits block until something changes ([`MemoryBus::threaded`]) instead of letting
+    /// the timeout pass on the clock at once.
+    blocking: bool,
 }
 
 impl MemoryBus {
@@ -101,13 +114,89 @@ impl MemoryBus {
             next_nonce: 1,
         };
         MemoryBus {
-            state: Arc::new(Mutex::new(state)),
+            shared: Arc::new(Shared {
+                state: Mutex::new(state),
+                changed: Condvar::new(),
+            }),
             clock,
+            blocking: false,
+        }
+    }
+
+    /// A bus for `n_robots` robots whose world and agents run on threads of their own, on the
+    /// system clock: a wait blocks until something it waits for arrives, or its timeout passes.
+    pub fn threaded(n_robots: usize) -> MemoryBus {
+        MemoryBus {
+            blocking: true,
+            ..MemoryBus::new(n_robots, Arc::new(SystemClock))
         }
     }
 
     fn lock(&self) -> MutexGuard<'_, BusState> {
-        self.state.lock().unwrap_or_else(|e| e.into_inner())
+        self.shared.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Changes the bus's state with `change` and wakes every waiter.
+    fn update<R>(&self, change: impl FnOnce(&mut BusState) -> R) -> R {
+        let result = change(&mut self.lock());
+        self.ring();
+        result
+    }
+
+    /// Wakes every waiter: something changed.
+    fn ring(&self) {
+        self.shared.changed.notify_all();
+    }
+
+    /// Waits until `ready` holds or `timeout` passes: on a threaded bus by blocking, else by
+    /// letting the timeout pass on the clock (instant for a fake clock).
+    fn wait_for(&self, timeout: Duration, ready: impl Fn(&BusState) -> bool) {
+        if !self.blocking {
+            self.clock.sleep(timeout);
+            return;
+        }
+        let guard = self.lock();
+        let _unused = self
+            .shared
+            .changed
+            .wait_timeout_while(guard, timeout, |state| !ready(state));
+    }
+
+    /// Connects an agent process `pid` to robot `robot` of run `run` as a transport's agent link
+    /// does: greets proving `secret`, waits up to `timeout` for the world's answer, and returns
+    /// its end of the incarnation the world opened; a refusal is an error at once.
+    pub fn connect(
+        &self,
+        robot: usize,
+        pid: u32,
+        (run, secret): (&RunId, &LaunchSecret),
+        timeout: Duration,
+    ) -> Result<MemoryAgentLink, AgentLinkError> {
+        let started = self.clock.now();
+        let nonce = self.greet(robot, pid, run, secret);
+        loop {
+            match self.welcome(robot, nonce) {
+                Some(Welcome::Accepted) => return Ok(self.agent_link(robot, nonce)),
+                Some(Welcome::Refused(reason)) => {
+                    return Err(AgentLinkError::Refused { robot, reason });
+                }
+                None => {}
+            }
+            let waited = self.clock.now().saturating_duration_since(started);
+            if waited >= timeout {
+                return Err(AgentLinkError::NoWelcome {
+                    robot,
+                    run: run.to_string(),
+                    waited_s: waited.as_secs_f64(),
+                });
+            }
+            self.wait_for(timeout - waited, |state| {
+                state
+                    .lobbies
+                    .get(robot)
+                    .is_some_and(|lobby| lobby.welcomes.contains_key(&nonce))
+            });
+        }
     }
 
     /// The world's end.
@@ -120,9 +209,11 @@ impl MemoryBus {
 
     /// Sends a hello in robot `robot`'s lobby as it is (a test may forge one).
     pub fn send_hello(&self, robot: usize, hello: Hello) {
-        if let Some(lobby) = self.lock().lobbies.get_mut(robot) {
-            lobby.hellos.push_back(hello);
-        }
+        self.update(|state| {
+            if let Some(lobby) = state.lobbies.get_mut(robot) {
+                lobby.hellos.push_back(hello);
+            }
+        });
     }
 
     /// Asks to drive robot `robot` of run `run` as process `pid`, proving `secret` with a fresh
@@ -160,26 +251,55 @@ impl MemoryBus {
 
     /// Agent process `pid` of robot `robot` dies.
     pub fn kill(&self, robot: usize, pid: u32) {
-        let mut state = self.lock();
-        if state.dead.insert((robot, pid)) {
-            state.unreported_dead.push((robot, pid));
-        }
+        self.update(|state| {
+            if state.dead.insert((robot, pid)) {
+                state.unreported_dead.push((robot, pid));
+            }
+        });
     }
 
     /// The world receives a termination signal: its next wait ends with
     /// [`WorldLinkError::Terminated`].
     pub fn terminate_world(&self, signal: TerminationSignal) {
-        self.lock().terminate_world = Some(signal);
+        self.update(|state| state.terminate_world = Some(signal));
     }
 
     /// The world process is gone: agents see it in [`AgentLink::world_alive`].
     pub fn end_world(&self) {
-        self.lock().world_alive = false;
+        self.update(|state| state.world_alive = false);
     }
 
     /// A user's swap request (what `formation swap` sends).
     pub fn request_swap(&self, request: SwapRequest) {
-        self.lock().swap_requests.push_back(request);
+        self.update(|state| state.swap_requests.push_back(request));
+    }
+
+    /// Waits up to `timeout` for the world's reply to swap request `request_id` and takes it
+    /// (what `formation swap` does).
+    pub fn await_swap_reply(&self, request_id: u64, timeout: Duration) -> Option<SwapReply> {
+        let started = self.clock.now();
+        loop {
+            {
+                let mut state = self.lock();
+                let found = state
+                    .swap_replies
+                    .iter()
+                    .position(|r| r.request_id == request_id);
+                if let Some(index) = found {
+                    return Some(state.swap_replies.remove(index));
+                }
+            }
+            let waited = self.clock.now().saturating_duration_since(started);
+            if waited >= timeout {
+                return None;
+            }
+            self.wait_for(timeout - waited, |state| {
+                state
+                    .swap_replies
+                    .iter()
+                    .any(|r| r.request_id == request_id)
+            });
+        }
     }
 
     /// The swap replies the world sent since the last call.
@@ -214,11 +334,7 @@ impl WorldLink for MemoryWorldLink {
         self.bus.lock().lobbies.len()
     }
 
-    fn drain_hellos(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(Hello),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_hellos(&mut self, robot: usize, sink: &mut dyn FnMut(Hello)) -> WorldResult {
         let hellos: Vec<Hello> = {
             let mut state = self.bus.lock();
             let lobby = state
@@ -231,28 +347,27 @@ impl WorldLink for MemoryWorldLink {
         Ok(())
     }
 
-    fn answer_hello(
-        &mut self,
-        robot: usize,
-        nonce: u64,
-        welcome: &Welcome,
-    ) -> Result<(), WorldLinkError> {
+    fn answer_hello(&mut self, robot: usize, nonce: u64, welcome: &Welcome) -> WorldResult {
         let mut state = self.bus.lock();
         let lobby = state
             .lobbies
             .get_mut(robot)
             .ok_or_else(|| no_robot(robot))?;
         lobby.welcomes.insert(nonce, welcome.clone());
+        drop(state);
+        self.bus.ring();
         Ok(())
     }
 
-    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> WorldResult {
         let mut state = self.bus.lock();
         let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
         *slot = Some(Incarnation {
             id: incarnation,
             ..Incarnation::default()
         });
+        drop(state);
+        self.bus.ring();
         Ok(())
     }
 
@@ -262,30 +377,30 @@ impl WorldLink for MemoryWorldLink {
         }
     }
 
-    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError> {
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult {
         let mut state = self.bus.lock();
         let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
         if let Some(incarnation) = slot {
             incarnation.scans.push_back(*msg);
         }
+        drop(state);
+        self.bus.ring();
         Ok(())
     }
 
-    fn send_control(
-        &mut self,
-        robot: usize,
-        request: &ControlRequest,
-    ) -> Result<(), WorldLinkError> {
+    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> WorldResult {
         let mut state = self.bus.lock();
         let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
         if let Some(incarnation) = slot {
             incarnation.control.push_back(request.clone());
         }
+        drop(state);
+        self.bus.ring();
         Ok(())
     }
 
-    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
-        let ready = |bus: &MemoryBus| -> Result<bool, WorldLinkError> {
+    fn wait(&mut self, timeout: Duration) -> WorldResult {
+        let ready = |bus: &MemoryBus| -> WorldResult<bool> {
             let state = bus.lock();
             if let Some(signal) = state.terminate_world {
                 return Err(WorldLinkError::Terminated(signal));
@@ -301,15 +416,13 @@ impl WorldLink for MemoryWorldLink {
                 return Ok(());
             }
         }
-        self.bus.clock.sleep(timeout);
-        Ok(())
+        self.bus.wait_for(timeout, |state| {
+            state.terminate_world.is_some() || state.world_has_mail()
+        });
+        ready(&self.bus).map(|_| ())
     }
 
-    fn drain_commands(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(CmdMsg),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_commands(&mut self, robot: usize, sink: &mut dyn FnMut(CmdMsg)) -> WorldResult {
         let cmds: Vec<CmdMsg> = {
             let mut state = self.bus.lock();
             let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
@@ -321,11 +434,7 @@ impl WorldLink for MemoryWorldLink {
         Ok(())
     }
 
-    fn drain_statuses(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(AgentStatus),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_statuses(&mut self, robot: usize, sink: &mut dyn FnMut(AgentStatus)) -> WorldResult {
         let statuses: Vec<AgentStatus> = {
             let mut state = self.bus.lock();
             let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
@@ -337,7 +446,7 @@ impl WorldLink for MemoryWorldLink {
         Ok(())
     }
 
-    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
         Ok(!self.bus.lock().dead.contains(&(robot, pid)))
     }
 
@@ -348,17 +457,15 @@ impl WorldLink for MemoryWorldLink {
         Ok(dead)
     }
 
-    fn drain_swap_requests(
-        &mut self,
-        sink: &mut dyn FnMut(SwapRequest),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_swap_requests(&mut self, sink: &mut dyn FnMut(SwapRequest)) -> WorldResult {
         let requests: Vec<SwapRequest> = self.bus.lock().swap_requests.drain(..).collect();
         requests.into_iter().for_each(sink);
         Ok(())
     }
 
-    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), WorldLinkError> {
-        self.bus.lock().swap_replies.push(reply.clone());
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> WorldResult {
+        self.bus
+            .update(|state| state.swap_replies.push(reply.clone()));
         Ok(())
     }
 }
@@ -384,7 +491,15 @@ impl AgentLink for MemoryAgentLink {
         if self.has_mail() {
             return Ok(Wake::Activity);
         }
-        self.bus.clock.sleep(timeout);
+        let (robot, incarnation) = (self.robot, self.incarnation);
+        self.bus.wait_for(timeout, |state| {
+            state
+                .robots
+                .get(robot)
+                .and_then(Option::as_ref)
+                .filter(|i| i.id == incarnation)
+                .is_some_and(|i| !i.scans.is_empty() || !i.control.is_empty())
+        });
         Ok(if self.has_mail() {
             Wake::Activity
         } else {
@@ -419,16 +534,20 @@ impl AgentLink for MemoryAgentLink {
     }
 
     fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), AgentLinkError> {
-        if let Some(i) = self.bus.lock().incarnation(self.robot, self.incarnation) {
-            i.cmds.push_back(*msg);
-        }
+        self.bus.update(|state| {
+            if let Some(i) = state.incarnation(self.robot, self.incarnation) {
+                i.cmds.push_back(*msg);
+            }
+        });
         Ok(())
     }
 
     fn publish_status(&mut self, status: &AgentStatus) -> Result<(), AgentLinkError> {
-        if let Some(i) = self.bus.lock().incarnation(self.robot, self.incarnation) {
-            i.statuses.push_back(status.clone());
-        }
+        self.bus.update(|state| {
+            if let Some(i) = state.incarnation(self.robot, self.incarnation) {
+                i.statuses.push_back(status.clone());
+            }
+        });
         Ok(())
     }
 

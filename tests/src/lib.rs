@@ -111,6 +111,21 @@ impl LeakCheck {
         self.namespace.leftovers()
     }
 
+    /// Panics listing the run's shared-memory files if any exist but iceoryx2's management
+    /// segment of the namespace, which stays after every node of the run closed cleanly (by
+    /// design, across nodes) until the launcher removes the namespace.
+    pub fn assert_only_management_left(&self) {
+        let shm: Vec<_> = self
+            .leftovers()
+            .into_iter()
+            .filter(|p| p.starts_with("/dev/shm") && !p.to_string_lossy().ends_with(".global_mgmt"))
+            .collect();
+        assert!(
+            shm.is_empty(),
+            "shared memory left after a clean exit: {shm:#?}"
+        );
+    }
+
     /// Panics listing the run's files if any exist (its lock file included).
     pub fn assert_clean(&self) {
         let mut left = self.leftovers();
@@ -337,7 +352,9 @@ pub fn write_tiny_model_with(path: &Path, seed: u64, extra: &[&str]) {
     std::fs::rename(&tmp, path).expect("moving the test model into place");
 }
 
-fn python() -> PathBuf {
+/// The interpreter the tests run Python with: `FORMATION_PYTHON`, else `<repo>/.venv/bin/python`,
+/// else `python3`.
+pub fn python() -> PathBuf {
     if let Some(p) = std::env::var_os("FORMATION_PYTHON") {
         return PathBuf::from(p);
     }
@@ -846,6 +863,18 @@ pub fn formation_run_with_model(
     extra: &[&str],
 ) -> Command {
     let mut command = Command::new(&binaries().cli);
+    formation_run_args(&mut command, run, (scenario, model, out), extra);
+    command
+}
+
+/// Adds `run --run-id RUN EXTRA --scenario SCENARIO --model MODEL --out OUT` to `command` (the
+/// `formation` binary, or a command that runs it, in a network namespace for example).
+pub fn formation_run_args(
+    command: &mut Command,
+    run: &RunId,
+    (scenario, model, out): (&Path, &Path, &Path),
+    extra: &[&str],
+) {
     command
         .args(["run", "--run-id", run.as_str()])
         .args(extra)
@@ -855,7 +884,6 @@ pub fn formation_run_with_model(
         .arg(model)
         .arg("--out")
         .arg(out);
-    command
 }
 
 /// `formation eval --controller policy --runs 1 --scenario SCENARIO --model MODEL --json JSON`:
@@ -1032,6 +1060,32 @@ impl Drop for Tmpfs {
             let _ = Command::new("umount").arg("-l").arg(&self.dir).status();
         }
     }
+}
+
+/// `formation credentials --robots ROBOTS --out DIR/creds`: a Zenoh team's logins and launch
+/// secret, made by the launcher's own command; returns the folder.
+pub fn zenoh_credentials(dir: &Path, robots: usize) -> PathBuf {
+    let creds = dir.join("creds");
+    std::fs::create_dir_all(dir).unwrap_or_else(|e| panic!("creating {}: {e}", dir.display()));
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["credentials", "--robots", &robots.to_string(), "--out"])
+        .arg(&creds);
+    run(command, Duration::from_secs(120)).assert_success();
+    creds
+}
+
+/// Starts the `delay-relay` of `command` (its arguments given) and waits until it listens.
+pub fn start_relay(command: Command) -> LiveProcess {
+    let mut relay = LiveProcess::spawn_with_input(command, Some(""));
+    assert!(
+        relay
+            .wait_for_line(Duration::from_secs(10), |l| l == "listening")
+            .is_some(),
+        "{}",
+        relay.describe()
+    );
+    relay
 }
 
 /// The JSON file at `path`, parsed; a missing or malformed file fails the test naming it.

@@ -8,25 +8,19 @@
 //!
 //! Every test uses its own run id, port and scratch folder, and runs alone within this binary.
 
-use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
 use formation_tests::{
     LeakCheck, LiveProcess, TempDir, Watchdog, binaries, case1_scenario, formation_run,
-    free_tcp_port, one_at_a_time, run, test_model, unique_run_id,
+    free_tcp_port, one_at_a_time, read_json, run, start_relay, test_model, unique_run_id,
+    zenoh_credentials,
 };
 
 const LIMIT: Duration = Duration::from_secs(240);
 
 /// One tick of the 20 Hz schedule \[µs\].
 const TICK_US: f64 = 50_000.0;
-
-fn json(path: &Path) -> serde_json::Value {
-    let text =
-        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("parsing {}: {e}", path.display()))
-}
 
 /// Robot `robot`'s p50 round trip in `profile.json` \[µs\].
 fn round_trip_p50_us(profile: &serde_json::Value, robot: usize) -> f64 {
@@ -56,7 +50,7 @@ fn a_late_agent_shows_its_lateness_in_the_round_trip_and_a_degraded_link_is_told
     );
     let finished = run(command, LIMIT);
     finished.assert_success();
-    let profile = json(&out.join("profile.json"));
+    let profile = read_json(&out.join("profile.json"));
     let late = round_trip_p50_us(&profile, 1);
     eprintln!("an agent 120 ms late: round trip p50 {late} us");
     assert!(
@@ -86,7 +80,7 @@ fn a_late_agent_shows_its_lateness_in_the_round_trip_and_a_degraded_link_is_told
         "{}",
         finished.describe()
     );
-    let summary = json(&out.join("summary.json"));
+    let summary = read_json(&out.join("summary.json"));
     let braked = summary["braked_ticks"][1]
         .as_object()
         .unwrap_or_else(|| panic!("robot 1's braked ticks in {summary:#}"));
@@ -111,12 +105,7 @@ fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_i
     let leaks = LeakCheck::new(&run_id);
     let scenario = case1_scenario(dir.path(), 10.0);
     let out = dir.path().join("out");
-    let creds = dir.path().join("creds");
-    let mut credentials = Command::new(&bins.cli);
-    credentials
-        .args(["credentials", "--robots", "3", "--out"])
-        .arg(&creds);
-    run(credentials, LIMIT).assert_success();
+    let creds = zenoh_credentials(dir.path(), 3);
     let world_port = free_tcp_port();
     let listen = format!("tcp/127.0.0.1:{world_port}");
     let relay_port = free_tcp_port();
@@ -128,14 +117,7 @@ fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_i
         "30",
         "26",
     ]);
-    let mut relay = LiveProcess::spawn_with_input(relay, Some(""));
-    assert!(
-        relay
-            .wait_for_line(Duration::from_secs(10), |l| l == "listening")
-            .is_some(),
-        "{}",
-        relay.describe()
-    );
+    let mut relay = start_relay(relay);
     let mut command = formation_run(
         &run_id,
         &scenario,
@@ -164,9 +146,9 @@ fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_i
     relay.close_input();
     finished.assert_success();
     assert!(remote.output.status.success(), "{}", remote.describe());
-    let profile = json(&out.join("profile.json"));
+    let profile = read_json(&out.join("profile.json"));
     let delayed = round_trip_p50_us(&profile, 1);
-    let summary = json(&out.join("summary.json"));
+    let summary = read_json(&out.join("summary.json"));
     eprintln!(
         "70 ± 30 ms each way: round trip p50 {delayed} us; braked ticks {}",
         summary["braked_ticks"]

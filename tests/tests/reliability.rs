@@ -11,8 +11,8 @@ use formation_proto::wire::RunId;
 use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_tests::{
     LaunchSecret, LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, await_connected,
-    await_rejoin, binaries, case1_scenario, formation_run, incarnations, one_at_a_time, run,
-    send_signal, test_model, unique_run_id, world_pid,
+    await_rejoin, binaries, case1_scenario, formation_run, one_at_a_time, run, send_signal,
+    unique_run_id, world_pid,
 };
 use rand::{Rng, SeedableRng};
 
@@ -230,68 +230,6 @@ fn a_kill_near_the_end_whose_restart_is_under_way_does_not_fail_the_run() {
         profile["braked_per_robot"][1]["agent_down"], 10,
         "{profile:#}"
     );
-    leaks.assert_clean();
-}
-
-/// A process that does not hold the launch's secret (here a real agent of another "launch") is
-/// refused by pid, drives nothing, and blocks nothing: the launch's own restarted agent rejoins
-/// on fresh services of its own, and the run ends with the launch's model on every robot.
-#[test]
-fn a_process_without_the_launch_secret_drives_no_robot() {
-    let _watchdog = Watchdog::arm("impostor", LIMIT);
-    let _one = one_at_a_time();
-    let bins = binaries();
-    let dir = TempDir::new("squat");
-    let run_id = unique_run_id("squat");
-    let leaks = LeakCheck::new(&run_id);
-    let mut launch = launch(
-        &run_id,
-        &dir,
-        20.0,
-        &["--pace-ms", "25", "--restart-delay-ms", "400"],
-    );
-    await_connected(&mut launch);
-    let before = incarnations(&run_id, 0);
-    assert_eq!(before.len(), 1, "{before:x?}");
-    let old = the_agent(&run_id, 0, &mut launch);
-    send_signal(old, "KILL");
-    // While the launch waits to restart robot 0's agent, an impostor asks for robot 0.
-    let mut impostor = Command::new(&bins.agent);
-    impostor
-        .args(["--run-id", run_id.as_str(), "--robot", "0"])
-        .args(["--connect-timeout-ms", "60000"])
-        .arg("--model")
-        .arg(test_model());
-    let impostor = LiveProcess::spawn_with_secret(impostor, &LaunchSecret::generate().unwrap());
-    let impostor_pid = impostor.id();
-    let refused = impostor.finish(LIMIT);
-    assert!(!refused.output.status.success(), "{}", refused.describe());
-    assert!(
-        refused
-            .stderr()
-            .contains("did not prove this launch's secret"),
-        "{}",
-        refused.describe()
-    );
-    await_rejoin(&mut launch, 0, old);
-    let after = incarnations(&run_id, 0);
-    assert!(
-        after.iter().all(|i| !before.contains(i)) && !after.is_empty(),
-        "the restarted agent has services of its own: before {before:x?}, after {after:x?}"
-    );
-    let finished = launch.finish(LIMIT);
-    finished.assert_success();
-    assert!(
-        finished
-            .stderr()
-            .contains(&format!("refused process {impostor_pid}")),
-        "the launcher names the impostor's pid\n{}",
-        finished.describe()
-    );
-    let log = RobotLog::read(&dir.path().join("out"), 0);
-    let used: std::collections::BTreeSet<&String> =
-        log.models.iter().filter(|m| *m != "<none>").collect();
-    assert_eq!(used.len(), 1, "one model drove robot 0: {used:?}");
     leaks.assert_clean();
 }
 

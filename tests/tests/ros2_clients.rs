@@ -31,8 +31,8 @@ use formation_ros2::{
 };
 use formation_runtime::agent::PilotMaker;
 use formation_tests::{
-    Finished, LiveProcess, TempDir, Watchdog, binaries, free_tcp_port, one_at_a_time, repo_root,
-    run, send_signal, test_model,
+    Finished, LiveProcess, TempDir, Watchdog, binaries, free_tcp_port, one_at_a_time, python,
+    repo_root, run, send_signal, test_model,
 };
 use rand::{Rng, SeedableRng};
 use serde_json::{Value, json};
@@ -50,20 +50,6 @@ const MISSING_PACKAGE: i32 = 3;
 
 fn client_script() -> PathBuf {
     repo_root().join("tests/python/ros2_client.py")
-}
-
-/// The interpreter the tests use: `FORMATION_PYTHON`, else `.venv/bin/python`, else `python3`
-/// (as the test model's script is run).
-fn python() -> PathBuf {
-    if let Some(p) = std::env::var_os("FORMATION_PYTHON") {
-        return PathBuf::from(p);
-    }
-    let venv = repo_root().join(".venv/bin/python");
-    if venv.is_file() {
-        venv
-    } else {
-        PathBuf::from("python3")
-    }
 }
 
 /// The interpreter with the client's packages. A missing package or interpreter fails the tests

@@ -17,19 +17,14 @@ use std::time::Duration;
 use formation_cli::launch::read_trajectory;
 use formation_tests::{
     LeakCheck, TempDir, Watchdog, binaries, case1_scenario, formation_run_with_model,
-    free_tcp_port, one_at_a_time, policy_eval, repo_root, run, test_model, unique_run_id,
+    free_tcp_port, one_at_a_time, policy_eval, python, read_json, repo_root, run, test_model,
+    unique_run_id,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
 
 fn endpoint(port: u16) -> String {
     format!("tcp/127.0.0.1:{port}")
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    let text =
-        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
-    serde_json::from_str(&text).expect("JSON")
 }
 
 /// Equal, with numbers that are not integers compared to `1e-9` relative.
@@ -71,7 +66,7 @@ fn in_process_summary(dir: &Path, scenario: &Path) -> serde_json::Value {
     let path = dir.join("in-process.json");
     let eval = policy_eval(scenario, &shipped_model(), &path);
     run(eval, LIMIT).assert_success();
-    json(&path)
+    read_json(&path)
 }
 
 /// What one launch of a ROS 2 team left: its folder, scenario, output and the finished
@@ -124,7 +119,7 @@ fn lockstep_case1_through_ros2_gives_the_in_process_table() {
         out,
         finished,
     } = run_team("r2lock", "lockstep");
-    let over_ros2 = json(&out.join("summary.json"));
+    let over_ros2 = read_json(&out.join("summary.json"));
     let reference = in_process_summary(dir.path(), &scenario);
     assert_eq!(
         reference["per_run"][0]["success_10"],
@@ -166,7 +161,7 @@ fn eval_through_ros2_writes_the_in_process_json() {
     eval.args(["--processes", "--transport", "ros2", "--listen", &listen]);
     let finished = run(eval, LIMIT);
     finished.assert_success();
-    let over_ros2 = json(&over_path);
+    let over_ros2 = read_json(&over_path);
     let keys = reference.as_object().expect("eval JSON is an object");
     assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
     for (key, value) in keys {
@@ -190,7 +185,7 @@ fn realtime_case1_through_ros2_converges() {
         finished,
         ..
     } = run_team("r2real", "realtime");
-    let summary = json(&out.join("summary.json"));
+    let summary = read_json(&out.join("summary.json"));
     assert_eq!(
         summary["per_run"][0]["success_10"],
         serde_json::Value::Bool(true),
@@ -251,13 +246,6 @@ fn bad_ros2_launches_are_refused_with_the_reason() {
         .arg("--model")
         .arg(test_model());
     run(swap, LIMIT).assert_failure_mentioning("a ROS 2 agent cannot be swapped");
-}
-
-/// The interpreter with the independent clients: `FORMATION_PYTHON`, else `.venv/bin/python`.
-fn python() -> std::path::PathBuf {
-    std::env::var_os("FORMATION_PYTHON")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| repo_root().join(".venv/bin/python"))
 }
 
 /// A live ROS 2 team's `/tf` and `/tf_static`, read by an independent client (`eclipse-zenoh`

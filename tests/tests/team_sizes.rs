@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use formation_tests::{
     Finished, LeakCheck, TempDir, Watchdog, case1_scenario, formation_run_with_model, policy_eval,
-    run, unique_run_id, write_tiny_model_with,
+    read_json, run, unique_run_id, write_tiny_model_with,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -39,10 +39,6 @@ fn eval(scenario: &Path, model: &Path, json: &Path, extra: &[&str]) -> Finished 
     finished
 }
 
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_slice(&std::fs::read(path).expect("reading the JSON")).expect("JSON")
-}
-
 #[test]
 fn eval_flags_sizes_outside_the_trained_ones_and_warns_below_them() {
     let _watchdog = Watchdog::arm("team_sizes_eval", LIMIT);
@@ -70,7 +66,7 @@ fn eval_flags_sizes_outside_the_trained_ones_and_warns_below_them() {
                 finished.describe()
             ),
         }
-        let written = json(&out);
+        let written = read_json(&out);
         let entry = &written["team_size"][0];
         assert_eq!(entry["fit"], fit, "{robots} robots: {written}");
         assert_eq!(entry["zero_shot"], zero_shot, "{robots} robots");
@@ -91,7 +87,7 @@ fn eval_flags_sizes_outside_the_trained_ones_and_warns_below_them() {
         "{}",
         finished.describe()
     );
-    let rows = json(&table)["rows"].as_array().cloned().expect("rows");
+    let rows = read_json(&table)["rows"].as_array().cloned().expect("rows");
     let policy: Vec<_> = rows
         .iter()
         .filter(|r| r["controller"] == "policy")
@@ -125,7 +121,7 @@ fn a_launch_flags_a_zero_shot_team_on_the_terminal_and_in_its_summary() {
         "{}",
         finished.describe()
     );
-    let summary = json(&out.join("summary.json"));
+    let summary = read_json(&out.join("summary.json"));
     assert_eq!(summary["team_size"][0]["zero_shot"], true, "{summary}");
     assert_eq!(summary["team_size"][0]["fit"], "zero_shot");
 }

@@ -17,7 +17,7 @@ use formation_robot_agent::decision::PolicyController;
 use formation_tests::{
     LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
     count_samples, formation_run, free_tcp_port, launch_secret, one_at_a_time, policy_eval,
-    raw_client, run, run_with_input, test_model, unique_run_id,
+    raw_client, read_json, run, run_with_input, test_model, unique_run_id, zenoh_credentials,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -84,13 +84,6 @@ fn lockstep_case1_over_zenoh_is_bit_identical_to_in_process() {
     leaks.assert_clean();
 }
 
-/// Reads a JSON file.
-fn json(path: &Path) -> serde_json::Value {
-    let text =
-        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
-    serde_json::from_str(&text).expect("JSON")
-}
-
 /// Issue 13 (`--transport` on `formation eval`): one lockstep run of case 1 with
 /// `formation eval --processes --transport zenoh --listen E` (the world listening on E, three
 /// local agents connecting with fresh credentials) writes the same `--json` as in-process
@@ -119,8 +112,8 @@ fn eval_over_zenoh_writes_the_same_json_as_in_process() {
         &zenoh_json,
     );
     over_zenoh.assert_success();
-    let in_process = json(&in_process_json);
-    let over = json(&zenoh_json);
+    let in_process = read_json(&in_process_json);
+    let over = read_json(&zenoh_json);
     let keys = in_process.as_object().expect("eval JSON is an object");
     assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
     assert_eq!(
@@ -290,12 +283,7 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
     let leaks = LeakCheck::new(&run_id);
     let scenario = case1_scenario(dir.path(), 4.0);
     let out = dir.path().join("out");
-    let creds = dir.path().join("creds");
-    let mut credentials = Command::new(&bins.cli);
-    credentials
-        .args(["credentials", "--robots", "3", "--out"])
-        .arg(&creds);
-    run(credentials, LIMIT).assert_success();
+    let creds = zenoh_credentials(dir.path(), 3);
     let listen = endpoint(free_tcp_port());
     let mut command = formation_run(
         &run_id,
@@ -390,17 +378,9 @@ fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
     let leaks = LeakCheck::new(&run_id);
     let scenario = case1_scenario(dir.path(), 2.0);
     let out = dir.path().join("out");
-    let make_credentials = |folder: &Path| {
-        let mut credentials = Command::new(&bins.cli);
-        credentials
-            .args(["credentials", "--robots", "3", "--out"])
-            .arg(folder);
-        run(credentials, LIMIT).assert_success();
-    };
-    let creds = dir.path().join("creds");
-    let others = dir.path().join("other-run");
-    make_credentials(&creds);
-    make_credentials(&others);
+    let creds = zenoh_credentials(dir.path(), 3);
+    let other_run = dir.path().join("other-run");
+    let others = zenoh_credentials(&other_run, 3);
     let listen = endpoint(free_tcp_port());
     let mut command = formation_run(
         &run_id,
@@ -508,12 +488,7 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
     let leaks = LeakCheck::new(&run_id);
     let scenario = case1_scenario(dir.path(), 8.0);
     let out = dir.path().join("out");
-    let creds = dir.path().join("creds");
-    let mut credentials = Command::new(&bins.cli);
-    credentials
-        .args(["credentials", "--robots", "3", "--out"])
-        .arg(&creds);
-    run(credentials, LIMIT).assert_success();
+    let creds = zenoh_credentials(dir.path(), 3);
     let listen = endpoint(free_tcp_port());
     let mut command = formation_run(
         &run_id,

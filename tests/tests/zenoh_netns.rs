@@ -20,8 +20,9 @@ use formation_robot_agent::decision::PolicyController;
 use formation_tests::netns::{NetPair, WORLD_IP};
 use formation_tests::{
     LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, assert_bit_identical,
-    binaries, case1_scenario, free_tcp_port, one_at_a_time, repo_root, run, send_signal,
-    test_model, unique_run_id, world_pid,
+    binaries, case1_scenario, formation_run_args, free_tcp_port, one_at_a_time, read_json,
+    repo_root, run, send_signal, start_relay, test_model, unique_run_id, world_pid,
+    zenoh_credentials,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -53,12 +54,7 @@ impl Rig {
         let dir = TempDir::new(tag);
         let run_id = unique_run_id(tag);
         let leaks = LeakCheck::new(&run_id);
-        let creds = dir.path().join("creds");
-        let mut credentials = Command::new(&binaries().cli);
-        credentials
-            .args(["credentials", "--robots", &ROBOTS.to_string(), "--out"])
-            .arg(&creds);
-        run(credentials, LIMIT).assert_success();
+        let creds = zenoh_credentials(dir.path(), ROBOTS);
         let listen = format!("tcp/{WORLD_IP}:{}", free_tcp_port());
         Rig {
             pair,
@@ -76,20 +72,17 @@ impl Rig {
 
     /// `formation run` in the world's namespace, every robot remote.
     fn launch(&self, scenario: &Path, model: &Path, extra: &[&str]) -> LiveProcess {
+        let creds = self.creds.to_string_lossy();
+        let flags = [
+            ["--transport", "zenoh", "--listen", &self.listen].as_slice(),
+            &["--remote", "0,1,2", "--remote-timeout-s", "120"],
+            &["--credentials", &creds],
+            extra,
+        ]
+        .concat();
         let mut command = self.pair.in_world(&binaries().cli);
-        command
-            .args(["run", "--run-id", self.run_id.as_str()])
-            .args(["--transport", "zenoh", "--listen", &self.listen])
-            .args(["--remote", "0,1,2", "--remote-timeout-s", "120"])
-            .arg("--credentials")
-            .arg(&self.creds)
-            .args(extra)
-            .arg("--scenario")
-            .arg(scenario)
-            .arg("--model")
-            .arg(model)
-            .arg("--out")
-            .arg(self.out());
+        let out = self.out();
+        formation_run_args(&mut command, &self.run_id, (scenario, model, &out), &flags);
         let mut launch = LiveProcess::spawn(command);
         let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
             l.contains("waiting for the remote agents")
@@ -140,13 +133,6 @@ fn in_process(scenario: &Path, model: &Path) -> formation_world::Trajectory {
     run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process")
 }
 
-/// Reads a JSON file.
-fn json(path: &Path) -> serde_json::Value {
-    let text =
-        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
-    serde_json::from_str(&text).expect("JSON")
-}
-
 /// Issue 13 acceptance: lockstep case 1 with the world and the agents in different namespaces
 /// gives the in-process trajectory bit for bit, and the same Table I figures as
 /// `formation eval` in-process.
@@ -182,8 +168,8 @@ fn lockstep_case1_across_namespaces_equals_in_process() {
     .arg("--json")
     .arg(&eval_json);
     run(eval, LIMIT).assert_success();
-    let in_process = json(&eval_json);
-    let over = json(&rig.out().join("summary.json"));
+    let in_process = read_json(&eval_json);
+    let over = read_json(&rig.out().join("summary.json"));
     let keys = in_process.as_object().expect("eval JSON is an object");
     assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
     for (key, value) in keys {
@@ -232,8 +218,8 @@ fn ten_table1_runs_across_namespaces_give_the_in_process_table() {
     .arg("--json")
     .arg(&eval_json);
     run(eval, LIMIT).assert_success();
-    let in_process = json(&eval_json);
-    let over = json(&rig.out().join("summary.json"));
+    let in_process = read_json(&eval_json);
+    let over = read_json(&rig.out().join("summary.json"));
     let keys = in_process.as_object().expect("eval JSON is an object");
     assert_eq!(
         in_process["per_run"].as_array().map(Vec::len),
@@ -272,14 +258,7 @@ fn realtime_case1_converges_with_delay_and_loss() {
         "5",
         "7",
     ]);
-    let mut relay = LiveProcess::spawn_with_input(relay, Some(""));
-    assert!(
-        relay
-            .wait_for_line(Duration::from_secs(10), |l| l == "listening")
-            .is_some(),
-        "{}",
-        relay.describe()
-    );
+    let mut relay = start_relay(relay);
     let model = repo_root().join("onnx/models/policy.onnx");
     // Success is judged on the final 20 s (the paper's window), so the run is longer than that.
     let scenario = case1_scenario(rig.dir.path(), 30.0);
@@ -289,14 +268,14 @@ fn realtime_case1_converges_with_delay_and_loss() {
     finished.assert_success();
     finish_agents(agents);
     relay.close_input();
-    let summary = json(&rig.out().join("summary.json"));
+    let summary = read_json(&rig.out().join("summary.json"));
     assert_eq!(
         summary["success_rate_5"].as_f64(),
         Some(1.0),
         "case 1 converges within 5 % despite delay and loss\n{}\n{summary:#}",
         finished.describe()
     );
-    let profile = json(&rig.out().join("profile.json"));
+    let profile = read_json(&rig.out().join("profile.json"));
     let round_trip = &profile["stages"]["round_trip"];
     eprintln!(
         "round trip with 20 ± 5 ms each way and 1 % loss: p50 {} us, p99 {} us",

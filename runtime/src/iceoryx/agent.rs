@@ -22,6 +22,9 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 
+use super::services::{
+    Access, ServiceError, ServiceErrorKind, drain_decoded, event_service, pubsub_service, run_node,
+};
 use super::watch_termination_signals;
 use crate::link::{AgentLink, AgentLinkError, Wake};
 use crate::signals;
@@ -94,18 +97,24 @@ impl IceoryxAgentLink {
         secret: &LaunchSecret,
         timeout: Duration,
     ) -> Result<Self, AgentLinkError> {
+        Self::connect_as(namespace, robot, secret, timeout, std::process::id())
+    }
+
+    /// [`IceoryxAgentLink::connect`] for an agent known as process `pid` (its node's name, what
+    /// it proves and how the world tells whether it lives): this process's id, except in tests
+    /// that run several agents of one robot in one process, one after another.
+    pub fn connect_as(
+        namespace: &RunNamespace,
+        robot: usize,
+        secret: &LaunchSecret,
+        timeout: Duration,
+        pid: u32,
+    ) -> Result<Self, AgentLinkError> {
         watch_termination_signals();
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
-        let pid = std::process::id();
-        let name = NodeName::new(&agent_node_name(robot, pid))
-            .map_err(|e| iox("name the agent node")(&e))?;
-        let node = NodeBuilder::new()
-            .name(&name)
-            .config(&config)
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<ipc::Service>()
-            .map_err(|e| iox("create the agent node")(&e))?;
+        let node = run_node(&config, &agent_node_name(robot, pid))
+            .map_err(|(action, detail)| AgentLinkError::Iceoryx { action, detail })?;
         // iceoryx2 makes its node-management segment world-writable (this agent may be the first
         // process of the run to create it): close it at once.
         namespace.restrict_permissions()?;
@@ -241,59 +250,59 @@ struct Lobby {
     welcome: Subscriber<ipc::Service, WelcomeMsg, ()>,
 }
 
+/// A service opened with [`Access::Open`]: one the world has not created yet is
+/// [`OpenFailure::NotYet`].
+fn opened<T>(result: Result<T, ServiceError>) -> Result<T, OpenFailure> {
+    result.map_err(|e| match e.kind {
+        ServiceErrorKind::Name => OpenFailure::Fatal(AgentLinkError::Iceoryx {
+            action: e.action("open"),
+            detail: e.detail,
+        }),
+        ServiceErrorKind::Unavailable => OpenFailure::NotYet,
+    })
+}
+
+/// A port this agent needs is held by someone else.
+fn taken(port: &'static str) -> impl FnOnce(&dyn std::fmt::Debug) -> OpenFailure {
+    move |e| OpenFailure::Taken {
+        port,
+        detail: format!("{e:?}"),
+    }
+}
+
 fn open_lobby(
     node: &Node<ipc::Service>,
     namespace: &RunNamespace,
     robot: usize,
 ) -> Result<Lobby, OpenFailure> {
-    let service = |channel| {
-        let text = lobby_service_name(namespace.run(), robot, channel);
-        ServiceName::new(&text)
-            .map_err(|e| OpenFailure::Fatal(iox(format!("name service {text}"))(&e)))
-    };
+    let name = |channel| lobby_service_name(namespace.run(), robot, channel);
+    let hello_name = name(LobbyChannel::Hello);
     let hello_limits = ServiceLimits::HELLO;
     let welcome_limits = ServiceLimits::WELCOME;
-    let busy = |port: &'static str| {
-        move |e: &dyn std::fmt::Debug| OpenFailure::Taken {
-            port,
-            detail: format!("{e:?}"),
-        }
-    };
     // The subscriber exists before the greeting goes out, so the answer cannot be missed.
-    let welcome = node
-        .service_builder(&service(LobbyChannel::Welcome)?)
-        .publish_subscribe::<WelcomeMsg>()
-        .max_publishers(welcome_limits.max_publishers)
-        .max_subscribers(welcome_limits.max_subscribers)
-        .subscriber_max_buffer_size(welcome_limits.subscriber_buffer)
-        .open()
-        .map_err(|_| OpenFailure::NotYet)?
-        .subscriber_builder()
-        .buffer_size(welcome_limits.subscriber_buffer)
-        .create()
-        .map_err(|e| busy("welcome")(&e))?;
-    let hello_service = service(LobbyChannel::Hello)?;
-    let hello = node
-        .service_builder(&hello_service)
-        .publish_subscribe::<HelloMsg>()
-        .max_publishers(hello_limits.max_publishers)
-        .max_subscribers(hello_limits.max_subscribers)
-        .subscriber_max_buffer_size(hello_limits.subscriber_buffer)
-        .open()
-        .map_err(|_| OpenFailure::NotYet)?
-        .publisher_builder()
-        .create()
-        .map_err(|e| busy("hello")(&e))?;
-    let hello_wake = node
-        .service_builder(&hello_service)
-        .event()
-        .max_notifiers(hello_limits.max_publishers)
-        .max_listeners(hello_limits.max_subscribers)
-        .open()
-        .map_err(|_| OpenFailure::NotYet)?
+    let welcome = opened(pubsub_service::<WelcomeMsg>(
+        node,
+        &name(LobbyChannel::Welcome),
+        welcome_limits,
+        Access::Open,
+    ))?
+    .subscriber_builder()
+    .buffer_size(welcome_limits.subscriber_buffer)
+    .create()
+    .map_err(|e| taken("welcome")(&e))?;
+    let hello = opened(pubsub_service::<HelloMsg>(
+        node,
+        &hello_name,
+        hello_limits,
+        Access::Open,
+    ))?
+    .publisher_builder()
+    .create()
+    .map_err(|e| taken("hello")(&e))?;
+    let hello_wake = opened(event_service(node, &hello_name, hello_limits, Access::Open))?
         .notifier_builder()
         .create()
-        .map_err(|e| busy("hello event")(&e))?;
+        .map_err(|e| taken("hello event")(&e))?;
     Ok(Lobby {
         hello,
         hello_wake,
@@ -357,35 +366,16 @@ fn try_open(
     incarnation: u64,
 ) -> Result<Ports, OpenFailure> {
     let limits = ServiceLimits::ROBOT;
-    let name = |channel| {
-        let text = robot_service_name(namespace.run(), robot, incarnation, channel);
-        ServiceName::new(&text)
-            .map_err(|e| OpenFailure::Fatal(iox(format!("name service {text}"))(&e)))
-    };
-    let open_event = |channel| -> Result<_, OpenFailure> {
-        let service = name(channel)?;
-        node.service_builder(&service)
-            .event()
-            .max_notifiers(limits.max_publishers)
-            .max_listeners(limits.max_subscribers)
-            .open()
-            .map_err(|_| OpenFailure::NotYet)
-    };
-    let taken = |port: &'static str| {
-        move |e: &dyn std::fmt::Debug| OpenFailure::Taken {
-            port,
-            detail: format!("{e:?}"),
-        }
-    };
+    let name = |channel| robot_service_name(namespace.run(), robot, incarnation, channel);
+    let event = |channel| opened(event_service(node, &name(channel), limits, Access::Open));
     macro_rules! open_pubsub {
         ($payload:ty, $channel:expr) => {
-            node.service_builder(&name($channel)?)
-                .publish_subscribe::<$payload>()
-                .max_publishers(limits.max_publishers)
-                .max_subscribers(limits.max_subscribers)
-                .subscriber_max_buffer_size(limits.subscriber_buffer)
-                .open()
-                .map_err(|_| OpenFailure::NotYet)?
+            opened(pubsub_service::<$payload>(
+                node,
+                &name($channel),
+                limits,
+                Access::Open,
+            ))?
         };
     }
     let scan = open_pubsub!(ScanMsg, RobotChannel::Scan);
@@ -397,7 +387,7 @@ fn try_open(
             .buffer_size(limits.subscriber_buffer)
             .create()
             .map_err(|e| taken("scan")(&e))?,
-        open_event(RobotChannel::Scan)?
+        event(RobotChannel::Scan)?
             .listener_builder()
             .create()
             .map_err(|e| taken("scan event")(&e))?,
@@ -406,14 +396,14 @@ fn try_open(
             .buffer_size(limits.subscriber_buffer)
             .create()
             .map_err(|e| taken("control")(&e))?,
-        open_event(RobotChannel::Control)?
+        event(RobotChannel::Control)?
             .listener_builder()
             .create()
             .map_err(|e| taken("control event")(&e))?,
         cmd.publisher_builder()
             .create()
             .map_err(|e| taken("command")(&e))?,
-        open_event(RobotChannel::Cmd)?
+        event(RobotChannel::Cmd)?
             .notifier_builder()
             .create()
             .map_err(|e| taken("command event")(&e))?,
@@ -421,7 +411,7 @@ fn try_open(
             .publisher_builder()
             .create()
             .map_err(|e| taken("status")(&e))?,
-        open_event(RobotChannel::Status)?
+        event(RobotChannel::Status)?
             .notifier_builder()
             .create()
             .map_err(|e| taken("status event")(&e))?,
@@ -471,17 +461,13 @@ impl AgentLink for IceoryxAgentLink {
         &mut self,
         sink: &mut dyn FnMut(ControlRequest),
     ) -> Result<(), AgentLinkError> {
-        while let Some(sample) = self
-            .control
-            .receive()
-            .map_err(|e| iox("receive a control request")(&e))?
-        {
-            match sample.payload().decode() {
-                Ok(request) => sink(request),
-                Err(e) => tracing::warn!("ignoring a malformed control request: {e}"),
+        let decode = ControlMsg::decode;
+        drain_decoded(&self.control, "control request", decode, sink).map_err(|detail| {
+            AgentLinkError::Iceoryx {
+                action: "receive a control request".into(),
+                detail,
             }
-        }
-        Ok(())
+        })
     }
 
     fn newest_scan(&mut self) -> Result<Option<ScanMsg>, AgentLinkError> {

@@ -11,6 +11,8 @@
 
 mod agent;
 pub mod naming;
+mod services;
+pub mod swap;
 mod world;
 
 /// Starts recording which termination signal arrives ([`crate::signals`]); when that fails, a
@@ -26,4 +28,5 @@ fn watch_termination_signals() {
 }
 
 pub use agent::IceoryxAgentLink;
+pub use swap::{SwapClientError, request_swap};
 pub use world::IceoryxWorldLink;

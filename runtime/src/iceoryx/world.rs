@@ -28,8 +28,11 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{WaitSetGuard, WaitSetRunResult};
 
+use super::services::{
+    self, Access, EventService, PubSubService, ServiceError, drain_decoded, run_node,
+};
 use super::watch_termination_signals;
-use crate::link::{Hello, WorldLink, WorldLinkError, check_robot_index};
+use crate::link::{Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index};
 use crate::signals;
 
 fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> WorldLinkError {
@@ -72,7 +75,7 @@ pub struct IceoryxWorldLink {
     namespace: RunNamespace,
     lobbies: Vec<LobbyPorts>,
     /// Per robot: its current incarnation's ports, if an agent was accepted and is not gone.
-    robots: Vec<Option<RobotPorts>>,
+    robots: Incarnations<RobotPorts>,
     swap: SwapPorts,
     waitset: Rc<WaitSet<ipc::Service>>,
     /// The swap channel's request listener and every lobby's hello listener.
@@ -102,7 +105,7 @@ impl AttachedListeners {
     fn attach(
         waitset: &Rc<WaitSet<ipc::Service>>,
         listeners: Vec<Listener<ipc::Service>>,
-    ) -> Result<Self, WorldLinkError> {
+    ) -> WorldResult<Self> {
         let owner = Listeners {
             waitset: Rc::clone(waitset),
             listeners,
@@ -132,17 +135,12 @@ impl AttachedListeners {
 impl IceoryxWorldLink {
     /// Creates the world's node, every robot's lobby and the swap channel in `namespace`, and
     /// makes the run's files private to this user.
-    pub fn create(namespace: &RunNamespace, n_robots: usize) -> Result<Self, WorldLinkError> {
+    pub fn create(namespace: &RunNamespace, n_robots: usize) -> WorldResult<Self> {
         watch_termination_signals();
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
-        let name = NodeName::new(WORLD_NODE_NAME).map_err(|e| iox("name the world node")(&e))?;
-        let node = NodeBuilder::new()
-            .name(&name)
-            .config(&config)
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<ipc::Service>()
-            .map_err(|e| iox("create the world node")(&e))?;
+        let node = run_node(&config, WORLD_NODE_NAME)
+            .map_err(|(action, detail)| WorldLinkError::Iceoryx { action, detail })?;
         // iceoryx2 makes its node-management segment world-writable: close it at once.
         namespace.restrict_permissions()?;
         let (lobbies, hello_wakes): (Vec<_>, Vec<_>) = (0..n_robots)
@@ -165,62 +163,41 @@ impl IceoryxWorldLink {
             node,
             namespace: namespace.clone(),
             lobbies,
-            robots: (0..n_robots).map(|_| None).collect(),
+            robots: Incarnations::new(n_robots),
             swap,
             waitset,
             run_wakes,
         })
     }
 
-    fn check_robot(&self, robot: usize) -> Result<(), WorldLinkError> {
+    fn check_robot(&self, robot: usize) -> WorldResult {
         check_robot_index(robot, self.lobbies.len())
-    }
-
-    /// Robot `robot`'s current incarnation, if any.
-    fn ports(&self, robot: usize) -> Result<Option<&RobotPorts>, WorldLinkError> {
-        self.check_robot(robot)?;
-        Ok(self.robots[robot].as_ref())
     }
 }
 
-type PubSubService<T> =
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
-type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
-
-/// Creates (or opens) the publish-subscribe service `name` with `limits`, keeping no history and
-/// overwriting the oldest unread sample when a reader falls behind.
+/// The world creates every service of the run ([`Access::Create`]).
 fn pubsub_service<T: std::fmt::Debug + ZeroCopySend + IceoryxSend>(
     node: &Node<ipc::Service>,
     name: &str,
     limits: ServiceLimits,
 ) -> Result<PubSubService<T>, WorldLinkError> {
-    let service = ServiceName::new(name).map_err(|e| iox(format!("name service {name}"))(&e))?;
-    node.service_builder(&service)
-        .publish_subscribe::<T>()
-        .max_publishers(limits.max_publishers)
-        .max_subscribers(limits.max_subscribers)
-        .subscriber_max_buffer_size(limits.subscriber_buffer)
-        .max_nodes(limits.max_nodes)
-        .history_size(0)
-        .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| iox(format!("create service {name}"))(&e))
+    services::pubsub_service(node, name, limits, Access::Create).map_err(create_failed)
 }
 
-/// Creates (or opens) the event service `name` paired with a publish-subscribe service of `limits`.
+/// The event service paired with the publish-subscribe service `name` of `limits`, created.
 fn event_service(
     node: &Node<ipc::Service>,
     name: &str,
     limits: ServiceLimits,
-) -> Result<EventService, WorldLinkError> {
-    let service = ServiceName::new(name).map_err(|e| iox(format!("name service {name}"))(&e))?;
-    node.service_builder(&service)
-        .event()
-        .max_notifiers(limits.max_publishers)
-        .max_listeners(limits.max_subscribers)
-        .max_nodes(limits.max_nodes)
-        .open_or_create()
-        .map_err(|e| iox(format!("create event service {name}"))(&e))
+) -> WorldResult<EventService> {
+    services::event_service(node, name, limits, Access::Create).map_err(create_failed)
+}
+
+fn create_failed(e: ServiceError) -> WorldLinkError {
+    WorldLinkError::Iceoryx {
+        action: e.action("create"),
+        detail: e.detail,
+    }
 }
 
 /// Robot `robot`'s lobby ports and its hello listener.
@@ -257,7 +234,7 @@ fn create_robot_ports(
     namespace: &RunNamespace,
     robot: usize,
     incarnation: u64,
-) -> Result<RobotPorts, WorldLinkError> {
+) -> WorldResult<RobotPorts> {
     let limits = ServiceLimits::ROBOT;
     let name = |channel| robot_service_name(namespace.run(), robot, incarnation, channel);
     let event = |channel| event_service(node, &name(channel), limits);
@@ -356,11 +333,7 @@ impl WorldLink for IceoryxWorldLink {
         self.lobbies.len()
     }
 
-    fn drain_hellos(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(Hello),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_hellos(&mut self, robot: usize, sink: &mut dyn FnMut(Hello)) -> WorldResult {
         self.check_robot(robot)?;
         while let Some(sample) = self.lobbies[robot]
             .hellos
@@ -377,12 +350,7 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn answer_hello(
-        &mut self,
-        robot: usize,
-        nonce: u64,
-        welcome: &Welcome,
-    ) -> Result<(), WorldLinkError> {
+    fn answer_hello(&mut self, robot: usize, nonce: u64, welcome: &Welcome) -> WorldResult {
         self.check_robot(robot)?;
         self.lobbies[robot]
             .welcome
@@ -391,28 +359,19 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
-        self.check_robot(robot)?;
-        self.robots[robot] = None;
-        let ports = create_robot_ports(
-            &self.node,
-            &self.waitset,
-            &self.namespace,
-            robot,
-            incarnation,
-        )?;
-        self.robots[robot] = Some(ports);
-        Ok(())
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> WorldResult {
+        let (node, waitset, namespace) = (&self.node, &self.waitset, &self.namespace);
+        self.robots.open(robot, || {
+            create_robot_ports(node, waitset, namespace, robot, incarnation)
+        })
     }
 
     fn close_incarnation(&mut self, robot: usize) {
-        if let Some(slot) = self.robots.get_mut(robot) {
-            *slot = None;
-        }
+        self.robots.close(robot);
     }
 
-    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError> {
-        let Some(ports) = self.ports(robot)? else {
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult {
+        let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
         ports
@@ -424,13 +383,9 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn send_control(
-        &mut self,
-        robot: usize,
-        request: &ControlRequest,
-    ) -> Result<(), WorldLinkError> {
+    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> WorldResult {
         let msg = ControlMsg::encode(request)?;
-        let Some(ports) = self.ports(robot)? else {
+        let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
         ports
@@ -441,7 +396,7 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
+    fn wait(&mut self, timeout: Duration) -> WorldResult {
         // Every listener is already attached: the lobbies' and the swap channel's since the run
         // began, each incarnation's since it opened.
         let result = self
@@ -449,7 +404,7 @@ impl WorldLink for IceoryxWorldLink {
             .wait_and_process_once_with_timeout(|_| CallbackProgression::Stop, timeout)
             .map_err(|e| iox("wait for the agents")(&e))?;
         self.run_wakes.consume();
-        for ports in self.robots.iter().flatten() {
+        for ports in self.robots.open_ones() {
             ports.wakes.consume();
         }
         if let Some(signal) = signals::received() {
@@ -465,12 +420,8 @@ impl WorldLink for IceoryxWorldLink {
         }
     }
 
-    fn drain_commands(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(CmdMsg),
-    ) -> Result<(), WorldLinkError> {
-        let Some(ports) = self.ports(robot)? else {
+    fn drain_commands(&mut self, robot: usize, sink: &mut dyn FnMut(CmdMsg)) -> WorldResult {
+        let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
         while let Some(sample) = ports
@@ -483,28 +434,20 @@ impl WorldLink for IceoryxWorldLink {
         Ok(())
     }
 
-    fn drain_statuses(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(AgentStatus),
-    ) -> Result<(), WorldLinkError> {
-        let Some(ports) = self.ports(robot)? else {
+    fn drain_statuses(&mut self, robot: usize, sink: &mut dyn FnMut(AgentStatus)) -> WorldResult {
+        let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
-        while let Some(sample) = ports
-            .status
-            .receive()
-            .map_err(|e| iox(format!("receive robot {robot}'s status"))(&e))?
-        {
-            match sample.payload().decode() {
-                Ok(status) => sink(status),
-                Err(e) => tracing::warn!("robot {robot}: ignoring a malformed status: {e}"),
+        let what = format!("status of robot {robot}");
+        drain_decoded(&ports.status, &what, StatusMsg::decode, sink).map_err(|detail| {
+            WorldLinkError::Iceoryx {
+                action: format!("receive robot {robot}'s status"),
+                detail,
             }
-        }
-        Ok(())
+        })
     }
 
-    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
         let wanted = crate::iceoryx::naming::agent_node_name(robot, pid);
         let mut alive = false;
         Node::<ipc::Service>::list(self.node.config(), |state| {
@@ -543,7 +486,7 @@ impl WorldLink for IceoryxWorldLink {
                 "agents of robots {dead:?} died; cleaned up {} dead node(s)",
                 cleaned.cleanups
             );
-            for ports in self.robots.iter().flatten() {
+            for ports in self.robots.open_ones() {
                 let _ = ports.scan.update_connections();
                 let _ = ports.control.update_connections();
                 let _ = ports.cmd.update_connections();
@@ -555,25 +498,17 @@ impl WorldLink for IceoryxWorldLink {
         Ok(dead)
     }
 
-    fn drain_swap_requests(
-        &mut self,
-        sink: &mut dyn FnMut(SwapRequest),
-    ) -> Result<(), WorldLinkError> {
-        while let Some(sample) = self
-            .swap
-            .requests
-            .receive()
-            .map_err(|e| iox("receive a swap request")(&e))?
-        {
-            match sample.payload().decode() {
-                Ok(request) => sink(request),
-                Err(e) => tracing::warn!("ignoring a malformed swap request: {e}"),
+    fn drain_swap_requests(&mut self, sink: &mut dyn FnMut(SwapRequest)) -> WorldResult {
+        let decode = SwapRequestMsg::decode;
+        drain_decoded(&self.swap.requests, "swap request", decode, sink).map_err(|detail| {
+            WorldLinkError::Iceoryx {
+                action: "receive a swap request".into(),
+                detail,
             }
-        }
-        Ok(())
+        })
     }
 
-    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), WorldLinkError> {
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> WorldResult {
         let msg = SwapReplyMsg::encode(reply)?;
         self.swap
             .replies

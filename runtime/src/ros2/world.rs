@@ -54,7 +54,7 @@ use formation_ros2::{
 
 use super::node::{Delivery, Node, NodeError, RosPublisher, RosSubscription};
 use super::{Ros2Team, TeamTopics};
-use crate::link::{Hello, WorldLink, WorldLinkError};
+use crate::link::{Hello, WorldLink, WorldLinkError, WorldResult};
 use crate::zenoh::{Bell, Endpoint, SignalWatch};
 
 /// Stamps of the current episode's ticks kept per robot, to match Twists to ticks.
@@ -185,7 +185,7 @@ impl RobotPorts {
         sensors: Delivery,
         graph: &Arc<Mutex<Graph>>,
         bell: &Arc<Bell>,
-    ) -> Result<RobotPorts, WorldLinkError> {
+    ) -> WorldResult<RobotPorts> {
         let topics = TeamTopics::robot(robot);
         let namespace =
             Namespace::new(&format!("/robot_{robot}")).map_err(|e| WorldLinkError::Zenoh {
@@ -240,7 +240,7 @@ fn subscribe_cmd_vel(
     robot: usize,
     graph: &Arc<Mutex<Graph>>,
     bell: &Arc<Bell>,
-) -> Result<RosSubscription, WorldLinkError> {
+) -> WorldResult<RosSubscription> {
     let graph = Arc::clone(graph);
     let bell = Arc::clone(bell);
     node.subscription::<Twist>(topic, Qos::ROS_DEFAULT, move |sample| match sample {
@@ -373,7 +373,7 @@ impl Ros2WorldLink {
         team: Ros2Team,
         listen: &Endpoint,
         secret: LaunchSecret,
-    ) -> Result<Ros2WorldLink, WorldLinkError> {
+    ) -> WorldResult<Ros2WorldLink> {
         let session = open_router(listen)?;
         let bell = Arc::new(Bell::default());
         let n = team.n_robots;
@@ -444,7 +444,7 @@ impl Ros2WorldLink {
         stamp
     }
 
-    fn publish_goal(&mut self, msg: &ScanMsg, stamp: i64) -> Result<(), WorldLinkError> {
+    fn publish_goal(&mut self, msg: &ScanMsg, stamp: i64) -> WorldResult {
         if self.goal_published == Some((msg.generation, msg.tick)) {
             return Ok(());
         }
@@ -475,11 +475,7 @@ impl WorldLink for Ros2WorldLink {
         self.team.n_robots
     }
 
-    fn drain_hellos(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(Hello),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_hellos(&mut self, robot: usize, sink: &mut dyn FnMut(Hello)) -> WorldResult {
         let drivers: Vec<Driver> = lock(&self.graph).new_drivers[robot].drain(..).collect();
         for driver in drivers {
             let nonce = crate::auth::fresh_nonce().map_err(|e| WorldLinkError::Zenoh {
@@ -498,12 +494,7 @@ impl WorldLink for Ros2WorldLink {
         Ok(())
     }
 
-    fn answer_hello(
-        &mut self,
-        robot: usize,
-        nonce: u64,
-        welcome: &Welcome,
-    ) -> Result<(), WorldLinkError> {
+    fn answer_hello(&mut self, robot: usize, nonce: u64, welcome: &Welcome) -> WorldResult {
         let driver = self.pending[robot].remove(&nonce);
         if let (Welcome::Refused(reason), Some(driver)) = (welcome, driver) {
             eprintln!(
@@ -514,7 +505,7 @@ impl WorldLink for Ros2WorldLink {
         Ok(())
     }
 
-    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> WorldResult {
         let Some(driver) = self.pending[robot].get(&incarnation).cloned() else {
             return Ok(());
         };
@@ -533,17 +524,12 @@ impl WorldLink for Ros2WorldLink {
         self.statuses[robot].clear();
     }
 
-    fn publish_odometry(
-        &mut self,
-        robot: usize,
-        pose: &Pose,
-        wheels: WheelCmd,
-    ) -> Result<(), WorldLinkError> {
+    fn publish_odometry(&mut self, robot: usize, pose: &Pose, wheels: WheelCmd) -> WorldResult {
         self.robots[robot].odometry = Some((*pose, wheels));
         Ok(())
     }
 
-    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError> {
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult {
         let stamp = self.stamp(msg);
         self.publish_goal(msg, stamp)?;
         let ports = &mut self.robots[robot];
@@ -603,11 +589,7 @@ impl WorldLink for Ros2WorldLink {
         Ok(())
     }
 
-    fn send_control(
-        &mut self,
-        robot: usize,
-        request: &ControlRequest,
-    ) -> Result<(), WorldLinkError> {
+    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> WorldResult {
         if self.admitted[robot].is_none() {
             return Ok(());
         }
@@ -632,15 +614,11 @@ impl WorldLink for Ros2WorldLink {
         Ok(())
     }
 
-    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
+    fn wait(&mut self, timeout: Duration) -> WorldResult {
         self.bell.world_wait(timeout)
     }
 
-    fn drain_commands(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(CmdMsg),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_commands(&mut self, robot: usize, sink: &mut dyn FnMut(CmdMsg)) -> WorldResult {
         let twists: Vec<_> = lock(&self.graph).twists[robot].drain(..).collect();
         let Some(driver) = &self.admitted[robot] else {
             return Ok(());
@@ -681,18 +659,14 @@ impl WorldLink for Ros2WorldLink {
         Ok(())
     }
 
-    fn drain_statuses(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(AgentStatus),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_statuses(&mut self, robot: usize, sink: &mut dyn FnMut(AgentStatus)) -> WorldResult {
         for status in self.statuses[robot].drain(..) {
             sink(status);
         }
         Ok(())
     }
 
-    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
         Ok(lock(&self.graph).drivers[robot]
             .values()
             .any(|d| d.pid == pid))
@@ -702,14 +676,11 @@ impl WorldLink for Ros2WorldLink {
         Ok(std::mem::take(&mut lock(&self.graph).gone))
     }
 
-    fn drain_swap_requests(
-        &mut self,
-        _sink: &mut dyn FnMut(SwapRequest),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_swap_requests(&mut self, _sink: &mut dyn FnMut(SwapRequest)) -> WorldResult {
         Ok(())
     }
 
-    fn publish_swap_reply(&mut self, _reply: &SwapReply) -> Result<(), WorldLinkError> {
+    fn publish_swap_reply(&mut self, _reply: &SwapReply) -> WorldResult {
         Ok(())
     }
 }

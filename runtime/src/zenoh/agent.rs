@@ -174,6 +174,27 @@ impl ZenohAgentLink {
         secret: &LaunchSecret,
         timeout: Duration,
     ) -> Result<Self, AgentLinkError> {
+        Self::connect_as(
+            endpoint,
+            login,
+            (run, robot),
+            secret,
+            timeout,
+            std::process::id(),
+        )
+    }
+
+    /// [`ZenohAgentLink::connect`] to robot `robot` of run `run` (`(run, robot)`) for an agent
+    /// known as process `pid` (what it proves, its liveliness token, its model folder): this
+    /// process's id, except in tests that run several agents of one robot in one process.
+    pub fn connect_as(
+        endpoint: &Endpoint,
+        login: Option<&Login>,
+        (run, robot): (&RunId, usize),
+        secret: &LaunchSecret,
+        timeout: Duration,
+        pid: u32,
+    ) -> Result<Self, AgentLinkError> {
         let started = Instant::now();
         let deadline = started + timeout;
         let session = open_session(endpoint, login, robot, timeout)?;
@@ -194,7 +215,6 @@ impl ZenohAgentLink {
             deadline,
         };
         rendezvous.wait_for_world()?;
-        let pid = std::process::id();
         let incarnation = rendezvous.greet_until_welcomed(secret, pid)?;
         drop(welcomes);
         let name = |channel| robot_service_name(run, robot, incarnation, channel);

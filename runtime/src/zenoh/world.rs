@@ -25,7 +25,7 @@ use formation_proto::wire::{
 
 use super::model::split_model;
 use super::{Bell, Endpoint, Queue, SignalWatch, WorldAccess, keys};
-use crate::link::{Hello, WorldLink, WorldLinkError, check_robot_index};
+use crate::link::{Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index};
 
 fn zenoh_error(action: impl Into<String>) -> impl FnOnce(String) -> WorldLinkError {
     let action = action.into();
@@ -71,7 +71,7 @@ pub struct ZenohWorldLink {
     run: RunId,
     bell: Arc<Bell>,
     lobbies: Vec<Lobby>,
-    robots: Vec<Option<Incarnation>>,
+    robots: Incarnations<Incarnation>,
     swap_requests: Arc<Queue<SwapRequest>>,
     /// Swap requests refused on arrival (damaged model bytes), to answer.
     swap_refusals: Arc<Queue<SwapReply>>,
@@ -147,7 +147,7 @@ impl Lobby {
         run: &RunId,
         robot: usize,
         bell: &Arc<Bell>,
-    ) -> Result<Lobby, WorldLinkError> {
+    ) -> WorldResult<Lobby> {
         let hellos = Arc::new(Queue::new(HELLO_QUEUE));
         let subscriber = queue_subscriber(
             session,
@@ -303,7 +303,7 @@ impl ZenohWorldLink {
         n_robots: usize,
         listen: &Endpoint,
         access: Option<&WorldAccess>,
-    ) -> Result<Self, WorldLinkError> {
+    ) -> WorldResult<Self> {
         let config = super::world_config(listen, access).map_err(zenoh_error(format!(
             "configure the world's router on {listen}"
         )))?;
@@ -343,7 +343,7 @@ impl ZenohWorldLink {
             run: run.clone(),
             bell,
             lobbies,
-            robots: (0..n_robots).map(|_| None).collect(),
+            robots: Incarnations::new(n_robots),
             swap_requests,
             swap_refusals,
             swap_models,
@@ -356,24 +356,63 @@ impl ZenohWorldLink {
         })
     }
 
-    fn check_robot(&self, robot: usize) -> Result<(), WorldLinkError> {
+    fn check_robot(&self, robot: usize) -> WorldResult {
         check_robot_index(robot, self.lobbies.len())
-    }
-
-    fn incarnation(&self, robot: usize) -> Result<Option<&Incarnation>, WorldLinkError> {
-        self.check_robot(robot)?;
-        Ok(self.robots[robot].as_ref())
     }
 
     fn put(
         publisher: &Publisher<'static>,
         bytes: &[u8],
         what: impl FnOnce() -> String,
-    ) -> Result<(), WorldLinkError> {
+    ) -> WorldResult {
         publisher
             .put(bytes.to_vec())
             .wait()
             .map_err(|e| zenoh_error(what())(e.to_string()))
+    }
+}
+
+impl Incarnation {
+    /// The world's ends of incarnation `incarnation` of robot `robot` (`(robot, incarnation)`)
+    /// of run `run` on `session`: subscribers of its commands and statuses that queue them and
+    /// ring `bell`, publishers of its scans and control requests.
+    fn open(
+        session: &::zenoh::Session,
+        run: &RunId,
+        bell: &Arc<Bell>,
+        (robot, incarnation): (usize, u64),
+    ) -> WorldResult<Incarnation> {
+        let name = |channel| robot_service_name(run, robot, incarnation, channel);
+        let commands = Arc::new(Queue::new(AGENT_QUEUE));
+        let statuses = Arc::new(Queue::new(AGENT_QUEUE));
+        let cmd = queue_subscriber(
+            session,
+            name(RobotChannel::Cmd),
+            bell,
+            &commands,
+            |sample| {
+                message_from_bytes::<CmdMsg>("command", &bytes(sample)).map_err(|e| e.to_string())
+            },
+        )?;
+        let status = queue_subscriber(
+            session,
+            name(RobotChannel::Status),
+            bell,
+            &statuses,
+            |sample| {
+                let msg: StatusMsg =
+                    message_from_bytes("status", &bytes(sample)).map_err(|e| e.to_string())?;
+                msg.decode().map_err(|e| e.to_string())
+            },
+        )?;
+        Ok(Incarnation {
+            scan: publisher(session, name(RobotChannel::Scan), true)?,
+            control: publisher(session, name(RobotChannel::Control), false)?,
+            commands,
+            statuses,
+            _cmd: cmd,
+            _status: status,
+        })
     }
 }
 
@@ -382,11 +421,7 @@ impl WorldLink for ZenohWorldLink {
         self.lobbies.len()
     }
 
-    fn drain_hellos(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(Hello),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_hellos(&mut self, robot: usize, sink: &mut dyn FnMut(Hello)) -> WorldResult {
         self.check_robot(robot)?;
         self.lobbies[robot]
             .hellos
@@ -396,12 +431,7 @@ impl WorldLink for ZenohWorldLink {
         Ok(())
     }
 
-    fn answer_hello(
-        &mut self,
-        robot: usize,
-        nonce: u64,
-        welcome: &Welcome,
-    ) -> Result<(), WorldLinkError> {
+    fn answer_hello(&mut self, robot: usize, nonce: u64, welcome: &Welcome) -> WorldResult {
         self.check_robot(robot)?;
         let msg = WelcomeMsg::encode(nonce, welcome);
         Self::put(&self.lobbies[robot].welcome, message_bytes(&msg), || {
@@ -409,51 +439,19 @@ impl WorldLink for ZenohWorldLink {
         })
     }
 
-    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> Result<(), WorldLinkError> {
-        self.check_robot(robot)?;
-        self.robots[robot] = None;
-        let name = |channel| robot_service_name(&self.run, robot, incarnation, channel);
-        let commands = Arc::new(Queue::new(AGENT_QUEUE));
-        let statuses = Arc::new(Queue::new(AGENT_QUEUE));
-        let cmd = queue_subscriber(
-            &self.session,
-            name(RobotChannel::Cmd),
-            &self.bell,
-            &commands,
-            |sample| {
-                message_from_bytes::<CmdMsg>("command", &bytes(sample)).map_err(|e| e.to_string())
-            },
-        )?;
-        let status = queue_subscriber(
-            &self.session,
-            name(RobotChannel::Status),
-            &self.bell,
-            &statuses,
-            |sample| {
-                let msg: StatusMsg =
-                    message_from_bytes("status", &bytes(sample)).map_err(|e| e.to_string())?;
-                msg.decode().map_err(|e| e.to_string())
-            },
-        )?;
-        self.robots[robot] = Some(Incarnation {
-            scan: publisher(&self.session, name(RobotChannel::Scan), true)?,
-            control: publisher(&self.session, name(RobotChannel::Control), false)?,
-            commands,
-            statuses,
-            _cmd: cmd,
-            _status: status,
-        });
-        Ok(())
+    fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> WorldResult {
+        let (session, run, bell) = (&self.session, &self.run, &self.bell);
+        self.robots.open(robot, || {
+            Incarnation::open(session, run, bell, (robot, incarnation))
+        })
     }
 
     fn close_incarnation(&mut self, robot: usize) {
-        if let Some(slot) = self.robots.get_mut(robot) {
-            *slot = None;
-        }
+        self.robots.close(robot);
     }
 
-    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> Result<(), WorldLinkError> {
-        let Some(ports) = self.incarnation(robot)? else {
+    fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult {
+        let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
         Self::put(&ports.scan, message_bytes(msg), || {
@@ -461,11 +459,7 @@ impl WorldLink for ZenohWorldLink {
         })
     }
 
-    fn send_control(
-        &mut self,
-        robot: usize,
-        request: &ControlRequest,
-    ) -> Result<(), WorldLinkError> {
+    fn send_control(&mut self, robot: usize, request: &ControlRequest) -> WorldResult {
         let msg = ControlMsg::encode(request)?;
         let model = match request {
             ControlRequest::SwapModel { request_id, .. } => self
@@ -475,7 +469,7 @@ impl WorldLink for ZenohWorldLink {
                 .remove(request_id),
             _ => None,
         };
-        let Some(ports) = self.incarnation(robot)? else {
+        let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
         let mut payload = message_bytes(&msg).to_vec();
@@ -489,33 +483,25 @@ impl WorldLink for ZenohWorldLink {
         })
     }
 
-    fn wait(&mut self, timeout: Duration) -> Result<(), WorldLinkError> {
+    fn wait(&mut self, timeout: Duration) -> WorldResult {
         self.bell.world_wait(timeout)
     }
 
-    fn drain_commands(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(CmdMsg),
-    ) -> Result<(), WorldLinkError> {
-        if let Some(ports) = self.incarnation(robot)? {
+    fn drain_commands(&mut self, robot: usize, sink: &mut dyn FnMut(CmdMsg)) -> WorldResult {
+        if let Some(ports) = self.robots.get(robot)? {
             ports.commands.drain().into_iter().for_each(sink);
         }
         Ok(())
     }
 
-    fn drain_statuses(
-        &mut self,
-        robot: usize,
-        sink: &mut dyn FnMut(AgentStatus),
-    ) -> Result<(), WorldLinkError> {
-        if let Some(ports) = self.incarnation(robot)? {
+    fn drain_statuses(&mut self, robot: usize, sink: &mut dyn FnMut(AgentStatus)) -> WorldResult {
+        if let Some(ports) = self.robots.get(robot)? {
             ports.statuses.drain().into_iter().for_each(sink);
         }
         Ok(())
     }
 
-    fn agent_alive(&mut self, robot: usize, pid: u32) -> Result<bool, WorldLinkError> {
+    fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
         // An agent is alive until its token goes: one admitted a moment ago may not have
         // declared it yet.
         let liveness = self.liveness.lock().unwrap_or_else(|e| e.into_inner());
@@ -535,10 +521,7 @@ impl WorldLink for ZenohWorldLink {
         Ok(dead)
     }
 
-    fn drain_swap_requests(
-        &mut self,
-        sink: &mut dyn FnMut(SwapRequest),
-    ) -> Result<(), WorldLinkError> {
+    fn drain_swap_requests(&mut self, sink: &mut dyn FnMut(SwapRequest)) -> WorldResult {
         for refusal in self.swap_refusals.drain() {
             self.publish_swap_reply(&refusal)?;
         }
@@ -546,7 +529,7 @@ impl WorldLink for ZenohWorldLink {
         Ok(())
     }
 
-    fn publish_swap_reply(&mut self, reply: &SwapReply) -> Result<(), WorldLinkError> {
+    fn publish_swap_reply(&mut self, reply: &SwapReply) -> WorldResult {
         let msg = SwapReplyMsg::encode(reply)?;
         Self::put(&self.swap_replies, message_bytes(&msg), || {
             "send a swap reply".to_string()
