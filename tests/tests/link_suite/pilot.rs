@@ -163,7 +163,7 @@ impl Pilot for SuitePilot {
         &self.model.id
     }
 
-    fn perceive(&mut self, ranges: &[f32]) -> Result<(), BoxError> {
+    fn perceive(&mut self, ranges: &[f32], _goal: &Goal) -> Result<(), BoxError> {
         if ranges.is_empty() {
             Err("an empty scan".into())
         } else {
