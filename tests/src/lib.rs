@@ -8,13 +8,14 @@
 //! test process, in the same profile as the test itself (a no-op when they are up to date), and
 //! takes them from `target/<profile>/`, the directory above the test executable. Set
 //! `FORMATION_TESTS_NO_BUILD=1` to skip the build (e.g. when the binaries were built beforehand).
-//! The build is `cargo runtime-bins`, an alias in `.cargo/config.toml`.
-//! That build is not a no-op on a cold target directory even after `cargo test` compiled
-//! everything: a plain build of formation-cli resolves dependency features without the
-//! workspace's dev-dependencies (`bitflags`, `zerocopy`, `regex-automata` differ), so much of the
-//! dependency graph is compiled a second time. `scripts/test-all` therefore builds them first,
-//! and no [`Watchdog`] counts the time a test waits for this one-time setup (or for the test
-//! model): a slow build is not a hung test.
+//! The build is `cargo runtime-bins`, an alias in `.cargo/config.toml`. It builds what `cargo
+//! test --workspace` builds, test targets included, because only with the dev-dependencies in
+//! the build are features resolved as the tests resolve them (a plain build of formation-cli gave
+//! `bitflags`, `zerocopy` and `regex-automata` other features and compiled much of the dependency
+//! graph a second time). After `cargo test --workspace` it is a no-op; from a single test on a
+//! stale target it compiles the other test targets too. `scripts/test-all` runs it first, and no
+//! [`Watchdog`] counts the time a test waits for this one-time setup (or for the test model): a
+//! slow build is not a hung test.
 //!
 //! [`netns`] makes network namespaces for the Zenoh tests across a network; the `delay-relay`
 //! binary of this package delays TCP between them.
