@@ -575,16 +575,17 @@ fn an_agent_built_without_zenoh_says_how_to_build_it() {
         .unwrap_or("debug")
         .to_string();
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    // The agent as the demo builds it (formation-cli's default features: no Zenoh), then as
-    // `cargo runtime-bins` builds it (with Zenoh), which the other tests run.
-    let build = |with_zenoh: bool| -> std::path::PathBuf {
+    // The agent as the demo builds it (formation-cli's default features: no Zenoh), then the
+    // tests' build again (`cargo runtime-bins`, with Zenoh), which the other tests run.
+    let build = |demo: bool| -> Option<std::path::PathBuf> {
         let mut command = Command::new(&cargo);
-        command
-            .current_dir(formation_tests::repo_root())
-            .args(["build", "-p", "formation-cli", "--bin", "formation-agent"])
-            .args(["--message-format", "json-render-diagnostics"]);
-        if with_zenoh {
-            command.args(["--features", "zenoh"]);
+        command.current_dir(formation_tests::repo_root());
+        if demo {
+            command
+                .args(["build", "-p", "formation-cli", "--bin", "formation-agent"])
+                .args(["--message-format", "json-render-diagnostics"]);
+        } else {
+            command.arg("runtime-bins");
         }
         match profile.as_str() {
             "debug" => {}
@@ -606,15 +607,14 @@ fn an_agent_built_without_zenoh_says_how_to_build_it() {
             .filter_map(|line| serde_json::from_str::<serde_json::Value>(line).ok())
             .filter_map(|message| message["executable"].as_str().map(Into::into))
             .next_back()
-            .expect("cargo names the executable it built")
     };
-    let without = build(false);
+    let without = build(true).expect("cargo names the executable it built");
     // Cargo's copy in target/<profile>/ is now the build without Zenoh; keep a copy of that
     // one and put the tests' one back before anything else runs an agent.
     let kept = TempDir::new("znobuild");
     let agent = kept.path().join("formation-agent");
     std::fs::copy(&without, &agent).expect("copying the agent built without zenoh");
-    build(true);
+    build(false);
     let mut command = Command::new(&agent);
     command
         .args(["--transport", "zenoh", "--connect", "tcp/127.0.0.1:9"])
