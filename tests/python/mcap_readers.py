@@ -12,7 +12,7 @@ fix.
     mcap_readers.py decode FILE RUN_LOG ROBOTS      every ROS 2 message, /tf against the run log
     mcap_readers.py rosbags FILE ROBOTS             LaserScan, Odometry and Twist through rosbags
     mcap_readers.py rerun FILE RRD ROBOTS           rerun mcap convert, then the .rrd's entities
-    mcap_readers.py stream < FILE                   the streaming reader on a pipe (a crashed file)
+    mcap_readers.py stream FILE                     the streaming reader on a pipe (a crashed file)
     mcap_readers.py compare FILE_A FILE_B           the decoded ROS 2 messages of two recordings
     mcap_readers.py metadata FILE                   the run's metadata record (formation.run)
 """
@@ -156,21 +156,35 @@ def read_rerun(path, rrd, robots):
                       "tf_frames": len(child_frames)}))
 
 
-def stream():
-    """The streaming reader over standard input (a pipe: nothing can be sought), up to the
-    first record it cannot read, as after a crash."""
-    from mcap.stream_reader import StreamReader
-    from mcap.records import Message
+def stream(path):
+    """The streaming reader over a pipe (nothing can be sought) that the file is copied into,
+    up to the first record it cannot read, as after a crash."""
+    import threading
 
+    from mcap.records import Message
+    from mcap.stream_reader import StreamReader
+
+    read_end, write_end = os.pipe()
+
+    def feed():
+        with open(path, "rb") as src, os.fdopen(write_end, "wb") as pipe:
+            try:
+                shutil.copyfileobj(src, pipe)
+            except BrokenPipeError:
+                pass
+
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
     messages, latest, error = 0, None, None
-    reader = StreamReader(sys.stdin.buffer, skip_magic=False)
-    try:
-        for record in reader.records:
-            if isinstance(record, Message):
-                messages += 1
-                latest = record.log_time if latest is None else max(latest, record.log_time)
-    except Exception as e:  # a file cut short ends in a record that cannot be read
-        error = f"{type(e).__name__}: {e}"
+    with os.fdopen(read_end, "rb") as pipe:
+        need(not pipe.seekable(), "the stream must not be seekable")
+        try:
+            for record in StreamReader(pipe, skip_magic=False).records:
+                if isinstance(record, Message):
+                    messages += 1
+                    latest = record.log_time if latest is None else max(latest, record.log_time)
+        except Exception as e:  # a file cut short ends in a record that cannot be read
+            error = f"{type(e).__name__}: {e}"
     print(json.dumps({"messages": messages, "latest_s": None if latest is None else latest / 1e9,
                       "stopped_by": error}))
 
@@ -207,7 +221,7 @@ def main():
     elif command == "rerun":
         read_rerun(args[0], args[1], int(args[2]))
     elif command == "stream":
-        stream()
+        stream(args[0])
     elif command == "compare":
         compare(args[0], args[1])
     elif command == "metadata":

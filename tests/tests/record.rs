@@ -243,9 +243,7 @@ fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_c
     let finished = launch.finish(LIMIT);
     assert!(!finished.output.status.success(), "{}", finished.describe());
     leaks.assert_clean();
-    let mut command = readers_command(&[os("stream")]);
-    command.stdin(Stdio::from(std::fs::File::open(&file).unwrap()));
-    let streamed = check_readers(run(command, LIMIT));
+    let streamed = readers(&[os("stream"), file.as_os_str()]);
     let latest = streamed["latest_s"].as_f64().unwrap_or(0.0);
     assert!(
         latest >= 9.0,
