@@ -102,6 +102,18 @@ pub struct EvalArgs {
     /// Worker threads for in-process evaluation (default: available cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Record the runs to MCAP in this folder, which must exist: `run-NNNN.mcap` per run, each
+    /// robot's scan, odometry, command and TF, the goal and the formation's edges, for Foxglove,
+    /// Rerun and ROS 2 tools, plus what each agent received and sent, for replay.
+    #[arg(long, value_name = "DIR")]
+    pub record: Option<PathBuf>,
+    /// With --record: record at most this many runs, the first ones (default: all when there
+    /// are at most 5 runs, else the first 5).
+    #[arg(long, requires = "record", value_name = "N")]
+    pub record_runs: Option<usize>,
+    /// Record run 0 into this file instead (`formation demo --record`).
+    #[arg(skip)]
+    pub record_file: Option<PathBuf>,
     /// Evaluate over these team sizes (e.g. `3,5,8,13,16,32`): the scenario resized to each, the
     /// expert always and the policy when `--model` is given; prints the scaling table and writes
     /// it with `--json`.
@@ -289,6 +301,10 @@ pub struct DemoArgs {
     /// Run in-process instead of one OS process per robot.
     #[arg(long)]
     pub in_process: bool,
+    /// Record case 1 to this MCAP file, whose folder must exist (for Foxglove, Rerun and ROS 2
+    /// tools, and replay).
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
 }
 
 /// Parses a `--runs` count: a whole number from 1 to the scenario limit
@@ -469,6 +485,12 @@ pub struct RunArgs {
     /// ROS 2: the ROS domain id of the team's topics (default 0).
     #[arg(long, value_name = "ID", value_parser = clap::value_parser!(u32).range(0..=232))]
     pub ros_domain_id: Option<u32>,
+    /// Record the run to this MCAP file, whose folder must exist (with several --runs, run N to
+    /// `<stem>-run-NNNN.mcap` beside it): each robot's scan, odometry, command and TF, the goal
+    /// and the formation's edges, for Foxglove, Rerun and ROS 2 tools, plus what each agent
+    /// received and sent, for replay. The world process writes it.
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
 }
 
 /// `formation profile`: a run whose per-stage latency histograms are written as JSON.

@@ -1,6 +1,7 @@
 //! `formation demo`: the README's main job. Runs the paper's three cases and the Table I
 //! evaluation with the shipped model, every robot in its own OS process over iceoryx2 (or
-//! in-process with `--in-process`), then writes the HTML report and prints its path.
+//! in-process with `--in-process`), then writes the HTML report and prints its path. With
+//! `--record FILE.mcap` case 1 is recorded.
 
 use std::path::Path;
 
@@ -12,10 +13,16 @@ use crate::{eval, paths};
 /// The paper's cases and where their scenarios live, relative to the repository root.
 const CASES: [&str; 3] = ["case1", "case2", "case3"];
 
+/// The case `--record` records.
+const RECORDED_CASE: &str = "case1";
+
 /// `formation demo`.
 pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
     let root = paths::repo_root();
     let model = paths::resolve_model(args.model.as_deref())?;
+    if let Some(file) = &args.record {
+        formation_record::RecordTarget::File(file.clone()).check()?;
+    }
     formation_proto::files::create_private_dir_all(&args.out)
         .map_err(|e| paths::WriteError::creating_dir(&args.out, e))?;
     let mode = if args.in_process {
@@ -25,12 +32,13 @@ pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
     };
     println!("formation demo: model {} ({mode})", model.display());
     for case in CASES {
+        let record = args.record.as_deref().filter(|_| case == RECORDED_CASE);
         let (out, _) = run_eval(
             args,
             &root.join(format!("scenarios/{case}.toml")),
             &model,
-            1,
-            case,
+            (1, case),
+            record,
         )?;
         let s = &out.summary;
         println!(
@@ -49,8 +57,8 @@ pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
         args,
         &root.join("scenarios/table1.toml"),
         &model,
-        args.runs,
-        "table1",
+        (args.runs, "table1"),
+        None,
     )?;
     print!("{}", crate::table::table_text(&table));
     copy_training_curve(&model, &args.out)?;
@@ -65,8 +73,8 @@ fn run_eval(
     args: &DemoArgs,
     scenario: &Path,
     model: &Path,
-    runs: usize,
-    name: &str,
+    (runs, name): (usize, &str),
+    record: Option<&Path>,
 ) -> anyhow::Result<(eval::EvalOutput, Vec<eval::RunResult>)> {
     let dir = args.out.join(name);
     let eval_args = EvalArgs {
@@ -83,6 +91,9 @@ fn run_eval(
         listen: None,
         threads: None,
         robots: None,
+        record: None,
+        record_runs: None,
+        record_file: record.map(Path::to_path_buf),
     };
     let (out, results) =
         eval::evaluate(&eval_args).with_context(|| format!("evaluating {name}"))?;

@@ -173,19 +173,20 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
     let keep_n = args
         .save_trajectories
         .unwrap_or(if runs <= 5 { runs } else { 0 });
+    let team = eval_team(args, &scenario)?;
     let plan = EvalRuns {
         scenario: &scenario,
         seed,
         runs,
         keep_n,
+        record: record_settings(args, &scenario, seed, runs, &team)?,
     };
-    let team = eval_team(args, &scenario)?;
     let bar = progress_bar(runs, "eval");
     let started = Instant::now();
     let results: Vec<RunResult> = if args.processes {
         results_over_processes(args, &plan, &team.models, &network, &bar)?
     } else {
-        results_in_process(args, &plan, &team.models, &bar)?
+        results_in_process(args, &plan, &team, &bar)?
     };
     bar.finish_and_clear();
     let elapsed = started.elapsed().as_secs_f64();
@@ -219,6 +220,8 @@ struct EvalRuns<'a> {
     runs: usize,
     /// The first `keep_n` runs keep their trajectories.
     keep_n: usize,
+    /// What to record (`--record`), checked.
+    record: Option<formation_record::RecordSettings>,
 }
 
 impl EvalRuns<'_> {
@@ -226,6 +229,37 @@ impl EvalRuns<'_> {
     fn keep(&self, i: usize) -> bool {
         i < self.keep_n
     }
+}
+
+/// What `--record DIR` (at most `--record-runs` runs) or the demo's recording of run 0 asks
+/// for, checked before any run.
+fn record_settings(
+    args: &EvalArgs,
+    scenario: &Scenario,
+    seed: u64,
+    runs: usize,
+    team: &EvalTeam,
+) -> anyhow::Result<Option<formation_record::RecordSettings>> {
+    use formation_record::RecordTarget;
+    let target = match (&args.record, &args.record_file) {
+        (Some(dir), _) => RecordTarget::Folder {
+            dir: dir.clone(),
+            max_runs: args.record_runs.unwrap_or(if runs <= 5 { runs } else { 5 }),
+        },
+        (None, Some(file)) => RecordTarget::File(file.clone()),
+        (None, None) => return Ok(None),
+    };
+    let clock = if args.processes {
+        crate::launch::ClockMode::Lockstep.as_str()
+    } else {
+        "in-process"
+    };
+    let controller = match args.controller {
+        ControllerKind::Expert => "expert",
+        ControllerKind::Policy => "policy",
+    };
+    let launch = crate::record::launch_info(scenario, seed, clock, controller, &team.models);
+    crate::record::checked_settings(target, launch).map(Some)
 }
 
 /// The team an evaluation drives: no models for the expert, else each robot's model.
@@ -277,13 +311,14 @@ fn results_over_processes(
     bar: &indicatif::ProgressBar,
 ) -> anyhow::Result<Vec<RunResult>> {
     let default = models.first().cloned().context("no robots")?;
-    let evaluated = crate::launch::eval_over_processes(
+    let evaluated = crate::launch::eval_over_processes_recorded(
         plan.scenario,
         plan.seed,
         plan.runs,
         &default,
         crate::launch::ClockMode::Lockstep,
         network,
+        plan.record.clone(),
         &mut |n| bar.set_position(n as u64),
     )?;
     if let Some(dir) = &args.out {
@@ -311,21 +346,28 @@ fn results_over_processes(
         .collect())
 }
 
-/// Plays the runs in this process (on `--threads` threads) with the expert or the models.
+/// Plays the runs in this process (on `--threads` threads) with the expert or the models, then
+/// records the runs `--record` asks for.
 fn results_in_process(
     args: &EvalArgs,
     plan: &EvalRuns<'_>,
-    models: &[PathBuf],
+    team: &EvalTeam,
     bar: &indicatif::ProgressBar,
 ) -> anyhow::Result<Vec<RunResult>> {
     let driver = match args.controller {
         ControllerKind::Expert => Driver::Expert(ExpertGains::default()),
         ControllerKind::Policy => Driver::Policy {
-            models: models.to_vec(),
+            models: team.models.clone(),
         },
     };
-    let keep = |i: usize| plan.keep(i);
-    Ok(with_threads(args.threads, || {
+    let recorded = |i: usize| {
+        plan.record
+            .as_ref()
+            .is_some_and(|r| r.target.path_for(i, i, plan.runs).is_some())
+    };
+    // A recorded run keeps its trajectory until the recording is compared with it.
+    let keep = |i: usize| plan.keep(i) || recorded(i);
+    let mut results: Vec<RunResult> = with_threads(args.threads, || {
         formation_learning::evaluate_runs(
             plan.scenario,
             plan.seed,
@@ -343,15 +385,38 @@ fn results_in_process(
         trajectory: r.trajectory,
         clock: "in-process",
     })
-    .collect())
+    .collect();
+    if let Some(settings) = &plan.record {
+        bar.finish_and_clear();
+        crate::record::record_in_process(
+            plan.scenario,
+            plan.seed,
+            plan.runs,
+            settings,
+            &team.model_ids,
+            &|| Ok(driver.controller(plan.scenario)?),
+            &|i| results.get(i).and_then(|r| r.trajectory.clone()),
+        )?;
+    }
+    for r in &mut results {
+        if !plan.keep(r.index) {
+            r.trajectory = None;
+        }
+    }
+    Ok(results)
 }
 
 /// `formation eval --robots ...`: the scaling table over team sizes.
 pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
-    if args.processes || args.out.is_some() || args.save_trajectories.is_some() {
+    if args.processes
+        || args.out.is_some()
+        || args.save_trajectories.is_some()
+        || args.record.is_some()
+    {
         anyhow::bail!(
             "--robots evaluates in-process and writes a table (print and --json); drop \
-             --processes, --out and --save-trajectories, or evaluate one team size at a time"
+             --processes, --out, --save-trajectories and --record, or evaluate one team size at a \
+             time"
         );
     }
     let base = Scenario::from_path(&args.scenario)?;

@@ -28,6 +28,7 @@ pub mod launch;
 pub mod learn;
 pub mod paths;
 pub mod pilot;
+pub mod record;
 pub mod report;
 pub mod table;
 pub mod team_models;

@@ -42,6 +42,13 @@ Float64 = T["std_msgs/msg/Float64"]
 Transform = T["geometry_msgs/msg/Transform"]
 TransformStamped = T["geometry_msgs/msg/TransformStamped"]
 TFMessage = T["tf2_msgs/msg/TFMessage"]
+Duration = T["builtin_interfaces/msg/Duration"]
+ColorRGBA = T["std_msgs/msg/ColorRGBA"]
+CompressedImage = T["sensor_msgs/msg/CompressedImage"]
+MeshFile = T["visualization_msgs/msg/MeshFile"]
+UVCoordinate = T["visualization_msgs/msg/UVCoordinate"]
+Marker = T["visualization_msgs/msg/Marker"]
+MarkerArray = T["visualization_msgs/msg/MarkerArray"]
 
 
 def f64s(values):
@@ -127,6 +134,56 @@ TF = TFMessage(
 )
 TF_EMPTY = TFMessage(transforms=[])
 
+
+def marker(ns, id_, type_, action, points, colors, text, frame_locked, uv, texture_data):
+    return Marker(
+        header=Header(stamp=Time(sec=7, nanosec=250000000), frame_id="world"),
+        ns=ns,
+        id=id_,
+        type=type_,
+        action=action,
+        pose=Pose(Point(0.5, -1.25, 0.0), Quaternion(0.0, 0.0, math.sin(0.2), math.cos(0.2))),
+        scale=Vector3(0.03, 0.0, 0.0),
+        color=ColorRGBA(r=0.25, g=0.5, b=0.75, a=1.0),
+        lifetime=Duration(sec=1, nanosec=5),
+        frame_locked=frame_locked,
+        points=points,
+        colors=colors,
+        texture_resource="",
+        texture=CompressedImage(
+            header=Header(stamp=Time(sec=0, nanosec=0), frame_id=""), format="png", data=texture_data
+        ),
+        uv_coordinates=uv,
+        text=text,
+        mesh_resource="",
+        mesh_file=MeshFile(filename="", data=np.array([], dtype=np.uint8)),
+        mesh_use_embedded_materials=False,
+    )
+
+
+# A line list of two edges with a colour per point, then a text marker: bools, strings ending
+# off a 4-byte boundary ("edges" 6 bytes, "e=+1.5%" 8), a uint8 sequence and float32 pairs, so
+# padding is needed after several of them.
+MARKERS = MarkerArray(
+    markers=[
+        marker(
+            "edges",
+            0,
+            5,
+            0,
+            [Point(0.0, 0.0, 0.0), Point(1.5, 0.0, 0.0), Point(1.5, 0.0, 0.0), Point(0.75, 1.3, 0.0)],
+            [ColorRGBA(r=float(i) / 4, g=1.0 - float(i) / 4, b=0.0, a=1.0) for i in range(4)],
+            "",
+            True,
+            [],
+            np.array([1, 2, 3], dtype=np.uint8),
+        ),
+        marker("edge_errors", 3, 9, 0, [], [], "e=+1.5%", False, [UVCoordinate(u=0.5, v=0.25)],
+               np.array([], dtype=np.uint8)),
+    ]
+)
+MARKERS_EMPTY = MarkerArray(markers=[])
+
 # rmw_zenoh_cpp AttachmentData: (int64 sequence_number, int64 source_timestamp,
 # std::array<uint8_t, 16> source_gid); a std::array is serialized as a sequence.
 ATTACHMENT_SEQUENCE = 7
@@ -175,6 +232,8 @@ emit("ODOM_CDR", cdr(ODOM, "nav_msgs/msg/Odometry"), "rosbags serialize_cdr of O
 emit("HEADING_CDR", cdr(HEADING, "std_msgs/msg/Float64"), "rosbags serialize_cdr of HEADING")
 emit("TF_CDR", cdr(TF, "tf2_msgs/msg/TFMessage"), "rosbags serialize_cdr of TF")
 emit("TF_EMPTY_CDR", cdr(TF_EMPTY, "tf2_msgs/msg/TFMessage"), "rosbags serialize_cdr of TF_EMPTY")
+emit("MARKERS_CDR", cdr(MARKERS, "visualization_msgs/msg/MarkerArray"), "rosbags serialize_cdr of MARKERS")
+emit("MARKERS_EMPTY_CDR", cdr(MARKERS_EMPTY, "visualization_msgs/msg/MarkerArray"), "rosbags serialize_cdr of MARKERS_EMPTY")
 emit("ATTACHMENT", ATTACHMENT, "zenoh.ext.z_serialize of (Int64 7, Int64 1700000000123456789, [UInt8 0xa0..=0xaf])")
 print()
 for const, typename in [
@@ -184,6 +243,7 @@ for const, typename in [
     ("ODOMETRY_HASH", "nav_msgs/msg/Odometry"),
     ("FLOAT64_HASH", "std_msgs/msg/Float64"),
     ("TF_MESSAGE_HASH", "tf2_msgs/msg/TFMessage"),
+    ("MARKER_ARRAY_HASH", "visualization_msgs/msg/MarkerArray"),
 ]:
     print(f"/// rosbags hash_rihs01(\"{typename}\")")
     print(rust_const(const, ts.hash_rihs01(typename)))
@@ -208,3 +268,22 @@ print(f"/// The liveliness token whose GID follows (`xxhash.xxh3_128`, low half 
 print(rust_const("GID_TOKEN", GID_TOKEN))
 print("/// rmw_zenoh's GID of `GID_TOKEN`.")
 print(rust_const("GID", digest.to_bytes(16, "little").hex()))
+
+# The ros2msg schema text rosbag2 stores for each message type (rosbags' generate_msgdef with
+# ros_version=2): the type's fields, then every type it uses after a MSG: line.
+print()
+print("/// `(type, rosbags generate_msgdef(type, ros_version=2))`: the ros2msg schema text of each message.")
+print("pub const ROS2MSG: &[(&str, &str)] = &[")
+for typename in [
+    "geometry_msgs/msg/Twist",
+    "sensor_msgs/msg/LaserScan",
+    "sensor_msgs/msg/Imu",
+    "nav_msgs/msg/Odometry",
+    "std_msgs/msg/Float64",
+    "tf2_msgs/msg/TFMessage",
+    "visualization_msgs/msg/MarkerArray",
+]:
+    text, _ = ts.generate_msgdef(typename, ros_version=2)
+    escaped = text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+    print(f'    (\n        "{typename}",\n        "{escaped}",\n    ),')
+print("];")

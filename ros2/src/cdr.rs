@@ -181,6 +181,30 @@ impl CdrWriter {
         self.buf.resize(self.buf.len() + padding, 0);
     }
 
+    /// A payload holding only the encapsulation header, with room for `capacity` bytes in all
+    /// (a writer that knows its message's size allocates once).
+    pub fn with_capacity(capacity: usize) -> Self {
+        let mut buf = Vec::with_capacity(capacity.max(HEADER_LEN));
+        buf.extend_from_slice(&ENCAPSULATION_CDR_LE);
+        CdrWriter { buf }
+    }
+
+    /// Writes a `uint8` (or a `bool`, as 0 or 1).
+    pub fn write_u8(&mut self, value: u8) {
+        self.buf.push(value);
+    }
+
+    /// Writes a `bool` as one byte, 0 or 1.
+    pub fn write_bool(&mut self, value: bool) {
+        self.buf.push(u8::from(value));
+    }
+
+    /// Writes a `u64`, aligned to 8.
+    pub fn write_u64(&mut self, value: u64) {
+        self.align(8);
+        self.buf.extend_from_slice(&value.to_le_bytes());
+    }
+
     /// Writes a `u32`, aligned to 4.
     pub fn write_u32(&mut self, value: u32) {
         self.align(4);
@@ -254,6 +278,17 @@ impl CdrWriter {
         }
         Ok(())
     }
+
+    /// Writes a `sequence<uint8>`: `u32` count, then the bytes.
+    pub fn write_u8_sequence(
+        &mut self,
+        field: &'static str,
+        values: &[u8],
+    ) -> Result<(), CdrEncodeError> {
+        self.write_sequence_len(field, values.len())?;
+        self.buf.extend_from_slice(values);
+        Ok(())
+    }
 }
 
 /// Reads one CDR payload field by field, never past its end.
@@ -317,6 +352,21 @@ impl<'a> CdrReader<'a> {
     /// Reads a `u32`.
     pub fn read_u32(&mut self, field: &'static str) -> Result<u32, CdrError> {
         self.take_array::<4>(field).map(u32::from_le_bytes)
+    }
+
+    /// Reads a `uint8`.
+    pub fn read_u8(&mut self, field: &'static str) -> Result<u8, CdrError> {
+        self.take_array::<1>(field).map(|[b]| b)
+    }
+
+    /// Reads a `bool`: one byte, where anything but 0 is true (as Fast CDR reads it).
+    pub fn read_bool(&mut self, field: &'static str) -> Result<bool, CdrError> {
+        self.read_u8(field).map(|b| b != 0)
+    }
+
+    /// Reads a `u64`.
+    pub fn read_u64(&mut self, field: &'static str) -> Result<u64, CdrError> {
+        self.take_array::<8>(field).map(u64::from_le_bytes)
     }
 
     /// Reads an `i32`.
@@ -399,6 +449,13 @@ impl<'a> CdrReader<'a> {
             });
         }
         Ok(declared as usize)
+    }
+
+    /// Reads a `sequence<uint8>`; the count is checked against the cap and the bytes present
+    /// before anything is allocated.
+    pub fn read_u8_sequence(&mut self, field: &'static str) -> Result<Vec<u8>, CdrError> {
+        let declared = self.read_sequence_len(field, 1)?;
+        Ok(self.take(field, 1, declared)?.to_vec())
     }
 
     /// Reads a `sequence<float32>`; the count is checked against the cap and the bytes present

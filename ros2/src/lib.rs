@@ -7,7 +7,9 @@
 //! tokens that make it visible to `ros2 node list` and `ros2 topic info` ([`liveliness`]) and the
 //! GIDs rmw_zenoh derives from them ([`gid`]), valid
 //! ROS names ([`names`]), and the conversions between those messages and the agent's sensor and
-//! command contract ([`convert`]).
+//! command contract ([`convert`]). For recordings and viewers: each message's `ros2msg` schema
+//! text ([`schema`]), the markers a viewer draws ([`visualization`]), and the messages a
+//! simulated team publishes, built once for the live topics and for a recording ([`team`]).
 //!
 //! Every decoder here is total and bounded: malformed input is a typed error that says what is
 //! wrong, never a panic, and nothing is allocated beyond what the input's length justifies.
@@ -24,7 +26,10 @@ pub mod key_expr;
 pub mod liveliness;
 pub mod msg;
 pub mod names;
+pub mod schema;
+pub mod team;
 pub mod type_hash;
+pub mod visualization;
 
 pub use attachment::{Attachment, AttachmentError};
 pub use cdr::{CdrEncodeError, CdrError, DecodeLimits};
@@ -39,4 +44,6 @@ pub use msg::{
     TransformStamped, Twist, Vector3,
 };
 pub use names::{NameError, Namespace, NodeName, TopicName};
+pub use schema::MsgDefinition;
 pub use type_hash::{TypeHash, TypeHashField};
+pub use visualization::{ColorRgba, Duration, Marker, MarkerArray};

@@ -8,6 +8,7 @@
 //! The byte layouts and hashes are checked against `rosbags` in `tests/wire_format.rs`.
 
 use crate::cdr::{CdrEncodeError, CdrError, CdrReader, CdrWriter, DecodeLimits};
+use crate::schema::{self, MsgDefinition};
 use crate::type_hash::TypeHash;
 
 /// A ROS 2 message with a fixed CDR layout.
@@ -18,6 +19,8 @@ pub trait RosMessage: Sized {
     const DDS_TYPE_NAME: &'static str;
     /// The RIHS01 type hash of this message in ROS 2 Jazzy (and later, while it is unchanged).
     const TYPE_HASH: &'static str;
+    /// Its `.msg` definition, whose [`MsgDefinition::ros2msg`] is the schema a recording stores.
+    const DEFINITION: &'static MsgDefinition;
 
     /// Writes the fields (after the encapsulation header).
     fn write_fields(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError>;
@@ -84,12 +87,12 @@ impl Time {
         i64::from(self.sec) * 1_000_000_000 + i64::from(self.nanosec)
     }
 
-    fn write(&self, w: &mut CdrWriter) {
+    pub(crate) fn write(&self, w: &mut CdrWriter) {
         w.write_i32(self.sec);
         w.write_u32(self.nanosec);
     }
 
-    fn read(r: &mut CdrReader<'_>) -> Result<Time, CdrError> {
+    pub(crate) fn read(r: &mut CdrReader<'_>) -> Result<Time, CdrError> {
         Ok(Time {
             sec: r.read_i32("header.stamp.sec")?,
             nanosec: r.read_u32("header.stamp.nanosec")?,
@@ -107,12 +110,12 @@ pub struct Header {
 }
 
 impl Header {
-    fn write(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
+    pub(crate) fn write(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
         self.stamp.write(w);
         w.write_string("header.frame_id", &self.frame_id)
     }
 
-    fn read(r: &mut CdrReader<'_>) -> Result<Header, CdrError> {
+    pub(crate) fn read(r: &mut CdrReader<'_>) -> Result<Header, CdrError> {
         Ok(Header {
             stamp: Time::read(r)?,
             frame_id: r.read_string("header.frame_id")?,
@@ -132,13 +135,13 @@ pub struct Vector3 {
 }
 
 impl Vector3 {
-    fn write(&self, w: &mut CdrWriter) {
+    pub(crate) fn write(&self, w: &mut CdrWriter) {
         w.write_f64(self.x);
         w.write_f64(self.y);
         w.write_f64(self.z);
     }
 
-    fn read(r: &mut CdrReader<'_>, field: &'static str) -> Result<Vector3, CdrError> {
+    pub(crate) fn read(r: &mut CdrReader<'_>, field: &'static str) -> Result<Vector3, CdrError> {
         Ok(Vector3 {
             x: r.read_f64(field)?,
             y: r.read_f64(field)?,
@@ -173,14 +176,14 @@ impl Default for Quaternion {
 }
 
 impl Quaternion {
-    fn write(&self, w: &mut CdrWriter) {
+    pub(crate) fn write(&self, w: &mut CdrWriter) {
         w.write_f64(self.x);
         w.write_f64(self.y);
         w.write_f64(self.z);
         w.write_f64(self.w);
     }
 
-    fn read(r: &mut CdrReader<'_>, field: &'static str) -> Result<Quaternion, CdrError> {
+    pub(crate) fn read(r: &mut CdrReader<'_>, field: &'static str) -> Result<Quaternion, CdrError> {
         Ok(Quaternion {
             x: r.read_f64(field)?,
             y: r.read_f64(field)?,
@@ -219,6 +222,7 @@ impl Twist {
 
 impl RosMessage for Twist {
     const ROS_NAME: &'static str = "geometry_msgs/msg/Twist";
+    const DEFINITION: &'static MsgDefinition = &schema::TWIST;
     const DDS_TYPE_NAME: &'static str = "geometry_msgs::msg::dds_::Twist_";
     const TYPE_HASH: &'static str =
         "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a";
@@ -260,6 +264,7 @@ pub struct LaserScan {
 
 impl RosMessage for LaserScan {
     const ROS_NAME: &'static str = "sensor_msgs/msg/LaserScan";
+    const DEFINITION: &'static MsgDefinition = &schema::LASER_SCAN;
     const DDS_TYPE_NAME: &'static str = "sensor_msgs::msg::dds_::LaserScan_";
     const TYPE_HASH: &'static str =
         "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828";
@@ -314,6 +319,7 @@ pub struct Imu {
 
 impl RosMessage for Imu {
     const ROS_NAME: &'static str = "sensor_msgs/msg/Imu";
+    const DEFINITION: &'static MsgDefinition = &schema::IMU;
     const DDS_TYPE_NAME: &'static str = "sensor_msgs::msg::dds_::Imu_";
     const TYPE_HASH: &'static str =
         "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b";
@@ -383,6 +389,7 @@ impl Default for Odometry {
 
 impl RosMessage for Odometry {
     const ROS_NAME: &'static str = "nav_msgs/msg/Odometry";
+    const DEFINITION: &'static MsgDefinition = &schema::ODOMETRY;
     const DDS_TYPE_NAME: &'static str = "nav_msgs::msg::dds_::Odometry_";
     const TYPE_HASH: &'static str =
         "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0";
@@ -467,6 +474,7 @@ pub struct TfMessage {
 
 impl RosMessage for TfMessage {
     const ROS_NAME: &'static str = "tf2_msgs/msg/TFMessage";
+    const DEFINITION: &'static MsgDefinition = &schema::TF_MESSAGE;
     const DDS_TYPE_NAME: &'static str = "tf2_msgs::msg::dds_::TFMessage_";
     const TYPE_HASH: &'static str = TF_MESSAGE_HASH;
 
@@ -502,6 +510,7 @@ pub struct Float64 {
 
 impl RosMessage for Float64 {
     const ROS_NAME: &'static str = "std_msgs/msg/Float64";
+    const DEFINITION: &'static MsgDefinition = &schema::FLOAT64;
     const DDS_TYPE_NAME: &'static str = "std_msgs::msg::dds_::Float64_";
     const TYPE_HASH: &'static str =
         "RIHS01_705ba9c3d1a09df43737eb67095534de36fd426c0587779bda2bc51fe790182a";
@@ -540,6 +549,8 @@ mod tests {
         check_names::<Imu>();
         check_names::<Odometry>();
         check_names::<Float64>();
+        check_names::<TfMessage>();
+        check_names::<crate::MarkerArray>();
     }
 
     #[test]

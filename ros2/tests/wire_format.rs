@@ -2,8 +2,9 @@
 //!
 //! The constants in `golden/mod.rs` were printed by `ros2/scripts/golden.py`: the CDR payloads and
 //! RIHS01 hashes by `rosbags` 0.11.9 (`Stores.ROS2_JAZZY`), the attachment by `eclipse-zenoh`'s
-//! serializer. The message values below mirror the ones in that script. Each test encodes the
-//! same message here and compares bytes, decodes the golden bytes back, and checks the hash.
+//! serializer, the `ros2msg` schema texts by `rosbags`' `generate_msgdef(..., ros_version=2)`.
+//! The message values below mirror the ones in that script. Each test encodes the same message
+//! here and compares bytes, decodes the golden bytes back, and checks the hash.
 
 mod golden;
 
@@ -12,9 +13,11 @@ use std::f64::consts::PI;
 use formation_ros2::cdr::CdrError;
 use formation_ros2::gid::{entity_gid, xxh3_128};
 use formation_ros2::msg::{Pose, Quaternion, Vector3};
+use formation_ros2::visualization::{CompressedImage, MeshFile};
 use formation_ros2::{
-    Attachment, DecodeLimits, Float64, Header, Imu, LaserScan, LivelinessToken, Odometry,
-    RosMessage, TfMessage, Time, Transform, TransformStamped, Twist,
+    Attachment, ColorRgba, DecodeLimits, Duration, Float64, Header, Imu, LaserScan,
+    LivelinessToken, Marker, MarkerArray, Odometry, RosMessage, TfMessage, Time, Transform,
+    TransformStamped, Twist,
 };
 
 fn hex(text: &str) -> Vec<u8> {
@@ -242,6 +245,148 @@ fn tf_message_with_padding_after_frame_ids_matches_rosbags() {
         golden::TF_EMPTY_CDR,
         golden::TF_MESSAGE_HASH,
     );
+}
+
+/// One marker of `MARKERS` in golden.py.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "mirrors golden.py's marker(), one argument per field that varies"
+)]
+fn marker(
+    ns: &str,
+    id: i32,
+    kind: i32,
+    points: Vec<Vector3>,
+    colors: Vec<ColorRgba>,
+    text: &str,
+    frame_locked: bool,
+    uv_coordinates: Vec<(f32, f32)>,
+    texture_data: Vec<u8>,
+) -> Marker {
+    Marker {
+        header: Header {
+            stamp: Time {
+                sec: 7,
+                nanosec: 250_000_000,
+            },
+            frame_id: "world".into(),
+        },
+        ns: ns.into(),
+        id,
+        kind,
+        action: 0,
+        pose: Pose {
+            position: Vector3 {
+                x: 0.5,
+                y: -1.25,
+                z: 0.0,
+            },
+            orientation: quaternion_about_z(0.2),
+        },
+        scale: Vector3 {
+            x: 0.03,
+            y: 0.0,
+            z: 0.0,
+        },
+        color: ColorRgba {
+            r: 0.25,
+            g: 0.5,
+            b: 0.75,
+            a: 1.0,
+        },
+        lifetime: Duration { sec: 1, nanosec: 5 },
+        frame_locked,
+        points,
+        colors,
+        texture_resource: String::new(),
+        texture: CompressedImage {
+            header: Header::default(),
+            format: "png".into(),
+            data: texture_data,
+        },
+        uv_coordinates,
+        text: text.into(),
+        mesh_resource: String::new(),
+        mesh_file: MeshFile::default(),
+        mesh_use_embedded_materials: false,
+    }
+}
+
+/// `MARKERS` in golden.py: a line list of two edges with a colour per point, and a text marker.
+fn markers() -> MarkerArray {
+    let point = |x, y| Vector3 { x, y, z: 0.0 };
+    let colors = (0..4)
+        .map(|i| ColorRgba {
+            r: i as f32 / 4.0,
+            g: 1.0 - i as f32 / 4.0,
+            b: 0.0,
+            a: 1.0,
+        })
+        .collect();
+    MarkerArray {
+        markers: vec![
+            marker(
+                "edges",
+                0,
+                5,
+                vec![
+                    point(0.0, 0.0),
+                    point(1.5, 0.0),
+                    point(1.5, 0.0),
+                    point(0.75, 1.3),
+                ],
+                colors,
+                "",
+                true,
+                Vec::new(),
+                vec![1, 2, 3],
+            ),
+            marker(
+                "edge_errors",
+                3,
+                9,
+                Vec::new(),
+                Vec::new(),
+                "e=+1.5%",
+                false,
+                vec![(0.5, 0.25)],
+                Vec::new(),
+            ),
+        ],
+    }
+}
+
+#[test]
+fn marker_array_with_bools_bytes_and_text_matches_rosbags() {
+    check(&markers(), golden::MARKERS_CDR, golden::MARKER_ARRAY_HASH);
+    check(
+        &MarkerArray::default(),
+        golden::MARKERS_EMPTY_CDR,
+        golden::MARKER_ARRAY_HASH,
+    );
+}
+
+/// The schema text a recording stores for a message type, as rosbag2 writes it.
+fn ros2msg_of<M: RosMessage>() -> String {
+    M::DEFINITION.ros2msg()
+}
+
+#[test]
+fn ros2msg_schemas_match_rosbags_definitions() {
+    let ours = [
+        (Twist::ROS_NAME, ros2msg_of::<Twist>()),
+        (LaserScan::ROS_NAME, ros2msg_of::<LaserScan>()),
+        (Imu::ROS_NAME, ros2msg_of::<Imu>()),
+        (Odometry::ROS_NAME, ros2msg_of::<Odometry>()),
+        (Float64::ROS_NAME, ros2msg_of::<Float64>()),
+        (TfMessage::ROS_NAME, ros2msg_of::<TfMessage>()),
+        (MarkerArray::ROS_NAME, ros2msg_of::<MarkerArray>()),
+    ];
+    assert_eq!(ours.len(), golden::ROS2MSG.len());
+    for ((name, text), (golden_name, golden_text)) in ours.iter().zip(golden::ROS2MSG) {
+        assert_eq!(name, golden_name);
+        assert_eq!(text, golden_text, "{name}");
+    }
 }
 
 #[test]

@@ -348,6 +348,22 @@ impl<'l> AgentsController<'l> {
         &self.model_ids
     }
 
+    /// What robot `robot`'s last tick played came to: the watchdog's outcome, how many ticks
+    /// older than that tick the scan was that the used command answered, and the model that
+    /// decided it (`None` when no command was used). `None` before the episode's first tick.
+    pub fn last_outcome(&self, robot: usize) -> Option<(TickOutcome, u32, Option<&str>)> {
+        let timing = self.timings.get(robot)?;
+        let outcome = *timing.outcome.last()?;
+        let lag = timing.lag_ticks.last().copied().unwrap_or(0);
+        let model = timing
+            .model
+            .last()
+            .and_then(|&m| usize::try_from(m).ok())
+            .and_then(|m| timing.model_ids.get(m))
+            .map(String::as_str);
+        Some((outcome, lag, model))
+    }
+
     fn robots_in(&self, state: AgentState) -> Vec<usize> {
         (0..self.states.len())
             .filter(|&i| self.states[i] == state)

@@ -141,6 +141,19 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         let wait = positive_seconds("--remote-timeout-s", args.remote_timeout_s)?;
         startup_timeout_ms = wait.as_millis().clamp(1, u64::MAX as u128) as u64;
     }
+    let record = match &args.record {
+        Some(file) => Some(crate::record::checked_settings(
+            formation_record::RecordTarget::File(file.clone()),
+            crate::record::launch_info(
+                &scenario,
+                base_seed,
+                args.clock.as_str(),
+                "policy",
+                &models,
+            ),
+        )?),
+        None => None,
+    };
     let plan = LaunchPlan {
         run_id,
         run_specs,
@@ -160,6 +173,7 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         restart_budget: args.restarts,
         restart_window: positive_seconds("--restart-window-s", args.restart_window_s)?,
         restart_delay: Duration::from_millis(args.restart_delay_ms),
+        record,
     };
     Ok(PlannedRun {
         plan,
@@ -827,6 +841,33 @@ pub fn eval_over_processes(
     network: &NetworkFlags,
     on_run_done: &mut dyn FnMut(usize),
 ) -> anyhow::Result<ProcessEval> {
+    eval_over_processes_recorded(
+        scenario,
+        base_seed,
+        runs,
+        default_model,
+        clock,
+        network,
+        None,
+        on_run_done,
+    )
+}
+
+/// [`eval_over_processes`], with the world recording the runs `record` asks for.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "eval_over_processes' arguments and the recording's settings"
+)]
+pub fn eval_over_processes_recorded(
+    scenario: &Scenario,
+    base_seed: u64,
+    runs: usize,
+    default_model: &Path,
+    clock: ClockMode,
+    network: &NetworkFlags,
+    record: Option<formation_record::RecordSettings>,
+    on_run_done: &mut dyn FnMut(usize),
+) -> anyhow::Result<ProcessEval> {
     if !network.remote.is_empty() || network.credentials.is_some() {
         anyhow::bail!(
             "an evaluation over processes starts every agent itself, with fresh credentials: \
@@ -856,6 +897,7 @@ pub fn eval_over_processes(
             restart_window: Duration::from_secs(60),
             restart_delay: Duration::from_millis(50),
             network,
+            record,
         };
         let mut done = 0;
         let report = block_on(supervisor::launch(&plan, &mut |event| {

@@ -62,6 +62,9 @@ pub struct LaunchPlan {
     pub faults: Vec<Option<String>>,
     /// How the world and the agents reach each other.
     pub network: Network,
+    /// What the world records (`--record`), handed to it as a JSON file next to `run_specs`
+    /// ([`LaunchPlan::record_settings_path`]).
+    pub record: Option<formation_record::RecordSettings>,
 }
 
 impl LaunchPlan {
@@ -148,6 +151,12 @@ impl LaunchPlan {
     /// next to the run specs.
     pub fn settings_path(&self) -> PathBuf {
         self.run_specs.with_file_name("runtime-settings.json")
+    }
+
+    /// Where the launch writes [`LaunchPlan::record`] for the world: `record-settings.json`
+    /// next to the run specs.
+    pub fn record_settings_path(&self) -> PathBuf {
+        self.run_specs.with_file_name("record-settings.json")
     }
 }
 
@@ -266,6 +275,9 @@ pub enum LaunchError {
     /// The world's settings file could not be written.
     #[error(transparent)]
     Settings(#[from] SettingsError),
+    /// The world's recording settings could not be written.
+    #[error(transparent)]
+    RecordSettings(#[from] formation_record::RecordError),
     /// The host cannot run a team this large.
     #[error(transparent)]
     Capacity(#[from] super::capacity::CapacityError),
@@ -795,6 +807,11 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
     }
     world_settings.write(&settings)?;
     let mut command = Command::new(&binaries.world);
+    if let Some(record) = &plan.record {
+        let path = plan.record_settings_path();
+        record.write(&path)?;
+        command.arg("--record-settings").arg(path);
+    }
     if let Some(zenoh) = plan.network.zenoh() {
         command
             .arg("--transport")

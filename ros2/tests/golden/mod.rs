@@ -20,6 +20,10 @@ pub const HEADING_CDR: &str = "0001000065732d3852c1f03f";
 pub const TF_CDR: &str = "00010000020000000c0000000065cd1d06000000776f726c6400000012000000726f626f745f302f626173655f6c696e6b000000000000000000d0bf000000000000e8bf00000000000000000000000000000000000000000000000033baba95cde9d23fba092fd41d92ee3f0c0000000065cd1d06000000776f726c6400000012000000726f626f745f312f626173655f6c696e6b00000000000000000000000000f43f000000000000d03f0000000000000000000000000000000000000000000000005941a5178d11e23f155b483c2669ea3f";
 /// rosbags serialize_cdr of TF_EMPTY
 pub const TF_EMPTY_CDR: &str = "0001000000000000";
+/// rosbags serialize_cdr of MARKERS
+pub const MARKERS_CDR: &str = "00010000020000000700000080b2e60e06000000776f726c64000000060000006564676573000000000000000500000000000000000000000000e03f000000000000f4bf000000000000000000000000000000000000000000000000bcd23d23ff6dc93f7a627795b45cef3fb81e85eb51b89e3f000000000000000000000000000000000000803e0000003f0000403f0000803f01000000050000000100000004000000000000000000000000000000000000000000000000000000000000000000f83f00000000000000000000000000000000000000000000f83f00000000000000000000000000000000000000000000e83fcdccccccccccf43f000000000000000004000000000000000000803f000000000000803f0000803e0000403f000000000000803f0000003f0000003f000000000000803f0000403f0000803e000000000000803f01000000000000000000000000000000010000000000000004000000706e670003000000010203000000000001000000000000000100000000000000010000000000000000000000000000000700000080b2e60e06000000776f726c640000000c000000656467655f6572726f727300030000000900000000000000000000000000e03f000000000000f4bf000000000000000000000000000000000000000000000000bcd23d23ff6dc93f7a627795b45cef3fb81e85eb51b89e3f000000000000000000000000000000000000803e0000003f0000403f0000803f010000000500000000000000000000000000000001000000000000000000000000000000010000000000000004000000706e670000000000010000000000003f0000803e08000000653d2b312e352500010000000000000001000000000000000000000000";
+/// rosbags serialize_cdr of MARKERS_EMPTY
+pub const MARKERS_EMPTY_CDR: &str = "0001000000000000";
 /// zenoh.ext.z_serialize of (Int64 7, Int64 1700000000123456789, [UInt8 0xa0..=0xaf])
 pub const ATTACHMENT: &str = "070000000000000015cd853dfe9c971710a0a1a2a3a4a5a6a7a8a9aaabacadaeaf";
 
@@ -41,6 +45,9 @@ pub const FLOAT64_HASH: &str =
 /// rosbags hash_rihs01("tf2_msgs/msg/TFMessage")
 pub const TF_MESSAGE_HASH: &str =
     "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087";
+/// rosbags hash_rihs01("visualization_msgs/msg/MarkerArray")
+pub const MARKER_ARRAY_HASH: &str =
+    "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf";
 
 /// `(length, xxhash.xxh3_128(pattern(length)).intdigest())` with `pattern(n)[i] = (31 i + 7) % 251`.
 pub const XXH3_128: &[(usize, u128)] = &[
@@ -90,3 +97,32 @@ pub const XXH3_128: &[(usize, u128)] = &[
 pub const GID_TOKEN: &str = "@ros2_lv/0/7c4e5f0a1b2c3d4e5f60718293a4b5c6/0/3/MP/%/%robot_0/formation_agent/%cmd_vel/geometry_msgs::msg::dds_::Twist_/RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a/::,10:,:,:,,";
 /// rmw_zenoh's GID of `GID_TOKEN`.
 pub const GID: &str = "5d04aaef08d282befd6e9117330ee298";
+
+/// `(type, rosbags generate_msgdef(type, ros_version=2))`: the ros2msg schema text of each message.
+pub const ROS2MSG: &[(&str, &str)] = &[
+    (
+        "geometry_msgs/msg/Twist",
+        "geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n================================================================================\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n",
+    ),
+    (
+        "sensor_msgs/msg/LaserScan",
+        "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\nfloat32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\nfloat32[] ranges\nfloat32[] intensities\n================================================================================\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n================================================================================\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n",
+    ),
+    (
+        "sensor_msgs/msg/Imu",
+        "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\ngeometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n================================================================================\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n================================================================================\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n================================================================================\nMSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n================================================================================\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n",
+    ),
+    (
+        "nav_msgs/msg/Odometry",
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n================================================================================\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n================================================================================\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n================================================================================\nMSG: geometry_msgs/PoseWithCovariance\ngeometry_msgs/Pose pose\nfloat64[36] covariance\n================================================================================\nMSG: geometry_msgs/Pose\ngeometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n================================================================================\nMSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n================================================================================\nMSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n================================================================================\nMSG: geometry_msgs/TwistWithCovariance\ngeometry_msgs/Twist twist\nfloat64[36] covariance\n================================================================================\nMSG: geometry_msgs/Twist\ngeometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n================================================================================\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n",
+    ),
+    ("std_msgs/msg/Float64", "float64 data\n"),
+    (
+        "tf2_msgs/msg/TFMessage",
+        "geometry_msgs/TransformStamped[] transforms\n================================================================================\nMSG: geometry_msgs/TransformStamped\nstd_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n================================================================================\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n================================================================================\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n================================================================================\nMSG: geometry_msgs/Transform\ngeometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n================================================================================\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n================================================================================\nMSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n",
+    ),
+    (
+        "visualization_msgs/msg/MarkerArray",
+        "visualization_msgs/Marker[] markers\n================================================================================\nMSG: visualization_msgs/Marker\nint32 ARROW=0\nint32 CUBE=1\nint32 SPHERE=2\nint32 CYLINDER=3\nint32 LINE_STRIP=4\nint32 LINE_LIST=5\nint32 CUBE_LIST=6\nint32 SPHERE_LIST=7\nint32 POINTS=8\nint32 TEXT_VIEW_FACING=9\nint32 MESH_RESOURCE=10\nint32 TRIANGLE_LIST=11\nint32 ARROW_STRIP=12\nint32 ADD=0\nint32 MODIFY=0\nint32 DELETE=2\nint32 DELETEALL=3\nstd_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\ngeometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\nbuiltin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\nstd_msgs/ColorRGBA[] colors\nstring texture_resource\nsensor_msgs/CompressedImage texture\nvisualization_msgs/UVCoordinate[] uv_coordinates\nstring text\nstring mesh_resource\nvisualization_msgs/MeshFile mesh_file\nbool mesh_use_embedded_materials\n================================================================================\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n================================================================================\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n================================================================================\nMSG: geometry_msgs/Pose\ngeometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n================================================================================\nMSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n================================================================================\nMSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n================================================================================\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n================================================================================\nMSG: std_msgs/ColorRGBA\nfloat32 r\nfloat32 g\nfloat32 b\nfloat32 a\n================================================================================\nMSG: builtin_interfaces/Duration\nint32 sec\nuint32 nanosec\n================================================================================\nMSG: sensor_msgs/CompressedImage\nstd_msgs/Header header\nstring format\nuint8[] data\n================================================================================\nMSG: visualization_msgs/UVCoordinate\nfloat32 u\nfloat32 v\n================================================================================\nMSG: visualization_msgs/MeshFile\nstring filename\nuint8[] data\n",
+    ),
+];

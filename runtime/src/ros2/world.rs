@@ -45,11 +45,10 @@ use formation_proto::wire::{
 };
 use formation_proto::{Pose, WheelCmd};
 use formation_ros2::liveliness::domain_wildcard;
-use formation_ros2::msg::Vector3;
+use formation_ros2::team;
 use formation_ros2::{
-    EntityKind, Float64, Header, LaserScan, LivelinessToken, Namespace, NodeName, Odometry, Qos,
-    TfMessage, Time, TopicName, Transform, TransformStamped, Twist, quaternion_from_yaw,
-    twist_from_wheels, wheels_from_twist,
+    EntityKind, Float64, LaserScan, LivelinessToken, Namespace, NodeName, Odometry, Qos, TfMessage,
+    Time, TopicName, Twist, wheels_from_twist,
 };
 
 use super::node::{Delivery, Node, NodeError, RosPublisher, RosSubscription};
@@ -64,7 +63,7 @@ const TWIST_QUEUE: usize = 64;
 /// The model id the exchange logs for a ROS 2 agent's commands.
 const ROS2_MODEL_ID: &str = "ros2";
 /// The fixed frame every robot is placed in on `/tf`.
-pub const WORLD_FRAME: &str = "world";
+pub use formation_ros2::team::WORLD_FRAME;
 /// How often `/tf_static` is sent again \[ns of the simulated clock\]: this link does not
 /// implement transient-local durability, so a viewer that joins later gets the static frames
 /// within a second instead of at once.
@@ -533,10 +532,6 @@ impl WorldLink for Ros2WorldLink {
         let stamp = self.stamp(msg);
         self.publish_goal(msg, stamp)?;
         let ports = &mut self.robots[robot];
-        let header = |frame: &str| Header {
-            stamp: Time::from_nanos(stamp),
-            frame_id: format!("robot_{robot}/{frame}"),
-        };
         if let Some((pose, wheels)) = ports.odometry.take() {
             let odometry = odometry_message(
                 robot,
@@ -563,24 +558,12 @@ impl WorldLink for Ros2WorldLink {
             }
         }
         let beams = msg.n_beams as usize;
-        let max_range = self.team.max_range as f32;
-        let increment = (std::f64::consts::TAU / beams.max(1) as f64) as f32;
-        let scan = LaserScan {
-            header: header("laser"),
-            angle_min: 0.0,
-            angle_max: increment * beams.saturating_sub(1) as f32,
-            angle_increment: increment,
-            time_increment: 0.0,
-            scan_time: 0.0,
-            range_min: 0.0,
-            range_max: max_range,
-            // REP-117: a beam without a return reads +inf.
-            ranges: msg.ranges[..beams]
-                .iter()
-                .map(|&r| if r >= max_range { f32::INFINITY } else { r })
-                .collect(),
-            intensities: Vec::new(),
-        };
+        let scan = team::laser_scan_message(
+            robot,
+            Time::from_nanos(stamp),
+            &msg.ranges[..beams],
+            self.team.max_range,
+        );
         ports.scan.publish(&scan, stamp).map_err(node_error)?;
         if ports.stamps.len() == STAMPS_KEPT {
             ports.stamps.pop_front();
@@ -698,73 +681,19 @@ fn tf_topic(name: &str) -> TopicName {
     TopicName::new(name).expect("a valid ROS topic name")
 }
 
-/// One TF edge at `stamp`.
-fn transform(
-    stamp: Time,
-    parent: &str,
-    child: String,
-    x: f64,
-    y: f64,
-    yaw: f64,
-) -> TransformStamped {
-    TransformStamped {
-        header: Header {
-            stamp,
-            frame_id: parent.to_owned(),
-        },
-        child_frame_id: child,
-        transform: Transform {
-            translation: Vector3 { x, y, z: 0.0 },
-            rotation: quaternion_from_yaw(yaw),
-        },
-    }
-}
-
-/// Robot `robot`'s `/tf` at `stamp`: `world` → `robot_<i>/base_link`, its true pose (the
-/// simulation's ground truth, for viewers; what the robot itself senses is in its scan and
-/// odometry).
+/// Robot `robot`'s `/tf` at `stamp` ([`formation_ros2::team::tf_message`]).
 fn tf_message(robot: usize, stamp: Time, pose: &Pose) -> TfMessage {
-    TfMessage {
-        transforms: vec![transform(
-            stamp,
-            WORLD_FRAME,
-            format!("robot_{robot}/base_link"),
-            pose.x,
-            pose.y,
-            pose.theta,
-        )],
-    }
+    team::tf_message(robot, stamp, pose.x, pose.y, pose.theta)
 }
 
-/// Robot `robot`'s `/tf_static`: `world` → `robot_<i>/odom` (the simulated odometry is the true
-/// pose, so its frame is the world's) and `robot_<i>/base_link` → `robot_<i>/laser` (the LIDAR
-/// sits on the axle centre, the origin of its rays).
+/// Robot `robot`'s `/tf_static` ([`formation_ros2::team::static_tf_message`]).
 fn static_tf_message(robot: usize, stamp: Time) -> TfMessage {
-    TfMessage {
-        transforms: vec![
-            transform(
-                stamp,
-                WORLD_FRAME,
-                format!("robot_{robot}/odom"),
-                0.0,
-                0.0,
-                0.0,
-            ),
-            transform(
-                stamp,
-                &format!("robot_{robot}/base_link"),
-                format!("robot_{robot}/laser"),
-                0.0,
-                0.0,
-                0.0,
-            ),
-        ],
-    }
+    team::static_tf_message(robot, stamp)
 }
 
-/// Robot `robot`'s Odometry at `stamp`: its pose (`heading` as the orientation, what its compass
-/// reads) and the twist of the wheel speeds it ran over the last step, as wheel encoders give it.
-/// Speeds that are not finite (never the world's) give a zero twist rather than no message.
+/// Robot `robot`'s Odometry at `stamp` ([`formation_ros2::team::odometry_message`]): its pose
+/// (`heading` as the orientation, what its compass reads) and the twist of the wheel speeds it ran
+/// over the last step, as wheel encoders give it.
 fn odometry_message(
     robot: usize,
     stamp: Time,
@@ -773,23 +702,12 @@ fn odometry_message(
     wheels: WheelCmd,
     wheel_separation: f64,
 ) -> Odometry {
-    Odometry {
-        header: Header {
-            stamp,
-            frame_id: format!("robot_{robot}/odom"),
-        },
-        child_frame_id: format!("robot_{robot}/base_link"),
-        pose: formation_ros2::msg::Pose {
-            position: Vector3 {
-                x: pose.x,
-                y: pose.y,
-                z: 0.0,
-            },
-            orientation: quaternion_from_yaw(heading),
-        },
-        twist: twist_from_wheels(wheels.left, wheels.right, wheel_separation).unwrap_or_default(),
-        ..Odometry::default()
-    }
+    let wheels = team::Wheels {
+        left: wheels.left,
+        right: wheels.right,
+        separation: wheel_separation,
+    };
+    team::odometry_message(robot, stamp, (pose.x, pose.y), heading, wheels)
 }
 
 #[cfg(test)]

@@ -112,6 +112,10 @@ struct Args {
     /// its own robot's keys. Without it, any process that reaches the endpoint may.
     #[arg(long, value_name = "DIR")]
     credentials: Option<PathBuf>,
+    /// JSON file saying what to record to MCAP and where (`formation_record::RecordSettings`;
+    /// the launcher writes it for `--record`).
+    #[arg(long, value_name = "FILE")]
+    record_settings: Option<PathBuf>,
 }
 
 impl Args {
@@ -173,6 +177,11 @@ enum Ended {
 
 fn run(args: &Args) -> anyhow::Result<Ended> {
     let specs = read_run_specs(&args.run_specs)?;
+    let record = args
+        .record_settings
+        .as_deref()
+        .map(formation_record::RecordSettings::read)
+        .transpose()?;
     let run_id = RunId::new(&args.run_id)?;
     let namespace = RunNamespace::new(&run_id);
     let n_robots = specs[0].n_robots;
@@ -215,7 +224,7 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
         Arc::new(SystemClock),
         Box::new(emit),
     );
-    let result = play(args, &runtime, &specs, &mut agents);
+    let result = play(args, &runtime, &specs, record.as_ref(), &mut agents);
     // A world that stops early says why first, and tells the launcher before it asks the agents
     // to exit, so that their exits are not taken for crashes (and restarted).
     let ended = match (&result, agents.stopped()) {
@@ -355,18 +364,39 @@ fn play(
     args: &Args,
     runtime: &RuntimeSettings,
     specs: &[RunSpec],
+    record: Option<&formation_record::RecordSettings>,
     agents: &mut AgentsController<'_>,
 ) -> anyhow::Result<()> {
     agents.await_agents(runtime.startup_timeout())?;
     emit(&WorldEvent::AgentsConnected);
-    for spec in specs {
+    for (nth, spec) in specs.iter().enumerate() {
         let index = spec.index;
         agents
             .begin_episode(spec.world.dt, spec.world.lidar)
             .with_context(|| format!("run {index}"))?;
-        let log = play_journaled(&args.out, runtime.clock.as_str(), spec, agents)
+        let recorder = record.and_then(|r| start_recording(r, spec, nth, specs.len()));
+        let log = play_journaled(&args.out, runtime.clock.as_str(), spec, agents, recorder)
             .with_context(|| format!("run {index}"))?;
         emit(&WorldEvent::RunDone { index, log });
     }
     Ok(())
+}
+
+/// The recorder of run `spec` (the `nth` of `runs`), when it is to be recorded; a recording that
+/// cannot start is said, and the run plays without it.
+fn start_recording(
+    record: &formation_record::RecordSettings,
+    spec: &RunSpec,
+    nth: usize,
+    runs: usize,
+) -> Option<formation_record::Recorder> {
+    let path = record.target.path_for(spec.index, nth, runs)?;
+    let setup = formation_record::RecordingSetup::for_run(spec, &record.launch);
+    match formation_record::Recorder::start(&path, setup) {
+        Ok(recorder) => Some(recorder),
+        Err(e) => {
+            runlog::report_recording_failure(&e);
+            None
+        }
+    }
 }

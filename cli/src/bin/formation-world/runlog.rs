@@ -8,8 +8,11 @@
 
 use std::path::{Path, PathBuf};
 
-use formation_proto::control::ControllerError;
+use formation_proto::WheelCmd;
+use formation_proto::control::{Controller, ControllerError, Observation};
+use formation_proto::wire::TickOutcome;
 use formation_proto::wire::WorldEvent;
+use formation_record::{Recorder, SentCommand, TickRecord};
 use formation_world::metrics::{MetricsConfig, run_metrics};
 use formation_world::runlog::{
     JournalHeader, RunJournal, RunLogError, journal_path, recover_journal, write_json_atomic,
@@ -84,15 +87,36 @@ pub fn play_journaled(
     clock: &str,
     spec: &RunSpec,
     agents: &mut AgentsController<'_>,
+    recorder: Option<Recorder>,
 ) -> Result<PathBuf, RunError> {
     let index = spec.index;
     let (log_path, timing_path) = log_paths(out, index);
     let header = JournalHeader::new(spec, clock, agents.model_ids());
     let mut journal =
         RunJournal::create(&journal_path(out, index), &header).map_err(RunError::Start)?;
-    let played = run_episode_recorded(spec, agents, &mut |_, _| {}, &mut |trajectory| {
+    let mut recording = RecordingAgents {
+        agents: &mut *agents,
+        recorder,
+    };
+    let played = run_episode_recorded(spec, &mut recording, &mut |_, _| {}, &mut |trajectory| {
         journal.append(trajectory)
     });
+    if let Some(recorder) = recording.recorder.take() {
+        let last = played
+            .as_ref()
+            .ok()
+            .and_then(formation_record::final_sample);
+        match recorder.finish(last) {
+            Ok(Some(summary)) => tracing::info!(
+                "recorded {} ({} messages, {} bytes)",
+                summary.path.display(),
+                summary.messages,
+                summary.bytes
+            ),
+            Ok(None) => {}
+            Err(e) => report_recording_failure(&e),
+        }
+    }
     let mut timing = || TimingLog {
         index,
         clock: clock.to_owned(),
@@ -141,6 +165,58 @@ pub fn play_journaled(
             let saved = keep_partial(journal, &log_path, &timing_path, &reason, timing());
             Err(RunError::Write { cause, saved })
         }
+    }
+}
+
+/// Says that a recording stopped, and that the run goes on.
+pub fn report_recording_failure(error: &formation_record::RecordError) {
+    eprintln!(
+        "formation-world: recording stopped: {}; the run goes on without it, and its other \
+         outputs are written as usual",
+        formation_proto::errors::chain_text(error)
+    );
+}
+
+/// The agents' exchange, recording each tick it decides: the observation the agents were sent,
+/// and per robot the command the world used, what its watchdog made of it, the scan's lag and
+/// the model that decided (from the exchange's timing of that tick).
+struct RecordingAgents<'a, 'l> {
+    agents: &'a mut AgentsController<'l>,
+    recorder: Option<Recorder>,
+}
+
+impl Controller for RecordingAgents<'_, '_> {
+    fn commands(
+        &mut self,
+        obs: &Observation<'_>,
+        out: &mut [WheelCmd],
+    ) -> Result<(), ControllerError> {
+        self.agents.commands(obs, out)?;
+        let Some(recorder) = &mut self.recorder else {
+            return Ok(());
+        };
+        let mut models = Vec::with_capacity(out.len());
+        let sent = out
+            .iter()
+            .enumerate()
+            .map(|(robot, &wheels)| {
+                let (outcome, lag_ticks, model) =
+                    self.agents
+                        .last_outcome(robot)
+                        .unwrap_or((TickOutcome::Fresh, 0, None));
+                models.push(model.unwrap_or_default().to_owned());
+                SentCommand {
+                    wheels,
+                    outcome,
+                    lag_ticks,
+                }
+            })
+            .collect();
+        if let Err(e) = recorder.tick(TickRecord::new(obs, sent, &models)) {
+            report_recording_failure(&e);
+            self.recorder = None;
+        }
+        Ok(())
     }
 }
 

@@ -1,0 +1,408 @@
+//! Issue 24's acceptance tests of `--record`: recordings opened by independent readers only
+//! (`tests/python/mcap_readers.py`: Python's `mcap` with `mcap-ros2-support`, `rosbags`, and
+//! Rerun's `rerun mcap convert` with its Python API; none of formation's code), a recording cut
+//! short by a SIGKILL read by the streaming reader, the multi-process recording equal to the
+//! in-process one, and bad targets refused with the path and the fix.
+//!
+//! The Python packages come from `tests/python/requirements-record.txt` (`bash .ci/setup-python
+//! --test` installs them into `.venv`); without them the tests fail with that fix. The full-disk
+//! test mounts a small tmpfs and needs root, as CI has.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+use formation_tests::{
+    Finished, LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries,
+    case1_scenario, formation_run, one_at_a_time, read_json, repo_root, run, send_signal,
+    test_model, unique_run_id, world_pid,
+};
+use serde_json::Value;
+
+const LIMIT: Duration = Duration::from_secs(300);
+/// The readers' exit status for a missing package.
+const MISSING_PACKAGE: i32 = 3;
+
+/// The interpreter with the readers: `FORMATION_PYTHON`, else `.venv/bin/python`.
+fn python() -> PathBuf {
+    if let Some(p) = std::env::var_os("FORMATION_PYTHON") {
+        return PathBuf::from(p);
+    }
+    let venv = repo_root().join(".venv/bin/python");
+    if venv.is_file() {
+        venv
+    } else {
+        PathBuf::from("python3")
+    }
+}
+
+fn readers_command(args: &[&std::ffi::OsStr]) -> Command {
+    let mut command = Command::new(python());
+    command
+        .arg(repo_root().join("tests/python/mcap_readers.py"))
+        .args(args);
+    command
+}
+
+/// Runs `mcap_readers.py ARGS` and returns the JSON it prints; fails the test with the readers'
+/// words (and the fix, for a missing package).
+fn readers(args: &[&std::ffi::OsStr]) -> Value {
+    check_readers(run(readers_command(args), LIMIT))
+}
+
+fn check_readers(finished: Finished) -> Value {
+    assert_ne!(
+        finished.output.status.code(),
+        Some(MISSING_PACKAGE),
+        "the independent readers are not installed: run `bash .ci/setup-python --test`\n{}",
+        finished.describe()
+    );
+    finished.assert_success();
+    serde_json::from_str(finished.stdout().trim())
+        .unwrap_or_else(|e| panic!("the readers printed no JSON ({e})\n{}", finished.describe()))
+}
+
+fn os(s: &str) -> &std::ffi::OsStr {
+    s.as_ref()
+}
+
+/// `formation eval` in-process with `args`, recording into `record` and keeping run 0's log in
+/// `out`.
+fn eval_recorded(args: &[&str], record: &Path, out: &Path) -> Finished {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .arg("eval")
+        .args(args)
+        .args(["--runs", "1", "--save-trajectories", "1"])
+        .arg("--record")
+        .arg(record)
+        .arg("--out")
+        .arg(out);
+    run(command, LIMIT)
+}
+
+/// The three readers on `file`, a recording of `robots` robots whose run log is `run_log`.
+fn assert_independent_readers_open(file: &Path, run_log: &Path, robots: usize, rrd: &Path) {
+    let robots = robots.to_string();
+    let decoded = readers(&[
+        os("decode"),
+        file.as_os_str(),
+        run_log.as_os_str(),
+        os(&robots),
+    ]);
+    assert!(
+        decoded["max_tf_error_m"].as_f64().unwrap() <= 1e-6,
+        "{decoded}"
+    );
+    let bag = readers(&[os("rosbags"), file.as_os_str(), os(&robots)]);
+    assert!(bag["messages"].as_u64().unwrap() > 0, "{bag}");
+    let rerun = readers(&[os("rerun"), file.as_os_str(), rrd.as_os_str(), os(&robots)]);
+    assert!(rerun["rows"].as_u64().unwrap() > 0, "{rerun}");
+}
+
+/// Case 1 with the shipped model, recorded in-process: the mcap readers decode every ROS 2
+/// message and place the robots where the run log has them, rosbags reads it as a rosbag2, and
+/// Rerun converts it with every robot's entity; the metadata names the run and the shipped model
+/// by its hash.
+#[test]
+fn a_case1_recording_is_read_by_mcap_rosbags_and_rerun() {
+    let _watchdog = Watchdog::arm("record_case1", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("rec-case1");
+    let record = dir.path().join("rec");
+    std::fs::create_dir(&record).unwrap();
+    let out = dir.path().join("out");
+    let scenario = repo_root().join("scenarios/case1.toml");
+    let finished = eval_recorded(&["--scenario", scenario.to_str().unwrap()], &record, &out);
+    finished.assert_success();
+    let file = record.join("run-0000.mcap");
+    assert!(
+        finished
+            .stdout()
+            .contains(&format!("recorded {}", file.display())),
+        "{}",
+        finished.describe()
+    );
+    let run_log = out.join("runs/run-0000.json");
+    assert_independent_readers_open(&file, &run_log, 3, &dir.path().join("case1.rrd"));
+    let meta = readers(&[os("metadata"), file.as_os_str()]);
+    assert_eq!(meta["scenario"], "case1", "{meta}");
+    assert_eq!(meta["run_index"], "0", "{meta}");
+    assert_eq!(meta["model.0.stored"], "shipped", "{meta}");
+    assert_eq!(meta["model.0.sha256"].as_str().unwrap().len(), 64, "{meta}");
+}
+
+/// A team of 16 (the expert, 10 s): the same three readers.
+#[test]
+fn a_16_robot_recording_is_read_by_mcap_rosbags_and_rerun() {
+    let _watchdog = Watchdog::arm("record_team16", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("rec-team16");
+    let text = std::fs::read_to_string(repo_root().join("scenarios/swarm32.toml")).unwrap();
+    let text = text
+        .replace("robots = 32", "robots = 16")
+        .replace("duration_s = 20.0", "duration_s = 10.0");
+    let scenario = dir.path().join("team16.toml");
+    std::fs::write(&scenario, text).unwrap();
+    let record = dir.path().join("rec");
+    std::fs::create_dir(&record).unwrap();
+    let out = dir.path().join("out");
+    let finished = eval_recorded(
+        &[
+            "--controller",
+            "expert",
+            "--scenario",
+            scenario.to_str().unwrap(),
+        ],
+        &record,
+        &out,
+    );
+    finished.assert_success();
+    assert_independent_readers_open(
+        &record.join("run-0000.mcap"),
+        &out.join("runs/run-0000.json"),
+        16,
+        &dir.path().join("team16.rrd"),
+    );
+}
+
+/// A lockstep run over processes, recorded by the world, holds the same ROS 2 messages (and the
+/// same replay channel) as the same run recorded in-process: the world is bit-identical in
+/// lockstep, and so is its recording. The test model is not a shipped one, so both store it.
+#[test]
+fn a_lockstep_run_over_processes_records_the_same_messages_as_in_process() {
+    let _watchdog = Watchdog::arm("record_processes", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("rec-procs");
+    let scenario = case1_scenario(dir.path(), 10.0);
+    let run_id = unique_run_id("recproc");
+    let leaks = LeakCheck::new(&run_id);
+    let over_processes = dir.path().join("processes.mcap");
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &dir.path().join("run-out"),
+        &["--clock", "lockstep"],
+    );
+    command.arg("--record").arg(&over_processes);
+    run(command, LIMIT).assert_success();
+    leaks.assert_clean();
+
+    let record = dir.path().join("rec");
+    std::fs::create_dir(&record).unwrap();
+    let model = test_model().to_str().unwrap();
+    eval_recorded(
+        &["--scenario", scenario.to_str().unwrap(), "--model", model],
+        &record,
+        &dir.path().join("eval-out"),
+    )
+    .assert_success();
+    let in_process = record.join("run-0000.mcap");
+    let compared = readers(&[
+        os("compare"),
+        over_processes.as_os_str(),
+        in_process.as_os_str(),
+    ]);
+    assert!(compared["messages"].as_u64().unwrap() > 0, "{compared}");
+    let meta = readers(&[os("metadata"), over_processes.as_os_str()]);
+    assert_eq!(meta["clock"], "lockstep", "{meta}");
+    assert!(
+        meta["model.0.stored"]
+            .as_str()
+            .unwrap()
+            .starts_with("attachment models/"),
+        "{meta}"
+    );
+}
+
+/// The world SIGKILLed about 10 s into a realtime run: the streaming reader (on a pipe, so
+/// nothing can be sought) reads at least 9 s of data from what it left.
+#[test]
+fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_chunk() {
+    let _watchdog = Watchdog::arm("record_sigkill", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("rec-kill");
+    let run_id = unique_run_id("reckill");
+    let leaks = LeakCheck::new(&run_id);
+    let file = dir.path().join("killed.mcap");
+    let scenario = repo_root().join("scenarios/case1.toml");
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &dir.path().join("out"),
+        &["--clock", "realtime"],
+    );
+    command.arg("--record").arg(&file);
+    let mut launch = LiveProcess::spawn(command);
+    await_connected(&mut launch);
+    std::thread::sleep(Duration::from_millis(10_500));
+    let Some(world) = world_pid(&run_id) else {
+        panic!("no world process\n{}", launch.describe());
+    };
+    send_signal(world, "-KILL");
+    let finished = launch.finish(LIMIT);
+    assert!(!finished.output.status.success(), "{}", finished.describe());
+    leaks.assert_clean();
+    let streamed = readers(&[os("stream"), file.as_os_str()]);
+    let latest = streamed["latest_s"].as_f64().unwrap_or(0.0);
+    assert!(
+        latest >= 9.0,
+        "the streaming reader read {latest} s of data\n{streamed}\n{}",
+        finished.describe()
+    );
+    // The run was cut short, so no summary was written: the reader stops at the cut.
+    assert!(latest < 30.0, "{streamed}");
+}
+
+/// A target whose folder is missing, a device, or a component that is a file: refused before
+/// anything runs, naming the path and the fix.
+#[test]
+fn bad_record_targets_are_refused_before_anything_runs() {
+    let _watchdog = Watchdog::arm("record_bad_targets", LIMIT);
+    let dir = TempDir::new("rec-bad");
+    let scenario = case1_scenario(dir.path(), 1.0);
+    let missing = dir.path().join("no/such/folder");
+    let cli = &binaries().cli;
+
+    let mut eval = Command::new(cli);
+    eval.args([
+        "eval",
+        "--controller",
+        "expert",
+        "--runs",
+        "1",
+        "--scenario",
+    ])
+    .arg(&scenario)
+    .arg("--record")
+    .arg(&missing);
+    let finished = run(eval, LIMIT);
+    finished.assert_failure_mentioning(&format!("{} does not exist", missing.display()));
+    finished.assert_failure_mentioning(&format!("mkdir -p {}", missing.display()));
+    assert!(
+        !finished.stdout().contains("Table I"),
+        "{}",
+        finished.describe()
+    );
+
+    let run_id = unique_run_id("recbad");
+    let leaks = LeakCheck::new(&run_id);
+    let out = dir.path().join("out");
+    for (target, needle) in [
+        (
+            missing.join("run.mcap"),
+            "does not exist: create it first".to_owned(),
+        ),
+        (
+            PathBuf::from("/dev/full"),
+            "/dev/full: it is a character device".to_owned(),
+        ),
+        (
+            scenario.join("run.mcap"),
+            format!("{} is a file, not a directory", scenario.display()),
+        ),
+    ] {
+        let mut command = formation_run(&run_id, &scenario, &out, &[]);
+        command.arg("--record").arg(&target);
+        let finished = run(command, LIMIT);
+        finished.assert_failure_mentioning(&needle);
+        assert!(
+            !finished.stdout().contains("agents connected"),
+            "refused before the launch\n{}",
+            finished.describe()
+        );
+    }
+    leaks.assert_clean();
+}
+
+/// A full disk: said before the run when the disk is full already; when the recording fills it
+/// mid-run, the recording stops with a message naming the file and the full disk, and the run
+/// goes on and writes its other outputs, in-process and over processes.
+#[test]
+fn a_full_disk_is_said_before_the_run_and_mid_run_stops_only_the_recording() {
+    let _watchdog = Watchdog::arm("record_full_disk", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("rec-full");
+    let disk = Tmpfs::mount(&dir.path().join("disk"), "256k");
+    let scenario = case1_scenario(dir.path(), 20.0);
+
+    // Mid-run, in-process: 20 s of case 1 take about 700 kB.
+    let out = dir.path().join("eval-out");
+    let finished = eval_recorded(
+        &[
+            "--controller",
+            "expert",
+            "--scenario",
+            scenario.to_str().unwrap(),
+        ],
+        disk.dir(),
+        &out,
+    );
+    finished.assert_success();
+    let stderr = finished.stderr();
+    let file = disk.dir().join("run-0000.mcap");
+    assert!(
+        stderr.contains("recording stopped")
+            && stderr.contains(&file.display().to_string())
+            && stderr.contains("the disk is full"),
+        "{}",
+        finished.describe()
+    );
+    assert!(
+        out.join("summary.json").is_file(),
+        "{}",
+        finished.describe()
+    );
+    assert_eq!(read_json(&out.join("runs/run-0000.json"))["complete"], true);
+    std::fs::remove_file(&file).unwrap();
+
+    // Mid-run, over processes: the world's recording stops, the run does not.
+    let run_id = unique_run_id("recfull");
+    let leaks = LeakCheck::new(&run_id);
+    let out = dir.path().join("run-out");
+    let file = disk.dir().join("run.mcap");
+    let mut command = formation_run(&run_id, &scenario, &out, &[]);
+    command.arg("--record").arg(&file);
+    let finished = run(command, LIMIT);
+    finished.assert_success();
+    assert!(
+        finished
+            .stderr()
+            .contains("formation-world: recording stopped")
+            && finished.stderr().contains("the disk is full"),
+        "{}",
+        finished.describe()
+    );
+    assert_eq!(read_json(&out.join("runs/run-0000.json"))["complete"], true);
+    assert!(
+        out.join("summary.json").is_file(),
+        "{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+
+    // Full before the run: fill the disk to its last byte, then record.
+    let filler = disk.dir().join("filler");
+    let _ = Command::new("dd")
+        .arg("if=/dev/zero")
+        .arg(format!("of={}", filler.display()))
+        .arg("bs=4k")
+        .stderr(Stdio::null())
+        .status();
+    let finished = eval_recorded(
+        &[
+            "--controller",
+            "expert",
+            "--scenario",
+            scenario.to_str().unwrap(),
+        ],
+        disk.dir(),
+        &dir.path().join("eval-full"),
+    );
+    finished.assert_failure_mentioning("the disk is full");
+    assert!(
+        !finished.stdout().contains("Table I"),
+        "{}",
+        finished.describe()
+    );
+}
