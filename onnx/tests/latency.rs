@@ -77,7 +77,10 @@ fn measure(label: &str, path: &Path) {
 #[ignore = "measurement; run with --ignored --nocapture"]
 fn single_sample_latency_percentiles() {
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
-    measure("onnx/models/policy.onnx (default)", &models.join("policy.onnx"));
+    measure(
+        "onnx/models/policy.onnx (default)",
+        &models.join("policy.onnx"),
+    );
     measure(
         "onnx/models/paper/policy.onnx",
         &models.join("paper").join("policy.onnx"),

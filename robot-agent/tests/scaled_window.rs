@@ -33,7 +33,9 @@ fn lit_cells(agent: &mut Agent, range: f64, d_star: f64) -> Vec<usize> {
 fn the_scaled_model_sees_a_neighbour_at_d_star_in_one_cell_at_every_spacing() {
     let mut agent = scaled_agent();
     let spec = agent.policy().occupancy_spec();
-    let reference = spec.d_star_ref_m.expect("the model declares a window scaled with d*");
+    let reference = spec
+        .d_star_ref_m
+        .expect("the model declares a window scaled with d*");
     let cells_ahead = (reference / spec.resolution_m).floor() as usize;
     let expected = vec![25 * spec.size_px + 25 + cells_ahead];
     // 2 % beyond d*, a third of a cell, so that no hit sits on a cell boundary.
@@ -58,6 +60,11 @@ fn a_goal_outside_the_scaled_models_d_star_range_is_refused() {
         d_star: 3.0,
         v_star: 0.7,
     };
-    let err = agent.act(&scan, 0.0, &goal).expect_err("3 m is outside 0.8–2.5 m");
-    assert!(matches!(err, DecisionError::OutsideEnvelope { .. }), "{err}");
+    let err = agent
+        .act(&scan, 0.0, &goal)
+        .expect_err("3 m is outside 0.8–2.5 m");
+    assert!(
+        matches!(err, DecisionError::OutsideEnvelope { .. }),
+        "{err}"
+    );
 }
