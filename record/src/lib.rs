@@ -1,6 +1,6 @@
 //! Recording a run to MCAP, for Foxglove, Rerun, ROS 2 tools and a later replay.
 //!
-//! A recording is an MCAP file with the `ros2` profile ([`file`]): each robot's scan, odometry,
+//! A recording is an MCAP file with the `ros2` profile ([`mod@file`]): each robot's scan, odometry,
 //! commanded Twist and `/tf`, the `/tf_static` frames, the team's goal and the formation's edges
 //! with their errors as markers ([`edges`]), all CDR with their `ros2msg` schemas, the same
 //! messages as the live ROS 2 team (`formation_ros2::team`); the run's metadata (scenario, seeds,
