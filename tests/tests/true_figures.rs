@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use formation_tests::{
     Finished, LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries,
-    case1_scenario, files_under, formation_run, formation_run_with_model, one_at_a_time, read_json,
+    case1_scenario, files_under, formation_run, formation_run_args, one_at_a_time, read_json,
     repo_root, run, send_signal, unique_run_id, world_pid,
 };
 use formation_world::metrics::{MetricsConfig, run_metrics};
@@ -52,9 +52,10 @@ fn assert_no_panic(finished: &Finished) {
 /// the shipped policy: the last 20 s it played are well formed, which used to count as a success
 /// at both tolerances. The run is kept, marked incomplete, and counts as a run that did not
 /// succeed; the terminal and `summary.json` say how many runs were incomplete.
+///
+/// The launch runs under `env --default-signal=HUP`: a harness started with `nohup` ignores
+/// SIGHUP, every child inherits that, and the world would rightly live through the signal.
 #[test]
-#[ignore = "regressed on 2026-12-03 (CI of the link-suite and recording merges): the lockstep run \
-            ended with exit 0 after SIGHUP to its world; under investigation, see the closing note"]
 fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
     let _watchdog = Watchdog::arm("sighup_incomplete", LIMIT);
     let _one = one_at_a_time();
@@ -64,13 +65,17 @@ fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
     let out = dir.path().join("out");
     let scenario = repo_root().join("scenarios/case1.toml");
     let model = repo_root().join("onnx/models/policy.onnx");
-    let mut launch = LiveProcess::spawn(formation_run_with_model(
+    let mut hangup_by_default = Command::new("env");
+    hangup_by_default
+        .arg("--default-signal=HUP")
+        .arg(&binaries().cli);
+    formation_run_args(
+        &mut hangup_by_default,
         &run_id,
-        &scenario,
-        &model,
-        &out,
+        (&scenario, &model, &out),
         &["--clock", "lockstep", "--pace-ms", "10"],
-    ));
+    );
+    let mut launch = LiveProcess::spawn(hangup_by_default);
     await_connected(&mut launch);
     // Wait until the journal holds more than the 20 s window (400 ticks), well short of 1200.
     let journal = out.join("runs/run-0000.journal");
