@@ -27,6 +27,8 @@ pub struct Cli {
 pub enum Command {
     /// Evaluate a controller over a scenario's runs and print Table I figures.
     Eval(EvalArgs),
+    /// Merge the shards of an evaluation spread over workers (`eval --shard`) into its summary.
+    Merge(MergeArgs),
     /// Record expert demonstrations into a dataset.
     Collect(CollectArgs),
     /// Train the paper's CNN on a dataset (PyTorch) and export it to ONNX.
@@ -119,6 +121,29 @@ pub struct EvalArgs {
     /// it with `--json`.
     #[arg(long, value_delimiter = ',', value_parser = team_size)]
     pub robots: Option<Vec<usize>>,
+    /// Play only runs `A .. A + --runs` of the evaluation (a share of a sweep over workers);
+    /// needs --shard.
+    #[arg(long, value_name = "A", requires = "shard")]
+    pub first_run: Option<usize>,
+    /// Write the runs' metrics as a shard for `formation merge`, which builds the summary one
+    /// evaluation of all the runs writes, byte for byte (in-process only).
+    #[arg(long, value_name = "FILE")]
+    pub shard: Option<PathBuf>,
+}
+
+/// `formation merge`.
+#[derive(Debug, Args)]
+pub struct MergeArgs {
+    /// The shards (`formation eval --shard`) of one evaluation, in any order.
+    #[arg(required = true, value_name = "SHARD")]
+    pub shards: Vec<PathBuf>,
+    /// The evaluation's number of runs (default: up to the last run a shard holds); a run that
+    /// no shard holds is an error.
+    #[arg(long, value_parser = run_count)]
+    pub runs: Option<usize>,
+    /// Write the merged summary here (the JSON `formation eval --json` writes).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
 }
 
 /// `formation collect`.

@@ -94,6 +94,8 @@ fn run_eval(
         record: None,
         record_runs: None,
         record_file: record.map(Path::to_path_buf),
+        first_run: None,
+        shard: None,
     };
     let (out, results) =
         eval::evaluate(&eval_args).with_context(|| format!("evaluating {name}"))?;

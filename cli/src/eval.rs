@@ -21,7 +21,7 @@ use formation_runtime::transport::Transport;
 use formation_world::metrics::{MetricsConfig, RunMetrics, run_metrics};
 use formation_world::{RunLog, Scenario, Trajectory};
 
-use crate::args::{ControllerKind, EvalArgs};
+use crate::args::{ControllerKind, EvalArgs, MergeArgs};
 use crate::paths;
 use crate::table::table_text;
 use crate::team_models::{
@@ -191,12 +191,8 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
     bar.finish_and_clear();
     let elapsed = started.elapsed().as_secs_f64();
     let per_run: Vec<RunMetrics> = results.iter().map(|r| r.metrics.clone()).collect();
-    let controller = match args.controller {
-        ControllerKind::Expert => "expert",
-        ControllerKind::Policy => "policy",
-    };
     let mut out = eval_output(
-        controller,
+        controller_name(args),
         team.model_ids,
         scenario.name(),
         Some(seed),
@@ -254,11 +250,8 @@ fn record_settings(
     } else {
         "in-process"
     };
-    let controller = match args.controller {
-        ControllerKind::Expert => "expert",
-        ControllerKind::Policy => "policy",
-    };
-    let launch = crate::record::launch_info(scenario, seed, clock, controller, &team.models);
+    let launch =
+        crate::record::launch_info(scenario, seed, clock, controller_name(args), &team.models);
     crate::record::checked_settings(target, launch).map(Some)
 }
 
@@ -354,12 +347,7 @@ fn results_in_process(
     team: &EvalTeam,
     bar: &indicatif::ProgressBar,
 ) -> anyhow::Result<Vec<RunResult>> {
-    let driver = match args.controller {
-        ControllerKind::Expert => Driver::Expert(ExpertGains::default()),
-        ControllerKind::Policy => Driver::Policy {
-            models: team.models.clone(),
-        },
-    };
+    let driver = driver_of(args, team);
     let recorded = |i: usize| {
         plan.record
             .as_ref()
@@ -404,6 +392,103 @@ fn results_in_process(
         }
     }
     Ok(results)
+}
+
+/// What drives the robots of an in-process evaluation.
+fn driver_of(args: &EvalArgs, team: &EvalTeam) -> Driver {
+    match args.controller {
+        ControllerKind::Expert => Driver::Expert(ExpertGains::default()),
+        ControllerKind::Policy => Driver::Policy {
+            models: team.models.clone(),
+        },
+    }
+}
+
+/// `expert` or `policy`, as the outputs name the controller.
+fn controller_name(args: &EvalArgs) -> &'static str {
+    match args.controller {
+        ControllerKind::Expert => "expert",
+        ControllerKind::Policy => "policy",
+    }
+}
+
+/// `formation eval --shard FILE [--first-run A] [--runs N]`: plays runs `A .. A + N` of the
+/// evaluation in this process (N: the scenario's runs after A) and writes their metrics as a
+/// shard, for `formation merge`.
+pub fn shard_command(args: &EvalArgs, shard: &Path) -> anyhow::Result<()> {
+    if args.processes
+        || args.out.is_some()
+        || args.json.is_some()
+        || args.save_trajectories.is_some()
+        || args.record.is_some()
+        || args.robots.is_some()
+    {
+        anyhow::bail!(
+            "--shard plays a share of the runs in this process and writes only the shard: drop \
+             --processes, --out, --json, --save-trajectories, --record and --robots (`formation \
+             merge SHARDS --json FILE` writes the summary)"
+        );
+    }
+    formation_proto::files::check_output_file(shard)?;
+    let scenario = Scenario::from_path(&args.scenario)?;
+    let first = args.first_run.unwrap_or(0);
+    let runs = args
+        .runs
+        .unwrap_or_else(|| scenario.runs().saturating_sub(first));
+    let Some(end) = first.checked_add(runs).filter(|_| runs > 0) else {
+        anyhow::bail!(
+            "--first-run {first} leaves no runs to play: give --runs N (the scenario has {} runs)",
+            scenario.runs()
+        );
+    };
+    let seed = args.seed.unwrap_or_else(|| scenario.seed());
+    let team = eval_team(args, &scenario)?;
+    let driver = driver_of(args, &team);
+    let bar = progress_bar(runs, "eval shard");
+    let results = with_threads(args.threads, || {
+        formation_learning::evaluate_run_range(
+            &scenario,
+            seed,
+            first..end,
+            &driver,
+            &MetricsConfig::default(),
+            &|_| false,
+            &|n| bar.set_position(n as u64),
+        )
+    })??;
+    bar.finish_and_clear();
+    let out = formation_schema::EvalShard {
+        controller: controller_name(args).to_owned(),
+        models: team.model_ids,
+        scenario: scenario.name().to_owned(),
+        seed,
+        team_size: team.team_size,
+        first_run: first,
+        per_run: results.into_iter().map(|r| r.metrics).collect(),
+    };
+    paths::write_atomic(shard, &formation_schema::to_json(&out)?)?;
+    println!("wrote {} (runs {first}..{end})", shard.display());
+    Ok(())
+}
+
+/// `formation merge SHARDS [--runs N] [--json FILE]`: the summary of an evaluation from its
+/// shards, byte for byte what one `formation eval --json` of all the runs writes.
+pub fn merge_command(args: &MergeArgs) -> anyhow::Result<()> {
+    if let Some(json) = &args.json {
+        formation_proto::files::check_output_file(json)?;
+    }
+    let shards = args
+        .shards
+        .iter()
+        .map(|path| formation_schema::read::<formation_schema::EvalShard>(path))
+        .collect::<Result<Vec<_>, _>>()?;
+    let out = formation_learning::shards::merge_shards(&shards, args.runs)?;
+    print!("{}", table_text(&out));
+    if let Some(json) = &args.json {
+        paths::write_atomic(json, &formation_schema::to_json_pretty(&out)?)?;
+        println!("wrote {}", json.display());
+    }
+    Ok(())
 }
 
 /// `formation eval --robots ...`: the scaling table over team sizes.
@@ -467,6 +552,9 @@ pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
     }
     if let Some(dir) = &args.out {
         formation_proto::files::check_output_dir(dir)?;
+    }
+    if let Some(shard) = &args.shard {
+        return shard_command(args, shard);
     }
     if let Some(sizes) = &args.robots {
         return scaling_command(args, sizes);

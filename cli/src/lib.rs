@@ -55,6 +55,7 @@ pub fn main_with_args() -> anyhow::Result<()> {
     formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
     match cli.command {
         args::Command::Eval(a) => eval::eval_command(&a),
+        args::Command::Merge(a) => eval::merge_command(&a),
         args::Command::Collect(a) => collect::collect_command(&a),
         args::Command::Train(a) => learn::train_command(&a),
         args::Command::Dagger(a) => learn::dagger_command(&a),

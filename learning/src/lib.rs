@@ -5,16 +5,19 @@
 //!   robot), run in parallel with rayon; every run is a pure function of (scenario, base seed,
 //!   run index, driver), so results do not depend on the thread count.
 //! * [`scaling`]: the scaling table: Table I figures per team size and driver.
+//! * [`shards`]: an evaluation spread over workers (a Ray sweep): shares of its runs, merged
+//!   into the summary one evaluation writes, byte for byte.
 //! * [`dagger`]: DAgger over teams of several sizes: the policy drives, the expert labels every
 //!   robot's view, the dataset grows, the policy is retrained, and each iteration is evaluated.
 
 pub mod dagger;
 pub mod rollout;
 pub mod scaling;
+pub mod shards;
 
 use std::path::PathBuf;
 
-pub use rollout::{Driver, RunResult, eval_output, evaluate_runs};
+pub use rollout::{Driver, RunResult, eval_output, evaluate_run_range, evaluate_runs};
 
 /// Why a rollout, an evaluation or a DAgger iteration failed.
 #[derive(Debug, thiserror::Error)]

@@ -93,10 +93,24 @@ pub fn evaluate_runs(
     keep: &(dyn Fn(usize) -> bool + Sync),
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<RunResult>, LearningError> {
+    evaluate_run_range(scenario, base_seed, 0..runs, driver, cfg, keep, progress)
+}
+
+/// [`evaluate_runs`] for the runs `range` of the evaluation only (a share of a sweep): run `i`
+/// is the same run, with the same result, as run `i` of the whole evaluation.
+pub fn evaluate_run_range(
+    scenario: &Scenario,
+    base_seed: u64,
+    range: std::ops::Range<usize>,
+    driver: &Driver,
+    cfg: &MetricsConfig,
+    keep: &(dyn Fn(usize) -> bool + Sync),
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<Vec<RunResult>, LearningError> {
     // Build one controller here first, so that a model that cannot load is a typed error.
     driver.controller(scenario)?;
     let done = AtomicUsize::new(0);
-    (0..runs)
+    range
         .into_par_iter()
         .map_init(
             || driver.controller(scenario),

@@ -8,6 +8,7 @@
 //! | `summary.json`, `formation eval --json` | [`EvalOutput`] | [`EvalOutput::FORMAT`] | [`EvalOutput::VERSION`] |
 //! | `profile.json` | [`LatencyProfile`] | [`LatencyProfile::FORMAT`] | [`LatencyProfile::VERSION`] |
 //! | `formation eval --robots ... --json` | [`ScalingTable`] | [`ScalingTable::FORMAT`] | [`ScalingTable::VERSION`] |
+//! | `formation eval --shard FILE` (a share of the runs, for `formation merge`) | [`EvalShard`] | [`EvalShard::FORMAT`] | [`EvalShard::VERSION`] |
 //!
 //! A format may read older versions than it writes ([`SchemaFile::OLDEST_VERSION`]): the run log
 //! is written as version 2 (its trajectory names its neighbour rule) and version 1 files still
@@ -34,6 +35,7 @@ mod nan;
 mod profile;
 mod run;
 mod scaling;
+mod shard;
 mod summary;
 mod team_size;
 mod timing;
@@ -48,6 +50,7 @@ use serde::{Deserialize, Serialize};
 pub use profile::{LatencyProfile, StageStats};
 pub use run::{RunLog, RunMetrics, TeamMetrics, TicksPlayed, Trajectory};
 pub use scaling::{ScalingRow, ScalingTable};
+pub use shard::EvalShard;
 pub use summary::{Coverage, EvalOutput, IncompleteRun, MediansOver, Quantiles, Summary};
 pub use team_size::ModelTeamSize;
 pub use timing::TimingLog;
