@@ -118,7 +118,7 @@ pub struct EvalArgs {
     pub record_file: Option<PathBuf>,
     /// Evaluate over these team sizes (e.g. `3,5,8,13,16,32`): the scenario resized to each, the
     /// expert always and the policy when `--model` is given; prints the scaling table and writes
-    /// it with `--json`.
+    /// it with `--json`. With `--shard`, one size: the scenario resized to it.
     #[arg(long, value_delimiter = ',', value_parser = team_size)]
     pub robots: Option<Vec<usize>>,
     /// Play only runs `A .. A + --runs` of the evaluation (a share of a sweep over workers);

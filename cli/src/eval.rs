@@ -412,25 +412,29 @@ fn controller_name(args: &EvalArgs) -> &'static str {
     }
 }
 
-/// `formation eval --shard FILE [--first-run A] [--runs N]`: plays runs `A .. A + N` of the
-/// evaluation in this process (N: the scenario's runs after A) and writes their metrics as a
-/// shard, for `formation merge`.
+/// `formation eval --shard FILE [--first-run A] [--runs N] [--robots R]`: plays runs `A .. A + N`
+/// of the evaluation in this process (N: the scenario's runs after A), the scenario resized to
+/// `R` robots when given (one size: a sweep cell), and writes their metrics as a shard, for
+/// `formation merge`.
 pub fn shard_command(args: &EvalArgs, shard: &Path) -> anyhow::Result<()> {
     if args.processes
         || args.out.is_some()
         || args.json.is_some()
         || args.save_trajectories.is_some()
         || args.record.is_some()
-        || args.robots.is_some()
+        || args.robots.as_ref().is_some_and(|sizes| sizes.len() != 1)
     {
         anyhow::bail!(
             "--shard plays a share of the runs in this process and writes only the shard: drop \
-             --processes, --out, --json, --save-trajectories, --record and --robots (`formation \
-             merge SHARDS --json FILE` writes the summary)"
+             --processes, --out, --json, --save-trajectories and --record, and give --robots one \
+             team size at most (`formation merge SHARDS --json FILE` writes the summary)"
         );
     }
     formation_proto::files::check_output_file(shard)?;
-    let scenario = Scenario::from_path(&args.scenario)?;
+    let mut scenario = Scenario::from_path(&args.scenario)?;
+    if let Some(&[robots]) = args.robots.as_deref() {
+        scenario = scenario.with_robots(robots)?;
+    }
     let first = args.first_run.unwrap_or(0);
     let runs = args
         .runs
