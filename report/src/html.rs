@@ -626,6 +626,7 @@ fn write_player(html: &mut String, run: &RunSection) {
     html.push_str("<canvas></canvas>\n<div class=\"player-controls\"><button type=\"button\" class=\"player-play\">Play</button>");
     html.push_str("<input type=\"range\" class=\"player-time\" aria-label=\"time\">");
     html.push_str("<select class=\"player-speed\" aria-label=\"speed\"><option value=\"0.5\">0.5×</option><option value=\"1\" selected>1×</option><option value=\"2\">2×</option><option value=\"5\">5×</option></select>");
+    html.push_str("<label><input type=\"checkbox\" class=\"player-follow\"> follow the team</label>");
     html.push_str("<output class=\"player-clock\"></output></div>\n");
     let _ = writeln!(
         html,

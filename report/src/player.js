@@ -1,9 +1,9 @@
-// The run players of the report (see player.rs): each <figure class="player"> holds its run's
+// The run players of the report (see player.rs): each figure of class "player" holds its run's
 // frames as JSON and gets a canvas, play/pause, a speed and a time slider. No network, no library.
 // A URL fragment drives it for tests: #player-t=SECONDS shows every player at that time, paused,
-// the first scrolled to the top, with its robots' positions on screen in data-player-robots;
+// with its robots' positions in the viewport in data-player-robots;
 // #player-bench draws 300 frames of the first player, each rasterised, and writes the frame rate
-// in data-player-fps on <body>.
+// in data-player-fps on the body element. (No tags in these comments: the tests search the DOM.)
 (function () {
   'use strict';
   var TRAIL_S = 10;
@@ -24,6 +24,7 @@
     this.button = root.querySelector('button.player-play');
     this.speed = root.querySelector('select.player-speed');
     this.clock = root.querySelector('output.player-clock');
+    this.follow = root.querySelector('input.player-follow');
     this.t0 = data.t[0];
     this.t1 = data.t[data.t.length - 1];
     this.slider.min = String(this.t0);
@@ -33,8 +34,11 @@
     this.playing = false;
     this.last = null;
     this.bounds();
+    // Follow the team when its run covers much more ground than the team itself.
+    this.follow.checked = (this.hi[0] - this.lo[0]) * (this.hi[1] - this.lo[1]) > 4 * this.span[0] * this.span[1];
     this.resize();
     var self = this;
+    this.follow.addEventListener('change', function () { self.resize(); self.publish(); });
     this.button.addEventListener('click', function () { self.toggle(); });
     this.slider.addEventListener('input', function () { self.pause(); self.seek(parseFloat(self.slider.value)); });
     root.addEventListener('keydown', function (event) {
@@ -43,18 +47,25 @@
     window.addEventListener('resize', function () { self.resize(); });
   }
   Player.prototype.bounds = function () {
-    var lo = [Infinity, Infinity], hi = [-Infinity, -Infinity];
+    // The run's bounds, and the largest extent of the team about its centre at any frame.
+    var lo = [Infinity, Infinity], hi = [-Infinity, -Infinity], span = [0, 0];
     this.data.pose.forEach(function (row) {
+      var flo = [Infinity, Infinity], fhi = [-Infinity, -Infinity];
       for (var i = 0; i + 2 < row.length; i += 3) {
         if (row[i] === null || row[i + 1] === null) { continue; }
-        lo[0] = Math.min(lo[0], row[i]); hi[0] = Math.max(hi[0], row[i]);
-        lo[1] = Math.min(lo[1], row[i + 1]); hi[1] = Math.max(hi[1], row[i + 1]);
+        flo[0] = Math.min(flo[0], row[i]); fhi[0] = Math.max(fhi[0], row[i]);
+        flo[1] = Math.min(flo[1], row[i + 1]); fhi[1] = Math.max(fhi[1], row[i + 1]);
       }
+      if (!isFinite(flo[0])) { return; }
+      lo = [Math.min(lo[0], flo[0]), Math.min(lo[1], flo[1])];
+      hi = [Math.max(hi[0], fhi[0]), Math.max(hi[1], fhi[1])];
+      span = [Math.max(span[0], fhi[0] - flo[0]), Math.max(span[1], fhi[1] - flo[1])];
     });
     if (!isFinite(lo[0])) { lo = [-1, -1]; hi = [1, 1]; }
     var pad = Math.max(0.5, 0.6 * (this.data.d_star || 1));
     this.lo = [lo[0] - pad, lo[1] - pad];
     this.hi = [hi[0] + pad, hi[1] + pad];
+    this.span = [2 * span[0] + 2 * pad, 2 * span[1] + 2 * pad];
   };
   Player.prototype.resize = function () {
     var ratio = window.devicePixelRatio || 1;
@@ -63,10 +74,8 @@
     this.canvas.height = Math.round(HEIGHT * ratio);
     this.ratio = ratio;
     this.width = width;
-    var scale = Math.min(width / (this.hi[0] - this.lo[0]), HEIGHT / (this.hi[1] - this.lo[1]));
-    this.scale = scale;
-    this.ox = (width - scale * (this.hi[0] - this.lo[0])) / 2 - scale * this.lo[0];
-    this.oy = (HEIGHT + scale * (this.hi[1] - this.lo[1])) / 2 + scale * this.lo[1];
+    var extent = this.follow.checked ? this.span : [this.hi[0] - this.lo[0], this.hi[1] - this.lo[1]];
+    this.scale = Math.min(width / extent[0], HEIGHT / extent[1]);
     this.draw();
   };
   Player.prototype.px = function (x, y) { return [this.ox + this.scale * x, this.oy - this.scale * y]; };
@@ -90,11 +99,40 @@
     }
     return { frame: at[1] < 0.5 ? at[0] : Math.min(at[0] + 1, this.data.t.length - 1), poses: out, index: at[0] };
   };
+  // Where the world's origin lands: the team's centre in the middle when following it, else the
+  // run's bounds centred.
+  Player.prototype.place = function (poses) {
+    var scale = this.scale, c = [0, 0], n = 0;
+    if (this.follow.checked) {
+      poses.forEach(function (p) { if (p) { c[0] += p[0]; c[1] += p[1]; n += 1; } });
+      if (n > 0) { this.ox = this.width / 2 - scale * c[0] / n; this.oy = HEIGHT / 2 + scale * c[1] / n; return; }
+    }
+    this.ox = (this.width - scale * (this.hi[0] - this.lo[0])) / 2 - scale * this.lo[0];
+    this.oy = (HEIGHT + scale * (this.hi[1] - this.lo[1])) / 2 + scale * this.lo[1];
+  };
+  // Grid lines every 0.5, 1, 2, 5, ... m, at least 40 px apart.
+  Player.prototype.grid = function () {
+    var ctx = this.ctx, step = 0.5;
+    while (step * this.scale < 40) { step *= String(step).charAt(0) === '2' ? 2.5 : 2; }
+    ctx.strokeStyle = '#eceff1';
+    ctx.lineWidth = 1;
+    ctx.beginPath();
+    var x0 = Math.ceil(-this.ox / this.scale / step) * step, y0 = Math.ceil((this.oy - HEIGHT) / this.scale / step) * step;
+    for (var x = x0; this.ox + this.scale * x <= this.width; x += step) {
+      var px = Math.round(this.ox + this.scale * x) + 0.5; ctx.moveTo(px, 0); ctx.lineTo(px, HEIGHT);
+    }
+    for (var y = y0; this.oy - this.scale * y >= 0; y += step) {
+      var py = Math.round(this.oy - this.scale * y) + 0.5; ctx.moveTo(0, py); ctx.lineTo(this.width, py);
+    }
+    ctx.stroke();
+  };
   Player.prototype.draw = function () {
     var ctx = this.ctx, data = this.data, self = this, state = this.posesAt(this.time);
+    this.place(state.poses);
     ctx.setTransform(this.ratio, 0, 0, this.ratio, 0, 0);
     ctx.fillStyle = '#ffffff';
     ctx.fillRect(0, 0, this.width, HEIGHT);
+    this.grid();
     // Trails: each robot's path over the last TRAIL_S seconds.
     var first = this.frameAt(this.time - TRAIL_S)[0];
     ctx.lineWidth = 1.5;
@@ -200,7 +238,6 @@
     if (players.length === 0) { return; }
     var hash = decodeURIComponent(location.hash.slice(1)), at = /^player-t=([0-9.]+)$/.exec(hash);
     if (at) {
-      players[0].root.scrollIntoView({ block: 'start' });
       players.forEach(function (p) { p.seek(parseFloat(at[1])); p.publish(); });
     } else if (hash === 'player-bench') {
       bench(players[0]);
