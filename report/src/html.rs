@@ -177,6 +177,7 @@ table.results th:first-child, table.results td:first-child { text-align: left; }
 table.results thead th { font-weight: 600; color: var(--muted); font-size: 0.84rem; text-transform: uppercase; letter-spacing: 0.03em; border-bottom: 2px solid var(--ink); vertical-align: bottom; white-space: normal; }
 table.results tr.paper td { color: var(--paper); font-style: italic; background: #fdf6f5; }
 table.results .detail { color: var(--muted); font-size: 0.82rem; font-style: normal; }
+table.results .detail code { word-break: break-all; white-space: normal; }
 .table-scroll { overflow-x: auto; }
 figure { margin: 0; }
 figure.plot { background: #fff; }
@@ -520,13 +521,24 @@ fn write_scaling(html: &mut String, section: &ScalingSection) {
     }
     html.push_str("</tr></thead>\n<tbody>\n");
     for row in &section.rows {
+        // The model id and the IQR go on a second line of their cells: on one line the table
+        // was wider than the page at 1300 px and its last column was clipped.
         let who = match &row.model {
-            Some(id) => format!("{} <code>{}</code>", escape(&row.controller), escape(id)),
+            Some(id) => format!(
+                "{}<div class=\"detail\"><code>{}</code></div>",
+                escape(&row.controller),
+                escape(id)
+            ),
             None => escape(&row.controller),
         };
         let convergence = row.convergence_s.map_or_else(
             || "–".to_owned(),
-            |q| format!("{:.1} s ({:.1}–{:.1})", q.median, q.q1, q.q3),
+            |q| {
+                format!(
+                    "{:.1} s<div class=\"detail\">IQR {:.1}–{:.1}</div>",
+                    q.median, q.q1, q.q3
+                )
+            },
         );
         let error = row
             .rel_formation_error
@@ -626,7 +638,9 @@ fn write_player(html: &mut String, run: &RunSection) {
     html.push_str("<canvas></canvas>\n<div class=\"player-controls\"><button type=\"button\" class=\"player-play\">Play</button>");
     html.push_str("<input type=\"range\" class=\"player-time\" aria-label=\"time\">");
     html.push_str("<select class=\"player-speed\" aria-label=\"speed\"><option value=\"0.5\">0.5×</option><option value=\"1\" selected>1×</option><option value=\"2\">2×</option><option value=\"5\">5×</option></select>");
-    html.push_str("<label><input type=\"checkbox\" class=\"player-follow\"> follow the team</label>");
+    html.push_str(
+        "<label><input type=\"checkbox\" class=\"player-follow\"> follow the team</label>",
+    );
     html.push_str("<output class=\"player-clock\"></output></div>\n");
     let _ = writeln!(
         html,

@@ -218,7 +218,11 @@ mod tests {
         assert_eq!(frame_stride(1201, 400), 4);
         let traj = line_of_robots(3, 1201);
         let data = player_data(&traj);
-        assert!(data.frames.len() <= MAX_PLAYER_FRAMES, "{}", data.frames.len());
+        assert!(
+            data.frames.len() <= MAX_PLAYER_FRAMES,
+            "{}",
+            data.frames.len()
+        );
         assert_eq!(data.stride, 4);
         assert_eq!(data.samples, 1201);
         assert_eq!(data.frames[0].time, 0.0);
@@ -256,7 +260,9 @@ mod tests {
         traj.poses[1][1].y = f64::NAN;
         let json = player_json(&player_data(&traj));
         assert!(
-            json.starts_with("{\"version\":1,\"robots\":2,\"stride\":1,\"samples\":2,\"d_star\":1,"),
+            json.starts_with(
+                "{\"version\":1,\"robots\":2,\"stride\":1,\"samples\":2,\"d_star\":1,"
+            ),
             "{json}"
         );
         assert!(json.contains("\"t\":[0,0.05]"), "{json}");
