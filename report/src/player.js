@@ -35,7 +35,7 @@
     this.last = null;
     this.bounds();
     // Follow the team when its run covers much more ground than the team itself.
-    this.follow.checked = (this.hi[0] - this.lo[0]) * (this.hi[1] - this.lo[1]) > 4 * this.span[0] * this.span[1];
+    this.follow.checked = (this.hi[0] - this.lo[0]) * (this.hi[1] - this.lo[1]) > 2 * this.span[0] * this.span[1];
     this.resize();
     var self = this;
     this.follow.addEventListener('change', function () { self.resize(); self.publish(); });
@@ -65,7 +65,7 @@
     var pad = Math.max(0.5, 0.6 * (this.data.d_star || 1));
     this.lo = [lo[0] - pad, lo[1] - pad];
     this.hi = [hi[0] + pad, hi[1] + pad];
-    this.span = [2 * span[0] + 2 * pad, 2 * span[1] + 2 * pad];
+    this.span = [1.4 * span[0] + 2 * pad, 1.4 * span[1] + 2 * pad];
   };
   Player.prototype.resize = function () {
     var ratio = window.devicePixelRatio || 1;
