@@ -97,13 +97,18 @@ fn run_chromium(browser: &Path, profile: &Path, args: &[String], url: &str) -> B
     }
 }
 
-/// The value of attribute `name` on the dumped `<body>` tag.
-fn body_attribute(dom: &str, name: &str) -> Option<String> {
-    let body = &dom[dom.find("<body")?..];
-    let tag = &body[..body.find('>')?];
-    let start = tag.find(&format!("{name}=\""))? + name.len() + 2;
+/// The value of attribute `name` on the first dumped tag that starts with `opening`.
+fn tag_attribute(dom: &str, opening: &str, name: &str) -> Option<String> {
+    let from = &dom[dom.find(opening)?..];
+    let tag = &from[..from.find('>')?];
+    let start = tag.find(&format!(" {name}=\""))? + name.len() + 3;
     let end = start + tag[start..].find('"')?;
     Some(tag[start..end].to_owned())
+}
+
+/// The value of attribute `name` on the dumped `<body>` tag.
+fn body_attribute(dom: &str, name: &str) -> Option<String> {
+    tag_attribute(dom, "<body", name)
 }
 
 /// Console messages other than the page's own check line (Chromium logs `console.error`, uncaught
@@ -120,11 +125,7 @@ fn unexpected_console_lines(stderr: &str) -> Vec<&str> {
 
 /// The value of attribute `name` on the dumped `<html>` tag.
 fn html_attribute(dom: &str, name: &str) -> Option<String> {
-    let html = &dom[dom.find("<html")?..];
-    let tag = &html[..html.find('>')?];
-    let start = tag.find(&format!("{name}=\""))? + name.len() + 2;
-    let end = start + tag[start..].find('"')?;
-    Some(tag[start..end].to_owned())
+    tag_attribute(dom, "<html", name)
 }
 
 /// Headless Chromium; its absence fails the test with the fix (no test passes by skipping).
@@ -380,11 +381,7 @@ fn decode_png(path: &Path) -> Image {
 
 /// The value of attribute `name` on the dumped `<figure class="player" ...>` tag.
 fn player_attribute(dom: &str, name: &str) -> Option<String> {
-    let figure = &dom[dom.find("<figure class=\"player\"")?..];
-    let tag = &figure[..figure.find('>')?];
-    let start = tag.find(&format!("{name}=\""))? + name.len() + 2;
-    let end = start + tag[start..].find('"')?;
-    Some(tag[start..end].to_owned())
+    tag_attribute(dom, "<figure class=\"player\"", name)
 }
 
 /// `x,y;x,y` → points.
