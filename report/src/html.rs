@@ -737,6 +737,13 @@ mod tests {
         assert_eq!(html.matches("<figure class=\"plot\"").count(), 4);
         assert!(html.contains("aria-label=\"a &lt;figure&gt;\""));
         assert!(html.contains("<b>Figure 2:</b> case"));
+        // The run's player: its canvas, its controls and its frames as JSON.
+        assert!(html.contains("<figure class=\"player\" tabindex=\"0\" data-run=\"run-case1-0\""));
+        assert!(html.contains(
+            "<script type=\"application/json\" class=\"player-data\">{\"t\":[0]}</script>"
+        ));
+        assert!(html.contains("class=\"player-play\"") && html.contains("class=\"player-time\""));
+        assert_eq!(html.matches("<canvas>").count(), 1);
         assert!(html.contains("href=\"#fig-9\"") && !html.contains("href=\"#training\""));
         assert!(!html.contains("http://") && !html.contains("https://") && !html.contains(" src="));
     }

@@ -25,6 +25,7 @@
     this.speed = root.querySelector('select.player-speed');
     this.clock = root.querySelector('output.player-clock');
     this.follow = root.querySelector('input.player-follow');
+    if (!data.t || data.t.length === 0) { throw new Error('no frames'); }
     this.t0 = data.t[0];
     this.t1 = data.t[data.t.length - 1];
     this.slider.min = String(this.t0);
@@ -233,7 +234,13 @@
   }
   document.addEventListener('DOMContentLoaded', function () {
     var players = [];
-    document.querySelectorAll('figure.player').forEach(function (root) { players.push(new Player(root)); });
+    document.querySelectorAll('figure.player').forEach(function (root) {
+      try {
+        players.push(new Player(root));
+      } catch (error) {
+        console.error('a run player could not start: ' + error);
+      }
+    });
     document.body.setAttribute('data-players', String(players.length));
     if (players.length === 0) { return; }
     var hash = decodeURIComponent(location.hash.slice(1)), at = /^player-t=([0-9.]+)$/.exec(hash);
