@@ -3,7 +3,9 @@
 // A URL fragment drives it for tests: #player-t=SECONDS shows every player at that time, paused,
 // with its robots' positions in the viewport in data-player-robots;
 // #player-bench draws 300 frames of the first player, each rasterised, and writes the frame rate
-// in data-player-fps on the body element. (No tags in these comments: the tests search the DOM.)
+// in data-player-fps on the body element; #player-play plays the first player for 3 s and writes
+// the frames shown per second in data-player-play-fps. (No tags in these comments: the tests
+// search the DOM.)
 (function () {
   'use strict';
   var TRAIL_S = 10;
@@ -34,6 +36,7 @@
     this.time = this.t0;
     this.playing = false;
     this.last = null;
+    this.played = 0;
     this.bounds();
     // Follow the team when its run covers much more ground than the team itself.
     this.follow.checked = (this.hi[0] - this.lo[0]) * (this.hi[1] - this.lo[1]) > 2 * this.span[0] * this.span[1];
@@ -202,6 +205,7 @@
       self.last = now;
       if (self.time >= self.t1) { self.seek(self.t1); self.pause(); return; }
       self.seek(self.time);
+      self.played += 1;
       requestAnimationFrame(tick);
     }
     requestAnimationFrame(tick);
@@ -232,6 +236,19 @@
       span.toFixed(1) + ' s in ' + ms.toFixed(0) + ' ms');
     console.log('formation-report: player ' + fps.toFixed(1) + ' frames/s (' + player.data.robots + ' robots)');
   }
+  // Plays `player` at 1x for `ms` of real time and writes the frames it showed per second in
+  // data-player-play-fps on the body element (read over the DevTools protocol by
+  // scripts/player-fps: a DOM dump would not wait).
+  function playFor(player, ms) {
+    var start = performance.now();
+    player.played = 0;
+    player.play();
+    setTimeout(function () {
+      var fps = 1000 * player.played / (performance.now() - start);
+      player.pause();
+      document.body.setAttribute('data-player-play-fps', fps.toFixed(1));
+    }, ms);
+  }
   document.addEventListener('DOMContentLoaded', function () {
     var players = [];
     document.querySelectorAll('figure.player').forEach(function (root) {
@@ -248,6 +265,8 @@
       players.forEach(function (p) { p.seek(parseFloat(at[1])); p.publish(); });
     } else if (hash === 'player-bench') {
       bench(players[0]);
+    } else if (hash === 'player-play') {
+      playFor(players[0], 3000);
     } else {
       players.forEach(function (p) { p.publish(); });
     }
