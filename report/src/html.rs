@@ -1,5 +1,5 @@
-//! The report page: one self-contained HTML document (inline CSS, inline SVG, one small inline
-//! script, a Content-Security-Policy that forbids loading anything) laid out like the paper's
+//! The report page: one self-contained HTML document (inline CSS, inline SVG, two small inline
+//! scripts, a Content-Security-Policy that forbids loading anything) laid out like the paper's
 //! results section: Table I, Fig. 9, the case runs (Figs. 6-8), training and latency.
 //!
 //! The first inline script only inspects the page: on load it checks that every figure's SVG has

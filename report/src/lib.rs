@@ -11,7 +11,8 @@
 //! * for each run log (the paper's cases, Figs. 6-8): formation and orientation error over time,
 //!   wheel commands, and the trajectories with the formation drawn every 3 s; for a team whose
 //!   edges follow a neighbour graph, the median and worst edge error instead of one line per
-//!   pair, and the graph of each snapshot (every 10 s);
+//!   pair, and the graph of each snapshot (every 10 s); and a player of the run (the robots, their
+//!   headings, the neighbour graph and its edge errors over time; [`player`]);
 //! * the scaling over team sizes (`scaling*.json` from `formation eval --robots ...`): the table
 //!   and success and convergence against the team size;
 //! * the training loss curve and the latency profile, when present.
@@ -20,7 +21,8 @@
 //! HTML file.
 //!
 //! Modules: [`input`] (finding and reading inputs), [`series`] (the plotted numbers, pure),
-//! [`figures`] (SVG drawing), [`html`] (the page), [`loss`] and [`profile`] (optional inputs).
+//! [`figures`] (SVG drawing), [`player`] (the players' frames, pure), [`html`] (the page),
+//! [`loss`] and [`profile`] (optional inputs).
 
 pub mod error;
 pub mod figures;
