@@ -1,10 +1,12 @@
-//! The report page: one self-contained HTML document (inline CSS, inline SVG, one small inline
-//! script, a Content-Security-Policy that forbids loading anything) laid out like the paper's
+//! The report page: one self-contained HTML document (inline CSS, inline SVG, two small inline
+//! scripts, a Content-Security-Policy that forbids loading anything) laid out like the paper's
 //! results section: Table I, Fig. 9, the case runs (Figs. 6-8), training and latency.
 //!
-//! The inline script only inspects the page: on load it checks that every figure's SVG has a
-//! non-empty box and drawn elements and records the count in `data-figures-ok` on `<body>` (and
-//! in the console), which the browser test reads back.
+//! The first inline script only inspects the page: on load it checks that every figure's SVG has
+//! a non-empty box and drawn elements and records the count in `data-figures-ok` on `<body>` (and
+//! in the console), and counts the tables wider than their box (`data-tables-clipped`), which the
+//! browser test reads back. The second (`player.js`) plays each run's recorded frames on a
+//! `<canvas>` ([`crate::player`]).
 
 use std::fmt::Write as _;
 
@@ -73,6 +75,10 @@ pub struct RunSection {
     pub caption: String,
     /// True when the run stopped before its last tick.
     pub incomplete: bool,
+    /// What the player shows and how it samples the run (plain text).
+    pub player_note: String,
+    /// The player's frames ([`crate::player::player_json`]); empty for no player.
+    pub player_json: String,
 }
 
 /// One Table I row of ours.
@@ -171,6 +177,7 @@ table.results th:first-child, table.results td:first-child { text-align: left; }
 table.results thead th { font-weight: 600; color: var(--muted); font-size: 0.84rem; text-transform: uppercase; letter-spacing: 0.03em; border-bottom: 2px solid var(--ink); vertical-align: bottom; white-space: normal; }
 table.results tr.paper td { color: var(--paper); font-style: italic; background: #fdf6f5; }
 table.results .detail { color: var(--muted); font-size: 0.82rem; font-style: normal; }
+table.results .detail code { word-break: break-all; white-space: normal; }
 .table-scroll { overflow-x: auto; }
 figure { margin: 0; }
 figure.plot { background: #fff; }
@@ -191,6 +198,14 @@ dl.facts dd { margin: 0; }
 .badge { display: inline-block; margin-left: 8px; padding: 0 6px; border: 1px solid var(--paper); border-radius: 3px; color: var(--paper); font-size: 0.75rem; font-weight: 600; vertical-align: middle; text-transform: uppercase; letter-spacing: 0.04em; }
 footer { color: var(--muted); font-size: 0.85rem; padding: 24px 32px 40px; text-align: center; }
 ul.inputs { columns: 2; font-size: 0.88rem; }
+figure.player { margin: 18px 0 0; padding-top: 14px; border-top: 1px solid var(--rule); outline: none; }
+figure.player canvas { display: block; width: 100%; height: 440px; border: 1px solid var(--rule); border-radius: 4px; background: #fff; }
+.player-controls { display: flex; align-items: center; gap: 12px; margin-top: 8px; font-size: 0.9rem; }
+.player-controls button { min-width: 5em; font: inherit; padding: 3px 10px; }
+.player-controls input[type=range] { flex: 1; }
+.player-clock { min-width: 21em; font-variant-numeric: tabular-nums; color: var(--muted); }
+.player-scale { display: inline-block; width: 110px; height: 9px; vertical-align: middle; border-radius: 2px;
+  background: linear-gradient(to right, hsl(130,75%,40%), hsl(65,75%,40%), hsl(0,75%,40%)); }
 @media (max-width: 900px) { .panels { grid-template-columns: 1fr; } ul.inputs { columns: 1; } .wrap { padding: 0 14px; } }
 @media print { body { background: #fff; } .card { border: none; padding: 0; } nav, .svg-link { display: none; } }
 "#;
@@ -228,11 +243,19 @@ const CHECK_SCRIPT: &str = r#"
     document.body.setAttribute('data-figures-total', String(figures.length));
     document.body.setAttribute('data-figures-ok', String(ok));
     document.body.setAttribute('data-figures-bad', bad.join(' '));
+    var clipped = [];
+    document.querySelectorAll('.table-scroll').forEach(function (box, k) {
+      if (box.scrollWidth > box.clientWidth + 1) { clipped.push(k + ':' + box.scrollWidth + '>' + box.clientWidth); }
+    });
+    document.body.setAttribute('data-tables-clipped', clipped.length ? clipped.join(' ') : 'none');
     console.log('formation-report: ' + ok + '/' + figures.length + ' figures drawn');
   }
   document.addEventListener('DOMContentLoaded', check);
 })();
 "#;
+
+/// Plays the runs' frames (see the module documentation of [`crate::player`]).
+const PLAYER_SCRIPT: &str = include_str!("player.js");
 
 /// Renders the page.
 pub fn render_page(page: &ReportPage) -> String {
@@ -289,6 +312,8 @@ fn write_head(html: &mut String, page: &ReportPage, sections: &[(&str, &str)]) {
     );
     html.push_str("<title>Formation control report</title>\n<script>");
     html.push_str(CHECK_SCRIPT);
+    html.push_str("</script>\n<script>");
+    html.push_str(PLAYER_SCRIPT);
     html.push_str("</script>\n<style>");
     html.push_str(STYLE);
     html.push_str("</style>\n</head>\n<body>\n<header><div class=\"wrap\">\n");
@@ -496,13 +521,24 @@ fn write_scaling(html: &mut String, section: &ScalingSection) {
     }
     html.push_str("</tr></thead>\n<tbody>\n");
     for row in &section.rows {
+        // The model id and the IQR go on a second line of their cells: on one line the table
+        // was wider than the page at 1300 px and its last column was clipped.
         let who = match &row.model {
-            Some(id) => format!("{} <code>{}</code>", escape(&row.controller), escape(id)),
+            Some(id) => format!(
+                "{}<div class=\"detail\"><code>{}</code></div>",
+                escape(&row.controller),
+                escape(id)
+            ),
             None => escape(&row.controller),
         };
         let convergence = row.convergence_s.map_or_else(
             || "–".to_owned(),
-            |q| format!("{:.1} s ({:.1}–{:.1})", q.median, q.q1, q.q3),
+            |q| {
+                format!(
+                    "{:.1} s<div class=\"detail\">IQR {:.1}–{:.1}</div>",
+                    q.median, q.q1, q.q3
+                )
+            },
         );
         let error = row
             .rel_formation_error
@@ -580,10 +616,42 @@ fn write_run(html: &mut String, run: &RunSection) {
         );
     }
     html.push_str("</dl>\n</div>\n");
+    write_player(html, run);
     let _ = writeln!(
         html,
         "<p class=\"caption\">{}</p>\n</article>",
         bold_figure_number(&run.caption)
+    );
+}
+
+/// A run's player: the canvas, the controls, the edge error scale and the frames as JSON.
+fn write_player(html: &mut String, run: &RunSection) {
+    if run.player_json.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        html,
+        "<figure class=\"player\" tabindex=\"0\" data-run=\"{}\" aria-label=\"Player of {}\">",
+        escape(&run.anchor),
+        escape(&run.heading)
+    );
+    html.push_str("<canvas></canvas>\n<div class=\"player-controls\"><button type=\"button\" class=\"player-play\">Play</button>");
+    html.push_str("<input type=\"range\" class=\"player-time\" aria-label=\"time\">");
+    html.push_str("<select class=\"player-speed\" aria-label=\"speed\"><option value=\"0.5\">0.5×</option><option value=\"1\" selected>1×</option><option value=\"2\">2×</option><option value=\"5\">5×</option></select>");
+    html.push_str(
+        "<label><input type=\"checkbox\" class=\"player-follow\"> follow the team</label>",
+    );
+    html.push_str("<output class=\"player-clock\"></output></div>\n");
+    let _ = writeln!(
+        html,
+        "<figcaption>{} Edge error: <span class=\"player-scale\"></span> 0 % · 10 % · ≥ 20 %.</figcaption>",
+        escape(&run.player_note)
+    );
+    // Numbers and fixed keys only: it cannot close the element early.
+    let _ = writeln!(
+        html,
+        "<script type=\"application/json\" class=\"player-data\">{}</script>\n</figure>",
+        run.player_json
     );
 }
 
@@ -643,6 +711,8 @@ mod tests {
                 panels: vec![placed("a"), placed("b"), placed("c")],
                 caption: "Figure 2: case".into(),
                 incomplete: true,
+                player_note: "Player".into(),
+                player_json: "{\"t\":[0]}".into(),
             }],
             ..ReportPage::default()
         };
@@ -667,6 +737,13 @@ mod tests {
         assert_eq!(html.matches("<figure class=\"plot\"").count(), 4);
         assert!(html.contains("aria-label=\"a &lt;figure&gt;\""));
         assert!(html.contains("<b>Figure 2:</b> case"));
+        // The run's player: its canvas, its controls and its frames as JSON.
+        assert!(html.contains("<figure class=\"player\" tabindex=\"0\" data-run=\"run-case1-0\""));
+        assert!(html.contains(
+            "<script type=\"application/json\" class=\"player-data\">{\"t\":[0]}</script>"
+        ));
+        assert!(html.contains("class=\"player-play\"") && html.contains("class=\"player-time\""));
+        assert_eq!(html.matches("<canvas>").count(), 1);
         assert!(html.contains("href=\"#fig-9\"") && !html.contains("href=\"#training\""));
         assert!(!html.contains("http://") && !html.contains("https://") && !html.contains(" src="));
     }

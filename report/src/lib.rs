@@ -11,7 +11,8 @@
 //! * for each run log (the paper's cases, Figs. 6-8): formation and orientation error over time,
 //!   wheel commands, and the trajectories with the formation drawn every 3 s; for a team whose
 //!   edges follow a neighbour graph, the median and worst edge error instead of one line per
-//!   pair, and the graph of each snapshot (every 10 s);
+//!   pair, and the graph of each snapshot (every 10 s); and a player of the run (the robots, their
+//!   headings, the neighbour graph and its edge errors over time; [`player`]);
 //! * the scaling over team sizes (`scaling*.json` from `formation eval --robots ...`): the table
 //!   and success and convergence against the team size;
 //! * the training loss curve and the latency profile, when present.
@@ -20,13 +21,15 @@
 //! HTML file.
 //!
 //! Modules: [`input`] (finding and reading inputs), [`series`] (the plotted numbers, pure),
-//! [`figures`] (SVG drawing), [`html`] (the page), [`loss`] and [`profile`] (optional inputs).
+//! [`figures`] (SVG drawing), [`player`] (the players' frames, pure), [`html`] (the page),
+//! [`loss`] and [`profile`] (optional inputs).
 
 pub mod error;
 pub mod figures;
 pub mod html;
 pub mod input;
 pub mod loss;
+pub mod player;
 pub mod profile;
 pub mod series;
 
@@ -580,6 +583,7 @@ fn run_section(
             " Incomplete run: it stopped early after {duration:.1} s{planned}{reason}; its metrics are over the ticks it played."
         ));
     }
+    let player = player::player_data(traj);
     Ok(RunSection {
         heading: format!("{} · run {}", eval.name, run.index),
         anchor: format!("run-{stem}"),
@@ -587,7 +591,44 @@ fn run_section(
         panels,
         caption,
         incomplete: !run.complete,
+        player_note: player_note(&player),
+        // A run log without samples is refused when read; no frame, no player all the same.
+        player_json: if player.frames.is_empty() {
+            String::new()
+        } else {
+            player::player_json(&player)
+        },
     })
+}
+
+/// What the player shows, and how often it samples the run.
+fn player_note(player: &player::PlayerData) -> String {
+    let every = if player.stride == 1 {
+        "every recorded sample".to_owned()
+    } else {
+        format!(
+            "every {} recorded sample ({} of {}; positions are interpolated between them)",
+            ordinal(player.stride),
+            player.frames.len(),
+            player.samples
+        )
+    };
+    format!(
+        "Player: the {} robots (a triangle points along each heading, with the path of the last 10 s) and the formation's edges coloured by their error |dᵢⱼ − d*| / d*, from {every}. Space plays and pauses; the slider picks the time.",
+        player.robots
+    )
+}
+
+/// `2nd`, `3rd`, `4th`, ...
+fn ordinal(n: usize) -> String {
+    let suffix = match (n % 10, n % 100) {
+        (_, 11..=13) => "th",
+        (1, _) => "st",
+        (2, _) => "nd",
+        (3, _) => "rd",
+        _ => "th",
+    };
+    format!("{n}{suffix}")
 }
 
 /// A run's panels: (a) the errors, (b) the wheel commands, (c) the trajectories.

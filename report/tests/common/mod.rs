@@ -234,3 +234,78 @@ pub fn write_demo_dir(root: &Path, case_seconds: f64) -> usize {
     );
     per_run.len()
 }
+
+/// A team of `n` robots under the Gabriel neighbour rule, `seconds` long at 20 Hz: from a loose
+/// jittered grid they close to a triangular lattice of spacing `d* = 1 m` while the team drives
+/// along a gentle curve at 0.4 m/s.
+pub fn team_trajectory(n: usize, seconds: f64) -> Trajectory {
+    let dt = 0.05;
+    let ticks = (seconds / dt).round() as usize;
+    let cols = (n as f64).sqrt().ceil() as usize;
+    let wobble = |k: usize| ((k * 104_729 + 7919) % 1000) as f64 / 1000.0 - 0.5;
+    let lattice: Vec<(f64, f64)> = (0..n)
+        .map(|i| {
+            let (row, col) = ((i / cols) as f64, (i % cols) as f64);
+            (col + 0.5 * (row % 2.0), row * 3f64.sqrt() / 2.0)
+        })
+        .collect();
+    let start: Vec<(f64, f64)> = lattice
+        .iter()
+        .enumerate()
+        .map(|(i, &(x, y))| (1.7 * x + wobble(2 * i), 1.7 * y + wobble(2 * i + 1)))
+        .collect();
+    let (mut times, mut phi_star, mut poses, mut commands) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut centre = (0.0, 0.0);
+    for k in 0..=ticks {
+        let t = k as f64 * dt;
+        let heading = 0.4 * (0.1 * t).sin();
+        let decay = (-t / 8.0).exp();
+        let row: Vec<Pose> = (0..n)
+            .map(|i| Pose {
+                x: centre.0 + lattice[i].0 + (start[i].0 - lattice[i].0) * decay,
+                y: centre.1 + lattice[i].1 + (start[i].1 - lattice[i].1) * decay,
+                theta: heading + 1.5 * wobble(3 * i) * decay,
+            })
+            .collect();
+        times.push(t);
+        phi_star.push(heading);
+        poses.push(row);
+        if k < ticks {
+            commands.push(vec![
+                WheelCmd {
+                    left: 0.4,
+                    right: 0.4
+                };
+                n
+            ]);
+        }
+        centre.0 += 0.4 * heading.cos() * dt;
+        centre.1 += 0.4 * heading.sin() * dt;
+    }
+    Trajectory {
+        dt,
+        d_star: 1.0,
+        v_star: 0.4,
+        edges: Vec::new(),
+        neighbours: formation_proto::NeighbourRule::Gabriel(
+            formation_proto::GabrielRule::with_range(10.0),
+        ),
+        times,
+        phi_star,
+        poses,
+        commands,
+        collisions: Vec::new(),
+    }
+}
+
+/// One eval output (`team/`) holding one run log of `team_trajectory(n, seconds)`.
+pub fn write_team_dir(root: &Path, n: usize, seconds: f64) {
+    let metrics = run_metrics(0, true);
+    write_file(
+        &root.join("team/summary.json"),
+        &summary("teams", std::slice::from_ref(&metrics)),
+    );
+    let log = run_log(0, metrics, team_trajectory(n, seconds));
+    write_file(&root.join("team/runs/run-0000.json"), &log);
+}
