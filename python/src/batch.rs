@@ -15,7 +15,7 @@ use formation_world::metrics::{MetricsConfig, run_metrics};
 use formation_world::neighbours::NeighbourTracker;
 use formation_world::{Episode, Scenario, StepError};
 use numpy::{
-    IntoPyArray, PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArray3, PyUntypedArrayMethods,
+    IntoPyArray, PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -154,7 +154,7 @@ impl Batch {
 
     /// The commands of a `(B, N, 2)` array of wheel speeds, refusing another shape and
     /// non-finite speeds.
-    fn commands_of(&self, actions: &PyReadonlyArray3<'_, f64>) -> PyResult<Vec<WheelCmd>> {
+    fn commands_of(&self, actions: &PyReadonlyArrayDyn<'_, f64>) -> PyResult<Vec<WheelCmd>> {
         let expected = [self.slots.len(), self.robots(), 2];
         if actions.shape() != expected {
             return Err(PyValueError::new_err(format!(
@@ -413,7 +413,7 @@ impl Batch {
     fn policy_actions<'py>(
         &self,
         py: Python<'py>,
-        outputs: PyReadonlyArray3<'py, f32>,
+        outputs: PyReadonlyArrayDyn<'py, f32>,
         v_train: f64,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let n = self.robots();
@@ -472,7 +472,7 @@ impl Batch {
     fn step<'py>(
         &mut self,
         py: Python<'py>,
-        actions: PyReadonlyArray3<'py, f64>,
+        actions: PyReadonlyArrayDyn<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray2<bool>>> {
         let commands = self.commands_of(&actions)?;
         let n = self.robots();
