@@ -15,7 +15,8 @@ use formation_world::metrics::{MetricsConfig, run_metrics};
 use formation_world::neighbours::NeighbourTracker;
 use formation_world::{Episode, Scenario, StepError};
 use numpy::{
-    IntoPyArray, PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+    IntoPyArray, PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -107,7 +108,11 @@ impl Slot {
         Ok(&self.expert_commands)
     }
 
-    fn step(&mut self, world: usize, commands: &[WheelCmd]) -> Result<Vec<(usize, usize)>, SlotError> {
+    fn step(
+        &mut self,
+        world: usize,
+        commands: &[WheelCmd],
+    ) -> Result<Vec<(usize, usize)>, SlotError> {
         if self.episode.is_over() {
             return Err(SlotError::Step {
                 world,
@@ -164,7 +169,9 @@ impl Batch {
             )));
         }
         let values = actions.as_slice().map_err(|_| {
-            PyValueError::new_err("actions must be a C-contiguous float64 array (np.ascontiguousarray)")
+            PyValueError::new_err(
+                "actions must be a C-contiguous float64 array (np.ascontiguousarray)",
+            )
         })?;
         if let Some(at) = values.iter().position(|v| !v.is_finite()) {
             let (world, robot) = (at / 2 / expected[1], at / 2 % expected[1]);
@@ -305,7 +312,13 @@ impl Batch {
         let mut out = vec![0.0; self.slots.len() * n * 3];
         py.detach(|| {
             self.fill(&mut out, n * 3, |_, slot, chunk| {
-                for (pose, cell) in slot.episode.world().poses().iter().zip(chunk.chunks_exact_mut(3)) {
+                for (pose, cell) in slot
+                    .episode
+                    .world()
+                    .poses()
+                    .iter()
+                    .zip(chunk.chunks_exact_mut(3))
+                {
                     cell.copy_from_slice(&[pose.x, pose.y, pose.theta]);
                 }
                 Ok(())
@@ -319,7 +332,13 @@ impl Batch {
         let n = self.robots();
         let mut out = vec![0.0; self.slots.len() * n * 2];
         self.fill(&mut out, n * 2, |_, slot, chunk| {
-            for (w, cell) in slot.episode.world().wheel_speeds().iter().zip(chunk.chunks_exact_mut(2)) {
+            for (w, cell) in slot
+                .episode
+                .world()
+                .wheel_speeds()
+                .iter()
+                .zip(chunk.chunks_exact_mut(2))
+            {
                 cell.copy_from_slice(&[w.left, w.right]);
             }
             Ok(())
@@ -353,7 +372,8 @@ impl Batch {
                 Ok(())
             })
         })?;
-        out.into_pyarray(py).reshape(vec![self.slots.len(), n, beams])
+        out.into_pyarray(py)
+            .reshape(vec![self.slots.len(), n, beams])
     }
 
     /// Every robot's occupancy image of this tick's scan, rendered by `formation_perception`
@@ -492,7 +512,7 @@ impl Batch {
                 })
         });
         stepped?;
-        Ok(collided.into_pyarray(py).reshape([self.slots.len(), n])?)
+        collided.into_pyarray(py).reshape([self.slots.len(), n])
     }
 
     /// World `world`'s formation edges `(i, j)` now, under the scenario's neighbour rule.
@@ -501,7 +521,11 @@ impl Batch {
     }
 
     /// World `world`'s poses at every sample so far: `(ticks played + 1, N, 3)` float64.
-    fn trajectory<'py>(&self, py: Python<'py>, world: usize) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    fn trajectory<'py>(
+        &self,
+        py: Python<'py>,
+        world: usize,
+    ) -> PyResult<Bound<'py, PyArray3<f64>>> {
         let trajectory = self.slot(world)?.episode.trajectory();
         let samples = trajectory.poses.len();
         let out: Vec<f64> = trajectory
@@ -510,7 +534,7 @@ impl Batch {
             .flatten()
             .flat_map(|p| [p.x, p.y, p.theta])
             .collect();
-        Ok(out.into_pyarray(py).reshape([samples, self.robots(), 3])?)
+        out.into_pyarray(py).reshape([samples, self.robots(), 3])
     }
 
     /// World `world`'s run metrics (Table I) as JSON, the `metrics` of its run log: scored as
@@ -518,7 +542,11 @@ impl Batch {
     /// marked incomplete).
     fn metrics_json(&self, world: usize) -> PyResult<String> {
         let episode = &self.slot(world)?.episode;
-        let metrics = run_metrics(episode.trajectory(), episode.ticks(), &MetricsConfig::default());
+        let metrics = run_metrics(
+            episode.trajectory(),
+            episode.ticks(),
+            &MetricsConfig::default(),
+        );
         serde_json::to_string(&metrics)
             .map_err(|e| PyRuntimeError::new_err(format!("cannot write the metrics: {e}")))
     }

@@ -7,8 +7,8 @@
 //! expert and one with a policy see the same noise for the same states. The multi-process lockstep runtime
 //! calls the same world methods in the same order, which is what makes it bit-identical to this loop.
 
-pub use formation_proto::control::{Controller, ControllerError, Observation};
 use formation_proto::WheelCmd;
+pub use formation_proto::control::{Controller, ControllerError, Observation};
 
 use crate::scenario::RunSpec;
 use crate::world::World;

@@ -1005,7 +1005,10 @@ fn overrides_set_keys_before_validation_with_the_files_messages() {
     let into_value = Scenario::from_path_overridden(&path, &set("robots.n", 3.into()))
         .unwrap_err()
         .to_string();
-    assert!(into_value.contains("`robots` is a value, not a table"), "{into_value}");
+    assert!(
+        into_value.contains("`robots` is a value, not a table"),
+        "{into_value}"
+    );
     assert_eq!(
         Scenario::from_path_overridden(&path, &[]).unwrap(),
         Scenario::from_path(&path).unwrap()
