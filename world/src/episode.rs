@@ -1,6 +1,6 @@
 //! The in-process loop of one run: sense, decide, step, record.
 //!
-//! [`run_episode`] drives a [`World`](crate::World) built from a [`RunSpec`] with any [`Controller`]
+//! [`run_episode`] drives a [`World`] built from a [`RunSpec`] with any [`Controller`]
 //! (the expert, the learned policy run per robot, a test double) and records a [`Trajectory`] that the
 //! [`metrics`](crate::metrics) score. Every robot's scan is taken at every tick whatever the controller,
 //! so the world's noise generator is consumed in the same order by every controller and a run with the
