@@ -30,6 +30,8 @@ Agents are ``robot_0 .. robot_{N-1}``.
 * :meth:`FormationParallelEnv.expert_actions`: the expert's wheel speeds for this tick, for
   imitation; :meth:`FormationParallelEnv.policy_actions` turns a policy's raw outputs into wheel
   speeds as the agent does.
+
+:class:`SingleRobotEnv` is a Gymnasium view of one robot, the expert driving the others.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from pathlib import Path
 from typing import Any, Dict, Mapping, Optional
 
 import numpy as np
+import gymnasium
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
@@ -258,3 +261,35 @@ class FormationParallelEnv(ParallelEnv):
 
     def close(self) -> None:
         return None
+
+
+class SingleRobotEnv(gymnasium.Env):
+    """A Gymnasium view of one robot of a :class:`FormationParallelEnv`: the learner drives robot
+    ``robot`` and the expert drives the others (the DAgger setting). Observation, action and
+    reward are that robot's; it terminates when it collides and is truncated at the scenario's
+    duration. Keyword arguments go to :class:`FormationParallelEnv`.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, robot: int = 0, **kwargs: Any) -> None:
+        kwargs["expert"] = True
+        self.parallel = FormationParallelEnv(**kwargs)
+        if not 0 <= robot < len(self.parallel.possible_agents):
+            raise ValueError(f"robot {robot} is not in the team of {len(self.parallel.possible_agents)}")
+        self.agent = self.parallel.possible_agents[robot]
+        self.observation_space = self.parallel.observation_space(self.agent)
+        self.action_space = self.parallel.action_space(self.agent)
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        super().reset(seed=seed)
+        observations, infos = self.parallel.reset(seed=seed, options=options)
+        return observations[self.agent], infos[self.agent]
+
+    def step(self, action: Any):
+        if self.agent not in self.parallel.agents:
+            raise EpisodeOver("the run is over for this robot; call reset() to start another run")
+        actions = self.parallel.expert_actions()
+        actions[self.agent] = action
+        observations, rewards, terms, truncs, infos = self.parallel.step(actions)
+        return observations[self.agent], rewards[self.agent], terms[self.agent], truncs[self.agent], infos[self.agent]

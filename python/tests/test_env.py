@@ -135,3 +135,19 @@ def test_a_collision_terminates_the_robots_in_contact(tmp_path):
     assert terms.get("robot_0") and terms.get("robot_1"), poses
     assert rewards["robot_0"] < -5.0
     assert "robot_0" not in env.agents and "robot_2" in env.agents
+
+
+def test_the_single_robot_view_passes_gymnasiums_checker():
+    from gymnasium.utils.env_checker import check_env
+
+    from formation.env import SingleRobotEnv
+
+    env = SingleRobotEnv(robot=1, scenario=TABLE1, overrides={"duration_s": 1.0})
+    check_env(env, skip_render_check=True)
+    obs, _ = env.reset(seed=3)
+    assert obs["occupancy"].shape == (1, 50, 50)
+    done, steps = False, 0
+    while not done:
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        done, steps = terminated or truncated, steps + 1
+    assert steps == 20 and "metrics" in info or terminated
