@@ -14,8 +14,10 @@ MODEL = REPO / "onnx" / "models" / "policy.onnx"
 
 
 def cli() -> Path:
-    """The `formation` binary: FORMATION_BIN, else the workspace's target/debug/formation."""
-    path = Path(os.environ.get("FORMATION_BIN", REPO / "target" / "debug" / "formation"))
+    """The `formation` binary: FORMATION_BIN, else `$CARGO_TARGET_DIR` (or the workspace's
+    target/) /debug/formation."""
+    target = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
+    path = Path(os.environ.get("FORMATION_BIN", target / "debug" / "formation"))
     if not path.is_file():
         pytest.fail(
             f"no formation binary at {path}: build it with `cargo build -p formation-cli` "
