@@ -27,9 +27,9 @@ use std::path::{Path, PathBuf};
 use formation_onnx::contract::{SensorContract, SensorViolation, check_sensor};
 use formation_onnx::{OnnxPolicy, PolicyError};
 use formation_proto::control::{Controller, ControllerError, Observation};
-use formation_proto::{Goal, LidarSpec, OccupancySpec, WheelCmd, wrap_angle};
+use formation_proto::{Goal, LidarSpec, OccupancySpec, WheelCmd};
 
-use formation_perception::occupancy;
+use formation_perception::{occupancy, policy_input};
 
 /// Why an agent could not decide, or could not take a policy.
 #[derive(Debug, thiserror::Error)]
@@ -279,11 +279,11 @@ impl Agent {
                 right,
             });
         }
-        let k = goal.v_star / self.policy.v_train();
-        Ok(WheelCmd {
-            left: k * f64::from(left),
-            right: k * f64::from(right),
-        })
+        Ok(policy_input::scale_to_goal_speed(
+            [left, right],
+            goal.v_star,
+            self.policy.v_train(),
+        ))
     }
 
     /// Runs the last decision again and throws its answer away: the occupancy rendering of the
@@ -403,25 +403,12 @@ fn trial_run(
     }
 }
 
-/// The policy's auxiliary input `(delta_phi, d*)` for a robot with this heading and goal.
+/// The policy's auxiliary input `(delta_phi, d*)` for a robot with this heading and goal
+/// ([`formation_perception::policy_input::policy_aux`]).
 pub fn policy_aux(heading: f64, goal: &Goal) -> Result<[f32; 2], DecisionError> {
-    if !(goal.d_star.is_finite() && goal.d_star > 0.0) {
-        return Err(DecisionError::Goal {
-            reason: format!("d* must be > 0, got {}", goal.d_star),
-        });
-    }
-    if !(goal.phi_star.is_finite() && heading.is_finite() && goal.v_star.is_finite()) {
-        return Err(DecisionError::Goal {
-            reason: format!(
-                "non-finite input (phi* {}, heading {}, v* {})",
-                goal.phi_star, heading, goal.v_star
-            ),
-        });
-    }
-    Ok([
-        wrap_angle(goal.phi_star - heading) as f32,
-        goal.d_star as f32,
-    ])
+    policy_input::policy_aux(heading, goal).map_err(|e| DecisionError::Goal {
+        reason: e.to_string(),
+    })
 }
 
 fn cells(spec: &OccupancySpec) -> usize {
@@ -574,7 +561,7 @@ impl Controller for PolicyController {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use formation_proto::BeyondWindow;
+    use formation_proto::{BeyondWindow, wrap_angle};
 
     /// A transparent policy for testing the decision's plumbing: returns the aux input and the
     /// number of occupied cells, so the test can see exactly what reached the policy.

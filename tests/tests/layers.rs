@@ -120,6 +120,7 @@ fn the_architecture_states_layers_for_the_pure_crates() {
         "formation-perception",
         "formation-report",
         "formation-robot-agent",
+        "formation-python",
     ] {
         assert!(
             ruled.contains(package),

@@ -1,16 +1,17 @@
 //! The in-process loop of one run: sense, decide, step, record.
 //!
-//! [`run_episode`] drives a [`World`](crate::World) built from a [`RunSpec`] with any [`Controller`]
+//! [`run_episode`] drives a [`World`] built from a [`RunSpec`] with any [`Controller`]
 //! (the expert, the learned policy run per robot, a test double) and records a [`Trajectory`] that the
 //! [`metrics`](crate::metrics) score. Every robot's scan is taken at every tick whatever the controller,
 //! so the world's noise generator is consumed in the same order by every controller and a run with the
 //! expert and one with a policy see the same noise for the same states. The multi-process lockstep runtime
 //! calls the same world methods in the same order, which is what makes it bit-identical to this loop.
 
+use formation_proto::WheelCmd;
 pub use formation_proto::control::{Controller, ControllerError, Observation};
-use formation_proto::{Pose, WheelCmd};
 
 use crate::scenario::RunSpec;
+use crate::world::World;
 
 /// The record of one run: defined with the run log in [`formation_schema`].
 pub use formation_schema::Trajectory;
@@ -55,60 +56,175 @@ pub fn run_episode_recorded<E>(
     on_tick: &mut dyn FnMut(&Observation<'_>, &[WheelCmd]),
     on_record: &mut dyn FnMut(&Trajectory) -> Result<(), E>,
 ) -> Result<Trajectory, EpisodeError<E>> {
-    let mut world = spec.make_world();
-    let n_robots = world.n_robots();
-    let ticks = spec.ticks();
-    let samples = usize::try_from(ticks).map_or(usize::MAX, |t| t.saturating_add(1));
-    let capacity = samples.min(1 << 20);
-
-    let mut trajectory = Trajectory {
-        dt: spec.world.dt,
-        d_star: spec.d_star,
-        v_star: spec.v_star,
-        edges: crate::neighbours::first_sample_edges(spec.neighbours, &spec.initial),
-        neighbours: spec.neighbours,
-        times: Vec::with_capacity(capacity),
-        phi_star: Vec::with_capacity(capacity),
-        poses: Vec::with_capacity(capacity),
-        commands: Vec::with_capacity(capacity),
-        collisions: Vec::new(),
-    };
-    let record_state = |trajectory: &mut Trajectory, time: f64, poses: &[Pose]| {
-        trajectory.times.push(time);
-        trajectory.phi_star.push(spec.heading.phi_star(time));
-        trajectory.poses.push(poses.to_vec());
-    };
-    record_state(&mut trajectory, world.time(), world.poses());
-    on_record(&trajectory).map_err(EpisodeError::Record)?;
-
-    let mut scans = vec![vec![0.0_f32; spec.world.lidar.beams]; n_robots];
-    let mut commands = vec![WheelCmd::BRAKE; n_robots];
-    for _ in 0..ticks {
-        let tick = world.tick();
-        let time = world.time();
-        world.scan_all(&mut scans);
+    let mut episode = Episode::new(spec.clone());
+    on_record(episode.trajectory()).map_err(EpisodeError::Record)?;
+    let mut commands = vec![WheelCmd::BRAKE; episode.world().n_robots()];
+    while !episode.is_over() {
         commands.fill(WheelCmd::BRAKE);
-        let observation = Observation {
-            tick,
-            time,
-            goal: spec.goal_at(time),
-            poses: world.poses(),
-            wheel_speeds: world.wheel_speeds(),
-            scans: &scans,
-        };
+        let observation = episode.observe();
         controller.commands(&observation, &mut commands)?;
         on_tick(&observation, &commands);
-
-        let report = world.step(&commands);
-        trajectory.commands.push(report.applied);
-        let sample = world.tick();
-        trajectory
-            .collisions
-            .extend(report.collisions.into_iter().map(|(i, j)| (sample, i, j)));
-        record_state(&mut trajectory, world.time(), world.poses());
-        on_record(&trajectory).map_err(EpisodeError::Record)?;
+        episode
+            .step(&commands)
+            .map_err(|e| ControllerError::new(e.to_string()))?;
+        on_record(episode.trajectory()).map_err(EpisodeError::Record)?;
     }
-    Ok(trajectory)
+    Ok(episode.into_trajectory())
+}
+
+/// Why [`Episode::step`] refused to step.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum StepError {
+    /// Every planned tick has been played.
+    #[error(
+        "the run is over: all {ticks} ticks of its duration have been played; reset to start \
+         another run"
+    )]
+    Over {
+        /// The run's planned ticks.
+        ticks: u64,
+    },
+    /// Not one command per robot.
+    #[error("{given} wheel commands for {robots} robots: give one command per robot")]
+    Commands {
+        /// Commands given.
+        given: usize,
+        /// Robots in the world.
+        robots: usize,
+    },
+}
+
+/// One run played tick by tick, for drivers that are not a [`Controller`] (the Python bindings'
+/// environments); [`run_episode`] is this loop over a controller, so both give the same bits.
+///
+/// Per tick: [`Episode::observe`] (optional), then [`Episode::step`]. The scans of a tick are
+/// taken exactly once, by the first of the two that is called in it, so the world's noise is
+/// drawn in the same order whether or not the driver looks.
+#[derive(Debug, Clone)]
+pub struct Episode {
+    spec: RunSpec,
+    world: World,
+    ticks: u64,
+    trajectory: Trajectory,
+    scans: Vec<Vec<f32>>,
+    /// Whether `scans` hold this tick's scans.
+    sensed: bool,
+}
+
+impl Episode {
+    /// Run `spec` at tick 0, its initial state recorded.
+    pub fn new(spec: RunSpec) -> Episode {
+        let world = spec.make_world();
+        let ticks = spec.ticks();
+        let samples = usize::try_from(ticks).map_or(usize::MAX, |t| t.saturating_add(1));
+        let capacity = samples.min(1 << 20);
+        let trajectory = Trajectory {
+            dt: spec.world.dt,
+            d_star: spec.d_star,
+            v_star: spec.v_star,
+            edges: crate::neighbours::first_sample_edges(spec.neighbours, &spec.initial),
+            neighbours: spec.neighbours,
+            times: Vec::with_capacity(capacity),
+            phi_star: Vec::with_capacity(capacity),
+            poses: Vec::with_capacity(capacity),
+            commands: Vec::with_capacity(capacity),
+            collisions: Vec::new(),
+        };
+        let scans = vec![vec![0.0_f32; spec.world.lidar.beams]; world.n_robots()];
+        let mut episode = Episode {
+            spec,
+            world,
+            ticks,
+            trajectory,
+            scans,
+            sensed: false,
+        };
+        episode.record_state();
+        episode
+    }
+
+    fn record_state(&mut self) {
+        let time = self.world.time();
+        self.trajectory.times.push(time);
+        self.trajectory
+            .phi_star
+            .push(self.spec.heading.phi_star(time));
+        self.trajectory.poses.push(self.world.poses().to_vec());
+    }
+
+    /// The run being played.
+    pub fn spec(&self) -> &RunSpec {
+        &self.spec
+    }
+
+    /// The world in its current state.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The run's planned ticks ([`RunSpec::ticks`]).
+    pub fn ticks(&self) -> u64 {
+        self.ticks
+    }
+
+    /// Whether every planned tick has been played.
+    pub fn is_over(&self) -> bool {
+        self.world.tick() >= self.ticks
+    }
+
+    /// The trajectory recorded so far.
+    pub fn trajectory(&self) -> &Trajectory {
+        &self.trajectory
+    }
+
+    /// The trajectory recorded.
+    pub fn into_trajectory(self) -> Trajectory {
+        self.trajectory
+    }
+
+    /// This tick's observation: the goal, every pose and every robot's scan (taken now if this
+    /// tick's scans were not taken yet).
+    pub fn observe(&mut self) -> Observation<'_> {
+        if !self.sensed {
+            self.world.scan_all(&mut self.scans);
+            self.sensed = true;
+        }
+        let time = self.world.time();
+        Observation {
+            tick: self.world.tick(),
+            time,
+            goal: self.spec.goal_at(time),
+            poses: self.world.poses(),
+            wheel_speeds: self.world.wheel_speeds(),
+            scans: &self.scans,
+        }
+    }
+
+    /// Steps the world with `commands[i]` for robot `i` (after taking this tick's scans if
+    /// [`Episode::observe`] did not) and records the new state; returns the pairs in contact
+    /// after the step.
+    pub fn step(&mut self, commands: &[WheelCmd]) -> Result<Vec<(usize, usize)>, StepError> {
+        if self.is_over() {
+            return Err(StepError::Over { ticks: self.ticks });
+        }
+        let robots = self.world.n_robots();
+        if commands.len() != robots {
+            return Err(StepError::Commands {
+                given: commands.len(),
+                robots,
+            });
+        }
+        self.observe();
+        let report = self.world.step(commands);
+        self.sensed = false;
+        self.trajectory.commands.push(report.applied);
+        let sample = self.world.tick();
+        self.trajectory
+            .collisions
+            .extend(report.collisions.iter().map(|&(i, j)| (sample, i, j)));
+        self.record_state();
+        Ok(report.collisions)
+    }
 }
 
 #[cfg(test)]
@@ -317,5 +433,43 @@ noise_std = {noise_std}
         )
         .unwrap_err();
         assert!(matches!(error, EpisodeError::Record(ref m) if m == "disk full"));
+    }
+
+    #[test]
+    fn an_episode_stepped_by_hand_equals_the_loop_and_refuses_bad_steps() {
+        let spec = short_spec(0.05);
+        let cmd = WheelCmd {
+            left: 0.4,
+            right: 0.1,
+        };
+        let looped = run_episode(
+            &spec,
+            &mut ConstantWheels { cmd, fail_at: None },
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let mut episode = Episode::new(spec.clone());
+        assert_eq!(
+            episode.step(&[cmd; 2]),
+            Err(StepError::Commands {
+                given: 2,
+                robots: 3
+            })
+        );
+        let mut k = 0;
+        while !episode.is_over() {
+            // Observing on some ticks only draws the same noise: the step takes the scans.
+            if k % 3 == 0 {
+                episode.observe();
+                episode.observe();
+            }
+            episode.step(&[cmd; 3]).unwrap();
+            k += 1;
+        }
+        assert_eq!(k, spec.ticks());
+        let over = episode.step(&[cmd; 3]).unwrap_err();
+        assert_eq!(over, StepError::Over { ticks: 20 });
+        assert!(over.to_string().contains("reset"), "{over}");
+        assert_eq!(episode.into_trajectory(), looped);
     }
 }

@@ -27,7 +27,8 @@ pub mod scenario;
 pub mod world;
 
 pub use episode::{
-    Controller, EpisodeError, Observation, Trajectory, run_episode, run_episode_recorded,
+    Controller, Episode, EpisodeError, Observation, StepError, Trajectory, run_episode,
+    run_episode_recorded,
 };
 pub use robot::RobotParams;
 pub use runlog::{RunJournal, RunLog, TimingLog, recover_journal, recover_journals};

@@ -357,8 +357,23 @@ impl Scenario {
     /// Only a regular file of at most [`limits::MAX_FILE_BYTES`] is read; anything else is refused
     /// by its metadata before a byte is read (see [`read_scenario_text`]).
     pub fn from_path(path: &Path) -> Result<Scenario, ScenarioError> {
-        let text = read_scenario_text(path)?;
-        let mut scenario = Scenario::from_toml_str(&text, &path.display().to_string())?;
+        Scenario::from_path_overridden(path, &[])
+    }
+
+    /// [`Scenario::from_path`] with some keys of the file replaced before validation: each
+    /// `(dotted key, value)` of `overrides` (e.g. `("goal.v_star", 0.5)`) sets that key, adding
+    /// it or its tables when absent, so an unknown key or a bad value is refused with the same
+    /// message as in the file.
+    pub fn from_path_overridden(
+        path: &Path,
+        overrides: &[(String, toml::Value)],
+    ) -> Result<Scenario, ScenarioError> {
+        let origin = path.display().to_string();
+        let mut text = read_scenario_text(path)?;
+        if !overrides.is_empty() {
+            text = overridden_text(&text, &origin, overrides)?;
+        }
+        let mut scenario = Scenario::from_toml_str(&text, &origin)?;
         let base = path.parent().unwrap_or_else(|| Path::new(""));
         for agent in &mut scenario.agents {
             if agent.model.is_relative() {
@@ -482,4 +497,51 @@ impl Scenario {
             ..self.clone()
         })
     }
+}
+
+/// Scenario text with `overrides` (dotted keys) set in its tables.
+fn overridden_text(
+    text: &str,
+    origin: &str,
+    overrides: &[(String, toml::Value)],
+) -> Result<String, ScenarioError> {
+    let parse_error = |source| ScenarioError::Parse {
+        origin: origin.to_owned(),
+        source,
+    };
+    let mut root: toml::Table = toml::from_str(text).map_err(parse_error)?;
+    for (key, value) in overrides {
+        let invalid = |problem: String| ScenarioError::Invalid {
+            origin: origin.to_owned(),
+            field: key.clone(),
+            problem,
+        };
+        let parts: Vec<&str> = key.split('.').collect();
+        let Some((last, tables)) = parts.split_last() else {
+            return Err(invalid("is an empty key".to_owned()));
+        };
+        if parts.iter().any(|p| p.is_empty()) {
+            return Err(invalid(
+                "has an empty part; write dotted keys such as `goal.v_star`".to_owned(),
+            ));
+        }
+        let mut table = &mut root;
+        for (depth, part) in tables.iter().enumerate() {
+            let entry = table
+                .entry((*part).to_owned())
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            table = entry.as_table_mut().ok_or_else(|| {
+                invalid(format!(
+                    "cannot be set: `{}` is a value, not a table",
+                    parts[..=depth].join(".")
+                ))
+            })?;
+        }
+        table.insert((*last).to_owned(), value.clone());
+    }
+    toml::to_string(&root).map_err(|e| ScenarioError::Invalid {
+        origin: origin.to_owned(),
+        field: "overrides".to_owned(),
+        problem: format!("cannot be written back as TOML: {e}"),
+    })
 }

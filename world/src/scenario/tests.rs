@@ -977,3 +977,41 @@ fn splitmix64_matches_the_reference_sequence() {
     assert_eq!(splitmix64(0), 0xE220_A839_7B1D_CDAF);
     assert_eq!(splitmix64(gamma), 0x6E78_9E6A_A1B9_65F4);
 }
+
+#[test]
+fn overrides_set_keys_before_validation_with_the_files_messages() {
+    let path = std::env::temp_dir().join(format!("overrides-{}.toml", std::process::id()));
+    std::fs::write(&path, MINIMAL).unwrap();
+    let set = |key: &str, value: toml::Value| vec![(key.to_owned(), value)];
+    let faster = Scenario::from_path_overridden(&path, &set("goal.v_star", 0.5.into())).unwrap();
+    assert_eq!(faster.v_star(), 0.5);
+    assert_eq!(faster.n_robots(), 3);
+    let added = Scenario::from_path_overridden(&path, &set("lidar.beams", 90.into())).unwrap();
+    assert_eq!(added.world_config().lidar.beams, 90);
+    let unknown = Scenario::from_path_overridden(&path, &set("goal.speed", 1.0.into()))
+        .unwrap_err()
+        .to_string();
+    assert!(unknown.contains("unknown field `speed`"), "{unknown}");
+    let bad = Scenario::from_path_overridden(&path, &set("goal.v_star", (-1.0).into()))
+        .unwrap_err()
+        .to_string();
+    let in_file = Scenario::from_toml_str(&edited("v_star = 0.7", "v_star = -1.0"), "x")
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        bad.split_once(": ").unwrap().1,
+        in_file.split_once(": ").unwrap().1
+    );
+    let into_value = Scenario::from_path_overridden(&path, &set("robots.n", 3.into()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        into_value.contains("`robots` is a value, not a table"),
+        "{into_value}"
+    );
+    assert_eq!(
+        Scenario::from_path_overridden(&path, &[]).unwrap(),
+        Scenario::from_path(&path).unwrap()
+    );
+    std::fs::remove_file(&path).unwrap();
+}

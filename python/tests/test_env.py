@@ -1,0 +1,153 @@
+"""The PettingZoo environment: PettingZoo's own API and seed tests at 3 and 16 robots, bit
+identity with `formation eval` (expert and the shipped ONNX policy), and bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import MODEL, REPO, cli_run_poses, pose_rows, team_scenario
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+import formation
+from formation.env import parallel_env
+
+TABLE1 = str(REPO / "scenarios" / "table1.toml")
+
+
+def short_env(robots: int, **kwargs):
+    return parallel_env(scenario=TABLE1, robots=robots, overrides={"duration_s": 2.0}, **kwargs)
+
+
+@pytest.mark.parametrize("robots", [3, 16])
+def test_pettingzoos_parallel_api_test_passes(robots):
+    parallel_api_test(short_env(robots), num_cycles=100)
+
+
+@pytest.mark.parametrize("robots", [3, 16])
+def test_pettingzoos_parallel_seed_test_passes(robots):
+    parallel_seed_test(lambda: short_env(robots))
+
+
+@pytest.mark.parametrize("robots", [3, 16])
+def test_an_expert_episode_equals_formation_eval_bit_for_bit(tmp_path, robots):
+    scenario = team_scenario(tmp_path, robots, 6.0)
+    seed, run = 11, 1
+    expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", seed, run, "expert"))
+    env = parallel_env(scenario=str(scenario))
+    env.reset(seed=seed, run=run)
+    while env.agents:
+        _, _, _, _, infos = env.step(env.expert_actions())
+    got = [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+    assert len(got) == len(expected) == 121
+    assert got == expected
+    assert "metrics" in infos["robot_0"]
+
+
+def policy_session():
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    # The agent's session: one intra-op and one inter-op thread, default graph optimisation.
+    options.intra_op_num_threads = 1
+    options.inter_op_num_threads = 1
+    return ort.InferenceSession(str(MODEL), options, providers=["CPUExecutionProvider"])
+
+
+@pytest.mark.parametrize("robots", [3, 16])
+def test_an_onnx_policy_episode_equals_formation_eval_bit_for_bit(tmp_path, robots):
+    scenario = team_scenario(tmp_path, robots, 3.0)
+    seed, run = 5, 0
+    expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", seed, run, "policy"))
+    env = parallel_env(scenario=str(scenario), model=MODEL)
+    session = policy_session()
+    observations, _ = env.reset(seed=seed, run=run)
+    while env.agents:
+        outputs = {}
+        for agent, obs in observations.items():
+            # One robot at a time, as each agent runs its own model.
+            feed = {"occupancy": obs["occupancy"][None], "aux": obs["aux"][None]}
+            outputs[agent] = session.run(["wheels"], feed)[0][0]
+        observations, _, _, _, _ = env.step(env.policy_actions(outputs))
+    got = [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+    assert len(got) == len(expected) == 61
+    assert got == expected
+
+
+def test_reset_without_a_seed_plays_the_next_run_of_the_last_seed():
+    env = short_env(3)
+    env.reset(seed=4)
+    assert env.seed_and_run == (4, 0)
+    env.reset()
+    assert env.seed_and_run == (4, 1)
+    env.reset(seed=4, options={"run": 7})
+    assert env.seed_and_run == (4, 7)
+    first = env.trajectory()
+    batch = formation.Batch(env.scenario, [4], [7])
+    assert np.array_equal(batch.trajectory(0), first)
+
+
+def test_bad_actions_raise_clear_exceptions():
+    env = short_env(3)
+    env.reset(seed=1)
+    good = {a: np.zeros(2) for a in env.agents}
+    with pytest.raises(ValueError, match=r"action of robot_1 has shape \(3,\)"):
+        env.step({**good, "robot_1": np.zeros(3)})
+    with pytest.raises(ValueError, match="action of robot_2 is .*nan.*must be finite"):
+        env.step({**good, "robot_2": np.array([0.1, math.nan])})
+    with pytest.raises(ValueError, match=r"no action for \['robot_0'\]"):
+        env.step({a: v for a, v in good.items() if a != "robot_0"})
+    with pytest.raises(ValueError, match="unknown agents"):
+        env.step({**good, "robot_9": np.zeros(2)})
+    while env.agents:
+        env.step({a: np.zeros(2) for a in env.agents})
+    with pytest.raises(formation.EpisodeOver, match="call reset"):
+        env.step(good)
+
+
+def test_an_unknown_or_bad_scenario_key_raises_the_clis_message():
+    with pytest.raises(formation.ScenarioError, match="unknown field `speed`"):
+        parallel_env(scenario=TABLE1, overrides={"goal.speed": 1.0})
+    with pytest.raises(formation.ScenarioError, match="table1.toml"):
+        parallel_env(scenario=TABLE1, overrides={"goal.v_star": -1.0})
+    with pytest.raises(formation.ScenarioError, match="cannot read scenario file"):
+        parallel_env(scenario=str(REPO / "scenarios" / "missing.toml"))
+    with pytest.raises(formation.ScenarioError, match="robots"):
+        parallel_env(scenario=TABLE1, robots=1)
+
+
+def test_a_collision_terminates_the_robots_in_contact(tmp_path):
+    env = short_env(3, collision_penalty=5.0)
+    env.reset(seed=2)
+    poses = env.batch.poses()[0]
+    # Drive robot 0 straight at robot 1 until they touch.
+    rewards, terms = {}, {}
+    for _ in range(40):
+        if not env.agents or any(terms.values()):
+            break
+        p = env.batch.poses()[0]
+        bearing = math.atan2(p[1, 1] - p[0, 1], p[1, 0] - p[0, 0])
+        turn = math.remainder(bearing - p[0, 2], 2 * math.pi)
+        actions = {a: np.zeros(2) for a in env.agents}
+        actions["robot_0"] = np.array([1.0 - turn, 1.0 + turn])
+        _, rewards, terms, _, _ = env.step(actions)
+    assert terms.get("robot_0") and terms.get("robot_1"), poses
+    assert rewards["robot_0"] < -5.0
+    assert "robot_0" not in env.agents and "robot_2" in env.agents
+
+
+def test_the_single_robot_view_passes_gymnasiums_checker():
+    from gymnasium.utils.env_checker import check_env
+
+    from formation.env import SingleRobotEnv
+
+    env = SingleRobotEnv(robot=1, scenario=TABLE1, overrides={"duration_s": 1.0})
+    check_env(env, skip_render_check=True)
+    obs, _ = env.reset(seed=3)
+    assert obs["occupancy"].shape == (1, 50, 50)
+    done, steps = False, 0
+    while not done:
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        done, steps = terminated or truncated, steps + 1
+    assert steps == 20 and "metrics" in info or terminated
