@@ -8,6 +8,7 @@
 //! | `summary.json`, `formation eval --json` | [`EvalOutput`] | [`EvalOutput::FORMAT`] | [`EvalOutput::VERSION`] |
 //! | `profile.json` | [`LatencyProfile`] | [`LatencyProfile::FORMAT`] | [`LatencyProfile::VERSION`] |
 //! | `formation eval --robots ... --json` | [`ScalingTable`] | [`ScalingTable::FORMAT`] | [`ScalingTable::VERSION`] |
+//! | `formation replay --json` | [`ReplayReport`] | [`ReplayReport::FORMAT`] | [`ReplayReport::VERSION`] |
 //!
 //! A format may read older versions than it writes ([`SchemaFile::OLDEST_VERSION`]): the run log
 //! is written as version 2 (its trajectory names its neighbour rule) and version 1 files still
@@ -32,6 +33,7 @@
 
 mod nan;
 mod profile;
+mod replay;
 mod run;
 mod scaling;
 mod summary;
@@ -46,6 +48,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 pub use profile::{LatencyProfile, StageStats};
+pub use replay::{ReplayReport, ReplayRobot};
 pub use run::{RunLog, RunMetrics, TeamMetrics, TicksPlayed, Trajectory};
 pub use scaling::{ScalingRow, ScalingTable};
 pub use summary::{Coverage, EvalOutput, IncompleteRun, MediansOver, Quantiles, Summary};
@@ -153,6 +156,11 @@ pub fn read_scaling(path: &Path) -> Result<ScalingTable, SchemaError> {
 
 /// Reads a latency profile (`profile.json`).
 pub fn read_profile(path: &Path) -> Result<LatencyProfile, SchemaError> {
+    read(path)
+}
+
+/// Reads a replay report (what `formation replay --json` wrote).
+pub fn read_replay(path: &Path) -> Result<ReplayReport, SchemaError> {
     read(path)
 }
 
