@@ -29,8 +29,8 @@ pub mod tick;
 
 pub use error::RecordError;
 pub use file::{RecordingFile, RecordingSummary};
-pub use recorder::{RecordedController, Recorder, final_sample};
 pub use read::{ReadError, RecordingItem, RecordingReader, RunInfo};
+pub use recorder::{RecordedController, Recorder, final_sample};
 pub use replay::ReplayStep;
 pub use setup::{LaunchInfo, RecordingSetup, TeamSetup};
 pub use target::{RecordSettings, RecordTarget};

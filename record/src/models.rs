@@ -103,7 +103,13 @@ fn hex(digest: &[u8]) -> String {
 pub fn attachment_path(dir: &Path, name: &str) -> PathBuf {
     let flat: String = name
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '.' { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
         .collect();
     dir.join("attachments").join(flat)
 }
@@ -235,7 +241,10 @@ mod tests {
             &format!("attachment {name}"),
         );
         let err = recorded_model_files(Path::new("r"), &recorded, dir.path()).unwrap_err();
-        assert!(matches!(err, ModelFileError::AttachmentMissing { .. }), "{err}");
+        assert!(
+            matches!(err, ModelFileError::AttachmentMissing { .. }),
+            "{err}"
+        );
         save_attachment(Path::new("r"), dir.path(), &name, b"stored").unwrap();
         let files = recorded_model_files(Path::new("r"), &recorded, dir.path()).unwrap();
         assert_eq!(files[0].file_name().unwrap(), "tiny-seed0.onnx");

@@ -119,7 +119,10 @@ impl RunInfo {
         };
         let lidar_max_range_m = match raw.get("lidar_max_range_m") {
             None => None,
-            Some(v) => Some(v.parse::<f64>().map_err(|_| bad("lidar_max_range_m", "not a number"))?),
+            Some(v) => Some(
+                v.parse::<f64>()
+                    .map_err(|_| bad("lidar_max_range_m", "not a number"))?,
+            ),
         };
         Ok(RunInfo {
             clock: raw.get("clock").cloned().unwrap_or_default(),
@@ -233,7 +236,11 @@ fn topic_list(topics: &[String]) -> String {
         return String::new();
     }
     let shown: Vec<&str> = topics.iter().take(8).map(String::as_str).collect();
-    let more = if topics.len() > shown.len() { ", ..." } else { "" };
+    let more = if topics.len() > shown.len() {
+        ", ..."
+    } else {
+        ""
+    };
     format!(" ({}{more})", shown.join(", "))
 }
 
@@ -524,7 +531,12 @@ mod tests {
     fn a_file_without_a_replay_channel_names_its_topics() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("chatter.mcap");
-        write(&path, "std_msgs/msg/String", "/chatter", &[vec![0, 1, 0, 0]]);
+        write(
+            &path,
+            "std_msgs/msg/String",
+            "/chatter",
+            &[vec![0, 1, 0, 0]],
+        );
         let err = read_all(&path).1.unwrap_err();
         assert!(matches!(err, ReadError::NoReplayChannel { .. }), "{err}");
         assert!(err.to_string().contains("/chatter"), "{err}");
@@ -557,7 +569,13 @@ mod tests {
         write(&path, replay::TYPE_NAME, "/robot_0/replay", &[payload]);
         let err = read_all(&path).1.unwrap_err();
         assert!(
-            matches!(&err, ReadError::Step { source: ReplayError::Version { found: 2 }, .. }),
+            matches!(
+                &err,
+                ReadError::Step {
+                    source: ReplayError::Version { found: 2 },
+                    ..
+                }
+            ),
             "{err}"
         );
     }

@@ -14,8 +14,8 @@ use std::time::Duration;
 
 use formation_tests::{
     Finished, LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries,
-    case1_scenario, eval_recorded, formation_run, one_at_a_time, read_json, repo_root, run, send_signal,
-    test_model, unique_run_id, world_pid,
+    case1_scenario, eval_recorded, formation_run, one_at_a_time, read_json, repo_root, run,
+    send_signal, test_model, unique_run_id, world_pid,
 };
 use serde_json::Value;
 

@@ -14,8 +14,8 @@ use formation_proto::{LidarSpec, OccupancySpec};
 use formation_robot_agent::decision::{DecisionError, PolicyBackend};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
-    Finished, LeakCheck, TempDir, Watchdog, binaries, case1_scenario, eval_recorded,
-    formation_run, one_at_a_time, read_json, repo_root, run, test_model, unique_run_id,
+    Finished, LeakCheck, TempDir, Watchdog, binaries, case1_scenario, eval_recorded, formation_run,
+    one_at_a_time, read_json, repo_root, run, test_model, unique_run_id,
 };
 use serde_json::Value;
 
@@ -227,11 +227,19 @@ fn bad_input_gets_a_clear_error() {
     std::fs::write(&text, "not a recording\n").unwrap();
     let refused = replay(&text, &[], &json);
     assert_exit(&refused, 2);
-    assert!(refused.stderr().contains("not an MCAP file"), "{}", refused.describe());
+    assert!(
+        refused.stderr().contains("not an MCAP file"),
+        "{}",
+        refused.describe()
+    );
 
     let missing = replay(&dir.path().join("absent.mcap"), &[], &json);
     assert_exit(&missing, 2);
-    assert!(missing.stderr().contains("absent.mcap"), "{}", missing.describe());
+    assert!(
+        missing.stderr().contains("absent.mcap"),
+        "{}",
+        missing.describe()
+    );
 
     let file = record_case1(dir.path());
     let bytes = std::fs::read(&file).unwrap();
@@ -240,11 +248,18 @@ fn bad_input_gets_a_clear_error() {
     let json = dir.path().join("cut.json");
     let truncated = replay(&cut, &[], &json);
     assert_exit(&truncated, 2);
-    assert!(truncated.stderr().contains("truncated"), "{}", truncated.describe());
+    assert!(
+        truncated.stderr().contains("truncated"),
+        "{}",
+        truncated.describe()
+    );
     let report = read_json(&json);
     assert_eq!(report["complete"], false, "{report}");
     assert_eq!(report["diverged"], false, "{report}");
-    assert!(report["robots"][0]["compared"].as_u64().unwrap() > 0, "{report}");
+    assert!(
+        report["robots"][0]["compared"].as_u64().unwrap() > 0,
+        "{report}"
+    );
 
     let no_model = replay(&file, &["--model", "/nonexistent/model.onnx"], &json);
     assert_exit(&no_model, 2);

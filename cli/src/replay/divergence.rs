@@ -74,7 +74,8 @@ impl RobotTally {
                     .abs()
                     .max((cmd.right - recorded.right).abs());
                 // Both are finite in a fresh step; a NaN would still count as differing.
-                self.deltas.push(if delta.is_nan() { f64::MAX } else { delta });
+                self.deltas
+                    .push(if delta.is_nan() { f64::MAX } else { delta });
                 self.differing += 1;
             }
             None => self.failed += 1,
@@ -140,7 +141,10 @@ mod tests {
         t.compare(1, cmd(0.1, -0.0), Some(cmd(0.1, 0.0)));
         assert!(t.diverged());
         let row = t.finish(3);
-        assert_eq!((row.robot, row.steps, row.compared, row.differing), (3, 2, 2, 1));
+        assert_eq!(
+            (row.robot, row.steps, row.compared, row.differing),
+            (3, 2, 2, 1)
+        );
         assert_eq!(row.first_differing_tick, Some(1));
         assert_eq!(row.max_abs_delta, 0.0);
     }
@@ -148,9 +152,17 @@ mod tests {
     #[test]
     fn quantiles_first_and_last_ticks_and_failures() {
         let mut t = RobotTally::default();
-        for tick in 0..100 {
-            let replayed = if tick < 90 { 0.0 } else { 0.01 * f64::from(tick - 89) };
-            t.compare(tick, cmd(0.0, 0.0), Some(cmd(replayed, -replayed)));
+        for tick in 0..100u32 {
+            let replayed = if tick < 90 {
+                0.0
+            } else {
+                0.01 * f64::from(tick - 89)
+            };
+            t.compare(
+                u64::from(tick),
+                cmd(0.0, 0.0),
+                Some(cmd(replayed, -replayed)),
+            );
         }
         t.skip(TickOutcome::Stale);
         t.unreplayable(Unreplayable::UnknownModel);
@@ -159,7 +171,10 @@ mod tests {
         assert_eq!(row.p50_abs_delta, 0.0);
         assert!((row.p99_abs_delta - 0.09).abs() < 1e-12, "{row:?}");
         assert!((row.max_abs_delta - 0.10).abs() < 1e-12, "{row:?}");
-        assert_eq!((row.first_differing_tick, row.last_differing_tick), (Some(90), Some(99)));
+        assert_eq!(
+            (row.first_differing_tick, row.last_differing_tick),
+            (Some(90), Some(99))
+        );
         assert_eq!(row.skipped["stale"], 1);
         assert_eq!(row.unreplayable["unknown_model"], 1);
         t.compare(100, cmd(0.0, 0.0), None);

@@ -12,6 +12,7 @@ pub mod divergence;
 pub mod engine;
 
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use formation_schema::ReplayReport;
@@ -54,20 +55,26 @@ pub fn replay_command(args: &ReplayArgs) -> anyhow::Result<()> {
     };
     let replayed = replay_recording(&args.file, &options, &OnnxPilots, scratch.path())?;
     let report = &replayed.report;
-    print!("{}", table(report));
+    // The JSON is the lasting output: a closed stdout (`| head`) must not stop it being written.
+    let mut stdout = std::io::stdout().lock();
+    let _ = stdout.write_all(table(report).as_bytes());
     let json = args
         .json
         .clone()
         .unwrap_or_else(|| default_json_path(&args.file));
     paths::write_atomic(&json, &formation_schema::to_json_pretty(report)?)?;
-    println!("replay report: {}", json.display());
+    let _ = writeln!(stdout, "replay report: {}", json.display());
     if let Some(cut) = replayed.truncated {
         return Err(cut.into());
     }
     if report.diverged {
         return Err(Diverged {
             recording: report.recording.clone(),
-            robots: report.robots.iter().filter(|r| r.differing + r.failed > 0).count(),
+            robots: report
+                .robots
+                .iter()
+                .filter(|r| r.differing + r.failed > 0)
+                .count(),
             json: json.display().to_string(),
         }
         .into());
@@ -88,13 +95,27 @@ pub fn table(report: &ReplayReport) -> String {
         out,
         "replay of {} ({} clock), {whose} model(s): {models}",
         report.recording,
-        if report.clock.is_empty() { "unknown" } else { &report.clock },
+        if report.clock.is_empty() {
+            "unknown"
+        } else {
+            &report.clock
+        },
     );
     let _ = writeln!(
         out,
         "{:>5} {:>7} {:>8} {:>7} {:>8} {:>9} {:>6} {:>11} {:>11} {:>11} {:>7} {:>7}",
-        "robot", "steps", "compared", "skipped", "no-model", "differing", "failed",
-        "p50 |d| m/s", "p99 |d| m/s", "max |d| m/s", "first", "last"
+        "robot",
+        "steps",
+        "compared",
+        "skipped",
+        "no-model",
+        "differing",
+        "failed",
+        "p50 |d| m/s",
+        "p99 |d| m/s",
+        "max |d| m/s",
+        "first",
+        "last"
     );
     for r in &report.robots {
         let tick = |t: Option<u64>| t.map_or_else(|| "-".to_owned(), |t| t.to_string());
