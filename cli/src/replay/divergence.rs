@@ -161,7 +161,7 @@ mod tests {
             t.compare(
                 u64::from(tick),
                 cmd(0.0, 0.0),
-                Some(cmd(replayed, -replayed)),
+                Some(cmd(replayed, replayed)),
             );
         }
         t.skip(TickOutcome::Stale);
