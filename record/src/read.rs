@@ -96,11 +96,10 @@ impl RunInfo {
             let sha_key = format!("model.{k}.sha256");
             let sha256 = raw.get(&sha_key).ok_or_else(|| bad(&sha_key, "missing"))?;
             let stored_key = format!("model.{k}.stored");
-            let storage = match raw.get(&stored_key).map(String::as_str) {
-                Some("shipped") => ModelStorage::Shipped,
-                Some(s) if s.starts_with("attachment ") => {
-                    ModelStorage::Attachment(s["attachment ".len()..].to_owned())
-                }
+            let stored = raw.get(&stored_key).map_or("", String::as_str);
+            let storage = match (stored, stored.strip_prefix("attachment ")) {
+                ("shipped", _) => ModelStorage::Shipped,
+                (_, Some(name)) => ModelStorage::Attachment(name.to_owned()),
                 _ => return Err(bad(&stored_key, "neither `shipped` nor `attachment NAME`")),
             };
             models.push(RecordedModel {
@@ -117,13 +116,11 @@ impl RunInfo {
                 .collect::<Option<Vec<_>>>()
                 .ok_or_else(|| bad("robot_models", "not a list of model indexes"))?,
         };
-        let lidar_max_range_m = match raw.get("lidar_max_range_m") {
-            None => None,
-            Some(v) => Some(
-                v.parse::<f64>()
-                    .map_err(|_| bad("lidar_max_range_m", "not a number"))?,
-            ),
-        };
+        let lidar_max_range_m = raw
+            .get("lidar_max_range_m")
+            .map(|v| v.parse::<f64>())
+            .transpose()
+            .map_err(|_| bad("lidar_max_range_m", "not a number"))?;
         Ok(RunInfo {
             clock: raw.get("clock").cloned().unwrap_or_default(),
             models,
