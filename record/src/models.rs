@@ -220,7 +220,7 @@ mod tests {
         let good = info(&model, &sha, "shipped");
         assert_eq!(good.robot_models, [0, 0]);
         let files = recorded_model_files(Path::new("rec.mcap"), &good, dir.path()).unwrap();
-        assert_eq!(files, [model.clone()]);
+        assert_eq!(files, std::slice::from_ref(&model));
         std::fs::write(&model, b"changed").unwrap();
         let err = recorded_model_files(Path::new("rec.mcap"), &good, dir.path()).unwrap_err();
         assert!(matches!(err, ModelFileError::HashMismatch { .. }), "{err}");
