@@ -50,6 +50,10 @@ pub enum Command {
     /// The main job: the paper's three cases and Table I with the shipped model over real
     /// processes, ending in a report.
     Demo(DemoArgs),
+    /// Replay a recording (`--record`): each robot's recorded inputs through the agent's
+    /// decision, compared with the recorded commands. Exit 0: every command bit for bit the
+    /// same; 1: some differ (the table and the JSON say where); 2: an error.
+    Replay(ReplayArgs),
 }
 
 /// Which controller drives the robots.
@@ -330,6 +334,24 @@ pub struct DemoArgs {
     /// tools, and replay).
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
+}
+
+/// `formation replay`.
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The recording (an MCAP file written by `--record`).
+    #[arg(value_name = "FILE.mcap")]
+    pub file: PathBuf,
+    /// Decide with this ONNX model instead of the recording's own (to see how far another model
+    /// would have driven otherwise).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Replay only this robot.
+    #[arg(long, value_name = "I")]
+    pub robot: Option<u32>,
+    /// Write the report's JSON here (default: next to the recording, `FILE.replay.json`).
+    #[arg(long, value_name = "FILE.json")]
+    pub json: Option<PathBuf>,
 }
 
 /// Parses a `--runs` count: a whole number from 1 to the scenario limit

@@ -16,6 +16,8 @@
 //! * [`report`]: the HTML report with the paper's figures.
 //! * [`table`] and [`team_models`]: Table I as text, and the checked models of a team, shared by
 //!   the evaluating commands and the launcher.
+//! * [`replay`]: a recording's inputs through the agent's decision again, compared with its
+//!   commands.
 //! * [`demo`]: the README's main job: the paper's cases and Table I with the shipped model, then a report.
 
 pub mod args;
@@ -29,6 +31,7 @@ pub mod learn;
 pub mod paths;
 pub mod pilot;
 pub mod record;
+pub mod replay;
 pub mod report;
 pub mod table;
 pub mod team_models;
@@ -37,8 +40,12 @@ use clap::Parser;
 use formation_proto::exit::ProcessExit;
 
 /// How `formation` exits after `error`: 130 or 143 when the user interrupted a launch with
-/// SIGINT (Ctrl-C) or SIGTERM, 2 for any other error. (Bad flags exit 2 through clap.)
+/// SIGINT (Ctrl-C) or SIGTERM, 1 when a replay found differing commands, 2 for any other error.
+/// (Bad flags exit 2 through clap.)
 pub fn exit_for_error(error: &anyhow::Error) -> ProcessExit {
+    if error.downcast_ref::<replay::Diverged>().is_some() {
+        return ProcessExit::Diverged;
+    }
     let interrupted = error.chain().find_map(|cause| {
         match cause.downcast_ref::<launch::supervisor::LaunchError>() {
             Some(launch::supervisor::LaunchError::Interrupted(signal)) => Some(*signal),
@@ -65,6 +72,7 @@ pub fn main_with_args() -> anyhow::Result<()> {
         args::Command::Credentials(a) => launch::credentials_command(&a),
         args::Command::Report(a) => report::report_command(&a),
         args::Command::Demo(a) => demo::demo_command(&a),
+        args::Command::Replay(a) => replay::replay_command(&a),
     }
 }
 

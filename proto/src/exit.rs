@@ -54,6 +54,9 @@ pub enum ProcessExit {
     /// degraded; `formation-world`: every run was played; `formation-agent`: the world asked it
     /// to shut down, or it left because its world or launcher went away, saying so).
     Success,
+    /// 1: the work was done and found a difference (`formation replay`: a replayed command
+    /// differs from the recorded one), as `diff` and `cmp` say so; the report says where.
+    Diverged,
     /// 2: an error, reported on stderr (bad flags or files, a failed launch, a run that ended
     /// with a robot that lost its agent for good, an agent refused by the world).
     Failure,
@@ -69,6 +72,7 @@ impl ProcessExit {
     pub const fn code(self) -> u8 {
         match self {
             ProcessExit::Success => 0,
+            ProcessExit::Diverged => 1,
             ProcessExit::Failure => 2,
             ProcessExit::Interrupted => 130,
             ProcessExit::Terminated => 143,
@@ -116,6 +120,7 @@ mod tests {
         );
         assert_eq!(TerminationSignal::from_number(1), None);
         assert_eq!(ProcessExit::Success.code(), 0);
+        assert_eq!(ProcessExit::Diverged.code(), 1);
         assert_eq!(ProcessExit::Failure.code(), 2);
     }
 }

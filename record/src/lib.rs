@@ -11,11 +11,16 @@
 //! leaves a file that a streaming reader reads up to its last chunk.
 //!
 //! The tick loop hands each tick ([`tick`]) to a writer thread ([`recorder`]); where recordings
-//! go and the checks before a run are in [`target`], the errors in [`error`].
+//! go and the checks before a run are in [`target`], the errors in [`error`]. A replay reads a
+//! recording back in one streaming pass ([`read`]) and finds its models, checked against their
+//! hashes ([`models`]); running them is the `formation replay` command's (formation-cli), since
+//! this crate builds no ONNX Runtime.
 
 pub mod edges;
 pub mod error;
 pub mod file;
+pub mod models;
+pub mod read;
 pub mod recorder;
 pub mod replay;
 pub mod setup;
@@ -24,6 +29,7 @@ pub mod tick;
 
 pub use error::RecordError;
 pub use file::{RecordingFile, RecordingSummary};
+pub use read::{ReadError, RecordingItem, RecordingReader, RunInfo};
 pub use recorder::{RecordedController, Recorder, final_sample};
 pub use replay::ReplayStep;
 pub use setup::{LaunchInfo, RecordingSetup, TeamSetup};

@@ -129,6 +129,9 @@ impl RecordingSetup {
         put("run_index", self.run_index.to_string());
         put("run_seed", self.run_seed.to_string());
         put("robots", self.team.n_robots.to_string());
+        // The world's f64 range (the replay channel holds it as f32): an agent renders beams at
+        // or beyond it as no return, so a replay needs it bit for bit (Display round-trips).
+        put("lidar_max_range_m", self.team.max_range.to_string());
         put("clock", launch.clock.clone());
         put("controller", launch.controller.clone());
         put("dt_s", self.dt.to_string());

@@ -9,6 +9,7 @@
 //! | `profile.json` | [`LatencyProfile`] | [`LatencyProfile::FORMAT`] | [`LatencyProfile::VERSION`] |
 //! | `formation eval --robots ... --json` | [`ScalingTable`] | [`ScalingTable::FORMAT`] | [`ScalingTable::VERSION`] |
 //! | `formation eval --shard FILE` (a share of the runs, for `formation merge`) | [`EvalShard`] | [`EvalShard::FORMAT`] | [`EvalShard::VERSION`] |
+//! | `formation replay --json` | [`ReplayReport`] | [`ReplayReport::FORMAT`] | [`ReplayReport::VERSION`] |
 //!
 //! A format may read older versions than it writes ([`SchemaFile::OLDEST_VERSION`]): the run log
 //! is written as version 2 (its trajectory names its neighbour rule) and version 1 files still
@@ -33,6 +34,7 @@
 
 mod nan;
 mod profile;
+mod replay;
 mod run;
 mod scaling;
 mod shard;
@@ -48,6 +50,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 pub use profile::{LatencyProfile, StageStats};
+pub use replay::{ReplayReport, ReplayRobot};
 pub use run::{RunLog, RunMetrics, TeamMetrics, TicksPlayed, Trajectory};
 pub use scaling::{ScalingRow, ScalingTable};
 pub use shard::EvalShard;
@@ -156,6 +159,11 @@ pub fn read_scaling(path: &Path) -> Result<ScalingTable, SchemaError> {
 
 /// Reads a latency profile (`profile.json`).
 pub fn read_profile(path: &Path) -> Result<LatencyProfile, SchemaError> {
+    read(path)
+}
+
+/// Reads a replay report (what `formation replay --json` wrote).
+pub fn read_replay(path: &Path) -> Result<ReplayReport, SchemaError> {
     read(path)
 }
 

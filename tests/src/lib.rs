@@ -387,6 +387,21 @@ pub fn case1_scenario(dir: &Path, duration_s: f64) -> PathBuf {
     path
 }
 
+/// `formation eval` in-process with `args` (one run, its trajectory kept), recording into the
+/// folder `record` and writing its outputs to `out`.
+pub fn eval_recorded(args: &[&str], record: &Path, out: &Path) -> Finished {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .arg("eval")
+        .args(args)
+        .args(["--runs", "1", "--save-trajectories", "1"])
+        .arg("--record")
+        .arg(record)
+        .arg("--out")
+        .arg(out);
+    run(command, Duration::from_secs(300))
+}
+
 /// A finished child process, with what it printed.
 pub struct Finished {
     /// The command line, for messages.

@@ -14,8 +14,8 @@ use std::time::Duration;
 
 use formation_tests::{
     Finished, LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries,
-    case1_scenario, formation_run, one_at_a_time, read_json, repo_root, run, send_signal,
-    test_model, unique_run_id, world_pid,
+    case1_scenario, eval_recorded, formation_run, one_at_a_time, read_json, repo_root, run,
+    send_signal, test_model, unique_run_id, world_pid,
 };
 use serde_json::Value;
 
@@ -64,21 +64,6 @@ fn check_readers(finished: Finished) -> Value {
 
 fn os(s: &str) -> &std::ffi::OsStr {
     s.as_ref()
-}
-
-/// `formation eval` in-process with `args`, recording into `record` and keeping run 0's log in
-/// `out`.
-fn eval_recorded(args: &[&str], record: &Path, out: &Path) -> Finished {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .arg("eval")
-        .args(args)
-        .args(["--runs", "1", "--save-trajectories", "1"])
-        .arg("--record")
-        .arg(record)
-        .arg("--out")
-        .arg(out);
-    run(command, LIMIT)
 }
 
 /// The three readers on `file`, a recording of `robots` robots whose run log is `run_log`.

@@ -1,0 +1,267 @@
+//! The model files a replay loads: the recording's own, found and checked against its hashes.
+//!
+//! A shipped model is referenced by its path and SHA-256: the file at that path is hashed
+//! (piece by piece) and refused when it differs or is missing. A stored model comes from its
+//! attachment, which is written into a folder of the caller's and checked against its hash too.
+//! Each file is placed under its recorded file name, so that the model id an agent derives from
+//! it (file stem and content) is the id the recording's steps carry.
+
+use std::io::Read as _;
+use std::path::{Path, PathBuf};
+
+use sha2::Digest as _;
+
+use crate::read::{ModelStorage, RunInfo};
+
+/// How much of a model is hashed at a time.
+const PIECE: usize = 64 << 10;
+
+/// Why a recording's model cannot be replayed.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelFileError {
+    /// A shipped model is not at its recorded path.
+    #[error(
+        "{}: the recording's model {} (SHA-256 {sha256}) is not there: run the replay from the \
+         folder the run was recorded in, or give the model with --model",
+        recording.display(), model.display()
+    )]
+    Missing {
+        /// The recording.
+        recording: PathBuf,
+        /// The recorded path.
+        model: PathBuf,
+        /// Its recorded hash.
+        sha256: String,
+    },
+    /// A model's bytes are not the ones the recording names.
+    #[error(
+        "{}: the model {} has SHA-256 {found}, but the run used {expected}: it changed since the \
+         recording; restore it, or replay against it on purpose with --model {}",
+        recording.display(), model.display(), model.display()
+    )]
+    HashMismatch {
+        /// The recording.
+        recording: PathBuf,
+        /// The file.
+        model: PathBuf,
+        /// The recorded hash.
+        expected: String,
+        /// The file's hash.
+        found: String,
+    },
+    /// A stored model's attachment is not in the file.
+    #[error(
+        "{}: the model {} should be stored as the attachment {name}, which the file does not \
+         hold: give the model with --model",
+        recording.display(), model.display()
+    )]
+    AttachmentMissing {
+        /// The recording.
+        recording: PathBuf,
+        /// The recorded path.
+        model: PathBuf,
+        /// The attachment's name.
+        name: String,
+    },
+    /// A model could not be read or written.
+    #[error("{}: cannot read or write the model file {}", recording.display(), model.display())]
+    Io {
+        /// The recording.
+        recording: PathBuf,
+        /// The file.
+        model: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// The SHA-256 of `bytes`, as lowercase hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    hex(&sha2::Sha256::digest(bytes))
+}
+
+/// The SHA-256 of the file at `path`, read piece by piece, as lowercase hex.
+pub fn sha256_file(path: &Path) -> std::io::Result<String> {
+    let mut file = std::fs::File::open(path)?;
+    let mut hasher = sha2::Sha256::new();
+    let mut piece = vec![0u8; PIECE];
+    loop {
+        let n = file.read(&mut piece)?;
+        if n == 0 {
+            return Ok(hex(&hasher.finalize()));
+        }
+        hasher.update(&piece[..n]);
+    }
+}
+
+fn hex(digest: &[u8]) -> String {
+    digest.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Where the attachment `name` is kept in `dir` until the metadata names its model.
+pub fn attachment_path(dir: &Path, name: &str) -> PathBuf {
+    let flat: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    dir.join("attachments").join(flat)
+}
+
+/// Keeps the attachment `name` in `dir` (see [`attachment_path`]).
+pub fn save_attachment(
+    recording: &Path,
+    dir: &Path,
+    name: &str,
+    bytes: &[u8],
+) -> Result<(), ModelFileError> {
+    let path = attachment_path(dir, name);
+    let io = |source| ModelFileError::Io {
+        recording: recording.to_path_buf(),
+        model: path.clone(),
+        source,
+    };
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).map_err(io)?;
+    }
+    std::fs::write(&path, bytes).map_err(io)
+}
+
+/// The file to load for each of `info`'s models (in its order), each checked against its
+/// recorded hash: a shipped one where it was, a stored one from `dir` (where
+/// [`save_attachment`] kept it), moved to `dir/model-<k>/<its recorded file name>`.
+pub fn recorded_model_files(
+    recording: &Path,
+    info: &RunInfo,
+    dir: &Path,
+) -> Result<Vec<PathBuf>, ModelFileError> {
+    let mut files = Vec::with_capacity(info.models.len());
+    for (k, model) in info.models.iter().enumerate() {
+        let io = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| ModelFileError::Io {
+                recording: recording.to_path_buf(),
+                model: path,
+                source,
+            }
+        };
+        let file = match &model.storage {
+            ModelStorage::Shipped => {
+                if !model.path.is_file() {
+                    return Err(ModelFileError::Missing {
+                        recording: recording.to_path_buf(),
+                        model: model.path.clone(),
+                        sha256: model.sha256.clone(),
+                    });
+                }
+                model.path.clone()
+            }
+            ModelStorage::Attachment(name) => {
+                let kept = attachment_path(dir, name);
+                if !kept.is_file() {
+                    return Err(ModelFileError::AttachmentMissing {
+                        recording: recording.to_path_buf(),
+                        model: model.path.clone(),
+                        name: name.clone(),
+                    });
+                }
+                let file_name = model
+                    .path
+                    .file_name()
+                    .map_or_else(|| "model.onnx".into(), ToOwned::to_owned);
+                let place = dir.join(format!("model-{k}"));
+                std::fs::create_dir_all(&place).map_err(io(&place))?;
+                let target = place.join(file_name);
+                std::fs::rename(&kept, &target).map_err(io(&kept))?;
+                target
+            }
+        };
+        let found = sha256_file(&file).map_err(io(&file))?;
+        if found != model.sha256 {
+            return Err(ModelFileError::HashMismatch {
+                recording: recording.to_path_buf(),
+                model: file,
+                expected: model.sha256.clone(),
+                found,
+            });
+        }
+        files.push(file);
+    }
+    Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeMap;
+
+    fn info(path: &Path, sha: &str, stored: &str) -> RunInfo {
+        let mut raw = BTreeMap::new();
+        raw.insert("model.0.path".into(), path.display().to_string());
+        raw.insert("model.0.sha256".into(), sha.into());
+        raw.insert("model.0.stored".into(), stored.into());
+        raw.insert("robot_models".into(), "0,0".into());
+        RunInfo::parse(Path::new("rec.mcap"), raw).unwrap()
+    }
+
+    #[test]
+    fn a_shipped_model_is_checked_against_its_hash_and_refused_missing_or_changed() {
+        let dir = tempfile::tempdir().unwrap();
+        let model = dir.path().join("policy.onnx");
+        std::fs::write(&model, b"model bytes").unwrap();
+        let sha = sha256_hex(b"model bytes");
+        assert_eq!(sha256_file(&model).unwrap(), sha);
+        let good = info(&model, &sha, "shipped");
+        assert_eq!(good.robot_models, [0, 0]);
+        let files = recorded_model_files(Path::new("rec.mcap"), &good, dir.path()).unwrap();
+        assert_eq!(files, std::slice::from_ref(&model));
+        std::fs::write(&model, b"changed").unwrap();
+        let err = recorded_model_files(Path::new("rec.mcap"), &good, dir.path()).unwrap_err();
+        assert!(matches!(err, ModelFileError::HashMismatch { .. }), "{err}");
+        assert!(err.to_string().contains("--model"), "{err}");
+        std::fs::remove_file(&model).unwrap();
+        let err = recorded_model_files(Path::new("rec.mcap"), &good, dir.path()).unwrap_err();
+        assert!(matches!(err, ModelFileError::Missing { .. }), "{err}");
+    }
+
+    #[test]
+    fn a_stored_model_is_placed_under_its_recorded_name_and_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let sha = sha256_hex(b"stored");
+        let name = format!("models/{sha}.onnx");
+        let recorded = info(
+            Path::new("/elsewhere/tiny-seed0.onnx"),
+            &sha,
+            &format!("attachment {name}"),
+        );
+        let err = recorded_model_files(Path::new("r"), &recorded, dir.path()).unwrap_err();
+        assert!(
+            matches!(err, ModelFileError::AttachmentMissing { .. }),
+            "{err}"
+        );
+        save_attachment(Path::new("r"), dir.path(), &name, b"stored").unwrap();
+        let files = recorded_model_files(Path::new("r"), &recorded, dir.path()).unwrap();
+        assert_eq!(files[0].file_name().unwrap(), "tiny-seed0.onnx");
+        assert_eq!(std::fs::read(&files[0]).unwrap(), b"stored");
+    }
+
+    #[test]
+    fn malformed_metadata_is_a_typed_error() {
+        let mut raw = BTreeMap::new();
+        raw.insert("model.0.path".into(), "m.onnx".into());
+        raw.insert("model.0.sha256".into(), "ab".into());
+        raw.insert("model.0.stored".into(), "somewhere".into());
+        let err = RunInfo::parse(Path::new("r"), raw.clone()).unwrap_err();
+        assert!(err.to_string().contains("model.0.stored"), "{err}");
+        raw.insert("model.0.stored".into(), "shipped".into());
+        raw.insert("robot_models".into(), "0,1".into());
+        let err = RunInfo::parse(Path::new("r"), raw).unwrap_err();
+        assert!(err.to_string().contains("robot_models"), "{err}");
+    }
+}

@@ -1,0 +1,271 @@
+//! Issue 24's acceptance tests of `formation replay`: a recorded case-1 run (in-process, and
+//! lockstep over processes) replayed with its own model gives every command back bit for bit and
+//! exits 0; another model, or a renderer changed by one cell, is reported as a divergence with
+//! exit 1; a file that is not MCAP, a truncated one and a missing model are each a clear error
+//! (exit 2). Real ONNX Runtime, real processes, the real `formation` binary.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use formation_cli::pilot::{OnnxPilot, OnnxPilots};
+use formation_cli::replay::{ReplayOptions, replay_recording};
+use formation_proto::{LidarSpec, OccupancySpec};
+use formation_robot_agent::decision::{DecisionError, PolicyBackend};
+use formation_runtime::agent::{BoxError, PilotMaker};
+use formation_tests::{
+    Finished, LeakCheck, TempDir, Watchdog, binaries, case1_scenario, eval_recorded, formation_run,
+    one_at_a_time, read_json, repo_root, run, test_model, unique_run_id,
+};
+use serde_json::Value;
+
+const LIMIT: Duration = Duration::from_secs(300);
+
+/// `formation replay FILE ARGS --json JSON`.
+fn replay(file: &Path, args: &[&str], json: &Path) -> Finished {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .arg("replay")
+        .arg(file)
+        .args(args)
+        .arg("--json")
+        .arg(json);
+    run(command, LIMIT)
+}
+
+/// Case 1 for 10 s with the shipped model, recorded in-process; returns the recording.
+fn record_case1(dir: &Path) -> PathBuf {
+    let scenario = case1_scenario(dir, 10.0);
+    let record = dir.join("rec");
+    std::fs::create_dir(&record).unwrap();
+    eval_recorded(
+        &["--scenario", scenario.to_str().unwrap()],
+        &record,
+        &dir.join("out"),
+    )
+    .assert_success();
+    record.join("run-0000.mcap")
+}
+
+fn assert_exit(finished: &Finished, code: i32) {
+    assert_eq!(
+        finished.output.status.code(),
+        Some(code),
+        "{}",
+        finished.describe()
+    );
+}
+
+/// Every robot compared on every tick, none differing.
+fn assert_identical(report: &Value, robots: usize) {
+    assert_eq!(report["format"], "formation-replay", "{report}");
+    assert_eq!(report["schema_version"], 1, "{report}");
+    assert_eq!(report["diverged"], false, "{report}");
+    assert_eq!(report["complete"], true, "{report}");
+    let rows = report["robots"].as_array().unwrap();
+    assert_eq!(rows.len(), robots, "{report}");
+    for row in rows {
+        assert!(row["compared"].as_u64().unwrap() >= 190, "{row}");
+        assert_eq!(row["differing"], 0, "{row}");
+        assert_eq!(row["failed"], 0, "{row}");
+        assert_eq!(row["max_abs_delta"], 0.0, "{row}");
+    }
+}
+
+/// The in-process recording replayed with its own model: zero differing commands, exit 0;
+/// with the paper's model: a per-robot divergence and exit 1; `--robot` replays one robot and a
+/// robot the file does not hold is an error.
+#[test]
+fn a_case1_recording_replays_bit_identical_and_another_model_diverges() {
+    let _watchdog = Watchdog::arm("replay_case1", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("replay-case1");
+    let file = record_case1(dir.path());
+
+    let json = dir.path().join("same.json");
+    let same = replay(&file, &[], &json);
+    assert_exit(&same, 0);
+    assert!(same.stdout().contains("identical"), "{}", same.describe());
+    assert_identical(&read_json(&json), 3);
+
+    let paper = repo_root().join("onnx/models/paper/policy.onnx");
+    let json = dir.path().join("paper.json");
+    let other = replay(&file, &["--model", paper.to_str().unwrap()], &json);
+    assert_exit(&other, 1);
+    assert!(other.stdout().contains("DIVERGED"), "{}", other.describe());
+    assert!(other.stderr().contains("diverged"), "{}", other.describe());
+    let report = read_json(&json);
+    assert_eq!(report["diverged"], true, "{report}");
+    assert_eq!(report["model_override"], true, "{report}");
+    for row in report["robots"].as_array().unwrap() {
+        assert!(row["differing"].as_u64().unwrap() > 0, "{row}");
+        assert!(row["max_abs_delta"].as_f64().unwrap() > 0.0, "{row}");
+        assert!(row["p99_abs_delta"].as_f64().unwrap() <= row["max_abs_delta"].as_f64().unwrap());
+        assert!(row["first_differing_tick"].is_u64(), "{row}");
+    }
+
+    let json = dir.path().join("one.json");
+    let one = replay(&file, &["--robot", "1"], &json);
+    assert_exit(&one, 0);
+    let rows = read_json(&json)["robots"].as_array().unwrap().clone();
+    assert_eq!(rows.len(), 1);
+    assert_eq!(rows[0]["robot"], 1);
+    let none = replay(&file, &["--robot", "7"], &dir.path().join("none.json"));
+    assert_exit(&none, 2);
+    assert!(none.stderr().contains("--robot 7"), "{}", none.describe());
+}
+
+/// A lockstep run over processes (an agent per robot, the test model stored in the recording as
+/// an attachment) replayed in one process: every command bit for bit the agents'.
+#[test]
+fn a_lockstep_run_over_processes_replays_bit_identical() {
+    let _watchdog = Watchdog::arm("replay_lockstep", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("replay-lockstep");
+    let scenario = case1_scenario(dir.path(), 10.0);
+    let run_id = unique_run_id("replay");
+    let leaks = LeakCheck::new(&run_id);
+    let file = dir.path().join("lockstep.mcap");
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &dir.path().join("out"),
+        &["--clock", "lockstep"],
+    );
+    command.arg("--record").arg(&file);
+    run(command, LIMIT).assert_success();
+    leaks.assert_clean();
+
+    let json = dir.path().join("lockstep.json");
+    let replayed = replay(&file, &[], &json);
+    assert_exit(&replayed, 0);
+    let report = read_json(&json);
+    assert_identical(&report, 3);
+    assert_eq!(report["clock"], "lockstep", "{report}");
+    let model = report["models"][0].as_str().unwrap();
+    assert_eq!(Path::new(model), test_model(), "{report}");
+}
+
+/// A policy whose input image has one cell flipped: the renderer changed by one pixel.
+struct OneCellFlipped(Box<dyn PolicyBackend>);
+
+impl PolicyBackend for OneCellFlipped {
+    fn infer(&mut self, occupancy: &[f32], aux: [f32; 2]) -> Result<[f32; 2], DecisionError> {
+        let mut image = occupancy.to_vec();
+        // The cell in the middle of the image's first row: beside the robot, within the window.
+        let cell = self.0.occupancy_spec().size_px / 2;
+        image[cell] = 1.0 - image[cell];
+        self.0.infer(&image, aux)
+    }
+    fn occupancy_spec(&self) -> OccupancySpec {
+        self.0.occupancy_spec()
+    }
+    fn beams(&self) -> Option<usize> {
+        self.0.beams()
+    }
+    fn max_range(&self) -> Option<f64> {
+        self.0.max_range()
+    }
+    fn v_train(&self) -> f64 {
+        self.0.v_train()
+    }
+    fn model_id(&self) -> &str {
+        self.0.model_id()
+    }
+    fn envelope(&self) -> formation_onnx::ModelEnvelope {
+        self.0.envelope()
+    }
+}
+
+/// The agent's pilots, with the renderer's output changed by one cell.
+struct FlippedPilots;
+
+impl PilotMaker for FlippedPilots {
+    type Model = Box<dyn PolicyBackend>;
+    type Pilot = OnnxPilot;
+
+    fn load(&self, path: &Path) -> Result<Self::Model, BoxError> {
+        Ok(Box::new(OneCellFlipped(OnnxPilots.load(path)?)))
+    }
+    fn model_id<'m>(&self, model: &'m Self::Model) -> &'m str {
+        model.model_id()
+    }
+    fn pilot(&self, model: Self::Model, lidar: LidarSpec) -> Result<OnnxPilot, BoxError> {
+        OnnxPilots.pilot(model, lidar)
+    }
+}
+
+/// The replay library with a renderer changed by one pixel finds differing commands; with the
+/// agent's own pilots it finds none (the control).
+#[test]
+fn a_renderer_changed_by_one_pixel_is_caught() {
+    let _watchdog = Watchdog::arm("replay_pixel", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("replay-pixel");
+    let file = record_case1(dir.path());
+    let scratch = dir.path().join("scratch");
+    std::fs::create_dir(&scratch).unwrap();
+    let options = ReplayOptions::default();
+    let control = replay_recording(&file, &options, &OnnxPilots, &scratch).unwrap();
+    assert!(!control.report.diverged, "{:?}", control.report);
+    let flipped = replay_recording(&file, &options, &FlippedPilots, &scratch).unwrap();
+    assert!(flipped.report.diverged, "{:?}", flipped.report);
+    let differing: u64 = flipped.report.robots.iter().map(|r| r.differing).sum();
+    assert!(differing > 0, "{:?}", flipped.report);
+}
+
+/// Not MCAP, truncated, a missing model: each an error (exit 2) naming the cause and the fix; a
+/// truncated recording is replayed up to the cut and its report says so.
+#[test]
+fn bad_input_gets_a_clear_error() {
+    let _watchdog = Watchdog::arm("replay_bad", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("replay-bad");
+    let json = dir.path().join("bad.json");
+
+    let text = dir.path().join("notes.mcap");
+    std::fs::write(&text, "not a recording\n").unwrap();
+    let refused = replay(&text, &[], &json);
+    assert_exit(&refused, 2);
+    assert!(
+        refused.stderr().contains("not an MCAP file"),
+        "{}",
+        refused.describe()
+    );
+
+    let missing = replay(&dir.path().join("absent.mcap"), &[], &json);
+    assert_exit(&missing, 2);
+    assert!(
+        missing.stderr().contains("absent.mcap"),
+        "{}",
+        missing.describe()
+    );
+
+    let file = record_case1(dir.path());
+    let bytes = std::fs::read(&file).unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 3 / 5]).unwrap();
+    let json = dir.path().join("cut.json");
+    let truncated = replay(&cut, &[], &json);
+    assert_exit(&truncated, 2);
+    assert!(
+        truncated.stderr().contains("truncated"),
+        "{}",
+        truncated.describe()
+    );
+    let report = read_json(&json);
+    assert_eq!(report["complete"], false, "{report}");
+    assert_eq!(report["diverged"], false, "{report}");
+    assert!(
+        report["robots"][0]["compared"].as_u64().unwrap() > 0,
+        "{report}"
+    );
+
+    let no_model = replay(&file, &["--model", "/nonexistent/model.onnx"], &json);
+    assert_exit(&no_model, 2);
+    assert!(
+        no_model.stderr().contains("/nonexistent/model.onnx"),
+        "{}",
+        no_model.describe()
+    );
+}
