@@ -8,7 +8,7 @@
 //! ([`formation_runtime::iceoryx::request_swap`]), which opens the swap channel with the world's
 //! own service definitions; everything it opens in the run's namespace goes when it returns.
 //!
-//! With `--transport zenoh` ([`request_swap_over_zenoh`]) the request goes to the world's
+//! With `--transport zenoh` (`request_swap_over_zenoh`, feature `zenoh`) the request goes to the world's
 //! Zenoh router instead, and carries the model's bytes (at most 32 MiB, with a SHA-256), since a
 //! remote agent cannot open this host's path.
 //!
