@@ -1,5 +1,5 @@
 //! `formation-agent --transport ros2`: the flags of the ROS 2 mode and how they become the
-//! runtime's [`Ros2AgentSettings`].
+//! runtime's `Ros2AgentSettings`.
 //!
 //! Topic defaults: with `--robot I`, the simulated team's (`/robot_I/scan`, `/robot_I/odom` as
 //! Odometry, `/robot_I/cmd_vel`, node `/robot_I/formation_agent`); without it, a single robot's

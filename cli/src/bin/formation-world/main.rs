@@ -15,7 +15,7 @@
 //! agents that prove it are let drive a robot.
 //!
 //! With `--transport zenoh` the agents reach it over Zenoh instead: the world listens on
-//! `--listen tcp/ADDR:PORT` as a Zenoh router (see [`formation_runtime::zenoh`]), checking the
+//! `--listen tcp/ADDR:PORT` as a Zenoh router (see `formation_runtime::zenoh`), checking the
 //! logins of a credentials folder (`--credentials DIR`, from `formation credentials`) when given.
 //!
 //! Usually started by `formation run` / `formation eval --processes`, not by hand.
