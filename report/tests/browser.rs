@@ -456,17 +456,23 @@ fn differing_pixels(a: &Image, b: &Image, (x, y): (f64, f64), r: i64) -> usize {
     count
 }
 
+/// A report of one 16-robot, 60 s run in a temp folder (kept while the guard lives).
+fn sixteen_robot_report() -> (tempfile::TempDir, std::path::PathBuf) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dir.path().join("data");
+    common::write_team_dir(&data, 16, 60.0);
+    let out = dir.path().join("report.html");
+    build_report(&data, &out).expect("report");
+    (dir, out)
+}
+
 /// The player in Chromium: at two times of a 16-robot run the screenshots differ where the
 /// robots were and moved away from, the robots are drawn where the page says, and nothing outside
 /// the player changes.
 #[test]
 fn the_player_draws_the_robots_where_they_are_at_two_times() {
     let browser = chromium();
-    let dir = tempfile::tempdir().expect("tempdir");
-    let data = dir.path().join("data");
-    common::write_team_dir(&data, 16, 60.0);
-    let out = dir.path().join("report.html");
-    build_report(&data, &out).expect("report");
+    let (dir, out) = sixteen_robot_report();
 
     let (dom_a, shot_a) = player_at(&browser, dir.path(), &out, 5.0);
     let (dom_b, shot_b) = player_at(&browser, dir.path(), &out, 40.0);
@@ -555,11 +561,7 @@ fn the_player_draws_the_robots_where_they_are_at_two_times() {
 #[test]
 fn the_players_frame_rate_on_sixteen_robots_is_measured() {
     let browser = chromium();
-    let dir = tempfile::tempdir().expect("tempdir");
-    let data = dir.path().join("data");
-    common::write_team_dir(&data, 16, 60.0);
-    let out = dir.path().join("report.html");
-    build_report(&data, &out).expect("report");
+    let (dir, out) = sixteen_robot_report();
     let mut args = window_args(1300, 900);
     args.push("--dump-dom".to_owned());
     let run = run_chromium(
