@@ -11,11 +11,14 @@
 //! leaves a file that a streaming reader reads up to its last chunk.
 //!
 //! The tick loop hands each tick ([`tick`]) to a writer thread ([`recorder`]); where recordings
-//! go and the checks before a run are in [`target`], the errors in [`error`].
+//! go and the checks before a run are in [`target`], the errors in [`error`]. A recorder of a
+//! live team from outside (`formation record --connect`) gets the same ticks over the network
+//! in the encoding of [`live`], and writes the same file.
 
 pub mod edges;
 pub mod error;
 pub mod file;
+pub mod live;
 pub mod recorder;
 pub mod replay;
 pub mod setup;
