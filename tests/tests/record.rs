@@ -18,7 +18,6 @@ use formation_tests::{
     case1_scenario, formation_run, one_at_a_time, read_json, repo_root, run, send_signal,
     test_model, unique_run_id, world_pid,
 };
-use serde_json::Value;
 
 const LIMIT: Duration = Duration::from_secs(300);
 fn os(s: &str) -> &std::ffi::OsStr {

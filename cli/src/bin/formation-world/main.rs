@@ -207,7 +207,7 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
         Arc::new(AtomicBool::new(false))
     };
 
-    let (mut link, mut feed): (Box<dyn WorldLink>, Option<Box<dyn RecordFeed>>) =
+    let (mut link, feed): (Box<dyn WorldLink>, Option<Box<dyn RecordFeed>>) =
         match args.transport {
             Transport::Iceoryx2 => (
                 Box::new(
@@ -237,12 +237,12 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
         Arc::new(SystemClock),
         Box::new(emit),
     );
-    let recording = Recording {
-        settings: record.as_ref(),
-        launch: &launch,
-        feed: feed.as_deref_mut(),
+    let mut recording = Recording {
+        settings: record,
+        launch,
+        feed,
     };
-    let result = play(args, &runtime, &specs, recording, &mut agents);
+    let result = play(args, &runtime, &specs, &mut recording, &mut agents);
     // A world that stops early says why first, and tells the launcher before it asks the agents
     // to exit, so that their exits are not taken for crashes (and restarted).
     let ended = match (&result, agents.stopped()) {
@@ -406,20 +406,20 @@ fn read_run_specs(path: &Path) -> anyhow::Result<Vec<RunSpec>> {
 
 /// What a world records: its own file (`--record`) and its record channel for remote
 /// recorders.
-struct Recording<'a> {
+struct Recording {
     /// Where `--record` goes.
-    settings: Option<&'a formation_record::RecordSettings>,
+    settings: Option<formation_record::RecordSettings>,
     /// What the launch knows of its runs.
-    launch: &'a formation_record::LaunchInfo,
+    launch: formation_record::LaunchInfo,
     /// The record channel (Zenoh).
-    feed: Option<&'a mut dyn RecordFeed>,
+    feed: Option<Box<dyn RecordFeed>>,
 }
 
 fn play(
     args: &Args,
     runtime: &RuntimeSettings,
     specs: &[RunSpec],
-    mut recording: Recording<'_>,
+    recording: &mut Recording,
     agents: &mut AgentsController<'_>,
 ) -> anyhow::Result<()> {
     agents.await_agents(runtime.startup_timeout())?;
@@ -431,11 +431,13 @@ fn play(
             .with_context(|| format!("run {index}"))?;
         let recorder = recording
             .settings
+            .as_ref()
             .and_then(|r| start_recording(r, spec, nth, specs.len()));
+        let launch = &recording.launch;
         let live = recording
             .feed
             .as_deref_mut()
-            .and_then(|feed| runlog::LiveFeed::begin(feed, spec, recording.launch, nth, specs.len()));
+            .and_then(|feed| runlog::LiveFeed::begin(feed, spec, launch, nth, specs.len()));
         let log = play_journaled(&args.out, runtime.clock.as_str(), spec, agents, recorder, live)
             .with_context(|| format!("run {index}"))?;
         emit(&WorldEvent::RunDone { index, log });
