@@ -69,10 +69,8 @@ pub fn record_command(args: &RecordArgs) -> anyhow::Result<()> {
     let timeout = crate::launch::positive_seconds("--timeout-s", args.timeout_s)?;
     let link = RecorderLink::connect(&endpoint, &login, &run, timeout)?;
     println!("connected to run {run} at {endpoint}; recording its runs");
-    let mut recording = LiveRecording::new(
-        &args.out,
-        &format!("formation record --connect {endpoint}"),
-    );
+    let mut recording =
+        LiveRecording::new(&args.out, &format!("formation record --connect {endpoint}"));
     let mut kept = Vec::new();
     let outcome = record_until_done(&link, &mut recording, &mut kept);
     let ended = recording.abandon()?;
@@ -122,8 +120,7 @@ fn record_until_done(
         };
         match event {
             RecorderEvent::Message(bytes) => {
-                if take(recording, &bytes, kept)?.is_some_and(|done| done.last_run && done.ended)
-                {
+                if take(recording, &bytes, kept)?.is_some_and(|done| done.last_run && done.ended) {
                     return Ok(Ended::AllRuns);
                 }
                 if !asked && !recording.has_setup() {

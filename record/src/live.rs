@@ -21,7 +21,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use formation_proto::wire::TickOutcome;
-use formation_proto::{Goal, GabrielRule, NeighbourRule, Pose, WheelCmd};
+use formation_proto::{GabrielRule, Goal, NeighbourRule, Pose, WheelCmd};
 
 use crate::error::RecordError;
 use crate::file::{RecordingFile, RecordingSummary};
@@ -593,7 +593,10 @@ impl LiveRecording {
         let Some(run) = &mut self.run else {
             return Ok(());
         };
-        if run.first_tick.is_some_and(|first| tick.tick < first + run.ticks) {
+        if run
+            .first_tick
+            .is_some_and(|first| tick.tick < first + run.ticks)
+        {
             return Ok(()); // a tick already written (the query's and the channel's copies)
         }
         if run.file.is_none() {

@@ -186,9 +186,9 @@ fn read_settings_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, 
                 FileRefusal::NotAFile { kind } => {
                     std::io::Error::other(format!("it is {kind}, not a regular file"))
                 }
-                FileRefusal::TooLarge { .. } => std::io::Error::other(format!(
-                    "it is larger than {MAX_SETTINGS_BYTES} bytes"
-                )),
+                FileRefusal::TooLarge { .. } => {
+                    std::io::Error::other(format!("it is larger than {MAX_SETTINGS_BYTES} bytes"))
+                }
             };
             RecordError::Settings {
                 path: path.to_path_buf(),

@@ -77,7 +77,11 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
         Duration::from_secs(60),
     );
     refused.assert_failure_mentioning("needs the team's recorder login");
-    assert!(refused.stderr().contains("recorder.json"), "{}", refused.describe());
+    assert!(
+        refused.stderr().contains("recorder.json"),
+        "{}",
+        refused.describe()
+    );
     let robot1 = creds.join("robot-1.json");
     let refused = run(
         record_connect(&listen, run_id.as_str(), &outside, Some(&robot1)),
@@ -93,8 +97,12 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
 
     // The recorder with its login, attached before the run starts.
     let login = creds.join("recorder.json");
-    let mut recorder =
-        LiveProcess::spawn(record_connect(&listen, run_id.as_str(), &outside, Some(&login)));
+    let mut recorder = LiveProcess::spawn(record_connect(
+        &listen,
+        run_id.as_str(),
+        &outside,
+        Some(&login),
+    ));
     let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
         l.contains(&format!("connected to run {run_id}"))
     });
@@ -117,24 +125,31 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
     let recorded = recorder.finish(Duration::from_secs(60));
     recorded.assert_success();
     assert!(
-        recorded.stdout().contains("recorded run 0 to") && !recorded.stdout().contains("joined late"),
+        recorded.stdout().contains("recorded run 0 to")
+            && !recorded.stdout().contains("joined late"),
         "{}",
         recorded.describe()
     );
 
-    let compared = mcap_readers(&[
-        "compare".as_ref(),
-        own.as_os_str(),
-        outside.as_os_str(),
-    ]);
+    let compared = mcap_readers(&["compare".as_ref(), own.as_os_str(), outside.as_os_str()]);
     // 8 s at 20 Hz: 160 ticks of 3 robots' scan, odometry, command, TF and more.
-    assert!(compared["messages"].as_u64().unwrap() > 160 * 3 * 4, "{compared}");
+    assert!(
+        compared["messages"].as_u64().unwrap() > 160 * 3 * 4,
+        "{compared}"
+    );
     assert_eq!(compared["differing"], 0, "{compared}");
     let theirs = mcap_readers(&["metadata".as_ref(), outside.as_os_str()]);
     let ours = mcap_readers(&["metadata".as_ref(), own.as_os_str()]);
     assert_eq!(theirs["live.first_tick"], "0", "{theirs}");
     assert_eq!(theirs["live.complete_from_start"], "true", "{theirs}");
-    for key in ["scenario", "seed", "run_seed", "clock", "model.0.sha256", "robot_models"] {
+    for key in [
+        "scenario",
+        "seed",
+        "run_seed",
+        "clock",
+        "model.0.sha256",
+        "robot_models",
+    ] {
         assert_eq!(theirs[key], ours[key], "{key}: {theirs} against {ours}");
     }
     assert_eq!(

@@ -72,7 +72,9 @@ impl ZenohRecordFeed {
                 }
             })
             .wait()
-            .map_err(|e| zenoh_error(format!("declare a queryable on {setup_key}"))(e.to_string()))?;
+            .map_err(|e| {
+                zenoh_error(format!("declare a queryable on {setup_key}"))(e.to_string())
+            })?;
         Ok(ZenohRecordFeed {
             publisher,
             setup,
@@ -175,7 +177,8 @@ impl RecorderLink {
         timeout: Duration,
     ) -> Result<Self, RecorderLinkError> {
         let started = Instant::now();
-        let zenoh = |action: String| move |e: String| RecorderLinkError::Zenoh { action, detail: e };
+        let zenoh =
+            |action: String| move |e: String| RecorderLinkError::Zenoh { action, detail: e };
         let config = super::client_config(endpoint, timeout, Some(login))
             .map_err(zenoh(format!("configure the connection to {endpoint}")))?;
         let session = super::open(config).map_err(|detail| RecorderLinkError::Unreachable {
@@ -266,7 +269,10 @@ impl RecorderLink {
                 return Some(RecorderEvent::Stopped(signal));
             }
             let left = deadline.saturating_duration_since(Instant::now());
-            match self.events.recv_timeout(left.min(Duration::from_millis(50))) {
+            match self
+                .events
+                .recv_timeout(left.min(Duration::from_millis(50)))
+            {
                 Ok(event) => return Some(event),
                 Err(RecvTimeoutError::Timeout) if !left.is_zero() => {}
                 Err(_) => return None,

@@ -207,21 +207,20 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
         Arc::new(AtomicBool::new(false))
     };
 
-    let (mut link, feed): (Box<dyn WorldLink>, Option<Box<dyn RecordFeed>>) =
-        match args.transport {
-            Transport::Iceoryx2 => (
-                Box::new(
-                    IceoryxWorldLink::create(&namespace, n_robots)
-                        .with_context(|| format!("setting up run {run_id}'s services"))?,
-                ),
-                None,
+    let (mut link, feed): (Box<dyn WorldLink>, Option<Box<dyn RecordFeed>>) = match args.transport {
+        Transport::Iceoryx2 => (
+            Box::new(
+                IceoryxWorldLink::create(&namespace, n_robots)
+                    .with_context(|| format!("setting up run {run_id}'s services"))?,
             ),
-            Transport::Zenoh => zenoh_link(args, &run_id, n_robots)?,
-            Transport::Ros2 => (
-                ros2_link(args, &run_id, &specs[0], &runtime, secret.clone())?,
-                None,
-            ),
-        };
+            None,
+        ),
+        Transport::Zenoh => zenoh_link(args, &run_id, n_robots)?,
+        Transport::Ros2 => (
+            ros2_link(args, &run_id, &specs[0], &runtime, secret.clone())?,
+            None,
+        ),
+    };
     let launch = launch_info(args, record.as_ref(), &runtime)?;
     emit(&WorldEvent::Listening { robots: n_robots });
     let settings = ExchangeSettings {
@@ -438,8 +437,15 @@ fn play(
             .feed
             .as_deref_mut()
             .and_then(|feed| runlog::LiveFeed::begin(feed, spec, launch, nth, specs.len()));
-        let log = play_journaled(&args.out, runtime.clock.as_str(), spec, agents, recorder, live)
-            .with_context(|| format!("run {index}"))?;
+        let log = play_journaled(
+            &args.out,
+            runtime.clock.as_str(),
+            spec,
+            agents,
+            recorder,
+            live,
+        )
+        .with_context(|| format!("run {index}"))?;
         emit(&WorldEvent::RunDone { index, log });
     }
     Ok(())
