@@ -8,6 +8,9 @@ use formation_proto::NeighbourRule;
 use formation_world::RunSpec;
 use serde::{Deserialize, Serialize};
 
+/// Models to store in a recording: each file with its attachment's name.
+pub type ModelAttachments = Vec<(PathBuf, String)>;
+
 /// The team a recording's messages describe.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TeamSetup {
@@ -120,7 +123,7 @@ impl RecordingSetup {
     pub fn metadata_with_models(
         &self,
         recording: &Path,
-    ) -> Result<(BTreeMap<String, String>, Vec<(PathBuf, String)>), crate::RecordError> {
+    ) -> Result<(BTreeMap<String, String>, ModelAttachments), crate::RecordError> {
         let mut metadata = self.run_metadata();
         let mut attachments = Vec::new();
         let (files, per_robot) = self.distinct_models();
