@@ -42,9 +42,12 @@ pub enum Command {
     Profile(ProfileArgs),
     /// Swap the ONNX model of one running agent.
     Swap(SwapArgs),
-    /// Create Zenoh credentials for a team: one login per robot (plus the launch secret) and
-    /// one for `formation swap`, for agents on other hosts.
+    /// Create Zenoh credentials for a team: one login per robot (plus the launch secret), one
+    /// for `formation swap` and a read-only one for `formation record --connect`, for agents on
+    /// other hosts.
     Credentials(CredentialsArgs),
+    /// Record a live Zenoh team from outside to MCAP: the same file `--record` writes.
+    Record(RecordArgs),
     /// Build the HTML report (Table I, Figs. 6-9) from eval/run output directories.
     Report(ReportArgs),
     /// The main job: the paper's three cases and Table I with the shipped model over real
@@ -575,6 +578,28 @@ pub struct SwapArgs {
     /// Zenoh: the operator's login file (operator.json from `formation credentials`).
     #[arg(long, value_name = "FILE")]
     pub credentials: Option<PathBuf>,
+}
+
+/// `formation record --connect`: record a live Zenoh team from outside.
+#[derive(Debug, Clone, Args)]
+pub struct RecordArgs {
+    /// The team's endpoint, tcp/HOST:PORT (its `formation run --listen`).
+    #[arg(long, value_name = "tcp/HOST:PORT")]
+    pub connect: String,
+    /// Run id of the running launch (`formation run` prints it; set it with `--run-id`).
+    #[arg(long)]
+    pub run_id: String,
+    /// The recorder's login file (recorder.json from `formation credentials`): read-only, and
+    /// required.
+    #[arg(long, value_name = "FILE")]
+    pub credentials: Option<PathBuf>,
+    /// The MCAP file to write, whose folder must exist (with several runs, run N to
+    /// `<stem>-run-NNNN.mcap` beside it, as `--record` names them).
+    #[arg(long, value_name = "FILE.mcap")]
+    pub out: PathBuf,
+    /// How long to wait for the team's world to be there \[s\].
+    #[arg(long, default_value_t = 30.0)]
+    pub timeout_s: f64,
 }
 
 /// `formation credentials`: Zenoh logins for a team.

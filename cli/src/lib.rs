@@ -13,6 +13,8 @@
 //! * [`launch`]: the multi-process launcher (`run`, `profile`, `swap`, `credentials`).
 //! * [`pilot`]: the robot's ONNX decision as the runtime's agent loop drives it (the
 //!   `formation-agent` binary).
+//! * `record_connect` (feature `zenoh`): `formation record --connect`, recording a live team
+//!   from outside.
 //! * [`report`]: the HTML report with the paper's figures.
 //! * [`table`] and [`team_models`]: Table I as text, and the checked models of a team, shared by
 //!   the evaluating commands and the launcher.
@@ -31,6 +33,8 @@ pub mod learn;
 pub mod paths;
 pub mod pilot;
 pub mod record;
+#[cfg(feature = "zenoh")]
+pub mod record_connect;
 pub mod replay;
 pub mod report;
 pub mod table;
@@ -70,10 +74,27 @@ pub fn main_with_args() -> anyhow::Result<()> {
         args::Command::Profile(a) => launch::profile_command(&a),
         args::Command::Swap(a) => launch::swap_command(&a),
         args::Command::Credentials(a) => launch::credentials_command(&a),
+        args::Command::Record(a) => record_command(&a),
         args::Command::Report(a) => report::report_command(&a),
         args::Command::Demo(a) => demo::demo_command(&a),
         args::Command::Replay(a) => replay::replay_command(&a),
     }
+}
+
+/// `formation record --connect` ([`record_connect`]).
+#[cfg(feature = "zenoh")]
+fn record_command(args: &args::RecordArgs) -> anyhow::Result<()> {
+    record_connect::record_command(args)
+}
+
+/// `formation record --connect` needs Zenoh.
+#[cfg(not(feature = "zenoh"))]
+fn record_command(_args: &args::RecordArgs) -> anyhow::Result<()> {
+    Err(formation_runtime::transport::TransportError::NotBuilt {
+        program: "formation".into(),
+        transport: formation_runtime::transport::Transport::Zenoh,
+    }
+    .into())
 }
 
 /// Logs to stderr with `FORMATION_LOG`'s filter, else at the level `verbose` asks for (0: warn,

@@ -32,7 +32,7 @@ use mcap::records::{AttachmentHeader, MessageHeader, Metadata};
 use crate::edges::{self, EdgeMarkers};
 use crate::error::RecordError;
 use crate::replay::{self, ReplayStep};
-use crate::setup::RecordingSetup;
+use crate::setup::{RecordingSetup, TeamSetup};
 use crate::tick::{FinalSample, TickRecord};
 
 /// The most bytes of a model a recording stores as an attachment.
@@ -53,7 +53,7 @@ const FILE_BUFFER: usize = 256 << 10;
 const MODEL_PIECE: usize = 64 << 10;
 
 /// What takes a model's bytes piece by piece: a hasher, or the attachment being written.
-type PieceSink<'a> = dyn FnMut(&mut RecordingFile, &[u8]) -> Result<(), RecordError> + 'a;
+type PieceSink<'a> = dyn FnMut(&[u8]) -> Result<(), RecordError> + 'a;
 
 /// A robot's channels.
 #[derive(Debug, Clone, Copy)]
@@ -91,7 +91,8 @@ pub struct RecordingSummary {
 pub struct RecordingFile {
     path: PathBuf,
     mcap: mcap::Writer<BufWriter<File>>,
-    setup: RecordingSetup,
+    team: TeamSetup,
+    d_star: f64,
     channels: Channels,
     /// Per channel id: its topic (for messages) and its next sequence number.
     topics: Vec<(String, u32)>,
@@ -123,10 +124,97 @@ fn stamp(ns: u64) -> Time {
     Time::from_nanos(i64::try_from(ns).unwrap_or(i64::MAX))
 }
 
+/// Opens a model to read, refusing one larger than a recording stores (`recording` names the
+/// file in errors).
+fn open_model(recording: &Path, model: &Path) -> Result<(File, u64), RecordError> {
+    let model_error = |source| RecordError::Model {
+        path: recording.to_path_buf(),
+        model: model.to_path_buf(),
+        source,
+    };
+    let file = File::open(model).map_err(model_error)?;
+    let size = file.metadata().map_err(model_error)?.len();
+    if size > MAX_ATTACHED_MODEL_BYTES {
+        return Err(RecordError::ModelTooLarge {
+            path: recording.to_path_buf(),
+            model: model.to_path_buf(),
+            size,
+            limit: MAX_ATTACHED_MODEL_BYTES,
+        });
+    }
+    Ok((file, size))
+}
+
+/// Reads `model` piece by piece, handing each piece to `each`; returns the bytes read.
+fn read_model(
+    recording: &Path,
+    model: &Path,
+    each: &mut PieceSink<'_>,
+) -> Result<u64, RecordError> {
+    let (file, size) = open_model(recording, model)?;
+    let mut file = file.take(size);
+    let mut piece = vec![0u8; MODEL_PIECE];
+    let mut total = 0;
+    loop {
+        let n = file.read(&mut piece).map_err(|source| RecordError::Model {
+            path: recording.to_path_buf(),
+            model: model.to_path_buf(),
+            source,
+        })?;
+        if n == 0 {
+            return Ok(total);
+        }
+        total += n as u64;
+        each(&piece[..n])?;
+    }
+}
+
+/// The SHA-256 of `model`, as hex (`recording` names the file in errors).
+pub(crate) fn hash_model(recording: &Path, model: &Path) -> Result<String, RecordError> {
+    use sha2::Digest as _;
+    let mut hasher = sha2::Sha256::new();
+    read_model(recording, model, &mut |piece| {
+        hasher.update(piece);
+        Ok(())
+    })?;
+    Ok(hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
+}
+
 impl RecordingFile {
     /// Creates (or replaces) `path` and writes everything that precedes the first tick: the
     /// metadata, the models, the channels and the static frames.
     pub fn create(path: &Path, setup: RecordingSetup) -> Result<RecordingFile, RecordError> {
+        let mut recording = Self::open(path, setup.team.clone(), setup.d_star)?;
+        let (metadata, attachments) = setup.metadata_with_models(path)?;
+        for (model, name) in &attachments {
+            recording.attach_model(model, name)?;
+        }
+        recording.write_metadata(metadata)?;
+        recording.write_channels()?;
+        Ok(recording)
+    }
+
+    /// Creates (or replaces) `path` for the team `team` with a metadata record made elsewhere
+    /// (a recorder of a live team: the world hashed the models, and stores none here), and
+    /// writes the channels and the static frames.
+    pub fn create_with_metadata(
+        path: &Path,
+        team: TeamSetup,
+        d_star: f64,
+        metadata: BTreeMap<String, String>,
+    ) -> Result<RecordingFile, RecordError> {
+        let mut recording = Self::open(path, team, d_star)?;
+        recording.write_metadata(metadata)?;
+        recording.write_channels()?;
+        Ok(recording)
+    }
+
+    /// Creates the file and writes the MCAP header.
+    fn open(path: &Path, team: TeamSetup, d_star: f64) -> Result<RecordingFile, RecordError> {
         let file = crate::target::create_file(path)?;
         let options = mcap::WriteOptions::new()
             .profile("ros2")
@@ -137,8 +225,8 @@ impl RecordingFile {
             .chunk_size(Some(MAX_CHUNK_BYTES));
         let mcap = mcap::Writer::with_options(BufWriter::with_capacity(FILE_BUFFER, file), options)
             .map_err(|e| RecordError::from_mcap(path, e))?;
-        let edges = EdgeMarkers::new(setup.team.neighbours, setup.team.n_robots);
-        let mut recording = RecordingFile {
+        let edges = EdgeMarkers::new(team.neighbours, team.n_robots);
+        Ok(RecordingFile {
             path: path.to_path_buf(),
             mcap,
             channels: Channels {
@@ -152,16 +240,19 @@ impl RecordingFile {
             chunk_second: None,
             edges,
             model_ids: Vec::new(),
-            setup,
-        };
-        recording.write_metadata()?;
-        recording.add_channels()?;
-        for robot in 0..recording.setup.team.n_robots {
+            team,
+            d_star,
+        })
+    }
+
+    /// Adds the channels and writes the static frames.
+    fn write_channels(&mut self) -> Result<(), RecordError> {
+        self.add_channels()?;
+        for robot in 0..self.team.n_robots {
             let tf = team::static_tf_message(robot, Time::default());
-            recording.put(recording.channels.tf_static, 0, &tf)?;
+            self.put(self.channels.tf_static, 0, &tf)?;
         }
-        recording.flush()?;
-        Ok(recording)
+        self.flush()
     }
 
     /// The file.
@@ -173,28 +264,8 @@ impl RecordingFile {
         RecordError::from_mcap(&self.path, e)
     }
 
-    /// The run's metadata record, with each distinct model referenced by path and hash, and
-    /// stored as an attachment unless it is a shipped one.
-    fn write_metadata(&mut self) -> Result<(), RecordError> {
-        let mut metadata = self.setup.run_metadata();
-        let (files, per_robot) = self.setup.distinct_models();
-        let files: Vec<PathBuf> = files.into_iter().map(Path::to_path_buf).collect();
-        for (k, model) in files.iter().enumerate() {
-            let shipped = self.setup.is_shipped(model);
-            let sha256 = self.hash_model(model)?;
-            metadata.insert(format!("model.{k}.path"), model.display().to_string());
-            metadata.insert(format!("model.{k}.sha256"), sha256.clone());
-            let stored = if shipped {
-                "shipped".to_owned()
-            } else {
-                let name = format!("models/{sha256}.onnx");
-                self.attach_model(model, &name)?;
-                format!("attachment {name}")
-            };
-            metadata.insert(format!("model.{k}.stored"), stored);
-        }
-        let robot_models: Vec<String> = per_robot.iter().map(usize::to_string).collect();
-        metadata.insert("robot_models".into(), robot_models.join(","));
+    /// The run's metadata record.
+    fn write_metadata(&mut self, metadata: BTreeMap<String, String>) -> Result<(), RecordError> {
         self.mcap
             .write_metadata(&Metadata {
                 name: "formation.run".into(),
@@ -203,64 +274,9 @@ impl RecordingFile {
             .map_err(|e| self.mcap_error(e))
     }
 
-    /// Opens a model to read, refusing one larger than a recording stores.
-    fn open_model(&self, model: &Path) -> Result<(File, u64), RecordError> {
-        let model_error = |source| RecordError::Model {
-            path: self.path.clone(),
-            model: model.to_path_buf(),
-            source,
-        };
-        let file = File::open(model).map_err(model_error)?;
-        let size = file.metadata().map_err(model_error)?.len();
-        if size > MAX_ATTACHED_MODEL_BYTES {
-            return Err(RecordError::ModelTooLarge {
-                path: self.path.clone(),
-                model: model.to_path_buf(),
-                size,
-                limit: MAX_ATTACHED_MODEL_BYTES,
-            });
-        }
-        Ok((file, size))
-    }
-
-    /// Reads `model` piece by piece, handing each piece to `each`; returns the bytes read.
-    fn read_model(&mut self, model: &Path, each: &mut PieceSink<'_>) -> Result<u64, RecordError> {
-        let (file, size) = self.open_model(model)?;
-        let mut file = file.take(size);
-        let mut piece = vec![0u8; MODEL_PIECE];
-        let mut total = 0;
-        loop {
-            let n = file.read(&mut piece).map_err(|source| RecordError::Model {
-                path: self.path.clone(),
-                model: model.to_path_buf(),
-                source,
-            })?;
-            if n == 0 {
-                return Ok(total);
-            }
-            total += n as u64;
-            each(self, &piece[..n])?;
-        }
-    }
-
-    /// The SHA-256 of `model`, as hex.
-    fn hash_model(&mut self, model: &Path) -> Result<String, RecordError> {
-        use sha2::Digest as _;
-        let mut hasher = sha2::Sha256::new();
-        self.read_model(model, &mut |_, piece| {
-            hasher.update(piece);
-            Ok(())
-        })?;
-        Ok(hasher
-            .finalize()
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect())
-    }
-
     /// Stores `model` as the attachment `name`, streamed in pieces.
     fn attach_model(&mut self, model: &Path, name: &str) -> Result<(), RecordError> {
-        let (_, size) = self.open_model(model)?;
+        let (_, size) = open_model(&self.path, model)?;
         let header = AttachmentHeader {
             log_time: 0,
             create_time: 0,
@@ -270,10 +286,11 @@ impl RecordingFile {
         self.mcap
             .start_attachment(size, header)
             .map_err(|e| self.mcap_error(e))?;
-        let written = self.read_model(model, &mut |me, piece| {
-            me.mcap
+        let recording = self.path.clone();
+        let written = read_model(&recording, model, &mut |piece| {
+            self.mcap
                 .put_attachment_bytes(piece)
-                .map_err(|e| me.mcap_error(e))
+                .map_err(|e| RecordError::from_mcap(&recording, e))
         })?;
         if written != size {
             return Err(RecordError::Model {
@@ -323,7 +340,7 @@ impl RecordingFile {
             self.channels.goal[slot] = self.channel::<Float64>(topic)?;
         }
         self.channels.edges = self.channel::<MarkerArray>(edges::TOPIC)?;
-        for robot in 0..self.setup.team.n_robots {
+        for robot in 0..self.team.n_robots {
             let channels = RobotChannels {
                 scan: self.channel::<LaserScan>(&team::robot_topic(robot, "scan"))?,
                 odom: self.channel::<Odometry>(&team::robot_topic(robot, "odom"))?,
@@ -392,7 +409,7 @@ impl RecordingFile {
         for (slot, data) in goal.into_iter().enumerate() {
             self.put(self.channels.goal[slot], ns, &Float64 { data })?;
         }
-        let n = self.setup.team.n_robots.min(tick.poses.len());
+        let n = self.team.n_robots.min(tick.poses.len());
         for robot in 0..n {
             self.write_robot(robot, tick, ns, at)?;
         }
@@ -409,8 +426,8 @@ impl RecordingFile {
     ) -> Result<(), RecordError> {
         let channels = self.channels.robots[robot];
         let pose = tick.poses[robot];
-        let separation = self.setup.team.wheel_separation;
-        let max_range = self.setup.team.max_range;
+        let separation = self.team.wheel_separation;
+        let max_range = self.team.max_range;
         self.put(
             self.channels.tf,
             ns,
@@ -463,7 +480,7 @@ impl RecordingFile {
             time: tick.time,
             heading: tick.poses[robot].theta,
             goal: tick.goal,
-            max_range: self.setup.team.max_range as f32,
+            max_range: self.team.max_range as f32,
             ranges: tick.scans.get(robot).cloned().unwrap_or_default(),
             command: sent.wheels,
             outcome: sent.outcome,
@@ -514,6 +531,6 @@ impl RecordingFile {
 
     /// The run's d* (a run's goal keeps it).
     fn last_d_star(&self) -> f64 {
-        self.setup.d_star
+        self.d_star
     }
 }

@@ -15,10 +15,13 @@
 //! recording back in one streaming pass ([`read`]) and finds its models, checked against their
 //! hashes ([`models`]); running them is the `formation replay` command's (formation-cli), since
 //! this crate builds no ONNX Runtime.
+//! A recorder of a live team from outside (`formation record --connect`) gets the same ticks
+//! over the network in the encoding of [`live`], and writes the same file.
 
 pub mod edges;
 pub mod error;
 pub mod file;
+pub mod live;
 pub mod models;
 pub mod read;
 pub mod recorder;

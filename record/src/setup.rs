@@ -8,6 +8,9 @@ use formation_proto::NeighbourRule;
 use formation_world::RunSpec;
 use serde::{Deserialize, Serialize};
 
+/// Models to store in a recording: each file with its attachment's name.
+pub type ModelAttachments = Vec<(PathBuf, String)>;
+
 /// The team a recording's messages describe.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TeamSetup {
@@ -112,6 +115,34 @@ impl RecordingSetup {
             (Ok(model), Ok(dir)) => model.starts_with(dir),
             _ => false,
         }
+    }
+
+    /// The run's metadata record (`formation.run`) with each distinct model referenced by its
+    /// path and SHA-256, and the models to store as attachments (each with its attachment's
+    /// name): every one that is not a shipped model. `recording` names the file in errors.
+    pub fn metadata_with_models(
+        &self,
+        recording: &Path,
+    ) -> Result<(BTreeMap<String, String>, ModelAttachments), crate::RecordError> {
+        let mut metadata = self.run_metadata();
+        let mut attachments = Vec::new();
+        let (files, per_robot) = self.distinct_models();
+        for (k, model) in files.into_iter().enumerate() {
+            let sha256 = crate::file::hash_model(recording, model)?;
+            metadata.insert(format!("model.{k}.path"), model.display().to_string());
+            metadata.insert(format!("model.{k}.sha256"), sha256.clone());
+            let stored = if self.is_shipped(model) {
+                "shipped".to_owned()
+            } else {
+                let name = format!("models/{sha256}.onnx");
+                attachments.push((model.to_path_buf(), name.clone()));
+                format!("attachment {name}")
+            };
+            metadata.insert(format!("model.{k}.stored"), stored);
+        }
+        let robot_models: Vec<String> = per_robot.iter().map(usize::to_string).collect();
+        metadata.insert("robot_models".into(), robot_models.join(","));
+        Ok((metadata, attachments))
     }
 
     /// The run's metadata record (`formation.run`), without the models'.

@@ -144,39 +144,61 @@ const MAX_SETTINGS_BYTES: u64 = 1 << 20;
 impl RecordSettings {
     /// Writes the settings to `path` (atomically, private).
     pub fn write(&self, path: &Path) -> Result<(), RecordError> {
-        let json =
-            serde_json::to_vec_pretty(self).map_err(|source| RecordError::SettingsFormat {
-                path: path.to_path_buf(),
-                source,
-            })?;
-        formation_proto::files::write_atomic(path, &json)
-            .map_err(|e| RecordError::Write(WriteError::new(path, e)))
+        write_settings_json(self, path)
     }
 
     /// Reads the settings at `path` (at most 1 MiB).
     pub fn read(path: &Path) -> Result<RecordSettings, RecordError> {
-        let bytes =
-            formation_proto::files::read_bounded(path, MAX_SETTINGS_BYTES).map_err(|refusal| {
-                use formation_proto::files::FileRefusal;
-                let source = match refusal {
-                    FileRefusal::Io(e) => e,
-                    FileRefusal::NotAFile { kind } => {
-                        std::io::Error::other(format!("it is {kind}, not a regular file"))
-                    }
-                    FileRefusal::TooLarge { .. } => std::io::Error::other(format!(
-                        "it is larger than {MAX_SETTINGS_BYTES} bytes"
-                    )),
-                };
-                RecordError::Settings {
-                    path: path.to_path_buf(),
-                    source,
-                }
-            })?;
-        serde_json::from_slice(&bytes).map_err(|source| RecordError::SettingsFormat {
-            path: path.to_path_buf(),
-            source,
-        })
+        read_settings_json(path)
     }
+}
+
+impl LaunchInfo {
+    /// Writes what the launch knows to `path` (atomically, private), for a world that has no
+    /// recording settings but may be recorded from outside (`formation-world --launch-info`).
+    pub fn write(&self, path: &Path) -> Result<(), RecordError> {
+        write_settings_json(self, path)
+    }
+
+    /// Reads it back from `path` (at most 1 MiB).
+    pub fn read(path: &Path) -> Result<LaunchInfo, RecordError> {
+        read_settings_json(path)
+    }
+}
+
+/// Writes `value` as JSON to `path` (atomically, private).
+fn write_settings_json<T: Serialize>(value: &T, path: &Path) -> Result<(), RecordError> {
+    let json = serde_json::to_vec_pretty(value).map_err(|source| RecordError::SettingsFormat {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    formation_proto::files::write_atomic(path, &json)
+        .map_err(|e| RecordError::Write(WriteError::new(path, e)))
+}
+
+/// Reads the JSON at `path` (at most [`MAX_SETTINGS_BYTES`]).
+fn read_settings_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, RecordError> {
+    let bytes =
+        formation_proto::files::read_bounded(path, MAX_SETTINGS_BYTES).map_err(|refusal| {
+            use formation_proto::files::FileRefusal;
+            let source = match refusal {
+                FileRefusal::Io(e) => e,
+                FileRefusal::NotAFile { kind } => {
+                    std::io::Error::other(format!("it is {kind}, not a regular file"))
+                }
+                FileRefusal::TooLarge { .. } => {
+                    std::io::Error::other(format!("it is larger than {MAX_SETTINGS_BYTES} bytes"))
+                }
+            };
+            RecordError::Settings {
+                path: path.to_path_buf(),
+                source,
+            }
+        })?;
+    serde_json::from_slice(&bytes).map_err(|source| RecordError::SettingsFormat {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 #[cfg(test)]

@@ -128,6 +128,20 @@ pub struct Hello {
     pub proof: [u8; crate::auth::PROOF_LEN],
 }
 
+/// Where a world hands remote recorders what its own recorder gets (`formation record
+/// --connect`): the bytes of each live-recording message (`formation_record::live`), in order.
+/// A transport without remote recorders has none.
+pub trait RecordFeed {
+    /// Whether a recorder is listening now: the world encodes nothing otherwise, so a team
+    /// nobody records pays nothing.
+    fn wanted(&self) -> bool;
+    /// A run begins: `setup` is its setup message, sent now (when wanted) and kept for a
+    /// recorder that joins while the run plays.
+    fn begin_run(&mut self, setup: Vec<u8>) -> WorldResult;
+    /// Sends one message (a tick, the run's end) to the recorders, reliably and in order.
+    fn publish(&mut self, message: Vec<u8>) -> WorldResult;
+}
+
 /// What the world needs from a transport: per-robot channels to and from the agents.
 pub trait WorldLink {
     /// Number of robots the link serves.

@@ -367,6 +367,29 @@ pub fn python() -> PathBuf {
     }
 }
 
+/// `mcap_readers.py`'s exit status for a missing package.
+const MCAP_READERS_MISSING_PACKAGE: i32 = 3;
+
+/// Runs the independent MCAP readers, `tests/python/mcap_readers.py ARGS` (Python's `mcap` with
+/// `mcap-ros2-support`, `rosbags`, Rerun; none of formation's code), and returns the JSON they
+/// print; fails the test with the readers' words (and the fix, for a missing package).
+pub fn mcap_readers(args: &[&std::ffi::OsStr]) -> serde_json::Value {
+    let mut command = Command::new(python());
+    command
+        .arg(repo_root().join("tests/python/mcap_readers.py"))
+        .args(args);
+    let finished = run(command, Duration::from_secs(300));
+    assert_ne!(
+        finished.output.status.code(),
+        Some(MCAP_READERS_MISSING_PACKAGE),
+        "the independent readers are not installed: run `bash .ci/setup-python --test`\n{}",
+        finished.describe()
+    );
+    finished.assert_success();
+    serde_json::from_str(finished.stdout().trim())
+        .unwrap_or_else(|e| panic!("the readers printed no JSON ({e})\n{}", finished.describe()))
+}
+
 /// The paper's case 1 shortened to `duration_s`, as a scenario file in `dir`.
 pub fn case1_scenario(dir: &Path, duration_s: f64) -> PathBuf {
     let text = std::fs::read_to_string(repo_root().join("scenarios/case1.toml"))

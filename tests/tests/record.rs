@@ -12,56 +12,14 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
+use formation_tests::mcap_readers as readers;
 use formation_tests::{
     Finished, LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries,
     case1_scenario, eval_recorded, formation_run, one_at_a_time, read_json, repo_root, run,
     send_signal, test_model, unique_run_id, world_pid,
 };
-use serde_json::Value;
 
 const LIMIT: Duration = Duration::from_secs(300);
-/// The readers' exit status for a missing package.
-const MISSING_PACKAGE: i32 = 3;
-
-/// The interpreter with the readers: `FORMATION_PYTHON`, else `.venv/bin/python`.
-fn python() -> PathBuf {
-    if let Some(p) = std::env::var_os("FORMATION_PYTHON") {
-        return PathBuf::from(p);
-    }
-    let venv = repo_root().join(".venv/bin/python");
-    if venv.is_file() {
-        venv
-    } else {
-        PathBuf::from("python3")
-    }
-}
-
-fn readers_command(args: &[&std::ffi::OsStr]) -> Command {
-    let mut command = Command::new(python());
-    command
-        .arg(repo_root().join("tests/python/mcap_readers.py"))
-        .args(args);
-    command
-}
-
-/// Runs `mcap_readers.py ARGS` and returns the JSON it prints; fails the test with the readers'
-/// words (and the fix, for a missing package).
-fn readers(args: &[&std::ffi::OsStr]) -> Value {
-    check_readers(run(readers_command(args), LIMIT))
-}
-
-fn check_readers(finished: Finished) -> Value {
-    assert_ne!(
-        finished.output.status.code(),
-        Some(MISSING_PACKAGE),
-        "the independent readers are not installed: run `bash .ci/setup-python --test`\n{}",
-        finished.describe()
-    );
-    finished.assert_success();
-    serde_json::from_str(finished.stdout().trim())
-        .unwrap_or_else(|e| panic!("the readers printed no JSON ({e})\n{}", finished.describe()))
-}
-
 fn os(s: &str) -> &std::ffi::OsStr {
     s.as_ref()
 }

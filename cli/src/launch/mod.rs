@@ -45,14 +45,14 @@ pub fn credentials_command(args: &CredentialsArgs) -> anyhow::Result<()> {
          passwords, launch-secret: stay with the world (formation run --transport zenoh \
          --credentials {dir})\n  robot-I.json: copy privately (scp) to robot I's host \
          (formation-agent --credentials robot-I.json)\n  operator.json: for formation swap \
-         --credentials",
+         --credentials\n  recorder.json: read-only, for formation record --connect --credentials",
         args.robots.saturating_sub(1)
     );
     Ok(())
 }
 
 /// `value` seconds as a duration, or an error naming `flag` when it is not a positive number.
-fn positive_seconds(flag: &str, value: f64) -> anyhow::Result<Duration> {
+pub(crate) fn positive_seconds(flag: &str, value: f64) -> anyhow::Result<Duration> {
     if value.is_finite() && value > 0.0 {
         Ok(Duration::from_secs_f64(value))
     } else {
@@ -141,16 +141,12 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         let wait = positive_seconds("--remote-timeout-s", args.remote_timeout_s)?;
         startup_timeout_ms = wait.as_millis().clamp(1, u64::MAX as u128) as u64;
     }
+    let launch_info =
+        crate::record::launch_info(&scenario, base_seed, args.clock.as_str(), "policy", &models);
     let record = match &args.record {
         Some(file) => Some(crate::record::checked_settings(
             formation_record::RecordTarget::File(file.clone()),
-            crate::record::launch_info(
-                &scenario,
-                base_seed,
-                args.clock.as_str(),
-                "policy",
-                &models,
-            ),
+            launch_info.clone(),
         )?),
         None => None,
     };
@@ -174,6 +170,7 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         restart_window: positive_seconds("--restart-window-s", args.restart_window_s)?,
         restart_delay: Duration::from_millis(args.restart_delay_ms),
         record,
+        launch_info: Some(launch_info),
     };
     Ok(PlannedRun {
         plan,
@@ -882,6 +879,8 @@ pub fn eval_over_processes_recorded(
         let network = network.network(models.len(), &work.join("credentials"))?;
         let run_specs = work.join("run-specs.json");
         write_run_specs(scenario, base_seed, 0, runs, &run_specs)?;
+        let launch_info =
+            crate::record::launch_info(scenario, base_seed, clock.as_str(), "policy", &models);
         let plan = LaunchPlan {
             run_id,
             run_specs,
@@ -897,6 +896,7 @@ pub fn eval_over_processes_recorded(
             restart_window: Duration::from_secs(60),
             restart_delay: Duration::from_millis(50),
             network,
+            launch_info: Some(launch_info),
             record,
         };
         let mut done = 0;

@@ -65,6 +65,9 @@ pub struct LaunchPlan {
     /// What the world records (`--record`), handed to it as a JSON file next to `run_specs`
     /// ([`LaunchPlan::record_settings_path`]).
     pub record: Option<formation_record::RecordSettings>,
+    /// What the launch knows of its runs, handed to a Zenoh world without `record` for the
+    /// metadata of recordings made from outside (`formation record --connect`).
+    pub launch_info: Option<formation_record::LaunchInfo>,
 }
 
 impl LaunchPlan {
@@ -811,6 +814,11 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
         let path = plan.record_settings_path();
         record.write(&path)?;
         command.arg("--record-settings").arg(path);
+    }
+    if let (None, Some(info), Some(_)) = (&plan.record, &plan.launch_info, plan.network.zenoh()) {
+        let path = plan.run_specs.with_file_name("launch-info.json");
+        info.write(&path)?;
+        command.arg("--launch-info").arg(path);
     }
     if let Some(zenoh) = plan.network.zenoh() {
         command

@@ -12,6 +12,7 @@
 //! |---|---|---|---|
 //! | `robot-<i>` | `robot/<i>/hello`, `robot/<i>/*/cmd`, `robot/<i>/*/status`, its token `robot/<i>/*/agent/*` | `robot/<i>/welcome`, `robot/<i>/*/scan`, `robot/<i>/*/control`, the world's token | the same keys, the world's token |
 //! | `operator` | `swap/request` | `swap/reply`, the world's token | the same keys, the world's token |
+//! | `recorder` | nothing | `record/live`, every robot's `robot/*/*/scan` and `robot/*/*/cmd`, the world's token, replies to its queries of `record/setup` | the same keys, the world's token |
 //!
 //! so only robot `i`'s credentials receive robot `i`'s scan or command robot `i`, as the
 //! one-publisher/one-subscriber limits guarantee on one host.
@@ -28,6 +29,10 @@ pub fn robot_user(robot: usize) -> String {
 
 /// The user name of `formation swap`.
 pub const OPERATOR_USER: &str = "operator";
+
+/// The user name of `formation record --connect`: read-only, it may read every robot's scans
+/// and commands and the world's record channel ([`super::keys::record_live`]), and send nothing.
+pub const RECORDER_USER: &str = "recorder";
 
 /// Credentials that could not be used.
 #[derive(Debug, thiserror::Error)]
@@ -150,6 +155,9 @@ impl WorldAccess {
                               token: Option<String>| {
             let mut ids = Vec::new();
             let mut rule = |suffix: &str, messages: &[&str], flow: &str, keys: Vec<String>| {
+                if keys.is_empty() {
+                    return;
+                }
                 let rule_id = format!("{id}-{suffix}");
                 rules.push(json!({
                     "id": rule_id,
@@ -183,6 +191,11 @@ impl WorldAccess {
             if let Some(token) = token {
                 rule("token", &["liveliness_token"], "ingress", vec![token]);
             }
+            if user == RECORDER_USER {
+                let setup = vec![super::keys::record_setup(run)];
+                rule("ask-setup", &["query"], "ingress", setup.clone());
+                rule("get-setup", &["reply"], "egress", setup);
+            }
             subjects.push(json!({ "id": id, "usernames": [user] }));
             policies.push(json!({ "rules": ids, "subjects": [id] }));
         };
@@ -209,6 +222,17 @@ impl WorldAccess {
             OPERATOR_USER.to_string(),
             vec![format!("formation/{run}/swap/request")],
             vec![format!("formation/{run}/swap/reply")],
+            None,
+        );
+        user_rules(
+            RECORDER_USER.to_string(),
+            RECORDER_USER.to_string(),
+            Vec::new(),
+            vec![
+                super::keys::record_live(run),
+                format!("formation/{run}/robot/*/*/scan"),
+                format!("formation/{run}/robot/*/*/cmd"),
+            ],
             None,
         );
         json!({
@@ -244,7 +268,19 @@ mod tests {
         let text = rules.to_string();
         assert!(text.contains("formation/r1/robot/1/*/scan"));
         let policies = rules["policies"].as_array().unwrap();
-        assert_eq!(policies.len(), 3, "two robots and the operator");
+        assert_eq!(
+            policies.len(),
+            4,
+            "two robots, the operator and the recorder"
+        );
+        // The recorder sends nothing and declares no token.
+        for rule in rules["rules"].as_array().unwrap() {
+            let id = rule["id"].as_str().unwrap();
+            if id.starts_with("recorder-") {
+                assert!(rule["flows"][0] == "egress" || !rule.to_string().contains("\"put\""));
+                assert!(!id.ends_with("-send") && !id.ends_with("-token"), "{rule}");
+            }
+        }
         // Robot 0's rules never name robot 1's keys.
         let robot0: Vec<&serde_json::Value> = rules["rules"]
             .as_array()

@@ -7,6 +7,7 @@
 //! | `DIR/launch-secret` | the launch secret (64 hex digits) | the launcher |
 //! | `DIR/robot-<i>.json` | robot `i`'s login and the launch secret | robot `i`'s agent, wherever it runs |
 //! | `DIR/operator.json` | the operator's login | `formation swap` |
+//! | `DIR/recorder.json` | the recorder's login (read-only) | `formation record --connect` |
 //!
 //! Every file is created owner-only (0600, the folder 0700): copy `robot-<i>.json` to robot `i`'s
 //! host by a private channel (scp) and nothing else. Reads are bounded and refuse anything but a
@@ -20,7 +21,7 @@ use crate::auth::{LaunchSecret, SecretError};
 use formation_proto::files::{FileRefusal, read_bounded};
 use serde::{Deserialize, Serialize};
 
-use super::access::{AccessError, Login, OPERATOR_USER, robot_user};
+use super::access::{AccessError, Login, OPERATOR_USER, RECORDER_USER, robot_user};
 
 /// The `format` of a login file.
 pub const FORMAT: &str = "formation-zenoh-login";
@@ -141,6 +142,11 @@ pub fn operator_file(dir: &Path) -> PathBuf {
     dir.join("operator.json")
 }
 
+/// The path of the recorder's login file in `dir`.
+pub fn recorder_file(dir: &Path) -> PathBuf {
+    dir.join("recorder.json")
+}
+
 /// The path of the world's password dictionary in `dir`.
 pub fn passwords_file(dir: &Path) -> PathBuf {
     dir.join("passwords")
@@ -172,11 +178,10 @@ pub fn create(dir: &Path, robots: usize) -> Result<(), CredentialsError> {
     let mut dictionary = String::new();
     let users = (0..robots)
         .map(|robot| (robot_user(robot), robot_file(dir, robot), true))
-        .chain(std::iter::once((
-            OPERATOR_USER.to_string(),
-            operator_file(dir),
-            false,
-        )));
+        .chain([
+            (OPERATOR_USER.to_string(), operator_file(dir), false),
+            (RECORDER_USER.to_string(), recorder_file(dir), false),
+        ]);
     for (user, path, with_secret) in users {
         let password = random_password()?;
         Login::new(&user, &password)?;
@@ -261,6 +266,45 @@ pub fn read_login(path: &Path) -> Result<Login, CredentialsError> {
     Ok(Login::new(&file.user, &file.password)?)
 }
 
+/// A login file that is not the recorder's.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "{} holds the login of {user}, not the recorder's: `formation record --connect` needs the \
+     read-only recorder login, recorder.json in the team's credentials folder (written by \
+     `formation credentials --robots N --out DIR`)",
+    path.display()
+)]
+pub struct NotTheRecorder {
+    /// The file.
+    pub path: PathBuf,
+    /// The user it holds.
+    pub user: String,
+}
+
+/// Reads the recorder's login file; a file of another user (an agent's, the operator's) is
+/// refused.
+pub fn read_recorder(path: &Path) -> Result<Login, RecorderLoginError> {
+    let login = read_login(path)?;
+    if login.user() != RECORDER_USER {
+        return Err(RecorderLoginError::NotTheRecorder(NotTheRecorder {
+            path: path.to_path_buf(),
+            user: login.user().to_string(),
+        }));
+    }
+    Ok(login)
+}
+
+/// Why the recorder's login could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum RecorderLoginError {
+    /// The file could not be read.
+    #[error(transparent)]
+    Credentials(#[from] CredentialsError),
+    /// It holds another user's login.
+    #[error(transparent)]
+    NotTheRecorder(NotTheRecorder),
+}
+
 /// Reads the launch secret of a credentials folder.
 pub fn read_secret(dir: &Path) -> Result<LaunchSecret, CredentialsError> {
     let path = secret_file(dir);
@@ -300,8 +344,17 @@ mod tests {
         let wrong = read_robot(&robot_file(&dir, 1), 0).unwrap_err().to_string();
         assert!(wrong.contains("robot-0.json"), "{wrong}");
         assert!(read_login(&operator_file(&dir)).is_ok());
+        assert_eq!(
+            read_recorder(&recorder_file(&dir)).unwrap().user(),
+            RECORDER_USER
+        );
+        let agent = read_recorder(&robot_file(&dir, 1)).unwrap_err().to_string();
+        assert!(
+            agent.contains("robot-1, not the recorder's") && agent.contains("recorder.json"),
+            "{agent}"
+        );
         let dictionary = std::fs::read_to_string(passwords_file(&dir)).unwrap();
-        assert_eq!(dictionary.lines().count(), 3);
+        assert_eq!(dictionary.lines().count(), 4);
         assert!(dictionary.contains(&format!("robot-1:{}", robot1.login.password())));
         let again = create(&dir, 2).unwrap_err().to_string();
         assert!(again.contains("already holds credentials"), "{again}");

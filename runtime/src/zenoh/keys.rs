@@ -10,6 +10,8 @@
 //! | `formation/<run>/robot/<i>/<n>/status` | `StatusMsg` | agent `i` → world |
 //! | `formation/<run>/swap/request` | `SwapRequestMsg` | `formation swap` → world |
 //! | `formation/<run>/swap/reply` | `SwapReplyMsg` | world → `formation swap` |
+//! | `formation/<run>/record/live` | live-recording messages (`formation_record::live`) | world → `formation record --connect` |
+//! | `formation/<run>/record/setup` | queryable: the run under way's setup | world → a recorder that joined late |
 //! | `formation/<run>/world` | liveliness token | world |
 //! | `formation/<run>/robot/<i>/<n>/agent/<pid>` | liveliness token | agent `i` |
 //!
@@ -27,6 +29,16 @@ pub fn world_token(run: &RunId) -> String {
 /// `incarnation`.
 pub fn agent_token(run: &RunId, robot: usize, incarnation: u64, pid: u32) -> String {
     format!("formation/{run}/robot/{robot}/{incarnation:016x}/agent/{pid}")
+}
+
+/// The world's record channel: every run's setup, ticks and end, for remote recorders.
+pub fn record_live(run: &RunId) -> String {
+    format!("formation/{run}/record/live")
+}
+
+/// The world's queryable of the setup of the run under way (for a recorder that joined late).
+pub fn record_setup(run: &RunId) -> String {
+    format!("formation/{run}/record/setup")
 }
 
 /// Every agent's liveliness token of the run.

@@ -31,6 +31,7 @@ mod agent;
 pub mod credentials;
 pub mod keys;
 pub mod model;
+pub mod record;
 pub mod swap;
 mod world;
 
@@ -45,6 +46,7 @@ use formation_proto::exit::TerminationSignal;
 
 pub use access::{AccessError, Login, WorldAccess};
 pub use agent::ZenohAgentLink;
+pub use record::{RecorderEvent, RecorderLink, RecorderLinkError, ZenohRecordFeed};
 pub use world::ZenohWorldLink;
 
 /// The most bytes one Zenoh message may carry here (a model sent for a swap is the largest).

@@ -356,6 +356,12 @@ impl ZenohWorldLink {
         })
     }
 
+    /// The run's record channel for remote recorders (`formation record --connect`), on this
+    /// world's session.
+    pub fn record_feed(&self) -> WorldResult<super::ZenohRecordFeed> {
+        super::ZenohRecordFeed::declare(&self.session, &self.run)
+    }
+
     fn check_robot(&self, robot: usize) -> WorldResult {
         check_robot_index(robot, self.lobbies.len())
     }

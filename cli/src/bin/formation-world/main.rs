@@ -37,7 +37,7 @@ use formation_runtime::clock::SystemClock;
 use formation_runtime::exchange::{AgentsController, ExchangeSettings, StopReason};
 use formation_runtime::iceoryx::IceoryxWorldLink;
 use formation_runtime::iceoryx::naming::RunNamespace;
-use formation_runtime::link::WorldLink;
+use formation_runtime::link::{RecordFeed, WorldLink};
 use formation_runtime::process::flag_when_stdin_closes;
 use formation_runtime::transport::Transport;
 #[cfg(not(feature = "zenoh"))]
@@ -116,6 +116,11 @@ struct Args {
     /// the launcher writes it for `--record`).
     #[arg(long, value_name = "FILE")]
     record_settings: Option<PathBuf>,
+    /// Zenoh: JSON file with what the launch knows of its runs (`formation_record::LaunchInfo`;
+    /// the launcher writes it), for the metadata of a recording made from outside
+    /// (`formation record --connect`) when there are no --record-settings.
+    #[arg(long, value_name = "FILE")]
+    launch_info: Option<PathBuf>,
 }
 
 impl Args {
@@ -202,14 +207,21 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
         Arc::new(AtomicBool::new(false))
     };
 
-    let mut link: Box<dyn WorldLink> = match args.transport {
-        Transport::Iceoryx2 => Box::new(
-            IceoryxWorldLink::create(&namespace, n_robots)
-                .with_context(|| format!("setting up run {run_id}'s services"))?,
+    let (mut link, feed): (Box<dyn WorldLink>, Option<Box<dyn RecordFeed>>) = match args.transport {
+        Transport::Iceoryx2 => (
+            Box::new(
+                IceoryxWorldLink::create(&namespace, n_robots)
+                    .with_context(|| format!("setting up run {run_id}'s services"))?,
+            ),
+            None,
         ),
         Transport::Zenoh => zenoh_link(args, &run_id, n_robots)?,
-        Transport::Ros2 => ros2_link(args, &run_id, &specs[0], &runtime, secret.clone())?,
+        Transport::Ros2 => (
+            ros2_link(args, &run_id, &specs[0], &runtime, secret.clone())?,
+            None,
+        ),
     };
+    let launch = launch_info(args, record.as_ref(), &runtime)?;
     emit(&WorldEvent::Listening { robots: n_robots });
     let settings = ExchangeSettings {
         runtime,
@@ -224,7 +236,12 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
         Arc::new(SystemClock),
         Box::new(emit),
     );
-    let result = play(args, &runtime, &specs, record.as_ref(), &mut agents);
+    let mut recording = Recording {
+        settings: record,
+        launch,
+        feed,
+    };
+    let result = play(args, &runtime, &specs, &mut recording, &mut agents);
     // A world that stops early says why first, and tells the launcher before it asks the agents
     // to exit, so that their exits are not taken for crashes (and restarted).
     let ended = match (&result, agents.stopped()) {
@@ -249,9 +266,36 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
     Ok(ended)
 }
 
-/// The Zenoh link: a router on `--listen`, with the credentials folder's logins and rules.
+/// What a world's recordings know of the launch: the recording settings', else the
+/// `--launch-info` file's, else what the world itself knows (the clock).
+fn launch_info(
+    args: &Args,
+    record: Option<&formation_record::RecordSettings>,
+    runtime: &RuntimeSettings,
+) -> anyhow::Result<formation_record::LaunchInfo> {
+    if let Some(record) = record {
+        return Ok(record.launch.clone());
+    }
+    if let Some(path) = &args.launch_info {
+        return Ok(formation_record::LaunchInfo::read(path)?);
+    }
+    Ok(formation_record::LaunchInfo {
+        scenario: String::new(),
+        base_seed: None,
+        clock: runtime.clock.as_str().to_owned(),
+        controller: "policy".into(),
+        models: Vec::new(),
+        shipped_models: None,
+    })
+}
+
+/// The world's link and its record channel for remote recorders.
+type LinkAndFeed = (Box<dyn WorldLink>, Option<Box<dyn RecordFeed>>);
+
+/// The Zenoh link: a router on `--listen`, with the credentials folder's logins and rules, and
+/// its record channel (`formation record --connect`).
 #[cfg(feature = "zenoh")]
-fn zenoh_link(args: &Args, run_id: &RunId, n_robots: usize) -> anyhow::Result<Box<dyn WorldLink>> {
+fn zenoh_link(args: &Args, run_id: &RunId, n_robots: usize) -> anyhow::Result<LinkAndFeed> {
     use formation_runtime::zenoh::{WorldAccess, ZenohWorldLink, credentials};
     let listen = formation_cli::endpoint::required_endpoint(
         args.listen.as_deref(),
@@ -274,16 +318,15 @@ fn zenoh_link(args: &Args, run_id: &RunId, n_robots: usize) -> anyhow::Result<Bo
     };
     let link = ZenohWorldLink::create(run_id, n_robots, &listen, access.as_ref())
         .with_context(|| format!("setting up run {run_id}'s Zenoh router on {listen}"))?;
-    Ok(Box::new(link))
+    let feed = link
+        .record_feed()
+        .with_context(|| format!("setting up run {run_id}'s record channel"))?;
+    Ok((Box::new(link), Some(Box::new(feed))))
 }
 
 /// This build has no Zenoh.
 #[cfg(not(feature = "zenoh"))]
-fn zenoh_link(
-    _args: &Args,
-    _run_id: &RunId,
-    _n_robots: usize,
-) -> anyhow::Result<Box<dyn WorldLink>> {
+fn zenoh_link(_args: &Args, _run_id: &RunId, _n_robots: usize) -> anyhow::Result<LinkAndFeed> {
     Err(TransportError::NotBuilt {
         program: "formation-world".into(),
         transport: Transport::Zenoh,
@@ -360,11 +403,22 @@ fn read_run_specs(path: &Path) -> anyhow::Result<Vec<RunSpec>> {
     Ok(specs)
 }
 
+/// What a world records: its own file (`--record`) and its record channel for remote
+/// recorders.
+struct Recording {
+    /// Where `--record` goes.
+    settings: Option<formation_record::RecordSettings>,
+    /// What the launch knows of its runs.
+    launch: formation_record::LaunchInfo,
+    /// The record channel (Zenoh).
+    feed: Option<Box<dyn RecordFeed>>,
+}
+
 fn play(
     args: &Args,
     runtime: &RuntimeSettings,
     specs: &[RunSpec],
-    record: Option<&formation_record::RecordSettings>,
+    recording: &mut Recording,
     agents: &mut AgentsController<'_>,
 ) -> anyhow::Result<()> {
     agents.await_agents(runtime.startup_timeout())?;
@@ -374,9 +428,24 @@ fn play(
         agents
             .begin_episode(spec.world.dt, spec.world.lidar)
             .with_context(|| format!("run {index}"))?;
-        let recorder = record.and_then(|r| start_recording(r, spec, nth, specs.len()));
-        let log = play_journaled(&args.out, runtime.clock.as_str(), spec, agents, recorder)
-            .with_context(|| format!("run {index}"))?;
+        let recorder = recording
+            .settings
+            .as_ref()
+            .and_then(|r| start_recording(r, spec, nth, specs.len()));
+        let launch = &recording.launch;
+        let live = recording
+            .feed
+            .as_deref_mut()
+            .and_then(|feed| runlog::LiveFeed::begin(feed, spec, launch, nth, specs.len()));
+        let log = play_journaled(
+            &args.out,
+            runtime.clock.as_str(),
+            spec,
+            agents,
+            recorder,
+            live,
+        )
+        .with_context(|| format!("run {index}"))?;
         emit(&WorldEvent::RunDone { index, log });
     }
     Ok(())

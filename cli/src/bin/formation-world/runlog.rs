@@ -21,7 +21,9 @@ use formation_world::runlog::{
 pub use formation_world::runlog::{RunLog, TimingLog, log_paths, write_atomic};
 use formation_world::{EpisodeError, RunSpec, run_episode_recorded};
 
+use formation_record::live::{LiveMessage, LiveSetup, encode};
 use formation_runtime::exchange::AgentsController;
+use formation_runtime::link::RecordFeed;
 
 /// Prints one progress event line on stdout, for the launcher.
 pub fn emit(event: &WorldEvent) {
@@ -88,6 +90,7 @@ pub fn play_journaled(
     spec: &RunSpec,
     agents: &mut AgentsController<'_>,
     recorder: Option<Recorder>,
+    live: Option<LiveFeed<'_>>,
 ) -> Result<PathBuf, RunError> {
     let index = spec.index;
     let (log_path, timing_path) = log_paths(out, index);
@@ -97,10 +100,18 @@ pub fn play_journaled(
     let mut recording = RecordingAgents {
         agents: &mut *agents,
         recorder,
+        live,
     };
     let played = run_episode_recorded(spec, &mut recording, &mut |_, _| {}, &mut |trajectory| {
         journal.append(trajectory)
     });
+    if let Some(live) = recording.live.take() {
+        let last = played
+            .as_ref()
+            .ok()
+            .and_then(formation_record::final_sample);
+        live.end(last);
+    }
     if let Some(recorder) = recording.recorder.take() {
         let last = played
             .as_ref()
@@ -177,24 +188,127 @@ pub fn report_recording_failure(error: &formation_record::RecordError) {
     );
 }
 
+/// The record channel of one run, for remote recorders (`formation record --connect`): what the
+/// world's own recorder gets, encoded ([`formation_record::live`]) only while a recorder
+/// listens. A failed send is said once and ends the channel for the run, never the run.
+pub struct LiveFeed<'a> {
+    feed: &'a mut dyn RecordFeed,
+    run_index: u64,
+}
+
+impl<'a> LiveFeed<'a> {
+    /// Begins run `spec` (the `nth` of `runs`) on `feed`: its setup, with the models hashed,
+    /// is sent to the recorders listening and kept for those that join while it plays.
+    pub fn begin(
+        feed: &'a mut dyn RecordFeed,
+        spec: &RunSpec,
+        launch: &formation_record::LaunchInfo,
+        nth: usize,
+        runs: usize,
+    ) -> Option<LiveFeed<'a>> {
+        let setup = formation_record::RecordingSetup::for_run(spec, launch);
+        let live = match LiveSetup::for_run(&setup, nth, runs, Path::new("(the record channel)")) {
+            Ok(live) => live,
+            Err(e) => {
+                report_live_failure(&e.to_string());
+                return None;
+            }
+        };
+        if let Err(e) = feed.begin_run(encode(&LiveMessage::Setup(live))) {
+            report_live_failure(&e.to_string());
+            return None;
+        }
+        Some(LiveFeed {
+            feed,
+            run_index: spec.index as u64,
+        })
+    }
+
+    /// Whether a recorder listens.
+    fn wanted(&self) -> bool {
+        self.feed.wanted()
+    }
+
+    /// Sends `tick`; false when the send failed (said).
+    fn tick(&mut self, tick: TickRecord) -> bool {
+        let message = LiveMessage::Tick {
+            run_index: self.run_index,
+            tick,
+        };
+        self.send(&message)
+    }
+
+    /// Sends the run's end, with the state after its last step when it played to its end.
+    fn end(mut self, last: Option<formation_record::FinalSample>) {
+        if self.wanted() {
+            let message = LiveMessage::End {
+                run_index: self.run_index,
+                last,
+            };
+            self.send(&message);
+        }
+    }
+
+    fn send(&mut self, message: &LiveMessage) -> bool {
+        match self.feed.publish(encode(message)) {
+            Ok(()) => true,
+            Err(e) => {
+                report_live_failure(&e.to_string());
+                false
+            }
+        }
+    }
+}
+
+/// Says that the record channel stopped for this run, and that the run goes on.
+fn report_live_failure(error: &str) {
+    eprintln!(
+        "formation-world: the record channel for `formation record --connect` stopped for this \
+         run: {error}; the run goes on"
+    );
+}
+
 /// The agents' exchange, recording each tick it decides: the observation the agents were sent,
 /// and per robot the command the world used, what its watchdog made of it, the scan's lag and
 /// the model that decided (from the exchange's timing of that tick).
-struct RecordingAgents<'a, 'l> {
+struct RecordingAgents<'a, 'l, 'f> {
     agents: &'a mut AgentsController<'l>,
     recorder: Option<Recorder>,
+    live: Option<LiveFeed<'f>>,
 }
 
-impl Controller for RecordingAgents<'_, '_> {
+impl Controller for RecordingAgents<'_, '_, '_> {
     fn commands(
         &mut self,
         obs: &Observation<'_>,
         out: &mut [WheelCmd],
     ) -> Result<(), ControllerError> {
         self.agents.commands(obs, out)?;
-        let Some(recorder) = &mut self.recorder else {
+        let live_wanted = self.live.as_ref().is_some_and(LiveFeed::wanted);
+        if self.recorder.is_none() && !live_wanted {
             return Ok(());
-        };
+        }
+        let tick = self.tick_record(obs, out);
+        if live_wanted
+            && let Some(live) = &mut self.live
+            && !live.tick(tick.clone())
+        {
+            self.live = None;
+        }
+        if let Some(recorder) = &mut self.recorder
+            && let Err(e) = recorder.tick(tick)
+        {
+            report_recording_failure(&e);
+            self.recorder = None;
+        }
+        Ok(())
+    }
+}
+
+impl RecordingAgents<'_, '_, '_> {
+    /// The tick `obs` with the commands `out` the world used and what its watchdog made of
+    /// them.
+    fn tick_record(&self, obs: &Observation<'_>, out: &[WheelCmd]) -> TickRecord {
         let mut models = Vec::with_capacity(out.len());
         let sent = out
             .iter()
@@ -212,11 +326,7 @@ impl Controller for RecordingAgents<'_, '_> {
                 }
             })
             .collect();
-        if let Err(e) = recorder.tick(TickRecord::new(obs, sent, &models)) {
-            report_recording_failure(&e);
-            self.recorder = None;
-        }
-        Ok(())
+        TickRecord::new(obs, sent, &models)
     }
 }
 

@@ -1,0 +1,162 @@
+//! Issue 24, item 3: `formation record --connect` records a live Zenoh team from outside, with
+//! the read-only recorder login of `formation credentials`, into the very file the world's own
+//! `--record` writes (compared message for message by the independent Python readers of
+//! `tests/python/mcap_readers.py`: topics, log times, decoded messages and payload bytes);
+//! without that login (none, or an agent's) it is refused with the fix, and the team plays on
+//! unaffected; an agent's login that subscribes to the record channel gets nothing.
+//!
+//! Real processes on 127.0.0.1 with real Zenoh: the launch's robot 2 is remote, so the run
+//! waits while the recorder connects; its own run id, port and scratch folder.
+
+use std::process::Command;
+use std::time::Duration;
+
+use formation_tests::{
+    LeakCheck, LiveProcess, TempDir, Watchdog, binaries, case1_scenario, count_samples,
+    formation_run, free_tcp_port, mcap_readers, one_at_a_time, raw_client, run, test_model,
+    unique_run_id, zenoh_credentials,
+};
+
+const LIMIT: Duration = Duration::from_secs(240);
+
+/// `formation record --connect ENDPOINT --run-id RUN --out OUT`, with `login` when given.
+fn record_connect(
+    endpoint: &str,
+    run: &str,
+    out: &std::path::Path,
+    login: Option<&std::path::Path>,
+) -> Command {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["record", "--connect", endpoint, "--run-id", run, "--out"])
+        .arg(out);
+    if let Some(login) = login {
+        command.arg("--credentials").arg(login);
+    }
+    command
+}
+
+/// The acceptance: a lockstep case-1 run over Zenoh recorded by the world (`--record A`) and
+/// from outside (`formation record --connect ... --out B`, attached before the run starts) gives
+/// the same messages; the recorder refuses to start without the recorder login (none, or robot
+/// 1's), and robot 1's login subscribing to the record channel receives nothing.
+#[test]
+fn a_live_team_recorded_from_outside_equals_its_own_recording() {
+    use std::sync::atomic::Ordering;
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("record_connect_equal", LIMIT);
+    let dir = TempDir::new("rconn");
+    let run_id = unique_run_id("rconn");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 8.0);
+    let out = dir.path().join("out");
+    let creds = zenoh_credentials(dir.path(), 3);
+    let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
+    let own = dir.path().join("own.mcap");
+    let outside = dir.path().join("outside.mcap");
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &["--transport", "zenoh", "--listen", &listen, "--remote", "2"],
+    );
+    command
+        .args(["--clock", "lockstep", "--credentials"])
+        .arg(&creds)
+        .arg("--record")
+        .arg(&own);
+    let mut launch = LiveProcess::spawn(command);
+    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains("waiting for the remote agents of robots [2]")
+    });
+    assert!(waiting.is_some(), "{}", launch.describe());
+
+    // Refused without the recorder login: none at all, or an agent's.
+    let refused = run(
+        record_connect(&listen, run_id.as_str(), &outside, None),
+        Duration::from_secs(60),
+    );
+    refused.assert_failure_mentioning("needs the team's recorder login");
+    assert!(
+        refused.stderr().contains("recorder.json"),
+        "{}",
+        refused.describe()
+    );
+    let robot1 = creds.join("robot-1.json");
+    let refused = run(
+        record_connect(&listen, run_id.as_str(), &outside, Some(&robot1)),
+        Duration::from_secs(60),
+    );
+    refused.assert_failure_mentioning("holds the login of robot-1, not the recorder's");
+    assert!(!outside.exists(), "a refused recorder writes nothing");
+    // Robot 1's login may connect, but the router gives it nothing of the record channel.
+    let login = formation_runtime::zenoh::credentials::read_login(&robot1).expect("robot 1");
+    let impostor = raw_client(&listen, Some((login.user(), login.password())))
+        .expect("robot 1's login is a valid login");
+    let (_sub, stolen) = count_samples(&impostor, format!("formation/{run_id}/record/**"));
+
+    // The recorder with its login, attached before the run starts.
+    let login = creds.join("recorder.json");
+    let mut recorder = LiveProcess::spawn(record_connect(
+        &listen,
+        run_id.as_str(),
+        &outside,
+        Some(&login),
+    ));
+    let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains(&format!("connected to run {run_id}"))
+    });
+    assert!(connected.is_some(), "{}", recorder.describe());
+    // Let the recorder's subscription reach the router before the run begins.
+    std::thread::sleep(Duration::from_secs(1));
+
+    let mut agent = Command::new(&binaries().agent);
+    agent
+        .args(["--transport", "zenoh", "--connect", &listen])
+        .args(["--run-id", run_id.as_str(), "--robot", "2", "--model"])
+        .arg(test_model())
+        .arg("--credentials")
+        .arg(creds.join("robot-2.json"));
+    let remote = LiveProcess::spawn_with_input(agent, None);
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    let remote = remote.finish(Duration::from_secs(30));
+    assert!(remote.output.status.success(), "{}", remote.describe());
+    let recorded = recorder.finish(Duration::from_secs(60));
+    recorded.assert_success();
+    assert!(
+        recorded.stdout().contains("recorded run 0 to")
+            && !recorded.stdout().contains("joined late"),
+        "{}",
+        recorded.describe()
+    );
+
+    let compared = mcap_readers(&["compare".as_ref(), own.as_os_str(), outside.as_os_str()]);
+    // 8 s at 20 Hz: 160 ticks of 3 robots' scan, odometry, command, TF and more.
+    assert!(
+        compared["messages"].as_u64().unwrap() > 160 * 3 * 4,
+        "{compared}"
+    );
+    assert_eq!(compared["differing"], 0, "{compared}");
+    let theirs = mcap_readers(&["metadata".as_ref(), outside.as_os_str()]);
+    let ours = mcap_readers(&["metadata".as_ref(), own.as_os_str()]);
+    assert_eq!(theirs["live.first_tick"], "0", "{theirs}");
+    assert_eq!(theirs["live.complete_from_start"], "true", "{theirs}");
+    for key in [
+        "scenario",
+        "seed",
+        "run_seed",
+        "clock",
+        "model.0.sha256",
+        "robot_models",
+    ] {
+        assert_eq!(theirs[key], ours[key], "{key}: {theirs} against {ours}");
+    }
+    assert_eq!(
+        stolen.load(Ordering::Relaxed),
+        0,
+        "robot 1's login received the record channel"
+    );
+    drop(impostor);
+    leaks.assert_clean();
+}
