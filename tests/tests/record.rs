@@ -14,9 +14,9 @@ use std::time::Duration;
 
 use formation_tests::mcap_readers as readers;
 use formation_tests::{
-    Finished, LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries,
-    case1_scenario, eval_recorded, formation_run, one_at_a_time, read_json, repo_root, run,
-    send_signal, test_model, unique_run_id, world_pid,
+    LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries, case1_scenario,
+    eval_recorded, formation_run, one_at_a_time, read_json, repo_root, run, send_signal,
+    test_model, unique_run_id, world_pid,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
