@@ -58,6 +58,11 @@ fn assert_exit(finished: &Finished, code: i32) {
 
 /// Every robot compared on every tick, none differing.
 fn assert_identical(report: &Value, robots: usize) {
+    assert_identical_over(report, robots, 190);
+}
+
+/// [`assert_identical`] with at least `min_compared` fresh steps compared per robot.
+fn assert_identical_over(report: &Value, robots: usize, min_compared: u64) {
     assert_eq!(report["format"], "formation-replay", "{report}");
     assert_eq!(report["schema_version"], 1, "{report}");
     assert_eq!(report["diverged"], false, "{report}");
@@ -65,7 +70,7 @@ fn assert_identical(report: &Value, robots: usize) {
     let rows = report["robots"].as_array().unwrap();
     assert_eq!(rows.len(), robots, "{report}");
     for row in rows {
-        assert!(row["compared"].as_u64().unwrap() >= 190, "{row}");
+        assert!(row["compared"].as_u64().unwrap() >= min_compared, "{row}");
         assert_eq!(row["differing"], 0, "{row}");
         assert_eq!(row["failed"], 0, "{row}");
         assert_eq!(row["max_abs_delta"], 0.0, "{row}");
@@ -144,6 +149,36 @@ fn a_lockstep_run_over_processes_replays_bit_identical() {
     assert_eq!(report["clock"], "lockstep", "{report}");
     let model = report["models"][0].as_str().unwrap();
     assert_eq!(Path::new(model), test_model(), "{report}");
+}
+
+/// A realtime run over processes, recorded by the world: each fresh command is replayed against
+/// the scan it answered (`lag_ticks` before its tick), bit for bit. A realtime run's commands
+/// depend on timing, so fewer steps may be fresh; every fresh one must match.
+#[test]
+fn a_realtime_run_over_processes_replays_bit_identical() {
+    let _watchdog = Watchdog::arm("replay_realtime", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("replay-realtime");
+    let scenario = case1_scenario(dir.path(), 10.0);
+    let run_id = unique_run_id("replayrt");
+    let leaks = LeakCheck::new(&run_id);
+    let file = dir.path().join("realtime.mcap");
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &dir.path().join("out"),
+        &["--clock", "realtime"],
+    );
+    command.arg("--record").arg(&file);
+    run(command, LIMIT).assert_success();
+    leaks.assert_clean();
+
+    let json = dir.path().join("realtime.json");
+    let replayed = replay(&file, &[], &json);
+    assert_exit(&replayed, 0);
+    let report = read_json(&json);
+    assert_identical_over(&report, 3, 100);
+    assert_eq!(report["clock"], "realtime", "{report}");
 }
 
 /// A policy whose input image has one cell flipped: the renderer changed by one pixel.
