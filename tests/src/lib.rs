@@ -410,6 +410,25 @@ pub fn case1_scenario(dir: &Path, duration_s: f64) -> PathBuf {
     path
 }
 
+/// A 10 s case-1 `formation run --clock CLOCK --record FILE` over processes (the test model's
+/// agents), in `dir` under a run id tagged `tag`; fails the test unless it succeeds and leaves
+/// no shared memory behind. Returns the scenario file it ran.
+pub fn record_case1_over_processes(dir: &Path, tag: &str, clock: &str, file: &Path) -> PathBuf {
+    let scenario = case1_scenario(dir, 10.0);
+    let run_id = unique_run_id(tag);
+    let leaks = LeakCheck::new(&run_id);
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &dir.join(format!("{tag}-out")),
+        &["--clock", clock],
+    );
+    command.arg("--record").arg(file);
+    run(command, std::time::Duration::from_secs(300)).assert_success();
+    leaks.assert_clean();
+    scenario
+}
+
 /// `formation eval` in-process with `args` (one run, its trajectory kept), recording into the
 /// folder `record` and writing its outputs to `out`.
 pub fn eval_recorded(args: &[&str], record: &Path, out: &Path) -> Finished {

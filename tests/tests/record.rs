@@ -15,8 +15,8 @@ use std::time::Duration;
 use formation_tests::mcap_readers as readers;
 use formation_tests::{
     LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries, case1_scenario,
-    eval_recorded, formation_run, one_at_a_time, read_json, repo_root, run, send_signal,
-    test_model, unique_run_id, world_pid,
+    eval_recorded, formation_run, one_at_a_time, read_json, record_case1_over_processes, repo_root,
+    run, send_signal, test_model, unique_run_id, world_pid,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -117,19 +117,8 @@ fn a_lockstep_run_over_processes_records_the_same_messages_as_in_process() {
     let _watchdog = Watchdog::arm("record_processes", LIMIT);
     let _one = one_at_a_time();
     let dir = TempDir::new("rec-procs");
-    let scenario = case1_scenario(dir.path(), 10.0);
-    let run_id = unique_run_id("recproc");
-    let leaks = LeakCheck::new(&run_id);
     let over_processes = dir.path().join("processes.mcap");
-    let mut command = formation_run(
-        &run_id,
-        &scenario,
-        &dir.path().join("run-out"),
-        &["--clock", "lockstep"],
-    );
-    command.arg("--record").arg(&over_processes);
-    run(command, LIMIT).assert_success();
-    leaks.assert_clean();
+    let scenario = record_case1_over_processes(dir.path(), "recproc", "lockstep", &over_processes);
 
     let record = dir.path().join("rec");
     std::fs::create_dir(&record).unwrap();

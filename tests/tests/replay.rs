@@ -14,8 +14,8 @@ use formation_proto::{LidarSpec, OccupancySpec};
 use formation_robot_agent::decision::{DecisionError, PolicyBackend};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
-    Finished, LeakCheck, TempDir, Watchdog, binaries, case1_scenario, eval_recorded, formation_run,
-    one_at_a_time, read_json, repo_root, run, test_model, unique_run_id,
+    Finished, TempDir, Watchdog, binaries, case1_scenario, eval_recorded, one_at_a_time, read_json,
+    record_case1_over_processes, repo_root, run, test_model,
 };
 use serde_json::Value;
 
@@ -56,12 +56,7 @@ fn assert_exit(finished: &Finished, code: i32) {
     );
 }
 
-/// Every robot compared on every tick, none differing.
-fn assert_identical(report: &Value, robots: usize) {
-    assert_identical_over(report, robots, 190);
-}
-
-/// [`assert_identical`] with at least `min_compared` fresh steps compared per robot.
+/// The report says nothing diverged, with at least `min_compared` fresh steps compared per robot.
 fn assert_identical_over(report: &Value, robots: usize, min_compared: u64) {
     assert_eq!(report["format"], "formation-replay", "{report}");
     assert_eq!(report["schema_version"], 1, "{report}");
@@ -91,7 +86,7 @@ fn a_case1_recording_replays_bit_identical_and_another_model_diverges() {
     let same = replay(&file, &[], &json);
     assert_exit(&same, 0);
     assert!(same.stdout().contains("identical"), "{}", same.describe());
-    assert_identical(&read_json(&json), 3);
+    assert_identical_over(&read_json(&json), 3, 190);
 
     let paper = repo_root().join("onnx/models/paper/policy.onnx");
     let json = dir.path().join("paper.json");
@@ -120,65 +115,38 @@ fn a_case1_recording_replays_bit_identical_and_another_model_diverges() {
     assert!(none.stderr().contains("--robot 7"), "{}", none.describe());
 }
 
-/// A lockstep run over processes (an agent per robot, the test model stored in the recording as
-/// an attachment) replayed in one process: every command bit for bit the agents'.
-#[test]
-fn a_lockstep_run_over_processes_replays_bit_identical() {
-    let _watchdog = Watchdog::arm("replay_lockstep", LIMIT);
+/// A run over processes (an agent per robot, the test model stored in the recording as an
+/// attachment), recorded by the world with `clock`, replayed in one process: every fresh
+/// command bit for bit the agents', with at least `min_compared` compared per robot.
+fn replays_a_run_over_processes(clock: &str, min_compared: u64) {
     let _one = one_at_a_time();
-    let dir = TempDir::new("replay-lockstep");
-    let scenario = case1_scenario(dir.path(), 10.0);
-    let run_id = unique_run_id("replay");
-    let leaks = LeakCheck::new(&run_id);
-    let file = dir.path().join("lockstep.mcap");
-    let mut command = formation_run(
-        &run_id,
-        &scenario,
-        &dir.path().join("out"),
-        &["--clock", "lockstep"],
-    );
-    command.arg("--record").arg(&file);
-    run(command, LIMIT).assert_success();
-    leaks.assert_clean();
-
-    let json = dir.path().join("lockstep.json");
+    let dir = TempDir::new("replay-procs");
+    let file = dir.path().join(format!("{clock}.mcap"));
+    record_case1_over_processes(dir.path(), "replay", clock, &file);
+    let json = dir.path().join(format!("{clock}.json"));
     let replayed = replay(&file, &[], &json);
     assert_exit(&replayed, 0);
     let report = read_json(&json);
-    assert_identical(&report, 3);
-    assert_eq!(report["clock"], "lockstep", "{report}");
+    assert_identical_over(&report, 3, min_compared);
+    assert_eq!(report["clock"], clock, "{report}");
     let model = report["models"][0].as_str().unwrap();
     assert_eq!(Path::new(model), test_model(), "{report}");
 }
 
-/// A realtime run over processes, recorded by the world: each fresh command is replayed against
-/// the scan it answered (`lag_ticks` before its tick), bit for bit. A realtime run's commands
-/// depend on timing, so fewer steps may be fresh; every fresh one must match.
+/// Lockstep: every tick's command is fresh and replays bit for bit.
+#[test]
+fn a_lockstep_run_over_processes_replays_bit_identical() {
+    let _watchdog = Watchdog::arm("replay_lockstep", LIMIT);
+    replays_a_run_over_processes("lockstep", 190);
+}
+
+/// Realtime: each fresh command is replayed against the scan it answered (`lag_ticks` before
+/// its tick), bit for bit. A realtime run's commands depend on timing, so fewer steps may be
+/// fresh; every fresh one must match.
 #[test]
 fn a_realtime_run_over_processes_replays_bit_identical() {
     let _watchdog = Watchdog::arm("replay_realtime", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("replay-realtime");
-    let scenario = case1_scenario(dir.path(), 10.0);
-    let run_id = unique_run_id("replayrt");
-    let leaks = LeakCheck::new(&run_id);
-    let file = dir.path().join("realtime.mcap");
-    let mut command = formation_run(
-        &run_id,
-        &scenario,
-        &dir.path().join("out"),
-        &["--clock", "realtime"],
-    );
-    command.arg("--record").arg(&file);
-    run(command, LIMIT).assert_success();
-    leaks.assert_clean();
-
-    let json = dir.path().join("realtime.json");
-    let replayed = replay(&file, &[], &json);
-    assert_exit(&replayed, 0);
-    let report = read_json(&json);
-    assert_identical_over(&report, 3, 100);
-    assert_eq!(report["clock"], "realtime", "{report}");
+    replays_a_run_over_processes("realtime", 100);
 }
 
 /// A policy whose input image has one cell flipped: the renderer changed by one pixel.
