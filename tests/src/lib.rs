@@ -410,6 +410,19 @@ pub fn case1_scenario(dir: &Path, duration_s: f64) -> PathBuf {
     path
 }
 
+/// `formation-agent --transport zenoh --connect LISTEN --run-id RUN --robot ROBOT --model
+/// <test model>`: robot `robot`'s agent started by hand, as on another host (the caller adds
+/// its credentials and any other flag).
+pub fn remote_zenoh_agent(listen: &str, run: &RunId, robot: usize) -> Command {
+    let mut agent = Command::new(&binaries().agent);
+    agent
+        .args(["--transport", "zenoh", "--connect", listen])
+        .args(["--run-id", run.as_str(), "--robot", &robot.to_string()])
+        .arg("--model")
+        .arg(test_model());
+    agent
+}
+
 /// A 10 s case-1 `formation run --clock CLOCK --record FILE` over processes (the test model's
 /// agents), in `dir` under a run id tagged `tag`; fails the test unless it succeeds and leaves
 /// no shared memory behind. Returns the scenario file it ran.

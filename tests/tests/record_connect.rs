@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use formation_tests::{
     LeakCheck, LiveProcess, TempDir, Watchdog, binaries, case1_scenario, count_samples,
-    formation_run, free_tcp_port, mcap_readers, one_at_a_time, raw_client, run, test_model,
+    formation_run, free_tcp_port, mcap_readers, one_at_a_time, raw_client, remote_zenoh_agent, run,
     unique_run_id, zenoh_credentials,
 };
 
@@ -110,13 +110,8 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
     // Let the recorder's subscription reach the router before the run begins.
     std::thread::sleep(Duration::from_secs(1));
 
-    let mut agent = Command::new(&binaries().agent);
-    agent
-        .args(["--transport", "zenoh", "--connect", &listen])
-        .args(["--run-id", run_id.as_str(), "--robot", "2", "--model"])
-        .arg(test_model())
-        .arg("--credentials")
-        .arg(creds.join("robot-2.json"));
+    let mut agent = remote_zenoh_agent(&listen, &run_id, 2);
+    agent.arg("--credentials").arg(creds.join("robot-2.json"));
     let remote = LiveProcess::spawn_with_input(agent, None);
     let finished = launch.finish(LIMIT);
     finished.assert_success();

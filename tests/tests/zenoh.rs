@@ -17,7 +17,8 @@ use formation_robot_agent::decision::PolicyController;
 use formation_tests::{
     LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
     count_samples, formation_run, free_tcp_port, launch_secret, one_at_a_time, policy_eval,
-    raw_client, read_json, run, run_with_input, test_model, unique_run_id, zenoh_credentials,
+    raw_client, read_json, remote_zenoh_agent, run, run_with_input, test_model, unique_run_id,
+    zenoh_credentials,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -277,7 +278,6 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
     use zenoh::Wait;
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("zenoh_remote_and_impostor", LIMIT);
-    let bins = binaries();
     let dir = TempDir::new("zremo");
     let run_id = unique_run_id("zremo");
     let leaks = LeakCheck::new(&run_id);
@@ -326,13 +326,8 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
         .expect("the put leaves the client");
 
     // The remote agent, started by hand as on another host, with robot 2's credentials only.
-    let mut agent = Command::new(&bins.agent);
-    agent
-        .args(["--transport", "zenoh", "--connect", &listen])
-        .args(["--run-id", run_id.as_str(), "--robot", "2", "--model"])
-        .arg(test_model())
-        .arg("--credentials")
-        .arg(creds.join("robot-2.json"));
+    let mut agent = remote_zenoh_agent(&listen, &run_id, 2);
+    agent.arg("--credentials").arg(creds.join("robot-2.json"));
     let remote = LiveProcess::spawn_with_input(agent, None);
     let finished = launch.finish(LIMIT);
     finished.assert_success();
@@ -372,7 +367,6 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
 fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("zenoh_bad_credentials", LIMIT);
-    let bins = binaries();
     let dir = TempDir::new("zcred");
     let run_id = unique_run_id("zcred");
     let leaks = LeakCheck::new(&run_id);
@@ -398,12 +392,8 @@ fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
     });
     assert!(waiting.is_some(), "{}", launch.describe());
     let agent = |credentials: Option<&Path>| {
-        let mut agent = Command::new(&bins.agent);
-        agent
-            .args(["--transport", "zenoh", "--connect", &listen])
-            .args(["--run-id", run_id.as_str(), "--robot", "2"])
-            .args(["--connect-timeout-ms", "5000", "--model"])
-            .arg(test_model());
+        let mut agent = remote_zenoh_agent(&listen, &run_id, 2);
+        agent.args(["--connect-timeout-ms", "5000"]);
         match credentials {
             Some(file) => {
                 agent.arg("--credentials").arg(file);
