@@ -22,7 +22,14 @@
 //!
 //! How the tests get a model: `FORMATION_TEST_MODEL` if set; else `tests/fixtures/tiny_policy.py`
 //! writes a contract-conforming ONNX model with seeded random weights, run with
-//! `FORMATION_PYTHON` or `<repo>/.venv/bin/python` (it needs the `onnx` package only).
+//! `FORMATION_PYTHON` or `<repo>/.venv/bin/python` (it needs the `onnx` package only), into
+//! `target/formation-test-models/` under a name taken from the script's bytes, so that every test
+//! process of a build shares one model.
+//!
+//! How the tests share the machine: `scripts/test-all` runs them with cargo-nextest, one process
+//! per test, two at a time on two cores, with the tests that rebuild the binaries alone
+//! (`.config/nextest.toml`). Under plain `cargo test`, [`one_at_a_time`] still runs a binary's
+//! multi-process tests one by one.
 
 pub mod netns;
 
@@ -302,7 +309,7 @@ fn build_binaries(profile_dir: &Path) {
     );
 }
 
-/// The ONNX model the runtime tests use (see the module docs), created once per test process.
+/// The ONNX model the runtime tests use (see the module docs), written once per test build.
 pub fn test_model() -> &'static Path {
     static MODEL: OnceLock<PathBuf> = OnceLock::new();
     MODEL.get_or_init(|| {
@@ -317,11 +324,28 @@ pub fn test_model() -> &'static Path {
             .unwrap_or_else(std::env::temp_dir);
         let dir = target.join("formation-test-models");
         std::fs::create_dir_all(&dir).expect("creating the test model directory");
-        let path = dir.join("tiny-seed0.onnx");
-        let _setup = SharedSetup::begin();
-        write_tiny_model(&path, 0);
+        // Named after the script's bytes: test processes (nextest runs one per test) share the
+        // model its current version writes, and an edited script writes a new one.
+        let script = std::fs::read(repo_root().join(TINY_POLICY_SCRIPT))
+            .expect("reading the tiny policy script");
+        let path = dir.join(format!("tiny-seed0-{:016x}.onnx", content_key(&script)));
+        if !path.is_file() {
+            let _setup = SharedSetup::begin();
+            write_tiny_model(&path, 0);
+        }
         path
     })
+}
+
+/// The script that writes the tests' ONNX models, relative to the repository root.
+const TINY_POLICY_SCRIPT: &str = "tests/fixtures/tiny_policy.py";
+
+/// A key of `bytes` that is stable within one build of the tests (std's SipHash, fixed keys).
+fn content_key(bytes: &[u8]) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut hasher = std::hash::DefaultHasher::new();
+    bytes.hash(&mut hasher);
+    hasher.finish()
 }
 
 /// Writes a contract-conforming ONNX model with seeded random weights to `path`.
@@ -333,7 +357,7 @@ pub fn write_tiny_model(path: &Path, seed: u64) {
 /// for a model of the wrong input shape, `--beams 450` for one made for another sensor).
 pub fn write_tiny_model_with(path: &Path, seed: u64, extra: &[&str]) {
     let python = python();
-    let script = repo_root().join("tests/fixtures/tiny_policy.py");
+    let script = repo_root().join(TINY_POLICY_SCRIPT);
     let tmp = path.with_extension(format!("tmp-{}.onnx", std::process::id()));
     let output = Command::new(&python)
         .arg(&script)
@@ -910,9 +934,10 @@ impl RobotLog {
     }
 }
 
-/// Multi-process tests time real processes against the wall clock; holding this guard runs them
-/// one at a time within a test binary, so a 2-core machine never starves one test's agents with
-/// another's.
+/// Multi-process tests time real processes against the wall clock; under plain `cargo test`,
+/// holding this guard runs them one at a time within a test binary, so a 2-core machine never
+/// starves one test's agents with another's. (`scripts/test-all` runs each test in a process of
+/// its own with nextest, two at a time; there the guard has nothing to wait for.)
 pub fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
     ONE_AT_A_TIME

@@ -50,8 +50,10 @@ impl Fixtures {
 /// Number of torch reference cases written.
 pub const CASES: usize = 16;
 
-/// The fixtures of this test binary (regenerated once per process in
-/// `target/tmp/formation-onnx-<tag>`); without Python, torch and onnx the test fails with the fix.
+/// The fixtures of this test binary, in `target/tmp/formation-onnx-<tag>-<key>` where the key is
+/// taken from `make_fixtures.py`'s bytes: written once and shared by every test process (nextest
+/// runs one per test), and written anew when the script changes. Without Python, torch and onnx
+/// the test fails with the fix.
 pub fn fixtures(tag: &str) -> &'static Fixtures {
     static FIXTURES: OnceLock<Result<Fixtures, String>> = OnceLock::new();
     match FIXTURES.get_or_init(|| generate(tag)) {
@@ -71,18 +73,35 @@ fn python() -> PathBuf {
 }
 
 fn generate(tag: &str) -> Result<Fixtures, String> {
-    let python = python();
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("formation-onnx-{tag}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/common/make_fixtures.py");
+    let source =
+        std::fs::read(&script).map_err(|e| format!("cannot read {}: {e}", script.display()))?;
+    let key = {
+        use std::hash::{Hash, Hasher};
+        let mut hasher = std::hash::DefaultHasher::new();
+        (source, CASES).hash(&mut hasher);
+        hasher.finish()
+    };
+    let dir =
+        Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("formation-onnx-{tag}-{key:016x}"));
+    if dir.is_dir() {
+        return Ok(Fixtures { dir });
+    }
+    // Written beside the final folder and renamed into place, so that a test process never
+    // reads another's half-written fixtures; the first rename wins and the others use it.
+    let partial = dir.with_extension(format!("partial-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&partial);
+    std::fs::create_dir_all(&partial)
+        .map_err(|e| format!("cannot create {}: {e}", partial.display()))?;
+    let python = python();
     let output = Command::new(&python)
         .arg(&script)
-        .arg(&dir)
+        .arg(&partial)
         .arg(CASES.to_string())
         .output()
         .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
     if !output.status.success() {
+        let _ = std::fs::remove_dir_all(&partial);
         return Err(format!(
             "{} {} failed ({}):\n{}",
             python.display(),
@@ -90,6 +109,12 @@ fn generate(tag: &str) -> Result<Fixtures, String> {
             output.status,
             String::from_utf8_lossy(&output.stderr)
         ));
+    }
+    if std::fs::rename(&partial, &dir).is_err() {
+        let _ = std::fs::remove_dir_all(&partial);
+        if !dir.is_dir() {
+            return Err(format!("cannot move the fixtures into {}", dir.display()));
+        }
     }
     Ok(Fixtures { dir })
 }
