@@ -589,8 +589,12 @@ pub struct RecordArgs {
     /// Run id of the running launch (`formation run` prints it; set it with `--run-id`).
     #[arg(long)]
     pub run_id: String,
+    /// The team's transport: zenoh (a formation team over Zenoh) or ros2 (a ROS 2 team,
+    /// `formation run --transport ros2`).
+    #[arg(long, value_enum, default_value_t = Transport::Zenoh)]
+    pub transport: Transport,
     /// The recorder's login file (recorder.json from `formation credentials`): read-only, and
-    /// required.
+    /// required for a Zenoh team; a ROS 2 team has no logins and takes none.
     #[arg(long, value_name = "FILE")]
     pub credentials: Option<PathBuf>,
     /// The MCAP file to write, whose folder must exist (with several runs, run N to

@@ -8,11 +8,12 @@
 //! Real processes on 127.0.0.1 with real Zenoh: the launch's robot 2 is remote, so the run
 //! waits while the recorder connects; its own run id, port and scratch folder.
 
+use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, binaries, case1_scenario, count_samples,
+    AgentGate, LeakCheck, LiveProcess, TempDir, Watchdog, binaries, case1_scenario, count_samples,
     formation_run, free_tcp_port, mcap_readers, one_at_a_time, raw_client, remote_zenoh_agent, run,
     unique_run_id, zenoh_credentials,
 };
@@ -126,6 +127,20 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
         recorded.describe()
     );
 
+    assert_recorded_alike(&own, &outside);
+    assert_eq!(
+        stolen.load(Ordering::Relaxed),
+        0,
+        "robot 1's login received the record channel"
+    );
+    drop(impostor);
+    leaks.assert_clean();
+}
+
+/// The world's own recording `own` and the one made from outside, `outside`, of the same 8 s
+/// lockstep case-1 run: the same ROS 2 messages (compared by the independent readers), the
+/// outside one complete from tick 0, the run's metadata alike.
+fn assert_recorded_alike(own: &Path, outside: &Path) {
     let compared = mcap_readers(&["compare".as_ref(), own.as_os_str(), outside.as_os_str()]);
     // 8 s at 20 Hz: 160 ticks of 3 robots' scan, odometry, command, TF and more.
     assert!(
@@ -147,11 +162,66 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
     ] {
         assert_eq!(theirs[key], ours[key], "{key}: {theirs} against {ours}");
     }
-    assert_eq!(
-        stolen.load(Ordering::Relaxed),
-        0,
-        "robot 1's login received the record channel"
+}
+
+/// Gap 1 of issue 24: a lockstep case-1 run of a ROS 2 team (`formation run --transport ros2`,
+/// ROS 2 agents) recorded by its world (`--record A`) and from outside (`formation record
+/// --connect --transport ros2 --out B`, attached before the first tick) gives the same messages.
+/// A ROS 2 team has no logins: the recorder takes none, and `--credentials` is refused with it.
+#[test]
+fn a_live_ros2_team_recorded_from_outside_equals_its_own_recording() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("record_connect_ros2", LIMIT);
+    let dir = TempDir::new("rconn2");
+    let run_id = unique_run_id("rconn2");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 8.0);
+    let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
+    let own = dir.path().join("own.mcap");
+    let outside = dir.path().join("outside.mcap");
+    // The agents wait at the gate, so the run waits for them while the recorder connects.
+    let gate = AgentGate::new(dir.path());
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &dir.path().join("out"),
+        &["--transport", "ros2", "--listen", &listen, "--clock", "lockstep"],
     );
-    drop(impostor);
+    command
+        .arg("--record")
+        .arg(&own)
+        .env("FORMATION_AGENT_BIN", gate.bin());
+    let launch = LiveProcess::spawn(command);
+
+    let mut with_login = record_connect(
+        &listen,
+        run_id.as_str(),
+        &outside,
+        Some(&dir.path().join("recorder.json")),
+    );
+    with_login.args(["--transport", "ros2"]);
+    let refused = run(with_login, Duration::from_secs(60));
+    refused.assert_failure_mentioning("--credentials needs --transport zenoh");
+
+    let mut command = record_connect(&listen, run_id.as_str(), &outside, None);
+    command.args(["--transport", "ros2"]);
+    let mut recorder = LiveProcess::spawn(command);
+    let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains(&format!("connected to run {run_id}"))
+    });
+    assert!(connected.is_some(), "{}", recorder.describe());
+    // Let the recorder's subscription reach the router before the run begins.
+    std::thread::sleep(Duration::from_secs(1));
+    gate.open();
+    launch.finish(LIMIT).assert_success();
+    let recorded = recorder.finish(Duration::from_secs(60));
+    recorded.assert_success();
+    assert!(
+        recorded.stdout().contains("recorded run 0 to")
+            && !recorded.stdout().contains("joined late"),
+        "{}",
+        recorded.describe()
+    );
+    assert_recorded_alike(&own, &outside);
     leaks.assert_clean();
 }
