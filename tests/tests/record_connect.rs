@@ -7,7 +7,7 @@
 //! team (`--transport ros2`, no logins) recorded from outside gives its own recording too. The
 //! recorder's failure modes: joined late (its file says from which tick), its team's world
 //! SIGKILLed (a clear error, exit 2, a finished file up to the last tick), SIGINT (exit 130, a
-//! finished file).
+//! finished file); a file recorded from outside replays with the model at its recorded path.
 //!
 //! Real processes on 127.0.0.1 with real Zenoh: for a recording from the first tick the run waits
 //! while the recorder connects (a remote robot over Zenoh, gated agents over ROS 2); each test
@@ -192,7 +192,14 @@ fn a_live_ros2_team_recorded_from_outside_equals_its_own_recording() {
         &run_id,
         &scenario,
         &dir.path().join("out"),
-        &["--transport", "ros2", "--listen", &listen, "--clock", "lockstep"],
+        &[
+            "--transport",
+            "ros2",
+            "--listen",
+            &listen,
+            "--clock",
+            "lockstep",
+        ],
     );
     command
         .arg("--record")
@@ -267,12 +274,8 @@ fn paced_zenoh_team(dir: &Path, run_id: &RunId) -> (LiveProcess, String, PathBuf
 /// Starts `formation record --connect` on the team at `listen` into `file`, and returns it once
 /// it has written its file and recorded for two seconds more.
 fn recorder_under_way(listen: &str, run_id: &RunId, file: &Path, login: &Path) -> LiveProcess {
-    let mut recorder = LiveProcess::spawn(record_connect(
-        listen,
-        run_id.as_str(),
-        file,
-        Some(login),
-    ));
+    let mut recorder =
+        LiveProcess::spawn(record_connect(listen, run_id.as_str(), file, Some(login)));
     let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
         l.contains(&format!("connected to run {run_id}"))
     });
@@ -344,17 +347,20 @@ fn a_late_recorder_says_where_it_joined_and_sigint_finishes_its_file() {
     // Two seconds at 20 ms a tick at least: 3 robots' scan, odometry, command and TF a tick.
     assert_read_to_its_end(&late, 50 * 3 * 4);
 
+    // The test model is not a shipped one: the world's own recording would store it, this one
+    // names it, and the replay finds it at its path on this host (its hash checked).
+    assert!(
+        metadata["model.0.stored"]
+            .as_str()
+            .is_some_and(|v| v.starts_with("not stored")),
+        "{metadata}"
+    );
     let json = dir.path().join("late.json");
     let mut replay = Command::new(&binaries().cli);
-    replay
-        .arg("replay")
-        .arg(&late)
-        .arg("--model")
-        .arg(test_model())
-        .arg("--json")
-        .arg(&json);
+    replay.arg("replay").arg(&late).arg("--json").arg(&json);
     run(replay, LIMIT).assert_success();
     let report = read_json(&json);
+    assert_eq!(report["models"][0], test_model().display().to_string());
     assert_eq!(report["diverged"], false, "{report}");
     for row in report["robots"].as_array().unwrap() {
         assert!(row["compared"].as_u64().unwrap() >= 50, "{row}");

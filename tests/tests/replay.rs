@@ -15,9 +15,9 @@ use formation_proto::{LidarSpec, OccupancySpec};
 use formation_robot_agent::decision::{DecisionError, PolicyBackend};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
-    Finished, LeakCheck, LiveProcess, TempDir, Watchdog, await_connected, binaries,
-    case1_scenario, eval_recorded, formation_run, one_at_a_time, read_json,
-    record_case1_over_processes, repo_root, run, test_model, unique_run_id, write_tiny_model,
+    Finished, LeakCheck, LiveProcess, TempDir, Watchdog, await_connected, binaries, case1_scenario,
+    eval_recorded, formation_run, one_at_a_time, read_json, record_case1_over_processes, repo_root,
+    run, test_model, unique_run_id, write_tiny_model,
 };
 use serde_json::Value;
 
@@ -332,15 +332,14 @@ fn a_run_with_a_mid_run_swap_replays_bit_identical_with_each_ticks_model() {
         200 - SWAP_TICK,
         "{report}"
     );
-    assert!(robot1["compared"].as_u64().unwrap() >= SWAP_TICK - 5, "{report}");
+    assert!(
+        robot1["compared"].as_u64().unwrap() >= SWAP_TICK - 5,
+        "{report}"
+    );
 
     // With it: every step compared, each with the model that decided its tick.
     let json = dir.path().join("with.json");
-    let with = replay(
-        &file,
-        &["--swap-model", second.to_str().unwrap()],
-        &json,
-    );
+    let with = replay(&file, &["--swap-model", second.to_str().unwrap()], &json);
     assert_exit(&with, 0);
     let report = read_json(&json);
     assert_identical_over(&report, 3, 190);
