@@ -352,6 +352,10 @@ pub struct ReplayArgs {
     /// Replay only this robot.
     #[arg(long, value_name = "I")]
     pub robot: Option<u32>,
+    /// A model swapped in during the run (`formation swap`; repeat for several): the recording
+    /// names it by its id only, and it decides the steps whose model id is its own.
+    #[arg(long, value_name = "FILE.onnx")]
+    pub swap_model: Vec<PathBuf>,
     /// Write the report's JSON here (default: next to the recording, `FILE.replay.json`).
     #[arg(long, value_name = "FILE.json")]
     pub json: Option<PathBuf>,
@@ -589,8 +593,12 @@ pub struct RecordArgs {
     /// Run id of the running launch (`formation run` prints it; set it with `--run-id`).
     #[arg(long)]
     pub run_id: String,
+    /// The team's transport: zenoh (a formation team over Zenoh) or ros2 (a ROS 2 team,
+    /// `formation run --transport ros2`).
+    #[arg(long, value_enum, default_value_t = Transport::Zenoh)]
+    pub transport: Transport,
     /// The recorder's login file (recorder.json from `formation credentials`): read-only, and
-    /// required.
+    /// required for a Zenoh team; a ROS 2 team has no logins and takes none.
     #[arg(long, value_name = "FILE")]
     pub credentials: Option<PathBuf>,
     /// The MCAP file to write, whose folder must exist (with several runs, run N to

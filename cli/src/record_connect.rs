@@ -1,11 +1,14 @@
 //! `formation record --connect tcp/HOST:PORT --run-id ID --credentials recorder.json --out
 //! FILE.mcap`: records a live Zenoh team from outside, into the very file `--record` writes for
-//! the same run (message for message; see [`formation_record::live`]).
+//! the same run (message for message; see [`formation_record::live`]); with `--transport ros2`
+//! (and no `--credentials`), a live ROS 2 team, whose world serves the same record channel.
 //!
-//! It needs the read-only recorder login that `formation credentials` writes (`recorder.json`):
-//! without `--credentials`, or with another user's login (an agent's, the operator's), it is
-//! refused before it connects, naming the fix; the world's router refuses a connection without
-//! a valid login and its access rules let only the recorder read the record channel.
+//! A Zenoh team needs the read-only recorder login that `formation credentials` writes
+//! (`recorder.json`): without `--credentials`, or with another user's login (an agent's, the
+//! operator's), it is refused before it connects, naming the fix; the world's router refuses a
+//! connection without a valid login and its access rules let only the recorder read the record
+//! channel. A ROS 2 team has no logins or access rules (as ROS 2 without SROS2: whoever reaches
+//! its router reads its topics too), so its recorder connects without one.
 //!
 //! It connects, subscribes, and asks for the setup of a run under way: started before the run,
 //! it records from its first tick; started while a run plays, from the tick it joined at (the
@@ -21,7 +24,8 @@ use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::RunId;
 use formation_record::live::{LiveRecording, LiveRunDone, decode};
 use formation_record::{RecordTarget, RecordingSummary};
-use formation_runtime::zenoh::{Endpoint, RecorderEvent, RecorderLink, credentials};
+use formation_runtime::transport::Transport;
+use formation_runtime::zenoh::{Endpoint, Login, RecorderEvent, RecorderLink, credentials};
 
 use crate::args::RecordArgs;
 use crate::launch::supervisor::LaunchError;
@@ -52,9 +56,16 @@ fn kept_note(kept: &[PathBuf]) -> String {
     }
 }
 
-/// `formation record`.
-pub fn record_command(args: &RecordArgs) -> anyhow::Result<()> {
-    let endpoint = Endpoint::parse(&args.connect)?;
+/// The recorder's login: a Zenoh team's `recorder.json` (required); none for a ROS 2 team,
+/// which has no logins (`--credentials` is refused there, as it is for `formation run`).
+fn recorder_login(args: &RecordArgs) -> anyhow::Result<Option<Login>> {
+    args.transport
+        .refuse_network_flags(&[(true, "formation record --connect")])?;
+    args.transport
+        .refuse_zenoh_flags(&[(args.credentials.is_some(), "--credentials")])?;
+    if args.transport == Transport::Ros2 {
+        return Ok(None);
+    }
     let Some(login_file) = &args.credentials else {
         anyhow::bail!(
             "formation record --connect needs the team's recorder login: pass --credentials \
@@ -63,11 +74,17 @@ pub fn record_command(args: &RecordArgs) -> anyhow::Result<()> {
              --credentials makes one in <out>/credentials/<run id>/)"
         );
     };
-    let login = credentials::read_recorder(login_file)?;
+    Ok(Some(credentials::read_recorder(login_file)?))
+}
+
+/// `formation record`.
+pub fn record_command(args: &RecordArgs) -> anyhow::Result<()> {
+    let endpoint = Endpoint::parse(&args.connect)?;
+    let login = recorder_login(args)?;
     let run = RunId::new(&args.run_id)?;
     RecordTarget::File(args.out.clone()).check()?;
     let timeout = crate::launch::positive_seconds("--timeout-s", args.timeout_s)?;
-    let link = RecorderLink::connect(&endpoint, &login, &run, timeout)?;
+    let link = RecorderLink::connect(&endpoint, login.as_ref(), &run, timeout)?;
     println!("connected to run {run} at {endpoint}; recording its runs");
     let mut recording =
         LiveRecording::new(&args.out, &format!("formation record --connect {endpoint}"));

@@ -25,6 +25,7 @@ use formation_proto::{GabrielRule, Goal, NeighbourRule, Pose, WheelCmd};
 
 use crate::error::RecordError;
 use crate::file::{RecordingFile, RecordingSummary};
+use crate::read::NOT_STORED_PREFIX;
 use crate::setup::{RecordingSetup, TeamSetup};
 use crate::target::RecordTarget;
 use crate::tick::{FinalSample, SentCommand, TickRecord};
@@ -658,7 +659,7 @@ fn create_file(
     for value in metadata.values_mut() {
         // A model the world stores as an attachment stays on the world's host.
         if value.starts_with("attachment ") {
-            *value = format!("not stored (recorded live; the world's {value})");
+            *value = format!("{NOT_STORED_PREFIX}{value})");
         }
     }
     metadata.insert("live.recorded_by".into(), recorded_by.to_owned());

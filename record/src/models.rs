@@ -49,6 +49,20 @@ pub enum ModelFileError {
         /// The file's hash.
         found: String,
     },
+    /// A recording made from outside the team does not hold a model that is not shipped, and it
+    /// is not at its recorded path here.
+    #[error(
+        "{}: the model {} is not stored in this recording (it was recorded from outside the \
+         team, and the model stayed on the world's host; the world's own --record stores it) \
+         and is not at that path here: give the model with --model",
+        recording.display(), model.display()
+    )]
+    NotStored {
+        /// The recording.
+        recording: PathBuf,
+        /// The recorded path.
+        model: PathBuf,
+    },
     /// A stored model's attachment is not in the file.
     #[error(
         "{}: the model {} should be stored as the attachment {name}, which the file does not \
@@ -152,7 +166,13 @@ pub fn recorded_model_files(
             }
         };
         let file = match &model.storage {
-            ModelStorage::Shipped => {
+            ModelStorage::NotStored if !model.path.is_file() => {
+                return Err(ModelFileError::NotStored {
+                    recording: recording.to_path_buf(),
+                    model: model.path.clone(),
+                });
+            }
+            ModelStorage::Shipped | ModelStorage::NotStored => {
                 if !model.path.is_file() {
                     return Err(ModelFileError::Missing {
                         recording: recording.to_path_buf(),
@@ -249,6 +269,28 @@ mod tests {
         let files = recorded_model_files(Path::new("r"), &recorded, dir.path()).unwrap();
         assert_eq!(files[0].file_name().unwrap(), "tiny-seed0.onnx");
         assert_eq!(std::fs::read(&files[0]).unwrap(), b"stored");
+    }
+
+    #[test]
+    fn a_model_a_live_recording_did_not_store_is_taken_from_its_path_or_asked_for() {
+        let dir = tempfile::tempdir().unwrap();
+        let model = dir.path().join("tiny-seed0.onnx");
+        let sha = sha256_hex(b"kept on the world's host");
+        let stored = format!(
+            "{}attachment models/{sha}.onnx)",
+            crate::read::NOT_STORED_PREFIX
+        );
+        let recorded = info(&model, &sha, &stored);
+        assert_eq!(recorded.models[0].storage, ModelStorage::NotStored);
+        let err = recorded_model_files(Path::new("r"), &recorded, dir.path()).unwrap_err();
+        assert!(matches!(err, ModelFileError::NotStored { .. }), "{err}");
+        assert!(err.to_string().contains("--model"), "{err}");
+        std::fs::write(&model, b"kept on the world's host").unwrap();
+        let files = recorded_model_files(Path::new("r"), &recorded, dir.path()).unwrap();
+        assert_eq!(files, std::slice::from_ref(&model));
+        std::fs::write(&model, b"another model").unwrap();
+        let err = recorded_model_files(Path::new("r"), &recorded, dir.path()).unwrap_err();
+        assert!(matches!(err, ModelFileError::HashMismatch { .. }), "{err}");
     }
 
     #[test]

@@ -53,7 +53,15 @@ pub enum ModelStorage {
     Shipped,
     /// Stored in the recording as the attachment of this name.
     Attachment(String),
+    /// Not stored: a recording made from outside the team (`formation record --connect`), whose
+    /// world stored it as an attachment of its own recording, on its own host
+    /// ([`NOT_STORED_PREFIX`]); the model is found at its path, or given with `--model`.
+    NotStored,
 }
+
+/// How a recording made from outside begins the `model.N.stored` value of a model that the
+/// world's own recording stores as an attachment (followed by what the world's said).
+pub const NOT_STORED_PREFIX: &str = "not stored (recorded live; the world's ";
 
 /// One model a recording names.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -100,7 +108,13 @@ impl RunInfo {
             let storage = match (stored, stored.strip_prefix("attachment ")) {
                 ("shipped", _) => ModelStorage::Shipped,
                 (_, Some(name)) => ModelStorage::Attachment(name.to_owned()),
-                _ => return Err(bad(&stored_key, "neither `shipped` nor `attachment NAME`")),
+                (not, _) if not.starts_with(NOT_STORED_PREFIX) => ModelStorage::NotStored,
+                _ => {
+                    return Err(bad(
+                        &stored_key,
+                        "neither `shipped`, `attachment NAME` nor `not stored`",
+                    ));
+                }
             };
             models.push(RecordedModel {
                 path: PathBuf::from(model_path),

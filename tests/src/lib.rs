@@ -447,6 +447,45 @@ pub fn remote_zenoh_agent(listen: &str, run: &RunId, robot: usize) -> Command {
     agent
 }
 
+/// Holds a launch before its first tick until the test says go: an agent executable (a shell
+/// script) that waits until the file `gate` exists and then becomes the real `formation-agent`
+/// (`exec`, so the launcher's pid and pipes are the agent's). A launch whose
+/// `FORMATION_AGENT_BIN` is [`AgentGate::bin`] waits for its agents, as it does for remote ones
+/// (`--remote`), until [`AgentGate::open`]: how a test attaches something (a recorder) to a team
+/// whose transport has no remote agents (ROS 2) before it plays.
+pub struct AgentGate {
+    script: PathBuf,
+    gate: PathBuf,
+}
+
+impl AgentGate {
+    /// The gated agent's script in `dir`, the gate closed.
+    pub fn new(dir: &Path) -> AgentGate {
+        use std::os::unix::fs::PermissionsExt;
+        let script = dir.join("gated-agent.sh");
+        let gate = dir.join("agent-gate-open");
+        let text = format!(
+            "#!/bin/sh\nwhile [ ! -e '{}' ]; do sleep 0.05; done\nexec '{}' \"$@\"\n",
+            gate.display(),
+            binaries().agent.display()
+        );
+        std::fs::write(&script, text).expect("writing the gated agent's script");
+        std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755))
+            .expect("making the gated agent's script executable");
+        AgentGate { script, gate }
+    }
+
+    /// The executable to give the launcher as `FORMATION_AGENT_BIN`.
+    pub fn bin(&self) -> &Path {
+        &self.script
+    }
+
+    /// Lets the agents start.
+    pub fn open(&self) {
+        std::fs::write(&self.gate, "").expect("opening the agents' gate");
+    }
+}
+
 /// A 10 s case-1 `formation run --clock CLOCK --record FILE` over processes (the test model's
 /// agents), in `dir` under a run id tagged `tag`; fails the test unless it succeeds and leaves
 /// no shared memory behind. Returns the scenario file it ran.

@@ -1,8 +1,9 @@
 //! Issue 24's acceptance tests of `formation replay`: a recorded case-1 run (in-process, and
 //! lockstep over processes) replayed with its own model gives every command back bit for bit and
-//! exits 0; another model, or a renderer changed by one cell, is reported as a divergence with
-//! exit 1; a file that is not MCAP, a truncated one and a missing model are each a clear error
-//! (exit 2). Real ONNX Runtime, real processes, the real `formation` binary.
+//! exits 0; so does a run whose model was swapped mid-run, each tick with the model active then;
+//! another model, or a renderer changed by one cell, is reported as a divergence with exit 1; a
+//! file that is not MCAP, a truncated one and a missing model are each a clear error (exit 2).
+//! Real ONNX Runtime, real processes, the real `formation` binary.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -14,8 +15,9 @@ use formation_proto::{LidarSpec, OccupancySpec};
 use formation_robot_agent::decision::{DecisionError, PolicyBackend};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
-    Finished, TempDir, Watchdog, binaries, case1_scenario, eval_recorded, one_at_a_time, read_json,
-    record_case1_over_processes, repo_root, run, test_model,
+    Finished, LeakCheck, LiveProcess, TempDir, Watchdog, await_connected, binaries, case1_scenario,
+    eval_recorded, formation_run, one_at_a_time, read_json, record_case1_over_processes, repo_root,
+    run, test_model, unique_run_id, write_tiny_model,
 };
 use serde_json::Value;
 
@@ -270,5 +272,89 @@ fn bad_input_gets_a_clear_error() {
         no_model.stderr().contains("/nonexistent/model.onnx"),
         "{}",
         no_model.describe()
+    );
+}
+
+/// Gap 2 of issue 24: a paced lockstep run over processes in which robot 1's model is swapped
+/// at tick 120 (`formation swap`), recorded by the world. Each step of the recording names the
+/// model that decided it, so the replay decides each tick with the model active then: with the
+/// swapped-in model given (`--swap-model`), every command of every robot, before and after the
+/// swap, comes back bit for bit; without it, the replay says which steps it could not decide and
+/// how to give the model, and compares the rest.
+#[test]
+fn a_run_with_a_mid_run_swap_replays_bit_identical_with_each_ticks_model() {
+    const SWAP_TICK: u64 = 120;
+    let _watchdog = Watchdog::arm("replay_swap", LIMIT);
+    let _one = one_at_a_time();
+    let dir = TempDir::new("replay-swap");
+    let run_id = unique_run_id("rswap");
+    let leaks = LeakCheck::new(&run_id);
+    let second = dir.path().join("second.onnx");
+    write_tiny_model(&second, 1);
+    let scenario = case1_scenario(dir.path(), 10.0);
+    let file = dir.path().join("swapped.mcap");
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &dir.path().join("out"),
+        &["--clock", "lockstep", "--pace-ms", "20"],
+    );
+    command.arg("--record").arg(&file);
+    let mut launch = LiveProcess::spawn(command);
+    await_connected(&mut launch);
+    let mut swap = Command::new(&binaries().cli);
+    swap.args(["swap", "--run", run_id.as_str(), "--robot", "1", "--model"])
+        .arg(&second)
+        .args(["--at-tick", &SWAP_TICK.to_string()]);
+    let swapped = run(swap, LIMIT);
+    swapped.assert_success();
+    assert!(
+        swapped.stdout().contains(&format!("from tick {SWAP_TICK}")),
+        "{}",
+        swapped.describe()
+    );
+    launch.finish(LIMIT).assert_success();
+    leaks.assert_clean();
+
+    // Without the swapped-in model: robot 1's later steps cannot be decided, and it says so.
+    let json = dir.path().join("without.json");
+    let without = replay(&file, &[], &json);
+    assert_exit(&without, 0);
+    assert!(
+        without.stdout().contains("--swap-model"),
+        "{}",
+        without.describe()
+    );
+    let report = read_json(&json);
+    let robot1 = &report["robots"][1];
+    assert_eq!(
+        robot1["unreplayable"]["unknown_model"],
+        200 - SWAP_TICK,
+        "{report}"
+    );
+    assert!(
+        robot1["compared"].as_u64().unwrap() >= SWAP_TICK - 5,
+        "{report}"
+    );
+
+    // With it: every step compared, each with the model that decided its tick.
+    let json = dir.path().join("with.json");
+    let with = replay(&file, &["--swap-model", second.to_str().unwrap()], &json);
+    assert_exit(&with, 0);
+    let report = read_json(&json);
+    assert_identical_over(&report, 3, 190);
+    for row in report["robots"].as_array().unwrap() {
+        assert!(
+            row["unreplayable"].as_object().is_none_or(|u| u.is_empty()),
+            "{row}"
+        );
+    }
+    assert!(
+        report["models"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|m| m.as_str().unwrap().contains("second.onnx")),
+        "{report}"
     );
 }

@@ -65,8 +65,8 @@ pub struct LaunchPlan {
     /// What the world records (`--record`), handed to it as a JSON file next to `run_specs`
     /// ([`LaunchPlan::record_settings_path`]).
     pub record: Option<formation_record::RecordSettings>,
-    /// What the launch knows of its runs, handed to a Zenoh world without `record` for the
-    /// metadata of recordings made from outside (`formation record --connect`).
+    /// What the launch knows of its runs, handed to a Zenoh or ROS 2 world without `record` for
+    /// the metadata of recordings made from outside (`formation record --connect`).
     pub launch_info: Option<formation_record::LaunchInfo>,
 }
 
@@ -815,7 +815,8 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
         record.write(&path)?;
         command.arg("--record-settings").arg(path);
     }
-    if let (None, Some(info), Some(_)) = (&plan.record, &plan.launch_info, plan.network.zenoh()) {
+    let over_zenoh = !matches!(plan.network, Network::SharedMemory);
+    if let (None, Some(info), true) = (&plan.record, &plan.launch_info, over_zenoh) {
         let path = plan.run_specs.with_file_name("launch-info.json");
         info.write(&path)?;
         command.arg("--launch-info").arg(path);

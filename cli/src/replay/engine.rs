@@ -9,8 +9,9 @@
 //! the replay catch it.
 //!
 //! Which model decides a step: with `--model`, that one; otherwise the recording's model whose
-//! id the step names (a swap within the recording changes it), or the robot's model in the
-//! metadata for a step without one. A realtime step answers the scan of `tick - lag_ticks`,
+//! id the step names (a swap within the recording changes it; a model swapped in with
+//! `formation swap` is named only by its id, content hash included, and is given with
+//! `--swap-model`), or the robot's model in the metadata for a step without one. A realtime step answers the scan of `tick - lag_ticks`,
 //! which is fed instead of its own. Steps the world did not take a fresh answer for are counted,
 //! not compared.
 
@@ -36,6 +37,9 @@ pub struct ReplayOptions {
     pub model: Option<PathBuf>,
     /// Replay only this robot.
     pub robot: Option<u32>,
+    /// Models swapped in during the run (`formation swap`), which the recording names only by
+    /// id: each decides the steps whose model id is its own (ignored with `model`).
+    pub swapped: Vec<PathBuf>,
 }
 
 /// A finished replay: the report, and why the file stopped early when it was cut short.
@@ -199,6 +203,11 @@ impl<M: PilotMaker> Replay<'_, M> {
             let files = models::recorded_model_files(&self.recording, &info, scratch)?;
             for (file, model) in files.into_iter().zip(&info.models) {
                 self.add_model(file, model.path.display().to_string())?;
+            }
+            // After the recorded ones, whose indices the metadata's robot_models name.
+            for file in self.options.swapped.clone() {
+                let label = format!("{} (swapped in)", file.display());
+                self.add_model(file, label)?;
             }
         }
         self.info = Some(info);

@@ -1,4 +1,4 @@
-//! `formation replay FILE.mcap [--model M] [--robot I] [--json OUT]`: a recording's inputs fed
+//! `formation replay FILE.mcap [--model M] [--swap-model S]... [--robot I] [--json OUT]`: a recording's inputs fed
 //! through the agent's decision again and compared with its commands ([`engine`]), tallied per
 //! robot ([`divergence`]), printed as a table and written as JSON (`formation_schema::ReplayReport`).
 //!
@@ -52,6 +52,7 @@ pub fn replay_command(args: &ReplayArgs) -> anyhow::Result<()> {
     let options = ReplayOptions {
         model: args.model.clone(),
         robot: args.robot,
+        swapped: args.swap_model.clone(),
     };
     let replayed = replay_recording(&args.file, &options, &OnnxPilots, scratch.path())?;
     let report = &replayed.report;
@@ -134,6 +135,18 @@ pub fn table(report: &ReplayReport) -> String {
             r.max_abs_delta,
             tick(r.first_differing_tick),
             tick(r.last_differing_tick),
+        );
+    }
+    let unknown: u64 = report
+        .robots
+        .iter()
+        .filter_map(|r| r.unreplayable.get("unknown_model"))
+        .sum();
+    if unknown > 0 {
+        let _ = writeln!(
+            out,
+            "{unknown} step(s) name a model this replay does not have (one swapped in during the \
+             run?): give it with --swap-model FILE.onnx"
         );
     }
     let verdict = if report.diverged {

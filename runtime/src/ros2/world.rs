@@ -26,6 +26,14 @@
 //!   twist from the wheel speeds of the last step (`odometry_message`). No TF is published:
 //!   the odometry's frames name it (`robot_<i>/odom` to `robot_<i>/base_link`).
 //!
+//! - **Recording from outside** (`formation record --connect --transport ros2`): the world's
+//!   session also carries the run's record channel and liveliness token under `formation/<run>/`
+//!   ([`Ros2WorldLink::record_feed`], the Zenoh team's [`crate::zenoh::ZenohRecordFeed`]), keys
+//!   outside rmw_zenoh's layout that ROS 2 tools do not see. The ROS 2 topics alone could not
+//!   give the file `--record` writes: a Twist is not the wheel speeds bit for bit, and the
+//!   replay channel's inputs, watchdog outcomes and the run's metadata are on no topic. A ROS 2
+//!   team has no logins (as ROS 2 without SROS2), so the recorder needs none.
+//!
 //! A Twist becomes wheel speeds as `diff_drive_controller` makes them
 //! ([`formation_ros2::wheels_from_twist`]), which is the inverse of the agent's conversion only up
 //! to rounding: a ROS 2 team's trajectories match in-process ones to about 1e-15 m per step, not
@@ -37,6 +45,7 @@ use std::time::Duration;
 
 use crate::auth::LaunchSecret;
 use ::zenoh::Wait;
+use ::zenoh::liveliness::LivelinessToken as RunToken;
 use ::zenoh::pubsub::Subscriber;
 use ::zenoh::sample::SampleKind;
 use formation_proto::wire::{
@@ -151,6 +160,8 @@ pub struct Ros2WorldLink {
     episode: Option<(u64, i64)>,
     last_stamp: i64,
     _graph_watch: Subscriber<()>,
+    /// The world's liveliness token (`formation/<run>/world`), which a remote recorder watches.
+    _token: RunToken,
     _signals: SignalWatch,
 }
 
@@ -399,6 +410,14 @@ impl Ros2WorldLink {
             action: "watch for termination signals".into(),
             detail: e.to_string(),
         })?;
+        let token = session
+            .liveliness()
+            .declare_token(crate::zenoh::keys::world_token(run))
+            .wait()
+            .map_err(|e| WorldLinkError::Zenoh {
+                action: "declare the world's liveliness token".into(),
+                detail: e.to_string(),
+            })?;
         Ok(Ros2WorldLink {
             session,
             run: run.clone(),
@@ -416,8 +435,15 @@ impl Ros2WorldLink {
             last_stamp: 0,
             team,
             _graph_watch: graph_watch,
+            _token: token,
             _signals: signals,
         })
+    }
+
+    /// The run's record channel for remote recorders (`formation record --connect --transport
+    /// ros2`), on this world's session: the Zenoh team's, keys and format alike.
+    pub fn record_feed(&self) -> WorldResult<crate::zenoh::ZenohRecordFeed> {
+        crate::zenoh::ZenohRecordFeed::declare(&self.session, &self.run)
     }
 
     /// The stamp \[ns\] of `msg`'s tick on the team's simulated clock, starting an episode's

@@ -1,13 +1,15 @@
-//! Recording a live Zenoh team from outside: the world's record channel ([`ZenohRecordFeed`])
-//! and the recorder's client ([`RecorderLink`]), carrying the live-recording messages of
-//! `formation_record::live` as opaque bytes.
+//! Recording a live Zenoh or ROS 2 team from outside: the world's record channel
+//! ([`ZenohRecordFeed`]) and the recorder's client ([`RecorderLink`]), carrying the
+//! live-recording messages of `formation_record::live` as opaque bytes. A ROS 2 world declares
+//! the same channel and token on its own session (`crate::ros2::Ros2WorldLink::record_feed`).
 //!
 //! The world publishes each message on `formation/<run>/record/live` ([`keys::record_live`])
 //! reliably and blocking under congestion, so a lockstep run waits for a slow recorder rather
 //! than losing a tick, and only while a subscriber matches: nobody recording costs nothing. The
 //! setup of the run under way also answers queries on `formation/<run>/record/setup`, for a
-//! recorder that joins while a run plays. Only the `recorder` login may subscribe and query
-//! there ([`super::access`]).
+//! recorder that joins while a run plays. On a Zenoh team only the `recorder` login may subscribe
+//! and query there ([`super::access`]); a ROS 2 team has no logins, so its recorder connects
+//! without one.
 //!
 //! The recorder subscribes first, then watches the world's liveliness token (its going ends
 //! the recording: the team ended, or the link was lost), then asks for the setup; SIGINT and
@@ -124,8 +126,8 @@ pub enum RecorderLinkError {
     /// The world's endpoint could not be reached, or its router refused the login.
     #[error(
         "cannot reach the team at {endpoint}, or its router refused the recorder's login: \
-         {detail}; is the team listening there, and is --credentials the recorder.json of this \
-         team's credentials folder?"
+         {detail}; is the team listening there, and (a Zenoh team) is --credentials the \
+         recorder.json of this team's credentials folder?"
     )]
     Unreachable {
         /// The endpoint.
@@ -168,18 +170,19 @@ pub struct RecorderLink {
 }
 
 impl RecorderLink {
-    /// Connects to run `run`'s world at `endpoint` with the recorder's `login`, subscribes to
-    /// its record channel, and waits up to `timeout` for the world to be there.
+    /// Connects to run `run`'s world at `endpoint` with the recorder's `login` (none for a ROS 2
+    /// team, which has no logins), subscribes to its record channel, and waits up to `timeout`
+    /// for the world to be there.
     pub fn connect(
         endpoint: &Endpoint,
-        login: &Login,
+        login: Option<&Login>,
         run: &RunId,
         timeout: Duration,
     ) -> Result<Self, RecorderLinkError> {
         let started = Instant::now();
         let zenoh =
             |action: String| move |e: String| RecorderLinkError::Zenoh { action, detail: e };
-        let config = super::client_config(endpoint, timeout, Some(login))
+        let config = super::client_config(endpoint, timeout, login)
             .map_err(zenoh(format!("configure the connection to {endpoint}")))?;
         let session = super::open(config).map_err(|detail| RecorderLinkError::Unreachable {
             endpoint: endpoint.to_string(),

@@ -216,10 +216,7 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
             None,
         ),
         Transport::Zenoh => zenoh_link(args, &run_id, n_robots)?,
-        Transport::Ros2 => (
-            ros2_link(args, &run_id, &specs[0], &runtime, secret.clone())?,
-            None,
-        ),
+        Transport::Ros2 => ros2_link(args, &run_id, &specs[0], &runtime, secret.clone())?,
     };
     let launch = launch_info(args, record.as_ref(), &runtime)?;
     emit(&WorldEvent::Listening { robots: n_robots });
@@ -335,7 +332,7 @@ fn zenoh_link(_args: &Args, _run_id: &RunId, _n_robots: usize) -> anyhow::Result
 }
 
 /// The world as a ROS 2 team: a Zenoh router on `--listen` serving each robot's LaserScan,
-/// Odometry and cmd_vel.
+/// Odometry and cmd_vel, and its record channel (`formation record --connect --transport ros2`).
 #[cfg(feature = "zenoh")]
 fn ros2_link(
     args: &Args,
@@ -343,7 +340,7 @@ fn ros2_link(
     spec: &RunSpec,
     runtime: &RuntimeSettings,
     secret: LaunchSecret,
-) -> anyhow::Result<Box<dyn WorldLink>> {
+) -> anyhow::Result<LinkAndFeed> {
     use formation_runtime::ros2::{Ros2Team, Ros2WorldLink};
     let listen = formation_cli::endpoint::required_endpoint(
         args.listen.as_deref(),
@@ -359,7 +356,10 @@ fn ros2_link(
     };
     let link = Ros2WorldLink::create(run_id, team, &listen, secret)
         .with_context(|| format!("setting up the ROS 2 team of run {run_id} on {listen}"))?;
-    Ok(Box::new(link))
+    let feed = link
+        .record_feed()
+        .with_context(|| format!("setting up run {run_id}'s record channel"))?;
+    Ok((Box::new(link), Some(Box::new(feed))))
 }
 
 /// This build has no Zenoh.
@@ -370,7 +370,7 @@ fn ros2_link(
     _spec: &RunSpec,
     _runtime: &RuntimeSettings,
     _secret: LaunchSecret,
-) -> anyhow::Result<Box<dyn WorldLink>> {
+) -> anyhow::Result<LinkAndFeed> {
     Err(TransportError::NotBuilt {
         program: "formation-world".into(),
         transport: Transport::Ros2,
@@ -410,7 +410,7 @@ struct Recording {
     settings: Option<formation_record::RecordSettings>,
     /// What the launch knows of its runs.
     launch: formation_record::LaunchInfo,
-    /// The record channel (Zenoh).
+    /// The record channel (Zenoh and ROS 2).
     feed: Option<Box<dyn RecordFeed>>,
 }
 
