@@ -383,12 +383,12 @@ impl IterationRollouts<'_> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
-    use formation_proto::OccupancySpec;
     use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader};
 
-    fn scenario(robots: usize) -> Scenario {
+    /// A 1 s scenario of `robots` robots, 4 runs.
+    pub(crate) fn scenario(robots: usize) -> Scenario {
         let text = format!(
             "name = \"dagger-test\"\nrobots = {robots}\nduration_s = 1.0\nseed = 5\nruns = 4\n\
              [goal]\nv_star = 0.7\nd_star_choices = [1.0, 2.0]\n[heading]\nschedule = \"random\"\n"
@@ -396,7 +396,8 @@ mod tests {
         Scenario::from_toml_str(&text, "dagger-test").unwrap()
     }
 
-    fn empty_dataset(dir: &Path, scenario: &Scenario) -> PathBuf {
+    /// An empty dataset in `dir/data` with the paper's images and `scenario`'s LIDAR.
+    pub(crate) fn empty_dataset(dir: &Path, scenario: &Scenario) -> PathBuf {
         let spec = scenario.run_spec(scenario.seed(), 0);
         let header = DatasetHeader::new(
             OccupancySpec::PAPER,
@@ -413,7 +414,8 @@ mod tests {
         path
     }
 
-    fn options(data: PathBuf, base: &Scenario) -> DaggerOptions {
+    /// DAgger over teams of 3 and 5 from `base`, 4 runs, beta 0.5, seed 9.
+    pub(crate) fn options(data: PathBuf, base: &Scenario) -> DaggerOptions {
         DaggerOptions {
             data,
             scenario: base.clone(),
@@ -471,6 +473,32 @@ mod tests {
             read.push(samples);
         }
         assert_eq!(read[0], read[1], "the same settings give the same samples");
+    }
+
+    #[test]
+    fn labelling_two_ranges_of_runs_and_concatenating_them_equals_the_whole_range() {
+        let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
+        let base = scenario(3);
+        let scenarios = team_scenarios(&base, &[3, 5]).unwrap();
+        let rollouts = IterationRollouts {
+            scenarios: &scenarios,
+            iteration: 2,
+            expert_share: 0.25,
+            seed: 9,
+            occupancy: OccupancySpec::PAPER,
+            model: &model,
+        };
+        let done = AtomicUsize::new(0);
+        let count = || {
+            done.fetch_add(1, Ordering::Relaxed);
+        };
+        let whole = rollouts.label_runs(0..5, &count).unwrap();
+        assert_eq!(done.load(Ordering::Relaxed), 5, "every run reports once");
+        let mut parts = rollouts.label_runs(0..2, &|| {}).unwrap();
+        parts.extend(rollouts.label_runs(2..5, &|| {}).unwrap());
+        assert_eq!(whole.len(), 20 * (3 + 5 + 3 + 5 + 3));
+        assert!(whole.iter().all(|s| s.iteration == 2));
+        assert_eq!(parts, whole);
     }
 
     #[test]

@@ -10,7 +10,9 @@
 use std::ops::Range;
 use std::path::PathBuf;
 
-use formation_trainer_bridge::dagger_part::{PartHeader, RolloutSettings, file_fnv1a64, write_part};
+use formation_trainer_bridge::dagger_part::{
+    PartHeader, RolloutSettings, file_fnv1a64, write_part,
+};
 use formation_trainer_bridge::dataset::Manifest;
 use formation_world::Scenario;
 
@@ -92,4 +94,83 @@ pub fn label_share(
     let samples = rollouts.label_runs(opts.runs.clone(), on_run_done)?;
     write_part(&opts.part, &header, &samples).map_err(part_error)?;
     Ok((header, samples.len()))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+    use crate::dagger::rollout_and_label;
+    use crate::dagger::tests::{empty_dataset, options, scenario};
+    use formation_trainer_bridge::dagger_part::append_parts;
+
+    #[test]
+    fn shares_appended_in_run_order_write_the_dataset_of_one_labelling_byte_for_byte() {
+        let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
+        let base = scenario(3);
+        let dir = tempfile::tempdir().unwrap();
+        let whole = empty_dataset(&dir.path().join("whole"), &base);
+        let opts = options(whole.clone(), &base);
+        let scenarios = team_scenarios(&base, &opts.team_sizes).unwrap();
+        let added = rollout_and_label(&opts, &scenarios, 1, opts.beta, &model, &|_| {}).unwrap();
+
+        let shared = empty_dataset(&dir.path().join("shared"), &base);
+        let share = |runs: Range<usize>, name: &str| {
+            let share = ShareOptions {
+                data: shared.clone(),
+                scenario: base.clone(),
+                team_sizes: opts.team_sizes.clone(),
+                model: model.clone(),
+                iteration: 1,
+                beta: opts.beta,
+                seed: opts.seed,
+                runs,
+                part: dir.path().join(name),
+            };
+            label_share(&share, &|| {}).unwrap();
+            share.part
+        };
+        let parts = [share(3..4, "c"), share(0..1, "a"), share(1..3, "b")];
+        let (_, appended) = append_parts(&shared, 1, opts.runs, &parts).unwrap();
+        assert_eq!(appended, added);
+        let files = |dir: &Path| {
+            let mut names: Vec<_> = std::fs::read_dir(dir)
+                .unwrap()
+                .map(|e| e.unwrap().file_name())
+                .collect();
+            names.sort();
+            names
+        };
+        assert_eq!(files(&whole), files(&shared));
+        for name in files(&whole) {
+            assert_eq!(
+                std::fs::read(whole.join(&name)).unwrap(),
+                std::fs::read(shared.join(&name)).unwrap(),
+                "{name:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn iteration_zero_or_a_beta_outside_zero_to_one_is_refused_before_anything_runs() {
+        let base = scenario(3);
+        let mut opts = ShareOptions {
+            data: PathBuf::from("/nonexistent"),
+            scenario: base,
+            team_sizes: Vec::new(),
+            model: PathBuf::from("/nonexistent.onnx"),
+            iteration: 0,
+            beta: 0.0,
+            seed: 1,
+            runs: 0..1,
+            part: PathBuf::from("/nonexistent/part"),
+        };
+        let err = label_share(&opts, &|| {}).unwrap_err();
+        assert!(err.to_string().contains("--iteration"), "{err}");
+        opts.iteration = 1;
+        opts.beta = -0.5;
+        let err = label_share(&opts, &|| {}).unwrap_err();
+        assert!(err.to_string().contains("--beta"), "{err}");
+    }
 }
