@@ -1088,14 +1088,24 @@ pub(crate) mod tests {
 
     #[test]
     fn the_same_samples_write_the_same_bytes() {
-        let dirs: Vec<_> = (0..4).map(|_| tempfile::tempdir().expect("tempdir")).collect();
+        let dirs: Vec<_> = (0..4)
+            .map(|_| tempfile::tempdir().expect("tempdir"))
+            .collect();
         for dir in &dirs {
             write(dir.path(), 6, 4);
         }
-        for file in [MANIFEST_FILE, "shard-000000.safetensors", "shard-000001.safetensors"] {
+        for file in [
+            MANIFEST_FILE,
+            "shard-000000.safetensors",
+            "shard-000001.safetensors",
+        ] {
             let first = fs::read(dirs[0].path().join(file)).expect("read");
             for dir in &dirs[1..] {
-                assert_eq!(fs::read(dir.path().join(file)).expect("read"), first, "{file}");
+                assert_eq!(
+                    fs::read(dir.path().join(file)).expect("read"),
+                    first,
+                    "{file}"
+                );
             }
         }
     }
