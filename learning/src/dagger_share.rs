@@ -66,7 +66,7 @@ pub fn label_share(
     let dataset = manifest.header();
     let part_error = |source| LearningError::Part {
         path: opts.part.clone(),
-        source,
+        source: Box::new(source),
     };
     let expert_share = opts.beta.powi(opts.iteration as i32);
     let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes)?;

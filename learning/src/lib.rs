@@ -78,9 +78,9 @@ pub enum LearningError {
     Part {
         /// The part file.
         path: PathBuf,
-        /// Why.
+        /// Why (boxed: the error names several files).
         #[source]
-        source: formation_trainer_bridge::dagger_part::PartError,
+        source: Box<formation_trainer_bridge::dagger_part::PartError>,
     },
     /// Training failed.
     #[error("training {}: {source}", out.display())]
