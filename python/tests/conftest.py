@@ -65,6 +65,15 @@ def pose_rows(rows: list) -> list:
     return [[(p["x"], p["y"], p["theta"]) for p in row] for row in rows]
 
 
+def local_eval_json(tmp_path: Path, *args: str) -> bytes:
+    """What `formation eval ARGS --json` writes, run here."""
+    out = tmp_path / "local.json"
+    done = subprocess.run([str(cli()), "eval", *args, "--json", str(out)],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    return out.read_bytes()
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

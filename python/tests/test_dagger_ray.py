@@ -1,7 +1,8 @@
 """One DAgger iteration's rollouts as Ray tasks on a real two-node Ray cluster on this machine
 (`ray start --head`, and a second node with `--address`): the dataset is byte for byte the one the
 local CLI writes for that iteration, also when a worker is SIGKILLed mid-iteration (Ray retries
-its share; nothing is lost or counted twice)."""
+its share; nothing is lost or counted twice); a whole iteration then trains on the driver and
+evaluates on Ray."""
 
 from __future__ import annotations
 
@@ -12,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from conftest import MODEL, WorkerKiller, cli, team_scenario
-from formation.dagger import label_iteration
+from conftest import MODEL, WorkerKiller, cli, local_eval_json, team_scenario
+from formation.dagger import dagger_iteration, label_iteration
 from formation.sweep import SweepError, run_cli
 
 SETTINGS = dict(team_sizes=(3, 4), beta=0.5, seed=11)
@@ -79,3 +80,22 @@ def test_a_dagger_share_that_fails_names_its_runs_and_the_cause(cluster, tmp_pat
                         address=cluster, formation_bin=str(cli()), max_retries=0)
     manifest = json.loads((expert / "manifest.json").read_text())
     assert {s["iteration"] for s in manifest["shards"]} == {0}, "nothing was appended"
+
+
+def test_a_whole_dagger_iteration_labels_on_ray_trains_on_the_driver_and_evaluates(cluster, tmp_path):
+    scenario = team_scenario(tmp_path, robots=3, duration_s=1.0)
+    expert = expert_dataset(tmp_path, scenario)
+    out = tmp_path / "models" / "m1.onnx"
+    point = dagger_iteration(str(expert), str(MODEL), 1, str(out), runs=4, scenario=str(scenario),
+                             train_args=("--epochs", "1", "--device", "cpu"),
+                             eval_scenario=str(scenario), eval_runs=2, runs_per_share=2,
+                             address=cluster, formation_bin=str(cli()))
+    manifest = json.loads((expert / "manifest.json").read_text())
+    assert {s["iteration"] for s in manifest["shards"]} == {0, 1}
+    assert out.is_file() and out.with_suffix(".pt").is_file()
+    local = local_eval_json(tmp_path, "--scenario", str(scenario), "--controller", "policy",
+                            "--model", str(out), "--runs", "2")
+    merged = out.parent / "m1-eval" / f"{scenario.stem}-policy-m1.json"
+    assert merged.read_bytes() == local, "the evaluation on Ray is the local one, byte for byte"
+    assert point == json.loads(local)
+    assert len(point["per_run"]) == 2

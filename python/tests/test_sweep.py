@@ -4,21 +4,10 @@ worker is SIGKILLed mid-sweep (Ray retries its share; nothing is lost or counted
 
 from __future__ import annotations
 
-import subprocess
-from pathlib import Path
-
 import pytest
 
-from conftest import MODEL, REPO, WorkerKiller, cli
+from conftest import MODEL, REPO, WorkerKiller, cli, local_eval_json
 from formation.sweep import Cell, SweepError, eval_sweep, grid
-
-
-def local_eval_json(tmp_path: Path, *args: str) -> bytes:
-    out = tmp_path / "local.json"
-    done = subprocess.run([str(cli()), "eval", *args, "--json", str(out)],
-                          capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr
-    return out.read_bytes()
 
 
 def test_a_table1_policy_sweep_on_two_nodes_survives_a_killed_worker_byte_for_byte(cluster, tmp_path):
