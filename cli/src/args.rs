@@ -503,6 +503,53 @@ mod tests {
     }
 
     #[test]
+    fn dagger_label_takes_dagger_s_rollout_flags_and_a_share_of_runs() {
+        let cli = Cli::try_parse_from([
+            "formation",
+            "dagger-label",
+            "--data",
+            "d",
+            "--model",
+            "m.onnx",
+            "--iteration",
+            "2",
+            "--beta",
+            "0.5",
+            "--team-sizes",
+            "3,5",
+            "--first-run",
+            "10",
+            "--runs",
+            "5",
+            "--part",
+            "p",
+        ])
+        .expect("parses");
+        let Command::DaggerLabel(args) = cli.command else {
+            panic!("not dagger-label: {:?}", cli.command);
+        };
+        assert_eq!(args.rollouts.team_sizes, [3, 5]);
+        assert_eq!(args.rollouts.seed, 1000, "formation dagger's default seed");
+        assert_eq!(
+            (args.iteration, args.first_run, args.runs),
+            (2, 10, Some(5))
+        );
+        let missing_runs = Cli::try_parse_from([
+            "formation",
+            "dagger-append",
+            "--data",
+            "d",
+            "--iteration",
+            "1",
+            "p",
+        ]);
+        assert!(
+            missing_runs.is_err(),
+            "dagger-append needs the iteration's --runs"
+        );
+    }
+
+    #[test]
     fn run_counts_are_bounded() {
         assert_eq!(run_count("1"), Ok(1));
         assert_eq!(run_count("10000"), Ok(10_000));
