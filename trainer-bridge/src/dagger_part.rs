@@ -173,13 +173,26 @@ pub enum PartError {
         /// The version it declares.
         found: String,
     },
-    /// A sample does not fit the part's dataset, iteration or runs.
-    #[error("{path}: {reason}")]
+    /// A sample does not fit the part's dataset or iteration.
+    #[error("{path}: {source}")]
     Sample {
         /// The part being written.
         path: PathBuf,
         /// What is wrong.
-        reason: String,
+        #[source]
+        source: DatasetError,
+    },
+    /// A sample of a run the part does not hold.
+    #[error(
+        "{path}: a sample of run {run} is outside the part's runs {runs:?}; label the share's runs only"
+    )]
+    SampleRun {
+        /// The part being written.
+        path: PathBuf,
+        /// The sample's run.
+        run: u32,
+        /// The part's runs.
+        runs: Range<usize>,
     },
     /// Encoding or appending failed in the dataset layer.
     #[error(transparent)]
@@ -293,17 +306,18 @@ pub fn write_part(path: &Path, header: &PartHeader, samples: &[Sample]) -> Resul
     let runs = header.run_range();
     let mut columns = PendingShard::default();
     for sample in samples {
-        let misfit = |reason: String| PartError::Sample {
-            path: path.to_path_buf(),
-            reason,
-        };
-        check_sample(&header.dataset, header.iteration, sample)
-            .map_err(|e| misfit(e.to_string()))?;
+        check_sample(&header.dataset, header.iteration, sample).map_err(|source| {
+            PartError::Sample {
+                path: path.to_path_buf(),
+                source,
+            }
+        })?;
         if !runs.contains(&(sample.run as usize)) {
-            return Err(misfit(format!(
-                "a sample of run {} is outside the part's runs {runs:?}",
-                sample.run
-            )));
+            return Err(PartError::SampleRun {
+                path: path.to_path_buf(),
+                run: sample.run,
+                runs,
+            });
         }
         columns.push(sample);
     }
@@ -761,7 +775,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let err =
             write_part(&dir.path().join("p"), &part_header(0, 1), &samples_of(0..2)).unwrap_err();
-        assert!(matches!(err, PartError::Sample { .. }), "{err:?}");
+        assert!(
+            matches!(err, PartError::SampleRun { run: 1, .. }),
+            "{err:?}"
+        );
         assert!(!dir.path().join("p").exists());
     }
 }
