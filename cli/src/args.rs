@@ -35,6 +35,12 @@ pub enum Command {
     Train(TrainArgs),
     /// DAgger: the policy drives, the expert labels, the dataset grows, the policy is retrained.
     Dagger(DaggerArgs),
+    /// Label one share of a DAgger iteration's runs into a part file (a sweep worker's task);
+    /// `formation dagger-append` appends the iteration's parts to the dataset.
+    DaggerLabel(DaggerLabelArgs),
+    /// Append the parts of one DAgger iteration (`formation dagger-label --part`) to the
+    /// dataset in run order, after checking they are that iteration's, complete and disjoint.
+    DaggerAppend(DaggerAppendArgs),
     /// Launch the world and one agent process per robot (iceoryx2, or Zenoh for agents on other
     /// hosts).
     Run(RunArgs),
@@ -251,15 +257,32 @@ pub struct NetworkArgs {
     pub relative_loss: bool,
 }
 
-/// `formation dagger`.
+/// What DAgger rolls out, shared by `formation dagger` and `formation dagger-label`.
 #[derive(Debug, Args)]
-pub struct DaggerArgs {
+pub struct DaggerRolloutArgs {
     /// The expert dataset to start from; DAgger samples are appended to it.
     #[arg(long)]
     pub data: PathBuf,
     /// Scenario the policy drives in to visit states (default: scenarios/collect.toml).
     #[arg(long, default_value = "scenarios/collect.toml")]
     pub scenario: PathBuf,
+    /// Probability that the expert drives a run in iteration 1; it decays as beta^k.
+    #[arg(long, default_value_t = 0.0)]
+    pub beta: f64,
+    /// Base seed of the DAgger rollouts.
+    #[arg(long, default_value_t = 1000)]
+    pub seed: u64,
+    /// Team sizes of the rollouts, used in turn (e.g. `3,5,7`; default: the scenario's).
+    #[arg(long, value_delimiter = ',', value_parser = team_size)]
+    pub team_sizes: Vec<usize>,
+}
+
+/// `formation dagger`.
+#[derive(Debug, Args)]
+pub struct DaggerArgs {
+    /// The dataset, the rollout scenario, beta, seed and team sizes.
+    #[command(flatten)]
+    pub rollouts: DaggerRolloutArgs,
     /// DAgger iterations.
     #[arg(long, default_value_t = 2)]
     pub iterations: usize,
@@ -272,9 +295,6 @@ pub struct DaggerArgs {
     /// Closed-loop runs per iteration (default: the scenario's `runs`; at most 10000).
     #[arg(long, value_parser = run_count)]
     pub runs: Option<usize>,
-    /// Probability that the expert drives a run in iteration 1; it decays as beta^k.
-    #[arg(long, default_value_t = 0.0)]
-    pub beta: f64,
     /// Training epochs per iteration.
     #[arg(long, default_value_t = 8)]
     pub epochs: usize,
@@ -293,19 +313,58 @@ pub struct DaggerArgs {
     /// Runs of that evaluation (at most 10000).
     #[arg(long, default_value_t = 100, value_parser = run_count)]
     pub eval_runs: usize,
-    /// Base seed of the DAgger rollouts.
-    #[arg(long, default_value_t = 1000)]
-    pub seed: u64,
     /// The d* range the models are declared for, `MIN,MAX` in metres (default: the rollout
     /// scenario's `goal.d_star_range` when it has one, else the data's own range).
     #[arg(long, value_name = "MIN,MAX", value_parser = d_star_range)]
     pub d_star_range: Option<(f64, f64)>,
-    /// Team sizes of the rollouts, used in turn (e.g. `3,5,7`; default: the scenario's).
-    #[arg(long, value_delimiter = ',', value_parser = team_size)]
-    pub team_sizes: Vec<usize>,
     /// Which network, whether to mirror the data, how many samples an epoch draws.
     #[command(flatten)]
     pub network: NetworkArgs,
+}
+
+/// `formation dagger-label`.
+#[derive(Debug, Args)]
+pub struct DaggerLabelArgs {
+    /// The dataset (only its manifest is read), the rollout scenario, beta, seed and team sizes:
+    /// the same as the DAgger session's.
+    #[command(flatten)]
+    pub rollouts: DaggerRolloutArgs,
+    /// The policy that drives in this iteration: iteration K-1's model (`formation dagger`
+    /// keeps iteration k's as `<stem>-dagger<k>.onnx`).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// The DAgger iteration K (at least 1); the expert drives a run with probability beta^K.
+    #[arg(long, value_name = "K")]
+    pub iteration: usize,
+    /// The first run of the iteration this share labels.
+    #[arg(long, value_name = "A", default_value_t = 0)]
+    pub first_run: usize,
+    /// Runs in this share, `A .. A + R` (default: the scenario's runs after A; at most 10000).
+    #[arg(long, value_name = "R", value_parser = run_count)]
+    pub runs: Option<usize>,
+    /// Write the share's labelled samples here (a DAgger part), atomically.
+    #[arg(long, value_name = "FILE")]
+    pub part: PathBuf,
+    /// Worker threads (default: available cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// `formation dagger-append`.
+#[derive(Debug, Args)]
+pub struct DaggerAppendArgs {
+    /// The dataset the parts were labelled for.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The DAgger iteration the parts hold.
+    #[arg(long, value_name = "K")]
+    pub iteration: u32,
+    /// The iteration's runs: the parts must hold runs 0 .. N, each once (at most 10000).
+    #[arg(long, value_name = "N", value_parser = run_count)]
+    pub runs: usize,
+    /// The parts (`formation dagger-label --part`) of the iteration, in any order.
+    #[arg(required = true, value_name = "PART")]
+    pub parts: Vec<PathBuf>,
 }
 
 /// `formation report`.
@@ -444,6 +503,53 @@ mod tests {
         assert!(
             Cli::try_parse_from(["formation", "eval", "--scenario", "s", "--robots", "3,1"])
                 .is_err()
+        );
+    }
+
+    #[test]
+    fn dagger_label_takes_dagger_s_rollout_flags_and_a_share_of_runs() {
+        let cli = Cli::try_parse_from([
+            "formation",
+            "dagger-label",
+            "--data",
+            "d",
+            "--model",
+            "m.onnx",
+            "--iteration",
+            "2",
+            "--beta",
+            "0.5",
+            "--team-sizes",
+            "3,5",
+            "--first-run",
+            "10",
+            "--runs",
+            "5",
+            "--part",
+            "p",
+        ])
+        .expect("parses");
+        let Command::DaggerLabel(args) = cli.command else {
+            panic!("not dagger-label: {:?}", cli.command);
+        };
+        assert_eq!(args.rollouts.team_sizes, [3, 5]);
+        assert_eq!(args.rollouts.seed, 1000, "formation dagger's default seed");
+        assert_eq!(
+            (args.iteration, args.first_run, args.runs),
+            (2, 10, Some(5))
+        );
+        let missing_runs = Cli::try_parse_from([
+            "formation",
+            "dagger-append",
+            "--data",
+            "d",
+            "--iteration",
+            "1",
+            "p",
+        ]);
+        assert!(
+            missing_runs.is_err(),
+            "dagger-append needs the iteration's --runs"
         );
     }
 

@@ -5,17 +5,23 @@
 //! iteration rolls out the current policy in closed loop (optionally letting the expert drive a
 //! decaying share of runs), labels every visited state of every robot with the expert's action,
 //! appends those samples to the dataset as a new iteration, retrains from the previous checkpoint,
-//! and reports the closed-loop Table I figures of the new model. This module only turns the
-//! arguments into options and prints progress.
+//! and reports the closed-loop Table I figures of the new model. `formation dagger-label` labels
+//! one share of an iteration's runs into a part (a Ray task's work) and `formation
+//! dagger-append` appends an iteration's parts in run order
+//! (`formation_learning::dagger_share`, `formation_trainer_bridge::dagger_part`). This module only
+//! turns the arguments into options and prints progress.
 
 use std::time::Instant;
 
 use anyhow::Context;
 use formation_learning::dagger::{DaggerEvent, DaggerOptions, run_dagger};
+use formation_learning::dagger_share::{ShareOptions, label_share};
+use formation_learning::rollout::with_threads;
+use formation_trainer_bridge::dagger_part::append_parts;
 use formation_trainer_bridge::train::{Mirror, TrainOptions, TrainReport, train};
 use formation_world::Scenario;
 
-use crate::args::{DaggerArgs, TrainArgs};
+use crate::args::{DaggerAppendArgs, DaggerArgs, DaggerLabelArgs, TrainArgs};
 use crate::eval;
 
 /// `formation train`.
@@ -59,21 +65,22 @@ fn run_training(opts: &TrainOptions) -> anyhow::Result<TrainReport> {
 
 /// `formation dagger`: the loop itself is `formation_learning::dagger::run_dagger`.
 pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
-    let scenario = Scenario::from_path(&args.scenario)?;
+    let rollouts = &args.rollouts;
+    let scenario = Scenario::from_path(&rollouts.scenario)?;
     let eval_scenario = Scenario::from_path(&args.eval_scenario)?;
     let d_star_range = args.d_star_range.or(match scenario.d_star() {
         formation_world::scenario::DStarPlan::Range { min, max } => Some((*min, *max)),
         _ => None,
     });
     let opts = DaggerOptions {
-        data: args.data.clone(),
+        data: rollouts.data.clone(),
         runs: args.runs.unwrap_or_else(|| scenario.runs()),
         scenario,
-        team_sizes: args.team_sizes.clone(),
+        team_sizes: rollouts.team_sizes.clone(),
         iterations: args.iterations,
         out: args.out.clone(),
         init_model: args.init_model.clone(),
-        beta: args.beta,
+        beta: rollouts.beta,
         training: TrainOptions {
             epochs: args.epochs,
             batch_size: args.batch_size,
@@ -91,14 +98,14 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
         },
         eval_scenario,
         eval_runs: args.eval_runs,
-        seed: args.seed,
+        seed: rollouts.seed,
     };
     let bar = eval::progress_bar(opts.runs, "dagger");
     let started = std::sync::Mutex::new(Instant::now());
     let curve = run_dagger(&opts, &|event| match event {
         DaggerEvent::Cloning => eprintln!(
             "DAgger iteration 0: behaviour cloning on {}",
-            args.data.display()
+            rollouts.data.display()
         ),
         DaggerEvent::Rollout { done } => bar.set_position(done as u64),
         DaggerEvent::Labelled {
@@ -150,5 +157,63 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
         );
     }
     println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// `formation dagger-label`: runs `A .. A + R` of iteration K, labelled into a part.
+pub fn dagger_label_command(args: &DaggerLabelArgs) -> anyhow::Result<()> {
+    formation_proto::files::check_output_file(&args.part)?;
+    let rollouts = &args.rollouts;
+    let scenario = Scenario::from_path(&rollouts.scenario)?;
+    let first = args.first_run;
+    let runs = args
+        .runs
+        .unwrap_or_else(|| scenario.runs().saturating_sub(first));
+    let Some(end) = first.checked_add(runs).filter(|_| runs > 0) else {
+        anyhow::bail!(
+            "--first-run {first} leaves no runs to label: give --runs R (the scenario has {} runs)",
+            scenario.runs()
+        );
+    };
+    let opts = ShareOptions {
+        data: rollouts.data.clone(),
+        scenario,
+        team_sizes: rollouts.team_sizes.clone(),
+        model: args.model.clone(),
+        iteration: args.iteration,
+        beta: rollouts.beta,
+        seed: rollouts.seed,
+        runs: first..end,
+        part: args.part.clone(),
+    };
+    let bar = eval::progress_bar(runs, "dagger share");
+    let (_, samples) = with_threads(args.threads, || label_share(&opts, &|| bar.inc(1)))??;
+    bar.finish_and_clear();
+    println!(
+        "wrote {} (iteration {}, runs {first}..{end}, {samples} samples)",
+        args.part.display(),
+        args.iteration
+    );
+    Ok(())
+}
+
+/// `formation dagger-append`: an iteration's parts, checked, appended in run order.
+pub fn dagger_append_command(args: &DaggerAppendArgs) -> anyhow::Result<()> {
+    let (manifest, added) = append_parts(&args.data, args.iteration, args.runs, &args.parts)
+        .with_context(|| {
+            format!(
+                "appending DAgger iteration {} to {}",
+                args.iteration,
+                args.data.display()
+            )
+        })?;
+    println!(
+        "appended {added} samples of DAgger iteration {} ({} runs, {} parts) to {}: {} samples in all",
+        args.iteration,
+        args.runs,
+        args.parts.len(),
+        args.data.display(),
+        manifest.samples
+    );
     Ok(())
 }

@@ -9,7 +9,8 @@
 //!
 //! * [`eval`]: in-process (or, with `--processes`, multi-process) evaluation with the paper's metrics.
 //! * [`collect`]: expert demonstrations into a dataset.
-//! * [`learn`]: `train` (runs the PyTorch trainer) and `dagger` (policy drives, expert labels, retrain).
+//! * [`learn`]: `train` (runs the PyTorch trainer), `dagger` (policy drives, expert labels,
+//!   retrain), and `dagger-label` / `dagger-append` (one iteration's labelling in shares).
 //! * [`launch`]: the multi-process launcher (`run`, `profile`, `swap`, `credentials`).
 //! * [`pilot`]: the robot's ONNX decision as the runtime's agent loop drives it (the
 //!   `formation-agent` binary).
@@ -70,6 +71,8 @@ pub fn main_with_args() -> anyhow::Result<()> {
         args::Command::Collect(a) => collect::collect_command(&a),
         args::Command::Train(a) => learn::train_command(&a),
         args::Command::Dagger(a) => learn::dagger_command(&a),
+        args::Command::DaggerLabel(a) => learn::dagger_label_command(&a),
+        args::Command::DaggerAppend(a) => learn::dagger_append_command(&a),
         args::Command::Run(a) => launch::run_command(&a),
         args::Command::Profile(a) => launch::profile_command(&a),
         args::Command::Swap(a) => launch::swap_command(&a),

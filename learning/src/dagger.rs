@@ -8,11 +8,13 @@
 //! scenario resized to that team, so the samples are a pure function of the settings and the
 //! model, written in run order.
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use formation_expert::collect::Labeller;
 use formation_expert::{ExpertController, ExpertGains};
+use formation_proto::OccupancySpec;
 use formation_schema::EvalOutput;
 use formation_trainer_bridge::dataset::{DatasetWriter, Sample};
 use formation_trainer_bridge::train::{TrainOptions, TrainReport, train};
@@ -92,21 +94,8 @@ pub fn run_dagger(
     opts: &DaggerOptions,
     on_event: &(dyn Fn(DaggerEvent) + Sync),
 ) -> Result<Vec<EvalOutput>, LearningError> {
-    if !(0.0..=1.0).contains(&opts.beta) {
-        return Err(LearningError::Setting {
-            setting: "--beta",
-            problem: format!("must be in [0, 1] (got {})", opts.beta),
-        });
-    }
-    let sizes = if opts.team_sizes.is_empty() {
-        vec![opts.scenario.n_robots()]
-    } else {
-        opts.team_sizes.clone()
-    };
-    let scenarios = sizes
-        .iter()
-        .map(|&n| opts.scenario.with_robots(n))
-        .collect::<Result<Vec<_>, _>>()?;
+    check_beta(opts.beta)?;
+    let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes)?;
     let out_dir = opts
         .out
         .parent()
@@ -239,7 +228,7 @@ fn evaluate_iteration(
 /// Rolls out `model` (or the expert, with probability `beta` per run) over `opts.runs` runs of
 /// the team sizes in turn and appends every robot's expert-labelled view at every tick as
 /// iteration `k`; returns the number of samples appended.
-fn rollout_and_label(
+pub(crate) fn rollout_and_label(
     opts: &DaggerOptions,
     scenarios: &[Scenario],
     k: usize,
@@ -252,72 +241,154 @@ fn rollout_and_label(
         source,
     };
     let mut writer = DatasetWriter::append(&opts.data, k as u32).map_err(dataset)?;
-    let occupancy = writer.header().occupancy;
-    let gains = ExpertGains::default();
-    let drivers = scenarios
-        .iter()
-        .map(|s| Driver::policy_for(s, model))
-        .collect::<Result<Vec<_>, _>>()?;
-    // One policy per team size, built on each worker the first time it needs it.
-    let iteration_seed = opts.seed.wrapping_add(1_000_003 * k as u64);
+    let rollouts = IterationRollouts {
+        scenarios,
+        iteration: k,
+        expert_share: beta,
+        seed: opts.seed,
+        occupancy: writer.header().occupancy,
+        model,
+    };
     let done = AtomicUsize::new(0);
-    let per_run: Vec<Vec<Sample>> = (0..opts.runs)
-        .into_par_iter()
-        .map_init(
-            || (0..scenarios.len()).map(|_| None).collect::<Vec<_>>(),
-            |policies: &mut Vec<Option<Box<dyn Controller>>>, i| {
-                let size = i % scenarios.len();
-                let scenario = &scenarios[size];
-                let spec = scenario.run_spec(iteration_seed, i);
-                let mut coin = rand_chacha::ChaCha8Rng::seed_from_u64(spec.seed ^ 0xDA66E5);
-                let expert_drives = beta > 0.0 && coin.random::<f64>() < beta;
-                let mut expert =
-                    ExpertController::new(gains, spec.world.robot).with_neighbours(spec.neighbours);
-                if policies[size].is_none() && !expert_drives {
-                    policies[size] = Some(drivers[size].controller(scenario)?);
-                }
-                let driver: &mut dyn Controller = match &mut policies[size] {
-                    Some(policy) if !expert_drives => policy.as_mut(),
-                    _ => &mut expert,
-                };
-                let mut labeller = Labeller::for_run(&spec, gains, occupancy)
-                    .map_err(|source| LearningError::Label { run: i, source })?;
-                let mut samples = Vec::new();
-                let mut failure = None;
-                run_episode(&spec, driver, &mut |obs, _| {
-                    if failure.is_none() {
-                        failure = labeller
-                            .label_observation(obs, k as u32, i as u32, &mut |s| samples.push(s))
-                            .err();
-                    }
-                })
-                .map_err(|source| LearningError::Run { run: i, source })?;
-                if let Some(source) = failure {
-                    return Err(LearningError::Label { run: i, source });
-                }
-                on_event(DaggerEvent::Rollout {
-                    done: done.fetch_add(1, Ordering::Relaxed) + 1,
-                });
-                Ok(samples)
-            },
-        )
-        .collect::<Result<_, LearningError>>()?;
-    let mut added = 0;
-    for sample in per_run.into_iter().flatten() {
+    let samples = rollouts.label_runs(0..opts.runs, &|| {
+        on_event(DaggerEvent::Rollout {
+            done: done.fetch_add(1, Ordering::Relaxed) + 1,
+        });
+    })?;
+    let added = samples.len();
+    for sample in samples {
         writer.push(sample).map_err(dataset)?;
-        added += 1;
     }
     writer.finish().map_err(dataset)?;
     Ok(added)
 }
 
+/// The rollout scenario resized to each team size (the scenario's own size when none is given):
+/// run `i` plays `team_scenarios(..)[i % len]`.
+pub fn team_scenarios(
+    scenario: &Scenario,
+    team_sizes: &[usize],
+) -> Result<Vec<Scenario>, LearningError> {
+    if team_sizes.is_empty() {
+        return Ok(vec![scenario.with_robots(scenario.n_robots())?]);
+    }
+    Ok(team_sizes
+        .iter()
+        .map(|&n| scenario.with_robots(n))
+        .collect::<Result<Vec<_>, _>>()?)
+}
+
+/// Refuses a `--beta` outside [0, 1].
+pub fn check_beta(beta: f64) -> Result<(), LearningError> {
+    if (0.0..=1.0).contains(&beta) {
+        return Ok(());
+    }
+    Err(LearningError::Setting {
+        setting: "--beta",
+        problem: format!("must be in [0, 1] (got {beta})"),
+    })
+}
+
+/// Iteration `k`'s rollouts: who drives, who labels, and how runs are drawn. Any range of runs
+/// can be labelled on its own ([`IterationRollouts::label_runs`]): run `i` is a pure function of
+/// these settings and `i`, so ranges labelled apart and concatenated in run order are the whole.
+#[derive(Debug, Clone, Copy)]
+pub struct IterationRollouts<'a> {
+    /// The rollout scenario per team size ([`team_scenarios`]); run `i` plays `i % len`.
+    pub scenarios: &'a [Scenario],
+    /// The DAgger iteration (at least 1; samples carry it).
+    pub iteration: usize,
+    /// The probability that the expert drives a run (`beta^k`).
+    pub expert_share: f64,
+    /// Base seed of the DAgger rollouts; iteration `k` draws its runs from
+    /// `seed + 1,000,003 k`.
+    pub seed: u64,
+    /// How the samples' occupancy images are rendered (the dataset's settings).
+    pub occupancy: OccupancySpec,
+    /// The policy that drives when the expert does not.
+    pub model: &'a Path,
+}
+
+impl IterationRollouts<'_> {
+    /// Rolls out runs `runs` in parallel (rayon) and returns every robot's expert-labelled view
+    /// at every tick, in run order; `on_run_done` is called as each run finishes.
+    pub fn label_runs(
+        &self,
+        runs: Range<usize>,
+        on_run_done: &(dyn Fn() + Sync),
+    ) -> Result<Vec<Sample>, LearningError> {
+        let drivers = self
+            .scenarios
+            .iter()
+            .map(|s| Driver::policy_for(s, self.model))
+            .collect::<Result<Vec<_>, _>>()?;
+        let per_run: Vec<Vec<Sample>> = runs
+            .into_par_iter()
+            // One policy per team size, built on each worker the first time it needs it.
+            .map_init(
+                || (0..self.scenarios.len()).map(|_| None).collect::<Vec<_>>(),
+                |policies: &mut Vec<Option<Box<dyn Controller>>>, i| {
+                    let samples = self.label_run(&drivers, policies, i)?;
+                    on_run_done();
+                    Ok(samples)
+                },
+            )
+            .collect::<Result<_, LearningError>>()?;
+        Ok(per_run.into_iter().flatten().collect())
+    }
+
+    /// Run `i`'s labelled samples, driven by the expert or by the policy of its team size
+    /// (built into `policies` on first use).
+    fn label_run(
+        &self,
+        drivers: &[Driver],
+        policies: &mut [Option<Box<dyn Controller>>],
+        i: usize,
+    ) -> Result<Vec<Sample>, LearningError> {
+        let k = self.iteration;
+        let iteration_seed = self.seed.wrapping_add(1_000_003 * k as u64);
+        let size = i % self.scenarios.len();
+        let scenario = &self.scenarios[size];
+        let spec = scenario.run_spec(iteration_seed, i);
+        let mut coin = rand_chacha::ChaCha8Rng::seed_from_u64(spec.seed ^ 0xDA66E5);
+        let beta = self.expert_share;
+        let expert_drives = beta > 0.0 && coin.random::<f64>() < beta;
+        let gains = ExpertGains::default();
+        let mut expert =
+            ExpertController::new(gains, spec.world.robot).with_neighbours(spec.neighbours);
+        if policies[size].is_none() && !expert_drives {
+            policies[size] = Some(drivers[size].controller(scenario)?);
+        }
+        let driver: &mut dyn Controller = match &mut policies[size] {
+            Some(policy) if !expert_drives => policy.as_mut(),
+            _ => &mut expert,
+        };
+        let mut labeller = Labeller::for_run(&spec, gains, self.occupancy)
+            .map_err(|source| LearningError::Label { run: i, source })?;
+        let mut samples = Vec::new();
+        let mut failure = None;
+        run_episode(&spec, driver, &mut |obs, _| {
+            if failure.is_none() {
+                failure = labeller
+                    .label_observation(obs, k as u32, i as u32, &mut |s| samples.push(s))
+                    .err();
+            }
+        })
+        .map_err(|source| LearningError::Run { run: i, source })?;
+        match failure {
+            Some(source) => Err(LearningError::Label { run: i, source }),
+            None => Ok(samples),
+        }
+    }
+}
+
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
-    use formation_proto::OccupancySpec;
     use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader};
 
-    fn scenario(robots: usize) -> Scenario {
+    /// A 1 s scenario of `robots` robots, 4 runs.
+    pub(crate) fn scenario(robots: usize) -> Scenario {
         let text = format!(
             "name = \"dagger-test\"\nrobots = {robots}\nduration_s = 1.0\nseed = 5\nruns = 4\n\
              [goal]\nv_star = 0.7\nd_star_choices = [1.0, 2.0]\n[heading]\nschedule = \"random\"\n"
@@ -325,7 +396,8 @@ mod tests {
         Scenario::from_toml_str(&text, "dagger-test").unwrap()
     }
 
-    fn empty_dataset(dir: &Path, scenario: &Scenario) -> PathBuf {
+    /// An empty dataset in `dir/data` with the paper's images and `scenario`'s LIDAR.
+    pub(crate) fn empty_dataset(dir: &Path, scenario: &Scenario) -> PathBuf {
         let spec = scenario.run_spec(scenario.seed(), 0);
         let header = DatasetHeader::new(
             OccupancySpec::PAPER,
@@ -342,7 +414,8 @@ mod tests {
         path
     }
 
-    fn options(data: PathBuf, base: &Scenario) -> DaggerOptions {
+    /// DAgger over teams of 3 and 5 from `base`, 4 runs, beta 0.5, seed 9.
+    pub(crate) fn options(data: PathBuf, base: &Scenario) -> DaggerOptions {
         DaggerOptions {
             data,
             scenario: base.clone(),
@@ -400,6 +473,32 @@ mod tests {
             read.push(samples);
         }
         assert_eq!(read[0], read[1], "the same settings give the same samples");
+    }
+
+    #[test]
+    fn labelling_two_ranges_of_runs_and_concatenating_them_equals_the_whole_range() {
+        let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
+        let base = scenario(3);
+        let scenarios = team_scenarios(&base, &[3, 5]).unwrap();
+        let rollouts = IterationRollouts {
+            scenarios: &scenarios,
+            iteration: 2,
+            expert_share: 0.25,
+            seed: 9,
+            occupancy: OccupancySpec::PAPER,
+            model: &model,
+        };
+        let done = AtomicUsize::new(0);
+        let count = || {
+            done.fetch_add(1, Ordering::Relaxed);
+        };
+        let whole = rollouts.label_runs(0..5, &count).unwrap();
+        assert_eq!(done.load(Ordering::Relaxed), 5, "every run reports once");
+        let mut parts = rollouts.label_runs(0..2, &|| {}).unwrap();
+        parts.extend(rollouts.label_runs(2..5, &|| {}).unwrap());
+        assert_eq!(whole.len(), 20 * (3 + 5 + 3 + 5 + 3));
+        assert!(whole.iter().all(|s| s.iteration == 2));
+        assert_eq!(parts, whole);
     }
 
     #[test]

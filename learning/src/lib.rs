@@ -9,8 +9,11 @@
 //!   into the summary one evaluation writes, byte for byte.
 //! * [`dagger`]: DAgger over teams of several sizes: the policy drives, the expert labels every
 //!   robot's view, the dataset grows, the policy is retrained, and each iteration is evaluated.
+//! * [`dagger_share`]: one share of a DAgger iteration's labelling (a Ray task), written as a
+//!   part that `formation dagger-append` appends with the others, in run order.
 
 pub mod dagger;
+pub mod dagger_share;
 pub mod rollout;
 pub mod scaling;
 pub mod shards;
@@ -69,6 +72,15 @@ pub enum LearningError {
         /// Why.
         #[source]
         source: formation_trainer_bridge::dataset::DatasetError,
+    },
+    /// A DAgger part could not be written.
+    #[error("DAgger part {}: {source}", path.display())]
+    Part {
+        /// The part file.
+        path: PathBuf,
+        /// Why (boxed: the error names several files).
+        #[source]
+        source: Box<formation_trainer_bridge::dagger_part::PartError>,
     },
     /// Training failed.
     #[error("training {}: {source}", out.display())]

@@ -112,19 +112,81 @@ def _scenario_runs(cell: Cell) -> int:
     return runs
 
 
-def _run_share(binary: str, eval_args: list[str], first: int, runs: int) -> bytes:
-    """One share: ``formation eval --first-run FIRST --runs RUNS --shard F``; returns F's bytes."""
+@dataclasses.dataclass(frozen=True)
+class Share:
+    """One Ray task of a sweep: ``formation ARGS OUT_FLAG FILE`` on some node, whose output file
+    the driver keeps at ``path`` (``what`` names the share in errors)."""
+
+    args: tuple[str, ...]
+    out_flag: str
+    path: Path
+    what: str
+
+
+def _run_share(binary: str, args: Sequence[str], out_flag: str, what: str) -> bytes:
+    """One share, on a worker: runs ``formation ARGS OUT_FLAG F`` into a temp dir of its own and
+    returns F's bytes (so nodes need no shared folder)."""
     with tempfile.TemporaryDirectory(prefix="formation-share-") as tmp:
-        shard = Path(tmp) / "shard.json"
-        cmd = [binary, "eval", *eval_args, "--first-run", str(first), "--runs", str(runs)]
-        cmd += ["--threads", "1", "--shard", str(shard)]
+        out = Path(tmp) / "share.out"
+        cmd = [binary, *args, out_flag, str(out)]
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:
             raise SweepError(
-                f"runs {first}..{first + runs}: `{' '.join(cmd)}` exited {done.returncode}: "
-                f"{done.stderr.strip()}"
+                f"{what}: `{' '.join(cmd)}` exited {done.returncode}: {done.stderr.strip()}"
             )
-        return shard.read_bytes()
+        return out.read_bytes()
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Writes ``data`` to ``path`` under a temporary name, synced, then renamed: a reader (or a
+    driver killed mid-write) sees the old file or the new one, never half of one."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def run_shares(
+    shares: Sequence[Share],
+    binary: str,
+    address: Optional[str] = None,
+    max_retries: int = 3,
+) -> None:
+    """Runs every share as a Ray task of one CPU and writes its output file to ``share.path``.
+
+    A task whose worker dies (a killed process, a lost node) is retried by Ray up to
+    ``max_retries`` times; the driver keeps exactly one result per share, written atomically, so
+    a share's file is written once, whole. Joins the cluster at ``address`` (``None``: a local
+    ``ray.init()``) unless Ray is already initialised here.
+    """
+    import ray
+
+    started_here = not ray.is_initialized()
+    if started_here:
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    try:
+        task = ray.remote(num_cpus=1, max_retries=max_retries)(_run_share)
+        pending = [(s, task.remote(binary, list(s.args), s.out_flag, s.what)) for s in shares]
+        for share, ref in pending:
+            try:
+                data = ray.get(ref)
+            except ray.exceptions.RayError as e:
+                raise SweepError(f"{share.what}: {e}") from e
+            write_atomic(share.path, data)
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def run_cli(binary: str, *args: str) -> str:
+    """Runs ``formation ARGS`` here (a merge, an append, a training); returns its stdout."""
+    done = subprocess.run([binary, *args], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SweepError(f"`formation {' '.join(args)}` exited {done.returncode}: {done.stderr.strip()}")
+    return done.stdout
 
 
 def eval_sweep(
@@ -140,8 +202,6 @@ def eval_sweep(
     Writes ``OUT_DIR/<cell>/shard-NNNNNN.json`` and ``OUT_DIR/<cell>.json`` (what ``formation eval
     --json`` writes); returns the merged JSON per cell name.
     """
-    import ray
-
     if runs_per_share < 1:
         raise SweepError(f"runs_per_share must be at least 1 (got {runs_per_share})")
     binary = formation_binary(formation_bin)
@@ -149,42 +209,25 @@ def eval_sweep(
     names = [c.name() for c in cells]
     if len(set(names)) != len(names):
         raise SweepError(f"two cells have the same name: {names}")
-    started_here = not ray.is_initialized()
-    if started_here:
-        ray.init(address=address, include_dashboard=False, log_to_driver=False)
-    try:
-        share = ray.remote(num_cpus=1, max_retries=max_retries)(_run_share)
-        pending = []
-        for cell in cells:
-            total = _scenario_runs(cell)
-            for first in range(0, total, runs_per_share):
-                count = min(runs_per_share, total - first)
-                ref = share.remote(binary, cell.eval_args(), first, count)
-                pending.append((cell, total, first, ref))
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        shards: dict[str, list[Path]] = {}
-        for cell, _, first, ref in pending:
-            try:
-                data = ray.get(ref)
-            except ray.exceptions.RayError as e:
-                raise SweepError(f"cell {cell.name()}, runs from {first}: {e}") from e
-            folder = out / cell.name()
-            folder.mkdir(exist_ok=True)
-            path = folder / f"shard-{first:06d}.json"
-            path.write_bytes(data)
-            shards.setdefault(cell.name(), []).append(path)
-    finally:
-        if started_here:
-            ray.shutdown()
+    out = Path(out_dir)
+    shares: list[Share] = []
+    for cell in cells:
+        total = _scenario_runs(cell)
+        for first in range(0, total, runs_per_share):
+            count = min(runs_per_share, total - first)
+            args = ("eval", *cell.eval_args(), "--first-run", str(first), "--runs", str(count),
+                    "--threads", "1")
+            path = out / cell.name() / f"shard-{first:06d}.json"
+            what = f"cell {cell.name()}, runs {first}..{first + count}"
+            shares.append(Share(args, "--shard", path, what))
+    run_shares(shares, binary, address=address, max_retries=max_retries)
     results = {}
     for cell in cells:
         merged = out / f"{cell.name()}.json"
-        total = _scenario_runs(cell)
-        cmd = [binary, "merge", *map(str, shards[cell.name()]), "--runs", str(total)]
-        cmd += ["--json", str(merged)]
-        done = subprocess.run(cmd, capture_output=True, text=True)
-        if done.returncode != 0:
-            raise SweepError(f"merging {cell.name()}: {done.stderr.strip()}")
+        paths = [str(s.path) for s in shares if s.path.parent.name == cell.name()]
+        try:
+            run_cli(binary, "merge", *paths, "--runs", str(_scenario_runs(cell)), "--json", str(merged))
+        except SweepError as e:
+            raise SweepError(f"merging {cell.name()}: {e}") from e
         results[cell.name()] = json.loads(merged.read_text())
     return results

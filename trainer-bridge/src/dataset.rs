@@ -105,7 +105,10 @@ impl DatasetHeader {
     }
 
     /// The first field in which `self` and `other` differ, with both values, if any.
-    fn first_difference(&self, other: &DatasetHeader) -> Option<(&'static str, String, String)> {
+    pub(crate) fn first_difference(
+        &self,
+        other: &DatasetHeader,
+    ) -> Option<(&'static str, String, String)> {
         let fields: [(&'static str, String, String); 7] = [
             (
                 "format version",
@@ -212,6 +215,12 @@ impl Manifest {
             shards: Vec::new(),
             samples: 0,
         }
+    }
+
+    /// Reads and checks `dir/manifest.json` alone (format, version, shape), not the shards: what
+    /// a worker labelling samples for the dataset needs of it.
+    pub fn read(dir: &Path) -> Result<Manifest, DatasetError> {
+        read_manifest(dir)
     }
 
     /// The settings every sample shares.
@@ -492,9 +501,10 @@ fn read_manifest(dir: &Path) -> Result<Manifest, DatasetError> {
     Ok(manifest)
 }
 
-/// Column buffers of the shard being filled.
+/// Column buffers of the shard being filled (also the body of a DAgger part,
+/// [`crate::dagger_part`]).
 #[derive(Debug, Default)]
-struct PendingShard {
+pub(crate) struct PendingShard {
     occupancy: Vec<u8>,
     aux: Vec<u8>,
     wheels: Vec<u8>,
@@ -505,7 +515,7 @@ struct PendingShard {
 }
 
 impl PendingShard {
-    fn push(&mut self, sample: &Sample) {
+    pub(crate) fn push(&mut self, sample: &Sample) {
         self.occupancy.extend_from_slice(&sample.occupancy);
         for value in [sample.delta_phi, sample.d_star] {
             self.aux.extend_from_slice(&value.to_le_bytes());
@@ -520,15 +530,56 @@ impl PendingShard {
         self.samples += 1;
     }
 
-    /// The safetensors file for these samples.
+    /// Samples buffered.
+    pub(crate) fn samples(&self) -> usize {
+        self.samples
+    }
+
+    /// FNV-1a 64 over the six columns, each length-prefixed, in file order.
+    pub(crate) fn columns_fnv1a64(&self) -> String {
+        let mut hash = Fnv1a64::new();
+        for column in self.columns() {
+            hash.update_field(column);
+        }
+        hash.hex()
+    }
+
+    fn columns(&self) -> [&[u8]; 6] {
+        [
+            &self.occupancy,
+            &self.aux,
+            &self.wheels,
+            &self.iteration,
+            &self.run,
+            &self.robot,
+        ]
+    }
+
+    /// The safetensors file of a dataset shard for these samples.
     fn encode(
         &self,
         header: &DatasetHeader,
         iteration: u32,
         path: &Path,
     ) -> Result<Vec<u8>, DatasetError> {
+        let metadata = HashMap::from([
+            ("format".to_owned(), DATASET_FORMAT.to_owned()),
+            ("version".to_owned(), DATASET_VERSION.to_string()),
+            ("dataset_id".to_owned(), header.dataset_id.clone()),
+            ("iteration".to_owned(), iteration.to_string()),
+        ]);
+        self.encode_with(header.occupancy.size_px, metadata, path)
+    }
+
+    /// The safetensors file holding these samples' columns, with `metadata` as its
+    /// `__metadata__`.
+    pub(crate) fn encode_with(
+        &self,
+        size: usize,
+        metadata: HashMap<String, String>,
+        path: &Path,
+    ) -> Result<Vec<u8>, DatasetError> {
         let n = self.samples;
-        let size = header.occupancy.size_px;
         let encode_error = |source| DatasetError::Encode {
             path: path.to_path_buf(),
             source,
@@ -554,14 +605,70 @@ impl PendingShard {
         for (name, view) in tensors {
             views.push((name, view.map_err(encode_error)?));
         }
-        let metadata = HashMap::from([
-            ("format".to_owned(), DATASET_FORMAT.to_owned()),
-            ("version".to_owned(), DATASET_VERSION.to_string()),
-            ("dataset_id".to_owned(), header.dataset_id.clone()),
-            ("iteration".to_owned(), iteration.to_string()),
-        ]);
-        safetensors::serialize(views, Some(metadata)).map_err(encode_error)
+        let mut file =
+            safetensors::serialize(views, Some(metadata.clone())).map_err(encode_error)?;
+        sort_metadata(&mut file, &metadata).map_err(|reason| DatasetError::CorruptShard {
+            path: path.to_path_buf(),
+            reason,
+        })?;
+        Ok(file)
     }
+}
+
+/// safetensors writes `__metadata__` (a `HashMap`) in the map's random iteration order, but the
+/// same samples must give the same bytes: this rewrites the object with its keys sorted. Its
+/// length does not depend on the order, so nothing else in the file moves.
+fn sort_metadata(file: &mut [u8], metadata: &HashMap<String, String>) -> Result<(), String> {
+    const PREFIX: &[u8] = b"{\"__metadata__\":";
+    let sorted: std::collections::BTreeMap<&String, &String> = metadata.iter().collect();
+    let sorted = serde_json::to_vec(&sorted).map_err(|e| e.to_string())?;
+    let start = 8 + PREFIX.len();
+    let end = start + sorted.len();
+    if file.get(8..start) != Some(PREFIX) || file.len() < end {
+        return Err("the encoder did not write `__metadata__` first".into());
+    }
+    let written: HashMap<String, String> =
+        serde_json::from_slice(&file[start..end]).map_err(|e| e.to_string())?;
+    if written != *metadata {
+        return Err("the encoder wrote other `__metadata__` than given".into());
+    }
+    file[start..end].copy_from_slice(&sorted);
+    Ok(())
+}
+
+/// Refuses a sample that does not fit a dataset with `header` being written as `iteration`:
+/// another image size, another iteration, a non-finite value.
+pub(crate) fn check_sample(
+    header: &DatasetHeader,
+    iteration: u32,
+    sample: &Sample,
+) -> Result<(), DatasetError> {
+    let expected = header.cells();
+    if sample.occupancy.len() != expected {
+        return Err(DatasetError::SampleImageSize {
+            size_px: header.occupancy.size_px,
+            expected,
+            actual: sample.occupancy.len(),
+        });
+    }
+    if sample.iteration != iteration {
+        return Err(DatasetError::SampleIteration {
+            expected: iteration,
+            actual: sample.iteration,
+        });
+    }
+    let non_finite = |field| DatasetError::NonFiniteSample {
+        field,
+        run: sample.run,
+        robot: sample.robot,
+    };
+    if !(sample.delta_phi.is_finite() && sample.d_star.is_finite()) {
+        return Err(non_finite("delta_phi or d_star"));
+    }
+    if !sample.wheels.iter().all(|w| w.is_finite()) {
+        return Err(non_finite("wheels label"));
+    }
+    Ok(())
 }
 
 /// Writes samples into a new dataset, or appends a new DAgger iteration to an existing one.
@@ -664,6 +771,11 @@ impl DatasetWriter {
         &self.header
     }
 
+    /// The manifest as written so far (buffered samples are not in it yet).
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
+    }
+
     /// The DAgger iteration this writer writes.
     pub fn iteration(&self) -> u32 {
         self.iteration
@@ -676,31 +788,7 @@ impl DatasetWriter {
 
     /// Adds one sample; writes a shard when `shard_size` samples are buffered.
     pub fn push(&mut self, sample: Sample) -> Result<(), DatasetError> {
-        let expected = self.header().cells();
-        if sample.occupancy.len() != expected {
-            return Err(DatasetError::SampleImageSize {
-                size_px: self.header().occupancy.size_px,
-                expected,
-                actual: sample.occupancy.len(),
-            });
-        }
-        if sample.iteration != self.iteration {
-            return Err(DatasetError::SampleIteration {
-                expected: self.iteration,
-                actual: sample.iteration,
-            });
-        }
-        let non_finite = |field| DatasetError::NonFiniteSample {
-            field,
-            run: sample.run,
-            robot: sample.robot,
-        };
-        if !(sample.delta_phi.is_finite() && sample.d_star.is_finite()) {
-            return Err(non_finite("delta_phi or d_star"));
-        }
-        if !sample.wheels.iter().all(|w| w.is_finite()) {
-            return Err(non_finite("wheels label"));
-        }
+        check_sample(&self.header, self.iteration, &sample)?;
         self.pending.push(&sample);
         if self.pending.samples >= self.shard_size {
             self.flush_shard()?;
@@ -854,18 +942,26 @@ fn decode_shard(
         )));
     }
     let tensors = SafeTensors::deserialize(bytes).map_err(|e| corrupt(e.to_string()))?;
-    let n = entry.samples;
-    let size = header.occupancy.size_px;
-    let column = |name: &str, dtype: Dtype, shape: &[usize]| -> Result<&[u8], DatasetError> {
+    decode_columns(&tensors, entry.samples, header.occupancy.size_px).map_err(corrupt)
+}
+
+/// The `n` samples of `size`x`size` images held in the six columns of `tensors`; the error says
+/// which column is missing or of another type or shape.
+pub(crate) fn decode_columns(
+    tensors: &SafeTensors<'_>,
+    n: usize,
+    size: usize,
+) -> Result<Vec<Sample>, String> {
+    let column = |name: &str, dtype: Dtype, shape: &[usize]| -> Result<&[u8], String> {
         let view = tensors
             .tensor(name)
-            .map_err(|_| corrupt(format!("no `{name}` tensor")))?;
+            .map_err(|_| format!("no `{name}` tensor"))?;
         if view.dtype() != dtype || view.shape() != shape {
-            return Err(corrupt(format!(
+            return Err(format!(
                 "`{name}` is {:?} {:?}, expected {dtype:?} {shape:?}",
                 view.dtype(),
                 view.shape()
-            )));
+            ));
         }
         Ok(view.data())
     };
@@ -907,13 +1003,14 @@ fn decode_shard(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use formation_proto::BeyondWindow;
 
     const SIZE: usize = 6;
 
-    fn header(seed: u64) -> DatasetHeader {
+    /// The settings of the test datasets, with `seed`.
+    pub(crate) fn header(seed: u64) -> DatasetHeader {
         DatasetHeader::new(
             OccupancySpec {
                 size_px: SIZE,
@@ -929,7 +1026,7 @@ mod tests {
     }
 
     /// A sample whose every field depends on `k`, so mix-ups show.
-    fn sample(k: u32, iteration: u32) -> Sample {
+    pub(crate) fn sample(k: u32, iteration: u32) -> Sample {
         let mut occupancy = vec![0u8; SIZE * SIZE];
         occupancy[k as usize % (SIZE * SIZE)] = 1;
         Sample {
@@ -987,6 +1084,30 @@ mod tests {
             .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
             .collect();
         assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
+    }
+
+    #[test]
+    fn the_same_samples_write_the_same_bytes() {
+        let dirs: Vec<_> = (0..4)
+            .map(|_| tempfile::tempdir().expect("tempdir"))
+            .collect();
+        for dir in &dirs {
+            write(dir.path(), 6, 4);
+        }
+        for file in [
+            MANIFEST_FILE,
+            "shard-000000.safetensors",
+            "shard-000001.safetensors",
+        ] {
+            let first = fs::read(dirs[0].path().join(file)).expect("read");
+            for dir in &dirs[1..] {
+                assert_eq!(
+                    fs::read(dir.path().join(file)).expect("read"),
+                    first,
+                    "{file}"
+                );
+            }
+        }
     }
 
     #[test]
