@@ -88,7 +88,7 @@ pub struct ExpertGains {
     /// success at 10 % (`cargo run -p formation-expert --example expert_teams`). Over 200 runs
     /// of `teams-generalist` (d* over 0.8-2.5 m, σ = 3 cm) 1.0 succeeds (strict, 10 %) in 100 /
     /// 100 / 99.5 / 99 / 99 / 98.5 % at N = 5 / 8 / 13 / 16 / 24 / 32, against 0.5's 100 / 99.5 /
-    /// 99.5 / 99.5 / 99 / OLD32 %, and converges faster (median 11.1 s against 14 s at N = 32);
+    /// 99.5 / 99.5 / 99 / 94 %, and converges faster (median 11.1 s against 14 s at N = 32);
     /// 1.5 weaves even without an acceleration limit (86 % at 32 robots over 50 runs);
     /// `GAINS='{"k_formation_graph": 0.5}' ACCEL=none cargo run -p formation-expert --example
     /// expert_accel -- scenarios/teams-generalist.toml 200 5 8 13 16 24 32`.
