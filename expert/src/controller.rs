@@ -111,7 +111,9 @@ pub struct ExpertGains {
     /// shares, at 1.0 m/s² (30 runs of 16 / 24 / 32 robots unless said): 0.15: 100 / 100 / 93 %;
     /// 0.2: 100 / 100 / 90 %; 0.3: 100 / 100 / 93 %; 0.4: 80 % at N = 32 over 200 runs (the limit
     /// binds again in the last 20 s); 1.0: 27 % at N = 16, 13 % at N = 32 (the team weaves)
-    /// (`GAINS='{"braking_share": 0.3}'`).
+    /// (`GAINS='{"braking_share": 0.3}'`). Other limits, 50 runs of 5 / 16 / 32 robots, against the
+    /// capped gains: 98 / 94 / 90 % against 100 / 90 / 70 % at 0.5 m/s² (`ACCEL=0.5`), 100 / 100 /
+    /// 98 % against 100 / 100 / 90 % at 2.0 m/s².
     pub braking_share: f64,
 }
 
