@@ -109,7 +109,8 @@ pub struct ExpertGains {
     /// are teams split into well-formed sub-teams (`ACCEL=1.0 cargo run -p formation-expert
     /// --example expert_accel -- scenarios/teams-generalist.toml 200 5 8 13 16 24 32`). Other
     /// shares, at 1.0 m/s² (30 runs of 16 / 24 / 32 robots unless said): 0.15: 100 / 100 / 93 %;
-    /// 0.2: 100 / 100 / 90 %; 0.3: 100 / 100 / 93 %; 0.4: 80 % at N = 32 over 200 runs (the limit
+    /// 0.2: 100 / 100 / 90 % (over 200 runs, 96.5 / 91 % at N = 24 / 32); 0.3: 100 / 100 / 93 %
+    /// (over 200 runs, 97 / 89.5 % at N = 24 / 32); 0.4: 80 % at N = 32 over 200 runs (the limit
     /// binds again in the last 20 s); 1.0: 27 % at N = 16, 13 % at N = 32 (the team weaves)
     /// (`GAINS='{"braking_share": 0.3}'`). Other limits, 50 runs of 5 / 16 / 32 robots, against the
     /// capped gains: 98 / 94 / 90 % against 100 / 90 / 70 % at 0.5 m/s² (`ACCEL=0.5`), 100 / 100 /
