@@ -28,6 +28,8 @@ struct Diagnosis {
     limited: f64,
     /// Share of robot-ticks of the last 20 s whose applied command differs from the requested.
     limited_window: f64,
+    /// The run's d* \[m\] at its start.
+    d_star: f64,
 }
 
 /// What the command line and the environment ask for.
@@ -164,6 +166,7 @@ fn diagnose_run(
     let metrics = run_metrics(&traj, spec.ticks(), cfg);
     Diagnosis {
         metrics,
+        d_star: spec.goal_at(0.0).d_star,
         limited: bound as f64 / total.max(1) as f64,
         limited_window: bound_w as f64 / total_w.max(1) as f64,
     }
@@ -199,7 +202,8 @@ fn print_failures(n: usize, results: &[Diagnosis]) {
         let m = &d.metrics;
         let t = m.team.as_ref();
         eprintln!(
-            "N={n} run {i}: max_window_err={:.3} mean_err={:.3} conv10={:?} heading_err={:.3} collisions={} connected={:?} anchor={:?} final_err={:?} limited={:.2} limited_window={:.2}",
+            "N={n} run {i}: d*={:.2} max_window_err={:.3} mean_err={:.3} conv10={:?} heading_err={:.3} collisions={} connected={:?} anchor={:?} final_err={:?} limited={:.2} limited_window={:.2}",
+            d.d_star,
             m.max_edge_window_error,
             m.rel_formation_error,
             m.convergence_s_10,

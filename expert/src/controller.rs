@@ -33,19 +33,27 @@
 //! centre law succeeded in 99 % / 99 % of runs at 5 % / 10 % against 97 % / 98 %.
 //!
 //! **Wheels with an acceleration limit.** The law commands a point velocity as if the wheels reached
-//! any speed within one tick. With a limit (`[robot] max_wheel_accel`, which the world applies to
-//! each wheel) they lag, and under a neighbour graph the lag sits in a loop that is already
-//! underdamped: a pair is measured between centres while the robot steers its offset point, and the
-//! centre trails the point like a trailer (time constant `c / v`, about 0.25 s at 0.7 m/s). With the
-//! team gain 0.5 (pair stiffness `8 K3` = 4/s per edge) that loop oscillates once the wheels lag:
-//! measured over `teams-generalist` at 1.0 m/s², formed teams weaved with headings swinging by up to
-//! ±1.4 rad, the limit bound in 70–85 % of the last 20 s, and strict success at 10 % fell to 64 %
-//! (5 robots) and 10 % (32 robots). So when a limit `a` is set, both formation gains are capped
-//! at [`ExpertGains::k_formation_per_accel`]` * a` (0.2 s/m² × 1.0 m/s² = 0.2, the team gain of
-//! 0.5 kept from 2.5 m/s² up): the law and its equilibrium are unchanged, the loop is slow enough
-//! for wheels that need about a second to reverse, and the command stays a function of what the
-//! robot senses (no wheel speeds, no memory), so a policy can still learn it. Without a limit
-//! nothing changes, bit for bit.
+//! any speed within one tick. With a limit `a` (`[robot] max_wheel_accel`, which the world applies
+//! to each wheel) the controlled point is a double integrator whose acceleration is bounded by about
+//! `a` along and across the heading (with `c = l/2` a wheel difference changing at `2a` turns the
+//! point sideways at `a`). A velocity law `f = -k x` then overshoots from any distance `x` beyond
+//! `2a / k^2` (a few centimetres at the team's stiffness): the point arrives too fast to stop, and
+//! under a neighbour graph, whose loop is already underdamped (a pair is measured between centres
+//! while the robot steers its offset point, the centre trailing it like a trailer), the overshoots
+//! lock the team into a weave: measured over `teams-generalist` at 1.0 m/s² with the team gain 0.5,
+//! headings swung by up to ±1.4 rad, the limit bound in 70-85 % of the last 20 s, and strict success
+//! at 10 % fell to 64 % (5 robots) and 10 % (32 robots). So under a limit the formation velocity is
+//! shaped to one the point can still brake from ([`braking_speed`]): with `k = 8 K` (one pair's
+//! stiffness at `d*`, where `d tau / dr = 8`), the point `|f| / k` from its equilibrium may approach
+//! at most at `sqrt(2 beta a |f| / k)`, `beta` ([`ExpertGains::braking_share`], 0.25) the share of
+//! the limit it spends braking (the rest is left to turning and to the neighbours' motion); smoothly,
+//! `|f| / sqrt(1 + k |f| / (2 beta a))`, which is the law itself near the formation (the factor is
+//! about `1 - k |f| / (4 beta a)` for small `|f|`). The direction, the
+//! distance law and its equilibrium are unchanged, the command stays a function of what the robot
+//! senses (no wheel speeds, no memory, so a policy can still learn it), and the team gain needs no
+//! cap: over 200 runs of `teams-generalist-accel` the strict success at 10 % rose from the capped
+//! gain's 100 / 100 / 98 / 94 / 88 / 80 % (N = 5 / 8 / 13 / 16 / 24 / 32) to the figures in
+//! [`ExpertGains::braking_share`]. Without a limit nothing is shaped.
 //!
 //! The expert sees ground-truth poses of all robots. It exists to generate demonstrations and as the
 //! baseline the learned policy is compared with; it never runs inside an agent.
@@ -77,7 +85,13 @@ pub struct ExpertGains {
     /// only a few neighbours there, and a stronger pull converges larger teams faster without
     /// collisions: over 100 runs of table1's draws (strict check), 0.5 against the paper's 0.15
     /// took 16 robots from 16.7 s to 8.6 s median convergence and 32 robots from 62 % to 94 %
-    /// success at 10 % (`cargo run -p formation-expert --example expert_teams`).
+    /// success at 10 % (`cargo run -p formation-expert --example expert_teams`). Over 200 runs
+    /// of `teams-generalist` (d* over 0.8-2.5 m, σ = 3 cm) 1.0 succeeds (strict, 10 %) in 100 /
+    /// 100 / 99.5 / 99 / 99 / 98.5 % at N = 5 / 8 / 13 / 16 / 24 / 32, against 0.5's 100 / 99.5 /
+    /// 99.5 / 99.5 / 99 / 94 %, and converges faster (median 11.1 s against 14 s at N = 32);
+    /// 1.5 weaves even without an acceleration limit (86 % at 32 robots over 50 runs);
+    /// `GAINS='{"k_formation_graph": 0.5}' ACCEL=none cargo run -p formation-expert --example
+    /// expert_accel -- scenarios/teams-generalist.toml 200 5 8 13 16 24 32`.
     pub k_formation_graph: f64,
     /// Distance `c`, in metres, from the axle centre to the controlled point, along the heading. Must be > 0.
     pub point_offset: f64,
@@ -87,17 +101,21 @@ pub struct ExpertGains {
     /// measured (see the module documentation). The paper's all-pairs law always uses the offset
     /// points.
     pub graph_pair_points: PairPoints,
-    /// Formation gain per unit of wheel acceleration limit \[s/m²\]: when the robot's wheels have
-    /// a limit `a` (`RobotParams::max_wheel_accel`), both formation gains are capped at
-    /// `k_formation_per_accel * a`; without a limit it plays no part. The default 0.2 caps the team
-    /// gain at 0.2 for 1.0 m/s² and 0.3 for 1.5 m/s², and leaves the paper's 0.15 alone from
-    /// 0.75 m/s² up. Measured over 100 runs of `teams-generalist` at 1.0 m/s² (see the module
-    /// documentation for why), strict success at 10 % for 13 / 16 / 24 / 32 robots: 98 / 97 / 90 /
-    /// 82 % with 0.2, 92 / 91 / 79 / 66 % with 0.25 (some teams weave again), 64 / 34 / 14 / 10 %
-    /// uncapped; with 0.2 the limit no longer binds in the last 20 s (`ACCEL=1.0 cargo run -p
-    /// formation-expert --release --example expert_accel -- scenarios/teams-generalist.toml 100 13
-    /// 16 24 32`, `GAINS='{"k_formation_per_accel": 0.25}'` for the other).
-    pub k_formation_per_accel: f64,
+    /// Share `beta` (in (0, 1]) of the wheel acceleration limit `a` that the formation velocity
+    /// may spend braking ([`braking_speed`]); without a limit it plays no part. Over 200 runs of
+    /// `teams-generalist` at 1.0 m/s² with the team gain 1.0 and 0.25, strict success at 10 % is
+    /// 100 / 99.5 / 98.5 / 98.5 / 97 / 92.5 % at N = 5 / 8 / 13 / 16 / 24 / 32 (the gains capped at
+    /// 0.2 s/m² × a before: 100 / 100 / 98 / 94 / 88 / 80 %); most failures left up to 24 robots
+    /// are teams split into well-formed sub-teams (`ACCEL=1.0 cargo run -p formation-expert
+    /// --example expert_accel -- scenarios/teams-generalist.toml 200 5 8 13 16 24 32`). Other
+    /// shares, at 1.0 m/s² (30 runs of 16 / 24 / 32 robots unless said): 0.15: 100 / 100 / 93 %;
+    /// 0.2: 100 / 100 / 90 % (over 200 runs, 96.5 / 91 % at N = 24 / 32); 0.3: 100 / 100 / 93 %
+    /// (over 200 runs, 97 / 89.5 % at N = 24 / 32); 0.4: 80 % at N = 32 over 200 runs (the limit
+    /// binds again in the last 20 s); 1.0: 27 % at N = 16, 13 % at N = 32 (the team weaves)
+    /// (`GAINS='{"braking_share": 0.3}'`). Other limits, 50 runs of 5 / 16 / 32 robots, against the
+    /// capped gains: 98 / 94 / 90 % against 100 / 90 / 70 % at 0.5 m/s² (`ACCEL=0.5`), 100 / 100 /
+    /// 98 % against 100 / 100 / 90 % at 2.0 m/s².
+    pub braking_share: f64,
 }
 
 /// The points of two robots between which the expert measures their distance and direction.
@@ -114,11 +132,11 @@ impl Default for ExpertGains {
     fn default() -> Self {
         ExpertGains {
             k_formation: 0.15,
-            k_formation_graph: 0.5,
+            k_formation_graph: 1.0,
             point_offset: 0.331 / 2.0,
             max_reference_speed: 0.7,
             graph_pair_points: PairPoints::Centres,
-            k_formation_per_accel: 0.2,
+            braking_share: 0.25,
         }
     }
 }
@@ -136,17 +154,8 @@ pub struct InvalidGains {
 }
 
 impl ExpertGains {
-    /// The formation gain `k` to use for robots with these parameters: `k` itself without an
-    /// acceleration limit, else `min(k, k_formation_per_accel * max_wheel_accel)`.
-    pub fn formation_gain_for(&self, k: f64, robot: &RobotParams) -> f64 {
-        match robot.max_wheel_accel {
-            Some(accel) => k.min(self.k_formation_per_accel * accel),
-            None => k,
-        }
-    }
-
     /// Checks that every gain is finite and in range: `k_formation >= 0`,
-    /// `k_formation_graph >= 0`, `k_formation_per_accel > 0`, `point_offset > 0`,
+    /// `k_formation_graph >= 0`, `0 < braking_share <= 1`, `point_offset > 0`,
     /// `max_reference_speed >= 0`.
     pub fn validate(&self) -> Result<(), InvalidGains> {
         let checks = [
@@ -163,10 +172,10 @@ impl ExpertGains {
                 "finite and >= 0",
             ),
             (
-                "k_formation_per_accel",
-                self.k_formation_per_accel,
-                self.k_formation_per_accel > 0.0,
-                "finite and > 0",
+                "braking_share",
+                self.braking_share,
+                self.braking_share > 0.0 && self.braking_share <= 1.0,
+                "finite, > 0 and <= 1",
             ),
             (
                 "point_offset",
@@ -197,8 +206,8 @@ impl ExpertGains {
 /// The expert's wheel command for every robot, written to `out[i]` for `poses[i]`.
 ///
 /// Every pair of robots is a formation edge (the paper's complete graph). The formation gain is
-/// [`ExpertGains::k_formation`], capped when `robot` has an acceleration limit
-/// ([`ExpertGains::formation_gain_for`]). Non-finite poses or goal
+/// [`ExpertGains::k_formation`]; when `robot` has an acceleration limit the formation velocity
+/// is shaped by [`braking_speed`]. Non-finite poses or goal
 /// values give non-finite commands, which the world brakes; [`ExpertController`] refuses them up front.
 ///
 /// # Panics
@@ -226,8 +235,8 @@ pub fn expert_commands(
 
 /// The expert's wheel command for every robot when robot `i` holds only its own neighbours under
 /// `tracker`'s rule, at the sample the tracker last saw (which must be `poses`), with the formation
-/// gain [`ExpertGains::k_formation_graph`] (capped under an acceleration limit, see
-/// [`ExpertGains::formation_gain_for`]) and pairs measured between
+/// gain [`ExpertGains::k_formation_graph`] (shaped under an acceleration limit by
+/// [`braking_speed`]) and pairs measured between
 /// [`ExpertGains::graph_pair_points`].
 ///
 /// # Panics
@@ -275,7 +284,7 @@ fn commands_among<I: Iterator<Item = usize>>(
     neighbours: impl Fn(usize) -> I,
 ) {
     let c = gains.point_offset;
-    let k_formation = gains.formation_gain_for(gains.k_formation, robot);
+    let k_formation = gains.k_formation;
     let offset_point = |pose: &Pose| (pose.x + c * pose.theta.cos(), pose.y + c * pose.theta.sin());
     let reference = reference_velocity(goal, gains.max_reference_speed);
     let d4 = goal.d_star.powi(4);
@@ -300,12 +309,29 @@ fn commands_among<I: Iterator<Item = usize>>(
             gradient.0 += magnitude * dx / r;
             gradient.1 += magnitude * dy / r;
         }
-        let u = (
-            reference.0 - k_formation * gradient.0,
-            reference.1 - k_formation * gradient.1,
-        );
+        let mut f = (-k_formation * gradient.0, -k_formation * gradient.1);
+        if let Some(accel) = robot.max_wheel_accel {
+            let speed = f.0.hypot(f.1);
+            if speed > 0.0 {
+                let scale = braking_speed(speed, k_formation, gains.braking_share * accel) / speed;
+                f = (f.0 * scale, f.1 * scale);
+            }
+        }
+        let u = (reference.0 + f.0, reference.1 + f.1);
         *cmd = point_velocity_to_wheels(u, pose.theta, c, robot);
     }
+}
+
+/// The speed \[m/s\] at which a point whose formation law asks for `speed` under the gain
+/// `k_formation` may approach its equilibrium when it can brake at `braking_accel` \[m/s²\]:
+/// `speed / sqrt(1 + k speed / (2 braking_accel))` with `k = 8 k_formation` (one pair's
+/// stiffness at `d*`). The law asks for `speed` from about `speed / k` away, and from there a point
+/// braking at `braking_accel` stops in time from at most `sqrt(2 braking_accel speed / k)`: the
+/// result tends to `speed` for small speeds and to that bound for large ones, and grows with
+/// `speed` throughout. Without a gain (`k_formation = 0`) it is `speed`.
+pub fn braking_speed(speed: f64, k_formation: f64, braking_accel: f64) -> f64 {
+    let stiffness = 8.0 * k_formation;
+    speed / (1.0 + stiffness * speed / (2.0 * braking_accel)).sqrt()
 }
 
 /// `v* (cos phi*, sin phi*)` with its norm capped at `max_speed`.
@@ -1001,19 +1027,39 @@ mod tests {
     }
 
     #[test]
-    fn an_acceleration_limit_caps_the_formation_gains_and_nothing_else() {
+    fn the_braking_speed_is_the_law_near_the_formation_and_bounded_far_from_it() {
+        // Small speeds pass almost unchanged, to first order 1 - k v / (4 b).
+        let (k, b) = (1.0, 0.25);
+        let small = braking_speed(1e-4, k, b);
+        assert!(
+            (small / 1e-4 - (1.0 - 8.0 * 1e-4 / (4.0 * b))).abs() < 1e-6,
+            "{small}"
+        );
+        // Large ones approach sqrt(2 b v / k_eff) from below.
+        for v in [0.5, 2.0, 10.0] {
+            let bound = (2.0 * b * v / 8.0_f64).sqrt();
+            let shaped = braking_speed(v, k, b);
+            assert!(shaped < bound && shaped < v, "{v}: {shaped} vs {bound}");
+        }
+        assert!(
+            (braking_speed(100.0, k, b) / (2.0 * b * 100.0 / 8.0_f64).sqrt() - 1.0).abs() < 0.01
+        );
+        // Monotone, so a robot asked for more still moves faster; no gain, no shaping.
+        let speeds: Vec<f64> = (1..200)
+            .map(|i| braking_speed(0.01 * i as f64, k, b))
+            .collect();
+        assert!(speeds.windows(2).all(|w| w[1] > w[0]));
+        assert_eq!(braking_speed(0.3, 0.0, b), 0.3);
+    }
+
+    #[test]
+    fn an_acceleration_limit_shapes_the_formation_velocity_and_nothing_else() {
         let gains = ExpertGains::default();
         let free = RobotParams::default();
         let limited = |accel| RobotParams {
             max_wheel_accel: Some(accel),
             ..free
         };
-        assert_eq!(gains.formation_gain_for(0.5, &free), 0.5);
-        assert!((gains.formation_gain_for(0.5, &limited(1.0)) - 0.2).abs() < 1e-15);
-        assert!((gains.formation_gain_for(0.5, &limited(1.5)) - 0.3).abs() < 1e-15);
-        assert_eq!(gains.formation_gain_for(0.5, &limited(3.0)), 0.5);
-        assert_eq!(gains.formation_gain_for(0.15, &limited(1.0)), 0.15);
-
         let poses: Vec<Pose> = (0..4)
             .map(|k| {
                 let k = k as f64;
@@ -1030,16 +1076,40 @@ mod tests {
             expert_commands(&poses, &g, gains, robot, &mut out);
             out
         };
-        // A limit too loose to cap the gain changes no bit of the command.
-        assert_eq!(run(&gains, &free), run(&gains, &limited(1000.0)));
-        // A binding limit is the law with the capped gain, on wheels without a limit.
-        let capped = ExpertGains {
-            k_formation: 0.2 * 0.5,
-            ..gains
+        // A limit changes the command, a looser one less; a very loose one almost not at all.
+        let error = |a: &[WheelCmd], b: &[WheelCmd]| {
+            a.iter()
+                .zip(b)
+                .map(|(a, b)| (a.left - b.left).abs().max((a.right - b.right).abs()))
+                .fold(0.0, f64::max)
         };
-        assert_eq!(run(&gains, &limited(0.5)), run(&capped, &free));
-        assert_ne!(run(&gains, &limited(0.5)), run(&gains, &free));
-        // The graph law too.
+        let unlimited = run(&gains, &free);
+        let tight = error(&run(&gains, &limited(0.5)), &unlimited);
+        let loose = error(&run(&gains, &limited(5.0)), &unlimited);
+        assert!(tight > loose && loose > 0.0, "{tight} {loose}");
+        assert!(error(&run(&gains, &limited(1e9)), &unlimited) < 1e-6);
+        // Without a reference the shaped command points the same way as the law's: each robot's
+        // formation velocity is only scaled, by braking_speed.
+        let still = Goal { v_star: 0.0, ..g };
+        let mut shaped = vec![WheelCmd::BRAKE; poses.len()];
+        let mut law = vec![WheelCmd::BRAKE; poses.len()];
+        let slow = RobotParams {
+            max_wheel_speed: 1e6,
+            ..limited(1.0)
+        };
+        let fast = RobotParams {
+            max_wheel_speed: 1e6,
+            ..free
+        };
+        expert_commands(&poses, &still, &gains, &slow, &mut shaped);
+        expert_commands(&poses, &still, &gains, &fast, &mut law);
+        for (s, l) in shaped.iter().zip(&law) {
+            let (s_norm, l_norm) = (s.left.hypot(s.right), l.left.hypot(l.right));
+            assert!((s.left * l.right - s.right * l.left).abs() < 1e-9 * s_norm * l_norm);
+            assert!(s.left * l.left + s.right * l.right > 0.0);
+            assert!(s_norm < l_norm);
+        }
+        // The graph law too; without a limit nothing is shaped.
         use formation_world::neighbours::{GabrielRule, NeighbourRule, NeighbourTracker};
         let mut tracker = NeighbourTracker::new(
             NeighbourRule::Gabriel(GabrielRule::with_range(10.0)),
@@ -1052,23 +1122,26 @@ mod tests {
             expert_commands_among(&poses, &g, gains, robot, &tracker, &mut out);
             out
         };
-        let capped_graph = ExpertGains {
-            k_formation_graph: 0.2,
-            ..gains
-        };
-        assert_eq!(among(&gains, &limited(1.0)), among(&capped_graph, &free));
         assert_ne!(among(&gains, &limited(1.0)), among(&gains, &free));
-
-        let bad = ExpertGains {
-            k_formation_per_accel: 0.0,
+        let other_share = ExpertGains {
+            braking_share: 0.5,
             ..gains
         };
-        assert_eq!(bad.validate().unwrap_err().field, "k_formation_per_accel");
+        assert_eq!(among(&gains, &free), among(&other_share, &free));
+
+        for share in [0.0, 1.5, f64::NAN] {
+            let bad = ExpertGains {
+                braking_share: share,
+                ..gains
+            };
+            assert_eq!(bad.validate().unwrap_err().field, "braking_share");
+        }
     }
 
-    /// Five robots whose wheels reach at most 1 m/s²: the capped law forms the team and holds it
-    /// without the world's limit binding in the last 20 s; the uncapped team gain (0.5) weaves, the
-    /// limit binding through most of the window and the team failing the strict check.
+    /// Five robots whose wheels reach at most 1 m/s²: the shaped law forms the team and holds it
+    /// without the world's limit binding in the last 20 s; the same team gain shaped for braking
+    /// at the whole limit (`braking_share` 1) weaves, the limit binding through much of the
+    /// window and the team failing the strict check.
     #[test]
     fn a_team_of_five_under_an_acceleration_limit_converges_and_stops_straining_its_wheels() {
         use formation_world::episode::run_episode;
@@ -1101,19 +1174,22 @@ mod tests {
                 bound as f64 / total as f64,
             )
         };
-        let uncapped = ExpertGains {
-            k_formation_per_accel: 1.0,
+        let whole_limit = ExpertGains {
+            braking_share: 1.0,
             ..ExpertGains::default()
         };
         let mut weaves = 0;
         for index in 0..3 {
             let (success, bound) = run(ExpertGains::default(), index);
             assert!(success && bound == 0.0, "run {index}: {success}, {bound}");
-            let (success, bound) = run(uncapped, index);
+            let (success, bound) = run(whole_limit, index);
             if !success && bound > 0.3 {
                 weaves += 1;
             }
         }
-        assert!(weaves >= 1, "the uncapped gain was expected to weave");
+        assert!(
+            weaves >= 1,
+            "braking at the whole limit was expected to weave"
+        );
     }
 }
