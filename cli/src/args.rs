@@ -411,8 +411,10 @@ pub struct ReplayArgs {
     /// Replay only this robot.
     #[arg(long, value_name = "I")]
     pub robot: Option<u32>,
-    /// A model swapped in during the run (`formation swap`; repeat for several): the recording
-    /// names it by its id only, and it decides the steps whose model id is its own.
+    /// A model swapped in during the run (`formation swap`; repeat for several) that the
+    /// recording does not hold (the world's own --record stores it; a recording made from
+    /// outside, or one whose file changed before it was stored, names it by its id only): it
+    /// decides the steps whose model id is its own.
     #[arg(long, value_name = "FILE.onnx")]
     pub swap_model: Vec<PathBuf>,
     /// Write the report's JSON here (default: next to the recording, `FILE.replay.json`).

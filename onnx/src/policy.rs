@@ -88,7 +88,7 @@ impl OnnxPolicy {
         Ok(OnnxPolicy {
             session,
             metadata,
-            model_id: model_id(path, &bytes),
+            model_id: formation_proto::model_id::model_id(path, &bytes),
             inputs,
             occupancy_slot,
             cells,
@@ -211,22 +211,6 @@ fn zeros(shape: Vec<usize>) -> Result<Tensor<f32>, String> {
     Tensor::from_array((shape, vec![0.0_f32; len])).map_err(|e| e.to_string())
 }
 
-/// `<file stem>-<8 hex digits of FNV-1a over the bytes>`: the same file always gets the same id,
-/// a retrained model with the same name a different one.
-fn model_id(path: &Path, bytes: &[u8]) -> String {
-    let stem = path
-        .file_stem()
-        .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
-    format!("{stem}-{:08x}", fnv1a_32(bytes))
-}
-
-/// 32-bit FNV-1a: a short content fingerprint, not a security hash.
-fn fnv1a_32(bytes: &[u8]) -> u32 {
-    bytes.iter().fold(0x811c_9dc5_u32, |hash, &b| {
-        (hash ^ u32::from(b)).wrapping_mul(0x0100_0193)
-    })
-}
-
 /// Keeps [`OnnxPolicy`] movable to an agent thread: a compile error if it stops being `Send`.
 const _: fn() = || {
     fn assert_send<T: Send>() {}
@@ -236,20 +220,6 @@ const _: fn() = || {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn fnv1a_matches_reference_vectors() {
-        assert_eq!(fnv1a_32(b""), 0x811c_9dc5);
-        assert_eq!(fnv1a_32(b"a"), 0xe40c_292c);
-        assert_eq!(fnv1a_32(b"foobar"), 0xbf9c_f968);
-    }
-
-    #[test]
-    fn model_id_is_stem_and_content_hash() {
-        let id = model_id(Path::new("/models/dagger-2.onnx"), b"foobar");
-        assert_eq!(id, "dagger-2-bf9cf968");
-        assert_ne!(model_id(Path::new("dagger-2.onnx"), b"foobaz"), id);
-    }
 
     #[test]
     fn missing_model_is_reported_before_touching_the_runtime() {

@@ -4,6 +4,7 @@
 //!   is given, LIDAR and occupancy settings). They carry no behaviour beyond validation.
 //! * [`neighbours`]: the formation's neighbour rule as a value (its computation is the world's).
 //! * [`files`]: reading a user's file only if it is a regular file within a size limit.
+//! * [`mod@model_id`]: the id an agent reports for its model (file stem and content hash).
 //! * [`errors`]: an error and its sources as one line, each cause printed once.
 //! * [`exit`]: the exit codes of the three binaries and the termination signals behind two of
 //!   them.
@@ -19,6 +20,7 @@ pub mod control;
 pub mod errors;
 pub mod exit;
 pub mod files;
+pub mod model_id;
 pub mod neighbours;
 pub mod team_size;
 pub mod types;

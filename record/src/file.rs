@@ -4,7 +4,10 @@
 //! model from outside the shipped folder, the model as an attachment; then the messages in
 //! chunks, each chunk holding one second of simulated time at most (a chunk is closed and
 //! written out when a tick enters the next second, so a crash loses at most the second under
-//! way, and memory holds one chunk); at the end the summary (schemas, channels, chunk indexes,
+//! way, and memory holds one chunk); between two chunks, a model swapped in during the run, as an
+//! attachment followed by its `formation.swapped_model` record ([`crate::swap`]), written out at
+//! once (a crash after it keeps it, and a crash inside it keeps everything before it readable by
+//! a streaming reader); at the end the summary (schemas, channels, chunk indexes,
 //! statistics). What stays in memory until then is the summary's chunk indexes: one per second of
 //! run, each with the offset of every channel's message index in its chunk (which `rosbags` and
 //! rosbag2 need to find a topic's chunks), about 40 bytes per channel and second: 5 KB per
@@ -18,11 +21,12 @@
 //! `/formation/edges` (MarkerArray): the messages of the live ROS 2 team
 //! ([`formation_ros2::team`]).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::fs::File;
 use std::io::{BufWriter, Read as _};
 use std::path::{Path, PathBuf};
 
+use formation_proto::files::{FileRefusal, read_bounded};
 use formation_ros2::msg::Time;
 use formation_ros2::schema::MsgDefinition;
 use formation_ros2::team::{self, GOAL_TOPICS};
@@ -33,10 +37,14 @@ use crate::edges::{self, EdgeMarkers};
 use crate::error::RecordError;
 use crate::replay::{self, ReplayStep};
 use crate::setup::{RecordingSetup, TeamSetup};
+use crate::swap::{SWAP_METADATA, SwapEvent, SwapStorage, SwappedModel, check_swapped_bytes};
 use crate::tick::{FinalSample, TickRecord};
 
 /// The most bytes of a model a recording stores as an attachment.
 pub const MAX_ATTACHED_MODEL_BYTES: u64 = 256 << 20;
+
+/// The media type of a model stored as an attachment.
+pub const MODEL_MEDIA_TYPE: &str = "application/x-onnx";
 
 /// Uncompressed bytes at which a chunk is closed even within a second (a huge team).
 const MAX_CHUNK_BYTES: u64 = 16 << 20;
@@ -100,6 +108,12 @@ pub struct RecordingFile {
     chunk_second: Option<u64>,
     edges: EdgeMarkers,
     model_ids: Vec<String>,
+    /// The folder of the shipped models, whose swapped-in models are referenced, not stored.
+    shipped_models: Option<PathBuf>,
+    /// The names of the models stored so far (each model is stored once).
+    attached: HashSet<String>,
+    /// The simulated time of the last tick written \[ns\] (a swapped-in model's log time).
+    last_tick_ns: u64,
 }
 
 impl std::fmt::Debug for RecordingFile {
@@ -189,6 +203,9 @@ impl RecordingFile {
     /// metadata, the models, the channels and the static frames.
     pub fn create(path: &Path, setup: RecordingSetup) -> Result<RecordingFile, RecordError> {
         let mut recording = Self::open(path, setup.team.clone(), setup.d_star)?;
+        recording
+            .shipped_models
+            .clone_from(&setup.launch.shipped_models);
         let (metadata, attachments) = setup.metadata_with_models(path)?;
         for (model, name) in &attachments {
             recording.attach_model(model, name)?;
@@ -240,6 +257,9 @@ impl RecordingFile {
             chunk_second: None,
             edges,
             model_ids: Vec::new(),
+            shipped_models: None,
+            attached: HashSet::new(),
+            last_tick_ns: 0,
             team,
             d_star,
         })
@@ -274,18 +294,29 @@ impl RecordingFile {
             .map_err(|e| self.mcap_error(e))
     }
 
+    /// Starts the model attachment `name` of `size` bytes, logged at `ns`.
+    fn start_model_attachment(
+        &mut self,
+        name: &str,
+        size: u64,
+        ns: u64,
+    ) -> Result<(), RecordError> {
+        let header = AttachmentHeader {
+            log_time: ns,
+            create_time: ns,
+            name: name.to_owned(),
+            media_type: MODEL_MEDIA_TYPE.into(),
+        };
+        self.attached.insert(name.to_owned());
+        self.mcap
+            .start_attachment(size, header)
+            .map_err(|e| self.mcap_error(e))
+    }
+
     /// Stores `model` as the attachment `name`, streamed in pieces.
     fn attach_model(&mut self, model: &Path, name: &str) -> Result<(), RecordError> {
         let (_, size) = open_model(&self.path, model)?;
-        let header = AttachmentHeader {
-            log_time: 0,
-            create_time: 0,
-            name: name.to_owned(),
-            media_type: "application/x-onnx".into(),
-        };
-        self.mcap
-            .start_attachment(size, header)
-            .map_err(|e| self.mcap_error(e))?;
+        self.start_model_attachment(name, size, 0)?;
         let recording = self.path.clone();
         let written = read_model(&recording, model, &mut |piece| {
             self.mcap
@@ -304,6 +335,76 @@ impl RecordingFile {
         self.mcap
             .finish_attachment()
             .map_err(|e| self.mcap_error(e))
+    }
+
+    /// Records a model swapped in during the run (see [`crate::swap`]): the model file stored as
+    /// an attachment (once; a shipped one is referenced) when its bytes are the ones the agent
+    /// loaded, else recorded as not stored with the reason; then the record that maps the model
+    /// id to it, and everything is handed to the operating system. Only a failed write is an
+    /// error.
+    pub fn write_swap(&mut self, event: &SwapEvent) -> Result<SwappedModel, RecordError> {
+        let ns = self.last_tick_ns;
+        let (sha256, storage) = match self.read_swapped(event) {
+            Err(why) => (String::new(), SwapStorage::NotStored(why)),
+            Ok((path, bytes)) => {
+                let sha256 = crate::models::sha256_hex(&bytes);
+                let storage = if crate::setup::is_shipped_in(self.shipped_models.as_deref(), &path)
+                {
+                    SwapStorage::Shipped
+                } else {
+                    let name = format!("models/{sha256}.onnx");
+                    if !self.attached.contains(&name) {
+                        self.start_model_attachment(&name, bytes.len() as u64, ns)?;
+                        self.mcap
+                            .put_attachment_bytes(&bytes)
+                            .map_err(|e| self.mcap_error(e))?;
+                        self.mcap
+                            .finish_attachment()
+                            .map_err(|e| self.mcap_error(e))?;
+                    }
+                    SwapStorage::Attachment(name)
+                };
+                (sha256, storage)
+            }
+        };
+        let swapped = SwappedModel {
+            robot: event.robot,
+            tick: event.tick,
+            request_id: event.request_id,
+            model_id: event.model_id.clone(),
+            path: event.path.clone().unwrap_or_default(),
+            sha256,
+            storage,
+        };
+        self.mcap
+            .write_metadata(&Metadata {
+                name: SWAP_METADATA.into(),
+                metadata: swapped.to_metadata(),
+            })
+            .map_err(|e| self.mcap_error(e))?;
+        self.flush()?;
+        Ok(swapped)
+    }
+
+    /// The swapped-in model's file and bytes when they are the ones the agent loaded, else why
+    /// not (bounded by [`MAX_ATTACHED_MODEL_BYTES`]).
+    fn read_swapped(&self, event: &SwapEvent) -> Result<(PathBuf, Vec<u8>), String> {
+        let Some(path) = &event.path else {
+            return Err("the world does not know the file the swap request named".into());
+        };
+        let bytes = read_bounded(path, MAX_ATTACHED_MODEL_BYTES).map_err(|refusal| {
+            let why = match refusal {
+                FileRefusal::NotAFile { kind } => format!("it is {kind}"),
+                FileRefusal::TooLarge { .. } => format!(
+                    "it is larger than the {MAX_ATTACHED_MODEL_BYTES} bytes a recording stores"
+                ),
+                FileRefusal::Io(e) => e.to_string(),
+            };
+            format!("cannot read {} on the world's host: {why}", path.display())
+        })?;
+        check_swapped_bytes(&event.model_id, &bytes)
+            .map_err(|why| format!("{}: {why}", path.display()))?;
+        Ok((path.clone(), bytes))
     }
 
     /// Adds a channel of message type `M` on `topic`.
@@ -404,6 +505,7 @@ impl RecordingFile {
     pub fn write_tick(&mut self, tick: &TickRecord) -> Result<(), RecordError> {
         let ns = nanos(tick.time);
         self.start_second(ns)?;
+        self.last_tick_ns = ns;
         let at = stamp(ns);
         let goal = [tick.goal.phi_star, tick.goal.d_star, tick.goal.v_star];
         for (slot, data) in goal.into_iter().enumerate() {

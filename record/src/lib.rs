@@ -5,7 +5,8 @@
 //! with their errors as markers ([`edges`]), all CDR with their `ros2msg` schemas, the same
 //! messages as the live ROS 2 team (`formation_ros2::team`); the run's metadata (scenario, seeds,
 //! models with their SHA-256) as a metadata record, a model from outside the shipped folder as
-//! an attachment ([`setup`]); and a replay channel per robot that holds, bit for bit, what its
+//! an attachment ([`setup`]), and so is a model swapped in during the run, with a record that maps
+//! its model id to it ([`swap`]); and a replay channel per robot that holds, bit for bit, what its
 //! agent received and sent ([`replay`]). Chunks are zstd-compressed and hold one second of
 //! simulated time at most, written out as they close, so memory stays bounded and a crash
 //! leaves a file that a streaming reader reads up to its last chunk.
@@ -27,6 +28,7 @@ pub mod read;
 pub mod recorder;
 pub mod replay;
 pub mod setup;
+pub mod swap;
 pub mod target;
 pub mod tick;
 
@@ -36,5 +38,6 @@ pub use read::{ReadError, RecordingItem, RecordingReader, RunInfo};
 pub use recorder::{RecordedController, Recorder, final_sample};
 pub use replay::ReplayStep;
 pub use setup::{LaunchInfo, RecordingSetup, TeamSetup};
+pub use swap::{SwapEvent, SwapStorage, SwappedModel};
 pub use target::{RecordSettings, RecordTarget};
 pub use tick::{FinalSample, SentCommand, TickRecord};

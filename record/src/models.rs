@@ -4,14 +4,19 @@
 //! (piece by piece) and refused when it differs or is missing. A stored model comes from its
 //! attachment, which is written into a folder of the caller's and checked against its hash too.
 //! Each file is placed under its recorded file name, so that the model id an agent derives from
-//! it (file stem and content) is the id the recording's steps carry.
+//! it (file stem and content) is the id the recording's steps carry. A model swapped in during the
+//! run is found the same way from its record ([`swapped_model_file`]), placed under the file stem
+//! of its recorded model id.
 
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
 
 use sha2::Digest as _;
 
+use formation_proto::model_id::split_model_id;
+
 use crate::read::{ModelStorage, RunInfo};
+use crate::swap::{SwapStorage, SwappedModel};
 
 /// How much of a model is hashed at a time.
 const PIECE: usize = 64 << 10;
@@ -216,6 +221,73 @@ pub fn recorded_model_files(
     Ok(files)
 }
 
+/// The file to load for a model swapped in during the run, checked against its recorded hash:
+/// a stored one from `dir` (where [`save_attachment`] kept it, or among `loaded`, the files
+/// already placed, when an earlier model had the same bytes), copied to
+/// `dir/swapped-<request id>/<the file stem of its model id>.onnx` so that an agent loading it
+/// gets the recorded model id; a shipped one where it was. `None` when the recording does not
+/// hold it.
+pub fn swapped_model_file(
+    recording: &Path,
+    swapped: &SwappedModel,
+    dir: &Path,
+    loaded: &[PathBuf],
+) -> Result<Option<PathBuf>, ModelFileError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| ModelFileError::Io {
+            recording: recording.to_path_buf(),
+            model: path,
+            source,
+        }
+    };
+    let file = match &swapped.storage {
+        SwapStorage::NotStored(_) => return Ok(None),
+        SwapStorage::Shipped => {
+            if !swapped.path.is_file() {
+                return Err(ModelFileError::Missing {
+                    recording: recording.to_path_buf(),
+                    model: swapped.path.clone(),
+                    sha256: swapped.sha256.clone(),
+                });
+            }
+            swapped.path.clone()
+        }
+        SwapStorage::Attachment(name) => {
+            let kept = attachment_path(dir, name);
+            let source = if kept.is_file() {
+                kept
+            } else {
+                let same = loaded
+                    .iter()
+                    .find(|f| sha256_file(f).is_ok_and(|sha| sha == swapped.sha256));
+                same.cloned()
+                    .ok_or_else(|| ModelFileError::AttachmentMissing {
+                        recording: recording.to_path_buf(),
+                        model: swapped.path.clone(),
+                        name: name.clone(),
+                    })?
+            };
+            let stem = split_model_id(&swapped.model_id).map_or("model", |(stem, _)| stem);
+            let place = dir.join(format!("swapped-{}", swapped.request_id));
+            std::fs::create_dir_all(&place).map_err(io(&place))?;
+            let target = place.join(format!("{stem}.onnx"));
+            std::fs::copy(&source, &target).map_err(io(&source))?;
+            target
+        }
+    };
+    let found = sha256_file(&file).map_err(io(&file))?;
+    if found != swapped.sha256 {
+        return Err(ModelFileError::HashMismatch {
+            recording: recording.to_path_buf(),
+            model: file,
+            expected: swapped.sha256.clone(),
+            found,
+        });
+    }
+    Ok(Some(file))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -291,6 +363,46 @@ mod tests {
         std::fs::write(&model, b"another model").unwrap();
         let err = recorded_model_files(Path::new("r"), &recorded, dir.path()).unwrap_err();
         assert!(matches!(err, ModelFileError::HashMismatch { .. }), "{err}");
+    }
+
+    #[test]
+    fn a_swapped_in_model_is_placed_under_its_id_stem_and_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let bytes = b"swapped in";
+        let sha = sha256_hex(bytes);
+        let name = format!("models/{sha}.onnx");
+        let model_id = formation_proto::model_id::model_id(Path::new("swap-9.onnx"), bytes);
+        let mut swapped = SwappedModel {
+            robot: 1,
+            tick: 120,
+            request_id: 9,
+            model_id,
+            path: PathBuf::from("sent-over-zenoh/second.onnx"),
+            sha256: sha.clone(),
+            storage: SwapStorage::Attachment(name.clone()),
+        };
+        let err = swapped_model_file(Path::new("r"), &swapped, dir.path(), &[]).unwrap_err();
+        assert!(
+            matches!(err, ModelFileError::AttachmentMissing { .. }),
+            "{err}"
+        );
+        // The same bytes as a model placed already (stored once in the file).
+        let earlier = dir.path().join("earlier.onnx");
+        std::fs::write(&earlier, bytes).unwrap();
+        let file = swapped_model_file(Path::new("r"), &swapped, dir.path(), &[earlier])
+            .unwrap()
+            .unwrap();
+        assert_eq!(file.file_name().unwrap(), "swap-9.onnx");
+        assert_eq!(std::fs::read(&file).unwrap(), bytes);
+        // Kept from its attachment; bytes that are not the recorded ones are refused.
+        save_attachment(Path::new("r"), dir.path(), &name, b"other bytes").unwrap();
+        let err = swapped_model_file(Path::new("r"), &swapped, dir.path(), &[]).unwrap_err();
+        assert!(matches!(err, ModelFileError::HashMismatch { .. }), "{err}");
+        swapped.storage = SwapStorage::NotStored("the file changed".into());
+        assert_eq!(
+            swapped_model_file(Path::new("r"), &swapped, dir.path(), &[]).unwrap(),
+            None
+        );
     }
 
     #[test]

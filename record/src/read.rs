@@ -4,8 +4,9 @@
 //! (no seeking, no whole-file read: memory holds one chunk being decompressed, and one record,
 //! an attached model at most [`crate::file::MAX_ATTACHED_MODEL_BYTES`]), and hands out, in the
 //! order the writer put them: the models stored as attachments, the run's metadata record
-//! ([`RunInfo`]) and every robot's replay step ([`ReplayStep`]) on the `/robot_<i>/replay`
-//! channels; every other channel is skipped.
+//! ([`RunInfo`]), every robot's replay step ([`ReplayStep`]) on the `/robot_<i>/replay`
+//! channels, and the record of each model swapped in during the run ([`SwappedModel`], after its
+//! attachment and before the steps it decided); every other channel is skipped.
 //!
 //! A file cut short (a crash, a full disk, a copy that stopped) is read up to the cut: the steps
 //! before it are handed out, and then [`ReadError::Truncated`] says how many bytes were read of
@@ -22,6 +23,7 @@ use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
 use crate::replay::{self, ReplayError, ReplayStep};
+use crate::swap::{SWAP_METADATA, SwappedModel};
 
 /// The name of the run's metadata record.
 pub const RUN_METADATA: &str = "formation.run";
@@ -44,6 +46,8 @@ pub enum RecordingItem {
     Run(RunInfo),
     /// One robot's tick on its replay channel.
     Step(ReplayStep),
+    /// A model swapped in during the run (its attachment, when stored, came before).
+    Swap(SwappedModel),
 }
 
 /// How a recording holds one of its models.
@@ -95,6 +99,7 @@ impl RunInfo {
     pub fn parse(path: &Path, raw: BTreeMap<String, String>) -> Result<RunInfo, ReadError> {
         let bad = |key: &str, why: &str| ReadError::Metadata {
             path: path.to_path_buf(),
+            record: RUN_METADATA,
             key: key.to_owned(),
             why: why.to_owned(),
         };
@@ -215,13 +220,15 @@ pub enum ReadError {
     },
     /// The run's metadata record has a malformed key.
     #[error(
-        "{}: the metadata record {RUN_METADATA} has a bad {key} ({why}): the recording was not \
+        "{}: the metadata record {record} has a bad {key} ({why}): the recording was not \
          written by formation, or was edited",
         path.display()
     )]
     Metadata {
         /// The file.
         path: PathBuf,
+        /// The metadata record's name.
+        record: &'static str,
         /// The key.
         key: String,
         /// What is wrong with it.
@@ -426,6 +433,10 @@ impl RecordingReader {
             Record::Metadata(metadata) if metadata.name == RUN_METADATA => {
                 let info = RunInfo::parse(&self.path, metadata.metadata)?;
                 return Ok(Some(RecordingItem::Run(info)));
+            }
+            Record::Metadata(metadata) if metadata.name == SWAP_METADATA => {
+                let swapped = SwappedModel::from_metadata(&self.path, &metadata.metadata)?;
+                return Ok(Some(RecordingItem::Swap(swapped)));
             }
             Record::Message { header, data } => {
                 if let Some(topic) = self.replay_channels.get(&header.channel_id) {

@@ -21,6 +21,7 @@ use formation_world::Trajectory;
 use crate::error::RecordError;
 use crate::file::{RecordingFile, RecordingSummary};
 use crate::setup::RecordingSetup;
+use crate::swap::SwapEvent;
 use crate::tick::{FinalSample, TickRecord};
 
 /// Ticks the writer may fall behind before the tick loop waits for it (two simulated seconds
@@ -29,6 +30,7 @@ pub const QUEUE_TICKS: usize = 40;
 
 enum Job {
     Tick(Box<TickRecord>),
+    Swap(SwapEvent),
     Finish(Option<FinalSample>),
 }
 
@@ -70,10 +72,20 @@ impl Recorder {
     /// Queues one tick. Fails once, with the writer's error, when a write has failed: the
     /// recording is over, and later ticks are dropped.
     pub fn tick(&mut self, tick: TickRecord) -> Result<(), RecordError> {
+        self.send(Job::Tick(Box::new(tick)))
+    }
+
+    /// Queues a model swapped in during the run, to be stored before the ticks queued after it
+    /// ([`RecordingFile::write_swap`]). Fails as [`Recorder::tick`] does.
+    pub fn swapped(&mut self, swap: SwapEvent) -> Result<(), RecordError> {
+        self.send(Job::Swap(swap))
+    }
+
+    fn send(&mut self, job: Job) -> Result<(), RecordError> {
         let Some(jobs) = &self.jobs else {
             return Ok(());
         };
-        if jobs.send(Job::Tick(Box::new(tick))).is_ok() {
+        if jobs.send(job).is_ok() {
             return Ok(());
         }
         self.jobs = None;
@@ -134,6 +146,9 @@ fn write_jobs(
     for job in queue.iter() {
         match job {
             Job::Tick(tick) => file.write_tick(&tick)?,
+            Job::Swap(swap) => {
+                file.write_swap(&swap)?;
+            }
             Job::Finish(last) => return file.finish(last.as_ref()).map(Some),
         }
     }

@@ -11,6 +11,17 @@ use serde::{Deserialize, Serialize};
 /// Models to store in a recording: each file with its attachment's name.
 pub type ModelAttachments = Vec<(PathBuf, String)>;
 
+/// Whether `model` lies in the folder of the shipped models `shipped` (none: no model is shipped).
+pub fn is_shipped_in(shipped: Option<&Path>, model: &Path) -> bool {
+    let Some(dir) = shipped else {
+        return false;
+    };
+    match (model.canonicalize(), dir.canonicalize()) {
+        (Ok(model), Ok(dir)) => model.starts_with(dir),
+        _ => false,
+    }
+}
+
 /// The team a recording's messages describe.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TeamSetup {
@@ -108,13 +119,7 @@ impl RecordingSetup {
 
     /// Whether `model` is one of the shipped models, referenced rather than stored.
     pub fn is_shipped(&self, model: &Path) -> bool {
-        let Some(dir) = &self.launch.shipped_models else {
-            return false;
-        };
-        match (model.canonicalize(), dir.canonicalize()) {
-            (Ok(model), Ok(dir)) => model.starts_with(dir),
-            _ => false,
-        }
+        is_shipped_in(self.launch.shipped_models.as_deref(), model)
     }
 
     /// The run's metadata record (`formation.run`) with each distinct model referenced by its

@@ -17,9 +17,12 @@
 //! Around it the exchange keeps each robot's agent state: admission of candidates by the launch
 //! secret (one agent per robot, each nonce once), lockstep lagging and rejoining (and the grace
 //! a lost agent's successor gets), the realtime schedule with its re-anchoring after a pause, and
-//! the forwarding of swap requests. It reads time only from its [`Clock`] and talks only to a
+//! the forwarding of swap requests (each swap done is kept, with the file its request named, for
+//! the recording: [`AgentsController::take_swaps_done`]). It reads time only from its [`Clock`] and talks only to a
 //! [`WorldLink`], so all of it runs in unit tests on an in-memory link and a fake clock.
 
+use std::collections::VecDeque;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -168,8 +171,12 @@ pub struct AgentsController<'l> {
     last_liveness_check: Instant,
     dt: Duration,
     stopped: Option<StopReason>,
-    /// Swap requests forwarded to an agent and not answered yet: request id → robot.
-    pending_swaps: Vec<(u64, usize)>,
+    /// Swap requests forwarded to an agent and not answered yet: request id, robot and the
+    /// model file the request named.
+    pending_swaps: Vec<(u64, usize, PathBuf)>,
+    /// Swaps done since [`AgentsController::take_swaps_done`] last took them (at most
+    /// [`MAX_SWAPS_DONE`], the oldest dropped first).
+    swaps_done: VecDeque<SwapDone>,
     /// Per robot: the pid of an agent that said hello during an episode and has not driven yet.
     rejoining: Vec<Option<u32>>,
     /// Per robot: the pid of the agent that last said hello.
@@ -190,6 +197,25 @@ pub struct AgentsController<'l> {
     /// Per tick of this episode: when it began (published its scans), since the first tick
     /// began \[ns\]; also what realtime staleness measures a command's scan age from.
     tick_start_ns: Vec<u64>,
+}
+
+/// The most swaps done that the exchange keeps until they are taken.
+pub const MAX_SWAPS_DONE: usize = 64;
+
+/// A swap an agent did: which robot, from which tick on, the model id the agent now reports and
+/// the model file the request named (`None` when the request was not forwarded by this world).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SwapDone {
+    /// The robot.
+    pub robot: usize,
+    /// The request's id.
+    pub request_id: u64,
+    /// The first tick the new model decided.
+    pub tick: u64,
+    /// The id of the model the agent runs now.
+    pub model_id: String,
+    /// The model file the request named, on the world's host.
+    pub path: Option<PathBuf>,
 }
 
 /// Why the world stopped before finishing its runs.
@@ -233,6 +259,7 @@ impl<'l> AgentsController<'l> {
             dt: DEFAULT_DT,
             stopped: None,
             pending_swaps: Vec::new(),
+            swaps_done: VecDeque::new(),
             rejoining: vec![None; n],
             agent_pids: vec![None; n],
             admitted: vec![None; n],
@@ -592,12 +619,13 @@ impl<'l> AgentsController<'l> {
         let control = ControlRequest::SwapModel {
             request_id: request.request_id,
             at_tick: request.at_tick,
-            path: request.path,
+            path: request.path.clone(),
         };
         self.link
             .send_control(request.robot, &control)
             .map_err(transport_error)?;
-        self.pending_swaps.push((request.request_id, request.robot));
+        self.pending_swaps
+            .push((request.request_id, request.robot, request.path));
         Ok(())
     }
 
@@ -608,7 +636,7 @@ impl<'l> AgentsController<'l> {
         robot: usize,
         outcome: SwapOutcome,
     ) -> Result<(), ControllerError> {
-        self.pending_swaps.retain(|&(id, _)| id != request_id);
+        self.pending_swaps.retain(|(id, _, _)| *id != request_id);
         let reply = SwapReply {
             request_id,
             robot,
@@ -620,12 +648,37 @@ impl<'l> AgentsController<'l> {
         Ok(())
     }
 
+    /// Keeps swap `request_id` of `robot`, done at `tick` with `model_id`, for
+    /// [`AgentsController::take_swaps_done`], with the model file its request named.
+    fn note_swap_done(&mut self, robot: usize, request_id: u64, tick: u64, model_id: &str) {
+        let path = self
+            .pending_swaps
+            .iter()
+            .find(|(id, _, _)| *id == request_id)
+            .map(|(_, _, path)| path.clone());
+        if self.swaps_done.len() == MAX_SWAPS_DONE {
+            self.swaps_done.pop_front();
+        }
+        self.swaps_done.push_back(SwapDone {
+            robot,
+            request_id,
+            tick,
+            model_id: model_id.to_owned(),
+            path,
+        });
+    }
+
+    /// The swaps done since the last call, oldest first: what a recording stores of each.
+    pub fn take_swaps_done(&mut self) -> Vec<SwapDone> {
+        self.swaps_done.drain(..).collect()
+    }
+
     fn fail_pending_swaps(&mut self, robot: usize, why: &str) -> Result<(), ControllerError> {
         let failed: Vec<u64> = self
             .pending_swaps
             .iter()
-            .filter(|&&(_, r)| r == robot)
-            .map(|&(id, _)| id)
+            .filter(|(_, r, _)| *r == robot)
+            .map(|(id, _, _)| *id)
             .collect();
         for request_id in failed {
             let reason = format!("robot {robot}'s swap was not done: {why}");
@@ -681,6 +734,7 @@ impl<'l> AgentsController<'l> {
             } => {
                 tracing::info!("robot {robot}: swap {request_id} done at tick {tick}: {model_id}");
                 self.model_ids[robot] = model_id.clone();
+                self.note_swap_done(robot, request_id, tick, &model_id);
                 self.reply_swap(request_id, robot, SwapOutcome::Done { tick, model_id })?;
             }
             AgentStatus::SwapRefused { request_id, reason } => {

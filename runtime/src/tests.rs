@@ -490,6 +490,19 @@ fn a_swap_is_done_at_its_tick_and_a_model_that_fails_is_refused() {
     };
     assert!(reason.contains("robot 7 does not exist"), "{reason}");
     assert_eq!(world.model_ids(), ["fast-model", "slow-model"]);
+    // The swap done is kept once, with the file its request named, for a recording.
+    let done = world.take_swaps_done();
+    assert_eq!(
+        done,
+        [crate::exchange::SwapDone {
+            robot: 0,
+            request_id: 1,
+            tick: 3,
+            model_id: "fast-model".into(),
+            path: Some(PathBuf::from("fast-model")),
+        }]
+    );
+    assert!(world.take_swaps_done().is_empty());
 }
 
 #[test]

@@ -15,6 +15,8 @@ fix.
     mcap_readers.py stream FILE                     the streaming reader on a pipe (a crashed file)
     mcap_readers.py compare FILE_A FILE_B           the decoded ROS 2 messages of two recordings
     mcap_readers.py metadata FILE                   the run's metadata record (formation.run)
+    mcap_readers.py attachments FILE                every attachment (name, media type, size,
+                                                    SHA-256) and formation.swapped_model record
 """
 
 import collections
@@ -209,6 +211,21 @@ def metadata(path):
     print(json.dumps(records["formation.run"]))
 
 
+def attachments(path):
+    import hashlib
+
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        found = [{"name": a.name, "media_type": a.media_type, "size": len(a.data),
+                  "sha256": hashlib.sha256(a.data).hexdigest()} for a in reader.iter_attachments()]
+        f.seek(0)
+        swaps = [m.metadata for m in make_reader(f).iter_metadata()
+                 if m.name == "formation.swapped_model"]
+    print(json.dumps({"attachments": found, "swapped_models": swaps}))
+
+
 def main():
     imports()
     command, args = sys.argv[1], sys.argv[2:]
@@ -226,6 +243,8 @@ def main():
         compare(args[0], args[1])
     elif command == "metadata":
         metadata(args[0])
+    elif command == "attachments":
+        attachments(args[0])
     else:
         fail(f"unknown command {command}")
 

@@ -1,6 +1,7 @@
 //! Issue 24's acceptance tests of `formation replay`: a recorded case-1 run (in-process, and
 //! lockstep over processes) replayed with its own model gives every command back bit for bit and
-//! exits 0; so does a run whose model was swapped mid-run, each tick with the model active then;
+//! exits 0; so does a run whose model was swapped mid-run, each tick with the model active then
+//! (the swapped-in model stored in the recording by the world, so no flag is needed);
 //! another model, or a renderer changed by one cell, is reported as a divergence with exit 1; a
 //! file that is not MCAP, a truncated one and a missing model are each a clear error (exit 2).
 //! Real ONNX Runtime, real processes, the real `formation` binary.
@@ -16,8 +17,8 @@ use formation_robot_agent::decision::{DecisionError, PolicyBackend};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
     Finished, LeakCheck, LiveProcess, TempDir, Watchdog, await_connected, binaries, case1_scenario,
-    eval_recorded, formation_run, one_at_a_time, read_json, record_case1_over_processes, repo_root,
-    run, test_model, unique_run_id, write_tiny_model,
+    eval_recorded, formation_run, mcap_readers, one_at_a_time, read_json,
+    record_case1_over_processes, repo_root, run, test_model, unique_run_id, write_tiny_model,
 };
 use serde_json::Value;
 
@@ -276,11 +277,13 @@ fn bad_input_gets_a_clear_error() {
 }
 
 /// Gap 2 of issue 24: a paced lockstep run over processes in which robot 1's model is swapped
-/// at tick 120 (`formation swap`), recorded by the world. Each step of the recording names the
-/// model that decided it, so the replay decides each tick with the model active then: with the
-/// swapped-in model given (`--swap-model`), every command of every robot, before and after the
-/// swap, comes back bit for bit; without it, the replay says which steps it could not decide and
-/// how to give the model, and compares the rest.
+/// at tick 120 (`formation swap`) to a model from outside the repository, recorded by the world.
+/// Each step of the recording names the model that decided it, and the world stored the
+/// swapped-in model as an attachment (its bytes, read back by Python's independent `mcap`
+/// reader, are the file's) with the `formation.swapped_model` record that maps its id to it; so
+/// the replay, with no flag, decides each tick with the model active then and every command of
+/// every robot, before and after the swap, comes back bit for bit. `--swap-model` (for a
+/// recording that lacks the model) still works beside it.
 #[test]
 fn a_run_with_a_mid_run_swap_replays_bit_identical_with_each_ticks_model() {
     const SWAP_TICK: u64 = 120;
@@ -316,45 +319,63 @@ fn a_run_with_a_mid_run_swap_replays_bit_identical_with_each_ticks_model() {
     launch.finish(LIMIT).assert_success();
     leaks.assert_clean();
 
-    // Without the swapped-in model: robot 1's later steps cannot be decided, and it says so.
-    let json = dir.path().join("without.json");
-    let without = replay(&file, &[], &json);
-    assert_exit(&without, 0);
+    // The world stored the swapped-in model: one attachment, the file's bytes, named by its record.
+    let read = mcap_readers(&["attachments".as_ref(), file.as_os_str()]);
+    let sha256 = formation_record::models::sha256_file(&second).unwrap();
+    let size = std::fs::metadata(&second).unwrap().len();
+    let attachments = read["attachments"].as_array().unwrap();
+    let name = format!("models/{sha256}.onnx");
+    let stored: Vec<&Value> = attachments.iter().filter(|a| a["name"] == name).collect();
+    assert_eq!(stored.len(), 1, "{read}");
+    assert_eq!(stored[0]["sha256"], sha256.as_str(), "{read}");
+    assert_eq!(stored[0]["size"], size, "{read}");
+    assert_eq!(stored[0]["media_type"], "application/x-onnx", "{read}");
+    let swaps = read["swapped_models"].as_array().unwrap();
+    assert_eq!(swaps.len(), 1, "{read}");
+    let record = &swaps[0];
+    assert_eq!(record["format"], "formation.swapped_model v1", "{read}");
+    assert_eq!(record["robot"], "1", "{read}");
+    assert_eq!(record["tick"], SWAP_TICK.to_string(), "{read}");
+    assert_eq!(record["stored"], format!("attachment {name}"), "{read}");
+    assert_eq!(record["sha256"], sha256.as_str(), "{read}");
     assert!(
-        without.stdout().contains("--swap-model"),
+        record["model_id"].as_str().unwrap().starts_with("second-"),
+        "{read}"
+    );
+
+    // No flag: every step compared, each with the model that decided its tick.
+    let json = dir.path().join("stored.json");
+    let stored_replay = replay(&file, &[], &json);
+    assert_exit(&stored_replay, 0);
+    assert!(
+        !stored_replay.stdout().contains("--swap-model"),
         "{}",
-        without.describe()
+        stored_replay.describe()
     );
     let report = read_json(&json);
-    let robot1 = &report["robots"][1];
-    assert_eq!(
-        robot1["unreplayable"]["unknown_model"],
-        200 - SWAP_TICK,
-        "{report}"
-    );
+    assert_every_step_identical(&report);
     assert!(
-        robot1["compared"].as_u64().unwrap() >= SWAP_TICK - 5,
+        report["models"].as_array().unwrap().iter().any(|m| {
+            let m = m.as_str().unwrap();
+            m.contains("second.onnx") && m.contains("stored in the recording")
+        }),
         "{report}"
     );
 
-    // With it: every step compared, each with the model that decided its tick.
+    // --swap-model beside the stored model: the same model, still every step identical.
     let json = dir.path().join("with.json");
     let with = replay(&file, &["--swap-model", second.to_str().unwrap()], &json);
     assert_exit(&with, 0);
-    let report = read_json(&json);
-    assert_identical_over(&report, 3, 190);
+    assert_every_step_identical(&read_json(&json));
+}
+
+/// Nothing diverged in a 3-robot, 200-tick run and no step was left undecided.
+fn assert_every_step_identical(report: &Value) {
+    assert_identical_over(report, 3, 190);
     for row in report["robots"].as_array().unwrap() {
         assert!(
             row["unreplayable"].as_object().is_none_or(|u| u.is_empty()),
             "{row}"
         );
     }
-    assert!(
-        report["models"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|m| m.as_str().unwrap().contains("second.onnx")),
-        "{report}"
-    );
 }

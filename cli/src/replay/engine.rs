@@ -10,8 +10,10 @@
 //!
 //! Which model decides a step: with `--model`, that one; otherwise the recording's model whose
 //! id the step names (a swap within the recording changes it; a model swapped in with
-//! `formation swap` is named only by its id, content hash included, and is given with
-//! `--swap-model`), or the robot's model in the metadata for a step without one. A realtime step answers the scan of `tick - lag_ticks`,
+//! `formation swap` is stored in the recording by the world that recorded it, found by its
+//! `formation.swapped_model` record, and is given with `--swap-model` when the recording lacks
+//! it, as one made from outside does), or the robot's model in the metadata for a step without
+//! one. A realtime step answers the scan of `tick - lag_ticks`,
 //! which is fed instead of its own. Steps the world did not take a fresh answer for are counted,
 //! not compared.
 
@@ -21,7 +23,9 @@ use std::path::{Path, PathBuf};
 use formation_proto::wire::TickOutcome;
 use formation_proto::{Goal, LidarSpec};
 use formation_record::models::{self, ModelFileError};
-use formation_record::{ReadError, RecordingItem, RecordingReader, ReplayStep, RunInfo};
+use formation_record::{
+    ReadError, RecordingItem, RecordingReader, ReplayStep, RunInfo, SwapStorage, SwappedModel,
+};
 use formation_runtime::agent::{BoxError, Pilot, PilotMaker};
 use formation_schema::ReplayReport;
 
@@ -49,6 +53,8 @@ pub struct Replayed {
     pub report: ReplayReport,
     /// The truncation the replay stopped at (the report covers the steps before it).
     pub truncated: Option<ReadError>,
+    /// Models swapped in during the run that the recording does not hold, each with why.
+    pub notes: Vec<String>,
 }
 
 /// Why a replay could not be done.
@@ -128,6 +134,8 @@ struct Replay<'m, M: PilotMaker> {
     ids: HashMap<String, usize>,
     info: Option<RunInfo>,
     pilots: HashMap<(u32, usize), M::Pilot>,
+    /// What the replay has to say about models swapped in during the run that it lacks.
+    notes: Vec<String>,
     scans: HashMap<u32, VecDeque<SentScan>>,
     tallies: BTreeMap<u32, RobotTally>,
 }
@@ -150,6 +158,7 @@ pub fn replay_recording<M: PilotMaker>(
         ids: HashMap::new(),
         info: None,
         pilots: HashMap::new(),
+        notes: Vec::new(),
         scans: HashMap::new(),
         tallies: BTreeMap::new(),
     };
@@ -164,6 +173,7 @@ pub fn replay_recording<M: PilotMaker>(
                 }
             }
             Ok(Some(RecordingItem::Run(info))) => replay.take_run(info, scratch)?,
+            Ok(Some(RecordingItem::Swap(swapped))) => replay.take_swap(&swapped, scratch)?,
             Ok(Some(RecordingItem::Step(step))) => replay.step(&step)?,
             Ok(None) => break None,
             Err(e @ ReadError::Truncated { .. }) => break Some(e),
@@ -212,6 +222,35 @@ impl<M: PilotMaker> Replay<'_, M> {
         }
         self.info = Some(info);
         Ok(())
+    }
+
+    /// A model swapped in during the run: from the recording when it holds it (unless
+    /// `--model` replaces every model, or `--swap-model` gave it), else a note saying why not.
+    fn take_swap(&mut self, swapped: &SwappedModel, scratch: &Path) -> Result<(), ReplayFailure> {
+        if self.options.model.is_some() || self.ids.contains_key(&swapped.model_id) {
+            return Ok(());
+        }
+        match models::swapped_model_file(&self.recording, swapped, scratch, &self.files)? {
+            Some(file) => {
+                let label = format!(
+                    "{} (swapped in for robot {} at tick {}, stored in the recording)",
+                    swapped.path.display(),
+                    swapped.robot,
+                    swapped.tick
+                );
+                self.add_model(file, label)
+            }
+            None => {
+                if let SwapStorage::NotStored(why) = &swapped.storage {
+                    self.notes.push(format!(
+                        "the model {} swapped in for robot {} at tick {} is not stored in the \
+                         recording ({why}): give it with --swap-model FILE.onnx",
+                        swapped.model_id, swapped.robot, swapped.tick
+                    ));
+                }
+                Ok(())
+            }
+        }
     }
 
     /// Which model decides `step`, or why none can.
@@ -364,6 +403,10 @@ impl<M: PilotMaker> Replay<'_, M> {
             robots,
             diverged,
         };
-        Ok(Replayed { report, truncated })
+        Ok(Replayed {
+            report,
+            truncated,
+            notes: self.notes,
+        })
     }
 }

@@ -59,6 +59,9 @@ pub fn replay_command(args: &ReplayArgs) -> anyhow::Result<()> {
     // The JSON is the lasting output: a closed stdout (`| head`) must not stop it being written.
     let mut stdout = std::io::stdout().lock();
     let _ = stdout.write_all(table(report).as_bytes());
+    for note in &replayed.notes {
+        let _ = writeln!(stdout, "{note}");
+    }
     let json = args
         .json
         .clone()

@@ -284,6 +284,7 @@ impl Controller for RecordingAgents<'_, '_, '_> {
         out: &mut [WheelCmd],
     ) -> Result<(), ControllerError> {
         self.agents.commands(obs, out)?;
+        self.record_swaps();
         let live_wanted = self.live.as_ref().is_some_and(LiveFeed::wanted);
         if self.recorder.is_none() && !live_wanted {
             return Ok(());
@@ -306,6 +307,29 @@ impl Controller for RecordingAgents<'_, '_, '_> {
 }
 
 impl RecordingAgents<'_, '_, '_> {
+    /// Hands the swaps the agents did since the last tick to the recording (before this tick,
+    /// whose steps the new models decided), which stores their model files.
+    fn record_swaps(&mut self) {
+        let swaps = self.agents.take_swaps_done();
+        let Some(recorder) = &mut self.recorder else {
+            return;
+        };
+        for swap in swaps {
+            let event = formation_record::SwapEvent {
+                robot: u32::try_from(swap.robot).unwrap_or(u32::MAX),
+                tick: swap.tick,
+                request_id: swap.request_id,
+                model_id: swap.model_id,
+                path: swap.path,
+            };
+            if let Err(e) = recorder.swapped(event) {
+                report_recording_failure(&e);
+                self.recorder = None;
+                return;
+            }
+        }
+    }
+
     /// The tick `obs` with the commands `out` the world used and what its watchdog made of
     /// them.
     fn tick_record(&self, obs: &Observation<'_>, out: &[WheelCmd]) -> TickRecord {
