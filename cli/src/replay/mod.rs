@@ -2,10 +2,11 @@
 //! through the agent's decision again and compared with its commands ([`engine`]), tallied per
 //! robot ([`divergence`]), printed as a table and written as JSON (`formation_schema::ReplayReport`).
 //!
-//! With the recording's own models every command must come back bit for bit: a regression check
-//! for the renderer, the decision and the runtime. With `--model`, the table says how far
-//! another model's commands are from the recorded ones. Exit status: 0 when nothing differs, 1
-//! ([`Diverged`]) when something does, 2 for an error; a truncated recording is replayed up to
+//! The recording's own models include those swapped in during the run, which the world's
+//! recording stores; `--swap-model` gives one it lacks. With them every command must come back
+//! bit for bit: a regression check for the renderer, the decision and the runtime. With
+//! `--model`, the table says how far another model's commands are from the recorded ones. Exit
+//! status: 0 when nothing differs, 1 ([`Diverged`]) when something does, 2 for an error; a truncated recording is replayed up to
 //! the cut, its report written, and then refused (2) with the byte where it ends.
 
 pub mod divergence;
@@ -149,7 +150,7 @@ pub fn table(report: &ReplayReport) -> String {
         let _ = writeln!(
             out,
             "{unknown} step(s) name a model this replay does not have (one swapped in during the \
-             run?): give it with --swap-model FILE.onnx"
+             run that the recording does not hold?): give it with --swap-model FILE.onnx"
         );
     }
     let verdict = if report.diverged {
