@@ -6,8 +6,9 @@
 //! recording stores; `--swap-model` gives one it lacks. With them every command must come back
 //! bit for bit: a regression check for the renderer, the decision and the runtime. With
 //! `--model`, the table says how far another model's commands are from the recorded ones. Exit
-//! status: 0 when nothing differs, 1 ([`Diverged`]) when something does, 2 for an error; a truncated recording is replayed up to
-//! the cut, its report written, and then refused (2) with the byte where it ends.
+//! status: 0 when nothing differs, 1 ([`Diverged`]) when something does, 2 for an error; a
+//! truncated recording is replayed up to the cut, its report written, and then refused (2) with
+//! the byte where it ends.
 
 pub mod divergence;
 pub mod engine;
