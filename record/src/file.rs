@@ -348,8 +348,9 @@ impl RecordingFile {
             Err(why) => (String::new(), SwapStorage::NotStored(why)),
             Ok((path, bytes)) => {
                 let sha256 = crate::models::sha256_hex(&bytes);
-                let storage = if crate::setup::is_shipped_in(self.shipped_models.as_deref(), &path)
-                {
+                let local = event.bytes.is_none();
+                let shipped_models = self.shipped_models.as_deref();
+                let storage = if local && crate::setup::is_shipped_in(shipped_models, path) {
                     SwapStorage::Shipped
                 } else {
                     let name = format!("models/{sha256}.onnx");
@@ -387,11 +388,26 @@ impl RecordingFile {
     }
 
     /// The swapped-in model's file and bytes when they are the ones the agent loaded, else why
-    /// not (bounded by [`MAX_ATTACHED_MODEL_BYTES`]).
-    fn read_swapped(&self, event: &SwapEvent) -> Result<(PathBuf, Vec<u8>), String> {
-        let Some(path) = &event.path else {
+    /// not (bounded by [`MAX_ATTACHED_MODEL_BYTES`]): the bytes that came with the request, or
+    /// the file's.
+    fn read_swapped<'e>(
+        &self,
+        event: &'e SwapEvent,
+    ) -> Result<(&'e Path, std::borrow::Cow<'e, [u8]>), String> {
+        let path = event.path.as_deref().unwrap_or(Path::new(""));
+        if let Some(bytes) = &event.bytes {
+            if bytes.len() as u64 > MAX_ATTACHED_MODEL_BYTES {
+                return Err(format!(
+                    "the model sent with the request is larger than the \
+                     {MAX_ATTACHED_MODEL_BYTES} bytes a recording stores"
+                ));
+            }
+            check_swapped_bytes(&event.model_id, bytes)?;
+            return Ok((path, std::borrow::Cow::Borrowed(bytes)));
+        }
+        if event.path.is_none() {
             return Err("the world does not know the file the swap request named".into());
-        };
+        }
         let bytes = read_bounded(path, MAX_ATTACHED_MODEL_BYTES).map_err(|refusal| {
             let why = match refusal {
                 FileRefusal::NotAFile { kind } => format!("it is {kind}"),
@@ -404,7 +420,7 @@ impl RecordingFile {
         })?;
         check_swapped_bytes(&event.model_id, &bytes)
             .map_err(|why| format!("{}: {why}", path.display()))?;
-        Ok((path.clone(), bytes))
+        Ok((path, std::borrow::Cow::Owned(bytes)))
     }
 
     /// Adds a channel of message type `M` on `topic`.

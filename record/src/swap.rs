@@ -15,7 +15,8 @@
 //! | `sha256` | the stored bytes' SHA-256 (empty when not stored) |
 //! | `stored` | `attachment models/<sha256>.onnx`, `shipped` or `not stored (<reason>)` |
 //!
-//! A model is stored only when the file's bytes are the ones the agent loaded: their content
+//! The bytes are the file's at the request's path, or those that came with the request over the
+//! network (Zenoh). A model is stored only when they are the ones the agent loaded: their content
 //! hash must be the one in the agent's model id ([`check_swapped_bytes`]); a file changed on disk
 //! since the swap, one that cannot be read or is larger than
 //! [`crate::file::MAX_ATTACHED_MODEL_BYTES`] is recorded as not stored, with the reason.
@@ -49,6 +50,9 @@ pub struct SwapEvent {
     pub model_id: String,
     /// The model file the request named (`None` when the world does not know it).
     pub path: Option<PathBuf>,
+    /// The model's bytes, when they came over the network with the request (then `path` is the
+    /// sender's, informative only).
+    pub bytes: Option<Vec<u8>>,
 }
 
 /// Where a swapped-in model's bytes are.
@@ -305,6 +309,7 @@ mod tests {
             request_id: u64::from(robot) + 5,
             model_id: id.clone(),
             path: Some(model.clone()),
+            bytes: None,
         };
         let name = format!("models/{}.onnx", crate::models::sha256_hex(b"second model"));
         let stored = rec.write_swap(&event(0)).unwrap();
@@ -320,6 +325,26 @@ mod tests {
         };
         assert!(why.contains("changed since the agent loaded it"), "{why}");
         assert!(changed.sha256.is_empty());
+        // Bytes that came over the network with the request, under the agent's own file name.
+        let sent = SwapEvent {
+            model_id: formation_proto::model_id::model_id(
+                Path::new("swap-7.onnx"),
+                b"second model",
+            ),
+            path: Some(PathBuf::from("sent-over-zenoh/second.onnx")),
+            bytes: Some(b"second model".to_vec()),
+            ..event(1)
+        };
+        assert_eq!(rec.write_swap(&sent).unwrap().storage, stored.storage);
+        let damaged = SwapEvent {
+            bytes: Some(b"damaged".to_vec()),
+            ..sent
+        };
+        let refused = rec.write_swap(&damaged).unwrap();
+        assert!(
+            matches!(refused.storage, SwapStorage::NotStored(_)),
+            "{refused:?}"
+        );
         rec.write_tick(&tick(1, &id)).unwrap();
         rec.finish(None).unwrap();
 
@@ -340,7 +365,7 @@ mod tests {
             .unwrap();
         assert!(first_swap < first_step_of_it);
         assert_eq!(all[first_swap], Swap(stored.clone()));
-        assert_eq!(all.iter().filter(|i| matches!(i, Swap(_))).count(), 3);
+        assert_eq!(all.iter().filter(|i| matches!(i, Swap(_))).count(), 5);
 
         let (kept, end) = items(&crashed);
         assert!(matches!(end, Err(ReadError::Truncated { .. })), "{end:?}");

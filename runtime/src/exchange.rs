@@ -171,9 +171,8 @@ pub struct AgentsController<'l> {
     last_liveness_check: Instant,
     dt: Duration,
     stopped: Option<StopReason>,
-    /// Swap requests forwarded to an agent and not answered yet: request id, robot and the
-    /// model file the request named.
-    pending_swaps: Vec<(u64, usize, PathBuf)>,
+    /// Swap requests forwarded to an agent and not answered yet.
+    pending_swaps: Vec<PendingSwap>,
     /// Swaps done since [`AgentsController::take_swaps_done`] last took them (at most
     /// [`MAX_SWAPS_DONE`], the oldest dropped first).
     swaps_done: VecDeque<SwapDone>,
@@ -202,8 +201,9 @@ pub struct AgentsController<'l> {
 /// The most swaps done that the exchange keeps until they are taken.
 pub const MAX_SWAPS_DONE: usize = 64;
 
-/// A swap an agent did: which robot, from which tick on, the model id the agent now reports and
-/// the model file the request named (`None` when the request was not forwarded by this world).
+/// A swap an agent did: which robot, from which tick on, the model id the agent now reports, and
+/// the model file the request named (`None` when the request was not forwarded by this world) or
+/// the bytes that came with it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SwapDone {
     /// The robot.
@@ -214,8 +214,22 @@ pub struct SwapDone {
     pub tick: u64,
     /// The id of the model the agent runs now.
     pub model_id: String,
-    /// The model file the request named, on the world's host.
+    /// The model file the request named (on the world's host, unless the model came over the
+    /// network).
     pub path: Option<PathBuf>,
+    /// The model's bytes, when they came over the network with the request (Zenoh).
+    pub model: Option<Vec<u8>>,
+}
+
+/// A swap request forwarded to an agent and not answered yet.
+#[derive(Debug)]
+struct PendingSwap {
+    request_id: u64,
+    robot: usize,
+    /// The model file the request named.
+    path: PathBuf,
+    /// The model's bytes, when they came over the network with the request.
+    model: Option<Vec<u8>>,
 }
 
 /// Why the world stopped before finishing its runs.
@@ -624,8 +638,13 @@ impl<'l> AgentsController<'l> {
         self.link
             .send_control(request.robot, &control)
             .map_err(transport_error)?;
-        self.pending_swaps
-            .push((request.request_id, request.robot, request.path));
+        let model = self.link.take_forwarded_swap_model(request.request_id);
+        self.pending_swaps.push(PendingSwap {
+            request_id: request.request_id,
+            robot: request.robot,
+            path: request.path,
+            model,
+        });
         Ok(())
     }
 
@@ -636,7 +655,7 @@ impl<'l> AgentsController<'l> {
         robot: usize,
         outcome: SwapOutcome,
     ) -> Result<(), ControllerError> {
-        self.pending_swaps.retain(|(id, _, _)| *id != request_id);
+        self.pending_swaps.retain(|p| p.request_id != request_id);
         let reply = SwapReply {
             request_id,
             robot,
@@ -651,11 +670,14 @@ impl<'l> AgentsController<'l> {
     /// Keeps swap `request_id` of `robot`, done at `tick` with `model_id`, for
     /// [`AgentsController::take_swaps_done`], with the model file its request named.
     fn note_swap_done(&mut self, robot: usize, request_id: u64, tick: u64, model_id: &str) {
-        let path = self
+        let pending = self
             .pending_swaps
-            .iter()
-            .find(|(id, _, _)| *id == request_id)
-            .map(|(_, _, path)| path.clone());
+            .iter_mut()
+            .find(|p| p.request_id == request_id);
+        let (path, model) = match pending {
+            Some(p) => (Some(p.path.clone()), p.model.take()),
+            None => (None, None),
+        };
         if self.swaps_done.len() == MAX_SWAPS_DONE {
             self.swaps_done.pop_front();
         }
@@ -665,6 +687,7 @@ impl<'l> AgentsController<'l> {
             tick,
             model_id: model_id.to_owned(),
             path,
+            model,
         });
     }
 
@@ -677,8 +700,8 @@ impl<'l> AgentsController<'l> {
         let failed: Vec<u64> = self
             .pending_swaps
             .iter()
-            .filter(|(_, r, _)| *r == robot)
-            .map(|(id, _, _)| *id)
+            .filter(|p| p.robot == robot)
+            .map(|p| p.request_id)
             .collect();
         for request_id in failed {
             let reason = format!("robot {robot}'s swap was not done: {why}");

@@ -189,6 +189,13 @@ pub trait WorldLink {
     fn drain_swap_requests(&mut self, sink: &mut dyn FnMut(SwapRequest)) -> WorldResult;
     /// Answers a swap request.
     fn publish_swap_reply(&mut self, reply: &SwapReply) -> WorldResult;
+    /// The model bytes that came over the network with swap request `request_id` and that the
+    /// last [`WorldLink::send_control`] forwarded to its agent (Zenoh: the request's path is on
+    /// another host), for the recording; `None` where the agent opens the request's path itself,
+    /// as by default.
+    fn take_forwarded_swap_model(&mut self, _request_id: u64) -> Option<Vec<u8>> {
+        None
+    }
 }
 
 /// A failure of an agent's transport.

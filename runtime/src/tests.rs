@@ -500,6 +500,7 @@ fn a_swap_is_done_at_its_tick_and_a_model_that_fails_is_refused() {
             tick: 3,
             model_id: "fast-model".into(),
             path: Some(PathBuf::from("fast-model")),
+            model: None,
         }]
     );
     assert!(world.take_swaps_done().is_empty());

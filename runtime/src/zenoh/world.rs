@@ -77,6 +77,9 @@ pub struct ZenohWorldLink {
     swap_refusals: Arc<Queue<SwapReply>>,
     /// Model bytes that came with a swap request, by request id, until forwarded to the agent.
     swap_models: Arc<Mutex<HashMap<u64, Vec<u8>>>>,
+    /// The model bytes the last swap request forwarded to an agent carried, until the exchange
+    /// takes them for the recording.
+    forwarded_model: Option<(u64, Vec<u8>)>,
     _swap_subscriber: Subscriber<()>,
     swap_replies: Publisher<'static>,
     liveness: Arc<Mutex<Liveness>>,
@@ -347,6 +350,7 @@ impl ZenohWorldLink {
             swap_requests,
             swap_refusals,
             swap_models,
+            forwarded_model: None,
             _swap_subscriber: swap_subscriber,
             swap_replies,
             liveness,
@@ -472,17 +476,19 @@ impl WorldLink for ZenohWorldLink {
                 .swap_models
                 .lock()
                 .unwrap_or_else(|e| e.into_inner())
-                .remove(request_id),
+                .remove(request_id)
+                .map(|model| (*request_id, model)),
             _ => None,
         };
         let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
         let mut payload = message_bytes(&msg).to_vec();
-        if let Some(model) = model {
+        if let Some((request_id, model)) = model {
             super::model::append_model(&mut payload, &model).map_err(|e| {
                 zenoh_error(format!("forward robot {robot}'s swap model"))(e.to_string())
             })?;
+            self.forwarded_model = Some((request_id, model));
         }
         Self::put(&ports.control, &payload, || {
             format!("send robot {robot}'s control request")
@@ -540,5 +546,12 @@ impl WorldLink for ZenohWorldLink {
         Self::put(&self.swap_replies, message_bytes(&msg), || {
             "send a swap reply".to_string()
         })
+    }
+
+    fn take_forwarded_swap_model(&mut self, request_id: u64) -> Option<Vec<u8>> {
+        match self.forwarded_model.take() {
+            Some((id, model)) if id == request_id => Some(model),
+            _ => None,
+        }
     }
 }

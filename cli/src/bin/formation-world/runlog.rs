@@ -321,6 +321,7 @@ impl RecordingAgents<'_, '_, '_> {
                 request_id: swap.request_id,
                 model_id: swap.model_id,
                 path: swap.path,
+                bytes: swap.model,
             };
             if let Err(e) = recorder.swapped(event) {
                 report_recording_failure(&e);
