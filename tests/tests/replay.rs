@@ -379,3 +379,86 @@ fn assert_every_step_identical(report: &Value) {
         );
     }
 }
+
+/// A step that names a swapped-in model before the model's record in the file (its command
+/// overtook the agent's report of the swap, as it can over Zenoh) is held back until the record
+/// comes, then replayed with that model: no step is left undecided. The recording is written
+/// with formation-record's own writer in that order; real ONNX Runtime decides.
+#[test]
+fn a_step_that_precedes_its_swap_record_waits_for_it() {
+    use formation_proto::model_id::model_id;
+    use formation_proto::{Goal, NeighbourRule, Pose, WheelCmd};
+    use formation_record::{RecordingFile, SentCommand, SwapEvent, TeamSetup, TickRecord};
+
+    let _watchdog = Watchdog::arm("replay_held", LIMIT);
+    let dir = TempDir::new("replay-held");
+    let first = dir.path().join("first.onnx");
+    write_tiny_model(&first, 0);
+    let second = dir.path().join("second.onnx");
+    write_tiny_model(&second, 1);
+    let id = |p: &Path| model_id(p, &std::fs::read(p).unwrap());
+    let metadata = [
+        ("model.0.path", first.display().to_string()),
+        (
+            "model.0.sha256",
+            formation_record::models::sha256_file(&first).unwrap(),
+        ),
+        ("model.0.stored", "shipped".into()),
+        ("robot_models", "0".into()),
+        ("lidar_max_range_m", "10".into()),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_owned(), v))
+    .collect();
+    let team = TeamSetup {
+        n_robots: 1,
+        max_range: 10.0,
+        wheel_separation: 0.2,
+        neighbours: NeighbourRule::AllPairs,
+    };
+    let file = dir.path().join("held.mcap");
+    let mut recording = RecordingFile::create_with_metadata(&file, team, 1.0, metadata).unwrap();
+    let tick = |k: u64, model: String| TickRecord {
+        tick: k,
+        time: k as f64 * 0.05,
+        goal: Goal {
+            phi_star: 0.0,
+            d_star: 1.0,
+            v_star: 0.2,
+        },
+        poses: vec![Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.1,
+        }],
+        wheel_speeds: vec![WheelCmd::default()],
+        scans: vec![vec![2.0; 900]],
+        commands: vec![SentCommand::in_process(WheelCmd::default())],
+        model_ids: vec![model],
+    };
+    for k in 0..3 {
+        recording.write_tick(&tick(k, id(&first))).unwrap();
+    }
+    recording.write_tick(&tick(3, id(&second))).unwrap();
+    let swap = SwapEvent {
+        robot: 0,
+        tick: 3,
+        request_id: 1,
+        model_id: id(&second),
+        path: Some(second.clone()),
+        bytes: None,
+    };
+    recording.write_swap(&swap).unwrap();
+    recording.write_tick(&tick(4, id(&second))).unwrap();
+    recording.finish(None).unwrap();
+
+    let scratch = dir.path().join("scratch");
+    std::fs::create_dir(&scratch).unwrap();
+    let replayed =
+        replay_recording(&file, &ReplayOptions::default(), &OnnxPilots, &scratch).unwrap();
+    let robot = &replayed.report.robots[0];
+    assert_eq!(robot.steps, 5, "{:?}", replayed.report);
+    assert_eq!(robot.compared, 5, "{:?}", replayed.report);
+    assert!(robot.unreplayable.is_empty(), "{:?}", replayed.report);
+    assert!(replayed.notes.is_empty(), "{:?}", replayed.notes);
+}

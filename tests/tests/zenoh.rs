@@ -467,7 +467,8 @@ fn a_remote_agent_that_never_comes_is_named() {
 /// Issue 13 (swap over the network): `formation swap --transport zenoh` sends the model's bytes
 /// (as user operator) and the agent drives with it; a model that is not ONNX is refused by the
 /// agent and the old one keeps driving; a model over the 32 MiB limit is refused before it is
-/// sent; the operator's credentials are needed.
+/// sent; the operator's credentials are needed. The world's recording stores the model from the
+/// bytes that came (its path is the sender's), so the run replays bit for bit with no flag.
 #[test]
 fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
     let _one = one_at_a_time();
@@ -494,6 +495,8 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
         ],
     );
     command.arg("--credentials").arg(&creds);
+    let recording = dir.path().join("swapped.mcap");
+    command.arg("--record").arg(&recording);
     let mut launch = LiveProcess::spawn(command);
     let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
     assert!(connected.is_some(), "{}", launch.describe());
@@ -546,6 +549,32 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
         "robot 1 drove with the old model, then the one sent over the network: {models:?}"
     );
     leaks.assert_clean();
+
+    let json = dir.path().join("replay.json");
+    let mut replay = Command::new(&bins.cli);
+    replay
+        .arg("replay")
+        .arg(&recording)
+        .arg("--json")
+        .arg(&json);
+    run(replay, LIMIT).assert_success();
+    let report = read_json(&json);
+    assert_eq!(report["diverged"], false, "{report}");
+    for row in report["robots"].as_array().unwrap() {
+        assert!(row["compared"].as_u64().unwrap() > 0, "{row}");
+        assert!(
+            row["unreplayable"].as_object().is_none_or(|u| u.is_empty()),
+            "{row}"
+        );
+    }
+    assert!(
+        report["models"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|m| m.as_str().unwrap().contains("stored in the recording")),
+        "{report}"
+    );
 }
 
 /// A `formation-agent` built without the `zenoh` feature (the demo's build), asked for

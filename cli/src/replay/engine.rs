@@ -15,7 +15,9 @@
 //! it, as one made from outside does), or the robot's model in the metadata for a step without
 //! one. A realtime step answers the scan of `tick - lag_ticks`,
 //! which is fed instead of its own. Steps the world did not take a fresh answer for are counted,
-//! not compared.
+//! not compared. A step naming a model whose swap record comes later in the file (a command that
+//! overtook the agent's report of the swap) is held back until the record comes
+//! ([`HELD_STEPS`] at most).
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::path::{Path, PathBuf};
@@ -33,6 +35,10 @@ use super::divergence::{RobotTally, Unreplayable};
 
 /// How many of a robot's recent scans are kept for realtime steps that answer an older one.
 const SCAN_HISTORY: usize = 256;
+
+/// How many steps (all robots together) are held back waiting for the record of the model they
+/// name (see [`Replay::offer`]) before the oldest is replayed as it stands.
+const HELD_STEPS: usize = 256;
 
 /// What to replay.
 #[derive(Debug, Clone, Default)]
@@ -136,6 +142,8 @@ struct Replay<'m, M: PilotMaker> {
     pilots: HashMap<(u32, usize), M::Pilot>,
     /// What the replay has to say about models swapped in during the run that it lacks.
     notes: Vec<String>,
+    /// Per robot, its steps held back, oldest first: the first names a model not known yet.
+    held: BTreeMap<u32, VecDeque<ReplayStep>>,
     scans: HashMap<u32, VecDeque<SentScan>>,
     tallies: BTreeMap<u32, RobotTally>,
 }
@@ -159,6 +167,7 @@ pub fn replay_recording<M: PilotMaker>(
         info: None,
         pilots: HashMap::new(),
         notes: Vec::new(),
+        held: BTreeMap::new(),
         scans: HashMap::new(),
         tallies: BTreeMap::new(),
     };
@@ -173,13 +182,17 @@ pub fn replay_recording<M: PilotMaker>(
                 }
             }
             Ok(Some(RecordingItem::Run(info))) => replay.take_run(info, scratch)?,
-            Ok(Some(RecordingItem::Swap(swapped))) => replay.take_swap(&swapped, scratch)?,
-            Ok(Some(RecordingItem::Step(step))) => replay.step(&step)?,
+            Ok(Some(RecordingItem::Swap(swapped))) => {
+                replay.take_swap(&swapped, scratch)?;
+                replay.release_held(false)?;
+            }
+            Ok(Some(RecordingItem::Step(step))) => replay.offer(step)?,
             Ok(None) => break None,
             Err(e @ ReadError::Truncated { .. }) => break Some(e),
             Err(e) => return Err(e.into()),
         }
     };
+    replay.release_held(true)?;
     let bytes_read = reader.bytes_read();
     replay.finish(truncated, bytes_read)
 }
@@ -269,6 +282,63 @@ impl<M: PilotMaker> Replay<'_, M> {
             .get(&step.model_id)
             .copied()
             .ok_or(Unreplayable::UnknownModel)
+    }
+
+    /// Whether `step` names a model this replay does not know (yet).
+    fn names_unknown_model(&self, step: &ReplayStep) -> bool {
+        self.options.model.is_none()
+            && !step.model_id.is_empty()
+            && !self.ids.contains_key(&step.model_id)
+    }
+
+    /// Takes `step` in file order. The world records a swap when its agent reports it done, and
+    /// over Zenoh the first command of the new model can overtake that report, so the record of
+    /// a swapped-in model can follow the first steps it decided: a step that names a model not
+    /// known yet is held back (with its robot's later steps, to keep their order) until the
+    /// model's record comes, up to [`HELD_STEPS`] in all.
+    fn offer(&mut self, step: ReplayStep) -> Result<(), ReplayFailure> {
+        if self.options.robot.is_some_and(|r| r != step.robot) {
+            return Ok(());
+        }
+        let waiting = self.held.get(&step.robot).is_some_and(|q| !q.is_empty());
+        if !waiting && !self.names_unknown_model(&step) {
+            return self.step(&step);
+        }
+        self.held.entry(step.robot).or_default().push_back(step);
+        if self.held.values().map(VecDeque::len).sum::<usize>() > HELD_STEPS {
+            let longest = self
+                .held
+                .iter()
+                .max_by_key(|(_, q)| q.len())
+                .map(|(&robot, _)| robot);
+            if let Some(oldest) = longest.and_then(|r| self.held.get_mut(&r)?.pop_front()) {
+                self.step(&oldest)?;
+            }
+            self.release_held(false)?;
+        }
+        Ok(())
+    }
+
+    /// Replays the held steps whose models are known now, each robot's in order up to one that
+    /// still names an unknown model; `all`: every held step (the file ended).
+    fn release_held(&mut self, all: bool) -> Result<(), ReplayFailure> {
+        let robots: Vec<u32> = self.held.keys().copied().collect();
+        for robot in robots {
+            loop {
+                let front_unknown = match self.held.get(&robot).and_then(VecDeque::front) {
+                    None => break,
+                    Some(front) => self.names_unknown_model(front),
+                };
+                if front_unknown && !all {
+                    break;
+                }
+                let Some(step) = self.held.get_mut(&robot).and_then(VecDeque::pop_front) else {
+                    break;
+                };
+                self.step(&step)?;
+            }
+        }
+        Ok(())
     }
 
     /// One step: kept as the scan its agent received, and compared when it was used fresh.
