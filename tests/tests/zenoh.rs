@@ -549,14 +549,15 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
         "robot 1 drove with the old model, then the one sent over the network: {models:?}"
     );
     leaks.assert_clean();
+    assert_replays_with_the_stored_swap_model(&recording, dir.path());
+}
 
-    let json = dir.path().join("replay.json");
-    let mut replay = Command::new(&bins.cli);
-    replay
-        .arg("replay")
-        .arg(&recording)
-        .arg("--json")
-        .arg(&json);
+/// `formation replay RECORDING` with no flag: nothing diverged and no step was left undecided,
+/// the model swapped in during the run taken from the recording.
+fn assert_replays_with_the_stored_swap_model(recording: &Path, dir: &Path) {
+    let json = dir.join("replay.json");
+    let mut replay = Command::new(&binaries().cli);
+    replay.arg("replay").arg(recording).arg("--json").arg(&json);
     run(replay, LIMIT).assert_success();
     let report = read_json(&json);
     assert_eq!(report["diverged"], false, "{report}");
