@@ -17,7 +17,7 @@
 //! which is fed instead of its own. Steps the world did not take a fresh answer for are counted,
 //! not compared. A step naming a model whose swap record comes later in the file (a command that
 //! overtook the agent's report of the swap) is held back until the record comes
-//! ([`HELD_STEPS`] at most).
+//! (`HELD_STEPS` at most).
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::path::{Path, PathBuf};
@@ -37,7 +37,7 @@ use super::divergence::{RobotTally, Unreplayable};
 const SCAN_HISTORY: usize = 256;
 
 /// How many steps (all robots together) are held back waiting for the record of the model they
-/// name (see [`Replay::offer`]) before the oldest is replayed as it stands.
+/// name (see `Replay::offer`) before the oldest is replayed as it stands.
 const HELD_STEPS: usize = 256;
 
 /// What to replay.
