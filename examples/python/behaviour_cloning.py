@@ -4,11 +4,14 @@ Rust agent runs (issue 25's example).
 1. `formation.Batch` plays B runs driven by the expert and records each robot's own input (the
    occupancy image and `(delta_phi, d*)`) with the expert's wheel speeds, scaled to `v_train`.
 2. A small CNN learns them (PyTorch, CPU).
-3. It is exported to ONNX with the `formation.*` metadata, so `formation eval --model` and
+3. DAgger: the next B runs are driven by the CNN (each robot at each tick with probability
+   1 - 0.5^k, at iteration k) and labelled by the expert, so the network learns to recover from
+   its own mistakes; the samples are aggregated and training continues.
+4. It is exported to ONNX with the `formation.*` metadata, so `formation eval --model` and
    `formation.env.parallel_env(model=...)` take it.
-4. The exported model drives one run through ONNX Runtime in Python; its metrics are printed.
+5. The exported model drives one run through ONNX Runtime in Python; its metrics are printed.
 
-    .venv/bin/python examples/python/behaviour_cloning.py --out /tmp/bc.onnx [--worlds 16 --epochs 3]
+    .venv/bin/python examples/python/behaviour_cloning.py --out /tmp/bc.onnx [--worlds 32 --iterations 4 --epochs 6]
 """
 
 import argparse
@@ -27,17 +30,30 @@ REPO = Path(__file__).resolve().parents[2]
 SPEC = formation.ModelSpec(size_px=50, resolution_m=0.1, beyond="border", v_train=0.7)
 
 
-def collect(scenario: formation.Scenario, worlds: int, ticks: int, seed: int):
-    """Expert demonstrations: images, aux inputs and wheel speeds at v_train."""
-    batch = formation.Batch(scenario, [seed] * worlds, list(range(worlds)))
+def rollouts(scenario: formation.Scenario, worlds: int, first_run: int, seed: int, every: int,
+             policy: "Policy | None" = None, beta: float = 1.0, rng: "np.random.Generator | None" = None):
+    """One DAgger iteration's data: B runs driven by the expert (``policy=None``) or, robot by
+    robot and tick by tick, by the policy with probability ``1 - beta``; every ``every``-th tick
+    each robot's own input is kept with the expert's wheel speeds, scaled to ``v_train``."""
+    batch = formation.Batch(scenario, [seed] * worlds, list(range(first_run, first_run + worlds)))
     images, aux, labels = [], [], []
-    for _ in range(min(ticks, batch.ticks)):
-        images.append(batch.occupancy(SPEC.size_px, SPEC.resolution_m, SPEC.beyond, SPEC.d_star_ref_m))
-        aux.append(batch.aux())
+    while not batch.over:
+        image = batch.occupancy(SPEC.size_px, SPEC.resolution_m, SPEC.beyond, SPEC.d_star_ref_m)
+        inputs = batch.aux()
         expert = batch.expert_actions()
-        v_star = batch.goals()[:, 2][:, None, None]
-        labels.append((expert * SPEC.v_train / v_star).astype(np.float32))
-        batch.step(expert)
+        if batch.tick % every == 0:
+            v_star = batch.goals()[:, 2][:, None, None]
+            images.append(image.astype(np.uint8))
+            aux.append(inputs)
+            labels.append((expert * SPEC.v_train / v_star).astype(np.float32))
+        actions = expert
+        if policy is not None and beta < 1.0:
+            with torch.no_grad():
+                raw = policy(torch.from_numpy(image.reshape(-1, 1, SPEC.size_px, SPEC.size_px)),
+                             torch.from_numpy(inputs.reshape(-1, 2))).numpy()
+            learned = batch.policy_actions(raw.reshape(expert.shape).astype(np.float32), SPEC.v_train)
+            actions = np.where(rng.random(expert.shape[:2] + (1,)) < beta, expert, learned)
+        batch.step(actions)
     flat = lambda xs: np.concatenate([x.reshape(-1, *x.shape[2:]) for x in xs])
     return flat(images), flat(aux), flat(labels)
 
@@ -46,30 +62,34 @@ class Policy(nn.Module):
     def __init__(self) -> None:
         super().__init__()
         self.conv = nn.Sequential(
-            nn.Conv2d(1, 8, 5, stride=2), nn.ReLU(), nn.Conv2d(8, 16, 5, stride=2), nn.ReLU(), nn.Flatten()
+            nn.Conv2d(1, 16, 5, stride=2), nn.ReLU(), nn.Conv2d(16, 32, 5, stride=2), nn.ReLU(), nn.Flatten()
         )
-        self.head = nn.Sequential(nn.Linear(16 * 10 * 10 + 2, 64), nn.ReLU(), nn.Linear(64, 2))
+        self.head = nn.Sequential(nn.Linear(32 * 10 * 10 + 2, 128), nn.ReLU(), nn.Linear(128, 2))
 
     def forward(self, occupancy: torch.Tensor, aux: torch.Tensor) -> torch.Tensor:
         return self.head(torch.cat([self.conv(occupancy), aux], dim=1))
 
 
-def train(images, aux, labels, epochs: int) -> Policy:
-    torch.manual_seed(0)
-    model = Policy()
+def train(model: Policy, images, aux, labels, epochs: int) -> Policy:
+    """``epochs`` passes of Adam over the aggregated samples (images stored as 0/1 bytes)."""
+    model.train()
     optimiser = torch.optim.Adam(model.parameters(), lr=1e-3)
+    steps = epochs * ((len(labels) + 255) // 256)
+    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, max_lr=2e-3, total_steps=steps)
     data = [torch.from_numpy(a) for a in (images, aux, labels)]
     for epoch in range(epochs):
         order = torch.randperm(len(labels))
         total = 0.0
         for start in range(0, len(order), 256):
             idx = order[start : start + 256]
-            loss = nn.functional.mse_loss(model(data[0][idx], data[1][idx]), data[2][idx])
+            loss = nn.functional.mse_loss(model(data[0][idx].float(), data[1][idx]), data[2][idx])
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
+            schedule.step()
             total += loss.item() * len(idx)
         print(f"epoch {epoch + 1}: loss {total / len(order):.5f}")
+    model.eval()
     return model
 
 
@@ -116,15 +136,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default=str(REPO / "scenarios" / "table1.toml"))
     parser.add_argument("--robots", type=int, default=3)
-    parser.add_argument("--worlds", type=int, default=16)
-    parser.add_argument("--ticks", type=int, default=400)
-    parser.add_argument("--epochs", type=int, default=3)
+    parser.add_argument("--worlds", type=int, default=32, help="runs per iteration")
+    parser.add_argument("--iterations", type=int, default=4, help="1: behaviour cloning alone")
+    parser.add_argument("--every", type=int, default=2, help="keep every k-th tick")
+    parser.add_argument("--epochs", type=int, default=6, help="per iteration")
+    parser.add_argument("--seed", type=int, default=1000, help="the demonstrations' seed")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     scenario = formation.Scenario(args.scenario, robots=args.robots)
-    images, aux, labels = collect(scenario, args.worlds, args.ticks, seed=1)
-    print(f"{len(labels)} samples from {args.worlds} expert runs")
-    model = train(images, aux, labels, args.epochs)
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    model, data = Policy(), None
+    for iteration in range(args.iterations):
+        beta = 0.5 ** iteration
+        new = rollouts(scenario, args.worlds, iteration * args.worlds, args.seed, args.every,
+                       policy=model if iteration > 0 else None, beta=beta, rng=rng)
+        data = new if data is None else tuple(np.concatenate(pair) for pair in zip(data, new))
+        print(f"iteration {iteration} (beta {beta:.2f}): {len(data[2])} samples")
+        model = train(model, *data, args.epochs)
     export(model, scenario, args.out)
     print(f"wrote {args.out}; `formation eval --model {args.out}` takes it")
     print(f"one run driven by it (seed 7, run 0): {drive(args.out, args.scenario, args.robots, seed=7)}")
