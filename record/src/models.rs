@@ -133,6 +133,19 @@ pub fn attachment_path(dir: &Path, name: &str) -> PathBuf {
     dir.join("attachments").join(flat)
 }
 
+/// A model the recording names by its path (shipped, or not stored), which must be on disk here.
+fn file_on_disk(recording: &Path, model: &Path, sha256: &str) -> Result<PathBuf, ModelFileError> {
+    if model.is_file() {
+        Ok(model.to_path_buf())
+    } else {
+        Err(ModelFileError::Missing {
+            recording: recording.to_path_buf(),
+            model: model.to_path_buf(),
+            sha256: sha256.to_string(),
+        })
+    }
+}
+
 /// Keeps the attachment `name` in `dir` (see [`attachment_path`]).
 pub fn save_attachment(
     recording: &Path,
@@ -178,14 +191,7 @@ pub fn recorded_model_files(
                 });
             }
             ModelStorage::Shipped | ModelStorage::NotStored => {
-                if !model.path.is_file() {
-                    return Err(ModelFileError::Missing {
-                        recording: recording.to_path_buf(),
-                        model: model.path.clone(),
-                        sha256: model.sha256.clone(),
-                    });
-                }
-                model.path.clone()
+                file_on_disk(recording, &model.path, &model.sha256)?
             }
             ModelStorage::Attachment(name) => {
                 let kept = attachment_path(dir, name);
@@ -243,16 +249,7 @@ pub fn swapped_model_file(
     };
     let file = match &swapped.storage {
         SwapStorage::NotStored(_) => return Ok(None),
-        SwapStorage::Shipped => {
-            if !swapped.path.is_file() {
-                return Err(ModelFileError::Missing {
-                    recording: recording.to_path_buf(),
-                    model: swapped.path.clone(),
-                    sha256: swapped.sha256.clone(),
-                });
-            }
-            swapped.path.clone()
-        }
+        SwapStorage::Shipped => file_on_disk(recording, &swapped.path, &swapped.sha256)?,
         SwapStorage::Attachment(name) => {
             let kept = attachment_path(dir, name);
             let source = if kept.is_file() {
