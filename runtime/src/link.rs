@@ -4,7 +4,7 @@
 //! The exchange ([`crate::exchange`]) and the agent loop ([`crate::agent`]) talk only to these
 //! traits, so a transport is one implementation among others: iceoryx2 shared memory
 //! ([`crate::iceoryx`]) for the processes, channels in one process ([`crate::memory`]) for tests,
-//! and Zenoh ([`crate::zenoh`], with the `zenoh` feature) for agents on other hosts. The world watches command ages itself, so its
+//! and Zenoh (the `zenoh` module, with the `zenoh` feature) for agents on other hosts. The world watches command ages itself, so its
 //! watchdog does not depend on the transport's own liveness reports; those
 //! ([`WorldLink::dead_agents`]) only speed up noticing a crashed agent and clean up after it.
 //!
