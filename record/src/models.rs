@@ -133,6 +133,34 @@ pub fn attachment_path(dir: &Path, name: &str) -> PathBuf {
     dir.join("attachments").join(flat)
 }
 
+/// An I/O error on `model`, a file of `recording`'s models.
+fn io_error(
+    recording: &Path,
+    model: &Path,
+) -> impl FnOnce(std::io::Error) -> ModelFileError + use<> {
+    let (recording, model) = (recording.to_path_buf(), model.to_path_buf());
+    move |source| ModelFileError::Io {
+        recording,
+        model,
+        source,
+    }
+}
+
+/// `file`, if its SHA-256 is the one the recording gives for it.
+fn with_hash(recording: &Path, file: PathBuf, expected: &str) -> Result<PathBuf, ModelFileError> {
+    let found = sha256_file(&file).map_err(io_error(recording, &file))?;
+    if found == expected {
+        Ok(file)
+    } else {
+        Err(ModelFileError::HashMismatch {
+            recording: recording.to_path_buf(),
+            model: file,
+            expected: expected.to_string(),
+            found,
+        })
+    }
+}
+
 /// A model the recording names by its path (shipped, or not stored), which must be on disk here.
 fn file_on_disk(recording: &Path, model: &Path, sha256: &str) -> Result<PathBuf, ModelFileError> {
     if model.is_file() {
@@ -175,14 +203,7 @@ pub fn recorded_model_files(
 ) -> Result<Vec<PathBuf>, ModelFileError> {
     let mut files = Vec::with_capacity(info.models.len());
     for (k, model) in info.models.iter().enumerate() {
-        let io = |path: &Path| {
-            let path = path.to_path_buf();
-            move |source| ModelFileError::Io {
-                recording: recording.to_path_buf(),
-                model: path,
-                source,
-            }
-        };
+        let io = |path: &Path| io_error(recording, path);
         let file = match &model.storage {
             ModelStorage::NotStored if !model.path.is_file() => {
                 return Err(ModelFileError::NotStored {
@@ -213,16 +234,7 @@ pub fn recorded_model_files(
                 target
             }
         };
-        let found = sha256_file(&file).map_err(io(&file))?;
-        if found != model.sha256 {
-            return Err(ModelFileError::HashMismatch {
-                recording: recording.to_path_buf(),
-                model: file,
-                expected: model.sha256.clone(),
-                found,
-            });
-        }
-        files.push(file);
+        files.push(with_hash(recording, file, &model.sha256)?);
     }
     Ok(files)
 }
@@ -239,14 +251,7 @@ pub fn swapped_model_file(
     dir: &Path,
     loaded: &[PathBuf],
 ) -> Result<Option<PathBuf>, ModelFileError> {
-    let io = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| ModelFileError::Io {
-            recording: recording.to_path_buf(),
-            model: path,
-            source,
-        }
-    };
+    let io = |path: &Path| io_error(recording, path);
     let file = match &swapped.storage {
         SwapStorage::NotStored(_) => return Ok(None),
         SwapStorage::Shipped => file_on_disk(recording, &swapped.path, &swapped.sha256)?,
@@ -273,16 +278,7 @@ pub fn swapped_model_file(
             target
         }
     };
-    let found = sha256_file(&file).map_err(io(&file))?;
-    if found != swapped.sha256 {
-        return Err(ModelFileError::HashMismatch {
-            recording: recording.to_path_buf(),
-            model: file,
-            expected: swapped.sha256.clone(),
-            found,
-        });
-    }
-    Ok(Some(file))
+    with_hash(recording, file, &swapped.sha256).map(Some)
 }
 
 #[cfg(test)]
