@@ -188,6 +188,10 @@ pub struct CollectArgs {
     /// of cells away at every spacing (default: a fixed window, as in the paper).
     #[arg(long, value_name = "D_STAR_REF_M")]
     pub scale_d_star: Option<f64>,
+    /// Label with the expert's formation velocity shaped for this wheel acceleration limit
+    /// \[m/s²\], whatever the scenario's own (see `formation dagger --label-wheel-accel`).
+    #[arg(long, value_name = "A", value_parser = wheel_accel)]
+    pub label_wheel_accel: Option<f64>,
 }
 
 /// `formation train`.
@@ -317,6 +321,15 @@ pub struct DaggerArgs {
     /// scenario's `goal.d_star_range` when it has one, else the data's own range).
     #[arg(long, value_name = "MIN,MAX", value_parser = d_star_range)]
     pub d_star_range: Option<(f64, f64)>,
+    /// Wheel acceleration limits \[m/s²\] of the rollouts, each run with every team size in
+    /// turn (e.g. `none,1.0,2.0`; `none`: no limit; default: the scenario's own).
+    #[arg(long, value_delimiter = ',', value_parser = wheel_accel_or_none)]
+    pub wheel_accels: Vec<Option<f64>>,
+    /// Label with the expert's formation velocity shaped for this wheel acceleration limit
+    /// \[m/s²\] in every run, whatever the run's own limit, so that the labels are one function of
+    /// what a robot senses (default: each run's own limit).
+    #[arg(long, value_name = "A", value_parser = wheel_accel)]
+    pub label_wheel_accel: Option<f64>,
     /// Which network, whether to mirror the data, how many samples an epoch draws.
     #[command(flatten)]
     pub network: NetworkArgs,
@@ -452,6 +465,28 @@ pub fn team_size(text: &str) -> Result<usize, String> {
 /// A network architecture by its name (`paper` or `wide`).
 fn architecture(text: &str) -> Result<Architecture, String> {
     text.parse()
+}
+
+/// A wheel acceleration limit in m/s², within the scenario's bounds for `robot.max_wheel_accel`.
+fn wheel_accel(text: &str) -> Result<f64, String> {
+    let bounds = formation_world::scenario::limits::MAX_WHEEL_ACCEL;
+    match text.trim().parse::<f64>() {
+        Ok(a) if a.is_finite() && bounds.min <= a && a <= bounds.max => Ok(a),
+        _ => Err(format!(
+            "expected a wheel acceleration limit from {} to {} m/s², got {text:?}",
+            bounds.min, bounds.max
+        )),
+    }
+}
+
+/// A wheel acceleration limit in m/s², or `none` for no limit.
+fn wheel_accel_or_none(text: &str) -> Result<Option<f64>, String> {
+    if text.trim() == "none" {
+        return Ok(None);
+    }
+    wheel_accel(text)
+        .map(Some)
+        .map_err(|e| format!("{e}, or none for no limit"))
 }
 
 /// `MIN,MAX` in metres, with `0 < MIN < MAX`, both finite.

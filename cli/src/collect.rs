@@ -56,6 +56,7 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
     )?;
     let mut opts = CollectOptions::for_scenario(&scenario);
     opts.occupancy = occupancy;
+    opts.gains.shaping_wheel_accel = args.label_wheel_accel;
     if let Some(runs) = args.runs {
         opts.runs = runs;
     }

@@ -14,7 +14,8 @@
 use std::time::Instant;
 
 use anyhow::Context;
-use formation_learning::dagger::{DaggerEvent, DaggerOptions, run_dagger};
+use formation_expert::ExpertGains;
+use formation_learning::dagger::{DaggerEvent, DaggerOptions, RolloutLabels, run_dagger};
 use formation_learning::dagger_share::{ShareOptions, label_share};
 use formation_learning::rollout::with_threads;
 use formation_trainer_bridge::dagger_part::append_parts;
@@ -77,6 +78,13 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
         runs: args.runs.unwrap_or_else(|| scenario.runs()),
         scenario,
         team_sizes: rollouts.team_sizes.clone(),
+        labels: RolloutLabels {
+            gains: ExpertGains {
+                shaping_wheel_accel: args.label_wheel_accel,
+                ..ExpertGains::default()
+            },
+            wheel_accels: args.wheel_accels.clone(),
+        },
         iterations: args.iterations,
         out: args.out.clone(),
         init_model: args.init_model.clone(),

@@ -116,6 +116,13 @@ pub struct ExpertGains {
     /// capped gains: 98 / 94 / 90 % against 100 / 90 / 70 % at 0.5 m/s² (`ACCEL=0.5`), 100 / 100 /
     /// 98 % against 100 / 100 / 90 % at 2.0 m/s².
     pub braking_share: f64,
+    /// The wheel acceleration limit \[m/s²\] the formation velocity is shaped for
+    /// ([`braking_speed`]) whatever the robot's own limit; `None` (the default) shapes for the
+    /// robot's own `max_wheel_accel`, and not at all without one. Training data set it so that
+    /// the labels are one function of what a robot senses: a robot's limit is not in its image,
+    /// and labels shaped for each run's own limit would ask different commands of the same image
+    /// (`formation collect|dagger --label-wheel-accel`).
+    pub shaping_wheel_accel: Option<f64>,
 }
 
 /// The points of two robots between which the expert measures their distance and direction.
@@ -137,6 +144,7 @@ impl Default for ExpertGains {
             max_reference_speed: 0.7,
             graph_pair_points: PairPoints::Centres,
             braking_share: 0.25,
+            shaping_wheel_accel: None,
         }
     }
 }
@@ -156,7 +164,7 @@ pub struct InvalidGains {
 impl ExpertGains {
     /// Checks that every gain is finite and in range: `k_formation >= 0`,
     /// `k_formation_graph >= 0`, `0 < braking_share <= 1`, `point_offset > 0`,
-    /// `max_reference_speed >= 0`.
+    /// `max_reference_speed >= 0`, `shaping_wheel_accel` absent or `> 0`.
     pub fn validate(&self) -> Result<(), InvalidGains> {
         let checks = [
             (
@@ -188,6 +196,12 @@ impl ExpertGains {
                 self.max_reference_speed,
                 self.max_reference_speed >= 0.0,
                 "finite and >= 0",
+            ),
+            (
+                "shaping_wheel_accel",
+                self.shaping_wheel_accel.unwrap_or(1.0),
+                self.shaping_wheel_accel.is_none_or(|a| a > 0.0),
+                "absent, or finite and > 0",
             ),
         ];
         for (field, value, in_range, requirement) in checks {
@@ -310,7 +324,7 @@ fn commands_among<I: Iterator<Item = usize>>(
             gradient.1 += magnitude * dy / r;
         }
         let mut f = (-k_formation * gradient.0, -k_formation * gradient.1);
-        if let Some(accel) = robot.max_wheel_accel {
+        if let Some(accel) = gains.shaping_wheel_accel.or(robot.max_wheel_accel) {
             let speed = f.0.hypot(f.1);
             if speed > 0.0 {
                 let scale = braking_speed(speed, k_formation, gains.braking_share * accel) / speed;
@@ -1136,6 +1150,25 @@ mod tests {
             };
             assert_eq!(bad.validate().unwrap_err().field, "braking_share");
         }
+        // A shaping limit of its own makes the labels the same whatever the robot's limit.
+        let shaped_for_one = ExpertGains {
+            shaping_wheel_accel: Some(1.0),
+            ..gains
+        };
+        assert_eq!(among(&shaped_for_one, &free), among(&gains, &limited(1.0)));
+        assert_eq!(
+            among(&shaped_for_one, &limited(3.0)),
+            among(&gains, &limited(1.0))
+        );
+        assert_eq!(run(&shaped_for_one, &free), run(&gains, &limited(1.0)));
+        for accel in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let bad = ExpertGains {
+                shaping_wheel_accel: Some(accel),
+                ..gains
+            };
+            assert_eq!(bad.validate().unwrap_err().field, "shaping_wheel_accel");
+        }
+        assert!(shaped_for_one.validate().is_ok());
     }
 
     /// Five robots whose wheels reach at most 1 m/s²: the shaped law forms the team and holds it

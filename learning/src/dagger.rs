@@ -35,6 +35,8 @@ pub struct DaggerOptions {
     pub scenario: Scenario,
     /// Team sizes of the rollouts, used in turn (empty: the scenario's own size).
     pub team_sizes: Vec<usize>,
+    /// Who labels the rollouts, and the wheel acceleration limits they are run under.
+    pub labels: RolloutLabels,
     /// DAgger iterations.
     pub iterations: usize,
     /// The final model; every iteration's model is kept beside it (`<stem>-dagger<k>.onnx`).
@@ -248,6 +250,7 @@ pub(crate) fn rollout_and_label(
         seed: opts.seed,
         occupancy: writer.header().occupancy,
         model,
+        labels: &opts.labels,
     };
     let done = AtomicUsize::new(0);
     let samples = rollouts.label_runs(0..opts.runs, &|| {
@@ -289,6 +292,29 @@ pub fn check_beta(beta: f64) -> Result<(), LearningError> {
     })
 }
 
+/// Who labels DAgger's rollouts, and under which wheel acceleration limits they run.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RolloutLabels {
+    /// The expert's gains; [`ExpertGains::shaping_wheel_accel`] makes its labels one function
+    /// of the image whatever a run's limit.
+    pub gains: ExpertGains,
+    /// Wheel acceleration limits \[m/s²\] (`None`: no limit) the runs use in turn, each with
+    /// every team size: run `i` uses `wheel_accels[(i / team sizes) % len]`. Empty: the
+    /// scenario's own.
+    pub wheel_accels: Vec<Option<f64>>,
+}
+
+impl RolloutLabels {
+    /// The wheel acceleration limit of run `i` when `teams` team sizes are used in turn, if it
+    /// overrides the scenario's.
+    fn wheel_accel_of_run(&self, i: usize, teams: usize) -> Option<Option<f64>> {
+        if self.wheel_accels.is_empty() {
+            return None;
+        }
+        Some(self.wheel_accels[(i / teams.max(1)) % self.wheel_accels.len()])
+    }
+}
+
 /// Iteration `k`'s rollouts: who drives, who labels, and how runs are drawn. Any range of runs
 /// can be labelled on its own ([`IterationRollouts::label_runs`]): run `i` is a pure function of
 /// these settings and `i`, so ranges labelled apart and concatenated in run order are the whole.
@@ -307,6 +333,8 @@ pub struct IterationRollouts<'a> {
     pub occupancy: OccupancySpec,
     /// The policy that drives when the expert does not.
     pub model: &'a Path,
+    /// The expert's gains and the runs' wheel acceleration limits.
+    pub labels: &'a RolloutLabels,
 }
 
 impl IterationRollouts<'_> {
@@ -349,11 +377,14 @@ impl IterationRollouts<'_> {
         let iteration_seed = self.seed.wrapping_add(1_000_003 * k as u64);
         let size = i % self.scenarios.len();
         let scenario = &self.scenarios[size];
-        let spec = scenario.run_spec(iteration_seed, i);
+        let mut spec = scenario.run_spec(iteration_seed, i);
+        if let Some(accel) = self.labels.wheel_accel_of_run(i, self.scenarios.len()) {
+            spec.world.robot.max_wheel_accel = accel;
+        }
         let mut coin = rand_chacha::ChaCha8Rng::seed_from_u64(spec.seed ^ 0xDA66E5);
         let beta = self.expert_share;
         let expert_drives = beta > 0.0 && coin.random::<f64>() < beta;
-        let gains = ExpertGains::default();
+        let gains = self.labels.gains;
         let mut expert =
             ExpertController::new(gains, spec.world.robot).with_neighbours(spec.neighbours);
         if policies[size].is_none() && !expert_drives {
@@ -420,6 +451,7 @@ pub(crate) mod tests {
             data,
             scenario: base.clone(),
             team_sizes: vec![3, 5],
+            labels: RolloutLabels::default(),
             iterations: 1,
             out: PathBuf::from("unused.onnx"),
             init_model: None,
@@ -487,6 +519,7 @@ pub(crate) mod tests {
             seed: 9,
             occupancy: OccupancySpec::PAPER,
             model: &model,
+            labels: &RolloutLabels::default(),
         };
         let done = AtomicUsize::new(0);
         let count = || {

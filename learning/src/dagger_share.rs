@@ -17,7 +17,7 @@ use formation_trainer_bridge::dataset::Manifest;
 use formation_world::Scenario;
 
 use crate::LearningError;
-use crate::dagger::{IterationRollouts, check_beta, team_scenarios};
+use crate::dagger::{IterationRollouts, RolloutLabels, check_beta, team_scenarios};
 
 /// What one share labels and where its part goes.
 #[derive(Debug, Clone)]
@@ -90,6 +90,7 @@ pub fn label_share(
         seed: opts.seed,
         occupancy: header.dataset.occupancy,
         model: &opts.model,
+        labels: &RolloutLabels::default(),
     };
     let samples = rollouts.label_runs(opts.runs.clone(), on_run_done)?;
     write_part(&opts.part, &header, &samples).map_err(part_error)?;
