@@ -519,6 +519,40 @@ mod tests {
     }
 
     #[test]
+    fn wheel_acceleration_limits_are_bounded_and_none_means_no_limit() {
+        assert_eq!(wheel_accel("1.5"), Ok(1.5));
+        assert_eq!(wheel_accel_or_none("none"), Ok(None));
+        assert_eq!(wheel_accel_or_none("2"), Ok(Some(2.0)));
+        for bad in ["0", "-1", "nan", "inf", "1e9", "fast"] {
+            let e = wheel_accel(bad).unwrap_err();
+            assert!(
+                e.contains("0.01 to 1000 m/s²") && e.contains(bad),
+                "{bad}: {e}"
+            );
+            let e = wheel_accel_or_none(bad).unwrap_err();
+            assert!(e.contains("or none for no limit"), "{bad}: {e}");
+        }
+        let cli = Cli::try_parse_from([
+            "formation",
+            "dagger",
+            "--data",
+            "d",
+            "--out",
+            "p.onnx",
+            "--wheel-accels",
+            "none,1.0",
+            "--label-wheel-accel",
+            "1",
+        ])
+        .unwrap();
+        let Command::Dagger(args) = cli.command else {
+            panic!("not dagger")
+        };
+        assert_eq!(args.wheel_accels, [None, Some(1.0)]);
+        assert_eq!(args.label_wheel_accel, Some(1.0));
+    }
+
+    #[test]
     fn team_sizes_are_bounded_and_lists_parse() {
         assert_eq!(team_size("16"), Ok(16));
         for bad in ["1", "0", "1025", "x"] {

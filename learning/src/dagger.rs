@@ -416,7 +416,7 @@ impl IterationRollouts<'_> {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader};
+    use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader, Sample};
 
     /// A 1 s scenario of `robots` robots, 4 runs.
     pub(crate) fn scenario(robots: usize) -> Scenario {
@@ -532,6 +532,71 @@ pub(crate) mod tests {
         assert_eq!(whole.len(), 20 * (3 + 5 + 3 + 5 + 3));
         assert!(whole.iter().all(|s| s.iteration == 2));
         assert_eq!(parts, whole);
+    }
+
+    #[test]
+    fn each_team_size_runs_with_each_wheel_acceleration_limit_in_turn() {
+        let labels = RolloutLabels {
+            wheel_accels: vec![None, Some(1.0), Some(2.0)],
+            ..RolloutLabels::default()
+        };
+        // Two team sizes: runs 0-1 without a limit, 2-3 at 1.0, 4-5 at 2.0, then again.
+        let limits: Vec<_> = (0..8).map(|i| labels.wheel_accel_of_run(i, 2)).collect();
+        assert_eq!(
+            limits,
+            [
+                None,
+                None,
+                Some(1.0),
+                Some(1.0),
+                Some(2.0),
+                Some(2.0),
+                None,
+                None
+            ]
+            .map(Some)
+        );
+        assert_eq!(RolloutLabels::default().wheel_accel_of_run(3, 2), None);
+    }
+
+    /// The expert drives every run: one run under a 0.5 m/s² limit and labels shaped for it,
+    /// against the same run without a limit and labels shaped for 0.5 m/s² all the same.
+    #[test]
+    fn rollouts_run_under_the_limits_asked_and_label_with_the_gains_asked() {
+        let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
+        let scenarios = team_scenarios(&scenario(5), &[]).unwrap();
+        let label = |labels: &RolloutLabels| {
+            IterationRollouts {
+                scenarios: &scenarios,
+                iteration: 1,
+                expert_share: 1.0,
+                seed: 4,
+                occupancy: OccupancySpec::PAPER,
+                model: &model,
+                labels,
+            }
+            .label_runs(0..1, &|| {})
+            .unwrap()
+        };
+        let limited = label(&RolloutLabels {
+            wheel_accels: vec![Some(0.5)],
+            ..RolloutLabels::default()
+        });
+        let shaped_free = label(&RolloutLabels {
+            gains: ExpertGains {
+                shaping_wheel_accel: Some(0.5),
+                ..ExpertGains::default()
+            },
+            wheel_accels: vec![None],
+        });
+        let free = label(&RolloutLabels::default());
+        let first_tick = |samples: &[Sample]| samples[..5].to_vec();
+        // At tick 0 the robots stand where the run put them: the labels are the gains' alone.
+        assert_eq!(first_tick(&limited), first_tick(&shaped_free));
+        assert_ne!(first_tick(&limited), first_tick(&free));
+        // Later the world's limit moves the robots differently.
+        assert_eq!(limited.len(), shaped_free.len());
+        assert_ne!(limited, shaped_free);
     }
 
     #[test]
