@@ -85,17 +85,25 @@ pub enum Architecture {
     /// The same convolutions with 64 channels in the last two and a head of two 256-unit layers:
     /// about twice the arithmetic, for teams with many neighbours.
     Wide,
+    /// The paper's convolutions with the wide network's head (two 256-unit layers): about 1.2
+    /// times the paper's arithmetic, and a head that can hold many neighbours at once.
+    WideHead,
 }
 
 impl Architecture {
     /// Every architecture, in the order `--help` lists them.
-    pub const ALL: [Architecture; 2] = [Architecture::Paper, Architecture::Wide];
+    pub const ALL: [Architecture; 3] = [
+        Architecture::Paper,
+        Architecture::Wide,
+        Architecture::WideHead,
+    ];
 
     /// The name the trainer and the command line use.
     pub fn name(self) -> &'static str {
         match self {
             Architecture::Paper => "paper",
             Architecture::Wide => "wide",
+            Architecture::WideHead => "wide-head",
         }
     }
 }
@@ -660,7 +668,7 @@ mod tests {
         }
         let err = "wdie".parse::<Architecture>().unwrap_err();
         assert!(
-            err.contains("\"wdie\"") && err.contains("paper, wide"),
+            err.contains("\"wdie\"") && err.contains("paper, wide, wide-head"),
             "{err}"
         );
         let plain: Vec<String> = trainer_args(&opts())

@@ -13,7 +13,7 @@ from pathlib import Path
 MISSING_DEPENDENCY_EXIT = 3
 USAGE_EXIT = 2
 #: The keys of ``model.ARCHITECTURES``, spelled out so that ``--help`` works without PyTorch.
-ARCHITECTURE_NAMES = ["paper", "wide"]
+ARCHITECTURE_NAMES = ["paper", "wide", "wide-head"]
 
 
 def _parser() -> argparse.ArgumentParser:

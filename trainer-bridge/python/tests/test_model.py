@@ -69,7 +69,7 @@ def _reflect(occupancy, aux):
     return occupancy.flip(2), torch.stack([-aux[:, 0], aux[:, 1]], dim=1)
 
 
-@pytest.mark.parametrize("architecture", ["paper", "wide"])
+@pytest.mark.parametrize("architecture", ["paper", "wide", "wide-head"])
 def test_the_mirror_average_makes_the_network_exactly_symmetric(architecture):
     torch.manual_seed(1)
     occupancy = (torch.rand(6, 1, 50, 50) < 0.05).float()
