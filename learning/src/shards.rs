@@ -115,6 +115,7 @@ pub fn merge_shards(shards: &[EvalShard], runs: Option<usize>) -> Result<EvalOut
         per_run,
     );
     out.team_size = first.team_size.clone();
+    out.model_inputs = first.model_inputs.clone();
     Ok(out)
 }
 
@@ -124,7 +125,7 @@ fn check_same_evaluation(
     shard: &EvalShard,
     index: usize,
 ) -> Result<(), MergeError> {
-    let fields: [(&'static str, String, String); 5] = [
+    let fields: [(&'static str, String, String); 6] = [
         (
             "controller",
             first.controller.clone(),
@@ -141,6 +142,11 @@ fn check_same_evaluation(
             "team_size",
             format!("{:?}", first.team_size),
             format!("{:?}", shard.team_size),
+        ),
+        (
+            "model_inputs",
+            format!("{:?}", first.model_inputs),
+            format!("{:?}", shard.model_inputs),
         ),
     ];
     match fields.into_iter().find(|(_, a, b)| a != b) {
@@ -190,6 +196,7 @@ mod tests {
             scenario: scenario.name().into(),
             seed: 11,
             team_size: Vec::new(),
+            model_inputs: Vec::new(),
             first_run: range.start,
             per_run: results.into_iter().map(|r| r.metrics).collect(),
         }

@@ -525,7 +525,8 @@ fn the_models_declared_inputs_round_trip_and_files_without_them_still_read() {
         "{text}"
     );
     // A summary of before (and the expert's): no key, no inputs.
-    let mut value: serde_json::Value = serde_json::from_slice(&to_json(&summary()).unwrap()).unwrap();
+    let mut value: serde_json::Value =
+        serde_json::from_slice(&to_json(&summary()).unwrap()).unwrap();
     value.as_object_mut().unwrap().remove("model_inputs");
     let read: EvalOutput = from_json(value.to_string().as_bytes(), path).unwrap();
     assert!(read.model_inputs.is_empty());
@@ -533,7 +534,11 @@ fn the_models_declared_inputs_round_trip_and_files_without_them_still_read() {
         model_inputs: Vec::new(),
         ..summary()
     };
-    assert!(!String::from_utf8(to_json(&expert).unwrap()).unwrap().contains("model_inputs"));
+    assert!(
+        !String::from_utf8(to_json(&expert).unwrap())
+            .unwrap()
+            .contains("model_inputs")
+    );
     // A fixed window leaves its reference d* out; a model without an envelope, its range.
     let paper = crate::ModelInput {
         occupancy: formation_proto::OccupancySpec::PAPER,
@@ -552,8 +557,14 @@ fn the_models_declared_inputs_round_trip_and_files_without_them_still_read() {
         per_run: vec![metrics()],
     };
     let text = String::from_utf8(to_json(&shard).unwrap()).unwrap();
-    assert!(!text.contains("d_star_ref_m") && !text.contains("trained_d_star_m"), "{text}");
-    assert_eq!(from_json::<crate::EvalShard>(text.as_bytes(), path).unwrap(), shard);
+    assert!(
+        !text.contains("d_star_ref_m") && !text.contains("trained_d_star_m"),
+        "{text}"
+    );
+    assert_eq!(
+        from_json::<crate::EvalShard>(text.as_bytes(), path).unwrap(),
+        shard
+    );
     let mut table = scaling();
     table.rows[0].model_input = Some(paper);
     assert_eq!(
