@@ -270,7 +270,14 @@ fn a_scaling_table_gets_its_section_with_the_rows_and_the_figure() {
         max_edge_window_error: Some(q(0.02)),
         collisions: 0,
         team_size: None,
-        model_input: None,
+        model_input: (controller == "policy").then(|| formation_schema::ModelInput {
+            model: "policy-1234".into(),
+            occupancy: formation_proto::OccupancySpec::PAPER,
+            lidar_beams: 900,
+            lidar_max_range_m: 10.0,
+            lidar_noise_std_m: None,
+            trained_d_star_m: None,
+        }),
     };
     let table = ScalingTable {
         scenario: "teams".into(),
@@ -296,6 +303,15 @@ fn a_scaling_table_gets_its_section_with_the_rows_and_the_figure() {
     assert!(html.contains("Scaling over team sizes"));
     assert!(html.contains("<td>16</td><td>gabriel</td><td>10</td><td>88.0 %</td><td>98.0 %</td>"));
     assert!(html.contains("policy-1234"));
+    assert_eq!(
+        html.matches(
+            "input of model policy-1234: 50 × 50 cells of 0.1 m (a fixed 5 m window), far hits \
+             dropped; 900-beam 10 m LIDAR."
+        )
+        .count(),
+        1,
+        "one note per model, not per row"
+    );
     let svg = fs::read_to_string(&summary.figures[0]).expect("svg");
     assert!(svg.contains("expert @ 10 %") && svg.contains("policy @ 5 %"));
 }
