@@ -157,3 +157,64 @@ pub fn checked_team_models(
     };
     Ok((models, notes))
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use formation_onnx::ModelMetadata;
+    use formation_proto::OccupancySpec;
+
+    use super::*;
+
+    fn metadata(occupancy: OccupancySpec, extra: &[(&str, &str)]) -> ModelMetadata {
+        ModelMetadata {
+            occupancy,
+            beams: 900,
+            max_range: 10.0,
+            v_train: 0.7,
+            dataset_id: "d".into(),
+            extra: extra
+                .iter()
+                .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))
+                .collect::<BTreeMap<_, _>>(),
+        }
+    }
+
+    #[test]
+    fn each_distinct_model_declares_its_input_once_in_first_use_order() {
+        let scaled = OccupancySpec {
+            d_star_ref_m: Some(1.5),
+            ..OccupancySpec::PAPER
+        };
+        let envelope = [
+            (formation_onnx::contract::keys::D_STAR_MIN, "0.8"),
+            (formation_onnx::contract::keys::D_STAR_MAX, "2.5"),
+            (formation_onnx::contract::keys::NOISE_STD, "0.03"),
+            (formation_onnx::contract::keys::TEAM_SIZES, "3,5"),
+        ];
+        let team = [
+            ("scaled".to_owned(), metadata(scaled, &envelope)),
+            ("paper".to_owned(), metadata(OccupancySpec::PAPER, &[])),
+            ("scaled".to_owned(), metadata(scaled, &envelope)),
+        ];
+        let inputs = model_inputs_of(&team);
+        assert_eq!(
+            inputs.iter().map(|i| i.model.as_str()).collect::<Vec<_>>(),
+            ["scaled", "paper"]
+        );
+        assert_eq!(inputs[0].occupancy, scaled);
+        assert_eq!(inputs[0].trained_d_star_m, Some([0.8, 2.5]));
+        assert_eq!(inputs[0].lidar_noise_std_m, Some(0.03));
+        assert_eq!(
+            (inputs[0].lidar_beams, inputs[0].lidar_max_range_m),
+            (900, 10.0)
+        );
+        assert_eq!(inputs[1].occupancy, OccupancySpec::PAPER);
+        assert_eq!(inputs[1].trained_d_star_m, None);
+        // The team sizes follow the same distinct models.
+        let sizes = team_sizes_of(&team, 4);
+        assert_eq!(sizes.len(), 1, "only the scaled model records team sizes");
+        assert!(sizes[0].zero_shot);
+    }
+}

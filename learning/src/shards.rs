@@ -287,4 +287,37 @@ mod tests {
         assert!(refused.to_string().contains("another evaluation"));
         assert_eq!(merge_shards(&[], None), Err(MergeError::Empty));
     }
+
+    #[test]
+    fn the_models_declared_inputs_carry_into_the_summary_and_must_agree() {
+        let scenario = scenario();
+        let input = formation_schema::ModelInput {
+            model: "m-1".into(),
+            occupancy: formation_proto::OccupancySpec::PAPER,
+            lidar_beams: 90,
+            lidar_max_range_m: 10.0,
+            lidar_noise_std_m: None,
+            trained_d_star_m: None,
+        };
+        let with_input = |range| EvalShard {
+            model_inputs: vec![input.clone()],
+            ..shard(&scenario, range)
+        };
+        let merged = merge_shards(&[with_input(0..4), with_input(4..7)], Some(7)).expect("merge");
+        assert_eq!(merged.model_inputs, vec![input.clone()]);
+        let mut scaled = with_input(4..7);
+        scaled.model_inputs[0].occupancy.d_star_ref_m = Some(1.5);
+        let refused = merge_shards(&[with_input(0..4), scaled], Some(7)).expect_err("two inputs");
+        assert!(
+            matches!(
+                &refused,
+                MergeError::Mismatch {
+                    index: 1,
+                    field: "model_inputs",
+                    ..
+                }
+            ),
+            "{refused}"
+        );
+    }
 }
