@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{TempDir, Watchdog, binaries, case1_scenario, read_json, repo_root, run};
+use formation_tests::{TempDir, Watchdog, binaries, case1_scenario, repo_root, run};
 
 /// The watchdog limit: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
@@ -36,41 +36,41 @@ fn the_report_says_what_input_the_scaled_and_the_paper_window_models_were_given(
         let model = repo_root().join(format!("onnx/models/{name}/policy.onnx"));
         eval_out(&scenario, &model, &evals.join(name));
     }
-
-    let scaled = read_json(&evals.join("scaled/summary.json"));
-    let input = &scaled["model_inputs"][0];
-    assert_eq!(input["model"], scaled["models"][0], "{scaled}");
-    assert_eq!(input["occupancy"]["size_px"], 50, "{input}");
-    assert_eq!(input["occupancy"]["d_star_ref_m"], 1.5, "{input}");
-    assert_eq!(input["trained_d_star_m"], serde_json::json!([0.8, 2.5]));
-    assert_eq!(input["lidar_beams"], 900);
-    let paper = read_json(&evals.join("paper/summary.json"));
-    let input = &paper["model_inputs"][0];
-    assert!(input["occupancy"].get("d_star_ref_m").is_none(), "{input}");
-    assert_eq!(paper["model_inputs"].as_array().map(Vec::len), Some(1));
-
     let html = dir.path().join("report.html");
     let mut report = Command::new(&binaries().cli);
     report.arg("report").arg(&evals).arg("--out").arg(&html);
     run(report, LIMIT).assert_success();
     let page = std::fs::read_to_string(&html).expect("the report");
-    let scaled_text = "50 × 50 cells of 0.1 m at d* = 1.5 m (scales with d*: 0.053-0.167 m over \
-                       the model&#39;s d* range 0.8-2.5 m), far hits on the border; 900-beam 10 m \
-                       LIDAR, noise 0.03 m";
-    let paper_text = "50 × 50 cells of 0.1 m (a fixed 5 m window), far hits on the border; \
-                      900-beam 10 m LIDAR, no noise";
-    for (name, text, id) in [
-        ("scaled", scaled_text, &scaled["models"][0]),
-        ("paper", paper_text, &paper["models"][0]),
+
+    for (name, scales, says) in [
+        ("scaled", true, "scales with d*"),
+        ("paper", false, "fixed"),
     ] {
-        let id = id.as_str().expect("a model id");
+        let summary = formation_schema::read_summary(&evals.join(name).join("summary.json"))
+            .expect("the summary eval wrote");
+        let [input] = summary.model_inputs.as_slice() else {
+            panic!("{name}: one model, one declared input: {summary:?}");
+        };
+        assert_eq!(input.model, summary.models[0]);
+        assert_eq!(
+            input.occupancy.scales_with_d_star(),
+            scales,
+            "{name}: {input:?}"
+        );
+        assert_eq!(
+            (input.occupancy.size_px, input.lidar_beams),
+            (50, 900),
+            "{name}: the shipped models take the paper's image and LIDAR"
+        );
+        let text = input.describe().replace('\'', "&#39;");
+        assert!(text.contains(says), "{name}: {text}");
         assert!(
-            page.contains(&format!("{name}: input of model {id}: {text}.")),
-            "the note under Table I names {name}'s input"
+            page.contains(&format!("{name}: input of model {}: {text}.", input.model)),
+            "the note under Table I says {name}'s input: {text}"
         );
         assert!(
             page.contains(&format!("<dt>policy input</dt><dd>{text}</dd>")),
-            "{name}'s run says what its policy was given"
+            "{name}'s run says what its policy was given: {text}"
         );
     }
 }
