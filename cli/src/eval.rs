@@ -25,7 +25,8 @@ use crate::args::{ControllerKind, EvalArgs, MergeArgs};
 use crate::paths;
 use crate::table::table_text;
 use crate::team_models::{
-    checked_models, print_team_size_notes, resolved_models_per_robot, team_sizes_of,
+    checked_models, model_input, model_inputs_of, print_team_size_notes, resolved_models_per_robot,
+    team_sizes_of,
 };
 
 /// What `formation eval` writes as JSON, and a run that stopped early: defined in
@@ -199,6 +200,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         per_run,
     );
     out.team_size = team.team_size;
+    out.model_inputs = team.model_inputs;
     eprintln!(
         "evaluated {runs} runs in {elapsed:.1} s ({:.2} s per run)",
         elapsed / runs as f64
@@ -263,12 +265,15 @@ struct EvalTeam {
     model_ids: Vec<String>,
     /// The team-size notes of the models, for the output.
     team_size: Vec<formation_schema::ModelTeamSize>,
+    /// The input each distinct model declares, for the output.
+    model_inputs: Vec<formation_schema::ModelInput>,
 }
 
 /// Resolves and checks the team's models (printing their team-size notes); refuses
 /// `--processes` with the expert.
 fn eval_team(args: &EvalArgs, scenario: &Scenario) -> anyhow::Result<EvalTeam> {
     let mut team_size = Vec::new();
+    let mut model_inputs = Vec::new();
     let (models, model_ids) = match args.controller {
         ControllerKind::Expert => {
             if args.processes {
@@ -283,6 +288,7 @@ fn eval_team(args: &EvalArgs, scenario: &Scenario) -> anyhow::Result<EvalTeam> {
             let models = resolved_models_per_robot(scenario, &default)?;
             let checked = checked_models(&models, scenario)?;
             team_size = team_sizes_of(&checked, scenario.n_robots());
+            model_inputs = model_inputs_of(&checked);
             print_team_size_notes(&team_size);
             (models, checked.into_iter().map(|(id, _)| id).collect())
         }
@@ -291,6 +297,7 @@ fn eval_team(args: &EvalArgs, scenario: &Scenario) -> anyhow::Result<EvalTeam> {
         models,
         model_ids,
         team_size,
+        model_inputs,
     })
 }
 
@@ -467,6 +474,7 @@ pub fn shard_command(args: &EvalArgs, shard: &Path) -> anyhow::Result<()> {
         scenario: scenario.name().to_owned(),
         seed,
         team_size: team.team_size,
+        model_inputs: team.model_inputs,
         first_run: first,
         per_run: results.into_iter().map(|r| r.metrics).collect(),
     };
@@ -514,16 +522,18 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
     let mut drivers = vec![ScalingDriver::Expert(ExpertGains::default())];
     if args.model.is_some() {
         let model = paths::resolve_model(args.model.as_deref())?;
-        let (id, envelope) = checked_models(std::slice::from_ref(&model), &base)?
-            .pop()
-            .unwrap_or_default();
+        let checked = checked_models(std::slice::from_ref(&model), &base)?;
         for &robots in sizes {
-            print_team_size_notes(&team_sizes_of(&[(id.clone(), envelope.clone())], robots));
+            print_team_size_notes(&team_sizes_of(&checked, robots));
         }
+        let Some((id, metadata)) = checked.into_iter().next() else {
+            anyhow::bail!("no model to evaluate: give --model FILE");
+        };
         drivers.push(ScalingDriver::Policy {
             model,
+            input: Some(model_input(&id, &metadata)),
+            trained_team_sizes: metadata.envelope().team_sizes,
             id,
-            trained_team_sizes: envelope.team_sizes,
         });
     }
     let bar = progress_bar(runs * sizes.len() * drivers.len(), "scaling");

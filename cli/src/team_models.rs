@@ -1,6 +1,7 @@
 //! The models a team drives: each robot's model file, checked against the scenario before
-//! anything runs, and what each model's trained team sizes say about this team. Shared by
-//! `formation eval` and the launcher.
+//! anything runs, what each model's trained team sizes say about this team, and the input each
+//! model declares (its occupancy window and LIDAR, for the summary). Shared by `formation eval`
+//! and the launcher.
 
 use std::path::{Path, PathBuf};
 
@@ -39,16 +40,16 @@ fn assigned_models(scenario: &Scenario, default: &Path) -> anyhow::Result<Vec<Pa
     Ok(models)
 }
 
-/// Model ids of the given files, as the agents would report them, beside each model's envelope,
-/// after checking each model against the contract and the scenario's LIDAR (beams, range,
+/// Model ids of the given files, as the agents would report them, beside each model's metadata
+/// (its declared input and its envelope), after checking each model against the contract and the scenario's LIDAR (beams, range,
 /// window), and the scenario's d* against each model's trained d* range (its envelope), before
 /// anything runs.
 pub fn checked_models(
     models: &[PathBuf],
     scenario: &Scenario,
-) -> anyhow::Result<Vec<(String, formation_onnx::ModelEnvelope)>> {
+) -> anyhow::Result<Vec<(String, formation_onnx::ModelMetadata)>> {
     Ok(
-        formation_robot_agent::decision::check_team_models_with_envelopes(
+        formation_robot_agent::decision::check_team_models_with_metadata(
             models,
             &scenario.world_config().lidar,
             &scenario_d_stars(scenario),
@@ -59,23 +60,54 @@ pub fn checked_models(
 /// Each distinct model of a team (by id, in first-use order) that records its trained team
 /// sizes, against the team's size `robots`.
 pub fn team_sizes_of(
-    models: &[(String, formation_onnx::ModelEnvelope)],
+    models: &[(String, formation_onnx::ModelMetadata)],
     robots: usize,
 ) -> Vec<formation_schema::ModelTeamSize> {
-    let mut seen = Vec::new();
-    let mut out = Vec::new();
-    for (id, envelope) in models {
-        if seen.contains(&id) {
-            continue;
-        }
-        seen.push(id);
-        out.extend(formation_schema::ModelTeamSize::new(
-            id,
-            &envelope.team_sizes,
-            robots,
-        ));
+    distinct(models)
+        .filter_map(|(id, metadata)| {
+            formation_schema::ModelTeamSize::new(id, &metadata.envelope().team_sizes, robots)
+        })
+        .collect()
+}
+
+/// The input each distinct model of a team declares (by id, in first-use order).
+pub fn model_inputs_of(
+    models: &[(String, formation_onnx::ModelMetadata)],
+) -> Vec<formation_schema::ModelInput> {
+    distinct(models)
+        .map(|(id, metadata)| model_input(id, metadata))
+        .collect()
+}
+
+/// The input model `id` declares in its metadata: its occupancy window, its LIDAR, and the d*
+/// range and noise of its training data.
+pub fn model_input(
+    id: &str,
+    metadata: &formation_onnx::ModelMetadata,
+) -> formation_schema::ModelInput {
+    let envelope = metadata.envelope();
+    formation_schema::ModelInput {
+        model: id.to_owned(),
+        occupancy: metadata.occupancy,
+        lidar_beams: metadata.beams,
+        lidar_max_range_m: metadata.max_range,
+        lidar_noise_std_m: envelope.noise_std,
+        trained_d_star_m: envelope.d_star.map(|(lo, hi)| [lo, hi]),
     }
-    out
+}
+
+/// The first entry of each model id, in order.
+fn distinct(
+    models: &[(String, formation_onnx::ModelMetadata)],
+) -> impl Iterator<Item = &(String, formation_onnx::ModelMetadata)> {
+    let mut seen: Vec<&str> = Vec::new();
+    models.iter().filter(move |(id, _)| {
+        let new = !seen.contains(&id.as_str());
+        if new {
+            seen.push(id);
+        }
+        new
+    })
 }
 
 /// Prints, on stderr, a line for each model that never saw a team of this size: a note when
@@ -101,18 +133,88 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
     Ok(checked_team_models(scenario, default)?.0)
 }
 
+/// What a launch's summary says about its models: each distinct model's trained team sizes
+/// against the team's size, and the input each declares.
+#[derive(Debug, Clone, Default)]
+pub struct TeamModelNotes {
+    /// The team-size records ([`team_sizes_of`]).
+    pub team_size: Vec<formation_schema::ModelTeamSize>,
+    /// The declared inputs ([`model_inputs_of`]).
+    pub model_inputs: Vec<formation_schema::ModelInput>,
+}
+
 /// [`models_per_robot`], with each distinct model's trained team sizes against the scenario's
-/// team size (for the terminal and `summary.json`).
+/// team size and its declared input (for the terminal and `summary.json`).
 pub fn checked_team_models(
     scenario: &Scenario,
     default: &Path,
-) -> anyhow::Result<(Vec<PathBuf>, Vec<formation_schema::ModelTeamSize>)> {
+) -> anyhow::Result<(Vec<PathBuf>, TeamModelNotes)> {
     let models = assigned_models(scenario, default)?;
-    let checked = formation_robot_agent::decision::check_team_models_with_envelopes(
-        &models,
-        &scenario.world_config().lidar,
-        &scenario_d_stars(scenario),
-    )?;
-    let team_size = team_sizes_of(&checked, scenario.n_robots());
-    Ok((models, team_size))
+    let checked = checked_models(&models, scenario)?;
+    let notes = TeamModelNotes {
+        team_size: team_sizes_of(&checked, scenario.n_robots()),
+        model_inputs: model_inputs_of(&checked),
+    };
+    Ok((models, notes))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use formation_onnx::ModelMetadata;
+    use formation_proto::OccupancySpec;
+
+    use super::*;
+
+    fn metadata(occupancy: OccupancySpec, extra: &[(&str, &str)]) -> ModelMetadata {
+        ModelMetadata {
+            occupancy,
+            beams: 900,
+            max_range: 10.0,
+            v_train: 0.7,
+            dataset_id: "d".into(),
+            extra: extra
+                .iter()
+                .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))
+                .collect::<BTreeMap<_, _>>(),
+        }
+    }
+
+    #[test]
+    fn each_distinct_model_declares_its_input_once_in_first_use_order() {
+        let scaled = OccupancySpec {
+            d_star_ref_m: Some(1.5),
+            ..OccupancySpec::PAPER
+        };
+        let envelope = [
+            (formation_onnx::contract::keys::D_STAR_MIN, "0.8"),
+            (formation_onnx::contract::keys::D_STAR_MAX, "2.5"),
+            (formation_onnx::contract::keys::NOISE_STD, "0.03"),
+            (formation_onnx::contract::keys::TEAM_SIZES, "3,5"),
+        ];
+        let team = [
+            ("scaled".to_owned(), metadata(scaled, &envelope)),
+            ("paper".to_owned(), metadata(OccupancySpec::PAPER, &[])),
+            ("scaled".to_owned(), metadata(scaled, &envelope)),
+        ];
+        let inputs = model_inputs_of(&team);
+        assert_eq!(
+            inputs.iter().map(|i| i.model.as_str()).collect::<Vec<_>>(),
+            ["scaled", "paper"]
+        );
+        assert_eq!(inputs[0].occupancy, scaled);
+        assert_eq!(inputs[0].trained_d_star_m, Some([0.8, 2.5]));
+        assert_eq!(inputs[0].lidar_noise_std_m, Some(0.03));
+        assert_eq!(
+            (inputs[0].lidar_beams, inputs[0].lidar_max_range_m),
+            (900, 10.0)
+        );
+        assert_eq!(inputs[1].occupancy, OccupancySpec::PAPER);
+        assert_eq!(inputs[1].trained_d_star_m, None);
+        // The team sizes follow the same distinct models.
+        let sizes = team_sizes_of(&team, 4);
+        assert_eq!(sizes.len(), 1, "only the scaled model records team sizes");
+        assert!(sizes[0].zero_shot);
+    }
 }

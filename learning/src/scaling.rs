@@ -29,6 +29,8 @@ pub enum ScalingDriver {
         /// The team sizes it was trained on (its envelope; empty when it records none), so
         /// that a row for another size is marked zero-shot.
         trained_team_sizes: Vec<usize>,
+        /// The input it declares (its occupancy window and LIDAR), for its rows.
+        input: Option<formation_schema::ModelInput>,
     },
 }
 
@@ -50,16 +52,18 @@ pub fn evaluate_scaling(
     for &robots in sizes {
         let scenario = base.with_robots(robots)?;
         for driver in drivers {
-            let (run_driver, model, team_size) = match driver {
-                ScalingDriver::Expert(gains) => (Driver::Expert(*gains), None, None),
+            let (run_driver, model, team_size, model_input) = match driver {
+                ScalingDriver::Expert(gains) => (Driver::Expert(*gains), None, None, None),
                 ScalingDriver::Policy {
                     model,
                     id,
                     trained_team_sizes,
+                    input,
                 } => (
                     Driver::policy_for(&scenario, model)?,
                     Some(id.clone()),
                     ModelTeamSize::new(id, trained_team_sizes, robots),
+                    input.clone(),
                 ),
             };
             let row = rows.len();
@@ -75,6 +79,7 @@ pub fn evaluate_scaling(
             let metrics: Vec<RunMetrics> = results.into_iter().map(|r| r.metrics).collect();
             rows.push(ScalingRow {
                 team_size,
+                model_input,
                 ..scaling_row(
                     run_driver.name(),
                     model,
@@ -124,6 +129,7 @@ pub fn scaling_row(
         max_edge_window_error: quantiles(runs.iter().map(|r| r.max_edge_window_error)),
         collisions: summary.collisions,
         team_size: None,
+        model_input: None,
     }
 }
 

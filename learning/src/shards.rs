@@ -115,6 +115,7 @@ pub fn merge_shards(shards: &[EvalShard], runs: Option<usize>) -> Result<EvalOut
         per_run,
     );
     out.team_size = first.team_size.clone();
+    out.model_inputs = first.model_inputs.clone();
     Ok(out)
 }
 
@@ -124,7 +125,7 @@ fn check_same_evaluation(
     shard: &EvalShard,
     index: usize,
 ) -> Result<(), MergeError> {
-    let fields: [(&'static str, String, String); 5] = [
+    let fields: [(&'static str, String, String); 6] = [
         (
             "controller",
             first.controller.clone(),
@@ -141,6 +142,11 @@ fn check_same_evaluation(
             "team_size",
             format!("{:?}", first.team_size),
             format!("{:?}", shard.team_size),
+        ),
+        (
+            "model_inputs",
+            format!("{:?}", first.model_inputs),
+            format!("{:?}", shard.model_inputs),
         ),
     ];
     match fields.into_iter().find(|(_, a, b)| a != b) {
@@ -190,6 +196,7 @@ mod tests {
             scenario: scenario.name().into(),
             seed: 11,
             team_size: Vec::new(),
+            model_inputs: Vec::new(),
             first_run: range.start,
             per_run: results.into_iter().map(|r| r.metrics).collect(),
         }
@@ -279,5 +286,38 @@ mod tests {
         );
         assert!(refused.to_string().contains("another evaluation"));
         assert_eq!(merge_shards(&[], None), Err(MergeError::Empty));
+    }
+
+    #[test]
+    fn the_models_declared_inputs_carry_into_the_summary_and_must_agree() {
+        let scenario = scenario();
+        let input = formation_schema::ModelInput {
+            model: "m-1".into(),
+            occupancy: formation_proto::OccupancySpec::PAPER,
+            lidar_beams: 90,
+            lidar_max_range_m: 10.0,
+            lidar_noise_std_m: None,
+            trained_d_star_m: None,
+        };
+        let with_input = |range| EvalShard {
+            model_inputs: vec![input.clone()],
+            ..shard(&scenario, range)
+        };
+        let merged = merge_shards(&[with_input(0..4), with_input(4..7)], Some(7)).expect("merge");
+        assert_eq!(merged.model_inputs, vec![input.clone()]);
+        let mut scaled = with_input(4..7);
+        scaled.model_inputs[0].occupancy.d_star_ref_m = Some(1.5);
+        let refused = merge_shards(&[with_input(0..4), scaled], Some(7)).expect_err("two inputs");
+        assert!(
+            matches!(
+                &refused,
+                MergeError::Mismatch {
+                    index: 1,
+                    field: "model_inputs",
+                    ..
+                }
+            ),
+            "{refused}"
+        );
     }
 }

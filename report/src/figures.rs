@@ -932,6 +932,7 @@ mod tests {
             max_edge_window_error: None,
             collisions: 0,
             team_size: None,
+            model_input: None,
         };
         let table = formation_schema::ScalingTable {
             scenario: "teams".into(),

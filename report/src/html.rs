@@ -96,6 +96,8 @@ pub struct TableEntry {
     pub partial: Option<String>,
     /// Which runs a median covers, when its rule leaves some successful runs out.
     pub medians: Option<String>,
+    /// What each model was given (`input of model m-1: 50 × 50 cells ...`), policy only.
+    pub model_inputs: Vec<String>,
 }
 
 /// Everything on the page.
@@ -467,6 +469,14 @@ fn write_table(html: &mut String, page: &ReportPage) {
                 escape(note)
             );
         }
+        for note in &entry.model_inputs {
+            let _ = writeln!(
+                html,
+                "<p class=\"note model-input\">{}: {}.</p>",
+                escape(&entry.name),
+                escape(note)
+            );
+        }
     }
     html.push_str(
         "<p class=\"note\">A run succeeds at tolerance τ when, for every pair of robots, the mean of the relative formation error |dᵢⱼ − d*| / d* over the last 20 s is below τ. The error medians are over the runs that succeed at 10 %; the convergence time is when the largest pairwise error falls below 10 % for good, and its median is over the runs that succeed at 10 % and converged (a run can succeed on its 20 s mean without converging).</p>\n</div>\n</section>\n",
@@ -563,6 +573,21 @@ fn write_scaling(html: &mut String, section: &ScalingSection) {
         "<p class=\"note\">From <code>{}</code>. Success is the strict check: every edge of the neighbour graph within the tolerance over the last 20 s, the graph connected and no collision (the paper's check for all pairs); anchor-compatible: mean edge error at most 10 % at the end and no two robots closer than 0.2 m.</p>",
         escape(&section.source)
     );
+    let mut described: Vec<&str> = Vec::new();
+    for input in section
+        .rows
+        .iter()
+        .filter_map(|row| row.model_input.as_ref())
+    {
+        if !described.contains(&input.model.as_str()) {
+            described.push(&input.model);
+            let _ = writeln!(
+                html,
+                "<p class=\"note model-input\">{}.</p>",
+                escape(&crate::model_input_note(input))
+            );
+        }
+    }
     write_captioned(html, &section.figure);
     html.push_str("</div>\n");
 }
@@ -699,6 +724,7 @@ mod tests {
                 incomplete: Some("1 of 20 runs incomplete (stopped early: <Ctrl-C>)".into()),
                 partial: None,
                 medians: None,
+                model_inputs: Vec::new(),
             }],
             fig9: Some(CaptionedFigure {
                 placed: placed("fig9"),

@@ -63,6 +63,9 @@ pub struct EvalData {
     pub controller: String,
     /// Model ids (policy only).
     pub models: Vec<String>,
+    /// The input each distinct model declares (its occupancy window and LIDAR), when the summary
+    /// records it (policy only; absent in summaries written before it existed).
+    pub model_inputs: Vec<formation_schema::ModelInput>,
     /// Scenario name.
     pub scenario: String,
     /// Base seed, when recorded.
@@ -170,6 +173,7 @@ pub fn eval_data(summary: EvalOutput, source: &Path, name: &str) -> Result<EvalD
         incomplete_runs,
         run_logs,
         complete,
+        model_inputs,
         ..
     } = summary;
     for (key, rate) in [
@@ -198,6 +202,7 @@ pub fn eval_data(summary: EvalOutput, source: &Path, name: &str) -> Result<EvalD
         source: source.to_path_buf(),
         controller,
         models,
+        model_inputs,
         scenario,
         seed,
         table: TableRow {
@@ -568,6 +573,7 @@ mod tests {
             braked_ticks: Vec::new(),
             incomplete_runs: Vec::new(),
             team_size: Vec::new(),
+            model_inputs: Vec::new(),
             run_logs: Vec::new(),
             complete: true,
         }

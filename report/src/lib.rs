@@ -5,7 +5,9 @@
 //! (`*loss*.csv`) and latency profiles (`profile.json`), and writes one self-contained HTML file
 //! with
 //!
-//! * Table I: success at 5 % and 10 % and the Fig. 9 medians, the paper's numbers beside ours;
+//! * Table I: success at 5 % and 10 % and the Fig. 9 medians, the paper's numbers beside ours,
+//!   with the input each policy was given as its model declares it (the occupancy window, its
+//!   cells and whether they scale with d*, far hits, the LIDAR; also in each run's facts);
 //! * Fig. 9: box plots of convergence time, relative formation error and orientation error over
 //!   the runs that succeed at 10 %;
 //! * for each run log (the paper's cases, Figs. 6-8): formation and orientation error over time,
@@ -154,6 +156,7 @@ fn add_table_and_statistics(
             incomplete: incomplete_note(e),
             partial: partial_note(e),
             medians: medians_note(e),
+            model_inputs: e.model_inputs.iter().map(model_input_note).collect(),
         })
         .collect();
 
@@ -462,6 +465,28 @@ pub fn input_warnings(inputs: &Inputs) -> Vec<String> {
         .collect()
 }
 
+/// What a model was given, as its metadata declares it: `input of model m-1: 50 × 50 cells of
+/// 0.1 m (a fixed 5 m window), far hits dropped; 900-beam 10 m LIDAR`.
+pub fn model_input_note(input: &formation_schema::ModelInput) -> String {
+    format!("input of model {}: {}", input.model, input.describe())
+}
+
+/// The input each of an evaluation's models was given, for a run's facts: the description
+/// alone for one model, each prefixed by its id for several; `None` without any (the expert,
+/// or a summary written before models recorded it).
+fn model_inputs_fact(eval: &EvalData) -> Option<String> {
+    match eval.model_inputs.as_slice() {
+        [] => None,
+        [one] => Some(one.describe()),
+        many => Some(
+            many.iter()
+                .map(|input| format!("{}: {}", input.model, input.describe()))
+                .collect::<Vec<_>>()
+                .join("; "),
+        ),
+    }
+}
+
 fn eval_detail(eval: &EvalData) -> String {
     let mut parts = vec![if eval.controller.is_empty() {
         "?".to_owned()
@@ -687,7 +712,7 @@ fn run_caption(eval: &EvalData, run: &RunData, number: usize) -> String {
 fn run_facts(eval: &EvalData, run: &RunData, duration: f64) -> Vec<(String, String)> {
     let traj = &run.trajectory;
     let yes_no = |b: bool| if b { "yes" } else { "no" }.to_owned();
-    vec![
+    let mut facts = vec![
         (
             "scenario".to_owned(),
             if eval.scenario.is_empty() {
@@ -726,7 +751,12 @@ fn run_facts(eval: &EvalData, run: &RunData, duration: f64) -> Vec<(String, Stri
             }),
         ),
         ("collisions".to_owned(), run.scores.collisions.to_string()),
-    ]
+    ];
+    if let Some(input) = model_inputs_fact(eval) {
+        // After the controller: what the policy was given.
+        facts.insert(2, ("policy input".to_owned(), input));
+    }
+    facts
 }
 
 /// `constant desired orientation φ* = 3.76 rad` or `time-varying desired orientation φ*(t) from

@@ -270,6 +270,14 @@ fn a_scaling_table_gets_its_section_with_the_rows_and_the_figure() {
         max_edge_window_error: Some(q(0.02)),
         collisions: 0,
         team_size: None,
+        model_input: (controller == "policy").then(|| formation_schema::ModelInput {
+            model: "policy-1234".into(),
+            occupancy: formation_proto::OccupancySpec::PAPER,
+            lidar_beams: 900,
+            lidar_max_range_m: 10.0,
+            lidar_noise_std_m: None,
+            trained_d_star_m: None,
+        }),
     };
     let table = ScalingTable {
         scenario: "teams".into(),
@@ -295,6 +303,15 @@ fn a_scaling_table_gets_its_section_with_the_rows_and_the_figure() {
     assert!(html.contains("Scaling over team sizes"));
     assert!(html.contains("<td>16</td><td>gabriel</td><td>10</td><td>88.0 %</td><td>98.0 %</td>"));
     assert!(html.contains("policy-1234"));
+    assert_eq!(
+        html.matches(
+            "input of model policy-1234: 50 × 50 cells of 0.1 m (a fixed 5 m window), far hits \
+             dropped; 900-beam 10 m LIDAR."
+        )
+        .count(),
+        1,
+        "one note per model, not per row"
+    );
     let svg = fs::read_to_string(&summary.figures[0]).expect("svg");
     assert!(svg.contains("expert @ 10 %") && svg.contains("policy @ 5 %"));
 }
@@ -365,4 +382,81 @@ fn the_page_states_which_runs_the_convergence_median_covers() {
         ),
         "the page states the median's runs"
     );
+}
+
+/// The input each model declares, as the summary records it: a window that scales with d* says
+/// its reference d* and its cells over the model's d* range, the paper's fixed window says its
+/// size and that far hits are dropped; both in the notes under Table I and in each run's facts,
+/// and nothing of the kind for a summary without them.
+#[test]
+fn the_page_says_what_input_each_model_was_given() {
+    use formation_proto::{BeyondWindow, OccupancySpec};
+    use formation_schema::ModelInput;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let metrics: Vec<_> = (0..2).map(|k| common::run_metrics(k, true)).collect();
+    let paper = ModelInput {
+        model: "policy-paper".into(),
+        occupancy: OccupancySpec::PAPER,
+        lidar_beams: 900,
+        lidar_max_range_m: 10.0,
+        lidar_noise_std_m: None,
+        trained_d_star_m: None,
+    };
+    let scaled = ModelInput {
+        model: "policy-scaled".into(),
+        occupancy: OccupancySpec {
+            beyond: BeyondWindow::Border,
+            d_star_ref_m: Some(1.5),
+            ..OccupancySpec::PAPER
+        },
+        lidar_noise_std_m: Some(0.01),
+        trained_d_star_m: Some([0.8, 2.5]),
+        ..paper.clone()
+    };
+    for (name, input) in [
+        ("fixed", Some(&paper)),
+        ("scaled", Some(&scaled)),
+        ("older", None),
+    ] {
+        let mut summary = common::summary(name, &metrics);
+        summary.models = vec![input.map_or("policy-abc123".into(), |i| i.model.clone()); 3];
+        summary.model_inputs = input.into_iter().cloned().collect();
+        common::write_file(&dir.path().join(format!("{name}/summary.json")), &summary);
+        common::write_file(
+            &dir.path().join(format!("{name}/runs/run-0000.json")),
+            &common::run_log(
+                0,
+                metrics[0].clone(),
+                common::trajectory(common::Heading::Constant(3.76), 1.5, 25.0, 0),
+            ),
+        );
+    }
+    let out = dir.path().join("report.html");
+    build_report(dir.path(), &out).expect("report");
+    let html = fs::read_to_string(&out).expect("html");
+    let fixed_text = "50 × 50 cells of 0.1 m (a fixed 5 m window), far hits dropped; 900-beam \
+                      10 m LIDAR";
+    let scaled_text = "50 × 50 cells of 0.1 m at d* = 1.5 m (scales with d*: 0.053-0.167 m over \
+                       the model&#39;s d* range 0.8-2.5 m), far hits on the border; 900-beam 10 m \
+                       LIDAR, noise 0.01 m";
+    assert!(
+        html.contains(&format!(
+            "fixed: input of model policy-paper: {fixed_text}."
+        )),
+        "the fixed window under Table I: {html}"
+    );
+    assert!(
+        html.contains(&format!(
+            "scaled: input of model policy-scaled: {scaled_text}."
+        )),
+        "the scaled window under Table I"
+    );
+    assert!(html.contains(&format!("<dt>policy input</dt><dd>{fixed_text}</dd>")));
+    assert!(html.contains(&format!("<dt>policy input</dt><dd>{scaled_text}</dd>")));
+    assert_eq!(
+        html.matches("<dt>policy input</dt>").count(),
+        2,
+        "none for the older summary"
+    );
+    assert!(!html.contains("older: input of model"));
 }

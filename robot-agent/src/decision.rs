@@ -462,21 +462,21 @@ pub fn check_team_models_for(
     lidar: &LidarSpec,
     d_stars: &[f64],
 ) -> Result<Vec<String>, TeamModelError> {
-    Ok(check_team_models_with_envelopes(models, lidar, d_stars)?
+    Ok(check_team_models_with_metadata(models, lidar, d_stars)?
         .into_iter()
         .map(|(id, _)| id)
         .collect())
 }
 
-/// [`check_team_models_for`], with each robot's model id beside the model's envelope (what it
-/// was trained on: its d* range and team sizes), for the launcher to report a team size the
-/// model never saw.
-pub fn check_team_models_with_envelopes(
+/// [`check_team_models_for`], with each robot's model id beside the model's whole metadata (the
+/// input it declares, its LIDAR and its envelope: d* range, team sizes), for the launcher to
+/// report what each model is given and a team size it never saw.
+pub fn check_team_models_with_metadata(
     models: &[PathBuf],
     lidar: &LidarSpec,
     d_stars: &[f64],
-) -> Result<Vec<(String, formation_onnx::ModelEnvelope)>, TeamModelError> {
-    let mut checked: BTreeMap<&Path, (String, formation_onnx::ModelEnvelope)> = BTreeMap::new();
+) -> Result<Vec<(String, formation_onnx::ModelMetadata)>, TeamModelError> {
+    let mut checked: BTreeMap<&Path, (String, formation_onnx::ModelMetadata)> = BTreeMap::new();
     let mut ids = Vec::with_capacity(models.len());
     for (robot, path) in models.iter().enumerate() {
         let id = match checked.get(path.as_path()) {
@@ -492,7 +492,7 @@ pub fn check_team_models_with_envelopes(
                 for &d_star in d_stars {
                     check_goal_envelope(&policy, d_star).map_err(fail)?;
                 }
-                let id = (policy.model_id().to_owned(), policy.metadata().envelope());
+                let id = (policy.model_id().to_owned(), policy.metadata().clone());
                 checked.insert(path, id.clone());
                 id
             }

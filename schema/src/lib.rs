@@ -32,6 +32,7 @@
 //! `null`, and the readers read `null` back as NaN wherever a float may be NaN (the metrics and
 //! the trajectory). Every other float reads back bit for bit (`float_roundtrip`).
 
+mod model_input;
 mod nan;
 mod profile;
 mod replay;
@@ -49,6 +50,7 @@ use formation_proto::files::{FileRefusal, read_bounded};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
+pub use model_input::ModelInput;
 pub use profile::{LatencyProfile, StageStats};
 pub use replay::{ReplayReport, ReplayRobot};
 pub use run::{RunLog, RunMetrics, TeamMetrics, TicksPlayed, Trajectory};

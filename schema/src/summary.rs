@@ -126,6 +126,11 @@ pub struct EvalOutput {
     /// team's size; `zero_shot` marks a size it never saw. Absent when no model records them.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub team_size: Vec<crate::ModelTeamSize>,
+    /// Policy only: the input each distinct model declares in its metadata (its occupancy
+    /// window and the LIDAR it was trained for), in first-use order. Absent for the expert and
+    /// in files written before it existed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub model_inputs: Vec<crate::ModelInput>,
     /// `formation eval --out`: the runs whose run logs (`runs/run-NNNN.json`) belong beside this
     /// summary, in run order. A reader that misses one of them has a partial output (the eval
     /// failed while writing it, say on a full disk) and says so. Absent when no run log was

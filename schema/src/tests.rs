@@ -139,6 +139,7 @@ fn summary() -> EvalOutput {
         team_size: crate::ModelTeamSize::new("policy-1", &[3, 5], 2)
             .into_iter()
             .collect(),
+        model_inputs: vec![scaled_model_input()],
         run_logs: vec![0, 1],
         complete: false,
     }
@@ -440,6 +441,7 @@ fn scaling() -> ScalingTable {
             max_edge_window_error: None,
             collisions: 0,
             team_size: None,
+            model_input: None,
         }],
     }
 }
@@ -491,5 +493,82 @@ fn summaries_and_metrics_before_incomplete_runs_and_median_rules_still_read() {
     assert_eq!(
         from_json::<EvalOutput>(&to_json(&summary()).unwrap(), path).unwrap(),
         summary()
+    );
+}
+
+fn scaled_model_input() -> crate::ModelInput {
+    crate::ModelInput {
+        model: "policy-1".into(),
+        occupancy: formation_proto::OccupancySpec {
+            beyond: formation_proto::BeyondWindow::Border,
+            d_star_ref_m: Some(1.5),
+            ..formation_proto::OccupancySpec::PAPER
+        },
+        lidar_beams: 900,
+        lidar_max_range_m: 10.0,
+        lidar_noise_std_m: Some(0.01),
+        trained_d_star_m: Some([0.8, 2.5]),
+    }
+}
+
+#[test]
+fn the_models_declared_inputs_round_trip_and_files_without_them_still_read() {
+    let path = Path::new("summary.json");
+    let text = round_trip(&summary(), read_summary);
+    assert!(
+        text.contains(
+            "\"model_inputs\":[{\"model\":\"policy-1\",\"occupancy\":{\"size_px\":50,\
+             \"resolution_m\":0.1,\"beyond\":\"border\",\"d_star_ref_m\":1.5},\
+             \"lidar_beams\":900,\"lidar_max_range_m\":10.0,\"lidar_noise_std_m\":0.01,\
+             \"trained_d_star_m\":[0.8,2.5]}]"
+        ),
+        "{text}"
+    );
+    // A summary of before (and the expert's): no key, no inputs.
+    let mut value: serde_json::Value =
+        serde_json::from_slice(&to_json(&summary()).unwrap()).unwrap();
+    value.as_object_mut().unwrap().remove("model_inputs");
+    let read: EvalOutput = from_json(value.to_string().as_bytes(), path).unwrap();
+    assert!(read.model_inputs.is_empty());
+    let expert = EvalOutput {
+        model_inputs: Vec::new(),
+        ..summary()
+    };
+    assert!(
+        !String::from_utf8(to_json(&expert).unwrap())
+            .unwrap()
+            .contains("model_inputs")
+    );
+    // A fixed window leaves its reference d* out; a model without an envelope, its range.
+    let paper = crate::ModelInput {
+        occupancy: formation_proto::OccupancySpec::PAPER,
+        lidar_noise_std_m: None,
+        trained_d_star_m: None,
+        ..scaled_model_input()
+    };
+    let shard = crate::EvalShard {
+        controller: "policy".into(),
+        models: vec!["policy-1".into()],
+        scenario: "table1".into(),
+        seed: 7,
+        team_size: Vec::new(),
+        model_inputs: vec![paper.clone()],
+        first_run: 0,
+        per_run: vec![metrics()],
+    };
+    let text = String::from_utf8(to_json(&shard).unwrap()).unwrap();
+    assert!(
+        !text.contains("d_star_ref_m") && !text.contains("trained_d_star_m"),
+        "{text}"
+    );
+    assert_eq!(
+        from_json::<crate::EvalShard>(text.as_bytes(), path).unwrap(),
+        shard
+    );
+    let mut table = scaling();
+    table.rows[0].model_input = Some(paper);
+    assert_eq!(
+        from_json::<ScalingTable>(&to_json(&table).unwrap(), Path::new("scaling.json")).unwrap(),
+        table
     );
 }

@@ -124,4 +124,17 @@ fn a_launch_flags_a_zero_shot_team_on_the_terminal_and_in_its_summary() {
     let summary = read_json(&out.join("summary.json"));
     assert_eq!(summary["team_size"][0]["zero_shot"], true, "{summary}");
     assert_eq!(summary["team_size"][0]["fit"], "zero_shot");
+    // The launch's summary records what its model declares, as the in-process eval's does.
+    let input = &summary["model_inputs"][0];
+    assert_eq!(input["model"], summary["models"][0], "{summary}");
+    assert!(
+        input["occupancy"]["size_px"]
+            .as_u64()
+            .is_some_and(|n| n > 0),
+        "{input}"
+    );
+    assert!(
+        input["lidar_beams"].as_u64().is_some_and(|n| n > 0),
+        "{input}"
+    );
 }

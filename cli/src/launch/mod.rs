@@ -102,12 +102,12 @@ fn write_run_specs(
 
 /// The launch plan of `args`, its scenario and the base seed of its runs.
 /// What `formation run` launches: the plan, the scenario, the base seed, and the team size
-/// against each model's trained sizes.
+/// against each model's trained sizes beside the input each model declares.
 struct PlannedRun {
     plan: LaunchPlan,
     scenario: Scenario,
     base_seed: u64,
-    team_size: Vec<formation_schema::ModelTeamSize>,
+    notes: crate::team_models::TeamModelNotes,
 }
 
 fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
@@ -127,7 +127,7 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
     } else {
         args.model.clone()
     };
-    let (models, team_size) = checked_team_models(&scenario, &default_model)?;
+    let (models, notes) = checked_team_models(&scenario, &default_model)?;
     let run_id = match &args.run_id {
         Some(id) => RunId::new(id)?,
         None => RunId::generate(),
@@ -176,7 +176,7 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         plan,
         scenario,
         base_seed,
-        team_size,
+        notes,
     })
 }
 
@@ -345,9 +345,9 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         plan,
         scenario,
         base_seed,
-        team_size,
+        notes,
     } = plan_from_args(args)?;
-    crate::team_models::print_team_size_notes(&team_size);
+    crate::team_models::print_team_size_notes(&notes.team_size);
     println!(
         "formation run {}: {} robots, {} run(s) of {}, {} clock",
         plan.run_id,
@@ -376,7 +376,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
             return Err(error.into());
         }
     };
-    write_run_outputs(&plan, &report, scenario.name(), base_seed, team_size)?;
+    write_run_outputs(&plan, &report, scenario.name(), base_seed, notes)?;
     print_launch_outcome(&plan, &report)
 }
 
@@ -431,7 +431,7 @@ fn write_run_outputs(
     report: &supervisor::LaunchReport,
     scenario: &str,
     base_seed: u64,
-    team_size: Vec<formation_schema::ModelTeamSize>,
+    notes: crate::team_models::TeamModelNotes,
 ) -> anyhow::Result<()> {
     let latency = profile::profile_dir(&plan.out)?;
     let table = write_summary(
@@ -440,7 +440,7 @@ fn write_run_outputs(
         scenario,
         Some(base_seed),
         latency.braked_per_robot.clone(),
-        team_size,
+        notes,
     )?;
     print!("{}", crate::table::table_text(&table));
     let path = plan.out.join("profile.json");
@@ -582,11 +582,12 @@ fn write_summary(
     scenario: &str,
     seed: Option<u64>,
     braked_ticks: Vec<std::collections::BTreeMap<String, usize>>,
-    team_size: Vec<formation_schema::ModelTeamSize>,
+    notes: crate::team_models::TeamModelNotes,
 ) -> anyhow::Result<formation_schema::EvalOutput> {
     let mut table = run_summary(run_logs, scenario, seed)?;
     table.braked_ticks = braked_ticks;
-    table.team_size = team_size;
+    table.team_size = notes.team_size;
+    table.model_inputs = notes.model_inputs;
     paths::write_atomic(
         &out.join("summary.json"),
         &formation_schema::to_json_pretty(&table)?,
@@ -677,7 +678,7 @@ fn keep_partial_runs(
     let braked = profile::profile_dir(out)
         .map(|p| p.braked_per_robot)
         .unwrap_or_default();
-    match write_summary(out, &logs, scenario, Some(seed), braked, Vec::new()) {
+    match write_summary(out, &logs, scenario, Some(seed), braked, Default::default()) {
         Ok(table) => {
             print!("{}", crate::table::table_text(&table));
             eprintln!(
@@ -728,7 +729,7 @@ pub fn recover_run_dirs(dir: &Path) {
             continue;
         }
         let logs: Vec<PathBuf> = run_logs_in(&out).into_iter().map(|(_, p)| p).collect();
-        match write_summary(&out, &logs, "", None, Vec::new(), Vec::new()) {
+        match write_summary(&out, &logs, "", None, Vec::new(), Default::default()) {
             Ok(table) => eprintln!(
                 "formation: wrote {} over {} run log(s) that had none ({} incomplete)",
                 out.join("summary.json").display(),
