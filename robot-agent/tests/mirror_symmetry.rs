@@ -1,8 +1,9 @@
-//! The shipped policy is exactly symmetric under the task's reflection about the robot's heading
-//! axis, as a robot runs it: a scan reflected beam by beam, rendered by the agent's own renderer
-//! and run through ONNX Runtime with the heading error negated, gives the same wheel speeds with
-//! left and right swapped. The trainer builds that into the graph (`--mirror`: the network's
-//! output averaged over the reflection); a network without it, such as the paper's, is not.
+//! A mirror-averaged policy (`wide/policy.onnx`, the default before issue 22) is exactly
+//! symmetric under the task's reflection about the robot's heading axis, as a robot runs it: a
+//! scan reflected beam by beam, rendered by the agent's own renderer and run through ONNX Runtime
+//! with the heading error negated, gives the same wheel speeds with left and right swapped. The
+//! trainer builds that into the graph (`--mirror`: the network's output averaged over the
+//! reflection); a network without it, such as the paper's, is not.
 
 use std::path::{Path, PathBuf};
 
@@ -79,8 +80,8 @@ fn asymmetry(path: &Path) -> f32 {
 }
 
 #[test]
-fn the_shipped_policy_swaps_its_wheels_on_a_reflected_scan() {
-    let shipped = model("policy.onnx");
+fn the_mirror_averaged_policy_swaps_its_wheels_on_a_reflected_scan() {
+    let shipped = model("wide/policy.onnx");
     let policy = OnnxPolicy::load(&shipped).expect("the shipped model loads");
     assert_eq!(
         policy
