@@ -891,15 +891,7 @@ pub fn tick_label(value: f64) -> String {
 }
 
 /// A number without trailing zeros (`0.7`, `2`, `2.15`).
-pub fn trim_number(value: f64) -> String {
-    let text = format!("{value:.3}");
-    let text = text.trim_end_matches('0').trim_end_matches('.');
-    if text == "-0" {
-        "0".to_owned()
-    } else {
-        text.to_owned()
-    }
-}
+pub use formation_schema::trim_number;
 
 #[cfg(test)]
 mod tests {

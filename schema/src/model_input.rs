@@ -39,24 +39,24 @@ impl ModelInput {
         let window = match spec.d_star_ref_m {
             None => format!(
                 "{cells} of {} m (a fixed {} m window)",
-                number(spec.resolution_m),
-                number(spec.window_m())
+                trim_number(spec.resolution_m),
+                trim_number(spec.window_m())
             ),
             Some(reference) => {
                 let scaling = match self.trained_d_star_m {
                     Some([lo, hi]) => format!(
                         "scales with d*: {}-{} m over the model's d* range {}-{} m",
-                        number(spec.at_d_star(lo).resolution_m),
-                        number(spec.at_d_star(hi).resolution_m),
-                        number(lo),
-                        number(hi)
+                        trim_number(spec.at_d_star(lo).resolution_m),
+                        trim_number(spec.at_d_star(hi).resolution_m),
+                        trim_number(lo),
+                        trim_number(hi)
                     ),
                     None => "scales with d*".to_owned(),
                 };
                 format!(
                     "{cells} of {} m at d* = {} m ({scaling})",
-                    number(spec.resolution_m),
-                    number(reference)
+                    trim_number(spec.resolution_m),
+                    trim_number(reference)
                 )
             }
         };
@@ -65,20 +65,21 @@ impl ModelInput {
             BeyondWindow::Border => "far hits on the border",
         };
         let noise = match self.lidar_noise_std_m {
-            Some(noise) if noise > 0.0 => format!(", noise {} m", number(noise)),
+            Some(noise) if noise > 0.0 => format!(", noise {} m", trim_number(noise)),
             Some(_) => ", no noise".to_owned(),
             None => String::new(),
         };
         format!(
             "{window}, {far}; {}-beam {} m LIDAR{noise}",
             self.lidar_beams,
-            number(self.lidar_max_range_m)
+            trim_number(self.lidar_max_range_m)
         )
     }
 }
 
-/// `x` with at most three decimals and no trailing zeros (`0.1`, `0.053`, `10`).
-fn number(x: f64) -> String {
+/// `x` with at most three decimals and no trailing zeros (`0.1`, `0.053`, `10`), as the report
+/// and these descriptions print figures.
+pub fn trim_number(x: f64) -> String {
     let text = format!("{x:.3}");
     let text = text.trim_end_matches('0').trim_end_matches('.');
     if text == "-0" {
@@ -143,9 +144,9 @@ mod tests {
 
     #[test]
     fn numbers_keep_three_decimals_without_trailing_zeros() {
-        assert_eq!(number(0.1), "0.1");
-        assert_eq!(number(10.0), "10");
-        assert_eq!(number(0.05333), "0.053");
-        assert_eq!(number(-0.0001), "0");
+        assert_eq!(trim_number(0.1), "0.1");
+        assert_eq!(trim_number(10.0), "10");
+        assert_eq!(trim_number(0.05333), "0.053");
+        assert_eq!(trim_number(-0.0001), "0");
     }
 }
