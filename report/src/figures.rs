@@ -881,13 +881,7 @@ pub fn tick_label(value: f64) -> String {
     if value.abs() >= 1000.0 {
         return format!("{value:.0}");
     }
-    let text = format!("{value:.6}");
-    let text = text.trim_end_matches('0').trim_end_matches('.');
-    if text == "-0" {
-        "0".to_owned()
-    } else {
-        text.to_owned()
-    }
+    formation_schema::trim_decimals(value, 6)
 }
 
 /// A number without trailing zeros (`0.7`, `2`, `2.15`).

@@ -50,7 +50,7 @@ use formation_proto::files::{FileRefusal, read_bounded};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-pub use model_input::{ModelInput, trim_number};
+pub use model_input::{ModelInput, trim_decimals, trim_number};
 pub use profile::{LatencyProfile, StageStats};
 pub use replay::{ReplayReport, ReplayRobot};
 pub use run::{RunLog, RunMetrics, TeamMetrics, TicksPlayed, Trajectory};

@@ -80,7 +80,12 @@ impl ModelInput {
 /// `x` with at most three decimals and no trailing zeros (`0.1`, `0.053`, `10`), as the report
 /// and these descriptions print figures.
 pub fn trim_number(x: f64) -> String {
-    let text = format!("{x:.3}");
+    trim_decimals(x, 3)
+}
+
+/// `x` with at most `places` decimals and no trailing zeros; never `-0`.
+pub fn trim_decimals(x: f64, places: usize) -> String {
+    let text = format!("{x:.places$}");
     let text = text.trim_end_matches('0').trim_end_matches('.');
     if text == "-0" {
         "0".to_owned()
