@@ -25,6 +25,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             Ok((f.clone(), serde_json::from_str(&text)?))
         })
         .collect::<Result<_, _>>()?;
+    let runs = outputs.first().map_or(0, |(_, o)| o.per_run.len());
+    if let Some((name, _)) = outputs.iter().find(|(_, o)| o.per_run.len() != runs) {
+        return Err(format!(
+            "{name} holds another number of runs than {}: evaluate every file over the same runs",
+            files[0]
+        )
+        .into());
+    }
     print!("| d* | runs |");
     for (name, out) in &outputs {
         print!(" {} ({}) |", out.controller, name);
@@ -36,7 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .first()
             .and_then(|(_, o)| o.seed)
             .unwrap_or(scenario.seed());
-        let runs: Vec<usize> = (0..outputs.first().map_or(0, |(_, o)| o.per_run.len()))
+        let runs: Vec<usize> = (0..runs)
             .filter(|&i| {
                 let d = scenario.run_spec(seed, i).d_star;
                 low <= d && d < high
