@@ -1,5 +1,6 @@
 //! The exit codes of formation's three binaries (`formation`, `formation-world`,
-//! `formation-agent`), defined once: README.md's "Exit codes" table lists the same values.
+//! `formation-agent`), defined once: the guide's exit codes chapter (docs/src/exit-codes.md) lists
+//! the same values.
 //!
 //! A termination signal gives the shell's convention, 128 + the signal's number: SIGINT (Ctrl-C)
 //! 130, SIGTERM 143, so a supervisor (systemd, a CI runner, a shell script) tells a user's

@@ -1,7 +1,8 @@
 //! Issue 26: SIGTERM ends every binary with 143 and SIGINT with 130 (the shell's 128 + the
-//! signal), as README.md's "Exit codes" table says: `formation-agent` over iceoryx2 and over Zenoh,
-//! `formation-world` over both, and the `formation` launcher. The launcher restarts an agent
-//! whatever its exit code and prints that code, which is how an agent's is read here; a world's
+//! signal), as the guide's exit codes chapter (docs/src/exit-codes.md) says: `formation-agent`
+//! over iceoryx2 and over Zenoh, `formation-world` over both, and the `formation` launcher. The
+//! launcher restarts an agent whatever its exit code and prints that code, which is how an
+//! agent's is read here; a world's
 //! is printed by the launcher when it fails.
 //!
 //! Every test uses its own run id (and port) and runs alone within this binary.
