@@ -3,8 +3,8 @@
 //! drawn (the page's own check script writes `data-figures-ok` on `<body>`, read back from the
 //! dumped DOM).
 //!
-//! Needs Chromium (`/usr/bin/chromium`, or the path in `FORMATION_CHROMIUM`); CI installs it
-//! (`.ci/run`); without it the test fails with the fix.
+//! Needs Chromium (`/usr/bin/chromium`, or the path in `FORMATION_CHROMIUM`); `scripts/test-all`
+//! installs it (`scripts/setup-system`); without it the test fails with the fix.
 //! `FORMATION_REPORT_SCREENSHOT=/path/shot.png` also saves a screenshot of the page.
 
 mod common;
@@ -133,7 +133,8 @@ fn chromium() -> PathBuf {
     find_chromium().unwrap_or_else(|| {
         panic!(
             "headless Chromium is needed for the report's browser test but /usr/bin/chromium (or \
-             $FORMATION_CHROMIUM) is missing: run `.ci/run` (installs it) or `apt-get install -y chromium`"
+             $FORMATION_CHROMIUM) is missing: run `bash scripts/setup-system` as root (installs \
+             it) or `apt-get install -y chromium`"
         )
     })
 }

@@ -47,7 +47,7 @@ impl Rig {
         let pair = NetPair::create().unwrap_or_else(|reason| {
             panic!(
                 "network namespaces are unavailable here ({reason}); run the tests as root with \
-                 iproute2 and nftables (`.ci/run` installs them) to test the Zenoh transport \
+                 iproute2 and nftables (`bash scripts/setup-system` installs them) to test the Zenoh transport \
                  across a network"
             )
         });
