@@ -349,7 +349,7 @@ pub fn braking_speed(speed: f64, k_formation: f64, braking_accel: f64) -> f64 {
 }
 
 /// `v* (cos phi*, sin phi*)` with its norm capped at `max_speed`.
-fn reference_velocity(goal: &Goal, max_speed: f64) -> (f64, f64) {
+pub(crate) fn reference_velocity(goal: &Goal, max_speed: f64) -> (f64, f64) {
     let speed = goal.v_star.clamp(-max_speed, max_speed);
     (speed * goal.phi_star.cos(), speed * goal.phi_star.sin())
 }

@@ -5,12 +5,15 @@
 //!   the same as a [`formation_world::Controller`].
 //! * [`collect`]: demonstration collection into the training data set, and the expert labelling of
 //!   any observation that DAgger uses while the learned policy drives.
+//! * [`response`]: the response gauge, a controller's formation velocity against the expert's
+//!   label on the controller's own states (`formation gauge`).
 //!
 //! The expert reads ground truth that no agent has; it exists to teach and to compare with, never to
 //! run inside a robot.
 
 pub mod collect;
 pub mod controller;
+pub mod response;
 
 pub use controller::{
     ExpertController, ExpertGains, InvalidGains, PairPoints, expert_commands, expert_commands_among,

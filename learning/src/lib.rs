@@ -5,6 +5,8 @@
 //!   robot), run in parallel with rayon; every run is a pure function of (scenario, base seed,
 //!   run index, driver), so results do not depend on the thread count.
 //! * [`scaling`]: the scaling table: Table I figures per team size and driver.
+//! * [`response`]: the response gauge: each driver's formation velocity against the expert's
+//!   label on its own states, binned by the label's size (`formation gauge`).
 //! * [`shards`]: an evaluation spread over workers (a Ray sweep): shares of its runs, merged
 //!   into the summary one evaluation writes, byte for byte.
 //! * [`dagger`]: DAgger over teams of several sizes: the policy drives, the expert labels every
@@ -15,6 +17,7 @@
 pub mod dagger;
 pub mod dagger_share;
 pub mod rollout;
+pub mod response;
 pub mod scaling;
 pub mod shards;
 

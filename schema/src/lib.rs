@@ -10,6 +10,7 @@
 //! | `formation eval --robots ... --json` | [`ScalingTable`] | [`ScalingTable::FORMAT`] | [`ScalingTable::VERSION`] |
 //! | `formation eval --shard FILE` (a share of the runs, for `formation merge`) | [`EvalShard`] | [`EvalShard::FORMAT`] | [`EvalShard::VERSION`] |
 //! | `formation replay --json` | [`ReplayReport`] | [`ReplayReport::FORMAT`] | [`ReplayReport::VERSION`] |
+//! | `formation gauge --json`, `response.json` | [`ResponseCurve`] | [`ResponseCurve::FORMAT`] | [`ResponseCurve::VERSION`] |
 //!
 //! A format may read older versions than it writes ([`SchemaFile::OLDEST_VERSION`]): the run log
 //! is written as version 2 (its trajectory names its neighbour rule) and version 1 files still
@@ -36,6 +37,7 @@ mod model_input;
 mod nan;
 mod profile;
 mod replay;
+mod response;
 mod run;
 mod scaling;
 mod shard;
@@ -53,6 +55,9 @@ use serde::{Deserialize, Serialize};
 pub use model_input::{ModelInput, trim_decimals, trim_number};
 pub use profile::{LatencyProfile, StageStats};
 pub use replay::{ReplayReport, ReplayRobot};
+pub use response::{
+    MIN_JUDGED_SAMPLES, RESPONSE_BIN_EDGES, ResponseBin, ResponseCurve, ResponseRow,
+};
 pub use run::{RunLog, RunMetrics, TeamMetrics, TicksPlayed, Trajectory};
 pub use scaling::{ScalingRow, ScalingTable};
 pub use shard::EvalShard;
@@ -161,6 +166,11 @@ pub fn read_scaling(path: &Path) -> Result<ScalingTable, SchemaError> {
 
 /// Reads a latency profile (`profile.json`).
 pub fn read_profile(path: &Path) -> Result<LatencyProfile, SchemaError> {
+    read(path)
+}
+
+/// Reads a response curve (what `formation gauge --json` wrote).
+pub fn read_response(path: &Path) -> Result<ResponseCurve, SchemaError> {
     read(path)
 }
 
