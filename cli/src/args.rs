@@ -26,44 +26,105 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Evaluate a controller over a scenario's runs and print Table I figures.
+    #[command(after_help = EVAL_EXAMPLES)]
     Eval(EvalArgs),
     /// Merge the shards of an evaluation spread over workers (`eval --shard`) into its summary.
+    #[command(after_help = MERGE_EXAMPLES)]
     Merge(MergeArgs),
     /// Record expert demonstrations into a dataset.
+    #[command(after_help = COLLECT_EXAMPLES)]
     Collect(CollectArgs),
     /// Train the paper's CNN on a dataset (PyTorch) and export it to ONNX.
+    #[command(after_help = TRAIN_EXAMPLES)]
     Train(TrainArgs),
     /// DAgger: the policy drives, the expert labels, the dataset grows, the policy is retrained.
+    #[command(after_help = DAGGER_EXAMPLES)]
     Dagger(DaggerArgs),
     /// Label one share of a DAgger iteration's runs into a part file (a sweep worker's task);
     /// `formation dagger-append` appends the iteration's parts to the dataset.
+    #[command(after_help = DAGGER_LABEL_EXAMPLES)]
     DaggerLabel(DaggerLabelArgs),
     /// Append the parts of one DAgger iteration (`formation dagger-label --part`) to the
     /// dataset in run order, after checking they are that iteration's, complete and disjoint.
+    #[command(after_help = DAGGER_APPEND_EXAMPLES)]
     DaggerAppend(DaggerAppendArgs),
     /// Launch the world and one agent process per robot (iceoryx2, or Zenoh for agents on other
     /// hosts).
+    #[command(after_help = RUN_EXAMPLES)]
     Run(RunArgs),
     /// Per-stage latency profile of the multi-process runtime.
+    #[command(after_help = PROFILE_EXAMPLES)]
     Profile(ProfileArgs),
     /// Swap the ONNX model of one running agent.
+    #[command(after_help = SWAP_EXAMPLES)]
     Swap(SwapArgs),
     /// Create Zenoh credentials for a team: one login per robot (plus the launch secret), one
     /// for `formation swap` and a read-only one for `formation record --connect`, for agents on
     /// other hosts.
+    #[command(after_help = CREDENTIALS_EXAMPLES)]
     Credentials(CredentialsArgs),
     /// Record a live Zenoh team from outside to MCAP: the same file `--record` writes.
+    #[command(after_help = RECORD_EXAMPLES)]
     Record(RecordArgs),
     /// Build the HTML report (Table I, Figs. 6-9) from eval/run output directories.
+    #[command(after_help = REPORT_EXAMPLES)]
     Report(ReportArgs),
     /// The main job: the paper's three cases and Table I with the shipped model over real
     /// processes, ending in a report.
+    #[command(after_help = DEMO_EXAMPLES)]
     Demo(DemoArgs),
     /// Replay a recording (`--record`): each robot's recorded inputs through the agent's
     /// decision, compared with the recorded commands. Exit 0: every command bit for bit the
     /// same; 1: some differ (the table and the JSON say where); 2: an error.
+    #[command(after_help = REPLAY_EXAMPLES)]
     Replay(ReplayArgs),
 }
+
+// The examples that end each subcommand's help (`after_help`): one or two each, and every one
+// parses (`tests::every_subcommand_ends_its_help_with_examples_that_parse`).
+const EVAL_EXAMPLES: &str = "Examples:
+  formation eval --scenario scenarios/table1.toml --runs 100 --json out/table1.json
+  formation eval --controller expert --scenario scenarios/teams.toml --robots 3,8,16 --runs 20";
+const MERGE_EXAMPLES: &str = "Examples:
+  formation eval --scenario scenarios/table1.toml --first-run 0 --runs 40 --shard a.json
+  formation merge a.json b.json --json table1.json";
+const COLLECT_EXAMPLES: &str = "Examples:
+  formation collect --scenario scenarios/collect.toml --out data/expert --beyond border";
+const TRAIN_EXAMPLES: &str = "Examples:
+  formation train --data data/expert --out models/policy.onnx --epochs 10 --device cpu";
+const DAGGER_EXAMPLES: &str = "Examples:
+  formation dagger --data data/expert --iterations 2 --out models/policy.onnx
+  formation dagger --data data/expert --init-model m0.onnx --iterations 3 --d-star-range \\
+      0.8,2.5 --out m.onnx";
+const DAGGER_LABEL_EXAMPLES: &str = "Examples:
+  formation dagger-label --data data --model m0.onnx --iteration 1 --first-run 0 --runs 80 \\
+      --part a.part";
+const DAGGER_APPEND_EXAMPLES: &str = "Examples:
+  formation dagger-append --data data --iteration 1 --runs 153 a.part b.part";
+const RUN_EXAMPLES: &str = "Examples:
+  formation run --scenario scenarios/case1.toml --out runs/case1
+  formation run --scenario scenarios/case1.toml --clock realtime --run-id demo --record \\
+      case1.mcap";
+const PROFILE_EXAMPLES: &str = "Examples:
+  formation profile --scenario scenarios/case1.toml --out runs/prof3
+  formation profile --scenario scenarios/swarm32.toml --clock realtime --out runs/prof32";
+const SWAP_EXAMPLES: &str = "Examples:
+  formation swap --run demo --robot 1 --model onnx/models/paper/policy.onnx
+  formation swap --run demo --robot 1 --model other.onnx --at-tick 400";
+const CREDENTIALS_EXAMPLES: &str = "Examples:
+  formation credentials --robots 3 --out creds";
+const RECORD_EXAMPLES: &str = "Examples:
+  formation record --connect tcp/WORLD_HOST:7447 --run-id demo --credentials \\
+      creds/recorder.json --out demo.mcap
+  formation record --connect tcp/WORLD_HOST:7447 --transport ros2 --run-id demo --out demo.mcap";
+const REPORT_EXAMPLES: &str = "Examples:
+  formation report runs/ --out report.html";
+const DEMO_EXAMPLES: &str = "Examples:
+  formation demo --out reports/demo
+  formation demo --runs 10 --record case1.mcap --out reports/quick";
+const REPLAY_EXAMPLES: &str = "Examples:
+  formation replay case1.mcap
+  formation replay case1.mcap --model onnx/models/paper/policy.onnx --json r.json";
 
 /// Which controller drives the robots.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -632,6 +693,50 @@ mod tests {
             let err = run_count(bad).expect_err(bad);
             assert!(err.contains("1 to 10000"), "{err}");
         }
+    }
+
+    /// Every subcommand's help ends with examples (`after_help`), each a whole `formation`
+    /// command line that parses with today's flags, and one of them runs the subcommand itself.
+    #[test]
+    fn every_subcommand_ends_its_help_with_examples_that_parse() {
+        use clap::CommandFactory;
+        let cli = Cli::command();
+        let mut checked = 0;
+        for sub in cli.get_subcommands() {
+            let name = sub.get_name();
+            let help = sub
+                .get_after_help()
+                .map(|h| h.to_string())
+                .unwrap_or_else(|| panic!("`formation {name} --help` ends with no examples"));
+            let body = help.strip_prefix("Examples:\n").unwrap_or_else(|| {
+                panic!("{name}: its after_help starts with Examples:, got {help:?}")
+            });
+            let examples: Vec<String> = body
+                .replace("\\\n", " ")
+                .lines()
+                .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+                .collect();
+            assert!(
+                (1..=2).contains(&examples.len()),
+                "{name}: {} examples",
+                examples.len()
+            );
+            for example in &examples {
+                let words: Vec<&str> = example.split_whitespace().collect();
+                assert_eq!(words.first(), Some(&"formation"), "{name}: {example}");
+                if let Err(e) = Cli::try_parse_from(&words) {
+                    panic!("{name}: the example `{example}` does not parse:\n{e}");
+                }
+            }
+            assert!(
+                examples
+                    .iter()
+                    .any(|e| e.starts_with(&format!("formation {name} "))),
+                "{name}: no example runs `formation {name}`: {examples:?}"
+            );
+            checked += 1;
+        }
+        assert!(checked >= 15, "only {checked} subcommands");
     }
 }
 
