@@ -12,6 +12,8 @@
 //! * [`learn`]: `train` (runs the PyTorch trainer), `dagger` (policy drives, expert labels,
 //!   retrain), and `dagger-label` / `dagger-append` (one iteration's labelling in shares).
 //! * [`launch`]: the multi-process launcher (`run`, `profile`, `swap`, `credentials`).
+//! * [`live_view`]: `--foxglove HOST:PORT`, the run served live to Foxglove (feature
+//!   `foxglove`).
 //! * [`pilot`]: the robot's ONNX decision as the runtime's agent loop drives it (the
 //!   `formation-agent` binary).
 //! * `record_connect` (feature `zenoh`): `formation record --connect`, recording a live team
@@ -29,8 +31,10 @@ pub mod demo;
 #[cfg(feature = "zenoh")]
 pub mod endpoint;
 pub mod eval;
+pub mod gauge;
 pub mod launch;
 pub mod learn;
+pub mod live_view;
 pub mod paths;
 pub mod pilot;
 pub mod record;

@@ -11,6 +11,8 @@
 //! simulated time at most, written out as they close, so memory stays bounded and a crash
 //! leaves a file that a streaming reader reads up to its last chunk.
 //!
+//! The topics and each tick's messages are defined once, in [`topics`], which the live view
+//! (`formation run --foxglove`, formation-cli) serves as well.
 //! The tick loop hands each tick ([`tick`]) to a writer thread ([`recorder`]); where recordings
 //! go and the checks before a run are in [`target`], the errors in [`error`]. A replay reads a
 //! recording back in one streaming pass ([`read`]) and finds its models, checked against their
@@ -31,6 +33,7 @@ pub mod setup;
 pub mod swap;
 pub mod target;
 pub mod tick;
+pub mod topics;
 
 pub use error::RecordError;
 pub use file::{RecordingFile, RecordingSummary};
