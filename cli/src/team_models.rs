@@ -174,6 +174,7 @@ mod tests {
             max_range: 10.0,
             v_train: 0.7,
             dataset_id: "d".into(),
+            output: formation_onnx::PolicyOutput::Wheels,
             extra: extra
                 .iter()
                 .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))

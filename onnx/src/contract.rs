@@ -3,7 +3,9 @@
 //! The Python exporter writes it and [`crate::OnnxPolicy::load`] enforces it:
 //!
 //! - inputs exactly `occupancy` f32 `[B, 1, S, S]` and `aux` f32 `[B, 2]` (`delta_phi`, `d*`);
-//! - one output, `wheels` f32 `[B, 2]` (left, right) m/s at `v_train`; `B` dynamic;
+//! - one output, by default `wheels` f32 `[B, 2]` (left, right) m/s at `v_train`; or, where the
+//!   metadata declares `formation.output = formation_velocity`, `formation_velocity` f32 `[B, 2]`:
+//!   the correction of the formation in the robot's frame ([`PolicyOutput`]); `B` dynamic;
 //! - string metadata (`formation.*` keys, see [`keys`]) with the occupancy rendering, the LIDAR
 //!   and `v_train`, where `S` equals `formation.occupancy.size_px`.
 //!
@@ -23,6 +25,10 @@ pub const OCCUPANCY_INPUT: &str = "occupancy";
 pub const AUX_INPUT: &str = "aux";
 /// Name of the wheel-speed output.
 pub const WHEELS_OUTPUT: &str = "wheels";
+/// Name of the formation-velocity output.
+pub const FORMATION_VELOCITY_OUTPUT: &str = "formation_velocity";
+
+pub use formation_proto::PolicyOutput;
 
 /// The one input kind agents feed today: the occupancy image rendered from the robot's own scan
 /// (the value of [`keys::INPUT`]).
@@ -47,6 +53,9 @@ pub mod keys {
     pub const D_STAR_REF_M: &str = "formation.occupancy.d_star_ref_m";
     /// The kind of sensor input the model takes (optional; absent means [`super::INPUT_OCCUPANCY`]).
     pub const INPUT: &str = "formation.input";
+    /// What the model's one output means (optional; absent means `wheels`): see
+    /// [`super::PolicyOutput`].
+    pub const OUTPUT: &str = "formation.output";
     /// LIDAR beams the model was trained with.
     pub const BEAMS: &str = "formation.lidar.beams";
     /// LIDAR maximum range \[m\].
@@ -179,6 +188,8 @@ pub struct ModelMetadata {
     pub v_train: f64,
     /// Id of the training dataset.
     pub dataset_id: String,
+    /// What its one output means.
+    pub output: PolicyOutput,
     /// Every other metadata entry (training figures, DAgger iteration, creator, ...), by full key.
     pub extra: BTreeMap<String, String>,
 }
@@ -225,11 +236,29 @@ pub enum ContractViolation {
         /// Input names found.
         found: Vec<String>,
     },
-    /// The model's outputs are not exactly `wheels`.
-    #[error("outputs are [{}], expected exactly [wheels]", .found.join(", "))]
+    /// The model's outputs are not exactly the one its metadata declares.
+    #[error(
+        "outputs are [{}], expected exactly [{expected}] (the output `{}` declares, or \
+         `wheels` where it is absent)",
+        .found.join(", "),
+        keys::OUTPUT
+    )]
     OutputNames {
         /// Output names found.
         found: Vec<String>,
+        /// The output the metadata declares.
+        expected: PolicyOutput,
+    },
+    /// The model declares an output this agent cannot use.
+    #[error(
+        "the model declares the output \"{output}\" ({}), which this agent cannot use: it \
+         uses \"wheels\" or \"formation_velocity\"; use a model with one of those outputs, or a \
+         formation build that knows \"{output}\"",
+        keys::OUTPUT
+    )]
+    UnsupportedOutput {
+        /// The declared output.
+        output: String,
     },
     /// An input or output is not an f32 tensor.
     #[error("`{name}` is {found}, expected a float32 tensor")]
@@ -267,7 +296,8 @@ pub enum ContractViolation {
     },
 }
 
-/// Formats dimensions with `batch` for dynamic ones: `[batch, 1, 40, 40]`.
+/// Formats dimensions with `batch` for a dynamic first one and `dynamic` for any other:
+/// `[batch, 1, 40, 40]`, `[batch, dynamic]`.
 struct DimsDisplay<'a>(&'a [i64]);
 
 impl fmt::Display for DimsDisplay<'_> {
@@ -277,8 +307,10 @@ impl fmt::Display for DimsDisplay<'_> {
             if i > 0 {
                 f.write_str(", ")?;
             }
-            if *d < 0 {
+            if *d < 0 && i == 0 {
                 f.write_str("batch")?
+            } else if *d < 0 {
+                f.write_str("dynamic")?
             } else {
                 write!(f, "{d}")?
             }
@@ -307,6 +339,14 @@ pub fn parse_metadata(
             input: input.clone(),
         });
     }
+    let output = match entries.get(keys::OUTPUT) {
+        None => PolicyOutput::Wheels,
+        Some(text) => {
+            PolicyOutput::parse(text).ok_or_else(|| ContractViolation::UnsupportedOutput {
+                output: text.clone(),
+            })?
+        }
+    };
     let size_px: usize = parse_positive_int(entries, keys::SIZE_PX)?;
     if size_px > MAX_SIZE_PX {
         return Err(ContractViolation::BadMetadata {
@@ -331,8 +371,9 @@ pub fn parse_metadata(
     let v_train = parse_positive_real(entries, keys::V_TRAIN)?;
     let dataset_id = required(entries, keys::DATASET_ID)?.to_owned();
 
-    const PARSED: [&str; 10] = [
+    const PARSED: [&str; 11] = [
         keys::FORMAT,
+        keys::OUTPUT,
         keys::SIZE_PX,
         keys::RESOLUTION_M,
         keys::BEYOND,
@@ -360,6 +401,7 @@ pub fn parse_metadata(
         max_range,
         v_train,
         dataset_id,
+        output,
         extra,
     })
 }
@@ -516,13 +558,15 @@ enum Dim {
     Exact(i64),
 }
 
-/// Checks the model's inputs and outputs against the contract for `size_px x size_px` images.
+/// Checks the model's inputs and outputs against the contract for `size_px x size_px` images
+/// and the output its metadata declares.
 ///
 /// Input order does not matter (inputs are bound by name); names, element types and shapes do.
 pub fn check_signature(
     inputs: &[TensorSignature],
     outputs: &[TensorSignature],
     size_px: usize,
+    output: PolicyOutput,
 ) -> Result<(), ContractViolation> {
     let names = |list: &[TensorSignature]| list.iter().map(|t| t.name.clone()).collect::<Vec<_>>();
     let find = |name: &str| inputs.iter().find(|t| t.name == name);
@@ -535,11 +579,13 @@ pub fn check_signature(
     let [wheels] = outputs else {
         return Err(ContractViolation::OutputNames {
             found: names(outputs),
+            expected: output,
         });
     };
-    if wheels.name != WHEELS_OUTPUT {
+    if wheels.name != output.name() {
         return Err(ContractViolation::OutputNames {
             found: names(outputs),
+            expected: output,
         });
     }
     let side = i64::try_from(size_px).unwrap_or(i64::MAX);
@@ -603,6 +649,26 @@ fn check_tensor(tensor: &TensorSignature, expected: &[Dim]) -> Result<(), Contra
 mod tests {
     use super::*;
 
+    /// Issue 39: only the first dynamic dimension is the batch; any other unknown one is said to
+    /// be dynamic, not "batch".
+    #[test]
+    fn a_shape_names_only_its_first_dynamic_dimension_batch() {
+        let err = ContractViolation::Shape {
+            name: "wheel_cmd".into(),
+            expected: "[batch, 2]".into(),
+            found: vec![-1, -1],
+        };
+        let message = err.to_string();
+        assert!(
+            message.contains("has shape [batch, dynamic], expected [batch, 2]"),
+            "{message}"
+        );
+        assert_eq!(
+            DimsDisplay(&[-1, 1, 50, 50]).to_string(),
+            "[batch, 1, 50, 50]"
+        );
+    }
+
     fn paper_metadata() -> BTreeMap<String, String> {
         [
             (keys::FORMAT, "formation-policy/1"),
@@ -658,6 +724,48 @@ mod tests {
         assert_eq!(
             extra,
             ["formation.dagger.iteration", "formation.train.epochs"]
+        );
+    }
+
+    #[test]
+    fn the_output_is_declared_in_the_metadata_and_an_unknown_one_is_refused_by_name() {
+        // Absent: today's wheels.
+        let meta = parse_metadata(&paper_metadata()).unwrap();
+        assert_eq!(meta.output, PolicyOutput::Wheels);
+        let mut entries = paper_metadata();
+        entries.insert(keys::OUTPUT.into(), "formation_velocity".into());
+        let meta = parse_metadata(&entries).unwrap();
+        assert_eq!(meta.output, PolicyOutput::FormationVelocity);
+        assert!(!meta.extra.contains_key(keys::OUTPUT));
+        // The declared output's tensor must be the model's one output.
+        let outputs = [tensor("formation_velocity", &[-1, 2])];
+        check_signature(
+            &paper_inputs(),
+            &outputs,
+            50,
+            PolicyOutput::FormationVelocity,
+        )
+        .expect("declared and present");
+        let err = check_signature(
+            &paper_inputs(),
+            &paper_outputs(),
+            50,
+            PolicyOutput::FormationVelocity,
+        )
+        .unwrap_err();
+        let message = err.to_string();
+        assert!(
+            message.contains("outputs are [wheels], expected exactly [formation_velocity]")
+                && message.contains("formation.output"),
+            "{message}"
+        );
+        assert!(check_signature(&paper_inputs(), &outputs, 50, PolicyOutput::Wheels).is_err());
+        entries.insert(keys::OUTPUT.into(), "torques".into());
+        let message = parse_metadata(&entries).unwrap_err().to_string();
+        assert!(
+            message.contains("declares the output \"torques\" (formation.output)")
+                && message.contains("cannot use"),
+            "{message}"
         );
     }
 
@@ -838,17 +946,19 @@ mod tests {
 
     #[test]
     fn paper_signature_passes_in_any_input_order() {
-        check_signature(&paper_inputs(), &paper_outputs(), 50).expect("paper contract");
+        check_signature(&paper_inputs(), &paper_outputs(), 50, PolicyOutput::Wheels)
+            .expect("paper contract");
         let mut swapped = paper_inputs();
         swapped.reverse();
-        check_signature(&swapped, &paper_outputs(), 50).expect("order does not matter");
+        check_signature(&swapped, &paper_outputs(), 50, PolicyOutput::Wheels)
+            .expect("order does not matter");
     }
 
     #[test]
     fn wrong_or_extra_names_are_refused() {
         let renamed = vec![tensor("image", &[-1, 1, 50, 50]), tensor("aux", &[-1, 2])];
         assert_eq!(
-            check_signature(&renamed, &paper_outputs(), 50),
+            check_signature(&renamed, &paper_outputs(), 50, PolicyOutput::Wheels),
             Err(ContractViolation::InputNames {
                 found: vec!["image".into(), "aux".into()]
             })
@@ -856,16 +966,21 @@ mod tests {
         let mut extra = paper_inputs();
         extra.push(tensor("speed", &[-1, 1]));
         assert!(matches!(
-            check_signature(&extra, &paper_outputs(), 50),
+            check_signature(&extra, &paper_outputs(), 50, PolicyOutput::Wheels),
             Err(ContractViolation::InputNames { .. })
         ));
         let outputs = vec![tensor("wheels", &[-1, 2]), tensor("value", &[-1, 1])];
         assert!(matches!(
-            check_signature(&paper_inputs(), &outputs, 50),
+            check_signature(&paper_inputs(), &outputs, 50, PolicyOutput::Wheels),
             Err(ContractViolation::OutputNames { .. })
         ));
         assert!(matches!(
-            check_signature(&paper_inputs(), &[tensor("cmd", &[-1, 2])], 50),
+            check_signature(
+                &paper_inputs(),
+                &[tensor("cmd", &[-1, 2])],
+                50,
+                PolicyOutput::Wheels
+            ),
             Err(ContractViolation::OutputNames { .. })
         ));
     }
@@ -876,15 +991,15 @@ mod tests {
             tensor("occupancy", &[-1, 1, 40, 40]),
             tensor("aux", &[-1, 2]),
         ];
-        let err =
-            check_signature(&small, &paper_outputs(), 50).expect_err("40 px image for size_px 50");
+        let err = check_signature(&small, &paper_outputs(), 50, PolicyOutput::Wheels)
+            .expect_err("40 px image for size_px 50");
         assert_eq!(
             err.to_string(),
             "`occupancy` has shape [batch, 1, 40, 40], expected [batch (dynamic), 1, 50, 50]"
         );
         let fixed_batch = vec![tensor("occupancy", &[1, 1, 50, 50]), tensor("aux", &[1, 2])];
         assert!(matches!(
-            check_signature(&fixed_batch, &paper_outputs(), 50),
+            check_signature(&fixed_batch, &paper_outputs(), 50, PolicyOutput::Wheels),
             Err(ContractViolation::Shape { .. })
         ));
         let flat_aux = vec![
@@ -892,7 +1007,7 @@ mod tests {
             tensor("aux", &[-1, 3]),
         ];
         assert!(matches!(
-            check_signature(&flat_aux, &paper_outputs(), 50),
+            check_signature(&flat_aux, &paper_outputs(), 50, PolicyOutput::Wheels),
             Err(ContractViolation::Shape { name, .. }) if name == "aux"
         ));
     }
@@ -902,7 +1017,7 @@ mod tests {
         let mut inputs = paper_inputs();
         inputs[0].element = ElementKind::OtherTensor("Float64".into());
         assert_eq!(
-            check_signature(&inputs, &paper_outputs(), 50),
+            check_signature(&inputs, &paper_outputs(), 50, PolicyOutput::Wheels),
             Err(ContractViolation::ElementType {
                 name: "occupancy".into(),
                 found: "a Float64 tensor".into()
@@ -911,7 +1026,7 @@ mod tests {
         let mut outputs = paper_outputs();
         outputs[0].element = ElementKind::NotTensor("a sequence".into());
         assert!(matches!(
-            check_signature(&paper_inputs(), &outputs, 50),
+            check_signature(&paper_inputs(), &outputs, 50, PolicyOutput::Wheels),
             Err(ContractViolation::ElementType { .. })
         ));
     }

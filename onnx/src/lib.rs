@@ -19,7 +19,7 @@ mod policy;
 mod runtime;
 
 pub use contract::{
-    ContractViolation, ModelEnvelope, ModelMetadata, SensorContract, SensorViolation,
+    ContractViolation, ModelEnvelope, ModelMetadata, PolicyOutput, SensorContract, SensorViolation,
 };
 pub use error::{LIBRARY_FIX, PolicyError};
 pub use model_file::{MAX_MODEL_BYTES, check_model_file};

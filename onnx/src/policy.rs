@@ -10,8 +10,8 @@ use ort::session::Session;
 use ort::value::{Tensor, TensorElementType, ValueType};
 
 use crate::contract::{
-    ElementKind, ModelMetadata, OCCUPANCY_INPUT, SensorContract, TensorSignature, WHEELS_OUTPUT,
-    check_sensor, check_signature, parse_metadata,
+    ElementKind, ModelMetadata, OCCUPANCY_INPUT, SensorContract, TensorSignature, check_sensor,
+    check_signature, parse_metadata,
 };
 use crate::error::PolicyError;
 use crate::model_file::read_model_file;
@@ -74,7 +74,7 @@ impl OnnxPolicy {
             .map(|o| signature(o.name(), o.dtype()))
             .collect();
         let size_px = metadata.occupancy.size_px;
-        check_signature(&inputs, &outputs, size_px).map_err(contract)?;
+        check_signature(&inputs, &outputs, size_px, metadata.output).map_err(contract)?;
 
         let occupancy_slot = usize::from(inputs[0].name != OCCUPANCY_INPUT);
         let cells = size_px * size_px;
@@ -117,7 +117,9 @@ impl OnnxPolicy {
     }
 
     /// One forward pass: `occupancy` has `size_px * size_px` cells, row-major; `aux` is
-    /// `(delta_phi, d*)`. Returns `(left, right)` wheel speeds at `v_train`.
+    /// `(delta_phi, d*)`. Returns the model's two output values: `(left, right)` wheel speeds at
+    /// `v_train`, or the formation velocity `(f_x, f_y)` in the robot's frame, as its metadata
+    /// declares ([`crate::contract::PolicyOutput`]).
     pub fn infer(&mut self, occupancy: &[f32], aux: [f32; 2]) -> Result<[f32; 2], PolicyError> {
         if occupancy.len() != self.cells {
             return Err(PolicyError::InputLength {
@@ -145,15 +147,16 @@ impl OnnxPolicy {
             .session
             .run(ort::inputs![&self.inputs[0], &self.inputs[1]])
             .map_err(|e| failed(e.to_string()))?;
+        let name = self.metadata.output.name();
         let wheels = outputs
-            .get(WHEELS_OUTPUT)
-            .ok_or_else(|| failed(format!("no `{WHEELS_OUTPUT}` output")))?;
+            .get(name)
+            .ok_or_else(|| failed(format!("no `{name}` output")))?;
         let (_, values) = wheels
             .try_extract_tensor::<f32>()
             .map_err(|e| failed(e.to_string()))?;
         let &[left, right] = values else {
             return Err(failed(format!(
-                "`{WHEELS_OUTPUT}` has {} values, expected 2",
+                "`{name}` has {} values, expected 2",
                 values.len()
             )));
         };

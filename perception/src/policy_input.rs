@@ -1,12 +1,14 @@
 //! The rest of a policy's input beside the image, and how its output becomes wheel speeds.
 //!
-//! A policy takes `(delta_phi, d*)` next to the occupancy image ([`policy_aux`]) and answers wheel
-//! speeds at its training speed `v_train`, which the robot scales to the goal's speed
-//! ([`scale_to_goal_speed`]). The running agent (`formation-robot-agent`) and the Python bindings
+//! A policy takes `(delta_phi, d*)` next to the occupancy image ([`policy_aux`]) and answers what
+//! its model declares ([`PolicyOutput`]): wheel speeds at its training speed `v_train`, which the
+//! robot scales to the goal's speed ([`scale_to_goal_speed`]), or the formation velocity in the
+//! robot's frame, to which the robot adds the reference term ([`formation_velocity_to_wheels`]);
+//! [`command_of_output`] picks the one the model declares. The running agent (`formation-robot-agent`) and the Python bindings
 //! (`formation-python`, whose policy runs in Python) call these same functions, so a policy driven
 //! from Python sees, and moves its robot by, exactly the numbers the agent's would.
 
-use formation_proto::{Goal, WheelCmd, wrap_angle};
+use formation_proto::{Goal, PolicyOutput, WheelCmd, wrap_angle};
 
 /// Why a goal cannot be turned into a policy's input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -60,6 +62,41 @@ pub fn scale_to_goal_speed(wheels: [f32; 2], v_star: f64, v_train: f64) -> Wheel
     }
 }
 
+/// The wheel command of a formation-velocity output `f = (f_x, f_y)` \[m/s\] in the robot's frame,
+/// for a robot `delta_phi` off the goal's heading at goal speed `v_star`.
+///
+/// The controlled point lies half a wheel track ahead of the axle (the expert's `c = l/2`), so
+/// its velocity `u` in the robot's frame sets `v = u_x`, `ω = u_y / c` and the wheels
+/// `v ∓ (l/2) ω = u_x ∓ u_y` whatever the track `l`. `u = f + v* (cos Δφ, sin Δφ)`: the
+/// reference term `v* (cos φ*, sin φ*)` seen from the robot. The world applies its own wheel
+/// limits, as it does to any command.
+pub fn formation_velocity_to_wheels(f: [f32; 2], delta_phi: f64, v_star: f64) -> WheelCmd {
+    let (sin, cos) = delta_phi.sin_cos();
+    let u_x = f64::from(f[0]) + v_star * cos;
+    let u_y = f64::from(f[1]) + v_star * sin;
+    WheelCmd {
+        left: u_x - u_y,
+        right: u_x + u_y,
+    }
+}
+
+/// The wheel command of a policy's two output values `values`, as `output` says they are meant,
+/// for the robot's auxiliary input `aux = (delta_phi, d*)` and goal speed `v_star`.
+pub fn command_of_output(
+    output: PolicyOutput,
+    values: [f32; 2],
+    aux: [f32; 2],
+    v_star: f64,
+    v_train: f64,
+) -> WheelCmd {
+    match output {
+        PolicyOutput::Wheels => scale_to_goal_speed(values, v_star, v_train),
+        PolicyOutput::FormationVelocity => {
+            formation_velocity_to_wheels(values, f64::from(aux[0]), v_star)
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -96,5 +133,41 @@ mod tests {
     fn outputs_scale_with_the_goal_speed() {
         let cmd = scale_to_goal_speed([0.25, -0.5], 1.0, 0.5);
         assert_eq!((cmd.left, cmd.right), (0.5, -1.0));
+    }
+
+    #[test]
+    fn a_formation_velocity_becomes_the_wheels_that_move_the_point_half_a_track_ahead() {
+        // On heading with no correction: straight on at v*.
+        let cmd = formation_velocity_to_wheels([0.0, 0.0], 0.0, 0.5);
+        assert_eq!((cmd.left, cmd.right), (0.5, 0.5));
+        // Goal heading 90° to the left, standing still otherwise: the point is asked to move
+        // sideways at v*, which turns the robot left on the spot (ω = v* / c).
+        let cmd = formation_velocity_to_wheels([0.0, 0.0], std::f64::consts::FRAC_PI_2, 0.4);
+        assert!((cmd.left + 0.4).abs() < 1e-12 && (cmd.right - 0.4).abs() < 1e-12);
+        // The correction adds to the reference term and does not scale with v*.
+        let slow = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.3);
+        let fast = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.8);
+        assert!((slow.left - 0.4).abs() < 1e-6 && (fast.left - 0.9).abs() < 1e-6);
+        // The point's velocity from these wheels, with l = 0.331 and c = l/2, is f + reference.
+        let (l, c) = (0.331, 0.331 / 2.0);
+        let f = [0.05_f32, -0.12_f32];
+        let cmd = formation_velocity_to_wheels(f, 0.3, 0.7);
+        let v = (cmd.left + cmd.right) / 2.0;
+        let omega = (cmd.right - cmd.left) / l;
+        assert!((v - (f64::from(f[0]) + 0.7 * 0.3f64.cos())).abs() < 1e-9);
+        assert!((c * omega - (f64::from(f[1]) + 0.7 * 0.3f64.sin())).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_declared_output_picks_the_conversion() {
+        let aux = [0.2, 1.5];
+        assert_eq!(
+            command_of_output(PolicyOutput::Wheels, [0.7, 0.35], aux, 0.35, 0.7),
+            scale_to_goal_speed([0.7, 0.35], 0.35, 0.7)
+        );
+        assert_eq!(
+            command_of_output(PolicyOutput::FormationVelocity, [0.1, 0.0], aux, 0.35, 0.7),
+            formation_velocity_to_wheels([0.1, 0.0], f64::from(aux[0]), 0.35)
+        );
     }
 }

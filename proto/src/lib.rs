@@ -3,6 +3,7 @@
 //! * [`types`]: plain values that cross crate boundaries (poses, wheel commands, the goal a robot
 //!   is given, LIDAR and occupancy settings). They carry no behaviour beyond validation.
 //! * [`neighbours`]: the formation's neighbour rule as a value (its computation is the world's).
+//! * [`policy_output`]: what a policy's output means ([`PolicyOutput`]), as its model declares it.
 //! * [`files`]: reading a user's file only if it is a regular file within a size limit.
 //! * [`mod@model_id`]: the id an agent reports for its model (file stem and content hash).
 //! * [`errors`]: an error and its sources as one line, each cause printed once.
@@ -22,10 +23,12 @@ pub mod exit;
 pub mod files;
 pub mod model_id;
 pub mod neighbours;
+pub mod policy_output;
 pub mod team_size;
 pub mod types;
 pub mod wire;
 
 pub use neighbours::{GabrielRule, NeighbourRule};
+pub use policy_output::PolicyOutput;
 pub use team_size::TeamSizeFit;
 pub use types::*;

@@ -6,8 +6,12 @@
 //! 1. render the occupancy image from the scan ([`formation_perception::occupancy::render`], the same function the
 //!    demonstration collector uses);
 //! 2. `delta_phi = wrap(phi* - theta)`, and `aux = (delta_phi, d*)`;
-//! 3. `u_hat = policy(image, aux)`, the wheel speeds at the training speed `v_train`;
-//! 4. `u = K u_hat` with `K = v* / v_train` (the paper's speed scaling).
+//! 3. `y = policy(image, aux)`, what the model declares it outputs ([`PolicyOutput`]);
+//! 4. for `wheels`, the wheel speeds at the training speed `v_train`: `u = K y` with
+//!    `K = v* / v_train` (the paper's speed scaling); for `formation_velocity`, the formation
+//!    velocity in the robot's frame: the reference term `v* (cos Δφ, sin Δφ)` is added and the
+//!    point velocity turned into wheel speeds
+//!    ([`policy_input::command_of_output`], shared with the Python bindings).
 //!
 //! The steps are exposed separately ([`Agent::perceive`], [`Agent::decide`]) so the agent process
 //! can time them, and together as [`Agent::act`]. [`PolicyController`] runs one independent `Agent`
@@ -27,7 +31,7 @@ use std::path::{Path, PathBuf};
 use formation_onnx::contract::{SensorContract, SensorViolation, check_sensor};
 use formation_onnx::{OnnxPolicy, PolicyError};
 use formation_proto::control::{Controller, ControllerError, Observation};
-use formation_proto::{Goal, LidarSpec, OccupancySpec, WheelCmd};
+use formation_proto::{Goal, LidarSpec, OccupancySpec, PolicyOutput, WheelCmd};
 
 use formation_perception::{occupancy, policy_input};
 
@@ -148,8 +152,12 @@ pub trait PolicyBackend: Send {
     fn beams(&self) -> Option<usize>;
     /// LIDAR maximum range \[m\] the policy was trained with, if it records it.
     fn max_range(&self) -> Option<f64>;
-    /// Training speed `v_train` \[m/s\]; deployed commands are scaled by `v* / v_train`.
+    /// Training speed `v_train` \[m/s\]; deployed wheel outputs are scaled by `v* / v_train`.
     fn v_train(&self) -> f64;
+    /// What the policy's output means (`wheels` unless the model declares otherwise).
+    fn output(&self) -> PolicyOutput {
+        PolicyOutput::Wheels
+    }
     /// A short id naming the model (logged with every command).
     fn model_id(&self) -> &str;
     /// What the model was trained on beyond its sensor (d* range, team sizes, noise); empty
@@ -190,6 +198,9 @@ impl PolicyBackend for OnnxPolicy {
     }
     fn v_train(&self) -> f64 {
         self.metadata().v_train
+    }
+    fn output(&self) -> PolicyOutput {
+        self.metadata().output
     }
     fn envelope(&self) -> formation_onnx::ModelEnvelope {
         self.metadata().envelope()
@@ -279,8 +290,10 @@ impl Agent {
                 right,
             });
         }
-        Ok(policy_input::scale_to_goal_speed(
+        Ok(policy_input::command_of_output(
+            self.policy.output(),
             [left, right],
+            aux,
             goal.v_star,
             self.policy.v_train(),
         ))
