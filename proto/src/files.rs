@@ -289,6 +289,13 @@ pub fn check_output_file(path: &Path) -> Result<(), WriteError> {
     check_output(path, false)
 }
 
+/// [`check_output_file`] for a file of a kind the fix's example names: a folder given as the
+/// file says "name a file (for example DIR/`example`)", `report.html` for a report,
+/// `run.mcap` for a recording.
+pub fn check_output_file_as(path: &Path, example: &str) -> Result<(), WriteError> {
+    check_output(path, false).map_err(|e| e.with_example(example))
+}
+
 /// Checks, before anything is computed, that `dir` could be created or used as an output
 /// folder: no component of it is something other than a folder. Nothing is created.
 pub fn check_output_dir(dir: &Path) -> Result<(), WriteError> {
@@ -309,6 +316,7 @@ fn check_output(path: &Path, dir_wanted: bool) -> Result<(), WriteError> {
             },
             obstacle,
             error: refused,
+            example: None,
         }),
     }
 }
@@ -324,6 +332,8 @@ pub struct WriteError {
     path: PathBuf,
     obstacle: WriteObstacle,
     error: std::io::Error,
+    /// The file name the fix gives as an example when the path is a folder (`out.json` if none).
+    example: Option<String>,
 }
 
 impl WriteError {
@@ -333,7 +343,16 @@ impl WriteError {
             obstacle: diagnose_write(path, &error, &FileSystem),
             path: path.to_path_buf(),
             error,
+            example: None,
         }
+    }
+
+    /// The same error, whose fix names `example` (`report.html`, `run.mcap`) as the file to
+    /// write into a folder given as the file.
+    #[must_use]
+    pub fn with_example(mut self, example: &str) -> WriteError {
+        self.example = Some(example.to_owned());
+        self
     }
 
     /// Explains `error`, the failure to create the folder `dir` (and its parents): the folder
@@ -347,6 +366,7 @@ impl WriteError {
             obstacle,
             path: dir.to_path_buf(),
             error,
+            example: None,
         }
     }
 
@@ -380,15 +400,33 @@ impl fmt::Display for WriteError {
             f,
             "could not write {}: {}",
             self.path.display(),
-            explain(&self.path, &self.obstacle, &self.error)
+            explain_as(
+                &self.path,
+                &self.obstacle,
+                &self.error,
+                self.example.as_deref().unwrap_or(DEFAULT_EXAMPLE)
+            )
         )
     }
 }
 
 impl std::error::Error for WriteError {}
 
+/// The example file name of a fix that asks for a file where a folder was given.
+const DEFAULT_EXAMPLE: &str = "out.json";
+
 /// The reason and the fix, in words, for writing `path` against `obstacle`.
 pub fn explain(path: &Path, obstacle: &WriteObstacle, error: &std::io::Error) -> String {
+    explain_as(path, obstacle, error, DEFAULT_EXAMPLE)
+}
+
+/// [`explain`], with `example` as the file name the fix suggests for a folder given as the file.
+pub fn explain_as(
+    path: &Path,
+    obstacle: &WriteObstacle,
+    error: &std::io::Error,
+    example: &str,
+) -> String {
     match obstacle {
         WriteObstacle::NotADirectory { component, what } => format!(
             "{} is {what}, not a directory, so nothing can be written under it: choose a path under a directory",
@@ -397,7 +435,7 @@ pub fn explain(path: &Path, obstacle: &WriteObstacle, error: &std::io::Error) ->
         WriteObstacle::IsADirectory => format!(
             "{} is a directory: name a file (for example {})",
             path.display(),
-            path.join("out.json").display()
+            path.join(example).display()
         ),
         WriteObstacle::DiskFull { dir } => format!(
             "the disk is full (no space left on the file system of {}): free some space or choose another output directory",

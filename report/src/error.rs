@@ -79,6 +79,22 @@ pub enum ReportError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// `--out` names a file the report reads (or would read, the next time it is built from
+    /// the same folder): writing the page there would destroy an input.
+    #[error(
+        "--out {}: that is the name of one of the report's inputs ({what}): the HTML page would \
+         overwrite it and the next report would fail: name an .html file instead (for example \
+         {})",
+        out.display(), example.display()
+    )]
+    OutIsInput {
+        /// The output file given.
+        out: PathBuf,
+        /// What input such a file is.
+        what: &'static str,
+        /// A file name that is no input.
+        example: PathBuf,
+    },
     /// Plotting a figure failed.
     #[error("could not draw figure {figure}: {message}")]
     Plot {

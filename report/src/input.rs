@@ -331,6 +331,29 @@ struct Found {
     scalings: Vec<PathBuf>,
 }
 
+/// What input of the report a file at `path` would be, by its name (and, for a run log, its
+/// folder's): `None` for a file the report does not read.
+pub fn input_kind(path: &Path) -> Option<&'static str> {
+    let name = path.file_name()?.to_string_lossy();
+    let in_runs = path
+        .parent()
+        .and_then(Path::file_name)
+        .is_some_and(|folder| folder == "runs");
+    if name == "summary.json" {
+        Some("an eval summary, summary.json")
+    } else if name == "profile.json" {
+        Some("a latency profile, profile.json")
+    } else if is_scaling_json(&name) {
+        Some("a scaling table, scaling*.json")
+    } else if is_loss_csv(&name) {
+        Some("a training loss curve, *loss*.csv")
+    } else if in_runs && name.starts_with("run-") && name.ends_with(".json") {
+        Some("a run log, runs/run-NNNN.json")
+    } else {
+        None
+    }
+}
+
 /// True for a training loss curve file name: `*loss*.csv`.
 pub fn is_loss_csv(file_name: &str) -> bool {
     file_name.ends_with(".csv") && file_name.contains("loss")

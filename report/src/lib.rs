@@ -73,6 +73,7 @@ pub struct ReportSummary {
 /// Errors: `dir` missing or not a directory; no `summary.json` under it; an input that cannot be
 /// read or parsed (the error names the file); an output that cannot be written.
 pub fn build_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError> {
+    check_output(out)?;
     let inputs = input::load_inputs(dir)?;
     let figures_dir = figures_dir_for(out);
     let href_dir = figures_dir
@@ -106,6 +107,24 @@ pub fn build_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError
         latency_profiles: inputs.profiles.len(),
         warnings: input_warnings(&inputs),
     })
+}
+
+/// The file name a fix suggests for the report.
+const REPORT_EXAMPLE: &str = "report.html";
+
+/// Refuses, before anything is read or written, an `out` that cannot take the page: a folder,
+/// a path under a file, or a file the report reads (a summary, a run log, ...), which the page
+/// would destroy.
+pub fn check_output(out: &Path) -> Result<(), ReportError> {
+    formation_proto::files::check_output_file_as(out, REPORT_EXAMPLE)?;
+    if let Some(what) = input::input_kind(out) {
+        return Err(ReportError::OutIsInput {
+            out: out.to_path_buf(),
+            what,
+            example: out.with_file_name(REPORT_EXAMPLE),
+        });
+    }
+    Ok(())
 }
 
 /// `report.html` → `report-figures/` in the same directory.

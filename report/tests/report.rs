@@ -460,3 +460,45 @@ fn the_page_says_what_input_each_model_was_given() {
     );
     assert!(!html.contains("older: input of model"));
 }
+
+/// Issue 39: `--out` naming one of the report's own inputs (a summary, a run log, a loss curve)
+/// is refused before anything is read or written, and the input is left as it was; a folder
+/// given as `--out` is told to name an .html file.
+#[test]
+fn an_out_that_names_an_input_is_refused_and_the_input_kept() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dir.path().join("demo");
+    common::write_demo_dir(&data, 30.0);
+    let case = fs::read_dir(&data)
+        .expect("read demo")
+        .map(|e| e.expect("entry").path())
+        .find(|p| p.join("runs/run-0000.json").is_file())
+        .expect("an eval with a run log");
+    for (out, what) in [
+        (data.join("table1/summary.json"), "eval summary"),
+        (case.join("runs/run-0000.json"), "run log"),
+        (data.join("policy-loss.csv"), "training loss curve"),
+        (data.join("new/summary.json"), "eval summary"),
+    ] {
+        let before = fs::read(&out).ok();
+        let err = build_report(&data, &out).expect_err("an input as --out");
+        assert!(matches!(err, ReportError::OutIsInput { .. }), "{err}");
+        let message = err.to_string();
+        assert!(message.contains(what), "{message}");
+        assert!(message.contains("report.html"), "{message}");
+        assert_eq!(fs::read(&out).ok(), before, "{} was kept", out.display());
+        let figures = formation_report::figures_dir_for(&out);
+        assert!(!figures.exists(), "{} was made", figures.display());
+    }
+    assert!(!data.join("new").exists());
+    // The report still builds from the same folder afterwards.
+    build_report(&data, &dir.path().join("report.html")).expect("report after the refusals");
+
+    let err = build_report(&data, &data).expect_err("a folder as --out");
+    let message = err.to_string();
+    assert!(
+        message.contains(&data.join("report.html").display().to_string()),
+        "{message}"
+    );
+    assert!(!message.contains("out.json"), "{message}");
+}

@@ -97,6 +97,25 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
     );
     refused.assert_failure_mentioning("holds the login of robot-1, not the recorder's");
     assert!(!outside.exists(), "a refused recorder writes nothing");
+    // The recorder's user with another password (issue 39): refused as a login, not as an
+    // unreachable team, well within --timeout-s, and without the build's source paths.
+    let mut wrong: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(creds.join("recorder.json")).expect("recorder"))
+            .expect("recorder.json");
+    wrong["password"] = serde_json::Value::String("not-the-teams-password".into());
+    let wrong_login = dir.path().join("wrong-recorder.json");
+    std::fs::write(&wrong_login, wrong.to_string()).expect("write the wrong login");
+    let mut command = record_connect(&listen, run_id.as_str(), &outside, Some(&wrong_login));
+    command.args(["--timeout-s", "200"]);
+    let refused = run(command, Duration::from_secs(200));
+    refused.assert_failure_mentioning("refused the login of user recorder");
+    let stderr = refused.stderr();
+    assert!(
+        !stderr.contains(".cargo") && !stderr.contains(".rs:") && !stderr.contains("within 200"),
+        "{}",
+        refused.describe()
+    );
+    assert!(!outside.exists(), "a refused recorder writes nothing");
     // Robot 1's login may connect, but the router gives it nothing of the record channel.
     let login = formation_runtime::zenoh::credentials::read_login(&robot1).expect("robot 1");
     let impostor = raw_client(&listen, Some((login.user(), login.password())))

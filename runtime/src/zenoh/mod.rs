@@ -187,9 +187,53 @@ pub(crate) fn client_config(
     Ok(config)
 }
 
-/// Opens a session, mapping Zenoh's error to text.
+/// Opens a session, mapping Zenoh's error to text (without the source locations Zenoh appends).
 pub(crate) fn open(config: ::zenoh::Config) -> Result<::zenoh::Session, String> {
-    ::zenoh::open(config).wait().map_err(|e| e.to_string())
+    ::zenoh::open(config)
+        .wait()
+        .map_err(|e| without_source_locations(&e.to_string()))
+}
+
+/// Zenoh's error text without the ` at /path/to/zenoh-x.y/src/file.rs:123.` it appends (paths
+/// of the build machine's cargo registry, which mean nothing to a user).
+pub(crate) fn without_source_locations(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = rest.find(" at /") {
+        let after = &rest[at + 4..];
+        let Some(rs) = after.find(".rs:") else {
+            break;
+        };
+        let tail = &after[rs + 4..];
+        let digits = tail.len() - tail.trim_start_matches(|c: char| c.is_ascii_digit()).len();
+        if digits == 0 || after[..rs].contains(char::is_whitespace) {
+            out.push_str(&rest[..at + 4]);
+            rest = after;
+            continue;
+        }
+        out.push_str(&rest[..at]);
+        rest = tail[digits..].strip_prefix('.').unwrap_or(&tail[digits..]);
+    }
+    out.push_str(rest);
+    out.trim().to_owned()
+}
+
+/// How long a client with a login waits for the router once its TCP port accepts: a router
+/// answers a login at once, so a session not open by then was refused (a wrong password).
+pub(crate) const LOGIN_ANSWER: Duration = Duration::from_secs(10);
+
+/// Whether something accepts TCP connections at `endpoint`, within `within`.
+pub(crate) fn accepts_tcp(endpoint: &Endpoint, within: Duration) -> bool {
+    use std::net::ToSocketAddrs as _;
+    let Some(address) = endpoint.as_str().strip_prefix("tcp/") else {
+        return false;
+    };
+    let Ok(addresses) = address.to_socket_addrs() else {
+        return false;
+    };
+    addresses
+        .into_iter()
+        .any(|a| std::net::TcpStream::connect_timeout(&a, within).is_ok())
 }
 
 /// What a link's waits block on: rung by subscriber callbacks (something arrived) and by
@@ -337,6 +381,22 @@ impl<T> Queue<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 39: Zenoh's errors lose the build machine's source paths, and keep their words.
+    #[test]
+    fn zenoh_errors_lose_their_source_locations() {
+        let text = "Unable to connect to any of [tcp/127.0.0.1:7447]!  at \
+                    /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-1.10.0/src/\
+                    net/runtime/orchestrator.rs:1000. at /x/y.rs:2";
+        assert_eq!(
+            without_source_locations(text),
+            "Unable to connect to any of [tcp/127.0.0.1:7447]!"
+        );
+        assert_eq!(
+            without_source_locations("look at /etc/hosts"),
+            "look at /etc/hosts"
+        );
+    }
 
     #[test]
     fn endpoints_must_be_tcp_host_and_port() {

@@ -135,6 +135,24 @@ pub enum RecorderLinkError {
         /// Zenoh's error.
         detail: String,
     },
+    /// The router accepted the TCP connection but not the login: the password is not the one
+    /// the team was launched with.
+    #[error(
+        "the router at {endpoint} accepted the connection but refused the login of user {user} \
+         (no session within {waited_s:.1} s of connecting): --credentials holds another \
+         password than the team's; pass the recorder.json of the credentials folder the team \
+         was launched with (Zenoh said: {detail})"
+    )]
+    LoginRefused {
+        /// The endpoint.
+        endpoint: String,
+        /// The user the login named.
+        user: String,
+        /// How long the login was given \[s\].
+        waited_s: f64,
+        /// Zenoh's error.
+        detail: String,
+    },
     /// No world of this run answered in time.
     #[error(
         "no world of run {run} at {endpoint} within {waited_s:.1} s: check --run-id (formation \
@@ -182,12 +200,7 @@ impl RecorderLink {
         let started = Instant::now();
         let zenoh =
             |action: String| move |e: String| RecorderLinkError::Zenoh { action, detail: e };
-        let config = super::client_config(endpoint, timeout, login)
-            .map_err(zenoh(format!("configure the connection to {endpoint}")))?;
-        let session = super::open(config).map_err(|detail| RecorderLinkError::Unreachable {
-            endpoint: endpoint.to_string(),
-            detail,
-        })?;
+        let session = open_session(endpoint, login, timeout)?;
         let bell = Arc::new(Bell::default());
         let signals = SignalWatch::start(Arc::clone(&bell))
             .map_err(|e| zenoh("watch for SIGINT and SIGTERM".into())(e.to_string()))?;
@@ -282,6 +295,48 @@ impl RecorderLink {
             }
         }
     }
+}
+
+/// Opens the recorder's session at `endpoint` within `timeout`. With a login, it first waits for
+/// the router's TCP port and then gives the login [`super::LOGIN_ANSWER`]: a session that does
+/// not open by then was refused by the router (a wrong password), which is said at once rather
+/// than after the whole timeout as if the team were not there.
+fn open_session(
+    endpoint: &Endpoint,
+    login: Option<&Login>,
+    timeout: Duration,
+) -> Result<::zenoh::Session, RecorderLinkError> {
+    let started = Instant::now();
+    let configure = |within: Duration| {
+        super::client_config(endpoint, within, login).map_err(|detail| RecorderLinkError::Zenoh {
+            action: format!("configure the connection to {endpoint}"),
+            detail,
+        })
+    };
+    let unreachable = |detail: String| RecorderLinkError::Unreachable {
+        endpoint: endpoint.to_string(),
+        detail,
+    };
+    let Some(login) = login else {
+        return super::open(configure(timeout)?).map_err(unreachable);
+    };
+    while !super::accepts_tcp(endpoint, Duration::from_secs(1)) {
+        if started.elapsed() >= timeout {
+            return Err(unreachable(format!(
+                "nothing accepted a TCP connection there within {:.1} s",
+                started.elapsed().as_secs_f64()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let left = timeout.saturating_sub(started.elapsed());
+    let within = left.min(super::LOGIN_ANSWER).max(Duration::from_millis(1));
+    super::open(configure(within)?).map_err(|detail| RecorderLinkError::LoginRefused {
+        endpoint: endpoint.to_string(),
+        user: login.user().to_owned(),
+        waited_s: within.as_secs_f64(),
+        detail,
+    })
 }
 
 /// Watches run `run`'s world token (with history): whether it is there goes to the returned
