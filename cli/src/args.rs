@@ -28,6 +28,10 @@ pub enum Command {
     /// Evaluate a controller over a scenario's runs and print Table I figures.
     #[command(after_help = EVAL_EXAMPLES)]
     Eval(EvalArgs),
+    /// Gauge how strongly a controller corrects formation errors: its own runs relabelled by the
+    /// expert, the slope and RMS error of its formation velocity binned by the label's size.
+    #[command(after_help = GAUGE_EXAMPLES)]
+    Gauge(GaugeArgs),
     /// Merge the shards of an evaluation spread over workers (`eval --shard`) into its summary.
     #[command(after_help = MERGE_EXAMPLES)]
     Merge(MergeArgs),
@@ -205,6 +209,61 @@ pub struct EvalArgs {
     pub shard: Option<PathBuf>,
 }
 
+/// `formation gauge`'s examples.
+const GAUGE_EXAMPLES: &str = "Examples:
+  formation gauge --scenario scenarios/teams-generalist.toml --robots 16,32 --runs 20
+  formation gauge --scenario scenarios/teams-generalist.toml --robots 16 --model M.onnx \\
+      --duration-s 240 --json response.json";
+
+/// `formation gauge`.
+#[derive(Debug, Args)]
+pub struct GaugeArgs {
+    /// Scenario TOML file.
+    #[arg(long)]
+    pub scenario: PathBuf,
+    /// Team sizes to gauge (e.g. `16,32`; default: the scenario's).
+    #[arg(long, value_delimiter = ',', value_parser = team_size)]
+    pub robots: Option<Vec<usize>>,
+    /// ONNX model to gauge (default: the shipped model).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Also gauge the expert with these gains as JSON (for example `{"shaping_wheel_accel": 1.0}`,
+    /// a teacher), against the scored expert's labels; `{}` gauges the scored expert itself.
+    #[arg(long, value_name = "JSON")]
+    pub expert: Option<String>,
+    /// Gauge only the expert given by `--expert`, not the policy.
+    #[arg(long, requires = "expert")]
+    pub no_policy: bool,
+    /// Runs per team size (default: the scenario's `runs`; at most 10000).
+    #[arg(long, value_parser = run_count)]
+    pub runs: Option<usize>,
+    /// Base seed (default: the scenario's `seed`).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Run length in seconds (default: the scenario's).
+    #[arg(long, value_parser = gauge_duration)]
+    pub duration_s: Option<f64>,
+    /// Gauge every this many ticks.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+    pub stride: u64,
+    /// Write the response curve JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Worker threads (default: available cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// Parses a gauge run length: seconds from 1 to 3600.
+pub fn gauge_duration(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(s) if (1.0..=3600.0).contains(&s) => Ok(s),
+        _ => Err(format!(
+            "expected a run length from 1 to 3600 s, got {text:?}"
+        )),
+    }
+}
+
 /// `formation merge`.
 #[derive(Debug, Args)]
 pub struct MergeArgs {
@@ -320,6 +379,21 @@ pub struct NetworkArgs {
     /// judges distances relative to d*, so this fits small-d* teams as tightly as large ones.
     #[arg(long)]
     pub relative_loss: bool,
+    /// What the model outputs: `wheels` (the paper's wheel speeds at v_train, scaled by
+    /// v*/v_train) or `formation_velocity` (the expert's correction in the robot's frame, to
+    /// which the agent adds the reference term at the goal's own speed).
+    #[arg(long, default_value = "wheels", value_parser = policy_output)]
+    pub output: formation_proto::PolicyOutput,
+    /// Weight each sample's squared error by 1 / (|f| + EPS), `f` the expert's formation
+    /// velocity \[m/s\] (mean weight 1), so that small corrections count (for example 0.05).
+    #[arg(long, value_name = "EPS")]
+    pub response_weight: Option<f64>,
+}
+
+/// Parses a policy output kind: `wheels` or `formation_velocity`.
+pub fn policy_output(text: &str) -> Result<formation_proto::PolicyOutput, String> {
+    formation_proto::PolicyOutput::parse(text.trim())
+        .ok_or_else(|| format!("expected `wheels` or `formation_velocity`, got {text:?}"))
 }
 
 /// What DAgger rolls out, shared by `formation dagger` and `formation dagger-label`.

@@ -40,6 +40,8 @@ pub fn train_command(args: &TrainArgs) -> anyhow::Result<()> {
         architecture: args.network.architecture,
         mirror: Mirror::from_flags(args.network.mirror, args.network.mirror_augment_only),
         relative_loss: args.network.relative_loss,
+        output: args.network.output,
+        response_weight: args.network.response_weight,
         samples_per_epoch: args
             .network
             .samples_per_epoch
@@ -98,6 +100,8 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
             architecture: args.network.architecture,
             mirror: Mirror::from_flags(args.network.mirror, args.network.mirror_augment_only),
             relative_loss: args.network.relative_loss,
+            output: args.network.output,
+            response_weight: args.network.response_weight,
             samples_per_epoch: args
                 .network
                 .samples_per_epoch

@@ -8,6 +8,7 @@
 //! with errors that name the file and the fix, calls the pure logic, and writes outputs.
 //!
 //! * [`eval`]: in-process (or, with `--processes`, multi-process) evaluation with the paper's metrics.
+//! * [`gauge`]: the response gauge, a controller's corrections against the expert's labels.
 //! * [`collect`]: expert demonstrations into a dataset.
 //! * [`learn`]: `train` (runs the PyTorch trainer), `dagger` (policy drives, expert labels,
 //!   retrain), and `dagger-label` / `dagger-append` (one iteration's labelling in shares).
@@ -31,6 +32,7 @@ pub mod demo;
 #[cfg(feature = "zenoh")]
 pub mod endpoint;
 pub mod eval;
+pub mod gauge;
 pub mod gauge;
 pub mod launch;
 pub mod learn;
@@ -71,6 +73,7 @@ pub fn main_with_args() -> anyhow::Result<()> {
     formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
     match cli.command {
         args::Command::Eval(a) => eval::eval_command(&a),
+        args::Command::Gauge(a) => gauge::gauge_command(&a),
         args::Command::Merge(a) => eval::merge_command(&a),
         args::Command::Collect(a) => collect::collect_command(&a),
         args::Command::Train(a) => learn::train_command(&a),

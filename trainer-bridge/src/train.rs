@@ -74,6 +74,14 @@ pub struct TrainOptions {
     /// success check is relative, a wheel-speed error is in metres (metadata
     /// `formation.train.relative_loss`).
     pub relative_loss: bool,
+    /// What the model outputs: the paper's wheel speeds, or the expert's formation velocity in
+    /// the robot's frame (computed from the dataset's wheel labels; declared in the model's
+    /// `formation.output`).
+    pub output: formation_proto::PolicyOutput,
+    /// Weight each sample's squared error by `1 / (|f| + eps)` (`f` the expert's formation
+    /// velocity, mean weight 1), so that small corrections count; `None`: unweighted
+    /// (metadata `formation.train.response_weight`).
+    pub response_weight: Option<f64>,
 }
 
 /// The policy networks the trainer can build (`formation_trainer.model.ARCHITECTURES`). Both take
@@ -144,6 +152,8 @@ impl Default for TrainOptions {
             mirror: Mirror::Off,
             samples_per_epoch: None,
             relative_loss: false,
+            output: formation_proto::PolicyOutput::Wheels,
+            response_weight: None,
         }
     }
 }
@@ -368,6 +378,15 @@ fn validate(opts: &TrainOptions) -> Result<(), TrainError> {
     if !(opts.lr.is_finite() && opts.lr > 0.0) {
         return invalid("lr", opts.lr.to_string(), "must be finite and > 0");
     }
+    if let Some(eps) = opts.response_weight
+        && !(eps.is_finite() && eps > 0.0)
+    {
+        return invalid(
+            "response_weight",
+            eps.to_string(),
+            "must be a speed > 0 m/s (for example 0.05)",
+        );
+    }
     if !(0.0..1.0).contains(&opts.val_fraction) {
         return invalid(
             "val_fraction",
@@ -425,6 +444,12 @@ fn trainer_args(opts: &TrainOptions) -> Vec<std::ffi::OsString> {
     }
     if let Some(count) = opts.samples_per_epoch {
         push("--samples-per-epoch", count.to_string().into());
+    }
+    if opts.output != formation_proto::PolicyOutput::Wheels {
+        push("--output", opts.output.name().into());
+    }
+    if let Some(eps) = opts.response_weight {
+        push("--response-weight", eps.to_string().into());
     }
     match opts.mirror {
         Mirror::Off => {}
@@ -632,6 +657,8 @@ mod tests {
             mirror: Mirror::Average,
             samples_per_epoch: Some(200_000),
             relative_loss: true,
+            output: formation_proto::PolicyOutput::FormationVelocity,
+            response_weight: Some(0.05),
             ..opts()
         })
         .into_iter()
@@ -655,6 +682,8 @@ mod tests {
             "--samples-per-epoch 200000",
             " --mirror",
             " --relative-loss",
+            "--output formation_velocity",
+            "--response-weight 0.05",
         ] {
             assert!(joined.contains(part), "{part} missing in {joined}");
         }

@@ -66,6 +66,21 @@ def _parser() -> argparse.ArgumentParser:
         help="weight each sample's squared error by (d_ref/d*)^2, so small d* is fitted as tightly, relative to d*, as large",
     )
 
+    train.add_argument(
+        "--output",
+        choices=("wheels", "formation_velocity"),
+        default="wheels",
+        help="what the model outputs: wheels (the paper's wheel speeds at v_train) or formation_velocity "
+        "(the expert's correction in the robot's frame, to which the agent adds v* (cos dphi, sin dphi))",
+    )
+    train.add_argument(
+        "--response-weight",
+        type=float,
+        metavar="EPS",
+        help="weight each sample's squared error by 1/(|f| + EPS), f the expert's formation velocity [m/s] "
+        "(mean weight 1), so small corrections count (for example 0.05)",
+    )
+
     exp = commands.add_parser("export", help="export a .pt checkpoint to ONNX (with the parity check)")
     exp.add_argument("--checkpoint", type=Path, required=True)
     exp.add_argument("--out", type=Path, required=True, help="ONNX model to write")
@@ -95,6 +110,8 @@ def _train(args) -> None:
         mirror_average=not args.mirror_augment_only,
         samples_per_epoch=args.samples_per_epoch,
         relative_loss=args.relative_loss,
+        output=args.output,
+        response_weight=args.response_weight,
     )
     report = train.run(config, log=lambda line: print(line, flush=True))
     print(train.report_line(report), flush=True)
@@ -120,8 +137,9 @@ def _export(args) -> None:
         occupancy = (rng.random((train.PARITY_SAMPLES, 1, size, size)) < 0.02).astype(np.float32)
         aux = np.stack([rng.uniform(-np.pi, np.pi, train.PARITY_SAMPLES), rng.uniform(0.5, 3.0, train.PARITY_SAMPLES)], 1)
         aux = aux.astype(np.float32)
-    export.export_onnx(model, args.out, checkpoint["metadata"])
-    parity = export.check_parity(model, args.out, occupancy, aux)
+    output = checkpoint["metadata"].get("formation.output", export.OUTPUT_NAME)
+    export.export_onnx(model, args.out, checkpoint["metadata"], output=output)
+    parity = export.check_parity(model, args.out, occupancy, aux, output=output)
     if args.parity_out:
         n = train.PARITY_FILE_SAMPLES
         export.write_parity_file(args.parity_out, model, occupancy[:n], aux[:n])

@@ -1,7 +1,8 @@
 """ONNX export with the formation model contract, and the torch/onnxruntime parity check.
 
-The exported graph has inputs ``occupancy`` f32 [B, 1, S, S] and ``aux`` f32 [B, 2], output
-``wheels`` f32 [B, 2], with a dynamic batch B, and carries ``formation.*`` metadata_props (all
+The exported graph has inputs ``occupancy`` f32 [B, 1, S, S] and ``aux`` f32 [B, 2], one output
+f32 [B, 2] named as the model's ``formation.output`` metadata declares it (``wheels``, the default,
+or ``formation_velocity``), with a dynamic batch B, and carries ``formation.*`` metadata_props (all
 strings) that the Rust ``formation_onnx`` crate validates against the agent's sensor. After
 export the same held-out inputs are run through torch and onnxruntime; a difference above
 :data:`PARITY_TOLERANCE` fails the export.
@@ -27,6 +28,8 @@ from .model import PolicyNet
 MODEL_FORMAT = "formation-policy/1"
 INPUT_NAMES = ("occupancy", "aux")
 OUTPUT_NAME = "wheels"
+#: The outputs a model may declare (``formation.output``), each also its tensor's name.
+OUTPUT_NAMES = ("wheels", "formation_velocity")
 OPSET = 20
 PARITY_TOLERANCE = 1e-4
 
@@ -95,8 +98,14 @@ def _quiet_exporter():
             logging.getLogger("torch").setLevel(previous)
 
 
-def export_onnx(model: PolicyNet, path: str | Path, metadata: dict[str, str]) -> None:
-    """Exports ``model`` (on CPU, eval mode) to ``path`` atomically, with ``metadata`` as metadata_props."""
+def export_onnx(model: PolicyNet, path: str | Path, metadata: dict[str, str], output: str = OUTPUT_NAME) -> None:
+    """Exports ``model`` (on CPU, eval mode) to ``path`` atomically, with ``metadata`` as metadata_props
+    and its one output named ``output`` (which a model other than ``wheels`` declares in
+    ``formation.output``)."""
+    if output not in OUTPUT_NAMES:
+        raise ValueError(f"output must be one of {OUTPUT_NAMES}, got {output!r}")
+    if metadata.get("formation.output", OUTPUT_NAME) != output:
+        raise ValueError(f"metadata declares formation.output = {metadata.get('formation.output')!r}, the graph {output!r}")
     import onnx
 
     path = Path(path)
@@ -113,7 +122,7 @@ def export_onnx(model: PolicyNet, path: str | Path, metadata: dict[str, str]) ->
                 example,
                 str(temp),
                 input_names=list(INPUT_NAMES),
-                output_names=[OUTPUT_NAME],
+                output_names=[output],
                 dynamic_shapes={"occupancy": {0: batch}, "aux": {0: batch}},
                 opset_version=OPSET,
                 dynamo=True,
@@ -121,8 +130,8 @@ def export_onnx(model: PolicyNet, path: str | Path, metadata: dict[str, str]) ->
             )
         proto = onnx.load(str(temp))
         names = ([i.name for i in proto.graph.input], [o.name for o in proto.graph.output])
-        if names != (list(INPUT_NAMES), [OUTPUT_NAME]):
-            raise RuntimeError(f"the exporter produced inputs/outputs {names}, expected {INPUT_NAMES} -> {OUTPUT_NAME}")
+        if names != (list(INPUT_NAMES), [output]):
+            raise RuntimeError(f"the exporter produced inputs/outputs {names}, expected {INPUT_NAMES} -> {output}")
         del proto.metadata_props[:]
         for key, value in sorted(metadata.items()):
             entry = proto.metadata_props.add()
@@ -142,7 +151,12 @@ def torch_outputs(model: PolicyNet, occupancy: np.ndarray, aux: np.ndarray) -> n
 
 
 def check_parity(
-    model: PolicyNet, onnx_path: str | Path, occupancy: np.ndarray, aux: np.ndarray, tolerance: float = PARITY_TOLERANCE
+    model: PolicyNet,
+    onnx_path: str | Path,
+    occupancy: np.ndarray,
+    aux: np.ndarray,
+    tolerance: float = PARITY_TOLERANCE,
+    output: str = OUTPUT_NAME,
 ) -> float:
     """Runs the same inputs through torch and onnxruntime; returns the largest |difference|.
 
@@ -156,7 +170,7 @@ def check_parity(
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     session = ort.InferenceSession(str(onnx_path), options, providers=["CPUExecutionProvider"])
-    (actual,) = session.run([OUTPUT_NAME], {"occupancy": occupancy, "aux": aux})
+    (actual,) = session.run([output], {"occupancy": occupancy, "aux": aux})
     diff = float(np.max(np.abs(actual - expected))) if expected.size else 0.0
     if not diff <= tolerance:
         raise ParityError(

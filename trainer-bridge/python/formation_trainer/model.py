@@ -34,7 +34,9 @@ for two epochs, its validation error was 27 % below the paper network's (0.0177 
 the task's reflection about the robot's heading axis: the output is the mean of the network on the
 input and, reflected back, on the reflected input (see :func:`mirror_inputs`). A policy that is
 only trained on reflected samples is symmetric only as far as it has learned to be; the average
-removes the asymmetric part of its error, at twice the arithmetic per image.
+removes the asymmetric part of its error, at twice the arithmetic per image. The reflection of
+the output depends on what it is (``output``): wheel speeds swap left and right, a formation
+velocity in the robot's frame negates its sideways part.
 """
 
 from __future__ import annotations
@@ -74,8 +76,13 @@ def mirror_inputs(occupancy: torch.Tensor, aux: torch.Tensor) -> tuple[torch.Ten
 class PolicyNet(nn.Module):
     """The CNN mapping an occupancy image and (delta_phi, d*) to (left, right) wheel speeds."""
 
-    def __init__(self, size_px: int = PAPER_SIZE_PX, architecture: str = "paper", mirror_averaged: bool = False):
+    def __init__(
+        self, size_px: int = PAPER_SIZE_PX, architecture: str = "paper", mirror_averaged: bool = False, output: str = "wheels"
+    ):
         super().__init__()
+        if output not in ("wheels", "formation_velocity"):
+            raise ValueError(f"unknown output {output!r}: choose wheels or formation_velocity")
+        self.output = output
         if architecture not in ARCHITECTURES:
             names = ", ".join(ARCHITECTURES)
             raise ValueError(f"unknown network architecture {architecture!r}: choose one of {names}")
@@ -112,5 +119,9 @@ class PolicyNet(nn.Module):
         wheels = self.raw(occupancy, aux)
         if not self.mirror_averaged:
             return wheels
-        reflected = self.raw(*mirror_inputs(occupancy, aux)).flip(1)
+        reflected = self.raw(*mirror_inputs(occupancy, aux))
+        if self.output == "formation_velocity":
+            reflected = reflected * torch.tensor([1.0, -1.0], dtype=reflected.dtype, device=reflected.device)
+        else:
+            reflected = reflected.flip(1)
         return 0.5 * (wheels + reflected)

@@ -1,4 +1,13 @@
-"""Behaviour cloning of the expert: MSE on (left, right) wheel speeds, Adam, seeded.
+"""Behaviour cloning of the expert: MSE on the model's output, Adam, seeded.
+
+The output (``output``) is either the paper's ``wheels``, the (left, right) wheel speeds at
+``v_train``, or ``formation_velocity``: the expert's formation velocity in the robot's frame, the
+velocity of the point half a wheel track ahead of the axle minus the reference term
+``v_train (cos Δφ, sin Δφ)``, which the agent adds back at the goal's own speed. It is computed from
+the dataset's wheel labels (:func:`formation_velocity_targets`), so no data is collected again.
+With ``response_weight`` each sample's squared error is weighted by ``1 / (|f| + eps)`` (mean
+weight 1), so the small corrections that decide the strict check (labels of 0.05-0.2 m/s, edges
+1-5 % off d*) are not averaged away by a loss dominated by large ones.
 
 With ``relative_loss`` each sample's squared error is weighted by ``(d_ref / d*)**2``, where
 ``d_ref`` makes the training samples' mean weight 1 (see :func:`relative_weights`). The success
@@ -80,6 +89,11 @@ class TrainConfig:
     samples_per_epoch: int | None = None
     # Weight each sample's squared error by (d_ref / d*)^2 (see relative_weights).
     relative_loss: bool = False
+    # What the model outputs: "wheels" (the paper's) or "formation_velocity" (see the module).
+    output: str = "wheels"
+    # Weight each sample's squared error by 1 / (|f| + response_weight) [m/s] (see
+    # response_weights); None: unweighted.
+    response_weight: float | None = None
 
 
 def artifact_paths(out: Path) -> dict[str, Path]:
@@ -173,9 +187,10 @@ def checkpoint_from_onnx(path: Path) -> dict:
         raise foreign(f"its formation.format is {meta.get('formation.format')!r}, not {export.MODEL_FORMAT!r}")
     architecture = meta.get("formation.train.architecture", "paper")
     mirror_averaged = meta.get("formation.policy.mirror_averaged") == "true"
+    output = meta.get("formation.output", export.OUTPUT_NAME)
     try:
         size_px = int(meta["formation.occupancy.size_px"])
-        model = PolicyNet(size_px, architecture, mirror_averaged)
+        model = PolicyNet(size_px, architecture, mirror_averaged, output)
     except (KeyError, ValueError) as e:
         raise foreign(f"its metadata does not describe a network this trainer builds ({e})") from e
     weights = {init.name: numpy_helper.to_array(init) for init in graph.graph.initializer}
@@ -191,6 +206,7 @@ def checkpoint_from_onnx(path: Path) -> dict:
         "size_px": size_px,
         "architecture": architecture,
         "mirror_averaged": mirror_averaged,
+        "output": output,
         "model_state": state,
         "metadata": meta,
     }
@@ -204,6 +220,7 @@ def save_checkpoint(path: Path, model: PolicyNet, optimizer, metadata: dict[str,
             "size_px": model.size_px,
             "architecture": model.architecture,
             "mirror_averaged": model.mirror_averaged,
+            "output": model.output,
             "model_state": model.state_dict(),
             "optimizer_state": optimizer.state_dict(),
             "metadata": metadata,
@@ -223,7 +240,10 @@ def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> Polic
     # Checkpoints from before the architecture choice hold the paper's network, and those from
     # before the mirror average a network without it.
     model = PolicyNet(
-        checkpoint["size_px"], checkpoint.get("architecture", "paper"), checkpoint.get("mirror_averaged", False)
+        checkpoint["size_px"],
+        checkpoint.get("architecture", "paper"),
+        checkpoint.get("mirror_averaged", False),
+        checkpoint.get("output", "wheels"),
     )
     model.load_state_dict(checkpoint["model_state"])
     return model
@@ -231,7 +251,31 @@ def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> Polic
 
 def _batch(tensors: dict, index: torch.Tensor):
     occupancy = tensors["occupancy"].index_select(0, index).unsqueeze(1).float()
-    return occupancy, tensors["aux"].index_select(0, index), tensors["wheels"].index_select(0, index)
+    return occupancy, tensors["aux"].index_select(0, index), tensors["targets"].index_select(0, index)
+
+
+def formation_velocity_targets(wheels: np.ndarray, aux: np.ndarray, v_train: float) -> np.ndarray:
+    """The expert's formation velocity in the robot's frame from its wheel labels at ``v_train``.
+
+    With the controlled point half a track ahead of the axle (``c = l/2``), wheels ``(L, R)`` move it
+    at ``u = ((L + R) / 2, (R - L) / 2)`` in the robot's frame, whatever the track; the reference term
+    seen from the robot is ``v_train (cos Δφ, sin Δφ)``. Where the expert's wheels saturated, ``u`` is
+    the saturated point velocity, which is what the robot could do."""
+    wheels = np.asarray(wheels, dtype=np.float64)
+    delta_phi = np.asarray(aux, dtype=np.float64)[:, 0]
+    u_x = (wheels[:, 0] + wheels[:, 1]) / 2
+    u_y = (wheels[:, 1] - wheels[:, 0]) / 2
+    f = np.stack([u_x - v_train * np.cos(delta_phi), u_y - v_train * np.sin(delta_phi)], axis=1)
+    return f.astype(np.float32)
+
+
+def response_weights(targets: np.ndarray, eps: float, train_idx: np.ndarray) -> np.ndarray:
+    """Per-sample weights ``1 / (|f| + eps)``, scaled so that the training samples' mean weight is 1."""
+    if not (math.isfinite(eps) and eps > 0):
+        raise TrainError(f"--response-weight must be a speed > 0 m/s (for example 0.05), got {eps}")
+    inverse = 1.0 / (np.linalg.norm(np.asarray(targets, dtype=np.float64), axis=1) + eps)
+    scale = inverse[train_idx].mean() if len(train_idx) else inverse.mean()
+    return (inverse / scale).astype(np.float32)
 
 
 def training_threads() -> int:
@@ -251,19 +295,26 @@ def training_threads() -> int:
     return threads
 
 
-def mirror_batch(occupancy: torch.Tensor, aux: torch.Tensor, wheels: torch.Tensor, flip: torch.Tensor):
+def mirror_batch(
+    occupancy: torch.Tensor, aux: torch.Tensor, wheels: torch.Tensor, flip: torch.Tensor, output: str = "wheels"
+):
     """Reflects the samples where ``flip`` is true about the robot's heading axis (y -> -y).
 
     The task is symmetric under that reflection, exactly: the image's rows reverse (row ``r`` holds
     ``y`` in ``[W/2 - (r+1) res, W/2 - r res)``, so ``-y`` falls in row ``size - 1 - r``, and a scan
     of beams at ``2 pi k / n`` reflects onto itself), the heading error ``delta_phi`` changes sign,
-    d* stays, and the expert's turn reverses, which swaps the left and right wheel speeds. Training
-    on both halves doubles the distinct views and builds the symmetry into the policy.
+    d* stays, and the expert's turn reverses, which swaps the left and right wheel speeds (for a
+    ``formation_velocity`` output: negates its sideways component). Training on both halves
+    doubles the distinct views and builds the symmetry into the policy.
     """
     mirrored_occupancy, mirrored_aux = mirror_inputs(occupancy, aux)
     occupancy = torch.where(flip[:, None, None, None], mirrored_occupancy, occupancy)
     aux = torch.where(flip[:, None], mirrored_aux, aux)
-    wheels = torch.where(flip[:, None], wheels.flip(1), wheels)
+    if output == "formation_velocity":
+        mirrored = wheels * torch.tensor([1.0, -1.0], dtype=wheels.dtype, device=wheels.device)
+    else:
+        mirrored = wheels.flip(1)
+    wheels = torch.where(flip[:, None], mirrored, wheels)
     return occupancy, aux, wheels
 
 
@@ -368,6 +419,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         raise TrainError(f"epochs and batch size must be >= 1 and lr > 0 (got {cfg.epochs}, {cfg.batch_size}, {cfg.lr})")
     if cfg.samples_per_epoch is not None and cfg.samples_per_epoch < 1:
         raise TrainError(f"--samples-per-epoch must be >= 1 (got {cfg.samples_per_epoch}); leave it out to use every sample")
+    if cfg.output not in export.OUTPUT_NAMES:
+        raise TrainError(f"--output must be one of {', '.join(export.OUTPUT_NAMES)}, got {cfg.output!r}")
     out = Path(cfg.out)
     if out.suffix != ".onnx":
         raise TrainError(f"--out must end in .onnx, got {out}")
@@ -394,18 +447,31 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             raise TrainError(str(e)) from e
     if cfg.mirror:
         model.mirror_averaged = cfg.mirror_average
+    # A warm start from a model of the other output keeps its weights and learns the new meaning.
+    model.output = cfg.output
     # With mirrored batches the network itself is fitted to both halves of the reflection. Its
     # expected loss bounds that of its mirror average from above (the square of a mean error is
     # at most the mean of the squares), at half the arithmetic of fitting the average.
     fitted = model.raw if cfg.mirror else model
     model.to(device)
+    v_train = samples.manifests[0].v_train
+    if cfg.output == "formation_velocity":
+        targets = formation_velocity_targets(samples.wheels, samples.aux, v_train)
+    else:
+        targets = samples.wheels
     tensors = {
         "occupancy": torch.from_numpy(samples.occupancy).to(device),
         "aux": torch.from_numpy(samples.aux).to(device),
-        "wheels": torch.from_numpy(samples.wheels).to(device),
+        "targets": torch.from_numpy(targets).to(device),
     }
+    weights = None
     if cfg.relative_loss:
-        tensors["weights"] = torch.from_numpy(relative_weights(samples.aux[:, 1], train_idx)).to(device)
+        weights = relative_weights(samples.aux[:, 1], train_idx)
+    if cfg.response_weight is not None:
+        respond = response_weights(formation_velocity_targets(samples.wheels, samples.aux, v_train), cfg.response_weight, train_idx)
+        weights = respond if weights is None else weights * respond
+    if weights is not None:
+        tensors["weights"] = torch.from_numpy(weights).to(device)
     train_t = torch.from_numpy(train_idx).to(device)
     val_t = torch.from_numpy(val_idx).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
@@ -416,7 +482,9 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         f"training on {len(samples)} samples ({len(train_idx)} train / {len(val_idx)} validation) "
         f"from {', '.join(str(d) for d in cfg.data)} on {device} ({torch.get_num_threads()} threads); "
         f"{model.architecture} network{', mirrored' if cfg.mirror else ''}{', mirror-averaged' if model.mirror_averaged else ''}"
-        f"{', loss relative to d*' if cfg.relative_loss else ''}, batch {cfg.batch_size}, lr {cfg.lr:g}, "
+        f"{', loss relative to d*' if cfg.relative_loss else ''}"
+        f"{f', loss weighted 1/(|f| + {cfg.response_weight:g})' if cfg.response_weight is not None else ''}"
+        f", output {cfg.output}, batch {cfg.batch_size}, lr {cfg.lr:g}, "
         f"{cfg.epochs} epochs{drawn}"
     )
 
@@ -432,8 +500,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             occupancy, aux, wheels = _batch(tensors, index)
             if cfg.mirror:
                 flip = torch.rand(len(aux), generator=shuffle) < 0.5
-                occupancy, aux, wheels = mirror_batch(occupancy, aux, wheels, flip.to(device))
-            weights = tensors["weights"].index_select(0, index) if cfg.relative_loss else None
+                occupancy, aux, wheels = mirror_batch(occupancy, aux, wheels, flip.to(device), cfg.output)
+            weights = tensors["weights"].index_select(0, index) if "weights" in tensors else None
             # The mean over samples and both wheels, as nn.functional.mse_loss computes it.
             loss = squared_error(fitted(occupancy, aux), wheels, weights).mean() / 2
             optimizer.zero_grad(set_to_none=True)
@@ -477,18 +545,20 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             "policy.mirror_averaged": "true" if model.mirror_averaged else "false",
             "train.samples_per_epoch": per_epoch,
             "train.relative_loss": "true" if cfg.relative_loss else "false",
+            "train.response_weight": "" if cfg.response_weight is None else repr(float(cfg.response_weight)),
+            "output": cfg.output,
             **envelope_metadata(samples, cfg.d_star_range),
         },
     )
     save_checkpoint(paths["checkpoint"], model, optimizer, metadata)
     write_loss_curve(paths, history)
-    export.export_onnx(model, out, metadata)
+    export.export_onnx(model, out, metadata, output=cfg.output)
 
     held_out = val_idx if len(val_idx) else train_idx
     pick = np.random.default_rng(cfg.seed).permutation(held_out)[:PARITY_SAMPLES]
     occupancy = samples.occupancy[pick][:, None].astype(np.float32)
     aux = samples.aux[pick]
-    parity = export.check_parity(model, out, occupancy, aux)
+    parity = export.check_parity(model, out, occupancy, aux, output=cfg.output)
     if cfg.parity_out is not None:
         export.write_parity_file(cfg.parity_out, model, occupancy[:PARITY_FILE_SAMPLES], aux[:PARITY_FILE_SAMPLES])
     log(f"wrote {out} (onnxruntime parity {parity:.2e} on {len(pick)} held-out samples), {paths['checkpoint'].name}, "

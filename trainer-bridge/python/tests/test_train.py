@@ -406,7 +406,7 @@ def test_the_weighted_loss_is_each_samples_squared_error_times_its_weight():
     tensors = {
         "occupancy": torch.zeros(3, 4, 4, dtype=torch.uint8),
         "aux": torch.zeros(3, 2),
-        "wheels": torch.tensor([[1.0, 1.0], [2.0, 0.0], [0.0, 0.0]]),
+        "targets": torch.tensor([[1.0, 1.0], [2.0, 0.0], [0.0, 0.0]]),
     }
     indices = torch.arange(3)
     assert train.mean_loss(Constant(), tensors, indices) == pytest.approx((2 + 4) / 6)
@@ -433,3 +433,74 @@ def test_training_threads_follow_the_environment(monkeypatch):
     monkeypatch.setenv("FORMATION_TRAIN_THREADS", "two")
     with pytest.raises(train.TrainError, match="FORMATION_TRAIN_THREADS must be a positive number"):
         train.training_threads()
+
+
+def test_formation_velocity_targets_invert_the_point_kinematics():
+    # Straight on at v_train on heading: no correction.
+    wheels = np.array([[0.7, 0.7], [0.8, 0.6], [0.0, 0.0]], dtype=np.float32)
+    aux = np.array([[0.0, 1.5], [0.0, 1.5], [np.pi / 2, 1.5]], dtype=np.float32)
+    f = train.formation_velocity_targets(wheels, aux, 0.7)
+    assert f[0] == pytest.approx([0.0, 0.0], abs=1e-6)
+    # A right turn at v_train: the point is asked to move to the right (negative y) by 0.1 m/s.
+    assert f[1] == pytest.approx([0.0, -0.1], abs=1e-6)
+    # Standing still while the goal heading is 90° to the left: the reference term is all
+    # correction, -v_train along y.
+    assert f[2] == pytest.approx([0.0, -0.7], abs=1e-6)
+
+
+def test_response_weights_favour_small_corrections_and_average_one_over_training():
+    targets = np.array([[0.0, 0.05], [0.0, 0.5], [0.3, 0.4]], dtype=np.float32)
+    weights = train.response_weights(targets, 0.05, np.array([0, 1, 2]))
+    assert weights.mean() == pytest.approx(1.0, rel=1e-6)
+    assert weights[0] / weights[1] == pytest.approx(0.55 / 0.1, rel=1e-5)
+    with pytest.raises(train.TrainError, match="--response-weight"):
+        train.response_weights(targets, 0.0, np.array([0]))
+
+
+def test_mirroring_a_formation_velocity_negates_its_sideways_part():
+    occupancy = torch.zeros(2, 1, 50, 50)
+    aux = torch.tensor([[0.3, 1.5], [0.3, 1.5]])
+    f = torch.tensor([[0.1, 0.2], [0.1, 0.2]])
+    flip = torch.tensor([True, False])
+    _, mirrored_aux, mirrored = train.mirror_batch(occupancy, aux, f, flip, "formation_velocity")
+    assert mirrored[0].tolist() == pytest.approx([0.1, -0.2])
+    assert mirrored[1].tolist() == pytest.approx([0.1, 0.2])
+    assert mirrored_aux[0, 0].item() == pytest.approx(-0.3)
+
+
+def test_a_formation_velocity_model_declares_its_output_and_runs_in_onnxruntime(trained, tmp_path):
+    out = tmp_path / "fv.onnx"
+    config = train.TrainConfig(
+        data=[trained["data"]], out=out, epochs=1, batch_size=16, lr=1e-3, device="cpu",
+        output="formation_velocity", response_weight=0.05, mirror=True,
+    )
+    report = train.run(config, log=lambda _line: None)
+    assert report["parity_max_abs_diff"] <= export.PARITY_TOLERANCE
+    model = onnx.load(str(out))
+    meta = {p.key: p.value for p in model.metadata_props}
+    assert meta["formation.output"] == "formation_velocity"
+    assert meta["formation.train.response_weight"] == "0.05"
+    assert [o.name for o in model.graph.output] == ["formation_velocity"]
+    session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
+    (values,) = session.run(["formation_velocity"], {
+        "occupancy": np.zeros((3, 1, 50, 50), np.float32),
+        "aux": np.array([[0.1, 1.0], [-0.1, 1.0], [0.0, 2.0]], np.float32),
+    })
+    assert values.shape == (3, 2) and np.all(np.isfinite(values))
+    # Mirror-averaged: the reflected input gives the reflected output.
+    assert values[0][0] == pytest.approx(values[1][0], abs=1e-5)
+    assert values[0][1] == pytest.approx(-values[1][1], abs=1e-5)
+    # The export command rebuilds it from its checkpoint with the same output.
+    again = tmp_path / "again.onnx"
+    assert cli.main(["export", "--checkpoint", str(out.with_suffix(".pt")), "--out", str(again)]) == 0
+    assert [o.name for o in onnx.load(str(again)).graph.output] == ["formation_velocity"]
+
+
+def test_an_unknown_output_is_a_usage_error(trained, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit:
+        cli.main(["train", "--data", str(trained["data"]), "--out", str(tmp_path / "x.onnx"), "--output", "torques"])
+    assert exit.value.code == 2
+    assert "invalid choice: 'torques'" in capsys.readouterr().err
+    config = train.TrainConfig(data=[trained["data"]], out=tmp_path / "y.onnx", output="torques")
+    with pytest.raises(train.TrainError, match="--output must be one of wheels, formation_velocity"):
+        train.run(config, log=lambda _line: None)

@@ -1,0 +1,106 @@
+//! `formation gauge`: the response gauge. The policy (and, with `--expert`, an expert with other
+//! gains, a teacher for instance) plays its own runs; the scored expert relabels every `--stride`-th
+//! state; the slope and RMS error of the controller's formation velocity against the label are
+//! printed per team size and bin of the label's size, and written with `--json`
+//! ([`formation_schema::ResponseCurve`]). It costs minutes of simulation, no training.
+
+use std::time::Instant;
+
+use anyhow::Context;
+use formation_expert::ExpertGains;
+use formation_learning::response::{GaugeSettings, gauge_response, response_text};
+use formation_learning::rollout::with_threads;
+use formation_learning::scaling::ScalingDriver;
+use formation_world::Scenario;
+
+use crate::args::GaugeArgs;
+use crate::eval::progress_bar;
+use crate::paths;
+use crate::team_models::{checked_models, model_input, print_team_size_notes, team_sizes_of};
+
+/// `formation gauge`.
+pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
+    // A path that cannot be written is refused before minutes of runs, not after.
+    if let Some(json) = &args.json {
+        formation_proto::files::check_output_file(json)?;
+        for (input, what) in [
+            (Some(&args.scenario), "the scenario"),
+            (args.model.as_ref(), "the model"),
+        ] {
+            if input.is_some_and(|input| is_same_file(json, input)) {
+                anyhow::bail!(
+                    "--json {} is {what} being read: give another file for the curve",
+                    json.display()
+                );
+            }
+        }
+    }
+    let base = Scenario::from_path(&args.scenario)?;
+    let sizes = args.robots.clone().unwrap_or_else(|| vec![base.n_robots()]);
+    let runs = args.runs.unwrap_or_else(|| base.runs());
+    let seed = args.seed.unwrap_or_else(|| base.seed());
+    let mut drivers = Vec::new();
+    if let Some(json) = &args.expert {
+        let gains: ExpertGains = serde_json::from_str(json).with_context(|| {
+            format!(
+                "--expert {json:?} is not the expert's gains as JSON: give for example \
+                 '{{\"shaping_wheel_accel\": 1.0}}' (fields of ExpertGains), or '{{}}' for the \
+                 scored expert"
+            )
+        })?;
+        gains
+            .validate()
+            .with_context(|| format!("--expert {json:?}"))?;
+        drivers.push(ScalingDriver::Expert(gains));
+    }
+    if !args.no_policy {
+        let model = paths::resolve_model(args.model.as_deref())?;
+        let checked = checked_models(std::slice::from_ref(&model), &base)?;
+        for &robots in &sizes {
+            print_team_size_notes(&team_sizes_of(&checked, robots));
+        }
+        let Some((id, metadata)) = checked.into_iter().next() else {
+            anyhow::bail!("no model to gauge: give --model FILE");
+        };
+        drivers.push(ScalingDriver::Policy {
+            model,
+            input: Some(model_input(&id, &metadata)),
+            trained_team_sizes: metadata.envelope().team_sizes,
+            id,
+        });
+    }
+    let settings = GaugeSettings {
+        seed,
+        runs,
+        duration_s: args.duration_s,
+        stride: args.stride,
+        label_gains: ExpertGains::default(),
+    };
+    let bar = progress_bar(runs * sizes.len() * drivers.len(), "gauge");
+    let started = Instant::now();
+    let curve = with_threads(args.threads, || {
+        gauge_response(&base, &sizes, &drivers, &settings, &|row, done| {
+            bar.set_position((row * runs + done) as u64)
+        })
+    })??;
+    bar.finish_and_clear();
+    eprintln!(
+        "gauged {} runs in {:.1} s",
+        runs * curve.rows.len(),
+        started.elapsed().as_secs_f64()
+    );
+    print!("{}", response_text(&curve));
+    if let Some(json) = &args.json {
+        paths::write_atomic(json, &formation_schema::to_json_pretty(&curve)?)?;
+        println!("wrote {}", json.display());
+    }
+    Ok(())
+}
+
+/// Whether `a` and `b` name one existing file.
+fn is_same_file(a: &std::path::Path, b: &std::path::Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
+}
