@@ -194,6 +194,10 @@ pub struct EvalArgs {
     /// Record run 0 into this file instead (`formation demo --record`).
     #[arg(skip)]
     pub record_file: Option<PathBuf>,
+    /// Serve the runs live to Foxglove on this address, checked (`formation demo --foxglove`;
+    /// with --processes).
+    #[arg(skip)]
+    pub foxglove: Option<std::net::SocketAddr>,
     /// Evaluate over these team sizes (e.g. `3,5,8,13,16,32`): the scenario resized to each, the
     /// expert always and the policy when `--model` is given; prints the scaling table and writes
     /// it with `--json`. With `--shard`, one size: the scenario resized to it.
@@ -544,6 +548,11 @@ pub struct DemoArgs {
     /// tools, and replay).
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
+    /// Watch the three cases live in Foxglove: serve them on HOST:PORT over Foxglove's
+    /// WebSocket protocol (e.g. 127.0.0.1:8765; another address than loopback is readable by
+    /// anyone who reaches it). Builds with the feature `foxglove` only; not with --in-process.
+    #[arg(long, value_name = "HOST:PORT", conflicts_with = "in_process")]
+    pub foxglove: Option<String>,
 }
 
 /// `formation replay`.
@@ -901,6 +910,12 @@ pub struct RunArgs {
     /// received and sent, for replay. The world process writes it.
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
+    /// Watch the run live in Foxglove: the world serves it on HOST:PORT over Foxglove's
+    /// WebSocket protocol, with the topics of --record (e.g. 127.0.0.1:8765, or port 0 for any
+    /// free port; another address than loopback is readable by anyone who reaches it). Builds
+    /// with the feature `foxglove` only.
+    #[arg(long, value_name = "HOST:PORT")]
+    pub foxglove: Option<String>,
 }
 
 /// `formation profile`: a run whose per-stage latency histograms are written as JSON.

@@ -1,7 +1,8 @@
 //! `formation demo`: the README's main job. Runs the paper's three cases and the Table I
 //! evaluation with the shipped model, every robot in its own OS process over iceoryx2 (or
 //! in-process with `--in-process`), then writes the HTML report and prints its path. With
-//! `--record FILE.mcap` case 1 is recorded.
+//! `--record FILE.mcap` case 1 is recorded; with `--foxglove HOST:PORT` the three cases are
+//! served live to Foxglove ([`crate::live_view`]), one world after another on that address.
 
 use std::path::Path;
 
@@ -23,6 +24,7 @@ pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
     if let Some(file) = &args.record {
         formation_record::RecordTarget::File(file.clone()).check()?;
     }
+    let foxglove = crate::live_view::requested(args.foxglove.as_deref(), "formation", true)?;
     formation_proto::files::create_private_dir_all(&args.out)
         .map_err(|e| paths::WriteError::creating_dir(&args.out, e))?;
     let mode = if args.in_process {
@@ -38,7 +40,7 @@ pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
             &root.join(format!("scenarios/{case}.toml")),
             &model,
             (1, case),
-            record,
+            (record, foxglove),
         )?;
         let s = &out.summary;
         println!(
@@ -58,7 +60,7 @@ pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
         &root.join("scenarios/table1.toml"),
         &model,
         (args.runs, "table1"),
-        None,
+        (None, None),
     )?;
     print!("{}", crate::table::table_text(&table));
     copy_training_curve(&model, &args.out)?;
@@ -74,7 +76,7 @@ fn run_eval(
     scenario: &Path,
     model: &Path,
     (runs, name): (usize, &str),
-    record: Option<&Path>,
+    (record, foxglove): (Option<&Path>, Option<std::net::SocketAddr>),
 ) -> anyhow::Result<(eval::EvalOutput, Vec<eval::RunResult>)> {
     let dir = args.out.join(name);
     let eval_args = EvalArgs {
@@ -94,6 +96,7 @@ fn run_eval(
         record: None,
         record_runs: None,
         record_file: record.map(Path::to_path_buf),
+        foxglove,
         first_run: None,
         shard: None,
     };

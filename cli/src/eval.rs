@@ -318,7 +318,7 @@ fn results_over_processes(
         &default,
         crate::launch::ClockMode::Lockstep,
         network,
-        plan.record.clone(),
+        (plan.record.clone(), args.foxglove),
         &mut |n| bar.set_position(n as u64),
     )?;
     if let Some(dir) = &args.out {

@@ -132,8 +132,64 @@ pub fn requested(
     Ok(Some(address))
 }
 
+#[cfg(not(feature = "foxglove"))]
+pub use off::LiveView;
 #[cfg(feature = "foxglove")]
 pub use server::{LiveView, client_backlog};
+
+/// A build without the feature: a live view that cannot be made, so that its callers need no
+/// `cfg` of their own ([`requested`] refuses the flag first).
+#[cfg(not(feature = "foxglove"))]
+mod off {
+    use std::net::SocketAddr;
+
+    use formation_record::{FinalSample, TeamSetup, TickRecord};
+
+    use super::LiveViewError;
+
+    /// No live view: this build has none.
+    #[derive(Debug)]
+    pub enum LiveView {}
+
+    impl LiveView {
+        /// Refused: this build has no live view.
+        pub fn start(_address: SocketAddr, _n_robots: usize) -> Result<LiveView, LiveViewError> {
+            Err(LiveViewError::NotBuilt {
+                program: "program".into(),
+            })
+        }
+
+        /// Where it listens.
+        pub fn address(&self) -> SocketAddr {
+            match *self {}
+        }
+
+        /// Begins a run.
+        pub fn begin_run(&mut self, _team: TeamSetup, _d_star: f64) {
+            match *self {}
+        }
+
+        /// Whether a tick would be shown.
+        pub fn wants_ticks(&self) -> bool {
+            match *self {}
+        }
+
+        /// Hands a tick on.
+        pub fn tick(&mut self, _tick: TickRecord) {
+            match *self {}
+        }
+
+        /// Ends the run.
+        pub fn end_run(&mut self, _last: Option<FinalSample>) {
+            match *self {}
+        }
+
+        /// Ticks dropped so far.
+        pub fn dropped_ticks(&self) -> u64 {
+            match *self {}
+        }
+    }
+}
 
 #[cfg(feature = "foxglove")]
 mod server {
@@ -173,6 +229,8 @@ mod server {
     /// A live view being served.
     pub struct LiveView {
         address: SocketAddr,
+        /// Holds the channels (they close with it).
+        _context: Arc<Context>,
         server: Option<WebSocketServerHandle>,
         jobs: Option<SyncSender<Job>>,
         thread: Option<JoinHandle<()>>,
@@ -210,6 +268,7 @@ mod server {
                 .map_err(LiveViewError::Thread)?;
             Ok(LiveView {
                 address: bound,
+                _context: context,
                 server: Some(server),
                 jobs: Some(jobs),
                 thread: Some(thread),

@@ -171,6 +171,7 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         restart_delay: Duration::from_millis(args.restart_delay_ms),
         record,
         launch_info: Some(launch_info),
+        foxglove: crate::live_view::requested(args.foxglove.as_deref(), "formation", true)?,
     };
     Ok(PlannedRun {
         plan,
@@ -846,12 +847,13 @@ pub fn eval_over_processes(
         default_model,
         clock,
         network,
-        None,
+        (None, None),
         on_run_done,
     )
 }
 
-/// [`eval_over_processes`], with the world recording the runs `record` asks for.
+/// [`eval_over_processes`], with the world recording the runs `record` asks for and serving
+/// them live on `foxglove` (`formation demo --foxglove`).
 #[expect(
     clippy::too_many_arguments,
     reason = "eval_over_processes' arguments and the recording's settings"
@@ -863,7 +865,10 @@ pub fn eval_over_processes_recorded(
     default_model: &Path,
     clock: ClockMode,
     network: &NetworkFlags,
-    record: Option<formation_record::RecordSettings>,
+    (record, foxglove): (
+        Option<formation_record::RecordSettings>,
+        Option<std::net::SocketAddr>,
+    ),
     on_run_done: &mut dyn FnMut(usize),
 ) -> anyhow::Result<ProcessEval> {
     if !network.remote.is_empty() || network.credentials.is_some() {
@@ -899,6 +904,7 @@ pub fn eval_over_processes_recorded(
             network,
             launch_info: Some(launch_info),
             record,
+            foxglove,
         };
         let mut done = 0;
         let report = block_on(supervisor::launch(&plan, &mut |event| {

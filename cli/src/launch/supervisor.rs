@@ -68,6 +68,9 @@ pub struct LaunchPlan {
     /// What the launch knows of its runs, handed to a Zenoh or ROS 2 world without `record` for
     /// the metadata of recordings made from outside (`formation record --connect`).
     pub launch_info: Option<formation_record::LaunchInfo>,
+    /// Where the world serves the runs live to Foxglove (`--foxglove`, checked; the launcher
+    /// has said the warning for an address other than loopback).
+    pub foxglove: Option<std::net::SocketAddr>,
 }
 
 impl LaunchPlan {
@@ -814,6 +817,9 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
         let path = plan.record_settings_path();
         record.write(&path)?;
         command.arg("--record-settings").arg(path);
+    }
+    if let Some(address) = plan.foxglove {
+        command.arg("--foxglove").arg(address.to_string());
     }
     let over_zenoh = !matches!(plan.network, Network::SharedMemory);
     if let (None, Some(info), true) = (&plan.record, &plan.launch_info, over_zenoh) {

@@ -31,6 +31,7 @@ use std::sync::atomic::AtomicBool;
 
 use anyhow::Context;
 use clap::Parser;
+use formation_cli::live_view::{self, LiveView};
 use formation_proto::wire::{RunId, WorldEvent};
 use formation_runtime::auth::LaunchSecret;
 use formation_runtime::clock::SystemClock;
@@ -121,6 +122,11 @@ struct Args {
     /// (`formation record --connect`) when there are no --record-settings.
     #[arg(long, value_name = "FILE")]
     launch_info: Option<PathBuf>,
+    /// Serve the runs live to Foxglove on HOST:PORT (its WebSocket protocol; feature
+    /// `foxglove`; see `formation_cli::live_view`). The launcher has warned about an address
+    /// other than loopback.
+    #[arg(long, value_name = "HOST:PORT")]
+    foxglove: Option<String>,
 }
 
 impl Args {
@@ -219,6 +225,7 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
         Transport::Ros2 => ros2_link(args, &run_id, &specs[0], &runtime, secret.clone())?,
     };
     let launch = launch_info(args, record.as_ref(), &runtime)?;
+    let mut view = start_live_view(args.foxglove.as_deref(), n_robots)?;
     emit(&WorldEvent::Listening { robots: n_robots });
     let settings = ExchangeSettings {
         runtime,
@@ -237,6 +244,7 @@ fn run(args: &Args) -> anyhow::Result<Ended> {
         settings: record,
         launch,
         feed,
+        view: view.as_mut(),
     };
     let result = play(args, &runtime, &specs, &mut recording, &mut agents);
     // A world that stops early says why first, and tells the launcher before it asks the agents
@@ -405,20 +413,35 @@ fn read_run_specs(path: &Path) -> anyhow::Result<Vec<RunSpec>> {
 
 /// What a world records: its own file (`--record`) and its record channel for remote
 /// recorders.
-struct Recording {
+struct Recording<'v> {
     /// Where `--record` goes.
     settings: Option<formation_record::RecordSettings>,
     /// What the launch knows of its runs.
     launch: formation_record::LaunchInfo,
     /// The record channel (Zenoh and ROS 2).
     feed: Option<Box<dyn RecordFeed>>,
+    /// The live view (`--foxglove`).
+    view: Option<&'v mut LiveView>,
+}
+
+/// The live view `--foxglove` asks for, listening (it says where on stderr).
+fn start_live_view(address: Option<&str>, n_robots: usize) -> anyhow::Result<Option<LiveView>> {
+    let Some(address) = live_view::requested(address, "formation-world", false)? else {
+        return Ok(None);
+    };
+    let view = LiveView::start(address, n_robots)?;
+    eprintln!(
+        "formation-world: live view on ws://{} (Foxglove: Open connection, Foxglove WebSocket)",
+        view.address()
+    );
+    Ok(Some(view))
 }
 
 fn play(
     args: &Args,
     runtime: &RuntimeSettings,
     specs: &[RunSpec],
-    recording: &mut Recording,
+    recording: &mut Recording<'_>,
     agents: &mut AgentsController<'_>,
 ) -> anyhow::Result<()> {
     agents.await_agents(runtime.startup_timeout())?;
@@ -444,6 +467,7 @@ fn play(
             agents,
             recorder,
             live,
+            recording.view.as_deref_mut(),
         )
         .with_context(|| format!("run {index}"))?;
         emit(&WorldEvent::RunDone { index, log });

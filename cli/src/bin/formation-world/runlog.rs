@@ -21,6 +21,7 @@ use formation_world::runlog::{
 pub use formation_world::runlog::{RunLog, TimingLog, log_paths, write_atomic};
 use formation_world::{EpisodeError, RunSpec, run_episode_recorded};
 
+use formation_cli::live_view::LiveView;
 use formation_record::live::{LiveMessage, LiveSetup, encode};
 use formation_runtime::exchange::AgentsController;
 use formation_runtime::link::RecordFeed;
@@ -91,20 +92,33 @@ pub fn play_journaled(
     agents: &mut AgentsController<'_>,
     recorder: Option<Recorder>,
     live: Option<LiveFeed<'_>>,
+    mut view: Option<&mut LiveView>,
 ) -> Result<PathBuf, RunError> {
     let index = spec.index;
     let (log_path, timing_path) = log_paths(out, index);
     let header = JournalHeader::new(spec, clock, agents.model_ids());
     let mut journal =
         RunJournal::create(&journal_path(out, index), &header).map_err(RunError::Start)?;
+    if let Some(view) = view.as_deref_mut() {
+        view.begin_run(formation_record::TeamSetup::of(spec), spec.d_star);
+    }
     let mut recording = RecordingAgents {
         agents: &mut *agents,
         recorder,
         live,
+        view: view.as_deref_mut(),
     };
     let played = run_episode_recorded(spec, &mut recording, &mut |_, _| {}, &mut |trajectory| {
         journal.append(trajectory)
     });
+    if let Some(view) = recording.view.take() {
+        view.end_run(
+            played
+                .as_ref()
+                .ok()
+                .and_then(formation_record::final_sample),
+        );
+    }
     if let Some(live) = recording.live.take() {
         let last = played
             .as_ref()
@@ -275,6 +289,8 @@ struct RecordingAgents<'a, 'l, 'f> {
     agents: &'a mut AgentsController<'l>,
     recorder: Option<Recorder>,
     live: Option<LiveFeed<'f>>,
+    /// The live view (`--foxglove`), shown each tick while a client is connected.
+    view: Option<&'a mut LiveView>,
 }
 
 impl Controller for RecordingAgents<'_, '_, '_> {
@@ -286,10 +302,14 @@ impl Controller for RecordingAgents<'_, '_, '_> {
         self.agents.commands(obs, out)?;
         self.record_swaps();
         let live_wanted = self.live.as_ref().is_some_and(LiveFeed::wanted);
-        if self.recorder.is_none() && !live_wanted {
+        let view_wanted = self.view.as_ref().is_some_and(|v| v.wants_ticks());
+        if self.recorder.is_none() && !live_wanted && !view_wanted {
             return Ok(());
         }
         let tick = self.tick_record(obs, out);
+        if view_wanted && let Some(view) = &mut self.view {
+            view.tick(tick.clone());
+        }
         if live_wanted
             && let Some(live) = &mut self.live
             && !live.tick(tick.clone())
