@@ -33,7 +33,6 @@ pub mod demo;
 pub mod endpoint;
 pub mod eval;
 pub mod gauge;
-pub mod gauge;
 pub mod launch;
 pub mod learn;
 pub mod live_view;
