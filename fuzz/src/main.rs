@@ -24,6 +24,9 @@ struct Cli {
     /// The campaign seed: the same seed makes the same cases.
     #[arg(long, global = true, default_value_t = 1)]
     seed: u64,
+    /// Resident memory [MB] above which the watchdog stops a campaign (a finding).
+    #[arg(long, global = true, default_value_t = 256)]
+    memory_mb: u64,
 }
 
 #[derive(Subcommand)]
@@ -91,6 +94,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
     let base = Settings {
         seed: cli.seed,
         findings: cli.findings,
+        memory_limit: cli.memory_mb << 20,
         ..Settings::default()
     };
     match cli.command {

@@ -21,6 +21,7 @@
 //! A recorder of a live team from outside (`formation record --connect`) gets the same ticks
 //! over the network in the encoding of [`live`], and writes the same file.
 
+pub mod bounds;
 pub mod edges;
 pub mod error;
 pub mod file;

@@ -207,6 +207,21 @@ pub enum ReadError {
         #[source]
         source: mcap::McapError,
     },
+    /// A record declares a string, map or data longer than the record itself (checked before
+    /// the MCAP parser allocates it; [`crate::bounds`]).
+    #[error(
+        "{}: the recording is corrupt near byte {read}: record the run again",
+        path.display()
+    )]
+    BadLength {
+        /// The file.
+        path: PathBuf,
+        /// Bytes read when it was noticed.
+        read: u64,
+        /// The field and its lengths.
+        #[source]
+        source: crate::bounds::LengthError,
+    },
     /// A replay step could not be decoded (another format version, bad CDR).
     #[error("{}: {topic}", path.display())]
     Step {
@@ -267,6 +282,10 @@ pub struct RecordingReader {
     path: PathBuf,
     file: File,
     reader: LinearReader,
+    /// The chunk being read, its records read one by one ([`crate::bounds::ChunkRecords`]).
+    chunk: Option<crate::bounds::ChunkRecords>,
+    /// The options of the file's reader, which a chunk's reader shares.
+    options: LinearReaderOptions,
     /// Bytes taken from the file so far.
     read: u64,
     /// Schema id → its type name.
@@ -306,11 +325,14 @@ impl RecordingReader {
         let file = File::open(path).map_err(io)?;
         let options = LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
-            .with_record_length_limit(usize::try_from(MAX_RECORD_BYTES).unwrap_or(usize::MAX));
+            .with_record_length_limit(usize::try_from(MAX_RECORD_BYTES).unwrap_or(usize::MAX))
+            .with_emit_chunks(true);
         Ok(RecordingReader {
             path: path.to_path_buf(),
             file,
-            reader: LinearReader::new_with_options(options),
+            reader: LinearReader::new_with_options(options.clone()),
+            chunk: None,
+            options,
             read: 0,
             schemas: HashMap::new(),
             replay_channels: HashMap::new(),
@@ -333,19 +355,49 @@ impl RecordingReader {
     /// The next item, or `None` at the end of a complete file that has a replay channel.
     pub fn next_item(&mut self) -> Result<Option<RecordingItem>, ReadError> {
         while !self.done {
-            let Some(event) = self.reader.next_event() else {
-                self.done = true;
-                break;
-            };
-            let (opcode, data) = match event {
-                Ok(LinearReadEvent::ReadRequest(need)) => {
-                    self.fill(need)?;
-                    continue;
+            let in_chunk = self.chunk.is_some();
+            let (opcode, data) = if let Some(chunk) = self.chunk.as_mut() {
+                match chunk.next_record() {
+                    Some(Ok(record)) => record,
+                    Some(Err(e)) => return Err(self.failure(e)),
+                    None => {
+                        self.chunk = None;
+                        continue;
+                    }
                 }
-                Ok(LinearReadEvent::Record { opcode, data }) => (opcode, data.to_vec()),
-                Err(e) => return Err(self.failure(e)),
+            } else {
+                let Some(event) = self.reader.next_event() else {
+                    self.done = true;
+                    break;
+                };
+                match event {
+                    Ok(LinearReadEvent::ReadRequest(need)) => {
+                        self.fill(need)?;
+                        continue;
+                    }
+                    Ok(LinearReadEvent::Record { opcode, data }) => (opcode, data.to_vec()),
+                    Err(e) => return Err(self.failure(e)),
+                }
             };
             self.any_record = true;
+            if opcode == crate::bounds::CHUNK && !in_chunk {
+                self.chunk = Some(crate::bounds::ChunkRecords::new(
+                    &data,
+                    self.options.clone(),
+                ));
+                continue;
+            }
+            if !crate::bounds::READ_OPCODES.contains(&opcode) {
+                continue;
+            }
+            if let Err(source) = crate::bounds::check(opcode, &data) {
+                self.done = true;
+                return Err(ReadError::BadLength {
+                    path: self.path.clone(),
+                    read: self.read,
+                    source,
+                });
+            }
             let record = match mcap::parse_record(opcode, &data) {
                 Ok(record) => record,
                 Err(e) => return Err(self.failure(e)),
