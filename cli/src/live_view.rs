@@ -499,7 +499,13 @@ mod tests {
                     d_star: 1.0,
                     v_star: 0.7,
                 },
-                poses: vec![Pose::default(); 3],
+                poses: (0..3)
+                    .map(|i| Pose {
+                        x: f64::from(i),
+                        y: 0.0,
+                        theta: 0.0,
+                    })
+                    .collect(),
                 wheel_speeds: vec![WheelCmd::default(); 3],
                 scans: vec![vec![1.0; 900]; 3],
                 commands: vec![SentCommand::in_process(WheelCmd::default()); 3],

@@ -12,6 +12,9 @@ what failed; a missing package exits 3 with the fix.
                                             and a /tf message came (at most SECONDS)
     foxglove_client.py stall URL SECONDS    subscribe to every channel, read a little, then stop
                                             reading for SECONDS (the socket fills) and leave
+    foxglove_client.py follow URL SECONDS   subscribe to every channel and read every message
+                                            until the server closes (at most SECONDS); counts
+                                            (`scripts/measure live-view`)
 """
 
 import json
@@ -179,11 +182,31 @@ def stall(url, seconds):
     print(json.dumps({"channels": len(channels), "received_before_stall": received}))
 
 
+def follow(url, seconds):
+    from websockets.exceptions import ConnectionClosed
+
+    messages = size = 0
+    with connect_view(url) as ws:
+        open_view(ws)
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            try:
+                got = message(ws.recv(timeout=max(0.1, deadline - time.monotonic())))
+            except (TimeoutError, ConnectionClosed):
+                break
+            if got is not None:
+                messages += 1
+                size += len(got[2])
+    print(json.dumps({"messages": messages, "bytes": size}))
+
+
 def main(argv):
     if len(argv) == 3 and argv[0] == "watch":
         watch(argv[1], float(argv[2]))
     elif len(argv) == 3 and argv[0] == "stall":
         stall(argv[1], float(argv[2]))
+    elif len(argv) == 3 and argv[0] == "follow":
+        follow(argv[1], float(argv[2]))
     else:
         fail(__doc__)
 
