@@ -1,0 +1,118 @@
+//! Every consumer follows the output a model declares (issue 34, item 2): a model whose
+//! `formation.output` is `formation_velocity` drives through the agent's conversion (the
+//! reference term added at the goal's own speed), runs across processes in lockstep bit for bit
+//! as in-process, and a model that declares an output no consumer knows is refused by name.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
+use formation_onnx::{OnnxPolicy, PolicyOutput};
+use formation_perception::policy_input::{formation_velocity_to_wheels, policy_aux};
+use formation_proto::Goal;
+use formation_robot_agent::decision::{Agent, PolicyController};
+use formation_tests::{
+    TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario, run, write_tiny_model_with,
+};
+use formation_world::{Scenario, run_episode};
+
+/// The watchdog limit: generous, it only stops a hung test.
+const LIMIT: Duration = Duration::from_secs(180);
+
+/// A tiny model (seeded random weights) that declares `output`.
+fn model_declaring(dir: &Path, output: &str) -> std::path::PathBuf {
+    let path = dir.join(format!("{output}.onnx"));
+    write_tiny_model_with(&path, 5, &["--output", output]);
+    path
+}
+
+#[test]
+fn a_formation_velocity_model_is_turned_into_wheels_with_the_reference_term_at_the_goals_speed() {
+    let _watchdog = Watchdog::arm("formation_velocity_agent", LIMIT);
+    let dir = TempDir::new("fv-agent");
+    let model = model_declaring(dir.path(), "formation_velocity");
+    let mut raw = OnnxPolicy::load(&model).expect("the model loads");
+    assert_eq!(raw.metadata().output, PolicyOutput::FormationVelocity);
+    let lidar = formation_proto::LidarSpec {
+        noise_std: 0.0,
+        ..formation_proto::LidarSpec::default()
+    };
+    let mut agent = Agent::from_model_path(&model, lidar).expect("an agent takes it");
+    // A scan with a neighbour ahead-left, and two goal speeds: the correction stays, the
+    // reference term follows v*.
+    let mut scan = vec![10.0_f32; lidar.beams];
+    for beam in &mut scan[100..110] {
+        *beam = 1.2;
+    }
+    for v_star in [0.3, 0.8] {
+        let goal = Goal {
+            phi_star: 0.4,
+            d_star: 1.5,
+            v_star,
+        };
+        let heading = -0.2;
+        let command = agent.act(&scan, heading, &goal).expect("a decision");
+        let aux = policy_aux(heading, &goal).unwrap();
+        let image: Vec<f32> = agent.image().iter().map(|&c| f32::from(c)).collect();
+        let values = raw.infer(&image, aux).expect("the raw output");
+        let expected = formation_velocity_to_wheels(values, f64::from(aux[0]), v_star);
+        assert_eq!(command, expected, "v* = {v_star}");
+    }
+}
+
+#[test]
+fn a_formation_velocity_team_in_lockstep_over_processes_is_bit_identical_to_in_process() {
+    let _watchdog = Watchdog::arm("formation_velocity_lockstep", LIMIT);
+    let dir = TempDir::new("fv-lockstep");
+    let model = model_declaring(dir.path(), "formation_velocity");
+    let scenario = Scenario::from_path(&case1_scenario(dir.path(), 4.0)).expect("scenario");
+    let over_processes = eval_over_processes(
+        &scenario,
+        scenario.seed(),
+        1,
+        &model,
+        ClockMode::Lockstep,
+        &NetworkFlags::default(),
+        &mut |_| {},
+    )
+    .expect("a run over processes")
+    .trajectories;
+    let spec = scenario.run_spec(scenario.seed(), 0);
+    let models = [model.as_path(); 3];
+    let mut controller =
+        PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
+    let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
+    assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
+    assert_bit_identical(&over_processes[0], &in_process);
+}
+
+#[test]
+fn a_model_declaring_an_output_no_consumer_knows_is_refused_naming_it() {
+    let _watchdog = Watchdog::arm("unknown_output_refused", LIMIT);
+    let dir = TempDir::new("fv-refused");
+    let model = model_declaring(dir.path(), "torques");
+    let scenario = case1_scenario(dir.path(), 2.0);
+    let mut eval = Command::new(&binaries().cli);
+    eval.args([
+        "eval",
+        "--controller",
+        "policy",
+        "--runs",
+        "1",
+        "--scenario",
+    ])
+    .arg(&scenario)
+    .arg("--model")
+    .arg(&model);
+    let finished = run(eval, LIMIT);
+    finished.assert_failure_mentioning("declares the output \"torques\" (formation.output)");
+    assert_eq!(
+        finished.output.status.code(),
+        Some(2),
+        "{}",
+        finished.describe()
+    );
+    let err = OnnxPolicy::load(&model).unwrap_err().to_string();
+    assert!(err.contains("cannot use"), "{err}");
+}
