@@ -49,8 +49,9 @@ fn quotes(chapter: &str) -> Vec<Quote> {
             .unwrap_or_else(|| panic!("{CHAPTER}:{}: a fenced block never closes", start + 1));
         let body = &lines[start + 1..end];
         let expected = |skip_commands: bool| {
+            let is_command = |l: &str| skip_commands && l.starts_with("$ ");
             body.iter()
-                .filter(|l| !l.trim().is_empty() && !(skip_commands && l.starts_with("$ ")))
+                .filter(|l| !l.trim().is_empty() && !is_command(l))
                 .map(|l| l.trim().to_owned())
                 .collect::<Vec<_>>()
         };
