@@ -166,6 +166,11 @@ pub fn network_flags(args: &EvalArgs) -> anyhow::Result<crate::launch::NetworkFl
 pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)> {
     let network = network_flags(args)?;
     let scenario = Scenario::from_path(&args.scenario)?;
+    // `--robots N` with --out and the like: the scenario's team resized as the scaling table does.
+    let scenario = match args.robots.as_deref() {
+        Some(&[robots]) => scenario.with_robots(robots)?,
+        _ => scenario,
+    };
     let runs = args.runs.unwrap_or_else(|| scenario.runs());
     if runs == 0 {
         anyhow::bail!("--runs must be at least 1");
@@ -505,22 +510,25 @@ pub fn merge_command(args: &MergeArgs) -> anyhow::Result<()> {
 
 /// `formation eval --robots ...`: the scaling table over team sizes.
 pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
-    if args.processes
-        || args.out.is_some()
-        || args.save_trajectories.is_some()
-        || args.record.is_some()
-    {
+    if single_team_outputs(args) {
         anyhow::bail!(
-            "--robots evaluates in-process and writes a table (print and --json); drop \
-             --processes, --out, --save-trajectories and --record, or evaluate one team size at a \
-             time"
+            "--robots {} evaluates several team sizes in-process and writes a table (print and \
+             --json); --processes, --out, --save-trajectories and --record are for one team: \
+             drop them, or evaluate one team size at a time (--robots N)",
+            sizes
+                .iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(",")
         );
     }
     let base = Scenario::from_path(&args.scenario)?;
     let runs = args.runs.unwrap_or_else(|| base.runs());
     let seed = args.seed.unwrap_or_else(|| base.seed());
     let mut drivers = vec![ScalingDriver::Expert(ExpertGains::default())];
-    if args.model.is_some() {
+    // The expert is the baseline of every size; the policy (`--model`, else the shipped one)
+    // unless `--controller expert` asks for the expert alone.
+    if args.controller == ControllerKind::Policy {
         let model = paths::resolve_model(args.model.as_deref())?;
         let checked = checked_models(std::slice::from_ref(&model), &base)?;
         for &robots in sizes {
@@ -557,6 +565,32 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Whether `args` asks for what only an evaluation of one team gives (`--processes`, `--out`,
+/// `--save-trajectories`, `--record`), rather than the scaling table.
+fn single_team_outputs(args: &EvalArgs) -> bool {
+    args.processes
+        || args.out.is_some()
+        || args.save_trajectories.is_some()
+        || args.record.is_some()
+}
+
+/// Refuses `--json` or `--out` where they would overwrite the scenario or a model.
+fn refuse_overwriting_inputs(args: &EvalArgs) -> anyhow::Result<()> {
+    let mut inputs: Vec<(&'static str, &Path)> = vec![("--scenario", &args.scenario)];
+    if let Some(model) = &args.model {
+        inputs.push(("--model", model));
+    }
+    if let Some(shard) = &args.shard {
+        inputs.push(("--shard", shard));
+    }
+    let json = args.json.as_deref().map(|j| ("--json", j, "out.json"));
+    let out = args.out.as_deref().map(|o| ("--out", o));
+    let record = args.record.as_deref().map(|r| ("--record", r));
+    let folders: Vec<(&'static str, &Path)> = out.into_iter().chain(record).collect();
+    paths::refuse_overwriting_inputs(json.as_slice(), &folders, &inputs)?;
+    Ok(())
+}
+
 /// `formation eval`.
 pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
     network_flags(args)?;
@@ -567,11 +601,15 @@ pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
     if let Some(dir) = &args.out {
         formation_proto::files::check_output_dir(dir)?;
     }
+    refuse_overwriting_inputs(args)?;
     if let Some(shard) = &args.shard {
         return shard_command(args, shard);
     }
-    if let Some(sizes) = &args.robots {
-        return scaling_command(args, sizes);
+    match args.robots.as_deref() {
+        // One team size with what only an evaluation of one team writes: that evaluation.
+        Some([_]) if single_team_outputs(args) => {}
+        Some(sizes) => return scaling_command(args, sizes),
+        None => {}
     }
     let (out, results) = evaluate(args)?;
     print!("{}", table_text(&out));

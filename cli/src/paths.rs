@@ -55,3 +55,136 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
 
 /// A file the command line could not write, explained from its path.
 pub use formation_proto::files::WriteError;
+
+/// An output that would overwrite one of the command's own inputs.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "{flag} {}: {} is the file {input_flag} reads, and writing there would destroy it: {fix}",
+    output.display(), input.display()
+)]
+pub struct OutputIsInput {
+    /// The output's flag (`--json`, `--record`, `--out`).
+    pub flag: &'static str,
+    /// The output as given.
+    pub output: PathBuf,
+    /// The input's flag (`--scenario`, `--model`, ...).
+    pub input_flag: &'static str,
+    /// The input it would overwrite.
+    pub input: PathBuf,
+    /// What to do instead.
+    pub fix: String,
+}
+
+/// The files an output folder (`--out DIR` of `eval` and `run`) gets: its summary, run specs,
+/// latency profile and the logs under `runs/`, `timing/` and `credentials/`.
+fn written_in_out_folder(relative: &Path) -> bool {
+    let mut parts = relative.components();
+    let first = parts
+        .next()
+        .map(|c| c.as_os_str().to_string_lossy().into_owned());
+    let nested = parts.next().is_some();
+    match first.as_deref() {
+        Some("runs" | "timing" | "credentials") => nested,
+        Some("summary.json" | "run-specs.json" | "profile.json" | "profile.svg") => !nested,
+        _ => false,
+    }
+}
+
+/// Refuses, before anything is written, an output that is one of `inputs` (each with its flag):
+/// a file output (`files`: flag, path, an example name for the fix) that is the same file as an
+/// input, or an output folder (`folders`) an input lies in where the command writes (its
+/// `summary.json`, `runs/...`). Nothing is created.
+pub fn refuse_overwriting_inputs(
+    files: &[(&'static str, &Path, &str)],
+    folders: &[(&'static str, &Path)],
+    inputs: &[(&'static str, &Path)],
+) -> Result<(), OutputIsInput> {
+    let canonical = |p: &Path| std::fs::canonicalize(p).ok();
+    let inputs: Vec<(&'static str, &Path, PathBuf)> = inputs
+        .iter()
+        .filter_map(|&(flag, path)| Some((flag, path, canonical(path)?)))
+        .collect();
+    for &(flag, output, example) in files {
+        let Some(out) = canonical(output) else {
+            continue; // not there yet: no input is
+        };
+        if let Some((input_flag, input, _)) = inputs.iter().find(|(_, _, c)| *c == out) {
+            return Err(OutputIsInput {
+                flag,
+                output: output.to_path_buf(),
+                input_flag,
+                input: input.to_path_buf(),
+                fix: format!(
+                    "name another file (for example {})",
+                    output.with_file_name(example).display()
+                ),
+            });
+        }
+    }
+    for &(flag, dir) in folders {
+        let Some(out) = canonical(dir) else {
+            continue;
+        };
+        let clash = inputs.iter().find(|(_, _, c)| {
+            c.strip_prefix(&out)
+                .is_ok_and(|relative| written_in_out_folder(relative))
+        });
+        if let Some((input_flag, input, _)) = clash {
+            return Err(OutputIsInput {
+                flag,
+                output: dir.to_path_buf(),
+                input_flag,
+                input: input.to_path_buf(),
+                fix: format!(
+                    "{flag} writes its summary and logs there; name another folder, or move \
+                     the input out of it"
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_output_that_is_an_input_is_refused_by_its_identity() {
+        let dir = tempfile::tempdir().unwrap();
+        let scenario = dir.path().join("case1.toml");
+        std::fs::write(&scenario, "x").unwrap();
+        // The same file under another spelling.
+        let spelled = dir.path().join(".").join("case1.toml");
+        let err = refuse_overwriting_inputs(
+            &[("--json", &spelled, "out.json")],
+            &[],
+            &[("--scenario", &scenario)],
+        )
+        .unwrap_err();
+        let message = err.to_string();
+        assert!(
+            message.contains("--json") && message.contains("--scenario"),
+            "{message}"
+        );
+        assert!(message.contains("out.json"), "{message}");
+        // A new file, or another one, is no input.
+        let other = dir.path().join("other.json");
+        refuse_overwriting_inputs(
+            &[("--json", &other, "out.json")],
+            &[],
+            &[("--scenario", &scenario)],
+        )
+        .unwrap();
+        // An input where an output folder gets its summary or run logs.
+        std::fs::create_dir_all(dir.path().join("runs")).unwrap();
+        let log = dir.path().join("runs/run-0000.json");
+        std::fs::write(&log, "x").unwrap();
+        let err = refuse_overwriting_inputs(&[], &[("--out", dir.path())], &[("--model", &log)])
+            .unwrap_err();
+        assert!(err.to_string().contains("--out"), "{err}");
+        // ... but not one beside them that the command does not write.
+        refuse_overwriting_inputs(&[], &[("--out", dir.path())], &[("--scenario", &scenario)])
+            .unwrap();
+    }
+}

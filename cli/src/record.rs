@@ -123,8 +123,13 @@ fn record_one(
     };
     let mut recorded =
         RecordedController::new(inner, recorder, model_ids.to_vec(), &mut on_failure);
-    let played = run_episode(spec, &mut recorded, &mut |_, _| {}).ok();
-    match recorded.finish(played.as_ref()) {
+    let played = run_episode(spec, &mut recorded, &mut |_, _| {});
+    let finished = match &played {
+        Ok(trajectory) => recorded.finish(Some(trajectory)),
+        Err(e) => recorded.finish_stopped(&e.to_string()),
+    };
+    let played = played.ok();
+    match finished {
         Ok(Some(summary)) => report_done(&summary),
         Ok(None) => {}
         Err(e) => report_failure(&e),

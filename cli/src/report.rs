@@ -7,6 +7,8 @@
 
 /// `formation report`.
 pub fn report_command(args: &crate::args::ReportArgs) -> anyhow::Result<()> {
+    // Before the recovery below writes anything: an --out the page cannot take is refused.
+    formation_report::check_output(&args.out)?;
     if args.dir.is_dir() {
         crate::launch::recover_run_dirs(&args.dir);
     }

@@ -4,9 +4,15 @@
 use formation_schema::EvalOutput;
 
 /// Formats Table I and the Fig. 9 medians as text, with the runs each median covers when the
-/// rule leaves some out, and the incomplete runs, if any.
+/// rule leaves some out, a team size its model was not trained on, and the incomplete runs, if
+/// any.
 pub fn table_text(out: &EvalOutput) -> String {
     let mut text = table_i_text(out);
+    // A team size its model was not trained on is marked on the table itself, as on the terminal
+    // before the runs and in the JSON (`team_size`).
+    for line in out.team_size.iter().filter_map(|t| t.describe()) {
+        text.push_str(&format!("{line}\n"));
+    }
     let incomplete = out.summary.runs_incomplete.max(out.incomplete_runs.len());
     if incomplete > 0 {
         text.push_str(&format!(

@@ -50,6 +50,25 @@ from formation._native import Batch, EpisodeOver, Scenario
 from formation.model import ModelSpec
 
 
+#: The shipped default policy, relative to the repository root.
+SHIPPED_MODEL = Path("onnx") / "models" / "policy.onnx"
+
+
+def shipped_model() -> Path:
+    """The shipped default policy, whose declared input an environment renders when given
+    neither ``model`` nor ``spec`` (as ``formation eval`` and ``run`` drive it when given no
+    ``--model``). Raises, naming both, when this installation has no repository beside it."""
+    for root in Path(__file__).resolve().parents:
+        candidate = root / SHIPPED_MODEL
+        if candidate.is_file():
+            return candidate
+    raise ValueError(
+        f"no model to take the observation from: the shipped default ({SHIPPED_MODEL}) is not "
+        "beside this installation of formation, and the environment will not guess an input; "
+        "pass model='path/to/policy.onnx' (its declared input is rendered) or spec=ModelSpec(...)"
+    )
+
+
 def parallel_env(**kwargs: Any) -> "FormationParallelEnv":
     """A :class:`FormationParallelEnv` (keyword arguments as its constructor's)."""
     return FormationParallelEnv(**kwargs)
@@ -60,7 +79,8 @@ class FormationParallelEnv(ParallelEnv):
 
     ``scenario`` is a scenario path or a :class:`Scenario`; ``robots`` and ``overrides`` (dotted
     keys, ``{"goal.v_star": 0.5}``) change it as the CLI does; ``model`` (an ONNX path) or
-    ``spec`` (a :class:`ModelSpec`) fixes the observation; ``expert=False`` skips the expert.
+    ``spec`` (a :class:`ModelSpec`) fixes the observation, and without either it is the shipped
+    default model's declared input (:func:`shipped_model`); ``expert=False`` skips the expert.
     """
 
     metadata = {"name": "formation_v0", "render_modes": []}
@@ -86,7 +106,7 @@ class FormationParallelEnv(ParallelEnv):
         else:
             self.scenario = Scenario(str(scenario), robots=robots, overrides=dict(overrides or {}))
         if spec is None:
-            spec = ModelSpec.from_onnx(model) if model is not None else ModelSpec()
+            spec = ModelSpec.from_onnx(model if model is not None else shipped_model())
         self.spec = spec
         if spec.beams is not None and spec.beams != self.scenario.beams:
             raise ValueError(
@@ -181,7 +201,13 @@ class FormationParallelEnv(ParallelEnv):
             raise ValueError(f"no action for {missing}: give every live agent its (left, right) wheel speeds")
         wheels = np.zeros((1, len(self.possible_agents), 2), dtype=np.float64)
         for agent in self.agents:
-            action = np.asarray(actions[agent], dtype=np.float64)
+            try:
+                action = np.asarray(actions[agent], dtype=np.float64)
+            except (TypeError, ValueError) as e:
+                raise ValueError(
+                    f"action of {agent} is {actions[agent]!r}, not numbers: give (left, right) wheel "
+                    f"speeds in m/s, e.g. np.array([0.2, 0.3])"
+                ) from e
             if action.shape != (2,):
                 raise ValueError(
                     f"action of {agent} has shape {action.shape}; give (left, right) wheel speeds, shape (2,)"

@@ -12,6 +12,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import formation
 from formation.env import parallel_env
+from formation.model import ModelSpec
 
 TABLE1 = str(REPO / "scenarios" / "table1.toml")
 
@@ -55,12 +56,14 @@ def policy_session():
     return ort.InferenceSession(str(MODEL), options, providers=["CPUExecutionProvider"])
 
 
-@pytest.mark.parametrize("robots", [3, 16])
-def test_an_onnx_policy_episode_equals_formation_eval_bit_for_bit(tmp_path, robots):
+@pytest.mark.parametrize("robots,given", [(3, True), (16, True), (16, False)])
+def test_an_onnx_policy_episode_equals_formation_eval_bit_for_bit(tmp_path, robots, given):
+    # Without model= the environment renders the shipped default's declared input (issue 39),
+    # which is what `formation eval` gives its agents without --model: the same episode.
     scenario = team_scenario(tmp_path, robots, 3.0)
     seed, run = 5, 0
     expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", seed, run, "policy"))
-    env = parallel_env(scenario=str(scenario), model=MODEL)
+    env = parallel_env(scenario=str(scenario), **({"model": MODEL} if given else {}))
     session = policy_session()
     observations, _ = env.reset(seed=seed, run=run)
     while env.agents:
@@ -88,10 +91,24 @@ def test_reset_without_a_seed_plays_the_next_run_of_the_last_seed():
     assert np.array_equal(batch.trajectory(0), first)
 
 
+def test_without_a_model_the_observation_is_the_shipped_models_declared_input(tmp_path):
+    scenario = team_scenario(tmp_path, 16, 1.0)
+    default = parallel_env(scenario=str(scenario))
+    given = parallel_env(scenario=str(scenario), model=MODEL)
+    assert default.spec == given.spec == ModelSpec.from_onnx(MODEL)
+    a, _ = default.reset(seed=3)
+    b, _ = given.reset(seed=3)
+    for agent in a:
+        assert np.array_equal(a[agent]["occupancy"], b[agent]["occupancy"]), agent
+        assert np.array_equal(a[agent]["aux"], b[agent]["aux"]), agent
+
+
 def test_bad_actions_raise_clear_exceptions():
     env = short_env(3)
     env.reset(seed=1)
     good = {a: np.zeros(2) for a in env.agents}
+    with pytest.raises(ValueError, match=r"action of robot_1 is 'fast', not numbers"):
+        env.step({**good, "robot_1": "fast"})
     with pytest.raises(ValueError, match=r"action of robot_1 has shape \(3,\)"):
         env.step({**good, "robot_1": np.zeros(3)})
     with pytest.raises(ValueError, match="action of robot_2 is .*nan.*must be finite"):

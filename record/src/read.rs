@@ -5,18 +5,24 @@
 //! an attached model at most [`crate::file::MAX_ATTACHED_MODEL_BYTES`]), and hands out, in the
 //! order the writer put them: the models stored as attachments, the run's metadata record
 //! ([`RunInfo`]), every robot's replay step ([`ReplayStep`]) on the `/robot_<i>/replay`
-//! channels, and the record of each model swapped in during the run ([`SwappedModel`], after its
-//! attachment and before the steps it decided); every other channel is skipped.
+//! channels, the record of each model swapped in during the run ([`SwappedModel`], after its
+//! attachment and before the steps it decided), and how the run ended ([`RunEnd`]); every other
+//! channel is skipped.
 //!
 //! A file cut short (a crash, a full disk, a copy that stopped) is read up to the cut: the steps
-//! before it are handed out, and then [`ReadError::Truncated`] says how many bytes were read of
-//! how many, so a replay can report what it compared and still fail. A file that is not MCAP,
+//! before it are handed out, and then [`ReadError::Truncated`] says at which byte the readable
+//! part ends, so a replay can report what it compared and still fail. The MCAP writer starts a
+//! chunk with a header whose lengths are placeholders (all ones) and fills them in when it closes
+//! the chunk, so a writer killed (or stopped by a full disk) inside a chunk leaves such a header;
+//! [`Framing`] follows the file's top-level records by their lengths as the bytes are read and
+//! ends the file before an unclosed chunk, so the reader stops after the last whole chunk. A file that is not MCAP,
 //! holds no replay channel, or has steps in a layout this build does not read is refused with
 //! the file named and the fix ([`ReadError`]).
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::Read as _;
+use std::os::unix::fs::FileExt as _;
 use std::path::{Path, PathBuf};
 
 use mcap::records::Record;
@@ -24,6 +30,7 @@ use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOp
 
 use crate::replay::{self, ReplayError, ReplayStep};
 use crate::swap::{SWAP_METADATA, SwappedModel};
+use crate::tick::{RUN_END_METADATA, RunEnd};
 
 /// The name of the run's metadata record.
 pub const RUN_METADATA: &str = "formation.run";
@@ -48,6 +55,8 @@ pub enum RecordingItem {
     Step(ReplayStep),
     /// A model swapped in during the run (its attachment, when stored, came before).
     Swap(SwappedModel),
+    /// How the run ended (after its last step; recordings made before it was written have none).
+    End(RunEnd),
 }
 
 /// How a recording holds one of its models.
@@ -180,18 +189,42 @@ pub enum ReadError {
         /// The file.
         path: PathBuf,
     },
+    /// The file starts with the MCAP magic but ends before its first record: cut short (or
+    /// still being written) before anything readable.
+    #[error(
+        "{}: the recording is too short to hold anything ({size} bytes, starting with the MCAP \
+         magic): it was truncated before its first record (a crash, a full disk or an \
+         interrupted copy), or is still being written: record the run again, or wait for the \
+         recorder to finish",
+        path.display()
+    )]
+    TooShort {
+        /// The file.
+        path: PathBuf,
+        /// Its size \[bytes\].
+        size: u64,
+    },
     /// The file ends before the MCAP footer: it was cut short.
     #[error(
-        "{}: the recording is truncated: it ends at byte {read} inside an MCAP record, before \
-         the footer (a crash, a full disk or an interrupted copy); the steps before the cut were \
-         read, the rest of the run is missing: record the run again for a full replay",
-        path.display()
+        "{}: the recording is truncated: {} (a crash, a full disk or an interrupted copy); the \
+         steps before byte {read} were read, the rest of the run is missing: record the run \
+         again for a full replay",
+        path.display(),
+        match unclosed_chunk {
+            Some(at) => format!(
+                "its last whole chunk ends at byte {read}, followed by a chunk the writer never \
+                 closed (its header at byte {at} still holds the placeholder length)"
+            ),
+            _ => format!("it ends at byte {read} inside an MCAP record, before the footer"),
+        }
     )]
     Truncated {
         /// The file.
         path: PathBuf,
-        /// Bytes read, all of the file.
+        /// Bytes read: where the readable part of the file ends.
         read: u64,
+        /// Where a chunk the writer never closed begins, if the file ends with one.
+        unclosed_chunk: Option<u64>,
     },
     /// The MCAP structure is broken (a bad CRC, a record that does not parse).
     #[error(
@@ -277,11 +310,83 @@ fn topic_list(topics: &[String]) -> String {
     format!(" ({}{more})", shown.join(", "))
 }
 
+/// The MCAP magic, which starts (and ends) a file.
+const MAGIC_LEN: u64 = 8;
+/// A record's opcode and length, which start it.
+const OPCODE_LEN_SIZE: u64 = 9;
+/// The opcodes the framing looks for.
+const OP_CHUNK: u8 = 0x06;
+const OP_DATA_END: u8 = 0x0F;
+/// The length the MCAP writer puts in a chunk's header until it closes the chunk.
+const PLACEHOLDER_LENGTH: u64 = u64::MAX;
+
+/// The file's top-level records, followed by their lengths as the file is read, to find a chunk
+/// the writer never closed (its length still the placeholder) before the MCAP reader gets it.
+#[derive(Debug)]
+struct Framing {
+    /// Where the next top-level record starts (`None` once the data section is over, or the
+    /// file ends inside a record's opcode and length).
+    next_record: Option<u64>,
+    /// Where an unclosed chunk starts: the file is read as if it ended there.
+    unclosed_chunk: Option<u64>,
+}
+
+impl Framing {
+    fn new() -> Framing {
+        Framing {
+            next_record: Some(MAGIC_LEN),
+            unclosed_chunk: None,
+        }
+    }
+
+    /// Follows the records that start before `until` (reading their opcode and length from
+    /// `file`, without moving its cursor); returns where the readable part of the file ends, if
+    /// an unclosed chunk starts before `until`.
+    fn scan(&mut self, file: &File, until: u64) -> std::io::Result<Option<u64>> {
+        while let Some(at) = self.next_record.filter(|&at| at < until) {
+            let mut head = [0u8; OPCODE_LEN_SIZE as usize];
+            if !read_exact_at(file, &mut head, at)? {
+                self.next_record = None;
+                break;
+            }
+            let opcode = head[0];
+            let len = u64::from_le_bytes(head[1..].try_into().unwrap_or_default());
+            if opcode == OP_CHUNK && len == PLACEHOLDER_LENGTH {
+                self.unclosed_chunk = Some(at);
+                self.next_record = None;
+                break;
+            }
+            self.next_record = if opcode == OP_DATA_END {
+                None
+            } else {
+                at.checked_add(OPCODE_LEN_SIZE)
+                    .and_then(|end| end.checked_add(len))
+            };
+        }
+        Ok(self.unclosed_chunk)
+    }
+}
+
+/// Fills `buf` from `file` at `offset`; false if the file ends first.
+fn read_exact_at(file: &File, buf: &mut [u8], offset: u64) -> std::io::Result<bool> {
+    let mut filled = 0;
+    while filled < buf.len() {
+        match file.read_at(&mut buf[filled..], offset + filled as u64) {
+            Ok(0) => return Ok(false),
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(true)
+}
+
 /// A recording being read, front to back.
 pub struct RecordingReader {
     path: PathBuf,
     file: File,
     reader: LinearReader,
+    framing: Framing,
     /// The chunk being read, its records read one by one ([`crate::bounds::ChunkRecords`]).
     chunk: Option<crate::bounds::ChunkRecords>,
     /// The options of the file's reader, which a chunk's reader shares.
@@ -333,6 +438,7 @@ impl RecordingReader {
             reader: LinearReader::new_with_options(options.clone()),
             chunk: None,
             options,
+            framing: Framing::new(),
             read: 0,
             schemas: HashMap::new(),
             replay_channels: HashMap::new(),
@@ -417,7 +523,20 @@ impl RecordingReader {
 
     /// Reads up to `need` more bytes into the MCAP reader (0 at the end of the file).
     fn fill(&mut self, need: usize) -> Result<(), ReadError> {
-        let want = need.clamp(1, 1 << 20);
+        let mut want = need.clamp(1, 1 << 20);
+        let io = |source| ReadError::Io {
+            path: self.path.clone(),
+            source,
+        };
+        let until = self.read.saturating_add(want as u64);
+        if let Some(end) = self.framing.scan(&self.file, until).map_err(io)? {
+            // An unclosed chunk: the file ends where it begins.
+            want = usize::try_from(end.saturating_sub(self.read)).unwrap_or(want);
+            if want == 0 {
+                self.reader.notify_read(0);
+                return Ok(());
+            }
+        }
         let buf = self.reader.insert(want);
         let n = loop {
             match self.file.read(buf) {
@@ -443,12 +562,20 @@ impl RecordingReader {
             mcap::McapError::BadMagic if !self.any_record => ReadError::NotMcap {
                 path: self.path.clone(),
             },
-            mcap::McapError::UnexpectedEof if !self.any_record => ReadError::NotMcap {
+            mcap::McapError::UnexpectedEof if !self.any_record && self.read < MAGIC_LEN => {
+                ReadError::NotMcap {
+                    path: self.path.clone(),
+                }
+            }
+            // The magic was read (else the error would be `BadMagic`), and no whole record.
+            mcap::McapError::UnexpectedEof if !self.any_record => ReadError::TooShort {
                 path: self.path.clone(),
+                size: self.read,
             },
             mcap::McapError::UnexpectedEof => ReadError::Truncated {
                 path: self.path.clone(),
                 read: self.read,
+                unclosed_chunk: self.framing.unclosed_chunk,
             },
             source => ReadError::Corrupt {
                 path: self.path.clone(),
@@ -485,6 +612,10 @@ impl RecordingReader {
             Record::Metadata(metadata) if metadata.name == RUN_METADATA => {
                 let info = RunInfo::parse(&self.path, metadata.metadata)?;
                 return Ok(Some(RecordingItem::Run(info)));
+            }
+            Record::Metadata(metadata) if metadata.name == RUN_END_METADATA => {
+                let end = RunEnd::from_metadata(&self.path, &metadata.metadata)?;
+                return Ok(Some(RecordingItem::End(end)));
             }
             Record::Metadata(metadata) if metadata.name == SWAP_METADATA => {
                 let swapped = SwappedModel::from_metadata(&self.path, &metadata.metadata)?;

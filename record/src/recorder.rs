@@ -32,6 +32,7 @@ enum Job {
     Tick(Box<TickRecord>),
     Swap(SwapEvent),
     Finish(Option<FinalSample>),
+    Stopped(String),
 }
 
 /// A recording being written by its own thread.
@@ -100,13 +101,24 @@ impl Recorder {
     /// Writes the state after the last step (when given) and the summary, and closes the file.
     /// `Ok(None)` when a write had failed already (its error was returned by [`Recorder::tick`]).
     pub fn finish(
-        mut self,
+        self,
         last: Option<FinalSample>,
     ) -> Result<Option<RecordingSummary>, RecordError> {
+        self.end(Job::Finish(last))
+    }
+
+    /// Closes the recording of a run that stopped before its end, for `reason` (its run log's
+    /// stop reason), which the recording keeps ([`crate::tick::RunEnd`]). Returns as
+    /// [`Recorder::finish`] does.
+    pub fn finish_stopped(self, reason: &str) -> Result<Option<RecordingSummary>, RecordError> {
+        self.end(Job::Stopped(reason.to_owned()))
+    }
+
+    fn end(mut self, job: Job) -> Result<Option<RecordingSummary>, RecordError> {
         let Some(jobs) = self.jobs.take() else {
             return Ok(None);
         };
-        let sent = jobs.send(Job::Finish(last)).is_ok();
+        let sent = jobs.send(job).is_ok();
         drop(jobs);
         let joined = self.join();
         match joined {
@@ -150,6 +162,7 @@ fn write_jobs(
                 file.write_swap(&swap)?;
             }
             Job::Finish(last) => return file.finish(last.as_ref()).map(Some),
+            Job::Stopped(reason) => return file.finish_stopped(&reason).map(Some),
         }
     }
     file.finish(None).map(Some)
@@ -188,6 +201,15 @@ impl<'a> RecordedController<'a> {
             recorder: Some(recorder),
             model_ids,
             on_failure,
+        }
+    }
+
+    /// Closes the recording of a run that stopped before its end, for `reason` (its run log's
+    /// stop reason) ([`Recorder::finish_stopped`]).
+    pub fn finish_stopped(mut self, reason: &str) -> Result<Option<RecordingSummary>, RecordError> {
+        match self.recorder.take() {
+            Some(recorder) => recorder.finish_stopped(reason),
+            None => Ok(None),
         }
     }
 

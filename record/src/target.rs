@@ -72,7 +72,9 @@ impl RecordTarget {
         };
         // A component on the way that is a file, or a file target that is a folder.
         match self {
-            RecordTarget::File(path) => formation_proto::files::check_output_file(path),
+            RecordTarget::File(path) => {
+                formation_proto::files::check_output_file_as(path, RECORDING_EXAMPLE)
+            }
             RecordTarget::Folder { dir, .. } => formation_proto::files::check_output_dir(dir),
         }
         .map_err(RecordError::Write)?;
@@ -87,13 +89,16 @@ impl RecordTarget {
     }
 }
 
+/// The file name a fix suggests for a recording given a folder where a file was wanted.
+pub const RECORDING_EXAMPLE: &str = "run.mcap";
+
 /// Refuses a path that exists and is not a regular file (symbolic links followed).
 fn check_regular_or_absent(path: &Path) -> Result<(), RecordError> {
     match std::fs::metadata(path) {
-        Ok(meta) if meta.is_dir() => Err(RecordError::Write(WriteError::new(
-            path,
-            std::io::Error::from(std::io::ErrorKind::IsADirectory),
-        ))),
+        Ok(meta) if meta.is_dir() => Err(RecordError::Write(
+            WriteError::new(path, std::io::Error::from(std::io::ErrorKind::IsADirectory))
+                .with_example(RECORDING_EXAMPLE),
+        )),
         Ok(meta) if !meta.is_file() => Err(RecordError::NotAFile {
             path: path.to_path_buf(),
             what: formation_proto::files::file_kind(&meta),

@@ -1,5 +1,9 @@
 //! What a recording takes from one tick of a run, owned so that it can cross to the writer's
-//! thread: the state before the step, what each agent received and what it sent.
+//! thread: the state before the step, what each agent received and what it sent; and how the
+//! run ended ([`RunEnd`]), written at the end of the recording.
+
+use std::collections::BTreeMap;
+use std::path::Path;
 
 use formation_proto::control::Observation;
 use formation_proto::wire::TickOutcome;
@@ -89,4 +93,72 @@ pub struct FinalSample {
     pub time: f64,
     /// Every robot's pose.
     pub poses: Vec<Pose>,
+}
+
+/// The name of the metadata record that says how a recorded run ended.
+pub const RUN_END_METADATA: &str = "formation.run_end";
+
+/// How a recorded run ended, as its run log says it (`complete`, `stop_reason`): the recording
+/// of a run stopped early (Ctrl-C, SIGTERM, an agent that stopped answering) is a whole MCAP
+/// file, and this record is what tells it from a full run's.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RunEnd {
+    /// Whether the run played to its last tick.
+    pub complete: bool,
+    /// Why it stopped, when it did not.
+    pub stop_reason: Option<String>,
+}
+
+impl RunEnd {
+    /// The reason recorded when the writer was closed without being told why the run stopped.
+    pub const UNKNOWN_REASON: &'static str = "the run stopped before its last tick";
+
+    /// A run that played to its last tick.
+    pub fn complete() -> RunEnd {
+        RunEnd {
+            complete: true,
+            stop_reason: None,
+        }
+    }
+
+    /// A run that stopped early, for `reason`.
+    pub fn stopped(reason: &str) -> RunEnd {
+        RunEnd {
+            complete: false,
+            stop_reason: Some(reason.to_owned()),
+        }
+    }
+
+    /// The metadata record's keys: `complete` (`true` / `false`) and `stop_reason`.
+    pub fn to_metadata(&self) -> BTreeMap<String, String> {
+        let mut metadata = BTreeMap::new();
+        metadata.insert("complete".to_owned(), self.complete.to_string());
+        if let Some(reason) = &self.stop_reason {
+            metadata.insert("stop_reason".to_owned(), reason.clone());
+        }
+        metadata
+    }
+
+    /// Reads the record's keys back (`path` names the file in errors).
+    pub fn from_metadata(
+        path: &Path,
+        metadata: &BTreeMap<String, String>,
+    ) -> Result<RunEnd, crate::read::ReadError> {
+        let complete = match metadata.get("complete").map(String::as_str) {
+            Some("true") => true,
+            Some("false") => false,
+            _ => {
+                return Err(crate::read::ReadError::Metadata {
+                    path: path.to_path_buf(),
+                    record: RUN_END_METADATA,
+                    key: "complete".to_owned(),
+                    why: "neither `true` nor `false`".to_owned(),
+                });
+            }
+        };
+        Ok(RunEnd {
+            complete,
+            stop_reason: metadata.get("stop_reason").cloned(),
+        })
+    }
 }

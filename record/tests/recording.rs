@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 use formation_proto::WheelCmd;
 use formation_proto::control::{Controller, ControllerError, Observation};
 use formation_record::{
-    LaunchInfo, RecordError, RecordedController, Recorder, RecordingSetup, ReplayStep,
+    LaunchInfo, ReadError, RecordError, RecordedController, Recorder, RecordingItem,
+    RecordingReader, RecordingSetup, ReplayStep,
 };
 use formation_ros2::{LaserScan, RosMessage, TfMessage, Twist};
 use formation_world::{RunSpec, Scenario, run_episode};
@@ -229,4 +230,207 @@ fn a_file_cut_short_reads_up_to_its_last_whole_chunk() {
     }
     // The chunks of seconds 0 and 1 survive whole.
     assert!(latest >= 1_950_000_000, "{latest}");
+}
+
+/// Every replay step `RecordingReader` hands out of `path`, and how the file ended.
+fn read_steps(path: &Path) -> (Vec<ReplayStep>, Result<(), ReadError>) {
+    let mut reader = RecordingReader::open(path).unwrap();
+    let mut steps = Vec::new();
+    loop {
+        match reader.next_item() {
+            Ok(Some(RecordingItem::Step(step))) => steps.push(step),
+            Ok(Some(_)) => {}
+            Ok(None) => return (steps, Ok(())),
+            Err(e) => return (steps, Err(e)),
+        }
+    }
+}
+
+/// How many replay messages the `mcap` crate's own streaming reader finds in `bytes` before it
+/// stops.
+fn replay_messages_in(bytes: &[u8]) -> usize {
+    let mut count = 0;
+    for message in mcap::MessageStream::new(bytes).unwrap() {
+        match message {
+            Ok(m) if m.channel.topic.ends_with("/replay") => count += 1,
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    count
+}
+
+/// The header the MCAP writer puts at the start of a chunk it has not closed yet: the chunk
+/// opcode, and the lengths, sizes and CRC as placeholders (all ones), 53 bytes for zstd.
+fn unclosed_chunk_header() -> Vec<u8> {
+    let mut header = vec![0x06];
+    header.extend(u64::MAX.to_le_bytes()); // record length
+    header.extend(0u64.to_le_bytes()); // message start time
+    header.extend(0u64.to_le_bytes()); // message end time
+    header.extend(u64::MAX.to_le_bytes()); // uncompressed size
+    header.extend(u32::MAX.to_le_bytes()); // uncompressed CRC
+    header.extend(4u32.to_le_bytes());
+    header.extend(b"zstd");
+    header.extend(u64::MAX.to_le_bytes()); // compressed size
+    assert_eq!(header.len(), 53);
+    header
+}
+
+/// A crash or a full disk stops the writer at any byte: at a chunk boundary, inside a chunk's
+/// header, just after it, or inside a chunk it has not closed (its header's length still the
+/// placeholder, its data partly written). Every such file reads up to its last whole chunk: the
+/// steps before the cut, each bit for bit, then `Truncated` with the byte where the readable part
+/// ends.
+#[test]
+fn a_recording_cut_at_every_chunk_boundary_and_after_every_chunk_header_reads_to_its_last_whole_chunk()
+ {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    record(&spec(3, 3.0), &path, Vec::new());
+    let bytes = std::fs::read(&path).unwrap();
+    let (all, end) = read_steps(&path);
+    end.unwrap();
+    assert_eq!(all.len(), 3 * 60);
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    assert!(summary.chunk_indexes.len() >= 4);
+    let unclosed = unclosed_chunk_header();
+    let cut_path = dir.path().join("cut.mcap");
+    let mut cases = 0;
+    for chunk in &summary.chunk_indexes {
+        let start = chunk.chunk_start_offset as usize;
+        let end = start + chunk.chunk_length as usize;
+        // The record's opcode and length, then the header's fixed fields and compression name.
+        let header_end = start + 9 + 8 + 8 + 8 + 4 + 4 + chunk.compression.len() + 8;
+        let data = &bytes[header_end..end];
+        let crashed = |tail: &[u8]| [&bytes[..start], &unclosed, tail].concat();
+        // (file, where its readable part ends, whether an unclosed chunk follows it)
+        let cuts: Vec<(Vec<u8>, usize, bool)> = vec![
+            (bytes[..start].to_vec(), start, false),
+            (bytes[..start + 5].to_vec(), start + 5, false),
+            (bytes[..start + 30].to_vec(), start + 30, false),
+            (bytes[..header_end].to_vec(), header_end, false),
+            (bytes[..end].to_vec(), end, false),
+            (crashed(&[]), start, true),
+            (crashed(&data[..data.len() / 2]), start, true),
+            (crashed(data), start, true),
+        ];
+        for (cut, readable, unclosed_follows) in cuts {
+            std::fs::write(&cut_path, &cut).unwrap();
+            let expected = replay_messages_in(&bytes[..readable]);
+            let (steps, end) = read_steps(&cut_path);
+            let what = format!("cut of {} bytes, chunk at {start}", cut.len());
+            let err = end.expect_err(&what);
+            match &err {
+                ReadError::Truncated {
+                    read,
+                    unclosed_chunk,
+                    ..
+                } => {
+                    assert_eq!(*read, readable as u64, "{what}: {err}");
+                    let at = unclosed_follows.then_some(start as u64);
+                    assert_eq!(*unclosed_chunk, at, "{what}: {err}");
+                }
+                other => panic!("{what}: not Truncated: {other}"),
+            }
+            let message = err.to_string();
+            assert!(message.contains(&format!("byte {readable}")), "{message}");
+            assert!(message.contains("record the run again"), "{message}");
+            if unclosed_follows {
+                assert!(message.contains("never closed"), "{message}");
+            }
+            assert_eq!(steps.len(), expected, "{what}");
+            assert_eq!(steps[..], all[..expected], "{what}");
+            cases += 1;
+        }
+    }
+    // Whole chunks were read from some cuts, so the cuts compared something.
+    assert!(replay_messages_in(&bytes[..summary.chunk_indexes[2].chunk_start_offset as usize]) > 0);
+    assert_eq!(cases, 8 * summary.chunk_indexes.len());
+}
+
+/// A file that holds the MCAP magic and then stops (a recorder killed as it started) is "too
+/// short", not "not MCAP".
+#[test]
+fn a_file_cut_just_after_the_magic_is_too_short_not_foreign() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    record(&spec(3, 1.0), &path, Vec::new());
+    let bytes = std::fs::read(&path).unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..20]).unwrap();
+    let err = read_steps(&cut).1.unwrap_err();
+    assert!(matches!(err, ReadError::TooShort { size: 20, .. }), "{err}");
+    let message = err.to_string();
+    assert!(
+        message.contains("too short") && message.contains("truncated"),
+        "{message}"
+    );
+    assert!(
+        !message.contains("does not start with the MCAP magic"),
+        "{message}"
+    );
+}
+
+/// A run stopped early (Ctrl-C) is a whole MCAP file: its end record says it is incomplete and
+/// why, as the run log does; a run played to its end says it is complete (issue 39).
+#[test]
+fn the_recording_says_whether_the_run_played_to_its_end() {
+    use formation_record::RunEnd;
+    let dir = tempfile::tempdir().unwrap();
+    let spec = spec(3, 1.0);
+    let ends = |path: &Path| {
+        let mut reader = RecordingReader::open(path).unwrap();
+        let mut ends = Vec::new();
+        while let Some(item) = reader.next_item().unwrap() {
+            if let RecordingItem::End(end) = item {
+                ends.push(end);
+            }
+        }
+        ends
+    };
+    let full = dir.path().join("full.mcap");
+    record(&spec, &full, Vec::new());
+    assert_eq!(ends(&full), [RunEnd::complete()]);
+
+    let stopped = dir.path().join("stopped.mcap");
+    let recorder = Recorder::start(
+        &stopped,
+        RecordingSetup::for_run(&spec, &launch(Vec::new())),
+    )
+    .unwrap();
+    let mut inner = StopAfter {
+        inner: Turning::default(),
+        left: 5,
+    };
+    let mut failed = |e: &RecordError| panic!("{e}");
+    let ids = vec!["m".to_owned(); spec.n_robots];
+    let mut recorded = RecordedController::new(&mut inner, recorder, ids, &mut failed);
+    let played = run_episode(&spec, &mut recorded, &mut |_, _| {});
+    assert!(played.is_err());
+    recorded
+        .finish_stopped("interrupted by Ctrl-C")
+        .unwrap()
+        .unwrap();
+    assert_eq!(ends(&stopped), [RunEnd::stopped("interrupted by Ctrl-C")]);
+    assert_eq!(read_steps(&stopped).0.len(), 3 * 5);
+}
+
+/// Decides `left` ticks with `inner`, then fails as an interrupted controller does.
+struct StopAfter<C: Controller> {
+    inner: C,
+    left: usize,
+}
+
+impl<C: Controller> Controller for StopAfter<C> {
+    fn commands(
+        &mut self,
+        obs: &Observation<'_>,
+        out: &mut [WheelCmd],
+    ) -> Result<(), ControllerError> {
+        if self.left == 0 {
+            return Err(ControllerError::new("interrupted"));
+        }
+        self.left -= 1;
+        self.inner.commands(obs, out)
+    }
 }

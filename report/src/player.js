@@ -33,6 +33,8 @@
     this.slider.min = String(this.t0);
     this.slider.max = String(this.t1);
     this.slider.step = 'any';
+    // A range input starts at its middle: put it at the first frame, which the clock shows.
+    this.slider.value = String(this.t0);
     this.time = this.t0;
     this.playing = false;
     this.last = null;
@@ -220,6 +222,7 @@
       return (rect.left + p[0]).toFixed(1) + ',' + (rect.top + p[1]).toFixed(1);
     });
     this.root.setAttribute('data-player-time', this.time.toFixed(3));
+    this.root.setAttribute('data-player-slider', parseFloat(this.slider.value).toFixed(3));
     this.root.setAttribute('data-player-robots', robots.join(';'));
     var box = this.root.getBoundingClientRect();
     this.root.setAttribute('data-player-box', [box.left, box.top, box.right, box.bottom].map(function (v) { return v.toFixed(1); }).join(','));

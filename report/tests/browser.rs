@@ -467,6 +467,31 @@ fn sixteen_robot_report() -> (tempfile::TempDir, std::path::PathBuf) {
     (dir, out)
 }
 
+/// Issue 39: the page opens with the player's time slider at the first frame, where its clock
+/// says it is (a range input left alone starts at its middle).
+#[test]
+fn the_players_slider_starts_at_the_time_its_clock_shows() {
+    let browser = chromium();
+    let (dir, out) = sixteen_robot_report();
+    let url = format!("file://{}", out.display());
+    let mut args = window_args(1300, PAGE_HEIGHT);
+    args.push("--dump-dom".to_owned());
+    let dom = run_chromium(&browser, &dir.path().join("profile-start"), &args, &url).stdout;
+    assert_eq!(body_attribute(&dom, "data-players").as_deref(), Some("1"));
+    let time = player_attribute(&dom, "data-player-time").expect("time");
+    assert_eq!(time, "0.000");
+    assert_eq!(
+        player_attribute(&dom, "data-player-slider").as_deref(),
+        Some(time.as_str())
+    );
+    // At a later time both move together.
+    let (later, _) = player_at(&browser, dir.path(), &out, 5.0);
+    assert_eq!(
+        player_attribute(&later, "data-player-slider").as_deref(),
+        Some("5.000")
+    );
+}
+
 /// The player in Chromium: at two times of a 16-robot run the screenshots differ where the
 /// robots were and moved away from, the robots are drawn where the page says, and nothing outside
 /// the player changes.

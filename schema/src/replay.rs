@@ -54,8 +54,13 @@ pub struct ReplayReport {
     pub models: Vec<String>,
     /// Whether `--model` replaced the recording's models.
     pub model_override: bool,
-    /// Whether the whole file was read (false: truncated, replayed up to the cut).
+    /// Whether the whole run was replayed: false when the file is truncated (replayed up to the
+    /// cut) or when the run itself stopped early (`stop_reason`), as its run log says.
     pub complete: bool,
+    /// Why the recorded run stopped before its last tick (Ctrl-C, SIGTERM, an agent that
+    /// stopped answering), as its recording says; absent for a run that played to its end.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stop_reason: Option<String>,
     /// Bytes of the recording read.
     pub bytes_read: u64,
     /// Per robot replayed, in robot order.

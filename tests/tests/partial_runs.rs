@@ -74,7 +74,17 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
     let leaks = LeakCheck::new(&run_id);
     let out = dir.path().join("out");
     let scenario = repo_root().join("scenarios/case1.toml");
-    let mut launch = launch(&run_id, &scenario, &out, &["--clock", "realtime"]);
+    let recording = dir.path().join("ctrlc.mcap");
+    let record = recording.display().to_string();
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &["--clock", "realtime", "--record", &record],
+    );
+    // The world's info lines (its recording's) go to a pipe here: no colour codes (issue 39).
+    command.env("FORMATION_LOG", "info");
+    let mut launch = LiveProcess::spawn(command);
     await_connected(&mut launch);
     std::thread::sleep(Duration::from_secs(4));
     send_signal(launch.id(), "-INT");
@@ -90,6 +100,11 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
         finished.describe()
     );
     leaks.assert_clean();
+    assert!(
+        finished.stderr().contains("recorded") && !finished.stderr().contains('\u{1b}'),
+        "log lines to a pipe are plain text\n{}",
+        finished.describe()
+    );
     // 4 s at 20 Hz is 80 ticks; allow for a slow start on a loaded machine.
     let log = assert_kept_incomplete(&out, 40, &finished.describe());
     assert_eq!(log["stop_reason"], "interrupted by Ctrl-C");
@@ -98,6 +113,40 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
         out.join("timing/run-0000.json").is_file(),
         "the world keeps its timing log too"
     );
+    // The recording says the run stopped early, and so does its replay (issue 39): every tick
+    // recorded is replayed, the report is marked incomplete with the reason.
+    let json = dir.path().join("ctrlc.replay.json");
+    let mut replay = Command::new(&binaries().cli);
+    replay
+        .arg("replay")
+        .arg(&recording)
+        .arg("--json")
+        .arg(&json);
+    let replayed = run(replay, LIMIT);
+    let report = read_json(&json);
+    assert_eq!(
+        report["complete"],
+        false,
+        "{report}\n{}",
+        replayed.describe()
+    );
+    assert!(
+        report["stop_reason"]
+            .as_str()
+            .is_some_and(|r| !r.is_empty()),
+        "{report}"
+    );
+    assert!(
+        replayed
+            .stdout()
+            .contains("the run is incomplete: it stopped before its last tick"),
+        "{}",
+        replayed.describe()
+    );
+    let compared: u64 = report["robots"]
+        .as_array()
+        .map_or(0, |r| r.iter().filter_map(|r| r["compared"].as_u64()).sum());
+    assert!(compared >= 3 * 40, "{report}");
 }
 
 /// A world SIGKILLed mid-run cannot save anything itself: the launcher turns the journal it

@@ -184,6 +184,45 @@ fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_c
     );
     // The run was cut short, so no summary was written: the reader stops at the cut.
     assert!(latest < 30.0, "{streamed}");
+    // The launcher says the world was killed; nothing "above" explains it (issue 39).
+    assert!(
+        finished.stderr().contains("SIGKILL") && !finished.stderr().contains("see its error above"),
+        "{}",
+        finished.describe()
+    );
+    // `formation replay` replays it up to its last whole chunk, says where the readable part
+    // ends, marks the report incomplete and exits 2 (issue 39).
+    let json = dir.path().join("killed.replay.json");
+    let mut replay = Command::new(&binaries().cli);
+    replay.arg("replay").arg(&file).arg("--json").arg(&json);
+    let replayed = run(replay, LIMIT);
+    assert_eq!(
+        replayed.output.status.code(),
+        Some(2),
+        "{}",
+        replayed.describe()
+    );
+    let report = read_json(&json);
+    assert_eq!(report["complete"], false, "{report}");
+    let bytes_read = report["bytes_read"].as_u64().unwrap_or(0);
+    assert!(bytes_read > 0, "{report}");
+    assert!(
+        replayed
+            .stderr()
+            .contains(&format!("the steps before byte {bytes_read} were read")),
+        "{}",
+        replayed.describe()
+    );
+    assert!(
+        replayed.stdout().contains("identical") && !replayed.stderr().contains("corrupt"),
+        "{}",
+        replayed.describe()
+    );
+    let compared: u64 = report["robots"]
+        .as_array()
+        .map_or(0, |r| r.iter().filter_map(|r| r["compared"].as_u64()).sum());
+    // At least 9 of the 10 s played, for 3 robots, were replayed.
+    assert!(compared >= 3 * 180, "{report}");
 }
 
 /// A target whose folder is missing, a device, or a component that is a file: refused before
@@ -220,7 +259,22 @@ fn bad_record_targets_are_refused_before_anything_runs() {
     let run_id = unique_run_id("recbad");
     let leaks = LeakCheck::new(&run_id);
     let out = dir.path().join("out");
+    let folder = dir.path().join("a-folder");
+    std::fs::create_dir(&folder).unwrap();
     for (target, needle) in [
+        // A folder where a file is wanted: the fix's example is a recording (issue 39).
+        (
+            folder.clone(),
+            format!(
+                "name a file (for example {})",
+                folder.join("run.mcap").display()
+            ),
+        ),
+        // The scenario itself (issue 39): never written over.
+        (
+            scenario.clone(),
+            format!("{} is the file --scenario reads", scenario.display()),
+        ),
         (
             missing.join("run.mcap"),
             "does not exist: create it first".to_owned(),
@@ -243,7 +297,26 @@ fn bad_record_targets_are_refused_before_anything_runs() {
             "refused before the launch\n{}",
             finished.describe()
         );
+        assert_eq!(
+            finished.output.status.code(),
+            Some(2),
+            "{}",
+            finished.describe()
+        );
+        // A refusal leaves nothing behind: no --out folder, no run-specs.json (issue 39).
+        assert!(
+            !out.exists(),
+            "{} was created by a refused launch\n{}",
+            out.display(),
+            finished.describe()
+        );
     }
+    assert!(std::fs::read_dir(&folder).unwrap().next().is_none());
+    assert!(
+        std::fs::read_to_string(&scenario)
+            .unwrap()
+            .contains("robots")
+    );
     leaks.assert_clean();
 }
 

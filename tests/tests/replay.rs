@@ -220,6 +220,22 @@ fn a_renderer_changed_by_one_pixel_is_caught() {
     assert!(differing > 0, "{:?}", flipped.report);
 }
 
+/// Where the last chunk of a whole MCAP file begins, found by following its top-level records
+/// (an opcode byte and a little-endian u64 length each, after the 8-byte magic).
+fn last_chunk_offset(bytes: &[u8]) -> usize {
+    let (mut at, mut last) = (8, None);
+    while at + 9 <= bytes.len() {
+        let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
+        match bytes[at] {
+            0x06 => last = Some(at),
+            0x0F => break, // the data section ends
+            _ => {}
+        }
+        at += 9 + len;
+    }
+    last.expect("a chunk")
+}
+
 /// Not MCAP, truncated, a missing model: each an error (exit 2) naming the cause and the fix; a
 /// truncated recording is replayed up to the cut and its report says so.
 #[test]
@@ -266,6 +282,53 @@ fn bad_input_gets_a_clear_error() {
         report["robots"][0]["compared"].as_u64().unwrap() > 0,
         "{report}"
     );
+
+    // Issue 39: 20 bytes that start as an MCAP file does are "too short", not "not MCAP".
+    let short = dir.path().join("short.mcap");
+    std::fs::write(&short, &bytes[..20]).unwrap();
+    let too_short = replay(&short, &[], &dir.path().join("short.json"));
+    assert_exit(&too_short, 2);
+    assert!(
+        too_short.stderr().contains("too short")
+            && too_short.stderr().contains("truncated")
+            && !too_short
+                .stderr()
+                .contains("does not start with the MCAP magic"),
+        "{}",
+        too_short.describe()
+    );
+
+    // A crash inside a chunk leaves its header with the placeholder length (issue 39): the file
+    // replays up to its last whole chunk, names the byte and exits 2.
+    let start = last_chunk_offset(&bytes);
+    let mut crashed = bytes[..start].to_vec();
+    crashed.push(0x06);
+    crashed.extend(u64::MAX.to_le_bytes());
+    crashed.extend([0u8; 16]);
+    crashed.extend(u64::MAX.to_le_bytes());
+    crashed.extend(u32::MAX.to_le_bytes());
+    crashed.extend(4u32.to_le_bytes());
+    crashed.extend(b"zstd");
+    crashed.extend(u64::MAX.to_le_bytes());
+    crashed.extend(&bytes[start + 53..start + 53 + 100]);
+    let unclosed = dir.path().join("unclosed.mcap");
+    std::fs::write(&unclosed, &crashed).unwrap();
+    let json_unclosed = dir.path().join("unclosed.json");
+    let replayed = replay(&unclosed, &[], &json_unclosed);
+    assert_exit(&replayed, 2);
+    assert!(
+        replayed
+            .stderr()
+            .contains(&format!("its last whole chunk ends at byte {start}"))
+            && replayed.stderr().contains("never closed")
+            && !replayed.stderr().contains("corrupt"),
+        "{}",
+        replayed.describe()
+    );
+    let report = read_json(&json_unclosed);
+    assert_eq!(report["complete"], false, "{report}");
+    assert_eq!(report["bytes_read"], start as u64, "{report}");
+    assert_eq!(report["diverged"], false, "{report}");
 
     let no_model = replay(&file, &["--model", "/nonexistent/model.onnx"], &json);
     assert_exit(&no_model, 2);

@@ -45,21 +45,33 @@ fn eval_flags_sizes_outside_the_trained_ones_and_warns_below_them() {
     let dir = TempDir::new("team-sizes");
     let model = model_of_3_and_5(dir.path());
     let cases = [
-        (2, "below_trained", true, Some("warning: 2 robots is fewer")),
+        // One wording, scaled by how far outside the trained sizes (issue 39): 2 is 1.5x below
+        // the smallest, 6 is 1.2x above the largest, 4 lies between them.
+        (
+            2,
+            "below_trained",
+            true,
+            Some("warning: 2 robots is zero-shot for model"),
+        ),
         (3, "trained", false, None),
         (4, "zero_shot", true, Some("note: 4 robots is zero-shot")),
         (
             6,
             "above_trained",
             true,
-            Some("note: 6 robots is zero-shot"),
+            Some("warning: 6 robots is zero-shot for model"),
         ),
     ];
     for (robots, fit, zero_shot, line) in cases {
         let out = dir.path().join(format!("eval-{robots}.json"));
         let finished = eval(&scenario(dir.path(), robots), &model, &out, &[]);
         match line {
-            Some(line) => assert!(finished.stderr().contains(line), "{}", finished.describe()),
+            // On the terminal before the runs, and under the printed Table I.
+            Some(line) => assert!(
+                finished.stderr().contains(line) && finished.stdout().contains(line),
+                "{}",
+                finished.describe()
+            ),
             None => assert!(
                 !finished.stderr().contains("zero-shot") && !finished.stderr().contains("fewer"),
                 "{}",

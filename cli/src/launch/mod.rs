@@ -132,15 +132,14 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         Some(id) => RunId::new(id)?,
         None => RunId::generate(),
     };
-    let network = network_from_args(args, &run_id, models.len())?;
-    let run_specs = args.out.join("run-specs.json");
+    // Every target is checked before anything is written (the credentials and run specs below):
+    // a refusal leaves nothing behind.
+    formation_proto::files::check_output_dir(&args.out)?;
+    let mut inputs: Vec<(&'static str, &Path)> = vec![("--scenario", &args.scenario)];
+    inputs.extend(models.iter().map(|m| ("--model", m.as_path())));
+    let record_file = args.record.as_deref().map(|r| ("--record", r, "run.mcap"));
+    paths::refuse_overwriting_inputs(record_file.as_slice(), &[("--out", &args.out)], &inputs)?;
     let base_seed = args.seed.unwrap_or_else(|| scenario.seed());
-    write_run_specs(&scenario, base_seed, args.first_run, args.runs, &run_specs)?;
-    let mut startup_timeout_ms = RuntimeSettings::DEFAULT.startup_timeout_ms;
-    if network.zenoh().is_some_and(|z| !z.remote.is_empty()) {
-        let wait = positive_seconds("--remote-timeout-s", args.remote_timeout_s)?;
-        startup_timeout_ms = wait.as_millis().clamp(1, u64::MAX as u128) as u64;
-    }
     let launch_info =
         crate::record::launch_info(&scenario, base_seed, args.clock.as_str(), "policy", &models);
     let record = match &args.record {
@@ -150,6 +149,16 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         )?),
         None => None,
     };
+    let faults = faults_per_robot(&args.faults, models.len())?;
+    let restart_window = positive_seconds("--restart-window-s", args.restart_window_s)?;
+    let network = network_from_args(args, &run_id, models.len())?;
+    let run_specs = args.out.join("run-specs.json");
+    write_run_specs(&scenario, base_seed, args.first_run, args.runs, &run_specs)?;
+    let mut startup_timeout_ms = RuntimeSettings::DEFAULT.startup_timeout_ms;
+    if network.zenoh().is_some_and(|z| !z.remote.is_empty()) {
+        let wait = positive_seconds("--remote-timeout-s", args.remote_timeout_s)?;
+        startup_timeout_ms = wait.as_millis().clamp(1, u64::MAX as u128) as u64;
+    }
     let plan = LaunchPlan {
         run_id,
         run_specs,
@@ -164,10 +173,10 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         },
         network,
         out: args.out.clone(),
-        faults: faults_per_robot(&args.faults, models.len())?,
+        faults,
         models,
         restart_budget: args.restarts,
-        restart_window: positive_seconds("--restart-window-s", args.restart_window_s)?,
+        restart_window,
         restart_delay: Duration::from_millis(args.restart_delay_ms),
         record,
         launch_info: Some(launch_info),
@@ -378,7 +387,32 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         }
     };
     write_run_outputs(&plan, &report, scenario.name(), base_seed, notes)?;
+    print_recordings(&plan, args.first_run, args.runs);
     print_launch_outcome(&plan, &report)
+}
+
+/// Prints each recording the world wrote (`--record`), as `eval --record` does.
+fn print_recordings(plan: &LaunchPlan, first_run: usize, runs: usize) {
+    let Some(settings) = &plan.record else {
+        return;
+    };
+    for (nth, index) in (first_run..first_run + runs).enumerate() {
+        let Some(path) = settings.target.path_for(index, nth, runs) else {
+            continue;
+        };
+        match std::fs::metadata(&path) {
+            Ok(meta) if meta.is_file() => println!(
+                "recorded {} ({:.1} MB)",
+                path.display(),
+                meta.len() as f64 / 1e6
+            ),
+            _ => eprintln!(
+                "formation: run {index} was to be recorded into {}, which the world did not \
+                 write (see its message above)",
+                path.display()
+            ),
+        }
+    }
 }
 
 /// Runs the launch, printing the world's events as they come and the agents' readiness on a
@@ -606,7 +640,7 @@ fn stop_reason(error: &supervisor::LaunchError) -> String {
         LaunchError::AgentFailed { robot, status, .. } => {
             format!("the agent of robot {robot} exited ({status}) and the restart budget was spent")
         }
-        LaunchError::WorldFailed { status } => format!("the world process exited ({status})"),
+        LaunchError::WorldFailed { status, .. } => format!("the world process exited ({status})"),
         other => other.to_string(),
     }
 }
@@ -1007,7 +1041,12 @@ mod tests {
 
         let error = supervisor::LaunchError::WorldFailed {
             status: "killed by signal 9".into(),
+            signal: Some(9),
         };
+        // Issue 39: a killed world printed nothing, and the message does not point above.
+        let message = error.to_string();
+        assert!(!message.contains("see its error above"), "{message}");
+        assert!(message.contains("SIGKILL"), "{message}");
         keep_partial_runs(&out, 0..2, std::time::SystemTime::now(), &error, "t", 3);
         let summary: serde_json::Value =
             serde_json::from_slice(&std::fs::read(out.join("summary.json")).expect("summary.json"))

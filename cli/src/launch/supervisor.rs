@@ -323,10 +323,12 @@ pub enum LaunchError {
         credentials: String,
     },
     /// The world failed.
-    #[error("the world process exited ({status}); see its error above")]
+    #[error("the world process exited ({status}); {}", world_failure_hint(*.signal))]
     WorldFailed {
         /// Its exit status.
         status: String,
+        /// The signal that killed it, if one did (then it could say nothing itself).
+        signal: Option<i32>,
     },
     /// Stopped by the user: SIGINT (Ctrl-C) or SIGTERM.
     #[error("interrupted by {}; all processes stopped and cleaned up", interruption_name(.0))]
@@ -741,8 +743,10 @@ impl Supervision {
                 credentials: zenoh.credentials.display().to_string(),
             })
         } else {
+            use std::os::unix::process::ExitStatusExt;
             Err(LaunchError::WorldFailed {
                 status: describe(status),
+                signal: status.signal(),
             })
         }
     }
@@ -788,6 +792,28 @@ impl Supervision {
             let _ = restart_tx.send(robot);
         });
         Ok(())
+    }
+}
+
+/// What to look at after the world failed: its own error when it exited, else what can kill a
+/// process from outside, since a killed world prints nothing.
+fn world_failure_hint(signal: Option<i32>) -> String {
+    match signal {
+        None => "see its error above".to_owned(),
+        Some(signal) => {
+            let name = match signal {
+                9 => " (SIGKILL)",
+                15 => " (SIGTERM)",
+                6 => " (SIGABRT)",
+                11 => " (SIGSEGV)",
+                _ => "",
+            };
+            format!(
+                "it was killed by signal {signal}{name} before it could say why: something outside \
+                 formation stopped it (the kernel's out-of-memory killer, which `dmesg` reports, \
+                 or a `kill`); the run played so far is kept as an incomplete run log"
+            )
+        }
     }
 }
 

@@ -26,7 +26,8 @@ use formation_proto::wire::TickOutcome;
 use formation_proto::{Goal, LidarSpec};
 use formation_record::models::{self, ModelFileError};
 use formation_record::{
-    ReadError, RecordingItem, RecordingReader, ReplayStep, RunInfo, SwapStorage, SwappedModel,
+    ReadError, RecordingItem, RecordingReader, ReplayStep, RunEnd, RunInfo, SwapStorage,
+    SwappedModel,
 };
 use formation_runtime::agent::{BoxError, Pilot, PilotMaker};
 use formation_schema::ReplayReport;
@@ -146,6 +147,8 @@ struct Replay<'m, M: PilotMaker> {
     held: BTreeMap<u32, VecDeque<ReplayStep>>,
     scans: HashMap<u32, VecDeque<SentScan>>,
     tallies: BTreeMap<u32, RobotTally>,
+    /// How the run ended, as the recording says (none in recordings made before it was written).
+    end: Option<RunEnd>,
 }
 
 /// Replays the recording at `recording` through `maker`'s pilots; attached models are written
@@ -170,6 +173,7 @@ pub fn replay_recording<M: PilotMaker>(
         held: BTreeMap::new(),
         scans: HashMap::new(),
         tallies: BTreeMap::new(),
+        end: None,
     };
     if let Some(model) = &options.model {
         replay.add_model(model.clone(), model.display().to_string())?;
@@ -187,6 +191,7 @@ pub fn replay_recording<M: PilotMaker>(
                 replay.release_held(false)?;
             }
             Ok(Some(RecordingItem::Step(step))) => replay.offer(step)?,
+            Ok(Some(RecordingItem::End(end))) => replay.end = Some(end),
             Ok(None) => break None,
             Err(e @ ReadError::Truncated { .. }) => break Some(e),
             Err(e) => return Err(e.into()),
@@ -468,7 +473,8 @@ impl<M: PilotMaker> Replay<'_, M> {
             clock: self.info.map(|i| i.clock).unwrap_or_default(),
             models: self.labels,
             model_override: self.options.model.is_some(),
-            complete: truncated.is_none(),
+            complete: truncated.is_none() && self.end.as_ref().is_none_or(|end| end.complete),
+            stop_reason: self.end.and_then(|end| end.stop_reason),
             bytes_read,
             robots,
             diverged,

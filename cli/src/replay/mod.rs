@@ -160,7 +160,13 @@ pub fn table(report: &ReplayReport) -> String {
         "identical: every compared command is bit for bit the recorded one"
     };
     let _ = writeln!(out, "{verdict}");
-    if !report.complete {
+    if let Some(reason) = &report.stop_reason {
+        let _ = writeln!(
+            out,
+            "the run is incomplete: it stopped before its last tick ({reason}); every tick it \
+             recorded was replayed"
+        );
+    } else if !report.complete {
         let _ = writeln!(
             out,
             "the recording is truncated: replayed up to byte {}",

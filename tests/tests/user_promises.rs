@@ -1,0 +1,198 @@
+//! Issue 39's command-line promises, through the real `formation` binary: an output never
+//! overwrites one of the command's own inputs (refused, exit 2, the input kept byte for byte, and
+//! nothing else written); `--controller policy` with `--robots` evaluates the policy without
+//! `--model` (the shipped default); `eval --robots N` with `--out` and `--save-trajectories`
+//! evaluates that one team size as any evaluation.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use formation_tests::{Finished, TempDir, Watchdog, binaries, case1_scenario, read_json, run};
+
+const LIMIT: Duration = Duration::from_secs(300);
+
+/// `formation ARGS`.
+fn formation(args: &[&str]) -> Finished {
+    let mut command = Command::new(&binaries().cli);
+    command.args(args);
+    run(command, LIMIT)
+}
+
+fn assert_exit(finished: &Finished, code: i32) {
+    assert_eq!(
+        finished.output.status.code(),
+        Some(code),
+        "{}",
+        finished.describe()
+    );
+}
+
+fn text(path: &Path) -> &str {
+    path.to_str().expect("a UTF-8 path")
+}
+
+#[test]
+fn outputs_never_overwrite_their_own_inputs() {
+    let _watchdog = Watchdog::arm("promises_inputs", LIMIT);
+    let dir = TempDir::new("promises-inputs");
+    let scenario = case1_scenario(dir.path(), 2.0);
+    let before = std::fs::read(&scenario).expect("scenario");
+    let out = dir.path().join("eval");
+    let evaluated = formation(&[
+        "eval",
+        "--controller",
+        "expert",
+        "--runs",
+        "1",
+        "--scenario",
+        text(&scenario),
+        "--out",
+        text(&out),
+    ]);
+    evaluated.assert_success();
+    let summary = out.join("summary.json");
+    let run_log = out.join("runs/run-0000.json");
+    let kept = |path: &Path| std::fs::read(path).expect("an input");
+    let (summary_bytes, log_bytes) = (kept(&summary), kept(&run_log));
+
+    // `report D --out D/summary.json` and `--out D/runs/run-0000.json`: refused, kept.
+    for (target, what) in [(&summary, "an eval summary"), (&run_log, "a run log")] {
+        let refused = formation(&["report", text(&out), "--out", text(target)]);
+        assert_exit(&refused, 2);
+        refused.assert_failure_mentioning(what);
+        refused.assert_failure_mentioning("report.html");
+        assert!(
+            !formation_report_figures(target).exists(),
+            "{}",
+            refused.describe()
+        );
+    }
+    assert_eq!(kept(&summary), summary_bytes);
+    assert_eq!(kept(&run_log), log_bytes);
+    // A folder given as `--out` is told to name an .html file.
+    let refused = formation(&["report", text(&out), "--out", text(&out)]);
+    assert_exit(&refused, 2);
+    refused.assert_failure_mentioning(&out.join("report.html").display().to_string());
+    // The report still builds from the same folder.
+    let html = dir.path().join("report.html");
+    formation(&["report", text(&out), "--out", text(&html)]).assert_success();
+
+    // `eval --json <the scenario>`: refused before any run, the scenario kept.
+    let refused = formation(&[
+        "eval",
+        "--controller",
+        "expert",
+        "--runs",
+        "1",
+        "--scenario",
+        text(&scenario),
+        "--json",
+        text(&scenario),
+    ]);
+    assert_exit(&refused, 2);
+    refused.assert_failure_mentioning("is the file --scenario reads");
+    assert!(
+        !refused.stdout().contains("Table I"),
+        "{}",
+        refused.describe()
+    );
+    assert_eq!(std::fs::read(&scenario).expect("scenario"), before);
+}
+
+/// The figures folder a report at `out` would get.
+fn formation_report_figures(out: &Path) -> std::path::PathBuf {
+    let stem = out
+        .file_stem()
+        .expect("stem")
+        .to_string_lossy()
+        .into_owned();
+    out.with_file_name(format!("{stem}-figures"))
+}
+
+#[test]
+fn one_team_size_evaluates_with_its_outputs_and_the_policy_is_always_evaluated() {
+    let _watchdog = Watchdog::arm("promises_sizes", LIMIT);
+    let dir = TempDir::new("promises-sizes");
+    let scenario = case1_scenario(dir.path(), 2.0);
+
+    // `eval --robots 16 --runs 2 --save-trajectories 2 --out D`: the 16-robot team, evaluated
+    // and written as any evaluation.
+    let out = dir.path().join("sixteen");
+    let evaluated = formation(&[
+        "eval",
+        "--controller",
+        "expert",
+        "--scenario",
+        text(&scenario),
+        "--robots",
+        "16",
+        "--runs",
+        "2",
+        "--save-trajectories",
+        "2",
+        "--out",
+        text(&out),
+    ]);
+    evaluated.assert_success();
+    assert_eq!(read_json(&out.join("summary.json"))["runs"], 2);
+    for index in 0..2 {
+        let log = read_json(&out.join(format!("runs/run-{index:04}.json")));
+        let poses = &log["trajectory"]["poses"][0];
+        assert_eq!(poses.as_array().map(Vec::len), Some(16), "run {index}");
+    }
+    // Several sizes with --out still say how to get one.
+    let refused = formation(&[
+        "eval",
+        "--scenario",
+        text(&scenario),
+        "--robots",
+        "3,4",
+        "--out",
+        text(&dir.path().join("two")),
+    ]);
+    assert_exit(&refused, 2);
+    refused.assert_failure_mentioning("one team size at a time (--robots N)");
+    assert!(!dir.path().join("two").exists());
+
+    // `--robots` without `--model`: the default controller is the policy, and the shipped one
+    // is evaluated beside the expert.
+    let table = dir.path().join("scaling.json");
+    let scaled = formation(&[
+        "eval",
+        "--controller",
+        "policy",
+        "--scenario",
+        text(&scenario),
+        "--robots",
+        "4",
+        "--runs",
+        "1",
+        "--json",
+        text(&table),
+    ]);
+    scaled.assert_success();
+    let rows = read_json(&table)["rows"].as_array().cloned().expect("rows");
+    let controllers: Vec<&str> = rows
+        .iter()
+        .filter_map(|r| r["controller"].as_str())
+        .collect();
+    assert_eq!(controllers, ["expert", "policy"], "{}", scaled.describe());
+    // `--controller expert` asks for the expert alone.
+    let expert = formation(&[
+        "eval",
+        "--controller",
+        "expert",
+        "--scenario",
+        text(&scenario),
+        "--robots",
+        "4",
+        "--runs",
+        "1",
+        "--json",
+        text(&table),
+    ]);
+    expert.assert_success();
+    let rows = read_json(&table)["rows"].as_array().cloned().expect("rows");
+    assert!(rows.iter().all(|r| r["controller"] == "expert"), "{rows:?}");
+}
