@@ -108,16 +108,21 @@ fn record_command(_args: &args::RecordArgs) -> anyhow::Result<()> {
 
 /// Logs to stderr with `FORMATION_LOG`'s filter, else at the level `verbose` asks for (0: warn,
 /// 1: info, more: debug). The `formation` command and both runtime processes start with it.
+/// By default Zenoh's own lines are off: it logs every retry of a refused connection with its
+/// source paths, and formation says what failed and the fix itself (`-v` or `FORMATION_LOG`
+/// shows them).
 pub fn init_tracing(verbose: u8) {
     let level = match verbose {
-        0 => "warn",
+        0 => "warn,zenoh=off",
         1 => "info",
         _ => "debug",
     };
     let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    // Colour only for a terminal: a log file or a pipe gets plain text.
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
 }

@@ -127,11 +127,12 @@ pub fn play_journaled(
         live.end(last);
     }
     if let Some(recorder) = recording.recorder.take() {
-        let last = played
-            .as_ref()
-            .ok()
-            .and_then(formation_record::final_sample);
-        match recorder.finish(last) {
+        // A run stopped early says so in its recording, with the run log's reason.
+        let finished = match &played {
+            Ok(trajectory) => recorder.finish(formation_record::final_sample(trajectory)),
+            Err(e) => recorder.finish_stopped(&stop_reason(e)),
+        };
+        match finished {
             Ok(Some(summary)) => tracing::info!(
                 "recorded {} ({} messages, {} bytes)",
                 summary.path.display(),
@@ -190,6 +191,14 @@ pub fn play_journaled(
             let saved = keep_partial(journal, &log_path, &timing_path, &reason, timing());
             Err(RunError::Write { cause, saved })
         }
+    }
+}
+
+/// Why a run stopped early, as its incomplete run log says it.
+fn stop_reason<E: std::fmt::Display>(error: &EpisodeError<E>) -> String {
+    match error {
+        EpisodeError::Controller(cause) => cause.to_string(),
+        EpisodeError::Record(cause) => format!("the run journal could not be written: {cause}"),
     }
 }
 
