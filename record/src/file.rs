@@ -7,8 +7,9 @@
 //! way, and memory holds one chunk); between two chunks, a model swapped in during the run, as an
 //! attachment followed by its `formation.swapped_model` record ([`crate::swap`]), written out at
 //! once (a crash after it keeps it, and a crash inside it keeps everything before it readable by
-//! a streaming reader); at the end the summary (schemas, channels, chunk indexes,
-//! statistics). What stays in memory until then is the summary's chunk indexes: one per second of
+//! a streaming reader); at the end how the run ended (the `formation.run_end` metadata record:
+//! whether the run played to its last tick, and if not why it stopped, as its run log says) and
+//! the summary (schemas, channels, chunk indexes, statistics). What stays in memory until then is the summary's chunk indexes: one per second of
 //! run, each with the offset of every channel's message index in its chunk (which `rosbags` and
 //! rosbag2 need to find a topic's chunks), about 40 bytes per channel and second: 5 KB per
 //! second for 32 robots, under 20 MB for the longest run a scenario allows (an hour).
@@ -38,7 +39,7 @@ use crate::error::RecordError;
 use crate::replay::{self, ReplayStep};
 use crate::setup::{RecordingSetup, TeamSetup};
 use crate::swap::{SWAP_METADATA, SwapEvent, SwapStorage, SwappedModel, check_swapped_bytes};
-use crate::tick::{FinalSample, TickRecord};
+use crate::tick::{FinalSample, RUN_END_METADATA, RunEnd, TickRecord};
 
 /// The most bytes of a model a recording stores as an attachment.
 pub const MAX_ATTACHED_MODEL_BYTES: u64 = 256 << 20;
@@ -615,8 +616,29 @@ impl RecordingFile {
     }
 
     /// Writes the state after the last step (each robot's `/tf` and the edges) and the summary,
-    /// and closes the file.
-    pub fn finish(mut self, last: Option<&FinalSample>) -> Result<RecordingSummary, RecordError> {
+    /// and closes the file. With `last` the run played to its end; without it the recording
+    /// says it stopped early ([`RecordingFile::finish_stopped`] says why).
+    pub fn finish(self, last: Option<&FinalSample>) -> Result<RecordingSummary, RecordError> {
+        let end = match last {
+            Some(_) => RunEnd::complete(),
+            None => RunEnd::stopped(RunEnd::UNKNOWN_REASON),
+        };
+        self.finish_with(last, &end)
+    }
+
+    /// Closes the file of a run that stopped before its end, for `reason` (the run log's stop
+    /// reason: "interrupted by Ctrl-C", an agent that stopped answering, ...).
+    pub fn finish_stopped(self, reason: &str) -> Result<RecordingSummary, RecordError> {
+        self.finish_with(None, &RunEnd::stopped(reason))
+    }
+
+    /// Writes the state after the last step (when given), how the run ended, the summary, and
+    /// closes the file.
+    fn finish_with(
+        mut self,
+        last: Option<&FinalSample>,
+        end: &RunEnd,
+    ) -> Result<RecordingSummary, RecordError> {
         if let Some(last) = last {
             let ns = nanos(last.time);
             self.start_second(ns)?;
@@ -629,6 +651,12 @@ impl RecordingFile {
             let markers = self.edges.next(at, &last.poses, d_star);
             self.put(self.channels.edges, ns, &markers)?;
         }
+        self.mcap
+            .write_metadata(&Metadata {
+                name: RUN_END_METADATA.into(),
+                metadata: end.to_metadata(),
+            })
+            .map_err(|e| self.mcap_error(e))?;
         let summary = self.mcap.finish().map_err(|e| self.mcap_error(e))?;
         let messages = summary.stats.as_ref().map_or(0, |s| s.message_count);
         let chunks = summary.chunk_indexes.len();
