@@ -196,3 +196,33 @@ fn one_team_size_evaluates_with_its_outputs_and_the_policy_is_always_evaluated()
     let rows = read_json(&table)["rows"].as_array().cloned().expect("rows");
     assert!(rows.iter().all(|r| r["controller"] == "expert"), "{rows:?}");
 }
+
+/// `formation run --record FILE` says which file it wrote, as `eval --record` does (issue 39).
+#[test]
+fn run_record_prints_the_file_it_wrote() {
+    let _watchdog = Watchdog::arm("promises_run_record", LIMIT);
+    let _one = formation_tests::one_at_a_time();
+    let dir = TempDir::new("promises-record");
+    let run_id = formation_tests::unique_run_id("prorec");
+    let leaks = formation_tests::LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 1.0);
+    let file = dir.path().join("run.mcap");
+    let mut command = formation_tests::formation_run(
+        &run_id,
+        &scenario,
+        &dir.path().join("out"),
+        &["--clock", "lockstep"],
+    );
+    command.arg("--record").arg(&file);
+    let finished = run(command, LIMIT);
+    finished.assert_success();
+    leaks.assert_clean();
+    assert!(file.is_file(), "{}", finished.describe());
+    assert!(
+        finished
+            .stdout()
+            .contains(&format!("recorded {}", file.display())),
+        "{}",
+        finished.describe()
+    );
+}
