@@ -23,7 +23,10 @@ class ModelSpec:
     ``input`` is ``"occupancy"`` (an image of ``size_px`` x ``size_px`` cells of ``resolution_m``
     metres, hits beyond the window dropped or drawn on the border, the window scaled with d* when
     ``d_star_ref_m`` is set) or ``"scan"`` (the raw ranges); both come with ``aux = (delta_phi,
-    d*)``. Outputs are wheel speeds at ``v_train`` m/s, scaled by ``v* / v_train``.
+    d*)``. ``output`` is what the model answers (``formation.output``): ``"wheels"``, wheel
+    speeds at ``v_train`` m/s scaled by ``v* / v_train``, or ``"formation_velocity"``, the
+    correction in the robot's frame to which the reference term ``v* (cos Δφ, sin Δφ)`` is added,
+    exactly as the agent does.
     """
 
     size_px: int = 50
@@ -34,8 +37,14 @@ class ModelSpec:
     beams: Optional[int] = None
     max_range: Optional[float] = None
     input: str = "occupancy"
+    output: str = "wheels"
 
     def __post_init__(self) -> None:
+        if self.output not in ("wheels", "formation_velocity"):
+            raise ValueError(
+                f"output {self.output!r} is not 'wheels' or 'formation_velocity': use a model with one of "
+                "those outputs (formation.output), or a formation build that knows it"
+            )
         if self.input not in ("occupancy", "scan"):
             raise ValueError(f"input {self.input!r} is not 'occupancy' or 'scan'")
         if self.beyond not in ("drop", "border"):
@@ -73,6 +82,7 @@ class ModelSpec:
             beams=get("formation.lidar.beams", int),
             max_range=get("formation.lidar.max_range", float),
             input="scan" if raw_input == "scan-ranges" else raw_input,
+            output=meta.get("formation.output", "wheels"),
         )
 
     @staticmethod

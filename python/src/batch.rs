@@ -428,14 +428,23 @@ impl Batch {
         out.into_pyarray(py).reshape(vec![self.slots.len(), n, 2])
     }
 
-    /// A policy's outputs `(B, N, 2)` (float32, at its training speed `v_train`) as wheel
-    /// speeds for each world's goal speed, as the agent scales them: `(B, N, 2)` float64.
+    /// A policy's outputs `(B, N, 2)` (float32) as wheel speeds for each world's goal, as the
+    /// agent turns them into wheels: `(B, N, 2)` float64. `output` is what the model declares
+    /// (`wheels`, at its training speed `v_train`, or `formation_velocity`, to which each robot's
+    /// reference term is added).
+    #[pyo3(signature = (outputs, v_train, output = "wheels"))]
     fn policy_actions<'py>(
         &self,
         py: Python<'py>,
         outputs: PyReadonlyArrayDyn<'py, f32>,
         v_train: f64,
+        output: &str,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let output = formation_proto::PolicyOutput::parse(output).ok_or_else(|| {
+            PyValueError::new_err(format!(
+                "output {output:?} is not `wheels` or `formation_velocity` (the model's formation.output)"
+            ))
+        })?;
         let n = self.robots();
         let expected = [self.slots.len(), n, 2];
         if outputs.shape() != expected {
@@ -454,9 +463,21 @@ impl Batch {
             .map_err(|_| PyValueError::new_err("policy outputs must be C-contiguous float32"))?;
         let mut out = Vec::with_capacity(raw.len());
         for (b, slot) in self.slots.iter().enumerate() {
-            let v_star = slot.episode.spec().v_star;
-            for w in raw[b * n * 2..(b + 1) * n * 2].chunks_exact(2) {
-                let cmd = policy_input::scale_to_goal_speed([w[0], w[1]], v_star, v_train);
+            let world = slot.episode.world();
+            let goal = slot.episode.spec().goal_at(world.time());
+            for (w, pose) in raw[b * n * 2..(b + 1) * n * 2]
+                .chunks_exact(2)
+                .zip(world.poses())
+            {
+                let aux = policy_input::policy_aux(pose.theta, &goal)
+                    .map_err(|e| PyValueError::new_err(format!("world {b}: {e}")))?;
+                let cmd = policy_input::command_of_output(
+                    output,
+                    [w[0], w[1]],
+                    aux,
+                    goal.v_star,
+                    v_train,
+                );
                 out.extend([cmd.left, cmd.right]);
             }
         }

@@ -44,7 +44,7 @@ def team_scenario(tmp_path: Path, robots: int, duration_s: float) -> Path:
     return path
 
 
-def cli_run_poses(scenario: Path, out: Path, seed: int, run: int, controller: str) -> list:
+def cli_run_poses(scenario: Path, out: Path, seed: int, run: int, controller: str, model: Path = MODEL) -> list:
     """Every robot's pose at every tick of run `run` of `formation eval --seed seed`, from the
     run log it writes (`--out ... --save-trajectories`)."""
     args = [
@@ -53,7 +53,7 @@ def cli_run_poses(scenario: Path, out: Path, seed: int, run: int, controller: st
         "--save-trajectories", str(run + 1), "--threads", "1",
     ]
     if controller == "policy":
-        args += ["--model", str(MODEL)]
+        args += ["--model", str(model)]
     done = subprocess.run(args, capture_output=True, text=True, env={**os.environ, "ORT_DISABLE_TELEMETRY": "1"})
     assert done.returncode == 0, done.stderr
     log = json.loads((out / "runs" / f"run-{run:04d}.json").read_text())
