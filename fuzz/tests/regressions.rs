@@ -128,3 +128,15 @@ fn issue_36_a_chunk_record_of_200_mb_is_refused_before_room_is_made_for_it() {
     let (_, peak) = formation_fuzz::campaign::memory().unwrap();
     assert!(peak < 100 << 20, "peak resident memory {} MB", peak >> 20);
 }
+
+/// Found by the `recording` target's million-case campaign (seed 20261206, case 117069; the
+/// file is the case): a chunk record with bytes after its compressed records, and a record
+/// among them running past the chunk. The chunk's own reader was given those bytes too, and
+/// the overflow above came back. Now it is given the chunk's records and nothing after them.
+#[test]
+fn issue_36_bytes_after_a_chunks_records_are_not_read_as_its_records() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/findings/recording-bytes-after-a-chunk.mcap");
+    let err = first_error(&path);
+    assert!(matches!(err, ReadError::Corrupt { .. }), "{err:?}");
+}

@@ -159,6 +159,23 @@ pub fn check(opcode: u8, body: &[u8]) -> Result<(), LengthError> {
     }
 }
 
+/// Where a chunk's compressed records end in its record `body` (bytes after them, which a
+/// chunk record may carry, would be read as records by `mcap`'s reader): the times and the
+/// uncompressed size and CRC (28 bytes), the compression's name, the records' length and the
+/// records. `None` when the body is too short to say.
+fn chunk_end(body: &[u8]) -> Option<usize> {
+    let word = |at: usize, n: usize| -> Option<u64> {
+        let bytes = body.get(at..at.checked_add(n)?)?;
+        let mut le = [0u8; 8];
+        le[..n].copy_from_slice(bytes);
+        Some(u64::from_le_bytes(le))
+    };
+    let name = usize::try_from(word(28, 4)?).ok()?;
+    let records_at = 32usize.checked_add(name)?;
+    let records = usize::try_from(word(records_at, 8)?).ok()?;
+    records_at.checked_add(8)?.checked_add(records)
+}
+
 /// The records of one chunk, read by an MCAP reader that is given the chunk's bytes and nothing
 /// more (its CRC is checked as the file's reader checks it).
 pub struct ChunkRecords {
@@ -175,6 +192,7 @@ impl ChunkRecords {
     /// A reader of the chunk whose record body is `body`, with the file reader's `options` but
     /// records of at most [`MAX_CHUNK_RECORD_BYTES`].
     pub fn new(body: &[u8], options: LinearReaderOptions) -> ChunkRecords {
+        let body = &body[..chunk_end(body).unwrap_or(body.len())];
         let options = options
             .with_skip_start_magic(true)
             .with_skip_end_magic(true)
