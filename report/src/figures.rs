@@ -887,6 +887,77 @@ pub fn tick_label(value: f64) -> String {
 /// A number without trailing zeros (`0.7`, `2`, `2.15`).
 pub use formation_schema::trim_number;
 
+/// The response figure: each controller's slope (log-scaled label size on x) per team size, one
+/// colour per row of the curve; a bin with too few samples to be judged is drawn hollow.
+pub fn response_figure(
+    id: &str,
+    curve: &formation_schema::ResponseCurve,
+) -> Result<Figure, ReportError> {
+    let slope_max = curve
+        .rows
+        .iter()
+        .flat_map(|r| r.bins.iter().filter_map(|b| b.slope))
+        .fold(1.2_f64, f64::max)
+        .min(5.0);
+    let slope_min = curve
+        .rows
+        .iter()
+        .flat_map(|r| r.bins.iter().filter_map(|b| b.slope))
+        .fold(0.0_f64, f64::min)
+        .max(-1.0);
+    let (width, height) = (960_u32, 400_u32);
+    render(id, (width, height), |root| {
+        let (plot, legend) = root.split_horizontally(width - LEGEND_WIDTH);
+        let mut chart = ChartBuilder::on(&plot)
+            .caption("slope against the expert's label size", text_style(19.0))
+            .margin(8)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d((0.04_f64..1.0_f64).log_scale(), slope_min..slope_max)?;
+        configure_mesh_labelled(&mut chart, "label size [m/s]", "slope", &|v| {
+            formation_schema::trim_number(*v)
+        })?;
+        chart.draw_series(LineSeries::new(
+            [(0.04, 1.0), (1.0, 1.0)],
+            BLACK.mix(0.3).stroke_width(1),
+        ))?;
+        let mut entries = Vec::new();
+        for (k, row) in curve.rows.iter().enumerate() {
+            let color = robot_color(k);
+            let points: Vec<(f64, f64, bool)> = row
+                .bins
+                .iter()
+                .filter_map(|b| {
+                    b.slope.map(|s| {
+                        (
+                            (b.label_min * b.label_max).sqrt(),
+                            s.clamp(slope_min, slope_max),
+                            b.judged,
+                        )
+                    })
+                })
+                .collect();
+            chart.draw_series(LineSeries::new(
+                points.iter().map(|&(x, y, _)| (x, y)),
+                color.stroke_width(2),
+            ))?;
+            chart.draw_series(points.iter().map(|&(x, y, judged)| {
+                let style = if judged {
+                    color.filled()
+                } else {
+                    color.stroke_width(1)
+                };
+                Circle::new((x, y), 4, style)
+            }))?;
+            entries.push((
+                Mark::Line(color),
+                format!("{} N = {}", row.controller, row.robots),
+            ));
+        }
+        draw_legend(&legend, 44, &entries)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

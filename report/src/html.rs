@@ -117,6 +117,8 @@ pub struct ReportPage {
     pub run_notes: Vec<String>,
     /// Training loss curves.
     pub training: Vec<CaptionedFigure>,
+    /// Response curves (`formation gauge`).
+    pub response: Vec<CaptionedFigure>,
     /// Latency profiles.
     pub latency: Vec<CaptionedFigure>,
     /// Scaling tables over team sizes.
@@ -297,6 +299,9 @@ fn nav_sections(page: &ReportPage) -> Vec<(&'static str, &'static str)> {
     if !page.training.is_empty() {
         sections.push(("training", "Training"));
     }
+    if !page.response.is_empty() {
+        sections.push(("response", "Response"));
+    }
     if !page.latency.is_empty() {
         sections.push(("latency", "Latency"));
     }
@@ -358,6 +363,7 @@ fn write_runs(html: &mut String, page: &ReportPage) {
 fn write_figure_sections(html: &mut String, page: &ReportPage) {
     for (anchor, title, figures) in [
         ("training", "Training (cf. paper Fig. 5)", &page.training),
+        ("response", "Response to formation errors", &page.response),
         (
             "latency",
             "Latency profile (paper: 2.1 ms per inference)",

@@ -35,6 +35,22 @@ pub struct Inputs {
     pub profiles: Vec<LatencyProfile>,
     /// Scaling tables (`scaling*.json`, written by `formation eval --robots ... --json`).
     pub scalings: Vec<ScalingData>,
+    /// Response curves (`response*.json`, written by `formation gauge --json`).
+    pub responses: Vec<ResponseData>,
+}
+
+/// One response curve and where it came from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResponseData {
+    /// The file.
+    pub source: PathBuf,
+    /// Its rows.
+    pub curve: formation_schema::ResponseCurve,
+}
+
+/// True for a response curve's file name: `response*.json`.
+pub fn is_response_json(file_name: &str) -> bool {
+    file_name.starts_with("response") && file_name.ends_with(".json")
 }
 
 /// One scaling table and where it came from.
@@ -329,6 +345,7 @@ struct Found {
     loss_csvs: Vec<PathBuf>,
     profiles: Vec<PathBuf>,
     scalings: Vec<PathBuf>,
+    responses: Vec<PathBuf>,
 }
 
 /// What input of the report a file at `path` would be, by its name (and, for a run log, its
@@ -345,6 +362,8 @@ pub fn input_kind(path: &Path) -> Option<&'static str> {
         Some("a latency profile, profile.json")
     } else if is_scaling_json(&name) {
         Some("a scaling table, scaling*.json")
+    } else if is_response_json(&name) {
+        Some("a response curve, response*.json")
     } else if is_loss_csv(&name) {
         Some("a training loss curve, *loss*.csv")
     } else if in_runs && name.starts_with("run-") && name.ends_with(".json") {
@@ -380,7 +399,7 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
     }
     let mut found = Found::default();
     search(root, 0, &mut found)?;
-    if found.summaries.is_empty() && found.scalings.is_empty() {
+    if found.summaries.is_empty() && found.scalings.is_empty() && found.responses.is_empty() {
         return Err(ReportError::NoEvalOutput {
             dir: root.to_path_buf(),
         });
@@ -390,6 +409,7 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
         &mut found.loss_csvs,
         &mut found.profiles,
         &mut found.scalings,
+        &mut found.responses,
     ] {
         list.sort();
     }
@@ -418,12 +438,23 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
             })
         })
         .collect::<Result<Vec<_>, ReportError>>()?;
+    let responses = found
+        .responses
+        .iter()
+        .map(|path| {
+            Ok(ResponseData {
+                source: path.clone(),
+                curve: formation_schema::read_response(path)?,
+            })
+        })
+        .collect::<Result<Vec<_>, ReportError>>()?;
     Ok(Inputs {
         root: root.to_path_buf(),
         evals,
         loss_curves,
         profiles,
         scalings,
+        responses,
     })
 }
 
@@ -455,6 +486,8 @@ fn search(dir: &Path, depth: usize, found: &mut Found) -> Result<(), ReportError
             found.profiles.push(path);
         } else if is_scaling_json(&name) {
             found.scalings.push(path);
+        } else if is_response_json(&name) {
+            found.responses.push(path);
         } else if is_loss_csv(&name) {
             found.loss_csvs.push(path);
         }

@@ -151,6 +151,7 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
     add_runs(&mut page, inputs, &mut numbering)?;
     add_scalings(&mut page, inputs, &mut numbering)?;
     add_training(&mut page, inputs, &mut numbering)?;
+    add_responses(&mut page, inputs, &mut numbering)?;
     add_latency(&mut page, inputs, &mut numbering)?;
     page.inputs = input_list(inputs);
     Ok((page, numbering.figures))
@@ -291,6 +292,32 @@ fn add_training(
     Ok(())
 }
 
+/// One figure per response curve: each controller's slope against the label's size.
+fn add_responses(
+    page: &mut ReportPage,
+    inputs: &Inputs,
+    numbering: &mut FigureNumbering,
+) -> Result<(), ReportError> {
+    for (k, response) in inputs.responses.iter().enumerate() {
+        let curve = &response.curve;
+        let figure = figures::response_figure(&format!("response-{}", k + 1), curve)?;
+        let number = numbering.take();
+        page.response.push(CaptionedFigure {
+            placed: numbering.place(figure, "Slope of each controller's response against the expert's label"),
+            caption: format!(
+                "Figure {number}: The response gauge (formation gauge): per bin of the expert's label size, the slope Σ p·l / Σ |l|² of each controller's formation velocity p against the expert's label l on the controller's own states (1: it moves as far as the expert asks; hollow marks: fewer than {} samples, not judged), {}, seed {}, {} s runs, every {} ticks, from {}.",
+                formation_schema::MIN_JUDGED_SAMPLES,
+                curve.scenario,
+                curve.seed,
+                formation_schema::trim_number(curve.duration_s),
+                curve.stride,
+                relative(&inputs.root, &response.source)
+            ),
+        });
+    }
+    Ok(())
+}
+
 /// One figure per latency profile.
 fn add_latency(
     page: &mut ReportPage,
@@ -326,6 +353,7 @@ fn input_list(inputs: &Inputs) -> Vec<String> {
         .chain(inputs.loss_curves.iter().map(|c| &c.source))
         .chain(inputs.profiles.iter().map(|p| &p.source))
         .chain(inputs.scalings.iter().map(|s| &s.source))
+        .chain(inputs.responses.iter().map(|r| &r.source))
         .map(|path| relative(&inputs.root, path))
         .collect()
 }
