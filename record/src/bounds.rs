@@ -192,7 +192,7 @@ impl ChunkRecords {
     /// A reader of the chunk whose record body is `body`, with the file reader's `options` but
     /// records of at most [`MAX_CHUNK_RECORD_BYTES`].
     pub fn new(body: &[u8], options: LinearReaderOptions) -> ChunkRecords {
-        let body = &body[..chunk_end(body).unwrap_or(body.len())];
+        let body = &body[..chunk_end(body).map_or(body.len(), |end| end.min(body.len()))];
         let options = options
             .with_skip_start_magic(true)
             .with_skip_end_magic(true)
