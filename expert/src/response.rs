@@ -192,7 +192,7 @@ impl ResponseGauge {
         self.labels.resize(obs.poses.len(), WheelCmd::BRAKE);
         self.expert
             .compute(obs.tick, obs.poses, &obs.goal, &mut self.labels);
-        if obs.tick % self.stride != 0 {
+        if !obs.tick.is_multiple_of(self.stride) {
             return Ok(());
         }
         let (gains, robot) = (*self.expert.gains(), *self.expert.robot());

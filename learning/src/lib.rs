@@ -16,8 +16,8 @@
 
 pub mod dagger;
 pub mod dagger_share;
-pub mod rollout;
 pub mod response;
+pub mod rollout;
 pub mod scaling;
 pub mod shards;
 
