@@ -22,8 +22,22 @@ use formation_trainer_bridge::dagger_part::append_parts;
 use formation_trainer_bridge::train::{Mirror, TrainOptions, TrainReport, train};
 use formation_world::Scenario;
 
-use crate::args::{DaggerAppendArgs, DaggerArgs, DaggerLabelArgs, TrainArgs};
+use crate::args::{DaggerAppendArgs, DaggerArgs, DaggerLabelArgs, NetworkArgs, TrainArgs};
 use crate::eval;
+
+/// The training options `formation train` and `formation dagger` share: the network, its
+/// augmentation, its output and loss, and how much of the data an epoch draws.
+fn network_options(network: &NetworkArgs) -> TrainOptions {
+    TrainOptions {
+        architecture: network.architecture,
+        mirror: Mirror::from_flags(network.mirror, network.mirror_augment_only),
+        relative_loss: network.relative_loss,
+        output: network.output,
+        response_weight: network.response_weight,
+        samples_per_epoch: network.samples_per_epoch.map(std::num::NonZeroUsize::get),
+        ..TrainOptions::default()
+    }
+}
 
 /// `formation train`.
 pub fn train_command(args: &TrainArgs) -> anyhow::Result<()> {
@@ -37,16 +51,7 @@ pub fn train_command(args: &TrainArgs) -> anyhow::Result<()> {
         seed: args.seed,
         init_from: args.init_from.clone(),
         d_star_range: args.d_star_range,
-        architecture: args.network.architecture,
-        mirror: Mirror::from_flags(args.network.mirror, args.network.mirror_augment_only),
-        relative_loss: args.network.relative_loss,
-        output: args.network.output,
-        response_weight: args.network.response_weight,
-        samples_per_epoch: args
-            .network
-            .samples_per_epoch
-            .map(std::num::NonZeroUsize::get),
-        ..TrainOptions::default()
+        ..network_options(&args.network)
     };
     let report = run_training(&opts)?;
     println!(
@@ -97,16 +102,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
             lr: args.lr,
             device: args.device.clone(),
             d_star_range,
-            architecture: args.network.architecture,
-            mirror: Mirror::from_flags(args.network.mirror, args.network.mirror_augment_only),
-            relative_loss: args.network.relative_loss,
-            output: args.network.output,
-            response_weight: args.network.response_weight,
-            samples_per_epoch: args
-                .network
-                .samples_per_epoch
-                .map(std::num::NonZeroUsize::get),
-            ..TrainOptions::default()
+            ..network_options(&args.network)
         },
         eval_scenario,
         eval_runs: args.eval_runs,
