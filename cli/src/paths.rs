@@ -125,10 +125,9 @@ pub fn refuse_overwriting_inputs(
         let Some(out) = canonical(dir) else {
             continue;
         };
-        let clash = inputs.iter().find(|(_, _, c)| {
-            c.strip_prefix(&out)
-                .is_ok_and(|relative| written_in_out_folder(relative))
-        });
+        let clash = inputs
+            .iter()
+            .find(|(_, _, c)| c.strip_prefix(&out).is_ok_and(written_in_out_folder));
         if let Some((input_flag, input, _)) = clash {
             return Err(OutputIsInput {
                 flag,
