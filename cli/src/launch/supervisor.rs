@@ -800,21 +800,29 @@ impl Supervision {
 fn world_failure_hint(signal: Option<i32>) -> String {
     match signal {
         None => "see its error above".to_owned(),
+        Some(6) => crashed("SIGABRT"),
+        Some(11) => crashed("SIGSEGV"),
         Some(signal) => {
             let name = match signal {
                 9 => " (SIGKILL)",
                 15 => " (SIGTERM)",
-                6 => " (SIGABRT)",
-                11 => " (SIGSEGV)",
                 _ => "",
             };
             format!(
-                "it was killed by signal {signal}{name} before it could say why: something outside \
-                 formation stopped it (the kernel's out-of-memory killer, which `dmesg` reports, \
-                 or a `kill`); the run played so far is kept as an incomplete run log"
+                "a signal{name} from outside formation stopped it before it could say why (the \
+                 kernel's out-of-memory killer, which `dmesg` reports, or a `kill`); the run \
+                 played so far is kept as an incomplete run log"
             )
         }
     }
+}
+
+/// The world crashed on `signal` itself, so it printed nothing.
+fn crashed(signal: &str) -> String {
+    format!(
+        "it crashed ({signal}) before it could say why, which is a bug: please report it with the \
+         scenario and the command; the run played so far is kept as an incomplete run log"
+    )
 }
 
 fn describe(status: ExitStatus) -> String {
