@@ -106,7 +106,7 @@ pub fn play_journaled(
         agents: &mut *agents,
         recorder,
         live,
-        view: view.as_deref_mut(),
+        view,
     };
     let played = run_episode_recorded(spec, &mut recording, &mut |_, _| {}, &mut |trajectory| {
         journal.append(trajectory)
