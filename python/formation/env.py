@@ -265,12 +265,13 @@ class FormationParallelEnv(ParallelEnv):
         return {a: actions[self._index[a]] for a in self.agents}
 
     def policy_actions(self, outputs: Mapping[str, Any]) -> Dict[str, np.ndarray]:
-        """A policy's raw outputs per agent (float32, at ``v_train``) as wheel speeds for the
-        goal's speed, scaled as the Rust agent scales them."""
+        """A policy's raw outputs per agent as wheel speeds for the goal, turned into wheels as
+        the Rust agent does for the output the model declares (``spec.output``: ``wheels`` at
+        ``v_train``, scaled to v*, or ``formation_velocity`` with the reference term added)."""
         raw = np.zeros((1, len(self.possible_agents), 2), dtype=np.float32)
         for agent, out in outputs.items():
             raw[0, self._index[agent]] = np.asarray(out, dtype=np.float32).reshape(2)
-        wheels = self._batch.policy_actions(raw, self.spec.v_train)[0]
+        wheels = self._batch.policy_actions(raw, self.spec.v_train, self.spec.output)[0]
         return {a: wheels[self._index[a]] for a in outputs}
 
     def metrics(self) -> dict:

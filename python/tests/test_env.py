@@ -78,6 +78,49 @@ def test_an_onnx_policy_episode_equals_formation_eval_bit_for_bit(tmp_path, robo
     assert got == expected
 
 
+def test_a_formation_velocity_policy_episode_equals_formation_eval_bit_for_bit(tmp_path):
+    # A model that declares formation.output = formation_velocity: the environment adds the
+    # reference term as the Rust agent does (issue 34), so the episode is formation eval's.
+    import subprocess
+    import sys
+
+    model = tmp_path / "fv.onnx"
+    subprocess.run(
+        [sys.executable, str(REPO / "tests" / "fixtures" / "tiny_policy.py"), str(model), "--seed", "3",
+         "--output", "formation_velocity"],
+        check=True,
+    )
+    assert ModelSpec.from_onnx(model).output == "formation_velocity"
+    scenario = team_scenario(tmp_path, 5, 3.0)
+    seed, run = 2, 0
+    expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", seed, run, "policy", model))
+    env = parallel_env(scenario=str(scenario), model=model)
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    options.inter_op_num_threads = 1
+    session = ort.InferenceSession(str(model), options, providers=["CPUExecutionProvider"])
+    observations, _ = env.reset(seed=seed, run=run)
+    while env.agents:
+        outputs = {}
+        for agent, obs in observations.items():
+            feed = {"occupancy": obs["occupancy"][None], "aux": obs["aux"][None]}
+            outputs[agent] = session.run(["formation_velocity"], feed)[0][0]
+        observations, _, _, _, _ = env.step(env.policy_actions(outputs))
+    got = [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+    assert len(got) == len(expected) == 61
+    assert got == expected
+
+
+def test_a_spec_with_an_output_the_package_does_not_know_is_refused_by_name():
+    with pytest.raises(ValueError, match="output 'torques' is not 'wheels' or 'formation_velocity'"):
+        ModelSpec.from_metadata({"formation.format": "formation-policy/1", "formation.occupancy.size_px": "50",
+                                 "formation.occupancy.resolution_m": "0.1", "formation.occupancy.beyond": "drop",
+                                 "formation.v_train": "0.7", "formation.lidar.beams": "900",
+                                 "formation.lidar.max_range": "10", "formation.output": "torques"})
+
+
 def test_reset_without_a_seed_plays_the_next_run_of_the_last_seed():
     env = short_env(3)
     env.reset(seed=4)

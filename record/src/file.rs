@@ -14,13 +14,9 @@
 //! rosbag2 need to find a topic's chunks), about 40 bytes per channel and second: 5 KB per
 //! second for 32 robots, under 20 MB for the longest run a scenario allows (an hour).
 //!
-//! Topics (log and publish time = the message's stamp = the tick's simulated time):
-//! `/robot_<i>/scan` (LaserScan), `/robot_<i>/odom` (Odometry), `/robot_<i>/cmd_vel` (Twist),
-//! `/robot_<i>/replay` ([`crate::replay`]), `/tf` (one TFMessage per robot and sample, world →
-//! `robot_<i>/base_link`, including the state after the last step), `/tf_static` (once, at 0),
-//! the goal on `/formation/goal/{heading,distance,speed}` (Float64) and the edges on
-//! `/formation/edges` (MarkerArray): the messages of the live ROS 2 team
-//! ([`formation_ros2::team`]).
+//! Topics (log and publish time = the message's stamp = the tick's simulated time): those of
+//! [`crate::topics`], defined there once (the live view serves the same), with the replay
+//! channel; `/tf` includes the state after the last step, and `/tf_static` is written once, at 0.
 
 use std::collections::{BTreeMap, HashSet};
 use std::fs::File;
@@ -28,18 +24,13 @@ use std::io::{BufWriter, Read as _};
 use std::path::{Path, PathBuf};
 
 use formation_proto::files::{FileRefusal, read_bounded};
-use formation_ros2::msg::Time;
-use formation_ros2::schema::MsgDefinition;
-use formation_ros2::team::{self, GOAL_TOPICS};
-use formation_ros2::{Float64, LaserScan, MarkerArray, Odometry, RosMessage, TfMessage, Twist};
 use mcap::records::{AttachmentHeader, MessageHeader, Metadata};
 
-use crate::edges::{self, EdgeMarkers};
 use crate::error::RecordError;
-use crate::replay::{self, ReplayStep};
 use crate::setup::{RecordingSetup, TeamSetup};
 use crate::swap::{SWAP_METADATA, SwapEvent, SwapStorage, SwappedModel, check_swapped_bytes};
 use crate::tick::{FinalSample, RUN_END_METADATA, RunEnd, TickRecord};
+use crate::topics::{MessageError, Replay, Slot, TickMessages, Topics, nanos};
 
 /// The most bytes of a model a recording stores as an attachment.
 pub const MAX_ATTACHED_MODEL_BYTES: u64 = 256 << 20;
@@ -64,24 +55,8 @@ const MODEL_PIECE: usize = 64 << 10;
 /// What takes a model's bytes piece by piece: a hasher, or the attachment being written.
 type PieceSink<'a> = dyn FnMut(&[u8]) -> Result<(), RecordError> + 'a;
 
-/// A robot's channels.
-#[derive(Debug, Clone, Copy)]
-struct RobotChannels {
-    scan: u16,
-    odom: u16,
-    cmd_vel: u16,
-    replay: u16,
-}
-
-/// Every channel of a recording.
-#[derive(Debug)]
-struct Channels {
-    robots: Vec<RobotChannels>,
-    tf: u16,
-    tf_static: u16,
-    goal: [u16; 3],
-    edges: u16,
-}
+/// The file's writer.
+type McapWriter = mcap::Writer<BufWriter<File>>;
 
 /// What a finished recording holds.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -99,16 +74,16 @@ pub struct RecordingSummary {
 /// A recording being written.
 pub struct RecordingFile {
     path: PathBuf,
-    mcap: mcap::Writer<BufWriter<File>>,
-    team: TeamSetup,
+    mcap: McapWriter,
     d_star: f64,
-    channels: Channels,
-    /// Per channel id: its topic (for messages) and its next sequence number.
-    topics: Vec<(String, u32)>,
+    /// The messages of each tick.
+    messages: TickMessages,
+    /// Per topic slot ([`Topics`]): its channel id.
+    channels: Vec<u16>,
+    /// Per channel id: its next sequence number.
+    sequences: Vec<u32>,
     /// The whole second of simulated time the open chunk holds.
     chunk_second: Option<u64>,
-    edges: EdgeMarkers,
-    model_ids: Vec<String>,
     /// The folder of the shipped models, whose swapped-in models are referenced, not stored.
     shipped_models: Option<PathBuf>,
     /// The names of the models stored so far (each model is stored once).
@@ -125,18 +100,24 @@ impl std::fmt::Debug for RecordingFile {
     }
 }
 
-/// Simulated time `t` \[s\] in nanoseconds (0 for a negative or non-finite time).
-fn nanos(t: f64) -> u64 {
-    let ns = (t * 1e9).round();
-    if ns.is_finite() && ns > 0.0 {
-        ns as u64
-    } else {
-        0
-    }
-}
-
-fn stamp(ns: u64) -> Time {
-    Time::from_nanos(i64::try_from(ns).unwrap_or(i64::MAX))
+/// Writes one message's CDR `data` on the channel of topic `slot` at `ns`, with its channel's
+/// next sequence number.
+fn write_message(
+    mcap: &mut McapWriter,
+    (channels, sequences): (&[u16], &mut [u32]),
+    (slot, ns, data): (Slot, u64, &[u8]),
+) -> Result<(), mcap::McapError> {
+    let channel = channels[slot];
+    let next = &mut sequences[usize::from(channel)];
+    let sequence = *next;
+    *next = next.wrapping_add(1);
+    let header = MessageHeader {
+        channel_id: channel,
+        sequence,
+        log_time: ns,
+        publish_time: ns,
+    };
+    mcap.write_to_known_channel(&header, data)
 }
 
 /// Opens a model to read, refusing one larger than a recording stores (`recording` names the
@@ -243,25 +224,16 @@ impl RecordingFile {
             .chunk_size(Some(MAX_CHUNK_BYTES));
         let mcap = mcap::Writer::with_options(BufWriter::with_capacity(FILE_BUFFER, file), options)
             .map_err(|e| RecordError::from_mcap(path, e))?;
-        let edges = EdgeMarkers::new(team.neighbours, team.n_robots);
         Ok(RecordingFile {
             path: path.to_path_buf(),
             mcap,
-            channels: Channels {
-                robots: Vec::new(),
-                tf: 0,
-                tf_static: 0,
-                goal: [0; 3],
-                edges: 0,
-            },
-            topics: vec![(String::new(), 0)],
+            messages: TickMessages::new(team, Replay::Included),
+            channels: Vec::new(),
+            sequences: Vec::new(),
             chunk_second: None,
-            edges,
-            model_ids: Vec::new(),
             shipped_models: None,
             attached: HashSet::new(),
             last_tick_ns: 0,
-            team,
             d_star,
         })
     }
@@ -269,10 +241,19 @@ impl RecordingFile {
     /// Adds the channels and writes the static frames.
     fn write_channels(&mut self) -> Result<(), RecordError> {
         self.add_channels()?;
-        for robot in 0..self.team.n_robots {
-            let tf = team::static_tf_message(robot, Time::default());
-            self.put(self.channels.tf_static, 0, &tf)?;
-        }
+        let RecordingFile {
+            mcap,
+            messages,
+            channels,
+            sequences,
+            path,
+            ..
+        } = self;
+        messages
+            .static_frames(&mut |slot, ns, data| {
+                write_message(mcap, (channels, sequences), (slot, ns, data))
+            })
+            .map_err(|e| message_error(path, e))?;
         self.flush()
     }
 
@@ -424,80 +405,50 @@ impl RecordingFile {
         Ok((path, std::borrow::Cow::Owned(bytes)))
     }
 
-    /// Adds a channel of message type `M` on `topic`.
-    fn channel<M: RosMessage>(&mut self, topic: &str) -> Result<u16, RecordError> {
-        self.channel_of(topic, M::ROS_NAME, M::DEFINITION)
-    }
-
-    fn channel_of(
-        &mut self,
-        topic: &str,
-        type_name: &str,
-        definition: &'static MsgDefinition,
-    ) -> Result<u16, RecordError> {
-        let schema = self
-            .mcap
-            .add_schema(type_name, "ros2msg", definition.ros2msg().as_bytes())
-            .map_err(|e| self.mcap_error(e))?;
-        let id = self
-            .mcap
-            .add_channel(schema, topic, "cdr", &BTreeMap::new())
-            .map_err(|e| self.mcap_error(e))?;
-        let slot = usize::from(id);
-        if self.topics.len() <= slot {
-            self.topics.resize(slot + 1, (String::new(), 0));
-        }
-        self.topics[slot] = (topic.to_owned(), 0);
-        Ok(id)
-    }
-
+    /// Adds a channel for each topic of the team, in slot order ([`Topics::all`]).
     fn add_channels(&mut self) -> Result<(), RecordError> {
-        self.channels.tf = self.channel::<TfMessage>("/tf")?;
-        self.channels.tf_static = self.channel::<TfMessage>("/tf_static")?;
-        for (slot, topic) in GOAL_TOPICS.iter().enumerate() {
-            self.channels.goal[slot] = self.channel::<Float64>(topic)?;
-        }
-        self.channels.edges = self.channel::<MarkerArray>(edges::TOPIC)?;
-        for robot in 0..self.team.n_robots {
-            let channels = RobotChannels {
-                scan: self.channel::<LaserScan>(&team::robot_topic(robot, "scan"))?,
-                odom: self.channel::<Odometry>(&team::robot_topic(robot, "odom"))?,
-                cmd_vel: self.channel::<Twist>(&team::robot_topic(robot, "cmd_vel"))?,
-                replay: self.channel_of(
-                    &replay::topic(robot),
-                    replay::TYPE_NAME,
-                    &replay::REPLAY_STEP,
-                )?,
-            };
-            self.channels.robots.push(channels);
+        for topic in Topics::all(self.messages.team().n_robots) {
+            let schema = self
+                .mcap
+                .add_schema(
+                    topic.type_name,
+                    "ros2msg",
+                    topic.definition.ros2msg().as_bytes(),
+                )
+                .map_err(|e| self.mcap_error(e))?;
+            let id = self
+                .mcap
+                .add_channel(schema, &topic.name, "cdr", &BTreeMap::new())
+                .map_err(|e| self.mcap_error(e))?;
+            let slot = usize::from(id);
+            if self.sequences.len() <= slot {
+                self.sequences.resize(slot + 1, 0);
+            }
+            self.channels.push(id);
         }
         Ok(())
     }
 
-    /// Writes one message's CDR `data` on `channel` at `ns`.
-    fn put_bytes(&mut self, channel: u16, ns: u64, data: &[u8]) -> Result<(), RecordError> {
-        let slot = &mut self.topics[usize::from(channel)];
-        let sequence = slot.1;
-        slot.1 = slot.1.wrapping_add(1);
-        let header = MessageHeader {
-            channel_id: channel,
-            sequence,
-            log_time: ns,
-            publish_time: ns,
-        };
-        self.mcap
-            .write_to_known_channel(&header, data)
-            .map_err(|e| self.mcap_error(e))
-    }
-
-    /// Writes `msg` on `channel` at `ns`.
-    fn put<M: RosMessage>(&mut self, channel: u16, ns: u64, msg: &M) -> Result<(), RecordError> {
-        let data = msg.to_cdr().map_err(|source| RecordError::Encode {
-            path: self.path.clone(),
-            topic: self.topics[usize::from(channel)].0.clone(),
-            source,
-        })?;
-        self.put_bytes(channel, ns, &data)
+    /// Writes what `write` emits, each message on its topic's channel.
+    fn emit(
+        &mut self,
+        write: impl FnOnce(
+            &mut TickMessages,
+            &mut crate::topics::Emit<'_, mcap::McapError>,
+        ) -> Result<(), MessageError<mcap::McapError>>,
+    ) -> Result<(), RecordError> {
+        let RecordingFile {
+            mcap,
+            messages,
+            channels,
+            sequences,
+            path,
+            ..
+        } = self;
+        write(messages, &mut |slot, ns, data| {
+            write_message(mcap, (channels, sequences), (slot, ns, data))
+        })
+        .map_err(|e| message_error(path, e))
     }
 
     /// Closes the open chunk when `ns` lies in a later second than it, so that no chunk spans
@@ -523,96 +474,7 @@ impl RecordingFile {
         let ns = nanos(tick.time);
         self.start_second(ns)?;
         self.last_tick_ns = ns;
-        let at = stamp(ns);
-        let goal = [tick.goal.phi_star, tick.goal.d_star, tick.goal.v_star];
-        for (slot, data) in goal.into_iter().enumerate() {
-            self.put(self.channels.goal[slot], ns, &Float64 { data })?;
-        }
-        let n = self.team.n_robots.min(tick.poses.len());
-        for robot in 0..n {
-            self.write_robot(robot, tick, ns, at)?;
-        }
-        let markers = self.edges.next(at, &tick.poses, tick.goal.d_star);
-        self.put(self.channels.edges, ns, &markers)
-    }
-
-    fn write_robot(
-        &mut self,
-        robot: usize,
-        tick: &TickRecord,
-        ns: u64,
-        at: Time,
-    ) -> Result<(), RecordError> {
-        let channels = self.channels.robots[robot];
-        let pose = tick.poses[robot];
-        let separation = self.team.wheel_separation;
-        let max_range = self.team.max_range;
-        self.put(
-            self.channels.tf,
-            ns,
-            &team::tf_message(robot, at, pose.x, pose.y, pose.theta),
-        )?;
-        let speeds = tick.wheel_speeds.get(robot).copied().unwrap_or_default();
-        let wheels = team::Wheels {
-            left: speeds.left,
-            right: speeds.right,
-            separation,
-        };
-        let odom = team::odometry_message(robot, at, (pose.x, pose.y), pose.theta, wheels);
-        self.put(channels.odom, ns, &odom)?;
-        let ranges: &[f32] = tick.scans.get(robot).map_or(&[], Vec::as_slice);
-        let scan = team::laser_scan_message(robot, at, ranges, max_range);
-        self.put(channels.scan, ns, &scan)?;
-        let sent = tick.commands.get(robot).copied();
-        let command = sent.map_or_else(Default::default, |c| c.wheels);
-        let cmd_vel = team::Wheels {
-            left: command.left,
-            right: command.right,
-            separation,
-        };
-        self.put(channels.cmd_vel, ns, &cmd_vel.twist())?;
-        self.write_replay(robot, tick, ns)
-    }
-
-    fn write_replay(
-        &mut self,
-        robot: usize,
-        tick: &TickRecord,
-        ns: u64,
-    ) -> Result<(), RecordError> {
-        let sent = tick
-            .commands
-            .get(robot)
-            .copied()
-            .unwrap_or_else(|| crate::tick::SentCommand::in_process(Default::default()));
-        if let Some(id) = tick.model_ids.get(robot) {
-            if self.model_ids.len() <= robot {
-                self.model_ids.resize(robot + 1, String::new());
-            }
-            if self.model_ids[robot] != *id {
-                self.model_ids[robot].clone_from(id);
-            }
-        }
-        let step = ReplayStep {
-            robot: u32::try_from(robot).unwrap_or(u32::MAX),
-            tick: tick.tick,
-            time: tick.time,
-            heading: tick.poses[robot].theta,
-            goal: tick.goal,
-            max_range: self.team.max_range as f32,
-            ranges: tick.scans.get(robot).cloned().unwrap_or_default(),
-            command: sent.wheels,
-            outcome: sent.outcome,
-            lag_ticks: sent.lag_ticks,
-            model_id: self.model_ids.get(robot).cloned().unwrap_or_default(),
-        };
-        let channel = self.channels.robots[robot].replay;
-        let data = step.to_cdr().map_err(|source| RecordError::Encode {
-            path: self.path.clone(),
-            topic: replay::topic(robot),
-            source,
-        })?;
-        self.put_bytes(channel, ns, &data)
+        self.emit(|messages, emit| messages.tick(tick, emit))
     }
 
     /// Writes the state after the last step (each robot's `/tf` and the edges) and the summary,
@@ -640,16 +502,9 @@ impl RecordingFile {
         end: &RunEnd,
     ) -> Result<RecordingSummary, RecordError> {
         if let Some(last) = last {
-            let ns = nanos(last.time);
-            self.start_second(ns)?;
-            let at = stamp(ns);
-            for (robot, pose) in last.poses.iter().enumerate() {
-                let tf = team::tf_message(robot, at, pose.x, pose.y, pose.theta);
-                self.put(self.channels.tf, ns, &tf)?;
-            }
+            self.start_second(nanos(last.time))?;
             let d_star = self.last_d_star();
-            let markers = self.edges.next(at, &last.poses, d_star);
-            self.put(self.channels.edges, ns, &markers)?;
+            self.emit(|messages, emit| messages.last(last, d_star, emit))?;
         }
         self.mcap
             .write_metadata(&Metadata {
@@ -678,5 +533,17 @@ impl RecordingFile {
     /// The run's d* (a run's goal keeps it).
     fn last_d_star(&self) -> f64 {
         self.d_star
+    }
+}
+
+/// A message that could not be encoded, or written, as the recording `path`'s error.
+fn message_error(path: &Path, error: MessageError<mcap::McapError>) -> RecordError {
+    match error {
+        MessageError::Encode { topic, source } => RecordError::Encode {
+            path: path.to_path_buf(),
+            topic,
+            source,
+        },
+        MessageError::Sink(e) => RecordError::from_mcap(path, e),
     }
 }

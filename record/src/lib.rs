@@ -44,4 +44,4 @@ pub use replay::ReplayStep;
 pub use setup::{LaunchInfo, RecordingSetup, TeamSetup};
 pub use swap::{SwapEvent, SwapStorage, SwappedModel};
 pub use target::{RecordSettings, RecordTarget};
-pub use tick::{FinalSample, SentCommand, TickRecord};
+pub use tick::{FinalSample, RunEnd, SentCommand, TickRecord};
