@@ -131,13 +131,73 @@ enum Mark {
     Triangle(RGBColor),
     Dot(RGBColor),
     Box,
+    /// Text only (a heading over the entries below it).
+    Heading,
 }
 
-/// Draws legend entries top-down in `area` (the strip right of a plot).
+/// Pixels between two legend rows, and the label font size \[px\], when every row fits.
+const LEGEND_PITCH: i32 = 20;
+const LEGEND_FONT: f64 = 15.0;
+/// The tightest legend: rows this far apart, their labels at three quarters of it.
+const LEGEND_MIN_PITCH: i32 = 12;
+
+/// The legend entries of a team's robots, marked by `mark`: one per robot while every robot has
+/// its own colour, else one per colour under a heading, listing the robots that share it
+/// (`1, 11, 21`, or `1, 11, …, 61` for a long list), so the legend of 16, 32 or 64 robots has
+/// eleven rows.
+fn robot_entries(n: usize, mark: impl Fn(RGBColor) -> Mark) -> Vec<(Mark, String)> {
+    if n <= ROBOT_COLORS.len() {
+        return (0..n)
+            .map(|i| (mark(robot_color(i)), robot_label(i)))
+            .collect();
+    }
+    let mut entries = vec![(Mark::Heading, "robots by colour".to_owned())];
+    for c in 0..ROBOT_COLORS.len() {
+        let members: Vec<String> = (c..n)
+            .step_by(ROBOT_COLORS.len())
+            .map(|i| (i + 1).to_string())
+            .collect();
+        let label = if members.len() <= 4 {
+            members.join(", ")
+        } else {
+            format!(
+                "{}, {}, …, {}",
+                members[0],
+                members[1],
+                members[members.len() - 1]
+            )
+        };
+        entries.push((mark(robot_color(c)), label));
+    }
+    entries
+}
+
+/// Draws legend entries top-down in `area` (the strip right of a plot), from `top`. Rows are
+/// [`LEGEND_PITCH`] apart; when they would run past the bottom of `area` they move closer (down
+/// to [`LEGEND_MIN_PITCH`], the labels shrinking with them), and what still does not fit is
+/// summed up in a last row (`+ 5 more`): rows never overlap each other or the panel below.
 fn draw_legend(area: &Area<'_>, top: i32, entries: &[(Mark, String)]) -> DrawResult {
-    let label_style = text_style(15.0).pos(Pos::new(HPos::Left, VPos::Center));
-    for (k, (mark, label)) in entries.iter().enumerate() {
-        let y = top + 20 * k as i32;
+    let height = i32::try_from(area.dim_in_pixel().1).unwrap_or(i32::MAX);
+    // The room from the first row's centre to the last row's centre, half a row kept free below.
+    let room = (height - top - LEGEND_PITCH / 2).max(0);
+    let rows = i32::try_from(entries.len()).unwrap_or(i32::MAX).max(1);
+    let pitch = if rows <= 1 {
+        LEGEND_PITCH
+    } else {
+        (room / (rows - 1)).clamp(LEGEND_MIN_PITCH, LEGEND_PITCH)
+    };
+    let fits = usize::try_from(room / pitch + 1).unwrap_or(usize::MAX);
+    let mut shown: Vec<(Mark, String)> = entries.to_vec();
+    if shown.len() > fits {
+        let kept = fits.saturating_sub(1);
+        let more = shown.len() - kept;
+        shown.truncate(kept);
+        shown.push((Mark::Heading, format!("+ {more} more")));
+    }
+    let font = LEGEND_FONT.min(0.75 * f64::from(pitch));
+    let label_style = text_style(font).pos(Pos::new(HPos::Left, VPos::Center));
+    for (k, (mark, label)) in shown.iter().enumerate() {
+        let y = top + pitch * i32::try_from(k).unwrap_or(i32::MAX);
         let (x0, x1) = (6, 28);
         match *mark {
             Mark::Line(color) => area.draw(&PathElement::new(
@@ -169,6 +229,10 @@ fn draw_legend(area: &Area<'_>, top: i32, entries: &[(Mark, String)]) -> DrawRes
                     BOX.stroke_width(1),
                 ))?;
             }
+            Mark::Heading => {
+                area.draw(&Text::new(label.clone(), (x0, y), label_style.clone()))?;
+                continue;
+            }
         }
         area.draw(&Text::new(label.clone(), (x1 + 6, y), label_style.clone()))?;
     }
@@ -187,9 +251,20 @@ struct Reference {
     label: String,
 }
 
+/// How a time-series panel's lines are named in its legend.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum LineLegend {
+    /// One entry per line, its series' label.
+    PerLine,
+    /// The lines are the team's robots, in order: [`robot_entries`].
+    Robots,
+}
+
 /// One time-series panel: lines over `time \[s\]` with a legend strip on the right.
+#[allow(clippy::too_many_arguments)]
 fn time_panel(
     area: &Area<'_>,
+    line_legend: LineLegend,
     title: &str,
     y_desc: &str,
     x_range: Range<f64>,
@@ -225,9 +300,15 @@ fn time_panel(
             line.color.stroke_width(2),
         ))?;
     }
-    let entries: Vec<(Mark, String)> = lines
-        .iter()
-        .map(|l| (Mark::Line(l.color), l.series.label.clone()))
+    let line_entries = match line_legend {
+        LineLegend::PerLine => lines
+            .iter()
+            .map(|l| (Mark::Line(l.color), l.series.label.clone()))
+            .collect(),
+        LineLegend::Robots => robot_entries(lines.len(), Mark::Line),
+    };
+    let entries: Vec<(Mark, String)> = line_entries
+        .into_iter()
         .chain(
             references
                 .iter()
@@ -321,6 +402,7 @@ pub fn errors_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError>
             .collect();
         time_panel(
             &top,
+            LineLegend::PerLine,
             "(a) formation error eᵢⱼ = |dᵢⱼ − d*| / d*",
             "formation error [%]",
             time_range(traj),
@@ -347,6 +429,7 @@ pub fn errors_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError>
             .collect();
         time_panel(
             &bottom,
+            LineLegend::Robots,
             "orientation error θᵢ − φ* (wrapped)",
             "orientation error [rad]",
             time_range(traj),
@@ -388,6 +471,7 @@ pub fn wheels_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError>
                 .collect();
             time_panel(
                 area,
+                LineLegend::Robots,
                 title,
                 "wheel speed [m/s]",
                 time_range(traj),
@@ -483,9 +567,7 @@ pub fn trajectory_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportEr
                 .map(|&p| Circle::new(p, 7, PAPER.stroke_width(2))),
         )?;
 
-        let mut entries: Vec<(Mark, String)> = (0..traj.n_robots())
-            .map(|i| (Mark::Triangle(robot_color(i)), robot_label(i)))
-            .collect();
+        let mut entries = robot_entries(traj.n_robots(), Mark::Triangle);
         entries.push((Mark::Dashed(REFERENCE), "formation".into()));
         if !collision_points.is_empty() {
             entries.push((Mark::Dot(PAPER), "collision".into()));
@@ -529,16 +611,15 @@ pub fn box_figure(id: &str, panels: &[BoxPanel]) -> Result<Figure, ReportError> 
         for (panel, area) in panels.iter().zip(&areas) {
             box_panel(area, panel)?;
         }
-        draw_legend(
-            &legend,
-            44,
-            &[
-                (Mark::Box, "quartiles".into()),
-                (Mark::Line(INK), "median".into()),
-                (Mark::Dot(BOX), "one run".into()),
-                (Mark::Dashed(PAPER), "paper median".into()),
-            ],
-        )
+        let mut entries = vec![
+            (Mark::Box, "quartiles".into()),
+            (Mark::Line(INK), "median".into()),
+            (Mark::Dot(BOX), "one run".into()),
+        ];
+        if panels.iter().any(|p| p.paper_median.is_some()) {
+            entries.push((Mark::Dashed(PAPER), "paper median".into()));
+        }
+        draw_legend(&legend, 44, &entries)
     })
 }
 
@@ -1281,3 +1362,112 @@ mod tests {
         assert_eq!(trim_number(3.756), "3.756");
     }
 }
+
+    /// `n` robots on parallel lines, `samples` samples.
+    fn team_traj(n: usize, samples: usize) -> Trajectory {
+        let dt = 0.1;
+        let times: Vec<f64> = (0..samples).map(|k| k as f64 * dt).collect();
+        let poses = times
+            .iter()
+            .map(|&t| {
+                (0..n)
+                    .map(|i| Pose {
+                        x: t,
+                        y: i as f64,
+                        theta: 0.01 * i as f64,
+                    })
+                    .collect()
+            })
+            .collect();
+        Trajectory {
+            dt,
+            d_star: 1.0,
+            v_star: 0.7,
+            edges: (1..n).map(|i| (i - 1, i)).collect(),
+            neighbours: formation_proto::NeighbourRule::AllPairs,
+            times: times.clone(),
+            phi_star: vec![0.0; samples],
+            poses,
+            commands: vec![
+                (0..n)
+                    .map(|i| WheelCmd {
+                        left: 0.5 + 0.01 * i as f64,
+                        right: 0.6
+                    })
+                    .collect();
+                samples - 1
+            ],
+            collisions: vec![],
+        }
+    }
+
+    /// The legend texts of a figure `width` wide (those in the strip right of the plots): their
+    /// label, `y` and font size.
+    fn legend_texts(svg: &str, width: u32) -> Vec<(String, f64, f64)> {
+        let attr = |tag: &str, name: &str| -> Option<f64> {
+            let start = tag.find(&format!(" {name}=\""))? + name.len() + 3;
+            tag[start..start + tag[start..].find('"')?].parse().ok()
+        };
+        svg.split("<text")
+            .skip(1)
+            .filter_map(|t| {
+                let tag = &t[..t.find('>')?];
+                let label = t[t.find('>')? + 1..t.find("</text>")?].trim().to_owned();
+                let x = attr(tag, "x")?;
+                (x >= f64::from(width - LEGEND_WIDTH))
+                    .then(|| Some((label, attr(tag, "y")?, attr(tag, "font-size")?)))?
+            })
+            .collect()
+    }
+
+    #[test]
+    fn legends_never_overlap_at_any_team_size() {
+        for n in [3, 16, 32, 64] {
+            let traj = team_traj(n, 40);
+            for figure in [
+                errors_figure("e", &traj).unwrap(),
+                wheels_figure("w", &traj).unwrap(),
+                trajectory_figure("t", &traj).unwrap(),
+            ] {
+                let texts = legend_texts(&figure.svg, 640);
+                let labels: Vec<&str> = texts.iter().map(|t| t.0.as_str()).collect();
+                assert!(texts.len() >= 3, "{n} robots, {}: {labels:?}", figure.id);
+                for (a, (label_a, ya, size_a)) in texts.iter().enumerate() {
+                    assert!(
+                        *ya - size_a / 2.0 >= 0.0 && *ya + size_a / 2.0 <= 600.0,
+                        "{n} robots, {}: {label_a} at y = {ya} is off the figure",
+                        figure.id
+                    );
+                    for (label_b, yb, size_b) in &texts[a + 1..] {
+                        assert!(
+                            (ya - yb).abs() >= size_a.max(*size_b),
+                            "{n} robots, {}: {label_a:?} at y = {ya} and {label_b:?} at y = {yb} overlap",
+                            figure.id
+                        );
+                    }
+                }
+                // The wheel and orientation legends keep their reference lines.
+                if figure.id == "w" {
+                    assert_eq!(
+                        labels.iter().filter(|l| l.starts_with("v* = 0.7")).count(),
+                        2,
+                        "{n} robots: {labels:?}"
+                    );
+                }
+                if n > ROBOT_COLORS.len() {
+                    // Robots share a row per colour (an explicit edge list may still be cut
+                    // short, with a `+ N more` row).
+                    assert!(
+                        figure.id == "e" || !labels.iter().any(|l| l.contains("more")),
+                        "{n} robots, {}: every colour is named: {labels:?}",
+                        figure.id
+                    );
+                    assert!(labels.iter().any(|l| l.starts_with("1, 11")), "{labels:?}");
+                }
+            }
+        }
+        // The legend of the three-robot figures names each robot.
+        let svg = wheels_figure("w", &team_traj(3, 40)).unwrap().svg;
+        let labels: Vec<String> = legend_texts(&svg, 640).into_iter().map(|t| t.0).collect();
+        assert!(labels.iter().any(|l| l == "robot 3"), "{labels:?}");
+    }

@@ -27,6 +27,8 @@ pub mod paper {
     pub const MEDIAN_ORIENTATION_ERROR_RAD: f64 = 0.031;
     /// Runs in Table I.
     pub const RUNS: usize = 100;
+    /// The team size of every figure above: the paper evaluates three robots only.
+    pub const ROBOTS: usize = 3;
 }
 
 /// A figure placed on the page: its SVG inline and the file it is also written to.
@@ -90,6 +92,9 @@ pub struct TableEntry {
     pub detail: String,
     /// The numbers.
     pub row: TableRow,
+    /// The team size, when the run logs or the summary say: only a team of
+    /// [`paper::ROBOTS`] is compared with the paper.
+    pub robots: Option<usize>,
     /// `N of M runs incomplete (stopped early: reason)` when some runs stopped early.
     pub incomplete: Option<String>,
     /// The output is partial: what is missing.
@@ -400,6 +405,29 @@ fn write_inputs_and_footer(html: &mut String, page: &ReportPage) {
     html.push_str("</body>\n</html>\n");
 }
 
+/// The paper's success rates under a row's own (at 5 % and at 10 %): only a team of
+/// [`paper::ROBOTS`] is compared with the paper; another team size says so once, and an unknown
+/// one says nothing.
+fn paper_notes(robots: Option<usize>) -> (String, String) {
+    let note = |text: String| format!("<div class=\"detail\">{text}</div>");
+    match robots {
+        Some(paper::ROBOTS) => (
+            note(format!("paper: {}", percent_whole(paper::SUCCESS_RATE_5))),
+            note(format!("paper: {}", percent_whole(paper::SUCCESS_RATE_10))),
+        ),
+        Some(_) => (
+            note(format!("paper: {} robots only", paper::ROBOTS)),
+            String::new(),
+        ),
+        None => (String::new(), String::new()),
+    }
+}
+
+/// A fraction as a whole percentage (`90 %`), as the paper prints it.
+fn percent_whole(fraction: f64) -> String {
+    format!("{:.0} %", 100.0 * fraction)
+}
+
 fn write_table(html: &mut String, page: &ReportPage) {
     html.push_str("<section id=\"table-1\">\n<h2>Table I: success rate (paper: over 100 runs)</h2>\n<div class=\"card\">\n<div class=\"table-scroll\">\n<table class=\"results\">\n<thead><tr>");
     for head in [
@@ -417,7 +445,8 @@ fn write_table(html: &mut String, page: &ReportPage) {
     html.push_str("</tr></thead>\n<tbody>\n");
     let _ = writeln!(
         html,
-        "<tr class=\"paper\"><td>Paper (Table I, Fig. 9)<div class=\"detail\">learned policy · V-REP</div></td><td>{}</td><td>{}</td><td>{}</td><td>≈ {:.0} s</td><td>{}</td><td>{:.3} rad</td><td>–</td></tr>",
+        "<tr class=\"paper\"><td>Paper (Table I, Fig. 9)<div class=\"detail\">{} robots · learned policy · V-REP</div></td><td>{}</td><td>{}</td><td>{}</td><td>≈ {:.0} s</td><td>{}</td><td>{:.3} rad</td><td>–</td></tr>",
+        paper::ROBOTS,
         paper::RUNS,
         percent(paper::SUCCESS_RATE_5),
         percent(paper::SUCCESS_RATE_10),
@@ -427,6 +456,7 @@ fn write_table(html: &mut String, page: &ReportPage) {
     );
     for entry in &page.table {
         let row = &entry.row;
+        let (paper_5, paper_10) = paper_notes(entry.robots);
         let incomplete = entry
             .incomplete
             .as_deref()
@@ -434,7 +464,7 @@ fn write_table(html: &mut String, page: &ReportPage) {
             .unwrap_or_default();
         let _ = writeln!(
             html,
-            "<tr><td>{}<div class=\"detail\">{}</div>{incomplete}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr><td>{}<div class=\"detail\">{}</div>{incomplete}</td><td>{}</td><td>{}{paper_5}</td><td>{}{paper_10}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             escape(&entry.name),
             escape(&entry.detail),
             row.runs,
@@ -727,6 +757,7 @@ mod tests {
                     runs_incomplete: 1,
                     medians_over: None,
                 },
+                robots: Some(3),
                 incomplete: Some("1 of 20 runs incomplete (stopped early: <Ctrl-C>)".into()),
                 partial: None,
                 medians: None,

@@ -105,6 +105,20 @@ pub struct EvalData {
     pub output_complete: bool,
     /// The run logs the summary lists that are not there: a partial output.
     pub missing_run_logs: Vec<PathBuf>,
+    /// The team size the summary records (its models' `team_size` notes, or the per-robot
+    /// `braked_ticks` of a multi-process eval); `None` when it records none (the expert's).
+    pub recorded_team_size: Option<usize>,
+}
+
+impl EvalData {
+    /// The evaluation's team size: the robots in its first run log's trajectory, else what the
+    /// summary records; `None` when neither says.
+    pub fn team_size(&self) -> Option<usize> {
+        self.runs
+            .first()
+            .map(|run| run.trajectory.n_robots())
+            .or(self.recorded_team_size)
+    }
 }
 
 /// A run that stopped before its last tick, the metrics of one run (NaN where the writer could
@@ -190,6 +204,8 @@ pub fn eval_data(summary: EvalOutput, source: &Path, name: &str) -> Result<EvalD
         run_logs,
         complete,
         model_inputs,
+        team_size,
+        braked_ticks,
         ..
     } = summary;
     for (key, rate) in [
@@ -244,6 +260,10 @@ pub fn eval_data(summary: EvalOutput, source: &Path, name: &str) -> Result<EvalD
         expected_run_logs: run_logs,
         output_complete: complete,
         missing_run_logs: Vec::new(),
+        recorded_team_size: team_size
+            .first()
+            .map(|t| t.robots)
+            .or((!braked_ticks.is_empty()).then_some(braked_ticks.len())),
     })
 }
 

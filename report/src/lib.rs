@@ -173,6 +173,7 @@ fn add_table_and_statistics(
             name: e.name.clone(),
             detail: eval_detail(e),
             row: e.table.clone(),
+            robots: e.team_size(),
             incomplete: incomplete_note(e),
             partial: partial_note(e),
             medians: medians_note(e),
@@ -200,7 +201,12 @@ fn add_table_and_statistics(
                 "Box plots of convergence time, formation error and orientation error",
             ),
             caption: format!(
-                "Figure {number}: Box plot of convergence time, relative formation error and orientation error over the last 20 s, over the runs that succeed at 10 % (cf. paper Fig. 9). The thick line is the median, the box spans the 25th to 75th percentiles, the whiskers extend to the minimum and maximum, dots are single runs; the dashed line is the paper's median."
+                "Figure {number}: Box plot of convergence time, relative formation error and orientation error over the last 20 s, over the runs that succeed at 10 % (cf. paper Fig. 9). The thick line is the median, the box spans the 25th to 75th percentiles, the whiskers extend to the minimum and maximum, dots are single runs{}.",
+                if compares_with_paper(&fig9_evals) {
+                    "; the dashed line is the paper's median (of three robots: it compares with the three-robot evaluations only)"
+                } else {
+                    ""
+                }
             ),
         });
         page.fig9_note = format!(
@@ -546,11 +552,21 @@ fn eval_detail(eval: &EvalData) -> String {
     if let Some(seed) = eval.seed {
         parts.push(format!("seed {seed}"));
     }
+    if let Some(robots) = eval.team_size() {
+        parts.push(format!("{robots} robots"));
+    }
     parts.join(" · ")
 }
 
-/// The three Fig. 9 panels, one box per evaluation, in the panels' units (s, %, rad).
+/// Whether any of `evals` is a team of the paper's size, the only one compared with the paper.
+fn compares_with_paper(evals: &[&EvalData]) -> bool {
+    evals.iter().any(|e| e.team_size() == Some(paper::ROBOTS))
+}
+
+/// The three Fig. 9 panels, one box per evaluation, in the panels' units (s, %, rad); the
+/// paper's medians only when some evaluation is a team of the paper's size.
 pub fn fig9_panels(evals: &[&EvalData]) -> Vec<BoxPanel> {
+    let paper_median = |value: f64| compares_with_paper(evals).then_some(value);
     let successful = |e: &EvalData| -> Vec<input::RunMetrics> {
         e.per_run.iter().filter(|r| r.success_10).cloned().collect()
     };
@@ -593,19 +609,19 @@ pub fn fig9_panels(evals: &[&EvalData]) -> Vec<BoxPanel> {
             title: "convergence time".into(),
             y_desc: "convergence time [s]".into(),
             groups: convergence,
-            paper_median: Some(paper::MEDIAN_CONVERGENCE_S),
+            paper_median: paper_median(paper::MEDIAN_CONVERGENCE_S),
         },
         BoxPanel {
             title: "relative formation error".into(),
             y_desc: "formation error [%]".into(),
             groups: formation,
-            paper_median: Some(100.0 * paper::MEDIAN_REL_FORMATION_ERROR),
+            paper_median: paper_median(100.0 * paper::MEDIAN_REL_FORMATION_ERROR),
         },
         BoxPanel {
             title: "orientation error".into(),
             y_desc: "orientation error [rad]".into(),
             groups: orientation,
-            paper_median: Some(paper::MEDIAN_ORIENTATION_ERROR_RAD),
+            paper_median: paper_median(paper::MEDIAN_ORIENTATION_ERROR_RAD),
         },
     ]
 }
