@@ -502,3 +502,73 @@ fn an_out_that_names_an_input_is_refused_and_the_input_kept() {
     );
     assert!(!message.contains("out.json"), "{message}");
 }
+
+/// The Table I row of the evaluation `name`.
+fn table_row<'a>(html: &'a str, name: &str) -> &'a str {
+    let start = html
+        .find(&format!("<tr><td>{name}<div"))
+        .unwrap_or_else(|| panic!("a Table I row for {name}"));
+    &html[start..start + html[start..].find("</tr>").expect("row end")]
+}
+
+/// The paper evaluates three robots: a three-robot evaluation shows the paper's success rates
+/// beside its own, a 16-robot one says the paper has three robots only, and Fig. 9 draws the
+/// paper's median only when a three-robot evaluation is there to compare with it.
+#[test]
+fn only_a_three_robot_team_is_compared_with_the_paper() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dir.path().join("data");
+    common::write_team_dir(&data, 16, 12.0);
+    let team_only = build_report(&data, &dir.path().join("team.html")).expect("report");
+    let html = fs::read_to_string(&team_only.html).expect("html");
+    let row = table_row(&html, "team");
+    assert!(row.contains("16 robots"), "{row}");
+    assert!(row.contains("paper: 3 robots only"), "{row}");
+    assert!(
+        !row.contains("paper: 90 %") && !row.contains("paper: 96 %"),
+        "{row}"
+    );
+    let fig9 = fs::read_to_string(team_only.figures_dir.join("fig9-statistics.svg")).expect("svg");
+    assert!(
+        !fig9.contains("paper median"),
+        "no paper median for 16 robots"
+    );
+    assert!(
+        !html.contains("the dashed line is the paper"),
+        "nor in the caption"
+    );
+
+    let metrics = common::run_metrics(0, true);
+    common::write_file(
+        &data.join("case1/summary.json"),
+        &common::summary("case1", std::slice::from_ref(&metrics)),
+    );
+    common::write_file(
+        &data.join("case1/runs/run-0000.json"),
+        &common::run_log(
+            0,
+            metrics,
+            common::trajectory(common::Heading::Constant(3.76), 2.0, 12.0, 1),
+        ),
+    );
+    let both = build_report(&data, &dir.path().join("both.html")).expect("report");
+    let html = fs::read_to_string(&both.html).expect("html");
+    let three = table_row(&html, "case1");
+    assert!(three.contains("3 robots"), "{three}");
+    assert!(
+        three.contains("paper: 90 %") && three.contains("paper: 96 %"),
+        "{three}"
+    );
+    let team = table_row(&html, "team");
+    assert!(
+        team.contains("paper: 3 robots only") && !team.contains("paper: 90 %"),
+        "{team}"
+    );
+    let fig9 = fs::read_to_string(both.figures_dir.join("fig9-statistics.svg")).expect("svg");
+    assert!(fig9.contains("paper median"));
+    assert!(
+        html.contains(
+            "median (of three robots: it compares with the three-robot evaluations only)"
+        )
+    );
+}
