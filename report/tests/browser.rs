@@ -707,3 +707,106 @@ fn at_1300_px_the_tables_fit_and_one_team_size_gets_whole_ticks() {
         .collect();
     assert!(team_sizes.len() >= 2, "{texts:?}");
 }
+
+/// Measures, in the loaded page, the legend labels of every run's error, wheel and trajectory
+/// figure (the text in the strip right of the plots, 140 px wide) with `getBBox`, and writes on
+/// `<body>` how many it measured (`data-legend-texts`) and each pair whose boxes intersect, or a
+/// label outside its figure (`data-legend-overlaps`, `none` when there is none).
+const LEGEND_CHECK: &str = r#"<script>
+(function () {
+  var measured = 0, overlaps = [];
+  document.querySelectorAll('figure.plot').forEach(function (figure) {
+    var id = figure.getAttribute('data-figure') || '';
+    if (!/-(errors|wheels|trajectory)$/.test(id)) { return; }
+    var svg = figure.querySelector('svg');
+    var width = parseFloat(svg.getAttribute('width'));
+    var height = parseFloat(svg.getAttribute('height'));
+    var boxes = [];
+    svg.querySelectorAll('text').forEach(function (text) {
+      if (parseFloat(text.getAttribute('x')) < width - 140) { return; }
+      var b = text.getBBox();
+      boxes.push({ label: text.textContent.trim(), x0: b.x, y0: b.y, x1: b.x + b.width, y1: b.y + b.height });
+    });
+    measured += boxes.length;
+    boxes.forEach(function (a, i) {
+      if (a.x0 < 0 || a.y0 < 0 || a.x1 > width || a.y1 > height) {
+        overlaps.push(id + ': ' + a.label + ' leaves the figure');
+      }
+      boxes.slice(i + 1).forEach(function (b) {
+        // Boxes that intersect by more than half a pixel each way.
+        if (Math.min(a.x1, b.x1) - Math.max(a.x0, b.x0) > 0.5 &&
+            Math.min(a.y1, b.y1) - Math.max(a.y0, b.y0) > 0.5) {
+          overlaps.push(id + ': ' + a.label + ' / ' + b.label);
+        }
+      });
+    });
+  });
+  document.body.setAttribute('data-legend-texts', String(measured));
+  document.body.setAttribute('data-legend-overlaps', overlaps.length ? overlaps.join(' | ') : 'none');
+})();
+</script>"#;
+
+/// Issue 39: with 16 robots the legends of "robot 14–16" and "v* = 0.7 m/s" were drawn on one
+/// line. In Chromium, no two legend labels of a 16- or 32-robot run's figures intersect, and
+/// none leaves its figure; the same check finds the overlap of a legend drawn one row too close.
+#[test]
+fn in_chromium_the_legends_of_16_and_32_robots_do_not_overlap() {
+    let browser = chromium();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dir.path().join("data");
+    common::write_team_dir(&data.join("sixteen"), 16, 20.0);
+    common::write_team_dir(&data.join("thirty-two"), 32, 20.0);
+    let out = dir.path().join("report.html");
+    let summary = build_report(&data, &out).expect("report");
+    assert_eq!(summary.runs_drawn, 2);
+    let html = std::fs::read_to_string(&out).expect("html");
+    let checked = dir.path().join("checked.html");
+    std::fs::write(
+        &checked,
+        html.replace("</body>", &format!("{LEGEND_CHECK}</body>")),
+    )
+    .expect("write");
+    let run = run_chromium(
+        &browser,
+        &dir.path().join("profile-legends"),
+        &["--dump-dom".to_owned()],
+        &format!("file://{}", checked.display()),
+    );
+    let measured: usize = body_attribute(&run.stdout, "data-legend-texts")
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("the legend check did not run\nstderr:\n{}", run.stderr));
+    // Per run: errors (2 edge rows, 2 tolerances; heading, 10 colours, zero), wheels (twice
+    // heading, 10 colours, v*) and trajectory (heading, 10 colours, formation).
+    assert!(
+        measured >= 2 * (4 + 12 + 2 * 12 + 12),
+        "{measured} legend labels"
+    );
+    assert_eq!(
+        body_attribute(&run.stdout, "data-legend-overlaps").as_deref(),
+        Some("none"),
+        "overlapping legend labels"
+    );
+
+    // The check can fail: a legend label drawn twice on one line is found.
+    let wheels = html.find("-wheels\"").expect("a wheel figure");
+    let label = wheels + html[wheels..].find("v* = ").expect("the v* label");
+    let start = html[..label].rfind("<text").expect("its text element");
+    let end = label + html[label..].find("</text>").expect("its end") + "</text>".len();
+    let doubled = format!("{}{}", &html[..end], &html[start..]);
+    std::fs::write(
+        &checked,
+        doubled.replace("</body>", &format!("{LEGEND_CHECK}</body>")),
+    )
+    .expect("write");
+    let run = run_chromium(
+        &browser,
+        &dir.path().join("profile-doubled"),
+        &["--dump-dom".to_owned()],
+        &format!("file://{}", checked.display()),
+    );
+    let overlaps = body_attribute(&run.stdout, "data-legend-overlaps").unwrap_or_default();
+    assert!(
+        overlaps.contains("-wheels: v* = 0.4 m/s / v* = 0.4 m/s"),
+        "{overlaps}"
+    );
+}
