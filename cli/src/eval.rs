@@ -25,8 +25,8 @@ use crate::args::{ControllerKind, EvalArgs, MergeArgs};
 use crate::paths;
 use crate::table::table_text;
 use crate::team_models::{
-    checked_models, model_input, model_inputs_of, print_team_size_notes, resolved_models_per_robot,
-    team_sizes_of,
+    checked_models, goal_speeds_of, model_input, model_inputs_of, print_goal_speed_notes,
+    print_team_size_notes, resolved_models_per_robot, team_sizes_of,
 };
 
 /// What `formation eval` writes as JSON, and a run that stopped early: defined in
@@ -205,6 +205,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<(EvalOutput, Vec<RunResult>)>
         per_run,
     );
     out.team_size = team.team_size;
+    out.goal_speed = team.goal_speed;
     out.model_inputs = team.model_inputs;
     eprintln!(
         "evaluated {runs} runs in {elapsed:.1} s ({:.2} s per run)",
@@ -270,14 +271,17 @@ struct EvalTeam {
     model_ids: Vec<String>,
     /// The team-size notes of the models, for the output.
     team_size: Vec<formation_schema::ModelTeamSize>,
+    /// The models trained at another v* than the runs', for the output.
+    goal_speed: Vec<formation_schema::ModelGoalSpeed>,
     /// The input each distinct model declares, for the output.
     model_inputs: Vec<formation_schema::ModelInput>,
 }
 
-/// Resolves and checks the team's models (printing their team-size notes); refuses
+/// Resolves and checks the team's models (printing their team-size and v* notes); refuses
 /// `--processes` with the expert.
 fn eval_team(args: &EvalArgs, scenario: &Scenario) -> anyhow::Result<EvalTeam> {
     let mut team_size = Vec::new();
+    let mut goal_speed = Vec::new();
     let mut model_inputs = Vec::new();
     let (models, model_ids) = match args.controller {
         ControllerKind::Expert => {
@@ -294,7 +298,9 @@ fn eval_team(args: &EvalArgs, scenario: &Scenario) -> anyhow::Result<EvalTeam> {
             let checked = checked_models(&models, scenario)?;
             team_size = team_sizes_of(&checked, scenario.n_robots());
             model_inputs = model_inputs_of(&checked);
+            goal_speed = goal_speeds_of(&checked, scenario.v_star());
             print_team_size_notes(&team_size);
+            print_goal_speed_notes(&goal_speed);
             (models, checked.into_iter().map(|(id, _)| id).collect())
         }
     };
@@ -302,6 +308,7 @@ fn eval_team(args: &EvalArgs, scenario: &Scenario) -> anyhow::Result<EvalTeam> {
         models,
         model_ids,
         team_size,
+        goal_speed,
         model_inputs,
     })
 }
@@ -479,6 +486,7 @@ pub fn shard_command(args: &EvalArgs, shard: &Path) -> anyhow::Result<()> {
         scenario: scenario.name().to_owned(),
         seed,
         team_size: team.team_size,
+        goal_speed: team.goal_speed,
         model_inputs: team.model_inputs,
         first_run: first,
         per_run: results.into_iter().map(|r| r.metrics).collect(),
@@ -534,6 +542,7 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
         for &robots in sizes {
             print_team_size_notes(&team_sizes_of(&checked, robots));
         }
+        print_goal_speed_notes(&goal_speeds_of(&checked, base.v_star()));
         let Some((id, metadata)) = checked.into_iter().next() else {
             anyhow::bail!("no model to evaluate: give --model FILE");
         };
@@ -541,6 +550,7 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
             model,
             input: Some(model_input(&id, &metadata)),
             trained_team_sizes: metadata.envelope().team_sizes,
+            v_train: metadata.v_train,
             id,
         });
     }

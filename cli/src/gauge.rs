@@ -16,7 +16,10 @@ use formation_world::Scenario;
 use crate::args::GaugeArgs;
 use crate::eval::progress_bar;
 use crate::paths;
-use crate::team_models::{checked_models, model_input, print_team_size_notes, team_sizes_of};
+use crate::team_models::{
+    checked_models, goal_speeds_of, model_input, print_goal_speed_notes, print_team_size_notes,
+    team_sizes_of,
+};
 
 /// `formation gauge`.
 pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
@@ -59,6 +62,7 @@ pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
         for &robots in &sizes {
             print_team_size_notes(&team_sizes_of(&checked, robots));
         }
+        print_goal_speed_notes(&goal_speeds_of(&checked, base.v_star()));
         let Some((id, metadata)) = checked.into_iter().next() else {
             anyhow::bail!("no model to gauge: give --model FILE");
         };
@@ -66,6 +70,7 @@ pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
             model,
             input: Some(model_input(&id, &metadata)),
             trained_team_sizes: metadata.envelope().team_sizes,
+            v_train: metadata.v_train,
             id,
         });
     }

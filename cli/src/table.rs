@@ -4,13 +4,16 @@
 use formation_schema::EvalOutput;
 
 /// Formats Table I and the Fig. 9 medians as text, with the runs each median covers when the
-/// rule leaves some out, a team size its model was not trained on, and the incomplete runs, if
+/// rule leaves some out, a team size or v* its model was not trained on, and the incomplete runs, if
 /// any.
 pub fn table_text(out: &EvalOutput) -> String {
     let mut text = table_i_text(out);
-    // A team size its model was not trained on is marked on the table itself, as on the terminal
-    // before the runs and in the JSON (`team_size`).
-    for line in out.team_size.iter().filter_map(|t| t.describe()) {
+    // A team size its model was not trained on, and a v* it was not trained at, are marked on
+    // the table itself, as on the terminal before the runs and in the JSON (`team_size`,
+    // `goal_speed`).
+    let team_size = out.team_size.iter().filter_map(|t| t.describe());
+    let goal_speed = out.goal_speed.iter().filter_map(|g| g.describe());
+    for line in team_size.chain(goal_speed) {
         text.push_str(&format!("{line}\n"));
     }
     let incomplete = out.summary.runs_incomplete.max(out.incomplete_runs.len());

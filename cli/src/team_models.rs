@@ -1,5 +1,6 @@
 //! The models a team drives: each robot's model file, checked against the scenario before
-//! anything runs, what each model's trained team sizes say about this team, and the input each
+//! anything runs, what each model's trained team sizes and v* say about this team and its runs'
+//! v*, and the input each
 //! model declares (its occupancy window and LIDAR, for the summary). Shared by `formation eval`
 //! and the launcher.
 
@@ -70,6 +71,20 @@ pub fn team_sizes_of(
         .collect()
 }
 
+/// Each distinct model of a team (by id, in first-use order) trained at another v* than the
+/// runs' `v_star` (`formation.v_train`), against it; empty when every model was trained at it.
+pub fn goal_speeds_of(
+    models: &[(String, formation_onnx::ModelMetadata)],
+    v_star: f64,
+) -> Vec<formation_schema::ModelGoalSpeed> {
+    distinct(models)
+        .filter_map(|(id, metadata)| {
+            formation_schema::ModelGoalSpeed::new(id, metadata.v_train, v_star)
+        })
+        .filter(formation_schema::ModelGoalSpeed::is_outside)
+        .collect()
+}
+
 /// The input each distinct model of a team declares (by id, in first-use order).
 pub fn model_inputs_of(
     models: &[(String, formation_onnx::ModelMetadata)],
@@ -118,6 +133,14 @@ pub fn print_team_size_notes(team_size: &[formation_schema::ModelTeamSize]) {
     }
 }
 
+/// Prints, on stderr, a line for each model trained at another v* than the runs': a note near
+/// its trained v*, a warning further ([`formation_proto::GoalSpeedFit::describe`]).
+pub fn print_goal_speed_notes(goal_speed: &[formation_schema::ModelGoalSpeed]) {
+    for line in goal_speed.iter().filter_map(|g| g.describe()) {
+        eprintln!("formation: {line}");
+    }
+}
+
 /// The d* values that bound a scenario's runs: its fixed d*, each of its choices, or its
 /// range's ends.
 pub fn scenario_d_stars(scenario: &Scenario) -> Vec<f64> {
@@ -139,6 +162,8 @@ pub fn models_per_robot(scenario: &Scenario, default: &Path) -> anyhow::Result<V
 pub struct TeamModelNotes {
     /// The team-size records ([`team_sizes_of`]).
     pub team_size: Vec<formation_schema::ModelTeamSize>,
+    /// The trained-v* records of the models trained at another v* ([`goal_speeds_of`]).
+    pub goal_speed: Vec<formation_schema::ModelGoalSpeed>,
     /// The declared inputs ([`model_inputs_of`]).
     pub model_inputs: Vec<formation_schema::ModelInput>,
 }
@@ -153,6 +178,7 @@ pub fn checked_team_models(
     let checked = checked_models(&models, scenario)?;
     let notes = TeamModelNotes {
         team_size: team_sizes_of(&checked, scenario.n_robots()),
+        goal_speed: goal_speeds_of(&checked, scenario.v_star()),
         model_inputs: model_inputs_of(&checked),
     };
     Ok((models, notes))
@@ -217,5 +243,13 @@ mod tests {
         let sizes = team_sizes_of(&team, 4);
         assert_eq!(sizes.len(), 1, "only the scaled model records team sizes");
         assert!(sizes[0].zero_shot);
+        // So do the v* records, only for a v* off the trained one (0.7 here).
+        assert!(goal_speeds_of(&team, 0.7).is_empty());
+        let speeds = goal_speeds_of(&team, 0.4);
+        assert_eq!(
+            speeds.iter().map(|g| g.model.as_str()).collect::<Vec<_>>(),
+            ["scaled", "paper"]
+        );
+        assert_eq!(speeds[0].fit, formation_proto::GoalSpeedFit::Slower);
     }
 }

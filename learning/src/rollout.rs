@@ -168,6 +168,7 @@ pub fn eval_output(
         braked_ticks: Vec::new(),
         incomplete_runs: Vec::new(),
         team_size: Vec::new(),
+        goal_speed: Vec::new(),
         model_inputs: Vec::new(),
         run_logs: Vec::new(),
         complete: true,

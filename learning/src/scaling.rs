@@ -8,7 +8,7 @@
 use std::path::PathBuf;
 
 use formation_expert::ExpertGains;
-use formation_schema::{ModelTeamSize, ScalingRow, ScalingTable};
+use formation_schema::{ModelGoalSpeed, ModelTeamSize, ScalingRow, ScalingTable};
 use formation_world::Scenario;
 use formation_world::metrics::{MetricsConfig, RunMetrics, quantiles, summarize};
 
@@ -29,6 +29,9 @@ pub enum ScalingDriver {
         /// The team sizes it was trained on (its envelope; empty when it records none), so
         /// that a row for another size is marked zero-shot.
         trained_team_sizes: Vec<usize>,
+        /// The v* \[m/s\] it was trained at (`formation.v_train`), so that a row at another v*
+        /// is marked.
+        v_train: f64,
         /// The input it declares (its occupancy window and LIDAR), for its rows.
         input: Option<formation_schema::ModelInput>,
     },
@@ -52,17 +55,20 @@ pub fn evaluate_scaling(
     for &robots in sizes {
         let scenario = base.with_robots(robots)?;
         for driver in drivers {
-            let (run_driver, model, team_size, model_input) = match driver {
-                ScalingDriver::Expert(gains) => (Driver::Expert(*gains), None, None, None),
+            let (run_driver, model, team_size, goal_speed, model_input) = match driver {
+                ScalingDriver::Expert(gains) => (Driver::Expert(*gains), None, None, None, None),
                 ScalingDriver::Policy {
                     model,
                     id,
                     trained_team_sizes,
+                    v_train,
                     input,
                 } => (
                     Driver::policy_for(&scenario, model)?,
                     Some(id.clone()),
                     ModelTeamSize::new(id, trained_team_sizes, robots),
+                    ModelGoalSpeed::new(id, *v_train, scenario.v_star())
+                        .filter(ModelGoalSpeed::is_outside),
                     input.clone(),
                 ),
             };
@@ -79,6 +85,7 @@ pub fn evaluate_scaling(
             let metrics: Vec<RunMetrics> = results.into_iter().map(|r| r.metrics).collect();
             rows.push(ScalingRow {
                 team_size,
+                goal_speed,
                 model_input,
                 ..scaling_row(
                     run_driver.name(),
@@ -129,6 +136,7 @@ pub fn scaling_row(
         max_edge_window_error: quantiles(runs.iter().map(|r| r.max_edge_window_error)),
         collisions: summary.collisions,
         team_size: None,
+        goal_speed: None,
         model_input: None,
     }
 }
@@ -163,8 +171,14 @@ pub fn scaling_text(table: &ScalingTable) -> String {
         } else {
             ""
         };
+        let speed = row
+            .goal_speed
+            .as_ref()
+            .filter(|g| g.is_outside())
+            .map(|g| format!(" (v* {:.2}x v_train)", g.factor))
+            .unwrap_or_default();
         let who = match &row.model {
-            Some(id) => format!("{} `{id}`{zero_shot}", row.controller),
+            Some(id) => format!("{} `{id}`{zero_shot}{speed}", row.controller),
             None => row.controller.clone(),
         };
         text.push_str(&format!(
@@ -262,6 +276,28 @@ mod tests {
         });
         assert!(text.contains("| policy `m` | 5 |"), "{text}");
         assert!(text.contains("| policy `m` (zero-shot) | 24 |"), "{text}");
+    }
+
+    #[test]
+    fn a_policy_row_at_a_v_star_the_model_was_not_trained_at_is_marked() {
+        let runs = [run(true, true, 0.01, 0)];
+        let row = |v_star| ScalingRow {
+            goal_speed: ModelGoalSpeed::new("m", 0.7, v_star).filter(ModelGoalSpeed::is_outside),
+            ..scaling_row("policy", Some("m".into()), 3, "all_pairs", &runs)
+        };
+        let (trained, slower) = (row(0.7), row(0.4));
+        assert_eq!(trained.goal_speed, None);
+        let text = scaling_text(&ScalingTable {
+            scenario: "s".into(),
+            seed: 1,
+            duration_s: 60.0,
+            rows: vec![trained, slower],
+        });
+        assert!(text.contains("| policy `m` | 3 |"), "{text}");
+        assert!(
+            text.contains("| policy `m` (v* 0.57x v_train) | 3 |"),
+            "{text}"
+        );
     }
 
     #[test]

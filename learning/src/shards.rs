@@ -115,6 +115,7 @@ pub fn merge_shards(shards: &[EvalShard], runs: Option<usize>) -> Result<EvalOut
         per_run,
     );
     out.team_size = first.team_size.clone();
+    out.goal_speed = first.goal_speed.clone();
     out.model_inputs = first.model_inputs.clone();
     Ok(out)
 }
@@ -125,7 +126,7 @@ fn check_same_evaluation(
     shard: &EvalShard,
     index: usize,
 ) -> Result<(), MergeError> {
-    let fields: [(&'static str, String, String); 6] = [
+    let fields: [(&'static str, String, String); 7] = [
         (
             "controller",
             first.controller.clone(),
@@ -142,6 +143,11 @@ fn check_same_evaluation(
             "team_size",
             format!("{:?}", first.team_size),
             format!("{:?}", shard.team_size),
+        ),
+        (
+            "goal_speed",
+            format!("{:?}", first.goal_speed),
+            format!("{:?}", shard.goal_speed),
         ),
         (
             "model_inputs",
@@ -196,6 +202,7 @@ mod tests {
             scenario: scenario.name().into(),
             seed: 11,
             team_size: Vec::new(),
+            goal_speed: Vec::new(),
             model_inputs: Vec::new(),
             first_run: range.start,
             per_run: results.into_iter().map(|r| r.metrics).collect(),

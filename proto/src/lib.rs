@@ -21,6 +21,7 @@ pub mod control;
 pub mod errors;
 pub mod exit;
 pub mod files;
+pub mod goal_speed;
 pub mod model_id;
 pub mod neighbours;
 pub mod policy_output;
@@ -28,6 +29,7 @@ pub mod team_size;
 pub mod types;
 pub mod wire;
 
+pub use goal_speed::GoalSpeedFit;
 pub use neighbours::{GabrielRule, NeighbourRule};
 pub use policy_output::PolicyOutput;
 pub use team_size::TeamSizeFit;

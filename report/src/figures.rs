@@ -1070,6 +1070,7 @@ mod tests {
             max_edge_window_error: None,
             collisions: 0,
             team_size: None,
+            goal_speed: None,
             model_input: None,
         };
         let table = formation_schema::ScalingTable {

@@ -649,6 +649,7 @@ mod tests {
             braked_ticks: Vec::new(),
             incomplete_runs: Vec::new(),
             team_size: Vec::new(),
+            goal_speed: Vec::new(),
             model_inputs: Vec::new(),
             run_logs: Vec::new(),
             complete: true,
@@ -810,6 +811,7 @@ mod tests {
         let marked = EvalOutput {
             incomplete_runs: vec![stopped.clone()],
             team_size: Vec::new(),
+            goal_speed: Vec::new(),
             ..summary()
         };
         let eval = parse_summary(&text(&marked), Path::new("s.json"), "s").expect("summary");

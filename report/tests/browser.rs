@@ -652,6 +652,7 @@ fn at_1300_px_the_tables_fit_and_one_team_size_gets_whole_ticks() {
         max_edge_window_error: Some(q(0.061)),
         collisions: 12,
         team_size: None,
+        goal_speed: None,
         model_input: None,
     };
     let table = ScalingTable {

@@ -270,6 +270,7 @@ fn a_scaling_table_gets_its_section_with_the_rows_and_the_figure() {
         max_edge_window_error: Some(q(0.02)),
         collisions: 0,
         team_size: None,
+        goal_speed: None,
         model_input: (controller == "policy").then(|| formation_schema::ModelInput {
             model: "policy-1234".into(),
             occupancy: formation_proto::OccupancySpec::PAPER,
@@ -556,7 +557,7 @@ fn only_a_three_robot_team_is_compared_with_the_paper() {
     let three = table_row(&html, "case1");
     assert!(three.contains("3 robots"), "{three}");
     assert!(
-        three.contains("paper: 90 %") && three.contains("paper: 96 %"),
+        three.contains("paper: 90 % at 5 %, 96 % at 10 %"),
         "{three}"
     );
     let team = table_row(&html, "team");

@@ -33,6 +33,7 @@
 //! `null`, and the readers read `null` back as NaN wherever a float may be NaN (the metrics and
 //! the trajectory). Every other float reads back bit for bit (`float_roundtrip`).
 
+mod goal_speed;
 mod model_input;
 mod nan;
 mod profile;
@@ -52,6 +53,7 @@ use formation_proto::files::{FileRefusal, read_bounded};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
+pub use goal_speed::ModelGoalSpeed;
 pub use model_input::{ModelInput, trim_decimals, trim_number};
 pub use profile::{LatencyProfile, StageStats};
 pub use replay::{ReplayReport, ReplayRobot};

@@ -38,6 +38,10 @@ pub struct ScalingRow {
     /// model records none); `zero_shot` marks a size it never saw.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub team_size: Option<crate::ModelTeamSize>,
+    /// Policy only: the runs' v* against the model's trained v*, when they differ. Absent at
+    /// the trained v*, and in files written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal_speed: Option<crate::ModelGoalSpeed>,
     /// Policy only: the input the model declares (its occupancy window and LIDAR). Absent for
     /// the expert and in files written before it existed.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -3,13 +3,13 @@
 //!
 //! A sweep that spreads an evaluation over several workers (a Ray cluster, say) has each worker
 //! play a contiguous range of runs and write their per-run metrics here, with what the summary
-//! names (controller, models, scenario, seed, team-size notes, the models' declared inputs). Every run is a pure function of
+//! names (controller, models, scenario, seed, team-size and v* notes, the models' declared inputs). Every run is a pure function of
 //! (scenario, base seed, run index, driver), so the merged summary is the one a single
 //! `formation eval` writes, byte for byte.
 
 use serde::{Deserialize, Serialize};
 
-use crate::{ModelInput, ModelTeamSize, RunMetrics, SchemaFile};
+use crate::{ModelGoalSpeed, ModelInput, ModelTeamSize, RunMetrics, SchemaFile};
 
 /// What `formation eval --shard` writes: runs `first_run .. first_run + per_run.len()` of an
 /// evaluation.
@@ -27,6 +27,9 @@ pub struct EvalShard {
     /// holds them.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub team_size: Vec<ModelTeamSize>,
+    /// Policy only: the models' trained v* against the runs' v*, as the summary holds them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub goal_speed: Vec<ModelGoalSpeed>,
     /// Policy only: the input each distinct model declares, as the summary holds it.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub model_inputs: Vec<ModelInput>,

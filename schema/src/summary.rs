@@ -126,6 +126,11 @@ pub struct EvalOutput {
     /// team's size; `zero_shot` marks a size it never saw. Absent when no model records them.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub team_size: Vec<crate::ModelTeamSize>,
+    /// Policy only: each distinct model whose trained v* (`formation.v_train`) differs from the
+    /// runs' v*, against it. Absent when every model was trained at this v*, and in files
+    /// written before it existed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub goal_speed: Vec<crate::ModelGoalSpeed>,
     /// Policy only: the input each distinct model declares in its metadata (its occupancy
     /// window and the LIDAR it was trained for), in first-use order. Absent for the expert and
     /// in files written before it existed.

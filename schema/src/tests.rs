@@ -139,6 +139,9 @@ fn summary() -> EvalOutput {
         team_size: crate::ModelTeamSize::new("policy-1", &[3, 5], 2)
             .into_iter()
             .collect(),
+        goal_speed: crate::ModelGoalSpeed::new("policy-1", 0.7, 0.4)
+            .into_iter()
+            .collect(),
         model_inputs: vec![scaled_model_input()],
         run_logs: vec![0, 1],
         complete: false,
@@ -441,6 +444,7 @@ fn scaling() -> ScalingTable {
             max_edge_window_error: None,
             collisions: 0,
             team_size: None,
+            goal_speed: None,
             model_input: None,
         }],
     }
@@ -464,6 +468,7 @@ fn summaries_and_metrics_before_incomplete_runs_and_median_rules_still_read() {
     old.summary.runs_incomplete = 0;
     old.summary.medians_over = None;
     old.run_logs = Vec::new();
+    old.goal_speed = Vec::new();
     old.complete = true;
     old.per_run[1].incomplete = Some(TicksPlayed {
         ticks: 80,
@@ -472,7 +477,13 @@ fn summaries_and_metrics_before_incomplete_runs_and_median_rules_still_read() {
     let mut value: serde_json::Value = serde_json::from_slice(&to_json(&old).unwrap()).unwrap();
     // A summary of before: none of the new keys.
     let object = value.as_object_mut().unwrap();
-    for key in ["runs_incomplete", "medians_over", "run_logs", "complete"] {
+    for key in [
+        "runs_incomplete",
+        "medians_over",
+        "run_logs",
+        "complete",
+        "goal_speed",
+    ] {
         assert!(!object.contains_key(key), "{key} is left out when empty");
     }
     object["per_run"][1]
@@ -481,7 +492,7 @@ fn summaries_and_metrics_before_incomplete_runs_and_median_rules_still_read() {
         .remove("incomplete")
         .expect("an incomplete run's metrics say so");
     let read: EvalOutput = from_json(value.to_string().as_bytes(), path).unwrap();
-    assert!(read.complete && read.run_logs.is_empty());
+    assert!(read.complete && read.run_logs.is_empty() && read.goal_speed.is_empty());
     assert_eq!(read.summary.runs_incomplete, 0);
     assert_eq!(read.summary.medians_over, None);
     assert!(read.per_run.iter().all(RunMetrics::is_complete));
@@ -552,6 +563,7 @@ fn the_models_declared_inputs_round_trip_and_files_without_them_still_read() {
         scenario: "table1".into(),
         seed: 7,
         team_size: Vec::new(),
+        goal_speed: Vec::new(),
         model_inputs: vec![paper.clone()],
         first_run: 0,
         per_run: vec![metrics()],
@@ -571,4 +583,18 @@ fn the_models_declared_inputs_round_trip_and_files_without_them_still_read() {
         from_json::<ScalingTable>(&to_json(&table).unwrap(), Path::new("scaling.json")).unwrap(),
         table
     );
+}
+
+#[test]
+fn a_goal_speed_off_the_trained_one_is_written_beside_the_team_size() {
+    let text = String::from_utf8(to_json(&summary()).unwrap()).unwrap();
+    assert!(
+        text.contains(
+            r#""goal_speed":[{"model":"policy-1","trained_v_star":0.7,"v_star":0.4,"factor":0.5714285714285715,"fit":"slower"}]"#
+        ),
+        "{text}"
+    );
+    assert_eq!(crate::ModelGoalSpeed::new("m", 0.0, 0.4), None);
+    let trained = crate::ModelGoalSpeed::new("m", 0.7, 0.7).unwrap();
+    assert!(!trained.is_outside() && trained.describe().is_none());
 }

@@ -358,6 +358,7 @@ pub fn run_command(args: &RunArgs) -> anyhow::Result<()> {
         notes,
     } = plan_from_args(args)?;
     crate::team_models::print_team_size_notes(&notes.team_size);
+    crate::team_models::print_goal_speed_notes(&notes.goal_speed);
     println!(
         "formation run {}: {} robots, {} run(s) of {}, {} clock",
         plan.run_id,
@@ -622,6 +623,7 @@ fn write_summary(
     let mut table = run_summary(run_logs, scenario, seed)?;
     table.braked_ticks = braked_ticks;
     table.team_size = notes.team_size;
+    table.goal_speed = notes.goal_speed;
     table.model_inputs = notes.model_inputs;
     paths::write_atomic(
         &out.join("summary.json"),

@@ -131,6 +131,7 @@ pub fn summary(scenario: &str, per_run: &[RunMetrics]) -> EvalOutput {
         braked_ticks: Vec::new(),
         incomplete_runs: Vec::new(),
         team_size: Vec::new(),
+        goal_speed: Vec::new(),
         model_inputs: Vec::new(),
         run_logs: Vec::new(),
         complete: true,
