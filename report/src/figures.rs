@@ -4,7 +4,8 @@
 //!
 //! Every figure has its legend in a strip to the right of the plot, so it never hides data, and
 //! units on both axes. Colours come from one palette per robot, so robot 2 has the same colour in
-//! every panel.
+//! every panel. A team larger than the palette gets one legend row per colour, naming the robots
+//! that share it, and no legend runs past its panel.
 
 use std::error::Error;
 use std::ops::Range;
@@ -1362,7 +1363,6 @@ mod tests {
         assert_eq!(trim_number(-0.0001), "0");
         assert_eq!(trim_number(3.756), "3.756");
     }
-}
 
     /// `n` robots on parallel lines, `samples` samples.
     fn team_traj(n: usize, samples: usize) -> Trajectory {
@@ -1472,3 +1472,4 @@ mod tests {
         let labels: Vec<String> = legend_texts(&svg, 640).into_iter().map(|t| t.0).collect();
         assert!(labels.iter().any(|l| l == "robot 3"), "{labels:?}");
     }
+}

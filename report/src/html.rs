@@ -405,21 +405,20 @@ fn write_inputs_and_footer(html: &mut String, page: &ReportPage) {
     html.push_str("</body>\n</html>\n");
 }
 
-/// The paper's success rates under a row's own (at 5 % and at 10 %): only a team of
-/// [`paper::ROBOTS`] is compared with the paper; another team size says so once, and an unknown
-/// one says nothing.
-fn paper_notes(robots: Option<usize>) -> (String, String) {
-    let note = |text: String| format!("<div class=\"detail\">{text}</div>");
+/// The paper's success rates under a row's name: only a team of [`paper::ROBOTS`] is compared
+/// with the paper; another team size says so, and an unknown one says nothing.
+fn paper_note(robots: Option<usize>) -> String {
     match robots {
-        Some(paper::ROBOTS) => (
-            note(format!("paper: {}", percent_whole(paper::SUCCESS_RATE_5))),
-            note(format!("paper: {}", percent_whole(paper::SUCCESS_RATE_10))),
+        Some(paper::ROBOTS) => format!(
+            "<div class=\"detail\">paper: {} at 5 %, {} at 10 %</div>",
+            percent_whole(paper::SUCCESS_RATE_5),
+            percent_whole(paper::SUCCESS_RATE_10)
         ),
-        Some(_) => (
-            note(format!("paper: {} robots only", paper::ROBOTS)),
-            String::new(),
+        Some(_) => format!(
+            "<div class=\"detail\">paper: {} robots only</div>",
+            paper::ROBOTS
         ),
-        None => (String::new(), String::new()),
+        None => String::new(),
     }
 }
 
@@ -456,7 +455,7 @@ fn write_table(html: &mut String, page: &ReportPage) {
     );
     for entry in &page.table {
         let row = &entry.row;
-        let (paper_5, paper_10) = paper_notes(entry.robots);
+        let paper_note = paper_note(entry.robots);
         let incomplete = entry
             .incomplete
             .as_deref()
@@ -464,7 +463,7 @@ fn write_table(html: &mut String, page: &ReportPage) {
             .unwrap_or_default();
         let _ = writeln!(
             html,
-            "<tr><td>{}<div class=\"detail\">{}</div>{incomplete}</td><td>{}</td><td>{}{paper_5}</td><td>{}{paper_10}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr><td>{}<div class=\"detail\">{}</div>{paper_note}{incomplete}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             escape(&entry.name),
             escape(&entry.detail),
             row.runs,

@@ -5,8 +5,9 @@
 //! (`*loss*.csv`) and latency profiles (`profile.json`), and writes one self-contained HTML file
 //! with
 //!
-//! * Table I: success at 5 % and 10 % and the Fig. 9 medians, the paper's numbers beside ours,
-//!   with the input each policy was given as its model declares it (the occupancy window, its
+//! * Table I: success at 5 % and 10 % and the Fig. 9 medians, the paper's numbers beside ours
+//!   (the paper has three robots: only a three-robot evaluation is compared with them, its team
+//!   size taken from its run logs or its summary), with the input each policy was given as its model declares it (the occupancy window, its
 //!   cells and whether they scale with d*, far hits, the LIDAR; also in each run's facts);
 //! * Fig. 9: box plots of convergence time, relative formation error and orientation error over
 //!   the runs that succeed at 10 %;
