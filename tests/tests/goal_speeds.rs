@@ -2,13 +2,15 @@
 //! outside the trained ones gets no word at all"): `formation eval` marks it on the terminal
 //! before the runs, under the printed Table I and in the JSON it writes, in the team sizes'
 //! wording scaled by how far from the model's `formation.v_train` the run is; at the trained v*
-//! nothing is said and the JSON has no `goal_speed` key.
+//! nothing is said and the JSON has no `goal_speed` key. `formation run` says it too, on the
+//! terminal and in its `summary.json`.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use formation_tests::{
-    TempDir, Watchdog, case1_scenario, policy_eval, read_json, run, write_tiny_model_with,
+    LeakCheck, TempDir, Watchdog, case1_scenario, formation_run_with_model, policy_eval, read_json,
+    run, unique_run_id, write_tiny_model_with,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -93,4 +95,33 @@ fn eval_marks_a_goal_speed_off_the_models_trained_one() {
             }
         }
     }
+}
+
+#[test]
+fn a_launch_marks_a_goal_speed_off_the_trained_one_on_the_terminal_and_in_its_summary() {
+    let _watchdog = Watchdog::arm("goal_speeds_run", LIMIT);
+    let dir = TempDir::new("goal-speeds-run");
+    let model = dir.path().join("tiny.onnx");
+    write_tiny_model_with(&model, 0, &[]);
+    let run_id = unique_run_id("goalspeed");
+    let leaks = LeakCheck::new(&run_id);
+    let out = dir.path().join("out");
+    let finished = run(
+        formation_run_with_model(&run_id, &scenario(dir.path(), "0.4"), &model, &out, &[]),
+        LIMIT,
+    );
+    finished.assert_success();
+    leaks.assert_clean();
+    assert!(
+        finished
+            .stderr()
+            .contains("far outside its trained v* (1.75x slower)"),
+        "{}",
+        finished.describe()
+    );
+    let summary = read_json(&out.join("summary.json"));
+    let entry = &summary["goal_speed"][0];
+    assert_eq!(entry["model"], summary["models"][0], "{summary}");
+    assert_eq!(entry["fit"], "slower", "{summary}");
+    assert_eq!(entry["v_star"], 0.4);
 }
