@@ -7,9 +7,15 @@
 //!
 //! - within [`GoalSpeedFit::TOLERANCE`] (1 %) of v_train: trained, no mark;
 //! - up to [`GoalSpeedFit::NEAR`] (1.15x) either way: a note;
-//! - beyond it: a warning, expect lower success than at the trained v*;
-//! - from [`GoalSpeedFit::FAR`] (1.5x, the team sizes' threshold) either way: a warning that
-//!   the run is far outside and its formations are expected to fail.
+//! - beyond it: a warning that the figures are zero-shot, to be compared with the expert's;
+//! - from [`GoalSpeedFit::FAR`] (1.5x, the team sizes' threshold) either way: the same warning,
+//!   said to be far outside, with a model trained near this v* as the fix if they fall short.
+//!
+//! Unlike a team size, a v* off the trained one is not said to fail: the commands scale with
+//! v*/v_train, and the shipped model (trained at 0.7 m/s) succeeds at 10 % in 100 % of 100 runs
+//! of case 1 and of table 1 at every v* from 0.2 to 0.9 m/s, as the expert does, and in 98 % and
+//! 94 % of them at 0.1 m/s (7x slower; the expert: 100 %). The mark says the figure is zero-shot,
+//! not that it is poor.
 
 use serde::{Deserialize, Serialize};
 
@@ -96,10 +102,14 @@ impl GoalSpeedFit {
         let (outside, expect) = if distance >= Self::FAR {
             (
                 "far outside",
-                "expect its formations to fail (a model trained at this v* is the fix)",
+                "its figures are zero-shot: compare them with the expert's at this v*, and train \
+                 a model near this v* if they fall short",
             )
         } else {
-            ("outside", "expect lower success than at its trained v*")
+            (
+                "outside",
+                "its figures are zero-shot: compare them with the expert's at this v*",
+            )
         };
         Some(format!(
             "warning: {speeds}: {outside} its trained v* ({how_far}): {expect}"
@@ -151,7 +161,10 @@ mod tests {
         let outside = line(0.56).unwrap();
         assert!(outside.starts_with("warning: v* = 0.56 m/s"), "{outside}");
         assert!(
-            outside.contains(": outside its trained v* (1.25x slower): expect lower success"),
+            outside.contains(
+                ": outside its trained v* (1.25x slower): its figures are zero-shot: compare them \
+                 with the expert's at this v*"
+            ) && !outside.contains("train a model"),
             "{outside}"
         );
         // 0.4 (1.75x slower), 1.4 (2x faster) and standing still are said alike.
@@ -166,7 +179,10 @@ mod tests {
                 far.contains(&format!("far outside its trained v* ({how_far})")),
                 "{far}"
             );
-            assert!(far.contains("expect its formations to fail"), "{far}");
+            assert!(
+                far.contains("zero-shot") && far.contains("train a model near this v*"),
+                "{far}"
+            );
         }
         // Just inside each threshold keeps the milder word.
         assert!(line(0.7 * 1.14).unwrap().starts_with("note: "));

@@ -43,7 +43,7 @@ fn eval_marks_a_goal_speed_off_the_models_trained_one() {
             Some((
                 "slower",
                 "warning: v* = 0.4 m/s, model",
-                "far outside its trained v* (1.75x slower): expect its formations to fail",
+                "far outside its trained v* (1.75x slower): its figures are zero-shot",
             )),
         ),
         // 0.75 is 1.07x faster: a note.
