@@ -14,7 +14,7 @@
 //! part ends, so a replay can report what it compared and still fail. The MCAP writer starts a
 //! chunk with a header whose lengths are placeholders (all ones) and fills them in when it closes
 //! the chunk, so a writer killed (or stopped by a full disk) inside a chunk leaves such a header;
-//! [`Framing`] follows the file's top-level records by their lengths as the bytes are read and
+//! `Framing` follows the file's top-level records by their lengths as the bytes are read and
 //! ends the file before an unclosed chunk, so the reader stops after the last whole chunk. A file that is not MCAP,
 //! holds no replay channel, or has steps in a layout this build does not read is refused with
 //! the file named and the fix ([`ReadError`]).
