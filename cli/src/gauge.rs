@@ -26,17 +26,11 @@ pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
     // A path that cannot be written is refused before minutes of runs, not after.
     if let Some(json) = &args.json {
         formation_proto::files::check_output_file(json)?;
-        for (input, what) in [
-            (Some(&args.scenario), "the scenario"),
-            (args.model.as_ref(), "the model"),
-        ] {
-            if input.is_some_and(|input| is_same_file(json, input)) {
-                anyhow::bail!(
-                    "--json {} is {what} being read: give another file for the curve",
-                    json.display()
-                );
-            }
+        let mut inputs = vec![("--scenario", args.scenario.as_path())];
+        if let Some(model) = &args.model {
+            inputs.push(("--model", model.as_path()));
         }
+        paths::refuse_overwriting_inputs(&[("--json", json, "response.json")], &[], &inputs)?;
     }
     let base = Scenario::from_path(&args.scenario)?;
     let sizes = args.robots.clone().unwrap_or_else(|| vec![base.n_robots()]);
@@ -100,12 +94,4 @@ pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
         println!("wrote {}", json.display());
     }
     Ok(())
-}
-
-/// Whether `a` and `b` name one existing file.
-fn is_same_file(a: &std::path::Path, b: &std::path::Path) -> bool {
-    match (a.canonicalize(), b.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    }
 }

@@ -83,6 +83,14 @@ pub fn record_command(args: &RecordArgs) -> anyhow::Result<()> {
     let login = recorder_login(args)?;
     let run = RunId::new(&args.run_id)?;
     RecordTarget::File(args.out.clone()).check()?;
+    // The recording never goes over the credentials it logs in with.
+    if let Some(credentials) = &args.credentials {
+        crate::paths::refuse_overwriting_inputs(
+            &[("--out", &args.out, "run.mcap")],
+            &[],
+            &[("--credentials", credentials)],
+        )?;
+    }
     let timeout = crate::launch::positive_seconds("--timeout-s", args.timeout_s)?;
     let link = RecorderLink::connect(&endpoint, login.as_ref(), &run, timeout)?;
     println!("connected to run {run} at {endpoint}; recording its runs");

@@ -100,6 +100,50 @@ fn outputs_never_overwrite_their_own_inputs() {
     assert_eq!(std::fs::read(&scenario).expect("scenario"), before);
 }
 
+/// `formation record --out` and `formation gauge --json` never go over the credentials or the
+/// scenario they read: refused before connecting or playing, exit 2, the input kept.
+#[test]
+fn record_and_gauge_never_overwrite_their_own_inputs() {
+    let _watchdog = Watchdog::arm("promises_record_gauge", LIMIT);
+    let dir = TempDir::new("promises-record");
+    let creds = dir.path().join("creds");
+    formation(&["credentials", "--robots", "2", "--out", text(&creds)]).assert_success();
+    let credentials = creds.join("recorder.json");
+    let before = std::fs::read(&credentials).unwrap();
+    let refused = formation(&[
+        "record",
+        "--connect",
+        "tcp/127.0.0.1:9",
+        "--run-id",
+        "promises",
+        "--credentials",
+        text(&credentials),
+        "--out",
+        text(&credentials),
+    ]);
+    assert_exit(&refused, 2);
+    if !refused.stderr().contains("not built") {
+        refused.assert_failure_mentioning("is the file --credentials reads");
+    }
+    assert_eq!(std::fs::read(&credentials).unwrap(), before);
+
+    let scenario = case1_scenario(dir.path(), 2.0);
+    let scenario_bytes = std::fs::read(&scenario).unwrap();
+    let refused = formation(&[
+        "gauge",
+        "--scenario",
+        text(&scenario),
+        "--runs",
+        "1",
+        "--json",
+        text(&scenario),
+    ]);
+    assert_exit(&refused, 2);
+    refused.assert_failure_mentioning("is the file --scenario reads");
+    refused.assert_failure_mentioning("response.json");
+    assert_eq!(std::fs::read(&scenario).unwrap(), scenario_bytes);
+}
+
 /// The figures folder a report at `out` would get.
 fn formation_report_figures(out: &Path) -> std::path::PathBuf {
     let stem = out
