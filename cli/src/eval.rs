@@ -25,7 +25,7 @@ use crate::args::{ControllerKind, EvalArgs, MergeArgs};
 use crate::paths;
 use crate::table::table_text;
 use crate::team_models::{
-    checked_models, goal_speeds_of, model_input, model_inputs_of, print_goal_speed_notes,
+    checked_models, goal_speeds_of, model_inputs_of, policy_driver, print_goal_speed_notes,
     print_team_size_notes, resolved_models_per_robot, team_sizes_of,
 };
 
@@ -537,22 +537,7 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
     // The expert is the baseline of every size; the policy (`--model`, else the shipped one)
     // unless `--controller expert` asks for the expert alone.
     if args.controller == ControllerKind::Policy {
-        let model = paths::resolve_model(args.model.as_deref())?;
-        let checked = checked_models(std::slice::from_ref(&model), &base)?;
-        for &robots in sizes {
-            print_team_size_notes(&team_sizes_of(&checked, robots));
-        }
-        print_goal_speed_notes(&goal_speeds_of(&checked, base.v_star()));
-        let Some((id, metadata)) = checked.into_iter().next() else {
-            anyhow::bail!("no model to evaluate: give --model FILE");
-        };
-        drivers.push(ScalingDriver::Policy {
-            model,
-            input: Some(model_input(&id, &metadata)),
-            trained_team_sizes: metadata.envelope().team_sizes,
-            v_train: metadata.v_train,
-            id,
-        });
+        drivers.push(policy_driver(args.model.as_deref(), &base, sizes)?);
     }
     let bar = progress_bar(runs * sizes.len() * drivers.len(), "scaling");
     let started = Instant::now();

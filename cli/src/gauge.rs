@@ -16,10 +16,7 @@ use formation_world::Scenario;
 use crate::args::GaugeArgs;
 use crate::eval::progress_bar;
 use crate::paths;
-use crate::team_models::{
-    checked_models, goal_speeds_of, model_input, print_goal_speed_notes, print_team_size_notes,
-    team_sizes_of,
-};
+use crate::team_models::policy_driver;
 
 /// `formation gauge`.
 pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
@@ -51,22 +48,7 @@ pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
         drivers.push(ScalingDriver::Expert(gains));
     }
     if !args.no_policy {
-        let model = paths::resolve_model(args.model.as_deref())?;
-        let checked = checked_models(std::slice::from_ref(&model), &base)?;
-        for &robots in &sizes {
-            print_team_size_notes(&team_sizes_of(&checked, robots));
-        }
-        print_goal_speed_notes(&goal_speeds_of(&checked, base.v_star()));
-        let Some((id, metadata)) = checked.into_iter().next() else {
-            anyhow::bail!("no model to gauge: give --model FILE");
-        };
-        drivers.push(ScalingDriver::Policy {
-            model,
-            input: Some(model_input(&id, &metadata)),
-            trained_team_sizes: metadata.envelope().team_sizes,
-            v_train: metadata.v_train,
-            id,
-        });
+        drivers.push(policy_driver(args.model.as_deref(), &base, &sizes)?);
     }
     let settings = GaugeSettings {
         seed,

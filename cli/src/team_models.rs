@@ -184,6 +184,32 @@ pub fn checked_team_models(
     Ok((models, notes))
 }
 
+/// The policy driver of the scaling table and the gauge: `model` (else the shipped default),
+/// checked against `base`'s sensor and d* before anything runs, with a note on the terminal for
+/// each team size of `sizes` and for a v* the model was not trained at.
+pub fn policy_driver(
+    model: Option<&std::path::Path>,
+    base: &Scenario,
+    sizes: &[usize],
+) -> anyhow::Result<formation_learning::scaling::ScalingDriver> {
+    let model = crate::paths::resolve_model(model)?;
+    let checked = checked_models(std::slice::from_ref(&model), base)?;
+    for &robots in sizes {
+        print_team_size_notes(&team_sizes_of(&checked, robots));
+    }
+    print_goal_speed_notes(&goal_speeds_of(&checked, base.v_star()));
+    let Some((id, metadata)) = checked.into_iter().next() else {
+        anyhow::bail!("no model to run: give --model FILE");
+    };
+    Ok(formation_learning::scaling::ScalingDriver::Policy {
+        model,
+        input: Some(model_input(&id, &metadata)),
+        trained_team_sizes: metadata.envelope().team_sizes,
+        v_train: metadata.v_train,
+        id,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use std::collections::BTreeMap;
