@@ -182,11 +182,14 @@ impl Episode {
         self.trajectory
     }
 
-    /// This tick's observation: the goal, every pose and every robot's scan (taken now if this
-    /// tick's scans were not taken yet).
+    /// This tick's observation: the goal, every pose (its heading as the robot's compass reads
+    /// it, [`World::observed_poses`]) and every robot's scan (as its LIDAR hands it out, held
+    /// between a slow LIDAR's scans; [`World::scan_age`] says how old), all taken now if this
+    /// tick's were not taken yet.
     pub fn observe(&mut self) -> Observation<'_> {
         if !self.sensed {
             self.world.scan_all(&mut self.scans);
+            self.world.read_compasses();
             self.sensed = true;
         }
         let time = self.world.time();
@@ -194,7 +197,7 @@ impl Episode {
             tick: self.world.tick(),
             time,
             goal: self.spec.goal_at(time),
-            poses: self.world.poses(),
+            poses: self.world.observed_poses(),
             wheel_speeds: self.world.wheel_speeds(),
             scans: &self.scans,
         }

@@ -9,6 +9,8 @@
 //! * [`scenario`]: scenarios read from TOML (unknown keys are errors), heading schedules, seeded
 //!   initial conditions, and the fully resolved [`RunSpec`] of one run.
 //! * [`episode`]: the in-process loop of one run over a [`Controller`], producing a [`Trajectory`].
+//! * [`reality`]: what makes a real robot differ from the ideal world (motor lag, noise and gains,
+//!   LIDAR timing and geometry, compass error, command latency, per-robot spread), all off by default.
 //! * [`neighbours`]: the formation's neighbour rule (all pairs, or the Gabriel rule each robot can
 //!   apply from its own LIDAR), recomputed sample after sample.
 //! * [`metrics`]: the paper's Table I and Fig. 9 metrics, made exact, over formation edges that may
@@ -21,6 +23,7 @@ pub mod grid;
 pub mod lidar;
 pub mod metrics;
 pub mod neighbours;
+pub mod reality;
 pub mod robot;
 pub mod runlog;
 pub mod scenario;

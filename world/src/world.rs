@@ -1,21 +1,28 @@
 //! [`World`]: the state of every robot, advanced one fixed time step at a time by [`World::step`].
 //!
-//! The world takes wheel commands and hands out LIDAR scans; it has no clock and does no I/O, so the
-//! in-process episode loop and the multi-process runtime drive the very same code. Everything random
-//! in it (the sensor noise) comes from one ChaCha8 generator seeded at construction, drawn in a fixed
-//! order, so the same initial state, seed and commands always give the same bits.
+//! The world takes wheel commands and hands out LIDAR scans and compass headings; it has no clock
+//! and does no I/O, so the in-process episode loop and the multi-process runtime drive the very same
+//! code. Everything random in it (the LIDAR's range noise, and the [`reality`](crate::reality)
+//! models' draws, each from a stream of its own) comes from ChaCha8 generators seeded at
+//! construction, drawn in a fixed order, so the same initial state, seed and commands always give
+//! the same bits.
+
+use std::collections::VecDeque;
 
 use formation_proto::{LidarSpec, Pose, WheelCmd};
 use parry2d::math::Point;
 use parry2d::query::details::intersection_test_ball_ball;
 use parry2d::shape::Ball;
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use crate::grid::SpatialGrid;
 use crate::lidar::{TeamScanner, cast_scan};
+use crate::reality::{
+    RealityModels, RealitySeeds, RobotTraits, apply_lidar_geometry, scan_age_ticks,
+};
 use crate::robot::{RobotParams, integrate};
 
 /// Control period of the paper's setting: 20 Hz.
@@ -31,6 +38,10 @@ pub struct WorldConfig {
     pub lidar: LidarSpec,
     /// Time step \[s\] of one [`World::step`].
     pub dt: f64,
+    /// Motor, LIDAR timing and geometry, compass, latency and spread models; all off by default
+    /// (and then absent from the serialized form, which stays as it was before the models).
+    #[serde(default, skip_serializing_if = "RealityModels::is_ideal")]
+    pub reality: RealityModels,
 }
 
 impl Default for WorldConfig {
@@ -40,6 +51,7 @@ impl Default for WorldConfig {
             robot: RobotParams::default(),
             lidar: LidarSpec::default(),
             dt: DEFAULT_DT,
+            reality: RealityModels::IDEAL,
         }
     }
 }
@@ -67,6 +79,52 @@ pub struct World {
     scanner: TeamScanner,
     contact_grid: SpatialGrid,
     contact_partners: Vec<usize>,
+    /// The reality models' state: each robot's traits, held scans, queued commands, streams.
+    reality: RealityState,
+}
+
+/// What the [`reality`](crate::reality) models keep from tick to tick.
+#[derive(Debug, Clone)]
+struct RealityState {
+    /// Each robot's own parameters (the nominal ones when nothing is spread).
+    traits: Vec<RobotTraits>,
+    /// Control ticks between two scans (1: a scan every tick).
+    scan_period_ticks: u64,
+    /// Each robot's last scan taken, when scans are held (`scan_period_ticks > 1`).
+    held_scans: Vec<Vec<f32>>,
+    /// Each robot's commands not yet applied, oldest first (`command_latency_ticks` of them).
+    pending: Vec<VecDeque<WheelCmd>>,
+    /// Each robot's pose with the heading its compass read this tick (compass model on).
+    compass_poses: Vec<Pose>,
+    motor_rng: ChaCha8Rng,
+    dropout_rng: ChaCha8Rng,
+    compass_rng: ChaCha8Rng,
+}
+
+impl RealityState {
+    fn new(config: &WorldConfig, poses: &[Pose], noise_seed: u64) -> RealityState {
+        let models = &config.reality;
+        let seeds = RealitySeeds::from_noise_seed(noise_seed);
+        let scan_period_ticks = models.lidar.scan_period_ticks(config.dt);
+        let traits = (0..poses.len())
+            .map(|robot| RobotTraits::draw(&config.robot, models, scan_period_ticks, &seeds, robot))
+            .collect();
+        let latency = models.command_latency_ticks as usize;
+        RealityState {
+            traits,
+            scan_period_ticks,
+            held_scans: Vec::new(),
+            pending: vec![VecDeque::from(vec![WheelCmd::BRAKE; latency]); poses.len()],
+            compass_poses: if models.compass == crate::reality::CompassModel::IDEAL {
+                Vec::new()
+            } else {
+                poses.to_vec()
+            },
+            motor_rng: ChaCha8Rng::seed_from_u64(seeds.motors),
+            dropout_rng: ChaCha8Rng::seed_from_u64(seeds.dropout),
+            compass_rng: ChaCha8Rng::seed_from_u64(seeds.compass),
+        }
+    }
 }
 
 impl World {
@@ -74,6 +132,7 @@ impl World {
     /// generator seeded with `noise_seed`.
     pub fn new(config: WorldConfig, poses: Vec<Pose>, noise_seed: u64) -> World {
         let wheel_speeds = vec![WheelCmd::BRAKE; poses.len()];
+        let reality = RealityState::new(&config, &poses, noise_seed);
         World {
             config,
             poses,
@@ -84,6 +143,7 @@ impl World {
             scanner: TeamScanner::new(),
             contact_grid: SpatialGrid::new(),
             contact_partners: Vec::new(),
+            reality,
         }
     }
 
@@ -125,7 +185,9 @@ impl World {
 
     /// Writes robot `robot`'s LIDAR ranges into `out` (one per beam): the noiseless ray cast plus,
     /// when `noise_std > 0`, Gaussian noise from the world's generator on every beam that hit
-    /// something, clamped to `[0, max_range]`. Beams that hit nothing read exactly `max_range`.
+    /// something, clamped to `[0, max_range]`, and then the LIDAR model's field of view, minimum
+    /// range and dropout. Beams that hit nothing read exactly `max_range`. This is the scan cast
+    /// now: holding scans between a slower LIDAR's scans is [`World::scan_all`]'s.
     ///
     /// # Panics
     ///
@@ -134,6 +196,19 @@ impl World {
         let lidar = self.config.lidar;
         cast_scan(&self.poses, robot, &self.config.robot, &lidar, out);
         add_range_noise(out, &lidar, &mut self.noise_rng);
+        self.apply_lidar_model(out);
+    }
+
+    /// The LIDAR model's field of view, minimum range and dropout on one scan (nothing, and no
+    /// draw, for the ideal ring).
+    fn apply_lidar_model(&mut self, ranges: &mut [f32]) {
+        let model = self.config.reality.lidar;
+        if model.changes_geometry() {
+            let rng = &mut self.reality.dropout_rng;
+            apply_lidar_geometry(ranges, self.config.lidar.max_range, &model, || {
+                rng.random::<f64>()
+            });
+        }
     }
 
     /// Scans every robot in order `0..n_robots()` (which fixes the order noise is drawn in), each into
@@ -163,13 +238,101 @@ impl World {
         for scan in out.iter_mut() {
             add_range_noise(scan, &lidar, &mut self.noise_rng);
         }
+        for scan in out.iter_mut() {
+            self.apply_lidar_model(scan);
+        }
+        self.hold_scans(out);
+    }
+
+    /// With a LIDAR slower than the control rate, replaces each scan of `out` that is not due this
+    /// tick by the robot's last scan taken, and keeps each one taken. Every scan is cast and noised
+    /// anyway, so the noise streams advance the same whatever the scan rate.
+    fn hold_scans(&mut self, out: &mut [Vec<f32>]) {
+        let period = self.reality.scan_period_ticks;
+        if period <= 1 {
+            return;
+        }
+        if self.reality.held_scans.len() != out.len() {
+            self.reality.held_scans = out.to_vec();
+        }
+        for (robot, (scan, held)) in out.iter_mut().zip(&mut self.reality.held_scans).enumerate() {
+            let offset = self.reality.traits[robot].scan_offset_ticks;
+            if self.tick == 0 || scan_age_ticks(self.tick, offset, period) == 0 {
+                held.copy_from_slice(scan);
+            } else {
+                scan.copy_from_slice(held);
+            }
+        }
+    }
+
+    /// How many seconds old robot `robot`'s scan of this tick is (as [`World::scan_all`] hands it
+    /// out): 0 when the LIDAR scans every tick.
+    ///
+    /// # Panics
+    ///
+    /// If `robot >= n_robots()`.
+    pub fn scan_age(&self, robot: usize) -> f64 {
+        self.scan_age_ticks(robot) as f64 * self.config.dt
+    }
+
+    /// [`World::scan_age`] in control ticks.
+    ///
+    /// # Panics
+    ///
+    /// If `robot >= n_robots()`.
+    pub fn scan_age_ticks(&self, robot: usize) -> u64 {
+        let offset = self.reality.traits[robot].scan_offset_ticks;
+        scan_age_ticks(self.tick, offset, self.reality.scan_period_ticks)
+    }
+
+    /// Each robot's own parameters, drawn around the nominal ones when the models spread them.
+    pub fn robot_traits(&self) -> &[RobotTraits] {
+        &self.reality.traits
+    }
+
+    /// Reads every robot's compass for this tick (robot order, one draw per robot whose compass
+    /// is noisy); [`World::observed_poses`] then hands the readings out. Draws nothing with an
+    /// exact compass.
+    pub fn read_compasses(&mut self) {
+        if self.reality.compass_poses.is_empty() {
+            return;
+        }
+        for ((reading, pose), traits) in self
+            .reality
+            .compass_poses
+            .iter_mut()
+            .zip(&self.poses)
+            .zip(&self.reality.traits)
+        {
+            let deviation = if traits.compass_noise_std > 0.0 {
+                StandardNormal.sample(&mut self.reality.compass_rng)
+            } else {
+                0.0
+            };
+            *reading = Pose {
+                theta: traits.compass_reading(pose.theta, deviation),
+                ..*pose
+            };
+        }
+    }
+
+    /// Every robot's pose as a controller observes it: the true position with the heading its
+    /// compass read at the last [`World::read_compasses`] (the true pose with an exact compass).
+    pub fn observed_poses(&self) -> &[Pose] {
+        if self.reality.compass_poses.is_empty() {
+            &self.poses
+        } else {
+            &self.reality.compass_poses
+        }
     }
 
     /// Advances the world by one time step with `cmds[i]` for robot `i`.
     ///
-    /// A command with a non-finite wheel speed brakes its robot; each wheel is saturated to
-    /// `±max_wheel_speed` and, when set, limited in acceleration (see
-    /// [`RobotParams::achievable`]). Every robot then moves along its exact arc for `dt`; afterwards
+    /// With a command latency of `k` ticks, the commands run are those given `k` steps ago (a
+    /// brake before the first). A command with a non-finite wheel speed brakes its robot; each
+    /// wheel is saturated to `±max_wheel_speed` and, when set, limited in acceleration (see
+    /// [`RobotParams::achievable`]), through the motor model when it is on
+    /// ([`RobotTraits::drive`]). Every robot then moves along its exact arc for `dt`; afterwards
     /// the pairs of overlapping bodies are reported and added to [`World::collisions_total`]. Bodies
     /// pass through each other: the world reports collisions, it does not resolve them.
     ///
@@ -186,11 +349,29 @@ impl World {
         );
         let WorldConfig { robot, dt, .. } = self.config;
         let mut applied = Vec::with_capacity(cmds.len());
-        for ((pose, speeds), &requested) in
-            self.poses.iter_mut().zip(&mut self.wheel_speeds).zip(cmds)
+        let reality = &mut self.reality;
+        for (((pose, speeds), &given), (traits, pending)) in self
+            .poses
+            .iter_mut()
+            .zip(&mut self.wheel_speeds)
+            .zip(cmds)
+            .zip(reality.traits.iter().zip(&mut reality.pending))
         {
-            *speeds = robot.achievable(requested, *speeds, dt);
-            *pose = integrate(*pose, *speeds, &robot, dt);
+            let requested = match pending.pop_front() {
+                Some(due) => {
+                    pending.push_back(given);
+                    due
+                }
+                None => given,
+            };
+            let mut noise = [0.0; 2];
+            if traits.speed_noise_std > 0.0 {
+                for deviation in &mut noise {
+                    *deviation = StandardNormal.sample(&mut reality.motor_rng);
+                }
+            }
+            *speeds = traits.drive(requested, *speeds, dt, noise);
+            *pose = integrate(*pose, *speeds, &traits.params, dt);
             applied.push(*speeds);
         }
         let collisions = overlapping_pairs_in_grid(

@@ -82,8 +82,31 @@ pub const MAX_WHEEL_SPEED: Bounds = bounds(0.01, 10.0, "m/s");
 /// `robot.max_wheel_accel`.
 pub const MAX_WHEEL_ACCEL: Bounds = bounds(0.01, 1000.0, "m/s^2");
 
+/// `robot.motor_tau`: the wheels' lag time constant (0: none).
+pub const MOTOR_TAU: Bounds = bounds(0.0, 2.0, "s");
+/// `robot.wheel_speed_noise`: the standard deviation of each wheel's speed noise.
+pub const WHEEL_SPEED_NOISE: Bounds = bounds(0.0, 1.0, "m/s");
+/// `robot.wheel_gain_asymmetry`: right gain minus left gain.
+pub const WHEEL_GAIN_ASYMMETRY: Bounds = bounds(-0.5, 0.5, "");
+/// `robot.spread`: each robot's parameters drawn within `±spread` of the profile's (relative).
+pub const SPREAD: Bounds = bounds(0.0, 0.5, "");
+/// Most `robot.command_latency` \[ticks\].
+pub const MAX_COMMAND_LATENCY: usize = 20;
+/// `lidar.scan_rate_hz` (and at most the control rate `1 / dt`, dividing it into whole ticks).
+pub const SCAN_RATE: Bounds = bounds(0.1, 1000.0, "Hz");
+/// `lidar.fov_deg`.
+pub const FOV: Bounds = bounds(1.0, 360.0, "deg");
+/// `lidar.min_range` (and below `lidar.max_range`).
+pub const MIN_RANGE: Bounds = bounds(0.0, 1000.0, "m");
+/// `lidar.dropout`: the probability that a beam returns nothing.
+pub const DROPOUT: Bounds = bounds(0.0, 0.9, "");
+/// `compass.noise_std_deg`.
+pub const COMPASS_NOISE: Bounds = bounds(0.0, 90.0, "deg");
+/// `compass.bias_deg`.
+pub const COMPASS_BIAS: Bounds = bounds(-180.0, 180.0, "deg");
+
 /// Every real-valued bound, by the keys it applies to (for tests and documentation).
-pub const ALL: [(&str, Bounds); 14] = [
+pub const ALL: [(&str, Bounds); 24] = [
     ("duration_s", DURATION_S),
     ("dt", DT),
     (
@@ -101,6 +124,16 @@ pub const ALL: [(&str, Bounds); 14] = [
     ("robot.body_radius", BODY_RADIUS),
     ("robot.max_wheel_speed", MAX_WHEEL_SPEED),
     ("robot.max_wheel_accel", MAX_WHEEL_ACCEL),
+    ("robot.motor_tau", MOTOR_TAU),
+    ("robot.wheel_speed_noise", WHEEL_SPEED_NOISE),
+    ("robot.wheel_gain_asymmetry", WHEEL_GAIN_ASYMMETRY),
+    ("robot.spread", SPREAD),
+    ("lidar.scan_rate_hz", SCAN_RATE),
+    ("lidar.fov_deg", FOV),
+    ("lidar.min_range", MIN_RANGE),
+    ("lidar.dropout", DROPOUT),
+    ("compass.noise_std_deg", COMPASS_NOISE),
+    ("compass.bias_deg", COMPASS_BIAS),
 ];
 
 /// A number in messages: plain for everyday magnitudes, scientific for huge or tiny ones (so

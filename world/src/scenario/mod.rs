@@ -109,6 +109,7 @@ pub mod limits;
 mod parse;
 mod placement;
 mod plan;
+pub mod profile;
 mod validate;
 
 #[cfg(test)]
@@ -119,9 +120,12 @@ pub use self::parse::read_scenario_text;
 use self::parse::*;
 use self::placement::*;
 pub use self::plan::RunSpec;
+pub(crate) use self::plan::splitmix64;
+pub use self::profile::{ProfileSettings, RobotProfile};
 use self::validate::*;
 pub use crate::neighbours::all_pairs;
 use crate::neighbours::{GabrielRule, NeighbourRule, connected_within};
+use crate::reality::{CompassModel, LidarModel, MotorModel, RealityModels};
 use crate::robot::RobotParams;
 use crate::world::{World, WorldConfig};
 
@@ -334,6 +338,10 @@ pub struct Scenario {
     init: InitialConditions,
     neighbours: NeighbourRule,
     world: WorldConfig,
+    /// The robot profile the file started from (`[robot] profile`; absent when ideal, so the
+    /// serialized form of every scenario without one is unchanged).
+    #[serde(skip_serializing_if = "RobotProfile::is_ideal")]
+    profile: RobotProfile,
     agents: Vec<AgentModel>,
     /// What the file said, for [`Scenario::with_robots`]: the disc radius and the formation
     /// table as given (absent keys take team-size-dependent defaults).
@@ -440,6 +448,11 @@ impl Scenario {
     /// Robot, sensor and time-step settings shared by all runs.
     pub fn world_config(&self) -> &WorldConfig {
         &self.world
+    }
+
+    /// The robot profile the file's `[robot]`, `[lidar]` and `[compass]` values start from.
+    pub fn profile(&self) -> RobotProfile {
+        self.profile
     }
 
     /// Per-robot model overrides, each with `robot < n_robots()` and at most one per robot.

@@ -57,7 +57,9 @@ pub(super) struct ScenarioToml {
     #[serde(default)]
     pub(super) lidar: LidarToml,
     #[serde(default)]
-    pub(super) robot: RobotParams,
+    pub(super) robot: RobotToml,
+    #[serde(default)]
+    pub(super) compass: CompassToml,
     #[serde(default)]
     pub(super) agent: Vec<AgentModel>,
 }
@@ -126,21 +128,40 @@ pub(super) struct HeadingToml {
     pub(super) phi0: Option<f64>,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+/// The `[lidar]` table: each key absent takes the robot profile's value.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub(super) struct LidarToml {
-    pub(super) beams: usize,
-    pub(super) max_range: f64,
-    pub(super) noise_std: f64,
+    pub(super) beams: Option<usize>,
+    pub(super) max_range: Option<f64>,
+    pub(super) noise_std: Option<f64>,
+    pub(super) scan_rate_hz: Option<f64>,
+    pub(super) fov_deg: Option<f64>,
+    pub(super) min_range: Option<f64>,
+    pub(super) dropout: Option<f64>,
 }
 
-impl Default for LidarToml {
-    fn default() -> Self {
-        let spec = LidarSpec::default();
-        LidarToml {
-            beams: spec.beams,
-            max_range: spec.max_range,
-            noise_std: spec.noise_std,
-        }
-    }
+/// The `[robot]` table: a profile, and each key absent takes the profile's value.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RobotToml {
+    pub(super) profile: Option<String>,
+    pub(super) wheel_separation: Option<f64>,
+    pub(super) wheel_radius: Option<f64>,
+    pub(super) body_radius: Option<f64>,
+    pub(super) max_wheel_speed: Option<f64>,
+    pub(super) max_wheel_accel: Option<f64>,
+    pub(super) motor_tau: Option<f64>,
+    pub(super) wheel_speed_noise: Option<f64>,
+    pub(super) wheel_gain_asymmetry: Option<f64>,
+    pub(super) command_latency: Option<i64>,
+    pub(super) spread: Option<f64>,
+}
+
+/// The `[compass]` table: each key absent takes the robot profile's value.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct CompassToml {
+    pub(super) noise_std_deg: Option<f64>,
+    pub(super) bias_deg: Option<f64>,
 }

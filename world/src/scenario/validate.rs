@@ -80,13 +80,18 @@ impl ScenarioToml {
         check_robot_ticks(check, robots, steps.round() as u64, dt)?;
         let runs = check.count("runs", self.runs, 1, limits::MAX_RUNS, "")?;
 
-        let robot = validate_robot(check, self.robot)?;
-        let lidar = validate_lidar(check, &self.lidar)?;
+        let hardware = validate_hardware(check, &self.robot, &self.lidar, &self.compass, dt)?;
+        let (profile, robot, lidar, reality) = hardware;
 
-        let (v_star, d_star) = validate_goal(check, self.goal, &robot)?;
+        let (v_star, d_star) = validate_goal(check, self.goal, &robot, profile)?;
 
         let heading = validate_heading(check, &self.heading)?;
-        let world = WorldConfig { robot, lidar, dt };
+        let world = WorldConfig {
+            robot,
+            lidar,
+            dt,
+            reality,
+        };
         let neighbours = validate_formation(check, &self.formation, robots, &world)?;
         let init = validate_init(
             check,
@@ -110,6 +115,7 @@ impl ScenarioToml {
             init,
             neighbours,
             world,
+            profile,
             agents,
             given: Given {
                 disc_radius: self.init.disc_radius,
@@ -150,22 +156,100 @@ pub(super) fn validate_timing(
     Ok((duration_s, dt, steps))
 }
 
-/// The `[lidar]` table as a [`LidarSpec`], each value in range.
+/// The `[lidar]` table as a [`LidarSpec`] and the LIDAR's [`LidarModel`], each key the table
+/// gives in range and each it omits taken from `profile` (in range by construction).
 pub(super) fn validate_lidar(
     check: &Checker<'_>,
     lidar: &LidarToml,
-) -> Result<LidarSpec, ScenarioError> {
-    Ok(LidarSpec {
+    profile: &ProfileSettings,
+    dt: f64,
+) -> Result<(LidarSpec, LidarModel), ScenarioError> {
+    let spec = LidarSpec {
         beams: check.count(
             "lidar.beams",
-            lidar.beams,
+            lidar.beams.unwrap_or(profile.lidar.beams),
             limits::MIN_BEAMS,
             limits::MAX_BEAMS,
             " (a scan message carries at most 900 ranges)",
         )?,
-        max_range: check.bounded("lidar.max_range", lidar.max_range, limits::MAX_RANGE)?,
-        noise_std: check.bounded("lidar.noise_std", lidar.noise_std, limits::NOISE_STD)?,
-    })
+        max_range: check.bounded(
+            "lidar.max_range",
+            lidar.max_range.unwrap_or(profile.lidar.max_range),
+            limits::MAX_RANGE,
+        )?,
+        noise_std: check.bounded(
+            "lidar.noise_std",
+            lidar.noise_std.unwrap_or(profile.lidar.noise_std),
+            limits::NOISE_STD,
+        )?,
+    };
+    let nominal = profile.reality.lidar;
+    let scan_rate_hz = match lidar.scan_rate_hz.or(nominal.scan_rate_hz) {
+        None => None,
+        Some(rate) => Some(validate_scan_rate(check, rate, dt)?),
+    };
+    let fov_deg = check.bounded(
+        "lidar.fov_deg",
+        lidar.fov_deg.unwrap_or(nominal.fov_deg),
+        limits::FOV,
+    )?;
+    let min_range = check.bounded(
+        "lidar.min_range",
+        lidar.min_range.unwrap_or(nominal.min_range),
+        limits::MIN_RANGE,
+    )?;
+    if min_range >= spec.max_range {
+        return Err(check.invalid(
+            "lidar.min_range",
+            format_args!(
+                "must be below lidar.max_range ({}) or no beam can return anything (got {min_range})",
+                spec.max_range
+            ),
+        ));
+    }
+    let dropout = check.bounded(
+        "lidar.dropout",
+        lidar.dropout.unwrap_or(nominal.dropout),
+        limits::DROPOUT,
+    )?;
+    let model = LidarModel {
+        scan_rate_hz,
+        fov_deg,
+        min_range,
+        dropout,
+    };
+    Ok((spec, model))
+}
+
+/// `lidar.scan_rate_hz`: in range, at most the control rate `1 / dt`, and a whole number of
+/// control ticks per scan.
+fn validate_scan_rate(check: &Checker<'_>, rate: f64, dt: f64) -> Result<f64, ScenarioError> {
+    let rate = check.bounded("lidar.scan_rate_hz", rate, limits::SCAN_RATE)?;
+    let ticks_per_scan = 1.0 / (rate * dt);
+    let control_rate = 1.0 / dt;
+    if ticks_per_scan < 1.0 - 1e-9 {
+        return Err(check.invalid(
+            "lidar.scan_rate_hz",
+            format_args!(
+                "must be at most the control rate 1 / dt ({}) Hz: a scan is taken at a control \
+                 tick (got {rate})",
+                Num(control_rate)
+            ),
+        ));
+    }
+    if (ticks_per_scan - ticks_per_scan.round()).abs() > 1e-6 {
+        return Err(check.invalid(
+            "lidar.scan_rate_hz",
+            format_args!(
+                "must divide the control rate 1 / dt ({} Hz) into whole ticks per scan, such as \
+                 {} or {} Hz (got {rate}: {ticks_per_scan:.3} ticks per scan)",
+                Num(control_rate),
+                Num(control_rate / ticks_per_scan.floor().max(1.0)),
+                Num(control_rate / ticks_per_scan.ceil()),
+            ),
+        ));
+    }
+    Ok(rate)
 }
 
 /// `goal.v_star` (reachable by the wheels) and exactly one of `goal.d_star`,
@@ -174,6 +258,7 @@ pub(super) fn validate_goal(
     check: &Checker<'_>,
     goal: GoalToml,
     robot: &RobotParams,
+    profile: RobotProfile,
 ) -> Result<(f64, DStarPlan), ScenarioError> {
     let v_star = check.bounded(
         "goal.v_star",
@@ -184,10 +269,19 @@ pub(super) fn validate_goal(
         },
     )?;
     if v_star > robot.max_wheel_speed {
+        let from_profile = if profile.is_ideal() {
+            String::new()
+        } else {
+            format!(
+                ", the {:?} profile's unless [robot] sets it",
+                profile.name()
+            )
+        };
         return Err(check.invalid(
             "goal.v_star",
             format_args!(
-                "must be <= robot.max_wheel_speed ({}) or the robots cannot reach it (got {v_star})",
+                "must be <= robot.max_wheel_speed ({}{from_profile}) or the robots cannot reach \
+                 it (got {v_star})",
                 robot.max_wheel_speed
             ),
         ));
@@ -304,30 +398,126 @@ pub(super) fn validate_name(check: &Checker<'_>, name: String) -> Result<String,
     Ok(name)
 }
 
-pub(super) fn validate_robot(
+/// The robot's profile, geometry, LIDAR and reality models from the `[robot]`, `[lidar]` and
+/// `[compass]` tables: the profile's values, each key a table gives overriding its own.
+pub(super) fn validate_hardware(
     check: &Checker<'_>,
-    robot: RobotParams,
+    robot: &RobotToml,
+    lidar: &LidarToml,
+    compass: &CompassToml,
+    dt: f64,
+) -> Result<(RobotProfile, RobotParams, LidarSpec, RealityModels), ScenarioError> {
+    let profile = match robot.profile.as_deref() {
+        None => RobotProfile::Ideal,
+        Some(name) => RobotProfile::from_name(name).ok_or_else(|| {
+            let names: Vec<String> = RobotProfile::ALL
+                .iter()
+                .map(|p| format!("{:?}", p.name()))
+                .collect();
+            check.invalid(
+                "robot.profile",
+                format_args!("must be one of {} (got {name:?})", names.join(", ")),
+            )
+        })?,
+    };
+    let settings = profile.settings();
+    let params = validate_robot(check, robot, &settings.robot)?;
+    let (spec, lidar_model) = validate_lidar(check, lidar, &settings, dt)?;
+    let nominal = settings.reality;
+    let or = |given: Option<f64>, default: f64| given.unwrap_or(default);
+    let motors = MotorModel {
+        tau_s: check.bounded(
+            "robot.motor_tau",
+            or(robot.motor_tau, nominal.motors.tau_s),
+            limits::MOTOR_TAU,
+        )?,
+        speed_noise_std: check.bounded(
+            "robot.wheel_speed_noise",
+            or(robot.wheel_speed_noise, nominal.motors.speed_noise_std),
+            limits::WHEEL_SPEED_NOISE,
+        )?,
+        gain_asymmetry: check.bounded(
+            "robot.wheel_gain_asymmetry",
+            or(robot.wheel_gain_asymmetry, nominal.motors.gain_asymmetry),
+            limits::WHEEL_GAIN_ASYMMETRY,
+        )?,
+    };
+    let latency = robot
+        .command_latency
+        .unwrap_or(i64::from(nominal.command_latency_ticks));
+    let max_latency = limits::MAX_COMMAND_LATENCY;
+    let command_latency_ticks = u32::try_from(latency)
+        .ok()
+        .filter(|&ticks| ticks as usize <= max_latency)
+        .ok_or_else(|| {
+            check.invalid(
+                "robot.command_latency",
+                format_args!("must be in [0, {max_latency}] ticks (got {latency})"),
+            )
+        })?;
+    let spread = check.bounded(
+        "robot.spread",
+        or(robot.spread, nominal.spread),
+        limits::SPREAD,
+    )?;
+    let compass = CompassModel {
+        noise_std_deg: check.bounded(
+            "compass.noise_std_deg",
+            or(compass.noise_std_deg, nominal.compass.noise_std_deg),
+            limits::COMPASS_NOISE,
+        )?,
+        bias_deg: check.bounded(
+            "compass.bias_deg",
+            or(compass.bias_deg, nominal.compass.bias_deg),
+            limits::COMPASS_BIAS,
+        )?,
+    };
+    let reality = RealityModels {
+        motors,
+        lidar: lidar_model,
+        compass,
+        command_latency_ticks,
+        spread,
+    };
+    Ok((profile, params, spec, reality))
+}
+
+/// The `[robot]` geometry and limits: each key the table gives in range, each it omits the
+/// profile's.
+fn validate_robot(
+    check: &Checker<'_>,
+    robot: &RobotToml,
+    profile: &RobotParams,
 ) -> Result<RobotParams, ScenarioError> {
-    check.bounded(
-        "robot.wheel_separation",
-        robot.wheel_separation,
-        limits::WHEEL_SEPARATION,
-    )?;
-    check.bounded(
-        "robot.wheel_radius",
-        robot.wheel_radius,
-        limits::WHEEL_RADIUS,
-    )?;
-    check.bounded("robot.body_radius", robot.body_radius, limits::BODY_RADIUS)?;
-    check.bounded(
-        "robot.max_wheel_speed",
-        robot.max_wheel_speed,
-        limits::MAX_WHEEL_SPEED,
-    )?;
-    if let Some(accel) = robot.max_wheel_accel {
-        check.bounded("robot.max_wheel_accel", accel, limits::MAX_WHEEL_ACCEL)?;
-    }
-    Ok(robot)
+    let max_wheel_accel = match robot.max_wheel_accel.or(profile.max_wheel_accel) {
+        Some(accel) => {
+            Some(check.bounded("robot.max_wheel_accel", accel, limits::MAX_WHEEL_ACCEL)?)
+        }
+        None => None,
+    };
+    Ok(RobotParams {
+        wheel_separation: check.bounded(
+            "robot.wheel_separation",
+            robot.wheel_separation.unwrap_or(profile.wheel_separation),
+            limits::WHEEL_SEPARATION,
+        )?,
+        wheel_radius: check.bounded(
+            "robot.wheel_radius",
+            robot.wheel_radius.unwrap_or(profile.wheel_radius),
+            limits::WHEEL_RADIUS,
+        )?,
+        body_radius: check.bounded(
+            "robot.body_radius",
+            robot.body_radius.unwrap_or(profile.body_radius),
+            limits::BODY_RADIUS,
+        )?,
+        max_wheel_speed: check.bounded(
+            "robot.max_wheel_speed",
+            robot.max_wheel_speed.unwrap_or(profile.max_wheel_speed),
+            limits::MAX_WHEEL_SPEED,
+        )?,
+        max_wheel_accel,
+    })
 }
 
 pub(super) fn validate_heading(
