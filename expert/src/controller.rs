@@ -62,6 +62,8 @@ use formation_proto::{Goal, Pose, WheelCmd};
 use formation_world::RobotParams;
 use formation_world::episode::{Controller, ControllerError, Observation};
 use formation_world::neighbours::{NeighbourRule, NeighbourTracker};
+
+use crate::pair_weights::{WeightedNeighbours, weighted_neighbours};
 use serde::{Deserialize, Serialize};
 
 /// Below this distance \[m\] between two offset points the pair's direction is undefined and the pair
@@ -123,6 +125,12 @@ pub struct ExpertGains {
     /// and labels shaped for each run's own limit would ask different commands of the same image
     /// (`formation collect|dagger --label-wheel-accel`).
     pub shaping_wheel_accel: Option<f64>,
+    /// Under a Gabriel neighbour rule, the witness-ratio band `[low, high]` over which a pair's
+    /// weight rises smoothly from 0 to 1 ([`crate::pair_weights`]) instead of the rule's step at
+    /// its threshold; `None` (the default) holds exactly the rule's pairs. For teaching: labels
+    /// that are one continuous function of what a robot senses. The scored formation's edges
+    /// stay the rule's.
+    pub pair_weight_band: Option<[f64; 2]>,
 }
 
 /// The points of two robots between which the expert measures their distance and direction.
@@ -145,6 +153,7 @@ impl Default for ExpertGains {
             graph_pair_points: PairPoints::Centres,
             braking_share: 0.25,
             shaping_wheel_accel: None,
+            pair_weight_band: None,
         }
     }
 }
@@ -164,7 +173,8 @@ pub struct InvalidGains {
 impl ExpertGains {
     /// Checks that every gain is finite and in range: `k_formation >= 0`,
     /// `k_formation_graph >= 0`, `0 < braking_share <= 1`, `point_offset > 0`,
-    /// `max_reference_speed >= 0`, `shaping_wheel_accel` absent or `> 0`.
+    /// `max_reference_speed >= 0`, `shaping_wheel_accel` absent or `> 0`, `pair_weight_band`
+    /// absent or `0 < low < high`.
     pub fn validate(&self) -> Result<(), InvalidGains> {
         let checks = [
             (
@@ -204,7 +214,14 @@ impl ExpertGains {
                 "absent, or finite and > 0",
             ),
         ];
-        for (field, value, in_range, requirement) in checks {
+        let band = self.pair_weight_band.unwrap_or([1.0, 2.0]);
+        let band_checks = [(
+            "pair_weight_band",
+            band[0],
+            band[0] > 0.0 && band[1].is_finite() && band[0] < band[1],
+            "absent, or [low, high] with 0 < low < high, both finite",
+        )];
+        for (field, value, in_range, requirement) in checks.into_iter().chain(band_checks) {
             if !(value.is_finite() && in_range) {
                 return Err(InvalidGains {
                     field,
@@ -243,7 +260,7 @@ pub fn expert_commands(
         PairPoints::OffsetPoints,
         robot,
         out,
-        |i| (0..n).filter(move |&j| j != i),
+        |i| (0..n).filter(move |&j| j != i).map(|j| (j, 1.0)),
     );
 }
 
@@ -282,13 +299,51 @@ pub fn expert_commands_among(
                 .iter()
                 .copied()
                 .filter(|&j| j < poses.len())
+                .map(|j| (j, 1.0))
         },
     );
 }
 
-/// The distance law of robot `i` summed over `neighbours(i)`, in the order given, each pair
-/// measured between `pair_points`.
-fn commands_among<I: Iterator<Item = usize>>(
+/// The expert's wheel command for every robot when robot `i` holds each robot `j` of
+/// `neighbours[i]` with its weight (`(j, w)`, [`crate::pair_weights`]), with the formation gain
+/// [`ExpertGains::k_formation_graph`] (shaped under an acceleration limit by [`braking_speed`])
+/// and pairs measured between [`ExpertGains::graph_pair_points`].
+///
+/// # Panics
+///
+/// If `out.len() != poses.len()` or `neighbours.len() < poses.len()`.
+pub fn expert_commands_weighted(
+    poses: &[Pose],
+    goal: &Goal,
+    gains: &ExpertGains,
+    robot: &RobotParams,
+    neighbours: &[WeightedNeighbours],
+    out: &mut [WheelCmd],
+) {
+    assert_eq!(out.len(), poses.len(), "one output command per robot");
+    let gains = ExpertGains {
+        k_formation: gains.k_formation_graph,
+        ..*gains
+    };
+    commands_among(
+        poses,
+        goal,
+        &gains,
+        gains.graph_pair_points,
+        robot,
+        out,
+        |i| {
+            neighbours[i]
+                .iter()
+                .copied()
+                .filter(|&(j, _)| j < poses.len())
+        },
+    );
+}
+
+/// The distance law of robot `i` summed over `neighbours(i)` (each `(j, weight)`), in the
+/// order given, each pair measured between `pair_points`.
+fn commands_among<I: Iterator<Item = (usize, f64)>>(
     poses: &[Pose],
     goal: &Goal,
     gains: &ExpertGains,
@@ -306,7 +361,7 @@ fn commands_among<I: Iterator<Item = usize>>(
     for (i, (pose, cmd)) in poses.iter().zip(out.iter_mut()).enumerate() {
         let p_i = offset_point(pose);
         let mut gradient = (0.0, 0.0);
-        for j in neighbours(i) {
+        for (j, weight) in neighbours(i) {
             let (dx, dy) = match pair_points {
                 PairPoints::OffsetPoints => {
                     let p_j = offset_point(&poses[j]);
@@ -319,7 +374,7 @@ fn commands_among<I: Iterator<Item = usize>>(
                 continue;
             }
             // tau_ij = 2 (r^4 - d*^4) / r^3 * p_ij / r
-            let magnitude = 2.0 * (r.powi(4) - d4) / r.powi(3);
+            let magnitude = weight * 2.0 * (r.powi(4) - d4) / r.powi(3);
             gradient.0 += magnitude * dx / r;
             gradient.1 += magnitude * dy / r;
         }
@@ -396,6 +451,7 @@ pub struct ExpertController {
     tracker: Option<NeighbourTracker>,
     next_tick: Option<u64>,
     positions: Vec<(f64, f64)>,
+    weighted: Vec<WeightedNeighbours>,
 }
 
 impl ExpertController {
@@ -409,6 +465,7 @@ impl ExpertController {
             tracker: None,
             next_tick: None,
             positions: Vec::new(),
+            weighted: Vec::new(),
         }
     }
 
@@ -429,6 +486,15 @@ impl ExpertController {
     pub(crate) fn compute(&mut self, tick: u64, poses: &[Pose], goal: &Goal, out: &mut [WheelCmd]) {
         if self.neighbours == NeighbourRule::AllPairs {
             expert_commands(poses, goal, &self.gains, &self.robot, out);
+            return;
+        }
+        if let (NeighbourRule::Gabriel(rule), Some(band)) =
+            (self.neighbours, self.gains.pair_weight_band)
+        {
+            self.positions.clear();
+            self.positions.extend(poses.iter().map(|p| (p.x, p.y)));
+            weighted_neighbours(&self.positions, &rule, band, &mut self.weighted);
+            expert_commands_weighted(poses, goal, &self.gains, &self.robot, &self.weighted, out);
             return;
         }
         let n = poses.len();
@@ -986,6 +1052,96 @@ mod tests {
 
     #[test]
     fn teams_of_five_and_eight_form_under_the_gabriel_rule() {
+        teams_of_five_and_eight_form_with(ExpertGains::default());
+    }
+
+    #[test]
+    fn teams_of_five_and_eight_form_with_smooth_pair_weights() {
+        teams_of_five_and_eight_form_with(ExpertGains {
+            pair_weight_band: Some([1.1, 1.5]),
+            ..ExpertGains::default()
+        });
+    }
+
+    #[test]
+    fn smooth_pair_weights_give_the_hard_rules_command_far_from_the_band() {
+        use formation_world::neighbours::GabrielRule;
+        // A triangular lattice patch: every pair in range has witness ratio 2 (an edge, weight
+        // 1) or at most 1 (no edge, weight 0), so both laws hold the same pairs.
+        // Robot 4 below the lattice's edge 0-1 gives that pair witness ratio
+        // 2 (0.25 + 0.35) = 1.2: no edge under the hard rule (threshold 1.3), weight
+        // smoothstep(0.25) = 0.156 under the band [1.1, 1.5]. Pair 0-1 is neither robot's nearest.
+        let poses: Vec<Pose> = [
+            (0.0, 0.0),
+            (1.0, 0.0),
+            (0.5, 0.866),
+            (1.5, 0.866),
+            (0.5, -0.35_f64.sqrt()),
+        ]
+        .iter()
+        .map(|&(x, y)| Pose { x, y, theta: 0.3 })
+        .collect();
+        let rule = NeighbourRule::Gabriel(GabrielRule::with_range(5.0));
+        let robot = RobotParams::default();
+        let band = [1.1, 1.5];
+        let mut hard = ExpertController::new(ExpertGains::default(), robot).with_neighbours(rule);
+        let mut smooth = ExpertController::new(
+            ExpertGains {
+                pair_weight_band: Some(band),
+                ..ExpertGains::default()
+            },
+            robot,
+        )
+        .with_neighbours(rule);
+        // d* = 1.2, so that a pair 1 m apart pulls.
+        let goal = goal(0.0, 1.2);
+        let (mut a, mut b) = (vec![WheelCmd::default(); 5], vec![WheelCmd::default(); 5]);
+        // The lattice alone: every pair's witness ratio is 2 (an edge) or at most 1 (none), far
+        // from the band, so both laws hold the same pairs with weight 1.
+        hard.compute(0, &poses[..4], &goal, &mut a[..4]);
+        smooth.compute(0, &poses[..4], &goal, &mut b[..4]);
+        for (x, y) in a[..4].iter().zip(&b[..4]) {
+            assert!((x.left - y.left).abs() < 1e-12 && (x.right - y.right).abs() < 1e-12);
+        }
+        // With robot 4, the smooth law holds pair 0-1 partly: robot 0's command changes, and
+        // robot 3, whose pairs are all far from the band, keeps the hard law's.
+        hard.compute(0, &poses, &goal, &mut a);
+        smooth.compute(0, &poses, &goal, &mut b);
+        assert!((a[0].left - b[0].left).abs() + (a[0].right - b[0].right).abs() > 1e-6);
+        assert!((a[3].left - b[3].left).abs() < 1e-12 && (a[3].right - b[3].right).abs() < 1e-12);
+        let weight = crate::pair_weights::pair_weight(1.2, band);
+        assert!((weight - 0.15625).abs() < 1e-9, "{weight}");
+        // A pair held at weight w adds w times its term: with slow goals, where no wheel
+        // saturates, the wheel map is affine in the formation velocity.
+        let slow = Goal {
+            phi_star: 0.0,
+            d_star: 1.05,
+            v_star: 0.1,
+        };
+        let gains = ExpertGains::default();
+        let command = |neighbours: Vec<(usize, f64)>| {
+            let mut out = vec![WheelCmd::default(); 2];
+            expert_commands_weighted(
+                &poses[..2],
+                &slow,
+                &gains,
+                &robot,
+                &[neighbours, Vec::new()],
+                &mut out,
+            );
+            out[0]
+        };
+        let (none, full, part) = (
+            command(Vec::new()),
+            command(vec![(1, 1.0)]),
+            command(vec![(1, weight)]),
+        );
+        assert!((full.left - none.left).abs() > 1e-3, "{full:?} {none:?}");
+        assert!((part.left - none.left - weight * (full.left - none.left)).abs() < 1e-12);
+        assert!((part.right - none.right - weight * (full.right - none.right)).abs() < 1e-12);
+    }
+
+    fn teams_of_five_and_eight_form_with(gains: ExpertGains) {
         use formation_world::episode::run_episode;
         use formation_world::metrics::{MetricsConfig, run_metrics};
         for robots in [5, 8] {
@@ -993,8 +1149,8 @@ mod tests {
             assert_eq!(scenario.neighbours().name(), "gabriel");
             for run in 0..3 {
                 let spec = scenario.run_spec(scenario.seed(), run);
-                let mut expert = ExpertController::new(ExpertGains::default(), spec.world.robot)
-                    .with_neighbours(spec.neighbours);
+                let mut expert =
+                    ExpertController::new(gains, spec.world.robot).with_neighbours(spec.neighbours);
                 let traj = run_episode(&spec, &mut expert, &mut |_, _| {}).expect("runs");
                 let m = run_metrics(&traj, spec.ticks(), &MetricsConfig::default());
                 assert!(

@@ -3,6 +3,8 @@
 //! * [`controller`]: [`expert_commands`], the paper's distance-based formation controller as a pure
 //!   function of all robots' poses and the goal, with its [`ExpertGains`], and [`ExpertController`],
 //!   the same as a [`formation_world::Controller`].
+//! * [`pair_weights`]: the neighbour rule's pairs weighed smoothly by their witness ratio, for
+//!   labels that are continuous across the rule's threshold ([`ExpertGains::pair_weight_band`]).
 //! * [`collect`]: demonstration collection into the training data set, and the expert labelling of
 //!   any observation that DAgger uses while the learned policy drives.
 //! * [`response`]: the response gauge, a controller's formation velocity against the expert's
@@ -13,8 +15,10 @@
 
 pub mod collect;
 pub mod controller;
+pub mod pair_weights;
 pub mod response;
 
 pub use controller::{
-    ExpertController, ExpertGains, InvalidGains, PairPoints, expert_commands, expert_commands_among,
+    ExpertController, ExpertGains, InvalidGains, PairPoints, expert_commands,
+    expert_commands_among, expert_commands_weighted,
 };
