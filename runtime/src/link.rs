@@ -257,6 +257,10 @@ pub enum AgentLinkError {
         /// Zenoh's error.
         detail: String,
     },
+    /// The agent's TLS certificate is not usable, or the world refused it (feature `tls`).
+    #[cfg(feature = "tls")]
+    #[error(transparent)]
+    Tls(#[from] crate::zenoh::tls::TlsError),
     /// A world answers at the endpoint, but not for this run.
     #[error(
         "no world of run {run} at {endpoint} after {waited_s:.1} s: the endpoint answers, but the \

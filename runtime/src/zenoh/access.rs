@@ -16,6 +16,10 @@
 //!
 //! so only robot `i`'s credentials receive robot `i`'s scan or command robot `i`, as the
 //! one-publisher/one-subscriber limits guarantee on one host.
+//!
+//! Over a `tls/` endpoint (feature `tls`) each subject is named by its certificate's common name
+//! as well as by its login, and Zenoh admits a session to a subject only when both match: robot
+//! `i` needs robot `i`'s certificate and robot `i`'s password.
 
 use std::path::PathBuf;
 
@@ -66,11 +70,13 @@ fn check(what: &'static str, value: &str, shown: &str) -> Result<(), AccessError
     }
 }
 
-/// A client's login: user and password.
+/// A client's login: user and password, and, when it was read from a credentials folder, that
+/// folder, where a `tls/` endpoint finds the principal's certificate ([`super::tls`]).
 #[derive(Clone, PartialEq, Eq)]
 pub struct Login {
     user: String,
     password: String,
+    folder: Option<PathBuf>,
 }
 
 impl std::fmt::Debug for Login {
@@ -89,7 +95,20 @@ impl Login {
         Ok(Login {
             user: user.to_string(),
             password: password.to_string(),
+            folder: None,
         })
+    }
+
+    /// The login as read from a file of credentials folder `folder`, whose certificate files a
+    /// `tls/` endpoint uses.
+    pub fn in_folder(mut self, folder: PathBuf) -> Login {
+        self.folder = Some(folder);
+        self
+    }
+
+    /// The credentials folder the login was read from, if any.
+    pub fn folder(&self) -> Option<&std::path::Path> {
+        self.folder.as_deref()
     }
 
     /// The user name.
@@ -122,7 +141,22 @@ pub struct WorldAccess {
 }
 
 impl WorldAccess {
-    pub(super) fn apply(&self, config: &mut ::zenoh::Config) -> Result<(), String> {
+    /// The credentials folder: the dictionary's. Over a `tls/` endpoint the world's certificate
+    /// and the team's authority are read there too ([`super::tls`]).
+    pub fn folder(&self) -> PathBuf {
+        match self.dictionary_file.parent() {
+            Some(dir) if !dir.as_os_str().is_empty() => dir.to_path_buf(),
+            _ => PathBuf::from("."),
+        }
+    }
+
+    /// Sets the login dictionary and the rules; `by_certificate`: each subject is named by its
+    /// certificate's common name as well as by its login, so a session must show both.
+    pub(super) fn apply(
+        &self,
+        config: &mut ::zenoh::Config,
+        by_certificate: bool,
+    ) -> Result<(), String> {
         let file = self.dictionary_file.to_str().ok_or_else(|| {
             format!(
                 "the password file {} is not a UTF-8 path",
@@ -135,7 +169,7 @@ impl WorldAccess {
                 &json!({ "dictionary_file": file }).to_string(),
             )
             .map_err(|e| format!("setting the password file {file}: {e}"))?;
-        let acl = self.rules().to_string();
+        let acl = self.rules_naming(by_certificate).to_string();
         config
             .insert_json5("access_control", &acl)
             .map_err(|e| format!("setting the access rules: {e}"))
@@ -143,6 +177,12 @@ impl WorldAccess {
 
     /// The `access_control` section: deny by default, allow each user its own keys.
     pub fn rules(&self) -> serde_json::Value {
+        self.rules_naming(false)
+    }
+
+    /// [`WorldAccess::rules`], each subject named by its login and, with `by_certificate`, by
+    /// its certificate's common name too (Zenoh matches a subject only when both match).
+    pub fn rules_naming(&self, by_certificate: bool) -> serde_json::Value {
         let run = &self.run;
         let world = format!("formation/{run}/world");
         let mut rules = Vec::new();
@@ -196,7 +236,12 @@ impl WorldAccess {
                 rule("ask-setup", &["query"], "ingress", setup.clone());
                 rule("get-setup", &["reply"], "egress", setup);
             }
-            subjects.push(json!({ "id": id, "usernames": [user] }));
+            let subject = if by_certificate {
+                json!({ "id": id, "usernames": [user], "cert_common_names": [user] })
+            } else {
+                json!({ "id": id, "usernames": [user] })
+            };
+            subjects.push(subject);
             policies.push(json!({ "rules": ids, "subjects": [id] }));
         };
         for robot in 0..self.n_robots {
@@ -293,6 +338,14 @@ mod tests {
             assert!(!rule.to_string().contains("robot/1"), "{rule}");
         }
         let mut config = ::zenoh::Config::default();
-        access.apply(&mut config).expect("zenoh takes the rules");
+        access.apply(&mut config, false).expect("zenoh takes the rules");
+        // Over TLS each subject is its certificate's common name and its login, both.
+        let by_certificate = access.rules_naming(true);
+        for subject in by_certificate["subjects"].as_array().unwrap() {
+            assert_eq!(subject["usernames"], subject["cert_common_names"], "{subject}");
+        }
+        assert_eq!(by_certificate["rules"], rules["rules"]);
+        let mut config = ::zenoh::Config::default();
+        access.apply(&mut config, true).expect("zenoh takes the rules");
     }
 }

@@ -260,6 +260,8 @@ fn open_session(
     robot: usize,
     timeout: Duration,
 ) -> Result<::zenoh::Session, AgentLinkError> {
+    #[cfg(feature = "tls")]
+    super::check_tls_client(endpoint, login, timeout)?;
     let config = super::client_config(endpoint, timeout, login).map_err(zenoh_error(format!(
         "configure the connection to {endpoint}"
     )))?;

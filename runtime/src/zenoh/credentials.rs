@@ -8,6 +8,7 @@
 //! | `DIR/robot-<i>.json` | robot `i`'s login and the launch secret | robot `i`'s agent, wherever it runs |
 //! | `DIR/operator.json` | the operator's login | `formation swap` |
 //! | `DIR/recorder.json` | the recorder's login (read-only) | `formation record --connect` |
+//! | `DIR/ca.pem`, `DIR/<principal>.pem`, `DIR/<principal>.key.pem` | with `--tls`: the team's authority and each principal's certificate and key ([`super::tls`]) | each principal, beside its login file |
 //!
 //! Every file is created owner-only (0600, the folder 0700): copy `robot-<i>.json` to robot `i`'s
 //! host by a private channel (scp) and nothing else. Reads are bounded and refuse anything but a
@@ -87,6 +88,13 @@ pub enum CredentialsError {
     /// A login that is not usable.
     #[error(transparent)]
     Access(#[from] AccessError),
+    /// Certificates asked of a build without TLS.
+    #[error("this build has no TLS: build with `--features tls` to make or renew certificates")]
+    NoTls,
+    /// The certificates could not be made.
+    #[cfg(feature = "tls")]
+    #[error(transparent)]
+    Certificates(#[from] super::tls::issue::IssueError),
 }
 
 /// A login file as written: one user's login, and for a robot the launch secret.
@@ -204,6 +212,46 @@ pub fn create(dir: &Path, robots: usize) -> Result<(), CredentialsError> {
     write_private(&passwords_file(dir), &dictionary)
 }
 
+/// [`create`], and the team's certificates ([`super::tls::issue::write_team`]): an authority
+/// and, per principal, a key and a certificate valid for `valid_days` days.
+pub fn create_with_tls(dir: &Path, robots: usize, valid_days: u32) -> Result<(), CredentialsError> {
+    #[cfg(feature = "tls")]
+    {
+        if valid_days == 0 || valid_days > super::tls::issue::MAX_VALID_DAYS {
+            return Err(super::tls::issue::IssueError::ValidDays(valid_days).into());
+        }
+        create(dir, robots)?;
+        let now = std::time::SystemTime::now();
+        super::tls::issue::write_team(dir, robots, now, valid_days)?;
+        Ok(())
+    }
+    #[cfg(not(feature = "tls"))]
+    {
+        let _ = (dir, robots, valid_days);
+        Err(CredentialsError::NoTls)
+    }
+}
+
+/// Renews `principal`'s key and certificate in the team's folder `dir` with its authority,
+/// valid for `valid_days` days; the others stay valid.
+pub fn renew_certificate(
+    dir: &Path,
+    principal: &str,
+    valid_days: u32,
+) -> Result<(), CredentialsError> {
+    #[cfg(feature = "tls")]
+    {
+        let now = std::time::SystemTime::now();
+        super::tls::issue::renew(dir, principal, now, valid_days)?;
+        Ok(())
+    }
+    #[cfg(not(feature = "tls"))]
+    {
+        let _ = (dir, principal, valid_days);
+        Err(CredentialsError::NoTls)
+    }
+}
+
 /// Reads at most `limit` bytes of the regular file `path`.
 fn read_file(path: &Path, limit: u64) -> Result<Vec<u8>, CredentialsError> {
     read_bounded(path, limit).map_err(|refusal| match refusal {
@@ -255,7 +303,7 @@ pub fn read_robot(path: &Path, robot: usize) -> Result<RobotCredentials, Credent
             reason: "it holds no launch secret".into(),
         })?;
     Ok(RobotCredentials {
-        login: Login::new(&file.user, &file.password)?,
+        login: Login::new(&file.user, &file.password)?.in_folder(folder_of(path)),
         secret: LaunchSecret::parse(&secret_text)?,
     })
 }
@@ -263,7 +311,16 @@ pub fn read_robot(path: &Path, robot: usize) -> Result<RobotCredentials, Credent
 /// Reads a login file of any user (the operator's, for `formation swap`).
 pub fn read_login(path: &Path) -> Result<Login, CredentialsError> {
     let file = read_login_file(path)?;
-    Ok(Login::new(&file.user, &file.password)?)
+    Ok(Login::new(&file.user, &file.password)?.in_folder(folder_of(path)))
+}
+
+/// The folder a login file sits in (`.` for a bare file name): a `tls/` endpoint finds the
+/// principal's certificate there.
+fn folder_of(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
 }
 
 /// A login file that is not the recorder's.

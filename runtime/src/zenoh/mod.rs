@@ -33,6 +33,8 @@ pub mod keys;
 pub mod model;
 pub mod record;
 pub mod swap;
+#[cfg(feature = "tls")]
+pub mod tls;
 mod world;
 
 use std::collections::VecDeque;
@@ -55,15 +57,15 @@ pub const MAX_MESSAGE_BYTES: usize = 64 << 20;
 /// The link lease: a peer silent this long is dropped (Zenoh's default).
 pub const LINK_LEASE: Duration = Duration::from_secs(10);
 
-/// A Zenoh TCP endpoint, `tcp/HOST:PORT`, checked.
+/// A Zenoh endpoint, `tcp/HOST:PORT` or (feature `tls`) `tls/HOST:PORT`, checked.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Endpoint(String);
 
-/// An endpoint that is not `tcp/HOST:PORT`.
+/// An endpoint that is not `tcp/HOST:PORT` or `tls/HOST:PORT`.
 #[derive(Debug, thiserror::Error)]
 #[error(
-    "{given:?} is not a Zenoh TCP endpoint: {reason}; write tcp/HOST:PORT, e.g. \
-     tcp/192.168.1.10:7447 or tcp/[::1]:7447"
+    "{given:?} is not a Zenoh TCP endpoint (tcp/ or tls/): {reason}; write tcp/HOST:PORT, e.g. \
+     tcp/192.168.1.10:7447 or tcp/[::1]:7447, or tls/HOST:PORT for mutual TLS"
 )]
 pub struct EndpointError {
     /// What was given.
@@ -73,14 +75,23 @@ pub struct EndpointError {
 }
 
 impl Endpoint {
-    /// Checks `text` is `tcp/HOST:PORT` with a port from 1 to 65535.
+    /// Checks `text` is `tcp/HOST:PORT` or `tls/HOST:PORT` with a port from 1 to 65535; `tls/`
+    /// only in a build with the feature `tls`.
     pub fn parse(text: &str) -> Result<Endpoint, EndpointError> {
         let fail = |reason: &str| EndpointError {
             given: text.to_string(),
             reason: reason.to_string(),
         };
-        let Some(address) = text.strip_prefix("tcp/") else {
-            return Err(fail("only tcp/ is built in"));
+        let address = match (text.strip_prefix("tcp/"), text.strip_prefix("tls/")) {
+            (Some(address), _) => address,
+            (None, Some(address)) if cfg!(feature = "tls") => address,
+            (None, Some(_)) => {
+                return Err(fail(
+                    "this build has no TLS: build with `--features tls` (cargo build \
+                     --features tls)",
+                ));
+            }
+            (None, None) => return Err(fail("only tcp/ and tls/ are built in")),
         };
         let (host, port) = address
             .rsplit_once(':')
@@ -99,6 +110,43 @@ impl Endpoint {
     /// The endpoint as Zenoh writes it.
     pub fn as_str(&self) -> &str {
         &self.0
+    }
+
+    /// Whether it is a mutual-TLS endpoint (`tls/`).
+    pub fn is_tls(&self) -> bool {
+        self.0.starts_with("tls/")
+    }
+
+    /// `HOST:PORT`, without the protocol.
+    pub fn address(&self) -> &str {
+        self.0.split_once('/').map_or(self.0.as_str(), |(_, a)| a)
+    }
+
+    /// Whether its host is a loopback address (`127.0.0.0/8`, `::1`, `localhost`): traffic that
+    /// never leaves this host.
+    pub fn is_loopback(&self) -> bool {
+        let host = self
+            .address()
+            .rsplit_once(':')
+            .map_or(self.address(), |(host, _)| host);
+        let host = host.trim_start_matches('[').trim_end_matches(']');
+        host.eq_ignore_ascii_case("localhost")
+            || host
+                .parse::<std::net::IpAddr>()
+                .is_ok_and(|ip| ip.is_loopback())
+    }
+
+    /// The warning a router listening here gets: `None` on loopback or TLS.
+    pub fn clear_text_warning(&self) -> Option<String> {
+        if self.is_tls() || self.is_loopback() {
+            return None;
+        }
+        Some(format!(
+            "warning: {self} carries the team in clear text: whoever is on the path reads every \
+             scan and command; use tls/{} with the certificates of `formation credentials --tls` \
+             (a build with --features tls)",
+            self.address()
+        ))
     }
 }
 
@@ -143,7 +191,9 @@ fn base_config(mode: &str) -> Result<::zenoh::Config, String> {
 }
 
 /// The world's configuration: a router listening on `listen`, checking logins and key
-/// permissions when `access` is given.
+/// permissions when `access` is given; on a `tls/` endpoint also the certificates of `access`'s
+/// folder (the world's own is checked first). A plain `tcp/` endpoint off loopback is warned
+/// about once.
 pub(crate) fn world_config(
     listen: &Endpoint,
     access: Option<&WorldAccess>,
@@ -152,10 +202,39 @@ pub(crate) fn world_config(
     config
         .insert_json5("listen/endpoints", &format!("[{:?}]", listen.as_str()))
         .map_err(|e| format!("listening on {listen}: {e}"))?;
+    if let Some(warning) = listen.clear_text_warning() {
+        static WARNED: std::sync::Once = std::sync::Once::new();
+        WARNED.call_once(|| eprintln!("formation-world: {warning}"));
+    }
+    if listen.is_tls() {
+        let access = access.ok_or_else(|| {
+            format!(
+                "{listen} needs the team's credentials: pass --credentials DIR, a folder written \
+                 by `formation credentials --tls`"
+            )
+        })?;
+        apply_world_tls(&mut config, access)?;
+    }
     if let Some(access) = access {
-        access.apply(&mut config)?;
+        access.apply(&mut config, listen.is_tls())?;
     }
     Ok(config)
+}
+
+/// The world's certificate (checked) and the team's authority, from `access`'s folder.
+#[cfg(feature = "tls")]
+fn apply_world_tls(config: &mut ::zenoh::Config, access: &WorldAccess) -> Result<(), String> {
+    let identity = tls::TlsIdentity::in_folder(&access.folder(), tls::WORLD_PRINCIPAL);
+    identity
+        .load_checked(std::time::SystemTime::now())
+        .map_err(|e| e.to_string())?;
+    identity.apply_listen(config)
+}
+
+/// No TLS in this build ([`Endpoint::parse`] refuses `tls/` already).
+#[cfg(not(feature = "tls"))]
+fn apply_world_tls(_: &mut ::zenoh::Config, _: &WorldAccess) -> Result<(), String> {
+    Err("this build has no TLS: build with `--features tls`".into())
 }
 
 /// An agent's (or a tool's) configuration: a client of the world's router at `connect`, within
@@ -184,7 +263,69 @@ pub(crate) fn client_config(
     if let Some(login) = login {
         login.apply(&mut config)?;
     }
+    if connect.is_tls() {
+        client_tls_identity(connect, login)?.apply_connect(&mut config)?;
+    }
     Ok(config)
+}
+
+/// The certificate files of `login`'s principal, in the folder its login file came from.
+#[cfg(feature = "tls")]
+fn client_tls_identity(
+    connect: &Endpoint,
+    login: Option<&Login>,
+) -> Result<tls::TlsIdentity, String> {
+    let missing = || {
+        format!(
+            "{connect} needs a certificate: pass --credentials with the login file of a folder \
+             written by `formation credentials --tls` (its NAME.pem and NAME.key.pem and ca.pem \
+             beside it)"
+        )
+    };
+    let login = login.ok_or_else(missing)?;
+    let folder = login.folder().ok_or_else(missing)?;
+    Ok(tls::TlsIdentity::in_folder(folder, login.user()))
+}
+
+/// No TLS in this build.
+#[cfg(not(feature = "tls"))]
+fn client_tls_identity(connect: &Endpoint, _: Option<&Login>) -> Result<Never, String> {
+    Err(format!("{connect}: this build has no TLS: build with `--features tls`"))
+}
+
+/// Stands in for the identity a build without TLS never has.
+#[cfg(not(feature = "tls"))]
+enum Never {}
+
+#[cfg(not(feature = "tls"))]
+impl Never {
+    fn apply_connect(&self, _: &mut ::zenoh::Config) -> Result<(), String> {
+        match *self {}
+    }
+}
+
+/// Before a client connects to a `tls/` endpoint: its own certificate is checked against the
+/// team's authority, its dates and its name, then one handshake of its own with the world
+/// ([`tls::probe`]) names a refusal, within `timeout`. Nothing to do on `tcp/`.
+#[cfg(feature = "tls")]
+pub(crate) fn check_tls_client(
+    connect: &Endpoint,
+    login: Option<&Login>,
+    timeout: Duration,
+) -> Result<(), tls::TlsError> {
+    if !connect.is_tls() {
+        return Ok(());
+    }
+    let identity = client_tls_identity(connect, login).map_err(|detail| {
+        tls::TlsError::Read {
+            what: "the certificate".into(),
+            path: std::path::PathBuf::from(connect.as_str()),
+            source: std::io::Error::other(detail),
+        }
+    })?;
+    let loaded = identity.load_checked(std::time::SystemTime::now())?;
+    tls::probe::probe_world(connect.as_str(), &loaded, &identity.principal, timeout)?;
+    Ok(())
 }
 
 /// Opens a session, mapping Zenoh's error to text (without the source locations Zenoh appends).
@@ -225,10 +366,7 @@ pub(crate) const LOGIN_ANSWER: Duration = Duration::from_secs(10);
 /// Whether something accepts TCP connections at `endpoint`, within `within`.
 pub(crate) fn accepts_tcp(endpoint: &Endpoint, within: Duration) -> bool {
     use std::net::ToSocketAddrs as _;
-    let Some(address) = endpoint.as_str().strip_prefix("tcp/") else {
-        return false;
-    };
-    let Ok(addresses) = address.to_socket_addrs() else {
+    let Ok(addresses) = endpoint.address().to_socket_addrs() else {
         return false;
     };
     addresses
@@ -408,8 +546,8 @@ mod tests {
             assert_eq!(Endpoint::parse(good).unwrap().as_str(), good);
         }
         for (bad, why) in [
-            ("127.0.0.1:7447", "only tcp/"),
-            ("udp/127.0.0.1:7447", "only tcp/"),
+            ("127.0.0.1:7447", "only tcp/ and tls/"),
+            ("udp/127.0.0.1:7447", "only tcp/ and tls/"),
             ("tcp/127.0.0.1", "port is missing"),
             ("tcp/:7447", "host is missing"),
             ("tcp/127.0.0.1:0", "from 1 to 65535"),
@@ -417,6 +555,29 @@ mod tests {
         ] {
             let e = Endpoint::parse(bad).unwrap_err().to_string();
             assert!(e.contains(why) && e.contains("tcp/HOST:PORT"), "{bad}: {e}");
+        }
+    }
+
+    /// Issue 36: a plain endpoint off loopback is warned about, naming `--tls`; loopback and
+    /// TLS are not.
+    #[test]
+    fn clear_text_off_loopback_is_warned_about() {
+        let warning = |text: &str| Endpoint::parse(text).unwrap().clear_text_warning();
+        for quiet in ["tcp/127.0.0.1:7447", "tcp/[::1]:7447", "tcp/localhost:7447"] {
+            assert_eq!(warning(quiet), None, "{quiet}");
+        }
+        let loud = warning("tcp/0.0.0.0:7447").expect("a warning");
+        assert!(loud.contains("clear text") && loud.contains("--tls"), "{loud}");
+        assert!(loud.contains("tls/0.0.0.0:7447"), "{loud}");
+        assert!(warning("tcp/robot-host.local:7447").is_some());
+        let tls = Endpoint::parse("tls/0.0.0.0:7447");
+        if cfg!(feature = "tls") {
+            let tls = tls.unwrap();
+            assert!(tls.is_tls() && tls.clear_text_warning().is_none());
+            assert_eq!(tls.address(), "0.0.0.0:7447");
+        } else {
+            let e = tls.unwrap_err().to_string();
+            assert!(e.contains("--features tls"), "{e}");
         }
     }
 

@@ -123,6 +123,10 @@ pub enum RecorderEvent {
 /// Why a recorder could not connect.
 #[derive(Debug, thiserror::Error)]
 pub enum RecorderLinkError {
+    /// The recorder's TLS certificate is not usable, or the world refused it (feature `tls`).
+    #[cfg(feature = "tls")]
+    #[error(transparent)]
+    Tls(#[from] super::tls::TlsError),
     /// The world's endpoint could not be reached, or its router refused the login.
     #[error(
         "cannot reach the team at {endpoint}, or its router refused the recorder's login: \
@@ -307,6 +311,8 @@ fn open_session(
     timeout: Duration,
 ) -> Result<::zenoh::Session, RecorderLinkError> {
     let started = Instant::now();
+    #[cfg(feature = "tls")]
+    super::check_tls_client(endpoint, login, timeout)?;
     let configure = |within: Duration| {
         super::client_config(endpoint, within, login).map_err(|detail| RecorderLinkError::Zenoh {
             action: format!("configure the connection to {endpoint}"),

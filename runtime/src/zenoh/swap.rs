@@ -18,6 +18,10 @@ use super::{Endpoint, Login};
 /// Why a swap request over Zenoh got no answer.
 #[derive(Debug, thiserror::Error)]
 pub enum SwapClientError {
+    /// The operator's TLS certificate is not usable, or the world refused it (feature `tls`).
+    #[cfg(feature = "tls")]
+    #[error(transparent)]
+    Tls(#[from] super::tls::TlsError),
     /// The world's endpoint could not be reached (or refused the login).
     #[error(
         "cannot reach the world at {endpoint}: {detail}; is the run listening there, and are the \
@@ -71,6 +75,8 @@ pub fn request_swap(
     let started = Instant::now();
     let mut payload = message_bytes(&SwapRequestMsg::encode(request)?).to_vec();
     append_model(&mut payload, model)?;
+    #[cfg(feature = "tls")]
+    super::check_tls_client(endpoint, login, timeout)?;
     let config = super::client_config(endpoint, timeout, login).map_err(|detail| {
         SwapClientError::Zenoh {
             action: format!("configure the connection to {endpoint}"),
