@@ -2,7 +2,7 @@
 //! evaluation with the shipped model, every robot in its own OS process over iceoryx2 (or
 //! in-process with `--in-process`), then writes the HTML report and prints its path. With
 //! `--record FILE.mcap` case 1 is recorded; with `--foxglove HOST:PORT` the three cases are
-//! served live to Foxglove ([`crate::live_view`]), one world after another on that address.
+//! served live to Foxglove ([`formation_world_node::live_view`]), one world after another on that address.
 
 use std::path::Path;
 
@@ -24,7 +24,8 @@ pub fn demo_command(args: &DemoArgs) -> anyhow::Result<()> {
     if let Some(file) = &args.record {
         formation_record::RecordTarget::File(file.clone()).check()?;
     }
-    let foxglove = crate::live_view::requested(args.foxglove.as_deref(), "formation", true)?;
+    let foxglove =
+        formation_world_node::live_view::requested(args.foxglove.as_deref(), "formation", true)?;
     formation_proto::files::create_private_dir_all(&args.out)
         .map_err(|e| paths::WriteError::creating_dir(&args.out, e))?;
     let mode = if args.in_process {

@@ -13,10 +13,6 @@
 //! * [`learn`]: `train` (runs the PyTorch trainer), `dagger` (policy drives, expert labels,
 //!   retrain), and `dagger-label` / `dagger-append` (one iteration's labelling in shares).
 //! * [`launch`]: the multi-process launcher (`run`, `profile`, `swap`, `credentials`).
-//! * [`live_view`]: `--foxglove HOST:PORT`, the run served live to Foxglove (feature
-//!   `foxglove`).
-//! * [`pilot`]: the robot's ONNX decision as the runtime's agent loop drives it (the
-//!   `formation-agent` binary).
 //! * `record_connect` (feature `zenoh`): `formation record --connect`, recording a live team
 //!   from outside.
 //! * [`report`]: the HTML report with the paper's figures.
@@ -29,15 +25,11 @@
 pub mod args;
 pub mod collect;
 pub mod demo;
-#[cfg(feature = "zenoh")]
-pub mod endpoint;
 pub mod eval;
 pub mod gauge;
 pub mod launch;
 pub mod learn;
-pub mod live_view;
 pub mod paths;
-pub mod pilot;
 pub mod record;
 #[cfg(feature = "zenoh")]
 pub mod record_connect;
@@ -68,7 +60,7 @@ pub fn exit_for_error(error: &anyhow::Error) -> ProcessExit {
 /// Parses the command line and runs the chosen subcommand.
 pub fn main_with_args() -> anyhow::Result<()> {
     let cli = args::Cli::parse();
-    init_tracing(cli.verbose);
+    formation_runtime::process::init_tracing(cli.verbose);
     formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
     match cli.command {
         args::Command::Eval(a) => eval::eval_command(&a),
@@ -104,25 +96,4 @@ fn record_command(_args: &args::RecordArgs) -> anyhow::Result<()> {
         transport: formation_runtime::transport::Transport::Zenoh,
     }
     .into())
-}
-
-/// Logs to stderr with `FORMATION_LOG`'s filter, else at the level `verbose` asks for (0: warn,
-/// 1: info, more: debug). The `formation` command and both runtime processes start with it.
-/// By default Zenoh's own lines are off: it logs every retry of a refused connection with its
-/// source paths, and formation says what failed and the fix itself (`-v` or `FORMATION_LOG`
-/// shows them).
-pub fn init_tracing(verbose: u8) {
-    let level = match verbose {
-        0 => "warn,zenoh=off",
-        1 => "info",
-        _ => "debug",
-    };
-    let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
-    // Colour only for a terminal: a log file or a pipe gets plain text.
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .try_init();
 }

@@ -20,20 +20,20 @@
 
 use std::collections::{BTreeMap, HashSet};
 use std::fs::File;
-use std::io::{BufWriter, Read as _};
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use formation_proto::files::{FileRefusal, read_bounded};
 use mcap::records::{AttachmentHeader, MessageHeader, Metadata};
 
 use crate::error::RecordError;
+use crate::model_files::{open_model, read_model, sha256_hex};
 use crate::setup::{RecordingSetup, TeamSetup};
 use crate::swap::{SWAP_METADATA, SwapEvent, SwapStorage, SwappedModel, check_swapped_bytes};
 use crate::tick::{FinalSample, RUN_END_METADATA, RunEnd, TickRecord};
 use crate::topics::{MessageError, Replay, Slot, TickMessages, Topics, nanos};
 
-/// The most bytes of a model a recording stores as an attachment.
-pub const MAX_ATTACHED_MODEL_BYTES: u64 = 256 << 20;
+pub use crate::model_files::MAX_ATTACHED_MODEL_BYTES;
 
 /// The media type of a model stored as an attachment.
 pub const MODEL_MEDIA_TYPE: &str = "application/x-onnx";
@@ -48,12 +48,6 @@ const ZSTD_LEVEL: u32 = 1;
 
 /// The output buffer between the MCAP writer and the file.
 const FILE_BUFFER: usize = 256 << 10;
-
-/// How much of a model is read at a time, to hash and store it.
-const MODEL_PIECE: usize = 64 << 10;
-
-/// What takes a model's bytes piece by piece: a hasher, or the attachment being written.
-type PieceSink<'a> = dyn FnMut(&[u8]) -> Result<(), RecordError> + 'a;
 
 /// The file's writer.
 type McapWriter = mcap::Writer<BufWriter<File>>;
@@ -118,66 +112,6 @@ fn write_message(
         publish_time: ns,
     };
     mcap.write_to_known_channel(&header, data)
-}
-
-/// Opens a model to read, refusing one larger than a recording stores (`recording` names the
-/// file in errors).
-fn open_model(recording: &Path, model: &Path) -> Result<(File, u64), RecordError> {
-    let model_error = |source| RecordError::Model {
-        path: recording.to_path_buf(),
-        model: model.to_path_buf(),
-        source,
-    };
-    let file = File::open(model).map_err(model_error)?;
-    let size = file.metadata().map_err(model_error)?.len();
-    if size > MAX_ATTACHED_MODEL_BYTES {
-        return Err(RecordError::ModelTooLarge {
-            path: recording.to_path_buf(),
-            model: model.to_path_buf(),
-            size,
-            limit: MAX_ATTACHED_MODEL_BYTES,
-        });
-    }
-    Ok((file, size))
-}
-
-/// Reads `model` piece by piece, handing each piece to `each`; returns the bytes read.
-fn read_model(
-    recording: &Path,
-    model: &Path,
-    each: &mut PieceSink<'_>,
-) -> Result<u64, RecordError> {
-    let (file, size) = open_model(recording, model)?;
-    let mut file = file.take(size);
-    let mut piece = vec![0u8; MODEL_PIECE];
-    let mut total = 0;
-    loop {
-        let n = file.read(&mut piece).map_err(|source| RecordError::Model {
-            path: recording.to_path_buf(),
-            model: model.to_path_buf(),
-            source,
-        })?;
-        if n == 0 {
-            return Ok(total);
-        }
-        total += n as u64;
-        each(&piece[..n])?;
-    }
-}
-
-/// The SHA-256 of `model`, as hex (`recording` names the file in errors).
-pub(crate) fn hash_model(recording: &Path, model: &Path) -> Result<String, RecordError> {
-    use sha2::Digest as _;
-    let mut hasher = sha2::Sha256::new();
-    read_model(recording, model, &mut |piece| {
-        hasher.update(piece);
-        Ok(())
-    })?;
-    Ok(hasher
-        .finalize()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect())
 }
 
 impl RecordingFile {
@@ -329,7 +263,7 @@ impl RecordingFile {
         let (sha256, storage) = match self.read_swapped(event) {
             Err(why) => (String::new(), SwapStorage::NotStored(why)),
             Ok((path, bytes)) => {
-                let sha256 = crate::models::sha256_hex(&bytes);
+                let sha256 = sha256_hex(&bytes);
                 let local = event.bytes.is_none();
                 let shipped_models = self.shipped_models.as_deref();
                 let storage = if local && crate::setup::is_shipped_in(shipped_models, path) {

@@ -8,18 +8,13 @@
 //! run is found the same way from its record ([`swapped_model_file`]), placed under the file stem
 //! of its recorded model id.
 
-use std::io::Read as _;
 use std::path::{Path, PathBuf};
-
-use sha2::Digest as _;
 
 use formation_proto::model_id::split_model_id;
 
+pub use crate::model_files::{sha256_file, sha256_hex};
 use crate::read::{ModelStorage, RunInfo};
 use crate::swap::{SwapStorage, SwappedModel};
-
-/// How much of a model is hashed at a time.
-const PIECE: usize = 64 << 10;
 
 /// Why a recording's model cannot be replayed.
 #[derive(Debug, thiserror::Error)]
@@ -93,29 +88,6 @@ pub enum ModelFileError {
         #[source]
         source: std::io::Error,
     },
-}
-
-/// The SHA-256 of `bytes`, as lowercase hex.
-pub fn sha256_hex(bytes: &[u8]) -> String {
-    hex(&sha2::Sha256::digest(bytes))
-}
-
-/// The SHA-256 of the file at `path`, read piece by piece, as lowercase hex.
-pub fn sha256_file(path: &Path) -> std::io::Result<String> {
-    let mut file = std::fs::File::open(path)?;
-    let mut hasher = sha2::Sha256::new();
-    let mut piece = vec![0u8; PIECE];
-    loop {
-        let n = file.read(&mut piece)?;
-        if n == 0 {
-            return Ok(hex(&hasher.finalize()));
-        }
-        hasher.update(&piece[..n]);
-    }
-}
-
-fn hex(digest: &[u8]) -> String {
-    digest.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// Where the attachment `name` is kept in `dir` until the metadata names its model.

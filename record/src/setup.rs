@@ -133,7 +133,7 @@ impl RecordingSetup {
         let mut attachments = Vec::new();
         let (files, per_robot) = self.distinct_models();
         for (k, model) in files.into_iter().enumerate() {
-            let sha256 = crate::file::hash_model(recording, model)?;
+            let sha256 = crate::model_files::hash_model(recording, model)?;
             metadata.insert(format!("model.{k}.path"), model.display().to_string());
             metadata.insert(format!("model.{k}.sha256"), sha256.clone());
             let stored = if self.is_shipped(model) {

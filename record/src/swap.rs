@@ -19,14 +19,14 @@
 //! network (Zenoh). A model is stored only when they are the ones the agent loaded: their content
 //! hash must be the one in the agent's model id ([`check_swapped_bytes`]); a file changed on disk
 //! since the swap, one that cannot be read or is larger than
-//! [`crate::file::MAX_ATTACHED_MODEL_BYTES`] is recorded as not stored, with the reason.
+//! [`crate::model_files::MAX_ATTACHED_MODEL_BYTES`] is recorded as not stored, with the reason.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use formation_proto::model_id::{content_hash, content_hash_of_id};
 
-use crate::read::ReadError;
+use crate::read_error::ReadError;
 
 /// The name of a swapped-in model's metadata record.
 pub const SWAP_METADATA: &str = "formation.swapped_model";

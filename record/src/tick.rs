@@ -143,12 +143,12 @@ impl RunEnd {
     pub fn from_metadata(
         path: &Path,
         metadata: &BTreeMap<String, String>,
-    ) -> Result<RunEnd, crate::read::ReadError> {
+    ) -> Result<RunEnd, crate::read_error::ReadError> {
         let complete = match metadata.get("complete").map(String::as_str) {
             Some("true") => true,
             Some("false") => false,
             _ => {
-                return Err(crate::read::ReadError::Metadata {
+                return Err(crate::read_error::ReadError::Metadata {
                     path: path.to_path_buf(),
                     record: RUN_END_METADATA,
                     key: "complete".to_owned(),

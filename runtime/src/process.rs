@@ -1,4 +1,6 @@
-//! What the world and agent processes share beyond the link: noticing that the launcher is gone.
+//! What the world and agent processes share beyond the link: noticing that the launcher is gone,
+//! their log lines ([`init_tracing`], the `formation` command's too) and the endpoint flag of a
+//! network transport ([`required_endpoint`]).
 
 use std::io::Read;
 use std::sync::Arc;
@@ -24,4 +26,52 @@ pub fn flag_when_stdin_closes() -> Arc<AtomicBool> {
         flag.store(true, Ordering::Relaxed);
     });
     closed
+}
+
+/// Logs to stderr with `FORMATION_LOG`'s filter, else at the level `verbose` asks for (0: warn,
+/// 1: info, more: debug). The `formation` command and both runtime processes start with it.
+/// By default Zenoh's own lines are off: it logs every retry of a refused connection with its
+/// source paths, and formation says what failed and the fix itself (`-v` or `FORMATION_LOG`
+/// shows them).
+pub fn init_tracing(verbose: u8) {
+    let level = match verbose {
+        0 => "warn,zenoh=off",
+        1 => "info",
+        _ => "debug",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_env("FORMATION_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    // Colour only for a terminal: a log file or a pipe gets plain text.
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .try_init();
+}
+
+/// Why the endpoint flag of a network transport (`--listen`, `--connect`) gives no endpoint.
+#[cfg(feature = "zenoh")]
+#[derive(Debug, thiserror::Error)]
+pub enum EndpointFlagError {
+    /// The flag is missing.
+    #[error(transparent)]
+    Missing(#[from] crate::transport::TransportError),
+    /// The flag's value is not `tcp/HOST:PORT`.
+    #[error(transparent)]
+    Invalid(#[from] crate::zenoh::EndpointError),
+}
+
+/// The Zenoh endpoint that `transport` needs from `flag` (`--listen` or `--connect`), given as
+/// `given`: missing, it is [`crate::transport::TransportError::MissingEndpoint`] naming the flag;
+/// given, it must parse as `tcp/HOST:PORT`. One reading for the world's and the agent's
+/// processes, over Zenoh and ROS 2.
+#[cfg(feature = "zenoh")]
+pub fn required_endpoint(
+    given: Option<&str>,
+    flag: &'static str,
+    transport: crate::transport::Transport,
+) -> Result<crate::zenoh::Endpoint, EndpointFlagError> {
+    let text =
+        given.ok_or(crate::transport::TransportError::MissingEndpoint { flag, transport })?;
+    Ok(crate::zenoh::Endpoint::parse(text)?)
 }

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use formation_cli::pilot::{OnnxPilot, OnnxPilots};
+use formation_agent_node::pilot::{OnnxPilot, OnnxPilots};
 use formation_cli::replay::{ReplayOptions, replay_recording};
 use formation_proto::{LidarSpec, OccupancySpec};
 use formation_robot_agent::decision::{DecisionError, PolicyBackend};

@@ -21,7 +21,7 @@ use std::process::Command;
 use std::sync::OnceLock;
 use std::time::Duration;
 
-use formation_cli::pilot::OnnxPilots;
+use formation_agent_node::pilot::OnnxPilots;
 use formation_proto::{Goal, LidarSpec};
 use formation_robot_agent::decision::Agent;
 use formation_ros2::msg::Quaternion;

@@ -22,11 +22,14 @@
 //! (SIGCONT after a stop, SIGUSR1, SIGURG, ...) only interrupt a wait, which it simply resumes.
 //! Its exit code is one of [`formation_proto::exit::ProcessExit`]: 0 when it leaves cleanly, 2 on
 //! an error, 130 on SIGINT, 143 on SIGTERM (in every mode, and while it connects too).
+//!
+//! The binary's `main.rs` parses [`Args`] and calls [`run`], then [`exit_for`]; the robot's
+//! ONNX decision as the agent loop drives it is [`pilot`].
 
-mod ros2;
+pub mod pilot;
+pub mod ros2;
 
 use std::path::PathBuf;
-use std::process::ExitCode;
 
 use formation_proto::exit::ProcessExit;
 use formation_runtime::link::AgentLinkError;
@@ -34,8 +37,8 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
+use crate::pilot::OnnxPilots;
 use clap::Parser;
-use formation_cli::pilot::OnnxPilots;
 use formation_proto::wire::RunId;
 use formation_runtime::agent::{AgentExit, AgentLoop, load_model};
 use formation_runtime::auth::LaunchSecret;
@@ -52,38 +55,38 @@ use formation_runtime::transport::TransportError;
 /// One robot's agent process of formation's multi-process runtime.
 #[derive(Debug, Parser)]
 #[command(name = "formation-agent", version)]
-struct Args {
+pub struct Args {
     /// Run id of the world to join (iceoryx2 and zenoh).
     #[arg(long)]
-    run_id: Option<String>,
+    pub run_id: Option<String>,
     /// Index of the robot this agent drives. With ROS 2: the simulated team's robot whose topics
     /// (`/robot_<i>/scan`, `/robot_<i>/odom`, `/robot_<i>/cmd_vel`) are the defaults.
     #[arg(long)]
-    robot: Option<usize>,
+    pub robot: Option<usize>,
     /// ONNX policy model.
     #[arg(long)]
-    model: PathBuf,
+    pub model: PathBuf,
     /// How long to wait for the world's services \[ms\].
     #[arg(long, default_value_t = 10_000)]
-    connect_timeout_ms: u64,
+    pub connect_timeout_ms: u64,
     /// Testing only: misbehave (crash-after=N, hang-after=N, late-ms=X, nan-after=N).
     #[arg(long, env = "FORMATION_AGENT_FAULT")]
-    fault: Option<Fault>,
+    pub fault: Option<Fault>,
     /// Exit when standard input closes (set by the launcher, so agents never outlive it).
     #[arg(long)]
-    exit_on_stdin_close: bool,
+    pub exit_on_stdin_close: bool,
     /// How to reach the world: iceoryx2 shared memory on this host, or Zenoh over TCP; or, with
     /// ros2, drive a ROS 2 robot through its Zenoh router (rmw_zenoh).
     #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
-    transport: Transport,
+    pub transport: Transport,
     /// Zenoh: the world's endpoint, tcp/ADDR:PORT; ROS 2: the robot's router (rmw_zenohd
     /// listens on tcp/ADDR:7447).
     #[arg(long, value_name = "tcp/ADDR:PORT")]
-    connect: Option<String>,
+    pub connect: Option<String>,
     /// Zenoh: this robot's credentials file (`robot-<i>.json` from `formation credentials`): its
     /// login and the launch secret, which then is not read from standard input.
     #[arg(long, value_name = "FILE")]
-    credentials: Option<PathBuf>,
+    pub credentials: Option<PathBuf>,
     /// Rehearse the last decision this long before the next scan is due \[µs\] (0: never), so
     /// that an agent idling between realtime ticks decides with warm caches (measured on 2
     /// cores, realtime case 1: inference p50 from 140–166 µs down to 72–88 µs, for one extra
@@ -92,21 +95,15 @@ struct Args {
     /// rehearsals before each scan would cost the world its deadlines, unless
     /// `FORMATION_AGENT_REHEARSE_US` is set.
     #[arg(long, env = "FORMATION_AGENT_REHEARSE_US", default_value_t = 2_000)]
-    rehearse_us: u64,
+    pub rehearse_us: u64,
     /// ROS 2 mode's flags.
     #[command(flatten)]
-    ros2: ros2::Ros2Args,
+    pub ros2: ros2::Ros2Args,
 }
 
-fn main() -> ExitCode {
-    formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
-    formation_cli::init_tracing(0);
-    let args = Args::parse();
-    let who = match args.robot {
-        Some(robot) => format!("formation-agent (robot {robot})"),
-        None => "formation-agent".to_string(),
-    };
-    let exit = match run(&args) {
+/// How a run of this agent ends as the process's exit, said on stderr (`who` names the agent).
+pub fn exit_for(who: &str, result: anyhow::Result<AgentExit>) -> ProcessExit {
+    match result {
         Ok(AgentExit::Shutdown) => {
             tracing::info!("{who}: exiting: the world asked us to shut down");
             ProcessExit::Success
@@ -132,11 +129,19 @@ fn main() -> ExitCode {
                 ProcessExit::Failure
             }
         },
-    };
-    exit.into()
+    }
 }
 
-fn run(args: &Args) -> anyhow::Result<AgentExit> {
+/// The name this agent goes by in its messages: `formation-agent (robot I)`.
+pub fn who(args: &Args) -> String {
+    match args.robot {
+        Some(robot) => format!("formation-agent (robot {robot})"),
+        None => "formation-agent".to_string(),
+    }
+}
+
+/// Loads the model, connects over the chosen transport and runs the agent loop until it ends.
+pub fn run(args: &Args) -> anyhow::Result<AgentExit> {
     let pilots = Arc::new(OnnxPilots);
     let model = load_model(&*pilots, &args.model)?;
     args.transport.check_built_in("formation-agent")?;
@@ -201,7 +206,7 @@ fn zenoh_link(
     timeout: Duration,
 ) -> anyhow::Result<Box<dyn AgentLink>> {
     use formation_runtime::zenoh::{ZenohAgentLink, credentials};
-    let endpoint = formation_cli::endpoint::required_endpoint(
+    let endpoint = formation_runtime::process::required_endpoint(
         args.connect.as_deref(),
         "--connect",
         Transport::Zenoh,

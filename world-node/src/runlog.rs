@@ -21,7 +21,7 @@ use formation_world::runlog::{
 pub use formation_world::runlog::{RunLog, TimingLog, log_paths, write_atomic};
 use formation_world::{EpisodeError, RunSpec, run_episode_recorded};
 
-use formation_cli::live_view::LiveView;
+use crate::live_view::LiveView;
 use formation_record::live::{LiveMessage, LiveSetup, encode};
 use formation_runtime::exchange::AgentsController;
 use formation_runtime::link::RecordFeed;

@@ -18,8 +18,8 @@ use formation_runtime::transport::TransportError;
 
 #[cfg(feature = "zenoh")]
 use {
+    crate::pilot::OnnxPilots,
     anyhow::Context,
-    formation_cli::pilot::OnnxPilots,
     formation_proto::LidarSpec,
     formation_ros2::{Namespace, NodeName, PartialScan, RingContract, TopicName},
     formation_runtime::agent::PilotMaker,
@@ -144,7 +144,7 @@ fn model_ring(model: &dyn PolicyBackend, path: &Path) -> anyhow::Result<LidarSpe
 /// Runs the ROS 2 mode until a signal or `stop`.
 #[cfg(feature = "zenoh")]
 pub fn run(
-    args: &super::Args,
+    args: &crate::Args,
     model: Box<dyn PolicyBackend>,
     stop: &AtomicBool,
 ) -> anyhow::Result<AgentExit> {
@@ -212,7 +212,7 @@ pub fn run(
 
 /// Refuses the flags of the other transports and returns the router to connect to.
 #[cfg(feature = "zenoh")]
-fn check_ros2_flags(args: &super::Args) -> anyhow::Result<Endpoint> {
+fn check_ros2_flags(args: &crate::Args) -> anyhow::Result<Endpoint> {
     if args.fault.is_some() {
         anyhow::bail!("--fault is for the iceoryx2 and zenoh transports, not ros2");
     }
@@ -222,11 +222,12 @@ fn check_ros2_flags(args: &super::Args) -> anyhow::Result<Endpoint> {
              ROS graph, not a run (drop --run-id)"
         );
     }
-    formation_cli::endpoint::required_endpoint(
+    formation_runtime::process::required_endpoint(
         args.connect.as_deref(),
         "--connect",
         Transport::Ros2,
     )
+    .map_err(Into::into)
 }
 
 /// The topic `flag` names, else `default`, checked.
@@ -249,7 +250,7 @@ struct RobotTopics {
 
 /// The robot's topics: the flags', else the team's robot's (`--robot`) or a single robot's.
 #[cfg(feature = "zenoh")]
-fn robot_topics(args: &super::Args) -> anyhow::Result<RobotTopics> {
+fn robot_topics(args: &crate::Args) -> anyhow::Result<RobotTopics> {
     let flags = &args.ros2;
     let team = args.robot.map(TeamTopics::robot);
     let default = |pick: fn(&TeamTopics) -> &TopicName, single: &str| match &team {
@@ -352,7 +353,7 @@ fn checked_stale_ms(flags: &Ros2Args) -> anyhow::Result<u64> {
 /// This build has no Zenoh, so no ROS 2.
 #[cfg(not(feature = "zenoh"))]
 pub fn run(
-    _args: &super::Args,
+    _args: &crate::Args,
     _model: Box<dyn PolicyBackend>,
     _stop: &AtomicBool,
 ) -> anyhow::Result<AgentExit> {

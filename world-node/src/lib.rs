@@ -19,19 +19,23 @@
 //! logins of a credentials folder (`--credentials DIR`, from `formation credentials`) when given.
 //!
 //! Usually started by `formation run` / `formation eval --processes`, not by hand.
+//!
+//! The binary's `main.rs` parses [`Args`] and calls [`run`], then [`exit_for`]. Playing one run
+//! with its journal, recording and record channel is [`runlog`]; the Foxglove view is
+//! [`live_view`].
 
-mod runlog;
+pub mod live_view;
+pub mod runlog;
 
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use formation_proto::exit::ProcessExit;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
+use crate::live_view::LiveView;
 use anyhow::Context;
 use clap::Parser;
-use formation_cli::live_view::{self, LiveView};
 use formation_proto::wire::{RunId, WorldEvent};
 use formation_runtime::auth::LaunchSecret;
 use formation_runtime::clock::SystemClock;
@@ -61,72 +65,72 @@ const SETTING_FLAGS: [&str; 6] = [
 /// The world process of formation's multi-process runtime.
 #[derive(Debug, Parser)]
 #[command(name = "formation-world", version)]
-struct Args {
+pub struct Args {
     /// Run id: namespaces the iceoryx2 services and files (letters, digits, '-', '_').
     #[arg(long)]
-    run_id: String,
+    pub run_id: String,
     /// JSON file with the runs to play: an array of fully resolved run specs, as
     /// `Scenario::run_spec` makes them (the launcher writes it).
     #[arg(long)]
-    run_specs: PathBuf,
+    pub run_specs: PathBuf,
     /// Directory for the run logs (`runs/`, `timing/`).
     #[arg(long)]
-    out: PathBuf,
+    pub out: PathBuf,
     /// JSON file with the runtime settings (`RuntimeSettings`, every field; the launcher
     /// writes it). Replaces the setting flags below, which may then not be given.
     #[arg(long, conflicts_with_all = SETTING_FLAGS)]
-    settings: Option<PathBuf>,
+    pub settings: Option<PathBuf>,
     /// Clock mode.
     #[arg(long, value_enum, default_value_t = RuntimeSettings::DEFAULT.clock)]
-    clock: ClockMode,
+    pub clock: ClockMode,
     /// Lockstep: wait at most this long for a robot's command before braking it \[ms\].
     #[arg(long, default_value_t = RuntimeSettings::DEFAULT.command_timeout_ms)]
-    command_timeout_ms: u64,
+    pub command_timeout_ms: u64,
     /// Realtime: a command older than this brakes its robot \[ms\].
     #[arg(long, default_value_t = RuntimeSettings::DEFAULT.stale_ms)]
-    stale_ms: u64,
+    pub stale_ms: u64,
     /// Lockstep: each tick takes at least this long \[ms\] (0: as fast as the agents answer).
     #[arg(long, default_value_t = RuntimeSettings::DEFAULT.pace_ms)]
-    pace_ms: u64,
+    pub pace_ms: u64,
     /// How long to wait for every agent to connect \[ms\].
     #[arg(long, default_value_t = RuntimeSettings::DEFAULT.startup_timeout_ms)]
-    startup_timeout_ms: u64,
+    pub startup_timeout_ms: u64,
     /// How long agents may take to get ready for an episode \[ms\].
     #[arg(long, default_value_t = RuntimeSettings::DEFAULT.ready_timeout_ms)]
-    ready_timeout_ms: u64,
+    pub ready_timeout_ms: u64,
     /// Stop when standard input closes (set by the launcher, so the world never outlives it).
     #[arg(long)]
-    exit_on_stdin_close: bool,
+    pub exit_on_stdin_close: bool,
     /// How the agents reach the world: iceoryx2 shared memory on this host, Zenoh over TCP
     /// (agents on this host or others), or ROS 2 over rmw_zenoh (the world as a team of ROS 2
     /// robots: `/robot_<i>/scan`, `/robot_<i>/odom`, `/robot_<i>/cmd_vel`).
     #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
-    transport: Transport,
+    pub transport: Transport,
     /// Zenoh and ROS 2: the endpoint to listen on, tcp/ADDR:PORT, as a Zenoh router (agents, and
     /// ROS 2 tools, connect to it).
     #[arg(long, value_name = "tcp/ADDR:PORT")]
-    listen: Option<String>,
+    pub listen: Option<String>,
     /// ROS 2: the ROS domain id of the team's topics (default 0).
     #[arg(long, value_name = "ID", value_parser = clap::value_parser!(u32).range(0..=232))]
-    ros_domain_id: Option<u32>,
+    pub ros_domain_id: Option<u32>,
     /// Zenoh: a credentials folder (`formation credentials`); only its users may connect, each to
     /// its own robot's keys. Without it, any process that reaches the endpoint may.
     #[arg(long, value_name = "DIR")]
-    credentials: Option<PathBuf>,
+    pub credentials: Option<PathBuf>,
     /// JSON file saying what to record to MCAP and where (`formation_record::RecordSettings`;
     /// the launcher writes it for `--record`).
     #[arg(long, value_name = "FILE")]
-    record_settings: Option<PathBuf>,
+    pub record_settings: Option<PathBuf>,
     /// Zenoh: JSON file with what the launch knows of its runs (`formation_record::LaunchInfo`;
     /// the launcher writes it), for the metadata of a recording made from outside
     /// (`formation record --connect`) when there are no --record-settings.
     #[arg(long, value_name = "FILE")]
-    launch_info: Option<PathBuf>,
+    pub launch_info: Option<PathBuf>,
     /// Serve the runs live to Foxglove on HOST:PORT (its WebSocket protocol; feature
-    /// `foxglove`; see `formation_cli::live_view`). The launcher has warned about an address
+    /// `foxglove`; see [`live_view`]). The launcher has warned about an address
     /// other than loopback.
     #[arg(long, value_name = "HOST:PORT")]
-    foxglove: Option<String>,
+    pub foxglove: Option<String>,
 }
 
 impl Args {
@@ -147,11 +151,9 @@ impl Args {
     }
 }
 
-fn main() -> ExitCode {
-    formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
-    formation_cli::init_tracing(0);
-    let args = Args::parse();
-    let exit = match run(&args) {
+/// How the world's runs ended as the process's exit, said on stderr.
+pub fn exit_for(result: anyhow::Result<Ended>) -> ProcessExit {
+    match result {
         Ok(Ended::Finished) => ProcessExit::Success,
         Ok(Ended::Stopped(StopReason::Signal(signal))) => {
             eprintln!("formation-world: stopped by {signal}; agents asked to exit");
@@ -172,12 +174,11 @@ fn main() -> ExitCode {
             );
             ProcessExit::Failure
         }
-    };
-    exit.into()
+    }
 }
 
 /// How the world's runs ended, once its agents were there.
-enum Ended {
+pub enum Ended {
     /// Every run played.
     Finished,
     /// A signal or the launcher stopped them.
@@ -186,7 +187,8 @@ enum Ended {
     Failed,
 }
 
-fn run(args: &Args) -> anyhow::Result<Ended> {
+/// Sets up the link, waits for the agents, plays every run and asks the agents to exit.
+pub fn run(args: &Args) -> anyhow::Result<Ended> {
     let specs = read_run_specs(&args.run_specs)?;
     let record = args
         .record_settings
@@ -302,7 +304,7 @@ type LinkAndFeed = (Box<dyn WorldLink>, Option<Box<dyn RecordFeed>>);
 #[cfg(feature = "zenoh")]
 fn zenoh_link(args: &Args, run_id: &RunId, n_robots: usize) -> anyhow::Result<LinkAndFeed> {
     use formation_runtime::zenoh::{WorldAccess, ZenohWorldLink, credentials};
-    let listen = formation_cli::endpoint::required_endpoint(
+    let listen = formation_runtime::process::required_endpoint(
         args.listen.as_deref(),
         "--listen",
         Transport::Zenoh,
@@ -350,7 +352,7 @@ fn ros2_link(
     secret: LaunchSecret,
 ) -> anyhow::Result<LinkAndFeed> {
     use formation_runtime::ros2::{Ros2Team, Ros2WorldLink};
-    let listen = formation_cli::endpoint::required_endpoint(
+    let listen = formation_runtime::process::required_endpoint(
         args.listen.as_deref(),
         "--listen",
         Transport::Ros2,
