@@ -475,4 +475,40 @@ noise_std = {noise_std}
         assert!(over.to_string().contains("reset"), "{over}");
         assert_eq!(episode.into_trajectory(), looped);
     }
+
+    #[test]
+    fn the_heading_a_controller_receives_carries_the_compass_bias() {
+        let text = "name = \"compass\"\nrobots = 3\nduration_s = 1.0\nseed = 2\n[goal]\n\
+                    v_star = 0.3\nd_star = 1.5\n[heading]\nschedule = \"random\"\n\
+                    [compass]\nbias_deg = 4.0\n[lidar]\nscan_rate_hz = 5.0\n";
+        let spec = Scenario::from_toml_str(text, "compass")
+            .unwrap()
+            .run_spec(2, 0);
+        let cmd = WheelCmd {
+            left: 0.2,
+            right: 0.3,
+        };
+        let mut received = Vec::new();
+        let traj = run_episode(
+            &spec,
+            &mut ConstantWheels { cmd, fail_at: None },
+            &mut |obs, _| received.push(obs.poses.to_vec()),
+        )
+        .unwrap();
+        for (tick, seen) in received.iter().enumerate() {
+            for (robot, (seen, truth)) in seen.iter().zip(&traj.poses[tick]).enumerate() {
+                let error = formation_proto::wrap_angle(seen.theta - truth.theta);
+                assert!(
+                    (error - 4f64.to_radians()).abs() < 1e-9,
+                    "tick {tick}, robot {robot}: {error}"
+                );
+                assert_eq!((seen.x, seen.y), (truth.x, truth.y));
+            }
+        }
+        // The trajectory keeps the true poses, and the episode exposes the held scans' ages.
+        let mut episode = Episode::new(spec);
+        episode.observe();
+        let ages: Vec<f64> = (0..3).map(|r| episode.world().scan_age(r)).collect();
+        assert!(ages.iter().all(|&a| (0.0..0.2).contains(&a)), "{ages:?}");
+    }
 }

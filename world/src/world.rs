@@ -467,6 +467,7 @@ fn overlapping_pairs(poses: &[Pose], body_radius: f64) -> Vec<(usize, usize)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use formation_proto::wrap_angle;
 
     fn pose(x: f64, y: f64, theta: f64) -> Pose {
         Pose { x, y, theta }
@@ -882,5 +883,206 @@ mod tests {
         }
         assert!(collisions > 0);
         assert_eq!(world.collisions_total(), reference.collisions_total());
+    }
+
+    fn with_reality(reality: RealityModels) -> WorldConfig {
+        WorldConfig {
+            reality,
+            ..noisy_config(0.03)
+        }
+    }
+
+    #[test]
+    fn a_slow_lidar_holds_each_scan_and_reports_its_age() {
+        use crate::reality::LidarModel;
+        let config = with_reality(RealityModels {
+            lidar: LidarModel {
+                scan_rate_hz: Some(5.0),
+                ..LidarModel::IDEAL
+            },
+            ..RealityModels::IDEAL
+        });
+        let poses = vec![
+            pose(0.0, 0.0, 0.0),
+            pose(1.5, 0.3, 0.0),
+            pose(-1.0, 1.0, 2.0),
+        ];
+        let mut world = World::new(config, poses, 4);
+        let cmds = [WheelCmd {
+            left: 0.3,
+            right: 0.5,
+        }; 3];
+        let mut scans = vec![Vec::new(); 3];
+        let mut previous: Option<Vec<Vec<f32>>> = None;
+        for tick in 0..16 {
+            world.scan_all(&mut scans);
+            for robot in 0..3 {
+                let age = world.scan_age_ticks(robot);
+                assert!(age < 4);
+                assert_eq!(world.scan_age(robot), age as f64 * DEFAULT_DT);
+                if let Some(previous) = &previous {
+                    // A held scan is the same bits; a fresh one differs (the robots move).
+                    assert_eq!(
+                        age != 0,
+                        scans[robot] == previous[robot],
+                        "tick {tick}, robot {robot}, age {age}"
+                    );
+                }
+            }
+            previous = Some(scans.clone());
+            world.step(&cmds);
+        }
+        // The robots' scans are not in step with each other.
+        let offsets: Vec<u64> = world
+            .robot_traits()
+            .iter()
+            .map(|t| t.scan_offset_ticks)
+            .collect();
+        assert!(offsets.iter().any(|&o| o != offsets[0]), "{offsets:?}");
+    }
+
+    #[test]
+    fn a_command_runs_after_the_latency() {
+        let config = with_reality(RealityModels {
+            command_latency_ticks: 2,
+            ..RealityModels::IDEAL
+        });
+        let mut world = World::new(config, vec![pose(0.0, 0.0, 0.0)], 1);
+        let go = WheelCmd {
+            left: 0.4,
+            right: 0.4,
+        };
+        let ran: Vec<WheelCmd> = [go, WheelCmd::BRAKE, go, go, WheelCmd::BRAKE]
+            .iter()
+            .map(|&cmd| world.step(&[cmd]).applied[0])
+            .collect();
+        assert_eq!(
+            ran,
+            [WheelCmd::BRAKE, WheelCmd::BRAKE, go, WheelCmd::BRAKE, go]
+        );
+    }
+
+    #[test]
+    fn the_compass_reads_bias_and_noise_and_leaves_the_true_pose_alone() {
+        use crate::reality::CompassModel;
+        let config = with_reality(RealityModels {
+            compass: CompassModel {
+                noise_std_deg: 2.0,
+                bias_deg: 5.0,
+            },
+            ..RealityModels::IDEAL
+        });
+        let mut world = World::new(config, vec![pose(1.0, 2.0, 0.5), pose(3.0, 2.0, -0.5)], 8);
+        let mut errors = Vec::new();
+        for _ in 0..400 {
+            world.read_compasses();
+            for (seen, truth) in world.observed_poses().iter().zip(world.poses()) {
+                assert_eq!((seen.x, seen.y), (truth.x, truth.y));
+                errors.push(wrap_angle(seen.theta - truth.theta).to_degrees());
+            }
+            world.step(&[WheelCmd::BRAKE; 2]);
+        }
+        let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+        let std =
+            (errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / errors.len() as f64).sqrt();
+        // 800 readings: the mean's standard error is 2 / sqrt(800) = 0.07 degrees.
+        assert!((mean - 5.0).abs() < 0.3, "mean error {mean}");
+        assert!((std - 2.0).abs() < 0.3, "spread {std}");
+        assert_eq!(world.poses()[0], pose(1.0, 2.0, 0.5));
+    }
+
+    #[test]
+    fn turning_models_on_shifts_no_range_noise_draw() {
+        use crate::reality::{CompassModel, MotorModel};
+        // Braking robots stay put under lag, latency and compass noise, so their scans must be
+        // the same bits as in the ideal world: those models draw from streams of their own.
+        let poses = vec![
+            pose(0.0, 0.0, 0.0),
+            pose(1.2, 0.4, 1.0),
+            pose(-0.8, 0.9, 2.0),
+        ];
+        let mut ideal = World::new(noisy_config(0.03), poses.clone(), 21);
+        let mut real = World::new(
+            with_reality(RealityModels {
+                motors: MotorModel {
+                    tau_s: 0.2,
+                    gain_asymmetry: 0.1,
+                    ..MotorModel::IDEAL
+                },
+                compass: CompassModel {
+                    noise_std_deg: 3.0,
+                    bias_deg: 1.0,
+                },
+                command_latency_ticks: 3,
+                ..RealityModels::IDEAL
+            }),
+            poses,
+            21,
+        );
+        let (mut a, mut b) = (vec![Vec::new(); 3], vec![Vec::new(); 3]);
+        for _ in 0..10 {
+            ideal.scan_all(&mut a);
+            real.scan_all(&mut b);
+            real.read_compasses();
+            assert_eq!(a, b);
+            ideal.step(&[WheelCmd::BRAKE; 3]);
+            real.step(&[WheelCmd::BRAKE; 3]);
+        }
+    }
+
+    #[test]
+    fn every_model_on_replays_bit_for_bit_from_its_seed() {
+        use crate::reality::{CompassModel, LidarModel, MotorModel};
+        let config = with_reality(RealityModels {
+            motors: MotorModel {
+                tau_s: 0.1,
+                speed_noise_std: 0.01,
+                gain_asymmetry: 0.02,
+            },
+            lidar: LidarModel {
+                scan_rate_hz: Some(10.0),
+                fov_deg: 270.0,
+                min_range: 0.12,
+                dropout: 0.02,
+            },
+            compass: CompassModel {
+                noise_std_deg: 1.0,
+                bias_deg: 2.0,
+            },
+            command_latency_ticks: 1,
+            spread: 0.05,
+        });
+        let run = |seed: u64| {
+            let poses = vec![
+                pose(0.0, 0.0, 0.0),
+                pose(1.2, 0.4, 1.0),
+                pose(-0.8, 0.9, 2.0),
+            ];
+            let mut world = World::new(config, poses, seed);
+            let mut scans = vec![Vec::new(); 3];
+            let mut bits = Vec::new();
+            for tick in 0..30 {
+                world.scan_all(&mut scans);
+                world.read_compasses();
+                bits.extend(scans.iter().flatten().map(|r| u64::from(r.to_bits())));
+                bits.extend(world.observed_poses().iter().map(|p| p.theta.to_bits()));
+                let turn = if tick % 7 < 3 { 0.2 } else { -0.1 };
+                world.step(
+                    &[WheelCmd {
+                        left: 0.5 - turn,
+                        right: 0.5 + turn,
+                    }; 3],
+                );
+                bits.extend(
+                    world
+                        .poses()
+                        .iter()
+                        .flat_map(|p| [p.x.to_bits(), p.y.to_bits()]),
+                );
+            }
+            bits
+        };
+        assert_eq!(run(5), run(5));
+        assert_ne!(run(5), run(6));
     }
 }

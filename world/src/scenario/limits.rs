@@ -45,7 +45,12 @@ pub struct Bounds {
 
 impl fmt::Display for Bounds {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "[{}, {}] {}", Num(self.min), Num(self.max), self.unit)
+        write!(f, "[{}, {}]", Num(self.min), Num(self.max))?;
+        if self.unit.is_empty() {
+            Ok(())
+        } else {
+            write!(f, " {}", self.unit)
+        }
     }
 }
 

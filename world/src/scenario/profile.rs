@@ -137,3 +137,182 @@ impl RobotProfile {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::{Scenario, ScenarioError};
+
+    /// A scenario slow enough for every profile, with `tables` appended.
+    fn scenario(tables: &str) -> Result<Scenario, ScenarioError> {
+        let text = format!(
+            "name = \"p\"\nrobots = 3\nduration_s = 2.0\nseed = 3\n[goal]\nv_star = 0.1\n\
+             d_star = 1.0\n[heading]\nschedule = \"random\"\n{tables}"
+        );
+        Scenario::from_toml_str(&text, "scenarios/p.toml")
+    }
+
+    fn error(tables: &str) -> String {
+        match scenario(tables) {
+            Ok(s) => panic!("expected an error, got {:?}", s.world_config()),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn no_profile_is_the_ideal_world_of_before() {
+        let plain = scenario("").unwrap();
+        assert_eq!(plain.profile(), RobotProfile::Ideal);
+        assert_eq!(*plain.world_config(), crate::WorldConfig::default());
+        let named = scenario("[robot]\nprofile = \"ideal\"\n").unwrap();
+        assert_eq!(named.world_config(), plain.world_config());
+        // Neither the scenario nor its runs serialize anything new.
+        let json = serde_json::to_string(&named).unwrap();
+        assert!(
+            !json.contains("reality") && !json.contains("profile"),
+            "{json}"
+        );
+    }
+
+    #[test]
+    fn a_profile_sets_every_key_and_each_key_overrides_it() {
+        let burger = scenario("[robot]\nprofile = \"turtlebot3-burger\"\n").unwrap();
+        let config = burger.world_config();
+        let settings = RobotProfile::Turtlebot3Burger.settings();
+        assert_eq!(
+            (config.robot, config.lidar, config.reality),
+            (settings.robot, settings.lidar, settings.reality)
+        );
+        assert_eq!(config.robot.max_wheel_speed, 0.22);
+        assert_eq!((config.lidar.beams, config.lidar.max_range), (360, 3.5));
+        assert_eq!(config.reality.lidar.scan_rate_hz, Some(5.0));
+        assert_eq!(config.reality.lidar.min_range, 0.12);
+        assert_eq!(config.reality.command_latency_ticks, 1);
+        assert!(config.reality.motors.tau_s >= 0.1);
+        assert!(config.reality.compass.noise_std_deg >= 1.0);
+        assert!(config.reality.lidar.dropout >= 0.01);
+
+        let tuned = scenario(
+            "[robot]\nprofile = \"turtlebot3-burger\"\nmotor_tau = 0.3\ncommand_latency = 0\n\
+             [lidar]\nscan_rate_hz = 20.0\nbeams = 180\n[compass]\nbias_deg = -4.0\n",
+        )
+        .unwrap();
+        let tuned = tuned.world_config();
+        assert_eq!(tuned.reality.motors.tau_s, 0.3);
+        assert_eq!(tuned.reality.command_latency_ticks, 0);
+        assert_eq!(tuned.reality.lidar.scan_period_ticks(tuned.dt), 1);
+        assert_eq!(tuned.lidar.beams, 180);
+        assert_eq!(tuned.reality.compass.bias_deg, -4.0);
+        // Everything not overridden is the profile's.
+        assert_eq!(tuned.robot, settings.robot);
+        assert_eq!(tuned.reality.lidar.dropout, settings.reality.lidar.dropout);
+
+        let pioneer = scenario("[robot]\nprofile = \"pioneer-p3dx\"\n").unwrap();
+        let pioneer = pioneer.world_config();
+        assert_eq!((pioneer.lidar.beams, pioneer.lidar.max_range), (900, 10.0));
+        assert_eq!(pioneer.robot.max_wheel_speed, 1.2);
+        assert!(pioneer.reality.motors.tau_s > 0.0);
+    }
+
+    #[test]
+    fn a_key_that_turns_one_model_on_needs_no_profile() {
+        let lagged = scenario("[robot]\nmotor_tau = 0.2\n").unwrap();
+        let reality = lagged.world_config().reality;
+        assert_eq!(reality.motors.tau_s, 0.2);
+        assert_eq!(
+            crate::reality::RealityModels {
+                motors: crate::reality::MotorModel::IDEAL,
+                ..reality
+            },
+            crate::reality::RealityModels::IDEAL
+        );
+    }
+
+    #[test]
+    fn an_unknown_profile_is_named_with_the_known_ones() {
+        assert_eq!(
+            error("[robot]\nprofile = \"turtlebot4\"\n"),
+            "scenarios/p.toml: robot.profile must be one of \"ideal\", \"pioneer-p3dx\", \
+             \"turtlebot3-burger\" (got \"turtlebot4\")"
+        );
+    }
+
+    #[test]
+    fn a_key_out_of_bounds_is_named_with_its_range() {
+        let cases = [
+            (
+                "[robot]\nmotor_tau = 5.0\n",
+                "robot.motor_tau must be in [0, 2] s (got 5)",
+            ),
+            (
+                "[robot]\nprofile = \"turtlebot3-burger\"\nspread = 0.9\n",
+                "robot.spread must be in [0, 0.5] (got 0.9)",
+            ),
+            (
+                "[robot]\ncommand_latency = -1\n",
+                "robot.command_latency must be in [0, 20] ticks (got -1)",
+            ),
+            (
+                "[robot]\nwheel_gain_asymmetry = nan\n",
+                "robot.wheel_gain_asymmetry must be a finite number in [-0.5, 0.5]",
+            ),
+            (
+                "[robot]\nwheel_speed_noise = 2.0\n",
+                "robot.wheel_speed_noise must be in [0, 1] m/s (got 2)",
+            ),
+            (
+                "[lidar]\nfov_deg = 0.5\n",
+                "lidar.fov_deg must be in [1, 360] deg (got 0.5)",
+            ),
+            (
+                "[lidar]\ndropout = 1.0\n",
+                "lidar.dropout must be in [0, 0.9] (got 1)",
+            ),
+            (
+                "[robot]\nprofile = \"turtlebot3-burger\"\n[lidar]\nmin_range = 4.0\n",
+                "lidar.min_range must be below lidar.max_range (3.5)",
+            ),
+            (
+                "[lidar]\nscan_rate_hz = 40.0\n",
+                "lidar.scan_rate_hz must be at most the control rate 1 / dt (20) Hz",
+            ),
+            (
+                "[lidar]\nscan_rate_hz = 7.0\n",
+                "lidar.scan_rate_hz must divide the control rate 1 / dt (20 Hz) into whole \
+                 ticks per scan, such as 10 or 6.666666666666667 Hz (got 7",
+            ),
+            (
+                "[compass]\nnoise_std_deg = -1.0\n",
+                "compass.noise_std_deg must be in [0, 90] deg (got -1)",
+            ),
+            (
+                "[compass]\nbias_deg = 200.0\n",
+                "compass.bias_deg must be in [-180, 180] deg (got 200)",
+            ),
+        ];
+        for (tables, expected) in cases {
+            let message = error(tables);
+            assert!(
+                message.starts_with("scenarios/p.toml: ") && message.contains(expected),
+                "{tables:?}: {message}"
+            );
+        }
+        let unknown = error("[compass]\ndrift = 1.0\n");
+        assert!(unknown.contains("drift"), "{unknown}");
+    }
+
+    #[test]
+    fn a_goal_faster_than_the_profile_names_the_profile() {
+        let text = "name = \"p\"\nrobots = 3\nduration_s = 2.0\nseed = 3\n[goal]\nv_star = 0.7\n\
+                    d_star = 1.0\n[heading]\nschedule = \"random\"\n[robot]\n\
+                    profile = \"turtlebot3-burger\"\n";
+        let message = Scenario::from_toml_str(text, "x").unwrap_err().to_string();
+        assert!(
+            message.contains(
+                "goal.v_star must be <= robot.max_wheel_speed (0.22, the \
+                              \"turtlebot3-burger\" profile's"
+            ),
+            "{message}"
+        );
+    }
+}
