@@ -981,13 +981,30 @@ pub struct RecordArgs {
     pub timeout_s: f64,
 }
 
-/// `formation credentials`: Zenoh logins for a team.
+/// `formation credentials`: Zenoh logins for a team, and with `--tls` its certificates.
 #[derive(Debug, Clone, Args)]
 pub struct CredentialsArgs {
     /// Robots of the team (logins robot-0 .. robot-(N-1)).
-    #[arg(long)]
-    pub robots: usize,
-    /// Folder to create (owner-only); it must not hold credentials yet.
+    #[arg(long, required_unless_present = "renew")]
+    pub robots: Option<usize>,
+    /// Folder to create (owner-only); it must not hold credentials yet (with --renew: the
+    /// team's folder).
     #[arg(long)]
     pub out: PathBuf,
+    /// Also write a certificate authority (ca.pem) and, per principal (world, robot-I,
+    /// operator, recorder), a key and a certificate named by its login, for `tls/` endpoints.
+    #[arg(long)]
+    pub tls: bool,
+    /// How many days the certificates are valid.
+    #[arg(long, default_value_t = 365, requires = "tls")]
+    pub valid_days: u32,
+    /// Renew one principal's key and certificate (world, operator, recorder or robot-I) with
+    /// the folder's authority; the others stay valid.
+    #[arg(
+        long,
+        value_name = "PRINCIPAL",
+        requires = "tls",
+        conflicts_with = "robots"
+    )]
+    pub renew: Option<String>,
 }

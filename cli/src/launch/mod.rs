@@ -36,17 +36,39 @@ use supervisor::{LaunchPlan, Network, ZenohPlan};
 /// How the world process paces ticks (defined once, in the runtime library).
 pub use formation_runtime::ClockMode;
 
-/// `formation credentials`: writes the folder and says what goes where.
+/// `formation credentials`: writes the folder and says what goes where; `--tls` adds the
+/// certificates, `--renew` renews one principal's.
 pub fn credentials_command(args: &CredentialsArgs) -> anyhow::Result<()> {
-    create_credentials(&args.out, args.robots)?;
+    if let Some(principal) = &args.renew {
+        renew_certificate(&args.out, principal, args.valid_days)?;
+        println!(
+            "renewed the key and certificate of {principal} in {dir} ({principal}.pem, \
+             {principal}.key.pem, valid {days} days); copy them privately to its host and \
+             restart it; the other principals' certificates stay valid",
+            dir = args.out.display(),
+            days = args.valid_days
+        );
+        return Ok(());
+    }
+    let robots = args.robots.unwrap_or_default();
+    create_credentials(&args.out, robots, args.tls.then_some(args.valid_days))?;
     let dir = args.out.display();
+    if args.tls {
+        println!(
+            "certificates valid {} days: ca.pem for every principal; ca.key.pem stays with you \
+             (renewing needs it); world.pem/world.key.pem with the world; robot-I.pem and \
+             robot-I.key.pem with robot-I.json; operator.* and recorder.* with their logins; \
+             listen and connect on tls/HOST:PORT",
+            args.valid_days
+        );
+    }
     println!(
         "credentials for robots 0..{} in {dir} (owner-only):\n  \
          passwords, launch-secret: stay with the world (formation run --transport zenoh \
          --credentials {dir})\n  robot-I.json: copy privately (scp) to robot I's host \
          (formation-agent --credentials robot-I.json)\n  operator.json: for formation swap \
          --credentials\n  recorder.json: read-only, for formation record --connect --credentials",
-        args.robots.saturating_sub(1)
+        robots.saturating_sub(1)
     );
     Ok(())
 }
@@ -180,11 +202,7 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         restart_delay: Duration::from_millis(args.restart_delay_ms),
         record,
         launch_info: Some(launch_info),
-        foxglove: formation_world_node::live_view::requested(
-            args.foxglove.as_deref(),
-            "formation",
-            true,
-        )?,
+        foxglove: crate::live_view::requested(args.foxglove.as_deref(), "formation", true)?,
     };
     Ok(PlannedRun {
         plan,
@@ -282,7 +300,8 @@ impl NetworkFlags {
         let credentials = match &self.credentials {
             Some(dir) => dir.clone(),
             None => {
-                create_credentials(fresh, n_robots)?;
+                let tls = listen.starts_with("tls/").then_some(FRESH_CERTIFICATE_DAYS);
+                create_credentials(fresh, n_robots, tls)?;
                 fresh.to_path_buf()
             }
         };
@@ -309,17 +328,38 @@ fn network_from_args(args: &RunArgs, run_id: &RunId, n_robots: usize) -> anyhow:
     Ok(network)
 }
 
+/// How long the certificates of a launch's fresh credentials are valid, in days.
+const FRESH_CERTIFICATE_DAYS: u32 = 30;
+
 /// `formation credentials`: writes logins for robots `0..robots` and the operator, and a launch
-/// secret, into `dir` (owner-only).
+/// secret, into `dir` (owner-only); with `tls_days`, also the team's certificates, valid that
+/// many days.
 #[cfg(feature = "zenoh")]
-pub fn create_credentials(dir: &Path, robots: usize) -> anyhow::Result<()> {
-    formation_runtime::zenoh::credentials::create(dir, robots)?;
+pub fn create_credentials(dir: &Path, robots: usize, tls_days: Option<u32>) -> anyhow::Result<()> {
+    use formation_runtime::zenoh::credentials;
+    match tls_days {
+        None => credentials::create(dir, robots)?,
+        Some(days) => credentials::create_with_tls(dir, robots, days)?,
+    }
     Ok(())
+}
+
+/// `formation credentials --tls --renew PRINCIPAL`.
+#[cfg(feature = "zenoh")]
+fn renew_certificate(dir: &Path, principal: &str, days: u32) -> anyhow::Result<()> {
+    formation_runtime::zenoh::credentials::renew_certificate(dir, principal, days)?;
+    Ok(())
+}
+
+/// Without Zenoh there are no certificates to renew.
+#[cfg(not(feature = "zenoh"))]
+fn renew_certificate(_dir: &Path, _principal: &str, _days: u32) -> anyhow::Result<()> {
+    create_credentials(_dir, 0, None)
 }
 
 /// Without Zenoh there are no credentials to make.
 #[cfg(not(feature = "zenoh"))]
-pub fn create_credentials(_dir: &Path, _robots: usize) -> anyhow::Result<()> {
+pub fn create_credentials(_dir: &Path, _robots: usize, _tls_days: Option<u32>) -> anyhow::Result<()> {
     Err(TransportError::NotBuilt {
         program: "formation".into(),
         transport: Transport::Zenoh,

@@ -110,6 +110,8 @@ fn local_endpoint(listen: &str) -> String {
     listen
         .replacen("tcp/0.0.0.0:", "tcp/127.0.0.1:", 1)
         .replacen("tcp/[::]:", "tcp/[::1]:", 1)
+        .replacen("tls/0.0.0.0:", "tls/127.0.0.1:", 1)
+        .replacen("tls/[::]:", "tls/[::1]:", 1)
 }
 
 /// A launch over Zenoh.
