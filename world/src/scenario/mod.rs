@@ -64,17 +64,31 @@
 //! threshold = 1.3         # gabriel only: witness ratio that makes a pair an edge, 0.05 ..= 4
 //! hysteresis = 0.0        # gabriel only: how far below threshold an edge is kept (0: memoryless), 0 ..= threshold - 0.01
 //!
-//! [lidar]                 # optional; each key defaults to LidarSpec::default()
+//! [lidar]                 # optional; each key defaults to the robot profile's (below)
 //! beams = 900             # 8 ..= 900 (the most a scan message carries)
 //! max_range = 10.0        # 0.1 ..= 1000 \[m\]; must match the model's (checked before a run starts)
 //! noise_std = 0.0         # 0 ..= 10 \[m\]
+//! # scan_rate_hz = 5.0    # 0.1 ..= 1000 \[Hz\], <= 1 / dt, whole ticks per scan; absent = every tick
+//! fov_deg = 360.0         # 1 ..= 360 \[deg\]: beams outside it return nothing
+//! min_range = 0.0         # 0 ..= 1000 \[m\], < max_range: a nearer hit returns nothing
+//! dropout = 0.0           # 0 ..= 0.9: probability that a beam returns nothing
 //!
-//! [robot]                 # optional; each key defaults to RobotParams::default()
+//! [robot]                 # optional; each key defaults to the profile's
+//! profile = "ideal"       # "ideal" | "pioneer-p3dx" | "turtlebot3-burger" (profile.rs)
 //! wheel_separation = 0.331  # 0.01 ..= 10 \[m\]
 //! wheel_radius = 0.0975     # 0.001 ..= 10 \[m\]
 //! body_radius = 0.25        # 0.01 ..= 10 \[m\]
 //! max_wheel_speed = 0.9     # 0.01 ..= 10 \[m/s\]
 //! # max_wheel_accel = 2.0   # optional, 0.01 ..= 1000 \[m/s^2\]; absent = unlimited
+//! motor_tau = 0.0           # 0 ..= 2 \[s\]: each wheel's first-order lag
+//! wheel_speed_noise = 0.0   # 0 ..= 1 \[m/s\]
+//! wheel_gain_asymmetry = 0.0  # -0.5 ..= 0.5: right gain minus left gain
+//! command_latency = 0       # 0 ..= 20 \[ticks\]
+//! spread = 0.0              # 0 ..= 0.5: each robot's parameters drawn within ±spread (relative)
+//!
+//! [compass]               # optional; the heading each robot receives
+//! noise_std_deg = 0.0     # 0 ..= 90 \[deg\]
+//! bias_deg = 0.0          # -180 ..= 180 \[deg\]
 //!
 //! [[agent]]               # optional, repeatable: a per-robot model for mixed teams
 //! robot = 1               # < robots, at most one entry per robot
