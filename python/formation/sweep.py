@@ -91,7 +91,7 @@ def formation_binary(formation_bin: Optional[str] = None) -> str:
     candidate = formation_bin or os.environ.get("FORMATION_BIN") or shutil.which("formation")
     if not candidate or not Path(candidate).is_file():
         raise SweepError(
-            "no `formation` binary: build it (`cargo build --release -p formation-cli`) and pass "
+            "no `formation` binary: build it (`cargo build --release`) and pass "
             "formation_bin=..., set FORMATION_BIN, or put it on PATH"
         )
     return str(Path(candidate).resolve())

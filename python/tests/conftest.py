@@ -28,7 +28,7 @@ def cli() -> Path:
     path = Path(os.environ.get("FORMATION_BIN", target / "debug" / "formation"))
     if not path.is_file():
         pytest.fail(
-            f"no formation binary at {path}: build it with `cargo build -p formation-cli` "
+            f"no formation binary at {path}: build it with `cargo build` "
             "(scripts/test-all does) or point FORMATION_BIN at one"
         )
     return path

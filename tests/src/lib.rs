@@ -3,16 +3,19 @@
 //! model, and a process fixture that prints the command, stdout and stderr when a check fails.
 //!
 //! How the tests get the executables: integration tests can only name binaries of their own
-//! package (`CARGO_BIN_EXE_*`), and `formation-world`, `formation-agent` and `formation` live in
-//! `formation-cli`. [`binaries`] therefore builds those three binaries once per
-//! test process, in the same profile as the test itself (a no-op when they are up to date), and
-//! takes them from `target/<profile>/`, the directory above the test executable. Set
-//! `FORMATION_TESTS_NO_BUILD=1` to skip the build (e.g. when the binaries were built beforehand).
-//! The build is `cargo runtime-bins`, an alias in `.cargo/config.toml`. It builds what `cargo
-//! test --workspace` builds, test targets included, because only with the dev-dependencies in
-//! the build are features resolved as the tests resolve them (a plain build of formation-cli gave
-//! `bitflags`, `zerocopy` and `regex-automata` other features and compiled much of the dependency
-//! graph a second time). After `cargo test --workspace` it is a no-op; from a single test on a
+//! package (`CARGO_BIN_EXE_*`), and `formation`, `formation-world` and `formation-agent` live in
+//! packages of their own (`formation-cli`, `formation-world-node`, `formation-agent-node`, the
+//! workspace's default members: `cargo build` builds the three). [`binaries`] therefore builds
+//! them once per test process, in the same profile as the test itself (a no-op when they are up
+//! to date), and takes them from `target/<profile>/`, the directory above the test executable.
+//! Set `FORMATION_TESTS_NO_BUILD=1` to skip the build (e.g. when the binaries were built
+//! beforehand). The build is `cargo runtime-bins`, an alias in `.cargo/config.toml`: the same
+//! three binaries, with every transport and the live view (formation-tests turns on
+//! formation-cli's features, which turn on the processes' own), built as part
+//! of what `cargo test --workspace` builds, test targets included, because only with the
+//! dev-dependencies in the build are features resolved as the tests resolve them (`cargo build
+//! --features zenoh` alone gives `bitflags`, `zerocopy` and `regex-automata` other features and
+//! compiles much of the dependency graph, Zenoh included, a second time). After `cargo test --workspace` it is a no-op; from a single test on a
 //! stale target it compiles the other test targets too. `scripts/test-all` runs it first, and no
 //! [`Watchdog`] counts the time a test waits for this one-time setup (or for the test model): a
 //! slow build is not a hung test.

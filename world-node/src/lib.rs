@@ -26,6 +26,8 @@
 
 pub mod live_view;
 pub mod runlog;
+#[cfg(test)]
+mod tests;
 
 use std::path::{Path, PathBuf};
 
@@ -392,7 +394,13 @@ fn ros2_link(
 fn read_run_specs(path: &Path) -> anyhow::Result<Vec<RunSpec>> {
     let bytes =
         std::fs::read(path).with_context(|| format!("reading run specs {}", path.display()))?;
-    let specs: Vec<RunSpec> = serde_json::from_slice(&bytes)
+    parse_run_specs(&bytes, path)
+}
+
+/// The run specs in `bytes` (read from `path`, which errors name); all must have the same team
+/// size, of at least one robot.
+fn parse_run_specs(bytes: &[u8], path: &Path) -> anyhow::Result<Vec<RunSpec>> {
+    let specs: Vec<RunSpec> = serde_json::from_slice(bytes)
         .with_context(|| format!("parsing run specs {}", path.display()))?;
     let Some(first) = specs.first() else {
         anyhow::bail!("{} holds no runs", path.display());

@@ -43,7 +43,7 @@ pub enum LiveViewError {
     /// This build has no live view.
     #[error(
         "--foxglove: this {program} was built without the live view; build it with the feature \
-         `foxglove` (`cargo build --release -p formation-cli --features foxglove`)"
+         `foxglove` (`cargo build --release --features foxglove`)"
     )]
     NotBuilt {
         /// The program.

@@ -424,3 +424,157 @@ fn keep_partial(
         Err(e) => Saved::Lost(e),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::cell::RefCell;
+    use std::rc::Rc;
+
+    use formation_record::LaunchInfo;
+    use formation_record::live::{LiveMessage, decode};
+    use formation_runtime::link::{WorldLinkError, WorldResult};
+    use formation_world::Scenario;
+
+    use super::*;
+
+    /// A record channel that keeps what it is sent; `fail` makes every send fail.
+    #[derive(Default)]
+    struct FakeFeed {
+        listening: bool,
+        fail: bool,
+        sent: Rc<RefCell<Vec<Vec<u8>>>>,
+    }
+
+    impl RecordFeed for FakeFeed {
+        fn wanted(&self) -> bool {
+            self.listening
+        }
+
+        fn begin_run(&mut self, setup: Vec<u8>) -> WorldResult {
+            self.publish(setup)
+        }
+
+        fn publish(&mut self, message: Vec<u8>) -> WorldResult {
+            if self.fail {
+                return Err(WorldLinkError::NoSuchRobot {
+                    robot: 9,
+                    robots: 3,
+                });
+            }
+            self.sent.borrow_mut().push(message);
+            Ok(())
+        }
+    }
+
+    fn case1() -> RunSpec {
+        let text = include_str!("../../scenarios/case1.toml");
+        let scenario = Scenario::from_toml_str(text, "case1.toml").expect("case 1 parses");
+        scenario.run_spec(1, 4)
+    }
+
+    fn launch() -> LaunchInfo {
+        LaunchInfo {
+            scenario: "case1".into(),
+            base_seed: Some(1),
+            clock: "lockstep".into(),
+            controller: "policy".into(),
+            models: Vec::new(),
+            shipped_models: None,
+        }
+    }
+
+    #[test]
+    fn a_run_on_the_record_channel_is_its_setup_then_its_end_while_a_recorder_listens() {
+        let sent = Rc::new(RefCell::new(Vec::new()));
+        let mut feed = FakeFeed {
+            listening: true,
+            fail: false,
+            sent: Rc::clone(&sent),
+        };
+        let spec = case1();
+        let live = LiveFeed::begin(&mut feed, &spec, &launch(), 0, 1).expect("the channel begins");
+        assert!(live.wanted());
+        live.end(None);
+        let messages: Vec<LiveMessage> = sent.borrow().iter().map(|m| decode(m).unwrap()).collect();
+        assert_eq!(messages.len(), 2, "{messages:?}");
+        assert!(matches!(messages[0], LiveMessage::Setup(_)), "{messages:?}");
+        assert!(
+            matches!(
+                messages[1],
+                LiveMessage::End {
+                    run_index: 4,
+                    last: None
+                }
+            ),
+            "{messages:?}"
+        );
+    }
+
+    #[test]
+    fn nobody_listening_gets_no_end_and_a_failed_send_ends_the_channel_not_the_run() {
+        let sent = Rc::new(RefCell::new(Vec::new()));
+        let mut quiet = FakeFeed {
+            listening: false,
+            fail: false,
+            sent: Rc::clone(&sent),
+        };
+        let spec = case1();
+        let live = LiveFeed::begin(&mut quiet, &spec, &launch(), 0, 1).expect("begins");
+        live.end(None);
+        assert_eq!(
+            sent.borrow().len(),
+            1,
+            "only the setup, kept for late joiners"
+        );
+
+        let mut broken = FakeFeed {
+            listening: true,
+            fail: true,
+            sent: Rc::default(),
+        };
+        assert!(LiveFeed::begin(&mut broken, &spec, &launch(), 0, 1).is_none());
+    }
+
+    #[test]
+    fn what_became_of_a_run_is_said_with_its_path() {
+        let partial = saved_note(&Saved::Partial(PathBuf::from("out/runs/run-0001.json")));
+        assert_eq!(
+            partial,
+            "; the partial run is kept in out/runs/run-0001.json"
+        );
+        let journal = saved_note(&Saved::Journal(PathBuf::from("run-0001.journal")));
+        assert!(
+            journal.contains("its journal run-0001.journal"),
+            "{journal}"
+        );
+        assert!(
+            journal.contains("`formation report` recovers it"),
+            "{journal}"
+        );
+    }
+
+    #[test]
+    fn a_run_stopped_before_its_first_sample_keeps_nothing_and_leaves_no_journal() {
+        let dir = tempfile::tempdir().unwrap();
+        let spec = case1();
+        let journal_file = journal_path(dir.path(), spec.index);
+        std::fs::create_dir_all(journal_file.parent().unwrap()).unwrap();
+        let header = JournalHeader::new(&spec, "lockstep", &[]);
+        let journal = RunJournal::create(&journal_file, &header).unwrap();
+        let (log_path, timing_path) = log_paths(dir.path(), spec.index);
+        let timing = TimingLog {
+            index: spec.index,
+            clock: "lockstep".into(),
+            dt_s: spec.world.dt,
+            tick_start_ns: Vec::new(),
+            robots: Vec::new(),
+        };
+        let saved = keep_partial(journal, &log_path, &timing_path, "stopped", timing);
+        assert!(
+            matches!(saved, Saved::Lost(RunLogError::NoSamples { .. })),
+            "{saved:?}"
+        );
+        assert!(!journal_file.exists(), "the empty journal is removed");
+        assert!(!log_path.exists(), "no run log for a run without samples");
+    }
+}

@@ -202,7 +202,11 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
         restart_delay: Duration::from_millis(args.restart_delay_ms),
         record,
         launch_info: Some(launch_info),
-        foxglove: crate::live_view::requested(args.foxglove.as_deref(), "formation", true)?,
+        foxglove: formation_world_node::live_view::requested(
+            args.foxglove.as_deref(),
+            "formation",
+            true,
+        )?,
     };
     Ok(PlannedRun {
         plan,
