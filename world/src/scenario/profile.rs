@@ -315,4 +315,20 @@ mod tests {
             "{message}"
         );
     }
+
+    #[test]
+    fn a_run_spec_with_every_model_on_survives_the_launchers_json() {
+        // The launcher hands the world process its runs as JSON: every model must come back
+        // bit for bit.
+        for profile in RobotProfile::ALL {
+            let tables = format!(
+                "[robot]\nprofile = \"{}\"\n[lidar]\nfov_deg = 300.0\n",
+                profile.name()
+            );
+            let spec = scenario(&tables).unwrap().run_spec(3, 1);
+            let json = serde_json::to_vec(&spec).unwrap();
+            let back: crate::RunSpec = serde_json::from_slice(&json).unwrap();
+            assert_eq!(back, spec, "{}", profile.name());
+        }
+    }
 }

@@ -1,0 +1,65 @@
+//! The reality models across processes (issue 37): a team under every model of the P3-DX
+//! profile, and then some (a narrower field of view, a minimum range), each robot its own
+//! process in lockstep, reproduces the in-process run bit for bit.
+
+use std::time::Duration;
+
+use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
+use formation_robot_agent::decision::PolicyController;
+use formation_tests::{TempDir, Watchdog, assert_bit_identical, repo_root};
+use formation_world::{Scenario, run_episode};
+
+const LIMIT: Duration = Duration::from_secs(360);
+
+/// The shipped default: one policy for teams of any size (issue 10).
+const SHIPPED_MODEL: &str = "onnx/models/policy.onnx";
+
+#[test]
+fn every_reality_model_on_in_lockstep_is_bit_identical_to_in_process() {
+    let _watchdog = Watchdog::arm("reality_lockstep", LIMIT);
+    let dir = TempDir::new("reality");
+    let text = std::fs::read_to_string(repo_root().join("scenarios/teams-generalist.toml"))
+        .expect("reading teams-generalist.toml");
+    let text = text
+        .replace("robots = 8", "robots = 5")
+        .replace("duration_s = 60.0", "duration_s = 4.0")
+        .replace("runs = 100", "runs = 2")
+        .replace(
+            "[lidar]\n",
+            "[robot]\nprofile = \"pioneer-p3dx\"\n[lidar]\nfov_deg = 300.0\nmin_range = 0.3\n",
+        );
+    let scenario_path = dir.path().join("reality.toml");
+    std::fs::write(&scenario_path, text).expect("writing the scenario");
+    let scenario = Scenario::from_path(&scenario_path).expect("scenario");
+    let reality = scenario.world_config().reality;
+    assert!(reality.motors.tau_s > 0.0 && reality.motors.speed_noise_std > 0.0);
+    assert!(reality.motors.gain_asymmetry != 0.0 && reality.spread > 0.0);
+    assert!(reality.lidar.scan_period_ticks(scenario.world_config().dt) > 1);
+    assert!(reality.lidar.dropout > 0.0 && reality.lidar.fov_deg < 360.0);
+    assert!(reality.compass.noise_std_deg > 0.0 && reality.compass.bias_deg != 0.0);
+    assert!(reality.command_latency_ticks > 0);
+
+    let model = repo_root().join(SHIPPED_MODEL);
+    let over_processes = eval_over_processes(
+        &scenario,
+        scenario.seed(),
+        2,
+        &model,
+        ClockMode::Lockstep,
+        &NetworkFlags::default(),
+        &mut |_| {},
+    )
+    .expect("runs over processes")
+    .trajectories;
+    assert_eq!(over_processes.len(), 2);
+    for (index, from_processes) in over_processes.iter().enumerate() {
+        let spec = scenario.run_spec(scenario.seed(), index);
+        let models = vec![model.as_path(); 5];
+        let mut controller = PolicyController::from_model_paths(&models, spec.world.lidar)
+            .expect("in-process agents");
+        let in_process =
+            run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
+        assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
+        assert_bit_identical(from_processes, &in_process);
+    }
+}
