@@ -1,7 +1,8 @@
 //! Which transport joins the world and its agents ([`Transport`]): iceoryx2 shared memory on one
 //! host (the default), Zenoh over TCP for agents on other hosts, or ROS 2 over rmw_zenoh (agents
 //! that drive ROS 2 robots, the world as a ROS 2 team). A build may leave the last two out (the
-//! `zenoh` cargo feature, on by default in the binaries' packages).
+//! `zenoh` cargo feature, off in the demo's build; `cargo build --features zenoh` turns it on in
+//! the three binaries' packages).
 
 use std::fmt;
 
@@ -112,8 +113,7 @@ pub enum TransportError {
     /// The binary was built without it.
     #[error(
         "{program} was built without the {transport} transport; rebuild it with the `zenoh` \
-         feature (on by default: `cargo build --release --workspace --bins`, or add \
-         `--features zenoh` where default features are off)"
+         feature: `cargo build --release --features zenoh` (the demo's build leaves it out)"
     )]
     NotBuilt {
         /// The binary.

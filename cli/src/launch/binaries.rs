@@ -22,8 +22,9 @@ pub enum BinaryError {
     /// Not next to the running executable.
     #[error(
         "{name} was not found in {searched}; build the runtime executables with \
-         `cargo build --release --workspace --bins` (a plain `cargo run`/`cargo build` builds only \
-         the `formation` command), or point {env} at it"
+         `cargo build --release` in the repository (the workspace's default members: `formation`, \
+         `formation-world` and `formation-agent`; `cargo run -p formation-cli` builds only the \
+         `formation` command), or point {env} at it"
     )]
     NotFound {
         /// Executable name.
