@@ -1,0 +1,720 @@
+//! Zenoh over mutual TLS (issue 36) with real processes and real Zenoh on 127.0.0.1: a team on
+//! `tls/` runs lockstep bit for bit as in-process; an agent with no certificate, another team's,
+//! an expired one or another robot's is refused within seconds, naming the cause, and raw Zenoh
+//! clients with such certificates receive nothing; the recorder's certificate reads the run and
+//! publishes nothing.
+//!
+//! Every test uses its own run id, its own free TCP port and its own scratch folder, and runs
+//! alone within this binary ([`one_at_a_time`]).
+
+use std::io::{Read as _, Write as _};
+use std::net::{Shutdown, TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, SystemTime};
+
+use formation_cli::launch::read_trajectory;
+use formation_proto::wire::ScanMsg;
+use formation_robot_agent::decision::PolicyController;
+use formation_runtime::zenoh::credentials::read_login;
+use formation_runtime::zenoh::tls::issue::{Authority, issue_for};
+use formation_runtime::zenoh::tls::{certificate_file, key_file};
+use formation_tests::{
+    LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
+    formation_run, free_tcp_port, one_at_a_time, remote_zenoh_agent, run, test_model,
+    unique_run_id,
+};
+use formation_world::{Scenario, run_episode};
+use zenoh::Wait;
+
+const LIMIT: Duration = Duration::from_secs(180);
+/// A refused process must end within this (issue 36): the watchdog of each refusal.
+const REFUSAL_LIMIT: Duration = Duration::from_secs(10);
+
+fn endpoint(port: u16) -> String {
+    format!("tls/127.0.0.1:{port}")
+}
+
+/// `formation credentials --tls --robots N --out DIR/NAME`.
+fn tls_credentials(dir: &Path, name: &str, robots: usize) -> PathBuf {
+    let creds = dir.join(name);
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args(["credentials", "--tls", "--valid-days", "30"])
+        .args(["--robots", &robots.to_string(), "--out"])
+        .arg(&creds);
+    run(command, Duration::from_secs(120)).assert_success();
+    creds
+}
+
+/// A folder holding `principal`'s login file from `logins`, and the TLS files given
+/// (`(file name, source path)`), for an agent or a raw client made to fail one way.
+fn folder_with(
+    dir: &Path,
+    name: &str,
+    principal: &str,
+    logins: &Path,
+    files: &[(&str, PathBuf)],
+) -> PathBuf {
+    let folder = dir.join(name);
+    std::fs::create_dir_all(&folder).expect("the folder");
+    let login = format!("{principal}.json");
+    std::fs::copy(logins.join(&login), folder.join(&login)).expect("the login file");
+    for (file, source) in files {
+        std::fs::copy(source, folder.join(file)).expect("a TLS file");
+    }
+    folder
+}
+
+/// A raw Zenoh client of `endpoint` (no `formation` code): `principal`'s login from `logins`,
+/// and on a `tls/` endpoint the certificate and key of `tls`'s principal in its folder (none: no
+/// certificate).
+fn raw_tls_client(
+    endpoint: &str,
+    logins: &Path,
+    principal: &str,
+    tls: Option<(&Path, &str)>,
+) -> zenoh::Result<zenoh::Session> {
+    let login = read_login(&logins.join(format!("{principal}.json"))).expect("a login");
+    let mut config = zenoh::Config::default();
+    config.insert_json5("mode", "\"client\"")?;
+    config.insert_json5("scouting/multicast/enabled", "false")?;
+    config.insert_json5("connect/endpoints", &format!("[{endpoint:?}]"))?;
+    config.insert_json5("connect/timeout_ms", "3000")?;
+    config.insert_json5("connect/exit_on_failure", "true")?;
+    config.insert_json5(
+        "transport/auth/usrpwd",
+        &format!(
+            "{{ user: {:?}, password: {:?} }}",
+            login.user(),
+            login.password()
+        ),
+    )?;
+    if endpoint.starts_with("tcp/") {
+        return zenoh::open(config).wait();
+    }
+    let ca = logins.join("ca.pem");
+    let section = match tls {
+        Some((folder, who)) => serde_json::json!({
+            "root_ca_certificate": ca,
+            "connect_certificate": certificate_file(folder, who),
+            "connect_private_key": key_file(folder, who),
+            "enable_mtls": true,
+            "verify_name_on_connect": false,
+        }),
+        None => serde_json::json!({
+            "root_ca_certificate": ca,
+            "enable_mtls": false,
+            "verify_name_on_connect": false,
+        }),
+    };
+    config.insert_json5("transport/link/tls", &section.to_string())?;
+    zenoh::open(config).wait()
+}
+
+/// A subscriber of `session` on `key` counting samples whose key contains `marker` (every
+/// sample when empty).
+fn count_keys(
+    session: &zenoh::Session,
+    key: String,
+    marker: &'static str,
+) -> (zenoh::pubsub::Subscriber<()>, Arc<AtomicUsize>) {
+    let count = Arc::new(AtomicUsize::new(0));
+    let seen = Arc::clone(&count);
+    let subscriber = session
+        .declare_subscriber(key)
+        .callback(move |sample| {
+            if sample.key_expr().as_str().contains(marker) {
+                seen.fetch_add(1, Ordering::Relaxed);
+            }
+        })
+        .wait()
+        .expect("declaring a subscriber");
+    (subscriber, count)
+}
+
+/// Issue 36: lockstep case 1 over Zenoh on `tls/` (credentials with certificates made by the
+/// launcher) reproduces the in-process run bit for bit.
+#[test]
+fn a_tls_team_runs_lockstep_bit_identical_to_in_process() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_tls_lockstep", LIMIT);
+    let dir = TempDir::new("ztls");
+    let run_id = unique_run_id("ztls");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario_path = case1_scenario(dir.path(), 10.0);
+    let scenario = Scenario::from_path(&scenario_path).expect("scenario");
+    let out = dir.path().join("out");
+    let listen = endpoint(free_tcp_port());
+    let finished = run(
+        formation_run(
+            &run_id,
+            &scenario_path,
+            &out,
+            &[
+                "--transport",
+                "zenoh",
+                "--listen",
+                &listen,
+                "--clock",
+                "lockstep",
+            ],
+        ),
+        LIMIT,
+    );
+    finished.assert_success();
+    let over_tls = read_trajectory(&out.join("runs").join("run-0000.json")).expect("the run log");
+    let spec = scenario.run_spec(scenario.seed(), 0);
+    let model = test_model();
+    let mut controller =
+        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
+            .expect("in-process agents");
+    let reference = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
+    assert_eq!(reference.poses.len(), 201, "10 s at 20 Hz");
+    assert_bit_identical(&over_tls, &reference);
+    let credentials = out.join("credentials").join(run_id.as_str());
+    assert!(
+        credentials.join("ca.pem").is_file() && credentials.join("world.key.pem").is_file(),
+        "the launcher made certificates for a tls/ launch\n{}",
+        finished.describe()
+    );
+    assert!(
+        !finished.stderr().contains("clear text"),
+        "no clear-text warning on TLS\n{}",
+        finished.describe()
+    );
+    leaks.assert_clean();
+}
+
+/// Issue 36: against a TLS team whose robot 1 is remote, an agent for robot 1 with no
+/// certificate, another team's credentials, an expired certificate or robot 2's certificate
+/// ends within 10 s (the watchdog of `run`) with a non-zero exit naming the cause; raw Zenoh
+/// clients with no certificate, another team's, an expired one, or robot 2's on robot 1's keys
+/// receive nothing of robot 1; the recorder's certificate reads scans and commands and what it
+/// publishes reaches nobody. Then robot 1's own agent joins and the run completes.
+#[test]
+#[expect(
+    clippy::too_many_lines,
+    reason = "one launch, its refusals in sequence, then its end"
+)]
+fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_tls_refusals", LIMIT);
+    let dir = TempDir::new("ztref");
+    let run_id = unique_run_id("ztref");
+    let leaks = LeakCheck::new(&run_id);
+    let scenario = case1_scenario(dir.path(), 6.0);
+    let out = dir.path().join("out");
+    let creds = tls_credentials(dir.path(), "creds", 3);
+    let other = tls_credentials(dir.path(), "other", 3);
+    let listen = endpoint(free_tcp_port());
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &["--transport", "zenoh", "--listen", &listen, "--remote", "1"],
+    );
+    command
+        .args(["--clock", "realtime", "--credentials"])
+        .arg(&creds);
+    let mut launch = LiveProcess::spawn(command);
+    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains("waiting for the remote agents of robots [1]")
+    });
+    assert!(waiting.is_some(), "{}", launch.describe());
+
+    // An expired certificate of the team's own authority.
+    let now = SystemTime::now();
+    let authority = Authority::read(&creds).expect("the team's authority");
+    let (expired_pem, expired_key) = issue_for(
+        &authority,
+        "robot-1",
+        now - Duration::from_secs(10 * 86_400),
+        1,
+    )
+    .expect("an expired certificate");
+    let expired = folder_with(
+        dir.path(),
+        "expired",
+        "robot-1",
+        &creds,
+        &[("ca.pem", creds.join("ca.pem"))],
+    );
+    std::fs::write(expired.join("robot-1.pem"), expired_pem).expect("writing");
+    std::fs::write(expired.join("robot-1.key.pem"), expired_key).expect("writing");
+    let no_certificate = folder_with(dir.path(), "bare", "robot-1", &creds, &[]);
+    let wrong_name = folder_with(
+        dir.path(),
+        "robot2",
+        "robot-1",
+        &creds,
+        &[
+            ("ca.pem", creds.join("ca.pem")),
+            ("robot-1.pem", creds.join("robot-2.pem")),
+            ("robot-1.key.pem", creds.join("robot-2.key.pem")),
+        ],
+    );
+    let cases: [(&str, &Path, &str); 4] = [
+        (
+            "no certificate",
+            &no_certificate,
+            "cannot read the certificate authority",
+        ),
+        ("another team's", &other, "is not this team's world"),
+        ("expired", &expired, "expired on"),
+        (
+            "robot 2's",
+            &wrong_name,
+            "this is the certificate of robot-2, not of robot-1",
+        ),
+    ];
+    for (case, folder, cause) in cases {
+        let mut agent = remote_zenoh_agent(&listen, &run_id, 1);
+        agent.arg("--credentials").arg(folder.join("robot-1.json"));
+        let refused = run(agent, REFUSAL_LIMIT);
+        assert!(
+            !refused.output.status.success(),
+            "{case}: {}",
+            refused.describe()
+        );
+        assert!(
+            refused.stderr().contains(cause),
+            "{case}: expected {cause:?}\n{}",
+            refused.describe()
+        );
+    }
+
+    // Raw clients: the world's own refusals, and robot 2's certificate on robot 1's keys.
+    let robot1_keys = format!("formation/{run_id}/robot/1/**");
+    // A refused client gets no session, or (Zenoh retrying) a session that receives nothing.
+    let refused_clients: Vec<_> = [
+        ("no certificate", None),
+        (
+            "another team's certificate",
+            Some((other.as_path(), "robot-1")),
+        ),
+        (
+            "an expired certificate",
+            Some((expired.as_path(), "robot-1")),
+        ),
+    ]
+    .into_iter()
+    .filter_map(|(case, tls)| {
+        let session = raw_tls_client(&listen, &creds, "robot-1", tls).ok()?;
+        let (subscriber, count) = count_keys(&session, robot1_keys.clone(), "");
+        Some((case, session, subscriber, count))
+    })
+    .collect();
+    let robot2 = raw_tls_client(&listen, &creds, "robot-2", Some((&creds, "robot-2")))
+        .expect("robot 2's own certificate and login");
+    let (_r2, robot2_sees) = count_keys(&robot2, robot1_keys.clone(), "");
+    // Robot 2's certificate with robot 1's login: the rules need both to be robot 1's.
+    let mixed = raw_tls_client(&listen, &creds, "robot-1", Some((&creds, "robot-2")));
+    let mixed_sees = mixed
+        .as_ref()
+        .ok()
+        .map(|s| count_keys(s, robot1_keys.clone(), ""));
+    let recorder = raw_tls_client(&listen, &creds, "recorder", Some((&creds, "recorder")))
+        .expect("the recorder's certificate and login");
+    let (_scans, recorder_scans) =
+        count_keys(&recorder, format!("formation/{run_id}/robot/*/*/scan"), "");
+    let (_forged, forged_seen) = count_keys(
+        &recorder,
+        format!("formation/{run_id}/robot/0/*/cmd"),
+        "/999999/",
+    );
+    let publisher = raw_tls_client(&listen, &creds, "recorder", Some((&creds, "recorder")))
+        .expect("a second recorder session");
+    for _ in 0..20 {
+        publisher
+            .put(
+                format!("formation/{run_id}/robot/0/999999/cmd"),
+                vec![0u8; 24],
+            )
+            .wait()
+            .expect("the put leaves the client");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+
+    let mut agent = remote_zenoh_agent(&listen, &run_id, 1);
+    agent.arg("--credentials").arg(creds.join("robot-1.json"));
+    let remote = LiveProcess::spawn_with_input(agent, None);
+    let finished = launch.finish(LIMIT);
+    finished.assert_success();
+    let remote = remote.finish(Duration::from_secs(30));
+    assert!(remote.output.status.success(), "{}", remote.describe());
+    assert!(
+        recorder_scans.load(Ordering::Relaxed) > 0,
+        "the recorder reads scans\n{}",
+        finished.describe()
+    );
+    assert_eq!(
+        forged_seen.load(Ordering::Relaxed),
+        0,
+        "the recorder published a command"
+    );
+    assert_eq!(
+        robot2_sees.load(Ordering::Relaxed),
+        0,
+        "robot 2's certificate read robot 1's keys"
+    );
+    for (case, _, _, count) in &refused_clients {
+        assert_eq!(
+            count.load(Ordering::Relaxed),
+            0,
+            "{case} received robot 1's traffic"
+        );
+    }
+    if let Some((_s, count)) = &mixed_sees {
+        assert_eq!(
+            count.load(Ordering::Relaxed),
+            0,
+            "robot 2's certificate with robot 1's login"
+        );
+    }
+    drop((
+        robot2,
+        mixed_sees,
+        mixed,
+        recorder,
+        publisher,
+        refused_clients,
+    ));
+    leaks.assert_clean();
+}
+
+/// Issue 36: `formation credentials --tls` writes private keys in a private folder, and
+/// `--renew robot-1` replaces robot 1's certificate only.
+#[test]
+fn credentials_with_tls_are_private_and_renew_one_principal() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = TempDir::new("ztcred");
+    let creds = tls_credentials(dir.path(), "creds", 2);
+    let mode = |p: &Path| std::fs::metadata(p).expect("a file").permissions().mode() & 0o777;
+    assert_eq!(mode(&creds), 0o700);
+    for principal in ["world", "robot-0", "robot-1", "operator", "recorder", "ca"] {
+        assert_eq!(mode(&key_file(&creds, principal)), 0o600, "{principal}");
+        assert!(certificate_file(&creds, principal).is_file(), "{principal}");
+    }
+    let before = |p: &str| std::fs::read(certificate_file(&creds, p)).expect("a certificate");
+    let (world, robot0, robot1) = (before("world"), before("robot-0"), before("robot-1"));
+    let mut renew = Command::new(&binaries().cli);
+    renew
+        .args([
+            "credentials",
+            "--tls",
+            "--renew",
+            "robot-1",
+            "--valid-days",
+            "7",
+            "--out",
+        ])
+        .arg(&creds);
+    let renewed = run(renew, Duration::from_secs(60));
+    renewed.assert_success();
+    assert!(
+        renewed.stdout().contains("renewed"),
+        "{}",
+        renewed.describe()
+    );
+    assert_ne!(before("robot-1"), robot1);
+    assert_eq!(before("world"), world);
+    assert_eq!(before("robot-0"), robot0);
+    let mut unknown = Command::new(&binaries().cli);
+    unknown
+        .args(["credentials", "--tls", "--renew", "robot-x", "--out"])
+        .arg(&creds);
+    run(unknown, Duration::from_secs(60)).assert_failure_mentioning("no principal of a team");
+}
+
+/// The most bytes a [`RecordingRelay`] keeps of one direction of one connection.
+const MAX_CAPTURE_BYTES: usize = 64 << 20;
+
+/// One direction of one relayed connection, as it crossed the relay.
+type Capture = Arc<Mutex<Vec<u8>>>;
+
+/// A TCP relay on 127.0.0.1 between agents and the world's endpoint that forwards every
+/// connection and keeps a copy of what crossed it, each direction of each connection apart: what
+/// whoever is on the path between a robot and the world reads.
+struct RecordingRelay {
+    port: u16,
+    to_world: Arc<Mutex<Vec<Capture>>>,
+    to_agent: Arc<Mutex<Vec<Capture>>>,
+    stop: Arc<AtomicBool>,
+    acceptor: Option<JoinHandle<()>>,
+}
+
+impl RecordingRelay {
+    /// A relay forwarding to `world` (`HOST:PORT`).
+    fn start(world: &str) -> RecordingRelay {
+        let listener = TcpListener::bind("127.0.0.1:0").expect("binding the relay");
+        listener
+            .set_nonblocking(true)
+            .expect("a non-blocking listener");
+        let port = listener.local_addr().expect("the relay's address").port();
+        let to_world = Arc::new(Mutex::new(Vec::new()));
+        let to_agent = Arc::new(Mutex::new(Vec::new()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let world = world.to_string();
+        let (up, down, stopped) = (
+            Arc::clone(&to_world),
+            Arc::clone(&to_agent),
+            Arc::clone(&stop),
+        );
+        let acceptor = std::thread::spawn(move || {
+            while !stopped.load(Ordering::Relaxed) {
+                let agent = match listener.accept() {
+                    Ok((agent, _)) => agent,
+                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                        std::thread::sleep(Duration::from_millis(10));
+                        continue;
+                    }
+                    Err(e) => panic!("the relay's accept: {e}"),
+                };
+                agent.set_nonblocking(false).expect("a blocking stream");
+                let Ok(world) = TcpStream::connect(&world) else {
+                    continue;
+                };
+                for (from, to, captures) in [(&agent, &world, &up), (&world, &agent, &down)] {
+                    let capture = Capture::default();
+                    captures
+                        .lock()
+                        .expect("captures")
+                        .push(Arc::clone(&capture));
+                    let (from, to) = (
+                        from.try_clone().expect("a stream"),
+                        to.try_clone().expect("a stream"),
+                    );
+                    std::thread::spawn(move || pump(from, to, &capture));
+                }
+            }
+        });
+        RecordingRelay {
+            port,
+            to_world,
+            to_agent,
+            stop,
+            acceptor: Some(acceptor),
+        }
+    }
+
+    /// Whether `pattern` crossed the relay toward the world (`to_world`) or toward the agents.
+    fn carried(&self, to_world: bool, pattern: &[u8]) -> bool {
+        let captures = if to_world {
+            &self.to_world
+        } else {
+            &self.to_agent
+        };
+        captures.lock().expect("captures").iter().any(|capture| {
+            capture
+                .lock()
+                .expect("a capture")
+                .windows(pattern.len())
+                .any(|window| window == pattern)
+        })
+    }
+
+    /// Every byte that crossed, both directions.
+    fn bytes_carried(&self) -> usize {
+        [&self.to_world, &self.to_agent]
+            .iter()
+            .flat_map(|c| c.lock().expect("captures").clone())
+            .map(|capture| capture.lock().expect("a capture").len())
+            .sum()
+    }
+}
+
+impl Drop for RecordingRelay {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(acceptor) = self.acceptor.take() {
+            let _ = acceptor.join();
+        }
+    }
+}
+
+/// Copies `from` to `to` until either closes, keeping a copy in `capture`.
+fn pump(mut from: TcpStream, mut to: TcpStream, capture: &Capture) {
+    let mut buffer = [0u8; 16 << 10];
+    loop {
+        let n = match from.read(&mut buffer) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => n,
+        };
+        {
+            let mut kept = capture.lock().expect("a capture");
+            if kept.len() + n <= MAX_CAPTURE_BYTES {
+                kept.extend_from_slice(&buffer[..n]);
+            }
+        }
+        if to.write_all(&buffer[..n]).is_err() {
+            break;
+        }
+    }
+    let _ = to.shutdown(Shutdown::Write);
+}
+
+/// A subscriber of `session` on `key` keeping the payloads of the first `most` samples.
+fn keep_payloads(
+    session: &zenoh::Session,
+    key: String,
+    most: usize,
+) -> (zenoh::pubsub::Subscriber<()>, Arc<Mutex<Vec<Vec<u8>>>>) {
+    let kept = Arc::new(Mutex::new(Vec::new()));
+    let into = Arc::clone(&kept);
+    let subscriber = session
+        .declare_subscriber(key)
+        .callback(move |sample| {
+            let mut kept = into.lock().expect("payloads");
+            if kept.len() < most {
+                kept.push(sample.payload().to_bytes().into_owned());
+            }
+        })
+        .wait()
+        .expect("declaring a subscriber");
+    (subscriber, kept)
+}
+
+/// A distinctive 16-byte window of `scan`'s ranges (four finite ranges, not all equal), if it
+/// has one.
+fn range_window(scan: &[u8]) -> Option<Vec<u8>> {
+    let at = std::mem::offset_of!(ScanMsg, n_beams);
+    let beams = u32::from_ne_bytes(scan.get(at..at + 4)?.try_into().ok()?) as usize;
+    let ranges = scan.get(std::mem::offset_of!(ScanMsg, ranges)..)?;
+    let ranges = ranges.get(..beams * 4)?;
+    ranges
+        .chunks_exact(4)
+        .collect::<Vec<_>>()
+        .windows(4)
+        .find(|four| {
+            let values: Vec<f32> = four
+                .iter()
+                .map(|b| f32::from_ne_bytes([b[0], b[1], b[2], b[3]]))
+                .collect();
+            values.iter().all(|v| v.is_finite()) && values.iter().any(|v| *v != values[0])
+        })
+        .map(<[&[u8]]>::concat)
+}
+
+/// What a relay between robot 1's agent and the world saw of a lockstep run on `protocol`
+/// (`tcp` or `tls`), and the scan windows and commands of robot 1 that a recorder read.
+struct Eavesdropped {
+    relay: RecordingRelay,
+    scan_windows: Vec<Vec<u8>>,
+    commands: Vec<Vec<u8>>,
+}
+
+fn eavesdrop(protocol: &str, dir: &Path, creds: &Path) -> Eavesdropped {
+    let run_id = unique_run_id(&format!("zt{protocol}"));
+    let leaks = LeakCheck::new(&run_id);
+    std::fs::create_dir_all(dir.join(protocol)).expect("the run's folder");
+    let scenario = case1_scenario(&dir.join(protocol), 3.0);
+    let out = dir.join(protocol).join("out");
+    let port = free_tcp_port();
+    let listen = format!("{protocol}/127.0.0.1:{port}");
+    let mut command = formation_run(
+        &run_id,
+        &scenario,
+        &out,
+        &["--transport", "zenoh", "--listen", &listen, "--remote", "1"],
+    );
+    command
+        .args(["--clock", "lockstep", "--credentials"])
+        .arg(creds);
+    let mut launch = LiveProcess::spawn(command);
+    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains("waiting for the remote agents of robots [1]")
+    });
+    assert!(waiting.is_some(), "{}", launch.describe());
+    let recorder = raw_tls_client(&listen, creds, "recorder", Some((creds, "recorder")))
+        .expect("the recorder's session");
+    let robot1 = format!("formation/{run_id}/robot/1/*");
+    let (_scans, scans) = keep_payloads(&recorder, format!("{robot1}/scan"), 200);
+    let (_commands, commands) = keep_payloads(&recorder, format!("{robot1}/cmd"), 200);
+    let relay = RecordingRelay::start(&format!("127.0.0.1:{port}"));
+    let mut agent = remote_zenoh_agent(&format!("{protocol}/127.0.0.1:{}", relay.port), &run_id, 1);
+    agent.arg("--credentials").arg(creds.join("robot-1.json"));
+    let agent = LiveProcess::spawn_with_input(agent, None);
+    launch.finish(LIMIT).assert_success();
+    let agent = agent.finish(Duration::from_secs(30));
+    assert!(agent.output.status.success(), "{}", agent.describe());
+    drop(recorder);
+    leaks.assert_clean();
+    let scan_windows: Vec<_> = scans
+        .lock()
+        .expect("scans")
+        .iter()
+        .filter_map(|scan| range_window(scan))
+        .take(10)
+        .collect();
+    let commands: Vec<_> = commands
+        .lock()
+        .expect("commands")
+        .iter()
+        .take(10)
+        .cloned()
+        .collect();
+    assert!(
+        scan_windows.len() >= 5 && commands.len() >= 5,
+        "the recorder read {} scan windows and {} commands of robot 1",
+        scan_windows.len(),
+        commands.len()
+    );
+    Eavesdropped {
+        relay,
+        scan_windows,
+        commands,
+    }
+}
+
+/// Issue 36: what crosses a `tls/` link between a robot and the world holds no scan's range
+/// bytes and no command in clear; the same capture of a `tcp/` link finds them all (so the
+/// check can fail).
+#[test]
+fn a_capture_of_a_tls_link_holds_no_scan_or_command_in_clear() {
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_tls_capture", LIMIT);
+    let dir = TempDir::new("ztcap");
+    let creds = tls_credentials(dir.path(), "creds", 3);
+
+    let plain = eavesdrop("tcp", dir.path(), &creds);
+    for (k, window) in plain.scan_windows.iter().enumerate() {
+        assert!(
+            plain.relay.carried(false, window),
+            "tcp/: scan window {k} in clear"
+        );
+    }
+    for (k, command) in plain.commands.iter().enumerate() {
+        assert!(
+            plain.relay.carried(true, command),
+            "tcp/: command {k} in clear"
+        );
+    }
+
+    let sealed = eavesdrop("tls", dir.path(), &creds);
+    let carried = sealed.relay.bytes_carried();
+    let scan_bytes = std::mem::size_of::<ScanMsg>() * sealed.scan_windows.len();
+    assert!(
+        carried > scan_bytes,
+        "the tls/ link carried the run through the relay ({carried} bytes)"
+    );
+    for (k, window) in sealed.scan_windows.iter().enumerate() {
+        for to_world in [false, true] {
+            assert!(
+                !sealed.relay.carried(to_world, window),
+                "tls/: scan window {k} in clear"
+            );
+        }
+    }
+    for (k, command) in sealed.commands.iter().enumerate() {
+        for to_world in [false, true] {
+            assert!(
+                !sealed.relay.carried(to_world, command),
+                "tls/: command {k} in clear"
+            );
+        }
+    }
+}
