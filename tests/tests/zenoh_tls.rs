@@ -718,3 +718,79 @@ fn a_capture_of_a_tls_link_holds_no_scan_or_command_in_clear() {
         }
     }
 }
+
+/// Issue 36's cost of TLS, measured (not a test: it asserts no time, and runs only when asked,
+/// as root): a realtime case 1 of 20 s with the world in one network namespace and its three
+/// agents in another, on `tcp/` and on `tls/` in turn, twice each; prints the world's round trip
+/// (scan published to command received) p50 and p99 of each run.
+///
+/// `cargo test -p formation-tests --test zenoh_tls -- --ignored --nocapture round_trip`
+#[test]
+#[ignore = "a measurement: run it by name with --ignored --nocapture"]
+fn tls_round_trip_against_plain_tcp_across_namespaces() {
+    use formation_tests::netns::{NetPair, WORLD_IP};
+    use formation_tests::{formation_run_args, read_json};
+    let _one = one_at_a_time();
+    let pair = NetPair::create().unwrap_or_else(|reason| {
+        panic!("network namespaces are unavailable here ({reason}); run as root")
+    });
+    let dir = TempDir::new("ztrtt");
+    let creds = tls_credentials(dir.path(), "creds", 3);
+    let scenario = case1_scenario(dir.path(), 20.0);
+    for round in 0..2 {
+        for protocol in ["tcp", "tls"] {
+            let run_id = unique_run_id(&format!("rtt{protocol}"));
+            let listen = format!("{protocol}/{WORLD_IP}:{}", free_tcp_port());
+            let out = dir.path().join(format!("{protocol}-{round}"));
+            let creds_text = creds.to_string_lossy();
+            let flags = [
+                "--transport",
+                "zenoh",
+                "--listen",
+                &listen,
+                "--remote",
+                "0,1,2",
+                "--clock",
+                "realtime",
+                "--credentials",
+                &creds_text,
+            ];
+            let mut command = pair.in_world(&binaries().cli);
+            formation_run_args(
+                &mut command,
+                &run_id,
+                (&scenario, test_model(), &out),
+                &flags,
+            );
+            let mut launch = LiveProcess::spawn(command);
+            let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+                l.contains("waiting for the remote agents")
+            });
+            assert!(waiting.is_some(), "{}", launch.describe());
+            let agents: Vec<_> = (0..3)
+                .map(|robot| {
+                    let mut agent = pair.in_agents(&binaries().agent);
+                    agent
+                        .args(["--transport", "zenoh", "--connect", &listen])
+                        .args(["--run-id", run_id.as_str(), "--robot", &robot.to_string()])
+                        .arg("--model")
+                        .arg(test_model())
+                        .arg("--credentials")
+                        .arg(creds.join(format!("robot-{robot}.json")));
+                    LiveProcess::spawn(agent)
+                })
+                .collect();
+            launch.finish(LIMIT).assert_success();
+            for agent in agents {
+                let agent = agent.finish(Duration::from_secs(30));
+                assert!(agent.output.status.success(), "{}", agent.describe());
+            }
+            let profile = read_json(&out.join("profile.json"));
+            let round_trip = &profile["stages"]["round_trip"];
+            eprintln!(
+                "round {round} {protocol}/: round trip p50 {} us, p99 {} us",
+                round_trip["p50_us"], round_trip["p99_us"]
+            );
+        }
+    }
+}
