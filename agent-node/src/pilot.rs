@@ -74,4 +74,8 @@ impl Pilot for OnnxPilot {
     fn rehearse(&mut self) -> Result<(), BoxError> {
         Ok(self.agent.rehearse()?)
     }
+
+    fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
+        self.agent.set_max_wheel_accel(max_wheel_accel);
+    }
 }

@@ -316,6 +316,10 @@ pub struct CollectArgs {
     /// \[m/s²\], whatever the scenario's own (see `formation dagger --label-wheel-accel`).
     #[arg(long, value_name = "A", value_parser = wheel_accel)]
     pub label_wheel_accel: Option<f64>,
+    /// Label with the unlimited law, shaped for no limit whatever the scenario's own: for a
+    /// policy that answers a formation velocity, which each agent shapes for its own wheels.
+    #[arg(long, conflicts_with = "label_wheel_accel")]
+    pub unshaped_labels: bool,
 }
 
 /// `formation train`.
@@ -469,6 +473,11 @@ pub struct DaggerArgs {
     /// what a robot senses (default: each run's own limit).
     #[arg(long, value_name = "A", value_parser = wheel_accel)]
     pub label_wheel_accel: Option<f64>,
+    /// Label with the unlimited law in every run, whatever the run's own limit: for a policy
+    /// that answers a formation velocity (`formation train --output formation_velocity`), which
+    /// each agent shapes for its own wheels.
+    #[arg(long, conflicts_with = "label_wheel_accel")]
+    pub unshaped_labels: bool,
     /// Which network, whether to mirror the data, how many samples an epoch draws.
     #[command(flatten)]
     pub network: NetworkArgs,
@@ -694,6 +703,17 @@ mod tests {
         };
         assert_eq!(args.wheel_accels, [None, Some(1.0)]);
         assert_eq!(args.label_wheel_accel, Some(1.0));
+        assert!(!args.unshaped_labels);
+        // Unshaped labels, for a formation-velocity policy; never beside a fixed limit.
+        let base = ["formation", "collect", "--scenario", "s.toml", "--out", "D"];
+        let cli = Cli::try_parse_from(base.iter().chain(&["--unshaped-labels"])).unwrap();
+        let Command::Collect(args) = cli.command else {
+            panic!("not collect")
+        };
+        assert!(args.unshaped_labels && args.label_wheel_accel.is_none());
+        let both = ["--unshaped-labels", "--label-wheel-accel", "1"];
+        let error = Cli::try_parse_from(base.iter().chain(&both)).unwrap_err();
+        assert!(error.to_string().contains("cannot be used with"), "{error}");
     }
 
     #[test]

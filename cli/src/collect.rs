@@ -57,6 +57,7 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
     let mut opts = CollectOptions::for_scenario(&scenario);
     opts.occupancy = occupancy;
     opts.gains.shaping_wheel_accel = args.label_wheel_accel;
+    opts.gains.unshaped = args.unshaped_labels;
     if let Some(runs) = args.runs {
         opts.runs = runs;
     }

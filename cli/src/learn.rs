@@ -88,6 +88,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
         labels: RolloutLabels {
             gains: ExpertGains {
                 shaping_wheel_accel: args.label_wheel_accel,
+                unshaped: args.unshaped_labels,
                 ..ExpertGains::default()
             },
             wheel_accels: args.wheel_accels.clone(),

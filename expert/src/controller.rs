@@ -131,6 +131,11 @@ pub struct ExpertGains {
     /// that are one continuous function of what a robot senses. The scored formation's edges
     /// stay the rule's.
     pub pair_weight_band: Option<[f64; 2]>,
+    /// Never shape the formation velocity, whatever the robot's limit: the unlimited law's
+    /// labels, for a policy that answers a formation velocity, which its agent shapes for its
+    /// own wheels (`formation_perception::policy_input::shape_for_wheels`). Not with
+    /// [`shaping_wheel_accel`](Self::shaping_wheel_accel).
+    pub unshaped: bool,
 }
 
 /// The points of two robots between which the expert measures their distance and direction.
@@ -154,6 +159,7 @@ impl Default for ExpertGains {
             braking_share: 0.25,
             shaping_wheel_accel: None,
             pair_weight_band: None,
+            unshaped: false,
         }
     }
 }
@@ -221,6 +227,13 @@ impl ExpertGains {
             band[0] > 0.0 && band[1].is_finite() && band[0] < band[1],
             "absent, or [low, high] with 0 < low < high, both finite",
         )];
+        if self.unshaped && self.shaping_wheel_accel.is_some() {
+            return Err(InvalidGains {
+                field: "shaping_wheel_accel",
+                value: self.shaping_wheel_accel.unwrap_or_default(),
+                requirement: "absent when unshaped is true (unshaped labels are shaped by no limit)",
+            });
+        }
         for (field, value, in_range, requirement) in checks.into_iter().chain(band_checks) {
             if !(value.is_finite() && in_range) {
                 return Err(InvalidGains {
@@ -379,7 +392,8 @@ fn commands_among<I: Iterator<Item = (usize, f64)>>(
             gradient.1 += magnitude * dy / r;
         }
         let mut f = (-k_formation * gradient.0, -k_formation * gradient.1);
-        if let Some(accel) = gains.shaping_wheel_accel.or(robot.max_wheel_accel) {
+        let shaping_accel = gains.shaping_wheel_accel.or(robot.max_wheel_accel);
+        if let Some(accel) = shaping_accel.filter(|_| !gains.unshaped) {
             let speed = f.0.hypot(f.1);
             if speed > 0.0 {
                 let scale = braking_speed(speed, k_formation, gains.braking_share * accel) / speed;
@@ -391,17 +405,10 @@ fn commands_among<I: Iterator<Item = (usize, f64)>>(
     }
 }
 
-/// The speed \[m/s\] at which a point whose formation law asks for `speed` under the gain
-/// `k_formation` may approach its equilibrium when it can brake at `braking_accel` \[m/s²\]:
-/// `speed / sqrt(1 + k speed / (2 braking_accel))` with `k = 8 k_formation` (one pair's
-/// stiffness at `d*`). The law asks for `speed` from about `speed / k` away, and from there a point
-/// braking at `braking_accel` stops in time from at most `sqrt(2 braking_accel speed / k)`: the
-/// result tends to `speed` for small speeds and to that bound for large ones, and grows with
-/// `speed` throughout. Without a gain (`k_formation = 0`) it is `speed`.
-pub fn braking_speed(speed: f64, k_formation: f64, braking_accel: f64) -> f64 {
-    let stiffness = 8.0 * k_formation;
-    speed / (1.0 + stiffness * speed / (2.0 * braking_accel)).sqrt()
-}
+/// The expert's shaping under an acceleration limit, defined once beside the policies' own
+/// (`formation_perception::policy_input`), since an agent whose policy answers a formation
+/// velocity shapes it the same way for its own wheels.
+pub use formation_perception::policy_input::braking_speed;
 
 /// `v* (cos phi*, sin phi*)` with its norm capped at `max_speed`.
 pub(crate) fn reference_velocity(goal: &Goal, max_speed: f64) -> (f64, f64) {
@@ -1053,6 +1060,39 @@ mod tests {
     #[test]
     fn teams_of_five_and_eight_form_under_the_gabriel_rule() {
         teams_of_five_and_eight_form_with(ExpertGains::default());
+    }
+
+    #[test]
+    fn an_agent_shapes_a_formation_velocity_with_the_experts_own_gains() {
+        use formation_perception::policy_input::{SHAPING_BRAKING_SHARE, SHAPING_GAIN};
+        let gains = ExpertGains::default();
+        assert_eq!(gains.k_formation_graph, SHAPING_GAIN);
+        assert_eq!(gains.braking_share, SHAPING_BRAKING_SHARE);
+        // Unshaped labels under a limit are the unlimited law's; refused beside a fixed limit.
+        let robot = RobotParams {
+            max_wheel_accel: Some(1.0),
+            ..RobotParams::default()
+        };
+        let poses = triangle(1.3, 0.2);
+        let unshaped = ExpertGains {
+            unshaped: true,
+            ..gains
+        };
+        let (mut a, mut b) = (vec![WheelCmd::default(); 3], vec![WheelCmd::default(); 3]);
+        expert_commands(&poses, &goal(0.1, 1.0), &unshaped, &robot, &mut a);
+        expert_commands(
+            &poses,
+            &goal(0.1, 1.0),
+            &gains,
+            &RobotParams::default(),
+            &mut b,
+        );
+        assert_eq!(a, b);
+        let both = ExpertGains {
+            shaping_wheel_accel: Some(1.0),
+            ..unshaped
+        };
+        assert_eq!(both.validate().unwrap_err().field, "shaping_wheel_accel");
     }
 
     #[test]

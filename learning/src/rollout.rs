@@ -60,9 +60,12 @@ impl Driver {
             )),
             Driver::Policy { models } => {
                 let refs: Vec<&Path> = models.iter().map(PathBuf::as_path).collect();
-                let policy =
-                    PolicyController::from_model_paths(&refs, scenario.world_config().lidar)
-                        .map_err(|source| LearningError::Policy { source })?;
+                let world = scenario.world_config();
+                let mut policy = PolicyController::from_model_paths(&refs, world.lidar)
+                    .map_err(|source| LearningError::Policy { source })?;
+                // Each robot knows its own wheels, as a real one does: a policy that answers a
+                // formation velocity has it shaped for them.
+                policy.set_max_wheel_accel(world.robot.max_wheel_accel);
                 Ok(Box::new(policy))
             }
         }

@@ -4,7 +4,10 @@
 //! its model declares ([`PolicyOutput`]): wheel speeds at its training speed `v_train`, which the
 //! robot scales to the goal's speed ([`scale_to_goal_speed`]), or the formation velocity in the
 //! robot's frame, to which the robot adds the reference term ([`formation_velocity_to_wheels`]);
-//! [`command_of_output`] picks the one the model declares. The running agent (`formation-robot-agent`) and the Python bindings
+//! [`command_of_output`] picks the one the model declares. A formation velocity is the
+//! expert's law as if the wheels had no acceleration limit; a robot whose wheels have one shapes
+//! it to a speed its point can still brake from ([`shape_for_wheels`], the expert's own
+//! [`braking_speed`]), so one model serves robots with any limit, or none, at full speed. The running agent (`formation-robot-agent`) and the Python bindings
 //! (`formation-python`, whose policy runs in Python) call these same functions, so a policy driven
 //! from Python sees, and moves its robot by, exactly the numbers the agent's would.
 
@@ -62,18 +65,61 @@ pub fn scale_to_goal_speed(wheels: [f32; 2], v_star: f64, v_train: f64) -> Wheel
     }
 }
 
+/// The expert's team gain `K` \[1/(m s)\] under a neighbour graph, for which a formation
+/// velocity is shaped ([`shape_for_wheels`]): the labels' gain (`ExpertGains::k_formation_graph`'s
+/// default, which the expert's tests check against this).
+pub const SHAPING_GAIN: f64 = 1.0;
+
+/// The share of a wheel acceleration limit a formation velocity may spend braking
+/// (`ExpertGains::braking_share`'s default, which the expert's tests check against this).
+pub const SHAPING_BRAKING_SHARE: f64 = 0.25;
+
+/// The speed \[m/s\] at which a point whose formation law asks for `speed` under the gain
+/// `k_formation` may approach its equilibrium when it can brake at `braking_accel` \[m/s²\]:
+/// `speed / sqrt(1 + k speed / (2 braking_accel))` with `k = 8 k_formation` (one pair's
+/// stiffness at d*). Near the formation it is the law itself; far from it, a point
+/// braking at `braking_accel` stops in time from at most `sqrt(2 braking_accel speed / k)`: the
+/// expert's shaping under an acceleration limit (see `formation_expert::controller`).
+pub fn braking_speed(speed: f64, k_formation: f64, braking_accel: f64) -> f64 {
+    let stiffness = 8.0 * k_formation;
+    speed / (1.0 + stiffness * speed / (2.0 * braking_accel)).sqrt()
+}
+
+/// A formation velocity `f` \[m/s\] of the unlimited law shaped for wheels that accelerate at
+/// most `max_wheel_accel` \[m/s²\] ([`braking_speed`] with [`SHAPING_GAIN`] and
+/// [`SHAPING_BRAKING_SHARE`]): the same direction, a speed the point can brake from. Without a
+/// limit, `f` itself.
+pub fn shape_for_wheels(f: (f64, f64), max_wheel_accel: Option<f64>) -> (f64, f64) {
+    let Some(accel) = max_wheel_accel else {
+        return f;
+    };
+    let speed = f.0.hypot(f.1);
+    if speed.is_nan() || speed <= 0.0 {
+        return f;
+    }
+    let scale = braking_speed(speed, SHAPING_GAIN, SHAPING_BRAKING_SHARE * accel) / speed;
+    (f.0 * scale, f.1 * scale)
+}
+
 /// The wheel command of a formation-velocity output `f = (f_x, f_y)` \[m/s\] in the robot's frame,
-/// for a robot `delta_phi` off the goal's heading at goal speed `v_star`.
+/// for a robot `delta_phi` off the goal's heading at goal speed `v_star`, whose wheels
+/// accelerate at most `max_wheel_accel` \[m/s²\] (`None`: no limit).
 ///
-/// The controlled point lies half a wheel track ahead of the axle (the expert's `c = l/2`), so
-/// its velocity `u` in the robot's frame sets `v = u_x`, `ω = u_y / c` and the wheels
-/// `v ∓ (l/2) ω = u_x ∓ u_y` whatever the track `l`. `u = f + v* (cos Δφ, sin Δφ)`: the
-/// reference term `v* (cos φ*, sin φ*)` seen from the robot. The world applies its own wheel
-/// limits, as it does to any command.
-pub fn formation_velocity_to_wheels(f: [f32; 2], delta_phi: f64, v_star: f64) -> WheelCmd {
+/// `f` is shaped for that limit first ([`shape_for_wheels`]). The controlled point lies half a
+/// wheel track ahead of the axle (the expert's `c = l/2`), so its velocity `u` in the robot's
+/// frame sets `v = u_x`, `ω = u_y / c` and the wheels `v ∓ (l/2) ω = u_x ∓ u_y` whatever the
+/// track `l`. `u = f + v* (cos Δφ, sin Δφ)`: the reference term `v* (cos φ*, sin φ*)` seen from
+/// the robot. The world applies its own wheel limits, as it does to any command.
+pub fn formation_velocity_to_wheels(
+    f: [f32; 2],
+    delta_phi: f64,
+    v_star: f64,
+    max_wheel_accel: Option<f64>,
+) -> WheelCmd {
+    let f = shape_for_wheels((f64::from(f[0]), f64::from(f[1])), max_wheel_accel);
     let (sin, cos) = delta_phi.sin_cos();
-    let u_x = f64::from(f[0]) + v_star * cos;
-    let u_y = f64::from(f[1]) + v_star * sin;
+    let u_x = f.0 + v_star * cos;
+    let u_y = f.1 + v_star * sin;
     WheelCmd {
         left: u_x - u_y,
         right: u_x + u_y,
@@ -81,18 +127,21 @@ pub fn formation_velocity_to_wheels(f: [f32; 2], delta_phi: f64, v_star: f64) ->
 }
 
 /// The wheel command of a policy's two output values `values`, as `output` says they are meant,
-/// for the robot's auxiliary input `aux = (delta_phi, d*)` and goal speed `v_star`.
+/// for the robot's auxiliary input `aux = (delta_phi, d*)`, goal speed `v_star` and wheel
+/// acceleration limit `max_wheel_accel` (which shapes a formation velocity; a wheels output was
+/// trained for one limit and is taken as it is).
 pub fn command_of_output(
     output: PolicyOutput,
     values: [f32; 2],
     aux: [f32; 2],
     v_star: f64,
     v_train: f64,
+    max_wheel_accel: Option<f64>,
 ) -> WheelCmd {
     match output {
         PolicyOutput::Wheels => scale_to_goal_speed(values, v_star, v_train),
         PolicyOutput::FormationVelocity => {
-            formation_velocity_to_wheels(values, f64::from(aux[0]), v_star)
+            formation_velocity_to_wheels(values, f64::from(aux[0]), v_star, max_wheel_accel)
         }
     }
 }
@@ -138,20 +187,20 @@ mod tests {
     #[test]
     fn a_formation_velocity_becomes_the_wheels_that_move_the_point_half_a_track_ahead() {
         // On heading with no correction: straight on at v*.
-        let cmd = formation_velocity_to_wheels([0.0, 0.0], 0.0, 0.5);
+        let cmd = formation_velocity_to_wheels([0.0, 0.0], 0.0, 0.5, None);
         assert_eq!((cmd.left, cmd.right), (0.5, 0.5));
         // Goal heading 90° to the left, standing still otherwise: the point is asked to move
         // sideways at v*, which turns the robot left on the spot (ω = v* / c).
-        let cmd = formation_velocity_to_wheels([0.0, 0.0], std::f64::consts::FRAC_PI_2, 0.4);
+        let cmd = formation_velocity_to_wheels([0.0, 0.0], std::f64::consts::FRAC_PI_2, 0.4, None);
         assert!((cmd.left + 0.4).abs() < 1e-12 && (cmd.right - 0.4).abs() < 1e-12);
         // The correction adds to the reference term and does not scale with v*.
-        let slow = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.3);
-        let fast = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.8);
+        let slow = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.3, None);
+        let fast = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.8, None);
         assert!((slow.left - 0.4).abs() < 1e-6 && (fast.left - 0.9).abs() < 1e-6);
         // The point's velocity from these wheels, with l = 0.331 and c = l/2, is f + reference.
         let (l, c) = (0.331, 0.331 / 2.0);
         let f = [0.05_f32, -0.12_f32];
-        let cmd = formation_velocity_to_wheels(f, 0.3, 0.7);
+        let cmd = formation_velocity_to_wheels(f, 0.3, 0.7, None);
         let v = (cmd.left + cmd.right) / 2.0;
         let omega = (cmd.right - cmd.left) / l;
         assert!((v - (f64::from(f[0]) + 0.7 * 0.3f64.cos())).abs() < 1e-9);
@@ -162,12 +211,53 @@ mod tests {
     fn the_declared_output_picks_the_conversion() {
         let aux = [0.2, 1.5];
         assert_eq!(
-            command_of_output(PolicyOutput::Wheels, [0.7, 0.35], aux, 0.35, 0.7),
+            command_of_output(PolicyOutput::Wheels, [0.7, 0.35], aux, 0.35, 0.7, Some(1.0)),
             scale_to_goal_speed([0.7, 0.35], 0.35, 0.7)
         );
         assert_eq!(
-            command_of_output(PolicyOutput::FormationVelocity, [0.1, 0.0], aux, 0.35, 0.7),
-            formation_velocity_to_wheels([0.1, 0.0], f64::from(aux[0]), 0.35)
+            command_of_output(
+                PolicyOutput::FormationVelocity,
+                [0.1, 0.0],
+                aux,
+                0.35,
+                0.7,
+                None
+            ),
+            formation_velocity_to_wheels([0.1, 0.0], f64::from(aux[0]), 0.35, None)
         );
+    }
+
+    #[test]
+    fn a_limit_shapes_a_formation_velocity_as_the_expert_does_and_no_limit_keeps_it() {
+        let f = (0.3, -0.4);
+        assert_eq!(shape_for_wheels(f, None), f);
+        assert_eq!(shape_for_wheels((0.0, 0.0), Some(1.0)), (0.0, 0.0));
+        let shaped = shape_for_wheels(f, Some(1.0));
+        // The direction is kept, the speed is the braking speed: 0.5 / sqrt(1 + 8 * 0.5 / 0.5).
+        assert!((shaped.0 / shaped.1 - f.0 / f.1).abs() < 1e-12);
+        let speed = shaped.0.hypot(shaped.1);
+        assert!((speed - 0.5 / 9.0_f64.sqrt()).abs() < 1e-12, "{speed}");
+        // A looser limit shapes less; small corrections are almost untouched.
+        let loose = shape_for_wheels(f, Some(4.0));
+        assert!(loose.0.hypot(loose.1) > speed);
+        let small = shape_for_wheels((0.01, 0.0), Some(1.0));
+        assert!(small.0 > 0.0085 && small.0 < 0.01);
+        // Through the wheels: under a limit the command is the shaped velocity's.
+        let limited = command_of_output(
+            PolicyOutput::FormationVelocity,
+            [0.3, -0.4],
+            [0.2, 1.5],
+            0.5,
+            0.7,
+            Some(1.0),
+        );
+        let expected = formation_velocity_to_wheels(
+            [shaped.0 as f32, shaped.1 as f32],
+            f64::from(0.2_f32),
+            0.5,
+            None,
+        );
+        assert!((limited.left - expected.left).abs() < 1e-6);
+        assert!((limited.right - expected.right).abs() < 1e-6);
     }
 }

@@ -626,6 +626,10 @@ pub enum ControlRequest {
         generation: u64,
         /// The robot's LIDAR settings this episode.
         lidar: LidarSpec,
+        /// The robot's wheel acceleration limit \[m/s²\] this episode (`None`: none), for which
+        /// a policy that answers a formation velocity has it shaped: a real robot knows its own
+        /// wheels.
+        max_wheel_accel: Option<f64>,
     },
     /// Load another model off the hot path and let it drive from the first tick `>= at_tick`.
     SwapModel {
@@ -645,7 +649,7 @@ pub enum ControlRequest {
 #[cfg_attr(
     feature = "iceoryx2",
     derive(ZeroCopySend),
-    type_name("formation.ControlMsg.v1")
+    type_name("formation.ControlMsg.v2")
 )]
 #[repr(C)]
 pub struct ControlMsg {
@@ -659,6 +663,8 @@ pub struct ControlMsg {
     pub max_range: f64,
     /// LIDAR noise standard deviation \[m\] (begin episode).
     pub noise_std: f64,
+    /// The robot's wheel acceleration limit \[m/s²\], 0 for none (begin episode).
+    pub max_wheel_accel: f64,
     /// Request id (swap model).
     pub request_id: u64,
     /// First tick the new model may drive (swap model).
@@ -680,18 +686,35 @@ impl ControlMsg {
             generation: 0,
             max_range: 0.0,
             noise_std: 0.0,
+            max_wheel_accel: 0.0,
             request_id: 0,
             at_tick: 0,
             path: [0; MODEL_PATH_LEN],
         };
         match request {
-            ControlRequest::BeginEpisode { generation, lidar } => {
+            ControlRequest::BeginEpisode {
+                generation,
+                lidar,
+                max_wheel_accel,
+            } => {
                 msg.kind = CONTROL_BEGIN;
                 msg.generation = *generation;
                 msg.beams = u32::try_from(lidar.beams)
                     .map_err(|_| WireError::TooManyBeams { beams: lidar.beams })?;
                 msg.max_range = lidar.max_range;
                 msg.noise_std = lidar.noise_std;
+                msg.max_wheel_accel = match *max_wheel_accel {
+                    None => 0.0,
+                    Some(accel) if accel.is_finite() && accel > 0.0 => accel,
+                    Some(accel) => {
+                        return Err(WireError::Malformed {
+                            message: "control",
+                            reason: format!(
+                                "wheel acceleration limit {accel} is not a finite number > 0"
+                            ),
+                        });
+                    }
+                };
             }
             ControlRequest::SwapModel {
                 request_id,
@@ -721,6 +744,18 @@ impl ControlMsg {
                     beams: self.beams as usize,
                     max_range: self.max_range,
                     noise_std: self.noise_std,
+                },
+                max_wheel_accel: match self.max_wheel_accel {
+                    0.0 => None,
+                    accel if accel.is_finite() && accel > 0.0 => Some(accel),
+                    accel => {
+                        return Err(WireError::Malformed {
+                            message: "control",
+                            reason: format!(
+                                "wheel acceleration limit {accel} is neither 0 (none) nor a finite number > 0"
+                            ),
+                        });
+                    }
                 },
             }),
             CONTROL_SWAP => Ok(ControlRequest::SwapModel {
@@ -1544,6 +1579,12 @@ mod tests {
                     max_range: 10.0,
                     noise_std: 0.03,
                 },
+                max_wheel_accel: None,
+            },
+            ControlRequest::BeginEpisode {
+                generation: 10,
+                lidar: LidarSpec::default(),
+                max_wheel_accel: Some(1.0),
             },
             ControlRequest::SwapModel {
                 request_id: 4,
@@ -1558,6 +1599,23 @@ mod tests {
                 request
             );
         }
+        // A limit that is no limit is refused both ways, naming it.
+        let bad_limit = ControlRequest::BeginEpisode {
+            generation: 1,
+            lidar: LidarSpec::default(),
+            max_wheel_accel: Some(-1.0),
+        };
+        let error = ControlMsg::encode(&bad_limit).unwrap_err().to_string();
+        assert!(error.contains("wheel acceleration limit -1"), "{error}");
+        let mut nan = ControlMsg::encode(&ControlRequest::BeginEpisode {
+            generation: 1,
+            lidar: LidarSpec::default(),
+            max_wheel_accel: None,
+        })
+        .unwrap();
+        nan.max_wheel_accel = f64::NAN;
+        let error = nan.decode().unwrap_err().to_string();
+        assert!(error.contains("wheel acceleration limit NaN"), "{error}");
         let mut unknown = ControlMsg::encode(&ControlRequest::Shutdown).unwrap();
         unknown.kind = 77;
         assert_eq!(

@@ -430,8 +430,8 @@ impl Batch {
 
     /// A policy's outputs `(B, N, 2)` (float32) as wheel speeds for each world's goal, as the
     /// agent turns them into wheels: `(B, N, 2)` float64. `output` is what the model declares
-    /// (`wheels`, at its training speed `v_train`, or `formation_velocity`, to which each robot's
-    /// reference term is added).
+    /// (`wheels`, at its training speed `v_train`, or `formation_velocity`, which is shaped for
+    /// the world's wheel acceleration limit and to which each robot's reference term is added).
     #[pyo3(signature = (outputs, v_train, output = "wheels"))]
     fn policy_actions<'py>(
         &self,
@@ -465,6 +465,7 @@ impl Batch {
         for (b, slot) in self.slots.iter().enumerate() {
             let world = slot.episode.world();
             let goal = slot.episode.spec().goal_at(world.time());
+            let max_wheel_accel = slot.episode.spec().world.robot.max_wheel_accel;
             for (w, pose) in raw[b * n * 2..(b + 1) * n * 2]
                 .chunks_exact(2)
                 .zip(world.poses())
@@ -477,6 +478,7 @@ impl Batch {
                     aux,
                     goal.v_star,
                     v_train,
+                    max_wheel_accel,
                 );
                 out.extend([cmd.left, cmd.right]);
             }

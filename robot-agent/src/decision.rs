@@ -223,6 +223,9 @@ pub struct Agent {
     last_aux: Option<[f32; 2]>,
     /// The d* of the last [`Agent::perceive`] (the window of a model that scales with d*).
     last_d_star: f64,
+    /// The robot's wheel acceleration limit \[m/s²\], which shapes a formation-velocity output
+    /// ([`policy_input::shape_for_wheels`]); `None`: no limit.
+    max_wheel_accel: Option<f64>,
 }
 
 impl Agent {
@@ -239,7 +242,19 @@ impl Agent {
             last_scan: Vec::with_capacity(lidar.beams),
             last_aux: None,
             last_d_star: 1.0,
+            max_wheel_accel: None,
         })
+    }
+
+    /// Sets the robot's wheel acceleration limit \[m/s²\] (`None`: none, the default), for which
+    /// a policy that answers a formation velocity has it shaped.
+    pub fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
+        self.max_wheel_accel = max_wheel_accel;
+    }
+
+    /// The robot's wheel acceleration limit this agent shapes for.
+    pub fn max_wheel_accel(&self) -> Option<f64> {
+        self.max_wheel_accel
     }
 
     /// Loads an ONNX model (validating its contract) and wraps it.
@@ -296,6 +311,7 @@ impl Agent {
             aux,
             goal.v_star,
             self.policy.v_train(),
+            self.max_wheel_accel,
         ))
     }
 
@@ -537,6 +553,13 @@ impl PolicyController {
             .map(|m| Agent::from_model_path(m, lidar))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(PolicyController::new(agents))
+    }
+
+    /// Sets every robot's wheel acceleration limit \[m/s²\] ([`Agent::set_max_wheel_accel`]).
+    pub fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
+        for agent in &mut self.agents {
+            agent.set_max_wheel_accel(max_wheel_accel);
+        }
     }
 
     /// The agents, in robot order.

@@ -41,6 +41,10 @@ pub trait Pilot {
     fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, BoxError>;
     /// Puts another model in place after validating it; on error the old one keeps driving.
     fn swap(&mut self, model: Self::Model) -> Result<(), BoxError>;
+    /// Sets the robot's wheel acceleration limit \[m/s²\] (`None`: none) for the episode
+    /// beginning, which shapes a policy's formation velocity
+    /// (`formation_perception::policy_input::shape_for_wheels`).
+    fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>);
     /// Runs the last decision again, changing nothing and answering nothing, to warm the caches
     /// before the next scan is due (see [`AgentLoop::with_rehearsal`]). By default a no-op.
     fn rehearse(&mut self) -> Result<(), BoxError> {
@@ -310,9 +314,13 @@ impl<M: PilotMaker> AgentLoop<M> {
     ) -> Result<Option<AgentExit>, AgentError> {
         match request {
             ControlRequest::Shutdown => return Ok(Some(AgentExit::Shutdown)),
-            ControlRequest::BeginEpisode { generation, lidar } => {
+            ControlRequest::BeginEpisode {
+                generation,
+                lidar,
+                max_wheel_accel,
+            } => {
                 self.generation = generation;
-                let status = match self.prepare(lidar) {
+                let status = match self.prepare(lidar, max_wheel_accel) {
                     Ok(model_id) => AgentStatus::Ready {
                         generation,
                         model_id,
@@ -352,11 +360,17 @@ impl<M: PilotMaker> AgentLoop<M> {
         Ok(None)
     }
 
-    /// Makes the agent ready for an episode with this sensor; returns the model id.
-    fn prepare(&mut self, lidar: LidarSpec) -> Result<String, ModelError> {
-        if let Some((pilot, current)) = &self.pilot
+    /// Makes the agent ready for an episode with this sensor and wheel acceleration limit;
+    /// returns the model id.
+    fn prepare(
+        &mut self,
+        lidar: LidarSpec,
+        max_wheel_accel: Option<f64>,
+    ) -> Result<String, ModelError> {
+        if let Some((pilot, current)) = &mut self.pilot
             && *current == lidar
         {
+            pilot.set_max_wheel_accel(max_wheel_accel);
             return Ok(pilot.model_id().to_owned());
         }
         let model = match self.idle_model.take() {
@@ -370,6 +384,8 @@ impl<M: PilotMaker> AgentLoop<M> {
                 path: self.model_path.clone(),
                 source,
             })?;
+        let mut pilot = pilot;
+        pilot.set_max_wheel_accel(max_wheel_accel);
         let id = pilot.model_id().to_owned();
         self.pilot = Some((pilot, lidar));
         Ok(id)

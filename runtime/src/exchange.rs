@@ -159,6 +159,8 @@ pub struct AgentsController<'l> {
     events: EventSink,
     generation: u64,
     lidar: LidarSpec,
+    /// The robots' wheel acceleration limit this episode, which each agent is told.
+    max_wheel_accel: Option<f64>,
     states: Vec<AgentState>,
     newest: Vec<Option<Arrival>>,
     /// Per robot: when its recent scans were published, for timing the command that answers one.
@@ -262,6 +264,7 @@ impl<'l> AgentsController<'l> {
             events,
             generation: 0,
             lidar,
+            max_wheel_accel: None,
             states: vec![AgentState::Absent; n],
             newest: vec![None; n],
             scan_stamps,
@@ -308,11 +311,18 @@ impl<'l> AgentsController<'l> {
         }
     }
 
-    /// Starts a new episode: sends every connected agent a begin request and waits until all are
-    /// ready. An agent that refuses (e.g. its model does not fit the sensor) fails the episode.
-    pub fn begin_episode(&mut self, dt: f64, lidar: LidarSpec) -> Result<(), ControllerError> {
+    /// Starts a new episode of robots with this LIDAR and wheel acceleration limit (`None`:
+    /// none): sends every connected agent a begin request and waits until all are ready. An
+    /// agent that refuses (e.g. its model does not fit the sensor) fails the episode.
+    pub fn begin_episode(
+        &mut self,
+        dt: f64,
+        lidar: LidarSpec,
+        max_wheel_accel: Option<f64>,
+    ) -> Result<(), ControllerError> {
         self.generation += 1;
         self.lidar = lidar;
+        self.max_wheel_accel = max_wheel_accel;
         self.dt = Duration::from_secs_f64(dt);
         self.schedule_start = None;
         self.schedule_shift = Duration::ZERO;
@@ -415,6 +425,7 @@ impl<'l> AgentsController<'l> {
         let request = ControlRequest::BeginEpisode {
             generation: self.generation,
             lidar: self.lidar,
+            max_wheel_accel: self.max_wheel_accel,
         };
         self.link
             .send_control(robot, &request)

@@ -40,6 +40,9 @@ struct TestPilots;
 
 struct TestPilot {
     model: TestModel,
+    /// The wheel acceleration limit of the episode: the test pilot caps its speed at it, so a
+    /// test sees that the limit reached the agent.
+    max_wheel_accel: Option<f64>,
 }
 
 impl PilotMaker for TestPilots {
@@ -64,7 +67,10 @@ impl PilotMaker for TestPilots {
     }
 
     fn pilot(&self, model: TestModel, _: LidarSpec) -> Result<TestPilot, BoxError> {
-        Ok(TestPilot { model })
+        Ok(TestPilot {
+            model,
+            max_wheel_accel: None,
+        })
     }
 }
 
@@ -84,15 +90,22 @@ impl Pilot for TestPilot {
     }
 
     fn decide(&mut self, _: f64, _: &Goal) -> Result<WheelCmd, BoxError> {
+        let speed = self
+            .max_wheel_accel
+            .map_or(self.model.speed, |cap| self.model.speed.min(cap));
         Ok(WheelCmd {
-            left: self.model.speed,
-            right: self.model.speed,
+            left: speed,
+            right: speed,
         })
     }
 
     fn swap(&mut self, model: TestModel) -> Result<(), BoxError> {
         self.model = model;
         Ok(())
+    }
+
+    fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
+        self.max_wheel_accel = max_wheel_accel;
     }
 }
 
@@ -328,7 +341,7 @@ fn connected_with<'l>(
         .await_agents(Duration::from_secs(1))
         .expect("agents connect");
     world
-        .begin_episode(DT.as_secs_f64(), lidar())
+        .begin_episode(DT.as_secs_f64(), lidar(), None)
         .expect("agents ready");
     world
 }
@@ -394,6 +407,27 @@ fn lockstep_waits_for_a_late_agent_once_then_stops_waiting_until_it_answers_agai
         vec![1, 2, 3],
         "readiness counts every agent's hello once"
     );
+}
+
+#[test]
+fn each_episode_tells_every_agent_its_robots_wheel_acceleration_limit() {
+    let sim = Sim::new(2);
+    let mut link = sim.world_link();
+    let mut world = connected(&sim, &mut link, ClockMode::Lockstep);
+    assert_eq!(sim.tick(&mut world, 0), vec![SLOW; 2]);
+    // The test pilot caps its speed at the limit it was told.
+    world
+        .begin_episode(DT.as_secs_f64(), lidar(), Some(0.05))
+        .expect("agents ready");
+    let capped = WheelCmd {
+        left: 0.05,
+        right: 0.05,
+    };
+    assert_eq!(sim.tick(&mut world, 0), vec![capped; 2]);
+    world
+        .begin_episode(DT.as_secs_f64(), lidar(), None)
+        .expect("agents ready");
+    assert_eq!(sim.tick(&mut world, 0), vec![SLOW; 2]);
 }
 
 #[test]

@@ -56,8 +56,18 @@ fn a_formation_velocity_model_is_turned_into_wheels_with_the_reference_term_at_t
         let aux = policy_aux(heading, &goal).unwrap();
         let image: Vec<f32> = agent.image().iter().map(|&c| f32::from(c)).collect();
         let values = raw.infer(&image, aux).expect("the raw output");
-        let expected = formation_velocity_to_wheels(values, f64::from(aux[0]), v_star);
+        let expected = formation_velocity_to_wheels(values, f64::from(aux[0]), v_star, None);
         assert_eq!(command, expected, "v* = {v_star}");
+        // A robot whose wheels have an acceleration limit shapes the same output for them.
+        agent.set_max_wheel_accel(Some(1.0));
+        let limited = agent.act(&scan, heading, &goal).expect("a decision");
+        agent.set_max_wheel_accel(None);
+        let shaped = formation_velocity_to_wheels(values, f64::from(aux[0]), v_star, Some(1.0));
+        assert_eq!(limited, shaped, "v* = {v_star}");
+        assert_ne!(
+            limited, command,
+            "the limit shapes a non-zero formation velocity"
+        );
     }
 }
 
@@ -66,7 +76,14 @@ fn a_formation_velocity_team_in_lockstep_over_processes_is_bit_identical_to_in_p
     let _watchdog = Watchdog::arm("formation_velocity_lockstep", LIMIT);
     let dir = TempDir::new("fv-lockstep");
     let model = model_declaring(dir.path(), "formation_velocity");
-    let scenario = Scenario::from_path(&case1_scenario(dir.path(), 4.0)).expect("scenario");
+    // Wheels with an acceleration limit, which each agent is told at the episode's start and
+    // shapes its formation velocity for: the same over processes as in-process.
+    let short = case1_scenario(dir.path(), 4.0);
+    let limited = std::fs::read_to_string(&short).expect("the scenario")
+        + "\n[robot]\nmax_wheel_accel = 1.0\n";
+    std::fs::write(&short, limited).expect("the limited scenario");
+    let scenario = Scenario::from_path(&short).expect("scenario");
+    assert_eq!(scenario.world_config().robot.max_wheel_accel, Some(1.0));
     let over_processes = eval_over_processes(
         &scenario,
         scenario.seed(),
@@ -82,9 +99,18 @@ fn a_formation_velocity_team_in_lockstep_over_processes_is_bit_identical_to_in_p
     let models = [model.as_path(); 3];
     let mut controller =
         PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
+    controller.set_max_wheel_accel(spec.world.robot.max_wheel_accel);
     let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
     assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
     assert_bit_identical(&over_processes[0], &in_process);
+    // Unshaped agents drive another run: the limit did reach the agents over processes.
+    let mut unshaped =
+        PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
+    let unaware = run_episode(&spec, &mut unshaped, &mut |_, _| {}).expect("in-process run");
+    assert_ne!(
+        unaware.poses, in_process.poses,
+        "the limit shapes the team's motion"
+    );
 }
 
 #[test]

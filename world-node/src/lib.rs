@@ -459,7 +459,11 @@ fn play(
     for (nth, spec) in specs.iter().enumerate() {
         let index = spec.index;
         agents
-            .begin_episode(spec.world.dt, spec.world.lidar)
+            .begin_episode(
+                spec.world.dt,
+                spec.world.lidar,
+                spec.world.robot.max_wheel_accel,
+            )
             .with_context(|| format!("run {index}"))?;
         let recorder = recording
             .settings

@@ -144,6 +144,7 @@ fn control_and_swap_seeds() -> Result<Vec<Seed>, FuzzError> {
             max_range: 4.0,
             noise_std: 0.01,
         },
+        max_wheel_accel: Some(1.0),
     })
     .map_err(seed_error("wire"))?;
     let swap_control = ControlMsg::encode(&ControlRequest::SwapModel {

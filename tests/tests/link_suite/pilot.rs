@@ -180,4 +180,6 @@ impl Pilot for SuitePilot {
         self.model = model;
         Ok(())
     }
+
+    fn set_max_wheel_accel(&mut self, _max_wheel_accel: Option<f64>) {}
 }

@@ -94,7 +94,7 @@ impl<'l> World<'l> {
             .await_agents(Duration::from_secs(60))
             .expect("every agent connects");
         self.exchange
-            .begin_episode(DT, lidar())
+            .begin_episode(DT, lidar(), None)
             .expect("every agent is ready");
     }
 
