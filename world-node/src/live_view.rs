@@ -2,8 +2,9 @@
 //! steps the world serves its run over Foxglove's WebSocket protocol (the `foxglove` crate,
 //! subprotocol `foxglove.sdk.v1`), with the topics and messages of a recording
 //! ([`formation_record::topics`], defined once there) less the replay channels: each robot's
-//! scan, odometry and command, `/tf` and `/tf_static`, the goal and the formation's edges, all
-//! CDR with their `ros2msg` schemas, stamped and logged at the tick's simulated time.
+//! scan (at 5 Hz: every `SCAN_EVERY_TICKS`th tick), odometry and command, `/tf` and
+//! `/tf_static`, the goal and the formation's edges, all CDR with their `ros2msg` schemas,
+//! stamped and logged at the tick's simulated time.
 //!
 //! Built with the cargo feature `foxglove` only (the demo's build leaves it out); without it the
 //! flag is refused with the build that has it ([`requested`]).
@@ -193,6 +194,7 @@ mod off {
 
 #[cfg(feature = "foxglove")]
 mod server {
+    use std::cell::Cell;
     use std::convert::Infallible;
     use std::net::SocketAddr;
     use std::sync::Arc;
@@ -212,6 +214,13 @@ mod server {
     /// Each robot's fixed frames are sent again every this many ticks (a second at 20 Hz), for
     /// the clients that joined since.
     const STATIC_EVERY_TICKS: u64 = 20;
+
+    /// Each robot's LaserScan is served every this many ticks (5 Hz at 20 Hz control, a real
+    /// LDS-01's rate); poses, odometry, commands, the goal and the edges every tick. Scans are
+    /// most of a tick's bytes (900 ranges a robot), and a viewer gains little from 20 of them a
+    /// second, while the world pays for each (paired 32-robot realtime runs, release:
+    /// `scripts/measure live-view`, docs/measurements/live-view.json).
+    pub const SCAN_EVERY_TICKS: u64 = 4;
 
     /// The messages a client's queue holds for a team of `n_robots`: about two seconds of
     /// ticks at 20 Hz (each tick: four per robot, the goal's three and the edges), at least
@@ -397,13 +406,24 @@ mod server {
     fn serve(channels: &[Option<Arc<RawChannel>>], queue: &Receiver<Job>) {
         let mut messages: Option<TickMessages> = None;
         let mut failed = false;
+        // Whether this tick's scans are served ([`SCAN_EVERY_TICKS`]); the others' are emptied
+        // before encoding and not logged.
+        let scans_now = Cell::new(true);
+        let per_robot = Topics::scan(1) - Topics::scan(0);
+        let is_scan = |slot: Slot| {
+            slot >= Topics::scan(0) && (slot - Topics::scan(0)).is_multiple_of(per_robot)
+        };
         let mut log = |slot: Slot, ns: u64, data: &[u8]| -> Result<(), Infallible> {
+            if !scans_now.get() && is_scan(slot) {
+                return Ok(());
+            }
             if let Some(Some(channel)) = channels.get(slot) {
                 channel.log_with_meta(data, PartialMetadata::with_log_time(ns));
             }
             Ok(())
         };
         for job in queue.iter() {
+            scans_now.set(true);
             let done = match job {
                 Job::Begin(team) => {
                     let fresh = TickMessages::new(team, Replay::Left);
@@ -411,13 +431,20 @@ mod server {
                     messages = Some(fresh);
                     sent
                 }
-                Job::Tick(tick) => match &mut messages {
-                    Some(messages) if tick.tick % STATIC_EVERY_TICKS == 0 => messages
-                        .static_frames(&mut log)
-                        .and_then(|()| messages.tick(&tick, &mut log)),
-                    Some(messages) => messages.tick(&tick, &mut log),
-                    None => Ok(()),
-                },
+                Job::Tick(mut tick) => {
+                    let scans = tick.tick.is_multiple_of(SCAN_EVERY_TICKS);
+                    if !scans {
+                        tick.scans.iter_mut().for_each(Vec::clear);
+                    }
+                    scans_now.set(scans);
+                    match &mut messages {
+                        Some(messages) if tick.tick % STATIC_EVERY_TICKS == 0 => messages
+                            .static_frames(&mut log)
+                            .and_then(|()| messages.tick(&tick, &mut log)),
+                        Some(messages) => messages.tick(&tick, &mut log),
+                        None => Ok(()),
+                    }
+                }
                 Job::End(last, d_star) => match (last, messages.take()) {
                     (Some(last), Some(mut messages)) => messages.last(&last, d_star, &mut log),
                     _ => Ok(()),
