@@ -214,7 +214,10 @@ impl World {
     /// Scans every robot in order `0..n_robots()` (which fixes the order noise is drawn in), each into
     /// `out[i]`, resized to the beam count: the same bits as [`World::scan_into`] robot after robot,
     /// but looking only at the bodies within each robot's range (see [`TeamScanner`]), so a tick
-    /// costs `O(N)` rather than `O(N^2)` in the team's size.
+    /// costs `O(N)` rather than `O(N^2)` in the team's size. With a LIDAR slower than the control
+    /// rate (`reality.lidar.scan_rate_hz`), a robot whose scan is not due this tick gets its last
+    /// scan again ([`World::scan_age`] says how old); every scan is still cast and noised, so no
+    /// stream's draws depend on the scan rate.
     ///
     /// # Panics
     ///
