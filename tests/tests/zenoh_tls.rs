@@ -196,10 +196,6 @@ fn a_tls_team_runs_lockstep_bit_identical_to_in_process() {
 /// receive nothing of robot 1; the recorder's certificate reads scans and commands and what it
 /// publishes reaches nobody. Then robot 1's own agent joins and the run completes.
 #[test]
-#[expect(
-    clippy::too_many_lines,
-    reason = "one launch, its refusals in sequence, then its end"
-)]
 fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("zenoh_tls_refusals", LIMIT);
@@ -436,6 +432,9 @@ const MAX_CAPTURE_BYTES: usize = 64 << 20;
 /// One direction of one relayed connection, as it crossed the relay.
 type Capture = Arc<Mutex<Vec<u8>>>;
 
+/// Payloads a subscriber kept, in arrival order.
+type Payloads = Arc<Mutex<Vec<Vec<u8>>>>;
+
 /// A TCP relay on 127.0.0.1 between agents and the world's endpoint that forwards every
 /// connection and keeps a copy of what crossed it, each direction of each connection apart: what
 /// whoever is on the path between a robot and the world reads.
@@ -562,7 +561,7 @@ fn keep_payloads(
     session: &zenoh::Session,
     key: String,
     most: usize,
-) -> (zenoh::pubsub::Subscriber<()>, Arc<Mutex<Vec<Vec<u8>>>>) {
+) -> (zenoh::pubsub::Subscriber<()>, Payloads) {
     let kept = Arc::new(Mutex::new(Vec::new()));
     let into = Arc::clone(&kept);
     let subscriber = session
