@@ -138,6 +138,128 @@ impl RobotProfile {
     }
 }
 
+/// One rung of a profile's reality ladder: the effects added so far, as scenario keys.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LadderRung {
+    /// The effect this rung adds (`"ideal"` for the base scenario itself).
+    pub name: &'static str,
+    /// The keys this rung adds to the previous one's (dotted, e.g. `robot.motor_tau`).
+    pub added: Vec<&'static str>,
+    /// Every key set so far with the profile's value, for
+    /// [`Scenario::from_path_overridden`](crate::Scenario::from_path_overridden).
+    pub overrides: Vec<(String, toml::Value)>,
+}
+
+impl RobotProfile {
+    /// The reality ladder of this profile: the base scenario (`ideal`), then the profile's
+    /// effects added one at a time, cumulatively, in this order: geometry and speed, motors,
+    /// LIDAR timing, LIDAR geometry (with its range noise), compass, latency, spread. The last
+    /// rung sets every key the profile sets.
+    ///
+    /// A value the profile leaves absent (no acceleration limit, a scan every tick) is not set,
+    /// so the base scenario's stays: a profile cannot remove a key through overrides.
+    pub fn ladder(self) -> Vec<LadderRung> {
+        let ProfileSettings {
+            robot,
+            lidar,
+            reality,
+        } = self.settings();
+        let float = toml::Value::Float;
+        let optional = |value: Option<f64>| value.map(toml::Value::Float);
+        let effects: [(&'static str, Vec<(&'static str, Option<toml::Value>)>); 7] = [
+            (
+                "geometry and speed",
+                vec![
+                    (
+                        "robot.wheel_separation",
+                        Some(float(robot.wheel_separation)),
+                    ),
+                    ("robot.wheel_radius", Some(float(robot.wheel_radius))),
+                    ("robot.body_radius", Some(float(robot.body_radius))),
+                    ("robot.max_wheel_speed", Some(float(robot.max_wheel_speed))),
+                    ("robot.max_wheel_accel", optional(robot.max_wheel_accel)),
+                ],
+            ),
+            (
+                "motors",
+                vec![
+                    ("robot.motor_tau", Some(float(reality.motors.tau_s))),
+                    (
+                        "robot.wheel_speed_noise",
+                        Some(float(reality.motors.speed_noise_std)),
+                    ),
+                    (
+                        "robot.wheel_gain_asymmetry",
+                        Some(float(reality.motors.gain_asymmetry)),
+                    ),
+                ],
+            ),
+            (
+                "lidar timing",
+                vec![("lidar.scan_rate_hz", optional(reality.lidar.scan_rate_hz))],
+            ),
+            (
+                "lidar geometry",
+                vec![
+                    (
+                        "lidar.beams",
+                        Some(toml::Value::Integer(lidar.beams as i64)),
+                    ),
+                    ("lidar.fov_deg", Some(float(reality.lidar.fov_deg))),
+                    ("lidar.min_range", Some(float(reality.lidar.min_range))),
+                    ("lidar.max_range", Some(float(lidar.max_range))),
+                    ("lidar.dropout", Some(float(reality.lidar.dropout))),
+                    ("lidar.noise_std", Some(float(lidar.noise_std))),
+                ],
+            ),
+            (
+                "compass",
+                vec![
+                    (
+                        "compass.noise_std_deg",
+                        Some(float(reality.compass.noise_std_deg)),
+                    ),
+                    ("compass.bias_deg", Some(float(reality.compass.bias_deg))),
+                ],
+            ),
+            (
+                "latency",
+                vec![(
+                    "robot.command_latency",
+                    Some(toml::Value::Integer(i64::from(
+                        reality.command_latency_ticks,
+                    ))),
+                )],
+            ),
+            (
+                "spread",
+                vec![("robot.spread", Some(float(reality.spread)))],
+            ),
+        ];
+        let mut rungs = vec![LadderRung {
+            name: "ideal",
+            added: Vec::new(),
+            overrides: Vec::new(),
+        }];
+        let mut overrides: Vec<(String, toml::Value)> = Vec::new();
+        for (name, keys) in effects {
+            let mut added = Vec::new();
+            for (key, value) in keys {
+                if let Some(value) = value {
+                    added.push(key);
+                    overrides.push((key.to_owned(), value));
+                }
+            }
+            rungs.push(LadderRung {
+                name,
+                added,
+                overrides: overrides.clone(),
+            });
+        }
+        rungs
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -330,5 +452,70 @@ mod tests {
             let back: crate::RunSpec = serde_json::from_slice(&json).unwrap();
             assert_eq!(back, spec, "{}", profile.name());
         }
+    }
+
+    #[test]
+    fn a_ladder_adds_each_effect_in_order_and_ends_at_the_full_profile() {
+        let names: Vec<&str> = RobotProfile::Turtlebot3Burger
+            .ladder()
+            .iter()
+            .map(|r| r.name)
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "ideal",
+                "geometry and speed",
+                "motors",
+                "lidar timing",
+                "lidar geometry",
+                "compass",
+                "latency",
+                "spread"
+            ]
+        );
+        for profile in RobotProfile::ALL {
+            let ladder = profile.ladder();
+            assert!(ladder[0].overrides.is_empty() && ladder[0].added.is_empty());
+            for pair in ladder.windows(2) {
+                let (before, after) = (&pair[0], &pair[1]);
+                // Cumulative: each rung keeps every key before it and adds its own.
+                assert_eq!(
+                    after.overrides[..before.overrides.len()],
+                    before.overrides[..]
+                );
+                let new_keys: Vec<&str> = after.overrides[before.overrides.len()..]
+                    .iter()
+                    .map(|(k, _)| k.as_str())
+                    .collect();
+                assert_eq!(new_keys, after.added, "{}: {}", profile.name(), after.name);
+            }
+            // The last rung is the profile itself.
+            let last = ladder.last().unwrap();
+            let text = "name = \"p\"\nrobots = 3\nduration_s = 2.0\nseed = 3\n[goal]\n\
+                        v_star = 0.1\nd_star = 1.0\n[heading]\nschedule = \"random\"\n";
+            let dir = std::env::temp_dir().join(format!(
+                "formation-ladder-{}-{}",
+                std::process::id(),
+                profile.name()
+            ));
+            std::fs::create_dir_all(&dir).unwrap();
+            let path = dir.join("p.toml");
+            std::fs::write(&path, text).unwrap();
+            let laddered = Scenario::from_path_overridden(&path, &last.overrides).unwrap();
+            std::fs::remove_dir_all(&dir).unwrap();
+            let named = scenario(&format!("[robot]\nprofile = \"{}\"\n", profile.name())).unwrap();
+            assert_eq!(
+                laddered.world_config(),
+                named.world_config(),
+                "{}",
+                profile.name()
+            );
+        }
+        // The turtlebot's rungs set what the issue names, at the rung that names it.
+        let burger = RobotProfile::Turtlebot3Burger.ladder();
+        assert!(burger[1].added.contains(&"robot.max_wheel_speed"));
+        assert_eq!(burger[3].added, ["lidar.scan_rate_hz"]);
+        assert_eq!(burger[6].added, ["robot.command_latency"]);
     }
 }
