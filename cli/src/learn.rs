@@ -85,6 +85,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
         runs: args.runs.unwrap_or_else(|| scenario.runs()),
         scenario,
         team_sizes: rollouts.team_sizes.clone(),
+        rollout_durations: rollouts.rollout_durations.clone(),
         labels: RolloutLabels {
             gains: ExpertGains {
                 shaping_wheel_accel: args.label_wheel_accel,
@@ -188,6 +189,7 @@ pub fn dagger_label_command(args: &DaggerLabelArgs) -> anyhow::Result<()> {
         data: rollouts.data.clone(),
         scenario,
         team_sizes: rollouts.team_sizes.clone(),
+        rollout_durations: rollouts.rollout_durations.clone(),
         model: args.model.clone(),
         iteration: args.iteration,
         beta: rollouts.beta,

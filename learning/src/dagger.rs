@@ -35,6 +35,9 @@ pub struct DaggerOptions {
     pub scenario: Scenario,
     /// Team sizes of the rollouts, used in turn (empty: the scenario's own size).
     pub team_sizes: Vec<usize>,
+    /// Run lengths \[s\] of some team sizes, `(size, seconds)`, instead of the scenario's: long
+    /// rollouts where large teams stall ([`team_scenarios`]).
+    pub rollout_durations: Vec<(usize, f64)>,
     /// Who labels the rollouts, and the wheel acceleration limits they are run under.
     pub labels: RolloutLabels,
     /// DAgger iterations.
@@ -97,7 +100,7 @@ pub fn run_dagger(
     on_event: &(dyn Fn(DaggerEvent) + Sync),
 ) -> Result<Vec<EvalOutput>, LearningError> {
     check_beta(opts.beta)?;
-    let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes)?;
+    let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes, &opts.rollout_durations)?;
     let out_dir = opts
         .out
         .parent()
@@ -266,19 +269,51 @@ pub(crate) fn rollout_and_label(
     Ok(added)
 }
 
-/// The rollout scenario resized to each team size (the scenario's own size when none is given):
-/// run `i` plays `team_scenarios(..)[i % len]`.
+/// The rollout scenario resized to each team size (the scenario's own size when none is given),
+/// each run `durations` seconds long where they name its size (`(size, seconds)`; the
+/// scenario's length otherwise): run `i` plays `team_scenarios(..)[i % len]`. A duration for a
+/// size that is not rolled out is refused, naming the sizes that are.
 pub fn team_scenarios(
     scenario: &Scenario,
     team_sizes: &[usize],
+    durations: &[(usize, f64)],
 ) -> Result<Vec<Scenario>, LearningError> {
-    if team_sizes.is_empty() {
-        return Ok(vec![scenario.with_robots(scenario.n_robots())?]);
+    let sizes = if team_sizes.is_empty() {
+        vec![scenario.n_robots()]
+    } else {
+        team_sizes.to_vec()
+    };
+    if let Some((size, _)) = durations.iter().find(|(n, _)| !sizes.contains(n)) {
+        return Err(LearningError::Setting {
+            setting: "--rollout-durations",
+            problem: format!(
+                "names teams of {size}, but the rollouts are of {sizes:?} robots (--team-sizes)"
+            ),
+        });
     }
-    Ok(team_sizes
+    sizes
         .iter()
-        .map(|&n| scenario.with_robots(n))
-        .collect::<Result<Vec<_>, _>>()?)
+        .map(|&n| {
+            let resized = scenario.with_robots(n)?;
+            match durations.iter().rev().find(|(size, _)| *size == n) {
+                Some(&(_, seconds)) => Ok(resized.with_duration(seconds)?),
+                None => Ok(resized),
+            }
+        })
+        .collect()
+}
+
+/// The run lengths a part header records for these rollout scenarios: empty when every one is
+/// `base`'s length, else each one's, in turn.
+pub fn recorded_durations(base: &Scenario, scenarios: &[Scenario]) -> Vec<f64> {
+    if scenarios
+        .iter()
+        .all(|s| s.duration_s() == base.duration_s())
+    {
+        Vec::new()
+    } else {
+        scenarios.iter().map(Scenario::duration_s).collect()
+    }
 }
 
 /// Refuses a `--beta` outside [0, 1].
@@ -451,6 +486,7 @@ pub(crate) mod tests {
             data,
             scenario: base.clone(),
             team_sizes: vec![3, 5],
+            rollout_durations: Vec::new(),
             labels: RolloutLabels::default(),
             iterations: 1,
             out: PathBuf::from("unused.onnx"),
@@ -462,6 +498,34 @@ pub(crate) mod tests {
             eval_runs: 1,
             seed: 9,
         }
+    }
+
+    #[test]
+    fn rollout_durations_lengthen_the_named_team_sizes_and_refuse_others() {
+        let base = scenario(3);
+        let scenarios = team_scenarios(&base, &[3, 5], &[(5, 3.0)]).unwrap();
+        assert_eq!(scenarios[0].duration_s(), base.duration_s());
+        assert_eq!(
+            (scenarios[1].n_robots(), scenarios[1].duration_s()),
+            (5, 3.0)
+        );
+        assert_eq!(
+            recorded_durations(&base, &scenarios),
+            [base.duration_s(), 3.0]
+        );
+        let same = team_scenarios(&base, &[3, 5], &[]).unwrap();
+        assert!(recorded_durations(&base, &same).is_empty());
+        let error = team_scenarios(&base, &[3, 5], &[(8, 3.0)])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("teams of 8") && error.contains("[3, 5]"),
+            "{error}"
+        );
+        let error = team_scenarios(&base, &[3], &[(3, -1.0)])
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("duration_s"), "{error}");
     }
 
     #[test]
@@ -511,7 +575,7 @@ pub(crate) mod tests {
     fn labelling_two_ranges_of_runs_and_concatenating_them_equals_the_whole_range() {
         let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
         let base = scenario(3);
-        let scenarios = team_scenarios(&base, &[3, 5]).unwrap();
+        let scenarios = team_scenarios(&base, &[3, 5], &[]).unwrap();
         let rollouts = IterationRollouts {
             scenarios: &scenarios,
             iteration: 2,
@@ -564,7 +628,7 @@ pub(crate) mod tests {
     #[test]
     fn rollouts_run_under_the_limits_asked_and_label_with_the_gains_asked() {
         let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
-        let scenarios = team_scenarios(&scenario(5), &[]).unwrap();
+        let scenarios = team_scenarios(&scenario(5), &[], &[]).unwrap();
         let label = |labels: &RolloutLabels| {
             IterationRollouts {
                 scenarios: &scenarios,

@@ -17,7 +17,9 @@ use formation_trainer_bridge::dataset::Manifest;
 use formation_world::Scenario;
 
 use crate::LearningError;
-use crate::dagger::{IterationRollouts, RolloutLabels, check_beta, team_scenarios};
+use crate::dagger::{
+    IterationRollouts, RolloutLabels, check_beta, recorded_durations, team_scenarios,
+};
 
 /// What one share labels and where its part goes.
 #[derive(Debug, Clone)]
@@ -28,6 +30,9 @@ pub struct ShareOptions {
     pub scenario: Scenario,
     /// Team sizes of the rollouts, used in turn (empty: the scenario's own size).
     pub team_sizes: Vec<usize>,
+    /// Run lengths of some team sizes instead of the scenario's (see
+    /// [`DaggerOptions::rollout_durations`](crate::dagger::DaggerOptions::rollout_durations)).
+    pub rollout_durations: Vec<(usize, f64)>,
     /// The policy that drives this iteration (the previous iteration's model).
     pub model: PathBuf,
     /// The DAgger iteration, at least 1 (iteration 0 is the expert demonstrations).
@@ -69,13 +74,14 @@ pub fn label_share(
         source: Box::new(source),
     };
     let expert_share = opts.beta.powi(opts.iteration as i32);
-    let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes)?;
+    let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes, &opts.rollout_durations)?;
     let header = PartHeader {
         dataset,
         iteration,
         rollouts: RolloutSettings {
             scenario: opts.scenario.name().to_owned(),
             team_sizes: scenarios.iter().map(Scenario::n_robots).collect(),
+            durations_s: recorded_durations(&opts.scenario, &scenarios),
             seed: opts.seed,
             expert_share,
             model_fnv1a64: file_fnv1a64(&opts.model).map_err(part_error)?,
@@ -113,7 +119,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let whole = empty_dataset(&dir.path().join("whole"), &base);
         let opts = options(whole.clone(), &base);
-        let scenarios = team_scenarios(&base, &opts.team_sizes).unwrap();
+        let scenarios = team_scenarios(&base, &opts.team_sizes, &[]).unwrap();
         let added = rollout_and_label(&opts, &scenarios, 1, opts.beta, &model, &|_| {}).unwrap();
 
         let shared = empty_dataset(&dir.path().join("shared"), &base);
@@ -122,6 +128,7 @@ mod tests {
                 data: shared.clone(),
                 scenario: base.clone(),
                 team_sizes: opts.team_sizes.clone(),
+                rollout_durations: Vec::new(),
                 model: model.clone(),
                 iteration: 1,
                 beta: opts.beta,
@@ -160,6 +167,7 @@ mod tests {
             data: PathBuf::from("/nonexistent"),
             scenario: base,
             team_sizes: Vec::new(),
+            rollout_durations: Vec::new(),
             model: PathBuf::from("/nonexistent.onnx"),
             iteration: 0,
             beta: 0.0,

@@ -44,6 +44,10 @@ pub struct RolloutSettings {
     pub scenario: String,
     /// Team sizes of the runs, used in turn.
     pub team_sizes: Vec<usize>,
+    /// Each team size's run length \[s\], in the same turn, where some differ from the
+    /// scenario's (`formation dagger --rollout-durations`); empty: every run the scenario's.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub durations_s: Vec<f64>,
     /// Base seed of the DAgger rollouts.
     pub seed: u64,
     /// The expert's share of the runs in this iteration (`beta^k`).
@@ -553,6 +557,7 @@ mod tests {
             rollouts: RolloutSettings {
                 scenario: "unit".into(),
                 team_sizes: vec![3, 5],
+                durations_s: Vec::new(),
                 seed: 9,
                 expert_share: 0.5,
                 model_fnv1a64: "0123456789abcdef".into(),

@@ -45,6 +45,7 @@ fn seeds() -> Result<Vec<Seed>, FuzzError> {
         rollouts: RolloutSettings {
             scenario: "fuzz-seed".into(),
             team_sizes: vec![3, 5],
+            durations_s: Vec::new(),
             seed: 11,
             expert_share: 0.25,
             model_fnv1a64: "0123456789abcdef".into(),

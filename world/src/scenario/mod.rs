@@ -524,6 +524,21 @@ impl Scenario {
             ..self.clone()
         })
     }
+
+    /// The same scenario with runs of `duration_s` simulated seconds (within `duration_s`'s
+    /// bounds, and robots × ticks within the trajectory limit); every other setting is kept.
+    pub fn with_duration(&self, duration_s: f64) -> Result<Scenario, ScenarioError> {
+        let check = Checker {
+            origin: &self.given.origin,
+        };
+        let duration_s = check.bounded("duration_s", duration_s, limits::DURATION_S)?;
+        let ticks = (duration_s / self.world.dt).round() as u64;
+        check_robot_ticks(&check, self.n_robots, ticks, self.world.dt)?;
+        Ok(Scenario {
+            duration_s,
+            ..self.clone()
+        })
+    }
 }
 
 /// Scenario text with `overrides` (dotted keys) set in its tables.

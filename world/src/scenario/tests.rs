@@ -971,6 +971,24 @@ fn with_robots_keeps_what_the_file_gave_and_resizes_the_rest() {
 }
 
 #[test]
+fn with_duration_keeps_every_other_setting_and_checks_its_bounds() {
+    let scenario = parse(&edited("robots = 3", "robots = 4")).unwrap();
+    let long = scenario.with_duration(100.0).unwrap();
+    assert_eq!(long.duration_s(), 100.0);
+    assert_eq!(long.with_duration(scenario.duration_s()).unwrap(), scenario);
+    let spec = long.run_spec(long.seed(), 0);
+    assert_eq!(spec.ticks(), 2000);
+    for bad in [0.0, -1.0, f64::NAN, 1e6] {
+        let error = scenario.with_duration(bad).unwrap_err().to_string();
+        assert!(error.contains("duration_s"), "{bad}: {error}");
+    }
+    // Robots x ticks is bounded: a long run of a huge team is refused, naming the fix.
+    let huge = scenario.with_robots(1024).unwrap();
+    let error = huge.with_duration(3600.0).unwrap_err().to_string();
+    assert!(error.contains("shorten duration_s"), "{error}");
+}
+
+#[test]
 fn splitmix64_matches_the_reference_sequence() {
     // Reference: the first outputs of SplitMix64 seeded with 0 (state advanced by the golden gamma).
     let gamma = 0x9E37_79B9_7F4A_7C15_u64;
