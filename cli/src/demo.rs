@@ -100,6 +100,7 @@ fn run_eval(
         foxglove,
         first_run: None,
         shard: None,
+        ladder: None,
     };
     let (out, results) =
         eval::evaluate(&eval_args).with_context(|| format!("evaluating {name}"))?;

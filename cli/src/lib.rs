@@ -27,6 +27,7 @@ pub mod collect;
 pub mod demo;
 pub mod eval;
 pub mod gauge;
+pub mod ladder;
 pub mod launch;
 pub mod learn;
 pub mod paths;

@@ -8,6 +8,7 @@
 //! | `summary.json`, `formation eval --json` | [`EvalOutput`] | [`EvalOutput::FORMAT`] | [`EvalOutput::VERSION`] |
 //! | `profile.json` | [`LatencyProfile`] | [`LatencyProfile::FORMAT`] | [`LatencyProfile::VERSION`] |
 //! | `formation eval --robots ... --json` | [`ScalingTable`] | [`ScalingTable::FORMAT`] | [`ScalingTable::VERSION`] |
+//! | `formation eval --ladder PROFILE --json` | [`LadderTable`] | [`LadderTable::FORMAT`] | [`LadderTable::VERSION`] |
 //! | `formation eval --shard FILE` (a share of the runs, for `formation merge`) | [`EvalShard`] | [`EvalShard::FORMAT`] | [`EvalShard::VERSION`] |
 //! | `formation replay --json` | [`ReplayReport`] | [`ReplayReport::FORMAT`] | [`ReplayReport::VERSION`] |
 //! | `formation gauge --json`, `response.json` | [`ResponseCurve`] | [`ResponseCurve::FORMAT`] | [`ResponseCurve::VERSION`] |
@@ -34,6 +35,7 @@
 //! the trajectory). Every other float reads back bit for bit (`float_roundtrip`).
 
 mod goal_speed;
+mod ladder;
 mod model_input;
 mod nan;
 mod profile;
@@ -54,6 +56,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 pub use goal_speed::ModelGoalSpeed;
+pub use ladder::{LadderRung, LadderTable};
 pub use model_input::{ModelInput, trim_decimals, trim_number};
 pub use profile::{LatencyProfile, StageStats};
 pub use replay::{ReplayReport, ReplayRobot};
@@ -163,6 +166,11 @@ pub fn read_summary(path: &Path) -> Result<EvalOutput, SchemaError> {
 
 /// Reads a scaling table (what `formation eval --robots ... --json` wrote).
 pub fn read_scaling(path: &Path) -> Result<ScalingTable, SchemaError> {
+    read(path)
+}
+
+/// Reads a reality ladder (what `formation eval --ladder PROFILE --json` wrote).
+pub fn read_ladder(path: &Path) -> Result<LadderTable, SchemaError> {
     read(path)
 }
 
