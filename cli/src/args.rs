@@ -428,6 +428,27 @@ pub struct DaggerRolloutArgs {
     /// Team sizes of the rollouts, used in turn (e.g. `3,5,7`; default: the scenario's).
     #[arg(long, value_delimiter = ',', value_parser = team_size)]
     pub team_sizes: Vec<usize>,
+    /// Run lengths of some team sizes instead of the scenario's, `SIZE=SECONDS` (e.g.
+    /// `24=100,32=100`: long rollouts where large teams stall).
+    #[arg(long, value_delimiter = ',', value_name = "SIZE=SECONDS", value_parser = team_duration)]
+    pub rollout_durations: Vec<(usize, f64)>,
+}
+
+/// A team size and a run length, `SIZE=SECONDS` (`formation dagger --rollout-durations`); the
+/// length's bounds are the scenario's `duration_s`'s, checked with the team.
+pub fn team_duration(text: &str) -> Result<(usize, f64), String> {
+    let (size, seconds) = text
+        .split_once('=')
+        .ok_or_else(|| format!("`{text}` is not SIZE=SECONDS (e.g. 32=100)"))?;
+    let size = team_size(size.trim())?;
+    let seconds: f64 = seconds
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{seconds}` in `{text}` is not a number of seconds"))?;
+    if !(seconds.is_finite() && seconds > 0.0) {
+        return Err(format!("`{text}`: the run length must be > 0 seconds"));
+    }
+    Ok((size, seconds))
 }
 
 /// `formation dagger`.
@@ -723,6 +744,22 @@ mod tests {
     }
 
     #[test]
+    fn rollout_durations_are_size_equals_seconds() {
+        assert_eq!(team_duration("32=100"), Ok((32, 100.0)));
+        assert_eq!(team_duration(" 24 = 80.5"), Ok((24, 80.5)));
+        for (bad, says) in [
+            ("32", "SIZE=SECONDS"),
+            ("1=10", "2 to 1024"),
+            ("8=fast", "not a number"),
+            ("8=-1", "> 0"),
+            ("8=nan", "> 0"),
+        ] {
+            let error = team_duration(bad).unwrap_err();
+            assert!(error.contains(says), "{bad}: {error}");
+        }
+    }
+
+    #[test]
     fn team_sizes_are_bounded_and_lists_parse() {
         assert_eq!(team_size("16"), Ok(16));
         for bad in ["1", "0", "1025", "x"] {
@@ -774,6 +811,7 @@ mod tests {
             panic!("not dagger-label: {:?}", cli.command);
         };
         assert_eq!(args.rollouts.team_sizes, [3, 5]);
+        assert!(args.rollouts.rollout_durations.is_empty());
         assert_eq!(args.rollouts.seed, 1000, "formation dagger's default seed");
         assert_eq!(
             (args.iteration, args.first_run, args.runs),
