@@ -166,7 +166,9 @@ impl RobotProfile {
         } = self.settings();
         let float = toml::Value::Float;
         let optional = |value: Option<f64>| value.map(toml::Value::Float);
-        let effects: [(&'static str, Vec<(&'static str, Option<toml::Value>)>); 7] = [
+        // An effect's name and its keys; a key whose value is `None` is left to the base scenario.
+        type Effect = (&'static str, Vec<(&'static str, Option<toml::Value>)>);
+        let effects: [Effect; 7] = [
             (
                 "geometry and speed",
                 vec![
