@@ -2,7 +2,7 @@
 //! steps the world serves its run over Foxglove's WebSocket protocol (the `foxglove` crate,
 //! subprotocol `foxglove.sdk.v1`), with the topics and messages of a recording
 //! ([`formation_record::topics`], defined once there) less the replay channels: each robot's
-//! scan (at 5 Hz: every `SCAN_EVERY_TICKS`th tick), odometry and command, `/tf` and
+//! scan, odometry and command (at 5 Hz: every `ROBOT_TOPICS_EVERY_TICKS`th tick), `/tf` and
 //! `/tf_static`, the goal and the formation's edges, all CDR with their `ros2msg` schemas,
 //! stamped and logged at the tick's simulated time.
 //!
@@ -215,12 +215,14 @@ mod server {
     /// the clients that joined since.
     const STATIC_EVERY_TICKS: u64 = 20;
 
-    /// Each robot's LaserScan is served every this many ticks (5 Hz at 20 Hz control, a real
-    /// LDS-01's rate); poses, odometry, commands, the goal and the edges every tick. Scans are
-    /// most of a tick's bytes (900 ranges a robot), and a viewer gains little from 20 of them a
-    /// second, while the world pays for each (paired 32-robot realtime runs, release:
-    /// `scripts/measure live-view`, docs/measurements/live-view.json).
-    pub const SCAN_EVERY_TICKS: u64 = 4;
+    /// Each robot's own topics (its LaserScan, odometry and command) are served every this many
+    /// ticks (5 Hz at 20 Hz control, a real LDS-01's scan rate); `/tf`, the goal and the edges
+    /// every tick, so the team still moves smoothly. Each message costs the world about the
+    /// same whatever its size, and the robots' topics are three messages a robot a tick:
+    /// served every tick, the view cost a 32-robot realtime world 12–19 % of its work a tick,
+    /// with scans every 4th tick 1–13 % (paired runs, release: `scripts/measure live-view`,
+    /// docs/measurements/live-view.json).
+    pub const ROBOT_TOPICS_EVERY_TICKS: u64 = 4;
 
     /// The messages a client's queue holds for a team of `n_robots`: about two seconds of
     /// ticks at 20 Hz (each tick: four per robot, the goal's three and the edges), at least
@@ -406,15 +408,12 @@ mod server {
     fn serve(channels: &[Option<Arc<RawChannel>>], queue: &Receiver<Job>) {
         let mut messages: Option<TickMessages> = None;
         let mut failed = false;
-        // Whether this tick's scans are served ([`SCAN_EVERY_TICKS`]); the others' are emptied
-        // before encoding and not logged.
-        let scans_now = Cell::new(true);
-        let per_robot = Topics::scan(1) - Topics::scan(0);
-        let is_scan = |slot: Slot| {
-            slot >= Topics::scan(0) && (slot - Topics::scan(0)).is_multiple_of(per_robot)
-        };
+        // Whether this tick's robot topics are served ([`ROBOT_TOPICS_EVERY_TICKS`]); on the
+        // other ticks the scans are emptied before encoding and no robot topic is logged.
+        let robots_now = Cell::new(true);
+        let is_robot_topic = |slot: Slot| slot >= Topics::scan(0);
         let mut log = |slot: Slot, ns: u64, data: &[u8]| -> Result<(), Infallible> {
-            if !scans_now.get() && is_scan(slot) {
+            if !robots_now.get() && is_robot_topic(slot) {
                 return Ok(());
             }
             if let Some(Some(channel)) = channels.get(slot) {
@@ -423,7 +422,7 @@ mod server {
             Ok(())
         };
         for job in queue.iter() {
-            scans_now.set(true);
+            robots_now.set(true);
             let done = match job {
                 Job::Begin(team) => {
                     let fresh = TickMessages::new(team, Replay::Left);
@@ -432,11 +431,11 @@ mod server {
                     sent
                 }
                 Job::Tick(mut tick) => {
-                    let scans = tick.tick.is_multiple_of(SCAN_EVERY_TICKS);
-                    if !scans {
+                    let robots = tick.tick.is_multiple_of(ROBOT_TOPICS_EVERY_TICKS);
+                    if !robots {
                         tick.scans.iter_mut().for_each(Vec::clear);
                     }
-                    scans_now.set(scans);
+                    robots_now.set(robots);
                     match &mut messages {
                         Some(messages) if tick.tick % STATIC_EVERY_TICKS == 0 => messages
                             .static_frames(&mut log)
