@@ -600,9 +600,6 @@ pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
     if let Some(shard) = &args.shard {
         return shard_command(args, shard);
     }
-    if let Some(profile) = &args.ladder {
-        return crate::ladder::ladder_command(args, profile);
-    }
     match args.robots.as_deref() {
         // One team size with what only an evaluation of one team writes: that evaluation.
         Some([_]) if single_team_outputs(args) => {}

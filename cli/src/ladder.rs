@@ -32,9 +32,22 @@ pub fn profile_named(name: &str) -> anyhow::Result<RobotProfile> {
     })
 }
 
-/// `formation eval --ladder PROFILE`.
-pub fn ladder_command(args: &EvalArgs, profile_name: &str) -> anyhow::Result<()> {
+/// `formation eval --ladder PROFILE` (dispatched before the other `eval` forms).
+pub fn ladder_command(args: &EvalArgs) -> anyhow::Result<()> {
+    let Some(profile_name) = args.ladder.as_deref() else {
+        anyhow::bail!("--ladder PROFILE names the profile whose ladder to walk");
+    };
     let profile = profile_named(profile_name)?;
+    // A path that cannot be written, or one that is an input, is refused before the runs.
+    if let Some(json) = &args.json {
+        formation_proto::files::check_output_file(json)?;
+        let mut inputs: Vec<(&'static str, &std::path::Path)> =
+            vec![("--scenario", &args.scenario)];
+        if let Some(model) = &args.model {
+            inputs.push(("--model", model));
+        }
+        paths::refuse_overwriting_inputs(&[("--json", json, "ladder.json")], &[], &inputs)?;
+    }
     if args.processes
         || args.out.is_some()
         || args.save_trajectories.is_some()

@@ -64,6 +64,7 @@ pub fn main_with_args() -> anyhow::Result<()> {
     formation_runtime::process::init_tracing(cli.verbose);
     formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
     match cli.command {
+        args::Command::Eval(a) if a.ladder.is_some() => ladder::ladder_command(&a),
         args::Command::Eval(a) => eval::eval_command(&a),
         args::Command::Gauge(a) => gauge::gauge_command(&a),
         args::Command::Merge(a) => eval::merge_command(&a),
