@@ -84,7 +84,21 @@ pub fn ladder_command(args: &EvalArgs) -> anyhow::Result<()> {
                 )
             })?;
         let mut drivers = vec![ScalingDriver::Expert(ExpertGains::default())];
-        drivers.extend(policy.clone());
+        // A policy that cannot drive this rung (a LIDAR it was not trained on) gives no row,
+        // and the rung says why; the expert's rows stand.
+        let mut policy_refused = None;
+        if let Some(driver @ ScalingDriver::Policy { model, .. }) = &policy {
+            // Loading it for the rung's robot is the check the runs would make.
+            let fits = formation_learning::Driver::policy_for(&scenario, model)
+                .and_then(|d| d.controller(&scenario).map(drop));
+            match fits {
+                Ok(()) => drivers.push(driver.clone()),
+                Err(refusal) => {
+                    eprintln!("{}: no policy rows: {refusal}", rung.name);
+                    policy_refused = Some(refusal.to_string());
+                }
+            }
+        }
         let table = with_threads(args.threads, || {
             evaluate_scaling(&scenario, &sizes, seed, runs, &drivers, &|row, done| {
                 bar.set_position((index * per_rung + row * runs + done) as u64)
@@ -95,6 +109,7 @@ pub fn ladder_command(args: &EvalArgs) -> anyhow::Result<()> {
             rung: rung.name.to_owned(),
             added: rung.added.iter().map(|k| (*k).to_owned()).collect(),
             rows: table.rows,
+            policy_refused,
         });
     }
     bar.finish_and_clear();
@@ -146,6 +161,12 @@ pub fn ladder_text(table: &LadderTable) -> String {
                 row.collisions,
             ));
         }
+        if let Some(refusal) = &rung.policy_refused {
+            text.push_str(&format!(
+                "| {} | policy: no rows ({refusal}) | | | | | | |\n",
+                rung.rung
+            ));
+        }
     }
     text
 }
@@ -181,16 +202,22 @@ mod tests {
                     rung: "ideal".to_owned(),
                     added: Vec::new(),
                     rows: vec![row.clone()],
+                    policy_refused: None,
                 },
                 LadderRung {
                     rung: "motors".to_owned(),
                     added: vec!["robot.motor_tau".to_owned()],
                     rows: vec![row],
+                    policy_refused: Some("900 beams, not 360".to_owned()),
                 },
             ],
         };
         let text = ladder_text(&table);
         assert!(text.contains("| ideal | expert | 3 | 0 |"), "{text}");
         assert!(text.contains("| motors | expert | 3 | 0 |"), "{text}");
+        assert!(
+            text.contains("| motors | policy: no rows (900 beams, not 360) |"),
+            "{text}"
+        );
     }
 }

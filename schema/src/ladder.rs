@@ -14,6 +14,10 @@ pub struct LadderRung {
     pub added: Vec<String>,
     /// One row per team size and controller (the expert first), as in the scaling table.
     pub rows: Vec<ScalingRow>,
+    /// Why the policy has no rows on this rung (it cannot drive the rung's robot, e.g. a LIDAR
+    /// it was not trained on); absent when it has them or was not asked for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub policy_refused: Option<String>,
 }
 
 /// What `formation eval --ladder PROFILE --json` writes.
