@@ -294,27 +294,14 @@ pub fn expert_commands_among(
     tracker: &NeighbourTracker,
     out: &mut [WheelCmd],
 ) {
-    assert_eq!(out.len(), poses.len(), "one output command per robot");
-    let gains = ExpertGains {
-        k_formation: gains.k_formation_graph,
-        ..*gains
-    };
-    commands_among(
-        poses,
-        goal,
-        &gains,
-        gains.graph_pair_points,
-        robot,
-        out,
-        |i| {
-            tracker
-                .own_neighbours(i)
-                .iter()
-                .copied()
-                .filter(|&j| j < poses.len())
-                .map(|j| (j, 1.0))
-        },
-    );
+    graph_commands(poses, goal, gains, robot, out, |i| {
+        tracker
+            .own_neighbours(i)
+            .iter()
+            .copied()
+            .filter(|&j| j < poses.len())
+            .map(|j| (j, 1.0))
+    });
 }
 
 /// The expert's wheel command for every robot when robot `i` holds each robot `j` of
@@ -333,6 +320,24 @@ pub fn expert_commands_weighted(
     neighbours: &[WeightedNeighbours],
     out: &mut [WheelCmd],
 ) {
+    graph_commands(poses, goal, gains, robot, out, |i| {
+        neighbours[i]
+            .iter()
+            .copied()
+            .filter(|&(j, _)| j < poses.len())
+    });
+}
+
+/// The law under a neighbour graph: the team gain [`ExpertGains::k_formation_graph`], pairs
+/// measured between [`ExpertGains::graph_pair_points`], robot `i` holding `neighbours(i)`.
+fn graph_commands<I: Iterator<Item = (usize, f64)>>(
+    poses: &[Pose],
+    goal: &Goal,
+    gains: &ExpertGains,
+    robot: &RobotParams,
+    out: &mut [WheelCmd],
+    neighbours: impl Fn(usize) -> I,
+) {
     assert_eq!(out.len(), poses.len(), "one output command per robot");
     let gains = ExpertGains {
         k_formation: gains.k_formation_graph,
@@ -345,12 +350,7 @@ pub fn expert_commands_weighted(
         gains.graph_pair_points,
         robot,
         out,
-        |i| {
-            neighbours[i]
-                .iter()
-                .copied()
-                .filter(|&(j, _)| j < poses.len())
-        },
+        neighbours,
     );
 }
 
