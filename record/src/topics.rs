@@ -161,6 +161,8 @@ pub struct TickMessages {
     team: TeamSetup,
     edges: EdgeMarkers,
     replay: Replay,
+    /// Every robot's `/tf` in one message a tick ([`TickMessages::with_one_tf_message`]).
+    one_tf: bool,
     /// Each robot's last known model (a tick may leave it out).
     model_ids: Vec<String>,
 }
@@ -186,8 +188,17 @@ impl TickMessages {
             edges: EdgeMarkers::new(team.neighbours, team.n_robots),
             team,
             replay,
+            one_tf: false,
             model_ids: Vec::new(),
         }
+    }
+
+    /// The same, with every robot's `/tf` transform in one `TFMessage` a tick instead of one a
+    /// robot (a live view, where each message costs the world about the same whatever its
+    /// size; a recording keeps one a robot).
+    pub fn with_one_tf_message(mut self) -> TickMessages {
+        self.one_tf = true;
+        self
     }
 
     /// The team.
@@ -220,6 +231,16 @@ impl TickMessages {
             })?;
         }
         let n = self.team.n_robots.min(tick.poses.len());
+        if self.one_tf {
+            let mut tf = TfMessage {
+                transforms: Vec::with_capacity(n),
+            };
+            for (robot, pose) in tick.poses.iter().enumerate().take(n) {
+                let own = team::tf_message(robot, at, pose.x, pose.y, pose.theta);
+                tf.transforms.extend(own.transforms);
+            }
+            put(emit, Topics::TF, ns, &tf, || "/tf".into())?;
+        }
         for robot in 0..n {
             self.robot(robot, tick, ns, at, emit)?;
         }
@@ -237,8 +258,10 @@ impl TickMessages {
     ) -> Result<(), MessageError<E>> {
         let pose = tick.poses[robot];
         let separation = self.team.wheel_separation;
-        let tf = team::tf_message(robot, at, pose.x, pose.y, pose.theta);
-        put(emit, Topics::TF, ns, &tf, || "/tf".into())?;
+        if !self.one_tf {
+            let tf = team::tf_message(robot, at, pose.x, pose.y, pose.theta);
+            put(emit, Topics::TF, ns, &tf, || "/tf".into())?;
+        }
         let speeds = tick.wheel_speeds.get(robot).copied().unwrap_or_default();
         let wheels = team::Wheels {
             left: speeds.left,
@@ -411,6 +434,42 @@ mod tests {
             })
             .unwrap();
         assert_eq!(count, seen.len() + 2);
+    }
+
+    #[test]
+    fn one_tf_message_carries_every_robots_transform_once_a_tick() {
+        let mut per_robot = Vec::new();
+        TickMessages::new(team(3), Replay::Left)
+            .tick::<()>(&tick(3), &mut |slot, _, data| {
+                if slot == Topics::TF {
+                    per_robot.push(data.to_vec());
+                }
+                Ok(())
+            })
+            .unwrap();
+        let mut one = Vec::new();
+        let mut others = 0;
+        TickMessages::new(team(3), Replay::Left)
+            .with_one_tf_message()
+            .tick::<()>(&tick(3), &mut |slot, _, data| {
+                if slot == Topics::TF {
+                    one.push(data.to_vec());
+                } else {
+                    others += 1;
+                }
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!((per_robot.len(), one.len()), (3, 1));
+        assert_eq!(others, 3 + 3 * 3 + 1, "the other topics as before");
+        let expected = TfMessage {
+            transforms: (0..3)
+                .flat_map(|r| {
+                    team::tf_message(r, stamp(150_000_000), r as f64, 0.0, 0.0).transforms
+                })
+                .collect(),
+        };
+        assert_eq!(one[0], expected.to_cdr().unwrap());
     }
 
     #[test]

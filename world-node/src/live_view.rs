@@ -219,9 +219,9 @@ mod server {
     /// ticks (5 Hz at 20 Hz control, a real LDS-01's scan rate); `/tf`, the goal and the edges
     /// every tick, so the team still moves smoothly. Each message costs the world about the
     /// same whatever its size, and the robots' topics are three messages a robot a tick:
-    /// served every tick, the view cost a 32-robot realtime world 12–19 % of its work a tick,
-    /// with scans every 4th tick 1–13 % (paired runs, release: `scripts/measure live-view`,
-    /// docs/measurements/live-view.json).
+    /// served every tick with one `/tf` a robot, the view cost a 32-robot realtime world 12–19 %
+    /// of its work a tick; at 5 Hz with one `/tf` a tick, +4.4 % (median of 5 paired runs,
+    /// release: `scripts/measure live-view`, docs/measurements/live-view.json).
     pub const ROBOT_TOPICS_EVERY_TICKS: u64 = 4;
 
     /// The messages a client's queue holds for a team of `n_robots`: about two seconds of
@@ -425,7 +425,7 @@ mod server {
             robots_now.set(true);
             let done = match job {
                 Job::Begin(team) => {
-                    let fresh = TickMessages::new(team, Replay::Left);
+                    let fresh = TickMessages::new(team, Replay::Left).with_one_tf_message();
                     let sent = fresh.static_frames(&mut log);
                     messages = Some(fresh);
                     sent
