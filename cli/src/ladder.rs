@@ -8,10 +8,10 @@ use std::time::Instant;
 use anyhow::Context;
 use formation_expert::ExpertGains;
 use formation_learning::rollout::with_threads;
-use formation_learning::scaling::{evaluate_scaling, ScalingDriver};
+use formation_learning::scaling::{ScalingDriver, evaluate_scaling};
 use formation_schema::{LadderRung, LadderTable};
-use formation_world::scenario::RobotProfile;
 use formation_world::Scenario;
+use formation_world::scenario::RobotProfile;
 
 use crate::args::{ControllerKind, EvalArgs};
 use crate::eval::progress_bar;

@@ -4,7 +4,7 @@
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{binaries, case1_scenario, read_json, repo_root, run, TempDir, Watchdog};
+use formation_tests::{TempDir, Watchdog, binaries, case1_scenario, read_json, repo_root, run};
 
 const LIMIT: Duration = Duration::from_secs(600);
 

@@ -363,7 +363,11 @@ fn renew_certificate(_dir: &Path, _principal: &str, _days: u32) -> anyhow::Resul
 
 /// Without Zenoh there are no credentials to make.
 #[cfg(not(feature = "zenoh"))]
-pub fn create_credentials(_dir: &Path, _robots: usize, _tls_days: Option<u32>) -> anyhow::Result<()> {
+pub fn create_credentials(
+    _dir: &Path,
+    _robots: usize,
+    _tls_days: Option<u32>,
+) -> anyhow::Result<()> {
     Err(TransportError::NotBuilt {
         program: "formation".into(),
         transport: Transport::Zenoh,

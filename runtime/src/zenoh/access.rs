@@ -338,14 +338,21 @@ mod tests {
             assert!(!rule.to_string().contains("robot/1"), "{rule}");
         }
         let mut config = ::zenoh::Config::default();
-        access.apply(&mut config, false).expect("zenoh takes the rules");
+        access
+            .apply(&mut config, false)
+            .expect("zenoh takes the rules");
         // Over TLS each subject is its certificate's common name and its login, both.
         let by_certificate = access.rules_naming(true);
         for subject in by_certificate["subjects"].as_array().unwrap() {
-            assert_eq!(subject["usernames"], subject["cert_common_names"], "{subject}");
+            assert_eq!(
+                subject["usernames"], subject["cert_common_names"],
+                "{subject}"
+            );
         }
         assert_eq!(by_certificate["rules"], rules["rules"]);
         let mut config = ::zenoh::Config::default();
-        access.apply(&mut config, true).expect("zenoh takes the rules");
+        access
+            .apply(&mut config, true)
+            .expect("zenoh takes the rules");
     }
 }

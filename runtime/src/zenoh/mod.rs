@@ -290,7 +290,9 @@ fn client_tls_identity(
 /// No TLS in this build.
 #[cfg(not(feature = "tls"))]
 fn client_tls_identity(connect: &Endpoint, _: Option<&Login>) -> Result<Never, String> {
-    Err(format!("{connect}: this build has no TLS: build with `--features tls`"))
+    Err(format!(
+        "{connect}: this build has no TLS: build with `--features tls`"
+    ))
 }
 
 /// Stands in for the identity a build without TLS never has.
@@ -316,12 +318,10 @@ pub(crate) fn check_tls_client(
     if !connect.is_tls() {
         return Ok(());
     }
-    let identity = client_tls_identity(connect, login).map_err(|detail| {
-        tls::TlsError::Read {
-            what: "the certificate".into(),
-            path: std::path::PathBuf::from(connect.as_str()),
-            source: std::io::Error::other(detail),
-        }
+    let identity = client_tls_identity(connect, login).map_err(|detail| tls::TlsError::Read {
+        what: "the certificate".into(),
+        path: std::path::PathBuf::from(connect.as_str()),
+        source: std::io::Error::other(detail),
     })?;
     let loaded = identity.load_checked(std::time::SystemTime::now())?;
     tls::probe::probe_world(connect.as_str(), &loaded, &identity.principal, timeout)?;
@@ -567,7 +567,10 @@ mod tests {
             assert_eq!(warning(quiet), None, "{quiet}");
         }
         let loud = warning("tcp/0.0.0.0:7447").expect("a warning");
-        assert!(loud.contains("clear text") && loud.contains("--tls"), "{loud}");
+        assert!(
+            loud.contains("clear text") && loud.contains("--tls"),
+            "{loud}"
+        );
         assert!(loud.contains("tls/0.0.0.0:7447"), "{loud}");
         assert!(warning("tcp/robot-host.local:7447").is_some());
         let tls = Endpoint::parse("tls/0.0.0.0:7447");
