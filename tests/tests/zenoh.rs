@@ -595,14 +595,20 @@ fn an_agent_built_without_zenoh_says_how_to_build_it() {
         .unwrap_or("debug")
         .to_string();
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    // The agent as the demo builds it (formation-cli's default features: no Zenoh), then the
+    // The agent as the demo builds it (its package's default features: no Zenoh), then the
     // tests' build again (`cargo runtime-bins`, with Zenoh), which the other tests run.
     let build = |demo: bool| -> Option<std::path::PathBuf> {
         let mut command = Command::new(&cargo);
         command.current_dir(formation_tests::repo_root());
         if demo {
             command
-                .args(["build", "-p", "formation-cli", "--bin", "formation-agent"])
+                .args([
+                    "build",
+                    "-p",
+                    "formation-agent-node",
+                    "--bin",
+                    "formation-agent",
+                ])
                 .args(["--message-format", "json-render-diagnostics"]);
         } else {
             command.arg("runtime-bins");
