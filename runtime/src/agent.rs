@@ -377,14 +377,13 @@ impl<M: PilotMaker> AgentLoop<M> {
             Some(model) => model,
             None => load_model(&*self.maker, &self.model_path)?,
         };
-        let pilot = self
+        let mut pilot = self
             .maker
             .pilot(model, lidar)
             .map_err(|source| ModelError::Unfit {
                 path: self.model_path.clone(),
                 source,
             })?;
-        let mut pilot = pilot;
         pilot.set_max_wheel_accel(max_wheel_accel);
         let id = pilot.model_id().to_owned();
         self.pilot = Some((pilot, lidar));
