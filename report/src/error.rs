@@ -24,9 +24,10 @@ pub enum ReportError {
         /// The path given.
         path: PathBuf,
     },
-    /// No `summary.json` (nor `scaling*.json`) anywhere under the input directory.
+    /// No `summary.json` (nor `scaling*.json`, `response*.json` or `ladder*.json`) anywhere under
+    /// the input directory.
     #[error(
-        "no eval or run output under {}: run `formation eval --out {}/...`, `formation eval --robots 3,5,8 --json .../scaling.json` or `formation demo` first",
+        "no eval or run output under {}: run `formation eval --out {}/...`, `formation eval --robots 3,5,8 --json .../scaling.json`, `formation eval --ladder pioneer-p3dx --json .../ladder.json` or `formation demo` first",
         dir.display(),
         dir.display()
     )]

@@ -834,6 +834,103 @@ pub fn scaling_figure(
     })
 }
 
+/// The reality ladder's figure: (a) success at 10 % (solid) and 5 % (thin) and (b) the median
+/// convergence time at 10 %, against the rungs in the order their effects were added, one
+/// colour per controller (and model) and team size ([`crate::ladder::ladder_series`]). A rung
+/// without a row (a policy that cannot drive its LIDAR) leaves a gap in that line.
+pub fn ladder_figure(
+    id: &str,
+    table: &formation_schema::LadderTable,
+) -> Result<Figure, ReportError> {
+    use crate::ladder::{ladder_series, rung_label, unbroken_runs};
+    let series = ladder_series(table);
+    let rungs = series.rungs.len().max(1);
+    let x_range = -0.4..(rungs as f64 - 0.6);
+    let names: Vec<String> = series.rungs.iter().map(|r| rung_label(r)).collect();
+    let rung_name = |v: &f64| -> String {
+        let whole = v.round();
+        if (v - whole).abs() > 1e-9 || whole < 0.0 {
+            return String::new();
+        }
+        names.get(whole as usize).cloned().unwrap_or_default()
+    };
+    let (width, height) = (1100_u32, 720_u32);
+    render(id, (width, height), |root| {
+        let (plots, legend) = root.split_horizontally(width - LEGEND_WIDTH);
+        let (top, bottom) = plots.split_vertically(height / 2);
+        let mut success = ChartBuilder::on(&top)
+            .caption("(a) success per rung", text_style(19.0))
+            .margin(8)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x_range.clone(), 0.0..105.0)?;
+        success
+            .configure_mesh()
+            .y_desc("success [%]")
+            .label_style(text_style(14.0))
+            .axis_desc_style(text_style(17.0))
+            .axis_style(RGBColor(0x66, 0x66, 0x66))
+            .bold_line_style(RGBColor(0xE4, 0xE4, 0xE4))
+            .light_line_style(RGBColor(0xF4, 0xF4, 0xF4))
+            .x_label_formatter(&rung_name)
+            .y_label_formatter(&|v| tick_label(*v))
+            .x_labels(rungs)
+            .y_labels(6)
+            .draw()?;
+        let convergence_max = series
+            .lines
+            .iter()
+            .flat_map(|l| l.convergence_s.iter().flatten().copied())
+            .filter(|v| v.is_finite())
+            .fold(1.0_f64, f64::max);
+        let mut convergence = ChartBuilder::on(&bottom)
+            .caption("(b) median convergence (10 %) per rung", text_style(19.0))
+            .margin(8)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x_range.clone(), 0.0..1.1 * convergence_max)?;
+        convergence
+            .configure_mesh()
+            .y_desc("convergence [s]")
+            .label_style(text_style(14.0))
+            .axis_desc_style(text_style(17.0))
+            .axis_style(RGBColor(0x66, 0x66, 0x66))
+            .bold_line_style(RGBColor(0xE4, 0xE4, 0xE4))
+            .light_line_style(RGBColor(0xF4, 0xF4, 0xF4))
+            .x_label_formatter(&rung_name)
+            .y_label_formatter(&|v| tick_label(*v))
+            .x_labels(rungs)
+            .y_labels(6)
+            .draw()?;
+        let mut entries = Vec::new();
+        for (k, line) in series.lines.iter().enumerate() {
+            let color = robot_color(k);
+            for run in unbroken_runs(&line.success_10) {
+                success.draw_series(LineSeries::new(run.iter().copied(), color.stroke_width(2)))?;
+                success.draw_series(run.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
+            }
+            for run in unbroken_runs(&line.success_5) {
+                success.draw_series(LineSeries::new(run.iter().copied(), color.stroke_width(1)))?;
+            }
+            for run in unbroken_runs(&line.convergence_s) {
+                convergence
+                    .draw_series(LineSeries::new(run.iter().copied(), color.stroke_width(2)))?;
+                convergence.draw_series(run.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
+            }
+            // The legend is narrow: the controller and the team size (the table names the
+            // model).
+            entries.push((
+                Mark::Line(color),
+                format!("{} N={} @ 10 %", line.controller, line.robots),
+            ));
+        }
+        if !entries.is_empty() {
+            entries.push((Mark::Thin(INK), "thin: @ 5 %".to_owned()));
+        }
+        draw_legend(&legend, 44, &entries)
+    })
+}
+
 /// `expert`, or `policy <model id>`.
 fn scaling_driver(row: &formation_schema::ScalingRow) -> String {
     match &row.model {

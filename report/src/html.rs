@@ -62,6 +62,17 @@ pub struct ScalingSection {
     pub figure: CaptionedFigure,
 }
 
+/// One reality ladder: its rungs and its figure.
+#[derive(Debug, Clone)]
+pub struct LadderSection {
+    /// Where it came from, relative to the input directory.
+    pub source: String,
+    /// The ladder as written.
+    pub table: formation_schema::LadderTable,
+    /// Success and convergence per rung.
+    pub figure: CaptionedFigure,
+}
+
 /// One case run: three panels and a fact sheet.
 #[derive(Debug, Clone)]
 pub struct RunSection {
@@ -128,6 +139,8 @@ pub struct ReportPage {
     pub latency: Vec<CaptionedFigure>,
     /// Scaling tables over team sizes.
     pub scaling: Vec<ScalingSection>,
+    /// Reality ladders.
+    pub ladders: Vec<LadderSection>,
     /// Input files, relative to the input directory.
     pub inputs: Vec<String>,
 }
@@ -284,6 +297,13 @@ pub fn render_page(page: &ReportPage) -> String {
         }
         html.push_str("</section>\n");
     }
+    if !page.ladders.is_empty() {
+        html.push_str("<section id=\"ladder\">\n<h2>Reality ladders</h2>\n");
+        for section in &page.ladders {
+            write_ladder(&mut html, section);
+        }
+        html.push_str("</section>\n");
+    }
     write_figure_sections(&mut html, page);
     write_inputs_and_footer(&mut html, page);
     html
@@ -300,6 +320,9 @@ fn nav_sections(page: &ReportPage) -> Vec<(&'static str, &'static str)> {
     }
     if !page.scaling.is_empty() {
         sections.push(("scaling", "Scaling"));
+    }
+    if !page.ladders.is_empty() {
+        sections.push(("ladder", "Reality ladders"));
     }
     if !page.training.is_empty() {
         sections.push(("training", "Training"));
@@ -546,6 +569,90 @@ fn write_placed(html: &mut String, placed: &PlacedFigure, caption: Option<&str>)
         );
     }
     html.push_str("</figure>\n");
+}
+
+/// A reality ladder: one table row per rung, controller and team size, the policy's refusal
+/// where it has no rows, then the figure.
+fn write_ladder(html: &mut String, section: &LadderSection) {
+    let table = &section.table;
+    let _ = writeln!(
+        html,
+        "<h3>The <code>{}</code> profile on <code>{}</code></h3>",
+        escape(&table.profile),
+        escape(&table.scenario)
+    );
+    html.push_str("<div class=\"card\">\n<div class=\"table-scroll\">\n<table class=\"results\">\n<thead><tr>");
+    for head in [
+        "Rung (adds)",
+        "Controller",
+        "Robots",
+        "Runs",
+        "Success at 10 %",
+        "Success at 5 %",
+        "Median convergence (IQR)",
+        "Runs with collisions",
+    ] {
+        let _ = write!(html, "<th>{head}</th>");
+    }
+    html.push_str("</tr></thead>\n<tbody>\n");
+    for rung in &table.rungs {
+        let added = if rung.added.is_empty() {
+            String::new()
+        } else {
+            let keys: Vec<String> = rung
+                .added
+                .iter()
+                .map(|k| format!("<code>{}</code>", escape(k)))
+                .collect();
+            format!("<div class=\"detail\">{}</div>", keys.join(", "))
+        };
+        let name = format!("{}{added}", escape(&rung.rung));
+        for row in &rung.rows {
+            let who = match &row.model {
+                Some(id) => format!(
+                    "{}<div class=\"detail\"><code>{}</code></div>",
+                    escape(&row.controller),
+                    escape(id)
+                ),
+                None => escape(&row.controller),
+            };
+            let convergence = row.convergence_s.map_or_else(
+                || "–".to_owned(),
+                |q| {
+                    format!(
+                        "{:.1} s<div class=\"detail\">IQR {:.1}–{:.1}</div>",
+                        q.median, q.q1, q.q3
+                    )
+                },
+            );
+            let _ = writeln!(
+                html,
+                "<tr><td>{name}</td><td>{who}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{convergence}</td><td>{}</td></tr>",
+                row.robots,
+                row.runs,
+                percent(row.success_rate_10),
+                percent(row.success_rate_5),
+                row.collisions
+            );
+        }
+        if let Some(why) = &rung.policy_refused {
+            let _ = writeln!(
+                html,
+                "<tr><td>{name}</td><td colspan=\"7\">policy: no rows ({})</td></tr>",
+                escape(why)
+            );
+        }
+    }
+    html.push_str("</tbody>\n</table>\n</div>\n");
+    let _ = writeln!(
+        html,
+        "<p class=\"note\">From <code>{}</code> (seed {}, {} s per run). Each rung adds its effect to those above it; success is the strict check of the scaling table.</p>",
+        escape(&section.source),
+        table.seed,
+        table.duration_s
+    );
+    write_captioned(html, &section.figure);
+    html.push_str("</div>\n");
 }
 
 fn write_scaling(html: &mut String, section: &ScalingSection) {

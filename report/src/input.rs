@@ -37,6 +37,22 @@ pub struct Inputs {
     pub scalings: Vec<ScalingData>,
     /// Response curves (`response*.json`, written by `formation gauge --json`).
     pub responses: Vec<ResponseData>,
+    /// Reality ladders (`ladder*.json`, written by `formation eval --ladder PROFILE --json`).
+    pub ladders: Vec<LadderData>,
+}
+
+/// One reality ladder and where it came from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LadderData {
+    /// The file.
+    pub source: PathBuf,
+    /// Its rungs.
+    pub table: formation_schema::LadderTable,
+}
+
+/// True for a reality ladder's file name: `ladder*.json`.
+pub fn is_ladder_json(file_name: &str) -> bool {
+    file_name.starts_with("ladder") && file_name.ends_with(".json")
 }
 
 /// One response curve and where it came from.
@@ -366,6 +382,7 @@ struct Found {
     profiles: Vec<PathBuf>,
     scalings: Vec<PathBuf>,
     responses: Vec<PathBuf>,
+    ladders: Vec<PathBuf>,
 }
 
 /// What input of the report a file at `path` would be, by its name (and, for a run log, its
@@ -384,6 +401,8 @@ pub fn input_kind(path: &Path) -> Option<&'static str> {
         Some("a scaling table, scaling*.json")
     } else if is_response_json(&name) {
         Some("a response curve, response*.json")
+    } else if is_ladder_json(&name) {
+        Some("a reality ladder, ladder*.json")
     } else if is_loss_csv(&name) {
         Some("a training loss curve, *loss*.csv")
     } else if in_runs && name.starts_with("run-") && name.ends_with(".json") {
@@ -419,7 +438,11 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
     }
     let mut found = Found::default();
     search(root, 0, &mut found)?;
-    if found.summaries.is_empty() && found.scalings.is_empty() && found.responses.is_empty() {
+    if found.summaries.is_empty()
+        && found.scalings.is_empty()
+        && found.responses.is_empty()
+        && found.ladders.is_empty()
+    {
         return Err(ReportError::NoEvalOutput {
             dir: root.to_path_buf(),
         });
@@ -430,6 +453,7 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
         &mut found.profiles,
         &mut found.scalings,
         &mut found.responses,
+        &mut found.ladders,
     ] {
         list.sort();
     }
@@ -468,6 +492,16 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
             })
         })
         .collect::<Result<Vec<_>, ReportError>>()?;
+    let ladders = found
+        .ladders
+        .iter()
+        .map(|path| {
+            Ok(LadderData {
+                source: path.clone(),
+                table: formation_schema::read_ladder(path)?,
+            })
+        })
+        .collect::<Result<Vec<_>, ReportError>>()?;
     Ok(Inputs {
         root: root.to_path_buf(),
         evals,
@@ -475,6 +509,7 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
         profiles,
         scalings,
         responses,
+        ladders,
     })
 }
 
@@ -508,6 +543,8 @@ fn search(dir: &Path, depth: usize, found: &mut Found) -> Result<(), ReportError
             found.scalings.push(path);
         } else if is_response_json(&name) {
             found.responses.push(path);
+        } else if is_ladder_json(&name) {
+            found.ladders.push(path);
         } else if is_loss_csv(&name) {
             found.loss_csvs.push(path);
         }

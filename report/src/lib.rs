@@ -18,12 +18,16 @@
 //!   headings, the neighbour graph and its edge errors over time; [`player`]);
 //! * the scaling over team sizes (`scaling*.json` from `formation eval --robots ...`): the table
 //!   and success and convergence against the team size;
+//! * reality ladders (`ladder*.json` from `formation eval --ladder PROFILE --json`): the table
+//!   and success and convergence per rung, each controller and team size a line ([`ladder`]),
+//!   so the reader sees which effect costs what;
 //! * the training loss curve and the latency profile, when present.
 //!
 //! Every figure is also written as a standalone SVG file in `<out stem>-figures/` next to the
 //! HTML file.
 //!
-//! Modules: [`input`] (finding and reading inputs), [`series`] (the plotted numbers, pure),
+//! Modules: [`input`] (finding and reading inputs), [`series`] and [`ladder`] (the plotted
+//! numbers, pure),
 //! [`figures`] (SVG drawing), [`player`] (the players' frames, pure), [`html`] (the page),
 //! [`loss`] and [`profile`] (optional inputs).
 
@@ -31,6 +35,7 @@ pub mod error;
 pub mod figures;
 pub mod html;
 pub mod input;
+pub mod ladder;
 pub mod loss;
 pub mod player;
 pub mod profile;
@@ -151,6 +156,7 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
     add_table_and_statistics(&mut page, inputs, &mut numbering)?;
     add_runs(&mut page, inputs, &mut numbering)?;
     add_scalings(&mut page, inputs, &mut numbering)?;
+    add_ladders(&mut page, inputs, &mut numbering)?;
     add_training(&mut page, inputs, &mut numbering)?;
     add_responses(&mut page, inputs, &mut numbering)?;
     add_latency(&mut page, inputs, &mut numbering)?;
@@ -279,6 +285,30 @@ fn add_scalings(
     Ok(())
 }
 
+/// One section per reality ladder: its table and its figure.
+fn add_ladders(
+    page: &mut ReportPage,
+    inputs: &Inputs,
+    numbering: &mut FigureNumbering,
+) -> Result<(), ReportError> {
+    for (k, ladder) in inputs.ladders.iter().enumerate() {
+        let figure = figures::ladder_figure(&format!("ladder-{}", k + 1), &ladder.table)?;
+        let number = numbering.take();
+        page.ladders.push(html::LadderSection {
+            source: relative(&inputs.root, &ladder.source),
+            table: ladder.table.clone(),
+            figure: CaptionedFigure {
+                placed: numbering.place(figure, "Success and convergence per rung of a reality ladder"),
+                caption: format!(
+                    "Figure {number}: the {} profile's reality ladder on {}: (a) success at 10 % (thick) and 5 % (thin) and (b) median convergence time at 10 % per rung, each rung adding its effect to those left of it ({} s per run, seed {}).",
+                    ladder.table.profile, ladder.table.scenario, ladder.table.duration_s, ladder.table.seed
+                ),
+            },
+        });
+    }
+    Ok(())
+}
+
 /// One figure per training loss curve (cf. Fig. 5).
 fn add_training(
     page: &mut ReportPage,
@@ -361,6 +391,7 @@ fn input_list(inputs: &Inputs) -> Vec<String> {
         .chain(inputs.profiles.iter().map(|p| &p.source))
         .chain(inputs.scalings.iter().map(|s| &s.source))
         .chain(inputs.responses.iter().map(|r| &r.source))
+        .chain(inputs.ladders.iter().map(|l| &l.source))
         .map(|path| relative(&inputs.root, path))
         .collect()
 }

@@ -317,6 +317,101 @@ fn a_scaling_table_gets_its_section_with_the_rows_and_the_figure() {
     assert!(svg.contains("expert @ 10 %") && svg.contains("policy @ 5 %"));
 }
 
+/// A reality ladder (`formation eval --ladder PROFILE --json`) alone makes a report: a section
+/// with one row per rung, controller and team size, the policy's refusal where it has no rows,
+/// and a figure with a line per controller and team size, broken where a rung has no row.
+#[test]
+fn a_reality_ladder_gets_its_section_with_the_rows_and_the_figure() {
+    use formation_schema::{LadderRung, LadderTable, Quantiles, ScalingRow};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dir.path().join("ladders");
+    fs::create_dir_all(&data).expect("dir");
+    let q = |median: f64| Quantiles {
+        min: median,
+        q1: median,
+        median,
+        q3: median,
+        max: median,
+        count: 10,
+    };
+    let row = |controller: &str, robots: usize, success: f64| ScalingRow {
+        controller: controller.into(),
+        model: (controller == "policy").then(|| "policy-1234".to_owned()),
+        robots,
+        neighbours: if robots == 3 { "all_pairs" } else { "gabriel" }.into(),
+        runs: 10,
+        success_rate_5: success - 0.1,
+        success_rate_10: success,
+        anchor_success_rate: 1.0,
+        convergence_s: Some(q(robots as f64)),
+        rel_formation_error: Some(q(0.01)),
+        max_edge_window_error: Some(q(0.02)),
+        collisions: 0,
+        team_size: None,
+        goal_speed: None,
+        model_input: None,
+    };
+    let rung =
+        |name: &str, added: &[&str], rows: Vec<ScalingRow>, refused: Option<&str>| LadderRung {
+            rung: name.into(),
+            added: added.iter().map(|k| (*k).to_owned()).collect(),
+            rows,
+            policy_refused: refused.map(Into::into),
+        };
+    let table = LadderTable {
+        profile: "turtlebot3-burger".into(),
+        scenario: "table1".into(),
+        seed: 7,
+        duration_s: 60.0,
+        rungs: vec![
+            rung(
+                "ideal",
+                &[],
+                vec![row("expert", 3, 1.0), row("policy", 3, 0.9)],
+                None,
+            ),
+            rung(
+                "lidar geometry",
+                &["lidar.beams", "lidar.max_range"],
+                vec![row("expert", 3, 0.8)],
+                Some("the model was trained on a 900-beam LIDAR"),
+            ),
+            rung(
+                "latency",
+                &["robot.command_latency"],
+                vec![row("expert", 3, 0.7), row("policy", 3, 0.6)],
+                None,
+            ),
+        ],
+    };
+    fs::write(
+        data.join("ladder-burger.json"),
+        formation_schema::to_json_pretty(&table).expect("json"),
+    )
+    .expect("write");
+    let out = dir.path().join("report.html");
+    let summary = build_report(&data, &out).expect("a ladder alone makes a report");
+    assert_eq!(summary.evaluations, 0);
+    assert_eq!(summary.figures.len(), 1);
+    let html = fs::read_to_string(&out).expect("html");
+    assert!(html.contains("Reality ladders"));
+    assert!(html.contains("The <code>turtlebot3-burger</code> profile on <code>table1</code>"));
+    assert!(html.contains(
+        "<tr><td>latency<div class=\"detail\"><code>robot.command_latency</code></div></td>\
+         <td>expert</td><td>3</td><td>10</td><td>70.0 %</td><td>60.0 %</td>"
+    ));
+    assert!(html.contains("policy: no rows (the model was trained on a 900-beam LIDAR)"));
+    assert!(html.contains("ladder-burger.json"));
+    let svg = fs::read_to_string(&summary.figures[0]).expect("svg");
+    assert!(svg.contains("expert N=3 @ 10 %") && svg.contains("policy N=3 @ 10 %"));
+    assert!(svg.contains("lidar geometry") && svg.contains("latency"));
+    // The expert's three lines (success at 10 % and 5 %, convergence) run unbroken over the
+    // three rungs; the policy's are broken at the rung it could not drive, one point each side.
+    let counts = polyline_point_counts(&svg);
+    assert_eq!(counts.iter().filter(|&&c| c == 3).count(), 3, "{counts:?}");
+    assert_eq!(counts.iter().filter(|&&c| c == 1).count(), 6, "{counts:?}");
+}
+
 /// An eval output whose writer could not write every run log (a full disk): the report builds,
 /// says on the page and in its warnings which run logs are missing, and an output whose run logs
 /// are all there says nothing of the kind.
