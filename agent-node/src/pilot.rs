@@ -60,7 +60,7 @@ impl Pilot for OnnxPilot {
     }
 
     fn perceive(&mut self, ranges: &[f32], goal: &Goal) -> Result<(), BoxError> {
-        Ok(self.agent.perceive(ranges, goal.d_star)?)
+        Ok(self.agent.perceive(ranges, goal)?)
     }
 
     fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, BoxError> {

@@ -126,7 +126,8 @@ impl Ros2Args {
 /// The LIDAR ring the model was trained on, from its metadata.
 #[cfg(feature = "zenoh")]
 fn model_ring(model: &dyn PolicyBackend, path: &Path) -> anyhow::Result<LidarSpec> {
-    match (model.beams(), model.max_range()) {
+    let sensor = model.sensor();
+    match (sensor.beams, sensor.max_range) {
         (Some(beams), Some(max_range)) => Ok(LidarSpec {
             beams,
             max_range,

@@ -227,6 +227,7 @@ mod tests {
             v_train: 0.7,
             dataset_id: "d".into(),
             output: formation_onnx::PolicyOutput::Wheels,
+            aux: formation_proto::AuxLayout::PAPER,
             extra: extra
                 .iter()
                 .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))

@@ -13,7 +13,7 @@
 use std::time::{Duration, Instant};
 
 use formation_perception::occupancy;
-use formation_proto::{LidarSpec, NeighbourRule, OccupancySpec, WheelCmd, wrap_angle};
+use formation_proto::{AuxInput, LidarSpec, NeighbourRule, OccupancySpec, WheelCmd};
 use formation_trainer_bridge::dataset::{DatasetError, DatasetWriter, Sample};
 use formation_world::episode::{Observation, run_episode};
 use formation_world::{RobotParams, RunSpec, Scenario};
@@ -353,8 +353,8 @@ impl Labeller {
             );
             sink(Sample {
                 occupancy: image,
-                delta_phi: wrap_angle(obs.goal.phi_star - pose.theta) as f32,
-                d_star: obs.goal.d_star as f32,
+                delta_phi: AuxInput::HeadingError.value(pose.theta, &obs.goal) as f32,
+                d_star: AuxInput::DStar.value(pose.theta, &obs.goal) as f32,
                 wheels: [command.left as f32, command.right as f32],
                 iteration,
                 run,
@@ -401,7 +401,7 @@ fn narrow_run(run: usize) -> Result<u32, CollectError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use formation_proto::{Goal, Pose};
+    use formation_proto::{Goal, Pose, wrap_angle};
 
     const TINY: &str = r#"
         name = "tiny"

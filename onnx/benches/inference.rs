@@ -17,7 +17,7 @@ fn single_sample(c: &mut Criterion) {
             let (image, aux, _) = &cases[next % cases.len()];
             next += 1;
             policy
-                .infer(std::hint::black_box(image), *aux)
+                .infer(std::hint::black_box(image), aux)
                 .expect("infer")
         })
     });

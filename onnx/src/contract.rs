@@ -2,7 +2,9 @@
 //!
 //! The Python exporter writes it and [`crate::OnnxPolicy::load`] enforces it:
 //!
-//! - inputs exactly `occupancy` f32 `[B, 1, S, S]` and `aux` f32 `[B, 2]` (`delta_phi`, `d*`);
+//! - inputs exactly `occupancy` f32 `[B, 1, S, S]` and `aux` f32 `[B, A]`: the scalars that
+//!   `formation.aux` declares, in order (`A` of them; absent: the paper's `delta_phi,d_star`, see
+//!   [`AuxLayout`]);
 //! - one output, by default `wheels` f32 `[B, 2]` (left, right) m/s at `v_train`; or, where the
 //!   metadata declares `formation.output = formation_velocity`, `formation_velocity` f32 `[B, 2]`:
 //!   the correction of the formation in the robot's frame ([`PolicyOutput`]); `B` dynamic;
@@ -15,13 +17,13 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec};
+use formation_proto::{AuxLayout, BeyondWindow, LidarSpec, OccupancySpec, PolicyIo};
 
 /// The value of [`keys::FORMAT`] this crate understands.
 pub const MODEL_FORMAT: &str = "formation-policy/1";
 /// Name of the image input.
 pub const OCCUPANCY_INPUT: &str = "occupancy";
-/// Name of the `(delta_phi, d*)` input.
+/// Name of the input of scalars beside the image ([`AuxLayout`]).
 pub const AUX_INPUT: &str = "aux";
 /// Name of the wheel-speed output.
 pub const WHEELS_OUTPUT: &str = "wheels";
@@ -56,6 +58,9 @@ pub mod keys {
     /// What the model's one output means (optional; absent means `wheels`): see
     /// [`super::PolicyOutput`].
     pub const OUTPUT: &str = "formation.output";
+    /// The scalars beside the image, by name and in order, comma-separated (optional; absent
+    /// means `delta_phi,d_star`): see [`formation_proto::AuxLayout`].
+    pub const AUX: &str = "formation.aux";
     /// LIDAR beams the model was trained with.
     pub const BEAMS: &str = "formation.lidar.beams";
     /// LIDAR maximum range \[m\].
@@ -101,6 +106,16 @@ impl ModelEnvelope {
 }
 
 impl ModelMetadata {
+    /// What the model takes and answers: its image, its scalars, its output and `v_train`.
+    pub fn io(&self) -> PolicyIo {
+        PolicyIo {
+            image: self.occupancy,
+            aux: self.aux,
+            output: self.output,
+            v_train: self.v_train,
+        }
+    }
+
     /// The envelope the metadata records ([`parse_metadata`] has checked it parses).
     pub fn envelope(&self) -> ModelEnvelope {
         parse_envelope(&self.extra).unwrap_or_default()
@@ -190,6 +205,8 @@ pub struct ModelMetadata {
     pub dataset_id: String,
     /// What its one output means.
     pub output: PolicyOutput,
+    /// The scalars it takes beside its image.
+    pub aux: AuxLayout,
     /// Every other metadata entry (training figures, DAgger iteration, creator, ...), by full key.
     pub extra: BTreeMap<String, String>,
 }
@@ -278,6 +295,15 @@ pub enum ContractViolation {
         /// Dimensions found (`-1` = dynamic).
         found: Vec<i64>,
     },
+    /// The model declares scalar inputs this agent cannot feed.
+    #[error("metadata `{}` = {value:?} cannot be fed: {reason}", keys::AUX)]
+    BadAux {
+        /// The declared value.
+        value: String,
+        /// What is wrong with it.
+        #[source]
+        reason: formation_proto::policy_io::AuxLayoutError,
+    },
     /// A required metadata key is absent.
     #[error("metadata key `{key}` is missing")]
     MissingMetadata {
@@ -347,6 +373,13 @@ pub fn parse_metadata(
             })?
         }
     };
+    let aux = match entries.get(keys::AUX) {
+        None => AuxLayout::PAPER,
+        Some(text) => AuxLayout::parse(text).map_err(|reason| ContractViolation::BadAux {
+            value: text.clone(),
+            reason,
+        })?,
+    };
     let size_px: usize = parse_positive_int(entries, keys::SIZE_PX)?;
     if size_px > MAX_SIZE_PX {
         return Err(ContractViolation::BadMetadata {
@@ -371,9 +404,10 @@ pub fn parse_metadata(
     let v_train = parse_positive_real(entries, keys::V_TRAIN)?;
     let dataset_id = required(entries, keys::DATASET_ID)?.to_owned();
 
-    const PARSED: [&str; 11] = [
+    const PARSED: [&str; 12] = [
         keys::FORMAT,
         keys::OUTPUT,
+        keys::AUX,
         keys::SIZE_PX,
         keys::RESOLUTION_M,
         keys::BEYOND,
@@ -402,6 +436,7 @@ pub fn parse_metadata(
         v_train,
         dataset_id,
         output,
+        aux,
         extra,
     })
 }
@@ -558,14 +593,15 @@ enum Dim {
     Exact(i64),
 }
 
-/// Checks the model's inputs and outputs against the contract for `size_px x size_px` images
-/// and the output its metadata declares.
+/// Checks the model's inputs and outputs against the contract for `size_px x size_px` images,
+/// the scalars `aux` and the output its metadata declares.
 ///
 /// Input order does not matter (inputs are bound by name); names, element types and shapes do.
 pub fn check_signature(
     inputs: &[TensorSignature],
     outputs: &[TensorSignature],
     size_px: usize,
+    aux_layout: AuxLayout,
     output: PolicyOutput,
 ) -> Result<(), ContractViolation> {
     let names = |list: &[TensorSignature]| list.iter().map(|t| t.name.clone()).collect::<Vec<_>>();
@@ -598,7 +634,8 @@ pub fn check_signature(
             Dim::Exact(side),
         ],
     )?;
-    check_tensor(aux, &[Dim::Batch, Dim::Exact(2)])?;
+    let width = i64::try_from(aux_layout.len()).unwrap_or(i64::MAX);
+    check_tensor(aux, &[Dim::Batch, Dim::Exact(width)])?;
     check_tensor(wheels, &[Dim::Batch, Dim::Exact(2)])
 }
 
@@ -728,6 +765,46 @@ mod tests {
     }
 
     #[test]
+    fn the_scalars_beside_the_image_are_declared_and_set_the_aux_width() {
+        let meta = parse_metadata(&paper_metadata()).unwrap();
+        assert_eq!(meta.aux, AuxLayout::PAPER);
+        assert_eq!(meta.io().aux.len(), 2);
+        let mut entries = paper_metadata();
+        entries.insert(keys::AUX.into(), "d_star".into());
+        let meta = parse_metadata(&entries).unwrap();
+        assert_eq!(meta.aux.len(), 1);
+        assert!(!meta.extra.contains_key(keys::AUX));
+        let one_wide = vec![
+            tensor("occupancy", &[-1, 1, 50, 50]),
+            tensor("aux", &[-1, 1]),
+        ];
+        check_signature(
+            &one_wide,
+            &paper_outputs(),
+            50,
+            meta.aux,
+            PolicyOutput::Wheels,
+        )
+        .expect("a one-wide aux for one declared scalar");
+        assert!(matches!(
+            check_signature(
+                &paper_inputs(),
+                &paper_outputs(),
+                50,
+                meta.aux,
+                PolicyOutput::Wheels
+            ),
+            Err(ContractViolation::Shape { .. })
+        ));
+        entries.insert(keys::AUX.into(), "delta_phi,wind".into());
+        let message = parse_metadata(&entries).unwrap_err().to_string();
+        assert!(
+            message.contains("formation.aux") && message.contains("\"wind\""),
+            "{message}"
+        );
+    }
+
+    #[test]
     fn the_output_is_declared_in_the_metadata_and_an_unknown_one_is_refused_by_name() {
         // Absent: today's wheels.
         let meta = parse_metadata(&paper_metadata()).unwrap();
@@ -743,6 +820,7 @@ mod tests {
             &paper_inputs(),
             &outputs,
             50,
+            AuxLayout::PAPER,
             PolicyOutput::FormationVelocity,
         )
         .expect("declared and present");
@@ -750,6 +828,7 @@ mod tests {
             &paper_inputs(),
             &paper_outputs(),
             50,
+            AuxLayout::PAPER,
             PolicyOutput::FormationVelocity,
         )
         .unwrap_err();
@@ -759,7 +838,16 @@ mod tests {
                 && message.contains("formation.output"),
             "{message}"
         );
-        assert!(check_signature(&paper_inputs(), &outputs, 50, PolicyOutput::Wheels).is_err());
+        assert!(
+            check_signature(
+                &paper_inputs(),
+                &outputs,
+                50,
+                AuxLayout::PAPER,
+                PolicyOutput::Wheels
+            )
+            .is_err()
+        );
         entries.insert(keys::OUTPUT.into(), "torques".into());
         let message = parse_metadata(&entries).unwrap_err().to_string();
         assert!(
@@ -946,19 +1034,37 @@ mod tests {
 
     #[test]
     fn paper_signature_passes_in_any_input_order() {
-        check_signature(&paper_inputs(), &paper_outputs(), 50, PolicyOutput::Wheels)
-            .expect("paper contract");
+        check_signature(
+            &paper_inputs(),
+            &paper_outputs(),
+            50,
+            AuxLayout::PAPER,
+            PolicyOutput::Wheels,
+        )
+        .expect("paper contract");
         let mut swapped = paper_inputs();
         swapped.reverse();
-        check_signature(&swapped, &paper_outputs(), 50, PolicyOutput::Wheels)
-            .expect("order does not matter");
+        check_signature(
+            &swapped,
+            &paper_outputs(),
+            50,
+            AuxLayout::PAPER,
+            PolicyOutput::Wheels,
+        )
+        .expect("order does not matter");
     }
 
     #[test]
     fn wrong_or_extra_names_are_refused() {
         let renamed = vec![tensor("image", &[-1, 1, 50, 50]), tensor("aux", &[-1, 2])];
         assert_eq!(
-            check_signature(&renamed, &paper_outputs(), 50, PolicyOutput::Wheels),
+            check_signature(
+                &renamed,
+                &paper_outputs(),
+                50,
+                AuxLayout::PAPER,
+                PolicyOutput::Wheels
+            ),
             Err(ContractViolation::InputNames {
                 found: vec!["image".into(), "aux".into()]
             })
@@ -966,12 +1072,24 @@ mod tests {
         let mut extra = paper_inputs();
         extra.push(tensor("speed", &[-1, 1]));
         assert!(matches!(
-            check_signature(&extra, &paper_outputs(), 50, PolicyOutput::Wheels),
+            check_signature(
+                &extra,
+                &paper_outputs(),
+                50,
+                AuxLayout::PAPER,
+                PolicyOutput::Wheels
+            ),
             Err(ContractViolation::InputNames { .. })
         ));
         let outputs = vec![tensor("wheels", &[-1, 2]), tensor("value", &[-1, 1])];
         assert!(matches!(
-            check_signature(&paper_inputs(), &outputs, 50, PolicyOutput::Wheels),
+            check_signature(
+                &paper_inputs(),
+                &outputs,
+                50,
+                AuxLayout::PAPER,
+                PolicyOutput::Wheels
+            ),
             Err(ContractViolation::OutputNames { .. })
         ));
         assert!(matches!(
@@ -979,6 +1097,7 @@ mod tests {
                 &paper_inputs(),
                 &[tensor("cmd", &[-1, 2])],
                 50,
+                AuxLayout::PAPER,
                 PolicyOutput::Wheels
             ),
             Err(ContractViolation::OutputNames { .. })
@@ -991,15 +1110,27 @@ mod tests {
             tensor("occupancy", &[-1, 1, 40, 40]),
             tensor("aux", &[-1, 2]),
         ];
-        let err = check_signature(&small, &paper_outputs(), 50, PolicyOutput::Wheels)
-            .expect_err("40 px image for size_px 50");
+        let err = check_signature(
+            &small,
+            &paper_outputs(),
+            50,
+            AuxLayout::PAPER,
+            PolicyOutput::Wheels,
+        )
+        .expect_err("40 px image for size_px 50");
         assert_eq!(
             err.to_string(),
             "`occupancy` has shape [batch, 1, 40, 40], expected [batch (dynamic), 1, 50, 50]"
         );
         let fixed_batch = vec![tensor("occupancy", &[1, 1, 50, 50]), tensor("aux", &[1, 2])];
         assert!(matches!(
-            check_signature(&fixed_batch, &paper_outputs(), 50, PolicyOutput::Wheels),
+            check_signature(
+                &fixed_batch,
+                &paper_outputs(),
+                50,
+                AuxLayout::PAPER,
+                PolicyOutput::Wheels
+            ),
             Err(ContractViolation::Shape { .. })
         ));
         let flat_aux = vec![
@@ -1007,7 +1138,7 @@ mod tests {
             tensor("aux", &[-1, 3]),
         ];
         assert!(matches!(
-            check_signature(&flat_aux, &paper_outputs(), 50, PolicyOutput::Wheels),
+            check_signature(&flat_aux, &paper_outputs(), 50, AuxLayout::PAPER, PolicyOutput::Wheels),
             Err(ContractViolation::Shape { name, .. }) if name == "aux"
         ));
     }
@@ -1017,7 +1148,13 @@ mod tests {
         let mut inputs = paper_inputs();
         inputs[0].element = ElementKind::OtherTensor("Float64".into());
         assert_eq!(
-            check_signature(&inputs, &paper_outputs(), 50, PolicyOutput::Wheels),
+            check_signature(
+                &inputs,
+                &paper_outputs(),
+                50,
+                AuxLayout::PAPER,
+                PolicyOutput::Wheels
+            ),
             Err(ContractViolation::ElementType {
                 name: "occupancy".into(),
                 found: "a Float64 tensor".into()
@@ -1026,7 +1163,13 @@ mod tests {
         let mut outputs = paper_outputs();
         outputs[0].element = ElementKind::NotTensor("a sequence".into());
         assert!(matches!(
-            check_signature(&paper_inputs(), &outputs, 50, PolicyOutput::Wheels),
+            check_signature(
+                &paper_inputs(),
+                &outputs,
+                50,
+                AuxLayout::PAPER,
+                PolicyOutput::Wheels
+            ),
             Err(ContractViolation::ElementType { .. })
         ));
     }

@@ -124,6 +124,19 @@ pub enum PolicyError {
         /// Cells given.
         actual: usize,
     },
+    /// The scalars beside the image are not as many as the model declares.
+    #[error(
+        "model {model}: {actual} scalars given beside the image, the model declares {} ({declared})",
+        declared.len()
+    )]
+    AuxLength {
+        /// Model id.
+        model: String,
+        /// What the model declares.
+        declared: formation_proto::AuxLayout,
+        /// Scalars given.
+        actual: usize,
+    },
     /// ONNX Runtime failed while running the model.
     #[error("model {model}: inference failed: {reason}")]
     Inference {

@@ -6,7 +6,7 @@
 //! # fn main() -> Result<(), formation_onnx::PolicyError> {
 //! let mut policy = formation_onnx::OnnxPolicy::load(std::path::Path::new("onnx/models/policy.onnx"))?;
 //! let cells = policy.metadata().occupancy.size_px.pow(2);
-//! let [left, right] = policy.infer(&vec![0.0; cells], [0.3, 1.5])?;
+//! let [left, right] = policy.infer(&vec![0.0; cells], &[0.3, 1.5])?;
 //! # let _ = (left, right);
 //! # Ok(())
 //! # }

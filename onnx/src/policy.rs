@@ -74,12 +74,13 @@ impl OnnxPolicy {
             .map(|o| signature(o.name(), o.dtype()))
             .collect();
         let size_px = metadata.occupancy.size_px;
-        check_signature(&inputs, &outputs, size_px, metadata.output).map_err(contract)?;
+        check_signature(&inputs, &outputs, size_px, metadata.aux, metadata.output)
+            .map_err(contract)?;
 
         let occupancy_slot = usize::from(inputs[0].name != OCCUPANCY_INPUT);
         let cells = size_px * size_px;
         let occupancy = zeros(vec![1, 1, size_px, size_px]).map_err(session_error)?;
-        let aux = zeros(vec![1, 2]).map_err(session_error)?;
+        let aux = zeros(vec![1, metadata.aux.len()]).map_err(session_error)?;
         let inputs = if occupancy_slot == 0 {
             [occupancy, aux]
         } else {
@@ -116,16 +117,24 @@ impl OnnxPolicy {
         })
     }
 
-    /// One forward pass: `occupancy` has `size_px * size_px` cells, row-major; `aux` is
-    /// `(delta_phi, d*)`. Returns the model's two output values: `(left, right)` wheel speeds at
+    /// One forward pass: `occupancy` has `size_px * size_px` cells, row-major; `aux` holds the
+    /// scalars the model declares, in order ([`ModelMetadata::aux`]; the paper's
+    /// `(delta_phi, d*)` for a model that declares none). Returns the model's two output values: `(left, right)` wheel speeds at
     /// `v_train`, or the formation velocity `(f_x, f_y)` in the robot's frame, as its metadata
     /// declares ([`crate::contract::PolicyOutput`]).
-    pub fn infer(&mut self, occupancy: &[f32], aux: [f32; 2]) -> Result<[f32; 2], PolicyError> {
+    pub fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], PolicyError> {
         if occupancy.len() != self.cells {
             return Err(PolicyError::InputLength {
                 model: self.model_id.clone(),
                 expected: self.cells,
                 actual: occupancy.len(),
+            });
+        }
+        if aux.len() != self.metadata.aux.len() {
+            return Err(PolicyError::AuxLength {
+                model: self.model_id.clone(),
+                declared: self.metadata.aux,
+                actual: aux.len(),
             });
         }
         let model = &self.model_id;
@@ -141,7 +150,7 @@ impl OnnxPolicy {
         let (_, aux_cells) = self.inputs[aux_slot]
             .try_extract_tensor_mut()
             .map_err(|e| failed(e.to_string()))?;
-        aux_cells.copy_from_slice(&aux);
+        aux_cells.copy_from_slice(aux);
 
         let outputs = self
             .session

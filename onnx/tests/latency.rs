@@ -50,13 +50,13 @@ fn measure(label: &str, path: &Path) {
     let cases = inputs(policy.metadata().occupancy.size_px);
     for i in 0..WARMUP {
         let (image, aux) = &cases[i % cases.len()];
-        policy.infer(image, *aux).expect("infer");
+        policy.infer(image, aux).expect("infer");
     }
     let mut micros: Vec<f64> = Vec::with_capacity(CALLS);
     for i in 0..CALLS {
         let (image, aux) = &cases[i % cases.len()];
         let t = Instant::now();
-        let out = policy.infer(image, *aux).expect("infer");
+        let out = policy.infer(image, aux).expect("infer");
         micros.push(t.elapsed().as_secs_f64() * 1e6);
         std::hint::black_box(out);
     }

@@ -53,7 +53,7 @@ fn outputs_match_torch_and_metadata_is_read() {
     assert_eq!(cases.len(), CASES);
     let mut largest_output = 0.0_f32;
     for (i, (image, aux, torch)) in cases.iter().enumerate() {
-        let ours = policy.infer(image, *aux).expect("inference");
+        let ours = policy.infer(image, aux).expect("inference");
         for wheel in 0..2 {
             let diff = (ours[wheel] - torch[wheel]).abs();
             assert!(
@@ -77,11 +77,11 @@ fn repeated_inference_is_deterministic_and_buffers_do_not_leak_between_calls() {
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let cases = fx.cases();
     let (first_image, first_aux, _) = &cases[0];
-    let first = policy.infer(first_image, *first_aux).expect("infer");
+    let first = policy.infer(first_image, first_aux).expect("infer");
     let (other_image, other_aux, _) = &cases[1];
-    let other = policy.infer(other_image, *other_aux).expect("infer");
+    let other = policy.infer(other_image, other_aux).expect("infer");
     assert_ne!(first, other, "different inputs give different outputs");
-    assert_eq!(policy.infer(first_image, *first_aux).expect("infer"), first);
+    assert_eq!(policy.infer(first_image, first_aux).expect("infer"), first);
 }
 
 #[test]
@@ -89,7 +89,7 @@ fn policy_moves_to_another_thread() {
     let fx = fixtures("parity");
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let (image, aux, torch) = fx.cases().swap_remove(2);
-    let ours = std::thread::spawn(move || policy.infer(&image, aux))
+    let ours = std::thread::spawn(move || policy.infer(&image, &aux))
         .join()
         .expect("thread")
         .expect("infer");
@@ -162,7 +162,7 @@ fn non_finite_output_is_an_error() {
         OnnxPolicy::load(&fx.model("nan_output.onnx")).expect("the contract itself is fine");
     let (image, aux, _) = fx.cases().swap_remove(0);
     assert!(
-        matches!(policy.infer(&image, aux), Err(PolicyError::NonFiniteOutput { left, right, .. }) if left.is_nan() && right.is_nan())
+        matches!(policy.infer(&image, &aux), Err(PolicyError::NonFiniteOutput { left, right, .. }) if left.is_nan() && right.is_nan())
     );
 }
 
@@ -171,14 +171,14 @@ fn wrong_image_length_is_an_error() {
     let fx = fixtures("parity");
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let short = vec![0.0; 40 * 40];
-    match policy.infer(&short, [0.0, 1.0]) {
+    match policy.infer(&short, &[0.0, 1.0]) {
         Err(PolicyError::InputLength {
             expected, actual, ..
         }) => assert_eq!((expected, actual), (SIZE_PX * SIZE_PX, 1600)),
         other => panic!("expected InputLength, got {other:?}"),
     }
     policy
-        .infer(&vec![0.0; SIZE_PX * SIZE_PX], [0.0, 1.0])
+        .infer(&vec![0.0; SIZE_PX * SIZE_PX], &[0.0, 1.0])
         .expect("still usable after a refused call");
 }
 

@@ -4,8 +4,8 @@
 //!   renderer used both when collecting demonstrations (`formation-expert`) and by the running
 //!   agent (`formation-robot-agent`), so a policy sees at run time exactly the pixels it was
 //!   trained on.
-//! * [`policy_input`]: the policy's `(delta_phi, d*)` beside the image, and its output scaled to
-//!   the goal's speed.
+//! * [`policy_input`]: a goal checked where it enters a robot, and the policy's declared output
+//!   turned into wheel speeds (the scalars beside the image are `formation_proto::PolicyIo`'s).
 //!
 //! Pure functions of one robot's own scan and the model's declared settings: no I/O, no ONNX, no
 //! transport, so the expert, the agent and the Python bindings share them without building any of

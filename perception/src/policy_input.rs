@@ -1,19 +1,21 @@
-//! The rest of a policy's input beside the image, and how its output becomes wheel speeds.
+//! How a policy's input is checked and how its output becomes wheel speeds.
 //!
-//! A policy takes `(delta_phi, d*)` next to the occupancy image ([`policy_aux`]) and answers what
-//! its model declares ([`PolicyOutput`]): wheel speeds at its training speed `v_train`, which the
-//! robot scales to the goal's speed ([`scale_to_goal_speed`]), or the formation velocity in the
-//! robot's frame, to which the robot adds the reference term ([`formation_velocity_to_wheels`]);
+//! What a policy takes and answers is its model's declaration ([`PolicyIo`], in
+//! `formation_proto::policy_io`): an image, the scalars beside it, and an output
+//! ([`PolicyOutput`]). A goal is checked once where it enters a robot ([`check_goal`]); a wheels
+//! output is scaled to the goal's speed ([`scale_to_goal_speed`]); a formation velocity in the
+//! robot's frame gets the reference term added ([`formation_velocity_to_wheels`]);
 //! [`command_of_output`] picks the one the model declares. A formation velocity is the
 //! expert's law as if the wheels had no acceleration limit; a robot whose wheels have one shapes
 //! it to a speed its point can still brake from ([`shape_for_wheels`], the expert's own
-//! [`braking_speed`]), so one model serves robots with any limit, or none, at full speed. The running agent (`formation-robot-agent`) and the Python bindings
-//! (`formation-python`, whose policy runs in Python) call these same functions, so a policy driven
-//! from Python sees, and moves its robot by, exactly the numbers the agent's would.
+//! [`braking_speed`]), so one model serves robots with any limit, or none, at full speed. The
+//! running agent (`formation-robot-agent`) and the Python bindings (`formation-python`, whose
+//! policy runs in Python) call these same functions, so a policy driven from Python sees, and
+//! moves its robot by, exactly the numbers the agent's would.
 
-use formation_proto::{Goal, PolicyOutput, WheelCmd, wrap_angle};
+use formation_proto::{AuxInput, Goal, PolicyIo, PolicyOutput, WheelCmd};
 
-/// Why a goal cannot be turned into a policy's input.
+/// Why a goal or a heading cannot be turned into a policy's input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PolicyInputError {
     /// d* is not a positive finite distance.
@@ -22,37 +24,46 @@ pub enum PolicyInputError {
         /// The goal's d* \[m\].
         d_star: f64,
     },
-    /// The heading, phi* or v* is NaN or infinite.
-    #[error("non-finite input (phi* {phi_star}, heading {heading}, v* {v_star})")]
-    NonFinite {
+    /// phi* or v* is NaN or infinite.
+    #[error("non-finite goal (phi* {phi_star}, v* {v_star})")]
+    NonFiniteGoal {
         /// The goal's phi* \[rad\].
         phi_star: f64,
-        /// The robot's heading \[rad\].
-        heading: f64,
         /// The goal's v* \[m/s\].
         v_star: f64,
     },
+    /// The robot's compass heading is NaN or infinite.
+    #[error("non-finite heading {heading}: check the robot's compass")]
+    NonFiniteHeading {
+        /// The heading \[rad\].
+        heading: f64,
+    },
 }
 
-/// The policy's auxiliary input `(delta_phi, d*)` for a robot with this heading and goal:
-/// `delta_phi = wrap(phi* - heading)`, both narrowed to `f32`.
-pub fn policy_aux(heading: f64, goal: &Goal) -> Result<[f32; 2], PolicyInputError> {
+/// Checks a goal where it enters a robot: d* a positive finite distance, phi* and v* finite.
+/// A robot holds a checked goal until the next one, so nothing checks it again on each tick.
+pub fn check_goal(goal: &Goal) -> Result<(), PolicyInputError> {
     if !(goal.d_star.is_finite() && goal.d_star > 0.0) {
         return Err(PolicyInputError::DStar {
             d_star: goal.d_star,
         });
     }
-    if !(goal.phi_star.is_finite() && heading.is_finite() && goal.v_star.is_finite()) {
-        return Err(PolicyInputError::NonFinite {
+    if !(goal.phi_star.is_finite() && goal.v_star.is_finite()) {
+        return Err(PolicyInputError::NonFiniteGoal {
             phi_star: goal.phi_star,
-            heading,
             v_star: goal.v_star,
         });
     }
-    Ok([
-        wrap_angle(goal.phi_star - heading) as f32,
-        goal.d_star as f32,
-    ])
+    Ok(())
+}
+
+/// Checks the robot's own heading, which changes every tick.
+pub fn check_heading(heading: f64) -> Result<(), PolicyInputError> {
+    if heading.is_finite() {
+        Ok(())
+    } else {
+        Err(PolicyInputError::NonFiniteHeading { heading })
+    }
 }
 
 /// The wheel command of a policy output `[left, right]` (at the training speed `v_train`) for a
@@ -126,23 +137,25 @@ pub fn formation_velocity_to_wheels(
     }
 }
 
-/// The wheel command of a policy's two output values `values`, as `output` says they are meant,
-/// for the robot's auxiliary input `aux = (delta_phi, d*)`, goal speed `v_star` and wheel
-/// acceleration limit `max_wheel_accel` (which shapes a formation velocity; a wheels output was
-/// trained for one limit and is taken as it is).
+/// The wheel command of a policy's two output values `values`, as `io` says they are meant, for
+/// a robot with this heading under this goal, whose wheels accelerate at most
+/// `max_wheel_accel` \[m/s²\] (which shapes a formation velocity; a wheels output was trained for
+/// one limit and is taken as it is).
 pub fn command_of_output(
-    output: PolicyOutput,
+    io: &PolicyIo,
     values: [f32; 2],
-    aux: [f32; 2],
-    v_star: f64,
-    v_train: f64,
+    heading: f64,
+    goal: &Goal,
     max_wheel_accel: Option<f64>,
 ) -> WheelCmd {
-    match output {
-        PolicyOutput::Wheels => scale_to_goal_speed(values, v_star, v_train),
-        PolicyOutput::FormationVelocity => {
-            formation_velocity_to_wheels(values, f64::from(aux[0]), v_star, max_wheel_accel)
-        }
+    match io.output {
+        PolicyOutput::Wheels => scale_to_goal_speed(values, goal.v_star, io.v_train),
+        PolicyOutput::FormationVelocity => formation_velocity_to_wheels(
+            values,
+            AuxInput::HeadingError.value(heading, goal),
+            goal.v_star,
+            max_wheel_accel,
+        ),
     }
 }
 
@@ -159,22 +172,22 @@ mod tests {
     }
 
     #[test]
-    fn the_aux_input_is_the_wrapped_heading_error_and_d_star() {
-        let aux = policy_aux(3.0, &goal(-3.0, 1.5)).unwrap();
-        assert_eq!(aux, [wrap_angle(-6.0) as f32, 1.5]);
-        assert!(aux[0] > 0.0 && aux[0] < 0.3);
-    }
-
-    #[test]
-    fn a_bad_goal_is_refused_with_its_values() {
+    fn a_bad_goal_or_heading_is_refused_with_its_values() {
+        assert_eq!(check_goal(&goal(0.0, 1.5)), Ok(()));
         assert_eq!(
-            policy_aux(0.0, &goal(0.0, 0.0)).unwrap_err().to_string(),
+            check_goal(&goal(0.0, 0.0)).unwrap_err().to_string(),
             "d* must be > 0, got 0"
         );
-        let err = policy_aux(f64::NAN, &goal(0.0, 1.0)).unwrap_err();
         assert_eq!(
-            err.to_string(),
-            "non-finite input (phi* 0, heading NaN, v* 0.5)"
+            check_goal(&goal(f64::NAN, 1.0)).unwrap_err().to_string(),
+            "non-finite goal (phi* NaN, v* 0.5)"
+        );
+        assert!(check_heading(0.3).is_ok());
+        assert!(
+            check_heading(f64::INFINITY)
+                .unwrap_err()
+                .to_string()
+                .contains("compass")
         );
     }
 
@@ -207,23 +220,41 @@ mod tests {
         assert!((c * omega - (f64::from(f[1]) + 0.7 * 0.3f64.sin())).abs() < 1e-9);
     }
 
+    fn io(output: PolicyOutput) -> PolicyIo {
+        PolicyIo {
+            image: formation_proto::OccupancySpec::PAPER,
+            aux: formation_proto::AuxLayout::PAPER,
+            output,
+            v_train: 0.7,
+        }
+    }
+
     #[test]
     fn the_declared_output_picks_the_conversion() {
-        let aux = [0.2, 1.5];
+        let goal = Goal {
+            phi_star: 0.5,
+            d_star: 1.5,
+            v_star: 0.35,
+        };
         assert_eq!(
-            command_of_output(PolicyOutput::Wheels, [0.7, 0.35], aux, 0.35, 0.7, Some(1.0)),
+            command_of_output(
+                &io(PolicyOutput::Wheels),
+                [0.7, 0.35],
+                0.3,
+                &goal,
+                Some(1.0)
+            ),
             scale_to_goal_speed([0.7, 0.35], 0.35, 0.7)
         );
         assert_eq!(
             command_of_output(
-                PolicyOutput::FormationVelocity,
+                &io(PolicyOutput::FormationVelocity),
                 [0.1, 0.0],
-                aux,
-                0.35,
-                0.7,
+                0.3,
+                &goal,
                 None
             ),
-            formation_velocity_to_wheels([0.1, 0.0], f64::from(aux[0]), 0.35, None)
+            formation_velocity_to_wheels([0.1, 0.0], 0.5 - 0.3, 0.35, None)
         );
     }
 
@@ -243,20 +274,20 @@ mod tests {
         let small = shape_for_wheels((0.01, 0.0), Some(1.0));
         assert!(small.0 > 0.0085 && small.0 < 0.01);
         // Through the wheels: under a limit the command is the shaped velocity's.
+        let goal = Goal {
+            phi_star: 0.2,
+            d_star: 1.5,
+            v_star: 0.5,
+        };
         let limited = command_of_output(
-            PolicyOutput::FormationVelocity,
+            &io(PolicyOutput::FormationVelocity),
             [0.3, -0.4],
-            [0.2, 1.5],
-            0.5,
-            0.7,
+            0.0,
+            &goal,
             Some(1.0),
         );
-        let expected = formation_velocity_to_wheels(
-            [shaped.0 as f32, shaped.1 as f32],
-            f64::from(0.2_f32),
-            0.5,
-            None,
-        );
+        let expected =
+            formation_velocity_to_wheels([shaped.0 as f32, shaped.1 as f32], 0.2, 0.5, None);
         assert!((limited.left - expected.left).abs() < 1e-6);
         assert!((limited.right - expected.right).abs() < 1e-6);
     }

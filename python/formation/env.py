@@ -133,9 +133,18 @@ class FormationParallelEnv(ParallelEnv):
 
     def _make_observation_space(self) -> spaces.Dict:
         pi = np.float32(math.pi)
+        # Each declared scalar's bounds (formation_proto::AuxInput): a heading error or a d*.
+        bounds = {"delta_phi": (-pi, pi), "d_star": (0.0, np.inf)}
+        names = [name.strip() for name in self.spec.aux.split(",")]
+        unknown = [name for name in names if name not in bounds]
+        if unknown:
+            raise ValueError(
+                f"the model declares the inputs {unknown} (formation.aux), which this build cannot feed; "
+                f"it feeds {sorted(bounds)}"
+            )
         aux = spaces.Box(
-            low=np.array([-pi, 0.0], dtype=np.float32),
-            high=np.array([pi, np.inf], dtype=np.float32),
+            low=np.array([bounds[name][0] for name in names], dtype=np.float32),
+            high=np.array([bounds[name][1] for name in names], dtype=np.float32),
             dtype=np.float32,
         )
         if self.spec.input == "scan":
@@ -180,7 +189,7 @@ class FormationParallelEnv(ParallelEnv):
         return observations, {a: {} for a in self.agents}
 
     def _observations(self, agents: list) -> Dict[str, dict]:
-        aux = self._batch.aux()[0]
+        aux = self._batch.aux(self.spec.aux)[0]
         if self.spec.input == "scan":
             own = self._batch.scans()[0]
             key = "scan"

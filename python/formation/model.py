@@ -22,8 +22,9 @@ class ModelSpec:
 
     ``input`` is ``"occupancy"`` (an image of ``size_px`` x ``size_px`` cells of ``resolution_m``
     metres, hits beyond the window dropped or drawn on the border, the window scaled with d* when
-    ``d_star_ref_m`` is set) or ``"scan"`` (the raw ranges); both come with ``aux = (delta_phi,
-    d*)``. ``output`` is what the model answers (``formation.output``): ``"wheels"``, wheel
+    ``d_star_ref_m`` is set) or ``"scan"`` (the raw ranges); both come with the scalars ``aux``
+    declares (``formation.aux``: names in order, ``"delta_phi,d_star"`` where the model declares
+    none), which the environment makes with the agent's own code. ``output`` is what the model answers (``formation.output``): ``"wheels"``, wheel
     speeds at ``v_train`` m/s scaled by ``v* / v_train``, or ``"formation_velocity"``, the
     correction in the robot's frame to which the reference term ``v* (cos Δφ, sin Δφ)`` is added,
     exactly as the agent does.
@@ -38,6 +39,7 @@ class ModelSpec:
     max_range: Optional[float] = None
     input: str = "occupancy"
     output: str = "wheels"
+    aux: str = "delta_phi,d_star"
 
     def __post_init__(self) -> None:
         if self.output not in ("wheels", "formation_velocity"):
@@ -83,6 +85,7 @@ class ModelSpec:
             max_range=get("formation.lidar.max_range", float),
             input="scan" if raw_input == "scan-ranges" else raw_input,
             output=meta.get("formation.output", "wheels"),
+            aux=meta.get("formation.aux", "delta_phi,d_star"),
         )
 
     @staticmethod

@@ -10,7 +10,7 @@
 use formation_expert::{ExpertController, ExpertGains};
 use formation_perception::{occupancy, policy_input};
 use formation_proto::control::Controller;
-use formation_proto::{BeyondWindow, OccupancySpec, WheelCmd};
+use formation_proto::{AuxLayout, BeyondWindow, OccupancySpec, PolicyIo, WheelCmd};
 use formation_world::metrics::{MetricsConfig, run_metrics};
 use formation_world::neighbours::NeighbourTracker;
 use formation_world::{Episode, Scenario, StepError};
@@ -411,21 +411,29 @@ impl Batch {
             .reshape(vec![self.slots.len(), n, 1, size_px, size_px])
     }
 
-    /// Every robot's `(delta_phi, d*)`, the policy's `aux` input: `(B, N, 2)` float32.
-    fn aux<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-        let n = self.robots();
-        let mut out = vec![0.0_f32; self.slots.len() * n * 2];
-        self.fill(&mut out, n * 2, |b, slot, chunk| {
+    /// Every robot's scalars beside the image, the policy's `aux` input, as the model declares
+    /// them (`layout`, its `formation.aux`; the paper's `delta_phi,d_star` by default), made by
+    /// the agent's own `formation_proto::PolicyIo`: `(B, N, A)` float32.
+    #[pyo3(signature = (layout = "delta_phi,d_star"))]
+    fn aux<'py>(&mut self, py: Python<'py>, layout: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let layout = AuxLayout::parse(layout).map_err(|e| {
+            PyValueError::new_err(format!(
+                "aux layout {layout:?} (the model's formation.aux): {e}"
+            ))
+        })?;
+        let (n, width) = (self.robots(), layout.len());
+        let mut out = vec![0.0_f32; self.slots.len() * n * width];
+        self.fill(&mut out, n * width, |b, slot, chunk| {
             let world = slot.episode.world();
             let goal = slot.episode.spec().goal_at(world.time());
-            for (pose, cell) in world.poses().iter().zip(chunk.chunks_exact_mut(2)) {
-                let aux = policy_input::policy_aux(pose.theta, &goal)
-                    .map_err(|e| format!("world {b}: {e}"))?;
-                cell.copy_from_slice(&aux);
+            policy_input::check_goal(&goal).map_err(|e| format!("world {b}: {e}"))?;
+            for (pose, cell) in world.poses().iter().zip(chunk.chunks_exact_mut(width)) {
+                cell.copy_from_slice(&layout.values(pose.theta, &goal));
             }
             Ok(())
         })?;
-        out.into_pyarray(py).reshape(vec![self.slots.len(), n, 2])
+        out.into_pyarray(py)
+            .reshape(vec![self.slots.len(), n, width])
     }
 
     /// A policy's outputs `(B, N, 2)` (float32) as wheel speeds for each world's goal, as the
@@ -461,23 +469,29 @@ impl Batch {
         let raw = outputs
             .as_slice()
             .map_err(|_| PyValueError::new_err("policy outputs must be C-contiguous float32"))?;
+        // Only the output and v_train matter for turning outputs into wheels.
+        let io = PolicyIo {
+            image: OccupancySpec::PAPER,
+            aux: AuxLayout::PAPER,
+            output,
+            v_train,
+        };
         let mut out = Vec::with_capacity(raw.len());
         for (b, slot) in self.slots.iter().enumerate() {
             let world = slot.episode.world();
             let goal = slot.episode.spec().goal_at(world.time());
+            policy_input::check_goal(&goal)
+                .map_err(|e| PyValueError::new_err(format!("world {b}: {e}")))?;
             let max_wheel_accel = slot.episode.spec().world.robot.max_wheel_accel;
             for (w, pose) in raw[b * n * 2..(b + 1) * n * 2]
                 .chunks_exact(2)
                 .zip(world.poses())
             {
-                let aux = policy_input::policy_aux(pose.theta, &goal)
-                    .map_err(|e| PyValueError::new_err(format!("world {b}: {e}")))?;
                 let cmd = policy_input::command_of_output(
-                    output,
+                    &io,
                     [w[0], w[1]],
-                    aux,
-                    goal.v_star,
-                    v_train,
+                    pose.theta,
+                    &goal,
                     max_wheel_accel,
                 );
                 out.extend([cmd.left, cmd.right]);

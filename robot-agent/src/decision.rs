@@ -5,7 +5,8 @@
 //!
 //! 1. render the occupancy image from the scan ([`formation_perception::occupancy::render`], the same function the
 //!    demonstration collector uses);
-//! 2. `delta_phi = wrap(phi* - theta)`, and `aux = (delta_phi, d*)`;
+//! 2. the scalars the model declares beside the image, `aux` (the paper's
+//!    `(wrap(phi* - theta), d*)`: see [`PolicyIo`]);
 //! 3. `y = policy(image, aux)`, what the model declares it outputs ([`PolicyOutput`]);
 //! 4. for `wheels`, the wheel speeds at the training speed `v_train`: `u = K y` with
 //!    `K = v* / v_train` (the paper's speed scaling); for `formation_velocity`, the formation
@@ -19,6 +20,10 @@
 //!
 //! # Contracts checked
 //!
+//! A goal is checked once where it enters the agent, and held until the next one: d* positive,
+//! everything finite, d* inside the model's trained range ([`Agent::hold_goal`]); each tick then
+//! checks only what changes with it, the scan's length and the heading.
+//!
 //! A policy drives a robot only if it was trained for that robot's sensor: beams, maximum range
 //! and image window ([`formation_onnx::contract::check_sensor`]), checked by [`Agent::new`] and
 //! again by [`Agent::swap_policy`]. [`check_team_models`] runs the same check for every robot of
@@ -30,8 +35,10 @@ use std::path::{Path, PathBuf};
 
 use formation_onnx::contract::{SensorContract, SensorViolation, check_sensor};
 use formation_onnx::{OnnxPolicy, PolicyError};
+#[cfg(doc)]
+use formation_proto::PolicyOutput;
 use formation_proto::control::{Controller, ControllerError, Observation};
-use formation_proto::{Goal, LidarSpec, OccupancySpec, PolicyOutput, WheelCmd};
+use formation_proto::{AuxValues, Goal, LidarSpec, OccupancySpec, PolicyIo, WheelCmd};
 
 use formation_perception::{occupancy, policy_input};
 
@@ -122,10 +129,10 @@ pub enum DecisionError {
 /// What a swap candidate was tried on before it could drive.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TrialObservation {
-    /// The scan and `(delta_phi, d*)` the agent last decided on, the image rendered for the
-    /// candidate.
+    /// The scan, heading and goal the agent last decided on, the image and the scalars
+    /// made for the candidate.
     Last,
-    /// No decision yet: an empty image (nothing in sight) and `(0, 1 m)`, see [`TRIAL_AUX`].
+    /// No decision yet: an empty image (nothing in sight) on heading under [`TRIAL_GOAL`].
     Empty,
 }
 
@@ -138,26 +145,24 @@ impl std::fmt::Display for TrialObservation {
     }
 }
 
-/// The `(delta_phi, d*)` a swap candidate is tried on before the agent has decided anything:
-/// on heading and a 1 m distance.
-pub const TRIAL_AUX: [f32; 2] = [0.0, 1.0];
+/// The goal a swap candidate is tried on, on heading, before the agent has decided anything:
+/// a 1 m distance at rest.
+pub const TRIAL_GOAL: Goal = Goal {
+    phi_star: 0.0,
+    d_star: 1.0,
+    v_star: 0.0,
+};
 
-/// A policy an [`Agent`] can run: maps one occupancy image and `(delta_phi, d*)` to wheel speeds.
+/// A policy an [`Agent`] can run: maps one occupancy image and the scalars beside it to the two
+/// values its model declares.
 pub trait PolicyBackend: Send {
-    /// One forward pass. `occupancy` has `size_px * size_px` cells (0.0 or 1.0), row-major.
-    fn infer(&mut self, occupancy: &[f32], aux: [f32; 2]) -> Result<[f32; 2], DecisionError>;
-    /// The occupancy rendering the policy was trained on.
-    fn occupancy_spec(&self) -> OccupancySpec;
-    /// LIDAR beams the policy was trained with, if it records them.
-    fn beams(&self) -> Option<usize>;
-    /// LIDAR maximum range \[m\] the policy was trained with, if it records it.
-    fn max_range(&self) -> Option<f64>;
-    /// Training speed `v_train` \[m/s\]; deployed wheel outputs are scaled by `v* / v_train`.
-    fn v_train(&self) -> f64;
-    /// What the policy's output means (`wheels` unless the model declares otherwise).
-    fn output(&self) -> PolicyOutput {
-        PolicyOutput::Wheels
-    }
+    /// One forward pass. `occupancy` has `size_px * size_px` cells (0.0 or 1.0), row-major;
+    /// `aux` the scalars [`PolicyBackend::io`] declares, in order.
+    fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError>;
+    /// What the policy takes and answers: its image, its scalars, its output and `v_train`.
+    fn io(&self) -> PolicyIo;
+    /// The sensor it was trained for: beams and range where it records them, and its window.
+    fn sensor(&self) -> SensorContract;
     /// A short id naming the model (logged with every command).
     fn model_id(&self) -> &str;
     /// What the model was trained on beyond its sensor (d* range, team sizes, noise); empty
@@ -184,23 +189,14 @@ pub fn check_goal_envelope(policy: &dyn PolicyBackend, d_star: f64) -> Result<()
 }
 
 impl PolicyBackend for OnnxPolicy {
-    fn infer(&mut self, occupancy: &[f32], aux: [f32; 2]) -> Result<[f32; 2], DecisionError> {
+    fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError> {
         Ok(OnnxPolicy::infer(self, occupancy, aux)?)
     }
-    fn occupancy_spec(&self) -> OccupancySpec {
-        self.metadata().occupancy
+    fn io(&self) -> PolicyIo {
+        self.metadata().io()
     }
-    fn beams(&self) -> Option<usize> {
-        Some(self.metadata().beams)
-    }
-    fn max_range(&self) -> Option<f64> {
-        Some(self.metadata().max_range)
-    }
-    fn v_train(&self) -> f64 {
-        self.metadata().v_train
-    }
-    fn output(&self) -> PolicyOutput {
-        self.metadata().output
+    fn sensor(&self) -> SensorContract {
+        SensorContract::from(self.metadata())
     }
     fn envelope(&self) -> formation_onnx::ModelEnvelope {
         self.metadata().envelope()
@@ -210,19 +206,21 @@ impl PolicyBackend for OnnxPolicy {
     }
 }
 
-/// One robot's decision maker: its policy, its sensor settings, reusable image buffers, and the
-/// last observation it decided on (a swap candidate's trial input).
+/// One robot's decision maker: its policy, its sensor settings, reusable image buffers, the goal
+/// it holds, and the last observation it decided on (a swap candidate's trial input).
 pub struct Agent {
     policy: Box<dyn PolicyBackend>,
+    /// The policy's declared input and output, read once from it.
+    io: PolicyIo,
     lidar: LidarSpec,
     image: Vec<u8>,
     image_f32: Vec<f32>,
+    /// The goal checked where it entered ([`Agent::hold_goal`]); `None` before the first.
+    goal: Option<Goal>,
     /// The scan of the last [`Agent::perceive`]; empty before the first.
     last_scan: Vec<f32>,
-    /// The `(delta_phi, d*)` of the last [`Agent::decide`]; `None` before the first.
-    last_aux: Option<[f32; 2]>,
-    /// The d* of the last [`Agent::perceive`] (the window of a model that scales with d*).
-    last_d_star: f64,
+    /// The heading and the scalars of the last [`Agent::decide`]; `None` before the first.
+    last_decision: Option<(f64, AuxValues)>,
     /// The robot's wheel acceleration limit \[m/s²\], which shapes a formation-velocity output
     /// ([`policy_input::shape_for_wheels`]); `None`: no limit.
     max_wheel_accel: Option<f64>,
@@ -233,15 +231,17 @@ impl Agent {
     /// and image window).
     pub fn new(policy: Box<dyn PolicyBackend>, lidar: LidarSpec) -> Result<Agent, DecisionError> {
         check_policy(policy.as_ref(), &lidar)?;
-        let cells = cells(&policy.occupancy_spec());
+        let io = policy.io();
+        let cells = cells(&io.image);
         Ok(Agent {
             policy,
+            io,
             lidar,
             image: vec![0; cells],
             image_f32: vec![0.0; cells],
+            goal: None,
             last_scan: Vec::with_capacity(lidar.beams),
-            last_aux: None,
-            last_d_star: 1.0,
+            last_decision: None,
             max_wheel_accel: None,
         })
     }
@@ -263,41 +263,57 @@ impl Agent {
         Agent::new(Box::new(policy), lidar)
     }
 
-    /// Renders this robot's occupancy image from its own scan, for the goal spacing `d_star`
-    /// (which sets the window of a model whose window scales with d*; a fixed window ignores it).
-    pub fn perceive(&mut self, scan: &[f32], d_star: f64) -> Result<(), DecisionError> {
+    /// Takes a goal where it enters the robot and holds it: d* positive, phi* and v* finite, and
+    /// d* inside the model's trained range. The same goal again is not checked again, so a
+    /// goal that comes with every tick is checked once. On error the agent holds no goal.
+    pub fn hold_goal(&mut self, goal: &Goal) -> Result<(), DecisionError> {
+        if self.goal.as_ref() == Some(goal) {
+            return Ok(());
+        }
+        self.goal = None;
+        policy_input::check_goal(goal).map_err(|e| DecisionError::Goal {
+            reason: e.to_string(),
+        })?;
+        check_goal_envelope(self.policy.as_ref(), goal.d_star)?;
+        self.goal = Some(*goal);
+        Ok(())
+    }
+
+    /// Renders this robot's occupancy image from its own scan under the goal (whose d* sets the
+    /// window of a model whose window scales with d*; a fixed window ignores it).
+    pub fn perceive(&mut self, scan: &[f32], goal: &Goal) -> Result<(), DecisionError> {
+        self.hold_goal(goal)?;
         if scan.len() != self.lidar.beams {
             return Err(DecisionError::ScanLength {
                 expected: self.lidar.beams,
                 actual: scan.len(),
             });
         }
-        let spec = self.policy.occupancy_spec();
-        if spec.scales_with_d_star() && !(d_star.is_finite() && d_star > 0.0) {
-            return Err(DecisionError::Goal {
-                reason: format!(
-                    "d* must be > 0 to size a window that scales with d*, got {d_star}"
-                ),
-            });
-        }
-        occupancy::render_at(scan, &self.lidar, &spec, d_star, &mut self.image);
+        occupancy::render_at(
+            scan,
+            &self.lidar,
+            &self.io.image,
+            goal.d_star,
+            &mut self.image,
+        );
         for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
             *dst = f32::from(src);
         }
         self.last_scan.clear();
         self.last_scan.extend_from_slice(scan);
-        self.last_d_star = d_star;
         Ok(())
     }
 
-    /// Runs the policy on the last perceived image and scales its output to the goal's speed.
-    ///
-    /// A goal whose d* lies outside the model's trained d* range (its envelope) is refused.
+    /// Runs the policy on the last perceived image and turns its output into the wheel command,
+    /// as the model declares it ([`policy_input::command_of_output`]).
     pub fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, DecisionError> {
-        let aux = policy_aux(heading, goal)?;
-        check_goal_envelope(self.policy.as_ref(), goal.d_star)?;
-        self.last_aux = Some(aux);
-        let [left, right] = self.policy.infer(&self.image_f32, aux)?;
+        self.hold_goal(goal)?;
+        policy_input::check_heading(heading).map_err(|e| DecisionError::Goal {
+            reason: e.to_string(),
+        })?;
+        let aux = self.io.aux.values(heading, goal);
+        self.last_decision = Some((heading, aux));
+        let [left, right] = self.policy.infer(&self.image_f32, &aux)?;
         if !(left.is_finite() && right.is_finite()) {
             return Err(DecisionError::NonFinite {
                 model: self.policy.model_id().to_owned(),
@@ -306,11 +322,10 @@ impl Agent {
             });
         }
         Ok(policy_input::command_of_output(
-            self.policy.output(),
+            &self.io,
             [left, right],
-            aux,
-            goal.v_star,
-            self.policy.v_train(),
+            heading,
+            goal,
             self.max_wheel_accel,
         ))
     }
@@ -321,21 +336,20 @@ impl Agent {
     /// its next scan is due, so that the real decision finds caches warm. Does nothing before
     /// the first decision.
     pub fn rehearse(&mut self) -> Result<(), DecisionError> {
-        let Some(aux) = self.last_aux else {
+        let (Some((_, aux)), Some(goal)) = (self.last_decision, self.goal) else {
             return Ok(());
         };
-        let spec = self.policy.occupancy_spec();
         occupancy::render_at(
             &self.last_scan,
             &self.lidar,
-            &spec,
-            self.last_d_star,
+            &self.io.image,
+            goal.d_star,
             &mut self.image,
         );
         for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
             *dst = f32::from(src);
         }
-        self.policy.infer(&self.image_f32, aux)?;
+        self.policy.infer(&self.image_f32, &aux)?;
         Ok(())
     }
 
@@ -346,7 +360,7 @@ impl Agent {
         heading: f64,
         goal: &Goal,
     ) -> Result<WheelCmd, DecisionError> {
-        self.perceive(scan, goal.d_star)?;
+        self.perceive(scan, goal)?;
         self.decide(heading, goal)
     }
 
@@ -365,36 +379,50 @@ impl Agent {
         self.policy.as_ref()
     }
 
+    /// What the policy now driving takes and answers.
+    pub fn io(&self) -> &PolicyIo {
+        &self.io
+    }
+
     /// Replaces the policy after validating the new one; on error the old policy keeps driving.
     ///
     /// The candidate must fit this robot's sensor (as in [`Agent::new`]) and must give a finite
-    /// command when run once on the last observation this agent decided on: its scan, rendered
-    /// with the candidate's occupancy settings, and its `(delta_phi, d*)`. Before the first
-    /// decision it is run on an empty image with [`TRIAL_AUX`]. A model whose output is NaN or
-    /// infinite is refused here rather than braking its robot on every tick.
+    /// command when run once on the last observation this agent decided on: its scan, heading
+    /// and goal, the image and the scalars made as the candidate declares them (which may differ
+    /// from the current policy's). Before the first decision it is run on an empty image under
+    /// [`TRIAL_GOAL`]. A model whose output is NaN or infinite is refused here rather than
+    /// braking its robot on every tick. The goal held must lie in the candidate's trained range.
     pub fn swap_policy(&mut self, mut policy: Box<dyn PolicyBackend>) -> Result<(), DecisionError> {
         check_policy(policy.as_ref(), &self.lidar)?;
-        let spec = policy.occupancy_spec();
-        let n = cells(&spec);
+        if let Some(goal) = self.goal {
+            check_goal_envelope(policy.as_ref(), goal.d_star)?;
+        }
+        let io = policy.io();
+        let n = cells(&io.image);
         let mut image = vec![0u8; n];
-        let (aux, observation) = match self.last_aux {
-            Some(aux) if self.last_scan.len() == self.lidar.beams => {
+        let (aux, observation) = match (self.last_decision, self.goal) {
+            (Some((heading, _)), Some(goal)) if self.last_scan.len() == self.lidar.beams => {
                 occupancy::render_at(
                     &self.last_scan,
                     &self.lidar,
-                    &spec,
-                    self.last_d_star,
+                    &io.image,
+                    goal.d_star,
                     &mut image,
                 );
-                (aux, TrialObservation::Last)
+                (io.aux.values(heading, &goal), TrialObservation::Last)
             }
-            _ => (TRIAL_AUX, TrialObservation::Empty),
+            _ => (io.aux.values(0.0, &TRIAL_GOAL), TrialObservation::Empty),
         };
         let image: Vec<f32> = image.into_iter().map(f32::from).collect();
-        trial_run(policy.as_mut(), &image, aux, observation)?;
+        trial_run(policy.as_mut(), &image, &aux, observation)?;
         self.image.resize(n, 0);
         self.image_f32.resize(n, 0.0);
+        if let Some((heading, _)) = self.last_decision {
+            let goal = self.goal.unwrap_or(TRIAL_GOAL);
+            self.last_decision = Some((heading, io.aux.values(heading, &goal)));
+        }
         self.policy = policy;
+        self.io = io;
         Ok(())
     }
 }
@@ -404,7 +432,7 @@ impl Agent {
 fn trial_run(
     policy: &mut dyn PolicyBackend,
     image: &[f32],
-    aux: [f32; 2],
+    aux: &[f32],
     observation: TrialObservation,
 ) -> Result<(), DecisionError> {
     let outcome = policy.infer(image, aux);
@@ -432,26 +460,13 @@ fn trial_run(
     }
 }
 
-/// The policy's auxiliary input `(delta_phi, d*)` for a robot with this heading and goal
-/// ([`formation_perception::policy_input::policy_aux`]).
-pub fn policy_aux(heading: f64, goal: &Goal) -> Result<[f32; 2], DecisionError> {
-    policy_input::policy_aux(heading, goal).map_err(|e| DecisionError::Goal {
-        reason: e.to_string(),
-    })
-}
-
 fn cells(spec: &OccupancySpec) -> usize {
     spec.size_px * spec.size_px
 }
 
 /// The full sensor contract of `policy` against this robot's LIDAR: beams, range and window.
 fn check_policy(policy: &dyn PolicyBackend, lidar: &LidarSpec) -> Result<(), DecisionError> {
-    let trained = SensorContract {
-        beams: policy.beams(),
-        max_range: policy.max_range(),
-        occupancy: policy.occupancy_spec(),
-    };
-    check_sensor(&trained, lidar).map_err(|reason| DecisionError::SensorMismatch {
+    check_sensor(&policy.sensor(), lidar).map_err(|reason| DecisionError::SensorMismatch {
         model: policy.model_id().to_owned(),
         reason,
     })
@@ -605,30 +620,38 @@ mod tests {
         spec: OccupancySpec,
         seen: Option<([f32; 2], f32)>,
         d_star: Option<(f64, f64)>,
+        /// How often its envelope was read: the goal checks.
+        envelope_reads: std::sync::Arc<std::sync::atomic::AtomicUsize>,
     }
 
     impl PolicyBackend for Probe {
-        fn infer(&mut self, occupancy: &[f32], aux: [f32; 2]) -> Result<[f32; 2], DecisionError> {
+        fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError> {
             let occupied: f32 = occupancy.iter().sum();
+            let aux = [aux[0], aux[1]];
             self.seen = Some((aux, occupied));
             Ok([aux[0], occupied])
         }
-        fn occupancy_spec(&self) -> OccupancySpec {
-            self.spec
+        fn io(&self) -> PolicyIo {
+            PolicyIo {
+                image: self.spec,
+                aux: formation_proto::AuxLayout::PAPER,
+                output: formation_proto::PolicyOutput::Wheels,
+                v_train: 0.5,
+            }
         }
-        fn beams(&self) -> Option<usize> {
-            Some(900)
-        }
-        fn max_range(&self) -> Option<f64> {
-            Some(10.0)
-        }
-        fn v_train(&self) -> f64 {
-            0.5
+        fn sensor(&self) -> SensorContract {
+            SensorContract {
+                beams: Some(900),
+                max_range: Some(10.0),
+                occupancy: self.spec,
+            }
         }
         fn model_id(&self) -> &str {
             "probe"
         }
         fn envelope(&self) -> formation_onnx::ModelEnvelope {
+            self.envelope_reads
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             formation_onnx::ModelEnvelope {
                 d_star: self.d_star,
                 ..formation_onnx::ModelEnvelope::default()
@@ -646,7 +669,56 @@ mod tests {
             },
             seen: None,
             d_star: None,
+            envelope_reads: Default::default(),
         })
+    }
+
+    /// Issue 35: d* is checked once, where the goal enters, not on every tick; a refused goal
+    /// leaves the agent holding none, and a swap candidate must admit the goal held.
+    #[test]
+    fn a_goal_is_checked_once_where_it_enters_and_held() {
+        let lidar = LidarSpec::default();
+        let mut probe = probe();
+        probe.d_star = Some((0.8, 2.5));
+        let envelope_reads = std::sync::Arc::clone(&probe.envelope_reads);
+        let mut agent = Agent::new(probe, lidar).expect("probe matches the sensor");
+        let scan = vec![lidar.max_range as f32; lidar.beams];
+        let goal = |d_star| Goal {
+            phi_star: 0.5,
+            d_star,
+            v_star: 0.7,
+        };
+        let checks = |_: &Agent| envelope_reads.load(std::sync::atomic::Ordering::Relaxed);
+        for tick in 0..5 {
+            agent
+                .act(&scan, 0.1 * f64::from(tick), &goal(1.5))
+                .expect("inside the range");
+        }
+        assert_eq!(checks(&agent), 1, "one goal, one check, over five ticks");
+        agent.act(&scan, 0.0, &goal(2.0)).expect("a new goal");
+        assert_eq!(checks(&agent), 2, "a new goal is checked when it enters");
+        for _ in 0..2 {
+            assert!(matches!(
+                agent.act(&scan, 0.0, &goal(-1.0)),
+                Err(DecisionError::Goal { .. })
+            ));
+            assert!(matches!(
+                agent.act(&scan, 0.0, &goal(3.0)),
+                Err(DecisionError::OutsideEnvelope { .. })
+            ));
+        }
+        agent
+            .act(&scan, 0.0, &goal(2.0))
+            .expect("a good goal again");
+        let narrow = Probe {
+            d_star: Some((0.5, 1.0)),
+            ..*self::probe()
+        };
+        assert!(matches!(
+            agent.swap_policy(Box::new(narrow)),
+            Err(DecisionError::OutsideEnvelope { .. })
+        ));
+        assert_eq!(agent.model_id(), "probe");
     }
 
     #[test]
@@ -704,7 +776,14 @@ mod tests {
             "10 cells ahead at every d*"
         );
         let err = agent
-            .perceive(&vec![1.0; lidar.beams], f64::NAN)
+            .perceive(
+                &vec![1.0; lidar.beams],
+                &Goal {
+                    phi_star: 0.0,
+                    d_star: f64::NAN,
+                    v_star: 0.7,
+                },
+            )
             .expect_err("no window for a NaN d*");
         assert!(err.to_string().contains("d* must be > 0"), "{err}");
     }
@@ -819,22 +898,28 @@ mod tests {
     }
 
     impl PolicyBackend for Fake {
-        fn infer(&mut self, occupancy: &[f32], aux: [f32; 2]) -> Result<[f32; 2], DecisionError> {
+        fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError> {
             let occupied = occupancy.iter().sum();
-            self.seen.lock().expect("log").push((aux, occupied));
+            self.seen
+                .lock()
+                .expect("log")
+                .push(([aux[0], aux[1]], occupied));
             self.output.map_err(|make| make())
         }
-        fn occupancy_spec(&self) -> OccupancySpec {
-            OccupancySpec::PAPER
+        fn io(&self) -> PolicyIo {
+            PolicyIo {
+                image: OccupancySpec::PAPER,
+                aux: formation_proto::AuxLayout::PAPER,
+                output: formation_proto::PolicyOutput::Wheels,
+                v_train: 0.7,
+            }
         }
-        fn beams(&self) -> Option<usize> {
-            self.beams
-        }
-        fn max_range(&self) -> Option<f64> {
-            self.max_range
-        }
-        fn v_train(&self) -> f64 {
-            0.7
+        fn sensor(&self) -> SensorContract {
+            SensorContract {
+                beams: self.beams,
+                max_range: self.max_range,
+                occupancy: OccupancySpec::PAPER,
+            }
         }
         fn model_id(&self) -> &str {
             self.id
@@ -931,7 +1016,8 @@ mod tests {
         let mut agent = Agent::new(Box::new(current), lidar).expect("fits");
         let scan = one_hit(&lidar);
         let before = agent.act(&scan, 0.25, &goal()).expect("decides");
-        let last_aux = policy_aux(0.25, &goal()).expect("aux");
+        let last_aux = formation_proto::AuxLayout::PAPER.values(0.25, &goal());
+        let last_aux = [last_aux[0], last_aux[1]];
 
         for output in [[f32::NAN, 0.1], [0.1, f32::INFINITY], [f32::NAN, f32::NAN]] {
             let candidate = Fake::new("broken", output);
@@ -1018,7 +1104,7 @@ mod tests {
             }
             other => panic!("expected SwapNonFinite, got {other:?}"),
         }
-        assert_eq!(*calls.lock().expect("log"), vec![(TRIAL_AUX, 0.0)]);
+        assert_eq!(*calls.lock().expect("log"), vec![([0.0, 1.0], 0.0)]);
         assert_eq!(agent.model_id(), "current");
     }
 }

@@ -67,7 +67,7 @@ fn asymmetry(path: &Path) -> f32 {
             assert!(input.iter().any(|&c| c > 0.0), "the neighbours are drawn");
             wheels.push(
                 policy
-                    .infer(&input, [heading_error, d_star])
+                    .infer(&input, &[heading_error, d_star])
                     .expect("infers"),
             );
         }

@@ -32,7 +32,7 @@ fn lit_cells(agent: &mut Agent, range: f64, d_star: f64) -> Vec<usize> {
 #[test]
 fn the_scaled_model_sees_a_neighbour_at_d_star_in_one_cell_at_every_spacing() {
     let mut agent = scaled_agent();
-    let spec = agent.policy().occupancy_spec();
+    let spec = agent.io().image;
     let reference = spec
         .d_star_ref_m
         .expect("the model declares a window scaled with d*");

@@ -27,6 +27,8 @@ from .model import PolicyNet
 
 MODEL_FORMAT = "formation-policy/1"
 INPUT_NAMES = ("occupancy", "aux")
+#: The scalars of the ``aux`` input, in order (``formation.aux``): what the dataset stores.
+AUX_LAYOUT = "delta_phi,d_star"
 OUTPUT_NAME = "wheels"
 #: The outputs a model may declare (``formation.output``), each also its tensor's name.
 OUTPUT_NAMES = ("wheels", "formation_velocity")
@@ -66,6 +68,8 @@ def model_metadata(
         "formation.occupancy.resolution_m": number_text(occupancy["resolution_m"]),
         "formation.occupancy.beyond": str(occupancy["beyond"]),
         "formation.input": "occupancy",
+        # The scalars beside the image, by name and in order (formation_proto::AuxLayout).
+        "formation.aux": AUX_LAYOUT,
         "formation.lidar.beams": str(int(lidar["beams"])),
         "formation.lidar.max_range": number_text(lidar["max_range"]),
         "formation.lidar.noise_std": number_text(lidar["noise_std"]),

@@ -1,0 +1,317 @@
+//! A policy's input and output contract, as its model declares it: the one description that
+//! collection, the agent, replay and the Python package all read.
+//!
+//! A policy sees one robot and nothing else ([`RobotInput`]: its own scan, its own compass heading
+//! and the goal every robot is given). From that it is fed an occupancy image of the scan and a
+//! short vector of scalars beside it ([`AuxLayout`], in the order the model declares in its
+//! `formation.aux` metadata; the paper's `(delta_phi, d*)` where it declares none), and it answers
+//! what its `formation.output` declares ([`PolicyOutput`]). [`PolicyIo`] holds all of it.
+//!
+//! **Adding a scalar input** is a variant of [`AuxInput`] with its name and its value here; the
+//! dataset, the trainer and the exporter carry it by name (see the guide's "Adding a policy
+//! input").
+
+use std::fmt;
+
+use crate::{Goal, OccupancySpec, PolicyOutput, wrap_angle};
+
+/// The most scalars a model may take beside its image.
+pub const MAX_AUX: usize = 8;
+
+/// One robot's own view at one tick: everything a decentralised policy may read. The world's
+/// other poses are not in it; only the expert is handed those.
+#[derive(Debug, Clone, Copy)]
+pub struct RobotInput<'a> {
+    /// The robot's own LIDAR ranges \[m\], beam 0 ahead, counter-clockwise.
+    pub scan: &'a [f32],
+    /// The robot's own compass heading \[rad\].
+    pub heading: f64,
+    /// The goal every robot is given.
+    pub goal: &'a Goal,
+}
+
+/// One scalar a policy takes beside its image, known by its name in `formation.aux`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AuxInput {
+    /// `delta_phi`: `wrap(phi* - heading)` \[rad\], the heading error the compass gives.
+    HeadingError,
+    /// `d_star`: the goal's distance d* \[m\].
+    DStar,
+}
+
+impl AuxInput {
+    /// Every scalar input this build knows.
+    pub const KNOWN: [AuxInput; 2] = [AuxInput::HeadingError, AuxInput::DStar];
+
+    /// Its name in `formation.aux` (and in datasets).
+    pub fn name(self) -> &'static str {
+        match self {
+            AuxInput::HeadingError => "delta_phi",
+            AuxInput::DStar => "d_star",
+        }
+    }
+
+    /// The input a name stands for, if this build knows it.
+    pub fn parse(name: &str) -> Option<AuxInput> {
+        AuxInput::KNOWN.into_iter().find(|i| i.name() == name)
+    }
+
+    /// Its value for a robot with this heading under this goal.
+    pub fn value(self, heading: f64, goal: &Goal) -> f64 {
+        match self {
+            AuxInput::HeadingError => wrap_angle(goal.phi_star - heading),
+            AuxInput::DStar => goal.d_star,
+        }
+    }
+}
+
+/// Why a `formation.aux` declaration cannot be used.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum AuxLayoutError {
+    /// A name this build does not know.
+    #[error(
+        "unknown input {name:?}: this build knows {}; update formation or re-export the model",
+        known_names()
+    )]
+    Unknown {
+        /// The name.
+        name: String,
+    },
+    /// A name given twice.
+    #[error("input {name:?} is declared twice")]
+    Repeated {
+        /// The name.
+        name: String,
+    },
+    /// No name at all, or more than [`MAX_AUX`].
+    #[error("{count} inputs declared; a model takes 1 to {MAX_AUX} scalars beside its image")]
+    Count {
+        /// How many were declared.
+        count: usize,
+    },
+}
+
+fn known_names() -> String {
+    AuxInput::KNOWN.map(AuxInput::name).join(", ")
+}
+
+/// The scalars a model takes beside its image, in its declared order.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct AuxLayout {
+    inputs: [AuxInput; MAX_AUX],
+    len: usize,
+}
+
+impl AuxLayout {
+    /// The paper's `(delta_phi, d*)`: what a model that declares nothing takes.
+    pub const PAPER: AuxLayout = AuxLayout {
+        inputs: [
+            AuxInput::HeadingError,
+            AuxInput::DStar,
+            AuxInput::DStar,
+            AuxInput::DStar,
+            AuxInput::DStar,
+            AuxInput::DStar,
+            AuxInput::DStar,
+            AuxInput::DStar,
+        ],
+        len: 2,
+    };
+
+    /// The layout of these inputs, in this order.
+    pub fn new(inputs: &[AuxInput]) -> Result<AuxLayout, AuxLayoutError> {
+        if inputs.is_empty() || inputs.len() > MAX_AUX {
+            return Err(AuxLayoutError::Count {
+                count: inputs.len(),
+            });
+        }
+        let mut layout = AuxLayout {
+            inputs: [AuxInput::DStar; MAX_AUX],
+            len: inputs.len(),
+        };
+        for (k, &input) in inputs.iter().enumerate() {
+            if inputs[..k].contains(&input) {
+                return Err(AuxLayoutError::Repeated {
+                    name: input.name().to_owned(),
+                });
+            }
+            layout.inputs[k] = input;
+        }
+        Ok(layout)
+    }
+
+    /// Parses a `formation.aux` value: names separated by commas, e.g. `delta_phi,d_star`.
+    pub fn parse(text: &str) -> Result<AuxLayout, AuxLayoutError> {
+        let mut inputs = Vec::new();
+        for name in text.split(',').map(str::trim) {
+            let input = AuxInput::parse(name).ok_or_else(|| AuxLayoutError::Unknown {
+                name: name.to_owned(),
+            })?;
+            inputs.push(input);
+        }
+        AuxLayout::new(&inputs)
+    }
+
+    /// The inputs, in order.
+    pub fn inputs(&self) -> &[AuxInput] {
+        &self.inputs[..self.len]
+    }
+
+    /// How many scalars: the width of the model's `aux` tensor.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Never true: a layout holds at least one input.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The values for a robot with this heading under this goal, narrowed to `f32`.
+    pub fn values(&self, heading: f64, goal: &Goal) -> AuxValues {
+        let mut values = AuxValues {
+            values: [0.0; MAX_AUX],
+            len: self.len,
+        };
+        for (slot, input) in values.values.iter_mut().zip(self.inputs()) {
+            *slot = input.value(heading, goal) as f32;
+        }
+        values
+    }
+}
+
+impl Default for AuxLayout {
+    fn default() -> AuxLayout {
+        AuxLayout::PAPER
+    }
+}
+
+impl fmt::Display for AuxLayout {
+    /// The `formation.aux` value: the names joined by commas.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (k, input) in self.inputs().iter().enumerate() {
+            if k > 0 {
+                f.write_str(",")?;
+            }
+            f.write_str(input.name())?;
+        }
+        Ok(())
+    }
+}
+
+impl fmt::Debug for AuxLayout {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "AuxLayout({self})")
+    }
+}
+
+/// The scalars fed beside the image, as [`AuxLayout::values`] computes them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AuxValues {
+    values: [f32; MAX_AUX],
+    len: usize,
+}
+
+impl AuxValues {
+    /// Values given directly (a test's or a trial's), at most [`MAX_AUX`]; `None` if more.
+    pub fn from_slice(values: &[f32]) -> Option<AuxValues> {
+        let mut out = AuxValues {
+            values: [0.0; MAX_AUX],
+            len: values.len(),
+        };
+        out.values.get_mut(..values.len())?.copy_from_slice(values);
+        Some(out)
+    }
+}
+
+impl std::ops::Deref for AuxValues {
+    type Target = [f32];
+    fn deref(&self) -> &[f32] {
+        &self.values[..self.len]
+    }
+}
+
+/// What a model takes and answers: its image, its scalars and its output, as its metadata
+/// declares them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PolicyIo {
+    /// The occupancy image it takes, rendered from the robot's own scan.
+    pub image: OccupancySpec,
+    /// The scalars beside the image.
+    pub aux: AuxLayout,
+    /// What its one output means.
+    pub output: PolicyOutput,
+    /// Its training speed \[m/s\]: a `wheels` output is scaled by `v* / v_train`.
+    pub v_train: f64,
+}
+
+impl PolicyIo {
+    /// The scalars for a robot's own view.
+    pub fn aux_values(&self, robot: &RobotInput<'_>) -> AuxValues {
+        self.aux.values(robot.heading, robot.goal)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn goal(phi_star: f64, d_star: f64) -> Goal {
+        Goal {
+            phi_star,
+            d_star,
+            v_star: 0.5,
+        }
+    }
+
+    #[test]
+    fn the_paper_layout_is_the_wrapped_heading_error_then_d_star() {
+        let values = AuxLayout::PAPER.values(3.0, &goal(-3.0, 1.5));
+        assert_eq!(&*values, &[wrap_angle(-6.0) as f32, 1.5]);
+        assert_eq!(AuxLayout::PAPER.to_string(), "delta_phi,d_star");
+        assert_eq!(AuxLayout::parse("delta_phi,d_star"), Ok(AuxLayout::PAPER));
+        assert_eq!(AuxLayout::default(), AuxLayout::PAPER);
+    }
+
+    #[test]
+    fn a_declared_order_is_kept() {
+        let layout = AuxLayout::parse("d_star, delta_phi").unwrap();
+        assert_eq!(layout.inputs(), &[AuxInput::DStar, AuxInput::HeadingError]);
+        assert_eq!(&*layout.values(0.0, &goal(0.25, 2.0)), &[2.0, 0.25]);
+        assert_ne!(layout, AuxLayout::PAPER);
+    }
+
+    #[test]
+    fn bad_declarations_are_refused_naming_the_fault() {
+        let unknown = AuxLayout::parse("delta_phi,speed").unwrap_err();
+        assert_eq!(
+            unknown,
+            AuxLayoutError::Unknown {
+                name: "speed".into()
+            }
+        );
+        assert!(
+            unknown.to_string().contains("delta_phi, d_star"),
+            "{unknown}"
+        );
+        assert!(matches!(
+            AuxLayout::parse("d_star,d_star"),
+            Err(AuxLayoutError::Repeated { .. })
+        ));
+        assert!(matches!(
+            AuxLayout::parse(""),
+            Err(AuxLayoutError::Unknown { .. })
+        ));
+        assert_eq!(AuxLayout::new(&[]), Err(AuxLayoutError::Count { count: 0 }));
+        assert_eq!(
+            AuxLayout::new(&[AuxInput::DStar; MAX_AUX + 1]),
+            Err(AuxLayoutError::Count { count: MAX_AUX + 1 })
+        );
+    }
+
+    #[test]
+    fn values_given_directly_keep_their_length() {
+        assert_eq!(&*AuxValues::from_slice(&[0.0, 1.0]).unwrap(), &[0.0, 1.0]);
+        assert!(AuxValues::from_slice(&[0.0; MAX_AUX + 1]).is_none());
+    }
+}
