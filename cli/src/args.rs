@@ -959,7 +959,9 @@ pub struct RunArgs {
     #[arg(long, value_delimiter = ',', value_name = "ROBOTS")]
     pub remote: Vec<usize>,
     /// Zenoh: the credentials folder (`formation credentials`); default: fresh credentials in
-    /// `<out>/credentials/<run id>/`.
+    /// `<out>/credentials/<run id>/`. ROS 2 on a tls/ endpoint: the folder of `formation
+    /// credentials --tls` (default: fresh ones there too), whose `ros2/` gets each node's
+    /// session configuration.
     #[arg(long, value_name = "DIR")]
     pub credentials: Option<PathBuf>,
     /// Zenoh: how long the world waits for the remote agents to connect \[s\].

@@ -116,7 +116,9 @@ pub struct Args {
     #[arg(long, value_name = "ID", value_parser = clap::value_parser!(u32).range(0..=232))]
     pub ros_domain_id: Option<u32>,
     /// Zenoh: a credentials folder (`formation credentials`); only its users may connect, each to
-    /// its own robot's keys. Without it, any process that reaches the endpoint may.
+    /// its own robot's keys. Without it, any process that reaches the endpoint may. ROS 2 on a
+    /// tls/ endpoint: the folder of `formation credentials --tls`, whose certificates the nodes
+    /// show, each reaching only its own robot's topics.
     #[arg(long, value_name = "DIR")]
     pub credentials: Option<PathBuf>,
     /// JSON file saying what to record to MCAP and where (`formation_record::RecordSettings`;
@@ -206,8 +208,11 @@ pub fn run(args: &Args) -> anyhow::Result<Ended> {
     args.transport.check_built_in("formation-world")?;
     args.transport
         .refuse_network_flags(&[(args.listen.is_some(), "--listen")])?;
-    args.transport
-        .refuse_zenoh_flags(&[(args.credentials.is_some(), "--credentials")])?;
+    // A ROS 2 team takes a credentials folder for its certificates on a tls/ endpoint.
+    if args.transport != Transport::Ros2 {
+        args.transport
+            .refuse_zenoh_flags(&[(args.credentials.is_some(), "--credentials")])?;
+    }
     args.transport
         .refuse_ros2_flags(&[(args.ros_domain_id.is_some(), "--ros-domain-id")])?;
     let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
@@ -366,8 +371,14 @@ fn ros2_link(
         max_range: spec.world.lidar.max_range,
         lossless: runtime.clock == ClockMode::Lockstep,
     };
-    let link = Ros2WorldLink::create(run_id, team, &listen, secret)
-        .with_context(|| format!("setting up the ROS 2 team of run {run_id} on {listen}"))?;
+    let link = Ros2WorldLink::create_with_credentials(
+        run_id,
+        team,
+        &listen,
+        secret,
+        args.credentials.as_deref(),
+    )
+    .with_context(|| format!("setting up the ROS 2 team of run {run_id} on {listen}"))?;
     let feed = link
         .record_feed()
         .with_context(|| format!("setting up run {run_id}'s record channel"))?;

@@ -252,10 +252,13 @@ impl NetworkFlags {
     pub fn refuse_misplaced(&self) -> Result<(), TransportError> {
         self.transport
             .refuse_network_flags(&[(self.listen.is_some(), "--listen")])?;
-        self.transport.refuse_zenoh_flags(&[
-            (!self.remote.is_empty(), "--remote"),
-            (self.credentials.is_some(), "--credentials"),
-        ])?;
+        self.transport
+            .refuse_zenoh_flags(&[(!self.remote.is_empty(), "--remote")])?;
+        // ROS 2 takes a credentials folder for its certificates on a tls/ endpoint.
+        if self.transport != Transport::Ros2 {
+            self.transport
+                .refuse_zenoh_flags(&[(self.credentials.is_some(), "--credentials")])?;
+        }
         self.transport
             .refuse_ros2_flags(&[(self.ros_domain_id.is_some(), "--ros-domain-id")])
     }
@@ -271,6 +274,35 @@ impl NetworkFlags {
         Ok(listen)
     }
 
+    /// A ROS 2 launch's certificates: none on `tcp/` (`--credentials` is refused there); on
+    /// `tls/` the `--credentials` folder or fresh ones in `fresh`, with the ROS 2 nodes' session
+    /// configurations written into its `ros2/` for this host's agents.
+    fn ros2_credentials(
+        &self,
+        listen: &str,
+        n_robots: usize,
+        fresh: &Path,
+    ) -> anyhow::Result<Option<PathBuf>> {
+        if !listen.starts_with("tls/") {
+            if self.credentials.is_some() {
+                anyhow::bail!(
+                    "--credentials with --transport ros2 is the certificates of a tls/ endpoint; \
+                     {listen} is not one (use --listen tls/HOST:PORT, or drop --credentials)"
+                );
+            }
+            return Ok(None);
+        }
+        let dir = match &self.credentials {
+            Some(dir) => dir.clone(),
+            None => {
+                create_credentials(fresh, n_robots, Some(FRESH_CERTIFICATE_DAYS))?;
+                fresh.to_path_buf()
+            }
+        };
+        write_ros2_session_configs(&dir, &supervisor::local_endpoint(listen), n_robots)?;
+        Ok(Some(dir))
+    }
+
     /// The launch's network for a team of `n_robots`: flags of Zenoh need it, the transport
     /// must be built in, Zenoh needs `--listen` (a valid endpoint), a remote robot must exist in
     /// the scenario, and a Zenoh launch without `--credentials` gets fresh ones in `fresh`.
@@ -280,9 +312,12 @@ impl NetworkFlags {
         match self.transport {
             Transport::Iceoryx2 => return Ok(Network::SharedMemory),
             Transport::Ros2 => {
+                let listen = self.listen()?;
+                let credentials = self.ros2_credentials(&listen, n_robots, fresh)?;
                 return Ok(Network::Ros2(supervisor::Ros2Plan {
-                    listen: self.listen()?,
+                    listen,
                     domain_id: self.ros_domain_id.unwrap_or(0),
+                    credentials,
                 }));
             }
             Transport::Zenoh => {}
@@ -346,6 +381,22 @@ pub fn create_credentials(dir: &Path, robots: usize, tls_days: Option<u32>) -> a
         Some(days) => credentials::create_with_tls(dir, robots, days)?,
     }
     Ok(())
+}
+
+/// Writes the ROS 2 nodes' session configurations of credentials folder `dir` for a router at
+/// `connect` (`dir/ros2/<principal>.json5`).
+#[cfg(feature = "tls")]
+fn write_ros2_session_configs(dir: &Path, connect: &str, n_robots: usize) -> anyhow::Result<()> {
+    let connect = formation_runtime::zenoh::Endpoint::parse(connect)?;
+    formation_runtime::ros2::secure::write_session_configs(dir, &connect, n_robots)?;
+    Ok(())
+}
+
+/// Without TLS there is no tls/ endpoint ([`formation_runtime::zenoh::Endpoint::parse`] refused
+/// it already).
+#[cfg(not(feature = "tls"))]
+fn write_ros2_session_configs(_dir: &Path, connect: &str, _n_robots: usize) -> anyhow::Result<()> {
+    anyhow::bail!("{connect}: this build has no TLS: build with `--features tls`")
 }
 
 /// `formation credentials --tls --renew PRINCIPAL`.

@@ -102,11 +102,15 @@ pub struct Ros2Plan {
     pub listen: String,
     /// The ROS domain id.
     pub domain_id: u32,
+    /// On a `tls/` endpoint, the credentials folder (`formation credentials --tls`): the world
+    /// listens with its certificate, and each agent joins with the session configuration of its
+    /// robot in the folder's `ros2/` (`ZENOH_SESSION_CONFIG_URI`, as rmw_zenoh's nodes do).
+    pub credentials: Option<PathBuf>,
 }
 
 /// Where a process on this host connects to a router listening on `listen`: the address, with an
 /// any-address (`0.0.0.0`, `[::]`) replaced by loopback.
-fn local_endpoint(listen: &str) -> String {
+pub(crate) fn local_endpoint(listen: &str) -> String {
     listen
         .replacen("tcp/0.0.0.0:", "tcp/127.0.0.1:", 1)
         .replacen("tcp/[::]:", "tcp/[::1]:", 1)
@@ -876,6 +880,9 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
         command
             .args(["--transport", "ros2", "--listen", &ros2.listen])
             .args(["--ros-domain-id", &ros2.domain_id.to_string()]);
+        if let Some(dir) = &ros2.credentials {
+            command.arg("--credentials").arg(dir);
+        }
     }
     command
         .arg("--run-id")
@@ -929,6 +936,15 @@ async fn spawn_agent(
             .arg(local_endpoint(&ros2.listen))
             .args(["--ros-domain-id", &ros2.domain_id.to_string()])
             .args(["--stale-ms", &plan.settings.stale_ms.to_string()]);
+        #[cfg(feature = "tls")]
+        if let Some(dir) = &ros2.credentials {
+            use formation_runtime::ros2::secure;
+            let principal = formation_runtime::zenoh::access::robot_user(robot);
+            command.env(
+                secure::SESSION_CONFIG_ENV,
+                secure::session_config_file(dir, &principal),
+            );
+        }
     } else {
         command.arg("--run-id").arg(plan.run_id.as_str());
     }

@@ -8,14 +8,19 @@
 //! `/formation/goal/heading`, `/formation/goal/distance` and `/formation/goal/speed`
 //! (`std_msgs/Float64`: φ\* \[rad\], d\* \[m\], v\* \[m/s\]).
 //!
-//! Who may talk: a ROS 2 graph has no per-robot access control here (as in ROS 2 without SROS2):
-//! any process that reaches the router can publish on a robot's `cmd_vel`. The simulated team
-//! takes Twists only from the first node that publishes on each robot's `cmd_vel` (by its GID);
-//! a real robot's drivers take every publisher's, as ROS 2 does.
+//! Who may talk: on a `tcp/` endpoint a ROS 2 graph has no per-robot access control (as in ROS 2
+//! without SROS2): any process that reaches the router can publish on a robot's `cmd_vel`. On a
+//! `tls/` endpoint (feature `tls`, [`secure`]) every node shows a certificate of the team's
+//! authority and the router's rules let robot i's certificate publish only on `/robot_<i>/cmd_vel`
+//! and read only its own sensors, `/tf` and the goal. The simulated team takes Twists only from
+//! the first node that publishes on each robot's `cmd_vel` (by its GID); a real robot's drivers
+//! take every publisher's, as ROS 2 does.
 
 pub mod agent;
 pub mod decider;
 pub mod node;
+#[cfg(feature = "tls")]
+pub mod secure;
 pub mod world;
 
 use formation_ros2::TopicName;

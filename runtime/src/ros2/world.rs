@@ -32,7 +32,9 @@
 //!   outside rmw_zenoh's layout that ROS 2 tools do not see. The ROS 2 topics alone could not
 //!   give the file `--record` writes: a Twist is not the wheel speeds bit for bit, and the
 //!   replay channel's inputs, watchdog outcomes and the run's metadata are on no topic. A ROS 2
-//!   team has no logins (as ROS 2 without SROS2), so the recorder needs none.
+//!   team has no logins (as ROS 2 without SROS2), so the recorder needs none; on a `tls/`
+//!   endpoint it shows the recorder's certificate, which reads and publishes nothing
+//!   ([`super::secure`]).
 //!
 //! A Twist becomes wheel speeds as `diff_drive_controller` makes them
 //! ([`formation_ros2::wheels_from_twist`]), which is the inverse of the agent's conversion only up
@@ -40,6 +42,7 @@
 //! bit for bit (a Twist carries v and ω, not the wheel speeds).
 
 use std::collections::{HashMap, VecDeque};
+use std::path::Path;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
@@ -169,19 +172,69 @@ fn lock(graph: &Mutex<Graph>) -> MutexGuard<'_, Graph> {
     graph.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// Opens the world's session: a Zenoh router listening on `listen`.
-fn open_router(listen: &Endpoint) -> Result<Arc<::zenoh::Session>, WorldLinkError> {
-    let config =
-        crate::zenoh::world_config(listen, None).map_err(|detail| WorldLinkError::Zenoh {
-            action: format!("configure a router on {listen}"),
-            detail,
-        })?;
+/// Opens the world's session: a Zenoh router listening on `listen`; on a `tls/` endpoint with
+/// the certificates and rules of credentials folder `credentials` ([`super::secure`]).
+fn open_router(
+    listen: &Endpoint,
+    run: &RunId,
+    team: &Ros2Team,
+    credentials: Option<&Path>,
+) -> Result<Arc<::zenoh::Session>, WorldLinkError> {
+    let configure = |detail| WorldLinkError::Zenoh {
+        action: format!("configure a router on {listen}"),
+        detail,
+    };
+    let config = if listen.is_tls() {
+        secure_router_config(listen, run, team, credentials).map_err(configure)?
+    } else {
+        crate::zenoh::world_config(listen, None).map_err(configure)?
+    };
     Ok(Arc::new(crate::zenoh::open(config).map_err(|detail| {
         WorldLinkError::Zenoh {
             action: format!("listen on {listen} (is the port free?)"),
             detail,
         }
     })?))
+}
+
+/// The router's configuration on a `tls/` endpoint: the world's certificate, and rules that name
+/// each node by its certificate ([`super::secure::Ros2Access`]).
+#[cfg(feature = "tls")]
+fn secure_router_config(
+    listen: &Endpoint,
+    run: &RunId,
+    team: &Ros2Team,
+    credentials: Option<&Path>,
+) -> Result<::zenoh::Config, String> {
+    let folder = credentials.ok_or_else(|| {
+        format!(
+            "{listen} needs the team's certificates: pass --credentials DIR, a folder written by \
+             `formation credentials --tls`"
+        )
+    })?;
+    let mut config = crate::zenoh::base_config("router")?;
+    config
+        .insert_json5("listen/endpoints", &format!("[{:?}]", listen.as_str()))
+        .map_err(|e| format!("listening on {listen}: {e}"))?;
+    let access = super::secure::Ros2Access {
+        folder: folder.to_path_buf(),
+        run: run.clone(),
+        n_robots: team.n_robots,
+        domain_id: team.domain_id,
+    };
+    access.apply(&mut config).map_err(|e| e.to_string())?;
+    Ok(config)
+}
+
+/// No TLS in this build ([`Endpoint::parse`] refuses `tls/` already).
+#[cfg(not(feature = "tls"))]
+fn secure_router_config(
+    _listen: &Endpoint,
+    _run: &RunId,
+    _team: &Ros2Team,
+    _credentials: Option<&Path>,
+) -> Result<::zenoh::Config, String> {
+    Err("this build has no TLS: build with `--features tls`".into())
 }
 
 impl RobotPorts {
@@ -384,7 +437,20 @@ impl Ros2WorldLink {
         listen: &Endpoint,
         secret: LaunchSecret,
     ) -> WorldResult<Ros2WorldLink> {
-        let session = open_router(listen)?;
+        Self::create_with_credentials(run, team, listen, secret, None)
+    }
+
+    /// [`Ros2WorldLink::create`]; a `tls/` endpoint takes the certificates of credentials
+    /// folder `credentials` (`formation credentials --tls`), and admits only nodes with a
+    /// certificate of its authority, each to its own topics ([`super::secure`]).
+    pub fn create_with_credentials(
+        run: &RunId,
+        team: Ros2Team,
+        listen: &Endpoint,
+        secret: LaunchSecret,
+        credentials: Option<&Path>,
+    ) -> WorldResult<Ros2WorldLink> {
+        let session = open_router(listen, run, &team, credentials)?;
         let bell = Arc::new(Bell::default());
         let n = team.n_robots;
         let graph = Arc::new(Mutex::new(Graph {

@@ -165,7 +165,7 @@ impl std::str::FromStr for Endpoint {
 }
 
 /// Settings both ends share: no scouting, no shared memory, bounded messages.
-fn base_config(mode: &str) -> Result<::zenoh::Config, String> {
+pub(crate) fn base_config(mode: &str) -> Result<::zenoh::Config, String> {
     let mut config = ::zenoh::Config::default();
     let entries = [
         ("mode", format!("{mode:?}")),
@@ -264,9 +264,54 @@ pub(crate) fn client_config(
         login.apply(&mut config)?;
     }
     if connect.is_tls() {
+        if login.is_none()
+            && let Some(node) = ros2_node_config(connect, &config)?
+        {
+            return Ok(node);
+        }
         client_tls_identity(connect, login)?.apply_connect(&mut config)?;
     }
     Ok(config)
+}
+
+/// A ROS 2 node's session on a `tls/` endpoint (no login): the configuration file named by
+/// `ZENOH_SESSION_CONFIG_URI`, as rmw_zenoh reads it ([`crate::ros2::secure`]), connecting to
+/// `connect` with `base`'s settings of the connection; `None` when the variable is unset.
+#[cfg(feature = "tls")]
+fn ros2_node_config(
+    connect: &Endpoint,
+    base: &::zenoh::Config,
+) -> Result<Option<::zenoh::Config>, String> {
+    let Some(mut config) =
+        crate::ros2::secure::session_config_from_env().map_err(|e| e.to_string())?
+    else {
+        return Ok(None);
+    };
+    for key in [
+        "connect/timeout_ms",
+        "connect/exit_on_failure",
+        "connect/retry",
+    ] {
+        let value = base
+            .get_json(key)
+            .map_err(|e| format!("reading {key}: {e}"))?;
+        config
+            .insert_json5(key, &value)
+            .map_err(|e| format!("setting {key} = {value}: {e}"))?;
+    }
+    config
+        .insert_json5("connect/endpoints", &format!("[{:?}]", connect.as_str()))
+        .map_err(|e| format!("connecting to {connect}: {e}"))?;
+    Ok(Some(config))
+}
+
+/// No TLS in this build.
+#[cfg(not(feature = "tls"))]
+fn ros2_node_config(
+    _connect: &Endpoint,
+    _base: &::zenoh::Config,
+) -> Result<Option<::zenoh::Config>, String> {
+    Ok(None)
 }
 
 /// The certificate files of `login`'s principal, in the folder its login file came from.
