@@ -35,6 +35,9 @@
 //! multi-process tests one by one.
 
 pub mod netns;
+pub mod process_test;
+
+pub use process_test::ProcessTest;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -580,6 +583,24 @@ impl Finished {
         );
         self
     }
+
+    /// Panics with [`Finished::describe`] unless its stdout contains `needle`.
+    pub fn assert_stdout_has(&self, needle: &str) -> &Self {
+        assert!(self.stdout().contains(needle), "{}", self.describe());
+        self
+    }
+
+    /// Panics with [`Finished::describe`] unless its stderr contains `needle`.
+    pub fn assert_stderr_has(&self, needle: &str) -> &Self {
+        assert!(self.stderr().contains(needle), "{}", self.describe());
+        self
+    }
+
+    /// Panics with [`Finished::describe`] if its stderr contains `needle`.
+    pub fn assert_stderr_lacks(&self, needle: &str) -> &Self {
+        assert!(!self.stderr().contains(needle), "{}", self.describe());
+        self
+    }
 }
 
 /// Runs `command` to completion (killing it after `limit`) and captures its output.
@@ -985,6 +1006,27 @@ pub fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     ONE_AT_A_TIME
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Runs `runs` runs of `scenario` (from its seed) over processes in lockstep, `model` on every
+/// robot, iceoryx2 between them, and returns their trajectories.
+pub fn lockstep_over_processes(
+    scenario: &formation_world::Scenario,
+    runs: usize,
+    model: &Path,
+) -> Vec<Trajectory> {
+    use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
+    eval_over_processes(
+        scenario,
+        scenario.seed(),
+        runs,
+        model,
+        ClockMode::Lockstep,
+        &NetworkFlags::default(),
+        &mut |_| {},
+    )
+    .expect("runs over processes")
+    .trajectories
 }
 
 /// `formation run --run-id RUN EXTRA --scenario SCENARIO --model <test model> --out OUT`.

@@ -1,0 +1,92 @@
+//! The prologue every multi-process test shares, as one value: [`ProcessTest::start`] takes this
+//! test binary's one-at-a-time lock ([`one_at_a_time`]), arms the [`Watchdog`] with the test's
+//! limit, and makes the test's isolation: a scratch folder ([`TempDir`]), a run id of its own
+//! (so its own iceoryx2 namespace and Zenoh key space) and the [`LeakCheck`] of that run id.
+//!
+//! Dropping the value releases them in the order the hand-written prologue did: the run's
+//! namespace is removed first (never leaking into another test, even after a failure), then the
+//! scratch folder, then the watchdog is disarmed and the lock released. Values the test makes
+//! after it (its processes) are dropped before it. A test that needs a second run id, or a
+//! network namespace, makes those itself next to this value.
+//!
+//! The lock is taken before the watchdog is armed, so a test waiting for another test of its
+//! binary (under plain `cargo test`) is not counted as hung.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::MutexGuard;
+use std::time::Duration;
+
+use formation_proto::wire::RunId;
+
+use crate::{
+    Binaries, LeakCheck, TempDir, Watchdog, binaries, case1_scenario, formation_run, free_tcp_port,
+    one_at_a_time, unique_run_id,
+};
+
+/// One multi-process test's lock, watchdog, scratch folder, run id and leak check.
+pub struct ProcessTest {
+    /// The leak check of [`ProcessTest::run`]; dropped (removing the namespace) first.
+    pub leaks: LeakCheck,
+    /// The test's own run id (its own iceoryx2 namespace and Zenoh key space).
+    pub run: RunId,
+    /// The test's own scratch folder, removed on drop.
+    pub dir: TempDir,
+    _watchdog: Watchdog,
+    _one: MutexGuard<'static, ()>,
+}
+
+impl ProcessTest {
+    /// The prologue of test `name` (also the tag of its folder and run id), which the watchdog
+    /// aborts if it still runs after `limit`.
+    pub fn start(name: &'static str, limit: Duration) -> ProcessTest {
+        let one = one_at_a_time();
+        let watchdog = Watchdog::arm(name, limit);
+        let dir = TempDir::new(name);
+        let run = unique_run_id(name);
+        let leaks = LeakCheck::new(&run);
+        ProcessTest {
+            leaks,
+            run,
+            dir,
+            _watchdog: watchdog,
+            _one: one,
+        }
+    }
+
+    /// The scratch folder's path.
+    pub fn path(&self) -> &Path {
+        self.dir.path()
+    }
+
+    /// `out` in the scratch folder, where the tests have their launches write.
+    pub fn out(&self) -> PathBuf {
+        self.dir.path().join("out")
+    }
+
+    /// Case 1 of `duration_s` seconds, written into the scratch folder ([`case1_scenario`]).
+    pub fn case1(&self, duration_s: f64) -> PathBuf {
+        case1_scenario(self.dir.path(), duration_s)
+    }
+
+    /// `formation run` of `scenario` with this test's run id, `extra` flags and the test model,
+    /// writing to [`ProcessTest::out`] ([`formation_run`]).
+    pub fn formation_run(&self, scenario: &Path, extra: &[&str]) -> Command {
+        formation_run(&self.run, scenario, &self.out(), extra)
+    }
+
+    /// The runtime executables ([`binaries`]; built on first use, outside the watchdog's time).
+    pub fn bins(&self) -> &'static Binaries {
+        binaries()
+    }
+
+    /// A Zenoh endpoint on 127.0.0.1 at a port free now ([`free_tcp_port`]).
+    pub fn endpoint(&self) -> String {
+        format!("tcp/127.0.0.1:{}", free_tcp_port())
+    }
+
+    /// Panics listing the run's files if any are left (its lock file included).
+    pub fn assert_clean(&self) {
+        self.leaks.assert_clean();
+    }
+}
