@@ -150,9 +150,10 @@ pub fn command_of_output(
 ) -> WheelCmd {
     match io.output {
         PolicyOutput::Wheels => scale_to_goal_speed(values, goal.v_star, io.v_train),
+        // The heading error as the network is fed it, narrowed to f32.
         PolicyOutput::FormationVelocity => formation_velocity_to_wheels(
             values,
-            AuxInput::HeadingError.value(heading, goal),
+            f64::from(AuxInput::HeadingError.value(heading, goal) as f32),
             goal.v_star,
             max_wheel_accel,
         ),
@@ -254,7 +255,7 @@ mod tests {
                 &goal,
                 None
             ),
-            formation_velocity_to_wheels([0.1, 0.0], 0.5 - 0.3, 0.35, None)
+            formation_velocity_to_wheels([0.1, 0.0], f64::from((0.5_f64 - 0.3) as f32), 0.35, None)
         );
     }
 
@@ -286,8 +287,12 @@ mod tests {
             &goal,
             Some(1.0),
         );
-        let expected =
-            formation_velocity_to_wheels([shaped.0 as f32, shaped.1 as f32], 0.2, 0.5, None);
+        let expected = formation_velocity_to_wheels(
+            [shaped.0 as f32, shaped.1 as f32],
+            f64::from(0.2_f32),
+            0.5,
+            None,
+        );
         assert!((limited.left - expected.left).abs() < 1e-6);
         assert!((limited.right - expected.right).abs() < 1e-6);
     }
