@@ -5,9 +5,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{
-    Finished, LeakCheck, TempDir, Watchdog, binaries, repo_root, run, test_model, unique_run_id,
-};
+use formation_tests::{Finished, ProcessTest, binaries, repo_root, run, test_model};
 
 const LIMIT: Duration = Duration::from_secs(240);
 
@@ -28,11 +26,7 @@ fn fails_cleanly(args: &[&str], env: &[(&str, &str)], needles: &[&str]) -> Finis
         "a panic is not an error message\n{}",
         finished.describe()
     );
-    assert!(
-        !finished.stderr().contains("panicked"),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_stderr_lacks("panicked");
     finished
 }
 
@@ -46,18 +40,17 @@ fn scenario_with(dir: &Path, name: &str, edit: impl Fn(&str) -> String) -> Strin
 
 #[test]
 fn bad_scenarios_name_the_field_or_file() {
-    let _watchdog = Watchdog::arm("bad_scenarios", LIMIT);
-    let dir = TempDir::new("badscen");
-    let typo = scenario_with(dir.path(), "typo.toml", |t| {
+    let t = ProcessTest::start("bad_scenarios", LIMIT);
+    let typo = scenario_with(t.path(), "typo.toml", |t| {
         t.replace("duration_s", "duraton_s")
     });
-    let negative = scenario_with(dir.path(), "neg.toml", |t| {
+    let negative = scenario_with(t.path(), "neg.toml", |t| {
         t.replace("d_star = 2.0", "d_star = -1.0")
     });
-    let nan = scenario_with(dir.path(), "nan.toml", |t| {
+    let nan = scenario_with(t.path(), "nan.toml", |t| {
         t.replace("phi = 3.76", "phi = nan")
     });
-    let empty = scenario_with(dir.path(), "zero.toml", |t| {
+    let empty = scenario_with(t.path(), "zero.toml", |t| {
         t.replace("robots = 3", "robots = 0")
     });
     for (path, needle) in [
@@ -80,15 +73,14 @@ fn bad_scenarios_name_the_field_or_file() {
 
 #[test]
 fn bad_models_and_a_missing_runtime_library_are_explained() {
-    let _watchdog = Watchdog::arm("bad_models", LIMIT);
-    let dir = TempDir::new("badmodel");
+    let t = ProcessTest::start("bad_models", LIMIT);
     let case1 = repo_root()
         .join("scenarios/case1.toml")
         .display()
         .to_string();
-    let wrong_shape = dir.path().join("wrong-shape.onnx");
+    let wrong_shape = t.path().join("wrong-shape.onnx");
     formation_tests::write_tiny_model_with(&wrong_shape, 1, &["--aux-width", "3"]);
-    let garbage = dir.path().join("garbage.onnx");
+    let garbage = t.path().join("garbage.onnx");
     std::fs::write(&garbage, b"not a model").expect("writing");
     let eval = |model: &Path, env: &[(&str, &str)], needles: &[&str]| {
         let model = model.display().to_string();
@@ -101,11 +93,11 @@ fn bad_models_and_a_missing_runtime_library_are_explained() {
         ];
         fails_cleanly(&args, env, needles);
     };
-    eval(&dir.path().join("missing.onnx"), &[], &["not found"]);
+    eval(&t.path().join("missing.onnx"), &[], &["not found"]);
     // A cause that a message already names is printed once, not once per layer of the chain.
-    let missing = dir.path().join("missing.onnx").display().to_string();
-    let nodata = dir.path().join("nodata").display().to_string();
-    let out = dir.path().join("dagger.onnx").display().to_string();
+    let missing = t.path().join("missing.onnx").display().to_string();
+    let nodata = t.path().join("nodata").display().to_string();
+    let out = t.path().join("dagger.onnx").display().to_string();
     let scenario = repo_root()
         .join("scenarios/collect.toml")
         .display()
@@ -145,9 +137,8 @@ fn bad_models_and_a_missing_runtime_library_are_explained() {
 
 #[test]
 fn a_truncated_dataset_is_refused_before_training() {
-    let _watchdog = Watchdog::arm("truncated_dataset", LIMIT);
-    let dir = TempDir::new("truncated");
-    let data = dir.path().join("data");
+    let t = ProcessTest::start("truncated_dataset", LIMIT);
+    let data = t.path().join("data");
     let data_arg = data.display().to_string();
     let mut collect = Command::new(&binaries().cli);
     collect
@@ -157,14 +148,14 @@ fn a_truncated_dataset_is_refused_before_training() {
     let shard = data.join("shard-000000.safetensors");
     let bytes = std::fs::read(&shard).expect("shard");
     std::fs::write(&shard, &bytes[..bytes.len() / 2]).expect("truncating");
-    let out = dir.path().join("m/policy.onnx").display().to_string();
+    let out = t.path().join("m/policy.onnx").display().to_string();
     fails_cleanly(
         &["train", "--epochs", "1", "--data", &data_arg, "--out", &out],
         &[],
         &["shard-000000.safetensors"],
     );
     assert!(
-        !dir.path().join("m/policy.onnx").exists(),
+        !t.path().join("m/policy.onnx").exists(),
         "no model from bad data"
     );
 }
@@ -173,15 +164,14 @@ fn a_truncated_dataset_is_refused_before_training() {
 /// not a regular file, or is over 1 MiB, is refused by its metadata before it is read.
 #[test]
 fn scenarios_that_are_not_small_regular_files_are_refused_before_reading() {
-    let _watchdog = Watchdog::arm("scenario_files", LIMIT);
-    let dir = TempDir::new("scenfile");
-    let big = dir.path().join("big.toml");
+    let t = ProcessTest::start("scenario_files", LIMIT);
+    let big = t.path().join("big.toml");
     // Sparse: 2 MiB that take no disk space.
     std::fs::File::create(&big)
         .and_then(|f| f.set_len(2 << 20))
         .expect("a sparse file");
     let big = big.display().to_string();
-    let directory = dir.path().display().to_string();
+    let directory = t.path().display().to_string();
     for (path, needles) in [
         (
             "/dev/zero",
@@ -207,36 +197,35 @@ fn scenarios_that_are_not_small_regular_files_are_refused_before_reading() {
 /// refused with the field, the allowed range and the value.
 #[test]
 fn out_of_range_scenario_values_are_refused_with_the_field_and_the_range() {
-    let _watchdog = Watchdog::arm("scenario_limits", LIMIT);
-    let dir = TempDir::new("scenlim");
+    let t = ProcessTest::start("scenario_limits", LIMIT);
     let long_name = "n".repeat(5000);
     let cases = [
         (
-            scenario_with(dir.path(), "long.toml", |t| {
+            scenario_with(t.path(), "long.toml", |t| {
                 t.replace("duration_s = 60.0", "duration_s = 1e12")
             }),
             vec!["duration_s", "[0.001, 3600] s", "(got 1e12)"],
         ),
         (
-            scenario_with(dir.path(), "far.toml", |t| {
+            scenario_with(t.path(), "far.toml", |t| {
                 t.replace("d_star = 2.0", "d_star = 1e308")
             }),
             vec!["goal.d_star", "[0.01, 100] m", "(got 1e308)"],
         ),
         (
-            scenario_with(dir.path(), "blind.toml", |t| {
+            scenario_with(t.path(), "blind.toml", |t| {
                 format!("{t}\n[lidar]\nmax_range = 1e-9\n")
             }),
             vec!["lidar.max_range", "[0.1, 1000] m", "(got 1e-9)"],
         ),
         (
-            scenario_with(dir.path(), "beams.toml", |t| {
+            scenario_with(t.path(), "beams.toml", |t| {
                 format!("{t}\n[lidar]\nbeams = 4096\n")
             }),
             vec!["lidar.beams", "[8, 900]", "(got 4096)"],
         ),
         (
-            scenario_with(dir.path(), "name.toml", |t| {
+            scenario_with(t.path(), "name.toml", |t| {
                 t.replace("name = \"case1\"", &format!("name = \"{long_name}\""))
             }),
             vec!["name", "at most 128 characters"],
@@ -280,23 +269,20 @@ fn out_of_range_scenario_values_are_refused_with_the_field_and_the_range() {
 /// before any process starts, naming the model's range and the scenario's.
 #[test]
 fn a_lidar_range_the_model_was_not_trained_for_is_refused_before_any_process_starts() {
-    let _watchdog = Watchdog::arm("range_mismatch", LIMIT);
-    let dir = TempDir::new("range");
-    let scenario = scenario_with(dir.path(), "short-range.toml", |t| {
+    let t = ProcessTest::start("range_mismatch", LIMIT);
+    let scenario = scenario_with(t.path(), "short-range.toml", |t| {
         format!("{t}\n[lidar]\nmax_range = 5.0\n")
     });
     let model = test_model().display().to_string();
     let needles = ["robot 0", "max_range of 10 m", "max_range 5 m"];
 
-    let run_id = unique_run_id("range");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
+    let out = t.out();
     let out_arg = out.display().to_string();
     let finished = fails_cleanly(
         &[
             "run",
             "--run-id",
-            run_id.as_str(),
+            t.run.as_str(),
             "--scenario",
             &scenario,
             "--model",
@@ -313,7 +299,7 @@ fn a_lidar_range_the_model_was_not_trained_for_is_refused_before_any_process_sta
         finished.describe()
     );
     assert!(!out.exists(), "no run specs or logs may be written");
-    leaks.assert_clean();
+    t.assert_clean();
 
     for extra in [&[][..], &["--processes"][..]] {
         let mut args = vec!["eval", "--scenario", &scenario, "--model", &model];
@@ -326,14 +312,13 @@ fn a_lidar_range_the_model_was_not_trained_for_is_refused_before_any_process_sta
 /// found", and a 4 GB file given to `formation swap` was read whole before it was refused.
 #[test]
 fn a_model_that_is_not_a_small_regular_file_is_named_for_what_it_is() {
-    let _watchdog = Watchdog::arm("model_files", LIMIT);
-    let dir = TempDir::new("modelfile");
+    let t = ProcessTest::start("model_files", LIMIT);
     let case1 = repo_root()
         .join("scenarios/case1.toml")
         .display()
         .to_string();
-    let directory = dir.path().display().to_string();
-    let fifo = dir.path().join("model.fifo");
+    let directory = t.path().display().to_string();
+    let fifo = t.path().join("model.fifo");
     let made = std::process::Command::new("mkfifo")
         .arg(&fifo)
         .status()
@@ -356,14 +341,10 @@ fn a_model_that_is_not_a_small_regular_file_is_named_for_what_it_is() {
             ],
         ] {
             let finished = fails_cleanly(&args, &[], &[model, "not a regular file"]);
-            assert!(
-                !finished.stderr().contains("not found"),
-                "{}",
-                finished.describe()
-            );
+            finished.assert_stderr_lacks("not found");
         }
     }
-    let huge = dir.path().join("huge.onnx");
+    let huge = t.path().join("huge.onnx");
     // Sparse: 4 GiB that take no disk space; the refusal must come from the size, not a read.
     std::fs::File::create(&huge)
         .and_then(|f| f.set_len(4 << 30))
@@ -395,15 +376,12 @@ fn a_model_that_is_not_a_small_regular_file_is_named_for_what_it_is() {
 /// world serve) is refused up front with the reason and the fix, before any process starts.
 #[test]
 fn a_team_too_large_for_the_hosts_limits_is_refused_before_anything_starts() {
-    let _watchdog = Watchdog::arm("team_too_large", LIMIT);
-    let dir = TempDir::new("toolarge");
-    let scenario = dir.path().join("swarm.toml");
+    let t = ProcessTest::start("team_too_large", LIMIT);
+    let scenario = t.path().join("swarm.toml");
     let text =
         std::fs::read_to_string(repo_root().join("scenarios/swarm32.toml")).expect("swarm32.toml");
     std::fs::write(&scenario, text).expect("scenario");
-    let run_id = unique_run_id("toolarge");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
+    let out = t.out();
     // 32 robots need about 1,900 descriptors in the world; allow 512, hard limit included, so
     // the launcher cannot raise it.
     let mut command = Command::new("bash");
@@ -412,7 +390,7 @@ fn a_team_too_large_for_the_hosts_limits_is_refused_before_anything_starts() {
         .arg("ulimit -Sn 512 && ulimit -Hn 512 && exec \"$@\"")
         .arg("bash")
         .arg(&binaries().cli)
-        .args(["run", "--run-id", run_id.as_str(), "--scenario"])
+        .args(["run", "--run-id", t.run.as_str(), "--scenario"])
         .arg(&scenario)
         .arg("--model")
         .arg(test_model())
@@ -426,16 +404,15 @@ fn a_team_too_large_for_the_hosts_limits_is_refused_before_anything_starts() {
         "{}",
         finished.describe()
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 10: a goal outside the model's trained d* range, a neighbour rule named wrongly and a team
 /// too large for its disc are refused before anything runs, each naming the cause and the fix.
 #[test]
 fn teams_and_envelopes_bad_input_is_refused_with_a_clear_error() {
-    let _watchdog = Watchdog::arm("teams_bad_input", LIMIT);
-    let dir = TempDir::new("teams");
-    let narrow = dir.path().join("narrow.onnx");
+    let t = ProcessTest::start("teams_bad_input", LIMIT);
+    let narrow = t.path().join("narrow.onnx");
     formation_tests::write_tiny_model_with(&narrow, 3, &["--d-star-range", "0.8,1.5"]);
     let narrow_arg = narrow.display().to_string();
     // case1's d* = 2 m is outside [0.8, 1.5] m.
@@ -449,13 +426,11 @@ fn teams_and_envelopes_bad_input_is_refused_with_a_clear_error() {
         args.extend_from_slice(extra);
         fails_cleanly(&args, &[], &needles);
     }
-    let run_id = unique_run_id("envelope");
-    let leaks = LeakCheck::new(&run_id);
     fails_cleanly(
         &[
             "run",
             "--run-id",
-            run_id.as_str(),
+            t.run.as_str(),
             "--scenario",
             &case1,
             "--model",
@@ -464,9 +439,9 @@ fn teams_and_envelopes_bad_input_is_refused_with_a_clear_error() {
         &[],
         &needles,
     );
-    leaks.assert_clean();
+    t.assert_clean();
     // Inside the range the same model is accepted.
-    let inside = scenario_with(dir.path(), "inside.toml", |t| {
+    let inside = scenario_with(t.path(), "inside.toml", |t| {
         t.replace("d_star = 2.0", "d_star = 1.5")
             .replace("duration_s = 60.0", "duration_s = 1.0")
     });
@@ -474,7 +449,7 @@ fn teams_and_envelopes_bad_input_is_refused_with_a_clear_error() {
     ok.args(["eval", "--scenario", &inside, "--model", &narrow_arg]);
     run(ok, LIMIT).assert_success();
 
-    let wrong_rule = scenario_with(dir.path(), "rule.toml", |t| {
+    let wrong_rule = scenario_with(t.path(), "rule.toml", |t| {
         format!("{t}\n[formation]\nneighbours = \"delaunay\"\n")
     });
     fails_cleanly(
@@ -486,7 +461,7 @@ fn teams_and_envelopes_bad_input_is_refused_with_a_clear_error() {
             "delaunay",
         ],
     );
-    let crowded = scenario_with(dir.path(), "crowded.toml", |t| {
+    let crowded = scenario_with(t.path(), "crowded.toml", |t| {
         format!(
             "{}\n[init]\ndisc_radius = 3.0\n",
             t.replace("robots = 3", "robots = 200")

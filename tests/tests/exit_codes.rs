@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, agent_pids, await_connected, case1_scenario,
-    formation_run, free_tcp_port, one_at_a_time, send_signal, unique_run_id, world_pid,
+    LeakCheck, LiveProcess, ProcessTest, TempDir, agent_pids, await_connected, case1_scenario,
+    formation_run, send_signal, unique_run_id, world_pid,
 };
 
 const LIMIT: Duration = Duration::from_secs(240);
@@ -86,8 +86,7 @@ fn agents_then_world(tag: &str, extra: &[&str]) {
 
 #[test]
 fn sigterm_gives_143_and_sigint_130_for_agents_and_the_world_over_iceoryx2() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("exit_codes_iceoryx", LIMIT);
+    let _t = ProcessTest::start("exit_codes_iceoryx", LIMIT);
     agents_then_world("exitI", &[]);
     // The world on SIGINT.
     let (_dir, run_id, leaks, launch) = launch("exitJ", &[]);
@@ -99,16 +98,14 @@ fn sigterm_gives_143_and_sigint_130_for_agents_and_the_world_over_iceoryx2() {
 
 #[test]
 fn sigterm_gives_143_and_sigint_130_for_agents_and_the_world_over_zenoh() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("exit_codes_zenoh", LIMIT);
-    let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
+    let t = ProcessTest::start("exit_codes_zenoh", LIMIT);
+    let listen = t.endpoint();
     agents_then_world("exitZ", &["--transport", "zenoh", "--listen", &listen]);
 }
 
 #[test]
 fn the_launcher_exits_143_on_sigterm_and_130_on_sigint() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("exit_codes_launcher", LIMIT);
+    let _t = ProcessTest::start("exit_codes_launcher", LIMIT);
     for (signal, code) in [("TERM", 143), ("INT", 130)] {
         let (_dir, _run_id, leaks, launch) = launch(&format!("exitL{code}"), &[]);
         send_signal(launch.id(), signal);

@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, await_rejoin, binaries,
-    case1_scenario, formation_run, one_at_a_time, run, test_model, unique_run_id, world_pid,
+    LiveProcess, ProcessTest, RobotLog, TempDir, agent_pids, await_rejoin, binaries,
+    case1_scenario, formation_run, run, test_model, world_pid,
 };
 use rand::{Rng, SeedableRng};
 
@@ -47,16 +47,12 @@ fn kill_agent(run_id: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
 /// run's shared memory is gone afterwards.
 #[test]
 fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
-    let _watchdog = Watchdog::arm("twenty_kills_lockstep", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("kills");
-    let run_id = unique_run_id("kills");
-    let leaks = LeakCheck::new(&run_id);
+    let t = ProcessTest::start("twenty_kills_lockstep", LIMIT);
     let kills = 20;
     // 150 s at >= 20 ms per tick: at least 60 s of run, far more than 20 kill-restart cycles take.
     let mut launch = launch(
-        &run_id,
-        &dir,
+        &t.run,
+        &t.dir,
         150.0,
         &[
             "--timeout-ms",
@@ -77,19 +73,13 @@ fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
         // A random moment, hence a random tick, then a random robot.
         std::thread::sleep(Duration::from_millis(rng.random_range(100..600)));
         let robot = rng.random_range(0..3);
-        let pid = kill_agent(&run_id, robot, &mut launch);
+        let pid = kill_agent(&t.run, robot, &mut launch);
         rejoins[robot].push(await_rejoin(&mut launch, robot, pid));
     }
     let finished = launch.finish(LIMIT);
     finished.assert_success();
-    assert!(
-        finished
-            .stdout()
-            .contains(&format!("{kills} agent restart(s)")),
-        "{}",
-        finished.describe()
-    );
-    let out = dir.path().join("out");
+    finished.assert_stdout_has(&format!("{kills} agent restart(s)"));
+    let out = t.out();
     let mut orphaned_ticks = 0;
     for (robot, rejoined_at) in rejoins.iter().enumerate() {
         let log = RobotLog::read(&out, robot);
@@ -115,21 +105,17 @@ fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
     // A kill usually orphans at least the next tick (a kill between an answer and the next
     // tick can be healed while the world waits for another robot, so not always).
     assert!(orphaned_ticks > 0, "no tick was ever braked");
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 5: a kill in a realtime run: the world never waits for the dead agent, the robot brakes
 /// once its newest command is stale, and the restarted agent drives it again.
 #[test]
 fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
-    let _watchdog = Watchdog::arm("kill_realtime", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("kill-rt");
-    let run_id = unique_run_id("killrt");
-    let leaks = LeakCheck::new(&run_id);
+    let t = ProcessTest::start("kill_realtime", LIMIT);
     let mut launch = launch(
-        &run_id,
-        &dir,
+        &t.run,
+        &t.dir,
         12.0,
         // The restart waits 600 ms (12 ticks), so the orphan is seen braking meanwhile.
         &[
@@ -144,16 +130,12 @@ fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
     let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
     assert!(connected.is_some(), "{}", launch.describe());
     std::thread::sleep(Duration::from_secs(3));
-    let pid = kill_agent(&run_id, 1, &mut launch);
+    let pid = kill_agent(&t.run, 1, &mut launch);
     await_rejoin(&mut launch, 1, pid);
     let finished = launch.finish(LIMIT);
     finished.assert_success();
-    assert!(
-        finished.stdout().contains("1 agent restart(s)"),
-        "{}",
-        finished.describe()
-    );
-    let out = dir.path().join("out");
+    finished.assert_stdout_has("1 agent restart(s)");
+    let out = t.out();
     let robot1 = RobotLog::read(&out, 1);
     assert_eq!(robot1.outcomes.len(), 240, "12 s at 20 Hz, every tick");
     robot1.assert_braked_whenever_refused(1);
@@ -174,30 +156,26 @@ fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
             "robot {robot}'s live agent kept driving: {fresh} fresh ticks"
         );
     }
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 5: an agent that hangs is braked from its first missed tick on and the run completes
 /// without it; an agent that answers later than the realtime staleness limit is never obeyed.
 #[test]
 fn hung_and_late_agents_are_braked() {
-    let _watchdog = Watchdog::arm("hung_and_late", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("hang");
-    let run_id = unique_run_id("hang");
-    let leaks = LeakCheck::new(&run_id);
+    let t = ProcessTest::start("hung_and_late", LIMIT);
     let mut command = Command::new(&binaries().cli);
     command
-        .args(["run", "--run-id", run_id.as_str(), "--clock", "realtime"])
+        .args(["run", "--run-id", t.run.as_str(), "--clock", "realtime"])
         .args(["--fault", "1:hang-after=20", "--fault", "2:late-ms=400"])
         .arg("--scenario")
-        .arg(case1_scenario(dir.path(), 5.0))
+        .arg(t.case1(5.0))
         .arg("--model")
         .arg(test_model())
         .arg("--out")
-        .arg(dir.path().join("out"));
+        .arg(t.out());
     run(command, LIMIT).assert_success();
-    let out = dir.path().join("out");
+    let out = t.out();
     let hung = RobotLog::read(&out, 1);
     hung.assert_braked_whenever_refused(1);
     // It answered 20 times (so at least up to tick 19; realtime reuses a command while the scan it
@@ -217,7 +195,7 @@ fn hung_and_late_agents_are_braked() {
     );
     let healthy = RobotLog::read(&out, 0);
     assert!(healthy.outcomes.iter().filter(|o| *o == "fresh").count() > 80);
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 5: when the world dies, every agent notices on its own (no launcher involved) and exits
@@ -227,32 +205,27 @@ fn hung_and_late_agents_are_braked() {
 #[test]
 fn agents_exit_cleanly_when_the_world_dies() {
     use std::time::Instant;
-    let _watchdog = Watchdog::arm("world_dies", LIMIT);
-    let _one = one_at_a_time();
-    let bins = binaries();
-    let dir = TempDir::new("world-dies");
-    let run_id = unique_run_id("wdies");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario_path = case1_scenario(dir.path(), 600.0);
+    let t = ProcessTest::start("world_dies", LIMIT);
+    let scenario_path = t.case1(600.0);
     let scenario = formation_world::Scenario::from_path(&scenario_path).expect("scenario");
-    let specs = dir.path().join("run-specs.json");
+    let specs = t.path().join("run-specs.json");
     let spec = scenario.run_spec(scenario.seed(), 0);
     std::fs::write(&specs, serde_json::to_vec(&[spec]).expect("specs JSON")).expect("specs");
 
-    let mut world = Command::new(&bins.world);
+    let mut world = Command::new(&t.bins().world);
     world
-        .args(["--run-id", run_id.as_str(), "--pace-ms", "20"])
+        .args(["--run-id", t.run.as_str(), "--pace-ms", "20"])
         .arg("--run-specs")
         .arg(&specs)
         .arg("--out")
-        .arg(dir.path().join("out"));
+        .arg(t.out());
     let secret = formation_tests::launch_secret();
     let mut world = LiveProcess::spawn_with_secret(world, &secret);
     let mut agents: Vec<LiveProcess> = (0..3)
         .map(|robot| {
-            let mut agent = Command::new(&bins.agent);
+            let mut agent = Command::new(&t.bins().agent);
             agent
-                .args(["--run-id", run_id.as_str(), "--robot", &robot.to_string()])
+                .args(["--run-id", t.run.as_str(), "--robot", &robot.to_string()])
                 .arg("--model")
                 .arg(test_model());
             LiveProcess::spawn_with_secret(agent, &secret)
@@ -285,23 +258,19 @@ fn agents_exit_cleanly_when_the_world_dies() {
             killed_at.elapsed().as_secs_f64() * 1e3
         );
     }
-    drop(leaks); // removes the dead world's leftovers
+    drop(t.leaks); // removes the dead world's leftovers
 }
 
 /// Issue 5: a world killed under `formation run` fails the launch with the reason, the agents are
 /// stopped, and nothing of the run is left in shared memory.
 #[test]
 fn a_killed_world_ends_the_launch_cleanly() {
-    let _watchdog = Watchdog::arm("world_killed_launch", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("world-killed");
-    let run_id = unique_run_id("wkill");
-    let leaks = LeakCheck::new(&run_id);
-    let mut launch = launch(&run_id, &dir, 600.0, &["--pace-ms", "20"]);
+    let t = ProcessTest::start("world_killed_launch", LIMIT);
+    let mut launch = launch(&t.run, &t.dir, 600.0, &["--pace-ms", "20"]);
     let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
     assert!(connected.is_some(), "{}", launch.describe());
     std::thread::sleep(Duration::from_millis(300));
-    let world = world_pid(&run_id).expect("the world process runs");
+    let world = world_pid(&t.run).expect("the world process runs");
     let status = Command::new("kill")
         .args(["-KILL", &world.to_string()])
         .status()
@@ -311,9 +280,9 @@ fn a_killed_world_ends_the_launch_cleanly() {
     finished.assert_failure_mentioning("world process exited (killed by signal 9)");
     for robot in 0..3 {
         assert!(
-            agent_pids(&run_id, robot).is_empty(),
+            agent_pids(&t.run, robot).is_empty(),
             "robot {robot}'s agent still runs"
         );
     }
-    leaks.assert_clean();
+    t.assert_clean();
 }

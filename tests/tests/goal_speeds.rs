@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use formation_tests::{
-    LeakCheck, TempDir, Watchdog, case1_scenario, formation_run_with_model, policy_eval, read_json,
-    run, unique_run_id, write_tiny_model_with,
+    ProcessTest, case1_scenario, formation_run_with_model, policy_eval, read_json, run,
+    write_tiny_model_with,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -31,10 +31,9 @@ fn scenario(dir: &Path, v_star: &str) -> PathBuf {
 
 #[test]
 fn eval_marks_a_goal_speed_off_the_models_trained_one() {
-    let _watchdog = Watchdog::arm("goal_speeds_eval", LIMIT);
-    let dir = TempDir::new("goal-speeds");
+    let t = ProcessTest::start("goal_speeds_eval", LIMIT);
     // The test model is trained at v* = 0.7 m/s (`formation.v_train`).
-    let model = dir.path().join("tiny.onnx");
+    let model = t.path().join("tiny.onnx");
     write_tiny_model_with(&model, 0, &[]);
     let cases = [
         // 0.4 is 1.75x slower than 0.7: far outside, the case.
@@ -58,9 +57,9 @@ fn eval_marks_a_goal_speed_off_the_models_trained_one() {
         ("0.7", None),
     ];
     for (v_star, mark) in cases {
-        let out = dir.path().join(format!("eval-{v_star}.json"));
+        let out = t.path().join(format!("eval-{v_star}.json"));
         let finished = run(
-            policy_eval(&scenario(dir.path(), v_star), &model, &out),
+            policy_eval(&scenario(t.path(), v_star), &model, &out),
             LIMIT,
         );
         finished.assert_success();
@@ -99,26 +98,17 @@ fn eval_marks_a_goal_speed_off_the_models_trained_one() {
 
 #[test]
 fn a_launch_marks_a_goal_speed_off_the_trained_one_on_the_terminal_and_in_its_summary() {
-    let _watchdog = Watchdog::arm("goal_speeds_run", LIMIT);
-    let dir = TempDir::new("goal-speeds-run");
-    let model = dir.path().join("tiny.onnx");
+    let t = ProcessTest::start("goal_speeds_run", LIMIT);
+    let model = t.path().join("tiny.onnx");
     write_tiny_model_with(&model, 0, &[]);
-    let run_id = unique_run_id("goalspeed");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
+    let out = t.out();
     let finished = run(
-        formation_run_with_model(&run_id, &scenario(dir.path(), "0.4"), &model, &out, &[]),
+        formation_run_with_model(&t.run, &scenario(t.path(), "0.4"), &model, &out, &[]),
         LIMIT,
     );
     finished.assert_success();
-    leaks.assert_clean();
-    assert!(
-        finished
-            .stderr()
-            .contains("far outside its trained v* (1.75x slower)"),
-        "{}",
-        finished.describe()
-    );
+    t.assert_clean();
+    finished.assert_stderr_has("far outside its trained v* (1.75x slower)");
     let summary = read_json(&out.join("summary.json"));
     let entry = &summary["goal_speed"][0];
     assert_eq!(entry["model"], summary["models"][0], "{summary}");

@@ -4,16 +4,15 @@
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{TempDir, Watchdog, binaries, case1_scenario, read_json, repo_root, run};
+use formation_tests::{ProcessTest, TempDir, binaries, case1_scenario, read_json, repo_root, run};
 
 const LIMIT: Duration = Duration::from_secs(600);
 
 #[test]
 fn a_ladder_writes_every_rung_with_the_expert_and_the_policy() {
-    let _watchdog = Watchdog::arm("ladder", LIMIT);
-    let dir = TempDir::new("ladder");
-    let scenario = case1_scenario(dir.path(), 2.0);
-    let json = dir.path().join("ladder.json");
+    let t = ProcessTest::start("ladder", LIMIT);
+    let scenario = t.case1(2.0);
+    let json = t.path().join("ladder.json");
     let mut command = Command::new(&binaries().cli);
     command
         .args([
@@ -33,11 +32,7 @@ fn a_ladder_writes_every_rung_with_the_expert_and_the_policy() {
         .arg(&json);
     let finished = run(command, LIMIT);
     finished.assert_success();
-    assert!(
-        finished.stdout().contains("| spread | expert | 3 | 2 |"),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_stdout_has("| spread | expert | 3 | 2 |");
 
     let table = read_json(&json);
     assert_eq!(table["format"], "formation-ladder");

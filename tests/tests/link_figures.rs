@@ -12,8 +12,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, binaries, case1_scenario, formation_run,
-    free_tcp_port, one_at_a_time, read_json, run, start_relay, test_model, unique_run_id,
+    LiveProcess, ProcessTest, free_tcp_port, read_json, run, start_relay, test_model,
     zenoh_credentials,
 };
 
@@ -35,17 +34,11 @@ fn round_trip_p50_us(profile: &serde_json::Value, robot: usize) -> f64 {
 /// degraded link, and the run still exits 0.
 #[test]
 fn a_late_agent_shows_its_lateness_in_the_round_trip_and_a_degraded_link_is_told() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("late_agent_round_trip", LIMIT);
-    let dir = TempDir::new("lateRT");
-    let run_id = unique_run_id("lateRT");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 8.0);
-    let out = dir.path().join("out");
-    let command = formation_run(
-        &run_id,
+    let t = ProcessTest::start("late_agent_round_trip", LIMIT);
+    let scenario = t.case1(8.0);
+    let out = t.out();
+    let command = t.formation_run(
         &scenario,
-        &out,
         &["--clock", "realtime", "--fault", "1:late-ms=120"],
     );
     let finished = run(command, LIMIT);
@@ -75,11 +68,7 @@ fn a_late_agent_shows_its_lateness_in_the_round_trip_and_a_degraded_link_is_told
         "the launcher tells the degraded link while the run goes on\n{}",
         finished.describe()
     );
-    assert!(
-        !finished.stderr().contains("robot 0: degraded link"),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_stderr_lacks("robot 0: degraded link");
     let summary = read_json(&out.join("summary.json"));
     let braked = summary["braked_ticks"][1]
         .as_object()
@@ -88,7 +77,7 @@ fn a_late_agent_shows_its_lateness_in_the_round_trip_and_a_degraded_link_is_told
         braked.get("stale").and_then(serde_json::Value::as_u64) > Some(8),
         "summary.json gives the totals by reason: {braked:?}"
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Across the delaying relay (70 ± 30 ms each way; a remote Zenoh agent on 127.0.0.1), robot 1's
@@ -97,15 +86,10 @@ fn a_late_agent_shows_its_lateness_in_the_round_trip_and_a_degraded_link_is_told
 /// (about a third of them), is reported degraded while the run goes on; the run exits 0.
 #[test]
 fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_is_told() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("relay_round_trip", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("relayRT");
-    let run_id = unique_run_id("relayRT");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 10.0);
-    let out = dir.path().join("out");
-    let creds = zenoh_credentials(dir.path(), 3);
+    let t = ProcessTest::start("relay_round_trip", LIMIT);
+    let scenario = t.case1(10.0);
+    let out = t.out();
+    let creds = zenoh_credentials(t.path(), 3);
     let world_port = free_tcp_port();
     let listen = format!("tcp/127.0.0.1:{world_port}");
     let relay_port = free_tcp_port();
@@ -118,10 +102,8 @@ fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_i
         "26",
     ]);
     let mut relay = start_relay(relay);
-    let mut command = formation_run(
-        &run_id,
+    let mut command = t.formation_run(
         &scenario,
-        &out,
         &["--transport", "zenoh", "--listen", &listen, "--remote", "1"],
     );
     command
@@ -132,11 +114,11 @@ fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_i
         l.contains("waiting for the remote agents of robots [1]")
     });
     assert!(waiting.is_some(), "{}", launch.describe());
-    let mut agent = Command::new(&bins.agent);
+    let mut agent = Command::new(&t.bins().agent);
     agent
         .args(["--transport", "zenoh", "--connect"])
         .arg(format!("tcp/127.0.0.1:{relay_port}"))
-        .args(["--run-id", run_id.as_str(), "--robot", "1", "--model"])
+        .args(["--run-id", t.run.as_str(), "--robot", "1", "--model"])
         .arg(test_model())
         .arg("--credentials")
         .arg(creds.join("robot-1.json"));
@@ -163,5 +145,5 @@ fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_i
         "the launcher tells the degraded link while the run goes on\n{}",
         finished.describe()
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }

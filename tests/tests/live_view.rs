@@ -19,8 +19,8 @@ use std::process::Command;
 use std::time::Duration;
 
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, await_connected, case1_scenario, formation_run,
-    free_tcp_port, one_at_a_time, python, repo_root, run, unique_run_id,
+    LeakCheck, LiveProcess, ProcessTest, await_connected, formation_run, free_tcp_port, python,
+    repo_root, run, unique_run_id,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -86,11 +86,9 @@ fn launch(tag: &str, scenario: &Path, out: &Path, extra: &[&str]) -> (LiveProces
 /// `/tf` message it decodes, stamped after the start.
 #[test]
 fn a_late_websocket_client_decodes_the_live_scans_and_tf() {
-    let _watchdog = Watchdog::arm("live_view_watch", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("live-watch");
-    let scenario = case1_scenario(dir.path(), 15.0);
-    let out = dir.path().join("out");
+    let t = ProcessTest::start("live_view_watch", LIMIT);
+    let scenario = t.case1(15.0);
+    let out = t.out();
     let address = format!("127.0.0.1:{}", free_tcp_port());
     let (mut team, leaks) = launch(
         "lvwatch",
@@ -160,13 +158,11 @@ fn a_late_websocket_client_decodes_the_live_scans_and_tf() {
 /// time, so that both meet the same load of the machine.
 #[test]
 fn a_client_that_stops_reading_leaves_the_tick_timing_as_it_is() {
-    let _watchdog = Watchdog::arm("live_view_stall", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("live-stall");
-    let scenario = case1_scenario(dir.path(), 20.0);
+    let t = ProcessTest::start("live_view_stall", LIMIT);
+    let scenario = t.case1(20.0);
 
-    let baseline_out = dir.path().join("baseline");
-    let stalled_out = dir.path().join("stalled");
+    let baseline_out = t.path().join("baseline");
+    let stalled_out = t.path().join("stalled");
     let address = format!("127.0.0.1:{}", free_tcp_port());
     let (mut baseline, baseline_leaks) =
         launch("lvbase", &scenario, &baseline_out, &["--clock", "realtime"]);
@@ -205,19 +201,17 @@ fn a_client_that_stops_reading_leaves_the_tick_timing_as_it_is() {
 /// with a client watching as without the view.
 #[test]
 fn lockstep_results_are_the_same_bytes_with_and_without_a_client() {
-    let _watchdog = Watchdog::arm("live_view_lockstep", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("live-lockstep");
-    let scenario = case1_scenario(dir.path(), 10.0);
+    let t = ProcessTest::start("live_view_lockstep", LIMIT);
+    let scenario = t.case1(10.0);
     // Paced, so that the client watches while the run plays.
     let lockstep = ["--clock", "lockstep", "--pace-ms", "20"];
 
-    let plain_out = dir.path().join("plain");
+    let plain_out = t.path().join("plain");
     let (plain, leaks) = launch("lvplain", &scenario, &plain_out, &lockstep);
     plain.finish(LIMIT).assert_success();
     leaks.assert_clean();
 
-    let viewed_out = dir.path().join("viewed");
+    let viewed_out = t.path().join("viewed");
     let address = format!("127.0.0.1:{}", free_tcp_port());
     let mut flags = lockstep.to_vec();
     flags.extend(["--foxglove", address.as_str()]);
@@ -245,14 +239,8 @@ fn lockstep_results_are_the_same_bytes_with_and_without_a_client() {
 /// A bad address is refused before anything starts, naming the form it takes.
 #[test]
 fn a_bad_address_is_refused_with_the_form_it_takes() {
-    let _watchdog = Watchdog::arm("live_view_address", LIMIT);
-    let dir = TempDir::new("live-address");
-    let scenario = case1_scenario(dir.path(), 1.0);
-    let out = dir.path().join("out");
-    let run_id = unique_run_id("lvaddr");
-    let finished = run(
-        formation_run(&run_id, &scenario, &out, &["--foxglove", "8765"]),
-        LIMIT,
-    );
+    let t = ProcessTest::start("live_view_address", LIMIT);
+    let scenario = t.case1(1.0);
+    let finished = run(t.formation_run(&scenario, &["--foxglove", "8765"]), LIMIT);
     finished.assert_failure_mentioning("HOST:PORT");
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{TempDir, Watchdog, binaries, case1_scenario, repo_root, run};
+use formation_tests::{ProcessTest, binaries, repo_root, run};
 
 /// The watchdog limit: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
@@ -28,15 +28,14 @@ fn eval_out(scenario: &Path, model: &Path, out: &Path) {
 
 #[test]
 fn the_report_says_what_input_the_scaled_and_the_paper_window_models_were_given() {
-    let _watchdog = Watchdog::arm("model_inputs_report", LIMIT);
-    let dir = TempDir::new("model-inputs");
-    let scenario = case1_scenario(dir.path(), 2.0);
-    let evals = dir.path().join("evals");
+    let t = ProcessTest::start("model_inputs_report", LIMIT);
+    let scenario = t.case1(2.0);
+    let evals = t.path().join("evals");
     for name in ["scaled", "paper"] {
         let model = repo_root().join(format!("onnx/models/{name}/policy.onnx"));
         eval_out(&scenario, &model, &evals.join(name));
     }
-    let html = dir.path().join("report.html");
+    let html = t.path().join("report.html");
     let mut report = Command::new(&binaries().cli);
     report.arg("report").arg(&evals).arg("--out").arg(&html);
     run(report, LIMIT).assert_success();

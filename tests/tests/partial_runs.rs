@@ -8,9 +8,8 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries, case1_scenario,
-    files_under, formation_run, one_at_a_time, read_json, repo_root, run, send_signal,
-    unique_run_id, world_pid,
+    LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, files_under, formation_run,
+    read_json, repo_root, run, send_signal, world_pid,
 };
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
@@ -67,21 +66,12 @@ fn assert_kept_incomplete(out: &Path, min_ticks: usize, describe: &str) -> serde
 /// and the report.
 #[test]
 fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
-    let _watchdog = Watchdog::arm("ctrl_c_partial", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("ctrlc");
-    let run_id = unique_run_id("ctrlc");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
+    let t = ProcessTest::start("ctrl_c_partial", LIMIT);
+    let out = t.out();
     let scenario = repo_root().join("scenarios/case1.toml");
-    let recording = dir.path().join("ctrlc.mcap");
+    let recording = t.path().join("ctrlc.mcap");
     let record = recording.display().to_string();
-    let mut command = formation_run(
-        &run_id,
-        &scenario,
-        &out,
-        &["--clock", "realtime", "--record", &record],
-    );
+    let mut command = t.formation_run(&scenario, &["--clock", "realtime", "--record", &record]);
     // The world's info lines (its recording's) go to a pipe here: no colour codes (issue 39).
     command.env("FORMATION_LOG", "info");
     let mut launch = LiveProcess::spawn(command);
@@ -94,12 +84,8 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
         "an interrupted run fails\n{}",
         finished.describe()
     );
-    assert!(
-        finished.stderr().contains("interrupted by Ctrl-C"),
-        "{}",
-        finished.describe()
-    );
-    leaks.assert_clean();
+    finished.assert_stderr_has("interrupted by Ctrl-C");
+    t.assert_clean();
     assert!(
         finished.stderr().contains("recorded") && !finished.stderr().contains('\u{1b}'),
         "log lines to a pipe are plain text\n{}",
@@ -115,7 +101,7 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
     );
     // The recording says the run stopped early, and so does its replay (issue 39): every tick
     // recorded is replayed, the report is marked incomplete with the reason.
-    let json = dir.path().join("ctrlc.replay.json");
+    let json = t.path().join("ctrlc.replay.json");
     let mut replay = Command::new(&binaries().cli);
     replay
         .arg("replay")
@@ -136,13 +122,7 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
             .is_some_and(|r| !r.is_empty()),
         "{report}"
     );
-    assert!(
-        replayed
-            .stdout()
-            .contains("the run is incomplete: it stopped before its last tick"),
-        "{}",
-        replayed.describe()
-    );
+    replayed.assert_stdout_has("the run is incomplete: it stopped before its last tick");
     let compared: u64 = report["robots"]
         .as_array()
         .map_or(0, |r| r.iter().filter_map(|r| r["compared"].as_u64()).sum());
@@ -153,20 +133,16 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
 /// left into an incomplete run log once the world is gone.
 #[test]
 fn a_sigkilled_world_leaves_a_journal_the_launcher_recovers() {
-    let _watchdog = Watchdog::arm("killed_world", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("killw");
-    let run_id = unique_run_id("killw");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
+    let t = ProcessTest::start("killed_world", LIMIT);
+    let out = t.out();
     let scenario = repo_root().join("scenarios/case1.toml");
-    let mut launch = launch(&run_id, &scenario, &out, &["--clock", "realtime"]);
+    let mut launch = launch(&t.run, &scenario, &out, &["--clock", "realtime"]);
     await_connected(&mut launch);
     // Past the journal's one-second flush period, twice over.
     std::thread::sleep(Duration::from_secs(3));
     let journal = out.join("runs/run-0000.journal");
     assert!(journal.is_file(), "the world journals the run as it goes");
-    let Some(world) = world_pid(&run_id) else {
+    let Some(world) = world_pid(&t.run) else {
         panic!("no world process\n{}", launch.describe());
     };
     send_signal(world, "-KILL");
@@ -176,12 +152,8 @@ fn a_sigkilled_world_leaves_a_journal_the_launcher_recovers() {
         "a killed world fails the launch\n{}",
         finished.describe()
     );
-    assert!(
-        finished.stderr().contains("recovered run 0"),
-        "{}",
-        finished.describe()
-    );
-    leaks.assert_clean();
+    finished.assert_stderr_has("recovered run 0");
+    t.assert_clean();
     let log = assert_kept_incomplete(&out, 20, &finished.describe());
     let reason = log["stop_reason"].as_str().unwrap_or_default();
     assert!(
@@ -194,15 +166,11 @@ fn a_sigkilled_world_leaves_a_journal_the_launcher_recovers() {
 /// run played so far; the run log says why it stopped.
 #[test]
 fn a_spent_restart_budget_keeps_the_partial_run() {
-    let _watchdog = Watchdog::arm("budget_partial", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("budget");
-    let run_id = unique_run_id("budget");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
+    let t = ProcessTest::start("budget_partial", LIMIT);
+    let out = t.out();
     let scenario = repo_root().join("scenarios/case1.toml");
     let finished = launch(
-        &run_id,
+        &t.run,
         &scenario,
         &out,
         &[
@@ -218,7 +186,7 @@ fn a_spent_restart_budget_keeps_the_partial_run() {
     )
     .finish(LIMIT);
     finished.assert_failure_mentioning("restart budget");
-    leaks.assert_clean();
+    t.assert_clean();
     let log = assert_kept_incomplete(&out, 60, &finished.describe());
     let reason = log["stop_reason"].as_str().unwrap_or_default();
     assert!(
@@ -233,16 +201,12 @@ fn a_spent_restart_budget_keeps_the_partial_run() {
 /// launcher exits non-zero.
 #[test]
 fn a_full_disk_fails_the_run_promptly_and_leaves_no_temporary_file() {
-    let _watchdog = Watchdog::arm("full_disk", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("full");
-    let disk = Tmpfs::mount(&dir.path().join("disk"), "256k");
-    let run_id = unique_run_id("full");
-    let leaks = LeakCheck::new(&run_id);
+    let t = ProcessTest::start("full_disk", LIMIT);
+    let disk = Tmpfs::mount(&t.path().join("disk"), "256k");
     let out = disk.dir().join("out");
     let ticks = 2400;
-    let scenario = case1_scenario(dir.path(), 120.0);
-    let finished = launch(&run_id, &scenario, &out, &["--clock", "lockstep"]).finish(LIMIT);
+    let scenario = t.case1(120.0);
+    let finished = launch(&t.run, &scenario, &out, &["--clock", "lockstep"]).finish(LIMIT);
     assert!(
         !finished.output.status.success(),
         "a run that cannot be written fails\n{}",
@@ -254,7 +218,7 @@ fn a_full_disk_fails_the_run_promptly_and_leaves_no_temporary_file() {
         "the error names the file and the full disk\n{}",
         finished.describe()
     );
-    leaks.assert_clean();
+    t.assert_clean();
 
     let files = files_under(disk.dir());
     let temporary: Vec<&PathBuf> = files

@@ -9,10 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{
-    LeakCheck, TempDir, Watchdog, binaries, case1_scenario, formation_run, one_at_a_time, run,
-    test_model, unique_run_id,
-};
+use formation_tests::{ProcessTest, binaries, run, test_model};
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
@@ -76,24 +73,15 @@ fn assert_private(root: &Path, expected: &[&str]) {
 /// report` on its output.
 #[test]
 fn a_runs_files_are_private_under_umask_022() {
-    let _watchdog = Watchdog::arm("private_run_files", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("private-run");
-    let run_id = unique_run_id("private");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
-    let scenario = case1_scenario(dir.path(), 2.0);
+    let t = ProcessTest::start("private_run_files", LIMIT);
+    let out = t.out();
+    let scenario = t.case1(2.0);
     run(
-        under_umask_022(&formation_run(
-            &run_id,
-            &scenario,
-            &out,
-            &["--pace-ms", "5"],
-        )),
+        under_umask_022(&t.formation_run(&scenario, &["--pace-ms", "5"])),
         LIMIT,
     )
     .assert_success();
-    leaks.assert_clean();
+    t.assert_clean();
     assert_private(
         &out,
         &[
@@ -109,18 +97,16 @@ fn a_runs_files_are_private_under_umask_022() {
         .arg("report")
         .arg(&out)
         .arg("--out")
-        .arg(dir.path().join("report/index.html"));
+        .arg(t.path().join("report/index.html"));
     run(under_umask_022(&report), LIMIT).assert_success();
-    assert_private(&dir.path().join("report"), &["index.html"]);
+    assert_private(&t.path().join("report"), &["index.html"]);
 }
 
 /// `formation eval --out` in-process and over processes, and `formation profile --out`.
 #[test]
 fn eval_and_profile_files_are_private_under_umask_022() {
-    let _watchdog = Watchdog::arm("private_eval_files", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("private-eval");
-    let scenario = case1_scenario(dir.path(), 2.0);
+    let t = ProcessTest::start("private_eval_files", LIMIT);
+    let scenario = t.case1(2.0);
     let eval = |out: &Path, extra: &[&str]| {
         let mut command = Command::new(&binaries().cli);
         command
@@ -135,23 +121,21 @@ fn eval_and_profile_files_are_private_under_umask_022() {
             .arg(out);
         command
     };
-    let in_process = dir.path().join("eval/in-process");
+    let in_process = t.path().join("eval/in-process");
     run(under_umask_022(&eval(&in_process, &[])), LIMIT).assert_success();
     assert_private(
-        &dir.path().join("eval"),
+        &t.path().join("eval"),
         &["in-process/summary.json", "in-process/runs/run-0001.json"],
     );
 
-    let processes = dir.path().join("eval-processes");
+    let processes = t.path().join("eval-processes");
     run(under_umask_022(&eval(&processes, &["--processes"])), LIMIT).assert_success();
     assert_private(&processes, &["summary.json", "runs/run-0000.json"]);
 
-    let profiled = dir.path().join("profile");
-    let run_id = unique_run_id("private-profile");
-    let leaks = LeakCheck::new(&run_id);
+    let profiled = t.path().join("profile");
     let mut profile = Command::new(&binaries().cli);
     profile
-        .args(["profile", "--run-id", run_id.as_str()])
+        .args(["profile", "--run-id", t.run.as_str()])
         .arg("--scenario")
         .arg(&scenario)
         .arg("--model")
@@ -159,6 +143,6 @@ fn eval_and_profile_files_are_private_under_umask_022() {
         .arg("--out")
         .arg(&profiled);
     run(under_umask_022(&profile), LIMIT).assert_success();
-    leaks.assert_clean();
+    t.assert_clean();
     assert_private(&profiled, &["profile.json"]);
 }

@@ -4,9 +4,8 @@
 
 use std::time::Duration;
 
-use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
 use formation_robot_agent::decision::PolicyController;
-use formation_tests::{TempDir, Watchdog, assert_bit_identical, repo_root};
+use formation_tests::{ProcessTest, assert_bit_identical, lockstep_over_processes, repo_root};
 use formation_world::{Scenario, run_episode};
 
 const LIMIT: Duration = Duration::from_secs(360);
@@ -16,8 +15,7 @@ const SHIPPED_MODEL: &str = "onnx/models/policy.onnx";
 
 #[test]
 fn every_reality_model_on_in_lockstep_is_bit_identical_to_in_process() {
-    let _watchdog = Watchdog::arm("reality_lockstep", LIMIT);
-    let dir = TempDir::new("reality");
+    let t = ProcessTest::start("reality_lockstep", LIMIT);
     let text = std::fs::read_to_string(repo_root().join("scenarios/teams-generalist.toml"))
         .expect("reading teams-generalist.toml");
     let text = text
@@ -28,7 +26,7 @@ fn every_reality_model_on_in_lockstep_is_bit_identical_to_in_process() {
             "[lidar]\n",
             "[robot]\nprofile = \"pioneer-p3dx\"\n[lidar]\nfov_deg = 300.0\nmin_range = 0.3\n",
         );
-    let scenario_path = dir.path().join("reality.toml");
+    let scenario_path = t.path().join("reality.toml");
     std::fs::write(&scenario_path, text).expect("writing the scenario");
     let scenario = Scenario::from_path(&scenario_path).expect("scenario");
     let reality = scenario.world_config().reality;
@@ -40,17 +38,7 @@ fn every_reality_model_on_in_lockstep_is_bit_identical_to_in_process() {
     assert!(reality.command_latency_ticks > 0);
 
     let model = repo_root().join(SHIPPED_MODEL);
-    let over_processes = eval_over_processes(
-        &scenario,
-        scenario.seed(),
-        2,
-        &model,
-        ClockMode::Lockstep,
-        &NetworkFlags::default(),
-        &mut |_| {},
-    )
-    .expect("runs over processes")
-    .trajectories;
+    let over_processes = lockstep_over_processes(&scenario, 2, &model);
     assert_eq!(over_processes.len(), 2);
     for (index, from_processes) in over_processes.iter().enumerate() {
         let spec = scenario.run_spec(scenario.seed(), index);

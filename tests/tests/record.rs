@@ -14,9 +14,8 @@ use std::time::Duration;
 
 use formation_tests::mcap_readers as readers;
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries, case1_scenario,
-    eval_recorded, formation_run, one_at_a_time, read_json, record_case1_over_processes, repo_root,
-    run, send_signal, test_model, unique_run_id, world_pid,
+    LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, eval_recorded, formation_run,
+    read_json, record_case1_over_processes, repo_root, run, send_signal, test_model, world_pid,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -49,25 +48,17 @@ fn assert_independent_readers_open(file: &Path, run_log: &Path, robots: usize, r
 /// by its hash.
 #[test]
 fn a_case1_recording_is_read_by_mcap_rosbags_and_rerun() {
-    let _watchdog = Watchdog::arm("record_case1", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("rec-case1");
-    let record = dir.path().join("rec");
+    let t = ProcessTest::start("record_case1", LIMIT);
+    let record = t.path().join("rec");
     std::fs::create_dir(&record).unwrap();
-    let out = dir.path().join("out");
+    let out = t.out();
     let scenario = repo_root().join("scenarios/case1.toml");
     let finished = eval_recorded(&["--scenario", scenario.to_str().unwrap()], &record, &out);
     finished.assert_success();
     let file = record.join("run-0000.mcap");
-    assert!(
-        finished
-            .stdout()
-            .contains(&format!("recorded {}", file.display())),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_stdout_has(&format!("recorded {}", file.display()));
     let run_log = out.join("runs/run-0000.json");
-    assert_independent_readers_open(&file, &run_log, 3, &dir.path().join("case1.rrd"));
+    assert_independent_readers_open(&file, &run_log, 3, &t.path().join("case1.rrd"));
     let meta = readers(&[os("metadata"), file.as_os_str()]);
     assert_eq!(meta["scenario"], "case1", "{meta}");
     assert_eq!(meta["run_index"], "0", "{meta}");
@@ -78,18 +69,16 @@ fn a_case1_recording_is_read_by_mcap_rosbags_and_rerun() {
 /// A team of 16 (the expert, 10 s): the same three readers.
 #[test]
 fn a_16_robot_recording_is_read_by_mcap_rosbags_and_rerun() {
-    let _watchdog = Watchdog::arm("record_team16", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("rec-team16");
+    let t = ProcessTest::start("record_team16", LIMIT);
     let text = std::fs::read_to_string(repo_root().join("scenarios/swarm32.toml")).unwrap();
     let text = text
         .replace("robots = 32", "robots = 16")
         .replace("duration_s = 20.0", "duration_s = 10.0");
-    let scenario = dir.path().join("team16.toml");
+    let scenario = t.path().join("team16.toml");
     std::fs::write(&scenario, text).unwrap();
-    let record = dir.path().join("rec");
+    let record = t.path().join("rec");
     std::fs::create_dir(&record).unwrap();
-    let out = dir.path().join("out");
+    let out = t.out();
     let finished = eval_recorded(
         &[
             "--controller",
@@ -105,7 +94,7 @@ fn a_16_robot_recording_is_read_by_mcap_rosbags_and_rerun() {
         &record.join("run-0000.mcap"),
         &out.join("runs/run-0000.json"),
         16,
-        &dir.path().join("team16.rrd"),
+        &t.path().join("team16.rrd"),
     );
 }
 
@@ -114,19 +103,17 @@ fn a_16_robot_recording_is_read_by_mcap_rosbags_and_rerun() {
 /// lockstep, and so is its recording. The test model is not a shipped one, so both store it.
 #[test]
 fn a_lockstep_run_over_processes_records_the_same_messages_as_in_process() {
-    let _watchdog = Watchdog::arm("record_processes", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("rec-procs");
-    let over_processes = dir.path().join("processes.mcap");
-    let scenario = record_case1_over_processes(dir.path(), "recproc", "lockstep", &over_processes);
+    let t = ProcessTest::start("record_processes", LIMIT);
+    let over_processes = t.path().join("processes.mcap");
+    let scenario = record_case1_over_processes(t.path(), "recproc", "lockstep", &over_processes);
 
-    let record = dir.path().join("rec");
+    let record = t.path().join("rec");
     std::fs::create_dir(&record).unwrap();
     let model = test_model().to_str().unwrap();
     eval_recorded(
         &["--scenario", scenario.to_str().unwrap(), "--model", model],
         &record,
-        &dir.path().join("eval-out"),
+        &t.path().join("eval-out"),
     )
     .assert_success();
     let in_process = record.join("run-0000.mcap");
@@ -151,30 +138,21 @@ fn a_lockstep_run_over_processes_records_the_same_messages_as_in_process() {
 /// nothing can be sought) reads at least 9 s of data from what it left.
 #[test]
 fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_chunk() {
-    let _watchdog = Watchdog::arm("record_sigkill", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("rec-kill");
-    let run_id = unique_run_id("reckill");
-    let leaks = LeakCheck::new(&run_id);
-    let file = dir.path().join("killed.mcap");
+    let t = ProcessTest::start("record_sigkill", LIMIT);
+    let file = t.path().join("killed.mcap");
     let scenario = repo_root().join("scenarios/case1.toml");
-    let mut command = formation_run(
-        &run_id,
-        &scenario,
-        &dir.path().join("out"),
-        &["--clock", "realtime"],
-    );
+    let mut command = t.formation_run(&scenario, &["--clock", "realtime"]);
     command.arg("--record").arg(&file);
     let mut launch = LiveProcess::spawn(command);
     await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(10_500));
-    let Some(world) = world_pid(&run_id) else {
+    let Some(world) = world_pid(&t.run) else {
         panic!("no world process\n{}", launch.describe());
     };
     send_signal(world, "-KILL");
     let finished = launch.finish(LIMIT);
     assert!(!finished.output.status.success(), "{}", finished.describe());
-    leaks.assert_clean();
+    t.assert_clean();
     let streamed = readers(&[os("stream"), file.as_os_str()]);
     let latest = streamed["latest_s"].as_f64().unwrap_or(0.0);
     assert!(
@@ -192,7 +170,7 @@ fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_c
     );
     // `formation replay` replays it up to its last whole chunk, says where the readable part
     // ends, marks the report incomplete and exits 2 (issue 39).
-    let json = dir.path().join("killed.replay.json");
+    let json = t.path().join("killed.replay.json");
     let mut replay = Command::new(&binaries().cli);
     replay.arg("replay").arg(&file).arg("--json").arg(&json);
     let replayed = run(replay, LIMIT);
@@ -206,13 +184,7 @@ fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_c
     assert_eq!(report["complete"], false, "{report}");
     let bytes_read = report["bytes_read"].as_u64().unwrap_or(0);
     assert!(bytes_read > 0, "{report}");
-    assert!(
-        replayed
-            .stderr()
-            .contains(&format!("the steps before byte {bytes_read} were read")),
-        "{}",
-        replayed.describe()
-    );
+    replayed.assert_stderr_has(&format!("the steps before byte {bytes_read} were read"));
     assert!(
         replayed.stdout().contains("identical") && !replayed.stderr().contains("corrupt"),
         "{}",
@@ -229,10 +201,9 @@ fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_c
 /// anything runs, naming the path and the fix.
 #[test]
 fn bad_record_targets_are_refused_before_anything_runs() {
-    let _watchdog = Watchdog::arm("record_bad_targets", LIMIT);
-    let dir = TempDir::new("rec-bad");
-    let scenario = case1_scenario(dir.path(), 1.0);
-    let missing = dir.path().join("no/such/folder");
+    let t = ProcessTest::start("record_bad_targets", LIMIT);
+    let scenario = t.case1(1.0);
+    let missing = t.path().join("no/such/folder");
     let cli = &binaries().cli;
 
     let mut eval = Command::new(cli);
@@ -256,10 +227,8 @@ fn bad_record_targets_are_refused_before_anything_runs() {
         finished.describe()
     );
 
-    let run_id = unique_run_id("recbad");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
-    let folder = dir.path().join("a-folder");
+    let out = t.out();
+    let folder = t.path().join("a-folder");
     std::fs::create_dir(&folder).unwrap();
     for (target, needle) in [
         // A folder where a file is wanted: the fix's example is a recording (issue 39).
@@ -288,7 +257,7 @@ fn bad_record_targets_are_refused_before_anything_runs() {
             format!("{} is a file, not a directory", scenario.display()),
         ),
     ] {
-        let mut command = formation_run(&run_id, &scenario, &out, &[]);
+        let mut command = t.formation_run(&scenario, &[]);
         command.arg("--record").arg(&target);
         let finished = run(command, LIMIT);
         finished.assert_failure_mentioning(&needle);
@@ -317,7 +286,7 @@ fn bad_record_targets_are_refused_before_anything_runs() {
             .unwrap()
             .contains("robots")
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// A full disk: said before the run when the disk is full already; when the recording fills it
@@ -325,14 +294,12 @@ fn bad_record_targets_are_refused_before_anything_runs() {
 /// goes on and writes its other outputs, in-process and over processes.
 #[test]
 fn a_full_disk_is_said_before_the_run_and_mid_run_stops_only_the_recording() {
-    let _watchdog = Watchdog::arm("record_full_disk", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("rec-full");
-    let disk = Tmpfs::mount(&dir.path().join("disk"), "256k");
-    let scenario = case1_scenario(dir.path(), 20.0);
+    let t = ProcessTest::start("record_full_disk", LIMIT);
+    let disk = Tmpfs::mount(&t.path().join("disk"), "256k");
+    let scenario = t.case1(20.0);
 
     // Mid-run, in-process: 20 s of case 1 take about 700 kB.
-    let out = dir.path().join("eval-out");
+    let out = t.path().join("eval-out");
     let finished = eval_recorded(
         &[
             "--controller",
@@ -362,11 +329,9 @@ fn a_full_disk_is_said_before_the_run_and_mid_run_stops_only_the_recording() {
     std::fs::remove_file(&file).unwrap();
 
     // Mid-run, over processes: the world's recording stops, the run does not.
-    let run_id = unique_run_id("recfull");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("run-out");
+    let out = t.path().join("run-out");
     let file = disk.dir().join("run.mcap");
-    let mut command = formation_run(&run_id, &scenario, &out, &[]);
+    let mut command = formation_run(&t.run, &scenario, &out, &[]);
     command.arg("--record").arg(&file);
     let finished = run(command, LIMIT);
     finished.assert_success();
@@ -384,7 +349,7 @@ fn a_full_disk_is_said_before_the_run_and_mid_run_stops_only_the_recording() {
         "{}",
         finished.describe()
     );
-    leaks.assert_clean();
+    t.assert_clean();
 
     // Full before the run: fill the disk to its last byte, then record.
     let filler = disk.dir().join("filler");
@@ -402,7 +367,7 @@ fn a_full_disk_is_said_before_the_run_and_mid_run_stops_only_the_recording() {
             scenario.to_str().unwrap(),
         ],
         disk.dir(),
-        &dir.path().join("eval-full"),
+        &t.path().join("eval-full"),
     );
     finished.assert_failure_mentioning("the disk is full");
     assert!(

@@ -19,10 +19,9 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    AgentGate, LeakCheck, LiveProcess, TempDir, Watchdog, await_connected, binaries,
-    case1_scenario, count_samples, formation_run, free_tcp_port, mcap_readers, one_at_a_time,
-    raw_client, read_json, remote_zenoh_agent, run, send_signal, test_model, unique_run_id,
-    world_pid, zenoh_credentials,
+    AgentGate, LiveProcess, ProcessTest, await_connected, binaries, case1_scenario, count_samples,
+    formation_run, free_tcp_port, mcap_readers, raw_client, read_json, remote_zenoh_agent, run,
+    send_signal, test_model, world_pid, zenoh_credentials,
 };
 
 const LIMIT: Duration = Duration::from_secs(240);
@@ -51,21 +50,14 @@ fn record_connect(
 #[test]
 fn a_live_team_recorded_from_outside_equals_its_own_recording() {
     use std::sync::atomic::Ordering;
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("record_connect_equal", LIMIT);
-    let dir = TempDir::new("rconn");
-    let run_id = unique_run_id("rconn");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 8.0);
-    let out = dir.path().join("out");
-    let creds = zenoh_credentials(dir.path(), 3);
-    let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
-    let own = dir.path().join("own.mcap");
-    let outside = dir.path().join("outside.mcap");
-    let mut command = formation_run(
-        &run_id,
+    let t = ProcessTest::start("record_connect_equal", LIMIT);
+    let scenario = t.case1(8.0);
+    let creds = zenoh_credentials(t.path(), 3);
+    let listen = t.endpoint();
+    let own = t.path().join("own.mcap");
+    let outside = t.path().join("outside.mcap");
+    let mut command = t.formation_run(
         &scenario,
-        &out,
         &["--transport", "zenoh", "--listen", &listen, "--remote", "2"],
     );
     command
@@ -81,18 +73,14 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
 
     // Refused without the recorder login: none at all, or an agent's.
     let refused = run(
-        record_connect(&listen, run_id.as_str(), &outside, None),
+        record_connect(&listen, t.run.as_str(), &outside, None),
         Duration::from_secs(60),
     );
     refused.assert_failure_mentioning("needs the team's recorder login");
-    assert!(
-        refused.stderr().contains("recorder.json"),
-        "{}",
-        refused.describe()
-    );
+    refused.assert_stderr_has("recorder.json");
     let robot1 = creds.join("robot-1.json");
     let refused = run(
-        record_connect(&listen, run_id.as_str(), &outside, Some(&robot1)),
+        record_connect(&listen, t.run.as_str(), &outside, Some(&robot1)),
         Duration::from_secs(60),
     );
     refused.assert_failure_mentioning("holds the login of robot-1, not the recorder's");
@@ -103,9 +91,9 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
         serde_json::from_slice(&std::fs::read(creds.join("recorder.json")).expect("recorder"))
             .expect("recorder.json");
     wrong["password"] = serde_json::Value::String("not-the-teams-password".into());
-    let wrong_login = dir.path().join("wrong-recorder.json");
+    let wrong_login = t.path().join("wrong-recorder.json");
     std::fs::write(&wrong_login, wrong.to_string()).expect("write the wrong login");
-    let mut command = record_connect(&listen, run_id.as_str(), &outside, Some(&wrong_login));
+    let mut command = record_connect(&listen, t.run.as_str(), &outside, Some(&wrong_login));
     command.args(["--timeout-s", "200"]);
     let refused = run(command, Duration::from_secs(200));
     refused.assert_failure_mentioning("refused the login of user recorder");
@@ -120,24 +108,24 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
     let login = formation_runtime::zenoh::credentials::read_login(&robot1).expect("robot 1");
     let impostor = raw_client(&listen, Some((login.user(), login.password())))
         .expect("robot 1's login is a valid login");
-    let (_sub, stolen) = count_samples(&impostor, format!("formation/{run_id}/record/**"));
+    let (_sub, stolen) = count_samples(&impostor, format!("formation/{}/record/**", t.run));
 
     // The recorder with its login, attached before the run starts.
     let login = creds.join("recorder.json");
     let mut recorder = LiveProcess::spawn(record_connect(
         &listen,
-        run_id.as_str(),
+        t.run.as_str(),
         &outside,
         Some(&login),
     ));
     let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains(&format!("connected to run {run_id}"))
+        l.contains(&format!("connected to run {}", t.run))
     });
     assert!(connected.is_some(), "{}", recorder.describe());
     // Let the recorder's subscription reach the router before the run begins.
     std::thread::sleep(Duration::from_secs(1));
 
-    let mut agent = remote_zenoh_agent(&listen, &run_id, 2);
+    let mut agent = remote_zenoh_agent(&listen, &t.run, 2);
     agent.arg("--credentials").arg(creds.join("robot-2.json"));
     let remote = LiveProcess::spawn_with_input(agent, None);
     let finished = launch.finish(LIMIT);
@@ -160,7 +148,7 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
         "robot 1's login received the record channel"
     );
     drop(impostor);
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// The world's own recording `own` and the one made from outside, `outside`, of the same 8 s
@@ -196,21 +184,15 @@ fn assert_recorded_alike(own: &Path, outside: &Path) {
 /// A ROS 2 team has no logins: the recorder takes none, and `--credentials` is refused with it.
 #[test]
 fn a_live_ros2_team_recorded_from_outside_equals_its_own_recording() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("record_connect_ros2", LIMIT);
-    let dir = TempDir::new("rconn2");
-    let run_id = unique_run_id("rconn2");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 8.0);
-    let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
-    let own = dir.path().join("own.mcap");
-    let outside = dir.path().join("outside.mcap");
+    let t = ProcessTest::start("record_connect_ros2", LIMIT);
+    let scenario = t.case1(8.0);
+    let listen = t.endpoint();
+    let own = t.path().join("own.mcap");
+    let outside = t.path().join("outside.mcap");
     // The agents wait at the gate, so the run waits for them while the recorder connects.
-    let gate = AgentGate::new(dir.path());
-    let mut command = formation_run(
-        &run_id,
+    let gate = AgentGate::new(t.path());
+    let mut command = t.formation_run(
         &scenario,
-        &dir.path().join("out"),
         &[
             "--transport",
             "ros2",
@@ -228,19 +210,19 @@ fn a_live_ros2_team_recorded_from_outside_equals_its_own_recording() {
 
     let mut with_login = record_connect(
         &listen,
-        run_id.as_str(),
+        t.run.as_str(),
         &outside,
-        Some(&dir.path().join("recorder.json")),
+        Some(&t.path().join("recorder.json")),
     );
     with_login.args(["--transport", "ros2"]);
     let refused = run(with_login, Duration::from_secs(60));
     refused.assert_failure_mentioning("--credentials needs --transport zenoh");
 
-    let mut command = record_connect(&listen, run_id.as_str(), &outside, None);
+    let mut command = record_connect(&listen, t.run.as_str(), &outside, None);
     command.args(["--transport", "ros2"]);
     let mut recorder = LiveProcess::spawn(command);
     let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains(&format!("connected to run {run_id}"))
+        l.contains(&format!("connected to run {}", t.run))
     });
     assert!(connected.is_some(), "{}", recorder.describe());
     // Let the recorder's subscription reach the router before the run begins.
@@ -256,7 +238,7 @@ fn a_live_ros2_team_recorded_from_outside_equals_its_own_recording() {
         recorded.describe()
     );
     assert_recorded_alike(&own, &outside);
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// A paced lockstep case-1 launch of 20 s over Zenoh (fresh credentials in its `out` folder),
@@ -329,15 +311,12 @@ fn assert_read_to_its_end(file: &Path, min_messages: u64) -> u64 {
 /// model). The team plays on to its end, undisturbed.
 #[test]
 fn a_late_recorder_says_where_it_joined_and_sigint_finishes_its_file() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("record_connect_late", LIMIT);
-    let dir = TempDir::new("rlate");
-    let run_id = unique_run_id("rlate");
-    let (launch, listen, login) = paced_zenoh_team(dir.path(), &run_id);
+    let t = ProcessTest::start("record_connect_late", LIMIT);
+    let (launch, listen, login) = paced_zenoh_team(t.path(), &t.run);
     // Join about 40 ticks into the run.
     std::thread::sleep(Duration::from_secs(2));
-    let late = dir.path().join("late.mcap");
-    let recorder = recorder_under_way(&listen, &run_id, &late, &login);
+    let late = t.path().join("late.mcap");
+    let recorder = recorder_under_way(&listen, &t.run, &late, &login);
     send_signal(recorder.id(), "INT");
     let recorded = recorder.finish(Duration::from_secs(60));
     assert_eq!(
@@ -374,7 +353,7 @@ fn a_late_recorder_says_where_it_joined_and_sigint_finishes_its_file() {
             .is_some_and(|v| v.starts_with("not stored")),
         "{metadata}"
     );
-    let json = dir.path().join("late.json");
+    let json = t.path().join("late.json");
     let mut replay = Command::new(&binaries().cli);
     replay.arg("replay").arg(&late).arg("--json").arg(&json);
     run(replay, LIMIT).assert_success();
@@ -392,14 +371,11 @@ fn a_late_recorder_says_where_it_joined_and_sigint_finishes_its_file() {
 /// finished file (the streaming reader reads it to its end) with the run's metadata.
 #[test]
 fn a_world_killed_mid_recording_ends_the_recorder_with_a_clear_error_and_a_readable_file() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("record_connect_world_killed", LIMIT);
-    let dir = TempDir::new("rkill");
-    let run_id = unique_run_id("rkill");
-    let (launch, listen, login) = paced_zenoh_team(dir.path(), &run_id);
-    let file = dir.path().join("cut.mcap");
-    let recorder = recorder_under_way(&listen, &run_id, &file, &login);
-    let world = world_pid(&run_id).expect("the world runs");
+    let t = ProcessTest::start("record_connect_world_killed", LIMIT);
+    let (launch, listen, login) = paced_zenoh_team(t.path(), &t.run);
+    let file = t.path().join("cut.mcap");
+    let recorder = recorder_under_way(&listen, &t.run, &file, &login);
+    let world = world_pid(&t.run).expect("the world runs");
     send_signal(world, "KILL");
     let recorded = recorder.finish(Duration::from_secs(60));
     assert_eq!(

@@ -10,9 +10,9 @@ use std::time::{Duration, Instant};
 use formation_proto::wire::RunId;
 use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_tests::{
-    LaunchSecret, LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, await_connected,
-    await_rejoin, binaries, case1_scenario, formation_run, one_at_a_time, run, send_signal,
-    unique_run_id, world_pid,
+    LaunchSecret, LeakCheck, LiveProcess, ProcessTest, RobotLog, TempDir, agent_pids,
+    await_connected, await_rejoin, case1_scenario, formation_run, run, send_signal, unique_run_id,
+    world_pid,
 };
 use rand::{Rng, SeedableRng};
 
@@ -47,15 +47,11 @@ fn alive(pid: u32) -> bool {
 /// keeps driving, nobody restarts it, the run succeeds.
 #[test]
 fn harmless_signals_to_an_agent_do_not_end_it() {
-    let _watchdog = Watchdog::arm("harmless_signals", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("sig");
-    let run_id = unique_run_id("sig");
-    let leaks = LeakCheck::new(&run_id);
-    let mut launch = launch(&run_id, &dir, 8.0, &["--clock", "realtime"]);
+    let t = ProcessTest::start("harmless_signals", LIMIT);
+    let mut launch = launch(&t.run, &t.dir, 8.0, &["--clock", "realtime"]);
     await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(1500));
-    let agent = the_agent(&run_id, 1, &mut launch);
+    let agent = the_agent(&t.run, 1, &mut launch);
     for name in ["CONT", "USR1", "URG", "CONT", "USR1"] {
         send_signal(agent, name);
         std::thread::sleep(Duration::from_millis(200));
@@ -63,17 +59,9 @@ fn harmless_signals_to_an_agent_do_not_end_it() {
     assert!(alive(agent), "robot 1's agent died of a harmless signal");
     let finished = launch.finish(LIMIT);
     finished.assert_success();
-    assert!(
-        finished.stdout().contains("0 agent restart(s)"),
-        "{}",
-        finished.describe()
-    );
-    assert!(
-        !finished.stderr().contains("termination signal"),
-        "{}",
-        finished.describe()
-    );
-    let out = dir.path().join("out");
+    finished.assert_stdout_has("0 agent restart(s)");
+    finished.assert_stderr_lacks("termination signal");
+    let out = t.out();
     let robot1 = RobotLog::read(&out, 1).outcomes;
     let fresh = robot1.iter().filter(|o| *o == "fresh").count();
     assert!(
@@ -81,27 +69,23 @@ fn harmless_signals_to_an_agent_do_not_end_it() {
         "robot 1 drove only {fresh} of {} ticks: {robot1:?}",
         robot1.len()
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// SIGSTOP then SIGCONT of the world, and of an agent: both are survived. The stopped agent's robot
 /// brakes while it is stopped and drives again afterwards; nothing is restarted.
 #[test]
 fn stopped_and_continued_processes_are_survived() {
-    let _watchdog = Watchdog::arm("stop_continue", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("stop");
-    let run_id = unique_run_id("stop");
-    let leaks = LeakCheck::new(&run_id);
-    let mut launch = launch(&run_id, &dir, 14.0, &["--clock", "realtime"]);
+    let t = ProcessTest::start("stop_continue", LIMIT);
+    let mut launch = launch(&t.run, &t.dir, 14.0, &["--clock", "realtime"]);
     await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(1000));
-    let world = world_pid(&run_id).expect("the world's pid");
+    let world = world_pid(&t.run).expect("the world's pid");
     send_signal(world, "STOP");
     std::thread::sleep(Duration::from_millis(1000));
     send_signal(world, "CONT");
     std::thread::sleep(Duration::from_millis(1000));
-    let agent = the_agent(&run_id, 2, &mut launch);
+    let agent = the_agent(&t.run, 2, &mut launch);
     send_signal(agent, "STOP");
     std::thread::sleep(Duration::from_millis(1000));
     send_signal(agent, "CONT");
@@ -110,7 +94,7 @@ fn stopped_and_continued_processes_are_survived() {
     // one, since the launch shares this test's process group).
     let everyone: Vec<u32> = [launch.id(), world]
         .into_iter()
-        .chain((0..3).flat_map(|robot| agent_pids(&run_id, robot)))
+        .chain((0..3).flat_map(|robot| agent_pids(&t.run, robot)))
         .collect();
     for &pid in &everyone {
         send_signal(pid, "TSTP");
@@ -121,12 +105,8 @@ fn stopped_and_continued_processes_are_survived() {
     }
     let finished = launch.finish(LIMIT);
     finished.assert_success();
-    assert!(
-        finished.stdout().contains("0 agent restart(s)"),
-        "{}",
-        finished.describe()
-    );
-    let log = RobotLog::read(&dir.path().join("out"), 2);
+    finished.assert_stdout_has("0 agent restart(s)");
+    let log = RobotLog::read(&t.out(), 2);
     let robot2 = &log.outcomes;
     let braked = robot2.iter().filter(|o| *o != "fresh").count();
     assert!(
@@ -142,31 +122,23 @@ fn stopped_and_continued_processes_are_survived() {
         robot2.iter().rev().take(20).all(|o| o == "fresh"),
         "robot 2 drives again after SIGCONT: {robot2:?}"
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// An agent that exits on its own mid-run (here SIGTERM, exit code 130) is restarted and rejoins.
 #[test]
 fn an_agent_that_exits_mid_run_is_restarted() {
-    let _watchdog = Watchdog::arm("exit_restart", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("term");
-    let run_id = unique_run_id("term");
-    let leaks = LeakCheck::new(&run_id);
-    let mut launch = launch(&run_id, &dir, 8.0, &["--clock", "realtime"]);
+    let t = ProcessTest::start("exit_restart", LIMIT);
+    let mut launch = launch(&t.run, &t.dir, 8.0, &["--clock", "realtime"]);
     await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(1000));
-    let old = the_agent(&run_id, 0, &mut launch);
+    let old = the_agent(&t.run, 0, &mut launch);
     send_signal(old, "TERM");
     await_rejoin(&mut launch, 0, old);
     let finished = launch.finish(LIMIT);
     finished.assert_success();
-    assert!(
-        finished.stdout().contains("1 agent restart(s)"),
-        "{}",
-        finished.describe()
-    );
-    leaks.assert_clean();
+    finished.assert_stdout_has("1 agent restart(s)");
+    t.assert_clean();
 }
 
 /// Issue 26: a kill in the last seconds whose restart is still under way (here inside a 5 s
@@ -175,15 +147,11 @@ fn an_agent_that_exits_mid_run_is_restarted() {
 /// dead agent under their own reason, `agent_down`.
 #[test]
 fn a_kill_near_the_end_whose_restart_is_under_way_does_not_fail_the_run() {
-    let _watchdog = Watchdog::arm("restart_under_way", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("late-kill");
-    let run_id = unique_run_id("late-kill");
-    let leaks = LeakCheck::new(&run_id);
+    let t = ProcessTest::start("restart_under_way", LIMIT);
     // 100 ticks; robot 1 crashes after 90 and is restarted only after 5 s, past the end.
     let command = run_command(
-        &run_id,
-        &dir,
+        &t.run,
+        &t.dir,
         5.0,
         &[
             "--fault",
@@ -196,20 +164,10 @@ fn a_kill_near_the_end_whose_restart_is_under_way_does_not_fail_the_run() {
     );
     let finished = run(command, LIMIT);
     finished.assert_success();
-    assert!(
-        finished
-            .stdout()
-            .contains("run 0: robot 1's agent (lost at tick 90) was being restarted"),
-        "{}",
-        finished.describe()
-    );
-    assert!(
-        finished.stdout().contains("1 agent restart(s)"),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_stdout_has("run 0: robot 1's agent (lost at tick 90) was being restarted");
+    finished.assert_stdout_has("1 agent restart(s)");
     let summary: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(dir.path().join("out/summary.json")).expect("summary.json"),
+        &std::fs::read(t.path().join("out/summary.json")).expect("summary.json"),
     )
     .expect("summary JSON");
     let braked = &summary["braked_ticks"];
@@ -223,22 +181,21 @@ fn a_kill_near_the_end_whose_restart_is_under_way_does_not_fail_the_run() {
     );
     assert_eq!(braked[0].as_object().map(|m| m.len()), Some(0), "{braked}");
     let profile: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(dir.path().join("out/profile.json")).expect("profile.json"),
+        &std::fs::read(t.path().join("out/profile.json")).expect("profile.json"),
     )
     .expect("profile JSON");
     assert_eq!(
         profile["braked_per_robot"][1]["agent_down"], 10,
         "{profile:#}"
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Two launches started at the same instant with one run id: exactly one wins, the other is
 /// refused without touching the winner's files, and the winner completes.
 #[test]
 fn two_launches_with_one_run_id_exactly_one_wins() {
-    let _watchdog = Watchdog::arm("same_run_id", LIMIT);
-    let _one = one_at_a_time();
+    let _t = ProcessTest::start("same_run_id", LIMIT);
     for attempt in 0..3 {
         let run_id = unique_run_id("twin");
         let leaks = LeakCheck::new(&run_id);
@@ -260,11 +217,7 @@ fn two_launches_with_one_run_id_exactly_one_wins() {
             finished[1].describe()
         );
         let loser = &finished[1 - winners[0]];
-        assert!(
-            loser.stderr().contains("in use by another live launch"),
-            "{}",
-            loser.describe()
-        );
+        loser.assert_stderr_has("in use by another live launch");
         let winner_out = dirs[winners[0]].path().join("out");
         assert_eq!(RobotLog::read(&winner_out, 0).outcomes.len(), 60);
         assert!(winner_out.join("summary.json").is_file());
@@ -277,15 +230,11 @@ fn two_launches_with_one_run_id_exactly_one_wins() {
 #[test]
 fn the_runs_shared_memory_is_private_to_its_user() {
     use std::os::unix::fs::PermissionsExt;
-    let _watchdog = Watchdog::arm("file_modes", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("modes");
-    let run_id = unique_run_id("modes");
-    let leaks = LeakCheck::new(&run_id);
-    let mut launch = launch(&run_id, &dir, 10.0, &["--pace-ms", "20"]);
+    let t = ProcessTest::start("file_modes", LIMIT);
+    let mut launch = launch(&t.run, &t.dir, 10.0, &["--pace-ms", "20"]);
     await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(300));
-    let namespace = RunNamespace::new(&run_id);
+    let namespace = RunNamespace::new(&t.run);
     let files = namespace.leftovers();
     assert!(
         files
@@ -305,85 +254,71 @@ fn the_runs_shared_memory_is_private_to_its_user() {
         "base folder is private"
     );
     launch.finish(LIMIT).assert_success();
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// A launcher SIGKILLed mid-run leaves iceoryx2 files behind; the next launch of the same run id
 /// removes them (none of the dead launch's processes lives) and says so.
 #[test]
 fn a_dead_launchs_leftovers_are_removed_by_the_next_launch() {
-    let _watchdog = Watchdog::arm("leftovers", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("dead");
-    let run_id = unique_run_id("dead");
-    let leaks = LeakCheck::new(&run_id);
-    let mut first = launch(&run_id, &dir, 60.0, &["--pace-ms", "20"]);
+    let t = ProcessTest::start("leftovers", LIMIT);
+    let mut first = launch(&t.run, &t.dir, 60.0, &["--pace-ms", "20"]);
     await_connected(&mut first);
-    let world = world_pid(&run_id).expect("the world's pid");
+    let world = world_pid(&t.run).expect("the world's pid");
     send_signal(first.id(), "KILL");
     let _ = first.finish(LIMIT);
     // The children see their input close and exit on their own.
     let deadline = Instant::now() + Duration::from_secs(30);
-    while (alive(world) || !agent_pids(&run_id, 0).is_empty()) && Instant::now() < deadline {
+    while (alive(world) || !agent_pids(&t.run, 0).is_empty()) && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(50));
     }
     assert!(!alive(world), "the orphaned world exited");
     assert!(
-        !leaks.leftovers().is_empty(),
+        !t.leaks.leftovers().is_empty(),
         "a killed launcher leaves its files (else this test proves nothing)"
     );
     let again = TempDir::new("dead-2");
-    let second = run(run_command(&run_id, &again, 2.0, &[]), LIMIT);
+    let second = run(run_command(&t.run, &again, 2.0, &[]), LIMIT);
     second.assert_success();
-    assert!(
-        second.stderr().contains("that a dead launch of run"),
-        "{}",
-        second.describe()
-    );
-    leaks.assert_clean();
+    second.assert_stderr_has("that a dead launch of run");
+    t.assert_clean();
 }
 
 /// Files of a run id whose processes are alive, though no launch holds the run's lock (a world
 /// started by hand), are not touched: the launch is refused naming the live process.
 #[test]
 fn leftovers_with_live_processes_are_not_touched() {
-    let _watchdog = Watchdog::arm("live_leftovers", LIMIT);
-    let _one = one_at_a_time();
-    let bins = binaries();
-    let dir = TempDir::new("live");
-    let run_id = unique_run_id("live");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario =
-        formation_world::Scenario::from_path(&case1_scenario(dir.path(), 5.0)).expect("scenario");
-    let specs = dir.path().join("run-specs.json");
+    let t = ProcessTest::start("live_leftovers", LIMIT);
+    let scenario = formation_world::Scenario::from_path(&t.case1(5.0)).expect("scenario");
+    let specs = t.path().join("run-specs.json");
     std::fs::write(
         &specs,
         serde_json::to_vec(&[scenario.run_spec(1, 0)]).expect("specs JSON"),
     )
     .expect("specs");
-    let mut world = Command::new(&bins.world);
+    let mut world = Command::new(&t.bins().world);
     world
-        .args(["--run-id", run_id.as_str(), "--exit-on-stdin-close"])
+        .args(["--run-id", t.run.as_str(), "--exit-on-stdin-close"])
         .args(["--startup-timeout-ms", "600000"])
         .arg("--run-specs")
         .arg(&specs)
         .arg("--out")
-        .arg(dir.path().join("world-out"));
+        .arg(t.path().join("world-out"));
     let mut world = LiveProcess::spawn_with_secret(world, &LaunchSecret::generate().unwrap());
     let listening = world.wait_for_line(Duration::from_secs(60), |l| l.contains("listening"));
     assert!(listening.is_some(), "{}", world.describe());
-    let before = leaks.leftovers();
-    let refused = run(run_command(&run_id, &dir, 2.0, &[]), LIMIT);
+    let before = t.leaks.leftovers();
+    let refused = run(run_command(&t.run, &t.dir, 2.0, &[]), LIMIT);
     refused.assert_failure_mentioning("has live processes (formation-world");
     assert_eq!(
-        leaks.leftovers(),
+        t.leaks.leftovers(),
         before,
         "the live run's files are untouched"
     );
     assert!(alive(world.id()), "the live world still runs");
     world.close_input();
     let _ = world.finish(LIMIT);
-    drop(leaks);
+    drop(t.leaks);
 }
 
 /// The realtime drill: 100 SIGKILLs of random agents at random moments, the restart budget raised
@@ -391,17 +326,13 @@ fn leftovers_with_live_processes_are_not_touched() {
 /// used beyond the stale window; nothing is left in /dev/shm or the iceoryx2 root.
 #[test]
 fn a_hundred_sigkills_in_realtime_each_end_in_a_rejoin() {
-    let _watchdog = Watchdog::arm("hundred_kills", Duration::from_secs(900));
-    let _one = one_at_a_time();
+    let t = ProcessTest::start("hundred_kills", Duration::from_secs(900));
     const KILLS: usize = 100;
     const STALE_MS: u64 = 150;
-    let dir = TempDir::new("drill");
-    let run_id = unique_run_id("drill");
-    let leaks = LeakCheck::new(&run_id);
     let stale = STALE_MS.to_string();
     let mut launch = launch(
-        &run_id,
-        &dir,
+        &t.run,
+        &t.dir,
         // 100 kills took 39 s on a 2-core machine; the run lasts long enough for them.
         100.0,
         &[
@@ -423,7 +354,7 @@ fn a_hundred_sigkills_in_realtime_each_end_in_a_rejoin() {
     for _ in 0..KILLS {
         std::thread::sleep(Duration::from_millis(rng.random_range(0..300)));
         let robot = rng.random_range(0..3);
-        let old = the_agent(&run_id, robot, &mut launch);
+        let old = the_agent(&t.run, robot, &mut launch);
         send_signal(old, "KILL");
         await_rejoin(&mut launch, robot, old);
     }
@@ -433,14 +364,8 @@ fn a_hundred_sigkills_in_realtime_each_end_in_a_rejoin() {
     );
     let finished = launch.finish(LIMIT);
     finished.assert_success();
-    assert!(
-        finished
-            .stdout()
-            .contains(&format!("{KILLS} agent restart(s)")),
-        "{}",
-        finished.describe()
-    );
-    let out = dir.path().join("out");
+    finished.assert_stdout_has(&format!("{KILLS} agent restart(s)"));
+    let out = t.out();
     let timing: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("timing/run-0000.json")).unwrap()).unwrap();
     let dt_ms = timing["dt_s"].as_f64().unwrap() * 1e3;
@@ -465,5 +390,5 @@ fn a_hundred_sigkills_in_realtime_each_end_in_a_rejoin() {
         braked >= KILLS,
         "each kill brakes at least one tick: {braked}"
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }

@@ -16,9 +16,8 @@ use std::time::Duration;
 
 use formation_cli::launch::read_trajectory;
 use formation_tests::{
-    LeakCheck, TempDir, Watchdog, binaries, case1_scenario, formation_run_with_model,
-    free_tcp_port, one_at_a_time, policy_eval, python, read_json, repo_root, run, test_model,
-    unique_run_id,
+    LeakCheck, ProcessTest, TempDir, binaries, case1_scenario, formation_run_with_model,
+    free_tcp_port, policy_eval, python, read_json, repo_root, run, test_model, unique_run_id,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -111,8 +110,7 @@ fn run_team(tag: &str, clock: &str) -> TeamRun {
 /// ROS 2 agents) converges and gives in-process evaluation's Table I JSON.
 #[test]
 fn lockstep_case1_through_ros2_gives_the_in_process_table() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_team_lockstep", LIMIT);
+    let _t = ProcessTest::start("ros2_team_lockstep", LIMIT);
     let TeamRun {
         dir,
         scenario,
@@ -150,13 +148,11 @@ fn lockstep_case1_through_ros2_gives_the_in_process_table() {
 /// its `--json` equals in-process evaluation's, key for key (to 1e-9 for continuous figures).
 #[test]
 fn eval_through_ros2_writes_the_in_process_json() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_eval_json", LIMIT);
-    let dir = TempDir::new("r2eval");
-    let scenario = case1_scenario(dir.path(), 10.0);
-    let reference = in_process_summary(dir.path(), &scenario);
-    let over_path = dir.path().join("ros2.json");
-    let listen = endpoint(free_tcp_port());
+    let t = ProcessTest::start("ros2_eval_json", LIMIT);
+    let scenario = t.case1(10.0);
+    let reference = in_process_summary(t.path(), &scenario);
+    let over_path = t.path().join("ros2.json");
+    let listen = t.endpoint();
     let mut eval = policy_eval(&scenario, &shipped_model(), &over_path);
     eval.args(["--processes", "--transport", "ros2", "--listen", &listen]);
     let finished = run(eval, LIMIT);
@@ -176,8 +172,7 @@ fn eval_through_ros2_writes_the_in_process_json() {
 /// Issue 14 acceptance: realtime case 1 through the ROS 2 path converges.
 #[test]
 fn realtime_case1_through_ros2_converges() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_team_realtime", LIMIT);
+    let _t = ProcessTest::start("ros2_team_realtime", LIMIT);
     // The folder stays bound (`_dir`) until the end, so the output outlives the assertions.
     let TeamRun {
         dir: _dir,
@@ -254,16 +249,12 @@ fn bad_ros2_launches_are_refused_with_the_reason() {
 /// its static `odom` and `laser` frames.
 #[test]
 fn a_live_teams_tf_is_read_by_an_independent_client() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_team_tf", LIMIT);
-    let dir = TempDir::new("r2tf");
-    let run_id = unique_run_id("r2tf");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 6.0);
-    let out = dir.path().join("out");
+    let t = ProcessTest::start("ros2_team_tf", LIMIT);
+    let scenario = t.case1(6.0);
+    let out = t.out();
     let port = free_tcp_port();
     let team = formation_tests::LiveProcess::spawn(formation_run_with_model(
-        &run_id,
+        &t.run,
         &scenario,
         &shipped_model(),
         &out,
@@ -285,7 +276,7 @@ fn a_live_teams_tf_is_read_by_an_independent_client() {
     let heard = run(listener, LIMIT);
     heard.assert_success();
     team.finish(LIMIT).assert_success();
-    leaks.assert_clean();
+    t.assert_clean();
 
     let log = read_trajectory(&out.join("runs/run-0000.json")).expect("the run log");
     let robots = log.n_robots();

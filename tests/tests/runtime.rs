@@ -11,8 +11,8 @@ use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, robot_service_name};
 use formation_robot_agent::decision::PolicyController;
 use formation_runtime::iceoryx::naming::ServiceLimits;
 use formation_tests::{
-    LeakCheck, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
-    incarnations, launch_secret, repo_root, run, run_with_input, test_model, unique_run_id,
+    LeakCheck, ProcessTest, RobotLog, assert_bit_identical, incarnations, launch_secret,
+    lockstep_over_processes, repo_root, run, run_with_input, test_model, unique_run_id,
 };
 use formation_world::{Scenario, run_episode};
 use iceoryx2::prelude::*;
@@ -26,16 +26,14 @@ const SHIPPED_MODEL: &str = "onnx/models/policy.onnx";
 /// in-process run bit for bit (and the run id's files are gone afterwards).
 #[test]
 fn lockstep_over_processes_is_bit_identical_to_in_process() {
-    let _watchdog = Watchdog::arm("lockstep_equals_in_process", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("lockstep");
-    let scenario_path = case1_scenario(dir.path(), 10.0);
+    let t = ProcessTest::start("lockstep_equals_in_process", LIMIT);
+    let scenario_path = t.case1(10.0);
     let scenario = Scenario::from_path(&scenario_path).expect("scenario");
     let model = test_model();
 
     // The launcher finds the runtime binaries next to the current executable; a test binary lives
     // in target/<profile>/deps, and the launcher also searches the directory above it.
-    assert!(bins.world.is_file() && bins.agent.is_file());
+    assert!(t.bins().world.is_file() && t.bins().agent.is_file());
     let mut progress = Vec::new();
     let over_processes = eval_over_processes(
         &scenario,
@@ -68,30 +66,19 @@ fn lockstep_over_processes_is_bit_identical_to_in_process() {
 /// reproduces the in-process run bit for bit.
 #[test]
 fn a_sixteen_robot_team_of_the_shipped_policy_in_lockstep_is_bit_identical_to_in_process() {
-    let _watchdog = Watchdog::arm("sixteen_robots_lockstep", 3 * LIMIT);
-    let dir = TempDir::new("team16");
+    let t = ProcessTest::start("sixteen_robots_lockstep", 3 * LIMIT);
     let text = std::fs::read_to_string(repo_root().join("scenarios/teams-generalist.toml"))
         .expect("reading teams-generalist.toml");
     let text = text
         .replace("robots = 8", "robots = 16")
         .replace("duration_s = 60.0", "duration_s = 4.0")
         .replace("runs = 100", "runs = 1");
-    let scenario_path = dir.path().join("team16.toml");
+    let scenario_path = t.path().join("team16.toml");
     std::fs::write(&scenario_path, text).expect("writing the scenario");
     let scenario = Scenario::from_path(&scenario_path).expect("scenario");
     assert_eq!(scenario.n_robots(), 16);
     let model = repo_root().join(SHIPPED_MODEL);
-    let over_processes = eval_over_processes(
-        &scenario,
-        scenario.seed(),
-        1,
-        &model,
-        ClockMode::Lockstep,
-        &NetworkFlags::default(),
-        &mut |_| {},
-    )
-    .expect("runs over processes")
-    .trajectories;
+    let over_processes = lockstep_over_processes(&scenario, 1, &model);
     let spec = scenario.run_spec(scenario.seed(), 0);
     assert!(spec.world.lidar.noise_std > 0.0, "a noisy LIDAR");
     let models = vec![model.as_path(); 16];
@@ -111,23 +98,19 @@ fn a_sixteen_robot_team_of_the_shipped_policy_in_lockstep_is_bit_identical_to_in
     reason = "one scripted scenario over real iceoryx2 services: its steps read in order"
 )]
 fn a_second_scan_reader_or_command_writer_is_refused() {
-    let _watchdog = Watchdog::arm("decentralisation", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("decent");
-    let run_id = unique_run_id("decent");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = Scenario::from_path(&case1_scenario(dir.path(), 5.0)).expect("scenario");
-    let specs = dir.path().join("specs.json");
+    let t = ProcessTest::start("decentralisation", LIMIT);
+    let scenario = Scenario::from_path(&t.case1(5.0)).expect("scenario");
+    let specs = t.path().join("specs.json");
     std::fs::write(
         &specs,
         serde_json::to_vec(&[scenario.run_spec(1, 0)]).unwrap(),
     )
     .unwrap();
 
-    let mut world = Command::new(&bins.world)
+    let mut world = Command::new(&t.bins().world)
         .args([
             "--run-id",
-            run_id.as_str(),
+            t.run.as_str(),
             "--exit-on-stdin-close",
             "--startup-timeout-ms",
             "60000",
@@ -135,7 +118,7 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
         .arg("--run-specs")
         .arg(&specs)
         .arg("--out")
-        .arg(dir.path().join("out"))
+        .arg(t.out())
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .spawn()
@@ -152,10 +135,10 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
     let mut line = String::new();
     world_out.read_line(&mut line).unwrap();
     assert!(line.contains("listening"), "world said {line:?}");
-    let mut agent = Command::new(&bins.agent)
+    let mut agent = Command::new(&t.bins().agent)
         .args([
             "--run-id",
-            run_id.as_str(),
+            t.run.as_str(),
             "--robot",
             "0",
             "--exit-on-stdin-close",
@@ -167,7 +150,7 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
         .expect("starting agent 0");
     hand_secret(&mut agent);
 
-    let config = leaks.namespace().iceoryx_config().unwrap();
+    let config = t.leaks.namespace().iceoryx_config().unwrap();
     let node = NodeBuilder::new()
         .config(&config)
         .create::<ipc::Service>()
@@ -176,14 +159,14 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
     // The world makes robot 0's services once it accepted the agent's proof.
     let deadline = Instant::now() + Duration::from_secs(30);
     let incarnation = loop {
-        match incarnations(&run_id, 0).as_slice() {
+        match incarnations(&t.run, 0).as_slice() {
             [one] => break *one,
             [] if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(20)),
             other => panic!("robot 0 should have exactly one incarnation, found {other:x?}"),
         }
     };
     let open =
-        |channel| ServiceName::new(&robot_service_name(&run_id, 0, incarnation, channel)).unwrap();
+        |channel| ServiceName::new(&robot_service_name(&t.run, 0, incarnation, channel)).unwrap();
     // The service is listed as soon as the world starts creating it, but opens only once the
     // world has finished: retry until then.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -243,40 +226,23 @@ fn a_second_scan_reader_or_command_writer_is_refused() {
         started.elapsed()
     );
     // Both exited cleanly: iceoryx2 removed every service and port segment itself.
-    leaks.assert_only_management_left();
+    t.leaks.assert_only_management_left();
 }
 
 /// Issue 4 (c): `formation run` leaves nothing in /dev/shm or iceoryx2's directory.
 #[test]
 fn formation_run_leaves_no_shared_memory_behind() {
-    let _watchdog = Watchdog::arm("no_leaks", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("leaks");
-    let run_id = unique_run_id("leaks");
-    let leaks = LeakCheck::new(&run_id);
-    let mut command = Command::new(&bins.cli);
-    command
-        .args(["run", "--run-id", run_id.as_str(), "--clock", "lockstep"])
-        .args(["--pace-ms", "10"])
-        .arg("--scenario")
-        .arg(case1_scenario(dir.path(), 2.0))
-        .arg("--model")
-        .arg(test_model())
-        .arg("--out")
-        .arg(dir.path().join("out"));
+    let t = ProcessTest::start("no_leaks", LIMIT);
+    let command = t.formation_run(&t.case1(2.0), &["--clock", "lockstep", "--pace-ms", "10"]);
     let finished = run(command, LIMIT);
     finished.assert_success();
-    assert!(
-        finished.stdout().contains("round_trip"),
-        "{}",
-        finished.describe()
-    );
-    assert!(dir.path().join("out/runs/run-0000.json").is_file());
-    leaks.assert_clean();
+    finished.assert_stdout_has("round_trip");
+    assert!(t.path().join("out/runs/run-0000.json").is_file());
+    t.assert_clean();
 
     // The run directory holds what the report needs (issue 6): its Table I summary, the run log,
     // the latency profile and its plot; `formation report` reads it as it is.
-    let out = dir.path().join("out");
+    let out = t.out();
     for file in ["summary.json", "profile.json", "profile.svg"] {
         assert!(out.join(file).is_file(), "{file} missing");
     }
@@ -297,87 +263,65 @@ fn formation_run_leaves_no_shared_memory_behind() {
             && tick["histogram"][0][0].as_f64() >= Some(16_000.0),
         "{tick}"
     );
-    let mut report = Command::new(&bins.cli);
+    let mut report = Command::new(&t.bins().cli);
     report
         .arg("report")
         .arg(&out)
         .arg("--out")
-        .arg(dir.path().join("report.html"));
+        .arg(t.path().join("report.html"));
     run(report, LIMIT).assert_success();
-    assert!(dir.path().join("report.html").is_file());
+    assert!(t.path().join("report.html").is_file());
 }
 
 /// Issue 4 (d): a missing model is refused before anything starts.
 #[test]
 fn a_missing_model_is_a_clear_error() {
-    let _watchdog = Watchdog::arm("missing_model", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("nomodel");
-    let run_id = unique_run_id("nomodel");
-    let leaks = LeakCheck::new(&run_id);
-    let mut command = Command::new(&bins.cli);
+    let t = ProcessTest::start("missing_model", LIMIT);
+    let mut command = Command::new(&t.bins().cli);
     command
         .args([
             "run",
             "--run-id",
-            run_id.as_str(),
+            t.run.as_str(),
             "--model",
             "/nonexistent/policy.onnx",
         ])
         .arg("--scenario")
-        .arg(case1_scenario(dir.path(), 1.0))
+        .arg(t.case1(1.0))
         .arg("--out")
-        .arg(dir.path().join("out"));
+        .arg(t.out());
     run(command, LIMIT).assert_failure_mentioning("/nonexistent/policy.onnx");
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 4 (d): an agent that exits at start ends the launch with the robot and status named,
 /// quickly, with every process reaped and nothing left behind.
 #[test]
 fn an_agent_that_exits_at_start_stops_the_launch_cleanly() {
-    let _watchdog = Watchdog::arm("agent_exits", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("exits");
-    let run_id = unique_run_id("exits");
-    let leaks = LeakCheck::new(&run_id);
-    let mut command = Command::new(&bins.cli);
-    command
-        .env("FORMATION_AGENT_BIN", "/bin/false")
-        .args(["run", "--run-id", run_id.as_str(), "--restarts", "0"])
-        .arg("--scenario")
-        .arg(case1_scenario(dir.path(), 1.0))
-        .arg("--model")
-        .arg(test_model())
-        .arg("--out")
-        .arg(dir.path().join("out"));
+    let t = ProcessTest::start("agent_exits", LIMIT);
+    let mut command = t.formation_run(&t.case1(1.0), &["--restarts", "0"]);
+    command.env("FORMATION_AGENT_BIN", "/bin/false");
     let finished = run(command, LIMIT);
     finished.assert_failure_mentioning("exit code 1");
-    assert!(
-        finished.stderr().contains("restart budget"),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_stderr_has("restart budget");
     assert!(
         finished.elapsed < Duration::from_secs(15),
         "{}",
         finished.describe()
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 4 (d): a robot index the world does not serve, and a scenario assigning a model to a
 /// robot it does not have, are both clear errors.
 #[test]
 fn robot_indices_out_of_range_are_clear_errors() {
-    let _watchdog = Watchdog::arm("robot_out_of_range", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("range");
+    let t = ProcessTest::start("robot_out_of_range", LIMIT);
     // A lone agent leaves iceoryx2's global management segment of its namespace behind (no
     // launcher runs to remove it); its own run id keeps that out of the launcher check below.
     let lone_run = unique_run_id("lone");
     let _lone_cleanup = LeakCheck::new(&lone_run);
-    let mut agent = Command::new(&bins.agent);
+    let mut agent = Command::new(&t.bins().agent);
     agent
         .args([
             "--run-id",
@@ -393,61 +337,44 @@ fn robot_indices_out_of_range_are_clear_errors() {
     run_with_input(agent, Some(&secret), LIMIT)
         .assert_failure_mentioning("robot 7's services do not exist");
 
-    let scenario = case1_scenario(dir.path(), 1.0);
+    let scenario = t.case1(1.0);
     let mut text = std::fs::read_to_string(&scenario).unwrap();
     text.push_str(&format!(
         "\n[[agent]]\nrobot = 5\nmodel = {:?}\n",
         test_model().display().to_string()
     ));
     std::fs::write(&scenario, text).unwrap();
-    let run_id = unique_run_id("range");
-    let leaks = LeakCheck::new(&run_id);
-    let mut command = Command::new(&bins.cli);
+    let mut command = Command::new(&t.bins().cli);
     command
-        .args(["run", "--run-id", run_id.as_str()])
+        .args(["run", "--run-id", t.run.as_str()])
         .arg("--scenario")
         .arg(&scenario)
         .arg("--out")
-        .arg(dir.path().join("out"));
+        .arg(t.out());
     run(command, LIMIT).assert_failure_mentioning("robot");
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 5 (fault injection): an agent that crashes mid-run in lockstep is braked, restarted by
 /// the launcher and rejoins; the run completes and leaves nothing behind.
 #[test]
 fn a_crashed_agent_is_braked_restarted_and_rejoins() {
-    let _watchdog = Watchdog::arm("crash_rejoin", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("crash");
-    let run_id = unique_run_id("crash");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
-    let mut command = Command::new(&bins.cli);
-    command
-        .args([
-            "run",
-            "--run-id",
-            run_id.as_str(),
+    let t = ProcessTest::start("crash_rejoin", LIMIT);
+    let out = t.out();
+    let command = t.formation_run(
+        &t.case1(5.0),
+        &[
             "--restarts",
             "1",
             "--timeout-ms",
             "500",
-        ])
-        .args(["--fault", "1:crash-after=40"])
-        .arg("--scenario")
-        .arg(case1_scenario(dir.path(), 5.0))
-        .arg("--model")
-        .arg(test_model())
-        .arg("--out")
-        .arg(&out);
+            "--fault",
+            "1:crash-after=40",
+        ],
+    );
     let finished = run(command, LIMIT);
     finished.assert_success();
-    assert!(
-        finished.stdout().contains("1 agent restart(s)"),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_stdout_has("1 agent restart(s)");
     let robot1 = RobotLog::read(&out, 1).outcomes;
     assert_eq!(robot1.len(), 100);
     assert!(robot1[..40].iter().all(|o| o == "fresh"), "{robot1:?}");
@@ -466,33 +393,15 @@ fn a_crashed_agent_is_braked_restarted_and_rejoins() {
             .iter()
             .all(|o| o == "fresh")
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 5 (fault injection): NaN commands are braked by the world's watchdog, tick by tick.
 #[test]
 fn nan_commands_are_braked() {
-    let _watchdog = Watchdog::arm("nan_braked", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("nan");
-    let run_id = unique_run_id("nan");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
-    let mut command = Command::new(&bins.cli);
-    command
-        .args([
-            "run",
-            "--run-id",
-            run_id.as_str(),
-            "--fault",
-            "2:nan-after=10",
-        ])
-        .arg("--scenario")
-        .arg(case1_scenario(dir.path(), 2.0))
-        .arg("--model")
-        .arg(test_model())
-        .arg("--out")
-        .arg(&out);
+    let t = ProcessTest::start("nan_braked", LIMIT);
+    let out = t.out();
+    let command = t.formation_run(&t.case1(2.0), &["--fault", "2:nan-after=10"]);
     run(command, LIMIT).assert_success();
     let robot2 = RobotLog::read(&out, 2);
     assert!(
@@ -504,7 +413,7 @@ fn nan_commands_are_braked() {
     for tick in 10..40 {
         assert_eq!(robot2.commands[tick], (0.0, 0.0), "tick {tick}");
     }
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 4: `formation eval --processes` and in-process `formation eval` write byte-identical JSON
@@ -512,13 +421,11 @@ fn nan_commands_are_braked() {
 /// assigned in the scenario).
 #[test]
 fn eval_over_processes_writes_the_same_json_as_in_process_for_a_mixed_team() {
-    let _watchdog = Watchdog::arm("eval_json_identical", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("evaljson");
-    let other = dir.path().join("other.onnx");
+    let t = ProcessTest::start("eval_json_identical", LIMIT);
+    let other = t.path().join("other.onnx");
     formation_tests::write_tiny_model(&other, 5);
-    let base = std::fs::read_to_string(case1_scenario(dir.path(), 4.0)).expect("scenario");
-    let scenario = dir.path().join("mixed.toml");
+    let base = std::fs::read_to_string(t.case1(4.0)).expect("scenario");
+    let scenario = t.path().join("mixed.toml");
     std::fs::write(
         &scenario,
         format!(
@@ -528,7 +435,7 @@ fn eval_over_processes_writes_the_same_json_as_in_process_for_a_mixed_team() {
     )
     .expect("writing the scenario");
     let eval = |processes: bool, json: &str| {
-        let mut command = Command::new(&bins.cli);
+        let mut command = Command::new(&t.bins().cli);
         command
             .args([
                 "eval",
@@ -544,12 +451,12 @@ fn eval_over_processes_writes_the_same_json_as_in_process_for_a_mixed_team() {
             .arg("--model")
             .arg(test_model())
             .arg("--json")
-            .arg(dir.path().join(json));
+            .arg(t.path().join(json));
         if processes {
             command.arg("--processes");
         }
         run(command, LIMIT).assert_success();
-        std::fs::read(dir.path().join(json)).expect("eval JSON")
+        std::fs::read(t.path().join(json)).expect("eval JSON")
     };
     let in_process = eval(false, "in-process.json");
     let over_processes = eval(true, "processes.json");

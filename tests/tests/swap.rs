@@ -9,8 +9,8 @@ use std::time::Duration;
 use formation_cli::launch::read_trajectory;
 use formation_robot_agent::decision::{Agent, PolicyController};
 use formation_tests::{
-    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, assert_bit_identical, binaries,
-    case1_scenario, run, test_model, unique_run_id, write_tiny_model, write_tiny_model_with,
+    LiveProcess, ProcessTest, RobotLog, assert_bit_identical, binaries, run, test_model,
+    write_tiny_model, write_tiny_model_with,
 };
 use formation_world::episode::{Controller, ControllerError, Observation};
 use formation_world::{Scenario, run_episode};
@@ -56,34 +56,20 @@ fn swap(run_id: &str, robot: &str, model: &Path, extra: &[&str]) -> formation_te
 /// tick 400 makes every later command of that robot exactly what the new model gives in-process.
 #[test]
 fn a_lockstep_swap_matches_the_new_model_in_process_and_bad_swaps_are_refused() {
-    let _watchdog = Watchdog::arm("swap_lockstep", LIMIT);
-    let dir = TempDir::new("swap");
-    let run_id = unique_run_id("swap");
-    let leaks = LeakCheck::new(&run_id);
+    let t = ProcessTest::start("swap_lockstep", LIMIT);
     let first = test_model();
-    let second = dir.path().join("second.onnx");
+    let second = t.path().join("second.onnx");
     write_tiny_model(&second, 1);
-    let wrong_shape = dir.path().join("wrong-shape.onnx");
+    let wrong_shape = t.path().join("wrong-shape.onnx");
     write_tiny_model_with(&wrong_shape, 2, &["--aux-width", "3"]);
-    let wrong_sensor = dir.path().join("wrong-sensor.onnx");
+    let wrong_sensor = t.path().join("wrong-sensor.onnx");
     write_tiny_model_with(&wrong_sensor, 3, &["--beams", "450"]);
-    let not_onnx = dir.path().join("not-a-model.onnx");
+    let not_onnx = t.path().join("not-a-model.onnx");
     std::fs::write(&not_onnx, b"this is not an ONNX file").expect("writing a bad file");
 
-    let scenario_path = case1_scenario(dir.path(), 30.0);
-    let out = dir.path().join("out");
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args(["run", "--run-id", run_id.as_str(), "--pace-ms", "10"])
-        .arg("--scenario")
-        .arg(&scenario_path)
-        .arg("--model")
-        .arg(first)
-        .arg("--out")
-        .arg(&out);
-    let mut launch = LiveProcess::spawn(command);
-    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    let scenario_path = t.case1(30.0);
+    let out = t.out();
+    let launch = launch_connected(&t, &scenario_path);
 
     let robot = SWAPPED_ROBOT.to_string();
     for (bad, why) in [
@@ -91,33 +77,24 @@ fn a_lockstep_swap_matches_the_new_model_in_process_and_bad_swaps_are_refused() 
         (&wrong_sensor, "450"),
         (&not_onnx, "not-a-model.onnx"),
     ] {
-        swap(run_id.as_str(), &robot, bad, &[])
+        swap(t.run.as_str(), &robot, bad, &[])
             .assert_failure_mentioning("refused")
             .assert_failure_mentioning(why)
             .assert_failure_mentioning("old model keeps driving");
     }
-    swap(run_id.as_str(), "7", &second, &[]).assert_failure_mentioning("robot 7 does not exist");
-    swap(
-        run_id.as_str(),
-        &robot,
-        &dir.path().join("missing.onnx"),
-        &[],
-    )
-    .assert_failure_mentioning("not found");
+    swap(t.run.as_str(), "7", &second, &[]).assert_failure_mentioning("robot 7 does not exist");
+    swap(t.run.as_str(), &robot, &t.path().join("missing.onnx"), &[])
+        .assert_failure_mentioning("not found");
     swap("no-such-run", &robot, &second, &[]).assert_failure_mentioning("no run");
 
     let done = swap(
-        run_id.as_str(),
+        t.run.as_str(),
         &robot,
         &second,
         &["--at-tick", &SWAP_TICK.to_string()],
     );
     done.assert_success();
-    assert!(
-        done.stdout().contains(&format!("from tick {SWAP_TICK}")),
-        "{}",
-        done.describe()
-    );
+    done.assert_stdout_has(&format!("from tick {SWAP_TICK}"));
     let finished = launch.finish(LIMIT);
     finished.assert_success();
 
@@ -162,39 +139,33 @@ fn a_lockstep_swap_matches_the_new_model_in_process_and_bad_swaps_are_refused() 
         without.commands[swap_tick][SWAPPED_ROBOT],
         in_process.commands[swap_tick][SWAPPED_ROBOT]
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue (contracts checked): a model whose output is NaN passed swap validation and then braked
 /// its robot every tick. The agent runs the candidate once on its last observation and refuses it;
 /// the robot keeps driving with the old model, every tick.
-#[test]
-fn a_swap_to_a_model_with_nan_output_is_refused_and_the_old_model_keeps_driving() {
-    let _watchdog = Watchdog::arm("swap_nan", LIMIT);
-    let dir = TempDir::new("swapnan");
-    let run_id = unique_run_id("swapnan");
-    let leaks = LeakCheck::new(&run_id);
-    let first = test_model();
-    let nan = dir.path().join("nan-output.onnx");
-    write_tiny_model_with(&nan, 4, &["--nan-output"]);
-
-    let scenario_path = case1_scenario(dir.path(), 30.0);
-    let out = dir.path().join("out");
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args(["run", "--run-id", run_id.as_str(), "--pace-ms", "10"])
-        .arg("--scenario")
-        .arg(&scenario_path)
-        .arg("--model")
-        .arg(first)
-        .arg("--out")
-        .arg(&out);
-    let mut launch = LiveProcess::spawn(command);
+/// `formation run` of `scenario` with the test model (the first model), paced at 10 ms a tick,
+/// started and connected.
+fn launch_connected(t: &ProcessTest, scenario: &Path) -> LiveProcess {
+    let mut launch = LiveProcess::spawn(t.formation_run(scenario, &["--pace-ms", "10"]));
     let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
     assert!(connected.is_some(), "{}", launch.describe());
+    launch
+}
+
+#[test]
+fn a_swap_to_a_model_with_nan_output_is_refused_and_the_old_model_keeps_driving() {
+    let t = ProcessTest::start("swap_nan", LIMIT);
+    let nan = t.path().join("nan-output.onnx");
+    write_tiny_model_with(&nan, 4, &["--nan-output"]);
+
+    let scenario_path = t.case1(30.0);
+    let out = t.out();
+    let launch = launch_connected(&t, &scenario_path);
 
     let robot = SWAPPED_ROBOT.to_string();
-    swap(run_id.as_str(), &robot, &nan, &[])
+    swap(t.run.as_str(), &robot, &nan, &[])
         .assert_failure_mentioning("refused")
         .assert_failure_mentioning("non-finite")
         .assert_failure_mentioning("nan-output")
@@ -226,5 +197,5 @@ fn a_swap_to_a_model_with_nan_output_is_refused_and_the_old_model_keeps_driving(
         log.commands.iter().any(|&c| c != (0.0, 0.0)),
         "the robot drove"
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }

@@ -8,9 +8,8 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use formation_tests::{
-    Finished, LeakCheck, LiveProcess, TempDir, Tmpfs, Watchdog, await_connected, binaries,
-    case1_scenario, files_under, formation_run, formation_run_args, one_at_a_time, read_json,
-    repo_root, run, send_signal, unique_run_id, world_pid,
+    Finished, LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, files_under,
+    formation_run, formation_run_args, read_json, repo_root, run, send_signal, world_pid,
 };
 use formation_world::metrics::{MetricsConfig, run_metrics};
 
@@ -41,11 +40,7 @@ fn assert_no_panic(finished: &Finished) {
         "a panic is not an error message\n{}",
         finished.describe()
     );
-    assert!(
-        !finished.stderr().contains("panicked"),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_stderr_lacks("panicked");
 }
 
 /// SIGHUP ends the world by its default action, 30-odd simulated seconds into a 60 s run of
@@ -57,12 +52,8 @@ fn assert_no_panic(finished: &Finished) {
 /// SIGHUP, every child inherits that, and the world would rightly live through the signal.
 #[test]
 fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
-    let _watchdog = Watchdog::arm("sighup_incomplete", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("sighup");
-    let run_id = unique_run_id("sighup");
-    let leaks = LeakCheck::new(&run_id);
-    let out = dir.path().join("out");
+    let t = ProcessTest::start("sighup_incomplete", LIMIT);
+    let out = t.out();
     let scenario = repo_root().join("scenarios/case1.toml");
     let model = repo_root().join("onnx/models/policy.onnx");
     let mut hangup_by_default = Command::new("env");
@@ -71,7 +62,7 @@ fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
         .arg(&binaries().cli);
     formation_run_args(
         &mut hangup_by_default,
-        &run_id,
+        &t.run,
         (&scenario, &model, &out),
         &["--clock", "lockstep", "--pace-ms", "10"],
     );
@@ -93,7 +84,7 @@ fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
-    let Some(world) = world_pid(&run_id) else {
+    let Some(world) = world_pid(&t.run) else {
         panic!("no world process\n{}", launch.describe());
     };
     send_signal(world, "-HUP");
@@ -103,7 +94,7 @@ fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
         "a run cut short fails the launch\n{}",
         finished.describe()
     );
-    leaks.assert_clean();
+    t.assert_clean();
 
     let log = formation_world::RunLog::read(&out.join("runs/run-0000.json"))
         .unwrap_or_else(|e| panic!("{e}\n{}", finished.describe()));
@@ -147,16 +138,12 @@ fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
 /// agent is reported as exited and restarting (the world asked them to exit).
 #[test]
 fn a_full_disk_under_run_is_named_first_without_restart_lines() {
-    let _watchdog = Watchdog::arm("full_disk_first", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("fullfirst");
-    let disk = Tmpfs::mount(&dir.path().join("disk"), "256k");
-    let run_id = unique_run_id("fullfirst");
-    let leaks = LeakCheck::new(&run_id);
+    let t = ProcessTest::start("full_disk_first", LIMIT);
+    let disk = Tmpfs::mount(&t.path().join("disk"), "256k");
     let out = disk.dir().join("out");
-    let scenario = case1_scenario(dir.path(), 120.0);
+    let scenario = t.case1(120.0);
     let finished = LiveProcess::spawn(formation_run(
-        &run_id,
+        &t.run,
         &scenario,
         &out,
         &["--clock", "lockstep"],
@@ -167,7 +154,7 @@ fn a_full_disk_under_run_is_named_first_without_restart_lines() {
         "a run that cannot be written fails\n{}",
         finished.describe()
     );
-    leaks.assert_clean();
+    t.assert_clean();
     let stderr = finished.stderr();
     assert!(
         !stderr.contains("restarting"),
@@ -192,9 +179,8 @@ fn a_full_disk_under_run_is_named_first_without_restart_lines() {
 /// and speaks of neither "File exists" nor a full disk.
 #[test]
 fn an_output_path_under_a_file_names_that_file() {
-    let _watchdog = Watchdog::arm("path_under_file", LIMIT);
-    let dir = TempDir::new("underfile");
-    let blocker = dir.path().join("passwd");
+    let t = ProcessTest::start("path_under_file", LIMIT);
+    let blocker = t.path().join("passwd");
     std::fs::write(&blocker, b"root:x:0:0\n").expect("blocker");
     let scenario = repo_root().join("scenarios/case1.toml");
     let json = blocker.join("x.json");
@@ -233,9 +219,8 @@ fn an_output_path_under_a_file_names_that_file() {
 /// run log, on the terminal and on the page.
 #[test]
 fn a_full_disk_under_eval_out_leaves_an_output_marked_partial_that_report_names() {
-    let _watchdog = Watchdog::arm("eval_out_full", LIMIT);
-    let dir = TempDir::new("evalfull");
-    let disk = Tmpfs::mount(&dir.path().join("disk"), "64k");
+    let t = ProcessTest::start("eval_out_full", LIMIT);
+    let disk = Tmpfs::mount(&t.path().join("disk"), "64k");
     let out = disk.dir().join("out");
     let scenario = repo_root().join("scenarios/case1.toml");
     let finished = run(
@@ -267,7 +252,7 @@ fn a_full_disk_under_eval_out_leaves_an_output_marked_partial_that_report_names(
         "each median states its runs: {summary}"
     );
 
-    let html = dir.path().join("report.html");
+    let html = t.path().join("report.html");
     let mut report = Command::new(&binaries().cli);
     report.arg("report").arg(&out).arg("--out").arg(&html);
     let reported = run(report, LIMIT);

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{Finished, TempDir, Watchdog, binaries, case1_scenario, read_json, run};
+use formation_tests::{Finished, ProcessTest, binaries, read_json, run};
 
 const LIMIT: Duration = Duration::from_secs(300);
 
@@ -34,11 +34,10 @@ fn text(path: &Path) -> &str {
 
 #[test]
 fn outputs_never_overwrite_their_own_inputs() {
-    let _watchdog = Watchdog::arm("promises_inputs", LIMIT);
-    let dir = TempDir::new("promises-inputs");
-    let scenario = case1_scenario(dir.path(), 2.0);
+    let t = ProcessTest::start("promises_inputs", LIMIT);
+    let scenario = t.case1(2.0);
     let before = std::fs::read(&scenario).expect("scenario");
-    let out = dir.path().join("eval");
+    let out = t.path().join("eval");
     let evaluated = formation(&[
         "eval",
         "--controller",
@@ -75,7 +74,7 @@ fn outputs_never_overwrite_their_own_inputs() {
     assert_exit(&refused, 2);
     refused.assert_failure_mentioning(&out.join("report.html").display().to_string());
     // The report still builds from the same folder.
-    let html = dir.path().join("report.html");
+    let html = t.path().join("report.html");
     formation(&["report", text(&out), "--out", text(&html)]).assert_success();
 
     // `eval --json <the scenario>`: refused before any run, the scenario kept.
@@ -104,9 +103,8 @@ fn outputs_never_overwrite_their_own_inputs() {
 /// scenario they read: refused before connecting or playing, exit 2, the input kept.
 #[test]
 fn record_and_gauge_never_overwrite_their_own_inputs() {
-    let _watchdog = Watchdog::arm("promises_record_gauge", LIMIT);
-    let dir = TempDir::new("promises-record");
-    let creds = dir.path().join("creds");
+    let t = ProcessTest::start("promises_record_gauge", LIMIT);
+    let creds = t.path().join("creds");
     formation(&["credentials", "--robots", "2", "--out", text(&creds)]).assert_success();
     let credentials = creds.join("recorder.json");
     let before = std::fs::read(&credentials).unwrap();
@@ -127,7 +125,7 @@ fn record_and_gauge_never_overwrite_their_own_inputs() {
     }
     assert_eq!(std::fs::read(&credentials).unwrap(), before);
 
-    let scenario = case1_scenario(dir.path(), 2.0);
+    let scenario = t.case1(2.0);
     let scenario_bytes = std::fs::read(&scenario).unwrap();
     let refused = formation(&[
         "gauge",
@@ -156,13 +154,12 @@ fn formation_report_figures(out: &Path) -> std::path::PathBuf {
 
 #[test]
 fn one_team_size_evaluates_with_its_outputs_and_the_policy_is_always_evaluated() {
-    let _watchdog = Watchdog::arm("promises_sizes", LIMIT);
-    let dir = TempDir::new("promises-sizes");
-    let scenario = case1_scenario(dir.path(), 2.0);
+    let t = ProcessTest::start("promises_sizes", LIMIT);
+    let scenario = t.case1(2.0);
 
     // `eval --robots 16 --runs 2 --save-trajectories 2 --out D`: the 16-robot team, evaluated
     // and written as any evaluation.
-    let out = dir.path().join("sixteen");
+    let out = t.path().join("sixteen");
     let evaluated = formation(&[
         "eval",
         "--controller",
@@ -193,80 +190,55 @@ fn one_team_size_evaluates_with_its_outputs_and_the_policy_is_always_evaluated()
         "--robots",
         "3,4",
         "--out",
-        text(&dir.path().join("two")),
+        text(&t.path().join("two")),
     ]);
     assert_exit(&refused, 2);
     refused.assert_failure_mentioning("one team size at a time (--robots N)");
-    assert!(!dir.path().join("two").exists());
+    assert!(!t.path().join("two").exists());
 
     // `--robots` without `--model`: the default controller is the policy, and the shipped one
     // is evaluated beside the expert.
-    let table = dir.path().join("scaling.json");
-    let scaled = formation(&[
-        "eval",
-        "--controller",
-        "policy",
-        "--scenario",
-        text(&scenario),
-        "--robots",
-        "4",
-        "--runs",
-        "1",
-        "--json",
-        text(&table),
-    ]);
-    scaled.assert_success();
-    let rows = read_json(&table)["rows"].as_array().cloned().expect("rows");
+    let table = t.path().join("scaling.json");
+    let four_robots = |controller: &str| {
+        let finished = formation(&[
+            "eval",
+            "--controller",
+            controller,
+            "--scenario",
+            text(&scenario),
+            "--robots",
+            "4",
+            "--runs",
+            "1",
+            "--json",
+            text(&table),
+        ]);
+        finished.assert_success();
+        let rows = read_json(&table)["rows"].as_array().cloned().expect("rows");
+        (finished, rows)
+    };
+    let (scaled, rows) = four_robots("policy");
     let controllers: Vec<&str> = rows
         .iter()
         .filter_map(|r| r["controller"].as_str())
         .collect();
     assert_eq!(controllers, ["expert", "policy"], "{}", scaled.describe());
     // `--controller expert` asks for the expert alone.
-    let expert = formation(&[
-        "eval",
-        "--controller",
-        "expert",
-        "--scenario",
-        text(&scenario),
-        "--robots",
-        "4",
-        "--runs",
-        "1",
-        "--json",
-        text(&table),
-    ]);
-    expert.assert_success();
-    let rows = read_json(&table)["rows"].as_array().cloned().expect("rows");
+    let (_, rows) = four_robots("expert");
     assert!(rows.iter().all(|r| r["controller"] == "expert"), "{rows:?}");
 }
 
 /// `formation run --record FILE` says which file it wrote, as `eval --record` does (issue 39).
 #[test]
 fn run_record_prints_the_file_it_wrote() {
-    let _watchdog = Watchdog::arm("promises_run_record", LIMIT);
-    let _one = formation_tests::one_at_a_time();
-    let dir = TempDir::new("promises-record");
-    let run_id = formation_tests::unique_run_id("prorec");
-    let leaks = formation_tests::LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 1.0);
-    let file = dir.path().join("run.mcap");
-    let mut command = formation_tests::formation_run(
-        &run_id,
-        &scenario,
-        &dir.path().join("out"),
-        &["--clock", "lockstep"],
-    );
+    let t = ProcessTest::start("promises_run_record", LIMIT);
+    let scenario = t.case1(1.0);
+    let file = t.path().join("run.mcap");
+    let mut command = t.formation_run(&scenario, &["--clock", "lockstep"]);
     command.arg("--record").arg(&file);
     let finished = run(command, LIMIT);
     finished.assert_success();
-    leaks.assert_clean();
+    t.assert_clean();
     assert!(file.is_file(), "{}", finished.describe());
-    assert!(
-        finished
-            .stdout()
-            .contains(&format!("recorded {}", file.display())),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_stdout_has(&format!("recorded {}", file.display()));
 }

@@ -15,10 +15,9 @@ use std::time::Duration;
 use formation_cli::launch::read_trajectory;
 use formation_robot_agent::decision::PolicyController;
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
-    count_samples, formation_run, free_tcp_port, launch_secret, one_at_a_time, policy_eval,
-    raw_client, read_json, remote_zenoh_agent, run, run_with_input, test_model, unique_run_id,
-    zenoh_credentials,
+    LeakCheck, LiveProcess, ProcessTest, assert_bit_identical, binaries, count_samples,
+    formation_run, launch_secret, policy_eval, raw_client, read_json, remote_zenoh_agent, run,
+    run_with_input, test_model, unique_run_id, zenoh_credentials,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -46,20 +45,14 @@ fn run_log(out: &Path, index: usize) -> std::path::PathBuf {
 /// launcher) reproduces the in-process run bit for bit.
 #[test]
 fn lockstep_case1_over_zenoh_is_bit_identical_to_in_process() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_lockstep_bit_identical", LIMIT);
-    let dir = TempDir::new("zlock");
-    let run_id = unique_run_id("zlock");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario_path = case1_scenario(dir.path(), 10.0);
+    let t = ProcessTest::start("zenoh_lockstep_bit_identical", LIMIT);
+    let scenario_path = t.case1(10.0);
     let scenario = Scenario::from_path(&scenario_path).expect("scenario");
-    let out = dir.path().join("out");
-    let listen = endpoint(free_tcp_port());
+    let out = t.out();
+    let listen = t.endpoint();
     let finished = run(
-        formation_run(
-            &run_id,
+        t.formation_run(
             &scenario_path,
-            &out,
             &[
                 "--transport",
                 "zenoh",
@@ -76,13 +69,13 @@ fn lockstep_case1_over_zenoh_is_bit_identical_to_in_process() {
     let reference = in_process(&scenario, 0);
     assert_eq!(reference.poses.len(), 201, "10 s at 20 Hz");
     assert_bit_identical(&over_zenoh, &reference);
-    let credentials = out.join("credentials").join(run_id.as_str());
+    let credentials = out.join("credentials").join(t.run.as_str());
     assert!(
         credentials.join("robot-0.json").is_file(),
         "the launcher made the run's credentials\n{}",
         finished.describe()
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 13 (`--transport` on `formation eval`): one lockstep run of case 1 with
@@ -93,21 +86,19 @@ fn lockstep_case1_over_zenoh_is_bit_identical_to_in_process() {
 /// (`TMPDIR`, where the work folder, its credentials and the run's lock live).
 #[test]
 fn eval_over_zenoh_writes_the_same_json_as_in_process() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_eval_json", LIMIT);
-    let dir = TempDir::new("zeval");
-    let scenario = case1_scenario(dir.path(), 10.0);
-    let tmp = dir.path().join("tmp");
+    let t = ProcessTest::start("zenoh_eval_json", LIMIT);
+    let scenario = t.case1(10.0);
+    let tmp = t.path().join("tmp");
     std::fs::create_dir_all(&tmp).expect("the evaluation's TMPDIR");
-    let listen = endpoint(free_tcp_port());
+    let listen = t.endpoint();
     let eval = |extra: &[&str], json: &Path| {
         let mut command = policy_eval(&scenario, test_model(), json);
         command.env("TMPDIR", &tmp).args(extra);
         run(command, LIMIT)
     };
-    let in_process_json = dir.path().join("in-process.json");
+    let in_process_json = t.path().join("in-process.json");
     eval(&[], &in_process_json).assert_success();
-    let zenoh_json = dir.path().join("zenoh.json");
+    let zenoh_json = t.path().join("zenoh.json");
     let over_zenoh = eval(
         &["--processes", "--transport", "zenoh", "--listen", &listen],
         &zenoh_json,
@@ -135,7 +126,7 @@ fn eval_over_zenoh_writes_the_same_json_as_in_process() {
     let busy = endpoint(taken.local_addr().expect("its address").port());
     eval(
         &["--processes", "--transport", "zenoh", "--listen", &busy],
-        &dir.path().join("busy.json"),
+        &t.path().join("busy.json"),
     )
     .assert_failure_mentioning(&format!("zenoh could not listen on {busy}"));
     drop(taken);
@@ -168,14 +159,12 @@ fn eval_over_zenoh_writes_the_same_json_as_in_process() {
 /// An agent pointed at an endpoint where nothing listens fails, naming the endpoint.
 #[test]
 fn an_agent_with_an_unreachable_endpoint_names_it() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_unreachable", LIMIT);
-    let run_id = unique_run_id("zunre");
-    let nowhere = endpoint(free_tcp_port());
+    let t = ProcessTest::start("zenoh_unreachable", LIMIT);
+    let nowhere = t.endpoint();
     let mut agent = Command::new(&binaries().agent);
     agent
         .args(["--transport", "zenoh", "--connect", &nowhere])
-        .args(["--run-id", run_id.as_str(), "--robot", "0"])
+        .args(["--run-id", t.run.as_str(), "--robot", "0"])
         .args(["--connect-timeout-ms", "1500", "--model"])
         .arg(test_model());
     run_with_input(agent, Some(&launch_secret().to_line()), LIMIT)
@@ -188,12 +177,10 @@ fn an_agent_with_an_unreachable_endpoint_names_it() {
 /// and Zenoh without `--listen`.
 #[test]
 fn bad_zenoh_flags_are_refused_with_the_reason() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_bad_flags", LIMIT);
-    let dir = TempDir::new("zflag");
-    let scenario = case1_scenario(dir.path(), 1.0);
-    let out = dir.path().join("out");
-    let listen = endpoint(free_tcp_port());
+    let t = ProcessTest::start("zenoh_bad_flags", LIMIT);
+    let scenario = t.case1(1.0);
+    let out = t.out();
+    let listen = t.endpoint();
     let cases: [(&[&str], &str); 4] = [
         (
             &[
@@ -276,19 +263,12 @@ fn bad_zenoh_flags_are_refused_with_the_reason() {
 fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
     use std::sync::atomic::Ordering;
     use zenoh::Wait;
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_remote_and_impostor", LIMIT);
-    let dir = TempDir::new("zremo");
-    let run_id = unique_run_id("zremo");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 4.0);
-    let out = dir.path().join("out");
-    let creds = zenoh_credentials(dir.path(), 3);
-    let listen = endpoint(free_tcp_port());
-    let mut command = formation_run(
-        &run_id,
+    let t = ProcessTest::start("zenoh_remote_and_impostor", LIMIT);
+    let scenario = t.case1(4.0);
+    let creds = zenoh_credentials(t.path(), 3);
+    let listen = t.endpoint();
+    let mut command = t.formation_run(
         &scenario,
-        &out,
         &["--transport", "zenoh", "--listen", &listen, "--remote", "2"],
     );
     command
@@ -312,21 +292,21 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
         .expect("robot 1's login");
     let impostor = raw_client(&listen, Some((robot1.user(), robot1.password())))
         .expect("robot 1's login is a valid login");
-    let (_own, own_scans) = count_samples(&impostor, format!("formation/{run_id}/robot/1/*/scan"));
-    let (_other, others) = count_samples(&impostor, format!("formation/{run_id}/robot/2/**"));
-    let (_all, everything) = count_samples(&impostor, format!("formation/{run_id}/robot/0/**"));
+    let (_own, own_scans) = count_samples(&impostor, format!("formation/{}/robot/1/*/scan", t.run));
+    let (_other, others) = count_samples(&impostor, format!("formation/{}/robot/2/**", t.run));
+    let (_all, everything) = count_samples(&impostor, format!("formation/{}/robot/0/**", t.run));
     // A greeting for robot 2 from robot 1's login, from a session of its own (a session hands
     // its own puts to its own subscribers): the router drops it, so the world never even
     // refuses it.
     let forger = raw_client(&listen, Some((robot1.user(), robot1.password())))
         .expect("robot 1's login is a valid login");
     forger
-        .put(format!("formation/{run_id}/robot/2/hello"), vec![0u8; 48])
+        .put(format!("formation/{}/robot/2/hello", t.run), vec![0u8; 48])
         .wait()
         .expect("the put leaves the client");
 
     // The remote agent, started by hand as on another host, with robot 2's credentials only.
-    let mut agent = remote_zenoh_agent(&listen, &run_id, 2);
+    let mut agent = remote_zenoh_agent(&listen, &t.run, 2);
     agent.arg("--credentials").arg(creds.join("robot-2.json"));
     let remote = LiveProcess::spawn_with_input(agent, None);
     let finished = launch.finish(LIMIT);
@@ -354,7 +334,7 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
         finished.describe()
     );
     drop((impostor, forger));
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 13 (bad input: wrong or missing credentials): against a launch whose robot 2 is remote,
@@ -365,21 +345,14 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
 /// was reachable all along and the refusals were the logins'.
 #[test]
 fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_bad_credentials", LIMIT);
-    let dir = TempDir::new("zcred");
-    let run_id = unique_run_id("zcred");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 2.0);
-    let out = dir.path().join("out");
-    let creds = zenoh_credentials(dir.path(), 3);
-    let other_run = dir.path().join("other-run");
+    let t = ProcessTest::start("zenoh_bad_credentials", LIMIT);
+    let scenario = t.case1(2.0);
+    let creds = zenoh_credentials(t.path(), 3);
+    let other_run = t.path().join("other-run");
     let others = zenoh_credentials(&other_run, 3);
-    let listen = endpoint(free_tcp_port());
-    let mut command = formation_run(
-        &run_id,
+    let listen = t.endpoint();
+    let mut command = t.formation_run(
         &scenario,
-        &out,
         &["--transport", "zenoh", "--listen", &listen, "--remote", "2"],
     );
     command
@@ -392,7 +365,7 @@ fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
     });
     assert!(waiting.is_some(), "{}", launch.describe());
     let agent = |credentials: Option<&Path>| {
-        let mut agent = remote_zenoh_agent(&listen, &run_id, 2);
+        let mut agent = remote_zenoh_agent(&listen, &t.run, 2);
         agent.args(["--connect-timeout-ms", "5000"]);
         match credentials {
             Some(file) => {
@@ -435,20 +408,15 @@ fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
         "the refused logins never reached the world\n{}",
         finished.describe()
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// A remote robot whose agent never comes is named when the wait runs out.
 #[test]
 fn a_remote_agent_that_never_comes_is_named() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_remote_missing", LIMIT);
-    let dir = TempDir::new("zmiss");
-    let run_id = unique_run_id("zmiss");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 2.0);
-    let out = dir.path().join("out");
-    let listen = endpoint(free_tcp_port());
+    let t = ProcessTest::start("zenoh_remote_missing", LIMIT);
+    let scenario = t.case1(2.0);
+    let listen = t.endpoint();
     let flags = [
         "--transport",
         "zenoh",
@@ -459,9 +427,9 @@ fn a_remote_agent_that_never_comes_is_named() {
         "--remote-timeout-s",
         "8",
     ];
-    run(formation_run(&run_id, &scenario, &out, &flags), LIMIT)
+    run(t.formation_run(&scenario, &flags), LIMIT)
         .assert_failure_mentioning("remote agents of robots [1] did not connect");
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 13 (swap over the network): `formation swap --transport zenoh` sends the model's bytes
@@ -471,20 +439,13 @@ fn a_remote_agent_that_never_comes_is_named() {
 /// bytes that came (its path is the sender's), so the run replays bit for bit with no flag.
 #[test]
 fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_swap", LIMIT);
-    let bins = binaries();
-    let dir = TempDir::new("zswap");
-    let run_id = unique_run_id("zswap");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 8.0);
-    let out = dir.path().join("out");
-    let creds = zenoh_credentials(dir.path(), 3);
-    let listen = endpoint(free_tcp_port());
-    let mut command = formation_run(
-        &run_id,
+    let t = ProcessTest::start("zenoh_swap", LIMIT);
+    let scenario = t.case1(8.0);
+    let out = t.out();
+    let creds = zenoh_credentials(t.path(), 3);
+    let listen = t.endpoint();
+    let mut command = t.formation_run(
         &scenario,
-        &out,
         &[
             "--transport",
             "zenoh",
@@ -495,24 +456,17 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
         ],
     );
     command.arg("--credentials").arg(&creds);
-    let recording = dir.path().join("swapped.mcap");
+    let recording = t.path().join("swapped.mcap");
     command.arg("--record").arg(&recording);
     let mut launch = LiveProcess::spawn(command);
     let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
     assert!(connected.is_some(), "{}", launch.describe());
 
     let swap = |model: &Path, login: Option<&Path>| {
-        let mut command = Command::new(&bins.cli);
+        let mut command = Command::new(&t.bins().cli);
         command
             .args(["swap", "--transport", "zenoh", "--connect", &listen])
-            .args([
-                "--run",
-                run_id.as_str(),
-                "--robot",
-                "1",
-                "--timeout-s",
-                "30",
-            ])
+            .args(["--run", t.run.as_str(), "--robot", "1", "--timeout-s", "30"])
             .arg("--model")
             .arg(model);
         if let Some(login) = login {
@@ -521,7 +475,7 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
         run(command, LIMIT)
     };
     let operator = creds.join("operator.json");
-    let other = dir.path().join("other.onnx");
+    let other = t.path().join("other.onnx");
     formation_tests::write_tiny_model(&other, 99);
     let done = swap(&other, Some(&operator));
     done.assert_success();
@@ -530,10 +484,10 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
         "{}",
         done.describe()
     );
-    let junk = dir.path().join("junk.onnx");
+    let junk = t.path().join("junk.onnx");
     std::fs::write(&junk, b"this is not an ONNX model").unwrap();
     swap(&junk, Some(&operator)).assert_failure_mentioning("swap refused for robot 1");
-    let huge = dir.path().join("huge.onnx");
+    let huge = t.path().join("huge.onnx");
     std::fs::File::create(&huge)
         .and_then(|f| f.set_len(33 << 20))
         .expect("a sparse 33 MiB file");
@@ -548,8 +502,8 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
         models.len() >= 2,
         "robot 1 drove with the old model, then the one sent over the network: {models:?}"
     );
-    leaks.assert_clean();
-    assert_replays_with_the_stored_swap_model(&recording, dir.path());
+    t.assert_clean();
+    assert_replays_with_the_stored_swap_model(&recording, t.path());
 }
 
 /// `formation replay RECORDING` with no flag: nothing diverged and no step was left undecided,
@@ -584,10 +538,9 @@ fn assert_replays_with_the_stored_swap_model(recording: &Path, dir: &Path) {
 /// build, with Zenoh, in `target/`.
 #[test]
 fn an_agent_built_without_zenoh_says_how_to_build_it() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_not_built", Duration::from_secs(900));
-    let bins = binaries();
-    let profile = bins
+    let t = ProcessTest::start("zenoh_not_built", Duration::from_secs(900));
+    let profile = t
+        .bins()
         .agent
         .parent()
         .and_then(Path::file_name)
@@ -637,8 +590,7 @@ fn an_agent_built_without_zenoh_says_how_to_build_it() {
     let without = build(true).expect("cargo names the executable it built");
     // Cargo's copy in target/<profile>/ is now the build without Zenoh; keep a copy of that
     // one and put the tests' one back before anything else runs an agent.
-    let kept = TempDir::new("znobuild");
-    let agent = kept.path().join("formation-agent");
+    let agent = t.path().join("formation-agent");
     std::fs::copy(&without, &agent).expect("copying the agent built without zenoh");
     build(false);
     let mut command = Command::new(&agent);
