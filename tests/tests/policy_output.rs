@@ -7,13 +7,13 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
 use formation_onnx::{OnnxPolicy, PolicyOutput};
-use formation_perception::policy_input::formation_velocity_to_wheels;
+use formation_perception::policy_input::{formation_velocity_to_wheels, policy_aux};
 use formation_proto::Goal;
 use formation_robot_agent::decision::{Agent, PolicyController};
 use formation_tests::{
-    TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario, run, write_tiny_model_with,
+    ProcessTest, assert_bit_identical, binaries, lockstep_over_processes, run,
+    write_tiny_model_with,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -29,9 +29,8 @@ fn model_declaring(dir: &Path, output: &str) -> std::path::PathBuf {
 
 #[test]
 fn a_formation_velocity_model_is_turned_into_wheels_with_the_reference_term_at_the_goals_speed() {
-    let _watchdog = Watchdog::arm("formation_velocity_agent", LIMIT);
-    let dir = TempDir::new("fv-agent");
-    let model = model_declaring(dir.path(), "formation_velocity");
+    let t = ProcessTest::start("formation_velocity_agent", LIMIT);
+    let model = model_declaring(t.path(), "formation_velocity");
     let mut raw = OnnxPolicy::load(&model).expect("the model loads");
     assert_eq!(raw.metadata().output, PolicyOutput::FormationVelocity);
     let lidar = formation_proto::LidarSpec {
@@ -53,9 +52,9 @@ fn a_formation_velocity_model_is_turned_into_wheels_with_the_reference_term_at_t
         };
         let heading = -0.2;
         let command = agent.act(&scan, heading, &goal).expect("a decision");
-        let aux = agent.io().aux.values(heading, &goal);
+        let aux = policy_aux(heading, &goal).unwrap();
         let image: Vec<f32> = agent.image().iter().map(|&c| f32::from(c)).collect();
-        let values = raw.infer(&image, &aux).expect("the raw output");
+        let values = raw.infer(&image, aux).expect("the raw output");
         let expected = formation_velocity_to_wheels(values, f64::from(aux[0]), v_star, None);
         assert_eq!(command, expected, "v* = {v_star}");
         // A robot whose wheels have an acceleration limit shapes the same output for them.
@@ -73,28 +72,17 @@ fn a_formation_velocity_model_is_turned_into_wheels_with_the_reference_term_at_t
 
 #[test]
 fn a_formation_velocity_team_in_lockstep_over_processes_is_bit_identical_to_in_process() {
-    let _watchdog = Watchdog::arm("formation_velocity_lockstep", LIMIT);
-    let dir = TempDir::new("fv-lockstep");
-    let model = model_declaring(dir.path(), "formation_velocity");
+    let t = ProcessTest::start("formation_velocity_lockstep", LIMIT);
+    let model = model_declaring(t.path(), "formation_velocity");
     // Wheels with an acceleration limit, which each agent is told at the episode's start and
     // shapes its formation velocity for: the same over processes as in-process.
-    let short = case1_scenario(dir.path(), 4.0);
+    let short = t.case1(4.0);
     let limited = std::fs::read_to_string(&short).expect("the scenario")
         + "\n[robot]\nmax_wheel_accel = 1.0\n";
     std::fs::write(&short, limited).expect("the limited scenario");
     let scenario = Scenario::from_path(&short).expect("scenario");
     assert_eq!(scenario.world_config().robot.max_wheel_accel, Some(1.0));
-    let over_processes = eval_over_processes(
-        &scenario,
-        scenario.seed(),
-        1,
-        &model,
-        ClockMode::Lockstep,
-        &NetworkFlags::default(),
-        &mut |_| {},
-    )
-    .expect("a run over processes")
-    .trajectories;
+    let over_processes = lockstep_over_processes(&scenario, 1, &model);
     let spec = scenario.run_spec(scenario.seed(), 0);
     let models = [model.as_path(); 3];
     let mut controller =
@@ -115,10 +103,9 @@ fn a_formation_velocity_team_in_lockstep_over_processes_is_bit_identical_to_in_p
 
 #[test]
 fn a_model_declaring_an_output_no_consumer_knows_is_refused_naming_it() {
-    let _watchdog = Watchdog::arm("unknown_output_refused", LIMIT);
-    let dir = TempDir::new("fv-refused");
-    let model = model_declaring(dir.path(), "torques");
-    let scenario = case1_scenario(dir.path(), 2.0);
+    let t = ProcessTest::start("unknown_output_refused", LIMIT);
+    let model = model_declaring(t.path(), "torques");
+    let scenario = t.case1(2.0);
     let mut eval = Command::new(&binaries().cli);
     eval.args([
         "eval",

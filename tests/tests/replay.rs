@@ -12,14 +12,13 @@ use std::time::Duration;
 
 use formation_agent_node::pilot::{OnnxPilot, OnnxPilots};
 use formation_cli::replay::{ReplayOptions, replay_recording};
-use formation_onnx::contract::SensorContract;
-use formation_proto::{LidarSpec, PolicyIo};
+use formation_proto::{LidarSpec, OccupancySpec};
 use formation_robot_agent::decision::{DecisionError, PolicyBackend};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
-    Finished, LeakCheck, LiveProcess, TempDir, Watchdog, await_connected, binaries, case1_scenario,
-    eval_recorded, formation_run, mcap_readers, one_at_a_time, read_json,
-    record_case1_over_processes, repo_root, run, test_model, unique_run_id, write_tiny_model,
+    Finished, LiveProcess, ProcessTest, await_connected, binaries, case1_scenario, eval_recorded,
+    mcap_readers, read_json, record_case1_over_processes, repo_root, run, test_model,
+    write_tiny_model,
 };
 use serde_json::Value;
 
@@ -81,23 +80,21 @@ fn assert_identical_over(report: &Value, robots: usize, min_compared: u64) {
 /// robot the file does not hold is an error.
 #[test]
 fn a_case1_recording_replays_bit_identical_and_another_model_diverges() {
-    let _watchdog = Watchdog::arm("replay_case1", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("replay-case1");
-    let file = record_case1(dir.path());
+    let t = ProcessTest::start("replay_case1", LIMIT);
+    let file = record_case1(t.path());
 
-    let json = dir.path().join("same.json");
+    let json = t.path().join("same.json");
     let same = replay(&file, &[], &json);
     assert_exit(&same, 0);
-    assert!(same.stdout().contains("identical"), "{}", same.describe());
+    same.assert_stdout_has("identical");
     assert_identical_over(&read_json(&json), 3, 190);
 
     let paper = repo_root().join("onnx/models/paper/policy.onnx");
-    let json = dir.path().join("paper.json");
+    let json = t.path().join("paper.json");
     let other = replay(&file, &["--model", paper.to_str().unwrap()], &json);
     assert_exit(&other, 1);
-    assert!(other.stdout().contains("DIVERGED"), "{}", other.describe());
-    assert!(other.stderr().contains("diverged"), "{}", other.describe());
+    other.assert_stdout_has("DIVERGED");
+    other.assert_stderr_has("diverged");
     let report = read_json(&json);
     assert_eq!(report["diverged"], true, "{report}");
     assert_eq!(report["model_override"], true, "{report}");
@@ -108,23 +105,23 @@ fn a_case1_recording_replays_bit_identical_and_another_model_diverges() {
         assert!(row["first_differing_tick"].is_u64(), "{row}");
     }
 
-    let json = dir.path().join("one.json");
+    let json = t.path().join("one.json");
     let one = replay(&file, &["--robot", "1"], &json);
     assert_exit(&one, 0);
     let rows = read_json(&json)["robots"].as_array().unwrap().clone();
     assert_eq!(rows.len(), 1);
     assert_eq!(rows[0]["robot"], 1);
-    let none = replay(&file, &["--robot", "7"], &dir.path().join("none.json"));
+    let none = replay(&file, &["--robot", "7"], &t.path().join("none.json"));
     assert_exit(&none, 2);
-    assert!(none.stderr().contains("--robot 7"), "{}", none.describe());
+    none.assert_stderr_has("--robot 7");
 }
 
 /// A run over processes (an agent per robot, the test model stored in the recording as an
 /// attachment), recorded by the world with `clock`, replayed in one process: every fresh
 /// command bit for bit the agents', with at least `min_compared` compared per robot.
-fn replays_a_run_over_processes(clock: &str, min_compared: u64) {
-    let _one = one_at_a_time();
-    let dir = TempDir::new("replay-procs");
+fn replays_a_run_over_processes(name: &'static str, clock: &str, min_compared: u64) {
+    let t = ProcessTest::start(name, LIMIT);
+    let dir = &t.dir;
     let file = dir.path().join(format!("{clock}.mcap"));
     record_case1_over_processes(dir.path(), "replay", clock, &file);
     let json = dir.path().join(format!("{clock}.json"));
@@ -140,8 +137,7 @@ fn replays_a_run_over_processes(clock: &str, min_compared: u64) {
 /// Lockstep: every tick's command is fresh and replays bit for bit.
 #[test]
 fn a_lockstep_run_over_processes_replays_bit_identical() {
-    let _watchdog = Watchdog::arm("replay_lockstep", LIMIT);
-    replays_a_run_over_processes("lockstep", 190);
+    replays_a_run_over_processes("replay_lockstep", "lockstep", 190);
 }
 
 /// Realtime: each fresh command is replayed against the scan it answered (`lag_ticks` before
@@ -149,26 +145,31 @@ fn a_lockstep_run_over_processes_replays_bit_identical() {
 /// fresh; every fresh one must match.
 #[test]
 fn a_realtime_run_over_processes_replays_bit_identical() {
-    let _watchdog = Watchdog::arm("replay_realtime", LIMIT);
-    replays_a_run_over_processes("realtime", 100);
+    replays_a_run_over_processes("replay_realtime", "realtime", 100);
 }
 
 /// A policy whose input image has one cell flipped: the renderer changed by one pixel.
 struct OneCellFlipped(Box<dyn PolicyBackend>);
 
 impl PolicyBackend for OneCellFlipped {
-    fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError> {
+    fn infer(&mut self, occupancy: &[f32], aux: [f32; 2]) -> Result<[f32; 2], DecisionError> {
         let mut image = occupancy.to_vec();
         // The cell in the middle of the image's first row: beside the robot, within the window.
-        let cell = self.0.io().image.size_px / 2;
+        let cell = self.0.occupancy_spec().size_px / 2;
         image[cell] = 1.0 - image[cell];
         self.0.infer(&image, aux)
     }
-    fn io(&self) -> PolicyIo {
-        self.0.io()
+    fn occupancy_spec(&self) -> OccupancySpec {
+        self.0.occupancy_spec()
     }
-    fn sensor(&self) -> SensorContract {
-        self.0.sensor()
+    fn beams(&self) -> Option<usize> {
+        self.0.beams()
+    }
+    fn max_range(&self) -> Option<f64> {
+        self.0.max_range()
+    }
+    fn v_train(&self) -> f64 {
+        self.0.v_train()
     }
     fn model_id(&self) -> &str {
         self.0.model_id()
@@ -200,11 +201,9 @@ impl PilotMaker for FlippedPilots {
 /// agent's own pilots it finds none (the control).
 #[test]
 fn a_renderer_changed_by_one_pixel_is_caught() {
-    let _watchdog = Watchdog::arm("replay_pixel", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("replay-pixel");
-    let file = record_case1(dir.path());
-    let scratch = dir.path().join("scratch");
+    let t = ProcessTest::start("replay_pixel", LIMIT);
+    let file = record_case1(t.path());
+    let scratch = t.path().join("scratch");
     std::fs::create_dir(&scratch).unwrap();
     let options = ReplayOptions::default();
     let control = replay_recording(&file, &options, &OnnxPilots, &scratch).unwrap();
@@ -235,41 +234,27 @@ fn last_chunk_offset(bytes: &[u8]) -> usize {
 /// truncated recording is replayed up to the cut and its report says so.
 #[test]
 fn bad_input_gets_a_clear_error() {
-    let _watchdog = Watchdog::arm("replay_bad", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("replay-bad");
-    let json = dir.path().join("bad.json");
+    let t = ProcessTest::start("replay_bad", LIMIT);
+    let json = t.path().join("bad.json");
 
-    let text = dir.path().join("notes.mcap");
+    let text = t.path().join("notes.mcap");
     std::fs::write(&text, "not a recording\n").unwrap();
     let refused = replay(&text, &[], &json);
     assert_exit(&refused, 2);
-    assert!(
-        refused.stderr().contains("not an MCAP file"),
-        "{}",
-        refused.describe()
-    );
+    refused.assert_stderr_has("not an MCAP file");
 
-    let missing = replay(&dir.path().join("absent.mcap"), &[], &json);
+    let missing = replay(&t.path().join("absent.mcap"), &[], &json);
     assert_exit(&missing, 2);
-    assert!(
-        missing.stderr().contains("absent.mcap"),
-        "{}",
-        missing.describe()
-    );
+    missing.assert_stderr_has("absent.mcap");
 
-    let file = record_case1(dir.path());
+    let file = record_case1(t.path());
     let bytes = std::fs::read(&file).unwrap();
-    let cut = dir.path().join("cut.mcap");
+    let cut = t.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() * 3 / 5]).unwrap();
-    let json = dir.path().join("cut.json");
+    let json = t.path().join("cut.json");
     let truncated = replay(&cut, &[], &json);
     assert_exit(&truncated, 2);
-    assert!(
-        truncated.stderr().contains("truncated"),
-        "{}",
-        truncated.describe()
-    );
+    truncated.assert_stderr_has("truncated");
     let report = read_json(&json);
     assert_eq!(report["complete"], false, "{report}");
     assert_eq!(report["diverged"], false, "{report}");
@@ -279,9 +264,9 @@ fn bad_input_gets_a_clear_error() {
     );
 
     // Issue 39: 20 bytes that start as an MCAP file does are "too short", not "not MCAP".
-    let short = dir.path().join("short.mcap");
+    let short = t.path().join("short.mcap");
     std::fs::write(&short, &bytes[..20]).unwrap();
-    let too_short = replay(&short, &[], &dir.path().join("short.json"));
+    let too_short = replay(&short, &[], &t.path().join("short.json"));
     assert_exit(&too_short, 2);
     assert!(
         too_short.stderr().contains("too short")
@@ -306,9 +291,9 @@ fn bad_input_gets_a_clear_error() {
     crashed.extend(b"zstd");
     crashed.extend(u64::MAX.to_le_bytes());
     crashed.extend(&bytes[start + 53..start + 53 + 100]);
-    let unclosed = dir.path().join("unclosed.mcap");
+    let unclosed = t.path().join("unclosed.mcap");
     std::fs::write(&unclosed, &crashed).unwrap();
-    let json_unclosed = dir.path().join("unclosed.json");
+    let json_unclosed = t.path().join("unclosed.json");
     let replayed = replay(&unclosed, &[], &json_unclosed);
     assert_exit(&replayed, 2);
     assert!(
@@ -327,11 +312,7 @@ fn bad_input_gets_a_clear_error() {
 
     let no_model = replay(&file, &["--model", "/nonexistent/model.onnx"], &json);
     assert_exit(&no_model, 2);
-    assert!(
-        no_model.stderr().contains("/nonexistent/model.onnx"),
-        "{}",
-        no_model.describe()
-    );
+    no_model.assert_stderr_has("/nonexistent/model.onnx");
 }
 
 /// Gap 2 of issue 24: a paced lockstep run over processes in which robot 1's model is swapped
@@ -345,37 +326,24 @@ fn bad_input_gets_a_clear_error() {
 #[test]
 fn a_run_with_a_mid_run_swap_replays_bit_identical_with_each_ticks_model() {
     const SWAP_TICK: u64 = 120;
-    let _watchdog = Watchdog::arm("replay_swap", LIMIT);
-    let _one = one_at_a_time();
-    let dir = TempDir::new("replay-swap");
-    let run_id = unique_run_id("rswap");
-    let leaks = LeakCheck::new(&run_id);
-    let second = dir.path().join("second.onnx");
+    let t = ProcessTest::start("replay_swap", LIMIT);
+    let second = t.path().join("second.onnx");
     write_tiny_model(&second, 1);
-    let scenario = case1_scenario(dir.path(), 10.0);
-    let file = dir.path().join("swapped.mcap");
-    let mut command = formation_run(
-        &run_id,
-        &scenario,
-        &dir.path().join("out"),
-        &["--clock", "lockstep", "--pace-ms", "20"],
-    );
+    let scenario = t.case1(10.0);
+    let file = t.path().join("swapped.mcap");
+    let mut command = t.formation_run(&scenario, &["--clock", "lockstep", "--pace-ms", "20"]);
     command.arg("--record").arg(&file);
     let mut launch = LiveProcess::spawn(command);
     await_connected(&mut launch);
     let mut swap = Command::new(&binaries().cli);
-    swap.args(["swap", "--run", run_id.as_str(), "--robot", "1", "--model"])
+    swap.args(["swap", "--run", t.run.as_str(), "--robot", "1", "--model"])
         .arg(&second)
         .args(["--at-tick", &SWAP_TICK.to_string()]);
     let swapped = run(swap, LIMIT);
     swapped.assert_success();
-    assert!(
-        swapped.stdout().contains(&format!("from tick {SWAP_TICK}")),
-        "{}",
-        swapped.describe()
-    );
+    swapped.assert_stdout_has(&format!("from tick {SWAP_TICK}"));
     launch.finish(LIMIT).assert_success();
-    leaks.assert_clean();
+    t.assert_clean();
 
     // The world stored the swapped-in model: one attachment, the file's bytes, named by its record.
     let read = mcap_readers(&["attachments".as_ref(), file.as_os_str()]);
@@ -402,7 +370,7 @@ fn a_run_with_a_mid_run_swap_replays_bit_identical_with_each_ticks_model() {
     );
 
     // No flag: every step compared, each with the model that decided its tick.
-    let json = dir.path().join("stored.json");
+    let json = t.path().join("stored.json");
     let stored_replay = replay(&file, &[], &json);
     assert_exit(&stored_replay, 0);
     assert!(
@@ -421,7 +389,7 @@ fn a_run_with_a_mid_run_swap_replays_bit_identical_with_each_ticks_model() {
     );
 
     // --swap-model beside the stored model: the same model, still every step identical.
-    let json = dir.path().join("with.json");
+    let json = t.path().join("with.json");
     let with = replay(&file, &["--swap-model", second.to_str().unwrap()], &json);
     assert_exit(&with, 0);
     assert_every_step_identical(&read_json(&json));
@@ -448,11 +416,10 @@ fn a_step_that_precedes_its_swap_record_waits_for_it() {
     use formation_proto::{Goal, NeighbourRule, Pose, WheelCmd};
     use formation_record::{RecordingFile, SentCommand, SwapEvent, TeamSetup, TickRecord};
 
-    let _watchdog = Watchdog::arm("replay_held", LIMIT);
-    let dir = TempDir::new("replay-held");
-    let first = dir.path().join("first.onnx");
+    let t = ProcessTest::start("replay_held", LIMIT);
+    let first = t.path().join("first.onnx");
     write_tiny_model(&first, 0);
-    let second = dir.path().join("second.onnx");
+    let second = t.path().join("second.onnx");
     write_tiny_model(&second, 1);
     let id = |p: &Path| model_id(p, &std::fs::read(p).unwrap());
     let metadata = [
@@ -474,7 +441,7 @@ fn a_step_that_precedes_its_swap_record_waits_for_it() {
         wheel_separation: 0.2,
         neighbours: NeighbourRule::AllPairs,
     };
-    let file = dir.path().join("held.mcap");
+    let file = t.path().join("held.mcap");
     let mut recording = RecordingFile::create_with_metadata(&file, team, 1.0, metadata).unwrap();
     let tick = |k: u64, model: String| TickRecord {
         tick: k,
@@ -510,7 +477,7 @@ fn a_step_that_precedes_its_swap_record_waits_for_it() {
     recording.write_tick(&tick(4, id(&second))).unwrap();
     recording.finish(None).unwrap();
 
-    let scratch = dir.path().join("scratch");
+    let scratch = t.path().join("scratch");
     std::fs::create_dir(&scratch).unwrap();
     let replayed =
         replay_recording(&file, &ReplayOptions::default(), &OnnxPilots, &scratch).unwrap();

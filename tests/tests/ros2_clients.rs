@@ -31,8 +31,8 @@ use formation_ros2::{
 };
 use formation_runtime::agent::PilotMaker;
 use formation_tests::{
-    Finished, LiveProcess, TempDir, Watchdog, binaries, free_tcp_port, one_at_a_time, python,
-    repo_root, run, send_signal, test_model,
+    Finished, LiveProcess, ProcessTest, TempDir, binaries, free_tcp_port, python, repo_root, run,
+    send_signal, test_model,
 };
 use rand::{Rng, SeedableRng};
 use serde_json::{Value, json};
@@ -476,8 +476,8 @@ impl InProcess {
             .load(test_model())
             .expect("loading the test model");
         let (beams, max_range) = (
-            model.sensor().beams.expect("the model's beams"),
-            model.sensor().max_range.expect("the model's range"),
+            model.beams().expect("the model's beams"),
+            model.max_range().expect("the model's range"),
         );
         let lidar = LidarSpec {
             beams,
@@ -494,7 +494,7 @@ impl InProcess {
         let resampled =
             resample_scan(&scan.message(), self.contract, partial).expect("a usable scan");
         self.agent
-            .perceive(&resampled.ranges, &GOAL)
+            .perceive(&resampled.ranges, GOAL.d_star)
             .expect("in-process perception");
         let wheels = self
             .agent
@@ -575,10 +575,8 @@ fn stamp(i: i64) -> i64 {
 /// code on the same f32/f64 values, so nothing may differ).
 #[test]
 fn twists_answer_laser_scans_and_imu_as_the_in_process_decision_does() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_twists_as_in_process", LIMIT);
+    let t = ProcessTest::start("ros2_twists_as_in_process", LIMIT);
     let python = clients();
-    let dir = TempDir::new("r2dec");
     let half_turn = std::f32::consts::PI;
     let cases = [
         (
@@ -600,7 +598,7 @@ fn twists_answer_laser_scans_and_imu_as_the_in_process_decision_does() {
         .collect();
     let mut flags = topic_flags();
     flags.extend(["--stale-ms", "5000"]);
-    let outcome = session(python, &dir, "decide", &plan(steps), &flags);
+    let outcome = session(python, &t.dir, "decide", &plan(steps), &flags);
 
     let mut reference = InProcess::new();
     let answers = outcome.answers();
@@ -633,10 +631,8 @@ fn twists_answer_laser_scans_and_imu_as_the_in_process_decision_does() {
     reason = "one scripted scenario against an independent client: its steps read in order"
 )]
 fn zenoh_ros2_sdk_discovers_the_agents_node_and_topics_through_liveliness() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_discovery", LIMIT);
+    let t = ProcessTest::start("ros2_discovery", LIMIT);
     let python = clients();
-    let dir = TempDir::new("r2dis");
     let node = "ros2_clients_agent";
     let scan = full_scan(stamp(0), 4, 0.0, true);
     let imu = Orientation::new(stamp(0), 0.0, 0.0, 1.0);
@@ -645,7 +641,7 @@ fn zenoh_ros2_sdk_discovers_the_agents_node_and_topics_through_liveliness() {
     plan["discover"] = json!(true);
     let mut flags = topic_flags();
     flags.extend(["--node-name", node, "--stale-ms", "5000"]);
-    let outcome = session(python, &dir, "discover", &plan, &flags);
+    let outcome = session(python, &t.dir, "discover", &plan, &flags);
 
     let answers = outcome.answers();
     assert_eq!(answers.len(), 1, "{}", outcome.describe());
@@ -753,11 +749,9 @@ fn zenoh_ros2_sdk_discovers_the_agents_node_and_topics_through_liveliness() {
 /// passes, telling why.
 #[test]
 fn a_laser_scan_with_another_type_hash_is_reported_and_the_robot_brakes() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_wrong_hash", LIMIT);
+    let t = ProcessTest::start("ros2_wrong_hash", LIMIT);
     let python = clients();
-    let dir = TempDir::new("r2hash");
-    let outcome = bad_stream(python, &dir, "wrong_hash");
+    let outcome = bad_stream(python, &t.dir, "wrong_hash");
     let brake = outcome.one("brake");
     assert_eq!(
         brake["streamed_answered"],
@@ -779,11 +773,9 @@ fn a_laser_scan_with_another_type_hash_is_reported_and_the_robot_brakes() {
 /// decided on; with only such scans arriving, the robot brakes when the stale window passes.
 #[test]
 fn a_truncated_laser_scan_is_reported_and_the_robot_brakes() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_truncated", LIMIT);
+    let t = ProcessTest::start("ros2_truncated", LIMIT);
     let python = clients();
-    let dir = TempDir::new("r2trun");
-    let outcome = bad_stream(python, &dir, "truncated");
+    let outcome = bad_stream(python, &t.dir, "truncated");
     let brake = outcome.one("brake");
     assert_eq!(
         brake["streamed_answered"],
@@ -831,10 +823,8 @@ fn bad_stream(python: &Path, dir: &TempDir, bad: &str) -> Outcome {
 /// zero Twist, and the agent says how many readings were NaN; the next good scan drives again.
 #[test]
 fn a_scan_of_mostly_nan_readings_brakes_the_robot_with_the_reason() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_nan", LIMIT);
+    let t = ProcessTest::start("ros2_nan", LIMIT);
     let python = clients();
-    let dir = TempDir::new("r2nan");
     let good = full_scan(stamp(0), 7, 0.0, true);
     let mut nan = full_scan(stamp(1), 8, 0.0, true);
     for (i, r) in nan.ranges.iter_mut().enumerate() {
@@ -852,7 +842,7 @@ fn a_scan_of_mostly_nan_readings_brakes_the_robot_with_the_reason() {
     ];
     let mut flags = topic_flags();
     flags.extend(["--stale-ms", "5000"]);
-    let outcome = session(python, &dir, "nan", &plan(steps), &flags);
+    let outcome = session(python, &t.dir, "nan", &plan(steps), &flags);
     let answers = outcome.answers();
     assert_eq!(answers.len(), 3, "{}", outcome.describe());
     for (answer, scan) in answers.iter().zip([&good, &nan, &again]) {
@@ -882,10 +872,8 @@ fn a_scan_of_mostly_nan_readings_brakes_the_robot_with_the_reason() {
 /// no return).
 #[test]
 fn a_partial_circle_scan_brakes_unless_allowed_and_then_drives_as_in_process() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_partial", LIMIT);
+    let t = ProcessTest::start("ros2_partial", LIMIT);
     let python = clients();
-    let dir = TempDir::new("r2part");
     let good = full_scan(stamp(0), 9, 0.0, true);
     let step_angle = (std::f64::consts::TAU / 720.0) as f32;
     let half = cast_scan(
@@ -900,7 +888,7 @@ fn a_partial_circle_scan_brakes_unless_allowed_and_then_drives_as_in_process() {
     flags.extend(["--stale-ms", "5000"]);
 
     let steps = vec![step(Some(imu(0)), &good), step(Some(imu(1)), &half)];
-    let refused = session(python, &dir, "refused", &plan(steps), &flags);
+    let refused = session(python, &t.dir, "refused", &plan(steps), &flags);
     let answers = refused.answers();
     assert_eq!(answers.len(), 2, "{}", refused.describe());
     assert_answers(&refused, answers[0], &good);
@@ -919,7 +907,7 @@ fn a_partial_circle_scan_brakes_unless_allowed_and_then_drives_as_in_process() {
 
     flags.push("--allow-partial-scan");
     let steps = vec![step(Some(imu(1)), &half)];
-    let allowed = session(python, &dir, "allowed", &plan(steps), &flags);
+    let allowed = session(python, &t.dir, "allowed", &plan(steps), &flags);
     let answers = allowed.answers();
     assert_eq!(answers.len(), 1, "{}", allowed.describe());
     assert_answers(&allowed, answers[0], &half);
@@ -934,10 +922,8 @@ fn a_partial_circle_scan_brakes_unless_allowed_and_then_drives_as_in_process() {
 /// as the newest orientation is older than the stale window (500 ms).
 #[test]
 fn a_silent_orientation_topic_brakes_the_robot() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_silent_orientation", LIMIT);
+    let t = ProcessTest::start("ros2_silent_orientation", LIMIT);
     let python = clients();
-    let dir = TempDir::new("r2imu");
     let blind = full_scan(stamp(0), 11, 0.0, true);
     let good = full_scan(stamp(1), 12, 0.0, true);
     let imu = Orientation::new(stamp(1), 0.0, 0.0, 2.2);
@@ -950,7 +936,7 @@ fn a_silent_orientation_topic_brakes_the_robot() {
     });
     let mut flags = topic_flags();
     flags.extend(["--stale-ms", "500"]);
-    let outcome = session(python, &dir, "silent", &plan, &flags);
+    let outcome = session(python, &t.dir, "silent", &plan, &flags);
     let answers = outcome.answers();
     assert_eq!(answers.len(), 2, "{}", outcome.describe());
     assert_answers(&outcome, answers[0], &blind);
@@ -980,17 +966,15 @@ fn a_silent_orientation_topic_brakes_the_robot() {
 /// nothing. The stale window is a minute, so no other brake can come meanwhile.
 #[test]
 fn on_sigterm_the_agent_publishes_one_zero_twist_before_exiting() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_sigterm", LIMIT);
+    let t = ProcessTest::start("ros2_sigterm", LIMIT);
     let python = clients();
-    let dir = TempDir::new("r2term");
     let scan = full_scan(stamp(0), 13, 0.0, true);
     let imu = Orientation::new(stamp(0), 0.0, 0.0, -1.1);
     let mut plan = plan(vec![step(Some(imu), &scan)]);
     plan["hold"] = json!(true);
     let mut flags = topic_flags();
     flags.extend(["--stale-ms", "60000"]);
-    let outcome = session(python, &dir, "term", &plan, &flags);
+    let outcome = session(python, &t.dir, "term", &plan, &flags);
     let answers = outcome.answers();
     assert_eq!(answers.len(), 1, "{}", outcome.describe());
     assert!(!is_zero(answers[0]), "{}", outcome.describe());
@@ -1020,9 +1004,8 @@ fn on_sigterm_the_agent_publishes_one_zero_twist_before_exiting() {
 /// endpoint and `rmw_zenohd`.
 #[test]
 fn an_unreachable_router_fails_with_status_2_naming_the_endpoint_and_rmw_zenohd() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_unreachable", LIMIT);
-    let nowhere = format!("tcp/127.0.0.1:{}", free_tcp_port());
+    let t = ProcessTest::start("ros2_unreachable", LIMIT);
+    let nowhere = t.endpoint();
     let mut agent = Command::new(&binaries().agent);
     agent
         .args(["--transport", "ros2", "--connect", &nowhere])
