@@ -19,10 +19,9 @@ use formation_cli::launch::read_trajectory;
 use formation_robot_agent::decision::PolicyController;
 use formation_tests::netns::{NetPair, WORLD_IP};
 use formation_tests::{
-    LeakCheck, LiveProcess, RobotLog, TempDir, Watchdog, agent_pids, assert_bit_identical,
-    binaries, case1_scenario, formation_run_args, free_tcp_port, one_at_a_time, read_json,
-    repo_root, run, send_signal, start_relay, test_model, unique_run_id, world_pid,
-    zenoh_credentials,
+    LiveProcess, ProcessTest, RobotLog, agent_pids, assert_bit_identical, binaries,
+    formation_run_args, free_tcp_port, read_json, repo_root, run, send_signal, start_relay,
+    test_model, world_pid, zenoh_credentials,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -32,18 +31,17 @@ const ROBOTS: usize = 3;
 /// One test's network, run id, credentials and folders.
 struct Rig {
     pair: NetPair,
-    dir: TempDir,
-    run_id: formation_proto::wire::RunId,
-    leaks: LeakCheck,
     creds: PathBuf,
     /// Where the world listens, in its namespace.
     listen: String,
+    /// The test's prologue: dropped after the network pair, as it was made before it.
+    t: ProcessTest,
 }
 
 impl Rig {
     /// The rig; a machine where namespaces cannot be made fails the test with the fix (no test
     /// passes by skipping).
-    fn new(tag: &str) -> Rig {
+    fn new(t: ProcessTest) -> Rig {
         let pair = NetPair::create().unwrap_or_else(|reason| {
             panic!(
                 "network namespaces are unavailable here ({reason}); run the tests as root with \
@@ -51,23 +49,18 @@ impl Rig {
                  across a network"
             )
         });
-        let dir = TempDir::new(tag);
-        let run_id = unique_run_id(tag);
-        let leaks = LeakCheck::new(&run_id);
-        let creds = zenoh_credentials(dir.path(), ROBOTS);
+        let creds = zenoh_credentials(t.path(), ROBOTS);
         let listen = format!("tcp/{WORLD_IP}:{}", free_tcp_port());
         Rig {
             pair,
-            dir,
-            run_id,
-            leaks,
             creds,
             listen,
+            t,
         }
     }
 
     fn out(&self) -> PathBuf {
-        self.dir.path().join("out")
+        self.t.out()
     }
 
     /// `formation run` in the world's namespace, every robot remote.
@@ -82,7 +75,7 @@ impl Rig {
         .concat();
         let mut command = self.pair.in_world(&binaries().cli);
         let out = self.out();
-        formation_run_args(&mut command, &self.run_id, (scenario, model, &out), &flags);
+        formation_run_args(&mut command, &self.t.run, (scenario, model, &out), &flags);
         let mut launch = LiveProcess::spawn(command);
         let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
             l.contains("waiting for the remote agents")
@@ -98,7 +91,7 @@ impl Rig {
             .args(["--transport", "zenoh", "--connect", connect])
             .args([
                 "--run-id",
-                self.run_id.as_str(),
+                self.t.run.as_str(),
                 "--robot",
                 &robot.to_string(),
             ])
@@ -107,6 +100,38 @@ impl Rig {
             .arg("--credentials")
             .arg(self.creds.join(format!("robot-{robot}.json")));
         LiveProcess::spawn(command)
+    }
+
+    /// Evaluates `scenario` in-process (`formation eval --controller policy` with `runs`, the
+    /// run's seed flags) and asserts that every key of its JSON equals the launch's
+    /// `summary.json`; returns the in-process JSON.
+    fn assert_summary_is_in_process_eval(
+        &self,
+        scenario: &Path,
+        model: &Path,
+        runs: &[&str],
+    ) -> serde_json::Value {
+        let eval_json = self.t.path().join("in-process.json");
+        let mut eval = Command::new(&binaries().cli);
+        eval.args(["eval", "--controller", "policy"])
+            .args(runs)
+            .arg("--scenario")
+            .arg(scenario)
+            .arg("--model")
+            .arg(model)
+            .arg("--json")
+            .arg(&eval_json);
+        run(eval, LIMIT).assert_success();
+        let in_process = read_json(&eval_json);
+        let over = read_json(&self.out().join("summary.json"));
+        let keys = in_process.as_object().expect("eval JSON is an object");
+        for (key, value) in keys {
+            assert_eq!(
+                &over[key], value,
+                "{key} differs between the network and in-process"
+            );
+        }
+        in_process
     }
 
     fn agents(&self, connect: &str, model: &Path) -> Vec<LiveProcess> {
@@ -138,10 +163,8 @@ fn in_process(scenario: &Path, model: &Path) -> formation_world::Trajectory {
 /// `formation eval` in-process.
 #[test]
 fn lockstep_case1_across_namespaces_equals_in_process() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("netns_lockstep", LIMIT);
-    let rig = Rig::new("nslock");
-    let scenario_path = case1_scenario(rig.dir.path(), 10.0);
+    let rig = Rig::new(ProcessTest::start("netns_lockstep", LIMIT));
+    let scenario_path = rig.t.case1(10.0);
     let model = test_model();
     let launch = rig.launch(&scenario_path, model, &["--clock", "lockstep"]);
     let agents = rig.agents(&rig.listen, model);
@@ -152,42 +175,17 @@ fn lockstep_case1_across_namespaces_equals_in_process() {
     let over_network = read_trajectory(&rig.out().join("runs/run-0000.json")).expect("the run log");
     assert_bit_identical(&over_network, &in_process(&scenario_path, model));
 
-    let eval_json = rig.dir.path().join("in-process.json");
-    let mut eval = Command::new(&binaries().cli);
-    eval.args([
-        "eval",
-        "--controller",
-        "policy",
-        "--runs",
-        "1",
-        "--scenario",
-    ])
-    .arg(&scenario_path)
-    .arg("--model")
-    .arg(model)
-    .arg("--json")
-    .arg(&eval_json);
-    run(eval, LIMIT).assert_success();
-    let in_process = read_json(&eval_json);
-    let over = read_json(&rig.out().join("summary.json"));
+    let in_process = rig.assert_summary_is_in_process_eval(&scenario_path, model, &["--runs", "1"]);
     let keys = in_process.as_object().expect("eval JSON is an object");
     assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
-    for (key, value) in keys {
-        assert_eq!(
-            &over[key], value,
-            "{key} differs between the network and in-process"
-        );
-    }
-    rig.leaks.assert_clean();
+    rig.t.assert_clean();
 }
 
 /// Issue 13: ten table1 runs of the shipped model in lockstep, the world in one namespace and the
 /// three agents in the other, give the same Table I JSON as `formation eval` in-process.
 #[test]
 fn ten_table1_runs_across_namespaces_give_the_in_process_table() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("netns_table1", LIMIT);
-    let rig = Rig::new("nstab");
+    let rig = Rig::new(ProcessTest::start("netns_table1", LIMIT));
     let scenario = repo_root().join("scenarios/table1.toml");
     let model = repo_root().join("onnx/models/policy.onnx");
     let launch = rig.launch(
@@ -200,48 +198,21 @@ fn ten_table1_runs_across_namespaces_give_the_in_process_table() {
     finished.assert_success();
     finish_agents(agents);
 
-    let eval_json = rig.dir.path().join("in-process.json");
-    let mut eval = Command::new(&binaries().cli);
-    eval.args([
-        "eval",
-        "--controller",
-        "policy",
-        "--runs",
-        "10",
-        "--seed",
-        "7",
-    ])
-    .arg("--scenario")
-    .arg(&scenario)
-    .arg("--model")
-    .arg(&model)
-    .arg("--json")
-    .arg(&eval_json);
-    run(eval, LIMIT).assert_success();
-    let in_process = read_json(&eval_json);
-    let over = read_json(&rig.out().join("summary.json"));
-    let keys = in_process.as_object().expect("eval JSON is an object");
+    let in_process =
+        rig.assert_summary_is_in_process_eval(&scenario, &model, &["--runs", "10", "--seed", "7"]);
     assert_eq!(
         in_process["per_run"].as_array().map(Vec::len),
         Some(10),
         "ten runs in process"
     );
-    for (key, value) in keys {
-        assert_eq!(
-            &over[key], value,
-            "{key} differs between the network and in-process"
-        );
-    }
-    rig.leaks.assert_clean();
+    rig.t.assert_clean();
 }
 
 /// Issue 13: with 20 ± 5 ms of delay each way and 1 % of the agents' TCP packets dropped, a
 /// realtime case-1 run with the shipped model still converges.
 #[test]
 fn realtime_case1_converges_with_delay_and_loss() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("netns_delay_loss", LIMIT);
-    let rig = Rig::new("nsdelay");
+    let rig = Rig::new(ProcessTest::start("netns_delay_loss", LIMIT));
     if let Err(reason) = rig.pair.drop_percent(1) {
         panic!("{reason}; install nftables (Debian: apt-get install nftables)");
     }
@@ -261,7 +232,7 @@ fn realtime_case1_converges_with_delay_and_loss() {
     let mut relay = start_relay(relay);
     let model = repo_root().join("onnx/models/policy.onnx");
     // Success is judged on the final 20 s (the paper's window), so the run is longer than that.
-    let scenario = case1_scenario(rig.dir.path(), 30.0);
+    let scenario = rig.t.case1(30.0);
     let launch = rig.launch(&scenario, &model, &["--clock", "realtime"]);
     let agents = rig.agents(&format!("tcp/127.0.0.1:{relay_port}"), &model);
     let finished = launch.finish(LIMIT);
@@ -281,18 +252,16 @@ fn realtime_case1_converges_with_delay_and_loss() {
         "round trip with 20 ± 5 ms each way and 1 % loss: p50 {} us, p99 {} us",
         round_trip["p50_us"], round_trip["p99_us"]
     );
-    rig.leaks.assert_clean();
+    rig.t.assert_clean();
 }
 
 /// Issue 13: a SIGKILLed remote agent's robot brakes (the world sees its liveliness token go),
 /// and the agent started again by hand rejoins and drives it to the end of the run.
 #[test]
 fn a_killed_remote_agent_brakes_its_robot_and_a_restarted_one_rejoins() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("netns_kill", LIMIT);
-    let rig = Rig::new("nskill");
+    let rig = Rig::new(ProcessTest::start("netns_kill", LIMIT));
     let model = test_model();
-    let scenario = case1_scenario(rig.dir.path(), 12.0);
+    let scenario = rig.t.case1(12.0);
     let mut launch = rig.launch(&scenario, model, &["--clock", "realtime"]);
     let mut agents = rig.agents(&rig.listen, model);
     let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
@@ -331,7 +300,7 @@ fn a_killed_remote_agent_brakes_its_robot_and_a_restarted_one_rejoins() {
         "a braked stretch while the agent was dead, then fresh commands: {stretches:?}"
     );
     assert_eq!(robot1.outcomes.last().map(String::as_str), Some("fresh"));
-    rig.leaks.assert_clean();
+    rig.t.assert_clean();
 }
 
 /// Issue 13: the link cut (`ip link set … down`) brakes every remote robot within the stale
@@ -339,11 +308,9 @@ fn a_killed_remote_agent_brakes_its_robot_and_a_restarted_one_rejoins() {
 /// run completes.
 #[test]
 fn a_cut_link_brakes_every_robot_and_they_drive_again_when_it_is_back() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("netns_cut", LIMIT);
-    let rig = Rig::new("nscut");
+    let rig = Rig::new(ProcessTest::start("netns_cut", LIMIT));
     let model = test_model();
-    let scenario = case1_scenario(rig.dir.path(), 14.0);
+    let scenario = rig.t.case1(14.0);
     let mut launch = rig.launch(&scenario, model, &["--clock", "realtime"]);
     let agents = rig.agents(&rig.listen, model);
     let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
@@ -373,7 +340,7 @@ fn a_cut_link_brakes_every_robot_and_they_drive_again_when_it_is_back() {
         let stale = log.outcomes.iter().filter(|o| *o != "fresh").count();
         eprintln!("robot {robot}: {stale} braked ticks of {ticks} around a 2 s cut");
     }
-    rig.leaks.assert_clean();
+    rig.t.assert_clean();
 }
 
 /// Issue 13 (an impostor without credentials gets no scan and moves no robot), across the
@@ -386,10 +353,8 @@ fn a_cut_link_brakes_every_robot_and_they_drive_again_when_it_is_back() {
 /// bit-identical to in-process: the impostor moved no robot.
 #[test]
 fn an_impostor_across_namespaces_gets_nothing_and_moves_no_robot() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("netns_impostor", LIMIT);
-    let rig = Rig::new("nsimp");
-    let scenario_path = case1_scenario(rig.dir.path(), 6.0);
+    let rig = Rig::new(ProcessTest::start("netns_impostor", LIMIT));
+    let scenario_path = rig.t.case1(6.0);
     let model = test_model();
     let launch = rig.launch(&scenario_path, model, &["--clock", "lockstep"]);
     let mut impostor = rig
@@ -397,7 +362,7 @@ fn an_impostor_across_namespaces_gets_nothing_and_moves_no_robot() {
         .in_agents(Path::new(env!("CARGO_BIN_EXE_zenoh-impostor")));
     impostor
         .arg(&rig.listen)
-        .arg(rig.run_id.as_str())
+        .arg(rig.t.run.as_str())
         .arg(rig.creds.join("robot-1.json"))
         .args(["1", &ROBOTS.to_string()]);
     let mut impostor = LiveProcess::spawn_with_input(impostor, Some(""));
@@ -464,7 +429,7 @@ fn an_impostor_across_namespaces_gets_nothing_and_moves_no_robot() {
     }
     let over_network = read_trajectory(&rig.out().join("runs/run-0000.json")).expect("the run log");
     assert_bit_identical(&over_network, &in_process(&scenario_path, model));
-    rig.leaks.assert_clean();
+    rig.t.assert_clean();
 }
 
 /// The exact message of an agent whose world went away (`formation_runtime::agent::world_gone`).
@@ -487,17 +452,15 @@ fn world_gone_message(robot: usize, run: &str) -> String {
 /// does, by claiming it).
 #[test]
 fn remote_agents_exit_with_a_message_when_the_world_is_killed() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("netns_world_killed", LIMIT);
-    let rig = Rig::new("nswkill");
+    let rig = Rig::new(ProcessTest::start("netns_world_killed", LIMIT));
     let model = test_model();
-    let scenario = case1_scenario(rig.dir.path(), 300.0);
+    let scenario = rig.t.case1(300.0);
     let mut launch = rig.launch(&scenario, model, &["--clock", "realtime"]);
     let agents = rig.agents(&rig.listen, model);
     let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
     assert!(connected.is_some(), "{}", launch.describe());
     std::thread::sleep(Duration::from_secs(2));
-    let world = world_pid(&rig.run_id).expect("the world process runs");
+    let world = world_pid(&rig.t.run).expect("the world process runs");
     // `ip netns exec` execs the launcher in its own process.
     let launcher = launch.id();
     let comm = std::fs::read_to_string(format!("/proc/{launcher}/comm")).unwrap_or_default();
@@ -521,7 +484,7 @@ fn remote_agents_exit_with_a_message_when_the_world_is_killed() {
             "robot {robot}'s agent exits cleanly\n{}",
             finished.describe()
         );
-        let expected = world_gone_message(robot, rig.run_id.as_str());
+        let expected = world_gone_message(robot, rig.t.run.as_str());
         assert!(
             finished.stderr().lines().any(|l| l == expected),
             "robot {robot}'s agent says why it exits and what to do:\n{expected}\n{}",
@@ -532,10 +495,10 @@ fn remote_agents_exit_with_a_message_when_the_world_is_killed() {
             killed_at.elapsed().as_secs_f64() * 1e3
         );
     }
-    assert!(world_pid(&rig.run_id).is_none(), "the world still runs");
+    assert!(world_pid(&rig.t.run).is_none(), "the world still runs");
     for robot in 0..ROBOTS {
         assert!(
-            agent_pids(&rig.run_id, robot).is_empty(),
+            agent_pids(&rig.t.run, robot).is_empty(),
             "robot {robot}'s agent still runs"
         );
     }
@@ -552,11 +515,11 @@ fn remote_agents_exit_with_a_message_when_the_world_is_killed() {
         .collect();
     assert!(folders.is_empty(), "agents left folders: {folders:?}");
     assert_eq!(
-        rig.leaks.leftovers(),
+        rig.t.leaks.leftovers(),
         Vec::<PathBuf>::new(),
         "a run over Zenoh makes no iceoryx2 files"
     );
-    let namespace = rig.leaks.namespace();
+    let namespace = rig.t.leaks.namespace();
     assert!(
         namespace.lock_path().exists(),
         "the SIGKILLed launcher could not remove its lock"
@@ -566,5 +529,5 @@ fn remote_agents_exit_with_a_message_when_the_world_is_killed() {
             .lock()
             .expect("no live process holds the dead launch's lock"),
     );
-    rig.leaks.assert_clean();
+    rig.t.assert_clean();
 }
