@@ -6,6 +6,13 @@
 //! (`/scan`, `/odom` as Odometry, `/cmd_vel`, node `/formation_agent`). Each goal component is a
 //! fixed value when its flag is given (`--phi-star`, `--d-star`, `--v-star`), else the newest
 //! `std_msgs/Float64` on its topic (`/formation/goal/heading`, `/distance`, `/speed` by default).
+//!
+//! `--profile NAME` (a robot profile the world knows: `pioneer-p3dx`, `turtlebot3-burger`) tells
+//! the agent its robot: it expects that robot's LaserScan (beams, range, rate), and a scan that
+//! differs is named in one warning; the wheel separation (unless `--wheel-separation`), the top
+//! wheel speed (both wheels scaled by one factor into it, keeping the curvature) and the wheel
+//! acceleration limit (which shapes a formation-velocity model's output) are the robot's. A
+//! profile whose LIDAR is not the model's ring is told at start: its scans are resampled.
 
 use std::sync::atomic::AtomicBool;
 
@@ -23,10 +30,13 @@ use {
     formation_proto::LidarSpec,
     formation_ros2::{Namespace, NodeName, PartialScan, RingContract, TopicName},
     formation_runtime::agent::PilotMaker,
+    formation_runtime::agent::{BoxError, Pilot},
+    formation_runtime::ros2::agent::{ExpectedScan, run_agent_expecting},
     formation_runtime::ros2::{
         DeciderSettings, GoalValue, OrientationKind, Ros2AgentSettings, TeamTopics,
     },
     formation_runtime::zenoh::Endpoint,
+    formation_world::scenario::{ProfileSettings, RobotProfile},
     std::path::Path,
     std::time::Duration,
 };
@@ -97,11 +107,16 @@ pub struct Ros2Args {
     /// ROS 2: the node's name.
     #[arg(long, value_name = "NAME")]
     node_name: Option<String>,
+    /// ROS 2: the robot, as a profile the world knows (`pioneer-p3dx`, `turtlebot3-burger`):
+    /// its LaserScan is expected (a scan that differs is named once), and its wheel separation,
+    /// top wheel speed and wheel acceleration limit are used.
+    #[arg(long, value_name = "PROFILE")]
+    profile: Option<String>,
 }
 
 impl Ros2Args {
     /// `(given, "--flag")` of every ROS 2 flag, for refusing them with another transport.
-    pub fn given(&self) -> [(bool, &'static str); 15] {
+    pub fn given(&self) -> [(bool, &'static str); 16] {
         [
             // The environment variable alone is not a flag given by mistake.
             (false, "--ros-domain-id"),
@@ -119,6 +134,7 @@ impl Ros2Args {
             (self.stale_ms.is_some(), "--stale-ms"),
             (self.allow_partial_scan, "--allow-partial-scan"),
             (self.node_name.is_some(), "--node-name"),
+            (self.profile.is_some(), "--profile"),
         ]
     }
 }
@@ -151,19 +167,28 @@ pub fn run(
 ) -> anyhow::Result<AgentExit> {
     let flags = &args.ros2;
     let connect = check_ros2_flags(args)?;
+    let profile = flags.profile.as_deref().map(profile_named).transpose()?;
     let lidar = model_ring(model.as_ref(), &args.model)?;
-    let mut pilot = OnnxPilots
+    let onnx = OnnxPilots
         .pilot(model, lidar)
         .map_err(|e| anyhow::anyhow!("{}", formation_runtime::agent::error_chain(&*e)))?;
+    let robot = profile.map(|p| (p, p.settings()));
+    if let Some((profile, settings)) = &robot {
+        if let Some(told) = profile_lidar_differs(*profile, settings, lidar, onnx.model_id()) {
+            eprintln!("formation-agent: {told}");
+        }
+    }
+    let mut pilot = RobotPilot::new(onnx, robot.map(|(_, s)| s.robot.max_wheel_speed));
+    pilot.set_max_wheel_accel(robot.and_then(|(_, s)| s.robot.max_wheel_accel));
     let topics = robot_topics(args)?;
     let goal = goal_values(flags)?;
     if let GoalValue::Fixed(d_star) = goal[1] {
         // Refused at once, as an agent refuses a goal outside its model's envelope at episode
         // start.
-        formation_robot_agent::decision::check_goal_envelope(pilot.agent().policy(), d_star)
+        formation_robot_agent::decision::check_goal_envelope(pilot.inner.agent().policy(), d_star)
             .with_context(|| format!("--d-star {d_star}"))?;
     }
-    let wheel_separation = checked_wheel_separation(flags)?;
+    let wheel_separation = checked_wheel_separation(flags, robot.map(|(_, s)| s.robot))?;
     let stale_ms = checked_stale_ms(flags)?;
     let namespace = match args.robot {
         Some(robot) => Namespace::new(&format!("/robot_{robot}"))?,
@@ -206,9 +231,140 @@ pub fn run(
         orientation,
         cmd_vel,
     };
-    Ok(formation_runtime::ros2::run_agent(
-        &settings, &mut pilot, stop,
-    )?)
+    let expected = match robot {
+        Some((profile, settings)) => expected_scan(profile, &settings),
+        None => ExpectedScan::model_ring(settings.decider.contract),
+    };
+    Ok(run_agent_expecting(&settings, &expected, &mut pilot, stop)?)
+}
+
+/// The profile named `name`, or an error listing the ones the world knows.
+#[cfg(feature = "zenoh")]
+fn profile_named(name: &str) -> anyhow::Result<RobotProfile> {
+    RobotProfile::from_name(name).ok_or_else(|| {
+        let known: Vec<String> = RobotProfile::ALL
+            .iter()
+            .map(|p| format!("\"{}\"", p.name()))
+            .collect();
+        anyhow::anyhow!(
+            "--profile must name a robot profile, one of {} (got \"{name}\")",
+            known.join(", ")
+        )
+    })
+}
+
+/// The LaserScan a robot of `profile` publishes: its LIDAR's beams and range, and its scan
+/// rate (the world's control rate, 20 Hz, where the profile scans every tick).
+#[cfg(feature = "zenoh")]
+fn expected_scan(profile: RobotProfile, settings: &ProfileSettings) -> ExpectedScan {
+    ExpectedScan {
+        source: format!("the {} profile's LIDAR", profile.name()),
+        beams: settings.lidar.beams,
+        max_range: settings.lidar.max_range,
+        rate_hz: Some(
+            settings
+                .reality
+                .lidar
+                .scan_rate_hz
+                .unwrap_or(1.0 / formation_world::WorldConfig::default().dt),
+        ),
+    }
+}
+
+/// What to tell at start when the profile's LIDAR is not the ring model `model_id` was trained
+/// on; `None` when it is.
+#[cfg(feature = "zenoh")]
+fn profile_lidar_differs(
+    profile: RobotProfile,
+    settings: &ProfileSettings,
+    model: LidarSpec,
+    model_id: &str,
+) -> Option<String> {
+    let lidar = settings.lidar;
+    (lidar.beams != model.beams || lidar.max_range != model.max_range).then(|| {
+        format!(
+            "model {model_id} was trained on a {}-beam, {} m LIDAR; the {} profile's has {} \
+             beams and {} m, and its scans are resampled onto the model's ring (expect worse \
+             formations than the model's card says; a model trained for this robot drives it \
+             better)",
+            model.beams,
+            model.max_range,
+            profile.name(),
+            lidar.beams,
+            lidar.max_range
+        )
+    })
+}
+
+/// The pilot of a robot with a top wheel speed: both wheels of each command scaled by one
+/// factor so that neither exceeds it, which keeps the curvature the decision asked for (as
+/// the expert saturates). Without a top speed, the command is the inner pilot's.
+#[cfg(feature = "zenoh")]
+struct RobotPilot<P> {
+    inner: P,
+    max_wheel_speed: Option<f64>,
+}
+
+#[cfg(feature = "zenoh")]
+impl<P: Pilot> RobotPilot<P> {
+    fn new(inner: P, max_wheel_speed: Option<f64>) -> RobotPilot<P> {
+        RobotPilot {
+            inner,
+            max_wheel_speed,
+        }
+    }
+}
+
+/// `cmd` with both wheels scaled by one factor into `±limit` (unchanged within it).
+#[cfg(feature = "zenoh")]
+fn saturate(cmd: formation_proto::WheelCmd, limit: f64) -> formation_proto::WheelCmd {
+    let largest = cmd.left.abs().max(cmd.right.abs());
+    if largest > limit {
+        let scale = limit / largest;
+        formation_proto::WheelCmd {
+            left: cmd.left * scale,
+            right: cmd.right * scale,
+        }
+    } else {
+        cmd
+    }
+}
+
+#[cfg(feature = "zenoh")]
+impl<P: Pilot> Pilot for RobotPilot<P> {
+    type Model = P::Model;
+
+    fn model_id(&self) -> &str {
+        self.inner.model_id()
+    }
+
+    fn perceive(&mut self, ranges: &[f32], goal: &formation_proto::Goal) -> Result<(), BoxError> {
+        self.inner.perceive(ranges, goal)
+    }
+
+    fn decide(
+        &mut self,
+        heading: f64,
+        goal: &formation_proto::Goal,
+    ) -> Result<formation_proto::WheelCmd, BoxError> {
+        let cmd = self.inner.decide(heading, goal)?;
+        Ok(match self.max_wheel_speed {
+            Some(limit) => saturate(cmd, limit),
+            None => cmd,
+        })
+    }
+
+    fn swap(&mut self, model: Self::Model) -> Result<(), BoxError> {
+        self.inner.swap(model)
+    }
+
+    fn rehearse(&mut self) -> Result<(), BoxError> {
+        self.inner.rehearse()
+    }
+
+    fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
+        self.inner.set_max_wheel_accel(max_wheel_accel);
+    }
 }
 
 /// Refuses the flags of the other transports and returns the router to connect to.
@@ -326,10 +482,16 @@ fn goal_values(flags: &Ros2Args) -> anyhow::Result<[GoalValue; 3]> {
     ])
 }
 
-/// `--wheel-separation` (default: the P3-DX's), refused outside (0, 10) m.
+/// `--wheel-separation` (default: the profile's robot's, else the P3-DX's), refused outside
+/// (0, 10) m.
 #[cfg(feature = "zenoh")]
-fn checked_wheel_separation(flags: &Ros2Args) -> anyhow::Result<f64> {
-    let wheel_separation = flags.wheel_separation.unwrap_or(P3DX_WHEEL_SEPARATION);
+fn checked_wheel_separation(
+    flags: &Ros2Args,
+    robot: Option<formation_world::RobotParams>,
+) -> anyhow::Result<f64> {
+    let wheel_separation = flags
+        .wheel_separation
+        .unwrap_or_else(|| robot.map_or(P3DX_WHEEL_SEPARATION, |robot| robot.wheel_separation));
     if !(wheel_separation.is_finite() && wheel_separation > 0.0 && wheel_separation < 10.0) {
         anyhow::bail!(
             "--wheel-separation must be a length in metres between 0 and 10, got {wheel_separation}"
@@ -363,4 +525,101 @@ pub fn run(
         transport: Transport::Ros2,
     }
     .into())
+}
+
+#[cfg(all(test, feature = "zenoh"))]
+mod tests {
+    use super::*;
+    use formation_proto::WheelCmd;
+
+    #[test]
+    fn an_unknown_profile_is_refused_with_the_known_names() {
+        let message = profile_named("turtlebot4").unwrap_err().to_string();
+        assert_eq!(
+            message,
+            "--profile must name a robot profile, one of \"ideal\", \"pioneer-p3dx\", \
+             \"turtlebot3-burger\" (got \"turtlebot4\")"
+        );
+        assert_eq!(
+            profile_named("turtlebot3-burger").unwrap(),
+            RobotProfile::Turtlebot3Burger
+        );
+    }
+
+    #[test]
+    fn the_burger_expects_its_lds01_scan() {
+        let profile = RobotProfile::Turtlebot3Burger;
+        let expected = expected_scan(profile, &profile.settings());
+        assert_eq!(
+            (expected.beams, expected.max_range, expected.rate_hz),
+            (360, 3.5, Some(5.0))
+        );
+        assert_eq!(expected.source, "the turtlebot3-burger profile's LIDAR");
+        // The ideal world's LIDAR scans every tick, at the control rate.
+        let ideal = expected_scan(RobotProfile::Ideal, &RobotProfile::Ideal.settings());
+        assert_eq!((ideal.beams, ideal.rate_hz), (900, Some(20.0)));
+    }
+
+    #[test]
+    fn a_profile_lidar_unlike_the_models_is_told_at_start() {
+        let model = LidarSpec::default();
+        let burger = RobotProfile::Turtlebot3Burger;
+        let told = profile_lidar_differs(burger, &burger.settings(), model, "policy-x")
+            .expect("the burger's LDS-01 is not the model's ring");
+        assert!(
+            told.starts_with(
+                "model policy-x was trained on a 900-beam, 10 m LIDAR; the turtlebot3-burger \
+                 profile's has 360 beams and 3.5 m"
+            ),
+            "{told}"
+        );
+        let pioneer = RobotProfile::Pioneer3dx;
+        assert_eq!(
+            profile_lidar_differs(pioneer, &pioneer.settings(), model, "policy-x"),
+            None
+        );
+    }
+
+    #[test]
+    fn the_top_wheel_speed_scales_both_wheels_and_keeps_the_curvature() {
+        let cmd = WheelCmd {
+            left: 0.5,
+            right: 0.7,
+        };
+        let saturated = saturate(cmd, 0.22);
+        assert!((saturated.right - 0.22).abs() < 1e-12, "{saturated:?}");
+        assert!((saturated.left / saturated.right - 0.5 / 0.7).abs() < 1e-12);
+        assert_eq!(saturate(cmd, 0.9), cmd);
+        let backwards = saturate(
+            WheelCmd {
+                left: -1.0,
+                right: 0.5,
+            },
+            0.22,
+        );
+        assert_eq!(backwards.left, -0.22);
+        assert!((backwards.right - 0.11).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_wheel_separation_is_the_profiles_unless_given() {
+        use clap::Parser;
+        #[derive(Parser)]
+        struct Cli {
+            #[command(flatten)]
+            ros2: Ros2Args,
+        }
+        let burger = RobotProfile::Turtlebot3Burger.settings().robot;
+        let plain = Cli::parse_from(["x"]);
+        assert_eq!(checked_wheel_separation(&plain.ros2, None).unwrap(), 0.331);
+        assert_eq!(
+            checked_wheel_separation(&plain.ros2, Some(burger)).unwrap(),
+            0.160
+        );
+        let given = Cli::parse_from(["x", "--wheel-separation", "0.2", "--profile", "x"]);
+        assert_eq!(
+            checked_wheel_separation(&given.ros2, Some(burger)).unwrap(),
+            0.2
+        );
+    }
 }

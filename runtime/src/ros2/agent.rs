@@ -8,13 +8,18 @@
 //! zero Twist before it goes. If it dies without one, the robot's own `cmd_vel` timeout brakes it
 //! (ros2_controllers' diff_drive_controller: 0.5 s). A router that goes away mid-run is waited
 //! for (Zenoh reconnects by itself); meanwhile the scans stop and the robot is braked.
+//!
+//! The first scans are checked against the scan the agent expects ([`ExpectedScan`]: its robot
+//! profile's LIDAR, else the ring its model was trained on): a beam count, a range or a rate
+//! that differs is named in one warning ([`ScanCheck`]), and the scans are resampled onto the
+//! model's ring as always.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use formation_ros2::{
-    Float64, Imu, LaserScan, Namespace, NodeName, Odometry, Qos, TopicName, Twist,
+    Float64, Imu, LaserScan, Namespace, NodeName, Odometry, Qos, RingContract, TopicName, Twist,
 };
 
 use super::decider::{Answer, Decider, DeciderSettings, GoalValue, Inputs};
@@ -112,9 +117,22 @@ fn note_problem(inbox: &Mutex<Inbox>, problem: String) {
 const LOOK_EVERY: Duration = Duration::from_millis(50);
 
 /// Runs the agent until a signal or `stop`: connects, declares the node, its subscriptions and
-/// its publisher, and answers every scan.
+/// its publisher, and answers every scan. The scans are expected to be the model's own ring
+/// ([`ExpectedScan::model_ring`]); [`run_agent_expecting`] names another.
 pub fn run_agent<P: Pilot>(
     settings: &Ros2AgentSettings,
+    pilot: &mut P,
+    stop: &AtomicBool,
+) -> Result<AgentExit, Ros2AgentError> {
+    let expected = ExpectedScan::model_ring(settings.decider.contract);
+    run_agent_expecting(settings, &expected, pilot, stop)
+}
+
+/// [`run_agent`] for a robot whose LaserScan is expected to be `expected` (a robot profile's
+/// LIDAR): the first scans that differ from it are named in one warning.
+pub fn run_agent_expecting<P: Pilot>(
+    settings: &Ros2AgentSettings,
+    expected: &ExpectedScan,
     pilot: &mut P,
     stop: &AtomicBool,
 ) -> Result<AgentExit, Ros2AgentError> {
@@ -136,8 +154,8 @@ pub fn run_agent<P: Pilot>(
     // (one per scan, tiny): a dropped one would leave the robot on its previous command.
     let cmd_vel =
         node.publisher::<Twist>(&settings.cmd_vel, Qos::ROS_DEFAULT, Delivery::Reliable)?;
-    let exit =
-        ScanAnswers::new(settings).answer_until_stopped(pilot, stop, &bell, &inbox, &cmd_vel);
+    let exit = ScanAnswers::new(settings, expected.clone())
+        .answer_until_stopped(pilot, stop, &bell, &inbox, &cmd_vel);
     // Whatever ended the loop (a signal, the launcher, an error), the robot is told to stop.
     brake(&cmd_vel, system_time_ns());
     drop(subscriptions);
@@ -319,17 +337,25 @@ struct ScanAnswers {
     superseded_told: u64,
     /// Why the latest sample on the scan topic was unusable, until a usable scan comes.
     scan_unusable: Option<String>,
+    /// The first scans against the one expected.
+    scan_check: ScanCheck,
 }
 
 impl ScanAnswers {
-    /// A fresh loop state with `settings`' decision, its clock started now.
-    fn new(settings: &Ros2AgentSettings) -> ScanAnswers {
+    /// A fresh loop state with `settings`' decision, its clock started now, expecting scans
+    /// like `expected`.
+    fn new(settings: &Ros2AgentSettings, expected: ExpectedScan) -> ScanAnswers {
         ScanAnswers {
             decider: Decider::new(settings.decider.clone(), Instant::now()),
             told: None,
             problems_told: ProblemLog::default(),
             superseded_told: 0,
             scan_unusable: None,
+            scan_check: ScanCheck::new(
+                expected,
+                settings.decider.contract,
+                settings.scan.as_str().to_owned(),
+            ),
         }
     }
 
@@ -388,6 +414,9 @@ impl ScanAnswers {
         }
         if let Some((scan, arrived)) = scan {
             self.scan_unusable = None;
+            if let Some(warning) = self.scan_check.look(&scan.message) {
+                eprintln!("formation-agent: {warning}");
+            }
             let stamp = scan.message.header.stamp.as_nanos();
             match self.decider.on_scan(&scan.message, &inputs, arrived, pilot) {
                 Answer::Drive(twist) => {
@@ -447,5 +476,261 @@ fn tell(told: &mut Option<String>, reason: &str) {
     if told.as_deref() != Some(reason) {
         eprintln!("formation-agent: braking: {reason}");
         *told = Some(reason.to_owned());
+    }
+}
+
+/// The LaserScan an agent expects of its robot: its robot profile's LIDAR (`formation-agent
+/// --profile`), else the ring its model was trained on (whose metadata declares no rate).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExpectedScan {
+    /// Whose scan it is, for the warning (`the turtlebot3-burger profile's LIDAR`).
+    pub source: String,
+    /// Readings per scan (a full circle).
+    pub beams: usize,
+    /// Largest range \[m\].
+    pub max_range: f64,
+    /// Scans per second, if expected (`None`: any rate).
+    pub rate_hz: Option<f64>,
+}
+
+impl ExpectedScan {
+    /// The model's own ring: its beams and range, any rate.
+    pub fn model_ring(contract: RingContract) -> ExpectedScan {
+        ExpectedScan {
+            source: "the model's LIDAR".into(),
+            beams: contract.beams,
+            max_range: contract.max_range,
+            rate_hz: None,
+        }
+    }
+}
+
+/// A scan's rate may differ from the expected one by this share before it is named (drivers
+/// round `scan_time`, and a LIDAR's motor drifts by a few per cent).
+const RATE_TOLERANCE: f64 = 0.2;
+/// A scan's `range_max` may differ from the expected range by this share before it is named.
+const RANGE_TOLERANCE: f64 = 0.05;
+
+/// What one scan shows of its LIDAR.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SeenScan {
+    beams: usize,
+    max_range: f64,
+    /// From `scan_time`, else from the first two scans' stamps; `None` while unknown.
+    rate_hz: Option<f64>,
+}
+
+/// Checks the first scans against the [`ExpectedScan`] and names, in one warning, every way
+/// they differ (beams, range, rate). It judges once: on the first scan when that scan tells its
+/// rate (`scan_time` > 0), when no rate is expected, or when the beams or range differ already;
+/// else on the second, whose stamp gives the rate. Later scans are not looked at.
+#[derive(Debug, Clone)]
+pub struct ScanCheck {
+    expected: ExpectedScan,
+    model: RingContract,
+    topic: String,
+    first_stamp_ns: Option<i64>,
+    judged: bool,
+}
+
+impl ScanCheck {
+    /// A check of the scans on `topic` against `expected`, resampled onto the `model`'s ring.
+    pub fn new(expected: ExpectedScan, model: RingContract, topic: String) -> ScanCheck {
+        ScanCheck {
+            expected,
+            model,
+            topic,
+            first_stamp_ns: None,
+            judged: false,
+        }
+    }
+
+    /// Looks at a scan that came: the warning to give, once, if the scans differ from the
+    /// expected one.
+    pub fn look(&mut self, scan: &LaserScan) -> Option<String> {
+        if self.judged {
+            return None;
+        }
+        let stamp = scan.header.stamp.as_nanos();
+        let mut seen = SeenScan {
+            beams: scan.ranges.len(),
+            max_range: f64::from(scan.range_max),
+            rate_hz: (scan.scan_time.is_finite() && scan.scan_time > 0.0)
+                .then(|| 1.0 / f64::from(scan.scan_time)),
+        };
+        if let (None, Some(first)) = (seen.rate_hz, self.first_stamp_ns) {
+            seen.rate_hz = (stamp > first).then(|| 1e9 / (stamp - first) as f64);
+        }
+        let differences = self.differences(&seen);
+        let waiting_for_rate = seen.rate_hz.is_none()
+            && self.expected.rate_hz.is_some()
+            && self.first_stamp_ns.is_none()
+            && differences.is_empty();
+        if waiting_for_rate {
+            self.first_stamp_ns = Some(stamp);
+            return None;
+        }
+        self.judged = true;
+        if differences.is_empty() {
+            return None;
+        }
+        Some(format!(
+            "the LaserScan on {} is not the one expected ({}: {}): {}; every scan is resampled \
+             onto the model's ring ({} beams, {} m) as usual, and the formations may be worse \
+             than the model's card says (told once)",
+            self.topic,
+            self.expected.source,
+            describe(
+                self.expected.beams,
+                self.expected.max_range,
+                self.expected.rate_hz
+            ),
+            differences.join(", "),
+            self.model.beams,
+            self.model.max_range,
+        ))
+    }
+
+    /// How `seen` differs from the expected scan, one phrase each.
+    fn differences(&self, seen: &SeenScan) -> Vec<String> {
+        let expected = &self.expected;
+        let mut differences = Vec::new();
+        if seen.beams != expected.beams {
+            differences.push(format!(
+                "it has {} beams, not {}",
+                seen.beams, expected.beams
+            ));
+        }
+        let range_off =
+            (seen.max_range - expected.max_range).abs() > RANGE_TOLERANCE * expected.max_range;
+        if !seen.max_range.is_finite() || range_off {
+            differences.push(format!(
+                "it reaches {} m, not {} m",
+                seen.max_range, expected.max_range
+            ));
+        }
+        if let (Some(seen_rate), Some(rate)) = (seen.rate_hz, expected.rate_hz)
+            && (seen_rate - rate).abs() > RATE_TOLERANCE * rate
+        {
+            differences.push(format!("it scans at {seen_rate:.1} Hz, not {rate} Hz"));
+        }
+        differences
+    }
+}
+
+/// `360 beams, 3.5 m, 5 Hz`.
+fn describe(beams: usize, max_range: f64, rate_hz: Option<f64>) -> String {
+    match rate_hz {
+        Some(rate) => format!("{beams} beams, {max_range} m, {rate} Hz"),
+        None => format!("{beams} beams, {max_range} m"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_ros2::{Header, Time};
+
+    fn scan(beams: usize, range_max: f32, scan_time: f32, stamp_ns: i64) -> LaserScan {
+        let increment = std::f32::consts::TAU / beams as f32;
+        LaserScan {
+            header: Header {
+                stamp: Time::from_nanos(stamp_ns),
+                frame_id: "base_scan".into(),
+            },
+            angle_min: 0.0,
+            angle_max: increment * (beams - 1) as f32,
+            angle_increment: increment,
+            time_increment: 0.0,
+            scan_time,
+            range_min: 0.12,
+            range_max,
+            ranges: vec![1.0; beams],
+            intensities: Vec::new(),
+        }
+    }
+
+    fn burger() -> ExpectedScan {
+        ExpectedScan {
+            source: "the turtlebot3-burger profile's LIDAR".into(),
+            beams: 360,
+            max_range: 3.5,
+            rate_hz: Some(5.0),
+        }
+    }
+
+    fn check(expected: ExpectedScan) -> ScanCheck {
+        let model = RingContract {
+            beams: 900,
+            max_range: 10.0,
+        };
+        ScanCheck::new(expected, model, "/scan".into())
+    }
+
+    #[test]
+    fn the_expected_scan_gives_no_warning() {
+        let mut check = check(burger());
+        assert_eq!(check.look(&scan(360, 3.5, 0.2, 0)), None);
+        // Judged on the first scan (it told its rate): later ones are not looked at.
+        assert_eq!(check.look(&scan(720, 30.0, 0.05, 1)), None);
+    }
+
+    #[test]
+    fn a_foreign_scan_is_named_once_with_every_difference() {
+        let mut check = check(burger());
+        let warning = check.look(&scan(720, 12.0, 0.1, 0)).expect("a warning");
+        assert!(
+            warning.starts_with(
+                "the LaserScan on /scan is not the one expected (the turtlebot3-burger \
+                 profile's LIDAR: 360 beams, 3.5 m, 5 Hz): it has 720 beams, not 360, it \
+                 reaches 12 m, not 3.5 m, it scans at 10.0 Hz, not 5 Hz; every scan is \
+                 resampled onto the model's ring (900 beams, 10 m)"
+            ),
+            "{warning}"
+        );
+        for stamp in 1..50 {
+            assert_eq!(check.look(&scan(720, 12.0, 0.1, stamp)), None);
+        }
+    }
+
+    #[test]
+    fn without_scan_time_the_rate_comes_from_the_first_two_stamps() {
+        let mut check = check(burger());
+        // 20 Hz, scan_time unset (0): nothing to say until the second stamp.
+        assert_eq!(check.look(&scan(360, 3.5, 0.0, 1_000_000_000)), None);
+        let warning = check
+            .look(&scan(360, 3.5, 0.0, 1_050_000_000))
+            .expect("a warning");
+        assert!(
+            warning.contains("): it scans at 20.0 Hz, not 5 Hz;"),
+            "{warning}"
+        );
+        assert_eq!(check.look(&scan(360, 3.5, 0.0, 1_100_000_000)), None);
+
+        // Within the tolerance (4.6 Hz against 5): no warning.
+        let mut check = check_fresh();
+        assert_eq!(check.look(&scan(360, 3.6, 0.0, 0)), None);
+        assert_eq!(check.look(&scan(360, 3.6, 0.0, 217_000_000)), None);
+    }
+
+    fn check_fresh() -> ScanCheck {
+        check(burger())
+    }
+
+    #[test]
+    fn the_model_ring_expects_no_rate_and_judges_at_once() {
+        let model = RingContract {
+            beams: 900,
+            max_range: 10.0,
+        };
+        let mut same = check(ExpectedScan::model_ring(model));
+        assert_eq!(same.look(&scan(900, 10.0, 0.0, 0)), None);
+        assert_eq!(same.look(&scan(360, 3.5, 0.0, 1)), None);
+        let mut other = check(ExpectedScan::model_ring(model));
+        let warning = other.look(&scan(360, 10.0, 0.0, 0)).expect("a warning");
+        assert!(
+            warning.contains("(the model's LIDAR: 900 beams, 10 m): it has 360 beams, not 900;"),
+            "{warning}"
+        );
     }
 }
