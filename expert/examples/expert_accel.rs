@@ -142,7 +142,7 @@ fn diagnose_run(
     }
     let window_start = spec.ticks().saturating_sub(400);
     let mut expert =
-        ExpertController::new(options.gains, spec.world.robot).with_neighbours(spec.neighbours);
+        ExpertController::for_world(options.gains, &spec.world).with_neighbours(spec.neighbours);
     let mut requested: Vec<Vec<WheelCmd>> = Vec::new();
     let traj = run_episode(&spec, &mut expert, &mut |_, cmds| {
         requested.push(cmds.to_vec())

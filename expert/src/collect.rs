@@ -228,16 +228,13 @@ fn collect_run(
     iteration: u32,
     samples: &mut Vec<Sample>,
 ) -> Result<(), CollectError> {
-    let labeller = Labeller::new(
-        opts.gains,
-        spec.world.robot,
-        spec.world.lidar,
-        opts.occupancy,
-    )?;
+    // A lagging robot profile's world gets its team gain (the ideal world: the gains given).
+    let gains = opts.gains.for_reality(&spec.world.reality);
+    let labeller = Labeller::new(gains, spec.world.robot, spec.world.lidar, opts.occupancy)?;
     let run = narrow_run(spec.index)?;
     narrow_robot(spec.n_robots.saturating_sub(1))?;
     let mut expert =
-        ExpertController::new(opts.gains, spec.world.robot).with_neighbours(spec.neighbours);
+        ExpertController::new(gains, spec.world.robot).with_neighbours(spec.neighbours);
     let mut failure = None;
     let mut on_tick = |obs: &Observation<'_>, commands: &[WheelCmd]| {
         if failure.is_some() || !obs.tick.is_multiple_of(u64::from(opts.record_every)) {

@@ -421,7 +421,7 @@ impl IterationRollouts<'_> {
         let expert_drives = beta > 0.0 && coin.random::<f64>() < beta;
         let gains = self.labels.gains;
         let mut expert =
-            ExpertController::new(gains, spec.world.robot).with_neighbours(spec.neighbours);
+            ExpertController::for_world(gains, &spec.world).with_neighbours(spec.neighbours);
         if policies[size].is_none() && !expert_drives {
             policies[size] = Some(drivers[size].controller(scenario)?);
         }

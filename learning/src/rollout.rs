@@ -55,7 +55,7 @@ impl Driver {
     pub fn controller(&self, scenario: &Scenario) -> Result<Box<dyn Controller>, LearningError> {
         match self {
             Driver::Expert(gains) => Ok(Box::new(
-                ExpertController::new(*gains, scenario.world_config().robot)
+                ExpertController::for_world(*gains, scenario.world_config())
                     .with_neighbours(*scenario.neighbours()),
             )),
             Driver::Policy { models } => {

@@ -66,7 +66,7 @@ impl Slot {
         let episode = Episode::new(scenario.run_spec(seed, run));
         let robots = scenario.n_robots();
         let expert = expert.then(|| {
-            ExpertController::new(ExpertGains::default(), scenario.world_config().robot)
+            ExpertController::for_world(ExpertGains::default(), scenario.world_config())
                 .with_neighbours(*scenario.neighbours())
         });
         let mut slot = Slot {
