@@ -12,7 +12,8 @@ use std::time::Duration;
 
 use formation_agent_node::pilot::{OnnxPilot, OnnxPilots};
 use formation_cli::replay::{ReplayOptions, replay_recording};
-use formation_proto::{LidarSpec, OccupancySpec};
+use formation_onnx::contract::SensorContract;
+use formation_proto::{LidarSpec, PolicyIo};
 use formation_robot_agent::decision::{DecisionError, PolicyBackend};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
@@ -152,24 +153,18 @@ fn a_realtime_run_over_processes_replays_bit_identical() {
 struct OneCellFlipped(Box<dyn PolicyBackend>);
 
 impl PolicyBackend for OneCellFlipped {
-    fn infer(&mut self, occupancy: &[f32], aux: [f32; 2]) -> Result<[f32; 2], DecisionError> {
+    fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError> {
         let mut image = occupancy.to_vec();
         // The cell in the middle of the image's first row: beside the robot, within the window.
-        let cell = self.0.occupancy_spec().size_px / 2;
+        let cell = self.0.io().image.size_px / 2;
         image[cell] = 1.0 - image[cell];
         self.0.infer(&image, aux)
     }
-    fn occupancy_spec(&self) -> OccupancySpec {
-        self.0.occupancy_spec()
+    fn io(&self) -> PolicyIo {
+        self.0.io()
     }
-    fn beams(&self) -> Option<usize> {
-        self.0.beams()
-    }
-    fn max_range(&self) -> Option<f64> {
-        self.0.max_range()
-    }
-    fn v_train(&self) -> f64 {
-        self.0.v_train()
+    fn sensor(&self) -> SensorContract {
+        self.0.sensor()
     }
     fn model_id(&self) -> &str {
         self.0.model_id()

@@ -476,8 +476,8 @@ impl InProcess {
             .load(test_model())
             .expect("loading the test model");
         let (beams, max_range) = (
-            model.beams().expect("the model's beams"),
-            model.max_range().expect("the model's range"),
+            model.sensor().beams.expect("the model's beams"),
+            model.sensor().max_range.expect("the model's range"),
         );
         let lidar = LidarSpec {
             beams,
@@ -494,7 +494,7 @@ impl InProcess {
         let resampled =
             resample_scan(&scan.message(), self.contract, partial).expect("a usable scan");
         self.agent
-            .perceive(&resampled.ranges, GOAL.d_star)
+            .perceive(&resampled.ranges, &GOAL)
             .expect("in-process perception");
         let wheels = self
             .agent
