@@ -921,11 +921,12 @@ pub fn ladder_figure(
             // model).
             entries.push((
                 Mark::Line(color),
-                format!("{} N={} @ 10 %", line.controller, line.robots),
+                format!("{} N={}", line.controller, line.robots),
             ));
         }
         if !entries.is_empty() {
-            entries.push((Mark::Thin(INK), "thin: @ 5 %".to_owned()));
+            entries.insert(0, (Mark::Heading, "thin: at 5 %".to_owned()));
+            entries.insert(0, (Mark::Heading, "thick: at 10 %".to_owned()));
         }
         draw_legend(&legend, 44, &entries)
     })

@@ -403,7 +403,8 @@ fn a_reality_ladder_gets_its_section_with_the_rows_and_the_figure() {
     assert!(html.contains("policy: no rows (the model was trained on a 900-beam LIDAR)"));
     assert!(html.contains("ladder-burger.json"));
     let svg = fs::read_to_string(&summary.figures[0]).expect("svg");
-    assert!(svg.contains("expert N=3 @ 10 %") && svg.contains("policy N=3 @ 10 %"));
+    assert!(svg.contains("expert N=3") && svg.contains("policy N=3"));
+    assert!(svg.contains("thick: at 10 %") && svg.contains("thin: at 5 %"));
     assert!(svg.contains("lidar geometry") && svg.contains("latency"));
     // The expert's three lines (success at 10 % and 5 %, convergence) run unbroken over the
     // three rungs; the policy's are broken at the rung it could not drive, one point each side.
