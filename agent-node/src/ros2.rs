@@ -173,10 +173,10 @@ pub fn run(
         .pilot(model, lidar)
         .map_err(|e| anyhow::anyhow!("{}", formation_runtime::agent::error_chain(&*e)))?;
     let robot = profile.map(|p| (p, p.settings()));
-    if let Some((profile, settings)) = &robot {
-        if let Some(told) = profile_lidar_differs(*profile, settings, lidar, onnx.model_id()) {
-            eprintln!("formation-agent: {told}");
-        }
+    if let Some((profile, settings)) = &robot
+        && let Some(told) = profile_lidar_differs(*profile, settings, lidar, onnx.model_id())
+    {
+        eprintln!("formation-agent: {told}");
     }
     let mut pilot = RobotPilot::new(onnx, robot.map(|(_, s)| s.robot.max_wheel_speed));
     pilot.set_max_wheel_accel(robot.and_then(|(_, s)| s.robot.max_wheel_accel));
