@@ -337,8 +337,14 @@ fn a_burger_agent_names_a_foreign_scan_once_and_still_drives_within_its_wheels()
         .filter(|e| e["event"] == "answer")
         .collect();
     assert_eq!(answers.len(), steps.len(), "one answer a scan\n{describe}");
-    let expected = in_process_twists(&steps);
-    for ((answer, twist), (scan, _)) in answers.iter().zip(&expected).zip(&steps) {
+    assert_drives_as_in_process(&answers, &steps, &describe);
+}
+
+/// Panics unless each answer answers its step's scan (by stamp) with the in-process Twist, bit
+/// for bit, its wheels within the Burger's top speed.
+fn assert_drives_as_in_process(answers: &[Value], steps: &[(LaserScan, f64)], describe: &str) {
+    let expected = in_process_twists(steps);
+    for ((answer, twist), (scan, _)) in answers.iter().zip(&expected).zip(steps) {
         assert_eq!(
             answer["stamp_ns"].as_i64(),
             Some(scan.header.stamp.as_nanos()),
