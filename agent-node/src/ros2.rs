@@ -241,16 +241,7 @@ pub fn run(
 /// The profile named `name`, or an error listing the ones the world knows.
 #[cfg(feature = "zenoh")]
 fn profile_named(name: &str) -> anyhow::Result<RobotProfile> {
-    RobotProfile::from_name(name).ok_or_else(|| {
-        let known: Vec<String> = RobotProfile::ALL
-            .iter()
-            .map(|p| format!("\"{}\"", p.name()))
-            .collect();
-        anyhow::anyhow!(
-            "--profile must name a robot profile, one of {} (got \"{name}\")",
-            known.join(", ")
-        )
-    })
+    Ok(RobotProfile::named_by_flag("--profile", name)?)
 }
 
 /// The LaserScan a robot of `profile` publishes: its LIDAR's beams and range, and its scan

@@ -20,16 +20,7 @@ use crate::team_models::policy_driver;
 
 /// The profile named `name`, or an error listing the known ones.
 pub fn profile_named(name: &str) -> anyhow::Result<RobotProfile> {
-    RobotProfile::from_name(name).ok_or_else(|| {
-        let known: Vec<String> = RobotProfile::ALL
-            .iter()
-            .map(|p| format!("\"{}\"", p.name()))
-            .collect();
-        anyhow::anyhow!(
-            "--ladder must name a robot profile, one of {} (got \"{name}\")",
-            known.join(", ")
-        )
-    })
+    Ok(RobotProfile::named_by_flag("--ladder", name)?)
 }
 
 /// `formation eval --ladder PROFILE` (dispatched before the other `eval` forms).

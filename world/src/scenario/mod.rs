@@ -135,7 +135,7 @@ use self::parse::*;
 use self::placement::*;
 pub use self::plan::RunSpec;
 pub(crate) use self::plan::splitmix64;
-pub use self::profile::{ProfileSettings, RobotProfile};
+pub use self::profile::{ProfileSettings, RobotProfile, UnknownProfile};
 use self::validate::*;
 pub use crate::neighbours::all_pairs;
 use crate::neighbours::{GabrielRule, NeighbourRule, connected_within};

@@ -37,6 +37,19 @@ pub struct ProfileSettings {
     pub reality: RealityModels,
 }
 
+/// A command-line flag named no robot profile.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "{flag} must name a robot profile, one of {} (got \"{name}\")",
+    RobotProfile::ALL.map(|p| format!("\"{}\"", p.name())).join(", ")
+)]
+pub struct UnknownProfile {
+    /// The flag, e.g. `--profile`.
+    pub flag: &'static str,
+    /// The name given.
+    pub name: String,
+}
+
 impl RobotProfile {
     /// Every profile, in the order error messages list them.
     pub const ALL: [RobotProfile; 3] = [
@@ -57,6 +70,14 @@ impl RobotProfile {
     /// The profile named `name`, if there is one.
     pub fn from_name(name: &str) -> Option<RobotProfile> {
         RobotProfile::ALL.into_iter().find(|p| p.name() == name)
+    }
+
+    /// The profile a command-line `flag` names, or an error listing the names.
+    pub fn named_by_flag(flag: &'static str, name: &str) -> Result<RobotProfile, UnknownProfile> {
+        RobotProfile::from_name(name).ok_or_else(|| UnknownProfile {
+            flag,
+            name: name.to_owned(),
+        })
     }
 
     /// Whether this is the ideal world's profile.
