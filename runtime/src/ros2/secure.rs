@@ -37,9 +37,7 @@ use crate::zenoh::Endpoint;
 use crate::zenoh::access::{RECORDER_USER, robot_user};
 use crate::zenoh::tls::{self, TlsIdentity};
 
-/// The environment variable rmw_zenoh reads a node's session configuration from (a path or a
-/// `file://` URI); `formation-agent --transport ros2` reads it on a `tls/` endpoint too.
-pub const SESSION_CONFIG_ENV: &str = "ZENOH_SESSION_CONFIG_URI";
+pub use crate::zenoh::SESSION_CONFIG_ENV;
 
 /// The folder of a credentials folder that holds the ROS 2 session configurations.
 pub const SESSION_CONFIG_DIR: &str = "ros2";
@@ -74,17 +72,6 @@ pub enum Ros2SecurityError {
         /// Why it failed.
         #[source]
         source: std::io::Error,
-    },
-    /// A session configuration file is not a Zenoh configuration.
-    #[error(
-        "{path} (from {SESSION_CONFIG_ENV}) is not a Zenoh configuration: {detail}; use the file \
-         formation wrote in the credentials folder's ros2/"
-    )]
-    NotAConfig {
-        /// The file.
-        path: PathBuf,
-        /// Zenoh's error.
-        detail: String,
     },
 }
 
@@ -375,30 +362,6 @@ fn write_private(path: &Path, bytes: &[u8]) -> Result<(), Ros2SecurityError> {
         .open(path)
         .map_err(io)?;
     file.write_all(bytes).map_err(io)
-}
-
-/// A ROS 2 node's session on `connect` when it is a `tls/` endpoint: the file named by
-/// [`SESSION_CONFIG_ENV`] (a path or `file://` URI), as rmw_zenoh reads it; `None` when the
-/// variable is unset.
-pub(crate) fn session_config_from_env() -> Result<Option<::zenoh::Config>, Ros2SecurityError> {
-    let Some(uri) = std::env::var_os(SESSION_CONFIG_ENV) else {
-        return Ok(None);
-    };
-    let text = uri.to_string_lossy();
-    let path = PathBuf::from(text.strip_prefix("file://").unwrap_or(&text));
-    if !path.is_file() {
-        return Err(Ros2SecurityError::Io {
-            action: "reading",
-            path,
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        });
-    }
-    ::zenoh::Config::from_file(&path)
-        .map(Some)
-        .map_err(|e| Ros2SecurityError::NotAConfig {
-            path,
-            detail: e.to_string(),
-        })
 }
 
 #[cfg(test)]

@@ -275,16 +275,14 @@ pub(crate) fn client_config(
 }
 
 /// A ROS 2 node's session on a `tls/` endpoint (no login): the configuration file named by
-/// `ZENOH_SESSION_CONFIG_URI`, as rmw_zenoh reads it ([`crate::ros2::secure`]), connecting to
+/// [`SESSION_CONFIG_ENV`], as rmw_zenoh reads it (the ROS 2 team's security module writes it), connecting to
 /// `connect` with `base`'s settings of the connection; `None` when the variable is unset.
 #[cfg(feature = "tls")]
 fn ros2_node_config(
     connect: &Endpoint,
     base: &::zenoh::Config,
 ) -> Result<Option<::zenoh::Config>, String> {
-    let Some(mut config) =
-        crate::ros2::secure::session_config_from_env().map_err(|e| e.to_string())?
-    else {
+    let Some(mut config) = session_config_from_env().map_err(|e| e.to_string())? else {
         return Ok(None);
     };
     for key in [
@@ -559,6 +557,56 @@ impl<T> Queue<T> {
     pub(crate) fn drain(&self) -> VecDeque<T> {
         std::mem::take(&mut *self.lock())
     }
+}
+
+/// The environment variable rmw_zenoh reads a node's session configuration from (a path or a
+/// `file://` URI); `formation-agent --transport ros2` reads it on a `tls/` endpoint too.
+pub const SESSION_CONFIG_ENV: &str = "ZENOH_SESSION_CONFIG_URI";
+
+/// Why the session configuration [`SESSION_CONFIG_ENV`] names cannot be used.
+#[cfg(feature = "tls")]
+#[derive(Debug, thiserror::Error)]
+pub enum SessionConfigError {
+    /// No file there.
+    #[error(
+        "{path} (from {SESSION_CONFIG_ENV}): no such file; point it at the file formation wrote \
+         in the credentials folder's ros2/"
+    )]
+    Missing {
+        /// The file.
+        path: std::path::PathBuf,
+    },
+    /// The file is not a Zenoh configuration.
+    #[error(
+        "{path} (from {SESSION_CONFIG_ENV}) is not a Zenoh configuration: {detail}; use the file \
+         formation wrote in the credentials folder's ros2/"
+    )]
+    NotAConfig {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Zenoh's error.
+        detail: String,
+    },
+}
+
+/// The session configuration file [`SESSION_CONFIG_ENV`] names (a path or a `file://` URI), as
+/// rmw_zenoh reads it; `None` when the variable is unset.
+#[cfg(feature = "tls")]
+fn session_config_from_env() -> Result<Option<::zenoh::Config>, SessionConfigError> {
+    let Some(uri) = std::env::var_os(SESSION_CONFIG_ENV) else {
+        return Ok(None);
+    };
+    let text = uri.to_string_lossy();
+    let path = std::path::PathBuf::from(text.strip_prefix("file://").unwrap_or(&text));
+    if !path.is_file() {
+        return Err(SessionConfigError::Missing { path });
+    }
+    ::zenoh::Config::from_file(&path)
+        .map(Some)
+        .map_err(|e| SessionConfigError::NotAConfig {
+            path,
+            detail: e.to_string(),
+        })
 }
 
 #[cfg(test)]
