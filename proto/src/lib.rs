@@ -4,8 +4,7 @@
 //!   is given, LIDAR and occupancy settings). They carry no behaviour beyond validation.
 //! * [`neighbours`]: the formation's neighbour rule as a value (its computation is the world's).
 //! * [`policy_output`]: what a policy's output means ([`PolicyOutput`]), as its model declares it.
-//! * [`policy_io`]: a policy's whole input and output contract ([`PolicyIo`]) and one robot's own
-//!   view ([`RobotInput`]).
+//! * [`policy_io`]: a policy's whole input and output contract ([`PolicyIo`]).
 //! * [`files`]: reading a user's file only if it is a regular file within a size limit.
 //! * [`mod@model_id`]: the id an agent reports for its model (file stem and content hash).
 //! * [`errors`]: an error and its sources as one line, each cause printed once.
@@ -34,7 +33,7 @@ pub mod wire;
 
 pub use goal_speed::GoalSpeedFit;
 pub use neighbours::{GabrielRule, NeighbourRule};
-pub use policy_io::{AuxInput, AuxLayout, AuxValues, PolicyIo, RobotInput};
+pub use policy_io::{AuxInput, AuxLayout, AuxValues, PolicyIo};
 pub use policy_output::PolicyOutput;
 pub use team_size::TeamSizeFit;
 pub use types::*;

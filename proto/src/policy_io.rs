@@ -1,8 +1,8 @@
 //! A policy's input and output contract, as its model declares it: the one description that
 //! collection, the agent, replay and the Python package all read.
 //!
-//! A policy sees one robot and nothing else ([`RobotInput`]: its own scan, its own compass heading
-//! and the goal every robot is given). From that it is fed an occupancy image of the scan and a
+//! A policy sees one robot and nothing else: its own scan, its own compass heading and the goal
+//! every robot is given. From that it is fed an occupancy image of the scan and a
 //! short vector of scalars beside it ([`AuxLayout`], in the order the model declares in its
 //! `formation.aux` metadata; the paper's `(delta_phi, d*)` where it declares none), and it answers
 //! what its `formation.output` declares ([`PolicyOutput`]). [`PolicyIo`] holds all of it.
@@ -17,18 +17,6 @@ use crate::{Goal, OccupancySpec, PolicyOutput, wrap_angle};
 
 /// The most scalars a model may take beside its image.
 pub const MAX_AUX: usize = 8;
-
-/// One robot's own view at one tick: everything a decentralised policy may read. The world's
-/// other poses are not in it; only the expert is handed those.
-#[derive(Debug, Clone, Copy)]
-pub struct RobotInput<'a> {
-    /// The robot's own LIDAR ranges \[m\], beam 0 ahead, counter-clockwise.
-    pub scan: &'a [f32],
-    /// The robot's own compass heading \[rad\].
-    pub heading: f64,
-    /// The goal every robot is given.
-    pub goal: &'a Goal,
-}
 
 /// One scalar a policy takes beside its image, known by its name in `formation.aux`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -243,13 +231,6 @@ pub struct PolicyIo {
     pub output: PolicyOutput,
     /// Its training speed \[m/s\]: a `wheels` output is scaled by `v* / v_train`.
     pub v_train: f64,
-}
-
-impl PolicyIo {
-    /// The scalars for a robot's own view.
-    pub fn aux_values(&self, robot: &RobotInput<'_>) -> AuxValues {
-        self.aux.values(robot.heading, robot.goal)
-    }
 }
 
 #[cfg(test)]
