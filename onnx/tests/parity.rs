@@ -182,6 +182,23 @@ fn wrong_image_length_is_an_error() {
         .expect("still usable after a refused call");
 }
 
+/// The scalars beside the image must be as many as the model declares (`formation.aux`).
+#[test]
+fn wrong_aux_width_is_an_error_naming_the_declared_inputs() {
+    let fx = fixtures("parity");
+    let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
+    let image = vec![0.0; SIZE_PX * SIZE_PX];
+    match policy.infer(&image, &[0.0, 1.0, 2.0]) {
+        Err(err @ PolicyError::AuxLength { actual: 3, .. }) => {
+            assert!(err.to_string().contains("delta_phi,d_star"), "{err}");
+        }
+        other => panic!("expected AuxLength, got {other:?}"),
+    }
+    policy
+        .infer(&image, &[0.0, 1.0])
+        .expect("still usable after a refused call");
+}
+
 #[test]
 fn sensor_check_compares_beams_and_range() {
     let fx = fixtures("parity");
