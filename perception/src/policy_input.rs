@@ -225,6 +225,7 @@ mod tests {
         PolicyIo {
             image: formation_proto::OccupancySpec::PAPER,
             aux: formation_proto::AuxLayout::PAPER,
+            ranges: None,
             output,
             v_train: 0.7,
         }

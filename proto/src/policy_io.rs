@@ -7,6 +7,11 @@
 //! `formation.aux` metadata; the paper's `(delta_phi, d*)` where it declares none), and it answers
 //! what its `formation.output` declares ([`PolicyOutput`]). [`PolicyIo`] holds all of it.
 //!
+//! A model may also take its scan's ranges as floats ([`RangeInput`], declared in its
+//! `formation.ranges` metadata): the image resolves a neighbour to one cell (10 cm at the
+//! shipped window), the ranges to about a centimetre, which is the precision the strict check's
+//! small edge errors need (issue 34).
+//!
 //! **Adding a scalar input** is a variant of [`AuxInput`] with its name and its value here; the
 //! dataset, the trainer and the exporter carry it by name (see the guide's "Adding a policy
 //! input").
@@ -219,6 +224,142 @@ impl std::ops::Deref for AuxValues {
     }
 }
 
+/// The scan's ranges as a model takes them beside its image: the `ranges` input, `[B, sectors]`
+/// f32, declared by `formation.ranges = "sectors=K,clip=C"`.
+///
+/// The beams of the model's LIDAR (`L` of them, beam `b` at body bearing `2 pi b / L`) are
+/// grouped into `K` sectors centred on bearings `2 pi s / K`: beam `b` belongs to sector
+/// `floor(b K / L + 1/2) mod K`. A sector's value is the mean of `range / d*` over its beams
+/// that return (a finite range in `[0, max_range)`), at most `C`; a sector with no return is
+/// `C`. Dividing by d* makes the input what the image is: the same formation at any d* looks
+/// the same. Reflecting the scene about the robot's heading axis maps sector `s` to
+/// `(K - s) mod K`, exactly when `L / K` is an odd whole number (900 beams in 100 sectors of
+/// 9, 360 in 120 of 3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RangeInput {
+    /// `K`: sectors, [`RangeInput::MIN_SECTORS`] ..= [`RangeInput::MAX_SECTORS`].
+    pub sectors: usize,
+    /// `C`: the largest value, in units of d*, in `(0, `[`RangeInput::MAX_CLIP`]`]`.
+    pub clip: f32,
+}
+
+/// Why a `formation.ranges` declaration cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RangeInputError {
+    /// Not `sectors=K,clip=C`.
+    #[error(
+        "\"{text}\" is not a range input: write \"sectors=K,clip=C\" (K sectors, {min} to {max}; \
+         C the largest value in units of d*, above 0 and at most {max_clip})",
+        min = RangeInput::MIN_SECTORS,
+        max = RangeInput::MAX_SECTORS,
+        max_clip = RangeInput::MAX_CLIP
+    )]
+    Syntax {
+        /// The declaration.
+        text: String,
+    },
+    /// A value outside its range.
+    #[error(
+        "range input {what} = {value} is out of range: sectors must be {min} to {max}, \
+         clip above 0 and at most {max_clip}",
+        min = RangeInput::MIN_SECTORS,
+        max = RangeInput::MAX_SECTORS,
+        max_clip = RangeInput::MAX_CLIP
+    )]
+    Range {
+        /// `sectors` or `clip`.
+        what: &'static str,
+        /// The value found.
+        value: String,
+    },
+    /// More sectors than the LIDAR has beams.
+    #[error("a range input of {sectors} sectors needs at least as many LIDAR beams, not {beams}")]
+    Beams {
+        /// Sectors declared.
+        sectors: usize,
+        /// Beams of the LIDAR.
+        beams: usize,
+    },
+}
+
+impl RangeInput {
+    /// The fewest sectors.
+    pub const MIN_SECTORS: usize = 4;
+    /// The most sectors (one a degree).
+    pub const MAX_SECTORS: usize = 360;
+    /// The largest clip, in units of d*.
+    pub const MAX_CLIP: f32 = 100.0;
+
+    /// A checked range input.
+    pub fn new(sectors: usize, clip: f32) -> Result<RangeInput, RangeInputError> {
+        if !(RangeInput::MIN_SECTORS..=RangeInput::MAX_SECTORS).contains(&sectors) {
+            return Err(RangeInputError::Range {
+                what: "sectors",
+                value: sectors.to_string(),
+            });
+        }
+        if !(clip > 0.0 && clip <= RangeInput::MAX_CLIP) {
+            return Err(RangeInputError::Range {
+                what: "clip",
+                value: clip.to_string(),
+            });
+        }
+        Ok(RangeInput { sectors, clip })
+    }
+
+    /// Reads `sectors=K,clip=C` (the keys in either order, spaces around them allowed).
+    pub fn parse(text: &str) -> Result<RangeInput, RangeInputError> {
+        let syntax = || RangeInputError::Syntax {
+            text: text.to_owned(),
+        };
+        let (mut sectors, mut clip) = (None, None);
+        for part in text.split(',') {
+            let (key, value) = part.split_once('=').ok_or_else(syntax)?;
+            let value = value.trim();
+            match key.trim() {
+                "sectors" if sectors.is_none() => {
+                    sectors = Some(value.parse::<usize>().map_err(|_| syntax())?)
+                }
+                "clip" if clip.is_none() => {
+                    clip = Some(value.parse::<f32>().map_err(|_| syntax())?)
+                }
+                _ => return Err(syntax()),
+            }
+        }
+        match (sectors, clip) {
+            (Some(sectors), Some(clip)) => RangeInput::new(sectors, clip),
+            _ => Err(syntax()),
+        }
+    }
+
+    /// Checks that a LIDAR of `beams` beams fills every sector.
+    pub fn check_beams(&self, beams: usize) -> Result<(), RangeInputError> {
+        if beams < self.sectors {
+            return Err(RangeInputError::Beams {
+                sectors: self.sectors,
+                beams,
+            });
+        }
+        Ok(())
+    }
+
+    /// The sector of beam `beam` of `beams`.
+    pub fn sector_of(&self, beam: usize, beams: usize) -> usize {
+        ((2 * beam * self.sectors + beams) / (2 * beams)) % self.sectors
+    }
+
+    /// The sector a reflection about the heading axis maps `sector` to.
+    pub fn mirrored(&self, sector: usize) -> usize {
+        (self.sectors - sector) % self.sectors
+    }
+}
+
+impl fmt::Display for RangeInput {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "sectors={},clip={}", self.sectors, self.clip)
+    }
+}
+
 /// What a model takes and answers: its image, its scalars and its output, as its metadata
 /// declares them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -227,6 +368,8 @@ pub struct PolicyIo {
     pub image: OccupancySpec,
     /// The scalars beside the image.
     pub aux: AuxLayout,
+    /// The scan's ranges beside the image, if the model takes them.
+    pub ranges: Option<RangeInput>,
     /// What its one output means.
     pub output: PolicyOutput,
     /// Its training speed \[m/s\]: a `wheels` output is scaled by `v* / v_train`.
@@ -288,6 +431,69 @@ mod tests {
             AuxLayout::new(&[AuxInput::DStar; MAX_AUX + 1]),
             Err(AuxLayoutError::Count { count: MAX_AUX + 1 })
         );
+    }
+
+    #[test]
+    fn a_range_input_reads_back_what_it_writes_and_refuses_bad_values() {
+        let ranges = RangeInput::parse("sectors=100, clip=3").unwrap();
+        assert_eq!(
+            ranges,
+            RangeInput {
+                sectors: 100,
+                clip: 3.0
+            }
+        );
+        assert_eq!(RangeInput::parse(&ranges.to_string()), Ok(ranges));
+        assert_eq!(
+            RangeInput::parse("clip=2.5,sectors=120").unwrap().sectors,
+            120
+        );
+        for bad in [
+            "",
+            "sectors=100",
+            "sectors=100,clip=3,x=1",
+            "sectors=1e2,clip=3",
+            "sectors=100,sectors=100",
+        ] {
+            assert!(
+                matches!(RangeInput::parse(bad), Err(RangeInputError::Syntax { .. })),
+                "{bad}"
+            );
+        }
+        for bad in [
+            "sectors=3,clip=3",
+            "sectors=361,clip=3",
+            "sectors=100,clip=0",
+            "sectors=100,clip=NaN",
+            "sectors=100,clip=101",
+        ] {
+            assert!(
+                matches!(RangeInput::parse(bad), Err(RangeInputError::Range { .. })),
+                "{bad}"
+            );
+        }
+        assert!(ranges.check_beams(100).is_ok());
+        assert!(matches!(
+            ranges.check_beams(90),
+            Err(RangeInputError::Beams { .. })
+        ));
+    }
+
+    #[test]
+    fn sectors_are_centred_and_mirror_exactly_when_each_holds_an_odd_number_of_beams() {
+        let ranges = RangeInput::new(100, 3.0).unwrap();
+        // 900 beams: sector 0 holds beams -4..=4, sector 1 beams 5..=13.
+        let sectors: Vec<usize> = (0..900).map(|b| ranges.sector_of(b, 900)).collect();
+        assert_eq!(&sectors[..6], &[0, 0, 0, 0, 0, 1]);
+        assert_eq!(&sectors[895..], &[99, 0, 0, 0, 0]);
+        for s in 0..100 {
+            assert_eq!(sectors.iter().filter(|&&x| x == s).count(), 9);
+        }
+        // The reflection b -> -b maps each beam's sector to its mirror.
+        for b in 0..900 {
+            let reflected = (900 - b) % 900;
+            assert_eq!(sectors[reflected], ranges.mirrored(sectors[b]));
+        }
     }
 
     #[test]

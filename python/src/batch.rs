@@ -473,6 +473,7 @@ impl Batch {
         let io = PolicyIo {
             image: OccupancySpec::PAPER,
             aux: AuxLayout::PAPER,
+            ranges: None,
             output,
             v_train,
         };

@@ -635,6 +635,7 @@ mod tests {
             PolicyIo {
                 image: self.spec,
                 aux: formation_proto::AuxLayout::PAPER,
+                ranges: None,
                 output: formation_proto::PolicyOutput::Wheels,
                 v_train: 0.5,
             }
@@ -910,6 +911,7 @@ mod tests {
             PolicyIo {
                 image: OccupancySpec::PAPER,
                 aux: formation_proto::AuxLayout::PAPER,
+                ranges: None,
                 output: formation_proto::PolicyOutput::Wheels,
                 v_train: 0.7,
             }
