@@ -2,13 +2,19 @@
 //! (runs `first_run .. first_run + runs`), labelled by one worker of a sweep, to be appended to
 //! the dataset with the other shares, in run order ([`append_parts`]).
 //!
-//! A part is one safetensors file holding the six columns of a dataset shard
-//! ([`crate::dataset`]), whose `__metadata__` extends the shard's with:
+//! A part is one safetensors file holding the columns of a dataset shard ([`crate::dataset`]:
+//! six, and `ranges` where the dataset declares ranges), whose `__metadata__` extends the
+//! shard's with:
 //!
 //! - `format` = [`PART_FORMAT`], `version` = [`PART_VERSION`];
 //! - `part`: the [`PartHeader`] as JSON: the dataset's settings ([`DatasetHeader`]), the
 //!   iteration, the rollout settings ([`RolloutSettings`]) and the run range;
-//! - `samples`: the sample count, and `columns_fnv1a64`: FNV-1a 64 over the six columns.
+//! - `samples`: the sample count, and `columns_fnv1a64`: FNV-1a 64 over the columns.
+//!
+//! The dataset header in `part` holds the dataset's range input, if any (absent when none, so a
+//! part without ranges is byte for byte what builds before ranges wrote); its samples carry
+//! ranges of that many sectors, and [`append_parts`] appends them only to a dataset of the same
+//! range input.
 //!
 //! Parts are written atomically (temporary name, sync, rename), so a worker killed mid-share
 //! leaves no half file. [`append_parts`] checks that the parts are of one iteration with the same
@@ -308,7 +314,11 @@ pub fn file_fnv1a64(path: &Path) -> Result<String, PartError> {
 /// Writes `samples` (in run order) as the part `header` describes, atomically.
 pub fn write_part(path: &Path, header: &PartHeader, samples: &[Sample]) -> Result<(), PartError> {
     let runs = header.run_range();
-    let mut columns = PendingShard::default();
+    header.dataset.check().map_err(|source| PartError::Sample {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut columns = PendingShard::new(&header.dataset);
     for sample in samples {
         check_sample(&header.dataset, header.iteration, sample).map_err(|source| {
             PartError::Sample {
@@ -390,8 +400,11 @@ pub fn read_part(path: &Path) -> Result<Part, PartError> {
     let count: usize = field("samples")
         .and_then(|n| n.parse().ok())
         .ok_or_else(|| corrupt("no numeric `samples`".into()))?;
-    let samples =
-        decode_columns(&tensors, count, header.dataset.occupancy.size_px).map_err(corrupt)?;
+    header
+        .dataset
+        .check()
+        .map_err(|e| corrupt(format!("its `part` header: {e}")))?;
+    let samples = decode_columns(&tensors, count, &header.dataset).map_err(corrupt)?;
     check_read_samples(&header, &samples, field("columns_fnv1a64")).map_err(corrupt)?;
     Ok(Part { header, samples })
 }
@@ -402,7 +415,7 @@ fn check_read_samples(
     samples: &[Sample],
     checksum: Option<&str>,
 ) -> Result<(), String> {
-    let mut columns = PendingShard::default();
+    let mut columns = PendingShard::new(&header.dataset);
     let runs = header.run_range();
     let mut last_run = runs.start;
     for sample in samples {
@@ -546,7 +559,7 @@ pub fn append_parts(
 mod tests {
     use super::*;
     use crate::dataset::DatasetReader;
-    use crate::dataset::tests::{header, sample};
+    use crate::dataset::tests::{header, header_with_ranges, sample, sample_with_ranges};
 
     const ITERATION: u32 = 1;
 
@@ -773,6 +786,78 @@ mod tests {
             "{err:?}"
         );
         assert_eq!(DatasetReader::open(&data).unwrap().samples(), 5);
+    }
+
+    #[test]
+    fn a_part_with_ranges_round_trips_and_appends_only_to_a_dataset_of_the_same_ranges() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("p");
+        let mut header = part_header(0, 2);
+        header.dataset = header_with_ranges(7);
+        let samples: Vec<Sample> = [0, 1, 4, 5]
+            .into_iter()
+            .map(|k| sample_with_ranges(k, ITERATION))
+            .collect();
+        write_part(&path, &header, &samples).unwrap();
+        let read = read_part(&path).unwrap();
+        assert_eq!(read.header, header);
+        assert_eq!(read.samples, samples);
+
+        // A part without ranges for the dataset with them is refused when written.
+        let err = write_part(&dir.path().join("q"), &header, &samples_of(0..2)).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                PartError::Sample {
+                    source: DatasetError::SampleRanges { actual: 0, .. },
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+
+        // Appended to a dataset without ranges: refused, naming the ranges, nothing written.
+        let plain = dataset(dir.path());
+        let err = append_parts(&plain, ITERATION, 2, std::slice::from_ref(&path)).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                PartError::Dataset(DatasetError::HeaderMismatch {
+                    field: "range input",
+                    ..
+                })
+            ),
+            "{err:?}"
+        );
+        assert_eq!(DatasetReader::open(&plain).unwrap().samples(), 1);
+
+        // Appended to a dataset with the same ranges: the samples keep their ranges.
+        let data = dir.path().join("ranged");
+        let mut writer = DatasetWriter::create(&data, header_with_ranges(7)).unwrap();
+        writer.push(sample_with_ranges(100, 0)).unwrap();
+        writer.finish().unwrap();
+        let (_, added) = append_parts(&data, ITERATION, 2, &[path]).unwrap();
+        assert_eq!(added, 4);
+        let all = DatasetReader::open(&data).unwrap().load_all().unwrap();
+        assert_eq!(all[1..], samples[..]);
+    }
+
+    #[test]
+    fn a_part_whose_header_version_disagrees_with_its_ranges_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut header = part_header(0, 1);
+        header.dataset.format_version = 2;
+        let err = write_part(&dir.path().join("p"), &header, &[]).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                PartError::Sample {
+                    source: DatasetError::InconsistentHeader { version: 2, .. },
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
     }
 
     #[test]

@@ -9,6 +9,12 @@
 //! - A shard holds `occupancy` U8 `[N, S, S]`, `aux` F32 `[N, 2]` (delta_phi, d*), `wheels` F32
 //!   `[N, 2]` (left, right), `iteration` U32 `[N]`, `run` U32 `[N]` and `robot` U8 `[N]`; its
 //!   safetensors `__metadata__` repeats the format, version, dataset id and iteration.
+//! - A dataset whose samples carry their scan's ranges ([`RangeInput`], issue 34) declares them in
+//!   the manifest as `"ranges": "sectors=K,clip=C"` and is format version 2
+//!   ([`DATASET_VERSION`]); each of its shards also holds `ranges` F32 `[N, K]`. A dataset without
+//!   them is version 1 ([`DATASET_VERSION_WITHOUT_RANGES`]), byte for byte what builds before
+//!   ranges wrote, with the same `dataset_id`. The reader takes both, and refuses a version 2
+//!   manifest without `ranges` or a version 1 manifest with them.
 //!
 //! Every file is written under a temporary name in the same directory, synced and renamed, and the
 //! manifest is rewritten after each shard, so an interrupted collection leaves a valid dataset of
@@ -22,7 +28,7 @@ use std::collections::HashMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use formation_proto::{LidarSpec, OccupancySpec};
+use formation_proto::{LidarSpec, OccupancySpec, RangeInput, RangeInputError};
 use safetensors::tensor::{Dtype, SafeTensorError, SafeTensors, TensorView};
 use serde::{Deserialize, Serialize};
 
@@ -30,17 +36,29 @@ use crate::digest::Fnv1a64;
 
 /// The `format` string of every dataset manifest.
 pub const DATASET_FORMAT: &str = "formation-dataset";
-/// The manifest/shard layout version this build writes and reads.
-pub const DATASET_VERSION: u32 = 1;
+/// The newest manifest/shard layout version, which this build writes for a dataset whose samples
+/// carry their scan's ranges (a manifest with `ranges`, shards with a `ranges` tensor).
+pub const DATASET_VERSION: u32 = 2;
+/// The layout version of a dataset without ranges: what this build writes for one, and what every
+/// build before ranges wrote. The reader takes both versions.
+pub const DATASET_VERSION_WITHOUT_RANGES: u32 = 1;
 /// Samples per shard unless [`DatasetWriter::with_shard_size`] says otherwise (~41 MB of images).
 pub const DEFAULT_SHARD_SIZE: usize = 16384;
 /// The manifest's file name inside a dataset directory.
 pub const MANIFEST_FILE: &str = "manifest.json";
 
+/// The layout version of a dataset with or without ranges.
+pub fn dataset_version(ranges: Option<RangeInput>) -> u32 {
+    match ranges {
+        Some(_) => DATASET_VERSION,
+        None => DATASET_VERSION_WITHOUT_RANGES,
+    }
+}
+
 /// What produced a dataset: the settings every sample shares. Appending checks it matches.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DatasetHeader {
-    /// Layout version ([`DATASET_VERSION`]); `version` in the manifest.
+    /// Layout version ([`dataset_version`] of `ranges`); `version` in the manifest.
     pub format_version: u32,
     /// How the occupancy images were rendered.
     pub occupancy: OccupancySpec,
@@ -52,13 +70,43 @@ pub struct DatasetHeader {
     pub seed: u64,
     /// Name of the scenario the samples came from.
     pub scenario: String,
+    /// The scan's ranges each sample carries beside its image, if any
+    /// ([`DatasetHeader::with_ranges`]); serialized as `"sectors=K,clip=C"`, absent when none.
+    #[serde(default, skip_serializing_if = "Option::is_none", with = "range_text")]
+    pub ranges: Option<RangeInput>,
     /// Deterministic id of the settings above (16 hex digits); see [`DatasetHeader::new`].
     pub dataset_id: String,
 }
 
+/// `Option<RangeInput>` as its `formation.ranges` text (`RangeInput`'s `Display` and `parse`, the
+/// one definition of it), or nothing.
+mod range_text {
+    use formation_proto::RangeInput;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub(super) fn serialize<S: Serializer>(
+        ranges: &Option<RangeInput>,
+        serializer: S,
+    ) -> Result<S::Ok, S::Error> {
+        match ranges {
+            Some(ranges) => serializer.collect_str(ranges),
+            None => serializer.serialize_none(),
+        }
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
+        deserializer: D,
+    ) -> Result<Option<RangeInput>, D::Error> {
+        Option::<String>::deserialize(deserializer)?
+            .map(|text| RangeInput::parse(&text).map_err(serde::de::Error::custom))
+            .transpose()
+    }
+}
+
 impl DatasetHeader {
-    /// A header for the current format version whose `dataset_id` is a stable hash of every
-    /// other field, so the same collection settings always give the same id.
+    /// A header of samples without ranges (format version [`DATASET_VERSION_WITHOUT_RANGES`])
+    /// whose `dataset_id` is a stable hash of every other field, so the same collection settings
+    /// always give the same id. [`DatasetHeader::with_ranges`] adds ranges.
     pub fn new(
         occupancy: OccupancySpec,
         lidar: LidarSpec,
@@ -67,16 +115,43 @@ impl DatasetHeader {
         scenario: impl Into<String>,
     ) -> DatasetHeader {
         let mut header = DatasetHeader {
-            format_version: DATASET_VERSION,
+            format_version: DATASET_VERSION_WITHOUT_RANGES,
             occupancy,
             lidar,
             v_train,
             seed,
             scenario: scenario.into(),
+            ranges: None,
             dataset_id: String::new(),
         };
         header.dataset_id = header.settings_hash();
         header
+    }
+
+    /// The same settings with samples that carry (`Some`) or do not carry (`None`) their scan's
+    /// ranges: sets the format version to match ([`dataset_version`]) and recomputes
+    /// `dataset_id`. `with_ranges(None)` gives back exactly [`DatasetHeader::new`]'s header.
+    pub fn with_ranges(mut self, ranges: Option<RangeInput>) -> DatasetHeader {
+        self.ranges = ranges;
+        self.format_version = dataset_version(ranges);
+        self.dataset_id = self.settings_hash();
+        self
+    }
+
+    /// Checks that the format version is the one of the header's ranges ([`dataset_version`]).
+    pub fn check(&self) -> Result<(), DatasetError> {
+        if self.format_version != dataset_version(self.ranges) {
+            return Err(DatasetError::InconsistentHeader {
+                version: self.format_version,
+                ranges: self.ranges,
+            });
+        }
+        Ok(())
+    }
+
+    /// Sectors of each sample's ranges: `K`, or 0 for a dataset without ranges.
+    pub fn range_sectors(&self) -> usize {
+        self.ranges.map_or(0, |r| r.sectors)
     }
 
     /// Cells in one occupancy image (`size_px^2`).
@@ -101,6 +176,10 @@ impl DatasetHeader {
         hash.update_field(&self.v_train.to_le_bytes());
         hash.update_field(&self.seed.to_le_bytes());
         hash.update_field(self.scenario.as_bytes());
+        // Only a dataset with ranges adds a field, so one without keeps its id.
+        if let Some(ranges) = self.ranges {
+            hash.update_field(ranges.to_string().as_bytes());
+        }
         hash.hex()
     }
 
@@ -109,7 +188,9 @@ impl DatasetHeader {
         &self,
         other: &DatasetHeader,
     ) -> Option<(&'static str, String, String)> {
-        let fields: [(&'static str, String, String); 7] = [
+        let ranges = |r: Option<RangeInput>| r.map_or_else(|| "none".to_owned(), |r| r.to_string());
+        let fields: [(&'static str, String, String); 8] = [
+            ("range input", ranges(self.ranges), ranges(other.ranges)),
             (
                 "format version",
                 self.format_version.to_string(),
@@ -153,6 +234,9 @@ pub struct Sample {
     pub d_star: f32,
     /// Label: (left, right) wheel speeds \[m/s\] at `v_train`.
     pub wheels: [f32; 2],
+    /// The scan's ranges, one value a sector ([`RangeInput`]): `K` values for a dataset that
+    /// declares ranges, none for one that does not.
+    pub ranges: Vec<f32>,
     /// DAgger iteration (0 = expert demonstrations).
     pub iteration: u32,
     /// Run index within its iteration.
@@ -195,6 +279,9 @@ pub struct Manifest {
     pub seed: u64,
     /// See [`DatasetHeader::scenario`].
     pub scenario: String,
+    /// See [`DatasetHeader::ranges`]: `"ranges": "sectors=K,clip=C"`, absent when none.
+    #[serde(default, skip_serializing_if = "Option::is_none", with = "range_text")]
+    pub ranges: Option<RangeInput>,
     /// Shards in the order they were written.
     pub shards: Vec<ShardEntry>,
     /// Total samples over all shards.
@@ -212,6 +299,7 @@ impl Manifest {
             v_train: header.v_train,
             seed: header.seed,
             scenario: header.scenario.clone(),
+            ranges: header.ranges,
             shards: Vec::new(),
             samples: 0,
         }
@@ -232,6 +320,7 @@ impl Manifest {
             v_train: self.v_train,
             seed: self.seed,
             scenario: self.scenario.clone(),
+            ranges: self.ranges,
             dataset_id: self.dataset_id.clone(),
         }
     }
@@ -297,13 +386,51 @@ pub enum DatasetError {
     },
     /// The manifest's version is not one this build reads.
     #[error(
-        "{path} is dataset format version {found}, but this build reads version {DATASET_VERSION}; re-collect it with `formation collect` (or use the formation release that wrote it)"
+        "{path} is dataset format version {found}, but this build reads versions {DATASET_VERSION_WITHOUT_RANGES} and {DATASET_VERSION}; re-collect it with `formation collect` (or use the formation release that wrote it)"
     )]
     UnsupportedVersion {
         /// The manifest file.
         path: PathBuf,
         /// The version it declares.
         found: u64,
+    },
+    /// The manifest's version disagrees with its `ranges`: version 2 declares ranges, version 1
+    /// does not.
+    #[error(
+        "{path} is dataset format version {version} but {}: version {DATASET_VERSION_WITHOUT_RANGES} holds no ranges and version {DATASET_VERSION} declares them; the manifest was edited or damaged: restore it, or re-run `formation collect`",
+        match ranges {
+            Some(ranges) => format!("declares ranges \"{ranges}\""),
+            None => "declares no `ranges`".to_owned(),
+        }
+    )]
+    RangesVersion {
+        /// The manifest file.
+        path: PathBuf,
+        /// The version it declares.
+        version: u32,
+        /// The ranges it declares.
+        ranges: Option<RangeInput>,
+    },
+    /// A header whose format version does not match its ranges (built field by field).
+    #[error(
+        "a dataset header of format version {version} with ranges {} is inconsistent; build it with `DatasetHeader::new(..).with_ranges(..)`",
+        ranges.map_or_else(|| "none".to_owned(), |r| r.to_string())
+    )]
+    InconsistentHeader {
+        /// The version it holds.
+        version: u32,
+        /// The ranges it holds.
+        ranges: Option<RangeInput>,
+    },
+    /// The ranges declared need more beams than the dataset's LIDAR has.
+    #[error(
+        "a dataset of {ranges} ranges cannot come from its LIDAR: {source}; declare fewer sectors"
+    )]
+    RangeBeams {
+        /// The ranges declared.
+        ranges: RangeInput,
+        /// What is wrong.
+        source: RangeInputError,
     },
     /// A shard listed in the manifest does not exist.
     #[error(
@@ -362,6 +489,20 @@ pub enum DatasetError {
         /// `size_px^2`.
         expected: usize,
         /// Cells in the sample.
+        actual: usize,
+    },
+    /// A sample's ranges do not have the dataset's sector count.
+    #[error(
+        "a sample has {actual} range values but the dataset {}; compute the ranges with the dataset's range input",
+        match declared {
+            Some(ranges) => format!("declares {} sectors ({ranges})", ranges.sectors),
+            None => "declares no ranges (give an empty `ranges`, or collect into a dataset with ranges)".to_owned(),
+        }
+    )]
+    SampleRanges {
+        /// The dataset's range input, if any.
+        declared: Option<RangeInput>,
+        /// Values in the sample.
         actual: usize,
     },
     /// A sample's iteration differs from the iteration being written.
@@ -474,13 +615,26 @@ fn read_manifest(dir: &Path) -> Result<Manifest, DatasetError> {
         .get("version")
         .and_then(serde_json::Value::as_u64)
         .ok_or_else(|| bad("no numeric `version`".into()))?;
-    if version != u64::from(DATASET_VERSION) {
+    if version != u64::from(DATASET_VERSION) && version != u64::from(DATASET_VERSION_WITHOUT_RANGES)
+    {
         return Err(DatasetError::UnsupportedVersion {
             path,
             found: version,
         });
     }
     let manifest: Manifest = serde_json::from_value(value).map_err(|e| bad(e.to_string()))?;
+    if manifest.version != dataset_version(manifest.ranges) {
+        return Err(DatasetError::RangesVersion {
+            path,
+            version: manifest.version,
+            ranges: manifest.ranges,
+        });
+    }
+    if let Some(ranges) = manifest.ranges {
+        ranges
+            .check_beams(manifest.lidar.beams)
+            .map_err(|e| bad(e.to_string()))?;
+    }
     let listed: usize = manifest.shards.iter().map(|s| s.samples).sum();
     if listed != manifest.samples {
         return Err(bad(format!(
@@ -503,7 +657,7 @@ fn read_manifest(dir: &Path) -> Result<Manifest, DatasetError> {
 
 /// Column buffers of the shard being filled (also the body of a DAgger part,
 /// [`crate::dagger_part`]).
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub(crate) struct PendingShard {
     occupancy: Vec<u8>,
     aux: Vec<u8>,
@@ -511,10 +665,27 @@ pub(crate) struct PendingShard {
     iteration: Vec<u8>,
     run: Vec<u8>,
     robot: Vec<u8>,
+    /// The `ranges` column, `Some` iff the dataset declares ranges of this many sectors.
+    ranges: Option<(usize, Vec<u8>)>,
     samples: usize,
 }
 
 impl PendingShard {
+    /// Empty columns for samples of a dataset with `header`.
+    pub(crate) fn new(header: &DatasetHeader) -> PendingShard {
+        PendingShard {
+            occupancy: Vec::new(),
+            aux: Vec::new(),
+            wheels: Vec::new(),
+            iteration: Vec::new(),
+            run: Vec::new(),
+            robot: Vec::new(),
+            ranges: header.ranges.map(|r| (r.sectors, Vec::new())),
+            samples: 0,
+        }
+    }
+
+    /// Adds a sample checked with [`check_sample`] against the same header.
     pub(crate) fn push(&mut self, sample: &Sample) {
         self.occupancy.extend_from_slice(&sample.occupancy);
         for value in [sample.delta_phi, sample.d_star] {
@@ -527,6 +698,11 @@ impl PendingShard {
             .extend_from_slice(&sample.iteration.to_le_bytes());
         self.run.extend_from_slice(&sample.run.to_le_bytes());
         self.robot.push(sample.robot);
+        if let Some((_, ranges)) = &mut self.ranges {
+            for value in &sample.ranges {
+                ranges.extend_from_slice(&value.to_le_bytes());
+            }
+        }
         self.samples += 1;
     }
 
@@ -535,24 +711,24 @@ impl PendingShard {
         self.samples
     }
 
-    /// FNV-1a 64 over the six columns, each length-prefixed, in file order.
+    /// FNV-1a 64 over the six columns, and `ranges` where the dataset declares them, each
+    /// length-prefixed, in file order.
     pub(crate) fn columns_fnv1a64(&self) -> String {
         let mut hash = Fnv1a64::new();
-        for column in self.columns() {
-            hash.update_field(column);
-        }
-        hash.hex()
-    }
-
-    fn columns(&self) -> [&[u8]; 6] {
-        [
+        for column in [
             &self.occupancy,
             &self.aux,
             &self.wheels,
             &self.iteration,
             &self.run,
             &self.robot,
-        ]
+        ] {
+            hash.update_field(column);
+        }
+        if let Some((_, ranges)) = &self.ranges {
+            hash.update_field(ranges);
+        }
+        hash.hex()
     }
 
     /// The safetensors file of a dataset shard for these samples.
@@ -564,7 +740,7 @@ impl PendingShard {
     ) -> Result<Vec<u8>, DatasetError> {
         let metadata = HashMap::from([
             ("format".to_owned(), DATASET_FORMAT.to_owned()),
-            ("version".to_owned(), DATASET_VERSION.to_string()),
+            ("version".to_owned(), header.format_version.to_string()),
             ("dataset_id".to_owned(), header.dataset_id.clone()),
             ("iteration".to_owned(), iteration.to_string()),
         ]);
@@ -584,7 +760,7 @@ impl PendingShard {
             path: path.to_path_buf(),
             source,
         };
-        let tensors = [
+        let mut tensors = vec![
             (
                 "occupancy",
                 TensorView::new(Dtype::U8, vec![n, size, size], &self.occupancy),
@@ -601,6 +777,12 @@ impl PendingShard {
             ("run", TensorView::new(Dtype::U32, vec![n], &self.run)),
             ("robot", TensorView::new(Dtype::U8, vec![n], &self.robot)),
         ];
+        if let Some((sectors, ranges)) = &self.ranges {
+            tensors.push((
+                "ranges",
+                TensorView::new(Dtype::F32, vec![n, *sectors], ranges),
+            ));
+        }
         let mut views = Vec::with_capacity(tensors.len());
         for (name, view) in tensors {
             views.push((name, view.map_err(encode_error)?));
@@ -637,7 +819,7 @@ fn sort_metadata(file: &mut [u8], metadata: &HashMap<String, String>) -> Result<
 }
 
 /// Refuses a sample that does not fit a dataset with `header` being written as `iteration`:
-/// another image size, another iteration, a non-finite value.
+/// another image size, another iteration, ranges of another length, a non-finite value.
 pub(crate) fn check_sample(
     header: &DatasetHeader,
     iteration: u32,
@@ -668,6 +850,15 @@ pub(crate) fn check_sample(
     if !sample.wheels.iter().all(|w| w.is_finite()) {
         return Err(non_finite("wheels label"));
     }
+    if sample.ranges.len() != header.range_sectors() {
+        return Err(DatasetError::SampleRanges {
+            declared: header.ranges,
+            actual: sample.ranges.len(),
+        });
+    }
+    if !sample.ranges.iter().all(|r| r.is_finite()) {
+        return Err(non_finite("ranges"));
+    }
     Ok(())
 }
 
@@ -690,6 +881,12 @@ impl DatasetWriter {
     /// Creates the dataset directory `dir` (which must not exist or be empty) with an empty
     /// manifest, and a writer of iteration 0.
     pub fn create(dir: &Path, header: DatasetHeader) -> Result<DatasetWriter, DatasetError> {
+        header.check()?;
+        if let Some(ranges) = header.ranges {
+            ranges
+                .check_beams(header.lidar.beams)
+                .map_err(|source| DatasetError::RangeBeams { ranges, source })?;
+        }
         if dir.join(MANIFEST_FILE).exists() {
             return Err(DatasetError::AlreadyExists {
                 dir: dir.to_path_buf(),
@@ -706,6 +903,7 @@ impl DatasetWriter {
         fs::create_dir_all(dir).map_err(io_error("creating", dir))?;
         let manifest = Manifest::empty(&header);
         write_manifest(dir, &manifest)?;
+        let pending = PendingShard::new(&header);
         Ok(DatasetWriter {
             dir: dir.to_path_buf(),
             header,
@@ -713,7 +911,7 @@ impl DatasetWriter {
             iteration: 0,
             shard_size: DEFAULT_SHARD_SIZE,
             next_shard: 0,
-            pending: PendingShard::default(),
+            pending,
         })
     }
 
@@ -727,14 +925,15 @@ impl DatasetWriter {
             .filter_map(|s| shard_index(&s.file))
             .max()
             .map_or(0, |last| last + 1);
+        let header = manifest.header();
         Ok(DatasetWriter {
             dir: dir.to_path_buf(),
-            header: manifest.header(),
+            pending: PendingShard::new(&header),
+            header,
             manifest,
             iteration,
             shard_size: DEFAULT_SHARD_SIZE,
             next_shard,
-            pending: PendingShard::default(),
         })
     }
 
@@ -816,7 +1015,7 @@ impl DatasetWriter {
         });
         self.manifest.samples += self.pending.samples;
         self.next_shard += 1;
-        self.pending = PendingShard::default();
+        self.pending = PendingShard::new(&self.header);
         write_manifest(&self.dir, &self.manifest)
     }
 
@@ -942,16 +1141,18 @@ fn decode_shard(
         )));
     }
     let tensors = SafeTensors::deserialize(bytes).map_err(|e| corrupt(e.to_string()))?;
-    decode_columns(&tensors, entry.samples, header.occupancy.size_px).map_err(corrupt)
+    decode_columns(&tensors, entry.samples, header).map_err(corrupt)
 }
 
-/// The `n` samples of `size`x`size` images held in the six columns of `tensors`; the error says
-/// which column is missing or of another type or shape.
+/// The `n` samples of a dataset with `header` held in the columns of `tensors` (six, and
+/// `ranges` iff the header declares ranges); the error says which column is missing, unexpected
+/// or of another type or shape.
 pub(crate) fn decode_columns(
     tensors: &SafeTensors<'_>,
     n: usize,
-    size: usize,
+    header: &DatasetHeader,
 ) -> Result<Vec<Sample>, String> {
+    let size = header.occupancy.size_px;
     let column = |name: &str, dtype: Dtype, shape: &[usize]| -> Result<&[u8], String> {
         let view = tensors
             .tensor(name)
@@ -971,6 +1172,14 @@ pub(crate) fn decode_columns(
     let iteration = column("iteration", Dtype::U32, &[n])?;
     let run = column("run", Dtype::U32, &[n])?;
     let robot = column("robot", Dtype::U8, &[n])?;
+    let sectors = header.range_sectors();
+    let ranges = match header.ranges {
+        Some(_) => column("ranges", Dtype::F32, &[n, sectors])?,
+        None if tensors.tensor("ranges").is_ok() => {
+            return Err("a `ranges` tensor, but the manifest declares no ranges".to_owned());
+        }
+        None => &[],
+    };
 
     let f32_at = |data: &[u8], i: usize| {
         f32::from_le_bytes([
@@ -997,6 +1206,9 @@ pub(crate) fn decode_columns(
             wheels: [f32_at(wheels, 2 * i), f32_at(wheels, 2 * i + 1)],
             iteration: u32_at(iteration, i),
             run: u32_at(run, i),
+            ranges: (0..sectors)
+                .map(|k| f32_at(ranges, i * sectors + k))
+                .collect(),
             robot: robot[i],
         })
         .collect())
@@ -1034,9 +1246,28 @@ pub(crate) mod tests {
             delta_phi: -1.5 + 0.01 * k as f32,
             d_star: 1.0 + 0.5 * (k % 3) as f32,
             wheels: [0.1 * k as f32, -0.2 * k as f32],
+            ranges: Vec::new(),
             iteration,
             run: k / 4,
             robot: (k % 4) as u8,
+        }
+    }
+
+    /// The test datasets' range input: 6 sectors, clip 3.
+    pub(crate) fn ranges() -> RangeInput {
+        RangeInput::new(6, 3.0).expect("ranges")
+    }
+
+    /// The settings of the test datasets with ranges, with `seed`.
+    pub(crate) fn header_with_ranges(seed: u64) -> DatasetHeader {
+        header(seed).with_ranges(Some(ranges()))
+    }
+
+    /// [`sample`] with 6 range values that depend on `k`.
+    pub(crate) fn sample_with_ranges(k: u32, iteration: u32) -> Sample {
+        Sample {
+            ranges: (0..6).map(|s| 0.25 * s as f32 + 0.001 * k as f32).collect(),
+            ..sample(k, iteration)
         }
     }
 
@@ -1282,14 +1513,14 @@ pub(crate) mod tests {
         let path = dir.path().join(MANIFEST_FILE);
         let text = fs::read_to_string(&path).expect("read");
         let mut value: serde_json::Value = serde_json::from_str(&text).expect("json");
-        value["version"] = 2.into();
+        value["version"] = 3.into();
         fs::write(&path, value.to_string()).expect("write");
         let err = DatasetReader::open(dir.path()).expect_err("version");
         assert!(
-            matches!(err, DatasetError::UnsupportedVersion { found: 2, .. }),
+            matches!(err, DatasetError::UnsupportedVersion { found: 3, .. }),
             "{err:?}"
         );
-        assert!(err.to_string().contains("reads version 1"), "{err}");
+        assert!(err.to_string().contains("reads versions 1 and 2"), "{err}");
 
         fs::write(&path, r#"{"format": "something-else", "version": 1}"#).expect("write");
         assert!(matches!(
@@ -1319,6 +1550,277 @@ pub(crate) mod tests {
             writer.with_shard_size(0),
             Err(DatasetError::ZeroShardSize)
         ));
+    }
+
+    fn write_with_ranges(dir: &Path, count: u32, shard_size: usize) -> Manifest {
+        let mut writer = DatasetWriter::create(dir, header_with_ranges(7))
+            .expect("create")
+            .with_shard_size(shard_size)
+            .expect("shard size");
+        for k in 0..count {
+            writer.push(sample_with_ranges(k, 0)).expect("push");
+        }
+        writer.finish().expect("finish")
+    }
+
+    /// The manifest of `dir` as JSON.
+    fn manifest_json(dir: &Path) -> serde_json::Value {
+        let text = fs::read_to_string(dir.join(MANIFEST_FILE)).expect("manifest");
+        serde_json::from_str(&text).expect("json")
+    }
+
+    #[test]
+    fn a_header_without_ranges_is_todays_byte_for_byte() {
+        // The id of `header(7)` as builds before ranges computed it (FNV-1a 64 over its
+        // length-prefixed fields, computed apart from this code): a dataset without ranges keeps
+        // its id, its version and its bytes.
+        assert_eq!(header(7).dataset_id, "6e5ecb97c951d8be");
+        assert_eq!(header(7).with_ranges(None), header(7));
+        assert_eq!(header(7).format_version, 1);
+        assert!(header(7).ranges.is_none());
+        let json = serde_json::to_value(header(7)).expect("json");
+        assert!(json.get("ranges").is_none(), "{json}");
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 3, 8);
+        let value = manifest_json(dir.path());
+        assert_eq!(value["version"], 1);
+        assert!(value.get("ranges").is_none(), "{value}");
+        let shard = fs::read(dir.path().join("shard-000000.safetensors")).expect("shard");
+        let tensors = SafeTensors::deserialize(&shard).expect("safetensors");
+        assert!(tensors.tensor("ranges").is_err());
+        let (_, meta) = SafeTensors::read_metadata(&shard).expect("metadata");
+        assert_eq!(meta.metadata().as_ref().expect("meta")["version"], "1");
+    }
+
+    #[test]
+    fn ranges_change_the_id_and_the_version_and_round_trip() {
+        let with = header_with_ranges(7);
+        assert_eq!(with.format_version, DATASET_VERSION);
+        assert_eq!(with.format_version, 2);
+        assert_ne!(with.dataset_id, header(7).dataset_id);
+        assert_ne!(
+            with.dataset_id,
+            header(7)
+                .with_ranges(Some(RangeInput::new(6, 2.0).expect("ranges")))
+                .dataset_id
+        );
+        assert_eq!(with.clone().with_ranges(None), header(7));
+        assert_eq!(with.range_sectors(), 6);
+
+        let dir = tempfile::tempdir().expect("tempdir");
+        let manifest = write_with_ranges(dir.path(), 10, 4);
+        let value = manifest_json(dir.path());
+        assert_eq!(value["version"], 2);
+        assert_eq!(value["ranges"], "sectors=6,clip=3");
+        let reader = DatasetReader::open(dir.path()).expect("open");
+        assert_eq!(reader.header(), &with);
+        assert_eq!(reader.manifest(), &manifest);
+        let expected: Vec<Sample> = (0..10).map(|k| sample_with_ranges(k, 0)).collect();
+        assert_eq!(reader.load_all().expect("load"), expected);
+
+        let shard = fs::read(dir.path().join("shard-000002.safetensors")).expect("shard");
+        let tensors = SafeTensors::deserialize(&shard).expect("safetensors");
+        let ranges = tensors.tensor("ranges").expect("ranges tensor");
+        assert_eq!((ranges.dtype(), ranges.shape()), (Dtype::F32, &[2, 6][..]));
+        let (_, meta) = SafeTensors::read_metadata(&shard).expect("metadata");
+        assert_eq!(meta.metadata().as_ref().expect("meta")["version"], "2");
+
+        let mut writer = DatasetWriter::append_matching(dir.path(), &with, 1).expect("append");
+        writer.push(sample_with_ranges(50, 1)).expect("push");
+        writer.finish().expect("finish");
+        let all = DatasetReader::open(dir.path())
+            .expect("open")
+            .load_all()
+            .expect("load");
+        assert_eq!(all[10], sample_with_ranges(50, 1));
+    }
+
+    #[test]
+    fn ranges_of_the_wrong_length_or_not_finite_are_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut writer = DatasetWriter::create(dir.path(), header_with_ranges(7)).expect("create");
+        let err = writer.push(sample(0, 0)).expect_err("no ranges");
+        assert!(
+            matches!(err, DatasetError::SampleRanges { actual: 0, .. }),
+            "{err:?}"
+        );
+        assert!(
+            err.to_string().contains(
+                "has 0 range values but the dataset declares 6 sectors (sectors=6,clip=3)"
+            ),
+            "{err}"
+        );
+        let mut short = sample_with_ranges(0, 0);
+        short.ranges.pop();
+        assert!(matches!(
+            writer.push(short),
+            Err(DatasetError::SampleRanges { actual: 5, .. })
+        ));
+        for bad in [f32::NAN, f32::INFINITY] {
+            let mut nan = sample_with_ranges(0, 0);
+            nan.ranges[3] = bad;
+            assert!(matches!(
+                writer.push(nan),
+                Err(DatasetError::NonFiniteSample {
+                    field: "ranges",
+                    ..
+                })
+            ));
+        }
+        assert_eq!(writer.finish().expect("finish").samples, 0);
+
+        let other = tempfile::tempdir().expect("tempdir");
+        let mut writer = DatasetWriter::create(other.path(), header(7)).expect("create");
+        let err = writer.push(sample_with_ranges(0, 0)).expect_err("ranges");
+        assert!(
+            matches!(
+                err,
+                DatasetError::SampleRanges {
+                    declared: None,
+                    actual: 6
+                }
+            ),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("declares no ranges"), "{err}");
+    }
+
+    #[test]
+    fn appending_with_other_ranges_is_refused_naming_them() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 2, 4);
+        let err = DatasetWriter::append_matching(dir.path(), &header_with_ranges(7), 1)
+            .expect_err("mismatch");
+        assert!(
+            matches!(&err, DatasetError::HeaderMismatch { field: "range input", existing, requested, .. }
+                if existing == "none" && requested == "sectors=6,clip=3"),
+            "{err:?}"
+        );
+        let with = tempfile::tempdir().expect("tempdir");
+        write_with_ranges(with.path(), 2, 4);
+        let other = header(7).with_ranges(Some(RangeInput::new(6, 2.5).expect("ranges")));
+        let err = DatasetWriter::append_matching(with.path(), &other, 1).expect_err("mismatch");
+        assert!(
+            matches!(&err, DatasetError::HeaderMismatch { field: "range input", existing, requested, .. }
+                if existing == "sectors=6,clip=3" && requested == "sectors=6,clip=2.5"),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn a_version_that_disagrees_with_the_ranges_is_refused_naming_the_file() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_with_ranges(dir.path(), 2, 4);
+        let path = dir.path().join(MANIFEST_FILE);
+        let mut value = manifest_json(dir.path());
+        value["version"] = 1.into();
+        fs::write(&path, value.to_string()).expect("write");
+        let err = DatasetReader::open(dir.path()).expect_err("v1 with ranges");
+        assert!(
+            matches!(
+                err,
+                DatasetError::RangesVersion {
+                    version: 1,
+                    ranges: Some(_),
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+        let message = err.to_string();
+        assert!(
+            message.contains(
+                "manifest.json is dataset format version 1 but declares ranges \"sectors=6,clip=3\""
+            ),
+            "{message}"
+        );
+        assert!(message.contains("re-run `formation collect`"), "{message}");
+
+        let other = tempfile::tempdir().expect("tempdir");
+        write(other.path(), 2, 4);
+        let path = other.path().join(MANIFEST_FILE);
+        let mut value = manifest_json(other.path());
+        value["version"] = 2.into();
+        fs::write(&path, value.to_string()).expect("write");
+        let err = DatasetReader::open(other.path()).expect_err("v2 without ranges");
+        assert!(
+            matches!(
+                err,
+                DatasetError::RangesVersion {
+                    version: 2,
+                    ranges: None,
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("declares no `ranges`"), "{err}");
+
+        value["version"] = 2.into();
+        value["ranges"] = "sectors=2,clip=3".into();
+        fs::write(&path, value.to_string()).expect("write");
+        let err = DatasetReader::open(other.path()).expect_err("bad ranges");
+        assert!(matches!(err, DatasetError::BadManifest { .. }), "{err:?}");
+        assert!(err.to_string().contains("sectors"), "{err}");
+    }
+
+    #[test]
+    fn a_shard_whose_ranges_disagree_with_the_manifest_is_corrupt() {
+        // A shard of a dataset with ranges, listed in a manifest without them: the shard has a
+        // `ranges` tensor the manifest does not declare. And the other way round: no tensor.
+        let with = tempfile::tempdir().expect("tempdir");
+        write_with_ranges(with.path(), 3, 8);
+        let without = tempfile::tempdir().expect("tempdir");
+        write(without.path(), 3, 8);
+        let shard = "shard-000000.safetensors";
+        let with_manifest = manifest_json(with.path());
+        let without_manifest = manifest_json(without.path());
+        for (dir, manifest, reason) in [
+            (
+                with.path(),
+                &without_manifest,
+                "a `ranges` tensor, but the manifest declares no ranges",
+            ),
+            (without.path(), &with_manifest, "no `ranges` tensor"),
+        ] {
+            let bytes = fs::read(dir.join(shard)).expect("shard");
+            let mut manifest = manifest.clone();
+            manifest["shards"][0]["bytes"] = bytes.len().into();
+            let mut checksum = Fnv1a64::new();
+            checksum.update(&bytes);
+            manifest["shards"][0]["fnv1a64"] = checksum.hex().into();
+            fs::write(dir.join(MANIFEST_FILE), manifest.to_string()).expect("write");
+            let err = DatasetReader::open(dir)
+                .expect("open")
+                .load_all()
+                .expect_err("corrupt");
+            assert!(
+                matches!(&err, DatasetError::CorruptShard { reason: r, .. } if r == reason),
+                "{err:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_header_built_field_by_field_with_the_wrong_version_is_refused() {
+        let mut header = header_with_ranges(7);
+        header.format_version = 1;
+        let dir = tempfile::tempdir().expect("tempdir");
+        assert!(matches!(
+            DatasetWriter::create(dir.path(), header),
+            Err(DatasetError::InconsistentHeader { version: 1, .. })
+        ));
+        let too_many =
+            header_with_ranges(7).with_ranges(Some(RangeInput::new(360, 3.0).expect("ranges")));
+        let mut few_beams = too_many.clone();
+        few_beams.lidar.beams = 100;
+        let ranges = few_beams.ranges;
+        let few_beams = few_beams.with_ranges(ranges);
+        assert!(matches!(
+            DatasetWriter::create(dir.path(), few_beams),
+            Err(DatasetError::RangeBeams { .. })
+        ));
+        DatasetWriter::create(dir.path(), too_many).expect("900 beams fill 360 sectors");
     }
 
     #[test]

@@ -8,8 +8,11 @@
 //! shard's true size and FNV-1a checksum before it is written, when the manifest is JSON with
 //! such an entry, so that mutations of the shard reach the safetensors and column checks instead
 //! of stopping at the checksum; with it clear, the checksum is checked as it is.
+//!
+//! Seeds: a dataset without ranges (format version 1) and one whose samples carry their scan's
+//! ranges (version 2: `"ranges"` in the manifest, a `ranges` tensor in the shard).
 
-use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec};
+use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec, RangeInput};
 use formation_trainer_bridge::dataset::{
     DatasetHeader, DatasetReader, DatasetWriter, MANIFEST_FILE, Sample,
 };
@@ -37,6 +40,8 @@ pub const TARGET: Target = Target {
         b"{}",
         b"\"__metadata__\"",
         b"shard-999999.safetensors",
+        b"\"ranges\": ",
+        b"sectors=12,clip=3",
     ],
     shape: Shape::Bytes,
 };
@@ -132,24 +137,51 @@ pub fn sample(i: usize, iteration: u32, run: u32) -> Sample {
         delta_phi: 0.1 * i as f32,
         d_star: 1.5,
         wheels: [0.3, 0.28 + 0.01 * i as f32],
+        ranges: Vec::new(),
         iteration,
         run,
         robot: (i % 3) as u8,
     }
 }
 
-fn seeds() -> Result<Vec<Seed>, FuzzError> {
+/// The range input of the seed with ranges: 12 sectors of the 36 beams, clip 3.
+pub fn ranges() -> RangeInput {
+    RangeInput {
+        sectors: 12,
+        clip: 3.0,
+    }
+}
+
+/// [`sample`] with the 12 range values of [`ranges`].
+pub fn sample_with_ranges(i: usize, iteration: u32, run: u32) -> Sample {
+    Sample {
+        ranges: (0..12).map(|s| 0.2 * s as f32 + 0.01 * i as f32).collect(),
+        ..sample(i, iteration, run)
+    }
+}
+
+/// The case of a dataset of `header` holding `samples`.
+fn seed_case(header: DatasetHeader, samples: Vec<Sample>) -> Result<Vec<u8>, FuzzError> {
     let dir = tempfile::tempdir().map_err(seed_error(TARGET.name))?;
-    let mut writer =
-        DatasetWriter::create(dir.path(), header()).map_err(seed_error(TARGET.name))?;
-    for i in 0..3 {
-        writer
-            .push(sample(i, 0, i as u32))
-            .map_err(seed_error(TARGET.name))?;
+    let mut writer = DatasetWriter::create(dir.path(), header).map_err(seed_error(TARGET.name))?;
+    for sample in samples {
+        writer.push(sample).map_err(seed_error(TARGET.name))?;
     }
     writer.finish().map_err(seed_error(TARGET.name))?;
     let manifest =
         std::fs::read(dir.path().join(MANIFEST_FILE)).map_err(seed_error(TARGET.name))?;
     let shard = std::fs::read(dir.path().join(SHARD_FILE)).map_err(seed_error(TARGET.name))?;
-    Ok(vec![("dataset.bin".into(), join(1, &manifest, &shard))])
+    Ok(join(1, &manifest, &shard))
+}
+
+fn seeds() -> Result<Vec<Seed>, FuzzError> {
+    let plain = seed_case(header(), (0..3).map(|i| sample(i, 0, i as u32)).collect())?;
+    let ranged = seed_case(
+        header().with_ranges(Some(ranges())),
+        (0..3).map(|i| sample_with_ranges(i, 0, i as u32)).collect(),
+    )?;
+    Ok(vec![
+        ("dataset.bin".into(), plain),
+        ("dataset-ranges.bin".into(), ranged),
+    ])
 }
