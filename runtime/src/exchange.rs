@@ -16,7 +16,9 @@
 //!
 //! Around it the exchange keeps each robot's agent state: admission of candidates by the launch
 //! secret (one agent per robot, each nonce once), lockstep lagging and rejoining (and the grace
-//! a lost agent's successor gets), the realtime schedule with its re-anchoring after a pause, and
+//! a lost agent's successor gets, and the tick a lockstep run holds for an agent whose link
+//! dropped and is reconnecting: [`WorldLink::agent_reconnecting`]), the realtime schedule with
+//! its re-anchoring after a pause, and
 //! the forwarding of swap requests (each swap done is kept, with the file its request named, for
 //! the recording: [`AgentsController::take_swaps_done`]). It reads time only from its [`Clock`] and talks only to a
 //! [`WorldLink`], so all of it runs in unit tests on an in-memory link and a fake clock.
@@ -951,7 +953,9 @@ impl AgentsController<'_> {
                 ClockMode::Lockstep => self.all_answered(tick),
                 ClockMode::Realtime => false,
             };
-            if (answered && now >= paced_until) || now >= deadline {
+            if (answered && now >= paced_until)
+                || (now >= deadline && !self.held_for_reconnection(tick)?)
+            {
                 break;
             }
             if !answered && std::time::Instant::now() < spin_until {
@@ -960,9 +964,36 @@ impl AgentsController<'_> {
                 std::thread::yield_now();
                 continue;
             }
-            self.wait(if answered { paced_until } else { deadline } - now)?;
+            let left = if answered { paced_until } else { deadline }.saturating_duration_since(now);
+            self.wait(if left.is_zero() { MAX_WAIT } else { left })?;
         }
         Ok(())
+    }
+
+    /// Lockstep: whether a live robot that has not answered tick `tick` has an agent whose link
+    /// dropped and is reconnecting ([`WorldLink::agent_reconnecting`]): the tick waits for it
+    /// past the command timeout, so a drop loses no tick (the link sends the scan again when it
+    /// is back, and counts the agent dead when it does not come back in time).
+    fn held_for_reconnection(&mut self, tick: u64) -> Result<bool, ControllerError> {
+        if self.settings.runtime.clock != ClockMode::Lockstep {
+            return Ok(false);
+        }
+        for robot in 0..self.states.len() {
+            let answered = self.newest[robot]
+                .is_some_and(|a| a.msg.generation == self.generation && a.msg.tick == tick);
+            if self.states[robot] != AgentState::Live || answered {
+                continue;
+            }
+            if let Some(pid) = self.agent_pids[robot]
+                && self
+                    .link
+                    .agent_reconnecting(robot, pid)
+                    .map_err(transport_error)?
+            {
+                return Ok(true);
+            }
+        }
+        Ok(false)
     }
 
     /// Robot `robot`'s command for tick `tick` at `now`, and why it is used or braked: the

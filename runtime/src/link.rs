@@ -95,6 +95,12 @@ impl<P> Incarnations<P> {
         Ok(self.slots[robot].as_ref())
     }
 
+    /// Robot `robot`'s current incarnation, if one is open, to change.
+    pub fn get_mut(&mut self, robot: usize) -> Result<Option<&mut P>, WorldLinkError> {
+        check_robot_index(robot, self.slots.len())?;
+        Ok(self.slots[robot].as_mut())
+    }
+
     /// Opens robot `robot`'s incarnation with the ends `open` makes, after dropping those of
     /// the previous one (so a new incarnation never meets its predecessor's ports).
     pub fn open(&mut self, robot: usize, open: impl FnOnce() -> WorldResult<P>) -> WorldResult {
@@ -182,6 +188,13 @@ pub trait WorldLink {
     /// Whether agent process `pid` of robot `robot` is still alive, as far as the transport can
     /// tell (a stopped process is alive).
     fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool>;
+    /// Whether agent process `pid` of robot `robot` is unreachable now but may come back on its
+    /// own: its session dropped and the transport waits for it to reconnect (Zenoh,
+    /// `RECONNECT_GRACE`), after which it is either back or among the [`WorldLink::dead_agents`].
+    /// Lockstep holds the tick for such an agent. By default never.
+    fn agent_reconnecting(&mut self, _robot: usize, _pid: u32) -> WorldResult<bool> {
+        Ok(false)
+    }
     /// `(robot, pid)` of agent processes the transport knows to be dead; cleans up after them so
     /// a restarted agent can take their place.
     fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError>;

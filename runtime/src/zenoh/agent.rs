@@ -4,9 +4,19 @@
 //! the world's liveliness token of its run, greets in its robot's lobby with a proof of the launch
 //! secret, and on the world's welcome declares the channels of its incarnation and then its own
 //! liveliness token. From then on the world's token tells whether the world is there: when it
-//! goes (the world exited, died, or its link was silent past the lease), the agent's loop ends
-//! with a message.
+//! goes (the world exited, died, or the link dropped) and stays gone for
+//! [`super::RECONNECT_GRACE`], the agent's loop ends with a message.
+//!
+//! A link that drops and comes back costs nothing but time: Zenoh reconnects the session and
+//! declares the agent's subscribers and token again, and the world sends again the last scan and
+//! the control requests of the episode that the drop may have lost. This link keeps the last
+//! command it sent and the control requests it received, so a scan it already answered is
+//! answered with the same command again (the pilot never decides twice on one scan, which keeps
+//! lockstep runs bit-identical), and a repeated begin is answered with the status already given.
+//! A refusal answering its own incarnation's nonce in the lobby (the world counted the agent gone
+//! before it came back) ends the agent's loop with that reason.
 
+use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -36,6 +46,9 @@ fn zenoh_error(action: impl Into<String>) -> impl FnOnce(String) -> AgentLinkErr
 const GREETING_RETRY: Duration = Duration::from_secs(1);
 /// Queued control requests.
 const CONTROL_QUEUE: usize = 64;
+/// How many control requests received are remembered, to recognise one sent again after a
+/// reconnection.
+const SEEN_CONTROLS: usize = 16;
 
 /// What the world sent, filled by subscriber callbacks.
 #[derive(Debug)]
@@ -43,9 +56,31 @@ struct Inbox {
     scan: Mutex<Option<ScanMsg>>,
     control: Queue<ControlRequest>,
     welcomes: Queue<(u64, Welcome)>,
-    world_present: Mutex<bool>,
+    world: Mutex<WorldSeen>,
     /// Swaps refused on arrival (damaged model bytes): request id and reason, to answer.
     refusals: Queue<(u64, String)>,
+    /// The control requests received lately (their message bytes), to recognise repeats.
+    seen_controls: Mutex<VecDeque<Vec<u8>>>,
+    /// A begin came again (after a reconnection): the status that answered it is due again.
+    begin_repeated: Mutex<bool>,
+    /// This agent's incarnation, once welcomed.
+    incarnation: Mutex<Option<u64>>,
+    /// The world's reason, when it answered this incarnation's nonce with a refusal (it counted
+    /// the agent gone before the agent came back).
+    dismissed: Mutex<Option<String>>,
+}
+
+/// Whether the world's liveliness token is seen, and since when it is not.
+#[derive(Debug, Default)]
+struct WorldSeen {
+    present: bool,
+    /// When the token went, while it stays gone after having been seen.
+    gone_since: Option<Instant>,
+}
+
+/// Locks `mutex`, keeping its plain data when a callback panicked while holding it.
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 impl Inbox {
@@ -55,13 +90,64 @@ impl Inbox {
             scan: Mutex::new(None),
             control: Queue::new(CONTROL_QUEUE),
             welcomes: Queue::new(8),
-            world_present: Mutex::new(false),
+            world: Mutex::default(),
             refusals: Queue::new(CONTROL_QUEUE),
+            seen_controls: Mutex::default(),
+            begin_repeated: Mutex::new(false),
+            incarnation: Mutex::new(None),
+            dismissed: Mutex::new(None),
         }
     }
 
     fn world_present(&self) -> bool {
-        *self.world_present.lock().unwrap_or_else(|e| e.into_inner())
+        lock(&self.world).present
+    }
+
+    /// The world's token came (`present`) or went, at `now`; a token gone after being seen is
+    /// waited for ([`super::RECONNECT_GRACE`]), and both are logged.
+    fn world_seen(&self, present: bool, now: Instant) {
+        let mut world = lock(&self.world);
+        match (present, world.gone_since) {
+            (true, Some(since)) => {
+                tracing::warn!(
+                    "the world is back after {:.1} s",
+                    now.saturating_duration_since(since).as_secs_f64()
+                );
+                world.gone_since = None;
+            }
+            (false, None) if world.present => {
+                tracing::warn!(
+                    "lost the world's liveliness (the link dropped?); waiting up to {:.0} s for \
+                     it to come back",
+                    super::RECONNECT_GRACE.as_secs_f64()
+                );
+                world.gone_since = Some(now);
+            }
+            _ => {}
+        }
+        world.present = present;
+    }
+
+    /// Whether the world is there at `now`, or gone for less than [`super::RECONNECT_GRACE`].
+    fn world_alive(&self, now: Instant) -> bool {
+        let world = lock(&self.world);
+        world.present
+            || world
+                .gone_since
+                .is_some_and(|since| now.saturating_duration_since(since) < super::RECONNECT_GRACE)
+    }
+
+    /// Whether the control request `head` (its message bytes) was received before; notes it.
+    fn control_seen_before(&self, head: &[u8]) -> bool {
+        let mut seen = lock(&self.seen_controls);
+        if seen.iter().any(|s| s == head) {
+            return true;
+        }
+        if seen.len() == SEEN_CONTROLS {
+            seen.pop_front();
+        }
+        seen.push_back(head.to_vec());
+        false
     }
 }
 
@@ -70,11 +156,17 @@ pub struct ZenohAgentLink {
     bell: Arc<Bell>,
     inbox: Arc<Inbox>,
     session: ::zenoh::Session,
+    robot: usize,
     cmd: String,
     status: String,
+    /// The last command sent: `(generation, tick)` and its bytes, to answer its scan again.
+    last_command: Option<((u64, u64), Vec<u8>)>,
+    /// The last status that answered a begin (ready or refused), to answer a repeated begin.
+    last_begin_answer: Option<Vec<u8>>,
     _scan: Subscriber<()>,
     _control: Subscriber<()>,
     _world: Subscriber<()>,
+    _welcomes: Subscriber<()>,
     _token: LivelinessToken,
     _signals: SignalWatch,
     _models: Arc<ModelFolder>,
@@ -216,7 +308,9 @@ impl ZenohAgentLink {
         };
         rendezvous.wait_for_world()?;
         let incarnation = rendezvous.greet_until_welcomed(secret, pid)?;
-        drop(welcomes);
+        // The lobby stays subscribed: a refusal answering this incarnation's nonce later says
+        // the world counted this agent gone.
+        *lock(&inbox.incarnation) = Some(incarnation);
         let name = |channel| robot_service_name(run, robot, incarnation, channel);
         let scan = subscribe_scans(&session, name(RobotChannel::Scan), &inbox, &bell)?;
         let models = Arc::new(ModelFolder::new(pid, incarnation));
@@ -238,13 +332,17 @@ impl ZenohAgentLink {
             .map_err(|e| zenoh_error("declare the agent's liveliness token")(e.to_string()))?;
         Ok(ZenohAgentLink {
             session,
+            robot,
             bell,
             inbox,
             cmd,
             status,
+            last_command: None,
+            last_begin_answer: None,
             _scan: scan,
             _control: control,
             _world: world,
+            _welcomes: welcomes,
             _token: token,
             _signals: signals,
             _models: models,
@@ -287,10 +385,7 @@ fn watch_world(
         .declare_subscriber(keys::world_token(run))
         .history(true)
         .callback(move |sample| {
-            *inbox
-                .world_present
-                .lock()
-                .unwrap_or_else(|e| e.into_inner()) = sample.kind() == SampleKind::Put;
+            inbox.world_seen(sample.kind() == SampleKind::Put, Instant::now());
             bell.ring();
         })
         .wait()
@@ -316,6 +411,12 @@ fn subscribe_welcomes(
             let decoded = message_from_bytes::<WelcomeMsg>("welcome", &sample.payload().to_bytes())
                 .and_then(|msg| Ok((msg.nonce, msg.decode()?)));
             match decoded {
+                Ok((nonce, Welcome::Refused(reason)))
+                    if *lock(&inbox.incarnation) == Some(nonce) =>
+                {
+                    *lock(&inbox.dismissed) = Some(reason);
+                    bell.ring();
+                }
                 Ok(welcome) => {
                     inbox.welcomes.push(welcome);
                     bell.ring();
@@ -369,6 +470,21 @@ fn subscribe_control(
         .declare_subscriber(key)
         .callback(move |sample| {
             let payload = sample.payload().to_bytes();
+            let head = payload
+                .get(..std::mem::size_of::<ControlMsg>())
+                .unwrap_or(&payload);
+            if inbox.control_seen_before(head) {
+                // Sent again after a reconnection: handled already. A begin's answer is due
+                // again (it may be what the drop lost).
+                let begin = message_from_bytes::<ControlMsg>("control", head)
+                    .and_then(|msg| msg.decode())
+                    .is_ok_and(|r| matches!(r, ControlRequest::BeginEpisode { .. }));
+                if begin {
+                    *lock(&inbox.begin_repeated) = true;
+                    bell.ring();
+                }
+                return;
+            }
             match decode_control(&payload, &models) {
                 Ok(request) => {
                     tracing::debug!("control request arrived: {request:?}");
@@ -478,9 +594,27 @@ impl Rendezvous<'_> {
     }
 }
 
+impl ZenohAgentLink {
+    /// Puts `bytes` on `key` reliably (statuses, and commands sent again).
+    fn put_reliably(&self, key: &str, bytes: Vec<u8>, what: &str) -> Result<(), AgentLinkError> {
+        self.session
+            .put(key, bytes)
+            .congestion_control(CongestionControl::Block)
+            .wait()
+            .map_err(|e| zenoh_error(format!("send {what}"))(e.to_string()))
+    }
+}
+
 impl AgentLink for ZenohAgentLink {
     fn wait(&mut self, timeout: Duration) -> Result<Wake, AgentLinkError> {
-        Ok(match self.bell.wait(timeout) {
+        let ring = self.bell.wait(timeout);
+        if let Some(reason) = lock(&self.inbox.dismissed).take() {
+            return Err(AgentLinkError::Refused {
+                robot: self.robot,
+                reason,
+            });
+        }
+        Ok(match ring {
             Ring::Activity => Wake::Activity,
             Ring::Idle => Wake::Idle,
             Ring::Terminated(signal) => Wake::Terminated(signal),
@@ -491,6 +625,12 @@ impl AgentLink for ZenohAgentLink {
         &mut self,
         sink: &mut dyn FnMut(ControlRequest),
     ) -> Result<(), AgentLinkError> {
+        if std::mem::take(&mut *lock(&self.inbox.begin_repeated))
+            && let Some(answer) = self.last_begin_answer.clone()
+        {
+            tracing::info!("the world began the episode again (a reconnection); answering again");
+            self.put_reliably(&self.status, answer, "a status again")?;
+        }
         for (request_id, reason) in self.inbox.refusals.drain() {
             self.publish_status(&AgentStatus::SwapRefused { request_id, reason })?;
         }
@@ -499,34 +639,50 @@ impl AgentLink for ZenohAgentLink {
     }
 
     fn newest_scan(&mut self) -> Result<Option<ScanMsg>, AgentLinkError> {
-        Ok(self
-            .inbox
-            .scan
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .take())
+        let Some(scan) = lock(&self.inbox.scan).take() else {
+            return Ok(None);
+        };
+        match &self.last_command {
+            Some((answered, bytes)) if *answered == (scan.generation, scan.tick) => {
+                // The world sent it again after a reconnection: the answer may be what the drop
+                // lost. The same command again, never a second decision.
+                tracing::info!(
+                    "tick {}: scan sent again; sending its command again",
+                    scan.tick
+                );
+                self.put_reliably(&self.cmd, bytes.clone(), "a command again")?;
+                Ok(None)
+            }
+            _ => Ok(Some(scan)),
+        }
     }
 
     fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), AgentLinkError> {
+        let bytes = message_bytes(msg).to_vec();
         self.session
-            .put(&self.cmd, message_bytes(msg).to_vec())
+            .put(&self.cmd, bytes.clone())
             .congestion_control(CongestionControl::Drop)
             .priority(Priority::RealTime)
             .express(true)
             .wait()
-            .map_err(|e| zenoh_error("send a command")(e.to_string()))
+            .map_err(|e| zenoh_error("send a command")(e.to_string()))?;
+        self.last_command = Some(((msg.generation, msg.tick), bytes));
+        Ok(())
     }
 
     fn publish_status(&mut self, status: &AgentStatus) -> Result<(), AgentLinkError> {
         let msg = StatusMsg::encode(status)?;
-        self.session
-            .put(&self.status, message_bytes(&msg).to_vec())
-            .congestion_control(CongestionControl::Block)
-            .wait()
-            .map_err(|e| zenoh_error("send a status")(e.to_string()))
+        let bytes = message_bytes(&msg).to_vec();
+        if matches!(
+            status,
+            AgentStatus::Ready { .. } | AgentStatus::Refused { .. }
+        ) {
+            self.last_begin_answer = Some(bytes.clone());
+        }
+        self.put_reliably(&self.status, bytes, "a status")
     }
 
     fn world_alive(&mut self) -> Result<bool, AgentLinkError> {
-        Ok(self.inbox.world_present())
+        Ok(self.inbox.world_alive(Instant::now()))
     }
 }

@@ -15,10 +15,31 @@
 //! block under congestion (they are rare and must arrive).
 //!
 //! Liveliness tokens tell who is there: the world declares `formation/<run>/world` once its
-//! subscribers exist (an agent greets only when it sees it, and exits when it goes), and each
+//! subscribers exist (an agent greets only when it sees it, and exits when it stays gone), and each
 //! agent declares `formation/<run>/robot/<i>/<n>/agent/<pid>` for its incarnation (the world
-//! reports its removal as a dead agent). A cut link is seen by liveliness only after the link
-//! lease (10 s and more), so the world's command-age watchdog, not liveliness, brakes the robots.
+//! counts it dead when the token stays gone). A cut link is seen by liveliness only after the
+//! link lease (10 s and more), so the world's command-age watchdog, not liveliness, brakes the
+//! robots.
+//!
+//! A dropped session comes back. When a link resets, or stays silent past the lease (a loaded
+//! host, a stopped process, Wi-Fi gone for a while), Zenoh closes the session's transport and the
+//! other end's tokens vanish; the agent's client reconnects on its own and declares its
+//! subscribers and its token again. Both ends therefore wait [`RECONNECT_GRACE`] (5 s) for a
+//! token that went to come back before counting its owner gone:
+//!
+//! - the world keeps a vanished agent's place (a successor proving the launch secret still takes
+//!   it at once); when the token comes back it logs `robot I: agent pid P reconnected after X s`
+//!   and sends the agent again the last scan and the control requests of its episode that the
+//!   drop may have lost, and in lockstep it holds the tick for the agent meanwhile, so no tick
+//!   is lost or doubled and the run stays bit-identical; a token gone for the whole grace is a
+//!   dead agent, as before (`robot I: agent pid P has been unreachable for 5 s; counting it
+//!   gone`);
+//! - the agent logs `lost the world's liveliness (the link dropped?); waiting up to 5 s for it
+//!   to come back` and, when it does, `the world is back after X s`; it answers a scan it already
+//!   answered with the same command again (never deciding twice), and a repeated control
+//!   request with the status it already gave; it exits as the world gone only when the world's
+//!   token stayed away for the whole grace. An agent that comes back after the world counted
+//!   it gone is told so in its lobby and exits saying to start it again.
 //!
 //! Subscriber callbacks run on Zenoh's threads: they decode, queue (bounded) and ring a bell (a condition variable);
 //! a link's `wait` blocks on the bell's condition variable, which SIGINT/SIGTERM ring too.
@@ -56,6 +77,14 @@ pub const MAX_MESSAGE_BYTES: usize = 64 << 20;
 
 /// The link lease: a peer silent this long is dropped (Zenoh's default).
 pub const LINK_LEASE: Duration = Duration::from_secs(10);
+
+/// How long either end waits for the other's liveliness token to come back before it counts the
+/// other gone. A session whose link dropped (reset, or silent past [`LINK_LEASE`]) reconnects on
+/// its own (Zenoh retries every 0.1 s to 1 s) and declares its subscribers and tokens again, so a
+/// token that went and came back within this time is the same agent (or world) on the same
+/// channels: the world keeps the agent's place, and the agent keeps driving. A process that was
+/// killed is counted gone this long after its link closed (its successor is admitted at once).
+pub const RECONNECT_GRACE: Duration = Duration::from_secs(5);
 
 /// A Zenoh endpoint, `tcp/HOST:PORT` or (feature `tls`) `tls/HOST:PORT`, checked.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -6,10 +6,19 @@
 //! incarnation's publishers (scan, control) and subscribers (command, status) are declared when
 //! the exchange admits an agent and undeclared when it is gone; what its subscribers receive
 //! goes to queues of that incarnation only, so a predecessor's late messages never count.
+//!
+//! An agent whose liveliness token goes is not dead at once: its session may have dropped and be
+//! reconnecting ([`super::RECONNECT_GRACE`]). Until the token comes back the agent is
+//! *unreachable*: a successor may take its place, and [`WorldLink::dead_agents`] reports it only
+//! once the grace has passed. When it comes back, the link sends it again what the drop may have
+//! lost: its incarnation's last scan and the control requests since its episode began (the
+//! agent's link answers repeats without deciding again). An agent counted dead whose token comes
+//! back later is told in its lobby (a refusal answering its incarnation's nonce), so it exits
+//! instead of waiting for scans that never come.
 
 use std::collections::{HashMap, HashSet};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use ::zenoh::Wait;
 use ::zenoh::liveliness::LivelinessToken;
@@ -38,6 +47,9 @@ const HELLO_QUEUE: usize = 8;
 const AGENT_QUEUE: usize = 64;
 /// Queued swap requests.
 const SWAP_QUEUE: usize = 8;
+/// The most control requests an incarnation keeps to send again after a reconnection (those
+/// since its episode began: a begin and the swaps forwarded since).
+const RESEND_CONTROLS: usize = 8;
 
 /// One robot's lobby on the world side.
 struct Lobby {
@@ -48,21 +60,97 @@ struct Lobby {
 
 /// The world's ends of one admitted agent's channels.
 struct Incarnation {
+    /// The incarnation (the accepted nonce).
+    id: u64,
     scan: Publisher<'static>,
     control: Publisher<'static>,
+    /// The last scan published, to send again when the agent reconnects.
+    last_scan: Option<Vec<u8>>,
+    /// The control requests since the episode began (a begin first), to send again when the
+    /// agent reconnects.
+    controls: Vec<Vec<u8>>,
     commands: Arc<Queue<CmdMsg>>,
     statuses: Arc<Queue<AgentStatus>>,
     _cmd: Subscriber<()>,
     _status: Subscriber<()>,
 }
 
+/// An agent's token: `(robot, incarnation, pid)`.
+type AgentKey = (usize, u64, u32);
+
 /// What the agents' liveliness tokens said.
 #[derive(Debug, Default)]
 struct Liveness {
-    /// `(robot, pid)` of agents whose token went, not yet reported.
-    dead: Vec<(usize, u32)>,
+    /// Agents whose token went and has not come back, and when it went: unreachable, counted
+    /// dead once [`super::RECONNECT_GRACE`] has passed.
+    vanished: HashMap<AgentKey, Instant>,
+    /// Agents counted dead (reported by `dead_agents`).
+    counted_dead: HashSet<AgentKey>,
     /// `(robot, pid)` of agents whose token went (and no token of that robot and pid came since).
     gone: HashSet<(usize, u32)>,
+    /// Agents whose token came back within the grace, not yet handled (sent again what the drop
+    /// may have lost).
+    returned: Vec<AgentKey>,
+    /// Agents counted dead whose token came back, not yet told.
+    dismissed: Vec<AgentKey>,
+}
+
+impl Liveness {
+    /// Agent `key`'s token came at `now`: back from a drop, a newcomer, or one counted dead.
+    fn came(&mut self, key: AgentKey, now: Instant) {
+        let (robot, incarnation, pid) = key;
+        self.gone.remove(&(robot, pid));
+        // An older incarnation of the same robot and pid (tests run several agents in one
+        // process) was replaced: its death, if pending, is no longer news.
+        self.vanished
+            .retain(|&(r, i, p), _| !(r == robot && p == pid && i != incarnation));
+        if let Some(went) = self.vanished.remove(&key) {
+            tracing::warn!(
+                "robot {robot}: agent pid {pid} reconnected after {:.1} s",
+                now.saturating_duration_since(went).as_secs_f64()
+            );
+            self.returned.push(key);
+        } else if self.counted_dead.remove(&key) {
+            tracing::warn!(
+                "robot {robot}: agent pid {pid} came back after it was counted gone; telling it \
+                 to start again"
+            );
+            self.dismissed.push(key);
+        }
+    }
+
+    /// Agent `key`'s token went at `now`.
+    fn went(&mut self, key: AgentKey, now: Instant) {
+        let (robot, _, pid) = key;
+        self.gone.insert((robot, pid));
+        self.vanished.insert(key, now);
+        tracing::warn!(
+            "robot {robot}: agent pid {pid} is unreachable (its liveliness token went); waiting \
+             up to {:.0} s for it to reconnect",
+            super::RECONNECT_GRACE.as_secs_f64()
+        );
+    }
+
+    /// Agents unreachable for the whole grace at `now`: counted dead from now on.
+    fn take_dead(&mut self, now: Instant) -> Vec<AgentKey> {
+        let dead: Vec<AgentKey> = self
+            .vanished
+            .iter()
+            .filter(|(_, went)| now.saturating_duration_since(**went) >= super::RECONNECT_GRACE)
+            .map(|(key, _)| *key)
+            .collect();
+        for key in &dead {
+            self.vanished.remove(key);
+            self.counted_dead.insert(*key);
+            tracing::warn!(
+                "robot {}: agent pid {} has been unreachable for {:.0} s; counting it gone",
+                key.0,
+                key.2,
+                super::RECONNECT_GRACE.as_secs_f64()
+            );
+        }
+        dead
+    }
 }
 
 /// The world's Zenoh session and its ends of every channel of the run.
@@ -260,8 +348,8 @@ fn subscribe_swap_requests(
         .map_err(|e| zenoh_error(format!("subscribe to {key}"))(e.to_string()))
 }
 
-/// Watches the agents' liveliness tokens of run `run` (with history): a token that comes takes
-/// its agent off the gone list; one that goes marks its agent gone and dead, and rings `bell`.
+/// Watches the agents' liveliness tokens of run `run` (with history) into `liveness`
+/// ([`Liveness::came`], [`Liveness::went`]), ringing `bell` on each.
 fn watch_agents(
     session: &::zenoh::Session,
     run: &RunId,
@@ -276,22 +364,16 @@ fn watch_agents(
         .declare_subscriber(keys::agent_tokens(&run))
         .history(true)
         .callback(move |sample| {
-            let Some((robot, _, pid)) = keys::parse_agent_token(&run, sample.key_expr().as_str())
-            else {
+            let Some(key) = keys::parse_agent_token(&run, sample.key_expr().as_str()) else {
                 return;
             };
             let mut liveness = liveness.lock().unwrap_or_else(|e| e.into_inner());
             match sample.kind() {
-                SampleKind::Put => {
-                    liveness.gone.remove(&(robot, pid));
-                }
-                SampleKind::Delete => {
-                    liveness.gone.insert((robot, pid));
-                    liveness.dead.push((robot, pid));
-                    drop(liveness);
-                    bell.ring();
-                }
+                SampleKind::Put => liveness.came(key, Instant::now()),
+                SampleKind::Delete => liveness.went(key, Instant::now()),
             }
+            drop(liveness);
+            bell.ring();
         })
         .wait()
         .map_err(|e| zenoh_error("watch the agents' liveliness")(e.to_string()))
@@ -370,6 +452,41 @@ impl ZenohWorldLink {
         check_robot_index(robot, self.lobbies.len())
     }
 
+    /// Sends agents back from a drop what it may have lost, and tells agents counted gone that
+    /// came back that their place is lost (a refusal answering their incarnation's nonce).
+    fn heal(&mut self) -> WorldResult {
+        let (returned, dismissed) = {
+            let mut liveness = self.liveness.lock().unwrap_or_else(|e| e.into_inner());
+            (
+                std::mem::take(&mut liveness.returned),
+                std::mem::take(&mut liveness.dismissed),
+            )
+        };
+        for (robot, incarnation, _) in returned {
+            if let Some(ports) = self.robots.get(robot).ok().flatten()
+                && ports.id == incarnation
+            {
+                ports.resend(robot)?;
+            }
+        }
+        for (robot, incarnation, pid) in dismissed {
+            if robot >= self.lobbies.len() {
+                continue;
+            }
+            let reason = format!(
+                "robot {robot}'s agent pid {pid} was unreachable for more than {:.0} s, so the \
+                 world counted it gone and its robot brakes until an agent rejoins; start this \
+                 agent again, with the same command, and it rejoins",
+                super::RECONNECT_GRACE.as_secs_f64()
+            );
+            let msg = WelcomeMsg::encode(incarnation, &Welcome::Refused(reason));
+            Self::put(&self.lobbies[robot].welcome, message_bytes(&msg), || {
+                format!("tell robot {robot}'s former agent it was counted gone")
+            })?;
+        }
+        Ok(())
+    }
+
     fn put(
         publisher: &Publisher<'static>,
         bytes: &[u8],
@@ -383,6 +500,34 @@ impl ZenohWorldLink {
 }
 
 impl Incarnation {
+    /// Keeps control request `request` (sent as `payload`) to send again after a reconnection:
+    /// a begin starts the list afresh.
+    fn keep_control(&mut self, request: &ControlRequest, payload: Vec<u8>) {
+        if matches!(request, ControlRequest::BeginEpisode { .. }) {
+            self.controls.clear();
+        }
+        if self.controls.len() == RESEND_CONTROLS {
+            self.controls.remove(1.min(self.controls.len() - 1));
+        }
+        self.controls.push(payload);
+    }
+
+    /// Sends robot `robot`'s agent, back from a drop, its episode's control requests and its
+    /// last scan again (its link answers what it already answered without deciding again).
+    fn resend(&self, robot: usize) -> WorldResult {
+        for payload in &self.controls {
+            ZenohWorldLink::put(&self.control, payload, || {
+                format!("send robot {robot}'s control request again")
+            })?;
+        }
+        if let Some(scan) = &self.last_scan {
+            ZenohWorldLink::put(&self.scan, scan, || {
+                format!("send robot {robot}'s scan again")
+            })?;
+        }
+        Ok(())
+    }
+
     /// The world's ends of incarnation `incarnation` of robot `robot` (`(robot, incarnation)`)
     /// of run `run` on `session`: subscribers of its commands and statuses that queue them and
     /// ring `bell`, publishers of its scans and control requests.
@@ -416,8 +561,11 @@ impl Incarnation {
             },
         )?;
         Ok(Incarnation {
+            id: incarnation,
             scan: publisher(session, name(RobotChannel::Scan), true)?,
             control: publisher(session, name(RobotChannel::Control), false)?,
+            last_scan: None,
+            controls: Vec::new(),
             commands,
             statuses,
             _cmd: cmd,
@@ -461,12 +609,17 @@ impl WorldLink for ZenohWorldLink {
     }
 
     fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult {
-        let Some(ports) = self.robots.get(robot)? else {
+        let Some(ports) = self.robots.get_mut(robot)? else {
             return Ok(());
         };
-        Self::put(&ports.scan, message_bytes(msg), || {
-            format!("send robot {robot}'s scan")
-        })
+        let bytes = message_bytes(msg).to_vec();
+        ports
+            .scan
+            .put(bytes.clone())
+            .wait()
+            .map_err(|e| zenoh_error(format!("send robot {robot}'s scan"))(e.to_string()))?;
+        ports.last_scan = Some(bytes);
+        Ok(())
     }
 
     fn send_control(&mut self, robot: usize, request: &ControlRequest) -> WorldResult {
@@ -480,7 +633,7 @@ impl WorldLink for ZenohWorldLink {
                 .map(|model| (*request_id, model)),
             _ => None,
         };
-        let Some(ports) = self.robots.get(robot)? else {
+        let Some(ports) = self.robots.get_mut(robot)? else {
             return Ok(());
         };
         let mut payload = message_bytes(&msg).to_vec();
@@ -492,10 +645,13 @@ impl WorldLink for ZenohWorldLink {
         }
         Self::put(&ports.control, &payload, || {
             format!("send robot {robot}'s control request")
-        })
+        })?;
+        ports.keep_control(request, payload);
+        Ok(())
     }
 
     fn wait(&mut self, timeout: Duration) -> WorldResult {
+        self.heal()?;
         self.bell.world_wait(timeout)
     }
 
@@ -520,14 +676,26 @@ impl WorldLink for ZenohWorldLink {
         Ok(!liveness.gone.contains(&(robot, pid)))
     }
 
+    fn agent_reconnecting(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
+        let liveness = self.liveness.lock().unwrap_or_else(|e| e.into_inner());
+        Ok(liveness
+            .vanished
+            .keys()
+            .any(|&(r, _, p)| r == robot && p == pid))
+    }
+
     fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError> {
+        self.heal()?;
         let n_robots = self.lobbies.len();
-        let mut dead =
-            std::mem::take(&mut self.liveness.lock().unwrap_or_else(|e| e.into_inner()).dead);
-        dead.retain(|&(robot, _)| robot < n_robots);
-        if !dead.is_empty() {
-            tracing::info!("the liveliness tokens of agents {dead:?} went");
-        }
+        let mut dead: Vec<(usize, u32)> = self
+            .liveness
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take_dead(Instant::now())
+            .into_iter()
+            .map(|(robot, _, pid)| (robot, pid))
+            .filter(|&(robot, _)| robot < n_robots)
+            .collect();
         dead.sort_unstable();
         dead.dedup();
         Ok(dead)

@@ -1,0 +1,244 @@
+//! An agent whose Zenoh session drops comes back (issue 36), with real processes and real Zenoh
+//! on 127.0.0.1: the world's `formation run` with robot 1 remote, and robot 1's
+//! `formation-agent` connecting through a TCP relay of this test.
+//!
+//! - The relay resets the agent's link twice mid-run (both TCP connections closed at once, as a
+//!   Wi-Fi access point or a NAT does): the world sees the agent's liveliness token go, waits for
+//!   it, the agent reconnects on its own, and the lockstep run is bit-identical to in-process,
+//!   with no agent reported lost.
+//! - The agent process is stopped (SIGSTOP) past the link lease, so the world's router drops its
+//!   session, then continued: it reconnects, and the lockstep run (a command timeout longer than
+//!   the stop) is still bit-identical to in-process.
+//!
+//! Without the world's grace for a vanished token the first reset counts the agent dead, its
+//! robot brakes for the rest of the run and the trajectories differ.
+//!
+//! Every test uses its own run id, its own free TCP port and its own scratch folder, and runs
+//! alone within this binary ([`one_at_a_time`](formation_tests::one_at_a_time)).
+
+use std::net::{Shutdown, TcpListener, TcpStream};
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use formation_cli::launch::read_trajectory;
+use formation_robot_agent::decision::PolicyController;
+use formation_tests::{
+    LiveProcess, ProcessTest, assert_bit_identical, free_tcp_port, remote_zenoh_agent, send_signal,
+    test_model, zenoh_credentials,
+};
+use formation_world::{Scenario, run_episode};
+
+const LIMIT: Duration = Duration::from_secs(180);
+
+/// A TCP relay on 127.0.0.1 to the world's endpoint that can reset every connection it
+/// carries: what a link reset looks like to both ends.
+struct ResettingRelay {
+    port: u16,
+    streams: Arc<Mutex<Vec<TcpStream>>>,
+    stop: Arc<AtomicBool>,
+    acceptor: Option<JoinHandle<()>>,
+}
+
+impl ResettingRelay {
+    /// A relay forwarding to `world` (`HOST:PORT`).
+    fn start(world: &str) -> ResettingRelay {
+        let listener = TcpListener::bind("127.0.0.1:0").expect("binding the relay");
+        listener
+            .set_nonblocking(true)
+            .expect("a non-blocking listener");
+        let port = listener.local_addr().expect("the relay's address").port();
+        let streams = Arc::new(Mutex::new(Vec::new()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let world = world.to_string();
+        let (kept, stopped) = (Arc::clone(&streams), Arc::clone(&stop));
+        let acceptor = std::thread::spawn(move || {
+            while !stopped.load(Ordering::Relaxed) {
+                let agent = match listener.accept() {
+                    Ok((agent, _)) => agent,
+                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                        std::thread::sleep(Duration::from_millis(10));
+                        continue;
+                    }
+                    Err(e) => panic!("the relay's accept: {e}"),
+                };
+                agent.set_nonblocking(false).expect("a blocking stream");
+                let Ok(world) = TcpStream::connect(&world) else {
+                    continue;
+                };
+                for (from, to) in [(&agent, &world), (&world, &agent)] {
+                    let (from, to) = (
+                        from.try_clone().expect("a stream"),
+                        to.try_clone().expect("a stream"),
+                    );
+                    std::thread::spawn(move || pump(from, to));
+                }
+                let mut kept = kept.lock().expect("streams");
+                kept.push(agent);
+                kept.push(world);
+            }
+        });
+        ResettingRelay {
+            port,
+            streams,
+            stop,
+            acceptor: Some(acceptor),
+        }
+    }
+
+    /// Closes every connection carried so far, both ways at once; returns how many links.
+    fn reset(&self) -> usize {
+        let streams = std::mem::take(&mut *self.streams.lock().expect("streams"));
+        for stream in &streams {
+            let _ = stream.shutdown(Shutdown::Both);
+        }
+        streams.len() / 2
+    }
+}
+
+impl Drop for ResettingRelay {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        self.reset();
+        if let Some(acceptor) = self.acceptor.take() {
+            let _ = acceptor.join();
+        }
+    }
+}
+
+/// Copies `from` to `to` until either closes.
+fn pump(mut from: TcpStream, mut to: TcpStream) {
+    let _ = std::io::copy(&mut from, &mut to);
+    let _ = to.shutdown(Shutdown::Both);
+    let _ = from.shutdown(Shutdown::Both);
+}
+
+/// Run 0 of the scenario at `scenario` in-process, the test model on every robot.
+fn in_process(scenario: &Path) -> formation_world::Trajectory {
+    let scenario = Scenario::from_path(scenario).expect("scenario");
+    let spec = scenario.run_spec(scenario.seed(), 0);
+    let model = test_model();
+    let mut controller =
+        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
+            .expect("in-process agents");
+    run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run")
+}
+
+/// A lockstep launch of `scenario` with robot 1 remote, listening on a free port of
+/// 127.0.0.1, with `extra` flags; returns it (waiting for robot 1) and its endpoint.
+fn launch(t: &ProcessTest, scenario: &Path, creds: &Path, extra: &[&str]) -> (LiveProcess, String) {
+    let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
+    let creds = creds.to_string_lossy();
+    let flags = [
+        ["--transport", "zenoh", "--listen", &listen, "--remote", "1"].as_slice(),
+        &["--clock", "lockstep", "--remote-timeout-s", "60"],
+        &["--credentials", &creds],
+        extra,
+    ]
+    .concat();
+    let mut launch = LiveProcess::spawn(formation_tests::formation_run(
+        &t.run,
+        scenario,
+        &t.out(),
+        &flags,
+    ));
+    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains("waiting for the remote agents of robots [1]")
+    });
+    assert!(waiting.is_some(), "{}", launch.describe());
+    (launch, listen)
+}
+
+/// Robot 1's agent of `t`'s run, connecting to `connect` with its credentials from `creds`.
+fn robot1(t: &ProcessTest, connect: &str, creds: &Path) -> LiveProcess {
+    let mut agent = remote_zenoh_agent(connect, &t.run, 1);
+    agent
+        .args(["--connect-timeout-ms", "60000", "--credentials"])
+        .arg(creds.join("robot-1.json"));
+    LiveProcess::spawn(agent)
+}
+
+/// Issue 36: robot 1's link reset twice mid-run (the relay closes both connections): the agent
+/// reconnects, the world takes it back (no agent lost), and the lockstep run is bit-identical to
+/// in-process.
+#[test]
+fn an_agent_whose_link_resets_reconnects_and_lockstep_stays_bit_identical() {
+    let t = ProcessTest::start("zreset", LIMIT);
+    let creds = zenoh_credentials(t.path(), 3);
+    let scenario = t.case1(10.0);
+    // Paced, so the resets fall mid-run (201 ticks of at least 30 ms).
+    let (mut launch, listen) = launch(&t, &scenario, &creds, &["--pace-ms", "30"]);
+    let relay = ResettingRelay::start(listen.trim_start_matches("tcp/"));
+    let agent = robot1(&t, &format!("tcp/127.0.0.1:{}", relay.port), &creds);
+    let connected =
+        launch.wait_for_line(Duration::from_secs(60), |l| l.contains("agents connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+    for _ in 0..2 {
+        std::thread::sleep(Duration::from_secs(2));
+        assert!(relay.reset() >= 1, "the relay carried robot 1's link");
+    }
+    let finished = launch.finish(LIMIT);
+    let agent = agent.finish(Duration::from_secs(30));
+    finished.assert_success();
+    assert!(agent.output.status.success(), "{}", agent.describe());
+    let stderr = finished.stderr();
+    assert!(
+        stderr.matches("robot 1: agent pid").count() >= 2 && stderr.contains("reconnected after"),
+        "the world saw robot 1's agent go and come back\n{}\n{}",
+        finished.describe(),
+        agent.describe()
+    );
+    assert!(
+        !finished.stdout().contains("agent lost"),
+        "no agent counted lost\n{}",
+        finished.describe()
+    );
+    let over_zenoh = read_trajectory(&t.out().join("runs/run-0000.json")).expect("the run log");
+    assert_bit_identical(&over_zenoh, &in_process(&scenario));
+    t.assert_clean();
+}
+
+/// Issue 36: robot 1's agent stopped (SIGSTOP) for 12 s, past the 10 s link lease, so the
+/// world's router drops its session; continued, it reconnects and the world takes it back. The
+/// world holds the tick meanwhile (a command timeout, `--timeout-ms`, longer than the stop), so the lockstep run
+/// is still bit-identical to in-process.
+#[test]
+fn an_agent_stopped_past_the_lease_reconnects_and_lockstep_stays_bit_identical() {
+    let t = ProcessTest::start("zstop", LIMIT);
+    let creds = zenoh_credentials(t.path(), 3);
+    let scenario = t.case1(6.0);
+    let (mut launch, listen) = launch(
+        &t,
+        &scenario,
+        &creds,
+        &["--pace-ms", "20", "--timeout-ms", "60000"],
+    );
+    let agent = robot1(&t, &listen, &creds);
+    let connected =
+        launch.wait_for_line(Duration::from_secs(60), |l| l.contains("agents connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+    std::thread::sleep(Duration::from_secs(1));
+    send_signal(agent.id(), "STOP");
+    std::thread::sleep(Duration::from_secs(12));
+    send_signal(agent.id(), "CONT");
+    let finished = launch.finish(LIMIT);
+    let agent = agent.finish(Duration::from_secs(30));
+    finished.assert_success();
+    assert!(agent.output.status.success(), "{}", agent.describe());
+    assert!(
+        finished.stderr().contains("reconnected after"),
+        "the world saw robot 1's agent go and come back\n{}\n{}",
+        finished.describe(),
+        agent.describe()
+    );
+    assert!(
+        !finished.stdout().contains("agent lost"),
+        "no agent counted lost\n{}",
+        finished.describe()
+    );
+    let over_zenoh = read_trajectory(&t.out().join("runs/run-0000.json")).expect("the run log");
+    assert_bit_identical(&over_zenoh, &in_process(&scenario));
+    t.assert_clean();
+}
