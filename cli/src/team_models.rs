@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use formation_world::Scenario;
+use formation_world::scenario::VStarPlan;
 
 use crate::paths;
 
@@ -73,12 +74,15 @@ pub fn team_sizes_of(
 
 /// Each distinct model of a team (by id, in first-use order) trained at another v* than the
 /// runs' `v_star` (`formation.v_train`), against it; empty when every model was trained at it.
+/// Where v* is drawn per run (`goal.v_star_range`), the end of the range farthest from the
+/// model's v_train is the one reported.
 pub fn goal_speeds_of(
     models: &[(String, formation_onnx::ModelMetadata)],
-    v_star: f64,
+    v_star: VStarPlan,
 ) -> Vec<formation_schema::ModelGoalSpeed> {
     distinct(models)
         .filter_map(|(id, metadata)| {
+            let v_star = v_star.farthest_from(metadata.v_train);
             formation_schema::ModelGoalSpeed::new(id, metadata.v_train, v_star)
         })
         .filter(formation_schema::ModelGoalSpeed::is_outside)
@@ -228,6 +232,7 @@ mod tests {
             dataset_id: "d".into(),
             output: formation_onnx::PolicyOutput::Wheels,
             aux: formation_proto::AuxLayout::PAPER,
+            ranges: None,
             extra: extra
                 .iter()
                 .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))
@@ -271,12 +276,27 @@ mod tests {
         assert_eq!(sizes.len(), 1, "only the scaled model records team sizes");
         assert!(sizes[0].zero_shot);
         // So do the v* records, only for a v* off the trained one (0.7 here).
-        assert!(goal_speeds_of(&team, 0.7).is_empty());
-        let speeds = goal_speeds_of(&team, 0.4);
+        assert!(goal_speeds_of(&team, VStarPlan::Fixed(0.7)).is_empty());
+        let speeds = goal_speeds_of(&team, VStarPlan::Fixed(0.4));
         assert_eq!(
             speeds.iter().map(|g| g.model.as_str()).collect::<Vec<_>>(),
             ["scaled", "paper"]
         );
         assert_eq!(speeds[0].fit, formation_proto::GoalSpeedFit::Slower);
+        // A v* drawn per run is reported at the end of its range farthest from v_train.
+        let drawn = goal_speeds_of(
+            &team,
+            VStarPlan::Range {
+                min: 0.5,
+                max: 0.75,
+            },
+        );
+        assert_eq!(drawn[0].v_star, 0.5);
+        let faster = goal_speeds_of(&team, VStarPlan::Range { min: 0.6, max: 1.2 });
+        assert_eq!(
+            (faster[0].v_star, faster[0].fit),
+            (1.2, formation_proto::GoalSpeedFit::Faster)
+        );
+        assert!(goal_speeds_of(&team, VStarPlan::Range { min: 0.7, max: 0.7 }).is_empty());
     }
 }

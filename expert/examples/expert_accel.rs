@@ -9,7 +9,8 @@
 //! * `ACCEL`: the wheel acceleration limit \[m/s²\] (`none` removes it; default: the scenario's);
 //! * `DURATION`: the run length \[s\] (default: the scenario's);
 //! * `THREADS`: worker threads (default 2);
-//! * `VERBOSE=1`: one line per failed run (its window errors, how often the limit bound);
+//! * `VERBOSE=1`: one line per run that failed or collided (its d* and v*, window errors, how
+//!   often the limit bound);
 //! * `DUMP=i`: robot 0's heading error and requested and applied wheels over run i's last 3 s;
 //! * `GAINS`: the expert's gains as JSON (`{"k_formation_graph": 0.4}`; default: the defaults).
 
@@ -30,6 +31,8 @@ struct Diagnosis {
     limited_window: f64,
     /// The run's d* \[m\] at its start.
     d_star: f64,
+    /// The run's v* \[m/s\] (drawn per run under `goal.v_star_range`).
+    v_star: f64,
 }
 
 /// What the command line and the environment ask for.
@@ -45,7 +48,7 @@ struct Options {
     duration: Option<f64>,
     /// Worker threads (`THREADS`).
     threads: usize,
-    /// One line per failed run (`VERBOSE=1`).
+    /// One line per run that failed or collided (`VERBOSE=1`).
     verbose: bool,
     /// The run whose last 3 s are dumped (`DUMP`).
     dump: Option<usize>,
@@ -167,6 +170,7 @@ fn diagnose_run(
     Diagnosis {
         metrics,
         d_star: spec.goal_at(0.0).d_star,
+        v_star: spec.v_star,
         limited: bound as f64 / total.max(1) as f64,
         limited_window: bound_w as f64 / total_w.max(1) as f64,
     }
@@ -192,18 +196,19 @@ fn dump_last_seconds(requested: &[Vec<WheelCmd>], traj: &Trajectory) {
     }
 }
 
-/// One line per run of team size `n` that failed at 10 %.
+/// One line per run of team size `n` that failed at 10 % or had a collision.
 fn print_failures(n: usize, results: &[Diagnosis]) {
     for (i, d) in results
         .iter()
         .enumerate()
-        .filter(|(_, d)| !d.metrics.success_10)
+        .filter(|(_, d)| !d.metrics.success_10 || d.metrics.collisions > 0)
     {
         let m = &d.metrics;
         let t = m.team.as_ref();
         eprintln!(
-            "N={n} run {i}: d*={:.2} max_window_err={:.3} mean_err={:.3} conv10={:?} heading_err={:.3} collisions={} connected={:?} anchor={:?} final_err={:?} limited={:.2} limited_window={:.2}",
+            "N={n} run {i}: d*={:.2} v*={:.3} max_window_err={:.3} mean_err={:.3} conv10={:?} heading_err={:.3} collisions={} connected={:?} anchor={:?} final_err={:?} limited={:.2} limited_window={:.2}",
             d.d_star,
+            d.v_star,
             m.max_edge_window_error,
             m.rel_formation_error,
             m.convergence_s_10,

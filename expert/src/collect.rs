@@ -16,6 +16,7 @@ use formation_perception::occupancy;
 use formation_proto::{AuxInput, LidarSpec, NeighbourRule, OccupancySpec, WheelCmd};
 use formation_trainer_bridge::dataset::{DatasetError, DatasetWriter, Sample};
 use formation_world::episode::{Observation, run_episode};
+use formation_world::scenario::VStarPlan;
 use formation_world::{RobotParams, RunSpec, Scenario};
 
 use crate::controller::{ExpertController, ExpertGains, InvalidGains, check_inputs};
@@ -92,6 +93,18 @@ pub enum CollectError {
         /// The collection's value.
         collection: String,
     },
+    /// The scenario draws v* per run, but a dataset records one training speed (`v_train`).
+    #[error(
+        "the scenario draws v* per run (goal.v_star_range = [{min}, {max}]), but a dataset \
+         records one training speed (v_train) for all its samples; collect at a fixed goal.v_star \
+         (e.g. override goal.v_star and drop goal.v_star_range from a copy of the scenario)"
+    )]
+    VStarPerRun {
+        /// Slowest v* of the range \[m/s\].
+        min: f64,
+        /// Fastest v* of the range \[m/s\].
+        max: f64,
+    },
     /// Writing the dataset failed.
     #[error("writing demonstrations of run {run}: {source}")]
     Dataset {
@@ -165,6 +178,11 @@ pub fn collect(
     }
     opts.gains.validate()?;
     check_occupancy(&opts.occupancy)?;
+    if let VStarPlan::Range { min, max } = opts.scenario.v_star()
+        && min < max
+    {
+        return Err(CollectError::VStarPerRun { min, max });
+    }
     let started = Instant::now();
     let mut samples_written = 0;
     let mut run_samples = Vec::new();

@@ -117,4 +117,19 @@ fn collection_refuses_bad_options_and_a_mismatched_dataset() {
         "{err}"
     );
     assert_eq!(writer.samples(), 0, "nothing written on refusal");
+
+    // A v* drawn per run has no one v_train to record: refused before any run, naming the key.
+    let drawn = Scenario::from_toml_str(
+        &TINY.replace("v_star = 0.7", "v_star_range = [0.3, 0.7]"),
+        "drawn.toml",
+    )
+    .expect("valid");
+    let drawn_opts = CollectOptions::for_scenario(&drawn);
+    let err = collect(&drawn_opts, &mut writer, &mut |_, _| {}).expect_err("v* per run");
+    assert!(
+        matches!(err, CollectError::VStarPerRun { min: 0.3, max: 0.7 }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("goal.v_star_range"), "{err}");
+    assert_eq!(writer.samples(), 0, "nothing written on refusal");
 }

@@ -67,7 +67,7 @@ pub fn evaluate_scaling(
                     Driver::policy_for(&scenario, model)?,
                     Some(id.clone()),
                     ModelTeamSize::new(id, trained_team_sizes, robots),
-                    ModelGoalSpeed::new(id, *v_train, scenario.v_star())
+                    ModelGoalSpeed::new(id, *v_train, scenario.v_star().farthest_from(*v_train))
                         .filter(ModelGoalSpeed::is_outside),
                     input.clone(),
                 ),

@@ -82,10 +82,20 @@ impl PyScenario {
         self.scenario.world_config().dt
     }
 
-    /// Desired speed v* \[m/s\].
+    /// Desired speed v* \[m/s\]; `None` where it is drawn per run (`goal.v_star_range`, see
+    /// `v_star_range`).
     #[getter]
-    fn v_star(&self) -> f64 {
-        self.scenario.v_star()
+    fn v_star(&self) -> Option<f64> {
+        self.scenario.v_star().fixed()
+    }
+
+    /// `(slowest, fastest)` v* \[m/s\] drawn per run (`goal.v_star_range`); `None` for a fixed v*.
+    #[getter]
+    fn v_star_range(&self) -> Option<(f64, f64)> {
+        match self.scenario.v_star() {
+            formation_world::scenario::VStarPlan::Range { min, max } => Some((min, max)),
+            formation_world::scenario::VStarPlan::Fixed(_) => None,
+        }
     }
 
     /// LIDAR beams per scan.

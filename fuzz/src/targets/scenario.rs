@@ -30,6 +30,7 @@ pub const TARGET: Target = Target {
         b"\n[[agent]]\nrobot = 0\nmodel = \"m.onnx\"\n",
         b"d_star_choices = []\n",
         b"d_star_range = [2.0, 1.0]\n",
+        b"v_star_range = [0.2, 0.05]\n",
         b"schedule = \"sine\"\n",
         b"neighbours = \"gabriel\"\n",
         b"robots = 1024\n",

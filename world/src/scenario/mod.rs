@@ -39,7 +39,8 @@
 //!                         # robots * ticks <= 10,000,000 (a run's trajectory is held in memory)
 //!
 //! [goal]                  # required
-//! v_star = 0.7            # desired speed \[m/s\], 0 ..= robot.max_wheel_speed
+//! v_star = 0.7            # desired speed \[m/s\], 0 ..= robot.max_wheel_speed ...
+//! # v_star_range = [0.05, 0.2]         # ... or drawn uniformly per run, lo <= hi (exactly one of the two)
 //! d_star = 2.0            # desired pairwise distance \[m\], 0.01 ..= 100 ...
 //! # d_star_choices = [1.0, 1.5, 2.0]   # ... or 1 to 256 distances drawn per run
 //! # d_star_range = [0.8, 2.5]          # ... or drawn uniformly per run (exactly one of the three)
@@ -107,7 +108,9 @@
 //! placed; the whole team is drawn again, up to a bounded number of times, until it is connected through
 //! sensing range, and then taken from lattice sites grown as a connected patch), then the headings of
 //! robots `0..n` (uniform over the circle, stored wrapped to (-pi, pi] like every [`Pose`]). The world's noise seed is mixed from the run seed in a separate domain, so it does not
-//! depend on how many numbers the draws above consumed.
+//! depend on how many numbers the draws above consumed. v\* (only with `v_star_range`) is drawn from a
+//! generator of its own, seeded from the run seed in another domain, so a scenario without the key
+//! draws exactly what it drew before the key existed, and adding it moves no other draw.
 
 use std::f64::consts::TAU;
 use std::fmt;
@@ -306,6 +309,73 @@ impl DStarPlan {
     }
 }
 
+/// How a scenario chooses the desired speed v* of each run.
+///
+/// It serializes untagged: a fixed v* as the bare number it always was (so the record of every
+/// scenario without `v_star_range` is unchanged), a range as `{"min": .., "max": ..}`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum VStarPlan {
+    /// Every run uses this speed \[m/s\].
+    Fixed(f64),
+    /// Each run draws its speed \[m/s\] uniformly from `[min, max]` (`min <= max`).
+    Range {
+        /// Slowest speed.
+        min: f64,
+        /// Fastest speed.
+        max: f64,
+    },
+}
+
+impl VStarPlan {
+    /// The fixed v*, or `None` when v* is drawn per run.
+    pub fn fixed(&self) -> Option<f64> {
+        match *self {
+            VStarPlan::Fixed(v) => Some(v),
+            VStarPlan::Range { .. } => None,
+        }
+    }
+
+    /// The speeds that bound every draw: the fixed one, or the range's ends.
+    pub fn bounds(&self) -> Vec<f64> {
+        match *self {
+            VStarPlan::Fixed(v) => vec![v],
+            VStarPlan::Range { min, max } => vec![min, max],
+        }
+    }
+
+    /// Of [`VStarPlan::bounds`], the speed farthest in ratio from `reference` (a model's
+    /// training speed): the v* a note on speeds the model was not trained at must speak of.
+    /// The fixed v* itself when there is one; the first end on a tie.
+    pub fn farthest_from(&self, reference: f64) -> f64 {
+        let distance = |v: f64| (v / reference).ln().abs();
+        match *self {
+            VStarPlan::Fixed(v) => v,
+            VStarPlan::Range { min, max } => {
+                if distance(max) > distance(min) {
+                    max
+                } else {
+                    min
+                }
+            }
+        }
+    }
+
+    /// The v* of the run whose seed is `run_seed`: the fixed one, or a uniform draw from a
+    /// generator of its own (seeded from `run_seed` in a domain of its own), so the draw neither
+    /// depends on nor moves any other draw of the run.
+    pub(crate) fn draw(&self, run_seed: u64) -> f64 {
+        match *self {
+            VStarPlan::Fixed(v) => v,
+            VStarPlan::Range { min, max } if min >= max => min,
+            VStarPlan::Range { min, max } => {
+                ChaCha8Rng::seed_from_u64(splitmix64(run_seed ^ plan::V_STAR_DOMAIN))
+                    .random_range(min..=max)
+            }
+        }
+    }
+}
+
 /// How the initial poses of a run are drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -346,7 +416,7 @@ pub struct Scenario {
     duration_s: f64,
     seed: u64,
     runs: usize,
-    v_star: f64,
+    v_star: VStarPlan,
     d_star: DStarPlan,
     heading: HeadingPlan,
     init: InitialConditions,
@@ -439,8 +509,8 @@ impl Scenario {
         self.duration_s
     }
 
-    /// Desired speed \[m/s\].
-    pub fn v_star(&self) -> f64 {
+    /// How v* is chosen per run (each run's own is [`RunSpec::v_star`]).
+    pub fn v_star(&self) -> VStarPlan {
         self.v_star
     }
 

@@ -92,7 +92,8 @@ pub(super) struct FormationToml {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct GoalToml {
-    pub(super) v_star: f64,
+    pub(super) v_star: Option<f64>,
+    pub(super) v_star_range: Option<[f64; 2]>,
     pub(super) d_star: Option<f64>,
     pub(super) d_star_choices: Option<Vec<f64>>,
     pub(super) d_star_range: Option<[f64; 2]>,

@@ -15,7 +15,7 @@ pub struct RunSpec {
     pub n_robots: usize,
     /// Desired pairwise distance \[m\].
     pub d_star: f64,
-    /// Desired speed \[m/s\].
+    /// Desired speed \[m/s\]: the scenario's fixed v*, or this run's draw from `goal.v_star_range`.
     pub v_star: f64,
     /// Desired heading over time.
     pub heading: HeadingSchedule,
@@ -85,7 +85,7 @@ impl Scenario {
             seed,
             n_robots: self.n_robots,
             d_star,
-            v_star: self.v_star,
+            v_star: self.v_star.draw(seed),
             heading,
             duration_s: self.duration_s,
             world: self.world,
@@ -99,6 +99,8 @@ impl Scenario {
 /// Domain-separation constants so the run seed and the noise seed are independent streams.
 pub(super) const RUN_DOMAIN: u64 = 0x5EED_0F0F_2A2A_0001;
 pub(super) const NOISE_DOMAIN: u64 = 0xA5A5_5A5A_C3C3_3C3C;
+/// The domain of v*'s own generator (`goal.v_star_range`).
+pub(super) const V_STAR_DOMAIN: u64 = 0x7E57_AB1E_0B57_A12D;
 
 /// The seed of run `run_index` of a scenario with `base_seed`.
 pub(super) fn run_seed(base_seed: u64, run_index: usize) -> u64 {

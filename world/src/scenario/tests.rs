@@ -62,6 +62,91 @@ fn a_d_star_range_draws_every_run_uniformly_within_it() {
     );
 }
 
+#[test]
+fn a_v_star_range_draws_every_run_uniformly_within_it_and_moves_no_other_draw() {
+    let fixed = parse(&edited("d_star = 2.0", "d_star_range = [0.8, 2.5]")).unwrap();
+    let text = edited("v_star = 0.7", "v_star_range = [0.05, 0.2]")
+        .replace("d_star = 2.0", "d_star_range = [0.8, 2.5]");
+    let scenario = parse(&text).unwrap();
+    assert_eq!(
+        scenario.v_star(),
+        VStarPlan::Range {
+            min: 0.05,
+            max: 0.2
+        }
+    );
+    assert_eq!(scenario.v_star().bounds(), [0.05, 0.2]);
+    assert_eq!(scenario.v_star().fixed(), None);
+    let draws: Vec<f64> = (0..400).map(|i| scenario.run_spec(9, i).v_star).collect();
+    assert!(draws.iter().all(|v| (0.05..=0.2).contains(v)));
+    let below_middle = draws.iter().filter(|&&v| v < 0.125).count();
+    assert!(
+        (150..=250).contains(&below_middle),
+        "{below_middle} of 400 below the middle"
+    );
+    let distinct: std::collections::BTreeSet<u64> = draws.iter().map(|v| v.to_bits()).collect();
+    assert_eq!(distinct.len(), 400, "a continuous draw");
+    for i in [0, 7, 399] {
+        // A run replays alone, bit for bit, and goes to every tick's goal.
+        let spec = scenario.run_spec(9, i);
+        assert_eq!(spec, scenario.run_spec(9, i));
+        assert_eq!(spec.v_star.to_bits(), draws[i].to_bits());
+        assert_eq!(spec.goal_at(3.0).v_star, spec.v_star);
+        // v* has a generator of its own: every other draw is the fixed-v* scenario's.
+        let other = fixed.run_spec(9, i);
+        assert_eq!((spec.d_star, spec.heading), (other.d_star, other.heading));
+        assert_eq!(spec.initial, other.initial);
+        assert_eq!(spec.noise_seed, other.noise_seed);
+    }
+    // Another base seed draws other speeds.
+    assert_ne!(scenario.run_spec(10, 0).v_star, draws[0]);
+    // A range of one speed is that speed.
+    let one = parse(&edited("v_star = 0.7", "v_star_range = [0.3, 0.3]")).unwrap();
+    assert!((0..20).all(|i| one.run_spec(1, i).v_star == 0.3));
+}
+
+#[test]
+fn a_v_star_range_is_checked_against_the_profiles_top_speed() {
+    let text = edited("v_star = 0.7", "v_star_range = [0.05, 0.3]").replace(
+        "phi = 1.0",
+        "phi = 1.0\n[robot]\nprofile = \"turtlebot3-burger\"",
+    );
+    let (field, problem) = invalid_field(&text);
+    assert_eq!(field, "goal.v_star_range[1]");
+    assert!(
+        problem.contains("0.22, the \"turtlebot3-burger\" profile's"),
+        "{problem}"
+    );
+    let fits = text.replace("0.3]", "0.2]");
+    assert!(parse(&fits).is_ok());
+}
+
+#[test]
+fn a_fixed_v_star_serializes_as_the_number_it_always_was() {
+    let scenario = parse(MINIMAL).unwrap();
+    let json = serde_json::to_value(&scenario).unwrap();
+    assert_eq!(json["v_star"], serde_json::json!(0.7));
+    let ranged = parse(&edited("v_star = 0.7", "v_star_range = [0.1, 0.2]")).unwrap();
+    let json = serde_json::to_value(&ranged).unwrap();
+    assert_eq!(json["v_star"], serde_json::json!({"min": 0.1, "max": 0.2}));
+}
+
+#[test]
+fn the_farthest_end_of_a_v_star_range_is_the_one_a_speed_note_speaks_of() {
+    let range = VStarPlan::Range {
+        min: 0.05,
+        max: 0.2,
+    };
+    assert_eq!(range.farthest_from(0.7), 0.05);
+    assert_eq!(range.farthest_from(0.04), 0.2);
+    assert_eq!(
+        range.farthest_from(0.1),
+        0.05,
+        "a tie (2x either way) takes the slower end"
+    );
+    assert_eq!(VStarPlan::Fixed(0.3).farthest_from(0.7), 0.3);
+}
+
 fn invalid_field(text: &str) -> (String, String) {
     match parse(text) {
         Err(ScenarioError::Invalid {
@@ -122,7 +207,7 @@ fn every_shipped_scenario_parses_with_the_papers_settings() {
         let scenario = Scenario::from_toml_str(text, name).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(scenario.name(), name);
         assert_eq!(scenario.n_robots(), 3);
-        assert_eq!(scenario.v_star(), 0.7);
+        assert_eq!(scenario.v_star(), VStarPlan::Fixed(0.7));
         assert_eq!(scenario.world_config().dt, DEFAULT_DT);
         assert_eq!(scenario.world_config().lidar, LidarSpec::default());
         assert_eq!(*scenario.initial_conditions(), InitialConditions::default());
@@ -322,6 +407,32 @@ fn invalid_values_name_the_field_and_the_value() {
             edited("v_star = 0.7", "v_star = -nan"),
             "goal.v_star",
             "finite",
+        ),
+        (edited("v_star = 0.7", ""), "goal.v_star", "is missing"),
+        (
+            edited("v_star = 0.7", "v_star = 0.7\nv_star_range = [0.1, 0.2]"),
+            "goal.v_star",
+            "given both ways; give exactly one of goal.v_star",
+        ),
+        (
+            edited("v_star = 0.7", "v_star_range = [0.3, 0.2]"),
+            "goal.v_star_range",
+            "slowest <= fastest (got [0.3, 0.2])",
+        ),
+        (
+            edited("v_star = 0.7", "v_star_range = [-0.1, 0.2]"),
+            "goal.v_star_range[0]",
+            "(got -0.1)",
+        ),
+        (
+            edited("v_star = 0.7", "v_star_range = [0.1, inf]"),
+            "goal.v_star_range[1]",
+            "finite",
+        ),
+        (
+            edited("v_star = 0.7", "v_star_range = [0.1, 1.5]"),
+            "goal.v_star_range[1]",
+            "must be <= robot.max_wheel_speed (0.9)",
         ),
         (edited("phi = 1.0", "phi = nan"), "heading.phi", "finite"),
         (edited("phi = 1.0", ""), "heading.phi", "required"),
@@ -1002,7 +1113,7 @@ fn overrides_set_keys_before_validation_with_the_files_messages() {
     std::fs::write(&path, MINIMAL).unwrap();
     let set = |key: &str, value: toml::Value| vec![(key.to_owned(), value)];
     let faster = Scenario::from_path_overridden(&path, &set("goal.v_star", 0.5.into())).unwrap();
-    assert_eq!(faster.v_star(), 0.5);
+    assert_eq!(faster.v_star(), VStarPlan::Fixed(0.5));
     assert_eq!(faster.n_robots(), 3);
     let added = Scenario::from_path_overridden(&path, &set("lidar.beams", 90.into())).unwrap();
     assert_eq!(added.world_config().lidar.beams, 90);

@@ -252,40 +252,87 @@ fn validate_scan_rate(check: &Checker<'_>, rate: f64, dt: f64) -> Result<f64, Sc
     Ok(rate)
 }
 
-/// `goal.v_star` (reachable by the wheels) and exactly one of `goal.d_star`,
-/// `goal.d_star_choices` and `goal.d_star_range`, each in range.
+/// Exactly one of `goal.v_star` and `goal.v_star_range` (reachable by the wheels), and exactly
+/// one of `goal.d_star`, `goal.d_star_choices` and `goal.d_star_range`, each in range.
 pub(super) fn validate_goal(
     check: &Checker<'_>,
     goal: GoalToml,
     robot: &RobotParams,
     profile: RobotProfile,
-) -> Result<(f64, DStarPlan), ScenarioError> {
-    let v_star = check.bounded(
-        "goal.v_star",
-        goal.v_star,
-        Bounds {
-            min: 0.0,
-            ..limits::MAX_WHEEL_SPEED
-        },
-    )?;
-    if v_star > robot.max_wheel_speed {
-        let from_profile = if profile.is_ideal() {
-            String::new()
-        } else {
-            format!(
-                ", the {:?} profile's unless [robot] sets it",
-                profile.name()
-            )
-        };
-        return Err(check.invalid(
-            "goal.v_star",
-            format_args!(
-                "must be <= robot.max_wheel_speed ({}{from_profile}) or the robots cannot reach \
-                 it (got {v_star})",
-                robot.max_wheel_speed
-            ),
-        ));
-    }
+) -> Result<(VStarPlan, DStarPlan), ScenarioError> {
+    let v_star = validate_v_star(check, &goal, robot, profile)?;
+    let d_star = validate_d_star(check, goal)?;
+    Ok((v_star, d_star))
+}
+
+/// Exactly one of `goal.v_star` and `goal.v_star_range`, each speed in `[0, max_wheel_speed]`.
+fn validate_v_star(
+    check: &Checker<'_>,
+    goal: &GoalToml,
+    robot: &RobotParams,
+    profile: RobotProfile,
+) -> Result<VStarPlan, ScenarioError> {
+    let reachable = |field: &str, v: f64| -> Result<f64, ScenarioError> {
+        let v = check.bounded(
+            field,
+            v,
+            Bounds {
+                min: 0.0,
+                ..limits::MAX_WHEEL_SPEED
+            },
+        )?;
+        if v > robot.max_wheel_speed {
+            let from_profile = if profile.is_ideal() {
+                String::new()
+            } else {
+                format!(
+                    ", the {:?} profile's unless [robot] sets it",
+                    profile.name()
+                )
+            };
+            return Err(check.invalid(
+                field,
+                format_args!(
+                    "must be <= robot.max_wheel_speed ({}{from_profile}) or the robots cannot \
+                     reach it (got {v})",
+                    robot.max_wheel_speed
+                ),
+            ));
+        }
+        Ok(v)
+    };
+    const ONE_SPEED: &str = "give exactly one of goal.v_star (fixed) and goal.v_star_range \
+                             (uniform per run)";
+    let v_star = match (goal.v_star, goal.v_star_range) {
+        (Some(_), Some(_)) => {
+            return Err(check.invalid(
+                "goal.v_star",
+                format_args!("is given both ways; {ONE_SPEED}"),
+            ));
+        }
+        (Some(v), None) => VStarPlan::Fixed(reachable("goal.v_star", v)?),
+        (None, Some([min, max])) => {
+            let min = reachable("goal.v_star_range[0]", min)?;
+            let max = reachable("goal.v_star_range[1]", max)?;
+            if min > max {
+                return Err(check.invalid(
+                    "goal.v_star_range",
+                    format_args!(
+                        "must be [slowest, fastest] with slowest <= fastest (got [{min}, {max}])"
+                    ),
+                ));
+            }
+            VStarPlan::Range { min, max }
+        }
+        (None, None) => {
+            return Err(check.invalid("goal.v_star", format_args!("is missing; {ONE_SPEED}")));
+        }
+    };
+    Ok(v_star)
+}
+
+/// Exactly one of `goal.d_star`, `goal.d_star_choices` and `goal.d_star_range`, each in range.
+fn validate_d_star(check: &Checker<'_>, goal: GoalToml) -> Result<DStarPlan, ScenarioError> {
     const ONE_OF: &str = "give exactly one of goal.d_star (fixed), goal.d_star_choices (one \
                           of a list per run) and goal.d_star_range (uniform per run)";
     let given = [
@@ -340,7 +387,7 @@ pub(super) fn validate_goal(
             return Err(check.invalid("goal.d_star", format_args!("is missing; {ONE_OF}")));
         }
     };
-    Ok((v_star, d_star))
+    Ok(d_star)
 }
 
 /// The `[[agent]]` entries: each names a robot of the team, at most once, and a model.
