@@ -125,24 +125,35 @@ def _export(args) -> None:
     checkpoint = train.load_checkpoint(args.checkpoint)
     model = train.model_from_checkpoint(checkpoint)
     size = model.size_px
+    declared = export.declared_ranges(checkpoint["metadata"])
+    ranges = None
     if args.data:
         samples = dataset.load(args.data)
         if samples.size_px != size:
             raise train.TrainError(f"the data has {samples.size_px} px images, the checkpoint {size} px")
+        if samples.range_input != declared:
+            raise train.TrainError(
+                f"the data's range input is {samples.range_input or 'none'}, the checkpoint's {declared or 'none'}: "
+                "check parity on the data the model was trained on"
+            )
         pick = np.random.default_rng(args.seed).permutation(len(samples))[: train.PARITY_SAMPLES]
         occupancy = samples.occupancy[pick][:, None].astype(np.float32)
         aux = samples.aux[pick]
+        if declared:
+            ranges = samples.ranges[pick]
     else:
         rng = np.random.default_rng(args.seed)
         occupancy = (rng.random((train.PARITY_SAMPLES, 1, size, size)) < 0.02).astype(np.float32)
         aux = np.stack([rng.uniform(-np.pi, np.pi, train.PARITY_SAMPLES), rng.uniform(0.5, 3.0, train.PARITY_SAMPLES)], 1)
         aux = aux.astype(np.float32)
+        if declared:
+            ranges = rng.uniform(0.0, declared.clip, (train.PARITY_SAMPLES, declared.sectors)).astype(np.float32)
     output = checkpoint["metadata"].get("formation.output", export.OUTPUT_NAME)
     export.export_onnx(model, args.out, checkpoint["metadata"], output=output)
-    parity = export.check_parity(model, args.out, occupancy, aux, output=output)
+    parity = export.check_parity(model, args.out, occupancy, aux, output=output, ranges=ranges)
     if args.parity_out:
         n = train.PARITY_FILE_SAMPLES
-        export.write_parity_file(args.parity_out, model, occupancy[:n], aux[:n])
+        export.write_parity_file(args.parity_out, model, occupancy[:n], aux[:n], ranges=None if ranges is None else ranges[:n])
     print(f"wrote {args.out} (onnxruntime parity {parity:.2e} on {len(aux)} samples)", flush=True)
 
 

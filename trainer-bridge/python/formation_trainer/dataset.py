@@ -4,12 +4,17 @@ A dataset is a directory with ``manifest.json`` and ``shard-NNNNNN.safetensors``
 ``trainer-bridge/src/dataset.rs`` for the format). Every problem found (missing or truncated shard,
 unknown version, shapes that disagree with the manifest, datasets that cannot be mixed) raises
 :class:`DatasetError` naming the file and the fix.
+
+Format version 1 holds no ranges; version 2 declares the scan's ranges in the manifest
+(``"ranges": "sectors=K,clip=C"``, :class:`RangeInput`) and each shard holds ``ranges`` f32
+``[N, K]`` beside the image. Both are read; :attr:`Samples.ranges` is ``[N, 0]`` for version 1.
 """
 
 from __future__ import annotations
 
 import json
 import struct
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,7 +22,11 @@ import numpy as np
 from safetensors.numpy import load_file
 
 FORMAT = "formation-dataset"
-VERSION = 1
+#: The newest layout version: a dataset whose samples carry their scan's ranges.
+VERSION = 2
+#: The layout of a dataset without ranges (every dataset written before ranges).
+VERSION_WITHOUT_RANGES = 1
+VERSIONS = (VERSION_WITHOUT_RANGES, VERSION)
 MANIFEST = "manifest.json"
 RECOLLECT = "delete the dataset and re-run `formation collect`"
 
@@ -38,6 +47,61 @@ class DatasetError(Exception):
     """A dataset is missing, damaged, of another version, or cannot be combined with another."""
 
 
+#: The bounds of ``formation_proto::RangeInput``.
+MIN_SECTORS, MAX_SECTORS, MAX_CLIP = 4, 360, 100.0
+
+
+def f32_text(value: float) -> str:
+    """``value`` as an ``f32`` and written as Rust's ``Display`` writes one: the shortest decimal
+    that reads back to the same ``f32``, no exponent, no ``.0`` (``3``, ``2.5``, ``0.1``)."""
+    return np.format_float_positional(np.float32(value), unique=True, trim="-")
+
+
+@dataclass(frozen=True)
+class RangeInput:
+    """The scan's ranges a model takes beside its image (``formation_proto::RangeInput``): ``sectors``
+    values, each the mean of ``range / d*`` over its sector's returning beams, at most ``clip``."""
+
+    sectors: int
+    clip: float
+
+    def __post_init__(self):
+        if not MIN_SECTORS <= self.sectors <= MAX_SECTORS:
+            raise ValueError(f"range input sectors = {self.sectors} is out of range: {MIN_SECTORS} to {MAX_SECTORS}")
+        if not 0.0 < float(np.float32(self.clip)) <= MAX_CLIP:
+            raise ValueError(f"range input clip = {self.clip} is out of range: above 0 and at most {MAX_CLIP:g}")
+        object.__setattr__(self, "clip", float(np.float32(self.clip)))
+
+    @staticmethod
+    def parse(text: str) -> "RangeInput":
+        """Reads ``sectors=K,clip=C`` (either order, spaces allowed), as ``RangeInput::parse``."""
+        values = {}
+        for part in str(text).split(","):
+            key, sep, value = part.partition("=")
+            key, value = key.strip(), value.strip()
+            if not sep or key not in ("sectors", "clip") or key in values:
+                raise ValueError(f"{text!r} is not a range input: write \"sectors=K,clip=C\"")
+            values[key] = value
+        if set(values) != {"sectors", "clip"} or not re.fullmatch(r"\+?[0-9]+", values["sectors"]):
+            raise ValueError(f"{text!r} is not a range input: write \"sectors=K,clip=C\"")
+        try:
+            clip = float(values["clip"])
+        except ValueError:
+            raise ValueError(f"{text!r} is not a range input: write \"sectors=K,clip=C\"") from None
+        return RangeInput(int(values["sectors"]), clip)
+
+    def text(self) -> str:
+        """``sectors=K,clip=C``, exactly as ``RangeInput``'s ``Display`` writes it."""
+        return f"sectors={self.sectors},clip={f32_text(self.clip)}"
+
+    def __str__(self) -> str:
+        return self.text()
+
+    def mirrored(self) -> list[int]:
+        """The sector each sector maps to under reflection about the heading axis: ``(K - s) % K``."""
+        return [(self.sectors - s) % self.sectors for s in range(self.sectors)]
+
+
 @dataclass(frozen=True)
 class Manifest:
     """A validated ``manifest.json``."""
@@ -51,6 +115,8 @@ class Manifest:
     scenario: str
     shards: list = field(default_factory=list)
     samples: int = 0
+    version: int = VERSION_WITHOUT_RANGES
+    ranges: RangeInput | None = None
 
     @property
     def size_px(self) -> int:
@@ -65,9 +131,10 @@ def _check_format_and_version(path: Path, fmt, version) -> None:
         raise DatasetError(
             f"{path} has format {fmt!r}, expected {FORMAT!r}: point at a dataset written by `formation collect`"
         )
-    if str(version) != str(VERSION):
+    if str(version) not in {str(v) for v in VERSIONS}:
         raise DatasetError(
-            f"{path} has dataset format version {version}, but this trainer reads version {VERSION}: "
+            f"{path} has dataset format version {version}, but this trainer reads versions "
+            f"{VERSION_WITHOUT_RANGES} and {VERSION}: "
             "re-run `formation collect` with this build (or use the formation build that wrote it)"
         )
 
@@ -87,6 +154,20 @@ def read_manifest(directory: str | Path) -> Manifest:
     if not isinstance(raw, dict):
         raise DatasetError(f"{path} is not a valid dataset manifest (not a JSON object): {RECOLLECT}")
     _check_format_and_version(path, raw.get("format"), raw.get("version"))
+    version = int(raw["version"])
+    ranges = None
+    if raw.get("ranges") is not None:
+        try:
+            ranges = RangeInput.parse(raw["ranges"])
+        except ValueError as e:
+            raise DatasetError(f"{path} is not a valid dataset manifest (its `ranges`: {e}): {RECOLLECT}") from e
+    if (ranges is not None) != (version == VERSION):
+        declared = f'declares ranges "{ranges}"' if ranges is not None else "declares no `ranges`"
+        raise DatasetError(
+            f"{path} is dataset format version {version} but {declared}: version {VERSION_WITHOUT_RANGES} "
+            f"holds no ranges and version {VERSION} declares them; the manifest was edited or damaged: "
+            "restore it, or re-run `formation collect`"
+        )
     try:
         manifest = Manifest(
             directory=directory,
@@ -101,6 +182,8 @@ def read_manifest(directory: str | Path) -> Manifest:
                 for s in raw["shards"]
             ],
             samples=int(raw["samples"]),
+            version=version,
+            ranges=ranges,
         )
     except (KeyError, TypeError, ValueError) as e:
         raise DatasetError(f"{path} is not a valid dataset manifest (bad or missing field {e}): {RECOLLECT}") from e
@@ -142,13 +225,27 @@ def _read_shard_header(path: Path) -> tuple[dict, int]:
     return header, expected
 
 
-def check_shard(path: Path, entry: dict, size_px: int) -> None:
-    """Validates one shard's header against its manifest entry without reading the samples."""
+def _tensors(sectors: int) -> dict:
+    """The shard tensors of a dataset whose ranges have ``sectors`` sectors (0: none)."""
+    if not sectors:
+        return _TENSORS
+    return {**_TENSORS, "ranges": (np.float32, lambda s: (sectors,))}
+
+
+def check_shard(path: Path, entry: dict, size_px: int, ranges: RangeInput | None = None, version: int | None = None) -> None:
+    """Validates one shard's header against its manifest entry without reading the samples: its
+    version (``version``, the manifest's, when given) and its tensors, ``ranges`` iff declared."""
     header, _ = _read_shard_header(path)
     meta = header.get("__metadata__") or {}
     _check_format_and_version(path, meta.get("format"), meta.get("version"))
+    if version is not None and str(meta.get("version")) != str(version):
+        raise DatasetError(
+            f"{path} is corrupt (its version {meta.get('version')} differs from the manifest's {version}): {RECOLLECT}"
+        )
+    if ranges is None and "ranges" in header:
+        raise DatasetError(f"{path} is corrupt (a `ranges` tensor, but the manifest declares no ranges): {RECOLLECT}")
     n = entry["samples"]
-    for name, (dtype, tail) in _TENSORS.items():
+    for name, (dtype, tail) in _tensors(ranges.sectors if ranges else 0).items():
         info = header.get(name)
         if info is None:
             raise DatasetError(f"{path} is corrupt (no `{name}` tensor): {RECOLLECT}")
@@ -165,9 +262,9 @@ def check_shard(path: Path, entry: dict, size_px: int) -> None:
         )
 
 
-def load_shard(path: Path, entry: dict, size_px: int) -> dict[str, np.ndarray]:
+def load_shard(path: Path, entry: dict, size_px: int, ranges: RangeInput | None = None, version: int | None = None) -> dict[str, np.ndarray]:
     """Validates and loads one shard's tensors."""
-    check_shard(path, entry, size_px)
+    check_shard(path, entry, size_px, ranges, version)
     try:
         return load_file(str(path))
     except Exception as e:  # safetensors raises its own error types
@@ -186,6 +283,11 @@ class Samples:
     robot: np.ndarray  # uint8 [N]
     source: np.ndarray  # int32 [N]: index into `manifests`
     manifests: list
+    ranges: np.ndarray | None = None  # float32 [N, K]; [N, 0] without ranges
+
+    def __post_init__(self):
+        if self.ranges is None:
+            self.ranges = np.zeros((len(self), 0), dtype=np.float32)
 
     def __len__(self) -> int:
         return int(self.robot.shape[0])
@@ -193,6 +295,11 @@ class Samples:
     @property
     def size_px(self) -> int:
         return self.manifests[0].size_px
+
+    @property
+    def range_input(self) -> RangeInput | None:
+        """The ranges every sample carries (shared by every dataset), or None."""
+        return self.manifests[0].ranges
 
     @property
     def lidar(self) -> dict:
@@ -239,11 +346,13 @@ def _check_compatible(first: Manifest, other: Manifest) -> None:
         ("occupancy", first.occupancy, other.occupancy),
         ("lidar", _sensor(first.lidar), _sensor(other.lidar)),
         ("v_train", first.v_train, other.v_train),
+        ("range input", first.ranges, other.ranges),
     ):
         if a != b:
             raise DatasetError(
                 f"datasets {first.directory} and {other.directory} cannot be trained together: "
                 f"their {name} differ ({a} vs {b}); train on datasets collected with the same settings"
+                + (" (the same `formation collect` range input)" if name == "range input" else "")
             )
 
 
@@ -264,16 +373,17 @@ def load(directories) -> Samples:
     # samples, so a dataset of more than half the machine's memory still loads.
     for m in manifests:
         for entry in m.shards:
-            check_shard(m.directory / entry["file"], entry, m.size_px)
+            check_shard(m.directory / entry["file"], entry, m.size_px, m.ranges, m.version)
     size_px = manifests[0].size_px
-    arrays = {name: np.empty((total, *tail(size_px)), dtype) for name, (dtype, tail) in _TENSORS.items()}
+    tensors_of = _tensors(manifests[0].ranges.sectors if manifests[0].ranges else 0)
+    arrays = {name: np.empty((total, *tail(size_px)), dtype) for name, (dtype, tail) in tensors_of.items()}
     source = np.empty(total, dtype=np.int32)
     start = 0
     for index, m in enumerate(manifests):
         for entry in m.shards:
-            tensors = load_shard(m.directory / entry["file"], entry, m.size_px)
+            tensors = load_shard(m.directory / entry["file"], entry, m.size_px, m.ranges, m.version)
             end = start + entry["samples"]
-            for name in _TENSORS:
+            for name in tensors_of:
                 arrays[name][start:end] = tensors[name]
             source[start:end] = index
             del tensors

@@ -15,6 +15,15 @@ check judges distances relative to d*, and a wheel-speed error moves a robot by 
 whatever d* is, so without the weight a team at d* = 0.8 m is fitted 10 times less tightly, in the
 check's terms, than one at 2.5 m. Train and validation losses are then both weighted.
 
+**Ranges.** A dataset whose samples carry their scan's ranges (``formation collect --ranges
+sectors=K,clip=C``) trains a model that takes them (``PolicyNet(range_sectors=K)``, the third
+input ``ranges`` and ``formation.ranges`` in the export); the dataset decides, no option does.
+Mirroring reflects the ranges with the image. A model with ranges needs a dataset with them.
+Warm-starting a model *without* ranges on a dataset *with* them (:func:`add_range_branch`) adds
+the range branch, copies every other weight, and gives the head's first layer zero weights on
+the 64 new features, so the new network starts with exactly the old one's outputs and learns to
+use the ranges from there.
+
 Validation holds out whole runs (every sample of a run is in the same split: consecutive ticks are
 nearly identical, so a per-sample split would measure memorisation). Images stay uint8 in memory
 and become float per batch. After training, beside ``out`` (``<stem>.onnx``) it writes:
@@ -44,7 +53,7 @@ from torch import nn
 
 from . import dataset as ds
 from . import export
-from .model import PolicyNet, mirror_inputs
+from .model import RANGE_FEATURES, PolicyNet, mirror_inputs
 
 CHECKPOINT_FORMAT = "formation-checkpoint/1"
 REPORT_PREFIX = "FORMATION_TRAIN_REPORT "
@@ -190,7 +199,9 @@ def checkpoint_from_onnx(path: Path) -> dict:
     output = meta.get("formation.output", export.OUTPUT_NAME)
     try:
         size_px = int(meta["formation.occupancy.size_px"])
-        model = PolicyNet(size_px, architecture, mirror_averaged, output)
+        ranges = export.declared_ranges(meta)
+        range_sectors = ranges.sectors if ranges else None
+        model = PolicyNet(size_px, architecture, mirror_averaged, output, range_sectors)
     except (KeyError, ValueError) as e:
         raise foreign(f"its metadata does not describe a network this trainer builds ({e})") from e
     weights = {init.name: numpy_helper.to_array(init) for init in graph.graph.initializer}
@@ -207,6 +218,7 @@ def checkpoint_from_onnx(path: Path) -> dict:
         "architecture": architecture,
         "mirror_averaged": mirror_averaged,
         "output": output,
+        "range_sectors": range_sectors,
         "model_state": state,
         "metadata": meta,
     }
@@ -221,6 +233,7 @@ def save_checkpoint(path: Path, model: PolicyNet, optimizer, metadata: dict[str,
             "architecture": model.architecture,
             "mirror_averaged": model.mirror_averaged,
             "output": model.output,
+            "range_sectors": model.range_sectors,
             "model_state": model.state_dict(),
             "optimizer_state": optimizer.state_dict(),
             "metadata": metadata,
@@ -244,14 +257,49 @@ def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> Polic
         checkpoint.get("architecture", "paper"),
         checkpoint.get("mirror_averaged", False),
         checkpoint.get("output", "wheels"),
+        checkpoint.get("range_sectors"),
     )
     model.load_state_dict(checkpoint["model_state"])
     return model
 
 
+def add_range_branch(model: PolicyNet, sectors: int) -> PolicyNet:
+    """``model`` (without ranges) with a range branch of ``sectors`` sectors, computing exactly
+    what ``model`` computes: every weight is copied, the head's first layer keeps its columns for
+    the image features and aux and gets zero columns for the 64 range features, and the range
+    branch is initialised as a fresh one is (its gradients reach it through those columns)."""
+    if model.range_sectors is not None:
+        raise TrainError(f"the network already takes ranges of {model.range_sectors} sectors")
+    widened = PolicyNet(model.size_px, model.architecture, model.mirror_averaged, model.output, sectors)
+    old, new = model.state_dict(), widened.state_dict()
+    first = next(m for m in model.head if isinstance(m, nn.Linear))
+    first_name = next(name for name, m in model.head.named_children() if m is first)
+    weight_key = f"head.{first_name}.weight"
+    state = {}
+    for name, param in new.items():
+        if name == weight_key:
+            columns = old[name].shape[1]
+            if param.shape[1] != columns + RANGE_FEATURES:
+                raise TrainError(f"the head's first layer takes {param.shape[1]} inputs, expected {columns} + {RANGE_FEATURES}")
+            param = torch.zeros_like(param)
+            param[:, :columns] = old[name]
+        elif name in old:
+            param = old[name].clone()
+        state[name] = param
+    widened.load_state_dict(state)
+    return widened
+
+
+def _apply(model, occupancy: torch.Tensor, aux: torch.Tensor, ranges: torch.Tensor | None) -> torch.Tensor:
+    """``model`` on a batch, given its ranges only where the data has them."""
+    return model(occupancy, aux) if ranges is None else model(occupancy, aux, ranges)
+
+
 def _batch(tensors: dict, index: torch.Tensor):
+    """The batch ``index``: occupancy [B, 1, S, S] float, aux, ranges (None without), targets."""
     occupancy = tensors["occupancy"].index_select(0, index).unsqueeze(1).float()
-    return occupancy, tensors["aux"].index_select(0, index), tensors["targets"].index_select(0, index)
+    ranges = tensors["ranges"].index_select(0, index) if "ranges" in tensors else None
+    return occupancy, tensors["aux"].index_select(0, index), ranges, tensors["targets"].index_select(0, index)
 
 
 def formation_velocity_targets(wheels: np.ndarray, aux: np.ndarray, v_train: float) -> np.ndarray:
@@ -296,7 +344,12 @@ def training_threads() -> int:
 
 
 def mirror_batch(
-    occupancy: torch.Tensor, aux: torch.Tensor, wheels: torch.Tensor, flip: torch.Tensor, output: str = "wheels"
+    occupancy: torch.Tensor,
+    aux: torch.Tensor,
+    wheels: torch.Tensor,
+    flip: torch.Tensor,
+    output: str = "wheels",
+    ranges: torch.Tensor | None = None,
 ):
     """Reflects the samples where ``flip`` is true about the robot's heading axis (y -> -y).
 
@@ -304,10 +357,14 @@ def mirror_batch(
     ``y`` in ``[W/2 - (r+1) res, W/2 - r res)``, so ``-y`` falls in row ``size - 1 - r``, and a scan
     of beams at ``2 pi k / n`` reflects onto itself), the heading error ``delta_phi`` changes sign,
     d* stays, and the expert's turn reverses, which swaps the left and right wheel speeds (for a
-    ``formation_velocity`` output: negates its sideways component). Training on both halves
-    doubles the distinct views and builds the symmetry into the policy.
+    ``formation_velocity`` output: negates its sideways component). The ranges' sector ``s``
+    becomes sector ``(K - s) % K``. Training on both halves doubles the distinct views and builds
+    the symmetry into the policy.
+
+    Returns ``(occupancy, aux, wheels)``, or ``(occupancy, aux, wheels, ranges)`` when ranges are
+    given.
     """
-    mirrored_occupancy, mirrored_aux = mirror_inputs(occupancy, aux)
+    mirrored_occupancy, mirrored_aux, *mirrored_ranges = mirror_inputs(occupancy, aux, ranges)
     occupancy = torch.where(flip[:, None, None, None], mirrored_occupancy, occupancy)
     aux = torch.where(flip[:, None], mirrored_aux, aux)
     if output == "formation_velocity":
@@ -315,7 +372,9 @@ def mirror_batch(
     else:
         mirrored = wheels.flip(1)
     wheels = torch.where(flip[:, None], mirrored, wheels)
-    return occupancy, aux, wheels
+    if ranges is None:
+        return occupancy, aux, wheels
+    return occupancy, aux, wheels, torch.where(flip[:, None], mirrored_ranges[0], ranges)
 
 
 def relative_weights(d_star: np.ndarray, train_idx: np.ndarray) -> np.ndarray:
@@ -344,9 +403,9 @@ def mean_loss(model: PolicyNet, tensors: dict, indices: torch.Tensor) -> float:
     with torch.no_grad():
         for start in range(0, len(indices), EVAL_BATCH):
             index = indices[start : start + EVAL_BATCH]
-            occupancy, aux, wheels = _batch(tensors, index)
+            occupancy, aux, ranges, wheels = _batch(tensors, index)
             weights = tensors["weights"].index_select(0, index) if "weights" in tensors else None
-            total += squared_error(model(occupancy, aux), wheels, weights).sum().item()
+            total += squared_error(_apply(model, occupancy, aux, ranges), wheels, weights).sum().item()
     return total / (2 * len(indices))
 
 
@@ -431,6 +490,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     torch.manual_seed(cfg.seed)
 
     samples = ds.load(cfg.data)
+    data_ranges = samples.range_input
+    sectors = data_ranges.sectors if data_ranges else None
     train_idx, val_idx = split_by_episode(samples.episode_keys(), cfg.val_fraction, cfg.seed)
     if cfg.init_from is not None:
         model = model_from_checkpoint(load_checkpoint(cfg.init_from), samples.size_px)
@@ -439,10 +500,28 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
                 f"{cfg.init_from} holds the {model.architecture!r} network, not {cfg.architecture!r}: "
                 f"warm-start from a checkpoint of the same architecture, or train {cfg.architecture!r} from scratch"
             )
-        log(f"warm start from {cfg.init_from}")
+        if model.range_sectors == sectors:
+            log(f"warm start from {cfg.init_from}")
+        elif model.range_sectors is None:
+            model = add_range_branch(model, sectors)
+            log(
+                f"warm start from {cfg.init_from}, a network without ranges: added a range branch for the data's "
+                f"{data_ranges} with zero weights into the head, so the network starts with the old model's outputs"
+            )
+        elif sectors is None:
+            raise TrainError(
+                f"{cfg.init_from} takes the scan's ranges ({model.range_sectors} sectors) but "
+                f"{', '.join(str(d) for d in cfg.data)} holds none: a model with ranges needs a dataset with ranges; "
+                "collect one with `formation collect --ranges sectors=K,clip=C`, or warm-start from a model without ranges"
+            )
+        else:
+            raise TrainError(
+                f"{cfg.init_from} takes ranges of {model.range_sectors} sectors but the data's are {data_ranges}: "
+                "warm-start from a model of the same range input, or collect the data with its"
+            )
     else:
         try:
-            model = PolicyNet(samples.size_px, cfg.architecture or "paper")
+            model = PolicyNet(samples.size_px, cfg.architecture or "paper", range_sectors=sectors)
         except ValueError as e:
             raise TrainError(str(e)) from e
     if cfg.mirror:
@@ -464,6 +543,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         "aux": torch.from_numpy(samples.aux).to(device),
         "targets": torch.from_numpy(targets).to(device),
     }
+    if sectors:
+        tensors["ranges"] = torch.from_numpy(samples.ranges).to(device)
     weights = None
     if cfg.relative_loss:
         weights = relative_weights(samples.aux[:, 1], train_idx)
@@ -481,7 +562,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     log(
         f"training on {len(samples)} samples ({len(train_idx)} train / {len(val_idx)} validation) "
         f"from {', '.join(str(d) for d in cfg.data)} on {device} ({torch.get_num_threads()} threads); "
-        f"{model.architecture} network{', mirrored' if cfg.mirror else ''}{', mirror-averaged' if model.mirror_averaged else ''}"
+        f"{model.architecture} network{f', ranges {data_ranges}' if data_ranges else ''}{', mirrored' if cfg.mirror else ''}{', mirror-averaged' if model.mirror_averaged else ''}"
         f"{', loss relative to d*' if cfg.relative_loss else ''}"
         f"{f', loss weighted 1/(|f| + {cfg.response_weight:g})' if cfg.response_weight is not None else ''}"
         f", output {cfg.output}, batch {cfg.batch_size}, lr {cfg.lr:g}, "
@@ -497,13 +578,14 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         total = 0.0
         for start in range(0, len(order), cfg.batch_size):
             index = order[start : start + cfg.batch_size]
-            occupancy, aux, wheels = _batch(tensors, index)
+            occupancy, aux, ranges, wheels = _batch(tensors, index)
             if cfg.mirror:
                 flip = torch.rand(len(aux), generator=shuffle) < 0.5
-                occupancy, aux, wheels = mirror_batch(occupancy, aux, wheels, flip.to(device), cfg.output)
+                occupancy, aux, wheels, *mirrored = mirror_batch(occupancy, aux, wheels, flip.to(device), cfg.output, ranges)
+                ranges = mirrored[0] if mirrored else None
             weights = tensors["weights"].index_select(0, index) if "weights" in tensors else None
             # The mean over samples and both wheels, as nn.functional.mse_loss computes it.
-            loss = squared_error(fitted(occupancy, aux), wheels, weights).mean() / 2
+            loss = squared_error(_apply(fitted, occupancy, aux, ranges), wheels, weights).mean() / 2
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
@@ -534,6 +616,7 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         final_val_loss=reported_val,
         samples=len(samples),
         dagger_iteration=samples.max_iteration,
+        ranges=data_ranges,
         extra={
             "train.batch_size": cfg.batch_size,
             "train.lr": repr(float(cfg.lr)),
@@ -558,9 +641,13 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     pick = np.random.default_rng(cfg.seed).permutation(held_out)[:PARITY_SAMPLES]
     occupancy = samples.occupancy[pick][:, None].astype(np.float32)
     aux = samples.aux[pick]
-    parity = export.check_parity(model, out, occupancy, aux, output=cfg.output)
+    ranges = samples.ranges[pick] if sectors else None
+    parity = export.check_parity(model, out, occupancy, aux, output=cfg.output, ranges=ranges)
     if cfg.parity_out is not None:
-        export.write_parity_file(cfg.parity_out, model, occupancy[:PARITY_FILE_SAMPLES], aux[:PARITY_FILE_SAMPLES])
+        n = PARITY_FILE_SAMPLES
+        export.write_parity_file(
+            cfg.parity_out, model, occupancy[:n], aux[:n], ranges=None if ranges is None else ranges[:n]
+        )
     log(f"wrote {out} (onnxruntime parity {parity:.2e} on {len(pick)} held-out samples), {paths['checkpoint'].name}, "
         f"{paths['loss_csv'].name}, {paths['loss_png'].name}")
     return {

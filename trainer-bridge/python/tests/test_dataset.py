@@ -92,9 +92,9 @@ def test_a_missing_shard_is_reported(make_dataset):
 def test_an_unknown_manifest_version_is_reported(make_dataset):
     directory = make_dataset()
     manifest = json.loads((directory / "manifest.json").read_text())
-    manifest["version"] = 2
+    manifest["version"] = 3
     (directory / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(ds.DatasetError, match="format version 2, but this trainer reads version 1"):
+    with pytest.raises(ds.DatasetError, match="format version 3, but this trainer reads versions 1 and 2"):
         ds.load([directory])
 
 
@@ -143,3 +143,89 @@ def test_a_single_run_is_split_by_sample_and_zero_fraction_keeps_everything():
     assert (len(train), len(val)) == (15, 5)
     train, val = split_by_episode(keys, 0.0, seed=0)
     assert (len(train), len(val)) == (20, 0)
+
+
+RANGES = "sectors=12,clip=3"
+
+
+def test_a_dataset_with_ranges_loads_them_beside_the_images(make_dataset):
+    directory = make_dataset(samples=50, shard_size=20, ranges=RANGES)
+    samples = ds.load([directory])
+    expected = synthetic_arrays(50, sectors=12)
+    assert samples.range_input == ds.RangeInput(12, 3.0)
+    assert samples.ranges.shape == (50, 12) and samples.ranges.dtype == np.float32
+    for name in ("occupancy", "aux", "wheels", "ranges", "run"):
+        np.testing.assert_array_equal(getattr(samples, name), expected[name])
+    manifest = ds.read_manifest(directory)
+    assert (manifest.version, manifest.ranges) == (2, ds.RangeInput(12, 3.0))
+
+
+def test_a_dataset_without_ranges_has_none(make_dataset):
+    samples = ds.load([make_dataset(samples=10)])
+    assert samples.range_input is None
+    assert samples.ranges.shape == (10, 0)
+    assert ds.read_manifest(samples.manifests[0].directory).version == 1
+
+
+def test_the_range_text_is_rusts(make_dataset):
+    # What formation_proto::RangeInput's Display writes, and what its parse reads.
+    for text, expected in (
+        ("sectors=100,clip=3", "sectors=100,clip=3"),
+        ("clip = 2.5, sectors = 12", "sectors=12,clip=2.5"),
+        ("sectors=100,clip=3.0", "sectors=100,clip=3"),
+        ("sectors=100,clip=0.1", "sectors=100,clip=0.1"),
+    ):
+        assert ds.RangeInput.parse(text).text() == expected
+    for bad in ("sectors=3,clip=3", "sectors=100", "sectors=100,clip=0", "sectors=12,clip=3,clip=3", "x", "sectors=361,clip=1"):
+        with pytest.raises(ValueError):
+            ds.RangeInput.parse(bad)
+    assert ds.RangeInput(100, 3.0).mirrored()[:3] == [0, 99, 98]
+
+
+def test_a_version_that_disagrees_with_the_ranges_is_refused_naming_the_file(make_dataset):
+    with_ranges = make_dataset("a", samples=10, ranges=RANGES)
+    manifest = json.loads((with_ranges / "manifest.json").read_text())
+    manifest["version"] = 1
+    (with_ranges / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(ds.DatasetError, match=r"a/manifest\.json is dataset format version 1 but declares ranges \"sectors=12,clip=3\""):
+        ds.load([with_ranges])
+    without = make_dataset("b", samples=10)
+    manifest = json.loads((without / "manifest.json").read_text())
+    manifest["version"] = 2
+    (without / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(ds.DatasetError, match=r"b/manifest\.json is dataset format version 2 but declares no `ranges`"):
+        ds.load([without])
+    manifest["ranges"] = "sectors=2,clip=3"
+    (without / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(ds.DatasetError, match="its `ranges`: .*out of range"):
+        ds.load([without])
+
+
+def test_a_shard_whose_ranges_disagree_with_the_manifest_is_corrupt(make_dataset):
+    from safetensors.numpy import save_file
+
+    directory = make_dataset(samples=10, shard_size=10, ranges=RANGES)
+    arrays = synthetic_arrays(10, sectors=8)
+    meta = {"format": "formation-dataset", "version": "2", "iteration": "0"}
+    save_file(arrays, str(directory / "shard-000000.safetensors"), metadata=meta)
+    with pytest.raises(ds.DatasetError, match=r"`ranges` is F32 \[10, 8\], the manifest needs float32 \[10, 12\]"):
+        ds.load([directory])
+    del arrays["ranges"]
+    save_file(arrays, str(directory / "shard-000000.safetensors"), metadata=meta)
+    with pytest.raises(ds.DatasetError, match="no `ranges` tensor"):
+        ds.load([directory])
+    plain = make_dataset("plain", samples=10, shard_size=10)
+    save_file(synthetic_arrays(10, sectors=12), str(plain / "shard-000000.safetensors"),
+              metadata={"format": "formation-dataset", "version": "1", "iteration": "0"})
+    with pytest.raises(ds.DatasetError, match="a `ranges` tensor, but the manifest declares no ranges"):
+        ds.load([plain])
+
+
+def test_datasets_with_other_ranges_cannot_be_mixed(make_dataset):
+    a = make_dataset("a", samples=10, ranges=RANGES)
+    b = make_dataset("b", samples=10)
+    with pytest.raises(ds.DatasetError, match="their range input differ"):
+        ds.load([a, b])
+    c = make_dataset("c", samples=10, ranges="sectors=12,clip=2")
+    with pytest.raises(ds.DatasetError, match="their range input differ"):
+        ds.load([a, c])
