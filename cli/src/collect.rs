@@ -2,7 +2,7 @@
 //! `scenarios/collect.toml`).
 
 use anyhow::Context;
-use formation_expert::collect::{CollectOptions, collect};
+use formation_expert::collect::{CollectOptions, check_one_v_star, collect};
 use formation_proto::{BeyondWindow, OccupancySpec};
 use formation_trainer_bridge::dataset::{DatasetHeader, DatasetWriter};
 use formation_world::Scenario;
@@ -48,6 +48,8 @@ pub fn occupancy_from_args(
 /// `formation collect`.
 pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
     let scenario = Scenario::from_path(&args.scenario)?;
+    // Before the dataset is created, so that a refusal leaves nothing behind.
+    check_one_v_star(&scenario)?;
     let occupancy = occupancy_from_args(
         args.size_px,
         args.resolution,

@@ -178,11 +178,7 @@ pub fn collect(
     }
     opts.gains.validate()?;
     check_occupancy(&opts.occupancy)?;
-    if let VStarPlan::Range { min, max } = opts.scenario.v_star()
-        && min < max
-    {
-        return Err(CollectError::VStarPerRun { min, max });
-    }
+    check_one_v_star(opts.scenario)?;
     let started = Instant::now();
     let mut samples_written = 0;
     let mut run_samples = Vec::new();
@@ -211,6 +207,16 @@ pub fn collect(
             0.0
         },
     })
+}
+
+/// Refuses a scenario that draws v* per run (`goal.v_star_range`): a dataset records one
+/// training speed (`v_train`) for all its samples. [`collect`] checks it first; a caller can
+/// check it before it creates the dataset.
+pub fn check_one_v_star(scenario: &Scenario) -> Result<(), CollectError> {
+    match scenario.v_star() {
+        VStarPlan::Range { min, max } if min < max => Err(CollectError::VStarPerRun { min, max }),
+        _ => Ok(()),
+    }
 }
 
 /// The dataset header must describe what this run records.
