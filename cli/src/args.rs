@@ -326,6 +326,12 @@ pub struct CollectArgs {
     /// policy that answers a formation velocity, which each agent shapes for its own wheels.
     #[arg(long, conflicts_with = "label_wheel_accel")]
     pub unshaped_labels: bool,
+    /// Also record each robot's scan ranges beside its image, `sectors=K,clip=C`: K sectors
+    /// (centred on bearings 2 pi s / K), each the mean range of its returning beams over d*, at
+    /// most C. A network trained on the dataset takes them as its `ranges` input (for example
+    /// `sectors=100,clip=3` for 900 beams, 9 a sector).
+    #[arg(long, value_name = "sectors=K,clip=C", value_parser = range_input)]
+    pub ranges: Option<formation_proto::RangeInput>,
 }
 
 /// `formation train`.
@@ -1073,4 +1079,9 @@ pub struct CredentialsArgs {
         conflicts_with = "robots"
     )]
     pub renew: Option<String>,
+}
+
+/// `--ranges`: a range input, checked as a model's metadata is.
+fn range_input(text: &str) -> Result<formation_proto::RangeInput, String> {
+    formation_proto::RangeInput::parse(text).map_err(|e| e.to_string())
 }

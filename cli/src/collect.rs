@@ -60,6 +60,7 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
     opts.occupancy = occupancy;
     opts.gains.shaping_wheel_accel = args.label_wheel_accel;
     opts.gains.unshaped = args.unshaped_labels;
+    opts.ranges = args.ranges;
     if let Some(runs) = args.runs {
         opts.runs = runs;
     }
@@ -85,7 +86,8 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
         spec0.v_star,
         opts.base_seed,
         scenario.name().to_owned(),
-    );
+    )
+    .with_ranges(opts.ranges);
     let mut writer = DatasetWriter::create(&args.out, header)
         .with_context(|| format!("creating dataset {}", args.out.display()))?;
     let bar = progress_bar(opts.runs, "collect");

@@ -12,8 +12,8 @@
 
 use std::time::{Duration, Instant};
 
-use formation_perception::occupancy;
-use formation_proto::{AuxInput, LidarSpec, NeighbourRule, OccupancySpec, WheelCmd};
+use formation_perception::{occupancy, ranges};
+use formation_proto::{AuxInput, LidarSpec, NeighbourRule, OccupancySpec, RangeInput, WheelCmd};
 use formation_trainer_bridge::dataset::{DatasetError, DatasetWriter, Sample};
 use formation_world::episode::{Observation, run_episode};
 use formation_world::scenario::VStarPlan;
@@ -105,6 +105,12 @@ pub enum CollectError {
         /// Fastest v* of the range \[m/s\].
         max: f64,
     },
+    /// The range input cannot be computed from this LIDAR.
+    #[error("cannot record the scan's ranges: {source}")]
+    Ranges {
+        /// Why.
+        source: formation_proto::RangeInputError,
+    },
     /// Writing the dataset failed.
     #[error("writing demonstrations of run {run}: {source}")]
     Dataset {
@@ -130,6 +136,9 @@ pub struct CollectOptions<'a> {
     pub record_every: u32,
     /// The expert's gains.
     pub gains: ExpertGains,
+    /// The scan's ranges recorded beside each image (a model that takes them is trained on
+    /// them), or none; recorded in the dataset header by the caller.
+    pub ranges: Option<RangeInput>,
 }
 
 impl<'a> CollectOptions<'a> {
@@ -142,6 +151,7 @@ impl<'a> CollectOptions<'a> {
             occupancy: OccupancySpec::PAPER,
             record_every: 1,
             gains: ExpertGains::default(),
+            ranges: None,
         }
     }
 }
@@ -184,7 +194,7 @@ pub fn collect(
     let mut run_samples = Vec::new();
     for run in 0..opts.runs {
         let spec = opts.scenario.run_spec(opts.base_seed, run);
-        check_writer(writer, &spec, &opts.occupancy)?;
+        check_writer(writer, &spec, &opts.occupancy, opts.ranges)?;
         run_samples.clear();
         collect_run(&spec, opts, writer.iteration(), &mut run_samples)?;
         for sample in run_samples.drain(..) {
@@ -224,6 +234,7 @@ fn check_writer(
     writer: &DatasetWriter,
     spec: &RunSpec,
     occupancy: &OccupancySpec,
+    ranges: Option<RangeInput>,
 ) -> Result<(), CollectError> {
     let header = writer.header();
     let mismatch = |what, dataset: &dyn std::fmt::Debug, collection: &dyn std::fmt::Debug| {
@@ -242,6 +253,9 @@ fn check_writer(
     if header.v_train != spec.v_star {
         return mismatch("v_train", &header.v_train, &spec.v_star);
     }
+    if header.ranges != ranges {
+        return mismatch("range input", &header.ranges, &ranges);
+    }
     Ok(())
 }
 
@@ -254,7 +268,8 @@ fn collect_run(
 ) -> Result<(), CollectError> {
     // A lagging robot profile's world gets its team gain (the ideal world: the gains given).
     let gains = opts.gains.for_reality(&spec.world.reality);
-    let labeller = Labeller::new(gains, spec.world.robot, spec.world.lidar, opts.occupancy)?;
+    let labeller = Labeller::new(gains, spec.world.robot, spec.world.lidar, opts.occupancy)?
+        .with_ranges(opts.ranges)?;
     let run = narrow_run(spec.index)?;
     narrow_robot(spec.n_robots.saturating_sub(1))?;
     let mut expert =
@@ -286,6 +301,7 @@ fn collect_run(
 pub struct Labeller {
     lidar: LidarSpec,
     occupancy: OccupancySpec,
+    ranges: Option<RangeInput>,
     expert: ExpertController,
 }
 
@@ -302,8 +318,20 @@ impl Labeller {
         Ok(Labeller {
             lidar,
             occupancy,
+            ranges: None,
             expert: ExpertController::new(gains, robot),
         })
+    }
+
+    /// The same labeller, also recording each robot's scan ranges as `ranges` declares (none:
+    /// the default). Refused when the LIDAR has fewer beams than sectors.
+    pub fn with_ranges(mut self, ranges: Option<RangeInput>) -> Result<Labeller, CollectError> {
+        if let Some(spec) = &ranges {
+            spec.check_beams(self.lidar.beams)
+                .map_err(|source| CollectError::Ranges { source })?;
+        }
+        self.ranges = ranges;
+        Ok(self)
     }
 
     /// The same labeller, labelling with the expert that holds each robot's own neighbours under
@@ -372,8 +400,13 @@ impl Labeller {
                 obs.goal.d_star,
                 &mut image,
             );
+            let mut pooled = vec![0.0; self.ranges.map_or(0, |r| r.sectors)];
+            if let Some(spec) = &self.ranges {
+                ranges::pool(scan, &self.lidar, spec, obs.goal.d_star, &mut pooled);
+            }
             sink(Sample {
                 occupancy: image,
+                ranges: pooled,
                 delta_phi: AuxInput::HeadingError.value(pose.theta, &obs.goal) as f32,
                 d_star: AuxInput::DStar.value(pose.theta, &obs.goal) as f32,
                 wheels: [command.left as f32, command.right as f32],

@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use formation_expert::collect::Labeller;
 use formation_expert::{ExpertController, ExpertGains};
-use formation_proto::OccupancySpec;
+use formation_proto::{OccupancySpec, RangeInput};
 use formation_schema::EvalOutput;
 use formation_trainer_bridge::dataset::{DatasetWriter, Sample};
 use formation_trainer_bridge::train::{TrainOptions, TrainReport, train};
@@ -252,6 +252,7 @@ pub(crate) fn rollout_and_label(
         expert_share: beta,
         seed: opts.seed,
         occupancy: writer.header().occupancy,
+        ranges: writer.header().ranges,
         model,
         labels: &opts.labels,
     };
@@ -366,6 +367,8 @@ pub struct IterationRollouts<'a> {
     pub seed: u64,
     /// How the samples' occupancy images are rendered (the dataset's settings).
     pub occupancy: OccupancySpec,
+    /// The scan's ranges recorded beside each image, if the dataset holds them.
+    pub ranges: Option<RangeInput>,
     /// The policy that drives when the expert does not.
     pub model: &'a Path,
     /// The expert's gains and the runs' wheel acceleration limits.
@@ -430,6 +433,7 @@ impl IterationRollouts<'_> {
             _ => &mut expert,
         };
         let mut labeller = Labeller::for_run(&spec, gains, self.occupancy)
+            .and_then(|labeller| labeller.with_ranges(self.ranges))
             .map_err(|source| LearningError::Label { run: i, source })?;
         let mut samples = Vec::new();
         let mut failure = None;
@@ -582,6 +586,7 @@ pub(crate) mod tests {
             expert_share: 0.25,
             seed: 9,
             occupancy: OccupancySpec::PAPER,
+            ranges: None,
             model: &model,
             labels: &RolloutLabels::default(),
         };
@@ -636,6 +641,7 @@ pub(crate) mod tests {
                 expert_share: 1.0,
                 seed: 4,
                 occupancy: OccupancySpec::PAPER,
+                ranges: None,
                 model: &model,
                 labels,
             }

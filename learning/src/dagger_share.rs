@@ -95,6 +95,7 @@ pub fn label_share(
         expert_share,
         seed: opts.seed,
         occupancy: header.dataset.occupancy,
+        ranges: header.dataset.ranges,
         model: &opts.model,
         labels: &RolloutLabels::default(),
     };

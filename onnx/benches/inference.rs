@@ -6,6 +6,7 @@ mod common;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use formation_onnx::OnnxPolicy;
+use formation_proto::PolicyInput;
 
 fn single_sample(c: &mut Criterion) {
     let fx = common::fixtures("bench");
@@ -17,7 +18,10 @@ fn single_sample(c: &mut Criterion) {
             let (image, aux, _) = &cases[next % cases.len()];
             next += 1;
             policy
-                .infer(std::hint::black_box(image), aux)
+                .infer(&PolicyInput::image_and_aux(
+                    std::hint::black_box(image),
+                    aux,
+                ))
                 .expect("infer")
         })
     });

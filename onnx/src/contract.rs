@@ -4,7 +4,8 @@
 //!
 //! - inputs exactly `occupancy` f32 `[B, 1, S, S]` and `aux` f32 `[B, A]`: the scalars that
 //!   `formation.aux` declares, in order (`A` of them; absent: the paper's `delta_phi,d_star`, see
-//!   [`AuxLayout`]);
+//!   [`AuxLayout`]); and `ranges` f32 `[B, K]` where `formation.ranges = "sectors=K,clip=C"`
+//!   declares the scan's ranges beside the image ([`RangeInput`]);
 //! - one output, by default `wheels` f32 `[B, 2]` (left, right) m/s at `v_train`; or, where the
 //!   metadata declares `formation.output = formation_velocity`, `formation_velocity` f32 `[B, 2]`:
 //!   the correction of the formation in the robot's frame ([`PolicyOutput`]); `B` dynamic;
@@ -17,7 +18,7 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-use formation_proto::{AuxLayout, BeyondWindow, LidarSpec, OccupancySpec, PolicyIo};
+use formation_proto::{AuxLayout, BeyondWindow, LidarSpec, OccupancySpec, PolicyIo, RangeInput};
 
 /// The value of [`keys::FORMAT`] this crate understands.
 pub const MODEL_FORMAT: &str = "formation-policy/1";
@@ -25,6 +26,8 @@ pub const MODEL_FORMAT: &str = "formation-policy/1";
 pub const OCCUPANCY_INPUT: &str = "occupancy";
 /// Name of the input of scalars beside the image ([`AuxLayout`]).
 pub const AUX_INPUT: &str = "aux";
+/// Name of the input of the scan's ranges ([`RangeInput`]), where the metadata declares one.
+pub const RANGES_INPUT: &str = "ranges";
 /// Name of the wheel-speed output.
 pub const WHEELS_OUTPUT: &str = "wheels";
 /// Name of the formation-velocity output.
@@ -61,6 +64,9 @@ pub mod keys {
     /// The scalars beside the image, by name and in order, comma-separated (optional; absent
     /// means `delta_phi,d_star`): see [`formation_proto::AuxLayout`].
     pub const AUX: &str = "formation.aux";
+    /// The scan's ranges beside the image, `sectors=K,clip=C` (optional; absent: none): see
+    /// [`formation_proto::RangeInput`].
+    pub const RANGES: &str = "formation.ranges";
     /// LIDAR beams the model was trained with.
     pub const BEAMS: &str = "formation.lidar.beams";
     /// LIDAR maximum range \[m\].
@@ -111,6 +117,7 @@ impl ModelMetadata {
         PolicyIo {
             image: self.occupancy,
             aux: self.aux,
+            ranges: self.ranges,
             output: self.output,
             v_train: self.v_train,
         }
@@ -207,6 +214,8 @@ pub struct ModelMetadata {
     pub output: PolicyOutput,
     /// The scalars it takes beside its image.
     pub aux: AuxLayout,
+    /// The scan's ranges it takes beside its image, if any.
+    pub ranges: Option<RangeInput>,
     /// Every other metadata entry (training figures, DAgger iteration, creator, ...), by full key.
     pub extra: BTreeMap<String, String>,
 }
@@ -247,11 +256,28 @@ pub enum ContractViolation {
         /// The declared input kind.
         input: String,
     },
-    /// The model's inputs are not exactly `occupancy` and `aux`.
-    #[error("inputs are [{}], expected exactly [occupancy, aux]", .found.join(", "))]
+    /// The model's inputs are not exactly `occupancy` and `aux` (and `ranges`, where its
+    /// metadata declares `formation.ranges`).
+    #[error(
+        "inputs are [{}], expected exactly [occupancy, aux{}] ({})",
+        .found.join(", "),
+        if *.ranges { ", ranges" } else { "" },
+        if *.ranges { "the metadata declares `formation.ranges`" } else { "the metadata declares no `formation.ranges`" }
+    )]
     InputNames {
         /// Input names found.
         found: Vec<String>,
+        /// Whether the metadata declares a range input.
+        ranges: bool,
+    },
+    /// The model declares a range input this agent cannot feed.
+    #[error("metadata `{}` = {value:?} cannot be fed: {reason}", keys::RANGES)]
+    BadRanges {
+        /// The declared value.
+        value: String,
+        /// What is wrong with it.
+        #[source]
+        reason: formation_proto::RangeInputError,
     },
     /// The model's outputs are not exactly the one its metadata declares.
     #[error(
@@ -401,13 +427,15 @@ pub fn parse_metadata(
     })?;
     let beams = parse_positive_int(entries, keys::BEAMS)?;
     let max_range = parse_positive_real(entries, keys::MAX_RANGE)?;
+    let ranges = parse_ranges(entries, beams)?;
     let v_train = parse_positive_real(entries, keys::V_TRAIN)?;
     let dataset_id = required(entries, keys::DATASET_ID)?.to_owned();
 
-    const PARSED: [&str; 12] = [
+    const PARSED: [&str; 13] = [
         keys::FORMAT,
         keys::OUTPUT,
         keys::AUX,
+        keys::RANGES,
         keys::SIZE_PX,
         keys::RESOLUTION_M,
         keys::BEYOND,
@@ -437,8 +465,26 @@ pub fn parse_metadata(
         dataset_id,
         output,
         aux,
+        ranges,
         extra,
     })
+}
+
+/// The optional range input, checked against the model's LIDAR beams.
+fn parse_ranges(
+    entries: &BTreeMap<String, String>,
+    beams: usize,
+) -> Result<Option<RangeInput>, ContractViolation> {
+    let Some(text) = entries.get(keys::RANGES) else {
+        return Ok(None);
+    };
+    let bad = |reason| ContractViolation::BadRanges {
+        value: text.clone(),
+        reason,
+    };
+    let ranges = RangeInput::parse(text).map_err(bad)?;
+    ranges.check_beams(beams).map_err(bad)?;
+    Ok(Some(ranges))
 }
 
 fn required<'a>(
@@ -525,6 +571,17 @@ pub enum SensorViolation {
         /// The sensor's range \[m\].
         actual: f64,
     },
+    /// The model takes the scan's ranges in more sectors than the LIDAR has beams.
+    #[error(
+        "takes the scan's ranges in {sectors} sectors, but this robot's LIDAR has only {beams} \
+         beams"
+    )]
+    RangeSectors {
+        /// Sectors the model declares.
+        sectors: usize,
+        /// The sensor's beams.
+        beams: usize,
+    },
     /// The sensor cannot see as far as the edge of the model's image window.
     #[error(
         "takes a {window_m} m wide image window (its edge {reach_m} m away), but this robot's \
@@ -603,15 +660,23 @@ pub fn check_signature(
     size_px: usize,
     aux_layout: AuxLayout,
     output: PolicyOutput,
+    ranges: Option<RangeInput>,
 ) -> Result<(), ContractViolation> {
     let names = |list: &[TensorSignature]| list.iter().map(|t| t.name.clone()).collect::<Vec<_>>();
     let find = |name: &str| inputs.iter().find(|t| t.name == name);
-    let (Some(occupancy), Some(aux), 2) = (find(OCCUPANCY_INPUT), find(AUX_INPUT), inputs.len())
-    else {
-        return Err(ContractViolation::InputNames {
-            found: names(inputs),
-        });
+    let wrong_inputs = || ContractViolation::InputNames {
+        found: names(inputs),
+        ranges: ranges.is_some(),
     };
+    let (Some(occupancy), Some(aux)) = (find(OCCUPANCY_INPUT), find(AUX_INPUT)) else {
+        return Err(wrong_inputs());
+    };
+    let ranges_tensor = find(RANGES_INPUT);
+    if inputs.len() != 2 + usize::from(ranges.is_some())
+        || ranges_tensor.is_some() != ranges.is_some()
+    {
+        return Err(wrong_inputs());
+    }
     let [wheels] = outputs else {
         return Err(ContractViolation::OutputNames {
             found: names(outputs),
@@ -636,6 +701,10 @@ pub fn check_signature(
     )?;
     let width = i64::try_from(aux_layout.len()).unwrap_or(i64::MAX);
     check_tensor(aux, &[Dim::Batch, Dim::Exact(width)])?;
+    if let (Some(tensor), Some(ranges)) = (ranges_tensor, ranges) {
+        let sectors = i64::try_from(ranges.sectors).unwrap_or(i64::MAX);
+        check_tensor(tensor, &[Dim::Batch, Dim::Exact(sectors)])?;
+    }
     check_tensor(wheels, &[Dim::Batch, Dim::Exact(2)])
 }
 
@@ -744,6 +813,57 @@ mod tests {
     }
 
     #[test]
+    fn a_declared_range_input_is_parsed_checked_and_needs_its_tensor() {
+        let mut entries = paper_metadata();
+        assert_eq!(parse_metadata(&entries).unwrap().ranges, None);
+        entries.insert(keys::RANGES.into(), "sectors=100,clip=3".into());
+        let meta = parse_metadata(&entries).expect("valid");
+        let ranges = meta.ranges.expect("declared");
+        assert_eq!((ranges.sectors, ranges.clip), (100, 3.0));
+        assert_eq!(meta.io().ranges, Some(ranges));
+        assert!(!meta.extra.contains_key(keys::RANGES));
+        let mut inputs = paper_inputs();
+        let check = |inputs: &[TensorSignature]| {
+            check_signature(
+                inputs,
+                &paper_outputs(),
+                50,
+                AuxLayout::PAPER,
+                PolicyOutput::Wheels,
+                Some(ranges),
+            )
+        };
+        assert!(matches!(
+            check(&inputs),
+            Err(ContractViolation::InputNames { ranges: true, .. })
+        ));
+        inputs.push(tensor("ranges", &[-1, 90]));
+        assert!(matches!(
+            check(&inputs),
+            Err(ContractViolation::Shape { ref name, .. }) if name == "ranges"
+        ));
+        inputs[2] = tensor("ranges", &[-1, 100]);
+        check(&inputs).expect("the declared input");
+
+        for (value, fault) in [
+            ("sectors=100", "is not a range input"),
+            ("sectors=1000,clip=3", "out of range"),
+            ("sectors=360,clip=3", "at least as many LIDAR beams"),
+        ] {
+            let mut entries = paper_metadata();
+            entries.insert(keys::RANGES.into(), value.into());
+            if value.starts_with("sectors=360") {
+                entries.insert(keys::BEAMS.into(), "180".into());
+            }
+            let message = parse_metadata(&entries).unwrap_err().to_string();
+            assert!(
+                message.contains("formation.ranges") && message.contains(fault),
+                "{value}: {message}"
+            );
+        }
+    }
+
+    #[test]
     fn paper_metadata_parses_with_extras_kept() {
         let meta = parse_metadata(&paper_metadata()).expect("valid metadata");
         assert_eq!(
@@ -784,6 +904,7 @@ mod tests {
             50,
             meta.aux,
             PolicyOutput::Wheels,
+            None,
         )
         .expect("a one-wide aux for one declared scalar");
         assert!(matches!(
@@ -792,7 +913,8 @@ mod tests {
                 &paper_outputs(),
                 50,
                 meta.aux,
-                PolicyOutput::Wheels
+                PolicyOutput::Wheels,
+                None
             ),
             Err(ContractViolation::Shape { .. })
         ));
@@ -822,6 +944,7 @@ mod tests {
             50,
             AuxLayout::PAPER,
             PolicyOutput::FormationVelocity,
+            None,
         )
         .expect("declared and present");
         let err = check_signature(
@@ -830,6 +953,7 @@ mod tests {
             50,
             AuxLayout::PAPER,
             PolicyOutput::FormationVelocity,
+            None,
         )
         .unwrap_err();
         let message = err.to_string();
@@ -844,7 +968,8 @@ mod tests {
                 &outputs,
                 50,
                 AuxLayout::PAPER,
-                PolicyOutput::Wheels
+                PolicyOutput::Wheels,
+                None
             )
             .is_err()
         );
@@ -1040,6 +1165,7 @@ mod tests {
             50,
             AuxLayout::PAPER,
             PolicyOutput::Wheels,
+            None,
         )
         .expect("paper contract");
         let mut swapped = paper_inputs();
@@ -1050,6 +1176,7 @@ mod tests {
             50,
             AuxLayout::PAPER,
             PolicyOutput::Wheels,
+            None,
         )
         .expect("order does not matter");
     }
@@ -1063,10 +1190,12 @@ mod tests {
                 &paper_outputs(),
                 50,
                 AuxLayout::PAPER,
-                PolicyOutput::Wheels
+                PolicyOutput::Wheels,
+                None
             ),
             Err(ContractViolation::InputNames {
-                found: vec!["image".into(), "aux".into()]
+                found: vec!["image".into(), "aux".into()],
+                ranges: false,
             })
         );
         let mut extra = paper_inputs();
@@ -1077,7 +1206,8 @@ mod tests {
                 &paper_outputs(),
                 50,
                 AuxLayout::PAPER,
-                PolicyOutput::Wheels
+                PolicyOutput::Wheels,
+                None
             ),
             Err(ContractViolation::InputNames { .. })
         ));
@@ -1088,7 +1218,8 @@ mod tests {
                 &outputs,
                 50,
                 AuxLayout::PAPER,
-                PolicyOutput::Wheels
+                PolicyOutput::Wheels,
+                None
             ),
             Err(ContractViolation::OutputNames { .. })
         ));
@@ -1098,7 +1229,8 @@ mod tests {
                 &[tensor("cmd", &[-1, 2])],
                 50,
                 AuxLayout::PAPER,
-                PolicyOutput::Wheels
+                PolicyOutput::Wheels,
+                None
             ),
             Err(ContractViolation::OutputNames { .. })
         ));
@@ -1116,6 +1248,7 @@ mod tests {
             50,
             AuxLayout::PAPER,
             PolicyOutput::Wheels,
+            None,
         )
         .expect_err("40 px image for size_px 50");
         assert_eq!(
@@ -1129,7 +1262,8 @@ mod tests {
                 &paper_outputs(),
                 50,
                 AuxLayout::PAPER,
-                PolicyOutput::Wheels
+                PolicyOutput::Wheels,
+                None
             ),
             Err(ContractViolation::Shape { .. })
         ));
@@ -1138,7 +1272,7 @@ mod tests {
             tensor("aux", &[-1, 3]),
         ];
         assert!(matches!(
-            check_signature(&flat_aux, &paper_outputs(), 50, AuxLayout::PAPER, PolicyOutput::Wheels),
+            check_signature(&flat_aux, &paper_outputs(), 50, AuxLayout::PAPER, PolicyOutput::Wheels, None),
             Err(ContractViolation::Shape { name, .. }) if name == "aux"
         ));
     }
@@ -1153,7 +1287,8 @@ mod tests {
                 &paper_outputs(),
                 50,
                 AuxLayout::PAPER,
-                PolicyOutput::Wheels
+                PolicyOutput::Wheels,
+                None
             ),
             Err(ContractViolation::ElementType {
                 name: "occupancy".into(),
@@ -1168,7 +1303,8 @@ mod tests {
                 &outputs,
                 50,
                 AuxLayout::PAPER,
-                PolicyOutput::Wheels
+                PolicyOutput::Wheels,
+                None
             ),
             Err(ContractViolation::ElementType { .. })
         ));

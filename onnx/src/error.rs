@@ -137,6 +137,24 @@ pub enum PolicyError {
         /// Scalars given.
         actual: usize,
     },
+    /// The scan's ranges given do not match the range input the model declares.
+    #[error(
+        "model {model}: {actual} range values given, but the model declares {} \
+         (`formation.ranges`); feed one value a sector, as \
+         `formation_perception::ranges::pool` computes them",
+        match declared {
+            Some(ranges) => format!("{} sectors ({ranges})", ranges.sectors),
+            None => "no range input".to_owned(),
+        }
+    )]
+    RangesLength {
+        /// Model id.
+        model: String,
+        /// What the model declares.
+        declared: Option<formation_proto::RangeInput>,
+        /// Values given.
+        actual: usize,
+    },
     /// ONNX Runtime failed while running the model.
     #[error("model {model}: inference failed: {reason}")]
     Inference {

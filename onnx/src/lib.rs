@@ -6,7 +6,9 @@
 //! # fn main() -> Result<(), formation_onnx::PolicyError> {
 //! let mut policy = formation_onnx::OnnxPolicy::load(std::path::Path::new("onnx/models/policy.onnx"))?;
 //! let cells = policy.metadata().occupancy.size_px.pow(2);
-//! let [left, right] = policy.infer(&vec![0.0; cells], &[0.3, 1.5])?;
+//! let image = vec![0.0; cells];
+//! let input = formation_proto::PolicyInput::image_and_aux(&image, &[0.3, 1.5]);
+//! let [left, right] = policy.infer(&input)?;
 //! # let _ = (left, right);
 //! # Ok(())
 //! # }

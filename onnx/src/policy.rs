@@ -4,14 +4,14 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use formation_proto::LidarSpec;
+use formation_proto::{LidarSpec, PolicyInput};
 use ort::environment::Environment;
 use ort::session::Session;
 use ort::value::{Tensor, TensorElementType, ValueType};
 
 use crate::contract::{
-    ElementKind, ModelMetadata, OCCUPANCY_INPUT, SensorContract, TensorSignature, check_sensor,
-    check_signature, parse_metadata,
+    AUX_INPUT, ElementKind, ModelMetadata, OCCUPANCY_INPUT, RANGES_INPUT, SensorContract,
+    TensorSignature, check_sensor, check_signature, parse_metadata,
 };
 use crate::error::PolicyError;
 use crate::model_file::read_model_file;
@@ -25,10 +25,11 @@ pub struct OnnxPolicy {
     session: Session,
     metadata: ModelMetadata,
     model_id: String,
-    /// `occupancy` `[1, 1, S, S]` and `aux` `[1, 2]`, in the session's input order.
-    inputs: [Tensor<f32>; 2],
-    /// Which of `inputs` is the image.
-    occupancy_slot: usize,
+    /// `occupancy` `[1, 1, S, S]`, `aux` `[1, A]` and, where declared, `ranges` `[1, K]`, in
+    /// the session's input order.
+    inputs: Vec<Tensor<f32>>,
+    /// Which of `inputs` is the image, the scalars and the ranges.
+    slots: InputSlots,
     cells: usize,
 }
 
@@ -74,24 +75,39 @@ impl OnnxPolicy {
             .map(|o| signature(o.name(), o.dtype()))
             .collect();
         let size_px = metadata.occupancy.size_px;
-        check_signature(&inputs, &outputs, size_px, metadata.aux, metadata.output)
-            .map_err(contract)?;
+        check_signature(
+            &inputs,
+            &outputs,
+            size_px,
+            metadata.aux,
+            metadata.output,
+            metadata.ranges,
+        )
+        .map_err(contract)?;
 
-        let occupancy_slot = usize::from(inputs[0].name != OCCUPANCY_INPUT);
-        let cells = size_px * size_px;
-        let occupancy = zeros(vec![1, 1, size_px, size_px]).map_err(session_error)?;
-        let aux = zeros(vec![1, metadata.aux.len()]).map_err(session_error)?;
-        let inputs = if occupancy_slot == 0 {
-            [occupancy, aux]
-        } else {
-            [aux, occupancy]
+        // The contract holds exactly these names, so each is found once.
+        let slot = |name: &str| inputs.iter().position(|t| t.name == name);
+        let slots = InputSlots {
+            image: slot(OCCUPANCY_INPUT).unwrap_or(0),
+            aux: slot(AUX_INPUT).unwrap_or(1),
+            ranges: slot(RANGES_INPUT),
         };
+        let cells = size_px * size_px;
+        let tensors = inputs
+            .iter()
+            .map(|t| match t.name.as_str() {
+                OCCUPANCY_INPUT => zeros(vec![1, 1, size_px, size_px]),
+                AUX_INPUT => zeros(vec![1, metadata.aux.len()]),
+                _ => zeros(vec![1, metadata.ranges.map_or(0, |r| r.sectors)]),
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(session_error)?;
         Ok(OnnxPolicy {
             session,
             metadata,
             model_id: formation_proto::model_id::model_id(path, &bytes),
-            inputs,
-            occupancy_slot,
+            inputs: tensors,
+            slots,
             cells,
         })
     }
@@ -117,17 +133,32 @@ impl OnnxPolicy {
         })
     }
 
-    /// One forward pass: `occupancy` has `size_px * size_px` cells, row-major; `aux` holds the
-    /// scalars the model declares, in order ([`ModelMetadata::aux`]; the paper's
-    /// `(delta_phi, d*)` for a model that declares none). Returns the model's two output values: `(left, right)` wheel speeds at
-    /// `v_train`, or the formation velocity `(f_x, f_y)` in the robot's frame, as its metadata
-    /// declares ([`crate::contract::PolicyOutput`]).
-    pub fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], PolicyError> {
+    /// One forward pass: `input.image` has `size_px * size_px` cells, row-major; `input.aux`
+    /// holds the scalars the model declares, in order ([`ModelMetadata::aux`]; the paper's
+    /// `(delta_phi, d*)` for a model that declares none); `input.ranges` one value a sector of
+    /// the range input it declares ([`ModelMetadata::ranges`]), or nothing where it declares
+    /// none. Returns the model's two output values: `(left, right)` wheel speeds at `v_train`,
+    /// or the formation velocity `(f_x, f_y)` in the robot's frame, as its metadata declares
+    /// ([`crate::contract::PolicyOutput`]).
+    pub fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], PolicyError> {
+        let PolicyInput {
+            image: occupancy,
+            aux,
+            ranges,
+        } = *input;
         if occupancy.len() != self.cells {
             return Err(PolicyError::InputLength {
                 model: self.model_id.clone(),
                 expected: self.cells,
                 actual: occupancy.len(),
+            });
+        }
+        let sectors = self.metadata.ranges.map_or(0, |r| r.sectors);
+        if ranges.len() != sectors {
+            return Err(PolicyError::RangesLength {
+                model: self.model_id.clone(),
+                declared: self.metadata.ranges,
+                actual: ranges.len(),
             });
         }
         if aux.len() != self.metadata.aux.len() {
@@ -142,20 +173,31 @@ impl OnnxPolicy {
             model: model.clone(),
             reason,
         };
-        let aux_slot = 1 - self.occupancy_slot;
-        let (_, image) = self.inputs[self.occupancy_slot]
-            .try_extract_tensor_mut()
-            .map_err(|e| failed(e.to_string()))?;
-        image.copy_from_slice(occupancy);
-        let (_, aux_cells) = self.inputs[aux_slot]
-            .try_extract_tensor_mut()
-            .map_err(|e| failed(e.to_string()))?;
-        aux_cells.copy_from_slice(aux);
+        let mut fill = |slot: usize, values: &[f32]| -> Result<(), PolicyError> {
+            let (_, cells) = self.inputs[slot]
+                .try_extract_tensor_mut()
+                .map_err(|e| failed(e.to_string()))?;
+            cells.copy_from_slice(values);
+            Ok(())
+        };
+        fill(self.slots.image, occupancy)?;
+        fill(self.slots.aux, aux)?;
+        if let Some(slot) = self.slots.ranges {
+            fill(slot, ranges)?;
+        }
 
-        let outputs = self
-            .session
-            .run(ort::inputs![&self.inputs[0], &self.inputs[1]])
-            .map_err(|e| failed(e.to_string()))?;
+        let inputs = &self.inputs;
+        let outputs = match inputs.as_slice() {
+            [a, b] => self.session.run(ort::inputs![a, b]),
+            [a, b, c] => self.session.run(ort::inputs![a, b, c]),
+            other => {
+                return Err(failed(format!(
+                    "{} inputs held, where the contract admits two or three",
+                    other.len()
+                )));
+            }
+        }
+        .map_err(|e| failed(e.to_string()))?;
         let name = self.metadata.output.name();
         let wheels = outputs
             .get(name)
@@ -178,6 +220,14 @@ impl OnnxPolicy {
         }
         Ok([left, right])
     }
+}
+
+/// Where each input sits in the session's input order.
+#[derive(Debug, Clone, Copy)]
+struct InputSlots {
+    image: usize,
+    aux: usize,
+    ranges: Option<usize>,
 }
 
 /// A session for the model bytes with one intra-op and one inter-op thread.

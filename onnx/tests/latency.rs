@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use formation_onnx::OnnxPolicy;
+use formation_proto::PolicyInput;
 
 const CALLS: usize = 10_000;
 const WARMUP: usize = 500;
@@ -50,13 +51,17 @@ fn measure(label: &str, path: &Path) {
     let cases = inputs(policy.metadata().occupancy.size_px);
     for i in 0..WARMUP {
         let (image, aux) = &cases[i % cases.len()];
-        policy.infer(image, aux).expect("infer");
+        policy
+            .infer(&PolicyInput::image_and_aux(image, aux))
+            .expect("infer");
     }
     let mut micros: Vec<f64> = Vec::with_capacity(CALLS);
     for i in 0..CALLS {
         let (image, aux) = &cases[i % cases.len()];
         let t = Instant::now();
-        let out = policy.infer(image, aux).expect("infer");
+        let out = policy
+            .infer(&PolicyInput::image_and_aux(image, aux))
+            .expect("infer");
         micros.push(t.elapsed().as_secs_f64() * 1e6);
         std::hint::black_box(out);
     }

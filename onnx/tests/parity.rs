@@ -7,9 +7,9 @@ use std::path::Path;
 
 use formation_onnx::contract::keys;
 use formation_onnx::{ContractViolation, OnnxPolicy, PolicyError, SensorViolation};
-use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec};
+use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec, PolicyInput};
 
-use common::{CASES, SIZE_PX, fixtures};
+use common::{CASES, SECTORS, SIZE_PX, fixtures};
 
 /// Largest allowed |onnxruntime - torch| per wheel.
 const TOLERANCE: f32 = 1e-4;
@@ -53,7 +53,9 @@ fn outputs_match_torch_and_metadata_is_read() {
     assert_eq!(cases.len(), CASES);
     let mut largest_output = 0.0_f32;
     for (i, (image, aux, torch)) in cases.iter().enumerate() {
-        let ours = policy.infer(image, aux).expect("inference");
+        let ours = policy
+            .infer(&PolicyInput::image_and_aux(image, aux))
+            .expect("inference");
         for wheel in 0..2 {
             let diff = (ours[wheel] - torch[wheel]).abs();
             assert!(
@@ -77,11 +79,20 @@ fn repeated_inference_is_deterministic_and_buffers_do_not_leak_between_calls() {
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let cases = fx.cases();
     let (first_image, first_aux, _) = &cases[0];
-    let first = policy.infer(first_image, first_aux).expect("infer");
+    let first = policy
+        .infer(&PolicyInput::image_and_aux(first_image, first_aux))
+        .expect("infer");
     let (other_image, other_aux, _) = &cases[1];
-    let other = policy.infer(other_image, other_aux).expect("infer");
+    let other = policy
+        .infer(&PolicyInput::image_and_aux(other_image, other_aux))
+        .expect("infer");
     assert_ne!(first, other, "different inputs give different outputs");
-    assert_eq!(policy.infer(first_image, first_aux).expect("infer"), first);
+    assert_eq!(
+        policy
+            .infer(&PolicyInput::image_and_aux(first_image, first_aux))
+            .expect("infer"),
+        first
+    );
 }
 
 #[test]
@@ -89,7 +100,7 @@ fn policy_moves_to_another_thread() {
     let fx = fixtures("parity");
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let (image, aux, torch) = fx.cases().swap_remove(2);
-    let ours = std::thread::spawn(move || policy.infer(&image, &aux))
+    let ours = std::thread::spawn(move || policy.infer(&PolicyInput::image_and_aux(&image, &aux)))
         .join()
         .expect("thread")
         .expect("infer");
@@ -121,7 +132,7 @@ fn wrong_input_name_is_refused_naming_it() {
     let fx = fixtures("parity");
     let (reason, message) = contract_violation(&fx.model("wrong_name.onnx"));
     assert!(
-        matches!(reason, ContractViolation::InputNames { ref found } if found.contains(&"image".to_owned()))
+        matches!(reason, ContractViolation::InputNames { ref found, .. } if found.contains(&"image".to_owned()))
     );
     assert!(
         message.contains("image") && message.contains("[occupancy, aux]"),
@@ -162,7 +173,7 @@ fn non_finite_output_is_an_error() {
         OnnxPolicy::load(&fx.model("nan_output.onnx")).expect("the contract itself is fine");
     let (image, aux, _) = fx.cases().swap_remove(0);
     assert!(
-        matches!(policy.infer(&image, &aux), Err(PolicyError::NonFiniteOutput { left, right, .. }) if left.is_nan() && right.is_nan())
+        matches!(policy.infer(&PolicyInput::image_and_aux(&image, &aux)), Err(PolicyError::NonFiniteOutput { left, right, .. }) if left.is_nan() && right.is_nan())
     );
 }
 
@@ -171,14 +182,17 @@ fn wrong_image_length_is_an_error() {
     let fx = fixtures("parity");
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let short = vec![0.0; 40 * 40];
-    match policy.infer(&short, &[0.0, 1.0]) {
+    match policy.infer(&PolicyInput::image_and_aux(&short, &[0.0, 1.0])) {
         Err(PolicyError::InputLength {
             expected, actual, ..
         }) => assert_eq!((expected, actual), (SIZE_PX * SIZE_PX, 1600)),
         other => panic!("expected InputLength, got {other:?}"),
     }
     policy
-        .infer(&vec![0.0; SIZE_PX * SIZE_PX], &[0.0, 1.0])
+        .infer(&PolicyInput::image_and_aux(
+            &vec![0.0; SIZE_PX * SIZE_PX],
+            &[0.0, 1.0],
+        ))
         .expect("still usable after a refused call");
 }
 
@@ -188,14 +202,14 @@ fn wrong_aux_width_is_an_error_naming_the_declared_inputs() {
     let fx = fixtures("parity");
     let mut policy = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
     let image = vec![0.0; SIZE_PX * SIZE_PX];
-    match policy.infer(&image, &[0.0, 1.0, 2.0]) {
+    match policy.infer(&PolicyInput::image_and_aux(&image, &[0.0, 1.0, 2.0])) {
         Err(err @ PolicyError::AuxLength { actual: 3, .. }) => {
             assert!(err.to_string().contains("delta_phi,d_star"), "{err}");
         }
         other => panic!("expected AuxLength, got {other:?}"),
     }
     policy
-        .infer(&image, &[0.0, 1.0])
+        .infer(&PolicyInput::image_and_aux(&image, &[0.0, 1.0]))
         .expect("still usable after a refused call");
 }
 
@@ -261,5 +275,78 @@ fn a_file_that_is_not_onnx_is_a_session_error() {
             assert!(!reason.is_empty());
         }
         other => panic!("expected a Session error, got {other:?}"),
+    }
+}
+
+/// A model with a range input (`formation.ranges`): ONNX Runtime gives torch's outputs on the
+/// three inputs, and the ranges must be one value a sector.
+#[test]
+fn a_range_input_model_matches_torch_and_checks_its_sectors() {
+    let fx = fixtures("parity");
+    let mut policy = OnnxPolicy::load(&fx.model("ranges.onnx")).expect("loads");
+    let declared = policy.metadata().ranges.expect("declares its ranges");
+    assert_eq!((declared.sectors, declared.clip), (SECTORS, 3.0));
+    assert_eq!(policy.metadata().io().ranges, Some(declared));
+    let cases = fx.ranges_cases();
+    assert_eq!(cases.len(), CASES);
+    for (i, (image, aux, ranges, torch)) in cases.iter().enumerate() {
+        let ours = policy
+            .infer(&PolicyInput { image, aux, ranges })
+            .expect("inference");
+        for wheel in 0..2 {
+            assert!(
+                (ours[wheel] - torch[wheel]).abs() <= TOLERANCE,
+                "case {i} wheel {wheel}: ort {} vs torch {}",
+                ours[wheel],
+                torch[wheel]
+            );
+        }
+    }
+    // The ranges reach the network: other ranges, another answer.
+    let (image, aux, ranges, _) = &cases[0];
+    let closer: Vec<f32> = ranges.iter().map(|r| r * 0.5).collect();
+    let first = policy.infer(&PolicyInput { image, aux, ranges }).unwrap();
+    let moved = policy
+        .infer(&PolicyInput {
+            image,
+            aux,
+            ranges: &closer,
+        })
+        .unwrap();
+    assert_ne!(first, moved);
+    match policy.infer(&PolicyInput::image_and_aux(image, aux)) {
+        Err(err @ PolicyError::RangesLength { actual: 0, .. }) => {
+            assert!(err.to_string().contains("sectors=100,clip=3"), "{err}");
+        }
+        other => panic!("expected RangesLength, got {other:?}"),
+    }
+    // A model without ranges refuses them.
+    let mut plain = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
+    match plain.infer(&PolicyInput { image, aux, ranges }) {
+        Err(err @ PolicyError::RangesLength { actual: 100, .. }) => {
+            assert!(err.to_string().contains("no range input"), "{err}");
+        }
+        other => panic!("expected RangesLength, got {other:?}"),
+    }
+}
+
+/// The `ranges` input and the `formation.ranges` metadata come together or not at all.
+#[test]
+fn a_range_input_without_its_declaration_or_the_other_way_round_is_refused() {
+    let fx = fixtures("parity");
+    for (file, names) in [
+        ("ranges_undeclared.onnx", "declares no `formation.ranges`"),
+        (
+            "ranges_missing.onnx",
+            "expected exactly [occupancy, aux, ranges]",
+        ),
+    ] {
+        match OnnxPolicy::load(&fx.model(file)) {
+            Err(err @ PolicyError::Contract { .. }) => {
+                let message = err.to_string();
+                assert!(message.contains(names), "{file}: {message}");
+            }
+            other => panic!("{file}: expected a contract violation, got {other:?}"),
+        }
     }
 }

@@ -4,6 +4,8 @@
 //!   renderer used both when collecting demonstrations (`formation-expert`) and by the running
 //!   agent (`formation-robot-agent`), so a policy sees at run time exactly the pixels it was
 //!   trained on.
+//! * [`ranges`]: the scan's ranges pooled into sectors, the float input beside the image of a
+//!   model that declares one (`formation_proto::RangeInput`).
 //! * [`policy_input`]: a goal checked where it enters a robot, and the policy's declared output
 //!   turned into wheel speeds (the scalars beside the image are `formation_proto::PolicyIo`'s).
 //!
@@ -13,3 +15,4 @@
 
 pub mod occupancy;
 pub mod policy_input;
+pub mod ranges;

@@ -33,7 +33,9 @@ pub mod wire;
 
 pub use goal_speed::GoalSpeedFit;
 pub use neighbours::{GabrielRule, NeighbourRule};
-pub use policy_io::{AuxInput, AuxLayout, AuxValues, PolicyIo, RangeInput, RangeInputError};
+pub use policy_io::{
+    AuxInput, AuxLayout, AuxValues, PolicyInput, PolicyIo, RangeInput, RangeInputError,
+};
 pub use policy_output::PolicyOutput;
 pub use team_size::TeamSizeFit;
 pub use types::*;

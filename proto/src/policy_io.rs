@@ -376,6 +376,28 @@ pub struct PolicyIo {
     pub v_train: f64,
 }
 
+/// One decision's inputs, as a model's [`PolicyIo`] declares them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PolicyInput<'a> {
+    /// The occupancy image, `size_px * size_px` cells (0.0 or 1.0), row-major.
+    pub image: &'a [f32],
+    /// The scalars the model declares, in order.
+    pub aux: &'a [f32],
+    /// The scan's ranges, one a sector; empty for a model that takes none.
+    pub ranges: &'a [f32],
+}
+
+impl<'a> PolicyInput<'a> {
+    /// The inputs of a model that takes no ranges: its image and its scalars.
+    pub fn image_and_aux(image: &'a [f32], aux: &'a [f32]) -> PolicyInput<'a> {
+        PolicyInput {
+            image,
+            aux,
+            ranges: &[],
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,8 +6,9 @@
 //! 1. render the occupancy image from the scan ([`formation_perception::occupancy::render`], the same function the
 //!    demonstration collector uses);
 //! 2. the scalars the model declares beside the image, `aux` (the paper's
-//!    `(wrap(phi* - theta), d*)`: see [`PolicyIo`]);
-//! 3. `y = policy(image, aux)`, what the model declares it outputs ([`PolicyOutput`]);
+//!    `(wrap(phi* - theta), d*)`: see [`PolicyIo`]), and the scan's ranges pooled into sectors
+//!    where the model declares them ([`formation_perception::ranges::pool`], as collected);
+//! 3. `y = policy(image, aux, ranges)`, what the model declares it outputs ([`PolicyOutput`]);
 //! 4. for `wheels`, the wheel speeds at the training speed `v_train`: `u = K y` with
 //!    `K = v* / v_train` (the paper's speed scaling); for `formation_velocity`, the formation
 //!    velocity in the robot's frame: the reference term `v* (cos Δφ, sin Δφ)` is added and the
@@ -38,9 +39,11 @@ use formation_onnx::{OnnxPolicy, PolicyError};
 #[cfg(doc)]
 use formation_proto::PolicyOutput;
 use formation_proto::control::{Controller, ControllerError, Observation};
-use formation_proto::{AuxValues, Goal, LidarSpec, OccupancySpec, PolicyIo, WheelCmd};
+use formation_proto::{
+    AuxValues, Goal, LidarSpec, OccupancySpec, PolicyInput, PolicyIo, RangeInput, WheelCmd,
+};
 
-use formation_perception::{occupancy, policy_input};
+use formation_perception::{occupancy, policy_input, ranges};
 
 /// Why an agent could not decide, or could not take a policy.
 #[derive(Debug, thiserror::Error)]
@@ -156,9 +159,10 @@ pub const TRIAL_GOAL: Goal = Goal {
 /// A policy an [`Agent`] can run: maps one occupancy image and the scalars beside it to the two
 /// values its model declares.
 pub trait PolicyBackend: Send {
-    /// One forward pass. `occupancy` has `size_px * size_px` cells (0.0 or 1.0), row-major;
-    /// `aux` the scalars [`PolicyBackend::io`] declares, in order.
-    fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError>;
+    /// One forward pass on the inputs [`PolicyBackend::io`] declares: the image
+    /// (`size_px * size_px` cells, 0.0 or 1.0, row-major), its scalars in order, and the
+    /// scan's ranges where it takes them.
+    fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], DecisionError>;
     /// What the policy takes and answers: its image, its scalars, its output and `v_train`.
     fn io(&self) -> PolicyIo;
     /// The sensor it was trained for: beams and range where it records them, and its window.
@@ -189,8 +193,8 @@ pub fn check_goal_envelope(policy: &dyn PolicyBackend, d_star: f64) -> Result<()
 }
 
 impl PolicyBackend for OnnxPolicy {
-    fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError> {
-        Ok(OnnxPolicy::infer(self, occupancy, aux)?)
+    fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], DecisionError> {
+        Ok(OnnxPolicy::infer(self, input)?)
     }
     fn io(&self) -> PolicyIo {
         self.metadata().io()
@@ -215,6 +219,9 @@ pub struct Agent {
     lidar: LidarSpec,
     image: Vec<u8>,
     image_f32: Vec<f32>,
+    /// The scan's ranges of the last [`Agent::perceive`], one a sector; empty for a policy that
+    /// takes none.
+    ranges: Vec<f32>,
     /// The goal checked where it entered ([`Agent::hold_goal`]); `None` before the first.
     goal: Option<Goal>,
     /// The scan of the last [`Agent::perceive`]; empty before the first.
@@ -239,6 +246,7 @@ impl Agent {
             lidar,
             image: vec![0; cells],
             image_f32: vec![0.0; cells],
+            ranges: vec![0.0; sectors(&io)],
             goal: None,
             last_scan: Vec::with_capacity(lidar.beams),
             last_decision: None,
@@ -299,6 +307,9 @@ impl Agent {
         for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
             *dst = f32::from(src);
         }
+        if let Some(spec) = &self.io.ranges {
+            ranges::pool(scan, &self.lidar, spec, goal.d_star, &mut self.ranges);
+        }
         self.last_scan.clear();
         self.last_scan.extend_from_slice(scan);
         Ok(())
@@ -313,7 +324,11 @@ impl Agent {
         })?;
         let aux = self.io.aux.values(heading, goal);
         self.last_decision = Some((heading, aux));
-        let [left, right] = self.policy.infer(&self.image_f32, &aux)?;
+        let [left, right] = self.policy.infer(&PolicyInput {
+            image: &self.image_f32,
+            aux: &aux,
+            ranges: &self.ranges,
+        })?;
         if !(left.is_finite() && right.is_finite()) {
             return Err(DecisionError::NonFinite {
                 model: self.policy.model_id().to_owned(),
@@ -349,7 +364,20 @@ impl Agent {
         for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
             *dst = f32::from(src);
         }
-        self.policy.infer(&self.image_f32, &aux)?;
+        if let Some(spec) = &self.io.ranges {
+            ranges::pool(
+                &self.last_scan,
+                &self.lidar,
+                spec,
+                goal.d_star,
+                &mut self.ranges,
+            );
+        }
+        self.policy.infer(&PolicyInput {
+            image: &self.image_f32,
+            aux: &aux,
+            ranges: &self.ranges,
+        })?;
         Ok(())
     }
 
@@ -400,6 +428,9 @@ impl Agent {
         let io = policy.io();
         let n = cells(&io.image);
         let mut image = vec![0u8; n];
+        // An empty observation: no beam returns, so every sector is the clip.
+        let mut trial_ranges: Vec<f32> =
+            io.ranges.map_or_else(Vec::new, |r| vec![r.clip; r.sectors]);
         let (aux, observation) = match (self.last_decision, self.goal) {
             (Some((heading, _)), Some(goal)) if self.last_scan.len() == self.lidar.beams => {
                 occupancy::render_at(
@@ -409,14 +440,29 @@ impl Agent {
                     goal.d_star,
                     &mut image,
                 );
+                if let Some(spec) = &io.ranges {
+                    ranges::pool(
+                        &self.last_scan,
+                        &self.lidar,
+                        spec,
+                        goal.d_star,
+                        &mut trial_ranges,
+                    );
+                }
                 (io.aux.values(heading, &goal), TrialObservation::Last)
             }
             _ => (io.aux.values(0.0, &TRIAL_GOAL), TrialObservation::Empty),
         };
         let image: Vec<f32> = image.into_iter().map(f32::from).collect();
-        trial_run(policy.as_mut(), &image, &aux, observation)?;
+        let trial = PolicyInput {
+            image: &image,
+            aux: &aux,
+            ranges: &trial_ranges,
+        };
+        trial_run(policy.as_mut(), &trial, observation)?;
         self.image.resize(n, 0);
         self.image_f32.resize(n, 0.0);
+        self.ranges = trial_ranges;
         if let Some((heading, _)) = self.last_decision {
             let goal = self.goal.unwrap_or(TRIAL_GOAL);
             self.last_decision = Some((heading, io.aux.values(heading, &goal)));
@@ -431,11 +477,10 @@ impl Agent {
 /// refusal naming the candidate and the observation.
 fn trial_run(
     policy: &mut dyn PolicyBackend,
-    image: &[f32],
-    aux: &[f32],
+    input: &PolicyInput<'_>,
     observation: TrialObservation,
 ) -> Result<(), DecisionError> {
-    let outcome = policy.infer(image, aux);
+    let outcome = policy.infer(input);
     let model = policy.model_id().to_owned();
     let non_finite = |left, right| DecisionError::SwapNonFinite {
         model: model.clone(),
@@ -464,12 +509,26 @@ fn cells(spec: &OccupancySpec) -> usize {
     spec.size_px * spec.size_px
 }
 
+fn sectors(io: &PolicyIo) -> usize {
+    io.ranges.map_or(0, |r: RangeInput| r.sectors)
+}
+
 /// The full sensor contract of `policy` against this robot's LIDAR: beams, range and window.
 fn check_policy(policy: &dyn PolicyBackend, lidar: &LidarSpec) -> Result<(), DecisionError> {
-    check_sensor(&policy.sensor(), lidar).map_err(|reason| DecisionError::SensorMismatch {
+    let mismatch = |reason| DecisionError::SensorMismatch {
         model: policy.model_id().to_owned(),
         reason,
-    })
+    };
+    check_sensor(&policy.sensor(), lidar).map_err(mismatch)?;
+    match policy.io().ranges {
+        Some(ranges) if ranges.check_beams(lidar.beams).is_err() => {
+            Err(mismatch(SensorViolation::RangeSectors {
+                sectors: ranges.sectors,
+                beams: lidar.beams,
+            }))
+        }
+        _ => Ok(()),
+    }
 }
 
 /// Why a launch's models cannot drive its robots: the first robot whose model fails.
@@ -625,7 +684,8 @@ mod tests {
     }
 
     impl PolicyBackend for Probe {
-        fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError> {
+        fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], DecisionError> {
+            let (occupancy, aux) = (input.image, input.aux);
             let occupied: f32 = occupancy.iter().sum();
             let aux = [aux[0], aux[1]];
             self.seen = Some((aux, occupied));
@@ -676,6 +736,99 @@ mod tests {
 
     /// Issue 35: d* is checked once, where the goal enters, not on every tick; a refused goal
     /// leaves the agent holding none, and a swap candidate must admit the goal held.
+    /// A policy that declares a range input and answers with the first two sectors it was fed.
+    struct RangesEcho {
+        sectors: usize,
+        seen: std::sync::Arc<std::sync::Mutex<Vec<Vec<f32>>>>,
+    }
+
+    impl PolicyBackend for RangesEcho {
+        fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], DecisionError> {
+            self.seen.lock().expect("log").push(input.ranges.to_vec());
+            Ok([input.ranges[0], input.ranges[1]])
+        }
+        fn io(&self) -> PolicyIo {
+            PolicyIo {
+                image: OccupancySpec::PAPER,
+                aux: formation_proto::AuxLayout::PAPER,
+                ranges: Some(RangeInput::new(self.sectors, 3.0).expect("valid")),
+                output: formation_proto::PolicyOutput::Wheels,
+                v_train: 0.7,
+            }
+        }
+        fn sensor(&self) -> SensorContract {
+            // Beams unrecorded, so that the range input's own check is the one that speaks.
+            SensorContract {
+                beams: None,
+                max_range: None,
+                occupancy: OccupancySpec::PAPER,
+            }
+        }
+        fn model_id(&self) -> &str {
+            "ranges-echo"
+        }
+    }
+
+    #[test]
+    fn a_policy_that_takes_ranges_is_fed_its_own_scan_pooled_as_collected() {
+        let lidar = LidarSpec::default();
+        let seen = std::sync::Arc::default();
+        let echo = RangesEcho {
+            sectors: 100,
+            seen: std::sync::Arc::clone(&seen),
+        };
+        let mut agent = Agent::new(Box::new(echo), lidar).expect("fits the sensor");
+        let mut scan = vec![lidar.max_range as f32; lidar.beams];
+        scan[0] = 1.5; // sector 0
+        scan[9] = 0.75; // sector 1
+        let goal = Goal {
+            phi_star: 0.0,
+            d_star: 1.5,
+            v_star: 0.7,
+        };
+        agent.act(&scan, 0.0, &goal).expect("decides");
+        let mut expected = vec![0.0; 100];
+        ranges::pool(
+            &scan,
+            &lidar,
+            &RangeInput::new(100, 3.0).unwrap(),
+            1.5,
+            &mut expected,
+        );
+        assert_eq!(seen.lock().unwrap().as_slice(), &[expected.clone()]);
+        assert_eq!((expected[0], expected[1], expected[2]), (1.0, 0.5, 3.0));
+        agent.rehearse().expect("rehearses");
+        assert_eq!(
+            seen.lock().unwrap()[1],
+            expected,
+            "a rehearsal feeds the same"
+        );
+
+        // A swap candidate that takes other sectors is tried on the last scan, pooled its way.
+        let candidate_seen = std::sync::Arc::default();
+        let candidate = RangesEcho {
+            sectors: 50,
+            seen: std::sync::Arc::clone(&candidate_seen),
+        };
+        agent.swap_policy(Box::new(candidate)).expect("swaps");
+        let tried = candidate_seen.lock().unwrap()[0].clone();
+        assert_eq!(tried.len(), 50);
+        assert_eq!(tried[0], 1.0, "beam 0 is in sector 0 of 50 too");
+
+        // More sectors than beams cannot be pooled: refused, naming both.
+        let few = LidarSpec { beams: 60, ..lidar };
+        let err = Agent::new(
+            Box::new(RangesEcho {
+                sectors: 100,
+                seen: std::sync::Arc::default(),
+            }),
+            few,
+        )
+        .err()
+        .expect("refused");
+        assert!(err.to_string().contains("100 sectors"), "{err}");
+    }
+
     #[test]
     fn a_goal_is_checked_once_where_it_enters_and_held() {
         let lidar = LidarSpec::default();
@@ -899,7 +1052,8 @@ mod tests {
     }
 
     impl PolicyBackend for Fake {
-        fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError> {
+        fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], DecisionError> {
+            let (occupancy, aux) = (input.image, input.aux);
             let occupied = occupancy.iter().sum();
             self.seen
                 .lock()

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use formation_onnx::OnnxPolicy;
 use formation_perception::occupancy::{render, to_f32};
-use formation_proto::LidarSpec;
+use formation_proto::{LidarSpec, PolicyInput};
 
 fn model(relative: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -67,7 +67,10 @@ fn asymmetry(path: &Path) -> f32 {
             assert!(input.iter().any(|&c| c > 0.0), "the neighbours are drawn");
             wheels.push(
                 policy
-                    .infer(&input, &[heading_error, d_star])
+                    .infer(&PolicyInput::image_and_aux(
+                        &input,
+                        &[heading_error, d_star],
+                    ))
                     .expect("infers"),
             );
         }

@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use formation_onnx::{OnnxPolicy, PolicyOutput};
 use formation_perception::policy_input::formation_velocity_to_wheels;
-use formation_proto::Goal;
+use formation_proto::{Goal, PolicyInput};
 use formation_robot_agent::decision::{Agent, PolicyController};
 use formation_tests::{
     ProcessTest, assert_bit_identical, binaries, lockstep_over_processes, run,
@@ -54,7 +54,9 @@ fn a_formation_velocity_model_is_turned_into_wheels_with_the_reference_term_at_t
         let command = agent.act(&scan, heading, &goal).expect("a decision");
         let aux = agent.io().aux.values(heading, &goal);
         let image: Vec<f32> = agent.image().iter().map(|&c| f32::from(c)).collect();
-        let values = raw.infer(&image, &aux).expect("the raw output");
+        let values = raw
+            .infer(&PolicyInput::image_and_aux(&image, &aux))
+            .expect("the raw output");
         let expected = formation_velocity_to_wheels(values, f64::from(aux[0]), v_star, None);
         assert_eq!(command, expected, "v* = {v_star}");
         // A robot whose wheels have an acceleration limit shapes the same output for them.

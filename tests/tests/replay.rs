@@ -13,7 +13,7 @@ use std::time::Duration;
 use formation_agent_node::pilot::{OnnxPilot, OnnxPilots};
 use formation_cli::replay::{ReplayOptions, replay_recording};
 use formation_onnx::contract::SensorContract;
-use formation_proto::{LidarSpec, PolicyIo};
+use formation_proto::{LidarSpec, PolicyInput, PolicyIo};
 use formation_robot_agent::decision::{DecisionError, PolicyBackend};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
@@ -153,12 +153,15 @@ fn a_realtime_run_over_processes_replays_bit_identical() {
 struct OneCellFlipped(Box<dyn PolicyBackend>);
 
 impl PolicyBackend for OneCellFlipped {
-    fn infer(&mut self, occupancy: &[f32], aux: &[f32]) -> Result<[f32; 2], DecisionError> {
-        let mut image = occupancy.to_vec();
+    fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], DecisionError> {
+        let mut image = input.image.to_vec();
         // The cell in the middle of the image's first row: beside the robot, within the window.
         let cell = self.0.io().image.size_px / 2;
         image[cell] = 1.0 - image[cell];
-        self.0.infer(&image, aux)
+        self.0.infer(&PolicyInput {
+            image: &image,
+            ..*input
+        })
     }
     fn io(&self) -> PolicyIo {
         self.0.io()

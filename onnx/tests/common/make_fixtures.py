@@ -12,6 +12,10 @@ formation.* metadata with the `onnx` package, and writes torch's own outputs for
 - no_metadata.onnx   no metadata_props at all
 - nan_output.onnx    valid contract, but a NaN bias makes every output NaN
 - cases.f32          CASES records of little-endian f32: occupancy (2500), aux (2), torch wheels (2)
+- ranges.onnx        the contract with a range input: `ranges` [B, 100], formation.ranges declared
+- ranges_undeclared.onnx  a `ranges` input the metadata does not declare
+- ranges_missing.onnx     formation.ranges declared, but no `ranges` input
+- ranges_cases.f32   CASES records: occupancy (2500), aux (2), ranges (100), torch wheels (2)
 """
 
 import sys
@@ -60,8 +64,26 @@ class PolicyNet(nn.Module):
         return self.head(torch.cat([self.features(occupancy), aux], dim=1))
 
 
+SECTORS = 100
+RANGES_METADATA = {**METADATA, "formation.ranges": f"sectors={SECTORS},clip=3"}
+
+
+class RangesNet(PolicyNet):
+    """The paper's network with a range branch whose features join the head."""
+
+    def __init__(self, size):
+        super().__init__(size)
+        self.ranges = nn.Sequential(nn.Linear(SECTORS, 8), nn.ReLU())
+        self.head = nn.Sequential(nn.Linear(16 * 3 * 3 + 2 + 8, 32), nn.ReLU(), nn.Linear(32, 2))
+
+    def forward(self, occupancy, aux, ranges):
+        return self.head(torch.cat([self.features(occupancy), aux, self.ranges(ranges)], dim=1))
+
+
 def export(model, path, size, input_names, metadata):
     example = (torch.zeros(2, 1, size, size), torch.zeros(2, 2))
+    if len(input_names) == 3:
+        example = (*example, torch.zeros(2, SECTORS))
     dynamic = {name: {0: "batch"} for name in [*input_names, "wheels"]}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -96,6 +118,16 @@ def main():
         wheels = model(torch.from_numpy(occupancy), torch.from_numpy(aux)).numpy()
     records = np.concatenate([occupancy.reshape(cases, -1), aux, wheels], axis=1).astype("<f4")
     records.tofile(f"{out}/cases.f32")
+
+    ranged = RangesNet(SIZE).eval()
+    export(ranged, f"{out}/ranges.onnx", SIZE, ["occupancy", "aux", "ranges"], RANGES_METADATA)
+    export(ranged, f"{out}/ranges_undeclared.onnx", SIZE, ["occupancy", "aux", "ranges"], METADATA)
+    export(model, f"{out}/ranges_missing.onnx", SIZE, ["occupancy", "aux"], RANGES_METADATA)
+    ranges = rng.uniform(0.1, 3.0, (cases, SECTORS)).astype(np.float32)
+    with torch.no_grad():
+        wheels = ranged(torch.from_numpy(occupancy), torch.from_numpy(aux), torch.from_numpy(ranges)).numpy()
+    records = np.concatenate([occupancy.reshape(cases, -1), aux, ranges, wheels], axis=1).astype("<f4")
+    records.tofile(f"{out}/ranges_cases.f32")
 
 
 if __name__ == "__main__":

@@ -47,6 +47,38 @@ impl Fixtures {
     }
 }
 
+impl Fixtures {
+    /// The torch reference cases of `ranges.onnx`: (occupancy, aux, ranges, torch's wheels).
+    pub fn ranges_cases(&self) -> Vec<RangesCase> {
+        let bytes = std::fs::read(self.dir.join("ranges_cases.f32"))
+            .expect("ranges_cases.f32 written by make_fixtures.py");
+        let values: Vec<f32> = bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        let cells = SIZE_PX * SIZE_PX;
+        values
+            .chunks_exact(cells + 2 + SECTORS + 2)
+            .map(|r| {
+                let ranges = cells + 2;
+                let wheels = ranges + SECTORS;
+                (
+                    r[..cells].to_vec(),
+                    [r[cells], r[cells + 1]],
+                    r[ranges..wheels].to_vec(),
+                    [r[wheels], r[wheels + 1]],
+                )
+            })
+            .collect()
+    }
+}
+
+/// One torch reference case of `ranges.onnx`: occupancy, aux, ranges and torch's wheels.
+pub type RangesCase = (Vec<f32>, [f32; 2], Vec<f32>, [f32; 2]);
+
+/// Sectors of `ranges.onnx`'s range input.
+pub const SECTORS: usize = 100;
+
 /// Number of torch reference cases written.
 pub const CASES: usize = 16;
 
