@@ -80,11 +80,11 @@ pub struct DatasetHeader {
 
 /// `Option<RangeInput>` as its `formation.ranges` text (`RangeInput`'s `Display` and `parse`, the
 /// one definition of it), or nothing.
-mod range_text {
+pub(crate) mod range_text {
     use formation_proto::RangeInput;
     use serde::{Deserialize, Deserializer, Serializer};
 
-    pub(super) fn serialize<S: Serializer>(
+    pub(crate) fn serialize<S: Serializer>(
         ranges: &Option<RangeInput>,
         serializer: S,
     ) -> Result<S::Ok, S::Error> {
@@ -94,7 +94,7 @@ mod range_text {
         }
     }
 
-    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
         deserializer: D,
     ) -> Result<Option<RangeInput>, D::Error> {
         Option::<String>::deserialize(deserializer)?

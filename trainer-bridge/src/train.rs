@@ -7,6 +7,11 @@
 //! `<stem>.onnx` (the model, with the metadata contract), `<stem>.pt` (checkpoint for warm starts),
 //! `<stem>.loss.csv` and `<stem>.loss.png`.
 //!
+//! The datasets decide whether the model takes the scan's ranges: data collected with ranges
+//! (`formation collect --ranges sectors=K,clip=C`, dataset format version 2) trains a model with
+//! the third input `ranges` and `formation.ranges` metadata ([`TrainReport::ranges`]); a warm start
+//! from a model without ranges gains a range branch that starts with the old model's outputs.
+//!
 //! Python is found as: [`TrainOptions::python`], else `$FORMATION_PYTHON`, else
 //! `<repo>/.venv/bin/python`, else `python3`.
 
@@ -219,6 +224,10 @@ pub struct TrainReport {
     pub loss_csv: PathBuf,
     /// The loss plot.
     pub loss_png: PathBuf,
+    /// The scan's ranges the model takes beside its image (its `formation.ranges`): the
+    /// datasets' range input, or `None` for data without ranges.
+    #[serde(default, deserialize_with = "crate::dataset::range_text::deserialize")]
+    pub ranges: Option<formation_proto::RangeInput>,
 }
 
 /// Why training did not produce a model.
@@ -710,6 +719,32 @@ mod tests {
             !plain.contains(&"--samples-per-epoch".to_owned()),
             "{plain:?}"
         );
+    }
+
+    #[test]
+    fn a_report_names_the_range_input_or_none() {
+        let report = |ranges: &str| {
+            format!(
+                r#"{{"epochs": 1, "samples": 2, "train_samples": 1, "val_samples": 1,
+                "samples_per_epoch": 1, "final_train_loss": 0.5, "final_val_loss": 0.5,
+                "seconds": 1.0, "device": "cpu", "dataset_id": "d", "parity_max_abs_diff": 0.0,
+                "model": "m.onnx", "checkpoint": "m.pt", "loss_csv": "m.loss.csv",
+                "loss_png": "m.loss.png"{ranges}}}"#
+            )
+        };
+        let parse = |text: String| serde_json::from_str::<TrainReport>(&text);
+        assert_eq!(parse(report("")).expect("no key").ranges, None);
+        assert_eq!(
+            parse(report(r#", "ranges": null"#)).expect("null").ranges,
+            None
+        );
+        assert_eq!(
+            parse(report(r#", "ranges": "sectors=100,clip=3""#))
+                .expect("ranges")
+                .ranges,
+            Some(formation_proto::RangeInput::new(100, 3.0).expect("ranges"))
+        );
+        assert!(parse(report(r#", "ranges": "sectors=1,clip=3""#)).is_err());
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! Needs the trainer's Python environment (`bash .ci/setup-python --train`); without PyTorch the test
 //! says so and passes, since the Rust side's own behaviour is covered by the unit tests.
 
-use formation_proto::{LidarSpec, OccupancySpec};
+use formation_proto::{LidarSpec, OccupancySpec, RangeInput};
 use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter, Sample};
 use formation_trainer_bridge::train::{TrainError, TrainOptions, train};
 
@@ -71,6 +71,7 @@ fn a_rust_written_dataset_trains_into_an_onnx_model() {
         "every sample, unless capped"
     );
     assert_eq!(report.dataset_id, manifest.dataset_id);
+    assert_eq!(report.ranges, None);
     assert!(report.final_train_loss.is_finite() && report.final_val_loss.is_finite());
     assert!(report.parity_max_abs_diff <= 1e-4);
     for path in [
@@ -91,6 +92,61 @@ fn a_rust_written_dataset_trains_into_an_onnx_model() {
         !lines
             .iter()
             .any(|l| l.starts_with("FORMATION_TRAIN_REPORT"))
+    );
+}
+
+#[test]
+fn a_dataset_with_ranges_trains_a_model_that_declares_them() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let data = tmp.path().join("data");
+    let ranges = RangeInput::parse("sectors=100,clip=3").expect("ranges");
+    let header = DatasetHeader::new(OccupancySpec::PAPER, LidarSpec::default(), 0.7, 3, "e2e")
+        .with_ranges(Some(ranges));
+    let mut writer = DatasetWriter::create(&data, header).expect("create");
+    for i in 0..120 {
+        let mut s = sample(i, 0);
+        s.ranges = (0..100)
+            .map(|k| (0.03 * (k as f32 + i as f32)) % 3.0)
+            .collect();
+        s.wheels[0] += 0.1 * s.ranges[1];
+        writer.push(s).expect("push");
+    }
+    writer.finish().expect("finish");
+
+    let out = tmp.path().join("ranges.onnx");
+    let parity = tmp.path().join("parity.json");
+    let mut lines = Vec::new();
+    let report = train(
+        &TrainOptions {
+            data: vec![data],
+            out: out.clone(),
+            epochs: 1,
+            batch_size: 16,
+            lr: 1e-3,
+            device: "cpu".into(),
+            parity_out: Some(parity.clone()),
+            ..TrainOptions::default()
+        },
+        &mut |line| lines.push(line.to_owned()),
+    )
+    .expect("training succeeds");
+    assert_eq!(report.ranges, Some(ranges));
+    assert!(report.parity_max_abs_diff <= 1e-4, "{report:?}");
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.contains("ranges sectors=100,clip=3")),
+        "{lines:?}"
+    );
+    // The metadata strings are stored as they are in the ONNX protobuf.
+    let model = std::fs::read(&out).expect("model");
+    let holds = |needle: &[u8]| model.windows(needle.len()).any(|w| w == needle);
+    assert!(holds(b"formation.ranges") && holds(b"sectors=100,clip=3"));
+    let cases: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&parity).expect("parity")).expect("json");
+    assert_eq!(
+        cases["cases"][0]["ranges"].as_array().map(Vec::len),
+        Some(100)
     );
 }
 

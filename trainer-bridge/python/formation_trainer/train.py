@@ -662,6 +662,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         "device": str(device),
         "dataset_id": samples.dataset_id,
         "parity_max_abs_diff": parity,
+        # The range input the model takes (formation.ranges), or None.
+        "ranges": data_ranges.text() if data_ranges else None,
         **{name: str(path) for name, path in paths.items()},
     }
 
