@@ -196,7 +196,6 @@ fn a_tls_team_runs_lockstep_bit_identical_to_in_process() {
 /// receive nothing of robot 1; the recorder's certificate reads scans and commands and what it
 /// publishes reaches nobody. Then robot 1's own agent joins and the run completes.
 #[test]
-#[ignore = "fails about one CI run in a few on two loaded cores: an agent's Zenoh session drops, the world counts it dead, and the agent never greets again (issue 36 keeps the product bug: runtime/src/zenoh/{agent,world}.rs); run with --ignored"]
 fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("zenoh_tls_refusals", LIMIT);
@@ -694,7 +693,6 @@ fn eavesdrop(protocol: &str, dir: &Path, creds: &Path) -> Eavesdropped {
 /// bytes and no command in clear; the same capture of a `tcp/` link finds them all (so the
 /// check can fail).
 #[test]
-#[ignore = "fails about one CI run in a few on two loaded cores: an agent's Zenoh session drops, the world counts it dead, and the agent never greets again (issue 36 keeps the product bug: runtime/src/zenoh/{agent,world}.rs); run with --ignored"]
 fn a_capture_of_a_tls_link_holds_no_scan_or_command_in_clear() {
     let _one = one_at_a_time();
     let _watchdog = Watchdog::arm("zenoh_tls_capture", LIMIT);
