@@ -10,7 +10,9 @@ Agents are ``robot_0 .. robot_{N-1}``.
 
 * **Observation** of a robot: its own input as the model declares it (:class:`ModelSpec`), and
   nothing else: ``{"occupancy": (1, S, S) float32 of 0/1, "aux": (delta_phi, d*) float32}`` or,
-  for a scan model, ``{"scan": (beams,) float32, "aux": ...}``.
+  for a scan model, ``{"scan": (beams,) float32, "aux": ...}``; for a model that declares the
+  scan's ranges beside its image (``formation.ranges``), also ``"ranges": (K,) float32``, the
+  agent's own pooling of the scan into K sectors.
 * **Action**: its ``(left, right)`` wheel speeds in m/s, within ``±max_wheel_speed`` (the world
   saturates them as a real robot would). A NaN, another shape, a missing robot or a step after
   the end raises.
@@ -152,7 +154,11 @@ class FormationParallelEnv(ParallelEnv):
             return spaces.Dict({"scan": own, "aux": aux})
         size = self.spec.size_px
         image = spaces.Box(0.0, 1.0, (1, size, size), np.float32)
-        return spaces.Dict({"occupancy": image, "aux": aux})
+        if self.spec.ranges is None:
+            return spaces.Dict({"occupancy": image, "aux": aux})
+        sectors, clip = _range_input(self.spec.ranges)
+        ranges = spaces.Box(0.0, np.float32(clip), (sectors,), np.float32)
+        return spaces.Dict({"occupancy": image, "aux": aux, "ranges": ranges})
 
     def observation_space(self, agent: str) -> spaces.Space:
         return self._observation_spaces[agent]
@@ -197,7 +203,12 @@ class FormationParallelEnv(ParallelEnv):
             s = self.spec
             own = self._batch.occupancy(s.size_px, s.resolution_m, s.beyond, s.d_star_ref_m)[0]
             key = "occupancy"
-        return {a: {key: own[self._index[a]], "aux": aux[self._index[a]]} for a in agents}
+        observations = {a: {key: own[self._index[a]], "aux": aux[self._index[a]]} for a in agents}
+        if self.spec.input != "scan" and self.spec.ranges is not None:
+            ranges = self._batch.ranges(self.spec.ranges)[0]
+            for agent, observation in observations.items():
+                observation["ranges"] = ranges[self._index[agent]]
+        return observations
 
     def _wheel_array(self, actions: Mapping[str, Any]) -> np.ndarray:
         if not isinstance(actions, Mapping):
@@ -329,3 +340,13 @@ class SingleRobotEnv(gymnasium.Env):
         actions[self.agent] = action
         observations, rewards, terms, truncs, infos = self.parallel.step(actions)
         return observations[self.agent], rewards[self.agent], terms[self.agent], truncs[self.agent], infos[self.agent]
+
+
+def _range_input(text: str) -> tuple:
+    """``(K, C)`` of a ``formation.ranges`` declaration ``"sectors=K,clip=C"`` (the native batch
+    checks it fully when it pools)."""
+    fields = dict(part.split("=", 1) for part in text.replace(" ", "").split(",") if "=" in part)
+    try:
+        return int(fields["sectors"]), float(fields["clip"])
+    except (KeyError, ValueError) as e:
+        raise ValueError(f"range input {text!r} (formation.ranges) is not 'sectors=K,clip=C'") from e

@@ -24,7 +24,8 @@ class ModelSpec:
     metres, hits beyond the window dropped or drawn on the border, the window scaled with d* when
     ``d_star_ref_m`` is set) or ``"scan"`` (the raw ranges); both come with the scalars ``aux``
     declares (``formation.aux``: names in order, ``"delta_phi,d_star"`` where the model declares
-    none), which the environment makes with the agent's own code. ``output`` is what the model answers (``formation.output``): ``"wheels"``, wheel
+    none), which the environment makes with the agent's own code, and, where ``ranges`` is set
+    (``formation.ranges``, ``"sectors=K,clip=C"``), the scan's ranges pooled into K sectors. ``output`` is what the model answers (``formation.output``): ``"wheels"``, wheel
     speeds at ``v_train`` m/s scaled by ``v* / v_train``, or ``"formation_velocity"``, the
     correction in the robot's frame to which the reference term ``v* (cos Δφ, sin Δφ)`` is added,
     exactly as the agent does.
@@ -40,6 +41,7 @@ class ModelSpec:
     input: str = "occupancy"
     output: str = "wheels"
     aux: str = "delta_phi,d_star"
+    ranges: Optional[str] = None
 
     def __post_init__(self) -> None:
         if self.output not in ("wheels", "formation_velocity"):
@@ -86,6 +88,7 @@ class ModelSpec:
             input="scan" if raw_input == "scan-ranges" else raw_input,
             output=meta.get("formation.output", "wheels"),
             aux=meta.get("formation.aux", "delta_phi,d_star"),
+            ranges=meta.get("formation.ranges"),
         )
 
     @staticmethod

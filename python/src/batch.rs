@@ -8,9 +8,10 @@
 //! `(B, N, 2)` array.
 
 use formation_expert::{ExpertController, ExpertGains};
+use formation_perception::ranges::pool;
 use formation_perception::{occupancy, policy_input};
 use formation_proto::control::Controller;
-use formation_proto::{AuxLayout, BeyondWindow, OccupancySpec, PolicyIo, WheelCmd};
+use formation_proto::{AuxLayout, BeyondWindow, OccupancySpec, PolicyIo, RangeInput, WheelCmd};
 use formation_world::metrics::{MetricsConfig, run_metrics};
 use formation_world::neighbours::NeighbourTracker;
 use formation_world::{Episode, Scenario, StepError};
@@ -431,6 +432,44 @@ impl Batch {
                 cell.copy_from_slice(&layout.values(pose.theta, &goal));
             }
             Ok(())
+        })?;
+        out.into_pyarray(py)
+            .reshape(vec![self.slots.len(), n, width])
+    }
+
+    /// Every robot's scan ranges pooled into sectors, the `ranges` input of a model that
+    /// declares one (`ranges`, its `formation.ranges`, e.g. `"sectors=100,clip=3"`), made by the
+    /// agent's own `formation_perception::ranges::pool`: `(B, N, K)` float32.
+    fn ranges<'py>(
+        &mut self,
+        py: Python<'py>,
+        ranges: &str,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let spec = RangeInput::parse(ranges).map_err(|e| {
+            PyValueError::new_err(format!(
+                "range input {ranges:?} (the model's formation.ranges): {e}"
+            ))
+        })?;
+        let lidar = self.scenario.world_config().lidar;
+        spec.check_beams(lidar.beams).map_err(|e| {
+            PyValueError::new_err(format!(
+                "range input {ranges:?} for this scenario's LIDAR: {e}"
+            ))
+        })?;
+        let (n, width) = (self.robots(), spec.sectors);
+        let mut out = vec![0.0_f32; self.slots.len() * n * width];
+        py.detach(|| {
+            self.fill(&mut out, n * width, |b, slot, chunk| {
+                let observation = slot.episode.observe();
+                let d_star = observation.goal.d_star;
+                if !(d_star.is_finite() && d_star > 0.0) {
+                    return Err(format!("world {b}: d* {d_star} cannot scale the ranges"));
+                }
+                for (scan, cell) in observation.scans.iter().zip(chunk.chunks_exact_mut(width)) {
+                    pool(scan, &lidar, &spec, d_star, cell);
+                }
+                Ok(())
+            })
         })?;
         out.into_pyarray(py)
             .reshape(vec![self.slots.len(), n, width])

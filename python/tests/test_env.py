@@ -113,6 +113,56 @@ def test_a_formation_velocity_policy_episode_equals_formation_eval_bit_for_bit(t
     assert got == expected
 
 
+def test_a_ranges_policy_episode_equals_formation_eval_bit_for_bit(tmp_path):
+    # A model that takes the scan's ranges beside its image (formation.ranges, issue 34 item 6):
+    # the environment feeds what the Rust agent feeds, so the episode is formation eval's.
+    import subprocess
+    import sys
+
+    model = tmp_path / "ranges.onnx"
+    subprocess.run(
+        [sys.executable, str(REPO / "tests" / "fixtures" / "tiny_policy.py"), str(model), "--seed", "5",
+         "--output", "formation_velocity", "--ranges-sectors", "100"],
+        check=True,
+    )
+    assert ModelSpec.from_onnx(model).ranges == "sectors=100,clip=3"
+    scenario = team_scenario(tmp_path, 5, 3.0)
+    seed, run = 2, 0
+    expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", seed, run, "policy", model))
+    env = parallel_env(scenario=str(scenario), model=model)
+    assert env.observation_space("robot_0")["ranges"].shape == (100,)
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    options.inter_op_num_threads = 1
+    session = ort.InferenceSession(str(model), options, providers=["CPUExecutionProvider"])
+    observations, _ = env.reset(seed=seed, run=run)
+    # The ranges are the documented pooling of the robot's own scan (checked here in numpy).
+    scans = env.batch.scans()[0]
+    d_star = env.batch.goals()[0][1]
+    beams = scans.shape[1]
+    sector = np.floor(np.arange(beams) * 100 / beams + 0.5).astype(int) % 100
+    for i, agent in enumerate(env.possible_agents):
+        scan = scans[i].astype(np.float64)
+        hit = (scan >= 0) & (scan < env.scenario.max_range)
+        want = np.full(100, 3.0)
+        for s in range(100):
+            mine = scan[(sector == s) & hit]
+            if mine.size:
+                want[s] = min(3.0, mine.mean() / d_star)
+        assert np.allclose(observations[agent]["ranges"], want, rtol=1e-6), agent
+    while env.agents:
+        outputs = {}
+        for agent, obs in observations.items():
+            feed = {"occupancy": obs["occupancy"][None], "aux": obs["aux"][None], "ranges": obs["ranges"][None]}
+            outputs[agent] = session.run(["formation_velocity"], feed)[0][0]
+        observations, _, _, _, _ = env.step(env.policy_actions(outputs))
+    got = [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+    assert len(got) == len(expected) == 61
+    assert got == expected
+
+
 def test_a_spec_with_an_output_the_package_does_not_know_is_refused_by_name():
     with pytest.raises(ValueError, match="output 'torques' is not 'wheels' or 'formation_velocity'"):
         ModelSpec.from_metadata({"formation.format": "formation-policy/1", "formation.occupancy.size_px": "50",

@@ -1,0 +1,101 @@
+//! A model that takes the scan's ranges beside its image (`formation.ranges`, issue 34 item 6)
+//! drives as every other model does: across processes in lockstep bit for bit as in-process,
+//! recorded and replayed bit for bit, and a replay with a model that does not take them diverges.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use formation_onnx::OnnxPolicy;
+use formation_robot_agent::decision::PolicyController;
+use formation_tests::{
+    Finished, ProcessTest, assert_bit_identical, binaries, eval_recorded, lockstep_over_processes,
+    read_json, run, write_tiny_model_with,
+};
+use formation_world::{Scenario, run_episode};
+
+/// The watchdog limit: generous, it only stops a hung test.
+const LIMIT: Duration = Duration::from_secs(240);
+
+/// A tiny model (seeded random weights) that takes the scan's ranges in 100 sectors and answers
+/// a formation velocity.
+fn ranges_model(dir: &Path) -> PathBuf {
+    let path = dir.join("ranges.onnx");
+    write_tiny_model_with(
+        &path,
+        5,
+        &["--output", "formation_velocity", "--ranges-sectors", "100"],
+    );
+    path
+}
+
+#[test]
+fn a_ranges_team_in_lockstep_over_processes_is_bit_identical_to_in_process() {
+    let t = ProcessTest::start("ranges_lockstep", LIMIT);
+    let model = ranges_model(t.path());
+    let declared = OnnxPolicy::load(&model)
+        .expect("the model loads")
+        .metadata()
+        .ranges
+        .expect("it declares its ranges");
+    assert_eq!(declared.sectors, 100);
+    let scenario = Scenario::from_path(&t.case1(4.0)).expect("scenario");
+    let over_processes = lockstep_over_processes(&scenario, 1, &model);
+    let spec = scenario.run_spec(scenario.seed(), 0);
+    let models = [model.as_path(); 3];
+    let mut controller =
+        PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
+    let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
+    assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
+    assert_bit_identical(&over_processes[0], &in_process);
+}
+
+/// `formation replay FILE ARGS --json JSON`.
+fn replay(file: &Path, args: &[&str], json: &Path) -> Finished {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .arg("replay")
+        .arg(file)
+        .args(args)
+        .arg("--json")
+        .arg(json);
+    run(command, LIMIT)
+}
+
+#[test]
+fn a_ranges_run_replays_bit_identical_and_a_model_without_ranges_diverges() {
+    let t = ProcessTest::start("ranges_replay", LIMIT);
+    let model = ranges_model(t.path());
+    let scenario = t.case1(5.0);
+    let record = t.path().join("rec");
+    std::fs::create_dir(&record).expect("record folder");
+    eval_recorded(
+        &[
+            "--scenario",
+            scenario.to_str().expect("utf-8"),
+            "--model",
+            model.to_str().expect("utf-8"),
+        ],
+        &record,
+        &t.path().join("out"),
+    )
+    .assert_success();
+    let file = record.join("run-0000.mcap");
+
+    let json = t.path().join("same.json");
+    replay(&file, &[], &json).assert_success();
+    let report = read_json(&json);
+    assert_eq!(report["diverged"], false, "{report}");
+    for row in report["robots"].as_array().expect("robots") {
+        assert!(row["compared"].as_u64().expect("compared") >= 90, "{row}");
+        assert_eq!(row["differing"], 0, "{row}");
+    }
+
+    // The same network without its range branch answers otherwise: the ranges reached it.
+    let plain = t.path().join("plain.onnx");
+    write_tiny_model_with(&plain, 5, &["--output", "formation_velocity"]);
+    let json = t.path().join("plain.json");
+    let other = replay(&file, &["--model", plain.to_str().expect("utf-8")], &json);
+    assert_eq!(other.output.status.code(), Some(1), "{}", other.describe());
+    assert_eq!(read_json(&json)["diverged"], true);
+}
