@@ -13,7 +13,9 @@
 //! policy runs in Python) call these same functions, so a policy driven from Python sees, and
 //! moves its robot by, exactly the numbers the agent's would.
 
-use formation_proto::{AuxInput, Goal, PolicyIo, PolicyOutput, WheelCmd};
+#[cfg(doc)]
+use formation_proto::PolicyIo;
+use formation_proto::{AuxInput, Goal, PolicyOutput, WheelCmd};
 
 /// Why a goal or a heading cannot be turned into a policy's input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -137,19 +139,21 @@ pub fn formation_velocity_to_wheels(
     }
 }
 
-/// The wheel command of a policy's two output values `values`, as `io` says they are meant, for
-/// a robot with this heading under this goal, whose wheels accelerate at most
+/// The wheel command of a policy's two output values `values`, as its declared `output` says
+/// they are meant (a `wheels` output at its training speed `v_train`, [`PolicyIo`]'s two
+/// fields), for a robot with this heading under this goal, whose wheels accelerate at most
 /// `max_wheel_accel` \[m/s²\] (which shapes a formation velocity; a wheels output was trained for
 /// one limit and is taken as it is).
 pub fn command_of_output(
-    io: &PolicyIo,
+    output: PolicyOutput,
+    v_train: f64,
     values: [f32; 2],
     heading: f64,
     goal: &Goal,
     max_wheel_accel: Option<f64>,
 ) -> WheelCmd {
-    match io.output {
-        PolicyOutput::Wheels => scale_to_goal_speed(values, goal.v_star, io.v_train),
+    match output {
+        PolicyOutput::Wheels => scale_to_goal_speed(values, goal.v_star, v_train),
         // The heading error as the network is fed it, narrowed to f32.
         PolicyOutput::FormationVelocity => formation_velocity_to_wheels(
             values,
@@ -221,16 +225,6 @@ mod tests {
         assert!((c * omega - (f64::from(f[1]) + 0.7 * 0.3f64.sin())).abs() < 1e-9);
     }
 
-    fn io(output: PolicyOutput) -> PolicyIo {
-        PolicyIo {
-            image: formation_proto::OccupancySpec::PAPER,
-            aux: formation_proto::AuxLayout::PAPER,
-            ranges: None,
-            output,
-            v_train: 0.7,
-        }
-    }
-
     #[test]
     fn the_declared_output_picks_the_conversion() {
         let goal = Goal {
@@ -240,7 +234,8 @@ mod tests {
         };
         assert_eq!(
             command_of_output(
-                &io(PolicyOutput::Wheels),
+                PolicyOutput::Wheels,
+                0.7,
                 [0.7, 0.35],
                 0.3,
                 &goal,
@@ -250,7 +245,8 @@ mod tests {
         );
         assert_eq!(
             command_of_output(
-                &io(PolicyOutput::FormationVelocity),
+                PolicyOutput::FormationVelocity,
+                0.7,
                 [0.1, 0.0],
                 0.3,
                 &goal,
@@ -282,7 +278,8 @@ mod tests {
             v_star: 0.5,
         };
         let limited = command_of_output(
-            &io(PolicyOutput::FormationVelocity),
+            PolicyOutput::FormationVelocity,
+            0.7,
             [0.3, -0.4],
             0.0,
             &goal,

@@ -11,7 +11,7 @@ use formation_expert::{ExpertController, ExpertGains};
 use formation_perception::ranges::pool;
 use formation_perception::{occupancy, policy_input};
 use formation_proto::control::Controller;
-use formation_proto::{AuxLayout, BeyondWindow, OccupancySpec, PolicyIo, RangeInput, WheelCmd};
+use formation_proto::{AuxLayout, BeyondWindow, OccupancySpec, RangeInput, WheelCmd};
 use formation_world::metrics::{MetricsConfig, run_metrics};
 use formation_world::neighbours::NeighbourTracker;
 use formation_world::{Episode, Scenario, StepError};
@@ -508,14 +508,6 @@ impl Batch {
         let raw = outputs
             .as_slice()
             .map_err(|_| PyValueError::new_err("policy outputs must be C-contiguous float32"))?;
-        // Only the output and v_train matter for turning outputs into wheels.
-        let io = PolicyIo {
-            image: OccupancySpec::PAPER,
-            aux: AuxLayout::PAPER,
-            ranges: None,
-            output,
-            v_train,
-        };
         let mut out = Vec::with_capacity(raw.len());
         for (b, slot) in self.slots.iter().enumerate() {
             let world = slot.episode.world();
@@ -528,7 +520,8 @@ impl Batch {
                 .zip(world.poses())
             {
                 let cmd = policy_input::command_of_output(
-                    &io,
+                    output,
+                    v_train,
                     [w[0], w[1]],
                     pose.theta,
                     &goal,

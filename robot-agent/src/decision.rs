@@ -337,7 +337,8 @@ impl Agent {
             });
         }
         Ok(policy_input::command_of_output(
-            &self.io,
+            self.io.output,
+            self.io.v_train,
             [left, right],
             heading,
             goal,
