@@ -8,7 +8,8 @@
 //! It measures `onnx/models/policy.onnx` (the default, its whole graph), `onnx/models/paper/
 //! policy.onnx` (the paper's network) and the random-weight fixture of the paper's network, then
 //! any further models named in `FORMATION_LATENCY_MODELS` (paths separated by `:`), each on the
-//! same sparse images, through `OnnxPolicy` with one intra-op thread, as an agent runs it.
+//! same sparse images (and, for a model that takes the scan's ranges, the same ranges), through
+//! `OnnxPolicy` with one intra-op thread, as an agent runs it.
 
 mod common;
 
@@ -49,10 +50,21 @@ fn measure(label: &str, path: &Path) {
     let mut policy = OnnxPolicy::load(path).expect("the model loads");
     let load_ms = started.elapsed().as_secs_f64() * 1e3;
     let cases = inputs(policy.metadata().occupancy.size_px);
+    // A model that takes the scan's ranges gets them too: d* (1.5 m, in units of d*) where no
+    // beam returns, a neighbour in a few sectors.
+    let ranges: Vec<f32> = policy.metadata().ranges.map_or_else(Vec::new, |r| {
+        (0..r.sectors)
+            .map(|s| if s % 17 < 3 { 1.0 } else { r.clip })
+            .collect()
+    });
     for i in 0..WARMUP {
         let (image, aux) = &cases[i % cases.len()];
         policy
-            .infer(&PolicyInput::image_and_aux(image, aux))
+            .infer(&PolicyInput {
+                image,
+                aux,
+                ranges: &ranges,
+            })
             .expect("infer");
     }
     let mut micros: Vec<f64> = Vec::with_capacity(CALLS);
@@ -60,7 +72,11 @@ fn measure(label: &str, path: &Path) {
         let (image, aux) = &cases[i % cases.len()];
         let t = Instant::now();
         let out = policy
-            .infer(&PolicyInput::image_and_aux(image, aux))
+            .infer(&PolicyInput {
+                image,
+                aux,
+                ranges: &ranges,
+            })
             .expect("infer");
         micros.push(t.elapsed().as_secs_f64() * 1e6);
         std::hint::black_box(out);
