@@ -161,21 +161,14 @@ pub fn eval_output(
     seed: Option<u64>,
     per_run: Vec<RunMetrics>,
 ) -> EvalOutput {
-    EvalOutput {
-        controller: controller.to_owned(),
+    EvalOutput::of_runs(
+        controller,
         models,
-        scenario: scenario.to_owned(),
+        scenario,
         seed,
-        summary: summarize(&per_run),
+        summarize(&per_run),
         per_run,
-        braked_ticks: Vec::new(),
-        incomplete_runs: Vec::new(),
-        team_size: Vec::new(),
-        goal_speed: Vec::new(),
-        model_inputs: Vec::new(),
-        run_logs: Vec::new(),
-        complete: true,
-    }
+    )
 }
 
 #[cfg(test)]

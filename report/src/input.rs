@@ -654,12 +654,12 @@ mod tests {
     }
 
     fn summary() -> EvalOutput {
-        EvalOutput {
-            controller: "policy".into(),
-            models: vec!["m-1234".into()],
-            scenario: "table1".into(),
-            seed: Some(7),
-            summary: Summary {
+        EvalOutput::of_runs(
+            "policy",
+            vec!["m-1234".into()],
+            "table1",
+            Some(7),
+            Summary {
                 runs: 2,
                 runs_incomplete: 0,
                 success_rate_5: 0.5,
@@ -682,15 +682,8 @@ mod tests {
                 anchor_success_rate: None,
                 connected_rate: None,
             },
-            per_run: vec![metrics(true, 9.0, 0.02), metrics(false, 10.0, f64::NAN)],
-            braked_ticks: Vec::new(),
-            incomplete_runs: Vec::new(),
-            team_size: Vec::new(),
-            goal_speed: Vec::new(),
-            model_inputs: Vec::new(),
-            run_logs: Vec::new(),
-            complete: true,
-        }
+            vec![metrics(true, 9.0, 0.02), metrics(false, 10.0, f64::NAN)],
+        )
     }
 
     fn text<F: formation_schema::SchemaFile>(value: &F) -> String {

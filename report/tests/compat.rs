@@ -95,21 +95,14 @@ fn write_eval_dir(dir: &Path, scenario: &str, runs: &[(Trajectory, bool)]) -> Ve
 
 /// The summary `formation eval` writes over these runs.
 fn eval_output(scenario: &str, per_run: &[RunMetrics]) -> EvalOutput {
-    EvalOutput {
-        controller: "expert".into(),
-        models: Vec::new(),
-        scenario: scenario.into(),
-        seed: Some(7),
-        summary: summarize(per_run),
-        per_run: per_run.to_vec(),
-        braked_ticks: Vec::new(),
-        incomplete_runs: Vec::new(),
-        team_size: Vec::new(),
-        goal_speed: Vec::new(),
-        model_inputs: Vec::new(),
-        run_logs: Vec::new(),
-        complete: true,
-    }
+    EvalOutput::of_runs(
+        "expert",
+        Vec::new(),
+        scenario,
+        Some(7),
+        summarize(per_run),
+        per_run.to_vec(),
+    )
 }
 
 fn write_summary(dir: &Path, summary: &EvalOutput) {

@@ -148,6 +148,36 @@ pub struct EvalOutput {
     pub complete: bool,
 }
 
+impl EvalOutput {
+    /// A whole output over `per_run` with nothing beside the runs: no braked ticks, no
+    /// incomplete runs, no model notes and no run logs. The writers that know more fill the
+    /// optional fields in afterwards.
+    pub fn of_runs(
+        controller: impl Into<String>,
+        models: Vec<String>,
+        scenario: impl Into<String>,
+        seed: Option<u64>,
+        summary: Summary,
+        per_run: Vec<RunMetrics>,
+    ) -> Self {
+        Self {
+            controller: controller.into(),
+            models,
+            scenario: scenario.into(),
+            seed,
+            summary,
+            per_run,
+            braked_ticks: Vec::new(),
+            incomplete_runs: Vec::new(),
+            team_size: Vec::new(),
+            goal_speed: Vec::new(),
+            model_inputs: Vec::new(),
+            run_logs: Vec::new(),
+            complete: true,
+        }
+    }
+}
+
 fn whole() -> bool {
     true
 }

@@ -121,21 +121,14 @@ pub fn run_metrics(k: u64, success_10: bool) -> RunMetrics {
 
 /// The summary.json of `per_run`, as `formation eval` writes it.
 pub fn summary(scenario: &str, per_run: &[RunMetrics]) -> EvalOutput {
-    EvalOutput {
-        controller: "policy".into(),
-        models: vec!["policy-abc123".into()],
-        scenario: scenario.into(),
-        seed: Some(42),
-        summary: summarize(per_run),
-        per_run: per_run.to_vec(),
-        braked_ticks: Vec::new(),
-        incomplete_runs: Vec::new(),
-        team_size: Vec::new(),
-        goal_speed: Vec::new(),
-        model_inputs: Vec::new(),
-        run_logs: Vec::new(),
-        complete: true,
-    }
+    EvalOutput::of_runs(
+        "policy",
+        vec!["policy-abc123".into()],
+        scenario,
+        Some(42),
+        summarize(per_run),
+        per_run.to_vec(),
+    )
 }
 
 /// The run log of a complete in-process run.
