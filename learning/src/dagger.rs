@@ -16,7 +16,7 @@ use formation_expert::collect::Labeller;
 use formation_expert::{ExpertController, ExpertGains};
 use formation_proto::{OccupancySpec, RangeInput};
 use formation_schema::EvalOutput;
-use formation_trainer_bridge::dataset::{DatasetWriter, Sample};
+use formation_trainer_bridge::dataset::{DatasetHeader, DatasetWriter, Sample};
 use formation_trainer_bridge::train::{TrainOptions, TrainReport, train};
 use formation_world::metrics::{MetricsConfig, RunMetrics};
 use formation_world::{Controller, Scenario, run_episode};
@@ -246,6 +246,7 @@ pub(crate) fn rollout_and_label(
         source,
     };
     let mut writer = DatasetWriter::append(&opts.data, k as u32).map_err(dataset)?;
+    check_rollouts_match(&opts.data, writer.header(), scenarios)?;
     let rollouts = IterationRollouts {
         scenarios,
         iteration: k,
@@ -268,6 +269,51 @@ pub(crate) fn rollout_and_label(
     }
     writer.finish().map_err(dataset)?;
     Ok(added)
+}
+
+/// Refuses rollouts whose samples would not be the dataset's: each team scenario's LIDAR must
+/// have the dataset's beams and range, and its v* be one fixed speed, the dataset's `v_train` (the speed the labels are
+/// recorded at, and that a formation-velocity target subtracts the reference term at).
+pub(crate) fn check_rollouts_match(
+    path: &Path,
+    header: &DatasetHeader,
+    scenarios: &[Scenario],
+) -> Result<(), LearningError> {
+    let mismatch = |what, dataset: String, rollout: String, fix| LearningError::RolloutMismatch {
+        path: path.to_path_buf(),
+        what,
+        dataset,
+        rollout,
+        fix,
+    };
+    for scenario in scenarios {
+        // The sensor's contract; its range noise may differ (rollouts noisier than the
+        // demonstrations are a choice).
+        let lidar = scenario.world_config().lidar;
+        if (lidar.beams, lidar.max_range) != (header.lidar.beams, header.lidar.max_range) {
+            return Err(mismatch(
+                "LIDAR",
+                format!(
+                    "{} beams of {} m",
+                    header.lidar.beams, header.lidar.max_range
+                ),
+                format!("{} beams of {} m", lidar.beams, lidar.max_range),
+                "roll out the scenario the dataset was collected with, or collect a new dataset",
+            ));
+        }
+        match scenario.v_star().fixed() {
+            Some(v_star) if v_star == header.v_train => {}
+            _ => {
+                return Err(mismatch(
+                    "v*",
+                    format!("v_train {} m/s", header.v_train),
+                    format!("{:?}", scenario.v_star()),
+                    "give the rollout scenario goal.v_star equal to the dataset's v_train",
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The rollout scenario resized to each team size (the scenario's own size when none is given),
@@ -502,6 +548,42 @@ pub(crate) mod tests {
             eval_runs: 1,
             seed: 9,
         }
+    }
+
+    #[test]
+    fn rollouts_that_would_mix_their_samples_into_the_dataset_are_refused() {
+        let base = scenario(3);
+        let spec = base.run_spec(base.seed(), 0);
+        let header = DatasetHeader::new(
+            OccupancySpec::PAPER,
+            spec.world.lidar,
+            spec.v_star,
+            base.seed(),
+            base.name(),
+        );
+        let path = Path::new("D");
+        check_rollouts_match(path, &header, std::slice::from_ref(&base)).expect("the same");
+        let with = |goal: &str, lidar: &str| {
+            let text = format!(
+                "name = \"x\"\nrobots = 3\nduration_s = 1.0\nseed = 5\n[goal]\n{goal}\n\
+                 d_star = 1.0\n[heading]\nschedule = \"random\"\n{lidar}"
+            );
+            Scenario::from_toml_str(&text, "x").unwrap()
+        };
+        for (other, what) in [
+            (with("v_star = 0.5", ""), "v*"),
+            (with("v_star_range = [0.5, 0.7]", ""), "v*"),
+            (with("v_star = 0.7", "[lidar]\nbeams = 360"), "LIDAR"),
+        ] {
+            let err = check_rollouts_match(path, &header, &[base.clone(), other]).unwrap_err();
+            assert!(
+                matches!(err, LearningError::RolloutMismatch { what: w, .. } if w == what),
+                "{err}"
+            );
+        }
+        // Another range noise is a choice, not a mix-up.
+        let noisy = with("v_star = 0.7", "[lidar]\nnoise_std = 0.05");
+        check_rollouts_match(path, &header, &[noisy]).expect("noise may differ");
     }
 
     #[test]

@@ -75,6 +75,7 @@ pub fn label_share(
     };
     let expert_share = opts.beta.powi(opts.iteration as i32);
     let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes, &opts.rollout_durations)?;
+    crate::dagger::check_rollouts_match(&opts.data, &dataset, &scenarios)?;
     let header = PartHeader {
         dataset,
         iteration,

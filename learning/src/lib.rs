@@ -114,6 +114,25 @@ pub enum LearningError {
         #[source]
         source: formation_world::runlog::RunLogError,
     },
+    /// The rollouts would record other samples than the dataset holds: another LIDAR, or a v*
+    /// other than the speed its labels were recorded at.
+    #[error(
+        "the DAgger rollouts' {what} is {rollout} but dataset {}'s is {dataset}: its samples would \
+         mix; {fix}",
+        path.display()
+    )]
+    RolloutMismatch {
+        /// The dataset.
+        path: PathBuf,
+        /// What differs (`LIDAR`, `v*`).
+        what: &'static str,
+        /// The dataset's value.
+        dataset: String,
+        /// The rollouts' value.
+        rollout: String,
+        /// How to make them agree.
+        fix: &'static str,
+    },
     /// A setting is out of range.
     #[error("{setting} {problem}")]
     Setting {
