@@ -489,21 +489,9 @@ mod tests {
         let gains = ExpertGains::default();
         let mut labeller = Labeller::new(gains, robot, lidar, OccupancySpec::PAPER).expect("valid");
         let poses = [
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 3.0,
-            },
-            Pose {
-                x: 2.0,
-                y: 0.5,
-                theta: -3.0,
-            },
-            Pose {
-                x: 0.5,
-                y: 3.0,
-                theta: 0.2,
-            },
+            Pose::new(0.0, 0.0, 3.0),
+            Pose::new(2.0, 0.5, -3.0),
+            Pose::new(0.5, 3.0, 0.2),
         ];
         let scans = vec![
             scan_with_hit(&lidar, 0, 1.0),
@@ -591,18 +579,7 @@ mod tests {
             OccupancySpec::PAPER,
         )
         .expect("valid");
-        let poses = [
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 1.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-        ];
+        let poses = [Pose::new(0.0, 0.0, 0.0), Pose::new(1.0, 0.0, 0.0)];
         let short = vec![vec![10.0_f32; 900], vec![10.0_f32; 10]];
         let goal = Goal {
             phi_star: 0.0,

@@ -663,11 +663,7 @@ mod tests {
                 -radius * (theta.cos() - pose.theta.cos()),
             )
         };
-        Pose {
-            x: pose.x + dx,
-            y: pose.y + dy,
-            theta: wrap_angle(theta),
-        }
+        Pose::new(pose.x + dx, pose.y + dy, wrap_angle(theta))
     }
 
     fn step(
@@ -697,11 +693,11 @@ mod tests {
         let poses: Vec<Pose> = (0..5)
             .map(|k| {
                 let k = k as f64;
-                Pose {
-                    x: 1.3 * k - 0.4 * k * k,
-                    y: 0.7 + 0.9 * (1.7 * k).sin(),
-                    theta: 0.3 + 1.1 * k,
-                }
+                Pose::new(
+                    1.3 * k - 0.4 * k * k,
+                    0.7 + 0.9 * (1.7 * k).sin(),
+                    0.3 + 1.1 * k,
+                )
             })
             .collect();
         let mirrored: Vec<Pose> = poses
@@ -762,34 +758,11 @@ mod tests {
         let gains = ExpertGains::default();
         let cases = [
             vec![
-                Pose {
-                    x: 0.0,
-                    y: 0.0,
-                    theta: 0.0,
-                },
-                Pose {
-                    x: 500.0,
-                    y: 10.0,
-                    theta: 3.0,
-                },
-                Pose {
-                    x: -80.0,
-                    y: 900.0,
-                    theta: -1.0,
-                },
+                Pose::new(0.0, 0.0, 0.0),
+                Pose::new(500.0, 10.0, 3.0),
+                Pose::new(-80.0, 900.0, -1.0),
             ],
-            vec![
-                Pose {
-                    x: 0.0,
-                    y: 0.0,
-                    theta: 1.0,
-                },
-                Pose {
-                    x: 0.01,
-                    y: 0.0,
-                    theta: 1.0,
-                },
-            ],
+            vec![Pose::new(0.0, 0.0, 1.0), Pose::new(0.01, 0.0, 1.0)],
         ];
         for poses in cases {
             let mut cmds = vec![WheelCmd::BRAKE; poses.len()];
@@ -810,18 +783,7 @@ mod tests {
     fn saturation_keeps_the_ratio_of_the_wheels() {
         let robot = RobotParams::default();
         let gains = ExpertGains::default();
-        let poses = [
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.3,
-            },
-            Pose {
-                x: 40.0,
-                y: 25.0,
-                theta: 0.0,
-            },
-        ];
+        let poses = [Pose::new(0.0, 0.0, 0.3), Pose::new(40.0, 25.0, 0.0)];
         let u = {
             // What robot 0 asks for before saturation, recomputed from the published formulas.
             let c = gains.point_offset;
@@ -863,18 +825,7 @@ mod tests {
         let gains = ExpertGains::default();
         let g = goal(0.0, 2.0);
         // Side by side, 0.6 m apart, both heading along phi*.
-        let mut poses = vec![
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 0.0,
-                y: 0.6,
-                theta: 0.0,
-            },
-        ];
+        let mut poses = vec![Pose::new(0.0, 0.0, 0.0), Pose::new(0.0, 0.6, 0.0)];
         let start = distance(&poses[0], &poses[1]);
         let mut previous = start;
         for _ in 0..10 {
@@ -895,21 +846,9 @@ mod tests {
         let (gains, robot) = (ExpertGains::default(), RobotParams::default());
         let g = goal(2.5, 1.5);
         let mut poses = vec![
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 2.0,
-                y: 1.0,
-                theta: 3.0,
-            },
-            Pose {
-                x: -1.0,
-                y: 2.5,
-                theta: -1.5,
-            },
+            Pose::new(0.0, 0.0, 0.0),
+            Pose::new(2.0, 1.0, 3.0),
+            Pose::new(-1.0, 2.5, -1.5),
         ];
         for _ in 0..(30.0 / DT) as usize {
             step(&mut poses, &g, &gains, &robot);
@@ -1012,11 +951,7 @@ mod tests {
         };
         observe(&mut expert, &poses, &mut out);
         let near = out.clone();
-        poses.push(Pose {
-            x: 40.0,
-            y: 0.0,
-            theta: 0.0,
-        });
+        poses.push(Pose::new(40.0, 0.0, 0.0));
         observe(&mut expert, &poses, &mut out);
         assert_eq!(&out[..3], &near[..], "a robot out of range changes nothing");
         // The end robots' 2 nearest include each other (3 m apart), so all three hold every
@@ -1041,21 +976,9 @@ mod tests {
         let robot = RobotParams::default();
         let g = goal(0.3, 1.5);
         let poses = vec![
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.3,
-            },
-            Pose {
-                x: 1.2,
-                y: 0.4,
-                theta: -0.8,
-            },
-            Pose {
-                x: 0.3,
-                y: 1.6,
-                theta: 2.0,
-            },
+            Pose::new(0.0, 0.0, 0.3),
+            Pose::new(1.2, 0.4, -0.8),
+            Pose::new(0.3, 1.6, 2.0),
         ];
         let rule = NeighbourRule::Gabriel(GabrielRule::with_range(5.0));
         let mut tracker = NeighbourTracker::new(rule, 3);
@@ -1312,11 +1235,7 @@ mod tests {
         let poses: Vec<Pose> = (0..4)
             .map(|k| {
                 let k = k as f64;
-                Pose {
-                    x: 1.1 * k,
-                    y: 0.4 * k * k - 0.5,
-                    theta: 0.7 * k - 1.0,
-                }
+                Pose::new(1.1 * k, 0.4 * k * k - 0.5, 0.7 * k - 1.0)
             })
             .collect();
         let g = goal(0.4, 1.2);

@@ -13,6 +13,13 @@ pub struct Pose {
     pub theta: f64,
 }
 
+impl Pose {
+    /// The pose at (`x`, `y`) heading `theta` \[rad\], taken as given (not wrapped).
+    pub const fn new(x: f64, y: f64, theta: f64) -> Self {
+        Self { x, y, theta }
+    }
+}
+
 /// Left and right wheel rim speeds \[m/s\] of a differential-drive robot.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct WheelCmd {

@@ -128,21 +128,9 @@ mod tests {
     fn a_triangle_draws_three_edges_with_their_errors() {
         let mut edges = EdgeMarkers::new(NeighbourRule::AllPairs, 3);
         let poses = [
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 2.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 0.0,
-                y: 1.0,
-                theta: 0.0,
-            },
+            Pose::new(0.0, 0.0, 0.0),
+            Pose::new(2.0, 0.0, 0.0),
+            Pose::new(0.0, 1.0, 0.0),
         ];
         let array = edges.next(Time::default(), &poses, 2.0);
         assert_eq!(array.markers[0].action, marker_action::DELETEALL);

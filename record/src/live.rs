@@ -300,13 +300,7 @@ impl<'a> Reader<'a> {
     fn poses(&mut self, what: &str) -> Result<Vec<Pose>, LiveError> {
         let n = self.len(24, what)?;
         (0..n)
-            .map(|_| {
-                Ok(Pose {
-                    x: self.f64(what)?,
-                    y: self.f64(what)?,
-                    theta: self.f64(what)?,
-                })
-            })
+            .map(|_| Ok(Pose::new(self.f64(what)?, self.f64(what)?, self.f64(what)?)))
             .collect()
     }
 }
@@ -711,14 +705,7 @@ mod tests {
                 d_star: 1.5,
                 v_star: 0.2,
             },
-            poses: vec![
-                Pose {
-                    x: 1.0,
-                    y: -2.0,
-                    theta: 0.3,
-                };
-                2
-            ],
+            poses: vec![Pose::new(1.0, -2.0, 0.3); 2],
             wheel_speeds: vec![WheelCmd::default(); 2],
             scans: vec![vec![1.0, f32::INFINITY, 3.5], vec![2.0; 3]],
             commands: vec![

@@ -258,14 +258,7 @@ mod tests {
                 d_star: 1.0,
                 v_star: 0.2,
             },
-            poses: vec![
-                Pose {
-                    x: 0.0,
-                    y: 0.0,
-                    theta: 0.0,
-                };
-                2
-            ],
+            poses: vec![Pose::new(0.0, 0.0, 0.0); 2],
             wheel_speeds: vec![WheelCmd::default(); 2],
             scans: vec![vec![1.0; 4]; 2],
             commands: vec![crate::SentCommand::in_process(WheelCmd::default()); 2],

@@ -1204,21 +1204,9 @@ mod tests {
             .map(|&t| {
                 let s = 1.0 + 0.5 * (-t).exp();
                 vec![
-                    Pose {
-                        x: t,
-                        y: 0.0,
-                        theta: 0.1,
-                    },
-                    Pose {
-                        x: t + s,
-                        y: 0.0,
-                        theta: 0.0,
-                    },
-                    Pose {
-                        x: t + 0.5 * s,
-                        y: 0.8 * s,
-                        theta: -0.1,
-                    },
+                    Pose::new(t, 0.0, 0.1),
+                    Pose::new(t + s, 0.0, 0.0),
+                    Pose::new(t + 0.5 * s, 0.8 * s, -0.1),
                 ]
             })
             .collect();

@@ -30,16 +30,8 @@ fn trajectory(seconds: f64, d_star: f64, spread: f64) -> Trajectory {
                     y: 0.0,
                     theta: 0.0,
                 },
-                Pose {
-                    x: x + side,
-                    y: 0.0,
-                    theta: 0.0,
-                },
-                Pose {
-                    x: x + 0.5 * side,
-                    y: 0.866 * side,
-                    theta: 0.0,
-                },
+                Pose::new(x + side, 0.0, 0.0),
+                Pose::new(x + 0.5 * side, 0.866 * side, 0.0),
             ]
         })
         .collect();

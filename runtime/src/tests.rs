@@ -271,14 +271,7 @@ impl Sim {
     /// Plays tick `tick` and returns the commands the exchange chose.
     fn tick(&self, world: &mut AgentsController<'_>, tick: u64) -> Vec<WheelCmd> {
         let scans = vec![vec![5.0f32; BEAMS]; self.n_robots];
-        let poses = vec![
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0
-            };
-            self.n_robots
-        ];
+        let poses = vec![Pose::new(0.0, 0.0, 0.0); self.n_robots];
         let obs = Observation {
             tick,
             time: tick as f64 * DT.as_secs_f64(),
@@ -703,14 +696,7 @@ fn shutdown_stops_the_agents_and_a_closed_input_or_a_signal_stops_the_world() {
     sim.tick(&mut world, 0);
     sim.stop.store(true, Ordering::Relaxed);
     let scans = vec![vec![5.0f32; BEAMS]; 2];
-    let poses = vec![
-        Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 0.0
-        };
-        2
-    ];
+    let poses = vec![Pose::new(0.0, 0.0, 0.0); 2];
     let obs = Observation {
         tick: 1,
         time: 0.05,
@@ -747,17 +733,7 @@ fn shutdown_stops_the_agents_and_a_closed_input_or_a_signal_stops_the_world() {
 
 fn obs_for(n: usize) -> Observation<'static> {
     let scans: &'static [Vec<f32>] = Box::leak(vec![vec![5.0f32; BEAMS]; n].into_boxed_slice());
-    let poses: &'static [Pose] = Box::leak(
-        vec![
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0
-            };
-            n
-        ]
-        .into_boxed_slice(),
-    );
+    let poses: &'static [Pose] = Box::leak(vec![Pose::new(0.0, 0.0, 0.0); n].into_boxed_slice());
     Observation {
         tick: 0,
         time: 0.0,

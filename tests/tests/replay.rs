@@ -449,11 +449,7 @@ fn a_step_that_precedes_its_swap_record_waits_for_it() {
             d_star: 1.0,
             v_star: 0.2,
         },
-        poses: vec![Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 0.1,
-        }],
+        poses: vec![Pose::new(0.0, 0.0, 0.1)],
         wheel_speeds: vec![WheelCmd::default()],
         scans: vec![vec![2.0; 900]],
         commands: vec![SentCommand::in_process(WheelCmd::default())],

@@ -28,21 +28,9 @@ const GROWTH_SIZES: [usize; 6] = [3, 16, 64, 256, 1000, 4096];
 /// The paper's three robots, a couple of metres apart.
 fn three_robots() -> Vec<Pose> {
     vec![
-        Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 0.3,
-        },
-        Pose {
-            x: 1.5,
-            y: 0.4,
-            theta: 1.0,
-        },
-        Pose {
-            x: -0.6,
-            y: 1.3,
-            theta: -2.0,
-        },
+        Pose::new(0.0, 0.0, 0.3),
+        Pose::new(1.5, 0.4, 1.0),
+        Pose::new(-0.6, 1.3, -2.0),
     ]
 }
 

@@ -27,6 +27,8 @@ pub mod reality;
 pub mod robot;
 pub mod runlog;
 pub mod scenario;
+#[cfg(test)]
+mod test_layouts;
 pub mod world;
 
 pub use episode::{

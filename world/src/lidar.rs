@@ -576,18 +576,7 @@ mod tests {
 
     #[test]
     fn a_body_straight_ahead_is_hit_by_beam_zero_at_its_surface() {
-        let poses = [
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 3.0,
-                y: 0.0,
-                theta: 1.0,
-            },
-        ];
+        let poses = [Pose::new(0.0, 0.0, 0.0), Pose::new(3.0, 0.0, 1.0)];
         let ranges = scan(&poses, 0);
         assert!(
             (ranges[0] - 2.75).abs() < 1e-4,
@@ -610,18 +599,7 @@ mod tests {
     fn the_hit_beam_follows_the_sensor_heading() {
         // Body to the world's +y, sensor heading +x rotated by 30 deg: the body is at body bearing
         // 60 deg, which is beam 150.
-        let poses = [
-            Pose {
-                x: 1.0,
-                y: 1.0,
-                theta: PI / 6.0,
-            },
-            Pose {
-                x: 1.0,
-                y: 5.0,
-                theta: 0.0,
-            },
-        ];
+        let poses = [Pose::new(1.0, 1.0, PI / 6.0), Pose::new(1.0, 5.0, 0.0)];
         let ranges = scan(&poses, 0);
         assert!(
             (ranges[150] - 3.75).abs() < 1e-4,
@@ -642,36 +620,12 @@ mod tests {
     #[test]
     fn every_beam_matches_closed_form_ray_circle_ranges() {
         let poses = [
-            Pose {
-                x: 20.0,
-                y: -7.0,
-                theta: -2.0,
-            },
-            Pose {
-                x: 21.1,
-                y: -6.2,
-                theta: 0.0,
-            },
-            Pose {
-                x: 17.5,
-                y: -8.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 22.0,
-                y: -11.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 29.0,
-                y: -7.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 40.0,
-                y: -7.0,
-                theta: 0.0,
-            },
+            Pose::new(20.0, -7.0, -2.0),
+            Pose::new(21.1, -6.2, 0.0),
+            Pose::new(17.5, -8.0, 0.0),
+            Pose::new(22.0, -11.0, 0.0),
+            Pose::new(29.0, -7.0, 0.0),
+            Pose::new(40.0, -7.0, 0.0),
         ];
         let ranges = scan(&poses, 0);
         let sensor = poses[0];
@@ -698,21 +652,9 @@ mod tests {
     #[test]
     fn a_nearer_body_occludes_a_farther_one_on_the_same_bearing() {
         let poses = [
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 5.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 2.0,
-                y: 0.0,
-                theta: 0.0,
-            },
+            Pose::new(0.0, 0.0, 0.0),
+            Pose::new(5.0, 0.0, 0.0),
+            Pose::new(2.0, 0.0, 0.0),
         ];
         let ranges = scan(&poses, 0);
         assert!(
@@ -724,44 +666,15 @@ mod tests {
 
     #[test]
     fn a_lone_robot_reads_max_range_everywhere() {
-        let ranges = scan(
-            &[Pose {
-                x: 1.0,
-                y: 2.0,
-                theta: 0.3,
-            }],
-            0,
-        );
+        let ranges = scan(&[Pose::new(1.0, 2.0, 0.3)], 0);
         assert!(ranges.iter().all(|&r| r == 10.0));
     }
 
     #[test]
     fn bodies_beyond_max_range_are_not_seen() {
-        let poses = [
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 10.3,
-                y: 0.0,
-                theta: 0.0,
-            },
-        ];
+        let poses = [Pose::new(0.0, 0.0, 0.0), Pose::new(10.3, 0.0, 0.0)];
         assert!(scan(&poses, 0).iter().all(|&r| r == 10.0));
-        let near_limit = [
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 10.2,
-                y: 0.0,
-                theta: 0.0,
-            },
-        ];
+        let near_limit = [Pose::new(0.0, 0.0, 0.0), Pose::new(10.2, 0.0, 0.0)];
         let ranges = scan(&near_limit, 0);
         assert!(
             (ranges[0] - 9.95).abs() < 1e-4,
@@ -772,36 +685,14 @@ mod tests {
 
     #[test]
     fn a_sensor_inside_another_body_reads_zero() {
-        let poses = [
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 0.1,
-                y: 0.0,
-                theta: 0.0,
-            },
-        ];
+        let poses = [Pose::new(0.0, 0.0, 0.0), Pose::new(0.1, 0.0, 0.0)];
         assert!(scan(&poses, 0).iter().all(|&r| r == 0.0));
     }
 
     #[test]
     fn a_body_across_the_beam_zero_seam_hits_beams_on_both_sides() {
         // Slightly below the +x axis: bearing about -1 deg, so the window wraps past beam 0.
-        let poses = [
-            Pose {
-                x: 0.0,
-                y: 0.0,
-                theta: 0.0,
-            },
-            Pose {
-                x: 2.0,
-                y: -0.035,
-                theta: 0.0,
-            },
-        ];
+        let poses = [Pose::new(0.0, 0.0, 0.0), Pose::new(2.0, -0.035, 0.0)];
         let ranges = scan(&poses, 0);
         assert!(ranges[0] < 10.0 && ranges[3] < 10.0 && ranges[899] < 10.0 && ranges[890] < 10.0);
         assert!(ranges[100..800].iter().all(|&r| r == 10.0));
@@ -810,6 +701,7 @@ mod tests {
     /// Seeded random layouts for comparing [`TeamScanner`] with [`cast_scan`], beam by beam.
     mod team_scanner_matches_cast_scan {
         use super::*;
+        use crate::test_layouts::disc_layout;
         use rand::{Rng, SeedableRng};
         use rand_chacha::ChaCha8Rng;
 
@@ -848,30 +740,17 @@ mod tests {
             hits
         }
 
-        fn pose(x: f64, y: f64, theta: f64) -> Pose {
-            Pose { x, y, theta }
-        }
-
-        /// `n` robots uniform in a disc of `radius` around `(cx, cy)`, at least `min_spacing` apart
-        /// (0 allows overlaps), headings uniform.
-        fn disc_layout(
+        /// [`disc_layout`] with headings uniform in [-pi, pi).
+        fn centred_disc_layout(
             rng: &mut ChaCha8Rng,
             n: usize,
-            (cx, cy): (f64, f64),
+            centre: (f64, f64),
             radius: f64,
             min_spacing: f64,
         ) -> Vec<Pose> {
-            let mut poses: Vec<Pose> = Vec::with_capacity(n);
-            while poses.len() < n {
-                let r = radius * rng.random::<f64>().sqrt();
-                let (s, c) = (TAU * rng.random::<f64>()).sin_cos();
-                let (x, y) = (cx + r * c, cy + r * s);
-                if poses
-                    .iter()
-                    .all(|p| (p.x - x).hypot(p.y - y) >= min_spacing)
-                {
-                    poses.push(pose(x, y, TAU * rng.random::<f64>() - PI));
-                }
+            let mut poses = disc_layout(rng, n, centre, radius, min_spacing);
+            for pose in &mut poses {
+                pose.theta -= PI;
             }
             poses
         }
@@ -882,7 +761,7 @@ mod tests {
             let mut hits = 0;
             for n in [2, 3, 5, 8, 13, 30, 64, 100, 150, 300] {
                 let radius = 3.0 * (n as f64 / 3.0).sqrt();
-                let poses = disc_layout(&mut rng, n, (0.0, 0.0), radius, 0.6);
+                let poses = centred_disc_layout(&mut rng, n, (0.0, 0.0), radius, 0.6);
                 hits += assert_same_bits(&poses, &RobotParams::default(), &lidar());
             }
             assert!(hits > 10_000, "only {hits} hits");
@@ -900,7 +779,7 @@ mod tests {
                 (300, 4.0),
                 (250, 9.0),
             ] {
-                let poses = disc_layout(&mut rng, n, (3.0, -2.0), radius, 0.0);
+                let poses = centred_disc_layout(&mut rng, n, (3.0, -2.0), radius, 0.0);
                 assert_same_bits(&poses, &RobotParams::default(), &lidar());
                 let mut scans = vec![vec![0.0; 900]; n];
                 TeamScanner::new().scan_all(&poses, &RobotParams::default(), &lidar(), &mut scans);
@@ -923,7 +802,7 @@ mod tests {
             ] {
                 let lidar = lidar();
                 let reach = lidar.max_range + params.body_radius;
-                let mut poses = vec![pose(0.7, -0.3, 0.4)];
+                let mut poses = vec![Pose::new(0.7, -0.3, 0.4)];
                 for k in 0..24 {
                     let angle = TAU * k as f64 / 24.0 + 0.01 * rng.random::<f64>();
                     let distance = match k % 6 {
@@ -935,7 +814,7 @@ mod tests {
                         _ => reach + 1e-7,
                     };
                     let (s, c) = angle.sin_cos();
-                    poses.push(pose(0.7 + distance * c, -0.3 + distance * s, 0.0));
+                    poses.push(Pose::new(0.7 + distance * c, -0.3 + distance * s, 0.0));
                 }
                 assert!(assert_same_bits(&poses, &params, &lidar) > 0);
             }
@@ -951,12 +830,12 @@ mod tests {
                 for j in -3..=3 {
                     let (x, y) = (i as f64 * cell, j as f64 * cell);
                     let nudge = |v: f64, k: i64| f64::from_bits((v.to_bits() as i64 + k) as u64);
-                    poses.push(pose(
+                    poses.push(Pose::new(
                         nudge(x, (i + j) % 3),
                         nudge(y, (i - j) % 3),
                         0.3 * i as f64,
                     ));
-                    poses.push(pose(x + 0.6, y - 0.6, 0.1 * j as f64));
+                    poses.push(Pose::new(x + 0.6, y - 0.6, 0.1 * j as f64));
                 }
             }
             assert!(assert_same_bits(&poses, &RobotParams::default(), &lidar()) > 0);
@@ -972,18 +851,24 @@ mod tests {
                 (2e9, -5.0),
                 (-3e12, 1e12),
             ] {
-                let poses = disc_layout(&mut rng, 40, centre, 8.0, 0.3);
+                let poses = centred_disc_layout(&mut rng, 40, centre, 8.0, 0.3);
                 assert_same_bits(&poses, &RobotParams::default(), &lidar());
             }
             // Robots straddling the gridded limit, and robots with NaN or infinite coordinates
             // among ordinary ones.
-            let mut poses = disc_layout(&mut rng, 30, (0.0, 0.0), 6.0, 0.5);
-            poses.extend(disc_layout(&mut rng, 20, (1e9 - 4.0, 0.0), 8.0, 0.5));
-            poses.push(pose(f64::NAN, 1.0, 0.0));
-            poses.push(pose(1.0, f64::INFINITY, 0.0));
-            poses.push(pose(f64::NEG_INFINITY, f64::NAN, 0.0));
-            poses.push(pose(0.5, 0.5, f64::NAN));
-            poses.push(pose(2.0, -1.0, f64::INFINITY));
+            let mut poses = centred_disc_layout(&mut rng, 30, (0.0, 0.0), 6.0, 0.5);
+            poses.extend(centred_disc_layout(
+                &mut rng,
+                20,
+                (1e9 - 4.0, 0.0),
+                8.0,
+                0.5,
+            ));
+            poses.push(Pose::new(f64::NAN, 1.0, 0.0));
+            poses.push(Pose::new(1.0, f64::INFINITY, 0.0));
+            poses.push(Pose::new(f64::NEG_INFINITY, f64::NAN, 0.0));
+            poses.push(Pose::new(0.5, 0.5, f64::NAN));
+            poses.push(Pose::new(2.0, -1.0, f64::INFINITY));
             assert!(assert_same_bits(&poses, &RobotParams::default(), &lidar()) > 0);
         }
 
@@ -1009,7 +894,7 @@ mod tests {
                         body_radius,
                         ..RobotParams::default()
                     };
-                    let poses = disc_layout(&mut rng, 60, (0.0, 0.0), 7.0, 0.0);
+                    let poses = centred_disc_layout(&mut rng, 60, (0.0, 0.0), 7.0, 0.0);
                     assert_same_bits(&poses, &params, &lidar);
                 }
             }
@@ -1030,7 +915,7 @@ mod tests {
                     body_radius,
                     ..RobotParams::default()
                 };
-                let poses = disc_layout(&mut rng, 20, (0.0, 0.0), 3.0, 0.0);
+                let poses = centred_disc_layout(&mut rng, 20, (0.0, 0.0), 3.0, 0.0);
                 assert_same_bits(&poses, &params, &lidar);
             }
             let no_beams = LidarSpec {
@@ -1038,7 +923,7 @@ mod tests {
                 ..lidar()
             };
             assert_same_bits(
-                &disc_layout(&mut rng, 5, (0.0, 0.0), 2.0, 0.0),
+                &centred_disc_layout(&mut rng, 5, (0.0, 0.0), 2.0, 0.0),
                 &RobotParams::default(),
                 &no_beams,
             );
@@ -1047,12 +932,12 @@ mod tests {
         #[test]
         fn for_a_team_where_far_bodies_hide_behind_near_ones() {
             // Rows of robots along rays from a sensor: most of each row is occluded by its front.
-            let mut poses = vec![pose(0.0, 0.0, 0.2)];
+            let mut poses = vec![Pose::new(0.0, 0.0, 0.2)];
             for ray in 0..40 {
                 let (s, c) = (TAU * ray as f64 / 40.0).sin_cos();
                 for step in 1..=12 {
                     let d = 0.55 * step as f64 + 0.01 * ray as f64;
-                    poses.push(pose(d * c, d * s, 0.0));
+                    poses.push(Pose::new(d * c, d * s, 0.0));
                 }
             }
             assert!(assert_same_bits(&poses, &RobotParams::default(), &lidar()) > 0);

@@ -85,11 +85,11 @@ pub fn integrate(pose: Pose, cmd: WheelCmd, params: &RobotParams, dt: f64) -> Po
     let half_turn = 0.5 * turned;
     let chord = forward * dt * sinc(half_turn);
     let (sin_mid, cos_mid) = (pose.theta + half_turn).sin_cos();
-    Pose {
-        x: pose.x + chord * cos_mid,
-        y: pose.y + chord * sin_mid,
-        theta: wrap_angle(pose.theta + turned),
-    }
+    Pose::new(
+        pose.x + chord * cos_mid,
+        pose.y + chord * sin_mid,
+        wrap_angle(pose.theta + turned),
+    )
 }
 
 /// `sin(x) / x`, with its Taylor series near zero where the quotient loses precision.

@@ -470,11 +470,8 @@ fn overlapping_pairs(poses: &[Pose], body_radius: f64) -> Vec<(usize, usize)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_layouts::disc_layout;
     use formation_proto::wrap_angle;
-
-    fn pose(x: f64, y: f64, theta: f64) -> Pose {
-        Pose { x, y, theta }
-    }
 
     fn noisy_config(noise_std: f64) -> WorldConfig {
         WorldConfig {
@@ -488,7 +485,7 @@ mod tests {
 
     #[test]
     fn step_saturates_wheels_and_moves_by_the_applied_speeds() {
-        let mut world = World::new(WorldConfig::default(), vec![pose(0.0, 0.0, 0.0)], 1);
+        let mut world = World::new(WorldConfig::default(), vec![Pose::new(0.0, 0.0, 0.0)], 1);
         let report = world.step(&[WheelCmd {
             left: 3.0,
             right: 3.0,
@@ -508,7 +505,7 @@ mod tests {
 
     #[test]
     fn a_non_finite_command_brakes_only_its_robot() {
-        let poses = vec![pose(0.0, 0.0, 0.0), pose(5.0, 0.0, 0.0)];
+        let poses = vec![Pose::new(0.0, 0.0, 0.0), Pose::new(5.0, 0.0, 0.0)];
         let mut world = World::new(WorldConfig::default(), poses, 1);
         world.step(
             &[WheelCmd {
@@ -548,7 +545,7 @@ mod tests {
             },
             ..WorldConfig::default()
         };
-        let mut world = World::new(config, vec![pose(0.0, 0.0, 0.0)], 1);
+        let mut world = World::new(config, vec![Pose::new(0.0, 0.0, 0.0)], 1);
         let cmd = [WheelCmd {
             left: 0.5,
             right: 0.5,
@@ -563,10 +560,10 @@ mod tests {
     #[test]
     fn overlapping_robots_collide_and_separated_ones_do_not() {
         let poses = vec![
-            pose(0.0, 0.0, 0.0),
-            pose(0.45, 0.0, 0.0),
-            pose(3.0, 3.0, 0.0),
-            pose(3.6, 3.0, 0.0),
+            Pose::new(0.0, 0.0, 0.0),
+            Pose::new(0.45, 0.0, 0.0),
+            Pose::new(3.0, 3.0, 0.0),
+            Pose::new(3.6, 3.0, 0.0),
         ];
         let mut world = World::new(WorldConfig::default(), poses, 1);
         let report = world.step(&[WheelCmd::BRAKE; 4]);
@@ -578,7 +575,10 @@ mod tests {
     #[test]
     fn robots_driving_head_on_collide_when_their_bodies_meet() {
         // 1.02 m apart closing at 1 m/s: the gap reaches 0.5 m after 0.52 s, so at the 11th step.
-        let poses = vec![pose(0.0, 0.0, 0.0), pose(1.02, 0.0, std::f64::consts::PI)];
+        let poses = vec![
+            Pose::new(0.0, 0.0, 0.0),
+            Pose::new(1.02, 0.0, std::f64::consts::PI),
+        ];
         let mut world = World::new(WorldConfig::default(), poses, 1);
         let cmds = [WheelCmd {
             left: 0.5,
@@ -590,7 +590,7 @@ mod tests {
 
     #[test]
     fn scan_into_matches_the_noiseless_cast_without_noise() {
-        let poses = vec![pose(0.0, 0.0, 0.0), pose(3.0, 0.0, 0.0)];
+        let poses = vec![Pose::new(0.0, 0.0, 0.0), Pose::new(3.0, 0.0, 0.0)];
         let mut world = World::new(WorldConfig::default(), poses.clone(), 1);
         let mut from_world = vec![0.0; 900];
         world.scan_into(0, &mut from_world);
@@ -608,7 +608,7 @@ mod tests {
 
     #[test]
     fn noise_perturbs_hits_only_with_the_configured_spread() {
-        let poses = vec![pose(0.0, 0.0, 0.0), pose(3.0, 0.0, 0.0)];
+        let poses = vec![Pose::new(0.0, 0.0, 0.0), Pose::new(3.0, 0.0, 0.0)];
         let mut world = World::new(noisy_config(0.03), poses.clone(), 7);
         let mut clean = vec![0.0; 900];
         cast_scan(
@@ -641,7 +641,7 @@ mod tests {
     #[test]
     fn noise_is_clamped_to_the_sensor_range() {
         // A body almost touching the sensor and a huge noise: many draws fall below 0.
-        let poses = vec![pose(0.0, 0.0, 0.0), pose(0.52, 0.0, 0.0)];
+        let poses = vec![Pose::new(0.0, 0.0, 0.0), Pose::new(0.52, 0.0, 0.0)];
         let mut world = World::new(noisy_config(1.0), poses, 3);
         let mut scan = vec![0.0; 900];
         world.scan_into(0, &mut scan);
@@ -653,7 +653,7 @@ mod tests {
     /// the final poses and the last scans.
     fn closed_loop_run(noise_seed: u64) -> (Vec<Pose>, Vec<Vec<f32>>) {
         let poses = (0..6)
-            .map(|i| pose(i as f64 * 0.9, (i % 2) as f64 * 0.7, i as f64))
+            .map(|i| Pose::new(i as f64 * 0.9, (i % 2) as f64 * 0.7, i as f64))
             .collect();
         let mut world = World::new(noisy_config(0.03), poses, noise_seed);
         let mut scans = vec![Vec::new(); world.n_robots()];
@@ -693,7 +693,7 @@ mod tests {
 
     #[test]
     fn a_different_noise_seed_gives_different_scans() {
-        let poses = vec![pose(0.0, 0.0, 0.0), pose(2.0, 0.5, 0.0)];
+        let poses = vec![Pose::new(0.0, 0.0, 0.0), Pose::new(2.0, 0.5, 0.0)];
         let scan_with = |seed| {
             let mut world = World::new(noisy_config(0.03), poses.clone(), seed);
             let mut scan = vec![0.0; 900];
@@ -714,31 +714,6 @@ mod tests {
         assert!(serde_json::from_str::<WorldConfig>(&extra).is_err());
     }
 
-    /// Seeded random layouts: `n` robots uniform in a disc of `radius` around `(cx, cy)`, at least
-    /// `min_spacing` apart (0 allows overlaps), headings uniform.
-    fn random_layout(
-        rng: &mut ChaCha8Rng,
-        n: usize,
-        (cx, cy): (f64, f64),
-        radius: f64,
-        min_spacing: f64,
-    ) -> Vec<Pose> {
-        use rand::Rng;
-        let mut poses: Vec<Pose> = Vec::with_capacity(n);
-        while poses.len() < n {
-            let r = radius * rng.random::<f64>().sqrt();
-            let (s, c) = (std::f64::consts::TAU * rng.random::<f64>()).sin_cos();
-            let (x, y) = (cx + r * c, cy + r * s);
-            if poses
-                .iter()
-                .all(|p| (p.x - x).hypot(p.y - y) >= min_spacing)
-            {
-                poses.push(pose(x, y, std::f64::consts::TAU * rng.random::<f64>()));
-            }
-        }
-        poses
-    }
-
     /// Layouts for the equivalence tests: the paper's density for teams of 2 to 300, dense crowds
     /// with overlapping bodies, and a team far from the origin.
     fn equivalence_layouts() -> Vec<Vec<Pose>> {
@@ -746,12 +721,12 @@ mod tests {
         let mut layouts = Vec::new();
         for n in [2, 3, 7, 20, 64, 150, 300] {
             let radius = 3.0 * (n as f64 / 3.0).sqrt();
-            layouts.push(random_layout(&mut rng, n, (0.0, 0.0), radius, 0.6));
+            layouts.push(disc_layout(&mut rng, n, (0.0, 0.0), radius, 0.6));
         }
         for (n, radius) in [(5, 0.4), (60, 2.0), (200, 4.0), (300, 12.0)] {
-            layouts.push(random_layout(&mut rng, n, (-4.0, 9.0), radius, 0.0));
+            layouts.push(disc_layout(&mut rng, n, (-4.0, 9.0), radius, 0.0));
         }
-        layouts.push(random_layout(&mut rng, 80, (5e8, -5e8), 6.0, 0.0));
+        layouts.push(disc_layout(&mut rng, 80, (5e8, -5e8), 6.0, 0.0));
         layouts
     }
 
@@ -800,10 +775,10 @@ mod tests {
         for k in 0..40_i64 {
             let (x, y) = (k as f64 * 3.0 * diameter, (k % 5) as f64 * diameter);
             let nudged = f64::from_bits((diameter.to_bits() as i64 + k % 3 - 1) as u64);
-            touching.push(pose(x, y, 0.0));
-            touching.push(pose(x + nudged, y, 0.0));
-            touching.push(pose(x, y + diameter, 0.0));
-            touching.push(pose(
+            touching.push(Pose::new(x, y, 0.0));
+            touching.push(Pose::new(x + nudged, y, 0.0));
+            touching.push(Pose::new(x, y + diameter, 0.0));
+            touching.push(Pose::new(
                 x + diameter * 0.5_f64.sqrt(),
                 y - diameter * 0.5_f64.sqrt(),
                 0.0,
@@ -811,16 +786,16 @@ mod tests {
         }
         layouts.push(touching);
         // Non-finite and huge coordinates among ordinary robots.
-        let mut odd = random_layout(&mut rng, 50, (0.0, 0.0), 2.0, 0.0);
+        let mut odd = disc_layout(&mut rng, 50, (0.0, 0.0), 2.0, 0.0);
         odd.extend([
-            pose(f64::NAN, 0.0, 0.0),
-            pose(f64::NAN, 0.0, 0.0),
-            pose(f64::INFINITY, 1.0, 0.0),
-            pose(f64::INFINITY, 1.0, 0.0),
-            pose(2e9, 0.0, 0.0),
-            pose(2e9 + 0.3, 0.0, 0.0),
-            pose(1e9 - 0.1, 0.0, 0.0),
-            pose(1e9 + 0.1, 0.0, 0.0),
+            Pose::new(f64::NAN, 0.0, 0.0),
+            Pose::new(f64::NAN, 0.0, 0.0),
+            Pose::new(f64::INFINITY, 1.0, 0.0),
+            Pose::new(f64::INFINITY, 1.0, 0.0),
+            Pose::new(2e9, 0.0, 0.0),
+            Pose::new(2e9 + 0.3, 0.0, 0.0),
+            Pose::new(1e9 - 0.1, 0.0, 0.0),
+            Pose::new(1e9 + 0.1, 0.0, 0.0),
         ]);
         layouts.push(odd);
         let mut pairs_seen = 0;
@@ -845,7 +820,7 @@ mod tests {
         // 120 robots in a 6 m disc driving with scan-dependent commands for 60 ticks: each tick's
         // scans must match scan_into robot by robot, and each step's collisions the all-pairs test.
         let mut rng = ChaCha8Rng::seed_from_u64(13);
-        let poses = random_layout(&mut rng, 120, (1.0, 1.0), 6.0, 0.0);
+        let poses = disc_layout(&mut rng, 120, (1.0, 1.0), 6.0, 0.0);
         let n = poses.len();
         let mut world = World::new(noisy_config(0.03), poses.clone(), 9);
         let mut reference = World::new(noisy_config(0.03), poses, 9);
@@ -906,9 +881,9 @@ mod tests {
             ..RealityModels::IDEAL
         });
         let poses = vec![
-            pose(0.0, 0.0, 0.0),
-            pose(1.5, 0.3, 0.0),
-            pose(-1.0, 1.0, 2.0),
+            Pose::new(0.0, 0.0, 0.0),
+            Pose::new(1.5, 0.3, 0.0),
+            Pose::new(-1.0, 1.0, 2.0),
         ];
         let mut world = World::new(config, poses, 4);
         let cmds = [WheelCmd {
@@ -950,7 +925,7 @@ mod tests {
             command_latency_ticks: 2,
             ..RealityModels::IDEAL
         });
-        let mut world = World::new(config, vec![pose(0.0, 0.0, 0.0)], 1);
+        let mut world = World::new(config, vec![Pose::new(0.0, 0.0, 0.0)], 1);
         let go = WheelCmd {
             left: 0.4,
             right: 0.4,
@@ -975,7 +950,11 @@ mod tests {
             },
             ..RealityModels::IDEAL
         });
-        let mut world = World::new(config, vec![pose(1.0, 2.0, 0.5), pose(3.0, 2.0, -0.5)], 8);
+        let mut world = World::new(
+            config,
+            vec![Pose::new(1.0, 2.0, 0.5), Pose::new(3.0, 2.0, -0.5)],
+            8,
+        );
         let mut errors = Vec::new();
         for _ in 0..400 {
             world.read_compasses();
@@ -991,7 +970,7 @@ mod tests {
         // 800 readings: the mean's standard error is 2 / sqrt(800) = 0.07 degrees.
         assert!((mean - 5.0).abs() < 0.3, "mean error {mean}");
         assert!((std - 2.0).abs() < 0.3, "spread {std}");
-        assert_eq!(world.poses()[0], pose(1.0, 2.0, 0.5));
+        assert_eq!(world.poses()[0], Pose::new(1.0, 2.0, 0.5));
     }
 
     #[test]
@@ -1000,9 +979,9 @@ mod tests {
         // Braking robots stay put under lag, latency and compass noise, so their scans must be
         // the same bits as in the ideal world: those models draw from streams of their own.
         let poses = vec![
-            pose(0.0, 0.0, 0.0),
-            pose(1.2, 0.4, 1.0),
-            pose(-0.8, 0.9, 2.0),
+            Pose::new(0.0, 0.0, 0.0),
+            Pose::new(1.2, 0.4, 1.0),
+            Pose::new(-0.8, 0.9, 2.0),
         ];
         let mut ideal = World::new(noisy_config(0.03), poses.clone(), 21);
         let mut real = World::new(
@@ -1057,9 +1036,9 @@ mod tests {
         });
         let run = |seed: u64| {
             let poses = vec![
-                pose(0.0, 0.0, 0.0),
-                pose(1.2, 0.4, 1.0),
-                pose(-0.8, 0.9, 2.0),
+                Pose::new(0.0, 0.0, 0.0),
+                Pose::new(1.2, 0.4, 1.0),
+                Pose::new(-0.8, 0.9, 2.0),
             ];
             let mut world = World::new(config, poses, seed);
             let mut scans = vec![Vec::new(); 3];
