@@ -242,3 +242,70 @@ fn an_agent_stopped_past_the_lease_reconnects_and_lockstep_stays_bit_identical()
     assert_bit_identical(&over_zenoh, &in_process(&scenario));
     t.assert_clean();
 }
+
+/// Issue 36: robot 1's agent stopped (SIGSTOP) for 17 s, past the 10 s lease and the 5 s the
+/// world waits for it, is counted lost (its robot brakes); continued, it reconnects, is told in
+/// its lobby that the world counted it gone, and exits with code 2 saying so and to start it
+/// again, instead of waiting for scans that never come. The run plays to its end without it
+/// (and the launch, whose robot 1 was lost for good, says its results are not the policy's).
+#[test]
+fn an_agent_back_after_the_grace_is_told_it_was_counted_gone_and_exits() {
+    let t = ProcessTest::start("zlate", LIMIT);
+    let creds = zenoh_credentials(t.path(), 3);
+    let scenario = t.case1(30.0);
+    let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
+    let creds_text = creds.to_string_lossy();
+    let mut launch = LiveProcess::spawn(formation_tests::formation_run(
+        &t.run,
+        &scenario,
+        &t.out(),
+        &[
+            "--transport",
+            "zenoh",
+            "--listen",
+            &listen,
+            "--remote",
+            "1",
+            "--clock",
+            "realtime",
+            "--remote-timeout-s",
+            "60",
+            "--credentials",
+            &creds_text,
+        ],
+    ));
+    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains("waiting for the remote agents of robots [1]")
+    });
+    assert!(waiting.is_some(), "{}", launch.describe());
+    let agent = robot1(&t, &listen, &creds);
+    let connected =
+        launch.wait_for_line(Duration::from_secs(60), |l| l.contains("agents connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+    std::thread::sleep(Duration::from_secs(1));
+    send_signal(agent.id(), "STOP");
+    let lost = launch.wait_for_line(Duration::from_secs(40), |l| {
+        l.starts_with("robot 1: agent lost")
+    });
+    assert!(lost.is_some(), "{}", launch.describe());
+    send_signal(agent.id(), "CONT");
+    let agent = agent.finish(Duration::from_secs(30));
+    assert_eq!(agent.output.status.code(), Some(2), "{}", agent.describe());
+    assert!(
+        agent.stderr().contains("was unreachable for more than 5 s")
+            && agent.stderr().contains("start this agent again"),
+        "the agent says the world counted it gone and what to do\n{}",
+        agent.describe()
+    );
+    let finished = launch.finish(LIMIT);
+    finished.assert_failure_mentioning("robots that had lost their agent for good");
+    assert!(
+        finished.stdout().contains("run 0 done")
+            && finished
+                .stderr()
+                .contains("came back after it was counted gone"),
+        "{}",
+        finished.describe()
+    );
+    t.assert_clean();
+}

@@ -110,7 +110,7 @@ impl Liveness {
                 now.saturating_duration_since(went).as_secs_f64()
             );
             self.returned.push(key);
-        } else if self.counted_dead.remove(&key) {
+        } else if self.counted_dead.contains(&key) {
             tracing::warn!(
                 "robot {robot}: agent pid {pid} came back after it was counted gone; telling it \
                  to start again"
@@ -123,6 +123,10 @@ impl Liveness {
     fn went(&mut self, key: AgentKey, now: Instant) {
         let (robot, _, pid) = key;
         self.gone.insert((robot, pid));
+        if self.counted_dead.contains(&key) {
+            // Counted dead already (and told so when it came back): nothing to wait for.
+            return;
+        }
         self.vanished.insert(key, now);
         tracing::warn!(
             "robot {robot}: agent pid {pid} is unreachable (its liveliness token went); waiting \
