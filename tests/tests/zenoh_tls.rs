@@ -1,5 +1,6 @@
 //! Zenoh over mutual TLS (issue 36) with real processes and real Zenoh on 127.0.0.1: a team on
-//! `tls/` runs lockstep bit for bit as in-process; an agent with no certificate, another team's,
+//! `tls/` runs lockstep bit for bit as in-process (and, with the world and its agents in two
+//! network namespaces, with the in-process Table I JSON); an agent with no certificate, another team's,
 //! an expired one or another robot's is refused within seconds, naming the cause, and raw Zenoh
 //! clients with such certificates receive nothing; the recorder's certificate reads the run and
 //! publishes nothing.
@@ -736,6 +737,112 @@ fn a_capture_of_a_tls_link_holds_no_scan_or_command_in_clear() {
             );
         }
     }
+}
+
+/// Issue 36 acceptance: a TLS team across two network namespaces (the world in one, its three
+/// agents in the other, joined only by a veth pair) runs case 1 in lockstep with the same
+/// Table I JSON as `formation eval` in-process, and the same trajectory bit for bit. Needs root
+/// (CI runs as root).
+#[test]
+fn a_tls_team_across_namespaces_gives_the_in_process_table() {
+    use formation_tests::netns::{NetPair, WORLD_IP};
+    use formation_tests::{formation_run_args, read_json};
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("zenoh_tls_netns", LIMIT);
+    let pair = NetPair::create().unwrap_or_else(|reason| {
+        panic!(
+            "network namespaces are unavailable here ({reason}); run the tests as root with \
+             iproute2 and nftables (`bash scripts/setup-system` installs them)"
+        )
+    });
+    let dir = TempDir::new("ztns");
+    let run_id = unique_run_id("ztns");
+    let leaks = LeakCheck::new(&run_id);
+    let creds = tls_credentials(dir.path(), "creds", 3);
+    let scenario_path = case1_scenario(dir.path(), 6.0);
+    let out = dir.path().join("out");
+    let listen = format!("tls/{WORLD_IP}:{}", free_tcp_port());
+    let creds_text = creds.to_string_lossy();
+    let mut command = pair.in_world(&binaries().cli);
+    formation_run_args(
+        &mut command,
+        &run_id,
+        (&scenario_path, test_model(), &out),
+        &[
+            "--transport",
+            "zenoh",
+            "--listen",
+            &listen,
+            "--remote",
+            "0,1,2",
+            "--remote-timeout-s",
+            "120",
+            "--clock",
+            "lockstep",
+            "--credentials",
+            &creds_text,
+        ],
+    );
+    let mut launch = LiveProcess::spawn(command);
+    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains("waiting for the remote agents")
+    });
+    assert!(waiting.is_some(), "{}", launch.describe());
+    let agents: Vec<_> = (0..3)
+        .map(|robot| {
+            let mut agent = pair.in_agents(&binaries().agent);
+            agent
+                .args(["--transport", "zenoh", "--connect", &listen])
+                .args(["--run-id", run_id.as_str(), "--robot", &robot.to_string()])
+                .args(["--connect-timeout-ms", "60000", "--model"])
+                .arg(test_model())
+                .arg("--credentials")
+                .arg(creds.join(format!("robot-{robot}.json")));
+            LiveProcess::spawn(agent)
+        })
+        .collect();
+    launch.finish(LIMIT).assert_success();
+    for agent in agents {
+        let agent = agent.finish(Duration::from_secs(30));
+        assert!(agent.output.status.success(), "{}", agent.describe());
+    }
+    let eval_json = dir.path().join("in-process.json");
+    let mut eval = Command::new(&binaries().cli);
+    eval.args([
+        "eval",
+        "--controller",
+        "policy",
+        "--runs",
+        "1",
+        "--scenario",
+    ])
+    .arg(&scenario_path)
+    .arg("--model")
+    .arg(test_model())
+    .arg("--json")
+    .arg(&eval_json);
+    run(eval, LIMIT).assert_success();
+    let in_process = read_json(&eval_json);
+    let over_tls = read_json(&out.join("summary.json"));
+    let keys = in_process.as_object().expect("eval JSON is an object");
+    assert!(keys.contains_key("per_run") && keys.contains_key("success_rate_5"));
+    for (key, value) in keys {
+        assert_eq!(
+            &over_tls[key], value,
+            "{key} differs between TLS across namespaces and in-process"
+        );
+    }
+    let scenario = Scenario::from_path(&scenario_path).expect("scenario");
+    let spec = scenario.run_spec(scenario.seed(), 0);
+    let model = test_model();
+    let mut controller =
+        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
+            .expect("in-process agents");
+    let reference = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
+    let over_tls = read_trajectory(&out.join("runs").join("run-0000.json")).expect("the run log");
+    assert_bit_identical(&over_tls, &reference);
+    drop(pair);
+    leaks.assert_clean();
 }
 
 /// Issue 36's cost of TLS, measured (not a test: it asserts no time, and runs only when asked,
