@@ -450,21 +450,59 @@ fn percent_whole(fraction: f64) -> String {
     format!("{:.0} %", 100.0 * fraction)
 }
 
-fn write_table(html: &mut String, page: &ReportPage) {
-    html.push_str("<section id=\"table-1\">\n<h2>Table I: success rate (paper: over 100 runs)</h2>\n<div class=\"card\">\n<div class=\"table-scroll\">\n<table class=\"results\">\n<thead><tr>");
-    for head in [
-        "Evaluation",
-        "Runs",
-        "Success at 5 %",
-        "Success at 10 %",
-        "Median convergence time",
-        "Median formation error",
-        "Median orientation error",
-        "Runs with collisions",
-    ] {
+/// Opens a results table in a card (it scrolls sideways on a narrow page) with these column
+/// heads, up to the first row; the caller closes it.
+fn open_results_table(html: &mut String, heads: &[&str]) {
+    html.push_str("<div class=\"card\">\n<div class=\"table-scroll\">\n<table class=\"results\">\n<thead><tr>");
+    for head in heads {
         let _ = write!(html, "<th>{head}</th>");
     }
     html.push_str("</tr></thead>\n<tbody>\n");
+}
+
+/// The driver of a row: the controller, and the model id on a second line (on one line the
+/// scaling table was wider than the page at 1300 px and its last column was clipped).
+fn driver_cell(controller: &str, model: Option<&str>) -> String {
+    match model {
+        Some(id) => format!(
+            "{}<div class=\"detail\"><code>{}</code></div>",
+            escape(controller),
+            escape(id)
+        ),
+        None => escape(controller),
+    }
+}
+
+/// A median convergence time with its IQR on a second line; `–` where none converged.
+fn convergence_cell(quantiles: Option<&crate::input::Quantiles>) -> String {
+    quantiles.map_or_else(
+        || "–".to_owned(),
+        |q| {
+            format!(
+                "{:.1} s<div class=\"detail\">IQR {:.1}–{:.1}</div>",
+                q.median, q.q1, q.q3
+            )
+        },
+    )
+}
+
+fn write_table(html: &mut String, page: &ReportPage) {
+    html.push_str(
+        "<section id=\"table-1\">\n<h2>Table I: success rate (paper: over 100 runs)</h2>\n",
+    );
+    open_results_table(
+        html,
+        &[
+            "Evaluation",
+            "Runs",
+            "Success at 5 %",
+            "Success at 10 %",
+            "Median convergence time",
+            "Median formation error",
+            "Median orientation error",
+            "Runs with collisions",
+        ],
+    );
     let _ = writeln!(
         html,
         "<tr class=\"paper\"><td>Paper (Table I, Fig. 9)<div class=\"detail\">{} robots · learned policy · V-REP</div></td><td>{}</td><td>{}</td><td>{}</td><td>≈ {:.0} s</td><td>{}</td><td>{:.3} rad</td><td>–</td></tr>",
@@ -581,20 +619,19 @@ fn write_ladder(html: &mut String, section: &LadderSection) {
         escape(&table.profile),
         escape(&table.scenario)
     );
-    html.push_str("<div class=\"card\">\n<div class=\"table-scroll\">\n<table class=\"results\">\n<thead><tr>");
-    for head in [
-        "Rung (adds)",
-        "Controller",
-        "Robots",
-        "Runs",
-        "Success at 10 %",
-        "Success at 5 %",
-        "Median convergence (IQR)",
-        "Runs with collisions",
-    ] {
-        let _ = write!(html, "<th>{head}</th>");
-    }
-    html.push_str("</tr></thead>\n<tbody>\n");
+    open_results_table(
+        html,
+        &[
+            "Rung (adds)",
+            "Controller",
+            "Robots",
+            "Runs",
+            "Success at 10 %",
+            "Success at 5 %",
+            "Median convergence (IQR)",
+            "Runs with collisions",
+        ],
+    );
     for rung in &table.rungs {
         let added = if rung.added.is_empty() {
             String::new()
@@ -608,23 +645,8 @@ fn write_ladder(html: &mut String, section: &LadderSection) {
         };
         let name = format!("{}{added}", escape(&rung.rung));
         for row in &rung.rows {
-            let who = match &row.model {
-                Some(id) => format!(
-                    "{}<div class=\"detail\"><code>{}</code></div>",
-                    escape(&row.controller),
-                    escape(id)
-                ),
-                None => escape(&row.controller),
-            };
-            let convergence = row.convergence_s.map_or_else(
-                || "–".to_owned(),
-                |q| {
-                    format!(
-                        "{:.1} s<div class=\"detail\">IQR {:.1}–{:.1}</div>",
-                        q.median, q.q1, q.q3
-                    )
-                },
-            );
+            let who = driver_cell(&row.controller, row.model.as_deref());
+            let convergence = convergence_cell(row.convergence_s.as_ref());
             let _ = writeln!(
                 html,
                 "<tr><td>{name}</td><td>{who}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{convergence}</td><td>{}</td></tr>",
@@ -656,42 +678,26 @@ fn write_ladder(html: &mut String, section: &LadderSection) {
 }
 
 fn write_scaling(html: &mut String, section: &ScalingSection) {
-    html.push_str("<div class=\"card\">\n<div class=\"table-scroll\">\n<table class=\"results\">\n<thead><tr>");
-    for head in [
-        "Controller",
-        "Robots",
-        "Neighbour rule",
-        "Runs",
-        "Success at 5 %",
-        "Success at 10 %",
-        "Anchor-compatible",
-        "Median convergence (IQR)",
-        "Median formation error",
-        "Runs with collisions",
-    ] {
-        let _ = write!(html, "<th>{head}</th>");
-    }
-    html.push_str("</tr></thead>\n<tbody>\n");
+    open_results_table(
+        html,
+        &[
+            "Controller",
+            "Robots",
+            "Neighbour rule",
+            "Runs",
+            "Success at 5 %",
+            "Success at 10 %",
+            "Anchor-compatible",
+            "Median convergence (IQR)",
+            "Median formation error",
+            "Runs with collisions",
+        ],
+    );
     for row in &section.rows {
         // The model id and the IQR go on a second line of their cells: on one line the table
         // was wider than the page at 1300 px and its last column was clipped.
-        let who = match &row.model {
-            Some(id) => format!(
-                "{}<div class=\"detail\"><code>{}</code></div>",
-                escape(&row.controller),
-                escape(id)
-            ),
-            None => escape(&row.controller),
-        };
-        let convergence = row.convergence_s.map_or_else(
-            || "–".to_owned(),
-            |q| {
-                format!(
-                    "{:.1} s<div class=\"detail\">IQR {:.1}–{:.1}</div>",
-                    q.median, q.q1, q.q3
-                )
-            },
-        );
+        let who = driver_cell(&row.controller, row.model.as_deref());
+        let convergence = convergence_cell(row.convergence_s.as_ref());
         let error = row
             .rel_formation_error
             .map_or_else(|| "–".to_owned(), |q| percent(q.median));
