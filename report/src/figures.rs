@@ -10,6 +10,7 @@
 use std::error::Error;
 use std::ops::Range;
 
+use plotters::chart::MeshStyle;
 use plotters::coord::Shift;
 use plotters::coord::ranged1d::ValueFormatter;
 use plotters::element::DashedPathElement;
@@ -121,6 +122,23 @@ fn render(
 
 fn text_style(size: f64) -> TextStyle<'static> {
     TextStyle::from((FONT, size).into_font()).color(&INK)
+}
+
+/// The house style of every chart's mesh: tick labels of one size, axis titles at 17 px, grey
+/// axes and faint grid lines.
+trait HouseStyle {
+    /// Applies the house style with tick labels of `label_size` px.
+    fn house_style(&mut self, label_size: f64) -> &mut Self;
+}
+
+impl<X: Ranged, Y: Ranged, DB: DrawingBackend> HouseStyle for MeshStyle<'_, '_, X, Y, DB> {
+    fn house_style(&mut self, label_size: f64) -> &mut Self {
+        self.label_style(text_style(label_size))
+            .axis_desc_style(text_style(17.0))
+            .axis_style(RGBColor(0x66, 0x66, 0x66))
+            .bold_line_style(RGBColor(0xE4, 0xE4, 0xE4))
+            .light_line_style(RGBColor(0xF4, 0xF4, 0xF4))
+    }
 }
 
 /// How a legend entry is marked.
@@ -346,11 +364,7 @@ where
         .configure_mesh()
         .x_desc(x_desc)
         .y_desc(y_desc)
-        .label_style(text_style(16.0))
-        .axis_desc_style(text_style(17.0))
-        .axis_style(RGBColor(0x66, 0x66, 0x66))
-        .bold_line_style(RGBColor(0xE4, 0xE4, 0xE4))
-        .light_line_style(RGBColor(0xF4, 0xF4, 0xF4))
+        .house_style(16.0)
         .x_label_formatter(x_label)
         .y_label_formatter(&|v| tick_label(*v))
         .x_labels(8)
@@ -651,11 +665,7 @@ fn box_panel(area: &Area<'_>, panel: &BoxPanel) -> DrawResult {
         .x_label_formatter(&|_| String::new())
         .y_desc(panel.y_desc.as_str())
         .y_label_formatter(&|v| tick_label(*v))
-        .label_style(text_style(16.0))
-        .axis_desc_style(text_style(17.0))
-        .axis_style(RGBColor(0x66, 0x66, 0x66))
-        .bold_line_style(RGBColor(0xE4, 0xE4, 0xE4))
-        .light_line_style(RGBColor(0xF4, 0xF4, 0xF4))
+        .house_style(16.0)
         .y_labels(6)
         .draw()?;
     let label_style = text_style(16.0).pos(Pos::new(HPos::Center, VPos::Top));
@@ -867,11 +877,7 @@ pub fn ladder_figure(
         success
             .configure_mesh()
             .y_desc("success [%]")
-            .label_style(text_style(14.0))
-            .axis_desc_style(text_style(17.0))
-            .axis_style(RGBColor(0x66, 0x66, 0x66))
-            .bold_line_style(RGBColor(0xE4, 0xE4, 0xE4))
-            .light_line_style(RGBColor(0xF4, 0xF4, 0xF4))
+            .house_style(14.0)
             .x_label_formatter(&rung_name)
             .y_label_formatter(&|v| tick_label(*v))
             .x_labels(rungs)
@@ -892,11 +898,7 @@ pub fn ladder_figure(
         convergence
             .configure_mesh()
             .y_desc("convergence [s]")
-            .label_style(text_style(14.0))
-            .axis_desc_style(text_style(17.0))
-            .axis_style(RGBColor(0x66, 0x66, 0x66))
-            .bold_line_style(RGBColor(0xE4, 0xE4, 0xE4))
-            .light_line_style(RGBColor(0xF4, 0xF4, 0xF4))
+            .house_style(14.0)
             .x_label_formatter(&rung_name)
             .y_label_formatter(&|v| tick_label(*v))
             .x_labels(rungs)
@@ -970,11 +972,7 @@ pub fn latency_figure(
             .x_label_formatter(&|_| String::new())
             .y_desc("latency [µs]")
             .y_label_formatter(&|v| tick_label(*v))
-            .label_style(text_style(16.0))
-            .axis_desc_style(text_style(17.0))
-            .axis_style(RGBColor(0x66, 0x66, 0x66))
-            .bold_line_style(RGBColor(0xE4, 0xE4, 0xE4))
-            .light_line_style(RGBColor(0xF4, 0xF4, 0xF4))
+            .house_style(16.0)
             .draw()?;
         let label_style = text_style(16.0).pos(Pos::new(HPos::Center, VPos::Top));
         let floor = lo;
