@@ -601,6 +601,42 @@ impl Finished {
         assert!(!self.stderr().contains(needle), "{}", self.describe());
         self
     }
+
+    /// Panics with [`Finished::describe`] unless it exited with `code`.
+    pub fn assert_exit(&self, code: i32) -> &Self {
+        assert_eq!(self.output.status.code(), Some(code), "{}", self.describe());
+        self
+    }
+
+    /// Panics with [`Finished::describe`] if it panicked: exit code 101, or `panicked` on stderr.
+    /// A panic is never an error message.
+    pub fn assert_no_panic(&self) -> &Self {
+        assert_ne!(
+            self.output.status.code(),
+            Some(101),
+            "a panic is not an error message\n{}",
+            self.describe()
+        );
+        self.assert_stderr_lacks("panicked")
+    }
+}
+
+/// `formation eval --controller expert --runs 1 --scenario SCENARIO EXTRA`: one expert run of
+/// `scenario`.
+pub fn expert_eval_once(scenario: &Path, extra: &[&str]) -> Command {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .args([
+            "eval",
+            "--controller",
+            "expert",
+            "--runs",
+            "1",
+            "--scenario",
+        ])
+        .arg(scenario)
+        .args(extra);
+    command
 }
 
 /// Runs `command` to completion (killing it after `limit`) and captures its output.

@@ -3,45 +3,18 @@
 //! first, and a partial `eval --out` is marked so and the report says what it lacks; an output
 //! path under a file names that file.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
 use formation_tests::{
-    Finished, LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, files_under,
+    LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, expert_eval_once, files_under,
     formation_run, formation_run_args, read_json, repo_root, run, send_signal, world_pid,
 };
 use formation_world::metrics::{MetricsConfig, run_metrics};
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
-
-/// `formation eval --controller expert --runs 1 --scenario SCENARIO EXTRA`.
-fn expert_eval(scenario: &Path, extra: &[&str]) -> Command {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args([
-            "eval",
-            "--controller",
-            "expert",
-            "--runs",
-            "1",
-            "--scenario",
-        ])
-        .arg(scenario)
-        .args(extra);
-    command
-}
-
-fn assert_no_panic(finished: &Finished) {
-    assert_ne!(
-        finished.output.status.code(),
-        Some(101),
-        "a panic is not an error message\n{}",
-        finished.describe()
-    );
-    finished.assert_stderr_lacks("panicked");
-}
 
 /// SIGHUP ends the world by its default action, 30-odd simulated seconds into a 60 s run of
 /// the shipped policy: the last 20 s it played are well formed, which used to count as a success
@@ -189,9 +162,9 @@ fn an_output_path_under_a_file_names_that_file() {
         ["--json", json.to_str().expect("utf-8")],
         ["--out", out.to_str().expect("utf-8")],
     ] {
-        let finished = run(expert_eval(&scenario, &extra), LIMIT);
+        let finished = run(expert_eval_once(&scenario, &extra), LIMIT);
         assert!(!finished.output.status.success(), "{}", finished.describe());
-        assert_no_panic(&finished);
+        finished.assert_no_panic();
         let stderr = finished.stderr();
         assert!(
             stderr.contains(&format!("{} is a file, not a directory", blocker.display())),
@@ -224,11 +197,11 @@ fn a_full_disk_under_eval_out_leaves_an_output_marked_partial_that_report_names(
     let out = disk.dir().join("out");
     let scenario = repo_root().join("scenarios/case1.toml");
     let finished = run(
-        expert_eval(&scenario, &["--out", out.to_str().expect("utf-8")]),
+        expert_eval_once(&scenario, &["--out", out.to_str().expect("utf-8")]),
         LIMIT,
     );
     assert!(!finished.output.status.success(), "{}", finished.describe());
-    assert_no_panic(&finished);
+    finished.assert_no_panic();
     let stderr = finished.stderr();
     assert!(
         stderr.contains("run-0000.json")

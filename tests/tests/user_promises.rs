@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{Finished, ProcessTest, binaries, read_json, run};
+use formation_tests::{Finished, ProcessTest, binaries, expert_eval_once, read_json, run};
 
 const LIMIT: Duration = Duration::from_secs(300);
 
@@ -17,15 +17,6 @@ fn formation(args: &[&str]) -> Finished {
     let mut command = Command::new(&binaries().cli);
     command.args(args);
     run(command, LIMIT)
-}
-
-fn assert_exit(finished: &Finished, code: i32) {
-    assert_eq!(
-        finished.output.status.code(),
-        Some(code),
-        "{}",
-        finished.describe()
-    );
 }
 
 fn text(path: &Path) -> &str {
@@ -38,17 +29,7 @@ fn outputs_never_overwrite_their_own_inputs() {
     let scenario = t.case1(2.0);
     let before = std::fs::read(&scenario).expect("scenario");
     let out = t.path().join("eval");
-    let evaluated = formation(&[
-        "eval",
-        "--controller",
-        "expert",
-        "--runs",
-        "1",
-        "--scenario",
-        text(&scenario),
-        "--out",
-        text(&out),
-    ]);
+    let evaluated = run(expert_eval_once(&scenario, &["--out", text(&out)]), LIMIT);
     evaluated.assert_success();
     let summary = out.join("summary.json");
     let run_log = out.join("runs/run-0000.json");
@@ -58,7 +39,7 @@ fn outputs_never_overwrite_their_own_inputs() {
     // `report D --out D/summary.json` and `--out D/runs/run-0000.json`: refused, kept.
     for (target, what) in [(&summary, "an eval summary"), (&run_log, "a run log")] {
         let refused = formation(&["report", text(&out), "--out", text(target)]);
-        assert_exit(&refused, 2);
+        refused.assert_exit(2);
         refused.assert_failure_mentioning(what);
         refused.assert_failure_mentioning("report.html");
         assert!(
@@ -71,25 +52,18 @@ fn outputs_never_overwrite_their_own_inputs() {
     assert_eq!(kept(&run_log), log_bytes);
     // A folder given as `--out` is told to name an .html file.
     let refused = formation(&["report", text(&out), "--out", text(&out)]);
-    assert_exit(&refused, 2);
+    refused.assert_exit(2);
     refused.assert_failure_mentioning(&out.join("report.html").display().to_string());
     // The report still builds from the same folder.
     let html = t.path().join("report.html");
     formation(&["report", text(&out), "--out", text(&html)]).assert_success();
 
     // `eval --json <the scenario>`: refused before any run, the scenario kept.
-    let refused = formation(&[
-        "eval",
-        "--controller",
-        "expert",
-        "--runs",
-        "1",
-        "--scenario",
-        text(&scenario),
-        "--json",
-        text(&scenario),
-    ]);
-    assert_exit(&refused, 2);
+    let refused = run(
+        expert_eval_once(&scenario, &["--json", text(&scenario)]),
+        LIMIT,
+    );
+    refused.assert_exit(2);
     refused.assert_failure_mentioning("is the file --scenario reads");
     assert!(
         !refused.stdout().contains("Table I"),
@@ -119,7 +93,7 @@ fn record_and_gauge_never_overwrite_their_own_inputs() {
         "--out",
         text(&credentials),
     ]);
-    assert_exit(&refused, 2);
+    refused.assert_exit(2);
     if !refused.stderr().contains("not built") {
         refused.assert_failure_mentioning("is the file --credentials reads");
     }
@@ -136,7 +110,7 @@ fn record_and_gauge_never_overwrite_their_own_inputs() {
         "--json",
         text(&scenario),
     ]);
-    assert_exit(&refused, 2);
+    refused.assert_exit(2);
     refused.assert_failure_mentioning("is the file --scenario reads");
     refused.assert_failure_mentioning("response.json");
     assert_eq!(std::fs::read(&scenario).unwrap(), scenario_bytes);
@@ -192,7 +166,7 @@ fn one_team_size_evaluates_with_its_outputs_and_the_policy_is_always_evaluated()
         "--out",
         text(&t.path().join("two")),
     ]);
-    assert_exit(&refused, 2);
+    refused.assert_exit(2);
     refused.assert_failure_mentioning("one team size at a time (--robots N)");
     assert!(!t.path().join("two").exists());
 
