@@ -27,12 +27,7 @@ impl Fixtures {
 
     /// The torch reference cases: (occupancy, aux, torch's wheels).
     pub fn cases(&self) -> Vec<(Vec<f32>, [f32; 2], [f32; 2])> {
-        let bytes = std::fs::read(self.dir.join("cases.f32"))
-            .expect("cases.f32 written by make_fixtures.py");
-        let values: Vec<f32> = bytes
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect();
+        let values = self.f32_file("cases.f32");
         let cells = SIZE_PX * SIZE_PX;
         values
             .chunks_exact(cells + 4)
@@ -48,14 +43,19 @@ impl Fixtures {
 }
 
 impl Fixtures {
-    /// The torch reference cases of `ranges.onnx`: (occupancy, aux, ranges, torch's wheels).
-    pub fn ranges_cases(&self) -> Vec<RangesCase> {
-        let bytes = std::fs::read(self.dir.join("ranges_cases.f32"))
-            .expect("ranges_cases.f32 written by make_fixtures.py");
-        let values: Vec<f32> = bytes
+    /// A file of little-endian f32 values written by `make_fixtures.py`.
+    fn f32_file(&self, name: &str) -> Vec<f32> {
+        let bytes = std::fs::read(self.dir.join(name))
+            .unwrap_or_else(|e| panic!("{name} written by make_fixtures.py: {e}"));
+        bytes
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect();
+            .collect()
+    }
+
+    /// The torch reference cases of `ranges.onnx`: (occupancy, aux, ranges, torch's wheels).
+    pub fn ranges_cases(&self) -> Vec<RangesCase> {
+        let values = self.f32_file("ranges_cases.f32");
         let cells = SIZE_PX * SIZE_PX;
         values
             .chunks_exact(cells + 2 + SECTORS + 2)
