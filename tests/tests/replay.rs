@@ -51,15 +51,6 @@ fn record_case1(dir: &Path) -> PathBuf {
     record.join("run-0000.mcap")
 }
 
-fn assert_exit(finished: &Finished, code: i32) {
-    assert_eq!(
-        finished.output.status.code(),
-        Some(code),
-        "{}",
-        finished.describe()
-    );
-}
-
 /// The report says nothing diverged, with at least `min_compared` fresh steps compared per robot.
 fn assert_identical_over(report: &Value, robots: usize, min_compared: u64) {
     assert_eq!(report["format"], "formation-replay", "{report}");
@@ -86,14 +77,14 @@ fn a_case1_recording_replays_bit_identical_and_another_model_diverges() {
 
     let json = t.path().join("same.json");
     let same = replay(&file, &[], &json);
-    assert_exit(&same, 0);
+    same.assert_exit(0);
     same.assert_stdout_has("identical");
     assert_identical_over(&read_json(&json), 3, 190);
 
     let paper = repo_root().join("onnx/models/paper/policy.onnx");
     let json = t.path().join("paper.json");
     let other = replay(&file, &["--model", paper.to_str().unwrap()], &json);
-    assert_exit(&other, 1);
+    other.assert_exit(1);
     other.assert_stdout_has("DIVERGED");
     other.assert_stderr_has("diverged");
     let report = read_json(&json);
@@ -108,12 +99,12 @@ fn a_case1_recording_replays_bit_identical_and_another_model_diverges() {
 
     let json = t.path().join("one.json");
     let one = replay(&file, &["--robot", "1"], &json);
-    assert_exit(&one, 0);
+    one.assert_exit(0);
     let rows = read_json(&json)["robots"].as_array().unwrap().clone();
     assert_eq!(rows.len(), 1);
     assert_eq!(rows[0]["robot"], 1);
     let none = replay(&file, &["--robot", "7"], &t.path().join("none.json"));
-    assert_exit(&none, 2);
+    none.assert_exit(2);
     none.assert_stderr_has("--robot 7");
 }
 
@@ -127,7 +118,7 @@ fn replays_a_run_over_processes(name: &'static str, clock: &str, min_compared: u
     record_case1_over_processes(dir.path(), "replay", clock, &file);
     let json = dir.path().join(format!("{clock}.json"));
     let replayed = replay(&file, &[], &json);
-    assert_exit(&replayed, 0);
+    replayed.assert_exit(0);
     let report = read_json(&json);
     assert_identical_over(&report, 3, min_compared);
     assert_eq!(report["clock"], clock, "{report}");
@@ -238,11 +229,11 @@ fn bad_input_gets_a_clear_error() {
     let text = t.path().join("notes.mcap");
     std::fs::write(&text, "not a recording\n").unwrap();
     let refused = replay(&text, &[], &json);
-    assert_exit(&refused, 2);
+    refused.assert_exit(2);
     refused.assert_stderr_has("not an MCAP file");
 
     let missing = replay(&t.path().join("absent.mcap"), &[], &json);
-    assert_exit(&missing, 2);
+    missing.assert_exit(2);
     missing.assert_stderr_has("absent.mcap");
 
     let file = record_case1(t.path());
@@ -251,7 +242,7 @@ fn bad_input_gets_a_clear_error() {
     std::fs::write(&cut, &bytes[..bytes.len() * 3 / 5]).unwrap();
     let json = t.path().join("cut.json");
     let truncated = replay(&cut, &[], &json);
-    assert_exit(&truncated, 2);
+    truncated.assert_exit(2);
     truncated.assert_stderr_has("truncated");
     let report = read_json(&json);
     assert_eq!(report["complete"], false, "{report}");
@@ -265,7 +256,7 @@ fn bad_input_gets_a_clear_error() {
     let short = t.path().join("short.mcap");
     std::fs::write(&short, &bytes[..20]).unwrap();
     let too_short = replay(&short, &[], &t.path().join("short.json"));
-    assert_exit(&too_short, 2);
+    too_short.assert_exit(2);
     assert!(
         too_short.stderr().contains("too short")
             && too_short.stderr().contains("truncated")
@@ -293,7 +284,7 @@ fn bad_input_gets_a_clear_error() {
     std::fs::write(&unclosed, &crashed).unwrap();
     let json_unclosed = t.path().join("unclosed.json");
     let replayed = replay(&unclosed, &[], &json_unclosed);
-    assert_exit(&replayed, 2);
+    replayed.assert_exit(2);
     assert!(
         replayed
             .stderr()
@@ -309,7 +300,7 @@ fn bad_input_gets_a_clear_error() {
     assert_eq!(report["diverged"], false, "{report}");
 
     let no_model = replay(&file, &["--model", "/nonexistent/model.onnx"], &json);
-    assert_exit(&no_model, 2);
+    no_model.assert_exit(2);
     no_model.assert_stderr_has("/nonexistent/model.onnx");
 }
 
@@ -370,7 +361,7 @@ fn a_run_with_a_mid_run_swap_replays_bit_identical_with_each_ticks_model() {
     // No flag: every step compared, each with the model that decided its tick.
     let json = t.path().join("stored.json");
     let stored_replay = replay(&file, &[], &json);
-    assert_exit(&stored_replay, 0);
+    stored_replay.assert_exit(0);
     assert!(
         !stored_replay.stdout().contains("--swap-model"),
         "{}",
@@ -389,7 +380,7 @@ fn a_run_with_a_mid_run_swap_replays_bit_identical_with_each_ticks_model() {
     // --swap-model beside the stored model: the same model, still every step identical.
     let json = t.path().join("with.json");
     let with = replay(&file, &["--swap-model", second.to_str().unwrap()], &json);
-    assert_exit(&with, 0);
+    with.assert_exit(0);
     assert_every_step_identical(&read_json(&json));
 }
 
