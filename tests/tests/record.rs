@@ -14,8 +14,9 @@ use std::time::Duration;
 
 use formation_tests::mcap_readers as readers;
 use formation_tests::{
-    LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, eval_recorded, formation_run,
-    read_json, record_case1_over_processes, repo_root, run, send_signal, test_model, world_pid,
+    LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, eval_recorded, expert_eval_once,
+    formation_run, read_json, record_case1_over_processes, repo_root, run, send_signal, test_model,
+    world_pid,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -204,20 +205,8 @@ fn bad_record_targets_are_refused_before_anything_runs() {
     let t = ProcessTest::start("record_bad_targets", LIMIT);
     let scenario = t.case1(1.0);
     let missing = t.path().join("no/such/folder");
-    let cli = &binaries().cli;
-
-    let mut eval = Command::new(cli);
-    eval.args([
-        "eval",
-        "--controller",
-        "expert",
-        "--runs",
-        "1",
-        "--scenario",
-    ])
-    .arg(&scenario)
-    .arg("--record")
-    .arg(&missing);
+    let mut eval = expert_eval_once(&scenario, &["--record"]);
+    eval.arg(&missing);
     let finished = run(eval, LIMIT);
     finished.assert_failure_mentioning(&format!("{} does not exist", missing.display()));
     finished.assert_failure_mentioning(&format!("mkdir -p {}", missing.display()));
