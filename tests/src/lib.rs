@@ -511,6 +511,18 @@ pub fn record_case1_over_processes(dir: &Path, tag: &str, clock: &str, file: &Pa
     scenario
 }
 
+/// `formation replay FILE ARGS --json JSON`, run to completion.
+pub fn replay(file: &Path, args: &[&str], json: &Path) -> Finished {
+    let mut command = Command::new(&binaries().cli);
+    command
+        .arg("replay")
+        .arg(file)
+        .args(args)
+        .arg("--json")
+        .arg(json);
+    run(command, Duration::from_secs(300))
+}
+
 /// `formation eval` in-process with `args` (one run, its trajectory kept), recording into the
 /// folder `record` and writing its outputs to `out`.
 pub fn eval_recorded(args: &[&str], record: &Path, out: &Path) -> Finished {

@@ -3,14 +3,13 @@
 //! recorded and replayed bit for bit, and a replay with a model that does not take them diverges.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Duration;
 
 use formation_onnx::OnnxPolicy;
 use formation_robot_agent::decision::PolicyController;
 use formation_tests::{
-    Finished, ProcessTest, assert_bit_identical, binaries, eval_recorded, lockstep_over_processes,
-    read_json, run, write_tiny_model_with,
+    ProcessTest, assert_bit_identical, eval_recorded, lockstep_over_processes, read_json, replay,
+    write_tiny_model_with,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -48,18 +47,6 @@ fn a_ranges_team_in_lockstep_over_processes_is_bit_identical_to_in_process() {
     let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
     assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
     assert_bit_identical(&over_processes[0], &in_process);
-}
-
-/// `formation replay FILE ARGS --json JSON`.
-fn replay(file: &Path, args: &[&str], json: &Path) -> Finished {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .arg("replay")
-        .arg(file)
-        .args(args)
-        .arg("--json")
-        .arg(json);
-    run(command, LIMIT)
 }
 
 #[test]

@@ -17,25 +17,13 @@ use formation_proto::{LidarSpec, PolicyInput, PolicyIo};
 use formation_robot_agent::decision::{DecisionError, PolicyBackend};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
-    Finished, LiveProcess, ProcessTest, await_connected, binaries, case1_scenario, eval_recorded,
-    mcap_readers, read_json, record_case1_over_processes, repo_root, run, test_model,
+    LiveProcess, ProcessTest, await_connected, binaries, case1_scenario, eval_recorded,
+    mcap_readers, read_json, record_case1_over_processes, replay, repo_root, run, test_model,
     write_tiny_model,
 };
 use serde_json::Value;
 
 const LIMIT: Duration = Duration::from_secs(300);
-
-/// `formation replay FILE ARGS --json JSON`.
-fn replay(file: &Path, args: &[&str], json: &Path) -> Finished {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .arg("replay")
-        .arg(file)
-        .args(args)
-        .arg("--json")
-        .arg(json);
-    run(command, LIMIT)
-}
 
 /// Case 1 for 10 s with the shipped model, recorded in-process; returns the recording.
 fn record_case1(dir: &Path) -> PathBuf {
