@@ -8,6 +8,7 @@
 //! held by none, naming the runs.
 
 use formation_schema::{EvalOutput, EvalShard, RunMetrics};
+use formation_trainer_bridge::difference::FirstDifference;
 
 use crate::rollout::eval_output;
 
@@ -126,36 +127,16 @@ fn check_same_evaluation(
     shard: &EvalShard,
     index: usize,
 ) -> Result<(), MergeError> {
-    let fields: [(&'static str, String, String); 7] = [
-        (
-            "controller",
-            first.controller.clone(),
-            shard.controller.clone(),
-        ),
-        (
-            "models",
-            format!("{:?}", first.models),
-            format!("{:?}", shard.models),
-        ),
-        ("scenario", first.scenario.clone(), shard.scenario.clone()),
-        ("seed", first.seed.to_string(), shard.seed.to_string()),
-        (
-            "team_size",
-            format!("{:?}", first.team_size),
-            format!("{:?}", shard.team_size),
-        ),
-        (
-            "goal_speed",
-            format!("{:?}", first.goal_speed),
-            format!("{:?}", shard.goal_speed),
-        ),
-        (
-            "model_inputs",
-            format!("{:?}", first.model_inputs),
-            format!("{:?}", shard.model_inputs),
-        ),
-    ];
-    match fields.into_iter().find(|(_, a, b)| a != b) {
+    let difference = FirstDifference::of(first, shard)
+        .display("controller", |s| &s.controller)
+        .debug("models", |s| &s.models)
+        .display("scenario", |s| &s.scenario)
+        .display("seed", |s| s.seed)
+        .debug("team_size", |s| &s.team_size)
+        .debug("goal_speed", |s| &s.goal_speed)
+        .debug("model_inputs", |s| &s.model_inputs)
+        .found();
+    match difference {
         Some((field, expected, found)) => Err(MergeError::Mismatch {
             index,
             field,

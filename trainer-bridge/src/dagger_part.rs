@@ -34,6 +34,7 @@ use crate::dataset::{
     DatasetError, DatasetHeader, DatasetWriter, Manifest, PendingShard, Sample, check_sample,
     decode_columns,
 };
+use crate::difference::{Difference, FirstDifference};
 use crate::digest::Fnv1a64;
 
 /// The `format` of every part's metadata.
@@ -84,32 +85,16 @@ impl PartHeader {
     }
 
     /// The first field in which the two parts' iterations differ, with both values.
-    fn first_difference(&self, other: &PartHeader) -> Option<(&'static str, String, String)> {
-        if let Some(difference) = self.dataset.first_difference(&other.dataset) {
-            return Some(difference);
-        }
-        let (a, b) = (&self.rollouts, &other.rollouts);
-        let fields: [(&'static str, String, String); 6] = [
-            (
-                "iteration",
-                self.iteration.to_string(),
-                other.iteration.to_string(),
-            ),
-            ("rollout scenario", a.scenario.clone(), b.scenario.clone()),
-            (
-                "team sizes",
-                format!("{:?}", a.team_sizes),
-                format!("{:?}", b.team_sizes),
-            ),
-            ("rollout seed", a.seed.to_string(), b.seed.to_string()),
-            (
-                "expert share",
-                a.expert_share.to_string(),
-                b.expert_share.to_string(),
-            ),
-            ("model", a.model_fnv1a64.clone(), b.model_fnv1a64.clone()),
-        ];
-        fields.into_iter().find(|(_, x, y)| x != y)
+    fn first_difference(&self, other: &PartHeader) -> Option<Difference> {
+        FirstDifference::of(self, other)
+            .after(self.dataset.first_difference(&other.dataset))
+            .display("iteration", |p| p.iteration)
+            .display("rollout scenario", |p| &p.rollouts.scenario)
+            .debug("team sizes", |p| &p.rollouts.team_sizes)
+            .display("rollout seed", |p| p.rollouts.seed)
+            .display("expert share", |p| p.rollouts.expert_share)
+            .display("model", |p| &p.rollouts.model_fnv1a64)
+            .found()
     }
 }
 

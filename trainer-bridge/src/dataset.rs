@@ -32,6 +32,7 @@ use formation_proto::{LidarSpec, OccupancySpec, RangeInput, RangeInputError};
 use safetensors::tensor::{Dtype, SafeTensorError, SafeTensors, TensorView};
 use serde::{Deserialize, Serialize};
 
+use crate::difference::{Difference, FirstDifference};
 use crate::digest::Fnv1a64;
 
 /// The `format` string of every dataset manifest.
@@ -184,42 +185,21 @@ impl DatasetHeader {
     }
 
     /// The first field in which `self` and `other` differ, with both values, if any.
-    pub(crate) fn first_difference(
-        &self,
-        other: &DatasetHeader,
-    ) -> Option<(&'static str, String, String)> {
-        let ranges = |r: Option<RangeInput>| r.map_or_else(|| "none".to_owned(), |r| r.to_string());
-        let fields: [(&'static str, String, String); 8] = [
-            ("range input", ranges(self.ranges), ranges(other.ranges)),
-            (
-                "format version",
-                self.format_version.to_string(),
-                other.format_version.to_string(),
-            ),
-            (
-                "occupancy settings",
-                format!("{:?}", self.occupancy),
-                format!("{:?}", other.occupancy),
-            ),
-            (
-                "LIDAR",
-                format!("{:?}", self.lidar),
-                format!("{:?}", other.lidar),
-            ),
-            (
-                "v_train",
-                self.v_train.to_string(),
-                other.v_train.to_string(),
-            ),
-            ("seed", self.seed.to_string(), other.seed.to_string()),
-            ("scenario", self.scenario.clone(), other.scenario.clone()),
-            (
-                "dataset_id",
-                self.dataset_id.clone(),
-                other.dataset_id.clone(),
-            ),
-        ];
-        fields.into_iter().find(|(_, a, b)| a != b)
+    pub(crate) fn first_difference(&self, other: &DatasetHeader) -> Option<Difference> {
+        let ranges = |h: &DatasetHeader| {
+            h.ranges
+                .map_or_else(|| "none".to_owned(), |r| r.to_string())
+        };
+        FirstDifference::of(self, other)
+            .display("range input", ranges)
+            .display("format version", |h| h.format_version)
+            .debug("occupancy settings", |h| h.occupancy)
+            .debug("LIDAR", |h| h.lidar)
+            .display("v_train", |h| h.v_train)
+            .display("seed", |h| h.seed)
+            .display("scenario", |h| &h.scenario)
+            .display("dataset_id", |h| &h.dataset_id)
+            .found()
     }
 }
 
