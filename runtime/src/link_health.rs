@@ -8,7 +8,8 @@
 //! ticks (of a full window, so a short start cannot trip it) were braked, it returns a
 //! [`WorldEvent::LinkDegraded`] naming the robot, the braked ticks by reason and the newest round
 //! trip, at most once per [`REPORT_INTERVAL`] per robot (on the exchange's clock). The world
-//! prints the event for its launcher, which prints one line per event.
+//! prints the event for its launcher, which prints one line per event
+//! ([`degraded_link_message`]).
 //!
 //! It is pure: outcomes and instants in, events out, so its rules are unit-tested below.
 
@@ -142,6 +143,37 @@ impl LinkMonitor {
     }
 }
 
+/// The line the launcher (`formation run`) prints for a [`WorldEvent::LinkDegraded`] (`None` for any other event):
+/// the robot, how many of the window's ticks were braked and why, and the newest round trip.
+pub fn degraded_link_message(event: &WorldEvent) -> Option<String> {
+    let WorldEvent::LinkDegraded {
+        robot,
+        tick,
+        window_ms,
+        window_ticks,
+        braked,
+        reasons,
+        round_trip_us,
+    } = event
+    else {
+        return None;
+    };
+    let reasons: Vec<String> = reasons
+        .iter()
+        .map(|(reason, count)| format!("{reason} {count}"))
+        .collect();
+    let round_trip = match round_trip_us {
+        Some(us) => format!("round trip {:.1} ms", *us as f64 / 1000.0),
+        None => "no command used in the window".to_owned(),
+    };
+    Some(format!(
+        "robot {robot}: degraded link at tick {tick}: {braked} of its last {window_ticks} ticks \
+         ({:.1} s) braked ({}); {round_trip}",
+        *window_ms as f64 / 1000.0,
+        reasons.join(", ")
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -178,30 +210,19 @@ mod tests {
         assert_eq!(feed(&mut monitor, start, 0, &ticks), []);
         // A sixth within the window: reported at once, with the reasons and the newest round trip.
         let reports = feed(&mut monitor, start, 100, &[Missing]);
-        let [
-            WorldEvent::LinkDegraded {
-                robot,
-                tick,
-                window_ms,
-                window_ticks,
-                braked,
-                reasons,
-                round_trip_us,
-            },
-        ] = reports.as_slice()
-        else {
-            panic!("one report: {reports:?}");
-        };
         assert_eq!(
-            (*robot, *tick, *window_ms, *window_ticks),
-            (2, 100, 5000, 100)
+            reports,
+            [WorldEvent::LinkDegraded {
+                robot: 2,
+                tick: 100,
+                window_ms: 5000,
+                window_ticks: 100,
+                braked: 6,
+                reasons: BTreeMap::from([("missing".to_owned(), 1), ("stale".to_owned(), 5)]),
+                // Tick 94 was the last fresh one.
+                round_trip_us: Some(94),
+            }]
         );
-        assert_eq!(*braked, 6);
-        assert_eq!(
-            reasons,
-            &BTreeMap::from([("missing".to_owned(), 1), ("stale".to_owned(), 5)])
-        );
-        assert_eq!(*round_trip_us, Some(94), "tick 94 was the last fresh one");
     }
 
     #[test]
@@ -245,5 +266,26 @@ mod tests {
         // A faster lockstep tick makes a longer window in ticks.
         monitor.begin_episode(Duration::from_millis(10));
         assert_eq!(monitor.window_ticks(), 500);
+    }
+
+    #[test]
+    fn a_degraded_link_is_one_line_naming_the_robot_the_reasons_and_the_round_trip() {
+        let event = WorldEvent::LinkDegraded {
+            robot: 2,
+            tick: 140,
+            window_ms: 5000,
+            window_ticks: 100,
+            braked: 12,
+            reasons: BTreeMap::from([("missing".to_owned(), 2), ("stale".to_owned(), 10)]),
+            round_trip_us: Some(102_500),
+        };
+        assert_eq!(
+            degraded_link_message(&event).as_deref(),
+            Some(
+                "robot 2: degraded link at tick 140: 12 of its last 100 ticks (5.0 s) braked \
+                 (missing 2, stale 10); round trip 102.5 ms"
+            )
+        );
+        assert_eq!(degraded_link_message(&WorldEvent::Finished), None);
     }
 }

@@ -24,6 +24,7 @@ use std::time::Duration;
 use anyhow::Context;
 use formation_proto::wire::RunId;
 use formation_runtime::RuntimeSettings;
+use formation_runtime::link_health::degraded_link_message;
 use formation_runtime::transport::{Transport, TransportError};
 use formation_world::{RunLog, RunSpec, Scenario, Trajectory, recover_journals};
 
@@ -632,37 +633,6 @@ fn print_launch_outcome(
     Ok(())
 }
 
-/// The line the launcher prints for a [`WorldEvent::LinkDegraded`] (`None` for any other event):
-/// the robot, how many of the window's ticks were braked and why, and the newest round trip.
-pub fn degraded_link_message(event: &WorldEvent) -> Option<String> {
-    let WorldEvent::LinkDegraded {
-        robot,
-        tick,
-        window_ms,
-        window_ticks,
-        braked,
-        reasons,
-        round_trip_us,
-    } = event
-    else {
-        return None;
-    };
-    let reasons: Vec<String> = reasons
-        .iter()
-        .map(|(reason, count)| format!("{reason} {count}"))
-        .collect();
-    let round_trip = match round_trip_us {
-        Some(us) => format!("round trip {:.1} ms", *us as f64 / 1000.0),
-        None => "no command used in the window".to_owned(),
-    };
-    Some(format!(
-        "robot {robot}: degraded link at tick {tick}: {braked} of its last {window_ticks} ticks \
-         ({:.1} s) braked ({}); {round_trip}",
-        *window_ms as f64 / 1000.0,
-        reasons.join(", ")
-    ))
-}
-
 /// What `formation run` says when the world lost a robot's agent: from which tick the robot is
 /// braked, and whether the dead agent's last command still drove it up to then.
 fn lost_message(robot: usize, tick: u64, last_fresh_tick: Option<u64>) -> String {
@@ -1233,30 +1203,6 @@ mod tests {
         assert!(earlier.contains("braking it from tick 39"), "{earlier}");
         let never = lost_message(2, 5, None);
         assert!(never.contains("before it drove this run"), "{never}");
-    }
-
-    #[test]
-    fn a_degraded_link_is_one_line_naming_the_robot_the_reasons_and_the_round_trip() {
-        let event = WorldEvent::LinkDegraded {
-            robot: 2,
-            tick: 140,
-            window_ms: 5000,
-            window_ticks: 100,
-            braked: 12,
-            reasons: std::collections::BTreeMap::from([
-                ("missing".to_owned(), 2),
-                ("stale".to_owned(), 10),
-            ]),
-            round_trip_us: Some(102_500),
-        };
-        assert_eq!(
-            degraded_link_message(&event).as_deref(),
-            Some(
-                "robot 2: degraded link at tick 140: 12 of its last 100 ticks (5.0 s) braked \
-                 (missing 2, stale 10); round trip 102.5 ms"
-            )
-        );
-        assert_eq!(degraded_link_message(&WorldEvent::Finished), None);
     }
 
     #[test]
