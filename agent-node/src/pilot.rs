@@ -63,8 +63,10 @@ impl Pilot for OnnxPilot {
         Ok(self.agent.perceive(ranges, goal)?)
     }
 
-    fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, BoxError> {
-        Ok(self.agent.decide(heading, goal)?)
+    /// Decides under the goal [`Pilot::perceive`] just checked and held (the agent loop hands
+    /// both the same goal), which is not checked again.
+    fn decide(&mut self, heading: f64, _goal: &Goal) -> Result<WheelCmd, BoxError> {
+        Ok(self.agent.decide(heading)?)
     }
 
     fn swap(&mut self, model: Box<dyn PolicyBackend>) -> Result<(), BoxError> {

@@ -129,6 +129,22 @@ pub enum DecisionError {
     },
 }
 
+/// Renders `scan` into the occupancy image `io` declares and pools its ranges where `io` takes
+/// them, under d*: one observation as a policy of `io` sees it.
+fn render_observation(
+    scan: &[f32],
+    lidar: &LidarSpec,
+    io: &PolicyIo,
+    d_star: f64,
+    image: &mut [u8],
+    ranges: &mut [f32],
+) {
+    occupancy::render_at(scan, lidar, &io.image, d_star, image);
+    if let Some(spec) = &io.ranges {
+        ranges::pool(scan, lidar, spec, d_star, ranges);
+    }
+}
+
 /// What a swap candidate was tried on before it could drive.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TrialObservation {
@@ -288,7 +304,8 @@ impl Agent {
     }
 
     /// Renders this robot's occupancy image from its own scan under the goal (whose d* sets the
-    /// window of a model whose window scales with d*; a fixed window ignores it).
+    /// window of a model whose window scales with d*; a fixed window ignores it), and holds the
+    /// goal for [`Agent::decide`].
     pub fn perceive(&mut self, scan: &[f32], goal: &Goal) -> Result<(), DecisionError> {
         self.hold_goal(goal)?;
         if scan.len() != self.lidar.beams {
@@ -297,28 +314,38 @@ impl Agent {
                 actual: scan.len(),
             });
         }
-        occupancy::render_at(
-            scan,
+        self.last_scan.clear();
+        self.last_scan.extend_from_slice(scan);
+        self.render_last_scan(goal.d_star);
+        Ok(())
+    }
+
+    /// Renders the last scan into the policy's image (u8 and f32) and pools its ranges where the
+    /// policy takes them, under d*: what [`Agent::perceive`] and [`Agent::rehearse`] both do.
+    fn render_last_scan(&mut self, d_star: f64) {
+        render_observation(
+            &self.last_scan,
             &self.lidar,
-            &self.io.image,
-            goal.d_star,
+            &self.io,
+            d_star,
             &mut self.image,
+            &mut self.ranges,
         );
         for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
             *dst = f32::from(src);
         }
-        if let Some(spec) = &self.io.ranges {
-            ranges::pool(scan, &self.lidar, spec, goal.d_star, &mut self.ranges);
-        }
-        self.last_scan.clear();
-        self.last_scan.extend_from_slice(scan);
-        Ok(())
     }
 
-    /// Runs the policy on the last perceived image and turns its output into the wheel command,
-    /// as the model declares it ([`policy_input::command_of_output`]).
-    pub fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, DecisionError> {
-        self.hold_goal(goal)?;
+    /// Runs the policy on the last perceived image under the goal [`Agent::perceive`] held, and
+    /// turns its output into the wheel command, as the model declares it
+    /// ([`policy_input::command_of_output`]). The goal is checked once a tick, where it entered.
+    pub fn decide(&mut self, heading: f64) -> Result<WheelCmd, DecisionError> {
+        let Some(goal) = self.goal else {
+            return Err(DecisionError::Goal {
+                reason: "no goal held: perceive a scan under a goal before deciding".to_owned(),
+            });
+        };
+        let goal = &goal;
         policy_input::check_heading(heading).map_err(|e| DecisionError::Goal {
             reason: e.to_string(),
         })?;
@@ -355,25 +382,7 @@ impl Agent {
         let (Some((_, aux)), Some(goal)) = (self.last_decision, self.goal) else {
             return Ok(());
         };
-        occupancy::render_at(
-            &self.last_scan,
-            &self.lidar,
-            &self.io.image,
-            goal.d_star,
-            &mut self.image,
-        );
-        for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
-            *dst = f32::from(src);
-        }
-        if let Some(spec) = &self.io.ranges {
-            ranges::pool(
-                &self.last_scan,
-                &self.lidar,
-                spec,
-                goal.d_star,
-                &mut self.ranges,
-            );
-        }
+        self.render_last_scan(goal.d_star);
         self.policy.infer(&PolicyInput {
             image: &self.image_f32,
             aux: &aux,
@@ -390,7 +399,7 @@ impl Agent {
         goal: &Goal,
     ) -> Result<WheelCmd, DecisionError> {
         self.perceive(scan, goal)?;
-        self.decide(heading, goal)
+        self.decide(heading)
     }
 
     /// The occupancy image of the last [`Agent::perceive`] (u8 cells, row-major).
@@ -434,22 +443,14 @@ impl Agent {
             io.ranges.map_or_else(Vec::new, |r| vec![r.clip; r.sectors]);
         let (aux, observation) = match (self.last_decision, self.goal) {
             (Some((heading, _)), Some(goal)) if self.last_scan.len() == self.lidar.beams => {
-                occupancy::render_at(
+                render_observation(
                     &self.last_scan,
                     &self.lidar,
-                    &io.image,
+                    &io,
                     goal.d_star,
                     &mut image,
+                    &mut trial_ranges,
                 );
-                if let Some(spec) = &io.ranges {
-                    ranges::pool(
-                        &self.last_scan,
-                        &self.lidar,
-                        spec,
-                        goal.d_star,
-                        &mut trial_ranges,
-                    );
-                }
                 (io.aux.values(heading, &goal), TrialObservation::Last)
             }
             _ => (io.aux.values(0.0, &TRIAL_GOAL), TrialObservation::Empty),
@@ -983,7 +984,7 @@ mod tests {
         let image = agent.image().to_vec();
         agent.rehearse().expect("rehearses");
         assert_eq!(agent.image(), image, "the same image");
-        let again = agent.decide(0.5, &goal).expect("decides again");
+        let again = agent.decide(0.5).expect("decides again");
         assert_eq!(first, again, "the same command after a rehearsal");
     }
 

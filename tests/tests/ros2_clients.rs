@@ -496,10 +496,7 @@ impl InProcess {
         self.agent
             .perceive(&resampled.ranges, &GOAL)
             .expect("in-process perception");
-        let wheels = self
-            .agent
-            .decide(heading, &GOAL)
-            .expect("in-process decision");
+        let wheels = self.agent.decide(heading).expect("in-process decision");
         twist_from_wheels(wheels.left, wheels.right, WHEEL_SEPARATION).expect("a Twist")
     }
 }

@@ -215,7 +215,7 @@ fn in_process_twists(steps: &[(LaserScan, f64)]) -> Vec<Twist> {
                 Quaternion { x, y, z, w }
             })
             .expect("a heading");
-            let wheels = agent.decide(heading, &GOAL).expect("a decision");
+            let wheels = agent.decide(heading).expect("a decision");
             let largest = wheels.left.abs().max(wheels.right.abs());
             let wheels = if largest > BURGER_TOP_SPEED {
                 let scale = BURGER_TOP_SPEED / largest;
