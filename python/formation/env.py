@@ -48,7 +48,7 @@ import gymnasium
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from formation._native import Batch, EpisodeOver, Scenario
+from formation._native import Batch, EpisodeOver, Scenario, range_input
 from formation.model import ModelSpec
 
 
@@ -156,7 +156,7 @@ class FormationParallelEnv(ParallelEnv):
         image = spaces.Box(0.0, 1.0, (1, size, size), np.float32)
         if self.spec.ranges is None:
             return spaces.Dict({"occupancy": image, "aux": aux})
-        sectors, clip = _range_input(self.spec.ranges)
+        sectors, clip = range_input(self.spec.ranges)
         ranges = spaces.Box(0.0, np.float32(clip), (sectors,), np.float32)
         return spaces.Dict({"occupancy": image, "aux": aux, "ranges": ranges})
 
@@ -340,13 +340,3 @@ class SingleRobotEnv(gymnasium.Env):
         actions[self.agent] = action
         observations, rewards, terms, truncs, infos = self.parallel.step(actions)
         return observations[self.agent], rewards[self.agent], terms[self.agent], truncs[self.agent], infos[self.agent]
-
-
-def _range_input(text: str) -> tuple:
-    """``(K, C)`` of a ``formation.ranges`` declaration ``"sectors=K,clip=C"`` (the native batch
-    checks it fully when it pools)."""
-    fields = dict(part.split("=", 1) for part in text.replace(" ", "").split(",") if "=" in part)
-    try:
-        return int(fields["sectors"]), float(fields["clip"])
-    except (KeyError, ValueError) as e:
-        raise ValueError(f"range input {text!r} (formation.ranges) is not 'sectors=K,clip=C'") from e

@@ -11,7 +11,9 @@
 //! * [`scenario`]: `Scenario`, loaded from a file with optional overrides.
 //! * [`batch`]: `Batch`, `B` runs of one scenario stepped together in parallel (rayon), numpy
 //!   arrays in and out; the Python environments are built on it (a single run is a batch of one).
+//! * [`range_input`]: a model's `formation.ranges` read by the agent's own `RangeInput::parse`.
 
+use formation_proto::RangeInput;
 use pyo3::prelude::*;
 
 pub mod batch;
@@ -30,9 +32,22 @@ pyo3::create_exception!(
     "A step after the last tick of a run: reset to start another run."
 );
 
-/// The native module: `Scenario`, `Batch` and their exceptions.
+/// `(sectors, clip)` of a model's range input, its `formation.ranges` (`"sectors=K,clip=C"`),
+/// read and checked by the agent's own [`RangeInput::parse`]; a `ValueError` says what is wrong.
+#[pyfunction]
+pub fn range_input(text: &str) -> PyResult<(usize, f32)> {
+    let spec = RangeInput::parse(text).map_err(|e| {
+        pyo3::exceptions::PyValueError::new_err(format!(
+            "range input {text:?} (the model's formation.ranges): {e}"
+        ))
+    })?;
+    Ok((spec.sectors, spec.clip))
+}
+
+/// The native module: `Scenario`, `Batch`, `range_input` and the exceptions.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(range_input, m)?)?;
     m.add_class::<scenario::PyScenario>()?;
     m.add_class::<batch::Batch>()?;
     m.add("ScenarioError", m.py().get_type::<ScenarioError>())?;

@@ -113,6 +113,18 @@ def test_a_formation_velocity_policy_episode_equals_formation_eval_bit_for_bit(t
     assert got == expected
 
 
+def test_the_range_input_is_read_by_the_agents_own_parser():
+    # formation.ranges as the agent reads it (RangeInput::parse): keys in either order, spaces
+    # allowed, values checked; what the environment's ranges space is sized by.
+    from formation._native import range_input
+
+    assert range_input("sectors=100,clip=3") == (100, 3.0)
+    assert range_input(" clip = 2.5 , sectors = 6 ") == (6, 2.5)
+    for bad in ["sectors=100", "sectors=x,clip=3", "sectors=2,clip=3", "sectors=8,clip=0", ""]:
+        with pytest.raises(ValueError, match="formation.ranges"):
+            range_input(bad)
+
+
 def test_a_ranges_policy_episode_equals_formation_eval_bit_for_bit(tmp_path):
     # A model that takes the scan's ranges beside its image (formation.ranges, issue 34 item 6):
     # the environment feeds what the Rust agent feeds, so the episode is formation eval's.
