@@ -27,6 +27,7 @@
 //! ONNX decision as the agent loop drives it is [`pilot`].
 
 pub mod pilot;
+pub mod reach;
 pub mod ros2;
 
 use std::path::PathBuf;
@@ -75,18 +76,9 @@ pub struct Args {
     /// Exit when standard input closes (set by the launcher, so agents never outlive it).
     #[arg(long)]
     pub exit_on_stdin_close: bool,
-    /// How to reach the world: iceoryx2 shared memory on this host, or Zenoh over TCP; or, with
-    /// ros2, drive a ROS 2 robot through its Zenoh router (rmw_zenoh).
-    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
-    pub transport: Transport,
-    /// Zenoh: the world's endpoint, tcp/ADDR:PORT; ROS 2: the robot's router (rmw_zenohd
-    /// listens on tcp/ADDR:7447).
-    #[arg(long, value_name = "tcp/ADDR:PORT")]
-    pub connect: Option<String>,
-    /// Zenoh: this robot's credentials file (`robot-<i>.json` from `formation credentials`): its
-    /// login and the launch secret, which then is not read from standard input.
-    #[arg(long, value_name = "FILE")]
-    pub credentials: Option<PathBuf>,
+    /// `--transport`, `--connect` and `--credentials`: how to reach the world.
+    #[command(flatten)]
+    pub reach: reach::ReachArgs,
     /// Rehearse the last decision this long before the next scan is due \[µs\] (0: never), so
     /// that an agent idling between realtime ticks decides with warm caches (measured on 2
     /// cores, realtime case 1: inference p50 from 140–166 µs down to 72–88 µs, for one extra
@@ -144,24 +136,26 @@ pub fn who(args: &Args) -> String {
 pub fn run(args: &Args) -> anyhow::Result<AgentExit> {
     let pilots = Arc::new(OnnxPilots);
     let model = load_model(&*pilots, &args.model)?;
-    args.transport.check_built_in("formation-agent")?;
-    args.transport
-        .refuse_network_flags(&[(args.connect.is_some(), "--connect")])?;
-    args.transport
-        .refuse_zenoh_flags(&[(args.credentials.is_some(), "--credentials")])?;
-    args.transport.refuse_ros2_flags(&args.ros2.given())?;
-    if args.transport == Transport::Ros2 {
+    args.reach.transport.check_built_in("formation-agent")?;
+    args.reach
+        .transport
+        .refuse_network_flags(&[(args.reach.connect.is_some(), "--connect")])?;
+    args.reach
+        .transport
+        .refuse_zenoh_flags(&[(args.reach.credentials.is_some(), "--credentials")])?;
+    args.reach.transport.refuse_ros2_flags(&args.ros2.given())?;
+    if args.reach.transport == Transport::Ros2 {
         return ros2::run(args, model, &stop_flag(args));
     }
     let (Some(run_id), Some(robot)) = (&args.run_id, args.robot) else {
         anyhow::bail!(
             "--transport {} needs --run-id and --robot (the run and robot to join)",
-            args.transport
+            args.reach.transport
         );
     };
     let run_id = RunId::new(run_id)?;
     let timeout = Duration::from_millis(args.connect_timeout_ms);
-    let mut link: Box<dyn AgentLink> = match args.transport {
+    let mut link: Box<dyn AgentLink> = match args.reach.transport {
         Transport::Iceoryx2 => {
             let namespace = RunNamespace::new(&run_id);
             let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
@@ -207,11 +201,11 @@ fn zenoh_link(
 ) -> anyhow::Result<Box<dyn AgentLink>> {
     use formation_runtime::zenoh::{ZenohAgentLink, credentials};
     let endpoint = formation_runtime::process::required_endpoint(
-        args.connect.as_deref(),
+        args.reach.connect.as_deref(),
         "--connect",
         Transport::Zenoh,
     )?;
-    let (login, secret) = match &args.credentials {
+    let (login, secret) = match &args.reach.credentials {
         Some(path) => {
             let found = credentials::read_robot(path, robot)?;
             (Some(found.login), found.secret)

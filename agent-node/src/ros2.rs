@@ -371,7 +371,7 @@ fn check_ros2_flags(args: &crate::Args) -> anyhow::Result<Endpoint> {
         );
     }
     formation_runtime::process::required_endpoint(
-        args.connect.as_deref(),
+        args.reach.connect.as_deref(),
         "--connect",
         Transport::Ros2,
     )
