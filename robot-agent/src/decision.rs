@@ -48,20 +48,10 @@ use formation_perception::{occupancy, policy_input, ranges};
 /// Why an agent could not decide, or could not take a policy.
 #[derive(Debug, thiserror::Error)]
 pub enum DecisionError {
-    /// The ONNX policy failed to load, validate or run.
+    /// The ONNX policy failed to load, validate or run, or was trained for another sensor than
+    /// this robot's ([`PolicyError::SensorMismatch`]).
     #[error(transparent)]
     Policy(#[from] PolicyError),
-    /// The model was trained for another sensor than this robot's.
-    #[error(
-        "model {model} {reason}; use a model trained with the scenario's sensor settings \
-         (formation collect/train) or set the scenario's [lidar] to the model's"
-    )]
-    SensorMismatch {
-        /// Model id.
-        model: String,
-        /// Which setting differs, with the model's value and the sensor's.
-        reason: SensorViolation,
-    },
     /// A swap candidate gave a non-finite command on its trial observation; it was not swapped in.
     #[error(
         "candidate model {model} gives a non-finite command ({left}, {right}) on {observation}; \
@@ -517,9 +507,11 @@ fn sectors(io: &PolicyIo) -> usize {
 
 /// The full sensor contract of `policy` against this robot's LIDAR: beams, range and window.
 fn check_policy(policy: &dyn PolicyBackend, lidar: &LidarSpec) -> Result<(), DecisionError> {
-    let mismatch = |reason| DecisionError::SensorMismatch {
-        model: policy.model_id().to_owned(),
-        reason,
+    let mismatch = |reason| {
+        DecisionError::Policy(PolicyError::SensorMismatch {
+            model: policy.model_id().to_owned(),
+            reason,
+        })
     };
     check_sensor(&policy.sensor(), lidar).map_err(mismatch)?;
     match policy.io().ranges {
@@ -996,13 +988,13 @@ mod tests {
         };
         assert!(matches!(
             Agent::new(probe(), lidar),
-            Err(DecisionError::SensorMismatch {
+            Err(DecisionError::Policy(PolicyError::SensorMismatch {
                 reason: SensorViolation::Beams {
                     trained: 900,
                     actual: 360
                 },
                 ..
-            })
+            }))
         ));
         let mut agent = Agent::new(probe(), LidarSpec::default()).expect("matches");
         let scan = vec![10.0; 900];
@@ -1107,8 +1099,8 @@ mod tests {
             ..LidarSpec::default()
         };
         match Agent::new(Box::new(Fake::new("ten-metres", [0.1, 0.1])), short) {
-            Err(err @ DecisionError::SensorMismatch { .. }) => {
-                let DecisionError::SensorMismatch { reason, .. } = &err else {
+            Err(err @ DecisionError::Policy(PolicyError::SensorMismatch { .. })) => {
+                let DecisionError::Policy(PolicyError::SensorMismatch { reason, .. }) = &err else {
                     unreachable!()
                 };
                 assert_eq!(
@@ -1140,10 +1132,10 @@ mod tests {
         };
         assert!(matches!(
             Agent::new(Box::new(unrecorded()), blind),
-            Err(DecisionError::SensorMismatch {
+            Err(DecisionError::Policy(PolicyError::SensorMismatch {
                 reason: SensorViolation::Window { .. },
                 ..
-            })
+            }))
         ));
         Agent::new(Box::new(unrecorded()), LidarSpec::default()).expect("10 m covers the window");
 
@@ -1159,10 +1151,10 @@ mod tests {
         };
         assert!(matches!(
             agent.swap_policy(Box::new(wrong)),
-            Err(DecisionError::SensorMismatch {
+            Err(DecisionError::Policy(PolicyError::SensorMismatch {
                 reason: SensorViolation::MaxRange { trained, .. },
                 ..
-            }) if trained == 20.0
+            })) if trained == 20.0
         ));
         assert_eq!(agent.model_id(), "current");
     }

@@ -34,10 +34,10 @@ fn a_range_mismatch_names_the_robot_the_models_range_and_the_scenarios() {
     assert!(
         matches!(
             *err.source,
-            DecisionError::SensorMismatch {
+            DecisionError::Policy(PolicyError::SensorMismatch {
                 reason: SensorViolation::MaxRange { trained, actual },
                 ..
-            } if trained == 10.0 && actual == 5.0
+            }) if trained == 10.0 && actual == 5.0
         ),
         "{err:?}"
     );
