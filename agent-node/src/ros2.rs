@@ -524,12 +524,12 @@ mod tests {
     use formation_proto::WheelCmd;
 
     #[test]
-    fn an_unknown_profile_is_refused_with_the_known_names() {
+    fn an_unknown_profile_is_refused_naming_the_flag() {
+        // The world's `RobotProfile::named_by_flag` lists the known names; the flag is ours.
         let message = profile_named("turtlebot4").unwrap_err().to_string();
-        assert_eq!(
-            message,
-            "--profile must name a robot profile, one of \"ideal\", \"pioneer-p3dx\", \
-             \"turtlebot3-burger\" (got \"turtlebot4\")"
+        assert!(
+            message.starts_with("--profile must name a robot profile"),
+            "{message}"
         );
         assert_eq!(
             profile_named("turtlebot3-burger").unwrap(),
