@@ -21,7 +21,8 @@
 //! slow build is not a hung test.
 //!
 //! [`netns`] makes network namespaces for the Zenoh tests across a network; the `delay-relay`
-//! binary of this package delays TCP between them.
+//! binary of this package delays TCP between them. [`ros2`] is what the ROS 2 tests share: the
+//! agent's decision computed in the test's process, the scans they send, the client's JSON.
 //!
 //! How the tests get a model: `FORMATION_TEST_MODEL` if set; else `tests/fixtures/tiny_policy.py`
 //! writes a contract-conforming ONNX model with seeded random weights, run with
@@ -36,6 +37,7 @@
 
 pub mod netns;
 pub mod process_test;
+pub mod ros2;
 
 pub use process_test::ProcessTest;
 

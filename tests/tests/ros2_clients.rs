@@ -21,18 +21,18 @@ use std::process::Command;
 use std::sync::OnceLock;
 use std::time::Duration;
 
-use formation_agent_node::pilot::OnnxPilots;
-use formation_proto::{Goal, LidarSpec};
-use formation_robot_agent::decision::Agent;
+use formation_proto::Goal;
 use formation_ros2::msg::Quaternion;
 use formation_ros2::{
-    Header, LaserScan, PartialScan, RingContract, Time, Twist, resample_scan, twist_from_wheels,
-    yaw_from_quaternion,
+    Header, LaserScan, PartialScan, Time, Twist, twist_from_wheels, yaw_from_quaternion,
 };
-use formation_runtime::agent::PilotMaker;
+use formation_tests::ros2::{
+    InProcessDecision, answered_bits, client_script, is_event, parse_event, range_to_discs,
+    twist_bits,
+};
 use formation_tests::{
-    Finished, LiveProcess, ProcessTest, TempDir, binaries, free_tcp_port, python, repo_root, run,
-    send_signal, test_model,
+    Finished, LiveProcess, ProcessTest, TempDir, binaries, free_tcp_port, python, run, send_signal,
+    test_model,
 };
 use rand::{Rng, SeedableRng};
 use serde_json::{Value, json};
@@ -47,10 +47,6 @@ const MISSING_PACKAGE: i32 = 3;
 
 // ---------------------------------------------------------------------------------------------
 // The client and its Python
-
-fn client_script() -> PathBuf {
-    repo_root().join("tests/python/ros2_client.py")
-}
 
 /// The interpreter with the client's packages. A missing package or interpreter fails the tests
 /// that need it with the fix (no test passes by skipping), as does any other failure of
@@ -88,19 +84,6 @@ fn clients() -> &'static Path {
         Ok(python) => python,
         Err(why) => panic!("{why}"),
     }
-}
-
-/// One JSON event line of the client.
-fn parse_event(line: &str) -> Option<Value> {
-    serde_json::from_str::<Value>(line)
-        .ok()
-        .filter(|v| v.get("event").is_some())
-}
-
-fn is_event(line: &str, names: &[&str]) -> bool {
-    parse_event(line)
-        .and_then(|v| v["event"].as_str().map(|e| names.contains(&e)))
-        .unwrap_or(false)
 }
 
 /// What a client and an agent did in one session.
@@ -333,21 +316,7 @@ fn cast_scan(
                 return 0.01;
             }
             let angle = f64::from(angle_min) + i as f64 * f64::from(increment);
-            let (dx, dy) = (angle.cos(), angle.sin());
-            let hit = obstacles
-                .iter()
-                .filter_map(|&(x, y, r)| {
-                    let along = dx * x + dy * y;
-                    let disc = along * along - (x * x + y * y) + r * r;
-                    (disc >= 0.0).then(|| along - disc.sqrt())
-                })
-                .filter(|&t| t > 0.0)
-                .fold(f64::INFINITY, f64::min);
-            if hit <= f64::from(range_max) {
-                hit as f32
-            } else {
-                f32::INFINITY
-            }
+            range_to_discs(angle, obstacles, range_max)
         })
         .collect();
     Scan {
@@ -462,66 +431,16 @@ fn plan(steps: Vec<Value>) -> Value {
     })
 }
 
-/// The decision of the agent's model computed in this process: the scan resampled onto the
-/// model's ring (`formation_ros2::resample_scan`), the occupancy image and the policy
-/// (`formation_robot_agent::decision::Agent`), and the Twist of the wheel speeds.
-struct InProcess {
-    agent: Agent,
-    contract: RingContract,
-}
-
-impl InProcess {
-    fn new() -> InProcess {
-        let model = OnnxPilots
-            .load(test_model())
-            .expect("loading the test model");
-        let (beams, max_range) = (
-            model.sensor().beams.expect("the model's beams"),
-            model.sensor().max_range.expect("the model's range"),
-        );
-        let lidar = LidarSpec {
-            beams,
-            max_range,
-            noise_std: 0.0,
-        };
-        InProcess {
-            agent: Agent::new(model, lidar).expect("the in-process agent"),
-            contract: RingContract { beams, max_range },
-        }
-    }
-
-    fn twist(&mut self, scan: &Scan, heading: f64, partial: PartialScan) -> Twist {
-        let resampled =
-            resample_scan(&scan.message(), self.contract, partial).expect("a usable scan");
-        self.agent
-            .perceive(&resampled.ranges, &GOAL)
-            .expect("in-process perception");
-        let wheels = self.agent.decide(heading).expect("in-process decision");
-        twist_from_wheels(wheels.left, wheels.right, WHEEL_SEPARATION).expect("a Twist")
-    }
-}
-
-fn twist_bits(twist: &Twist) -> [u64; 6] {
-    [
-        twist.linear.x,
-        twist.linear.y,
-        twist.linear.z,
-        twist.angular.x,
-        twist.angular.y,
-        twist.angular.z,
-    ]
-    .map(f64::to_bits)
-}
-
-/// The bit patterns of the Twist the client decoded with rosbags.
-fn answered_bits(answer: &Value) -> [u64; 6] {
-    let bits: Vec<u64> = answer["twist_bits"]
-        .as_array()
-        .expect("twist_bits")
-        .iter()
-        .map(|b| b.as_u64().expect("u64 bits"))
-        .collect();
-    bits.try_into().expect("six components")
+/// The Twist of the agent's decision computed in this process
+/// ([`InProcessDecision`]), made with the robot's wheel separation.
+fn in_process_twist(
+    reference: &mut InProcessDecision,
+    scan: &Scan,
+    heading: f64,
+    partial: PartialScan,
+) -> Twist {
+    let wheels = reference.wheels(&scan.message(), heading, &GOAL, partial);
+    twist_from_wheels(wheels.left, wheels.right, WHEEL_SEPARATION).expect("a Twist")
 }
 
 fn is_zero(answer: &Value) -> bool {
@@ -597,13 +516,13 @@ fn twists_answer_laser_scans_and_imu_as_the_in_process_decision_does() {
     flags.extend(["--stale-ms", "5000"]);
     let outcome = session(python, &t.dir, "decide", &plan(steps), &flags);
 
-    let mut reference = InProcess::new();
+    let mut reference = InProcessDecision::new();
     let answers = outcome.answers();
     assert_eq!(answers.len(), cases.len(), "{}", outcome.describe());
     let mut expected_twists = Vec::new();
     for (i, ((scan, imu), answer)) in cases.iter().zip(&answers).enumerate() {
         assert_answers(&outcome, answer, scan);
-        let expected = reference.twist(scan, imu.heading(), PartialScan::Refuse);
+        let expected = in_process_twist(&mut reference, scan, imu.heading(), PartialScan::Refuse);
         assert_drives_as(&outcome, answer, &expected, &format!("scan {i}"));
         expected_twists.push(twist_bits(&expected));
     }
@@ -642,7 +561,12 @@ fn zenoh_ros2_sdk_discovers_the_agents_node_and_topics_through_liveliness() {
 
     let answers = outcome.answers();
     assert_eq!(answers.len(), 1, "{}", outcome.describe());
-    let expected = InProcess::new().twist(&scan, imu.heading(), PartialScan::Refuse);
+    let expected = in_process_twist(
+        &mut InProcessDecision::new(),
+        &scan,
+        imu.heading(),
+        PartialScan::Refuse,
+    );
     assert_drives_as(
         &outcome,
         answers[0],
@@ -908,7 +832,12 @@ fn a_partial_circle_scan_brakes_unless_allowed_and_then_drives_as_in_process() {
     let answers = allowed.answers();
     assert_eq!(answers.len(), 1, "{}", allowed.describe());
     assert_answers(&allowed, answers[0], &half);
-    let expected = InProcess::new().twist(&half, imu(1).heading(), PartialScan::AllowAsNoReturn);
+    let expected = in_process_twist(
+        &mut InProcessDecision::new(),
+        &half,
+        imu(1).heading(),
+        PartialScan::AllowAsNoReturn,
+    );
     assert_drives_as(&allowed, answers[0], &expected, "the allowed partial scan");
     allowed.assert_clean_wire_and_exit();
 }

@@ -15,18 +15,17 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_agent_node::pilot::OnnxPilots;
-use formation_proto::{Goal, LidarSpec, WheelCmd};
-use formation_robot_agent::decision::Agent;
+use formation_proto::{Goal, WheelCmd};
 use formation_ros2::msg::Quaternion;
 use formation_ros2::{
-    Header, LaserScan, PartialScan, RingContract, Time, Twist, resample_scan, twist_from_wheels,
-    yaw_from_quaternion,
+    Header, LaserScan, PartialScan, Time, Twist, twist_from_wheels, yaw_from_quaternion,
 };
-use formation_runtime::agent::PilotMaker;
+use formation_tests::ros2::{
+    InProcessDecision, answered_bits, client_script, is_event, parse_event, range_to_discs,
+    twist_bits,
+};
 use formation_tests::{
-    LiveProcess, TempDir, Watchdog, binaries, free_tcp_port, one_at_a_time, python, repo_root,
-    test_model,
+    LiveProcess, TempDir, Watchdog, binaries, free_tcp_port, one_at_a_time, python, test_model,
 };
 use serde_json::{Value, json};
 
@@ -45,10 +44,6 @@ const GOAL: Goal = Goal {
     d_star: 1.2,
     v_star: 0.2,
 };
-
-fn client_script() -> PathBuf {
-    repo_root().join("tests/python/ros2_client.py")
-}
 
 /// The interpreter with the client's packages, or a panic with the fix.
 fn clients() -> PathBuf {
@@ -69,19 +64,6 @@ fn clients() -> PathBuf {
     python
 }
 
-/// One JSON event line of the client.
-fn parse_event(line: &str) -> Option<Value> {
-    serde_json::from_str::<Value>(line)
-        .ok()
-        .filter(|v| v.get("event").is_some())
-}
-
-fn is_event(line: &str, names: &[&str]) -> bool {
-    parse_event(line)
-        .and_then(|v| v["event"].as_str().map(|e| names.contains(&e)))
-        .unwrap_or(false)
-}
-
 /// A full-circle scan of `FOREIGN_BEAMS` readings of circular obstacles, beyond the range as
 /// +inf (REP-117); `seed` moves the obstacles.
 fn foreign_scan(stamp_ns: i64, seed: u64) -> LaserScan {
@@ -95,24 +77,7 @@ fn foreign_scan(stamp_ns: i64, seed: u64) -> LaserScan {
         })
         .collect();
     let ranges = (0..FOREIGN_BEAMS)
-        .map(|i| {
-            let angle = i as f64 * f64::from(increment);
-            let (dx, dy) = (angle.cos(), angle.sin());
-            let hit = obstacles
-                .iter()
-                .filter_map(|&(x, y, r)| {
-                    let along = dx * x + dy * y;
-                    let disc = along * along - (x * x + y * y) + r * r;
-                    (disc >= 0.0).then(|| along - disc.sqrt())
-                })
-                .filter(|&t| t > 0.0)
-                .fold(f64::INFINITY, f64::min);
-            if hit <= f64::from(FOREIGN_RANGE) {
-                hit as f32
-            } else {
-                f32::INFINITY
-            }
-        })
+        .map(|i| range_to_discs(i as f64 * f64::from(increment), &obstacles, FOREIGN_RANGE))
         .collect::<Vec<f32>>();
     LaserScan {
         header: Header {
@@ -192,30 +157,16 @@ fn plan(steps: &[(LaserScan, f64)]) -> Value {
 /// The same decision in this process: the scan resampled onto the model's ring, the policy,
 /// both wheels scaled by one factor into the Burger's top speed, the Burger's Twist.
 fn in_process_twists(steps: &[(LaserScan, f64)]) -> Vec<Twist> {
-    let model = OnnxPilots.load(test_model()).expect("the test model");
-    let contract = RingContract {
-        beams: model.sensor().beams.expect("the model's beams"),
-        max_range: model.sensor().max_range.expect("the model's range"),
-    };
-    let lidar = LidarSpec {
-        beams: contract.beams,
-        max_range: contract.max_range,
-        noise_std: 0.0,
-    };
-    let mut agent = Agent::new(model, lidar).expect("the in-process agent");
+    let mut reference = InProcessDecision::new();
     steps
         .iter()
         .map(|(scan, yaw)| {
-            let resampled = resample_scan(scan, contract, PartialScan::Refuse).expect("a scan");
-            agent
-                .perceive(&resampled.ranges, &GOAL)
-                .expect("perception");
             let heading = yaw_from_quaternion(&{
                 let [x, y, z, w] = quaternion(*yaw);
                 Quaternion { x, y, z, w }
             })
             .expect("a heading");
-            let wheels = agent.decide(heading).expect("a decision");
+            let wheels = reference.wheels(scan, heading, &GOAL, PartialScan::Refuse);
             let largest = wheels.left.abs().max(wheels.right.abs());
             let wheels = if largest > BURGER_TOP_SPEED {
                 let scale = BURGER_TOP_SPEED / largest;
@@ -229,18 +180,6 @@ fn in_process_twists(steps: &[(LaserScan, f64)]) -> Vec<Twist> {
             twist_from_wheels(wheels.left, wheels.right, BURGER_WHEEL_SEPARATION).expect("a Twist")
         })
         .collect()
-}
-
-fn twist_bits(twist: &Twist) -> [u64; 6] {
-    [
-        twist.linear.x,
-        twist.linear.y,
-        twist.linear.z,
-        twist.angular.x,
-        twist.angular.y,
-        twist.angular.z,
-    ]
-    .map(f64::to_bits)
 }
 
 /// A TurtleBot3 Burger agent on a 720-beam, 8 m LaserScan: one warning names the beams and the
@@ -351,14 +290,8 @@ fn assert_drives_as_in_process(answers: &[Value], steps: &[(LaserScan, f64)], de
             "{describe}"
         );
         assert_ne!(answer["zero"], json!(true), "the agent braked\n{describe}");
-        let bits: Vec<u64> = answer["twist_bits"]
-            .as_array()
-            .expect("twist_bits")
-            .iter()
-            .map(|b| b.as_u64().expect("bits"))
-            .collect();
         assert_eq!(
-            bits,
+            answered_bits(answer),
             twist_bits(twist),
             "the agent's Twist {} differs from the in-process {twist:?}\n{describe}",
             answer["twist"]
