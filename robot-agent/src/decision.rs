@@ -823,18 +823,31 @@ mod tests {
         assert!(err.to_string().contains("100 sectors"), "{err}");
     }
 
+    /// An agent of `probe` on the default LIDAR, and a scan with no return.
+    fn agent_and_open_scan(probe: Box<Probe>) -> (Agent, Vec<f32>) {
+        let lidar = LidarSpec::default();
+        let agent = Agent::new(probe, lidar).expect("probe matches the sensor");
+        (agent, vec![lidar.max_range as f32; lidar.beams])
+    }
+
+    /// A goal of d* `d_star` at v* 0.7 m/s, straight ahead.
+    fn goal_at(d_star: f64) -> Goal {
+        Goal {
+            phi_star: 0.0,
+            d_star,
+            v_star: 0.7,
+        }
+    }
+
     #[test]
     fn a_goal_is_checked_once_where_it_enters_and_held() {
-        let lidar = LidarSpec::default();
         let mut probe = probe();
         probe.d_star = Some((0.8, 2.5));
         let envelope_reads = std::sync::Arc::clone(&probe.envelope_reads);
-        let mut agent = Agent::new(probe, lidar).expect("probe matches the sensor");
-        let scan = vec![lidar.max_range as f32; lidar.beams];
+        let (mut agent, scan) = agent_and_open_scan(probe);
         let goal = |d_star| Goal {
             phi_star: 0.5,
-            d_star,
-            v_star: 0.7,
+            ..goal_at(d_star)
         };
         let checks = |_: &Agent| envelope_reads.load(std::sync::atomic::Ordering::Relaxed);
         for tick in 0..5 {
@@ -871,18 +884,13 @@ mod tests {
 
     #[test]
     fn a_goal_outside_the_models_d_star_range_is_refused_naming_the_range_and_the_model() {
-        let lidar = LidarSpec::default();
         let mut probe = probe();
         probe.d_star = Some((0.8, 2.5));
-        let mut agent = Agent::new(probe, lidar).expect("probe matches the sensor");
-        let scan = vec![lidar.max_range as f32; lidar.beams];
-        let goal = |d_star| Goal {
-            phi_star: 0.0,
-            d_star,
-            v_star: 0.7,
-        };
-        agent.act(&scan, 0.0, &goal(2.5)).expect("inside the range");
-        let err = agent.act(&scan, 0.0, &goal(3.0)).unwrap_err();
+        let (mut agent, scan) = agent_and_open_scan(probe);
+        agent
+            .act(&scan, 0.0, &goal_at(2.5))
+            .expect("inside the range");
+        let err = agent.act(&scan, 0.0, &goal_at(3.0)).unwrap_err();
         assert!(
             matches!(err, DecisionError::OutsideEnvelope { .. }),
             "{err}"
