@@ -8,8 +8,6 @@ use formation_trainer_bridge::train::Architecture;
 
 use formation_runtime::{ClockMode, RuntimeSettings};
 
-use crate::paths;
-
 /// Learned decentralized multi-robot formation control.
 #[derive(Debug, Parser)]
 #[command(name = "formation", version, about, propagate_version = true)]
@@ -148,7 +146,8 @@ pub struct EvalArgs {
     /// Controller to evaluate.
     #[arg(long, value_enum, default_value_t = ControllerKind::Policy)]
     pub controller: ControllerKind,
-    /// ONNX model for `--controller policy` (default: the shipped model).
+    /// ONNX model for `--controller policy` (default: the scenario's `model`, else the shipped
+    /// model).
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Number of runs (default: the scenario's `runs`; at most 10000).
@@ -234,7 +233,7 @@ pub struct GaugeArgs {
     /// Team sizes to gauge (e.g. `16,32`; default: the scenario's).
     #[arg(long, value_delimiter = ',', value_parser = team_size)]
     pub robots: Option<Vec<usize>>,
-    /// ONNX model to gauge (default: the shipped model).
+    /// ONNX model to gauge (default: the scenario's `model`, else the shipped model).
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Also gauge the expert with these gains as JSON (for example `{"shaping_wheel_accel": 1.0}`,
@@ -326,6 +325,12 @@ pub struct CollectArgs {
     /// policy that answers a formation velocity, which each agent shapes for its own wheels.
     #[arg(long, conflicts_with = "label_wheel_accel")]
     pub unshaped_labels: bool,
+    /// Label with smooth pair weights: a pair's weight rises from 0 to 1 over witness ratios
+    /// LOW..HIGH instead of the neighbour rule's step at its threshold, so that the labels are
+    /// one continuous function of what a robot senses (issue 34 item 3; default: the rule's
+    /// pairs exactly, as the scored expert holds them).
+    #[arg(long, value_name = "LOW,HIGH", value_parser = pair_weight_band)]
+    pub label_pair_band: Option<[f64; 2]>,
     /// Also record each robot's scan ranges beside its image, `sectors=K,clip=C`: K sectors
     /// (centred on bearings 2 pi s / K), each the mean range of its returning beams over d*, at
     /// most C. A network trained on the dataset takes them as its `ranges` input (for example
@@ -511,6 +516,12 @@ pub struct DaggerArgs {
     /// each agent shapes for its own wheels.
     #[arg(long, conflicts_with = "label_wheel_accel")]
     pub unshaped_labels: bool,
+    /// Label with smooth pair weights: a pair's weight rises from 0 to 1 over witness ratios
+    /// LOW..HIGH instead of the neighbour rule's step at its threshold, so that the labels are
+    /// one continuous function of what a robot senses (issue 34 item 3; default: the rule's
+    /// pairs exactly, as the scored expert holds them).
+    #[arg(long, value_name = "LOW,HIGH", value_parser = pair_weight_band)]
+    pub label_pair_band: Option<[f64; 2]>,
     /// Which network, whether to mirror the data, how many samples an epoch draws.
     #[command(flatten)]
     pub network: NetworkArgs,
@@ -676,7 +687,8 @@ fn wheel_accel_or_none(text: &str) -> Result<Option<f64>, String> {
 }
 
 /// `MIN,MAX` in metres, with `0 < MIN < MAX`, both finite.
-fn d_star_range(text: &str) -> Result<(f64, f64), String> {
+/// `A,B` with `0 < A < B`, both finite; `expected` says what was asked for in the error.
+fn increasing_positive_pair(text: &str, expected: &str) -> Result<(f64, f64), String> {
     let parsed = text
         .split_once(',')
         .and_then(|(a, b)| Some((a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?)));
@@ -684,10 +696,20 @@ fn d_star_range(text: &str) -> Result<(f64, f64), String> {
         Some((min, max)) if min.is_finite() && max.is_finite() && 0.0 < min && min < max => {
             Ok((min, max))
         }
-        _ => Err(format!(
-            "expected MIN,MAX in metres with 0 < MIN < MAX (e.g. 0.8,2.5), got {text:?}"
-        )),
+        _ => Err(format!("expected {expected}, got {text:?}")),
     }
+}
+
+fn d_star_range(text: &str) -> Result<(f64, f64), String> {
+    increasing_positive_pair(text, "MIN,MAX in metres with 0 < MIN < MAX (e.g. 0.8,2.5)")
+}
+
+fn pair_weight_band(text: &str) -> Result<[f64; 2], String> {
+    increasing_positive_pair(
+        text,
+        "LOW,HIGH witness ratios with 0 < LOW < HIGH (e.g. 1.1,1.5)",
+    )
+    .map(|(low, high)| [low, high])
 }
 
 #[cfg(test)]
@@ -701,6 +723,11 @@ mod tests {
         for bad in ["2.5,0.8", "0,1", "1", "1,nan", "a,b", "1,1"] {
             let e = d_star_range(bad).unwrap_err();
             assert!(e.contains("MIN,MAX") && e.contains(bad), "{bad}: {e}");
+        }
+        assert_eq!(pair_weight_band("1.1,1.5"), Ok([1.1, 1.5]));
+        for bad in ["1.5,1.1", "0,1", "1.2", "1,inf"] {
+            let e = pair_weight_band(bad).unwrap_err();
+            assert!(e.contains("LOW,HIGH") && e.contains(bad), "{bad}: {e}");
         }
     }
 
@@ -899,9 +926,10 @@ pub struct RunArgs {
     /// Scenario TOML file.
     #[arg(long)]
     pub scenario: PathBuf,
-    /// ONNX model for every robot the scenario does not assign one to.
-    #[arg(long, default_value = paths::DEFAULT_MODEL)]
-    pub model: PathBuf,
+    /// ONNX model for every robot the scenario does not assign one to (default: the scenario's
+    /// `model`, else the shipped model).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
     /// Clock mode of the world.
     #[arg(long, value_enum, default_value_t = RuntimeSettings::DEFAULT.clock)]
     pub clock: ClockMode,

@@ -60,6 +60,7 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
     opts.occupancy = occupancy;
     opts.gains.shaping_wheel_accel = args.label_wheel_accel;
     opts.gains.unshaped = args.unshaped_labels;
+    opts.gains.pair_weight_band = args.label_pair_band;
     opts.ranges = args.ranges;
     if let Some(runs) = args.runs {
         opts.runs = runs;

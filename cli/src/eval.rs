@@ -293,7 +293,7 @@ fn eval_team(args: &EvalArgs, scenario: &Scenario) -> anyhow::Result<EvalTeam> {
             (Vec::new(), Vec::new())
         }
         ControllerKind::Policy => {
-            let default = paths::resolve_model(args.model.as_deref())?;
+            let default = paths::resolve_model_for(args.model.as_deref(), scenario)?;
             let models = resolved_models_per_robot(scenario, &default)?;
             let checked = checked_models(&models, scenario)?;
             team_size = team_sizes_of(&checked, scenario.n_robots());

@@ -90,6 +90,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
             gains: ExpertGains {
                 shaping_wheel_accel: args.label_wheel_accel,
                 unshaped: args.unshaped_labels,
+                pair_weight_band: args.label_pair_band,
                 ..ExpertGains::default()
             },
             wheel_accels: args.wheel_accels.clone(),

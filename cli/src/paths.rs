@@ -45,6 +45,24 @@ pub fn resolve_model(given: Option<&Path>) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
+/// The model a command runs on `scenario` when `given` (`--model`) is absent: the scenario's own
+/// (its `model` key), else the shipped default; checked as [`resolve_model`] checks it, and a
+/// scenario's unusable model is named with its key.
+pub fn resolve_model_for(
+    given: Option<&Path>,
+    scenario: &formation_world::Scenario,
+) -> anyhow::Result<PathBuf> {
+    match (given, scenario.model()) {
+        (None, Some(named)) => resolve_model(Some(named)).map_err(|err| {
+            err.context(format!(
+                "the scenario's model (its `model` key, {}) is unusable; fix the key or pass --model PATH",
+                named.display()
+            ))
+        }),
+        _ => resolve_model(given),
+    }
+}
+
 /// Writes `bytes` to `path` atomically ([`formation_proto::files::write_atomic`]), creating
 /// parent directories. A failed write (e.g. a full disk) leaves the old file and no temporary one,
 /// and its error says what stood in the way ([`WriteError`]: a file where a folder should be, a

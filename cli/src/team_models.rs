@@ -188,7 +188,8 @@ pub fn checked_team_models(
     Ok((models, notes))
 }
 
-/// The policy driver of the scaling table and the gauge: `model` (else the shipped default),
+/// The policy driver of the scaling table and the gauge: `model` (else `base`'s own model, else
+/// the shipped default),
 /// checked against `base`'s sensor and d* before anything runs, with a note on the terminal for
 /// each team size of `sizes` and for a v* the model was not trained at.
 pub fn policy_driver(
@@ -196,7 +197,7 @@ pub fn policy_driver(
     base: &Scenario,
     sizes: &[usize],
 ) -> anyhow::Result<formation_learning::scaling::ScalingDriver> {
-    let model = crate::paths::resolve_model(model)?;
+    let model = crate::paths::resolve_model_for(model, base)?;
     let checked = checked_models(std::slice::from_ref(&model), base)?;
     for &robots in sizes {
         print_team_size_notes(&team_sizes_of(&checked, robots));

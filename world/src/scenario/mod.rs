@@ -37,6 +37,8 @@
 //! seed = 1                # required: base seed of the scenario's runs
 //! runs = 1                # optional, default 1, 1 ..= 10000: runs an evaluation of this scenario makes
 //!                         # robots * ticks <= 10,000,000 (a run's trajectory is held in memory)
+//! model = "../onnx/models/turtlebot3/policy.onnx"  # optional: the team's model when no --model is
+//!                         # given (default: the shipped model); relative to the scenario file's directory
 //!
 //! [goal]                  # required
 //! v_star = 0.7            # desired speed \[m/s\], 0 ..= robot.max_wheel_speed ...
@@ -427,6 +429,10 @@ pub struct Scenario {
     #[serde(skip_serializing_if = "RobotProfile::is_ideal")]
     profile: RobotProfile,
     agents: Vec<AgentModel>,
+    /// The team's model when the command line names none (`model`; absent: the shipped default,
+    /// so the serialized form of every scenario without one is unchanged).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    model: Option<PathBuf>,
     /// What the file said, for [`Scenario::with_robots`]: the disc radius and the formation
     /// table as given (absent keys take team-size-dependent defaults).
     #[serde(skip)]
@@ -443,8 +449,8 @@ struct Given {
 }
 
 impl Scenario {
-    /// Reads and validates the scenario file at `path`. Relative `[[agent]].model` paths are resolved
-    /// against the file's directory.
+    /// Reads and validates the scenario file at `path`. Relative `model` and `[[agent]].model` paths
+    /// are resolved against the file's directory.
     ///
     /// Only a regular file of at most [`limits::MAX_FILE_BYTES`] is read; anything else is refused
     /// by its metadata before a byte is read (see [`read_scenario_text`]).
@@ -467,9 +473,14 @@ impl Scenario {
         }
         let mut scenario = Scenario::from_toml_str(&text, &origin)?;
         let base = path.parent().unwrap_or_else(|| Path::new(""));
-        for agent in &mut scenario.agents {
-            if agent.model.is_relative() {
-                agent.model = base.join(&agent.model);
+        for model in scenario
+            .agents
+            .iter_mut()
+            .map(|agent| &mut agent.model)
+            .chain(scenario.model.as_mut())
+        {
+            if model.is_relative() {
+                *model = base.join(&*model);
             }
         }
         Ok(scenario)
@@ -542,6 +553,12 @@ impl Scenario {
     /// Per-robot model overrides, each with `robot < n_robots()` and at most one per robot.
     pub fn agent_models(&self) -> &[AgentModel] {
         &self.agents
+    }
+
+    /// The model the scenario names for its team (`model`), used where the command line names
+    /// none; `None`: the shipped default.
+    pub fn model(&self) -> Option<&Path> {
+        self.model.as_deref()
     }
 
     /// The neighbour rule of the formation.

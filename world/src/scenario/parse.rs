@@ -62,6 +62,7 @@ pub(super) struct ScenarioToml {
     pub(super) compass: CompassToml,
     #[serde(default)]
     pub(super) agent: Vec<AgentModel>,
+    pub(super) model: Option<PathBuf>,
 }
 
 pub(super) fn default_dt() -> f64 {

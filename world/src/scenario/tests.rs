@@ -817,6 +817,26 @@ fn missing_file_error_names_the_path() {
 }
 
 #[test]
+fn a_team_model_is_resolved_against_the_file_and_kept_when_resized() {
+    let dir = Scratch::new("team-model");
+    let path = dir.0.join("team.toml");
+    std::fs::write(&path, format!("model = \"m/team.onnx\"\n{MINIMAL}")).expect("write");
+    let scenario = Scenario::from_path(&path).expect("valid");
+    assert_eq!(scenario.model(), Some(dir.0.join("m/team.onnx").as_path()));
+    let resized = scenario.with_robots(8).expect("resized");
+    assert_eq!(resized.model(), scenario.model());
+    // Absent: the shipped default, and nothing in the serialized record.
+    let plain = parse(MINIMAL).expect("valid");
+    assert_eq!(plain.model(), None);
+    assert!(!serde_json::to_string(&plain).unwrap().contains("\"model\""));
+    let empty = error_text(&format!("model = \"\"\n{MINIMAL}"));
+    assert!(
+        empty.contains("model") && empty.contains("must not be empty"),
+        "{empty}"
+    );
+}
+
+#[test]
 fn agent_models_are_exposed() {
     let scenario = parse(&format!(
         "{MINIMAL}[[agent]]\nrobot = 2\nmodel = \"models/b.onnx\"\n"

@@ -102,6 +102,16 @@ impl ScenarioToml {
         )?;
 
         let agents = validate_agents(check, self.agent, robots)?;
+        if self
+            .model
+            .as_ref()
+            .is_some_and(|model| model.as_os_str().is_empty())
+        {
+            return Err(check.invalid(
+                "model",
+                "must not be empty: name the team's ONNX model, or drop the key for the shipped default",
+            ));
+        }
 
         Ok(Scenario {
             name,
@@ -117,6 +127,7 @@ impl ScenarioToml {
             world,
             profile,
             agents,
+            model: self.model,
             given: Given {
                 disc_radius: self.init.disc_radius,
                 min_spacing: self.init.min_spacing,
