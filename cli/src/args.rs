@@ -1028,6 +1028,15 @@ pub struct ProfileArgs {
 
 /// `formation swap`: change one running robot's model.
 #[derive(Debug, Clone, Args)]
+#[command(
+    mut_arg("transport", |a| a.help(
+        "How to reach the run: iceoryx2 (this host) or Zenoh (sends the model's bytes)"
+    )),
+    mut_arg("connect", |a| a.help("Zenoh: the world's endpoint, tcp/ADDR:PORT")),
+    mut_arg("credentials", |a| a.help(
+        "Zenoh: the operator's login file (operator.json from `formation credentials`)"
+    ))
+)]
 pub struct SwapArgs {
     /// Run id of the running launch (`formation run` prints it; set it with `--run-id`).
     #[arg(long)]
@@ -1044,15 +1053,9 @@ pub struct SwapArgs {
     /// How long to wait for the agent's answer \[s\].
     #[arg(long, default_value_t = 30.0)]
     pub timeout_s: f64,
-    /// How to reach the run: iceoryx2 (this host) or Zenoh (sends the model's bytes).
-    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
-    pub transport: Transport,
-    /// Zenoh: the world's endpoint, tcp/ADDR:PORT.
-    #[arg(long, value_name = "tcp/ADDR:PORT")]
-    pub connect: Option<String>,
-    /// Zenoh: the operator's login file (operator.json from `formation credentials`).
-    #[arg(long, value_name = "FILE")]
-    pub credentials: Option<PathBuf>,
+    /// `--transport`, `--connect` and `--credentials`, the agent's flags with the help above.
+    #[command(flatten)]
+    pub reach: formation_agent_node::reach::ReachArgs,
 }
 
 /// `formation record --connect`: record a live Zenoh team from outside.

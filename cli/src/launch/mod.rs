@@ -869,11 +869,11 @@ pub fn profile_command(args: &ProfileArgs) -> anyhow::Result<()> {
 /// which the new model drives.
 pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
     let timeout = positive_seconds("--timeout-s", args.timeout_s)?;
-    let done = match args.transport {
+    let done = match args.reach.transport {
         Transport::Iceoryx2 => {
-            args.transport.refuse_zenoh_flags(&[
-                (args.connect.is_some(), "--connect"),
-                (args.credentials.is_some(), "--credentials"),
+            args.reach.transport.refuse_zenoh_flags(&[
+                (args.reach.connect.is_some(), "--connect"),
+                (args.reach.credentials.is_some(), "--credentials"),
             ])?;
             swap::request_swap(&args.run, args.robot, &args.model, args.at_tick, timeout)?
         }
@@ -895,6 +895,7 @@ pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
 #[cfg(feature = "zenoh")]
 fn swap_over_zenoh(args: &SwapArgs, timeout: Duration) -> anyhow::Result<swap::SwapDone> {
     let connect = args
+        .reach
         .connect
         .as_deref()
         .ok_or(TransportError::MissingEndpoint {
@@ -903,7 +904,7 @@ fn swap_over_zenoh(args: &SwapArgs, timeout: Duration) -> anyhow::Result<swap::S
         })?;
     swap::request_swap_over_zenoh(
         connect,
-        args.credentials.as_deref(),
+        args.reach.credentials.as_deref(),
         &args.run,
         args.robot,
         &args.model,
