@@ -21,22 +21,19 @@ fn case1_with_model(dir: &Path, model: &str) -> PathBuf {
     path
 }
 
+/// `formation eval --controller policy --runs 1 --scenario SCENARIO`.
+fn eval_policy_once(scenario: &Path) -> Command {
+    let mut command = Command::new(&binaries().cli);
+    let args = ["eval", "--controller", "policy", "--runs", "1"];
+    command.args(args).arg("--scenario").arg(scenario);
+    command
+}
+
 /// The model ids `formation eval --runs 1 --scenario SCENARIO [--model MODEL]` drove, from the
 /// `summary.json` it wrote into `out`.
 fn models_driven(scenario: &Path, model: Option<&Path>, out: &Path) -> Vec<String> {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args([
-            "eval",
-            "--controller",
-            "policy",
-            "--runs",
-            "1",
-            "--scenario",
-        ])
-        .arg(scenario)
-        .arg("--out")
-        .arg(out);
+    let mut command = eval_policy_once(scenario);
+    command.arg("--out").arg(out);
     if let Some(model) = model {
         command.arg("--model").arg(model);
     }
@@ -75,17 +72,7 @@ fn a_scenario_whose_model_is_missing_is_refused_with_the_key_named() {
     let t = ProcessTest::start("scenario_model_missing", LIMIT);
     let scenario = case1_with_model(t.path(), "models/absent.onnx");
     let missing = t.path().join("models/absent.onnx");
-    let mut eval = Command::new(&binaries().cli);
-    eval.args([
-        "eval",
-        "--controller",
-        "policy",
-        "--runs",
-        "1",
-        "--scenario",
-    ])
-    .arg(&scenario);
-    run(eval, LIMIT)
+    run(eval_policy_once(&scenario), LIMIT)
         .assert_failure_mentioning("`model` key")
         .assert_failure_mentioning(&missing.display().to_string())
         .assert_no_panic();
