@@ -21,8 +21,11 @@
 //! slow build is not a hung test.
 //!
 //! [`netns`] makes network namespaces for the Zenoh tests across a network; the `delay-relay`
-//! binary of this package delays TCP between them. [`ros2`] is what the ROS 2 tests share: the
-//! agent's decision computed in the test's process, the scans they send, the client's JSON.
+//! binary of this package delays TCP between them, and [`capture`] with the `packet-capture`
+//! binary reads what crosses the link (no tcpdump needed); [`tls`] is the raw Zenoh client of a
+//! TLS team that the `zenoh-tap` binary and the TLS tests use. [`ros2`] is what the ROS 2 tests
+//! share: the agent's decision computed in the test's process, the scans they send, the client's
+//! JSON.
 //!
 //! How the tests get a model: `FORMATION_TEST_MODEL` if set; else `tests/fixtures/tiny_policy.py`
 //! writes a contract-conforming ONNX model with seeded random weights, run with
@@ -35,9 +38,12 @@
 //! (`.config/nextest.toml`). Under plain `cargo test`, [`one_at_a_time`] still runs a binary's
 //! multi-process tests one by one.
 
+pub mod capture;
 pub mod netns;
 pub mod process_test;
+pub mod relay;
 pub mod ros2;
+pub mod tls;
 
 pub use process_test::ProcessTest;
 

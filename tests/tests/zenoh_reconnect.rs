@@ -14,17 +14,15 @@
 //! robot brakes for the rest of the run and the trajectories differ.
 //!
 //! Every test uses its own run id, its own free TCP port and its own scratch folder, and runs
-//! alone within this binary ([`one_at_a_time`](formation_tests::one_at_a_time)).
+//! alone within this binary ([`one_at_a_time`](formation_tests::one_at_a_time)). The relay is
+//! [`ResettingRelay`].
 
-use std::net::{Shutdown, TcpListener, TcpStream};
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
 use std::time::Duration;
 
 use formation_cli::launch::read_trajectory;
 use formation_robot_agent::decision::PolicyController;
+use formation_tests::relay::ResettingRelay;
 use formation_tests::{
     LiveProcess, ProcessTest, assert_bit_identical, free_tcp_port, remote_zenoh_agent, send_signal,
     test_model, zenoh_credentials,
@@ -32,88 +30,6 @@ use formation_tests::{
 use formation_world::{Scenario, run_episode};
 
 const LIMIT: Duration = Duration::from_secs(180);
-
-/// A TCP relay on 127.0.0.1 to the world's endpoint that can reset every connection it
-/// carries: what a link reset looks like to both ends.
-struct ResettingRelay {
-    port: u16,
-    streams: Arc<Mutex<Vec<TcpStream>>>,
-    stop: Arc<AtomicBool>,
-    acceptor: Option<JoinHandle<()>>,
-}
-
-impl ResettingRelay {
-    /// A relay forwarding to `world` (`HOST:PORT`).
-    fn start(world: &str) -> ResettingRelay {
-        let listener = TcpListener::bind("127.0.0.1:0").expect("binding the relay");
-        listener
-            .set_nonblocking(true)
-            .expect("a non-blocking listener");
-        let port = listener.local_addr().expect("the relay's address").port();
-        let streams = Arc::new(Mutex::new(Vec::new()));
-        let stop = Arc::new(AtomicBool::new(false));
-        let world = world.to_string();
-        let (kept, stopped) = (Arc::clone(&streams), Arc::clone(&stop));
-        let acceptor = std::thread::spawn(move || {
-            while !stopped.load(Ordering::Relaxed) {
-                let agent = match listener.accept() {
-                    Ok((agent, _)) => agent,
-                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                        std::thread::sleep(Duration::from_millis(10));
-                        continue;
-                    }
-                    Err(e) => panic!("the relay's accept: {e}"),
-                };
-                agent.set_nonblocking(false).expect("a blocking stream");
-                let Ok(world) = TcpStream::connect(&world) else {
-                    continue;
-                };
-                for (from, to) in [(&agent, &world), (&world, &agent)] {
-                    let (from, to) = (
-                        from.try_clone().expect("a stream"),
-                        to.try_clone().expect("a stream"),
-                    );
-                    std::thread::spawn(move || pump(from, to));
-                }
-                let mut kept = kept.lock().expect("streams");
-                kept.push(agent);
-                kept.push(world);
-            }
-        });
-        ResettingRelay {
-            port,
-            streams,
-            stop,
-            acceptor: Some(acceptor),
-        }
-    }
-
-    /// Closes every connection carried so far, both ways at once; returns how many links.
-    fn reset(&self) -> usize {
-        let streams = std::mem::take(&mut *self.streams.lock().expect("streams"));
-        for stream in &streams {
-            let _ = stream.shutdown(Shutdown::Both);
-        }
-        streams.len() / 2
-    }
-}
-
-impl Drop for ResettingRelay {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        self.reset();
-        if let Some(acceptor) = self.acceptor.take() {
-            let _ = acceptor.join();
-        }
-    }
-}
-
-/// Copies `from` to `to` until either closes.
-fn pump(mut from: TcpStream, mut to: TcpStream) {
-    let _ = std::io::copy(&mut from, &mut to);
-    let _ = to.shutdown(Shutdown::Both);
-    let _ = from.shutdown(Shutdown::Both);
-}
 
 /// Run 0 of the scenario at `scenario` in-process, the test model on every robot.
 fn in_process(scenario: &Path) -> formation_world::Trajectory {
