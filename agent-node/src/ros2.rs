@@ -144,11 +144,7 @@ impl Ros2Args {
 fn model_ring(model: &dyn PolicyBackend, path: &Path) -> anyhow::Result<LidarSpec> {
     let sensor = model.sensor();
     match (sensor.beams, sensor.max_range) {
-        (Some(beams), Some(max_range)) => Ok(LidarSpec {
-            beams,
-            max_range,
-            noise_std: 0.0,
-        }),
+        (Some(beams), Some(max_range)) => Ok(LidarSpec { beams, max_range }),
         _ => anyhow::bail!(
             "model {} does not record the LIDAR it was trained on (formation.lidar.beams and \
              formation.lidar.max_range), which ROS 2 mode needs to resample the robot's \

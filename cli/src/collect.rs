@@ -83,7 +83,7 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
     }
     let header = DatasetHeader::new(
         occupancy,
-        spec0.world.lidar,
+        spec0.world.simulated_lidar(),
         spec0.v_star,
         opts.base_seed,
         scenario.name().to_owned(),

@@ -247,8 +247,8 @@ fn check_writer(
     if header.occupancy != *occupancy {
         return mismatch("occupancy settings", &header.occupancy, occupancy);
     }
-    if header.lidar != spec.world.lidar {
-        return mismatch("LIDAR", &header.lidar, &spec.world.lidar);
+    if header.lidar != spec.world.simulated_lidar() {
+        return mismatch("LIDAR", &header.lidar, &spec.world.simulated_lidar());
     }
     if header.v_train != spec.v_star {
         return mismatch("v_train", &header.v_train, &spec.v_star);

@@ -1429,6 +1429,7 @@ mod tests {
         WorldConfig {
             robot: settings.robot,
             lidar: settings.lidar,
+            lidar_noise: settings.lidar_noise,
             reality: settings.reality,
             ..WorldConfig::default()
         }

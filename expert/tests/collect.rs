@@ -27,7 +27,7 @@ fn header_for(scenario: &Scenario, opts: &CollectOptions<'_>) -> DatasetHeader {
     let spec = scenario.run_spec(opts.base_seed, 0);
     DatasetHeader::new(
         opts.occupancy,
-        spec.world.lidar,
+        spec.world.simulated_lidar(),
         spec.v_star,
         opts.base_seed,
         scenario.name(),

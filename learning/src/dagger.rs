@@ -290,12 +290,13 @@ pub(crate) fn check_rollouts_match(
         // The sensor's contract; its range noise may differ (rollouts noisier than the
         // demonstrations are a choice).
         let lidar = scenario.world_config().lidar;
-        if (lidar.beams, lidar.max_range) != (header.lidar.beams, header.lidar.max_range) {
+        if (lidar.beams, lidar.max_range) != (header.lidar.spec.beams, header.lidar.spec.max_range)
+        {
             return Err(mismatch(
                 "LIDAR",
                 format!(
                     "{} beams of {} m",
-                    header.lidar.beams, header.lidar.max_range
+                    header.lidar.spec.beams, header.lidar.spec.max_range
                 ),
                 format!("{} beams of {} m", lidar.beams, lidar.max_range),
                 "roll out the scenario the dataset was collected with, or collect a new dataset",
@@ -517,7 +518,7 @@ pub(crate) mod tests {
         let spec = scenario.run_spec(scenario.seed(), 0);
         let header = DatasetHeader::new(
             OccupancySpec::PAPER,
-            spec.world.lidar,
+            spec.world.simulated_lidar(),
             spec.v_star,
             scenario.seed(),
             scenario.name(),
@@ -556,7 +557,7 @@ pub(crate) mod tests {
         let spec = base.run_spec(base.seed(), 0);
         let header = DatasetHeader::new(
             OccupancySpec::PAPER,
-            spec.world.lidar,
+            spec.world.simulated_lidar(),
             spec.v_star,
             base.seed(),
             base.name(),

@@ -66,7 +66,6 @@ mod tests {
         LidarSpec {
             beams,
             max_range: 10.0,
-            noise_std: 0.0,
         }
     }
 

@@ -2,6 +2,8 @@
 //!
 //! * [`types`]: plain values that cross crate boundaries (poses, wheel commands, the goal a robot
 //!   is given, LIDAR and occupancy settings). They carry no behaviour beyond validation.
+//! * [`lidar_noise`]: what a simulated LIDAR adds beyond the sensor contract ([`LidarSpec`]):
+//!   [`LidarNoise`], and [`SimulatedLidar`], the two as files record them.
 //! * [`neighbours`]: the formation's neighbour rule as a value (its computation is the world's).
 //! * [`policy_output`]: what a policy's output means ([`PolicyOutput`]), as its model declares it.
 //! * [`policy_io`]: a policy's whole input and output contract ([`PolicyIo`]).
@@ -23,6 +25,7 @@ pub mod errors;
 pub mod exit;
 pub mod files;
 pub mod goal_speed;
+pub mod lidar_noise;
 pub mod model_id;
 pub mod neighbours;
 pub mod policy_io;
@@ -32,6 +35,7 @@ pub mod types;
 pub mod wire;
 
 pub use goal_speed::GoalSpeedFit;
+pub use lidar_noise::{LidarNoise, SimulatedLidar};
 pub use neighbours::{GabrielRule, NeighbourRule};
 pub use policy_io::{
     AuxInput, AuxLayout, AuxValues, PolicyInput, PolicyIo, RangeInput, RangeInputError,

@@ -53,7 +53,8 @@ pub struct Goal {
     pub v_star: f64,
 }
 
-/// Settings of the simulated planar LIDAR ring.
+/// The planar LIDAR ring as a robot's agent and its model must agree on it: the sensor contract.
+/// What a simulated world adds to the ranges is its own ([`crate::LidarNoise`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LidarSpec {
@@ -62,8 +63,6 @@ pub struct LidarSpec {
     pub beams: usize,
     /// Maximum range \[m\]; a beam that hits nothing reports this value.
     pub max_range: f64,
-    /// Standard deviation of additive Gaussian range noise \[m\] on beams that hit something.
-    pub noise_std: f64,
 }
 
 impl Default for LidarSpec {
@@ -71,7 +70,6 @@ impl Default for LidarSpec {
         LidarSpec {
             beams: 900,
             max_range: 10.0,
-            noise_std: 0.0,
         }
     }
 }

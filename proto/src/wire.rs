@@ -661,7 +661,8 @@ pub struct ControlMsg {
     pub generation: u64,
     /// LIDAR maximum range \[m\] (begin episode).
     pub max_range: f64,
-    /// LIDAR noise standard deviation \[m\] (begin episode).
+    /// Unused, written 0: an agent is given the sensor contract only, not the world's noise
+    /// (kept so that the message's layout and type name stay).
     pub noise_std: f64,
     /// The robot's wheel acceleration limit \[m/s²\], 0 for none (begin episode).
     pub max_wheel_accel: f64,
@@ -702,7 +703,6 @@ impl ControlMsg {
                 msg.beams = u32::try_from(lidar.beams)
                     .map_err(|_| WireError::TooManyBeams { beams: lidar.beams })?;
                 msg.max_range = lidar.max_range;
-                msg.noise_std = lidar.noise_std;
                 msg.max_wheel_accel = match *max_wheel_accel {
                     None => 0.0,
                     Some(accel) if accel.is_finite() && accel > 0.0 => accel,
@@ -743,7 +743,6 @@ impl ControlMsg {
                 lidar: LidarSpec {
                     beams: self.beams as usize,
                     max_range: self.max_range,
-                    noise_std: self.noise_std,
                 },
                 max_wheel_accel: match self.max_wheel_accel {
                     0.0 => None,
@@ -1575,9 +1574,8 @@ mod tests {
             ControlRequest::BeginEpisode {
                 generation: 9,
                 lidar: LidarSpec {
-                    beams: 900,
-                    max_range: 10.0,
-                    noise_std: 0.03,
+                    beams: 360,
+                    max_range: 3.5,
                 },
                 max_wheel_accel: None,
             },

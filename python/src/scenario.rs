@@ -113,7 +113,7 @@ impl PyScenario {
     /// LIDAR range noise (standard deviation \[m\]).
     #[getter]
     fn noise_std(&self) -> f64 {
-        self.scenario.world_config().lidar.noise_std
+        self.scenario.world_config().lidar_noise.noise_std
     }
 
     /// The largest wheel speed a robot runs \[m/s\]; commands are saturated to it.

@@ -145,7 +145,6 @@ fn lidar() -> LidarSpec {
     LidarSpec {
         beams: BEAMS,
         max_range: 10.0,
-        noise_std: 0.0,
     }
 }
 

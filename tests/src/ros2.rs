@@ -40,7 +40,6 @@ impl InProcessDecision {
         let lidar = LidarSpec {
             beams: contract.beams,
             max_range: contract.max_range,
-            noise_std: 0.0,
         };
         InProcessDecision {
             agent: Agent::new(model, lidar).expect("the in-process agent"),

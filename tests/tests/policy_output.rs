@@ -33,10 +33,7 @@ fn a_formation_velocity_model_is_turned_into_wheels_with_the_reference_term_at_t
     let model = model_declaring(t.path(), "formation_velocity");
     let mut raw = OnnxPolicy::load(&model).expect("the model loads");
     assert_eq!(raw.metadata().output, PolicyOutput::FormationVelocity);
-    let lidar = formation_proto::LidarSpec {
-        noise_std: 0.0,
-        ..formation_proto::LidarSpec::default()
-    };
+    let lidar = formation_proto::LidarSpec::default();
     let mut agent = Agent::from_model_path(&model, lidar).expect("an agent takes it");
     // A scan with a neighbour ahead-left, and two goal speeds: the correction stays, the
     // reference term follows v*.

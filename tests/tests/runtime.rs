@@ -80,7 +80,7 @@ fn a_sixteen_robot_team_of_the_shipped_policy_in_lockstep_is_bit_identical_to_in
     let model = repo_root().join(SHIPPED_MODEL);
     let over_processes = lockstep_over_processes(&scenario, 1, &model);
     let spec = scenario.run_spec(scenario.seed(), 0);
-    assert!(spec.world.lidar.noise_std > 0.0, "a noisy LIDAR");
+    assert!(spec.world.lidar_noise.noise_std > 0.0, "a noisy LIDAR");
     let models = vec![model.as_path(); 16];
     let mut controller =
         PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");

@@ -28,7 +28,7 @@ use std::collections::HashMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use formation_proto::{LidarSpec, OccupancySpec, RangeInput, RangeInputError};
+use formation_proto::{OccupancySpec, RangeInput, RangeInputError, SimulatedLidar};
 use safetensors::tensor::{Dtype, SafeTensorError, SafeTensors, TensorView};
 use serde::{Deserialize, Serialize};
 
@@ -64,7 +64,7 @@ pub struct DatasetHeader {
     /// How the occupancy images were rendered.
     pub occupancy: OccupancySpec,
     /// The LIDAR the scans came from.
-    pub lidar: LidarSpec,
+    pub lidar: SimulatedLidar,
     /// The speed v* \[m/s\] the wheel labels were produced at (deployment scales by v*/v_train).
     pub v_train: f64,
     /// Base seed of the collection.
@@ -110,7 +110,7 @@ impl DatasetHeader {
     /// always give the same id. [`DatasetHeader::with_ranges`] adds ranges.
     pub fn new(
         occupancy: OccupancySpec,
-        lidar: LidarSpec,
+        lidar: SimulatedLidar,
         v_train: f64,
         seed: u64,
         scenario: impl Into<String>,
@@ -171,9 +171,11 @@ impl DatasetHeader {
         if let Some(reference) = self.occupancy.d_star_ref_m {
             hash.update_field(&reference.to_le_bytes());
         }
-        hash.update_field(&(self.lidar.beams as u64).to_le_bytes());
-        hash.update_field(&self.lidar.max_range.to_le_bytes());
-        hash.update_field(&self.lidar.noise_std.to_le_bytes());
+        hash.update_field(&(self.lidar.spec.beams as u64).to_le_bytes());
+        hash.update_field(&self.lidar.spec.max_range.to_le_bytes());
+        self.lidar
+            .noise
+            .hash_fields(&mut |bytes| hash.update_field(bytes));
         hash.update_field(&self.v_train.to_le_bytes());
         hash.update_field(&self.seed.to_le_bytes());
         hash.update_field(self.scenario.as_bytes());
@@ -252,7 +254,7 @@ pub struct Manifest {
     /// See [`DatasetHeader::occupancy`].
     pub occupancy: OccupancySpec,
     /// See [`DatasetHeader::lidar`].
-    pub lidar: LidarSpec,
+    pub lidar: SimulatedLidar,
     /// See [`DatasetHeader::v_train`].
     pub v_train: f64,
     /// See [`DatasetHeader::seed`].
@@ -612,7 +614,7 @@ fn read_manifest(dir: &Path) -> Result<Manifest, DatasetError> {
     }
     if let Some(ranges) = manifest.ranges {
         ranges
-            .check_beams(manifest.lidar.beams)
+            .check_beams(manifest.lidar.spec.beams)
             .map_err(|e| bad(e.to_string()))?;
     }
     let listed: usize = manifest.shards.iter().map(|s| s.samples).sum();
@@ -864,7 +866,7 @@ impl DatasetWriter {
         header.check()?;
         if let Some(ranges) = header.ranges {
             ranges
-                .check_beams(header.lidar.beams)
+                .check_beams(header.lidar.spec.beams)
                 .map_err(|source| DatasetError::RangeBeams { ranges, source })?;
         }
         if dir.join(MANIFEST_FILE).exists() {
@@ -1210,7 +1212,7 @@ pub(crate) mod tests {
                 beyond: BeyondWindow::Drop,
                 d_star_ref_m: None,
             },
-            LidarSpec::default(),
+            SimulatedLidar::default(),
             0.7,
             seed,
             "unit".to_owned(),
@@ -1793,7 +1795,7 @@ pub(crate) mod tests {
         let too_many =
             header_with_ranges(7).with_ranges(Some(RangeInput::new(360, 3.0).expect("ranges")));
         let mut few_beams = too_many.clone();
-        few_beams.lidar.beams = 100;
+        few_beams.lidar.spec.beams = 100;
         let ranges = few_beams.ranges;
         let few_beams = few_beams.with_ranges(ranges);
         assert!(matches!(

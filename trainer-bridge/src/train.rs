@@ -760,7 +760,7 @@ mod tests {
         let data = dir.join("d");
         let header = crate::dataset::DatasetHeader::new(
             formation_proto::OccupancySpec::PAPER,
-            formation_proto::LidarSpec::default(),
+            formation_proto::SimulatedLidar::default(),
             0.7,
             0,
             "t",

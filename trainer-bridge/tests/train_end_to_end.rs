@@ -4,7 +4,7 @@
 //! Needs the trainer's Python environment (`bash .ci/setup-python --train`); without PyTorch the test
 //! says so and passes, since the Rust side's own behaviour is covered by the unit tests.
 
-use formation_proto::{LidarSpec, OccupancySpec, RangeInput};
+use formation_proto::{OccupancySpec, RangeInput, SimulatedLidar};
 use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter, Sample};
 use formation_trainer_bridge::train::{TrainError, TrainOptions, train};
 
@@ -30,7 +30,13 @@ fn sample(i: u32, iteration: u32) -> Sample {
 fn a_rust_written_dataset_trains_into_an_onnx_model() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let data = tmp.path().join("data");
-    let header = DatasetHeader::new(OccupancySpec::PAPER, LidarSpec::default(), 0.7, 3, "e2e");
+    let header = DatasetHeader::new(
+        OccupancySpec::PAPER,
+        SimulatedLidar::default(),
+        0.7,
+        3,
+        "e2e",
+    );
     let mut writer = DatasetWriter::create(&data, header)
         .expect("create")
         .with_shard_size(64)
@@ -100,8 +106,14 @@ fn a_dataset_with_ranges_trains_a_model_that_declares_them() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let data = tmp.path().join("data");
     let ranges = RangeInput::parse("sectors=100,clip=3").expect("ranges");
-    let header = DatasetHeader::new(OccupancySpec::PAPER, LidarSpec::default(), 0.7, 3, "e2e")
-        .with_ranges(Some(ranges));
+    let header = DatasetHeader::new(
+        OccupancySpec::PAPER,
+        SimulatedLidar::default(),
+        0.7,
+        3,
+        "e2e",
+    )
+    .with_ranges(Some(ranges));
     let mut writer = DatasetWriter::create(&data, header).expect("create");
     for i in 0..120 {
         let mut s = sample(i, 0);
@@ -154,7 +166,13 @@ fn a_dataset_with_ranges_trains_a_model_that_declares_them() {
 fn a_python_failure_carries_its_last_messages() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let data = tmp.path().join("data");
-    let header = DatasetHeader::new(OccupancySpec::PAPER, LidarSpec::default(), 0.7, 3, "e2e");
+    let header = DatasetHeader::new(
+        OccupancySpec::PAPER,
+        SimulatedLidar::default(),
+        0.7,
+        3,
+        "e2e",
+    );
     let mut writer = DatasetWriter::create(&data, header).expect("create");
     writer.push(sample(0, 0)).expect("push");
     writer.finish().expect("finish");

@@ -2,6 +2,7 @@
 //!
 //! * [`robot`]: P3-DX-like differential-drive kinematics and wheel limits.
 //! * [`lidar`]: the planar LIDAR ring, ray-cast against the other robots' bodies with parry2d.
+//! * [`lidar_noise`]: the noise models the world adds to the ranges it casts, which no agent sees.
 //! * [`grid`]: uniform grid hashing of the robots' positions, so that scans and collision tests look
 //!   only at nearby robots.
 //! * [`world`]: [`World`], which owns the robots' state and advances it by [`World::step`], taking the
@@ -21,6 +22,7 @@
 pub mod episode;
 pub mod grid;
 pub mod lidar;
+pub mod lidar_noise;
 pub mod metrics;
 pub mod neighbours;
 pub mod reality;

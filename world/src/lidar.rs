@@ -554,7 +554,6 @@ mod tests {
         LidarSpec {
             beams: 900,
             max_range: 10.0,
-            noise_std: 0.0,
         }
     }
 
@@ -885,11 +884,7 @@ mod tests {
             ];
             for (beams, max_range) in specs {
                 for body_radius in [0.25, 0.05, 0.0, 1.5] {
-                    let lidar = LidarSpec {
-                        beams,
-                        max_range,
-                        noise_std: 0.0,
-                    };
+                    let lidar = LidarSpec { beams, max_range };
                     let params = RobotParams {
                         body_radius,
                         ..RobotParams::default()
@@ -909,7 +904,6 @@ mod tests {
                 let lidar = LidarSpec {
                     beams: 90,
                     max_range,
-                    noise_std: 0.0,
                 };
                 let params = RobotParams {
                     body_radius,

@@ -9,7 +9,7 @@
 
 use std::collections::VecDeque;
 
-use formation_proto::{LidarSpec, Pose, WheelCmd};
+use formation_proto::{LidarNoise, LidarSpec, Pose, SimulatedLidar, WheelCmd};
 use parry2d::math::Point;
 use parry2d::query::details::intersection_test_ball_ball;
 use parry2d::shape::Ball;
@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::grid::SpatialGrid;
 use crate::lidar::{TeamScanner, cast_scan};
+use crate::lidar_noise::add_range_noise;
 use crate::reality::{
     RealityModels, RealitySeeds, RobotTraits, apply_lidar_geometry, scan_age_ticks,
 };
@@ -29,19 +30,68 @@ use crate::robot::{RobotParams, integrate};
 pub const DEFAULT_DT: f64 = 0.05;
 
 /// Everything that fixes a world's physics and sensing, shared by all its robots.
+///
+/// Serialised as before the LIDAR's contract and noise were apart: `lidar` is one object
+/// `{beams, max_range, noise_std}` ([`SimulatedLidar`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "WorldConfigFile", into = "WorldConfigFile")]
 pub struct WorldConfig {
     /// Body, wheel and limit parameters of every robot.
     pub robot: RobotParams,
-    /// The LIDAR ring every robot carries.
+    /// The LIDAR ring every robot carries, as its agent and model must agree on it.
     pub lidar: LidarSpec,
+    /// The noise the world adds to every LIDAR's ranges ([`crate::lidar_noise`]); no agent
+    /// sees it.
+    pub lidar_noise: LidarNoise,
     /// Time step \[s\] of one [`World::step`].
     pub dt: f64,
     /// Motor, LIDAR timing and geometry, compass, latency and spread models; all off by default
     /// (and then absent from the serialized form, which stays as it was before the models).
-    #[serde(default, skip_serializing_if = "RealityModels::is_ideal")]
     pub reality: RealityModels,
+}
+
+impl WorldConfig {
+    /// The LIDAR as a world simulates it: the contract and the noise.
+    pub fn simulated_lidar(&self) -> SimulatedLidar {
+        SimulatedLidar {
+            spec: self.lidar,
+            noise: self.lidar_noise,
+        }
+    }
+}
+
+/// [`WorldConfig`] as files hold it.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WorldConfigFile {
+    robot: RobotParams,
+    lidar: SimulatedLidar,
+    dt: f64,
+    #[serde(default, skip_serializing_if = "RealityModels::is_ideal")]
+    reality: RealityModels,
+}
+
+impl From<WorldConfigFile> for WorldConfig {
+    fn from(file: WorldConfigFile) -> WorldConfig {
+        WorldConfig {
+            robot: file.robot,
+            lidar: file.lidar.spec,
+            lidar_noise: file.lidar.noise,
+            dt: file.dt,
+            reality: file.reality,
+        }
+    }
+}
+
+impl From<WorldConfig> for WorldConfigFile {
+    fn from(config: WorldConfig) -> WorldConfigFile {
+        WorldConfigFile {
+            robot: config.robot,
+            lidar: config.simulated_lidar(),
+            dt: config.dt,
+            reality: config.reality,
+        }
+    }
 }
 
 impl Default for WorldConfig {
@@ -50,6 +100,7 @@ impl Default for WorldConfig {
         WorldConfig {
             robot: RobotParams::default(),
             lidar: LidarSpec::default(),
+            lidar_noise: LidarNoise::NONE,
             dt: DEFAULT_DT,
             reality: RealityModels::IDEAL,
         }
@@ -184,7 +235,7 @@ impl World {
     }
 
     /// Writes robot `robot`'s LIDAR ranges into `out` (one per beam): the noiseless ray cast plus,
-    /// when `noise_std > 0`, Gaussian noise from the world's generator on every beam that hit
+    /// the world's LIDAR noise ([`crate::lidar_noise`]), e.g. Gaussian noise from the world's generator on every beam that hit
     /// something, clamped to `[0, max_range]`, and then the LIDAR model's field of view, minimum
     /// range and dropout. Beams that hit nothing read exactly `max_range`. This is the scan cast
     /// now: holding scans between a slower LIDAR's scans is [`World::scan_all`]'s.
@@ -195,7 +246,12 @@ impl World {
     pub fn scan_into(&mut self, robot: usize, out: &mut [f32]) {
         let lidar = self.config.lidar;
         cast_scan(&self.poses, robot, &self.config.robot, &lidar, out);
-        add_range_noise(out, &lidar, &mut self.noise_rng);
+        add_range_noise(
+            out,
+            lidar.max_range,
+            &self.config.lidar_noise,
+            &mut self.noise_rng,
+        );
         self.apply_lidar_model(out);
     }
 
@@ -239,7 +295,12 @@ impl World {
         // The noiseless casts draw nothing, so adding each robot's noise after all the casts draws
         // the same numbers in the same order as scanning and noising robot after robot.
         for scan in out.iter_mut() {
-            add_range_noise(scan, &lidar, &mut self.noise_rng);
+            add_range_noise(
+                scan,
+                lidar.max_range,
+                &self.config.lidar_noise,
+                &mut self.noise_rng,
+            );
         }
         for scan in out.iter_mut() {
             self.apply_lidar_model(scan);
@@ -392,22 +453,6 @@ impl World {
     }
 }
 
-/// Adds Gaussian noise of `lidar.noise_std` from `rng` to every range of `ranges` that hit something
-/// (below `max_range`), in beam order, clamped to `[0, max_range]`; draws nothing when the spread is
-/// not positive.
-fn add_range_noise(ranges: &mut [f32], lidar: &LidarSpec, rng: &mut ChaCha8Rng) {
-    let adds_noise = lidar.noise_std > 0.0; // false for NaN too
-    if !adds_noise {
-        return;
-    }
-    let no_hit = lidar.max_range as f32;
-    for range in ranges.iter_mut().filter(|range| **range < no_hit) {
-        let deviation: f64 = StandardNormal.sample(rng);
-        let noisy = *range as f64 + lidar.noise_std * deviation;
-        *range = noisy.clamp(0.0, lidar.max_range) as f32;
-    }
-}
-
 /// [`overlapping_pairs`], finding each robot's possible partners in `grid` (rebuilt here, cells of
 /// one body diameter) instead of testing all pairs: the same pairs in the same order, in `O(N)` for a
 /// team without crowds. `partners` is scratch.
@@ -475,10 +520,7 @@ mod tests {
 
     fn noisy_config(noise_std: f64) -> WorldConfig {
         WorldConfig {
-            lidar: LidarSpec {
-                noise_std,
-                ..LidarSpec::default()
-            },
+            lidar_noise: LidarNoise { noise_std },
             ..WorldConfig::default()
         }
     }

@@ -415,7 +415,6 @@ impl<M: PilotMaker> Replay<'_, M> {
         LidarSpec {
             beams: step.ranges.len(),
             max_range,
-            noise_std: 0.0,
         }
     }
 

@@ -12,7 +12,9 @@
 //! Seeds: a dataset without ranges (format version 1) and one whose samples carry their scan's
 //! ranges (version 2: `"ranges"` in the manifest, a `ranges` tensor in the shard).
 
-use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec, RangeInput};
+use formation_proto::{
+    BeyondWindow, LidarNoise, LidarSpec, OccupancySpec, RangeInput, SimulatedLidar,
+};
 use formation_trainer_bridge::dataset::{
     DatasetHeader, DatasetReader, DatasetWriter, MANIFEST_FILE, Sample,
 };
@@ -117,10 +119,12 @@ pub fn header() -> DatasetHeader {
             beyond: BeyondWindow::Border,
             d_star_ref_m: Some(1.5),
         },
-        LidarSpec {
-            beams: 36,
-            max_range: 4.0,
-            noise_std: 0.01,
+        SimulatedLidar {
+            spec: LidarSpec {
+                beams: 36,
+                max_range: 4.0,
+            },
+            noise: LidarNoise { noise_std: 0.01 },
         },
         0.3,
         5,

@@ -58,7 +58,6 @@ fn run(_: &Scratch, case: &[u8]) -> Result<(), Refusal> {
     let lidar = LidarSpec {
         beams: 900,
         max_range: 10.0,
-        noise_std: 0.0,
     };
     let _ = check_sensor(&SensorContract::from(&meta), &lidar);
     let _ = check_sensor(

@@ -142,7 +142,6 @@ fn control_and_swap_seeds() -> Result<Vec<Seed>, FuzzError> {
         lidar: LidarSpec {
             beams: 360,
             max_range: 4.0,
-            noise_std: 0.01,
         },
         max_wheel_accel: Some(1.0),
     })

@@ -56,7 +56,6 @@ fn lidar() -> LidarSpec {
     LidarSpec {
         beams: BEAMS,
         max_range: MAX_RANGE,
-        noise_std: 0.0,
     }
 }
 

@@ -119,7 +119,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use formation_proto::files::{FileRefusal, read_bounded};
-use formation_proto::{Goal, LidarSpec, Pose, wrap_angle};
+use formation_proto::{Goal, LidarNoise, LidarSpec, Pose, SimulatedLidar, wrap_angle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};

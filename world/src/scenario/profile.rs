@@ -4,7 +4,7 @@
 //! The numbers and their sources (datasheets, manuals, and the estimates where none publishes a
 //! figure) are listed in `scenarios/README.md`.
 
-use formation_proto::LidarSpec;
+use formation_proto::{LidarNoise, LidarSpec};
 use serde::Serialize;
 
 use crate::reality::{CompassModel, LidarModel, MotorModel, RealityModels};
@@ -30,8 +30,10 @@ pub enum RobotProfile {
 pub struct ProfileSettings {
     /// The `[robot]` geometry and limits.
     pub robot: RobotParams,
-    /// The `[lidar]` beams, range and range noise.
+    /// The `[lidar]` beams and range: the sensor contract.
     pub lidar: LidarSpec,
+    /// The `[lidar]` range noise the world adds.
+    pub lidar_noise: LidarNoise,
     /// The reality models (`[robot]` motors, latency and spread; `[lidar]` timing and geometry;
     /// `[compass]`).
     pub reality: RealityModels,
@@ -91,6 +93,7 @@ impl RobotProfile {
             RobotProfile::Ideal => ProfileSettings {
                 robot: RobotParams::default(),
                 lidar: LidarSpec::default(),
+                lidar_noise: LidarNoise::NONE,
                 reality: RealityModels::IDEAL,
             },
             RobotProfile::Pioneer3dx => ProfileSettings {
@@ -98,10 +101,8 @@ impl RobotProfile {
                     max_wheel_speed: 1.2,
                     ..RobotParams::default()
                 },
-                lidar: LidarSpec {
-                    noise_std: 0.01,
-                    ..LidarSpec::default()
-                },
+                lidar: LidarSpec::default(),
+                lidar_noise: LidarNoise { noise_std: 0.01 },
                 reality: RealityModels {
                     motors: MotorModel {
                         tau_s: 0.15,
@@ -133,8 +134,8 @@ impl RobotProfile {
                 lidar: LidarSpec {
                     beams: 360,
                     max_range: 3.5,
-                    noise_std: 0.015,
                 },
+                lidar_noise: LidarNoise { noise_std: 0.015 },
                 reality: RealityModels {
                     motors: MotorModel {
                         tau_s: 0.1,
@@ -183,6 +184,7 @@ impl RobotProfile {
         let ProfileSettings {
             robot,
             lidar,
+            lidar_noise,
             reality,
         } = self.settings();
         let float = toml::Value::Float;
@@ -232,7 +234,7 @@ impl RobotProfile {
                     ("lidar.min_range", Some(float(reality.lidar.min_range))),
                     ("lidar.max_range", Some(float(lidar.max_range))),
                     ("lidar.dropout", Some(float(reality.lidar.dropout))),
-                    ("lidar.noise_std", Some(float(lidar.noise_std))),
+                    ("lidar.noise_std", Some(float(lidar_noise.noise_std))),
                 ],
             ),
             (
@@ -325,8 +327,18 @@ mod tests {
         let config = burger.world_config();
         let settings = RobotProfile::Turtlebot3Burger.settings();
         assert_eq!(
-            (config.robot, config.lidar, config.reality),
-            (settings.robot, settings.lidar, settings.reality)
+            (
+                config.robot,
+                config.lidar,
+                config.lidar_noise,
+                config.reality
+            ),
+            (
+                settings.robot,
+                settings.lidar,
+                settings.lidar_noise,
+                settings.reality
+            )
         );
         assert_eq!(config.robot.max_wheel_speed, 0.22);
         assert_eq!((config.lidar.beams, config.lidar.max_range), (360, 3.5));

@@ -188,7 +188,11 @@ fn every_file_in_the_scenarios_folder_parses_under_its_own_name() {
         ("table1-noise", None, 0.03),
     ] {
         let variant = &parsed[name];
-        assert_eq!(variant.world_config().lidar.noise_std, noise, "{name}");
+        assert_eq!(
+            variant.world_config().lidar_noise.noise_std,
+            noise,
+            "{name}"
+        );
         match d_star {
             Some(d) => assert_eq!(*variant.d_star(), DStarPlan::Fixed(d), "{name}"),
             None => assert_eq!(variant.d_star(), table1.d_star(), "{name}"),
@@ -264,9 +268,12 @@ fn defaults_fill_optional_keys_and_partial_tables() {
         "{MINIMAL}[lidar]\nnoise_std = 0.03\n[robot]\nmax_wheel_speed = 0.8\n"
     ))
     .unwrap();
-    let lidar = scenario.world_config().lidar;
+    let (lidar, noise) = (
+        scenario.world_config().lidar,
+        scenario.world_config().lidar_noise,
+    );
     assert_eq!(
-        (lidar.beams, lidar.max_range, lidar.noise_std),
+        (lidar.beams, lidar.max_range, noise.noise_std),
         (900, 10.0, 0.03)
     );
     let robot = scenario.world_config().robot;

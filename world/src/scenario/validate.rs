@@ -82,6 +82,10 @@ impl ScenarioToml {
 
         let hardware = validate_hardware(check, &self.robot, &self.lidar, &self.compass, dt)?;
         let (profile, robot, lidar, reality) = hardware;
+        let SimulatedLidar {
+            spec: lidar,
+            noise: lidar_noise,
+        } = lidar;
 
         let (v_star, d_star) = validate_goal(check, self.goal, &robot, profile)?;
 
@@ -89,6 +93,7 @@ impl ScenarioToml {
         let world = WorldConfig {
             robot,
             lidar,
+            lidar_noise,
             dt,
             reality,
         };
@@ -167,14 +172,15 @@ pub(super) fn validate_timing(
     Ok((duration_s, dt, steps))
 }
 
-/// The `[lidar]` table as a [`LidarSpec`] and the LIDAR's [`LidarModel`], each key the table
+/// The `[lidar]` table as a [`SimulatedLidar`] (the contract and its noise) and the LIDAR's
+/// [`LidarModel`], each key the table
 /// gives in range and each it omits taken from `profile` (in range by construction).
 pub(super) fn validate_lidar(
     check: &Checker<'_>,
     lidar: &LidarToml,
     profile: &ProfileSettings,
     dt: f64,
-) -> Result<(LidarSpec, LidarModel), ScenarioError> {
+) -> Result<(SimulatedLidar, LidarModel), ScenarioError> {
     let spec = LidarSpec {
         beams: check.count(
             "lidar.beams",
@@ -188,9 +194,11 @@ pub(super) fn validate_lidar(
             lidar.max_range.unwrap_or(profile.lidar.max_range),
             limits::MAX_RANGE,
         )?,
+    };
+    let noise = LidarNoise {
         noise_std: check.bounded(
             "lidar.noise_std",
-            lidar.noise_std.unwrap_or(profile.lidar.noise_std),
+            lidar.noise_std.unwrap_or(profile.lidar_noise.noise_std),
             limits::NOISE_STD,
         )?,
     };
@@ -229,7 +237,7 @@ pub(super) fn validate_lidar(
         min_range,
         dropout,
     };
-    Ok((spec, model))
+    Ok((SimulatedLidar { spec, noise }, model))
 }
 
 /// `lidar.scan_rate_hz`: in range, at most the control rate `1 / dt`, and a whole number of
@@ -464,7 +472,7 @@ pub(super) fn validate_hardware(
     lidar: &LidarToml,
     compass: &CompassToml,
     dt: f64,
-) -> Result<(RobotProfile, RobotParams, LidarSpec, RealityModels), ScenarioError> {
+) -> Result<(RobotProfile, RobotParams, SimulatedLidar, RealityModels), ScenarioError> {
     let profile = match robot.profile.as_deref() {
         None => RobotProfile::Ideal,
         Some(name) => RobotProfile::from_name(name).ok_or_else(|| {
