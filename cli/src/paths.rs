@@ -25,11 +25,17 @@ pub fn repo_root() -> PathBuf {
     })
 }
 
-/// The model to use: the one given, or the shipped default. A missing path, one that is not a
+/// The model to use: the one given (a relative path missing here is tried from the repository
+/// root), or the shipped default. A missing path, one that is not a
 /// regular file and an oversized file are each an error that names the path and the fix
 /// ([`formation_onnx::check_model_file`]); nothing is read.
 pub fn resolve_model(given: Option<&Path>) -> anyhow::Result<PathBuf> {
     let path = match given {
+        // A relative path not found here, but found from the repository root (the shipped
+        // models' `onnx/models/...`, typed from another folder), is taken from the root.
+        Some(p) if p.is_relative() && !p.exists() && repo_root().join(p).exists() => {
+            repo_root().join(p)
+        }
         Some(p) => p.to_path_buf(),
         None => repo_root().join(DEFAULT_MODEL),
     };

@@ -145,16 +145,8 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
             args.runs
         );
     }
-    // `--model`, else the scenario's own, else the shipped default; a relative `--model` that is
-    // not found here is taken from the repository root.
-    let default_model = match (&args.model, scenario.model()) {
-        (Some(given), _) if given.is_relative() && !given.exists() => {
-            paths::repo_root().join(given)
-        }
-        (Some(given), _) => given.clone(),
-        (None, Some(named)) => named.to_path_buf(),
-        (None, None) => paths::repo_root().join(paths::DEFAULT_MODEL),
-    };
+    // `--model`, else the scenario's own (its key named when unusable), else the shipped default.
+    let default_model = paths::resolve_model_for(args.model.as_deref(), &scenario)?;
     let (models, notes) = checked_team_models(&scenario, &default_model)?;
     let run_id = match &args.run_id {
         Some(id) => RunId::new(id)?,
