@@ -1072,7 +1072,8 @@ pub struct RecordArgs {
     #[arg(long, value_enum, default_value_t = Transport::Zenoh)]
     pub transport: Transport,
     /// The recorder's login file (recorder.json from `formation credentials`): read-only, and
-    /// required for a Zenoh team; a ROS 2 team has no logins and takes none.
+    /// required for a Zenoh team; a ROS 2 team on tcp/ has no logins and takes none; a ROS 2
+    /// team on tls/ takes the recorder's certificate beside it (`formation credentials --tls`).
     #[arg(long, value_name = "FILE")]
     pub credentials: Option<PathBuf>,
     /// The MCAP file to write, whose folder must exist (with several runs, run N to

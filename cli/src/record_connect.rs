@@ -1,14 +1,18 @@
 //! `formation record --connect tcp/HOST:PORT --run-id ID --credentials recorder.json --out
 //! FILE.mcap`: records a live Zenoh team from outside, into the very file `--record` writes for
 //! the same run (message for message; see [`formation_record::live`]); with `--transport ros2`
-//! (and no `--credentials`), a live ROS 2 team, whose world serves the same record channel.
+//! (and no `--credentials`), a live ROS 2 team, whose world serves the same record channel; on
+//! `tls/`, with the recorder's certificate (`--credentials DIR/recorder.json` of the team's
+//! `formation credentials --tls` folder), which the ROS 2 router lets read every topic and the
+//! record channel, and publish nothing.
 //!
 //! A Zenoh team needs the read-only recorder login that `formation credentials` writes
 //! (`recorder.json`): without `--credentials`, or with another user's login (an agent's, the
 //! operator's), it is refused before it connects, naming the fix; the world's router refuses a
 //! connection without a valid login and its access rules let only the recorder read the record
-//! channel. A ROS 2 team has no logins or access rules (as ROS 2 without SROS2: whoever reaches
-//! its router reads its topics too), so its recorder connects without one.
+//! channel. A ROS 2 team on `tcp/` has no logins or access rules (as ROS 2 without SROS2: whoever
+//! reaches its router reads its topics too), so its recorder connects without one; on `tls/` its
+//! router names principals by certificate, so the recorder shows its certificate and no password.
 //!
 //! It connects, subscribes, and asks for the setup of a run under way: started before the run,
 //! it records from its first tick; started while a run plays, from the tick it joined at (the
@@ -25,7 +29,9 @@ use formation_proto::wire::RunId;
 use formation_record::live::{LiveRecording, LiveRunDone, decode};
 use formation_record::{RecordTarget, RecordingSummary};
 use formation_runtime::transport::Transport;
-use formation_runtime::zenoh::{Endpoint, Login, RecorderEvent, RecorderLink, credentials};
+use formation_runtime::zenoh::{
+    Endpoint, Login, RecorderAccess, RecorderEvent, RecorderLink, credentials,
+};
 
 use crate::args::RecordArgs;
 use crate::launch::supervisor::LaunchError;
@@ -56,17 +62,31 @@ fn kept_note(kept: &[PathBuf]) -> String {
     }
 }
 
-/// The recorder's login: a Zenoh team's `recorder.json` (required); none for a ROS 2 team,
-/// which has no logins (`--credentials` is refused there, as it is for `formation run`).
-fn recorder_login(args: &RecordArgs) -> anyhow::Result<Option<Login>> {
+/// How the recorder shows itself: a Zenoh team's `recorder.json` (required); a ROS 2 team on
+/// `tls/`, the recorder's certificate beside its `recorder.json` (required: its router names
+/// principals by certificate); a ROS 2 team on `tcp/`, nothing (it has no logins, and
+/// `--credentials` is refused there, as it is for `formation run`).
+fn recorder_login(args: &RecordArgs, endpoint: &Endpoint) -> anyhow::Result<Option<Login>> {
     args.transport
         .refuse_network_flags(&[(true, "formation record --connect")])?;
-    args.transport
-        .refuse_zenoh_flags(&[(args.credentials.is_some(), "--credentials")])?;
-    if args.transport == Transport::Ros2 {
+    let ros2 = args.transport == Transport::Ros2;
+    if ros2 && !endpoint.is_tls() {
+        if args.credentials.is_some() {
+            anyhow::bail!(
+                "--credentials needs --transport zenoh, or a ROS 2 team on tls/: a ROS 2 team \
+                 on {endpoint} has no logins, so its recorder takes none"
+            );
+        }
         return Ok(None);
     }
     let Some(login_file) = &args.credentials else {
+        if ros2 {
+            anyhow::bail!(
+                "a ROS 2 team on {endpoint} admits its recorder by the recorder's certificate: \
+                 pass --credentials DIR/recorder.json of the team's `formation credentials \
+                 --tls` folder (recorder.pem, recorder.key.pem and ca.pem beside it)"
+            );
+        }
         anyhow::bail!(
             "formation record --connect needs the team's recorder login: pass --credentials \
              DIR/recorder.json from the team's credentials folder (`formation credentials \
@@ -80,7 +100,7 @@ fn recorder_login(args: &RecordArgs) -> anyhow::Result<Option<Login>> {
 /// `formation record`.
 pub fn record_command(args: &RecordArgs) -> anyhow::Result<()> {
     let endpoint = Endpoint::parse(&args.connect)?;
-    let login = recorder_login(args)?;
+    let login = recorder_login(args, &endpoint)?;
     let run = RunId::new(&args.run_id)?;
     RecordTarget::File(args.out.clone()).check()?;
     // The recording never goes over the credentials it logs in with.
@@ -92,7 +112,12 @@ pub fn record_command(args: &RecordArgs) -> anyhow::Result<()> {
         )?;
     }
     let timeout = crate::launch::positive_seconds("--timeout-s", args.timeout_s)?;
-    let link = RecorderLink::connect(&endpoint, login.as_ref(), &run, timeout)?;
+    let access = match &login {
+        None => RecorderAccess::Open,
+        Some(login) if args.transport == Transport::Ros2 => RecorderAccess::Certificate(login),
+        Some(login) => RecorderAccess::Login(login),
+    };
+    let link = RecorderLink::connect(&endpoint, access, &run, timeout)?;
     println!("connected to run {run} at {endpoint}; recording its runs");
     let mut recording =
         LiveRecording::new(&args.out, &format!("formation record --connect {endpoint}"));

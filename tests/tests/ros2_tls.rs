@@ -132,3 +132,152 @@ fn a_robot_s_certificate_reads_its_tf_and_scan_and_no_certificate_reads_nothing(
         assert!(config.is_file(), "{} is missing", config.display());
     }
 }
+
+/// A raw Zenoh session (no `formation` code on its path) with `principal`'s ROS 2 session
+/// configuration of credentials folder `creds`, joining the router at `listen`.
+fn ros2_session(creds: &Path, principal: &str, listen: &str) -> zenoh::Session {
+    use formation_runtime::ros2::secure::session_config;
+    use formation_runtime::zenoh::Endpoint;
+    use zenoh::Wait;
+    let endpoint = Endpoint::parse(listen).expect("a tls/ endpoint");
+    let config = session_config(creds, principal, &endpoint).expect("a session configuration");
+    let config = zenoh::Config::from_json5(&config.to_string()).expect("a Zenoh configuration");
+    zenoh::open(config).wait().expect("the session opens")
+}
+
+/// Issue 36: `formation record --connect tls/… --transport ros2 --credentials DIR/recorder.json`
+/// records a ROS 2 team on TLS from outside, attached before the first tick, into the very
+/// messages the world's own `--record` writes; without `--credentials` it is refused, naming the
+/// fix. The recorder's certificate publishes nothing: a raw session with its ROS 2 session
+/// configuration puts Twists on robot 0's `cmd_vel` and a record on the run's record channel, and
+/// a second such session, which sees the agents' Twists and the world's records, sees none of
+/// them (nor does the recorder, which would fail on a record it cannot read).
+#[test]
+fn the_recorder_s_certificate_records_a_ros2_tls_team_and_publishes_nothing() {
+    use formation_runtime::zenoh::keys::record_live;
+    use formation_tests::{AgentGate, mcap_readers};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use zenoh::Wait;
+    const FORGED: &[u8] = b"forged by the recorder's certificate";
+    let _one = one_at_a_time();
+    let _watchdog = Watchdog::arm("ros2_tls_record", LIMIT);
+    let dir = TempDir::new("r2trec");
+    let run_id = unique_run_id("r2trec");
+    let leaks = LeakCheck::new(&run_id);
+    let creds = tls_credentials(dir.path(), "creds", 3);
+    let scenario = case1_scenario(dir.path(), 6.0);
+    let out = dir.path().join("out");
+    let own = dir.path().join("own.mcap");
+    let outside = dir.path().join("outside.mcap");
+    let listen = format!("tls/127.0.0.1:{}", free_tcp_port());
+    let creds_text = creds.to_string_lossy();
+    // The agents wait at the gate, so the run waits for them while the recorder connects.
+    let gate = AgentGate::new(dir.path());
+    let mut command = formation_run_with_model(
+        &run_id,
+        &scenario,
+        &repo_root().join("onnx/models/policy.onnx"),
+        &out,
+        &[
+            "--transport",
+            "ros2",
+            "--listen",
+            &listen,
+            "--credentials",
+            &creds_text,
+            "--clock",
+            "lockstep",
+        ],
+    );
+    command
+        .arg("--record")
+        .arg(&own)
+        .env("FORMATION_AGENT_BIN", gate.bin());
+    let team = LiveProcess::spawn(command);
+    let record = |login: Option<&Path>| {
+        let mut command = Command::new(&binaries().cli);
+        command
+            .args(["record", "--connect", &listen, "--transport", "ros2"])
+            .args(["--run-id", run_id.as_str(), "--out"])
+            .arg(&outside);
+        if let Some(login) = login {
+            command.arg("--credentials").arg(login);
+        }
+        command
+    };
+    run(record(None), Duration::from_secs(60))
+        .assert_failure_mentioning("admits its recorder by the recorder's certificate");
+    let mut recorder = LiveProcess::spawn(record(Some(&creds.join("recorder.json"))));
+    let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
+        l.contains(&format!("connected to run {run_id}"))
+    });
+    assert!(connected.is_some(), "{}", recorder.describe());
+
+    let watcher = ros2_session(&creds, "recorder", &listen);
+    let count = |key: String| {
+        let (all, forged) = (Arc::new(AtomicUsize::new(0)), Arc::new(AtomicUsize::new(0)));
+        let (seen_all, seen_forged) = (Arc::clone(&all), Arc::clone(&forged));
+        let subscriber = watcher
+            .declare_subscriber(key)
+            .callback(move |sample| {
+                seen_all.fetch_add(1, Ordering::Relaxed);
+                if sample.payload().to_bytes().as_ref() == FORGED {
+                    seen_forged.fetch_add(1, Ordering::Relaxed);
+                }
+            })
+            .wait()
+            .expect("a subscriber");
+        (subscriber, all, forged)
+    };
+    let cmd_vel = "0/robot_0/cmd_vel/**".to_string();
+    let (_twists, twists, forged_twists) = count(cmd_vel.clone());
+    let (_records, records, forged_records) = count(record_live(&run_id));
+    let forger = ros2_session(&creds, "recorder", &listen);
+    // Let the subscriptions reach the router before the run begins.
+    std::thread::sleep(Duration::from_secs(1));
+    for _ in 0..20 {
+        for key in ["0/robot_0/cmd_vel/forged".to_string(), record_live(&run_id)] {
+            forger
+                .put(key, FORGED)
+                .wait()
+                .expect("the put leaves the session");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    gate.open();
+    let team = team.finish(LIMIT);
+    team.assert_success();
+    let recorded = recorder.finish(Duration::from_secs(60));
+    recorded.assert_success();
+    assert!(
+        recorded.stdout().contains("recorded run 0 to")
+            && !recorded.stdout().contains("joined late"),
+        "{}",
+        recorded.describe()
+    );
+    let compared = mcap_readers(&["compare".as_ref(), own.as_os_str(), outside.as_os_str()]);
+    // 6 s at 20 Hz: 120 ticks of 3 robots' scan, odometry, command, TF and more.
+    assert!(
+        compared["messages"].as_u64().unwrap_or(0) > 120 * 3 * 4,
+        "{compared}"
+    );
+    assert_eq!(compared["differing"], 0, "{compared}");
+    let context = team.describe();
+    assert!(
+        twists.load(Ordering::Relaxed) > 0 && records.load(Ordering::Relaxed) > 0,
+        "the recorder's certificate reads robot 0's Twists and the record channel: {context}"
+    );
+    assert_eq!(
+        forged_twists.load(Ordering::Relaxed),
+        0,
+        "a Twist the recorder's certificate put on {cmd_vel} got through: {context}"
+    );
+    assert_eq!(
+        forged_records.load(Ordering::Relaxed),
+        0,
+        "a record the recorder's certificate put on the record channel got through: {context}"
+    );
+    drop((forger, watcher));
+    leaks.assert_clean();
+}

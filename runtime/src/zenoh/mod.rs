@@ -69,7 +69,7 @@ use formation_proto::exit::TerminationSignal;
 
 pub use access::{AccessError, Login, WorldAccess};
 pub use agent::ZenohAgentLink;
-pub use record::{RecorderEvent, RecorderLink, RecorderLinkError, ZenohRecordFeed};
+pub use record::{RecorderAccess, RecorderEvent, RecorderLink, RecorderLinkError, ZenohRecordFeed};
 pub use world::ZenohWorldLink;
 
 /// The most bytes one Zenoh message may carry here (a model sent for a swap is the largest).
@@ -273,6 +273,50 @@ pub(crate) fn client_config(
     timeout: Duration,
     login: Option<&Login>,
 ) -> Result<::zenoh::Config, String> {
+    let mut config = connection_config(connect, timeout)?;
+    if let Some(login) = login {
+        login.apply(&mut config)?;
+    }
+    if connect.is_tls() {
+        if login.is_none()
+            && let Some(node) = ros2_node_config(connect, &config)?
+        {
+            return Ok(node);
+        }
+        client_tls_identity(connect, login)?.apply_connect(&mut config)?;
+    }
+    Ok(config)
+}
+
+/// A client of a ROS 2 team's router on `tls/` known by `login`'s certificate alone (the
+/// recorder's, `formation record --connect --transport ros2`): that router names its principals
+/// by certificate and has no logins, so the password is not sent.
+#[cfg(feature = "tls")]
+pub(crate) fn certificate_client_config(
+    connect: &Endpoint,
+    timeout: Duration,
+    login: &Login,
+) -> Result<::zenoh::Config, String> {
+    let mut config = connection_config(connect, timeout)?;
+    client_tls_identity(connect, Some(login))?.apply_connect(&mut config)?;
+    Ok(config)
+}
+
+/// No TLS in this build ([`Endpoint::parse`] refuses `tls/` already).
+#[cfg(not(feature = "tls"))]
+pub(crate) fn certificate_client_config(
+    connect: &Endpoint,
+    _: Duration,
+    _: &Login,
+) -> Result<::zenoh::Config, String> {
+    Err(format!(
+        "{connect}: this build has no TLS: build with `--features tls`"
+    ))
+}
+
+/// A client's connection to the world's router at `connect`, within `timeout`: no login, no
+/// certificate yet.
+fn connection_config(connect: &Endpoint, timeout: Duration) -> Result<::zenoh::Config, String> {
     let mut config = base_config("client")?;
     let timeout_ms = timeout.as_millis().clamp(1, i64::MAX as u128);
     let entries = [
@@ -288,17 +332,6 @@ pub(crate) fn client_config(
         config
             .insert_json5(key, &value)
             .map_err(|e| format!("setting {key} = {value}: {e}"))?;
-    }
-    if let Some(login) = login {
-        login.apply(&mut config)?;
-    }
-    if connect.is_tls() {
-        if login.is_none()
-            && let Some(node) = ros2_node_config(connect, &config)?
-        {
-            return Ok(node);
-        }
-        client_tls_identity(connect, login)?.apply_connect(&mut config)?;
     }
     Ok(config)
 }

@@ -180,6 +180,18 @@ pub enum RecorderLinkError {
     },
 }
 
+/// How the recorder shows itself to the team it records.
+#[derive(Debug, Clone, Copy)]
+pub enum RecorderAccess<'a> {
+    /// A Zenoh team: the recorder's login, with its certificate beside it on `tls/`.
+    Login(&'a Login),
+    /// A ROS 2 team on `tls/`: the recorder's certificate, from the folder of this login file;
+    /// the team's router names its principals by certificate and has no logins.
+    Certificate(&'a Login),
+    /// A ROS 2 team on `tcp/`, which has no logins: nothing.
+    Open,
+}
+
 /// A recorder's connection to a live team.
 pub struct RecorderLink {
     session: ::zenoh::Session,
@@ -192,19 +204,19 @@ pub struct RecorderLink {
 }
 
 impl RecorderLink {
-    /// Connects to run `run`'s world at `endpoint` with the recorder's `login` (none for a ROS 2
-    /// team, which has no logins), subscribes to its record channel, and waits up to `timeout`
-    /// for the world to be there.
+    /// Connects to run `run`'s world at `endpoint` as `access` says (a Zenoh team's recorder
+    /// login; a ROS 2 team's recorder certificate on `tls/`, or nothing on `tcp/`), subscribes
+    /// to its record channel, and waits up to `timeout` for the world to be there.
     pub fn connect(
         endpoint: &Endpoint,
-        login: Option<&Login>,
+        access: RecorderAccess<'_>,
         run: &RunId,
         timeout: Duration,
     ) -> Result<Self, RecorderLinkError> {
         let started = Instant::now();
         let zenoh =
             |action: String| move |e: String| RecorderLinkError::Zenoh { action, detail: e };
-        let session = open_session(endpoint, login, timeout)?;
+        let session = open_session(endpoint, access, timeout)?;
         let bell = Arc::new(Bell::default());
         let signals = SignalWatch::start(Arc::clone(&bell))
             .map_err(|e| zenoh("watch for SIGINT and SIGTERM".into())(e.to_string()))?;
@@ -301,20 +313,32 @@ impl RecorderLink {
     }
 }
 
-/// Opens the recorder's session at `endpoint` within `timeout`. With a login, it first waits for
-/// the router's TCP port and then gives the login [`super::LOGIN_ANSWER`]: a session that does
-/// not open by then was refused by the router (a wrong password), which is said at once rather
-/// than after the whole timeout as if the team were not there.
+/// Opens the recorder's session at `endpoint` within `timeout`. On `tls/` its certificate is
+/// checked and shown to the world first (a refusal is named at once). With a login, it then
+/// waits for the router's TCP port and gives the login [`super::LOGIN_ANSWER`]: a session that
+/// does not open by then was refused by the router (a wrong password), which is said at once
+/// rather than after the whole timeout as if the team were not there.
 fn open_session(
     endpoint: &Endpoint,
-    login: Option<&Login>,
+    access: RecorderAccess<'_>,
     timeout: Duration,
 ) -> Result<::zenoh::Session, RecorderLinkError> {
     let started = Instant::now();
+    let (login, password) = match access {
+        RecorderAccess::Login(login) => (Some(login), true),
+        RecorderAccess::Certificate(login) => (Some(login), false),
+        RecorderAccess::Open => (None, false),
+    };
     #[cfg(feature = "tls")]
     super::check_tls_client(endpoint, login, timeout)?;
     let configure = |within: Duration| {
-        super::client_config(endpoint, within, login).map_err(|detail| RecorderLinkError::Zenoh {
+        match access {
+            RecorderAccess::Certificate(login) => {
+                super::certificate_client_config(endpoint, within, login)
+            }
+            _ => super::client_config(endpoint, within, login),
+        }
+        .map_err(|detail| RecorderLinkError::Zenoh {
             action: format!("configure the connection to {endpoint}"),
             detail,
         })
@@ -323,7 +347,7 @@ fn open_session(
         endpoint: endpoint.to_string(),
         detail,
     };
-    let Some(login) = login else {
+    let Some(login) = login.filter(|_| password) else {
         return super::open(configure(timeout)?).map_err(unreachable);
     };
     while !super::accepts_tcp(endpoint, Duration::from_secs(1)) {
