@@ -39,6 +39,11 @@ def data(path, noise, seed, det=None):
     x = rel / ds[..., None]
     f = labels(wheels, aux)
     keep = np.abs(wheels).max(-1) < 0.9 - 1e-3
+    if det is not None and os.environ.get("OWN_GATE"):
+        # the robot's own rule applied to what it detected: Gabriel (ratio >= 1.3) or one of its 2 nearest
+        r2 = (x ** 2).sum(-1); dk = ((x[..., :, None, :] - x[..., None, :, :]) ** 2).sum(-1)
+        ratio = (r2[..., None, :] + dk) / np.maximum(r2[..., :, None], 1e-12) + np.eye(K) * 1e9
+        gate = (((ratio.min(-1) >= 1.3) | (np.arange(K) < 2)) & (np.sqrt(r2) < 50)).astype(np.float32)
     t = lambda a: torch.tensor(a[keep], dtype=torch.float32)
     return t(x), t(ds), t(f), t(gate)
 
@@ -93,13 +98,17 @@ def train(tr, vals, epochs, eps=0.05):
 
 if __name__ == "__main__":
     tn = float(os.environ.get("TRAIN_NOISE", "0"))
-    tr = data(os.environ["TRAIN"], tn, 1)
+    tr = None if os.environ.get("TRAIN_DET") else data(os.environ["TRAIN"], tn, 1)
     vals = {f"{v}": data(os.environ["VAL"], v, 2) for v in [float(s) for s in os.environ.get("VAL_NOISE", "0,0.01").split(",")]}
     if os.environ.get("VAL_DET"):
         vals["detected"] = data(os.environ["VAL"], 0, 2, os.environ["VAL_DET"])
     if os.environ.get("TRAIN_DET"):
-        tr = data(os.environ["TRAIN"], 0, 1, os.environ["TRAIN_DET"])
-    print("train noise", tn, "train", len(tr[0]), flush=True)
+        parts = [data(p, 0, 1, d) for p, d in zip(os.environ["TRAIN"].split(","), os.environ["TRAIN_DET"].split(","))]
+        tr = tuple(torch.cat([p[i] for p in parts]) for i in range(4))
+    print("train", len(tr[0]), flush=True)
     m = train(tr, vals, int(os.environ.get("EPOCHS", "20")))
     if os.environ.get("SAVE"): torch.save(m.state_dict(), os.environ["SAVE"])
 
+def save_if_asked(model):
+    if os.environ.get("SAVE"):
+        torch.save(model.state_dict(), os.environ["SAVE"])
