@@ -9,7 +9,13 @@
 //!   graph (its `MP` liveliness token). The link greets for it (with a proof of the launch
 //!   secret, which it holds), so the exchange admits one driver per robot as for other
 //!   transports; Twists from any other publisher on that topic (told apart by the GID in their
-//!   attachments) are ignored. When the token goes, the agent is reported dead.
+//!   attachments) are ignored. When the token goes, the driver is *unreachable*: its session
+//!   may have dropped (a link reset, a lease that ran out), and Zenoh reconnects it by itself,
+//!   declaring the same token again. The link waits [`RECONNECT_GRACE`] (5 s, as for the Zenoh
+//!   transport) for it, and lockstep holds the tick meanwhile
+//!   ([`WorldLink::agent_reconnecting`]); a driver that comes back gets the last tick's odometry
+//!   and scan again (the drop may have lost them, or its Twist) and answers as it would have,
+//!   and one that does not is reported dead when the grace ends.
 //! - **Episodes:** ROS 2 agents need no episode handshake (their decision keeps no state across
 //!   scans), so a begin-episode request is answered "ready" at once; a swap is refused (restart
 //!   the agent with another model instead).
@@ -44,7 +50,7 @@
 use std::collections::{HashMap, VecDeque};
 use std::path::Path;
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use crate::auth::LaunchSecret;
 use ::zenoh::Wait;
@@ -66,7 +72,7 @@ use formation_ros2::{
 use super::node::{Delivery, Node, NodeError, RosPublisher, RosSubscription};
 use super::{Ros2Team, TeamTopics};
 use crate::link::{Hello, WorldLink, WorldLinkError, WorldResult};
-use crate::zenoh::{Bell, Endpoint, SignalWatch};
+use crate::zenoh::{Bell, Endpoint, RECONNECT_GRACE, SignalWatch};
 
 /// Stamps of the current episode's ticks kept per robot, to match Twists to ticks.
 const STAMPS_KEPT: usize = 64;
@@ -118,8 +124,16 @@ struct Graph {
     drivers: Vec<HashMap<String, Driver>>,
     /// Drivers that appeared and were not greeted for yet.
     new_drivers: Vec<VecDeque<Driver>>,
-    /// `(robot, pid)` of drivers whose token went, not yet reported.
+    /// `(robot, pid)` of drivers whose token went and did not come back within
+    /// [`RECONNECT_GRACE`], not yet reported.
     gone: Vec<(usize, u32)>,
+    /// Drivers whose token went, by token key, with their robot and when it went: unreachable
+    /// (their session dropped, and Zenoh reconnects it by itself), back when the same token comes
+    /// again, counted gone once [`RECONNECT_GRACE`] has passed.
+    vanished: HashMap<String, (usize, Driver, Instant)>,
+    /// Robots whose driver came back within the grace, whose last tick's odometry and scan are
+    /// not yet sent again.
+    returned: Vec<usize>,
     /// Twists received per robot.
     twists: Vec<VecDeque<ReceivedTwist>>,
     next_pid: u32,
@@ -140,6 +154,9 @@ struct RobotPorts {
     odometry: Option<(Pose, WheelCmd)>,
     /// Stamp (ns) → (generation, tick) of this episode's latest ticks.
     stamps: VecDeque<(i64, u64, u64)>,
+    /// The last tick's stamp, odometry (if one went with it) and scan, sent again to a driver
+    /// that comes back from a drop (which may have lost them).
+    last_sent: Option<(i64, Option<Odometry>, LaserScan)>,
 }
 
 /// The world's ROS 2 link: a Zenoh router, one node per simulated robot, the team's goal topics.
@@ -290,6 +307,7 @@ impl RobotPorts {
             _cmd_vel: cmd_vel,
             odometry: None,
             stamps: VecDeque::with_capacity(STAMPS_KEPT),
+            last_sent: None,
         })
     }
 }
@@ -370,6 +388,16 @@ fn note_driver_token(
             if graph.drivers[robot].contains_key(key) {
                 return false;
             }
+            if let Some((_, driver, went)) = graph.vanished.remove(key) {
+                tracing::warn!(
+                    "robot {robot}: ROS 2 node {} reconnected after {:.1} s",
+                    driver.node,
+                    went.elapsed().as_secs_f64()
+                );
+                graph.drivers[robot].insert(key.to_owned(), driver);
+                graph.returned.push(robot);
+                return true;
+            }
             graph.next_pid = graph.next_pid.wrapping_add(1).max(1);
             let driver = Driver {
                 pid: graph.next_pid,
@@ -385,7 +413,15 @@ fn note_driver_token(
         }
         SampleKind::Delete => {
             if let Some(driver) = graph.drivers[robot].remove(key) {
-                graph.gone.push((robot, driver.pid));
+                tracing::warn!(
+                    "robot {robot}: ROS 2 node {} is unreachable (its cmd_vel publisher's token \
+                     went); waiting up to {:.0} s for it to reconnect",
+                    driver.node,
+                    RECONNECT_GRACE.as_secs_f64()
+                );
+                graph
+                    .vanished
+                    .insert(key.to_owned(), (robot, driver, Instant::now()));
             }
         }
     }
@@ -535,6 +571,24 @@ impl Ros2WorldLink {
         stamp
     }
 
+    /// Sends the last tick's odometry and scan again to each robot whose driver came back from a
+    /// drop, which may have lost them: in lockstep the tick is held for it, and it answers the
+    /// scan (with the same stamp) as it would have.
+    fn send_again_to_returned(&mut self) -> WorldResult {
+        let returned = std::mem::take(&mut lock(&self.graph).returned);
+        for robot in returned {
+            let ports = &self.robots[robot];
+            let Some((stamp, odometry, scan)) = &ports.last_sent else {
+                continue;
+            };
+            if let Some(odometry) = odometry {
+                ports.odom.publish(odometry, *stamp).map_err(node_error)?;
+            }
+            ports.scan.publish(scan, *stamp).map_err(node_error)?;
+        }
+        Ok(())
+    }
+
     fn publish_goal(&mut self, msg: &ScanMsg, stamp: i64) -> WorldResult {
         if self.goal_published == Some((msg.generation, msg.tick)) {
             return Ok(());
@@ -624,6 +678,7 @@ impl WorldLink for Ros2WorldLink {
         let stamp = self.stamp(msg);
         self.publish_goal(msg, stamp)?;
         let ports = &mut self.robots[robot];
+        let mut sent_odometry = None;
         if let Some((pose, wheels)) = ports.odometry.take() {
             let odometry = odometry_message(
                 robot,
@@ -634,6 +689,7 @@ impl WorldLink for Ros2WorldLink {
                 self.team.wheel_separation,
             );
             ports.odom.publish(&odometry, stamp).map_err(node_error)?;
+            sent_odometry = Some(odometry);
             ports
                 .tf
                 .publish(&tf_message(robot, Time::from_nanos(stamp), &pose), stamp)
@@ -657,6 +713,7 @@ impl WorldLink for Ros2WorldLink {
             self.team.max_range,
         );
         ports.scan.publish(&scan, stamp).map_err(node_error)?;
+        ports.last_sent = Some((stamp, sent_odometry, scan));
         if ports.stamps.len() == STAMPS_KEPT {
             ports.stamps.pop_front();
         }
@@ -747,8 +804,34 @@ impl WorldLink for Ros2WorldLink {
             .any(|d| d.pid == pid))
     }
 
+    fn agent_reconnecting(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
+        Ok(lock(&self.graph)
+            .vanished
+            .values()
+            .any(|(r, driver, _)| *r == robot && driver.pid == pid))
+    }
+
     fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError> {
-        Ok(std::mem::take(&mut lock(&self.graph).gone))
+        self.send_again_to_returned()?;
+        let mut graph = lock(&self.graph);
+        let expired: Vec<String> = graph
+            .vanished
+            .iter()
+            .filter(|(_, (_, _, went))| went.elapsed() >= RECONNECT_GRACE)
+            .map(|(key, _)| key.clone())
+            .collect();
+        for key in expired {
+            if let Some((robot, driver, _)) = graph.vanished.remove(&key) {
+                tracing::warn!(
+                    "robot {robot}: ROS 2 node {} has been unreachable for {:.0} s; counting it \
+                     gone",
+                    driver.node,
+                    RECONNECT_GRACE.as_secs_f64()
+                );
+                graph.gone.push((robot, driver.pid));
+            }
+        }
+        Ok(std::mem::take(&mut graph.gone))
     }
 
     fn drain_swap_requests(&mut self, _sink: &mut dyn FnMut(SwapRequest)) -> WorldResult {
