@@ -24,9 +24,8 @@
 //! an error, 130 on SIGINT, 143 on SIGTERM (in every mode, and while it connects too).
 //!
 //! The binary's `main.rs` parses [`Args`] and calls [`run`], then [`exit_for`]; the robot's
-//! ONNX decision as the agent loop drives it is [`pilot`].
+//! ONNX decision the agent loop drives is `formation_robot_agent::pilot`.
 
-pub mod pilot;
 pub mod reach;
 pub mod ros2;
 
@@ -38,9 +37,9 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
-use crate::pilot::OnnxPilots;
 use clap::Parser;
 use formation_proto::wire::RunId;
+use formation_robot_agent::pilot::OnnxPilots;
 use formation_runtime::agent::{AgentExit, AgentLoop, load_model};
 use formation_runtime::auth::LaunchSecret;
 use formation_runtime::clock::SystemClock;

@@ -25,9 +25,9 @@ use formation_runtime::transport::TransportError;
 
 #[cfg(feature = "zenoh")]
 use {
-    crate::pilot::OnnxPilots,
     anyhow::Context,
     formation_proto::LidarSpec,
+    formation_robot_agent::pilot::OnnxPilots,
     formation_ros2::{Namespace, NodeName, PartialScan, RingContract, TopicName},
     formation_runtime::agent::PilotMaker,
     formation_runtime::agent::{BoxError, Pilot},
@@ -181,7 +181,7 @@ pub fn run(
     if let GoalValue::Fixed(d_star) = goal[1] {
         // Refused at once, as an agent refuses a goal outside its model's envelope at episode
         // start.
-        formation_robot_agent::decision::check_goal_envelope(pilot.inner.agent().policy(), d_star)
+        formation_robot_agent::decision::check_goal_envelope(pilot.inner.policy(), d_star)
             .with_context(|| format!("--d-star {d_star}"))?;
     }
     let wheel_separation = checked_wheel_separation(flags, robot.map(|(_, s)| s.robot))?;

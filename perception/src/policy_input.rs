@@ -15,6 +15,7 @@
 
 #[cfg(doc)]
 use formation_proto::PolicyIo;
+use formation_proto::robot::{CheckedGoal, GoalError};
 use formation_proto::{AuxInput, Goal, PolicyOutput, WheelCmd};
 
 /// Why a goal or a heading cannot be turned into a policy's input.
@@ -42,21 +43,16 @@ pub enum PolicyInputError {
     },
 }
 
-/// Checks a goal where it enters a robot: d* a positive finite distance, phi* and v* finite.
-/// A robot holds a checked goal until the next one, so nothing checks it again on each tick.
+/// Checks a goal where it enters a robot: d* a positive finite distance, phi* and v* finite
+/// ([`CheckedGoal::new`], whose errors these are). A robot holds a checked goal until the next
+/// one, so nothing checks it again on each tick.
 pub fn check_goal(goal: &Goal) -> Result<(), PolicyInputError> {
-    if !(goal.d_star.is_finite() && goal.d_star > 0.0) {
-        return Err(PolicyInputError::DStar {
-            d_star: goal.d_star,
-        });
-    }
-    if !(goal.phi_star.is_finite() && goal.v_star.is_finite()) {
-        return Err(PolicyInputError::NonFiniteGoal {
-            phi_star: goal.phi_star,
-            v_star: goal.v_star,
-        });
-    }
-    Ok(())
+    CheckedGoal::new(*goal).map(|_| ()).map_err(|e| match e {
+        GoalError::DStar { d_star } => PolicyInputError::DStar { d_star },
+        GoalError::NonFinite { phi_star, v_star } => {
+            PolicyInputError::NonFiniteGoal { phi_star, v_star }
+        }
+    })
 }
 
 /// Checks the robot's own heading, which changes every tick.

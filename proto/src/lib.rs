@@ -14,6 +14,9 @@
 //!   them.
 //! * [`control`]: the [`control::Controller`] seam between an episode loop and what decides the
 //!   wheel commands, with its [`control::Observation`] and [`control::ControllerError`].
+//! * [`robot`]: one robot's decision: its [`robot::RobotInput`] (own scan, own heading, goal),
+//!   the [`robot::Pilot`] that decides from it, [`robot::CheckedGoal`] and
+//!   [`robot::Decentralised`], a team of pilots as a [`control::Controller`].
 //! * [`wire`]: the fixed-size `#[repr(C)]` messages between the world process and the
 //!   robot-agent processes, whatever carries them, and the names of their channels.
 //!
@@ -30,6 +33,7 @@ pub mod model_id;
 pub mod neighbours;
 pub mod policy_io;
 pub mod policy_output;
+pub mod robot;
 pub mod team_size;
 pub mod types;
 pub mod wire;

@@ -39,6 +39,7 @@ use formation_onnx::{OnnxPolicy, PolicyError};
 #[cfg(doc)]
 use formation_proto::PolicyOutput;
 use formation_proto::control::{Controller, ControllerError, Observation};
+use formation_proto::robot::{CheckedGoal, Decentralised};
 use formation_proto::{
     AuxValues, Goal, LidarSpec, OccupancySpec, PolicyInput, PolicyIo, RangeInput, WheelCmd,
 };
@@ -229,7 +230,7 @@ pub struct Agent {
     /// takes none.
     ranges: Vec<f32>,
     /// The goal checked where it entered ([`Agent::hold_goal`]); `None` before the first.
-    goal: Option<Goal>,
+    goal: Option<CheckedGoal>,
     /// The scan of the last [`Agent::perceive`]; empty before the first.
     last_scan: Vec<f32>,
     /// The heading and the scalars of the last [`Agent::decide`]; `None` before the first.
@@ -281,16 +282,21 @@ impl Agent {
     /// d* inside the model's trained range. The same goal again is not checked again, so a
     /// goal that comes with every tick is checked once. On error the agent holds no goal.
     pub fn hold_goal(&mut self, goal: &Goal) -> Result<(), DecisionError> {
-        if self.goal.as_ref() == Some(goal) {
+        if self.goal.as_ref().map(CheckedGoal::goal) == Some(goal) {
             return Ok(());
         }
         self.goal = None;
-        policy_input::check_goal(goal).map_err(|e| DecisionError::Goal {
+        let checked = CheckedGoal::new(*goal).map_err(|e| DecisionError::Goal {
             reason: e.to_string(),
         })?;
         check_goal_envelope(self.policy.as_ref(), goal.d_star)?;
-        self.goal = Some(*goal);
+        self.goal = Some(checked);
         Ok(())
+    }
+
+    /// The goal held, checked where it entered.
+    fn held_goal(&self) -> Option<Goal> {
+        self.goal.map(|goal| *goal.goal())
     }
 
     /// Renders this robot's occupancy image from its own scan under the goal (whose d* sets the
@@ -335,7 +341,7 @@ impl Agent {
                 reason: "no goal held: perceive a scan under a goal before deciding".to_owned(),
             });
         };
-        let goal = &goal;
+        let goal = goal.goal();
         policy_input::check_heading(heading).map_err(|e| DecisionError::Goal {
             reason: e.to_string(),
         })?;
@@ -369,7 +375,7 @@ impl Agent {
     /// its next scan is due, so that the real decision finds caches warm. Does nothing before
     /// the first decision.
     pub fn rehearse(&mut self) -> Result<(), DecisionError> {
-        let (Some((_, aux)), Some(goal)) = (self.last_decision, self.goal) else {
+        let (Some((_, aux)), Some(goal)) = (self.last_decision, self.held_goal()) else {
             return Ok(());
         };
         self.render_last_scan(goal.d_star);
@@ -422,7 +428,7 @@ impl Agent {
     /// braking its robot on every tick. The goal held must lie in the candidate's trained range.
     pub fn swap_policy(&mut self, mut policy: Box<dyn PolicyBackend>) -> Result<(), DecisionError> {
         check_policy(policy.as_ref(), &self.lidar)?;
-        if let Some(goal) = self.goal {
+        if let Some(goal) = self.held_goal() {
             check_goal_envelope(policy.as_ref(), goal.d_star)?;
         }
         let io = policy.io();
@@ -431,7 +437,7 @@ impl Agent {
         // An empty observation: no beam returns, so every sector is the clip.
         let mut trial_ranges: Vec<f32> =
             io.ranges.map_or_else(Vec::new, |r| vec![r.clip; r.sectors]);
-        let (aux, observation) = match (self.last_decision, self.goal) {
+        let (aux, observation) = match (self.last_decision, self.held_goal()) {
             (Some((heading, _)), Some(goal)) if self.last_scan.len() == self.lidar.beams => {
                 render_observation(
                     &self.last_scan,
@@ -456,7 +462,7 @@ impl Agent {
         self.image_f32.resize(n, 0.0);
         self.ranges = trial_ranges;
         if let Some((heading, _)) = self.last_decision {
-            let goal = self.goal.unwrap_or(TRIAL_GOAL);
+            let goal = self.held_goal().unwrap_or(TRIAL_GOAL);
             self.last_decision = Some((heading, io.aux.values(heading, &goal)));
         }
         self.policy = policy;
@@ -599,16 +605,19 @@ pub fn check_team_models_with_metadata(
     Ok(ids)
 }
 
-/// Runs one independent [`Agent`] per robot in-process. Robot `i`'s agent reads only
-/// `obs.scans[i]`, `obs.poses[i].theta` and the goal.
+/// Runs one independent [`Agent`] per robot in-process: a [`Decentralised`] team (an [`Agent`] is
+/// a [`formation_proto::robot::Pilot`], `crate::pilot`), which hands robot `i` only its own input
+/// (`obs.scans[i]`, `obs.poses[i].theta` and the goal).
 pub struct PolicyController {
-    agents: Vec<Agent>,
+    team: Decentralised<Agent>,
 }
 
 impl PolicyController {
     /// One agent per robot, in robot order.
     pub fn new(agents: Vec<Agent>) -> PolicyController {
-        PolicyController { agents }
+        PolicyController {
+            team: Decentralised::new(agents),
+        }
     }
 
     /// Loads `models[i]` for robot `i`.
@@ -625,14 +634,14 @@ impl PolicyController {
 
     /// Sets every robot's wheel acceleration limit \[m/s²\] ([`Agent::set_max_wheel_accel`]).
     pub fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
-        for agent in &mut self.agents {
+        for agent in self.team.pilots_mut() {
             agent.set_max_wheel_accel(max_wheel_accel);
         }
     }
 
     /// The agents, in robot order.
     pub fn agents_mut(&mut self) -> &mut [Agent] {
-        &mut self.agents
+        self.team.pilots_mut()
     }
 }
 
@@ -642,23 +651,7 @@ impl Controller for PolicyController {
         obs: &Observation<'_>,
         out: &mut [WheelCmd],
     ) -> Result<(), ControllerError> {
-        if self.agents.len() != out.len() {
-            return Err(ControllerError {
-                message: format!(
-                    "{} agents for {} robots: give one model per robot",
-                    self.agents.len(),
-                    out.len()
-                ),
-            });
-        }
-        for (i, (agent, cmd)) in self.agents.iter_mut().zip(out.iter_mut()).enumerate() {
-            *cmd = agent
-                .act(&obs.scans[i], obs.poses[i].theta, &obs.goal)
-                .map_err(|e| ControllerError {
-                    message: format!("robot {i}: {e}"),
-                })?;
-        }
-        Ok(())
+        self.team.commands(obs, out)
     }
 }
 

@@ -5,7 +5,8 @@
 //! and put it in place at a tick boundary; shut down), and turns each scan of the current episode
 //! into one command through its [`Pilot`] (perceive, then decide, each timed), optionally altered
 //! by an injected [`Fault`]. It knows nothing of ONNX: a [`PilotMaker`] loads models and makes
-//! pilots of them (the `formation-agent` binary's is ONNX, unit tests use a double). It reads time
+//! pilots of them (`formation_robot_agent::pilot::OnnxPilots` in the `formation-agent` binary, a
+//! double in unit tests); both traits are `formation_proto::robot`'s. It reads time
 //! only from its [`Clock`].
 
 use std::path::{Path, PathBuf};
@@ -17,7 +18,7 @@ use std::time::Duration;
 use formation_proto::wire::{
     AgentStatus, AgentTimings, CmdMsg, CmdStatus, ControlRequest, ScanMsg, WireError, wall_clock_ns,
 };
-use formation_proto::{Goal, LidarSpec, WheelCmd};
+use formation_proto::{LidarSpec, WheelCmd};
 
 use formation_proto::exit::TerminationSignal;
 
@@ -25,47 +26,10 @@ use crate::clock::Clock;
 use crate::faults::{Fault, FaultAction};
 use crate::link::{AgentLink, AgentLinkError, Wake};
 
-/// Any error a pilot or a model loader gives; its chain of sources is kept and shown.
-pub type BoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
-
-/// One robot's decision maker, as the agent loop drives it.
-pub trait Pilot {
-    /// The model it runs (loaded off the hot path for a swap).
-    type Model: Send + 'static;
-    /// The id of the model now driving (logged with every command).
-    fn model_id(&self) -> &str;
-    /// Takes in this robot's own scan (the occupancy rendering) under the goal it holds (whose
-    /// d* sizes the window of a model that scales with d*).
-    fn perceive(&mut self, ranges: &[f32], goal: &Goal) -> Result<(), BoxError>;
-    /// Decides the wheel command from the last perceived scan, the own heading and the goal.
-    fn decide(&mut self, heading: f64, goal: &Goal) -> Result<WheelCmd, BoxError>;
-    /// Puts another model in place after validating it; on error the old one keeps driving.
-    fn swap(&mut self, model: Self::Model) -> Result<(), BoxError>;
-    /// Sets the robot's wheel acceleration limit \[m/s²\] (`None`: none) for the episode
-    /// beginning, which shapes a policy's formation velocity
-    /// (`formation_perception::policy_input::shape_for_wheels`).
-    fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>);
-    /// Runs the last decision again, changing nothing and answering nothing, to warm the caches
-    /// before the next scan is due (see [`AgentLoop::with_rehearsal`]). By default a no-op.
-    fn rehearse(&mut self) -> Result<(), BoxError> {
-        Ok(())
-    }
-}
-
-/// Loads models and makes pilots of them for a robot's sensor.
-pub trait PilotMaker: Send + Sync + 'static {
-    /// The model type.
-    type Model: Send + 'static;
-    /// The pilot type.
-    type Pilot: Pilot<Model = Self::Model>;
-    /// Loads and validates the model at `path` (runs on a helper thread for swaps).
-    fn load(&self, path: &Path) -> Result<Self::Model, BoxError>;
-    /// The id of a loaded model.
-    fn model_id<'m>(&self, model: &'m Self::Model) -> &'m str;
-    /// A pilot running `model` on a robot with this LIDAR; refuses a model made for another
-    /// sensor.
-    fn pilot(&self, model: Self::Model, lidar: LidarSpec) -> Result<Self::Pilot, BoxError>;
-}
+/// One robot's decision as this loop drives it, and what loads its models: the traits live with
+/// the robot's input type in `formation_proto::robot`, so that the robot's decision
+/// (`formation-robot-agent`) implements them without knowing this crate.
+pub use formation_proto::robot::{BoxError, Pilot, PilotMaker};
 
 /// Why a model could not drive.
 #[derive(Debug, thiserror::Error)]

@@ -11,9 +11,9 @@
 
 use std::path::PathBuf;
 
-use formation_agent_node::pilot::OnnxPilots;
 use formation_proto::{Goal, LidarSpec, WheelCmd};
 use formation_robot_agent::decision::Agent;
+use formation_robot_agent::pilot::OnnxPilots;
 use formation_ros2::{LaserScan, PartialScan, RingContract, Twist, resample_scan};
 use formation_runtime::agent::PilotMaker;
 

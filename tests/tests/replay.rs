@@ -10,11 +10,11 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use formation_agent_node::pilot::{OnnxPilot, OnnxPilots};
 use formation_cli::replay::{ReplayOptions, replay_recording};
 use formation_onnx::contract::SensorContract;
 use formation_proto::{LidarSpec, PolicyInput, PolicyIo};
 use formation_robot_agent::decision::{DecisionError, PolicyBackend};
+use formation_robot_agent::pilot::{OnnxPilot, OnnxPilots};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
     LiveProcess, ProcessTest, await_connected, binaries, case1_scenario, eval_recorded,

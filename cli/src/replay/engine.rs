@@ -4,7 +4,7 @@
 //! The decision runs exactly as in an agent: the runtime's [`PilotMaker`] loads the model and
 //! makes a [`Pilot`] for the robot's LIDAR, and each step is `perceive(ranges, goal)` then
 //! `decide(heading, goal)`, as `formation_runtime::agent::AgentLoop` does on a scan
-//! ([`formation_agent_node::pilot::OnnxPilots`] for the `formation` command: the same ONNX session options, the
+//! ([`formation_robot_agent::pilot::OnnxPilots`] for the `formation` command: the same ONNX session options, the
 //! same renderer). A test may hand in another maker (one whose renderer is changed, say) to see
 //! the replay catch it.
 //!

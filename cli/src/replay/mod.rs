@@ -21,7 +21,7 @@ use formation_schema::ReplayReport;
 
 use crate::args::ReplayArgs;
 use crate::paths;
-use formation_agent_node::pilot::OnnxPilots;
+use formation_robot_agent::pilot::OnnxPilots;
 
 pub use engine::{ReplayFailure, ReplayOptions, Replayed, replay_recording};
 
