@@ -180,6 +180,10 @@ pub struct AgentsController<'l> {
     /// Swaps done since [`AgentsController::take_swaps_done`] last took them (at most
     /// [`MAX_SWAPS_DONE`], the oldest dropped first).
     swaps_done: VecDeque<SwapDone>,
+    /// `(robot, request id)` of the latest swaps answered (at most [`MAX_SWAPS_DONE`]): an
+    /// answer that comes again (an agent back from a drop answers a repeated request again, as
+    /// the first answer may be what the drop lost) is not a second swap.
+    swaps_answered: VecDeque<(usize, u64)>,
     /// Per robot: the pid of an agent that said hello during an episode and has not driven yet.
     rejoining: Vec<Option<u32>>,
     /// Per robot: the pid of the agent that last said hello.
@@ -279,6 +283,7 @@ impl<'l> AgentsController<'l> {
             stopped: None,
             pending_swaps: Vec::new(),
             swaps_done: VecDeque::new(),
+            swaps_answered: VecDeque::new(),
             rejoining: vec![None; n],
             agent_pids: vec![None; n],
             admitted: vec![None; n],
@@ -704,6 +709,15 @@ impl<'l> AgentsController<'l> {
         });
     }
 
+    /// Notes that robot `robot`'s agent answered swap `request_id`, so that the same answer
+    /// again is recognised.
+    fn note_swap_answered(&mut self, robot: usize, request_id: u64) {
+        if self.swaps_answered.len() == MAX_SWAPS_DONE {
+            self.swaps_answered.pop_front();
+        }
+        self.swaps_answered.push_back((robot, request_id));
+    }
+
     /// The swaps done since the last call, oldest first: what a recording stores of each.
     pub fn take_swaps_done(&mut self) -> Vec<SwapDone> {
         self.swaps_done.drain(..).collect()
@@ -763,17 +777,27 @@ impl<'l> AgentsController<'l> {
                 )));
             }
             AgentStatus::Refused { .. } => {}
+            AgentStatus::SwapDone { request_id, .. }
+            | AgentStatus::SwapRefused { request_id, .. }
+                if self.swaps_answered.contains(&(robot, request_id)) =>
+            {
+                tracing::debug!(
+                    "robot {robot}: swap {request_id} answered again; answered already"
+                );
+            }
             AgentStatus::SwapDone {
                 request_id,
                 tick,
                 model_id,
             } => {
+                self.note_swap_answered(robot, request_id);
                 tracing::info!("robot {robot}: swap {request_id} done at tick {tick}: {model_id}");
                 self.model_ids[robot] = model_id.clone();
                 self.note_swap_done(robot, request_id, tick, &model_id);
                 self.reply_swap(request_id, robot, SwapOutcome::Done { tick, model_id })?;
             }
             AgentStatus::SwapRefused { request_id, reason } => {
+                self.note_swap_answered(robot, request_id);
                 tracing::warn!("robot {robot}: swap {request_id} refused: {reason}");
                 self.reply_swap(request_id, robot, SwapOutcome::Refused { reason })?;
             }

@@ -1,9 +1,10 @@
 //! A TCP relay on 127.0.0.1 that can reset every connection it carries at once, for the tests of
 //! a link that drops mid-run (issue 36): what a Wi-Fi access point or a NAT that forgets a
-//! connection does to both ends.
+//! connection does to both ends. It can also hold what the agents send (stop reading it), so
+//! that a reset then loses it: a message sent just before a drop.
 
 use std::net::{Shutdown, TcpListener, TcpStream};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -15,6 +16,11 @@ pub struct ResettingRelay {
     pub port: u16,
     streams: Arc<Mutex<Vec<TcpStream>>>,
     stop: Arc<AtomicBool>,
+    /// While set, nothing the agents send is read (it stays in the sockets' buffers).
+    hold: Arc<AtomicBool>,
+    /// How many resets there were: a connection ends, forwarding nothing more, at the first
+    /// after it began.
+    resets: Arc<AtomicUsize>,
     acceptor: Option<JoinHandle<()>>,
 }
 
@@ -29,7 +35,10 @@ impl ResettingRelay {
         let streams = Arc::new(Mutex::new(Vec::new()));
         let stop = Arc::new(AtomicBool::new(false));
         let world = world.to_string();
+        let hold = Arc::new(AtomicBool::new(false));
+        let resets = Arc::new(AtomicUsize::new(0));
         let (kept, stopped) = (Arc::clone(&streams), Arc::clone(&stop));
+        let (held, reset) = (Arc::clone(&hold), Arc::clone(&resets));
         let acceptor = std::thread::spawn(move || {
             while !stopped.load(Ordering::Relaxed) {
                 let agent = match listener.accept() {
@@ -44,12 +53,16 @@ impl ResettingRelay {
                 let Ok(world) = TcpStream::connect(&world) else {
                     continue;
                 };
-                for (from, to) in [(&agent, &world), (&world, &agent)] {
+                for (from, to, toward_world) in [(&agent, &world, true), (&world, &agent, false)] {
                     let (from, to) = (
                         from.try_clone().expect("a stream"),
                         to.try_clone().expect("a stream"),
                     );
-                    std::thread::spawn(move || pump(from, to));
+                    let hold = toward_world.then(|| Arc::clone(&held));
+                    let (resets, begun) = (Arc::clone(&reset), reset.load(Ordering::SeqCst));
+                    std::thread::spawn(move || {
+                        pump(from, to, hold.as_deref(), (&resets, begun));
+                    });
                 }
                 let mut kept = kept.lock().expect("streams");
                 kept.push(agent);
@@ -60,13 +73,22 @@ impl ResettingRelay {
             port,
             streams,
             stop,
+            hold,
+            resets,
             acceptor: Some(acceptor),
         }
+    }
+
+    /// Stops (`true`) or resumes reading what the agents send; a [`ResettingRelay::reset`] while
+    /// held loses what was held.
+    pub fn hold_toward_world(&self, hold: bool) {
+        self.hold.store(hold, Ordering::Relaxed);
     }
 
     /// Closes every connection carried so far, both ways at once; returns how many links.
     pub fn reset(&self) -> usize {
         let streams = std::mem::take(&mut *self.streams.lock().expect("streams"));
+        self.resets.fetch_add(1, Ordering::SeqCst);
         for stream in &streams {
             let _ = stream.shutdown(Shutdown::Both);
         }
@@ -84,9 +106,33 @@ impl Drop for ResettingRelay {
     }
 }
 
-/// Copies `from` to `to` until either closes.
-fn pump(mut from: TcpStream, mut to: TcpStream) {
-    let _ = std::io::copy(&mut from, &mut to);
+/// Copies `from` to `to` until either closes or a reset comes (`resets` past `begun`); while
+/// `hold` is set, reads nothing, so that a reset loses what was held.
+fn pump(
+    mut from: TcpStream,
+    mut to: TcpStream,
+    hold: Option<&AtomicBool>,
+    (resets, begun): (&AtomicUsize, usize),
+) {
+    use std::io::{Read as _, Write as _};
+    let mut buffer = [0u8; 16 << 10];
+    let reset = || resets.load(Ordering::SeqCst) != begun;
+    loop {
+        if reset() {
+            break;
+        }
+        if hold.is_some_and(|h| h.load(Ordering::Relaxed)) {
+            std::thread::sleep(Duration::from_millis(10));
+            continue;
+        }
+        let n = match from.read(&mut buffer) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => n,
+        };
+        if reset() || to.write_all(&buffer[..n]).is_err() {
+            break;
+        }
+    }
     let _ = to.shutdown(Shutdown::Both);
     let _ = from.shutdown(Shutdown::Both);
 }

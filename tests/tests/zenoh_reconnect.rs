@@ -225,3 +225,67 @@ fn an_agent_back_after_the_grace_is_told_it_was_counted_gone_and_exits() {
     );
     t.assert_clean();
 }
+
+/// Issue 36: a swap's answer lost in a drop is sent again. In a realtime run, the relay holds
+/// what robot 1's agent sends (reads none of it) while `formation swap` sends the agent a model,
+/// so the agent's `SwapDone` is stuck in the relay; then the relay resets the link, losing it.
+/// The agent reconnects, the world sends its control requests again, the agent answers the
+/// repeated swap request with the `SwapDone` it sent (without loading the model twice), and
+/// `formation swap` reports the swap done.
+#[test]
+fn a_swap_answer_lost_in_a_drop_is_sent_again() {
+    let t = ProcessTest::start("zswapdrop", LIMIT);
+    let creds = zenoh_credentials(t.path(), 3);
+    let scenario = t.case1(40.0);
+    let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
+    let creds_text = creds.to_string_lossy();
+    let mut launch = LiveProcess::spawn(formation_tests::formation_run(
+        &t.run,
+        &scenario,
+        &t.out(),
+        &[
+            ["--transport", "zenoh", "--listen", &listen, "--remote", "1"].as_slice(),
+            &["--clock", "realtime", "--remote-timeout-s", "60"],
+            &["--credentials", &creds_text],
+        ]
+        .concat(),
+    ));
+    let relay = ResettingRelay::start(listen.trim_start_matches("tcp/"));
+    let agent = robot1(&t, &format!("tcp/127.0.0.1:{}", relay.port), &creds);
+    let connected =
+        launch.wait_for_line(Duration::from_secs(60), |l| l.contains("agents connected"));
+    assert!(connected.is_some(), "{}", launch.describe());
+    std::thread::sleep(Duration::from_secs(1));
+    relay.hold_toward_world(true);
+    let other = t.path().join("other.onnx");
+    formation_tests::write_tiny_model(&other, 99);
+    let mut swap = std::process::Command::new(&formation_tests::binaries().cli);
+    swap.args(["swap", "--transport", "zenoh", "--connect", &listen])
+        .args(["--run", t.run.as_str(), "--robot", "1", "--timeout-s", "40"])
+        .arg("--model")
+        .arg(&other)
+        .arg("--credentials")
+        .arg(creds.join("operator.json"));
+    let swap = LiveProcess::spawn(swap);
+    // The request reaches the agent, which swaps at its next scans and answers into the hold.
+    std::thread::sleep(Duration::from_secs(4));
+    assert!(relay.reset() >= 1, "the relay carried robot 1's link");
+    relay.hold_toward_world(false);
+    let swapped = swap.finish(LIMIT);
+    swapped.assert_success();
+    assert!(
+        swapped.stdout().contains("drives with model"),
+        "{}",
+        swapped.describe()
+    );
+    let finished = launch.finish(LIMIT);
+    let agent = agent.finish(Duration::from_secs(30));
+    finished.assert_success();
+    assert!(agent.output.status.success(), "{}", agent.describe());
+    assert!(
+        agent.stderr().contains("the world asked for swap"),
+        "the agent answered the repeated swap request again\n{}",
+        agent.describe()
+    );
+    t.assert_clean();
+}

@@ -12,7 +12,9 @@
 //! the control requests of the episode that the drop may have lost. This link keeps the last
 //! command it sent and the control requests it received, so a scan it already answered is
 //! answered with the same command again (the pilot never decides twice on one scan, which keeps
-//! lockstep runs bit-identical), and a repeated begin is answered with the status already given.
+//! lockstep runs bit-identical), a repeated begin is answered with the status already given, and
+//! a repeated swap request with the status that answered it (its `SwapDone` or `SwapRefused`,
+//! which the drop may have lost; the model is not loaded twice).
 //! A refusal answering its own incarnation's nonce in the lobby (the world counted the agent gone
 //! before it came back) ends the agent's loop with that reason.
 
@@ -46,6 +48,9 @@ fn zenoh_error(action: impl Into<String>) -> impl FnOnce(String) -> AgentLinkErr
 const GREETING_RETRY: Duration = Duration::from_secs(1);
 /// Queued control requests.
 const CONTROL_QUEUE: usize = 64;
+/// How many swap answers are kept, to answer a swap request sent again after a reconnection.
+const SWAP_ANSWERS_KEPT: usize = 8;
+
 /// How many control requests received are remembered, to recognise one sent again after a
 /// reconnection.
 const SEEN_CONTROLS: usize = 16;
@@ -63,6 +68,9 @@ struct Inbox {
     seen_controls: Mutex<VecDeque<Vec<u8>>>,
     /// A begin came again (after a reconnection): the status that answered it is due again.
     begin_repeated: Mutex<bool>,
+    /// Swap requests (their ids) that came again after a reconnection: the statuses that
+    /// answered them are due again.
+    swaps_repeated: Mutex<Vec<u64>>,
     /// This agent's incarnation, once welcomed.
     incarnation: Mutex<Option<u64>>,
     /// The world's reason, when it answered this incarnation's nonce with a refusal (it counted
@@ -94,6 +102,7 @@ impl Inbox {
             refusals: Queue::new(CONTROL_QUEUE),
             seen_controls: Mutex::default(),
             begin_repeated: Mutex::new(false),
+            swaps_repeated: Mutex::default(),
             incarnation: Mutex::new(None),
             dismissed: Mutex::new(None),
         }
@@ -163,6 +172,9 @@ pub struct ZenohAgentLink {
     last_command: Option<((u64, u64), Vec<u8>)>,
     /// The last status that answered a begin (ready or refused), to answer a repeated begin.
     last_begin_answer: Option<Vec<u8>>,
+    /// The statuses that answered the latest swap requests, by request id, to answer a repeated
+    /// swap request.
+    swap_answers: VecDeque<(u64, Vec<u8>)>,
     _scan: Subscriber<()>,
     _control: Subscriber<()>,
     _world: Subscriber<()>,
@@ -339,6 +351,7 @@ impl ZenohAgentLink {
             status,
             last_command: None,
             last_begin_answer: None,
+            swap_answers: VecDeque::new(),
             _scan: scan,
             _control: control,
             _world: world,
@@ -474,14 +487,18 @@ fn subscribe_control(
                 .get(..std::mem::size_of::<ControlMsg>())
                 .unwrap_or(&payload);
             if inbox.control_seen_before(head) {
-                // Sent again after a reconnection: handled already. A begin's answer is due
-                // again (it may be what the drop lost).
-                let begin = message_from_bytes::<ControlMsg>("control", head)
-                    .and_then(|msg| msg.decode())
-                    .is_ok_and(|r| matches!(r, ControlRequest::BeginEpisode { .. }));
-                if begin {
-                    *lock(&inbox.begin_repeated) = true;
-                    bell.ring();
+                // Sent again after a reconnection: handled already. A begin's or a swap's answer
+                // is due again (it may be what the drop lost).
+                match message_from_bytes::<ControlMsg>("control", head).and_then(|m| m.decode()) {
+                    Ok(ControlRequest::BeginEpisode { .. }) => {
+                        *lock(&inbox.begin_repeated) = true;
+                        bell.ring();
+                    }
+                    Ok(ControlRequest::SwapModel { request_id, .. }) => {
+                        lock(&inbox.swaps_repeated).push(request_id);
+                        bell.ring();
+                    }
+                    _ => {}
                 }
                 return;
             }
@@ -631,6 +648,16 @@ impl AgentLink for ZenohAgentLink {
             tracing::info!("the world began the episode again (a reconnection); answering again");
             self.put_reliably(&self.status, answer, "a status again")?;
         }
+        let repeated = std::mem::take(&mut *lock(&self.inbox.swaps_repeated));
+        for request_id in repeated {
+            let answer = self.swap_answers.iter().find(|(id, _)| *id == request_id);
+            if let Some((_, answer)) = answer.cloned() {
+                tracing::warn!(
+                    "the world asked for swap {request_id} again (a reconnection); answering again"
+                );
+                self.put_reliably(&self.status, answer, "a swap's status again")?;
+            }
+        }
         for (request_id, reason) in self.inbox.refusals.drain() {
             self.publish_status(&AgentStatus::SwapRefused { request_id, reason })?;
         }
@@ -678,6 +705,14 @@ impl AgentLink for ZenohAgentLink {
             AgentStatus::Ready { .. } | AgentStatus::Refused { .. }
         ) {
             self.last_begin_answer = Some(bytes.clone());
+        }
+        if let AgentStatus::SwapDone { request_id, .. }
+        | AgentStatus::SwapRefused { request_id, .. } = status
+        {
+            if self.swap_answers.len() == SWAP_ANSWERS_KEPT {
+                self.swap_answers.pop_front();
+            }
+            self.swap_answers.push_back((*request_id, bytes.clone()));
         }
         self.put_reliably(&self.status, bytes, "a status")
     }
