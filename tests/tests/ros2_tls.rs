@@ -11,7 +11,12 @@
 //! sees robot 2's agent's Twists there, sees none of them); a client without a certificate, or
 //! with another team's, reads nothing.
 //!
-//! The test uses its own run id, free TCP port on 127.0.0.1 and scratch folder, and runs alone
+//! `formation record --connect tls/… --transport ros2 --credentials DIR/recorder.json` records
+//! such a team from outside with the recorder's certificate, message for message as the world's
+//! own `--record`; the recorder's certificate publishes nothing (a raw session with its session
+//! configuration puts Twists and records that nobody receives).
+//!
+//! Each test uses its own run id, free TCP port on 127.0.0.1 and scratch folder, and runs alone
 //! within this binary ([`one_at_a_time`]).
 
 use std::path::{Path, PathBuf};
