@@ -268,7 +268,8 @@ fn a_swap_answer_lost_in_a_drop_is_sent_again() {
         .arg(creds.join("operator.json"));
     let swap = LiveProcess::spawn(swap);
     // The request reaches the agent, which swaps at its next scans and answers into the hold.
-    std::thread::sleep(Duration::from_secs(4));
+    // A tiny model loads in milliseconds; 8 s leaves room for cores loaded by other tests.
+    std::thread::sleep(Duration::from_secs(8));
     assert!(relay.reset() >= 1, "the relay carried robot 1's link");
     relay.hold_toward_world(false);
     let swapped = swap.finish(LIMIT);
