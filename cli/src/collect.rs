@@ -88,7 +88,8 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
         opts.base_seed,
         scenario.name().to_owned(),
     )
-    .with_ranges(opts.ranges);
+    .with_ranges(opts.ranges)
+    .with_labels(opts.gains.label_law());
     let mut writer = DatasetWriter::create(&args.out, header)
         .with_context(|| format!("creating dataset {}", args.out.display()))?;
     let bar = progress_bar(opts.runs, "collect");

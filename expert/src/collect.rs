@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 use formation_perception::{occupancy, ranges};
 use formation_proto::{AuxInput, LidarSpec, NeighbourRule, OccupancySpec, RangeInput, WheelCmd};
 use formation_trainer_bridge::dataset::{DatasetError, DatasetWriter, Sample};
+use formation_trainer_bridge::label_law::LabelLaw;
 use formation_world::episode::{Observation, run_episode};
 use formation_world::scenario::VStarPlan;
 use formation_world::{RobotParams, RunSpec, Scenario};
@@ -194,7 +195,13 @@ pub fn collect(
     let mut run_samples = Vec::new();
     for run in 0..opts.runs {
         let spec = opts.scenario.run_spec(opts.base_seed, run);
-        check_writer(writer, &spec, &opts.occupancy, opts.ranges)?;
+        check_writer(
+            writer,
+            &spec,
+            &opts.occupancy,
+            opts.ranges,
+            opts.gains.label_law(),
+        )?;
         run_samples.clear();
         collect_run(&spec, opts, writer.iteration(), &mut run_samples)?;
         for sample in run_samples.drain(..) {
@@ -235,6 +242,7 @@ fn check_writer(
     spec: &RunSpec,
     occupancy: &OccupancySpec,
     ranges: Option<RangeInput>,
+    labels: LabelLaw,
 ) -> Result<(), CollectError> {
     let header = writer.header();
     let mismatch = |what, dataset: &dyn std::fmt::Debug, collection: &dyn std::fmt::Debug| {
@@ -255,6 +263,9 @@ fn check_writer(
     }
     if header.ranges != ranges {
         return mismatch("range input", &header.ranges, &ranges);
+    }
+    if header.labels != labels {
+        return mismatch("label law", &header.labels, &labels);
     }
     Ok(())
 }

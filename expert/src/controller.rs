@@ -59,6 +59,7 @@
 //! baseline the learned policy is compared with; it never runs inside an agent.
 
 use formation_proto::{Goal, Pose, WheelCmd};
+use formation_trainer_bridge::label_law::LabelLaw;
 use formation_world::episode::{Controller, ControllerError, Observation};
 use formation_world::neighbours::{NeighbourRule, NeighbourTracker};
 use formation_world::reality::RealityModels;
@@ -274,6 +275,26 @@ impl ExpertGains {
             }
         } else {
             self
+        }
+    }
+
+    /// The labelling law these gains give (what a dataset records of them): the shaping and the
+    /// pair weights.
+    pub fn label_law(&self) -> LabelLaw {
+        LabelLaw {
+            shaping_wheel_accel: self.shaping_wheel_accel,
+            unshaped: self.unshaped,
+            pair_weight_band: self.pair_weight_band,
+        }
+    }
+
+    /// These gains labelling by `law` (a dataset's recorded law), every other gain unchanged.
+    pub fn with_label_law(self, law: LabelLaw) -> ExpertGains {
+        ExpertGains {
+            shaping_wheel_accel: law.shaping_wheel_accel,
+            unshaped: law.unshaped,
+            pair_weight_band: law.pair_weight_band,
+            ..self
         }
     }
 }

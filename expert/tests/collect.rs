@@ -118,6 +118,22 @@ fn collection_refuses_bad_options_and_a_mismatched_dataset() {
     );
     assert_eq!(writer.samples(), 0, "nothing written on refusal");
 
+    // Labels of another law than the dataset records would mix two laws in one dataset.
+    let mut unshaped = opts;
+    unshaped.gains.unshaped = true;
+    let err = collect(&unshaped, &mut writer, &mut |_, _| {}).expect_err("header says default");
+    assert!(
+        matches!(
+            err,
+            CollectError::WriterMismatch {
+                what: "label law",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert_eq!(writer.samples(), 0, "nothing written on refusal");
+
     // A v* drawn per run has no one v_train to record: refused before any run, naming the key.
     let drawn = Scenario::from_toml_str(
         &TINY.replace("v_star = 0.7", "v_star_range = [0.3, 0.7]"),

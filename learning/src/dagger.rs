@@ -17,6 +17,7 @@ use formation_expert::{ExpertController, ExpertGains};
 use formation_proto::{OccupancySpec, RangeInput};
 use formation_schema::EvalOutput;
 use formation_trainer_bridge::dataset::{DatasetHeader, DatasetWriter, Sample};
+use formation_trainer_bridge::label_law::LabelLaw;
 use formation_trainer_bridge::train::{TrainOptions, TrainReport, train};
 use formation_world::metrics::{MetricsConfig, RunMetrics};
 use formation_world::{Controller, Scenario, run_episode};
@@ -246,7 +247,12 @@ pub(crate) fn rollout_and_label(
         source,
     };
     let mut writer = DatasetWriter::append(&opts.data, k as u32).map_err(dataset)?;
-    check_rollouts_match(&opts.data, writer.header(), scenarios)?;
+    check_rollouts_match(
+        &opts.data,
+        writer.header(),
+        scenarios,
+        &opts.labels.gains.label_law(),
+    )?;
     let rollouts = IterationRollouts {
         scenarios,
         iteration: k,
@@ -278,6 +284,7 @@ pub(crate) fn check_rollouts_match(
     path: &Path,
     header: &DatasetHeader,
     scenarios: &[Scenario],
+    labels: &LabelLaw,
 ) -> Result<(), LearningError> {
     let mismatch = |what, dataset: String, rollout: String, fix| LearningError::RolloutMismatch {
         path: path.to_path_buf(),
@@ -286,6 +293,14 @@ pub(crate) fn check_rollouts_match(
         rollout,
         fix,
     };
+    if *labels != header.labels {
+        return Err(mismatch(
+            "label law",
+            header.labels.to_string(),
+            labels.to_string(),
+            "label with the law the dataset was collected with (the same --label-wheel-accel, --unshaped-labels and --label-pair-band as its `formation collect`), or collect a new dataset",
+        ));
+    }
     for scenario in scenarios {
         // The sensor's contract; its range noise may differ (rollouts noisier than the
         // demonstrations are a choice).
@@ -563,7 +578,13 @@ pub(crate) mod tests {
             base.name(),
         );
         let path = Path::new("D");
-        check_rollouts_match(path, &header, std::slice::from_ref(&base)).expect("the same");
+        check_rollouts_match(
+            path,
+            &header,
+            std::slice::from_ref(&base),
+            &LabelLaw::default(),
+        )
+        .expect("the same");
         let with = |goal: &str, lidar: &str| {
             let text = format!(
                 "name = \"x\"\nrobots = 3\nduration_s = 1.0\nseed = 5\n[goal]\n{goal}\n\
@@ -576,7 +597,9 @@ pub(crate) mod tests {
             (with("v_star_range = [0.5, 0.7]", ""), "v*"),
             (with("v_star = 0.7", "[lidar]\nbeams = 360"), "LIDAR"),
         ] {
-            let err = check_rollouts_match(path, &header, &[base.clone(), other]).unwrap_err();
+            let err =
+                check_rollouts_match(path, &header, &[base.clone(), other], &LabelLaw::default())
+                    .unwrap_err();
             assert!(
                 matches!(err, LearningError::RolloutMismatch { what: w, .. } if w == what),
                 "{err}"
@@ -584,7 +607,28 @@ pub(crate) mod tests {
         }
         // Another range noise is a choice, not a mix-up.
         let noisy = with("v_star = 0.7", "[lidar]\nnoise_std = 0.05");
-        check_rollouts_match(path, &header, &[noisy]).expect("noise may differ");
+        check_rollouts_match(path, &header, &[noisy], &LabelLaw::default())
+            .expect("noise may differ");
+        // Samples labelled by another law than the dataset's would mix two laws in one dataset.
+        let unshaped = LabelLaw {
+            unshaped: true,
+            ..LabelLaw::default()
+        };
+        let same = std::slice::from_ref(&base);
+        let err = check_rollouts_match(path, &header, same, &unshaped).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                LearningError::RolloutMismatch {
+                    what: "label law",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("--unshaped-labels"), "{err}");
+        let unshaped_dataset = header.clone().with_labels(unshaped);
+        check_rollouts_match(path, &unshaped_dataset, same, &unshaped).expect("the same law");
     }
 
     #[test]

@@ -10,6 +10,7 @@
 use std::ops::Range;
 use std::path::PathBuf;
 
+use formation_expert::ExpertGains;
 use formation_trainer_bridge::dagger_part::{
     PartHeader, RolloutSettings, file_fnv1a64, write_part,
 };
@@ -75,7 +76,12 @@ pub fn label_share(
     };
     let expert_share = opts.beta.powi(opts.iteration as i32);
     let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes, &opts.rollout_durations)?;
-    crate::dagger::check_rollouts_match(&opts.data, &dataset, &scenarios)?;
+    // A share labels with the law the dataset was collected with.
+    let labels = RolloutLabels {
+        gains: ExpertGains::default().with_label_law(dataset.labels),
+        ..RolloutLabels::default()
+    };
+    crate::dagger::check_rollouts_match(&opts.data, &dataset, &scenarios, &dataset.labels)?;
     let header = PartHeader {
         dataset,
         iteration,
@@ -98,7 +104,7 @@ pub fn label_share(
         occupancy: header.dataset.occupancy,
         ranges: header.dataset.ranges,
         model: &opts.model,
-        labels: &RolloutLabels::default(),
+        labels: &labels,
     };
     let samples = rollouts.label_runs(opts.runs.clone(), on_run_done)?;
     write_part(&opts.part, &header, &samples).map_err(part_error)?;

@@ -15,6 +15,9 @@
 //!   them is version 1 ([`DATASET_VERSION_WITHOUT_RANGES`]), byte for byte what builds before
 //!   ranges wrote, with the same `dataset_id`. The reader takes both, and refuses a version 2
 //!   manifest without `ranges` or a version 1 manifest with them.
+//! - A dataset labelled by a law other than the expert's default records it as `"labels"`
+//!   ([`LabelLaw`]), folded into `dataset_id`; one labelled by the default has no such key and
+//!   keeps the id and bytes of before.
 //!
 //! Every file is written under a temporary name in the same directory, synced and renamed, and the
 //! manifest is rewritten after each shard, so an interrupted collection leaves a valid dataset of
@@ -34,6 +37,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::difference::{Difference, FirstDifference};
 use crate::digest::Fnv1a64;
+use crate::label_law::LabelLaw;
 
 /// The `format` string of every dataset manifest.
 pub const DATASET_FORMAT: &str = "formation-dataset";
@@ -75,6 +79,10 @@ pub struct DatasetHeader {
     /// ([`DatasetHeader::with_ranges`]); serialized as `"sectors=K,clip=C"`, absent when none.
     #[serde(default, skip_serializing_if = "Option::is_none", with = "range_text")]
     pub ranges: Option<RangeInput>,
+    /// The law that labelled the samples ([`DatasetHeader::with_labels`]); absent for the
+    /// expert's default.
+    #[serde(default, skip_serializing_if = "LabelLaw::is_default")]
+    pub labels: LabelLaw,
     /// Deterministic id of the settings above (16 hex digits); see [`DatasetHeader::new`].
     pub dataset_id: String,
 }
@@ -123,10 +131,19 @@ impl DatasetHeader {
             seed,
             scenario: scenario.into(),
             ranges: None,
+            labels: LabelLaw::default(),
             dataset_id: String::new(),
         };
         header.dataset_id = header.settings_hash();
         header
+    }
+
+    /// The same settings with samples labelled by `labels`; recomputes `dataset_id`.
+    /// `with_labels(LabelLaw::default())` changes nothing.
+    pub fn with_labels(mut self, labels: LabelLaw) -> DatasetHeader {
+        self.labels = labels;
+        self.dataset_id = self.settings_hash();
+        self
     }
 
     /// The same settings with samples that carry (`Some`) or do not carry (`None`) their scan's
@@ -183,6 +200,9 @@ impl DatasetHeader {
         if let Some(ranges) = self.ranges {
             hash.update_field(ranges.to_string().as_bytes());
         }
+        // Only a law other than the default adds fields, so a default-labelled id is unchanged.
+        self.labels
+            .hash_fields(&mut |bytes| hash.update_field(bytes));
         hash.hex()
     }
 
@@ -194,6 +214,7 @@ impl DatasetHeader {
         };
         FirstDifference::of(self, other)
             .display("range input", ranges)
+            .display("label law", |h| h.labels)
             .display("format version", |h| h.format_version)
             .debug("occupancy settings", |h| h.occupancy)
             .debug("LIDAR", |h| h.lidar)
@@ -264,6 +285,9 @@ pub struct Manifest {
     /// See [`DatasetHeader::ranges`]: `"ranges": "sectors=K,clip=C"`, absent when none.
     #[serde(default, skip_serializing_if = "Option::is_none", with = "range_text")]
     pub ranges: Option<RangeInput>,
+    /// See [`DatasetHeader::labels`]: `"labels": {...}`, absent for the expert's default.
+    #[serde(default, skip_serializing_if = "LabelLaw::is_default")]
+    pub labels: LabelLaw,
     /// Shards in the order they were written.
     pub shards: Vec<ShardEntry>,
     /// Total samples over all shards.
@@ -282,6 +306,7 @@ impl Manifest {
             seed: header.seed,
             scenario: header.scenario.clone(),
             ranges: header.ranges,
+            labels: header.labels,
             shards: Vec::new(),
             samples: 0,
         }
@@ -303,6 +328,7 @@ impl Manifest {
             seed: self.seed,
             scenario: self.scenario.clone(),
             ranges: self.ranges,
+            labels: self.labels,
             dataset_id: self.dataset_id.clone(),
         }
     }
@@ -1685,6 +1711,45 @@ pub(crate) mod tests {
         assert!(
             matches!(&err, DatasetError::HeaderMismatch { field: "range input", existing, requested, .. }
                 if existing == "sectors=6,clip=3" && requested == "sectors=6,clip=2.5"),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn a_label_law_changes_the_id_round_trips_and_refuses_appends_of_another() {
+        let unshaped = crate::label_law::LabelLaw {
+            unshaped: true,
+            ..Default::default()
+        };
+        // The default law stores nothing and keeps the id and bytes of before.
+        assert_eq!(header(7).with_labels(Default::default()), header(7));
+        assert!(
+            serde_json::to_value(header(7))
+                .expect("json")
+                .get("labels")
+                .is_none()
+        );
+        let labelled = header(7).with_labels(unshaped);
+        assert_ne!(labelled.dataset_id, header(7).dataset_id);
+
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut writer = DatasetWriter::create(dir.path(), labelled.clone()).expect("create");
+        writer.push(sample(0, 0)).expect("push");
+        writer.finish().expect("finish");
+        let value = manifest_json(dir.path());
+        assert_eq!(
+            value["labels"],
+            serde_json::json!({"unshaped": true}),
+            "{value}"
+        );
+        let reader = DatasetReader::open(dir.path()).expect("open");
+        assert_eq!(reader.header(), &labelled);
+
+        // DAgger samples labelled by the default law may not join an unshaped dataset.
+        let err = DatasetWriter::append_matching(dir.path(), &header(7), 1).expect_err("mismatch");
+        assert!(
+            matches!(&err, DatasetError::HeaderMismatch { field: "label law", existing, .. }
+                if existing.contains("--unshaped-labels")),
             "{err:?}"
         );
     }

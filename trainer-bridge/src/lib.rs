@@ -15,4 +15,5 @@ pub mod dagger_part;
 pub mod dataset;
 pub mod difference;
 mod digest;
+pub mod label_law;
 pub mod train;

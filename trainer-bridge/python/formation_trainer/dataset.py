@@ -117,6 +117,9 @@ class Manifest:
     samples: int = 0
     version: int = VERSION_WITHOUT_RANGES
     ranges: RangeInput | None = None
+    #: The law that labelled the samples (``--label-wheel-accel``, ``--unshaped-labels``,
+    #: ``--label-pair-band``), ``{}`` for the expert's default (no ``labels`` key).
+    labels: dict = field(default_factory=dict)
 
     @property
     def size_px(self) -> int:
@@ -184,6 +187,7 @@ def read_manifest(directory: str | Path) -> Manifest:
             samples=int(raw["samples"]),
             version=version,
             ranges=ranges,
+            labels=dict(raw.get("labels") or {}),
         )
     except (KeyError, TypeError, ValueError) as e:
         raise DatasetError(f"{path} is not a valid dataset manifest (bad or missing field {e}): {RECOLLECT}") from e
@@ -347,6 +351,7 @@ def _check_compatible(first: Manifest, other: Manifest) -> None:
         ("lidar", _sensor(first.lidar), _sensor(other.lidar)),
         ("v_train", first.v_train, other.v_train),
         ("range input", first.ranges, other.ranges),
+        ("label law", first.labels or "the expert's default", other.labels or "the expert's default"),
     ):
         if a != b:
             raise DatasetError(

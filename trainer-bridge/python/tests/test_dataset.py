@@ -57,6 +57,18 @@ def test_datasets_with_other_settings_cannot_be_mixed(make_dataset):
         ds.load([a, b])
 
 
+def test_datasets_labelled_by_other_laws_cannot_be_mixed(make_dataset):
+    default = make_dataset("default", seed=1)
+    unshaped = make_dataset("unshaped", seed=2)
+    path = unshaped / "manifest.json"
+    manifest = json.loads(path.read_text())
+    path.write_text(json.dumps(manifest | {"labels": {"unshaped": True}}))
+    assert ds.load([unshaped]).manifests[0].labels == {"unshaped": True}
+    assert ds.load([default]).manifests[0].labels == {}
+    with pytest.raises(ds.DatasetError, match="cannot be trained together: their label law differ"):
+        ds.load([default, unshaped])
+
+
 def test_a_window_scaled_with_d_star_is_read_and_not_mixed_with_a_fixed_one(make_dataset):
     scaled = make_dataset("scaled", d_star_ref_m=1.25, seed=1)
     fixed = make_dataset("fixed", seed=2)
