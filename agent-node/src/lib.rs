@@ -13,7 +13,7 @@
 //! gives its login and the launch secret, in place of standard input.
 //!
 //! With `--transport ros2 --connect tcp/ROUTER:7447` it is a ROS 2 node instead
-//! (`formation_runtime::ros2`): it takes a robot's LaserScan and orientation and publishes its
+//! (`formation_transport_ros2`): it takes a robot's LaserScan and orientation and publishes its
 //! Twist, with no world and no ROS installation; see [`ros2`] for its flags.
 //!
 //! It exits cleanly, with a message saying why, on a shutdown request, on SIGINT/SIGTERM (SIGHUP
@@ -44,13 +44,13 @@ use formation_runtime::agent::{AgentExit, AgentLoop, load_model};
 use formation_runtime::auth::LaunchSecret;
 use formation_runtime::clock::SystemClock;
 use formation_runtime::faults::Fault;
-use formation_runtime::iceoryx::IceoryxAgentLink;
-use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_runtime::link::AgentLink;
 use formation_runtime::process::flag_when_stdin_closes;
 use formation_runtime::transport::Transport;
 #[cfg(not(feature = "zenoh"))]
 use formation_runtime::transport::TransportError;
+use formation_transport_iceoryx2::IceoryxAgentLink;
+use formation_transport_iceoryx2::naming::RunNamespace;
 
 /// One robot's agent process of formation's multi-process runtime.
 #[derive(Debug, Parser)]
@@ -123,6 +123,16 @@ pub fn exit_for(who: &str, result: anyhow::Result<AgentExit>) -> ProcessExit {
     }
 }
 
+/// The transports this binary links, one line each (`--transport` refuses the others, naming
+/// the build that has them): iceoryx2 always, Zenoh and ROS 2 with the `zenoh` feature.
+pub const TRANSPORTS: &[Transport] = &[
+    Transport::Iceoryx2,
+    #[cfg(feature = "zenoh")]
+    Transport::Zenoh,
+    #[cfg(feature = "zenoh")]
+    Transport::Ros2,
+];
+
 /// The name this agent goes by in its messages: `formation-agent (robot I)`.
 pub fn who(args: &Args) -> String {
     match args.robot {
@@ -135,7 +145,9 @@ pub fn who(args: &Args) -> String {
 pub fn run(args: &Args) -> anyhow::Result<AgentExit> {
     let pilots = Arc::new(OnnxPilots);
     let model = load_model(&*pilots, &args.model)?;
-    args.reach.transport.check_built_in("formation-agent")?;
+    args.reach
+        .transport
+        .check_built_in("formation-agent", TRANSPORTS)?;
     args.reach
         .transport
         .refuse_network_flags(&[(args.reach.connect.is_some(), "--connect")])?;
@@ -198,8 +210,8 @@ fn zenoh_link(
     robot: usize,
     timeout: Duration,
 ) -> anyhow::Result<Box<dyn AgentLink>> {
-    use formation_runtime::zenoh::{ZenohAgentLink, credentials};
-    let endpoint = formation_runtime::process::required_endpoint(
+    use formation_transport_zenoh::{ZenohAgentLink, credentials};
+    let endpoint = formation_transport_zenoh::required_endpoint(
         args.reach.connect.as_deref(),
         "--connect",
         Transport::Zenoh,

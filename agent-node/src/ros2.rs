@@ -31,11 +31,11 @@ use {
     formation_ros2::{Namespace, NodeName, PartialScan, RingContract, TopicName},
     formation_runtime::agent::PilotMaker,
     formation_runtime::agent::{BoxError, Pilot},
-    formation_runtime::ros2::agent::{ExpectedScan, run_agent_expecting},
-    formation_runtime::ros2::{
+    formation_transport_ros2::agent::{ExpectedScan, run_agent_expecting},
+    formation_transport_ros2::{
         DeciderSettings, GoalValue, OrientationKind, Ros2AgentSettings, TeamTopics,
     },
-    formation_runtime::zenoh::Endpoint,
+    formation_transport_zenoh::Endpoint,
     formation_world::scenario::{ProfileSettings, RobotProfile},
     std::path::Path,
     std::time::Duration,
@@ -366,7 +366,7 @@ fn check_ros2_flags(args: &crate::Args) -> anyhow::Result<Endpoint> {
              ROS graph, not a run (drop --run-id)"
         );
     }
-    formation_runtime::process::required_endpoint(
+    formation_transport_zenoh::required_endpoint(
         args.reach.connect.as_deref(),
         "--connect",
         Transport::Ros2,
@@ -491,7 +491,7 @@ fn checked_wheel_separation(
 #[cfg(feature = "zenoh")]
 fn checked_stale_ms(flags: &Ros2Args) -> anyhow::Result<u64> {
     let stale_ms = flags.stale_ms.unwrap_or_else(|| {
-        u64::try_from(formation_runtime::ros2::decider::DEFAULT_STALE.as_millis())
+        u64::try_from(formation_transport_ros2::decider::DEFAULT_STALE.as_millis())
             .unwrap_or(u64::MAX)
     });
     if stale_ms == 0 || stale_ms > 60_000 {

@@ -42,6 +42,17 @@ pub mod team_models;
 use clap::Parser;
 use formation_proto::exit::ProcessExit;
 
+/// The transports the `formation` command links, one line each (`--transport` refuses the
+/// others, naming the build that has them): iceoryx2 always, Zenoh and ROS 2 with the `zenoh`
+/// feature.
+pub const TRANSPORTS: &[formation_runtime::transport::Transport] = &[
+    formation_runtime::transport::Transport::Iceoryx2,
+    #[cfg(feature = "zenoh")]
+    formation_runtime::transport::Transport::Zenoh,
+    #[cfg(feature = "zenoh")]
+    formation_runtime::transport::Transport::Ros2,
+];
+
 /// How `formation` exits after `error`: 130 or 143 when the user interrupted a launch with
 /// SIGINT (Ctrl-C) or SIGTERM, 1 when a replay found differing commands, 2 for any other error.
 /// (Bad flags exit 2 through clap.)
@@ -62,7 +73,7 @@ pub fn exit_for_error(error: &anyhow::Error) -> ProcessExit {
 pub fn main_with_args() -> anyhow::Result<()> {
     let cli = args::Cli::parse();
     formation_runtime::process::init_tracing(cli.verbose);
-    formation_runtime::iceoryx::naming::quiet_iceoryx_logs();
+    formation_transport_iceoryx2::naming::quiet_iceoryx_logs();
     match cli.command {
         args::Command::Eval(a) if a.ladder.is_some() => ladder::ladder_command(&a),
         args::Command::Eval(a) => eval::eval_command(&a),

@@ -29,7 +29,7 @@ use formation_proto::wire::RunId;
 use formation_record::live::{LiveRecording, LiveRunDone, decode};
 use formation_record::{RecordTarget, RecordingSummary};
 use formation_runtime::transport::Transport;
-use formation_runtime::zenoh::{
+use formation_transport_zenoh::{
     Endpoint, Login, RecorderAccess, RecorderEvent, RecorderLink, credentials,
 };
 

@@ -4,7 +4,7 @@
 //! Every message is a fixed-size `#[repr(C)]` value. Over iceoryx2 it is placed in shared memory
 //! as it is, so nothing is serialised: with this crate's `iceoryx2` feature each message derives
 //! iceoryx2's `ZeroCopySend` under a versioned type name. The iceoryx2 service names, limits and
-//! namespaces of a run are the runtime's (`formation_runtime::iceoryx::naming`); the launch secret
+//! namespaces of a run are the runtime's (`formation_transport_iceoryx2::naming`); the launch secret
 //! that proves an agent's [`HelloMsg`] is the runtime's `auth` module. Wire structs are
 //! deliberately dumb (plain numbers and fixed byte arrays); each has a typed Rust view
 //! ([`ControlRequest`], [`AgentStatus`], [`CmdStatus`]) and a checked constructor, so a malformed

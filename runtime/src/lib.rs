@@ -12,13 +12,6 @@
 //! * [`link_health`]: the degraded-link detector, whose reports the world sends while a run goes
 //!   on.
 //! * [`auth`]: the launch secret, with which an agent proves that its own launch started it.
-//! * [`signals`]: which termination signal (SIGINT or SIGTERM) stopped an iceoryx2 process.
-//! * [`iceoryx`]: the links over iceoryx2 shared memory, used by the `formation-world` and
-//!   `formation-agent` processes, with the run's iceoryx2 namespace, its lock and the service
-//!   limits (`iceoryx::naming`).
-//! * `zenoh` (with the `zenoh` feature): the links over Zenoh, for agents on other hosts.
-//! * `ros2` (with the `zenoh` feature): ROS 2 over rmw_zenoh: an agent that drives a ROS 2
-//!   robot, and the world as a team of ROS 2 robots.
 //! * [`memory`]: both links over channels in one process, for tests.
 //! * [`clock`]: the injected [`clock::Clock`] (system, or fake for tests).
 //! * [`settings`]: [`settings::ClockMode`] and [`settings::RuntimeSettings`], shared by the
@@ -26,8 +19,10 @@
 //! * [`transport`]: [`transport::Transport`], which link the processes use.
 //! * [`process`]: what both processes do about the launcher going away.
 //!
-//! Dependencies point one way: this crate depends only on `formation-proto` (and, for ROS 2,
-//! the I/O-free `formation-ros2`); the world's binary,
+//! The transports are crates of their own that implement the link traits: `formation-transport-iceoryx2`
+//! (shared memory, the default), `formation-transport-zenoh` (agents on other hosts) and
+//! `formation-transport-ros2` (ROS 2 over rmw_zenoh). Dependencies point one way: this crate
+//! depends only on `formation-proto` and builds no transport; the transports, the world's binary,
 //! the agent's binary and the launcher depend on it, and it knows neither physics nor ONNX.
 
 pub mod agent;
@@ -35,19 +30,13 @@ pub mod auth;
 pub mod clock;
 pub mod exchange;
 pub mod faults;
-pub mod iceoryx;
 pub mod link;
 pub mod link_health;
 pub mod memory;
 pub mod process;
-#[cfg(feature = "zenoh")]
-pub mod ros2;
 pub mod settings;
-pub mod signals;
 pub mod stamps;
 pub mod transport;
-#[cfg(feature = "zenoh")]
-pub mod zenoh;
 
 pub use settings::{ClockMode, RuntimeSettings};
 

@@ -2,9 +2,12 @@
 //! needs ([`AgentLink`]), with their errors.
 //!
 //! The exchange ([`crate::exchange`]) and the agent loop ([`crate::agent`]) talk only to these
-//! traits, so a transport is one implementation among others: iceoryx2 shared memory
-//! ([`crate::iceoryx`]) for the processes, channels in one process ([`crate::memory`]) for tests,
-//! and Zenoh (the `zenoh` module, with the `zenoh` feature) for agents on other hosts. The world watches command ages itself, so its
+//! traits, so a transport is one implementation among others, each in a crate of its own:
+//! iceoryx2 shared memory (`formation-transport-iceoryx2`) for the processes of one host, Zenoh
+//! (`formation-transport-zenoh`) for agents on other hosts, ROS 2 over rmw_zenoh
+//! (`formation-transport-ros2`), and channels in one process ([`crate::memory`]) for tests. A
+//! transport's own failures are its crate's typed error, carried as the source of
+//! [`WorldLinkError::Transport`] and [`AgentLinkError::Transport`]. The world watches command ages itself, so its
 //! watchdog does not depend on the transport's own liveness reports; those
 //! ([`WorldLink::dead_agents`]) only speed up noticing a crashed agent and clean up after it.
 //!
@@ -17,40 +20,27 @@
 use std::time::Duration;
 
 use crate::auth::SecretError;
-use crate::iceoryx::naming::NamespaceError;
 use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::{
     AgentStatus, CmdMsg, ControlRequest, ScanMsg, SwapReply, SwapRequest, Welcome, WireError,
 };
 
+/// A transport's own failure: the typed error of the transport's crate, kept as the source (a
+/// caller that needs its details downcasts it).
+pub type TransportFailure = Box<dyn std::error::Error + Send + Sync + 'static>;
+
 /// A failure of the world's transport, or a request to stop.
 #[derive(Debug, thiserror::Error)]
 pub enum WorldLinkError {
-    /// iceoryx2 refused an operation.
-    #[error("iceoryx2 could not {action} ({detail}); is another world running with this run id?")]
-    Iceoryx {
-        /// What the world was doing.
-        action: String,
-        /// iceoryx2's error.
-        detail: String,
-    },
-    /// Zenoh refused an operation.
-    #[error("zenoh could not {action} ({detail})")]
-    Zenoh {
-        /// What the world was doing.
-        action: String,
-        /// Zenoh's error.
-        detail: String,
-    },
+    /// The transport failed (its crate's own error).
+    #[error(transparent)]
+    Transport(TransportFailure),
     /// A message could not be encoded or decoded.
     #[error(transparent)]
     Wire(#[from] WireError),
     /// SIGINT or SIGTERM arrived.
     #[error("stopped by a termination signal ({0})")]
     Terminated(TerminationSignal),
-    /// The run's files could not be made private.
-    #[error(transparent)]
-    Namespace(#[from] NamespaceError),
     /// A robot index past the end of the team.
     #[error("there is no robot {robot}: the run has {robots} robots (0 to {last})", last = robots.saturating_sub(1))]
     NoSuchRobot {
@@ -214,80 +204,10 @@ pub trait WorldLink {
 /// A failure of an agent's transport.
 #[derive(Debug, thiserror::Error)]
 pub enum AgentLinkError {
-    /// The run's services did not appear in time.
-    #[error(
-        "robot {robot}'s services do not exist in run {run} after {waited_s:.1} s: is the world \
-         running with this run id, and does the scenario have more than {robot} robots?"
-    )]
-    WorldNotFound {
-        /// The robot.
-        robot: usize,
-        /// The run id.
-        run: String,
-        /// How long the agent waited.
-        waited_s: f64,
-    },
-    /// Another live process holds this robot's port.
-    #[error(
-        "robot {robot}'s {port} port is held by another process (only one agent may drive a robot): {detail}"
-    )]
-    PortTaken {
-        /// The robot.
-        robot: usize,
-        /// Which port.
-        port: &'static str,
-        /// iceoryx2's error.
-        detail: String,
-    },
-    /// iceoryx2 refused an operation.
-    #[error("iceoryx2 could not {action} ({detail})")]
-    Iceoryx {
-        /// What the agent was doing.
-        action: String,
-        /// iceoryx2's error.
-        detail: String,
-    },
-    /// Zenoh refused an operation.
-    #[error("zenoh could not {action} ({detail})")]
-    Zenoh {
-        /// What the agent was doing.
-        action: String,
-        /// Zenoh's error.
-        detail: String,
-    },
-    /// The world's endpoint could not be reached, or its router refused the login.
-    #[error(
-        "cannot reach the world at {endpoint}: {detail}; is `formation-world --transport zenoh \
-         --listen {endpoint}` (or `formation run --transport zenoh --listen {endpoint}`) running, \
-         is that address reachable from this host, and is --credentials this run's \
-         robot-{robot}.json? (the world's router refuses a connection without a login it knows)"
-    )]
-    Unreachable {
-        /// The endpoint given with `--connect`.
-        endpoint: String,
-        /// The robot the agent would drive.
-        robot: usize,
-        /// Zenoh's error.
-        detail: String,
-    },
-    /// The agent's TLS certificate is not usable, or the world refused it (feature `tls`).
-    #[cfg(feature = "tls")]
+    /// The transport failed (its crate's own error: the world not found, a port taken, the
+    /// endpoint unreachable, a certificate refused, ...).
     #[error(transparent)]
-    Tls(#[from] crate::zenoh::tls::TlsError),
-    /// A world answers at the endpoint, but not for this run.
-    #[error(
-        "no world of run {run} at {endpoint} after {waited_s:.1} s: the endpoint answers, but the \
-         world there plays another run, or the credentials do not allow this robot's keys; check \
-         --run-id and the credentials file"
-    )]
-    NoWorldAt {
-        /// The endpoint given with `--connect`.
-        endpoint: String,
-        /// The run id.
-        run: String,
-        /// How long the agent waited.
-        waited_s: f64,
-    },
+    Transport(TransportFailure),
     /// SIGINT or SIGTERM arrived while the agent was connecting.
     #[error("stopped by a termination signal ({0}) while connecting to the world")]
     Terminated(TerminationSignal),
@@ -318,9 +238,6 @@ pub enum AgentLinkError {
     /// No nonce could be drawn.
     #[error(transparent)]
     Secret(#[from] SecretError),
-    /// The run's files could not be made private.
-    #[error(transparent)]
-    Namespace(#[from] NamespaceError),
 }
 
 /// Why an agent's wait ended.

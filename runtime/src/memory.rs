@@ -203,6 +203,7 @@ impl MemoryBus {
     pub fn world_link(&self) -> MemoryWorldLink {
         MemoryWorldLink {
             bus: self.clone(),
+            n_robots: self.lock().lobbies.len(),
             hook: None,
         }
     }
@@ -311,6 +312,7 @@ impl MemoryBus {
 /// The world's end of a [`MemoryBus`].
 pub struct MemoryWorldLink {
     bus: MemoryBus,
+    n_robots: usize,
     hook: Option<Box<dyn FnMut()>>,
 }
 
@@ -319,13 +321,6 @@ impl MemoryWorldLink {
     /// test runs its agents there, so one thread plays the whole launch.
     pub fn on_wait(&mut self, hook: impl FnMut() + 'static) {
         self.hook = Some(Box::new(hook));
-    }
-}
-
-fn no_robot(robot: usize) -> WorldLinkError {
-    WorldLinkError::Iceoryx {
-        action: format!("reach robot {robot}"),
-        detail: "no such robot on the in-memory bus".into(),
     }
 }
 
@@ -340,7 +335,10 @@ impl WorldLink for MemoryWorldLink {
             let lobby = state
                 .lobbies
                 .get_mut(robot)
-                .ok_or_else(|| no_robot(robot))?;
+                .ok_or(WorldLinkError::NoSuchRobot {
+                    robot,
+                    robots: self.n_robots,
+                })?;
             lobby.hellos.drain(..).collect()
         };
         hellos.into_iter().for_each(sink);
@@ -352,7 +350,10 @@ impl WorldLink for MemoryWorldLink {
         let lobby = state
             .lobbies
             .get_mut(robot)
-            .ok_or_else(|| no_robot(robot))?;
+            .ok_or(WorldLinkError::NoSuchRobot {
+                robot,
+                robots: self.n_robots,
+            })?;
         lobby.welcomes.insert(nonce, welcome.clone());
         drop(state);
         self.bus.ring();
@@ -361,7 +362,13 @@ impl WorldLink for MemoryWorldLink {
 
     fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> WorldResult {
         let mut state = self.bus.lock();
-        let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
+        let slot = state
+            .robots
+            .get_mut(robot)
+            .ok_or(WorldLinkError::NoSuchRobot {
+                robot,
+                robots: self.n_robots,
+            })?;
         *slot = Some(Incarnation {
             id: incarnation,
             ..Incarnation::default()
@@ -379,7 +386,13 @@ impl WorldLink for MemoryWorldLink {
 
     fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult {
         let mut state = self.bus.lock();
-        let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
+        let slot = state
+            .robots
+            .get_mut(robot)
+            .ok_or(WorldLinkError::NoSuchRobot {
+                robot,
+                robots: self.n_robots,
+            })?;
         if let Some(incarnation) = slot {
             incarnation.scans.push_back(*msg);
         }
@@ -390,7 +403,13 @@ impl WorldLink for MemoryWorldLink {
 
     fn send_control(&mut self, robot: usize, request: &ControlRequest) -> WorldResult {
         let mut state = self.bus.lock();
-        let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
+        let slot = state
+            .robots
+            .get_mut(robot)
+            .ok_or(WorldLinkError::NoSuchRobot {
+                robot,
+                robots: self.n_robots,
+            })?;
         if let Some(incarnation) = slot {
             incarnation.control.push_back(request.clone());
         }
@@ -425,7 +444,13 @@ impl WorldLink for MemoryWorldLink {
     fn drain_commands(&mut self, robot: usize, sink: &mut dyn FnMut(CmdMsg)) -> WorldResult {
         let cmds: Vec<CmdMsg> = {
             let mut state = self.bus.lock();
-            let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
+            let slot = state
+                .robots
+                .get_mut(robot)
+                .ok_or(WorldLinkError::NoSuchRobot {
+                    robot,
+                    robots: self.n_robots,
+                })?;
             slot.as_mut()
                 .map(|i| i.cmds.drain(..).collect())
                 .unwrap_or_default()
@@ -437,7 +462,13 @@ impl WorldLink for MemoryWorldLink {
     fn drain_statuses(&mut self, robot: usize, sink: &mut dyn FnMut(AgentStatus)) -> WorldResult {
         let statuses: Vec<AgentStatus> = {
             let mut state = self.bus.lock();
-            let slot = state.robots.get_mut(robot).ok_or_else(|| no_robot(robot))?;
+            let slot = state
+                .robots
+                .get_mut(robot)
+                .ok_or(WorldLinkError::NoSuchRobot {
+                    robot,
+                    robots: self.n_robots,
+                })?;
             slot.as_mut()
                 .map(|i| i.statuses.drain(..).collect())
                 .unwrap_or_default()

@@ -1,6 +1,5 @@
 //! What the world and agent processes share beyond the link: noticing that the launcher is gone,
-//! their log lines ([`init_tracing`], the `formation` command's too) and the endpoint flag of a
-//! network transport ([`required_endpoint`]).
+//! and their log lines ([`init_tracing`], the `formation` command's too).
 
 use std::io::Read;
 use std::sync::Arc;
@@ -47,31 +46,4 @@ pub fn init_tracing(verbose: u8) {
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
-}
-
-/// Why the endpoint flag of a network transport (`--listen`, `--connect`) gives no endpoint.
-#[cfg(feature = "zenoh")]
-#[derive(Debug, thiserror::Error)]
-pub enum EndpointFlagError {
-    /// The flag is missing.
-    #[error(transparent)]
-    Missing(#[from] crate::transport::TransportError),
-    /// The flag's value is not `tcp/HOST:PORT`.
-    #[error(transparent)]
-    Invalid(#[from] crate::zenoh::EndpointError),
-}
-
-/// The Zenoh endpoint that `transport` needs from `flag` (`--listen` or `--connect`), given as
-/// `given`: missing, it is [`crate::transport::TransportError::MissingEndpoint`] naming the flag;
-/// given, it must parse as `tcp/HOST:PORT`. One reading for the world's and the agent's
-/// processes, over Zenoh and ROS 2.
-#[cfg(feature = "zenoh")]
-pub fn required_endpoint(
-    given: Option<&str>,
-    flag: &'static str,
-    transport: crate::transport::Transport,
-) -> Result<crate::zenoh::Endpoint, EndpointFlagError> {
-    let text =
-        given.ok_or(crate::transport::TransportError::MissingEndpoint { flag, transport })?;
-    Ok(crate::zenoh::Endpoint::parse(text)?)
 }

@@ -56,7 +56,7 @@ use std::time::{Duration, Instant};
 
 use formation_proto::wire::RunId;
 pub use formation_runtime::auth::LaunchSecret;
-use formation_runtime::iceoryx::naming::RunNamespace;
+use formation_transport_iceoryx2::naming::RunNamespace;
 use formation_world::Trajectory;
 
 /// The repository root (the parent of this crate's directory).

@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
-use formation_runtime::zenoh::credentials::read_login;
-use formation_runtime::zenoh::tls::{certificate_file, key_file};
+use formation_transport_zenoh::credentials::read_login;
+use formation_transport_zenoh::tls::{certificate_file, key_file};
 use zenoh::Wait;
 
 /// A raw Zenoh client of `endpoint`: `principal`'s login from `logins`, and on a `tls/`

@@ -128,6 +128,10 @@ fn the_architecture_states_layers_for_the_pure_crates() {
         "formation-robot-agent",
         "formation-python",
         "formation-agent-node",
+        "formation-runtime",
+        "formation-transport-iceoryx2",
+        "formation-transport-zenoh",
+        "formation-transport-ros2",
     ] {
         assert!(
             ruled.contains(package),
@@ -166,6 +170,36 @@ fn every_crate_builds_none_of_what_the_architecture_forbids_it() {
         broken.is_empty(),
         "layering broken (see `cargo tree -e normal -i <crate> -p <package>`): {broken:?}"
     );
+}
+
+#[test]
+fn with_every_feature_the_runtime_builds_no_transport() {
+    let built: BTreeSet<String> = cargo(&[
+        "tree",
+        "--locked",
+        "--offline",
+        "-e",
+        "normal",
+        "-p",
+        "formation-runtime",
+        "--all-features",
+        "--prefix",
+        "none",
+        "--format",
+        "{p}",
+    ])
+    .lines()
+    .filter_map(|line| line.split_whitespace().next())
+    .map(str::to_owned)
+    .collect();
+    assert!(built.contains("formation-runtime"), "{built:?}");
+    for transport in ["iceoryx2", "zenoh", "formation-ros2"] {
+        assert!(
+            !built.contains(transport),
+            "formation-runtime builds {transport} (see `cargo tree -e normal --all-features -i \
+             {transport} -p formation-runtime`)"
+        );
+    }
 }
 
 #[test]
@@ -352,18 +386,11 @@ fn with_zenoh_the_agent_builds_tokio_only_under_zenoh() {
 
 /// Module cycles that exist today, each with what removes it. The check fails when one of them is
 /// gone, so that the list only shrinks.
-const KNOWN_CYCLES: [(&str, &[&str], &str); 2] = [
-    (
-        "runtime",
-        &["iceoryx", "link", "zenoh"],
-        "issue 35 item 2: the link traits import no backend",
-    ),
-    (
-        "world",
-        &["reality", "scenario"],
-        "reality borrows scenario's splitmix64 while scenario names the reality models",
-    ),
-];
+const KNOWN_CYCLES: [(&str, &[&str], &str); 1] = [(
+    "world",
+    &["reality", "scenario"],
+    "reality borrows scenario's splitmix64 while scenario names the reality models",
+)];
 
 /// Rust source without comment lines and without its trailing `#[cfg(test)] mod tests`.
 fn code_of(path: &Path) -> String {

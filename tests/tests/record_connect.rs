@@ -105,7 +105,7 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
     );
     assert!(!outside.exists(), "a refused recorder writes nothing");
     // Robot 1's login may connect, but the router gives it nothing of the record channel.
-    let login = formation_runtime::zenoh::credentials::read_login(&robot1).expect("robot 1");
+    let login = formation_transport_zenoh::credentials::read_login(&robot1).expect("robot 1");
     let impostor = raw_client(&listen, Some((login.user(), login.password())))
         .expect("robot 1's login is a valid login");
     let (_sub, stolen) = count_samples(&impostor, format!("formation/{}/record/**", t.run));

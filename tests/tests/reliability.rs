@@ -8,12 +8,12 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use formation_proto::wire::RunId;
-use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_tests::{
     LaunchSecret, LeakCheck, LiveProcess, ProcessTest, RobotLog, TempDir, agent_pids,
     await_connected, await_rejoin, case1_scenario, formation_run, run, send_signal, unique_run_id,
     world_pid,
 };
+use formation_transport_iceoryx2::naming::RunNamespace;
 use rand::{Rng, SeedableRng};
 
 /// The watchdog limit of each test: generous, it only stops a hung test.

@@ -141,8 +141,8 @@ fn a_robot_s_certificate_reads_its_tf_and_scan_and_no_certificate_reads_nothing(
 /// A raw Zenoh session (no `formation` code on its path) with `principal`'s ROS 2 session
 /// configuration of credentials folder `creds`, joining the router at `listen`.
 fn ros2_session(creds: &Path, principal: &str, listen: &str) -> zenoh::Session {
-    use formation_runtime::ros2::secure::session_config;
-    use formation_runtime::zenoh::Endpoint;
+    use formation_transport_ros2::secure::session_config;
+    use formation_transport_zenoh::Endpoint;
     use zenoh::Wait;
     let endpoint = Endpoint::parse(listen).expect("a tls/ endpoint");
     let config = session_config(creds, principal, &endpoint).expect("a session configuration");
@@ -159,8 +159,8 @@ fn ros2_session(creds: &Path, principal: &str, listen: &str) -> zenoh::Session {
 /// them (nor does the recorder, which would fail on a record it cannot read).
 #[test]
 fn the_recorder_s_certificate_records_a_ros2_tls_team_and_publishes_nothing() {
-    use formation_runtime::zenoh::keys::record_live;
     use formation_tests::{AgentGate, mcap_readers};
+    use formation_transport_zenoh::keys::record_live;
     use std::sync::Arc;
     use std::sync::atomic::{AtomicUsize, Ordering};
     use zenoh::Wait;

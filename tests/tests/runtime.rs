@@ -9,11 +9,11 @@ use std::time::{Duration, Instant};
 use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
 use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, robot_service_name};
 use formation_robot_agent::decision::PolicyController;
-use formation_runtime::iceoryx::naming::ServiceLimits;
 use formation_tests::{
     LeakCheck, ProcessTest, RobotLog, assert_bit_identical, incarnations, launch_secret,
     lockstep_over_processes, repo_root, run, run_with_input, test_model, unique_run_id,
 };
+use formation_transport_iceoryx2::naming::ServiceLimits;
 use formation_world::{Scenario, run_episode};
 use iceoryx2::prelude::*;
 

@@ -288,7 +288,7 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
         "a client without credentials must be refused"
     );
     // Robot 1's login: its own robot's keys only.
-    let robot1 = formation_runtime::zenoh::credentials::read_login(&creds.join("robot-1.json"))
+    let robot1 = formation_transport_zenoh::credentials::read_login(&creds.join("robot-1.json"))
         .expect("robot 1's login");
     let impostor = raw_client(&listen, Some((robot1.user(), robot1.password())))
         .expect("robot 1's login is a valid login");

@@ -21,8 +21,6 @@ use std::time::{Duration, SystemTime};
 use formation_cli::launch::read_trajectory;
 use formation_proto::wire::ScanMsg;
 use formation_robot_agent::decision::PolicyController;
-use formation_runtime::zenoh::tls::issue::{Authority, issue_for};
-use formation_runtime::zenoh::tls::{certificate_file, key_file};
 use formation_tests::capture::{PacketCapture, TcpStream as CapturedStream, TcpStreams};
 use formation_tests::netns::{AGENTS_IP, NetPair, WORLD_IP};
 use formation_tests::tls::raw_tls_client;
@@ -31,6 +29,8 @@ use formation_tests::{
     formation_run, formation_run_args, free_tcp_port, one_at_a_time, read_json, remote_zenoh_agent,
     run, test_model, unique_run_id,
 };
+use formation_transport_zenoh::tls::issue::{Authority, issue_for};
+use formation_transport_zenoh::tls::{certificate_file, key_file};
 use formation_world::{Scenario, run_episode};
 use zenoh::Wait;
 

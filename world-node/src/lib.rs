@@ -15,7 +15,7 @@
 //! agents that prove it are let drive a robot.
 //!
 //! With `--transport zenoh` the agents reach it over Zenoh instead: the world listens on
-//! `--listen tcp/ADDR:PORT` as a Zenoh router (see `formation_runtime::zenoh`), checking the
+//! `--listen tcp/ADDR:PORT` as a Zenoh router (see `formation_transport_zenoh`), checking the
 //! logins of a credentials folder (`--credentials DIR`, from `formation credentials`) when given.
 //!
 //! Usually started by `formation run` / `formation eval --processes`, not by hand.
@@ -42,14 +42,14 @@ use formation_proto::wire::{RunId, WorldEvent};
 use formation_runtime::auth::LaunchSecret;
 use formation_runtime::clock::SystemClock;
 use formation_runtime::exchange::{AgentsController, ExchangeSettings, StopReason};
-use formation_runtime::iceoryx::IceoryxWorldLink;
-use formation_runtime::iceoryx::naming::RunNamespace;
 use formation_runtime::link::{RecordFeed, WorldLink};
 use formation_runtime::process::flag_when_stdin_closes;
 use formation_runtime::transport::Transport;
 #[cfg(not(feature = "zenoh"))]
 use formation_runtime::transport::TransportError;
 use formation_runtime::{ClockMode, RuntimeSettings};
+use formation_transport_iceoryx2::IceoryxWorldLink;
+use formation_transport_iceoryx2::naming::RunNamespace;
 use formation_world::RunSpec;
 
 use crate::runlog::{emit, play_journaled};
@@ -155,6 +155,16 @@ impl Args {
     }
 }
 
+/// The transports this binary links, one line each (`--transport` refuses the others, naming
+/// the build that has them): iceoryx2 always, Zenoh and ROS 2 with the `zenoh` feature.
+pub const TRANSPORTS: &[Transport] = &[
+    Transport::Iceoryx2,
+    #[cfg(feature = "zenoh")]
+    Transport::Zenoh,
+    #[cfg(feature = "zenoh")]
+    Transport::Ros2,
+];
+
 /// How the world's runs ended as the process's exit, said on stderr.
 pub fn exit_for(result: anyhow::Result<Ended>) -> ProcessExit {
     match result {
@@ -205,7 +215,8 @@ pub fn run(args: &Args) -> anyhow::Result<Ended> {
     let lidar = specs[0].world.lidar;
 
     let runtime = args.runtime_settings()?;
-    args.transport.check_built_in("formation-world")?;
+    args.transport
+        .check_built_in("formation-world", TRANSPORTS)?;
     args.transport
         .refuse_network_flags(&[(args.listen.is_some(), "--listen")])?;
     // A ROS 2 team takes a credentials folder for its certificates on a tls/ endpoint.
@@ -310,8 +321,8 @@ type LinkAndFeed = (Box<dyn WorldLink>, Option<Box<dyn RecordFeed>>);
 /// its record channel (`formation record --connect`).
 #[cfg(feature = "zenoh")]
 fn zenoh_link(args: &Args, run_id: &RunId, n_robots: usize) -> anyhow::Result<LinkAndFeed> {
-    use formation_runtime::zenoh::{WorldAccess, ZenohWorldLink, credentials};
-    let listen = formation_runtime::process::required_endpoint(
+    use formation_transport_zenoh::{WorldAccess, ZenohWorldLink, credentials};
+    let listen = formation_transport_zenoh::required_endpoint(
         args.listen.as_deref(),
         "--listen",
         Transport::Zenoh,
@@ -358,8 +369,8 @@ fn ros2_link(
     runtime: &RuntimeSettings,
     secret: LaunchSecret,
 ) -> anyhow::Result<LinkAndFeed> {
-    use formation_runtime::ros2::{Ros2Team, Ros2WorldLink};
-    let listen = formation_runtime::process::required_endpoint(
+    use formation_transport_ros2::{Ros2Team, Ros2WorldLink};
+    let listen = formation_transport_zenoh::required_endpoint(
         args.listen.as_deref(),
         "--listen",
         Transport::Ros2,

@@ -268,7 +268,7 @@ impl NetworkFlags {
             transport: self.transport,
         })?;
         #[cfg(feature = "zenoh")]
-        formation_runtime::zenoh::Endpoint::parse(&listen)?;
+        formation_transport_zenoh::Endpoint::parse(&listen)?;
         Ok(listen)
     }
 
@@ -306,7 +306,8 @@ impl NetworkFlags {
     /// the scenario, and a Zenoh launch without `--credentials` gets fresh ones in `fresh`.
     pub fn network(&self, n_robots: usize, fresh: &Path) -> anyhow::Result<Network> {
         self.refuse_misplaced()?;
-        self.transport.check_built_in("formation")?;
+        self.transport
+            .check_built_in("formation", crate::TRANSPORTS)?;
         match self.transport {
             Transport::Iceoryx2 => return Ok(Network::SharedMemory),
             Transport::Ros2 => {
@@ -373,7 +374,7 @@ const FRESH_CERTIFICATE_DAYS: u32 = 30;
 /// many days.
 #[cfg(feature = "zenoh")]
 pub fn create_credentials(dir: &Path, robots: usize, tls_days: Option<u32>) -> anyhow::Result<()> {
-    use formation_runtime::zenoh::credentials;
+    use formation_transport_zenoh::credentials;
     match tls_days {
         None => credentials::create(dir, robots)?,
         Some(days) => credentials::create_with_tls(dir, robots, days)?,
@@ -385,12 +386,12 @@ pub fn create_credentials(dir: &Path, robots: usize, tls_days: Option<u32>) -> a
 /// `connect` (`dir/ros2/<principal>.json5`).
 #[cfg(feature = "tls")]
 fn write_ros2_session_configs(dir: &Path, connect: &str, n_robots: usize) -> anyhow::Result<()> {
-    let connect = formation_runtime::zenoh::Endpoint::parse(connect)?;
-    formation_runtime::ros2::secure::write_session_configs(dir, &connect, n_robots)?;
+    let connect = formation_transport_zenoh::Endpoint::parse(connect)?;
+    formation_transport_ros2::secure::write_session_configs(dir, &connect, n_robots)?;
     Ok(())
 }
 
-/// Without TLS there is no tls/ endpoint ([`formation_runtime::zenoh::Endpoint::parse`] refused
+/// Without TLS there is no tls/ endpoint ([`formation_transport_zenoh::Endpoint::parse`] refused
 /// it already).
 #[cfg(not(feature = "tls"))]
 fn write_ros2_session_configs(_dir: &Path, connect: &str, _n_robots: usize) -> anyhow::Result<()> {
@@ -400,7 +401,7 @@ fn write_ros2_session_configs(_dir: &Path, connect: &str, _n_robots: usize) -> a
 /// `formation credentials --tls --renew PRINCIPAL`.
 #[cfg(feature = "zenoh")]
 fn renew_certificate(dir: &Path, principal: &str, days: u32) -> anyhow::Result<()> {
-    formation_runtime::zenoh::credentials::renew_certificate(dir, principal, days)?;
+    formation_transport_zenoh::credentials::renew_certificate(dir, principal, days)?;
     Ok(())
 }
 

@@ -28,7 +28,7 @@ use std::time::{Duration, Instant};
 use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::{RunId, WorldEvent};
 use formation_runtime::auth::LaunchSecret;
-use formation_runtime::iceoryx::naming::{NamespaceError, RunNamespace};
+use formation_transport_iceoryx2::naming::{NamespaceError, RunNamespace};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::process::{Child, ChildStdin, Command};
 use tokio::sync::{mpsc, oneshot};
@@ -465,7 +465,7 @@ pub async fn launch(
 /// The launch secret of a credentials folder, which remote agents hold too.
 #[cfg(feature = "zenoh")]
 fn launch_secret_of(dir: &std::path::Path) -> Result<LaunchSecret, LaunchError> {
-    formation_runtime::zenoh::credentials::read_secret(dir)
+    formation_transport_zenoh::credentials::read_secret(dir)
         .map_err(|e| LaunchError::Secret(e.to_string()))
 }
 
@@ -938,8 +938,8 @@ async fn spawn_agent(
             .args(["--stale-ms", &plan.settings.stale_ms.to_string()]);
         #[cfg(feature = "tls")]
         if let Some(dir) = &ros2.credentials {
-            use formation_runtime::ros2::secure;
-            let principal = formation_runtime::zenoh::access::robot_user(robot);
+            use formation_transport_ros2::secure;
+            let principal = formation_transport_zenoh::access::robot_user(robot);
             command.env(
                 secure::SESSION_CONFIG_ENV,
                 secure::session_config_file(dir, &principal),

@@ -5,7 +5,7 @@
 //! agent as a control request without pausing its tick loop, the agent loads and validates the
 //! model on a helper thread and swaps it in at a tick boundary, and the world relays the agent's
 //! answer ([`formation_proto::wire::SwapReply`]) back here. The iceoryx2 client is the runtime's
-//! ([`formation_runtime::iceoryx::request_swap`]), which opens the swap channel with the world's
+//! ([`formation_transport_iceoryx2::request_swap`]), which opens the swap channel with the world's
 //! own service definitions; everything it opens in the run's namespace goes when it returns.
 //!
 //! With `--transport zenoh` (`request_swap_over_zenoh`, feature `zenoh`) the request goes to the world's
@@ -22,7 +22,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use formation_proto::wire::{RunId, SwapOutcome, SwapRequest};
-use formation_runtime::iceoryx::naming::RunNamespace;
+use formation_transport_iceoryx2::naming::RunNamespace;
 
 /// The world or the agent refused a swap; the old model keeps driving.
 #[derive(Debug, thiserror::Error)]
@@ -65,7 +65,7 @@ pub fn request_swap(
         at_tick,
         path,
     };
-    let reply = formation_runtime::iceoryx::request_swap(&namespace, &request, timeout)?;
+    let reply = formation_transport_iceoryx2::request_swap(&namespace, &request, timeout)?;
     swap_done(reply.outcome, robot)
 }
 
@@ -82,7 +82,7 @@ pub fn request_swap_over_zenoh(
     at_tick: u64,
     timeout: Duration,
 ) -> anyhow::Result<SwapDone> {
-    use formation_runtime::zenoh::{Endpoint, credentials as creds, model, swap};
+    use formation_transport_zenoh::{Endpoint, credentials as creds, model, swap};
     let run_id = RunId::new(run)?;
     let endpoint = Endpoint::parse(connect)?;
     let size = formation_onnx::check_model_file(model)?;

@@ -23,8 +23,8 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use formation_proto::wire::{HelloMsg, LobbyChannel, RunId, lobby_service_name, message_bytes};
-use formation_runtime::zenoh::{credentials, keys};
 use formation_tests::{count_samples, raw_client};
+use formation_transport_zenoh::{credentials, keys};
 use zenoh::Wait;
 
 fn main() -> ExitCode {

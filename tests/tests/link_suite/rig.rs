@@ -14,12 +14,12 @@ use std::time::{Duration, Instant};
 use formation_proto::wire::{RunId, SwapReply, SwapRequest};
 use formation_runtime::ClockMode;
 use formation_runtime::agent::error_chain;
-use formation_runtime::iceoryx::naming::RunNamespace;
-use formation_runtime::iceoryx::{IceoryxAgentLink, IceoryxWorldLink};
 use formation_runtime::link::WorldLink;
 use formation_runtime::memory::{MemoryBus, MemoryWorldLink};
-use formation_runtime::zenoh::{Endpoint, Login, WorldAccess, ZenohAgentLink, ZenohWorldLink};
 use formation_tests::{LaunchSecret, LeakCheck, TempDir, free_tcp_port, unique_run_id};
+use formation_transport_iceoryx2::naming::RunNamespace;
+use formation_transport_iceoryx2::{IceoryxAgentLink, IceoryxWorldLink};
+use formation_transport_zenoh::{Endpoint, Login, WorldAccess, ZenohAgentLink, ZenohWorldLink};
 
 use crate::agent::{Agent, CONNECT_TIMEOUT, loop_agent};
 use crate::pilot::Models;
@@ -216,7 +216,7 @@ impl SwapRig for IceoryxRig {
     fn swap(&self, request: SwapRequest) -> JoinHandle<Result<SwapReply, String>> {
         let namespace = self.namespace().clone();
         std::thread::spawn(move || {
-            formation_runtime::iceoryx::request_swap(&namespace, &request, CONNECT_TIMEOUT)
+            formation_transport_iceoryx2::request_swap(&namespace, &request, CONNECT_TIMEOUT)
                 .map_err(|e| error_chain(&e))
         })
     }
@@ -237,7 +237,7 @@ impl ZenohRig {
 
     /// The login in the credentials file `file`.
     fn login(&self, file: PathBuf) -> Login {
-        formation_runtime::zenoh::credentials::read_login(&file).expect("a login of the run")
+        formation_transport_zenoh::credentials::read_login(&file).expect("a login of the run")
     }
 }
 
@@ -250,7 +250,7 @@ impl Rig for ZenohRig {
     type World = ZenohWorldLink;
 
     fn new(robots: usize) -> Self {
-        use formation_runtime::zenoh::credentials;
+        use formation_transport_zenoh::credentials;
         let dir = TempDir::new("zcreds");
         let folder = dir.path().join("credentials");
         credentials::create(&folder, robots).expect("the run's credentials");
@@ -268,8 +268,10 @@ impl Rig for ZenohRig {
 
     fn world(&self, _: ClockMode) -> ZenohWorldLink {
         let access = WorldAccess {
-            dictionary_file: formation_runtime::zenoh::credentials::check_passwords(&self.folder())
-                .expect("the passwords file"),
+            dictionary_file: formation_transport_zenoh::credentials::check_passwords(
+                &self.folder(),
+            )
+            .expect("the passwords file"),
             run: self.run().clone(),
             n_robots: self.launch.robots,
         };
@@ -283,7 +285,7 @@ impl Rig for ZenohRig {
     }
 
     fn start(&self, robot: usize, pid: u32, secret: &LaunchSecret, model: PathBuf) -> Agent {
-        let robot_file = formation_runtime::zenoh::credentials::robot_file(&self.folder(), robot);
+        let robot_file = formation_transport_zenoh::credentials::robot_file(&self.folder(), robot);
         let login = self.login(robot_file);
         let (endpoint, run, secret) = (self.endpoint.clone(), self.run().clone(), secret.clone());
         Agent::spawn(move |gate, stop| {
@@ -318,7 +320,7 @@ impl Rig for ZenohRig {
 
 impl SwapRig for ZenohRig {
     fn swap(&self, request: SwapRequest) -> JoinHandle<Result<SwapReply, String>> {
-        use formation_runtime::zenoh::{credentials, swap};
+        use formation_transport_zenoh::{credentials, swap};
         let operator = self.login(credentials::operator_file(&self.folder()));
         let (endpoint, run) = (self.endpoint.clone(), self.run().clone());
         std::thread::spawn(move || {
@@ -363,12 +365,12 @@ fn assert_port_free(endpoint: &Endpoint) {
 }
 
 mod ros2 {
-    //! The world as a ROS 2 team, and ROS 2 agents (`formation_runtime::ros2::run_agent`) on
+    //! The world as a ROS 2 team, and ROS 2 agents (`formation_transport_ros2::run_agent`) on
     //! the team's topics.
 
     use super::*;
     use formation_ros2::{Namespace, NodeName, PartialScan, RingContract};
-    use formation_runtime::ros2::{
+    use formation_transport_ros2::{
         DeciderSettings, GoalValue, OrientationKind, Ros2AgentSettings, Ros2Team, Ros2WorldLink,
         TeamTopics, run_agent,
     };

@@ -34,11 +34,14 @@ use formation_proto::wire::{
 
 use super::model::split_model;
 use super::{Bell, Endpoint, Queue, SignalWatch, WorldAccess, keys};
-use crate::link::{Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index};
+use crate::ZenohError;
+use formation_runtime::link::{
+    Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index,
+};
 
 fn zenoh_error(action: impl Into<String>) -> impl FnOnce(String) -> WorldLinkError {
     let action = action.into();
-    move |detail| WorldLinkError::Zenoh { action, detail }
+    move |detail| ZenohError::Refused { action, detail }.into()
 }
 
 /// Queued hellos per robot (as many as iceoryx2's hello service buffers).

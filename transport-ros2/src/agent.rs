@@ -26,8 +26,8 @@ use super::decider::{Answer, Decider, DeciderSettings, GoalValue, Inputs};
 use super::node::{
     Delivery, Node, NodeError, Received, RosPublisher, RosSubscription, system_time_ns,
 };
-use crate::agent::{AgentExit, Pilot};
-use crate::zenoh::{Bell, Endpoint, Ring, SignalWatch};
+use formation_runtime::agent::{AgentExit, Pilot};
+use formation_transport_zenoh::{Bell, Endpoint, Ring, SignalWatch};
 
 /// Which message carries the robot's orientation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -164,17 +164,18 @@ pub fn run_agent_expecting<P: Pilot>(
 
 /// Opens the agent's session: a Zenoh client of the router at `settings.connect`.
 fn connect_router(settings: &Ros2AgentSettings) -> Result<Arc<::zenoh::Session>, Ros2AgentError> {
-    let config = crate::zenoh::client_config(&settings.connect, settings.connect_timeout, None)
-        .map_err(|detail| Ros2AgentError::Unreachable {
+    let config =
+        formation_transport_zenoh::client_config(&settings.connect, settings.connect_timeout, None)
+            .map_err(|detail| Ros2AgentError::Unreachable {
+                endpoint: settings.connect.to_string(),
+                detail,
+            })?;
+    Ok(Arc::new(formation_transport_zenoh::open(config).map_err(
+        |detail| Ros2AgentError::Unreachable {
             endpoint: settings.connect.to_string(),
             detail,
-        })?;
-    Ok(Arc::new(crate::zenoh::open(config).map_err(|detail| {
-        Ros2AgentError::Unreachable {
-            endpoint: settings.connect.to_string(),
-            detail,
-        }
-    })?))
+        },
+    )?))
 }
 
 /// Subscribes `node` to everything the decision reads, in this order: the scan, the orientation
@@ -216,7 +217,7 @@ fn subscribe_scan(
                     }
                 }
                 Err(e) => {
-                    let problem = crate::agent::error_chain(&e);
+                    let problem = formation_runtime::agent::error_chain(&e);
                     lock(&inbox).scan_problem = Some(problem.clone());
                     note_problem(&inbox, problem);
                 }
@@ -244,7 +245,7 @@ fn subscribe_orientation(
     let problem = {
         let (inbox, bell) = (Arc::clone(inbox), Arc::clone(bell));
         move |e: super::node::InputError| {
-            note_problem(&inbox, crate::agent::error_chain(&e));
+            note_problem(&inbox, formation_runtime::agent::error_chain(&e));
             bell.ring();
         }
     };
@@ -290,7 +291,7 @@ fn subscribe_goal(
                         value.message.data
                     ),
                 ),
-                Err(e) => note_problem(&inbox, crate::agent::error_chain(&e)),
+                Err(e) => note_problem(&inbox, formation_runtime::agent::error_chain(&e)),
             }
             bell.ring();
         })?,

@@ -50,6 +50,7 @@
 pub mod access;
 mod agent;
 pub mod credentials;
+pub mod error;
 pub mod keys;
 pub mod model;
 pub mod record;
@@ -69,6 +70,7 @@ use formation_proto::exit::TerminationSignal;
 
 pub use access::{AccessError, Login, WorldAccess};
 pub use agent::ZenohAgentLink;
+pub use error::ZenohError;
 pub use record::{RecorderAccess, RecorderEvent, RecorderLink, RecorderLinkError, ZenohRecordFeed};
 pub use world::ZenohWorldLink;
 
@@ -194,7 +196,7 @@ impl std::str::FromStr for Endpoint {
 }
 
 /// Settings both ends share: no scouting, no shared memory, bounded messages.
-pub(crate) fn base_config(mode: &str) -> Result<::zenoh::Config, String> {
+pub fn base_config(mode: &str) -> Result<::zenoh::Config, String> {
     let mut config = ::zenoh::Config::default();
     let entries = [
         ("mode", format!("{mode:?}")),
@@ -223,7 +225,7 @@ pub(crate) fn base_config(mode: &str) -> Result<::zenoh::Config, String> {
 /// permissions when `access` is given; on a `tls/` endpoint also the certificates of `access`'s
 /// folder (the world's own is checked first). A plain `tcp/` endpoint off loopback is warned
 /// about once.
-pub(crate) fn world_config(
+pub fn world_config(
     listen: &Endpoint,
     access: Option<&WorldAccess>,
 ) -> Result<::zenoh::Config, String> {
@@ -268,7 +270,7 @@ fn apply_world_tls(_: &mut ::zenoh::Config, _: &WorldAccess) -> Result<(), Strin
 
 /// An agent's (or a tool's) configuration: a client of the world's router at `connect`, within
 /// `timeout`, logging in when `login` is given.
-pub(crate) fn client_config(
+pub fn client_config(
     connect: &Endpoint,
     timeout: Duration,
     login: Option<&Login>,
@@ -292,7 +294,7 @@ pub(crate) fn client_config(
 /// recorder's, `formation record --connect --transport ros2`): that router names its principals
 /// by certificate and has no logins, so the password is not sent.
 #[cfg(feature = "tls")]
-pub(crate) fn certificate_client_config(
+pub fn certificate_client_config(
     connect: &Endpoint,
     timeout: Duration,
     login: &Login,
@@ -304,7 +306,7 @@ pub(crate) fn certificate_client_config(
 
 /// No TLS in this build ([`Endpoint::parse`] refuses `tls/` already).
 #[cfg(not(feature = "tls"))]
-pub(crate) fn certificate_client_config(
+pub fn certificate_client_config(
     connect: &Endpoint,
     _: Duration,
     _: &Login,
@@ -415,7 +417,7 @@ impl Never {
 /// team's authority, its dates and its name, then one handshake of its own with the world
 /// ([`tls::probe`]) names a refusal, within `timeout`. Nothing to do on `tcp/`.
 #[cfg(feature = "tls")]
-pub(crate) fn check_tls_client(
+pub fn check_tls_client(
     connect: &Endpoint,
     login: Option<&Login>,
     timeout: Duration,
@@ -434,7 +436,7 @@ pub(crate) fn check_tls_client(
 }
 
 /// Opens a session, mapping Zenoh's error to text (without the source locations Zenoh appends).
-pub(crate) fn open(config: ::zenoh::Config) -> Result<::zenoh::Session, String> {
+pub fn open(config: ::zenoh::Config) -> Result<::zenoh::Session, String> {
     ::zenoh::open(config)
         .wait()
         .map_err(|e| without_source_locations(&e.to_string()))
@@ -442,7 +444,7 @@ pub(crate) fn open(config: ::zenoh::Config) -> Result<::zenoh::Session, String> 
 
 /// Zenoh's error text without the ` at /path/to/zenoh-x.y/src/file.rs:123.` it appends (paths
 /// of the build machine's cargo registry, which mean nothing to a user).
-pub(crate) fn without_source_locations(text: &str) -> String {
+pub fn without_source_locations(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     let mut rest = text;
     while let Some(at) = rest.find(" at /") {
@@ -466,10 +468,10 @@ pub(crate) fn without_source_locations(text: &str) -> String {
 
 /// How long a client with a login waits for the router once its TCP port accepts: a router
 /// answers a login at once, so a session not open by then was refused (a wrong password).
-pub(crate) const LOGIN_ANSWER: Duration = Duration::from_secs(10);
+pub const LOGIN_ANSWER: Duration = Duration::from_secs(10);
 
 /// Whether something accepts TCP connections at `endpoint`, within `within`.
-pub(crate) fn accepts_tcp(endpoint: &Endpoint, within: Duration) -> bool {
+pub fn accepts_tcp(endpoint: &Endpoint, within: Duration) -> bool {
     use std::net::ToSocketAddrs as _;
     let Ok(addresses) = endpoint.address().to_socket_addrs() else {
         return false;
@@ -482,7 +484,7 @@ pub(crate) fn accepts_tcp(endpoint: &Endpoint, within: Duration) -> bool {
 /// What a link's waits block on: rung by subscriber callbacks (something arrived) and by
 /// SIGINT/SIGTERM.
 #[derive(Debug, Default)]
-pub(crate) struct Bell {
+pub struct Bell {
     state: Mutex<BellState>,
     rung: Condvar,
 }
@@ -495,7 +497,7 @@ struct BellState {
 
 /// How a wait on a [`Bell`] ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Ring {
+pub enum Ring {
     Activity,
     Idle,
     Terminated(TerminationSignal),
@@ -508,7 +510,7 @@ impl Bell {
     }
 
     /// Something arrived.
-    pub(crate) fn ring(&self) {
+    pub fn ring(&self) {
         self.lock().pending = true;
         self.rung.notify_all();
     }
@@ -521,7 +523,7 @@ impl Bell {
 
     /// Blocks until the bell rings or `timeout` passes; a ring that came since the last wait
     /// ends it at once.
-    pub(crate) fn wait(&self, timeout: Duration) -> Ring {
+    pub fn wait(&self, timeout: Duration) -> Ring {
         let guard = self.lock();
         let (mut guard, _) = self
             .rung
@@ -539,11 +541,16 @@ impl Bell {
 }
 
 impl Bell {
-    /// A world link's wait ([`crate::link::WorldLink::wait`]): `Ok` when something arrived or
-    /// the time passed, [`crate::link::WorldLinkError::Terminated`] on SIGINT/SIGTERM.
-    pub(crate) fn world_wait(&self, timeout: Duration) -> Result<(), crate::link::WorldLinkError> {
+    /// A world link's wait ([`formation_runtime::link::WorldLink::wait`]): `Ok` when something arrived or
+    /// the time passed, [`formation_runtime::link::WorldLinkError::Terminated`] on SIGINT/SIGTERM.
+    pub fn world_wait(
+        &self,
+        timeout: Duration,
+    ) -> Result<(), formation_runtime::link::WorldLinkError> {
         match self.wait(timeout) {
-            Ring::Terminated(signal) => Err(crate::link::WorldLinkError::Terminated(signal)),
+            Ring::Terminated(signal) => {
+                Err(formation_runtime::link::WorldLinkError::Terminated(signal))
+            }
             Ring::Activity | Ring::Idle => Ok(()),
         }
     }
@@ -553,12 +560,12 @@ impl Bell {
 /// Stray signals whose default action would end the process (SIGUSR1, SIGUSR2, SIGALRM) are
 /// caught and ignored, as the iceoryx2 processes ignore them: a harmless signal never ends a
 /// Zenoh or ROS 2 process.
-pub(crate) struct SignalWatch {
+pub struct SignalWatch {
     handle: signal_hook::iterator::Handle,
 }
 
 impl SignalWatch {
-    pub(crate) fn start(bell: Arc<Bell>) -> std::io::Result<SignalWatch> {
+    pub fn start(bell: Arc<Bell>) -> std::io::Result<SignalWatch> {
         use signal_hook::consts::{SIGALRM, SIGINT, SIGTERM, SIGUSR1, SIGUSR2};
         let mut signals =
             signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGUSR1, SIGUSR2, SIGALRM])?;
@@ -587,13 +594,13 @@ impl Drop for SignalWatch {
 /// A bounded first-in-first-out queue filled by a subscriber callback: when full, the oldest
 /// entry goes (and is counted), so a flooding publisher costs bounded memory.
 #[derive(Debug)]
-pub(crate) struct Queue<T> {
+pub struct Queue<T> {
     items: Mutex<VecDeque<T>>,
     capacity: usize,
 }
 
 impl<T> Queue<T> {
-    pub(crate) fn new(capacity: usize) -> Self {
+    pub fn new(capacity: usize) -> Self {
         Queue {
             items: Mutex::new(VecDeque::with_capacity(capacity.min(64))),
             capacity,
@@ -605,7 +612,7 @@ impl<T> Queue<T> {
     }
 
     /// Adds `item`; returns false when the oldest entry had to go to make room.
-    pub(crate) fn push(&self, item: T) -> bool {
+    pub fn push(&self, item: T) -> bool {
         let mut items = self.lock();
         let room = items.len() < self.capacity;
         if !room {
@@ -616,7 +623,7 @@ impl<T> Queue<T> {
     }
 
     /// Takes every entry, oldest first.
-    pub(crate) fn drain(&self) -> VecDeque<T> {
+    pub fn drain(&self) -> VecDeque<T> {
         std::mem::take(&mut *self.lock())
     }
 }
@@ -669,6 +676,31 @@ fn session_config_from_env() -> Result<Option<::zenoh::Config>, SessionConfigErr
             path,
             detail: e.to_string(),
         })
+}
+
+/// Why the endpoint flag of a network transport (`--listen`, `--connect`) gives no endpoint.
+#[derive(Debug, thiserror::Error)]
+pub enum EndpointFlagError {
+    /// The flag is missing.
+    #[error(transparent)]
+    Missing(#[from] formation_runtime::transport::TransportError),
+    /// The flag's value is not `tcp/HOST:PORT`.
+    #[error(transparent)]
+    Invalid(#[from] EndpointError),
+}
+
+/// The Zenoh endpoint that `transport` needs from `flag` (`--listen` or `--connect`), given as
+/// `given`: missing, it is [`formation_runtime::transport::TransportError::MissingEndpoint`]
+/// naming the flag; given, it must parse as `tcp/HOST:PORT`. One reading for the world's and the
+/// agent's processes, over Zenoh and ROS 2.
+pub fn required_endpoint(
+    given: Option<&str>,
+    flag: &'static str,
+    transport: formation_runtime::transport::Transport,
+) -> Result<Endpoint, EndpointFlagError> {
+    let text = given
+        .ok_or(formation_runtime::transport::TransportError::MissingEndpoint { flag, transport })?;
+    Ok(Endpoint::parse(text)?)
 }
 
 #[cfg(test)]

@@ -171,7 +171,7 @@ fn rustls_error(error: &std::io::Error) -> Option<&rustls::Error> {
 
 /// Handshakes with the world at `endpoint` (`tls/HOST:PORT`) as `principal`, trying to reach it
 /// for at most `within`; `Ok` once the world accepted the certificate and showed its own.
-pub(crate) fn probe_world(
+pub fn probe_world(
     endpoint: &str,
     identity: &LoadedIdentity,
     principal: &str,

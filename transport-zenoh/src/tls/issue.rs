@@ -15,7 +15,7 @@ use rcgen::{
 };
 
 use super::{WORLD_PRINCIPAL, ca_file, ca_key_file, certificate_file, key_file};
-use crate::zenoh::access::{OPERATOR_USER, RECORDER_USER, robot_user};
+use crate::access::{OPERATOR_USER, RECORDER_USER, robot_user};
 
 /// The longest validity asked for, in days (about 100 years).
 pub const MAX_VALID_DAYS: u32 = 36_500;

@@ -2,7 +2,7 @@
 //! Zenoh): their limits, node names and the run's namespace, with the lock that claims a run.
 //!
 //! Per robot `i` of a run `<run>` there is a *lobby*, where an agent asks to drive the robot and
-//! proves with the launch secret ([`crate::auth`]) that its launch started it:
+//! proves with the launch secret ([`formation_runtime::auth`]) that its launch started it:
 //!
 //! | service | payload | publisher → subscriber |
 //! |---|---|---|

@@ -26,7 +26,7 @@ use formation_ros2::{
     LaserScan, PartialScan, RingContract, Twist, resample_scan, twist_from_wheels,
 };
 
-use crate::agent::{Pilot, error_chain};
+use formation_runtime::agent::{Pilot, error_chain};
 
 /// Where a goal component comes from.
 #[derive(Debug, Clone, PartialEq)]
@@ -261,9 +261,9 @@ impl Decider {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::agent::BoxError;
     use formation_proto::WheelCmd;
     use formation_ros2::TopicName;
+    use formation_runtime::agent::BoxError;
     use std::f64::consts::TAU;
 
     /// A pilot that drives both wheels at d* m/s and records what it was given.

@@ -11,7 +11,7 @@
 use std::rc::Rc;
 use std::time::Duration;
 
-use crate::iceoryx::naming::{
+use crate::naming::{
     RunNamespace, ServiceLimits, WORLD_NODE_NAME, parse_agent_node_name, swap_limits,
 };
 use formation_proto::wire::{
@@ -32,16 +32,11 @@ use super::services::{
     self, Access, EventService, PubSubService, ServiceError, drain_decoded, run_node,
 };
 use super::watch_termination_signals;
-use crate::link::{Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index};
+use crate::error::iox;
 use crate::signals;
-
-fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> WorldLinkError {
-    let action = action.into();
-    move |e| WorldLinkError::Iceoryx {
-        action,
-        detail: format!("{e:?}"),
-    }
-}
+use formation_runtime::link::{
+    Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index,
+};
 
 /// One robot's ports on the world side.
 struct RobotPorts {
@@ -118,10 +113,11 @@ impl AttachedListeners {
                     owner
                         .waitset
                         .attach_notification(listener)
-                        .map_err(|e| iox("attach a wake-up to the world's wait set")(&e))
+                        .map_err(iox("attach a wake-up to the world's wait set"))
                 })
                 .collect()
         })
+        .map_err(WorldLinkError::from)
     }
 
     /// Consumes every pending wake-up (the samples themselves are drained by the caller).
@@ -139,8 +135,7 @@ impl IceoryxWorldLink {
         watch_termination_signals();
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
-        let node = run_node(&config, WORLD_NODE_NAME)
-            .map_err(|(action, detail)| WorldLinkError::Iceoryx { action, detail })?;
+        let node = run_node(&config, WORLD_NODE_NAME)?;
         // iceoryx2 makes its node-management segment world-writable: close it at once.
         namespace.restrict_permissions()?;
         let (lobbies, hello_wakes): (Vec<_>, Vec<_>) = (0..n_robots)
@@ -153,7 +148,7 @@ impl IceoryxWorldLink {
             WaitSetBuilder::new()
                 .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
                 .create::<ipc::Service>()
-                .map_err(|e| iox("create the world's wait set")(&e))?,
+                .map_err(iox("create the world's wait set"))?,
         );
         let run_wakes = AttachedListeners::attach(
             &waitset,
@@ -194,10 +189,7 @@ fn event_service(
 }
 
 fn create_failed(e: ServiceError) -> WorldLinkError {
-    WorldLinkError::Iceoryx {
-        action: e.action("create"),
-        detail: e.detail,
-    }
+    e.create_failed().into()
 }
 
 /// Robot `robot`'s lobby ports and its hello listener.
@@ -215,16 +207,16 @@ fn create_lobby_ports(
             .subscriber_builder()
             .buffer_size(hello_limits.subscriber_buffer)
             .create()
-            .map_err(|e| iox(what("hello"))(&e))?,
+            .map_err(iox(what("hello")))?,
         welcome: pubsub_service::<WelcomeMsg>(node, &welcome_name, ServiceLimits::WELCOME)?
             .publisher_builder()
             .create()
-            .map_err(|e| iox(what("welcome"))(&e))?,
+            .map_err(iox(what("welcome")))?,
     };
     let hello_wake = event_service(node, &hello_name, hello_limits)?
         .listener_builder()
         .create()
-        .map_err(|e| iox(what("hello event"))(&e))?;
+        .map_err(iox(what("hello event")))?;
     Ok((ports, hello_wake))
 }
 
@@ -252,40 +244,40 @@ fn create_robot_ports(
         scan: scan
             .publisher_builder()
             .create()
-            .map_err(|e| iox(what("scan"))(&e))?,
+            .map_err(iox(what("scan")))?,
         scan_wake: event(RobotChannel::Scan)?
             .notifier_builder()
             .create()
-            .map_err(|e| iox(what("scan event"))(&e))?,
+            .map_err(iox(what("scan event")))?,
         control: control
             .publisher_builder()
             .create()
-            .map_err(|e| iox(what("control"))(&e))?,
+            .map_err(iox(what("control")))?,
         control_wake: event(RobotChannel::Control)?
             .notifier_builder()
             .create()
-            .map_err(|e| iox(what("control event"))(&e))?,
+            .map_err(iox(what("control event")))?,
         cmd: cmd
             .subscriber_builder()
             .buffer_size(limits.subscriber_buffer)
             .create()
-            .map_err(|e| iox(what("cmd"))(&e))?,
+            .map_err(iox(what("cmd")))?,
         status: status
             .subscriber_builder()
             .buffer_size(limits.subscriber_buffer)
             .create()
-            .map_err(|e| iox(what("status"))(&e))?,
+            .map_err(iox(what("status")))?,
         wakes: AttachedListeners::attach(
             waitset,
             vec![
                 event(RobotChannel::Cmd)?
                     .listener_builder()
                     .create()
-                    .map_err(|e| iox(what("cmd event"))(&e))?,
+                    .map_err(iox(what("cmd event")))?,
                 event(RobotChannel::Status)?
                     .listener_builder()
                     .create()
-                    .map_err(|e| iox(what("status event"))(&e))?,
+                    .map_err(iox(what("status event")))?,
             ],
         )?,
     })
@@ -309,21 +301,21 @@ fn create_swap_ports(
     let request_wake = event(SwapChannel::Request)?
         .listener_builder()
         .create()
-        .map_err(|e| iox(what("request event"))(&e))?;
+        .map_err(iox(what("request event")))?;
     let ports = SwapPorts {
         requests: requests
             .subscriber_builder()
             .buffer_size(swap_limits(SwapChannel::Request).subscriber_buffer)
             .create()
-            .map_err(|e| iox(what("request"))(&e))?,
+            .map_err(iox(what("request")))?,
         replies: replies
             .publisher_builder()
             .create()
-            .map_err(|e| iox(what("reply"))(&e))?,
+            .map_err(iox(what("reply")))?,
         reply_wake: event(SwapChannel::Reply)?
             .notifier_builder()
             .create()
-            .map_err(|e| iox(what("reply event"))(&e))?,
+            .map_err(iox(what("reply event")))?,
     };
     Ok((ports, request_wake))
 }
@@ -338,7 +330,7 @@ impl WorldLink for IceoryxWorldLink {
         while let Some(sample) = self.lobbies[robot]
             .hellos
             .receive()
-            .map_err(|e| iox(format!("receive a hello for robot {robot}"))(&e))?
+            .map_err(iox(format!("receive a hello for robot {robot}")))?
         {
             let msg = sample.payload();
             sink(Hello {
@@ -355,7 +347,7 @@ impl WorldLink for IceoryxWorldLink {
         self.lobbies[robot]
             .welcome
             .send_copy(WelcomeMsg::encode(nonce, welcome))
-            .map_err(|e| iox(format!("answer a hello for robot {robot}"))(&e))?;
+            .map_err(iox(format!("answer a hello for robot {robot}")))?;
         Ok(())
     }
 
@@ -377,7 +369,7 @@ impl WorldLink for IceoryxWorldLink {
         ports
             .scan
             .send_copy(*msg)
-            .map_err(|e| iox(format!("send robot {robot}'s scan"))(&e))?;
+            .map_err(iox(format!("send robot {robot}'s scan")))?;
         // A wake-up nobody listens to (agent restarting) is not an error.
         let _ = ports.scan_wake.notify();
         Ok(())
@@ -391,7 +383,7 @@ impl WorldLink for IceoryxWorldLink {
         ports
             .control
             .send_copy(msg)
-            .map_err(|e| iox(format!("send robot {robot}'s control request"))(&e))?;
+            .map_err(iox(format!("send robot {robot}'s control request")))?;
         let _ = ports.control_wake.notify();
         Ok(())
     }
@@ -402,7 +394,7 @@ impl WorldLink for IceoryxWorldLink {
         let result = self
             .waitset
             .wait_and_process_once_with_timeout(|_| CallbackProgression::Stop, timeout)
-            .map_err(|e| iox("wait for the agents")(&e))?;
+            .map_err(iox("wait for the agents"))?;
         self.run_wakes.consume();
         for ports in self.robots.open_ones() {
             ports.wakes.consume();
@@ -427,7 +419,7 @@ impl WorldLink for IceoryxWorldLink {
         while let Some(sample) = ports
             .cmd
             .receive()
-            .map_err(|e| iox(format!("receive robot {robot}'s command"))(&e))?
+            .map_err(iox(format!("receive robot {robot}'s command")))?
         {
             sink(*sample.payload());
         }
@@ -439,16 +431,16 @@ impl WorldLink for IceoryxWorldLink {
             return Ok(());
         };
         let what = format!("status of robot {robot}");
-        drain_decoded(&ports.status, &what, StatusMsg::decode, sink).map_err(|detail| {
-            WorldLinkError::Iceoryx {
-                action: format!("receive robot {robot}'s status"),
-                detail,
-            }
-        })
+        Ok(drain_decoded(
+            &ports.status,
+            &what,
+            StatusMsg::decode,
+            sink,
+        )?)
     }
 
     fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
-        let wanted = crate::iceoryx::naming::agent_node_name(robot, pid);
+        let wanted = crate::naming::agent_node_name(robot, pid);
         let mut alive = false;
         Node::<ipc::Service>::list(self.node.config(), |state| {
             if let NodeState::Alive(view) = &state
@@ -462,7 +454,7 @@ impl WorldLink for IceoryxWorldLink {
             }
             CallbackProgression::Continue
         })
-        .map_err(|e| iox("list the run's nodes")(&e))?;
+        .map_err(iox("list the run's nodes"))?;
         Ok(alive)
     }
 
@@ -479,7 +471,7 @@ impl WorldLink for IceoryxWorldLink {
             }
             CallbackProgression::Continue
         })
-        .map_err(|e| iox("list the run's nodes")(&e))?;
+        .map_err(iox("list the run's nodes"))?;
         if !dead.is_empty() {
             let cleaned = self.node.try_cleanup_dead_nodes();
             tracing::info!(
@@ -500,12 +492,12 @@ impl WorldLink for IceoryxWorldLink {
 
     fn drain_swap_requests(&mut self, sink: &mut dyn FnMut(SwapRequest)) -> WorldResult {
         let decode = SwapRequestMsg::decode;
-        drain_decoded(&self.swap.requests, "swap request", decode, sink).map_err(|detail| {
-            WorldLinkError::Iceoryx {
-                action: "receive a swap request".into(),
-                detail,
-            }
-        })
+        Ok(drain_decoded(
+            &self.swap.requests,
+            "swap request",
+            decode,
+            sink,
+        )?)
     }
 
     fn publish_swap_reply(&mut self, reply: &SwapReply) -> WorldResult {
@@ -513,7 +505,7 @@ impl WorldLink for IceoryxWorldLink {
         self.swap
             .replies
             .send_copy(msg)
-            .map_err(|e| iox("send a swap reply")(&e))?;
+            .map_err(iox("send a swap reply"))?;
         let _ = self.swap.reply_wake.notify();
         Ok(())
     }

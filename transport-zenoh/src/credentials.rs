@@ -18,14 +18,14 @@ use std::io::Write;
 use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 
-use crate::auth::{LaunchSecret, SecretError};
 use formation_proto::files::{FileRefusal, read_bounded};
+use formation_runtime::auth::{LaunchSecret, SecretError};
 use serde::{Deserialize, Serialize};
 
 use super::access::{AccessError, Login, OPERATOR_USER, RECORDER_USER, robot_user};
 
 /// The `format` of a login file.
-pub const FORMAT: &str = "formation-zenoh-login";
+pub const FORMAT: &str = "formation-transport-zenoh-login";
 /// Its version.
 pub const VERSION: u32 = 1;
 /// The largest credentials file read.

@@ -1,7 +1,7 @@
 //! Recording a live Zenoh or ROS 2 team from outside: the world's record channel
 //! ([`ZenohRecordFeed`]) and the recorder's client ([`RecorderLink`]), carrying the
 //! live-recording messages of `formation_record::live` as opaque bytes. A ROS 2 world declares
-//! the same channel and token on its own session (`crate::ros2::Ros2WorldLink::record_feed`).
+//! the same channel and token on its own session (`formation_transport_ros2::Ros2WorldLink::record_feed`).
 //!
 //! The world publishes each message on `formation/<run>/record/live` ([`keys::record_live`])
 //! reliably and blocking under congestion, so a lockstep run waits for a slow recorder rather
@@ -29,7 +29,8 @@ use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::RunId;
 
 use super::{Bell, Endpoint, Login, Ring, SignalWatch, keys};
-use crate::link::{RecordFeed, WorldLinkError, WorldResult};
+use crate::ZenohError;
+use formation_runtime::link::{RecordFeed, WorldLinkError, WorldResult};
 
 /// Messages queued between the recorder's subscriber and its writer before the subscriber
 /// waits (and with it, through Zenoh's reliable channel, the world).
@@ -40,7 +41,7 @@ const SETUP_QUERY_TIMEOUT: Duration = Duration::from_secs(5);
 
 fn zenoh_error(action: impl Into<String>) -> impl FnOnce(String) -> WorldLinkError {
     let action = action.into();
-    move |detail| WorldLinkError::Zenoh { action, detail }
+    move |detail| ZenohError::Refused { action, detail }.into()
 }
 
 /// The world's record channel.
@@ -52,7 +53,7 @@ pub struct ZenohRecordFeed {
 
 impl ZenohRecordFeed {
     /// Declares run `run`'s record channel and setup queryable on the world's `session`.
-    pub(crate) fn declare(session: &::zenoh::Session, run: &RunId) -> WorldResult<Self> {
+    pub fn declare(session: &::zenoh::Session, run: &RunId) -> WorldResult<Self> {
         let live = keys::record_live(run);
         let publisher = session
             .declare_publisher(live.clone())

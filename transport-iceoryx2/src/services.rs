@@ -9,7 +9,8 @@
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
-use crate::iceoryx::naming::ServiceLimits;
+use crate::error::{IceoryxCause, IceoryxError};
+use crate::naming::ServiceLimits;
 
 /// A publish-subscribe service's port factory.
 pub(crate) type PubSubService<T> =
@@ -27,14 +28,14 @@ pub(crate) enum Access {
 }
 
 /// Why a service could not be had.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug)]
 pub(crate) struct ServiceError {
     /// The service's name.
     pub name: String,
     /// What went wrong.
     pub kind: ServiceErrorKind,
     /// iceoryx2's error.
-    pub detail: String,
+    pub source: IceoryxCause,
 }
 
 /// What went wrong with a service.
@@ -54,21 +55,39 @@ impl ServiceError {
             ServiceErrorKind::Unavailable => format!("{verb} service {}", self.name),
         }
     }
+
+    /// The error as the world reports it when creating the service failed.
+    pub(crate) fn create_failed(self) -> IceoryxError {
+        IceoryxError::Create {
+            action: self.action("create"),
+            source: self.source,
+        }
+    }
+
+    /// The error as a process that only opens services reports a name iceoryx2 refused.
+    pub(crate) fn open_failed(self) -> IceoryxError {
+        IceoryxError::Refused {
+            action: self.action("open"),
+            source: self.source,
+        }
+    }
 }
 
 fn service_name(name: &str) -> Result<ServiceName, ServiceError> {
     ServiceName::new(name).map_err(|e| ServiceError {
         name: name.to_owned(),
         kind: ServiceErrorKind::Name,
-        detail: format!("{e:?}"),
+        source: Box::new(e),
     })
 }
 
-fn unavailable(name: &str) -> impl FnOnce(&dyn std::fmt::Debug) -> ServiceError + '_ {
+fn unavailable<E: std::error::Error + Send + Sync + 'static>(
+    name: &str,
+) -> impl FnOnce(E) -> ServiceError + '_ {
     move |e| ServiceError {
         name: name.to_owned(),
         kind: ServiceErrorKind::Unavailable,
-        detail: format!("{e:?}"),
+        source: Box::new(e),
     }
 }
 
@@ -90,8 +109,8 @@ pub(crate) fn pubsub_service<T: std::fmt::Debug + ZeroCopySend + IceoryxSend>(
         .history_size(0)
         .enable_safe_overflow(true);
     match access {
-        Access::Create => builder.open_or_create().map_err(|e| unavailable(name)(&e)),
-        Access::Open => builder.open().map_err(|e| unavailable(name)(&e)),
+        Access::Create => builder.open_or_create().map_err(unavailable(name)),
+        Access::Open => builder.open().map_err(unavailable(name)),
     }
 }
 
@@ -110,8 +129,8 @@ pub(crate) fn event_service(
         .max_listeners(limits.max_subscribers)
         .max_nodes(limits.max_nodes);
     match access {
-        Access::Create => builder.open_or_create().map_err(|e| unavailable(name)(&e)),
-        Access::Open => builder.open().map_err(|e| unavailable(name)(&e)),
+        Access::Create => builder.open_or_create().map_err(unavailable(name)),
+        Access::Open => builder.open().map_err(unavailable(name)),
     }
 }
 
@@ -123,11 +142,15 @@ pub(crate) fn drain_decoded<T, U, E: std::fmt::Display>(
     what: &str,
     decode: impl Fn(&T) -> Result<U, E>,
     sink: &mut dyn FnMut(U),
-) -> Result<(), String>
+) -> Result<(), IceoryxError>
 where
     T: std::fmt::Debug + ZeroCopySend,
 {
-    while let Some(sample) = subscriber.receive().map_err(|e| format!("{e:?}"))? {
+    let failed = |e| IceoryxError::Refused {
+        action: format!("receive a {what}"),
+        source: Box::new(e),
+    };
+    while let Some(sample) = subscriber.receive().map_err(failed)? {
         match decode(sample.payload()) {
             Ok(decoded) => sink(decoded),
             Err(e) => tracing::warn!("ignoring a malformed {what}: {e}"),
@@ -137,17 +160,17 @@ where
 }
 
 /// A node of a run named `name` in iceoryx2's `config`, whose waits hand on termination requests
-/// (SIGINT, SIGTERM); the error is what failed and iceoryx2's detail.
+/// (SIGINT, SIGTERM).
 pub(crate) fn run_node(
     config: &iceoryx2::config::Config,
     name: &str,
-) -> Result<Node<ipc::Service>, (String, String)> {
+) -> Result<Node<ipc::Service>, IceoryxError> {
     let node_name =
-        NodeName::new(name).map_err(|e| (format!("name the node {name}"), format!("{e:?}")))?;
+        NodeName::new(name).map_err(crate::error::iox(format!("name the node {name}")))?;
     NodeBuilder::new()
         .name(&node_name)
         .config(config)
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
-        .map_err(|e| (format!("create the node {name}"), format!("{e:?}")))
+        .map_err(crate::error::iox(format!("create the node {name}")))
 }

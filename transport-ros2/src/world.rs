@@ -34,7 +34,7 @@
 //!
 //! - **Recording from outside** (`formation record --connect --transport ros2`): the world's
 //!   session also carries the run's record channel and liveliness token under `formation/<run>/`
-//!   ([`Ros2WorldLink::record_feed`], the Zenoh team's [`crate::zenoh::ZenohRecordFeed`]), keys
+//!   ([`Ros2WorldLink::record_feed`], the Zenoh team's [`formation_transport_zenoh::ZenohRecordFeed`]), keys
 //!   outside rmw_zenoh's layout that ROS 2 tools do not see. The ROS 2 topics alone could not
 //!   give the file `--record` writes: a Twist is not the wheel speeds bit for bit, and the
 //!   replay channel's inputs, watchdog outcomes and the run's metadata are on no topic. A ROS 2
@@ -52,7 +52,6 @@ use std::path::Path;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use crate::auth::LaunchSecret;
 use ::zenoh::Wait;
 use ::zenoh::liveliness::LivelinessToken as RunToken;
 use ::zenoh::pubsub::Subscriber;
@@ -68,11 +67,13 @@ use formation_ros2::{
     EntityKind, Float64, LaserScan, LivelinessToken, Namespace, NodeName, Odometry, Qos, TfMessage,
     Time, TopicName, Twist, wheels_from_twist,
 };
+use formation_runtime::auth::LaunchSecret;
 
 use super::node::{Delivery, Node, NodeError, RosPublisher, RosSubscription};
 use super::{Ros2Team, TeamTopics};
-use crate::link::{Hello, WorldLink, WorldLinkError, WorldResult};
-use crate::zenoh::{Bell, Endpoint, RECONNECT_GRACE, SignalWatch};
+use formation_runtime::link::{Hello, WorldLink, WorldLinkError, WorldResult};
+use formation_transport_zenoh::ZenohError;
+use formation_transport_zenoh::{Bell, Endpoint, RECONNECT_GRACE, SignalWatch};
 
 /// Stamps of the current episode's ticks kept per robot, to match Twists to ticks.
 const STAMPS_KEPT: usize = 64;
@@ -88,10 +89,11 @@ pub use formation_ros2::team::WORLD_FRAME;
 const TF_STATIC_PERIOD_NS: i64 = 1_000_000_000;
 
 fn node_error(e: NodeError) -> WorldLinkError {
-    WorldLinkError::Zenoh {
+    ZenohError::Refused {
         action: "set up the ROS 2 team".into(),
-        detail: crate::agent::error_chain(&e),
+        detail: formation_runtime::agent::error_chain(&e),
     }
+    .into()
 }
 
 /// A driver of a robot as the ROS graph shows it: the node publishing on its `cmd_vel`.
@@ -197,21 +199,21 @@ fn open_router(
     team: &Ros2Team,
     credentials: Option<&Path>,
 ) -> Result<Arc<::zenoh::Session>, WorldLinkError> {
-    let configure = |detail| WorldLinkError::Zenoh {
+    let configure = |detail| ZenohError::Refused {
         action: format!("configure a router on {listen}"),
         detail,
     };
     let config = if listen.is_tls() {
         secure_router_config(listen, run, team, credentials).map_err(configure)?
     } else {
-        crate::zenoh::world_config(listen, None).map_err(configure)?
+        formation_transport_zenoh::world_config(listen, None).map_err(configure)?
     };
-    Ok(Arc::new(crate::zenoh::open(config).map_err(|detail| {
-        WorldLinkError::Zenoh {
+    Ok(Arc::new(formation_transport_zenoh::open(config).map_err(
+        |detail| ZenohError::Refused {
             action: format!("listen on {listen} (is the port free?)"),
             detail,
-        }
-    })?))
+        },
+    )?))
 }
 
 /// The router's configuration on a `tls/` endpoint: the world's certificate, and rules that name
@@ -229,7 +231,7 @@ fn secure_router_config(
              `formation credentials --tls`"
         )
     })?;
-    let mut config = crate::zenoh::base_config("router")?;
+    let mut config = formation_transport_zenoh::base_config("router")?;
     config
         .insert_json5("listen/endpoints", &format!("[{:?}]", listen.as_str()))
         .map_err(|e| format!("listening on {listen}: {e}"))?;
@@ -268,7 +270,7 @@ impl RobotPorts {
     ) -> WorldResult<RobotPorts> {
         let topics = TeamTopics::robot(robot);
         let namespace =
-            Namespace::new(&format!("/robot_{robot}")).map_err(|e| WorldLinkError::Zenoh {
+            Namespace::new(&format!("/robot_{robot}")).map_err(|e| ZenohError::Refused {
                 action: "name the robot's namespace".into(),
                 detail: e.to_string(),
             })?;
@@ -459,9 +461,12 @@ fn watch_graph(
             bell.ring();
         })
         .wait()
-        .map_err(|e| WorldLinkError::Zenoh {
-            action: "watch the ROS graph".into(),
-            detail: e.to_string(),
+        .map_err(|e| {
+            ZenohError::Refused {
+                action: "watch the ROS graph".into(),
+                detail: e.to_string(),
+            }
+            .into()
         })
 }
 
@@ -508,15 +513,15 @@ impl Ros2WorldLink {
         }
         let (goal_node, goal) = declare_goal(&session, team.domain_id)?;
         let graph_watch = watch_graph(&session, team.domain_id, n, &graph, &bell)?;
-        let signals = SignalWatch::start(Arc::clone(&bell)).map_err(|e| WorldLinkError::Zenoh {
+        let signals = SignalWatch::start(Arc::clone(&bell)).map_err(|e| ZenohError::Refused {
             action: "watch for termination signals".into(),
             detail: e.to_string(),
         })?;
         let token = session
             .liveliness()
-            .declare_token(crate::zenoh::keys::world_token(run))
+            .declare_token(formation_transport_zenoh::keys::world_token(run))
             .wait()
-            .map_err(|e| WorldLinkError::Zenoh {
+            .map_err(|e| ZenohError::Refused {
                 action: "declare the world's liveliness token".into(),
                 detail: e.to_string(),
             })?;
@@ -544,8 +549,8 @@ impl Ros2WorldLink {
 
     /// The run's record channel for remote recorders (`formation record --connect --transport
     /// ros2`), on this world's session: the Zenoh team's, keys and format alike.
-    pub fn record_feed(&self) -> WorldResult<crate::zenoh::ZenohRecordFeed> {
-        crate::zenoh::ZenohRecordFeed::declare(&self.session, &self.run)
+    pub fn record_feed(&self) -> WorldResult<formation_transport_zenoh::ZenohRecordFeed> {
+        formation_transport_zenoh::ZenohRecordFeed::declare(&self.session, &self.run)
     }
 
     /// The stamp \[ns\] of `msg`'s tick on the team's simulated clock, starting an episode's
@@ -623,10 +628,11 @@ impl WorldLink for Ros2WorldLink {
     fn drain_hellos(&mut self, robot: usize, sink: &mut dyn FnMut(Hello)) -> WorldResult {
         let drivers: Vec<Driver> = lock(&self.graph).new_drivers[robot].drain(..).collect();
         for driver in drivers {
-            let nonce = crate::auth::fresh_nonce().map_err(|e| WorldLinkError::Zenoh {
-                action: "draw a nonce".into(),
-                detail: e.to_string(),
-            })?;
+            let nonce =
+                formation_runtime::auth::fresh_nonce().map_err(|e| ZenohError::Refused {
+                    action: "draw a nonce".into(),
+                    detail: e.to_string(),
+                })?;
             tracing::info!(
                 "robot {robot}: ROS 2 node {} publishes on its cmd_vel",
                 driver.node

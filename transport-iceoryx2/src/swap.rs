@@ -13,6 +13,7 @@ use iceoryx2::prelude::*;
 
 use super::naming::{RunNamespace, SWAP_NODE_NAME, swap_limits};
 use super::services::{Access, ServiceError, ServiceErrorKind, event_service, pubsub_service};
+use crate::error::{IceoryxError, iox};
 
 /// Why a swap request over iceoryx2 got no answer.
 #[derive(Debug, thiserror::Error)]
@@ -38,33 +39,18 @@ pub enum SwapClientError {
         waited_s: f64,
     },
     /// iceoryx2 failed.
-    #[error("iceoryx2 could not {action}: {detail}")]
-    Iceoryx {
-        /// What was being done.
-        action: String,
-        /// iceoryx2's error.
-        detail: String,
-    },
+    #[error(transparent)]
+    Iceoryx(#[from] IceoryxError),
     /// The request could not be encoded.
     #[error(transparent)]
     Wire(#[from] WireError),
-}
-
-fn iox(action: &str) -> impl FnOnce(&dyn std::fmt::Debug) -> SwapClientError + '_ {
-    move |e| SwapClientError::Iceoryx {
-        action: action.to_owned(),
-        detail: format!("{e:?}"),
-    }
 }
 
 /// The run's swap channel as this client opens it: a service that does not exist means no world
 /// of this run is running.
 fn open_failed(run: &str) -> impl Fn(ServiceError) -> SwapClientError + '_ {
     move |e| match e.kind {
-        ServiceErrorKind::Name => SwapClientError::Iceoryx {
-            action: e.action("open"),
-            detail: e.detail,
-        },
+        ServiceErrorKind::Name => e.open_failed().into(),
         ServiceErrorKind::Unavailable => SwapClientError::UnknownRun {
             run: run.to_owned(),
         },
@@ -85,13 +71,13 @@ pub fn request_swap(
     let msg = SwapRequestMsg::encode(request)?;
     let config = namespace
         .iceoryx_config()
-        .map_err(|e| iox("configure the run's namespace")(&e))?;
-    let node_name = NodeName::new(SWAP_NODE_NAME).map_err(|e| iox("name the swap node")(&e))?;
+        .map_err(iox("configure the run's namespace"))?;
+    let node_name = NodeName::new(SWAP_NODE_NAME).map_err(iox("name the swap node"))?;
     let node = NodeBuilder::new()
         .name(&node_name)
         .config(&config)
         .create::<ipc::Service>()
-        .map_err(|e| iox("create the swap node")(&e))?;
+        .map_err(iox("create the swap node"))?;
     let name = |channel| swap_service_name(namespace.run(), channel);
     let open_failed = open_failed(&run);
     let (request_name, reply_name) = (name(SwapChannel::Request), name(SwapChannel::Reply));
@@ -109,33 +95,28 @@ pub fn request_swap(
         .subscriber_builder()
         .buffer_size(reply_limits.subscriber_buffer)
         .create()
-        .map_err(|e| iox("subscribe to swap replies (8 swaps at once at most)")(&e))?;
+        .map_err(iox("subscribe to swap replies (8 swaps at once at most)"))?;
     let reply_wake = event(&reply_name, reply_limits)?
         .listener_builder()
         .create()
-        .map_err(|e| iox("listen for swap replies")(&e))?;
+        .map_err(iox("listen for swap replies"))?;
     let publisher =
         pubsub_service::<SwapRequestMsg>(&node, &request_name, request_limits, Access::Open)
             .map_err(&open_failed)?
             .publisher_builder()
             .create()
-            .map_err(|e| iox("publish a swap request (8 swaps at once at most)")(&e))?;
+            .map_err(iox("publish a swap request (8 swaps at once at most)"))?;
     let request_wake = event(&request_name, request_limits)?
         .notifier_builder()
         .create()
-        .map_err(|e| iox("wake the world")(&e))?;
+        .map_err(iox("wake the world"))?;
     publisher
         .send_copy(msg)
-        .map_err(|e| iox("send the swap request")(&e))?;
-    request_wake
-        .notify()
-        .map_err(|e| iox("wake the world")(&e))?;
+        .map_err(iox("send the swap request"))?;
+    request_wake.notify().map_err(iox("wake the world"))?;
     let started = Instant::now();
     loop {
-        while let Some(sample) = replies
-            .receive()
-            .map_err(|e| iox("receive a swap reply")(&e))?
-        {
+        while let Some(sample) = replies.receive().map_err(iox("receive a swap reply"))? {
             if let Ok(reply) = sample.payload().decode()
                 && reply.request_id == request.request_id
             {
@@ -151,6 +132,6 @@ pub fn request_swap(
         }
         reply_wake
             .timed_wait(|_| {}, left.min(Duration::from_millis(100)))
-            .map_err(|e| iox("wait for the swap reply")(&e))?;
+            .map_err(iox("wait for the swap reply"))?;
     }
 }

@@ -8,12 +8,12 @@
 
 use std::time::{Duration, Instant};
 
-use crate::auth::{LaunchSecret, fresh_nonce};
-use crate::iceoryx::naming::{RunNamespace, ServiceLimits, WORLD_NODE_NAME, agent_node_name};
+use crate::naming::{RunNamespace, ServiceLimits, WORLD_NODE_NAME, agent_node_name};
 use formation_proto::wire::{
     AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, LobbyChannel, RobotChannel, ScanMsg,
     StatusMsg, Welcome, WelcomeMsg, lobby_service_name, robot_service_name,
 };
+use formation_runtime::auth::{LaunchSecret, fresh_nonce};
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -26,16 +26,9 @@ use super::services::{
     Access, ServiceError, ServiceErrorKind, drain_decoded, event_service, pubsub_service, run_node,
 };
 use super::watch_termination_signals;
-use crate::link::{AgentLink, AgentLinkError, Wake};
+use crate::error::{IceoryxCause, IceoryxError, iox};
 use crate::signals;
-
-fn iox(action: impl Into<String>) -> impl FnOnce(&dyn std::fmt::Debug) -> AgentLinkError {
-    let action = action.into();
-    move |e| AgentLinkError::Iceoryx {
-        action,
-        detail: format!("{e:?}"),
-    }
-}
+use formation_runtime::link::{AgentLink, AgentLinkError, Wake};
 
 /// The agent's iceoryx2 ports on its own robot's services.
 pub struct IceoryxAgentLink {
@@ -113,17 +106,19 @@ impl IceoryxAgentLink {
         watch_termination_signals();
         namespace.prepare()?;
         let config = namespace.iceoryx_config()?;
-        let node = run_node(&config, &agent_node_name(robot, pid))
-            .map_err(|(action, detail)| AgentLinkError::Iceoryx { action, detail })?;
+        let node = run_node(&config, &agent_node_name(robot, pid))?;
         // iceoryx2 makes its node-management segment world-writable (this agent may be the first
         // process of the run to create it): close it at once.
         namespace.restrict_permissions()?;
         let started = Instant::now();
         let deadline = started + timeout;
-        let not_found = || AgentLinkError::WorldNotFound {
-            robot,
-            run: namespace.run().to_string(),
-            waited_s: started.elapsed().as_secs_f64(),
+        let not_found = || -> AgentLinkError {
+            IceoryxError::WorldNotFound {
+                robot,
+                run: namespace.run().to_string(),
+                waited_s: started.elapsed().as_secs_f64(),
+            }
+            .into()
         };
         let lobby = loop {
             if let Some(signal) = signals::received() {
@@ -150,7 +145,7 @@ impl IceoryxAgentLink {
             lobby
                 .hello
                 .send_copy(hello)
-                .map_err(|e| iox("send the greeting")(&e))?;
+                .map_err(iox("send the greeting"))?;
             let _ = lobby.hello_wake.notify();
             match await_welcome(&lobby, nonce, deadline)? {
                 None => {
@@ -169,28 +164,30 @@ impl IceoryxAgentLink {
                 Ok(ports) => return IceoryxAgentLink::from_ports(node, ports),
                 Err(OpenFailure::Fatal(e)) => return Err(e),
                 Err(OpenFailure::NotYet) => return Err(not_found()),
-                Err(OpenFailure::Taken { port, detail }) => {
+                Err(OpenFailure::Taken { port, source }) => {
                     tracing::warn!(
                         "robot {robot}: another process took this agent's new {port} port; \
                          greeting again"
                     );
-                    last_taken = Some((port, detail));
+                    last_taken = Some((port, source));
                 }
             }
         }
-        let (port, detail) = last_taken.unwrap_or(("scan", String::new()));
-        Err(AgentLinkError::PortTaken {
+        let (port, source) =
+            last_taken.map_or(("scan", None), |(port, source)| (port, Some(source)));
+        Err(IceoryxError::PortTaken {
             robot,
             port,
-            detail,
-        })
+            source,
+        }
+        .into())
     }
 
     fn from_ports(node: Node<ipc::Service>, ports: Ports) -> Result<Self, AgentLinkError> {
         let waitset = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<ipc::Service>()
-            .map_err(|e| iox("create the agent's wait set")(&e))?;
+            .map_err(iox("create the agent's wait set"))?;
         let (scan, scan_wake, control, control_wake, cmd, cmd_wake, status, status_wake) = ports;
         Ok(IceoryxAgentLink {
             node,
@@ -228,7 +225,7 @@ impl IceoryxAgentLink {
             }
             CallbackProgression::Continue
         })
-        .map_err(|e| iox("list the run's nodes")(&e))?;
+        .map_err(iox("list the run's nodes"))?;
         Ok(match (alive, found) {
             (false, _) => None,
             (true, Some(world)) => Some(world),
@@ -254,19 +251,18 @@ struct Lobby {
 /// [`OpenFailure::NotYet`].
 fn opened<T>(result: Result<T, ServiceError>) -> Result<T, OpenFailure> {
     result.map_err(|e| match e.kind {
-        ServiceErrorKind::Name => OpenFailure::Fatal(AgentLinkError::Iceoryx {
-            action: e.action("open"),
-            detail: e.detail,
-        }),
+        ServiceErrorKind::Name => OpenFailure::Fatal(e.open_failed().into()),
         ServiceErrorKind::Unavailable => OpenFailure::NotYet,
     })
 }
 
 /// A port this agent needs is held by someone else.
-fn taken(port: &'static str) -> impl FnOnce(&dyn std::fmt::Debug) -> OpenFailure {
+fn taken<E: std::error::Error + Send + Sync + 'static>(
+    port: &'static str,
+) -> impl FnOnce(E) -> OpenFailure {
     move |e| OpenFailure::Taken {
         port,
-        detail: format!("{e:?}"),
+        source: Box::new(e),
     }
 }
 
@@ -289,7 +285,7 @@ fn open_lobby(
     .subscriber_builder()
     .buffer_size(welcome_limits.subscriber_buffer)
     .create()
-    .map_err(|e| taken("welcome")(&e))?;
+    .map_err(taken("welcome"))?;
     let hello = opened(pubsub_service::<HelloMsg>(
         node,
         &hello_name,
@@ -298,11 +294,11 @@ fn open_lobby(
     ))?
     .publisher_builder()
     .create()
-    .map_err(|e| taken("hello")(&e))?;
+    .map_err(taken("hello"))?;
     let hello_wake = opened(event_service(node, &hello_name, hello_limits, Access::Open))?
         .notifier_builder()
         .create()
-        .map_err(|e| taken("hello event")(&e))?;
+        .map_err(taken("hello event"))?;
     Ok(Lobby {
         hello,
         hello_wake,
@@ -321,7 +317,7 @@ fn await_welcome(
         while let Some(sample) = lobby
             .welcome
             .receive()
-            .map_err(|e| iox("receive the world's answer")(&e))?
+            .map_err(iox("receive the world's answer"))?
         {
             if sample.payload().nonce == nonce {
                 return Ok(Some(sample.payload().decode()?));
@@ -343,7 +339,7 @@ enum OpenFailure {
     /// A port this agent needs is held by someone else.
     Taken {
         port: &'static str,
-        detail: String,
+        source: IceoryxCause,
     },
     Fatal(AgentLinkError),
 }
@@ -386,35 +382,33 @@ fn try_open(
         scan.subscriber_builder()
             .buffer_size(limits.subscriber_buffer)
             .create()
-            .map_err(|e| taken("scan")(&e))?,
+            .map_err(taken("scan"))?,
         event(RobotChannel::Scan)?
             .listener_builder()
             .create()
-            .map_err(|e| taken("scan event")(&e))?,
+            .map_err(taken("scan event"))?,
         control
             .subscriber_builder()
             .buffer_size(limits.subscriber_buffer)
             .create()
-            .map_err(|e| taken("control")(&e))?,
+            .map_err(taken("control"))?,
         event(RobotChannel::Control)?
             .listener_builder()
             .create()
-            .map_err(|e| taken("control event")(&e))?,
-        cmd.publisher_builder()
-            .create()
-            .map_err(|e| taken("command")(&e))?,
+            .map_err(taken("control event"))?,
+        cmd.publisher_builder().create().map_err(taken("command"))?,
         event(RobotChannel::Cmd)?
             .notifier_builder()
             .create()
-            .map_err(|e| taken("command event")(&e))?,
+            .map_err(taken("command event"))?,
         status
             .publisher_builder()
             .create()
-            .map_err(|e| taken("status")(&e))?,
+            .map_err(taken("status"))?,
         event(RobotChannel::Status)?
             .notifier_builder()
             .create()
-            .map_err(|e| taken("status event")(&e))?,
+            .map_err(taken("status event"))?,
     ))
 }
 
@@ -423,11 +417,11 @@ impl AgentLink for IceoryxAgentLink {
         let scan_guard = self
             .waitset
             .attach_notification(&self.scan_wake)
-            .map_err(|e| iox("attach the scan wake-up")(&e))?;
+            .map_err(iox("attach the scan wake-up"))?;
         let control_guard = self
             .waitset
             .attach_notification(&self.control_wake)
-            .map_err(|e| iox("attach the control wake-up")(&e))?;
+            .map_err(iox("attach the control wake-up"))?;
         let mut activity = false;
         let result = self
             .waitset
@@ -438,7 +432,7 @@ impl AgentLink for IceoryxAgentLink {
                 },
                 timeout,
             )
-            .map_err(|e| iox("wait for the world")(&e))?;
+            .map_err(iox("wait for the world"))?;
         drop((scan_guard, control_guard));
         let _ = self.scan_wake.try_wait(|_| {});
         let _ = self.control_wake.try_wait(|_| {});
@@ -462,35 +456,31 @@ impl AgentLink for IceoryxAgentLink {
         sink: &mut dyn FnMut(ControlRequest),
     ) -> Result<(), AgentLinkError> {
         let decode = ControlMsg::decode;
-        drain_decoded(&self.control, "control request", decode, sink).map_err(|detail| {
-            AgentLinkError::Iceoryx {
-                action: "receive a control request".into(),
-                detail,
-            }
-        })
+        Ok(drain_decoded(
+            &self.control,
+            "control request",
+            decode,
+            sink,
+        )?)
     }
 
     fn newest_scan(&mut self) -> Result<Option<ScanMsg>, AgentLinkError> {
         let mut newest = None;
-        while let Some(sample) = self.scan.receive().map_err(|e| iox("receive a scan")(&e))? {
+        while let Some(sample) = self.scan.receive().map_err(iox("receive a scan"))? {
             newest = Some(*sample.payload());
         }
         Ok(newest)
     }
 
     fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), AgentLinkError> {
-        self.cmd
-            .send_copy(*msg)
-            .map_err(|e| iox("send a command")(&e))?;
+        self.cmd.send_copy(*msg).map_err(iox("send a command"))?;
         let _ = self.cmd_wake.notify();
         Ok(())
     }
 
     fn publish_status(&mut self, status: &AgentStatus) -> Result<(), AgentLinkError> {
         let msg = StatusMsg::encode(status)?;
-        self.status
-            .send_copy(msg)
-            .map_err(|e| iox("send a status")(&e))?;
+        self.status.send_copy(msg).map_err(iox("send a status"))?;
         let _ = self.status_wake.notify();
         Ok(())
     }

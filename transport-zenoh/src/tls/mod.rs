@@ -118,10 +118,10 @@ pub struct TlsIdentity {
 
 /// A principal's TLS credentials read into memory.
 #[derive(Clone)]
-pub(crate) struct LoadedIdentity {
-    pub(crate) ca_pem: Vec<u8>,
-    pub(crate) certificate_pem: Vec<u8>,
-    pub(crate) key_pem: Vec<u8>,
+pub struct LoadedIdentity {
+    pub ca_pem: Vec<u8>,
+    pub certificate_pem: Vec<u8>,
+    pub key_pem: Vec<u8>,
 }
 
 impl TlsIdentity {
@@ -136,7 +136,7 @@ impl TlsIdentity {
     }
 
     /// Reads the three files, bounded.
-    pub(crate) fn load(&self) -> Result<LoadedIdentity, TlsError> {
+    pub fn load(&self) -> Result<LoadedIdentity, TlsError> {
         let principal = &self.principal;
         Ok(LoadedIdentity {
             ca_pem: read_pem("the certificate authority", &self.ca)?,
@@ -150,7 +150,7 @@ impl TlsIdentity {
 
     /// Reads the files and checks the certificate against the authority, its dates and its
     /// name at `now`; warns when it expires within [`EXPIRY_WARNING_DAYS`].
-    pub(crate) fn load_checked(&self, now: SystemTime) -> Result<LoadedIdentity, TlsError> {
+    pub fn load_checked(&self, now: SystemTime) -> Result<LoadedIdentity, TlsError> {
         let loaded = self.load()?;
         let facts = check::check_certificate(
             &loaded.ca_pem,
@@ -194,7 +194,7 @@ impl TlsIdentity {
 
     /// Zenoh's `transport/link/tls` section for a router that listens with this identity and
     /// admits only clients with a certificate of the same authority.
-    pub(crate) fn apply_listen(&self, config: &mut ::zenoh::Config) -> Result<(), String> {
+    pub fn apply_listen(&self, config: &mut ::zenoh::Config) -> Result<(), String> {
         let [ca, certificate, key] = self.paths()?;
         let section = serde_json::json!({
             "root_ca_certificate": ca,
@@ -209,7 +209,7 @@ impl TlsIdentity {
     /// Zenoh's `transport/link/tls` section for a client that connects with this identity. The
     /// world's name is checked by [`probe`] (against `ca.pem` alone), not by Zenoh (which would
     /// compare it with an IP address).
-    pub(crate) fn apply_connect(&self, config: &mut ::zenoh::Config) -> Result<(), String> {
+    pub fn apply_connect(&self, config: &mut ::zenoh::Config) -> Result<(), String> {
         let [ca, certificate, key] = self.paths()?;
         let section = serde_json::json!({
             "root_ca_certificate": ca,

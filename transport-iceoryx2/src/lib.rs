@@ -10,8 +10,10 @@
 //! node.
 
 mod agent;
+pub mod error;
 pub mod naming;
 mod services;
+pub mod signals;
 pub mod swap;
 mod world;
 
@@ -19,7 +21,7 @@ mod world;
 /// SIGTERM reads as SIGINT (the process then exits 130 instead of 143), which is worth a warning
 /// but not a failed start.
 fn watch_termination_signals() {
-    if let Err(e) = crate::signals::watch_termination_signals() {
+    if let Err(e) = signals::watch_termination_signals() {
         tracing::warn!(
             "{}; a SIGTERM will be reported as SIGINT",
             formation_proto::errors::chain_text(&e)
@@ -28,5 +30,6 @@ fn watch_termination_signals() {
 }
 
 pub use agent::IceoryxAgentLink;
+pub use error::IceoryxError;
 pub use swap::{SwapClientError, request_swap};
 pub use world::IceoryxWorldLink;

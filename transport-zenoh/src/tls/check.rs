@@ -126,18 +126,18 @@ pub fn read_facts(pem: &[u8]) -> Result<CertificateFacts, String> {
     deprecated,
     reason = "the provider Zenoh's TLS link uses, for the same checks"
 )]
-pub(crate) fn ring_provider() -> Arc<rustls::crypto::CryptoProvider> {
+pub fn ring_provider() -> Arc<rustls::crypto::CryptoProvider> {
     Arc::new(rustls::crypto::ring::default_provider())
 }
 
 /// The first certificate of PEM text `pem`, DER-encoded.
-pub(crate) fn der_of(pem: &[u8]) -> Result<CertificateDer<'static>, String> {
+pub fn der_of(pem: &[u8]) -> Result<CertificateDer<'static>, String> {
     let (_, pem) = parse_x509_pem(pem).map_err(|e| e.to_string())?;
     Ok(CertificateDer::from(pem.contents))
 }
 
 /// A root store holding the team's authority `ca_pem` alone.
-pub(crate) fn team_roots(ca_pem: &[u8]) -> Result<RootCertStore, CertificateProblem> {
+pub fn team_roots(ca_pem: &[u8]) -> Result<RootCertStore, CertificateProblem> {
     let ca = der_of(ca_pem).map_err(CertificateProblem::CaNotPem)?;
     let mut roots = RootCertStore::empty();
     roots

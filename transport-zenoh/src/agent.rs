@@ -22,7 +22,6 @@ use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use crate::auth::{LaunchSecret, fresh_nonce};
 use ::zenoh::Wait;
 use ::zenoh::liveliness::LivelinessToken;
 use ::zenoh::pubsub::Subscriber;
@@ -33,14 +32,16 @@ use formation_proto::wire::{
     ScanMsg, StatusMsg, Welcome, WelcomeMsg, lobby_service_name, message_bytes, message_from_bytes,
     robot_service_name,
 };
+use formation_runtime::auth::{LaunchSecret, fresh_nonce};
 
 use super::model::split_model;
 use super::{Bell, Endpoint, Login, Queue, Ring, SignalWatch, keys};
-use crate::link::{AgentLink, AgentLinkError, Wake};
+use crate::ZenohError;
+use formation_runtime::link::{AgentLink, AgentLinkError, Wake};
 
 fn zenoh_error(action: impl Into<String>) -> impl FnOnce(String) -> AgentLinkError {
     let action = action.into();
-    move |detail| AgentLinkError::Zenoh { action, detail }
+    move |detail| ZenohError::Refused { action, detail }.into()
 }
 
 /// How long an agent waits for the answer to one greeting before greeting again with a fresh
@@ -376,10 +377,13 @@ fn open_session(
     let config = super::client_config(endpoint, timeout, login).map_err(zenoh_error(format!(
         "configure the connection to {endpoint}"
     )))?;
-    super::open(config).map_err(|detail| AgentLinkError::Unreachable {
-        endpoint: endpoint.to_string(),
-        robot,
-        detail,
+    super::open(config).map_err(|detail| {
+        ZenohError::Unreachable {
+            endpoint: endpoint.to_string(),
+            robot,
+            detail,
+        }
+        .into()
     })
 }
 
@@ -551,11 +555,12 @@ impl Rendezvous<'_> {
     fn wait_for_world(&self) -> Result<(), AgentLinkError> {
         while !self.inbox.world_present() {
             if Instant::now() >= self.deadline {
-                return Err(AgentLinkError::NoWorldAt {
+                return Err(ZenohError::NoWorldAt {
                     endpoint: self.endpoint.to_string(),
                     run: self.run.to_string(),
                     waited_s: self.started.elapsed().as_secs_f64(),
-                });
+                }
+                .into());
             }
             self.wait_until(self.deadline)?;
         }

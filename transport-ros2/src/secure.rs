@@ -1,6 +1,6 @@
 //! A ROS 2 team over mutual TLS (feature `tls`): the world's router and every ROS 2 node use the
 //! certificates of the team's `formation credentials --tls` folder (the Zenoh team's, see
-//! [`crate::zenoh::tls`]), and the router's access rules name each node by its certificate's
+//! [`formation_transport_zenoh::tls`]), and the router's access rules name each node by its certificate's
 //! common name, so that a robot's certificate reaches only that robot's topics.
 //!
 //! The configurations are shaped as rmw_zenoh's `zenoh_security_tools` writes them from an SROS2
@@ -33,11 +33,11 @@ use formation_proto::wire::RunId;
 use serde_json::{Value, json};
 
 use super::TeamTopics;
-use crate::zenoh::Endpoint;
-use crate::zenoh::access::{RECORDER_USER, robot_user};
-use crate::zenoh::tls::{self, TlsIdentity};
+use formation_transport_zenoh::Endpoint;
+use formation_transport_zenoh::access::{RECORDER_USER, robot_user};
+use formation_transport_zenoh::tls::{self, TlsIdentity};
 
-pub use crate::zenoh::SESSION_CONFIG_ENV;
+pub use formation_transport_zenoh::SESSION_CONFIG_ENV;
 
 /// The folder of a credentials folder that holds the ROS 2 session configurations.
 pub const SESSION_CONFIG_DIR: &str = "ros2";
@@ -184,42 +184,42 @@ impl Ros2Access {
                 "messages": ["put"],
                 "flows": ["egress"],
                 "permission": "allow",
-                "key_exprs": [crate::zenoh::keys::record_live(run)],
+                "key_exprs": [formation_transport_zenoh::keys::record_live(run)],
             }),
             json!({
                 "id": "recorder-record-subscription",
                 "messages": ["declare_subscriber"],
                 "flows": ["ingress"],
                 "permission": "allow",
-                "key_exprs": [crate::zenoh::keys::record_live(run)],
+                "key_exprs": [formation_transport_zenoh::keys::record_live(run)],
             }),
             json!({
                 "id": "recorder-ask-setup",
                 "messages": ["query"],
                 "flows": ["ingress"],
                 "permission": "allow",
-                "key_exprs": [crate::zenoh::keys::record_setup(run)],
+                "key_exprs": [formation_transport_zenoh::keys::record_setup(run)],
             }),
             json!({
                 "id": "recorder-get-setup",
                 "messages": ["reply"],
                 "flows": ["egress"],
                 "permission": "allow",
-                "key_exprs": [crate::zenoh::keys::record_setup(run)],
+                "key_exprs": [formation_transport_zenoh::keys::record_setup(run)],
             }),
             json!({
                 "id": "recorder-watch-world",
                 "messages": ["declare_liveliness_subscriber", "liveliness_query"],
                 "flows": ["ingress"],
                 "permission": "allow",
-                "key_exprs": [crate::zenoh::keys::world_token(run)],
+                "key_exprs": [formation_transport_zenoh::keys::world_token(run)],
             }),
             json!({
                 "id": "recorder-see-world",
                 "messages": ["liveliness_token", "reply"],
                 "flows": ["egress"],
                 "permission": "allow",
-                "key_exprs": [crate::zenoh::keys::world_token(run)],
+                "key_exprs": [formation_transport_zenoh::keys::world_token(run)],
             }),
         ];
         let record_ids: Vec<Value> = record.iter().map(|r| r["id"].clone()).collect();
