@@ -15,7 +15,7 @@
 //!    [`DetectorSettings::min_beams`] beams are left out.
 //! 3. **Fit.** A circle of the body radius fitted to each cluster's points by Levenberg–Marquardt
 //!    on `sum (|p - c| - r)^2` (a 2 x 2 solve a step), started `0.7 r` behind the points' mean.
-//!    A fit that does not converge to a finite centre, puts the sensor inside the body, or puts
+//!    A fit that ends at a centre that is not finite, puts the sensor inside the body, or puts
 //!    the centre in front of the points or more than `1.5 r` from their mean is left out: the
 //!    cluster gives nothing, never a NaN.
 //! 4. **Two bodies in one cluster.** Two robots side by side at about the same range give one
@@ -29,7 +29,10 @@
 //!    Two detections whose centres are less than `r` apart are one body (two bodies cannot be that
 //!    close), fitted again on both clusters' points.
 //!
-//! The detections come out nearest first. The detector keeps its buffers, so after the first few
+//! The detections come out nearest first. Everything the LIDAR sees is taken for robots: a wall
+//! would be read as bodies wherever arcs of the radius fit it well enough. A sliver of a partly
+//! hidden robot (3–10 beams) fixes its centre least well; [`DetectedNeighbour::beams`] says how
+//! many beams each fit used. The detector keeps its buffers, so after the first few
 //! scans it allocates nothing (the caller's output vector included, once it has grown).
 
 use formation_proto::{DEFAULT_BODY_RADIUS_M, LidarSpec};
