@@ -6,6 +6,8 @@
 //!   trained on.
 //! * [`ranges`]: the scan's ranges pooled into sectors, the float input beside the image of a
 //!   model that declares one (`formation_proto::RangeInput`).
+//! * [`neighbours`]: the neighbours a robot detects in its own scan, each one's centre in its body
+//!   frame, fitted with a circle of the known body radius.
 //! * [`policy_input`]: a goal checked where it enters a robot, and the policy's declared output
 //!   turned into wheel speeds (the scalars beside the image are `formation_proto::PolicyIo`'s).
 //!
@@ -13,6 +15,7 @@
 //! transport, so the expert, the agent and the Python bindings share them without building any of
 //! those.
 
+pub mod neighbours;
 pub mod occupancy;
 pub mod policy_input;
 pub mod ranges;

@@ -53,6 +53,12 @@ pub struct Goal {
     pub v_star: f64,
 }
 
+/// Radius \[m\] of the disc that stands for a robot's body: a Pioneer P3-DX's, the world's default
+/// (`formation_world::RobotParams::body_radius`), which its LIDAR casts and its collision test
+/// uses, and what a robot's neighbour detector (`formation_perception::neighbours`) assumes of
+/// the bodies it sees unless told otherwise.
+pub const DEFAULT_BODY_RADIUS_M: f64 = 0.25;
+
 /// The planar LIDAR ring as a robot's agent and its model must agree on it: the sensor contract.
 /// What a simulated world adds to the ranges is its own ([`crate::LidarNoise`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -33,7 +33,7 @@ impl Default for RobotParams {
         RobotParams {
             wheel_separation: 0.331,
             wheel_radius: 0.0975,
-            body_radius: 0.25,
+            body_radius: formation_proto::DEFAULT_BODY_RADIUS_M,
             max_wheel_speed: 0.9,
             max_wheel_accel: None,
         }
