@@ -11,6 +11,8 @@
 //!   scan it answered.
 //! * [`link_health`]: the degraded-link detector, whose reports the world sends while a run goes
 //!   on.
+//! * [`reconnect`]: the peers of a network transport that are unreachable but may come back
+//!   within a grace.
 //! * [`auth`]: the launch secret, with which an agent proves that its own launch started it.
 //! * [`memory`]: both links over channels in one process, for tests.
 //! * [`clock`]: the injected [`clock::Clock`] (system, or fake for tests).
@@ -34,6 +36,7 @@ pub mod link;
 pub mod link_health;
 pub mod memory;
 pub mod process;
+pub mod reconnect;
 pub mod settings;
 pub mod stamps;
 pub mod transport;

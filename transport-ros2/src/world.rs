@@ -72,6 +72,7 @@ use formation_runtime::auth::LaunchSecret;
 use super::node::{Delivery, Node, NodeError, RosPublisher, RosSubscription};
 use super::{Ros2Team, TeamTopics};
 use formation_runtime::link::{Hello, WorldLink, WorldLinkError, WorldResult};
+use formation_runtime::reconnect::ReconnectGrace;
 use formation_transport_zenoh::ZenohError;
 use formation_transport_zenoh::{Bell, Endpoint, RECONNECT_GRACE, SignalWatch};
 
@@ -120,7 +121,7 @@ struct ReceivedTwist {
 }
 
 /// What the liveliness subscriber and the Twist subscribers fill.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct Graph {
     /// Live `cmd_vel` publishers per robot, by token key.
     drivers: Vec<HashMap<String, Driver>>,
@@ -129,10 +130,10 @@ struct Graph {
     /// `(robot, pid)` of drivers whose token went and did not come back within
     /// [`RECONNECT_GRACE`], not yet reported.
     gone: Vec<(usize, u32)>,
-    /// Drivers whose token went, by token key, with their robot and when it went: unreachable
-    /// (their session dropped, and Zenoh reconnects it by itself), back when the same token comes
-    /// again, counted gone once [`RECONNECT_GRACE`] has passed.
-    vanished: HashMap<String, (usize, Driver, Instant)>,
+    /// Drivers whose token went, by token key, with their robot: unreachable (their session
+    /// dropped, and Zenoh reconnects it by itself), back when the same token comes again,
+    /// counted gone once [`RECONNECT_GRACE`] has passed.
+    vanished: ReconnectGrace<String, (usize, Driver)>,
     /// Robots whose driver came back within the grace, whose last tick's odometry and scan are
     /// not yet sent again.
     returned: Vec<usize>,
@@ -390,12 +391,7 @@ fn note_driver_token(
             if graph.drivers[robot].contains_key(key) {
                 return false;
             }
-            if let Some((_, driver, went)) = graph.vanished.remove(key) {
-                tracing::warn!(
-                    "robot {robot}: ROS 2 node {} reconnected after {:.1} s",
-                    driver.node,
-                    went.elapsed().as_secs_f64()
-                );
+            if let Some((_, driver)) = graph.vanished.came_back(&key.to_owned(), Instant::now()) {
                 graph.drivers[robot].insert(key.to_owned(), driver);
                 graph.returned.push(robot);
                 return true;
@@ -415,15 +411,14 @@ fn note_driver_token(
         }
         SampleKind::Delete => {
             if let Some(driver) = graph.drivers[robot].remove(key) {
-                tracing::warn!(
-                    "robot {robot}: ROS 2 node {} is unreachable (its cmd_vel publisher's token \
-                     went); waiting up to {:.0} s for it to reconnect",
-                    driver.node,
-                    RECONNECT_GRACE.as_secs_f64()
+                let who = format!("robot {robot}: ROS 2 node {}", driver.node);
+                graph.vanished.went(
+                    key.to_owned(),
+                    (robot, driver),
+                    who,
+                    "its cmd_vel publisher's token went",
+                    Instant::now(),
                 );
-                graph
-                    .vanished
-                    .insert(key.to_owned(), (robot, driver, Instant::now()));
             }
         }
     }
@@ -497,8 +492,11 @@ impl Ros2WorldLink {
         let graph = Arc::new(Mutex::new(Graph {
             drivers: vec![HashMap::new(); n],
             new_drivers: vec![VecDeque::new(); n],
+            gone: Vec::new(),
+            vanished: ReconnectGrace::new(RECONNECT_GRACE),
+            returned: Vec::new(),
             twists: vec![VecDeque::new(); n],
-            ..Graph::default()
+            next_pid: 0,
         }));
         let sensors = if team.lossless {
             Delivery::Reliable
@@ -813,29 +811,14 @@ impl WorldLink for Ros2WorldLink {
     fn agent_reconnecting(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
         Ok(lock(&self.graph)
             .vanished
-            .values()
-            .any(|(r, driver, _)| *r == robot && driver.pid == pid))
+            .any(|_, (r, driver)| *r == robot && driver.pid == pid))
     }
 
     fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError> {
         self.send_again_to_returned()?;
         let mut graph = lock(&self.graph);
-        let expired: Vec<String> = graph
-            .vanished
-            .iter()
-            .filter(|(_, (_, _, went))| went.elapsed() >= RECONNECT_GRACE)
-            .map(|(key, _)| key.clone())
-            .collect();
-        for key in expired {
-            if let Some((robot, driver, _)) = graph.vanished.remove(&key) {
-                tracing::warn!(
-                    "robot {robot}: ROS 2 node {} has been unreachable for {:.0} s; counting it \
-                     gone",
-                    driver.node,
-                    RECONNECT_GRACE.as_secs_f64()
-                );
-                graph.gone.push((robot, driver.pid));
-            }
+        for (_, (robot, driver)) in graph.vanished.expire(Instant::now()) {
+            graph.gone.push((robot, driver.pid));
         }
         Ok(std::mem::take(&mut graph.gone))
     }

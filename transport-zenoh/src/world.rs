@@ -38,6 +38,7 @@ use crate::ZenohError;
 use formation_runtime::link::{
     Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index,
 };
+use formation_runtime::reconnect::ReconnectGrace;
 
 fn zenoh_error(action: impl Into<String>) -> impl FnOnce(String) -> WorldLinkError {
     let action = action.into();
@@ -82,11 +83,11 @@ struct Incarnation {
 type AgentKey = (usize, u64, u32);
 
 /// What the agents' liveliness tokens said.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct Liveness {
-    /// Agents whose token went and has not come back, and when it went: unreachable, counted
-    /// dead once [`super::RECONNECT_GRACE`] has passed.
-    vanished: HashMap<AgentKey, Instant>,
+    /// Agents whose token went and has not come back: unreachable, counted dead once
+    /// [`super::RECONNECT_GRACE`] has passed.
+    vanished: ReconnectGrace<AgentKey, ()>,
     /// Agents counted dead (reported by `dead_agents`).
     counted_dead: HashSet<AgentKey>,
     /// `(robot, pid)` of agents whose token went (and no token of that robot and pid came since).
@@ -99,6 +100,17 @@ struct Liveness {
 }
 
 impl Liveness {
+    /// No token seen yet.
+    fn new() -> Self {
+        Liveness {
+            vanished: ReconnectGrace::new(super::RECONNECT_GRACE),
+            counted_dead: HashSet::new(),
+            gone: HashSet::new(),
+            returned: Vec::new(),
+            dismissed: Vec::new(),
+        }
+    }
+
     /// Agent `key`'s token came at `now`: back from a drop, a newcomer, or one counted dead.
     fn came(&mut self, key: AgentKey, now: Instant) {
         let (robot, incarnation, pid) = key;
@@ -107,11 +119,7 @@ impl Liveness {
         // process) was replaced: its death, if pending, is no longer news.
         self.vanished
             .retain(|&(r, i, p), _| !(r == robot && p == pid && i != incarnation));
-        if let Some(went) = self.vanished.remove(&key) {
-            tracing::warn!(
-                "robot {robot}: agent pid {pid} reconnected after {:.1} s",
-                now.saturating_duration_since(went).as_secs_f64()
-            );
+        if self.vanished.came_back(&key, now).is_some() {
             self.returned.push(key);
         } else if self.counted_dead.contains(&key) {
             tracing::warn!(
@@ -130,11 +138,12 @@ impl Liveness {
             // Counted dead already (and told so when it came back): nothing to wait for.
             return;
         }
-        self.vanished.insert(key, now);
-        tracing::warn!(
-            "robot {robot}: agent pid {pid} is unreachable (its liveliness token went); waiting \
-             up to {:.0} s for it to reconnect",
-            super::RECONNECT_GRACE.as_secs_f64()
+        self.vanished.went(
+            key,
+            (),
+            format!("robot {robot}: agent pid {pid}"),
+            "its liveliness token went",
+            now,
         );
     }
 
@@ -142,20 +151,11 @@ impl Liveness {
     fn take_dead(&mut self, now: Instant) -> Vec<AgentKey> {
         let dead: Vec<AgentKey> = self
             .vanished
-            .iter()
-            .filter(|(_, went)| now.saturating_duration_since(**went) >= super::RECONNECT_GRACE)
-            .map(|(key, _)| *key)
+            .expire(now)
+            .into_iter()
+            .map(|(key, ())| key)
             .collect();
-        for key in &dead {
-            self.vanished.remove(key);
-            self.counted_dead.insert(*key);
-            tracing::warn!(
-                "robot {}: agent pid {} has been unreachable for {:.0} s; counting it gone",
-                key.0,
-                key.2,
-                super::RECONNECT_GRACE.as_secs_f64()
-            );
-        }
+        self.counted_dead.extend(dead.iter().copied());
         dead
     }
 }
@@ -423,7 +423,7 @@ impl ZenohWorldLink {
             &swap_models,
         )?;
         let swap_replies = publisher(&session, swap_service_name(run, SwapChannel::Reply), false)?;
-        let liveness = Arc::new(Mutex::new(Liveness::default()));
+        let liveness = Arc::new(Mutex::new(Liveness::new()));
         let agents = watch_agents(&session, run, &liveness, &bell)?;
         let token = session
             .liveliness()
@@ -687,8 +687,7 @@ impl WorldLink for ZenohWorldLink {
         let liveness = self.liveness.lock().unwrap_or_else(|e| e.into_inner());
         Ok(liveness
             .vanished
-            .keys()
-            .any(|&(r, _, p)| r == robot && p == pid))
+            .any(|&(r, _, p), ()| r == robot && p == pid))
     }
 
     fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError> {
