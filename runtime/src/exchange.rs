@@ -656,7 +656,10 @@ impl<'l> AgentsController<'l> {
         self.link
             .send_control(request.robot, &control)
             .map_err(transport_error)?;
-        let model = self.link.take_forwarded_swap_model(request.request_id);
+        let model = self
+            .link
+            .forwarded_swaps()
+            .and_then(|swaps| swaps.take_forwarded_swap_model(request.request_id));
         self.pending_swaps.push(PendingSwap {
             request_id: request.request_id,
             robot: request.robot,
@@ -883,16 +886,16 @@ impl AgentsController<'_> {
                 scan,
             )
             .map_err(|e| ControllerError::new(e.to_string()))?;
-            self.link
-                .publish_odometry(
-                    robot,
-                    &obs.poses[robot],
-                    obs.wheel_speeds
-                        .get(robot)
-                        .copied()
-                        .unwrap_or(WheelCmd::BRAKE),
-                )
-                .map_err(transport_error)?;
+            if let Some(odometry) = self.link.odometry() {
+                let wheels = obs
+                    .wheel_speeds
+                    .get(robot)
+                    .copied()
+                    .unwrap_or(WheelCmd::BRAKE);
+                odometry
+                    .publish_odometry(robot, &obs.poses[robot], wheels)
+                    .map_err(transport_error)?;
+            }
             // Stamped before the hand-over: publishing wakes the agent, which may run on this
             // very core before the world resumes, and a stamp taken afterwards would hide that
             // agent's whole answer from the round trip.

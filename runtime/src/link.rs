@@ -151,17 +151,10 @@ pub trait WorldLink {
     fn open_incarnation(&mut self, robot: usize, incarnation: u64) -> WorldResult;
     /// Drops the world's ends of robot `robot`'s current incarnation (its agent is gone).
     fn close_incarnation(&mut self, robot: usize);
-    /// Hands the link robot `robot`'s true pose of the tick whose scan comes next and the wheel
-    /// speeds it ran over the last step, for a link that publishes odometry like a real robot
-    /// (the ROS 2 team); agents of the other links see only their scan and heading, so by
-    /// default this does nothing.
-    fn publish_odometry(
-        &mut self,
-        _robot: usize,
-        _pose: &formation_proto::Pose,
-        _wheels: formation_proto::WheelCmd,
-    ) -> WorldResult {
-        Ok(())
+    /// The link's odometry, if it publishes each robot's like a real robot's driver (the ROS 2
+    /// team); agents of the other links see only their scan and heading, so by default none.
+    fn odometry(&mut self) -> Option<&mut dyn PublishesOdometry> {
+        None
     }
     /// Publishes robot `robot`'s scan and wakes its agent.
     fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult;
@@ -192,13 +185,31 @@ pub trait WorldLink {
     fn drain_swap_requests(&mut self, sink: &mut dyn FnMut(SwapRequest)) -> WorldResult;
     /// Answers a swap request.
     fn publish_swap_reply(&mut self, reply: &SwapReply) -> WorldResult;
-    /// The model bytes that came over the network with swap request `request_id` and that the
-    /// last [`WorldLink::send_control`] forwarded to its agent (Zenoh: the request's path is on
-    /// another host), for the recording; `None` where the agent opens the request's path itself,
-    /// as by default.
-    fn take_forwarded_swap_model(&mut self, _request_id: u64) -> Option<Vec<u8>> {
+    /// The link's forwarded swap models, if a swap request may bring the model's bytes from
+    /// another host (Zenoh); by default none: the agent opens the request's path itself.
+    fn forwarded_swaps(&mut self) -> Option<&mut dyn ForwardsSwapModels> {
         None
     }
+}
+
+/// A capability of a link that publishes odometry like a real robot's driver (the ROS 2 team).
+pub trait PublishesOdometry {
+    /// Hands the link robot `robot`'s true pose of the tick whose scan comes next and the wheel
+    /// speeds it ran over the last step, published with that scan.
+    fn publish_odometry(
+        &mut self,
+        robot: usize,
+        pose: &formation_proto::Pose,
+        wheels: formation_proto::WheelCmd,
+    ) -> WorldResult;
+}
+
+/// A capability of a link whose swap requests may bring the model's bytes from another host
+/// (Zenoh: the request's path is on the requester's host).
+pub trait ForwardsSwapModels {
+    /// The model bytes that came with swap request `request_id` and that the last
+    /// [`WorldLink::send_control`] forwarded to its agent, for the recording.
+    fn take_forwarded_swap_model(&mut self, request_id: u64) -> Option<Vec<u8>>;
 }
 
 /// A failure of an agent's transport.

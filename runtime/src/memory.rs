@@ -17,8 +17,8 @@
 //! [`FakeClock`](crate::clock::FakeClock) is instant. So a whole run is one deterministic thread.
 //! A bus made with [`MemoryBus::threaded`] is a transport like the others for a world and agents
 //! on threads of their own: its waits block until something arrives, and [`MemoryBus::connect`]
-//! greets and waits for the welcome as an agent's link does (the link suite of `formation-tests`
-//! runs on it).
+//! greets and waits for the welcome as an agent's link does (the conformance suite,
+//! `formation-transport-conformance`, runs on it as its reference).
 
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -317,6 +317,14 @@ pub struct MemoryWorldLink {
 }
 
 impl MemoryWorldLink {
+    /// The error for a robot index past this bus's team.
+    fn no_such_robot(&self, robot: usize) -> WorldLinkError {
+        WorldLinkError::NoSuchRobot {
+            robot,
+            robots: self.n_robots,
+        }
+    }
+
     /// Runs `hook` whenever the world would wait with nothing queued, before time passes: a
     /// test runs its agents there, so one thread plays the whole launch.
     pub fn on_wait(&mut self, hook: impl FnMut() + 'static) {
@@ -335,10 +343,7 @@ impl WorldLink for MemoryWorldLink {
             let lobby = state
                 .lobbies
                 .get_mut(robot)
-                .ok_or(WorldLinkError::NoSuchRobot {
-                    robot,
-                    robots: self.n_robots,
-                })?;
+                .ok_or_else(|| self.no_such_robot(robot))?;
             lobby.hellos.drain(..).collect()
         };
         hellos.into_iter().for_each(sink);
@@ -350,10 +355,7 @@ impl WorldLink for MemoryWorldLink {
         let lobby = state
             .lobbies
             .get_mut(robot)
-            .ok_or(WorldLinkError::NoSuchRobot {
-                robot,
-                robots: self.n_robots,
-            })?;
+            .ok_or_else(|| self.no_such_robot(robot))?;
         lobby.welcomes.insert(nonce, welcome.clone());
         drop(state);
         self.bus.ring();
@@ -365,10 +367,7 @@ impl WorldLink for MemoryWorldLink {
         let slot = state
             .robots
             .get_mut(robot)
-            .ok_or(WorldLinkError::NoSuchRobot {
-                robot,
-                robots: self.n_robots,
-            })?;
+            .ok_or_else(|| self.no_such_robot(robot))?;
         *slot = Some(Incarnation {
             id: incarnation,
             ..Incarnation::default()
@@ -389,10 +388,7 @@ impl WorldLink for MemoryWorldLink {
         let slot = state
             .robots
             .get_mut(robot)
-            .ok_or(WorldLinkError::NoSuchRobot {
-                robot,
-                robots: self.n_robots,
-            })?;
+            .ok_or_else(|| self.no_such_robot(robot))?;
         if let Some(incarnation) = slot {
             incarnation.scans.push_back(*msg);
         }
@@ -406,10 +402,7 @@ impl WorldLink for MemoryWorldLink {
         let slot = state
             .robots
             .get_mut(robot)
-            .ok_or(WorldLinkError::NoSuchRobot {
-                robot,
-                robots: self.n_robots,
-            })?;
+            .ok_or_else(|| self.no_such_robot(robot))?;
         if let Some(incarnation) = slot {
             incarnation.control.push_back(request.clone());
         }
@@ -447,10 +440,7 @@ impl WorldLink for MemoryWorldLink {
             let slot = state
                 .robots
                 .get_mut(robot)
-                .ok_or(WorldLinkError::NoSuchRobot {
-                    robot,
-                    robots: self.n_robots,
-                })?;
+                .ok_or_else(|| self.no_such_robot(robot))?;
             slot.as_mut()
                 .map(|i| i.cmds.drain(..).collect())
                 .unwrap_or_default()
@@ -465,10 +455,7 @@ impl WorldLink for MemoryWorldLink {
             let slot = state
                 .robots
                 .get_mut(robot)
-                .ok_or(WorldLinkError::NoSuchRobot {
-                    robot,
-                    robots: self.n_robots,
-                })?;
+                .ok_or_else(|| self.no_such_robot(robot))?;
             slot.as_mut()
                 .map(|i| i.statuses.drain(..).collect())
                 .unwrap_or_default()

@@ -94,7 +94,12 @@ fn backticked(text: &str) -> Vec<String> {
 
 /// The crate names `cargo tree -e normal -p <package>` lists.
 fn normal_dependencies(package: &str) -> BTreeSet<String> {
-    cargo(&[
+    normal_dependencies_with(package, &[])
+}
+
+/// The crate names `cargo tree -e normal -p <package> <flags>` lists.
+fn normal_dependencies_with(package: &str, flags: &[&str]) -> BTreeSet<String> {
+    let mut args = vec![
         "tree",
         "--locked",
         "--offline",
@@ -102,15 +107,14 @@ fn normal_dependencies(package: &str) -> BTreeSet<String> {
         "normal",
         "-p",
         package,
-        "--prefix",
-        "none",
-        "--format",
-        "{p}",
-    ])
-    .lines()
-    .filter_map(|line| line.split_whitespace().next())
-    .map(str::to_owned)
-    .collect()
+    ];
+    args.extend_from_slice(flags);
+    args.extend_from_slice(&["--prefix", "none", "--format", "{p}"]);
+    cargo(&args)
+        .lines()
+        .filter_map(|line| line.split_whitespace().next())
+        .map(str::to_owned)
+        .collect()
 }
 
 #[test]
@@ -174,24 +178,7 @@ fn every_crate_builds_none_of_what_the_architecture_forbids_it() {
 
 #[test]
 fn with_every_feature_the_runtime_builds_no_transport() {
-    let built: BTreeSet<String> = cargo(&[
-        "tree",
-        "--locked",
-        "--offline",
-        "-e",
-        "normal",
-        "-p",
-        "formation-runtime",
-        "--all-features",
-        "--prefix",
-        "none",
-        "--format",
-        "{p}",
-    ])
-    .lines()
-    .filter_map(|line| line.split_whitespace().next())
-    .map(str::to_owned)
-    .collect();
+    let built = normal_dependencies_with("formation-runtime", &["--all-features"]);
     assert!(built.contains("formation-runtime"), "{built:?}");
     for transport in ["iceoryx2", "zenoh", "formation-ros2"] {
         assert!(

@@ -91,7 +91,7 @@ fn a_sixteen_robot_team_of_the_shipped_policy_in_lockstep_is_bit_identical_to_in
 }
 
 /// Issue 4 (b): with an agent on robot 0, nobody else can read robot 0's scan or command robot 0
-/// (that another agent of the launch is refused the robot is the link suite's admission).
+/// (that another agent of the launch is refused the robot is the conformance suite's admission).
 #[test]
 #[expect(
     clippy::too_many_lines,

@@ -71,7 +71,9 @@ use formation_runtime::auth::LaunchSecret;
 
 use super::node::{Delivery, Node, NodeError, RosPublisher, RosSubscription};
 use super::{Ros2Team, TeamTopics};
-use formation_runtime::link::{Hello, WorldLink, WorldLinkError, WorldResult};
+use formation_runtime::link::{
+    Hello, PublishesOdometry, WorldLink, WorldLinkError, WorldResult, check_robot_index,
+};
 use formation_runtime::reconnect::ReconnectGrace;
 use formation_transport_zenoh::ZenohError;
 use formation_transport_zenoh::{Bell, Endpoint, RECONNECT_GRACE, SignalWatch};
@@ -153,7 +155,7 @@ struct RobotPorts {
     tf_static_sent: Option<i64>,
     _cmd_vel: RosSubscription,
     /// The pose and wheel speeds to publish with the next scan (given by
-    /// [`WorldLink::publish_odometry`]).
+    /// [`PublishesOdometry::publish_odometry`]).
     odometry: Option<(Pose, WheelCmd)>,
     /// Stamp (ns) → (generation, tick) of this episode's latest ticks.
     stamps: VecDeque<(i64, u64, u64)>,
@@ -618,6 +620,14 @@ fn driven_robot(token: &LivelinessToken, n_robots: usize) -> Option<usize> {
     (0..n_robots).find(|&robot| TeamTopics::robot(robot).cmd_vel == endpoint.topic)
 }
 
+impl PublishesOdometry for Ros2WorldLink {
+    fn publish_odometry(&mut self, robot: usize, pose: &Pose, wheels: WheelCmd) -> WorldResult {
+        check_robot_index(robot, self.robots.len())?;
+        self.robots[robot].odometry = Some((*pose, wheels));
+        Ok(())
+    }
+}
+
 impl WorldLink for Ros2WorldLink {
     fn n_robots(&self) -> usize {
         self.team.n_robots
@@ -673,9 +683,8 @@ impl WorldLink for Ros2WorldLink {
         self.statuses[robot].clear();
     }
 
-    fn publish_odometry(&mut self, robot: usize, pose: &Pose, wheels: WheelCmd) -> WorldResult {
-        self.robots[robot].odometry = Some((*pose, wheels));
-        Ok(())
+    fn odometry(&mut self) -> Option<&mut dyn PublishesOdometry> {
+        Some(self)
     }
 
     fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult {

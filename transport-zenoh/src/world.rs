@@ -36,7 +36,8 @@ use super::model::split_model;
 use super::{Bell, Endpoint, Queue, SignalWatch, WorldAccess, keys};
 use crate::ZenohError;
 use formation_runtime::link::{
-    Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index,
+    ForwardsSwapModels, Hello, Incarnations, WorldLink, WorldLinkError, WorldResult,
+    check_robot_index,
 };
 use formation_runtime::reconnect::ReconnectGrace;
 
@@ -722,6 +723,12 @@ impl WorldLink for ZenohWorldLink {
         })
     }
 
+    fn forwarded_swaps(&mut self) -> Option<&mut dyn ForwardsSwapModels> {
+        Some(self)
+    }
+}
+
+impl ForwardsSwapModels for ZenohWorldLink {
     fn take_forwarded_swap_model(&mut self, request_id: u64) -> Option<Vec<u8>> {
         match self.forwarded_model.take() {
             Some((id, model)) if id == request_id => Some(model),

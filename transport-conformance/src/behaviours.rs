@@ -9,8 +9,9 @@ use std::time::Duration;
 use formation_proto::WheelCmd;
 use formation_proto::wire::{SwapOutcome, SwapReply, SwapRequest, TickOutcome, WorldEvent};
 use formation_runtime::agent::AgentExit;
+use formation_runtime::auth::LaunchSecret;
 use formation_runtime::{ClockMode, RuntimeSettings};
-use formation_tests::{LaunchSecret, Watchdog, one_at_a_time};
+use formation_test_kit::{Watchdog, one_at_a_time};
 
 use crate::agent::Agent;
 use crate::pilot::{FAST, SLOW};

@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use formation_proto::{Goal, LidarSpec, WheelCmd};
 use formation_runtime::agent::{BoxError, Pilot, PilotMaker};
-use formation_tests::TempDir;
+use formation_test_kit::TempDir;
 
 /// What the slow model commands.
 pub const SLOW: WheelCmd = WheelCmd {
@@ -30,6 +30,12 @@ pub const FAST: WheelCmd = WheelCmd {
 /// The suite's model files, in a scratch folder of their own.
 pub struct Models {
     dir: TempDir,
+}
+
+impl Default for Models {
+    fn default() -> Self {
+        Models::new()
+    }
 }
 
 impl Models {
