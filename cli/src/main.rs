@@ -7,6 +7,9 @@ use std::process::ExitCode;
 use formation_proto::exit::ProcessExit;
 
 fn main() -> ExitCode {
+    // First, before any thread: ONNX Runtime then writes nothing outside the run's folders, here
+    // and in the processes the command starts.
+    formation_onnx::disable_telemetry_before_threads();
     let exit = match formation_cli::main_with_args() {
         Ok(()) => ProcessExit::Success,
         Err(err) => {

@@ -26,4 +26,7 @@ pub use contract::{
 pub use error::{LIBRARY_FIX, PolicyError};
 pub use model_file::{MAX_MODEL_BYTES, check_model_file};
 pub use policy::OnnxPolicy;
-pub use runtime::{ORT_DYLIB_PATH, init_runtime, ort_library_path};
+pub use runtime::{
+    ORT_DISABLE_TELEMETRY, ORT_DYLIB_PATH, disable_telemetry_before_threads, init_runtime,
+    ort_library_path,
+};

@@ -37,6 +37,28 @@ pub fn ort_library_path() -> Result<PathBuf, PolicyError> {
     locate_library(from_env.as_deref(), &root, python_onnxruntime_dir)
 }
 
+/// The variable ONNX Runtime reads, when it loads, to skip its telemetry store.
+pub const ORT_DISABLE_TELEMETRY: &str = "ORT_DISABLE_TELEMETRY";
+
+/// Keeps ONNX Runtime from writing outside the run's own folders: from 1.31 it persists a
+/// telemetry device id under `~/.cache/Microsoft/DeveloperTools/.onnxruntime/` and a session file
+/// `.ses` in the temporary folder when it loads, whatever the environment's telemetry setting
+/// (`with_telemetry(false)` stops only its events), unless `ORT_DISABLE_TELEMETRY` is set. Sets it
+/// for this process and the processes it starts, unless the user set it.
+///
+/// Call it first thing in `main`, before the process starts any thread: changing the environment
+/// while another thread reads it is undefined behaviour.
+pub fn disable_telemetry_before_threads() {
+    if std::env::var_os(ORT_DISABLE_TELEMETRY).is_none() {
+        #[allow(unsafe_code)]
+        // SAFETY: called at the start of `main`, before this process starts a thread, so no other
+        // thread reads or writes the environment meanwhile.
+        unsafe {
+            std::env::set_var(ORT_DISABLE_TELEMETRY, "1");
+        }
+    }
+}
+
 /// Starts ONNX Runtime from `library` for this process (telemetry off). Only the first call in a
 /// process has an effect; later calls return its outcome, whatever `library` they name.
 pub fn init_runtime(library: &Path) -> Result<(), PolicyError> {

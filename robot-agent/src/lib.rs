@@ -13,3 +13,7 @@
 
 pub mod decision;
 pub mod pilot;
+
+/// Keeps ONNX Runtime from writing outside the run's folders; call it first in `main`
+/// ([`formation_onnx::disable_telemetry_before_threads`]).
+pub use formation_onnx::disable_telemetry_before_threads;
