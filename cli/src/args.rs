@@ -86,7 +86,9 @@ pub enum Command {
 // parses (`tests::every_subcommand_ends_its_help_with_examples_that_parse`).
 const EVAL_EXAMPLES: &str = "Examples:
   formation eval --scenario scenarios/table1.toml --runs 100 --json out/table1.json
-  formation eval --controller expert --scenario scenarios/teams.toml --robots 3,8,16 --runs 20";
+  formation eval --controller expert --scenario scenarios/teams.toml --robots 3,8,16 --runs 20
+  formation eval --controller expert-own-scan --scenario scenarios/teams-generalist.toml \\
+      --robots 16,32 --runs 20";
 const MERGE_EXAMPLES: &str = "Examples:
   formation eval --scenario scenarios/table1.toml --first-run 0 --runs 40 --shard a.json
   formation merge a.json b.json --json table1.json";
@@ -135,6 +137,10 @@ pub enum ControllerKind {
     Expert,
     /// The learned policy, one independent agent per robot (own scan and heading only).
     Policy,
+    /// The expert's law on each robot's own scan: one independent pilot per robot, holding the
+    /// neighbours it detects in its own scan (own scan and heading only; no model). With
+    /// `--robots`, beside the expert on the same runs.
+    ExpertOwnScan,
 }
 
 /// `formation eval`.

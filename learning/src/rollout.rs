@@ -18,6 +18,9 @@ pub enum Driver {
     /// The model-based expert (sees every robot's pose), holding each robot's own neighbours
     /// under the scenario's rule.
     Expert(ExpertGains),
+    /// The expert's law on each robot's own scan: one independent pilot per robot, which
+    /// holds the neighbours it detects (`formation_expert::own_scan`).
+    ExpertOwnScan(ExpertGains),
     /// The learned policy, one independent agent per robot: robot `i` runs `models[i]`.
     Policy {
         /// One model per robot.
@@ -26,10 +29,11 @@ pub enum Driver {
 }
 
 impl Driver {
-    /// `expert` or `policy`.
+    /// `expert`, `expert-own-scan` or `policy`.
     pub fn name(&self) -> &'static str {
         match self {
             Driver::Expert(_) => "expert",
+            Driver::ExpertOwnScan(_) => formation_expert::own_scan::OWN_SCAN_ID,
             Driver::Policy { .. } => "policy",
         }
     }
@@ -58,6 +62,14 @@ impl Driver {
                 ExpertController::for_world(*gains, scenario.world_config())
                     .with_neighbours(*scenario.neighbours()),
             )),
+            Driver::ExpertOwnScan(gains) => {
+                Ok(Box::new(formation_expert::own_scan::own_scan_team(
+                    *gains,
+                    scenario.world_config(),
+                    *scenario.neighbours(),
+                    scenario.n_robots(),
+                )?))
+            }
             Driver::Policy { models } => {
                 let refs: Vec<&Path> = models.iter().map(PathBuf::as_path).collect();
                 let world = scenario.world_config();
