@@ -86,9 +86,7 @@ pub enum Command {
 // parses (`tests::every_subcommand_ends_its_help_with_examples_that_parse`).
 const EVAL_EXAMPLES: &str = "Examples:
   formation eval --scenario scenarios/table1.toml --runs 100 --json out/table1.json
-  formation eval --controller expert --scenario scenarios/teams.toml --robots 3,8,16 --runs 20
-  formation eval --controller expert-own-scan --scenario scenarios/teams-generalist.toml \\
-      --robots 16,32 --runs 20";
+  formation eval --controller expert --scenario scenarios/teams.toml --robots 3,8,16 --runs 20";
 const MERGE_EXAMPLES: &str = "Examples:
   formation eval --scenario scenarios/table1.toml --first-run 0 --runs 40 --shard a.json
   formation merge a.json b.json --json table1.json";
@@ -218,8 +216,8 @@ pub struct EvalArgs {
     pub shard: Option<PathBuf>,
     /// Walk a robot profile's reality ladder (`pioneer-p3dx`, `turtlebot3-burger`): the
     /// scenario with the profile's effects added one at a time, the expert and (unless
-    /// `--controller expert`) the policy on each rung; prints the table and writes it with
-    /// `--json`. Team sizes from `--robots` (default: the scenario's).
+    /// `--controller expert`) the policy, or with `--controller expert-own-scan` the expert's
+    /// law on each robot's own scan, on each rung; prints the table and writes it with `--json`. Team sizes from `--robots` (default: the scenario's).
     #[arg(long, value_name = "PROFILE")]
     pub ladder: Option<String>,
 }
