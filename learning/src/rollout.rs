@@ -226,6 +226,27 @@ mod tests {
     }
 
     #[test]
+    fn the_experts_law_on_each_robots_own_scan_forms_a_team_of_five() {
+        // The full LIDAR (900 beams) at σ = 3 cm: what the detector is made for.
+        let text = "name = \"t\"\nrobots = 5\nduration_s = 30.0\nseed = 3\nruns = 3\n\
+                    [goal]\nv_star = 0.7\nd_star = 1.5\n[heading]\nschedule = \"random\"\n\
+                    [lidar]\nnoise_std = 0.03\n";
+        let scenario = Scenario::from_toml_str(text, "t").unwrap();
+        let driver = Driver::ExpertOwnScan(ExpertGains::default());
+        assert_eq!(driver.name(), "expert-own-scan");
+        let cfg = MetricsConfig::default();
+        let runs = evaluate_runs(&scenario, 3, 3, &driver, &cfg, &|_| false, &|_| {}).unwrap();
+        for r in &runs {
+            assert!(
+                r.metrics.success_10 && r.metrics.collisions == 0,
+                "run {}: {:?}",
+                r.index,
+                r.metrics
+            );
+        }
+    }
+
+    #[test]
     fn a_policy_whose_model_is_missing_is_a_typed_error_before_any_run() {
         let scenario = scenario(3);
         let driver = Driver::Policy {
