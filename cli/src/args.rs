@@ -135,6 +135,10 @@ pub enum ControllerKind {
     Expert,
     /// The learned policy, one independent agent per robot (own scan and heading only).
     Policy,
+    /// The expert's law on each robot's own scan: one independent pilot per robot, holding the
+    /// neighbours it detects in its own scan (own scan and heading only; no model). With
+    /// `--robots`, beside the expert on the same runs.
+    ExpertOwnScan,
 }
 
 /// `formation eval`.
@@ -212,8 +216,8 @@ pub struct EvalArgs {
     pub shard: Option<PathBuf>,
     /// Walk a robot profile's reality ladder (`pioneer-p3dx`, `turtlebot3-burger`): the
     /// scenario with the profile's effects added one at a time, the expert and (unless
-    /// `--controller expert`) the policy on each rung; prints the table and writes it with
-    /// `--json`. Team sizes from `--robots` (default: the scenario's).
+    /// `--controller expert`) the policy, or with `--controller expert-own-scan` the expert's
+    /// law on each robot's own scan, on each rung; prints the table and writes it with `--json`. Team sizes from `--robots` (default: the scenario's).
     #[arg(long, value_name = "PROFILE")]
     pub ladder: Option<String>,
 }

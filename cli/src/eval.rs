@@ -292,6 +292,15 @@ fn eval_team(args: &EvalArgs, scenario: &Scenario) -> anyhow::Result<EvalTeam> {
             }
             (Vec::new(), Vec::new())
         }
+        ControllerKind::ExpertOwnScan => {
+            if args.processes {
+                anyhow::bail!(
+                    "--processes runs learned agents; --controller expert-own-scan runs every \
+                     robot's own-scan pilot in-process only: drop --processes"
+                );
+            }
+            (Vec::new(), Vec::new())
+        }
         ControllerKind::Policy => {
             let default = paths::resolve_model_for(args.model.as_deref(), scenario)?;
             let models = resolved_models_per_robot(scenario, &default)?;
@@ -417,16 +426,18 @@ fn results_in_process(
 fn driver_of(args: &EvalArgs, team: &EvalTeam) -> Driver {
     match args.controller {
         ControllerKind::Expert => Driver::Expert(ExpertGains::default()),
+        ControllerKind::ExpertOwnScan => Driver::ExpertOwnScan(ExpertGains::default()),
         ControllerKind::Policy => Driver::Policy {
             models: team.models.clone(),
         },
     }
 }
 
-/// `expert` or `policy`, as the outputs name the controller.
+/// `expert`, `expert-own-scan` or `policy`, as the outputs name the controller.
 fn controller_name(args: &EvalArgs) -> &'static str {
     match args.controller {
         ControllerKind::Expert => "expert",
+        ControllerKind::ExpertOwnScan => formation_expert::own_scan::OWN_SCAN_ID,
         ControllerKind::Policy => "policy",
     }
 }
@@ -535,9 +546,14 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
     let seed = args.seed.unwrap_or_else(|| base.seed());
     let mut drivers = vec![ScalingDriver::Expert(ExpertGains::default())];
     // The expert is the baseline of every size; the policy (`--model`, else the shipped one)
-    // unless `--controller expert` asks for the expert alone.
-    if args.controller == ControllerKind::Policy {
-        drivers.push(policy_driver(args.model.as_deref(), &base, sizes)?);
+    // unless `--controller expert` asks for the expert alone, or the expert's law on each
+    // robot's own scan (`--controller expert-own-scan`).
+    match args.controller {
+        ControllerKind::Policy => drivers.push(policy_driver(args.model.as_deref(), &base, sizes)?),
+        ControllerKind::ExpertOwnScan => {
+            drivers.push(ScalingDriver::ExpertOwnScan(ExpertGains::default()));
+        }
+        ControllerKind::Expert => {}
     }
     let bar = progress_bar(runs * sizes.len() * drivers.len(), "scaling");
     let started = Instant::now();

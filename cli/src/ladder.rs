@@ -55,10 +55,11 @@ pub fn ladder_command(args: &EvalArgs) -> anyhow::Result<()> {
     let seed = args.seed.unwrap_or_else(|| base.seed());
     let policy = match args.controller {
         ControllerKind::Policy => Some(policy_driver(args.model.as_deref(), &base, &sizes)?),
-        ControllerKind::Expert => None,
+        ControllerKind::Expert | ControllerKind::ExpertOwnScan => None,
     };
+    let own_scan = args.controller == ControllerKind::ExpertOwnScan;
     let ladder = profile.ladder();
-    let drivers_per_rung = 1 + usize::from(policy.is_some());
+    let drivers_per_rung = 1 + usize::from(policy.is_some()) + usize::from(own_scan);
     let per_rung = runs * sizes.len() * drivers_per_rung;
     let bar = progress_bar(per_rung * ladder.len(), "ladder");
     let started = Instant::now();
@@ -75,6 +76,9 @@ pub fn ladder_command(args: &EvalArgs) -> anyhow::Result<()> {
                 )
             })?;
         let mut drivers = vec![ScalingDriver::Expert(ExpertGains::default())];
+        if own_scan {
+            drivers.push(ScalingDriver::ExpertOwnScan(ExpertGains::default()));
+        }
         // A policy that cannot drive this rung (a LIDAR it was not trained on) gives no row,
         // and the rung says why; the expert's rows stand.
         let mut policy_refused = None;

@@ -418,7 +418,6 @@ fn commands_among<I: Iterator<Item = (usize, f64)>>(
     neighbours: impl Fn(usize) -> I,
 ) {
     let c = gains.point_offset;
-    let k_formation = gains.k_formation;
     let offset_point = |pose: &Pose| (pose.x + c * pose.theta.cos(), pose.y + c * pose.theta.sin());
     let reference = reference_velocity(goal, gains.max_reference_speed);
     let d4 = goal.d_star.powi(4);
@@ -427,34 +426,59 @@ fn commands_among<I: Iterator<Item = (usize, f64)>>(
         let p_i = offset_point(pose);
         let mut gradient = (0.0, 0.0);
         for (j, weight) in neighbours(i) {
-            let (dx, dy) = match pair_points {
+            let pair = match pair_points {
                 PairPoints::OffsetPoints => {
                     let p_j = offset_point(&poses[j]);
                     (p_i.0 - p_j.0, p_i.1 - p_j.1)
                 }
                 PairPoints::Centres => (pose.x - poses[j].x, pose.y - poses[j].y),
             };
-            let r = dx.hypot(dy);
-            if r < MIN_PAIR_DISTANCE {
-                continue;
-            }
-            // tau_ij = 2 (r^4 - d*^4) / r^3 * p_ij / r
-            let magnitude = weight * 2.0 * (r.powi(4) - d4) / r.powi(3);
-            gradient.0 += magnitude * dx / r;
-            gradient.1 += magnitude * dy / r;
+            add_pair_term(&mut gradient, pair, d4, weight);
         }
-        let mut f = (-k_formation * gradient.0, -k_formation * gradient.1);
-        let shaping_accel = gains.shaping_wheel_accel.or(robot.max_wheel_accel);
-        if let Some(accel) = shaping_accel.filter(|_| !gains.unshaped) {
-            let speed = f.0.hypot(f.1);
-            if speed > 0.0 {
-                let scale = braking_speed(speed, k_formation, gains.braking_share * accel) / speed;
-                f = (f.0 * scale, f.1 * scale);
-            }
-        }
-        let u = (reference.0 + f.0, reference.1 + f.1);
-        *cmd = point_velocity_to_wheels(u, pose.theta, c, robot);
+        *cmd = command_from_gradient(gradient, pose.theta, reference, gains, robot);
     }
+}
+
+/// Adds to `gradient` pair `p_ij = (dx, dy)`'s term `weight * tau_ij`, the gradient of its
+/// potential (`d4 = d*^4`); a pair closer than [`MIN_PAIR_DISTANCE`] adds nothing. The one pair
+/// law, whether the pair comes from two poses or from one robot's detection
+/// ([`crate::own_scan`]).
+pub(crate) fn add_pair_term(gradient: &mut (f64, f64), (dx, dy): (f64, f64), d4: f64, weight: f64) {
+    let r = dx.hypot(dy);
+    if r < MIN_PAIR_DISTANCE {
+        return;
+    }
+    // tau_ij = 2 (r^4 - d*^4) / r^3 * p_ij / r
+    let magnitude = weight * 2.0 * (r.powi(4) - d4) / r.powi(3);
+    gradient.0 += magnitude * dx / r;
+    gradient.1 += magnitude * dy / r;
+}
+
+/// One robot's wheel command from the summed gradient of its pair potentials (world frame), its
+/// heading `theta` and the reference velocity: the formation velocity `-K gradient` with
+/// `K = gains.k_formation`, shaped under an acceleration limit ([`braking_speed`]), plus the
+/// reference, turned into wheel speeds at the point `c` ahead of the axle and saturated. The one
+/// law after the pairs, whether they come from every pose or from one robot's detections
+/// ([`crate::own_scan`]).
+pub(crate) fn command_from_gradient(
+    gradient: (f64, f64),
+    theta: f64,
+    reference: (f64, f64),
+    gains: &ExpertGains,
+    robot: &RobotParams,
+) -> WheelCmd {
+    let k_formation = gains.k_formation;
+    let mut f = (-k_formation * gradient.0, -k_formation * gradient.1);
+    let shaping_accel = gains.shaping_wheel_accel.or(robot.max_wheel_accel);
+    if let Some(accel) = shaping_accel.filter(|_| !gains.unshaped) {
+        let speed = f.0.hypot(f.1);
+        if speed > 0.0 {
+            let scale = braking_speed(speed, k_formation, gains.braking_share * accel) / speed;
+            f = (f.0 * scale, f.1 * scale);
+        }
+    }
+    let u = (reference.0 + f.0, reference.1 + f.1);
+    point_velocity_to_wheels(u, theta, gains.point_offset, robot)
 }
 
 /// The expert's shaping under an acceleration limit, defined once beside the policies' own

@@ -7,6 +7,9 @@
 //!   labels that are continuous across the rule's threshold ([`ExpertGains::pair_weight_band`]).
 //! * [`collect`]: demonstration collection into the training data set, and the expert labelling of
 //!   any observation that DAgger uses while the learned policy drives.
+//! * [`own_scan`]: the same law on what one robot sees: its command from the neighbours it
+//!   detects in its own scan ([`own_scan::OwnScanPilot`], a [`formation_proto::robot::Pilot`];
+//!   [`own_scan::own_scan_team`], the decentralised team of them).
 //! * [`response`]: the response gauge, a controller's formation velocity against the expert's
 //!   label on the controller's own states (`formation gauge`).
 //!
@@ -15,6 +18,7 @@
 
 pub mod collect;
 pub mod controller;
+pub mod own_scan;
 pub mod pair_weights;
 pub mod response;
 

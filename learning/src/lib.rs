@@ -38,6 +38,9 @@ pub enum LearningError {
         #[source]
         source: formation_robot_agent::decision::DecisionError,
     },
+    /// The expert's law on each robot's own scan cannot drive these robots.
+    #[error(transparent)]
+    OwnScan(#[from] formation_expert::own_scan::OwnScanError),
     /// The models cannot drive this scenario's robots (checked before anything runs).
     #[error(transparent)]
     TeamModels(#[from] formation_robot_agent::decision::TeamModelError),

@@ -64,6 +64,7 @@ pub fn gauge_response(
         for driver in drivers {
             let (run_driver, model) = match driver {
                 ScalingDriver::Expert(gains) => (Driver::Expert(*gains), None),
+                ScalingDriver::ExpertOwnScan(gains) => (Driver::ExpertOwnScan(*gains), None),
                 ScalingDriver::Policy { model, id, .. } => {
                     (Driver::policy_for(&scenario, model)?, Some(id.clone()))
                 }

@@ -18,6 +18,9 @@ pub enum Driver {
     /// The model-based expert (sees every robot's pose), holding each robot's own neighbours
     /// under the scenario's rule.
     Expert(ExpertGains),
+    /// The expert's law on each robot's own scan: one independent pilot per robot, which
+    /// holds the neighbours it detects (`formation_expert::own_scan`).
+    ExpertOwnScan(ExpertGains),
     /// The learned policy, one independent agent per robot: robot `i` runs `models[i]`.
     Policy {
         /// One model per robot.
@@ -26,10 +29,11 @@ pub enum Driver {
 }
 
 impl Driver {
-    /// `expert` or `policy`.
+    /// `expert`, `expert-own-scan` or `policy`.
     pub fn name(&self) -> &'static str {
         match self {
             Driver::Expert(_) => "expert",
+            Driver::ExpertOwnScan(_) => formation_expert::own_scan::OWN_SCAN_ID,
             Driver::Policy { .. } => "policy",
         }
     }
@@ -58,6 +62,14 @@ impl Driver {
                 ExpertController::for_world(*gains, scenario.world_config())
                     .with_neighbours(*scenario.neighbours()),
             )),
+            Driver::ExpertOwnScan(gains) => {
+                Ok(Box::new(formation_expert::own_scan::own_scan_team(
+                    *gains,
+                    scenario.world_config(),
+                    *scenario.neighbours(),
+                    scenario.n_robots(),
+                )?))
+            }
             Driver::Policy { models } => {
                 let refs: Vec<&Path> = models.iter().map(PathBuf::as_path).collect();
                 let world = scenario.world_config();
@@ -211,6 +223,27 @@ mod tests {
             one[4].metrics,
             run_metrics(&traj, traj.commands.len() as u64, &cfg)
         );
+    }
+
+    #[test]
+    fn the_experts_law_on_each_robots_own_scan_forms_a_team_of_five() {
+        // The full LIDAR (900 beams) at σ = 3 cm: what the detector is made for.
+        let text = "name = \"t\"\nrobots = 5\nduration_s = 30.0\nseed = 3\nruns = 3\n\
+                    [goal]\nv_star = 0.7\nd_star = 1.5\n[heading]\nschedule = \"random\"\n\
+                    [lidar]\nnoise_std = 0.03\n";
+        let scenario = Scenario::from_toml_str(text, "t").unwrap();
+        let driver = Driver::ExpertOwnScan(ExpertGains::default());
+        assert_eq!(driver.name(), "expert-own-scan");
+        let cfg = MetricsConfig::default();
+        let runs = evaluate_runs(&scenario, 3, 3, &driver, &cfg, &|_| false, &|_| {}).unwrap();
+        for r in &runs {
+            assert!(
+                r.metrics.success_10 && r.metrics.collisions == 0,
+                "run {}: {:?}",
+                r.index,
+                r.metrics
+            );
+        }
     }
 
     #[test]

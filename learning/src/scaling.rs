@@ -20,6 +20,8 @@ use crate::rollout::{Driver, evaluate_runs};
 pub enum ScalingDriver {
     /// The expert with these gains.
     Expert(ExpertGains),
+    /// The expert's law with these gains on each robot's own scan ([`Driver::ExpertOwnScan`]).
+    ExpertOwnScan(ExpertGains),
     /// The policy `model` (with its id) on every robot (scenario `[[agent]]` entries apply).
     Policy {
         /// The ONNX model.
@@ -57,6 +59,9 @@ pub fn evaluate_scaling(
         for driver in drivers {
             let (run_driver, model, team_size, goal_speed, model_input) = match driver {
                 ScalingDriver::Expert(gains) => (Driver::Expert(*gains), None, None, None, None),
+                ScalingDriver::ExpertOwnScan(gains) => {
+                    (Driver::ExpertOwnScan(*gains), None, None, None, None)
+                }
                 ScalingDriver::Policy {
                     model,
                     id,
