@@ -226,10 +226,16 @@ pub struct EvalArgs {
 const GAUGE_EXAMPLES: &str = "Examples:
   formation gauge --scenario scenarios/teams-generalist.toml --robots 16,32 --runs 20
   formation gauge --scenario scenarios/teams-generalist.toml --robots 16 --model M.onnx \\
-      --duration-s 240 --json response.json";
+      --duration-s 240 --json response.json
+  formation gauge --scenario scenarios/teams-generalist.toml --robots 16,32 --own-scan --no-policy";
 
 /// `formation gauge`.
 #[derive(Debug, Args)]
+#[command(group(
+    clap::ArgGroup::new("other_controllers")
+        .args(["expert", "own_scan"])
+        .multiple(true)
+))]
 pub struct GaugeArgs {
     /// Scenario TOML file.
     #[arg(long)]
@@ -244,8 +250,13 @@ pub struct GaugeArgs {
     /// a teacher), against the scored expert's labels; `{}` gauges the scored expert itself.
     #[arg(long, value_name = "JSON")]
     pub expert: Option<String>,
-    /// Gauge only the expert given by `--expert`, not the policy.
-    #[arg(long, requires = "expert")]
+    /// Also gauge the expert's law on each robot's own scan (`eval --controller
+    /// expert-own-scan`, the teacher that sees what a policy sees), with `--expert`'s gains when
+    /// given, against the scored expert's labels.
+    #[arg(long)]
+    pub own_scan: bool,
+    /// Gauge only the controllers given by `--expert` and `--own-scan`, not the policy.
+    #[arg(long, requires = "other_controllers")]
     pub no_policy: bool,
     /// Runs per team size (default: the scenario's `runs`; at most 10000).
     #[arg(long, value_parser = run_count)]
@@ -732,6 +743,21 @@ mod tests {
         for bad in ["1.5,1.1", "0,1", "1.2", "1,inf"] {
             let e = pair_weight_band(bad).unwrap_err();
             assert!(e.contains("LOW,HIGH") && e.contains(bad), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn gauge_without_the_policy_needs_another_controller() {
+        let base = ["formation", "gauge", "--scenario", "s.toml", "--no-policy"];
+        let error = Cli::try_parse_from(base).unwrap_err();
+        assert!(error.to_string().contains("--no-policy"), "{error}");
+        for extra in [&["--own-scan"][..], &["--expert", "{}"][..]] {
+            let cli = Cli::try_parse_from(base.iter().chain(extra)).unwrap();
+            let Command::Gauge(args) = cli.command else {
+                panic!("not gauge")
+            };
+            assert!(args.no_policy);
+            assert_eq!(args.own_scan, extra[0] == "--own-scan");
         }
     }
 

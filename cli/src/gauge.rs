@@ -1,5 +1,6 @@
 //! `formation gauge`: the response gauge. The policy (and, with `--expert`, an expert with other
-//! gains, a teacher for instance) plays its own runs; the scored expert relabels every `--stride`-th
+//! gains, a teacher for instance; with `--own-scan`, the expert's law on each robot's own scan)
+//! plays its own runs; the scored expert relabels every `--stride`-th
 //! state; the slope and RMS error of the controller's formation velocity against the label are
 //! printed per team size and bin of the label's size, and written with `--json`
 //! ([`formation_schema::ResponseCurve`]). It costs minutes of simulation, no training.
@@ -34,8 +35,9 @@ pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
     let runs = args.runs.unwrap_or_else(|| base.runs());
     let seed = args.seed.unwrap_or_else(|| base.seed());
     let mut drivers = Vec::new();
+    let mut gains = ExpertGains::default();
     if let Some(json) = &args.expert {
-        let gains: ExpertGains = serde_json::from_str(json).with_context(|| {
+        gains = serde_json::from_str(json).with_context(|| {
             format!(
                 "--expert {json:?} is not the expert's gains as JSON: give for example \
                  '{{\"shaping_wheel_accel\": 1.0}}' (fields of ExpertGains), or '{{}}' for the \
@@ -46,6 +48,9 @@ pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
             .validate()
             .with_context(|| format!("--expert {json:?}"))?;
         drivers.push(ScalingDriver::Expert(gains));
+    }
+    if args.own_scan {
+        drivers.push(ScalingDriver::ExpertOwnScan(gains));
     }
     if !args.no_policy {
         drivers.push(policy_driver(args.model.as_deref(), &base, &sizes)?);

@@ -251,6 +251,32 @@ mod tests {
     }
 
     #[test]
+    fn the_law_on_each_robot_s_own_scan_responds_almost_as_the_expert() {
+        // The teacher that sees only its own scan (its detected neighbours), gauged against the
+        // expert that sees every pose, on noiseless scans: the same law through the detector, so
+        // its slope is near 1 in every bin (not exactly: a hidden neighbour is missed).
+        let text = "name = \"t\"\nrobots = 8\nduration_s = 20.0\nseed = 3\nruns = 4\n\
+                    [goal]\nv_star = 0.7\nd_star = 1.5\n[heading]\nschedule = \"random\"\n";
+        let scenario = Scenario::from_toml_str(text, "t").unwrap();
+        let curve = gauge_response(
+            &scenario,
+            &[8],
+            &[ScalingDriver::ExpertOwnScan(ExpertGains::default())],
+            &settings(4),
+            &|_, _| {},
+        )
+        .unwrap();
+        let row = &curve.rows[0];
+        assert_eq!(row.controller, "expert-own-scan");
+        let filled: Vec<_> = row.bins.iter().filter(|b| b.samples >= 50).collect();
+        assert!(filled.len() >= 3, "{row:?}");
+        for bin in filled {
+            let slope = bin.slope.unwrap();
+            assert!((0.95..1.05).contains(&slope), "{bin:?}");
+        }
+    }
+
+    #[test]
     fn bad_label_gains_are_refused_before_any_run() {
         let mut s = settings(1);
         s.label_gains.point_offset = f64::NAN;
