@@ -224,10 +224,9 @@ pub struct EvalArgs {
 
 /// `formation gauge`'s examples.
 const GAUGE_EXAMPLES: &str = "Examples:
-  formation gauge --scenario scenarios/teams-generalist.toml --robots 16,32 --runs 20
+  formation gauge --scenario scenarios/teams-generalist.toml --robots 16,32 --runs 20 --own-scan
   formation gauge --scenario scenarios/teams-generalist.toml --robots 16 --model M.onnx \\
-      --duration-s 240 --json response.json
-  formation gauge --scenario scenarios/teams-generalist.toml --robots 16,32 --own-scan --no-policy";
+      --duration-s 240 --json response.json";
 
 /// `formation gauge`.
 #[derive(Debug, Args)]
