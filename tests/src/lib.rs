@@ -102,11 +102,7 @@ impl LeakCheck {
     /// segment of the namespace, which stays after every node of the run closed cleanly (by
     /// design, across nodes) until the launcher removes the namespace.
     pub fn assert_only_management_left(&self) {
-        let shm: Vec<_> = self
-            .leftovers()
-            .into_iter()
-            .filter(|p| p.starts_with("/dev/shm") && !p.to_string_lossy().ends_with(".global_mgmt"))
-            .collect();
+        let shm = self.namespace.shared_memory_but_management();
         assert!(
             shm.is_empty(),
             "shared memory left after a clean exit: {shm:#?}"

@@ -208,6 +208,16 @@ impl RunNamespace {
         found
     }
 
+    /// The run's shared-memory objects but iceoryx2's management segment of the namespace, which
+    /// stays after every node closed cleanly (by design, across nodes) until the launcher removes
+    /// the namespace: empty after a clean shutdown.
+    pub fn shared_memory_but_management(&self) -> Vec<PathBuf> {
+        list_with_prefix(Path::new(SHM_DIR), &self.file_prefix())
+            .into_iter()
+            .filter(|p| !p.to_string_lossy().ends_with(".global_mgmt"))
+            .collect()
+    }
+
     /// Removes everything [`RunNamespace::leftovers`] lists. Returns how many entries were removed.
     /// Call it only when no process of the run is alive.
     pub fn remove_all(&self) -> std::io::Result<usize> {

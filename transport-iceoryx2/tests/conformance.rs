@@ -75,12 +75,7 @@ impl Rig for IceoryxRig {
     /// of the namespace stays (by design, across nodes), which the launcher removes at the end,
     /// as this does.
     fn assert_nothing_left(&self) {
-        let shm: Vec<_> = self
-            .namespace
-            .leftovers()
-            .into_iter()
-            .filter(|p| p.starts_with("/dev/shm") && !p.to_string_lossy().ends_with(".global_mgmt"))
-            .collect();
+        let shm = self.namespace.shared_memory_but_management();
         assert!(
             shm.is_empty(),
             "shared memory left after a clean exit: {shm:#?}"
