@@ -118,6 +118,7 @@ impl ModelMetadata {
             image: self.occupancy,
             aux: self.aux,
             ranges: self.ranges,
+            neighbours: None,
             output: self.output,
             v_train: self.v_train,
         }

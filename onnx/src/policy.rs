@@ -145,6 +145,7 @@ impl OnnxPolicy {
             image: occupancy,
             aux,
             ranges,
+            neighbours: _,
         } = *input;
         if occupancy.len() != self.cells {
             return Err(PolicyError::InputLength {

@@ -64,6 +64,7 @@ fn measure(label: &str, path: &Path) {
                 image,
                 aux,
                 ranges: &ranges,
+                neighbours: &[],
             })
             .expect("infer");
     }
@@ -76,6 +77,7 @@ fn measure(label: &str, path: &Path) {
                 image,
                 aux,
                 ranges: &ranges,
+                neighbours: &[],
             })
             .expect("infer");
         micros.push(t.elapsed().as_secs_f64() * 1e6);

@@ -291,7 +291,12 @@ fn a_range_input_model_matches_torch_and_checks_its_sectors() {
     assert_eq!(cases.len(), CASES);
     for (i, (image, aux, ranges, torch)) in cases.iter().enumerate() {
         let ours = policy
-            .infer(&PolicyInput { image, aux, ranges })
+            .infer(&PolicyInput {
+                image,
+                aux,
+                ranges,
+                neighbours: &[],
+            })
             .expect("inference");
         for wheel in 0..2 {
             assert!(
@@ -305,12 +310,20 @@ fn a_range_input_model_matches_torch_and_checks_its_sectors() {
     // The ranges reach the network: other ranges, another answer.
     let (image, aux, ranges, _) = &cases[0];
     let closer: Vec<f32> = ranges.iter().map(|r| r * 0.5).collect();
-    let first = policy.infer(&PolicyInput { image, aux, ranges }).unwrap();
+    let first = policy
+        .infer(&PolicyInput {
+            image,
+            aux,
+            ranges,
+            neighbours: &[],
+        })
+        .unwrap();
     let moved = policy
         .infer(&PolicyInput {
             image,
             aux,
             ranges: &closer,
+            neighbours: &[],
         })
         .unwrap();
     assert_ne!(first, moved);
@@ -322,7 +335,12 @@ fn a_range_input_model_matches_torch_and_checks_its_sectors() {
     }
     // A model without ranges refuses them.
     let mut plain = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
-    match plain.infer(&PolicyInput { image, aux, ranges }) {
+    match plain.infer(&PolicyInput {
+        image,
+        aux,
+        ranges,
+        neighbours: &[],
+    }) {
         Err(err @ PolicyError::RangesLength { actual: 100, .. }) => {
             assert!(err.to_string().contains("no range input"), "{err}");
         }

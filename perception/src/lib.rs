@@ -8,6 +8,8 @@
 //!   model that declares one (`formation_proto::RangeInput`).
 //! * [`neighbours`]: the neighbours a robot detects in its own scan, each one's centre in its body
 //!   frame, fitted with a circle of the known body radius.
+//! * [`neighbour_input`]: those detections as a model takes them beside its image, with the
+//!   Gabriel rule's verdict on each (`formation_proto::NeighbourInput`).
 //! * [`policy_input`]: a goal checked where it enters a robot, and the policy's declared output
 //!   turned into wheel speeds (the scalars beside the image are `formation_proto::PolicyIo`'s).
 //!
@@ -15,6 +17,7 @@
 //! transport, so the expert, the agent and the Python bindings share them without building any of
 //! those.
 
+pub mod neighbour_input;
 pub mod neighbours;
 pub mod occupancy;
 pub mod policy_input;

@@ -42,7 +42,8 @@ pub use goal_speed::GoalSpeedFit;
 pub use lidar_noise::{LidarNoise, SimulatedLidar};
 pub use neighbours::{GabrielRule, NeighbourRule};
 pub use policy_io::{
-    AuxInput, AuxLayout, AuxValues, PolicyInput, PolicyIo, RangeInput, RangeInputError,
+    AuxInput, AuxLayout, AuxValues, NeighbourInput, NeighbourInputError, PolicyInput, PolicyIo,
+    RangeInput, RangeInputError,
 };
 pub use policy_output::PolicyOutput;
 pub use team_size::TeamSizeFit;

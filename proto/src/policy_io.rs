@@ -12,6 +12,10 @@
 //! shipped window), the ranges to about a centimetre, which is the precision the strict check's
 //! small edge errors need (issue 34).
 //!
+//! A model may take the neighbours its robot detects in its scan ([`NeighbourInput`], declared
+//! in `formation.neighbours`): each one's centre to a few millimetres and whether the robot holds
+//! it at d*, the per-pair structure the expert's own law has (issue 34).
+//!
 //! **Adding a scalar input** is a variant of [`AuxInput`] with its name and its value here; the
 //! dataset, the trainer and the exporter carry it by name (see the guide's "Adding a policy
 //! input").
@@ -360,6 +364,179 @@ impl fmt::Display for RangeInput {
     }
 }
 
+/// The neighbours a robot detects in its own scan, as a model takes them beside its image: the
+/// `neighbours` input, `[B, slots, 4]` f32, declared by
+/// `formation.neighbours = "slots=K,threshold=T,nearest=M"` (issue 34).
+///
+/// Each detection (a body's centre fitted to its returns, in the robot's body frame, x ahead and
+/// y to the left) fills one slot with `(x / d*, y / d*, held, 1)`. `held` is 1 where the robot
+/// holds that neighbour at d* by the Gabriel rule applied to itself and its detections (witness
+/// ratio at least `T`, plus its `M` nearest, within the LIDAR's range: [`crate::GabrielRule`]
+/// with no hysteresis), 0 otherwise. Held neighbours come first, nearest first, then the others,
+/// nearest first; slots left over are all zeros, and detections past `K` are dropped. Dividing by
+/// d* makes the input what the image is: the same formation at any d* looks the same. Reflecting
+/// the scene about the robot's heading axis negates every `y` and keeps the order and the flags.
+///
+/// The detection and the rule are `formation_perception::neighbour_input`'s, shared by
+/// collection, the agent and the Python package.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NeighbourInput {
+    /// `K`: slots, [`NeighbourInput::MIN_SLOTS`] ..= [`NeighbourInput::MAX_SLOTS`].
+    pub slots: usize,
+    /// `T`: the Gabriel rule's witness-ratio threshold, in `[1, `[`NeighbourInput::MAX_THRESHOLD`]`]`.
+    pub threshold: f64,
+    /// `M`: the nearest detections always held, at most [`NeighbourInput::MAX_NEAREST`].
+    pub nearest: usize,
+}
+
+/// Why a `formation.neighbours` declaration cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NeighbourInputError {
+    /// Not `slots=K,threshold=T,nearest=M`.
+    #[error(
+        "\"{text}\" is not a neighbour input: write \"slots=K,threshold=T,nearest=M\" (K slots, \
+         {min} to {max}; T the Gabriel threshold, 1 to {max_threshold}; M the nearest always held, \
+         0 to {max_nearest})",
+        min = NeighbourInput::MIN_SLOTS,
+        max = NeighbourInput::MAX_SLOTS,
+        max_threshold = NeighbourInput::MAX_THRESHOLD,
+        max_nearest = NeighbourInput::MAX_NEAREST
+    )]
+    Syntax {
+        /// The declaration.
+        text: String,
+    },
+    /// A value outside its range.
+    #[error(
+        "neighbour input {what} = {value} is out of range: slots must be {min} to {max}, \
+         threshold 1 to {max_threshold}, nearest 0 to {max_nearest}",
+        min = NeighbourInput::MIN_SLOTS,
+        max = NeighbourInput::MAX_SLOTS,
+        max_threshold = NeighbourInput::MAX_THRESHOLD,
+        max_nearest = NeighbourInput::MAX_NEAREST
+    )]
+    Range {
+        /// `slots`, `threshold` or `nearest`.
+        what: &'static str,
+        /// The value found.
+        value: String,
+    },
+}
+
+impl NeighbourInput {
+    /// Numbers per slot: `x / d*`, `y / d*`, `held`, `present`.
+    pub const FEATURES: usize = 4;
+    /// The fewest slots.
+    pub const MIN_SLOTS: usize = 1;
+    /// The most slots.
+    pub const MAX_SLOTS: usize = 64;
+    /// The largest threshold.
+    pub const MAX_THRESHOLD: f64 = 4.0;
+    /// The most nearest neighbours always held.
+    pub const MAX_NEAREST: usize = 8;
+
+    /// A checked neighbour input.
+    pub fn new(
+        slots: usize,
+        threshold: f64,
+        nearest: usize,
+    ) -> Result<NeighbourInput, NeighbourInputError> {
+        if !(NeighbourInput::MIN_SLOTS..=NeighbourInput::MAX_SLOTS).contains(&slots) {
+            return Err(NeighbourInputError::Range {
+                what: "slots",
+                value: slots.to_string(),
+            });
+        }
+        if !(1.0..=NeighbourInput::MAX_THRESHOLD).contains(&threshold) {
+            return Err(NeighbourInputError::Range {
+                what: "threshold",
+                value: threshold.to_string(),
+            });
+        }
+        if nearest > NeighbourInput::MAX_NEAREST {
+            return Err(NeighbourInputError::Range {
+                what: "nearest",
+                value: nearest.to_string(),
+            });
+        }
+        Ok(NeighbourInput {
+            slots,
+            threshold,
+            nearest,
+        })
+    }
+
+    /// The scenarios' default rule ([`crate::GabrielRule::DEFAULT_THRESHOLD`],
+    /// [`crate::GabrielRule::DEFAULT_NEAREST`]) over `slots` slots.
+    pub fn with_default_rule(slots: usize) -> Result<NeighbourInput, NeighbourInputError> {
+        NeighbourInput::new(
+            slots,
+            crate::GabrielRule::DEFAULT_THRESHOLD,
+            crate::GabrielRule::DEFAULT_NEAREST,
+        )
+    }
+
+    /// Reads `slots=K,threshold=T,nearest=M` (the keys in any order, spaces around them allowed).
+    pub fn parse(text: &str) -> Result<NeighbourInput, NeighbourInputError> {
+        let syntax = || NeighbourInputError::Syntax {
+            text: text.to_owned(),
+        };
+        let (mut slots, mut threshold, mut nearest) = (None, None, None);
+        for part in text.split(',') {
+            let (key, value) = part.split_once('=').ok_or_else(syntax)?;
+            let value = value.trim();
+            match key.trim() {
+                "slots" if slots.is_none() => {
+                    slots = Some(value.parse::<usize>().map_err(|_| syntax())?)
+                }
+                "threshold" if threshold.is_none() => {
+                    threshold = Some(value.parse::<f64>().map_err(|_| syntax())?)
+                }
+                "nearest" if nearest.is_none() => {
+                    nearest = Some(value.parse::<usize>().map_err(|_| syntax())?)
+                }
+                _ => return Err(syntax()),
+            }
+        }
+        match (slots, threshold, nearest) {
+            (Some(slots), Some(threshold), Some(nearest)) => {
+                NeighbourInput::new(slots, threshold, nearest)
+            }
+            _ => Err(syntax()),
+        }
+    }
+
+    /// The width of one sample's input: `slots * FEATURES`.
+    pub fn len(&self) -> usize {
+        self.slots * NeighbourInput::FEATURES
+    }
+
+    /// Never true: an input has at least one slot.
+    pub fn is_empty(&self) -> bool {
+        self.slots == 0
+    }
+
+    /// The Gabriel rule the `held` flags follow, for a LIDAR that reaches `sensing_range` metres.
+    pub fn rule(&self, sensing_range: f64) -> crate::GabrielRule {
+        crate::GabrielRule {
+            sensing_range,
+            nearest: self.nearest,
+            threshold: self.threshold,
+            hysteresis: 0.0,
+        }
+    }
+}
+
+impl fmt::Display for NeighbourInput {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "slots={},threshold={},nearest={}",
+            self.slots, self.threshold, self.nearest
+        )
+    }
+}
+
 /// What a model takes and answers: its image, its scalars and its output, as its metadata
 /// declares them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -370,6 +547,8 @@ pub struct PolicyIo {
     pub aux: AuxLayout,
     /// The scan's ranges beside the image, if the model takes them.
     pub ranges: Option<RangeInput>,
+    /// The neighbours detected in the scan, beside the image, if the model takes them.
+    pub neighbours: Option<NeighbourInput>,
     /// What its one output means.
     pub output: PolicyOutput,
     /// Its training speed \[m/s\]: a `wheels` output is scaled by `v* / v_train`.
@@ -385,6 +564,9 @@ pub struct PolicyInput<'a> {
     pub aux: &'a [f32],
     /// The scan's ranges, one a sector; empty for a model that takes none.
     pub ranges: &'a [f32],
+    /// The detected neighbours, [`NeighbourInput::FEATURES`] a slot; empty for a model that
+    /// takes none.
+    pub neighbours: &'a [f32],
 }
 
 impl<'a> PolicyInput<'a> {
@@ -394,6 +576,7 @@ impl<'a> PolicyInput<'a> {
             image,
             aux,
             ranges: &[],
+            neighbours: &[],
         }
     }
 }
@@ -515,6 +698,50 @@ mod tests {
         for b in 0..900 {
             let reflected = (900 - b) % 900;
             assert_eq!(sectors[reflected], ranges.mirrored(sectors[b]));
+        }
+    }
+
+    #[test]
+    fn a_neighbour_input_reads_back_what_it_writes_and_refuses_bad_values() {
+        let input = NeighbourInput::parse("slots=16, threshold=1.3, nearest=2").unwrap();
+        assert_eq!(input, NeighbourInput::with_default_rule(16).unwrap());
+        assert_eq!(NeighbourInput::parse(&input.to_string()), Ok(input));
+        assert_eq!(input.len(), 64);
+        let rule = input.rule(10.0);
+        assert_eq!(
+            (rule.threshold, rule.nearest, rule.hysteresis),
+            (1.3, 2, 0.0)
+        );
+        for bad in [
+            "",
+            "slots=16",
+            "slots=16,threshold=1.3",
+            "slots=16,threshold=1.3,nearest=2,x=1",
+            "slots=16,slots=16,nearest=2",
+            "slots=1.5,threshold=1.3,nearest=2",
+        ] {
+            assert!(
+                matches!(
+                    NeighbourInput::parse(bad),
+                    Err(NeighbourInputError::Syntax { .. })
+                ),
+                "{bad}"
+            );
+        }
+        for bad in [
+            "slots=0,threshold=1.3,nearest=2",
+            "slots=65,threshold=1.3,nearest=2",
+            "slots=16,threshold=0.9,nearest=2",
+            "slots=16,threshold=NaN,nearest=2",
+            "slots=16,threshold=1.3,nearest=9",
+        ] {
+            assert!(
+                matches!(
+                    NeighbourInput::parse(bad),
+                    Err(NeighbourInputError::Range { .. })
+                ),
+                "{bad}"
+            );
         }
     }
 

@@ -351,6 +351,7 @@ impl Agent {
             image: &self.image_f32,
             aux: &aux,
             ranges: &self.ranges,
+            neighbours: &[],
         })?;
         if !(left.is_finite() && right.is_finite()) {
             return Err(DecisionError::NonFinite {
@@ -383,6 +384,7 @@ impl Agent {
             image: &self.image_f32,
             aux: &aux,
             ranges: &self.ranges,
+            neighbours: &[],
         })?;
         Ok(())
     }
@@ -456,6 +458,7 @@ impl Agent {
             image: &image,
             aux: &aux,
             ranges: &trial_ranges,
+            neighbours: &[],
         };
         trial_run(policy.as_mut(), &trial, observation)?;
         self.image.resize(n, 0);
@@ -683,6 +686,7 @@ mod tests {
                 image: self.spec,
                 aux: formation_proto::AuxLayout::PAPER,
                 ranges: None,
+                neighbours: None,
                 output: formation_proto::PolicyOutput::Wheels,
                 v_train: 0.5,
             }
@@ -739,6 +743,7 @@ mod tests {
                 image: OccupancySpec::PAPER,
                 aux: formation_proto::AuxLayout::PAPER,
                 ranges: Some(RangeInput::new(self.sectors, 3.0).expect("valid")),
+                neighbours: None,
                 output: formation_proto::PolicyOutput::Wheels,
                 v_train: 0.7,
             }
@@ -1061,6 +1066,7 @@ mod tests {
                 image: OccupancySpec::PAPER,
                 aux: formation_proto::AuxLayout::PAPER,
                 ranges: None,
+                neighbours: None,
                 output: formation_proto::PolicyOutput::Wheels,
                 v_train: 0.7,
             }
