@@ -89,8 +89,9 @@ pub struct TrainOptions {
     pub response_weight: Option<f64>,
 }
 
-/// The policy networks the trainer can build (`formation_trainer.model.ARCHITECTURES`). Both take
-/// the same inputs and give the same outputs, so an agent runs either without knowing which.
+/// The policy networks the trainer can build (`formation_trainer.model.ARCHITECTURES`). Each
+/// declares its inputs and output in its metadata, so an agent runs any of them without knowing
+/// which.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Architecture {
     /// The paper's CNN, with its exact layer sizes (a 32-unit head).
@@ -101,14 +102,19 @@ pub enum Architecture {
     /// The paper's convolutions with the wide network's head (two 256-unit layers): about 1.2
     /// times the paper's arithmetic, and a head that can hold many neighbours at once.
     WideHead,
+    /// A network that sums one learned term per neighbour the robot detects (issue 34), for a
+    /// dataset that carries the `neighbours` input; it leaves the image unused. A few thousand
+    /// multiply-adds.
+    Pair,
 }
 
 impl Architecture {
     /// Every architecture, in the order `--help` lists them.
-    pub const ALL: [Architecture; 3] = [
+    pub const ALL: [Architecture; 4] = [
         Architecture::Paper,
         Architecture::Wide,
         Architecture::WideHead,
+        Architecture::Pair,
     ];
 
     /// The name the trainer and the command line use.
@@ -117,6 +123,7 @@ impl Architecture {
             Architecture::Paper => "paper",
             Architecture::Wide => "wide",
             Architecture::WideHead => "wide-head",
+            Architecture::Pair => "pair",
         }
     }
 }
@@ -706,7 +713,7 @@ mod tests {
         }
         let err = "wdie".parse::<Architecture>().unwrap_err();
         assert!(
-            err.contains("\"wdie\"") && err.contains("paper, wide, wide-head"),
+            err.contains("\"wdie\"") && err.contains("paper, wide, wide-head, pair"),
             "{err}"
         );
         let plain: Vec<String> = trainer_args(&opts())

@@ -12,8 +12,8 @@ from pathlib import Path
 
 MISSING_DEPENDENCY_EXIT = 3
 USAGE_EXIT = 2
-#: The keys of ``model.ARCHITECTURES``, spelled out so that ``--help`` works without PyTorch.
-ARCHITECTURE_NAMES = ["paper", "wide", "wide-head"]
+#: ``model.ARCHITECTURE_NAMES``, spelled out so that ``--help`` works without PyTorch.
+ARCHITECTURE_NAMES = ["paper", "wide", "wide-head", "pair"]
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -40,7 +40,10 @@ def _parser() -> argparse.ArgumentParser:
     train.add_argument(
         "--architecture",
         choices=ARCHITECTURE_NAMES,
-        help="the network: paper (the paper's CNN, the default) or wide (for teams); a warm start keeps its own",
+        help="the network: paper (the paper's CNN), wide or wide-head (CNNs for teams), or pair (sums one learned "
+        "term per neighbour the robot detects in its own scan; needs a dataset collected with --neighbours K and "
+        "--output formation_velocity). Default: pair for a dataset that declares neighbours, else paper; "
+        "a warm start keeps its own",
     )
     train.add_argument(
         "--mirror",
@@ -126,21 +129,30 @@ def _export(args) -> None:
     model = train.model_from_checkpoint(checkpoint)
     size = model.size_px
     declared = export.declared_ranges(checkpoint["metadata"])
-    ranges = None
+    declared_neighbours = export.declared_neighbours(checkpoint["metadata"])
+    ranges = neighbours = None
     if args.data:
         samples = dataset.load(args.data)
         if samples.size_px != size:
             raise train.TrainError(f"the data has {samples.size_px} px images, the checkpoint {size} px")
-        if samples.range_input != declared:
+        # A pair network takes no ranges, whether or not its data holds them.
+        if not model.neighbour_slots and samples.range_input != declared:
             raise train.TrainError(
                 f"the data's range input is {samples.range_input or 'none'}, the checkpoint's {declared or 'none'}: "
                 "check parity on the data the model was trained on"
+            )
+        if model.neighbour_slots and samples.neighbour_input != declared_neighbours:
+            raise train.TrainError(
+                f"the data's neighbour input is {samples.neighbour_input or 'none'}, the checkpoint's "
+                f"{declared_neighbours}: check parity on the data the model was trained on"
             )
         pick = np.random.default_rng(args.seed).permutation(len(samples))[: train.PARITY_SAMPLES]
         occupancy = samples.occupancy[pick][:, None].astype(np.float32)
         aux = samples.aux[pick]
         if declared:
             ranges = samples.ranges[pick]
+        if model.neighbour_slots:
+            neighbours = samples.neighbours[pick]
     else:
         rng = np.random.default_rng(args.seed)
         occupancy = (rng.random((train.PARITY_SAMPLES, 1, size, size)) < 0.02).astype(np.float32)
@@ -148,13 +160,38 @@ def _export(args) -> None:
         aux = aux.astype(np.float32)
         if declared:
             ranges = rng.uniform(0.0, declared.clip, (train.PARITY_SAMPLES, declared.sectors)).astype(np.float32)
+        if model.neighbour_slots:
+            neighbours = random_neighbours(rng, train.PARITY_SAMPLES, model.neighbour_slots)
     output = checkpoint["metadata"].get("formation.output", export.OUTPUT_NAME)
     export.export_onnx(model, args.out, checkpoint["metadata"], output=output)
-    parity = export.check_parity(model, args.out, occupancy, aux, output=output, ranges=ranges)
+    parity = export.check_parity(model, args.out, occupancy, aux, output=output, ranges=ranges, neighbours=neighbours)
     if args.parity_out:
         n = train.PARITY_FILE_SAMPLES
-        export.write_parity_file(args.parity_out, model, occupancy[:n], aux[:n], ranges=None if ranges is None else ranges[:n])
+        export.write_parity_file(
+            args.parity_out, model, occupancy[:n], aux[:n], ranges=None if ranges is None else ranges[:n],
+            neighbours=None if neighbours is None else neighbours[:n],
+        )
     print(f"wrote {args.out} (onnxruntime parity {parity:.2e} on {len(aux)} samples)", flush=True)
+
+
+def random_neighbours(rng, samples: int, slots: int):
+    """``samples`` random neighbour inputs [samples, slots, 4] laid out as collection lays them
+    out: a random number of detections at 0.5-3 d* in random directions, the held ones first,
+    each group nearest first, then empty slots of zeros."""
+    import numpy as np
+
+    out = np.zeros((samples, slots, 4), dtype=np.float32)
+    for row in out:
+        count = int(rng.integers(0, slots + 1))
+        distance = rng.uniform(0.5, 3.0, count)
+        bearing = rng.uniform(-np.pi, np.pi, count)
+        held = rng.random(count) < 0.5
+        order = np.lexsort((distance, ~held))
+        row[:count, 0] = (distance * np.cos(bearing))[order]
+        row[:count, 1] = (distance * np.sin(bearing))[order]
+        row[:count, 2] = held[order]
+        row[:count, 3] = 1.0
+    return out
 
 
 def _d_star_range(text: str) -> tuple[float, float]:

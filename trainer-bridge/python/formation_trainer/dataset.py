@@ -7,7 +7,12 @@ unknown version, shapes that disagree with the manifest, datasets that cannot be
 
 Format version 1 holds no ranges; version 2 declares the scan's ranges in the manifest
 (``"ranges": "sectors=K,clip=C"``, :class:`RangeInput`) and each shard holds ``ranges`` f32
-``[N, K]`` beside the image. Both are read; :attr:`Samples.ranges` is ``[N, 0]`` for version 1.
+``[N, K]`` beside the image. Version 3 declares the neighbours each robot detects in its own scan
+(``"neighbours": "slots=K,threshold=T,nearest=M"``, :class:`NeighbourInput`), with or without
+ranges, and each shard holds ``neighbours`` f32 ``[N, K, 4]``: per slot ``(x / d*, y / d*, held,
+present)``, held slots first, nearest first, empty slots all zero. Every version is read;
+:attr:`Samples.ranges` is ``[N, 0]`` without ranges and :attr:`Samples.neighbours` ``[N, 0, 4]``
+without neighbours.
 """
 
 from __future__ import annotations
@@ -22,11 +27,14 @@ import numpy as np
 from safetensors.numpy import load_file
 
 FORMAT = "formation-dataset"
-#: The newest layout version: a dataset whose samples carry their scan's ranges.
+#: The layout version of a dataset whose samples carry their scan's ranges (and no neighbours).
 VERSION = 2
 #: The layout of a dataset without ranges (every dataset written before ranges).
 VERSION_WITHOUT_RANGES = 1
-VERSIONS = (VERSION_WITHOUT_RANGES, VERSION)
+#: The newest layout version: a dataset whose samples carry the neighbours each robot detects in
+#: its own scan (with or without ranges).
+VERSION_WITH_NEIGHBOURS = 3
+VERSIONS = (VERSION_WITHOUT_RANGES, VERSION, VERSION_WITH_NEIGHBOURS)
 MANIFEST = "manifest.json"
 RECOLLECT = "delete the dataset and re-run `formation collect`"
 
@@ -102,6 +110,70 @@ class RangeInput:
         return [(self.sectors - s) % self.sectors for s in range(self.sectors)]
 
 
+#: The bounds of ``formation_proto::NeighbourInput``.
+MIN_SLOTS, MAX_SLOTS, MAX_THRESHOLD, MAX_NEAREST = 1, 64, 4.0, 8
+#: Numbers per neighbour slot: ``x / d*``, ``y / d*``, ``held``, ``present``.
+NEIGHBOUR_FEATURES = 4
+_NEIGHBOUR_SYNTAX = 'write "slots=K,threshold=T,nearest=M"'
+
+
+def f64_text(value: float) -> str:
+    """``value`` written as Rust's ``Display`` writes an ``f64``: the shortest decimal that reads
+    back to the same number, no exponent, no ``.0`` (``1``, ``1.3``)."""
+    return np.format_float_positional(np.float64(value), unique=True, trim="-")
+
+
+@dataclass(frozen=True)
+class NeighbourInput:
+    """The neighbours a robot detects in its own scan, as a model takes them beside its image
+    (``formation_proto::NeighbourInput``): ``slots`` slots of ``(x / d*, y / d*, held, present)``,
+    ``held`` by the Gabriel rule at witness ratio ``threshold`` plus the ``nearest`` nearest."""
+
+    slots: int
+    threshold: float
+    nearest: int
+
+    def __post_init__(self):
+        if not MIN_SLOTS <= self.slots <= MAX_SLOTS:
+            raise ValueError(f"neighbour input slots = {self.slots} is out of range: {MIN_SLOTS} to {MAX_SLOTS}")
+        if not 1.0 <= float(self.threshold) <= MAX_THRESHOLD:
+            raise ValueError(f"neighbour input threshold = {self.threshold} is out of range: 1 to {MAX_THRESHOLD:g}")
+        if not 0 <= self.nearest <= MAX_NEAREST:
+            raise ValueError(f"neighbour input nearest = {self.nearest} is out of range: 0 to {MAX_NEAREST}")
+        object.__setattr__(self, "threshold", float(self.threshold))
+
+    @staticmethod
+    def parse(text: str) -> "NeighbourInput":
+        """Reads ``slots=K,threshold=T,nearest=M`` (any order, spaces around the keys and values
+        allowed), as ``NeighbourInput::parse``."""
+        values = {}
+        for part in str(text).split(","):
+            key, sep, value = part.partition("=")
+            key, value = key.strip(), value.strip()
+            if not sep or key not in ("slots", "threshold", "nearest") or key in values:
+                raise ValueError(f"{text!r} is not a neighbour input: {_NEIGHBOUR_SYNTAX}")
+            values[key] = value
+        integer = re.compile(r"\+?[0-9]+")
+        if (
+            set(values) != {"slots", "threshold", "nearest"}
+            or not integer.fullmatch(values["slots"])
+            or not integer.fullmatch(values["nearest"])
+        ):
+            raise ValueError(f"{text!r} is not a neighbour input: {_NEIGHBOUR_SYNTAX}")
+        try:
+            threshold = float(values["threshold"])
+        except ValueError:
+            raise ValueError(f"{text!r} is not a neighbour input: {_NEIGHBOUR_SYNTAX}") from None
+        return NeighbourInput(int(values["slots"]), threshold, int(values["nearest"]))
+
+    def text(self) -> str:
+        """``slots=K,threshold=T,nearest=M``, exactly as ``NeighbourInput``'s ``Display`` writes it."""
+        return f"slots={self.slots},threshold={f64_text(self.threshold)},nearest={self.nearest}"
+
+    def __str__(self) -> str:
+        return self.text()
+
+
 @dataclass(frozen=True)
 class Manifest:
     """A validated ``manifest.json``."""
@@ -117,8 +189,11 @@ class Manifest:
     samples: int = 0
     version: int = VERSION_WITHOUT_RANGES
     ranges: RangeInput | None = None
+    #: The neighbours each sample carries (version 3), or None.
+    neighbours: NeighbourInput | None = None
     #: The law that labelled the samples (``--label-wheel-accel``, ``--unshaped-labels``,
-    #: ``--label-pair-band``), ``{}`` for the expert's default (no ``labels`` key).
+    #: ``--label-pair-band``, ``--own-scan-labels``: ``"own_scan": true``), ``{}`` for the
+    #: expert's default (no ``labels`` key). Read as it is: any key is kept and compared.
     labels: dict = field(default_factory=dict)
 
     @property
@@ -137,7 +212,7 @@ def _check_format_and_version(path: Path, fmt, version) -> None:
     if str(version) not in {str(v) for v in VERSIONS}:
         raise DatasetError(
             f"{path} has dataset format version {version}, but this trainer reads versions "
-            f"{VERSION_WITHOUT_RANGES} and {VERSION}: "
+            f"{', '.join(str(v) for v in VERSIONS[:-1])} and {VERSIONS[-1]}: "
             "re-run `formation collect` with this build (or use the formation build that wrote it)"
         )
 
@@ -164,7 +239,20 @@ def read_manifest(directory: str | Path) -> Manifest:
             ranges = RangeInput.parse(raw["ranges"])
         except ValueError as e:
             raise DatasetError(f"{path} is not a valid dataset manifest (its `ranges`: {e}): {RECOLLECT}") from e
-    if (ranges is not None) != (version == VERSION):
+    neighbours = None
+    if raw.get("neighbours") is not None:
+        try:
+            neighbours = NeighbourInput.parse(raw["neighbours"])
+        except ValueError as e:
+            raise DatasetError(f"{path} is not a valid dataset manifest (its `neighbours`: {e}): {RECOLLECT}") from e
+    if (neighbours is not None) != (version == VERSION_WITH_NEIGHBOURS):
+        declared = f'declares neighbours "{neighbours}"' if neighbours is not None else "declares no `neighbours`"
+        raise DatasetError(
+            f"{path} is dataset format version {version} but {declared}: versions {VERSION_WITHOUT_RANGES} and "
+            f"{VERSION} hold no neighbours and version {VERSION_WITH_NEIGHBOURS} declares them; the manifest was "
+            "edited or damaged: restore it, or re-run `formation collect`"
+        )
+    if neighbours is None and (ranges is not None) != (version == VERSION):
         declared = f'declares ranges "{ranges}"' if ranges is not None else "declares no `ranges`"
         raise DatasetError(
             f"{path} is dataset format version {version} but {declared}: version {VERSION_WITHOUT_RANGES} "
@@ -187,6 +275,7 @@ def read_manifest(directory: str | Path) -> Manifest:
             samples=int(raw["samples"]),
             version=version,
             ranges=ranges,
+            neighbours=neighbours,
             labels=dict(raw.get("labels") or {}),
         )
     except (KeyError, TypeError, ValueError) as e:
@@ -229,16 +318,28 @@ def _read_shard_header(path: Path) -> tuple[dict, int]:
     return header, expected
 
 
-def _tensors(sectors: int) -> dict:
-    """The shard tensors of a dataset whose ranges have ``sectors`` sectors (0: none)."""
-    if not sectors:
-        return _TENSORS
-    return {**_TENSORS, "ranges": (np.float32, lambda s: (sectors,))}
+def _tensors(sectors: int, slots: int = 0) -> dict:
+    """The shard tensors of a dataset whose ranges have ``sectors`` sectors and whose neighbours
+    ``slots`` slots (0: none)."""
+    tensors = dict(_TENSORS)
+    if sectors:
+        tensors["ranges"] = (np.float32, lambda s: (sectors,))
+    if slots:
+        tensors["neighbours"] = (np.float32, lambda s: (slots, NEIGHBOUR_FEATURES))
+    return tensors
 
 
-def check_shard(path: Path, entry: dict, size_px: int, ranges: RangeInput | None = None, version: int | None = None) -> None:
+def check_shard(
+    path: Path,
+    entry: dict,
+    size_px: int,
+    ranges: RangeInput | None = None,
+    version: int | None = None,
+    neighbours: NeighbourInput | None = None,
+) -> None:
     """Validates one shard's header against its manifest entry without reading the samples: its
-    version (``version``, the manifest's, when given) and its tensors, ``ranges`` iff declared."""
+    version (``version``, the manifest's, when given) and its tensors, ``ranges`` iff declared and
+    ``neighbours`` iff declared."""
     header, _ = _read_shard_header(path)
     meta = header.get("__metadata__") or {}
     _check_format_and_version(path, meta.get("format"), meta.get("version"))
@@ -248,8 +349,12 @@ def check_shard(path: Path, entry: dict, size_px: int, ranges: RangeInput | None
         )
     if ranges is None and "ranges" in header:
         raise DatasetError(f"{path} is corrupt (a `ranges` tensor, but the manifest declares no ranges): {RECOLLECT}")
+    if neighbours is None and "neighbours" in header:
+        raise DatasetError(
+            f"{path} is corrupt (a `neighbours` tensor, but the manifest declares no neighbours): {RECOLLECT}"
+        )
     n = entry["samples"]
-    for name, (dtype, tail) in _tensors(ranges.sectors if ranges else 0).items():
+    for name, (dtype, tail) in _tensors(ranges.sectors if ranges else 0, neighbours.slots if neighbours else 0).items():
         info = header.get(name)
         if info is None:
             raise DatasetError(f"{path} is corrupt (no `{name}` tensor): {RECOLLECT}")
@@ -266,9 +371,16 @@ def check_shard(path: Path, entry: dict, size_px: int, ranges: RangeInput | None
         )
 
 
-def load_shard(path: Path, entry: dict, size_px: int, ranges: RangeInput | None = None, version: int | None = None) -> dict[str, np.ndarray]:
+def load_shard(
+    path: Path,
+    entry: dict,
+    size_px: int,
+    ranges: RangeInput | None = None,
+    version: int | None = None,
+    neighbours: NeighbourInput | None = None,
+) -> dict[str, np.ndarray]:
     """Validates and loads one shard's tensors."""
-    check_shard(path, entry, size_px, ranges, version)
+    check_shard(path, entry, size_px, ranges, version, neighbours)
     try:
         return load_file(str(path))
     except Exception as e:  # safetensors raises its own error types
@@ -288,10 +400,13 @@ class Samples:
     source: np.ndarray  # int32 [N]: index into `manifests`
     manifests: list
     ranges: np.ndarray | None = None  # float32 [N, K]; [N, 0] without ranges
+    neighbours: np.ndarray | None = None  # float32 [N, K, 4]; [N, 0, 4] without neighbours
 
     def __post_init__(self):
         if self.ranges is None:
             self.ranges = np.zeros((len(self), 0), dtype=np.float32)
+        if self.neighbours is None:
+            self.neighbours = np.zeros((len(self), 0, NEIGHBOUR_FEATURES), dtype=np.float32)
 
     def __len__(self) -> int:
         return int(self.robot.shape[0])
@@ -304,6 +419,11 @@ class Samples:
     def range_input(self) -> RangeInput | None:
         """The ranges every sample carries (shared by every dataset), or None."""
         return self.manifests[0].ranges
+
+    @property
+    def neighbour_input(self) -> NeighbourInput | None:
+        """The neighbours every sample carries (shared by every dataset), or None."""
+        return self.manifests[0].neighbours
 
     @property
     def lidar(self) -> dict:
@@ -351,6 +471,7 @@ def _check_compatible(first: Manifest, other: Manifest) -> None:
         ("lidar", _sensor(first.lidar), _sensor(other.lidar)),
         ("v_train", first.v_train, other.v_train),
         ("range input", first.ranges, other.ranges),
+        ("neighbour input", first.neighbours, other.neighbours),
         ("label law", first.labels or "the expert's default", other.labels or "the expert's default"),
     ):
         if a != b:
@@ -358,6 +479,7 @@ def _check_compatible(first: Manifest, other: Manifest) -> None:
                 f"datasets {first.directory} and {other.directory} cannot be trained together: "
                 f"their {name} differ ({a} vs {b}); train on datasets collected with the same settings"
                 + (" (the same `formation collect` range input)" if name == "range input" else "")
+                + (" (the same `formation collect --neighbours` input)" if name == "neighbour input" else "")
             )
 
 
@@ -378,15 +500,16 @@ def load(directories) -> Samples:
     # samples, so a dataset of more than half the machine's memory still loads.
     for m in manifests:
         for entry in m.shards:
-            check_shard(m.directory / entry["file"], entry, m.size_px, m.ranges, m.version)
+            check_shard(m.directory / entry["file"], entry, m.size_px, m.ranges, m.version, m.neighbours)
     size_px = manifests[0].size_px
-    tensors_of = _tensors(manifests[0].ranges.sectors if manifests[0].ranges else 0)
+    first = manifests[0]
+    tensors_of = _tensors(first.ranges.sectors if first.ranges else 0, first.neighbours.slots if first.neighbours else 0)
     arrays = {name: np.empty((total, *tail(size_px)), dtype) for name, (dtype, tail) in tensors_of.items()}
     source = np.empty(total, dtype=np.int32)
     start = 0
     for index, m in enumerate(manifests):
         for entry in m.shards:
-            tensors = load_shard(m.directory / entry["file"], entry, m.size_px, m.ranges, m.version)
+            tensors = load_shard(m.directory / entry["file"], entry, m.size_px, m.ranges, m.version, m.neighbours)
             end = start + entry["samples"]
             for name in tensors_of:
                 arrays[name][start:end] = tensors[name]

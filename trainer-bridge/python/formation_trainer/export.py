@@ -2,7 +2,11 @@
 
 The exported graph has inputs ``occupancy`` f32 [B, 1, S, S] and ``aux`` f32 [B, 2], and for a model
 with ranges a third, ``ranges`` f32 [B, K], declared by ``formation.ranges = "sectors=K,clip=C"``
-(the text of ``formation_proto::RangeInput``'s ``Display``); one output f32 [B, 2] named as the
+(the text of ``formation_proto::RangeInput``'s ``Display``); a pair network
+(:class:`~formation_trainer.model.PairNet`) has, beside the first two, ``neighbours`` f32
+[B, K, 4], declared by ``formation.neighbours = "slots=K,threshold=T,nearest=M"`` (the text of
+``formation_proto::NeighbourInput``'s ``Display``, as the dataset declared it) and answers a
+``formation_velocity``; one output f32 [B, 2] named as the
 model's ``formation.output`` metadata declares it (``wheels``, the default, or
 ``formation_velocity``), with a dynamic batch B; and it carries ``formation.*`` metadata_props
 (all strings) that the Rust ``formation_onnx`` crate validates against the agent's sensor. After
@@ -25,8 +29,8 @@ import numpy as np
 import torch
 
 from . import CREATED_BY
-from .dataset import RangeInput
-from .model import PolicyNet
+from .dataset import NeighbourInput, RangeInput
+from .model import AUX_NAMES, PairNet, PolicyNet
 
 MODEL_FORMAT = "formation-policy/1"
 INPUT_NAMES = ("occupancy", "aux")
@@ -34,8 +38,12 @@ INPUT_NAMES = ("occupancy", "aux")
 RANGE_INPUT_NAMES = ("occupancy", "aux", "ranges")
 #: The metadata key declaring the range input.
 RANGES_KEY = "formation.ranges"
+#: The inputs of a model that takes the detected neighbours.
+NEIGHBOUR_INPUT_NAMES = ("occupancy", "aux", "neighbours")
+#: The metadata key declaring the neighbour input.
+NEIGHBOURS_KEY = "formation.neighbours"
 #: The scalars of the ``aux`` input, in order (``formation.aux``): what the dataset stores.
-AUX_LAYOUT = "delta_phi,d_star"
+AUX_LAYOUT = ",".join(AUX_NAMES)
 OUTPUT_NAME = "wheels"
 #: The outputs a model may declare (``formation.output``), each also its tensor's name.
 OUTPUT_NAMES = ("wheels", "formation_velocity")
@@ -68,9 +76,11 @@ def model_metadata(
     dagger_iteration: int,
     extra: dict | None = None,
     ranges: RangeInput | None = None,
+    neighbours: NeighbourInput | None = None,
 ) -> dict[str, str]:
     """The ``formation.*`` metadata_props of a model (all values strings); ``ranges``, the data's
-    range input, becomes ``formation.ranges``."""
+    range input, becomes ``formation.ranges``, and ``neighbours``, the data's neighbour input,
+    ``formation.neighbours``."""
     meta = {
         "formation.format": MODEL_FORMAT,
         "formation.occupancy.size_px": str(int(occupancy["size_px"])),
@@ -95,6 +105,8 @@ def model_metadata(
         meta["formation.occupancy.d_star_ref_m"] = number_text(occupancy["d_star_ref_m"])
     if ranges is not None:
         meta[RANGES_KEY] = ranges.text()
+    if neighbours is not None:
+        meta[NEIGHBOURS_KEY] = neighbours.text()
     for key, value in (extra or {}).items():
         meta.setdefault(f"formation.{key}", str(value))
     return meta
@@ -119,11 +131,19 @@ def declared_ranges(metadata: dict[str, str]) -> RangeInput | None:
     return None if text is None else RangeInput.parse(text)
 
 
-def export_onnx(model: PolicyNet, path: str | Path, metadata: dict[str, str], output: str = OUTPUT_NAME) -> None:
+def declared_neighbours(metadata: dict[str, str]) -> NeighbourInput | None:
+    """The neighbour input ``formation.neighbours`` declares, or None."""
+    text = metadata.get(NEIGHBOURS_KEY)
+    return None if text is None else NeighbourInput.parse(text)
+
+
+def export_onnx(model: PolicyNet | PairNet, path: str | Path, metadata: dict[str, str], output: str = OUTPUT_NAME) -> None:
     """Exports ``model`` (on CPU, eval mode) to ``path`` atomically, with ``metadata`` as metadata_props
     and its one output named ``output`` (which a model other than ``wheels`` declares in
     ``formation.output``). A model with ranges has the third input ``ranges`` [B, K], which
-    ``metadata`` must declare with K sectors."""
+    ``metadata`` must declare with K sectors; a pair network the third input ``neighbours``
+    [B, K, 4], which ``metadata`` must declare with K slots. The image stays an input of a pair
+    network, which does not use it (the graph keeps it)."""
     if output not in OUTPUT_NAMES:
         raise ValueError(f"output must be one of {OUTPUT_NAMES}, got {output!r}")
     if metadata.get("formation.output", OUTPUT_NAME) != output:
@@ -134,7 +154,15 @@ def export_onnx(model: PolicyNet, path: str | Path, metadata: dict[str, str], ou
             f"metadata declares {RANGES_KEY} = {metadata.get(RANGES_KEY)!r}, "
             f"the network takes {model.range_sectors or 'no'} range sectors"
         )
-    input_names = RANGE_INPUT_NAMES if ranges else INPUT_NAMES
+    neighbours = declared_neighbours(metadata)
+    if (neighbours.slots if neighbours else None) != model.neighbour_slots:
+        raise ValueError(
+            f"metadata declares {NEIGHBOURS_KEY} = {metadata.get(NEIGHBOURS_KEY)!r}, "
+            f"the network takes {model.neighbour_slots or 'no'} neighbour slots"
+        )
+    if ranges and neighbours:
+        raise ValueError("no network of this trainer takes both ranges and neighbours")
+    input_names = NEIGHBOUR_INPUT_NAMES if neighbours else RANGE_INPUT_NAMES if ranges else INPUT_NAMES
     import onnx
 
     path = Path(path)
@@ -148,6 +176,9 @@ def export_onnx(model: PolicyNet, path: str | Path, metadata: dict[str, str], ou
     if ranges:
         example = (*example, torch.zeros(2, ranges.sectors))
         dynamic["ranges"] = {0: batch}
+    if neighbours:
+        example = (*example, torch.zeros(2, neighbours.slots, 4))
+        dynamic["neighbours"] = {0: batch}
     try:
         with _quiet_exporter():
             torch.onnx.export(
@@ -176,16 +207,25 @@ def export_onnx(model: PolicyNet, path: str | Path, metadata: dict[str, str], ou
         temp.unlink(missing_ok=True)
 
 
-def torch_outputs(model: PolicyNet, occupancy: np.ndarray, aux: np.ndarray, ranges: np.ndarray | None = None) -> np.ndarray:
-    """The model's outputs for float32 inputs, on CPU."""
+def torch_outputs(
+    model: PolicyNet | PairNet,
+    occupancy: np.ndarray,
+    aux: np.ndarray,
+    ranges: np.ndarray | None = None,
+    neighbours: np.ndarray | None = None,
+) -> np.ndarray:
+    """The model's outputs for float32 inputs, on CPU (its third input, ranges or neighbours,
+    where it takes one)."""
     model = model.to("cpu").eval()
     with torch.no_grad():
-        extra = () if ranges is None else (torch.from_numpy(ranges),)
+        third = neighbours if neighbours is not None else ranges
+        extra = () if third is None else (torch.from_numpy(third),)
         return model(torch.from_numpy(occupancy), torch.from_numpy(aux), *extra).numpy()
 
 
-def _inputs(model: PolicyNet, occupancy, aux, ranges):
-    """The inputs as contiguous float32 arrays; ``ranges`` None for a model without them."""
+def _inputs(model: PolicyNet | PairNet, occupancy, aux, ranges, neighbours=None):
+    """The inputs as contiguous float32 arrays; ``ranges`` and ``neighbours`` None for a model
+    without them."""
     occupancy = np.ascontiguousarray(occupancy, dtype=np.float32)
     aux = np.ascontiguousarray(aux, dtype=np.float32)
     if model.range_sectors:
@@ -194,17 +234,24 @@ def _inputs(model: PolicyNet, occupancy, aux, ranges):
         ranges = np.ascontiguousarray(ranges, dtype=np.float32)
     else:
         ranges = None
-    return occupancy, aux, ranges
+    if model.neighbour_slots:
+        if neighbours is None:
+            raise ValueError(f"the model takes neighbours in {model.neighbour_slots} slots: give them")
+        neighbours = np.ascontiguousarray(neighbours, dtype=np.float32)
+    else:
+        neighbours = None
+    return occupancy, aux, ranges, neighbours
 
 
 def check_parity(
-    model: PolicyNet,
+    model: PolicyNet | PairNet,
     onnx_path: str | Path,
     occupancy: np.ndarray,
     aux: np.ndarray,
     tolerance: float = PARITY_TOLERANCE,
     output: str = OUTPUT_NAME,
     ranges: np.ndarray | None = None,
+    neighbours: np.ndarray | None = None,
 ) -> float:
     """Runs the same inputs through torch and onnxruntime; returns the largest |difference|.
 
@@ -212,14 +259,16 @@ def check_parity(
     """
     import onnxruntime as ort
 
-    occupancy, aux, ranges = _inputs(model, occupancy, aux, ranges)
-    expected = torch_outputs(model, occupancy, aux, ranges)
+    occupancy, aux, ranges, neighbours = _inputs(model, occupancy, aux, ranges, neighbours)
+    expected = torch_outputs(model, occupancy, aux, ranges, neighbours)
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     session = ort.InferenceSession(str(onnx_path), options, providers=["CPUExecutionProvider"])
     feeds = {"occupancy": occupancy, "aux": aux}
     if ranges is not None:
         feeds["ranges"] = ranges
+    if neighbours is not None:
+        feeds["neighbours"] = neighbours
     (actual,) = session.run([output], feeds)
     diff = float(np.max(np.abs(actual - expected))) if expected.size else 0.0
     if not diff <= tolerance:
@@ -232,19 +281,21 @@ def check_parity(
 
 def write_parity_file(
     path: str | Path,
-    model: PolicyNet,
+    model: PolicyNet | PairNet,
     occupancy: np.ndarray,
     aux: np.ndarray,
     tolerance: float = PARITY_TOLERANCE,
     ranges: np.ndarray | None = None,
+    neighbours: np.ndarray | None = None,
 ) -> None:
     """Writes inputs and torch outputs as JSON for Rust-side parity tests.
 
     ``{"tolerance", "size_px", "cases": [{"occupancy": [S*S floats, row-major], "aux": [2], "wheels": [2]}]}``;
-    for a model with ranges each case also holds ``"ranges": [K]``.
+    for a model with ranges each case also holds ``"ranges": [K]``, and for a pair network
+    ``"neighbours": [K*4 floats, row-major]`` (``"wheels"`` then holds its formation velocity).
     """
-    occupancy, aux, ranges = _inputs(model, occupancy, aux, ranges)
-    outputs = torch_outputs(model, occupancy, aux, ranges)
+    occupancy, aux, ranges, neighbours = _inputs(model, occupancy, aux, ranges, neighbours)
+    outputs = torch_outputs(model, occupancy, aux, ranges, neighbours)
     cases = [
         {"occupancy": o.reshape(-1).tolist(), "aux": a.tolist(), "wheels": w.tolist()}
         for o, a, w in zip(occupancy, aux, outputs)
@@ -252,6 +303,9 @@ def write_parity_file(
     if ranges is not None:
         for case, r in zip(cases, ranges):
             case["ranges"] = r.tolist()
+    if neighbours is not None:
+        for case, n in zip(cases, neighbours):
+            case["neighbours"] = n.reshape(-1).tolist()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     temp = path.with_name(f".{path.name}.tmp-{os.getpid()}")

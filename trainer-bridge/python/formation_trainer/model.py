@@ -65,6 +65,39 @@ removes the asymmetric part of its error, at twice the arithmetic per image. The
 the output depends on what it is (``output``): wheel speeds swap left and right, a formation
 velocity in the robot's frame negates its sideways part. The ranges reflect with the sectors:
 sector ``s`` (centred on bearing ``2 pi s / K``) becomes sector ``(K - s) % K``.
+
+**The pair network** (:class:`PairNet`, ``architecture="pair"``, issue 34) takes the neighbours
+the robot detects in its own scan, ``neighbours`` [B, K, 4] (``formation.neighbours =
+"slots=K,threshold=T,nearest=M"``: per slot ``(x / d*, y / d*, held, present)``), and answers the
+formation velocity in the robot's frame as a sum of one learned term per neighbour::
+
+    per slot: (a, b) = phi([x, y, r - 1, held])   r = |(x, y)|, phi: Linear(4, 64) SiLU
+                                                                     Linear(64, 64) SiLU
+                                                                     Linear(64, 4)
+              (a, b) = phi's first pair if held, else its second
+              term = (a * e + b * e_left) * present   e = (x, y) / r, e_left = (-y, x) / r
+    f = d* * sum over slots                          -> [B, 2] m/s
+
+That is the structure of the teacher's law (``expert/src/controller.rs`` ``add_pair_term``,
+``expert/src/own_scan.rs``): with ``u = x / d*`` per neighbour, ``f / d* = k * sum over held
+neighbours of 2 (|u|^4 - 1) / |u|^4 * u`` (``k`` the team gain ``k_formation_graph``, 1.0), a
+function of the slots alone, and ``held`` (the
+robot's own Gabriel rule on its detections, computed, not learned) says which terms count. A
+network fitted to the summed label meets a slope ceiling of about 0.3 on small corrections at 16
+robots; one that sums per-neighbour terms reaches 0.8-1.0 (docs/src/training.md). It takes the
+image and aux as every model does; it uses aux's d* and leaves the image and delta_phi unused
+(the exporter keeps an unused input as a graph input). Each term is written along the line to
+its neighbour and across it, so that the teacher's term, ``2 (r^4 - 1) / r^3`` along that line
+and nothing across, is a function of ``r`` alone; ``r - 1`` (the edge's relative error) is
+centred where the law changes sign; and a held neighbour and another get separate outputs of
+the same layers, so that learning which terms count costs nothing. On synthetic neighbour sets
+(the tests'), 300 Adam steps of 256 samples at lr 1e-2 fit the law to a slope of 1.05 in every
+bin of the correction's size, and each choice matters: without the centring the same steps reach
+0.57; with one output for both kinds of neighbour, 400 steps at lr 3e-3 reach 0.05 (0.89 with
+two); a term written as a plain (x, y) vector, with neither, stayed at zero response for 1,500
+steps. Its multiply-adds are ``K * 4,608`` (its layers, once a slot; the few products and sums
+after them are not counted): 73,728 for K = 16, a seventh of the paper network's 525,184.
+The neighbours reflect with ``y -> -y``; the flags and the slots' order stay.
 """
 
 from __future__ import annotations
@@ -97,6 +130,21 @@ ARCHITECTURES: dict[str, tuple[int, tuple[int, ...]]] = {
 #: Features of the range branch.
 RANGE_FEATURES = 64
 
+#: The scalars of the ``aux`` input, in order (``formation.aux``; ``formation_proto::AuxLayout``).
+AUX_NAMES = ("delta_phi", "d_star")
+#: Where d* sits in ``aux``.
+D_STAR_INDEX = AUX_NAMES.index("d_star")
+#: Numbers per neighbour slot: ``x / d*``, ``y / d*``, ``held``, ``present``.
+NEIGHBOUR_FEATURES = 4
+#: The pair network's name (``formation.train.architecture``).
+PAIR_ARCHITECTURE = "pair"
+#: Hidden layers of the pair network's per-neighbour term.
+PAIR_HIDDEN = (64, 64)
+#: The distance [d*] below which a neighbour's direction is not computed (an empty slot's is 0).
+MIN_NEIGHBOUR_DISTANCE = 1e-6
+#: Every network this trainer builds: the CNNs, then the pair network.
+ARCHITECTURE_NAMES = (*ARCHITECTURES, PAIR_ARCHITECTURE)
+
 
 def mirror_ranges(ranges: torch.Tensor) -> torch.Tensor:
     """Reflects ranges [B, K] about the robot's heading axis: sector ``s`` takes sector
@@ -104,20 +152,45 @@ def mirror_ranges(ranges: torch.Tensor) -> torch.Tensor:
     return torch.cat([ranges[:, :1], ranges[:, 1:].flip(1)], dim=1)
 
 
-def mirror_inputs(occupancy: torch.Tensor, aux: torch.Tensor, ranges: torch.Tensor | None = None):
+def mirror_neighbours(neighbours: torch.Tensor) -> torch.Tensor:
+    """Reflects neighbours [B, K, 4] about the robot's heading axis: every ``y / d*`` changes sign;
+    ``x / d*``, the flags and the slots' order stay (the reflection keeps every distance)."""
+    sign = torch.tensor([1.0, -1.0, 1.0, 1.0], dtype=neighbours.dtype, device=neighbours.device)
+    return neighbours * sign
+
+
+def mirror_inputs(
+    occupancy: torch.Tensor,
+    aux: torch.Tensor,
+    ranges: torch.Tensor | None = None,
+    neighbours: torch.Tensor | None = None,
+):
     """Reflects inputs about the robot's heading axis (y -> -y): the image's rows reverse and the
-    heading error delta_phi changes sign; d* stays; the ranges' sectors map ``s -> (K - s) % K``.
-    Returns ``(occupancy, aux)``, or ``(occupancy, aux, ranges)`` when ranges are given. The
-    matching output reflection swaps the left and right wheels."""
+    heading error delta_phi changes sign; d* stays; the ranges' sectors map ``s -> (K - s) % K``;
+    the neighbours' ``y`` changes sign. Returns ``(occupancy, aux)``, followed by the ranges and
+    then the neighbours where they are given. The matching output reflection swaps the left and
+    right wheels (negates a formation velocity's sideways part)."""
     mirrored = (occupancy.flip(2), torch.stack([-aux[:, 0], aux[:, 1]], dim=1))
-    if ranges is None:
-        return mirrored
-    return (*mirrored, mirror_ranges(ranges))
+    if ranges is not None:
+        mirrored = (*mirrored, mirror_ranges(ranges))
+    if neighbours is not None:
+        mirrored = (*mirrored, mirror_neighbours(neighbours))
+    return mirrored
 
 
-def multiply_adds(model: "PolicyNet") -> int:
-    """Multiply-adds of one evaluation of ``model`` on one sample (convolutions and linear layers;
-    a mirror-averaged model evaluates twice per decision)."""
+def mirror_output(output: torch.Tensor, kind: str) -> torch.Tensor:
+    """Reflects a model's output about the robot's heading axis: a formation velocity negates its
+    sideways part, wheel speeds swap left and right."""
+    if kind == "formation_velocity":
+        return output * torch.tensor([1.0, -1.0], dtype=output.dtype, device=output.device)
+    return output.flip(1)
+
+
+def multiply_adds(model: "PolicyNet | PairNet") -> int:
+    """Multiply-adds of one evaluation of ``model`` on one sample (convolutions and linear layers,
+    a linear layer once for each row it maps, so the pair network's once per slot; the pair
+    network's few element-wise products and sums are not counted; a mirror-averaged model
+    evaluates twice per decision)."""
     total = 0
     hooks = []
 
@@ -127,15 +200,19 @@ def multiply_adds(model: "PolicyNet") -> int:
             k = module.in_channels // module.groups * module.kernel_size[0] * module.kernel_size[1]
             total += output[0].numel() * k
         elif isinstance(module, nn.Linear):
-            total += module.in_features * module.out_features
+            total += output.numel() * module.in_features
 
     for module in model.modules():
         if isinstance(module, (nn.Conv2d, nn.Linear)):
             hooks.append(module.register_forward_hook(count))
     try:
         with torch.no_grad():
-            ranges = torch.zeros(1, model.range_sectors) if model.range_sectors else None
-            model.raw(torch.zeros(1, 1, model.size_px, model.size_px), torch.zeros(1, 2), ranges)
+            occupancy, aux = torch.zeros(1, 1, model.size_px, model.size_px), torch.zeros(1, 2)
+            if isinstance(model, PairNet):
+                model.raw(occupancy, aux, torch.zeros(1, model.neighbour_slots, NEIGHBOUR_FEATURES))
+            else:
+                ranges = torch.zeros(1, model.range_sectors) if model.range_sectors else None
+                model.raw(occupancy, aux, ranges)
     finally:
         for hook in hooks:
             hook.remove()
@@ -145,6 +222,9 @@ def multiply_adds(model: "PolicyNet") -> int:
 class PolicyNet(nn.Module):
     """The CNN mapping an occupancy image and (delta_phi, d*), and the scan's ranges where
     ``range_sectors`` is set, to (left, right) wheel speeds (or a formation velocity)."""
+
+    #: A CNN takes no neighbours.
+    neighbour_slots = None
 
     def __init__(
         self,
@@ -207,9 +287,83 @@ class PolicyNet(nn.Module):
         wheels = self.raw(occupancy, aux, ranges)
         if not self.mirror_averaged:
             return wheels
-        reflected = self.raw(*mirror_inputs(occupancy, aux, ranges))
-        if self.output == "formation_velocity":
-            reflected = reflected * torch.tensor([1.0, -1.0], dtype=reflected.dtype, device=reflected.device)
-        else:
-            reflected = reflected.flip(1)
+        reflected = mirror_output(self.raw(*mirror_inputs(occupancy, aux, ranges)), self.output)
         return 0.5 * (wheels + reflected)
+
+
+class PairNet(nn.Module):
+    """The network that sums one learned term per detected neighbour (see the module): inputs
+    ``occupancy`` [B, 1, S, S] (unused), ``aux`` [B, 2] (its d*) and ``neighbours`` [B, K, 4];
+    output the formation velocity [B, 2] in the robot's frame, in m/s."""
+
+    architecture = PAIR_ARCHITECTURE
+    #: The pair network takes no ranges.
+    range_sectors = None
+
+    def __init__(
+        self,
+        slots: int,
+        size_px: int = PAPER_SIZE_PX,
+        mirror_averaged: bool = False,
+        output: str = "formation_velocity",
+        hidden: tuple[int, ...] = PAIR_HIDDEN,
+    ):
+        super().__init__()
+        if output != "formation_velocity":
+            raise ValueError(
+                f"the pair network answers a formation velocity, not {output!r}: train it with --output formation_velocity"
+            )
+        if not isinstance(slots, int) or slots < 1:
+            raise ValueError(f"the pair network needs at least one neighbour slot, got {slots!r}")
+        if size_px < 1:
+            raise ValueError(f"the image side must be at least 1 px, got {size_px}")
+        self.output = output
+        self.size_px = size_px
+        self.mirror_averaged = mirror_averaged
+        self.neighbour_slots = slots
+        self.hidden = tuple(int(h) for h in hidden)
+        layers: list[nn.Module] = []
+        width = NEIGHBOUR_FEATURES
+        for units in self.hidden:
+            layers += [nn.Linear(width, units), nn.SiLU()]
+            width = units
+        layers.append(nn.Linear(width, 4))
+        # The term of one neighbour from (x / d*, y / d*, |(x, y)| / d* - 1, held): its parts
+        # along and across the line to the neighbour, once for a held neighbour, once for another.
+        self.pair_term = nn.Sequential(*layers)
+
+    def terms(self, neighbours: torch.Tensor) -> torch.Tensor:
+        """Each slot's term [B, K, 2] in units of d* (zero for an empty slot)."""
+        if neighbours.dim() != 3 or tuple(neighbours.shape[1:]) != (self.neighbour_slots, NEIGHBOUR_FEATURES):
+            raise ValueError(
+                f"this network takes neighbours [B, {self.neighbour_slots}, {NEIGHBOUR_FEATURES}], "
+                f"got {list(neighbours.shape)}"
+            )
+        x, y = neighbours[..., 0:1], neighbours[..., 1:2]
+        held, present = neighbours[..., 2:3], neighbours[..., 3:4]
+        r = torch.sqrt(x * x + y * y)
+        # One row a slot: on rows the exporter writes each layer as a Gemm that keeps the
+        # parameter's name (a warm start from the .onnx reads them back).
+        rows = torch.cat([x, y, r - 1.0, held], dim=-1).reshape(-1, NEIGHBOUR_FEATURES)
+        both = self.pair_term(rows).reshape(-1, self.neighbour_slots, 4)
+        # The term of a held neighbour and that of one the robot does not hold, chosen by `held`.
+        along_across = held * both[..., 0:2] + (1.0 - held) * both[..., 2:4]
+        # The unit vector to the neighbour and the one a quarter turn to its left (both zero in an
+        # empty slot, where r is zero).
+        safe = torch.clamp(r, min=MIN_NEIGHBOUR_DISTANCE)
+        ux, uy = x / safe, y / safe
+        along, across = along_across[..., 0:1], along_across[..., 1:2]
+        return torch.cat([along * ux - across * uy, along * uy + across * ux], dim=-1) * present
+
+    def raw(self, occupancy: torch.Tensor, aux: torch.Tensor, neighbours: torch.Tensor | None = None) -> torch.Tensor:
+        """The network itself, without the mirror average."""
+        if neighbours is None:
+            raise ValueError(f"this network takes the detected neighbours ({self.neighbour_slots} slots); give them")
+        return self.terms(neighbours).sum(dim=1) * aux[:, D_STAR_INDEX : D_STAR_INDEX + 1]
+
+    def forward(self, occupancy: torch.Tensor, aux: torch.Tensor, neighbours: torch.Tensor | None = None) -> torch.Tensor:
+        velocity = self.raw(occupancy, aux, neighbours)
+        if not self.mirror_averaged:
+            return velocity
+        reflected = self.raw(*mirror_inputs(occupancy, aux, neighbours=neighbours))
+        return 0.5 * (velocity + mirror_output(reflected, self.output))

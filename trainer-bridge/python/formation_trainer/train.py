@@ -24,6 +24,18 @@ the range branch, copies every other weight, and gives the head's first layer ze
 the 64 new features, so the new network starts with exactly the old one's outputs and learns to
 use the ranges from there.
 
+**Neighbours: the pair network.** A dataset whose samples carry the neighbours each robot detects
+in its own scan (``formation collect --neighbours K``, format version 3) trains the pair network
+(:class:`~formation_trainer.model.PairNet`, ``--architecture pair``, which the trainer picks for
+such a dataset when no architecture is named): one learned term per neighbour, summed, times d*.
+It answers a formation velocity (``--output formation_velocity``, which it needs) and is exported
+with the third input ``neighbours`` and ``formation.neighbours``, the dataset's declaration. Its
+training leaves out the samples whose expert wheels saturated (:func:`unsaturated`): their
+formation velocity is the saturated point's, not the law's, and the network fits the law. A
+CNN (``--architecture paper|wide|wide-head``) may still be trained on such a dataset from its
+images; it leaves the neighbours out. A warm start from a pair network needs data with the same
+number of slots. Mirroring negates the neighbours' ``y``.
+
 Validation holds out whole runs (every sample of a run is in the same split: consecutive ticks are
 nearly identical, so a per-sample split would measure memorisation). Images stay uint8 in memory
 and become float per batch. After training, beside ``out`` (``<stem>.onnx``) it writes:
@@ -53,7 +65,7 @@ from torch import nn
 
 from . import dataset as ds
 from . import export
-from .model import RANGE_FEATURES, PolicyNet, mirror_inputs
+from .model import PAIR_ARCHITECTURE, PAIR_HIDDEN, RANGE_FEATURES, PairNet, PolicyNet, mirror_inputs, mirror_output
 
 CHECKPOINT_FORMAT = "formation-checkpoint/1"
 REPORT_PREFIX = "FORMATION_TRAIN_REPORT "
@@ -63,6 +75,8 @@ PARITY_SAMPLES = 64
 PARITY_FILE_SAMPLES = 8
 #: Batch size for evaluation passes (no gradients).
 EVAL_BATCH = 1024
+#: A wheel label within this much [m/s] of the data's largest |wheel label| counts as saturated.
+SATURATION_MARGIN = 1e-3
 
 
 class TrainError(Exception):
@@ -83,7 +97,8 @@ class TrainConfig:
     parity_out: Path | None = None
     # The d* range the model is declared for (its envelope); None: the data's own range.
     d_star_range: tuple[float, float] | None = None
-    # The network (a key of model.ARCHITECTURES); None: the warm start's, else the paper's.
+    # The network (one of model.ARCHITECTURE_NAMES); None: the warm start's, else the pair
+    # network for data with neighbours and the paper's for the rest.
     architecture: str | None = None
     # Use the task's mirror symmetry: mirror half of every batch about the robot's heading axis
     # (see mirror_batch), and make the model average its output over the reflection
@@ -197,11 +212,19 @@ def checkpoint_from_onnx(path: Path) -> dict:
     architecture = meta.get("formation.train.architecture", "paper")
     mirror_averaged = meta.get("formation.policy.mirror_averaged") == "true"
     output = meta.get("formation.output", export.OUTPUT_NAME)
+    neighbour_slots = None
     try:
         size_px = int(meta["formation.occupancy.size_px"])
         ranges = export.declared_ranges(meta)
         range_sectors = ranges.sectors if ranges else None
-        model = PolicyNet(size_px, architecture, mirror_averaged, output, range_sectors)
+        if architecture == PAIR_ARCHITECTURE:
+            neighbours = export.declared_neighbours(meta)
+            if neighbours is None:
+                raise ValueError(f"a pair network without {export.NEIGHBOURS_KEY}")
+            neighbour_slots = neighbours.slots
+            model = PairNet(neighbour_slots, size_px, mirror_averaged, output)
+        else:
+            model = PolicyNet(size_px, architecture, mirror_averaged, output, range_sectors)
     except (KeyError, ValueError) as e:
         raise foreign(f"its metadata does not describe a network this trainer builds ({e})") from e
     weights = {init.name: numpy_helper.to_array(init) for init in graph.graph.initializer}
@@ -219,12 +242,14 @@ def checkpoint_from_onnx(path: Path) -> dict:
         "mirror_averaged": mirror_averaged,
         "output": output,
         "range_sectors": range_sectors,
+        "neighbour_slots": neighbour_slots,
+        "pair_hidden": list(PAIR_HIDDEN) if neighbour_slots else None,
         "model_state": state,
         "metadata": meta,
     }
 
 
-def save_checkpoint(path: Path, model: PolicyNet, optimizer, metadata: dict[str, str]) -> None:
+def save_checkpoint(path: Path, model: PolicyNet | PairNet, optimizer, metadata: dict[str, str]) -> None:
     temp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     torch.save(
         {
@@ -234,6 +259,8 @@ def save_checkpoint(path: Path, model: PolicyNet, optimizer, metadata: dict[str,
             "mirror_averaged": model.mirror_averaged,
             "output": model.output,
             "range_sectors": model.range_sectors,
+            "neighbour_slots": model.neighbour_slots,
+            "pair_hidden": list(model.hidden) if isinstance(model, PairNet) else None,
             "model_state": model.state_dict(),
             "optimizer_state": optimizer.state_dict(),
             "metadata": metadata,
@@ -243,7 +270,7 @@ def save_checkpoint(path: Path, model: PolicyNet, optimizer, metadata: dict[str,
     os.replace(temp, path)
 
 
-def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> PolicyNet:
+def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> PolicyNet | PairNet:
     """A model with the checkpoint's weights; ``size_px`` (if given) must match the checkpoint's."""
     if size_px is not None and checkpoint["size_px"] != size_px:
         raise TrainError(
@@ -252,6 +279,16 @@ def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> Polic
         )
     # Checkpoints from before the architecture choice hold the paper's network, and those from
     # before the mirror average a network without it.
+    if checkpoint.get("architecture") == PAIR_ARCHITECTURE:
+        model = PairNet(
+            checkpoint["neighbour_slots"],
+            checkpoint["size_px"],
+            checkpoint.get("mirror_averaged", False),
+            checkpoint.get("output", "formation_velocity"),
+            tuple(checkpoint.get("pair_hidden") or PAIR_HIDDEN),
+        )
+        model.load_state_dict(checkpoint["model_state"])
+        return model
     model = PolicyNet(
         checkpoint["size_px"],
         checkpoint.get("architecture", "paper"),
@@ -290,16 +327,34 @@ def add_range_branch(model: PolicyNet, sectors: int) -> PolicyNet:
     return widened
 
 
-def _apply(model, occupancy: torch.Tensor, aux: torch.Tensor, ranges: torch.Tensor | None) -> torch.Tensor:
-    """``model`` on a batch, given its ranges only where the data has them."""
+def _apply(
+    model, occupancy: torch.Tensor, aux: torch.Tensor, ranges: torch.Tensor | None, neighbours: torch.Tensor | None = None
+) -> torch.Tensor:
+    """``model`` on a batch, given its third input (ranges or neighbours) only where it takes one."""
+    if neighbours is not None:
+        return model(occupancy, aux, neighbours)
     return model(occupancy, aux) if ranges is None else model(occupancy, aux, ranges)
 
 
 def _batch(tensors: dict, index: torch.Tensor):
-    """The batch ``index``: occupancy [B, 1, S, S] float, aux, ranges (None without), targets."""
+    """The batch ``index``: occupancy [B, 1, S, S] float, aux, ranges and neighbours (None where
+    the model takes none), targets."""
     occupancy = tensors["occupancy"].index_select(0, index).unsqueeze(1).float()
     ranges = tensors["ranges"].index_select(0, index) if "ranges" in tensors else None
-    return occupancy, tensors["aux"].index_select(0, index), ranges, tensors["targets"].index_select(0, index)
+    neighbours = tensors["neighbours"].index_select(0, index) if "neighbours" in tensors else None
+    return occupancy, tensors["aux"].index_select(0, index), ranges, neighbours, tensors["targets"].index_select(0, index)
+
+
+def unsaturated(wheels: np.ndarray, margin: float = SATURATION_MARGIN) -> np.ndarray:
+    """Which samples' expert wheel labels did not saturate: a sample whose larger |wheel label|
+    lies within ``margin`` m/s of the largest in the data was scaled into the wheel limit, so its
+    formation velocity is the saturated point's, not the law's (the manifest does not record the
+    robot's wheel limit; the data's own largest label stands for it, as in the offline probes of
+    docs/measurements/response-ceiling)."""
+    speed = np.abs(np.asarray(wheels, dtype=np.float64)).max(axis=1) if len(wheels) else np.zeros(0)
+    if len(speed) == 0:
+        return np.zeros(0, dtype=bool)
+    return speed < speed.max() - margin
 
 
 def formation_velocity_targets(wheels: np.ndarray, aux: np.ndarray, v_train: float) -> np.ndarray:
@@ -350,6 +405,7 @@ def mirror_batch(
     flip: torch.Tensor,
     output: str = "wheels",
     ranges: torch.Tensor | None = None,
+    neighbours: torch.Tensor | None = None,
 ):
     """Reflects the samples where ``flip`` is true about the robot's heading axis (y -> -y).
 
@@ -358,23 +414,22 @@ def mirror_batch(
     of beams at ``2 pi k / n`` reflects onto itself), the heading error ``delta_phi`` changes sign,
     d* stays, and the expert's turn reverses, which swaps the left and right wheel speeds (for a
     ``formation_velocity`` output: negates its sideways component). The ranges' sector ``s``
-    becomes sector ``(K - s) % K``. Training on both halves doubles the distinct views and builds
-    the symmetry into the policy.
+    becomes sector ``(K - s) % K``; the neighbours' ``y / d*`` changes sign (their flags and
+    order stay). Training on both halves doubles the distinct views and builds the symmetry into
+    the policy.
 
-    Returns ``(occupancy, aux, wheels)``, or ``(occupancy, aux, wheels, ranges)`` when ranges are
-    given.
+    Returns ``(occupancy, aux, wheels)``, followed by the ranges and then the neighbours where they
+    are given.
     """
-    mirrored_occupancy, mirrored_aux, *mirrored_ranges = mirror_inputs(occupancy, aux, ranges)
+    mirrored_occupancy, mirrored_aux, *mirrored_extra = mirror_inputs(occupancy, aux, ranges, neighbours)
     occupancy = torch.where(flip[:, None, None, None], mirrored_occupancy, occupancy)
     aux = torch.where(flip[:, None], mirrored_aux, aux)
-    if output == "formation_velocity":
-        mirrored = wheels * torch.tensor([1.0, -1.0], dtype=wheels.dtype, device=wheels.device)
-    else:
-        mirrored = wheels.flip(1)
-    wheels = torch.where(flip[:, None], mirrored, wheels)
-    if ranges is None:
-        return occupancy, aux, wheels
-    return occupancy, aux, wheels, torch.where(flip[:, None], mirrored_ranges[0], ranges)
+    wheels = torch.where(flip[:, None], mirror_output(wheels, output), wheels)
+    batch = (occupancy, aux, wheels)
+    for original, mirrored in zip((x for x in (ranges, neighbours) if x is not None), mirrored_extra):
+        where = flip.reshape(-1, *([1] * (original.dim() - 1)))
+        batch = (*batch, torch.where(where, mirrored, original))
+    return batch
 
 
 def relative_weights(d_star: np.ndarray, train_idx: np.ndarray) -> np.ndarray:
@@ -394,7 +449,7 @@ def squared_error(prediction: torch.Tensor, wheels: torch.Tensor, weights: torch
     return error if weights is None else error * weights
 
 
-def mean_loss(model: PolicyNet, tensors: dict, indices: torch.Tensor) -> float:
+def mean_loss(model: PolicyNet | PairNet, tensors: dict, indices: torch.Tensor) -> float:
     """Mean squared error over ``indices`` (no gradients), weighted if ``tensors`` has weights."""
     if len(indices) == 0:
         return math.nan
@@ -403,9 +458,9 @@ def mean_loss(model: PolicyNet, tensors: dict, indices: torch.Tensor) -> float:
     with torch.no_grad():
         for start in range(0, len(indices), EVAL_BATCH):
             index = indices[start : start + EVAL_BATCH]
-            occupancy, aux, ranges, wheels = _batch(tensors, index)
+            occupancy, aux, ranges, neighbours, wheels = _batch(tensors, index)
             weights = tensors["weights"].index_select(0, index) if "weights" in tensors else None
-            total += squared_error(_apply(model, occupancy, aux, ranges), wheels, weights).sum().item()
+            total += squared_error(_apply(model, occupancy, aux, ranges, neighbours), wheels, weights).sum().item()
     return total / (2 * len(indices))
 
 
@@ -492,6 +547,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     samples = ds.load(cfg.data)
     data_ranges = samples.range_input
     sectors = data_ranges.sectors if data_ranges else None
+    data_neighbours = samples.neighbour_input
+    data_names = ", ".join(str(d) for d in cfg.data)
     train_idx, val_idx = split_by_episode(samples.episode_keys(), cfg.val_fraction, cfg.seed)
     if cfg.init_from is not None:
         model = model_from_checkpoint(load_checkpoint(cfg.init_from), samples.size_px)
@@ -500,7 +557,15 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
                 f"{cfg.init_from} holds the {model.architecture!r} network, not {cfg.architecture!r}: "
                 f"warm-start from a checkpoint of the same architecture, or train {cfg.architecture!r} from scratch"
             )
-        if model.range_sectors == sectors:
+        if isinstance(model, PairNet):
+            _check_pair_data(data_neighbours, data_names, cfg.output)
+            if model.neighbour_slots != data_neighbours.slots:
+                raise TrainError(
+                    f"{cfg.init_from} takes neighbours in {model.neighbour_slots} slots but the data's are "
+                    f"{data_neighbours}: warm-start from a pair network of the same slots, or collect the data with its"
+                )
+            log(f"warm start from {cfg.init_from}")
+        elif model.range_sectors == sectors:
             log(f"warm start from {cfg.init_from}")
         elif model.range_sectors is None:
             model = add_range_branch(model, sectors)
@@ -519,11 +584,26 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
                 f"{cfg.init_from} takes ranges of {model.range_sectors} sectors but the data's are {data_ranges}: "
                 "warm-start from a model of the same range input, or collect the data with its"
             )
+    elif cfg.architecture == PAIR_ARCHITECTURE or (cfg.architecture is None and data_neighbours is not None):
+        _check_pair_data(data_neighbours, data_names, cfg.output, chosen=cfg.architecture is None)
+        model = PairNet(data_neighbours.slots, samples.size_px)
     else:
         try:
             model = PolicyNet(samples.size_px, cfg.architecture or "paper", range_sectors=sectors)
         except ValueError as e:
             raise TrainError(str(e)) from e
+    pair = isinstance(model, PairNet)
+    if pair:
+        # The pair network fits the law: samples whose wheels saturated are left out.
+        keep = unsaturated(samples.wheels)
+        dropped = int(len(keep) - keep.sum())
+        train_idx, val_idx = train_idx[keep[train_idx]], val_idx[keep[val_idx]]
+        if len(train_idx) == 0:
+            raise TrainError(
+                f"every training sample of {data_names} has saturated expert wheels: collect data whose labels "
+                "the wheel limit does not cut (--unshaped-labels on a team near its formation)"
+            )
+        log(f"left out {dropped} of {len(keep)} samples whose expert wheels saturated (the pair network fits the law)")
     if cfg.mirror:
         model.mirror_averaged = cfg.mirror_average
     # A warm start from a model of the other output keeps its weights and learns the new meaning.
@@ -543,8 +623,12 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         "aux": torch.from_numpy(samples.aux).to(device),
         "targets": torch.from_numpy(targets).to(device),
     }
-    if sectors:
+    # The model's third input, where it takes one: a CNN the data's ranges, the pair network the
+    # data's neighbours (and not the ranges).
+    if model.range_sectors:
         tensors["ranges"] = torch.from_numpy(samples.ranges).to(device)
+    if pair:
+        tensors["neighbours"] = torch.from_numpy(samples.neighbours).to(device)
     weights = None
     if cfg.relative_loss:
         weights = relative_weights(samples.aux[:, 1], train_idx)
@@ -562,7 +646,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     log(
         f"training on {len(samples)} samples ({len(train_idx)} train / {len(val_idx)} validation) "
         f"from {', '.join(str(d) for d in cfg.data)} on {device} ({torch.get_num_threads()} threads); "
-        f"{model.architecture} network{f', ranges {data_ranges}' if data_ranges else ''}{', mirrored' if cfg.mirror else ''}{', mirror-averaged' if model.mirror_averaged else ''}"
+        f"{model.architecture} network{f', ranges {data_ranges}' if model.range_sectors else ''}"
+        f"{f', neighbours {data_neighbours}' if pair else ''}{', mirrored' if cfg.mirror else ''}{', mirror-averaged' if model.mirror_averaged else ''}"
         f"{', loss relative to d*' if cfg.relative_loss else ''}"
         f"{f', loss weighted 1/(|f| + {cfg.response_weight:g})' if cfg.response_weight is not None else ''}"
         f", output {cfg.output}, batch {cfg.batch_size}, lr {cfg.lr:g}, "
@@ -578,14 +663,19 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         total = 0.0
         for start in range(0, len(order), cfg.batch_size):
             index = order[start : start + cfg.batch_size]
-            occupancy, aux, ranges, wheels = _batch(tensors, index)
+            occupancy, aux, ranges, neighbours, wheels = _batch(tensors, index)
             if cfg.mirror:
                 flip = torch.rand(len(aux), generator=shuffle) < 0.5
-                occupancy, aux, wheels, *mirrored = mirror_batch(occupancy, aux, wheels, flip.to(device), cfg.output, ranges)
-                ranges = mirrored[0] if mirrored else None
+                occupancy, aux, wheels, *mirrored = mirror_batch(
+                    occupancy, aux, wheels, flip.to(device), cfg.output, ranges, neighbours
+                )
+                if ranges is not None:
+                    ranges = mirrored.pop(0)
+                if neighbours is not None:
+                    neighbours = mirrored.pop(0)
             weights = tensors["weights"].index_select(0, index) if "weights" in tensors else None
             # The mean over samples and both wheels, as nn.functional.mse_loss computes it.
-            loss = squared_error(_apply(fitted, occupancy, aux, ranges), wheels, weights).mean() / 2
+            loss = squared_error(_apply(fitted, occupancy, aux, ranges, neighbours), wheels, weights).mean() / 2
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
@@ -616,7 +706,8 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         final_val_loss=reported_val,
         samples=len(samples),
         dagger_iteration=samples.max_iteration,
-        ranges=data_ranges,
+        ranges=data_ranges if model.range_sectors else None,
+        neighbours=data_neighbours if pair else None,
         extra={
             "train.batch_size": cfg.batch_size,
             "train.lr": repr(float(cfg.lr)),
@@ -641,12 +732,14 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     pick = np.random.default_rng(cfg.seed).permutation(held_out)[:PARITY_SAMPLES]
     occupancy = samples.occupancy[pick][:, None].astype(np.float32)
     aux = samples.aux[pick]
-    ranges = samples.ranges[pick] if sectors else None
-    parity = export.check_parity(model, out, occupancy, aux, output=cfg.output, ranges=ranges)
+    ranges = samples.ranges[pick] if model.range_sectors else None
+    neighbours = samples.neighbours[pick] if pair else None
+    parity = export.check_parity(model, out, occupancy, aux, output=cfg.output, ranges=ranges, neighbours=neighbours)
     if cfg.parity_out is not None:
         n = PARITY_FILE_SAMPLES
         export.write_parity_file(
-            cfg.parity_out, model, occupancy[:n], aux[:n], ranges=None if ranges is None else ranges[:n]
+            cfg.parity_out, model, occupancy[:n], aux[:n], ranges=None if ranges is None else ranges[:n],
+            neighbours=None if neighbours is None else neighbours[:n],
         )
     log(f"wrote {out} (onnxruntime parity {parity:.2e} on {len(pick)} held-out samples), {paths['checkpoint'].name}, "
         f"{paths['loss_csv'].name}, {paths['loss_png'].name}")
@@ -663,9 +756,26 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
         "dataset_id": samples.dataset_id,
         "parity_max_abs_diff": parity,
         # The range input the model takes (formation.ranges), or None.
-        "ranges": data_ranges.text() if data_ranges else None,
+        "ranges": data_ranges.text() if model.range_sectors else None,
+        # The neighbour input the model takes (formation.neighbours), or None.
+        "neighbours": data_neighbours.text() if pair else None,
         **{name: str(path) for name, path in paths.items()},
     }
+
+
+def _check_pair_data(neighbours, data_names: str, output: str, chosen: bool = False) -> None:
+    """Refuses to train the pair network on data without neighbours, or for a wheels output."""
+    if neighbours is None:
+        raise TrainError(
+            f"the pair network takes the neighbours each robot detects in its own scan, but {data_names} holds none: "
+            "collect the data with `formation collect --neighbours K`, or train a CNN (--architecture paper|wide|wide-head)"
+        )
+    if output != "formation_velocity":
+        why = f"{data_names} declares neighbours ({neighbours}), so the trainer builds the pair network, which" if chosen else "the pair network"
+        raise TrainError(
+            f"{why} answers a formation velocity, not {output!r}: add --output formation_velocity "
+            "(or name a CNN, --architecture wide-head, to train on the images alone)"
+        )
 
 
 def report_line(report: dict) -> str:

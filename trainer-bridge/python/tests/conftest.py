@@ -13,12 +13,79 @@ import numpy as np
 import pytest
 from safetensors.numpy import save_file
 
+#: The expert's team gain, ``ExpertGains::default().k_formation_graph`` in expert/src/controller.rs:
+#: the gain of the law on each robot's own detections (expert/src/own_scan.rs).
+K_FORMATION_GRAPH = 1.0
+
+
+def pair_law(neighbours: np.ndarray, gain: float = K_FORMATION_GRAPH) -> np.ndarray:
+    """The teacher's formation velocity in units of d* from neighbour slots ``[N, K, 4]``:
+    ``f / d* = -k * sum over held j of 2 (|u|^4 - 1) / |u|^3 * (-u / |u|)`` with ``u = x_j / d*``
+    (``add_pair_term`` on ``p_ij = -x_j``, then ``-k`` times the gradient), written here from the
+    formula, not from the trainer."""
+    u = np.asarray(neighbours, dtype=np.float64)[..., :2]
+    held = np.asarray(neighbours, dtype=np.float64)[..., 2] * np.asarray(neighbours, dtype=np.float64)[..., 3]
+    r = np.linalg.norm(u, axis=-1)
+    safe = np.where(r > 0, r, 1.0)
+    magnitude = 2.0 * (safe**4 - 1.0) / safe**3
+    gradient = magnitude[..., None] * (-u / safe[..., None])
+    return (-gain * (held[..., None] * gradient).sum(axis=1)).astype(np.float32)
+
+
+def neighbour_sets(rng: np.random.Generator, samples: int, slots: int) -> np.ndarray:
+    """Random neighbour inputs ``[samples, slots, 4]`` laid out as collection lays them out: 1-6
+    held neighbours near a hexagonal formation at d* (each sample its own jitter, 0.3 % to 15 % of
+    d*, so that small and large corrections both occur), up to 4 others held by nobody at 1.5-3 d*;
+    held slots first, each group nearest first, empty slots all zero."""
+    held_count = rng.integers(1, min(6, slots) + 1, samples)
+    other_count = np.minimum(rng.integers(0, 5, samples), slots - held_count)
+    slot = np.arange(slots)[None, :]
+    held = slot < held_count[:, None]
+    present = slot < (held_count + other_count)[:, None]
+    jitter = np.exp(rng.uniform(np.log(0.003), np.log(0.15), samples))[:, None]
+    hexagon = np.argsort(rng.random((samples, 6)), axis=1)[:, np.minimum(slot[0], 5)] * (np.pi / 3)
+    rotation = rng.uniform(-np.pi, np.pi, samples)[:, None]
+    bearing = np.where(
+        held,
+        rotation + hexagon + rng.normal(0.0, 1.0, (samples, slots)) * jitter,
+        rng.uniform(-np.pi, np.pi, (samples, slots)),
+    )
+    distance = np.where(held, 1.0 + rng.normal(0.0, 1.0, (samples, slots)) * jitter, rng.uniform(1.5, 3.0, (samples, slots)))
+    key = np.where(present, np.where(held, 0.0, 100.0) + distance, 1e9)
+    order = np.argsort(key, axis=1)
+    take = lambda a: np.take_along_axis(a, order, axis=1)
+    out = np.zeros((samples, slots, 4), dtype=np.float32)
+    out[..., 0] = take(np.where(present, distance * np.cos(bearing), 0.0))
+    out[..., 1] = take(np.where(present, distance * np.sin(bearing), 0.0))
+    out[..., 2] = take(held.astype(np.float64))
+    out[..., 3] = take(present.astype(np.float64))
+    return out
+
+
+def wheels_from_formation_velocity(f: np.ndarray, aux: np.ndarray, v_train: float) -> np.ndarray:
+    """The wheel labels at ``v_train`` whose point velocity is ``v_train (cos dphi, sin dphi) + f``
+    (the inverse of ``train.formation_velocity_targets``: ``u = ((L + R) / 2, (R - L) / 2)``)."""
+    delta_phi = aux[:, 0].astype(np.float64)
+    u_x = v_train * np.cos(delta_phi) + f[:, 0]
+    u_y = v_train * np.sin(delta_phi) + f[:, 1]
+    return np.stack([u_x - u_y, u_x + u_y], axis=1).astype(np.float32)
+
 
 def synthetic_arrays(
-    samples: int, size_px: int = 50, seed: int = 0, runs: int = 8, iteration: int = 0, sectors: int = 0, clip: float = 3.0
+    samples: int,
+    size_px: int = 50,
+    seed: int = 0,
+    runs: int = 8,
+    iteration: int = 0,
+    sectors: int = 0,
+    clip: float = 3.0,
+    slots: int = 0,
+    v_train: float = 0.7,
 ):
     """Random sparse images and labels that depend on them (so a model can learn something); with
-    ``sectors``, also ranges in [0, clip] that the labels depend on."""
+    ``sectors``, also ranges in [0, clip] that the labels depend on; with ``slots``, neighbours
+    (:func:`neighbour_sets`) and wheel labels that are the teacher's law on them
+    (:func:`pair_law`) at ``v_train``."""
     rng = np.random.default_rng(seed)
     occupancy = (rng.random((samples, size_px, size_px)) < 0.02).astype(np.uint8)
     aux = np.stack([rng.uniform(-np.pi, np.pi, samples), rng.uniform(0.5, 3.0, samples)], 1).astype(np.float32)
@@ -29,6 +96,11 @@ def synthetic_arrays(
         ranges = np.random.default_rng(seed + 1000).uniform(0.0, clip, (samples, sectors)).astype(np.float32)
         wheels = wheels + 0.05 * np.stack([ranges[:, 1] - ranges[:, -1], ranges[:, 0] - clip / 2], 1)
         extra["ranges"] = ranges
+    if slots:
+        neighbours = neighbour_sets(np.random.default_rng(seed + 2000), samples, slots)
+        f = pair_law(neighbours) * aux[:, 1:2]
+        wheels = wheels_from_formation_velocity(f, aux, v_train)
+        extra["neighbours"] = neighbours
     return extra | {
         "occupancy": occupancy,
         "aux": aux,
@@ -50,16 +122,26 @@ def write_dataset(
     noise_std: float = 0.0,
     d_star_ref_m: float | None = None,
     ranges: str | None = None,
+    neighbours: str | None = None,
+    labels: dict | None = None,
 ) -> Path:
     """Writes a dataset of ``samples`` synthetic samples in shards of ``shard_size``; ``ranges``
-    (``"sectors=K,clip=C"``) makes it a version 2 dataset whose shards hold ``ranges`` [N, K]."""
+    (``"sectors=K,clip=C"``) makes it a version 2 dataset whose shards hold ``ranges`` [N, K];
+    ``neighbours`` (``"slots=K,threshold=T,nearest=M"``) a version 3 dataset (with or without
+    ranges) whose shards hold ``neighbours`` [N, K, 4] and whose wheel labels follow the teacher's
+    law on them; ``labels`` is the manifest's label law."""
     directory.mkdir(parents=True)
     sectors, clip = 0, 3.0
     if ranges is not None:
         fields = dict(part.split("=") for part in ranges.split(","))
         sectors, clip = int(fields["sectors"]), float(fields["clip"])
-    version = 2 if ranges is not None else 1
-    arrays = synthetic_arrays(samples, size_px, seed, iteration=iteration, sectors=sectors, clip=clip)
+    slots = 0
+    if neighbours is not None:
+        slots = int({k.strip(): v for k, v in (part.split("=") for part in neighbours.split(","))}["slots"])
+    version = 3 if neighbours is not None else 2 if ranges is not None else 1
+    arrays = synthetic_arrays(
+        samples, size_px, seed, iteration=iteration, sectors=sectors, clip=clip, slots=slots, v_train=v_train
+    )
     shards = []
     for index, start in enumerate(range(0, samples, shard_size)):
         part = {k: np.ascontiguousarray(v[start : start + shard_size]) for k, v in arrays.items()}
@@ -80,7 +162,9 @@ def write_dataset(
         "scenario": "synthetic",
         "shards": shards,
         "samples": samples,
-    } | ({} if ranges is None else {"ranges": ranges})
+    } | ({} if ranges is None else {"ranges": ranges}) | ({} if neighbours is None else {"neighbours": neighbours}) | (
+        {} if labels is None else {"labels": labels}
+    )
     (directory / "manifest.json").write_text(json.dumps(manifest, indent=2))
     return directory
 

@@ -104,9 +104,9 @@ def test_a_missing_shard_is_reported(make_dataset):
 def test_an_unknown_manifest_version_is_reported(make_dataset):
     directory = make_dataset()
     manifest = json.loads((directory / "manifest.json").read_text())
-    manifest["version"] = 3
+    manifest["version"] = 4
     (directory / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(ds.DatasetError, match="format version 3, but this trainer reads versions 1 and 2"):
+    with pytest.raises(ds.DatasetError, match="format version 4, but this trainer reads versions 1, 2 and 3"):
         ds.load([directory])
 
 

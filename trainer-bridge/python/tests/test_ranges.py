@@ -126,7 +126,9 @@ def test_the_export_command_rebuilds_a_ranges_model(ranged, tmp_path, capsys):
     assert "range input is none, the checkpoint's sectors=12,clip=3" in capsys.readouterr().err
 
 
-def test_warm_starting_a_model_without_ranges_keeps_its_outputs_exactly():
+def test_warm_starting_a_model_without_ranges_keeps_its_outputs_to_rounding():
+    # The new columns are exactly zero, but a wider matrix may be summed in another order by the
+    # BLAS (torch 2.15 on an AMD EPYC differs by 1.5e-8), so the outputs agree to float rounding.
     torch.manual_seed(4)
     for architecture, averaged in (("paper", False), ("wide-head", False), ("wide-head", True)):
         old = PolicyNet(50, architecture, averaged).eval()
@@ -141,8 +143,8 @@ def test_warm_starting_a_model_without_ranges_keeps_its_outputs_exactly():
         with torch.no_grad():
             before = old(occupancy, aux)
             after = new(occupancy, aux, ranges)
-            assert torch.equal(after, before), (after - before).abs().max()
-            assert torch.equal(new(occupancy, aux, ranges + 1), before)
+            torch.testing.assert_close(after, before, rtol=0, atol=1e-6)
+            torch.testing.assert_close(new(occupancy, aux, ranges + 1), before, rtol=0, atol=1e-6)
 
 
 def test_a_warm_start_without_ranges_on_data_with_them_trains_a_ranges_model_from_the_old_outputs(ranged, tmp_path):

@@ -220,9 +220,9 @@ def test_the_wide_network_trains_exports_and_warm_starts_as_itself(trained, tmp_
 
 
 def test_an_unknown_architecture_is_a_usage_error(trained, tmp_path, capsys):
-    from formation_trainer.model import ARCHITECTURES
+    from formation_trainer.model import ARCHITECTURE_NAMES
 
-    assert cli.ARCHITECTURE_NAMES == list(ARCHITECTURES)
+    assert cli.ARCHITECTURE_NAMES == list(ARCHITECTURE_NAMES)
     with pytest.raises(SystemExit) as exit_info:
         cli.main(["train", "--data", str(trained["data"]), "--out", str(tmp_path / "m.onnx"), "--architecture", "wdie"])
     assert exit_info.value.code == 2
