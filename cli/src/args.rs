@@ -91,7 +91,9 @@ const MERGE_EXAMPLES: &str = "Examples:
   formation eval --scenario scenarios/table1.toml --first-run 0 --runs 40 --shard a.json
   formation merge a.json b.json --json table1.json";
 const COLLECT_EXAMPLES: &str = "Examples:
-  formation collect --scenario scenarios/collect.toml --out data/expert --beyond border";
+  formation collect --scenario scenarios/collect.toml --out data/expert --beyond border
+  formation collect --scenario scenarios/teams-generalist.toml --out data/own-scan \\
+      --neighbours 16 --own-scan-labels --unshaped-labels";
 const TRAIN_EXAMPLES: &str = "Examples:
   formation train --data data/expert --out models/policy.onnx --epochs 10 --device cpu";
 const DAGGER_EXAMPLES: &str = "Examples:
@@ -351,6 +353,18 @@ pub struct CollectArgs {
     /// `sectors=100,clip=3` for 900 beams, 9 a sector).
     #[arg(long, value_name = "sectors=K,clip=C", value_parser = range_input)]
     pub ranges: Option<formation_proto::RangeInput>,
+    /// Also record the neighbours each robot detects in its own scan beside its image, in K
+    /// slots (1 to 64) of (x/d*, y/d*, held, present), held by the scenarios' default rule
+    /// (`slots=K,threshold=1.3,nearest=2`). A network trained on the dataset takes them as its
+    /// `neighbours` input.
+    #[arg(long, value_name = "K", value_parser = neighbour_slots)]
+    pub neighbours: Option<formation_proto::NeighbourInput>,
+    /// Label each robot with the expert's law on the neighbours it detects in its own scan (what
+    /// `formation eval --controller expert-own-scan` drives with) instead of the expert's
+    /// command from every pose; combines with the shaping and pair-weight flags. The expert
+    /// still drives the runs.
+    #[arg(long)]
+    pub own_scan_labels: bool,
 }
 
 /// `formation train`.
@@ -536,6 +550,11 @@ pub struct DaggerArgs {
     /// pairs exactly, as the scored expert holds them).
     #[arg(long, value_name = "LOW,HIGH", value_parser = pair_weight_band)]
     pub label_pair_band: Option<[f64; 2]>,
+    /// Label each robot with the expert's law on the neighbours it detects in its own scan
+    /// instead of from every pose: give it when the dataset was collected with
+    /// `formation collect --own-scan-labels` (DAgger refuses to mix two laws in one dataset).
+    #[arg(long)]
+    pub own_scan_labels: bool,
     /// Which network, whether to mirror the data, how many samples an epoch draws.
     #[command(flatten)]
     pub network: NetworkArgs,
@@ -803,6 +822,61 @@ mod tests {
         let both = ["--unshaped-labels", "--label-wheel-accel", "1"];
         let error = Cli::try_parse_from(base.iter().chain(&both)).unwrap_err();
         assert!(error.to_string().contains("cannot be used with"), "{error}");
+    }
+
+    #[test]
+    fn neighbours_take_k_slots_of_the_default_rule_and_own_scan_labels_parse() {
+        let base = ["formation", "collect", "--scenario", "s.toml", "--out", "D"];
+        let cli = Cli::try_parse_from(base.iter().chain(&[
+            "--neighbours",
+            "16",
+            "--own-scan-labels",
+            "--unshaped-labels",
+        ]))
+        .unwrap();
+        let Command::Collect(args) = cli.command else {
+            panic!("not collect")
+        };
+        assert_eq!(
+            args.neighbours,
+            Some(formation_proto::NeighbourInput::with_default_rule(16).unwrap())
+        );
+        assert_eq!(
+            args.neighbours.unwrap().to_string(),
+            "slots=16,threshold=1.3,nearest=2"
+        );
+        assert!(args.own_scan_labels && args.unshaped_labels);
+        let cli = Cli::try_parse_from(base).unwrap();
+        let Command::Collect(args) = cli.command else {
+            panic!("not collect")
+        };
+        assert!(args.neighbours.is_none() && !args.own_scan_labels);
+        for (bad, says) in [
+            ("0", "slots = 0 is out of range"),
+            ("65", "slots = 65 is out of range"),
+            ("1.5", "from 1 to 64"),
+            ("many", "from 1 to 64"),
+        ] {
+            let flag = format!("--neighbours={bad}");
+            let error = Cli::try_parse_from(base.iter().copied().chain([flag.as_str()]))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                error.contains("--neighbours <K>") && error.contains(says),
+                "{bad}: {error}"
+            );
+        }
+        let dagger = ["formation", "dagger", "--data", "d", "--out", "p.onnx"];
+        let cli = Cli::try_parse_from(dagger.iter().chain(&["--own-scan-labels"])).unwrap();
+        let Command::Dagger(args) = cli.command else {
+            panic!("not dagger")
+        };
+        assert!(args.own_scan_labels);
+        let cli = Cli::try_parse_from(dagger).unwrap();
+        let Command::Dagger(args) = cli.command else {
+            panic!("not dagger")
+        };
+        assert!(!args.own_scan_labels);
     }
 
     #[test]
@@ -1145,4 +1219,18 @@ pub struct CredentialsArgs {
 /// `--ranges`: a range input, checked as a model's metadata is.
 fn range_input(text: &str) -> Result<formation_proto::RangeInput, String> {
     formation_proto::RangeInput::parse(text).map_err(|e| e.to_string())
+}
+
+/// `--neighbours K`: a neighbour input of K slots under the scenarios' default rule
+/// ([`formation_proto::NeighbourInput::with_default_rule`]), checked as a model's metadata is.
+fn neighbour_slots(text: &str) -> Result<formation_proto::NeighbourInput, String> {
+    use formation_proto::NeighbourInput;
+    let slots: usize = text.trim().parse().map_err(|_| {
+        format!(
+            "expected a number of neighbour slots from {} to {}, got {text:?}",
+            NeighbourInput::MIN_SLOTS,
+            NeighbourInput::MAX_SLOTS
+        )
+    })?;
+    NeighbourInput::with_default_rule(slots).map_err(|e| e.to_string())
 }

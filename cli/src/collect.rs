@@ -62,6 +62,8 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
     opts.gains.unshaped = args.unshaped_labels;
     opts.gains.pair_weight_band = args.label_pair_band;
     opts.ranges = args.ranges;
+    opts.neighbours = args.neighbours;
+    opts.own_scan_labels = args.own_scan_labels;
     if let Some(runs) = args.runs {
         opts.runs = runs;
     }
@@ -89,7 +91,8 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
         scenario.name().to_owned(),
     )
     .with_ranges(opts.ranges)
-    .with_labels(opts.gains.label_law());
+    .with_neighbours(opts.neighbours)
+    .with_labels(opts.label_law());
     let mut writer = DatasetWriter::create(&args.out, header)
         .with_context(|| format!("creating dataset {}", args.out.display()))?;
     let bar = progress_bar(opts.runs, "collect");

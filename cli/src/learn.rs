@@ -93,6 +93,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
                 pair_weight_band: args.label_pair_band,
                 ..ExpertGains::default()
             },
+            own_scan: args.own_scan_labels,
             wheel_accels: args.wheel_accels.clone(),
         },
         iterations: args.iterations,

@@ -8,12 +8,26 @@
 //! [`Labeller::label_observation`] labels any observation with the expert's commands whoever drives;
 //! DAgger uses it with the learned policy driving, so the data set covers the states the policy visits.
 //!
+//! A sample may also carry what the robot makes of its own scan beside its image: the scan's
+//! ranges ([`CollectOptions::ranges`], `formation_perception::ranges::pool`) and the neighbours
+//! it detects in it ([`CollectOptions::neighbours`],
+//! [`NeighbourInputBuilder::fill`], the computation the agent runs). With own-scan labels
+//! ([`CollectOptions::own_scan_labels`], [`LabelLaw::own_scan`]) each robot's label is the
+//! expert's law on the neighbours it detects in that same scan ([`OwnView`]) instead of the
+//! expert's command from every pose; the expert still drives a collection's runs.
+//!
 //! Nothing here reads a clock except to report throughput, and nothing does I/O but the writer.
 
 use std::time::{Duration, Instant};
 
+use formation_perception::neighbour_input::NeighbourInputBuilder;
+use formation_perception::neighbours::{
+    DetectedNeighbour, DetectorSettings, NeighbourDetector, SettingsError,
+};
 use formation_perception::{occupancy, ranges};
-use formation_proto::{AuxInput, LidarSpec, NeighbourRule, OccupancySpec, RangeInput, WheelCmd};
+use formation_proto::{
+    AuxInput, Goal, LidarSpec, NeighbourInput, NeighbourRule, OccupancySpec, RangeInput, WheelCmd,
+};
 use formation_trainer_bridge::dataset::{DatasetError, DatasetWriter, Sample};
 use formation_trainer_bridge::label_law::LabelLaw;
 use formation_world::episode::{Observation, run_episode};
@@ -21,6 +35,7 @@ use formation_world::scenario::VStarPlan;
 use formation_world::{RobotParams, RunSpec, Scenario};
 
 use crate::controller::{ExpertController, ExpertGains, InvalidGains, check_inputs};
+use crate::own_scan::OwnView;
 
 /// Why a collection stopped.
 #[derive(Debug, thiserror::Error)]
@@ -112,6 +127,16 @@ pub enum CollectError {
         /// Why.
         source: formation_proto::RangeInputError,
     },
+    /// The robots' neighbours cannot be detected in their scans (the detector refuses settings
+    /// made from the robot's body radius).
+    #[error(
+        "cannot detect neighbours in the robots' scans (for the neighbours input or own-scan \
+         labels): {source}; give the scenario's robot a body_radius the detector takes"
+    )]
+    Detector {
+        /// Why.
+        source: SettingsError,
+    },
     /// Writing the dataset failed.
     #[error("writing demonstrations of run {run}: {source}")]
     Dataset {
@@ -140,6 +165,14 @@ pub struct CollectOptions<'a> {
     /// The scan's ranges recorded beside each image (a model that takes them is trained on
     /// them), or none; recorded in the dataset header by the caller.
     pub ranges: Option<RangeInput>,
+    /// The neighbours each robot detects in its own scan, recorded beside each image (a model
+    /// that takes them is trained on them), or none; recorded in the dataset header by the
+    /// caller.
+    pub neighbours: Option<NeighbourInput>,
+    /// Label each robot with the expert's law on the neighbours it detects in its own scan
+    /// instead of the expert's command from every pose ([`LabelLaw::own_scan`]); recorded in the
+    /// dataset header by the caller ([`CollectOptions::label_law`]).
+    pub own_scan_labels: bool,
 }
 
 impl<'a> CollectOptions<'a> {
@@ -153,6 +186,17 @@ impl<'a> CollectOptions<'a> {
             record_every: 1,
             gains: ExpertGains::default(),
             ranges: None,
+            neighbours: None,
+            own_scan_labels: false,
+        }
+    }
+
+    /// The law the samples are labelled by: the gains' shaping and pair weights, from every pose
+    /// or from each robot's own scan. The dataset's header must record it.
+    pub fn label_law(&self) -> LabelLaw {
+        LabelLaw {
+            own_scan: self.own_scan_labels,
+            ..self.gains.label_law()
         }
     }
 }
@@ -195,13 +239,7 @@ pub fn collect(
     let mut run_samples = Vec::new();
     for run in 0..opts.runs {
         let spec = opts.scenario.run_spec(opts.base_seed, run);
-        check_writer(
-            writer,
-            &spec,
-            &opts.occupancy,
-            opts.ranges,
-            opts.gains.label_law(),
-        )?;
+        check_writer(writer, &spec, opts)?;
         run_samples.clear();
         collect_run(&spec, opts, writer.iteration(), &mut run_samples)?;
         for sample in run_samples.drain(..) {
@@ -240,11 +278,11 @@ pub fn check_one_v_star(scenario: &Scenario) -> Result<(), CollectError> {
 fn check_writer(
     writer: &DatasetWriter,
     spec: &RunSpec,
-    occupancy: &OccupancySpec,
-    ranges: Option<RangeInput>,
-    labels: LabelLaw,
+    opts: &CollectOptions<'_>,
 ) -> Result<(), CollectError> {
     let header = writer.header();
+    let (occupancy, ranges, neighbours) = (&opts.occupancy, opts.ranges, opts.neighbours);
+    let labels = opts.label_law();
     let mismatch = |what, dataset: &dyn std::fmt::Debug, collection: &dyn std::fmt::Debug| {
         Err(CollectError::WriterMismatch {
             what,
@@ -264,6 +302,9 @@ fn check_writer(
     if header.ranges != ranges {
         return mismatch("range input", &header.ranges, &ranges);
     }
+    if header.neighbours != neighbours {
+        return mismatch("neighbour input", &header.neighbours, &neighbours);
+    }
     if header.labels != labels {
         return mismatch("label law", &header.labels, &labels);
     }
@@ -279,8 +320,11 @@ fn collect_run(
 ) -> Result<(), CollectError> {
     // A lagging robot profile's world gets its team gain (the ideal world: the gains given).
     let gains = opts.gains.for_reality(&spec.world.reality);
-    let labeller = Labeller::new(gains, spec.world.robot, spec.world.lidar, opts.occupancy)?
-        .with_ranges(opts.ranges)?;
+    let mut labeller = Labeller::new(gains, spec.world.robot, spec.world.lidar, opts.occupancy)?
+        .with_neighbours(spec.neighbours)
+        .with_ranges(opts.ranges)?
+        .with_neighbour_input(opts.neighbours)?
+        .with_own_scan_labels(opts.own_scan_labels)?;
     let run = narrow_run(spec.index)?;
     narrow_robot(spec.n_robots.saturating_sub(1))?;
     let mut expert =
@@ -314,6 +358,63 @@ pub struct Labeller {
     occupancy: OccupancySpec,
     ranges: Option<RangeInput>,
     expert: ExpertController,
+    own_scan: OwnScanReader,
+}
+
+/// What a labeller reads in one robot's own scan beyond its image: the neighbours input, and
+/// under own-scan labels the expert's law on the same detections; its buffers are kept from one
+/// scan to the next.
+#[derive(Debug, Clone, Default)]
+struct OwnScanReader {
+    /// The neighbours input recorded, and the builder that fills it (with the robot's body).
+    input: Option<(NeighbourInput, NeighbourInputBuilder)>,
+    /// Whether labels come from the robot's own scan ([`LabelLaw::own_scan`]).
+    labels: bool,
+    /// The detector of own-scan labels when no neighbours input is recorded.
+    detector: Option<NeighbourDetector>,
+    detections: Vec<DetectedNeighbour>,
+    centres: Vec<(f64, f64)>,
+    view: OwnView,
+}
+
+impl OwnScanReader {
+    /// Fills `out` with the neighbours input of `scan` (empty when none is recorded) and, under
+    /// own-scan labels, returns the command of `expert`'s law (its gains, robot and neighbour
+    /// rule) on the neighbours detected in that same scan, for a robot heading `heading`.
+    fn read(
+        &mut self,
+        scan: &[f32],
+        lidar: &LidarSpec,
+        heading: f64,
+        goal: &Goal,
+        expert: &ExpertController,
+        out: &mut [f32],
+    ) -> Option<WheelCmd> {
+        let detections: &[DetectedNeighbour] = match (&mut self.input, &mut self.detector) {
+            (Some((spec, builder)), _) => {
+                builder.fill(scan, lidar, spec, goal.d_star, out);
+                builder.detections()
+            }
+            (None, Some(detector)) if self.labels => {
+                detector.detect(scan, lidar, &mut self.detections);
+                &self.detections
+            }
+            (None, _) => return None,
+        };
+        if !self.labels {
+            return None;
+        }
+        self.centres.clear();
+        self.centres.extend(detections.iter().map(|d| (d.x, d.y)));
+        Some(self.view.command(
+            &self.centres,
+            heading,
+            goal,
+            expert.gains(),
+            expert.robot(),
+            expert.neighbours(),
+        ))
+    }
 }
 
 impl Labeller {
@@ -331,6 +432,7 @@ impl Labeller {
             occupancy,
             ranges: None,
             expert: ExpertController::new(gains, robot),
+            own_scan: OwnScanReader::default(),
         })
     }
 
@@ -342,6 +444,44 @@ impl Labeller {
                 .map_err(|source| CollectError::Ranges { source })?;
         }
         self.ranges = ranges;
+        Ok(self)
+    }
+
+    /// The same labeller, also recording the neighbours each robot detects in its own scan as
+    /// `neighbours` declares (none: the default), filled by [`NeighbourInputBuilder`] with a
+    /// detector for the robot's body radius. Refused when the detector refuses that radius.
+    pub fn with_neighbour_input(
+        mut self,
+        neighbours: Option<NeighbourInput>,
+    ) -> Result<Labeller, CollectError> {
+        self.own_scan.input = match neighbours {
+            Some(spec) => Some((
+                spec,
+                NeighbourInputBuilder::with_body_radius(self.expert.robot().body_radius)
+                    .map_err(|source| CollectError::Detector { source })?,
+            )),
+            None => None,
+        };
+        Ok(self)
+    }
+
+    /// The same labeller, labelling each robot (when `own_scan`) with the expert's law on the
+    /// neighbours it detects in its own scan ([`OwnView`], with the labeller's gains, robot and
+    /// neighbour rule: [`with_neighbours`](Self::with_neighbours)) instead of the expert's command
+    /// from every pose ([`LabelLaw::own_scan`]). The detections are the neighbours input's when
+    /// one is recorded, else a [`NeighbourDetector`]'s for the robot's body radius, so they are
+    /// those the model sees. Refused when the detector refuses that radius.
+    pub fn with_own_scan_labels(mut self, own_scan: bool) -> Result<Labeller, CollectError> {
+        self.own_scan.labels = own_scan;
+        self.own_scan.detector = if own_scan {
+            let settings = DetectorSettings::with_body_radius(self.expert.robot().body_radius);
+            Some(
+                NeighbourDetector::new(settings)
+                    .map_err(|source| CollectError::Detector { source })?,
+            )
+        } else {
+            None
+        };
         Ok(self)
     }
 
@@ -365,7 +505,9 @@ impl Labeller {
     }
 
     /// Sends `sink` one sample per robot of `obs`, labelled with the EXPERT's command for that robot,
-    /// whatever controller is driving (DAgger: the policy drives, the expert labels).
+    /// whatever controller is driving (DAgger: the policy drives, the expert labels): from every
+    /// pose, or under own-scan labels ([`with_own_scan_labels`](Self::with_own_scan_labels)) from
+    /// the robot's own scan.
     pub fn label_observation(
         &mut self,
         obs: &Observation<'_>,
@@ -378,14 +520,17 @@ impl Labeller {
             run: run as usize,
             message: e.message,
         })?;
-        self.expert
-            .compute(obs.tick, obs.poses, &obs.goal, &mut commands);
+        if !self.own_scan.labels {
+            self.expert
+                .compute(obs.tick, obs.poses, &obs.goal, &mut commands);
+        }
         self.emit(obs, &commands, iteration, run, sink)
     }
 
-    /// One sample per robot with the given labels `commands[i]`.
+    /// One sample per robot with the given labels `commands[i]`, or under own-scan labels the
+    /// expert's law on the robot's own scan.
     fn emit(
-        &self,
+        &mut self,
         obs: &Observation<'_>,
         commands: &[WheelCmd],
         iteration: u32,
@@ -415,9 +560,23 @@ impl Labeller {
             if let Some(spec) = &self.ranges {
                 ranges::pool(scan, &self.lidar, spec, obs.goal.d_star, &mut pooled);
             }
+            let mut neighbours =
+                vec![0.0; self.own_scan.input.as_ref().map_or(0, |(n, _)| n.len())];
+            let command = self
+                .own_scan
+                .read(
+                    scan,
+                    &self.lidar,
+                    pose.theta,
+                    &obs.goal,
+                    &self.expert,
+                    &mut neighbours,
+                )
+                .unwrap_or(*command);
             sink(Sample {
                 occupancy: image,
                 ranges: pooled,
+                neighbours,
                 delta_phi: AuxInput::HeadingError.value(pose.theta, &obs.goal) as f32,
                 d_star: AuxInput::DStar.value(pose.theta, &obs.goal) as f32,
                 wheels: [command.left as f32, command.right as f32],
@@ -466,7 +625,8 @@ fn narrow_run(run: usize) -> Result<u32, CollectError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use formation_proto::{Goal, Pose, wrap_angle};
+    use formation_proto::{Pose, wrap_angle};
+    use formation_world::lidar::cast_scan;
 
     const TINY: &str = r#"
         name = "tiny"
@@ -638,6 +798,169 @@ mod tests {
             ),
             Err(CollectError::Occupancy { .. })
         ));
+    }
+
+    /// Three robots in a line along +y, 2 m apart, headings apart: robot 0 sees robot 1 and
+    /// not robot 2, which robot 1 hides. The world's own exact scans.
+    fn a_line_of_three() -> (Vec<Pose>, Vec<Vec<f32>>, LidarSpec, Goal) {
+        let lidar = LidarSpec::default();
+        let poses = vec![
+            Pose::new(0.0, 0.0, 0.4),
+            Pose::new(0.0, 2.0, -1.0),
+            Pose::new(0.0, 4.0, 2.5),
+        ];
+        let scans = (0..poses.len())
+            .map(|i| {
+                let mut scan = vec![0.0; lidar.beams];
+                cast_scan(&poses, i, &RobotParams::default(), &lidar, &mut scan);
+                scan
+            })
+            .collect();
+        let goal = Goal {
+            phi_star: 1.0,
+            d_star: 1.5,
+            v_star: 0.7,
+        };
+        (poses, scans, lidar, goal)
+    }
+
+    fn label(labeller: &mut Labeller, obs: &Observation<'_>) -> Vec<Sample> {
+        let mut samples = Vec::new();
+        labeller
+            .label_observation(obs, 1, 2, &mut |s| samples.push(s))
+            .expect("labels");
+        samples
+    }
+
+    #[test]
+    fn samples_carry_the_builders_neighbours_and_own_scan_labels_are_own_views_command() {
+        let (poses, scans, lidar, goal) = a_line_of_three();
+        let obs = Observation {
+            tick: 0,
+            time: 0.0,
+            goal,
+            poses: &poses,
+            wheel_speeds: &[],
+            scans: &scans,
+        };
+        let (gains, robot) = (ExpertGains::default(), RobotParams::default());
+        let spec = NeighbourInput::with_default_rule(4).expect("input");
+        let labeller = || Labeller::new(gains, robot, lidar, OccupancySpec::PAPER).expect("valid");
+        let mut expert_labelled = labeller().with_neighbour_input(Some(spec)).expect("input");
+        let mut own_labelled = labeller()
+            .with_neighbour_input(Some(spec))
+            .and_then(|l| l.with_own_scan_labels(true))
+            .expect("own scan");
+        let mut own_without_input = labeller().with_own_scan_labels(true).expect("own scan");
+        let by_expert = label(&mut expert_labelled, &obs);
+        let by_own_scan = label(&mut own_labelled, &obs);
+        let without_input = label(&mut own_without_input, &obs);
+
+        let mut all_poses = [WheelCmd::BRAKE; 3];
+        crate::expert_commands(&poses, &goal, &gains, &robot, &mut all_poses);
+        let mut builder = NeighbourInputBuilder::default();
+        let mut view = OwnView::new();
+        for i in 0..3 {
+            // The neighbours input is the builder's for the robot's own scan, whoever labels.
+            let mut expected = vec![f32::NAN; spec.len()];
+            builder.fill(&scans[i], &lidar, &spec, goal.d_star, &mut expected);
+            assert_eq!(by_expert[i].neighbours, expected, "robot {i}");
+            assert_eq!(by_own_scan[i].neighbours, expected, "robot {i}");
+            assert!(without_input[i].neighbours.is_empty());
+            // The expert's labels read every pose; own-scan labels are OwnView's command on
+            // the detections of that same scan, with or without the input recorded.
+            let wheels = |c: WheelCmd| [c.left as f32, c.right as f32];
+            assert_eq!(by_expert[i].wheels, wheels(all_poses[i]), "robot {i}");
+            let centres: Vec<(f64, f64)> =
+                builder.detections().iter().map(|d| (d.x, d.y)).collect();
+            let own = view.command(
+                &centres,
+                poses[i].theta,
+                &goal,
+                &gains,
+                &robot,
+                &NeighbourRule::AllPairs,
+            );
+            assert_eq!(by_own_scan[i].wheels, wheels(own), "robot {i}");
+            assert_eq!(without_input[i].wheels, wheels(own), "robot {i}");
+        }
+        // Robot 0 detects robot 1 alone (robot 2 is hidden): two slots, held first.
+        assert_eq!(
+            by_own_scan[0]
+                .neighbours
+                .chunks(4)
+                .map(|s| s[3])
+                .collect::<Vec<_>>(),
+            [1.0, 0.0, 0.0, 0.0]
+        );
+        // ... so its own-scan label leaves out the pair the expert holds with robot 2.
+        let gap = (by_own_scan[0].wheels[0] - by_expert[0].wheels[0]).abs()
+            + (by_own_scan[0].wheels[1] - by_expert[0].wheels[1]).abs();
+        assert!(
+            gap > 0.01,
+            "{:?} {:?}",
+            by_own_scan[0].wheels,
+            by_expert[0].wheels
+        );
+    }
+
+    #[test]
+    fn a_collected_run_with_neighbours_and_own_scan_labels_reads_back() {
+        use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader};
+        let scenario = tiny();
+        let opts = CollectOptions {
+            record_every: 5,
+            runs: 1,
+            neighbours: Some(NeighbourInput::with_default_rule(4).expect("input")),
+            own_scan_labels: true,
+            ..CollectOptions::for_scenario(&scenario)
+        };
+        let spec = scenario.run_spec(opts.base_seed, 0);
+        let plain = DatasetHeader::new(
+            opts.occupancy,
+            spec.world.simulated_lidar(),
+            spec.v_star,
+            opts.base_seed,
+            scenario.name(),
+        );
+        let header = plain
+            .clone()
+            .with_neighbours(opts.neighbours)
+            .with_labels(opts.label_law());
+        assert!(header.labels.own_scan);
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut writer = DatasetWriter::create(dir.path(), header.clone()).expect("create");
+        collect(&opts, &mut writer, &mut |_, _| {}).expect("collects");
+        writer.finish().expect("finish");
+
+        let reader = DatasetReader::open(dir.path()).expect("open");
+        assert_eq!(reader.header(), &header);
+        let read = reader.load_all().expect("load");
+        let mut direct = Vec::new();
+        collect_run(&spec, &opts, 0, &mut direct).expect("collects");
+        assert_eq!(read, direct);
+        // 20 ticks recorded at 0, 5, 10, 15 for 3 robots, each seeing someone.
+        assert_eq!(read.len(), 4 * 3);
+        for sample in &read {
+            assert_eq!(sample.neighbours.len(), 16);
+            assert!(sample.neighbours[3] == 1.0, "{:?}", sample.neighbours);
+        }
+
+        // A dataset declared without them is refused before anything is written.
+        let other = tempfile::tempdir().expect("tempdir");
+        let mut writer = DatasetWriter::create(other.path(), plain).expect("create");
+        let err = collect(&opts, &mut writer, &mut |_, _| {}).expect_err("mismatch");
+        assert!(
+            matches!(
+                err,
+                CollectError::WriterMismatch {
+                    what: "neighbour input",
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+        assert_eq!(writer.samples(), 0);
     }
 
     #[test]

@@ -279,16 +279,19 @@ impl ExpertGains {
     }
 
     /// The labelling law these gains give (what a dataset records of them): the shaping and the
-    /// pair weights.
+    /// pair weights, computed from every pose (whether labels come from each robot's own scan
+    /// instead, [`LabelLaw::own_scan`], is the labeller's, not the gains').
     pub fn label_law(&self) -> LabelLaw {
         LabelLaw {
             shaping_wheel_accel: self.shaping_wheel_accel,
             unshaped: self.unshaped,
             pair_weight_band: self.pair_weight_band,
+            ..LabelLaw::default()
         }
     }
 
-    /// These gains labelling by `law` (a dataset's recorded law), every other gain unchanged.
+    /// These gains labelling by `law` (a dataset's recorded law), every other gain unchanged
+    /// ([`LabelLaw::own_scan`] is not a gain: the labeller takes it).
     pub fn with_label_law(self, law: LabelLaw) -> ExpertGains {
         ExpertGains {
             shaping_wheel_accel: law.shaping_wheel_accel,

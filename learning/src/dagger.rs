@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use formation_expert::collect::Labeller;
 use formation_expert::{ExpertController, ExpertGains};
-use formation_proto::{OccupancySpec, RangeInput};
+use formation_proto::{NeighbourInput, OccupancySpec, RangeInput};
 use formation_schema::EvalOutput;
 use formation_trainer_bridge::dataset::{DatasetHeader, DatasetWriter, Sample};
 use formation_trainer_bridge::label_law::LabelLaw;
@@ -251,7 +251,7 @@ pub(crate) fn rollout_and_label(
         &opts.data,
         writer.header(),
         scenarios,
-        &opts.labels.gains.label_law(),
+        &opts.labels.label_law(),
     )?;
     let rollouts = IterationRollouts {
         scenarios,
@@ -260,6 +260,7 @@ pub(crate) fn rollout_and_label(
         seed: opts.seed,
         occupancy: writer.header().occupancy,
         ranges: writer.header().ranges,
+        neighbours: writer.header().neighbours,
         model,
         labels: &opts.labels,
     };
@@ -298,7 +299,7 @@ pub(crate) fn check_rollouts_match(
             "label law",
             header.labels.to_string(),
             labels.to_string(),
-            "label with the law the dataset was collected with (the same --label-wheel-accel, --unshaped-labels and --label-pair-band as its `formation collect`), or collect a new dataset",
+            "label with the law the dataset was collected with (the same --label-wheel-accel, --unshaped-labels, --label-pair-band and --own-scan-labels as its `formation collect`), or collect a new dataset",
         ));
     }
     for scenario in scenarios {
@@ -396,6 +397,9 @@ pub struct RolloutLabels {
     /// The expert's gains; [`ExpertGains::shaping_wheel_accel`] makes its labels one function
     /// of the image whatever a run's limit.
     pub gains: ExpertGains,
+    /// Label each robot with the expert's law on the neighbours it detects in its own scan
+    /// instead of from every pose (`--own-scan-labels`, [`LabelLaw::own_scan`]).
+    pub own_scan: bool,
     /// Wheel acceleration limits \[m/s²\] (`None`: no limit) the runs use in turn, each with
     /// every team size: run `i` uses `wheel_accels[(i / team sizes) % len]`. Empty: the
     /// scenario's own.
@@ -403,6 +407,24 @@ pub struct RolloutLabels {
 }
 
 impl RolloutLabels {
+    /// The law these labels are given by (what the dataset must record): the gains' shaping
+    /// and pair weights, from every pose or from each robot's own scan.
+    pub fn label_law(&self) -> LabelLaw {
+        LabelLaw {
+            own_scan: self.own_scan,
+            ..self.gains.label_law()
+        }
+    }
+
+    /// The labels of a dataset's recorded `law`: the default gains labelling by it.
+    pub fn for_law(law: LabelLaw) -> RolloutLabels {
+        RolloutLabels {
+            gains: ExpertGains::default().with_label_law(law),
+            own_scan: law.own_scan,
+            wheel_accels: Vec::new(),
+        }
+    }
+
     /// The wheel acceleration limit of run `i` when `teams` team sizes are used in turn, if it
     /// overrides the scenario's.
     fn wheel_accel_of_run(&self, i: usize, teams: usize) -> Option<Option<f64>> {
@@ -431,6 +453,9 @@ pub struct IterationRollouts<'a> {
     pub occupancy: OccupancySpec,
     /// The scan's ranges recorded beside each image, if the dataset holds them.
     pub ranges: Option<RangeInput>,
+    /// The neighbours detected in the scan recorded beside each image, if the dataset holds
+    /// them.
+    pub neighbours: Option<NeighbourInput>,
     /// The policy that drives when the expert does not.
     pub model: &'a Path,
     /// The expert's gains and the runs' wheel acceleration limits.
@@ -496,6 +521,8 @@ impl IterationRollouts<'_> {
         };
         let mut labeller = Labeller::for_run(&spec, gains, self.occupancy)
             .and_then(|labeller| labeller.with_ranges(self.ranges))
+            .and_then(|labeller| labeller.with_neighbour_input(self.neighbours))
+            .and_then(|labeller| labeller.with_own_scan_labels(self.labels.own_scan))
             .map_err(|source| LearningError::Label { run: i, source })?;
         let mut samples = Vec::new();
         let mut failure = None;
@@ -629,6 +656,78 @@ pub(crate) mod tests {
         assert!(err.to_string().contains("--unshaped-labels"), "{err}");
         let unshaped_dataset = header.clone().with_labels(unshaped);
         check_rollouts_match(path, &unshaped_dataset, same, &unshaped).expect("the same law");
+        // Own-scan labels may join only a dataset labelled from each robot's own scan.
+        let own_scan = LabelLaw {
+            own_scan: true,
+            ..unshaped
+        };
+        let err = check_rollouts_match(path, &unshaped_dataset, same, &own_scan).unwrap_err();
+        assert!(
+            matches!(
+                &err,
+                LearningError::RolloutMismatch {
+                    what: "label law",
+                    rollout,
+                    ..
+                } if rollout.contains("own scan (--own-scan-labels)")
+            ),
+            "{err}"
+        );
+        let own_scan_dataset = header.clone().with_labels(own_scan);
+        check_rollouts_match(path, &own_scan_dataset, same, &own_scan).expect("the same law");
+        check_rollouts_match(path, &own_scan_dataset, same, &unshaped).unwrap_err();
+    }
+
+    /// The expert drives every run of three robots (all pairs): labelled from every pose, from
+    /// each robot's own scan with the neighbours input recorded, and without it.
+    #[test]
+    fn own_scan_rollouts_record_the_datasets_neighbours_and_label_from_each_robots_scan() {
+        let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
+        let scenarios = team_scenarios(&scenario(3), &[], &[]).unwrap();
+        let input = NeighbourInput::with_default_rule(4).unwrap();
+        let label = |labels: &RolloutLabels, neighbours| {
+            IterationRollouts {
+                scenarios: &scenarios,
+                iteration: 1,
+                expert_share: 1.0,
+                seed: 4,
+                occupancy: OccupancySpec::PAPER,
+                ranges: None,
+                neighbours,
+                model: &model,
+                labels,
+            }
+            .label_runs(0..1, &|| {})
+            .unwrap()
+        };
+        let own = RolloutLabels {
+            own_scan: true,
+            ..RolloutLabels::default()
+        };
+        let by_expert = label(&RolloutLabels::default(), Some(input));
+        let by_own_scan = label(&own, Some(input));
+        let without_input = label(&own, None);
+        assert_eq!(by_expert.len(), 20 * 3);
+        assert_eq!(by_own_scan.len(), by_expert.len());
+        // The same states and neighbours (the expert drives both); other labels: the own-scan
+        // law measures pairs between the centres it detects, the paper's between offset points.
+        for (a, b) in by_expert.iter().zip(&by_own_scan) {
+            assert_eq!((&a.occupancy, &a.neighbours), (&b.occupancy, &b.neighbours));
+            assert_eq!(a.neighbours.len(), 16);
+        }
+        let relabelled = by_expert
+            .iter()
+            .zip(&by_own_scan)
+            .filter(|(a, b)| a.wheels != b.wheels)
+            .count();
+        assert!(relabelled > by_expert.len() / 2, "{relabelled}");
+        // Without the input recorded, the detections and so the labels are the same.
+        assert!(without_input.iter().all(|s| s.neighbours.is_empty()));
+        let wheels = |samples: &[Sample]| samples.iter().map(|s| s.wheels).collect::<Vec<_>>();
+        assert_eq!(wheels(&without_input), wheels(&by_own_scan));
+        // A dataset's recorded law gives the same labels back.
+        assert!(own.label_law().own_scan);
+        assert_eq!(RolloutLabels::for_law(own.label_law()), own);
     }
 
     #[test]
@@ -714,6 +813,7 @@ pub(crate) mod tests {
             seed: 9,
             occupancy: OccupancySpec::PAPER,
             ranges: None,
+            neighbours: None,
             model: &model,
             labels: &RolloutLabels::default(),
         };
@@ -769,6 +869,7 @@ pub(crate) mod tests {
                 seed: 4,
                 occupancy: OccupancySpec::PAPER,
                 ranges: None,
+                neighbours: None,
                 model: &model,
                 labels,
             }
@@ -784,6 +885,7 @@ pub(crate) mod tests {
                 shaping_wheel_accel: Some(0.5),
                 ..ExpertGains::default()
             },
+            own_scan: false,
             wheel_accels: vec![None],
         });
         let free = label(&RolloutLabels::default());

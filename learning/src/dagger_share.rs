@@ -10,7 +10,6 @@
 use std::ops::Range;
 use std::path::PathBuf;
 
-use formation_expert::ExpertGains;
 use formation_trainer_bridge::dagger_part::{
     PartHeader, RolloutSettings, file_fnv1a64, write_part,
 };
@@ -77,10 +76,7 @@ pub fn label_share(
     let expert_share = opts.beta.powi(opts.iteration as i32);
     let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes, &opts.rollout_durations)?;
     // A share labels with the law the dataset was collected with.
-    let labels = RolloutLabels {
-        gains: ExpertGains::default().with_label_law(dataset.labels),
-        ..RolloutLabels::default()
-    };
+    let labels = RolloutLabels::for_law(dataset.labels);
     crate::dagger::check_rollouts_match(&opts.data, &dataset, &scenarios, &dataset.labels)?;
     let header = PartHeader {
         dataset,
@@ -103,6 +99,7 @@ pub fn label_share(
         seed: opts.seed,
         occupancy: header.dataset.occupancy,
         ranges: header.dataset.ranges,
+        neighbours: header.dataset.neighbours,
         model: &opts.model,
         labels: &labels,
     };
@@ -116,21 +113,48 @@ mod tests {
     use std::path::Path;
 
     use super::*;
-    use crate::dagger::rollout_and_label;
     use crate::dagger::tests::{empty_dataset, options, scenario};
+    use crate::dagger::{DaggerOptions, rollout_and_label};
+    use formation_proto::NeighbourInput;
     use formation_trainer_bridge::dagger_part::append_parts;
+    use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter};
+    use formation_trainer_bridge::label_law::LabelLaw;
 
-    #[test]
-    fn shares_appended_in_run_order_write_the_dataset_of_one_labelling_byte_for_byte() {
+    /// An empty dataset in `dir/data` as [`empty_dataset`] makes, its header changed by `with`.
+    fn dataset_with(
+        dir: &Path,
+        base: &Scenario,
+        with: &dyn Fn(DatasetHeader) -> DatasetHeader,
+    ) -> PathBuf {
+        let plain = empty_dataset(&dir.join("plain"), base);
+        let header = with(Manifest::read(&plain).unwrap().header());
+        let path = dir.join("data");
+        DatasetWriter::create(&path, header)
+            .unwrap()
+            .finish()
+            .unwrap();
+        path
+    }
+
+    /// Labels iteration 1 of a dataset (its header changed by `with`) once whole with `labels`
+    /// and once in three shares appended out of order, and checks that the two datasets are the
+    /// same byte for byte; returns the whole one.
+    fn shares_write_the_dataset_of_one_labelling(
+        dir: &Path,
+        with: &dyn Fn(DatasetHeader) -> DatasetHeader,
+        labels: RolloutLabels,
+    ) -> PathBuf {
         let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
         let base = scenario(3);
-        let dir = tempfile::tempdir().unwrap();
-        let whole = empty_dataset(&dir.path().join("whole"), &base);
-        let opts = options(whole.clone(), &base);
+        let whole = dataset_with(&dir.join("whole"), &base, with);
+        let opts = DaggerOptions {
+            labels,
+            ..options(whole.clone(), &base)
+        };
         let scenarios = team_scenarios(&base, &opts.team_sizes, &[]).unwrap();
         let added = rollout_and_label(&opts, &scenarios, 1, opts.beta, &model, &|_| {}).unwrap();
 
-        let shared = empty_dataset(&dir.path().join("shared"), &base);
+        let shared = dataset_with(&dir.join("shared"), &base, with);
         let share = |runs: Range<usize>, name: &str| {
             let share = ShareOptions {
                 data: shared.clone(),
@@ -142,7 +166,7 @@ mod tests {
                 beta: opts.beta,
                 seed: opts.seed,
                 runs,
-                part: dir.path().join(name),
+                part: dir.join(name),
             };
             label_share(&share, &|| {}).unwrap();
             share.part
@@ -166,6 +190,51 @@ mod tests {
                 "{name:?}"
             );
         }
+        whole
+    }
+
+    #[test]
+    fn shares_appended_in_run_order_write_the_dataset_of_one_labelling_byte_for_byte() {
+        let dir = tempfile::tempdir().unwrap();
+        shares_write_the_dataset_of_one_labelling(dir.path(), &|h| h, RolloutLabels::default());
+    }
+
+    #[test]
+    fn shares_of_a_dataset_with_neighbours_and_own_scan_labels_keep_both() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = NeighbourInput::with_default_rule(4).unwrap();
+        let law = LabelLaw {
+            own_scan: true,
+            ..LabelLaw::default()
+        };
+        let with = |h: DatasetHeader| h.with_neighbours(Some(input)).with_labels(law);
+        let labels = RolloutLabels {
+            own_scan: true,
+            ..RolloutLabels::default()
+        };
+        let whole = shares_write_the_dataset_of_one_labelling(dir.path(), &with, labels);
+        let reader = DatasetReader::open(&whole).unwrap();
+        assert_eq!(reader.header().neighbours, Some(input));
+        assert!(reader.header().labels.own_scan);
+        let samples = reader.load_all().unwrap();
+        assert!(!samples.is_empty());
+        assert!(samples.iter().all(|s| s.neighbours.len() == 16));
+
+        // A share of the dataset labels from each robot's own scan: the expert's labels from
+        // every pose would differ (three robots: the paper's law between offset points).
+        let plain = shares_write_the_dataset_of_one_labelling(
+            &dir.path().join("plain"),
+            &|h: DatasetHeader| h.with_neighbours(Some(input)),
+            RolloutLabels::default(),
+        );
+        let by_expert = DatasetReader::open(&plain).unwrap().load_all().unwrap();
+        assert_eq!(by_expert.len(), samples.len());
+        assert!(
+            by_expert
+                .iter()
+                .zip(&samples)
+                .any(|(a, b)| a.wheels != b.wheels)
+        );
     }
 
     #[test]

@@ -3,18 +3,18 @@
 //! the dataset with the other shares, in run order ([`append_parts`]).
 //!
 //! A part is one safetensors file holding the columns of a dataset shard ([`crate::dataset`]:
-//! six, and `ranges` where the dataset declares ranges), whose `__metadata__` extends the
-//! shard's with:
+//! six, `ranges` where the dataset declares ranges and `neighbours` where it declares
+//! neighbours), whose `__metadata__` extends the shard's with:
 //!
 //! - `format` = [`PART_FORMAT`], `version` = [`PART_VERSION`];
 //! - `part`: the [`PartHeader`] as JSON: the dataset's settings ([`DatasetHeader`]), the
 //!   iteration, the rollout settings ([`RolloutSettings`]) and the run range;
 //! - `samples`: the sample count, and `columns_fnv1a64`: FNV-1a 64 over the columns.
 //!
-//! The dataset header in `part` holds the dataset's range input, if any (absent when none, so a
-//! part without ranges is byte for byte what builds before ranges wrote); its samples carry
-//! ranges of that many sectors, and [`append_parts`] appends them only to a dataset of the same
-//! range input.
+//! The dataset header in `part` holds the dataset's range input and neighbour input, if any
+//! (each absent when none, so a part without them is byte for byte what builds before them
+//! wrote); its samples carry ranges of that many sectors and neighbours of that many slots, and
+//! [`append_parts`] appends them only to a dataset of the same inputs.
 //!
 //! Parts are written atomically (temporary name, sync, rename), so a worker killed mid-share
 //! leaves no half file. [`append_parts`] checks that the parts are of one iteration with the same
@@ -544,7 +544,10 @@ pub fn append_parts(
 mod tests {
     use super::*;
     use crate::dataset::DatasetReader;
-    use crate::dataset::tests::{header, header_with_ranges, sample, sample_with_ranges};
+    use crate::dataset::tests::{
+        header, header_with_neighbours, header_with_ranges, sample, sample_with_neighbours,
+        sample_with_ranges,
+    };
 
     const ITERATION: u32 = 1;
 
@@ -820,6 +823,62 @@ mod tests {
         let data = dir.path().join("ranged");
         let mut writer = DatasetWriter::create(&data, header_with_ranges(7)).unwrap();
         writer.push(sample_with_ranges(100, 0)).unwrap();
+        writer.finish().unwrap();
+        let (_, added) = append_parts(&data, ITERATION, 2, &[path]).unwrap();
+        assert_eq!(added, 4);
+        let all = DatasetReader::open(&data).unwrap().load_all().unwrap();
+        assert_eq!(all[1..], samples[..]);
+    }
+
+    #[test]
+    fn a_part_with_neighbours_round_trips_and_appends_only_to_a_dataset_of_the_same_neighbours() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("p");
+        let mut header = part_header(0, 2);
+        header.dataset = header_with_neighbours(7);
+        let samples: Vec<Sample> = [0, 1, 4, 5]
+            .into_iter()
+            .map(|k| sample_with_neighbours(k, ITERATION))
+            .collect();
+        write_part(&path, &header, &samples).unwrap();
+        let read = read_part(&path).unwrap();
+        assert_eq!(read.header, header);
+        assert_eq!(read.samples, samples);
+        let text = serde_json::to_value(&read.header.dataset).unwrap();
+        assert_eq!(text["neighbours"], "slots=3,threshold=1.3,nearest=2");
+
+        // A part without neighbours for the dataset with them is refused when written.
+        let err = write_part(&dir.path().join("q"), &header, &samples_of(0..2)).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                PartError::Sample {
+                    source: DatasetError::SampleNeighbours { actual: 0, .. },
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+
+        // Appended to a dataset without neighbours: refused, naming them, nothing written.
+        let plain = dataset(dir.path());
+        let err = append_parts(&plain, ITERATION, 2, std::slice::from_ref(&path)).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                PartError::Dataset(DatasetError::HeaderMismatch {
+                    field: "neighbour input",
+                    ..
+                })
+            ),
+            "{err:?}"
+        );
+        assert_eq!(DatasetReader::open(&plain).unwrap().samples(), 1);
+
+        // Appended to a dataset with the same neighbours: the samples keep them.
+        let data = dir.path().join("with");
+        let mut writer = DatasetWriter::create(&data, header_with_neighbours(7)).unwrap();
+        writer.push(sample_with_neighbours(100, 0)).unwrap();
         writer.finish().unwrap();
         let (_, added) = append_parts(&data, ITERATION, 2, &[path]).unwrap();
         assert_eq!(added, 4);

@@ -15,6 +15,13 @@
 //!   them is version 1 ([`DATASET_VERSION_WITHOUT_RANGES`]), byte for byte what builds before
 //!   ranges wrote, with the same `dataset_id`. The reader takes both, and refuses a version 2
 //!   manifest without `ranges` or a version 1 manifest with them.
+//! - A dataset whose samples carry the neighbours each robot detects in its own scan
+//!   ([`NeighbourInput`], issue 34) declares them in the manifest as
+//!   `"neighbours": "slots=K,threshold=T,nearest=M"` and is format version 3 ([`DATASET_VERSION`]),
+//!   with or without ranges; each of its shards also holds `neighbours` F32 `[N, K, 4]` (per slot
+//!   `x/d*, y/d*, held, present`). A dataset without neighbours keeps version 1 or 2, its bytes and
+//!   its `dataset_id`. The reader refuses a version 3 manifest without `neighbours` or a version 1
+//!   or 2 manifest with them.
 //! - A dataset labelled by a law other than the expert's default records it as `"labels"`
 //!   ([`LabelLaw`]), folded into `dataset_id`; one labelled by the default has no such key and
 //!   keeps the id and bytes of before.
@@ -31,7 +38,7 @@ use std::collections::HashMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use formation_proto::{OccupancySpec, RangeInput, RangeInputError, SimulatedLidar};
+use formation_proto::{NeighbourInput, OccupancySpec, RangeInput, RangeInputError, SimulatedLidar};
 use safetensors::tensor::{Dtype, SafeTensorError, SafeTensors, TensorView};
 use serde::{Deserialize, Serialize};
 
@@ -42,28 +49,35 @@ use crate::label_law::LabelLaw;
 /// The `format` string of every dataset manifest.
 pub const DATASET_FORMAT: &str = "formation-dataset";
 /// The newest manifest/shard layout version, which this build writes for a dataset whose samples
-/// carry their scan's ranges (a manifest with `ranges`, shards with a `ranges` tensor).
-pub const DATASET_VERSION: u32 = 2;
-/// The layout version of a dataset without ranges: what this build writes for one, and what every
-/// build before ranges wrote. The reader takes both versions.
+/// carry the neighbours detected in their scan (a manifest with `neighbours`, shards with a
+/// `neighbours` tensor), with or without ranges.
+pub const DATASET_VERSION: u32 = 3;
+/// The layout version of a dataset with ranges and without neighbours (a manifest with `ranges`,
+/// shards with a `ranges` tensor).
+pub const DATASET_VERSION_WITH_RANGES: u32 = 2;
+/// The layout version of a dataset without ranges or neighbours: what this build writes for one,
+/// and what every build before ranges wrote. The reader takes all three versions.
 pub const DATASET_VERSION_WITHOUT_RANGES: u32 = 1;
 /// Samples per shard unless [`DatasetWriter::with_shard_size`] says otherwise (~41 MB of images).
 pub const DEFAULT_SHARD_SIZE: usize = 16384;
 /// The manifest's file name inside a dataset directory.
 pub const MANIFEST_FILE: &str = "manifest.json";
 
-/// The layout version of a dataset with or without ranges.
-pub fn dataset_version(ranges: Option<RangeInput>) -> u32 {
-    match ranges {
-        Some(_) => DATASET_VERSION,
-        None => DATASET_VERSION_WITHOUT_RANGES,
+/// The layout version of a dataset with or without ranges and neighbours: 3 with neighbours,
+/// else 2 with ranges, else 1.
+pub fn dataset_version(ranges: Option<RangeInput>, neighbours: Option<NeighbourInput>) -> u32 {
+    match (ranges, neighbours) {
+        (_, Some(_)) => DATASET_VERSION,
+        (Some(_), None) => DATASET_VERSION_WITH_RANGES,
+        (None, None) => DATASET_VERSION_WITHOUT_RANGES,
     }
 }
 
 /// What produced a dataset: the settings every sample shares. Appending checks it matches.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DatasetHeader {
-    /// Layout version ([`dataset_version`] of `ranges`); `version` in the manifest.
+    /// Layout version ([`dataset_version`] of `ranges` and `neighbours`); `version` in the
+    /// manifest.
     pub format_version: u32,
     /// How the occupancy images were rendered.
     pub occupancy: OccupancySpec,
@@ -79,6 +93,15 @@ pub struct DatasetHeader {
     /// ([`DatasetHeader::with_ranges`]); serialized as `"sectors=K,clip=C"`, absent when none.
     #[serde(default, skip_serializing_if = "Option::is_none", with = "range_text")]
     pub ranges: Option<RangeInput>,
+    /// The neighbours detected in its scan each sample carries beside its image, if any
+    /// ([`DatasetHeader::with_neighbours`]); serialized as `"slots=K,threshold=T,nearest=M"`,
+    /// absent when none.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        with = "neighbour_text"
+    )]
+    pub neighbours: Option<NeighbourInput>,
     /// The law that labelled the samples ([`DatasetHeader::with_labels`]); absent for the
     /// expert's default.
     #[serde(default, skip_serializing_if = "LabelLaw::is_default")]
@@ -112,10 +135,36 @@ pub(crate) mod range_text {
     }
 }
 
+/// `Option<NeighbourInput>` as its `formation.neighbours` text (`NeighbourInput`'s `Display` and
+/// `parse`, the one definition of it), or nothing.
+pub(crate) mod neighbour_text {
+    use formation_proto::NeighbourInput;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub(crate) fn serialize<S: Serializer>(
+        neighbours: &Option<NeighbourInput>,
+        serializer: S,
+    ) -> Result<S::Ok, S::Error> {
+        match neighbours {
+            Some(neighbours) => serializer.collect_str(neighbours),
+            None => serializer.serialize_none(),
+        }
+    }
+
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
+        deserializer: D,
+    ) -> Result<Option<NeighbourInput>, D::Error> {
+        Option::<String>::deserialize(deserializer)?
+            .map(|text| NeighbourInput::parse(&text).map_err(serde::de::Error::custom))
+            .transpose()
+    }
+}
+
 impl DatasetHeader {
     /// A header of samples without ranges (format version [`DATASET_VERSION_WITHOUT_RANGES`])
     /// whose `dataset_id` is a stable hash of every other field, so the same collection settings
-    /// always give the same id. [`DatasetHeader::with_ranges`] adds ranges.
+    /// always give the same id. [`DatasetHeader::with_ranges`] adds ranges,
+    /// [`DatasetHeader::with_neighbours`] neighbours.
     pub fn new(
         occupancy: OccupancySpec,
         lidar: SimulatedLidar,
@@ -131,6 +180,7 @@ impl DatasetHeader {
             seed,
             scenario: scenario.into(),
             ranges: None,
+            neighbours: None,
             labels: LabelLaw::default(),
             dataset_id: String::new(),
         };
@@ -151,17 +201,30 @@ impl DatasetHeader {
     /// `dataset_id`. `with_ranges(None)` gives back exactly [`DatasetHeader::new`]'s header.
     pub fn with_ranges(mut self, ranges: Option<RangeInput>) -> DatasetHeader {
         self.ranges = ranges;
-        self.format_version = dataset_version(ranges);
+        self.format_version = dataset_version(ranges, self.neighbours);
         self.dataset_id = self.settings_hash();
         self
     }
 
-    /// Checks that the format version is the one of the header's ranges ([`dataset_version`]).
+    /// The same settings with samples that carry (`Some`) or do not carry (`None`) the
+    /// neighbours detected in their scan: sets the format version to match
+    /// ([`dataset_version`]: 3 with neighbours) and recomputes `dataset_id`.
+    /// `with_neighbours(None)` on a header without neighbours changes nothing.
+    pub fn with_neighbours(mut self, neighbours: Option<NeighbourInput>) -> DatasetHeader {
+        self.neighbours = neighbours;
+        self.format_version = dataset_version(self.ranges, neighbours);
+        self.dataset_id = self.settings_hash();
+        self
+    }
+
+    /// Checks that the format version is the one of the header's ranges and neighbours
+    /// ([`dataset_version`]).
     pub fn check(&self) -> Result<(), DatasetError> {
-        if self.format_version != dataset_version(self.ranges) {
+        if self.format_version != dataset_version(self.ranges, self.neighbours) {
             return Err(DatasetError::InconsistentHeader {
                 version: self.format_version,
                 ranges: self.ranges,
+                neighbours: self.neighbours,
             });
         }
         Ok(())
@@ -170,6 +233,16 @@ impl DatasetHeader {
     /// Sectors of each sample's ranges: `K`, or 0 for a dataset without ranges.
     pub fn range_sectors(&self) -> usize {
         self.ranges.map_or(0, |r| r.sectors)
+    }
+
+    /// Slots of each sample's neighbours: `K`, or 0 for a dataset without neighbours.
+    pub fn neighbour_slots(&self) -> usize {
+        self.neighbours.map_or(0, |n| n.slots)
+    }
+
+    /// Values of each sample's neighbours: `K * 4`, or 0 for a dataset without neighbours.
+    pub fn neighbour_values(&self) -> usize {
+        self.neighbours.map_or(0, |n| n.len())
     }
 
     /// Cells in one occupancy image (`size_px^2`).
@@ -200,6 +273,10 @@ impl DatasetHeader {
         if let Some(ranges) = self.ranges {
             hash.update_field(ranges.to_string().as_bytes());
         }
+        // Only a dataset with neighbours adds a field, so one without keeps its id.
+        if let Some(neighbours) = self.neighbours {
+            hash.update_field(neighbours.to_string().as_bytes());
+        }
         // Only a law other than the default adds fields, so a default-labelled id is unchanged.
         self.labels
             .hash_fields(&mut |bytes| hash.update_field(bytes));
@@ -212,8 +289,13 @@ impl DatasetHeader {
             h.ranges
                 .map_or_else(|| "none".to_owned(), |r| r.to_string())
         };
+        let neighbours = |h: &DatasetHeader| {
+            h.neighbours
+                .map_or_else(|| "none".to_owned(), |n| n.to_string())
+        };
         FirstDifference::of(self, other)
             .display("range input", ranges)
+            .display("neighbour input", neighbours)
             .display("label law", |h| h.labels)
             .display("format version", |h| h.format_version)
             .debug("occupancy settings", |h| h.occupancy)
@@ -240,6 +322,10 @@ pub struct Sample {
     /// The scan's ranges, one value a sector ([`RangeInput`]): `K` values for a dataset that
     /// declares ranges, none for one that does not.
     pub ranges: Vec<f32>,
+    /// The neighbours detected in the scan ([`NeighbourInput`]), `K` slots of
+    /// [`NeighbourInput::FEATURES`] values each (`x/d*, y/d*, held, present`), slot after slot:
+    /// `K * 4` values for a dataset that declares neighbours, none for one that does not.
+    pub neighbours: Vec<f32>,
     /// DAgger iteration (0 = expert demonstrations).
     pub iteration: u32,
     /// Run index within its iteration.
@@ -268,7 +354,7 @@ pub struct ShardEntry {
 pub struct Manifest {
     /// Always [`DATASET_FORMAT`].
     pub format: String,
-    /// Layout version ([`DATASET_VERSION`]).
+    /// Layout version ([`dataset_version`]: 1, 2 or 3).
     pub version: u32,
     /// See [`DatasetHeader::dataset_id`].
     pub dataset_id: String,
@@ -285,6 +371,14 @@ pub struct Manifest {
     /// See [`DatasetHeader::ranges`]: `"ranges": "sectors=K,clip=C"`, absent when none.
     #[serde(default, skip_serializing_if = "Option::is_none", with = "range_text")]
     pub ranges: Option<RangeInput>,
+    /// See [`DatasetHeader::neighbours`]: `"neighbours": "slots=K,threshold=T,nearest=M"`,
+    /// absent when none.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        with = "neighbour_text"
+    )]
+    pub neighbours: Option<NeighbourInput>,
     /// See [`DatasetHeader::labels`]: `"labels": {...}`, absent for the expert's default.
     #[serde(default, skip_serializing_if = "LabelLaw::is_default")]
     pub labels: LabelLaw,
@@ -306,6 +400,7 @@ impl Manifest {
             seed: header.seed,
             scenario: header.scenario.clone(),
             ranges: header.ranges,
+            neighbours: header.neighbours,
             labels: header.labels,
             shards: Vec::new(),
             samples: 0,
@@ -328,6 +423,7 @@ impl Manifest {
             seed: self.seed,
             scenario: self.scenario.clone(),
             ranges: self.ranges,
+            neighbours: self.neighbours,
             labels: self.labels,
             dataset_id: self.dataset_id.clone(),
         }
@@ -394,7 +490,7 @@ pub enum DatasetError {
     },
     /// The manifest's version is not one this build reads.
     #[error(
-        "{path} is dataset format version {found}, but this build reads versions {DATASET_VERSION_WITHOUT_RANGES} and {DATASET_VERSION}; re-collect it with `formation collect` (or use the formation release that wrote it)"
+        "{path} is dataset format version {found}, but this build reads versions {DATASET_VERSION_WITHOUT_RANGES}, {DATASET_VERSION_WITH_RANGES} and {DATASET_VERSION}; re-collect it with `formation collect` (or use the formation release that wrote it)"
     )]
     UnsupportedVersion {
         /// The manifest file.
@@ -405,7 +501,7 @@ pub enum DatasetError {
     /// The manifest's version disagrees with its `ranges`: version 2 declares ranges, version 1
     /// does not.
     #[error(
-        "{path} is dataset format version {version} but {}: version {DATASET_VERSION_WITHOUT_RANGES} holds no ranges and version {DATASET_VERSION} declares them; the manifest was edited or damaged: restore it, or re-run `formation collect`",
+        "{path} is dataset format version {version} but {}: version {DATASET_VERSION_WITHOUT_RANGES} holds no ranges and version {DATASET_VERSION_WITH_RANGES} declares them; the manifest was edited or damaged: restore it, or re-run `formation collect`",
         match ranges {
             Some(ranges) => format!("declares ranges \"{ranges}\""),
             None => "declares no `ranges`".to_owned(),
@@ -419,16 +515,37 @@ pub enum DatasetError {
         /// The ranges it declares.
         ranges: Option<RangeInput>,
     },
-    /// A header whose format version does not match its ranges (built field by field).
+    /// The manifest's version disagrees with its `neighbours`: version 3 declares neighbours,
+    /// versions 1 and 2 do not.
     #[error(
-        "a dataset header of format version {version} with ranges {} is inconsistent; build it with `DatasetHeader::new(..).with_ranges(..)`",
-        ranges.map_or_else(|| "none".to_owned(), |r| r.to_string())
+        "{path} is dataset format version {version} but {}: only version {DATASET_VERSION} declares the neighbours detected in each scan, and versions {DATASET_VERSION_WITHOUT_RANGES} and {DATASET_VERSION_WITH_RANGES} hold none; the manifest was edited or damaged: restore it, or re-run `formation collect`",
+        match neighbours {
+            Some(neighbours) => format!("declares neighbours \"{neighbours}\""),
+            None => "declares no `neighbours`".to_owned(),
+        }
+    )]
+    NeighboursVersion {
+        /// The manifest file.
+        path: PathBuf,
+        /// The version it declares.
+        version: u32,
+        /// The neighbours it declares.
+        neighbours: Option<NeighbourInput>,
+    },
+    /// A header whose format version does not match its ranges and neighbours (built field by
+    /// field).
+    #[error(
+        "a dataset header of format version {version} with ranges {} and neighbours {} is inconsistent; build it with `DatasetHeader::new(..).with_ranges(..).with_neighbours(..)`",
+        ranges.map_or_else(|| "none".to_owned(), |r| r.to_string()),
+        neighbours.map_or_else(|| "none".to_owned(), |n| n.to_string())
     )]
     InconsistentHeader {
         /// The version it holds.
         version: u32,
         /// The ranges it holds.
         ranges: Option<RangeInput>,
+        /// The neighbours it holds.
+        neighbours: Option<NeighbourInput>,
     },
     /// The ranges declared need more beams than the dataset's LIDAR has.
     #[error(
@@ -510,6 +627,25 @@ pub enum DatasetError {
     SampleRanges {
         /// The dataset's range input, if any.
         declared: Option<RangeInput>,
+        /// Values in the sample.
+        actual: usize,
+    },
+    /// A sample's neighbours do not have the dataset's slot count.
+    #[error(
+        "a sample has {actual} neighbour values but the dataset {}; fill them with `NeighbourInputBuilder` for the dataset's neighbour input",
+        match declared {
+            Some(neighbours) => format!(
+                "declares {} slots of {} values ({neighbours}), {} in all",
+                neighbours.slots,
+                NeighbourInput::FEATURES,
+                neighbours.len()
+            ),
+            None => "declares no neighbours (give an empty `neighbours`, or collect into a dataset with neighbours)".to_owned(),
+        }
+    )]
+    SampleNeighbours {
+        /// The dataset's neighbour input, if any.
+        declared: Option<NeighbourInput>,
         /// Values in the sample.
         actual: usize,
     },
@@ -623,7 +759,13 @@ fn read_manifest(dir: &Path) -> Result<Manifest, DatasetError> {
         .get("version")
         .and_then(serde_json::Value::as_u64)
         .ok_or_else(|| bad("no numeric `version`".into()))?;
-    if version != u64::from(DATASET_VERSION) && version != u64::from(DATASET_VERSION_WITHOUT_RANGES)
+    if ![
+        DATASET_VERSION_WITHOUT_RANGES,
+        DATASET_VERSION_WITH_RANGES,
+        DATASET_VERSION,
+    ]
+    .map(u64::from)
+    .contains(&version)
     {
         return Err(DatasetError::UnsupportedVersion {
             path,
@@ -631,7 +773,14 @@ fn read_manifest(dir: &Path) -> Result<Manifest, DatasetError> {
         });
     }
     let manifest: Manifest = serde_json::from_value(value).map_err(|e| bad(e.to_string()))?;
-    if manifest.version != dataset_version(manifest.ranges) {
+    if manifest.neighbours.is_some() != (manifest.version == DATASET_VERSION) {
+        return Err(DatasetError::NeighboursVersion {
+            path,
+            version: manifest.version,
+            neighbours: manifest.neighbours,
+        });
+    }
+    if manifest.version != dataset_version(manifest.ranges, manifest.neighbours) {
         return Err(DatasetError::RangesVersion {
             path,
             version: manifest.version,
@@ -675,6 +824,8 @@ pub(crate) struct PendingShard {
     robot: Vec<u8>,
     /// The `ranges` column, `Some` iff the dataset declares ranges of this many sectors.
     ranges: Option<(usize, Vec<u8>)>,
+    /// The `neighbours` column, `Some` iff the dataset declares neighbours of this many slots.
+    neighbours: Option<(usize, Vec<u8>)>,
     samples: usize,
 }
 
@@ -689,6 +840,7 @@ impl PendingShard {
             run: Vec::new(),
             robot: Vec::new(),
             ranges: header.ranges.map(|r| (r.sectors, Vec::new())),
+            neighbours: header.neighbours.map(|n| (n.slots, Vec::new())),
             samples: 0,
         }
     }
@@ -711,6 +863,11 @@ impl PendingShard {
                 ranges.extend_from_slice(&value.to_le_bytes());
             }
         }
+        if let Some((_, neighbours)) = &mut self.neighbours {
+            for value in &sample.neighbours {
+                neighbours.extend_from_slice(&value.to_le_bytes());
+            }
+        }
         self.samples += 1;
     }
 
@@ -719,8 +876,8 @@ impl PendingShard {
         self.samples
     }
 
-    /// FNV-1a 64 over the six columns, and `ranges` where the dataset declares them, each
-    /// length-prefixed, in file order.
+    /// FNV-1a 64 over the six columns, then `ranges` and `neighbours` where the dataset declares
+    /// them, each length-prefixed, in file order.
     pub(crate) fn columns_fnv1a64(&self) -> String {
         let mut hash = Fnv1a64::new();
         for column in [
@@ -735,6 +892,9 @@ impl PendingShard {
         }
         if let Some((_, ranges)) = &self.ranges {
             hash.update_field(ranges);
+        }
+        if let Some((_, neighbours)) = &self.neighbours {
+            hash.update_field(neighbours);
         }
         hash.hex()
     }
@@ -791,6 +951,16 @@ impl PendingShard {
                 TensorView::new(Dtype::F32, vec![n, *sectors], ranges),
             ));
         }
+        if let Some((slots, neighbours)) = &self.neighbours {
+            tensors.push((
+                "neighbours",
+                TensorView::new(
+                    Dtype::F32,
+                    vec![n, *slots, NeighbourInput::FEATURES],
+                    neighbours,
+                ),
+            ));
+        }
         let mut views = Vec::with_capacity(tensors.len());
         for (name, view) in tensors {
             views.push((name, view.map_err(encode_error)?));
@@ -827,7 +997,8 @@ fn sort_metadata(file: &mut [u8], metadata: &HashMap<String, String>) -> Result<
 }
 
 /// Refuses a sample that does not fit a dataset with `header` being written as `iteration`:
-/// another image size, another iteration, ranges of another length, a non-finite value.
+/// another image size, another iteration, ranges or neighbours of another length, a non-finite
+/// value.
 pub(crate) fn check_sample(
     header: &DatasetHeader,
     iteration: u32,
@@ -866,6 +1037,15 @@ pub(crate) fn check_sample(
     }
     if !sample.ranges.iter().all(|r| r.is_finite()) {
         return Err(non_finite("ranges"));
+    }
+    if sample.neighbours.len() != header.neighbour_values() {
+        return Err(DatasetError::SampleNeighbours {
+            declared: header.neighbours,
+            actual: sample.neighbours.len(),
+        });
+    }
+    if !sample.neighbours.iter().all(|v| v.is_finite()) {
+        return Err(non_finite("neighbours"));
     }
     Ok(())
 }
@@ -1152,9 +1332,9 @@ fn decode_shard(
     decode_columns(&tensors, entry.samples, header).map_err(corrupt)
 }
 
-/// The `n` samples of a dataset with `header` held in the columns of `tensors` (six, and
-/// `ranges` iff the header declares ranges); the error says which column is missing, unexpected
-/// or of another type or shape.
+/// The `n` samples of a dataset with `header` held in the columns of `tensors` (six, `ranges` iff
+/// the header declares ranges, `neighbours` iff it declares neighbours); the error says which
+/// column is missing, unexpected or of another type or shape.
 pub(crate) fn decode_columns(
     tensors: &SafeTensors<'_>,
     n: usize,
@@ -1188,6 +1368,21 @@ pub(crate) fn decode_columns(
         }
         None => &[],
     };
+    let slots = header.neighbour_slots();
+    let neighbour_values = header.neighbour_values();
+    let neighbours = match header.neighbours {
+        Some(_) => column(
+            "neighbours",
+            Dtype::F32,
+            &[n, slots, NeighbourInput::FEATURES],
+        )?,
+        None if tensors.tensor("neighbours").is_ok() => {
+            return Err(
+                "a `neighbours` tensor, but the manifest declares no neighbours".to_owned(),
+            );
+        }
+        None => &[],
+    };
 
     let f32_at = |data: &[u8], i: usize| {
         f32::from_le_bytes([
@@ -1216,6 +1411,9 @@ pub(crate) fn decode_columns(
             run: u32_at(run, i),
             ranges: (0..sectors)
                 .map(|k| f32_at(ranges, i * sectors + k))
+                .collect(),
+            neighbours: (0..neighbour_values)
+                .map(|k| f32_at(neighbours, i * neighbour_values + k))
                 .collect(),
             robot: robot[i],
         })
@@ -1255,6 +1453,7 @@ pub(crate) mod tests {
             d_star: 1.0 + 0.5 * (k % 3) as f32,
             wheels: [0.1 * k as f32, -0.2 * k as f32],
             ranges: Vec::new(),
+            neighbours: Vec::new(),
             iteration,
             run: k / 4,
             robot: (k % 4) as u8,
@@ -1275,6 +1474,39 @@ pub(crate) mod tests {
     pub(crate) fn sample_with_ranges(k: u32, iteration: u32) -> Sample {
         Sample {
             ranges: (0..6).map(|s| 0.25 * s as f32 + 0.001 * k as f32).collect(),
+            ..sample(k, iteration)
+        }
+    }
+
+    /// The test datasets' neighbour input: 3 slots, threshold 1.3, the 2 nearest held.
+    pub(crate) fn neighbours() -> NeighbourInput {
+        NeighbourInput::with_default_rule(3).expect("neighbours")
+    }
+
+    /// The settings of the test datasets with neighbours (and no ranges), with `seed`.
+    pub(crate) fn header_with_neighbours(seed: u64) -> DatasetHeader {
+        header(seed).with_neighbours(Some(neighbours()))
+    }
+
+    /// [`sample`] with 3 slots of neighbours (12 values) that depend on `k`: two detections, the
+    /// first held, and an empty slot.
+    pub(crate) fn sample_with_neighbours(k: u32, iteration: u32) -> Sample {
+        let x = 0.01 * k as f32;
+        Sample {
+            neighbours: vec![
+                1.0 + x,
+                -0.5,
+                1.0,
+                1.0, //
+                -1.2,
+                0.8 + x,
+                0.0,
+                1.0, //
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
             ..sample(k, iteration)
         }
     }
@@ -1521,14 +1753,17 @@ pub(crate) mod tests {
         let path = dir.path().join(MANIFEST_FILE);
         let text = fs::read_to_string(&path).expect("read");
         let mut value: serde_json::Value = serde_json::from_str(&text).expect("json");
-        value["version"] = 3.into();
+        value["version"] = 4.into();
         fs::write(&path, value.to_string()).expect("write");
         let err = DatasetReader::open(dir.path()).expect_err("version");
         assert!(
-            matches!(err, DatasetError::UnsupportedVersion { found: 3, .. }),
+            matches!(err, DatasetError::UnsupportedVersion { found: 4, .. }),
             "{err:?}"
         );
-        assert!(err.to_string().contains("reads versions 1 and 2"), "{err}");
+        assert!(
+            err.to_string().contains("reads versions 1, 2 and 3"),
+            "{err}"
+        );
 
         fs::write(&path, r#"{"format": "something-else", "version": 1}"#).expect("write");
         assert!(matches!(
@@ -1603,7 +1838,7 @@ pub(crate) mod tests {
     #[test]
     fn ranges_change_the_id_and_the_version_and_round_trip() {
         let with = header_with_ranges(7);
-        assert_eq!(with.format_version, DATASET_VERSION);
+        assert_eq!(with.format_version, DATASET_VERSION_WITH_RANGES);
         assert_eq!(with.format_version, 2);
         assert_ne!(with.dataset_id, header(7).dataset_id);
         assert_ne!(
@@ -1868,6 +2103,322 @@ pub(crate) mod tests {
             Err(DatasetError::RangeBeams { .. })
         ));
         DatasetWriter::create(dir.path(), too_many).expect("900 beams fill 360 sectors");
+    }
+
+    fn write_with_neighbours(dir: &Path, header: DatasetHeader, samples: &[Sample]) -> Manifest {
+        let mut writer = DatasetWriter::create(dir, header)
+            .expect("create")
+            .with_shard_size(4)
+            .expect("shard size");
+        for sample in samples {
+            writer.push(sample.clone()).expect("push");
+        }
+        writer.finish().expect("finish")
+    }
+
+    #[test]
+    fn a_header_without_neighbours_keeps_its_version_id_and_bytes() {
+        // The ids of before neighbours (the first is pinned above, apart from this code).
+        assert_eq!(header(7).with_neighbours(None), header(7));
+        assert_eq!(header(7).dataset_id, "6e5ecb97c951d8be");
+        let ranged = header_with_ranges(7);
+        assert_eq!(ranged.clone().with_neighbours(None), ranged);
+        assert_eq!(ranged.format_version, 2);
+        for header in [header(7), ranged] {
+            let json = serde_json::to_value(&header).expect("json");
+            assert!(json.get("neighbours").is_none(), "{json}");
+            assert_eq!(header.neighbour_values(), 0);
+        }
+    }
+
+    #[test]
+    fn neighbours_make_version_3_change_the_id_and_round_trip() {
+        let with = header_with_neighbours(7);
+        assert_eq!(with.format_version, 3);
+        assert_eq!(with.format_version, DATASET_VERSION);
+        assert_ne!(with.dataset_id, header(7).dataset_id);
+        let other_rule =
+            header(7).with_neighbours(Some(NeighbourInput::new(3, 1.5, 2).expect("neighbours")));
+        assert_ne!(with.dataset_id, other_rule.dataset_id);
+        assert_eq!(with.clone().with_neighbours(None), header(7));
+        assert_eq!((with.neighbour_slots(), with.neighbour_values()), (3, 12));
+
+        let dir = tempfile::tempdir().expect("tempdir");
+        let samples: Vec<Sample> = (0..10).map(|k| sample_with_neighbours(k, 0)).collect();
+        let manifest = write_with_neighbours(dir.path(), with.clone(), &samples);
+        let value = manifest_json(dir.path());
+        assert_eq!(value["version"], 3);
+        assert_eq!(value["neighbours"], "slots=3,threshold=1.3,nearest=2");
+        assert!(value.get("ranges").is_none(), "{value}");
+        let reader = DatasetReader::open(dir.path()).expect("open");
+        assert_eq!(reader.header(), &with);
+        assert_eq!(reader.manifest(), &manifest);
+        assert_eq!(reader.load_all().expect("load"), samples);
+
+        let shard = fs::read(dir.path().join("shard-000002.safetensors")).expect("shard");
+        let tensors = SafeTensors::deserialize(&shard).expect("safetensors");
+        let neighbours = tensors.tensor("neighbours").expect("neighbours tensor");
+        assert_eq!(
+            (neighbours.dtype(), neighbours.shape()),
+            (Dtype::F32, &[2, 3, 4][..])
+        );
+        assert!(tensors.tensor("ranges").is_err());
+        let (_, meta) = SafeTensors::read_metadata(&shard).expect("metadata");
+        assert_eq!(meta.metadata().as_ref().expect("meta")["version"], "3");
+
+        let mut writer = DatasetWriter::append_matching(dir.path(), &with, 1).expect("append");
+        writer.push(sample_with_neighbours(50, 1)).expect("push");
+        writer.finish().expect("finish");
+        let all = DatasetReader::open(dir.path())
+            .expect("open")
+            .load_all()
+            .expect("load");
+        assert_eq!(all[10], sample_with_neighbours(50, 1));
+    }
+
+    #[test]
+    fn ranges_and_neighbours_together_are_version_3_and_round_trip() {
+        let both = header_with_ranges(7).with_neighbours(Some(neighbours()));
+        assert_eq!(both.format_version, 3);
+        assert_eq!(
+            header_with_neighbours(7).with_ranges(Some(ranges())),
+            both,
+            "the order of the two does not matter"
+        );
+        assert_ne!(both.dataset_id, header_with_neighbours(7).dataset_id);
+        assert_ne!(both.dataset_id, header_with_ranges(7).dataset_id);
+        let samples: Vec<Sample> = (0..5)
+            .map(|k| Sample {
+                ranges: sample_with_ranges(k, 0).ranges,
+                ..sample_with_neighbours(k, 0)
+            })
+            .collect();
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_with_neighbours(dir.path(), both.clone(), &samples);
+        let value = manifest_json(dir.path());
+        assert_eq!(
+            (&value["version"], &value["ranges"], &value["neighbours"]),
+            (
+                &serde_json::json!(3),
+                &serde_json::json!("sectors=6,clip=3"),
+                &serde_json::json!("slots=3,threshold=1.3,nearest=2")
+            )
+        );
+        let reader = DatasetReader::open(dir.path()).expect("open");
+        assert_eq!(reader.header(), &both);
+        assert_eq!(reader.load_all().expect("load"), samples);
+    }
+
+    #[test]
+    fn neighbours_of_the_wrong_length_or_not_finite_are_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut writer =
+            DatasetWriter::create(dir.path(), header_with_neighbours(7)).expect("create");
+        let err = writer.push(sample(0, 0)).expect_err("no neighbours");
+        assert!(
+            matches!(err, DatasetError::SampleNeighbours { actual: 0, .. }),
+            "{err:?}"
+        );
+        assert!(
+            err.to_string().contains(
+                "has 0 neighbour values but the dataset declares 3 slots of 4 values \
+                 (slots=3,threshold=1.3,nearest=2), 12 in all"
+            ),
+            "{err}"
+        );
+        let mut short = sample_with_neighbours(0, 0);
+        short.neighbours.pop();
+        assert!(matches!(
+            writer.push(short),
+            Err(DatasetError::SampleNeighbours { actual: 11, .. })
+        ));
+        let mut nan = sample_with_neighbours(0, 0);
+        nan.neighbours[5] = f32::NAN;
+        assert!(matches!(
+            writer.push(nan),
+            Err(DatasetError::NonFiniteSample {
+                field: "neighbours",
+                ..
+            })
+        ));
+        assert_eq!(writer.finish().expect("finish").samples, 0);
+
+        let other = tempfile::tempdir().expect("tempdir");
+        let mut writer = DatasetWriter::create(other.path(), header(7)).expect("create");
+        let err = writer
+            .push(sample_with_neighbours(0, 0))
+            .expect_err("neighbours");
+        assert!(
+            matches!(
+                err,
+                DatasetError::SampleNeighbours {
+                    declared: None,
+                    actual: 12
+                }
+            ),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("declares no neighbours"), "{err}");
+    }
+
+    #[test]
+    fn appending_with_other_neighbours_is_refused_naming_them() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 2, 4);
+        let err = DatasetWriter::append_matching(dir.path(), &header_with_neighbours(7), 1)
+            .expect_err("mismatch");
+        assert!(
+            matches!(&err, DatasetError::HeaderMismatch { field: "neighbour input", existing, requested, .. }
+                if existing == "none" && requested == "slots=3,threshold=1.3,nearest=2"),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn a_version_that_disagrees_with_the_neighbours_is_refused_naming_the_file() {
+        // Version 3 without neighbours.
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), 2, 4);
+        let path = dir.path().join(MANIFEST_FILE);
+        let mut value = manifest_json(dir.path());
+        value["version"] = 3.into();
+        fs::write(&path, value.to_string()).expect("write");
+        let err = DatasetReader::open(dir.path()).expect_err("v3 without neighbours");
+        assert!(
+            matches!(
+                err,
+                DatasetError::NeighboursVersion {
+                    version: 3,
+                    neighbours: None,
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+        let message = err.to_string();
+        assert!(
+            message
+                .contains("manifest.json is dataset format version 3 but declares no `neighbours`"),
+            "{message}"
+        );
+        assert!(message.contains("re-run `formation collect`"), "{message}");
+
+        // Versions 1 and 2 with neighbours.
+        let with = tempfile::tempdir().expect("tempdir");
+        write_with_neighbours(
+            with.path(),
+            header_with_neighbours(7),
+            &[sample_with_neighbours(0, 0)],
+        );
+        let path = with.path().join(MANIFEST_FILE);
+        for (version, ranges) in [(1, None), (2, Some("sectors=6,clip=3"))] {
+            let mut value = manifest_json(with.path());
+            value["version"] = version.into();
+            if let Some(ranges) = ranges {
+                value["ranges"] = ranges.into();
+            }
+            fs::write(&path, value.to_string()).expect("write");
+            let err = DatasetReader::open(with.path()).expect_err("v1/v2 with neighbours");
+            assert!(
+                matches!(
+                    &err,
+                    DatasetError::NeighboursVersion { version: v, neighbours: Some(_), .. } if *v == version
+                ),
+                "{err:?}"
+            );
+            assert!(
+                err.to_string().contains(&format!(
+                    "version {version} but declares neighbours \"slots=3,threshold=1.3,nearest=2\""
+                )),
+                "{err}"
+            );
+        }
+
+        // A neighbour input out of its bounds.
+        let mut value = manifest_json(with.path());
+        value["version"] = 3.into();
+        value["neighbours"] = "slots=65,threshold=1.3,nearest=2".into();
+        fs::write(&path, value.to_string()).expect("write");
+        let err = DatasetReader::open(with.path()).expect_err("bad neighbours");
+        assert!(matches!(err, DatasetError::BadManifest { .. }), "{err:?}");
+        assert!(err.to_string().contains("slots"), "{err}");
+    }
+
+    #[test]
+    fn a_shard_whose_neighbours_disagree_with_the_manifest_is_corrupt() {
+        let with = tempfile::tempdir().expect("tempdir");
+        write_with_neighbours(
+            with.path(),
+            header_with_neighbours(7),
+            &[sample_with_neighbours(0, 0), sample_with_neighbours(1, 0)],
+        );
+        let without = tempfile::tempdir().expect("tempdir");
+        write(without.path(), 2, 8);
+        let other_slots = tempfile::tempdir().expect("tempdir");
+        let four =
+            header(7).with_neighbours(Some(NeighbourInput::with_default_rule(4).expect("4")));
+        let four_samples: Vec<Sample> = (0..2)
+            .map(|k| Sample {
+                neighbours: vec![0.5; 16],
+                ..sample(k, 0)
+            })
+            .collect();
+        write_with_neighbours(other_slots.path(), four, &four_samples);
+        let shard = "shard-000000.safetensors";
+        let with_manifest = manifest_json(with.path());
+        let without_manifest = manifest_json(without.path());
+        for (dir, manifest, reason) in [
+            (
+                with.path(),
+                &without_manifest,
+                "a `neighbours` tensor, but the manifest declares no neighbours",
+            ),
+            (without.path(), &with_manifest, "no `neighbours` tensor"),
+            (
+                other_slots.path(),
+                &with_manifest,
+                "`neighbours` is F32 [2, 4, 4], expected F32 [2, 3, 4]",
+            ),
+        ] {
+            let bytes = fs::read(dir.join(shard)).expect("shard");
+            let mut manifest = manifest.clone();
+            manifest["shards"][0]["bytes"] = bytes.len().into();
+            manifest["shards"][0]["samples"] = 2.into();
+            manifest["samples"] = 2.into();
+            let mut checksum = Fnv1a64::new();
+            checksum.update(&bytes);
+            manifest["shards"][0]["fnv1a64"] = checksum.hex().into();
+            fs::write(dir.join(MANIFEST_FILE), manifest.to_string()).expect("write");
+            let err = DatasetReader::open(dir)
+                .expect("open")
+                .load_all()
+                .expect_err("corrupt");
+            assert!(
+                matches!(&err, DatasetError::CorruptShard { reason: r, .. } if r == reason),
+                "{err:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_header_with_neighbours_and_the_wrong_version_is_refused() {
+        for version in [1, 2] {
+            let mut header = header_with_neighbours(7);
+            header.format_version = version;
+            let dir = tempfile::tempdir().expect("tempdir");
+            let err = DatasetWriter::create(dir.path(), header).expect_err("inconsistent");
+            assert!(
+                matches!(
+                    err,
+                    DatasetError::InconsistentHeader {
+                        neighbours: Some(_),
+                        ..
+                    }
+                ),
+                "{err:?}"
+            );
+            assert!(err.to_string().contains("with_neighbours"), "{err}");
+        }
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! Which law labelled a dataset's samples ([`LabelLaw`]): the expert's shaping and pair weights,
 //! as `formation collect|dagger --label-wheel-accel | --unshaped-labels | --label-pair-band` set
-//! them. Stored in the dataset's manifest (absent for the expert's default law, so a dataset
+//! them, and whether the law read every pose or each robot's own scan (`--own-scan-labels`). Stored in the dataset's manifest (absent for the expert's default law, so a dataset
 //! collected with it keeps its bytes and id), folded into `dataset_id`, and compared wherever
 //! samples are mixed: DAgger refuses to append samples labelled by another law, and the trainer
 //! refuses to train on datasets labelled by different laws.
@@ -10,7 +10,8 @@ use std::fmt;
 use serde::{Deserialize, Serialize};
 
 /// The expert's labelling law, as far as it differs from its default (labels shaped for each
-/// robot's own wheel acceleration limit, the neighbour rule's pairs at full weight).
+/// robot's own wheel acceleration limit, the neighbour rule's pairs at full weight, computed from
+/// every robot's pose).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LabelLaw {
@@ -24,6 +25,11 @@ pub struct LabelLaw {
     /// Pair weights rising smoothly over this witness-ratio band (`--label-pair-band`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pair_weight_band: Option<[f64; 2]>,
+    /// Each robot's label is the expert's law applied to the neighbours it detects in its own
+    /// scan (`formation_expert::own_scan::OwnView`), not the expert's that reads every pose
+    /// (`--own-scan-labels`). The shaping and the pair weights above apply to it alike.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub own_scan: bool,
 }
 
 fn is_false(value: &bool) -> bool {
@@ -55,6 +61,9 @@ impl LabelLaw {
             update(&low.to_le_bytes());
             update(&high.to_le_bytes());
         }
+        if self.own_scan {
+            update(b"own_scan");
+        }
     }
 }
 
@@ -76,6 +85,9 @@ impl fmt::Display for LabelLaw {
             parts.push(format!(
                 "pair band {low}-{high} (--label-pair-band {low},{high})"
             ));
+        }
+        if self.own_scan {
+            parts.push("each robot's own scan (--own-scan-labels)".to_owned());
         }
         f.write_str(&parts.join(", "))
     }
@@ -115,6 +127,15 @@ mod tests {
                 pair_weight_band: Some([1.1, 1.5]),
                 ..LabelLaw::default()
             },
+            LabelLaw {
+                own_scan: true,
+                ..LabelLaw::default()
+            },
+            LabelLaw {
+                unshaped: true,
+                own_scan: true,
+                ..LabelLaw::default()
+            },
         ];
         for law in laws {
             let text = serde_json::to_string(&law).unwrap();
@@ -125,9 +146,34 @@ mod tests {
             );
         }
         let hashes: Vec<_> = laws.iter().map(hash).collect();
-        assert_ne!(hashes[0], hashes[1]);
-        assert_ne!(hashes[0], hashes[2]);
-        assert_ne!(hashes[1], hashes[2]);
+        for (i, a) in hashes.iter().enumerate() {
+            for b in &hashes[i + 1..] {
+                assert_ne!(a, b);
+            }
+        }
+    }
+
+    #[test]
+    fn own_scan_labels_are_stored_only_when_set() {
+        let own = LabelLaw {
+            own_scan: true,
+            ..LabelLaw::default()
+        };
+        assert!(!own.is_default());
+        assert_eq!(serde_json::to_string(&own).unwrap(), r#"{"own_scan":true}"#);
+        assert_eq!(
+            serde_json::from_str::<LabelLaw>(r#"{"own_scan":false}"#).unwrap(),
+            LabelLaw::default()
+        );
+        assert_eq!(hash(&own), [b"labels".to_vec(), b"own_scan".to_vec()]);
+        let with_band = LabelLaw {
+            pair_weight_band: Some([1.1, 1.5]),
+            ..own
+        };
+        assert_eq!(
+            with_band.to_string(),
+            "pair band 1.1-1.5 (--label-pair-band 1.1,1.5), each robot's own scan (--own-scan-labels)"
+        );
     }
 
     #[test]

@@ -20,6 +20,7 @@ fn sample(i: u32, iteration: u32) -> Sample {
         d_star: 1.5,
         wheels: [0.3 * delta_phi.sin(), 0.3 * delta_phi.cos()],
         ranges: Vec::new(),
+        neighbours: Vec::new(),
         iteration,
         run: i / 20,
         robot: (i % 3) as u8,

@@ -9,11 +9,13 @@
 //! such an entry, so that mutations of the shard reach the safetensors and column checks instead
 //! of stopping at the checksum; with it clear, the checksum is checked as it is.
 //!
-//! Seeds: a dataset without ranges (format version 1) and one whose samples carry their scan's
-//! ranges (version 2: `"ranges"` in the manifest, a `ranges` tensor in the shard).
+//! Seeds: a dataset without ranges (format version 1), one whose samples carry their scan's
+//! ranges (version 2: `"ranges"` in the manifest, a `ranges` tensor in the shard), and one whose
+//! samples carry both the ranges and the neighbours detected in the scan (version 3:
+//! `"neighbours"` too, a `neighbours` tensor `[N, K, 4]`).
 
 use formation_proto::{
-    BeyondWindow, LidarNoise, LidarSpec, OccupancySpec, RangeInput, SimulatedLidar,
+    BeyondWindow, LidarNoise, LidarSpec, NeighbourInput, OccupancySpec, RangeInput, SimulatedLidar,
 };
 use formation_trainer_bridge::dataset::{
     DatasetHeader, DatasetReader, DatasetWriter, MANIFEST_FILE, Sample,
@@ -44,6 +46,8 @@ pub const TARGET: Target = Target {
         b"shard-999999.safetensors",
         b"\"ranges\": ",
         b"sectors=12,clip=3",
+        b"\"neighbours\": ",
+        b"slots=3,threshold=1.3,nearest=2",
     ],
     shape: Shape::Bytes,
 };
@@ -142,6 +146,7 @@ pub fn sample(i: usize, iteration: u32, run: u32) -> Sample {
         d_star: 1.5,
         wheels: [0.3, 0.28 + 0.01 * i as f32],
         ranges: Vec::new(),
+        neighbours: Vec::new(),
         iteration,
         run,
         robot: (i % 3) as u8,
@@ -161,6 +166,37 @@ pub fn sample_with_ranges(i: usize, iteration: u32, run: u32) -> Sample {
     Sample {
         ranges: (0..12).map(|s| 0.2 * s as f32 + 0.01 * i as f32).collect(),
         ..sample(i, iteration, run)
+    }
+}
+
+/// The neighbour input of the seed with neighbours: 3 slots, the scenarios' default rule.
+pub fn neighbours() -> NeighbourInput {
+    NeighbourInput {
+        slots: 3,
+        threshold: 1.3,
+        nearest: 2,
+    }
+}
+
+/// [`sample_with_ranges`] with the 3 slots of [`neighbours`]: two detections and an empty slot.
+pub fn sample_with_neighbours(i: usize, iteration: u32, run: u32) -> Sample {
+    let x = 0.05 * i as f32;
+    Sample {
+        neighbours: vec![
+            0.9 + x,
+            0.2,
+            1.0,
+            1.0, //
+            -0.4,
+            -1.1 - x,
+            0.0,
+            1.0, //
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+        ],
+        ..sample_with_ranges(i, iteration, run)
     }
 }
 
@@ -184,8 +220,17 @@ fn seeds() -> Result<Vec<Seed>, FuzzError> {
         header().with_ranges(Some(ranges())),
         (0..3).map(|i| sample_with_ranges(i, 0, i as u32)).collect(),
     )?;
+    let with_neighbours = seed_case(
+        header()
+            .with_ranges(Some(ranges()))
+            .with_neighbours(Some(neighbours())),
+        (0..3)
+            .map(|i| sample_with_neighbours(i, 0, i as u32))
+            .collect(),
+    )?;
     Ok(vec![
         ("dataset.bin".into(), plain),
         ("dataset-ranges.bin".into(), ranged),
+        ("dataset-neighbours.bin".into(), with_neighbours),
     ])
 }
