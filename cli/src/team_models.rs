@@ -234,6 +234,7 @@ mod tests {
             output: formation_onnx::PolicyOutput::Wheels,
             aux: formation_proto::AuxLayout::PAPER,
             ranges: None,
+            neighbours: None,
             extra: extra
                 .iter()
                 .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))

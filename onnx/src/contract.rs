@@ -5,7 +5,9 @@
 //! - inputs exactly `occupancy` f32 `[B, 1, S, S]` and `aux` f32 `[B, A]`: the scalars that
 //!   `formation.aux` declares, in order (`A` of them; absent: the paper's `delta_phi,d_star`, see
 //!   [`AuxLayout`]); and `ranges` f32 `[B, K]` where `formation.ranges = "sectors=K,clip=C"`
-//!   declares the scan's ranges beside the image ([`RangeInput`]);
+//!   declares the scan's ranges beside the image ([`RangeInput`]); and `neighbours` f32
+//!   `[B, K, 4]` where `formation.neighbours = "slots=K,threshold=T,nearest=M"` declares the
+//!   neighbours detected in the scan ([`NeighbourInput`]);
 //! - one output, by default `wheels` f32 `[B, 2]` (left, right) m/s at `v_train`; or, where the
 //!   metadata declares `formation.output = formation_velocity`, `formation_velocity` f32 `[B, 2]`:
 //!   the correction of the formation in the robot's frame ([`PolicyOutput`]); `B` dynamic;
@@ -18,7 +20,9 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-use formation_proto::{AuxLayout, BeyondWindow, LidarSpec, OccupancySpec, PolicyIo, RangeInput};
+use formation_proto::{
+    AuxLayout, BeyondWindow, LidarSpec, NeighbourInput, OccupancySpec, PolicyIo, RangeInput,
+};
 
 /// The value of [`keys::FORMAT`] this crate understands.
 pub const MODEL_FORMAT: &str = "formation-policy/1";
@@ -28,6 +32,9 @@ pub const OCCUPANCY_INPUT: &str = "occupancy";
 pub const AUX_INPUT: &str = "aux";
 /// Name of the input of the scan's ranges ([`RangeInput`]), where the metadata declares one.
 pub const RANGES_INPUT: &str = "ranges";
+/// Name of the input of the detected neighbours ([`NeighbourInput`]), where the metadata declares
+/// one.
+pub const NEIGHBOURS_INPUT: &str = "neighbours";
 /// Name of the wheel-speed output.
 pub const WHEELS_OUTPUT: &str = "wheels";
 /// Name of the formation-velocity output.
@@ -67,6 +74,9 @@ pub mod keys {
     /// The scan's ranges beside the image, `sectors=K,clip=C` (optional; absent: none): see
     /// [`formation_proto::RangeInput`].
     pub const RANGES: &str = "formation.ranges";
+    /// The neighbours detected in the scan beside the image, `slots=K,threshold=T,nearest=M`
+    /// (optional; absent: none): see [`formation_proto::NeighbourInput`].
+    pub const NEIGHBOURS: &str = "formation.neighbours";
     /// LIDAR beams the model was trained with.
     pub const BEAMS: &str = "formation.lidar.beams";
     /// LIDAR maximum range \[m\].
@@ -118,7 +128,7 @@ impl ModelMetadata {
             image: self.occupancy,
             aux: self.aux,
             ranges: self.ranges,
-            neighbours: None,
+            neighbours: self.neighbours,
             output: self.output,
             v_train: self.v_train,
         }
@@ -217,6 +227,8 @@ pub struct ModelMetadata {
     pub aux: AuxLayout,
     /// The scan's ranges it takes beside its image, if any.
     pub ranges: Option<RangeInput>,
+    /// The neighbours detected in its scan it takes beside its image, if any.
+    pub neighbours: Option<NeighbourInput>,
     /// Every other metadata entry (training figures, DAgger iteration, creator, ...), by full key.
     pub extra: BTreeMap<String, String>,
 }
@@ -258,18 +270,26 @@ pub enum ContractViolation {
         input: String,
     },
     /// The model's inputs are not exactly `occupancy` and `aux` (and `ranges`, where its
-    /// metadata declares `formation.ranges`).
+    /// metadata declares `formation.ranges`, and `neighbours`, where it declares
+    /// `formation.neighbours`).
     #[error(
-        "inputs are [{}], expected exactly [occupancy, aux{}] ({})",
+        "inputs are [{}], expected exactly [occupancy, aux{}{}] (the metadata declares {}`{}` and \
+         declares {}`{}`)",
         .found.join(", "),
         if *.ranges { ", ranges" } else { "" },
-        if *.ranges { "the metadata declares `formation.ranges`" } else { "the metadata declares no `formation.ranges`" }
+        if *.neighbours { ", neighbours" } else { "" },
+        if *.ranges { "" } else { "no " },
+        keys::RANGES,
+        if *.neighbours { "" } else { "no " },
+        keys::NEIGHBOURS
     )]
     InputNames {
         /// Input names found.
         found: Vec<String>,
         /// Whether the metadata declares a range input.
         ranges: bool,
+        /// Whether the metadata declares a neighbour input.
+        neighbours: bool,
     },
     /// The model declares a range input this agent cannot feed.
     #[error("metadata `{}` = {value:?} cannot be fed: {reason}", keys::RANGES)]
@@ -279,6 +299,15 @@ pub enum ContractViolation {
         /// What is wrong with it.
         #[source]
         reason: formation_proto::RangeInputError,
+    },
+    /// The model declares a neighbour input this agent cannot feed.
+    #[error("metadata `{}` = {value:?} cannot be fed: {reason}", keys::NEIGHBOURS)]
+    BadNeighbours {
+        /// The declared value.
+        value: String,
+        /// What is wrong with it.
+        #[source]
+        reason: formation_proto::NeighbourInputError,
     },
     /// The model's outputs are not exactly the one its metadata declares.
     #[error(
@@ -429,14 +458,16 @@ pub fn parse_metadata(
     let beams = parse_positive_int(entries, keys::BEAMS)?;
     let max_range = parse_positive_real(entries, keys::MAX_RANGE)?;
     let ranges = parse_ranges(entries, beams)?;
+    let neighbours = parse_neighbours(entries)?;
     let v_train = parse_positive_real(entries, keys::V_TRAIN)?;
     let dataset_id = required(entries, keys::DATASET_ID)?.to_owned();
 
-    const PARSED: [&str; 13] = [
+    const PARSED: [&str; 14] = [
         keys::FORMAT,
         keys::OUTPUT,
         keys::AUX,
         keys::RANGES,
+        keys::NEIGHBOURS,
         keys::SIZE_PX,
         keys::RESOLUTION_M,
         keys::BEYOND,
@@ -467,6 +498,7 @@ pub fn parse_metadata(
         output,
         aux,
         ranges,
+        neighbours,
         extra,
     })
 }
@@ -486,6 +518,21 @@ fn parse_ranges(
     let ranges = RangeInput::parse(text).map_err(bad)?;
     ranges.check_beams(beams).map_err(bad)?;
     Ok(Some(ranges))
+}
+
+/// The optional neighbour input.
+fn parse_neighbours(
+    entries: &BTreeMap<String, String>,
+) -> Result<Option<NeighbourInput>, ContractViolation> {
+    let Some(text) = entries.get(keys::NEIGHBOURS) else {
+        return Ok(None);
+    };
+    NeighbourInput::parse(text)
+        .map(Some)
+        .map_err(|reason| ContractViolation::BadNeighbours {
+            value: text.clone(),
+            reason,
+        })
 }
 
 fn required<'a>(
@@ -652,7 +699,7 @@ enum Dim {
 }
 
 /// Checks the model's inputs and outputs against the contract for `size_px x size_px` images,
-/// the scalars `aux` and the output its metadata declares.
+/// the scalars `aux`, the output, the ranges and the neighbours its metadata declares.
 ///
 /// Input order does not matter (inputs are bound by name); names, element types and shapes do.
 pub fn check_signature(
@@ -662,19 +709,23 @@ pub fn check_signature(
     aux_layout: AuxLayout,
     output: PolicyOutput,
     ranges: Option<RangeInput>,
+    neighbours: Option<NeighbourInput>,
 ) -> Result<(), ContractViolation> {
     let names = |list: &[TensorSignature]| list.iter().map(|t| t.name.clone()).collect::<Vec<_>>();
     let find = |name: &str| inputs.iter().find(|t| t.name == name);
     let wrong_inputs = || ContractViolation::InputNames {
         found: names(inputs),
         ranges: ranges.is_some(),
+        neighbours: neighbours.is_some(),
     };
     let (Some(occupancy), Some(aux)) = (find(OCCUPANCY_INPUT), find(AUX_INPUT)) else {
         return Err(wrong_inputs());
     };
     let ranges_tensor = find(RANGES_INPUT);
-    if inputs.len() != 2 + usize::from(ranges.is_some())
+    let neighbours_tensor = find(NEIGHBOURS_INPUT);
+    if inputs.len() != 2 + usize::from(ranges.is_some()) + usize::from(neighbours.is_some())
         || ranges_tensor.is_some() != ranges.is_some()
+        || neighbours_tensor.is_some() != neighbours.is_some()
     {
         return Err(wrong_inputs());
     }
@@ -705,6 +756,14 @@ pub fn check_signature(
     if let (Some(tensor), Some(ranges)) = (ranges_tensor, ranges) {
         let sectors = i64::try_from(ranges.sectors).unwrap_or(i64::MAX);
         check_tensor(tensor, &[Dim::Batch, Dim::Exact(sectors)])?;
+    }
+    if let (Some(tensor), Some(neighbours)) = (neighbours_tensor, neighbours) {
+        let slots = i64::try_from(neighbours.slots).unwrap_or(i64::MAX);
+        let features = i64::try_from(NeighbourInput::FEATURES).unwrap_or(i64::MAX);
+        check_tensor(
+            tensor,
+            &[Dim::Batch, Dim::Exact(slots), Dim::Exact(features)],
+        )?;
     }
     check_tensor(wheels, &[Dim::Batch, Dim::Exact(2)])
 }
@@ -832,6 +891,7 @@ mod tests {
                 AuxLayout::PAPER,
                 PolicyOutput::Wheels,
                 Some(ranges),
+                None,
             )
         };
         assert!(matches!(
@@ -859,6 +919,110 @@ mod tests {
             let message = parse_metadata(&entries).unwrap_err().to_string();
             assert!(
                 message.contains("formation.ranges") && message.contains(fault),
+                "{value}: {message}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_declared_neighbour_input_is_parsed_checked_and_needs_its_tensor() {
+        let mut entries = paper_metadata();
+        assert_eq!(parse_metadata(&entries).unwrap().neighbours, None);
+        entries.insert(
+            keys::NEIGHBOURS.into(),
+            "slots=8,threshold=1.3,nearest=2".into(),
+        );
+        let meta = parse_metadata(&entries).expect("valid");
+        let neighbours = meta.neighbours.expect("declared");
+        assert_eq!(
+            (neighbours.slots, neighbours.threshold, neighbours.nearest),
+            (8, 1.3, 2)
+        );
+        assert_eq!(meta.io().neighbours, Some(neighbours));
+        assert_eq!(meta.io().ranges, None);
+        assert!(!meta.extra.contains_key(keys::NEIGHBOURS));
+        let mut inputs = paper_inputs();
+        let check = |inputs: &[TensorSignature]| {
+            check_signature(
+                inputs,
+                &paper_outputs(),
+                50,
+                AuxLayout::PAPER,
+                PolicyOutput::Wheels,
+                None,
+                Some(neighbours),
+            )
+        };
+        let missing = check(&inputs).unwrap_err();
+        assert!(matches!(
+            missing,
+            ContractViolation::InputNames {
+                neighbours: true,
+                ranges: false,
+                ..
+            }
+        ));
+        assert!(
+            missing
+                .to_string()
+                .contains("expected exactly [occupancy, aux, neighbours]"),
+            "{missing}"
+        );
+        inputs.push(tensor("neighbours", &[-1, 8]));
+        assert!(matches!(
+            check(&inputs),
+            Err(ContractViolation::Shape { ref name, .. }) if name == "neighbours"
+        ));
+        inputs[2] = tensor("neighbours", &[-1, 6, 4]);
+        assert!(matches!(
+            check(&inputs),
+            Err(ContractViolation::Shape { ref name, .. }) if name == "neighbours"
+        ));
+        inputs[2] = tensor("neighbours", &[-1, 8, 4]);
+        check(&inputs).expect("the declared input");
+
+        // An undeclared `neighbours` tensor is refused, saying the metadata declares none.
+        let undeclared = check_signature(
+            &inputs,
+            &paper_outputs(),
+            50,
+            AuxLayout::PAPER,
+            PolicyOutput::Wheels,
+            None,
+            None,
+        )
+        .unwrap_err();
+        assert!(
+            undeclared
+                .to_string()
+                .contains("declares no `formation.neighbours`"),
+            "{undeclared}"
+        );
+
+        // Both tensor inputs at once, in any order.
+        let mut both = vec![tensor("ranges", &[-1, 100])];
+        both.extend(inputs.iter().cloned());
+        check_signature(
+            &both,
+            &paper_outputs(),
+            50,
+            AuxLayout::PAPER,
+            PolicyOutput::Wheels,
+            Some(RangeInput::new(100, 3.0).unwrap()),
+            Some(neighbours),
+        )
+        .expect("ranges and neighbours");
+
+        for (value, fault) in [
+            ("slots=8", "is not a neighbour input"),
+            ("slots=80,threshold=1.3,nearest=2", "out of range"),
+            ("slots=8,threshold=0.5,nearest=2", "out of range"),
+        ] {
+            let mut entries = paper_metadata();
+            entries.insert(keys::NEIGHBOURS.into(), value.into());
+            let message = parse_metadata(&entries).unwrap_err().to_string();
+            assert!(
+                message.contains("formation.neighbours") && message.contains(fault),
                 "{value}: {message}"
             );
         }
@@ -906,6 +1070,7 @@ mod tests {
             meta.aux,
             PolicyOutput::Wheels,
             None,
+            None,
         )
         .expect("a one-wide aux for one declared scalar");
         assert!(matches!(
@@ -915,6 +1080,7 @@ mod tests {
                 50,
                 meta.aux,
                 PolicyOutput::Wheels,
+                None,
                 None
             ),
             Err(ContractViolation::Shape { .. })
@@ -946,6 +1112,7 @@ mod tests {
             AuxLayout::PAPER,
             PolicyOutput::FormationVelocity,
             None,
+            None,
         )
         .expect("declared and present");
         let err = check_signature(
@@ -954,6 +1121,7 @@ mod tests {
             50,
             AuxLayout::PAPER,
             PolicyOutput::FormationVelocity,
+            None,
             None,
         )
         .unwrap_err();
@@ -970,6 +1138,7 @@ mod tests {
                 50,
                 AuxLayout::PAPER,
                 PolicyOutput::Wheels,
+                None,
                 None
             )
             .is_err()
@@ -1159,6 +1328,7 @@ mod tests {
             AuxLayout::PAPER,
             PolicyOutput::Wheels,
             None,
+            None,
         )
         .expect("paper contract");
         let mut swapped = paper_inputs();
@@ -1169,6 +1339,7 @@ mod tests {
             50,
             AuxLayout::PAPER,
             PolicyOutput::Wheels,
+            None,
             None,
         )
         .expect("order does not matter");
@@ -1184,11 +1355,13 @@ mod tests {
                 50,
                 AuxLayout::PAPER,
                 PolicyOutput::Wheels,
+                None,
                 None
             ),
             Err(ContractViolation::InputNames {
                 found: vec!["image".into(), "aux".into()],
                 ranges: false,
+                neighbours: false,
             })
         );
         let mut extra = paper_inputs();
@@ -1200,6 +1373,7 @@ mod tests {
                 50,
                 AuxLayout::PAPER,
                 PolicyOutput::Wheels,
+                None,
                 None
             ),
             Err(ContractViolation::InputNames { .. })
@@ -1212,6 +1386,7 @@ mod tests {
                 50,
                 AuxLayout::PAPER,
                 PolicyOutput::Wheels,
+                None,
                 None
             ),
             Err(ContractViolation::OutputNames { .. })
@@ -1223,6 +1398,7 @@ mod tests {
                 50,
                 AuxLayout::PAPER,
                 PolicyOutput::Wheels,
+                None,
                 None
             ),
             Err(ContractViolation::OutputNames { .. })
@@ -1242,6 +1418,7 @@ mod tests {
             AuxLayout::PAPER,
             PolicyOutput::Wheels,
             None,
+            None,
         )
         .expect_err("40 px image for size_px 50");
         assert_eq!(
@@ -1256,6 +1433,7 @@ mod tests {
                 50,
                 AuxLayout::PAPER,
                 PolicyOutput::Wheels,
+                None,
                 None
             ),
             Err(ContractViolation::Shape { .. })
@@ -1265,7 +1443,7 @@ mod tests {
             tensor("aux", &[-1, 3]),
         ];
         assert!(matches!(
-            check_signature(&flat_aux, &paper_outputs(), 50, AuxLayout::PAPER, PolicyOutput::Wheels, None),
+            check_signature(&flat_aux, &paper_outputs(), 50, AuxLayout::PAPER, PolicyOutput::Wheels, None, None),
             Err(ContractViolation::Shape { name, .. }) if name == "aux"
         ));
     }
@@ -1281,6 +1459,7 @@ mod tests {
                 50,
                 AuxLayout::PAPER,
                 PolicyOutput::Wheels,
+                None,
                 None
             ),
             Err(ContractViolation::ElementType {
@@ -1297,6 +1476,7 @@ mod tests {
                 50,
                 AuxLayout::PAPER,
                 PolicyOutput::Wheels,
+                None,
                 None
             ),
             Err(ContractViolation::ElementType { .. })

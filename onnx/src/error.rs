@@ -155,6 +155,25 @@ pub enum PolicyError {
         /// Values given.
         actual: usize,
     },
+    /// The detected neighbours given do not match the neighbour input the model declares.
+    #[error(
+        "model {model}: {actual} neighbour values given, but the model declares {} \
+         (`formation.neighbours`); feed {} values a slot, as \
+         `formation_perception::neighbour_input::NeighbourInputBuilder::fill` computes them",
+        match declared {
+            Some(neighbours) => format!("{} ({neighbours})", neighbours.len()),
+            None => "no neighbour input".to_owned(),
+        },
+        formation_proto::NeighbourInput::FEATURES
+    )]
+    NeighboursLength {
+        /// Model id.
+        model: String,
+        /// What the model declares.
+        declared: Option<formation_proto::NeighbourInput>,
+        /// Values given.
+        actual: usize,
+    },
     /// ONNX Runtime failed while running the model.
     #[error("model {model}: inference failed: {reason}")]
     Inference {

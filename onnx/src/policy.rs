@@ -4,14 +4,14 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use formation_proto::{LidarSpec, PolicyInput};
+use formation_proto::{LidarSpec, NeighbourInput, PolicyInput};
 use ort::environment::Environment;
 use ort::session::Session;
 use ort::value::{Tensor, TensorElementType, ValueType};
 
 use crate::contract::{
-    AUX_INPUT, ElementKind, ModelMetadata, OCCUPANCY_INPUT, RANGES_INPUT, SensorContract,
-    TensorSignature, check_sensor, check_signature, parse_metadata,
+    AUX_INPUT, ElementKind, ModelMetadata, NEIGHBOURS_INPUT, OCCUPANCY_INPUT, RANGES_INPUT,
+    SensorContract, TensorSignature, check_sensor, check_signature, parse_metadata,
 };
 use crate::error::PolicyError;
 use crate::model_file::read_model_file;
@@ -25,10 +25,10 @@ pub struct OnnxPolicy {
     session: Session,
     metadata: ModelMetadata,
     model_id: String,
-    /// `occupancy` `[1, 1, S, S]`, `aux` `[1, A]` and, where declared, `ranges` `[1, K]`, in
-    /// the session's input order.
+    /// `occupancy` `[1, 1, S, S]`, `aux` `[1, A]` and, where declared, `ranges` `[1, K]` and
+    /// `neighbours` `[1, K, 4]`, in the session's input order.
     inputs: Vec<Tensor<f32>>,
-    /// Which of `inputs` is the image, the scalars and the ranges.
+    /// Which of `inputs` is the image, the scalars, the ranges and the neighbours.
     slots: InputSlots,
     cells: usize,
 }
@@ -82,6 +82,7 @@ impl OnnxPolicy {
             metadata.aux,
             metadata.output,
             metadata.ranges,
+            metadata.neighbours,
         )
         .map_err(contract)?;
 
@@ -91,6 +92,7 @@ impl OnnxPolicy {
             image: slot(OCCUPANCY_INPUT).unwrap_or(0),
             aux: slot(AUX_INPUT).unwrap_or(1),
             ranges: slot(RANGES_INPUT),
+            neighbours: slot(NEIGHBOURS_INPUT),
         };
         let cells = size_px * size_px;
         let tensors = inputs
@@ -98,6 +100,11 @@ impl OnnxPolicy {
             .map(|t| match t.name.as_str() {
                 OCCUPANCY_INPUT => zeros(vec![1, 1, size_px, size_px]),
                 AUX_INPUT => zeros(vec![1, metadata.aux.len()]),
+                NEIGHBOURS_INPUT => zeros(vec![
+                    1,
+                    metadata.neighbours.map_or(0, |n| n.slots),
+                    NeighbourInput::FEATURES,
+                ]),
                 _ => zeros(vec![1, metadata.ranges.map_or(0, |r| r.sectors)]),
             })
             .collect::<Result<Vec<_>, _>>()
@@ -137,7 +144,8 @@ impl OnnxPolicy {
     /// holds the scalars the model declares, in order ([`ModelMetadata::aux`]; the paper's
     /// `(delta_phi, d*)` for a model that declares none); `input.ranges` one value a sector of
     /// the range input it declares ([`ModelMetadata::ranges`]), or nothing where it declares
-    /// none. Returns the model's two output values: `(left, right)` wheel speeds at `v_train`,
+    /// none; `input.neighbours` [`NeighbourInput::FEATURES`] values a slot of the neighbour input
+    /// it declares ([`ModelMetadata::neighbours`]), or nothing where it declares none. Returns the model's two output values: `(left, right)` wheel speeds at `v_train`,
     /// or the formation velocity `(f_x, f_y)` in the robot's frame, as its metadata declares
     /// ([`crate::contract::PolicyOutput`]).
     pub fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], PolicyError> {
@@ -145,7 +153,7 @@ impl OnnxPolicy {
             image: occupancy,
             aux,
             ranges,
-            neighbours: _,
+            neighbours,
         } = *input;
         if occupancy.len() != self.cells {
             return Err(PolicyError::InputLength {
@@ -160,6 +168,14 @@ impl OnnxPolicy {
                 model: self.model_id.clone(),
                 declared: self.metadata.ranges,
                 actual: ranges.len(),
+            });
+        }
+        let neighbour_values = self.metadata.neighbours.map_or(0, |n| n.len());
+        if neighbours.len() != neighbour_values {
+            return Err(PolicyError::NeighboursLength {
+                model: self.model_id.clone(),
+                declared: self.metadata.neighbours,
+                actual: neighbours.len(),
             });
         }
         if aux.len() != self.metadata.aux.len() {
@@ -186,14 +202,18 @@ impl OnnxPolicy {
         if let Some(slot) = self.slots.ranges {
             fill(slot, ranges)?;
         }
+        if let Some(slot) = self.slots.neighbours {
+            fill(slot, neighbours)?;
+        }
 
         let inputs = &self.inputs;
         let outputs = match inputs.as_slice() {
             [a, b] => self.session.run(ort::inputs![a, b]),
             [a, b, c] => self.session.run(ort::inputs![a, b, c]),
+            [a, b, c, d] => self.session.run(ort::inputs![a, b, c, d]),
             other => {
                 return Err(failed(format!(
-                    "{} inputs held, where the contract admits two or three",
+                    "{} inputs held, where the contract admits two to four",
                     other.len()
                 )));
             }
@@ -229,6 +249,7 @@ struct InputSlots {
     image: usize,
     aux: usize,
     ranges: Option<usize>,
+    neighbours: Option<usize>,
 }
 
 /// A session for the model bytes with one intra-op and one inter-op thread.

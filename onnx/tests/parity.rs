@@ -9,7 +9,7 @@ use formation_onnx::contract::keys;
 use formation_onnx::{ContractViolation, OnnxPolicy, PolicyError, SensorViolation};
 use formation_proto::{BeyondWindow, LidarSpec, OccupancySpec, PolicyInput};
 
-use common::{CASES, SECTORS, SIZE_PX, fixtures};
+use common::{CASES, SECTORS, SIZE_PX, SLOTS, fixtures};
 
 /// Largest allowed |onnxruntime - torch| per wheel.
 const TOLERANCE: f32 = 1e-4;
@@ -363,6 +363,113 @@ fn a_range_input_without_its_declaration_or_the_other_way_round_is_refused() {
             Err(err @ PolicyError::Contract { .. }) => {
                 let message = err.to_string();
                 assert!(message.contains(names), "{file}: {message}");
+            }
+            other => panic!("{file}: expected a contract violation, got {other:?}"),
+        }
+    }
+}
+
+/// A model with a neighbour input (`formation.neighbours`): ONNX Runtime gives torch's outputs on
+/// the three inputs, the output moves when one slot moves, and the neighbours must be four values
+/// a slot.
+#[test]
+fn a_neighbour_input_model_matches_torch_and_checks_its_slots() {
+    let fx = fixtures("parity");
+    let mut policy = OnnxPolicy::load(&fx.model("neighbours.onnx")).expect("loads");
+    let declared = policy
+        .metadata()
+        .neighbours
+        .expect("declares its neighbours");
+    assert_eq!(
+        (declared.slots, declared.threshold, declared.nearest),
+        (SLOTS, 1.3, 2)
+    );
+    assert_eq!(policy.metadata().io().neighbours, Some(declared));
+    assert_eq!(policy.metadata().io().ranges, None);
+    let cases = fx.neighbours_cases();
+    assert_eq!(cases.len(), CASES);
+    let infer = |policy: &mut OnnxPolicy, image: &[f32], aux: &[f32], neighbours: &[f32]| {
+        policy.infer(&PolicyInput {
+            image,
+            aux,
+            ranges: &[],
+            neighbours,
+        })
+    };
+    for (i, (image, aux, neighbours, torch)) in cases.iter().enumerate() {
+        let ours = infer(&mut policy, image, aux, neighbours).expect("inference");
+        for wheel in 0..2 {
+            assert!(
+                (ours[wheel] - torch[wheel]).abs() <= TOLERANCE,
+                "case {i} wheel {wheel}: ort {} vs torch {}",
+                ours[wheel],
+                torch[wheel]
+            );
+        }
+    }
+    // The neighbours reach the network: one slot moved, another answer, and back again.
+    let (image, aux, neighbours, _) = &cases[0];
+    let first = infer(&mut policy, image, aux, neighbours).unwrap();
+    let mut moved = neighbours.clone();
+    moved[0] += 0.5;
+    moved[1] -= 0.25;
+    let after = infer(&mut policy, image, aux, &moved).unwrap();
+    assert_ne!(first, after, "moving slot 0 moves the output");
+    let mut last_slot = neighbours.clone();
+    last_slot[(SLOTS - 1) * 4..].copy_from_slice(&[0.8, -0.6, 1.0, 1.0]);
+    assert_ne!(
+        infer(&mut policy, image, aux, &last_slot).unwrap(),
+        first,
+        "the last slot reaches the network too"
+    );
+    assert_eq!(infer(&mut policy, image, aux, neighbours).unwrap(), first);
+
+    match policy.infer(&PolicyInput::image_and_aux(image, aux)) {
+        Err(err @ PolicyError::NeighboursLength { actual: 0, .. }) => {
+            let message = err.to_string();
+            assert!(
+                message.contains("slots=8,threshold=1.3,nearest=2")
+                    && message.contains("formation.neighbours"),
+                "{message}"
+            );
+        }
+        other => panic!("expected NeighboursLength, got {other:?}"),
+    }
+    match infer(&mut policy, image, aux, &neighbours[..SLOTS * 4 - 1]) {
+        Err(PolicyError::NeighboursLength { actual, .. }) => assert_eq!(actual, SLOTS * 4 - 1),
+        other => panic!("expected NeighboursLength, got {other:?}"),
+    }
+    // A model without neighbours refuses them.
+    let mut plain = OnnxPolicy::load(&fx.model("policy.onnx")).expect("loads");
+    match infer(&mut plain, image, aux, neighbours) {
+        Err(err @ PolicyError::NeighboursLength { actual: 32, .. }) => {
+            assert!(err.to_string().contains("no neighbour input"), "{err}");
+        }
+        other => panic!("expected NeighboursLength, got {other:?}"),
+    }
+}
+
+/// The `neighbours` input and the `formation.neighbours` metadata come together or not at all.
+#[test]
+fn a_neighbour_input_without_its_declaration_or_the_other_way_round_is_refused() {
+    let fx = fixtures("parity");
+    for (file, names) in [
+        (
+            "neighbours_undeclared.onnx",
+            "declares no `formation.neighbours`",
+        ),
+        (
+            "neighbours_missing.onnx",
+            "expected exactly [occupancy, aux, neighbours]",
+        ),
+    ] {
+        match OnnxPolicy::load(&fx.model(file)) {
+            Err(err @ PolicyError::Contract { .. }) => {
+                let message = err.to_string();
+                assert!(
+                    message.contains(names) && message.contains("neighbours"),
+                    "{file}: {message}"
+                );
             }
             other => panic!("{file}: expected a contract violation, got {other:?}"),
         }

@@ -12,7 +12,9 @@ Agents are ``robot_0 .. robot_{N-1}``.
   nothing else: ``{"occupancy": (1, S, S) float32 of 0/1, "aux": (delta_phi, d*) float32}`` or,
   for a scan model, ``{"scan": (beams,) float32, "aux": ...}``; for a model that declares the
   scan's ranges beside its image (``formation.ranges``), also ``"ranges": (K,) float32``, the
-  agent's own pooling of the scan into K sectors.
+  agent's own pooling of the scan into K sectors; for a model that declares the neighbours it
+  detects (``formation.neighbours``), also ``"neighbours": (K, 4) float32``, the agent's own
+  detections in K slots of ``(x / d*, y / d*, held, present)``.
 * **Action**: its ``(left, right)`` wheel speeds in m/s, within ``±max_wheel_speed`` (the world
   saturates them as a real robot would). A NaN, another shape, a missing robot or a step after
   the end raises.
@@ -48,7 +50,7 @@ import gymnasium
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from formation._native import Batch, EpisodeOver, Scenario, range_input
+from formation._native import Batch, EpisodeOver, Scenario, neighbour_input, range_input
 from formation.model import ModelSpec
 
 
@@ -154,11 +156,17 @@ class FormationParallelEnv(ParallelEnv):
             return spaces.Dict({"scan": own, "aux": aux})
         size = self.spec.size_px
         image = spaces.Box(0.0, 1.0, (1, size, size), np.float32)
-        if self.spec.ranges is None:
-            return spaces.Dict({"occupancy": image, "aux": aux})
-        sectors, clip = range_input(self.spec.ranges)
-        ranges = spaces.Box(0.0, np.float32(clip), (sectors,), np.float32)
-        return spaces.Dict({"occupancy": image, "aux": aux, "ranges": ranges})
+        observation = {"occupancy": image, "aux": aux}
+        if self.spec.ranges is not None:
+            sectors, clip = range_input(self.spec.ranges)
+            observation["ranges"] = spaces.Box(0.0, np.float32(clip), (sectors,), np.float32)
+        if self.spec.neighbours is not None:
+            slots, _, _ = neighbour_input(self.spec.neighbours)
+            # Per slot: the centre in units of d* (unbounded), then the held and present flags.
+            low = np.tile(np.array([-np.inf, -np.inf, 0.0, 0.0], dtype=np.float32), (slots, 1))
+            high = np.tile(np.array([np.inf, np.inf, 1.0, 1.0], dtype=np.float32), (slots, 1))
+            observation["neighbours"] = spaces.Box(low, high, dtype=np.float32)
+        return spaces.Dict(observation)
 
     def observation_space(self, agent: str) -> spaces.Space:
         return self._observation_spaces[agent]
@@ -208,6 +216,10 @@ class FormationParallelEnv(ParallelEnv):
             ranges = self._batch.ranges(self.spec.ranges)[0]
             for agent, observation in observations.items():
                 observation["ranges"] = ranges[self._index[agent]]
+        if self.spec.input != "scan" and self.spec.neighbours is not None:
+            neighbours = self._batch.neighbours(self.spec.neighbours)[0]
+            for agent, observation in observations.items():
+                observation["neighbours"] = neighbours[self._index[agent]]
         return observations
 
     def _wheel_array(self, actions: Mapping[str, Any]) -> np.ndarray:

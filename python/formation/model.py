@@ -25,8 +25,11 @@ class ModelSpec:
     ``d_star_ref_m`` is set) or ``"scan"`` (the raw ranges); both come with the scalars ``aux``
     declares (``formation.aux``: names in order, ``"delta_phi,d_star"`` where the model declares
     none), which the environment makes with the agent's own code, and, where ``ranges`` is set
-    (``formation.ranges``, ``"sectors=K,clip=C"``), the scan's ranges pooled into K sectors. ``output`` is what the model answers (``formation.output``): ``"wheels"``, wheel
-    speeds at ``v_train`` m/s scaled by ``v* / v_train``, or ``"formation_velocity"``, the
+    (``formation.ranges``, ``"sectors=K,clip=C"``), the scan's ranges pooled into K sectors, and,
+    where ``neighbours`` is set (``formation.neighbours``, ``"slots=K,threshold=T,nearest=M"``), the
+    neighbours detected in the scan in K slots of ``(x / d*, y / d*, held, present)``. ``output``
+    is what the model answers (``formation.output``): ``"wheels"``, wheel speeds at ``v_train``
+    m/s scaled by ``v* / v_train``, or ``"formation_velocity"``, the
     correction in the robot's frame to which the reference term ``v* (cos Δφ, sin Δφ)`` is added,
     exactly as the agent does.
     """
@@ -42,6 +45,7 @@ class ModelSpec:
     output: str = "wheels"
     aux: str = "delta_phi,d_star"
     ranges: Optional[str] = None
+    neighbours: Optional[str] = None
 
     def __post_init__(self) -> None:
         if self.output not in ("wheels", "formation_velocity"):
@@ -89,6 +93,7 @@ class ModelSpec:
             output=meta.get("formation.output", "wheels"),
             aux=meta.get("formation.aux", "delta_phi,d_star"),
             ranges=meta.get("formation.ranges"),
+            neighbours=meta.get("formation.neighbours"),
         )
 
     @staticmethod

@@ -8,10 +8,13 @@
 //! `(B, N, 2)` array.
 
 use formation_expert::{ExpertController, ExpertGains};
+use formation_perception::neighbour_input::NeighbourInputBuilder;
 use formation_perception::ranges::pool;
 use formation_perception::{occupancy, policy_input};
 use formation_proto::control::Controller;
-use formation_proto::{AuxLayout, BeyondWindow, OccupancySpec, RangeInput, WheelCmd};
+use formation_proto::{
+    AuxLayout, BeyondWindow, NeighbourInput, OccupancySpec, RangeInput, WheelCmd,
+};
 use formation_world::metrics::{MetricsConfig, run_metrics};
 use formation_world::neighbours::NeighbourTracker;
 use formation_world::{Episode, Scenario, StepError};
@@ -38,6 +41,9 @@ struct Slot {
     /// The formation's edges under the scenario's rule, updated sample after sample.
     tracker: NeighbourTracker,
     positions: Vec<(f64, f64)>,
+    /// Fills the `neighbours` input from each robot's own scan, as the agent's does (the
+    /// detector's default settings, the agent's).
+    neighbour_builder: NeighbourInputBuilder,
 }
 
 /// Why a world of the batch could not step.
@@ -77,6 +83,7 @@ impl Slot {
             expert_tick: None,
             tracker: NeighbourTracker::new(*scenario.neighbours(), robots),
             positions: Vec::with_capacity(robots),
+            neighbour_builder: NeighbourInputBuilder::default(),
         };
         slot.track();
         slot
@@ -473,6 +480,49 @@ impl Batch {
         })?;
         out.into_pyarray(py)
             .reshape(vec![self.slots.len(), n, width])
+    }
+
+    /// Every robot's detected neighbours, the `neighbours` input of a model that declares one
+    /// (`neighbours`, its `formation.neighbours`, e.g. `"slots=8,threshold=1.3,nearest=2"`),
+    /// filled from the robot's own scan by the agent's own
+    /// `formation_perception::neighbour_input::NeighbourInputBuilder` (its detector's default
+    /// settings, as the agent's): `(B, N, K, 4)` float32, per slot `(x / d*, y / d*, held,
+    /// present)`.
+    fn neighbours<'py>(
+        &mut self,
+        py: Python<'py>,
+        neighbours: &str,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let spec = NeighbourInput::parse(neighbours).map_err(|e| {
+            PyValueError::new_err(format!(
+                "neighbour input {neighbours:?} (the model's formation.neighbours): {e}"
+            ))
+        })?;
+        let lidar = self.scenario.world_config().lidar;
+        let (n, width) = (self.robots(), spec.len());
+        let mut out = vec![0.0_f32; self.slots.len() * n * width];
+        py.detach(|| {
+            self.fill(&mut out, n * width, |b, slot, chunk| {
+                let observation = slot.episode.observe();
+                let d_star = observation.goal.d_star;
+                if !(d_star.is_finite() && d_star > 0.0) {
+                    return Err(format!(
+                        "world {b}: d* {d_star} cannot scale the neighbours"
+                    ));
+                }
+                for (scan, cell) in observation.scans.iter().zip(chunk.chunks_exact_mut(width)) {
+                    slot.neighbour_builder
+                        .fill(scan, &lidar, &spec, d_star, cell);
+                }
+                Ok(())
+            })
+        })?;
+        out.into_pyarray(py).reshape(vec![
+            self.slots.len(),
+            n,
+            spec.slots,
+            NeighbourInput::FEATURES,
+        ])
     }
 
     /// A policy's outputs `(B, N, 2)` (float32) as wheel speeds for each world's goal, as the

@@ -12,11 +12,13 @@
 //! * [`batch`]: `Batch`, `B` runs of one scenario stepped together in parallel (rayon), numpy
 //!   arrays in and out; the Python environments are built on it (a single run is a batch of one).
 //! * [`range_input`]: a model's `formation.ranges` read by the agent's own `RangeInput::parse`.
+//! * [`neighbour_input`]: a model's `formation.neighbours` read by the agent's own
+//!   `NeighbourInput::parse`.
 //! * [`detect_neighbours`]: the neighbours one robot detects in its own scan, by
 //!   `formation_perception::neighbours`, the detector collection and the agent use.
 
 use formation_perception::neighbours::{DetectedNeighbour, DetectorSettings, NeighbourDetector};
-use formation_proto::{DEFAULT_BODY_RADIUS_M, LidarSpec, RangeInput};
+use formation_proto::{DEFAULT_BODY_RADIUS_M, LidarSpec, NeighbourInput, RangeInput};
 use numpy::{AllowTypeChange, PyArray2, PyArrayLike1, PyArrayMethods};
 use pyo3::prelude::*;
 
@@ -46,6 +48,19 @@ pub fn range_input(text: &str) -> PyResult<(usize, f32)> {
         ))
     })?;
     Ok((spec.sectors, spec.clip))
+}
+
+/// `(slots, threshold, nearest)` of a model's neighbour input, its `formation.neighbours`
+/// (`"slots=K,threshold=T,nearest=M"`), read and checked by the agent's own
+/// [`NeighbourInput::parse`]; a `ValueError` says what is wrong.
+#[pyfunction]
+pub fn neighbour_input(text: &str) -> PyResult<(usize, f64, usize)> {
+    let spec = NeighbourInput::parse(text).map_err(|e| {
+        pyo3::exceptions::PyValueError::new_err(format!(
+            "neighbour input {text:?} (the model's formation.neighbours): {e}"
+        ))
+    })?;
+    Ok((spec.slots, spec.threshold, spec.nearest))
 }
 
 /// The neighbours one robot detects in its own scan (`scan[k]` the range of beam `k`, at
@@ -82,10 +97,12 @@ pub fn detect_neighbours<'py>(
     numpy::PyArray1::from_vec(py, centres).reshape([found.len(), 2])
 }
 
-/// The native module: `Scenario`, `Batch`, `range_input`, `detect_neighbours` and the exceptions.
+/// The native module: `Scenario`, `Batch`, `range_input`, `neighbour_input`, `detect_neighbours`
+/// and the exceptions.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(range_input, m)?)?;
+    m.add_function(wrap_pyfunction!(neighbour_input, m)?)?;
     m.add_function(wrap_pyfunction!(detect_neighbours, m)?)?;
     m.add_class::<scenario::PyScenario>()?;
     m.add_class::<batch::Batch>()?;

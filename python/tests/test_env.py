@@ -175,6 +175,70 @@ def test_a_ranges_policy_episode_equals_formation_eval_bit_for_bit(tmp_path):
     assert got == expected
 
 
+def test_a_neighbours_policy_episode_equals_formation_eval_bit_for_bit(tmp_path):
+    # A model that takes the neighbours its robot detects in its own scan (formation.neighbours,
+    # issue 34): the environment feeds what the Rust agent feeds, so the episode is formation eval's.
+    import subprocess
+    import sys
+
+    model = tmp_path / "neighbours.onnx"
+    subprocess.run(
+        [sys.executable, str(REPO / "tests" / "fixtures" / "tiny_policy.py"), str(model), "--seed", "5",
+         "--output", "formation_velocity", "--neighbour-slots", "4"],
+        check=True,
+    )
+    assert ModelSpec.from_onnx(model).neighbours == "slots=4,threshold=1.3,nearest=2"
+    scenario = team_scenario(tmp_path, 5, 3.0)
+    seed, run = 2, 0
+    expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", seed, run, "policy", model))
+    env = parallel_env(scenario=str(scenario), model=model)
+    space = env.observation_space("robot_0")
+    assert space["neighbours"].shape == (4, 4)
+    assert "ranges" not in space.spaces
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    options.inter_op_num_threads = 1
+    session = ort.InferenceSession(str(model), options, providers=["CPUExecutionProvider"])
+    observations, _ = env.reset(seed=seed, run=run)
+    # The slots are the robot's own detections (the detector alone, checked here) in units of
+    # d*, held ones first, the empty slots zeros.
+    scans = env.batch.scans()[0]
+    d_star = env.batch.goals()[0][1]
+    held_somewhere = False
+    for i, agent in enumerate(env.possible_agents):
+        slots = observations[agent]["neighbours"]
+        assert slots.dtype == np.float32 and slots.shape == (4, 4)
+        found = formation.detect_neighbours(scans[i], env.scenario.max_range)
+        present = slots[:, 3] == 1.0
+        assert present.sum() == min(len(found), 4), agent
+        assert np.all(slots[~present] == 0.0), agent
+        held = slots[present, 2]
+        assert np.all(np.diff(held) <= 0), f"{agent}: held slots come first"
+        held_somewhere |= bool(held.any())
+        for x, y in slots[present, :2]:
+            distances = np.hypot(found[:, 0] / d_star - x, found[:, 1] / d_star - y)
+            assert distances.min() < 1e-5, agent
+    assert held_somewhere
+    while env.agents:
+        outputs = {}
+        for agent, obs in observations.items():
+            feed = {"occupancy": obs["occupancy"][None], "aux": obs["aux"][None],
+                    "neighbours": obs["neighbours"][None]}
+            outputs[agent] = session.run(["formation_velocity"], feed)[0][0]
+        observations, _, _, _, _ = env.step(env.policy_actions(outputs))
+    got = [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+    assert len(got) == len(expected) == 61
+    assert got == expected
+
+
+def test_a_bad_neighbour_declaration_is_refused_naming_the_key():
+    with pytest.raises(ValueError, match="formation.neighbours.*slots=K,threshold=T,nearest=M"):
+        formation._native.neighbour_input("slots=4")
+    assert formation._native.neighbour_input("slots=4,threshold=1.3,nearest=2") == (4, 1.3, 2)
+
+
 def test_a_spec_with_an_output_the_package_does_not_know_is_refused_by_name():
     with pytest.raises(ValueError, match="output 'torques' is not 'wheels' or 'formation_velocity'"):
         ModelSpec.from_metadata({"formation.format": "formation-policy/1", "formation.occupancy.size_px": "50",

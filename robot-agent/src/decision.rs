@@ -6,9 +6,12 @@
 //! 1. render the occupancy image from the scan ([`formation_perception::occupancy::render`], the same function the
 //!    demonstration collector uses);
 //! 2. the scalars the model declares beside the image, `aux` (the paper's
-//!    `(wrap(phi* - theta), d*)`: see [`PolicyIo`]), and the scan's ranges pooled into sectors
-//!    where the model declares them ([`formation_perception::ranges::pool`], as collected);
-//! 3. `y = policy(image, aux, ranges)`, what the model declares it outputs ([`PolicyOutput`]);
+//!    `(wrap(phi* - theta), d*)`: see [`PolicyIo`]), the scan's ranges pooled into sectors
+//!    where the model declares them ([`formation_perception::ranges::pool`], as collected), and
+//!    the neighbours detected in the scan where the model declares them
+//!    ([`NeighbourInputBuilder::fill`], as collected: one builder kept by each agent);
+//! 3. `y = policy(image, aux, ranges, neighbours)`, what the model declares it outputs
+//!    ([`PolicyOutput`]);
 //! 4. for `wheels`, the wheel speeds at the training speed `v_train`: `u = K y` with
 //!    `K = v* / v_train` (the paper's speed scaling); for `formation_velocity`, the formation
 //!    velocity in the robot's frame: the reference term `v* (cos Δφ, sin Δφ)` is added and the
@@ -40,10 +43,9 @@ use formation_onnx::{OnnxPolicy, PolicyError};
 use formation_proto::PolicyOutput;
 use formation_proto::control::{Controller, ControllerError, Observation};
 use formation_proto::robot::{CheckedGoal, Decentralised};
-use formation_proto::{
-    AuxValues, Goal, LidarSpec, OccupancySpec, PolicyInput, PolicyIo, RangeInput, WheelCmd,
-};
+use formation_proto::{AuxValues, Goal, LidarSpec, OccupancySpec, PolicyInput, PolicyIo, WheelCmd};
 
+use formation_perception::neighbour_input::NeighbourInputBuilder;
 use formation_perception::{occupancy, policy_input, ranges};
 
 /// Why an agent could not decide, or could not take a policy.
@@ -120,19 +122,44 @@ pub enum DecisionError {
     },
 }
 
-/// Renders `scan` into the occupancy image `io` declares and pools its ranges where `io` takes
-/// them, under d*: one observation as a policy of `io` sees it.
+/// The tensors a model may take from its scan beside its image: the scan's ranges, one a
+/// sector, and the detected neighbours, [`formation_proto::NeighbourInput::FEATURES`] a slot;
+/// each empty for a model that takes none.
+#[derive(Debug, Clone, PartialEq)]
+struct ScanTensors {
+    ranges: Vec<f32>,
+    neighbours: Vec<f32>,
+}
+
+impl ScanTensors {
+    /// Sized for `io` and holding an empty observation's values: no beam returns, so every
+    /// sector is the clip, and nobody is detected, so every slot is zeros.
+    fn empty(io: &PolicyIo) -> ScanTensors {
+        ScanTensors {
+            ranges: io.ranges.map_or_else(Vec::new, |r| vec![r.clip; r.sectors]),
+            neighbours: vec![0.0; io.neighbours.map_or(0, |n| n.len())],
+        }
+    }
+}
+
+/// Renders `scan` into the occupancy image `io` declares, pools its ranges and fills the
+/// neighbours it detects (with `builder`) where `io` takes them, under d*: one observation as a
+/// policy of `io` sees it.
 fn render_observation(
     scan: &[f32],
     lidar: &LidarSpec,
     io: &PolicyIo,
     d_star: f64,
     image: &mut [u8],
-    ranges: &mut [f32],
+    tensors: &mut ScanTensors,
+    builder: &mut NeighbourInputBuilder,
 ) {
     occupancy::render_at(scan, lidar, &io.image, d_star, image);
     if let Some(spec) = &io.ranges {
-        ranges::pool(scan, lidar, spec, d_star, ranges);
+        ranges::pool(scan, lidar, spec, d_star, &mut tensors.ranges);
+    }
+    if let Some(spec) = &io.neighbours {
+        builder.fill(scan, lidar, spec, d_star, &mut tensors.neighbours);
     }
 }
 
@@ -226,9 +253,12 @@ pub struct Agent {
     lidar: LidarSpec,
     image: Vec<u8>,
     image_f32: Vec<f32>,
-    /// The scan's ranges of the last [`Agent::perceive`], one a sector; empty for a policy that
-    /// takes none.
-    ranges: Vec<f32>,
+    /// The scan's ranges and detected neighbours of the last [`Agent::perceive`], each empty
+    /// for a policy that takes none.
+    tensors: ScanTensors,
+    /// Detects the neighbours in this robot's scans for a policy that takes them: the
+    /// detector's default settings, bodies of [`formation_proto::DEFAULT_BODY_RADIUS_M`].
+    neighbour_builder: NeighbourInputBuilder,
     /// The goal checked where it entered ([`Agent::hold_goal`]); `None` before the first.
     goal: Option<CheckedGoal>,
     /// The scan of the last [`Agent::perceive`]; empty before the first.
@@ -253,7 +283,8 @@ impl Agent {
             lidar,
             image: vec![0; cells],
             image_f32: vec![0.0; cells],
-            ranges: vec![0.0; sectors(&io)],
+            tensors: ScanTensors::empty(&io),
+            neighbour_builder: NeighbourInputBuilder::default(),
             goal: None,
             last_scan: Vec::with_capacity(lidar.beams),
             last_decision: None,
@@ -316,8 +347,9 @@ impl Agent {
         Ok(())
     }
 
-    /// Renders the last scan into the policy's image (u8 and f32) and pools its ranges where the
-    /// policy takes them, under d*: what [`Agent::perceive`] and [`Agent::rehearse`] both do.
+    /// Renders the last scan into the policy's image (u8 and f32), and pools its ranges and
+    /// detects its neighbours where the policy takes them, under d*: what [`Agent::perceive`]
+    /// and [`Agent::rehearse`] both do.
     fn render_last_scan(&mut self, d_star: f64) {
         render_observation(
             &self.last_scan,
@@ -325,7 +357,8 @@ impl Agent {
             &self.io,
             d_star,
             &mut self.image,
-            &mut self.ranges,
+            &mut self.tensors,
+            &mut self.neighbour_builder,
         );
         for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
             *dst = f32::from(src);
@@ -350,8 +383,8 @@ impl Agent {
         let [left, right] = self.policy.infer(&PolicyInput {
             image: &self.image_f32,
             aux: &aux,
-            ranges: &self.ranges,
-            neighbours: &[],
+            ranges: &self.tensors.ranges,
+            neighbours: &self.tensors.neighbours,
         })?;
         if !(left.is_finite() && right.is_finite()) {
             return Err(DecisionError::NonFinite {
@@ -383,8 +416,8 @@ impl Agent {
         self.policy.infer(&PolicyInput {
             image: &self.image_f32,
             aux: &aux,
-            ranges: &self.ranges,
-            neighbours: &[],
+            ranges: &self.tensors.ranges,
+            neighbours: &self.tensors.neighbours,
         })?;
         Ok(())
     }
@@ -436,9 +469,7 @@ impl Agent {
         let io = policy.io();
         let n = cells(&io.image);
         let mut image = vec![0u8; n];
-        // An empty observation: no beam returns, so every sector is the clip.
-        let mut trial_ranges: Vec<f32> =
-            io.ranges.map_or_else(Vec::new, |r| vec![r.clip; r.sectors]);
+        let mut trial_tensors = ScanTensors::empty(&io);
         let (aux, observation) = match (self.last_decision, self.held_goal()) {
             (Some((heading, _)), Some(goal)) if self.last_scan.len() == self.lidar.beams => {
                 render_observation(
@@ -447,7 +478,8 @@ impl Agent {
                     &io,
                     goal.d_star,
                     &mut image,
-                    &mut trial_ranges,
+                    &mut trial_tensors,
+                    &mut self.neighbour_builder,
                 );
                 (io.aux.values(heading, &goal), TrialObservation::Last)
             }
@@ -457,13 +489,13 @@ impl Agent {
         let trial = PolicyInput {
             image: &image,
             aux: &aux,
-            ranges: &trial_ranges,
-            neighbours: &[],
+            ranges: &trial_tensors.ranges,
+            neighbours: &trial_tensors.neighbours,
         };
         trial_run(policy.as_mut(), &trial, observation)?;
         self.image.resize(n, 0);
         self.image_f32.resize(n, 0.0);
-        self.ranges = trial_ranges;
+        self.tensors = trial_tensors;
         if let Some((heading, _)) = self.last_decision {
             let goal = self.held_goal().unwrap_or(TRIAL_GOAL);
             self.last_decision = Some((heading, io.aux.values(heading, &goal)));
@@ -508,10 +540,6 @@ fn trial_run(
 
 fn cells(spec: &OccupancySpec) -> usize {
     spec.size_px * spec.size_px
-}
-
-fn sectors(io: &PolicyIo) -> usize {
-    io.ranges.map_or(0, |r: RangeInput| r.sectors)
 }
 
 /// The full sensor contract of `policy` against this robot's LIDAR: beams, range and window.
@@ -662,6 +690,7 @@ impl Controller for PolicyController {
 mod tests {
     use super::*;
     use formation_proto::{BeyondWindow, wrap_angle};
+    use formation_proto::{NeighbourInput, RangeInput};
 
     /// A transparent policy for testing the decision's plumbing: returns the aux input and the
     /// number of occupied cells, so the test can see exactly what reached the policy.
@@ -819,6 +848,131 @@ mod tests {
         .err()
         .expect("refused");
         assert!(err.to_string().contains("100 sectors"), "{err}");
+    }
+
+    /// A policy that declares a neighbour input of `slots` slots and answers with the first
+    /// slot's `(x, y)`.
+    struct NeighboursEcho {
+        slots: usize,
+        seen: std::sync::Arc<std::sync::Mutex<Vec<Vec<f32>>>>,
+    }
+
+    impl PolicyBackend for NeighboursEcho {
+        fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], DecisionError> {
+            self.seen
+                .lock()
+                .expect("log")
+                .push(input.neighbours.to_vec());
+            assert!(input.ranges.is_empty(), "it takes no ranges");
+            Ok([input.neighbours[0], input.neighbours[1]])
+        }
+        fn io(&self) -> PolicyIo {
+            PolicyIo {
+                image: OccupancySpec::PAPER,
+                aux: formation_proto::AuxLayout::PAPER,
+                ranges: None,
+                neighbours: Some(NeighbourInput::with_default_rule(self.slots).expect("valid")),
+                output: formation_proto::PolicyOutput::FormationVelocity,
+                v_train: 0.7,
+            }
+        }
+        fn sensor(&self) -> SensorContract {
+            SensorContract {
+                beams: None,
+                max_range: None,
+                occupancy: OccupancySpec::PAPER,
+            }
+        }
+        fn model_id(&self) -> &str {
+            "neighbours-echo"
+        }
+    }
+
+    /// The exact scan of a robot at the origin, heading +x, among bodies of the default radius
+    /// centred at `bodies` (body frame, metres).
+    fn scan_among(lidar: &LidarSpec, bodies: &[(f64, f64)]) -> Vec<f32> {
+        let r = formation_proto::DEFAULT_BODY_RADIUS_M;
+        (0..lidar.beams)
+            .map(|k| {
+                let bearing = std::f64::consts::TAU * k as f64 / lidar.beams as f64;
+                let (dx, dy) = (bearing.cos(), bearing.sin());
+                let hit = bodies
+                    .iter()
+                    .filter_map(|&(cx, cy)| {
+                        // |t d - c|^2 = r^2, the nearer root ahead of the sensor.
+                        let along = dx * cx + dy * cy;
+                        let off_sq = cx * cx + cy * cy - along * along;
+                        let half = (r * r - off_sq).sqrt();
+                        (half.is_finite() && along - half > 0.0).then_some(along - half)
+                    })
+                    .fold(lidar.max_range, f64::min);
+                hit as f32
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_policy_that_takes_neighbours_is_fed_those_detected_in_its_own_scan_as_collected() {
+        let lidar = LidarSpec::default();
+        let seen = std::sync::Arc::default();
+        let echo = NeighboursEcho {
+            slots: 4,
+            seen: std::sync::Arc::clone(&seen),
+        };
+        let mut agent = Agent::new(Box::new(echo), lidar).expect("fits the sensor");
+        // Two robots: 1.5 m to the right, 2 m ahead.
+        let scan = scan_among(&lidar, &[(2.0, 0.0), (0.0, -1.5)]);
+        let goal = Goal {
+            phi_star: 0.0,
+            d_star: 1.5,
+            v_star: 0.7,
+        };
+        agent.act(&scan, 0.0, &goal).expect("decides");
+        let spec = NeighbourInput::with_default_rule(4).unwrap();
+        let mut expected = vec![f32::NAN; spec.len()];
+        NeighbourInputBuilder::default().fill(&scan, &lidar, &spec, 1.5, &mut expected);
+        assert_eq!(seen.lock().unwrap().as_slice(), &[expected.clone()]);
+        // Both held (the two nearest), the nearer first, in units of d*; the rest empty.
+        let want = [0.0, -1.0, 1.0, 1.0, 4.0 / 3.0, 0.0, 1.0, 1.0];
+        for (got, want) in expected.iter().zip(want) {
+            assert!((got - want).abs() < 1e-3, "{expected:?}");
+        }
+        assert_eq!(&expected[8..], &[0.0; 8]);
+        agent.rehearse().expect("rehearses");
+        assert_eq!(
+            seen.lock().unwrap()[1],
+            expected,
+            "a rehearsal feeds the same"
+        );
+
+        // A swap candidate with fewer slots is tried on the last scan, filled its way.
+        let candidate_seen = std::sync::Arc::default();
+        let candidate = NeighboursEcho {
+            slots: 1,
+            seen: std::sync::Arc::clone(&candidate_seen),
+        };
+        agent.swap_policy(Box::new(candidate)).expect("swaps");
+        assert_eq!(candidate_seen.lock().unwrap()[0], &expected[..4]);
+        agent.act(&scan, 0.0, &goal).expect("the candidate drives");
+        assert_eq!(candidate_seen.lock().unwrap()[1], &expected[..4]);
+
+        // Before any decision a candidate is tried on an empty observation: nobody detected.
+        let fresh_seen = std::sync::Arc::default();
+        let mut fresh = Agent::new(
+            Box::new(NeighboursEcho {
+                slots: 2,
+                seen: std::sync::Arc::default(),
+            }),
+            lidar,
+        )
+        .expect("fits");
+        fresh
+            .swap_policy(Box::new(NeighboursEcho {
+                slots: 3,
+                seen: std::sync::Arc::clone(&fresh_seen),
+            }))
+            .expect("swaps");
+        assert_eq!(fresh_seen.lock().unwrap().as_slice(), &[vec![0.0; 12]]);
     }
 
     /// An agent of `probe` on the default LIDAR, and a scan with no return.

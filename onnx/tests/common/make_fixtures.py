@@ -16,6 +16,11 @@ formation.* metadata with the `onnx` package, and writes torch's own outputs for
 - ranges_undeclared.onnx  a `ranges` input the metadata does not declare
 - ranges_missing.onnx     formation.ranges declared, but no `ranges` input
 - ranges_cases.f32   CASES records: occupancy (2500), aux (2), ranges (100), torch wheels (2)
+- neighbours.onnx    the contract with a neighbour input: `neighbours` [B, 8, 4],
+                     formation.neighbours declared
+- neighbours_undeclared.onnx  a `neighbours` input the metadata does not declare
+- neighbours_missing.onnx     formation.neighbours declared, but no `neighbours` input
+- neighbours_cases.f32  CASES records: occupancy (2500), aux (2), neighbours (32), torch wheels (2)
 """
 
 import sys
@@ -80,10 +85,32 @@ class RangesNet(PolicyNet):
         return self.head(torch.cat([self.features(occupancy), aux, self.ranges(ranges)], dim=1))
 
 
+SLOTS = 8
+NEIGHBOURS_METADATA = {**METADATA, "formation.neighbours": f"slots={SLOTS},threshold=1.3,nearest=2"}
+
+
+class NeighboursNet(PolicyNet):
+    """The paper's network with a neighbour branch (all slots flattened) whose features join the
+    head."""
+
+    def __init__(self, size):
+        super().__init__(size)
+        self.neighbours = nn.Sequential(nn.Flatten(), nn.Linear(SLOTS * 4, 8), nn.Tanh())
+        self.head = nn.Sequential(nn.Linear(16 * 3 * 3 + 2 + 8, 32), nn.ReLU(), nn.Linear(32, 2))
+
+    def forward(self, occupancy, aux, neighbours):
+        return self.head(torch.cat([self.features(occupancy), aux, self.neighbours(neighbours)], dim=1))
+
+
 def export(model, path, size, input_names, metadata):
-    example = (torch.zeros(2, 1, size, size), torch.zeros(2, 2))
-    if len(input_names) == 3:
-        example = (*example, torch.zeros(2, SECTORS))
+    shapes = {
+        "occupancy": (2, 1, size, size),
+        "image": (2, 1, size, size),
+        "aux": (2, 2),
+        "ranges": (2, SECTORS),
+        "neighbours": (2, SLOTS, 4),
+    }
+    example = tuple(torch.zeros(*shapes[name]) for name in input_names)
     dynamic = {name: {0: "batch"} for name in [*input_names, "wheels"]}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -128,6 +155,21 @@ def main():
         wheels = ranged(torch.from_numpy(occupancy), torch.from_numpy(aux), torch.from_numpy(ranges)).numpy()
     records = np.concatenate([occupancy.reshape(cases, -1), aux, ranges, wheels], axis=1).astype("<f4")
     records.tofile(f"{out}/ranges_cases.f32")
+
+    neighboured = NeighboursNet(SIZE).eval()
+    export(neighboured, f"{out}/neighbours.onnx", SIZE, ["occupancy", "aux", "neighbours"], NEIGHBOURS_METADATA)
+    export(neighboured, f"{out}/neighbours_undeclared.onnx", SIZE, ["occupancy", "aux", "neighbours"], METADATA)
+    export(model, f"{out}/neighbours_missing.onnx", SIZE, ["occupancy", "aux"], NEIGHBOURS_METADATA)
+    neighbours = np.zeros((cases, SLOTS, 4), dtype=np.float32)
+    for case in range(cases):
+        present = rng.integers(1, SLOTS + 1)
+        neighbours[case, :present, :2] = rng.uniform(-3.0, 3.0, (present, 2))
+        neighbours[case, :present, 2] = rng.integers(0, 2, present)
+        neighbours[case, :present, 3] = 1.0
+    with torch.no_grad():
+        wheels = neighboured(torch.from_numpy(occupancy), torch.from_numpy(aux), torch.from_numpy(neighbours)).numpy()
+    records = np.concatenate([occupancy.reshape(cases, -1), aux, neighbours.reshape(cases, -1), wheels], axis=1)
+    records.astype("<f4").tofile(f"{out}/neighbours_cases.f32")
 
 
 if __name__ == "__main__":

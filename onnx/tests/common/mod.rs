@@ -73,6 +73,36 @@ impl Fixtures {
     }
 }
 
+impl Fixtures {
+    /// The torch reference cases of `neighbours.onnx`: (occupancy, aux, neighbours, torch's
+    /// wheels).
+    pub fn neighbours_cases(&self) -> Vec<NeighboursCase> {
+        let values = self.f32_file("neighbours_cases.f32");
+        let cells = SIZE_PX * SIZE_PX;
+        let width = SLOTS * 4;
+        values
+            .chunks_exact(cells + 2 + width + 2)
+            .map(|r| {
+                let neighbours = cells + 2;
+                let wheels = neighbours + width;
+                (
+                    r[..cells].to_vec(),
+                    [r[cells], r[cells + 1]],
+                    r[neighbours..wheels].to_vec(),
+                    [r[wheels], r[wheels + 1]],
+                )
+            })
+            .collect()
+    }
+}
+
+/// One torch reference case of `neighbours.onnx`: occupancy, aux, neighbours (4 values a slot)
+/// and torch's wheels.
+pub type NeighboursCase = (Vec<f32>, [f32; 2], Vec<f32>, [f32; 2]);
+
+/// Slots of `neighbours.onnx`'s neighbour input.
+pub const SLOTS: usize = 8;
+
 /// One torch reference case of `ranges.onnx`: occupancy, aux, ranges and torch's wheels.
 pub type RangesCase = (Vec<f32>, [f32; 2], Vec<f32>, [f32; 2]);
 
