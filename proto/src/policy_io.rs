@@ -358,6 +358,13 @@ impl RangeInput {
     }
 }
 
+impl std::str::FromStr for RangeInput {
+    type Err = RangeInputError;
+    fn from_str(text: &str) -> Result<RangeInput, RangeInputError> {
+        RangeInput::parse(text)
+    }
+}
+
 impl fmt::Display for RangeInput {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "sectors={},clip={}", self.sectors, self.clip)
@@ -524,6 +531,13 @@ impl NeighbourInput {
             threshold: self.threshold,
             hysteresis: 0.0,
         }
+    }
+}
+
+impl std::str::FromStr for NeighbourInput {
+    type Err = NeighbourInputError;
+    fn from_str(text: &str) -> Result<NeighbourInput, NeighbourInputError> {
+        NeighbourInput::parse(text)
     }
 }
 

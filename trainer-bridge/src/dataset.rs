@@ -91,7 +91,11 @@ pub struct DatasetHeader {
     pub scenario: String,
     /// The scan's ranges each sample carries beside its image, if any
     /// ([`DatasetHeader::with_ranges`]); serialized as `"sectors=K,clip=C"`, absent when none.
-    #[serde(default, skip_serializing_if = "Option::is_none", with = "range_text")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        with = "declared_text"
+    )]
     pub ranges: Option<RangeInput>,
     /// The neighbours detected in its scan each sample carries beside its image, if any
     /// ([`DatasetHeader::with_neighbours`]); serialized as `"slots=K,threshold=T,nearest=M"`,
@@ -99,7 +103,7 @@ pub struct DatasetHeader {
     #[serde(
         default,
         skip_serializing_if = "Option::is_none",
-        with = "neighbour_text"
+        with = "declared_text"
     )]
     pub neighbours: Option<NeighbourInput>,
     /// The law that labelled the samples ([`DatasetHeader::with_labels`]); absent for the
@@ -110,52 +114,32 @@ pub struct DatasetHeader {
     pub dataset_id: String,
 }
 
-/// `Option<RangeInput>` as its `formation.ranges` text (`RangeInput`'s `Display` and `parse`, the
-/// one definition of it), or nothing.
-pub(crate) mod range_text {
-    use formation_proto::RangeInput;
+/// An optional model input declaration (`Option<RangeInput>`, `Option<NeighbourInput>`) as its
+/// metadata text (the type's `Display` and `FromStr`, the one definition of it), or nothing.
+pub(crate) mod declared_text {
+    use std::fmt::Display;
+    use std::str::FromStr;
+
     use serde::{Deserialize, Deserializer, Serializer};
 
-    pub(crate) fn serialize<S: Serializer>(
-        ranges: &Option<RangeInput>,
+    pub(crate) fn serialize<T: Display, S: Serializer>(
+        declared: &Option<T>,
         serializer: S,
     ) -> Result<S::Ok, S::Error> {
-        match ranges {
-            Some(ranges) => serializer.collect_str(ranges),
+        match declared {
+            Some(declared) => serializer.collect_str(declared),
             None => serializer.serialize_none(),
         }
     }
 
-    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
-        deserializer: D,
-    ) -> Result<Option<RangeInput>, D::Error> {
+    pub(crate) fn deserialize<'de, T, D>(deserializer: D) -> Result<Option<T>, D::Error>
+    where
+        T: FromStr,
+        T::Err: Display,
+        D: Deserializer<'de>,
+    {
         Option::<String>::deserialize(deserializer)?
-            .map(|text| RangeInput::parse(&text).map_err(serde::de::Error::custom))
-            .transpose()
-    }
-}
-
-/// `Option<NeighbourInput>` as its `formation.neighbours` text (`NeighbourInput`'s `Display` and
-/// `parse`, the one definition of it), or nothing.
-pub(crate) mod neighbour_text {
-    use formation_proto::NeighbourInput;
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub(crate) fn serialize<S: Serializer>(
-        neighbours: &Option<NeighbourInput>,
-        serializer: S,
-    ) -> Result<S::Ok, S::Error> {
-        match neighbours {
-            Some(neighbours) => serializer.collect_str(neighbours),
-            None => serializer.serialize_none(),
-        }
-    }
-
-    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
-        deserializer: D,
-    ) -> Result<Option<NeighbourInput>, D::Error> {
-        Option::<String>::deserialize(deserializer)?
-            .map(|text| NeighbourInput::parse(&text).map_err(serde::de::Error::custom))
+            .map(|text| text.parse::<T>().map_err(serde::de::Error::custom))
             .transpose()
     }
 }
@@ -369,14 +353,18 @@ pub struct Manifest {
     /// See [`DatasetHeader::scenario`].
     pub scenario: String,
     /// See [`DatasetHeader::ranges`]: `"ranges": "sectors=K,clip=C"`, absent when none.
-    #[serde(default, skip_serializing_if = "Option::is_none", with = "range_text")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        with = "declared_text"
+    )]
     pub ranges: Option<RangeInput>,
     /// See [`DatasetHeader::neighbours`]: `"neighbours": "slots=K,threshold=T,nearest=M"`,
     /// absent when none.
     #[serde(
         default,
         skip_serializing_if = "Option::is_none",
-        with = "neighbour_text"
+        with = "declared_text"
     )]
     pub neighbours: Option<NeighbourInput>,
     /// See [`DatasetHeader::labels`]: `"labels": {...}`, absent for the expert's default.

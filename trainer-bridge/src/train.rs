@@ -233,7 +233,10 @@ pub struct TrainReport {
     pub loss_png: PathBuf,
     /// The scan's ranges the model takes beside its image (its `formation.ranges`): the
     /// datasets' range input, or `None` for data without ranges.
-    #[serde(default, deserialize_with = "crate::dataset::range_text::deserialize")]
+    #[serde(
+        default,
+        deserialize_with = "crate::dataset::declared_text::deserialize"
+    )]
     pub ranges: Option<formation_proto::RangeInput>,
 }
 
