@@ -7,9 +7,10 @@
 //! 1. **Detections.** The robot's own scan goes through
 //!    [`formation_perception::neighbours::NeighbourDetector`], which gives each neighbour's centre
 //!    in the robot's body frame (x ahead, y to the left), the robot itself at the origin.
-//! 2. **The neighbour rule** is the scenario's [`NeighbourRule`], applied by the world's own
-//!    [`NeighbourTracker`] to the robot and its detections, and read from the robot's side: its
-//!    Gabriel pairs (witness ratio at or above [`GabrielRule::threshold`]) among the robots within
+//! 2. **The neighbour rule** is the scenario's [`NeighbourRule`], the world's rule read from the
+//!    robot's side by [`own_neighbours`] (the agent's own, held equal to the world's
+//!    `NeighbourTracker` by its tests): its Gabriel pairs (witness ratio at or above
+//!    [`GabrielRule::threshold`](formation_proto::GabrielRule::threshold)) among the robots within
 //!    sensing range, plus its `nearest` robots; with [`ExpertGains::pair_weight_band`], the same
 //!    smooth weights as the expert's ([`crate::pair_weights::weighted_neighbours`]). Detections
 //!    carry no identity from one scan to the next, so the rule is applied afresh at every scan:
@@ -32,12 +33,13 @@
 //! [`own_scan_team`] the in-process team of them, a [`Decentralised`] controller: robot `i` is
 //! handed its own scan, heading and the goal, and nothing else.
 
+use formation_perception::neighbour_input::own_neighbours;
 use formation_perception::neighbours::{
     DetectedNeighbour, DetectorSettings, NeighbourDetector, SettingsError,
 };
 use formation_proto::robot::{BoxError, CheckedGoal, Decentralised, Pilot};
 use formation_proto::{Goal, LidarSpec, WheelCmd};
-use formation_world::neighbours::{GabrielRule, NeighbourRule, NeighbourTracker};
+use formation_world::neighbours::NeighbourRule;
 use formation_world::{RobotParams, WorldConfig};
 
 use crate::controller::{
@@ -78,11 +80,14 @@ pub enum OwnScanError {
 /// call to the next, so that after a few calls it allocates nothing).
 #[derive(Debug, Clone, Default)]
 pub struct OwnView {
-    /// The robot (index 0, at the origin) and its detections (index `k + 1` for detection `k`).
+    /// The robot (index 0, at the origin) and its detections (index `k + 1` for detection `k`),
+    /// for the smooth pair weights.
     positions: Vec<(f64, f64)>,
-    /// The world's tracker over `positions`, grown to the largest view seen.
-    tracker: Option<NeighbourTracker>,
     weighted: Vec<WeightedNeighbours>,
+    /// Scratch of [`own_neighbours`]: detections in range, nearest first.
+    order: Vec<(f64, usize)>,
+    /// Which detections the rule holds.
+    flags: Vec<bool>,
     /// The neighbours held at the last call: `(detection index, weight)`.
     held: Vec<(usize, f64)>,
 }
@@ -149,44 +154,27 @@ impl OwnView {
             }
             NeighbourRule::Gabriel(gabriel) => gabriel,
         };
-        self.positions.clear();
-        self.positions.push((0.0, 0.0));
-        self.positions.extend_from_slice(neighbours);
         if let Some(band) = band {
+            self.positions.clear();
+            self.positions.push((0.0, 0.0));
+            self.positions.extend_from_slice(neighbours);
             weighted_neighbours(&self.positions, gabriel, band, &mut self.weighted);
             if let Some(own) = self.weighted.first() {
                 self.held.extend(own.iter().map(|&(j, w)| (j - 1, w)));
             }
             return;
         }
-        let tracker = tracker_for(&mut self.tracker, *gabriel, self.positions.len());
-        // Memoryless: detections have no identity from one scan to the next.
-        tracker.reset();
-        tracker.update(&self.positions);
+        // Memoryless, the world's rule read from the robot's side: detections have no identity
+        // from one scan to the next.
+        own_neighbours(neighbours, gabriel, &mut self.order, &mut self.flags);
         self.held.extend(
-            tracker
-                .own_neighbours(0)
+            self.flags
                 .iter()
-                .filter(|&&j| j >= 1 && j <= neighbours.len())
-                .map(|&j| (j - 1, 1.0)),
+                .enumerate()
+                .filter(|&(_, &held)| held)
+                .map(|(k, _)| (k, 1.0)),
         );
     }
-}
-
-/// The tracker in `slot`, made anew unless it applies `rule` to at least `n` robots.
-fn tracker_for(
-    slot: &mut Option<NeighbourTracker>,
-    rule: GabrielRule,
-    n: usize,
-) -> &mut NeighbourTracker {
-    let rule = NeighbourRule::Gabriel(rule);
-    if !slot
-        .as_ref()
-        .is_some_and(|t| t.n_robots() >= n && *t.rule() == rule)
-    {
-        *slot = None;
-    }
-    slot.get_or_insert_with(|| NeighbourTracker::new(rule, n.max(16)))
 }
 
 /// One robot driven by the expert's law on its own scan: a [`Pilot`] with its own
@@ -315,6 +303,7 @@ mod tests {
     use crate::controller::{expert_commands, expert_commands_among, expert_commands_weighted};
     use formation_proto::Pose;
     use formation_proto::control::{Controller, Observation};
+    use formation_world::neighbours::{GabrielRule, NeighbourTracker};
 
     fn goal(phi_star: f64, d_star: f64) -> Goal {
         Goal {
