@@ -175,7 +175,10 @@ pub fn run(
         eprintln!("formation-agent: {told}");
     }
     let mut pilot = RobotPilot::new(onnx, robot.map(|(_, s)| s.robot.max_wheel_speed));
-    pilot.set_max_wheel_accel(robot.and_then(|(_, s)| s.robot.max_wheel_accel));
+    pilot.set_wheel_limits(formation_proto::WheelLimits {
+        max_speed: robot.map(|(_, s)| s.robot.max_wheel_speed),
+        max_accel: robot.and_then(|(_, s)| s.robot.max_wheel_accel),
+    });
     let topics = robot_topics(args)?;
     let goal = goal_values(flags)?;
     if let GoalValue::Fixed(d_star) = goal[1] {
@@ -302,21 +305,6 @@ impl<P: Pilot> RobotPilot<P> {
     }
 }
 
-/// `cmd` with both wheels scaled by one factor into `±limit` (unchanged within it).
-#[cfg(feature = "zenoh")]
-fn saturate(cmd: formation_proto::WheelCmd, limit: f64) -> formation_proto::WheelCmd {
-    let largest = cmd.left.abs().max(cmd.right.abs());
-    if largest > limit {
-        let scale = limit / largest;
-        formation_proto::WheelCmd {
-            left: cmd.left * scale,
-            right: cmd.right * scale,
-        }
-    } else {
-        cmd
-    }
-}
-
 #[cfg(feature = "zenoh")]
 impl<P: Pilot> Pilot for RobotPilot<P> {
     type Model = P::Model;
@@ -336,7 +324,7 @@ impl<P: Pilot> Pilot for RobotPilot<P> {
     ) -> Result<formation_proto::WheelCmd, BoxError> {
         let cmd = self.inner.decide(heading, goal)?;
         Ok(match self.max_wheel_speed {
-            Some(limit) => saturate(cmd, limit),
+            Some(limit) => formation_perception::policy_input::saturate_together(cmd, limit),
             None => cmd,
         })
     }
@@ -349,8 +337,8 @@ impl<P: Pilot> Pilot for RobotPilot<P> {
         self.inner.rehearse()
     }
 
-    fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
-        self.inner.set_max_wheel_accel(max_wheel_accel);
+    fn set_wheel_limits(&mut self, wheels: formation_proto::WheelLimits) {
+        self.inner.set_wheel_limits(wheels);
     }
 }
 
@@ -517,7 +505,6 @@ pub fn run(
 #[cfg(all(test, feature = "zenoh"))]
 mod tests {
     use super::*;
-    use formation_proto::WheelCmd;
 
     #[test]
     fn an_unknown_profile_is_refused_naming_the_flag() {
@@ -565,27 +552,6 @@ mod tests {
             profile_lidar_differs(pioneer, &pioneer.settings(), model, "policy-x"),
             None
         );
-    }
-
-    #[test]
-    fn the_top_wheel_speed_scales_both_wheels_and_keeps_the_curvature() {
-        let cmd = WheelCmd {
-            left: 0.5,
-            right: 0.7,
-        };
-        let saturated = saturate(cmd, 0.22);
-        assert!((saturated.right - 0.22).abs() < 1e-12, "{saturated:?}");
-        assert!((saturated.left / saturated.right - 0.5 / 0.7).abs() < 1e-12);
-        assert_eq!(saturate(cmd, 0.9), cmd);
-        let backwards = saturate(
-            WheelCmd {
-                left: -1.0,
-                right: 0.5,
-            },
-            0.22,
-        );
-        assert_eq!(backwards.left, -0.22);
-        assert!((backwards.right - 0.11).abs() < 1e-12);
     }
 
     #[test]

@@ -409,8 +409,11 @@ pub struct TrainArgs {
 /// much of the data each epoch draws.
 #[derive(Debug, Args)]
 pub struct NetworkArgs {
-    /// The network: `paper` (the paper's CNN) or `wide` (for teams). Default: the warm start's
-    /// (`--init-from`, or `--init-model`'s checkpoint), else `paper`.
+    /// The network: `paper` (the paper's CNN), `wide` or `wide-head` (CNNs for teams), `pair`
+    /// (one learned term per detected neighbour; data collected with `--neighbours K`) or
+    /// `pair-potential` (the same, each term shaped by the law's pair profile). Default: the warm
+    /// start's (`--init-from`, or `--init-model`'s checkpoint), else `pair` for data with
+    /// neighbours, else `paper`.
     #[arg(long, value_parser = architecture)]
     pub architecture: Option<Architecture>,
     /// Use the task's exact symmetry under reflection about the robot's heading axis (the
@@ -692,7 +695,7 @@ pub fn team_size(text: &str) -> Result<usize, String> {
     }
 }
 
-/// A network architecture by its name (`paper` or `wide`).
+/// A network architecture by its name ([`Architecture::ALL`]).
 fn architecture(text: &str) -> Result<Architecture, String> {
     text.parse()
 }

@@ -14,6 +14,8 @@
 //! * `DUMP=i`: robot 0's heading error and requested and applied wheels over run i's last 3 s;
 //! * `GAINS`: the expert's gains as JSON (`{"k_formation_graph": 0.4}`; default: the defaults).
 
+mod common;
+
 use std::path::PathBuf;
 
 use formation_expert::{ExpertController, ExpertGains};
@@ -89,15 +91,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let runs: usize = args.next().ok_or("runs")?.parse()?;
     let sizes: Vec<usize> = args.map(|a| a.parse()).collect::<Result<_, _>>()?;
     let options = options_from_env(runs)?;
-    let base = Scenario::from_path(&path)?;
-    let cfg = MetricsConfig {
-        team_figures: true,
-        ..MetricsConfig::default()
-    };
-    for n in sizes {
-        let scenario = base.with_robots(n)?;
+    let cfg = common::team_metrics();
+    for (scenario, n) in common::scenarios_of_sizes(&path, &sizes)?.iter().zip(sizes) {
         let started = std::time::Instant::now();
-        let results = diagnose_team(&scenario, &options, &cfg);
+        let results = diagnose_team(scenario, &options, &cfg);
         if options.verbose {
             print_failures(n, &results);
         }
@@ -108,24 +105,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
 /// Runs every run of `scenario` on `options.threads` workers, in run order.
 fn diagnose_team(scenario: &Scenario, options: &Options, cfg: &MetricsConfig) -> Vec<Diagnosis> {
-    let (runs, threads) = (options.runs, options.threads);
-    std::thread::scope(|s| {
-        let workers: Vec<_> = (0..threads)
-            .map(|w| {
-                s.spawn(move || {
-                    (0..runs)
-                        .filter(|i| i % threads == w)
-                        .map(|i| (i, diagnose_run(scenario, i, options, cfg)))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        let mut all: Vec<_> = workers
-            .into_iter()
-            .flat_map(|w| w.join().expect("join"))
-            .collect();
-        all.sort_by_key(|(i, _)| *i);
-        all.into_iter().map(|(_, d)| d).collect()
+    common::in_run_order(options.runs, options.threads, |i| {
+        diagnose_run(scenario, i, options, cfg)
     })
 }
 

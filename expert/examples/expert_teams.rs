@@ -6,12 +6,13 @@
 //! ```
 //! Environment: `K3` overrides the formation gain under a neighbour graph.
 
+mod common;
+
 use std::path::PathBuf;
 
 use formation_expert::{ExpertController, ExpertGains};
-use formation_world::Scenario;
 use formation_world::episode::run_episode;
-use formation_world::metrics::{MetricsConfig, run_metrics, summarize};
+use formation_world::metrics::{run_metrics, summarize};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -22,38 +23,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(k) = std::env::var("K3") {
         gains.k_formation_graph = k.parse()?;
     }
-    let base = Scenario::from_path(&path)?;
-    let cfg = MetricsConfig {
-        team_figures: true,
-        ..MetricsConfig::default()
-    };
-    for n in sizes {
-        let scenario = base.with_robots(n)?;
-        let metrics: Vec<_> = std::thread::scope(|s| {
-            let workers: Vec<_> = (0..2)
-                .map(|w| {
-                    let scenario = &scenario;
-                    s.spawn(move || {
-                        (0..runs)
-                            .filter(|i| i % 2 == w)
-                            .map(|i| {
-                                let spec = scenario.run_spec(scenario.seed(), i);
-                                let mut expert = ExpertController::new(gains, spec.world.robot)
-                                    .with_neighbours(spec.neighbours);
-                                let traj = run_episode(&spec, &mut expert, &mut |_, _| {})
-                                    .expect("expert");
-                                (i, run_metrics(&traj, spec.ticks(), &cfg))
-                            })
-                            .collect::<Vec<_>>()
-                    })
-                })
-                .collect();
-            let mut all: Vec<_> = workers
-                .into_iter()
-                .flat_map(|w| w.join().expect("join"))
-                .collect();
-            all.sort_by_key(|(i, _)| *i);
-            all.into_iter().map(|(_, m)| m).collect()
+    let cfg = common::team_metrics();
+    for (scenario, n) in common::scenarios_of_sizes(&path, &sizes)?.iter().zip(sizes) {
+        let metrics = common::in_run_order(runs, 2, |i| {
+            let spec = scenario.run_spec(scenario.seed(), i);
+            let mut expert =
+                ExpertController::new(gains, spec.world.robot).with_neighbours(spec.neighbours);
+            let traj = run_episode(&spec, &mut expert, &mut |_, _| {}).expect("expert");
+            run_metrics(&traj, spec.ticks(), &cfg)
         });
         for (i, m) in metrics.iter().enumerate().filter(|(_, m)| !m.success_10) {
             eprintln!("N={n} run {i}: {m:?}");

@@ -58,6 +58,7 @@
 //! The expert sees ground-truth poses of all robots. It exists to generate demonstrations and as the
 //! baseline the learned policy is compared with; it never runs inside an agent.
 
+use formation_perception::policy_input::saturate_together;
 use formation_proto::{Goal, Pose, WheelCmd};
 use formation_trainer_bridge::label_law::LabelLaw;
 use formation_world::episode::{Controller, ControllerError, Observation};
@@ -502,27 +503,15 @@ fn point_velocity_to_wheels(u: (f64, f64), theta: f64, c: f64, robot: &RobotPara
     let v = cos * u.0 + sin * u.1;
     let omega = (-sin * u.0 + cos * u.1) / c;
     let half_track = robot.wheel_separation / 2.0;
-    saturate(
+    // Both wheels scaled by one factor into the limit: the one saturation, which an agent
+    // applies to its policy's formation velocity too.
+    saturate_together(
         WheelCmd {
             left: v - half_track * omega,
             right: v + half_track * omega,
         },
         robot.max_wheel_speed,
     )
-}
-
-/// Scales both wheels by the same factor so that neither exceeds `limit` in magnitude.
-fn saturate(cmd: WheelCmd, limit: f64) -> WheelCmd {
-    let largest = cmd.left.abs().max(cmd.right.abs());
-    if largest > limit {
-        let scale = limit / largest;
-        WheelCmd {
-            left: cmd.left * scale,
-            right: cmd.right * scale,
-        }
-    } else {
-        cmd
-    }
 }
 
 /// The expert as a [`Controller`]: reads the ground-truth poses and the goal of each observation.

@@ -38,7 +38,7 @@ use formation_perception::neighbours::{
     DetectedNeighbour, DetectorSettings, NeighbourDetector, SettingsError,
 };
 use formation_proto::robot::{BoxError, CheckedGoal, Decentralised, Pilot};
-use formation_proto::{Goal, LidarSpec, WheelCmd};
+use formation_proto::{Goal, LidarSpec, WheelCmd, WheelLimits};
 use formation_world::neighbours::NeighbourRule;
 use formation_world::{RobotParams, WorldConfig};
 
@@ -277,8 +277,11 @@ impl Pilot for OwnScanPilot {
         Ok(())
     }
 
-    fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
-        self.robot.max_wheel_accel = max_wheel_accel;
+    fn set_wheel_limits(&mut self, wheels: WheelLimits) {
+        self.robot.max_wheel_accel = wheels.max_accel;
+        if let Some(speed) = wheels.max_speed {
+            self.robot.max_wheel_speed = speed;
+        }
     }
 }
 
@@ -344,6 +347,26 @@ mod tests {
             .collect()
     }
 
+    /// `view`'s command for robot `i` of `poses` from its [`exact_view`] and its own heading.
+    fn exact_command(
+        view: &mut OwnView,
+        poses: &[Pose],
+        i: usize,
+        goal: &Goal,
+        gains: &ExpertGains,
+        robot: &RobotParams,
+        rule: &NeighbourRule,
+    ) -> WheelCmd {
+        view.command(
+            &exact_view(poses, i),
+            poses[i].theta,
+            goal,
+            gains,
+            robot,
+            rule,
+        )
+    }
+
     fn close(a: &WheelCmd, b: &WheelCmd, tolerance: f64) -> bool {
         (a.left - b.left).abs() < tolerance && (a.right - b.right).abs() < tolerance
     }
@@ -390,19 +413,11 @@ mod tests {
                     expert_commands_among(&poses, &g, &gains, &robot, &tracker, &mut expert);
                 }
                 let mut view = OwnView::new();
-                for (i, pose) in poses.iter().enumerate() {
-                    let own = view.command(
-                        &exact_view(&poses, i),
-                        pose.theta,
-                        &g,
-                        &gains,
-                        &robot,
-                        &rule,
-                    );
+                for (i, wanted) in expert.iter().enumerate() {
+                    let own = exact_command(&mut view, &poses, i, &g, &gains, &robot, &rule);
                     assert!(
-                        close(&own, &expert[i], 1e-6),
-                        "robot {i}, {gains:?}: {own:?} against {:?}",
-                        expert[i]
+                        close(&own, wanted, 1e-6),
+                        "robot {i}, {gains:?}: {own:?} against {wanted:?}"
                     );
                     if gains.pair_weight_band.is_none() {
                         // The same neighbours, in detection indices.
@@ -436,16 +451,10 @@ mod tests {
         let mut expert = vec![WheelCmd::BRAKE; 3];
         expert_commands(&poses, &g, &gains, &robot, &mut expert);
         let mut view = OwnView::new();
-        for (i, pose) in poses.iter().enumerate() {
-            let own = view.command(
-                &exact_view(&poses, i),
-                pose.theta,
-                &g,
-                &gains,
-                &robot,
-                &NeighbourRule::AllPairs,
-            );
-            assert!(close(&own, &expert[i], 1e-9), "{own:?} {:?}", expert[i]);
+        for (i, wanted) in expert.iter().enumerate() {
+            let rule = NeighbourRule::AllPairs;
+            let own = exact_command(&mut view, &poses, i, &g, &gains, &robot, &rule);
+            assert!(close(&own, wanted, 1e-9), "{own:?} {wanted:?}");
             assert_eq!(view.held().len(), 2);
         }
     }

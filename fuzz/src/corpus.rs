@@ -21,18 +21,20 @@ pub fn dir(root: &Path, target: &Target) -> PathBuf {
     root.join(target.name)
 }
 
+/// Maps an I/O error of `action` on `path` to [`FuzzError::Corpus`] naming both.
+fn corpus(action: &'static str, path: &Path) -> impl FnOnce(std::io::Error) -> FuzzError {
+    let path = path.to_path_buf();
+    move |source| FuzzError::Corpus {
+        action,
+        path,
+        source,
+    }
+}
+
 /// Reads `target`'s seeds (at most [`MAX_SEEDS`] files, in name order, each at most
 /// [`MAX_CASE_BYTES`]).
 pub fn load(root: &Path, target: &Target) -> Result<Vec<Seed>, FuzzError> {
     let dir = dir(root, target);
-    let corpus = |action, path: &Path| {
-        let path = path.to_path_buf();
-        move |source| FuzzError::Corpus {
-            action,
-            path,
-            source,
-        }
-    };
     let mut names = Vec::new();
     for entry in std::fs::read_dir(&dir).map_err(corpus("reading the corpus folder", &dir))? {
         let entry = entry.map_err(corpus("reading the corpus folder", &dir))?;
@@ -71,14 +73,6 @@ pub fn load(root: &Path, target: &Target) -> Result<Vec<Seed>, FuzzError> {
 pub fn write(root: &Path, target: &Target) -> Result<Vec<PathBuf>, FuzzError> {
     let seeds = (target.seeds)()?;
     let dir = dir(root, target);
-    let corpus = |action, path: &Path| {
-        let path = path.to_path_buf();
-        move |source| FuzzError::Corpus {
-            action,
-            path,
-            source,
-        }
-    };
     if dir.is_dir() {
         for entry in std::fs::read_dir(&dir).map_err(corpus("reading the corpus folder", &dir))? {
             let path = entry

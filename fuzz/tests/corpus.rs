@@ -6,21 +6,32 @@ use std::time::Duration;
 
 use formation_fuzz::campaign::{self, Settings};
 use formation_fuzz::corpus;
-use formation_fuzz::targets::{self, Scratch};
+use formation_fuzz::targets::{self, Scratch, Seed, Target};
+
+/// Asserts that each of `seeds` decodes as a case of `target`, naming a failing one
+/// `target/name` followed by `hint`.
+fn assert_every_seed_decodes(scratch: &Scratch, target: &Target, seeds: &[Seed], hint: &str) {
+    for (name, bytes) in seeds {
+        assert_eq!(
+            (target.run)(scratch, bytes),
+            Ok(()),
+            "{}/{name}{hint}",
+            target.name
+        );
+    }
+}
 
 #[test]
 fn every_checked_in_seed_decodes() {
     let scratch = Scratch::new().unwrap();
     for target in targets::ALL {
         let seeds = corpus::load(&corpus::default_root(), target).unwrap();
-        for (name, bytes) in &seeds {
-            assert_eq!(
-                (target.run)(&scratch, bytes),
-                Ok(()),
-                "{}/{name} does not decode: write the corpora again with `scripts/fuzz seed`",
-                target.name
-            );
-        }
+        assert_every_seed_decodes(
+            &scratch,
+            target,
+            &seeds,
+            " does not decode: write the corpora again with `scripts/fuzz seed`",
+        );
     }
 }
 
@@ -30,14 +41,7 @@ fn every_seed_the_encoders_make_now_decodes() {
     for target in targets::ALL {
         let seeds = (target.seeds)().unwrap();
         assert!(!seeds.is_empty(), "{} makes no seed", target.name);
-        for (name, bytes) in &seeds {
-            assert_eq!(
-                (target.run)(&scratch, bytes),
-                Ok(()),
-                "{}/{name}",
-                target.name
-            );
-        }
+        assert_every_seed_decodes(&scratch, target, &seeds, "");
     }
 }
 

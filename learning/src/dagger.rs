@@ -555,22 +555,51 @@ pub(crate) mod tests {
         Scenario::from_toml_str(&text, "dagger-test").unwrap()
     }
 
-    /// An empty dataset in `dir/data` with the paper's images and `scenario`'s LIDAR.
-    pub(crate) fn empty_dataset(dir: &Path, scenario: &Scenario) -> PathBuf {
+    /// The settings of a dataset of `scenario`'s first run: the paper's images, its LIDAR, v* and
+    /// seed.
+    fn paper_header(scenario: &Scenario) -> DatasetHeader {
         let spec = scenario.run_spec(scenario.seed(), 0);
-        let header = DatasetHeader::new(
+        DatasetHeader::new(
             OccupancySpec::PAPER,
             spec.world.simulated_lidar(),
             spec.v_star,
             scenario.seed(),
             scenario.name(),
-        );
+        )
+    }
+
+    /// An empty dataset in `dir/data` with the paper's images and `scenario`'s LIDAR.
+    pub(crate) fn empty_dataset(dir: &Path, scenario: &Scenario) -> PathBuf {
+        let header = paper_header(scenario);
         let path = dir.join("data");
         DatasetWriter::create(&path, header)
             .unwrap()
             .finish()
             .unwrap();
         path
+    }
+
+    /// The samples of run 0 of iteration 1 over `scenarios`, driven by the expert (`model`
+    /// never drives) and labelled by `labels`, with `neighbours` recorded if given.
+    fn expert_labels_of_run_0(
+        scenarios: &[Scenario],
+        model: &Path,
+        labels: &RolloutLabels,
+        neighbours: Option<NeighbourInput>,
+    ) -> Vec<Sample> {
+        IterationRollouts {
+            scenarios,
+            iteration: 1,
+            expert_share: 1.0,
+            seed: 4,
+            occupancy: OccupancySpec::PAPER,
+            ranges: None,
+            neighbours,
+            model,
+            labels,
+        }
+        .label_runs(0..1, &|| {})
+        .unwrap()
     }
 
     /// DAgger over teams of 3 and 5 from `base`, 4 runs, beta 0.5, seed 9.
@@ -596,14 +625,7 @@ pub(crate) mod tests {
     #[test]
     fn rollouts_that_would_mix_their_samples_into_the_dataset_are_refused() {
         let base = scenario(3);
-        let spec = base.run_spec(base.seed(), 0);
-        let header = DatasetHeader::new(
-            OccupancySpec::PAPER,
-            spec.world.simulated_lidar(),
-            spec.v_star,
-            base.seed(),
-            base.name(),
-        );
+        let header = paper_header(&base);
         let path = Path::new("D");
         check_rollouts_match(
             path,
@@ -686,19 +708,7 @@ pub(crate) mod tests {
         let scenarios = team_scenarios(&scenario(3), &[], &[]).unwrap();
         let input = NeighbourInput::with_default_rule(4).unwrap();
         let label = |labels: &RolloutLabels, neighbours| {
-            IterationRollouts {
-                scenarios: &scenarios,
-                iteration: 1,
-                expert_share: 1.0,
-                seed: 4,
-                occupancy: OccupancySpec::PAPER,
-                ranges: None,
-                neighbours,
-                model: &model,
-                labels,
-            }
-            .label_runs(0..1, &|| {})
-            .unwrap()
+            expert_labels_of_run_0(&scenarios, &model, labels, neighbours)
         };
         let own = RolloutLabels {
             own_scan: true,
@@ -861,21 +871,8 @@ pub(crate) mod tests {
     fn rollouts_run_under_the_limits_asked_and_label_with_the_gains_asked() {
         let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../onnx/models/policy.onnx");
         let scenarios = team_scenarios(&scenario(5), &[], &[]).unwrap();
-        let label = |labels: &RolloutLabels| {
-            IterationRollouts {
-                scenarios: &scenarios,
-                iteration: 1,
-                expert_share: 1.0,
-                seed: 4,
-                occupancy: OccupancySpec::PAPER,
-                ranges: None,
-                neighbours: None,
-                model: &model,
-                labels,
-            }
-            .label_runs(0..1, &|| {})
-            .unwrap()
-        };
+        let label =
+            |labels: &RolloutLabels| expert_labels_of_run_0(&scenarios, &model, labels, None);
         let limited = label(&RolloutLabels {
             wheel_accels: vec![Some(0.5)],
             ..RolloutLabels::default()

@@ -76,8 +76,8 @@ impl Driver {
                 let mut policy = PolicyController::from_model_paths(&refs, world.lidar)
                     .map_err(|source| LearningError::Policy { source })?;
                 // Each robot knows its own wheels, as a real one does: a policy that answers a
-                // formation velocity has it shaped for them.
-                policy.set_max_wheel_accel(world.robot.max_wheel_accel);
+                // formation velocity has it shaped and bounded for them.
+                policy.set_wheel_limits(world.robot.wheel_limits());
                 Ok(Box::new(policy))
             }
         }

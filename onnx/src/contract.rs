@@ -545,34 +545,42 @@ fn required<'a>(
         .ok_or(ContractViolation::MissingMetadata { key })
 }
 
+/// The required `key`'s value parsed as a `T` that `valid` accepts; else
+/// [`ContractViolation::BadMetadata`] with the value and `expected`, what it must be.
+fn parse_valid<T: std::str::FromStr>(
+    entries: &BTreeMap<String, String>,
+    key: &'static str,
+    valid: impl Fn(&T) -> bool,
+    expected: &'static str,
+) -> Result<T, ContractViolation> {
+    let text = required(entries, key)?;
+    match text.trim().parse::<T>() {
+        Ok(value) if valid(&value) => Ok(value),
+        _ => Err(ContractViolation::BadMetadata {
+            key,
+            value: text.to_owned(),
+            expected,
+        }),
+    }
+}
+
 fn parse_positive_int(
     entries: &BTreeMap<String, String>,
     key: &'static str,
 ) -> Result<usize, ContractViolation> {
-    let text = required(entries, key)?;
-    match text.trim().parse::<usize>() {
-        Ok(n) if n > 0 => Ok(n),
-        _ => Err(ContractViolation::BadMetadata {
-            key,
-            value: text.to_owned(),
-            expected: "a positive integer",
-        }),
-    }
+    parse_valid(entries, key, |&n: &usize| n > 0, "a positive integer")
 }
 
 fn parse_positive_real(
     entries: &BTreeMap<String, String>,
     key: &'static str,
 ) -> Result<f64, ContractViolation> {
-    let text = required(entries, key)?;
-    match text.trim().parse::<f64>() {
-        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
-        _ => Err(ContractViolation::BadMetadata {
-            key,
-            value: text.to_owned(),
-            expected: "a finite number > 0",
-        }),
-    }
+    parse_valid(
+        entries,
+        key,
+        |&x: &f64| x.is_finite() && x > 0.0,
+        "a finite number > 0",
+    )
 }
 
 /// The sensor side of the contract: what a policy was trained for, as far as it records it.
@@ -872,6 +880,66 @@ mod tests {
         vec![tensor("wheels", &[-1, 2])]
     }
 
+    /// What a model's metadata declares of its signature beside its 50 px images.
+    #[derive(Clone, Copy)]
+    struct Declared {
+        aux: AuxLayout,
+        output: PolicyOutput,
+        ranges: Option<RangeInput>,
+        neighbours: Option<NeighbourInput>,
+    }
+
+    impl Declared {
+        /// What a model that declares nothing takes and gives: the paper's.
+        const NOTHING: Declared = Declared {
+            aux: AuxLayout::PAPER,
+            output: PolicyOutput::Wheels,
+            ranges: None,
+            neighbours: None,
+        };
+    }
+
+    /// [`check_signature`] of `inputs` and `outputs` for 50 px images and `declared`.
+    fn check_declared(
+        inputs: &[TensorSignature],
+        outputs: &[TensorSignature],
+        declared: Declared,
+    ) -> Result<(), ContractViolation> {
+        check_signature(
+            inputs,
+            outputs,
+            50,
+            declared.aux,
+            declared.output,
+            declared.ranges,
+            declared.neighbours,
+        )
+    }
+
+    /// [`check_declared`] for a model that declares nothing.
+    fn check_paper(
+        inputs: &[TensorSignature],
+        outputs: &[TensorSignature],
+    ) -> Result<(), ContractViolation> {
+        check_declared(inputs, outputs, Declared::NOTHING)
+    }
+
+    /// Asserts that `entries` with `key` (an input declaration) set to `value` are refused, the
+    /// message naming `key` and saying `fault`.
+    fn assert_declaration_refused(
+        mut entries: BTreeMap<String, String>,
+        key: &str,
+        value: &str,
+        fault: &str,
+    ) {
+        entries.insert(key.into(), value.into());
+        let message = parse_metadata(&entries).unwrap_err().to_string();
+        assert!(
+            message.contains(key) && message.contains(fault),
+            "{value}: {message}"
+        );
+    }
+
     #[test]
     fn a_declared_range_input_is_parsed_checked_and_needs_its_tensor() {
         let mut entries = paper_metadata();
@@ -883,17 +951,11 @@ mod tests {
         assert_eq!(meta.io().ranges, Some(ranges));
         assert!(!meta.extra.contains_key(keys::RANGES));
         let mut inputs = paper_inputs();
-        let check = |inputs: &[TensorSignature]| {
-            check_signature(
-                inputs,
-                &paper_outputs(),
-                50,
-                AuxLayout::PAPER,
-                PolicyOutput::Wheels,
-                Some(ranges),
-                None,
-            )
+        let declared = Declared {
+            ranges: Some(ranges),
+            ..Declared::NOTHING
         };
+        let check = |inputs: &[TensorSignature]| check_declared(inputs, &paper_outputs(), declared);
         assert!(matches!(
             check(&inputs),
             Err(ContractViolation::InputNames { ranges: true, .. })
@@ -912,15 +974,10 @@ mod tests {
             ("sectors=360,clip=3", "at least as many LIDAR beams"),
         ] {
             let mut entries = paper_metadata();
-            entries.insert(keys::RANGES.into(), value.into());
             if value.starts_with("sectors=360") {
                 entries.insert(keys::BEAMS.into(), "180".into());
             }
-            let message = parse_metadata(&entries).unwrap_err().to_string();
-            assert!(
-                message.contains("formation.ranges") && message.contains(fault),
-                "{value}: {message}"
-            );
+            assert_declaration_refused(entries, keys::RANGES, value, fault);
         }
     }
 
@@ -942,17 +999,11 @@ mod tests {
         assert_eq!(meta.io().ranges, None);
         assert!(!meta.extra.contains_key(keys::NEIGHBOURS));
         let mut inputs = paper_inputs();
-        let check = |inputs: &[TensorSignature]| {
-            check_signature(
-                inputs,
-                &paper_outputs(),
-                50,
-                AuxLayout::PAPER,
-                PolicyOutput::Wheels,
-                None,
-                Some(neighbours),
-            )
+        let declared = Declared {
+            neighbours: Some(neighbours),
+            ..Declared::NOTHING
         };
+        let check = |inputs: &[TensorSignature]| check_declared(inputs, &paper_outputs(), declared);
         let missing = check(&inputs).unwrap_err();
         assert!(matches!(
             missing,
@@ -982,16 +1033,7 @@ mod tests {
         check(&inputs).expect("the declared input");
 
         // An undeclared `neighbours` tensor is refused, saying the metadata declares none.
-        let undeclared = check_signature(
-            &inputs,
-            &paper_outputs(),
-            50,
-            AuxLayout::PAPER,
-            PolicyOutput::Wheels,
-            None,
-            None,
-        )
-        .unwrap_err();
+        let undeclared = check_paper(&inputs, &paper_outputs()).unwrap_err();
         assert!(
             undeclared
                 .to_string()
@@ -1002,14 +1044,15 @@ mod tests {
         // Both tensor inputs at once, in any order.
         let mut both = vec![tensor("ranges", &[-1, 100])];
         both.extend(inputs.iter().cloned());
-        check_signature(
+        let ranges = Some(RangeInput::new(100, 3.0).unwrap());
+        check_declared(
             &both,
             &paper_outputs(),
-            50,
-            AuxLayout::PAPER,
-            PolicyOutput::Wheels,
-            Some(RangeInput::new(100, 3.0).unwrap()),
-            Some(neighbours),
+            Declared {
+                ranges,
+                neighbours: Some(neighbours),
+                ..Declared::NOTHING
+            },
         )
         .expect("ranges and neighbours");
 
@@ -1018,13 +1061,7 @@ mod tests {
             ("slots=80,threshold=1.3,nearest=2", "out of range"),
             ("slots=8,threshold=0.5,nearest=2", "out of range"),
         ] {
-            let mut entries = paper_metadata();
-            entries.insert(keys::NEIGHBOURS.into(), value.into());
-            let message = parse_metadata(&entries).unwrap_err().to_string();
-            assert!(
-                message.contains("formation.neighbours") && message.contains(fault),
-                "{value}: {message}"
-            );
+            assert_declaration_refused(paper_metadata(), keys::NEIGHBOURS, value, fault);
         }
     }
 
@@ -1063,25 +1100,23 @@ mod tests {
             tensor("occupancy", &[-1, 1, 50, 50]),
             tensor("aux", &[-1, 1]),
         ];
-        check_signature(
+        check_declared(
             &one_wide,
             &paper_outputs(),
-            50,
-            meta.aux,
-            PolicyOutput::Wheels,
-            None,
-            None,
+            Declared {
+                aux: meta.aux,
+                ..Declared::NOTHING
+            },
         )
         .expect("a one-wide aux for one declared scalar");
         assert!(matches!(
-            check_signature(
+            check_declared(
                 &paper_inputs(),
                 &paper_outputs(),
-                50,
-                meta.aux,
-                PolicyOutput::Wheels,
-                None,
-                None
+                Declared {
+                    aux: meta.aux,
+                    ..Declared::NOTHING
+                }
             ),
             Err(ContractViolation::Shape { .. })
         ));
@@ -1105,24 +1140,22 @@ mod tests {
         assert!(!meta.extra.contains_key(keys::OUTPUT));
         // The declared output's tensor must be the model's one output.
         let outputs = [tensor("formation_velocity", &[-1, 2])];
-        check_signature(
+        check_declared(
             &paper_inputs(),
             &outputs,
-            50,
-            AuxLayout::PAPER,
-            PolicyOutput::FormationVelocity,
-            None,
-            None,
+            Declared {
+                output: PolicyOutput::FormationVelocity,
+                ..Declared::NOTHING
+            },
         )
         .expect("declared and present");
-        let err = check_signature(
+        let err = check_declared(
             &paper_inputs(),
             &paper_outputs(),
-            50,
-            AuxLayout::PAPER,
-            PolicyOutput::FormationVelocity,
-            None,
-            None,
+            Declared {
+                output: PolicyOutput::FormationVelocity,
+                ..Declared::NOTHING
+            },
         )
         .unwrap_err();
         let message = err.to_string();
@@ -1131,18 +1164,7 @@ mod tests {
                 && message.contains("formation.output"),
             "{message}"
         );
-        assert!(
-            check_signature(
-                &paper_inputs(),
-                &outputs,
-                50,
-                AuxLayout::PAPER,
-                PolicyOutput::Wheels,
-                None,
-                None
-            )
-            .is_err()
-        );
+        assert!(check_paper(&paper_inputs(), &outputs).is_err());
         entries.insert(keys::OUTPUT.into(), "torques".into());
         let message = parse_metadata(&entries).unwrap_err().to_string();
         assert!(
@@ -1321,43 +1343,17 @@ mod tests {
 
     #[test]
     fn paper_signature_passes_in_any_input_order() {
-        check_signature(
-            &paper_inputs(),
-            &paper_outputs(),
-            50,
-            AuxLayout::PAPER,
-            PolicyOutput::Wheels,
-            None,
-            None,
-        )
-        .expect("paper contract");
+        check_paper(&paper_inputs(), &paper_outputs()).expect("paper contract");
         let mut swapped = paper_inputs();
         swapped.reverse();
-        check_signature(
-            &swapped,
-            &paper_outputs(),
-            50,
-            AuxLayout::PAPER,
-            PolicyOutput::Wheels,
-            None,
-            None,
-        )
-        .expect("order does not matter");
+        check_paper(&swapped, &paper_outputs()).expect("order does not matter");
     }
 
     #[test]
     fn wrong_or_extra_names_are_refused() {
         let renamed = vec![tensor("image", &[-1, 1, 50, 50]), tensor("aux", &[-1, 2])];
         assert_eq!(
-            check_signature(
-                &renamed,
-                &paper_outputs(),
-                50,
-                AuxLayout::PAPER,
-                PolicyOutput::Wheels,
-                None,
-                None
-            ),
+            check_paper(&renamed, &paper_outputs()),
             Err(ContractViolation::InputNames {
                 found: vec!["image".into(), "aux".into()],
                 ranges: false,
@@ -1367,40 +1363,16 @@ mod tests {
         let mut extra = paper_inputs();
         extra.push(tensor("speed", &[-1, 1]));
         assert!(matches!(
-            check_signature(
-                &extra,
-                &paper_outputs(),
-                50,
-                AuxLayout::PAPER,
-                PolicyOutput::Wheels,
-                None,
-                None
-            ),
+            check_paper(&extra, &paper_outputs()),
             Err(ContractViolation::InputNames { .. })
         ));
         let outputs = vec![tensor("wheels", &[-1, 2]), tensor("value", &[-1, 1])];
         assert!(matches!(
-            check_signature(
-                &paper_inputs(),
-                &outputs,
-                50,
-                AuxLayout::PAPER,
-                PolicyOutput::Wheels,
-                None,
-                None
-            ),
+            check_paper(&paper_inputs(), &outputs),
             Err(ContractViolation::OutputNames { .. })
         ));
         assert!(matches!(
-            check_signature(
-                &paper_inputs(),
-                &[tensor("cmd", &[-1, 2])],
-                50,
-                AuxLayout::PAPER,
-                PolicyOutput::Wheels,
-                None,
-                None
-            ),
+            check_paper(&paper_inputs(), &[tensor("cmd", &[-1, 2])]),
             Err(ContractViolation::OutputNames { .. })
         ));
     }
@@ -1411,31 +1383,14 @@ mod tests {
             tensor("occupancy", &[-1, 1, 40, 40]),
             tensor("aux", &[-1, 2]),
         ];
-        let err = check_signature(
-            &small,
-            &paper_outputs(),
-            50,
-            AuxLayout::PAPER,
-            PolicyOutput::Wheels,
-            None,
-            None,
-        )
-        .expect_err("40 px image for size_px 50");
+        let err = check_paper(&small, &paper_outputs()).expect_err("40 px image for size_px 50");
         assert_eq!(
             err.to_string(),
             "`occupancy` has shape [batch, 1, 40, 40], expected [batch (dynamic), 1, 50, 50]"
         );
         let fixed_batch = vec![tensor("occupancy", &[1, 1, 50, 50]), tensor("aux", &[1, 2])];
         assert!(matches!(
-            check_signature(
-                &fixed_batch,
-                &paper_outputs(),
-                50,
-                AuxLayout::PAPER,
-                PolicyOutput::Wheels,
-                None,
-                None
-            ),
+            check_paper(&fixed_batch, &paper_outputs()),
             Err(ContractViolation::Shape { .. })
         ));
         let flat_aux = vec![
@@ -1443,7 +1398,7 @@ mod tests {
             tensor("aux", &[-1, 3]),
         ];
         assert!(matches!(
-            check_signature(&flat_aux, &paper_outputs(), 50, AuxLayout::PAPER, PolicyOutput::Wheels, None, None),
+            check_paper(&flat_aux, &paper_outputs()),
             Err(ContractViolation::Shape { name, .. }) if name == "aux"
         ));
     }
@@ -1453,15 +1408,7 @@ mod tests {
         let mut inputs = paper_inputs();
         inputs[0].element = ElementKind::OtherTensor("Float64".into());
         assert_eq!(
-            check_signature(
-                &inputs,
-                &paper_outputs(),
-                50,
-                AuxLayout::PAPER,
-                PolicyOutput::Wheels,
-                None,
-                None
-            ),
+            check_paper(&inputs, &paper_outputs()),
             Err(ContractViolation::ElementType {
                 name: "occupancy".into(),
                 found: "a Float64 tensor".into()
@@ -1470,15 +1417,7 @@ mod tests {
         let mut outputs = paper_outputs();
         outputs[0].element = ElementKind::NotTensor("a sequence".into());
         assert!(matches!(
-            check_signature(
-                &paper_inputs(),
-                &outputs,
-                50,
-                AuxLayout::PAPER,
-                PolicyOutput::Wheels,
-                None,
-                None
-            ),
+            check_paper(&paper_inputs(), &outputs),
             Err(ContractViolation::ElementType { .. })
         ));
     }

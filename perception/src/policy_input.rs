@@ -16,7 +16,7 @@
 #[cfg(doc)]
 use formation_proto::PolicyIo;
 use formation_proto::robot::{CheckedGoal, GoalError};
-use formation_proto::{AuxInput, Goal, PolicyOutput, WheelCmd};
+use formation_proto::{AuxInput, Goal, PolicyOutput, WheelCmd, WheelLimits};
 
 /// Why a goal or a heading cannot be turned into a policy's input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -111,42 +111,61 @@ pub fn shape_for_wheels(f: (f64, f64), max_wheel_accel: Option<f64>) -> (f64, f6
 }
 
 /// The wheel command of a formation-velocity output `f = (f_x, f_y)` \[m/s\] in the robot's frame,
-/// for a robot `delta_phi` off the goal's heading at goal speed `v_star`, whose wheels
-/// accelerate at most `max_wheel_accel` \[m/s²\] (`None`: no limit).
+/// for a robot `delta_phi` off the goal's heading at goal speed `v_star`, within its `wheels`.
 ///
-/// `f` is shaped for that limit first ([`shape_for_wheels`]). The controlled point lies half a
-/// wheel track ahead of the axle (the expert's `c = l/2`), so its velocity `u` in the robot's
-/// frame sets `v = u_x`, `ω = u_y / c` and the wheels `v ∓ (l/2) ω = u_x ∓ u_y` whatever the
-/// track `l`. `u = f + v* (cos Δφ, sin Δφ)`: the reference term `v* (cos φ*, sin φ*)` seen from
-/// the robot. The world applies its own wheel limits, as it does to any command.
+/// `f` is shaped for the acceleration limit first ([`shape_for_wheels`]). The controlled point
+/// lies half a wheel track ahead of the axle (the expert's `c = l/2`), so its velocity `u` in
+/// the robot's frame sets `v = u_x`, `ω = u_y / c` and the wheels `v ∓ (l/2) ω = u_x ∓ u_y`
+/// whatever the track `l`. `u = f + v* (cos Δφ, sin Δφ)`: the reference term `v* (cos φ*, sin
+/// φ*)` seen from the robot. Where a wheel would exceed the speed limit, both are scaled by one
+/// factor into it, as the expert saturates its own command: the point keeps its direction (the
+/// world's own limit clips each wheel apart, which turns the robot off it).
 pub fn formation_velocity_to_wheels(
     f: [f32; 2],
     delta_phi: f64,
     v_star: f64,
-    max_wheel_accel: Option<f64>,
+    wheels: WheelLimits,
 ) -> WheelCmd {
-    let f = shape_for_wheels((f64::from(f[0]), f64::from(f[1])), max_wheel_accel);
+    let f = shape_for_wheels((f64::from(f[0]), f64::from(f[1])), wheels.max_accel);
     let (sin, cos) = delta_phi.sin_cos();
     let u_x = f.0 + v_star * cos;
     let u_y = f.1 + v_star * sin;
-    WheelCmd {
+    let cmd = WheelCmd {
         left: u_x - u_y,
         right: u_x + u_y,
+    };
+    match wheels.max_speed {
+        Some(limit) => saturate_together(cmd, limit),
+        None => cmd,
+    }
+}
+
+/// Scales both wheels by one factor so that neither exceeds `limit` in magnitude (the expert's
+/// saturation); a command within it, or one that is not finite, is left as it is.
+pub fn saturate_together(cmd: WheelCmd, limit: f64) -> WheelCmd {
+    let largest = cmd.left.abs().max(cmd.right.abs());
+    if largest > limit {
+        let scale = limit / largest;
+        WheelCmd {
+            left: cmd.left * scale,
+            right: cmd.right * scale,
+        }
+    } else {
+        cmd
     }
 }
 
 /// The wheel command of a policy's two output values `values`, as its declared `output` says
 /// they are meant (a `wheels` output at its training speed `v_train`, [`PolicyIo`]'s two
-/// fields), for a robot with this heading under this goal, whose wheels accelerate at most
-/// `max_wheel_accel` \[m/s²\] (which shapes a formation velocity; a wheels output was trained for
-/// one limit and is taken as it is).
+/// fields), for a robot with this heading under this goal, within its `wheels` (which bound and
+/// shape a formation velocity; a wheels output was trained for one robot and is taken as it is).
 pub fn command_of_output(
     output: PolicyOutput,
     v_train: f64,
     values: [f32; 2],
     heading: f64,
     goal: &Goal,
-    max_wheel_accel: Option<f64>,
+    wheels: WheelLimits,
 ) -> WheelCmd {
     match output {
         PolicyOutput::Wheels => scale_to_goal_speed(values, goal.v_star, v_train),
@@ -155,7 +174,7 @@ pub fn command_of_output(
             values,
             f64::from(AuxInput::HeadingError.value(heading, goal) as f32),
             goal.v_star,
-            max_wheel_accel,
+            wheels,
         ),
     }
 }
@@ -163,6 +182,17 @@ pub fn command_of_output(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// No limit told.
+    const NONE: WheelLimits = WheelLimits {
+        max_speed: None,
+        max_accel: None,
+    };
+    /// A 1.0 m/s² acceleration limit and no speed limit told.
+    const ACCEL_ONLY: WheelLimits = WheelLimits {
+        max_speed: None,
+        max_accel: Some(1.0),
+    };
 
     fn goal(phi_star: f64, d_star: f64) -> Goal {
         Goal {
@@ -201,20 +231,20 @@ mod tests {
     #[test]
     fn a_formation_velocity_becomes_the_wheels_that_move_the_point_half_a_track_ahead() {
         // On heading with no correction: straight on at v*.
-        let cmd = formation_velocity_to_wheels([0.0, 0.0], 0.0, 0.5, None);
+        let cmd = formation_velocity_to_wheels([0.0, 0.0], 0.0, 0.5, NONE);
         assert_eq!((cmd.left, cmd.right), (0.5, 0.5));
         // Goal heading 90° to the left, standing still otherwise: the point is asked to move
         // sideways at v*, which turns the robot left on the spot (ω = v* / c).
-        let cmd = formation_velocity_to_wheels([0.0, 0.0], std::f64::consts::FRAC_PI_2, 0.4, None);
+        let cmd = formation_velocity_to_wheels([0.0, 0.0], std::f64::consts::FRAC_PI_2, 0.4, NONE);
         assert!((cmd.left + 0.4).abs() < 1e-12 && (cmd.right - 0.4).abs() < 1e-12);
         // The correction adds to the reference term and does not scale with v*.
-        let slow = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.3, None);
-        let fast = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.8, None);
+        let slow = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.3, NONE);
+        let fast = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.8, NONE);
         assert!((slow.left - 0.4).abs() < 1e-6 && (fast.left - 0.9).abs() < 1e-6);
         // The point's velocity from these wheels, with l = 0.331 and c = l/2, is f + reference.
         let (l, c) = (0.331, 0.331 / 2.0);
         let f = [0.05_f32, -0.12_f32];
-        let cmd = formation_velocity_to_wheels(f, 0.3, 0.7, None);
+        let cmd = formation_velocity_to_wheels(f, 0.3, 0.7, NONE);
         let v = (cmd.left + cmd.right) / 2.0;
         let omega = (cmd.right - cmd.left) / l;
         assert!((v - (f64::from(f[0]) + 0.7 * 0.3f64.cos())).abs() < 1e-9);
@@ -235,7 +265,7 @@ mod tests {
                 [0.7, 0.35],
                 0.3,
                 &goal,
-                Some(1.0)
+                ACCEL_ONLY
             ),
             scale_to_goal_speed([0.7, 0.35], 0.35, 0.7)
         );
@@ -246,9 +276,9 @@ mod tests {
                 [0.1, 0.0],
                 0.3,
                 &goal,
-                None
+                NONE
             ),
-            formation_velocity_to_wheels([0.1, 0.0], f64::from((0.5_f64 - 0.3) as f32), 0.35, None)
+            formation_velocity_to_wheels([0.1, 0.0], f64::from((0.5_f64 - 0.3) as f32), 0.35, NONE)
         );
     }
 
@@ -279,15 +309,52 @@ mod tests {
             [0.3, -0.4],
             0.0,
             &goal,
-            Some(1.0),
+            ACCEL_ONLY,
         );
         let expected = formation_velocity_to_wheels(
             [shaped.0 as f32, shaped.1 as f32],
             f64::from(0.2_f32),
             0.5,
-            None,
+            NONE,
         );
         assert!((limited.left - expected.left).abs() < 1e-6);
         assert!((limited.right - expected.right).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_speed_limit_scales_both_wheels_by_one_factor_as_the_expert_saturates() {
+        let limits = WheelLimits {
+            max_speed: Some(0.9),
+            max_accel: None,
+        };
+        // Within the limit: the same command as with none.
+        let within = formation_velocity_to_wheels([0.05, 0.1], 0.0, 0.7, limits);
+        assert_eq!(
+            within,
+            formation_velocity_to_wheels([0.05, 0.1], 0.0, 0.7, NONE)
+        );
+        // Beyond it: 0.7 + 0.1 - 0.4 and 0.7 + 0.1 + 0.4 -> (0.4, 1.2) scaled by 0.75.
+        let free = formation_velocity_to_wheels([0.1, 0.4], 0.0, 0.7, NONE);
+        let cmd = formation_velocity_to_wheels([0.1, 0.4], 0.0, 0.7, limits);
+        assert!((free.left - 0.4).abs() < 1e-6 && (free.right - 1.2).abs() < 1e-6);
+        assert!((cmd.right - 0.9).abs() < 1e-12, "{cmd:?}");
+        assert!((cmd.left / cmd.right - free.left / free.right).abs() < 1e-12);
+        // The command a policy sends is the expert's saturation of the same point velocity.
+        let big = saturate_together(
+            WheelCmd {
+                left: -3.0,
+                right: 1.5,
+            },
+            0.9,
+        );
+        assert!((big.left + 0.9).abs() < 1e-12 && (big.right - 0.45).abs() < 1e-12);
+        assert!(limits.is_valid() && NONE.is_valid());
+        assert!(
+            !WheelLimits {
+                max_speed: Some(0.0),
+                max_accel: None
+            }
+            .is_valid()
+        );
     }
 }

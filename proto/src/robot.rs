@@ -15,7 +15,7 @@
 use std::path::Path;
 
 use crate::control::{Controller, ControllerError, Observation};
-use crate::types::{Goal, LidarSpec, WheelCmd};
+use crate::types::{Goal, LidarSpec, WheelCmd, WheelLimits};
 
 /// Any error a pilot or a model loader gives; its chain of sources is kept and shown.
 pub type BoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
@@ -97,9 +97,9 @@ pub trait Pilot {
     }
     /// Puts another model in place after validating it; on error the old one keeps driving.
     fn swap(&mut self, model: Self::Model) -> Result<(), BoxError>;
-    /// Sets the robot's wheel acceleration limit \[m/s²\] (`None`: none) for the episode
-    /// beginning, which shapes a policy's formation velocity.
-    fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>);
+    /// Sets the robot's wheel limits for the episode beginning, within which a policy's
+    /// formation velocity is turned into wheel speeds (its acceleration limit shapes it).
+    fn set_wheel_limits(&mut self, wheels: WheelLimits);
     /// Runs the last decision again, changing nothing and answering nothing, to warm the caches
     /// before the next scan is due. By default a no-op.
     fn rehearse(&mut self) -> Result<(), BoxError> {
@@ -217,7 +217,7 @@ mod tests {
         fn swap(&mut self, _model: ()) -> Result<(), BoxError> {
             Ok(())
         }
-        fn set_max_wheel_accel(&mut self, _max_wheel_accel: Option<f64>) {}
+        fn set_wheel_limits(&mut self, _wheels: WheelLimits) {}
     }
 
     #[test]

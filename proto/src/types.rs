@@ -80,6 +80,31 @@ impl Default for LidarSpec {
     }
 }
 
+/// What a robot knows of its own wheels, told to its agent at the start of each episode: a
+/// policy that answers a formation velocity turns it into wheel speeds within them, as the
+/// expert that taught it does (`formation_perception::policy_input::formation_velocity_to_wheels`).
+/// A real robot knows its own wheels; the world applies its limits to any command regardless.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WheelLimits {
+    /// The largest wheel speed \[m/s\] (`None`: not told; both wheels are then sent as computed
+    /// and the world clips each on its own).
+    pub max_speed: Option<f64>,
+    /// The largest wheel acceleration \[m/s²\] (`None`: none), for which a formation velocity
+    /// is shaped.
+    pub max_accel: Option<f64>,
+}
+
+impl WheelLimits {
+    /// Whether each limit given is a finite number > 0.
+    pub fn is_valid(&self) -> bool {
+        [self.max_speed, self.max_accel]
+            .into_iter()
+            .flatten()
+            .all(|limit| limit.is_finite() && limit > 0.0)
+    }
+}
+
 /// What the occupancy renderer does with a LIDAR hit that falls outside the image window.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

@@ -29,7 +29,7 @@ use std::time::{SystemTime, UNIX_EPOCH};
 #[cfg(feature = "iceoryx2")]
 use iceoryx2::prelude::ZeroCopySend;
 
-use crate::types::{Goal, LidarSpec, WheelCmd};
+use crate::types::{Goal, LidarSpec, WheelCmd, WheelLimits};
 
 /// Most LIDAR beams a [`ScanMsg`] can carry (the paper's sensor: 900 beams over 360 degrees).
 pub const MAX_BEAMS: usize = 900;
@@ -626,10 +626,9 @@ pub enum ControlRequest {
         generation: u64,
         /// The robot's LIDAR settings this episode.
         lidar: LidarSpec,
-        /// The robot's wheel acceleration limit \[m/s²\] this episode (`None`: none), for which
-        /// a policy that answers a formation velocity has it shaped: a real robot knows its own
-        /// wheels.
-        max_wheel_accel: Option<f64>,
+        /// The robot's wheel limits this episode, within which a policy that answers a
+        /// formation velocity turns it into wheel speeds: a real robot knows its own wheels.
+        wheels: WheelLimits,
     },
     /// Load another model off the hot path and let it drive from the first tick `>= at_tick`.
     SwapModel {
@@ -661,9 +660,10 @@ pub struct ControlMsg {
     pub generation: u64,
     /// LIDAR maximum range \[m\] (begin episode).
     pub max_range: f64,
-    /// Unused, written 0: an agent is given the sensor contract only, not the world's noise
-    /// (kept so that the message's layout and type name stay).
-    pub noise_std: f64,
+    /// The robot's largest wheel speed \[m/s\], 0 for not told (begin episode). Worlds before
+    /// 2026-12-07 wrote 0 here (the slot held the world's LIDAR noise, unused by agents), and
+    /// agents before then ignore it, so the layout and the type name stay.
+    pub max_wheel_speed: f64,
     /// The robot's wheel acceleration limit \[m/s²\], 0 for none (begin episode).
     pub max_wheel_accel: f64,
     /// Request id (swap model).
@@ -675,6 +675,33 @@ pub struct ControlMsg {
 }
 
 const CONTROL_BEGIN: u32 = 1;
+/// The names of [`ControlMsg`]'s two wheel limits in its errors.
+const WHEEL_SPEED_LIMIT: &str = "wheel speed limit";
+const WHEEL_ACCEL_LIMIT: &str = "wheel acceleration limit";
+
+/// A limit on the wire: 0 for none, else the finite number > 0 it is.
+fn encode_limit(what: &str, limit: Option<f64>) -> Result<f64, WireError> {
+    match limit {
+        None => Ok(0.0),
+        Some(value) if value.is_finite() && value > 0.0 => Ok(value),
+        Some(value) => Err(WireError::Malformed {
+            message: "control",
+            reason: format!("{what} {value} is not a finite number > 0"),
+        }),
+    }
+}
+
+/// A limit off the wire ([`encode_limit`]'s inverse); anything else is refused, naming it.
+fn decode_limit(what: &str, value: f64) -> Result<Option<f64>, WireError> {
+    match value {
+        0.0 => Ok(None),
+        value if value.is_finite() && value > 0.0 => Ok(Some(value)),
+        value => Err(WireError::Malformed {
+            message: "control",
+            reason: format!("{what} {value} is neither 0 (none) nor a finite number > 0"),
+        }),
+    }
+}
 const CONTROL_SWAP: u32 = 2;
 const CONTROL_SHUTDOWN: u32 = 3;
 
@@ -686,7 +713,7 @@ impl ControlMsg {
             beams: 0,
             generation: 0,
             max_range: 0.0,
-            noise_std: 0.0,
+            max_wheel_speed: 0.0,
             max_wheel_accel: 0.0,
             request_id: 0,
             at_tick: 0,
@@ -696,25 +723,15 @@ impl ControlMsg {
             ControlRequest::BeginEpisode {
                 generation,
                 lidar,
-                max_wheel_accel,
+                wheels,
             } => {
                 msg.kind = CONTROL_BEGIN;
                 msg.generation = *generation;
                 msg.beams = u32::try_from(lidar.beams)
                     .map_err(|_| WireError::TooManyBeams { beams: lidar.beams })?;
                 msg.max_range = lidar.max_range;
-                msg.max_wheel_accel = match *max_wheel_accel {
-                    None => 0.0,
-                    Some(accel) if accel.is_finite() && accel > 0.0 => accel,
-                    Some(accel) => {
-                        return Err(WireError::Malformed {
-                            message: "control",
-                            reason: format!(
-                                "wheel acceleration limit {accel} is not a finite number > 0"
-                            ),
-                        });
-                    }
-                };
+                msg.max_wheel_speed = encode_limit(WHEEL_SPEED_LIMIT, wheels.max_speed)?;
+                msg.max_wheel_accel = encode_limit(WHEEL_ACCEL_LIMIT, wheels.max_accel)?;
             }
             ControlRequest::SwapModel {
                 request_id,
@@ -744,17 +761,9 @@ impl ControlMsg {
                     beams: self.beams as usize,
                     max_range: self.max_range,
                 },
-                max_wheel_accel: match self.max_wheel_accel {
-                    0.0 => None,
-                    accel if accel.is_finite() && accel > 0.0 => Some(accel),
-                    accel => {
-                        return Err(WireError::Malformed {
-                            message: "control",
-                            reason: format!(
-                                "wheel acceleration limit {accel} is neither 0 (none) nor a finite number > 0"
-                            ),
-                        });
-                    }
+                wheels: WheelLimits {
+                    max_speed: decode_limit(WHEEL_SPEED_LIMIT, self.max_wheel_speed)?,
+                    max_accel: decode_limit(WHEEL_ACCEL_LIMIT, self.max_wheel_accel)?,
                 },
             }),
             CONTROL_SWAP => Ok(ControlRequest::SwapModel {
@@ -1577,12 +1586,23 @@ mod tests {
                     beams: 360,
                     max_range: 3.5,
                 },
-                max_wheel_accel: None,
+                wheels: WheelLimits::default(),
             },
             ControlRequest::BeginEpisode {
                 generation: 10,
                 lidar: LidarSpec::default(),
-                max_wheel_accel: Some(1.0),
+                wheels: WheelLimits {
+                    max_speed: Some(0.9),
+                    max_accel: Some(1.0),
+                },
+            },
+            ControlRequest::BeginEpisode {
+                generation: 11,
+                lidar: LidarSpec::default(),
+                wheels: WheelLimits {
+                    max_speed: Some(0.22),
+                    max_accel: None,
+                },
             },
             ControlRequest::SwapModel {
                 request_id: 4,
@@ -1598,22 +1618,44 @@ mod tests {
             );
         }
         // A limit that is no limit is refused both ways, naming it.
-        let bad_limit = ControlRequest::BeginEpisode {
+        for (wheels, named) in [
+            (
+                WheelLimits {
+                    max_speed: None,
+                    max_accel: Some(-1.0),
+                },
+                "wheel acceleration limit -1",
+            ),
+            (
+                WheelLimits {
+                    max_speed: Some(f64::INFINITY),
+                    max_accel: None,
+                },
+                "wheel speed limit inf",
+            ),
+        ] {
+            let bad_limit = ControlRequest::BeginEpisode {
+                generation: 1,
+                lidar: LidarSpec::default(),
+                wheels,
+            };
+            let error = ControlMsg::encode(&bad_limit).unwrap_err().to_string();
+            assert!(error.contains(named), "{error}");
+        }
+        let begin = ControlMsg::encode(&ControlRequest::BeginEpisode {
             generation: 1,
             lidar: LidarSpec::default(),
-            max_wheel_accel: Some(-1.0),
-        };
-        let error = ControlMsg::encode(&bad_limit).unwrap_err().to_string();
-        assert!(error.contains("wheel acceleration limit -1"), "{error}");
-        let mut nan = ControlMsg::encode(&ControlRequest::BeginEpisode {
-            generation: 1,
-            lidar: LidarSpec::default(),
-            max_wheel_accel: None,
+            wheels: WheelLimits::default(),
         })
         .unwrap();
+        let mut nan = begin;
         nan.max_wheel_accel = f64::NAN;
         let error = nan.decode().unwrap_err().to_string();
         assert!(error.contains("wheel acceleration limit NaN"), "{error}");
+        let mut negative = begin;
+        negative.max_wheel_speed = -0.5;
+        let error = negative.decode().unwrap_err().to_string();
+        assert!(error.contains("wheel speed limit -0.5"), "{error}");
         let mut unknown = ControlMsg::encode(&ControlRequest::Shutdown).unwrap();
         unknown.kind = 77;
         assert_eq!(

@@ -198,6 +198,30 @@ impl Batch {
             .collect())
     }
 
+    /// Fills `out` (`width` values a robot) robot by robot from each robot's own scan and its
+    /// world's d*, with `robot(its world's neighbour input builder, scan, d*, its values)`; a
+    /// world whose d* cannot scale the input (`what`) is an error.
+    fn fill_from_scans(
+        &mut self,
+        out: &mut [f32],
+        width: usize,
+        what: &str,
+        robot: impl Fn(&mut NeighbourInputBuilder, &[f32], f64, &mut [f32]) + Sync,
+    ) -> PyResult<()> {
+        let n = self.robots();
+        self.fill(out, n * width, |b, slot, chunk| {
+            let observation = slot.episode.observe();
+            let d_star = observation.goal.d_star;
+            if !(d_star.is_finite() && d_star > 0.0) {
+                return Err(format!("world {b}: d* {d_star} cannot scale the {what}"));
+            }
+            for (scan, cell) in observation.scans.iter().zip(chunk.chunks_exact_mut(width)) {
+                robot(&mut slot.neighbour_builder, scan, d_star, cell);
+            }
+            Ok(())
+        })
+    }
+
     /// Fills `out` (`per_world` values per world) world by world in parallel.
     fn fill<T: Send>(
         &mut self,
@@ -466,16 +490,8 @@ impl Batch {
         let (n, width) = (self.robots(), spec.sectors);
         let mut out = vec![0.0_f32; self.slots.len() * n * width];
         py.detach(|| {
-            self.fill(&mut out, n * width, |b, slot, chunk| {
-                let observation = slot.episode.observe();
-                let d_star = observation.goal.d_star;
-                if !(d_star.is_finite() && d_star > 0.0) {
-                    return Err(format!("world {b}: d* {d_star} cannot scale the ranges"));
-                }
-                for (scan, cell) in observation.scans.iter().zip(chunk.chunks_exact_mut(width)) {
-                    pool(scan, &lidar, &spec, d_star, cell);
-                }
-                Ok(())
+            self.fill_from_scans(&mut out, width, "ranges", |_, scan, d_star, cell| {
+                pool(scan, &lidar, &spec, d_star, cell)
             })
         })?;
         out.into_pyarray(py)
@@ -502,20 +518,12 @@ impl Batch {
         let (n, width) = (self.robots(), spec.len());
         let mut out = vec![0.0_f32; self.slots.len() * n * width];
         py.detach(|| {
-            self.fill(&mut out, n * width, |b, slot, chunk| {
-                let observation = slot.episode.observe();
-                let d_star = observation.goal.d_star;
-                if !(d_star.is_finite() && d_star > 0.0) {
-                    return Err(format!(
-                        "world {b}: d* {d_star} cannot scale the neighbours"
-                    ));
-                }
-                for (scan, cell) in observation.scans.iter().zip(chunk.chunks_exact_mut(width)) {
-                    slot.neighbour_builder
-                        .fill(scan, &lidar, &spec, d_star, cell);
-                }
-                Ok(())
-            })
+            self.fill_from_scans(
+                &mut out,
+                width,
+                "neighbours",
+                |builder, scan, d_star, cell| builder.fill(scan, &lidar, &spec, d_star, cell),
+            )
         })?;
         out.into_pyarray(py).reshape(vec![
             self.slots.len(),
@@ -564,7 +572,7 @@ impl Batch {
             let goal = slot.episode.spec().goal_at(world.time());
             policy_input::check_goal(&goal)
                 .map_err(|e| PyValueError::new_err(format!("world {b}: {e}")))?;
-            let max_wheel_accel = slot.episode.spec().world.robot.max_wheel_accel;
+            let wheels = slot.episode.spec().world.robot.wheel_limits();
             for (w, pose) in raw[b * n * 2..(b + 1) * n * 2]
                 .chunks_exact(2)
                 .zip(world.poses())
@@ -575,7 +583,7 @@ impl Batch {
                     [w[0], w[1]],
                     pose.theta,
                     &goal,
-                    max_wheel_accel,
+                    wheels,
                 );
                 out.extend([cmd.left, cmd.right]);
             }

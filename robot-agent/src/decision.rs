@@ -43,7 +43,9 @@ use formation_onnx::{OnnxPolicy, PolicyError};
 use formation_proto::PolicyOutput;
 use formation_proto::control::{Controller, ControllerError, Observation};
 use formation_proto::robot::{CheckedGoal, Decentralised};
-use formation_proto::{AuxValues, Goal, LidarSpec, OccupancySpec, PolicyInput, PolicyIo, WheelCmd};
+use formation_proto::{
+    AuxValues, Goal, LidarSpec, OccupancySpec, PolicyInput, PolicyIo, WheelCmd, WheelLimits,
+};
 
 use formation_perception::neighbour_input::NeighbourInputBuilder;
 use formation_perception::{occupancy, policy_input, ranges};
@@ -265,9 +267,9 @@ pub struct Agent {
     last_scan: Vec<f32>,
     /// The heading and the scalars of the last [`Agent::decide`]; `None` before the first.
     last_decision: Option<(f64, AuxValues)>,
-    /// The robot's wheel acceleration limit \[m/s²\], which shapes a formation-velocity output
-    /// ([`policy_input::shape_for_wheels`]); `None`: no limit.
-    max_wheel_accel: Option<f64>,
+    /// The robot's wheels, within which a formation-velocity output is turned into wheel speeds
+    /// ([`policy_input::formation_velocity_to_wheels`]); by default none told.
+    wheels: WheelLimits,
 }
 
 impl Agent {
@@ -288,19 +290,19 @@ impl Agent {
             goal: None,
             last_scan: Vec::with_capacity(lidar.beams),
             last_decision: None,
-            max_wheel_accel: None,
+            wheels: WheelLimits::default(),
         })
     }
 
-    /// Sets the robot's wheel acceleration limit \[m/s²\] (`None`: none, the default), for which
-    /// a policy that answers a formation velocity has it shaped.
-    pub fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
-        self.max_wheel_accel = max_wheel_accel;
+    /// Sets the robot's wheel limits (by default none told), within which a policy that answers
+    /// a formation velocity has it turned into wheel speeds.
+    pub fn set_wheel_limits(&mut self, wheels: WheelLimits) {
+        self.wheels = wheels;
     }
 
-    /// The robot's wheel acceleration limit this agent shapes for.
-    pub fn max_wheel_accel(&self) -> Option<f64> {
-        self.max_wheel_accel
+    /// The robot's wheel limits this agent drives within.
+    pub fn wheel_limits(&self) -> WheelLimits {
+        self.wheels
     }
 
     /// Loads an ONNX model (validating its contract) and wraps it.
@@ -399,7 +401,7 @@ impl Agent {
             [left, right],
             heading,
             goal,
-            self.max_wheel_accel,
+            self.wheels,
         ))
     }
 
@@ -663,10 +665,10 @@ impl PolicyController {
         Ok(PolicyController::new(agents))
     }
 
-    /// Sets every robot's wheel acceleration limit \[m/s²\] ([`Agent::set_max_wheel_accel`]).
-    pub fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
+    /// Sets every robot's wheel limits ([`Agent::set_wheel_limits`]).
+    pub fn set_wheel_limits(&mut self, wheels: WheelLimits) {
         for agent in self.team.pilots_mut() {
-            agent.set_max_wheel_accel(max_wheel_accel);
+            agent.set_wheel_limits(wheels);
         }
     }
 

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use formation_onnx::OnnxPolicy;
 use formation_proto::robot::{BoxError, Decentralised, Pilot, PilotMaker};
-use formation_proto::{Goal, LidarSpec, WheelCmd};
+use formation_proto::{Goal, LidarSpec, WheelCmd, WheelLimits};
 
 use crate::decision::{Agent, PolicyBackend};
 
@@ -66,7 +66,7 @@ impl Pilot for Agent {
         Ok(Agent::rehearse(self)?)
     }
 
-    fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
-        Agent::set_max_wheel_accel(self, max_wheel_accel);
+    fn set_wheel_limits(&mut self, wheels: WheelLimits) {
+        Agent::set_wheel_limits(self, wheels);
     }
 }

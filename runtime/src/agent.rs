@@ -18,7 +18,7 @@ use std::time::Duration;
 use formation_proto::wire::{
     AgentStatus, AgentTimings, CmdMsg, CmdStatus, ControlRequest, ScanMsg, WireError, wall_clock_ns,
 };
-use formation_proto::{LidarSpec, WheelCmd};
+use formation_proto::{LidarSpec, WheelCmd, WheelLimits};
 
 use formation_proto::exit::TerminationSignal;
 
@@ -281,10 +281,10 @@ impl<M: PilotMaker> AgentLoop<M> {
             ControlRequest::BeginEpisode {
                 generation,
                 lidar,
-                max_wheel_accel,
+                wheels,
             } => {
                 self.generation = generation;
-                let status = match self.prepare(lidar, max_wheel_accel) {
+                let status = match self.prepare(lidar, wheels) {
                     Ok(model_id) => AgentStatus::Ready {
                         generation,
                         model_id,
@@ -324,17 +324,13 @@ impl<M: PilotMaker> AgentLoop<M> {
         Ok(None)
     }
 
-    /// Makes the agent ready for an episode with this sensor and wheel acceleration limit;
-    /// returns the model id.
-    fn prepare(
-        &mut self,
-        lidar: LidarSpec,
-        max_wheel_accel: Option<f64>,
-    ) -> Result<String, ModelError> {
+    /// Makes the agent ready for an episode with this sensor and these wheel limits; returns
+    /// the model id.
+    fn prepare(&mut self, lidar: LidarSpec, wheels: WheelLimits) -> Result<String, ModelError> {
         if let Some((pilot, current)) = &mut self.pilot
             && *current == lidar
         {
-            pilot.set_max_wheel_accel(max_wheel_accel);
+            pilot.set_wheel_limits(wheels);
             return Ok(pilot.model_id().to_owned());
         }
         let model = match self.idle_model.take() {
@@ -348,7 +344,7 @@ impl<M: PilotMaker> AgentLoop<M> {
                 path: self.model_path.clone(),
                 source,
             })?;
-        pilot.set_max_wheel_accel(max_wheel_accel);
+        pilot.set_wheel_limits(wheels);
         let id = pilot.model_id().to_owned();
         self.pilot = Some((pilot, lidar));
         Ok(id)

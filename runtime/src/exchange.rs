@@ -37,7 +37,7 @@ use formation_proto::wire::{
     AgentStatus, CmdMsg, CmdStatus, ControlRequest, RobotTiming, RunId, ScanMsg, SwapOutcome,
     SwapReply, SwapRequest, TickOutcome, Welcome, wall_clock_ns,
 };
-use formation_proto::{LidarSpec, WheelCmd};
+use formation_proto::{LidarSpec, WheelCmd, WheelLimits};
 
 use crate::clock::Clock;
 use crate::link::{Hello, WorldLink, WorldLinkError};
@@ -161,8 +161,8 @@ pub struct AgentsController<'l> {
     events: EventSink,
     generation: u64,
     lidar: LidarSpec,
-    /// The robots' wheel acceleration limit this episode, which each agent is told.
-    max_wheel_accel: Option<f64>,
+    /// The robots' wheel limits this episode, which each agent is told.
+    wheels: WheelLimits,
     states: Vec<AgentState>,
     newest: Vec<Option<Arrival>>,
     /// Per robot: when its recent scans were published, for timing the command that answers one.
@@ -270,7 +270,7 @@ impl<'l> AgentsController<'l> {
             events,
             generation: 0,
             lidar,
-            max_wheel_accel: None,
+            wheels: WheelLimits::default(),
             states: vec![AgentState::Absent; n],
             newest: vec![None; n],
             scan_stamps,
@@ -318,18 +318,18 @@ impl<'l> AgentsController<'l> {
         }
     }
 
-    /// Starts a new episode of robots with this LIDAR and wheel acceleration limit (`None`:
-    /// none): sends every connected agent a begin request and waits until all are ready. An
-    /// agent that refuses (e.g. its model does not fit the sensor) fails the episode.
+    /// Starts a new episode of robots with this LIDAR and these wheel limits: sends every
+    /// connected agent a begin request and waits until all are ready. An agent that refuses
+    /// (e.g. its model does not fit the sensor) fails the episode.
     pub fn begin_episode(
         &mut self,
         dt: f64,
         lidar: LidarSpec,
-        max_wheel_accel: Option<f64>,
+        wheels: WheelLimits,
     ) -> Result<(), ControllerError> {
         self.generation += 1;
         self.lidar = lidar;
-        self.max_wheel_accel = max_wheel_accel;
+        self.wheels = wheels;
         self.dt = Duration::from_secs_f64(dt);
         self.schedule_start = None;
         self.schedule_shift = Duration::ZERO;
@@ -432,7 +432,7 @@ impl<'l> AgentsController<'l> {
         let request = ControlRequest::BeginEpisode {
             generation: self.generation,
             lidar: self.lidar,
-            max_wheel_accel: self.max_wheel_accel,
+            wheels: self.wheels,
         };
         self.link
             .send_control(robot, &request)

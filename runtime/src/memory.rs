@@ -325,6 +325,21 @@ impl MemoryWorldLink {
         }
     }
 
+    /// Runs `f` under the bus lock on robot `robot`'s open incarnation, if it has one (else
+    /// gives `T::default()`); a robot the bus does not have is an error.
+    fn with_incarnation<T: Default>(
+        &self,
+        robot: usize,
+        f: impl FnOnce(&mut Incarnation) -> T,
+    ) -> WorldResult<T> {
+        let mut state = self.bus.lock();
+        let slot = state
+            .robots
+            .get_mut(robot)
+            .ok_or_else(|| self.no_such_robot(robot))?;
+        Ok(slot.as_mut().map(f).unwrap_or_default())
+    }
+
     /// Runs `hook` whenever the world would wait with nothing queued, before time passes: a
     /// test runs its agents there, so one thread plays the whole launch.
     pub fn on_wait(&mut self, hook: impl FnMut() + 'static) {
@@ -384,29 +399,15 @@ impl WorldLink for MemoryWorldLink {
     }
 
     fn publish_scan(&mut self, robot: usize, msg: &ScanMsg) -> WorldResult {
-        let mut state = self.bus.lock();
-        let slot = state
-            .robots
-            .get_mut(robot)
-            .ok_or_else(|| self.no_such_robot(robot))?;
-        if let Some(incarnation) = slot {
-            incarnation.scans.push_back(*msg);
-        }
-        drop(state);
+        self.with_incarnation(robot, |incarnation| incarnation.scans.push_back(*msg))?;
         self.bus.ring();
         Ok(())
     }
 
     fn send_control(&mut self, robot: usize, request: &ControlRequest) -> WorldResult {
-        let mut state = self.bus.lock();
-        let slot = state
-            .robots
-            .get_mut(robot)
-            .ok_or_else(|| self.no_such_robot(robot))?;
-        if let Some(incarnation) = slot {
-            incarnation.control.push_back(request.clone());
-        }
-        drop(state);
+        self.with_incarnation(robot, |incarnation| {
+            incarnation.control.push_back(request.clone())
+        })?;
         self.bus.ring();
         Ok(())
     }
@@ -435,31 +436,16 @@ impl WorldLink for MemoryWorldLink {
     }
 
     fn drain_commands(&mut self, robot: usize, sink: &mut dyn FnMut(CmdMsg)) -> WorldResult {
-        let cmds: Vec<CmdMsg> = {
-            let mut state = self.bus.lock();
-            let slot = state
-                .robots
-                .get_mut(robot)
-                .ok_or_else(|| self.no_such_robot(robot))?;
-            slot.as_mut()
-                .map(|i| i.cmds.drain(..).collect())
-                .unwrap_or_default()
-        };
+        let cmds: Vec<CmdMsg> =
+            self.with_incarnation(robot, |incarnation| incarnation.cmds.drain(..).collect())?;
         cmds.into_iter().for_each(sink);
         Ok(())
     }
 
     fn drain_statuses(&mut self, robot: usize, sink: &mut dyn FnMut(AgentStatus)) -> WorldResult {
-        let statuses: Vec<AgentStatus> = {
-            let mut state = self.bus.lock();
-            let slot = state
-                .robots
-                .get_mut(robot)
-                .ok_or_else(|| self.no_such_robot(robot))?;
-            slot.as_mut()
-                .map(|i| i.statuses.drain(..).collect())
-                .unwrap_or_default()
-        };
+        let statuses: Vec<AgentStatus> = self.with_incarnation(robot, |incarnation| {
+            incarnation.statuses.drain(..).collect()
+        })?;
         statuses.into_iter().for_each(sink);
         Ok(())
     }

@@ -16,7 +16,7 @@ use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::{
     RunId, SwapOutcome, SwapReply, SwapRequest, TickOutcome, Welcome, WorldEvent,
 };
-use formation_proto::{Goal, LidarSpec, Pose, WheelCmd};
+use formation_proto::{Goal, LidarSpec, Pose, WheelCmd, WheelLimits};
 
 use crate::agent::{AgentExit, AgentLoop, BoxError, Pilot, PilotMaker};
 use crate::clock::{Clock, FakeClock};
@@ -40,9 +40,9 @@ struct TestPilots;
 
 struct TestPilot {
     model: TestModel,
-    /// The wheel acceleration limit of the episode: the test pilot caps its speed at it, so a
-    /// test sees that the limit reached the agent.
-    max_wheel_accel: Option<f64>,
+    /// The wheel limits of the episode: the test pilot caps its speed at the acceleration
+    /// limit, so a test sees that the limits reached the agent.
+    wheels: WheelLimits,
 }
 
 impl PilotMaker for TestPilots {
@@ -69,7 +69,7 @@ impl PilotMaker for TestPilots {
     fn pilot(&self, model: TestModel, _: LidarSpec) -> Result<TestPilot, BoxError> {
         Ok(TestPilot {
             model,
-            max_wheel_accel: None,
+            wheels: WheelLimits::default(),
         })
     }
 }
@@ -91,7 +91,8 @@ impl Pilot for TestPilot {
 
     fn decide(&mut self, _: f64, _: &Goal) -> Result<WheelCmd, BoxError> {
         let speed = self
-            .max_wheel_accel
+            .wheels
+            .max_accel
             .map_or(self.model.speed, |cap| self.model.speed.min(cap));
         Ok(WheelCmd {
             left: speed,
@@ -104,8 +105,8 @@ impl Pilot for TestPilot {
         Ok(())
     }
 
-    fn set_max_wheel_accel(&mut self, max_wheel_accel: Option<f64>) {
-        self.max_wheel_accel = max_wheel_accel;
+    fn set_wheel_limits(&mut self, wheels: WheelLimits) {
+        self.wheels = wheels;
     }
 }
 
@@ -333,7 +334,7 @@ fn connected_with<'l>(
         .await_agents(Duration::from_secs(1))
         .expect("agents connect");
     world
-        .begin_episode(DT.as_secs_f64(), lidar(), None)
+        .begin_episode(DT.as_secs_f64(), lidar(), WheelLimits::default())
         .expect("agents ready");
     world
 }
@@ -409,7 +410,14 @@ fn each_episode_tells_every_agent_its_robots_wheel_acceleration_limit() {
     assert_eq!(sim.tick(&mut world, 0), vec![SLOW; 2]);
     // The test pilot caps its speed at the limit it was told.
     world
-        .begin_episode(DT.as_secs_f64(), lidar(), Some(0.05))
+        .begin_episode(
+            DT.as_secs_f64(),
+            lidar(),
+            WheelLimits {
+                max_speed: Some(0.9),
+                max_accel: Some(0.05),
+            },
+        )
         .expect("agents ready");
     let capped = WheelCmd {
         left: 0.05,
@@ -417,7 +425,7 @@ fn each_episode_tells_every_agent_its_robots_wheel_acceleration_limit() {
     };
     assert_eq!(sim.tick(&mut world, 0), vec![capped; 2]);
     world
-        .begin_episode(DT.as_secs_f64(), lidar(), None)
+        .begin_episode(DT.as_secs_f64(), lidar(), WheelLimits::default())
         .expect("agents ready");
     assert_eq!(sim.tick(&mut world, 0), vec![SLOW; 2]);
 }

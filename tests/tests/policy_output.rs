@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use formation_onnx::{OnnxPolicy, PolicyOutput};
 use formation_perception::policy_input::formation_velocity_to_wheels;
-use formation_proto::{Goal, PolicyInput};
+use formation_proto::{Goal, PolicyInput, WheelLimits};
 use formation_robot_agent::decision::{Agent, PolicyController};
 use formation_tests::{
     ProcessTest, assert_bit_identical, binaries, lockstep_over_processes, run,
@@ -54,18 +54,35 @@ fn a_formation_velocity_model_is_turned_into_wheels_with_the_reference_term_at_t
         let values = raw
             .infer(&PolicyInput::image_and_aux(&image, &aux))
             .expect("the raw output");
-        let expected = formation_velocity_to_wheels(values, f64::from(aux[0]), v_star, None);
+        let untold = WheelLimits::default();
+        let expected = formation_velocity_to_wheels(values, f64::from(aux[0]), v_star, untold);
         assert_eq!(command, expected, "v* = {v_star}");
         // A robot whose wheels have an acceleration limit shapes the same output for them.
-        agent.set_max_wheel_accel(Some(1.0));
+        let accel = WheelLimits {
+            max_speed: None,
+            max_accel: Some(1.0),
+        };
+        agent.set_wheel_limits(accel);
         let limited = agent.act(&scan, heading, &goal).expect("a decision");
-        agent.set_max_wheel_accel(None);
-        let shaped = formation_velocity_to_wheels(values, f64::from(aux[0]), v_star, Some(1.0));
+        let shaped = formation_velocity_to_wheels(values, f64::from(aux[0]), v_star, accel);
         assert_eq!(limited, shaped, "v* = {v_star}");
         assert_ne!(
             limited, command,
             "the limit shapes a non-zero formation velocity"
         );
+        // A top wheel speed below the command scales both wheels into it, keeping the curvature.
+        let top = 0.5 * command.left.abs().max(command.right.abs());
+        agent.set_wheel_limits(WheelLimits {
+            max_speed: Some(top),
+            max_accel: None,
+        });
+        let bounded = agent.act(&scan, heading, &goal).expect("a decision");
+        agent.set_wheel_limits(untold);
+        assert!(
+            (bounded.left.abs().max(bounded.right.abs()) - top).abs() < 1e-12,
+            "{bounded:?} within {top}"
+        );
+        assert!((bounded.left * command.right - bounded.right * command.left).abs() < 1e-12);
     }
 }
 
@@ -86,7 +103,7 @@ fn a_formation_velocity_team_in_lockstep_over_processes_is_bit_identical_to_in_p
     let models = [model.as_path(); 3];
     let mut controller =
         PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
-    controller.set_max_wheel_accel(spec.world.robot.max_wheel_accel);
+    controller.set_wheel_limits(spec.world.robot.wheel_limits());
     let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
     assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
     assert_bit_identical(&over_processes[0], &in_process);

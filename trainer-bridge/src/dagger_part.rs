@@ -587,12 +587,27 @@ mod tests {
         path
     }
 
-    fn dataset(dir: &Path) -> PathBuf {
-        let data = dir.join("data");
-        let mut writer = DatasetWriter::create(&data, header(7)).unwrap();
-        writer.push(sample(100, 0)).unwrap();
+    /// Creates the dataset `dir/name` of `header` holding the one sample `first`.
+    fn dataset_of(dir: &Path, name: &str, header: DatasetHeader, first: Sample) -> PathBuf {
+        let data = dir.join(name);
+        let mut writer = DatasetWriter::create(&data, header).unwrap();
+        writer.push(first).unwrap();
         writer.finish().unwrap();
         data
+    }
+
+    /// The plain test dataset `dir/data`, holding one sample of iteration 0.
+    fn dataset(dir: &Path) -> PathBuf {
+        dataset_of(dir, "data", header(7), sample(100, 0))
+    }
+
+    /// Asserts that `data` ([`dataset`]) still holds its one sample: a refused append wrote nothing.
+    fn assert_nothing_appended(data: &Path) {
+        assert_eq!(
+            DatasetReader::open(data).unwrap().samples(),
+            1,
+            "nothing was appended"
+        );
     }
 
     #[test]
@@ -663,11 +678,7 @@ mod tests {
             matches!(err, PartError::Gap { ref missing, .. } if *missing == (0..3)),
             "{err:?}"
         );
-        assert_eq!(
-            DatasetReader::open(&data).unwrap().samples(),
-            1,
-            "nothing was appended"
-        );
+        assert_nothing_appended(&data);
     }
 
     #[test]
@@ -685,11 +696,7 @@ mod tests {
         );
         let err = append_parts(&data, ITERATION, 3, &[a.clone(), a]).unwrap_err();
         assert!(matches!(err, PartError::Overlap { run: 0, .. }), "{err:?}");
-        assert_eq!(
-            DatasetReader::open(&data).unwrap().samples(),
-            1,
-            "nothing was appended"
-        );
+        assert_nothing_appended(&data);
     }
 
     #[test]
@@ -776,114 +783,89 @@ mod tests {
         assert_eq!(DatasetReader::open(&data).unwrap().samples(), 5);
     }
 
-    #[test]
-    fn a_part_with_ranges_round_trips_and_appends_only_to_a_dataset_of_the_same_ranges() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("p");
-        let mut header = part_header(0, 2);
-        header.dataset = header_with_ranges(7);
-        let samples: Vec<Sample> = [0, 1, 4, 5]
-            .into_iter()
-            .map(|k| sample_with_ranges(k, ITERATION))
-            .collect();
-        write_part(&path, &header, &samples).unwrap();
-        let read = read_part(&path).unwrap();
-        assert_eq!(read.header, header);
-        assert_eq!(read.samples, samples);
-
-        // A part without ranges for the dataset with them is refused when written.
-        let err = write_part(&dir.path().join("q"), &header, &samples_of(0..2)).unwrap_err();
-        assert!(
-            matches!(
-                err,
-                PartError::Sample {
-                    source: DatasetError::SampleRanges { actual: 0, .. },
-                    ..
-                }
-            ),
-            "{err:?}"
-        );
-
-        // Appended to a dataset without ranges: refused, naming the ranges, nothing written.
-        let plain = dataset(dir.path());
-        let err = append_parts(&plain, ITERATION, 2, std::slice::from_ref(&path)).unwrap_err();
-        assert!(
-            matches!(
-                err,
-                PartError::Dataset(DatasetError::HeaderMismatch {
-                    field: "range input",
-                    ..
-                })
-            ),
-            "{err:?}"
-        );
-        assert_eq!(DatasetReader::open(&plain).unwrap().samples(), 1);
-
-        // Appended to a dataset with the same ranges: the samples keep their ranges.
-        let data = dir.path().join("ranged");
-        let mut writer = DatasetWriter::create(&data, header_with_ranges(7)).unwrap();
-        writer.push(sample_with_ranges(100, 0)).unwrap();
-        writer.finish().unwrap();
-        let (_, added) = append_parts(&data, ITERATION, 2, &[path]).unwrap();
-        assert_eq!(added, 4);
-        let all = DatasetReader::open(&data).unwrap().load_all().unwrap();
-        assert_eq!(all[1..], samples[..]);
+    /// One kind of input a sample may carry beside its image (ranges, neighbours): how the test
+    /// datasets declare it, how their samples carry it, and how its absence is refused.
+    struct ExtraInputCase {
+        name: &'static str,
+        /// The test datasets' settings with this input, with a seed.
+        header: fn(u64) -> DatasetHeader,
+        /// A test sample carrying this input.
+        sample: fn(u32, u32) -> Sample,
+        /// Whether a dataset error refuses a sample that lacks this input.
+        refuses_a_sample_without_it: fn(&DatasetError) -> bool,
+        /// The header field a mismatch is named by.
+        field: &'static str,
+        /// The input's metadata key and text in a serialized header, where the case checks it.
+        declared: Option<(&'static str, &'static str)>,
     }
 
+    const EXTRA_INPUTS: [ExtraInputCase; 2] = [
+        ExtraInputCase {
+            name: "ranges",
+            header: header_with_ranges,
+            sample: sample_with_ranges,
+            refuses_a_sample_without_it: |err| {
+                matches!(err, DatasetError::SampleRanges { actual: 0, .. })
+            },
+            field: "range input",
+            declared: None,
+        },
+        ExtraInputCase {
+            name: "neighbours",
+            header: header_with_neighbours,
+            sample: sample_with_neighbours,
+            refuses_a_sample_without_it: |err| {
+                matches!(err, DatasetError::SampleNeighbours { actual: 0, .. })
+            },
+            field: "neighbour input",
+            declared: Some(("neighbours", "slots=3,threshold=1.3,nearest=2")),
+        },
+    ];
+
     #[test]
-    fn a_part_with_neighbours_round_trips_and_appends_only_to_a_dataset_of_the_same_neighbours() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("p");
-        let mut header = part_header(0, 2);
-        header.dataset = header_with_neighbours(7);
-        let samples: Vec<Sample> = [0, 1, 4, 5]
-            .into_iter()
-            .map(|k| sample_with_neighbours(k, ITERATION))
-            .collect();
-        write_part(&path, &header, &samples).unwrap();
-        let read = read_part(&path).unwrap();
-        assert_eq!(read.header, header);
-        assert_eq!(read.samples, samples);
-        let text = serde_json::to_value(&read.header.dataset).unwrap();
-        assert_eq!(text["neighbours"], "slots=3,threshold=1.3,nearest=2");
+    fn a_part_with_an_extra_input_round_trips_and_appends_only_to_a_dataset_of_the_same_input() {
+        for case in &EXTRA_INPUTS {
+            let name = case.name;
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("p");
+            let mut header = part_header(0, 2);
+            header.dataset = (case.header)(7);
+            let samples: Vec<Sample> = [0, 1, 4, 5]
+                .into_iter()
+                .map(|k| (case.sample)(k, ITERATION))
+                .collect();
+            write_part(&path, &header, &samples).unwrap();
+            let read = read_part(&path).unwrap();
+            assert_eq!(read.header, header, "{name}");
+            assert_eq!(read.samples, samples, "{name}");
+            if let Some((key, text)) = case.declared {
+                let json = serde_json::to_value(&read.header.dataset).unwrap();
+                assert_eq!(json[key], text, "{name}");
+            }
 
-        // A part without neighbours for the dataset with them is refused when written.
-        let err = write_part(&dir.path().join("q"), &header, &samples_of(0..2)).unwrap_err();
-        assert!(
-            matches!(
-                err,
-                PartError::Sample {
-                    source: DatasetError::SampleNeighbours { actual: 0, .. },
-                    ..
-                }
-            ),
-            "{err:?}"
-        );
+            // A part without the input for the dataset with it is refused when written.
+            let err = write_part(&dir.path().join("q"), &header, &samples_of(0..2)).unwrap_err();
+            assert!(
+                matches!(err, PartError::Sample { ref source, .. } if (case.refuses_a_sample_without_it)(source)),
+                "{name}: {err:?}"
+            );
 
-        // Appended to a dataset without neighbours: refused, naming them, nothing written.
-        let plain = dataset(dir.path());
-        let err = append_parts(&plain, ITERATION, 2, std::slice::from_ref(&path)).unwrap_err();
-        assert!(
-            matches!(
-                err,
-                PartError::Dataset(DatasetError::HeaderMismatch {
-                    field: "neighbour input",
-                    ..
-                })
-            ),
-            "{err:?}"
-        );
-        assert_eq!(DatasetReader::open(&plain).unwrap().samples(), 1);
+            // Appended to a dataset without the input: refused, naming it, nothing written.
+            let plain = dataset(dir.path());
+            let err = append_parts(&plain, ITERATION, 2, std::slice::from_ref(&path)).unwrap_err();
+            assert!(
+                matches!(err, PartError::Dataset(DatasetError::HeaderMismatch { field, .. }) if field == case.field),
+                "{name}: {err:?}"
+            );
+            assert_nothing_appended(&plain);
 
-        // Appended to a dataset with the same neighbours: the samples keep them.
-        let data = dir.path().join("with");
-        let mut writer = DatasetWriter::create(&data, header_with_neighbours(7)).unwrap();
-        writer.push(sample_with_neighbours(100, 0)).unwrap();
-        writer.finish().unwrap();
-        let (_, added) = append_parts(&data, ITERATION, 2, &[path]).unwrap();
-        assert_eq!(added, 4);
-        let all = DatasetReader::open(&data).unwrap().load_all().unwrap();
-        assert_eq!(all[1..], samples[..]);
+            // Appended to a dataset with the same input: the samples keep it.
+            let data = dataset_of(dir.path(), "with", (case.header)(7), (case.sample)(100, 0));
+            let (_, added) = append_parts(&data, ITERATION, 2, &[path]).unwrap();
+            assert_eq!(added, 4, "{name}");
+            let all = DatasetReader::open(&data).unwrap().load_all().unwrap();
+            assert_eq!(all[1..], samples[..], "{name}");
+        }
     }
 
     #[test]

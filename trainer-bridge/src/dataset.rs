@@ -1480,21 +1480,13 @@ pub(crate) mod tests {
     /// first held, and an empty slot.
     pub(crate) fn sample_with_neighbours(k: u32, iteration: u32) -> Sample {
         let x = 0.01 * k as f32;
+        let slots: [[f32; 4]; 3] = [
+            [1.0 + x, -0.5, 1.0, 1.0],
+            [-1.2, 0.8 + x, 0.0, 1.0],
+            [0.0; 4],
+        ];
         Sample {
-            neighbours: vec![
-                1.0 + x,
-                -0.5,
-                1.0,
-                1.0, //
-                -1.2,
-                0.8 + x,
-                0.0,
-                1.0, //
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-            ],
+            neighbours: slots.concat(),
             ..sample(k, iteration)
         }
     }

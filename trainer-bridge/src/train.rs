@@ -106,15 +106,20 @@ pub enum Architecture {
     /// dataset that carries the `neighbours` input; it leaves the image unused. A few thousand
     /// multiply-adds.
     Pair,
+    /// The pair network with each term scaled by the expert's pair profile, `(r^4 - 1) / r^3` in
+    /// units of d*: the layers learn each neighbour's weight, the profile its shape in distance,
+    /// so a neighbour at d* adds nothing and a close one repels as the law does.
+    PairPotential,
 }
 
 impl Architecture {
     /// Every architecture, in the order `--help` lists them.
-    pub const ALL: [Architecture; 4] = [
+    pub const ALL: [Architecture; 5] = [
         Architecture::Paper,
         Architecture::Wide,
         Architecture::WideHead,
         Architecture::Pair,
+        Architecture::PairPotential,
     ];
 
     /// The name the trainer and the command line use.
@@ -124,6 +129,7 @@ impl Architecture {
             Architecture::Wide => "wide",
             Architecture::WideHead => "wide-head",
             Architecture::Pair => "pair",
+            Architecture::PairPotential => "pair-potential",
         }
     }
 }
@@ -716,7 +722,8 @@ mod tests {
         }
         let err = "wdie".parse::<Architecture>().unwrap_err();
         assert!(
-            err.contains("\"wdie\"") && err.contains("paper, wide, wide-head, pair"),
+            err.contains("\"wdie\"")
+                && err.contains("paper, wide, wide-head, pair, pair-potential"),
             "{err}"
         );
         let plain: Vec<String> = trainer_args(&opts())

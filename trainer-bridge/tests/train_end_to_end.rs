@@ -27,17 +27,23 @@ fn sample(i: u32, iteration: u32) -> Sample {
     }
 }
 
-#[test]
-fn a_rust_written_dataset_trains_into_an_onnx_model() {
-    let tmp = tempfile::tempdir().expect("tempdir");
-    let data = tmp.path().join("data");
-    let header = DatasetHeader::new(
+/// The settings of every dataset these tests write: the paper's images, the default LIDAR,
+/// v* 0.7 m/s, seed 3, scenario "e2e".
+fn e2e_header() -> DatasetHeader {
+    DatasetHeader::new(
         OccupancySpec::PAPER,
         SimulatedLidar::default(),
         0.7,
         3,
         "e2e",
-    );
+    )
+}
+
+#[test]
+fn a_rust_written_dataset_trains_into_an_onnx_model() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let data = tmp.path().join("data");
+    let header = e2e_header();
     let mut writer = DatasetWriter::create(&data, header)
         .expect("create")
         .with_shard_size(64)
@@ -107,14 +113,7 @@ fn a_dataset_with_ranges_trains_a_model_that_declares_them() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let data = tmp.path().join("data");
     let ranges = RangeInput::parse("sectors=100,clip=3").expect("ranges");
-    let header = DatasetHeader::new(
-        OccupancySpec::PAPER,
-        SimulatedLidar::default(),
-        0.7,
-        3,
-        "e2e",
-    )
-    .with_ranges(Some(ranges));
+    let header = e2e_header().with_ranges(Some(ranges));
     let mut writer = DatasetWriter::create(&data, header).expect("create");
     for i in 0..120 {
         let mut s = sample(i, 0);
@@ -167,13 +166,7 @@ fn a_dataset_with_ranges_trains_a_model_that_declares_them() {
 fn a_python_failure_carries_its_last_messages() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let data = tmp.path().join("data");
-    let header = DatasetHeader::new(
-        OccupancySpec::PAPER,
-        SimulatedLidar::default(),
-        0.7,
-        3,
-        "e2e",
-    );
+    let header = e2e_header();
     let mut writer = DatasetWriter::create(&data, header).expect("create");
     writer.push(sample(0, 0)).expect("push");
     writer.finish().expect("finish");

@@ -187,5 +187,5 @@ impl Pilot for SuitePilot {
         Ok(())
     }
 
-    fn set_max_wheel_accel(&mut self, _max_wheel_accel: Option<f64>) {}
+    fn set_wheel_limits(&mut self, _wheels: formation_proto::WheelLimits) {}
 }

@@ -93,7 +93,7 @@ impl<'l> World<'l> {
             .await_agents(Duration::from_secs(60))
             .expect("every agent connects");
         self.exchange
-            .begin_episode(DT, lidar(), None)
+            .begin_episode(DT, lidar(), formation_proto::WheelLimits::default())
             .expect("every agent is ready");
     }
 

@@ -296,7 +296,7 @@ mod tests {
         fn swap(&mut self, _model: ()) -> Result<(), BoxError> {
             Ok(())
         }
-        fn set_max_wheel_accel(&mut self, _max_wheel_accel: Option<f64>) {}
+        fn set_wheel_limits(&mut self, _wheels: formation_proto::WheelLimits) {}
     }
 
     fn settings(partial: PartialScan) -> DeciderSettings {

@@ -484,7 +484,7 @@ fn play(
             .begin_episode(
                 spec.world.dt,
                 spec.world.lidar,
-                spec.world.robot.max_wheel_accel,
+                spec.world.robot.wheel_limits(),
             )
             .with_context(|| format!("run {index}"))?;
         let recorder = recording

@@ -23,6 +23,22 @@ use parry2d::shape::Ball;
 use crate::grid::{SpatialGrid, floor_to_i64};
 use crate::robot::RobotParams;
 
+/// Checks that `out` holds one range per beam of `lidar` (else panics: `buffer` holds ... ranges
+/// but the LIDAR has ... beams) and fills it with the LIDAR's max range, what a beam that hits
+/// nothing reads. Returns the max range.
+#[track_caller]
+fn start_scan(out: &mut [f32], lidar: &LidarSpec, buffer: &str) -> f64 {
+    assert_eq!(
+        out.len(),
+        lidar.beams,
+        "{buffer} holds {} ranges but the LIDAR has {} beams",
+        out.len(),
+        lidar.beams
+    );
+    out.fill(lidar.max_range as f32);
+    lidar.max_range
+}
+
 /// Writes the noiseless ranges \[m\] of robot `own`'s LIDAR ring into `out`, given every robot's
 /// pose; all bodies are discs of `params.body_radius` centred at their poses.
 ///
@@ -40,15 +56,7 @@ pub fn cast_scan(
     lidar: &LidarSpec,
     out: &mut [f32],
 ) {
-    assert_eq!(
-        out.len(),
-        lidar.beams,
-        "cast_scan: the output buffer holds {} ranges but the LIDAR has {} beams",
-        out.len(),
-        lidar.beams
-    );
-    let max_range = lidar.max_range;
-    out.fill(max_range as f32);
+    let max_range = start_scan(out, lidar, "cast_scan: the output buffer");
     let sensor = poses[own];
     let beams = lidar.beams;
     if beams == 0 {
@@ -205,15 +213,7 @@ impl TeamScanner {
         lidar: &LidarSpec,
         out: &mut [f32],
     ) {
-        assert_eq!(
-            out.len(),
-            lidar.beams,
-            "TeamScanner::scan_all: a buffer holds {} ranges but the LIDAR has {} beams",
-            out.len(),
-            lidar.beams
-        );
-        let max_range = lidar.max_range;
-        out.fill(max_range as f32);
+        let max_range = start_scan(out, lidar, "TeamScanner::scan_all: a buffer");
         let beams = lidar.beams;
         if beams == 0 {
             return;
@@ -557,6 +557,16 @@ mod tests {
         }
     }
 
+    /// Asserts that beam `beam` of `ranges` reads `expected` \[m\] (to 1e-4 m).
+    #[track_caller]
+    fn assert_beam_reads(ranges: &[f32], beam: usize, expected: f32) {
+        assert!(
+            (ranges[beam] - expected).abs() < 1e-4,
+            "beam {beam} reads {}",
+            ranges[beam]
+        );
+    }
+
     fn scan(poses: &[Pose], own: usize) -> Vec<f32> {
         let lidar = lidar();
         let mut out = vec![f32::NAN; lidar.beams];
@@ -577,11 +587,7 @@ mod tests {
     fn a_body_straight_ahead_is_hit_by_beam_zero_at_its_surface() {
         let poses = [Pose::new(0.0, 0.0, 0.0), Pose::new(3.0, 0.0, 1.0)];
         let ranges = scan(&poses, 0);
-        assert!(
-            (ranges[0] - 2.75).abs() < 1e-4,
-            "beam 0 reads {}",
-            ranges[0]
-        );
+        assert_beam_reads(&ranges, 0, 2.75);
         // The body subtends asin(0.25 / 3) = 4.78 deg on each side: 11 beams of 0.4 deg each way.
         let per_side = ((0.25_f64 / 3.0).asin() / (TAU / 900.0)).floor() as usize;
         let hits: Vec<usize> = (0..900).filter(|&k| ranges[k] < 10.0).collect();
@@ -600,20 +606,12 @@ mod tests {
         // 60 deg, which is beam 150.
         let poses = [Pose::new(1.0, 1.0, PI / 6.0), Pose::new(1.0, 5.0, 0.0)];
         let ranges = scan(&poses, 0);
-        assert!(
-            (ranges[150] - 3.75).abs() < 1e-4,
-            "beam 150 reads {}",
-            ranges[150]
-        );
+        assert_beam_reads(&ranges, 150, 3.75);
         assert_eq!(ranges[0], 10.0);
         assert_eq!(ranges[375], 10.0);
         // The observed robot sees the sensor robot at world bearing -90 deg, i.e. body beam 675.
         let back = scan(&poses, 1);
-        assert!(
-            (back[675] - 3.75).abs() < 1e-4,
-            "beam 675 reads {}",
-            back[675]
-        );
+        assert_beam_reads(&back, 675, 3.75);
     }
 
     #[test]
@@ -656,11 +654,7 @@ mod tests {
             Pose::new(2.0, 0.0, 0.0),
         ];
         let ranges = scan(&poses, 0);
-        assert!(
-            (ranges[0] - 1.75).abs() < 1e-4,
-            "beam 0 reads {}",
-            ranges[0]
-        );
+        assert_beam_reads(&ranges, 0, 1.75);
     }
 
     #[test]
@@ -675,11 +669,7 @@ mod tests {
         assert!(scan(&poses, 0).iter().all(|&r| r == 10.0));
         let near_limit = [Pose::new(0.0, 0.0, 0.0), Pose::new(10.2, 0.0, 0.0)];
         let ranges = scan(&near_limit, 0);
-        assert!(
-            (ranges[0] - 9.95).abs() < 1e-4,
-            "beam 0 reads {}",
-            ranges[0]
-        );
+        assert_beam_reads(&ranges, 0, 9.95);
     }
 
     #[test]

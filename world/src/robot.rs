@@ -41,6 +41,15 @@ impl Default for RobotParams {
 }
 
 impl RobotParams {
+    /// What the robot knows of its own wheels, as its agent is told them: its top wheel speed
+    /// and its acceleration limit.
+    pub fn wheel_limits(&self) -> formation_proto::WheelLimits {
+        formation_proto::WheelLimits {
+            max_speed: Some(self.max_wheel_speed),
+            max_accel: self.max_wheel_accel,
+        }
+    }
+
     /// The wheel speeds the robot can actually run for one step of `dt` seconds, given the
     /// `requested` command and the wheel speeds `current` at the start of the step.
     ///

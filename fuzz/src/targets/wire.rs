@@ -80,10 +80,11 @@ impl From<WireError> for Refusal {
     }
 }
 
-fn tagged(kind: u8, bytes: &[u8]) -> Vec<u8> {
-    let mut out = vec![kind];
-    out.extend_from_slice(bytes);
-    out
+/// The seed file `name`: a message's wire `bytes` behind the tag of its `kind`.
+fn seed(name: &str, kind: u8, bytes: &[u8]) -> Seed {
+    let mut case = vec![kind];
+    case.extend_from_slice(bytes);
+    (name.into(), case)
 }
 
 fn seeds() -> Result<Vec<Seed>, FuzzError> {
@@ -125,13 +126,10 @@ fn lobby_and_tick_seeds() -> Result<Vec<Seed>, FuzzError> {
     )
     .map_err(seed_error("wire"))?;
     Ok(vec![
-        ("hello.bin".into(), tagged(HELLO, message_bytes(&hello))),
-        (
-            "welcome-refused.bin".into(),
-            tagged(WELCOME, message_bytes(&welcome)),
-        ),
-        ("scan.bin".into(), tagged(SCAN, message_bytes(&scan))),
-        ("cmd.bin".into(), tagged(CMD, message_bytes(&cmd))),
+        seed("hello.bin", HELLO, message_bytes(&hello)),
+        seed("welcome-refused.bin", WELCOME, message_bytes(&welcome)),
+        seed("scan.bin", SCAN, message_bytes(&scan)),
+        seed("cmd.bin", CMD, message_bytes(&cmd)),
     ])
 }
 
@@ -143,7 +141,11 @@ fn control_and_swap_seeds() -> Result<Vec<Seed>, FuzzError> {
             beams: 360,
             max_range: 4.0,
         },
-        max_wheel_accel: Some(1.0),
+        // No top speed: the seed's bytes stay those of the message before it had one.
+        wheels: formation_proto::WheelLimits {
+            max_speed: None,
+            max_accel: Some(1.0),
+        },
     })
     .map_err(seed_error("wire"))?;
     let swap_control = ControlMsg::encode(&ControlRequest::SwapModel {
@@ -179,29 +181,11 @@ fn control_and_swap_seeds() -> Result<Vec<Seed>, FuzzError> {
     })
     .map_err(seed_error("wire"))?;
     Ok(vec![
-        (
-            "control-begin.bin".into(),
-            tagged(CONTROL, message_bytes(&begin)),
-        ),
-        (
-            "control-swap.bin".into(),
-            tagged(CONTROL, message_bytes(&swap_control)),
-        ),
-        (
-            "status-ready.bin".into(),
-            tagged(STATUS, message_bytes(&ready)),
-        ),
-        (
-            "status-refused.bin".into(),
-            tagged(STATUS, message_bytes(&refused)),
-        ),
-        (
-            "swap-request.bin".into(),
-            tagged(SWAP_REQUEST, message_bytes(&request)),
-        ),
-        (
-            "swap-reply.bin".into(),
-            tagged(SWAP_REPLY, message_bytes(&reply)),
-        ),
+        seed("control-begin.bin", CONTROL, message_bytes(&begin)),
+        seed("control-swap.bin", CONTROL, message_bytes(&swap_control)),
+        seed("status-ready.bin", STATUS, message_bytes(&ready)),
+        seed("status-refused.bin", STATUS, message_bytes(&refused)),
+        seed("swap-request.bin", SWAP_REQUEST, message_bytes(&request)),
+        seed("swap-reply.bin", SWAP_REPLY, message_bytes(&reply)),
     ])
 }

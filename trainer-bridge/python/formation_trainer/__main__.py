@@ -13,7 +13,7 @@ from pathlib import Path
 MISSING_DEPENDENCY_EXIT = 3
 USAGE_EXIT = 2
 #: ``model.ARCHITECTURE_NAMES``, spelled out so that ``--help`` works without PyTorch.
-ARCHITECTURE_NAMES = ["paper", "wide", "wide-head", "pair"]
+ARCHITECTURE_NAMES = ["paper", "wide", "wide-head", "pair", "pair-potential"]
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -42,7 +42,8 @@ def _parser() -> argparse.ArgumentParser:
         choices=ARCHITECTURE_NAMES,
         help="the network: paper (the paper's CNN), wide or wide-head (CNNs for teams), or pair (sums one learned "
         "term per neighbour the robot detects in its own scan; needs a dataset collected with --neighbours K and "
-        "--output formation_velocity). Default: pair for a dataset that declares neighbours, else paper; "
+        "--output formation_velocity), or pair-potential (the same with each term scaled by the law's pair profile "
+        "(r^4 - 1) / r^3). Default: pair for a dataset that declares neighbours, else paper; "
         "a warm start keeps its own",
     )
     train.add_argument(

@@ -233,18 +233,8 @@ def read_manifest(directory: str | Path) -> Manifest:
         raise DatasetError(f"{path} is not a valid dataset manifest (not a JSON object): {RECOLLECT}")
     _check_format_and_version(path, raw.get("format"), raw.get("version"))
     version = int(raw["version"])
-    ranges = None
-    if raw.get("ranges") is not None:
-        try:
-            ranges = RangeInput.parse(raw["ranges"])
-        except ValueError as e:
-            raise DatasetError(f"{path} is not a valid dataset manifest (its `ranges`: {e}): {RECOLLECT}") from e
-    neighbours = None
-    if raw.get("neighbours") is not None:
-        try:
-            neighbours = NeighbourInput.parse(raw["neighbours"])
-        except ValueError as e:
-            raise DatasetError(f"{path} is not a valid dataset manifest (its `neighbours`: {e}): {RECOLLECT}") from e
+    ranges = _declared_input(path, raw, "ranges", RangeInput.parse)
+    neighbours = _declared_input(path, raw, "neighbours", NeighbourInput.parse)
     if (neighbours is not None) != (version == VERSION_WITH_NEIGHBOURS):
         declared = f'declares neighbours "{neighbours}"' if neighbours is not None else "declares no `neighbours`"
         raise DatasetError(
@@ -291,6 +281,17 @@ def read_manifest(directory: str | Path) -> Manifest:
     return manifest
 
 
+def _declared_input(path: Path, raw: dict, key: str, parse):
+    """The model input the manifest at ``path`` declares under ``key`` (``ranges``,
+    ``neighbours``), read by ``parse``, or None where it declares none."""
+    if raw.get(key) is None:
+        return None
+    try:
+        return parse(raw[key])
+    except ValueError as e:
+        raise DatasetError(f"{path} is not a valid dataset manifest (its `{key}`: {e}): {RECOLLECT}") from e
+
+
 def _read_shard_header(path: Path) -> tuple[dict, int]:
     """The safetensors header of ``path`` and the byte count it describes; checks truncation."""
     if not path.is_file():
@@ -329,21 +330,16 @@ def _tensors(sectors: int, slots: int = 0) -> dict:
     return tensors
 
 
-def check_shard(
-    path: Path,
-    entry: dict,
-    size_px: int,
-    ranges: RangeInput | None = None,
-    version: int | None = None,
-    neighbours: NeighbourInput | None = None,
-) -> None:
-    """Validates one shard's header against its manifest entry without reading the samples: its
-    version (``version``, the manifest's, when given) and its tensors, ``ranges`` iff declared and
-    ``neighbours`` iff declared."""
+def check_shard(manifest: Manifest, entry: dict) -> Path:
+    """Validates the header of the shard of ``entry`` in ``manifest`` against the two without
+    reading the samples: its version (the manifest's) and its tensors, ``ranges`` iff the manifest
+    declares them and ``neighbours`` iff it declares them. Returns the shard's path."""
+    path = manifest.directory / entry["file"]
+    size_px, ranges, version, neighbours = manifest.size_px, manifest.ranges, manifest.version, manifest.neighbours
     header, _ = _read_shard_header(path)
     meta = header.get("__metadata__") or {}
     _check_format_and_version(path, meta.get("format"), meta.get("version"))
-    if version is not None and str(meta.get("version")) != str(version):
+    if str(meta.get("version")) != str(version):
         raise DatasetError(
             f"{path} is corrupt (its version {meta.get('version')} differs from the manifest's {version}): {RECOLLECT}"
         )
@@ -369,18 +365,12 @@ def check_shard(
             f"{path} is corrupt (its iteration {meta.get('iteration')} differs from the manifest's "
             f"{entry['iteration']}): {RECOLLECT}"
         )
+    return path
 
 
-def load_shard(
-    path: Path,
-    entry: dict,
-    size_px: int,
-    ranges: RangeInput | None = None,
-    version: int | None = None,
-    neighbours: NeighbourInput | None = None,
-) -> dict[str, np.ndarray]:
-    """Validates and loads one shard's tensors."""
-    check_shard(path, entry, size_px, ranges, version, neighbours)
+def load_shard(manifest: Manifest, entry: dict) -> dict[str, np.ndarray]:
+    """Validates (``check_shard``) and loads the tensors of the shard of ``entry`` in ``manifest``."""
+    path = check_shard(manifest, entry)
     try:
         return load_file(str(path))
     except Exception as e:  # safetensors raises its own error types
@@ -500,7 +490,7 @@ def load(directories) -> Samples:
     # samples, so a dataset of more than half the machine's memory still loads.
     for m in manifests:
         for entry in m.shards:
-            check_shard(m.directory / entry["file"], entry, m.size_px, m.ranges, m.version, m.neighbours)
+            check_shard(m, entry)
     size_px = manifests[0].size_px
     first = manifests[0]
     tensors_of = _tensors(first.ranges.sectors if first.ranges else 0, first.neighbours.slots if first.neighbours else 0)
@@ -509,7 +499,7 @@ def load(directories) -> Samples:
     start = 0
     for index, m in enumerate(manifests):
         for entry in m.shards:
-            tensors = load_shard(m.directory / entry["file"], entry, m.size_px, m.ranges, m.version, m.neighbours)
+            tensors = load_shard(m, entry)
             end = start + entry["samples"]
             for name in tensors_of:
                 arrays[name][start:end] = tensors[name]

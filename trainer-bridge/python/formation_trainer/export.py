@@ -228,19 +228,23 @@ def _inputs(model: PolicyNet | PairNet, occupancy, aux, ranges, neighbours=None)
     without them."""
     occupancy = np.ascontiguousarray(occupancy, dtype=np.float32)
     aux = np.ascontiguousarray(aux, dtype=np.float32)
-    if model.range_sectors:
-        if ranges is None:
-            raise ValueError(f"the model takes ranges of {model.range_sectors} sectors: give them")
-        ranges = np.ascontiguousarray(ranges, dtype=np.float32)
-    else:
-        ranges = None
-    if model.neighbour_slots:
-        if neighbours is None:
-            raise ValueError(f"the model takes neighbours in {model.neighbour_slots} slots: give them")
-        neighbours = np.ascontiguousarray(neighbours, dtype=np.float32)
-    else:
-        neighbours = None
+    ranges = _optional_input(
+        ranges, model.range_sectors, f"the model takes ranges of {model.range_sectors} sectors: give them"
+    )
+    neighbours = _optional_input(
+        neighbours, model.neighbour_slots, f"the model takes neighbours in {model.neighbour_slots} slots: give them"
+    )
     return occupancy, aux, ranges, neighbours
+
+
+def _optional_input(value, taken: int, missing: str):
+    """An input the model takes only where ``taken`` (its sectors or slots) is not 0: ``value`` as a
+    contiguous float32 array there (a ValueError saying ``missing`` if it is None), else None."""
+    if not taken:
+        return None
+    if value is None:
+        raise ValueError(missing)
+    return np.ascontiguousarray(value, dtype=np.float32)
 
 
 def check_parity(

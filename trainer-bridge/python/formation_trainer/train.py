@@ -65,7 +65,7 @@ from torch import nn
 
 from . import dataset as ds
 from . import export
-from .model import PAIR_ARCHITECTURE, PAIR_HIDDEN, RANGE_FEATURES, PairNet, PolicyNet, mirror_inputs, mirror_output
+from .model import PAIR_ARCHITECTURES, PAIR_HIDDEN, PAIR_POTENTIAL_ARCHITECTURE, RANGE_FEATURES, PairNet, PolicyNet, mirror_inputs, mirror_output
 
 CHECKPOINT_FORMAT = "formation-checkpoint/1"
 REPORT_PREFIX = "FORMATION_TRAIN_REPORT "
@@ -217,12 +217,13 @@ def checkpoint_from_onnx(path: Path) -> dict:
         size_px = int(meta["formation.occupancy.size_px"])
         ranges = export.declared_ranges(meta)
         range_sectors = ranges.sectors if ranges else None
-        if architecture == PAIR_ARCHITECTURE:
+        if architecture in PAIR_ARCHITECTURES:
             neighbours = export.declared_neighbours(meta)
             if neighbours is None:
                 raise ValueError(f"a pair network without {export.NEIGHBOURS_KEY}")
             neighbour_slots = neighbours.slots
-            model = PairNet(neighbour_slots, size_px, mirror_averaged, output)
+            potential = architecture == PAIR_POTENTIAL_ARCHITECTURE
+            model = PairNet(neighbour_slots, size_px, mirror_averaged, output, potential=potential)
         else:
             model = PolicyNet(size_px, architecture, mirror_averaged, output, range_sectors)
     except (KeyError, ValueError) as e:
@@ -279,13 +280,14 @@ def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> Polic
         )
     # Checkpoints from before the architecture choice hold the paper's network, and those from
     # before the mirror average a network without it.
-    if checkpoint.get("architecture") == PAIR_ARCHITECTURE:
+    if checkpoint.get("architecture") in PAIR_ARCHITECTURES:
         model = PairNet(
             checkpoint["neighbour_slots"],
             checkpoint["size_px"],
             checkpoint.get("mirror_averaged", False),
             checkpoint.get("output", "formation_velocity"),
             tuple(checkpoint.get("pair_hidden") or PAIR_HIDDEN),
+            potential=checkpoint["architecture"] == PAIR_POTENTIAL_ARCHITECTURE,
         )
         model.load_state_dict(checkpoint["model_state"])
         return model
@@ -584,9 +586,10 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
                 f"{cfg.init_from} takes ranges of {model.range_sectors} sectors but the data's are {data_ranges}: "
                 "warm-start from a model of the same range input, or collect the data with its"
             )
-    elif cfg.architecture == PAIR_ARCHITECTURE or (cfg.architecture is None and data_neighbours is not None):
+    elif cfg.architecture in PAIR_ARCHITECTURES or (cfg.architecture is None and data_neighbours is not None):
         _check_pair_data(data_neighbours, data_names, cfg.output, chosen=cfg.architecture is None)
-        model = PairNet(data_neighbours.slots, samples.size_px)
+        potential = cfg.architecture == PAIR_POTENTIAL_ARCHITECTURE
+        model = PairNet(data_neighbours.slots, samples.size_px, potential=potential)
     else:
         try:
             model = PolicyNet(samples.size_px, cfg.architecture or "paper", range_sectors=sectors)

@@ -14,7 +14,7 @@ from safetensors.numpy import load_file, save_file
 from formation_trainer import __main__ as cli
 from formation_trainer import dataset as ds
 from formation_trainer import export, train
-from formation_trainer.model import PairNet, PolicyNet, mirror_inputs, mirror_neighbours, multiply_adds
+from formation_trainer.model import PairNet, PolicyNet, mirror_inputs, mirror_neighbours, multiply_adds, pair_profile
 
 from conftest import K_FORMATION_GRAPH, neighbour_sets, pair_law, write_dataset
 
@@ -51,11 +51,9 @@ def _slopes(prediction, label):
     return out
 
 
-@pytest.fixture(scope="module")
-def paired(tmp_path_factory):
+def _train_paired(root, architecture=None):
     """A pair network trained by `train.run` on a version 3 dataset (with ranges too, which the
     pair network leaves out) whose labels are the teacher's law on the neighbours."""
-    root = tmp_path_factory.mktemp("paired")
     data = write_dataset(
         root / "data", samples=8000, shard_size=3000, neighbours=NEIGHBOURS, ranges="sectors=12,clip=3",
         labels={"unshaped": True, "own_scan": True},
@@ -63,11 +61,23 @@ def paired(tmp_path_factory):
     out = root / "models" / "pair.onnx"
     config = train.TrainConfig(
         data=[data], out=out, epochs=10, batch_size=256, lr=1e-2, device="cpu", output="formation_velocity",
-        response_weight=0.05, parity_out=root / "parity.json",
+        response_weight=0.05, parity_out=root / "parity.json", architecture=architecture,
     )
     lines = []
     report = train.run(config, log=lines.append)
     return {"root": root, "data": data, "out": out, "report": report, "lines": lines}
+
+
+@pytest.fixture(scope="module")
+def paired(tmp_path_factory):
+    """The pair network the trainer picks for a dataset with neighbours."""
+    return _train_paired(tmp_path_factory.mktemp("paired"))
+
+
+@pytest.fixture(scope="module")
+def paired_potential(tmp_path_factory):
+    """The pair network whose terms carry the law's pair profile (``--architecture pair-potential``)."""
+    return _train_paired(tmp_path_factory.mktemp("paired-potential"), "pair-potential")
 
 
 # --- the dataset ---------------------------------------------------------------------------
@@ -252,9 +262,45 @@ def test_the_pair_network_sums_per_neighbour_terms_and_ignores_the_image():
         PairNet(SLOTS, output="wheels")
 
 
-def test_the_trained_pair_network_answers_small_corrections_at_the_teachers_slope(paired):
+def test_the_pair_profile_is_the_shape_of_the_laws_pair_term():
+    r = torch.tensor([0.5, 0.9, 1.0, 1.01, 1.5, 3.0], dtype=torch.float64)
+    torch.testing.assert_close(pair_profile(r), (r**4 - 1) / r**3)
+    assert pair_profile(torch.tensor([1.0])).item() == 0.0
+    # Closer than 0.1 d* (never detected) the profile holds its value there: finite, repulsive.
+    assert pair_profile(torch.tensor([0.0])).item() == pytest.approx(pair_profile(torch.tensor([0.1])).item())
+
+
+def test_the_potential_pair_network_is_the_law_when_its_layers_give_the_gain():
+    """With layers that answer a constant 2k along the line to a held neighbour and nothing else,
+    the network is the teacher's law exactly; a held neighbour at d* adds nothing whatever the
+    layers, and one the robot does not hold keeps the plain term (not grown with r)."""
+    model = PairNet(SLOTS, potential=True).eval()
+    assert model.architecture == "pair-potential" and PairNet(SLOTS).architecture == "pair"
+    assert multiply_adds(model) == multiply_adds(PairNet(SLOTS))
+    occupancy, aux, neighbours = (torch.from_numpy(a) for a in _inputs(64, seed=3))
+    with torch.no_grad():
+        at_d_star = neighbours.clone()
+        r = torch.linalg.vector_norm(at_d_star[..., :2], dim=-1, keepdim=True).clamp(min=1e-6)
+        at_d_star[..., :2] = at_d_star[..., :2] / r
+        at_d_star[..., 2] = at_d_star[..., 3]
+        torch.testing.assert_close(model(occupancy, aux, at_d_star), torch.zeros(64, 2), atol=1e-5, rtol=0)
+        others = neighbours.clone()
+        others[..., 2] = 0.0
+        plain = PairNet(SLOTS)
+        plain.load_state_dict(model.state_dict())
+        torch.testing.assert_close(model(occupancy, aux, others), plain.eval()(occupancy, aux, others))
+        last = model.pair_term[-1]
+        last.weight.zero_()
+        last.bias.copy_(torch.tensor([2.0 * K_FORMATION_GRAPH, 0.0, 0.0, 0.0]))
+        law = pair_law(neighbours.numpy(), K_FORMATION_GRAPH) * aux[:, 1:2].numpy()
+        np.testing.assert_allclose(model(occupancy, aux, neighbours).numpy(), law, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("fixture", ["paired", "paired_potential"])
+def test_the_trained_pair_network_answers_small_corrections_at_the_teachers_slope(fixture, request):
     """The gauge's measure on fresh neighbour sets: slope sum p.l / sum |l|^2 above 0.9 (and at most
     1.1) in every bin of the correction's size, the smallest ones included."""
+    paired = request.getfixturevalue(fixture)
     rng = np.random.default_rng(99)
     neighbours = neighbour_sets(rng, 20000, SLOTS)
     aux = np.stack([rng.uniform(-np.pi, np.pi, 20000), rng.uniform(0.8, 2.5, 20000)], 1).astype(np.float32)
@@ -348,10 +394,13 @@ def test_a_mirror_averaged_pair_network_is_exactly_symmetric_in_onnxruntime(pair
 # --- warm starts and the command line -------------------------------------------------------
 
 
-def test_a_pair_network_warm_starts_from_its_checkpoint_or_its_onnx(paired, tmp_path):
+@pytest.mark.parametrize("fixture", ["paired", "paired_potential"])
+def test_a_pair_network_warm_starts_from_its_checkpoint_or_its_onnx(fixture, request, tmp_path):
+    paired = request.getfixturevalue(fixture)
     from_pt = train.model_from_checkpoint(train.load_checkpoint(paired["out"].with_suffix(".pt")))
     from_onnx = train.model_from_checkpoint(train.load_checkpoint(paired["out"]))
     assert isinstance(from_onnx, PairNet) and from_onnx.neighbour_slots == SLOTS
+    assert from_onnx.architecture == from_pt.architecture == _meta(paired["out"])["formation.train.architecture"]
     for (name, a), (_, b) in zip(from_pt.state_dict().items(), from_onnx.state_dict().items()):
         torch.testing.assert_close(a, b, atol=0, rtol=0, msg=name)
     occupancy, aux, neighbours = _inputs(6, seed=8)
@@ -361,7 +410,7 @@ def test_a_pair_network_warm_starts_from_its_checkpoint_or_its_onnx(paired, tmp_
         out = tmp_path / f"warm-{init.suffix[1:]}.onnx"
         config = train.TrainConfig(
             data=[paired["data"]], out=out, epochs=1, batch_size=256, lr=1e-12, device="cpu", init_from=init,
-            output="formation_velocity", architecture="pair",
+            output="formation_velocity", architecture=from_pt.architecture,
         )
         train.run(config, log=lines.append)
         assert f"warm start from {init}" in lines
