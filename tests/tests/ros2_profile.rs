@@ -15,7 +15,8 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_proto::{Goal, WheelCmd};
+use formation_perception::policy_input::saturate_together;
+use formation_proto::Goal;
 use formation_ros2::msg::Quaternion;
 use formation_ros2::{
     Header, LaserScan, PartialScan, Time, Twist, twist_from_wheels, yaw_from_quaternion,
@@ -166,17 +167,10 @@ fn in_process_twists(steps: &[(LaserScan, f64)]) -> Vec<Twist> {
                 Quaternion { x, y, z, w }
             })
             .expect("a heading");
-            let wheels = reference.wheels(scan, heading, &GOAL, PartialScan::Refuse);
-            let largest = wheels.left.abs().max(wheels.right.abs());
-            let wheels = if largest > BURGER_TOP_SPEED {
-                let scale = BURGER_TOP_SPEED / largest;
-                WheelCmd {
-                    left: wheels.left * scale,
-                    right: wheels.right * scale,
-                }
-            } else {
-                wheels
-            };
+            let wheels = saturate_together(
+                reference.wheels(scan, heading, &GOAL, PartialScan::Refuse),
+                BURGER_TOP_SPEED,
+            );
             twist_from_wheels(wheels.left, wheels.right, BURGER_WHEEL_SEPARATION).expect("a Twist")
         })
         .collect()
