@@ -389,6 +389,7 @@ fn decode_setup(r: &mut Reader<'_>) -> Result<LiveSetup, LiveError> {
             max_range,
             wheel_separation,
             neighbours,
+            wheels: formation_proto::WheelLimits::default(),
         },
         d_star,
         metadata,
@@ -684,6 +685,7 @@ mod tests {
                     threshold: 1.0,
                     hysteresis: 0.1,
                 }),
+                wheels: formation_proto::WheelLimits::default(),
             },
             d_star: 1.5,
             metadata: BTreeMap::from([
@@ -733,6 +735,7 @@ mod tests {
             LiveMessage::Setup(LiveSetup {
                 team: TeamSetup {
                     neighbours: NeighbourRule::AllPairs,
+                    wheels: formation_proto::WheelLimits::default(),
                     ..setup(0, 0, 1).team
                 },
                 ..setup(0, 0, 1)

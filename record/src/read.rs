@@ -102,6 +102,9 @@ pub struct RunInfo {
     /// The world's LIDAR range \[m\] as the agents were told it (recordings made before it was
     /// written have only the `f32` of each step).
     pub lidar_max_range_m: Option<f64>,
+    /// The robots' wheels as the agents were told them (recordings made before 2026-12-07 have
+    /// none: their agents were told no top speed, and replay so).
+    pub wheels: formation_proto::WheelLimits,
 }
 
 impl RunInfo {
@@ -150,11 +153,22 @@ impl RunInfo {
             .map(|v| v.parse::<f64>())
             .transpose()
             .map_err(|_| bad("lidar_max_range_m", "not a number"))?;
+        let limit = |key: &str| {
+            raw.get(key)
+                .map(|v| v.parse::<f64>().ok().filter(|l| l.is_finite() && *l > 0.0))
+                .map(|l| l.ok_or_else(|| bad(key, "not a finite number > 0")))
+                .transpose()
+        };
+        let wheels = formation_proto::WheelLimits {
+            max_speed: limit(crate::setup::MAX_WHEEL_SPEED_KEY)?,
+            max_accel: limit(crate::setup::MAX_WHEEL_ACCEL_KEY)?,
+        };
         Ok(RunInfo {
             clock: raw.get("clock").cloned().unwrap_or_default(),
             models,
             robot_models,
             lidar_max_range_m,
+            wheels,
             raw,
         })
     }

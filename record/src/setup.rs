@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use formation_proto::NeighbourRule;
+use formation_proto::{NeighbourRule, WheelLimits};
 use formation_world::RunSpec;
 use serde::{Deserialize, Serialize};
 
@@ -22,6 +22,11 @@ pub fn is_shipped_in(shipped: Option<&Path>, model: &Path) -> bool {
     }
 }
 
+/// The run metadata's key for the robots' top wheel speed \[m/s\] as the agents were told it.
+pub const MAX_WHEEL_SPEED_KEY: &str = "max_wheel_speed_mps";
+/// The run metadata's key for the robots' wheel acceleration limit \[m/s²\] (absent: none).
+pub const MAX_WHEEL_ACCEL_KEY: &str = "max_wheel_accel_mps2";
+
 /// The team a recording's messages describe.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TeamSetup {
@@ -33,6 +38,8 @@ pub struct TeamSetup {
     pub wheel_separation: f64,
     /// Which pairs are formation edges (the edge markers follow the rule tick after tick).
     pub neighbours: NeighbourRule,
+    /// Each robot's wheels as its agent was told them; a replay tells its pilots the same.
+    pub wheels: WheelLimits,
 }
 
 impl TeamSetup {
@@ -43,6 +50,7 @@ impl TeamSetup {
             max_range: spec.world.lidar.max_range,
             wheel_separation: spec.world.robot.wheel_separation,
             neighbours: spec.neighbours,
+            wheels: spec.world.robot.wheel_limits(),
         }
     }
 }
@@ -168,6 +176,13 @@ impl RecordingSetup {
         // The world's f64 range (the replay channel holds it as f32): an agent renders beams at
         // or beyond it as no return, so a replay needs it bit for bit (Display round-trips).
         put("lidar_max_range_m", self.team.max_range.to_string());
+        // The wheels each agent was told (a formation-velocity policy saturates within them).
+        if let Some(speed) = self.team.wheels.max_speed {
+            put(MAX_WHEEL_SPEED_KEY, speed.to_string());
+        }
+        if let Some(accel) = self.team.wheels.max_accel {
+            put(MAX_WHEEL_ACCEL_KEY, accel.to_string());
+        }
         put("clock", launch.clock.clone());
         put("controller", launch.controller.clone());
         put("dt_s", self.dt.to_string());

@@ -291,6 +291,7 @@ mod tests {
             max_range: 4.0,
             wheel_separation: 0.2,
             neighbours: formation_proto::NeighbourRule::AllPairs,
+            wheels: formation_proto::WheelLimits::default(),
         };
         let path = dir.path().join("r.mcap");
         let mut rec =

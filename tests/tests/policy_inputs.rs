@@ -68,6 +68,8 @@ fn lockstep_is_bit_identical_to_in_process(input: &Input) {
     let models = [model.as_path(); 3];
     let mut controller =
         PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
+    // Each robot knows its wheels, as the world tells every agent over processes.
+    controller.set_wheel_limits(spec.world.robot.wheel_limits());
     let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
     assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
     assert_bit_identical(&over_processes[0], &in_process);

@@ -417,6 +417,7 @@ fn a_step_that_precedes_its_swap_record_waits_for_it() {
         max_range: 10.0,
         wheel_separation: 0.2,
         neighbours: NeighbourRule::AllPairs,
+        wheels: formation_proto::WheelLimits::default(),
     };
     let file = t.path().join("held.mcap");
     let mut recording = RecordingFile::create_with_metadata(&file, team, 1.0, metadata).unwrap();

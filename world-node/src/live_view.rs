@@ -513,6 +513,7 @@ mod tests {
                 max_range: 5.0,
                 wheel_separation: 0.331,
                 neighbours: NeighbourRule::AllPairs,
+                wheels: formation_proto::WheelLimits::default(),
             }
         }
 

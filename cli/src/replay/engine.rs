@@ -427,11 +427,13 @@ impl<M: PilotMaker> Replay<'_, M> {
     ) -> Result<&mut M::Pilot, ReplayFailure> {
         if !self.pilots.contains_key(&(robot, model)) {
             let file = &self.files[model];
-            let made = self
+            let mut made = self
                 .maker
                 .load(file)
                 .and_then(|loaded| self.maker.pilot(loaded, lidar))
                 .map_err(|source| self.pilot_error(file, robot, source))?;
+            // The wheels the agent was told, as its episode began.
+            made.set_wheel_limits(self.info.as_ref().map(|i| i.wheels).unwrap_or_default());
             self.pilots.insert((robot, model), made);
         }
         self.pilots
