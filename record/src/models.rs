@@ -383,4 +383,24 @@ mod tests {
         let err = RunInfo::parse(Path::new("r"), raw).unwrap_err();
         assert!(err.to_string().contains("robot_models"), "{err}");
     }
+
+    #[test]
+    fn the_wheels_the_agents_were_told_are_read_and_a_bad_limit_is_named() {
+        let mut raw = BTreeMap::new();
+        let info = RunInfo::parse(Path::new("r"), raw.clone()).unwrap();
+        assert_eq!(info.wheels, formation_proto::WheelLimits::default());
+        raw.insert("max_wheel_speed_mps".into(), "0.9".into());
+        raw.insert("max_wheel_accel_mps2".into(), "1".into());
+        let info = RunInfo::parse(Path::new("r"), raw.clone()).unwrap();
+        assert_eq!(info.wheels.max_speed, Some(0.9));
+        assert_eq!(info.wheels.max_accel, Some(1.0));
+        for bad in ["fast", "0", "-1", "NaN"] {
+            raw.insert("max_wheel_speed_mps".into(), bad.into());
+            let err = RunInfo::parse(Path::new("r"), raw.clone()).unwrap_err();
+            assert!(
+                err.to_string().contains("max_wheel_speed_mps"),
+                "{bad}: {err}"
+            );
+        }
+    }
 }
