@@ -14,7 +14,6 @@ use formation_proto::wire::{
     StatusMsg, Welcome, WelcomeMsg, lobby_service_name, robot_service_name,
 };
 use formation_runtime::auth::{LaunchSecret, fresh_nonce};
-use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -206,32 +205,12 @@ impl IceoryxAgentLink {
 
     /// Lists the run's nodes: whether the world's is alive, and its process when it is.
     fn find_world(&self) -> Result<Option<ProcessWatch>, AgentLinkError> {
-        let mut found = None;
-        let mut alive = false;
-        Node::<ipc::Service>::list(self.node.config(), |state| {
-            if let NodeState::Alive(view) = &state
-                && view
-                    .details()
-                    .as_ref()
-                    .is_some_and(|d| d.name().as_str() == WORLD_NODE_NAME)
-            {
-                alive = true;
-                found = view
-                    .id()
-                    .pid::<ipc::Service>()
-                    .ok()
-                    .and_then(|pid| ProcessWatch::of(pid.value()));
-                return CallbackProgression::Stop;
-            }
-            CallbackProgression::Continue
-        })
-        .map_err(iox("list the run's nodes"))?;
-        Ok(match (alive, found) {
-            (false, _) => None,
-            (true, Some(world)) => Some(world),
-            // Alive, but its process could not be read: list the nodes again next time.
-            (true, None) => Some(ProcessWatch::UNKNOWN),
-        })
+        let found = crate::services::alive_node(&self.node, WORLD_NODE_NAME)?;
+        // Alive, but its process could not be read: list the nodes again next time.
+        Ok(found.map(|pid| {
+            pid.and_then(ProcessWatch::of)
+                .unwrap_or(ProcessWatch::UNKNOWN)
+        }))
     }
 }
 

@@ -6,6 +6,7 @@
 //! reader falls behind; its event service of the same name (publishing wakes nobody in iceoryx2)
 //! has one notifier per publisher and one listener per subscriber.
 
+use iceoryx2::node::NodeView;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
@@ -173,4 +174,27 @@ pub(crate) fn run_node(
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
         .map_err(crate::error::iox(format!("create the node {name}")))
+}
+
+/// Lists the nodes of `node`'s run and finds the first alive one named `name`: `None` when there
+/// is none, else `Some` of its process id, `None` inside when it could not be read.
+pub(crate) fn alive_node(
+    node: &Node<ipc::Service>,
+    name: &str,
+) -> Result<Option<Option<i32>>, IceoryxError> {
+    let mut found = None;
+    Node::<ipc::Service>::list(node.config(), |state| {
+        if let NodeState::Alive(view) = &state
+            && view
+                .details()
+                .as_ref()
+                .is_some_and(|d| d.name().as_str() == name)
+        {
+            found = Some(view.id().pid::<ipc::Service>().ok().map(|pid| pid.value()));
+            return CallbackProgression::Stop;
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(crate::error::iox("list the run's nodes"))?;
+    Ok(found)
 }

@@ -441,21 +441,7 @@ impl WorldLink for IceoryxWorldLink {
 
     fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {
         let wanted = crate::naming::agent_node_name(robot, pid);
-        let mut alive = false;
-        Node::<ipc::Service>::list(self.node.config(), |state| {
-            if let NodeState::Alive(view) = &state
-                && view
-                    .details()
-                    .as_ref()
-                    .is_some_and(|d| d.name().as_str() == wanted)
-            {
-                alive = true;
-                return CallbackProgression::Stop;
-            }
-            CallbackProgression::Continue
-        })
-        .map_err(iox("list the run's nodes"))?;
-        Ok(alive)
+        Ok(crate::services::alive_node(&self.node, &wanted)?.is_some())
     }
 
     fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError> {
