@@ -34,7 +34,8 @@ use serde_json::{Value, json};
 
 use super::TeamTopics;
 use formation_transport_zenoh::Endpoint;
-use formation_transport_zenoh::access::{RECORDER_USER, robot_user};
+use formation_transport_zenoh::access::{RECORDER_USER, allow, deny_by_default, robot_user};
+use formation_transport_zenoh::keys;
 use formation_transport_zenoh::tls::{self, TlsIdentity};
 
 pub use formation_transport_zenoh::SESSION_CONFIG_ENV;
@@ -121,18 +122,14 @@ impl Ros2Access {
         let mut principal = |name: String, publishes: Vec<String>, receives: Vec<String>| {
             let mut ids = vec!["ros2-graph".to_string()];
             let mut rule = |suffix: &str, messages: &[&str], flow: &str, keys: &[String]| {
-                if keys.is_empty() {
-                    return;
-                }
-                let id = format!("{name}-{suffix}");
-                rules.push(json!({
-                    "id": id,
-                    "messages": messages,
-                    "flows": [flow],
-                    "permission": "allow",
-                    "key_exprs": keys,
-                }));
-                ids.push(id);
+                allow(
+                    &mut rules,
+                    &mut ids,
+                    format!("{name}-{suffix}"),
+                    messages,
+                    flow,
+                    keys,
+                );
             };
             rule("incoming-publications", &["put"], "ingress", &publishes);
             rule(
@@ -178,60 +175,41 @@ impl Ros2Access {
         // The recorder also reads the run's record channel, outside rmw_zenoh's keys
         // (`formation record --connect --transport ros2`).
         let run = &self.run;
-        let record = [
-            json!({
-                "id": "recorder-record-channel",
-                "messages": ["put"],
-                "flows": ["egress"],
-                "permission": "allow",
-                "key_exprs": [formation_transport_zenoh::keys::record_live(run)],
-            }),
-            json!({
-                "id": "recorder-record-subscription",
-                "messages": ["declare_subscriber"],
-                "flows": ["ingress"],
-                "permission": "allow",
-                "key_exprs": [formation_transport_zenoh::keys::record_live(run)],
-            }),
-            json!({
-                "id": "recorder-ask-setup",
-                "messages": ["query"],
-                "flows": ["ingress"],
-                "permission": "allow",
-                "key_exprs": [formation_transport_zenoh::keys::record_setup(run)],
-            }),
-            json!({
-                "id": "recorder-get-setup",
-                "messages": ["reply"],
-                "flows": ["egress"],
-                "permission": "allow",
-                "key_exprs": [formation_transport_zenoh::keys::record_setup(run)],
-            }),
-            json!({
-                "id": "recorder-watch-world",
-                "messages": ["declare_liveliness_subscriber", "liveliness_query"],
-                "flows": ["ingress"],
-                "permission": "allow",
-                "key_exprs": [formation_transport_zenoh::keys::world_token(run)],
-            }),
-            json!({
-                "id": "recorder-see-world",
-                "messages": ["liveliness_token", "reply"],
-                "flows": ["egress"],
-                "permission": "allow",
-                "key_exprs": [formation_transport_zenoh::keys::world_token(run)],
-            }),
+        let (live, setup, world) = (
+            [keys::record_live(run)],
+            [keys::record_setup(run)],
+            [keys::world_token(run)],
+        );
+        let record: [(&str, &[&str], &str, &[String]); 6] = [
+            ("record-channel", &["put"], "egress", &live),
+            (
+                "record-subscription",
+                &["declare_subscriber"],
+                "ingress",
+                &live,
+            ),
+            ("ask-setup", &["query"], "ingress", &setup),
+            ("get-setup", &["reply"], "egress", &setup),
+            (
+                "watch-world",
+                &["declare_liveliness_subscriber", "liveliness_query"],
+                "ingress",
+                &world,
+            ),
+            (
+                "see-world",
+                &["liveliness_token", "reply"],
+                "egress",
+                &world,
+            ),
         ];
-        let record_ids: Vec<Value> = record.iter().map(|r| r["id"].clone()).collect();
-        rules.extend(record);
+        let mut record_ids = Vec::new();
+        for (suffix, messages, flow, keys) in record {
+            let id = format!("{RECORDER_USER}-{suffix}");
+            allow(&mut rules, &mut record_ids, id, messages, flow, keys);
+        }
         policies.push(json!({ "rules": record_ids, "subjects": [RECORDER_USER] }));
-        json!({
-            "enabled": true,
-            "default_permission": "deny",
-            "rules": rules,
-            "subjects": subjects,
-            "policies": policies,
-        })
+        deny_by_default(rules, subjects, policies)
     }
 
     /// Adds to `config` (the world's router, listening on `listen`) the world's certificate,

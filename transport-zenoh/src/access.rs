@@ -195,18 +195,14 @@ impl WorldAccess {
                               token: Option<String>| {
             let mut ids = Vec::new();
             let mut rule = |suffix: &str, messages: &[&str], flow: &str, keys: Vec<String>| {
-                if keys.is_empty() {
-                    return;
-                }
-                let rule_id = format!("{id}-{suffix}");
-                rules.push(json!({
-                    "id": rule_id,
-                    "messages": messages,
-                    "flows": [flow],
-                    "permission": "allow",
-                    "key_exprs": keys,
-                }));
-                ids.push(rule_id);
+                allow(
+                    &mut rules,
+                    &mut ids,
+                    format!("{id}-{suffix}"),
+                    messages,
+                    flow,
+                    &keys,
+                );
             };
             rule("send", &["put"], "ingress", sends);
             rule(
@@ -280,14 +276,48 @@ impl WorldAccess {
             ],
             None,
         );
-        json!({
-            "enabled": true,
-            "default_permission": "deny",
-            "rules": rules,
-            "subjects": subjects,
-            "policies": policies,
-        })
+        deny_by_default(rules, subjects, policies)
     }
+}
+
+/// Adds to `rules` the rule `id` that allows `messages` flowing `flow` (`ingress`: what a client
+/// sends the router; `egress`: what the router sends a client) on `keys`, and `id` to `ids` (a
+/// policy's rules); nothing when `keys` is empty.
+pub fn allow(
+    rules: &mut Vec<serde_json::Value>,
+    ids: &mut Vec<String>,
+    id: String,
+    messages: &[&str],
+    flow: &str,
+    keys: &[String],
+) {
+    if keys.is_empty() {
+        return;
+    }
+    rules.push(json!({
+        "id": id,
+        "messages": messages,
+        "flows": [flow],
+        "permission": "allow",
+        "key_exprs": keys,
+    }));
+    ids.push(id);
+}
+
+/// A router's `access_control` section: deny by default, allow `rules` to `subjects` as
+/// `policies` say.
+pub fn deny_by_default(
+    rules: Vec<serde_json::Value>,
+    subjects: Vec<serde_json::Value>,
+    policies: Vec<serde_json::Value>,
+) -> serde_json::Value {
+    json!({
+        "enabled": true,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    })
 }
 
 #[cfg(test)]
