@@ -25,6 +25,10 @@
 //!    and the saturated wheel conversion. A scan shows a neighbour's centre, not its offset point,
 //!    so pairs are always measured between centres (the expert's default under a graph).
 //!
+//! 4. **Hidden pairs** (with [`ExpertGains::unblock_hidden_pairs`], off by default): a robot that
+//!    stands between two detections which would hold each other steps aside, so that they see
+//!    each other; the expert, which sees every robot, needs no such term.
+//!
 //! With every neighbour detected exactly, the command is the expert's (to rounding; a test holds
 //! it to 1e-6 m/s). A robot that detects nobody drives the reference velocity.
 //!
@@ -127,6 +131,14 @@ impl OwnView {
             let (x, y) = neighbours[k];
             add_pair_term(&mut body, (-x, -y), d4, weight);
         }
+        if gains.unblock_hidden_pairs {
+            // Under all pairs every two robots hold each other.
+            let nearest = match rule {
+                NeighbourRule::AllPairs => usize::MAX,
+                NeighbourRule::Gabriel(gabriel) => gabriel.nearest,
+            };
+            add_unblocking_term(&mut body, neighbours, nearest, robot.body_radius, d4);
+        }
         let (sin, cos) = heading.sin_cos();
         let world = (cos * body.0 - sin * body.1, sin * body.0 + cos * body.1);
         let reference = reference_velocity(goal, gains.max_reference_speed);
@@ -174,6 +186,71 @@ impl OwnView {
                 .filter(|&(_, &held)| held)
                 .map(|(k, _)| (k, 1.0)),
         );
+    }
+}
+
+/// Adds to `gradient` (body frame) the step aside of a robot that hides two of its detections
+/// from each other ([`ExpertGains::unblock_hidden_pairs`]): for each pair `a`, `c` with the robot
+/// between them (its foot on their segment) and within two body radii of their line, and which
+/// would hold each other by the `nearest` rule (counting the robot), a push perpendicular to their
+/// line, away from it, as strong as their pair's pull `2 (r^4 - d*^4) / r^3`, weighted from 1
+/// within half of `body_radius` of the line to 0 at `body_radius`. A robot exactly on the line steps to the left of
+/// `a -> c`, `a` the earlier detection.
+fn add_unblocking_term(
+    gradient: &mut (f64, f64),
+    neighbours: &[(f64, f64)],
+    nearest: usize,
+    body_radius: f64,
+    d4: f64,
+) {
+    let finite = |&(x, y): &(f64, f64)| x.is_finite() && y.is_finite();
+    let dist2 = |p: (f64, f64), q: (f64, f64)| (p.0 - q.0).powi(2) + (p.1 - q.1).powi(2);
+    // How many of the others (the robot at the origin included) lie within `sqrt(reach2)` of `p`.
+    let nearer = |p: usize, other: usize, reach2: f64| {
+        let robot = usize::from(dist2(neighbours[p], (0.0, 0.0)) < reach2);
+        robot
+            + neighbours
+                .iter()
+                .enumerate()
+                .filter(|&(k, q)| {
+                    k != p && k != other && finite(q) && dist2(neighbours[p], *q) < reach2
+                })
+                .count()
+    };
+    for a in 0..neighbours.len() {
+        let pa = neighbours[a];
+        if !finite(&pa) {
+            continue;
+        }
+        for (c, &pc) in neighbours.iter().enumerate().skip(a + 1) {
+            if !finite(&pc) {
+                continue;
+            }
+            let e = (pc.0 - pa.0, pc.1 - pa.1);
+            let l2 = e.0 * e.0 + e.1 * e.1;
+            if l2 * l2 <= d4 {
+                continue;
+            }
+            // The robot's foot on the line a -> c, as a share of the way, and its signed distance.
+            let t = -(pa.0 * e.0 + pa.1 * e.1) / l2;
+            if t <= 0.0 || t >= 1.0 {
+                continue;
+            }
+            let l = l2.sqrt();
+            let side = (e.1 * pa.0 - e.0 * pa.1) / l;
+            let weight = ((body_radius - side.abs()) / (0.5 * body_radius)).clamp(0.0, 1.0);
+            if weight == 0.0 {
+                continue;
+            }
+            if nearer(a, c, l2) >= nearest && nearer(c, a, l2) >= nearest {
+                continue;
+            }
+            let away = if side >= 0.0 { 1.0 } else { -1.0 };
+            let normal = (-e.1 / l * away, e.0 / l * away);
+            let pull = weight * 2.0 * (l2 * l2 - d4) / (l2 * l);
+            gradient.0 -= pull * normal.0;
+            gradient.1 -= pull * normal.1;
+        }
     }
 }
 
@@ -435,6 +512,89 @@ mod tests {
         }
         // Some pairs are vetoed, so the rule matters here.
         assert!((0..poses.len()).any(|i| tracker.own_neighbours(i).len() < poses.len() - 1));
+    }
+
+    /// The gradient [`add_unblocking_term`] adds for a robot at the origin seeing `neighbours`.
+    fn unblocking(neighbours: &[(f64, f64)], nearest: usize) -> (f64, f64) {
+        let mut gradient = (0.0, 0.0);
+        add_unblocking_term(&mut gradient, neighbours, nearest, 0.25, 1.5f64.powi(4));
+        gradient
+    }
+
+    #[test]
+    fn the_middle_of_a_line_of_three_steps_aside_and_nobody_else_does() {
+        let d = 1.5;
+        // The pull of a pair at 2 d*: 2 ((2d)^4 - d^4) / (2d)^3 = 3.75 d.
+        let pull = 3.75 * d;
+        // Left of the line from the first detection to the second: +y, so the gradient is -y.
+        let (gx, gy) = unblocking(&[(-d, 0.0), (d, 0.0)], 2);
+        assert!(gx.abs() < 1e-12 && (gy + pull).abs() < 1e-9, "{gx} {gy}");
+        let (gx, gy) = unblocking(&[(d, 0.0), (-d, 0.0)], 2);
+        assert!(gx.abs() < 1e-12 && (gy - pull).abs() < 1e-9, "{gx} {gy}");
+        // Off the line, the robot steps away from it: full weight up to half a body radius,
+        // half at three quarters, none from one body radius (0.25 m) on.
+        let (_, gy) = unblocking(&[(-d, -0.1), (d, -0.1)], 2);
+        assert!((gy + pull).abs() < 1e-9, "{gy}");
+        let (_, gy) = unblocking(&[(-d, 0.1875), (d, 0.1875)], 2);
+        assert!((gy - 0.5 * pull).abs() < 1e-9, "{gy}");
+        assert_eq!(unblocking(&[(-d, 0.25), (d, 0.25)], 2), (0.0, 0.0));
+        // An end robot, a triangle, a pair at d*, and a robot beside rather than between.
+        assert_eq!(unblocking(&[(d, 0.0), (2.0 * d, 0.0)], 2), (0.0, 0.0));
+        let h = d * 3f64.sqrt() / 2.0;
+        assert_eq!(unblocking(&[(h, d / 2.0), (h, -d / 2.0)], 2), (0.0, 0.0));
+        assert_eq!(
+            unblocking(&[(-d / 2.0, 0.0), (d / 2.0, 0.0)], 2),
+            (0.0, 0.0)
+        );
+        assert_eq!(unblocking(&[(f64::NAN, 0.0), (d, 0.0)], 2), (0.0, 0.0));
+    }
+
+    #[test]
+    fn a_pair_with_nearer_neighbours_of_its_own_is_not_held_through_the_robot() {
+        let d = 1.5;
+        // Each end of the line has a neighbour of its own nearer than the other end (2 d*):
+        // under the Gabriel rule's two nearest, the ends would not hold each other.
+        let team = [(-d, 0.0), (d, 0.0), (-1.5 * d, 0.8 * d), (1.5 * d, 0.8 * d)];
+        assert_eq!(unblocking(&team, 2), (0.0, 0.0));
+        // Under all pairs they would, and the robot still steps aside.
+        let (_, gy) = unblocking(&team, usize::MAX);
+        assert!(gy < 0.0, "{gy}");
+        // One end with a nearer neighbour of its own, the other without: the other would hold it.
+        let (_, gy) = unblocking(&team[..3], 2);
+        assert!(gy < 0.0, "{gy}");
+    }
+
+    #[test]
+    fn stepping_aside_is_off_by_default_and_out_of_the_gains_json_while_off() {
+        assert!(!ExpertGains::default().unblock_hidden_pairs);
+        let json = serde_json::to_string(&ExpertGains::default()).expect("serializes");
+        assert!(!json.contains("unblock_hidden_pairs"), "{json}");
+        let on = ExpertGains {
+            unblock_hidden_pairs: true,
+            ..ExpertGains::default()
+        };
+        let json = serde_json::to_string(&on).expect("serializes");
+        let back: ExpertGains = serde_json::from_str(&json).expect("parses");
+        assert_eq!(back, on);
+        // On, the middle of a line of three turns off its heading; off, it drives straight.
+        let robot = limited(None);
+        let rule = NeighbourRule::Gabriel(GabrielRule::with_range(10.0));
+        let line = [(-1.5, 0.0), (1.5, 0.0)];
+        let mut view = OwnView::new();
+        let straight = view.command(
+            &line,
+            0.0,
+            &goal(0.0, 1.5),
+            &ExpertGains::default(),
+            &robot,
+            &rule,
+        );
+        assert!(
+            (straight.left - straight.right).abs() < 1e-9,
+            "{straight:?}"
+        );
+        let aside = view.command(&line, 0.0, &goal(0.0, 1.5), &on, &robot, &rule);
+        assert!(aside.right > aside.left + 0.1, "{aside:?}");
     }
 
     #[test]
