@@ -12,6 +12,10 @@
 //! from this host or another; `--credentials robot-<i>.json` (from `formation credentials`) then
 //! gives its login and the launch secret, in place of standard input.
 //!
+//! With the name of a transport registered in [`TRANSPORT_PLUGINS`] it connects over that
+//! transport ([`formation_runtime::plugin::TransportPlugin::connect_agent`]), `--connect` being
+//! its endpoint, the launch secret read from standard input as over iceoryx2.
+//!
 //! With `--transport ros2 --connect tcp/ROUTER:7447` it is a ROS 2 node instead
 //! (`formation_transport_ros2`): it takes a robot's LaserScan and orientation and publishes its
 //! Twist, with no world and no ROS installation; see [`ros2`] for its flags.
@@ -45,10 +49,9 @@ use formation_runtime::auth::LaunchSecret;
 use formation_runtime::clock::SystemClock;
 use formation_runtime::faults::Fault;
 use formation_runtime::link::AgentLink;
+use formation_runtime::plugin::{AgentSite, RunSite, TransportPlugin};
 use formation_runtime::process::flag_when_stdin_closes;
-use formation_runtime::transport::Transport;
-#[cfg(not(feature = "zenoh"))]
-use formation_runtime::transport::TransportError;
+use formation_runtime::transport::{Transport, TransportError};
 use formation_transport_iceoryx2::IceoryxAgentLink;
 use formation_transport_iceoryx2::naming::RunNamespace;
 
@@ -107,7 +110,8 @@ pub fn exit_for(who: &str, result: anyhow::Result<AgentExit>) -> ProcessExit {
             eprintln!("{who}: exiting: {reason}");
             ProcessExit::Success
         }
-        Err(e) => match e.downcast_ref::<AgentLinkError>() {
+        // A registered transport's connection error is wrapped in one that names it.
+        Err(e) => match e.chain().find_map(|c| c.downcast_ref::<AgentLinkError>()) {
             Some(AgentLinkError::Terminated(signal)) => {
                 eprintln!("{who}: exiting: termination signal ({signal}) while connecting");
                 ProcessExit::stopped_by(*signal)
@@ -132,6 +136,11 @@ pub const TRANSPORTS: &[Transport] = &[
     #[cfg(feature = "zenoh")]
     Transport::Ros2,
 ];
+
+/// The transports registered beside the first-party ones, one line each; `--transport` takes
+/// their names ([`reach::ReachArgs`]), and [`run`] connects over them without knowing them.
+pub static TRANSPORT_PLUGINS: &[&dyn TransportPlugin] =
+    &[&formation_example_transport_unix_datagram::UnixDatagram];
 
 /// The name this agent goes by in its messages: `formation-agent (robot I)`.
 pub fn who(args: &Args) -> String {
@@ -175,6 +184,7 @@ pub fn run(args: &Args) -> anyhow::Result<AgentExit> {
             )?)
         }
         Transport::Zenoh => zenoh_link(args, &run_id, robot, timeout)?,
+        Transport::Plugin(plugin) => plugin_link(plugin, args, &run_id, robot, timeout)?,
         Transport::Ros2 => unreachable!("handled above"),
     };
     // Only now: the launch secret has been read from standard input, and the watcher must not
@@ -200,6 +210,37 @@ fn stop_flag(args: &Args) -> Arc<AtomicBool> {
     } else {
         Arc::new(AtomicBool::new(false))
     }
+}
+
+/// The link of a registered transport, `--connect` being its endpoint; the launch secret comes
+/// on standard input.
+fn plugin_link(
+    plugin: &'static dyn TransportPlugin,
+    args: &Args,
+    run_id: &RunId,
+    robot: usize,
+    timeout: Duration,
+) -> anyhow::Result<Box<dyn AgentLink>> {
+    let secret = LaunchSecret::read_line(&mut std::io::stdin().lock())?;
+    let site = AgentSite {
+        run: RunSite {
+            run: run_id,
+            endpoint: args.reach.connect.as_deref(),
+        },
+        robot,
+        pid: std::process::id(),
+        secret: &secret,
+        connect_timeout: timeout,
+    };
+    plugin.connect_agent(&site).map_err(|source| {
+        TransportError::ConnectAgent {
+            transport: plugin.name(),
+            robot,
+            run: run_id.to_string(),
+            source,
+        }
+        .into()
+    })
 }
 
 /// The Zenoh link to the world at `--connect`, logged in with `--credentials` when given.

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use formation_runtime::transport::Transport;
+use formation_runtime::transport::{Transport, TransportParser};
 use formation_trainer_bridge::train::Architecture;
 
 use formation_runtime::{ClockMode, RuntimeSettings};
@@ -177,9 +177,9 @@ pub struct EvalArgs {
     #[arg(long)]
     pub processes: bool,
     /// With `--processes`: how the agents reach the world, iceoryx2 shared memory, Zenoh over
-    /// TCP (needs --listen; every agent runs on this host, with fresh credentials), or ROS 2
-    /// (needs --listen; the world as a ROS 2 team, ROS 2 agents).
-    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    /// TCP (needs --listen; every agent runs on this host, with fresh credentials), ROS 2
+    /// (needs --listen; the world as a ROS 2 team, ROS 2 agents), or a registered transport.
+    #[arg(long, value_parser = TransportParser::new(crate::TRANSPORT_PLUGINS), default_value_t = Transport::Iceoryx2)]
     pub transport: Transport,
     /// Zenoh and ROS 2: where the world listens, tcp/ADDR:PORT.
     #[arg(long, value_name = "tcp/ADDR:PORT")]
@@ -1086,9 +1086,10 @@ pub struct RunArgs {
     #[arg(long = "fault", value_name = "ROBOT:MODE")]
     pub faults: Vec<String>,
     /// How the agents reach the world: iceoryx2 shared memory (this host), Zenoh over TCP
-    /// (agents on this host or others; needs --listen), or ROS 2 over rmw_zenoh (the world as a
-    /// team of ROS 2 robots that ROS 2 agents drive; needs --listen).
-    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    /// (agents on this host or others; needs --listen), ROS 2 over rmw_zenoh (the world as a
+    /// team of ROS 2 robots that ROS 2 agents drive; needs --listen), or a registered transport
+    /// (--listen: its endpoint, if it takes one).
+    #[arg(long, value_parser = TransportParser::new(crate::TRANSPORT_PLUGINS), default_value_t = Transport::Iceoryx2)]
     pub transport: Transport,
     /// Zenoh and ROS 2: where the world listens, tcp/ADDR:PORT (tcp/0.0.0.0:7447 for every
     /// interface).
@@ -1175,7 +1176,7 @@ pub struct RecordArgs {
     pub run_id: String,
     /// The team's transport: zenoh (a formation team over Zenoh) or ros2 (a ROS 2 team,
     /// `formation run --transport ros2`).
-    #[arg(long, value_enum, default_value_t = Transport::Zenoh)]
+    #[arg(long, value_parser = TransportParser::new(crate::TRANSPORT_PLUGINS), default_value_t = Transport::Zenoh)]
     pub transport: Transport,
     /// The recorder's login file (recorder.json from `formation credentials`): read-only, and
     /// required for a Zenoh team; a ROS 2 team on tcp/ has no logins and takes none; a ROS 2

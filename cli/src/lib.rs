@@ -53,6 +53,12 @@ pub const TRANSPORTS: &[formation_runtime::transport::Transport] = &[
     formation_runtime::transport::Transport::Ros2,
 ];
 
+/// The transports registered beside the first-party ones, one line each: `formation run`,
+/// `profile` and `eval --processes` take their names and hand them to the world and the agents
+/// (which register them too), `formation swap` uses their swap client.
+pub static TRANSPORT_PLUGINS: &[&dyn formation_runtime::plugin::TransportPlugin] =
+    &[&formation_example_transport_unix_datagram::UnixDatagram];
+
 /// How `formation` exits after `error`: 130 or 143 when the user interrupted a launch with
 /// SIGINT (Ctrl-C) or SIGTERM, 1 when a replay found differing commands, 2 for any other error.
 /// (Bad flags exit 2 through clap.)

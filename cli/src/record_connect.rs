@@ -69,6 +69,13 @@ fn kept_note(kept: &[PathBuf]) -> String {
 fn recorder_login(args: &RecordArgs, endpoint: &Endpoint) -> anyhow::Result<Option<Login>> {
     args.transport
         .refuse_network_flags(&[(true, "formation record --connect")])?;
+    if let Some(plugin) = args.transport.plugin() {
+        anyhow::bail!(
+            "formation record --connect needs --transport zenoh or ros2: the {} transport has no \
+             record channel (record the run with `formation run --record` instead)",
+            plugin.name()
+        );
+    }
     let ros2 = args.transport == Transport::Ros2;
     if ros2 && !endpoint.is_tls() {
         if args.credentials.is_some() {

@@ -18,12 +18,16 @@
 //! * [`clock`]: the injected [`clock::Clock`] (system, or fake for tests).
 //! * [`settings`]: [`settings::ClockMode`] and [`settings::RuntimeSettings`], shared by the
 //!   launcher and the world.
-//! * [`transport`]: [`transport::Transport`], which link the processes use.
+//! * [`transport`]: [`transport::Transport`], which link the processes use, and the parser of
+//!   `--transport` ([`transport::TransportParser`]).
+//! * [`plugin`]: [`plugin::TransportPlugin`], a transport registered by name: what a transport
+//!   crate implements so that the binaries' generic code opens its links.
 //! * [`process`]: what both processes do about the launcher going away.
 //!
 //! The transports are crates of their own that implement the link traits: `formation-transport-iceoryx2`
 //! (shared memory, the default), `formation-transport-zenoh` (agents on other hosts) and
-//! `formation-transport-ros2` (ROS 2 over rmw_zenoh). Dependencies point one way: this crate
+//! `formation-transport-ros2` (ROS 2 over rmw_zenoh); a further one registers a
+//! [`plugin::TransportPlugin`] (`examples/transport-unix-datagram/` is one). Dependencies point one way: this crate
 //! depends only on `formation-proto` and builds no transport; the transports, the world's binary,
 //! the agent's binary and the launcher depend on it, and it knows neither physics nor ONNX.
 
@@ -35,6 +39,7 @@ pub mod faults;
 pub mod link;
 pub mod link_health;
 pub mod memory;
+pub mod plugin;
 pub mod process;
 pub mod reconnect;
 pub mod settings;

@@ -4,7 +4,8 @@
 //!   say "build `a`, `b` or `c`": then `cargo tree -e normal -p <crate>` (the crate built on its
 //!   own, with its default features) lists none of those crates.
 //! * **One name per crate.** Every workspace package lives in the folder `<name>/` and is called
-//!   `formation-<name>`, and its library is `formation_<name>`.
+//!   `formation-<name>`, and its library is `formation_<name>` (an example's, in
+//!   `examples/<name>/`, `formation-example-<name>`).
 //! * **One package per process.** `formation`, `formation-world` and `formation-agent` are each
 //!   the only binary of a package of their own; the agent's demo build holds none of tokio,
 //!   plotters or rayon, and with Zenoh on, tokio only under Zenoh.
@@ -136,6 +137,7 @@ fn the_architecture_states_layers_for_the_pure_crates() {
         "formation-transport-iceoryx2",
         "formation-transport-zenoh",
         "formation-transport-ros2",
+        "formation-example-transport-unix-datagram",
     ] {
         assert!(
             ruled.contains(package),
@@ -220,7 +222,11 @@ fn every_crate_has_one_name_for_its_folder_package_and_library() {
             .and_then(|dir| dir.strip_prefix(&root).ok())
             .map(|dir| dir.display().to_string())
             .unwrap_or_default();
-        let expected = format!("formation-{folder}");
+        // An example crate in `examples/<name>/` is `formation-example-<name>`.
+        let expected = match folder.strip_prefix("examples/") {
+            Some(example) => format!("formation-example-{example}"),
+            None => format!("formation-{folder}"),
+        };
         if name != expected {
             wrong.push(format!(
                 "folder {folder}/ holds package {name}, not {expected}"

@@ -17,6 +17,9 @@
 //! With `--transport zenoh` the agents reach it over Zenoh instead: the world listens on
 //! `--listen tcp/ADDR:PORT` as a Zenoh router (see `formation_transport_zenoh`), checking the
 //! logins of a credentials folder (`--credentials DIR`, from `formation credentials`) when given.
+//! With the name of a transport registered in [`TRANSPORT_PLUGINS`] it opens that transport's
+//! world link ([`formation_runtime::plugin::TransportPlugin::open_world`]), `--listen` being its
+//! endpoint.
 //!
 //! Usually started by `formation run` / `formation eval --processes`, not by hand.
 //!
@@ -43,10 +46,9 @@ use formation_runtime::auth::LaunchSecret;
 use formation_runtime::clock::SystemClock;
 use formation_runtime::exchange::{AgentsController, ExchangeSettings, StopReason};
 use formation_runtime::link::{RecordFeed, WorldLink};
+use formation_runtime::plugin::{RunSite, TransportPlugin, WorldSite};
 use formation_runtime::process::flag_when_stdin_closes;
-use formation_runtime::transport::Transport;
-#[cfg(not(feature = "zenoh"))]
-use formation_runtime::transport::TransportError;
+use formation_runtime::transport::{Transport, TransportError, TransportParser};
 use formation_runtime::{ClockMode, RuntimeSettings};
 use formation_transport_iceoryx2::IceoryxWorldLink;
 use formation_transport_iceoryx2::naming::RunNamespace;
@@ -104,12 +106,13 @@ pub struct Args {
     #[arg(long)]
     pub exit_on_stdin_close: bool,
     /// How the agents reach the world: iceoryx2 shared memory on this host, Zenoh over TCP
-    /// (agents on this host or others), or ROS 2 over rmw_zenoh (the world as a team of ROS 2
-    /// robots: `/robot_<i>/scan`, `/robot_<i>/odom`, `/robot_<i>/cmd_vel`).
-    #[arg(long, value_enum, default_value_t = Transport::Iceoryx2)]
+    /// (agents on this host or others), ROS 2 over rmw_zenoh (the world as a team of ROS 2
+    /// robots: `/robot_<i>/scan`, `/robot_<i>/odom`, `/robot_<i>/cmd_vel`), or a registered
+    /// transport.
+    #[arg(long, value_parser = TransportParser::new(TRANSPORT_PLUGINS), default_value_t = Transport::Iceoryx2)]
     pub transport: Transport,
     /// Zenoh and ROS 2: the endpoint to listen on, tcp/ADDR:PORT, as a Zenoh router (agents, and
-    /// ROS 2 tools, connect to it).
+    /// ROS 2 tools, connect to it). A registered transport: its endpoint, if it takes one.
     #[arg(long, value_name = "tcp/ADDR:PORT")]
     pub listen: Option<String>,
     /// ROS 2: the ROS domain id of the team's topics (default 0).
@@ -164,6 +167,11 @@ pub const TRANSPORTS: &[Transport] = &[
     #[cfg(feature = "zenoh")]
     Transport::Ros2,
 ];
+
+/// The transports registered beside the first-party ones, one line each; `--transport` takes
+/// their names, and [`run`] opens their links without knowing them.
+pub static TRANSPORT_PLUGINS: &[&dyn TransportPlugin] =
+    &[&formation_example_transport_unix_datagram::UnixDatagram];
 
 /// How the world's runs ended as the process's exit, said on stderr.
 pub fn exit_for(result: anyhow::Result<Ended>) -> ProcessExit {
@@ -243,6 +251,7 @@ pub fn run(args: &Args) -> anyhow::Result<Ended> {
         ),
         Transport::Zenoh => zenoh_link(args, &run_id, n_robots)?,
         Transport::Ros2 => ros2_link(args, &run_id, &specs[0], &runtime, secret.clone())?,
+        Transport::Plugin(plugin) => (plugin_link(plugin, args, &run_id, n_robots)?, None),
     };
     let launch = launch_info(args, record.as_ref(), &runtime)?;
     let mut view = start_live_view(args.foxglove.as_deref(), n_robots)?;
@@ -312,6 +321,29 @@ fn launch_info(
         models: Vec::new(),
         shipped_models: None,
     })
+}
+
+/// The world's link of a registered transport, `--listen` being its endpoint.
+fn plugin_link(
+    plugin: &'static dyn TransportPlugin,
+    args: &Args,
+    run_id: &RunId,
+    n_robots: usize,
+) -> Result<Box<dyn WorldLink>, TransportError> {
+    let site = WorldSite {
+        run: RunSite {
+            run: run_id,
+            endpoint: args.listen.as_deref(),
+        },
+        robots: n_robots,
+    };
+    plugin
+        .open_world(&site)
+        .map_err(|source| TransportError::OpenWorld {
+            transport: plugin.name(),
+            run: run_id.to_string(),
+            source,
+        })
 }
 
 /// The world's link and its record channel for remote recorders.

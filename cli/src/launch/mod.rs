@@ -32,7 +32,7 @@ use crate::args::{CredentialsArgs, ProfileArgs, RunArgs, SwapArgs};
 use crate::paths;
 use crate::team_models::{checked_team_models, models_per_robot};
 use formation_proto::wire::WorldEvent;
-use supervisor::{LaunchPlan, Network, ZenohPlan};
+use supervisor::{LaunchPlan, Network, PluginPlan, ZenohPlan};
 
 /// How the world process paces ticks (defined once, in the runtime library).
 pub use formation_runtime::ClockMode;
@@ -310,6 +310,12 @@ impl NetworkFlags {
             .check_built_in("formation", crate::TRANSPORTS)?;
         match self.transport {
             Transport::Iceoryx2 => return Ok(Network::SharedMemory),
+            Transport::Plugin(transport) => {
+                return Ok(Network::Plugin(PluginPlan {
+                    transport,
+                    endpoint: self.listen.clone(),
+                }));
+            }
             Transport::Ros2 => {
                 let listen = self.listen()?;
                 let credentials = self.ros2_credentials(&listen, n_robots, fresh)?;
@@ -876,6 +882,16 @@ pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
              `formation-agent --transport ros2` with the other --model (the robot brakes \
              meanwhile)"
         ),
+        Transport::Plugin(transport) => {
+            args.reach
+                .transport
+                .refuse_zenoh_flags(&[(args.reach.credentials.is_some(), "--credentials")])?;
+            args.reach
+                .transport
+                .refuse_network_flags(&[(args.reach.connect.is_some(), "--connect")])?;
+            let endpoint = args.reach.connect.as_deref();
+            swap::request_swap_over_plugin(transport, endpoint, args, timeout)?
+        }
     };
     println!(
         "robot {} of run {} drives with model {} from tick {}",

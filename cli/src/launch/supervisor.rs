@@ -93,6 +93,60 @@ pub enum Network {
     /// ROS 2 over rmw_zenoh: the world is a team of ROS 2 robots on a Zenoh router, every agent a
     /// ROS 2 node that drives one of them.
     Ros2(Ros2Plan),
+    /// A registered transport: the world and every agent on this host take its name and
+    /// endpoint.
+    Plugin(PluginPlan),
+}
+
+/// A launch over a registered transport.
+#[derive(Clone)]
+pub struct PluginPlan {
+    /// The transport.
+    pub transport: &'static dyn formation_runtime::plugin::TransportPlugin,
+    /// `--listen`: its endpoint, handed to the world as `--listen` and to the agents as
+    /// `--connect`.
+    pub endpoint: Option<String>,
+}
+
+impl std::fmt::Debug for PluginPlan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PluginPlan")
+            .field("transport", &self.transport.name())
+            .field("endpoint", &self.endpoint)
+            .finish()
+    }
+}
+
+impl PluginPlan {
+    /// The flags that name it and its endpoint (`--listen` for the world, `--connect` for an
+    /// agent).
+    fn args(&self, endpoint_flag: &str) -> Vec<String> {
+        let mut args = vec!["--transport".to_owned(), self.transport.name().to_owned()];
+        if let Some(endpoint) = &self.endpoint {
+            args.extend([endpoint_flag.to_owned(), endpoint.clone()]);
+        }
+        args
+    }
+
+    /// Removes what the run left over this transport once none of its processes lives.
+    fn remove_leftovers(&self, run: &RunId) {
+        let site = formation_runtime::plugin::RunSite {
+            run,
+            endpoint: self.endpoint.as_deref(),
+        };
+        match self.transport.remove_leftovers(&site) {
+            Ok(0) => {}
+            Ok(removed) => tracing::info!(
+                "removed {removed} entries run {run} left over the {} transport",
+                self.transport.name()
+            ),
+            Err(e) => eprintln!(
+                "formation: could not remove what run {run} left over the {} transport: {}",
+                self.transport.name(),
+                formation_proto::errors::chain_text(e.as_ref())
+            ),
+        }
+    }
 }
 
 /// A launch over ROS 2.
@@ -149,7 +203,7 @@ impl Network {
     pub fn zenoh(&self) -> Option<&ZenohPlan> {
         match self {
             Network::Zenoh(plan) => Some(plan),
-            Network::SharedMemory | Network::Ros2(_) => None,
+            Network::SharedMemory | Network::Ros2(_) | Network::Plugin(_) => None,
         }
     }
 
@@ -451,6 +505,9 @@ pub async fn launch(
         None => LaunchSecret::generate().map_err(|e| LaunchError::Secret(e.to_string()))?,
     };
     let outcome = supervise(plan, &binaries, &secret, on_event, &mut report).await;
+    if let Network::Plugin(plugin) = &plan.network {
+        plugin.remove_leftovers(&plan.run_id);
+    }
     let removed = namespace
         .remove_all()
         .map_err(|source| LaunchError::Cleanup {
@@ -861,7 +918,7 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
     if let Some(address) = plan.foxglove {
         command.arg("--foxglove").arg(address.to_string());
     }
-    let over_zenoh = !matches!(plan.network, Network::SharedMemory);
+    let over_zenoh = matches!(plan.network, Network::Zenoh(_) | Network::Ros2(_));
     if let (None, Some(info), true) = (&plan.record, &plan.launch_info, over_zenoh) {
         let path = plan.run_specs.with_file_name("launch-info.json");
         info.write(&path)?;
@@ -875,6 +932,9 @@ fn spawn_world(plan: &LaunchPlan, binaries: &RuntimeBinaries) -> Result<Child, L
             .arg(&zenoh.listen)
             .arg("--credentials")
             .arg(&zenoh.credentials);
+    }
+    if let Network::Plugin(plugin) = &plan.network {
+        command.args(plugin.args("--listen"));
     }
     if let Network::Ros2(ros2) = &plan.network {
         command
@@ -927,6 +987,9 @@ async fn spawn_agent(
             .arg(zenoh.local_connect())
             .arg("--credentials")
             .arg(zenoh.credentials.join(format!("robot-{robot}.json")));
+    }
+    if let Network::Plugin(plugin) = &plan.network {
+        command.args(plugin.args("--connect"));
     }
     if let Network::Ros2(ros2) = &plan.network {
         // A ROS 2 agent joins the team's ROS graph, not the run: it takes its robot's topics,

@@ -8,6 +8,8 @@
 //! ([`formation_transport_iceoryx2::request_swap`]), which opens the swap channel with the world's
 //! own service definitions; everything it opens in the run's namespace goes when it returns.
 //!
+//! A registered transport carries it with its own client ([`request_swap_over_plugin`]).
+//!
 //! With `--transport zenoh` (`request_swap_over_zenoh`, feature `zenoh`) the request goes to the world's
 //! Zenoh router instead, and carries the model's bytes (at most 32 MiB, with a SHA-256), since a
 //! remote agent cannot open this host's path.
@@ -116,6 +118,40 @@ pub fn request_swap_over_zenoh(
         timeout,
     )?;
     swap_done(reply.outcome, robot)
+}
+
+/// [`request_swap`] over a registered transport, `endpoint` being its `--connect`.
+pub fn request_swap_over_plugin(
+    transport: &'static dyn formation_runtime::plugin::TransportPlugin,
+    endpoint: Option<&str>,
+    args: &crate::args::SwapArgs,
+    timeout: Duration,
+) -> anyhow::Result<SwapDone> {
+    let run_id = RunId::new(&args.run)?;
+    formation_onnx::check_model_file(&args.model)?;
+    let path = std::fs::canonicalize(&args.model)
+        .with_context(|| format!("resolving model path {}", args.model.display()))?;
+    let request = SwapRequest {
+        request_id: request_id(),
+        robot: args.robot,
+        at_tick: args.at_tick,
+        path,
+    };
+    let site = formation_runtime::plugin::RunSite {
+        run: &run_id,
+        endpoint,
+    };
+    let reply = transport
+        .request_swap(&site, &request, timeout)
+        .map_err(
+            |source| formation_runtime::transport::TransportError::Plugin {
+                transport: transport.name(),
+                action: "send the swap request",
+                run: run_id.to_string(),
+                source,
+            },
+        )?;
+    swap_done(reply.outcome, args.robot)
 }
 
 /// The world's answer about robot `robot` as the swap command's result.
