@@ -175,19 +175,7 @@ impl RecordingFile {
     /// Adds the channels and writes the static frames.
     fn write_channels(&mut self) -> Result<(), RecordError> {
         self.add_channels()?;
-        let RecordingFile {
-            mcap,
-            messages,
-            channels,
-            sequences,
-            path,
-            ..
-        } = self;
-        messages
-            .static_frames(&mut |slot, ns, data| {
-                write_message(mcap, (channels, sequences), (slot, ns, data))
-            })
-            .map_err(|e| message_error(path, e))?;
+        self.emit(|messages, emit| messages.static_frames(emit))?;
         self.flush()
     }
 
