@@ -376,6 +376,34 @@ impl AgentGate {
     pub fn open(&self) {
         std::fs::write(&self.gate, "").expect("opening the agents' gate");
     }
+
+    /// Starts the launch `command` with its agents held at this gate (`FORMATION_AGENT_BIN`, then
+    /// `--record RECORDING`: the world's own recording of the run).
+    pub fn spawn_recording(&self, mut command: Command, recording: &Path) -> LiveProcess {
+        command
+            .arg("--record")
+            .arg(recording)
+            .env("FORMATION_AGENT_BIN", &self.script);
+        LiveProcess::spawn(command)
+    }
+}
+
+/// Waits for `formation record --connect` to say that it connected to run `run`.
+pub fn await_recorder_connected(recorder: &mut LiveProcess, run: &RunId) {
+    await_line(recorder, &format!("connected to run {run}"));
+}
+
+/// Waits (60 s) for a recorder attached before the first tick to end successfully, having
+/// recorded run 0 from its start (not "joined late").
+pub fn assert_recorded_from_the_start(recorder: LiveProcess) {
+    let recorded = recorder.finish(Duration::from_secs(60));
+    recorded.assert_success();
+    assert!(
+        recorded.stdout().contains("recorded run 0 to")
+            && !recorded.stdout().contains("joined late"),
+        "{}",
+        recorded.describe()
+    );
 }
 
 /// A 10 s case-1 `formation run --clock CLOCK --record FILE` over processes (the test model's
@@ -952,6 +980,18 @@ pub fn lockstep_over_processes(
     .trajectories
 }
 
+/// Run `index` of `scenario` (from its seed) in-process, the test model on each of its three
+/// robots: the reference a run over processes must equal bit for bit.
+pub fn in_process_run(scenario: &formation_world::Scenario, index: usize) -> Trajectory {
+    use formation_robot_agent::decision::PolicyController;
+    let spec = scenario.run_spec(scenario.seed(), index);
+    let model = test_model();
+    let mut controller =
+        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
+            .expect("in-process agents");
+    formation_world::run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run")
+}
+
 /// `formation run --run-id RUN EXTRA --scenario SCENARIO --model <test model> --out OUT`.
 pub fn formation_run(run: &RunId, scenario: &Path, out: &Path, extra: &[&str]) -> Command {
     formation_run_with_model(run, scenario, test_model(), out, extra)
@@ -1022,6 +1062,36 @@ pub fn await_connected(launch: &mut LiveProcess) {
     assert!(line.is_some(), "{}", launch.describe());
 }
 
+/// Waits up to 60 s for a line of `launch` that contains `needle` (a launch announcing that it
+/// waits for its remote agents, a recorder that connected), or fails with its output.
+pub fn await_line(launch: &mut LiveProcess, needle: &str) {
+    let line = launch.wait_for_line(Duration::from_secs(60), |l| l.contains(needle));
+    assert!(line.is_some(), "{}", launch.describe());
+}
+
+/// Starts `agent` (a remote agent, by hand), then waits for `launch` to end successfully within
+/// `limit` and for the agent to end successfully within 30 s; returns the launch's result.
+pub fn finish_with_remote_agent(launch: LiveProcess, agent: Command, limit: Duration) -> Finished {
+    let remote = LiveProcess::spawn_with_input(agent, None);
+    let finished = launch.finish(limit);
+    finished.assert_success();
+    let remote = remote.finish(Duration::from_secs(30));
+    assert!(remote.output.status.success(), "{}", remote.describe());
+    finished
+}
+
+/// Asserts that every counter (of [`count_samples`], say) counted nothing: `(counter, what it
+/// would mean)`.
+pub fn assert_none_counted(counters: &[(&std::sync::atomic::AtomicUsize, &str)]) {
+    for (counter, meaning) in counters {
+        assert_eq!(
+            counter.load(std::sync::atomic::Ordering::Relaxed),
+            0,
+            "{meaning}"
+        );
+    }
+}
+
 /// Waits for the launcher to report that a new agent (not `old_pid`) of `robot` rejoined, and
 /// returns the first tick it drove.
 pub fn await_rejoin(launch: &mut LiveProcess, robot: usize, old_pid: u32) -> usize {
@@ -1069,17 +1139,24 @@ pub fn incarnations(run: &RunId, robot: usize) -> Vec<u64> {
     found
 }
 
-/// A raw Zenoh client of the world at `endpoint`, logged in as `login` (`None`: no login): an
-/// impostor that speaks Zenoh but is no `formation-agent`. Its connection is refused when the
-/// router does not admit the login (within the 3 s connect timeout).
-pub fn raw_client(endpoint: &str, login: Option<(&str, &str)>) -> zenoh::Result<zenoh::Session> {
-    use zenoh::Wait;
+/// The configuration of a raw Zenoh client of `endpoint` (no scouting, a 3 s connect timeout
+/// that ends the attempt), before its login and TLS settings.
+pub fn raw_client_config(endpoint: &str) -> zenoh::Result<zenoh::Config> {
     let mut config = zenoh::Config::default();
     config.insert_json5("mode", "\"client\"")?;
     config.insert_json5("scouting/multicast/enabled", "false")?;
     config.insert_json5("connect/endpoints", &format!("[{endpoint:?}]"))?;
     config.insert_json5("connect/timeout_ms", "3000")?;
     config.insert_json5("connect/exit_on_failure", "true")?;
+    Ok(config)
+}
+
+/// A raw Zenoh client of the world at `endpoint`, logged in as `login` (`None`: no login): an
+/// impostor that speaks Zenoh but is no `formation-agent`. Its connection is refused when the
+/// router does not admit the login (within the 3 s connect timeout).
+pub fn raw_client(endpoint: &str, login: Option<(&str, &str)>) -> zenoh::Result<zenoh::Session> {
+    use zenoh::Wait;
+    let mut config = raw_client_config(endpoint)?;
     if let Some((user, password)) = login {
         config.insert_json5(
             "transport/auth/usrpwd",
@@ -1161,14 +1238,26 @@ impl Drop for Tmpfs {
 /// `formation credentials --robots ROBOTS --out DIR/creds`: a Zenoh team's logins and launch
 /// secret, made by the launcher's own command; returns the folder.
 pub fn zenoh_credentials(dir: &Path, robots: usize) -> PathBuf {
-    let creds = dir.join("creds");
     std::fs::create_dir_all(dir).unwrap_or_else(|e| panic!("creating {}: {e}", dir.display()));
+    credentials(&dir.join("creds"), &[], robots)
+}
+
+/// `formation credentials --tls --valid-days 30 --robots ROBOTS --out DIR/NAME`: a team's logins
+/// with certificates of its own authority; returns the folder.
+pub fn tls_credentials(dir: &Path, name: &str, robots: usize) -> PathBuf {
+    credentials(&dir.join(name), &["--tls", "--valid-days", "30"], robots)
+}
+
+/// `formation credentials FLAGS --robots ROBOTS --out CREDS`, which must succeed.
+fn credentials(creds: &Path, flags: &[&str], robots: usize) -> PathBuf {
     let mut command = Command::new(&binaries().cli);
     command
-        .args(["credentials", "--robots", &robots.to_string(), "--out"])
-        .arg(&creds);
+        .arg("credentials")
+        .args(flags)
+        .args(["--robots", &robots.to_string(), "--out"])
+        .arg(creds);
     run(command, Duration::from_secs(120)).assert_success();
-    creds
+    creds.to_path_buf()
 }
 
 /// Starts the `delay-relay` of `command` (its arguments given) and waits until it listens.

@@ -20,8 +20,9 @@ use std::time::Duration;
 use formation_proto::wire::RunId;
 
 use crate::{
-    Binaries, LeakCheck, TempDir, Watchdog, binaries, case1_scenario, formation_run, free_tcp_port,
-    one_at_a_time, unique_run_id,
+    Binaries, Finished, LeakCheck, TempDir, Watchdog, assert_bit_identical, binaries,
+    case1_scenario, formation_run, free_tcp_port, in_process_run, one_at_a_time, run,
+    unique_run_id,
 };
 
 /// One multi-process test's lock, watchdog, scratch folder, run id and leak check.
@@ -83,6 +84,34 @@ impl ProcessTest {
     /// A Zenoh endpoint on 127.0.0.1 at a port free now ([`free_tcp_port`]).
     pub fn endpoint(&self) -> String {
         format!("tcp/127.0.0.1:{}", free_tcp_port())
+    }
+
+    /// Lockstep case 1 of 10 s over Zenoh, the world listening on `listen` (`tcp/` or `tls/`,
+    /// the credentials made by the launcher): the launch must succeed and its run reproduce the
+    /// in-process one bit for bit ([`in_process_run`]). Returns the launch's result.
+    pub fn lockstep_case1_over_zenoh(&self, listen: &str) -> Finished {
+        let scenario_path = self.case1(10.0);
+        let scenario = formation_world::Scenario::from_path(&scenario_path).expect("scenario");
+        let flags = [
+            "--transport",
+            "zenoh",
+            "--listen",
+            listen,
+            "--clock",
+            "lockstep",
+        ];
+        let finished = run(
+            self.formation_run(&scenario_path, &flags),
+            Duration::from_secs(180),
+        );
+        finished.assert_success();
+        let over_zenoh =
+            formation_cli::launch::read_trajectory(&self.out().join("runs").join("run-0000.json"))
+                .expect("the run log");
+        let reference = in_process_run(&scenario, 0);
+        assert_eq!(reference.poses.len(), 201, "10 s at 20 Hz");
+        assert_bit_identical(&over_zenoh, &reference);
+        finished
     }
 
     /// Panics listing the run's files if any are left (its lock file included).

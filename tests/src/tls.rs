@@ -18,12 +18,7 @@ pub fn raw_tls_client(
 ) -> zenoh::Result<zenoh::Session> {
     let login = read_login(&logins.join(format!("{principal}.json")))
         .map_err(|e| format!("reading {principal}'s login: {e}"))?;
-    let mut config = zenoh::Config::default();
-    config.insert_json5("mode", "\"client\"")?;
-    config.insert_json5("scouting/multicast/enabled", "false")?;
-    config.insert_json5("connect/endpoints", &format!("[{endpoint:?}]"))?;
-    config.insert_json5("connect/timeout_ms", "3000")?;
-    config.insert_json5("connect/exit_on_failure", "true")?;
+    let mut config = crate::raw_client_config(endpoint)?;
     config.insert_json5(
         "transport/auth/usrpwd",
         &format!(

@@ -19,9 +19,10 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    AgentGate, LiveProcess, ProcessTest, await_connected, binaries, case1_scenario, count_samples,
-    formation_run, free_tcp_port, mcap_readers, raw_client, read_json, remote_zenoh_agent, run,
-    send_signal, test_model, world_pid, zenoh_credentials,
+    AgentGate, LiveProcess, ProcessTest, assert_none_counted, assert_recorded_from_the_start,
+    await_connected, await_line, await_recorder_connected, binaries, case1_scenario, count_samples,
+    finish_with_remote_agent, formation_run, free_tcp_port, mcap_readers, raw_client, read_json,
+    remote_zenoh_agent, run, send_signal, test_model, world_pid, zenoh_credentials,
 };
 
 const LIMIT: Duration = Duration::from_secs(240);
@@ -49,7 +50,6 @@ fn record_connect(
 /// 1's), and robot 1's login subscribing to the record channel receives nothing.
 #[test]
 fn a_live_team_recorded_from_outside_equals_its_own_recording() {
-    use std::sync::atomic::Ordering;
     let t = ProcessTest::start("record_connect_equal", LIMIT);
     let scenario = t.case1(8.0);
     let creds = zenoh_credentials(t.path(), 3);
@@ -66,10 +66,7 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
         .arg("--record")
         .arg(&own);
     let mut launch = LiveProcess::spawn(command);
-    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains("waiting for the remote agents of robots [2]")
-    });
-    assert!(waiting.is_some(), "{}", launch.describe());
+    await_line(&mut launch, "waiting for the remote agents of robots [2]");
 
     // Refused without the recorder login: none at all, or an agent's.
     let refused = run(
@@ -118,35 +115,17 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
         &outside,
         Some(&login),
     ));
-    let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains(&format!("connected to run {}", t.run))
-    });
-    assert!(connected.is_some(), "{}", recorder.describe());
+    await_recorder_connected(&mut recorder, &t.run);
     // Let the recorder's subscription reach the router before the run begins.
     std::thread::sleep(Duration::from_secs(1));
 
     let mut agent = remote_zenoh_agent(&listen, &t.run, 2);
     agent.arg("--credentials").arg(creds.join("robot-2.json"));
-    let remote = LiveProcess::spawn_with_input(agent, None);
-    let finished = launch.finish(LIMIT);
-    finished.assert_success();
-    let remote = remote.finish(Duration::from_secs(30));
-    assert!(remote.output.status.success(), "{}", remote.describe());
-    let recorded = recorder.finish(Duration::from_secs(60));
-    recorded.assert_success();
-    assert!(
-        recorded.stdout().contains("recorded run 0 to")
-            && !recorded.stdout().contains("joined late"),
-        "{}",
-        recorded.describe()
-    );
+    finish_with_remote_agent(launch, agent, LIMIT);
+    assert_recorded_from_the_start(recorder);
 
     assert_recorded_alike(&own, &outside);
-    assert_eq!(
-        stolen.load(Ordering::Relaxed),
-        0,
-        "robot 1's login received the record channel"
-    );
+    assert_none_counted(&[(&stolen, "robot 1's login received the record channel")]);
     drop(impostor);
     t.assert_clean();
 }
@@ -191,22 +170,20 @@ fn a_live_ros2_team_recorded_from_outside_equals_its_own_recording() {
     let outside = t.path().join("outside.mcap");
     // The agents wait at the gate, so the run waits for them while the recorder connects.
     let gate = AgentGate::new(t.path());
-    let mut command = t.formation_run(
-        &scenario,
-        &[
-            "--transport",
-            "ros2",
-            "--listen",
-            &listen,
-            "--clock",
-            "lockstep",
-        ],
+    let launch = gate.spawn_recording(
+        t.formation_run(
+            &scenario,
+            &[
+                "--transport",
+                "ros2",
+                "--listen",
+                &listen,
+                "--clock",
+                "lockstep",
+            ],
+        ),
+        &own,
     );
-    command
-        .arg("--record")
-        .arg(&own)
-        .env("FORMATION_AGENT_BIN", gate.bin());
-    let launch = LiveProcess::spawn(command);
 
     let mut with_login = record_connect(
         &listen,
@@ -221,22 +198,12 @@ fn a_live_ros2_team_recorded_from_outside_equals_its_own_recording() {
     let mut command = record_connect(&listen, t.run.as_str(), &outside, None);
     command.args(["--transport", "ros2"]);
     let mut recorder = LiveProcess::spawn(command);
-    let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains(&format!("connected to run {}", t.run))
-    });
-    assert!(connected.is_some(), "{}", recorder.describe());
+    await_recorder_connected(&mut recorder, &t.run);
     // Let the recorder's subscription reach the router before the run begins.
     std::thread::sleep(Duration::from_secs(1));
     gate.open();
     launch.finish(LIMIT).assert_success();
-    let recorded = recorder.finish(Duration::from_secs(60));
-    recorded.assert_success();
-    assert!(
-        recorded.stdout().contains("recorded run 0 to")
-            && !recorded.stdout().contains("joined late"),
-        "{}",
-        recorded.describe()
-    );
+    assert_recorded_from_the_start(recorder);
     assert_recorded_alike(&own, &outside);
     t.assert_clean();
 }
@@ -277,10 +244,7 @@ fn paced_zenoh_team(dir: &Path, run_id: &RunId) -> (LiveProcess, String, PathBuf
 fn recorder_under_way(listen: &str, run_id: &RunId, file: &Path, login: &Path) -> LiveProcess {
     let mut recorder =
         LiveProcess::spawn(record_connect(listen, run_id.as_str(), file, Some(login)));
-    let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains(&format!("connected to run {run_id}"))
-    });
-    assert!(connected.is_some(), "{}", recorder.describe());
+    await_recorder_connected(&mut recorder, run_id);
     let deadline = std::time::Instant::now() + Duration::from_secs(30);
     while !file.exists() {
         assert!(

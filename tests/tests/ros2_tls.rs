@@ -17,30 +17,48 @@
 //! configuration puts Twists and records that nobody receives).
 //!
 //! Each test uses its own run id, free TCP port on 127.0.0.1 and scratch folder, and runs alone
-//! within this binary ([`one_at_a_time`]).
+//! within this binary ([`one_at_a_time`](formation_tests::one_at_a_time)).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, binaries, case1_scenario, formation_run_with_model,
-    free_tcp_port, one_at_a_time, python, repo_root, run, unique_run_id,
+    LiveProcess, ProcessTest, binaries, formation_run_with_model, free_tcp_port, python, repo_root,
+    run, tls_credentials,
 };
 use serde_json::Value;
 
 const LIMIT: Duration = Duration::from_secs(240);
 
-/// `formation credentials --tls --robots N --out DIR/NAME`.
-fn tls_credentials(dir: &Path, name: &str, robots: usize) -> PathBuf {
-    let creds = dir.join(name);
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args(["credentials", "--tls", "--valid-days", "30"])
-        .args(["--robots", &robots.to_string(), "--out"])
-        .arg(&creds);
-    run(command, Duration::from_secs(120)).assert_success();
-    creds
+/// A free `tls/` endpoint on 127.0.0.1.
+fn tls_endpoint() -> String {
+    format!("tls/127.0.0.1:{}", free_tcp_port())
+}
+
+/// `formation run --transport ros2 --listen LISTEN --credentials CREDS --clock lockstep EXTRA` of
+/// `scenario` with the shipped policy, this test's run id and its `out` folder.
+fn ros2_tls_team(
+    t: &ProcessTest,
+    scenario: &Path,
+    listen: &str,
+    creds: &Path,
+    extra: &[&str],
+) -> Command {
+    let creds = creds.to_string_lossy();
+    let flags = [
+        ["--transport", "ros2", "--listen", listen].as_slice(),
+        &["--credentials", &creds, "--clock", "lockstep"],
+        extra,
+    ]
+    .concat();
+    formation_run_with_model(
+        &t.run,
+        scenario,
+        &repo_root().join("onnx/models/policy.onnx"),
+        &t.out(),
+        &flags,
+    )
 }
 
 /// A count of the reader's report (0 when absent).
@@ -50,34 +68,17 @@ fn count(report: &Value, session: &str, what: &str) -> u64 {
 
 #[test]
 fn a_robot_s_certificate_reads_its_tf_and_scan_and_no_certificate_reads_nothing() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_tls", LIMIT);
-    let dir = TempDir::new("r2tls");
-    let run_id = unique_run_id("r2tls");
-    let leaks = LeakCheck::new(&run_id);
-    let creds = tls_credentials(dir.path(), "creds", 3);
-    let other = tls_credentials(dir.path(), "other", 3);
-    let scenario = case1_scenario(dir.path(), 20.0);
-    let out = dir.path().join("out");
-    let listen = format!("tls/127.0.0.1:{}", free_tcp_port());
-    let creds_text = creds.to_string_lossy();
-    let team = LiveProcess::spawn(formation_run_with_model(
-        &run_id,
+    let t = ProcessTest::start("ros2_tls", LIMIT);
+    let creds = tls_credentials(t.path(), "creds", 3);
+    let other = tls_credentials(t.path(), "other", 3);
+    let scenario = t.case1(20.0);
+    let listen = tls_endpoint();
+    let team = LiveProcess::spawn(ros2_tls_team(
+        &t,
         &scenario,
-        &repo_root().join("onnx/models/policy.onnx"),
-        &out,
-        &[
-            "--transport",
-            "ros2",
-            "--listen",
-            &listen,
-            "--credentials",
-            &creds_text,
-            "--clock",
-            "lockstep",
-            "--pace-ms",
-            "30",
-        ],
+        &listen,
+        &creds,
+        &["--pace-ms", "30"],
     ));
     let mut reader = Command::new(python());
     reader
@@ -91,7 +92,7 @@ fn a_robot_s_certificate_reads_its_tf_and_scan_and_no_certificate_reads_nothing(
     read.assert_success();
     let team = team.finish(LIMIT);
     team.assert_success();
-    leaks.assert_clean();
+    t.assert_clean();
 
     let report: Value = serde_json::from_str(read.stdout().trim())
         .unwrap_or_else(|e| panic!("the reader's report is not JSON ({e})\n{}", read.describe()));
@@ -159,47 +160,24 @@ fn ros2_session(creds: &Path, principal: &str, listen: &str) -> zenoh::Session {
 /// them (nor does the recorder, which would fail on a record it cannot read).
 #[test]
 fn the_recorder_s_certificate_records_a_ros2_tls_team_and_publishes_nothing() {
-    use formation_tests::{AgentGate, mcap_readers};
+    use formation_tests::{
+        AgentGate, assert_recorded_from_the_start, await_recorder_connected, mcap_readers,
+    };
     use formation_transport_zenoh::keys::record_live;
     use std::sync::Arc;
     use std::sync::atomic::{AtomicUsize, Ordering};
     use zenoh::Wait;
     const FORGED: &[u8] = b"forged by the recorder's certificate";
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_tls_record", LIMIT);
-    let dir = TempDir::new("r2trec");
-    let run_id = unique_run_id("r2trec");
-    let leaks = LeakCheck::new(&run_id);
-    let creds = tls_credentials(dir.path(), "creds", 3);
-    let scenario = case1_scenario(dir.path(), 6.0);
-    let out = dir.path().join("out");
-    let own = dir.path().join("own.mcap");
-    let outside = dir.path().join("outside.mcap");
-    let listen = format!("tls/127.0.0.1:{}", free_tcp_port());
-    let creds_text = creds.to_string_lossy();
+    let t = ProcessTest::start("ros2_tls_record", LIMIT);
+    let run_id = &t.run;
+    let creds = tls_credentials(t.path(), "creds", 3);
+    let scenario = t.case1(6.0);
+    let own = t.path().join("own.mcap");
+    let outside = t.path().join("outside.mcap");
+    let listen = tls_endpoint();
     // The agents wait at the gate, so the run waits for them while the recorder connects.
-    let gate = AgentGate::new(dir.path());
-    let mut command = formation_run_with_model(
-        &run_id,
-        &scenario,
-        &repo_root().join("onnx/models/policy.onnx"),
-        &out,
-        &[
-            "--transport",
-            "ros2",
-            "--listen",
-            &listen,
-            "--credentials",
-            &creds_text,
-            "--clock",
-            "lockstep",
-        ],
-    );
-    command
-        .arg("--record")
-        .arg(&own)
-        .env("FORMATION_AGENT_BIN", gate.bin());
-    let team = LiveProcess::spawn(command);
+    let gate = AgentGate::new(t.path());
+    let team = gate.spawn_recording(ros2_tls_team(&t, &scenario, &listen, &creds, &[]), &own);
     let record = |login: Option<&Path>| {
         let mut command = Command::new(&binaries().cli);
         command
@@ -214,10 +192,7 @@ fn the_recorder_s_certificate_records_a_ros2_tls_team_and_publishes_nothing() {
     run(record(None), Duration::from_secs(60))
         .assert_failure_mentioning("admits its recorder by the recorder's certificate");
     let mut recorder = LiveProcess::spawn(record(Some(&creds.join("recorder.json"))));
-    let connected = recorder.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains(&format!("connected to run {run_id}"))
-    });
-    assert!(connected.is_some(), "{}", recorder.describe());
+    await_recorder_connected(&mut recorder, run_id);
 
     let watcher = ros2_session(&creds, "recorder", &listen);
     let count = |key: String| {
@@ -237,12 +212,12 @@ fn the_recorder_s_certificate_records_a_ros2_tls_team_and_publishes_nothing() {
     };
     let cmd_vel = "0/robot_0/cmd_vel/**".to_string();
     let (_twists, twists, forged_twists) = count(cmd_vel.clone());
-    let (_records, records, forged_records) = count(record_live(&run_id));
+    let (_records, records, forged_records) = count(record_live(run_id));
     let forger = ros2_session(&creds, "recorder", &listen);
     // Let the subscriptions reach the router before the run begins.
     std::thread::sleep(Duration::from_secs(1));
     for _ in 0..20 {
-        for key in ["0/robot_0/cmd_vel/forged".to_string(), record_live(&run_id)] {
+        for key in ["0/robot_0/cmd_vel/forged".to_string(), record_live(run_id)] {
             forger
                 .put(key, FORGED)
                 .wait()
@@ -253,14 +228,7 @@ fn the_recorder_s_certificate_records_a_ros2_tls_team_and_publishes_nothing() {
     gate.open();
     let team = team.finish(LIMIT);
     team.assert_success();
-    let recorded = recorder.finish(Duration::from_secs(60));
-    recorded.assert_success();
-    assert!(
-        recorded.stdout().contains("recorded run 0 to")
-            && !recorded.stdout().contains("joined late"),
-        "{}",
-        recorded.describe()
-    );
+    assert_recorded_from_the_start(recorder);
     let compared = mcap_readers(&["compare".as_ref(), own.as_os_str(), outside.as_os_str()]);
     // 6 s at 20 Hz: 120 ticks of 3 robots' scan, odometry, command, TF and more.
     assert!(
@@ -284,5 +252,5 @@ fn the_recorder_s_certificate_records_a_ros2_tls_team_and_publishes_nothing() {
         "a record the recorder's certificate put on the record channel got through: {context}"
     );
     drop((forger, watcher));
-    leaks.assert_clean();
+    t.assert_clean();
 }

@@ -12,14 +12,11 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_cli::launch::read_trajectory;
-use formation_robot_agent::decision::PolicyController;
 use formation_tests::{
-    LeakCheck, LiveProcess, ProcessTest, assert_bit_identical, binaries, count_samples,
-    formation_run, launch_secret, policy_eval, raw_client, read_json, remote_zenoh_agent, run,
-    run_with_input, test_model, unique_run_id, zenoh_credentials,
+    LeakCheck, LiveProcess, ProcessTest, assert_none_counted, await_line, binaries, count_samples,
+    finish_with_remote_agent, formation_run, launch_secret, policy_eval, raw_client, read_json,
+    remote_zenoh_agent, run, run_with_input, test_model, unique_run_id, zenoh_credentials,
 };
-use formation_world::{Scenario, run_episode};
 
 const LIMIT: Duration = Duration::from_secs(180);
 
@@ -27,48 +24,13 @@ fn endpoint(port: u16) -> String {
     format!("tcp/127.0.0.1:{port}")
 }
 
-/// The in-process run `index` of `scenario` with the test model on every robot.
-fn in_process(scenario: &Scenario, index: usize) -> formation_world::Trajectory {
-    let spec = scenario.run_spec(scenario.seed(), index);
-    let model = test_model();
-    let mut controller =
-        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
-            .expect("in-process agents");
-    run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run")
-}
-
-fn run_log(out: &Path, index: usize) -> std::path::PathBuf {
-    out.join("runs").join(format!("run-{index:04}.json"))
-}
-
 /// Issue 13: lockstep case 1 over Zenoh (world, three agents, 127.0.0.1, credentials made by the
 /// launcher) reproduces the in-process run bit for bit.
 #[test]
 fn lockstep_case1_over_zenoh_is_bit_identical_to_in_process() {
     let t = ProcessTest::start("zenoh_lockstep_bit_identical", LIMIT);
-    let scenario_path = t.case1(10.0);
-    let scenario = Scenario::from_path(&scenario_path).expect("scenario");
+    let finished = t.lockstep_case1_over_zenoh(&t.endpoint());
     let out = t.out();
-    let listen = t.endpoint();
-    let finished = run(
-        t.formation_run(
-            &scenario_path,
-            &[
-                "--transport",
-                "zenoh",
-                "--listen",
-                &listen,
-                "--clock",
-                "lockstep",
-            ],
-        ),
-        LIMIT,
-    );
-    finished.assert_success();
-    let over_zenoh = read_trajectory(&run_log(&out, 0)).expect("the run log");
-    let reference = in_process(&scenario, 0);
-    assert_eq!(reference.poses.len(), 201, "10 s at 20 Hz");
-    assert_bit_identical(&over_zenoh, &reference);
     let credentials = out.join("credentials").join(t.run.as_str());
     assert!(
         credentials.join("robot-0.json").is_file(),
@@ -275,10 +237,7 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
         .args(["--clock", "realtime", "--credentials"])
         .arg(&creds);
     let mut launch = LiveProcess::spawn(command);
-    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains("waiting for the remote agents of robots [2]")
-    });
-    assert!(waiting.is_some(), "{}", launch.describe());
+    await_line(&mut launch, "waiting for the remote agents of robots [2]");
     // Robots 0 and 1 are local and connect; give them time to be admitted.
     std::thread::sleep(Duration::from_secs(3));
 
@@ -308,26 +267,16 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
     // The remote agent, started by hand as on another host, with robot 2's credentials only.
     let mut agent = remote_zenoh_agent(&listen, &t.run, 2);
     agent.arg("--credentials").arg(creds.join("robot-2.json"));
-    let remote = LiveProcess::spawn_with_input(agent, None);
-    let finished = launch.finish(LIMIT);
-    finished.assert_success();
-    let remote = remote.finish(Duration::from_secs(30));
-    assert!(remote.output.status.success(), "{}", remote.describe());
+    let finished = finish_with_remote_agent(launch, agent, LIMIT);
     assert!(
         own_scans.load(Ordering::Relaxed) > 0,
         "robot 1's login may read robot 1's scans (so the subscription works)\n{}",
         finished.describe()
     );
-    assert_eq!(
-        others.load(Ordering::Relaxed),
-        0,
-        "robot 1's login received robot 2's traffic"
-    );
-    assert_eq!(
-        everything.load(Ordering::Relaxed),
-        0,
-        "robot 1's login received robot 0's traffic"
-    );
+    assert_none_counted(&[
+        (&others, "robot 1's login received robot 2's traffic"),
+        (&everything, "robot 1's login received robot 0's traffic"),
+    ]);
     assert!(
         !finished.stderr().contains("refused process"),
         "nobody greeted as robot 2 but its agent\n{}",
@@ -360,10 +309,7 @@ fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
         .arg("--credentials")
         .arg(&creds);
     let mut launch = LiveProcess::spawn(command);
-    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains("waiting for the remote agents of robots [2]")
-    });
-    assert!(waiting.is_some(), "{}", launch.describe());
+    await_line(&mut launch, "waiting for the remote agents of robots [2]");
     let agent = |credentials: Option<&Path>| {
         let mut agent = remote_zenoh_agent(&listen, &t.run, 2);
         agent.args(["--connect-timeout-ms", "5000"]);
@@ -398,11 +344,8 @@ fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
         missing.display()
     ));
     // The run's own file: the agent joins and the run completes.
-    let joined = LiveProcess::spawn_with_input(agent(Some(&creds.join("robot-2.json"))), None);
-    let finished = launch.finish(LIMIT);
-    finished.assert_success();
-    let joined = joined.finish(Duration::from_secs(30));
-    assert!(joined.output.status.success(), "{}", joined.describe());
+    let finished =
+        finish_with_remote_agent(launch, agent(Some(&creds.join("robot-2.json"))), LIMIT);
     assert!(
         !finished.stderr().contains("refused process"),
         "the refused logins never reached the world\n{}",

@@ -21,35 +21,29 @@ use std::path::Path;
 use std::time::Duration;
 
 use formation_cli::launch::read_trajectory;
-use formation_robot_agent::decision::PolicyController;
 use formation_tests::relay::ResettingRelay;
 use formation_tests::{
-    LiveProcess, ProcessTest, assert_bit_identical, free_tcp_port, remote_zenoh_agent, send_signal,
-    test_model, zenoh_credentials,
+    Finished, LiveProcess, ProcessTest, assert_bit_identical, await_line, free_tcp_port,
+    in_process_run, remote_zenoh_agent, send_signal, zenoh_credentials,
 };
-use formation_world::{Scenario, run_episode};
+use formation_world::Scenario;
 
 const LIMIT: Duration = Duration::from_secs(180);
 
-/// Run 0 of the scenario at `scenario` in-process, the test model on every robot.
-fn in_process(scenario: &Path) -> formation_world::Trajectory {
-    let scenario = Scenario::from_path(scenario).expect("scenario");
-    let spec = scenario.run_spec(scenario.seed(), 0);
-    let model = test_model();
-    let mut controller =
-        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
-            .expect("in-process agents");
-    run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run")
-}
-
-/// A lockstep launch of `scenario` with robot 1 remote, listening on a free port of
+/// A launch of `scenario` on clock `clock` with robot 1 remote, listening on a free port of
 /// 127.0.0.1, with `extra` flags; returns it (waiting for robot 1) and its endpoint.
-fn launch(t: &ProcessTest, scenario: &Path, creds: &Path, extra: &[&str]) -> (LiveProcess, String) {
+fn launch(
+    t: &ProcessTest,
+    scenario: &Path,
+    creds: &Path,
+    clock: &str,
+    extra: &[&str],
+) -> (LiveProcess, String) {
     let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
     let creds = creds.to_string_lossy();
     let flags = [
         ["--transport", "zenoh", "--listen", &listen, "--remote", "1"].as_slice(),
-        &["--clock", "lockstep", "--remote-timeout-s", "60"],
+        &["--clock", clock, "--remote-timeout-s", "60"],
         &["--credentials", &creds],
         extra,
     ]
@@ -60,11 +54,44 @@ fn launch(t: &ProcessTest, scenario: &Path, creds: &Path, extra: &[&str]) -> (Li
         &t.out(),
         &flags,
     ));
-    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains("waiting for the remote agents of robots [1]")
-    });
-    assert!(waiting.is_some(), "{}", launch.describe());
+    await_line(&mut launch, "waiting for the remote agents of robots [1]");
     (launch, listen)
+}
+
+/// Waits for `launch` and then `agent` to end, both successfully.
+fn finish_both(launch: LiveProcess, agent: LiveProcess) -> (Finished, Finished) {
+    let finished = launch.finish(LIMIT);
+    let agent = agent.finish(Duration::from_secs(30));
+    finished.assert_success();
+    assert!(agent.output.status.success(), "{}", agent.describe());
+    (finished, agent)
+}
+
+/// The end of a lockstep run whose robot 1's agent went and came back: both ended successfully,
+/// the world's stderr says the agent came back (`came_back`), no agent was counted lost, and the
+/// run is bit-identical to in-process.
+fn assert_back_and_bit_identical(
+    t: &ProcessTest,
+    (launch, agent): (LiveProcess, LiveProcess),
+    scenario: &Path,
+    came_back: impl Fn(&str) -> bool,
+) {
+    let (finished, agent) = finish_both(launch, agent);
+    assert!(
+        came_back(&finished.stderr()),
+        "the world saw robot 1's agent go and come back\n{}\n{}",
+        finished.describe(),
+        agent.describe()
+    );
+    assert!(
+        !finished.stdout().contains("agent lost"),
+        "no agent counted lost\n{}",
+        finished.describe()
+    );
+    let over_zenoh = read_trajectory(&t.out().join("runs/run-0000.json")).expect("the run log");
+    let scenario = Scenario::from_path(scenario).expect("scenario");
+    assert_bit_identical(&over_zenoh, &in_process_run(&scenario, 0));
+    t.assert_clean();
 }
 
 /// Robot 1's agent of `t`'s run, connecting to `connect` with its credentials from `creds`.
@@ -85,35 +112,17 @@ fn an_agent_whose_link_resets_reconnects_and_lockstep_stays_bit_identical() {
     let creds = zenoh_credentials(t.path(), 3);
     let scenario = t.case1(10.0);
     // Paced, so the resets fall mid-run (201 ticks of at least 30 ms).
-    let (mut launch, listen) = launch(&t, &scenario, &creds, &["--pace-ms", "30"]);
+    let (mut launch, listen) = launch(&t, &scenario, &creds, "lockstep", &["--pace-ms", "30"]);
     let relay = ResettingRelay::start(listen.trim_start_matches("tcp/"));
     let agent = robot1(&t, &format!("tcp/127.0.0.1:{}", relay.port), &creds);
-    let connected =
-        launch.wait_for_line(Duration::from_secs(60), |l| l.contains("agents connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_line(&mut launch, "agents connected");
     for _ in 0..2 {
         std::thread::sleep(Duration::from_secs(2));
         assert!(relay.reset() >= 1, "the relay carried robot 1's link");
     }
-    let finished = launch.finish(LIMIT);
-    let agent = agent.finish(Duration::from_secs(30));
-    finished.assert_success();
-    assert!(agent.output.status.success(), "{}", agent.describe());
-    let stderr = finished.stderr();
-    assert!(
-        stderr.matches("robot 1: agent pid").count() >= 2 && stderr.contains("reconnected after"),
-        "the world saw robot 1's agent go and come back\n{}\n{}",
-        finished.describe(),
-        agent.describe()
-    );
-    assert!(
-        !finished.stdout().contains("agent lost"),
-        "no agent counted lost\n{}",
-        finished.describe()
-    );
-    let over_zenoh = read_trajectory(&t.out().join("runs/run-0000.json")).expect("the run log");
-    assert_bit_identical(&over_zenoh, &in_process(&scenario));
-    t.assert_clean();
+    assert_back_and_bit_identical(&t, (launch, agent), &scenario, |stderr| {
+        stderr.matches("robot 1: agent pid").count() >= 2 && stderr.contains("reconnected after")
+    });
 }
 
 /// Issue 36: robot 1's agent stopped (SIGSTOP) for 12 s, past the 10 s link lease, so the
@@ -129,34 +138,18 @@ fn an_agent_stopped_past_the_lease_reconnects_and_lockstep_stays_bit_identical()
         &t,
         &scenario,
         &creds,
+        "lockstep",
         &["--pace-ms", "20", "--timeout-ms", "60000"],
     );
     let agent = robot1(&t, &listen, &creds);
-    let connected =
-        launch.wait_for_line(Duration::from_secs(60), |l| l.contains("agents connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_line(&mut launch, "agents connected");
     std::thread::sleep(Duration::from_secs(1));
     send_signal(agent.id(), "STOP");
     std::thread::sleep(Duration::from_secs(12));
     send_signal(agent.id(), "CONT");
-    let finished = launch.finish(LIMIT);
-    let agent = agent.finish(Duration::from_secs(30));
-    finished.assert_success();
-    assert!(agent.output.status.success(), "{}", agent.describe());
-    assert!(
-        finished.stderr().contains("reconnected after"),
-        "the world saw robot 1's agent go and come back\n{}\n{}",
-        finished.describe(),
-        agent.describe()
-    );
-    assert!(
-        !finished.stdout().contains("agent lost"),
-        "no agent counted lost\n{}",
-        finished.describe()
-    );
-    let over_zenoh = read_trajectory(&t.out().join("runs/run-0000.json")).expect("the run log");
-    assert_bit_identical(&over_zenoh, &in_process(&scenario));
-    t.assert_clean();
+    assert_back_and_bit_identical(&t, (launch, agent), &scenario, |stderr| {
+        stderr.contains("reconnected after")
+    });
 }
 
 /// Issue 36: robot 1's agent stopped (SIGSTOP) for 17 s, past the 10 s lease and the 5 s the
@@ -169,35 +162,9 @@ fn an_agent_back_after_the_grace_is_told_it_was_counted_gone_and_exits() {
     let t = ProcessTest::start("zlate", LIMIT);
     let creds = zenoh_credentials(t.path(), 3);
     let scenario = t.case1(30.0);
-    let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
-    let creds_text = creds.to_string_lossy();
-    let mut launch = LiveProcess::spawn(formation_tests::formation_run(
-        &t.run,
-        &scenario,
-        &t.out(),
-        &[
-            "--transport",
-            "zenoh",
-            "--listen",
-            &listen,
-            "--remote",
-            "1",
-            "--clock",
-            "realtime",
-            "--remote-timeout-s",
-            "60",
-            "--credentials",
-            &creds_text,
-        ],
-    ));
-    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains("waiting for the remote agents of robots [1]")
-    });
-    assert!(waiting.is_some(), "{}", launch.describe());
+    let (mut launch, listen) = launch(&t, &scenario, &creds, "realtime", &[]);
     let agent = robot1(&t, &listen, &creds);
-    let connected =
-        launch.wait_for_line(Duration::from_secs(60), |l| l.contains("agents connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_line(&mut launch, "agents connected");
     std::thread::sleep(Duration::from_secs(1));
     send_signal(agent.id(), "STOP");
     let lost = launch.wait_for_line(Duration::from_secs(40), |l| {
@@ -237,24 +204,10 @@ fn a_swap_answer_lost_in_a_drop_is_sent_again() {
     let t = ProcessTest::start("zswapdrop", LIMIT);
     let creds = zenoh_credentials(t.path(), 3);
     let scenario = t.case1(40.0);
-    let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
-    let creds_text = creds.to_string_lossy();
-    let mut launch = LiveProcess::spawn(formation_tests::formation_run(
-        &t.run,
-        &scenario,
-        &t.out(),
-        &[
-            ["--transport", "zenoh", "--listen", &listen, "--remote", "1"].as_slice(),
-            &["--clock", "realtime", "--remote-timeout-s", "60"],
-            &["--credentials", &creds_text],
-        ]
-        .concat(),
-    ));
+    let (mut launch, listen) = launch(&t, &scenario, &creds, "realtime", &[]);
     let relay = ResettingRelay::start(listen.trim_start_matches("tcp/"));
     let agent = robot1(&t, &format!("tcp/127.0.0.1:{}", relay.port), &creds);
-    let connected =
-        launch.wait_for_line(Duration::from_secs(60), |l| l.contains("agents connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_line(&mut launch, "agents connected");
     std::thread::sleep(Duration::from_secs(1));
     relay.hold_toward_world(true);
     let other = t.path().join("other.onnx");
@@ -279,10 +232,7 @@ fn a_swap_answer_lost_in_a_drop_is_sent_again() {
         "{}",
         swapped.describe()
     );
-    let finished = launch.finish(LIMIT);
-    let agent = agent.finish(Duration::from_secs(30));
-    finished.assert_success();
-    assert!(agent.output.status.success(), "{}", agent.describe());
+    let (_, agent) = finish_both(launch, agent);
     assert!(
         agent.stderr().contains("the world asked for swap"),
         "the agent answered the repeated swap request again\n{}",

@@ -19,19 +19,19 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, SystemTime};
 
 use formation_cli::launch::read_trajectory;
-use formation_proto::wire::ScanMsg;
-use formation_robot_agent::decision::PolicyController;
+use formation_proto::wire::{RunId, ScanMsg};
 use formation_tests::capture::{PacketCapture, TcpStream as CapturedStream, TcpStreams};
 use formation_tests::netns::{AGENTS_IP, NetPair, WORLD_IP};
 use formation_tests::tls::raw_tls_client;
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
-    formation_run, formation_run_args, free_tcp_port, one_at_a_time, read_json, remote_zenoh_agent,
-    run, test_model, unique_run_id,
+    LeakCheck, LiveProcess, ProcessTest, TempDir, assert_bit_identical, assert_none_counted,
+    await_line, binaries, case1_scenario, finish_with_remote_agent, formation_run_args,
+    free_tcp_port, in_process_run, one_at_a_time, policy_eval, read_json, remote_zenoh_agent, run,
+    test_model, tls_credentials, unique_run_id,
 };
 use formation_transport_zenoh::tls::issue::{Authority, issue_for};
 use formation_transport_zenoh::tls::{certificate_file, key_file};
-use formation_world::{Scenario, run_episode};
+use formation_world::Scenario;
 use zenoh::Wait;
 
 const LIMIT: Duration = Duration::from_secs(180);
@@ -40,18 +40,6 @@ const REFUSAL_LIMIT: Duration = Duration::from_secs(10);
 
 fn endpoint(port: u16) -> String {
     format!("tls/127.0.0.1:{port}")
-}
-
-/// `formation credentials --tls --robots N --out DIR/NAME`.
-fn tls_credentials(dir: &Path, name: &str, robots: usize) -> PathBuf {
-    let creds = dir.join(name);
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args(["credentials", "--tls", "--valid-days", "30"])
-        .args(["--robots", &robots.to_string(), "--out"])
-        .arg(&creds);
-    run(command, Duration::from_secs(120)).assert_success();
-    creds
 }
 
 /// A folder holding `principal`'s login file from `logins`, and the TLS files given
@@ -98,42 +86,10 @@ fn count_keys(
 /// launcher) reproduces the in-process run bit for bit.
 #[test]
 fn a_tls_team_runs_lockstep_bit_identical_to_in_process() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_tls_lockstep", LIMIT);
-    let dir = TempDir::new("ztls");
-    let run_id = unique_run_id("ztls");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario_path = case1_scenario(dir.path(), 10.0);
-    let scenario = Scenario::from_path(&scenario_path).expect("scenario");
-    let out = dir.path().join("out");
-    let listen = endpoint(free_tcp_port());
-    let finished = run(
-        formation_run(
-            &run_id,
-            &scenario_path,
-            &out,
-            &[
-                "--transport",
-                "zenoh",
-                "--listen",
-                &listen,
-                "--clock",
-                "lockstep",
-            ],
-        ),
-        LIMIT,
-    );
-    finished.assert_success();
-    let over_tls = read_trajectory(&out.join("runs").join("run-0000.json")).expect("the run log");
-    let spec = scenario.run_spec(scenario.seed(), 0);
-    let model = test_model();
-    let mut controller =
-        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
-            .expect("in-process agents");
-    let reference = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
-    assert_eq!(reference.poses.len(), 201, "10 s at 20 Hz");
-    assert_bit_identical(&over_tls, &reference);
-    let credentials = out.join("credentials").join(run_id.as_str());
+    let t = ProcessTest::start("zenoh_tls_lockstep", LIMIT);
+    let finished = t.lockstep_case1_over_zenoh(&endpoint(free_tcp_port()));
+    let out = t.out();
+    let credentials = out.join("credentials").join(t.run.as_str());
     assert!(
         credentials.join("ca.pem").is_file() && credentials.join("world.key.pem").is_file(),
         "the launcher made certificates for a tls/ launch\n{}",
@@ -144,7 +100,7 @@ fn a_tls_team_runs_lockstep_bit_identical_to_in_process() {
         "no clear-text warning on TLS\n{}",
         finished.describe()
     );
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 36: against a TLS team whose robot 1 is remote, an agent for robot 1 with no
@@ -155,20 +111,14 @@ fn a_tls_team_runs_lockstep_bit_identical_to_in_process() {
 /// publishes reaches nobody. Then robot 1's own agent joins and the run completes.
 #[test]
 fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_tls_refusals", LIMIT);
-    let dir = TempDir::new("ztref");
-    let run_id = unique_run_id("ztref");
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 6.0);
-    let out = dir.path().join("out");
+    let t = ProcessTest::start("zenoh_tls_refusals", LIMIT);
+    let (dir, run_id) = (&t.dir, &t.run);
+    let scenario = t.case1(6.0);
     let creds = tls_credentials(dir.path(), "creds", 3);
     let other = tls_credentials(dir.path(), "other", 3);
     let listen = endpoint(free_tcp_port());
-    let mut command = formation_run(
-        &run_id,
+    let mut command = t.formation_run(
         &scenario,
-        &out,
         &["--transport", "zenoh", "--listen", &listen, "--remote", "1"],
     );
     // A robot whose agent never gets through (or is lost) fails the run within the watchdog,
@@ -183,10 +133,7 @@ fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
         ])
         .arg(&creds);
     let mut launch = LiveProcess::spawn(command);
-    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains("waiting for the remote agents of robots [1]")
-    });
-    assert!(waiting.is_some(), "{}", launch.describe());
+    await_line(&mut launch, "waiting for the remote agents of robots [1]");
 
     // An expired certificate of the team's own authority.
     let now = SystemTime::now();
@@ -234,7 +181,7 @@ fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
         ),
     ];
     for (case, folder, cause) in cases {
-        let mut agent = remote_zenoh_agent(&listen, &run_id, 1);
+        let mut agent = remote_zenoh_agent(&listen, run_id, 1);
         agent.arg("--credentials").arg(folder.join("robot-1.json"));
         let refused = run(agent, REFUSAL_LIMIT);
         assert!(
@@ -301,41 +248,23 @@ fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
         std::thread::sleep(Duration::from_millis(50));
     }
 
-    let mut agent = remote_zenoh_agent(&listen, &run_id, 1);
+    let mut agent = remote_zenoh_agent(&listen, run_id, 1);
     agent.arg("--credentials").arg(creds.join("robot-1.json"));
-    let remote = LiveProcess::spawn_with_input(agent, None);
-    let finished = launch.finish(LIMIT);
-    finished.assert_success();
-    let remote = remote.finish(Duration::from_secs(30));
-    assert!(remote.output.status.success(), "{}", remote.describe());
+    let finished = finish_with_remote_agent(launch, agent, LIMIT);
     assert!(
         recorder_scans.load(Ordering::Relaxed) > 0,
         "the recorder reads scans\n{}",
         finished.describe()
     );
-    assert_eq!(
-        forged_seen.load(Ordering::Relaxed),
-        0,
-        "the recorder published a command"
-    );
-    assert_eq!(
-        robot2_sees.load(Ordering::Relaxed),
-        0,
-        "robot 2's certificate read robot 1's keys"
-    );
+    assert_none_counted(&[
+        (&forged_seen, "the recorder published a command"),
+        (&robot2_sees, "robot 2's certificate read robot 1's keys"),
+    ]);
     for (case, _, _, count) in &refused_clients {
-        assert_eq!(
-            count.load(Ordering::Relaxed),
-            0,
-            "{case} received robot 1's traffic"
-        );
+        assert_none_counted(&[(count, &format!("{case} received robot 1's traffic"))]);
     }
     if let Some((_s, count)) = &mixed_sees {
-        assert_eq!(
-            count.load(Ordering::Relaxed),
-            0,
-            "robot 2's certificate with robot 1's login"
-        );
+        assert_none_counted(&[(count, "robot 2's certificate with robot 1's login")]);
     }
     drop((
         robot2,
@@ -345,7 +274,7 @@ fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
         publisher,
         refused_clients,
     ));
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 36: `formation credentials --tls` writes private keys in a private folder, and
@@ -488,10 +417,7 @@ fn eavesdrop(protocol: &str, dir: &Path, creds: &Path) -> Eavesdropped {
         .concat(),
     );
     let mut launch = LiveProcess::spawn(command);
-    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains("waiting for the remote agents of robots [1]")
-    });
-    assert!(waiting.is_some(), "{}", launch.describe());
+    await_line(&mut launch, "waiting for the remote agents of robots [1]");
     let robot1 = format!("formation/{run_id}/robot/1/*");
     let mut tap = pair.in_world(Path::new(env!("CARGO_BIN_EXE_zenoh-tap")));
     tap.arg(&listen)
@@ -567,18 +493,49 @@ fn namespaces() -> NetPair {
     })
 }
 
+/// Waits for `launch` (in `pair`'s world namespace) to wait for its remote agents, starts the
+/// agents of robots 0, 1 and 2 in the agents' namespace (with `extra` flags and their
+/// credentials from `creds`), and waits for the launch and then each agent to end successfully.
+fn run_team_across(
+    pair: &NetPair,
+    mut launch: LiveProcess,
+    listen: &str,
+    run_id: &RunId,
+    creds: &Path,
+    extra: &[&str],
+) {
+    await_line(&mut launch, "waiting for the remote agents");
+    let agents: Vec<_> = (0..3)
+        .map(|robot| {
+            let mut agent = pair.in_agents(&binaries().agent);
+            agent
+                .args(["--transport", "zenoh", "--connect", listen])
+                .args(["--run-id", run_id.as_str(), "--robot", &robot.to_string()])
+                .args(extra)
+                .arg("--model")
+                .arg(test_model())
+                .arg("--credentials")
+                .arg(creds.join(format!("robot-{robot}.json")));
+            LiveProcess::spawn(agent)
+        })
+        .collect();
+    launch.finish(LIMIT).assert_success();
+    for agent in agents {
+        let agent = agent.finish(Duration::from_secs(30));
+        assert!(agent.output.status.success(), "{}", agent.describe());
+    }
+}
+
 /// Issue 36 acceptance: a capture of the veth between a robot's agent and its world, in two
 /// network namespaces, holds no scan's range bytes and no command in clear on `tls/`; the same
 /// capture of a `tcp/` link finds them all (so the check can fail), and both captures are whole
 /// (no gap in any TCP stream). Needs root (CI runs as root).
 #[test]
 fn a_capture_of_a_tls_link_holds_no_scan_or_command_in_clear() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_tls_capture", LIMIT);
-    let dir = TempDir::new("ztcap");
-    let creds = tls_credentials(dir.path(), "creds", 3);
+    let t = ProcessTest::start("zenoh_tls_capture", LIMIT);
+    let creds = tls_credentials(t.path(), "creds", 3);
 
-    let plain = eavesdrop("tcp", dir.path(), &creds);
+    let plain = eavesdrop("tcp", t.path(), &creds);
     let (carried, gaps) = plain.bytes_and_gaps();
     eprintln!("tcp/: {carried} bytes crossed the veth");
     assert_eq!(gaps, 0, "the tcp/ capture is whole");
@@ -592,7 +549,7 @@ fn a_capture_of_a_tls_link_holds_no_scan_or_command_in_clear() {
         assert!(plain.carried(true, command), "tcp/: command {k} in clear");
     }
 
-    let sealed = eavesdrop("tls", dir.path(), &creds);
+    let sealed = eavesdrop("tls", t.path(), &creds);
     let (carried, gaps) = sealed.bytes_and_gaps();
     eprintln!("tls/: {carried} bytes crossed the veth");
     assert_eq!(gaps, 0, "the tls/ capture is whole");
@@ -625,21 +582,17 @@ fn a_capture_of_a_tls_link_holds_no_scan_or_command_in_clear() {
 /// (CI runs as root).
 #[test]
 fn a_tls_team_across_namespaces_gives_the_in_process_table() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("zenoh_tls_netns", LIMIT);
+    let t = ProcessTest::start("zenoh_tls_netns", LIMIT);
     let pair = namespaces();
-    let dir = TempDir::new("ztns");
-    let run_id = unique_run_id("ztns");
-    let leaks = LeakCheck::new(&run_id);
-    let creds = tls_credentials(dir.path(), "creds", 3);
-    let scenario_path = case1_scenario(dir.path(), 6.0);
-    let out = dir.path().join("out");
+    let creds = tls_credentials(t.path(), "creds", 3);
+    let scenario_path = t.case1(6.0);
+    let out = t.out();
     let listen = format!("tls/{WORLD_IP}:{}", free_tcp_port());
     let creds_text = creds.to_string_lossy();
     let mut command = pair.in_world(&binaries().cli);
     formation_run_args(
         &mut command,
-        &run_id,
+        &t.run,
         (&scenario_path, test_model(), &out),
         &[
             "--transport",
@@ -656,45 +609,17 @@ fn a_tls_team_across_namespaces_gives_the_in_process_table() {
             &creds_text,
         ],
     );
-    let mut launch = LiveProcess::spawn(command);
-    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains("waiting for the remote agents")
-    });
-    assert!(waiting.is_some(), "{}", launch.describe());
-    let agents: Vec<_> = (0..3)
-        .map(|robot| {
-            let mut agent = pair.in_agents(&binaries().agent);
-            agent
-                .args(["--transport", "zenoh", "--connect", &listen])
-                .args(["--run-id", run_id.as_str(), "--robot", &robot.to_string()])
-                .args(["--connect-timeout-ms", "60000", "--model"])
-                .arg(test_model())
-                .arg("--credentials")
-                .arg(creds.join(format!("robot-{robot}.json")));
-            LiveProcess::spawn(agent)
-        })
-        .collect();
-    launch.finish(LIMIT).assert_success();
-    for agent in agents {
-        let agent = agent.finish(Duration::from_secs(30));
-        assert!(agent.output.status.success(), "{}", agent.describe());
-    }
-    let eval_json = dir.path().join("in-process.json");
-    let mut eval = Command::new(&binaries().cli);
-    eval.args([
-        "eval",
-        "--controller",
-        "policy",
-        "--runs",
-        "1",
-        "--scenario",
-    ])
-    .arg(&scenario_path)
-    .arg("--model")
-    .arg(test_model())
-    .arg("--json")
-    .arg(&eval_json);
-    run(eval, LIMIT).assert_success();
+    let launch = LiveProcess::spawn(command);
+    run_team_across(
+        &pair,
+        launch,
+        &listen,
+        &t.run,
+        &creds,
+        &["--connect-timeout-ms", "60000"],
+    );
+    let eval_json = t.path().join("in-process.json");
+    run(policy_eval(&scenario_path, test_model(), &eval_json), LIMIT).assert_success();
     let in_process = read_json(&eval_json);
     let over_tls = read_json(&out.join("summary.json"));
     let keys = in_process.as_object().expect("eval JSON is an object");
@@ -706,16 +631,11 @@ fn a_tls_team_across_namespaces_gives_the_in_process_table() {
         );
     }
     let scenario = Scenario::from_path(&scenario_path).expect("scenario");
-    let spec = scenario.run_spec(scenario.seed(), 0);
-    let model = test_model();
-    let mut controller =
-        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
-            .expect("in-process agents");
-    let reference = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
+    let reference = in_process_run(&scenario, 0);
     let over_tls = read_trajectory(&out.join("runs").join("run-0000.json")).expect("the run log");
     assert_bit_identical(&over_tls, &reference);
     drop(pair);
-    leaks.assert_clean();
+    t.assert_clean();
 }
 
 /// Issue 36's cost of TLS, measured (not a test: it asserts no time, and runs only when asked,
@@ -757,29 +677,8 @@ fn tls_round_trip_against_plain_tcp_across_namespaces() {
                 (&scenario, test_model(), &out),
                 &flags,
             );
-            let mut launch = LiveProcess::spawn(command);
-            let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
-                l.contains("waiting for the remote agents")
-            });
-            assert!(waiting.is_some(), "{}", launch.describe());
-            let agents: Vec<_> = (0..3)
-                .map(|robot| {
-                    let mut agent = pair.in_agents(&binaries().agent);
-                    agent
-                        .args(["--transport", "zenoh", "--connect", &listen])
-                        .args(["--run-id", run_id.as_str(), "--robot", &robot.to_string()])
-                        .arg("--model")
-                        .arg(test_model())
-                        .arg("--credentials")
-                        .arg(creds.join(format!("robot-{robot}.json")));
-                    LiveProcess::spawn(agent)
-                })
-                .collect();
-            launch.finish(LIMIT).assert_success();
-            for agent in agents {
-                let agent = agent.finish(Duration::from_secs(30));
-                assert!(agent.output.status.success(), "{}", agent.describe());
-            }
+            let launch = LiveProcess::spawn(command);
+            run_team_across(&pair, launch, &listen, &run_id, &creds, &[]);
             let profile = read_json(&out.join("profile.json"));
             let round_trip = &profile["stages"]["round_trip"];
             eprintln!(
