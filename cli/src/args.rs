@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use formation_expert::ExpertGains;
 use formation_runtime::transport::{Transport, TransportParser};
 use formation_trainer_bridge::train::Architecture;
 
@@ -216,6 +217,10 @@ pub struct EvalArgs {
     /// evaluation of all the runs writes, byte for byte (in-process only).
     #[arg(long, value_name = "FILE")]
     pub shard: Option<PathBuf>,
+    /// With `--controller expert-own-scan`: the law's gains as JSON, fields of `ExpertGains` (for
+    /// example `{"unblock_hidden_pairs": true}`); the scored expert keeps its own.
+    #[arg(long, value_name = "JSON", value_parser = expert_gains)]
+    pub gains: Option<ExpertGains>,
     /// Walk a robot profile's reality ladder (`pioneer-p3dx`, `turtlebot3-burger`): the
     /// scenario with the profile's effects added one at a time, the expert and (unless
     /// `--controller expert`) the policy, or with `--controller expert-own-scan` the expert's
@@ -249,8 +254,8 @@ pub struct GaugeArgs {
     pub model: Option<PathBuf>,
     /// Also gauge the expert with these gains as JSON (for example `{"shaping_wheel_accel": 1.0}`,
     /// a teacher), against the scored expert's labels; `{}` gauges the scored expert itself.
-    #[arg(long, value_name = "JSON")]
-    pub expert: Option<String>,
+    #[arg(long, value_name = "JSON", value_parser = expert_gains)]
+    pub expert: Option<ExpertGains>,
     /// Also gauge the expert's law on each robot's own scan (`eval --controller
     /// expert-own-scan`, the teacher that sees what a policy sees), with `--expert`'s gains when
     /// given, against the scored expert's labels.
@@ -277,6 +282,20 @@ pub struct GaugeArgs {
     /// Worker threads (default: available cores).
     #[arg(long)]
     pub threads: Option<usize>,
+}
+
+/// Parses the expert's gains from JSON (fields of `ExpertGains`, the others at their defaults)
+/// and checks them.
+pub fn expert_gains(json: &str) -> Result<ExpertGains, String> {
+    let gains: ExpertGains = serde_json::from_str(json).map_err(|e| {
+        format!(
+            "{json:?} is not the expert's gains as JSON ({e}): give for example \
+             '{{\"shaping_wheel_accel\": 1.0}}' (fields of ExpertGains), or '{{}}' for the \
+             scored expert's"
+        )
+    })?;
+    gains.validate().map_err(|e| e.to_string())?;
+    Ok(gains)
 }
 
 /// Parses a gauge run length: seconds from 1 to 3600.
@@ -896,6 +915,49 @@ mod tests {
             let error = team_duration(bad).unwrap_err();
             assert!(error.contains(says), "{bad}: {error}");
         }
+    }
+
+    #[test]
+    fn expert_gains_parse_from_json_and_bad_ones_name_the_field() {
+        let gains = expert_gains(r#"{"unblock_hidden_pairs": true}"#).expect("parses");
+        assert!(gains.unblock_hidden_pairs);
+        assert_eq!(
+            gains.k_formation_graph,
+            ExpertGains::default().k_formation_graph
+        );
+        assert_eq!(expert_gains("{}"), Ok(ExpertGains::default()));
+        let typo = expert_gains(r#"{"unblock_hiden_pairs": true}"#).unwrap_err();
+        assert!(
+            typo.contains("unblock_hiden_pairs") && typo.contains("fields of ExpertGains"),
+            "{typo}"
+        );
+        let negative = expert_gains(r#"{"k_formation_graph": -1}"#).unwrap_err();
+        assert!(negative.contains("k_formation_graph"), "{negative}");
+        let cli = Cli::try_parse_from([
+            "formation",
+            "eval",
+            "--scenario",
+            "s.toml",
+            "--controller",
+            "expert-own-scan",
+            "--gains",
+            r#"{"unblock_hidden_pairs": true}"#,
+        ])
+        .expect("parses");
+        let Command::Eval(eval) = cli.command else {
+            panic!("an eval")
+        };
+        assert!(eval.gains.is_some_and(|g| g.unblock_hidden_pairs));
+        assert!(crate::eval::refuse_gains_without_own_scan(&eval).is_ok());
+        let policy = EvalArgs {
+            controller: ControllerKind::Policy,
+            ..eval
+        };
+        let refused = crate::eval::refuse_gains_without_own_scan(&policy).unwrap_err();
+        assert!(
+            refused.to_string().contains("--controller expert-own-scan"),
+            "{refused}"
+        );
     }
 
     #[test]

@@ -101,6 +101,7 @@ fn run_eval(
         first_run: None,
         shard: None,
         ladder: None,
+        gains: None,
     };
     let (out, results) =
         eval::evaluate(&eval_args).with_context(|| format!("evaluating {name}"))?;

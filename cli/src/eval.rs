@@ -422,11 +422,25 @@ fn results_in_process(
     Ok(results)
 }
 
+/// `Ok` unless `--gains` was given to a controller other than the expert's own-scan law (the
+/// scored expert is the baseline and keeps its gains; a policy has none).
+pub fn refuse_gains_without_own_scan(args: &EvalArgs) -> anyhow::Result<()> {
+    if args.gains.is_some() && args.controller != ControllerKind::ExpertOwnScan {
+        anyhow::bail!(
+            "--gains sets the gains of --controller expert-own-scan, not of --controller {}: the \
+             scored expert keeps its own (try them with `formation gauge --expert JSON`); add \
+             --controller expert-own-scan or drop --gains",
+            controller_name(args)
+        );
+    }
+    Ok(())
+}
+
 /// What drives the robots of an in-process evaluation.
 fn driver_of(args: &EvalArgs, team: &EvalTeam) -> Driver {
     match args.controller {
         ControllerKind::Expert => Driver::Expert(ExpertGains::default()),
-        ControllerKind::ExpertOwnScan => Driver::ExpertOwnScan(ExpertGains::default()),
+        ControllerKind::ExpertOwnScan => Driver::ExpertOwnScan(args.gains.unwrap_or_default()),
         ControllerKind::Policy => Driver::Policy {
             models: team.models.clone(),
         },
@@ -551,7 +565,7 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
     match args.controller {
         ControllerKind::Policy => drivers.push(policy_driver(args.model.as_deref(), &base, sizes)?),
         ControllerKind::ExpertOwnScan => {
-            drivers.push(ScalingDriver::ExpertOwnScan(ExpertGains::default()));
+            drivers.push(ScalingDriver::ExpertOwnScan(args.gains.unwrap_or_default()));
         }
         ControllerKind::Expert => {}
     }
@@ -605,6 +619,7 @@ fn refuse_overwriting_inputs(args: &EvalArgs) -> anyhow::Result<()> {
 /// `formation eval`.
 pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
     network_flags(args)?;
+    refuse_gains_without_own_scan(args)?;
     // A path that cannot be written is refused before hours of runs, not after.
     if let Some(json) = &args.json {
         formation_proto::files::check_output_file(json)?;

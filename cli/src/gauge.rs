@@ -7,7 +7,6 @@
 
 use std::time::Instant;
 
-use anyhow::Context;
 use formation_expert::ExpertGains;
 use formation_learning::response::{GaugeSettings, gauge_response, response_text};
 use formation_learning::rollout::with_threads;
@@ -35,18 +34,8 @@ pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
     let runs = args.runs.unwrap_or_else(|| base.runs());
     let seed = args.seed.unwrap_or_else(|| base.seed());
     let mut drivers = Vec::new();
-    let mut gains = ExpertGains::default();
-    if let Some(json) = &args.expert {
-        gains = serde_json::from_str(json).with_context(|| {
-            format!(
-                "--expert {json:?} is not the expert's gains as JSON: give for example \
-                 '{{\"shaping_wheel_accel\": 1.0}}' (fields of ExpertGains), or '{{}}' for the \
-                 scored expert"
-            )
-        })?;
-        gains
-            .validate()
-            .with_context(|| format!("--expert {json:?}"))?;
+    let gains = args.expert.unwrap_or_default();
+    if args.expert.is_some() {
         drivers.push(ScalingDriver::Expert(gains));
     }
     if args.own_scan {

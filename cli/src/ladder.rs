@@ -25,6 +25,7 @@ pub fn profile_named(name: &str) -> anyhow::Result<RobotProfile> {
 
 /// `formation eval --ladder PROFILE` (dispatched before the other `eval` forms).
 pub fn ladder_command(args: &EvalArgs) -> anyhow::Result<()> {
+    crate::eval::refuse_gains_without_own_scan(args)?;
     let Some(profile_name) = args.ladder.as_deref() else {
         anyhow::bail!("--ladder PROFILE names the profile whose ladder to walk");
     };
@@ -77,7 +78,7 @@ pub fn ladder_command(args: &EvalArgs) -> anyhow::Result<()> {
             })?;
         let mut drivers = vec![ScalingDriver::Expert(ExpertGains::default())];
         if own_scan {
-            drivers.push(ScalingDriver::ExpertOwnScan(ExpertGains::default()));
+            drivers.push(ScalingDriver::ExpertOwnScan(args.gains.unwrap_or_default()));
         }
         // A policy that cannot drive this rung (a LIDAR it was not trained on) gives no row,
         // and the rung says why; the expert's rows stand.

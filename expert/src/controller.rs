@@ -140,7 +140,7 @@ pub struct ExpertGains {
     /// [`shaping_wheel_accel`](Self::shaping_wheel_accel).
     pub unshaped: bool,
     /// On one robot's own scan ([`crate::own_scan`]) only: a robot that stands between two of
-    /// its detections which would hold each other (one among the other's `nearest`, counting
+    /// its detections which would hold each other (each among the other's `nearest`, counting
     /// the robot) but cannot see each other past its body steps aside, perpendicular to their
     /// line, with the pull their pair would feel, weighted from 1 within half a body radius of
     /// the line to 0 at one body radius. Without it a team of three can settle in a line whose
