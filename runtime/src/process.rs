@@ -1,9 +1,12 @@
 //! What the world and agent processes share beyond the link: noticing that the launcher is gone,
-//! and their log lines ([`init_tracing`], the `formation` command's too).
+//! which termination signal came ([`TerminationWatch`], for links whose waits a signal ends
+//! without saying which), and their log lines ([`init_tracing`], the `formation` command's too).
 
 use std::io::Read;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+
+use formation_proto::exit::TerminationSignal;
 
 /// Starts a thread that reads standard input to its end and then sets the returned flag: the
 /// launcher closed the pipe (it exited, or is shutting the launch down). Only end of file (or a
@@ -46,4 +49,73 @@ pub fn init_tracing(verbose: u8) {
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
+}
+
+/// One flag per termination signal, set by signal-hook's handler.
+#[derive(Debug)]
+struct TerminationFlags {
+    interrupt: Arc<AtomicBool>,
+    terminate: Arc<AtomicBool>,
+}
+
+/// SIGINT and SIGTERM recorded each in a flag of its own by signal-hook's handler, which chains to
+/// the handler it finds, so that a wait can end with the signal (130, 143) instead of the process
+/// dying. A link keeps one in a `static` ([`TerminationWatch::new`] is `const`).
+#[derive(Debug)]
+pub struct TerminationWatch {
+    /// The flags, once installed (or why they could not be).
+    flags: OnceLock<Result<TerminationFlags, Arc<std::io::Error>>>,
+}
+
+impl TerminationWatch {
+    /// A watch that records nothing until [`TerminationWatch::watch`].
+    pub const fn new() -> TerminationWatch {
+        TerminationWatch {
+            flags: OnceLock::new(),
+        }
+    }
+
+    /// From now on, SIGINT and SIGTERM set their flags. The first call runs `before` (what must
+    /// install its own handlers first) and installs; it is idempotent: later calls report what
+    /// the first did.
+    pub fn watch(&self, before: impl FnOnce()) -> Result<(), Arc<std::io::Error>> {
+        let install = || -> std::io::Result<TerminationFlags> {
+            before();
+            let flags = TerminationFlags {
+                interrupt: Arc::new(AtomicBool::new(false)),
+                terminate: Arc::new(AtomicBool::new(false)),
+            };
+            signal_hook::flag::register(signal_hook::consts::SIGINT, Arc::clone(&flags.interrupt))?;
+            signal_hook::flag::register(
+                signal_hook::consts::SIGTERM,
+                Arc::clone(&flags.terminate),
+            )?;
+            Ok(flags)
+        };
+        match self.flags.get_or_init(|| install().map_err(Arc::new)) {
+            Ok(_) => Ok(()),
+            Err(e) => Err(Arc::clone(e)),
+        }
+    }
+
+    /// The termination signal received since [`TerminationWatch::watch`], if any; SIGTERM when
+    /// both came.
+    pub fn received(&self) -> Option<TerminationSignal> {
+        let Some(Ok(flags)) = self.flags.get() else {
+            return None;
+        };
+        if flags.terminate.load(Ordering::Relaxed) {
+            Some(TerminationSignal::Terminate)
+        } else if flags.interrupt.load(Ordering::Relaxed) {
+            Some(TerminationSignal::Interrupt)
+        } else {
+            None
+        }
+    }
+}
+
+impl Default for TerminationWatch {
+    fn default() -> TerminationWatch {
+        TerminationWatch::new()
+    }
 }

@@ -12,20 +12,13 @@
 //! The Zenoh and ROS 2 links do not use this: their signal thread (signal-hook's iterator) is told
 //! the signal itself.
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use formation_proto::exit::TerminationSignal;
-
-/// One flag per termination signal, set by the signal's handler.
-#[derive(Debug)]
-struct Flags {
-    interrupt: Arc<AtomicBool>,
-    terminate: Arc<AtomicBool>,
-}
+use formation_runtime::process::TerminationWatch;
 
 /// The flags, once installed (or why they could not be).
-static FLAGS: OnceLock<Result<Flags, Arc<std::io::Error>>> = OnceLock::new();
+static FLAGS: TerminationWatch = TerminationWatch::new();
 
 /// The signal flags could not be installed: a SIGINT and a SIGTERM then both read as SIGINT.
 #[derive(Debug, Clone, thiserror::Error)]
@@ -36,44 +29,23 @@ pub struct SignalWatchError {
     pub source: Arc<std::io::Error>,
 }
 
-fn install() -> std::io::Result<Flags> {
-    // Makes iceoryx2 install its handlers now (its signal handler is created on first use), so it
-    // never replaces signal-hook's later; the call only reads (and clears) the last signal, and
-    // no signal can be pending yet: before this, SIGINT and SIGTERM had their default action.
-    let _ = iceoryx2_bb_posix::signal::SignalHandler::last_signal();
-    let flags = Flags {
-        interrupt: Arc::new(AtomicBool::new(false)),
-        terminate: Arc::new(AtomicBool::new(false)),
-    };
-    signal_hook::flag::register(signal_hook::consts::SIGINT, Arc::clone(&flags.interrupt))?;
-    signal_hook::flag::register(signal_hook::consts::SIGTERM, Arc::clone(&flags.terminate))?;
-    Ok(flags)
-}
-
 /// From now on, records SIGINT and SIGTERM for [`received`], beside iceoryx2's own handling.
 /// Idempotent: the first call installs, later ones report what it did.
 pub fn watch_termination_signals() -> Result<(), SignalWatchError> {
-    match FLAGS.get_or_init(|| install().map_err(Arc::new)) {
-        Ok(_) => Ok(()),
-        Err(source) => Err(SignalWatchError {
-            source: Arc::clone(source),
-        }),
-    }
+    // Makes iceoryx2 install its handlers first (its signal handler is created on first use), so
+    // it never replaces signal-hook's later; the call only reads (and clears) the last signal, and
+    // no signal can be pending yet: before this, SIGINT and SIGTERM had their default action.
+    FLAGS
+        .watch(|| {
+            let _ = iceoryx2_bb_posix::signal::SignalHandler::last_signal();
+        })
+        .map_err(|source| SignalWatchError { source })
 }
 
 /// The termination signal received since [`watch_termination_signals`], if any; SIGTERM when
 /// both came.
 pub fn received() -> Option<TerminationSignal> {
-    let Some(Ok(flags)) = FLAGS.get() else {
-        return None;
-    };
-    if flags.terminate.load(Ordering::Relaxed) {
-        Some(TerminationSignal::Terminate)
-    } else if flags.interrupt.load(Ordering::Relaxed) {
-        Some(TerminationSignal::Interrupt)
-    } else {
-        None
-    }
+    FLAGS.received()
 }
 
 /// The signal that made iceoryx2 end a wait with a termination request: the one recorded, or
