@@ -200,6 +200,26 @@ impl Sim {
         }
     }
 
+    /// A simulation of `n_robots` agents (processes 10, 11, ...) connected to the exchange in
+    /// `clock` mode.
+    fn connected(n_robots: usize, clock: ClockMode) -> (Sim, AgentsController<'static>) {
+        Sim::connected_with(n_robots, settings(clock), &[])
+    }
+
+    /// A simulation of `n_robots` agents (processes 10, 11, ..., the robots in `faults` with
+    /// those faults) connected to the exchange with `runtime`. The world's link lives as long as
+    /// the test.
+    fn connected_with(
+        n_robots: usize,
+        runtime: RuntimeSettings,
+        faults: &[(usize, Fault)],
+    ) -> (Sim, AgentsController<'static>) {
+        let sim = Sim::new(n_robots);
+        let link = Box::leak(Box::new(sim.world_link()));
+        let world = connected_with(&sim, link, runtime, faults);
+        (sim, world)
+    }
+
     /// Starts agent process `pid` for `robot` with this launch's secret.
     fn start(&self, robot: usize, pid: u32, fault: Option<Fault>) {
         let nonce = self.bus.greet(robot, pid, &self.run, &self.secret);
@@ -272,18 +292,7 @@ impl Sim {
     fn tick(&self, world: &mut AgentsController<'_>, tick: u64) -> Vec<WheelCmd> {
         let scans = vec![vec![5.0f32; BEAMS]; self.n_robots];
         let poses = vec![Pose::new(0.0, 0.0, 0.0); self.n_robots];
-        let obs = Observation {
-            tick,
-            time: tick as f64 * DT.as_secs_f64(),
-            goal: Goal {
-                phi_star: 0.0,
-                d_star: 1.0,
-                v_star: 0.1,
-            },
-            poses: &poses,
-            wheel_speeds: &[],
-            scans: &scans,
-        };
+        let obs = observation(tick, &poses, &scans);
         let mut out = vec![WheelCmd::BRAKE; self.n_robots];
         world.commands(&obs, &mut out).expect("a tick");
         out
@@ -310,15 +319,20 @@ fn settings(clock: ClockMode) -> RuntimeSettings {
     }
 }
 
-/// A team of `n` agents (pids 10, 11, ...) connected and ready for episode 1.
-fn connected<'l>(
+/// Plays tick `tick` of three robots whose second agent (11) is paused: it brakes, and the tick
+/// waits the whole 2 s command timeout for it (`why`).
+fn assert_tick_waits_the_command_timeout(
     sim: &Sim,
-    link: &'l mut MemoryWorldLink,
-    clock: ClockMode,
-) -> AgentsController<'l> {
-    connected_with(sim, link, settings(clock), &[])
+    world: &mut AgentsController<'_>,
+    tick: u64,
+    why: &str,
+) {
+    let before = sim.now();
+    assert_eq!(sim.tick(world, tick), vec![SLOW, WheelCmd::BRAKE, SLOW]);
+    assert_eq!(sim.now() - before, Duration::from_millis(2000), "{why}");
 }
 
+/// A team of `n` agents (pids 10, 11, ...) connected and ready for episode 1.
 fn connected_with<'l>(
     sim: &Sim,
     link: &'l mut MemoryWorldLink,
@@ -351,21 +365,18 @@ const SLOW: WheelCmd = WheelCmd {
 #[test]
 fn lockstep_waits_for_a_late_agent_once_then_stops_waiting_until_it_answers_again() {
     use TickOutcome::{Fresh, Stale};
-    let sim = Sim::new(3);
-    let mut link = sim.world_link();
-    let mut world = connected(&sim, &mut link, ClockMode::Lockstep);
+    let (sim, mut world) = Sim::connected(3, ClockMode::Lockstep);
     let start = sim.now();
     for tick in 0..2 {
         assert_eq!(sim.tick(&mut world, tick), vec![SLOW; 3]);
     }
     assert_eq!(sim.now(), start, "agents that answer at once cost no time");
     sim.pause(11);
-    let before = sim.now();
-    assert_eq!(sim.tick(&mut world, 2), vec![SLOW, WheelCmd::BRAKE, SLOW]);
-    assert_eq!(
-        sim.now() - before,
-        Duration::from_millis(2000),
-        "the first missed tick waits the whole command timeout"
+    assert_tick_waits_the_command_timeout(
+        &sim,
+        &mut world,
+        2,
+        "the first missed tick waits the whole command timeout",
     );
     let before = sim.now();
     assert_eq!(sim.tick(&mut world, 3), vec![SLOW, WheelCmd::BRAKE, SLOW]);
@@ -404,9 +415,7 @@ fn lockstep_waits_for_a_late_agent_once_then_stops_waiting_until_it_answers_agai
 
 #[test]
 fn each_episode_tells_every_agent_its_robots_wheel_acceleration_limit() {
-    let sim = Sim::new(2);
-    let mut link = sim.world_link();
-    let mut world = connected(&sim, &mut link, ClockMode::Lockstep);
+    let (sim, mut world) = Sim::connected(2, ClockMode::Lockstep);
     assert_eq!(sim.tick(&mut world, 0), vec![SLOW; 2]);
     // The test pilot caps its speed at the limit it was told.
     world
@@ -433,14 +442,8 @@ fn each_episode_tells_every_agent_its_robots_wheel_acceleration_limit() {
 #[test]
 fn realtime_brakes_commands_past_the_stale_window_and_non_finite_ones() {
     use TickOutcome::{Fresh, NonFinite, Stale};
-    let sim = Sim::new(3);
-    let mut link = sim.world_link();
-    let mut world = connected_with(
-        &sim,
-        &mut link,
-        settings(ClockMode::Realtime),
-        &[(2, Fault::NanAfter(2))],
-    );
+    let (sim, mut world) =
+        Sim::connected_with(3, settings(ClockMode::Realtime), &[(2, Fault::NanAfter(2))]);
     sim.tick(&mut world, 0);
     // Robot 1 stops after answering tick 0: its tick-0 command stays usable while tick 0's scan
     // is at most 150 ms old (decided at 100 and 150 ms), then brakes.
@@ -462,10 +465,8 @@ fn realtime_brakes_commands_past_the_stale_window_and_non_finite_ones() {
 
 #[test]
 fn a_late_agent_in_realtime_is_stale_however_soon_its_command_arrives_after() {
-    let sim = Sim::new(1);
-    let mut link = sim.world_link();
     let late = Fault::LateBy(Duration::from_millis(200));
-    let mut world = connected_with(&sim, &mut link, settings(ClockMode::Realtime), &[(0, late)]);
+    let (sim, mut world) = Sim::connected_with(1, settings(ClockMode::Realtime), &[(0, late)]);
     for tick in 0..3 {
         assert_eq!(sim.tick(&mut world, tick), vec![WheelCmd::BRAKE]);
     }
@@ -483,9 +484,7 @@ fn swap(sim: &Sim, request_id: u64, robot: usize, at_tick: u64, model: &str) {
 
 #[test]
 fn a_swap_is_done_at_its_tick_and_a_model_that_fails_is_refused() {
-    let sim = Sim::new(2);
-    let mut link = sim.world_link();
-    let mut world = connected(&sim, &mut link, ClockMode::Lockstep);
+    let (sim, mut world) = Sim::connected(2, ClockMode::Lockstep);
     swap(&sim, 1, 0, 3, "fast-model");
     swap(&sim, 2, 1, 2, "bad-model");
     swap(&sim, 3, 7, 0, "fast-model");
@@ -542,9 +541,7 @@ fn a_swap_is_done_at_its_tick_and_a_model_that_fails_is_refused() {
 
 #[test]
 fn a_restarted_agent_rejoins_as_a_new_incarnation_and_an_impostor_is_refused() {
-    let sim = Sim::new(3);
-    let mut link = sim.world_link();
-    let mut world = connected(&sim, &mut link, ClockMode::Lockstep);
+    let (sim, mut world) = Sim::connected(3, ClockMode::Lockstep);
     sim.tick(&mut world, 0);
     sim.start_impostor(2, 99);
     sim.start(0, 98, None);
@@ -592,9 +589,7 @@ fn a_restarted_agent_rejoins_as_a_new_incarnation_and_an_impostor_is_refused() {
 
 #[test]
 fn an_agent_lost_for_good_is_reported_and_its_robot_brakes() {
-    let sim = Sim::new(2);
-    let mut link = sim.world_link();
-    let mut world = connected(&sim, &mut link, ClockMode::Lockstep);
+    let (sim, mut world) = Sim::connected(2, ClockMode::Lockstep);
     sim.tick(&mut world, 0);
     sim.kill(1, 11);
     let before = sim.now();
@@ -625,9 +620,7 @@ fn an_agent_lost_for_good_is_reported_and_its_robot_brakes() {
 
 #[test]
 fn a_command_that_answers_an_older_scan_is_timed_from_that_scan() {
-    let sim = Sim::new(1);
-    let mut link = sim.world_link();
-    let mut world = connected(&sim, &mut link, ClockMode::Realtime);
+    let (sim, mut world) = Sim::connected(1, ClockMode::Realtime);
     // Tick 0's scan goes out; the agent takes it only 30 ms after tick 0 ended, so its answer
     // arrives during tick 1, after tick 1's scan was published.
     sim.pause(10);
@@ -660,10 +653,8 @@ fn a_command_that_answers_an_older_scan_is_timed_from_that_scan() {
 #[test]
 fn a_degraded_link_is_reported_while_the_run_goes_on() {
     // One robot: in this one-threaded simulation a late agent's delay holds up every agent.
-    let sim = Sim::new(1);
-    let mut link = sim.world_link();
     let late = Fault::LateBy(Duration::from_millis(200));
-    let mut world = connected_with(&sim, &mut link, settings(ClockMode::Realtime), &[(0, late)]);
+    let (sim, mut world) = Sim::connected_with(1, settings(ClockMode::Realtime), &[(0, late)]);
     for tick in 0..8 {
         sim.tick(&mut world, tick);
     }
@@ -697,25 +688,12 @@ fn a_degraded_link_is_reported_while_the_run_goes_on() {
 
 #[test]
 fn shutdown_stops_the_agents_and_a_closed_input_or_a_signal_stops_the_world() {
-    let sim = Sim::new(2);
-    let mut link = sim.world_link();
-    let mut world = connected(&sim, &mut link, ClockMode::Lockstep);
+    let (sim, mut world) = Sim::connected(2, ClockMode::Lockstep);
     sim.tick(&mut world, 0);
     sim.stop.store(true, Ordering::Relaxed);
     let scans = vec![vec![5.0f32; BEAMS]; 2];
     let poses = vec![Pose::new(0.0, 0.0, 0.0); 2];
-    let obs = Observation {
-        tick: 1,
-        time: 0.05,
-        goal: Goal {
-            phi_star: 0.0,
-            d_star: 1.0,
-            v_star: 0.1,
-        },
-        poses: &poses,
-        wheel_speeds: &[],
-        scans: &scans,
-    };
+    let obs = observation(1, &poses, &scans);
     let mut out = vec![WheelCmd::BRAKE; 2];
     let error = world.commands(&obs, &mut out).unwrap_err();
     assert!(error.message.contains("launcher closed"), "{error}");
@@ -725,9 +703,7 @@ fn shutdown_stops_the_agents_and_a_closed_input_or_a_signal_stops_the_world() {
     assert_eq!(sim.exit_of(10), Some(AgentExit::Shutdown));
     assert_eq!(sim.exit_of(11), Some(AgentExit::Shutdown));
 
-    let sim = Sim::new(1);
-    let mut link = sim.world_link();
-    let mut world = connected(&sim, &mut link, ClockMode::Lockstep);
+    let (sim, mut world) = Sim::connected(1, ClockMode::Lockstep);
     sim.bus.terminate_world(TerminationSignal::Terminate);
     sim.pause(10);
     assert!(world.commands(&obs_for(1), &mut [WheelCmd::BRAKE]).is_err());
@@ -738,12 +714,12 @@ fn shutdown_stops_the_agents_and_a_closed_input_or_a_signal_stops_the_world() {
     );
 }
 
-fn obs_for(n: usize) -> Observation<'static> {
-    let scans: &'static [Vec<f32>] = Box::leak(vec![vec![5.0f32; BEAMS]; n].into_boxed_slice());
-    let poses: &'static [Pose] = Box::leak(vec![Pose::new(0.0, 0.0, 0.0); n].into_boxed_slice());
+/// The observation of tick `tick` (at `tick` periods of [`DT`]) of robots at `poses` that see
+/// `scans`, with the tests' goal.
+fn observation<'a>(tick: u64, poses: &'a [Pose], scans: &'a [Vec<f32>]) -> Observation<'a> {
     Observation {
-        tick: 0,
-        time: 0.0,
+        tick,
+        time: tick as f64 * DT.as_secs_f64(),
         goal: Goal {
             phi_star: 0.0,
             d_star: 1.0,
@@ -753,6 +729,12 @@ fn obs_for(n: usize) -> Observation<'static> {
         wheel_speeds: &[],
         scans,
     }
+}
+
+fn obs_for(n: usize) -> Observation<'static> {
+    let scans: &'static [Vec<f32>] = Box::leak(vec![vec![5.0f32; BEAMS]; n].into_boxed_slice());
+    let poses: &'static [Pose] = Box::leak(vec![Pose::new(0.0, 0.0, 0.0); n].into_boxed_slice());
+    observation(0, poses, scans)
 }
 
 #[test]
@@ -788,9 +770,7 @@ fn an_agent_exits_when_its_world_goes_away_or_its_input_closes() {
 
 #[test]
 fn a_stopped_realtime_world_restarts_its_schedule_instead_of_rushing() {
-    let sim = Sim::new(1);
-    let mut link = sim.world_link();
-    let mut world = connected(&sim, &mut link, ClockMode::Realtime);
+    let (sim, mut world) = Sim::connected(1, ClockMode::Realtime);
     for tick in 0..4 {
         sim.tick(&mut world, tick);
     }
@@ -819,36 +799,31 @@ fn a_stopped_realtime_world_restarts_its_schedule_instead_of_rushing() {
 
 #[test]
 fn a_lockstep_spin_before_blocking_changes_no_outcome() {
-    let sim = Sim::new(3);
-    let mut link = sim.world_link();
     let spinning = RuntimeSettings {
         spin_us: 300,
         ..settings(ClockMode::Lockstep)
     };
-    let mut world = connected_with(&sim, &mut link, spinning, &[]);
+    let (sim, mut world) = Sim::connected_with(3, spinning, &[]);
     for tick in 0..3 {
         assert_eq!(sim.tick(&mut world, tick), vec![SLOW; 3]);
     }
     sim.pause(11);
-    let before = sim.now();
-    assert_eq!(sim.tick(&mut world, 3), vec![SLOW, WheelCmd::BRAKE, SLOW]);
-    assert_eq!(
-        sim.now() - before,
-        Duration::from_millis(2000),
-        "a spin does not shorten the command timeout"
+    assert_tick_waits_the_command_timeout(
+        &sim,
+        &mut world,
+        3,
+        "a spin does not shorten the command timeout",
     );
 }
 
 #[test]
 fn an_absurd_spin_setting_is_bounded_and_does_not_overflow() {
-    let sim = Sim::new(3);
-    let mut link = sim.world_link();
     let spinning = RuntimeSettings {
         spin_us: u64::MAX,
         command_timeout_ms: 50,
         ..settings(ClockMode::Lockstep)
     };
-    let mut world = connected_with(&sim, &mut link, spinning, &[]);
+    let (sim, mut world) = Sim::connected_with(3, spinning, &[]);
     for tick in 0..3 {
         assert_eq!(sim.tick(&mut world, tick), vec![SLOW; 3]);
     }
