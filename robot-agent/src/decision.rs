@@ -758,29 +758,91 @@ mod tests {
 
     /// Issue 35: d* is checked once, where the goal enters, not on every tick; a refused goal
     /// leaves the agent holding none, and a swap candidate must admit the goal held.
-    /// A policy that declares a range input and answers with the first two sectors it was fed.
-    struct RangesEcho {
-        sectors: usize,
-        seen: std::sync::Arc<std::sync::Mutex<Vec<Vec<f32>>>>,
+    /// The model input an [`Echo`] declares: a range input of `K` sectors (clip 3 m, wheel
+    /// output) or a neighbour input of `K` slots (the default rule, formation-velocity output).
+    #[derive(Clone, Copy)]
+    enum Echoed {
+        Ranges(usize),
+        Neighbours(usize),
     }
 
-    impl PolicyBackend for RangesEcho {
+    /// What an [`Echo`] was fed, one entry a call.
+    type EchoLog = std::sync::Arc<std::sync::Mutex<Vec<Vec<f32>>>>;
+
+    /// A policy that declares one model input ([`Echoed`]), logs the values it is fed of it and
+    /// answers with the first two.
+    struct Echo {
+        input: Echoed,
+        seen: EchoLog,
+    }
+
+    impl Echo {
+        /// An echo of `input` and the log of what it is fed.
+        fn logged(input: Echoed) -> (Box<Echo>, EchoLog) {
+            let seen = EchoLog::default();
+            let echo = Echo {
+                input,
+                seen: std::sync::Arc::clone(&seen),
+            };
+            (Box::new(echo), seen)
+        }
+    }
+
+    /// Rehearses `agent`, checking that its echo (logging to `seen`) is fed `expected` again, then
+    /// swaps in an echo of `candidate` and returns the log of what that one is fed.
+    fn rehearse_then_swap(
+        agent: &mut Agent,
+        seen: &EchoLog,
+        expected: &[f32],
+        candidate: Echoed,
+    ) -> EchoLog {
+        agent.rehearse().expect("rehearses");
+        assert_eq!(
+            seen.lock().unwrap()[1],
+            expected,
+            "a rehearsal feeds the same"
+        );
+        let (candidate, candidate_seen) = Echo::logged(candidate);
+        agent.swap_policy(candidate).expect("swaps");
+        candidate_seen
+    }
+
+    impl PolicyBackend for Echo {
         fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], DecisionError> {
-            self.seen.lock().expect("log").push(input.ranges.to_vec());
-            Ok([input.ranges[0], input.ranges[1]])
+            let fed = match self.input {
+                Echoed::Ranges(_) => input.ranges,
+                Echoed::Neighbours(_) => {
+                    assert!(input.ranges.is_empty(), "it takes no ranges");
+                    input.neighbours
+                }
+            };
+            self.seen.lock().expect("log").push(fed.to_vec());
+            Ok([fed[0], fed[1]])
         }
         fn io(&self) -> PolicyIo {
+            let (ranges, neighbours, output) = match self.input {
+                Echoed::Ranges(sectors) => (
+                    Some(RangeInput::new(sectors, 3.0).expect("valid")),
+                    None,
+                    formation_proto::PolicyOutput::Wheels,
+                ),
+                Echoed::Neighbours(slots) => (
+                    None,
+                    Some(NeighbourInput::with_default_rule(slots).expect("valid")),
+                    formation_proto::PolicyOutput::FormationVelocity,
+                ),
+            };
             PolicyIo {
                 image: OccupancySpec::PAPER,
                 aux: formation_proto::AuxLayout::PAPER,
-                ranges: Some(RangeInput::new(self.sectors, 3.0).expect("valid")),
-                neighbours: None,
-                output: formation_proto::PolicyOutput::Wheels,
+                ranges,
+                neighbours,
+                output,
                 v_train: 0.7,
             }
         }
         fn sensor(&self) -> SensorContract {
-            // Beams unrecorded, so that the range input's own check is the one that speaks.
+            // Beams unrecorded, so that the input's own check is the one that speaks.
             SensorContract {
                 beams: None,
                 max_range: None,
@@ -788,19 +850,18 @@ mod tests {
             }
         }
         fn model_id(&self) -> &str {
-            "ranges-echo"
+            match self.input {
+                Echoed::Ranges(_) => "ranges-echo",
+                Echoed::Neighbours(_) => "neighbours-echo",
+            }
         }
     }
 
     #[test]
     fn a_policy_that_takes_ranges_is_fed_its_own_scan_pooled_as_collected() {
         let lidar = LidarSpec::default();
-        let seen = std::sync::Arc::default();
-        let echo = RangesEcho {
-            sectors: 100,
-            seen: std::sync::Arc::clone(&seen),
-        };
-        let mut agent = Agent::new(Box::new(echo), lidar).expect("fits the sensor");
+        let (echo, seen) = Echo::logged(Echoed::Ranges(100));
+        let mut agent = Agent::new(echo, lidar).expect("fits the sensor");
         let mut scan = vec![lidar.max_range as f32; lidar.beams];
         scan[0] = 1.5; // sector 0
         scan[9] = 0.75; // sector 1
@@ -820,74 +881,18 @@ mod tests {
         );
         assert_eq!(seen.lock().unwrap().as_slice(), &[expected.clone()]);
         assert_eq!((expected[0], expected[1], expected[2]), (1.0, 0.5, 3.0));
-        agent.rehearse().expect("rehearses");
-        assert_eq!(
-            seen.lock().unwrap()[1],
-            expected,
-            "a rehearsal feeds the same"
-        );
-
         // A swap candidate that takes other sectors is tried on the last scan, pooled its way.
-        let candidate_seen = std::sync::Arc::default();
-        let candidate = RangesEcho {
-            sectors: 50,
-            seen: std::sync::Arc::clone(&candidate_seen),
-        };
-        agent.swap_policy(Box::new(candidate)).expect("swaps");
+        let candidate_seen = rehearse_then_swap(&mut agent, &seen, &expected, Echoed::Ranges(50));
         let tried = candidate_seen.lock().unwrap()[0].clone();
         assert_eq!(tried.len(), 50);
         assert_eq!(tried[0], 1.0, "beam 0 is in sector 0 of 50 too");
 
         // More sectors than beams cannot be pooled: refused, naming both.
         let few = LidarSpec { beams: 60, ..lidar };
-        let err = Agent::new(
-            Box::new(RangesEcho {
-                sectors: 100,
-                seen: std::sync::Arc::default(),
-            }),
-            few,
-        )
-        .err()
-        .expect("refused");
+        let err = Agent::new(Echo::logged(Echoed::Ranges(100)).0, few)
+            .err()
+            .expect("refused");
         assert!(err.to_string().contains("100 sectors"), "{err}");
-    }
-
-    /// A policy that declares a neighbour input of `slots` slots and answers with the first
-    /// slot's `(x, y)`.
-    struct NeighboursEcho {
-        slots: usize,
-        seen: std::sync::Arc<std::sync::Mutex<Vec<Vec<f32>>>>,
-    }
-
-    impl PolicyBackend for NeighboursEcho {
-        fn infer(&mut self, input: &PolicyInput<'_>) -> Result<[f32; 2], DecisionError> {
-            self.seen
-                .lock()
-                .expect("log")
-                .push(input.neighbours.to_vec());
-            assert!(input.ranges.is_empty(), "it takes no ranges");
-            Ok([input.neighbours[0], input.neighbours[1]])
-        }
-        fn io(&self) -> PolicyIo {
-            PolicyIo {
-                image: OccupancySpec::PAPER,
-                aux: formation_proto::AuxLayout::PAPER,
-                ranges: None,
-                neighbours: Some(NeighbourInput::with_default_rule(self.slots).expect("valid")),
-                output: formation_proto::PolicyOutput::FormationVelocity,
-                v_train: 0.7,
-            }
-        }
-        fn sensor(&self) -> SensorContract {
-            SensorContract {
-                beams: None,
-                max_range: None,
-                occupancy: OccupancySpec::PAPER,
-            }
-        }
-        fn model_id(&self) -> &str {
-            "neighbours-echo"
-        }
     }
 
     /// The exact scan of a robot at the origin, heading +x, among bodies of the default radius
@@ -916,12 +921,8 @@ mod tests {
     #[test]
     fn a_policy_that_takes_neighbours_is_fed_those_detected_in_its_own_scan_as_collected() {
         let lidar = LidarSpec::default();
-        let seen = std::sync::Arc::default();
-        let echo = NeighboursEcho {
-            slots: 4,
-            seen: std::sync::Arc::clone(&seen),
-        };
-        let mut agent = Agent::new(Box::new(echo), lidar).expect("fits the sensor");
+        let (echo, seen) = Echo::logged(Echoed::Neighbours(4));
+        let mut agent = Agent::new(echo, lidar).expect("fits the sensor");
         // Two robots: 1.5 m to the right, 2 m ahead.
         let scan = scan_among(&lidar, &[(2.0, 0.0), (0.0, -1.5)]);
         let goal = Goal {
@@ -940,40 +941,17 @@ mod tests {
             assert!((got - want).abs() < 1e-3, "{expected:?}");
         }
         assert_eq!(&expected[8..], &[0.0; 8]);
-        agent.rehearse().expect("rehearses");
-        assert_eq!(
-            seen.lock().unwrap()[1],
-            expected,
-            "a rehearsal feeds the same"
-        );
-
         // A swap candidate with fewer slots is tried on the last scan, filled its way.
-        let candidate_seen = std::sync::Arc::default();
-        let candidate = NeighboursEcho {
-            slots: 1,
-            seen: std::sync::Arc::clone(&candidate_seen),
-        };
-        agent.swap_policy(Box::new(candidate)).expect("swaps");
+        let candidate_seen =
+            rehearse_then_swap(&mut agent, &seen, &expected, Echoed::Neighbours(1));
         assert_eq!(candidate_seen.lock().unwrap()[0], &expected[..4]);
         agent.act(&scan, 0.0, &goal).expect("the candidate drives");
         assert_eq!(candidate_seen.lock().unwrap()[1], &expected[..4]);
 
         // Before any decision a candidate is tried on an empty observation: nobody detected.
-        let fresh_seen = std::sync::Arc::default();
-        let mut fresh = Agent::new(
-            Box::new(NeighboursEcho {
-                slots: 2,
-                seen: std::sync::Arc::default(),
-            }),
-            lidar,
-        )
-        .expect("fits");
-        fresh
-            .swap_policy(Box::new(NeighboursEcho {
-                slots: 3,
-                seen: std::sync::Arc::clone(&fresh_seen),
-            }))
-            .expect("swaps");
+        let mut fresh = Agent::new(Echo::logged(Echoed::Neighbours(2)).0, lidar).expect("fits");
+        let (candidate, fresh_seen) = Echo::logged(Echoed::Neighbours(3));
+        fresh.swap_policy(candidate).expect("swaps");
         assert_eq!(fresh_seen.lock().unwrap().as_slice(), &[vec![0.0; 12]]);
     }
 
