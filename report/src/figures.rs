@@ -13,6 +13,7 @@ use std::ops::Range;
 use plotters::chart::MeshStyle;
 use plotters::coord::Shift;
 use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -264,6 +265,18 @@ struct Line<'a> {
     color: RGBColor,
 }
 
+/// One line per series, the `i`th coloured `color(i)`.
+fn coloured_lines(series: &[Series], color: fn(usize) -> RGBColor) -> Vec<Line<'_>> {
+    series
+        .iter()
+        .enumerate()
+        .map(|(i, series)| Line {
+            series,
+            color: color(i),
+        })
+        .collect()
+}
+
 /// A horizontal dashed reference line with its legend label.
 struct Reference {
     y: f64,
@@ -373,6 +386,51 @@ where
     Ok(())
 }
 
+/// The chart of one panel of the scaling and ladder figures: `caption` above, `x` against `y`.
+fn panel_chart<'a, 'b>(
+    area: &'a Area<'b>,
+    caption: &str,
+    x: Range<f64>,
+    y: Range<f64>,
+) -> Result<PanelChart<'a, 'b>, Box<dyn Error>> {
+    Ok(ChartBuilder::on(area)
+        .caption(caption, text_style(19.0))
+        .margin(8)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x, y)?)
+}
+
+/// The [`panel_chart`] of the median convergence times `medians` \[s\]: from 0 to 10 % above
+/// the largest (at least 1 s).
+fn convergence_chart<'a, 'b>(
+    area: &'a Area<'b>,
+    caption: &str,
+    x: Range<f64>,
+    medians: impl Iterator<Item = f64>,
+) -> Result<PanelChart<'a, 'b>, Box<dyn Error>> {
+    let convergence_max = medians.fold(1.0_f64, f64::max);
+    panel_chart(area, caption, x, 0.0..1.1 * convergence_max)
+}
+
+/// A chart of [`panel_chart`].
+type PanelChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A line of `points` `color`ed 2 px wide with a dot at every point.
+fn draw_dotted_line(
+    chart: &mut PanelChart<'_, '_>,
+    points: &[(f64, f64)],
+    color: RGBColor,
+) -> DrawResult {
+    chart.draw_series(LineSeries::new(
+        points.iter().copied(),
+        color.stroke_width(2),
+    ))?;
+    chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
+    Ok(())
+}
+
 /// The team-size axis of the scaling figure: whole team sizes, at least one robot either side of
 /// the sizes shown (one size alone would otherwise get a sliver such as 15.6–16.4 robots).
 pub fn team_size_range(sizes: impl IntoIterator<Item = usize>) -> Range<f64> {
@@ -407,14 +465,7 @@ pub fn errors_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError>
     let orientation = orientation_error(traj);
     render(id, (640, 600), |root| {
         let (top, bottom) = root.split_vertically(300);
-        let edge_lines: Vec<Line<'_>> = formation
-            .iter()
-            .enumerate()
-            .map(|(k, s)| Line {
-                series: s,
-                color: edge_color(k),
-            })
-            .collect();
+        let edge_lines = coloured_lines(&formation, edge_color);
         time_panel(
             &top,
             LineLegend::PerLine,
@@ -434,14 +485,7 @@ pub fn errors_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError>
             ],
             true,
         )?;
-        let robot_lines: Vec<Line<'_>> = orientation
-            .iter()
-            .enumerate()
-            .map(|(i, s)| Line {
-                series: s,
-                color: robot_color(i),
-            })
-            .collect();
+        let robot_lines = coloured_lines(&orientation, robot_color);
         time_panel(
             &bottom,
             LineLegend::Robots,
@@ -476,14 +520,7 @@ pub fn wheels_figure(id: &str, traj: &Trajectory) -> Result<Figure, ReportError>
             (&top, &left, "(b) left wheel command"),
             (&bottom, &right, "right wheel command"),
         ] {
-            let lines: Vec<Line<'_>> = series
-                .iter()
-                .enumerate()
-                .map(|(i, s)| Line {
-                    series: s,
-                    color: robot_color(i),
-                })
-                .collect();
+            let lines = coloured_lines(series, robot_color);
             time_panel(
                 area,
                 LineLegend::Robots,
@@ -780,26 +817,25 @@ pub fn scaling_figure(
     render(id, (width, height), |root| {
         let (plots, legend) = root.split_horizontally(width - LEGEND_WIDTH);
         let (left, right) = plots.split_horizontally((width - LEGEND_WIDTH) / 2);
-        let mut success = ChartBuilder::on(&left)
-            .caption("(a) success against team size", text_style(19.0))
-            .margin(8)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(x_range.clone(), 0.0..105.0)?;
+        let mut success = panel_chart(
+            &left,
+            "(a) success against team size",
+            x_range.clone(),
+            0.0..105.0,
+        )?;
         configure_mesh_labelled(&mut success, "robots", "success [%]", &|v| {
             team_size_label(*v)
         })?;
-        let convergence_max = table
+        let medians = table
             .rows
             .iter()
-            .filter_map(|r| r.convergence_s.map(|q| q.median))
-            .fold(1.0_f64, f64::max);
-        let mut convergence = ChartBuilder::on(&right)
-            .caption("(b) median convergence (10 %)", text_style(19.0))
-            .margin(8)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(x_range.clone(), 0.0..1.1 * convergence_max)?;
+            .filter_map(|r| r.convergence_s.map(|q| q.median));
+        let mut convergence = convergence_chart(
+            &right,
+            "(b) median convergence (10 %)",
+            x_range.clone(),
+            medians,
+        )?;
         configure_mesh_labelled(&mut convergence, "robots", "convergence [s]", &|v| {
             team_size_label(*v)
         })?;
@@ -819,12 +855,9 @@ pub fn scaling_figure(
             let s10 = at(&|r| Some(100.0 * r.success_rate_10));
             let s5 = at(&|r| Some(100.0 * r.success_rate_5));
             let conv = at(&|r| r.convergence_s.map(|q| q.median));
-            success.draw_series(LineSeries::new(s10.iter().copied(), color.stroke_width(2)))?;
-            success.draw_series(s10.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
+            draw_dotted_line(&mut success, &s10, color)?;
             success.draw_series(LineSeries::new(s5.iter().copied(), color.stroke_width(1)))?;
-            convergence
-                .draw_series(LineSeries::new(conv.iter().copied(), color.stroke_width(2)))?;
-            convergence.draw_series(conv.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
+            draw_dotted_line(&mut convergence, &conv, color)?;
             // The legend is narrow: the controller, numbered when several models share it (the
             // table names each model).
             let controller = rows.first().map_or("", |r| r.controller.as_str());
@@ -868,56 +901,43 @@ pub fn ladder_figure(
     render(id, (width, height), |root| {
         let (plots, legend) = root.split_horizontally(width - LEGEND_WIDTH);
         let (top, bottom) = plots.split_vertically(height / 2);
-        let mut success = ChartBuilder::on(&top)
-            .caption("(a) success per rung", text_style(19.0))
-            .margin(8)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(x_range.clone(), 0.0..105.0)?;
-        success
-            .configure_mesh()
-            .y_desc("success [%]")
-            .house_style(14.0)
-            .x_label_formatter(&rung_name)
-            .y_label_formatter(&|v| tick_label(*v))
-            .x_labels(rungs)
-            .y_labels(6)
-            .draw()?;
-        let convergence_max = series
+        let rung_mesh = |chart: &mut PanelChart<'_, '_>, y_desc: &str| -> DrawResult {
+            chart
+                .configure_mesh()
+                .y_desc(y_desc)
+                .house_style(14.0)
+                .x_label_formatter(&rung_name)
+                .y_label_formatter(&|v| tick_label(*v))
+                .x_labels(rungs)
+                .y_labels(6)
+                .draw()?;
+            Ok(())
+        };
+        let mut success = panel_chart(&top, "(a) success per rung", x_range.clone(), 0.0..105.0)?;
+        rung_mesh(&mut success, "success [%]")?;
+        let medians = series
             .lines
             .iter()
             .flat_map(|l| l.convergence_s.iter().flatten().copied())
-            .filter(|v| v.is_finite())
-            .fold(1.0_f64, f64::max);
-        let mut convergence = ChartBuilder::on(&bottom)
-            .caption("(b) median convergence (10 %) per rung", text_style(19.0))
-            .margin(8)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(x_range.clone(), 0.0..1.1 * convergence_max)?;
-        convergence
-            .configure_mesh()
-            .y_desc("convergence [s]")
-            .house_style(14.0)
-            .x_label_formatter(&rung_name)
-            .y_label_formatter(&|v| tick_label(*v))
-            .x_labels(rungs)
-            .y_labels(6)
-            .draw()?;
+            .filter(|v| v.is_finite());
+        let mut convergence = convergence_chart(
+            &bottom,
+            "(b) median convergence (10 %) per rung",
+            x_range.clone(),
+            medians,
+        )?;
+        rung_mesh(&mut convergence, "convergence [s]")?;
         let mut entries = Vec::new();
         for (k, line) in series.lines.iter().enumerate() {
             let color = robot_color(k);
             for run in unbroken_runs(&line.success_10) {
-                success.draw_series(LineSeries::new(run.iter().copied(), color.stroke_width(2)))?;
-                success.draw_series(run.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
+                draw_dotted_line(&mut success, &run, color)?;
             }
             for run in unbroken_runs(&line.success_5) {
                 success.draw_series(LineSeries::new(run.iter().copied(), color.stroke_width(1)))?;
             }
             for run in unbroken_runs(&line.convergence_s) {
-                convergence
-                    .draw_series(LineSeries::new(run.iter().copied(), color.stroke_width(2)))?;
-                convergence.draw_series(run.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
+                draw_dotted_line(&mut convergence, &run, color)?;
             }
             // The legend is narrow: the controller and the team size (the table names the
             // model).
