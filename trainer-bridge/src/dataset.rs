@@ -1372,22 +1372,11 @@ pub(crate) fn decode_columns(
         None => &[],
     };
 
-    let f32_at = |data: &[u8], i: usize| {
-        f32::from_le_bytes([
-            data[4 * i],
-            data[4 * i + 1],
-            data[4 * i + 2],
-            data[4 * i + 3],
-        ])
-    };
-    let u32_at = |data: &[u8], i: usize| {
-        u32::from_le_bytes([
-            data[4 * i],
-            data[4 * i + 1],
-            data[4 * i + 2],
-            data[4 * i + 3],
-        ])
-    };
+    // The `i`th little-endian 4-byte word of a column.
+    let word_at =
+        |data: &[u8], i: usize| -> [u8; 4] { data[4 * i..4 * i + 4].try_into().expect("4 bytes") };
+    let f32_at = |data: &[u8], i: usize| f32::from_le_bytes(word_at(data, i));
+    let u32_at = |data: &[u8], i: usize| u32::from_le_bytes(word_at(data, i));
     let cells = size * size;
     Ok((0..n)
         .map(|i| Sample {
@@ -1491,15 +1480,77 @@ pub(crate) mod tests {
         }
     }
 
-    fn write(dir: &Path, count: u32, shard_size: usize) -> Manifest {
-        let mut writer = DatasetWriter::create(dir, header(7))
+    /// A new dataset of `header` in `dir`, `shard_size` samples a shard, holding `samples`.
+    fn write_samples(
+        dir: &Path,
+        header: DatasetHeader,
+        shard_size: usize,
+        samples: impl IntoIterator<Item = Sample>,
+    ) -> Manifest {
+        let mut writer = DatasetWriter::create(dir, header)
             .expect("create")
             .with_shard_size(shard_size)
             .expect("shard size");
-        for k in 0..count {
-            writer.push(sample(k, 0)).expect("push");
+        for sample in samples {
+            writer.push(sample).expect("push");
         }
         writer.finish().expect("finish")
+    }
+
+    fn write(dir: &Path, count: u32, shard_size: usize) -> Manifest {
+        write_samples(dir, header(7), shard_size, (0..count).map(|k| sample(k, 0)))
+    }
+
+    /// Appends `sample` as DAgger iteration 1 to the dataset of `header` in `dir`, then reads back
+    /// all its samples.
+    fn append_and_load(dir: &Path, header: &DatasetHeader, sample: Sample) -> Vec<Sample> {
+        let mut writer = DatasetWriter::append_matching(dir, header, 1).expect("append");
+        writer.push(sample).expect("push");
+        writer.finish().expect("finish");
+        DatasetReader::open(dir)
+            .expect("open")
+            .load_all()
+            .expect("load")
+    }
+
+    /// The tensors of shard `file` in `dir` (dtype and shape by name) and the format version in
+    /// its metadata.
+    fn shard_tensors(dir: &Path, file: &str) -> (HashMap<String, (Dtype, Vec<usize>)>, String) {
+        let shard = fs::read(dir.join(file)).expect("shard");
+        let tensors = SafeTensors::deserialize(&shard).expect("safetensors");
+        let shapes = tensors
+            .tensors()
+            .into_iter()
+            .map(|(name, view)| (name, (view.dtype(), view.shape().to_vec())))
+            .collect();
+        let (_, meta) = SafeTensors::read_metadata(&shard).expect("metadata");
+        let version = meta.metadata().as_ref().expect("meta")["version"].clone();
+        (shapes, version)
+    }
+
+    /// Rewrites the manifest of `dir` with `edit` applied to its JSON.
+    fn edit_manifest(dir: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
+        let mut value = manifest_json(dir);
+        edit(&mut value);
+        fs::write(dir.join(MANIFEST_FILE), value.to_string()).expect("write");
+    }
+
+    /// Lists the first shard of `dir` under `manifest` (as holding `samples`, its size and
+    /// checksum those of the file) and returns why loading the dataset then fails.
+    fn load_error_under(dir: &Path, manifest: &serde_json::Value, samples: usize) -> DatasetError {
+        let bytes = fs::read(dir.join("shard-000000.safetensors")).expect("shard");
+        let mut manifest = manifest.clone();
+        manifest["shards"][0]["bytes"] = bytes.len().into();
+        manifest["shards"][0]["samples"] = samples.into();
+        manifest["samples"] = samples.into();
+        let mut checksum = Fnv1a64::new();
+        checksum.update(&bytes);
+        manifest["shards"][0]["fnv1a64"] = checksum.hex().into();
+        fs::write(dir.join(MANIFEST_FILE), manifest.to_string()).expect("write");
+        DatasetReader::open(dir)
+            .expect("open")
+            .load_all()
+            .expect_err("corrupt")
     }
 
     #[test]
@@ -1776,14 +1827,8 @@ pub(crate) mod tests {
     }
 
     fn write_with_ranges(dir: &Path, count: u32, shard_size: usize) -> Manifest {
-        let mut writer = DatasetWriter::create(dir, header_with_ranges(7))
-            .expect("create")
-            .with_shard_size(shard_size)
-            .expect("shard size");
-        for k in 0..count {
-            writer.push(sample_with_ranges(k, 0)).expect("push");
-        }
-        writer.finish().expect("finish")
+        let samples = (0..count).map(|k| sample_with_ranges(k, 0));
+        write_samples(dir, header_with_ranges(7), shard_size, samples)
     }
 
     /// The manifest of `dir` as JSON.
@@ -1808,11 +1853,9 @@ pub(crate) mod tests {
         let value = manifest_json(dir.path());
         assert_eq!(value["version"], 1);
         assert!(value.get("ranges").is_none(), "{value}");
-        let shard = fs::read(dir.path().join("shard-000000.safetensors")).expect("shard");
-        let tensors = SafeTensors::deserialize(&shard).expect("safetensors");
-        assert!(tensors.tensor("ranges").is_err());
-        let (_, meta) = SafeTensors::read_metadata(&shard).expect("metadata");
-        assert_eq!(meta.metadata().as_ref().expect("meta")["version"], "1");
+        let (tensors, version) = shard_tensors(dir.path(), "shard-000000.safetensors");
+        assert!(!tensors.contains_key("ranges"));
+        assert_eq!(version, "1");
     }
 
     #[test]
@@ -1841,20 +1884,11 @@ pub(crate) mod tests {
         let expected: Vec<Sample> = (0..10).map(|k| sample_with_ranges(k, 0)).collect();
         assert_eq!(reader.load_all().expect("load"), expected);
 
-        let shard = fs::read(dir.path().join("shard-000002.safetensors")).expect("shard");
-        let tensors = SafeTensors::deserialize(&shard).expect("safetensors");
-        let ranges = tensors.tensor("ranges").expect("ranges tensor");
-        assert_eq!((ranges.dtype(), ranges.shape()), (Dtype::F32, &[2, 6][..]));
-        let (_, meta) = SafeTensors::read_metadata(&shard).expect("metadata");
-        assert_eq!(meta.metadata().as_ref().expect("meta")["version"], "2");
+        let (tensors, version) = shard_tensors(dir.path(), "shard-000002.safetensors");
+        assert_eq!(tensors["ranges"], (Dtype::F32, vec![2, 6]));
+        assert_eq!(version, "2");
 
-        let mut writer = DatasetWriter::append_matching(dir.path(), &with, 1).expect("append");
-        writer.push(sample_with_ranges(50, 1)).expect("push");
-        writer.finish().expect("finish");
-        let all = DatasetReader::open(dir.path())
-            .expect("open")
-            .load_all()
-            .expect("load");
+        let all = append_and_load(dir.path(), &with, sample_with_ranges(50, 1));
         assert_eq!(all[10], sample_with_ranges(50, 1));
     }
 
@@ -1909,25 +1943,45 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn appending_with_other_ranges_is_refused_naming_them() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        write(dir.path(), 2, 4);
-        let err = DatasetWriter::append_matching(dir.path(), &header_with_ranges(7), 1)
-            .expect_err("mismatch");
-        assert!(
-            matches!(&err, DatasetError::HeaderMismatch { field: "range input", existing, requested, .. }
-                if existing == "none" && requested == "sectors=6,clip=3"),
-            "{err:?}"
-        );
-        let with = tempfile::tempdir().expect("tempdir");
-        write_with_ranges(with.path(), 2, 4);
-        let other = header(7).with_ranges(Some(RangeInput::new(6, 2.5).expect("ranges")));
-        let err = DatasetWriter::append_matching(with.path(), &other, 1).expect_err("mismatch");
-        assert!(
-            matches!(&err, DatasetError::HeaderMismatch { field: "range input", existing, requested, .. }
-                if existing == "sectors=6,clip=3" && requested == "sectors=6,clip=2.5"),
-            "{err:?}"
-        );
+    fn appending_with_other_ranges_or_neighbours_is_refused_naming_them() {
+        let other_ranges = header(7).with_ranges(Some(RangeInput::new(6, 2.5).expect("ranges")));
+        for (ranged, appended, field, existing_text, requested_text) in [
+            (
+                false,
+                header_with_ranges(7),
+                "range input",
+                "none",
+                "sectors=6,clip=3",
+            ),
+            (
+                true,
+                other_ranges,
+                "range input",
+                "sectors=6,clip=3",
+                "sectors=6,clip=2.5",
+            ),
+            (
+                false,
+                header_with_neighbours(7),
+                "neighbour input",
+                "none",
+                "slots=3,threshold=1.3,nearest=2",
+            ),
+        ] {
+            let dir = tempfile::tempdir().expect("tempdir");
+            if ranged {
+                write_with_ranges(dir.path(), 2, 4);
+            } else {
+                write(dir.path(), 2, 4);
+            }
+            let err =
+                DatasetWriter::append_matching(dir.path(), &appended, 1).expect_err("mismatch");
+            assert!(
+                matches!(&err, DatasetError::HeaderMismatch { field: f, existing, requested, .. }
+                    if *f == field && existing == existing_text && requested == requested_text),
+                "{err:?}"
+            );
+        }
     }
 
     #[test]
@@ -1973,10 +2027,7 @@ pub(crate) mod tests {
     fn a_version_that_disagrees_with_the_ranges_is_refused_naming_the_file() {
         let dir = tempfile::tempdir().expect("tempdir");
         write_with_ranges(dir.path(), 2, 4);
-        let path = dir.path().join(MANIFEST_FILE);
-        let mut value = manifest_json(dir.path());
-        value["version"] = 1.into();
-        fs::write(&path, value.to_string()).expect("write");
+        edit_manifest(dir.path(), |value| value["version"] = 1.into());
         let err = DatasetReader::open(dir.path()).expect_err("v1 with ranges");
         assert!(
             matches!(
@@ -2000,10 +2051,7 @@ pub(crate) mod tests {
 
         let other = tempfile::tempdir().expect("tempdir");
         write(other.path(), 2, 4);
-        let path = other.path().join(MANIFEST_FILE);
-        let mut value = manifest_json(other.path());
-        value["version"] = 2.into();
-        fs::write(&path, value.to_string()).expect("write");
+        edit_manifest(other.path(), |value| value["version"] = 2.into());
         let err = DatasetReader::open(other.path()).expect_err("v2 without ranges");
         assert!(
             matches!(
@@ -2018,9 +2066,10 @@ pub(crate) mod tests {
         );
         assert!(err.to_string().contains("declares no `ranges`"), "{err}");
 
-        value["version"] = 2.into();
-        value["ranges"] = "sectors=2,clip=3".into();
-        fs::write(&path, value.to_string()).expect("write");
+        edit_manifest(other.path(), |value| {
+            value["version"] = 2.into();
+            value["ranges"] = "sectors=2,clip=3".into();
+        });
         let err = DatasetReader::open(other.path()).expect_err("bad ranges");
         assert!(matches!(err, DatasetError::BadManifest { .. }), "{err:?}");
         assert!(err.to_string().contains("sectors"), "{err}");
@@ -2034,7 +2083,6 @@ pub(crate) mod tests {
         write_with_ranges(with.path(), 3, 8);
         let without = tempfile::tempdir().expect("tempdir");
         write(without.path(), 3, 8);
-        let shard = "shard-000000.safetensors";
         let with_manifest = manifest_json(with.path());
         let without_manifest = manifest_json(without.path());
         for (dir, manifest, reason) in [
@@ -2045,17 +2093,7 @@ pub(crate) mod tests {
             ),
             (without.path(), &with_manifest, "no `ranges` tensor"),
         ] {
-            let bytes = fs::read(dir.join(shard)).expect("shard");
-            let mut manifest = manifest.clone();
-            manifest["shards"][0]["bytes"] = bytes.len().into();
-            let mut checksum = Fnv1a64::new();
-            checksum.update(&bytes);
-            manifest["shards"][0]["fnv1a64"] = checksum.hex().into();
-            fs::write(dir.join(MANIFEST_FILE), manifest.to_string()).expect("write");
-            let err = DatasetReader::open(dir)
-                .expect("open")
-                .load_all()
-                .expect_err("corrupt");
+            let err = load_error_under(dir, manifest, 3);
             assert!(
                 matches!(&err, DatasetError::CorruptShard { reason: r, .. } if r == reason),
                 "{err:?}"
@@ -2086,14 +2124,7 @@ pub(crate) mod tests {
     }
 
     fn write_with_neighbours(dir: &Path, header: DatasetHeader, samples: &[Sample]) -> Manifest {
-        let mut writer = DatasetWriter::create(dir, header)
-            .expect("create")
-            .with_shard_size(4)
-            .expect("shard size");
-        for sample in samples {
-            writer.push(sample.clone()).expect("push");
-        }
-        writer.finish().expect("finish")
+        write_samples(dir, header, 4, samples.iter().cloned())
     }
 
     #[test]
@@ -2135,24 +2166,12 @@ pub(crate) mod tests {
         assert_eq!(reader.manifest(), &manifest);
         assert_eq!(reader.load_all().expect("load"), samples);
 
-        let shard = fs::read(dir.path().join("shard-000002.safetensors")).expect("shard");
-        let tensors = SafeTensors::deserialize(&shard).expect("safetensors");
-        let neighbours = tensors.tensor("neighbours").expect("neighbours tensor");
-        assert_eq!(
-            (neighbours.dtype(), neighbours.shape()),
-            (Dtype::F32, &[2, 3, 4][..])
-        );
-        assert!(tensors.tensor("ranges").is_err());
-        let (_, meta) = SafeTensors::read_metadata(&shard).expect("metadata");
-        assert_eq!(meta.metadata().as_ref().expect("meta")["version"], "3");
+        let (tensors, version) = shard_tensors(dir.path(), "shard-000002.safetensors");
+        assert_eq!(tensors["neighbours"], (Dtype::F32, vec![2, 3, 4]));
+        assert!(!tensors.contains_key("ranges"));
+        assert_eq!(version, "3");
 
-        let mut writer = DatasetWriter::append_matching(dir.path(), &with, 1).expect("append");
-        writer.push(sample_with_neighbours(50, 1)).expect("push");
-        writer.finish().expect("finish");
-        let all = DatasetReader::open(dir.path())
-            .expect("open")
-            .load_all()
-            .expect("load");
+        let all = append_and_load(dir.path(), &with, sample_with_neighbours(50, 1));
         assert_eq!(all[10], sample_with_neighbours(50, 1));
     }
 
@@ -2242,27 +2261,11 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn appending_with_other_neighbours_is_refused_naming_them() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        write(dir.path(), 2, 4);
-        let err = DatasetWriter::append_matching(dir.path(), &header_with_neighbours(7), 1)
-            .expect_err("mismatch");
-        assert!(
-            matches!(&err, DatasetError::HeaderMismatch { field: "neighbour input", existing, requested, .. }
-                if existing == "none" && requested == "slots=3,threshold=1.3,nearest=2"),
-            "{err:?}"
-        );
-    }
-
-    #[test]
     fn a_version_that_disagrees_with_the_neighbours_is_refused_naming_the_file() {
         // Version 3 without neighbours.
         let dir = tempfile::tempdir().expect("tempdir");
         write(dir.path(), 2, 4);
-        let path = dir.path().join(MANIFEST_FILE);
-        let mut value = manifest_json(dir.path());
-        value["version"] = 3.into();
-        fs::write(&path, value.to_string()).expect("write");
+        edit_manifest(dir.path(), |value| value["version"] = 3.into());
         let err = DatasetReader::open(dir.path()).expect_err("v3 without neighbours");
         assert!(
             matches!(
@@ -2290,14 +2293,13 @@ pub(crate) mod tests {
             header_with_neighbours(7),
             &[sample_with_neighbours(0, 0)],
         );
-        let path = with.path().join(MANIFEST_FILE);
         for (version, ranges) in [(1, None), (2, Some("sectors=6,clip=3"))] {
-            let mut value = manifest_json(with.path());
-            value["version"] = version.into();
-            if let Some(ranges) = ranges {
-                value["ranges"] = ranges.into();
-            }
-            fs::write(&path, value.to_string()).expect("write");
+            edit_manifest(with.path(), |value| {
+                value["version"] = version.into();
+                if let Some(ranges) = ranges {
+                    value["ranges"] = ranges.into();
+                }
+            });
             let err = DatasetReader::open(with.path()).expect_err("v1/v2 with neighbours");
             assert!(
                 matches!(
@@ -2315,10 +2317,10 @@ pub(crate) mod tests {
         }
 
         // A neighbour input out of its bounds.
-        let mut value = manifest_json(with.path());
-        value["version"] = 3.into();
-        value["neighbours"] = "slots=65,threshold=1.3,nearest=2".into();
-        fs::write(&path, value.to_string()).expect("write");
+        edit_manifest(with.path(), |value| {
+            value["version"] = 3.into();
+            value["neighbours"] = "slots=65,threshold=1.3,nearest=2".into();
+        });
         let err = DatasetReader::open(with.path()).expect_err("bad neighbours");
         assert!(matches!(err, DatasetError::BadManifest { .. }), "{err:?}");
         assert!(err.to_string().contains("slots"), "{err}");
@@ -2344,7 +2346,6 @@ pub(crate) mod tests {
             })
             .collect();
         write_with_neighbours(other_slots.path(), four, &four_samples);
-        let shard = "shard-000000.safetensors";
         let with_manifest = manifest_json(with.path());
         let without_manifest = manifest_json(without.path());
         for (dir, manifest, reason) in [
@@ -2360,19 +2361,7 @@ pub(crate) mod tests {
                 "`neighbours` is F32 [2, 4, 4], expected F32 [2, 3, 4]",
             ),
         ] {
-            let bytes = fs::read(dir.join(shard)).expect("shard");
-            let mut manifest = manifest.clone();
-            manifest["shards"][0]["bytes"] = bytes.len().into();
-            manifest["shards"][0]["samples"] = 2.into();
-            manifest["samples"] = 2.into();
-            let mut checksum = Fnv1a64::new();
-            checksum.update(&bytes);
-            manifest["shards"][0]["fnv1a64"] = checksum.hex().into();
-            fs::write(dir.join(MANIFEST_FILE), manifest.to_string()).expect("write");
-            let err = DatasetReader::open(dir)
-                .expect("open")
-                .load_all()
-                .expect_err("corrupt");
+            let err = load_error_under(dir, manifest, 2);
             assert!(
                 matches!(&err, DatasetError::CorruptShard { reason: r, .. } if r == reason),
                 "{err:?}"
