@@ -1,5 +1,7 @@
-//! `formation-agent --transport ros2`: the flags of the ROS 2 mode and how they become the
-//! runtime's `Ros2AgentSettings`.
+//! `formation-agent --transport ros2`: the flags of the ROS 2 mode, how they become
+//! `formation_transport_ros2`'s `Ros2AgentSettings`, and the robot's pilots (`RobotPilot`s of
+//! the ONNX agent) that the runtime's agent loop drives over the robot's topics, as it drives the
+//! agents of every other transport.
 //!
 //! Topic defaults: with `--robot I`, the simulated team's (`/robot_I/scan`, `/robot_I/odom` as
 //! Odometry, `/robot_I/cmd_vel`, node `/robot_I/formation_agent`); without it, a single robot's
@@ -29,8 +31,8 @@ use {
     formation_proto::LidarSpec,
     formation_robot_agent::pilot::OnnxPilots,
     formation_ros2::{Namespace, NodeName, PartialScan, RingContract, TopicName},
-    formation_runtime::agent::PilotMaker,
-    formation_runtime::agent::{BoxError, Pilot},
+    formation_runtime::agent::{AgentLoop, BoxError, Pilot, PilotMaker},
+    formation_runtime::clock::SystemClock,
     formation_transport_ros2::agent::{ExpectedScan, run_agent_expecting},
     formation_transport_ros2::{
         DeciderSettings, GoalValue, OrientationKind, Ros2AgentSettings, TeamTopics,
@@ -38,6 +40,7 @@ use {
     formation_transport_zenoh::Endpoint,
     formation_world::scenario::{ProfileSettings, RobotProfile},
     std::path::Path,
+    std::sync::Arc,
     std::time::Duration,
 };
 
@@ -165,26 +168,25 @@ pub fn run(
     let connect = check_ros2_flags(args)?;
     let profile = flags.profile.as_deref().map(profile_named).transpose()?;
     let lidar = model_ring(model.as_ref(), &args.model)?;
-    let onnx = OnnxPilots
-        .pilot(model, lidar)
-        .map_err(|e| anyhow::anyhow!("{}", formation_runtime::agent::error_chain(&*e)))?;
     let robot = profile.map(|p| (p, p.settings()));
     if let Some((profile, settings)) = &robot
-        && let Some(told) = profile_lidar_differs(*profile, settings, lidar, onnx.model_id())
+        && let Some(told) = profile_lidar_differs(*profile, settings, lidar, model.model_id())
     {
         eprintln!("formation-agent: {told}");
     }
-    let mut pilot = RobotPilot::new(onnx, robot.map(|(_, s)| s.robot.max_wheel_speed));
-    pilot.set_wheel_limits(formation_proto::WheelLimits {
+    let pilots = Arc::new(RobotPilots {
+        max_wheel_speed: robot.map(|(_, s)| s.robot.max_wheel_speed),
+    });
+    let wheels = formation_proto::WheelLimits {
         max_speed: robot.map(|(_, s)| s.robot.max_wheel_speed),
         max_accel: robot.and_then(|(_, s)| s.robot.max_wheel_accel),
-    });
+    };
     let topics = robot_topics(args)?;
     let goal = goal_values(flags)?;
     if let GoalValue::Fixed(d_star) = goal[1] {
         // Refused at once, as an agent refuses a goal outside its model's envelope at episode
         // start.
-        formation_robot_agent::decision::check_goal_envelope(pilot.inner.policy(), d_star)
+        formation_robot_agent::decision::check_goal_envelope(model.as_ref(), d_star)
             .with_context(|| format!("--d-star {d_star}"))?;
     }
     let wheel_separation = checked_wheel_separation(flags, robot.map(|(_, s)| s.robot))?;
@@ -226,6 +228,7 @@ pub fn run(
             stale: Duration::from_millis(stale_ms),
             wheel_separation,
         },
+        wheels,
         scan,
         orientation,
         cmd_vel,
@@ -234,7 +237,15 @@ pub fn run(
         Some((profile, settings)) => expected_scan(profile, &settings),
         None => ExpectedScan::model_ring(settings.decider.contract),
     };
-    Ok(run_agent_expecting(&settings, &expected, &mut pilot, stop)?)
+    // The pilot is made for the model's own ring as the link begins the robot's one episode.
+    let agent = AgentLoop::new(
+        pilots,
+        args.model.clone(),
+        model,
+        None,
+        Arc::new(SystemClock),
+    );
+    Ok(run_agent_expecting(&settings, &expected, agent, stop)?)
 }
 
 /// The profile named `name`, or an error listing the ones the world knows.
@@ -293,6 +304,33 @@ fn profile_lidar_differs(
 struct RobotPilot<P> {
     inner: P,
     max_wheel_speed: Option<f64>,
+}
+
+/// Makes the ONNX agent's pilots of a robot with a top wheel speed ([`RobotPilot`]s).
+#[cfg(feature = "zenoh")]
+struct RobotPilots {
+    max_wheel_speed: Option<f64>,
+}
+
+#[cfg(feature = "zenoh")]
+impl PilotMaker for RobotPilots {
+    type Model = <OnnxPilots as PilotMaker>::Model;
+    type Pilot = RobotPilot<<OnnxPilots as PilotMaker>::Pilot>;
+
+    fn load(&self, path: &Path) -> Result<Self::Model, BoxError> {
+        OnnxPilots.load(path)
+    }
+
+    fn model_id<'m>(&self, model: &'m Self::Model) -> &'m str {
+        OnnxPilots.model_id(model)
+    }
+
+    fn pilot(&self, model: Self::Model, lidar: LidarSpec) -> Result<Self::Pilot, BoxError> {
+        Ok(RobotPilot::new(
+            OnnxPilots.pilot(model, lidar)?,
+            self.max_wheel_speed,
+        ))
+    }
 }
 
 #[cfg(feature = "zenoh")]

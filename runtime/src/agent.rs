@@ -8,6 +8,11 @@
 //! pilots of them (`formation_robot_agent::pilot::OnnxPilots` in the `formation-agent` binary, a
 //! double in unit tests); both traits are `formation_proto::robot`'s. It reads time
 //! only from its [`Clock`].
+//!
+//! The same loop drives a ROS 2 robot (`formation_transport_ros2::run_agent`), which runs free
+//! of any world: there the link stands in for the world (it begins the one episode, is never
+//! gone, and turns commands into Twists), and the loop only says another reason for its stop
+//! ([`AgentLoop::with_stop_reason`]).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -165,7 +170,13 @@ pub struct AgentLoop<M: PilotMaker> {
     rehearse_at: Option<std::time::Instant>,
     /// Simulation time of the last answered scan, and when it was answered.
     last_answer: Option<(f64, std::time::Instant)>,
+    /// Why the loop ended when its `stop` flag was set ([`AgentLoop::with_stop_reason`]).
+    stop_reason: &'static str,
 }
+
+/// Why an agent's loop ends when its `stop` flag is set, unless told otherwise: the launcher that
+/// started it closed its standard input.
+pub const LAUNCHER_CLOSED_INPUT: &str = "the launcher closed our input";
 
 impl<M: PilotMaker> AgentLoop<M> {
     /// An agent that will drive with `model` (loaded from `model_path` by `maker`), misbehaving
@@ -190,7 +201,16 @@ impl<M: PilotMaker> AgentLoop<M> {
             rehearse_ahead: Duration::ZERO,
             rehearse_at: None,
             last_answer: None,
+            stop_reason: LAUNCHER_CLOSED_INPUT,
         }
+    }
+
+    /// Says `reason` as the loop's end when its `stop` flag is set, in place of
+    /// [`LAUNCHER_CLOSED_INPUT`]: a ROS 2 agent belongs to its robot rather than to a run, and
+    /// its launcher, whatever it is, simply went away.
+    pub fn with_stop_reason(mut self, reason: &'static str) -> Self {
+        self.stop_reason = reason;
+        self
     }
 
     /// Makes the pilot rehearse its last decision `ahead` before the next scan is due (zero:
@@ -225,7 +245,7 @@ impl<M: PilotMaker> AgentLoop<M> {
     ) -> Result<AgentExit, AgentError> {
         loop {
             if stop.load(Ordering::Relaxed) {
-                return Ok(AgentExit::Because("the launcher closed our input".into()));
+                return Ok(AgentExit::Because(self.stop_reason.into()));
             }
             let now = self.clock.now();
             let wait = self.rehearse_at.map_or(IDLE_CHECK, |at| {
@@ -457,11 +477,7 @@ impl<M: PilotMaker> AgentLoop<M> {
         let mut cmd = match decided {
             Ok(cmd) => cmd,
             Err(e) => {
-                tracing::warn!(
-                    "tick {}: cannot decide ({}); asking for a brake",
-                    scan.tick,
-                    error_chain(e.as_ref())
-                );
+                link.decision_failed(scan.tick, &error_chain(e.as_ref()));
                 status = status.with(CmdStatus::DECISION_FAILED);
                 WheelCmd::BRAKE
             }

@@ -277,6 +277,15 @@ pub trait AgentLink {
     fn publish_status(&mut self, status: &AgentStatus) -> Result<(), AgentLinkError>;
     /// False once the world process is gone (exited or died).
     fn world_alive(&mut self) -> Result<bool, AgentLinkError>;
+    /// Told when the pilot could not decide on the scan of tick `tick` (`why`: the error's whole
+    /// chain), just before the loop publishes a brake for it ([`CmdStatus::DECISION_FAILED`]).
+    /// By default a warning in the log, since the world's watchdog tells the rest; a link whose
+    /// robot has a user of its own to tell (ROS 2's) keeps `why` for the brake it sends.
+    ///
+    /// [`CmdStatus::DECISION_FAILED`]: formation_proto::wire::CmdStatus::DECISION_FAILED
+    fn decision_failed(&mut self, tick: u64, why: &str) {
+        tracing::warn!("tick {tick}: cannot decide ({why}); asking for a brake");
+    }
 }
 
 #[cfg(test)]

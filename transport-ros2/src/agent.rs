@@ -1,8 +1,17 @@
 //! A ROS 2 agent ([`run_agent`]): one robot's decision maker as a ROS 2 node on the robot's
 //! rmw_zenoh router, with no ROS installation. It subscribes to the robot's LaserScan, an
 //! orientation (`sensor_msgs/Imu` or `nav_msgs/Odometry`) and, where they are not fixed, the
-//! goal topics (`std_msgs/Float64`), and publishes `geometry_msgs/Twist` on `cmd_vel`; what it
-//! does with each scan is the [`Decider`]'s.
+//! goal topics (`std_msgs/Float64`), and publishes `geometry_msgs/Twist` on `cmd_vel`.
+//!
+//! It runs on the runtime's agent loop ([`AgentLoop`]), as the agents of every other transport
+//! do, over [`RobotLink`]: the robot as an [`AgentLink`]. A robot runs free of any world, so the
+//! link is the world's stand-in, and this is all that differs:
+//! - one episode, begun by the link as the loop starts (the model's ring, the robot's wheel
+//!   limits), which lasts until the agent stops; no swap, no shutdown, no world to lose;
+//! - each LaserScan becomes the loop's scan once the [`Decider`] has it on the model's ring with
+//!   a fresh heading and the goal, and each command the loop answers becomes a Twist stamped
+//!   with that scan's stamp; what cannot be decided on brakes the robot with its reason;
+//! - the link wakes the loop at least every [`LOOK_EVERY`], to brake when the inputs go stale.
 //!
 //! It stops on SIGINT/SIGTERM, or when its launcher goes (the `stop` flag), and publishes one
 //! zero Twist before it goes. If it dies without one, the robot's own `cmd_vel` timeout brakes it
@@ -14,10 +23,12 @@
 //! that differs is named in one warning ([`ScanCheck`]), and the scans are resampled onto the
 //! model's ring as always.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
+use formation_proto::wire::{AgentStatus, CmdMsg, CmdStatus, ControlRequest, ScanMsg};
+use formation_proto::{LidarSpec, WheelLimits};
 use formation_ros2::{
     Float64, Imu, LaserScan, Namespace, NodeName, Odometry, Qos, RingContract, TopicName, Twist,
 };
@@ -26,7 +37,8 @@ use super::decider::{Answer, Decider, DeciderSettings, GoalValue, Inputs};
 use super::node::{
     Delivery, Node, NodeError, Received, RosPublisher, RosSubscription, system_time_ns,
 };
-use formation_runtime::agent::{AgentExit, Pilot};
+use formation_runtime::agent::{AgentError, AgentExit, AgentLoop, PilotMaker};
+use formation_runtime::link::{AgentLink, AgentLinkError, Wake};
 use formation_transport_zenoh::{Bell, Endpoint, Ring, SignalWatch};
 
 /// Which message carries the robot's orientation.
@@ -61,6 +73,9 @@ pub struct Ros2AgentSettings {
     pub cmd_vel: TopicName,
     /// The decision's settings (goal sources, ring, stale window, wheel separation).
     pub decider: DeciderSettings,
+    /// The robot's wheel limits (its profile's top speed and acceleration; none told: the
+    /// default), handed to the pilot as its one episode begins.
+    pub wheels: WheelLimits,
 }
 
 /// Why a ROS 2 agent could not run.
@@ -84,6 +99,21 @@ pub enum Ros2AgentError {
     /// Signals could not be watched.
     #[error("cannot watch for termination signals")]
     Signals(#[source] std::io::Error),
+    /// The pilot could not be made for the robot (the loop's episode was refused).
+    #[error("the model cannot drive this robot: {reason}")]
+    Unfit {
+        /// Why, as the agent loop told it.
+        reason: String,
+    },
+    /// The agent loop failed (its link's failure is one of the errors above, as its source).
+    #[error(transparent)]
+    Agent(#[from] AgentError),
+}
+
+impl From<Ros2AgentError> for AgentLinkError {
+    fn from(error: Ros2AgentError) -> AgentLinkError {
+        AgentLinkError::Transport(Box::new(error))
+    }
 }
 
 /// What the subscriptions leave for the loop.
@@ -113,27 +143,32 @@ fn note_problem(inbox: &Mutex<Inbox>, problem: String) {
     inbox.problems.push(problem);
 }
 
-/// How long the loop sleeps at most between looks at the stale window and the stop flag.
-const LOOK_EVERY: Duration = Duration::from_millis(50);
+/// How long the robot's link lets the agent loop wait at most, between looks at the stale window
+/// and the stop flag.
+pub const LOOK_EVERY: Duration = Duration::from_millis(50);
 
-/// Runs the agent until a signal or `stop`: connects, declares the node, its subscriptions and
-/// its publisher, and answers every scan. The scans are expected to be the model's own ring
-/// ([`ExpectedScan::model_ring`]); [`run_agent_expecting`] names another.
-pub fn run_agent<P: Pilot>(
+/// Why the agent's loop ends when its `stop` flag is set: a ROS 2 agent belongs to its robot,
+/// and whoever started it went away.
+pub const LAUNCHER_WENT_AWAY: &str = "the launcher went away";
+
+/// Runs `agent` (its pilot's maker and model) until a signal or `stop`: connects, declares the
+/// node, its subscriptions and its publisher, and answers every scan. The scans are expected to
+/// be the model's own ring ([`ExpectedScan::model_ring`]); [`run_agent_expecting`] names another.
+pub fn run_agent<M: PilotMaker>(
     settings: &Ros2AgentSettings,
-    pilot: &mut P,
+    agent: AgentLoop<M>,
     stop: &AtomicBool,
 ) -> Result<AgentExit, Ros2AgentError> {
     let expected = ExpectedScan::model_ring(settings.decider.contract);
-    run_agent_expecting(settings, &expected, pilot, stop)
+    run_agent_expecting(settings, &expected, agent, stop)
 }
 
 /// [`run_agent`] for a robot whose LaserScan is expected to be `expected` (a robot profile's
 /// LIDAR): the first scans that differ from it are named in one warning.
-pub fn run_agent_expecting<P: Pilot>(
+pub fn run_agent_expecting<M: PilotMaker>(
     settings: &Ros2AgentSettings,
     expected: &ExpectedScan,
-    pilot: &mut P,
+    agent: AgentLoop<M>,
     stop: &AtomicBool,
 ) -> Result<AgentExit, Ros2AgentError> {
     let session = connect_router(settings)?;
@@ -154,8 +189,12 @@ pub fn run_agent_expecting<P: Pilot>(
     // (one per scan, tiny): a dropped one would leave the robot on its previous command.
     let cmd_vel =
         node.publisher::<Twist>(&settings.cmd_vel, Qos::ROS_DEFAULT, Delivery::Reliable)?;
-    let exit = ScanAnswers::new(settings, expected.clone())
-        .answer_until_stopped(pilot, stop, &bell, &inbox, &cmd_vel);
+    let mut link = RobotLink::new(settings, expected.clone(), &bell, &inbox, &cmd_vel);
+    // No world checks on a robot: the run's name is never told.
+    let exit = agent
+        .with_stop_reason(LAUNCHER_WENT_AWAY)
+        .run(&mut link, stop, "")
+        .map_err(Ros2AgentError::from);
     // Whatever ended the loop (a signal, the launcher, an error), the robot is told to stop.
     brake(&cmd_vel, system_time_ns());
     drop(subscriptions);
@@ -329,9 +368,27 @@ impl Taken {
     }
 }
 
-/// The loop's state while it answers scans: the decision and what was told on stderr.
-struct ScanAnswers {
+/// The generation of a ROS 2 agent's one episode.
+const ROBOT_EPISODE: u64 = 0;
+
+/// A ROS 2 robot as the agent loop's [`AgentLink`]: the robot's inputs in (each usable scan as
+/// the loop's scan), Twists out, and what was told on stderr. It stands in for the world: it
+/// begins the one episode, is never gone, and asks for nothing else.
+pub struct RobotLink<'a> {
+    bell: &'a Bell,
+    inbox: &'a Mutex<Inbox>,
+    cmd_vel: &'a RosPublisher<Twist>,
+    /// The episode to begin, until the loop has taken it.
+    episode: Option<ControlRequest>,
     decider: Decider,
+    /// When the link began: the scans' simulation time is this host's time since.
+    started: Instant,
+    /// Scans handed to the loop so far (each one's tick).
+    ticks: u64,
+    /// The stamp of the scan handed to the loop and not answered yet.
+    answering: Option<i64>,
+    /// Why the pilot could not decide on that scan, when it could not.
+    decision_failure: Option<String>,
     /// The braking reason told last (told again only when it changes).
     told: Option<String>,
     problems_told: ProblemLog,
@@ -342,101 +399,187 @@ struct ScanAnswers {
     scan_check: ScanCheck,
 }
 
-impl ScanAnswers {
-    /// A fresh loop state with `settings`' decision, its clock started now, expecting scans
-    /// like `expected`.
-    fn new(settings: &Ros2AgentSettings, expected: ExpectedScan) -> ScanAnswers {
-        ScanAnswers {
-            decider: Decider::new(settings.decider.clone(), Instant::now()),
+impl<'a> RobotLink<'a> {
+    /// The robot of `settings` on the subscriptions' `inbox` (rung on `bell`) and `cmd_vel`,
+    /// its clock started now, expecting scans like `expected`.
+    fn new(
+        settings: &Ros2AgentSettings,
+        expected: ExpectedScan,
+        bell: &'a Bell,
+        inbox: &'a Mutex<Inbox>,
+        cmd_vel: &'a RosPublisher<Twist>,
+    ) -> RobotLink<'a> {
+        let contract = settings.decider.contract;
+        let now = Instant::now();
+        RobotLink {
+            bell,
+            inbox,
+            cmd_vel,
+            episode: Some(ControlRequest::BeginEpisode {
+                generation: ROBOT_EPISODE,
+                lidar: LidarSpec {
+                    beams: contract.beams,
+                    max_range: contract.max_range,
+                },
+                wheels: settings.wheels,
+            }),
+            decider: Decider::new(settings.decider.clone(), now),
+            started: now,
+            ticks: 0,
+            answering: None,
+            decision_failure: None,
             told: None,
             problems_told: ProblemLog::default(),
             superseded_told: 0,
             scan_unusable: None,
-            scan_check: ScanCheck::new(
-                expected,
-                settings.decider.contract,
-                settings.scan.as_str().to_owned(),
-            ),
+            scan_check: ScanCheck::new(expected, contract, settings.scan.as_str().to_owned()),
         }
     }
 
-    /// Answers every scan in `inbox` with a Twist on `cmd_vel` (or a brake) until `stop` is set
-    /// or a signal rings `bell`, waking at least every [`LOOK_EVERY`] to brake on stale input.
-    fn answer_until_stopped<P: Pilot>(
-        mut self,
-        pilot: &mut P,
-        stop: &AtomicBool,
-        bell: &Bell,
-        inbox: &Mutex<Inbox>,
-        cmd_vel: &RosPublisher<Twist>,
-    ) -> Result<AgentExit, Ros2AgentError> {
-        loop {
-            if stop.load(Ordering::Relaxed) {
-                break Ok(AgentExit::Because("the launcher went away".into()));
-            }
-            if let Ring::Terminated(signal) = bell.wait(LOOK_EVERY) {
-                break Ok(AgentExit::Signal(signal));
-            }
-            let taken = Taken::take_from(inbox);
-            if let Err(e) = self.answer(taken, pilot, cmd_vel) {
-                break Err(e);
-            }
-        }
-    }
-
-    /// One turn of the loop on what was `taken`: tells the problems, then answers the scan if
-    /// one came, or brakes when the inputs went stale. A Twist that cannot be sent is an error.
-    fn answer<P: Pilot>(
-        &mut self,
-        taken: Taken,
-        pilot: &mut P,
-        cmd_vel: &RosPublisher<Twist>,
-    ) -> Result<(), Ros2AgentError> {
-        let Taken {
-            scan,
-            inputs,
-            problems,
-            superseded,
-            scan_problem,
-        } = taken;
-        let now = Instant::now();
-        for problem in problems {
+    /// Tells the problems and the superseded scans in `taken`, and keeps the scan's problem.
+    fn tell_problems(&mut self, taken: &mut Taken, now: Instant) {
+        for problem in std::mem::take(&mut taken.problems) {
             self.problems_told.tell(problem, now);
         }
-        if superseded > self.superseded_told && self.superseded_told == 0 {
+        if taken.superseded > self.superseded_told && self.superseded_told == 0 {
             eprintln!(
                 "formation-agent: scans come faster than the agent decides: each decision takes \
                  the newest scan and the older ones go unanswered (the robot acts on the newest)"
             );
         }
-        self.superseded_told = superseded;
-        if scan_problem.is_some() {
-            self.scan_unusable = scan_problem;
+        self.superseded_told = taken.superseded;
+        if taken.scan_problem.is_some() {
+            self.scan_unusable = taken.scan_problem.take();
         }
-        if let Some((scan, arrived)) = scan {
-            self.scan_unusable = None;
-            if let Some(warning) = self.scan_check.look(&scan.message) {
-                eprintln!("formation-agent: {warning}");
+    }
+
+    /// The loop's scan for `scan`, arrived at `arrived`, if the decider has all it needs;
+    /// else the robot is braked with the reason, stamped with the scan's stamp.
+    fn ready_scan(
+        &mut self,
+        scan: &LaserScan,
+        inputs: &Inputs,
+        arrived: Instant,
+    ) -> Option<ScanMsg> {
+        self.scan_unusable = None;
+        if let Some(warning) = self.scan_check.look(scan) {
+            eprintln!("formation-agent: {warning}");
+        }
+        let stamp = scan.header.stamp.as_nanos();
+        let ready = self
+            .decider
+            .on_scan(scan, inputs, arrived)
+            .and_then(|ready| {
+                let since_start = arrived.saturating_duration_since(self.started);
+                ScanMsg::new(
+                    ROBOT_EPISODE,
+                    self.ticks + 1,
+                    since_start.as_secs_f64(),
+                    ready.heading,
+                    &ready.goal,
+                    &ready.ranges,
+                )
+                .map_err(|e| format!("the LaserScan on {}: {e}", self.scan_check.topic))
+            });
+        match ready {
+            Ok(msg) => {
+                self.ticks += 1;
+                self.answering = Some(stamp);
+                Some(msg)
             }
-            let stamp = scan.message.header.stamp.as_nanos();
-            match self.decider.on_scan(&scan.message, &inputs, arrived, pilot) {
-                Answer::Drive(twist) => {
-                    self.told = None;
-                    cmd_vel.publish(&twist, stamp)?;
-                }
-                Answer::Brake(reason) => {
-                    tell(&mut self.told, &reason);
-                    brake(cmd_vel, stamp);
-                }
+            Err(reason) => {
+                tell(&mut self.told, &reason);
+                brake(self.cmd_vel, stamp);
+                None
             }
-        } else if let Some(mut reason) = self.decider.check_stale(now) {
+        }
+    }
+}
+
+impl AgentLink for RobotLink<'_> {
+    /// Waits at most [`LOOK_EVERY`], so that stale inputs brake the robot in time.
+    fn wait(&mut self, timeout: Duration) -> Result<Wake, AgentLinkError> {
+        Ok(match self.bell.wait(timeout.min(LOOK_EVERY)) {
+            Ring::Activity => Wake::Activity,
+            Ring::Idle => Wake::Idle,
+            Ring::Terminated(signal) => Wake::Terminated(signal),
+        })
+    }
+
+    /// The one episode, once.
+    fn drain_control(
+        &mut self,
+        sink: &mut dyn FnMut(ControlRequest),
+    ) -> Result<(), AgentLinkError> {
+        if let Some(episode) = self.episode.take() {
+            sink(episode);
+        }
+        Ok(())
+    }
+
+    /// One turn on what the subscriptions left: tells the problems, then hands the loop the
+    /// newest scan if it can be decided on (else brakes), or brakes when the inputs went stale.
+    fn newest_scan(&mut self) -> Result<Option<ScanMsg>, AgentLinkError> {
+        let mut taken = Taken::take_from(self.inbox);
+        let now = Instant::now();
+        self.tell_problems(&mut taken, now);
+        if let Some((scan, arrived)) = taken.scan {
+            return Ok(self.ready_scan(&scan.message, &taken.inputs, arrived));
+        }
+        if let Some(mut reason) = self.decider.check_stale(now) {
             if let Some(problem) = &self.scan_unusable {
                 reason.push_str(&format!("; the samples that came were unusable: {problem}"));
             }
             tell(&mut self.told, &reason);
-            brake(cmd_vel, system_time_ns());
+            brake(self.cmd_vel, system_time_ns());
+        }
+        Ok(None)
+    }
+
+    /// The command as a Twist (or a brake, with the reason) stamped with its scan's stamp. A
+    /// Twist that cannot be sent is an error.
+    fn publish_command(&mut self, msg: &CmdMsg) -> Result<(), AgentLinkError> {
+        let stamp = self.answering.take().unwrap_or_else(system_time_ns);
+        let answer = if msg.status().contains(CmdStatus::DECISION_FAILED) {
+            let why = self.decision_failure.take().unwrap_or_default();
+            self.decider.on_failed_decision(&why)
+        } else {
+            self.decider.on_wheels(msg.wheels())
+        };
+        match answer {
+            Answer::Drive(twist) => {
+                self.told = None;
+                self.cmd_vel
+                    .publish(&twist, stamp)
+                    .map_err(Ros2AgentError::from)?;
+            }
+            Answer::Brake(reason) => {
+                tell(&mut self.told, &reason);
+                brake(self.cmd_vel, stamp);
+            }
         }
         Ok(())
+    }
+
+    /// Nothing to tell a robot, but a refused episode: the pilot cannot be made for it.
+    fn publish_status(&mut self, status: &AgentStatus) -> Result<(), AgentLinkError> {
+        match status {
+            AgentStatus::Refused { reason, .. } => Err(Ros2AgentError::Unfit {
+                reason: reason.clone(),
+            }
+            .into()),
+            _ => Ok(()),
+        }
+    }
+
+    /// A robot is never gone: its agent runs until stopped.
+    fn world_alive(&mut self) -> Result<bool, AgentLinkError> {
+        Ok(true)
+    }
+
+    /// Kept for the brake that follows, told with its reason.
+    fn decision_failed(&mut self, _tick: u64, why: &str) {
+        self.decision_failure = Some(why.to_owned());
     }
 }
 

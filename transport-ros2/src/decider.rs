@@ -1,6 +1,8 @@
-//! What a ROS 2 agent does with what it received, without I/O: [`Decider`] turns each LaserScan,
-//! with the newest orientation and goal, into one Twist for the robot's `cmd_vel`, or into a
-//! brake with the reason; and it notices when the scans stop.
+//! What a ROS 2 agent makes of what it received, without I/O: [`Decider`] readies each
+//! LaserScan, with the newest orientation and goal, for the pilot that the runtime's agent loop
+//! drives ([`Decider::on_scan`]: the scan on the model's ring, the heading, the goal), turns the
+//! pilot's wheel speeds into one Twist for the robot's `cmd_vel` ([`Decider::on_wheels`]), or
+//! gives the reason to brake; and it notices when the scans stop.
 //!
 //! The rules (the robot brakes, and the reason is told once, on each of these):
 //! - a scan that cannot be put on the model's ring ([`formation_ros2::resample_scan`]: a partial
@@ -10,7 +12,8 @@
 //! - no orientation yet, an orientation older than the stale window (measured on this host's
 //!   clock, at the scan's arrival), or one without a heading;
 //! - a goal value not received yet;
-//! - a decision the pilot refuses (a goal outside the model's envelope, a non-finite output);
+//! - a decision the pilot refuses (a goal outside the model's envelope, a non-finite output:
+//!   [`Decider::on_failed_decision`], or wheel speeds that make no Twist);
 //! - no scan for the stale window ([`Decider::check_stale`]).
 //!
 //! Every scan the agent takes gets exactly one answer, stamped with the scan's own stamp, so a
@@ -21,12 +24,10 @@
 
 use std::time::{Duration, Instant};
 
-use formation_proto::Goal;
+use formation_proto::{Goal, WheelCmd};
 use formation_ros2::{
     LaserScan, PartialScan, RingContract, Twist, resample_scan, twist_from_wheels,
 };
-
-use formation_runtime::agent::{Pilot, error_chain};
 
 /// Where a goal component comes from.
 #[derive(Debug, Clone, PartialEq)]
@@ -52,6 +53,18 @@ pub const GOAL_NAMES: [&str; 3] = [
     "the goal distance d*",
     "the goal speed v*",
 ];
+
+/// A scan ready for the pilot: its readings on the model's ring, and the heading and goal to
+/// decide with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReadyScan {
+    /// The readings, resampled onto the model's ring \[m\].
+    pub ranges: Vec<f32>,
+    /// The robot's heading \[rad\], from the newest orientation.
+    pub heading: f64,
+    /// The goal, from the fixed values and the goal topics.
+    pub goal: Goal,
+}
 
 /// What to send for a scan.
 #[derive(Debug, Clone, PartialEq)]
@@ -158,43 +171,37 @@ impl Decider {
         }
     }
 
-    /// The answer to `scan`, arrived at `now`.
-    pub fn on_scan<P: Pilot>(
+    /// Takes `scan`, arrived at `now`: what the pilot decides on with the newest `inputs` (the
+    /// scan on the model's ring, the heading, the goal), or the reason to brake.
+    pub fn on_scan(
         &mut self,
         scan: &LaserScan,
         inputs: &Inputs,
         now: Instant,
-        pilot: &mut P,
-    ) -> Answer {
+    ) -> Result<ReadyScan, String> {
         self.last_scan_at = Some(now);
-        let answer = self.decide(scan, inputs, now, pilot);
-        match &answer {
-            Answer::Drive(_) => self.braking_for = None,
-            Answer::Brake(reason) => self.braking_for = Some(reason.clone()),
-        }
-        answer
+        let ready = self.ready(scan, inputs, now);
+        self.braking_for = ready.as_ref().err().cloned();
+        ready
     }
 
-    fn decide<P: Pilot>(
+    fn ready(
         &mut self,
         scan: &LaserScan,
         inputs: &Inputs,
         now: Instant,
-        pilot: &mut P,
-    ) -> Answer {
+    ) -> Result<ReadyScan, String> {
         let topic = &self.settings.scan_topic;
         let nans = scan.ranges.iter().filter(|r| r.is_nan()).count();
         if !scan.ranges.is_empty() && nans as f64 > NAN_SHARE_LIMIT * scan.ranges.len() as f64 {
-            return Answer::Brake(format!(
+            return Err(format!(
                 "the LaserScan on {topic} has {nans} NaN readings of {} (NaN marks an erroneous \
                  measurement; more than a quarter means the sensor is failing)",
                 scan.ranges.len()
             ));
         }
-        let resampled = match resample_scan(scan, self.settings.contract, self.settings.partial) {
-            Ok(resampled) => resampled,
-            Err(e) => return Answer::Brake(format!("the LaserScan on {topic}: {e}")),
-        };
+        let resampled = resample_scan(scan, self.settings.contract, self.settings.partial)
+            .map_err(|e| format!("the LaserScan on {topic}: {e}"))?;
         if resampled.uncovered_beams > 0 && !self.warned_partial {
             self.warned_partial = true;
             tracing::warn!(
@@ -204,25 +211,36 @@ impl Decider {
                 self.settings.contract.beams
             );
         }
-        let heading = match self.heading(inputs, now) {
-            Ok(heading) => heading,
-            Err(reason) => return Answer::Brake(reason),
+        let heading = self.heading(inputs, now)?;
+        let goal = self.goal(inputs)?;
+        Ok(ReadyScan {
+            ranges: resampled.ranges,
+            heading,
+            goal,
+        })
+    }
+
+    /// The answer to the wheel speeds the pilot decided on the scan last taken: a Twist, or a
+    /// brake when they make none.
+    pub fn on_wheels(&mut self, wheels: WheelCmd) -> Answer {
+        let answer =
+            match twist_from_wheels(wheels.left, wheels.right, self.settings.wheel_separation) {
+                Ok(twist) => Answer::Drive(twist),
+                Err(e) => Answer::Brake(format!("the decision failed: {e}")),
+            };
+        self.braking_for = match &answer {
+            Answer::Drive(_) => None,
+            Answer::Brake(reason) => Some(reason.clone()),
         };
-        let goal = match self.goal(inputs) {
-            Ok(goal) => goal,
-            Err(reason) => return Answer::Brake(reason),
-        };
-        if let Err(e) = pilot.perceive(&resampled.ranges, &goal) {
-            return Answer::Brake(format!("the decision failed: {}", error_chain(&*e)));
-        }
-        let wheels = match pilot.decide(heading, &goal) {
-            Ok(wheels) => wheels,
-            Err(e) => return Answer::Brake(format!("the decision failed: {}", error_chain(&*e))),
-        };
-        match twist_from_wheels(wheels.left, wheels.right, self.settings.wheel_separation) {
-            Ok(twist) => Answer::Drive(twist),
-            Err(e) => Answer::Brake(format!("the decision failed: {e}")),
-        }
+        answer
+    }
+
+    /// The brake for the scan last taken when the pilot could not decide on it (`why`: the
+    /// error's chain).
+    pub fn on_failed_decision(&mut self, why: &str) -> Answer {
+        let reason = format!("the decision failed: {why}");
+        self.braking_for = Some(reason.clone());
+        Answer::Brake(reason)
     }
 
     /// At `now`: the reason to brake when no scan came for the stale window and the robot was
@@ -263,7 +281,7 @@ mod tests {
     use super::*;
     use formation_proto::WheelCmd;
     use formation_ros2::TopicName;
-    use formation_runtime::agent::BoxError;
+    use formation_runtime::agent::{BoxError, Pilot};
     use std::f64::consts::TAU;
 
     /// A pilot that drives both wheels at d* m/s and records what it was given.
@@ -297,6 +315,28 @@ mod tests {
             Ok(())
         }
         fn set_wheel_limits(&mut self, _wheels: formation_proto::WheelLimits) {}
+    }
+
+    /// What the agent loop and the link make of `scan` with `pilot`: the ready scan decided on,
+    /// then answered.
+    fn answer(
+        decider: &mut Decider,
+        scan: &LaserScan,
+        inputs: &Inputs,
+        now: Instant,
+        pilot: &mut Recorder,
+    ) -> Answer {
+        let ready = match decider.on_scan(scan, inputs, now) {
+            Ok(ready) => ready,
+            Err(reason) => return Answer::Brake(reason),
+        };
+        let decided = pilot
+            .perceive(&ready.ranges, &ready.goal)
+            .and_then(|()| pilot.decide(ready.heading, &ready.goal));
+        match decided {
+            Ok(wheels) => decider.on_wheels(wheels),
+            Err(e) => decider.on_failed_decision(&e.to_string()),
+        }
     }
 
     fn settings(partial: PartialScan) -> DeciderSettings {
@@ -341,7 +381,13 @@ mod tests {
         let now = Instant::now();
         let mut decider = Decider::new(settings(PartialScan::Refuse), now);
         let mut pilot = Recorder::default();
-        let answer = decider.on_scan(&scan(16, TAU, |i| i as f32), &fresh(now), now, &mut pilot);
+        let answer = answer(
+            &mut decider,
+            &scan(16, TAU, |i| i as f32),
+            &fresh(now),
+            now,
+            &mut pilot,
+        );
         let expected = twist_from_wheels(1.5, 1.6, 0.331).unwrap();
         assert_eq!(answer, Answer::Drive(expected));
         assert_eq!(pilot.heading, Some(0.25));
@@ -363,33 +409,39 @@ mod tests {
             goal: [None; 3],
             ..fresh(now)
         };
-        let reason = brake(decider.on_scan(&full, &no_goal, now, &mut pilot));
+        let reason = brake(answer(&mut decider, &full, &no_goal, now, &mut pilot));
         assert!(reason.contains("/formation/goal/distance"), "{reason}");
 
         let no_orientation = Inputs {
             orientation: None,
             ..fresh(now)
         };
-        let reason = brake(decider.on_scan(&full, &no_orientation, now, &mut pilot));
+        let reason = brake(answer(
+            &mut decider,
+            &full,
+            &no_orientation,
+            now,
+            &mut pilot,
+        ));
         assert!(
             reason.contains("no orientation received on /imu"),
             "{reason}"
         );
 
         let later = now + Duration::from_secs(2);
-        let reason = brake(decider.on_scan(&full, &fresh(now), later, &mut pilot));
+        let reason = brake(answer(&mut decider, &full, &fresh(now), later, &mut pilot));
         assert!(reason.contains("2.00 s old"), "{reason}");
 
         let half = scan(8, TAU / 2.0, |_| 3.0);
-        let reason = brake(decider.on_scan(&half, &fresh(now), now, &mut pilot));
+        let reason = brake(answer(&mut decider, &half, &fresh(now), now, &mut pilot));
         assert!(reason.contains("needs the full 360°"), "{reason}");
 
         let nan = scan(16, TAU, |i| if i % 2 == 0 { f32::NAN } else { 3.0 });
-        let reason = brake(decider.on_scan(&nan, &fresh(now), now, &mut pilot));
+        let reason = brake(answer(&mut decider, &nan, &fresh(now), now, &mut pilot));
         assert!(reason.contains("8 NaN readings of 16"), "{reason}");
 
         pilot.refuse = true;
-        let reason = brake(decider.on_scan(&full, &fresh(now), now, &mut pilot));
+        let reason = brake(answer(&mut decider, &full, &fresh(now), now, &mut pilot));
         assert!(reason.contains("outside the model's range"), "{reason}");
     }
 
@@ -400,7 +452,7 @@ mod tests {
         let mut pilot = Recorder::default();
         let half = scan(8, TAU / 2.0, |i| if i == 2 { f32::NAN } else { 3.0 });
         assert!(matches!(
-            decider.on_scan(&half, &fresh(now), now, &mut pilot),
+            answer(&mut decider, &half, &fresh(now), now, &mut pilot),
             Answer::Drive(_)
         ));
         assert_eq!(pilot.ranges, [3.0, 10.0, 3.0, 3.0, 10.0, 10.0, 10.0, 10.0]);
@@ -425,7 +477,7 @@ mod tests {
         let at = start + Duration::from_secs(3);
         let full = scan(16, TAU, |_| 3.0);
         assert!(matches!(
-            decider.on_scan(&full, &fresh(at), at, &mut pilot),
+            answer(&mut decider, &full, &fresh(at), at, &mut pilot),
             Answer::Drive(_)
         ));
         assert_eq!(decider.check_stale(at + Duration::from_millis(100)), None);
@@ -457,7 +509,7 @@ mod tests {
             };
             assert!(
                 matches!(
-                    decider.on_scan(&full, &inputs, at, &mut pilot),
+                    answer(&mut decider, &full, &inputs, at, &mut pilot),
                     Answer::Drive(_)
                 ),
                 "a scan {gap_ms} ms after the last one drives"

@@ -1,14 +1,17 @@
 //! ROS 2 held to the transport conformance suite (`formation-transport-conformance`): the world
 //! as a ROS 2 team on a free loopback port of each test's own, and ROS 2 agents
-//! (`formation_transport_ros2::run_agent`) on the team's topics. A ROS 2 world carries no swap
+//! (`formation_transport_ros2::run_agent`, the runtime's agent loop over the robot's topics) on
+//! the team's topics. A ROS 2 world carries no swap
 //! request, so ROS 2 runs no swap test.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 use formation_runtime::ClockMode;
-use formation_runtime::agent::error_chain;
+use formation_runtime::agent::{AgentLoop, PilotMaker, error_chain};
 use formation_runtime::auth::LaunchSecret;
+use formation_runtime::clock::SystemClock;
 use formation_test_kit::{assert_port_free, free_tcp_port, unique_run_id};
 use formation_transport_conformance::agent::{Agent, CONNECT_TIMEOUT};
 use formation_transport_conformance::rig::{Launch, Rig};
@@ -27,7 +30,7 @@ use formation_transport_ros2::{
     TeamTopics, run_agent,
 };
 
-use formation_transport_conformance::pilot::SuitePilot;
+use formation_transport_conformance::pilot::SuitePilots;
 use formation_transport_conformance::world::{BEAMS, MAX_RANGE};
 
 /// The robots' wheel separation \[m\].
@@ -62,6 +65,7 @@ fn settings(endpoint: &Endpoint, robot: usize, pid: u32) -> Ros2AgentSettings {
             stale: Duration::from_secs(30),
             wheel_separation: WHEEL_SEPARATION,
         },
+        wheels: formation_proto::WheelLimits::default(),
         scan: topics.scan,
         orientation: topics.odometry,
         cmd_vel: topics.cmd_vel,
@@ -101,8 +105,10 @@ impl Rig for Ros2Rig {
     fn start(&self, robot: usize, pid: u32, _secret: &LaunchSecret, model: PathBuf) -> Agent {
         let settings = settings(&self.endpoint, robot, pid);
         Agent::spawn(move |gate, stop| {
-            let mut pilot = SuitePilot::load(&model, gate).map_err(|e| e.to_string())?;
-            run_agent(&settings, &mut pilot, &stop).map_err(|e| error_chain(&e))
+            let pilots = Arc::new(SuitePilots { gate });
+            let loaded = pilots.load(&model).map_err(|e| e.to_string())?;
+            let agent = AgentLoop::new(pilots, model, loaded, None, Arc::new(SystemClock));
+            run_agent(&settings, agent, &stop).map_err(|e| error_chain(&e))
         })
     }
 
