@@ -37,6 +37,7 @@
 //! [`own_scan_team`] the in-process team of them, a [`Decentralised`] controller: robot `i` is
 //! handed its own scan, heading and the goal, and nothing else.
 
+use formation_perception::hidden_pairs::{HiddenPair, hidden_pairs};
 use formation_perception::neighbour_input::own_neighbours;
 use formation_perception::neighbours::{
     DetectedNeighbour, DetectorSettings, NeighbourDetector, SettingsError,
@@ -94,6 +95,8 @@ pub struct OwnView {
     flags: Vec<bool>,
     /// The neighbours held at the last call: `(detection index, weight)`.
     held: Vec<(usize, f64)>,
+    /// The pairs of detections the robot hides from each other, with `unblock_hidden_pairs`.
+    hidden: Vec<HiddenPair>,
 }
 
 impl OwnView {
@@ -137,7 +140,14 @@ impl OwnView {
                 NeighbourRule::AllPairs => usize::MAX,
                 NeighbourRule::Gabriel(gabriel) => gabriel.nearest,
             };
-            add_unblocking_term(&mut body, neighbours, nearest, robot.body_radius, d4);
+            hidden_pairs(
+                neighbours,
+                nearest,
+                robot.body_radius,
+                goal.d_star,
+                &mut self.hidden,
+            );
+            add_unblocking_term(&mut body, &self.hidden, d4);
         }
         let (sin, cos) = heading.sin_cos();
         let world = (cos * body.0 - sin * body.1, sin * body.0 + cos * body.1);
@@ -189,68 +199,15 @@ impl OwnView {
     }
 }
 
-/// Adds to `gradient` (body frame) the step aside of a robot that hides two of its detections
-/// from each other ([`ExpertGains::unblock_hidden_pairs`]): for each pair `a`, `c` with the robot
-/// between them (its foot on their segment) and within one body radius of their line, and which
-/// would both hold each other by the `nearest` rule (counting the robot), a push perpendicular to
-/// their line, away from it, as strong as their pair's pull `2 (r^4 - d*^4) / r^3`, weighted from
-/// 1 within half of `body_radius` of the line to 0 at `body_radius`. A robot exactly on the line
-/// steps to the left of `a -> c`, `a` the earlier detection.
-fn add_unblocking_term(
-    gradient: &mut (f64, f64),
-    neighbours: &[(f64, f64)],
-    nearest: usize,
-    body_radius: f64,
-    d4: f64,
-) {
-    let finite = |&(x, y): &(f64, f64)| x.is_finite() && y.is_finite();
-    let dist2 = |p: (f64, f64), q: (f64, f64)| (p.0 - q.0).powi(2) + (p.1 - q.1).powi(2);
-    // How many of the others (the robot at the origin included) lie within `sqrt(reach2)` of `p`.
-    let nearer = |p: usize, other: usize, reach2: f64| {
-        let robot = usize::from(dist2(neighbours[p], (0.0, 0.0)) < reach2);
-        robot
-            + neighbours
-                .iter()
-                .enumerate()
-                .filter(|&(k, q)| {
-                    k != p && k != other && finite(q) && dist2(neighbours[p], *q) < reach2
-                })
-                .count()
-    };
-    for a in 0..neighbours.len() {
-        let pa = neighbours[a];
-        if !finite(&pa) {
-            continue;
-        }
-        for (c, &pc) in neighbours.iter().enumerate().skip(a + 1) {
-            if !finite(&pc) {
-                continue;
-            }
-            let e = (pc.0 - pa.0, pc.1 - pa.1);
-            let l2 = e.0 * e.0 + e.1 * e.1;
-            if l2 * l2 <= d4 {
-                continue;
-            }
-            // The robot's foot on the line a -> c, as a share of the way, and its signed distance.
-            let t = -(pa.0 * e.0 + pa.1 * e.1) / l2;
-            if t <= 0.0 || t >= 1.0 {
-                continue;
-            }
-            let l = l2.sqrt();
-            let side = (e.1 * pa.0 - e.0 * pa.1) / l;
-            let weight = ((body_radius - side.abs()) / (0.5 * body_radius)).clamp(0.0, 1.0);
-            if weight == 0.0 {
-                continue;
-            }
-            if nearer(a, c, l2) >= nearest || nearer(c, a, l2) >= nearest {
-                continue;
-            }
-            let away = if side >= 0.0 { 1.0 } else { -1.0 };
-            let normal = (-e.1 / l * away, e.0 / l * away);
-            let pull = weight * 2.0 * (l2 * l2 - d4) / (l2 * l);
-            gradient.0 -= pull * normal.0;
-            gradient.1 -= pull * normal.1;
-        }
+/// Adds to `gradient` (body frame) the step aside of a robot from the pairs it hides
+/// ([`ExpertGains::unblock_hidden_pairs`], [`hidden_pairs`]): for each, a push along its `away`,
+/// as strong as the pull `2 (r^4 - d*^4) / r^3` its pair would feel, times its weight.
+fn add_unblocking_term(gradient: &mut (f64, f64), hidden: &[HiddenPair], d4: f64) {
+    for pair in hidden {
+        let r = pair.distance;
+        let pull = pair.weight * 2.0 * (r.powi(4) - d4) / r.powi(3);
+        gradient.0 -= pull * pair.away.0;
+        gradient.1 -= pull * pair.away.1;
     }
 }
 
@@ -514,53 +471,27 @@ mod tests {
         assert!((0..poses.len()).any(|i| tracker.own_neighbours(i).len() < poses.len() - 1));
     }
 
-    /// The gradient [`add_unblocking_term`] adds for a robot at the origin seeing `neighbours`.
-    fn unblocking(neighbours: &[(f64, f64)], nearest: usize) -> (f64, f64) {
-        let mut gradient = (0.0, 0.0);
-        add_unblocking_term(&mut gradient, neighbours, nearest, 0.25, 1.5f64.powi(4));
-        gradient
-    }
-
     #[test]
-    fn the_middle_of_a_line_of_three_steps_aside_and_nobody_else_does() {
-        let d = 1.5;
-        // The pull of a pair at 2 d*: 2 ((2d)^4 - d^4) / (2d)^3 = 3.75 d.
-        let pull = 3.75 * d;
-        // Left of the line from the first detection to the second: +y, so the gradient is -y.
-        let (gx, gy) = unblocking(&[(-d, 0.0), (d, 0.0)], 2);
-        assert!(gx.abs() < 1e-12 && (gy + pull).abs() < 1e-9, "{gx} {gy}");
-        let (gx, gy) = unblocking(&[(d, 0.0), (-d, 0.0)], 2);
-        assert!(gx.abs() < 1e-12 && (gy - pull).abs() < 1e-9, "{gx} {gy}");
-        // Off the line, the robot steps away from it: full weight up to half a body radius,
-        // half at three quarters, none from one body radius (0.25 m) on.
-        let (_, gy) = unblocking(&[(-d, -0.1), (d, -0.1)], 2);
-        assert!((gy + pull).abs() < 1e-9, "{gy}");
-        let (_, gy) = unblocking(&[(-d, 0.1875), (d, 0.1875)], 2);
-        assert!((gy - 0.5 * pull).abs() < 1e-9, "{gy}");
-        assert_eq!(unblocking(&[(-d, 0.25), (d, 0.25)], 2), (0.0, 0.0));
-        // An end robot, a triangle, a pair at d*, and a robot beside rather than between.
-        assert_eq!(unblocking(&[(d, 0.0), (2.0 * d, 0.0)], 2), (0.0, 0.0));
-        let h = d * 3f64.sqrt() / 2.0;
-        assert_eq!(unblocking(&[(h, d / 2.0), (h, -d / 2.0)], 2), (0.0, 0.0));
-        assert_eq!(
-            unblocking(&[(-d / 2.0, 0.0), (d / 2.0, 0.0)], 2),
-            (0.0, 0.0)
+    fn the_middle_of_a_line_of_three_steps_aside_with_the_pull_of_the_ends_pair() {
+        let d: f64 = 1.5;
+        let mut hidden = Vec::new();
+        let mut step = |neighbours: &[(f64, f64)]| {
+            hidden_pairs(neighbours, 2, 0.25, d, &mut hidden);
+            let mut gradient = (0.0, 0.0);
+            add_unblocking_term(&mut gradient, &hidden, d.powi(4));
+            gradient
+        };
+        // The pull of a pair at 2 d*: 2 ((2d)^4 - d^4) / (2d)^3 = 3.75 d, to the left of the
+        // line from the first detection to the second (+y), so the gradient is -y.
+        let (gx, gy) = step(&[(-d, 0.0), (d, 0.0)]);
+        assert!(
+            gx.abs() < 1e-12 && (gy + 3.75 * d).abs() < 1e-9,
+            "{gx} {gy}"
         );
-        assert_eq!(unblocking(&[(f64::NAN, 0.0), (d, 0.0)], 2), (0.0, 0.0));
-    }
-
-    #[test]
-    fn a_pair_with_nearer_neighbours_of_its_own_is_not_held_through_the_robot() {
-        let d = 1.5;
-        // Each end of the line has a neighbour of its own nearer than the other end (2 d*):
-        // under the Gabriel rule's two nearest, the ends would not hold each other.
-        let team = [(-d, 0.0), (d, 0.0), (-1.5 * d, 0.8 * d), (1.5 * d, 0.8 * d)];
-        assert_eq!(unblocking(&team, 2), (0.0, 0.0));
-        // Under all pairs they would, and the robot still steps aside.
-        let (_, gy) = unblocking(&team, usize::MAX);
-        assert!(gy < 0.0, "{gy}");
-        // One end with a nearer neighbour of its own: only the other would hold it, so no step.
-        assert_eq!(unblocking(&team[..3], 2), (0.0, 0.0));
+        // Half the weight, half the step; an end robot does not step.
+        let (_, gy) = step(&[(-d, 0.1875), (d, 0.1875)]);
+        assert!((gy - 0.5 * 3.75 * d).abs() < 1e-9, "{gy}");
+        assert_eq!(step(&[(d, 0.0), (2.0 * d, 0.0)]), (0.0, 0.0));
     }
 
     #[test]

@@ -8,6 +8,8 @@
 //!   model that declares one (`formation_proto::RangeInput`).
 //! * [`neighbours`]: the neighbours a robot detects in its own scan, each one's centre in its body
 //!   frame, fitted with a circle of the known body radius.
+//! * [`hidden_pairs`]: the pairs of those detections the robot hides from each other with its
+//!   own body, and the side it would step to (the law on one robot's scan steps aside).
 //! * [`neighbour_input`]: those detections as a model takes them beside its image, with the
 //!   Gabriel rule's verdict on each (`formation_proto::NeighbourInput`).
 //! * [`policy_input`]: a goal checked where it enters a robot, and the policy's declared output
@@ -17,6 +19,7 @@
 //! transport, so the expert, the agent and the Python bindings share them without building any of
 //! those.
 
+pub mod hidden_pairs;
 pub mod neighbour_input;
 pub mod neighbours;
 pub mod occupancy;
