@@ -34,6 +34,17 @@
 //! hidden robot (3–10 beams) fixes its centre least well; [`DetectedNeighbour::beams`] says how
 //! many beams each fit used. The detector keeps its buffers, so after the first few
 //! scans it allocates nothing (the caller's output vector included, once it has grown).
+//!
+//! **Accuracy and cost.** On `teams-generalist` at 16 robots (200 runs, seed 7, σ = 3 cm), each
+//! robot observing its 8 nearest, with the truth known to the world: the centre error's median /
+//! p90 / p99 is 6.6 / 13.2 / 21.8 mm in a formation at d*, and 9.3 / 20.1 / 47.8 mm from the
+//! scenario's starts; 0.05–0.07 % of the visible robots (3 beams or more on the body) are missed,
+//! and 0.08–0.38 % of detections are spurious; a scan takes 12.5–14.9 µs. Of the 8 nearest,
+//! 8.8–13.7 % are hidden behind nearer robots. Without noise every centre is within 0.1 mm. The
+//! times were taken on 2 cores that were also training; the bench gives 15.2 µs a scan in a
+//! 16-robot formation, against 2.4 µs for the occupancy renderer
+//! (`cargo run -p formation-perception --release --example detect_neighbours -- 200 0.03`, the
+//! runs and σ; `cargo bench -p formation-perception --bench neighbours`).
 
 use formation_proto::{DEFAULT_BODY_RADIUS_M, LidarSpec};
 

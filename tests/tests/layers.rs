@@ -605,3 +605,47 @@ fn no_crate_has_a_module_cycle_but_the_known_ones() {
         "these known cycles are gone: remove them from KNOWN_CYCLES: {gone:?}"
     );
 }
+
+/// Issue 35's map a newcomer reads in ten minutes: ARCHITECTURE.md of at most 3,000 words whose
+/// table cells are at most 300 characters, and a README of at most 40 lines in every crate.
+#[test]
+fn the_map_is_short_and_every_crate_has_a_short_readme() {
+    let root = repo_root().canonicalize().unwrap();
+    let architecture =
+        std::fs::read_to_string(root.join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
+    let words = architecture.split_whitespace().count();
+    assert!(
+        words <= 3000,
+        "ARCHITECTURE.md has {words} words, above 3,000"
+    );
+    let long_cells: Vec<String> = architecture
+        .lines()
+        .filter(|line| line.trim_start().starts_with('|'))
+        .flat_map(|line| line.split('|').map(str::trim))
+        .filter(|cell| cell.chars().count() > 300)
+        .map(|cell| cell.chars().take(60).collect())
+        .collect();
+    assert!(
+        long_cells.is_empty(),
+        "table cells above 300 characters: {long_cells:?}"
+    );
+    let metadata = workspace_metadata();
+    let mut wrong = Vec::new();
+    for package in metadata["packages"].as_array().expect("packages") {
+        let manifest = Path::new(package["manifest_path"].as_str().expect("manifest path"));
+        let readme = manifest.with_file_name("README.md");
+        match std::fs::read_to_string(&readme) {
+            Ok(text) if text.lines().count() <= 40 => {}
+            Ok(text) => wrong.push(format!(
+                "{}: {} lines",
+                readme.display(),
+                text.lines().count()
+            )),
+            Err(e) => wrong.push(format!("{}: {e}", readme.display())),
+        }
+    }
+    assert!(
+        wrong.is_empty(),
+        "each crate's README, at most 40 lines: {wrong:?}"
+    );
+}
