@@ -57,14 +57,29 @@ fn measure(label: &str, path: &Path) {
             .map(|s| if s % 17 < 3 { 1.0 } else { r.clip })
             .collect()
     });
-    // One call on an image and its scalars, with the ranges where the model takes them.
+    // A model that takes detected neighbours gets six, held at d* around the robot, in its
+    // first slots (per slot `x / d*, y / d*, held, present`); the other slots are empty.
+    let neighbours: Vec<f32> = policy.metadata().neighbours.map_or_else(Vec::new, |n| {
+        (0..n.slots)
+            .flat_map(|slot| {
+                let angle = slot as f32 * std::f32::consts::TAU / 6.0;
+                if slot < 6 {
+                    [angle.cos(), angle.sin(), 1.0, 1.0]
+                } else {
+                    [0.0; 4]
+                }
+            })
+            .collect()
+    });
+    // One call on an image and its scalars, with the ranges and neighbours where the model
+    // takes them.
     let mut infer = |image: &[f32], aux: &[f32]| {
         policy
             .infer(&PolicyInput {
                 image,
                 aux,
                 ranges: &ranges,
-                neighbours: &[],
+                neighbours: &neighbours,
             })
             .expect("infer")
     };
