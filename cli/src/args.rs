@@ -384,6 +384,11 @@ pub struct CollectArgs {
     /// still drives the runs.
     #[arg(long)]
     pub own_scan_labels: bool,
+    /// With --own-scan-labels: a robot that hides two detections from each other, which would
+    /// hold each other, steps aside (the law's `unblock_hidden_pairs`: table1 93 -> 100 % for
+    /// the law itself).
+    #[arg(long, requires = "own_scan_labels")]
+    pub unblock_hidden_pairs: bool,
 }
 
 /// `formation train`.
@@ -577,6 +582,10 @@ pub struct DaggerArgs {
     /// `formation collect --own-scan-labels` (DAgger refuses to mix two laws in one dataset).
     #[arg(long)]
     pub own_scan_labels: bool,
+    /// With --own-scan-labels: the law steps aside for the pairs a robot hides; give it when the
+    /// dataset was collected with `formation collect --unblock-hidden-pairs`.
+    #[arg(long, requires = "own_scan_labels")]
+    pub unblock_hidden_pairs: bool,
     /// Which network, whether to mirror the data, how many samples an epoch draws.
     #[command(flatten)]
     pub network: NetworkArgs,
@@ -867,7 +876,20 @@ mod tests {
             args.neighbours.unwrap().to_string(),
             "slots=16,threshold=1.3,nearest=2"
         );
-        assert!(args.own_scan_labels && args.unshaped_labels);
+        assert!(args.own_scan_labels && args.unshaped_labels && !args.unblock_hidden_pairs);
+        let cli = Cli::try_parse_from(
+            base.iter()
+                .chain(&["--own-scan-labels", "--unblock-hidden-pairs"]),
+        )
+        .unwrap();
+        let Command::Collect(args) = cli.command else {
+            panic!("not collect")
+        };
+        assert!(args.unblock_hidden_pairs);
+        // Stepping aside is the own-scan law's: without --own-scan-labels it is refused.
+        let error =
+            Cli::try_parse_from(base.iter().chain(&["--unblock-hidden-pairs"])).unwrap_err();
+        assert!(error.to_string().contains("--own-scan-labels"), "{error}");
         let cli = Cli::try_parse_from(base).unwrap();
         let Command::Collect(args) = cli.command else {
             panic!("not collect")

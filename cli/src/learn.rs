@@ -91,6 +91,7 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
                 shaping_wheel_accel: args.label_wheel_accel,
                 unshaped: args.unshaped_labels,
                 pair_weight_band: args.label_pair_band,
+                unblock_hidden_pairs: args.unblock_hidden_pairs,
                 ..ExpertGains::default()
             },
             own_scan: args.own_scan_labels,

@@ -291,14 +291,15 @@ impl ExpertGains {
         }
     }
 
-    /// The labelling law these gains give (what a dataset records of them): the shaping and the
-    /// pair weights, computed from every pose (whether labels come from each robot's own scan
-    /// instead, [`LabelLaw::own_scan`], is the labeller's, not the gains').
+    /// The labelling law these gains give (what a dataset records of them): the shaping, the
+    /// pair weights and the own-scan law's step aside (whether labels come from each robot's own
+    /// scan, [`LabelLaw::own_scan`], is the labeller's, not the gains').
     pub fn label_law(&self) -> LabelLaw {
         LabelLaw {
             shaping_wheel_accel: self.shaping_wheel_accel,
             unshaped: self.unshaped,
             pair_weight_band: self.pair_weight_band,
+            unblock_hidden_pairs: self.unblock_hidden_pairs,
             ..LabelLaw::default()
         }
     }
@@ -310,6 +311,7 @@ impl ExpertGains {
             shaping_wheel_accel: law.shaping_wheel_accel,
             unshaped: law.unshaped,
             pair_weight_band: law.pair_weight_band,
+            unblock_hidden_pairs: law.unblock_hidden_pairs,
             ..self
         }
     }

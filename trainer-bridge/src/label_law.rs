@@ -1,6 +1,7 @@
 //! Which law labelled a dataset's samples ([`LabelLaw`]): the expert's shaping and pair weights,
 //! as `formation collect|dagger --label-wheel-accel | --unshaped-labels | --label-pair-band` set
-//! them, and whether the law read every pose or each robot's own scan (`--own-scan-labels`). Stored in the dataset's manifest (absent for the expert's default law, so a dataset
+//! them, and whether the law read every pose or each robot's own scan (`--own-scan-labels`,
+//! with `--unblock-hidden-pairs`). Stored in the dataset's manifest (absent for the expert's default law, so a dataset
 //! collected with it keeps its bytes and id), folded into `dataset_id`, and compared wherever
 //! samples are mixed: DAgger refuses to append samples labelled by another law, and the trainer
 //! refuses to train on datasets labelled by different laws.
@@ -30,6 +31,11 @@ pub struct LabelLaw {
     /// (`--own-scan-labels`). The shaping and the pair weights above apply to it alike.
     #[serde(default, skip_serializing_if = "is_false")]
     pub own_scan: bool,
+    /// With `own_scan`: a robot that hides two detections from each other, which would hold each
+    /// other, steps aside (`formation_expert::ExpertGains::unblock_hidden_pairs`,
+    /// `--unblock-hidden-pairs`).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub unblock_hidden_pairs: bool,
 }
 
 fn is_false(value: &bool) -> bool {
@@ -64,6 +70,9 @@ impl LabelLaw {
         if self.own_scan {
             update(b"own_scan");
         }
+        if self.unblock_hidden_pairs {
+            update(b"unblock_hidden_pairs");
+        }
     }
 }
 
@@ -88,6 +97,9 @@ impl fmt::Display for LabelLaw {
         }
         if self.own_scan {
             parts.push("each robot's own scan (--own-scan-labels)".to_owned());
+        }
+        if self.unblock_hidden_pairs {
+            parts.push("stepping aside for hidden pairs (--unblock-hidden-pairs)".to_owned());
         }
         f.write_str(&parts.join(", "))
     }
@@ -134,6 +146,12 @@ mod tests {
             LabelLaw {
                 unshaped: true,
                 own_scan: true,
+                ..LabelLaw::default()
+            },
+            LabelLaw {
+                unshaped: true,
+                own_scan: true,
+                unblock_hidden_pairs: true,
                 ..LabelLaw::default()
             },
         ];
