@@ -115,11 +115,42 @@ pub struct Ros2Args {
     /// top wheel speed and wheel acceleration limit are used.
     #[arg(long, value_name = "PROFILE")]
     profile: Option<String>,
+    /// ROS 2: the robot's top wheel speed \[m/s\], told to the policy as the world tells its
+    /// agents (a formation-velocity policy scales both wheels into it), over the profile's;
+    /// `formation run --transport ros2` gives its scenario's.
+    #[arg(long, value_name = "M/S", value_parser = positive_number)]
+    max_wheel_speed: Option<f64>,
+    /// ROS 2: the robot's wheel acceleration limit \[m/s²\], over the profile's.
+    #[arg(long, value_name = "M/S2", value_parser = positive_number)]
+    max_wheel_accel: Option<f64>,
+}
+
+/// The wheels the policy is told: each of `--max-wheel-speed` and `--max-wheel-accel` over the
+/// profile's robot's, the profile's over nothing.
+#[cfg(feature = "zenoh")]
+fn told_wheels(
+    flags: &Ros2Args,
+    robot: Option<formation_world::RobotParams>,
+) -> formation_proto::WheelLimits {
+    formation_proto::WheelLimits {
+        max_speed: flags.max_wheel_speed.or(robot.map(|r| r.max_wheel_speed)),
+        max_accel: flags
+            .max_wheel_accel
+            .or(robot.and_then(|r| r.max_wheel_accel)),
+    }
+}
+
+/// Parses a finite number above zero.
+fn positive_number(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(value) if value.is_finite() && value > 0.0 => Ok(value),
+        _ => Err(format!("expected a finite number above 0, got {text:?}")),
+    }
 }
 
 impl Ros2Args {
     /// `(given, "--flag")` of every ROS 2 flag, for refusing them with another transport.
-    pub fn given(&self) -> [(bool, &'static str); 16] {
+    pub fn given(&self) -> [(bool, &'static str); 18] {
         [
             // The environment variable alone is not a flag given by mistake.
             (false, "--ros-domain-id"),
@@ -138,6 +169,8 @@ impl Ros2Args {
             (self.allow_partial_scan, "--allow-partial-scan"),
             (self.node_name.is_some(), "--node-name"),
             (self.profile.is_some(), "--profile"),
+            (self.max_wheel_speed.is_some(), "--max-wheel-speed"),
+            (self.max_wheel_accel.is_some(), "--max-wheel-accel"),
         ]
     }
 }
@@ -174,13 +207,13 @@ pub fn run(
     {
         eprintln!("formation-agent: {told}");
     }
+    let wheels = told_wheels(flags, robot.map(|(_, s)| s.robot));
+    // A profile's robot also gets every command's wheels scaled together into its top speed;
+    // the flags alone tell the policy, as the world tells its agents, and leave the rest to the
+    // robot's own controller, as the world clips each wheel.
     let pilots = Arc::new(RobotPilots {
         max_wheel_speed: robot.map(|(_, s)| s.robot.max_wheel_speed),
     });
-    let wheels = formation_proto::WheelLimits {
-        max_speed: robot.map(|(_, s)| s.robot.max_wheel_speed),
-        max_accel: robot.and_then(|(_, s)| s.robot.max_wheel_accel),
-    };
     let topics = robot_topics(args)?;
     let goal = goal_values(flags)?;
     if let GoalValue::Fixed(d_star) = goal[1] {
@@ -612,5 +645,21 @@ mod tests {
             checked_wheel_separation(&given.ros2, Some(burger)).unwrap(),
             0.2
         );
+        // The wheels the policy is told: the flags over the profile, the profile over nothing.
+        let none = formation_proto::WheelLimits::default();
+        assert_eq!(told_wheels(&plain.ros2, None), none);
+        assert_eq!(
+            told_wheels(&plain.ros2, Some(burger)),
+            burger.wheel_limits()
+        );
+        let told = Cli::parse_from(["x", "--max-wheel-speed", "0.9", "--max-wheel-accel", "1.5"]);
+        let wheels = told_wheels(&told.ros2, Some(burger));
+        assert_eq!((wheels.max_speed, wheels.max_accel), (Some(0.9), Some(1.5)));
+        for bad in ["0", "-1", "nan", "inf", "fast"] {
+            assert!(
+                Cli::try_parse_from(["x", "--max-wheel-speed", bad]).is_err(),
+                "{bad}"
+            );
+        }
     }
 }

@@ -60,10 +60,15 @@ fn shipped_model() -> std::path::PathBuf {
     repo_root().join("onnx/models/policy.onnx")
 }
 
-/// `formation eval` in-process of `scenario`'s first run, its summary JSON.
-fn in_process_summary(dir: &Path, scenario: &Path) -> serde_json::Value {
+/// The pair network (issue 34): detected neighbours in, a formation velocity out.
+fn pair_model() -> std::path::PathBuf {
+    repo_root().join("onnx/models/pair/policy.onnx")
+}
+
+/// `formation eval` in-process of `scenario`'s first run with `model`, its summary JSON.
+fn in_process_summary(dir: &Path, scenario: &Path, model: &Path) -> serde_json::Value {
     let path = dir.join("in-process.json");
-    let eval = policy_eval(scenario, &shipped_model(), &path);
+    let eval = policy_eval(scenario, model, &path);
     run(eval, LIMIT).assert_success();
     read_json(&path)
 }
@@ -77,9 +82,14 @@ struct TeamRun {
     finished: formation_tests::Finished,
 }
 
-/// `formation run --transport ros2` of case 1 (25 s) with `clock`, on a free port; the launch
-/// must succeed and leave nothing behind.
+/// `formation run --transport ros2` of case 1 (25 s) with `clock` and the shipped model, on a
+/// free port; the launch must succeed and leave nothing behind.
 fn run_team(tag: &str, clock: &str) -> TeamRun {
+    run_team_with(tag, clock, &shipped_model())
+}
+
+/// [`run_team`] with `model`.
+fn run_team_with(tag: &str, clock: &str, model: &Path) -> TeamRun {
     let dir = TempDir::new(tag);
     let run_id = unique_run_id(tag);
     let leaks = LeakCheck::new(&run_id);
@@ -90,7 +100,7 @@ fn run_team(tag: &str, clock: &str) -> TeamRun {
         formation_run_with_model(
             &run_id,
             &scenario,
-            &shipped_model(),
+            model,
             &out,
             &["--transport", "ros2", "--listen", &listen, "--clock", clock],
         ),
@@ -111,14 +121,28 @@ fn run_team(tag: &str, clock: &str) -> TeamRun {
 #[test]
 fn lockstep_case1_through_ros2_gives_the_in_process_table() {
     let _t = ProcessTest::start("ros2_team_lockstep", LIMIT);
+    assert_lockstep_case1_gives_the_in_process_table("r2lock", &shipped_model());
+}
+
+/// Issue 34: a model that takes detected neighbours and answers a formation velocity drives a
+/// ROS 2 team as the shipped model does, to in-process evaluation's Table I JSON.
+#[test]
+fn the_pair_network_drives_a_ros2_team_to_the_in_process_table() {
+    let _t = ProcessTest::start("ros2_team_pair", LIMIT);
+    assert_lockstep_case1_gives_the_in_process_table("r2pair", &pair_model());
+}
+
+/// Lockstep case 1 with `model` through the ROS 2 path converges, gives in-process evaluation's
+/// Table I JSON and answers every tick.
+fn assert_lockstep_case1_gives_the_in_process_table(tag: &str, model: &Path) {
     let TeamRun {
         dir,
         scenario,
         out,
         finished,
-    } = run_team("r2lock", "lockstep");
+    } = run_team_with(tag, "lockstep", model);
     let over_ros2 = read_json(&out.join("summary.json"));
-    let reference = in_process_summary(dir.path(), &scenario);
+    let reference = in_process_summary(dir.path(), &scenario, model);
     assert_eq!(
         reference["per_run"][0]["success_10"],
         serde_json::Value::Bool(true),
@@ -150,7 +174,7 @@ fn lockstep_case1_through_ros2_gives_the_in_process_table() {
 fn eval_through_ros2_writes_the_in_process_json() {
     let t = ProcessTest::start("ros2_eval_json", LIMIT);
     let scenario = t.case1(10.0);
-    let reference = in_process_summary(t.path(), &scenario);
+    let reference = in_process_summary(t.path(), &scenario, &shipped_model());
     let over_path = t.path().join("ros2.json");
     let listen = t.endpoint();
     let mut eval = policy_eval(&scenario, &shipped_model(), &over_path);

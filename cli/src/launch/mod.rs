@@ -171,7 +171,8 @@ fn plan_from_args(args: &RunArgs) -> anyhow::Result<PlannedRun> {
     };
     let faults = faults_per_robot(&args.faults, models.len())?;
     let restart_window = positive_seconds("--restart-window-s", args.restart_window_s)?;
-    let network = network_from_args(args, &run_id, models.len())?;
+    let wheels = scenario.world_config().robot.wheel_limits();
+    let network = network_from_args(args, &run_id, models.len(), wheels)?;
     let run_specs = args.out.join("run-specs.json");
     write_run_specs(&scenario, base_seed, args.first_run, args.runs, &run_specs)?;
     let mut startup_timeout_ms = RuntimeSettings::DEFAULT.startup_timeout_ms;
@@ -304,7 +305,13 @@ impl NetworkFlags {
     /// The launch's network for a team of `n_robots`: flags of Zenoh need it, the transport
     /// must be built in, Zenoh needs `--listen` (a valid endpoint), a remote robot must exist in
     /// the scenario, and a Zenoh launch without `--credentials` gets fresh ones in `fresh`.
-    pub fn network(&self, n_robots: usize, fresh: &Path) -> anyhow::Result<Network> {
+    /// `wheels` are the scenario's robot's, which ROS 2 agents are told.
+    pub fn network(
+        &self,
+        n_robots: usize,
+        wheels: formation_proto::WheelLimits,
+        fresh: &Path,
+    ) -> anyhow::Result<Network> {
         self.refuse_misplaced()?;
         self.transport
             .check_built_in("formation", crate::TRANSPORTS)?;
@@ -323,6 +330,7 @@ impl NetworkFlags {
                     listen,
                     domain_id: self.ros_domain_id.unwrap_or(0),
                     credentials,
+                    wheels,
                 }));
             }
             Transport::Zenoh => {}
@@ -360,9 +368,14 @@ impl NetworkFlags {
 /// How the launch's processes reach each other ([`NetworkFlags::network`]); a Zenoh launch
 /// without `--credentials` gets fresh ones in `<out>/credentials/<run id>/`.
 /// A ROS 2 launch takes no `--fault` (fault injection is the other transports' agents').
-fn network_from_args(args: &RunArgs, run_id: &RunId, n_robots: usize) -> anyhow::Result<Network> {
+fn network_from_args(
+    args: &RunArgs,
+    run_id: &RunId,
+    n_robots: usize,
+    wheels: formation_proto::WheelLimits,
+) -> anyhow::Result<Network> {
     let fresh = args.out.join("credentials").join(run_id.as_str());
-    let network = NetworkFlags::of_run(args).network(n_robots, &fresh)?;
+    let network = NetworkFlags::of_run(args).network(n_robots, wheels, &fresh)?;
     if matches!(network, Network::Ros2(_)) && !args.faults.is_empty() {
         anyhow::bail!(
             "--fault injects faults into agents of the iceoryx2 and zenoh transports; a ROS 2 \
@@ -1006,7 +1019,8 @@ pub fn eval_over_processes_recorded(
     let run_id = RunId::generate();
     let work = std::env::temp_dir().join(format!("formation-eval-{run_id}"));
     let result = (|| {
-        let network = network.network(models.len(), &work.join("credentials"))?;
+        let wheels = scenario.world_config().robot.wheel_limits();
+        let network = network.network(models.len(), wheels, &work.join("credentials"))?;
         let run_specs = work.join("run-specs.json");
         write_run_specs(scenario, base_seed, 0, runs, &run_specs)?;
         let launch_info =

@@ -160,6 +160,9 @@ pub struct Ros2Plan {
     /// listens with its certificate, and each agent joins with the session configuration of its
     /// robot in the folder's `ros2/` (`ZENOH_SESSION_CONFIG_URI`, as rmw_zenoh's nodes do).
     pub credentials: Option<PathBuf>,
+    /// The scenario's robot's wheels, told to each ROS 2 agent (`--max-wheel-speed`,
+    /// `--max-wheel-accel`) as the world tells its other agents at each episode's start.
+    pub wheels: formation_proto::WheelLimits,
 }
 
 /// Where a process on this host connects to a router listening on `listen`: the address, with an
@@ -999,6 +1002,12 @@ async fn spawn_agent(
             .arg(local_endpoint(&ros2.listen))
             .args(["--ros-domain-id", &ros2.domain_id.to_string()])
             .args(["--stale-ms", &plan.settings.stale_ms.to_string()]);
+        if let Some(speed) = ros2.wheels.max_speed {
+            command.args(["--max-wheel-speed", &speed.to_string()]);
+        }
+        if let Some(accel) = ros2.wheels.max_accel {
+            command.args(["--max-wheel-accel", &accel.to_string()]);
+        }
         #[cfg(feature = "tls")]
         if let Some(dir) = &ros2.credentials {
             use formation_transport_ros2::secure;
