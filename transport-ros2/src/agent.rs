@@ -39,7 +39,7 @@ use super::node::{
 };
 use formation_runtime::agent::{AgentError, AgentExit, AgentLoop, PilotMaker};
 use formation_runtime::link::{AgentLink, AgentLinkError, Wake};
-use formation_transport_zenoh::{Bell, Endpoint, Ring, SignalWatch};
+use formation_transport_zenoh::{Bell, Endpoint, SignalWatch};
 
 /// Which message carries the robot's orientation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -499,11 +499,7 @@ impl<'a> RobotLink<'a> {
 impl AgentLink for RobotLink<'_> {
     /// Waits at most [`LOOK_EVERY`], so that stale inputs brake the robot in time.
     fn wait(&mut self, timeout: Duration) -> Result<Wake, AgentLinkError> {
-        Ok(match self.bell.wait(timeout.min(LOOK_EVERY)) {
-            Ring::Activity => Wake::Activity,
-            Ring::Idle => Wake::Idle,
-            Ring::Terminated(signal) => Wake::Terminated(signal),
-        })
+        Ok(Wake::from(self.bell.wait(timeout.min(LOOK_EVERY))))
     }
 
     /// The one episode, once.

@@ -636,11 +636,7 @@ impl AgentLink for ZenohAgentLink {
                 reason,
             });
         }
-        Ok(match ring {
-            Ring::Activity => Wake::Activity,
-            Ring::Idle => Wake::Idle,
-            Ring::Terminated(signal) => Wake::Terminated(signal),
-        })
+        Ok(Wake::from(ring))
     }
 
     fn drain_control(

@@ -503,6 +503,18 @@ pub enum Ring {
     Terminated(TerminationSignal),
 }
 
+impl From<Ring> for formation_runtime::link::Wake {
+    /// A bell's ring as an agent link's wait answers it.
+    fn from(ring: Ring) -> Self {
+        use formation_runtime::link::Wake;
+        match ring {
+            Ring::Activity => Wake::Activity,
+            Ring::Idle => Wake::Idle,
+            Ring::Terminated(signal) => Wake::Terminated(signal),
+        }
+    }
+}
+
 impl Bell {
     fn lock(&self) -> MutexGuard<'_, BellState> {
         // A callback that panicked while holding the lock left plain flags behind: keep going.
