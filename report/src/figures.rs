@@ -38,27 +38,26 @@ const PAPER: RGBColor = RGBColor(0xC0, 0x39, 0x2B);
 /// Box fill of Fig. 9.
 const BOX: RGBColor = RGBColor(0x4C, 0x72, 0xB0);
 /// Robot colours (Tableau 10), robot `i` gets `ROBOT_COLORS[i % 10]`.
-pub const ROBOT_COLORS: [RGBColor; 10] = [
-    RGBColor(0x1F, 0x77, 0xB4),
-    RGBColor(0xFF, 0x7F, 0x0E),
-    RGBColor(0x2C, 0xA0, 0x2C),
-    RGBColor(0xD6, 0x27, 0x28),
-    RGBColor(0x94, 0x67, 0xBD),
-    RGBColor(0x8C, 0x56, 0x4B),
-    RGBColor(0xE3, 0x77, 0xC2),
-    RGBColor(0x7F, 0x7F, 0x7F),
-    RGBColor(0xBC, 0xBD, 0x22),
-    RGBColor(0x17, 0xBE, 0xCF),
-];
+pub const ROBOT_COLORS: [RGBColor; 10] = palette([
+    0x1F77B4, 0xFF7F0E, 0x2CA02C, 0xD62728, 0x9467BD, 0x8C564B, 0xE377C2, 0x7F7F7F, 0xBCBD22,
+    0x17BECF,
+]);
 /// Edge colours of the formation error panel (distinct from the robot colours).
-pub const EDGE_COLORS: [RGBColor; 6] = [
-    RGBColor(0x6A, 0x3D, 0x9A),
-    RGBColor(0x00, 0x8B, 0x8B),
-    RGBColor(0xB1, 0x59, 0x28),
-    RGBColor(0x33, 0xA0, 0x2C),
-    RGBColor(0xE3, 0x1A, 0x1C),
-    RGBColor(0x1F, 0x78, 0xB4),
-];
+pub const EDGE_COLORS: [RGBColor; 6] =
+    palette([0x6A3D9A, 0x008B8B, 0xB15928, 0x33A02C, 0xE31A1C, 0x1F78B4]);
+
+/// Colours from their `0xRRGGBB` codes.
+const fn palette<const N: usize>(codes: [u32; N]) -> [RGBColor; N] {
+    let mut colors = [RGBColor(0, 0, 0); N];
+    let mut i = 0;
+    while i < N {
+        let [_, red, green, blue] = codes[i].to_be_bytes();
+        colors[i] = RGBColor(red, green, blue);
+        i += 1;
+    }
+    colors
+}
+
 /// Width \[px\] of the legend strip right of every plot.
 const LEGEND_WIDTH: u32 = 140;
 /// Seconds between the formation snapshots of the trajectory panel (the paper's 3 s).

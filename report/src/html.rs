@@ -51,27 +51,22 @@ pub struct CaptionedFigure {
     pub caption: String,
 }
 
-/// One scaling table: its rows and its figure.
+/// A table read from a file (a scaling table, a reality ladder): the table and its figure.
 #[derive(Debug, Clone)]
-pub struct ScalingSection {
+pub struct TableSection<T> {
     /// Where it came from, relative to the input directory.
     pub source: String,
-    /// The rows.
-    pub rows: Vec<formation_schema::ScalingRow>,
-    /// Success and convergence against the team size.
+    /// The table as written.
+    pub table: T,
+    /// Success and convergence against the team size, or per rung.
     pub figure: CaptionedFigure,
 }
 
+/// One scaling table: its rows and its figure.
+pub type ScalingSection = TableSection<formation_schema::ScalingTable>;
+
 /// One reality ladder: its rungs and its figure.
-#[derive(Debug, Clone)]
-pub struct LadderSection {
-    /// Where it came from, relative to the input directory.
-    pub source: String,
-    /// The ladder as written.
-    pub table: formation_schema::LadderTable,
-    /// Success and convergence per rung.
-    pub figure: CaptionedFigure,
-}
+pub type LadderSection = TableSection<formation_schema::LadderTable>;
 
 /// One case run: three panels and a fact sheet.
 #[derive(Debug, Clone)]
@@ -290,20 +285,20 @@ pub fn render_page(page: &ReportPage) -> String {
     if !page.runs.is_empty() || !page.run_notes.is_empty() {
         write_runs(&mut html, page);
     }
-    if !page.scaling.is_empty() {
-        html.push_str("<section id=\"scaling\">\n<h2>Scaling over team sizes</h2>\n");
-        for section in &page.scaling {
-            write_scaling(&mut html, section);
-        }
-        html.push_str("</section>\n");
-    }
-    if !page.ladders.is_empty() {
-        html.push_str("<section id=\"ladder\">\n<h2>Reality ladders</h2>\n");
-        for section in &page.ladders {
-            write_ladder(&mut html, section);
-        }
-        html.push_str("</section>\n");
-    }
+    write_table_sections(
+        &mut html,
+        "scaling",
+        "Scaling over team sizes",
+        &page.scaling,
+        write_scaling,
+    );
+    write_table_sections(
+        &mut html,
+        "ladder",
+        "Reality ladders",
+        &page.ladders,
+        write_ladder,
+    );
     write_figure_sections(&mut html, page);
     write_inputs_and_footer(&mut html, page);
     html
@@ -383,6 +378,25 @@ fn write_runs(html: &mut String, page: &ReportPage) {
     }
     for note in &page.run_notes {
         let _ = writeln!(html, "<p class=\"note\">{}</p>", escape(note));
+    }
+    html.push_str("</section>\n");
+}
+
+/// A section of tables read from files (`anchor`, `title`), each written by `write`; nothing
+/// when there are none.
+fn write_table_sections<T>(
+    html: &mut String,
+    anchor: &str,
+    title: &str,
+    sections: &[TableSection<T>],
+    write: fn(&mut String, &TableSection<T>),
+) {
+    if sections.is_empty() {
+        return;
+    }
+    let _ = writeln!(html, "<section id=\"{anchor}\">\n<h2>{title}</h2>");
+    for section in sections {
+        write(html, section);
     }
     html.push_str("</section>\n");
 }
@@ -541,34 +555,28 @@ fn write_table(html: &mut String, page: &ReportPage) {
     }
     html.push_str("</tbody>\n</table>\n</div>\n");
     for entry in &page.table {
-        if let Some(note) = &entry.partial {
+        // (class, note, what follows the note), in this order.
+        let notes = [
+            ("note incomplete", entry.partial.as_deref(), ""),
+            (
+                "note incomplete",
+                entry.incomplete.as_deref(),
+                " An incomplete run has no final 20 s to judge: it counts as a run that did not succeed, and its other metrics are over the ticks it played.",
+            ),
+            ("note", entry.medians.as_deref(), ""),
+        ]
+        .into_iter()
+        .filter_map(|(class, note, after)| Some((class, note?, after)))
+        .chain(
+            entry
+                .model_inputs
+                .iter()
+                .map(|note| ("note model-input", note.as_str(), "")),
+        );
+        for (class, note, after) in notes {
             let _ = writeln!(
                 html,
-                "<p class=\"note incomplete\">{}: {}.</p>",
-                escape(&entry.name),
-                escape(note)
-            );
-        }
-        if let Some(note) = &entry.incomplete {
-            let _ = writeln!(
-                html,
-                "<p class=\"note incomplete\">{}: {}. An incomplete run has no final 20 s to judge: it counts as a run that did not succeed, and its other metrics are over the ticks it played.</p>",
-                escape(&entry.name),
-                escape(note)
-            );
-        }
-        if let Some(note) = &entry.medians {
-            let _ = writeln!(
-                html,
-                "<p class=\"note\">{}: {}.</p>",
-                escape(&entry.name),
-                escape(note)
-            );
-        }
-        for note in &entry.model_inputs {
-            let _ = writeln!(
-                html,
-                "<p class=\"note model-input\">{}: {}.</p>",
+                "<p class=\"{class}\">{}: {}.{after}</p>",
                 escape(&entry.name),
                 escape(note)
             );
@@ -693,7 +701,7 @@ fn write_scaling(html: &mut String, section: &ScalingSection) {
             "Runs with collisions",
         ],
     );
-    for row in &section.rows {
+    for row in &section.table.rows {
         // The model id and the IQR go on a second line of their cells: on one line the table
         // was wider than the page at 1300 px and its last column was clipped.
         let who = driver_cell(&row.controller, row.model.as_deref());
@@ -723,6 +731,7 @@ fn write_scaling(html: &mut String, section: &ScalingSection) {
     );
     let mut described: Vec<&str> = Vec::new();
     for input in section
+        .table
         .rows
         .iter()
         .filter_map(|row| row.model_input.as_ref())

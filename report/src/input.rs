@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use formation_schema::{EvalOutput, RunLog};
+use formation_schema::{EvalOutput, RunLog, SchemaFile};
 
 use crate::error::ReportError;
 use crate::loss::{LossCurve, parse_loss_csv};
@@ -41,41 +41,33 @@ pub struct Inputs {
     pub ladders: Vec<LadderData>,
 }
 
-/// One reality ladder and where it came from.
+/// A file the report reads whole with its one definition in [`formation_schema`] (a scaling
+/// table, a response curve, a reality ladder), and where it came from.
 #[derive(Debug, Clone, PartialEq)]
-pub struct LadderData {
+pub struct SourcedFile<T> {
     /// The file.
     pub source: PathBuf,
-    /// Its rungs.
-    pub table: formation_schema::LadderTable,
+    /// What it holds.
+    pub content: T,
 }
+
+/// One reality ladder and where it came from.
+pub type LadderData = SourcedFile<formation_schema::LadderTable>;
+
+/// One response curve and where it came from.
+pub type ResponseData = SourcedFile<formation_schema::ResponseCurve>;
+
+/// One scaling table and where it came from.
+pub type ScalingData = SourcedFile<formation_schema::ScalingTable>;
 
 /// True for a reality ladder's file name: `ladder*.json`.
 pub fn is_ladder_json(file_name: &str) -> bool {
     file_name.starts_with("ladder") && file_name.ends_with(".json")
 }
 
-/// One response curve and where it came from.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ResponseData {
-    /// The file.
-    pub source: PathBuf,
-    /// Its rows.
-    pub curve: formation_schema::ResponseCurve,
-}
-
 /// True for a response curve's file name: `response*.json`.
 pub fn is_response_json(file_name: &str) -> bool {
     file_name.starts_with("response") && file_name.ends_with(".json")
-}
-
-/// One scaling table and where it came from.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ScalingData {
-    /// The file.
-    pub source: PathBuf,
-    /// Its rows.
-    pub table: formation_schema::ScalingTable,
 }
 
 /// True for a scaling table's file name: `scaling*.json`.
@@ -472,45 +464,28 @@ pub fn load_inputs(root: &Path) -> Result<Inputs, ReportError> {
         .iter()
         .map(|path| profile_view(&formation_schema::read_profile(path)?, path))
         .collect::<Result<Vec<_>, _>>()?;
-    let scalings = found
-        .scalings
-        .iter()
-        .map(|path| {
-            Ok(ScalingData {
-                source: path.clone(),
-                table: formation_schema::read_scaling(path)?,
-            })
-        })
-        .collect::<Result<Vec<_>, ReportError>>()?;
-    let responses = found
-        .responses
-        .iter()
-        .map(|path| {
-            Ok(ResponseData {
-                source: path.clone(),
-                curve: formation_schema::read_response(path)?,
-            })
-        })
-        .collect::<Result<Vec<_>, ReportError>>()?;
-    let ladders = found
-        .ladders
-        .iter()
-        .map(|path| {
-            Ok(LadderData {
-                source: path.clone(),
-                table: formation_schema::read_ladder(path)?,
-            })
-        })
-        .collect::<Result<Vec<_>, ReportError>>()?;
     Ok(Inputs {
         root: root.to_path_buf(),
         evals,
         loss_curves,
         profiles,
-        scalings,
-        responses,
-        ladders,
+        scalings: read_sourced(&found.scalings)?,
+        responses: read_sourced(&found.responses)?,
+        ladders: read_sourced(&found.ladders)?,
     })
+}
+
+/// Reads each of `paths` as a file of format `F`, in order.
+fn read_sourced<F: SchemaFile>(paths: &[PathBuf]) -> Result<Vec<SourcedFile<F>>, ReportError> {
+    paths
+        .iter()
+        .map(|path| {
+            Ok(SourcedFile {
+                source: path.clone(),
+                content: formation_schema::read(path)?,
+            })
+        })
+        .collect()
 }
 
 fn search(dir: &Path, depth: usize, found: &mut Found) -> Result<(), ReportError> {

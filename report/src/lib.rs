@@ -155,11 +155,43 @@ pub fn assemble(inputs: &Inputs, href_dir: &str) -> Result<(ReportPage, Vec<Figu
     };
     add_table_and_statistics(&mut page, inputs, &mut numbering)?;
     add_runs(&mut page, inputs, &mut numbering)?;
-    add_scalings(&mut page, inputs, &mut numbering)?;
-    add_ladders(&mut page, inputs, &mut numbering)?;
-    add_training(&mut page, inputs, &mut numbering)?;
-    add_responses(&mut page, inputs, &mut numbering)?;
-    add_latency(&mut page, inputs, &mut numbering)?;
+    let scaling_figures = numbering.captioned_per_input(
+        &inputs.scalings,
+        "scaling",
+        "Success and convergence against team size",
+        |id, scaling| figures::scaling_figure(id, &scaling.content),
+        |scaling| scaling_caption(&scaling.content),
+    )?;
+    page.scaling = table_sections(&inputs.root, &inputs.scalings, scaling_figures);
+    let ladder_figures = numbering.captioned_per_input(
+        &inputs.ladders,
+        "ladder",
+        "Success and convergence per rung of a reality ladder",
+        |id, ladder| figures::ladder_figure(id, &ladder.content),
+        |ladder| ladder_caption(&ladder.content),
+    )?;
+    page.ladders = table_sections(&inputs.root, &inputs.ladders, ladder_figures);
+    page.training = numbering.captioned_per_input(
+        &inputs.loss_curves,
+        "training-loss",
+        "Training and validation loss per epoch",
+        figures::loss_figure,
+        |curve| loss_caption(&inputs.root, curve),
+    )?;
+    page.response = numbering.captioned_per_input(
+        &inputs.responses,
+        "response",
+        "Slope of each controller's response against the expert's label",
+        |id, response| figures::response_figure(id, &response.content),
+        |response| response_caption(&inputs.root, response),
+    )?;
+    page.latency = numbering.captioned_per_input(
+        &inputs.profiles,
+        "latency",
+        "Latency per runtime stage",
+        |id, profile| figures::latency_figure(id, &profile.stages, profile.inference_paper_ms),
+        |profile| latency_caption(&inputs.root, profile),
+    )?;
     page.inputs = input_list(inputs);
     Ok((page, numbering.figures))
 }
@@ -201,21 +233,18 @@ fn add_table_and_statistics(
     if !table_evals.is_empty() {
         let panels = fig9_panels(&fig9_evals);
         let figure = figures::box_figure("fig9-statistics", &panels)?;
-        let number = numbering.take();
-        page.fig9 = Some(CaptionedFigure {
-            placed: numbering.place(
-                figure,
-                "Box plots of convergence time, formation error and orientation error",
-            ),
-            caption: format!(
-                "Figure {number}: Box plot of convergence time, relative formation error and orientation error over the last 20 s, over the runs that succeed at 10 % (cf. paper Fig. 9). The thick line is the median, the box spans the 25th to 75th percentiles, the whiskers extend to the minimum and maximum, dots are single runs{}.",
+        page.fig9 = Some(numbering.captioned(
+            figure,
+            "Box plots of convergence time, formation error and orientation error",
+            &format!(
+                "Box plot of convergence time, relative formation error and orientation error over the last 20 s, over the runs that succeed at 10 % (cf. paper Fig. 9). The thick line is the median, the box spans the 25th to 75th percentiles, the whiskers extend to the minimum and maximum, dots are single runs{}.",
                 if compares_with_paper(&fig9_evals) {
                     "; the dashed line is the paper's median (of three robots: it compares with the three-robot evaluations only)"
                 } else {
                     ""
                 }
             ),
-        });
+        ));
         page.fig9_note = format!(
             "Evaluations: {}.{}",
             fig9_evals
@@ -261,123 +290,69 @@ fn add_runs(
     Ok(())
 }
 
-/// One section per scaling table: its rows and its figure.
-fn add_scalings(
-    page: &mut ReportPage,
-    inputs: &Inputs,
-    numbering: &mut FigureNumbering,
-) -> Result<(), ReportError> {
-    for (k, scaling) in inputs.scalings.iter().enumerate() {
-        let figure = figures::scaling_figure(&format!("scaling-{}", k + 1), &scaling.table)?;
-        let number = numbering.take();
-        page.scaling.push(html::ScalingSection {
-            source: relative(&inputs.root, &scaling.source),
-            rows: scaling.table.rows.clone(),
-            figure: CaptionedFigure {
-                placed: numbering.place(figure, "Success and convergence against team size"),
-                caption: format!(
-                    "Figure {number}: (a) success at 10 % (thick) and 5 % (thin) and (b) median convergence time at 10 % against the team size ({}, seed {}, {} s per run).",
-                    scaling.table.scenario, scaling.table.seed, scaling.table.duration_s
-                ),
-            },
-        });
-    }
-    Ok(())
+/// The caption of a scaling table's figure, after `Figure N: `.
+fn scaling_caption(table: &formation_schema::ScalingTable) -> String {
+    format!(
+        "(a) success at 10 % (thick) and 5 % (thin) and (b) median convergence time at 10 % against the team size ({}, seed {}, {} s per run).",
+        table.scenario, table.seed, table.duration_s
+    )
 }
 
-/// One section per reality ladder: its table and its figure.
-fn add_ladders(
-    page: &mut ReportPage,
-    inputs: &Inputs,
-    numbering: &mut FigureNumbering,
-) -> Result<(), ReportError> {
-    for (k, ladder) in inputs.ladders.iter().enumerate() {
-        let figure = figures::ladder_figure(&format!("ladder-{}", k + 1), &ladder.table)?;
-        let number = numbering.take();
-        page.ladders.push(html::LadderSection {
-            source: relative(&inputs.root, &ladder.source),
-            table: ladder.table.clone(),
-            figure: CaptionedFigure {
-                placed: numbering.place(figure, "Success and convergence per rung of a reality ladder"),
-                caption: format!(
-                    "Figure {number}: the {} profile's reality ladder on {}: (a) success at 10 % (thick) and 5 % (thin) and (b) median convergence time at 10 % per rung, each rung adding its effect to those left of it ({} s per run, seed {}).",
-                    ladder.table.profile, ladder.table.scenario, ladder.table.duration_s, ladder.table.seed
-                ),
-            },
-        });
-    }
-    Ok(())
+/// The caption of a reality ladder's figure, after `Figure N: `.
+fn ladder_caption(table: &formation_schema::LadderTable) -> String {
+    format!(
+        "the {} profile's reality ladder on {}: (a) success at 10 % (thick) and 5 % (thin) and (b) median convergence time at 10 % per rung, each rung adding its effect to those left of it ({} s per run, seed {}).",
+        table.profile, table.scenario, table.duration_s, table.seed
+    )
 }
 
-/// One figure per training loss curve (cf. Fig. 5).
-fn add_training(
-    page: &mut ReportPage,
-    inputs: &Inputs,
-    numbering: &mut FigureNumbering,
-) -> Result<(), ReportError> {
-    for (k, curve) in inputs.loss_curves.iter().enumerate() {
-        let figure = figures::loss_figure(&format!("training-loss-{}", k + 1), curve)?;
-        let number = numbering.take();
-        page.training.push(CaptionedFigure {
-            placed: numbering.place(figure, "Training and validation loss per epoch"),
-            caption: format!(
-                "Figure {number}: Training and validation loss over epochs, log scale (cf. paper Fig. 5), from {}.",
-                relative(&inputs.root, &curve.source)
-            ),
-        });
-    }
-    Ok(())
+/// One section per table read from a file (a scaling table, a reality ladder), with its figure.
+fn table_sections<T: Clone>(
+    root: &Path,
+    tables: &[input::SourcedFile<T>],
+    figures: Vec<CaptionedFigure>,
+) -> Vec<html::TableSection<T>> {
+    tables
+        .iter()
+        .zip(figures)
+        .map(|(table, figure)| html::TableSection {
+            source: relative(root, &table.source),
+            table: table.content.clone(),
+            figure,
+        })
+        .collect()
 }
 
-/// One figure per response curve: each controller's slope against the label's size.
-fn add_responses(
-    page: &mut ReportPage,
-    inputs: &Inputs,
-    numbering: &mut FigureNumbering,
-) -> Result<(), ReportError> {
-    for (k, response) in inputs.responses.iter().enumerate() {
-        let curve = &response.curve;
-        let figure = figures::response_figure(&format!("response-{}", k + 1), curve)?;
-        let number = numbering.take();
-        page.response.push(CaptionedFigure {
-            placed: numbering.place(figure, "Slope of each controller's response against the expert's label"),
-            caption: format!(
-                "Figure {number}: The response gauge (formation gauge): per bin of the expert's label size, the slope Σ p·l / Σ |l|² of each controller's formation velocity p against the expert's label l on the controller's own states (1: it moves as far as the expert asks; hollow marks: fewer than {} samples, not judged), {}, seed {}, {} s runs, every {} ticks, from {}.",
-                formation_schema::MIN_JUDGED_SAMPLES,
-                curve.scenario,
-                curve.seed,
-                formation_schema::trim_number(curve.duration_s),
-                curve.stride,
-                relative(&inputs.root, &response.source)
-            ),
-        });
-    }
-    Ok(())
+/// The caption of a training loss curve's figure (cf. Fig. 5), after `Figure N: `.
+fn loss_caption(root: &Path, curve: &loss::LossCurve) -> String {
+    format!(
+        "Training and validation loss over epochs, log scale (cf. paper Fig. 5), from {}.",
+        relative(root, &curve.source)
+    )
 }
 
-/// One figure per latency profile.
-fn add_latency(
-    page: &mut ReportPage,
-    inputs: &Inputs,
-    numbering: &mut FigureNumbering,
-) -> Result<(), ReportError> {
-    for (k, profile) in inputs.profiles.iter().enumerate() {
-        let figure = figures::latency_figure(
-            &format!("latency-{}", k + 1),
-            &profile.stages,
-            profile.inference_paper_ms,
-        )?;
-        let number = numbering.take();
-        page.latency.push(CaptionedFigure {
-            placed: numbering.place(figure, "Latency per runtime stage"),
-            caption: format!(
-                "Figure {number}: Latency per stage of the multi-process runtime, log scale: the box spans the median to the 90th percentile, the whisker reaches the 99th, the dot is the maximum{}, from {}.",
-                profile_counts(profile),
-                relative(&inputs.root, &profile.source)
-            ),
-        });
-    }
-    Ok(())
+/// The caption of a response curve's figure, after `Figure N: `: each controller's slope
+/// against the label's size.
+fn response_caption(root: &Path, response: &input::ResponseData) -> String {
+    let curve = &response.content;
+    format!(
+        "The response gauge (formation gauge): per bin of the expert's label size, the slope Σ p·l / Σ |l|² of each controller's formation velocity p against the expert's label l on the controller's own states (1: it moves as far as the expert asks; hollow marks: fewer than {} samples, not judged), {}, seed {}, {} s runs, every {} ticks, from {}.",
+        formation_schema::MIN_JUDGED_SAMPLES,
+        curve.scenario,
+        curve.seed,
+        formation_schema::trim_number(curve.duration_s),
+        curve.stride,
+        relative(root, &response.source)
+    )
+}
+
+/// The caption of a latency profile's figure, after `Figure N: `.
+fn latency_caption(root: &Path, profile: &profile::LatencyProfile) -> String {
+    format!(
+        "Latency per stage of the multi-process runtime, log scale: the box spans the median to the 90th percentile, the whisker reaches the 99th, the dot is the maximum{}, from {}.",
+        profile_counts(profile),
+        relative(root, &profile.source)
+    )
 }
 
 /// Every input file, relative to the root: evaluations with their run logs, loss curves,
@@ -431,6 +406,33 @@ impl FigureNumbering {
     fn take(&mut self) -> usize {
         self.next += 1;
         self.next - 1
+    }
+
+    /// Numbers and places `figure`, its caption `Figure N: ` followed by `text`.
+    fn captioned(&mut self, figure: Figure, alt: &str, text: &str) -> CaptionedFigure {
+        let number = self.take();
+        CaptionedFigure {
+            placed: self.place(figure, alt),
+            caption: format!("Figure {number}: {text}"),
+        }
+    }
+
+    /// One captioned figure per input, in order: input k's figure drawn by `draw` with the id
+    /// `{id_prefix}-{k + 1}`, its caption's text (after `Figure N: `) by `text`.
+    fn captioned_per_input<T>(
+        &mut self,
+        inputs: &[T],
+        id_prefix: &str,
+        alt: &str,
+        draw: impl Fn(&str, &T) -> Result<Figure, ReportError>,
+        text: impl Fn(&T) -> String,
+    ) -> Result<Vec<CaptionedFigure>, ReportError> {
+        let mut captioned = Vec::with_capacity(inputs.len());
+        for (k, input) in inputs.iter().enumerate() {
+            let figure = draw(&format!("{id_prefix}-{}", k + 1), input)?;
+            captioned.push(self.captioned(figure, alt, &text(input)));
+        }
+        Ok(captioned)
     }
 
     fn place(&mut self, figure: Figure, alt: &str) -> PlacedFigure {

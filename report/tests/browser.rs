@@ -97,6 +97,25 @@ fn run_chromium(browser: &Path, profile: &Path, args: &[String], url: &str) -> B
     }
 }
 
+/// Writes `html` as `dir/file` and runs headless Chromium on it with a fresh profile
+/// `dir/profile`, dumping the page's DOM after its scripts ran.
+fn dump_written_page(
+    browser: &Path,
+    dir: &Path,
+    file: &str,
+    html: &str,
+    profile: &str,
+) -> BrowserRun {
+    let path = dir.join(file);
+    std::fs::write(&path, html).expect("write");
+    run_chromium(
+        browser,
+        &dir.join(profile),
+        &["--dump-dom".to_owned()],
+        &format!("file://{}", path.display()),
+    )
+}
+
 /// The value of attribute `name` on the first dumped tag that starts with `opening`.
 fn tag_attribute(dom: &str, opening: &str, name: &str) -> Option<String> {
     let from = &dom[dom.find(opening)?..];
@@ -231,13 +250,12 @@ fn the_browser_checks_catch_a_broken_page() {
         "</main>",
         "<img src=\"https://example.invalid/x.png\"><script>throw new Error('boom')</script></main>",
     );
-    let broken_path = dir.path().join("broken.html");
-    std::fs::write(&broken_path, broken).expect("write");
-    let run = run_chromium(
+    let run = dump_written_page(
         &browser,
-        &dir.path().join("profile-broken"),
-        &["--dump-dom".to_owned()],
-        &format!("file://{}", broken_path.display()),
+        dir.path(),
+        "broken.html",
+        &broken,
+        "profile-broken",
     );
     let total = summary.figures.len();
     assert_eq!(
@@ -404,6 +422,20 @@ fn window_args(width: u32, height: u32) -> Vec<String> {
     ]
 }
 
+/// Runs headless Chromium on `url` with a fresh `profile` in a window of `width` × `height`,
+/// laid out as a screenshot of it would be ([`window_args`]), dumping the page's DOM after its
+/// scripts ran.
+fn dump_dom_in_window(
+    browser: &Path,
+    profile: &Path,
+    (width, height): (u32, u32),
+    url: &str,
+) -> BrowserRun {
+    let mut args = window_args(width, height);
+    args.push("--dump-dom".to_owned());
+    run_chromium(browser, profile, &args, url)
+}
+
 /// The window height of the player's screenshots: the whole page fits, so nothing scrolls.
 const PAGE_HEIGHT: u32 = 5000;
 
@@ -411,12 +443,10 @@ const PAGE_HEIGHT: u32 = 5000;
 /// screenshot of the window.
 fn player_at(browser: &Path, dir: &Path, html: &Path, time: f64) -> (String, Image) {
     let url = format!("file://{}#player-t={time}", html.display());
-    let mut args = window_args(1300, PAGE_HEIGHT);
-    args.push("--dump-dom".to_owned());
-    let dom = run_chromium(
+    let dom = dump_dom_in_window(
         browser,
         &dir.join(format!("profile-dom-{time}")),
-        &args,
+        (1300, PAGE_HEIGHT),
         &url,
     );
     let errors = unexpected_console_lines(&dom.stderr);
@@ -474,9 +504,8 @@ fn the_players_slider_starts_at_the_time_its_clock_shows() {
     let browser = chromium();
     let (dir, out) = sixteen_robot_report();
     let url = format!("file://{}", out.display());
-    let mut args = window_args(1300, PAGE_HEIGHT);
-    args.push("--dump-dom".to_owned());
-    let dom = run_chromium(&browser, &dir.path().join("profile-start"), &args, &url).stdout;
+    let profile = dir.path().join("profile-start");
+    let dom = dump_dom_in_window(&browser, &profile, (1300, PAGE_HEIGHT), &url).stdout;
     assert_eq!(body_attribute(&dom, "data-players").as_deref(), Some("1"));
     let time = player_attribute(&dom, "data-player-time").expect("time");
     assert_eq!(time, "0.000");
@@ -588,12 +617,10 @@ fn the_player_draws_the_robots_where_they_are_at_two_times() {
 fn the_players_frame_rate_on_sixteen_robots_is_measured() {
     let browser = chromium();
     let (dir, out) = sixteen_robot_report();
-    let mut args = window_args(1300, 900);
-    args.push("--dump-dom".to_owned());
-    let run = run_chromium(
+    let run = dump_dom_in_window(
         &browser,
         &dir.path().join("profile-bench"),
-        &args,
+        (1300, 900),
         &format!("file://{}#player-bench", out.display()),
     );
     let fps: f64 = body_attribute(&run.stdout, "data-player-fps")
@@ -668,12 +695,10 @@ fn at_1300_px_the_tables_fit_and_one_team_size_gets_whole_ticks() {
     let out = dir.path().join("report.html");
     let summary = build_report(&data, &out).expect("report");
 
-    let mut args = window_args(1300, 1000);
-    args.push("--dump-dom".to_owned());
-    let run = run_chromium(
+    let run = dump_dom_in_window(
         &browser,
         &dir.path().join("profile-1300"),
-        &args,
+        (1300, 1000),
         &format!("file://{}", out.display()),
     );
     assert_eq!(
@@ -761,18 +786,12 @@ fn in_chromium_the_legends_of_16_and_32_robots_do_not_overlap() {
     let summary = build_report(&data, &out).expect("report");
     assert_eq!(summary.runs_drawn, 2);
     let html = std::fs::read_to_string(&out).expect("html");
-    let checked = dir.path().join("checked.html");
-    std::fs::write(
-        &checked,
-        html.replace("</body>", &format!("{LEGEND_CHECK}</body>")),
-    )
-    .expect("write");
-    let run = run_chromium(
-        &browser,
-        &dir.path().join("profile-legends"),
-        &["--dump-dom".to_owned()],
-        &format!("file://{}", checked.display()),
-    );
+    // The page with the legend check added, in Chromium with a fresh profile.
+    let check_legends = |page: &str, profile: &str| {
+        let checked = page.replace("</body>", &format!("{LEGEND_CHECK}</body>"));
+        dump_written_page(&browser, dir.path(), "checked.html", &checked, profile)
+    };
+    let run = check_legends(&html, "profile-legends");
     let measured: usize = body_attribute(&run.stdout, "data-legend-texts")
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("the legend check did not run\nstderr:\n{}", run.stderr));
@@ -794,17 +813,7 @@ fn in_chromium_the_legends_of_16_and_32_robots_do_not_overlap() {
     let start = html[..label].rfind("<text").expect("its text element");
     let end = label + html[label..].find("</text>").expect("its end") + "</text>".len();
     let doubled = format!("{}{}", &html[..end], &html[start..]);
-    std::fs::write(
-        &checked,
-        doubled.replace("</body>", &format!("{LEGEND_CHECK}</body>")),
-    )
-    .expect("write");
-    let run = run_chromium(
-        &browser,
-        &dir.path().join("profile-doubled"),
-        &["--dump-dom".to_owned()],
-        &format!("file://{}", checked.display()),
-    );
+    let run = check_legends(&doubled, "profile-doubled");
     let overlaps = body_attribute(&run.stdout, "data-legend-overlaps").unwrap_or_default();
     assert!(
         overlaps.contains("-wheels: v* = 0.4 m/s / v* = 0.4 m/s"),

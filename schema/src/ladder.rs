@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{ScalingRow, SchemaFile};
+use crate::ScalingRow;
 
 /// One rung: the scenario with the profile's effects up to this one.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -33,11 +33,4 @@ pub struct LadderTable {
     pub duration_s: f64,
     /// The rungs, in the order their effects were added.
     pub rungs: Vec<LadderRung>,
-}
-
-impl SchemaFile for LadderTable {
-    const FORMAT: &'static str = "formation-ladder";
-    const VERSION: u32 = 1;
-    const WHAT: &'static str = "formation reality ladder";
-    const MAX_BYTES: u64 = 16 << 20;
 }

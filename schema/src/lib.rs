@@ -84,6 +84,40 @@ pub trait SchemaFile: Serialize + DeserializeOwned {
     const MAX_BYTES: u64;
 }
 
+/// Implements [`SchemaFile`] for each format of the table below, one row a format:
+/// `Type: "format", versions OLDEST..=VERSION (or version VERSION), "what it is", MAX_BYTES;`.
+macro_rules! schema_files {
+    ($($(#[$doc:meta])* $file:ty: $format:literal, $(version $version:literal)? $(versions $oldest:literal..=$newest:literal)?, $what:literal, $max_bytes:expr;)*) => {
+        $(
+            $(#[$doc])*
+            impl SchemaFile for $file {
+                const FORMAT: &'static str = $format;
+                $(const VERSION: u32 = $version;)?
+                $(const VERSION: u32 = $newest;
+                const OLDEST_VERSION: u32 = $oldest;)?
+                const WHAT: &'static str = $what;
+                const MAX_BYTES: u64 = $max_bytes;
+            }
+        )*
+    };
+}
+
+schema_files! {
+    /// Version 2 names its trajectory's neighbour rule; version 1 reads as all pairs.
+    RunLog: "formation-run-log", versions 1..=2, "formation run log", 2 << 30;
+    /// Version 2 times each used command from the scan it answered (version 1 from the current
+    /// tick's scan, which under lag understated the round trip) and may hold the outcome
+    /// `agent_down`; version 1 files read unchanged.
+    TimingLog: "formation-timing-log", versions 1..=2, "formation timing log", 2 << 30;
+    EvalOutput: "formation-eval-summary", version 1, "formation evaluation summary", 256 << 20;
+    LatencyProfile: "formation-latency-profile", version 1, "formation latency profile", 256 << 20;
+    ScalingTable: "formation-scaling-table", version 1, "formation scaling table", 16 << 20;
+    LadderTable: "formation-ladder", version 1, "formation reality ladder", 16 << 20;
+    EvalShard: "formation-eval-shard", version 1, "formation evaluation shard", 256 << 20;
+    ReplayReport: "formation-replay", version 1, "formation replay report", 64 << 20;
+    ResponseCurve: "formation-response-curve", version 1, "formation response curve", 4 << 20;
+}
+
 /// The JSON bytes of `value`, with its `format` and `schema_version` first.
 pub fn to_json<F: SchemaFile>(value: &F) -> Result<Vec<u8>, serde_json::Error> {
     serde_json::to_vec(&Versioned::of(value))

@@ -6,8 +6,6 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::SchemaFile;
-
 /// Statistics of one stage, in microseconds.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StageStats {
@@ -46,11 +44,4 @@ pub struct LatencyProfile {
     pub per_agent: Vec<BTreeMap<String, StageStats>>,
     /// The paper's single-sample inference time \[ms\], for comparison in the report.
     pub inference_paper_ms: f64,
-}
-
-impl SchemaFile for LatencyProfile {
-    const FORMAT: &'static str = "formation-latency-profile";
-    const VERSION: u32 = 1;
-    const WHAT: &'static str = "formation latency profile";
-    const MAX_BYTES: u64 = 256 << 20;
 }

@@ -5,8 +5,6 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::SchemaFile;
-
 /// One robot's replay.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ReplayRobot {
@@ -72,11 +70,4 @@ pub struct ReplayReport {
 impl ReplayReport {
     /// How many differing ticks a robot's row lists.
     pub const LISTED_TICKS: usize = 100;
-}
-
-impl SchemaFile for ReplayReport {
-    const FORMAT: &'static str = "formation-replay";
-    const VERSION: u32 = 1;
-    const WHAT: &'static str = "formation replay report";
-    const MAX_BYTES: u64 = 64 << 20;
 }

@@ -10,8 +10,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::SchemaFile;
-
 /// The bins' edges \[m/s\] of the label's size: 0.05–0.1, 0.1–0.2, 0.2–0.4 and 0.4–0.8 m/s.
 pub const RESPONSE_BIN_EDGES: [f64; 5] = [0.05, 0.1, 0.2, 0.4, 0.8];
 
@@ -70,11 +68,4 @@ pub struct ResponseCurve {
     pub expert_gains: serde_json::Value,
     /// One row per controller and team size, in the order asked.
     pub rows: Vec<ResponseRow>,
-}
-
-impl SchemaFile for ResponseCurve {
-    const FORMAT: &'static str = "formation-response-curve";
-    const VERSION: u32 = 1;
-    const WHAT: &'static str = "formation response curve";
-    const MAX_BYTES: u64 = 4 << 20;
 }

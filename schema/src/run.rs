@@ -3,7 +3,7 @@
 use formation_proto::{NeighbourRule, Pose, WheelCmd};
 use serde::{Deserialize, Serialize};
 
-use crate::{SchemaFile, nan};
+use crate::nan;
 
 /// The record of one run.
 ///
@@ -174,12 +174,4 @@ impl RunLog {
     pub fn ticks(&self) -> usize {
         self.trajectory.commands.len()
     }
-}
-
-impl SchemaFile for RunLog {
-    const FORMAT: &'static str = "formation-run-log";
-    const VERSION: u32 = 2;
-    const OLDEST_VERSION: u32 = 1;
-    const WHAT: &'static str = "formation run log";
-    const MAX_BYTES: u64 = 2 << 30;
 }

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{Quantiles, SchemaFile};
+use crate::Quantiles;
 
 /// One controller on one team size.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -59,11 +59,4 @@ pub struct ScalingTable {
     pub duration_s: f64,
     /// One row per controller and team size, in the order asked.
     pub rows: Vec<ScalingRow>,
-}
-
-impl SchemaFile for ScalingTable {
-    const FORMAT: &'static str = "formation-scaling-table";
-    const VERSION: u32 = 1;
-    const WHAT: &'static str = "formation scaling table";
-    const MAX_BYTES: u64 = 16 << 20;
 }

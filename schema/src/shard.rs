@@ -9,7 +9,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{ModelGoalSpeed, ModelInput, ModelTeamSize, RunMetrics, SchemaFile};
+use crate::{ModelGoalSpeed, ModelInput, ModelTeamSize, RunMetrics};
 
 /// What `formation eval --shard` writes: runs `first_run .. first_run + per_run.len()` of an
 /// evaluation.
@@ -37,11 +37,4 @@ pub struct EvalShard {
     pub first_run: usize,
     /// Per-run metrics of runs `first_run ..`, in run order.
     pub per_run: Vec<RunMetrics>,
-}
-
-impl SchemaFile for EvalShard {
-    const FORMAT: &'static str = "formation-eval-shard";
-    const VERSION: u32 = 1;
-    const WHAT: &'static str = "formation evaluation shard";
-    const MAX_BYTES: u64 = 256 << 20;
 }

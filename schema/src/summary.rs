@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::{RunMetrics, SchemaFile};
+use crate::RunMetrics;
 
 /// Order statistics of a sample (computed by `formation_world::metrics::quantiles`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -199,11 +199,4 @@ pub struct IncompleteRun {
     /// Why it stopped, when known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stop_reason: Option<String>,
-}
-
-impl SchemaFile for EvalOutput {
-    const FORMAT: &'static str = "formation-eval-summary";
-    const VERSION: u32 = 1;
-    const WHAT: &'static str = "formation evaluation summary";
-    const MAX_BYTES: u64 = 256 << 20;
 }

@@ -4,8 +4,6 @@
 use formation_proto::wire::RobotTiming;
 use serde::{Deserialize, Serialize};
 
-use crate::SchemaFile;
-
 /// One run's per-tick timing log, written by the world process. The per-robot records
 /// ([`RobotTiming`], with their [`TickOutcome`](formation_proto::wire::TickOutcome)s) are filled
 /// by the world's exchange, so they are defined beside the wire messages they are taken from.
@@ -21,15 +19,4 @@ pub struct TimingLog {
     pub tick_start_ns: Vec<u64>,
     /// One column-wise record per robot.
     pub robots: Vec<RobotTiming>,
-}
-
-/// Version 2 times each used command from the scan it answered (version 1 from the current
-/// tick's scan, which under lag understated the round trip) and may hold the outcome
-/// `agent_down`; version 1 files read unchanged.
-impl SchemaFile for TimingLog {
-    const FORMAT: &'static str = "formation-timing-log";
-    const VERSION: u32 = 2;
-    const OLDEST_VERSION: u32 = 1;
-    const WHAT: &'static str = "formation timing log";
-    const MAX_BYTES: u64 = 2 << 30;
 }
