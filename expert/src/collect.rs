@@ -625,6 +625,7 @@ fn narrow_run(run: usize) -> Result<u32, CollectError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_support::{first_tick, goal};
     use formation_proto::{Pose, wrap_angle};
     use formation_world::lidar::cast_scan;
 
@@ -669,11 +670,7 @@ mod tests {
             scan_with_hit(&lidar, 225, 1.0),
             scan_with_hit(&lidar, 450, 4.0),
         ];
-        let goal = Goal {
-            phi_star: -3.0,
-            d_star: 1.5,
-            v_star: 0.7,
-        };
+        let goal = goal(-3.0, 1.5);
         let obs = Observation {
             tick: 4,
             time: 0.2,
@@ -752,19 +749,8 @@ mod tests {
         .expect("valid");
         let poses = [Pose::new(0.0, 0.0, 0.0), Pose::new(1.0, 0.0, 0.0)];
         let short = vec![vec![10.0_f32; 900], vec![10.0_f32; 10]];
-        let goal = Goal {
-            phi_star: 0.0,
-            d_star: 1.0,
-            v_star: 0.7,
-        };
-        let obs = Observation {
-            tick: 0,
-            time: 0.0,
-            goal,
-            poses: &poses,
-            wheel_speeds: &[],
-            scans: &short,
-        };
+        let goal = goal(0.0, 1.0);
+        let obs = first_tick(goal, &poses, &short);
         let mut sink = |_| {};
         assert!(matches!(
             labeller.label_observation(&obs, 0, 0, &mut sink),
@@ -816,11 +802,7 @@ mod tests {
                 scan
             })
             .collect();
-        let goal = Goal {
-            phi_star: 1.0,
-            d_star: 1.5,
-            v_star: 0.7,
-        };
+        let goal = goal(1.0, 1.5);
         (poses, scans, lidar, goal)
     }
 
@@ -835,14 +817,7 @@ mod tests {
     #[test]
     fn samples_carry_the_builders_neighbours_and_own_scan_labels_are_own_views_command() {
         let (poses, scans, lidar, goal) = a_line_of_three();
-        let obs = Observation {
-            tick: 0,
-            time: 0.0,
-            goal,
-            poses: &poses,
-            wheel_speeds: &[],
-            scans: &scans,
-        };
+        let obs = first_tick(goal, &poses, &scans);
         let (gains, robot) = (ExpertGains::default(), RobotParams::default());
         let spec = NeighbourInput::with_default_rule(4).expect("input");
         let labeller = || Labeller::new(gains, robot, lidar, OccupancySpec::PAPER).expect("valid");

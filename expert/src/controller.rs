@@ -672,18 +672,11 @@ pub(crate) fn check_inputs(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_support::{first_tick, goal};
     use formation_proto::wrap_angle;
     use std::f64::consts::PI;
 
     const DT: f64 = 0.05;
-
-    fn goal(phi_star: f64, d_star: f64) -> Goal {
-        Goal {
-            phi_star,
-            d_star,
-            v_star: 0.7,
-        }
-    }
 
     /// Three robots on an equilateral triangle of side `side`, all heading `theta`.
     fn triangle(side: f64, theta: f64) -> Vec<Pose> {
@@ -753,11 +746,7 @@ mod tests {
             .collect();
         let mirrored: Vec<Pose> = poses
             .iter()
-            .map(|p| Pose {
-                x: p.x,
-                y: -p.y,
-                theta: -p.theta,
-            })
+            .map(|p| Pose::new(p.x, -p.y, -p.theta))
             .collect();
         let (mut wheels, mut mirror_wheels) =
             (vec![WheelCmd::default(); 5], vec![WheelCmd::default(); 5]);
@@ -910,27 +899,24 @@ mod tests {
         }
     }
 
+    /// What `expert` says refusing `obs`.
+    fn refusal(
+        expert: &mut ExpertController,
+        obs: &Observation<'_>,
+        out: &mut [WheelCmd],
+    ) -> String {
+        expert.commands(obs, out).unwrap_err().message
+    }
+
     #[test]
     fn the_controller_refuses_bad_inputs_and_gains() {
         let poses = triangle(1.0, 0.0);
         let scans: Vec<Vec<f32>> = vec![Vec::new(); 3];
         let mut expert = ExpertController::new(ExpertGains::default(), RobotParams::default());
         let mut out = vec![WheelCmd::BRAKE; 3];
-        let bad_goal = Observation {
-            tick: 0,
-            time: 0.0,
-            goal: goal(0.0, 0.0),
-            poses: &poses,
-            wheel_speeds: &[],
-            scans: &scans,
-        };
-        assert!(
-            expert
-                .commands(&bad_goal, &mut out)
-                .unwrap_err()
-                .message
-                .contains("d*")
-        );
+        let bad_goal = first_tick(goal(0.0, 0.0), &poses, &scans);
+        let refused = refusal(&mut expert, &bad_goal, &mut out);
+        assert!(refused.contains("d*"), "{refused}");
         let ok = Observation {
             goal: goal(0.0, 1.0),
             ..bad_goal
@@ -942,13 +928,8 @@ mod tests {
             poses: &nan_poses,
             ..ok
         };
-        assert!(
-            expert
-                .commands(&nan, &mut out)
-                .unwrap_err()
-                .message
-                .contains("robot 2")
-        );
+        let refused = refusal(&mut expert, &nan, &mut out);
+        assert!(refused.contains("robot 2"), "{refused}");
         expert.commands(&ok, &mut out).expect("valid inputs");
 
         let mut bad_gains = ExpertController::new(
@@ -990,14 +971,7 @@ mod tests {
         let observe = |expert: &mut ExpertController, poses: &[Pose], out: &mut Vec<WheelCmd>| {
             out.resize(poses.len(), WheelCmd::BRAKE);
             let scans = vec![Vec::new(); poses.len()];
-            let obs = Observation {
-                tick: 0,
-                time: 0.0,
-                goal: g,
-                poses,
-                wheel_speeds: &[],
-                scans: &scans,
-            };
+            let obs = first_tick(g, poses, &scans);
             expert.commands(&obs, out).expect("valid");
         };
         observe(&mut expert, &poses, &mut out);

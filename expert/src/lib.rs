@@ -21,6 +21,8 @@ pub mod controller;
 pub mod own_scan;
 pub mod pair_weights;
 pub mod response;
+#[cfg(test)]
+mod test_support;
 
 pub use controller::{
     ExpertController, ExpertGains, InvalidGains, PairPoints, expert_commands,

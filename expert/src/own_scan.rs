@@ -338,17 +338,10 @@ pub fn own_scan_team(
 mod tests {
     use super::*;
     use crate::controller::{expert_commands, expert_commands_among, expert_commands_weighted};
+    use crate::test_support::{first_tick, goal};
     use formation_proto::Pose;
-    use formation_proto::control::{Controller, Observation};
+    use formation_proto::control::Controller;
     use formation_world::neighbours::{GabrielRule, NeighbourTracker};
-
-    fn goal(phi_star: f64, d_star: f64) -> Goal {
-        Goal {
-            phi_star,
-            d_star,
-            v_star: 0.7,
-        }
-    }
 
     /// Seven robots off a lattice, with assorted headings: some pairs vetoed, some held.
     fn team() -> Vec<Pose> {
@@ -615,14 +608,7 @@ mod tests {
         let mut team =
             own_scan_team(ExpertGains::default(), &world, rule, poses.len()).expect("valid");
         let mut own = vec![WheelCmd::BRAKE; poses.len()];
-        let obs = Observation {
-            tick: 0,
-            time: 0.0,
-            goal: g,
-            poses: &poses,
-            wheel_speeds: &[],
-            scans: &scans,
-        };
+        let obs = first_tick(g, &poses, &scans);
         team.commands(&obs, &mut own).expect("valid");
         let mut tracker = NeighbourTracker::new(rule, poses.len());
         tracker.update(&poses.iter().map(|p| (p.x, p.y)).collect::<Vec<_>>());

@@ -263,19 +263,22 @@ mod tests {
         let v = cos * u[0] + sin * u[1];
         let omega = (-sin * u[0] + cos * u[1]) / gains.point_offset;
         let half = robot.wheel_separation / 2.0;
-        WheelCmd {
-            left: v - half * omega,
-            right: v + half * omega,
-        }
+        WheelCmd::new(v - half * omega, v + half * omega)
+    }
+
+    /// Gauges the default expert on a team of `robots`, its formation velocity scaled by `scale`:
+    /// the states are the expert's own.
+    fn gauge_expert(robots: usize, scale: f64) -> ResponseTally {
+        let scenario = scenario(robots);
+        let spec = scenario.run_spec(scenario.seed(), 0);
+        let mut expert = ExpertController::new(ExpertGains::default(), spec.world.robot)
+            .with_neighbours(spec.neighbours);
+        gauge(&scenario, &mut expert, scale)
     }
 
     #[test]
     fn the_expert_gauged_against_itself_has_slope_one_and_no_error_in_every_bin() {
-        let scenario = scenario(8);
-        let spec = scenario.run_spec(scenario.seed(), 0);
-        let mut expert = ExpertController::new(ExpertGains::default(), spec.world.robot)
-            .with_neighbours(spec.neighbours);
-        let tally = gauge(&scenario, &mut expert, 1.0);
+        let tally = gauge_expert(8, 1.0);
         assert!(tally.samples > 0);
         let filled: Vec<&BinSums> = tally.bins.iter().filter(|b| b.samples > 0).collect();
         assert!(
@@ -295,12 +298,8 @@ mod tests {
 
     #[test]
     fn a_controller_that_moves_a_tenth_as_far_has_slope_a_tenth() {
-        let scenario = scenario(5);
-        let spec = scenario.run_spec(scenario.seed(), 0);
-        let mut expert = ExpertController::new(ExpertGains::default(), spec.world.robot)
-            .with_neighbours(spec.neighbours);
         // The states are the expert's own; the gauged commands are its formation velocity at a tenth.
-        let tally = gauge(&scenario, &mut expert, 0.1);
+        let tally = gauge_expert(5, 0.1);
         for bin in tally.bins.iter().filter(|b| b.samples > 0) {
             let slope = bin.slope().unwrap();
             assert!((slope - 0.1).abs() < 1e-9, "slope {slope}");
@@ -314,41 +313,19 @@ mod tests {
     fn point_velocity_inverts_the_point_offset_kinematics() {
         let robot = RobotParams::default();
         let gains = ExpertGains::default();
-        let pose = Pose {
-            x: 0.3,
-            y: -1.0,
-            theta: 0.7,
-        };
+        let pose = Pose::new(0.3, -1.0, 0.7);
         let goal = Goal {
             phi_star: 0.2,
             d_star: 1.5,
             v_star: 0.5,
         };
-        let cmd = scale_formation(
-            WheelCmd {
-                left: 0.3,
-                right: 0.1,
-            },
-            &pose,
-            &goal,
-            &gains,
-            &robot,
-            1.0,
-        );
+        let cmd = scale_formation(WheelCmd::new(0.3, 0.1), &pose, &goal, &gains, &robot, 1.0);
         let f = formation_velocity(cmd, &pose, &goal, &gains, &robot);
         let back = scale_formation(cmd, &pose, &goal, &gains, &robot, 1.0);
         let f_back = formation_velocity(back, &pose, &goal, &gains, &robot);
         assert!((f[0] - f_back[0]).abs() < 1e-12 && (f[1] - f_back[1]).abs() < 1e-12);
         // Straight ahead at v: the point moves at v along the heading.
-        let ahead = point_velocity(
-            WheelCmd {
-                left: 0.4,
-                right: 0.4,
-            },
-            &pose,
-            gains.point_offset,
-            &robot,
-        );
+        let ahead = point_velocity(WheelCmd::new(0.4, 0.4), &pose, gains.point_offset, &robot);
         assert!((ahead[0] - 0.4 * 0.7f64.cos()).abs() < 1e-12);
         assert!((ahead[1] - 0.4 * 0.7f64.sin()).abs() < 1e-12);
     }

@@ -81,6 +81,17 @@ fn collected_demonstrations_round_trip_through_the_dataset() {
     );
 }
 
+/// Collecting with `opts` into `writer` is refused before anything is written, because the
+/// dataset's header records other `what`.
+fn assert_refused_as_mismatch(opts: &CollectOptions<'_>, writer: &mut DatasetWriter, what: &str) {
+    let err = collect(opts, writer, &mut |_, _| {}).expect_err("the header disagrees");
+    assert!(
+        matches!(err, CollectError::WriterMismatch { what: found, .. } if found == what),
+        "{err}"
+    );
+    assert_eq!(writer.samples(), 0, "nothing written on refusal");
+}
+
 #[test]
 fn collection_refuses_bad_options_and_a_mismatched_dataset() {
     let scenario = tiny();
@@ -105,34 +116,12 @@ fn collection_refuses_bad_options_and_a_mismatched_dataset() {
         },
         ..opts
     };
-    let err = collect(&border, &mut writer, &mut |_, _| {}).expect_err("header says drop");
-    assert!(
-        matches!(
-            err,
-            CollectError::WriterMismatch {
-                what: "occupancy settings",
-                ..
-            }
-        ),
-        "{err}"
-    );
-    assert_eq!(writer.samples(), 0, "nothing written on refusal");
+    assert_refused_as_mismatch(&border, &mut writer, "occupancy settings");
 
     // Labels of another law than the dataset records would mix two laws in one dataset.
     let mut unshaped = opts;
     unshaped.gains.unshaped = true;
-    let err = collect(&unshaped, &mut writer, &mut |_, _| {}).expect_err("header says default");
-    assert!(
-        matches!(
-            err,
-            CollectError::WriterMismatch {
-                what: "label law",
-                ..
-            }
-        ),
-        "{err}"
-    );
-    assert_eq!(writer.samples(), 0, "nothing written on refusal");
+    assert_refused_as_mismatch(&unshaped, &mut writer, "label law");
 
     // A v* drawn per run has no one v_train to record: refused before any run, naming the key.
     let drawn = Scenario::from_toml_str(

@@ -106,24 +106,20 @@ mod tests {
     #[test]
     fn team_sizes_are_placed_against_the_trained_ones() {
         let trained = [3, 5, 8, 13, 16];
-        assert_eq!(TeamSizeFit::of(&trained, 8), Some(TeamSizeFit::Trained));
-        assert_eq!(
-            TeamSizeFit::of(&trained, 2),
-            Some(TeamSizeFit::BelowTrained)
-        );
-        assert_eq!(
-            TeamSizeFit::of(&trained, 1),
-            Some(TeamSizeFit::BelowTrained)
-        );
-        assert_eq!(TeamSizeFit::of(&trained, 11), Some(TeamSizeFit::ZeroShot));
-        assert_eq!(
-            TeamSizeFit::of(&trained, 24),
-            Some(TeamSizeFit::AboveTrained)
-        );
-        assert_eq!(
-            TeamSizeFit::of(&trained, 300),
-            Some(TeamSizeFit::AboveTrained)
-        );
+        for (robots, fit) in [
+            (8, TeamSizeFit::Trained),
+            (2, TeamSizeFit::BelowTrained),
+            (1, TeamSizeFit::BelowTrained),
+            (11, TeamSizeFit::ZeroShot),
+            (24, TeamSizeFit::AboveTrained),
+            (300, TeamSizeFit::AboveTrained),
+        ] {
+            assert_eq!(
+                TeamSizeFit::of(&trained, robots),
+                Some(fit),
+                "{robots} robots"
+            );
+        }
         assert_eq!(TeamSizeFit::of(&[], 3), None);
         assert!(!TeamSizeFit::Trained.is_zero_shot());
         assert!(TeamSizeFit::AboveTrained.is_zero_shot());

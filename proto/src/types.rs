@@ -30,11 +30,13 @@ pub struct WheelCmd {
 }
 
 impl WheelCmd {
+    /// The command of rim speeds `left` and `right` \[m/s\], taken as given (not limited).
+    pub const fn new(left: f64, right: f64) -> Self {
+        Self { left, right }
+    }
+
     /// Both wheels stopped: what the watchdog applies to a robot without a valid command.
-    pub const BRAKE: WheelCmd = WheelCmd {
-        left: 0.0,
-        right: 0.0,
-    };
+    pub const BRAKE: WheelCmd = WheelCmd::new(0.0, 0.0);
 
     /// True when both wheel speeds are finite numbers.
     pub fn is_finite(&self) -> bool {

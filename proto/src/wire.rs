@@ -1556,10 +1556,7 @@ mod tests {
             occupancy_ns: 6,
             inference_ns: 7,
         };
-        let cmd = WheelCmd {
-            left: 0.25,
-            right: -0.5,
-        };
+        let cmd = WheelCmd::new(0.25, -0.5);
         let status = CmdStatus::OK.with(CmdStatus::MODEL_SWAPPED);
         let msg = CmdMsg::new(1, 2, cmd, "policy-abc123", timings, status).unwrap();
         assert_eq!(msg.wheels(), cmd);

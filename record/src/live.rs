@@ -712,17 +712,11 @@ mod tests {
             scans: vec![vec![1.0, f32::INFINITY, 3.5], vec![2.0; 3]],
             commands: vec![
                 SentCommand {
-                    wheels: WheelCmd {
-                        left: f64::NAN,
-                        right: 0.5,
-                    },
+                    wheels: WheelCmd::new(f64::NAN, 0.5),
                     outcome: TickOutcome::NonFinite,
                     lag_ticks: 3,
                 },
-                SentCommand::in_process(WheelCmd {
-                    left: 0.1,
-                    right: 0.2,
-                }),
+                SentCommand::in_process(WheelCmd::new(0.1, 0.2)),
             ],
             model_ids: vec!["m0".into(), "m1".into()],
         }

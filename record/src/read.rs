@@ -502,7 +502,7 @@ impl RecordingReader {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use formation_proto::wire::TickOutcome;
     use formation_proto::{Goal, WheelCmd};
@@ -520,10 +520,7 @@ mod tests {
             },
             max_range: 5.0,
             ranges: vec![1.0; 90],
-            command: WheelCmd {
-                left: 0.1,
-                right: 0.2,
-            },
+            command: WheelCmd::new(0.1, 0.2),
             outcome: TickOutcome::Fresh,
             lag_ticks: 0,
             model_id: "m-00000000".into(),
@@ -554,17 +551,30 @@ mod tests {
         w.finish().unwrap();
     }
 
-    fn read_all(path: &Path) -> (Vec<ReplayStep>, Result<(), ReadError>) {
+    /// Every item of the recording at `path`, and how its reading ended.
+    pub(crate) fn read_items(path: &Path) -> (Vec<RecordingItem>, Result<(), ReadError>) {
         let mut reader = RecordingReader::open(path).unwrap();
-        let mut steps = Vec::new();
+        let mut items = Vec::new();
         loop {
             match reader.next_item() {
-                Ok(Some(RecordingItem::Step(s))) => steps.push(s),
-                Ok(Some(_)) => {}
-                Ok(None) => return (steps, Ok(())),
-                Err(e) => return (steps, Err(e)),
+                Ok(Some(item)) => items.push(item),
+                Ok(None) => return (items, Ok(())),
+                Err(e) => return (items, Err(e)),
             }
         }
+    }
+
+    /// Every replay step of the recording at `path`, and how its reading ended.
+    fn read_all(path: &Path) -> (Vec<ReplayStep>, Result<(), ReadError>) {
+        let (items, end) = read_items(path);
+        let steps = items
+            .into_iter()
+            .filter_map(|item| match item {
+                RecordingItem::Step(step) => Some(step),
+                _ => None,
+            })
+            .collect();
+        (steps, end)
     }
 
     fn payloads(n: u64) -> Vec<Vec<u8>> {

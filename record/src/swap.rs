@@ -193,6 +193,7 @@ pub fn check_swapped_bytes(model_id: &str, bytes: &[u8]) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::read::tests::read_items;
 
     fn swapped(storage: SwapStorage) -> SwappedModel {
         SwappedModel {
@@ -266,19 +267,6 @@ mod tests {
         }
     }
 
-    /// Every item of the recording at `path`, and how its reading ended.
-    fn items(path: &Path) -> (Vec<crate::RecordingItem>, Result<(), ReadError>) {
-        let mut reader = crate::RecordingReader::open(path).unwrap();
-        let mut items = Vec::new();
-        loop {
-            match reader.next_item() {
-                Ok(Some(item)) => items.push(item),
-                Ok(None) => return (items, Ok(())),
-                Err(e) => return (items, Err(e)),
-            }
-        }
-    }
-
     #[test]
     fn a_swapped_in_model_is_stored_mid_file_once_before_its_steps_and_survives_a_crash() {
         use crate::RecordingItem::{Model, Step, Swap};
@@ -342,7 +330,7 @@ mod tests {
         rec.write_tick(&tick(1, &id)).unwrap();
         rec.finish(None).unwrap();
 
-        let (all, end) = items(&path);
+        let (all, end) = read_items(&path);
         end.unwrap();
         let models: Vec<_> = all.iter().filter(|i| matches!(i, Model { .. })).collect();
         assert_eq!(
@@ -361,7 +349,7 @@ mod tests {
         assert_eq!(all[first_swap], Swap(stored.clone()));
         assert_eq!(all.iter().filter(|i| matches!(i, Swap(_))).count(), 5);
 
-        let (kept, end) = items(&crashed);
+        let (kept, end) = read_items(&crashed);
         assert!(matches!(end, Err(ReadError::Truncated { .. })), "{end:?}");
         assert!(kept.contains(&Swap(stored)), "{kept:?}");
         assert!(kept.iter().any(|i| matches!(i, Model { .. })));

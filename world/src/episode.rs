@@ -235,34 +235,27 @@ mod tests {
     use super::*;
     use crate::robot::integrate;
     use crate::scenario::Scenario;
+    use crate::test_support::RampTeam;
 
     fn short_spec(noise_std: f64) -> RunSpec {
-        let text = format!(
-            r#"
-name = "episode-test"
-robots = 3
-duration_s = 1.0
-seed = 11
-[goal]
-v_star = 0.5
-d_star = 1.5
-[heading]
-schedule = "ramp"
-omega = 0.3
-[lidar]
-beams = 90
-noise_std = {noise_std}
-"#
-        );
-        Scenario::from_toml_str(&text, "episode-test")
-            .unwrap()
-            .run_spec(11, 0)
+        RampTeam {
+            noise_std,
+            ..RampTeam::default()
+        }
+        .run_spec("episode-test", 11, 0)
     }
 
     /// Drives every robot with the same wheel speeds; optionally fails at one tick.
     struct ConstantWheels {
         cmd: WheelCmd,
         fail_at: Option<u64>,
+    }
+
+    impl ConstantWheels {
+        /// Drives every robot with `cmd` at every tick.
+        fn new(cmd: WheelCmd) -> ConstantWheels {
+            ConstantWheels { cmd, fail_at: None }
+        }
     }
 
     impl Controller for ConstantWheels {
@@ -282,11 +275,8 @@ noise_std = {noise_std}
     #[test]
     fn episode_records_every_tick_and_matches_manual_integration() {
         let spec = short_spec(0.0);
-        let cmd = WheelCmd {
-            left: 0.3,
-            right: 0.5,
-        };
-        let mut controller = ConstantWheels { cmd, fail_at: None };
+        let cmd = WheelCmd::new(0.3, 0.5);
+        let mut controller = ConstantWheels::new(cmd);
         let mut seen_ticks = Vec::new();
         let traj = run_episode(&spec, &mut controller, &mut |obs, cmds| {
             assert_eq!(obs.goal, spec.goal_at(obs.time));
@@ -329,13 +319,7 @@ noise_std = {noise_std}
     #[test]
     fn non_finite_commands_are_recorded_as_the_brake_the_world_applied() {
         let spec = short_spec(0.0);
-        let mut controller = ConstantWheels {
-            cmd: WheelCmd {
-                left: f64::NAN,
-                right: 0.2,
-            },
-            fail_at: None,
-        };
+        let mut controller = ConstantWheels::new(WheelCmd::new(f64::NAN, 0.2));
         let traj = run_episode(&spec, &mut controller, &mut |_, _| {}).unwrap();
         assert!(
             traj.commands
@@ -364,21 +348,14 @@ noise_std = {noise_std}
         let spec = short_spec(0.05);
         let mut scans_a = Vec::new();
         let mut scans_b = Vec::new();
-        let cmd = WheelCmd {
-            left: 0.4,
-            right: 0.1,
-        };
-        let a = run_episode(
-            &spec,
-            &mut ConstantWheels { cmd, fail_at: None },
-            &mut |obs, _| scans_a.push(obs.scans.to_vec()),
-        )
+        let cmd = WheelCmd::new(0.4, 0.1);
+        let a = run_episode(&spec, &mut ConstantWheels::new(cmd), &mut |obs, _| {
+            scans_a.push(obs.scans.to_vec())
+        })
         .unwrap();
-        let b = run_episode(
-            &spec,
-            &mut ConstantWheels { cmd, fail_at: None },
-            &mut |obs, _| scans_b.push(obs.scans.to_vec()),
-        )
+        let b = run_episode(&spec, &mut ConstantWheels::new(cmd), &mut |obs, _| {
+            scans_b.push(obs.scans.to_vec())
+        })
         .unwrap();
         assert_eq!(a, b);
         let bits = |scans: &Vec<Vec<Vec<f32>>>| -> Vec<u32> {
@@ -395,14 +372,11 @@ noise_std = {noise_std}
     #[test]
     fn the_recorder_sees_the_trajectory_grow_and_can_stop_the_episode() {
         let spec = short_spec(0.0);
-        let cmd = WheelCmd {
-            left: 0.2,
-            right: 0.3,
-        };
+        let cmd = WheelCmd::new(0.2, 0.3);
         let mut seen = Vec::new();
         let full = run_episode_recorded(
             &spec,
-            &mut ConstantWheels { cmd, fail_at: None },
+            &mut ConstantWheels::new(cmd),
             &mut |_, _| {},
             &mut |traj| {
                 seen.push((traj.poses.len(), traj.commands.len(), traj.times.len()));
@@ -414,17 +388,12 @@ noise_std = {noise_std}
         assert_eq!(seen, expected);
         assert_eq!(
             full,
-            run_episode(
-                &spec,
-                &mut ConstantWheels { cmd, fail_at: None },
-                &mut |_, _| {}
-            )
-            .unwrap()
+            run_episode(&spec, &mut ConstantWheels::new(cmd), &mut |_, _| {}).unwrap()
         );
 
         let error = run_episode_recorded(
             &spec,
-            &mut ConstantWheels { cmd, fail_at: None },
+            &mut ConstantWheels::new(cmd),
             &mut |_, _| {},
             &mut |traj| {
                 if traj.commands.len() == 5 {
@@ -441,16 +410,8 @@ noise_std = {noise_std}
     #[test]
     fn an_episode_stepped_by_hand_equals_the_loop_and_refuses_bad_steps() {
         let spec = short_spec(0.05);
-        let cmd = WheelCmd {
-            left: 0.4,
-            right: 0.1,
-        };
-        let looped = run_episode(
-            &spec,
-            &mut ConstantWheels { cmd, fail_at: None },
-            &mut |_, _| {},
-        )
-        .unwrap();
+        let cmd = WheelCmd::new(0.4, 0.1);
+        let looped = run_episode(&spec, &mut ConstantWheels::new(cmd), &mut |_, _| {}).unwrap();
         let mut episode = Episode::new(spec.clone());
         assert_eq!(
             episode.step(&[cmd; 2]),
@@ -484,16 +445,11 @@ noise_std = {noise_std}
         let spec = Scenario::from_toml_str(text, "compass")
             .unwrap()
             .run_spec(2, 0);
-        let cmd = WheelCmd {
-            left: 0.2,
-            right: 0.3,
-        };
+        let cmd = WheelCmd::new(0.2, 0.3);
         let mut received = Vec::new();
-        let traj = run_episode(
-            &spec,
-            &mut ConstantWheels { cmd, fail_at: None },
-            &mut |obs, _| received.push(obs.poses.to_vec()),
-        )
+        let traj = run_episode(&spec, &mut ConstantWheels::new(cmd), &mut |obs, _| {
+            received.push(obs.poses.to_vec())
+        })
         .unwrap();
         for (tick, seen) in received.iter().enumerate() {
             for (robot, (seen, truth)) in seen.iter().zip(&traj.poses[tick]).enumerate() {

@@ -232,6 +232,7 @@ fn is_gridded(x: f64, y: f64) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_layouts::lattice;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -318,13 +319,10 @@ mod tests {
         // Robots at multiples of the cell side, and one cell side plus or minus an ulp from a query.
         let cell = 10.25_f64;
         let mut poses = Vec::new();
-        for i in -4..=4 {
-            for j in -4..=4 {
-                let (x, y) = (i as f64 * cell, j as f64 * cell);
-                poses.push(pose(x, y));
-                poses.push(pose(f64::from_bits(x.to_bits() + 1), y));
-                poses.push(pose(x, f64::from_bits(y.to_bits().wrapping_sub(1))));
-            }
+        for (_, _, x, y) in lattice(cell, 4) {
+            poses.push(pose(x, y));
+            poses.push(pose(f64::from_bits(x.to_bits() + 1), y));
+            poses.push(pose(x, f64::from_bits(y.to_bits().wrapping_sub(1))));
         }
         let queries: Vec<(f64, f64)> = poses
             .iter()

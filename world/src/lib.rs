@@ -31,6 +31,8 @@ pub mod runlog;
 pub mod scenario;
 #[cfg(test)]
 mod test_layouts;
+#[cfg(test)]
+mod test_support;
 pub mod world;
 
 pub use episode::{

@@ -690,7 +690,7 @@ mod tests {
     /// Seeded random layouts for comparing [`TeamScanner`] with [`cast_scan`], beam by beam.
     mod team_scanner_matches_cast_scan {
         use super::*;
-        use crate::test_layouts::disc_layout;
+        use crate::test_layouts::{disc_layout, lattice};
         use rand::{Rng, SeedableRng};
         use rand_chacha::ChaCha8Rng;
 
@@ -814,18 +814,15 @@ mod tests {
             // Robots a cell side (max_range + radius) apart along both axes, nudged by a few ulps, so
             // that sensor and body fall in neighbouring cells at every distance.
             let cell = 10.25_f64;
+            let nudge = |v: f64, k: i64| f64::from_bits((v.to_bits() as i64 + k) as u64);
             let mut poses = Vec::new();
-            for i in -3..=3 {
-                for j in -3..=3 {
-                    let (x, y) = (i as f64 * cell, j as f64 * cell);
-                    let nudge = |v: f64, k: i64| f64::from_bits((v.to_bits() as i64 + k) as u64);
-                    poses.push(Pose::new(
-                        nudge(x, (i + j) % 3),
-                        nudge(y, (i - j) % 3),
-                        0.3 * i as f64,
-                    ));
-                    poses.push(Pose::new(x + 0.6, y - 0.6, 0.1 * j as f64));
-                }
+            for (i, j, x, y) in lattice(cell, 3) {
+                poses.push(Pose::new(
+                    nudge(x, (i + j) % 3),
+                    nudge(y, (i - j) % 3),
+                    0.3 * i as f64,
+                ));
+                poses.push(Pose::new(x + 0.6, y - 0.6, 0.1 * j as f64));
             }
             assert!(assert_same_bits(&poses, &RobotParams::default(), &lidar()) > 0);
         }

@@ -397,10 +397,7 @@ mod tests {
             tau_s: tau,
             ..MotorModel::IDEAL
         });
-        let step = WheelCmd {
-            left: 0.5,
-            right: 0.5,
-        };
+        let step = WheelCmd::new(0.5, 0.5);
         let mut speeds = WheelCmd::BRAKE;
         for k in 1..=40 {
             speeds = traits.drive(step, speeds, DT, [0.0; 2]);
@@ -426,10 +423,7 @@ mod tests {
             ..MotorModel::IDEAL
         });
         traits.params.max_wheel_accel = Some(1.0);
-        let step = WheelCmd {
-            left: 0.8,
-            right: 0.8,
-        };
+        let step = WheelCmd::new(0.8, 0.8);
         // The lag alone would jump 63 % of the way (0.5 m/s) in one tick; the limit allows 0.05.
         let first = traits.drive(step, WheelCmd::BRAKE, DT, [0.0; 2]);
         assert!((first.left - 0.05).abs() < 1e-12, "{first:?}");
@@ -460,10 +454,7 @@ mod tests {
                 assert_eq!(ours.left.to_bits(), theirs.left.to_bits());
                 assert_eq!(ours.right.to_bits(), theirs.right.to_bits());
             }
-            let nan = WheelCmd {
-                left: f64::NAN,
-                right: 0.1,
-            };
+            let nan = WheelCmd::new(f64::NAN, 0.1);
             assert_eq!(
                 traits.drive(nan, WheelCmd::BRAKE, DT, [0.0; 2]),
                 WheelCmd::BRAKE
@@ -477,10 +468,7 @@ mod tests {
             gain_asymmetry: 0.1,
             ..MotorModel::IDEAL
         });
-        let cmd = WheelCmd {
-            left: 0.5,
-            right: 0.5,
-        };
+        let cmd = WheelCmd::new(0.5, 0.5);
         let ran = traits.drive(cmd, WheelCmd::BRAKE, DT, [0.0; 2]);
         assert!((ran.left - 0.475).abs() < 1e-12 && (ran.right - 0.525).abs() < 1e-12);
     }
@@ -491,10 +479,7 @@ mod tests {
             speed_noise_std: 0.02,
             ..MotorModel::IDEAL
         });
-        let cmd = WheelCmd {
-            left: 0.5,
-            right: 0.9,
-        };
+        let cmd = WheelCmd::new(0.5, 0.9);
         let ran = traits.drive(cmd, WheelCmd::BRAKE, DT, [1.5, 3.0]);
         assert!((ran.left - 0.53).abs() < 1e-12, "{ran:?}");
         assert_eq!(ran.right, traits.params.max_wheel_speed);

@@ -130,15 +130,8 @@ mod tests {
     #[test]
     fn equal_wheel_speeds_drive_straight_along_the_heading() {
         let params = RobotParams::default();
-        let start = Pose {
-            x: 1.0,
-            y: -2.0,
-            theta: 0.7,
-        };
-        let cmd = WheelCmd {
-            left: 0.6,
-            right: 0.6,
-        };
+        let start = Pose::new(1.0, -2.0, 0.7);
+        let cmd = WheelCmd::new(0.6, 0.6);
         let end = (0..40).fold(start, |pose, _| integrate(pose, cmd, &params, DT));
         let distance = 0.6 * 40.0 * DT;
         let expected = Pose {
@@ -152,15 +145,8 @@ mod tests {
     #[test]
     fn opposite_wheel_speeds_turn_in_place() {
         let params = RobotParams::default();
-        let start = Pose {
-            x: 0.3,
-            y: 0.4,
-            theta: 3.1,
-        };
-        let cmd = WheelCmd {
-            left: -0.2,
-            right: 0.2,
-        };
+        let start = Pose::new(0.3, 0.4, 3.1);
+        let cmd = WheelCmd::new(-0.2, 0.2);
         let end = integrate(start, cmd, &params, DT);
         let turn_rate = 0.4 / params.wheel_separation;
         let expected = Pose {
@@ -179,15 +165,8 @@ mod tests {
     #[test]
     fn unequal_wheel_speeds_follow_the_closed_form_arc() {
         let params = RobotParams::default();
-        let start = Pose {
-            x: -1.0,
-            y: 2.0,
-            theta: -2.5,
-        };
-        let cmd = WheelCmd {
-            left: 0.35,
-            right: 0.8,
-        };
+        let start = Pose::new(-1.0, 2.0, -2.5);
+        let cmd = WheelCmd::new(0.35, 0.8);
         let dt = 0.37;
         let v = 0.5 * (0.35 + 0.8);
         let w = (0.8 - 0.35) / params.wheel_separation;
@@ -202,18 +181,11 @@ mod tests {
     #[test]
     fn a_full_circle_returns_to_the_start() {
         let params = RobotParams::default();
-        let cmd = WheelCmd {
-            left: 0.3,
-            right: 0.5,
-        };
+        let cmd = WheelCmd::new(0.3, 0.5);
         let w = 0.2 / params.wheel_separation;
         let steps = 1000;
         let dt = 2.0 * PI / w / steps as f64;
-        let start = Pose {
-            x: 5.0,
-            y: 5.0,
-            theta: 1.0,
-        };
+        let start = Pose::new(5.0, 5.0, 1.0);
         let mut pose = start;
         let radius = 0.4 / w;
         for _ in 0..steps {
@@ -232,11 +204,7 @@ mod tests {
     #[test]
     fn tiny_turn_rates_match_the_straight_line_limit() {
         let params = RobotParams::default();
-        let start = Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 0.0,
-        };
+        let start = Pose::new(0.0, 0.0, 0.0);
         let cmd = WheelCmd {
             left: 0.5,
             right: 0.5 + 1e-12,
@@ -267,23 +235,11 @@ mod tests {
     fn non_finite_commands_brake() {
         let params = RobotParams::default();
         for bad in [
-            WheelCmd {
-                left: f64::NAN,
-                right: 0.5,
-            },
-            WheelCmd {
-                left: 0.5,
-                right: f64::INFINITY,
-            },
-            WheelCmd {
-                left: f64::NEG_INFINITY,
-                right: f64::NAN,
-            },
+            WheelCmd::new(f64::NAN, 0.5),
+            WheelCmd::new(0.5, f64::INFINITY),
+            WheelCmd::new(f64::NEG_INFINITY, f64::NAN),
         ] {
-            let current = WheelCmd {
-                left: 0.4,
-                right: 0.4,
-            };
+            let current = WheelCmd::new(0.4, 0.4);
             assert_eq!(params.achievable(bad, current, DT), WheelCmd::BRAKE);
         }
     }
@@ -294,27 +250,10 @@ mod tests {
             max_wheel_accel: Some(2.0),
             ..RobotParams::default()
         };
-        let current = WheelCmd {
-            left: 0.5,
-            right: -0.5,
-        };
-        let applied = params.achievable(
-            WheelCmd {
-                left: -0.9,
-                right: 0.9,
-            },
-            current,
-            DT,
-        );
+        let current = WheelCmd::new(0.5, -0.5);
+        let applied = params.achievable(WheelCmd::new(-0.9, 0.9), current, DT);
         assert!((applied.left - 0.4).abs() < 1e-12 && (applied.right + 0.4).abs() < 1e-12);
-        let small = params.achievable(
-            WheelCmd {
-                left: 0.55,
-                right: -0.5,
-            },
-            current,
-            DT,
-        );
+        let small = params.achievable(WheelCmd::new(0.55, -0.5), current, DT);
         assert_eq!(
             small,
             WheelCmd {
@@ -322,14 +261,7 @@ mod tests {
                 right: -0.5
             }
         );
-        let braking = params.achievable(
-            WheelCmd {
-                left: f64::NAN,
-                right: 0.0,
-            },
-            current,
-            DT,
-        );
+        let braking = params.achievable(WheelCmd::new(f64::NAN, 0.0), current, DT);
         assert!((braking.left - 0.4).abs() < 1e-12 && (braking.right + 0.4).abs() < 1e-12);
     }
 

@@ -878,34 +878,25 @@ mod tests {
     use super::*;
     use crate::episode::{Controller, ControllerError, EpisodeError, Observation};
     use crate::run_episode_recorded;
-    use crate::scenario::Scenario;
+    use crate::test_support::{RampTeam, Scratch};
     use std::cell::Cell;
     use std::rc::Rc;
 
     fn spec(duration_s: f64) -> RunSpec {
-        let text = format!(
-            r#"
-name = "journal-test"
-robots = 3
-duration_s = {duration_s:?}
-seed = 5
-[goal]
-v_star = 0.7
-d_star = 0.6
-[heading]
-schedule = "ramp"
-omega = 0.3
-[lidar]
-beams = 36
-noise_std = 0.01
-"#
-        );
-        let mut spec = Scenario::from_toml_str(&text, "journal-test")
-            .unwrap()
-            .run_spec(5, 2);
+        let ramp = RampTeam {
+            duration_s,
+            v_star: 0.7,
+            d_star: 0.6,
+            beams: 36,
+            noise_std: 0.01,
+        };
+        let mut spec = ramp.run_spec("journal-test", 5, 2);
         // Robots 0 and 1 start overlapping, so there are collisions to journal.
-        let at = |x: f64, y: f64, theta: f64| Pose { x, y, theta };
-        spec.initial = vec![at(0.0, 0.0, 0.1), at(0.3, 0.05, 3.0), at(4.0, 4.0, 1.0)];
+        spec.initial = vec![
+            Pose::new(0.0, 0.0, 0.1),
+            Pose::new(0.3, 0.05, 3.0),
+            Pose::new(4.0, 4.0, 1.0),
+        ];
         spec
     }
 
@@ -930,15 +921,11 @@ noise_std = 0.01
         }
     }
 
-    fn dir(tag: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!(
-            "formation-runlog-{tag}-{}-{:?}",
-            std::process::id(),
-            std::thread::current().id()
-        ));
-        let _ = fs::remove_dir_all(&dir);
-        fs::create_dir_all(&dir).unwrap();
-        dir
+    /// A scratch folder of its own, and the path of run 2's journal in it.
+    fn journal_in(tag: &str) -> (Scratch, PathBuf) {
+        let scratch = Scratch::new(&format!("runlog-{tag}"));
+        let path = scratch.path().join("run-0002.journal");
+        (scratch, path)
     }
 
     fn bits(traj: &Trajectory) -> Vec<u64> {
@@ -992,8 +979,8 @@ noise_std = 0.01
     #[test]
     fn a_journal_reads_back_bit_for_bit_and_stopped_early_as_a_prefix() {
         let spec = spec(6.0);
-        let dir = dir("roundtrip");
-        let path = journal_path(&dir, spec.index);
+        let scratch = Scratch::new("runlog-roundtrip");
+        let path = journal_path(scratch.path(), spec.index);
         let mut journal = RunJournal::create(&path, &header(&spec)).unwrap();
         let full = run_episode_recorded(&spec, &mut Wobble, &mut |_, _| {}, &mut |t| {
             journal.append(t)
@@ -1041,7 +1028,6 @@ noise_std = 0.01
             log.metrics,
             run_metrics(&prefix(&full, 41), spec.ticks(), &MetricsConfig::default())
         );
-        fs::remove_dir_all(&dir).unwrap();
     }
 
     fn journal_of(spec: &RunSpec, path: &Path) -> Trajectory {
@@ -1057,8 +1043,7 @@ noise_std = 0.01
     #[test]
     fn a_torn_last_line_is_dropped_and_damage_before_it_is_refused() {
         let spec = spec(1.0);
-        let dir = dir("torn");
-        let path = dir.join("run-0002.journal");
+        let (_scratch, path) = journal_in("torn");
         let full = journal_of(&spec, &path);
         let text = fs::read(&path).unwrap();
         let lines: Vec<&[u8]> = text.split_inclusive(|&b| b == b'\n').collect();
@@ -1096,14 +1081,12 @@ noise_std = 0.01
         fs::write(&path, skipped).unwrap();
         let err = recover_journal(&path).unwrap_err();
         assert!(matches!(err, RunLogError::Inconsistent { .. }), "{err}");
-        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
     fn other_versions_and_other_files_are_refused() {
         let spec = spec(0.5);
-        let dir = dir("version");
-        let path = dir.join("run-0002.journal");
+        let (_scratch, path) = journal_in("version");
         journal_of(&spec, &path);
         let text = fs::read_to_string(&path).unwrap();
         let newer = text.replacen("\"version\":1", "\"version\":2", 1);
@@ -1120,34 +1103,25 @@ noise_std = 0.01
         );
 
         let other = text.replacen(JOURNAL_FORMAT, "something-else", 1);
-        fs::write(&path, other).unwrap();
-        assert!(matches!(
-            recover_journal(&path),
-            Err(RunLogError::NotAJournal { .. })
-        ));
-        fs::write(&path, "{\"index\": 0}\n").unwrap();
-        assert!(matches!(
-            recover_journal(&path),
-            Err(RunLogError::NotAJournal { .. })
-        ));
-        fs::write(&path, "not json at all\n{}\n").unwrap();
-        assert!(matches!(
-            recover_journal(&path),
-            Err(RunLogError::NotAJournal { .. })
-        ));
-        fs::write(&path, "").unwrap();
-        assert!(matches!(
-            recover_journal(&path),
-            Err(RunLogError::NotAJournal { .. })
-        ));
-        fs::remove_dir_all(&dir).unwrap();
+        for not_a_journal in [
+            other.as_str(),
+            "{\"index\": 0}\n",
+            "not json at all\n{}\n",
+            "",
+        ] {
+            fs::write(&path, not_a_journal).unwrap();
+            let read = recover_journal(&path);
+            assert!(
+                matches!(read, Err(RunLogError::NotAJournal { .. })),
+                "{not_a_journal:?}: {read:?}"
+            );
+        }
     }
 
     #[test]
     fn the_journal_is_flushed_when_a_second_has_passed() {
         let spec = spec(1.0);
-        let dir = dir("flush");
-        let path = dir.join("run-0002.journal");
+        let (_scratch, path) = journal_in("flush");
         let t0 = Instant::now();
         let elapsed = Rc::new(Cell::new(Duration::ZERO));
         let clock = {
@@ -1187,7 +1161,6 @@ noise_std = 0.01
             "close flushes the rest"
         );
         assert_eq!(recover_journal(&path).unwrap().trajectory.poses.len(), 21);
-        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[cfg(target_os = "linux")]
@@ -1207,10 +1180,11 @@ noise_std = 0.01
         );
 
         // A directory that is a file: creating the journal fails naming it.
-        let dir = dir("notdir");
+        let scratch = Scratch::new("runlog-notdir");
+        let dir = scratch.path();
         let blocker = dir.join("runs");
         fs::write(&blocker, b"a file").unwrap();
-        let err = RunJournal::create(&journal_path(&dir, 0), &header(&spec))
+        let err = RunJournal::create(&journal_path(dir, 0), &header(&spec))
             .err()
             .expect("runs/ is a file");
         assert!(
@@ -1234,14 +1208,12 @@ noise_std = 0.01
             vec![std::ffi::OsString::from("x.json")],
             "no temporary file left"
         );
-        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
     fn a_failed_write_cuts_the_journal_to_whole_lines_and_refuses_more() {
         let spec = spec(0.5);
-        let dir = dir("fail");
-        let path = dir.join("run-0002.journal");
+        let (_scratch, path) = journal_in("fail");
         let full = journal_of(&spec, &path);
 
         // A write that fails after part of a flush reached the file: cut back to what was
@@ -1284,13 +1256,13 @@ noise_std = 0.01
         ));
         assert_eq!(fs::metadata(&path).unwrap().len(), header_len);
         assert!(recover_journal(&path).unwrap().trajectory.poses.is_empty());
-        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
     fn orphan_journals_are_recovered_into_incomplete_run_logs_and_live_ones_are_left() {
         let spec = spec(0.5);
-        let dir = dir("recover");
+        let scratch = Scratch::new("runlog-recover");
+        let dir = scratch.path();
         let out = dir.join("a").join("out");
         let orphan = journal_path(&out, spec.index);
         // A world killed before the last of its 12 ticks (the spec plays 10 here).
@@ -1308,7 +1280,7 @@ noise_std = 0.01
         let live_path = journal_path(&out, 7);
         let live = RunJournal::create(&live_path, &header(&live_spec)).unwrap();
 
-        assert_eq!(find_run_dirs(&dir), vec![out.clone()]);
+        assert_eq!(find_run_dirs(dir), vec![out.clone()]);
         assert_eq!(journals_in(&out), vec![orphan.clone(), live_path.clone()]);
         let recovered = recover_journals(&out, "the world was killed");
         assert_eq!(recovered.len(), 2, "{recovered:?}");
@@ -1345,8 +1317,7 @@ noise_std = 0.01
         assert!(!live_path.exists());
         assert!(journals_in(&out).is_empty());
         assert_eq!(run_logs_in(&out), vec![(2, out.join("runs/run-0002.json"))]);
-        assert_eq!(find_run_dirs(&dir), vec![out.clone()]);
-        fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(find_run_dirs(dir), vec![out.clone()]);
     }
 
     #[test]

@@ -1,4 +1,5 @@
-//! Seeded random team layouts shared by the unit tests of the LIDAR and the world.
+//! Team layouts shared by the unit tests of the LIDAR, the spatial grid and the world: seeded
+//! random discs and the points of a square lattice.
 
 use formation_proto::Pose;
 use rand::Rng;
@@ -27,4 +28,11 @@ pub(crate) fn disc_layout(
         }
     }
     poses
+}
+
+/// The points of the square lattice of side `cell` from `-half` to `half` cells along both axes,
+/// row by row: `(i, j, i * cell, j * cell)`.
+pub(crate) fn lattice(cell: f64, half: i64) -> impl Iterator<Item = (i64, i64, f64, f64)> {
+    (-half..=half)
+        .flat_map(move |i| (-half..=half).map(move |j| (i, j, i as f64 * cell, j as f64 * cell)))
 }

@@ -528,10 +528,7 @@ mod tests {
     #[test]
     fn step_saturates_wheels_and_moves_by_the_applied_speeds() {
         let mut world = World::new(WorldConfig::default(), vec![Pose::new(0.0, 0.0, 0.0)], 1);
-        let report = world.step(&[WheelCmd {
-            left: 3.0,
-            right: 3.0,
-        }]);
+        let report = world.step(&[WheelCmd::new(3.0, 3.0)]);
         let limit = world.config().robot.max_wheel_speed;
         assert_eq!(
             report.applied,
@@ -549,23 +546,9 @@ mod tests {
     fn a_non_finite_command_brakes_only_its_robot() {
         let poses = vec![Pose::new(0.0, 0.0, 0.0), Pose::new(5.0, 0.0, 0.0)];
         let mut world = World::new(WorldConfig::default(), poses, 1);
-        world.step(
-            &[WheelCmd {
-                left: 0.5,
-                right: 0.5,
-            }; 2],
-        );
+        world.step(&[WheelCmd::new(0.5, 0.5); 2]);
         let before = world.poses().to_vec();
-        let cmds = [
-            WheelCmd {
-                left: f64::NAN,
-                right: 0.5,
-            },
-            WheelCmd {
-                left: 0.5,
-                right: 0.5,
-            },
-        ];
+        let cmds = [WheelCmd::new(f64::NAN, 0.5), WheelCmd::new(0.5, 0.5)];
         let report = world.step(&cmds);
         assert_eq!(report.applied[0], WheelCmd::BRAKE);
         assert_eq!(world.poses()[0], before[0]);
@@ -588,10 +571,7 @@ mod tests {
             ..WorldConfig::default()
         };
         let mut world = World::new(config, vec![Pose::new(0.0, 0.0, 0.0)], 1);
-        let cmd = [WheelCmd {
-            left: 0.5,
-            right: 0.5,
-        }];
+        let cmd = [WheelCmd::new(0.5, 0.5)];
         let speeds: Vec<f64> = (0..7).map(|_| world.step(&cmd).applied[0].left).collect();
         let expected = [0.1, 0.2, 0.3, 0.4, 0.5, 0.5, 0.5];
         for (got, want) in speeds.iter().zip(expected) {
@@ -622,12 +602,17 @@ mod tests {
             Pose::new(1.02, 0.0, std::f64::consts::PI),
         ];
         let mut world = World::new(WorldConfig::default(), poses, 1);
-        let cmds = [WheelCmd {
-            left: 0.5,
-            right: 0.5,
-        }; 2];
+        let cmds = [WheelCmd::new(0.5, 0.5); 2];
         let first = (1..=20).find(|_| !world.step(&cmds).collisions.is_empty());
         assert_eq!(first, Some(11));
+    }
+
+    /// Robot `own`'s scan of `poses` without noise, by the default robot's default LIDAR.
+    fn exact_scan(poses: &[Pose], own: usize) -> Vec<f32> {
+        let lidar = LidarSpec::default();
+        let mut scan = vec![0.0; lidar.beams];
+        cast_scan(poses, own, &RobotParams::default(), &lidar, &mut scan);
+        scan
     }
 
     #[test]
@@ -636,14 +621,7 @@ mod tests {
         let mut world = World::new(WorldConfig::default(), poses.clone(), 1);
         let mut from_world = vec![0.0; 900];
         world.scan_into(0, &mut from_world);
-        let mut direct = vec![0.0; 900];
-        cast_scan(
-            &poses,
-            0,
-            &RobotParams::default(),
-            &LidarSpec::default(),
-            &mut direct,
-        );
+        let direct = exact_scan(&poses, 0);
         assert_eq!(from_world, direct);
         assert!((from_world[0] - 2.75).abs() < 1e-4);
     }
@@ -652,14 +630,7 @@ mod tests {
     fn noise_perturbs_hits_only_with_the_configured_spread() {
         let poses = vec![Pose::new(0.0, 0.0, 0.0), Pose::new(3.0, 0.0, 0.0)];
         let mut world = World::new(noisy_config(0.03), poses.clone(), 7);
-        let mut clean = vec![0.0; 900];
-        cast_scan(
-            &poses,
-            0,
-            &RobotParams::default(),
-            &LidarSpec::default(),
-            &mut clean,
-        );
+        let clean = exact_scan(&poses, 0);
         let mut scan = vec![0.0; 900];
         let mut errors = Vec::new();
         for _ in 0..200 {
@@ -705,10 +676,7 @@ mod tests {
             for (cmd, scan) in cmds.iter_mut().zip(&scans) {
                 let nearest = scan.iter().copied().fold(f32::INFINITY, f32::min) as f64;
                 let turn = if nearest < 1.0 { 0.3 } else { -0.05 };
-                *cmd = WheelCmd {
-                    left: 0.4 - turn + 0.01 * nearest,
-                    right: 0.4 + turn,
-                };
+                *cmd = WheelCmd::new(0.4 - turn + 0.01 * nearest, 0.4 + turn);
             }
             world.step(&cmds);
         }
@@ -887,10 +855,7 @@ mod tests {
                     .copied()
                     .fold(10.0, f32::min);
                 let turn = if ahead < 1.0 { 0.4 } else { 0.0 };
-                *cmd = WheelCmd {
-                    left: 0.5 - turn,
-                    right: 0.5 + turn,
-                };
+                *cmd = WheelCmd::new(0.5 - turn, 0.5 + turn);
             }
             let report = world.step(&cmds);
             let reference_report = reference.step(&cmds);
@@ -928,10 +893,7 @@ mod tests {
             Pose::new(-1.0, 1.0, 2.0),
         ];
         let mut world = World::new(config, poses, 4);
-        let cmds = [WheelCmd {
-            left: 0.3,
-            right: 0.5,
-        }; 3];
+        let cmds = [WheelCmd::new(0.3, 0.5); 3];
         let mut scans = vec![Vec::new(); 3];
         let mut previous: Option<Vec<Vec<f32>>> = None;
         for tick in 0..16 {
@@ -968,10 +930,7 @@ mod tests {
             ..RealityModels::IDEAL
         });
         let mut world = World::new(config, vec![Pose::new(0.0, 0.0, 0.0)], 1);
-        let go = WheelCmd {
-            left: 0.4,
-            right: 0.4,
-        };
+        let go = WheelCmd::new(0.4, 0.4);
         let ran: Vec<WheelCmd> = [go, WheelCmd::BRAKE, go, go, WheelCmd::BRAKE]
             .iter()
             .map(|&cmd| world.step(&[cmd]).applied[0])
@@ -1091,12 +1050,7 @@ mod tests {
                 bits.extend(scans.iter().flatten().map(|r| u64::from(r.to_bits())));
                 bits.extend(world.observed_poses().iter().map(|p| p.theta.to_bits()));
                 let turn = if tick % 7 < 3 { 0.2 } else { -0.1 };
-                world.step(
-                    &[WheelCmd {
-                        left: 0.5 - turn,
-                        right: 0.5 + turn,
-                    }; 3],
-                );
+                world.step(&[WheelCmd::new(0.5 - turn, 0.5 + turn); 3]);
                 bits.extend(
                     world
                         .poses()

@@ -2,6 +2,7 @@
 
 use super::plan::*;
 use super::*;
+use crate::test_support::Scratch;
 
 const SHIPPED: [(&str, &str); 5] = [
     ("case1", include_str!("../../../scenarios/case1.toml")),
@@ -717,33 +718,10 @@ fn names_are_short_and_printable() {
     );
 }
 
-/// A scratch directory under the system temp directory, removed on drop.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(tag: &str) -> Scratch {
-        use std::sync::atomic::{AtomicUsize, Ordering};
-        static N: AtomicUsize = AtomicUsize::new(0);
-        let dir = std::env::temp_dir().join(format!(
-            "formation-scenario-{tag}-{}-{}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
-        ));
-        std::fs::create_dir_all(&dir).expect("scratch dir");
-        Scratch(dir)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 #[test]
 fn an_oversized_file_is_refused_by_its_size() {
     let dir = Scratch::new("big");
-    let path = dir.0.join("big.toml");
+    let path = dir.path().join("big.toml");
     let file = std::fs::File::create(&path).expect("create");
     // Sparse: no disk space used, and a whole read would allocate over a MiB.
     file.set_len(limits::MAX_FILE_BYTES + 1).expect("set_len");
@@ -768,7 +746,7 @@ fn an_oversized_file_is_refused_by_its_size() {
 #[test]
 fn devices_directories_and_fifos_are_refused_before_reading() {
     let dir = Scratch::new("kinds");
-    let fifo = dir.0.join("pipe.toml");
+    let fifo = dir.path().join("pipe.toml");
     let made = std::process::Command::new("mkfifo")
         .arg(&fifo)
         .status()
@@ -776,7 +754,7 @@ fn devices_directories_and_fifos_are_refused_before_reading() {
     assert!(made.success(), "mkfifo failed");
     for (path, kind) in [
         (Path::new("/dev/zero"), "a character device"),
-        (dir.0.as_path(), "a directory"),
+        (dir.path(), "a directory"),
         (fifo.as_path(), "a FIFO"),
     ] {
         // Reading /dev/zero or opening the FIFO would never return: the refusal must come first.
@@ -795,14 +773,17 @@ fn devices_directories_and_fifos_are_refused_before_reading() {
 #[test]
 fn a_scenario_file_is_read_and_its_agent_paths_resolved() {
     let dir = Scratch::new("ok");
-    let path = dir.0.join("ok.toml");
+    let path = dir.path().join("ok.toml");
     std::fs::write(
         &path,
         format!("{MINIMAL}[[agent]]\nrobot = 1\nmodel = \"m/b.onnx\"\n"),
     )
     .expect("write");
     let scenario = Scenario::from_path(&path).expect("valid");
-    assert_eq!(scenario.agent_models()[0].model, dir.0.join("m/b.onnx"));
+    assert_eq!(
+        scenario.agent_models()[0].model,
+        dir.path().join("m/b.onnx")
+    );
     std::fs::write(&path, b"name = \"\xff\"\n").expect("write");
     assert!(matches!(
         Scenario::from_path(&path),
@@ -826,10 +807,13 @@ fn missing_file_error_names_the_path() {
 #[test]
 fn a_team_model_is_resolved_against_the_file_and_kept_when_resized() {
     let dir = Scratch::new("team-model");
-    let path = dir.0.join("team.toml");
+    let path = dir.path().join("team.toml");
     std::fs::write(&path, format!("model = \"m/team.onnx\"\n{MINIMAL}")).expect("write");
     let scenario = Scenario::from_path(&path).expect("valid");
-    assert_eq!(scenario.model(), Some(dir.0.join("m/team.onnx").as_path()));
+    assert_eq!(
+        scenario.model(),
+        Some(dir.path().join("m/team.onnx").as_path())
+    );
     let resized = scenario.with_robots(8).expect("resized");
     assert_eq!(resized.model(), scenario.model());
     // Absent: the shipped default, and nothing in the serialized record.
