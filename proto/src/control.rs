@@ -2,7 +2,8 @@
 //! commands.
 //!
 //! [`Controller`] is implemented by the expert, by the in-process policy (one agent per robot), by
-//! the multi-process runtime's world-side exchange, and by test doubles; the world's episode loop
+//! the multi-process runtime's world-side exchange, and by test doubles (a closure is one through
+//! [`controller_fn`]); the world's episode loop
 //! (`formation_world::run_episode`) drives any of them. It lives here, with the plain shared
 //! values, so that an agent or the runtime can name it without depending on the world's physics.
 
@@ -37,6 +38,31 @@ pub trait Controller {
         obs: &Observation<'_>,
         out: &mut [WheelCmd],
     ) -> Result<(), ControllerError>;
+}
+
+/// A [`Controller`] that is a closure writing every robot's command, made by [`controller_fn`]:
+/// a test double or a small tool without a type of its own.
+pub struct ControllerFn<F>(F);
+
+/// The [`Controller`] that hands each observation and the commands to write to `decide`.
+pub fn controller_fn<F>(decide: F) -> ControllerFn<F>
+where
+    F: FnMut(&Observation<'_>, &mut [WheelCmd]) -> Result<(), ControllerError>,
+{
+    ControllerFn(decide)
+}
+
+impl<F> Controller for ControllerFn<F>
+where
+    F: FnMut(&Observation<'_>, &mut [WheelCmd]) -> Result<(), ControllerError>,
+{
+    fn commands(
+        &mut self,
+        obs: &Observation<'_>,
+        out: &mut [WheelCmd],
+    ) -> Result<(), ControllerError> {
+        (self.0)(obs, out)
+    }
 }
 
 /// A controller could not produce commands; the episode stops with this error.

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use formation_proto::WheelCmd;
-use formation_proto::control::{Controller, ControllerError, Observation};
+use formation_proto::control::{Controller, ControllerError, controller_fn};
 use formation_record::{
     LaunchInfo, ReadError, RecordError, RecordedController, Recorder, RecordingItem,
     RecordingReader, RecordingSetup, ReplayStep,
@@ -40,18 +40,9 @@ noise_std = 0.01
 /// What the controller was given at one tick: the tick, the scans, the headings, the goal.
 type Seen = (u64, Vec<Vec<f32>>, Vec<f64>, formation_proto::Goal);
 
-/// Turns gently, and keeps every observation it was given.
-#[derive(Default)]
-struct Turning {
-    seen: Vec<Seen>,
-}
-
-impl Controller for Turning {
-    fn commands(
-        &mut self,
-        obs: &Observation<'_>,
-        out: &mut [WheelCmd],
-    ) -> Result<(), ControllerError> {
+/// Turns gently, and keeps every observation it was given in `seen`.
+fn turning(seen: &mut Vec<Seen>) -> impl Controller {
+    controller_fn(move |obs, out| {
         for (i, slot) in out.iter_mut().enumerate() {
             *slot = WheelCmd {
                 left: 0.1 + 0.01 * i as f64 + 1e-17 * obs.tick as f64,
@@ -59,10 +50,9 @@ impl Controller for Turning {
             };
         }
         let headings = obs.poses.iter().map(|p| p.theta).collect();
-        self.seen
-            .push((obs.tick, obs.scans.to_vec(), headings, obs.goal));
+        seen.push((obs.tick, obs.scans.to_vec(), headings, obs.goal));
         Ok(())
-    }
+    })
 }
 
 fn launch(models: Vec<PathBuf>) -> LaunchInfo {
@@ -76,21 +66,25 @@ fn launch(models: Vec<PathBuf>) -> LaunchInfo {
     }
 }
 
-/// Records `spec` into `path`; returns the controller (with what it saw) and the trajectory.
+/// Records `spec` into `path`; returns what the controller saw and the trajectory.
 fn record(
     spec: &RunSpec,
     path: &Path,
     models: Vec<PathBuf>,
-) -> (Turning, formation_world::Trajectory) {
+) -> (Vec<Seen>, formation_world::Trajectory) {
     let recorder = Recorder::start(path, RecordingSetup::for_run(spec, &launch(models))).unwrap();
-    let mut inner = Turning::default();
-    let mut failed = |e: &RecordError| panic!("{e}");
-    let ids = vec!["m".to_owned(); spec.n_robots];
-    let mut recorded = RecordedController::new(&mut inner, recorder, ids, &mut failed);
-    let trajectory = run_episode(spec, &mut recorded, &mut |_, _| {}).unwrap();
-    let summary = recorded.finish(Some(&trajectory)).unwrap().unwrap();
-    assert!(summary.bytes > 0 && summary.messages > 0);
-    (inner, trajectory)
+    let mut seen = Vec::new();
+    let trajectory = {
+        let mut inner = turning(&mut seen);
+        let mut failed = |e: &RecordError| panic!("{e}");
+        let ids = vec!["m".to_owned(); spec.n_robots];
+        let mut recorded = RecordedController::new(&mut inner, recorder, ids, &mut failed);
+        let trajectory = run_episode(spec, &mut recorded, &mut |_, _| {}).unwrap();
+        let summary = recorded.finish(Some(&trajectory)).unwrap().unwrap();
+        assert!(summary.bytes > 0 && summary.messages > 0);
+        trajectory
+    };
+    (seen, trajectory)
 }
 
 #[test]
@@ -170,7 +164,7 @@ fn a_recording_holds_every_topic_in_one_second_chunks_and_the_replay_bit_for_bit
     // The replay channel holds exactly what the controller was given and what it answered.
     assert_eq!(replays.len(), 3 * ticks);
     for step in &replays {
-        let (tick, scans, headings, goal) = &seen.seen[step.tick as usize];
+        let (tick, scans, headings, goal) = &seen[step.tick as usize];
         assert_eq!(*tick, step.tick);
         let robot = step.robot as usize;
         let bits = |v: &[f32]| v.iter().map(|r| r.to_bits()).collect::<Vec<_>>();
@@ -398,10 +392,8 @@ fn the_recording_says_whether_the_run_played_to_its_end() {
         RecordingSetup::for_run(&spec, &launch(Vec::new())),
     )
     .unwrap();
-    let mut inner = StopAfter {
-        inner: Turning::default(),
-        left: 5,
-    };
+    let mut seen = Vec::new();
+    let mut inner = stop_after(turning(&mut seen), 5);
     let mut failed = |e: &RecordError| panic!("{e}");
     let ids = vec!["m".to_owned(); spec.n_robots];
     let mut recorded = RecordedController::new(&mut inner, recorder, ids, &mut failed);
@@ -416,21 +408,12 @@ fn the_recording_says_whether_the_run_played_to_its_end() {
 }
 
 /// Decides `left` ticks with `inner`, then fails as an interrupted controller does.
-struct StopAfter<C: Controller> {
-    inner: C,
-    left: usize,
-}
-
-impl<C: Controller> Controller for StopAfter<C> {
-    fn commands(
-        &mut self,
-        obs: &Observation<'_>,
-        out: &mut [WheelCmd],
-    ) -> Result<(), ControllerError> {
-        if self.left == 0 {
+fn stop_after(mut inner: impl Controller, mut left: usize) -> impl Controller {
+    controller_fn(move |obs, out| {
+        if left == 0 {
             return Err(ControllerError::new("interrupted"));
         }
-        self.left -= 1;
-        self.inner.commands(obs, out)
-    }
+        left -= 1;
+        inner.commands(obs, out)
+    })
 }

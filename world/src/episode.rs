@@ -236,6 +236,7 @@ mod tests {
     use crate::robot::integrate;
     use crate::scenario::Scenario;
     use crate::test_support::RampTeam;
+    use formation_proto::control::controller_fn;
 
     fn short_spec(noise_std: f64) -> RunSpec {
         RampTeam {
@@ -245,38 +246,19 @@ mod tests {
         .run_spec("episode-test", 11, 0)
     }
 
-    /// Drives every robot with the same wheel speeds; optionally fails at one tick.
-    struct ConstantWheels {
-        cmd: WheelCmd,
-        fail_at: Option<u64>,
-    }
-
-    impl ConstantWheels {
-        /// Drives every robot with `cmd` at every tick.
-        fn new(cmd: WheelCmd) -> ConstantWheels {
-            ConstantWheels { cmd, fail_at: None }
-        }
-    }
-
-    impl Controller for ConstantWheels {
-        fn commands(
-            &mut self,
-            obs: &Observation<'_>,
-            out: &mut [WheelCmd],
-        ) -> Result<(), ControllerError> {
-            if self.fail_at == Some(obs.tick) {
-                return Err(ControllerError::new(format!("refusing tick {}", obs.tick)));
-            }
-            out.fill(self.cmd);
+    /// Drives every robot with the same wheel speeds.
+    fn constant_wheels(cmd: WheelCmd) -> impl Controller {
+        controller_fn(move |_, out| {
+            out.fill(cmd);
             Ok(())
-        }
+        })
     }
 
     #[test]
     fn episode_records_every_tick_and_matches_manual_integration() {
         let spec = short_spec(0.0);
         let cmd = WheelCmd::new(0.3, 0.5);
-        let mut controller = ConstantWheels::new(cmd);
+        let mut controller = constant_wheels(cmd);
         let mut seen_ticks = Vec::new();
         let traj = run_episode(&spec, &mut controller, &mut |obs, cmds| {
             assert_eq!(obs.goal, spec.goal_at(obs.time));
@@ -319,7 +301,7 @@ mod tests {
     #[test]
     fn non_finite_commands_are_recorded_as_the_brake_the_world_applied() {
         let spec = short_spec(0.0);
-        let mut controller = ConstantWheels::new(WheelCmd::new(f64::NAN, 0.2));
+        let mut controller = constant_wheels(WheelCmd::new(f64::NAN, 0.2));
         let traj = run_episode(&spec, &mut controller, &mut |_, _| {}).unwrap();
         assert!(
             traj.commands
@@ -333,10 +315,14 @@ mod tests {
     #[test]
     fn a_controller_error_stops_the_episode() {
         let spec = short_spec(0.0);
-        let mut controller = ConstantWheels {
-            cmd: WheelCmd::BRAKE,
-            fail_at: Some(3),
-        };
+        // Brakes every robot, and refuses tick 3.
+        let mut controller = controller_fn(|obs, out| {
+            if obs.tick == 3 {
+                return Err(ControllerError::new(format!("refusing tick {}", obs.tick)));
+            }
+            out.fill(WheelCmd::BRAKE);
+            Ok(())
+        });
         let mut calls = 0;
         let error = run_episode(&spec, &mut controller, &mut |_, _| calls += 1).unwrap_err();
         assert_eq!(error.to_string(), "refusing tick 3");
@@ -349,11 +335,11 @@ mod tests {
         let mut scans_a = Vec::new();
         let mut scans_b = Vec::new();
         let cmd = WheelCmd::new(0.4, 0.1);
-        let a = run_episode(&spec, &mut ConstantWheels::new(cmd), &mut |obs, _| {
+        let a = run_episode(&spec, &mut constant_wheels(cmd), &mut |obs, _| {
             scans_a.push(obs.scans.to_vec())
         })
         .unwrap();
-        let b = run_episode(&spec, &mut ConstantWheels::new(cmd), &mut |obs, _| {
+        let b = run_episode(&spec, &mut constant_wheels(cmd), &mut |obs, _| {
             scans_b.push(obs.scans.to_vec())
         })
         .unwrap();
@@ -376,7 +362,7 @@ mod tests {
         let mut seen = Vec::new();
         let full = run_episode_recorded(
             &spec,
-            &mut ConstantWheels::new(cmd),
+            &mut constant_wheels(cmd),
             &mut |_, _| {},
             &mut |traj| {
                 seen.push((traj.poses.len(), traj.commands.len(), traj.times.len()));
@@ -388,12 +374,12 @@ mod tests {
         assert_eq!(seen, expected);
         assert_eq!(
             full,
-            run_episode(&spec, &mut ConstantWheels::new(cmd), &mut |_, _| {}).unwrap()
+            run_episode(&spec, &mut constant_wheels(cmd), &mut |_, _| {}).unwrap()
         );
 
         let error = run_episode_recorded(
             &spec,
-            &mut ConstantWheels::new(cmd),
+            &mut constant_wheels(cmd),
             &mut |_, _| {},
             &mut |traj| {
                 if traj.commands.len() == 5 {
@@ -411,7 +397,7 @@ mod tests {
     fn an_episode_stepped_by_hand_equals_the_loop_and_refuses_bad_steps() {
         let spec = short_spec(0.05);
         let cmd = WheelCmd::new(0.4, 0.1);
-        let looped = run_episode(&spec, &mut ConstantWheels::new(cmd), &mut |_, _| {}).unwrap();
+        let looped = run_episode(&spec, &mut constant_wheels(cmd), &mut |_, _| {}).unwrap();
         let mut episode = Episode::new(spec.clone());
         assert_eq!(
             episode.step(&[cmd; 2]),
@@ -447,7 +433,7 @@ mod tests {
             .run_spec(2, 0);
         let cmd = WheelCmd::new(0.2, 0.3);
         let mut received = Vec::new();
-        let traj = run_episode(&spec, &mut ConstantWheels::new(cmd), &mut |obs, _| {
+        let traj = run_episode(&spec, &mut constant_wheels(cmd), &mut |obs, _| {
             received.push(obs.poses.to_vec())
         })
         .unwrap();

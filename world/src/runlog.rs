@@ -876,9 +876,10 @@ pub fn run_logs_in(out: &Path) -> Vec<(usize, PathBuf)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::episode::{Controller, ControllerError, EpisodeError, Observation};
+    use crate::episode::{Controller, EpisodeError};
     use crate::run_episode_recorded;
     use crate::test_support::{RampTeam, Scratch};
+    use formation_proto::control::controller_fn;
     use std::cell::Cell;
     use std::rc::Rc;
 
@@ -902,14 +903,8 @@ mod tests {
 
     /// Wheel speeds that vary per robot and tick (so the numbers are not round) and drive the
     /// robots into each other (so there are collisions to journal).
-    struct Wobble;
-
-    impl Controller for Wobble {
-        fn commands(
-            &mut self,
-            obs: &Observation<'_>,
-            out: &mut [WheelCmd],
-        ) -> Result<(), ControllerError> {
+    fn wobble() -> impl Controller {
+        controller_fn(|obs, out| {
             for (i, cmd) in out.iter_mut().enumerate() {
                 let phase = obs.time * (1.0 + i as f64) + 0.1;
                 *cmd = WheelCmd {
@@ -918,7 +913,7 @@ mod tests {
                 };
             }
             Ok(())
-        }
+        })
     }
 
     /// A scratch folder of its own, and the path of run 2's journal in it.
@@ -982,7 +977,7 @@ mod tests {
         let scratch = Scratch::new("runlog-roundtrip");
         let path = journal_path(scratch.path(), spec.index);
         let mut journal = RunJournal::create(&path, &header(&spec)).unwrap();
-        let full = run_episode_recorded(&spec, &mut Wobble, &mut |_, _| {}, &mut |t| {
+        let full = run_episode_recorded(&spec, &mut wobble(), &mut |_, _| {}, &mut |t| {
             journal.append(t)
         })
         .unwrap();
@@ -1008,7 +1003,7 @@ mod tests {
 
         // Stopped after 40 steps (the recorder fails the episode): the journal holds the prefix.
         let mut journal = RunJournal::create(&path, &header(&spec)).unwrap();
-        let error = run_episode_recorded(&spec, &mut Wobble, &mut |_, _| {}, &mut |t| {
+        let error = run_episode_recorded(&spec, &mut wobble(), &mut |_, _| {}, &mut |t| {
             journal.append(t)?;
             if t.commands.len() == 40 {
                 Err(RunLogError::Failed {
@@ -1032,7 +1027,7 @@ mod tests {
 
     fn journal_of(spec: &RunSpec, path: &Path) -> Trajectory {
         let mut journal = RunJournal::create(path, &header(spec)).unwrap();
-        let traj = run_episode_recorded(spec, &mut Wobble, &mut |_, _| {}, &mut |t| {
+        let traj = run_episode_recorded(spec, &mut wobble(), &mut |_, _| {}, &mut |t| {
             journal.append(t)
         })
         .unwrap();
@@ -1133,7 +1128,7 @@ mod tests {
         assert!(header_len > 0, "the header is written at once");
         let mut on_disk = Vec::new();
         let mut grew_at = Vec::new();
-        run_episode_recorded(&spec, &mut Wobble, &mut |_, _| {}, &mut |t| {
+        run_episode_recorded(&spec, &mut wobble(), &mut |_, _| {}, &mut |t| {
             // 100 ms of wall time per tick.
             elapsed.set(elapsed.get() + Duration::from_millis(100));
             journal.append(t)?;
@@ -1323,7 +1318,7 @@ mod tests {
     #[test]
     fn run_logs_without_the_new_fields_read_as_complete() {
         let spec = spec(0.5);
-        let traj = crate::run_episode(&spec, &mut Wobble, &mut |_, _| {}).unwrap();
+        let traj = crate::run_episode(&spec, &mut wobble(), &mut |_, _| {}).unwrap();
         let log = RunLog {
             index: 1,
             metrics: run_metrics(&traj, traj.commands.len() as u64, &MetricsConfig::default()),
