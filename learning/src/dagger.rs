@@ -570,7 +570,11 @@ pub(crate) mod tests {
 
     /// An empty dataset in `dir/data` with the paper's images and `scenario`'s LIDAR.
     pub(crate) fn empty_dataset(dir: &Path, scenario: &Scenario) -> PathBuf {
-        let header = paper_header(scenario);
+        empty_dataset_with_header(dir, paper_header(scenario))
+    }
+
+    /// An empty dataset in `dir/data` with `header`.
+    pub(crate) fn empty_dataset_with_header(dir: &Path, header: DatasetHeader) -> PathBuf {
         let path = dir.join("data");
         DatasetWriter::create(&path, header)
             .unwrap()

@@ -113,11 +113,11 @@ mod tests {
     use std::path::Path;
 
     use super::*;
-    use crate::dagger::tests::{empty_dataset, options, scenario};
+    use crate::dagger::tests::{empty_dataset, empty_dataset_with_header, options, scenario};
     use crate::dagger::{DaggerOptions, rollout_and_label};
     use formation_proto::NeighbourInput;
     use formation_trainer_bridge::dagger_part::append_parts;
-    use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader, DatasetWriter};
+    use formation_trainer_bridge::dataset::{DatasetHeader, DatasetReader};
     use formation_trainer_bridge::label_law::LabelLaw;
 
     /// An empty dataset in `dir/data` as [`empty_dataset`] makes, its header changed by `with`.
@@ -128,12 +128,7 @@ mod tests {
     ) -> PathBuf {
         let plain = empty_dataset(&dir.join("plain"), base);
         let header = with(Manifest::read(&plain).unwrap().header());
-        let path = dir.join("data");
-        DatasetWriter::create(&path, header)
-            .unwrap()
-            .finish()
-            .unwrap();
-        path
+        empty_dataset_with_header(dir, header)
     }
 
     /// Labels iteration 1 of a dataset (its header changed by `with`) once whole with `labels`

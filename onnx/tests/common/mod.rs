@@ -55,40 +55,29 @@ impl Fixtures {
 
     /// The torch reference cases of `ranges.onnx`: (occupancy, aux, ranges, torch's wheels).
     pub fn ranges_cases(&self) -> Vec<RangesCase> {
-        let values = self.f32_file("ranges_cases.f32");
-        let cells = SIZE_PX * SIZE_PX;
-        values
-            .chunks_exact(cells + 2 + SECTORS + 2)
-            .map(|r| {
-                let ranges = cells + 2;
-                let wheels = ranges + SECTORS;
-                (
-                    r[..cells].to_vec(),
-                    [r[cells], r[cells + 1]],
-                    r[ranges..wheels].to_vec(),
-                    [r[wheels], r[wheels + 1]],
-                )
-            })
-            .collect()
+        self.cases_with_tensor("ranges_cases.f32", SECTORS)
     }
-}
 
-impl Fixtures {
     /// The torch reference cases of `neighbours.onnx`: (occupancy, aux, neighbours, torch's
     /// wheels).
     pub fn neighbours_cases(&self) -> Vec<NeighboursCase> {
-        let values = self.f32_file("neighbours_cases.f32");
+        self.cases_with_tensor("neighbours_cases.f32", SLOTS * 4)
+    }
+
+    /// The torch reference cases of a model with a tensor input of `width` values beside the
+    /// image and the aux scalars, each written as (occupancy, aux, that tensor, torch's wheels).
+    fn cases_with_tensor(&self, name: &str, width: usize) -> Vec<TensorCase> {
+        let values = self.f32_file(name);
         let cells = SIZE_PX * SIZE_PX;
-        let width = SLOTS * 4;
         values
             .chunks_exact(cells + 2 + width + 2)
             .map(|r| {
-                let neighbours = cells + 2;
-                let wheels = neighbours + width;
+                let tensor = cells + 2;
+                let wheels = tensor + width;
                 (
                     r[..cells].to_vec(),
                     [r[cells], r[cells + 1]],
-                    r[neighbours..wheels].to_vec(),
+                    r[tensor..wheels].to_vec(),
                     [r[wheels], r[wheels + 1]],
                 )
             })
@@ -98,13 +87,17 @@ impl Fixtures {
 
 /// One torch reference case of `neighbours.onnx`: occupancy, aux, neighbours (4 values a slot)
 /// and torch's wheels.
-pub type NeighboursCase = (Vec<f32>, [f32; 2], Vec<f32>, [f32; 2]);
+pub type NeighboursCase = TensorCase;
 
 /// Slots of `neighbours.onnx`'s neighbour input.
 pub const SLOTS: usize = 8;
 
 /// One torch reference case of `ranges.onnx`: occupancy, aux, ranges and torch's wheels.
-pub type RangesCase = (Vec<f32>, [f32; 2], Vec<f32>, [f32; 2]);
+pub type RangesCase = TensorCase;
+
+/// One torch reference case of a model with a tensor input beside the image: occupancy, aux, that
+/// tensor and torch's wheels.
+pub type TensorCase = (Vec<f32>, [f32; 2], Vec<f32>, [f32; 2]);
 
 /// Sectors of `ranges.onnx`'s range input.
 pub const SECTORS: usize = 100;
