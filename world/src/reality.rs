@@ -468,8 +468,7 @@ mod tests {
             gain_asymmetry: 0.1,
             ..MotorModel::IDEAL
         });
-        let cmd = WheelCmd::new(0.5, 0.5);
-        let ran = traits.drive(cmd, WheelCmd::BRAKE, DT, [0.0; 2]);
+        let ran = traits.drive(WheelCmd::new(0.5, 0.5), WheelCmd::BRAKE, DT, [0.0; 2]);
         assert!((ran.left - 0.475).abs() < 1e-12 && (ran.right - 0.525).abs() < 1e-12);
     }
 
@@ -479,8 +478,7 @@ mod tests {
             speed_noise_std: 0.02,
             ..MotorModel::IDEAL
         });
-        let cmd = WheelCmd::new(0.5, 0.9);
-        let ran = traits.drive(cmd, WheelCmd::BRAKE, DT, [1.5, 3.0]);
+        let ran = traits.drive(WheelCmd::new(0.5, 0.9), WheelCmd::BRAKE, DT, [1.5, 3.0]);
         assert!((ran.left - 0.53).abs() < 1e-12, "{ran:?}");
         assert_eq!(ran.right, traits.params.max_wheel_speed);
     }
