@@ -3,9 +3,9 @@
 //!
 //! [`Controller`] is implemented by the expert, by the in-process policy (one agent per robot), by
 //! the multi-process runtime's world-side exchange, and by test doubles (a closure is one through
-//! [`controller_fn`]); the world's episode loop
-//! (`formation_world::run_episode`) drives any of them. It lives here, with the plain shared
-//! values, so that an agent or the runtime can name it without depending on the world's physics.
+//! [`controller_fn`]); the world's episode loop (`formation_world::run_episode`) drives any of
+//! them. It lives here, with the plain shared values, so that an agent or the runtime can name it
+//! without depending on the world's physics.
 
 use crate::{Goal, Pose, WheelCmd};
 
