@@ -1172,23 +1172,7 @@ mod tests {
         assert_eq!(team_size_label(16.0), "16");
         assert_eq!(team_size_label(15.6), "");
         assert_eq!(team_size_label(16.4), "");
-        let row = formation_schema::ScalingRow {
-            controller: "expert".into(),
-            model: None,
-            robots: 16,
-            neighbours: "gabriel".into(),
-            runs: 2,
-            success_rate_5: 1.0,
-            success_rate_10: 1.0,
-            anchor_success_rate: 1.0,
-            convergence_s: None,
-            rel_formation_error: None,
-            max_edge_window_error: None,
-            collisions: 0,
-            team_size: None,
-            goal_speed: None,
-            model_input: None,
-        };
+        let row = crate::fixtures::scaling_row("expert", None, 16, 1.0);
         let table = formation_schema::ScalingTable {
             scenario: "teams".into(),
             seed: 1,

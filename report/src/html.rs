@@ -11,7 +11,7 @@
 use std::fmt::Write as _;
 
 use crate::figures::Figure;
-use crate::input::TableRow;
+use crate::input::Summary;
 
 /// The paper's Table I and Fig. 9 medians, shown beside ours.
 pub mod paper {
@@ -97,7 +97,7 @@ pub struct TableEntry {
     /// Controller and scenario, for the second column.
     pub detail: String,
     /// The numbers.
-    pub row: TableRow,
+    pub row: Summary,
     /// The team size, when the run logs or the summary say: only a team of
     /// [`paper::ROBOTS`] is compared with the paper.
     pub robots: Option<usize>,
@@ -867,7 +867,7 @@ mod tests {
             table: vec![TableEntry {
                 name: "table1".into(),
                 detail: "policy · table1".into(),
-                row: TableRow {
+                row: Summary {
                     runs: 20,
                     success_rate_5: 0.85,
                     success_rate_10: 0.95,
@@ -877,6 +877,11 @@ mod tests {
                     collisions: 2,
                     runs_incomplete: 1,
                     medians_over: None,
+                    convergence_s: None,
+                    rel_formation_error: None,
+                    orientation_error_rad: None,
+                    anchor_success_rate: None,
+                    connected_rate: None,
                 },
                 robots: Some(3),
                 incomplete: Some("1 of 20 runs incomplete (stopped early: <Ctrl-C>)".into()),

@@ -94,10 +94,9 @@ pub struct EvalData {
     pub scenario: String,
     /// Base seed, when recorded.
     pub seed: Option<u64>,
-    /// The Table I figures.
-    pub table: TableRow,
-    /// Fig. 9 statistics over the runs that succeed at 10 %.
-    pub fig9: Fig9Stats,
+    /// The Table I figures and the Fig. 9 statistics (over the runs that succeed at 10 %), as
+    /// the summary holds them.
+    pub table: Summary,
     /// Per-run metrics, in run order.
     pub per_run: Vec<RunMetrics>,
     /// Run logs drawn (at most [`MAX_RUNS_PLOTTED_PER_EVAL`]), in run order.
@@ -130,42 +129,9 @@ impl EvalData {
 }
 
 /// A run that stopped before its last tick, the metrics of one run (NaN where the writer could
-/// not compute a value), the order statistics of a Fig. 9 quantity, and a run's trajectory.
-pub use formation_schema::{IncompleteRun, Quantiles, RunMetrics, Trajectory};
-
-/// The Table I keys of one evaluation.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TableRow {
-    /// Number of runs.
-    pub runs: usize,
-    /// Fraction (0..1) of runs successful at 5 %.
-    pub success_rate_5: f64,
-    /// Fraction (0..1) of runs successful at 10 %.
-    pub success_rate_10: f64,
-    /// Median convergence time \[s\] over runs successful at 10 %.
-    pub median_convergence_s: Option<f64>,
-    /// Median relative formation error (fraction) over runs successful at 10 %.
-    pub median_rel_formation_error: Option<f64>,
-    /// Median orientation error \[rad\] over runs successful at 10 %.
-    pub median_orientation_error_rad: Option<f64>,
-    /// Runs with at least one collision.
-    pub collisions: usize,
-    /// Runs that stopped early (counted as runs that did not succeed).
-    pub runs_incomplete: usize,
-    /// Which runs each median covers, when the summary says.
-    pub medians_over: Option<formation_schema::MediansOver>,
-}
-
-/// The three Fig. 9 quantities.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Fig9Stats {
-    /// Convergence time \[s\].
-    pub convergence_s: Option<Quantiles>,
-    /// Relative formation error (fraction).
-    pub rel_formation_error: Option<Quantiles>,
-    /// Orientation error \[rad\].
-    pub orientation_error_rad: Option<Quantiles>,
-}
+/// not compute a value), the order statistics of a Fig. 9 quantity, an evaluation's Table I
+/// figures and Fig. 9 statistics, and a run's trajectory.
+pub use formation_schema::{IncompleteRun, Quantiles, RunMetrics, Summary, Trajectory};
 
 /// One run log.
 #[derive(Debug, Clone)]
@@ -245,22 +211,7 @@ pub fn eval_data(summary: EvalOutput, source: &Path, name: &str) -> Result<EvalD
         model_inputs,
         scenario,
         seed,
-        table: TableRow {
-            runs: summary.runs,
-            success_rate_5: summary.success_rate_5,
-            success_rate_10: summary.success_rate_10,
-            median_convergence_s: summary.median_convergence_s,
-            median_rel_formation_error: summary.median_rel_formation_error,
-            median_orientation_error_rad: summary.median_orientation_error_rad,
-            collisions: summary.collisions,
-            runs_incomplete: summary.runs_incomplete,
-            medians_over: summary.medians_over,
-        },
-        fig9: Fig9Stats {
-            convergence_s: summary.convergence_s,
-            rel_formation_error: summary.rel_formation_error,
-            orientation_error_rad: summary.orientation_error_rad,
-        },
+        table: summary,
         per_run,
         runs: Vec::new(),
         runs_not_drawn: 0,
@@ -321,13 +272,9 @@ fn validate_trajectory(mut traj: Trajectory) -> Result<Trajectory, String> {
     if n_robots == 0 {
         return Err("trajectory.poses[0] lists no robots".into());
     }
-    if let Some(k) = traj.poses[..samples]
-        .iter()
-        .position(|row| row.len() != n_robots)
-    {
+    if let Some((k, poses)) = ragged_row(&traj.poses[..samples], n_robots) {
         return Err(format!(
-            "trajectory.poses[{k}] has {} poses, but poses[0] has {n_robots}",
-            traj.poses[k].len()
+            "trajectory.poses[{k}] has {poses} poses, but poses[0] has {n_robots}"
         ));
     }
     if let Some(&(i, j)) = traj
@@ -341,13 +288,9 @@ fn validate_trajectory(mut traj: Trajectory) -> Result<Trajectory, String> {
     }
     // `commands` normally has one entry fewer than the samples; more than `samples` cannot be timed.
     let ticks = traj.commands.len().min(samples);
-    if let Some(k) = traj.commands[..ticks]
-        .iter()
-        .position(|row| row.len() != n_robots)
-    {
+    if let Some((k, commands)) = ragged_row(&traj.commands[..ticks], n_robots) {
         return Err(format!(
-            "trajectory.commands[{k}] has {} commands, but there are {n_robots} robots",
-            traj.commands[k].len()
+            "trajectory.commands[{k}] has {commands} commands, but there are {n_robots} robots"
         ));
     }
     traj.times.truncate(samples);
@@ -355,6 +298,13 @@ fn validate_trajectory(mut traj: Trajectory) -> Result<Trajectory, String> {
     traj.poses.truncate(samples);
     traj.commands.truncate(ticks);
     Ok(traj)
+}
+
+/// The first of `rows` that does not hold one entry per robot: its index and its length.
+fn ragged_row<T>(rows: &[Vec<T>], n_robots: usize) -> Option<(usize, usize)> {
+    rows.iter()
+        .position(|row| row.len() != n_robots)
+        .map(|k| (k, rows[k].len()))
 }
 
 fn invalid(source: &Path, reason: String) -> ReportError {
@@ -666,8 +616,8 @@ mod tests {
         assert_eq!(eval.table.runs, 2);
         assert_eq!(eval.table.success_rate_5, 0.5);
         assert_eq!(eval.table.median_convergence_s, Some(9.5));
-        assert_eq!(eval.fig9.convergence_s.map(|q| q.q3), Some(9.75));
-        assert_eq!(eval.fig9.rel_formation_error, None);
+        assert_eq!(eval.table.convergence_s.map(|q| q.q3), Some(9.75));
+        assert_eq!(eval.table.rel_formation_error, None);
         assert_eq!(eval.per_run.len(), 2);
         assert!(
             eval.per_run[1].rel_formation_error.is_nan(),

@@ -102,32 +102,8 @@ pub fn rung_label(name: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use formation_schema::{LadderRung, Quantiles};
-
-    fn row(controller: &str, model: Option<&str>, robots: usize, success: f64) -> ScalingRow {
-        let json = serde_json::json!({
-            "controller": controller,
-            "model": model,
-            "robots": robots,
-            "neighbours": "all_pairs",
-            "runs": 100,
-            "success_rate_5": success - 0.1,
-            "success_rate_10": success,
-            "anchor_success_rate": success,
-            "convergence_s": Quantiles {
-                min: 0.5,
-                q1: 1.0,
-                median: 2.0 + robots as f64,
-                q3: 3.0,
-                max: 9.0,
-                count: 100,
-            },
-            "rel_formation_error": null,
-            "max_edge_window_error": null,
-            "collisions": 0
-        });
-        serde_json::from_value(json).expect("a scaling row")
-    }
+    use crate::fixtures::scaling_row as row;
+    use formation_schema::LadderRung;
 
     fn table() -> LadderTable {
         let rung = |name: &str, rows: Vec<ScalingRow>, refused: Option<&str>| LadderRung {

@@ -33,6 +33,8 @@
 
 pub mod error;
 pub mod figures;
+#[cfg(test)]
+mod fixtures;
 pub mod html;
 pub mod input;
 pub mod ladder;
@@ -624,17 +626,17 @@ pub fn fig9_panels(evals: &[&EvalData]) -> Vec<BoxPanel> {
         let orient_dots: Vec<f64> = runs.iter().map(|r| r.orientation_error_rad).collect();
         convergence.push(BoxGroup {
             label: eval.name.clone(),
-            stats: eval.fig9.convergence_s,
+            stats: eval.table.convergence_s,
             dots: conv_dots,
         });
         formation.push(BoxGroup {
             label: eval.name.clone(),
-            stats: scaled(eval.fig9.rel_formation_error, 100.0),
+            stats: scaled(eval.table.rel_formation_error, 100.0),
             dots: form_dots,
         });
         orientation.push(BoxGroup {
             label: eval.name.clone(),
-            stats: eval.fig9.orientation_error_rad,
+            stats: eval.table.orientation_error_rad,
             dots: orient_dots,
         });
     }

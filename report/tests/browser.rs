@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use formation_report::build_report;
+use formation_report::{ReportSummary, build_report};
 
 /// How long one Chromium run may take.
 const BROWSER_TIMEOUT: Duration = Duration::from_secs(120);
@@ -161,11 +161,9 @@ fn chromium() -> PathBuf {
 #[test]
 fn report_loads_in_headless_chromium_with_every_figure_drawn() {
     let browser = chromium();
-    let dir = tempfile::tempdir().expect("tempdir");
-    let data = dir.path().join("data");
-    common::write_demo_dir(&data, 40.0);
-    let out = dir.path().join("report.html");
-    let summary = build_report(&data, &out).expect("report");
+    let (dir, out, summary) = report_of(|data| {
+        common::write_demo_dir(data, 40.0);
+    });
     let url = format!("file://{}", out.display());
 
     let run = run_chromium(
@@ -231,11 +229,9 @@ fn report_loads_in_headless_chromium_with_every_figure_drawn() {
 #[test]
 fn the_browser_checks_catch_a_broken_page() {
     let browser = chromium();
-    let dir = tempfile::tempdir().expect("tempdir");
-    let data = dir.path().join("data");
-    common::write_demo_dir(&data, 6.0);
-    let out = dir.path().join("report.html");
-    let summary = build_report(&data, &out).expect("report");
+    let (dir, out, summary) = report_of(|data| {
+        common::write_demo_dir(data, 6.0);
+    });
     let html = std::fs::read_to_string(&out).expect("html");
     // Blank the first figure's drawing, load an image from the network, throw.
     let first_svg = html.find("<svg ").expect("an svg");
@@ -487,13 +483,20 @@ fn differing_pixels(a: &Image, b: &Image, (x, y): (f64, f64), r: i64) -> usize {
     count
 }
 
-/// A report of one 16-robot, 60 s run in a temp folder (kept while the guard lives).
-fn sixteen_robot_report() -> (tempfile::TempDir, std::path::PathBuf) {
+/// The report of the inputs `write_data` writes into `data/` of a temp folder (kept while the
+/// guard lives): the folder, the page (`report.html` beside `data/`) and what was written.
+fn report_of(write_data: impl FnOnce(&Path)) -> (tempfile::TempDir, PathBuf, ReportSummary) {
     let dir = tempfile::tempdir().expect("tempdir");
     let data = dir.path().join("data");
-    common::write_team_dir(&data, 16, 60.0);
+    write_data(&data);
     let out = dir.path().join("report.html");
-    build_report(&data, &out).expect("report");
+    let summary = build_report(&data, &out).expect("report");
+    (dir, out, summary)
+}
+
+/// A report of one 16-robot, 60 s run in a temp folder (kept while the guard lives).
+fn sixteen_robot_report() -> (tempfile::TempDir, std::path::PathBuf) {
+    let (dir, out, _) = report_of(|data| common::write_team_dir(data, 16, 60.0));
     (dir, out)
 }
 
@@ -654,9 +657,6 @@ fn svg_texts(svg: &str) -> Vec<String> {
 fn at_1300_px_the_tables_fit_and_one_team_size_gets_whole_ticks() {
     use formation_schema::{Quantiles, ScalingRow, ScalingTable};
     let browser = chromium();
-    let dir = tempfile::tempdir().expect("tempdir");
-    let data = dir.path().join("data");
-    common::write_demo_dir(&data, 6.0);
     let q = |median: f64| Quantiles {
         min: median - 3.0,
         q1: median - 1.25,
@@ -691,9 +691,10 @@ fn at_1300_px_the_tables_fit_and_one_team_size_gets_whole_ticks() {
             row("policy", Some("teams-generalist-policy-3f9a1c2e")),
         ],
     };
-    common::write_file(&data.join("scaling.json"), &table);
-    let out = dir.path().join("report.html");
-    let summary = build_report(&data, &out).expect("report");
+    let (dir, out, summary) = report_of(|data| {
+        common::write_demo_dir(data, 6.0);
+        common::write_file(&data.join("scaling.json"), &table);
+    });
 
     let run = dump_dom_in_window(
         &browser,
@@ -778,12 +779,10 @@ const LEGEND_CHECK: &str = r#"<script>
 #[test]
 fn in_chromium_the_legends_of_16_and_32_robots_do_not_overlap() {
     let browser = chromium();
-    let dir = tempfile::tempdir().expect("tempdir");
-    let data = dir.path().join("data");
-    common::write_team_dir(&data.join("sixteen"), 16, 20.0);
-    common::write_team_dir(&data.join("thirty-two"), 32, 20.0);
-    let out = dir.path().join("report.html");
-    let summary = build_report(&data, &out).expect("report");
+    let (dir, out, summary) = report_of(|data| {
+        common::write_team_dir(&data.join("sixteen"), 16, 20.0);
+        common::write_team_dir(&data.join("thirty-two"), 32, 20.0);
+    });
     assert_eq!(summary.runs_drawn, 2);
     let html = std::fs::read_to_string(&out).expect("html");
     // The page with the legend check added, in Chromium with a fresh profile.

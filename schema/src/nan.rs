@@ -39,31 +39,28 @@ struct WheelCmdIn {
 
 /// Rows of poses, `null` coordinates reading as NaN.
 pub fn pose_rows<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Vec<Pose>>, D::Error> {
-    Ok(Vec::<Vec<PoseIn>>::deserialize(d)?
-        .into_iter()
-        .map(|row| {
-            row.into_iter()
-                .map(|p| Pose {
-                    x: p.x.0,
-                    y: p.y.0,
-                    theta: p.theta.0,
-                })
-                .collect()
-        })
-        .collect())
+    rows(d, |p: PoseIn| Pose {
+        x: p.x.0,
+        y: p.y.0,
+        theta: p.theta.0,
+    })
 }
 
 /// Rows of wheel commands, `null` speeds reading as NaN.
 pub fn command_rows<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Vec<WheelCmd>>, D::Error> {
-    Ok(Vec::<Vec<WheelCmdIn>>::deserialize(d)?
+    rows(d, |c: WheelCmdIn| WheelCmd {
+        left: c.left.0,
+        right: c.right.0,
+    })
+}
+
+/// Rows of `In` (a value's fields, each read with [`float`]), each made a value by `make`.
+fn rows<'de, D: Deserializer<'de>, In: Deserialize<'de>, T>(
+    d: D,
+    make: impl Fn(In) -> T,
+) -> Result<Vec<Vec<T>>, D::Error> {
+    Ok(Vec::<Vec<In>>::deserialize(d)?
         .into_iter()
-        .map(|row| {
-            row.into_iter()
-                .map(|c| WheelCmd {
-                    left: c.left.0,
-                    right: c.right.0,
-                })
-                .collect()
-        })
+        .map(|row| row.into_iter().map(&make).collect())
         .collect())
 }

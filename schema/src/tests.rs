@@ -318,22 +318,10 @@ fn refuses_another_version<F: SchemaFile + std::fmt::Debug>(value: &F, what: &st
 }
 
 #[test]
-fn a_run_log_of_another_version_is_refused() {
+fn run_logs_timing_logs_summaries_and_profiles_of_another_version_are_refused() {
     refuses_another_version(&run_log(), "formation run log");
-}
-
-#[test]
-fn a_timing_log_of_another_version_is_refused() {
     refuses_another_version(&timing_log(), "formation timing log");
-}
-
-#[test]
-fn a_summary_of_another_version_is_refused() {
     refuses_another_version(&summary(), "formation evaluation summary");
-}
-
-#[test]
-fn a_profile_of_another_version_is_refused() {
     refuses_another_version(&profile(), "formation latency profile");
 }
 
@@ -348,30 +336,23 @@ fn a_file_of_another_format_is_refused_naming_both() {
     );
 }
 
-/// The file of `value` without the two keys, as written before they existed.
-fn unversioned<F: SchemaFile>(value: &F) -> Vec<u8> {
-    serde_json::to_vec(value).unwrap()
+/// The file of `value` without the two keys, as written before they existed, reads back as
+/// `value`.
+fn reads_unversioned<F: SchemaFile + PartialEq + std::fmt::Debug>(value: &F) {
+    let unversioned = serde_json::to_vec(value).unwrap();
+    assert_eq!(
+        &from_json::<F>(&unversioned, Path::new("old.json")).unwrap(),
+        value
+    );
 }
 
 #[test]
 fn files_written_before_the_schema_version_read_as_version_1() {
     let path = Path::new("old.json");
-    assert_eq!(
-        from_json::<RunLog>(&unversioned(&run_log()), path).unwrap(),
-        run_log()
-    );
-    assert_eq!(
-        from_json::<TimingLog>(&unversioned(&timing_log()), path).unwrap(),
-        timing_log()
-    );
-    assert_eq!(
-        from_json::<EvalOutput>(&unversioned(&summary()), path).unwrap(),
-        summary()
-    );
-    assert_eq!(
-        from_json::<LatencyProfile>(&unversioned(&profile()), path).unwrap(),
-        profile()
-    );
+    reads_unversioned(&run_log());
+    reads_unversioned(&timing_log());
+    reads_unversioned(&summary());
+    reads_unversioned(&profile());
     // The run logs `formation eval --out` wrote had no clock, no models and no `complete`.
     let old_eval_log = serde_json::json!({
         "index": 0, "metrics": metrics(), "trajectory": trajectory()
