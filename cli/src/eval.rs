@@ -9,15 +9,17 @@
 //! evaluates the expert (and the policy, when `--model` is given) over team sizes and writes the
 //! scaling table (`formation_learning::scaling`).
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
 use formation_expert::ExpertGains;
-use formation_learning::Driver;
 use formation_learning::rollout::with_threads;
 use formation_learning::scaling::{ScalingDriver, evaluate_scaling, scaling_text};
+use formation_learning::{Driver, LearningError};
 use formation_runtime::transport::Transport;
+use formation_schema::SchemaFile;
 use formation_world::metrics::{MetricsConfig, RunMetrics, run_metrics};
 use formation_world::{RunLog, Scenario, Trajectory};
 
@@ -58,6 +60,88 @@ pub fn progress_bar(len: usize, what: &str) -> indicatif::ProgressBar {
     }
     bar.set_message(what.to_owned());
     bar
+}
+
+/// A sweep of `rows` rows (a team size and driver each) of `runs` runs, behind a progress bar.
+pub struct RowSweep {
+    /// The progress bar's label (`scaling`, `gauge`).
+    pub what: &'static str,
+    /// What was done to every run, for the closing line (`evaluated`, `gauged`).
+    pub did: &'static str,
+    /// Rows in the sweep.
+    pub rows: usize,
+    /// Runs per row.
+    pub runs: usize,
+}
+
+impl RowSweep {
+    /// A sweep of `rows` rows of `runs` runs, `what` on its bar, said to be `did` when done.
+    pub fn new(what: &'static str, did: &'static str, rows: usize, runs: usize) -> RowSweep {
+        RowSweep {
+            what,
+            did,
+            rows,
+            runs,
+        }
+    }
+
+    /// Runs `sweep` on `threads` threads (`None`: one per core), handing it the callback that
+    /// moves the bar (the row, and the runs done in it); then says on stderr how many runs it
+    /// did and how long that took.
+    pub fn run<T: Send>(
+        &self,
+        threads: Option<usize>,
+        sweep: impl FnOnce(&(dyn Fn(usize, usize) + Sync)) -> Result<T, LearningError> + Send,
+    ) -> anyhow::Result<T> {
+        let bar = progress_bar(self.runs * self.rows, self.what);
+        let started = Instant::now();
+        let runs = self.runs;
+        let done = with_threads(threads, || {
+            sweep(&|row, done| bar.set_position((row * runs + done) as u64))
+        })??;
+        bar.finish_and_clear();
+        eprintln!(
+            "{} {} runs in {:.1} s",
+            self.did,
+            self.runs * self.rows,
+            started.elapsed().as_secs_f64()
+        );
+        Ok(done)
+    }
+}
+
+/// The runs `first..end` of `scenario` that `--first-run first` and `--runs runs` (default:
+/// every run from `first` on) select; none is an error that says what they were to be used for
+/// (`to`: `play`, `label`) and names `--runs` with its value (`runs_value`: `N`, `R`).
+pub fn run_share(
+    scenario: &Scenario,
+    first: usize,
+    runs: Option<usize>,
+    to: &str,
+    runs_value: &str,
+) -> anyhow::Result<Range<usize>> {
+    let runs = runs.unwrap_or_else(|| scenario.runs().saturating_sub(first));
+    let Some(end) = first.checked_add(runs).filter(|_| runs > 0) else {
+        anyhow::bail!(
+            "--first-run {first} leaves no runs to {to}: give --runs {runs_value} (the scenario has {} runs)",
+            scenario.runs()
+        );
+    };
+    Ok(first..end)
+}
+
+/// Prints `text` and, when `json` names a file, writes `value` there as JSON and says so.
+pub fn print_and_write_json<F: SchemaFile>(
+    text: &str,
+    value: &F,
+    json: Option<&Path>,
+) -> anyhow::Result<()> {
+    print!("{text}");
+    if let Some(json) = json {
+        paths::write_atomic(json, &formation_schema::to_json_pretty(value)?)?;
+        println!("wrote {}", json.display());
+    }
+    Ok(())
 }
 
 /// Writes the eval output directory the report reads: for the runs whose trajectory was kept,
@@ -480,24 +564,16 @@ pub fn shard_command(args: &EvalArgs, shard: &Path) -> anyhow::Result<()> {
         scenario = scenario.with_robots(robots)?;
     }
     let first = args.first_run.unwrap_or(0);
-    let runs = args
-        .runs
-        .unwrap_or_else(|| scenario.runs().saturating_sub(first));
-    let Some(end) = first.checked_add(runs).filter(|_| runs > 0) else {
-        anyhow::bail!(
-            "--first-run {first} leaves no runs to play: give --runs N (the scenario has {} runs)",
-            scenario.runs()
-        );
-    };
+    let share = run_share(&scenario, first, args.runs, "play", "N")?;
     let seed = args.seed.unwrap_or_else(|| scenario.seed());
     let team = eval_team(args, &scenario)?;
     let driver = driver_of(args, &team);
-    let bar = progress_bar(runs, "eval shard");
+    let bar = progress_bar(share.len(), "eval shard");
     let results = with_threads(args.threads, || {
         formation_learning::evaluate_run_range(
             &scenario,
             seed,
-            first..end,
+            share.clone(),
             &driver,
             &MetricsConfig::default(),
             &|_| false,
@@ -517,7 +593,12 @@ pub fn shard_command(args: &EvalArgs, shard: &Path) -> anyhow::Result<()> {
         per_run: results.into_iter().map(|r| r.metrics).collect(),
     };
     paths::write_atomic(shard, &formation_schema::to_json(&out)?)?;
-    println!("wrote {} (runs {first}..{end})", shard.display());
+    println!(
+        "wrote {} (runs {}..{})",
+        shard.display(),
+        share.start,
+        share.end
+    );
     Ok(())
 }
 
@@ -533,11 +614,7 @@ pub fn merge_command(args: &MergeArgs) -> anyhow::Result<()> {
         .map(|path| formation_schema::read::<formation_schema::EvalShard>(path))
         .collect::<Result<Vec<_>, _>>()?;
     let out = formation_learning::shards::merge_shards(&shards, args.runs)?;
-    print!("{}", table_text(&out));
-    if let Some(json) = &args.json {
-        paths::write_atomic(json, &formation_schema::to_json_pretty(&out)?)?;
-        println!("wrote {}", json.display());
-    }
+    print_and_write_json(&table_text(&out), &out, args.json.as_deref())?;
     Ok(())
 }
 
@@ -569,25 +646,11 @@ pub fn scaling_command(args: &EvalArgs, sizes: &[usize]) -> anyhow::Result<()> {
         }
         ControllerKind::Expert => {}
     }
-    let bar = progress_bar(runs * sizes.len() * drivers.len(), "scaling");
-    let started = Instant::now();
-    let table = with_threads(args.threads, || {
-        evaluate_scaling(&base, sizes, seed, runs, &drivers, &|row, done| {
-            bar.set_position((row * runs + done) as u64)
-        })
-    })??;
-    bar.finish_and_clear();
-    eprintln!(
-        "evaluated {} runs in {:.1} s",
-        runs * table.rows.len(),
-        started.elapsed().as_secs_f64()
-    );
-    print!("{}", scaling_text(&table));
-    if let Some(json) = &args.json {
-        paths::write_atomic(json, &formation_schema::to_json_pretty(&table)?)?;
-        println!("wrote {}", json.display());
-    }
-    Ok(())
+    let table = RowSweep::new("scaling", "evaluated", sizes.len() * drivers.len(), runs)
+        .run(args.threads, |progress| {
+            evaluate_scaling(&base, sizes, seed, runs, &drivers, progress)
+        })?;
+    print_and_write_json(&scaling_text(&table), &table, args.json.as_deref())
 }
 
 /// Whether `args` asks for what only an evaluation of one team gives (`--processes`, `--out`,
@@ -638,11 +701,7 @@ pub fn eval_command(args: &EvalArgs) -> anyhow::Result<()> {
         None => {}
     }
     let (out, results) = evaluate(args)?;
-    print!("{}", table_text(&out));
-    if let Some(json) = &args.json {
-        paths::write_atomic(json, &formation_schema::to_json_pretty(&out)?)?;
-        println!("wrote {}", json.display());
-    }
+    print_and_write_json(&table_text(&out), &out, args.json.as_deref())?;
     if let Some(dir) = &args.out {
         write_eval_dir(dir, &out, &results)?;
         println!("wrote {}", dir.display());

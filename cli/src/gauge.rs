@@ -5,16 +5,13 @@
 //! printed per team size and bin of the label's size, and written with `--json`
 //! ([`formation_schema::ResponseCurve`]). It costs minutes of simulation, no training.
 
-use std::time::Instant;
-
 use formation_expert::ExpertGains;
 use formation_learning::response::{GaugeSettings, gauge_response, response_text};
-use formation_learning::rollout::with_threads;
 use formation_learning::scaling::ScalingDriver;
 use formation_world::Scenario;
 
 use crate::args::GaugeArgs;
-use crate::eval::progress_bar;
+use crate::eval::{RowSweep, print_and_write_json};
 use crate::paths;
 use crate::team_models::policy_driver;
 
@@ -51,23 +48,9 @@ pub fn gauge_command(args: &GaugeArgs) -> anyhow::Result<()> {
         stride: args.stride,
         label_gains: ExpertGains::default(),
     };
-    let bar = progress_bar(runs * sizes.len() * drivers.len(), "gauge");
-    let started = Instant::now();
-    let curve = with_threads(args.threads, || {
-        gauge_response(&base, &sizes, &drivers, &settings, &|row, done| {
-            bar.set_position((row * runs + done) as u64)
-        })
-    })??;
-    bar.finish_and_clear();
-    eprintln!(
-        "gauged {} runs in {:.1} s",
-        runs * curve.rows.len(),
-        started.elapsed().as_secs_f64()
-    );
-    print!("{}", response_text(&curve));
-    if let Some(json) = &args.json {
-        paths::write_atomic(json, &formation_schema::to_json_pretty(&curve)?)?;
-        println!("wrote {}", json.display());
-    }
-    Ok(())
+    let curve = RowSweep::new("gauge", "gauged", sizes.len() * drivers.len(), runs)
+        .run(args.threads, |progress| {
+            gauge_response(&base, &sizes, &drivers, &settings, progress)
+        })?;
+    print_and_write_json(&response_text(&curve), &curve, args.json.as_deref())
 }

@@ -14,7 +14,7 @@ use formation_world::Scenario;
 use formation_world::scenario::RobotProfile;
 
 use crate::args::{ControllerKind, EvalArgs};
-use crate::eval::progress_bar;
+use crate::eval::{print_and_write_json, progress_bar};
 use crate::paths;
 use crate::team_models::policy_driver;
 
@@ -121,12 +121,7 @@ pub fn ladder_command(args: &EvalArgs) -> anyhow::Result<()> {
         duration_s: base.duration_s(),
         rungs,
     };
-    print!("{}", ladder_text(&table));
-    if let Some(json) = &args.json {
-        paths::write_atomic(json, &formation_schema::to_json_pretty(&table)?)?;
-        println!("wrote {}", json.display());
-    }
-    Ok(())
+    print_and_write_json(&ladder_text(&table), &table, args.json.as_deref())
 }
 
 /// The ladder as Markdown: one line per rung, controller and team size.

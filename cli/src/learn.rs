@@ -178,16 +178,7 @@ pub fn dagger_label_command(args: &DaggerLabelArgs) -> anyhow::Result<()> {
     formation_proto::files::check_output_file(&args.part)?;
     let rollouts = &args.rollouts;
     let scenario = Scenario::from_path(&rollouts.scenario)?;
-    let first = args.first_run;
-    let runs = args
-        .runs
-        .unwrap_or_else(|| scenario.runs().saturating_sub(first));
-    let Some(end) = first.checked_add(runs).filter(|_| runs > 0) else {
-        anyhow::bail!(
-            "--first-run {first} leaves no runs to label: give --runs R (the scenario has {} runs)",
-            scenario.runs()
-        );
-    };
+    let share = eval::run_share(&scenario, args.first_run, args.runs, "label", "R")?;
     let opts = ShareOptions {
         data: rollouts.data.clone(),
         scenario,
@@ -197,16 +188,18 @@ pub fn dagger_label_command(args: &DaggerLabelArgs) -> anyhow::Result<()> {
         iteration: args.iteration,
         beta: rollouts.beta,
         seed: rollouts.seed,
-        runs: first..end,
+        runs: share.clone(),
         part: args.part.clone(),
     };
-    let bar = eval::progress_bar(runs, "dagger share");
+    let bar = eval::progress_bar(share.len(), "dagger share");
     let (_, samples) = with_threads(args.threads, || label_share(&opts, &|| bar.inc(1)))??;
     bar.finish_and_clear();
     println!(
-        "wrote {} (iteration {}, runs {first}..{end}, {samples} samples)",
+        "wrote {} (iteration {}, runs {}..{}, {samples} samples)",
         args.part.display(),
-        args.iteration
+        args.iteration,
+        share.start,
+        share.end
     );
     Ok(())
 }

@@ -14,17 +14,14 @@ fn limit_memory() {
         .unwrap();
 }
 
+/// An MCAP record: its opcode, its body's length (u64, little-endian), its body.
 fn record(opcode: u8, body: &[u8]) -> Vec<u8> {
-    let mut out = vec![opcode];
-    out.extend_from_slice(&(body.len() as u64).to_le_bytes());
-    out.extend_from_slice(body);
-    out
+    [&[opcode][..], &(body.len() as u64).to_le_bytes()[..], body].concat()
 }
 
+/// An MCAP string: its length (u32, little-endian), its bytes.
 fn string(s: &str) -> Vec<u8> {
-    let mut out = (s.len() as u32).to_le_bytes().to_vec();
-    out.extend_from_slice(s.as_bytes());
-    out
+    [&(s.len() as u32).to_le_bytes()[..], s.as_bytes()].concat()
 }
 
 /// Found by the `recording` target (campaign seed 1, first seconds): a metadata record of 33

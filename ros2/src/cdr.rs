@@ -181,6 +181,12 @@ impl CdrWriter {
         self.buf.resize(self.buf.len() + padding, 0);
     }
 
+    /// Writes a primitive's little-endian bytes, aligned to its size.
+    fn write_aligned<const N: usize>(&mut self, bytes: [u8; N]) {
+        self.align(N);
+        self.buf.extend_from_slice(&bytes);
+    }
+
     /// A payload holding only the encapsulation header, with room for `capacity` bytes in all
     /// (a writer that knows its message's size allocates once).
     pub fn with_capacity(capacity: usize) -> Self {
@@ -201,32 +207,27 @@ impl CdrWriter {
 
     /// Writes a `u64`, aligned to 8.
     pub fn write_u64(&mut self, value: u64) {
-        self.align(8);
-        self.buf.extend_from_slice(&value.to_le_bytes());
+        self.write_aligned(value.to_le_bytes());
     }
 
     /// Writes a `u32`, aligned to 4.
     pub fn write_u32(&mut self, value: u32) {
-        self.align(4);
-        self.buf.extend_from_slice(&value.to_le_bytes());
+        self.write_aligned(value.to_le_bytes());
     }
 
     /// Writes an `i32`, aligned to 4.
     pub fn write_i32(&mut self, value: i32) {
-        self.align(4);
-        self.buf.extend_from_slice(&value.to_le_bytes());
+        self.write_aligned(value.to_le_bytes());
     }
 
     /// Writes an `f32`, aligned to 4.
     pub fn write_f32(&mut self, value: f32) {
-        self.align(4);
-        self.buf.extend_from_slice(&value.to_le_bytes());
+        self.write_aligned(value.to_le_bytes());
     }
 
     /// Writes an `f64`, aligned to 8.
     pub fn write_f64(&mut self, value: f64) {
-        self.align(8);
-        self.buf.extend_from_slice(&value.to_le_bytes());
+        self.write_aligned(value.to_le_bytes());
     }
 
     /// Writes a fixed-size `float64[N]` array (no length).
@@ -262,21 +263,30 @@ impl CdrWriter {
         Ok(())
     }
 
+    /// Writes a sequence of messages: `u32` count, then each element as `write_element` writes it.
+    pub fn write_sequence<T>(
+        &mut self,
+        field: &'static str,
+        elements: &[T],
+        mut write_element: impl FnMut(&mut Self, &T) -> Result<(), CdrEncodeError>,
+    ) -> Result<(), CdrEncodeError> {
+        self.write_sequence_len(field, elements.len())?;
+        for element in elements {
+            write_element(self, element)?;
+        }
+        Ok(())
+    }
+
     /// Writes a `sequence<float32>`: `u32` count, then the values.
     pub fn write_f32_sequence(
         &mut self,
         field: &'static str,
         values: &[f32],
     ) -> Result<(), CdrEncodeError> {
-        let count = u32::try_from(values.len()).map_err(|_| CdrEncodeError::TooLong {
-            field,
-            len: values.len(),
-        })?;
-        self.write_u32(count);
-        for &v in values {
-            self.write_f32(v);
-        }
-        Ok(())
+        self.write_sequence(field, values, |w, &v| {
+            w.write_f32(v);
+            Ok(())
+        })
     }
 
     /// Writes a `sequence<uint8>`: `u32` count, then the bytes.
@@ -451,6 +461,23 @@ impl<'a> CdrReader<'a> {
         Ok(declared as usize)
     }
 
+    /// Reads a sequence of messages whose elements take at least `min_element_size` bytes each,
+    /// each as `read_element` reads it; the count is checked as [`CdrReader::read_sequence_len`]
+    /// checks it before anything is allocated.
+    pub fn read_sequence<T>(
+        &mut self,
+        field: &'static str,
+        min_element_size: usize,
+        mut read_element: impl FnMut(&mut Self) -> Result<T, CdrError>,
+    ) -> Result<Vec<T>, CdrError> {
+        let count = self.read_sequence_len(field, min_element_size)?;
+        let mut elements = Vec::with_capacity(count);
+        for _ in 0..count {
+            elements.push(read_element(self)?);
+        }
+        Ok(elements)
+    }
+
     /// Reads a `sequence<uint8>`; the count is checked against the cap and the bytes present
     /// before anything is allocated.
     pub fn read_u8_sequence(&mut self, field: &'static str) -> Result<Vec<u8>, CdrError> {
@@ -508,16 +535,22 @@ mod tests {
         );
     }
 
-    #[test]
-    fn sequence_count_beyond_input_is_refused_before_allocating() {
-        let payload = reader(&u32::MAX.to_le_bytes());
+    /// The error of reading `body` as the float sequence `ranges` under a cap of
+    /// `max_sequence_len` elements.
+    fn ranges_error(body: &[u8], max_sequence_len: u32) -> CdrError {
+        let payload = reader(body);
         let limits = DecodeLimits {
-            max_sequence_len: u32::MAX,
+            max_sequence_len,
             ..DecodeLimits::default()
         };
         let mut r = CdrReader::new(&payload, limits).unwrap();
+        r.read_f32_sequence("ranges").unwrap_err()
+    }
+
+    #[test]
+    fn sequence_count_beyond_input_is_refused_before_allocating() {
         assert_eq!(
-            r.read_f32_sequence("ranges").unwrap_err(),
+            ranges_error(&u32::MAX.to_le_bytes(), u32::MAX),
             CdrError::SequenceBeyondInput {
                 field: "ranges",
                 declared: u32::MAX,
@@ -531,14 +564,8 @@ mod tests {
     fn sequence_count_beyond_the_cap_is_refused() {
         let mut body = 3u32.to_le_bytes().to_vec();
         body.extend_from_slice(&[0; 12]);
-        let payload = reader(&body);
-        let limits = DecodeLimits {
-            max_sequence_len: 2,
-            ..DecodeLimits::default()
-        };
-        let mut r = CdrReader::new(&payload, limits).unwrap();
         assert_eq!(
-            r.read_f32_sequence("ranges").unwrap_err(),
+            ranges_error(&body, 2),
             CdrError::SequenceTooLong {
                 field: "ranges",
                 declared: 3,

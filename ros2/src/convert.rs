@@ -452,37 +452,26 @@ mod tests {
     #[test]
     fn unusable_scans_and_contracts_are_typed_errors() {
         let good = scan(8, 0.0, |_| 1.0);
-        assert_eq!(
-            resample_scan(
-                &LaserScan {
-                    ranges: vec![],
-                    ..good.clone()
-                },
-                CONTRACT,
-                PartialScan::Refuse
-            ),
-            Err(ScanError::Empty)
-        );
+        let refusal = |scan: LaserScan| resample_scan(&scan, CONTRACT, PartialScan::Refuse);
+        let empty = LaserScan {
+            ranges: vec![],
+            ..good.clone()
+        };
+        assert_eq!(refusal(empty), Err(ScanError::Empty));
+        let no_increment = LaserScan {
+            angle_increment: 0.0,
+            ..good.clone()
+        };
         assert!(matches!(
-            resample_scan(
-                &LaserScan {
-                    angle_increment: 0.0,
-                    ..good.clone()
-                },
-                CONTRACT,
-                PartialScan::Refuse
-            ),
+            refusal(no_increment),
             Err(ScanError::BadAngles { .. })
         ));
+        let nan_range = LaserScan {
+            range_max: f32::NAN,
+            ..good.clone()
+        };
         assert!(matches!(
-            resample_scan(
-                &LaserScan {
-                    range_max: f32::NAN,
-                    ..good.clone()
-                },
-                CONTRACT,
-                PartialScan::Refuse
-            ),
+            refusal(nan_range),
             Err(ScanError::BadRangeLimits { .. })
         ));
         assert!(matches!(

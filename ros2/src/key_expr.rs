@@ -255,21 +255,13 @@ mod tests {
 
     #[test]
     fn malformed_keys_are_refused() {
-        assert!(matches!(
-            TopicKey::parse("0/scan"),
-            Err(KeyExprError::Malformed { .. })
-        ));
-        assert!(matches!(
-            TopicKey::parse("x/scan/T_/TypeHashNotSupported"),
-            Err(KeyExprError::BadDomain { .. })
-        ));
-        assert!(matches!(
-            TopicKey::parse("0/9scan/T_/TypeHashNotSupported"),
-            Err(KeyExprError::BadTopic { .. })
-        ));
-        assert!(matches!(
-            TopicKey::parse("0/scan/T_/RIHS01_zz"),
-            Err(KeyExprError::BadTypeHash { .. })
-        ));
+        let refusal = |key| TopicKey::parse(key).unwrap_err();
+        assert!(matches!(refusal("0/scan"), KeyExprError::Malformed { .. }));
+        let bad_domain = refusal("x/scan/T_/TypeHashNotSupported");
+        assert!(matches!(bad_domain, KeyExprError::BadDomain { .. }));
+        let bad_topic = refusal("0/9scan/T_/TypeHashNotSupported");
+        assert!(matches!(bad_topic, KeyExprError::BadTopic { .. }));
+        let bad_hash = refusal("0/scan/T_/RIHS01_zz");
+        assert!(matches!(bad_hash, KeyExprError::BadTypeHash { .. }));
     }
 }

@@ -55,6 +55,20 @@ pub trait RosMessage: Sized {
     }
 }
 
+/// A [`RosMessage`]'s names, definition and hash, inside its `impl` as
+/// `message_identity! { "package" / "Name", &DEFINITION, "RIHS01_..." }`: its ROS name
+/// `package/msg/Name` and the DDS type name rmw_zenoh builds from the same two parts
+/// (`_create_type_name`: namespace + `::dds_::` + name + `_`), so the two cannot disagree.
+macro_rules! message_identity {
+    ($package:literal / $name:literal, $definition:expr, $type_hash:literal) => {
+        const ROS_NAME: &'static str = concat!($package, "/msg/", $name);
+        const DEFINITION: &'static MsgDefinition = $definition;
+        const DDS_TYPE_NAME: &'static str = concat!($package, "::msg::dds_::", $name, "_");
+        const TYPE_HASH: &'static str = $type_hash;
+    };
+}
+pub(crate) use message_identity;
+
 /// `builtin_interfaces/msg/Time`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Time {
@@ -136,17 +150,12 @@ pub struct Vector3 {
 
 impl Vector3 {
     pub(crate) fn write(&self, w: &mut CdrWriter) {
-        w.write_f64(self.x);
-        w.write_f64(self.y);
-        w.write_f64(self.z);
+        w.write_f64_array(&[self.x, self.y, self.z]);
     }
 
     pub(crate) fn read(r: &mut CdrReader<'_>, field: &'static str) -> Result<Vector3, CdrError> {
-        Ok(Vector3 {
-            x: r.read_f64(field)?,
-            y: r.read_f64(field)?,
-            z: r.read_f64(field)?,
-        })
+        let [x, y, z] = r.read_f64_array(field)?;
+        Ok(Vector3 { x, y, z })
     }
 }
 
@@ -177,19 +186,12 @@ impl Default for Quaternion {
 
 impl Quaternion {
     pub(crate) fn write(&self, w: &mut CdrWriter) {
-        w.write_f64(self.x);
-        w.write_f64(self.y);
-        w.write_f64(self.z);
-        w.write_f64(self.w);
+        w.write_f64_array(&[self.x, self.y, self.z, self.w]);
     }
 
     pub(crate) fn read(r: &mut CdrReader<'_>, field: &'static str) -> Result<Quaternion, CdrError> {
-        Ok(Quaternion {
-            x: r.read_f64(field)?,
-            y: r.read_f64(field)?,
-            z: r.read_f64(field)?,
-            w: r.read_f64(field)?,
-        })
+        let [x, y, z, w] = r.read_f64_array(field)?;
+        Ok(Quaternion { x, y, z, w })
     }
 }
 
@@ -221,11 +223,10 @@ impl Twist {
 }
 
 impl RosMessage for Twist {
-    const ROS_NAME: &'static str = "geometry_msgs/msg/Twist";
-    const DEFINITION: &'static MsgDefinition = &schema::TWIST;
-    const DDS_TYPE_NAME: &'static str = "geometry_msgs::msg::dds_::Twist_";
-    const TYPE_HASH: &'static str =
-        "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a";
+    message_identity! {
+        "geometry_msgs" / "Twist", &schema::TWIST,
+        "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
+    }
 
     fn write_fields(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
         self.write(w);
@@ -263,11 +264,10 @@ pub struct LaserScan {
 }
 
 impl RosMessage for LaserScan {
-    const ROS_NAME: &'static str = "sensor_msgs/msg/LaserScan";
-    const DEFINITION: &'static MsgDefinition = &schema::LASER_SCAN;
-    const DDS_TYPE_NAME: &'static str = "sensor_msgs::msg::dds_::LaserScan_";
-    const TYPE_HASH: &'static str =
-        "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828";
+    message_identity! {
+        "sensor_msgs" / "LaserScan", &schema::LASER_SCAN,
+        "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828"
+    }
 
     fn write_fields(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
         self.header.write(w)?;
@@ -318,11 +318,10 @@ pub struct Imu {
 }
 
 impl RosMessage for Imu {
-    const ROS_NAME: &'static str = "sensor_msgs/msg/Imu";
-    const DEFINITION: &'static MsgDefinition = &schema::IMU;
-    const DDS_TYPE_NAME: &'static str = "sensor_msgs::msg::dds_::Imu_";
-    const TYPE_HASH: &'static str =
-        "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b";
+    message_identity! {
+        "sensor_msgs" / "Imu", &schema::IMU,
+        "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
+    }
 
     fn write_fields(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
         self.header.write(w)?;
@@ -388,11 +387,10 @@ impl Default for Odometry {
 }
 
 impl RosMessage for Odometry {
-    const ROS_NAME: &'static str = "nav_msgs/msg/Odometry";
-    const DEFINITION: &'static MsgDefinition = &schema::ODOMETRY;
-    const DDS_TYPE_NAME: &'static str = "nav_msgs::msg::dds_::Odometry_";
-    const TYPE_HASH: &'static str =
-        "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0";
+    message_identity! {
+        "nav_msgs" / "Odometry", &schema::ODOMETRY,
+        "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0"
+    }
 
     fn write_fields(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
         self.header.write(w)?;
@@ -473,33 +471,26 @@ pub struct TfMessage {
 }
 
 impl RosMessage for TfMessage {
-    const ROS_NAME: &'static str = "tf2_msgs/msg/TFMessage";
-    const DEFINITION: &'static MsgDefinition = &schema::TF_MESSAGE;
-    const DDS_TYPE_NAME: &'static str = "tf2_msgs::msg::dds_::TFMessage_";
-    const TYPE_HASH: &'static str = TF_MESSAGE_HASH;
+    message_identity! {
+        "tf2_msgs" / "TFMessage", &schema::TF_MESSAGE,
+        "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"
+    }
 
     fn write_fields(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
-        w.write_sequence_len("transforms", self.transforms.len())?;
-        for transform in &self.transforms {
-            transform.write(w)?;
-        }
-        Ok(())
+        w.write_sequence("transforms", &self.transforms, |w, transform| {
+            transform.write(w)
+        })
     }
 
     fn read_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
-        let count = r.read_sequence_len("transforms", TransformStamped::MIN_CDR_SIZE)?;
-        let mut transforms = Vec::with_capacity(count);
-        for _ in 0..count {
-            transforms.push(TransformStamped::read(r)?);
-        }
+        let transforms = r.read_sequence(
+            "transforms",
+            TransformStamped::MIN_CDR_SIZE,
+            TransformStamped::read,
+        )?;
         Ok(TfMessage { transforms })
     }
 }
-
-/// The RIHS01 hash of `tf2_msgs/msg/TFMessage` in ROS 2 Jazzy (from rosbags, checked in
-/// `tests/wire_format.rs`).
-const TF_MESSAGE_HASH: &str =
-    "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087";
 
 /// `std_msgs/msg/Float64`: used for a heading goal φ* \[rad\].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -509,11 +500,10 @@ pub struct Float64 {
 }
 
 impl RosMessage for Float64 {
-    const ROS_NAME: &'static str = "std_msgs/msg/Float64";
-    const DEFINITION: &'static MsgDefinition = &schema::FLOAT64;
-    const DDS_TYPE_NAME: &'static str = "std_msgs::msg::dds_::Float64_";
-    const TYPE_HASH: &'static str =
-        "RIHS01_705ba9c3d1a09df43737eb67095534de36fd426c0587779bda2bc51fe790182a";
+    message_identity! {
+        "std_msgs" / "Float64", &schema::FLOAT64,
+        "RIHS01_705ba9c3d1a09df43737eb67095534de36fd426c0587779bda2bc51fe790182a"
+    }
 
     fn write_fields(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
         w.write_f64(self.data);

@@ -178,9 +178,46 @@ fn validate_absolute(
     Ok(())
 }
 
-/// A valid, fully qualified ROS 2 topic name such as `/robot_0/scan`.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub struct TopicName(String);
+/// Declares a name that is validated once, where it is made (`new`): a newtype over its text,
+/// which `as_str` gives back and `Display` shows as it is.
+macro_rules! validated_name {
+    ($(#[$doc:meta])* $name:ident, $as_str_doc:literal) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, PartialEq, Eq, Hash)]
+        pub struct $name(String);
+
+        impl $name {
+            #[doc = $as_str_doc]
+            pub fn as_str(&self) -> &str {
+                &self.0
+            }
+        }
+
+        impl fmt::Display for $name {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(&self.0)
+            }
+        }
+    };
+}
+
+validated_name!(
+    /// A valid, fully qualified ROS 2 topic name such as `/robot_0/scan`.
+    TopicName,
+    "The name, leading slash included."
+);
+
+validated_name!(
+    /// A valid node namespace (`/` for none) or enclave (`/` by default).
+    Namespace,
+    "The namespace, leading slash included."
+);
+
+validated_name!(
+    /// A valid node name such as `formation_agent_0`.
+    NodeName,
+    "The name."
+);
 
 impl TopicName {
     /// Validates a fully qualified topic name.
@@ -189,26 +226,11 @@ impl TopicName {
         Ok(TopicName(name.to_owned()))
     }
 
-    /// The name, leading slash included.
-    pub fn as_str(&self) -> &str {
-        &self.0
-    }
-
     /// The name without its leading slash, as it appears in a data key expression.
     pub fn without_leading_slash(&self) -> &str {
         &self.0[1..]
     }
 }
-
-impl fmt::Display for TopicName {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-/// A valid node namespace (`/` for none) or enclave (`/` by default).
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub struct Namespace(String);
 
 impl Namespace {
     /// The root namespace `/`, which is also the default enclave.
@@ -227,22 +249,7 @@ impl Namespace {
         validate_absolute(NameKind::Enclave, name, NAMESPACE_MAX_LEN, true)?;
         Ok(Namespace(name.to_owned()))
     }
-
-    /// The namespace, leading slash included.
-    pub fn as_str(&self) -> &str {
-        &self.0
-    }
 }
-
-impl fmt::Display for Namespace {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-/// A valid node name such as `formation_agent_0`.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub struct NodeName(String);
 
 impl NodeName {
     /// Validates a node name.
@@ -280,17 +287,6 @@ impl NodeName {
         }
         Ok(NodeName(name.to_owned()))
     }
-
-    /// The name.
-    pub fn as_str(&self) -> &str {
-        &self.0
-    }
-}
-
-impl fmt::Display for NodeName {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
 }
 
 #[cfg(test)]
@@ -314,52 +310,57 @@ mod tests {
     fn each_topic_rule_has_its_error() {
         let kind = NameKind::Topic;
         assert_eq!(TopicName::new(""), Err(NameError::Empty { kind }));
-        assert_eq!(
-            TopicName::new("scan"),
-            Err(NameError::NotAbsolute {
-                kind,
-                name: "scan".into()
-            })
-        );
-        assert_eq!(
-            TopicName::new("/scan/"),
-            Err(NameError::EndsWithSlash {
-                kind,
-                name: "/scan/".into()
-            })
-        );
-        assert_eq!(
-            TopicName::new("/"),
-            Err(NameError::EndsWithSlash {
-                kind,
-                name: "/".into()
-            })
-        );
-        assert_eq!(
-            TopicName::new("/cmd-vel"),
-            Err(NameError::UnallowedCharacter {
-                kind,
-                name: "/cmd-vel".into(),
-                index: 4,
-                character: '-'
-            })
-        );
-        assert_eq!(
-            TopicName::new("/a//b"),
-            Err(NameError::RepeatedSlash {
-                kind,
-                name: "/a//b".into(),
-                index: 3
-            })
-        );
-        assert_eq!(
-            TopicName::new("/robot/0scan"),
-            Err(NameError::TokenStartsWithDigit {
-                kind,
-                name: "/robot/0scan".into(),
-                index: 7
-            })
-        );
+        let cases = [
+            (
+                "scan",
+                NameError::NotAbsolute {
+                    kind,
+                    name: "scan".into(),
+                },
+            ),
+            (
+                "/scan/",
+                NameError::EndsWithSlash {
+                    kind,
+                    name: "/scan/".into(),
+                },
+            ),
+            (
+                "/",
+                NameError::EndsWithSlash {
+                    kind,
+                    name: "/".into(),
+                },
+            ),
+            (
+                "/cmd-vel",
+                NameError::UnallowedCharacter {
+                    kind,
+                    name: "/cmd-vel".into(),
+                    index: 4,
+                    character: '-',
+                },
+            ),
+            (
+                "/a//b",
+                NameError::RepeatedSlash {
+                    kind,
+                    name: "/a//b".into(),
+                    index: 3,
+                },
+            ),
+            (
+                "/robot/0scan",
+                NameError::TokenStartsWithDigit {
+                    kind,
+                    name: "/robot/0scan".into(),
+                    index: 7,
+                },
+            ),
+        ];
+        for (text, error) in cases {
+            assert_eq!(TopicName::new(text), Err(error), "{text}");
+        }
         let long = format!("/{}", "a".repeat(TOPIC_NAME_MAX_LEN));
         assert_eq!(
             TopicName::new(&long),

@@ -46,192 +46,102 @@ impl MsgDefinition {
     }
 }
 
-/// `builtin_interfaces/Time`.
-pub static TIME: MsgDefinition = MsgDefinition {
-    name: "builtin_interfaces/Time",
-    fields: "int32 sec\nuint32 nanosec\n",
-    uses: &[],
-};
+/// Declares each definition as a `pub static`: `IDENT = "package/Name" uses [TYPES]: "fields";`,
+/// the types it uses in field order (none: no `uses`).
+macro_rules! msg_definitions {
+    ($(
+        $(#[$doc:meta])*
+        $ident:ident = $name:literal $(uses [$($uses:ident),*])?: $fields:expr;
+    )*) => {$(
+        $(#[$doc])*
+        pub static $ident: MsgDefinition = MsgDefinition {
+            name: $name,
+            fields: $fields,
+            uses: &[$($(&$uses),*)?],
+        };
+    )*};
+}
 
-/// `builtin_interfaces/Duration`.
-pub static DURATION: MsgDefinition = MsgDefinition {
-    name: "builtin_interfaces/Duration",
-    fields: "int32 sec\nuint32 nanosec\n",
-    uses: &[],
-};
-
-/// `std_msgs/Header`.
-pub static HEADER: MsgDefinition = MsgDefinition {
-    name: "std_msgs/Header",
-    fields: "builtin_interfaces/Time stamp\nstring frame_id\n",
-    uses: &[&TIME],
-};
-
-/// `std_msgs/Float64`.
-pub static FLOAT64: MsgDefinition = MsgDefinition {
-    name: "std_msgs/Float64",
-    fields: "float64 data\n",
-    uses: &[],
-};
-
-/// `std_msgs/ColorRGBA`.
-pub static COLOR_RGBA: MsgDefinition = MsgDefinition {
-    name: "std_msgs/ColorRGBA",
-    fields: "float32 r\nfloat32 g\nfloat32 b\nfloat32 a\n",
-    uses: &[],
-};
-
-/// `geometry_msgs/Vector3`.
-pub static VECTOR3: MsgDefinition = MsgDefinition {
-    name: "geometry_msgs/Vector3",
-    fields: "float64 x\nfloat64 y\nfloat64 z\n",
-    uses: &[],
-};
-
-/// `geometry_msgs/Point`.
-pub static POINT: MsgDefinition = MsgDefinition {
-    name: "geometry_msgs/Point",
-    fields: "float64 x\nfloat64 y\nfloat64 z\n",
-    uses: &[],
-};
-
-/// `geometry_msgs/Quaternion`.
-pub static QUATERNION: MsgDefinition = MsgDefinition {
-    name: "geometry_msgs/Quaternion",
-    fields: "float64 x\nfloat64 y\nfloat64 z\nfloat64 w\n",
-    uses: &[],
-};
-
-/// `geometry_msgs/Pose`.
-pub static POSE: MsgDefinition = MsgDefinition {
-    name: "geometry_msgs/Pose",
-    fields: "geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n",
-    uses: &[&POINT, &QUATERNION],
-};
-
-/// `geometry_msgs/PoseWithCovariance`.
-pub static POSE_WITH_COVARIANCE: MsgDefinition = MsgDefinition {
-    name: "geometry_msgs/PoseWithCovariance",
-    fields: "geometry_msgs/Pose pose\nfloat64[36] covariance\n",
-    uses: &[&POSE],
-};
-
-/// `geometry_msgs/Twist`.
-pub static TWIST: MsgDefinition = MsgDefinition {
-    name: "geometry_msgs/Twist",
-    fields: "geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n",
-    uses: &[&VECTOR3],
-};
-
-/// `geometry_msgs/TwistWithCovariance`.
-pub static TWIST_WITH_COVARIANCE: MsgDefinition = MsgDefinition {
-    name: "geometry_msgs/TwistWithCovariance",
-    fields: "geometry_msgs/Twist twist\nfloat64[36] covariance\n",
-    uses: &[&TWIST],
-};
-
-/// `geometry_msgs/Transform`.
-pub static TRANSFORM: MsgDefinition = MsgDefinition {
-    name: "geometry_msgs/Transform",
-    fields: "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n",
-    uses: &[&VECTOR3, &QUATERNION],
-};
-
-/// `geometry_msgs/TransformStamped`.
-pub static TRANSFORM_STAMPED: MsgDefinition = MsgDefinition {
-    name: "geometry_msgs/TransformStamped",
-    fields: "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n",
-    uses: &[&HEADER, &TRANSFORM],
-};
-
-/// `tf2_msgs/TFMessage`.
-pub static TF_MESSAGE: MsgDefinition = MsgDefinition {
-    name: "tf2_msgs/TFMessage",
-    fields: "geometry_msgs/TransformStamped[] transforms\n",
-    uses: &[&TRANSFORM_STAMPED],
-};
-
-/// `sensor_msgs/LaserScan`.
-pub static LASER_SCAN: MsgDefinition = MsgDefinition {
-    name: "sensor_msgs/LaserScan",
-    fields: "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n\
-             float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n\
-             float32[] ranges\nfloat32[] intensities\n",
-    uses: &[&HEADER],
-};
-
-/// `sensor_msgs/Imu`.
-pub static IMU: MsgDefinition = MsgDefinition {
-    name: "sensor_msgs/Imu",
-    fields: "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\n\
-             float64[9] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\n\
-             float64[9] angular_velocity_covariance\ngeometry_msgs/Vector3 linear_acceleration\n\
-             float64[9] linear_acceleration_covariance\n",
-    uses: &[&HEADER, &QUATERNION, &VECTOR3],
-};
-
-/// `sensor_msgs/CompressedImage` (a [`MARKER`]'s texture).
-pub static COMPRESSED_IMAGE: MsgDefinition = MsgDefinition {
-    name: "sensor_msgs/CompressedImage",
-    fields: "std_msgs/Header header\nstring format\nuint8[] data\n",
-    uses: &[&HEADER],
-};
-
-/// `nav_msgs/Odometry`.
-pub static ODOMETRY: MsgDefinition = MsgDefinition {
-    name: "nav_msgs/Odometry",
-    fields: "std_msgs/Header header\nstring child_frame_id\n\
-             geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n",
-    uses: &[&HEADER, &POSE_WITH_COVARIANCE, &TWIST_WITH_COVARIANCE],
-};
-
-/// `visualization_msgs/UVCoordinate`.
-pub static UV_COORDINATE: MsgDefinition = MsgDefinition {
-    name: "visualization_msgs/UVCoordinate",
-    fields: "float32 u\nfloat32 v\n",
-    uses: &[],
-};
-
-/// `visualization_msgs/MeshFile`.
-pub static MESH_FILE: MsgDefinition = MsgDefinition {
-    name: "visualization_msgs/MeshFile",
-    fields: "string filename\nuint8[] data\n",
-    uses: &[],
-};
-
-/// `visualization_msgs/Marker` (ROS 2 Jazzy: with texture and mesh file).
-pub static MARKER: MsgDefinition = MsgDefinition {
-    name: "visualization_msgs/Marker",
-    fields: "int32 ARROW=0\nint32 CUBE=1\nint32 SPHERE=2\nint32 CYLINDER=3\nint32 LINE_STRIP=4\n\
-             int32 LINE_LIST=5\nint32 CUBE_LIST=6\nint32 SPHERE_LIST=7\nint32 POINTS=8\n\
-             int32 TEXT_VIEW_FACING=9\nint32 MESH_RESOURCE=10\nint32 TRIANGLE_LIST=11\n\
-             int32 ARROW_STRIP=12\nint32 ADD=0\nint32 MODIFY=0\nint32 DELETE=2\nint32 DELETEALL=3\n\
-             std_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\n\
-             geometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\n\
-             builtin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\n\
-             std_msgs/ColorRGBA[] colors\nstring texture_resource\n\
-             sensor_msgs/CompressedImage texture\n\
-             visualization_msgs/UVCoordinate[] uv_coordinates\nstring text\nstring mesh_resource\n\
-             visualization_msgs/MeshFile mesh_file\nbool mesh_use_embedded_materials\n",
-    uses: &[
-        &HEADER,
-        &POSE,
-        &VECTOR3,
-        &COLOR_RGBA,
-        &DURATION,
-        &POINT,
-        &COMPRESSED_IMAGE,
-        &UV_COORDINATE,
-        &MESH_FILE,
-    ],
-};
-
-/// `visualization_msgs/MarkerArray`.
-pub static MARKER_ARRAY: MsgDefinition = MsgDefinition {
-    name: "visualization_msgs/MarkerArray",
-    fields: "visualization_msgs/Marker[] markers\n",
-    uses: &[&MARKER],
-};
+msg_definitions! {
+    /// `builtin_interfaces/Time`.
+    TIME = "builtin_interfaces/Time": "int32 sec\nuint32 nanosec\n";
+    /// `builtin_interfaces/Duration`.
+    DURATION = "builtin_interfaces/Duration": "int32 sec\nuint32 nanosec\n";
+    /// `std_msgs/Header`.
+    HEADER = "std_msgs/Header" uses [TIME]: "builtin_interfaces/Time stamp\nstring frame_id\n";
+    /// `std_msgs/Float64`.
+    FLOAT64 = "std_msgs/Float64": "float64 data\n";
+    /// `std_msgs/ColorRGBA`.
+    COLOR_RGBA = "std_msgs/ColorRGBA": "float32 r\nfloat32 g\nfloat32 b\nfloat32 a\n";
+    /// `geometry_msgs/Vector3`.
+    VECTOR3 = "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z\n";
+    /// `geometry_msgs/Point`.
+    POINT = "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z\n";
+    /// `geometry_msgs/Quaternion`.
+    QUATERNION = "geometry_msgs/Quaternion": "float64 x\nfloat64 y\nfloat64 z\nfloat64 w\n";
+    /// `geometry_msgs/Pose`.
+    POSE = "geometry_msgs/Pose" uses [POINT, QUATERNION]:
+        "geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n";
+    /// `geometry_msgs/PoseWithCovariance`.
+    POSE_WITH_COVARIANCE = "geometry_msgs/PoseWithCovariance" uses [POSE]:
+        "geometry_msgs/Pose pose\nfloat64[36] covariance\n";
+    /// `geometry_msgs/Twist`.
+    TWIST = "geometry_msgs/Twist" uses [VECTOR3]:
+        "geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n";
+    /// `geometry_msgs/TwistWithCovariance`.
+    TWIST_WITH_COVARIANCE = "geometry_msgs/TwistWithCovariance" uses [TWIST]:
+        "geometry_msgs/Twist twist\nfloat64[36] covariance\n";
+    /// `geometry_msgs/Transform`.
+    TRANSFORM = "geometry_msgs/Transform" uses [VECTOR3, QUATERNION]:
+        "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n";
+    /// `geometry_msgs/TransformStamped`.
+    TRANSFORM_STAMPED = "geometry_msgs/TransformStamped" uses [HEADER, TRANSFORM]:
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n";
+    /// `tf2_msgs/TFMessage`.
+    TF_MESSAGE = "tf2_msgs/TFMessage" uses [TRANSFORM_STAMPED]:
+        "geometry_msgs/TransformStamped[] transforms\n";
+    /// `sensor_msgs/LaserScan`.
+    LASER_SCAN = "sensor_msgs/LaserScan" uses [HEADER]:
+        "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n\
+        float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n\
+        float32[] ranges\nfloat32[] intensities\n";
+    /// `sensor_msgs/Imu`.
+    IMU = "sensor_msgs/Imu" uses [HEADER, QUATERNION, VECTOR3]:
+        "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\n\
+        float64[9] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\n\
+        float64[9] angular_velocity_covariance\ngeometry_msgs/Vector3 linear_acceleration\n\
+        float64[9] linear_acceleration_covariance\n";
+    /// `sensor_msgs/CompressedImage` (a [`MARKER`]'s texture).
+    COMPRESSED_IMAGE = "sensor_msgs/CompressedImage" uses [HEADER]:
+        "std_msgs/Header header\nstring format\nuint8[] data\n";
+    /// `nav_msgs/Odometry`.
+    ODOMETRY = "nav_msgs/Odometry" uses [HEADER, POSE_WITH_COVARIANCE, TWIST_WITH_COVARIANCE]:
+        "std_msgs/Header header\nstring child_frame_id\n\
+        geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n";
+    /// `visualization_msgs/UVCoordinate`.
+    UV_COORDINATE = "visualization_msgs/UVCoordinate": "float32 u\nfloat32 v\n";
+    /// `visualization_msgs/MeshFile`.
+    MESH_FILE = "visualization_msgs/MeshFile": "string filename\nuint8[] data\n";
+    /// `visualization_msgs/Marker` (ROS 2 Jazzy: with texture and mesh file).
+    MARKER = "visualization_msgs/Marker" uses [
+        HEADER, POSE, VECTOR3, COLOR_RGBA, DURATION, POINT, COMPRESSED_IMAGE, UV_COORDINATE,
+        MESH_FILE
+    ]:
+        "int32 ARROW=0\nint32 CUBE=1\nint32 SPHERE=2\nint32 CYLINDER=3\nint32 LINE_STRIP=4\n\
+        int32 LINE_LIST=5\nint32 CUBE_LIST=6\nint32 SPHERE_LIST=7\nint32 POINTS=8\n\
+        int32 TEXT_VIEW_FACING=9\nint32 MESH_RESOURCE=10\nint32 TRIANGLE_LIST=11\n\
+        int32 ARROW_STRIP=12\nint32 ADD=0\nint32 MODIFY=0\nint32 DELETE=2\nint32 DELETEALL=3\n\
+        std_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\n\
+        geometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\n\
+        builtin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\n\
+        std_msgs/ColorRGBA[] colors\nstring texture_resource\n\
+        sensor_msgs/CompressedImage texture\n\
+        visualization_msgs/UVCoordinate[] uv_coordinates\nstring text\nstring mesh_resource\n\
+        visualization_msgs/MeshFile mesh_file\nbool mesh_use_embedded_materials\n";
+    /// `visualization_msgs/MarkerArray`.
+    MARKER_ARRAY = "visualization_msgs/MarkerArray" uses [MARKER]:
+        "visualization_msgs/Marker[] markers\n";
+}
 
 #[cfg(test)]
 mod tests {

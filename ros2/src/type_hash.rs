@@ -164,19 +164,15 @@ mod tests {
 
     #[test]
     fn malformed_hashes_are_refused_with_the_reason() {
+        let refusal = |text: &str| TypeHash::parse(text).unwrap_err();
+        let version = refusal("RIHS02_00");
+        assert!(matches!(version, TypeHashError::UnknownVersion { .. }));
         assert!(matches!(
-            TypeHash::parse("RIHS02_00"),
-            Err(TypeHashError::UnknownVersion { .. })
-        ));
-        assert!(matches!(
-            TypeHash::parse("RIHS01_abc"),
-            Err(TypeHashError::BadDigits { .. })
+            refusal("RIHS01_abc"),
+            TypeHashError::BadDigits { .. }
         ));
         let upper = format!("RIHS01_{}", "A".repeat(64));
-        assert!(matches!(
-            TypeHash::parse(&upper),
-            Err(TypeHashError::BadDigits { .. })
-        ));
+        assert!(matches!(refusal(&upper), TypeHashError::BadDigits { .. }));
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! hashes against `rosbags`.
 
 use crate::cdr::{CdrEncodeError, CdrError, CdrReader, CdrWriter};
-use crate::msg::{Header, Pose, Quaternion, RosMessage, Vector3};
+use crate::msg::{Header, Pose, Quaternion, RosMessage, Vector3, message_identity};
 use crate::schema::{self, MsgDefinition};
 
 /// `builtin_interfaces/msg/Duration`.
@@ -149,23 +149,27 @@ impl Marker {
         w.write_i32(self.lifetime.sec);
         w.write_u32(self.lifetime.nanosec);
         w.write_bool(self.frame_locked);
-        w.write_sequence_len("markers.points", self.points.len())?;
-        for p in &self.points {
+        w.write_sequence("markers.points", &self.points, |w, p| {
             p.write(w);
-        }
-        w.write_sequence_len("markers.colors", self.colors.len())?;
-        for c in &self.colors {
+            Ok(())
+        })?;
+        w.write_sequence("markers.colors", &self.colors, |w, c| {
             c.write(w);
-        }
+            Ok(())
+        })?;
         w.write_string("markers.texture_resource", &self.texture_resource)?;
         self.texture.header.write(w)?;
         w.write_string("markers.texture.format", &self.texture.format)?;
         w.write_u8_sequence("markers.texture.data", &self.texture.data)?;
-        w.write_sequence_len("markers.uv_coordinates", self.uv_coordinates.len())?;
-        for &(u, v) in &self.uv_coordinates {
-            w.write_f32(u);
-            w.write_f32(v);
-        }
+        w.write_sequence(
+            "markers.uv_coordinates",
+            &self.uv_coordinates,
+            |w, &(u, v)| {
+                w.write_f32(u);
+                w.write_f32(v);
+                Ok(())
+            },
+        )?;
         w.write_string("markers.text", &self.text)?;
         w.write_string("markers.mesh_resource", &self.mesh_resource)?;
         w.write_string("markers.mesh_file.filename", &self.mesh_file.filename)?;
@@ -191,30 +195,23 @@ impl Marker {
             nanosec: r.read_u32("markers.lifetime.nanosec")?,
         };
         let frame_locked = r.read_bool("markers.frame_locked")?;
-        let count = r.read_sequence_len("markers.points", 24)?;
-        let mut points = Vec::with_capacity(count);
-        for _ in 0..count {
-            points.push(Vector3::read(r, "markers.points")?);
-        }
-        let count = r.read_sequence_len("markers.colors", 16)?;
-        let mut colors = Vec::with_capacity(count);
-        for _ in 0..count {
-            colors.push(ColorRgba::read(r, "markers.colors")?);
-        }
+        let points =
+            r.read_sequence("markers.points", 24, |r| Vector3::read(r, "markers.points"))?;
+        let colors = r.read_sequence("markers.colors", 16, |r| {
+            ColorRgba::read(r, "markers.colors")
+        })?;
         let texture_resource = r.read_string("markers.texture_resource")?;
         let texture = CompressedImage {
             header: Header::read(r)?,
             format: r.read_string("markers.texture.format")?,
             data: r.read_u8_sequence("markers.texture.data")?,
         };
-        let count = r.read_sequence_len("markers.uv_coordinates", 8)?;
-        let mut uv_coordinates = Vec::with_capacity(count);
-        for _ in 0..count {
-            uv_coordinates.push((
+        let uv_coordinates = r.read_sequence("markers.uv_coordinates", 8, |r| {
+            Ok((
                 r.read_f32("markers.uv_coordinates")?,
                 r.read_f32("markers.uv_coordinates")?,
-            ));
-        }
+            ))
+        })?;
         Ok(Marker {
             header,
             ns,
@@ -250,26 +247,17 @@ pub struct MarkerArray {
 }
 
 impl RosMessage for MarkerArray {
-    const ROS_NAME: &'static str = "visualization_msgs/msg/MarkerArray";
-    const DEFINITION: &'static MsgDefinition = &schema::MARKER_ARRAY;
-    const DDS_TYPE_NAME: &'static str = "visualization_msgs::msg::dds_::MarkerArray_";
-    const TYPE_HASH: &'static str =
-        "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf";
+    message_identity! {
+        "visualization_msgs" / "MarkerArray", &schema::MARKER_ARRAY,
+        "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf"
+    }
 
     fn write_fields(&self, w: &mut CdrWriter) -> Result<(), CdrEncodeError> {
-        w.write_sequence_len("markers", self.markers.len())?;
-        for marker in &self.markers {
-            marker.write(w)?;
-        }
-        Ok(())
+        w.write_sequence("markers", &self.markers, |w, marker| marker.write(w))
     }
 
     fn read_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
-        let count = r.read_sequence_len("markers", Marker::MIN_CDR_SIZE)?;
-        let mut markers = Vec::with_capacity(count);
-        for _ in 0..count {
-            markers.push(Marker::read(r)?);
-        }
+        let markers = r.read_sequence("markers", Marker::MIN_CDR_SIZE, Marker::read)?;
         Ok(MarkerArray { markers })
     }
 }

@@ -56,6 +56,17 @@ fn check<M: RosMessage + PartialEq + std::fmt::Debug>(message: &M, golden_hex: &
     }
 }
 
+/// [`check`]s `message`, and the message's default (an empty sequence) against `empty_hex`.
+fn check_with_empty<M: RosMessage + PartialEq + std::fmt::Debug + Default>(
+    message: &M,
+    golden_hex: &str,
+    empty_hex: &str,
+    hash: &str,
+) {
+    check(message, golden_hex, hash);
+    check(&M::default(), empty_hex, hash);
+}
+
 fn twist() -> Twist {
     Twist {
         linear: Vector3 {
@@ -239,9 +250,9 @@ fn tf() -> TfMessage {
 
 #[test]
 fn tf_message_with_padding_after_frame_ids_matches_rosbags() {
-    check(&tf(), golden::TF_CDR, golden::TF_MESSAGE_HASH);
-    check(
-        &TfMessage::default(),
+    check_with_empty(
+        &tf(),
+        golden::TF_CDR,
         golden::TF_EMPTY_CDR,
         golden::TF_MESSAGE_HASH,
     );
@@ -358,9 +369,9 @@ fn markers() -> MarkerArray {
 
 #[test]
 fn marker_array_with_bools_bytes_and_text_matches_rosbags() {
-    check(&markers(), golden::MARKERS_CDR, golden::MARKER_ARRAY_HASH);
-    check(
-        &MarkerArray::default(),
+    check_with_empty(
+        &markers(),
+        golden::MARKERS_CDR,
         golden::MARKERS_EMPTY_CDR,
         golden::MARKER_ARRAY_HASH,
     );
@@ -389,6 +400,15 @@ fn ros2msg_schemas_match_rosbags_definitions() {
     }
 }
 
+/// The default limits without a cap on a sequence's length, so that only the bytes present
+/// refuse a count.
+fn uncapped_sequences() -> DecodeLimits {
+    DecodeLimits {
+        max_sequence_len: u32::MAX,
+        ..DecodeLimits::default()
+    }
+}
+
 #[test]
 fn a_tf_message_declaring_more_transforms_than_present_is_refused() {
     let mut bytes = hex(golden::TF_CDR);
@@ -396,12 +416,8 @@ fn a_tf_message_declaring_more_transforms_than_present_is_refused() {
     bytes[4..8].copy_from_slice(&3u32.to_le_bytes());
     assert!(TfMessage::from_cdr(&bytes).is_err());
     bytes[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
-    let limits = DecodeLimits {
-        max_sequence_len: u32::MAX,
-        ..DecodeLimits::default()
-    };
     assert!(matches!(
-        TfMessage::from_cdr_with_limits(&bytes, limits),
+        TfMessage::from_cdr_with_limits(&bytes, uncapped_sequences()),
         Err(CdrError::SequenceBeyondInput {
             field: "transforms",
             ..
@@ -431,12 +447,8 @@ fn a_scan_declaring_more_ranges_than_present_is_refused() {
     let count_at = 4 + 20 + 28;
     assert_eq!(&bytes[count_at..count_at + 4], &4u32.to_le_bytes());
     bytes[count_at..count_at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
-    let limits = DecodeLimits {
-        max_sequence_len: u32::MAX,
-        ..DecodeLimits::default()
-    };
     assert!(matches!(
-        LaserScan::from_cdr_with_limits(&bytes, limits),
+        LaserScan::from_cdr_with_limits(&bytes, uncapped_sequences()),
         Err(CdrError::SequenceBeyondInput {
             field: "ranges",
             declared: u32::MAX,

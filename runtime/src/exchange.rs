@@ -40,7 +40,7 @@ use formation_proto::wire::{
 use formation_proto::{LidarSpec, WheelCmd, WheelLimits};
 
 use crate::clock::Clock;
-use crate::link::{Hello, WorldLink, WorldLinkError};
+use crate::link::{Hello, WorldLink, WorldLinkError, WorldResult};
 use crate::link_health::LinkMonitor;
 use crate::settings::{ClockMode, RuntimeSettings};
 use crate::stamps::{ScanStamp, ScanStamps};
@@ -460,18 +460,10 @@ impl<'l> AgentsController<'l> {
             ));
         }
         for robot in 0..self.states.len() {
-            let mut hellos = Vec::new();
-            self.link
-                .drain_hellos(robot, &mut |h| hellos.push(h))
-                .map_err(transport_error)?;
-            for hello in hellos {
+            for hello in drained(|sink| self.link.drain_hellos(robot, sink))? {
                 self.on_hello(robot, hello)?;
             }
-            let mut statuses = Vec::new();
-            self.link
-                .drain_statuses(robot, &mut |s| statuses.push(s))
-                .map_err(transport_error)?;
-            for status in statuses {
+            for status in drained(|sink| self.link.drain_statuses(robot, sink))? {
                 self.on_status(robot, status)?;
             }
             let newest = &mut self.newest[robot];
@@ -499,11 +491,7 @@ impl<'l> AgentsController<'l> {
                 self.states[robot] = AgentState::Live;
             }
         }
-        let mut requests = Vec::new();
-        self.link
-            .drain_swap_requests(&mut |r| requests.push(r))
-            .map_err(transport_error)?;
-        for request in requests {
+        for request in drained(|sink| self.link.drain_swap_requests(sink))? {
             self.on_swap_request(request)?;
         }
         if self
@@ -859,6 +847,16 @@ fn admit(
 
 fn transport_error(e: WorldLinkError) -> ControllerError {
     ControllerError::new(e.to_string())
+}
+
+/// What one of the link's `drain_*` calls hands its sink, in order (taken out first, so that
+/// handling it may use the link again).
+fn drained<T>(
+    drain: impl FnOnce(&mut dyn FnMut(T)) -> WorldResult,
+) -> Result<Vec<T>, ControllerError> {
+    let mut items = Vec::new();
+    drain(&mut |item| items.push(item)).map_err(transport_error)?;
+    Ok(items)
 }
 
 impl AgentsController<'_> {

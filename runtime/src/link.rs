@@ -6,8 +6,8 @@
 //! iceoryx2 shared memory (`formation-transport-iceoryx2`) for the processes of one host, Zenoh
 //! (`formation-transport-zenoh`) for agents on other hosts, ROS 2 over rmw_zenoh
 //! (`formation-transport-ros2`), and channels in one process ([`crate::memory`]) for tests. A
-//! transport's own failures are its crate's typed error, carried as the source of
-//! [`WorldLinkError::Transport`] and [`AgentLinkError::Transport`]. The world watches command ages itself, so its
+//! transport's own failures are its crate's typed error (a [`TransportCrateError`]), carried as
+//! the source of [`WorldLinkError::Transport`] and [`AgentLinkError::Transport`]. The world watches command ages itself, so its
 //! watchdog does not depend on the transport's own liveness reports; those
 //! ([`WorldLink::dead_agents`]) only speed up noticing a crashed agent and clean up after it.
 //!
@@ -17,6 +17,7 @@
 //! ([`WorldLink::close_incarnation`]), publishing to the robot is a no-op and nothing arrives
 //! from it.
 
+use std::path::PathBuf;
 use std::time::Duration;
 
 use crate::auth::SecretError;
@@ -28,6 +29,53 @@ use formation_proto::wire::{
 /// A transport's own failure: the typed error of the transport's crate, kept as the source (a
 /// caller that needs its details downcasts it).
 pub type TransportFailure = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// A transport crate's own typed error. `?` carries it into [`WorldLinkError::Transport`] and
+/// [`AgentLinkError::Transport`] (boxed as their source), so a transport only declares
+/// `impl TransportCrateError for ItsError {}`.
+pub trait TransportCrateError: std::error::Error + Send + Sync + 'static {}
+
+impl<E: TransportCrateError> From<E> for WorldLinkError {
+    fn from(e: E) -> Self {
+        WorldLinkError::Transport(Box::new(e))
+    }
+}
+
+impl<E: TransportCrateError> From<E> for AgentLinkError {
+    fn from(e: E) -> Self {
+        AgentLinkError::Transport(Box::new(e))
+    }
+}
+
+/// A transport's file-system or socket operation that failed: what was being done, on which
+/// path, and the operating system's error (`creating /run/user/1000/formation-x: Permission
+/// denied`); the `Io` variant of each transport's error.
+#[derive(Debug, thiserror::Error)]
+#[error("{action} {}: {source}", path.display())]
+pub struct PathIoError {
+    /// What was being done (`creating`, `sending to`).
+    pub action: &'static str,
+    /// On what.
+    pub path: PathBuf,
+    /// The operating system's error.
+    #[source]
+    pub source: std::io::Error,
+}
+
+impl PathIoError {
+    /// An `Err` mapper: the failure of `action` on `path` with the error it is given.
+    pub fn of(
+        action: &'static str,
+        path: impl Into<PathBuf>,
+    ) -> impl FnOnce(std::io::Error) -> Self {
+        let path = path.into();
+        move |source| PathIoError {
+            action,
+            path,
+            source,
+        }
+    }
+}
 
 /// A failure of the world's transport, or a request to stop.
 #[derive(Debug, thiserror::Error)]

@@ -95,6 +95,17 @@ pub enum SettingsError {
     },
 }
 
+/// Declares, for each `accessor => field_ms`, the method `accessor` that gives the setting in
+/// milliseconds `field_ms` as a [`Duration`].
+macro_rules! durations {
+    ($($accessor:ident => $field:ident,)*) => {$(
+        #[doc = concat!("[`RuntimeSettings::", stringify!($field), "`] as a duration.")]
+        pub fn $accessor(&self) -> Duration {
+            Duration::from_millis(self.$field)
+        }
+    )*};
+}
+
 impl RuntimeSettings {
     /// The defaults every flag and the launcher start from.
     pub const DEFAULT: RuntimeSettings = RuntimeSettings {
@@ -108,34 +119,13 @@ impl RuntimeSettings {
         spin_us: DEFAULT_SPIN_US,
     };
 
-    /// [`RuntimeSettings::command_timeout_ms`] as a duration.
-    pub fn command_timeout(&self) -> Duration {
-        Duration::from_millis(self.command_timeout_ms)
-    }
-
-    /// [`RuntimeSettings::stale_ms`] as a duration.
-    pub fn stale_after(&self) -> Duration {
-        Duration::from_millis(self.stale_ms)
-    }
-
-    /// [`RuntimeSettings::pace_ms`] as a duration.
-    pub fn pace(&self) -> Duration {
-        Duration::from_millis(self.pace_ms)
-    }
-
-    /// [`RuntimeSettings::startup_timeout_ms`] as a duration.
-    pub fn startup_timeout(&self) -> Duration {
-        Duration::from_millis(self.startup_timeout_ms)
-    }
-
-    /// [`RuntimeSettings::ready_timeout_ms`] as a duration.
-    pub fn ready_timeout(&self) -> Duration {
-        Duration::from_millis(self.ready_timeout_ms)
-    }
-
-    /// [`RuntimeSettings::liveness_period_ms`] as a duration.
-    pub fn liveness_period(&self) -> Duration {
-        Duration::from_millis(self.liveness_period_ms)
+    durations! {
+        command_timeout => command_timeout_ms,
+        stale_after => stale_ms,
+        pace => pace_ms,
+        startup_timeout => startup_timeout_ms,
+        ready_timeout => ready_timeout_ms,
+        liveness_period => liveness_period_ms,
     }
 
     /// The settings as pretty JSON.

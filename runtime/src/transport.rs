@@ -306,31 +306,28 @@ mod tests {
                 .refuse_zenoh_flags(&[(false, "--listen")])
                 .is_ok()
         );
-        let refused = Transport::Iceoryx2.refuse_zenoh_flags(&flags).unwrap_err();
-        assert_eq!(
-            refused.to_string(),
-            "--remote needs --transport zenoh (the transport is iceoryx2)"
-        );
-        let refused = Transport::Ros2.refuse_zenoh_flags(&flags).unwrap_err();
-        assert_eq!(
-            refused.to_string(),
-            "--remote needs --transport zenoh (the transport is ros2)"
-        );
         assert!(Transport::Ros2.refuse_network_flags(&flags).is_ok());
-        let refused = Transport::Iceoryx2
-            .refuse_network_flags(&[(true, "--connect")])
-            .unwrap_err();
-        assert_eq!(
-            refused.to_string(),
-            "--connect needs --transport zenoh or ros2 (the transport is iceoryx2)"
-        );
-        let refused = Transport::Zenoh
-            .refuse_ros2_flags(&[(true, "--scan")])
-            .unwrap_err();
-        assert_eq!(
-            refused.to_string(),
-            "--scan needs --transport ros2 (the transport is zenoh)"
-        );
+        let refusals = [
+            (
+                Transport::Iceoryx2.refuse_zenoh_flags(&flags),
+                "--remote needs --transport zenoh (the transport is iceoryx2)",
+            ),
+            (
+                Transport::Ros2.refuse_zenoh_flags(&flags),
+                "--remote needs --transport zenoh (the transport is ros2)",
+            ),
+            (
+                Transport::Iceoryx2.refuse_network_flags(&[(true, "--connect")]),
+                "--connect needs --transport zenoh or ros2 (the transport is iceoryx2)",
+            ),
+            (
+                Transport::Zenoh.refuse_ros2_flags(&[(true, "--scan")]),
+                "--scan needs --transport ros2 (the transport is zenoh)",
+            ),
+        ];
+        for (refused, message) in refusals {
+            assert_eq!(refused.unwrap_err().to_string(), message);
+        }
     }
 
     /// A registered transport for the tests: takes an endpoint, opens nothing.

@@ -76,6 +76,20 @@ class TimedOut(CheckFailed):
     """What the client waited for did not come in time."""
 
 
+def wait_on(condition, limit_s, found, timed_out):
+    """What `found()` returns once it is not None, waiting on `condition` (held by the caller)
+    up to `limit_s`; raises `timed_out()` after."""
+    deadline = time.monotonic() + limit_s
+    while True:
+        result = found()
+        if result is not None:
+            return result
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise timed_out()
+        condition.wait(min(left, 0.5))
+
+
 def emit(event, **fields):
     print(json.dumps({"event": event, **fields}), flush=True)
 
@@ -218,14 +232,8 @@ class Twists:
         if payload[:4] != b"\x00\x01\x00\x00":
             raise CheckFailed(f"CDR encapsulation header {payload[:4].hex()}, expected 00010000")
         twist = TS.deserialize_cdr(payload, TWIST)
-        values = [
-            twist.linear.x,
-            twist.linear.y,
-            twist.linear.z,
-            twist.angular.x,
-            twist.angular.y,
-            twist.angular.z,
-        ]
+        # The six components: linear x, y, z, then angular x, y, z.
+        values = [getattr(vector, axis) for vector in (twist.linear, twist.angular) for axis in "xyz"]
         return {
             "stamp_ns": timestamp,
             "sequence": sequence,
@@ -247,21 +255,21 @@ class Twists:
 
     def wait_for(self, matches, since=0, limit_s=WAIT_S, what="a Twist"):
         """The first Twist from index `since` on that `matches`, waiting up to `limit_s`."""
-        deadline = time.monotonic() + limit_s
+        index = since
+
+        def found():
+            nonlocal index
+            if self.problems:
+                raise CheckFailed("; ".join(self.problems))
+            while index < len(self.received):
+                entry = self.received[index]
+                index += 1
+                if matches(entry):
+                    return entry
+            return None
+
         with self.lock:
-            index = since
-            while True:
-                if self.problems:
-                    raise CheckFailed("; ".join(self.problems))
-                while index < len(self.received):
-                    entry = self.received[index]
-                    index += 1
-                    if matches(entry):
-                        return entry
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise TimedOut(f"no {what} within {limit_s} s")
-                self.lock.wait(min(left, 0.5))
+            return wait_on(self.lock, limit_s, found, lambda: TimedOut(f"no {what} within {limit_s} s"))
 
     def summary(self):
         with self.lock:
@@ -296,17 +304,18 @@ class Graph:
     def wait_for_publisher(self, topic, limit_s=WAIT_S):
         """Waits for an `MP` token on `topic` (the agent declares its publisher last)."""
         mangled = topic.replace("/", "%")
-        deadline = time.monotonic() + limit_s
+
+        def found():
+            for token in self.tokens:
+                parts = token.split("/")
+                if len(parts) >= 13 and parts[5] == "MP" and parts[9] == mangled:
+                    return token
+            return None
+
         with self.lock:
-            while True:
-                for token in self.tokens:
-                    parts = token.split("/")
-                    if len(parts) >= 13 and parts[5] == "MP" and parts[9] == mangled:
-                        return token
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise CheckFailed(f"no publisher token on {topic} within {limit_s} s")
-                self.lock.wait(min(left, 0.5))
+            return wait_on(
+                self.lock, limit_s, found, lambda: CheckFailed(f"no publisher token on {topic} within {limit_s} s")
+            )
 
 
 def open_router(listen):

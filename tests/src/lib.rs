@@ -283,8 +283,22 @@ pub fn python() -> PathBuf {
     }
 }
 
-/// `mcap_readers.py`'s exit status for a missing package.
-const MCAP_READERS_MISSING_PACKAGE: i32 = 3;
+/// The exit status of the independent Python tools (`tests/python/*.py`) for a missing package.
+pub const PYTHON_MISSING_PACKAGE: i32 = 3;
+
+/// The JSON an independent Python tool printed on stdout, once `finished`; fails the test with
+/// its words (and the fix, for a missing package). `tool` names it in the messages.
+pub fn printed_json(finished: &Finished, tool: &str) -> serde_json::Value {
+    assert_ne!(
+        finished.output.status.code(),
+        Some(PYTHON_MISSING_PACKAGE),
+        "{tool} lacks a package: run `bash .ci/setup-python --test`\n{}",
+        finished.describe()
+    );
+    finished.assert_success();
+    serde_json::from_str(finished.stdout().trim())
+        .unwrap_or_else(|e| panic!("{tool} printed no JSON ({e})\n{}", finished.describe()))
+}
 
 /// Runs the independent MCAP readers, `tests/python/mcap_readers.py ARGS` (Python's `mcap` with
 /// `mcap-ros2-support`, `rosbags`, Rerun; none of formation's code), and returns the JSON they
@@ -294,16 +308,10 @@ pub fn mcap_readers(args: &[&std::ffi::OsStr]) -> serde_json::Value {
     command
         .arg(repo_root().join("tests/python/mcap_readers.py"))
         .args(args);
-    let finished = run(command, Duration::from_secs(300));
-    assert_ne!(
-        finished.output.status.code(),
-        Some(MCAP_READERS_MISSING_PACKAGE),
-        "the independent readers are not installed: run `bash .ci/setup-python --test`\n{}",
-        finished.describe()
-    );
-    finished.assert_success();
-    serde_json::from_str(finished.stdout().trim())
-        .unwrap_or_else(|e| panic!("the readers printed no JSON ({e})\n{}", finished.describe()))
+    printed_json(
+        &run(command, Duration::from_secs(300)),
+        "the independent MCAP readers",
+    )
 }
 
 /// The paper's case 1 shortened to `duration_s`, as a scenario file in `dir`.
@@ -437,6 +445,20 @@ pub fn replay(file: &Path, args: &[&str], json: &Path) -> Finished {
     run(command, Duration::from_secs(300))
 }
 
+/// `formation report FOLDER --out HTML`: the report of the eval or run outputs in `folder`.
+pub fn report_command(folder: &Path, html: &Path) -> Command {
+    let mut command = Command::new(&binaries().cli);
+    command.arg("report").arg(folder).arg("--out").arg(html);
+    command
+}
+
+/// The steps a replay report ([`replay`]'s JSON) compared, over all its robots.
+pub fn compared_steps(report: &serde_json::Value) -> u64 {
+    report["robots"]
+        .as_array()
+        .map_or(0, |r| r.iter().filter_map(|r| r["compared"].as_u64()).sum())
+}
+
 /// `formation eval` in-process with `args` (one run, its trajectory kept), recording into the
 /// folder `record` and writing its outputs to `out`.
 pub fn eval_recorded(args: &[&str], record: &Path, out: &Path) -> Finished {
@@ -495,13 +517,22 @@ impl Finished {
         self
     }
 
+    /// Panics with `why` and [`Finished::describe`] unless `holds`: a check of what it did.
+    #[track_caller]
+    pub fn assert_holds(&self, holds: bool, why: &str) -> &Self {
+        assert!(holds, "{why}\n{}", self.describe());
+        self
+    }
+
+    /// Panics with `why` and [`Finished::describe`] if it exited with success.
+    #[track_caller]
+    pub fn assert_failed(&self, why: &str) -> &Self {
+        self.assert_holds(!self.output.status.success(), why)
+    }
+
     /// Panics with [`Finished::describe`] unless it failed with stderr containing `needle`.
     pub fn assert_failure_mentioning(&self, needle: &str) -> &Self {
-        assert!(
-            !self.output.status.success(),
-            "expected failure\n{}",
-            self.describe()
-        );
+        self.assert_failed("expected failure");
         assert!(
             self.stderr().contains(needle),
             "stderr should mention {needle:?}\n{}",
@@ -570,28 +601,60 @@ pub fn run(command: Command, limit: Duration) -> Finished {
     run_with_input(command, None, limit)
 }
 
+/// `attempt()` every 200 ms until it succeeds or `limit` has passed (a server that does not
+/// listen yet): its success, or its last error.
+pub fn retry_for<T, E>(limit: Duration, mut attempt: impl FnMut() -> Result<T, E>) -> Result<T, E> {
+    let deadline = Instant::now() + limit;
+    loop {
+        match attempt() {
+            Ok(value) => return Ok(value),
+            Err(e) if Instant::now() >= deadline => return Err(e),
+            Err(_) => std::thread::sleep(Duration::from_millis(200)),
+        }
+    }
+}
+
+/// The exit of this package's helper binary `tool` from what it ran: success, or its error on
+/// stderr (`TOOL: ERROR`) and exit status 2.
+pub fn tool_exit(tool: &str, result: Result<(), String>) -> std::process::ExitCode {
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{tool}: {e}");
+            std::process::ExitCode::from(2)
+        }
+    }
+}
+
 /// A launch secret for tests that start `formation-world` or `formation-agent` by hand: write
 /// [`LaunchSecret::to_line`] as the first line of their standard input.
 pub fn launch_secret() -> LaunchSecret {
     LaunchSecret::generate().expect("a launch secret")
 }
 
-/// [`run`] with `input` written to the command's standard input (then closed).
-pub fn run_with_input(mut command: Command, input: Option<&str>, limit: Duration) -> Finished {
-    use std::io::Write;
+/// Starts `command` with stdout and stderr piped, and stdin piped when `piped_input` (else
+/// empty); returns its command line, for messages, and the child. Panics if it cannot start.
+fn spawn_captured(command: &mut Command, piped_input: bool) -> (String, std::process::Child) {
     let text = format!("{command:?}");
     command
-        .stdin(if input.is_some() {
+        .stdin(if piped_input {
             Stdio::piped()
         } else {
             Stdio::null()
         })
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-    let started = Instant::now();
-    let mut child = command
+    let child = command
         .spawn()
         .unwrap_or_else(|e| panic!("starting {text}: {e}"));
+    (text, child)
+}
+
+/// [`run`] with `input` written to the command's standard input (then closed).
+pub fn run_with_input(mut command: Command, input: Option<&str>, limit: Duration) -> Finished {
+    use std::io::Write;
+    let started = Instant::now();
+    let (text, mut child) = spawn_captured(&mut command, input.is_some());
     if let (Some(input), Some(mut stdin)) = (input, child.stdin.take()) {
         let _ = stdin.write_all(input.as_bytes());
     }
@@ -684,18 +747,7 @@ impl LiveProcess {
     /// Starts `command` with `input` (if any) written to its standard input, kept open.
     pub fn spawn_with_input(mut command: Command, input: Option<&str>) -> LiveProcess {
         use std::io::{BufRead, BufReader, Read, Write};
-        let text = format!("{command:?}");
-        command
-            .stdin(if input.is_some() {
-                Stdio::piped()
-            } else {
-                Stdio::null()
-            })
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped());
-        let mut child = command
-            .spawn()
-            .unwrap_or_else(|e| panic!("starting {text}: {e}"));
+        let (text, mut child) = spawn_captured(&mut command, input.is_some());
         let mut stdin = child.stdin.take();
         if let (Some(input), Some(pipe)) = (input, stdin.as_mut()) {
             let _ = pipe.write_all(input.as_bytes());
@@ -767,6 +819,15 @@ impl LiveProcess {
         }
     }
 
+    /// Panics with `why` and [`LiveProcess::describe`] unless `holds`: a check made while it
+    /// runs.
+    #[track_caller]
+    pub fn assert_holds(&mut self, holds: bool, why: &str) {
+        if !holds {
+            panic!("{why}\n{}", self.describe());
+        }
+    }
+
     /// Everything printed so far, for failure messages.
     pub fn describe(&mut self) -> String {
         while let Ok(line) = self.lines.try_recv() {
@@ -830,6 +891,19 @@ impl Drop for LiveProcess {
 /// found through /proc.
 pub fn agent_pids(run: &RunId, robot: usize) -> Vec<u32> {
     pids_of("formation-agent", run, Some(robot))
+}
+
+/// The pid of the one `formation-agent` of run `run` serving robot `robot` now; panics with
+/// `launch`'s output unless exactly one runs.
+pub fn the_agent(run: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
+    let pids = agent_pids(run, robot);
+    assert_eq!(
+        pids.len(),
+        1,
+        "exactly one agent of robot {robot} should run: {pids:?}\n{}",
+        launch.describe()
+    );
+    pids[0]
 }
 
 /// The pid of run `run`'s `formation-world` process, found through /proc.
@@ -992,6 +1066,33 @@ pub fn in_process_run(scenario: &formation_world::Scenario, index: usize) -> Tra
     formation_world::run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run")
 }
 
+/// Run 0 of `scenario` over processes in lockstep ([`lockstep_over_processes`]) and in-process,
+/// `model` on every robot, each robot told its wheels in-process as the world tells every agent
+/// over processes: panics unless the in-process run has `samples` samples and the two agree bit
+/// for bit. Returns the in-process run.
+pub fn assert_lockstep_equals_in_process(
+    scenario: &formation_world::Scenario,
+    model: &Path,
+    samples: usize,
+) -> Trajectory {
+    use formation_robot_agent::decision::PolicyController;
+    let over_processes = lockstep_over_processes(scenario, 1, model);
+    let spec = scenario.run_spec(scenario.seed(), 0);
+    let models = vec![model; scenario.n_robots()];
+    let mut controller =
+        PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
+    controller.set_wheel_limits(spec.world.robot.wheel_limits());
+    let in_process = formation_world::run_episode(&spec, &mut controller, &mut |_, _| {})
+        .expect("in-process run");
+    assert_eq!(
+        in_process.poses.len(),
+        samples,
+        "samples of the in-process run"
+    );
+    assert_bit_identical(&over_processes[0], &in_process);
+    in_process
+}
+
 /// `formation run --run-id RUN EXTRA --scenario SCENARIO --model <test model> --out OUT`.
 pub fn formation_run(run: &RunId, scenario: &Path, out: &Path, extra: &[&str]) -> Command {
     formation_run_with_model(run, scenario, test_model(), out, extra)
@@ -1029,18 +1130,23 @@ pub fn formation_run_args(
         .arg(out);
 }
 
-/// `formation eval --controller policy --runs 1 --scenario SCENARIO --model MODEL --json JSON`:
-/// the first run of a scenario, evaluated in-process unless more flags are added.
-pub fn policy_eval(scenario: &Path, model: &Path, json: &Path) -> Command {
+/// `formation eval --controller policy --runs 1 --scenario SCENARIO --model MODEL`: the first
+/// run of a scenario, evaluated in-process unless more flags are added.
+pub fn policy_eval_once(scenario: &Path, model: &Path) -> Command {
     let mut command = Command::new(&binaries().cli);
     command
         .args(["eval", "--controller", "policy", "--runs", "1"])
         .arg("--scenario")
         .arg(scenario)
         .arg("--model")
-        .arg(model)
-        .arg("--json")
-        .arg(json);
+        .arg(model);
+    command
+}
+
+/// [`policy_eval_once`] with `--json JSON`.
+pub fn policy_eval(scenario: &Path, model: &Path, json: &Path) -> Command {
+    let mut command = policy_eval_once(scenario, model);
+    command.arg("--json").arg(json);
     command
 }
 

@@ -6,8 +6,9 @@
 //! Dropping the value releases them in the order the hand-written prologue did: the run's
 //! namespace is removed first (never leaking into another test, even after a failure), then the
 //! scratch folder, then the watchdog is disarmed and the lock released. Values the test makes
-//! after it (its processes) are dropped before it. A test that needs a second run id, or a
-//! network namespace, makes those itself next to this value.
+//! after it (its processes) are dropped before it. A test that needs a second run id takes it
+//! with its leak check from [`ProcessTest::another_run`]; one that needs a network namespace
+//! makes it itself next to this value.
 //!
 //! The lock is taken before the watchdog is armed, so a test waiting for another test of its
 //! binary (under plain `cargo test`) is not counted as hung.
@@ -44,8 +45,7 @@ impl ProcessTest {
         let one = one_at_a_time();
         let watchdog = Watchdog::arm(name, limit);
         let dir = TempDir::new(name);
-        let run = unique_run_id(name);
-        let leaks = LeakCheck::new(&run);
+        let (run, leaks) = own_run(name);
         ProcessTest {
             leaks,
             run,
@@ -53,6 +53,21 @@ impl ProcessTest {
             _watchdog: watchdog,
             _one: one,
         }
+    }
+
+    /// Another run id of this test's (tagged `tag`), for a test that launches more than once,
+    /// and its leak check: its own iceoryx2 namespace and Zenoh key space, removed when the
+    /// check is dropped.
+    pub fn another_run(&self, tag: &str) -> (RunId, LeakCheck) {
+        own_run(tag)
+    }
+
+    /// A folder `name` in the scratch folder, made now, for a test's launch of its own.
+    pub fn folder(&self, name: &str) -> PathBuf {
+        let folder = self.dir.path().join(name);
+        std::fs::create_dir_all(&folder)
+            .unwrap_or_else(|e| panic!("creating {}: {e}", folder.display()));
+        folder
     }
 
     /// The scratch folder's path.
@@ -118,4 +133,11 @@ impl ProcessTest {
     pub fn assert_clean(&self) {
         self.leaks.assert_clean();
     }
+}
+
+/// A run id of its own tagged `tag`, and its leak check (which asserts the run has no files yet).
+fn own_run(tag: &str) -> (RunId, LeakCheck) {
+    let run = unique_run_id(tag);
+    let leaks = LeakCheck::new(&run);
+    (run, leaks)
 }

@@ -24,6 +24,28 @@ fn fails_cleanly(args: &[&str], env: &[(&str, &str)], needles: &[&str]) -> Finis
     finished
 }
 
+/// The shipped scenario `scenarios/NAME.toml`, as an argument.
+fn shipped_scenario(name: &str) -> String {
+    repo_root()
+        .join(format!("scenarios/{name}.toml"))
+        .display()
+        .to_string()
+}
+
+/// `formation swap --run nosuchrun --robot 0 --model MODEL`: a swap of `model` into a run that
+/// does not exist.
+fn swap_to(model: &str) -> Vec<&str> {
+    vec![
+        "swap",
+        "--run",
+        "nosuchrun",
+        "--robot",
+        "0",
+        "--model",
+        model,
+    ]
+}
+
 /// case1.toml with `edit` applied to its text, written to `dir/name`.
 fn scenario_with(dir: &Path, name: &str, edit: impl Fn(&str) -> String) -> String {
     let text = std::fs::read_to_string(repo_root().join("scenarios/case1.toml")).expect("case1");
@@ -68,10 +90,7 @@ fn bad_scenarios_name_the_field_or_file() {
 #[test]
 fn bad_models_and_a_missing_runtime_library_are_explained() {
     let t = ProcessTest::start("bad_models", LIMIT);
-    let case1 = repo_root()
-        .join("scenarios/case1.toml")
-        .display()
-        .to_string();
+    let case1 = shipped_scenario("case1");
     let wrong_shape = t.path().join("wrong-shape.onnx");
     formation_tests::write_tiny_model_with(&wrong_shape, 1, &["--aux-width", "3"]);
     let garbage = t.path().join("garbage.onnx");
@@ -92,14 +111,8 @@ fn bad_models_and_a_missing_runtime_library_are_explained() {
     let missing = t.path().join("missing.onnx").display().to_string();
     let nodata = t.path().join("nodata").display().to_string();
     let out = t.path().join("dagger.onnx").display().to_string();
-    let scenario = repo_root()
-        .join("scenarios/collect.toml")
-        .display()
-        .to_string();
-    let eval_scenario = repo_root()
-        .join("scenarios/table1.toml")
-        .display()
-        .to_string();
+    let scenario = shipped_scenario("collect");
+    let eval_scenario = shipped_scenario("table1");
     let args = [
         "dagger",
         "--scenario",
@@ -238,17 +251,10 @@ fn out_of_range_scenario_values_are_refused_with_the_field_and_the_range() {
         ] {
             let finished = fails_cleanly(&args, &[], needles);
             let echoed = finished.stdout() + &finished.stderr();
-            assert!(
-                !echoed.contains(&long_name[..200]),
-                "the name was echoed\n{}",
-                finished.describe()
-            );
+            finished.assert_holds(!echoed.contains(&long_name[..200]), "the name was echoed");
         }
     }
-    let case1 = repo_root()
-        .join("scenarios/case1.toml")
-        .display()
-        .to_string();
+    let case1 = shipped_scenario("case1");
     for command in ["run", "eval"] {
         fails_cleanly(
             &[command, "--scenario", &case1, "--runs", "1000000000"],
@@ -287,10 +293,9 @@ fn a_lidar_range_the_model_was_not_trained_for_is_refused_before_any_process_sta
         &[],
         &needles,
     );
-    assert!(
+    finished.assert_holds(
         !finished.stdout().contains("formation run") && !finished.stdout().contains("connected"),
-        "nothing may be launched\n{}",
-        finished.describe()
+        "nothing may be launched",
     );
     assert!(!out.exists(), "no run specs or logs may be written");
     t.assert_clean();
@@ -307,10 +312,7 @@ fn a_lidar_range_the_model_was_not_trained_for_is_refused_before_any_process_sta
 #[test]
 fn a_model_that_is_not_a_small_regular_file_is_named_for_what_it_is() {
     let t = ProcessTest::start("model_files", LIMIT);
-    let case1 = repo_root()
-        .join("scenarios/case1.toml")
-        .display()
-        .to_string();
+    let case1 = shipped_scenario("case1");
     let directory = t.path().display().to_string();
     let fifo = t.path().join("model.fifo");
     let made = std::process::Command::new("mkfifo")
@@ -324,15 +326,7 @@ fn a_model_that_is_not_a_small_regular_file_is_named_for_what_it_is() {
         for args in [
             vec!["eval", "--scenario", case1.as_str(), "--model", model],
             vec!["run", "--scenario", case1.as_str(), "--model", model],
-            vec![
-                "swap",
-                "--run",
-                "nosuchrun",
-                "--robot",
-                "0",
-                "--model",
-                model,
-            ],
+            swap_to(model),
         ] {
             let finished = fails_cleanly(&args, &[], &[model, "not a regular file"]);
             finished.assert_stderr_lacks("not found");
@@ -345,15 +339,7 @@ fn a_model_that_is_not_a_small_regular_file_is_named_for_what_it_is() {
         .expect("a sparse file");
     let huge = huge.display().to_string();
     for args in [
-        vec![
-            "swap",
-            "--run",
-            "nosuchrun",
-            "--robot",
-            "0",
-            "--model",
-            huge.as_str(),
-        ],
+        swap_to(&huge),
         vec![
             "eval",
             "--scenario",
@@ -410,10 +396,7 @@ fn teams_and_envelopes_bad_input_is_refused_with_a_clear_error() {
     formation_tests::write_tiny_model_with(&narrow, 3, &["--d-star-range", "0.8,1.5"]);
     let narrow_arg = narrow.display().to_string();
     // case1's d* = 2 m is outside [0.8, 1.5] m.
-    let case1 = repo_root()
-        .join("scenarios/case1.toml")
-        .display()
-        .to_string();
+    let case1 = shipped_scenario("case1");
     let needles = ["d* = 2 m", "[0.8, 1.5] m", "robot 0", "narrow.onnx"];
     for extra in [&[][..], &["--processes"][..]] {
         let mut args = vec!["eval", "--scenario", &case1, "--model", &narrow_arg];

@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LeakCheck, LiveProcess, ProcessTest, TempDir, agent_pids, await_connected, case1_scenario,
-    formation_run, send_signal, unique_run_id, world_pid,
+    LeakCheck, LiveProcess, ProcessTest, await_connected, case1_scenario, formation_run,
+    send_signal, the_agent, world_pid,
 };
 
 const LIMIT: Duration = Duration::from_secs(240);
@@ -35,79 +35,71 @@ fn await_stderr(launch: &mut LiveProcess, needle: &str, limit: Duration) {
     }
 }
 
-fn the_agent(run_id: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
-    let pids = agent_pids(run_id, robot);
-    assert_eq!(pids.len(), 1, "{pids:?}\n{}", launch.describe());
-    pids[0]
-}
-
-/// A realtime launch of case 1 (long enough to outlive the test) with `extra` flags.
-fn launch(tag: &str, extra: &[&str]) -> (TempDir, RunId, LeakCheck, LiveProcess) {
-    let dir = TempDir::new(tag);
-    let run_id = unique_run_id(tag);
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 120.0);
+/// A realtime launch of case 1 (long enough to outlive the test) with `extra` flags, under a run
+/// id of its own tagged `tag` (in a folder `tag` of the test's), once its agents are connected.
+fn launch(t: &ProcessTest, tag: &str, extra: &[&str]) -> (RunId, LeakCheck, LiveProcess) {
+    let dir = t.folder(tag);
+    let (run_id, leaks) = t.another_run(tag);
+    let scenario = case1_scenario(&dir, 120.0);
     let mut flags = vec!["--clock", "realtime"];
     flags.extend_from_slice(extra);
-    let mut launch = LiveProcess::spawn(formation_run(
-        &run_id,
-        &scenario,
-        &dir.path().join("out"),
-        &flags,
-    ));
+    let mut launch =
+        LiveProcess::spawn(formation_run(&run_id, &scenario, &dir.join("out"), &flags));
     await_connected(&mut launch);
-    (dir, run_id, leaks, launch)
+    (run_id, leaks, launch)
 }
 
 /// Agents SIGTERMed exit 143 and SIGINTed 130 (each is then restarted); the world SIGTERMed exits
 /// 143 (the launcher fails, naming it).
-fn agents_then_world(tag: &str, extra: &[&str]) {
-    let (_dir, run_id, leaks, mut launch) = launch(tag, extra);
-    let agent = the_agent(&run_id, 0, &mut launch);
-    send_signal(agent, "TERM");
-    await_stderr(
-        &mut launch,
-        "agent of robot 0 exited (exit code 143)",
-        Duration::from_secs(30),
-    );
-    let agent = the_agent(&run_id, 1, &mut launch);
-    send_signal(agent, "INT");
-    await_stderr(
-        &mut launch,
-        "agent of robot 1 exited (exit code 130)",
-        Duration::from_secs(30),
-    );
-    let world = world_pid(&run_id).expect("the world runs");
-    send_signal(world, "TERM");
+fn agents_then_world(t: &ProcessTest, tag: &str, extra: &[&str]) {
+    let (run_id, leaks, mut launch) = launch(t, tag, extra);
+    for (robot, signal, code) in [(0, "TERM", 143), (1, "INT", 130)] {
+        let agent = the_agent(&run_id, robot, &mut launch);
+        send_signal(agent, signal);
+        await_stderr(
+            &mut launch,
+            &format!("agent of robot {robot} exited (exit code {code})"),
+            Duration::from_secs(30),
+        );
+    }
+    world_ends_the_launch(&run_id, leaks, launch, ("TERM", 143));
+}
+
+/// Sends `signal` to the world of `launch` (run `run_id`): the launch fails naming the world's
+/// exit code `code`, and leaves nothing behind.
+fn world_ends_the_launch(
+    run_id: &RunId,
+    leaks: LeakCheck,
+    launch: LiveProcess,
+    (signal, code): (&str, i32),
+) {
+    send_signal(world_pid(run_id).expect("the world runs"), signal);
     let finished = launch.finish(LIMIT);
-    finished.assert_failure_mentioning("the world process exited (exit code 143)");
+    finished.assert_failure_mentioning(&format!("the world process exited (exit code {code})"));
     leaks.assert_clean();
 }
 
 #[test]
 fn sigterm_gives_143_and_sigint_130_for_agents_and_the_world_over_iceoryx2() {
-    let _t = ProcessTest::start("exit_codes_iceoryx", LIMIT);
-    agents_then_world("exitI", &[]);
+    let t = ProcessTest::start("exit_codes_iceoryx", LIMIT);
+    agents_then_world(&t, "exitI", &[]);
     // The world on SIGINT.
-    let (_dir, run_id, leaks, launch) = launch("exitJ", &[]);
-    send_signal(world_pid(&run_id).expect("the world runs"), "INT");
-    let finished = launch.finish(LIMIT);
-    finished.assert_failure_mentioning("the world process exited (exit code 130)");
-    leaks.assert_clean();
+    let (run_id, leaks, launch) = launch(&t, "exitJ", &[]);
+    world_ends_the_launch(&run_id, leaks, launch, ("INT", 130));
 }
 
 #[test]
 fn sigterm_gives_143_and_sigint_130_for_agents_and_the_world_over_zenoh() {
     let t = ProcessTest::start("exit_codes_zenoh", LIMIT);
     let listen = t.endpoint();
-    agents_then_world("exitZ", &["--transport", "zenoh", "--listen", &listen]);
+    agents_then_world(&t, "exitZ", &["--transport", "zenoh", "--listen", &listen]);
 }
 
 #[test]
 fn the_launcher_exits_143_on_sigterm_and_130_on_sigint() {
-    let _t = ProcessTest::start("exit_codes_launcher", LIMIT);
+    let t = ProcessTest::start("exit_codes_launcher", LIMIT);
     for (signal, code) in [("TERM", 143), ("INT", 130)] {
-        let (_dir, _run_id, leaks, launch) = launch(&format!("exitL{code}"), &[]);
+        let (_run_id, leaks, launch) = launch(&t, &format!("exitL{code}"), &[]);
         send_signal(launch.id(), signal);
         let finished = launch.finish(LIMIT);
         assert_eq!(

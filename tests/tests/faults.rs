@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LiveProcess, ProcessTest, RobotLog, TempDir, agent_pids, await_rejoin, binaries,
-    case1_scenario, formation_run, run, test_model, world_pid,
+    LiveProcess, ProcessTest, RobotLog, TempDir, agent_pids, await_connected, await_rejoin,
+    binaries, case1_scenario, formation_run, run, send_signal, test_model, the_agent, world_pid,
 };
 use rand::{Rng, SeedableRng};
 
@@ -27,19 +27,9 @@ fn launch(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> Liv
 
 /// Sends SIGKILL to robot `robot`'s current agent and returns its pid.
 fn kill_agent(run_id: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
-    let pids = agent_pids(run_id, robot);
-    assert_eq!(
-        pids.len(),
-        1,
-        "exactly one agent of robot {robot} should run: {pids:?}\n{}",
-        launch.describe()
-    );
-    let status = Command::new("kill")
-        .args(["-KILL", &pids[0].to_string()])
-        .status()
-        .expect("running kill");
-    assert!(status.success(), "kill -KILL {}", pids[0]);
-    pids[0]
+    let pid = the_agent(run_id, robot, launch);
+    send_signal(pid, "KILL");
+    pid
 }
 
 /// Issue 5: twenty SIGKILLs of random agents at random ticks of one lockstep run. Every kill is
@@ -65,8 +55,7 @@ fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
             "3",
         ],
     );
-    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_connected(&mut launch);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(20);
     let mut rejoins: [Vec<usize>; 3] = Default::default();
     for _ in 0..kills {
@@ -127,8 +116,7 @@ fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
             "600",
         ],
     );
-    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_connected(&mut launch);
     std::thread::sleep(Duration::from_secs(3));
     let pid = kill_agent(&t.run, 1, &mut launch);
     await_rejoin(&mut launch, 1, pid);
@@ -267,8 +255,7 @@ fn agents_exit_cleanly_when_the_world_dies() {
 fn a_killed_world_ends_the_launch_cleanly() {
     let t = ProcessTest::start("world_killed_launch", LIMIT);
     let mut launch = launch(&t.run, &t.dir, 600.0, &["--pace-ms", "20"]);
-    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(300));
     let world = world_pid(&t.run).expect("the world process runs");
     let status = Command::new("kill")

@@ -98,8 +98,8 @@ fn normal_dependencies(package: &str) -> BTreeSet<String> {
     normal_dependencies_with(package, &[])
 }
 
-/// The crate names `cargo tree -e normal -p <package> <flags>` lists.
-fn normal_dependencies_with(package: &str, flags: &[&str]) -> BTreeSet<String> {
+/// What `cargo tree -e normal -p <package> <flags>` prints (locked and offline).
+fn normal_tree(package: &str, flags: &[&str]) -> String {
     let mut args = vec![
         "tree",
         "--locked",
@@ -110,8 +110,14 @@ fn normal_dependencies_with(package: &str, flags: &[&str]) -> BTreeSet<String> {
         package,
     ];
     args.extend_from_slice(flags);
-    args.extend_from_slice(&["--prefix", "none", "--format", "{p}"]);
     cargo(&args)
+}
+
+/// The crate names `cargo tree -e normal -p <package> <flags>` lists.
+fn normal_dependencies_with(package: &str, flags: &[&str]) -> BTreeSet<String> {
+    let mut flags = flags.to_vec();
+    flags.extend_from_slice(&["--prefix", "none", "--format", "{p}"]);
+    normal_tree(package, &flags)
         .lines()
         .filter_map(|line| line.split_whitespace().next())
         .map(str::to_owned)
@@ -207,9 +213,7 @@ fn a_layer_rule_is_read_from_its_table_cell() {
 
 #[test]
 fn every_crate_has_one_name_for_its_folder_package_and_library() {
-    let metadata: serde_json::Value =
-        serde_json::from_str(&cargo(&["metadata", "--no-deps", "--format-version", "1"]))
-            .expect("cargo metadata prints JSON");
+    let metadata = workspace_metadata();
     let root = repo_root().canonicalize().unwrap();
     let packages = metadata["packages"].as_array().expect("packages");
     assert!(packages.len() >= 10, "{} packages", packages.len());
@@ -232,17 +236,7 @@ fn every_crate_has_one_name_for_its_folder_package_and_library() {
                 "folder {folder}/ holds package {name}, not {expected}"
             ));
         }
-        let libs = package["targets"]
-            .as_array()
-            .expect("targets")
-            .iter()
-            .filter(|t| {
-                t["kind"]
-                    .as_array()
-                    .is_some_and(|k| k.iter().any(|k| k == "lib"))
-            });
-        for lib in libs {
-            let lib_name = lib["name"].as_str().unwrap_or_default();
+        for lib_name in targets_of(package, "lib") {
             if lib_name != expected.replace('-', "_") {
                 wrong.push(format!("package {name} has the library {lib_name}"));
             }
@@ -332,22 +326,18 @@ fn the_agents_demo_build_holds_no_tokio_plotters_or_rayon() {
 
 #[test]
 fn with_zenoh_the_agent_builds_tokio_only_under_zenoh() {
-    let tree = cargo(&[
-        "tree",
-        "--locked",
-        "--offline",
-        "-e",
-        "normal",
-        "-p",
+    let tree = normal_tree(
         "formation-agent-node",
-        "--features",
-        "zenoh",
-        "--no-dedupe",
-        "--prefix",
-        "depth",
-        "--format",
-        "{p}",
-    ]);
+        &[
+            "--features",
+            "zenoh",
+            "--no-dedupe",
+            "--prefix",
+            "depth",
+            "--format",
+            "{p}",
+        ],
+    );
     let mut path: Vec<String> = Vec::new();
     let mut found = 0;
     for line in tree.lines() {

@@ -46,10 +46,11 @@ fn a_late_agent_shows_its_lateness_in_the_round_trip_and_a_degraded_link_is_told
     let profile = read_json(&out.join("profile.json"));
     let late = round_trip_p50_us(&profile, 1);
     eprintln!("an agent 120 ms late: round trip p50 {late} us");
-    assert!(
+    finished.assert_holds(
         late >= 120_000.0,
-        "robot 1's agent answers 120 ms late, so its round trip is at least that: p50 {late} us\n{}",
-        finished.describe()
+        &format!(
+            "robot 1's agent answers 120 ms late, so its round trip is at least that: p50 {late} us"
+        ),
     );
     let max = profile["per_agent"][1]["round_trip"]["max_us"]
         .as_f64()
@@ -63,10 +64,9 @@ fn a_late_agent_shows_its_lateness_in_the_round_trip_and_a_degraded_link_is_told
         punctual < TICK_US,
         "robot 0's agent is not late: p50 {punctual} us"
     );
-    assert!(
+    finished.assert_holds(
         finished.stderr().contains("robot 1: degraded link"),
-        "the launcher tells the degraded link while the run goes on\n{}",
-        finished.describe()
+        "the launcher tells the degraded link while the run goes on",
     );
     finished.assert_stderr_lacks("robot 0: degraded link");
     let summary = read_json(&out.join("summary.json"));
@@ -127,7 +127,7 @@ fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_i
     let remote = remote.finish(Duration::from_secs(60));
     relay.close_input();
     finished.assert_success();
-    assert!(remote.output.status.success(), "{}", remote.describe());
+    remote.assert_success();
     let profile = read_json(&out.join("profile.json"));
     let delayed = round_trip_p50_us(&profile, 1);
     let summary = read_json(&out.join("summary.json"));
@@ -135,15 +135,13 @@ fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_i
         "70 ± 30 ms each way: round trip p50 {delayed} us; braked ticks {}",
         summary["braked_ticks"]
     );
-    assert!(
+    finished.assert_holds(
         (delayed - 140_000.0).abs() <= TICK_US,
-        "p50 round trip {delayed} us across 70 + 70 ms of delay\n{}",
-        finished.describe()
+        &format!("p50 round trip {delayed} us across 70 + 70 ms of delay"),
     );
-    assert!(
+    finished.assert_holds(
         finished.stderr().contains("robot 1: degraded link"),
-        "the launcher tells the degraded link while the run goes on\n{}",
-        finished.describe()
+        "the launcher tells the degraded link while the run goes on",
     );
     t.assert_clean();
 }

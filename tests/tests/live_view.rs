@@ -18,15 +18,13 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
+use formation_proto::wire::RunId;
 use formation_tests::{
-    LeakCheck, LiveProcess, ProcessTest, await_connected, formation_run, free_tcp_port, python,
-    repo_root, run, unique_run_id,
+    LiveProcess, ProcessTest, await_connected, formation_run, free_tcp_port, printed_json, python,
+    repo_root, run,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
-
-/// `foxglove_client.py`'s exit status for a missing package.
-const CLIENT_MISSING_PACKAGE: i32 = 3;
 
 /// The independent client, `foxglove_client.py ARGS`, started.
 fn client(args: &[&str]) -> LiveProcess {
@@ -40,16 +38,10 @@ fn client(args: &[&str]) -> LiveProcess {
 /// The JSON a finished client printed; fails the test with its words (and the fix, for a
 /// missing package).
 fn client_result(client: LiveProcess) -> serde_json::Value {
-    let finished = client.finish(Duration::from_secs(120));
-    assert_ne!(
-        finished.output.status.code(),
-        Some(CLIENT_MISSING_PACKAGE),
-        "the independent client is not installed: run `bash .ci/setup-python --test`\n{}",
-        finished.describe()
-    );
-    finished.assert_success();
-    serde_json::from_str(finished.stdout().trim())
-        .unwrap_or_else(|e| panic!("the client printed no JSON ({e})\n{}", finished.describe()))
+    printed_json(
+        &client.finish(Duration::from_secs(120)),
+        "the independent Foxglove client",
+    )
 }
 
 /// How late each tick of run 0 began against the schedule of the world's clock \[ms\], sorted.
@@ -73,12 +65,10 @@ fn quantile(samples: &[f64], q: f64) -> f64 {
     samples[at]
 }
 
-/// Case 1 over processes with `extra` flags, its output in `out`, started.
-fn launch(tag: &str, scenario: &Path, out: &Path, extra: &[&str]) -> (LiveProcess, LeakCheck) {
-    let run_id = unique_run_id(tag);
-    let leaks = LeakCheck::new(&run_id);
-    let launch = LiveProcess::spawn(formation_run(&run_id, scenario, out, extra));
-    (launch, leaks)
+/// Case 1 over processes with `extra` flags, its output in `out`, started under a run id of
+/// `t`'s tagged `tag`.
+fn launch(run: &RunId, scenario: &Path, out: &Path, extra: &[&str]) -> LiveProcess {
+    LiveProcess::spawn(formation_run(run, scenario, out, extra))
 }
 
 /// A client that connects to a realtime team after its run began sees it from then on: every
@@ -90,17 +80,13 @@ fn a_late_websocket_client_decodes_the_live_scans_and_tf() {
     let scenario = t.case1(15.0);
     let out = t.out();
     let address = format!("127.0.0.1:{}", free_tcp_port());
-    let (mut team, leaks) = launch(
-        "lvwatch",
-        &scenario,
-        &out,
-        &["--clock", "realtime", "--foxglove", &address],
-    );
+    let flags = ["--clock", "realtime", "--foxglove", &address];
+    let mut team = launch(&t.run, &scenario, &out, &flags);
     await_connected(&mut team);
     std::thread::sleep(Duration::from_secs(2));
     let watched = client_result(client(&["watch", &format!("ws://{address}"), "30"]));
     team.finish(LIMIT).assert_success();
-    leaks.assert_clean();
+    t.assert_clean();
 
     let topics: Vec<&str> = watched["topics"]
         .as_array()
@@ -164,21 +150,22 @@ fn a_client_that_stops_reading_leaves_the_tick_timing_as_it_is() {
     let baseline_out = t.path().join("baseline");
     let stalled_out = t.path().join("stalled");
     let address = format!("127.0.0.1:{}", free_tcp_port());
-    let (mut baseline, baseline_leaks) =
-        launch("lvbase", &scenario, &baseline_out, &["--clock", "realtime"]);
-    let (mut team, leaks) = launch(
-        "lvstall",
+    let (baseline_run, baseline_leaks) = t.another_run("lvbase");
+    let mut baseline = launch(
+        &baseline_run,
         &scenario,
-        &stalled_out,
-        &["--clock", "realtime", "--foxglove", &address],
+        &baseline_out,
+        &["--clock", "realtime"],
     );
+    let flags = ["--clock", "realtime", "--foxglove", &address];
+    let mut team = launch(&t.run, &scenario, &stalled_out, &flags);
     await_connected(&mut baseline);
     await_connected(&mut team);
     let stalled = client_result(client(&["stall", &format!("ws://{address}"), "15"]));
     baseline.finish(LIMIT).assert_success();
     team.finish(LIMIT).assert_success();
     baseline_leaks.assert_clean();
-    leaks.assert_clean();
+    t.assert_clean();
     assert!(
         stalled["received_before_stall"].as_u64().unwrap() > 0,
         "{stalled}"
@@ -207,15 +194,16 @@ fn lockstep_results_are_the_same_bytes_with_and_without_a_client() {
     let lockstep = ["--clock", "lockstep", "--pace-ms", "20"];
 
     let plain_out = t.path().join("plain");
-    let (plain, leaks) = launch("lvplain", &scenario, &plain_out, &lockstep);
+    let plain = launch(&t.run, &scenario, &plain_out, &lockstep);
     plain.finish(LIMIT).assert_success();
-    leaks.assert_clean();
+    t.assert_clean();
 
     let viewed_out = t.path().join("viewed");
     let address = format!("127.0.0.1:{}", free_tcp_port());
     let mut flags = lockstep.to_vec();
     flags.extend(["--foxglove", address.as_str()]);
-    let (mut team, leaks) = launch("lvviewed", &scenario, &viewed_out, &flags);
+    let (viewed_run, leaks) = t.another_run("lvviewed");
+    let mut team = launch(&viewed_run, &scenario, &viewed_out, &flags);
     let watcher = client(&["watch", &format!("ws://{address}"), "30"]);
     await_connected(&mut team);
     let watched = client_result(watcher);

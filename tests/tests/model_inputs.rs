@@ -4,25 +4,17 @@
 //! what the policy was given.
 
 use std::path::Path;
-use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{ProcessTest, binaries, repo_root, run};
+use formation_tests::{ProcessTest, policy_eval_once, repo_root, report_command, run};
 
 /// The watchdog limit: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
 
 /// `formation eval --controller policy --runs 1 --scenario SCENARIO --model MODEL --out OUT`.
 fn eval_out(scenario: &Path, model: &Path, out: &Path) {
-    let mut command = Command::new(&binaries().cli);
-    command
-        .args(["eval", "--controller", "policy", "--runs", "1"])
-        .arg("--scenario")
-        .arg(scenario)
-        .arg("--model")
-        .arg(model)
-        .arg("--out")
-        .arg(out);
+    let mut command = policy_eval_once(scenario, model);
+    command.arg("--out").arg(out);
     run(command, LIMIT).assert_success();
 }
 
@@ -36,9 +28,7 @@ fn the_report_says_what_input_the_scaled_and_the_paper_window_models_were_given(
         eval_out(&scenario, &model, &evals.join(name));
     }
     let html = t.path().join("report.html");
-    let mut report = Command::new(&binaries().cli);
-    report.arg("report").arg(&evals).arg("--out").arg(&html);
-    run(report, LIMIT).assert_success();
+    run(report_command(&evals, &html), LIMIT).assert_success();
     let page = std::fs::read_to_string(&html).expect("the report");
 
     for (name, scales, says) in [

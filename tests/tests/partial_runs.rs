@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, files_under, formation_run,
-    read_json, repo_root, run, send_signal, world_pid,
+    LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, compared_steps, files_under,
+    formation_run, read_json, repo_root, report_command, run, send_signal, world_pid,
 };
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
@@ -49,9 +49,7 @@ fn assert_kept_incomplete(out: &Path, min_ticks: usize, describe: &str) -> serde
     assert_eq!(incomplete[0]["ticks"], ticks);
 
     let html_path = out.with_file_name("report.html");
-    let mut report = Command::new(&binaries().cli);
-    report.arg("report").arg(out).arg("--out").arg(&html_path);
-    run(report, LIMIT).assert_success();
+    run(report_command(out, &html_path), LIMIT).assert_success();
     let html = std::fs::read_to_string(&html_path).expect("report.html");
     assert!(
         html.contains("1 of 1 run incomplete (stopped early"),
@@ -79,17 +77,12 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
     std::thread::sleep(Duration::from_secs(4));
     send_signal(launch.id(), "-INT");
     let finished = launch.finish(LIMIT);
-    assert!(
-        !finished.output.status.success(),
-        "an interrupted run fails\n{}",
-        finished.describe()
-    );
+    finished.assert_failed("an interrupted run fails");
     finished.assert_stderr_has("interrupted by Ctrl-C");
     t.assert_clean();
-    assert!(
+    finished.assert_holds(
         finished.stderr().contains("recorded") && !finished.stderr().contains('\u{1b}'),
-        "log lines to a pipe are plain text\n{}",
-        finished.describe()
+        "log lines to a pipe are plain text",
     );
     // 4 s at 20 Hz is 80 ticks; allow for a slow start on a loaded machine.
     let log = assert_kept_incomplete(&out, 40, &finished.describe());
@@ -123,9 +116,7 @@ fn ctrl_c_keeps_the_partial_run_marked_incomplete() {
         "{report}"
     );
     replayed.assert_stdout_has("the run is incomplete: it stopped before its last tick");
-    let compared: u64 = report["robots"]
-        .as_array()
-        .map_or(0, |r| r.iter().filter_map(|r| r["compared"].as_u64()).sum());
+    let compared = compared_steps(&report);
     assert!(compared >= 3 * 40, "{report}");
 }
 
@@ -147,11 +138,7 @@ fn a_sigkilled_world_leaves_a_journal_the_launcher_recovers() {
     };
     send_signal(world, "-KILL");
     let finished = launch.finish(LIMIT);
-    assert!(
-        !finished.output.status.success(),
-        "a killed world fails the launch\n{}",
-        finished.describe()
-    );
+    finished.assert_failed("a killed world fails the launch");
     finished.assert_stderr_has("recovered run 0");
     t.assert_clean();
     let log = assert_kept_incomplete(&out, 20, &finished.describe());
@@ -207,16 +194,11 @@ fn a_full_disk_fails_the_run_promptly_and_leaves_no_temporary_file() {
     let ticks = 2400;
     let scenario = t.case1(120.0);
     let finished = launch(&t.run, &scenario, &out, &["--clock", "lockstep"]).finish(LIMIT);
-    assert!(
-        !finished.output.status.success(),
-        "a run that cannot be written fails\n{}",
-        finished.describe()
-    );
+    finished.assert_failed("a run that cannot be written fails");
     let stderr = finished.stderr();
-    assert!(
+    finished.assert_holds(
         stderr.contains("run-0000.journal") && stderr.contains("the disk is full"),
-        "the error names the file and the full disk\n{}",
-        finished.describe()
+        "the error names the file and the full disk",
     );
     t.assert_clean();
 
@@ -225,10 +207,9 @@ fn a_full_disk_fails_the_run_promptly_and_leaves_no_temporary_file() {
         .iter()
         .filter(|p| p.to_string_lossy().contains(".tmp"))
         .collect();
-    assert!(
+    finished.assert_holds(
         temporary.is_empty(),
-        "temporary files left: {temporary:?}\n{}",
-        finished.describe()
+        &format!("temporary files left: {temporary:?}"),
     );
     // The run stopped when the disk filled: the journal holds whole lines, far fewer than the
     // scenario's ticks (it does not play on and fail only at the end).

@@ -9,12 +9,11 @@ use std::time::Duration;
 
 use formation_onnx::OnnxPolicy;
 use formation_proto::PolicyIo;
-use formation_robot_agent::decision::PolicyController;
 use formation_tests::{
-    ProcessTest, assert_bit_identical, eval_recorded, lockstep_over_processes, read_json, replay,
+    ProcessTest, assert_lockstep_equals_in_process, eval_recorded, read_json, replay,
     write_tiny_model_with,
 };
-use formation_world::{Scenario, run_episode};
+use formation_world::Scenario;
 
 /// The watchdog limit: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(240);
@@ -63,16 +62,8 @@ fn lockstep_is_bit_identical_to_in_process(input: &Input) {
         .io();
     assert_eq!((input.declared)(&io).as_deref(), Some(input.expected));
     let scenario = Scenario::from_path(&t.case1(4.0)).expect("scenario");
-    let over_processes = lockstep_over_processes(&scenario, 1, &model);
-    let spec = scenario.run_spec(scenario.seed(), 0);
-    let models = [model.as_path(); 3];
-    let mut controller =
-        PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
-    // Each robot knows its wheels, as the world tells every agent over processes.
-    controller.set_wheel_limits(spec.world.robot.wheel_limits());
-    let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
-    assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
-    assert_bit_identical(&over_processes[0], &in_process);
+    // 4 s at 20 Hz.
+    assert_lockstep_equals_in_process(&scenario, &model, 81);
 }
 
 fn replays_bit_identical_and_a_model_without_it_diverges(input: &Input) {
@@ -108,7 +99,7 @@ fn replays_bit_identical_and_a_model_without_it_diverges(input: &Input) {
     write_tiny_model_with(&plain, 5, &["--output", "formation_velocity"]);
     let json = t.path().join("plain.json");
     let other = replay(&file, &["--model", plain.to_str().expect("utf-8")], &json);
-    assert_eq!(other.output.status.code(), Some(1), "{}", other.describe());
+    other.assert_exit(1);
     assert_eq!(read_json(&json)["diverged"], true);
 }
 

@@ -4,7 +4,6 @@
 //! as in-process, and a model that declares an output no consumer knows is refused by name.
 
 use std::path::Path;
-use std::process::Command;
 use std::time::Duration;
 
 use formation_onnx::{OnnxPolicy, PolicyOutput};
@@ -12,8 +11,7 @@ use formation_perception::policy_input::formation_velocity_to_wheels;
 use formation_proto::{Goal, PolicyInput, WheelLimits};
 use formation_robot_agent::decision::{Agent, PolicyController};
 use formation_tests::{
-    ProcessTest, assert_bit_identical, binaries, lockstep_over_processes, run,
-    write_tiny_model_with,
+    ProcessTest, assert_lockstep_equals_in_process, policy_eval_once, run, write_tiny_model_with,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -98,16 +96,11 @@ fn a_formation_velocity_team_in_lockstep_over_processes_is_bit_identical_to_in_p
     std::fs::write(&short, limited).expect("the limited scenario");
     let scenario = Scenario::from_path(&short).expect("scenario");
     assert_eq!(scenario.world_config().robot.max_wheel_accel, Some(1.0));
-    let over_processes = lockstep_over_processes(&scenario, 1, &model);
+    // 4 s at 20 Hz.
+    let in_process = assert_lockstep_equals_in_process(&scenario, &model, 81);
+    // Unshaped agents drive another run: the limit did reach the agents over processes.
     let spec = scenario.run_spec(scenario.seed(), 0);
     let models = [model.as_path(); 3];
-    let mut controller =
-        PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
-    controller.set_wheel_limits(spec.world.robot.wheel_limits());
-    let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
-    assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
-    assert_bit_identical(&over_processes[0], &in_process);
-    // Unshaped agents drive another run: the limit did reach the agents over processes.
     let mut unshaped =
         PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
     let unaware = run_episode(&spec, &mut unshaped, &mut |_, _| {}).expect("in-process run");
@@ -122,26 +115,9 @@ fn a_model_declaring_an_output_no_consumer_knows_is_refused_naming_it() {
     let t = ProcessTest::start("unknown_output_refused", LIMIT);
     let model = model_declaring(t.path(), "torques");
     let scenario = t.case1(2.0);
-    let mut eval = Command::new(&binaries().cli);
-    eval.args([
-        "eval",
-        "--controller",
-        "policy",
-        "--runs",
-        "1",
-        "--scenario",
-    ])
-    .arg(&scenario)
-    .arg("--model")
-    .arg(&model);
-    let finished = run(eval, LIMIT);
+    let finished = run(policy_eval_once(&scenario, &model), LIMIT);
     finished.assert_failure_mentioning("declares the output \"torques\" (formation.output)");
-    assert_eq!(
-        finished.output.status.code(),
-        Some(2),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_exit(2);
     let err = OnnxPolicy::load(&model).unwrap_err().to_string();
     assert!(err.contains("cannot use"), "{err}");
 }

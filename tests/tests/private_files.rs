@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{ProcessTest, binaries, run, test_model};
+use formation_tests::{ProcessTest, binaries, report_command, run, test_model};
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
@@ -92,12 +92,7 @@ fn a_runs_files_are_private_under_umask_022() {
         ],
     );
 
-    let mut report = Command::new(&binaries().cli);
-    report
-        .arg("report")
-        .arg(&out)
-        .arg("--out")
-        .arg(t.path().join("report/index.html"));
+    let report = report_command(&out, &t.path().join("report/index.html"));
     run(under_umask_022(&report), LIMIT).assert_success();
     assert_private(&t.path().join("report"), &["index.html"]);
 }

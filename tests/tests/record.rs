@@ -14,12 +14,27 @@ use std::time::Duration;
 
 use formation_tests::mcap_readers as readers;
 use formation_tests::{
-    LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, eval_recorded, expert_eval_once,
-    formation_run, read_json, record_case1_over_processes, repo_root, run, send_signal, test_model,
-    world_pid,
+    Finished, LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, compared_steps,
+    eval_recorded, expert_eval_once, formation_run, read_json, record_case1_over_processes,
+    repo_root, run, send_signal, test_model, world_pid,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
+/// `formation eval --controller expert` of `scenario` in-process, recorded into `record`
+/// ([`eval_recorded`]).
+fn expert_eval_recorded(scenario: &Path, record: &Path, out: &Path) -> Finished {
+    eval_recorded(
+        &[
+            "--controller",
+            "expert",
+            "--scenario",
+            scenario.to_str().unwrap(),
+        ],
+        record,
+        out,
+    )
+}
+
 fn os(s: &str) -> &std::ffi::OsStr {
     s.as_ref()
 }
@@ -80,16 +95,7 @@ fn a_16_robot_recording_is_read_by_mcap_rosbags_and_rerun() {
     let record = t.path().join("rec");
     std::fs::create_dir(&record).unwrap();
     let out = t.out();
-    let finished = eval_recorded(
-        &[
-            "--controller",
-            "expert",
-            "--scenario",
-            scenario.to_str().unwrap(),
-        ],
-        &record,
-        &out,
-    );
+    let finished = expert_eval_recorded(&scenario, &record, &out);
     finished.assert_success();
     assert_independent_readers_open(
         &record.join("run-0000.mcap"),
@@ -152,14 +158,13 @@ fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_c
     };
     send_signal(world, "-KILL");
     let finished = launch.finish(LIMIT);
-    assert!(!finished.output.status.success(), "{}", finished.describe());
+    finished.assert_failed("expected failure");
     t.assert_clean();
     let streamed = readers(&[os("stream"), file.as_os_str()]);
     let latest = streamed["latest_s"].as_f64().unwrap_or(0.0);
-    assert!(
+    finished.assert_holds(
         latest >= 9.0,
-        "the streaming reader read {latest} s of data\n{streamed}\n{}",
-        finished.describe()
+        &format!("the streaming reader read {latest} s of data\n{streamed}"),
     );
     // The run was cut short, so no summary was written: the reader stops at the cut.
     assert!(latest < 30.0, "{streamed}");
@@ -175,12 +180,7 @@ fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_c
     let mut replay = Command::new(&binaries().cli);
     replay.arg("replay").arg(&file).arg("--json").arg(&json);
     let replayed = run(replay, LIMIT);
-    assert_eq!(
-        replayed.output.status.code(),
-        Some(2),
-        "{}",
-        replayed.describe()
-    );
+    replayed.assert_exit(2);
     let report = read_json(&json);
     assert_eq!(report["complete"], false, "{report}");
     let bytes_read = report["bytes_read"].as_u64().unwrap_or(0);
@@ -191,9 +191,7 @@ fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_c
         "{}",
         replayed.describe()
     );
-    let compared: u64 = report["robots"]
-        .as_array()
-        .map_or(0, |r| r.iter().filter_map(|r| r["compared"].as_u64()).sum());
+    let compared = compared_steps(&report);
     // At least 9 of the 10 s played, for 3 robots, were replayed.
     assert!(compared >= 3 * 180, "{report}");
 }
@@ -250,17 +248,11 @@ fn bad_record_targets_are_refused_before_anything_runs() {
         command.arg("--record").arg(&target);
         let finished = run(command, LIMIT);
         finished.assert_failure_mentioning(&needle);
-        assert!(
+        finished.assert_holds(
             !finished.stdout().contains("agents connected"),
-            "refused before the launch\n{}",
-            finished.describe()
+            "refused before the launch",
         );
-        assert_eq!(
-            finished.output.status.code(),
-            Some(2),
-            "{}",
-            finished.describe()
-        );
+        finished.assert_exit(2);
         // A refusal leaves nothing behind: no --out folder, no run-specs.json (issue 39).
         assert!(
             !out.exists(),
@@ -289,16 +281,7 @@ fn a_full_disk_is_said_before_the_run_and_mid_run_stops_only_the_recording() {
 
     // Mid-run, in-process: 20 s of case 1 take about 700 kB.
     let out = t.path().join("eval-out");
-    let finished = eval_recorded(
-        &[
-            "--controller",
-            "expert",
-            "--scenario",
-            scenario.to_str().unwrap(),
-        ],
-        disk.dir(),
-        &out,
-    );
+    let finished = expert_eval_recorded(&scenario, disk.dir(), &out);
     finished.assert_success();
     let stderr = finished.stderr();
     let file = disk.dir().join("run-0000.mcap");
@@ -348,16 +331,7 @@ fn a_full_disk_is_said_before_the_run_and_mid_run_stops_only_the_recording() {
         .arg("bs=4k")
         .stderr(Stdio::null())
         .status();
-    let finished = eval_recorded(
-        &[
-            "--controller",
-            "expert",
-            "--scenario",
-            scenario.to_str().unwrap(),
-        ],
-        disk.dir(),
-        &t.path().join("eval-full"),
-    );
+    let finished = expert_eval_recorded(&scenario, disk.dir(), &t.path().join("eval-full"));
     finished.assert_failure_mentioning("the disk is full");
     assert!(
         !finished.stdout().contains("Table I"),

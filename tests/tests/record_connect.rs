@@ -247,10 +247,9 @@ fn recorder_under_way(listen: &str, run_id: &RunId, file: &Path, login: &Path) -
     await_recorder_connected(&mut recorder, run_id);
     let deadline = std::time::Instant::now() + Duration::from_secs(30);
     while !file.exists() {
-        assert!(
+        recorder.assert_holds(
             std::time::Instant::now() < deadline,
-            "no recording within 30 s\n{}",
-            recorder.describe()
+            "no recording within 30 s",
         );
         std::thread::sleep(Duration::from_millis(50));
     }
@@ -283,12 +282,7 @@ fn a_late_recorder_says_where_it_joined_and_sigint_finishes_its_file() {
     let recorder = recorder_under_way(&listen, &t.run, &late, &login);
     send_signal(recorder.id(), "INT");
     let recorded = recorder.finish(Duration::from_secs(60));
-    assert_eq!(
-        recorded.output.status.code(),
-        Some(130),
-        "{}",
-        recorded.describe()
-    );
+    recorded.assert_exit(130);
     assert!(
         recorded.stdout().contains("recorded run 0 to")
             && recorded
@@ -342,12 +336,7 @@ fn a_world_killed_mid_recording_ends_the_recorder_with_a_clear_error_and_a_reada
     let world = world_pid(&t.run).expect("the world runs");
     send_signal(world, "KILL");
     let recorded = recorder.finish(Duration::from_secs(60));
-    assert_eq!(
-        recorded.output.status.code(),
-        Some(2),
-        "{}",
-        recorded.describe()
-    );
+    recorded.assert_exit(2);
     let said = recorded.stderr();
     assert!(
         said.contains("went before its last run ended")
@@ -356,7 +345,7 @@ fn a_world_killed_mid_recording_ends_the_recorder_with_a_clear_error_and_a_reada
         recorded.describe()
     );
     let launched = launch.finish(LIMIT);
-    assert!(!launched.output.status.success(), "{}", launched.describe());
+    launched.assert_failed("expected failure");
     assert_read_to_its_end(&file, 50 * 3 * 4);
     let metadata = mcap_readers(&["metadata".as_ref(), file.as_os_str()]);
     assert_eq!(metadata["clock"], "lockstep", "{metadata}");

@@ -9,9 +9,8 @@ use std::time::{Duration, Instant};
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LaunchSecret, LeakCheck, LiveProcess, ProcessTest, RobotLog, TempDir, agent_pids,
-    await_connected, await_rejoin, case1_scenario, formation_run, run, send_signal, unique_run_id,
-    world_pid,
+    LaunchSecret, LiveProcess, ProcessTest, RobotLog, TempDir, agent_pids, await_connected,
+    await_rejoin, case1_scenario, formation_run, run, send_signal, the_agent, world_pid,
 };
 use formation_transport_iceoryx2::naming::RunNamespace;
 use rand::{Rng, SeedableRng};
@@ -26,17 +25,6 @@ fn run_command(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -
 
 fn launch(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> LiveProcess {
     LiveProcess::spawn(run_command(run_id, dir, duration_s, extra))
-}
-
-fn the_agent(run_id: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
-    let pids = agent_pids(run_id, robot);
-    assert_eq!(
-        pids.len(),
-        1,
-        "one agent of robot {robot}: {pids:?}\n{}",
-        launch.describe()
-    );
-    pids[0]
 }
 
 fn alive(pid: u32) -> bool {
@@ -195,10 +183,9 @@ fn a_kill_near_the_end_whose_restart_is_under_way_does_not_fail_the_run() {
 /// refused without touching the winner's files, and the winner completes.
 #[test]
 fn two_launches_with_one_run_id_exactly_one_wins() {
-    let _t = ProcessTest::start("same_run_id", LIMIT);
+    let t = ProcessTest::start("same_run_id", LIMIT);
     for attempt in 0..3 {
-        let run_id = unique_run_id("twin");
-        let leaks = LeakCheck::new(&run_id);
+        let (run_id, leaks) = t.another_run("twin");
         let dirs = [TempDir::new("twin-a"), TempDir::new("twin-b")];
         let commands: Vec<Command> = dirs
             .iter()

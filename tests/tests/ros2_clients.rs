@@ -16,9 +16,8 @@
 //! Every test uses its own free TCP port and scratch folder, runs alone within this binary
 //! ([`one_at_a_time`]), and stops every process it started.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
-use std::sync::OnceLock;
 use std::time::Duration;
 
 use formation_proto::Goal;
@@ -27,202 +26,16 @@ use formation_ros2::{
     Header, LaserScan, PartialScan, Time, Twist, twist_from_wheels, yaw_from_quaternion,
 };
 use formation_tests::ros2::{
-    InProcessDecision, answered_bits, client_script, is_event, parse_event, range_to_discs,
-    twist_bits,
+    CMD_VEL_TOPIC, GOAL_TOPICS, IMU_TOPIC, InProcessDecision, Outcome, SCAN_TOPIC, answered_bits,
+    clients, plan, range_to_discs, session, topic_flags, twist_bits,
 };
-use formation_tests::{
-    Finished, LiveProcess, ProcessTest, TempDir, binaries, free_tcp_port, python, run, send_signal,
-    test_model,
-};
+use formation_tests::{ProcessTest, binaries, run, test_model};
 use rand::{Rng, SeedableRng};
 use serde_json::{Value, json};
 
 const LIMIT: Duration = Duration::from_secs(300);
-/// How long the client may take to come up, or to run its plan.
-const CLIENT_WAIT: Duration = Duration::from_secs(120);
 /// The agent's default wheel separation (the P3-DX's), which these tests do not override.
 const WHEEL_SEPARATION: f64 = 0.331;
-/// The message the client prints when a package is missing, and its exit status.
-const MISSING_PACKAGE: i32 = 3;
-
-// ---------------------------------------------------------------------------------------------
-// The client and its Python
-
-/// The interpreter with the client's packages. A missing package or interpreter fails the tests
-/// that need it with the fix (no test passes by skipping), as does any other failure of
-/// `ros2_client.py check` (a broken script).
-fn clients() -> &'static Path {
-    static FOUND: OnceLock<Result<PathBuf, String>> = OnceLock::new();
-    let found = FOUND.get_or_init(|| {
-        let python = python();
-        let output = Command::new(&python)
-            .arg(client_script())
-            .arg("check")
-            .output();
-        let missing = match output {
-            Ok(out) if out.status.success() => return Ok(python),
-            Ok(out) if out.status.code() == Some(MISSING_PACKAGE) => {
-                String::from_utf8_lossy(&out.stderr).trim().to_owned()
-            }
-            Ok(out) => panic!(
-                "{} {} check failed ({}):\n{}{}",
-                python.display(),
-                client_script().display(),
-                out.status,
-                String::from_utf8_lossy(&out.stdout),
-                String::from_utf8_lossy(&out.stderr)
-            ),
-            Err(e) => format!("cannot run {}: {e}", python.display()),
-        };
-        Err(format!(
-            "the independent ROS 2 clients are not installed for {} ({missing}); install them \
-             with `bash .ci/setup-python --test` (tests/python/requirements-ros2.txt)",
-            python.display()
-        ))
-    });
-    match found {
-        Ok(python) => python,
-        Err(why) => panic!("{why}"),
-    }
-}
-
-/// What a client and an agent did in one session.
-struct Outcome {
-    events: Vec<Value>,
-    client: Finished,
-    agent: Finished,
-}
-
-impl Outcome {
-    fn all(&self, name: &str) -> Vec<&Value> {
-        self.events.iter().filter(|e| e["event"] == name).collect()
-    }
-
-    fn one(&self, name: &str) -> &Value {
-        let found = self.all(name);
-        assert_eq!(found.len(), 1, "one {name} event\n{}", self.describe());
-        found[0]
-    }
-
-    /// The answers to the plan's steps, in order.
-    fn answers(&self) -> Vec<&Value> {
-        self.all("answer")
-    }
-
-    fn agent_stderr(&self) -> String {
-        self.agent.stderr()
-    }
-
-    fn describe(&self) -> String {
-        format!(
-            "=== client ===\n{}\n=== agent ===\n{}",
-            self.client.describe(),
-            self.agent.describe()
-        )
-    }
-
-    /// Panics unless the agent's stderr contains `needle`.
-    fn assert_agent_said(&self, needle: &str) {
-        assert!(
-            self.agent_stderr().contains(needle),
-            "the agent's stderr should say {needle:?}\n{}",
-            self.describe()
-        );
-    }
-
-    /// The checks every session ends with: the client found nothing wrong with any sample on
-    /// `cmd_vel` (key with rosbags' hash, 33-byte attachment with a 16-byte GID, CDR header),
-    /// the agent's sequence numbers increase under one GID, and the agent left on SIGTERM.
-    fn assert_clean_wire_and_exit(&self) {
-        let summary = self.one("summary");
-        assert_eq!(summary["problems"], json!([]), "{}", self.describe());
-        assert_eq!(
-            summary["sequences_increase"],
-            json!(true),
-            "{}",
-            self.describe()
-        );
-        let gids = summary["gids"].as_array().expect("gids");
-        assert_eq!(gids.len(), 1, "one publisher GID\n{}", self.describe());
-        assert_eq!(
-            self.agent.output.status.code(),
-            Some(143),
-            "the agent exits with 143 on SIGTERM\n{}",
-            self.describe()
-        );
-        self.assert_agent_said("exiting: termination signal (SIGTERM)");
-    }
-}
-
-/// Runs one session: the client (the router) with `plan`, then `formation-agent --transport
-/// ros2` connected to it with `flags`; waits for the client's plan to end (sending the agent
-/// SIGTERM when the client says it is driving, for a plan that holds), then stops the agent with
-/// SIGTERM and lets the client print its summary.
-fn session(python: &Path, dir: &TempDir, name: &str, plan: &Value, flags: &[&str]) -> Outcome {
-    let plan_path = dir.path().join(format!("{name}.json"));
-    std::fs::write(&plan_path, serde_json::to_vec(plan).expect("plan JSON")).expect("plan file");
-    let endpoint = format!("tcp/127.0.0.1:{}", free_tcp_port());
-    let mut client = Command::new(python);
-    client
-        .arg(client_script())
-        .arg("run")
-        .arg(&plan_path)
-        .args(["--listen", &endpoint]);
-    let mut client = LiveProcess::spawn_with_input(client, Some(""));
-    if client
-        .wait_for_line(CLIENT_WAIT, |l| is_event(l, &["listening"]))
-        .is_none()
-    {
-        panic!("the client did not listen\n{}", client.describe());
-    }
-    let mut agent = Command::new(&binaries().agent);
-    agent
-        .args(["--transport", "ros2", "--connect", &endpoint])
-        .args(["--connect-timeout-ms", "30000", "--model"])
-        .arg(test_model())
-        .args(flags);
-    let agent = LiveProcess::spawn(agent);
-    let holds = plan["hold"] == json!(true);
-    let wanted: &[&str] = if holds {
-        &["driving", "error"]
-    } else {
-        &["done", "error"]
-    };
-    let mut line = client.wait_for_line(CLIENT_WAIT, |l| is_event(l, wanted));
-    let mut terminated = false;
-    if holds && line.as_deref().is_some_and(|l| is_event(l, &["driving"])) {
-        // Stray signals first: they interrupt nothing and end nothing (the agent must still be
-        // there for SIGTERM, and exit 130 on it).
-        for stray in ["USR1", "USR2", "CONT", "ALRM"] {
-            send_signal(agent.id(), stray);
-        }
-        send_signal(agent.id(), "TERM");
-        terminated = true;
-        line = client.wait_for_line(CLIENT_WAIT, |l| is_event(l, &["done", "error"]));
-    }
-    let ok = line.as_deref().is_some_and(|l| is_event(l, &["done"]));
-    if !terminated {
-        // Tolerates an agent that is gone already: its status tells.
-        let _ = Command::new("kill")
-            .args(["-TERM", &agent.id().to_string()])
-            .status();
-    }
-    let agent = agent.finish(Duration::from_secs(60));
-    client.close_input();
-    let client = client.finish(Duration::from_secs(60));
-    let events = client.stdout().lines().filter_map(parse_event).collect();
-    let outcome = Outcome {
-        events,
-        client,
-        agent,
-    };
-    assert!(
-        ok,
-        "the client did not complete its plan\n{}",
-        outcome.describe()
-    );
-    outcome
-}
 
 // ---------------------------------------------------------------------------------------------
 // Scans, orientations and goals, and the decision in this process
@@ -378,58 +191,12 @@ fn step(orientation: Option<Orientation>, scan: &Scan) -> Value {
     json!({ "imu": orientation.map(Orientation::to_json), "scan": scan.to_json() })
 }
 
-const SCAN_TOPIC: &str = "/scan";
-const IMU_TOPIC: &str = "/imu";
-const CMD_VEL_TOPIC: &str = "/cmd_vel";
-const GOAL_TOPICS: [&str; 3] = [
-    "/team/goal/heading",
-    "/team/goal/distance",
-    "/team/goal/speed",
-];
-
 /// The goal of every test: φ* 0.3 rad, d* 1.2 m, v* 0.5 m/s.
 const GOAL: Goal = Goal {
     phi_star: 0.3,
     d_star: 1.2,
     v_star: 0.5,
 };
-
-/// The agent's flags for the topics above, with the goal on its three topics.
-fn topic_flags() -> Vec<&'static str> {
-    vec![
-        "--scan",
-        SCAN_TOPIC,
-        "--orientation",
-        IMU_TOPIC,
-        "--orientation-type",
-        "imu",
-        "--cmd-vel",
-        CMD_VEL_TOPIC,
-        "--heading-topic",
-        GOAL_TOPICS[0],
-        "--distance-topic",
-        GOAL_TOPICS[1],
-        "--speed-topic",
-        GOAL_TOPICS[2],
-    ]
-}
-
-/// A plan over the topics above with the goal published on its topics.
-fn plan(steps: Vec<Value>) -> Value {
-    json!({
-        "domain_id": 0,
-        "scan_topic": SCAN_TOPIC,
-        "orientation_topic": IMU_TOPIC,
-        "cmd_vel_topic": CMD_VEL_TOPIC,
-        "goal_topics": GOAL_TOPICS,
-        "goal_bits": [GOAL.phi_star.to_bits(), GOAL.d_star.to_bits(), GOAL.v_star.to_bits()],
-        "goal_via_sdk": false,
-        "steps": steps,
-        "stream": null,
-        "hold": false,
-        "discover": false,
-    })
-}
 
 /// The Twist of the agent's decision computed in this process
 /// ([`InProcessDecision`]), made with the robot's wheel separation.
@@ -459,11 +226,7 @@ fn assert_answers(outcome: &Outcome, answer: &Value, scan: &Scan) {
 
 /// Panics unless `answer` drives exactly as `expected`, bit for bit.
 fn assert_drives_as(outcome: &Outcome, answer: &Value, expected: &Twist, what: &str) {
-    assert!(
-        !is_zero(answer),
-        "{what}: the agent braked\n{}",
-        outcome.describe()
-    );
+    outcome.assert_holds(!is_zero(answer), &format!("{what}: the agent braked"));
     assert_eq!(
         answered_bits(answer),
         twist_bits(expected),
@@ -514,7 +277,7 @@ fn twists_answer_laser_scans_and_imu_as_the_in_process_decision_does() {
         .collect();
     let mut flags = topic_flags();
     flags.extend(["--stale-ms", "5000"]);
-    let outcome = session(python, &t.dir, "decide", &plan(steps), &flags);
+    let outcome = session(python, t.path(), "decide", &plan(&GOAL, steps), &flags);
 
     let mut reference = InProcessDecision::new();
     let answers = outcome.answers();
@@ -552,12 +315,12 @@ fn zenoh_ros2_sdk_discovers_the_agents_node_and_topics_through_liveliness() {
     let node = "ros2_clients_agent";
     let scan = full_scan(stamp(0), 4, 0.0, true);
     let imu = Orientation::new(stamp(0), 0.0, 0.0, 1.0);
-    let mut plan = plan(vec![step(Some(imu), &scan)]);
+    let mut plan = plan(&GOAL, vec![step(Some(imu), &scan)]);
     plan["goal_via_sdk"] = json!(true);
     plan["discover"] = json!(true);
     let mut flags = topic_flags();
     flags.extend(["--node-name", node, "--stale-ms", "5000"]);
-    let outcome = session(python, &t.dir, "discover", &plan, &flags);
+    let outcome = session(python, t.path(), "discover", &plan, &flags);
 
     let answers = outcome.answers();
     assert_eq!(answers.len(), 1, "{}", outcome.describe());
@@ -592,10 +355,9 @@ fn zenoh_ros2_sdk_discovers_the_agents_node_and_topics_through_liveliness() {
     ];
     wanted.extend(GOAL_TOPICS.map(|t| (t, "std_msgs/msg/Float64")));
     for (topic, ros_type) in &wanted {
-        assert!(
+        outcome.assert_holds(
             listed.contains(&(topic.to_string(), vec![ros_type.to_string()])),
-            "`ros2 topic list -t` should show {topic} [{ros_type}]: {listed:?}\n{}",
-            outcome.describe()
+            &format!("`ros2 topic list -t` should show {topic} [{ros_type}]: {listed:?}"),
         );
     }
     let endpoint = |topic: &str, side: &str, ros_type: &str| {
@@ -672,7 +434,7 @@ fn zenoh_ros2_sdk_discovers_the_agents_node_and_topics_through_liveliness() {
 fn a_laser_scan_with_another_type_hash_is_reported_and_the_robot_brakes() {
     let t = ProcessTest::start("ros2_wrong_hash", LIMIT);
     let python = clients();
-    let outcome = bad_stream(python, &t.dir, "wrong_hash");
+    let outcome = bad_stream(python, t.path(), "wrong_hash");
     let other_hash = outcome.one("stream")["other_hash"]
         .as_str()
         .expect("the hash used")
@@ -688,7 +450,7 @@ fn a_laser_scan_with_another_type_hash_is_reported_and_the_robot_brakes() {
 fn a_truncated_laser_scan_is_reported_and_the_robot_brakes() {
     let t = ProcessTest::start("ros2_truncated", LIMIT);
     let python = clients();
-    let outcome = bad_stream(python, &t.dir, "truncated");
+    let outcome = bad_stream(python, t.path(), "truncated");
     outcome.assert_agent_said(
         "formation-agent: ignoring an input: a sample on /scan is not a valid \
          sensor_msgs/msg/LaserScan (CDR)",
@@ -699,10 +461,10 @@ fn a_truncated_laser_scan_is_reported_and_the_robot_brakes() {
 /// Drives once on a good scan, then streams `bad` scans (every 50 ms, stale window 500 ms) until
 /// the agent publishes a zero Twist; checks that it drove first, answered none of the bad scans
 /// and braked after, saying no LaserScan came.
-fn bad_stream(python: &Path, dir: &TempDir, bad: &str) -> Outcome {
+fn bad_stream(python: &Path, dir: &Path, bad: &str) -> Outcome {
     let good = full_scan(stamp(0), 5, 0.0, true);
     let imu = Orientation::new(stamp(0), 0.0, 0.0, -0.7);
-    let mut plan = plan(vec![step(Some(imu), &good)]);
+    let mut plan = plan(&GOAL, vec![step(Some(imu), &good)]);
     plan["stream"] = json!({
         "bad": bad,
         "scan": full_scan(stamp(100), 6, 0.0, true).to_json(),
@@ -715,11 +477,7 @@ fn bad_stream(python: &Path, dir: &TempDir, bad: &str) -> Outcome {
     let answers = outcome.answers();
     assert_eq!(answers.len(), 1, "{}", outcome.describe());
     assert_answers(&outcome, answers[0], &good);
-    assert!(
-        !is_zero(answers[0]),
-        "the robot drove before the bad input\n{}",
-        outcome.describe()
-    );
+    outcome.assert_holds(!is_zero(answers[0]), "the robot drove before the bad input");
     let brake = outcome.one("brake");
     assert!(is_zero(brake), "{}", outcome.describe());
     assert_eq!(
@@ -755,23 +513,15 @@ fn a_scan_of_mostly_nan_readings_brakes_the_robot_with_the_reason() {
     ];
     let mut flags = topic_flags();
     flags.extend(["--stale-ms", "5000"]);
-    let outcome = session(python, &t.dir, "nan", &plan(steps), &flags);
+    let outcome = session(python, t.path(), "nan", &plan(&GOAL, steps), &flags);
     let answers = outcome.answers();
     assert_eq!(answers.len(), 3, "{}", outcome.describe());
     for (answer, scan) in answers.iter().zip([&good, &nan, &again]) {
         assert_answers(&outcome, answer, scan);
     }
     assert!(!is_zero(answers[0]), "{}", outcome.describe());
-    assert!(
-        is_zero(answers[1]),
-        "a NaN scan brakes\n{}",
-        outcome.describe()
-    );
-    assert!(
-        !is_zero(answers[2]),
-        "a good scan drives again\n{}",
-        outcome.describe()
-    );
+    outcome.assert_holds(is_zero(answers[1]), "a NaN scan brakes");
+    outcome.assert_holds(!is_zero(answers[2]), "a good scan drives again");
     outcome.assert_agent_said(&format!(
         "formation-agent: braking: the LaserScan on /scan has {nans} NaN readings of {}",
         nan.ranges.len()
@@ -801,17 +551,13 @@ fn a_partial_circle_scan_brakes_unless_allowed_and_then_drives_as_in_process() {
     flags.extend(["--stale-ms", "5000"]);
 
     let steps = vec![step(Some(imu(0)), &good), step(Some(imu(1)), &half)];
-    let refused = session(python, &t.dir, "refused", &plan(steps), &flags);
+    let refused = session(python, t.path(), "refused", &plan(&GOAL, steps), &flags);
     let answers = refused.answers();
     assert_eq!(answers.len(), 2, "{}", refused.describe());
     assert_answers(&refused, answers[0], &good);
     assert_answers(&refused, answers[1], &half);
     assert!(!is_zero(answers[0]), "{}", refused.describe());
-    assert!(
-        is_zero(answers[1]),
-        "a partial scan brakes\n{}",
-        refused.describe()
-    );
+    refused.assert_holds(is_zero(answers[1]), "a partial scan brakes");
     refused.assert_agent_said(
         "formation-agent: braking: the LaserScan on /scan: the LaserScan covers 180.0°",
     );
@@ -820,7 +566,7 @@ fn a_partial_circle_scan_brakes_unless_allowed_and_then_drives_as_in_process() {
 
     flags.push("--allow-partial-scan");
     let steps = vec![step(Some(imu(1)), &half)];
-    let allowed = session(python, &t.dir, "allowed", &plan(steps), &flags);
+    let allowed = session(python, t.path(), "allowed", &plan(&GOAL, steps), &flags);
     let answers = allowed.answers();
     assert_eq!(answers.len(), 1, "{}", allowed.describe());
     assert_answers(&allowed, answers[0], &half);
@@ -845,7 +591,7 @@ fn a_silent_orientation_topic_brakes_the_robot() {
     let blind = full_scan(stamp(0), 11, 0.0, true);
     let good = full_scan(stamp(1), 12, 0.0, true);
     let imu = Orientation::new(stamp(1), 0.0, 0.0, 2.2);
-    let mut plan = plan(vec![step(None, &blind), step(Some(imu), &good)]);
+    let mut plan = plan(&GOAL, vec![step(None, &blind), step(Some(imu), &good)]);
     plan["stream"] = json!({
         "bad": "no_orientation",
         "scan": good.with_stamp(stamp(100)).to_json(),
@@ -854,16 +600,12 @@ fn a_silent_orientation_topic_brakes_the_robot() {
     });
     let mut flags = topic_flags();
     flags.extend(["--stale-ms", "500"]);
-    let outcome = session(python, &t.dir, "silent", &plan, &flags);
+    let outcome = session(python, t.path(), "silent", &plan, &flags);
     let answers = outcome.answers();
     assert_eq!(answers.len(), 2, "{}", outcome.describe());
     assert_answers(&outcome, answers[0], &blind);
     assert_answers(&outcome, answers[1], &good);
-    assert!(
-        is_zero(answers[0]),
-        "no orientation yet: brake\n{}",
-        outcome.describe()
-    );
+    outcome.assert_holds(is_zero(answers[0]), "no orientation yet: brake");
     assert!(!is_zero(answers[1]), "{}", outcome.describe());
     let brake = outcome.one("brake");
     assert!(is_zero(brake), "{}", outcome.describe());
@@ -888,11 +630,11 @@ fn on_sigterm_the_agent_publishes_one_zero_twist_before_exiting() {
     let python = clients();
     let scan = full_scan(stamp(0), 13, 0.0, true);
     let imu = Orientation::new(stamp(0), 0.0, 0.0, -1.1);
-    let mut plan = plan(vec![step(Some(imu), &scan)]);
+    let mut plan = plan(&GOAL, vec![step(Some(imu), &scan)]);
     plan["hold"] = json!(true);
     let mut flags = topic_flags();
     flags.extend(["--stale-ms", "60000"]);
-    let outcome = session(python, &t.dir, "term", &plan, &flags);
+    let outcome = session(python, t.path(), "term", &plan, &flags);
     let answers = outcome.answers();
     assert_eq!(answers.len(), 1, "{}", outcome.describe());
     assert!(!is_zero(answers[0]), "{}", outcome.describe());
@@ -932,10 +674,5 @@ fn an_unreachable_router_fails_with_status_2_naming_the_endpoint_and_rmw_zenohd(
     let finished = run(agent, LIMIT);
     finished.assert_failure_mentioning(&format!("cannot reach the ROS 2 router at {nowhere}"));
     finished.assert_failure_mentioning("rmw_zenohd");
-    assert_eq!(
-        finished.output.status.code(),
-        Some(2),
-        "{}",
-        finished.describe()
-    );
+    finished.assert_exit(2);
 }

@@ -11,7 +11,6 @@
 //! binary ([`one_at_a_time`]), on its own free TCP port and scratch folder, and stops every
 //! process it started.
 
-use std::path::PathBuf;
 use std::process::Command;
 use std::time::Duration;
 
@@ -22,17 +21,13 @@ use formation_ros2::{
     Header, LaserScan, PartialScan, Time, Twist, twist_from_wheels, yaw_from_quaternion,
 };
 use formation_tests::ros2::{
-    InProcessDecision, answered_bits, client_script, is_event, parse_event, range_to_discs,
+    InProcessDecision, answered_bits, clients, plan, range_to_discs, session, topic_flags,
     twist_bits,
 };
-use formation_tests::{
-    LiveProcess, TempDir, Watchdog, binaries, free_tcp_port, one_at_a_time, python, test_model,
-};
+use formation_tests::{ProcessTest, binaries, free_tcp_port, test_model};
 use serde_json::{Value, json};
 
 const LIMIT: Duration = Duration::from_secs(300);
-/// How long the client may take to come up, or to run its plan.
-const CLIENT_WAIT: Duration = Duration::from_secs(120);
 /// The TurtleBot3 Burger's top wheel speed \[m/s\] and wheel separation \[m\] (its profile's).
 const BURGER_TOP_SPEED: f64 = 0.22;
 const BURGER_WHEEL_SEPARATION: f64 = 0.160;
@@ -45,25 +40,6 @@ const GOAL: Goal = Goal {
     d_star: 1.2,
     v_star: 0.2,
 };
-
-/// The interpreter with the client's packages, or a panic with the fix.
-fn clients() -> PathBuf {
-    let python = python();
-    let output = Command::new(&python)
-        .arg(client_script())
-        .arg("check")
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run {}: {e}", python.display()));
-    assert!(
-        output.status.success(),
-        "the independent ROS 2 clients are not usable with {} ({}); install them with `bash \
-         .ci/setup-python --test` (tests/python/requirements-ros2.txt)\n{}",
-        python.display(),
-        output.status,
-        String::from_utf8_lossy(&output.stderr)
-    );
-    python
-}
 
 /// A full-circle scan of `FOREIGN_BEAMS` readings of circular obstacles, beyond the range as
 /// +inf (REP-117); `seed` moves the obstacles.
@@ -116,18 +92,9 @@ fn quaternion(yaw: f64) -> [f64; 4] {
     [0.0, 0.0, s, c]
 }
 
-const TOPICS: [&str; 6] = [
-    "/scan",
-    "/imu",
-    "/cmd_vel",
-    "/team/goal/heading",
-    "/team/goal/distance",
-    "/team/goal/speed",
-];
-
-/// The client's plan: each step an Imu then a scan, the goal on its three topics.
-fn plan(steps: &[(LaserScan, f64)]) -> Value {
-    let steps: Vec<Value> = steps
+/// The client's plan steps: each an Imu then a scan.
+fn plan_steps(steps: &[(LaserScan, f64)]) -> Vec<Value> {
+    steps
         .iter()
         .map(|(scan, yaw)| {
             let stamp = scan.header.stamp.as_nanos();
@@ -139,20 +106,7 @@ fn plan(steps: &[(LaserScan, f64)]) -> Value {
                 "scan": scan_json(scan),
             })
         })
-        .collect();
-    json!({
-        "domain_id": 0,
-        "scan_topic": TOPICS[0],
-        "orientation_topic": TOPICS[1],
-        "cmd_vel_topic": TOPICS[2],
-        "goal_topics": &TOPICS[3..],
-        "goal_bits": [GOAL.phi_star.to_bits(), GOAL.d_star.to_bits(), GOAL.v_star.to_bits()],
-        "goal_via_sdk": false,
-        "steps": steps,
-        "stream": null,
-        "hold": false,
-        "discover": false,
-    })
+        .collect()
 }
 
 /// The same decision in this process: the scan resampled onto the model's ring, the policy,
@@ -184,12 +138,8 @@ fn in_process_twists(steps: &[(LaserScan, f64)]) -> Vec<Twist> {
 /// wheels, so the scaling into the top speed is checked by the agent's unit tests.)
 #[test]
 fn a_burger_agent_names_a_foreign_scan_once_and_still_drives_within_its_wheels() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_profile_foreign_scan", LIMIT);
-    let dir = TempDir::new("ros2_profile_foreign_scan");
+    let t = ProcessTest::start("ros2_profile_foreign_scan", LIMIT);
     let python = clients();
-    // Built (on first use) before the client starts its clock.
-    let agent_binary = binaries().agent.clone();
     let base = 1_700_000_000_000_000_000_i64;
     let steps: Vec<(LaserScan, f64)> = (0..4)
         .map(|i| {
@@ -199,52 +149,13 @@ fn a_burger_agent_names_a_foreign_scan_once_and_still_drives_within_its_wheels()
             )
         })
         .collect();
-    let plan_path = dir.path().join("plan.json");
-    std::fs::write(&plan_path, serde_json::to_vec(&plan(&steps)).expect("JSON")).expect("plan");
-    let endpoint = format!("tcp/127.0.0.1:{}", free_tcp_port());
-    let mut client = Command::new(&python);
-    client
-        .arg(client_script())
-        .arg("run")
-        .arg(&plan_path)
-        .args(["--listen", &endpoint]);
-    let mut client = LiveProcess::spawn_with_input(client, Some(""));
-    assert!(
-        client
-            .wait_for_line(CLIENT_WAIT, |l| is_event(l, &["listening"]))
-            .is_some(),
-        "the client did not listen\n{}",
-        client.describe()
-    );
-    let mut agent = Command::new(&agent_binary);
-    agent
-        .args(["--transport", "ros2", "--connect", &endpoint])
-        .args(["--connect-timeout-ms", "30000", "--model"])
-        .arg(test_model())
-        .args(["--scan", TOPICS[0], "--orientation", TOPICS[1]])
-        .args(["--orientation-type", "imu", "--cmd-vel", TOPICS[2]])
-        .args(["--heading-topic", TOPICS[3], "--distance-topic", TOPICS[4]])
-        .args(["--speed-topic", TOPICS[5], "--stale-ms", "5000"])
-        .args(["--profile", "turtlebot3-burger"]);
-    let agent = LiveProcess::spawn(agent);
-    let done = client.wait_for_line(CLIENT_WAIT, |l| is_event(l, &["done", "error"]));
-    let _ = Command::new("kill")
-        .args(["-TERM", &agent.id().to_string()])
-        .status();
-    let agent = agent.finish(Duration::from_secs(60));
-    client.close_input();
-    let client = client.finish(Duration::from_secs(60));
-    let describe = format!(
-        "=== client ===\n{}\n=== agent ===\n{}",
-        client.describe(),
-        agent.describe()
-    );
-    assert!(
-        done.as_deref().is_some_and(|l| is_event(l, &["done"])),
-        "the client did not complete its plan\n{describe}"
-    );
+    let mut flags = topic_flags();
+    flags.extend(["--stale-ms", "5000", "--profile", "turtlebot3-burger"]);
+    let plan = plan(&GOAL, plan_steps(&steps));
+    let outcome = session(python, t.path(), "plan", &plan, &flags);
+    let describe = outcome.describe();
 
-    let stderr = agent.stderr();
+    let stderr = outcome.agent_stderr();
     let warnings: Vec<&str> = stderr
         .lines()
         .filter(|l| l.contains("is not the one expected"))
@@ -263,19 +174,14 @@ fn a_burger_agent_names_a_foreign_scan_once_and_still_drives_within_its_wheels()
         "the start names the Burger's LIDAR against the model's\n{describe}"
     );
 
-    let answers: Vec<Value> = client
-        .stdout()
-        .lines()
-        .filter_map(parse_event)
-        .filter(|e| e["event"] == "answer")
-        .collect();
+    let answers = outcome.answers();
     assert_eq!(answers.len(), steps.len(), "one answer a scan\n{describe}");
     assert_drives_as_in_process(&answers, &steps, &describe);
 }
 
 /// Panics unless each answer answers its step's scan (by stamp) with the in-process Twist, bit
 /// for bit, its wheels within the Burger's top speed.
-fn assert_drives_as_in_process(answers: &[Value], steps: &[(LaserScan, f64)], describe: &str) {
+fn assert_drives_as_in_process(answers: &[&Value], steps: &[(LaserScan, f64)], describe: &str) {
     let expected = in_process_twists(steps);
     for ((answer, twist), (scan, _)) in answers.iter().zip(&expected).zip(steps) {
         assert_eq!(
@@ -303,8 +209,7 @@ fn assert_drives_as_in_process(answers: &[Value], steps: &[(LaserScan, f64)], de
 /// An unknown `--profile` is refused before the agent connects, naming the profiles known.
 #[test]
 fn an_unknown_profile_is_refused_with_the_known_names() {
-    let _one = one_at_a_time();
-    let _watchdog = Watchdog::arm("ros2_profile_unknown", LIMIT);
+    let _t = ProcessTest::start("ros2_profile_unknown", LIMIT);
     let port = free_tcp_port();
     let output = Command::new(&binaries().agent)
         .args(["--transport", "ros2", "--connect"])

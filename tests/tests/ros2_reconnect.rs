@@ -13,8 +13,8 @@ use std::time::Duration;
 use formation_cli::launch::read_trajectory;
 use formation_tests::relay::ResettingRelay;
 use formation_tests::{
-    LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical, binaries, case1_scenario,
-    formation_run_with_model, free_tcp_port, repo_root, unique_run_id,
+    LeakCheck, LiveProcess, ProcessTest, assert_bit_identical, binaries, formation_run_with_model,
+    free_tcp_port, repo_root,
 };
 
 const LIMIT: Duration = Duration::from_secs(240);
@@ -40,16 +40,16 @@ fn detour(dir: &Path, robot: usize, through: &str) -> PathBuf {
 }
 
 /// A lockstep ROS 2 launch of `scenario` paced at `pace_ms`, into `out`, on `listen`, its agents
-/// started as `agent` says (the real one when `None`).
+/// started as `agent` says (the real one when `None`), under a run id of `t`'s.
 fn ros2_team(
+    t: &ProcessTest,
     scenario: &Path,
     out: &Path,
     listen: &str,
     pace_ms: &str,
     agent: Option<&Path>,
 ) -> (LiveProcess, LeakCheck) {
-    let run_id = unique_run_id("r2drop");
-    let leaks = LeakCheck::new(&run_id);
+    let (run_id, leaks) = t.another_run("r2drop");
     let mut command = formation_run_with_model(
         &run_id,
         scenario,
@@ -77,23 +77,22 @@ fn ros2_team(
 /// is bit-identical to the same launch without resets.
 #[test]
 fn a_ros2_agent_whose_link_resets_comes_back_and_lockstep_plays_as_without() {
-    let _watchdog = Watchdog::arm("ros2_reconnect", LIMIT);
-    let dir = TempDir::new("r2drop");
-    let scenario = case1_scenario(dir.path(), 10.0);
+    let t = ProcessTest::start("ros2_reconnect", LIMIT);
+    let scenario = t.case1(10.0);
 
-    let plain_out = dir.path().join("plain");
+    let plain_out = t.path().join("plain");
     let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
-    let (plain, leaks) = ros2_team(&scenario, &plain_out, &listen, "0", None);
+    let (plain, leaks) = ros2_team(&t, &scenario, &plain_out, &listen, "0", None);
     plain.finish(LIMIT).assert_success();
     leaks.assert_clean();
 
-    let out = dir.path().join("reset");
+    let out = t.path().join("reset");
     let port = free_tcp_port();
     let relay = ResettingRelay::start(&format!("127.0.0.1:{port}"));
-    let agent = detour(dir.path(), 1, &format!("tcp/127.0.0.1:{}", relay.port));
+    let agent = detour(t.path(), 1, &format!("tcp/127.0.0.1:{}", relay.port));
     // Paced, so the resets fall mid-run (201 ticks of at least 30 ms).
     let listen = format!("tcp/127.0.0.1:{port}");
-    let (mut launch, leaks) = ros2_team(&scenario, &out, &listen, "30", Some(&agent));
+    let (mut launch, leaks) = ros2_team(&t, &scenario, &out, &listen, "30", Some(&agent));
     let connected =
         launch.wait_for_line(Duration::from_secs(60), |l| l.contains("agents connected"));
     assert!(connected.is_some(), "{}", launch.describe());
@@ -105,15 +104,13 @@ fn a_ros2_agent_whose_link_resets_comes_back_and_lockstep_plays_as_without() {
     finished.assert_success();
     leaks.assert_clean();
     let stderr = finished.stderr();
-    assert!(
+    finished.assert_holds(
         stderr.matches("is unreachable").count() >= 2 && stderr.contains("reconnected after"),
-        "the world saw robot 1's ROS 2 node go and come back\n{}",
-        finished.describe()
+        "the world saw robot 1's ROS 2 node go and come back",
     );
-    assert!(
+    finished.assert_holds(
         !finished.stdout().contains("agent lost"),
-        "no agent counted lost\n{}",
-        finished.describe()
+        "no agent counted lost",
     );
     let plain = read_trajectory(&plain_out.join("runs/run-0000.json")).expect("the run log");
     let reset = read_trajectory(&out.join("runs/run-0000.json")).expect("the run log");

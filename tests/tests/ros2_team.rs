@@ -16,8 +16,8 @@ use std::time::Duration;
 
 use formation_cli::launch::read_trajectory;
 use formation_tests::{
-    LeakCheck, ProcessTest, TempDir, binaries, case1_scenario, formation_run_with_model,
-    free_tcp_port, policy_eval, python, read_json, repo_root, run, test_model, unique_run_id,
+    ProcessTest, binaries, formation_run_with_model, free_tcp_port, policy_eval, python, read_json,
+    repo_root, run, test_model,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -73,10 +73,9 @@ fn in_process_summary(dir: &Path, scenario: &Path, model: &Path) -> serde_json::
     read_json(&path)
 }
 
-/// What one launch of a ROS 2 team left: its folder, scenario, output and the finished
-/// launcher, after the leak check passed.
+/// What one launch of a ROS 2 team left: its scenario, output and the finished launcher, after
+/// the leak check passed.
 struct TeamRun {
-    dir: TempDir,
     scenario: std::path::PathBuf,
     out: std::path::PathBuf,
     finished: formation_tests::Finished,
@@ -84,21 +83,18 @@ struct TeamRun {
 
 /// `formation run --transport ros2` of case 1 (25 s) with `clock` and the shipped model, on a
 /// free port; the launch must succeed and leave nothing behind.
-fn run_team(tag: &str, clock: &str) -> TeamRun {
-    run_team_with(tag, clock, &shipped_model())
+fn run_team(t: &ProcessTest, clock: &str) -> TeamRun {
+    run_team_with(t, clock, &shipped_model())
 }
 
 /// [`run_team`] with `model`.
-fn run_team_with(tag: &str, clock: &str, model: &Path) -> TeamRun {
-    let dir = TempDir::new(tag);
-    let run_id = unique_run_id(tag);
-    let leaks = LeakCheck::new(&run_id);
-    let scenario = case1_scenario(dir.path(), 25.0);
-    let out = dir.path().join("out");
+fn run_team_with(t: &ProcessTest, clock: &str, model: &Path) -> TeamRun {
+    let scenario = t.case1(25.0);
+    let out = t.out();
     let listen = endpoint(free_tcp_port());
     let finished = run(
         formation_run_with_model(
-            &run_id,
+            &t.run,
             &scenario,
             model,
             &out,
@@ -107,9 +103,8 @@ fn run_team_with(tag: &str, clock: &str, model: &Path) -> TeamRun {
         LIMIT,
     );
     finished.assert_success();
-    leaks.assert_clean();
+    t.assert_clean();
     TeamRun {
-        dir,
         scenario,
         out,
         finished,
@@ -120,29 +115,28 @@ fn run_team_with(tag: &str, clock: &str, model: &Path) -> TeamRun {
 /// ROS 2 agents) converges and gives in-process evaluation's Table I JSON.
 #[test]
 fn lockstep_case1_through_ros2_gives_the_in_process_table() {
-    let _t = ProcessTest::start("ros2_team_lockstep", LIMIT);
-    assert_lockstep_case1_gives_the_in_process_table("r2lock", &shipped_model());
+    let t = ProcessTest::start("ros2_team_lockstep", LIMIT);
+    assert_lockstep_case1_gives_the_in_process_table(&t, &shipped_model());
 }
 
 /// Issue 34: a model that takes detected neighbours and answers a formation velocity drives a
 /// ROS 2 team as the shipped model does, to in-process evaluation's Table I JSON.
 #[test]
 fn the_pair_network_drives_a_ros2_team_to_the_in_process_table() {
-    let _t = ProcessTest::start("ros2_team_pair", LIMIT);
-    assert_lockstep_case1_gives_the_in_process_table("r2pair", &pair_model());
+    let t = ProcessTest::start("ros2_team_pair", LIMIT);
+    assert_lockstep_case1_gives_the_in_process_table(&t, &pair_model());
 }
 
 /// Lockstep case 1 with `model` through the ROS 2 path converges, gives in-process evaluation's
 /// Table I JSON and answers every tick.
-fn assert_lockstep_case1_gives_the_in_process_table(tag: &str, model: &Path) {
+fn assert_lockstep_case1_gives_the_in_process_table(t: &ProcessTest, model: &Path) {
     let TeamRun {
-        dir,
         scenario,
         out,
         finished,
-    } = run_team_with(tag, "lockstep", model);
+    } = run_team_with(t, "lockstep", model);
     let over_ros2 = read_json(&out.join("summary.json"));
-    let reference = in_process_summary(dir.path(), &scenario, model);
+    let reference = in_process_summary(t.path(), &scenario, model);
     assert_eq!(
         reference["per_run"][0]["success_10"],
         serde_json::Value::Bool(true),
@@ -196,14 +190,8 @@ fn eval_through_ros2_writes_the_in_process_json() {
 /// Issue 14 acceptance: realtime case 1 through the ROS 2 path converges.
 #[test]
 fn realtime_case1_through_ros2_converges() {
-    let _t = ProcessTest::start("ros2_team_realtime", LIMIT);
-    // The folder stays bound (`_dir`) until the end, so the output outlives the assertions.
-    let TeamRun {
-        dir: _dir,
-        out,
-        finished,
-        ..
-    } = run_team("r2real", "realtime");
+    let t = ProcessTest::start("ros2_team_realtime", LIMIT);
+    let TeamRun { out, finished, .. } = run_team(&t, "realtime");
     let summary = read_json(&out.join("summary.json"));
     assert_eq!(
         summary["per_run"][0]["success_10"],
@@ -217,10 +205,9 @@ fn realtime_case1_through_ros2_converges() {
 /// Flags that make no sense for a ROS 2 team are refused with the reason.
 #[test]
 fn bad_ros2_launches_are_refused_with_the_reason() {
-    let dir = TempDir::new("r2bad");
-    let run_id = unique_run_id("r2bad");
-    let scenario = case1_scenario(dir.path(), 5.0);
-    let out = dir.path().join("out");
+    let t = ProcessTest::start("r2bad", LIMIT);
+    let scenario = t.case1(5.0);
+    let out = t.out();
     let cases: [(&[&str], &str); 4] = [
         (
             &["--transport", "ros2"],
@@ -255,7 +242,7 @@ fn bad_ros2_launches_are_refused_with_the_reason() {
     ];
     for (extra, message) in cases {
         run(
-            formation_run_with_model(&run_id, &scenario, &shipped_model(), &out, extra),
+            formation_run_with_model(&t.run, &scenario, &shipped_model(), &out, extra),
             LIMIT,
         )
         .assert_failure_mentioning(message);
@@ -339,10 +326,9 @@ fn a_live_teams_tf_is_read_by_an_independent_client() {
     }
     // The run is 120 ticks; the client connects while the team is starting, so it may miss the
     // first ones, never most of them.
-    assert!(
+    heard.assert_holds(
         ticks_seen.iter().all(|&n| n >= 60),
-        "/tf samples per robot: {ticks_seen:?}\n{}",
-        heard.describe()
+        &format!("/tf samples per robot: {ticks_seen:?}"),
     );
     for robot in 0..robots {
         for frame in ["odom", "laser"] {

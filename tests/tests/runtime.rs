@@ -10,8 +10,8 @@ use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
 use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, robot_service_name};
 use formation_robot_agent::decision::PolicyController;
 use formation_tests::{
-    LeakCheck, ProcessTest, RobotLog, assert_bit_identical, incarnations, launch_secret,
-    lockstep_over_processes, repo_root, run, run_with_input, test_model, unique_run_id,
+    ProcessTest, RobotLog, assert_bit_identical, incarnations, launch_secret,
+    lockstep_over_processes, repo_root, report_command, run, run_with_input, test_model,
 };
 use formation_transport_iceoryx2::naming::ServiceLimits;
 use formation_world::{Scenario, run_episode};
@@ -263,13 +263,7 @@ fn formation_run_leaves_no_shared_memory_behind() {
             && tick["histogram"][0][0].as_f64() >= Some(16_000.0),
         "{tick}"
     );
-    let mut report = Command::new(&t.bins().cli);
-    report
-        .arg("report")
-        .arg(&out)
-        .arg("--out")
-        .arg(t.path().join("report.html"));
-    run(report, LIMIT).assert_success();
+    run(report_command(&out, &t.path().join("report.html")), LIMIT).assert_success();
     assert!(t.path().join("report.html").is_file());
 }
 
@@ -319,8 +313,7 @@ fn robot_indices_out_of_range_are_clear_errors() {
     let t = ProcessTest::start("robot_out_of_range", LIMIT);
     // A lone agent leaves iceoryx2's global management segment of its namespace behind (no
     // launcher runs to remove it); its own run id keeps that out of the launcher check below.
-    let lone_run = unique_run_id("lone");
-    let _lone_cleanup = LeakCheck::new(&lone_run);
+    let (lone_run, _lone_cleanup) = t.another_run("lone");
     let mut agent = Command::new(&t.bins().agent);
     agent
         .args([

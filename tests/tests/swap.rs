@@ -9,8 +9,8 @@ use std::time::Duration;
 use formation_cli::launch::read_trajectory;
 use formation_robot_agent::decision::{Agent, PolicyController};
 use formation_tests::{
-    LiveProcess, ProcessTest, RobotLog, assert_bit_identical, binaries, run, test_model,
-    write_tiny_model, write_tiny_model_with,
+    LiveProcess, ProcessTest, RobotLog, assert_bit_identical, await_connected, binaries, run,
+    test_model, write_tiny_model, write_tiny_model_with,
 };
 use formation_world::episode::{Controller, ControllerError, Observation};
 use formation_world::{Scenario, run_episode};
@@ -149,8 +149,7 @@ fn a_lockstep_swap_matches_the_new_model_in_process_and_bad_swaps_are_refused() 
 /// started and connected.
 fn launch_connected(t: &ProcessTest, scenario: &Path) -> LiveProcess {
     let mut launch = LiveProcess::spawn(t.formation_run(scenario, &["--pace-ms", "10"]));
-    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_connected(&mut launch);
     launch
 }
 

@@ -16,7 +16,7 @@
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{TempDir, Watchdog, binaries, repo_root, run};
+use formation_tests::{ProcessTest, binaries, repo_root, run};
 
 const LIMIT: Duration = Duration::from_secs(300);
 const CHAPTER: &str = "docs/src/troubleshooting.md";
@@ -133,12 +133,12 @@ fn holds(haystack: &str, line: &str) -> bool {
     true
 }
 
-/// Runs a console block's commands in a scratch folder and checks its last one fails printing
-/// every quoted line.
-fn provoke(quote: &Quote) {
-    let dir = TempDir::new("troubleshooting");
+/// Runs a console block's commands in a scratch folder of `t`'s of their own and checks its last
+/// one fails printing every quoted line.
+fn provoke(t: &ProcessTest, quote: &Quote) {
+    let dir = t.folder(&format!("line-{}", quote.line));
     for shared in ["scenarios", "onnx"] {
-        std::os::unix::fs::symlink(repo_root().join(shared), dir.path().join(shared))
+        std::os::unix::fs::symlink(repo_root().join(shared), dir.join(shared))
             .expect("linking the repository's folders into the scratch folder");
     }
     let bin_dir = binaries().cli.parent().expect("the binaries' folder");
@@ -151,7 +151,7 @@ fn provoke(quote: &Quote) {
     command
         .arg("-c")
         .arg(&script)
-        .current_dir(dir.path())
+        .current_dir(&dir)
         .env("PATH", path)
         .env("ORT_DISABLE_TELEMETRY", "1");
     let finished = run(command, LIMIT);
@@ -204,7 +204,7 @@ fn quoted_from_source(quote: &Quote) {
 
 #[test]
 fn every_error_the_troubleshooting_chapter_quotes_is_what_the_product_prints() {
-    let _watchdog = Watchdog::arm("troubleshooting", LIMIT * 4);
+    let t = ProcessTest::start("troubleshooting", LIMIT * 4);
     let chapter = std::fs::read_to_string(repo_root().join(CHAPTER)).expect("the chapter");
     let quotes = quotes(&chapter);
     let provoked: Vec<&Quote> = quotes.iter().filter(|q| q.source.is_none()).collect();
@@ -228,7 +228,7 @@ fn every_error_the_troubleshooting_chapter_quotes_is_what_the_product_prints() {
                 "{CHAPTER}:{}: a console block without a `$ ` command",
                 quote.line
             );
-            provoke(quote);
+            provoke(&t, quote);
         }
     }
 }

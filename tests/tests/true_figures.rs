@@ -9,7 +9,8 @@ use std::time::{Duration, Instant};
 
 use formation_tests::{
     LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, expert_eval_once, files_under,
-    formation_run, formation_run_args, read_json, repo_root, run, send_signal, world_pid,
+    formation_run, formation_run_args, read_json, repo_root, report_command, run, send_signal,
+    world_pid,
 };
 use formation_world::metrics::{MetricsConfig, run_metrics};
 
@@ -50,10 +51,9 @@ fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
         if ticks >= 600 {
             break;
         }
-        assert!(
+        launch.assert_holds(
             started.elapsed() < Duration::from_secs(120),
-            "the run did not reach 600 ticks ({ticks})\n{}",
-            launch.describe()
+            &format!("the run did not reach 600 ticks ({ticks})"),
         );
         std::thread::sleep(Duration::from_millis(100));
     }
@@ -62,21 +62,13 @@ fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
     };
     send_signal(world, "-HUP");
     let finished = launch.finish(LIMIT);
-    assert!(
-        !finished.output.status.success(),
-        "a run cut short fails the launch\n{}",
-        finished.describe()
-    );
+    finished.assert_failed("a run cut short fails the launch");
     t.assert_clean();
 
     let log = formation_world::RunLog::read(&out.join("runs/run-0000.json"))
         .unwrap_or_else(|e| panic!("{e}\n{}", finished.describe()));
     let played = log.ticks() as u64;
-    assert!(
-        (600..1200).contains(&played),
-        "{played} ticks\n{}",
-        finished.describe()
-    );
+    finished.assert_holds((600..1200).contains(&played), &format!("{played} ticks"));
     assert!(!log.complete);
     // What the run log's figures were before a run knew it was incomplete: its last 20 s pass.
     let as_if_whole = run_metrics(&log.trajectory, played, &MetricsConfig::default());
@@ -122,17 +114,12 @@ fn a_full_disk_under_run_is_named_first_without_restart_lines() {
         &["--clock", "lockstep"],
     ))
     .finish(LIMIT);
-    assert!(
-        !finished.output.status.success(),
-        "a run that cannot be written fails\n{}",
-        finished.describe()
-    );
+    finished.assert_failed("a run that cannot be written fails");
     t.assert_clean();
     let stderr = finished.stderr();
-    assert!(
+    finished.assert_holds(
         !stderr.contains("restarting"),
-        "no agent restart is announced: the world asked the agents to exit\n{}",
-        finished.describe()
+        "no agent restart is announced: the world asked the agents to exit",
     );
     let first = stderr
         .lines()
@@ -163,7 +150,7 @@ fn an_output_path_under_a_file_names_that_file() {
         ["--out", out.to_str().expect("utf-8")],
     ] {
         let finished = run(expert_eval_once(&scenario, &extra), LIMIT);
-        assert!(!finished.output.status.success(), "{}", finished.describe());
+        finished.assert_failed("expected failure");
         finished.assert_no_panic();
         let stderr = finished.stderr();
         assert!(
@@ -172,16 +159,14 @@ fn an_output_path_under_a_file_names_that_file() {
             finished.describe()
         );
         for misleading in ["File exists", "disk", "Not a directory (os error"] {
-            assert!(
+            finished.assert_holds(
                 !stderr.contains(misleading),
-                "{misleading:?} is not the cause\n{}",
-                finished.describe()
+                &format!("{misleading:?} is not the cause"),
             );
         }
-        assert!(
+        finished.assert_holds(
             !finished.stdout().contains("Table I"),
-            "refused before evaluating\n{}",
-            finished.describe()
+            "refused before evaluating",
         );
     }
 }
@@ -200,7 +185,7 @@ fn a_full_disk_under_eval_out_leaves_an_output_marked_partial_that_report_names(
         expert_eval_once(&scenario, &["--out", out.to_str().expect("utf-8")]),
         LIMIT,
     );
-    assert!(!finished.output.status.success(), "{}", finished.describe());
+    finished.assert_failed("expected failure");
     finished.assert_no_panic();
     let stderr = finished.stderr();
     assert!(
@@ -226,9 +211,7 @@ fn a_full_disk_under_eval_out_leaves_an_output_marked_partial_that_report_names(
     );
 
     let html = t.path().join("report.html");
-    let mut report = Command::new(&binaries().cli);
-    report.arg("report").arg(&out).arg("--out").arg(&html);
-    let reported = run(report, LIMIT);
+    let reported = run(report_command(&out, &html), LIMIT);
     reported.assert_success();
     let warning = reported.stderr();
     assert!(

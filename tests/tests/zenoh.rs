@@ -13,9 +13,9 @@ use std::process::Command;
 use std::time::Duration;
 
 use formation_tests::{
-    LeakCheck, LiveProcess, ProcessTest, assert_none_counted, await_line, binaries, count_samples,
-    finish_with_remote_agent, formation_run, launch_secret, policy_eval, raw_client, read_json,
-    remote_zenoh_agent, run, run_with_input, test_model, unique_run_id, zenoh_credentials,
+    LiveProcess, ProcessTest, assert_none_counted, await_connected, await_line, binaries,
+    count_samples, finish_with_remote_agent, formation_run, launch_secret, policy_eval, raw_client,
+    read_json, remote_zenoh_agent, run, run_with_input, test_model, zenoh_credentials,
 };
 
 const LIMIT: Duration = Duration::from_secs(180);
@@ -32,10 +32,9 @@ fn lockstep_case1_over_zenoh_is_bit_identical_to_in_process() {
     let finished = t.lockstep_case1_over_zenoh(&t.endpoint());
     let out = t.out();
     let credentials = out.join("credentials").join(t.run.as_str());
-    assert!(
+    finished.assert_holds(
         credentials.join("robot-0.json").is_file(),
-        "the launcher made the run's credentials\n{}",
-        finished.describe()
+        "the launcher made the run's credentials",
     );
     t.assert_clean();
 }
@@ -173,8 +172,7 @@ fn bad_zenoh_flags_are_refused_with_the_reason() {
         ),
     ];
     for (flags, needle) in cases {
-        let run_id = unique_run_id("zflag");
-        let _leaks = LeakCheck::new(&run_id);
+        let (run_id, _leaks) = t.another_run("zflag");
         run(formation_run(&run_id, &scenario, &out, flags), LIMIT)
             .assert_failure_mentioning(needle);
     }
@@ -268,19 +266,17 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
     let mut agent = remote_zenoh_agent(&listen, &t.run, 2);
     agent.arg("--credentials").arg(creds.join("robot-2.json"));
     let finished = finish_with_remote_agent(launch, agent, LIMIT);
-    assert!(
+    finished.assert_holds(
         own_scans.load(Ordering::Relaxed) > 0,
-        "robot 1's login may read robot 1's scans (so the subscription works)\n{}",
-        finished.describe()
+        "robot 1's login may read robot 1's scans (so the subscription works)",
     );
     assert_none_counted(&[
         (&others, "robot 1's login received robot 2's traffic"),
         (&everything, "robot 1's login received robot 0's traffic"),
     ]);
-    assert!(
+    finished.assert_holds(
         !finished.stderr().contains("refused process"),
-        "nobody greeted as robot 2 but its agent\n{}",
-        finished.describe()
+        "nobody greeted as robot 2 but its agent",
     );
     drop((impostor, forger));
     t.assert_clean();
@@ -346,10 +342,9 @@ fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
     // The run's own file: the agent joins and the run completes.
     let finished =
         finish_with_remote_agent(launch, agent(Some(&creds.join("robot-2.json"))), LIMIT);
-    assert!(
+    finished.assert_holds(
         !finished.stderr().contains("refused process"),
-        "the refused logins never reached the world\n{}",
-        finished.describe()
+        "the refused logins never reached the world",
     );
     t.assert_clean();
 }
@@ -402,8 +397,7 @@ fn a_swap_over_zenoh_sends_the_model_and_a_refusal_keeps_the_old_one() {
     let recording = t.path().join("swapped.mcap");
     command.arg("--record").arg(&recording);
     let mut launch = LiveProcess::spawn(command);
-    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_connected(&mut launch);
 
     let swap = |model: &Path, login: Option<&Path>| {
         let mut command = Command::new(&t.bins().cli);

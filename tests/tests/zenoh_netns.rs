@@ -19,9 +19,9 @@ use formation_cli::launch::read_trajectory;
 use formation_robot_agent::decision::PolicyController;
 use formation_tests::netns::{NetPair, WORLD_IP};
 use formation_tests::{
-    LiveProcess, ProcessTest, RobotLog, agent_pids, assert_bit_identical, binaries,
-    formation_run_args, free_tcp_port, read_json, repo_root, run, send_signal, start_relay,
-    test_model, world_pid, zenoh_credentials,
+    LiveProcess, ProcessTest, RobotLog, agent_pids, assert_bit_identical, await_connected,
+    binaries, formation_run_args, free_tcp_port, read_json, repo_root, run, send_signal,
+    start_relay, test_model, world_pid, zenoh_credentials,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -144,7 +144,7 @@ impl Rig {
 fn finish_agents(agents: Vec<LiveProcess>) {
     for agent in agents {
         let finished = agent.finish(Duration::from_secs(30));
-        assert!(finished.output.status.success(), "{}", finished.describe());
+        finished.assert_success();
     }
 }
 
@@ -265,8 +265,7 @@ fn a_killed_remote_agent_brakes_its_robot_and_a_restarted_one_rejoins() {
     let scenario = rig.t.case1(16.0);
     let mut launch = rig.launch(&scenario, model, &["--clock", "realtime"]);
     let mut agents = rig.agents(&rig.listen, model);
-    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_connected(&mut launch);
     std::thread::sleep(Duration::from_secs(3));
     let victim = agents.remove(1);
     let killed_at = Instant::now();
@@ -314,8 +313,7 @@ fn a_cut_link_brakes_every_robot_and_they_drive_again_when_it_is_back() {
     let scenario = rig.t.case1(14.0);
     let mut launch = rig.launch(&scenario, model, &["--clock", "realtime"]);
     let agents = rig.agents(&rig.listen, model);
-    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_connected(&mut launch);
     std::thread::sleep(Duration::from_secs(3));
     rig.pair.set_link(false);
     std::thread::sleep(Duration::from_secs(2));
@@ -389,7 +387,7 @@ fn an_impostor_across_namespaces_gets_nothing_and_moves_no_robot() {
     finish_agents(agents);
     impostor.close_input();
     let impostor = impostor.finish(Duration::from_secs(30));
-    assert!(impostor.output.status.success(), "{}", impostor.describe());
+    impostor.assert_success();
     eprintln!("the impostor saw:\n{}", impostor.stdout().trim_end());
     let counted = |prefix: &str| -> usize {
         impostor
@@ -400,10 +398,9 @@ fn an_impostor_across_namespaces_gets_nothing_and_moves_no_robot() {
             .and_then(|n| n.parse().ok())
             .unwrap_or_else(|| panic!("no {prefix:?} line\n{}", impostor.describe()))
     };
-    assert!(
+    impostor.assert_holds(
         counted("own scans ") > 0,
-        "robot 1's login may read robot 1's scans\n{}",
-        impostor.describe()
+        "robot 1's login may read robot 1's scans",
     );
     assert_eq!(
         counted("robot 0: "),
@@ -416,16 +413,14 @@ fn an_impostor_across_namespaces_gets_nothing_and_moves_no_robot() {
         "robot 1's login received robot 2's traffic"
     );
     let stderr = finished.stderr();
-    assert!(
+    finished.assert_holds(
         stderr.contains(&format!("robot 1: refused process {impostor_pid}")),
-        "the hello robot 1's login may send reaches the world, which refuses it\n{}",
-        finished.describe()
+        "the hello robot 1's login may send reaches the world, which refuses it",
     );
     for robot in [0, 2] {
-        assert!(
+        finished.assert_holds(
             !stderr.contains(&format!("robot {robot}: refused process")),
-            "robot 1's login greeted as robot {robot}\n{}",
-            finished.describe()
+            &format!("robot 1's login greeted as robot {robot}"),
         );
     }
     let over_network = read_trajectory(&rig.out().join("runs/run-0000.json")).expect("the run log");
@@ -458,8 +453,7 @@ fn remote_agents_exit_with_a_message_when_the_world_is_killed() {
     let scenario = rig.t.case1(300.0);
     let mut launch = rig.launch(&scenario, model, &["--clock", "realtime"]);
     let agents = rig.agents(&rig.listen, model);
-    let connected = launch.wait_for_line(Duration::from_secs(120), |l| l.contains("connected"));
-    assert!(connected.is_some(), "{}", launch.describe());
+    await_connected(&mut launch);
     std::thread::sleep(Duration::from_secs(2));
     let world = world_pid(&rig.t.run).expect("the world process runs");
     // `ip netns exec` execs the launcher in its own process.
@@ -480,16 +474,14 @@ fn remote_agents_exit_with_a_message_when_the_world_is_killed() {
     let agent_pids_seen: Vec<u32> = agents.iter().map(LiveProcess::id).collect();
     for (robot, agent) in agents.into_iter().enumerate() {
         let finished = agent.finish(Duration::from_secs(60));
-        assert!(
+        finished.assert_holds(
             finished.output.status.success(),
-            "robot {robot}'s agent exits cleanly\n{}",
-            finished.describe()
+            &format!("robot {robot}'s agent exits cleanly"),
         );
         let expected = world_gone_message(robot, rig.t.run.as_str());
-        assert!(
+        finished.assert_holds(
             finished.stderr().lines().any(|l| l == expected),
-            "robot {robot}'s agent says why it exits and what to do:\n{expected}\n{}",
-            finished.describe()
+            &format!("robot {robot}'s agent says why it exits and what to do:\n{expected}"),
         );
         eprintln!(
             "robot {robot}'s remote agent exited within {:.0} ms of the world's kill",

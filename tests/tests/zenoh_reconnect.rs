@@ -63,7 +63,7 @@ fn finish_both(launch: LiveProcess, agent: LiveProcess) -> (Finished, Finished) 
     let finished = launch.finish(LIMIT);
     let agent = agent.finish(Duration::from_secs(30));
     finished.assert_success();
-    assert!(agent.output.status.success(), "{}", agent.describe());
+    agent.assert_success();
     (finished, agent)
 }
 
@@ -83,10 +83,9 @@ fn assert_back_and_bit_identical(
         finished.describe(),
         agent.describe()
     );
-    assert!(
+    finished.assert_holds(
         !finished.stdout().contains("agent lost"),
-        "no agent counted lost\n{}",
-        finished.describe()
+        "no agent counted lost",
     );
     let over_zenoh = read_trajectory(&t.out().join("runs/run-0000.json")).expect("the run log");
     let scenario = Scenario::from_path(scenario).expect("scenario");
@@ -173,7 +172,7 @@ fn an_agent_back_after_the_grace_is_told_it_was_counted_gone_and_exits() {
     assert!(lost.is_some(), "{}", launch.describe());
     send_signal(agent.id(), "CONT");
     let agent = agent.finish(Duration::from_secs(30));
-    assert_eq!(agent.output.status.code(), Some(2), "{}", agent.describe());
+    agent.assert_exit(2);
     assert!(
         agent.stderr().contains("was unreachable for more than 5 s")
             && agent.stderr().contains("start this agent again"),
@@ -233,10 +232,9 @@ fn a_swap_answer_lost_in_a_drop_is_sent_again() {
         swapped.describe()
     );
     let (_, agent) = finish_both(launch, agent);
-    assert!(
+    agent.assert_holds(
         agent.stderr().contains("the world asked for swap"),
-        "the agent answered the repeated swap request again\n{}",
-        agent.describe()
+        "the agent answered the repeated swap request again",
     );
     t.assert_clean();
 }

@@ -24,10 +24,9 @@ use formation_tests::capture::{PacketCapture, TcpStream as CapturedStream, TcpSt
 use formation_tests::netns::{AGENTS_IP, NetPair, WORLD_IP};
 use formation_tests::tls::raw_tls_client;
 use formation_tests::{
-    LeakCheck, LiveProcess, ProcessTest, TempDir, assert_bit_identical, assert_none_counted,
-    await_line, binaries, case1_scenario, finish_with_remote_agent, formation_run_args,
-    free_tcp_port, in_process_run, one_at_a_time, policy_eval, read_json, remote_zenoh_agent, run,
-    test_model, tls_credentials, unique_run_id,
+    LiveProcess, ProcessTest, TempDir, assert_bit_identical, assert_none_counted, await_line,
+    binaries, case1_scenario, finish_with_remote_agent, formation_run_args, free_tcp_port,
+    in_process_run, policy_eval, read_json, remote_zenoh_agent, run, test_model, tls_credentials,
 };
 use formation_transport_zenoh::tls::issue::{Authority, issue_for};
 use formation_transport_zenoh::tls::{certificate_file, key_file};
@@ -90,15 +89,13 @@ fn a_tls_team_runs_lockstep_bit_identical_to_in_process() {
     let finished = t.lockstep_case1_over_zenoh(&endpoint(free_tcp_port()));
     let out = t.out();
     let credentials = out.join("credentials").join(t.run.as_str());
-    assert!(
+    finished.assert_holds(
         credentials.join("ca.pem").is_file() && credentials.join("world.key.pem").is_file(),
-        "the launcher made certificates for a tls/ launch\n{}",
-        finished.describe()
+        "the launcher made certificates for a tls/ launch",
     );
-    assert!(
+    finished.assert_holds(
         !finished.stderr().contains("clear text"),
-        "no clear-text warning on TLS\n{}",
-        finished.describe()
+        "no clear-text warning on TLS",
     );
     t.assert_clean();
 }
@@ -189,10 +186,9 @@ fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
             "{case}: {}",
             refused.describe()
         );
-        assert!(
+        refused.assert_holds(
             refused.stderr().contains(cause),
-            "{case}: expected {cause:?}\n{}",
-            refused.describe()
+            &format!("{case}: expected {cause:?}"),
         );
     }
 
@@ -251,10 +247,9 @@ fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
     let mut agent = remote_zenoh_agent(&listen, run_id, 1);
     agent.arg("--credentials").arg(creds.join("robot-1.json"));
     let finished = finish_with_remote_agent(launch, agent, LIMIT);
-    assert!(
+    finished.assert_holds(
         recorder_scans.load(Ordering::Relaxed) > 0,
-        "the recorder reads scans\n{}",
-        finished.describe()
+        "the recorder reads scans",
     );
     assert_none_counted(&[
         (&forged_seen, "the recorder published a command"),
@@ -393,30 +388,21 @@ fn from_hex(hex: &str) -> Vec<u8> {
 /// in one network namespace and robot 1's agent in another, joined by a veth: the recorder's
 /// certificate reads robot 1's scans and commands from the world's namespace (its own link does
 /// not cross the veth), and `packet-capture` records the veth in the agent's.
-fn eavesdrop(protocol: &str, dir: &Path, creds: &Path) -> Eavesdropped {
+fn eavesdrop(t: &ProcessTest, protocol: &str, creds: &Path) -> Eavesdropped {
     let pair = namespaces();
-    let run_id = unique_run_id(&format!("zt{protocol}"));
-    let leaks = LeakCheck::new(&run_id);
-    let folder = dir.join(protocol);
-    std::fs::create_dir_all(&folder).expect("the run's folder");
+    let (run_id, leaks) = t.another_run(&format!("zt{protocol}"));
+    let folder = t.folder(protocol);
     let scenario = case1_scenario(&folder, 3.0);
     let out = folder.join("out");
-    let listen = format!("{protocol}/{WORLD_IP}:{}", free_tcp_port());
-    let creds_text = creds.to_string_lossy();
-    let mut command = pair.in_world(&binaries().cli);
-    formation_run_args(
-        &mut command,
+    let (mut launch, listen) = launch_in_world(
+        &pair,
         &run_id,
-        (&scenario, test_model(), &out),
-        &[
-            ["--transport", "zenoh", "--listen", &listen, "--remote", "1"].as_slice(),
-            // An agent that never gets through fails the run within the watchdog, with its output.
-            &["--clock", "lockstep", "--remote-timeout-s", "40"],
-            &["--credentials", &creds_text],
-        ]
-        .concat(),
+        (&scenario, &out),
+        (protocol, "1"),
+        // An agent that never gets through fails the run within the watchdog, with its output.
+        &["--clock", "lockstep", "--remote-timeout-s", "40"],
+        creds,
     );
-    let mut launch = LiveProcess::spawn(command);
     await_line(&mut launch, "waiting for the remote agents of robots [1]");
     let robot1 = format!("formation/{run_id}/robot/1/*");
     let mut tap = pair.in_world(Path::new(env!("CARGO_BIN_EXE_zenoh-tap")));
@@ -493,6 +479,35 @@ fn namespaces() -> NetPair {
     })
 }
 
+/// `formation run` of `scenario` (run `run_id`, the test model, writing to `out`) started in
+/// `pair`'s world namespace over Zenoh on `protocol` (`tcp` or `tls`) at the world's address,
+/// the robots `remote` remote, with `extra` flags and the team's credentials in `creds`.
+/// Returns the launch and the endpoint it listens on.
+fn launch_in_world(
+    pair: &NetPair,
+    run_id: &RunId,
+    (scenario, out): (&Path, &Path),
+    (protocol, remote): (&str, &str),
+    extra: &[&str],
+    creds: &Path,
+) -> (LiveProcess, String) {
+    let listen = format!("{protocol}/{WORLD_IP}:{}", free_tcp_port());
+    let creds_text = creds.to_string_lossy();
+    let mut flags = vec![
+        "--transport",
+        "zenoh",
+        "--listen",
+        &listen,
+        "--remote",
+        remote,
+    ];
+    flags.extend_from_slice(extra);
+    flags.extend_from_slice(&["--credentials", &creds_text]);
+    let mut command = pair.in_world(&binaries().cli);
+    formation_run_args(&mut command, run_id, (scenario, test_model(), out), &flags);
+    (LiveProcess::spawn(command), listen)
+}
+
 /// Waits for `launch` (in `pair`'s world namespace) to wait for its remote agents, starts the
 /// agents of robots 0, 1 and 2 in the agents' namespace (with `extra` flags and their
 /// credentials from `creds`), and waits for the launch and then each agent to end successfully.
@@ -522,7 +537,7 @@ fn run_team_across(
     launch.finish(LIMIT).assert_success();
     for agent in agents {
         let agent = agent.finish(Duration::from_secs(30));
-        assert!(agent.output.status.success(), "{}", agent.describe());
+        agent.assert_success();
     }
 }
 
@@ -535,7 +550,7 @@ fn a_capture_of_a_tls_link_holds_no_scan_or_command_in_clear() {
     let t = ProcessTest::start("zenoh_tls_capture", LIMIT);
     let creds = tls_credentials(t.path(), "creds", 3);
 
-    let plain = eavesdrop("tcp", t.path(), &creds);
+    let plain = eavesdrop(&t, "tcp", &creds);
     let (carried, gaps) = plain.bytes_and_gaps();
     eprintln!("tcp/: {carried} bytes crossed the veth");
     assert_eq!(gaps, 0, "the tcp/ capture is whole");
@@ -549,7 +564,7 @@ fn a_capture_of_a_tls_link_holds_no_scan_or_command_in_clear() {
         assert!(plain.carried(true, command), "tcp/: command {k} in clear");
     }
 
-    let sealed = eavesdrop("tls", t.path(), &creds);
+    let sealed = eavesdrop(&t, "tls", &creds);
     let (carried, gaps) = sealed.bytes_and_gaps();
     eprintln!("tls/: {carried} bytes crossed the veth");
     assert_eq!(gaps, 0, "the tls/ capture is whole");
@@ -587,29 +602,14 @@ fn a_tls_team_across_namespaces_gives_the_in_process_table() {
     let creds = tls_credentials(t.path(), "creds", 3);
     let scenario_path = t.case1(6.0);
     let out = t.out();
-    let listen = format!("tls/{WORLD_IP}:{}", free_tcp_port());
-    let creds_text = creds.to_string_lossy();
-    let mut command = pair.in_world(&binaries().cli);
-    formation_run_args(
-        &mut command,
+    let (launch, listen) = launch_in_world(
+        &pair,
         &t.run,
-        (&scenario_path, test_model(), &out),
-        &[
-            "--transport",
-            "zenoh",
-            "--listen",
-            &listen,
-            "--remote",
-            "0,1,2",
-            "--remote-timeout-s",
-            "120",
-            "--clock",
-            "lockstep",
-            "--credentials",
-            &creds_text,
-        ],
+        (&scenario_path, &out),
+        ("tls", "0,1,2"),
+        &["--remote-timeout-s", "120", "--clock", "lockstep"],
+        &creds,
     );
-    let launch = LiveProcess::spawn(command);
     run_team_across(
         &pair,
         launch,
@@ -647,37 +647,23 @@ fn a_tls_team_across_namespaces_gives_the_in_process_table() {
 #[test]
 #[ignore = "a measurement: run it by name with --ignored --nocapture"]
 fn tls_round_trip_against_plain_tcp_across_namespaces() {
-    let _one = one_at_a_time();
+    // Four realtime runs of 20 s.
+    let t = ProcessTest::start("ztrtt", 4 * LIMIT);
     let pair = namespaces();
-    let dir = TempDir::new("ztrtt");
-    let creds = tls_credentials(dir.path(), "creds", 3);
-    let scenario = case1_scenario(dir.path(), 20.0);
+    let creds = tls_credentials(t.path(), "creds", 3);
+    let scenario = t.case1(20.0);
     for round in 0..2 {
         for protocol in ["tcp", "tls"] {
-            let run_id = unique_run_id(&format!("rtt{protocol}"));
-            let listen = format!("{protocol}/{WORLD_IP}:{}", free_tcp_port());
-            let out = dir.path().join(format!("{protocol}-{round}"));
-            let creds_text = creds.to_string_lossy();
-            let flags = [
-                "--transport",
-                "zenoh",
-                "--listen",
-                &listen,
-                "--remote",
-                "0,1,2",
-                "--clock",
-                "realtime",
-                "--credentials",
-                &creds_text,
-            ];
-            let mut command = pair.in_world(&binaries().cli);
-            formation_run_args(
-                &mut command,
+            let (run_id, _leaks) = t.another_run(&format!("rtt{protocol}"));
+            let out = t.path().join(format!("{protocol}-{round}"));
+            let (launch, listen) = launch_in_world(
+                &pair,
                 &run_id,
-                (&scenario, test_model(), &out),
-                &flags,
+                (&scenario, &out),
+                (protocol, "0,1,2"),
+                &["--clock", "realtime"],
+                &creds,
             );
-            let launch = LiveProcess::spawn(command);
             run_team_across(&pair, launch, &listen, &run_id, &creds, &[]);
             let profile = read_json(&out.join("profile.json"));
             let round_trip = &profile["stages"]["round_trip"];

@@ -4,7 +4,7 @@
 
 use std::error::Error;
 
-use formation_runtime::link::{AgentLinkError, WorldLinkError};
+use formation_runtime::link::{AgentLinkError, TransportCrateError, WorldLinkError};
 
 use crate::naming::NamespaceError;
 
@@ -73,17 +73,7 @@ where
     }
 }
 
-impl From<IceoryxError> for WorldLinkError {
-    fn from(e: IceoryxError) -> Self {
-        WorldLinkError::Transport(Box::new(e))
-    }
-}
-
-impl From<IceoryxError> for AgentLinkError {
-    fn from(e: IceoryxError) -> Self {
-        AgentLinkError::Transport(Box::new(e))
-    }
-}
+impl TransportCrateError for IceoryxError {}
 
 impl From<NamespaceError> for WorldLinkError {
     fn from(e: NamespaceError) -> Self {

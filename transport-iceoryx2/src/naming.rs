@@ -40,6 +40,7 @@
 use std::path::{Path, PathBuf};
 
 use formation_proto::wire::{RunId, SwapChannel, WireError};
+use formation_runtime::link::PathIoError;
 use iceoryx2::prelude::*;
 
 /// The sizes of a swap service, shared by creator and openers.
@@ -99,40 +100,35 @@ impl ServiceLimits {
         max_nodes: 4,
     };
 
-    /// A robot's hello service: up to 8 candidate agents at once write, only the world reads.
-    pub const HELLO: ServiceLimits = ServiceLimits {
+    /// Many to one: up to 8 processes at once write, only the world reads.
+    const FAN_IN: ServiceLimits = ServiceLimits {
         max_publishers: 8,
         max_subscribers: 1,
         subscriber_buffer: 16,
         max_nodes: 16,
     };
+
+    /// One to many: only the world writes, up to 8 processes at once read.
+    const FAN_OUT: ServiceLimits = ServiceLimits {
+        max_publishers: 1,
+        max_subscribers: 8,
+        ..ServiceLimits::FAN_IN
+    };
+
+    /// A robot's hello service: up to 8 candidate agents at once write, only the world reads.
+    pub const HELLO: ServiceLimits = ServiceLimits::FAN_IN;
 
     /// A robot's welcome service: only the world writes; every candidate reads and keeps the
     /// answer to its own nonce.
-    pub const WELCOME: ServiceLimits = ServiceLimits {
-        max_publishers: 1,
-        max_subscribers: 8,
-        subscriber_buffer: 16,
-        max_nodes: 16,
-    };
+    pub const WELCOME: ServiceLimits = ServiceLimits::FAN_OUT;
 
     /// Swap requests: any number of `formation swap` processes (up to 8 at once) write, only the
     /// world reads.
-    pub const SWAP_REQUEST: ServiceLimits = ServiceLimits {
-        max_publishers: 8,
-        max_subscribers: 1,
-        subscriber_buffer: 16,
-        max_nodes: 16,
-    };
+    pub const SWAP_REQUEST: ServiceLimits = ServiceLimits::FAN_IN;
 
     /// Swap replies: only the world writes; every waiting `formation swap` reads and keeps the
     /// reply with its own request id.
-    pub const SWAP_REPLY: ServiceLimits = ServiceLimits {
-        max_publishers: 1,
-        max_subscribers: 8,
-        subscriber_buffer: 16,
-        max_nodes: 16,
-    };
+    pub const SWAP_REPLY: ServiceLimits = ServiceLimits::FAN_OUT;
 }
 
 /// The iceoryx2 namespace of one run: a file prefix for the shared-memory folder and a root
@@ -265,16 +261,8 @@ pub enum NamespaceError {
         us: u32,
     },
     /// A file system operation failed.
-    #[error("{action} {path}: {source}")]
-    Io {
-        /// What was being done.
-        action: &'static str,
-        /// On what.
-        path: PathBuf,
-        /// The OS error.
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] PathIoError),
 }
 
 /// The claim of one launch on a run id: an exclusive lock on `<base>/<run>.lock`, held for as
@@ -312,18 +300,14 @@ impl RunNamespace {
     fn private_base(&self) -> Result<&Path, NamespaceError> {
         use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
         let base = self.base_dir();
-        let io = |action, source| NamespaceError::Io {
-            action,
-            path: base.to_path_buf(),
-            source,
-        };
+        let io = |action, source| PathIoError::of(action, base)(source);
         match std::fs::DirBuilder::new()
             .recursive(true)
             .mode(0o700)
             .create(base)
         {
             Ok(()) => {}
-            Err(e) => return Err(io("creating", e)),
+            Err(e) => return Err(io("creating", e).into()),
         }
         let meta = std::fs::metadata(base).map_err(|e| io("inspecting", e))?;
         let us = current_uid();
@@ -361,11 +345,7 @@ impl RunNamespace {
                 .truncate(false)
                 .mode(0o600)
                 .open(&path)
-                .map_err(|source| NamespaceError::Io {
-                    action: "opening the run lock",
-                    path: path.clone(),
-                    source,
-                })?;
+                .map_err(PathIoError::of("opening the run lock", &path))?;
             match file.try_lock() {
                 Ok(()) => {}
                 Err(std::fs::TryLockError::WouldBlock) => {
@@ -375,11 +355,7 @@ impl RunNamespace {
                     });
                 }
                 Err(std::fs::TryLockError::Error(source)) => {
-                    return Err(NamespaceError::Io {
-                        action: "locking",
-                        path,
-                        source,
-                    });
+                    return Err(PathIoError::of("locking", path)(source).into());
                 }
             }
             // The winner of a race may have unlinked the file we opened: then ours is stale.
@@ -410,11 +386,7 @@ impl RunNamespace {
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
                 restrict(&self.root, 0o700).map(|_| ())
             }
-            Err(source) => Err(NamespaceError::Io {
-                action: "creating",
-                path: self.root.clone(),
-                source,
-            }),
+            Err(source) => Err(PathIoError::of("creating", &self.root)(source).into()),
         }
     }
 
@@ -477,13 +449,7 @@ fn restrict(path: &Path, mode: u32) -> Result<usize, NamespaceError> {
     let meta = match std::fs::symlink_metadata(path) {
         Ok(meta) => meta,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
-        Err(source) => {
-            return Err(NamespaceError::Io {
-                action: "inspecting",
-                path: path.to_path_buf(),
-                source,
-            });
-        }
+        Err(source) => return Err(PathIoError::of("inspecting", path)(source).into()),
     };
     if meta.file_type().is_symlink() || meta.permissions().mode() & 0o077 == 0 {
         return Ok(0);
@@ -491,11 +457,7 @@ fn restrict(path: &Path, mode: u32) -> Result<usize, NamespaceError> {
     match std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)) {
         Ok(()) => Ok(1),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(0),
-        Err(source) => Err(NamespaceError::Io {
-            action: "making private",
-            path: path.to_path_buf(),
-            source,
-        }),
+        Err(source) => Err(PathIoError::of("making private", path)(source).into()),
     }
 }
 

@@ -38,7 +38,7 @@ use super::node::{
     Delivery, Node, NodeError, Received, RosPublisher, RosSubscription, system_time_ns,
 };
 use formation_runtime::agent::{AgentError, AgentExit, AgentLoop, PilotMaker};
-use formation_runtime::link::{AgentLink, AgentLinkError, Wake};
+use formation_runtime::link::{AgentLink, AgentLinkError, TransportCrateError, Wake};
 use formation_transport_zenoh::{Bell, Endpoint, SignalWatch};
 
 /// Which message carries the robot's orientation.
@@ -110,11 +110,7 @@ pub enum Ros2AgentError {
     Agent(#[from] AgentError),
 }
 
-impl From<Ros2AgentError> for AgentLinkError {
-    fn from(error: Ros2AgentError) -> AgentLinkError {
-        AgentLinkError::Transport(Box::new(error))
-    }
-}
+impl TransportCrateError for Ros2AgentError {}
 
 /// What the subscriptions leave for the loop.
 #[derive(Default)]

@@ -30,6 +30,7 @@
 use std::path::{Path, PathBuf};
 
 use formation_proto::wire::RunId;
+use formation_runtime::link::PathIoError;
 use serde_json::{Value, json};
 
 use super::TeamTopics;
@@ -64,16 +65,8 @@ pub enum Ros2SecurityError {
         detail: String,
     },
     /// A session configuration could not be written or read.
-    #[error("{action} {path}: {source}")]
-    Io {
-        /// What was done.
-        action: &'static str,
-        /// The file.
-        path: PathBuf,
-        /// Why it failed.
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] PathIoError),
 }
 
 /// The ROS 2 team's side of TLS: the credentials folder, the team and the run whose record channel
@@ -299,17 +292,10 @@ pub fn write_session_configs(
     connect: &Endpoint,
     n_robots: usize,
 ) -> Result<Vec<PathBuf>, Ros2SecurityError> {
-    let folder = std::path::absolute(folder).map_err(|source| Ros2SecurityError::Io {
-        action: "finding the absolute path of",
-        path: folder.to_path_buf(),
-        source,
-    })?;
+    let folder = std::path::absolute(folder)
+        .map_err(PathIoError::of("finding the absolute path of", folder))?;
     let dir = folder.join(SESSION_CONFIG_DIR);
-    std::fs::create_dir_all(&dir).map_err(|source| Ros2SecurityError::Io {
-        action: "creating",
-        path: dir.clone(),
-        source,
-    })?;
+    std::fs::create_dir_all(&dir).map_err(PathIoError::of("creating", &dir))?;
     let principals = (0..n_robots)
         .map(robot_user)
         .chain(std::iter::once(RECORDER_USER.to_string()));
@@ -327,11 +313,7 @@ pub fn write_session_configs(
 fn write_private(path: &Path, bytes: &[u8]) -> Result<(), Ros2SecurityError> {
     use std::io::Write as _;
     use std::os::unix::fs::OpenOptionsExt as _;
-    let io = |source| Ros2SecurityError::Io {
-        action: "writing",
-        path: path.to_path_buf(),
-        source,
-    };
+    let io = |source| Ros2SecurityError::from(PathIoError::of("writing", path)(source));
     let mut file = std::fs::OpenOptions::new()
         .write(true)
         .create(true)

@@ -35,7 +35,7 @@ use formation_proto::wire::{
 use formation_runtime::auth::{LaunchSecret, fresh_nonce};
 
 use super::model::split_model;
-use super::{Bell, Endpoint, Login, Queue, Ring, SignalWatch, keys};
+use super::{Bell, Endpoint, Login, Queue, Ring, SignalWatch, keys, subscribe};
 use crate::ZenohError;
 use formation_runtime::link::{AgentLink, AgentLinkError, Wake};
 
@@ -422,27 +422,22 @@ fn subscribe_welcomes(
     let welcome_key = lobby_service_name(run, robot, LobbyChannel::Welcome);
     let inbox = Arc::clone(inbox);
     let bell = Arc::clone(bell);
-    session
-        .declare_subscriber(welcome_key.clone())
-        .callback(move |sample| {
-            let decoded = message_from_bytes::<WelcomeMsg>("welcome", &sample.payload().to_bytes())
-                .and_then(|msg| Ok((msg.nonce, msg.decode()?)));
-            match decoded {
-                Ok((nonce, Welcome::Refused(reason)))
-                    if *lock(&inbox.incarnation) == Some(nonce) =>
-                {
-                    *lock(&inbox.dismissed) = Some(reason);
-                    bell.ring();
-                }
-                Ok(welcome) => {
-                    inbox.welcomes.push(welcome);
-                    bell.ring();
-                }
-                Err(e) => tracing::warn!("ignoring a malformed welcome: {e}"),
+    let subscriber = subscribe(session, welcome_key, move |sample| {
+        let decoded = message_from_bytes::<WelcomeMsg>("welcome", &sample.payload().to_bytes())
+            .and_then(|msg| Ok((msg.nonce, msg.decode()?)));
+        match decoded {
+            Ok((nonce, Welcome::Refused(reason))) if *lock(&inbox.incarnation) == Some(nonce) => {
+                *lock(&inbox.dismissed) = Some(reason);
+                bell.ring();
             }
-        })
-        .wait()
-        .map_err(|e| zenoh_error(format!("subscribe to {welcome_key}"))(e.to_string()))
+            Ok(welcome) => {
+                inbox.welcomes.push(welcome);
+                bell.ring();
+            }
+            Err(e) => tracing::warn!("ignoring a malformed welcome: {e}"),
+        }
+    })?;
+    Ok(subscriber)
 }
 
 /// Subscribes to the incarnation's scan channel `key`: each well-formed scan replaces the one

@@ -5,7 +5,7 @@
 //! raised them; they are kept as their text without those locations ([`crate::without_source_locations`]),
 //! since a user can do nothing with them.
 
-use formation_runtime::link::{AgentLinkError, WorldLinkError};
+use formation_runtime::link::TransportCrateError;
 
 /// A failure of the Zenoh transport.
 #[derive(Debug, thiserror::Error)]
@@ -53,20 +53,10 @@ pub enum ZenohError {
     Tls(#[from] crate::tls::TlsError),
 }
 
-impl From<ZenohError> for WorldLinkError {
-    fn from(e: ZenohError) -> Self {
-        WorldLinkError::Transport(Box::new(e))
-    }
-}
-
-impl From<ZenohError> for AgentLinkError {
-    fn from(e: ZenohError) -> Self {
-        AgentLinkError::Transport(Box::new(e))
-    }
-}
+impl TransportCrateError for ZenohError {}
 
 #[cfg(feature = "tls")]
-impl From<crate::tls::TlsError> for AgentLinkError {
+impl From<crate::tls::TlsError> for formation_runtime::link::AgentLinkError {
     fn from(e: crate::tls::TlsError) -> Self {
         ZenohError::from(e).into()
     }

@@ -715,6 +715,23 @@ pub fn required_endpoint(
     Ok(Endpoint::parse(text)?)
 }
 
+/// Declares a subscriber on `key` that hands each sample to `callback`; Zenoh's refusal is a
+/// [`ZenohError::Refused`] naming the key.
+pub(crate) fn subscribe(
+    session: &::zenoh::Session,
+    key: String,
+    callback: impl Fn(::zenoh::sample::Sample) + Send + Sync + 'static,
+) -> Result<::zenoh::pubsub::Subscriber<()>, ZenohError> {
+    session
+        .declare_subscriber(key.clone())
+        .callback(callback)
+        .wait()
+        .map_err(|e| ZenohError::Refused {
+            action: format!("subscribe to {key}"),
+            detail: e.to_string(),
+        })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -33,7 +33,7 @@ use formation_proto::wire::{
 };
 
 use super::model::split_model;
-use super::{Bell, Endpoint, Queue, SignalWatch, WorldAccess, keys};
+use super::{Bell, Endpoint, Queue, SignalWatch, WorldAccess, keys, subscribe};
 use crate::ZenohError;
 use formation_runtime::link::{
     ForwardsSwapModels, Hello, Incarnations, WorldLink, WorldLinkError, WorldResult,
@@ -195,19 +195,16 @@ fn queue_subscriber<T: Send + Sync + 'static>(
     let bell = Arc::clone(bell);
     let queue = Arc::clone(queue);
     let what = key.clone();
-    session
-        .declare_subscriber(key.clone())
-        .callback(move |sample| match decode(&sample) {
-            Ok(item) => {
-                if !queue.push(item) {
-                    tracing::warn!("{what}: the world fell behind; dropped the oldest message");
-                }
-                bell.ring();
+    let subscriber = subscribe(session, key, move |sample| match decode(&sample) {
+        Ok(item) => {
+            if !queue.push(item) {
+                tracing::warn!("{what}: the world fell behind; dropped the oldest message");
             }
-            Err(e) => tracing::warn!("{what}: ignoring a malformed message: {e}"),
-        })
-        .wait()
-        .map_err(|e| zenoh_error(format!("subscribe to {key}"))(e.to_string()))
+            bell.ring();
+        }
+        Err(e) => tracing::warn!("{what}: ignoring a malformed message: {e}"),
+    })?;
+    Ok(subscriber)
 }
 
 /// A publisher on `key`: scans are express, real-time and dropped under congestion; the rest
@@ -344,16 +341,13 @@ fn subscribe_swap_requests(
         Arc::clone(refusals),
         Arc::clone(models),
     );
-    session
-        .declare_subscriber(key.clone())
-        .callback(move |sample| {
-            let payload = bytes(&sample);
-            if file_swap_request(&payload, &requests, &refusals, &models) {
-                bell.ring();
-            }
-        })
-        .wait()
-        .map_err(|e| zenoh_error(format!("subscribe to {key}"))(e.to_string()))
+    let subscriber = subscribe(session, key, move |sample| {
+        let payload = bytes(&sample);
+        if file_swap_request(&payload, &requests, &refusals, &models) {
+            bell.ring();
+        }
+    })?;
+    Ok(subscriber)
 }
 
 /// Watches the agents' liveliness tokens of run `run` (with history) into `liveness`

@@ -375,20 +375,36 @@ fn zenoh_link(args: &Args, run_id: &RunId, n_robots: usize) -> anyhow::Result<Li
     };
     let link = ZenohWorldLink::create(run_id, n_robots, &listen, access.as_ref())
         .with_context(|| format!("setting up run {run_id}'s Zenoh router on {listen}"))?;
-    let feed = link
-        .record_feed()
-        .with_context(|| format!("setting up run {run_id}'s record channel"))?;
+    let feed = link.record_feed();
+    with_record_feed(link, feed, run_id)
+}
+
+/// A link over a Zenoh router (Zenoh's or ROS 2's) with its record channel `feed` for remote
+/// recorders.
+#[cfg(feature = "zenoh")]
+fn with_record_feed(
+    link: impl WorldLink + 'static,
+    feed: formation_runtime::link::WorldResult<formation_transport_zenoh::ZenohRecordFeed>,
+    run_id: &RunId,
+) -> anyhow::Result<LinkAndFeed> {
+    let feed = feed.with_context(|| format!("setting up run {run_id}'s record channel"))?;
     Ok((Box::new(link), Some(Box::new(feed))))
 }
 
 /// This build has no Zenoh.
 #[cfg(not(feature = "zenoh"))]
 fn zenoh_link(_args: &Args, _run_id: &RunId, _n_robots: usize) -> anyhow::Result<LinkAndFeed> {
-    Err(TransportError::NotBuilt {
+    Err(not_built(Transport::Zenoh))
+}
+
+/// Zenoh and ROS 2 are the feature `zenoh`'s, which this build lacks.
+#[cfg(not(feature = "zenoh"))]
+fn not_built(transport: Transport) -> anyhow::Error {
+    TransportError::NotBuilt {
         program: "formation-world".into(),
-        transport: Transport::Zenoh,
+        transport,
     }
-    .into())
+    .into()
 }
 
 /// The world as a ROS 2 team: a Zenoh router on `--listen` serving each robot's LaserScan,
@@ -422,10 +438,8 @@ fn ros2_link(
         args.credentials.as_deref(),
     )
     .with_context(|| format!("setting up the ROS 2 team of run {run_id} on {listen}"))?;
-    let feed = link
-        .record_feed()
-        .with_context(|| format!("setting up run {run_id}'s record channel"))?;
-    Ok((Box::new(link), Some(Box::new(feed))))
+    let feed = link.record_feed();
+    with_record_feed(link, feed, run_id)
 }
 
 /// This build has no Zenoh.
@@ -437,11 +451,7 @@ fn ros2_link(
     _runtime: &RuntimeSettings,
     _secret: LaunchSecret,
 ) -> anyhow::Result<LinkAndFeed> {
-    Err(TransportError::NotBuilt {
-        program: "formation-world".into(),
-        transport: Transport::Ros2,
-    }
-    .into())
+    Err(not_built(Transport::Ros2))
 }
 
 /// Reads the run specs; all must have the same team size.

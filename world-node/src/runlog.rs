@@ -427,9 +427,6 @@ fn keep_partial(
 
 #[cfg(test)]
 mod tests {
-    use std::cell::RefCell;
-    use std::rc::Rc;
-
     use formation_record::LaunchInfo;
     use formation_record::live::{LiveMessage, decode};
     use formation_runtime::link::{WorldLinkError, WorldResult};
@@ -438,11 +435,21 @@ mod tests {
     use super::*;
 
     /// A record channel that keeps what it is sent; `fail` makes every send fail.
-    #[derive(Default)]
     struct FakeFeed {
         listening: bool,
         fail: bool,
-        sent: Rc<RefCell<Vec<Vec<u8>>>>,
+        sent: Vec<Vec<u8>>,
+    }
+
+    impl FakeFeed {
+        /// A channel with a recorder `listening` or not, whose sends `fail` or not.
+        fn new(listening: bool, fail: bool) -> FakeFeed {
+            FakeFeed {
+                listening,
+                fail,
+                sent: Vec::new(),
+            }
+        }
     }
 
     impl RecordFeed for FakeFeed {
@@ -461,7 +468,7 @@ mod tests {
                     robots: 3,
                 });
             }
-            self.sent.borrow_mut().push(message);
+            self.sent.push(message);
             Ok(())
         }
     }
@@ -485,17 +492,12 @@ mod tests {
 
     #[test]
     fn a_run_on_the_record_channel_is_its_setup_then_its_end_while_a_recorder_listens() {
-        let sent = Rc::new(RefCell::new(Vec::new()));
-        let mut feed = FakeFeed {
-            listening: true,
-            fail: false,
-            sent: Rc::clone(&sent),
-        };
+        let mut feed = FakeFeed::new(true, false);
         let spec = case1();
         let live = LiveFeed::begin(&mut feed, &spec, &launch(), 0, 1).expect("the channel begins");
         assert!(live.wanted());
         live.end(None);
-        let messages: Vec<LiveMessage> = sent.borrow().iter().map(|m| decode(m).unwrap()).collect();
+        let messages: Vec<LiveMessage> = feed.sent.iter().map(|m| decode(m).unwrap()).collect();
         assert_eq!(messages.len(), 2, "{messages:?}");
         assert!(matches!(messages[0], LiveMessage::Setup(_)), "{messages:?}");
         assert!(
@@ -512,26 +514,13 @@ mod tests {
 
     #[test]
     fn nobody_listening_gets_no_end_and_a_failed_send_ends_the_channel_not_the_run() {
-        let sent = Rc::new(RefCell::new(Vec::new()));
-        let mut quiet = FakeFeed {
-            listening: false,
-            fail: false,
-            sent: Rc::clone(&sent),
-        };
+        let mut quiet = FakeFeed::new(false, false);
         let spec = case1();
         let live = LiveFeed::begin(&mut quiet, &spec, &launch(), 0, 1).expect("begins");
         live.end(None);
-        assert_eq!(
-            sent.borrow().len(),
-            1,
-            "only the setup, kept for late joiners"
-        );
+        assert_eq!(quiet.sent.len(), 1, "only the setup, kept for late joiners");
 
-        let mut broken = FakeFeed {
-            listening: true,
-            fail: true,
-            sent: Rc::default(),
-        };
+        let mut broken = FakeFeed::new(true, true);
         assert!(LiveFeed::begin(&mut broken, &spec, &launch(), 0, 1).is_none());
     }
 

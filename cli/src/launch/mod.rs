@@ -887,7 +887,7 @@ pub fn swap_command(args: &SwapArgs) -> anyhow::Result<()> {
                 (args.reach.connect.is_some(), "--connect"),
                 (args.reach.credentials.is_some(), "--credentials"),
             ])?;
-            swap::request_swap(&args.run, args.robot, &args.model, args.at_tick, timeout)?
+            swap::request_swap(args, timeout)?
         }
         Transport::Zenoh => swap_over_zenoh(args, timeout)?,
         Transport::Ros2 => anyhow::bail!(
@@ -924,15 +924,7 @@ fn swap_over_zenoh(args: &SwapArgs, timeout: Duration) -> anyhow::Result<swap::S
             flag: "--connect",
             transport: Transport::Zenoh,
         })?;
-    swap::request_swap_over_zenoh(
-        connect,
-        args.reach.credentials.as_deref(),
-        &args.run,
-        args.robot,
-        &args.model,
-        args.at_tick,
-        timeout,
-    )
+    swap::request_swap_over_zenoh(connect, args, timeout)
 }
 
 /// Without Zenoh.

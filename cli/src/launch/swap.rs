@@ -19,12 +19,13 @@
 //! any request is sent, and the agent refuses a candidate that does not fit the robot's sensor or
 //! gives a non-finite command on its last observation.
 
-use std::path::Path;
 use std::time::Duration;
 
 use anyhow::Context;
 use formation_proto::wire::{RunId, SwapOutcome, SwapRequest};
 use formation_transport_iceoryx2::naming::RunNamespace;
+
+use crate::args::SwapArgs;
 
 /// The world or the agent refused a swap; the old model keeps driving.
 #[derive(Debug, thiserror::Error)]
@@ -45,67 +46,69 @@ pub struct SwapDone {
     pub model_id: String,
 }
 
-/// Asks run `run`'s world to make robot `robot` drive with `model` from tick `at_tick` on (0: as
-/// soon as it is loaded), and waits up to `timeout` for the answer.
-pub fn request_swap(
-    run: &str,
-    robot: usize,
-    model: &Path,
-    at_tick: u64,
-    timeout: Duration,
-) -> anyhow::Result<SwapDone> {
-    let run_id = RunId::new(run)?;
-    // Refused here by its metadata (missing, not a regular file, over the size limit) rather
-    // than by the agent after it has read the file.
-    formation_onnx::check_model_file(model)?;
-    let path = std::fs::canonicalize(model)
-        .with_context(|| format!("resolving model path {}", model.display()))?;
+/// Asks the world of run `args.run` to make robot `args.robot` drive with `args.model` from tick
+/// `args.at_tick` on (0: as soon as it is loaded), and waits up to `timeout` for the answer.
+pub fn request_swap(args: &SwapArgs, timeout: Duration) -> anyhow::Result<SwapDone> {
+    let (run_id, request) = request_on_this_host(args)?;
     let namespace = RunNamespace::new(&run_id);
-    let request = SwapRequest {
-        request_id: request_id(),
-        robot,
-        at_tick,
-        path,
-    };
     let reply = formation_transport_iceoryx2::request_swap(&namespace, &request, timeout)?;
-    swap_done(reply.outcome, robot)
+    swap_done(reply.outcome, args.robot)
 }
 
-/// [`request_swap`] over Zenoh: sends the model's bytes to run `run`'s world at `connect`
-/// (logging in with the login file `credentials`, the operator's), since a remote agent cannot
-/// open this host's path.
+/// The run's id and the request of `args` to a world on this host, which opens the model at
+/// its canonical path. The model is refused here by its metadata (missing, not a regular file,
+/// over the size limit) rather than by the agent after it has read the file.
+fn request_on_this_host(args: &SwapArgs) -> anyhow::Result<(RunId, SwapRequest)> {
+    let run_id = RunId::new(&args.run)?;
+    formation_onnx::check_model_file(&args.model)?;
+    let path = std::fs::canonicalize(&args.model)
+        .with_context(|| format!("resolving model path {}", args.model.display()))?;
+    let request = SwapRequest {
+        request_id: request_id(),
+        robot: args.robot,
+        at_tick: args.at_tick,
+        path,
+    };
+    Ok((run_id, request))
+}
+
+/// [`request_swap`] over Zenoh: sends the model's bytes to the world of run `args.run` at
+/// `connect` (logging in with the login file `args.reach.credentials`, the operator's), since a
+/// remote agent cannot open this host's path.
 #[cfg(feature = "zenoh")]
 pub fn request_swap_over_zenoh(
     connect: &str,
-    credentials: Option<&Path>,
-    run: &str,
-    robot: usize,
-    model: &Path,
-    at_tick: u64,
+    args: &SwapArgs,
     timeout: Duration,
 ) -> anyhow::Result<SwapDone> {
     use formation_transport_zenoh::{Endpoint, credentials as creds, model, swap};
-    let run_id = RunId::new(run)?;
+    let run_id = RunId::new(&args.run)?;
     let endpoint = Endpoint::parse(connect)?;
-    let size = formation_onnx::check_model_file(model)?;
+    let size = formation_onnx::check_model_file(&args.model)?;
     if size > model::MAX_MODEL_BYTES as u64 {
         anyhow::bail!(
             "{}: {}",
-            model.display(),
+            args.model.display(),
             model::ModelPayloadError::TooLarge { size }
         );
     }
-    let bytes = formation_proto::files::read_bounded(model, model::MAX_MODEL_BYTES as u64)
-        .map_err(|e| anyhow::anyhow!("reading model {}: {e:?}", model.display()))?;
-    let login = credentials.map(creds::read_login).transpose()?;
-    let name = model
+    let bytes = formation_proto::files::read_bounded(&args.model, model::MAX_MODEL_BYTES as u64)
+        .map_err(|e| anyhow::anyhow!("reading model {}: {e:?}", args.model.display()))?;
+    let login = args
+        .reach
+        .credentials
+        .as_deref()
+        .map(creds::read_login)
+        .transpose()?;
+    let name = args
+        .model
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "model.onnx".into());
     let request = SwapRequest {
         request_id: request_id(),
-        robot,
-        at_tick,
+        robot: args.robot,
+        at_tick: args.at_tick,
         // Informative only: the agent stores the bytes and loads its own copy.
         path: std::path::PathBuf::from(format!("sent-over-zenoh/{name}")),
     };
@@ -117,26 +120,17 @@ pub fn request_swap_over_zenoh(
         &bytes,
         timeout,
     )?;
-    swap_done(reply.outcome, robot)
+    swap_done(reply.outcome, args.robot)
 }
 
 /// [`request_swap`] over a registered transport, `endpoint` being its `--connect`.
 pub fn request_swap_over_plugin(
     transport: &'static dyn formation_runtime::plugin::TransportPlugin,
     endpoint: Option<&str>,
-    args: &crate::args::SwapArgs,
+    args: &SwapArgs,
     timeout: Duration,
 ) -> anyhow::Result<SwapDone> {
-    let run_id = RunId::new(&args.run)?;
-    formation_onnx::check_model_file(&args.model)?;
-    let path = std::fs::canonicalize(&args.model)
-        .with_context(|| format!("resolving model path {}", args.model.display()))?;
-    let request = SwapRequest {
-        request_id: request_id(),
-        robot: args.robot,
-        at_tick: args.at_tick,
-        path,
-    };
+    let (run_id, request) = request_on_this_host(args)?;
     let site = formation_runtime::plugin::RunSite {
         run: &run_id,
         endpoint,

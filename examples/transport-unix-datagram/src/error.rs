@@ -6,22 +6,14 @@ use std::path::PathBuf;
 
 use formation_proto::wire::WireError;
 use formation_runtime::auth::SecretError;
-use formation_runtime::link::{AgentLinkError, WorldLinkError};
+use formation_runtime::link::{PathIoError, TransportCrateError};
 
 /// A failure of the Unix datagram transport.
 #[derive(Debug, thiserror::Error)]
 pub enum DatagramError {
     /// A file system or socket operation failed.
-    #[error("{action} {path}: {source}")]
-    Io {
-        /// What was being done.
-        action: &'static str,
-        /// On what.
-        path: PathBuf,
-        /// The operating system's error.
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] PathIoError),
     /// The folder of this user's runs belongs to another user, or others may enter it.
     #[error(
         "{dir} is not private to us (owner {owner}, mode {mode:o}; we are user {us}): another \
@@ -93,23 +85,9 @@ impl DatagramError {
         action: &'static str,
         path: impl Into<PathBuf>,
     ) -> impl FnOnce(std::io::Error) -> DatagramError {
-        let path = path.into();
-        move |source| DatagramError::Io {
-            action,
-            path,
-            source,
-        }
+        let io = PathIoError::of(action, path);
+        move |source| DatagramError::Io(io(source))
     }
 }
 
-impl From<DatagramError> for WorldLinkError {
-    fn from(e: DatagramError) -> Self {
-        WorldLinkError::Transport(Box::new(e))
-    }
-}
-
-impl From<DatagramError> for AgentLinkError {
-    fn from(e: DatagramError) -> Self {
-        AgentLinkError::Transport(Box::new(e))
-    }
-}
+impl TransportCrateError for DatagramError {}

@@ -111,6 +111,22 @@ impl DatagramWorldLink {
         result
     }
 
+    /// Hands `sink` what robot `robot`'s current incarnation has queued in `queue`, after taking
+    /// every datagram waiting.
+    fn drain_peer<T>(
+        &mut self,
+        robot: usize,
+        queue: impl FnOnce(&mut Peer) -> &mut VecDeque<T>,
+        sink: &mut dyn FnMut(T),
+    ) -> WorldResult {
+        check_robot_index(robot, self.robots)?;
+        self.pump(None)?;
+        if let Some(peer) = self.incarnations.get_mut(robot)? {
+            queue(peer).drain(..).for_each(sink);
+        }
+        Ok(())
+    }
+
     /// Files one datagram where the exchange drains it; a malformed one is said and dropped.
     fn take(&mut self, bytes: &[u8]) {
         if let Err(e) = Frame::decode(bytes).and_then(|frame| self.file(frame)) {
@@ -295,21 +311,11 @@ impl WorldLink for DatagramWorldLink {
     }
 
     fn drain_commands(&mut self, robot: usize, sink: &mut dyn FnMut(CmdMsg)) -> WorldResult {
-        check_robot_index(robot, self.robots)?;
-        self.pump(None)?;
-        if let Some(peer) = self.incarnations.get_mut(robot)? {
-            peer.cmds.drain(..).for_each(sink);
-        }
-        Ok(())
+        self.drain_peer(robot, |peer| &mut peer.cmds, sink)
     }
 
     fn drain_statuses(&mut self, robot: usize, sink: &mut dyn FnMut(AgentStatus)) -> WorldResult {
-        check_robot_index(robot, self.robots)?;
-        self.pump(None)?;
-        if let Some(peer) = self.incarnations.get_mut(robot)? {
-            peer.statuses.drain(..).for_each(sink);
-        }
-        Ok(())
+        self.drain_peer(robot, |peer| &mut peer.statuses, sink)
     }
 
     fn agent_alive(&mut self, robot: usize, pid: u32) -> WorldResult<bool> {

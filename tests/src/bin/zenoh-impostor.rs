@@ -23,18 +23,12 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use formation_proto::wire::{HelloMsg, LobbyChannel, RunId, lobby_service_name, message_bytes};
-use formation_tests::{count_samples, raw_client};
+use formation_tests::{count_samples, raw_client, retry_for, tool_exit};
 use formation_transport_zenoh::{credentials, keys};
 use zenoh::Wait;
 
 fn main() -> ExitCode {
-    match run() {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("zenoh-impostor: {e}");
-            ExitCode::from(2)
-        }
-    }
+    tool_exit("zenoh-impostor", run())
 }
 
 fn run() -> Result<(), String> {
@@ -50,15 +44,8 @@ fn run() -> Result<(), String> {
     let with_login = Some((login.user(), login.password()));
 
     let deadline = Instant::now() + Duration::from_secs(60);
-    let session = loop {
-        match raw_client(endpoint, with_login) {
-            Ok(session) => break session,
-            Err(e) if Instant::now() >= deadline => {
-                return Err(format!("{} was not admitted: {e}", login.user()));
-            }
-            Err(_) => std::thread::sleep(Duration::from_millis(200)),
-        }
-    };
+    let session = retry_for(Duration::from_secs(60), || raw_client(endpoint, with_login))
+        .map_err(|e| format!("{} was not admitted: {e}", login.user()))?;
     // The world's token, watched as an agent watches it (robot logins may).
     let world_seen = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let seen = std::sync::Arc::clone(&world_seen);

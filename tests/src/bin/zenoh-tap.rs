@@ -13,22 +13,17 @@ use std::path::Path;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use formation_tests::tls::raw_tls_client;
+use formation_tests::{retry_for, tool_exit};
 use zenoh::Wait;
 
 /// The most samples printed per key expression.
 const MOST: usize = 400;
 
 fn main() -> ExitCode {
-    match run() {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("zenoh-tap: {e}");
-            ExitCode::from(2)
-        }
-    }
+    tool_exit("zenoh-tap", run())
 }
 
 fn run() -> Result<(), String> {
@@ -37,16 +32,10 @@ fn run() -> Result<(), String> {
         return Err("usage: zenoh-tap ENDPOINT CREDENTIALS PRINCIPAL KEY...".into());
     };
     let folder = Path::new(credentials);
-    let deadline = Instant::now() + Duration::from_secs(60);
-    let session = loop {
-        match raw_tls_client(endpoint, folder, principal, Some((folder, principal))) {
-            Ok(session) => break session,
-            Err(e) if Instant::now() >= deadline => {
-                return Err(format!("{principal} could not connect to {endpoint}: {e}"));
-            }
-            Err(_) => std::thread::sleep(Duration::from_millis(200)),
-        }
-    };
+    let session = retry_for(Duration::from_secs(60), || {
+        raw_tls_client(endpoint, folder, principal, Some((folder, principal)))
+    })
+    .map_err(|e| format!("{principal} could not connect to {endpoint}: {e}"))?;
     let mut subscribers = Vec::new();
     for (index, key) in keys.iter().enumerate() {
         let printed = Arc::new(AtomicUsize::new(0));
