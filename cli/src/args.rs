@@ -374,8 +374,9 @@ pub struct CollectArgs {
     pub ranges: Option<formation_proto::RangeInput>,
     /// Also record the neighbours each robot detects in its own scan beside its image, in K
     /// slots (1 to 64) of (x/d*, y/d*, held, present), held by the scenarios' default rule
-    /// (`slots=K,threshold=1.3,nearest=2`). A network trained on the dataset takes them as its
-    /// `neighbours` input.
+    /// (`slots=K,threshold=1.3,nearest=2`); or give the whole declaration, where `,hidden=1`
+    /// adds each slot's share of the step aside of the pairs the robot hides (hx, hy). A
+    /// network trained on the dataset takes them as its `neighbours` input.
     #[arg(long, value_name = "K", value_parser = neighbour_slots)]
     pub neighbours: Option<formation_proto::NeighbourInput>,
     /// Label each robot with the expert's law on the neighbours it detects in its own scan (what
@@ -895,11 +896,22 @@ mod tests {
             panic!("not collect")
         };
         assert!(args.neighbours.is_none() && !args.own_scan_labels);
+        // A whole declaration, with the hidden pairs' step aside.
+        let declared = "slots=8,threshold=1.3,nearest=2,hidden=1";
+        let flag = format!("--neighbours={declared}");
+        let cli = Cli::try_parse_from(base.iter().copied().chain([flag.as_str()])).unwrap();
+        let Command::Collect(args) = cli.command else {
+            panic!("not collect")
+        };
+        let neighbours = args.neighbours.unwrap();
+        assert!(neighbours.hidden && neighbours.slots == 8);
+        assert_eq!(neighbours.to_string(), declared);
         for (bad, says) in [
             ("0", "slots = 0 is out of range"),
             ("65", "slots = 65 is out of range"),
             ("1.5", "from 1 to 64"),
             ("many", "from 1 to 64"),
+            ("slots=8,hidden=1", "is not a neighbour input"),
         ] {
             let flag = format!("--neighbours={bad}");
             let error = Cli::try_parse_from(base.iter().copied().chain([flag.as_str()]))
@@ -1310,12 +1322,17 @@ fn range_input(text: &str) -> Result<formation_proto::RangeInput, String> {
 }
 
 /// `--neighbours K`: a neighbour input of K slots under the scenarios' default rule
-/// ([`formation_proto::NeighbourInput::with_default_rule`]), checked as a model's metadata is.
+/// ([`formation_proto::NeighbourInput::with_default_rule`]), or a whole declaration
+/// (`slots=K,threshold=T,nearest=M[,hidden=1]`), checked as a model's metadata is.
 fn neighbour_slots(text: &str) -> Result<formation_proto::NeighbourInput, String> {
     use formation_proto::NeighbourInput;
+    if text.contains('=') {
+        return NeighbourInput::parse(text).map_err(|e| e.to_string());
+    }
     let slots: usize = text.trim().parse().map_err(|_| {
         format!(
-            "expected a number of neighbour slots from {} to {}, got {text:?}",
+            "expected a number of neighbour slots from {} to {} (or a declaration \
+             slots=K,threshold=T,nearest=M[,hidden=1]), got {text:?}",
             NeighbourInput::MIN_SLOTS,
             NeighbourInput::MAX_SLOTS
         )

@@ -147,7 +147,7 @@ impl OwnView {
                 goal.d_star,
                 &mut self.hidden,
             );
-            add_unblocking_term(&mut body, &self.hidden, d4);
+            add_unblocking_term(&mut body, &self.hidden, goal.d_star);
         }
         let (sin, cos) = heading.sin_cos();
         let world = (cos * body.0 - sin * body.1, sin * body.0 + cos * body.1);
@@ -202,10 +202,9 @@ impl OwnView {
 /// Adds to `gradient` (body frame) the step aside of a robot from the pairs it hides
 /// ([`ExpertGains::unblock_hidden_pairs`], [`hidden_pairs`]): for each, a push along its `away`,
 /// as strong as the pull `2 (r^4 - d*^4) / r^3` its pair would feel, times its weight.
-fn add_unblocking_term(gradient: &mut (f64, f64), hidden: &[HiddenPair], d4: f64) {
+fn add_unblocking_term(gradient: &mut (f64, f64), hidden: &[HiddenPair], d_star: f64) {
     for pair in hidden {
-        let r = pair.distance;
-        let pull = pair.weight * 2.0 * (r.powi(4) - d4) / r.powi(3);
+        let pull = pair.pull(d_star);
         gradient.0 -= pull * pair.away.0;
         gradient.1 -= pull * pair.away.1;
     }
@@ -471,7 +470,7 @@ mod tests {
         let mut step = |neighbours: &[(f64, f64)]| {
             hidden_pairs(neighbours, 2, 0.25, d, &mut hidden);
             let mut gradient = (0.0, 0.0);
-            add_unblocking_term(&mut gradient, &hidden, d.powi(4));
+            add_unblocking_term(&mut gradient, &hidden, d);
             gradient
         };
         // The pull of a pair at 2 d*: 2 ((2d)^4 - d^4) / (2d)^3 = 3.75 d, to the left of the

@@ -7,7 +7,7 @@
 //!   [`AuxLayout`]); and `ranges` f32 `[B, K]` where `formation.ranges = "sectors=K,clip=C"`
 //!   declares the scan's ranges beside the image ([`RangeInput`]); and `neighbours` f32
 //!   `[B, K, 4]` where `formation.neighbours = "slots=K,threshold=T,nearest=M"` declares the
-//!   neighbours detected in the scan ([`NeighbourInput`]);
+//!   neighbours detected in the scan ([`NeighbourInput`]), `[B, K, 6]` where it adds `hidden=1`;
 //! - one output, by default `wheels` f32 `[B, 2]` (left, right) m/s at `v_train`; or, where the
 //!   metadata declares `formation.output = formation_velocity`, `formation_velocity` f32 `[B, 2]`:
 //!   the correction of the formation in the robot's frame ([`PolicyOutput`]); `B` dynamic;
@@ -74,8 +74,8 @@ pub mod keys {
     /// The scan's ranges beside the image, `sectors=K,clip=C` (optional; absent: none): see
     /// [`formation_proto::RangeInput`].
     pub const RANGES: &str = "formation.ranges";
-    /// The neighbours detected in the scan beside the image, `slots=K,threshold=T,nearest=M`
-    /// (optional; absent: none): see [`formation_proto::NeighbourInput`].
+    /// The neighbours detected in the scan beside the image, `slots=K,threshold=T,nearest=M`,
+    /// optionally `,hidden=1` (optional; absent: none): see [`formation_proto::NeighbourInput`].
     pub const NEIGHBOURS: &str = "formation.neighbours";
     /// LIDAR beams the model was trained with.
     pub const BEAMS: &str = "formation.lidar.beams";
@@ -767,7 +767,7 @@ pub fn check_signature(
     }
     if let (Some(tensor), Some(neighbours)) = (neighbours_tensor, neighbours) {
         let slots = i64::try_from(neighbours.slots).unwrap_or(i64::MAX);
-        let features = i64::try_from(NeighbourInput::FEATURES).unwrap_or(i64::MAX);
+        let features = i64::try_from(neighbours.features()).unwrap_or(i64::MAX);
         check_tensor(
             tensor,
             &[Dim::Batch, Dim::Exact(slots), Dim::Exact(features)],
@@ -1031,6 +1031,17 @@ mod tests {
         ));
         inputs[2] = tensor("neighbours", &[-1, 8, 4]);
         check(&inputs).expect("the declared input");
+        // With the hidden pairs' step aside (`hidden=1`) a slot holds six numbers, not four.
+        let hidden = Declared {
+            neighbours: Some(neighbours.with_hidden(true)),
+            ..Declared::NOTHING
+        };
+        let shape = check_declared(&inputs, &paper_outputs(), hidden).unwrap_err();
+        assert!(shape.to_string().contains("neighbours"), "{shape}");
+        let mut six = inputs.clone();
+        six[2] = tensor("neighbours", &[-1, 8, 6]);
+        check_declared(&six, &paper_outputs(), hidden).expect("six numbers a slot");
+        assert!(check(&six).is_err());
 
         // An undeclared `neighbours` tensor is refused, saying the metadata declares none.
         let undeclared = check_paper(&inputs, &paper_outputs()).unwrap_err();

@@ -164,7 +164,7 @@ pub enum PolicyError {
             Some(neighbours) => format!("{} ({neighbours})", neighbours.len()),
             None => "no neighbour input".to_owned(),
         },
-        formation_proto::NeighbourInput::FEATURES
+        declared.map_or(formation_proto::NeighbourInput::BASE_FEATURES, |n| n.features())
     )]
     NeighboursLength {
         /// Model id.

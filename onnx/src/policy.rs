@@ -103,7 +103,9 @@ impl OnnxPolicy {
                 NEIGHBOURS_INPUT => zeros(vec![
                     1,
                     metadata.neighbours.map_or(0, |n| n.slots),
-                    NeighbourInput::FEATURES,
+                    metadata
+                        .neighbours
+                        .map_or(NeighbourInput::BASE_FEATURES, |n| n.features()),
                 ]),
                 _ => zeros(vec![1, metadata.ranges.map_or(0, |r| r.sectors)]),
             })
@@ -144,7 +146,7 @@ impl OnnxPolicy {
     /// holds the scalars the model declares, in order ([`ModelMetadata::aux`]; the paper's
     /// `(delta_phi, d*)` for a model that declares none); `input.ranges` one value a sector of
     /// the range input it declares ([`ModelMetadata::ranges`]), or nothing where it declares
-    /// none; `input.neighbours` [`NeighbourInput::FEATURES`] values a slot of the neighbour input
+    /// none; `input.neighbours` [`NeighbourInput::features`] values a slot of the neighbour input
     /// it declares ([`ModelMetadata::neighbours`]), or nothing where it declares none. Returns the model's two output values: `(left, right)` wheel speeds at `v_train`,
     /// or the formation velocity `(f_x, f_y)` in the robot's frame, as its metadata declares
     /// ([`crate::contract::PolicyOutput`]).

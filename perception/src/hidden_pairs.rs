@@ -36,6 +36,16 @@ pub struct HiddenPair {
     pub weight: f64,
 }
 
+impl HiddenPair {
+    /// How hard the pair asks the robot to step aside along [`away`](Self::away) \[m\]: the
+    /// pull the pair would feel under the expert's pair law, `weight * 2 (r⁴ - d*⁴) / r³` with
+    /// `r` its distance.
+    pub fn pull(&self, d_star: f64) -> f64 {
+        let r = self.distance;
+        self.weight * 2.0 * (r.powi(4) - d_star.powi(4)) / r.powi(3)
+    }
+}
+
 /// Writes into `out` (cleared first) the pairs of `neighbours` (detected centres in the robot's
 /// body frame, the robot at the origin) that the robot hides from each other, for bodies of
 /// `body_radius` and a goal distance `d_star`, under a neighbour rule that always holds the

@@ -13,6 +13,7 @@
 
 use formation_proto::{GabrielRule, LidarSpec, NeighbourInput};
 
+use crate::hidden_pairs::{HiddenPair, hidden_pairs};
 use crate::neighbours::{DetectedNeighbour, DetectorSettings, NeighbourDetector, SettingsError};
 
 /// Marks in `held` (resized to `neighbours.len()`) the neighbours a robot at the origin holds
@@ -79,6 +80,8 @@ pub struct NeighbourInputBuilder {
     order: Vec<(f64, usize)>,
     held: Vec<bool>,
     slots: Vec<(bool, f64, usize)>,
+    hidden: Vec<HiddenPair>,
+    slot_of: Vec<Option<usize>>,
 }
 
 impl Default for NeighbourInputBuilder {
@@ -97,6 +100,8 @@ impl NeighbourInputBuilder {
             order: Vec::new(),
             held: Vec::new(),
             slots: Vec::new(),
+            hidden: Vec::new(),
+            slot_of: Vec::new(),
         })
     }
 
@@ -154,15 +159,44 @@ impl NeighbourInputBuilder {
         self.slots
             .sort_by(|a, b| b.0.cmp(&a.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
         out.fill(0.0);
-        for (slot, &(held, _, k)) in out
-            .chunks_exact_mut(NeighbourInput::FEATURES)
-            .zip(&self.slots)
-        {
+        let features = spec.features();
+        for (slot, &(held, _, k)) in out.chunks_exact_mut(features).zip(&self.slots) {
             let d = &self.detections[k];
             slot[0] = (d.x / d_star) as f32;
             slot[1] = (d.y / d_star) as f32;
             slot[2] = if held { 1.0 } else { 0.0 };
             slot[3] = 1.0;
+        }
+        if spec.hidden {
+            self.fill_hidden_pairs(spec, d_star, out);
+        }
+    }
+
+    /// Adds to each slot's `(hx, hy)` half the step aside of each hidden pair it is an end of
+    /// (see [`NeighbourInput`]), over all the scan's detections, under the rule's `nearest`.
+    fn fill_hidden_pairs(&mut self, spec: &NeighbourInput, d_star: f64, out: &mut [f32]) {
+        let features = spec.features();
+        hidden_pairs(
+            &self.centres,
+            spec.nearest,
+            self.detector.settings().body_radius_m,
+            d_star,
+            &mut self.hidden,
+        );
+        self.slot_of.clear();
+        self.slot_of.resize(self.detections.len(), None);
+        for (slot, &(_, _, k)) in self.slots.iter().enumerate().take(spec.slots) {
+            self.slot_of[k] = Some(slot);
+        }
+        for pair in &self.hidden {
+            let half = 0.5 * pair.pull(d_star) / d_star;
+            for end in [pair.first, pair.second] {
+                if let Some(slot) = self.slot_of[end] {
+                    let values = &mut out[slot * features..(slot + 1) * features];
+                    values[4] += (half * pair.away.0) as f32;
+                    values[5] += (half * pair.away.1) as f32;
+                }
+            }
         }
     }
 
@@ -314,5 +348,36 @@ mod tests {
             assert_eq!((p[2], p[3]), (q[2], q[3]));
         }
         assert_eq!(a.chunks_exact(4).filter(|s| s[3] == 1.0).count(), 4);
+    }
+
+    #[test]
+    fn the_middle_of_a_line_carries_its_hidden_pairs_step_on_both_ends() {
+        // Robot 0 between two robots 1.5 m either side, slightly below their line: it hides them
+        // from each other, and each end's slot carries half the step aside, away from the line.
+        let d_star = 1.5;
+        let positions = [(0.0, -0.05), (-d_star, 0.0), (d_star, 0.0)];
+        let (scan, lidar) = scan_of(&positions, 0.0);
+        let plain = NeighbourInput::with_default_rule(4).unwrap();
+        let spec = plain.with_hidden(true);
+        let mut builder = NeighbourInputBuilder::default();
+        let mut out = vec![f32::NAN; spec.len()];
+        builder.fill(&scan, &lidar, &spec, d_star, &mut out);
+        let slots: Vec<&[f32]> = out.chunks_exact(6).collect();
+        // rho = 2: each end carries half of 2 (16 - 1) / 8 = 3.75, to -y (away from the line).
+        for slot in &slots[..2] {
+            assert!(slot[4].abs() < 1e-2, "{out:?}");
+            assert!((slot[5] + 1.875).abs() < 2e-2, "{out:?}");
+        }
+        assert!(slots[2..].iter().all(|s| s.iter().all(|&v| v == 0.0)));
+        // The first four numbers of a slot are the plain input's.
+        let mut four = vec![0.0; plain.len()];
+        builder.fill(&scan, &lidar, &plain, d_star, &mut four);
+        for (with, without) in slots.iter().zip(four.chunks_exact(4)) {
+            assert_eq!(&with[..4], without);
+        }
+        // An end robot hides nothing.
+        let (scan, lidar) = scan_of(&[(-d_star, 0.0), (0.0, -0.05), (d_star, 0.0)], 0.0);
+        builder.fill(&scan, &lidar, &spec, d_star, &mut out);
+        assert!(out.chunks_exact(6).all(|s| s[4] == 0.0 && s[5] == 0.0), "{out:?}");
     }
 }

@@ -372,8 +372,8 @@ impl fmt::Display for RangeInput {
 }
 
 /// The neighbours a robot detects in its own scan, as a model takes them beside its image: the
-/// `neighbours` input, `[B, slots, 4]` f32, declared by
-/// `formation.neighbours = "slots=K,threshold=T,nearest=M"` (issue 34).
+/// `neighbours` input, `[B, slots, features]` f32, declared by
+/// `formation.neighbours = "slots=K,threshold=T,nearest=M[,hidden=1]"` (issue 34).
 ///
 /// Each detection (a body's centre fitted to its returns, in the robot's body frame, x ahead and
 /// y to the left) fills one slot with `(x / d*, y / d*, held, 1)`. `held` is 1 where the robot
@@ -383,6 +383,13 @@ impl fmt::Display for RangeInput {
 /// nearest first; slots left over are all zeros, and detections past `K` are dropped. Dividing by
 /// d* makes the input what the image is: the same formation at any d* looks the same. Reflecting
 /// the scene about the robot's heading axis negates every `y` and keeps the order and the flags.
+///
+/// With `hidden=1` each slot has two more numbers, `(hx, hy)`: the step aside that the pairs of
+/// detections the robot hides from each other ask of it (`formation_perception::hidden_pairs`),
+/// in the robot's frame and in units of d\*, half of each pair's step on each of its two slots.
+/// A pair `d` apart, with weight `w` and unit vector `away` from its line to the robot, asks for
+/// `w * 2 (ρ⁴ - 1) / ρ³ * away` with `ρ = d / d*`: the pull the pair would feel, the expert's law
+/// on one robot's scan with `unblock_hidden_pairs`. Reflecting the scene negates `hy` too.
 ///
 /// The detection and the rule are `formation_perception::neighbour_input`'s, shared by
 /// collection, the agent and the Python package.
@@ -394,16 +401,18 @@ pub struct NeighbourInput {
     pub threshold: f64,
     /// `M`: the nearest detections always held, at most [`NeighbourInput::MAX_NEAREST`].
     pub nearest: usize,
+    /// Whether each slot also carries the step aside its hidden pairs ask for (`hidden=1`).
+    pub hidden: bool,
 }
 
 /// Why a `formation.neighbours` declaration cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum NeighbourInputError {
-    /// Not `slots=K,threshold=T,nearest=M`.
+    /// Not `slots=K,threshold=T,nearest=M[,hidden=1]`.
     #[error(
         "\"{text}\" is not a neighbour input: write \"slots=K,threshold=T,nearest=M\" (K slots, \
          {min} to {max}; T the Gabriel threshold, 1 to {max_threshold}; M the nearest always held, \
-         0 to {max_nearest})",
+         0 to {max_nearest}), and \",hidden=1\" for the step aside of hidden pairs",
         min = NeighbourInput::MIN_SLOTS,
         max = NeighbourInput::MAX_SLOTS,
         max_threshold = NeighbourInput::MAX_THRESHOLD,
@@ -432,7 +441,9 @@ pub enum NeighbourInputError {
 
 impl NeighbourInput {
     /// Numbers per slot: `x / d*`, `y / d*`, `held`, `present`.
-    pub const FEATURES: usize = 4;
+    pub const BASE_FEATURES: usize = 4;
+    /// Numbers per slot with `hidden=1`: then also `hx`, `hy`.
+    pub const HIDDEN_FEATURES: usize = 6;
     /// The fewest slots.
     pub const MIN_SLOTS: usize = 1;
     /// The most slots.
@@ -470,7 +481,23 @@ impl NeighbourInput {
             slots,
             threshold,
             nearest,
+            hidden: false,
         })
+    }
+
+    /// The same input, with or without the hidden pairs' step aside in each slot.
+    pub fn with_hidden(self, hidden: bool) -> NeighbourInput {
+        NeighbourInput { hidden, ..self }
+    }
+
+    /// Numbers per slot: [`NeighbourInput::HIDDEN_FEATURES`] with `hidden=1`, else
+    /// [`NeighbourInput::BASE_FEATURES`].
+    pub fn features(&self) -> usize {
+        if self.hidden {
+            NeighbourInput::HIDDEN_FEATURES
+        } else {
+            NeighbourInput::BASE_FEATURES
+        }
     }
 
     /// The scenarios' default rule ([`crate::GabrielRule::DEFAULT_THRESHOLD`],
@@ -483,12 +510,13 @@ impl NeighbourInput {
         )
     }
 
-    /// Reads `slots=K,threshold=T,nearest=M` (the keys in any order, spaces around them allowed).
+    /// Reads `slots=K,threshold=T,nearest=M`, optionally `,hidden=0|1` (the keys in any order,
+    /// spaces around them allowed).
     pub fn parse(text: &str) -> Result<NeighbourInput, NeighbourInputError> {
         let syntax = || NeighbourInputError::Syntax {
             text: text.to_owned(),
         };
-        let (mut slots, mut threshold, mut nearest) = (None, None, None);
+        let (mut slots, mut threshold, mut nearest, mut hidden) = (None, None, None, None);
         for part in text.split(',') {
             let (key, value) = part.split_once('=').ok_or_else(syntax)?;
             let value = value.trim();
@@ -502,20 +530,28 @@ impl NeighbourInput {
                 "nearest" if nearest.is_none() => {
                     nearest = Some(value.parse::<usize>().map_err(|_| syntax())?)
                 }
+                "hidden" if hidden.is_none() => {
+                    hidden = Some(match value {
+                        "0" => false,
+                        "1" => true,
+                        _ => return Err(syntax()),
+                    })
+                }
                 _ => return Err(syntax()),
             }
         }
         match (slots, threshold, nearest) {
             (Some(slots), Some(threshold), Some(nearest)) => {
-                NeighbourInput::new(slots, threshold, nearest)
+                Ok(NeighbourInput::new(slots, threshold, nearest)?
+                    .with_hidden(hidden.unwrap_or(false)))
             }
             _ => Err(syntax()),
         }
     }
 
-    /// The width of one sample's input: `slots * FEATURES`.
+    /// The width of one sample's input: `slots * features()`.
     pub fn len(&self) -> usize {
-        self.slots * NeighbourInput::FEATURES
+        self.slots * self.features()
     }
 
     /// Never true: an input has at least one slot.
@@ -547,7 +583,12 @@ impl fmt::Display for NeighbourInput {
             f,
             "slots={},threshold={},nearest={}",
             self.slots, self.threshold, self.nearest
-        )
+        )?;
+        // Absent while off, so a declaration of four numbers a slot reads as it always has.
+        if self.hidden {
+            write!(f, ",hidden=1")?;
+        }
+        Ok(())
     }
 }
 
@@ -578,7 +619,7 @@ pub struct PolicyInput<'a> {
     pub aux: &'a [f32],
     /// The scan's ranges, one a sector; empty for a model that takes none.
     pub ranges: &'a [f32],
-    /// The detected neighbours, [`NeighbourInput::FEATURES`] a slot; empty for a model that
+    /// The detected neighbours, [`NeighbourInput::features`] a slot; empty for a model that
     /// takes none.
     pub neighbours: &'a [f32],
 }
@@ -721,6 +762,16 @@ mod tests {
         assert_eq!(input, NeighbourInput::with_default_rule(16).unwrap());
         assert_eq!(NeighbourInput::parse(&input.to_string()), Ok(input));
         assert_eq!(input.len(), 64);
+        assert_eq!(input.to_string(), "slots=16,threshold=1.3,nearest=2");
+        let hidden = NeighbourInput::parse("hidden=1,slots=16,threshold=1.3,nearest=2").unwrap();
+        assert_eq!(hidden, input.with_hidden(true));
+        assert_eq!((hidden.features(), hidden.len()), (6, 96));
+        assert_eq!(hidden.to_string(), "slots=16,threshold=1.3,nearest=2,hidden=1");
+        assert_eq!(NeighbourInput::parse(&hidden.to_string()), Ok(hidden));
+        assert_eq!(
+            NeighbourInput::parse("slots=16,threshold=1.3,nearest=2,hidden=0"),
+            Ok(input)
+        );
         let rule = input.rule(10.0);
         assert_eq!(
             (rule.threshold, rule.nearest, rule.hysteresis),
@@ -733,6 +784,8 @@ mod tests {
             "slots=16,threshold=1.3,nearest=2,x=1",
             "slots=16,slots=16,nearest=2",
             "slots=1.5,threshold=1.3,nearest=2",
+            "slots=16,threshold=1.3,nearest=2,hidden=yes",
+            "slots=16,threshold=1.3,nearest=2,hidden=1,hidden=1",
         ] {
             assert!(
                 matches!(

@@ -13,7 +13,8 @@ Agents are ``robot_0 .. robot_{N-1}``.
   for a scan model, ``{"scan": (beams,) float32, "aux": ...}``; for a model that declares the
   scan's ranges beside its image (``formation.ranges``), also ``"ranges": (K,) float32``, the
   agent's own pooling of the scan into K sectors; for a model that declares the neighbours it
-  detects (``formation.neighbours``), also ``"neighbours": (K, 4) float32``, the agent's own
+  detects (``formation.neighbours``), also ``"neighbours": (K, 4) float32`` (``(K, 6)`` with
+  ``hidden=1``), the agent's own
   detections in K slots of ``(x / d*, y / d*, held, present)``.
 * **Action**: its ``(left, right)`` wheel speeds in m/s, within ``±max_wheel_speed`` (the world
   saturates them as a real robot would). A NaN, another shape, a missing robot or a step after
@@ -161,10 +162,13 @@ class FormationParallelEnv(ParallelEnv):
             sectors, clip = range_input(self.spec.ranges)
             observation["ranges"] = spaces.Box(0.0, np.float32(clip), (sectors,), np.float32)
         if self.spec.neighbours is not None:
-            slots, _, _ = neighbour_input(self.spec.neighbours)
-            # Per slot: the centre in units of d* (unbounded), then the held and present flags.
-            low = np.tile(np.array([-np.inf, -np.inf, 0.0, 0.0], dtype=np.float32), (slots, 1))
-            high = np.tile(np.array([np.inf, np.inf, 1.0, 1.0], dtype=np.float32), (slots, 1))
+            slots, _, _, features = neighbour_input(self.spec.neighbours)
+            # Per slot: the centre in units of d* (unbounded), the held and present flags, and
+            # with hidden=1 the step aside of the slot's hidden pairs (unbounded).
+            low = [-np.inf, -np.inf, 0.0, 0.0] + [-np.inf] * (features - 4)
+            high = [np.inf, np.inf, 1.0, 1.0] + [np.inf] * (features - 4)
+            low = np.tile(np.array(low, dtype=np.float32), (slots, 1))
+            high = np.tile(np.array(high, dtype=np.float32), (slots, 1))
             observation["neighbours"] = spaces.Box(low, high, dtype=np.float32)
         return spaces.Dict(observation)
 

@@ -27,7 +27,8 @@ class ModelSpec:
     none), which the environment makes with the agent's own code, and, where ``ranges`` is set
     (``formation.ranges``, ``"sectors=K,clip=C"``), the scan's ranges pooled into K sectors, and,
     where ``neighbours`` is set (``formation.neighbours``, ``"slots=K,threshold=T,nearest=M"``), the
-    neighbours detected in the scan in K slots of ``(x / d*, y / d*, held, present)``. ``output``
+    neighbours detected in the scan in K slots of ``(x / d*, y / d*, held, present)``, and with
+    ``,hidden=1`` also ``(hx, hy)``, the step aside of the slot's hidden pairs. ``output``
     is what the model answers (``formation.output``): ``"wheels"``, wheel speeds at ``v_train``
     m/s scaled by ``v* / v_train``, or ``"formation_velocity"``, the
     correction in the robot's frame to which the reference term ``v* (cos Δφ, sin Δφ)`` is added,

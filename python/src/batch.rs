@@ -529,7 +529,7 @@ impl Batch {
             self.slots.len(),
             n,
             spec.slots,
-            NeighbourInput::FEATURES,
+            spec.features(),
         ])
     }
 

@@ -50,17 +50,18 @@ pub fn range_input(text: &str) -> PyResult<(usize, f32)> {
     Ok((spec.sectors, spec.clip))
 }
 
-/// `(slots, threshold, nearest)` of a model's neighbour input, its `formation.neighbours`
-/// (`"slots=K,threshold=T,nearest=M"`), read and checked by the agent's own
-/// [`NeighbourInput::parse`]; a `ValueError` says what is wrong.
+/// `(slots, threshold, nearest, features)` of a model's neighbour input, its
+/// `formation.neighbours` (`"slots=K,threshold=T,nearest=M[,hidden=1]"`), read and checked by
+/// the agent's own [`NeighbourInput::parse`]; `features` is the numbers a slot holds (4, or 6
+/// with `hidden=1`). A `ValueError` says what is wrong.
 #[pyfunction]
-pub fn neighbour_input(text: &str) -> PyResult<(usize, f64, usize)> {
+pub fn neighbour_input(text: &str) -> PyResult<(usize, f64, usize, usize)> {
     let spec = NeighbourInput::parse(text).map_err(|e| {
         pyo3::exceptions::PyValueError::new_err(format!(
             "neighbour input {text:?} (the model's formation.neighbours): {e}"
         ))
     })?;
-    Ok((spec.slots, spec.threshold, spec.nearest))
+    Ok((spec.slots, spec.threshold, spec.nearest, spec.features()))
 }
 
 /// The neighbours one robot detects in its own scan (`scan[k]` the range of beam `k`, at

@@ -236,7 +236,21 @@ def test_a_neighbours_policy_episode_equals_formation_eval_bit_for_bit(tmp_path)
 def test_a_bad_neighbour_declaration_is_refused_naming_the_key():
     with pytest.raises(ValueError, match="formation.neighbours.*slots=K,threshold=T,nearest=M"):
         formation._native.neighbour_input("slots=4")
-    assert formation._native.neighbour_input("slots=4,threshold=1.3,nearest=2") == (4, 1.3, 2)
+    assert formation._native.neighbour_input("slots=4,threshold=1.3,nearest=2") == (4, 1.3, 2, 4)
+    assert formation._native.neighbour_input("slots=4,threshold=1.3,nearest=2,hidden=1") == (4, 1.3, 2, 6)
+
+
+def test_the_pair_models_observations_hold_six_numbers_a_slot(tmp_path):
+    # The shipped pair network declares hidden=1: each slot also carries the step aside of its
+    # hidden pairs, and the observation space says so.
+    model = REPO / "onnx" / "models" / "pair" / "policy.onnx"
+    assert ModelSpec.from_onnx(model).neighbours.endswith(",hidden=1")
+    env = parallel_env(scenario=str(team_scenario(tmp_path, 5, 3.0)), model=model)
+    space = env.observation_space("robot_0")["neighbours"]
+    assert space.shape == (16, 6)
+    observations, _ = env.reset(seed=2, run=0)
+    for agent, obs in observations.items():
+        assert obs["neighbours"].shape == (16, 6) and space.contains(obs["neighbours"]), agent
 
 
 def test_a_spec_with_an_output_the_package_does_not_know_is_refused_by_name():

@@ -125,7 +125,7 @@ pub enum DecisionError {
 }
 
 /// The tensors a model may take from its scan beside its image: the scan's ranges, one a
-/// sector, and the detected neighbours, [`formation_proto::NeighbourInput::FEATURES`] a slot;
+/// sector, and the detected neighbours, [`formation_proto::NeighbourInput::features`] a slot;
 /// each empty for a model that takes none.
 #[derive(Debug, Clone, PartialEq)]
 struct ScanTensors {

@@ -19,7 +19,7 @@
 //!   ([`NeighbourInput`], issue 34) declares them in the manifest as
 //!   `"neighbours": "slots=K,threshold=T,nearest=M"` and is format version 3 ([`DATASET_VERSION`]),
 //!   with or without ranges; each of its shards also holds `neighbours` F32 `[N, K, 4]` (per slot
-//!   `x/d*, y/d*, held, present`). A dataset without neighbours keeps version 1 or 2, its bytes and
+//!   `x/d*, y/d*, held, present`; `[N, K, 6]` with `,hidden=1`, then also `hx, hy`). A dataset without neighbours keeps version 1 or 2, its bytes and
 //!   its `dataset_id`. The reader refuses a version 3 manifest without `neighbours` or a version 1
 //!   or 2 manifest with them.
 //! - A dataset labelled by a law other than the expert's default records it as `"labels"`
@@ -224,7 +224,7 @@ impl DatasetHeader {
         self.neighbours.map_or(0, |n| n.slots)
     }
 
-    /// Values of each sample's neighbours: `K * 4`, or 0 for a dataset without neighbours.
+    /// Values of each sample's neighbours: `K * features`, or 0 for a dataset without neighbours.
     pub fn neighbour_values(&self) -> usize {
         self.neighbours.map_or(0, |n| n.len())
     }
@@ -307,8 +307,8 @@ pub struct Sample {
     /// declares ranges, none for one that does not.
     pub ranges: Vec<f32>,
     /// The neighbours detected in the scan ([`NeighbourInput`]), `K` slots of
-    /// [`NeighbourInput::FEATURES`] values each (`x/d*, y/d*, held, present`), slot after slot:
-    /// `K * 4` values for a dataset that declares neighbours, none for one that does not.
+    /// [`NeighbourInput::features`] values each (`x/d*, y/d*, held, present`, then
+    /// `hx, hy` with `hidden=1`), slot after slot: `K * features` values for a dataset that declares neighbours, none for one that does not.
     pub neighbours: Vec<f32>,
     /// DAgger iteration (0 = expert demonstrations).
     pub iteration: u32,
@@ -625,7 +625,7 @@ pub enum DatasetError {
             Some(neighbours) => format!(
                 "declares {} slots of {} values ({neighbours}), {} in all",
                 neighbours.slots,
-                NeighbourInput::FEATURES,
+                neighbours.features(),
                 neighbours.len()
             ),
             None => "declares no neighbours (give an empty `neighbours`, or collect into a dataset with neighbours)".to_owned(),
@@ -812,8 +812,8 @@ pub(crate) struct PendingShard {
     robot: Vec<u8>,
     /// The `ranges` column, `Some` iff the dataset declares ranges of this many sectors.
     ranges: Option<(usize, Vec<u8>)>,
-    /// The `neighbours` column, `Some` iff the dataset declares neighbours of this many slots.
-    neighbours: Option<(usize, Vec<u8>)>,
+    /// The `neighbours` column, `Some` iff the dataset declares neighbours: `[slots, features]`.
+    neighbours: Option<([usize; 2], Vec<u8>)>,
     samples: usize,
 }
 
@@ -828,7 +828,9 @@ impl PendingShard {
             run: Vec::new(),
             robot: Vec::new(),
             ranges: header.ranges.map(|r| (r.sectors, Vec::new())),
-            neighbours: header.neighbours.map(|n| (n.slots, Vec::new())),
+            neighbours: header
+                .neighbours
+                .map(|n| ([n.slots, n.features()], Vec::new())),
             samples: 0,
         }
     }
@@ -939,14 +941,10 @@ impl PendingShard {
                 TensorView::new(Dtype::F32, vec![n, *sectors], ranges),
             ));
         }
-        if let Some((slots, neighbours)) = &self.neighbours {
+        if let Some(([slots, features], neighbours)) = &self.neighbours {
             tensors.push((
                 "neighbours",
-                TensorView::new(
-                    Dtype::F32,
-                    vec![n, *slots, NeighbourInput::FEATURES],
-                    neighbours,
-                ),
+                TensorView::new(Dtype::F32, vec![n, *slots, *features], neighbours),
             ));
         }
         let mut views = Vec::with_capacity(tensors.len());
@@ -1362,7 +1360,7 @@ pub(crate) fn decode_columns(
         Some(_) => column(
             "neighbours",
             Dtype::F32,
-            &[n, slots, NeighbourInput::FEATURES],
+            &[n, slots, header.neighbours.map_or(0, |n| n.features())],
         )?,
         None if tensors.tensor("neighbours").is_ok() => {
             return Err(

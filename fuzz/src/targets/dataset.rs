@@ -175,6 +175,7 @@ pub fn neighbours() -> NeighbourInput {
         slots: 3,
         threshold: 1.3,
         nearest: 2,
+        hidden: false,
     }
 }
 

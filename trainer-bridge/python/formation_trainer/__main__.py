@@ -162,7 +162,7 @@ def _export(args) -> None:
         if declared:
             ranges = rng.uniform(0.0, declared.clip, (train.PARITY_SAMPLES, declared.sectors)).astype(np.float32)
         if model.neighbour_slots:
-            neighbours = random_neighbours(rng, train.PARITY_SAMPLES, model.neighbour_slots)
+            neighbours = random_neighbours(rng, train.PARITY_SAMPLES, model.neighbour_slots, model.neighbour_features)
     output = checkpoint["metadata"].get("formation.output", export.OUTPUT_NAME)
     export.export_onnx(model, args.out, checkpoint["metadata"], output=output)
     parity = export.check_parity(model, args.out, occupancy, aux, output=output, ranges=ranges, neighbours=neighbours)
@@ -175,13 +175,14 @@ def _export(args) -> None:
     print(f"wrote {args.out} (onnxruntime parity {parity:.2e} on {len(aux)} samples)", flush=True)
 
 
-def random_neighbours(rng, samples: int, slots: int):
-    """``samples`` random neighbour inputs [samples, slots, 4] laid out as collection lays them
-    out: a random number of detections at 0.5-3 d* in random directions, the held ones first,
-    each group nearest first, then empty slots of zeros."""
+def random_neighbours(rng, samples: int, slots: int, features: int = 4):
+    """``samples`` random neighbour inputs [samples, slots, features] laid out as collection lays
+    them out: a random number of detections at 0.5-3 d* in random directions, the held ones first,
+    each group nearest first, then empty slots of zeros; with 6 features, a random step aside of
+    up to 4 in a tenth of the slots."""
     import numpy as np
 
-    out = np.zeros((samples, slots, 4), dtype=np.float32)
+    out = np.zeros((samples, slots, features), dtype=np.float32)
     for row in out:
         count = int(rng.integers(0, slots + 1))
         distance = rng.uniform(0.5, 3.0, count)
@@ -192,6 +193,9 @@ def random_neighbours(rng, samples: int, slots: int):
         row[:count, 1] = (distance * np.sin(bearing))[order]
         row[:count, 2] = held[order]
         row[:count, 3] = 1.0
+        if features > 4:
+            stepped = rng.random(count) < 0.1
+            row[:count, 4:6] = rng.uniform(-4.0, 4.0, (count, 2)) * stepped[:, None]
     return out
 
 

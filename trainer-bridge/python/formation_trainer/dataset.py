@@ -114,7 +114,10 @@ class RangeInput:
 MIN_SLOTS, MAX_SLOTS, MAX_THRESHOLD, MAX_NEAREST = 1, 64, 4.0, 8
 #: Numbers per neighbour slot: ``x / d*``, ``y / d*``, ``held``, ``present``.
 NEIGHBOUR_FEATURES = 4
-_NEIGHBOUR_SYNTAX = 'write "slots=K,threshold=T,nearest=M"'
+#: Numbers per neighbour slot with ``hidden=1``: then also ``hx``, ``hy``, the step aside of the
+#: hidden pairs the slot is an end of.
+HIDDEN_NEIGHBOUR_FEATURES = 6
+_NEIGHBOUR_SYNTAX = 'write "slots=K,threshold=T,nearest=M", and ",hidden=1" for the step aside of hidden pairs'
 
 
 def f64_text(value: float) -> str:
@@ -127,11 +130,18 @@ def f64_text(value: float) -> str:
 class NeighbourInput:
     """The neighbours a robot detects in its own scan, as a model takes them beside its image
     (``formation_proto::NeighbourInput``): ``slots`` slots of ``(x / d*, y / d*, held, present)``,
-    ``held`` by the Gabriel rule at witness ratio ``threshold`` plus the ``nearest`` nearest."""
+    ``held`` by the Gabriel rule at witness ratio ``threshold`` plus the ``nearest`` nearest; with
+    ``hidden`` two more a slot, ``(hx, hy)``, the step aside of the pairs the robot hides."""
 
     slots: int
     threshold: float
     nearest: int
+    hidden: bool = False
+
+    @property
+    def features(self) -> int:
+        """Numbers per slot: 6 with ``hidden``, else 4."""
+        return HIDDEN_NEIGHBOUR_FEATURES if self.hidden else NEIGHBOUR_FEATURES
 
     def __post_init__(self):
         if not MIN_SLOTS <= self.slots <= MAX_SLOTS:
@@ -144,18 +154,20 @@ class NeighbourInput:
 
     @staticmethod
     def parse(text: str) -> "NeighbourInput":
-        """Reads ``slots=K,threshold=T,nearest=M`` (any order, spaces around the keys and values
-        allowed), as ``NeighbourInput::parse``."""
+        """Reads ``slots=K,threshold=T,nearest=M``, optionally ``,hidden=0|1`` (any order, spaces
+        around the keys and values allowed), as ``NeighbourInput::parse``."""
         values = {}
         for part in str(text).split(","):
             key, sep, value = part.partition("=")
             key, value = key.strip(), value.strip()
-            if not sep or key not in ("slots", "threshold", "nearest") or key in values:
+            if not sep or key not in ("slots", "threshold", "nearest", "hidden") or key in values:
                 raise ValueError(f"{text!r} is not a neighbour input: {_NEIGHBOUR_SYNTAX}")
             values[key] = value
         integer = re.compile(r"\+?[0-9]+")
+        hidden = values.pop("hidden", "0")
         if (
-            set(values) != {"slots", "threshold", "nearest"}
+            hidden not in ("0", "1")
+            or set(values) != {"slots", "threshold", "nearest"}
             or not integer.fullmatch(values["slots"])
             or not integer.fullmatch(values["nearest"])
         ):
@@ -164,11 +176,13 @@ class NeighbourInput:
             threshold = float(values["threshold"])
         except ValueError:
             raise ValueError(f"{text!r} is not a neighbour input: {_NEIGHBOUR_SYNTAX}") from None
-        return NeighbourInput(int(values["slots"]), threshold, int(values["nearest"]))
+        return NeighbourInput(int(values["slots"]), threshold, int(values["nearest"]), hidden == "1")
 
     def text(self) -> str:
-        """``slots=K,threshold=T,nearest=M``, exactly as ``NeighbourInput``'s ``Display`` writes it."""
-        return f"slots={self.slots},threshold={f64_text(self.threshold)},nearest={self.nearest}"
+        """``slots=K,threshold=T,nearest=M[,hidden=1]``, exactly as ``NeighbourInput``'s
+        ``Display`` writes it."""
+        text = f"slots={self.slots},threshold={f64_text(self.threshold)},nearest={self.nearest}"
+        return text + ",hidden=1" if self.hidden else text
 
     def __str__(self) -> str:
         return self.text()
@@ -319,14 +333,14 @@ def _read_shard_header(path: Path) -> tuple[dict, int]:
     return header, expected
 
 
-def _tensors(sectors: int, slots: int = 0) -> dict:
-    """The shard tensors of a dataset whose ranges have ``sectors`` sectors and whose neighbours
-    ``slots`` slots (0: none)."""
+def _tensors(sectors: int, neighbours: "NeighbourInput | None" = None) -> dict:
+    """The shard tensors of a dataset whose ranges have ``sectors`` sectors (0: none) and which
+    declares ``neighbours`` (None: none)."""
     tensors = dict(_TENSORS)
     if sectors:
         tensors["ranges"] = (np.float32, lambda s: (sectors,))
-    if slots:
-        tensors["neighbours"] = (np.float32, lambda s: (slots, NEIGHBOUR_FEATURES))
+    if neighbours is not None:
+        tensors["neighbours"] = (np.float32, lambda s: (neighbours.slots, neighbours.features))
     return tensors
 
 
@@ -350,7 +364,7 @@ def check_shard(manifest: Manifest, entry: dict) -> Path:
             f"{path} is corrupt (a `neighbours` tensor, but the manifest declares no neighbours): {RECOLLECT}"
         )
     n = entry["samples"]
-    for name, (dtype, tail) in _tensors(ranges.sectors if ranges else 0, neighbours.slots if neighbours else 0).items():
+    for name, (dtype, tail) in _tensors(ranges.sectors if ranges else 0, neighbours).items():
         info = header.get(name)
         if info is None:
             raise DatasetError(f"{path} is corrupt (no `{name}` tensor): {RECOLLECT}")
@@ -390,7 +404,7 @@ class Samples:
     source: np.ndarray  # int32 [N]: index into `manifests`
     manifests: list
     ranges: np.ndarray | None = None  # float32 [N, K]; [N, 0] without ranges
-    neighbours: np.ndarray | None = None  # float32 [N, K, 4]; [N, 0, 4] without neighbours
+    neighbours: np.ndarray | None = None  # float32 [N, K, 4 or 6]; [N, 0, 4] without neighbours
 
     def __post_init__(self):
         if self.ranges is None:
@@ -493,7 +507,7 @@ def load(directories) -> Samples:
             check_shard(m, entry)
     size_px = manifests[0].size_px
     first = manifests[0]
-    tensors_of = _tensors(first.ranges.sectors if first.ranges else 0, first.neighbours.slots if first.neighbours else 0)
+    tensors_of = _tensors(first.ranges.sectors if first.ranges else 0, first.neighbours)
     arrays = {name: np.empty((total, *tail(size_px)), dtype) for name, (dtype, tail) in tensors_of.items()}
     source = np.empty(total, dtype=np.int32)
     start = 0

@@ -4,7 +4,8 @@ The exported graph has inputs ``occupancy`` f32 [B, 1, S, S] and ``aux`` f32 [B,
 with ranges a third, ``ranges`` f32 [B, K], declared by ``formation.ranges = "sectors=K,clip=C"``
 (the text of ``formation_proto::RangeInput``'s ``Display``); a pair network
 (:class:`~formation_trainer.model.PairNet`) has, beside the first two, ``neighbours`` f32
-[B, K, 4], declared by ``formation.neighbours = "slots=K,threshold=T,nearest=M"`` (the text of
+[B, K, 4] ([B, K, 6] with ``,hidden=1``), declared by ``formation.neighbours =
+"slots=K,threshold=T,nearest=M"`` (the text of
 ``formation_proto::NeighbourInput``'s ``Display``, as the dataset declared it) and answers a
 ``formation_velocity``; one output f32 [B, 2] named as the
 model's ``formation.output`` metadata declares it (``wheels``, the default, or
@@ -142,7 +143,7 @@ def export_onnx(model: PolicyNet | PairNet, path: str | Path, metadata: dict[str
     and its one output named ``output`` (which a model other than ``wheels`` declares in
     ``formation.output``). A model with ranges has the third input ``ranges`` [B, K], which
     ``metadata`` must declare with K sectors; a pair network the third input ``neighbours``
-    [B, K, 4], which ``metadata`` must declare with K slots. The image stays an input of a pair
+    [B, K, 4] ([B, K, 6] with ``hidden=1``), which ``metadata`` must declare alike. The image stays an input of a pair
     network, which does not use it (the graph keeps it)."""
     if output not in OUTPUT_NAMES:
         raise ValueError(f"output must be one of {OUTPUT_NAMES}, got {output!r}")
@@ -155,10 +156,12 @@ def export_onnx(model: PolicyNet | PairNet, path: str | Path, metadata: dict[str
             f"the network takes {model.range_sectors or 'no'} range sectors"
         )
     neighbours = declared_neighbours(metadata)
-    if (neighbours.slots if neighbours else None) != model.neighbour_slots:
+    declared = (neighbours.slots, neighbours.features) if neighbours else None
+    taken = (model.neighbour_slots, model.neighbour_features) if model.neighbour_slots else None
+    if declared != taken:
         raise ValueError(
             f"metadata declares {NEIGHBOURS_KEY} = {metadata.get(NEIGHBOURS_KEY)!r}, "
-            f"the network takes {model.neighbour_slots or 'no'} neighbour slots"
+            f"the network takes {f'{taken[0]} neighbour slots of {taken[1]} values' if taken else 'no neighbours'}"
         )
     if ranges and neighbours:
         raise ValueError("no network of this trainer takes both ranges and neighbours")
@@ -177,7 +180,7 @@ def export_onnx(model: PolicyNet | PairNet, path: str | Path, metadata: dict[str
         example = (*example, torch.zeros(2, ranges.sectors))
         dynamic["ranges"] = {0: batch}
     if neighbours:
-        example = (*example, torch.zeros(2, neighbours.slots, 4))
+        example = (*example, torch.zeros(2, neighbours.slots, neighbours.features))
         dynamic["neighbours"] = {0: batch}
     try:
         with _quiet_exporter():

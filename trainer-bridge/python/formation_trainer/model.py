@@ -68,7 +68,8 @@ sector ``s`` (centred on bearing ``2 pi s / K``) becomes sector ``(K - s) % K``.
 
 **The pair network** (:class:`PairNet`, ``architecture="pair"``, issue 34) takes the neighbours
 the robot detects in its own scan, ``neighbours`` [B, K, 4] (``formation.neighbours =
-"slots=K,threshold=T,nearest=M"``: per slot ``(x / d*, y / d*, held, present)``), and answers the
+"slots=K,threshold=T,nearest=M"``: per slot ``(x / d*, y / d*, held, present)``; ``[B, K, 6]``
+with ``,hidden=1``, below), and answers the
 formation velocity in the robot's frame as a sum of one learned term per neighbour::
 
     per slot: (a, b) = phi([x, y, r - 1, held])   r = |(x, y)|, phi: Linear(4, 64) SiLU
@@ -98,6 +99,14 @@ two); a term written as a plain (x, y) vector, with neither, stayed at zero resp
 steps. Its multiply-adds are ``K * 4,608`` (its layers, once a slot; the few products and sums
 after them are not counted): 73,728 for K = 16, a seventh of the paper network's 525,184.
 The neighbours reflect with ``y -> -y``; the flags and the slots' order stay.
+
+``hidden_pairs=True`` takes the declaration's ``hidden=1``: each slot carries two more numbers,
+``(hx, hy)``, the step aside that the pairs of detections the robot hides from each other ask of it
+(``formation_perception::hidden_pairs``, half a pair's on each of its two slots, in d*). A sum of
+one term per slot cannot compute that step: it depends on two detections at once, and the robot
+between them is the only one that sees them both. The network adds ``g * (hx, hy)`` to each slot's
+term, with one learned gain ``g`` (the teacher's is its team gain, 1.0). ``hy`` reflects with
+``y``.
 
 ``potential=True`` (``architecture="pair-potential"``) multiplies a held neighbour's (a, b) by the
 law's pair profile ``(r^4 - 1) / r^3`` (:func:`pair_profile`): the layers then learn its weight,
@@ -146,6 +155,8 @@ AUX_NAMES = ("delta_phi", "d_star")
 D_STAR_INDEX = AUX_NAMES.index("d_star")
 #: Numbers per neighbour slot: ``x / d*``, ``y / d*``, ``held``, ``present``.
 NEIGHBOUR_FEATURES = 4
+#: Numbers per neighbour slot with ``hidden=1``: then also ``hx``, ``hy``.
+HIDDEN_NEIGHBOUR_FEATURES = 6
 #: The pair network's name (``formation.train.architecture``).
 PAIR_ARCHITECTURE = "pair"
 #: The pair network whose terms are scaled by the law's pair profile (``potential=True``).
@@ -178,9 +189,11 @@ def mirror_ranges(ranges: torch.Tensor) -> torch.Tensor:
 
 
 def mirror_neighbours(neighbours: torch.Tensor) -> torch.Tensor:
-    """Reflects neighbours [B, K, 4] about the robot's heading axis: every ``y / d*`` changes sign;
-    ``x / d*``, the flags and the slots' order stay (the reflection keeps every distance)."""
-    sign = torch.tensor([1.0, -1.0, 1.0, 1.0], dtype=neighbours.dtype, device=neighbours.device)
+    """Reflects neighbours [B, K, 4 or 6] about the robot's heading axis: every ``y / d*`` (and
+    ``hy``) changes sign; ``x / d*``, the flags and the slots' order stay (the reflection keeps
+    every distance)."""
+    signs = [1.0, -1.0, 1.0, 1.0, 1.0, -1.0][: neighbours.shape[-1]]
+    sign = torch.tensor(signs, dtype=neighbours.dtype, device=neighbours.device)
     return neighbours * sign
 
 
@@ -234,7 +247,7 @@ def multiply_adds(model: "PolicyNet | PairNet") -> int:
         with torch.no_grad():
             occupancy, aux = torch.zeros(1, 1, model.size_px, model.size_px), torch.zeros(1, 2)
             if isinstance(model, PairNet):
-                model.raw(occupancy, aux, torch.zeros(1, model.neighbour_slots, NEIGHBOUR_FEATURES))
+                model.raw(occupancy, aux, torch.zeros(1, model.neighbour_slots, model.neighbour_features))
             else:
                 ranges = torch.zeros(1, model.range_sectors) if model.range_sectors else None
                 model.raw(occupancy, aux, ranges)
@@ -318,7 +331,8 @@ class PolicyNet(nn.Module):
 
 class PairNet(nn.Module):
     """The network that sums one learned term per detected neighbour (see the module): inputs
-    ``occupancy`` [B, 1, S, S] (unused), ``aux`` [B, 2] (its d*) and ``neighbours`` [B, K, 4];
+    ``occupancy`` [B, 1, S, S] (unused), ``aux`` [B, 2] (its d*) and ``neighbours`` [B, K, 4]
+    ([B, K, 6] with ``hidden_pairs``);
     output the formation velocity [B, 2] in the robot's frame, in m/s."""
 
     #: The pair network takes no ranges.
@@ -332,6 +346,7 @@ class PairNet(nn.Module):
         output: str = "formation_velocity",
         hidden: tuple[int, ...] = PAIR_HIDDEN,
         potential: bool = False,
+        hidden_pairs: bool = False,
     ):
         super().__init__()
         if output != "formation_velocity":
@@ -358,12 +373,22 @@ class PairNet(nn.Module):
         # The term of one neighbour from (x / d*, y / d*, |(x, y)| / d* - 1, held): its parts
         # along and across the line to the neighbour, once for a held neighbour, once for another.
         self.pair_term = nn.Sequential(*layers)
+        self.hidden_pairs = bool(hidden_pairs)
+        if self.hidden_pairs:
+            # The gain on each slot's share of its hidden pairs' step aside; learned from zero.
+            self.hidden_pair_gain = nn.Parameter(torch.zeros(1))
+
+    @property
+    def neighbour_features(self) -> int:
+        """Numbers per slot: 6 with ``hidden_pairs``, else 4."""
+        return HIDDEN_NEIGHBOUR_FEATURES if self.hidden_pairs else NEIGHBOUR_FEATURES
 
     def terms(self, neighbours: torch.Tensor) -> torch.Tensor:
         """Each slot's term [B, K, 2] in units of d* (zero for an empty slot)."""
-        if neighbours.dim() != 3 or tuple(neighbours.shape[1:]) != (self.neighbour_slots, NEIGHBOUR_FEATURES):
+        features = self.neighbour_features
+        if neighbours.dim() != 3 or tuple(neighbours.shape[1:]) != (self.neighbour_slots, features):
             raise ValueError(
-                f"this network takes neighbours [B, {self.neighbour_slots}, {NEIGHBOUR_FEATURES}], "
+                f"this network takes neighbours [B, {self.neighbour_slots}, {features}], "
                 f"got {list(neighbours.shape)}"
             )
         x, y = neighbours[..., 0:1], neighbours[..., 1:2]
@@ -389,7 +414,10 @@ class PairNet(nn.Module):
         safe = torch.clamp(r, min=MIN_NEIGHBOUR_DISTANCE)
         ux, uy = x / safe, y / safe
         along, across = along_across[..., 0:1], along_across[..., 1:2]
-        return torch.cat([along * ux - across * uy, along * uy + across * ux], dim=-1) * present
+        term = torch.cat([along * ux - across * uy, along * uy + across * ux], dim=-1)
+        if self.hidden_pairs:
+            term = term + self.hidden_pair_gain * neighbours[..., 4:6]
+        return term * present
 
     def raw(self, occupancy: torch.Tensor, aux: torch.Tensor, neighbours: torch.Tensor | None = None) -> torch.Tensor:
         """The network itself, without the mirror average."""

@@ -223,7 +223,9 @@ def checkpoint_from_onnx(path: Path) -> dict:
                 raise ValueError(f"a pair network without {export.NEIGHBOURS_KEY}")
             neighbour_slots = neighbours.slots
             potential = architecture == PAIR_POTENTIAL_ARCHITECTURE
-            model = PairNet(neighbour_slots, size_px, mirror_averaged, output, potential=potential)
+            model = PairNet(
+                neighbour_slots, size_px, mirror_averaged, output, potential=potential, hidden_pairs=neighbours.hidden
+            )
         else:
             model = PolicyNet(size_px, architecture, mirror_averaged, output, range_sectors)
     except (KeyError, ValueError) as e:
@@ -245,6 +247,7 @@ def checkpoint_from_onnx(path: Path) -> dict:
         "range_sectors": range_sectors,
         "neighbour_slots": neighbour_slots,
         "pair_hidden": list(PAIR_HIDDEN) if neighbour_slots else None,
+        "hidden_pairs": bool(neighbour_slots) and model.hidden_pairs,
         "model_state": state,
         "metadata": meta,
     }
@@ -262,6 +265,7 @@ def save_checkpoint(path: Path, model: PolicyNet | PairNet, optimizer, metadata:
             "range_sectors": model.range_sectors,
             "neighbour_slots": model.neighbour_slots,
             "pair_hidden": list(model.hidden) if isinstance(model, PairNet) else None,
+            "hidden_pairs": isinstance(model, PairNet) and model.hidden_pairs,
             "model_state": model.state_dict(),
             "optimizer_state": optimizer.state_dict(),
             "metadata": metadata,
@@ -288,6 +292,7 @@ def model_from_checkpoint(checkpoint: dict, size_px: int | None = None) -> Polic
             checkpoint.get("output", "formation_velocity"),
             tuple(checkpoint.get("pair_hidden") or PAIR_HIDDEN),
             potential=checkpoint["architecture"] == PAIR_POTENTIAL_ARCHITECTURE,
+            hidden_pairs=checkpoint.get("hidden_pairs", False),
         )
         model.load_state_dict(checkpoint["model_state"])
         return model
@@ -561,9 +566,10 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
             )
         if isinstance(model, PairNet):
             _check_pair_data(data_neighbours, data_names, cfg.output)
-            if model.neighbour_slots != data_neighbours.slots:
+            if (model.neighbour_slots, model.hidden_pairs) != (data_neighbours.slots, data_neighbours.hidden):
                 raise TrainError(
-                    f"{cfg.init_from} takes neighbours in {model.neighbour_slots} slots but the data's are "
+                    f"{cfg.init_from} takes neighbours in {model.neighbour_slots} slots of "
+                    f"{model.neighbour_features} values but the data's are "
                     f"{data_neighbours}: warm-start from a pair network of the same slots, or collect the data with its"
                 )
             log(f"warm start from {cfg.init_from}")
@@ -589,7 +595,9 @@ def run(cfg: TrainConfig, log: Callable[[str], None] = print) -> dict:
     elif cfg.architecture in PAIR_ARCHITECTURES or (cfg.architecture is None and data_neighbours is not None):
         _check_pair_data(data_neighbours, data_names, cfg.output, chosen=cfg.architecture is None)
         potential = cfg.architecture == PAIR_POTENTIAL_ARCHITECTURE
-        model = PairNet(data_neighbours.slots, samples.size_px, potential=potential)
+        model = PairNet(
+            data_neighbours.slots, samples.size_px, potential=potential, hidden_pairs=data_neighbours.hidden
+        )
     else:
         try:
             model = PolicyNet(samples.size_px, cfg.architecture or "paper", range_sectors=sectors)

@@ -62,6 +62,21 @@ def neighbour_sets(rng: np.random.Generator, samples: int, slots: int) -> np.nda
     return out
 
 
+def hidden_steps(rng: np.random.Generator, neighbours: np.ndarray) -> np.ndarray:
+    """``neighbours`` [N, K, 4] with the two numbers of ``hidden=1`` added a slot: in a fifth of
+    the samples the first two slots are the ends of a pair the robot hides, each carrying half of
+    a step aside of 0.5-4 d* in a random direction; elsewhere zeros."""
+    samples, slots, _ = neighbours.shape
+    out = np.zeros((samples, slots, 6), dtype=np.float32)
+    out[..., :4] = neighbours
+    hides = (rng.random(samples) < 0.2) & (neighbours[:, : min(2, slots), 3].sum(axis=1) == min(2, slots))
+    angle = rng.uniform(-np.pi, np.pi, samples)
+    half = 0.5 * rng.uniform(0.5, 4.0, samples) * hides
+    out[:, :2, 4] = (half * np.cos(angle))[:, None]
+    out[:, :2, 5] = (half * np.sin(angle))[:, None]
+    return out
+
+
 def wheels_from_formation_velocity(f: np.ndarray, aux: np.ndarray, v_train: float) -> np.ndarray:
     """The wheel labels at ``v_train`` whose point velocity is ``v_train (cos dphi, sin dphi) + f``
     (the inverse of ``train.formation_velocity_targets``: ``u = ((L + R) / 2, (R - L) / 2)``)."""
@@ -81,11 +96,13 @@ def synthetic_arrays(
     clip: float = 3.0,
     slots: int = 0,
     v_train: float = 0.7,
+    hidden: bool = False,
 ):
     """Random sparse images and labels that depend on them (so a model can learn something); with
     ``sectors``, also ranges in [0, clip] that the labels depend on; with ``slots``, neighbours
     (:func:`neighbour_sets`) and wheel labels that are the teacher's law on them
-    (:func:`pair_law`) at ``v_train``."""
+    (:func:`pair_law`) at ``v_train``; with ``hidden``, each slot also carries a step aside
+    (:func:`hidden_steps`), which the labels add at the team gain."""
     rng = np.random.default_rng(seed)
     occupancy = (rng.random((samples, size_px, size_px)) < 0.02).astype(np.uint8)
     aux = np.stack([rng.uniform(-np.pi, np.pi, samples), rng.uniform(0.5, 3.0, samples)], 1).astype(np.float32)
@@ -98,7 +115,11 @@ def synthetic_arrays(
         extra["ranges"] = ranges
     if slots:
         neighbours = neighbour_sets(np.random.default_rng(seed + 2000), samples, slots)
+        if hidden:
+            neighbours = hidden_steps(np.random.default_rng(seed + 3000), neighbours)
         f = pair_law(neighbours) * aux[:, 1:2]
+        if hidden:
+            f = f + K_FORMATION_GRAPH * neighbours[..., 4:6].sum(axis=1) * aux[:, 1:2]
         wheels = wheels_from_formation_velocity(f, aux, v_train)
         extra["neighbours"] = neighbours
     return extra | {
@@ -135,12 +156,14 @@ def write_dataset(
     if ranges is not None:
         fields = dict(part.split("=") for part in ranges.split(","))
         sectors, clip = int(fields["sectors"]), float(fields["clip"])
-    slots = 0
+    slots, hidden = 0, False
     if neighbours is not None:
-        slots = int({k.strip(): v for k, v in (part.split("=") for part in neighbours.split(","))}["slots"])
+        fields = {k.strip(): v for k, v in (part.split("=") for part in neighbours.split(","))}
+        slots, hidden = int(fields["slots"]), fields.get("hidden") == "1"
     version = 3 if neighbours is not None else 2 if ranges is not None else 1
     arrays = synthetic_arrays(
-        samples, size_px, seed, iteration=iteration, sectors=sectors, clip=clip, slots=slots, v_train=v_train
+        samples, size_px, seed, iteration=iteration, sectors=sectors, clip=clip, slots=slots, v_train=v_train,
+        hidden=hidden,
     )
     shards = []
     for index, start in enumerate(range(0, samples, shard_size)):

@@ -93,6 +93,12 @@ def test_the_neighbour_declaration_reads_and_writes_as_rusts():
                 "slots=16;threshold=1.3;nearest=2", "slots=16,threshold=x,nearest=2", ""):
         with pytest.raises(ValueError, match="is not a neighbour input: write \"slots=K,threshold=T,nearest=M\""):
             ds.NeighbourInput.parse(bad)
+    hidden = ds.NeighbourInput.parse("hidden=1, " + NEIGHBOURS)
+    assert (hidden.hidden, hidden.features, spec.features) == (True, 6, 4)
+    assert hidden.text() == NEIGHBOURS + ",hidden=1" and ds.NeighbourInput.parse(NEIGHBOURS + ",hidden=0") == spec
+    for bad in (NEIGHBOURS + ",hidden=2", NEIGHBOURS + ",hidden=1,hidden=1"):
+        with pytest.raises(ValueError, match="is not a neighbour input"):
+            ds.NeighbourInput.parse(bad)
     for bad, what in (("slots=0,threshold=1.3,nearest=2", "slots"), ("slots=65,threshold=1.3,nearest=2", "slots"),
                       ("slots=16,threshold=0.9,nearest=2", "threshold"), ("slots=16,threshold=4.5,nearest=2", "threshold"),
                       ("slots=16,threshold=1.3,nearest=9", "nearest")):
@@ -425,7 +431,7 @@ def test_a_pair_network_needs_data_with_its_neighbours_and_a_formation_velocity(
         (dict(data=[plain], init_from=init), "takes the neighbours each robot detects in its own scan, but .*plain holds none: "
          "collect the data with `formation collect --neighbours K`"),
         (dict(data=[plain], architecture="pair"), "plain holds none"),
-        (dict(data=[fewer], init_from=init), "takes neighbours in 16 slots but the data's are slots=8,threshold=1.3,nearest=2"),
+        (dict(data=[fewer], init_from=init), "takes neighbours in 16 slots of 4 values but the data's are slots=8,threshold=1.3,nearest=2"),
         (dict(data=[paired["data"]], architecture="pair", output="wheels"), "the pair network answers a formation velocity, "
          "not 'wheels': add --output formation_velocity"),
     )
@@ -459,3 +465,62 @@ def test_the_command_line_trains_a_pair_network_on_neighbours_and_a_cnn_when_nam
     assert [i.name for i in session.get_inputs()] == ["occupancy", "aux"]
     # What the Rust bridge passes for `formation train --architecture pair`.
     assert cli._parser().parse_args(["train", "--data", "d", "--out", "o.onnx", "--architecture", "pair"]).architecture == "pair"
+
+
+# --- the hidden pairs' step aside (hidden=1) -------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def hidden_paired(tmp_path_factory):
+    """A pair-potential network trained on neighbours with ``hidden=1``, whose labels add each
+    slot's step aside at the team gain."""
+    root = tmp_path_factory.mktemp("hidden")
+    data = write_dataset(
+        root / "data", samples=8000, shard_size=3000, neighbours=NEIGHBOURS + ",hidden=1",
+        labels={"unshaped": True, "own_scan": True, "unblock_hidden_pairs": True},
+    )
+    out = root / "pair.onnx"
+    config = train.TrainConfig(
+        data=[data], out=out, epochs=10, batch_size=256, lr=1e-2, device="cpu", output="formation_velocity",
+        response_weight=0.05, architecture="pair-potential",
+    )
+    train.run(config, log=lambda _: None)
+    return {"data": data, "out": out}
+
+
+def test_the_hidden_pairs_step_is_learnt_as_one_gain_and_exported_with_six_numbers_a_slot(hidden_paired, tmp_path):
+    model = train.model_from_checkpoint(train.load_checkpoint(hidden_paired["out"].with_suffix(".pt")))
+    assert model.hidden_pairs and model.neighbour_features == 6
+    # Learnt from zero to the teacher's team gain.
+    assert model.hidden_pair_gain.item() == pytest.approx(K_FORMATION_GRAPH, rel=0.1)
+    assert multiply_adds(model) == multiply_adds(PairNet(SLOTS))
+    meta = _meta(hidden_paired["out"])
+    assert meta["formation.neighbours"] == NEIGHBOURS + ",hidden=1"
+    session = ort.InferenceSession(str(hidden_paired["out"]), providers=["CPUExecutionProvider"])
+    shape = next(i.shape for i in session.get_inputs() if i.name == "neighbours")
+    assert shape[1:] == [SLOTS, 6]
+    # The step moves the answer by the gain times its sum over the slots, times d*; and it
+    # reflects with y.
+    rng = np.random.default_rng(4)
+    occupancy, aux, _ = _inputs(6, seed=4)
+    neighbours = cli.random_neighbours(rng, 6, SLOTS, 6)
+    still = neighbours.copy()
+    still[..., 4:6] = 0.0
+    moved = _run(hidden_paired["out"], occupancy, aux, neighbours) - _run(hidden_paired["out"], occupancy, aux, still)
+    step = neighbours[..., 4:6].sum(axis=1) * aux[:, 1:2] * model.hidden_pair_gain.item()
+    np.testing.assert_allclose(moved, step, atol=1e-4)
+    mirrored = mirror_neighbours(torch.from_numpy(neighbours)).numpy()
+    np.testing.assert_array_equal(mirrored[..., 5], -neighbours[..., 5])
+    np.testing.assert_array_equal(mirrored[..., 4], neighbours[..., 4])
+    # A warm start from the .onnx reads the gain back.
+    from_onnx = train.model_from_checkpoint(train.load_checkpoint(hidden_paired["out"]))
+    assert from_onnx.hidden_pairs and from_onnx.hidden_pair_gain.item() == model.hidden_pair_gain.item()
+
+
+def test_a_network_without_the_step_does_not_warm_start_on_data_with_it(paired, hidden_paired, tmp_path):
+    config = train.TrainConfig(
+        data=[hidden_paired["data"]], out=tmp_path / "x.onnx", epochs=1, batch_size=256, lr=1e-3, device="cpu",
+        output="formation_velocity", init_from=paired["out"], architecture="pair",
+    )
+    with pytest.raises(train.TrainError, match="slots of 4 values but the data's are .*hidden=1"):
+        train.run(config, log=lambda _: None)
