@@ -378,6 +378,9 @@ mod tests {
         // An end robot hides nothing.
         let (scan, lidar) = scan_of(&[(-d_star, 0.0), (0.0, -0.05), (d_star, 0.0)], 0.0);
         builder.fill(&scan, &lidar, &spec, d_star, &mut out);
-        assert!(out.chunks_exact(6).all(|s| s[4] == 0.0 && s[5] == 0.0), "{out:?}");
+        assert!(
+            out.chunks_exact(6).all(|s| s[4] == 0.0 && s[5] == 0.0),
+            "{out:?}"
+        );
     }
 }

@@ -766,7 +766,10 @@ mod tests {
         let hidden = NeighbourInput::parse("hidden=1,slots=16,threshold=1.3,nearest=2").unwrap();
         assert_eq!(hidden, input.with_hidden(true));
         assert_eq!((hidden.features(), hidden.len()), (6, 96));
-        assert_eq!(hidden.to_string(), "slots=16,threshold=1.3,nearest=2,hidden=1");
+        assert_eq!(
+            hidden.to_string(),
+            "slots=16,threshold=1.3,nearest=2,hidden=1"
+        );
         assert_eq!(NeighbourInput::parse(&hidden.to_string()), Ok(hidden));
         assert_eq!(
             NeighbourInput::parse("slots=16,threshold=1.3,nearest=2,hidden=0"),

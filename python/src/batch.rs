@@ -525,12 +525,8 @@ impl Batch {
                 |builder, scan, d_star, cell| builder.fill(scan, &lidar, &spec, d_star, cell),
             )
         })?;
-        out.into_pyarray(py).reshape(vec![
-            self.slots.len(),
-            n,
-            spec.slots,
-            spec.features(),
-        ])
+        out.into_pyarray(py)
+            .reshape(vec![self.slots.len(), n, spec.slots, spec.features()])
     }
 
     /// A policy's outputs `(B, N, 2)` (float32) as wheel speeds for each world's goal, as the
