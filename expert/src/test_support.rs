@@ -5,11 +5,7 @@ use formation_proto::{Goal, Pose};
 
 /// The goal of heading `phi_star` and distance `d_star` at the paper's speed, v* = 0.7 m/s.
 pub(crate) fn goal(phi_star: f64, d_star: f64) -> Goal {
-    Goal {
-        phi_star,
-        d_star,
-        v_star: 0.7,
-    }
+    Goal::new(phi_star, d_star, 0.7)
 }
 
 /// The observation of the first tick (tick 0 at time 0) of a team at `poses` with their `scans`

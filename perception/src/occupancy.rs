@@ -301,28 +301,16 @@ mod tests {
     #[test]
     fn hits_beyond_the_window_land_on_the_border_in_their_bearing() {
         let s = spec(BeyondWindow::Border);
-        assert_eq!(
-            render_single(0, 4.0, &s),
-            vec![(25, 49)],
-            "ahead: front edge"
-        );
-        assert_eq!(
-            render_single(225, 4.0, &s),
-            vec![(0, 25)],
-            "left: left edge"
-        );
         // Exactly behind or to the right, the ray runs along a cell edge and rounding picks the side,
-        // so these two use beams 4 degrees off the axis: 2.5 tan 4 deg = 0.175 m, 1.75 cells off.
-        assert_eq!(
-            render_single(460, 9.0, &s),
-            vec![(26, 0)],
-            "behind, slightly right: rear edge"
-        );
-        assert_eq!(
-            render_single(685, 3.0, &s),
-            vec![(49, 26)],
-            "right, slightly ahead: right edge"
-        );
+        // so the last two use beams 4 degrees off the axis: 2.5 tan 4 deg = 0.175 m, 1.75 cells off.
+        for (beam, range, cell, what) in [
+            (0, 4.0, (25, 49), "ahead: front edge"),
+            (225, 4.0, (0, 25), "left: left edge"),
+            (460, 9.0, (26, 0), "behind, slightly right: rear edge"),
+            (685, 3.0, (49, 26), "right, slightly ahead: right edge"),
+        ] {
+            assert_eq!(render_single(beam, range, &s), vec![cell], "{what}");
+        }
         // 45 degrees (beam 112.5 does not exist; beam 112 is at 44.8 degrees): the front-left corner region.
         let cells = render_single(112, 8.0, &s);
         assert_eq!(cells.len(), 1);

@@ -641,11 +641,7 @@ mod tests {
     use super::*;
 
     fn goal(phi_star: f64, d_star: f64) -> Goal {
-        Goal {
-            phi_star,
-            d_star,
-            v_star: 0.5,
-        }
+        Goal::new(phi_star, d_star, 0.5)
     }
 
     #[test]

@@ -55,6 +55,18 @@ pub struct Goal {
     pub v_star: f64,
 }
 
+impl Goal {
+    /// The goal of common heading `phi_star` \[rad\], pairwise distance `d_star` \[m\] and speed
+    /// `v_star` \[m/s\].
+    pub const fn new(phi_star: f64, d_star: f64, v_star: f64) -> Goal {
+        Goal {
+            phi_star,
+            d_star,
+            v_star,
+        }
+    }
+}
+
 /// Radius \[m\] of the disc that stands for a robot's body: a Pioneer P3-DX's, the world's default
 /// (`formation_world::RobotParams::body_radius`), which its LIDAR casts and its collision test
 /// uses, and what a robot's neighbour detector (`formation_perception::neighbours`) assumes of

@@ -1218,11 +1218,7 @@ mod tests {
     }
 
     fn goal() -> Goal {
-        Goal {
-            phi_star: 1.0,
-            d_star: 1.5,
-            v_star: 0.7,
-        }
+        Goal::new(1.0, 1.5, 0.7)
     }
 
     /// A scan with one hit 1 m straight ahead.

@@ -32,7 +32,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::dataset::{
     DatasetError, DatasetHeader, DatasetWriter, Manifest, PendingShard, Sample, check_sample,
-    decode_columns,
+    decode_columns, io_error,
 };
 use crate::difference::{Difference, FirstDifference};
 use crate::digest::Fnv1a64;
@@ -110,16 +110,6 @@ pub struct Part {
 /// Why a part could not be written, read or appended. Every message names the file and the fix.
 #[derive(Debug, thiserror::Error)]
 pub enum PartError {
-    /// A file-system operation failed.
-    #[error("{action} {path}: {source}")]
-    Io {
-        /// What was being done.
-        action: &'static str,
-        /// The file.
-        path: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
-    },
     /// The file is larger than [`MAX_PART_BYTES`].
     #[error(
         "{path} is {bytes} bytes, more than a part may be ({MAX_PART_BYTES}); label the iteration in shares of fewer runs"
@@ -189,7 +179,8 @@ pub enum PartError {
         /// The part's runs.
         runs: Range<usize>,
     },
-    /// Encoding or appending failed in the dataset layer.
+    /// A file-system operation failed ([`DatasetError::Io`]), or encoding or appending failed in
+    /// the dataset layer.
     #[error(transparent)]
     Dataset(#[from] DatasetError),
     /// No parts were given.
@@ -277,17 +268,6 @@ pub enum PartError {
     },
 }
 
-fn io_error<'a>(
-    action: &'static str,
-    path: &'a Path,
-) -> impl FnOnce(std::io::Error) -> PartError + 'a {
-    move |source| PartError::Io {
-        action,
-        path: path.to_path_buf(),
-        source,
-    }
-}
-
 /// FNV-1a 64 of a file's bytes, 16 hex digits (the model fingerprint of [`RolloutSettings`]).
 pub fn file_fnv1a64(path: &Path) -> Result<String, PartError> {
     let bytes = fs::read(path).map_err(io_error("reading", path))?;
@@ -332,7 +312,9 @@ pub fn write_part(path: &Path, header: &PartHeader, samples: &[Sample]) -> Resul
         ("columns_fnv1a64".to_owned(), columns.columns_fnv1a64()),
     ]);
     let bytes = columns.encode_with(header.dataset.occupancy.size_px, metadata, path)?;
-    formation_proto::files::write_atomic(path, &bytes).map_err(io_error("writing", path))
+    formation_proto::files::write_atomic(path, &bytes)
+        .map_err(io_error("writing", path))
+        .map_err(PartError::from)
 }
 
 /// Reads and checks a part: size, format, version, header, columns and checksum, and that every

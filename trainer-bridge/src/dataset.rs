@@ -680,7 +680,9 @@ fn size_verdict(actual: u64, expected: u64) -> &'static str {
     }
 }
 
-fn io_error<'a>(
+/// What turns an OS error while doing `action` (e.g. "reading") to `path` into a
+/// [`DatasetError::Io`]; the DAgger parts' file operations fail the same way.
+pub(crate) fn io_error<'a>(
     action: &'static str,
     path: &'a Path,
 ) -> impl FnOnce(std::io::Error) -> DatasetError + 'a {
@@ -1533,6 +1535,18 @@ pub(crate) mod tests {
         fs::write(dir.join(MANIFEST_FILE), value.to_string()).expect("write");
     }
 
+    /// Rewrites the manifest of `dir` to format `version` declaring `key` as `value`, and checks
+    /// that opening the dataset then fails as a bad manifest whose message contains `says`.
+    fn assert_bad_declaration(dir: &Path, version: u32, key: &str, value: &str, says: &str) {
+        edit_manifest(dir, |manifest| {
+            manifest["version"] = version.into();
+            manifest[key] = value.into();
+        });
+        let err = DatasetReader::open(dir).expect_err("a bad declaration");
+        assert!(matches!(err, DatasetError::BadManifest { .. }), "{err:?}");
+        assert!(err.to_string().contains(says), "{err}");
+    }
+
     /// Lists the first shard of `dir` under `manifest` (as holding `samples`, its size and
     /// checksum those of the file) and returns why loading the dataset then fails.
     fn load_error_under(dir: &Path, manifest: &serde_json::Value, samples: usize) -> DatasetError {
@@ -1614,8 +1628,7 @@ pub(crate) mod tests {
     fn the_manifest_uses_the_documented_keys() {
         let dir = tempfile::tempdir().expect("tempdir");
         write(dir.path(), 3, 8);
-        let text = fs::read_to_string(dir.path().join(MANIFEST_FILE)).expect("manifest");
-        let value: serde_json::Value = serde_json::from_str(&text).expect("json");
+        let value = manifest_json(dir.path());
         assert_eq!(value["format"], "formation-dataset");
         assert_eq!(value["version"], 1);
         assert_eq!(value["occupancy"]["size_px"], SIZE);
@@ -1779,11 +1792,7 @@ pub(crate) mod tests {
     fn an_unknown_version_or_format_is_refused_before_anything_else() {
         let dir = tempfile::tempdir().expect("tempdir");
         write(dir.path(), 1, 4);
-        let path = dir.path().join(MANIFEST_FILE);
-        let text = fs::read_to_string(&path).expect("read");
-        let mut value: serde_json::Value = serde_json::from_str(&text).expect("json");
-        value["version"] = 4.into();
-        fs::write(&path, value.to_string()).expect("write");
+        edit_manifest(dir.path(), |value| value["version"] = 4.into());
         let err = DatasetReader::open(dir.path()).expect_err("version");
         assert!(
             matches!(err, DatasetError::UnsupportedVersion { found: 4, .. }),
@@ -1794,6 +1803,7 @@ pub(crate) mod tests {
             "{err}"
         );
 
+        let path = dir.path().join(MANIFEST_FILE);
         fs::write(&path, r#"{"format": "something-else", "version": 1}"#).expect("write");
         assert!(matches!(
             DatasetReader::open(dir.path()),
@@ -2064,13 +2074,7 @@ pub(crate) mod tests {
         );
         assert!(err.to_string().contains("declares no `ranges`"), "{err}");
 
-        edit_manifest(other.path(), |value| {
-            value["version"] = 2.into();
-            value["ranges"] = "sectors=2,clip=3".into();
-        });
-        let err = DatasetReader::open(other.path()).expect_err("bad ranges");
-        assert!(matches!(err, DatasetError::BadManifest { .. }), "{err:?}");
-        assert!(err.to_string().contains("sectors"), "{err}");
+        assert_bad_declaration(other.path(), 2, "ranges", "sectors=2,clip=3", "sectors");
     }
 
     #[test]
@@ -2315,13 +2319,13 @@ pub(crate) mod tests {
         }
 
         // A neighbour input out of its bounds.
-        edit_manifest(with.path(), |value| {
-            value["version"] = 3.into();
-            value["neighbours"] = "slots=65,threshold=1.3,nearest=2".into();
-        });
-        let err = DatasetReader::open(with.path()).expect_err("bad neighbours");
-        assert!(matches!(err, DatasetError::BadManifest { .. }), "{err:?}");
-        assert!(err.to_string().contains("slots"), "{err}");
+        assert_bad_declaration(
+            with.path(),
+            3,
+            "neighbours",
+            "slots=65,threshold=1.3,nearest=2",
+            "slots",
+        );
     }
 
     #[test]
