@@ -32,6 +32,8 @@ pub mod scenario;
 #[cfg(test)]
 mod test_layouts;
 #[cfg(test)]
+mod test_scratch;
+#[cfg(test)]
 mod test_support;
 pub mod world;
 

@@ -878,7 +878,8 @@ mod tests {
     use super::*;
     use crate::episode::{Controller, EpisodeError};
     use crate::run_episode_recorded;
-    use crate::test_support::{RampTeam, Scratch};
+    use crate::test_scratch::Scratch;
+    use crate::test_support::RampTeam;
     use formation_proto::control::controller_fn;
     use std::cell::Cell;
     use std::rc::Rc;

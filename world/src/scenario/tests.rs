@@ -2,7 +2,7 @@
 
 use super::plan::*;
 use super::*;
-use crate::test_support::Scratch;
+use crate::test_scratch::Scratch;
 
 const SHIPPED: [(&str, &str); 5] = [
     ("case1", include_str!("../../../scenarios/case1.toml")),
