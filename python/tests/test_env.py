@@ -40,20 +40,62 @@ def test_an_expert_episode_equals_formation_eval_bit_for_bit(tmp_path, robots):
     env.reset(seed=seed, run=run)
     while env.agents:
         _, _, _, _, infos = env.step(env.expert_actions())
-    got = [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+    got = trajectory_rows(env)
     assert len(got) == len(expected) == 121
     assert got == expected
     assert "metrics" in infos["robot_0"]
 
 
-def policy_session():
+def policy_session(model=MODEL):
+    """An ONNX Runtime session on ``model`` set up as the agent's own."""
     import onnxruntime as ort
 
     options = ort.SessionOptions()
     # The agent's session: one intra-op and one inter-op thread, default graph optimisation.
     options.intra_op_num_threads = 1
     options.inter_op_num_threads = 1
-    return ort.InferenceSession(str(MODEL), options, providers=["CPUExecutionProvider"])
+    return ort.InferenceSession(str(model), options, providers=["CPUExecutionProvider"])
+
+
+def trajectory_rows(env) -> list:
+    """The environment's trajectory as rows of pose tuples, to compare with `pose_rows`."""
+    return [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+
+
+def play_policy(env, session, observations, output: str, inputs=("occupancy", "aux")) -> list:
+    """Steps ``env`` from ``observations`` to its end, each robot's action ``session``'s
+    ``output`` on its own observation's ``inputs`` (one robot at a time, as each agent runs its
+    own model); returns :func:`trajectory_rows`."""
+    while env.agents:
+        outputs = {}
+        for agent, obs in observations.items():
+            feed = {name: obs[name][None] for name in inputs}
+            outputs[agent] = session.run([output], feed)[0][0]
+        observations, _, _, _, _ = env.step(env.policy_actions(outputs))
+    return trajectory_rows(env)
+
+
+def tiny_model(tmp_path, name: str, seed: int, *flags: str):
+    """Writes ``tests/fixtures/tiny_policy.py``'s formation_velocity model with ``seed`` and
+    ``flags`` to ``tmp_path / name``; returns its path."""
+    import subprocess
+    import sys
+
+    model = tmp_path / name
+    subprocess.run(
+        [sys.executable, str(REPO / "tests" / "fixtures" / "tiny_policy.py"), str(model), "--seed", str(seed),
+         "--output", "formation_velocity", *flags],
+        check=True,
+    )
+    return model
+
+
+def team_policy_episode(tmp_path, model):
+    """`formation eval`'s poses (as `pose_rows`) for ``model`` driving 5 robots at d* = 3 m in
+    seed 2's run 0, and an environment on the same scenario and model to replay it."""
+    scenario = team_scenario(tmp_path, 5, 3.0)
+    expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", 2, 0, "policy", model))
+    return expected, parallel_env(scenario=str(scenario), model=model)
 
 
 @pytest.mark.parametrize("robots,given", [(3, True), (16, True), (16, False)])
@@ -66,14 +108,7 @@ def test_an_onnx_policy_episode_equals_formation_eval_bit_for_bit(tmp_path, robo
     env = parallel_env(scenario=str(scenario), **({"model": MODEL} if given else {}))
     session = policy_session()
     observations, _ = env.reset(seed=seed, run=run)
-    while env.agents:
-        outputs = {}
-        for agent, obs in observations.items():
-            # One robot at a time, as each agent runs its own model.
-            feed = {"occupancy": obs["occupancy"][None], "aux": obs["aux"][None]}
-            outputs[agent] = session.run(["wheels"], feed)[0][0]
-        observations, _, _, _, _ = env.step(env.policy_actions(outputs))
-    got = [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+    got = play_policy(env, session, observations, "wheels")
     assert len(got) == len(expected) == 61
     assert got == expected
 
@@ -81,34 +116,12 @@ def test_an_onnx_policy_episode_equals_formation_eval_bit_for_bit(tmp_path, robo
 def test_a_formation_velocity_policy_episode_equals_formation_eval_bit_for_bit(tmp_path):
     # A model that declares formation.output = formation_velocity: the environment adds the
     # reference term as the Rust agent does (issue 34), so the episode is formation eval's.
-    import subprocess
-    import sys
-
-    model = tmp_path / "fv.onnx"
-    subprocess.run(
-        [sys.executable, str(REPO / "tests" / "fixtures" / "tiny_policy.py"), str(model), "--seed", "3",
-         "--output", "formation_velocity"],
-        check=True,
-    )
+    model = tiny_model(tmp_path, "fv.onnx", 3)
     assert ModelSpec.from_onnx(model).output == "formation_velocity"
-    scenario = team_scenario(tmp_path, 5, 3.0)
-    seed, run = 2, 0
-    expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", seed, run, "policy", model))
-    env = parallel_env(scenario=str(scenario), model=model)
-    import onnxruntime as ort
-
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = 1
-    options.inter_op_num_threads = 1
-    session = ort.InferenceSession(str(model), options, providers=["CPUExecutionProvider"])
-    observations, _ = env.reset(seed=seed, run=run)
-    while env.agents:
-        outputs = {}
-        for agent, obs in observations.items():
-            feed = {"occupancy": obs["occupancy"][None], "aux": obs["aux"][None]}
-            outputs[agent] = session.run(["formation_velocity"], feed)[0][0]
-        observations, _, _, _, _ = env.step(env.policy_actions(outputs))
-    got = [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+    expected, env = team_policy_episode(tmp_path, model)
+    session = policy_session(model)
+    observations, _ = env.reset(seed=2, run=0)
+    got = play_policy(env, session, observations, "formation_velocity")
     assert len(got) == len(expected) == 61
     assert got == expected
 
@@ -128,28 +141,12 @@ def test_the_range_input_is_read_by_the_agents_own_parser():
 def test_a_ranges_policy_episode_equals_formation_eval_bit_for_bit(tmp_path):
     # A model that takes the scan's ranges beside its image (formation.ranges, issue 34 item 6):
     # the environment feeds what the Rust agent feeds, so the episode is formation eval's.
-    import subprocess
-    import sys
-
-    model = tmp_path / "ranges.onnx"
-    subprocess.run(
-        [sys.executable, str(REPO / "tests" / "fixtures" / "tiny_policy.py"), str(model), "--seed", "5",
-         "--output", "formation_velocity", "--ranges-sectors", "100"],
-        check=True,
-    )
+    model = tiny_model(tmp_path, "ranges.onnx", 5, "--ranges-sectors", "100")
     assert ModelSpec.from_onnx(model).ranges == "sectors=100,clip=3"
-    scenario = team_scenario(tmp_path, 5, 3.0)
-    seed, run = 2, 0
-    expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", seed, run, "policy", model))
-    env = parallel_env(scenario=str(scenario), model=model)
+    expected, env = team_policy_episode(tmp_path, model)
     assert env.observation_space("robot_0")["ranges"].shape == (100,)
-    import onnxruntime as ort
-
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = 1
-    options.inter_op_num_threads = 1
-    session = ort.InferenceSession(str(model), options, providers=["CPUExecutionProvider"])
-    observations, _ = env.reset(seed=seed, run=run)
+    session = policy_session(model)
+    observations, _ = env.reset(seed=2, run=0)
     # The ranges are the documented pooling of the robot's own scan (checked here in numpy).
     scans = env.batch.scans()[0]
     d_star = env.batch.goals()[0][1]
@@ -164,13 +161,7 @@ def test_a_ranges_policy_episode_equals_formation_eval_bit_for_bit(tmp_path):
             if mine.size:
                 want[s] = min(3.0, mine.mean() / d_star)
         assert np.allclose(observations[agent]["ranges"], want, rtol=1e-6), agent
-    while env.agents:
-        outputs = {}
-        for agent, obs in observations.items():
-            feed = {"occupancy": obs["occupancy"][None], "aux": obs["aux"][None], "ranges": obs["ranges"][None]}
-            outputs[agent] = session.run(["formation_velocity"], feed)[0][0]
-        observations, _, _, _, _ = env.step(env.policy_actions(outputs))
-    got = [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+    got = play_policy(env, session, observations, "formation_velocity", ("occupancy", "aux", "ranges"))
     assert len(got) == len(expected) == 61
     assert got == expected
 
@@ -178,30 +169,14 @@ def test_a_ranges_policy_episode_equals_formation_eval_bit_for_bit(tmp_path):
 def test_a_neighbours_policy_episode_equals_formation_eval_bit_for_bit(tmp_path):
     # A model that takes the neighbours its robot detects in its own scan (formation.neighbours,
     # issue 34): the environment feeds what the Rust agent feeds, so the episode is formation eval's.
-    import subprocess
-    import sys
-
-    model = tmp_path / "neighbours.onnx"
-    subprocess.run(
-        [sys.executable, str(REPO / "tests" / "fixtures" / "tiny_policy.py"), str(model), "--seed", "5",
-         "--output", "formation_velocity", "--neighbour-slots", "4"],
-        check=True,
-    )
+    model = tiny_model(tmp_path, "neighbours.onnx", 5, "--neighbour-slots", "4")
     assert ModelSpec.from_onnx(model).neighbours == "slots=4,threshold=1.3,nearest=2"
-    scenario = team_scenario(tmp_path, 5, 3.0)
-    seed, run = 2, 0
-    expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", seed, run, "policy", model))
-    env = parallel_env(scenario=str(scenario), model=model)
+    expected, env = team_policy_episode(tmp_path, model)
     space = env.observation_space("robot_0")
     assert space["neighbours"].shape == (4, 4)
     assert "ranges" not in space.spaces
-    import onnxruntime as ort
-
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = 1
-    options.inter_op_num_threads = 1
-    session = ort.InferenceSession(str(model), options, providers=["CPUExecutionProvider"])
-    observations, _ = env.reset(seed=seed, run=run)
+    session = policy_session(model)
+    observations, _ = env.reset(seed=2, run=0)
     # The slots are the robot's own detections (the detector alone, checked here) in units of
     # d*, held ones first, the empty slots zeros.
     scans = env.batch.scans()[0]
@@ -221,14 +196,7 @@ def test_a_neighbours_policy_episode_equals_formation_eval_bit_for_bit(tmp_path)
             distances = np.hypot(found[:, 0] / d_star - x, found[:, 1] / d_star - y)
             assert distances.min() < 1e-5, agent
     assert held_somewhere
-    while env.agents:
-        outputs = {}
-        for agent, obs in observations.items():
-            feed = {"occupancy": obs["occupancy"][None], "aux": obs["aux"][None],
-                    "neighbours": obs["neighbours"][None]}
-            outputs[agent] = session.run(["formation_velocity"], feed)[0][0]
-        observations, _, _, _, _ = env.step(env.policy_actions(outputs))
-    got = [[tuple(p) for p in row] for row in env.trajectory().tolist()]
+    got = play_policy(env, session, observations, "formation_velocity", ("occupancy", "aux", "neighbours"))
     assert len(got) == len(expected) == 61
     assert got == expected
 

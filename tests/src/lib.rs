@@ -553,6 +553,14 @@ impl Finished {
         self
     }
 
+    /// Panics with `why` and [`Finished::describe`] unless its stderr contains every one of
+    /// `needles`.
+    #[track_caller]
+    pub fn assert_stderr_has_all(&self, needles: &[&str], why: &str) -> &Self {
+        let stderr = self.stderr();
+        self.assert_holds(needles.iter().all(|needle| stderr.contains(needle)), why)
+    }
+
     /// Panics with [`Finished::describe`] if its stderr contains `needle`.
     pub fn assert_stderr_lacks(&self, needle: &str) -> &Self {
         assert!(!self.stderr().contains(needle), "{}", self.describe());
@@ -909,6 +917,22 @@ pub fn the_agent(run: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
 /// The pid of run `run`'s `formation-world` process, found through /proc.
 pub fn world_pid(run: &RunId) -> Option<u32> {
     pids_of("formation-world", run, None).first().copied()
+}
+
+/// Sends `signal` (as [`send_signal`] takes it) to the world process of `launch`, the launch of
+/// run `run`, and waits up to `limit` for the launch to end; panics with the launch's output if
+/// no world process runs.
+pub fn signal_world(
+    run: &RunId,
+    mut launch: LiveProcess,
+    signal: &str,
+    limit: Duration,
+) -> Finished {
+    let Some(world) = world_pid(run) else {
+        panic!("no world process\n{}", launch.describe());
+    };
+    send_signal(world, signal);
+    launch.finish(limit)
 }
 
 /// Running processes of executable `exe` whose command line has `--run-id <run>` (and

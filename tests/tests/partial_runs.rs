@@ -9,7 +9,7 @@ use std::time::Duration;
 use formation_proto::wire::RunId;
 use formation_tests::{
     LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, compared_steps, files_under,
-    formation_run, read_json, repo_root, report_command, run, send_signal, world_pid,
+    formation_run, read_json, repo_root, report_command, run, send_signal, signal_world,
 };
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
@@ -133,11 +133,7 @@ fn a_sigkilled_world_leaves_a_journal_the_launcher_recovers() {
     std::thread::sleep(Duration::from_secs(3));
     let journal = out.join("runs/run-0000.journal");
     assert!(journal.is_file(), "the world journals the run as it goes");
-    let Some(world) = world_pid(&t.run) else {
-        panic!("no world process\n{}", launch.describe());
-    };
-    send_signal(world, "-KILL");
-    let finished = launch.finish(LIMIT);
+    let finished = signal_world(&t.run, launch, "-KILL", LIMIT);
     finished.assert_failed("a killed world fails the launch");
     finished.assert_stderr_has("recovered run 0");
     t.assert_clean();

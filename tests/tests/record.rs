@@ -16,7 +16,7 @@ use formation_tests::mcap_readers as readers;
 use formation_tests::{
     Finished, LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, compared_steps,
     eval_recorded, expert_eval_once, formation_run, read_json, record_case1_over_processes,
-    repo_root, run, send_signal, test_model, world_pid,
+    repo_root, run, signal_world, test_model,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -153,11 +153,7 @@ fn a_sigkilled_world_leaves_a_recording_the_streaming_reader_reads_to_its_last_c
     let mut launch = LiveProcess::spawn(command);
     await_connected(&mut launch);
     std::thread::sleep(Duration::from_millis(10_500));
-    let Some(world) = world_pid(&t.run) else {
-        panic!("no world process\n{}", launch.describe());
-    };
-    send_signal(world, "-KILL");
-    let finished = launch.finish(LIMIT);
+    let finished = signal_world(&t.run, launch, "-KILL", LIMIT);
     finished.assert_failed("expected failure");
     t.assert_clean();
     let streamed = readers(&[os("stream"), file.as_os_str()]);
@@ -282,21 +278,21 @@ fn a_full_disk_is_said_before_the_run_and_mid_run_stops_only_the_recording() {
     // Mid-run, in-process: 20 s of case 1 take about 700 kB.
     let out = t.path().join("eval-out");
     let finished = expert_eval_recorded(&scenario, disk.dir(), &out);
-    finished.assert_success();
-    let stderr = finished.stderr();
     let file = disk.dir().join("run-0000.mcap");
-    assert!(
-        stderr.contains("recording stopped")
-            && stderr.contains(&file.display().to_string())
-            && stderr.contains("the disk is full"),
-        "{}",
-        finished.describe()
-    );
-    assert!(
-        out.join("summary.json").is_file(),
-        "{}",
-        finished.describe()
-    );
+    finished
+        .assert_success()
+        .assert_stderr_has_all(
+            &[
+                "recording stopped",
+                &file.display().to_string(),
+                "the disk is full",
+            ],
+            "the recording stopped, naming its file and the full disk",
+        )
+        .assert_holds(
+            out.join("summary.json").is_file(),
+            "summary.json is written",
+        );
     assert_eq!(read_json(&out.join("runs/run-0000.json"))["complete"], true);
     std::fs::remove_file(&file).unwrap();
 
@@ -306,20 +302,14 @@ fn a_full_disk_is_said_before_the_run_and_mid_run_stops_only_the_recording() {
     let mut command = formation_run(&t.run, &scenario, &out, &[]);
     command.arg("--record").arg(&file);
     let finished = run(command, LIMIT);
-    finished.assert_success();
-    assert!(
-        finished
-            .stderr()
-            .contains("formation-world: recording stopped")
-            && finished.stderr().contains("the disk is full"),
-        "{}",
-        finished.describe()
+    finished.assert_success().assert_stderr_has_all(
+        &["formation-world: recording stopped", "the disk is full"],
+        "the world's recording stopped for the full disk",
     );
     assert_eq!(read_json(&out.join("runs/run-0000.json"))["complete"], true);
-    assert!(
+    finished.assert_holds(
         out.join("summary.json").is_file(),
-        "{}",
-        finished.describe()
+        "summary.json is written",
     );
     t.assert_clean();
 

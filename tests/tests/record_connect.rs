@@ -282,15 +282,10 @@ fn a_late_recorder_says_where_it_joined_and_sigint_finishes_its_file() {
     let recorder = recorder_under_way(&listen, &t.run, &late, &login);
     send_signal(recorder.id(), "INT");
     let recorded = recorder.finish(Duration::from_secs(60));
-    recorded.assert_exit(130);
-    assert!(
-        recorded.stdout().contains("recorded run 0 to")
-            && recorded
-                .stdout()
-                .contains("only: the run did not end while recording"),
-        "{}",
-        recorded.describe()
-    );
+    recorded
+        .assert_exit(130)
+        .assert_stdout_has("recorded run 0 to")
+        .assert_stdout_has("only: the run did not end while recording");
     launch.finish(LIMIT).assert_success();
 
     let metadata = mcap_readers(&["metadata".as_ref(), late.as_os_str()]);
@@ -336,13 +331,12 @@ fn a_world_killed_mid_recording_ends_the_recorder_with_a_clear_error_and_a_reada
     let world = world_pid(&t.run).expect("the world runs");
     send_signal(world, "KILL");
     let recorded = recorder.finish(Duration::from_secs(60));
-    recorded.assert_exit(2);
-    let said = recorded.stderr();
-    assert!(
-        said.contains("went before its last run ended")
-            && said.contains(&format!("what arrived is kept in {}", file.display())),
-        "{}",
-        recorded.describe()
+    recorded.assert_exit(2).assert_stderr_has_all(
+        &[
+            "went before its last run ended",
+            &format!("what arrived is kept in {}", file.display()),
+        ],
+        "the recorder says the world went and where what arrived is kept",
     );
     let launched = launch.finish(LIMIT);
     launched.assert_failed("expected failure");

@@ -9,8 +9,7 @@ use std::time::{Duration, Instant};
 
 use formation_tests::{
     LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, expert_eval_once, files_under,
-    formation_run, formation_run_args, read_json, repo_root, report_command, run, send_signal,
-    world_pid,
+    formation_run, formation_run_args, read_json, repo_root, report_command, run, signal_world,
 };
 use formation_world::metrics::{MetricsConfig, run_metrics};
 
@@ -57,11 +56,7 @@ fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
-    let Some(world) = world_pid(&t.run) else {
-        panic!("no world process\n{}", launch.describe());
-    };
-    send_signal(world, "-HUP");
-    let finished = launch.finish(LIMIT);
+    let finished = signal_world(&t.run, launch, "-HUP", LIMIT);
     finished.assert_failed("a run cut short fails the launch");
     t.assert_clean();
 
@@ -186,14 +181,9 @@ fn a_full_disk_under_eval_out_leaves_an_output_marked_partial_that_report_names(
         LIMIT,
     );
     finished.assert_failed("expected failure");
-    finished.assert_no_panic();
-    let stderr = finished.stderr();
-    assert!(
-        stderr.contains("run-0000.json")
-            && stderr.contains("the disk is full")
-            && stderr.contains("partial"),
-        "{}",
-        finished.describe()
+    finished.assert_no_panic().assert_stderr_has_all(
+        &["run-0000.json", "the disk is full", "partial"],
+        "the error names the run log, the full disk and the partial output",
     );
     let temporary: Vec<PathBuf> = files_under(disk.dir())
         .into_iter()
@@ -212,14 +202,9 @@ fn a_full_disk_under_eval_out_leaves_an_output_marked_partial_that_report_names(
 
     let html = t.path().join("report.html");
     let reported = run(report_command(&out, &html), LIMIT);
-    reported.assert_success();
-    let warning = reported.stderr();
-    assert!(
-        warning.contains("warning")
-            && warning.contains("partial output")
-            && warning.contains("runs/run-0000.json"),
-        "the report says what is missing\n{}",
-        reported.describe()
+    reported.assert_success().assert_stderr_has_all(
+        &["warning", "partial output", "runs/run-0000.json"],
+        "the report says what is missing",
     );
     let page = std::fs::read_to_string(&html).expect("report.html");
     assert!(page.contains("partial output"), "the page says it too");

@@ -17,7 +17,7 @@
 //! alone within this binary ([`one_at_a_time`](formation_tests::one_at_a_time)). The relay is
 //! [`ResettingRelay`].
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use formation_cli::launch::read_trajectory;
@@ -102,19 +102,73 @@ fn robot1(t: &ProcessTest, connect: &str, creds: &Path) -> LiveProcess {
     LiveProcess::spawn(agent)
 }
 
+/// A test's launch of case 1 (see [`launch`]) with robot 1's agent connected, straight to the
+/// world or through a [`ResettingRelay`].
+struct Team {
+    /// The test (its run id, folder and leak check).
+    t: ProcessTest,
+    /// The team's Zenoh credentials folder.
+    creds: PathBuf,
+    /// The launched scenario.
+    scenario: PathBuf,
+    /// The world's `formation run`.
+    launch: LiveProcess,
+    /// The world's endpoint.
+    listen: String,
+    /// The relay robot 1's agent connects through, if any.
+    relay: Option<ResettingRelay>,
+    /// Robot 1's agent.
+    agent: LiveProcess,
+}
+
+impl Team {
+    /// Starts test `name`: `duration_s` s of case 1 on `clock` with `extra` flags, and robot 1's
+    /// agent (through a relay when `relayed`); returns once the agents are connected.
+    fn start(
+        name: &'static str,
+        duration_s: f64,
+        clock: &str,
+        extra: &[&str],
+        relayed: bool,
+    ) -> Team {
+        let t = ProcessTest::start(name, LIMIT);
+        let creds = zenoh_credentials(t.path(), 3);
+        let scenario = t.case1(duration_s);
+        let (mut launch, listen) = launch(&t, &scenario, &creds, clock, extra);
+        let relay = relayed.then(|| ResettingRelay::start(listen.trim_start_matches("tcp/")));
+        let connect = match &relay {
+            Some(relay) => format!("tcp/127.0.0.1:{}", relay.port),
+            None => listen.clone(),
+        };
+        let agent = robot1(&t, &connect, &creds);
+        await_line(&mut launch, "agents connected");
+        Team {
+            t,
+            creds,
+            scenario,
+            launch,
+            listen,
+            relay,
+            agent,
+        }
+    }
+}
+
 /// Issue 36: robot 1's link reset twice mid-run (the relay closes both connections): the agent
 /// reconnects, the world takes it back (no agent lost), and the lockstep run is bit-identical to
 /// in-process.
 #[test]
 fn an_agent_whose_link_resets_reconnects_and_lockstep_stays_bit_identical() {
-    let t = ProcessTest::start("zreset", LIMIT);
-    let creds = zenoh_credentials(t.path(), 3);
-    let scenario = t.case1(10.0);
     // Paced, so the resets fall mid-run (201 ticks of at least 30 ms).
-    let (mut launch, listen) = launch(&t, &scenario, &creds, "lockstep", &["--pace-ms", "30"]);
-    let relay = ResettingRelay::start(listen.trim_start_matches("tcp/"));
-    let agent = robot1(&t, &format!("tcp/127.0.0.1:{}", relay.port), &creds);
-    await_line(&mut launch, "agents connected");
+    let Team {
+        t,
+        scenario,
+        launch,
+        relay,
+        agent,
+        ..
+    } = Team::start("zreset", 10.0, "lockstep", &["--pace-ms", "30"], true);
+    let relay = relay.expect("the relay");
     for _ in 0..2 {
         std::thread::sleep(Duration::from_secs(2));
         assert!(relay.reset() >= 1, "the relay carried robot 1's link");
@@ -130,18 +184,19 @@ fn an_agent_whose_link_resets_reconnects_and_lockstep_stays_bit_identical() {
 /// is still bit-identical to in-process.
 #[test]
 fn an_agent_stopped_past_the_lease_reconnects_and_lockstep_stays_bit_identical() {
-    let t = ProcessTest::start("zstop", LIMIT);
-    let creds = zenoh_credentials(t.path(), 3);
-    let scenario = t.case1(6.0);
-    let (mut launch, listen) = launch(
-        &t,
-        &scenario,
-        &creds,
+    let Team {
+        t,
+        scenario,
+        launch,
+        agent,
+        ..
+    } = Team::start(
+        "zstop",
+        6.0,
         "lockstep",
         &["--pace-ms", "20", "--timeout-ms", "60000"],
+        false,
     );
-    let agent = robot1(&t, &listen, &creds);
-    await_line(&mut launch, "agents connected");
     std::thread::sleep(Duration::from_secs(1));
     send_signal(agent.id(), "STOP");
     std::thread::sleep(Duration::from_secs(12));
@@ -158,12 +213,12 @@ fn an_agent_stopped_past_the_lease_reconnects_and_lockstep_stays_bit_identical()
 /// (and the launch, whose robot 1 was lost for good, says its results are not the policy's).
 #[test]
 fn an_agent_back_after_the_grace_is_told_it_was_counted_gone_and_exits() {
-    let t = ProcessTest::start("zlate", LIMIT);
-    let creds = zenoh_credentials(t.path(), 3);
-    let scenario = t.case1(30.0);
-    let (mut launch, listen) = launch(&t, &scenario, &creds, "realtime", &[]);
-    let agent = robot1(&t, &listen, &creds);
-    await_line(&mut launch, "agents connected");
+    let Team {
+        t,
+        mut launch,
+        agent,
+        ..
+    } = Team::start("zlate", 30.0, "realtime", &[], false);
     std::thread::sleep(Duration::from_secs(1));
     send_signal(agent.id(), "STOP");
     let lost = launch.wait_for_line(Duration::from_secs(40), |l| {
@@ -172,23 +227,18 @@ fn an_agent_back_after_the_grace_is_told_it_was_counted_gone_and_exits() {
     assert!(lost.is_some(), "{}", launch.describe());
     send_signal(agent.id(), "CONT");
     let agent = agent.finish(Duration::from_secs(30));
-    agent.assert_exit(2);
-    assert!(
-        agent.stderr().contains("was unreachable for more than 5 s")
-            && agent.stderr().contains("start this agent again"),
-        "the agent says the world counted it gone and what to do\n{}",
-        agent.describe()
+    agent.assert_exit(2).assert_stderr_has_all(
+        &[
+            "was unreachable for more than 5 s",
+            "start this agent again",
+        ],
+        "the agent says the world counted it gone and what to do",
     );
-    let finished = launch.finish(LIMIT);
-    finished.assert_failure_mentioning("robots that had lost their agent for good");
-    assert!(
-        finished.stdout().contains("run 0 done")
-            && finished
-                .stderr()
-                .contains("came back after it was counted gone"),
-        "{}",
-        finished.describe()
-    );
+    launch
+        .finish(LIMIT)
+        .assert_failure_mentioning("robots that had lost their agent for good")
+        .assert_stdout_has("run 0 done")
+        .assert_stderr_has("came back after it was counted gone");
     t.assert_clean();
 }
 
@@ -200,13 +250,16 @@ fn an_agent_back_after_the_grace_is_told_it_was_counted_gone_and_exits() {
 /// `formation swap` reports the swap done.
 #[test]
 fn a_swap_answer_lost_in_a_drop_is_sent_again() {
-    let t = ProcessTest::start("zswapdrop", LIMIT);
-    let creds = zenoh_credentials(t.path(), 3);
-    let scenario = t.case1(40.0);
-    let (mut launch, listen) = launch(&t, &scenario, &creds, "realtime", &[]);
-    let relay = ResettingRelay::start(listen.trim_start_matches("tcp/"));
-    let agent = robot1(&t, &format!("tcp/127.0.0.1:{}", relay.port), &creds);
-    await_line(&mut launch, "agents connected");
+    let Team {
+        t,
+        creds,
+        launch,
+        listen,
+        relay,
+        agent,
+        ..
+    } = Team::start("zswapdrop", 40.0, "realtime", &[], true);
+    let relay = relay.expect("the relay");
     std::thread::sleep(Duration::from_secs(1));
     relay.hold_toward_world(true);
     let other = t.path().join("other.onnx");

@@ -94,28 +94,34 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+# The `train` options that pass to TrainConfig's field of the same name as they are.
+_TRAIN_OPTIONS = (
+    "data",
+    "out",
+    "epochs",
+    "batch_size",
+    "lr",
+    "device",
+    "val_fraction",
+    "seed",
+    "init_from",
+    "parity_out",
+    "d_star_range",
+    "architecture",
+    "samples_per_epoch",
+    "relative_loss",
+    "output",
+    "response_weight",
+)
+
+
 def _train(args) -> None:
     from . import train
 
     config = train.TrainConfig(
-        data=args.data,
-        out=args.out,
-        epochs=args.epochs,
-        batch_size=args.batch_size,
-        lr=args.lr,
-        device=args.device,
-        val_fraction=args.val_fraction,
-        seed=args.seed,
-        init_from=args.init_from,
-        parity_out=args.parity_out,
-        d_star_range=args.d_star_range,
-        architecture=args.architecture,
+        **{name: getattr(args, name) for name in _TRAIN_OPTIONS},
         mirror=args.mirror or args.mirror_augment_only,
         mirror_average=not args.mirror_augment_only,
-        samples_per_epoch=args.samples_per_epoch,
-        relative_loss=args.relative_loss,
-        output=args.output,
-        response_weight=args.response_weight,
     )
     report = train.run(config, log=lambda line: print(line, flush=True))
     print(train.report_line(report), flush=True)
