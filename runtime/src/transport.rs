@@ -66,6 +66,17 @@ impl fmt::Debug for Transport {
 }
 
 impl Transport {
+    /// The first-party transports a binary links, one line each (`--transport` refuses the
+    /// others, naming the build that has them): iceoryx2 always, Zenoh and ROS 2 where the
+    /// binary's build has them (`zenoh`, its `zenoh` cargo feature).
+    pub const fn linked(zenoh: bool) -> &'static [Transport] {
+        if zenoh {
+            &[Transport::Iceoryx2, Transport::Zenoh, Transport::Ros2]
+        } else {
+            &[Transport::Iceoryx2]
+        }
+    }
+
     /// The name the flags use.
     pub fn as_str(self) -> &'static str {
         match self {

@@ -23,6 +23,7 @@ use iceoryx2::waitset::WaitSetRunResult;
 
 use super::services::{
     Access, ServiceError, ServiceErrorKind, drain_decoded, event_service, pubsub_service, run_node,
+    subscriber,
 };
 use super::watch_termination_signals;
 use crate::error::{IceoryxCause, IceoryxError, iox};
@@ -255,15 +256,15 @@ fn open_lobby(
     let hello_limits = ServiceLimits::HELLO;
     let welcome_limits = ServiceLimits::WELCOME;
     // The subscriber exists before the greeting goes out, so the answer cannot be missed.
-    let welcome = opened(pubsub_service::<WelcomeMsg>(
-        node,
-        &name(LobbyChannel::Welcome),
+    let welcome = subscriber(
+        &opened(pubsub_service::<WelcomeMsg>(
+            node,
+            &name(LobbyChannel::Welcome),
+            welcome_limits,
+            Access::Open,
+        ))?,
         welcome_limits,
-        Access::Open,
-    ))?
-    .subscriber_builder()
-    .buffer_size(welcome_limits.subscriber_buffer)
-    .create()
+    )
     .map_err(taken("welcome"))?;
     let hello = opened(pubsub_service::<HelloMsg>(
         node,
@@ -357,37 +358,30 @@ fn try_open(
     let control = open_pubsub!(ControlMsg, RobotChannel::Control);
     let cmd = open_pubsub!(CmdMsg, RobotChannel::Cmd);
     let status = open_pubsub!(StatusMsg, RobotChannel::Status);
-    Ok((
-        scan.subscriber_builder()
-            .buffer_size(limits.subscriber_buffer)
-            .create()
-            .map_err(taken("scan"))?,
-        event(RobotChannel::Scan)?
+    let listener = |channel, port| -> Result<Listener<ipc::Service>, OpenFailure> {
+        event(channel)?
             .listener_builder()
             .create()
-            .map_err(taken("scan event"))?,
-        control
-            .subscriber_builder()
-            .buffer_size(limits.subscriber_buffer)
-            .create()
-            .map_err(taken("control"))?,
-        event(RobotChannel::Control)?
-            .listener_builder()
-            .create()
-            .map_err(taken("control event"))?,
-        cmd.publisher_builder().create().map_err(taken("command"))?,
-        event(RobotChannel::Cmd)?
+            .map_err(taken(port))
+    };
+    let notifier = |channel, port| -> Result<Notifier<ipc::Service>, OpenFailure> {
+        event(channel)?
             .notifier_builder()
             .create()
-            .map_err(taken("command event"))?,
+            .map_err(taken(port))
+    };
+    Ok((
+        subscriber(&scan, limits).map_err(taken("scan"))?,
+        listener(RobotChannel::Scan, "scan event")?,
+        subscriber(&control, limits).map_err(taken("control"))?,
+        listener(RobotChannel::Control, "control event")?,
+        cmd.publisher_builder().create().map_err(taken("command"))?,
+        notifier(RobotChannel::Cmd, "command event")?,
         status
             .publisher_builder()
             .create()
             .map_err(taken("status"))?,
-        event(RobotChannel::Status)?
-            .notifier_builder()
-            .create()
-            .map_err(taken("status event"))?,
+        notifier(RobotChannel::Status, "status event")?,
     ))
 }
 

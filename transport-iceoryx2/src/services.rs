@@ -7,7 +7,7 @@
 //! has one notifier per publisher and one listener per subscriber.
 
 use iceoryx2::node::NodeView;
-use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::prelude::*;
 
 use crate::error::{IceoryxCause, IceoryxError};
@@ -113,6 +113,18 @@ pub(crate) fn pubsub_service<T: std::fmt::Debug + ZeroCopySend + IceoryxSend>(
         Access::Create => builder.open_or_create().map_err(unavailable(name)),
         Access::Open => builder.open().map_err(unavailable(name)),
     }
+}
+
+/// A subscriber of `service` (a service of `limits`) that keeps as many unread samples as the
+/// service lets it.
+pub(crate) fn subscriber<T: std::fmt::Debug + ZeroCopySend + IceoryxSend>(
+    service: &PubSubService<T>,
+    limits: ServiceLimits,
+) -> Result<Subscriber<ipc::Service, T, ()>, SubscriberCreateError> {
+    service
+        .subscriber_builder()
+        .buffer_size(limits.subscriber_buffer)
+        .create()
 }
 
 /// The event service `name` paired with a publish-subscribe service of `limits`, created or

@@ -12,7 +12,9 @@ use formation_proto::wire::{
 use iceoryx2::prelude::*;
 
 use super::naming::{RunNamespace, SWAP_NODE_NAME, swap_limits};
-use super::services::{Access, ServiceError, ServiceErrorKind, event_service, pubsub_service};
+use super::services::{
+    Access, ServiceError, ServiceErrorKind, event_service, pubsub_service, subscriber,
+};
 use crate::error::{IceoryxError, iox};
 
 /// Why a swap request over iceoryx2 got no answer.
@@ -91,10 +93,7 @@ pub fn request_swap(
     let event =
         |name: &str, limits| event_service(&node, name, limits, Access::Open).map_err(&open_failed);
     // Subscribe to replies before asking, so the answer cannot be missed.
-    let replies = pubsub(&reply_name, reply_limits)?
-        .subscriber_builder()
-        .buffer_size(reply_limits.subscriber_buffer)
-        .create()
+    let replies = subscriber(&pubsub(&reply_name, reply_limits)?, reply_limits)
         .map_err(iox("subscribe to swap replies (8 swaps at once at most)"))?;
     let reply_wake = event(&reply_name, reply_limits)?
         .listener_builder()

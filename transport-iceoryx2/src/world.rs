@@ -29,7 +29,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::waitset::{WaitSetGuard, WaitSetRunResult};
 
 use super::services::{
-    self, Access, EventService, PubSubService, ServiceError, drain_decoded, run_node,
+    self, Access, EventService, PubSubService, ServiceError, drain_decoded, run_node, subscriber,
 };
 use super::watch_termination_signals;
 use crate::error::iox;
@@ -203,11 +203,11 @@ fn create_lobby_ports(
     let what = |port: &str| format!("create the world's {port} port of robot {robot}");
     let hello_limits = ServiceLimits::HELLO;
     let ports = LobbyPorts {
-        hellos: pubsub_service::<HelloMsg>(node, &hello_name, hello_limits)?
-            .subscriber_builder()
-            .buffer_size(hello_limits.subscriber_buffer)
-            .create()
-            .map_err(iox(what("hello")))?,
+        hellos: subscriber(
+            &pubsub_service::<HelloMsg>(node, &hello_name, hello_limits)?,
+            hello_limits,
+        )
+        .map_err(iox(what("hello")))?,
         welcome: pubsub_service::<WelcomeMsg>(node, &welcome_name, ServiceLimits::WELCOME)?
             .publisher_builder()
             .create()
@@ -240,44 +240,36 @@ fn create_robot_ports(
     let control = pubsub_service!(ControlMsg, RobotChannel::Control);
     let status = pubsub_service!(StatusMsg, RobotChannel::Status);
     let what = |port: &str| format!("create the world's {port} port of robot {robot}");
+    let notifier = |channel, port| -> WorldResult<Notifier<ipc::Service>> {
+        Ok(event(channel)?
+            .notifier_builder()
+            .create()
+            .map_err(iox(what(port)))?)
+    };
+    let listener = |channel, port| -> WorldResult<Listener<ipc::Service>> {
+        Ok(event(channel)?
+            .listener_builder()
+            .create()
+            .map_err(iox(what(port)))?)
+    };
     Ok(RobotPorts {
         scan: scan
             .publisher_builder()
             .create()
             .map_err(iox(what("scan")))?,
-        scan_wake: event(RobotChannel::Scan)?
-            .notifier_builder()
-            .create()
-            .map_err(iox(what("scan event")))?,
+        scan_wake: notifier(RobotChannel::Scan, "scan event")?,
         control: control
             .publisher_builder()
             .create()
             .map_err(iox(what("control")))?,
-        control_wake: event(RobotChannel::Control)?
-            .notifier_builder()
-            .create()
-            .map_err(iox(what("control event")))?,
-        cmd: cmd
-            .subscriber_builder()
-            .buffer_size(limits.subscriber_buffer)
-            .create()
-            .map_err(iox(what("cmd")))?,
-        status: status
-            .subscriber_builder()
-            .buffer_size(limits.subscriber_buffer)
-            .create()
-            .map_err(iox(what("status")))?,
+        control_wake: notifier(RobotChannel::Control, "control event")?,
+        cmd: subscriber(&cmd, limits).map_err(iox(what("cmd")))?,
+        status: subscriber(&status, limits).map_err(iox(what("status")))?,
         wakes: AttachedListeners::attach(
             waitset,
             vec![
-                event(RobotChannel::Cmd)?
-                    .listener_builder()
-                    .create()
-                    .map_err(iox(what("cmd event")))?,
-                event(RobotChannel::Status)?
-                    .listener_builder()
-                    .create()
-                    .map_err(iox(what("status event")))?,
+                listener(RobotChannel::Cmd, "cmd event")?,
+                listener(RobotChannel::Status, "status event")?,
             ],
         )?,
     })
@@ -303,10 +295,7 @@ fn create_swap_ports(
         .create()
         .map_err(iox(what("request event")))?;
     let ports = SwapPorts {
-        requests: requests
-            .subscriber_builder()
-            .buffer_size(swap_limits(SwapChannel::Request).subscriber_buffer)
-            .create()
+        requests: subscriber(&requests, swap_limits(SwapChannel::Request))
             .map_err(iox(what("request")))?,
         replies: replies
             .publisher_builder()

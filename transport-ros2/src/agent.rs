@@ -29,13 +29,14 @@ use std::time::{Duration, Instant};
 
 use formation_proto::wire::{AgentStatus, CmdMsg, CmdStatus, ControlRequest, ScanMsg};
 use formation_proto::{LidarSpec, WheelLimits};
+use formation_ros2::convert::OrientationError;
 use formation_ros2::{
     Float64, Imu, LaserScan, Namespace, NodeName, Odometry, Qos, RingContract, TopicName, Twist,
 };
 
 use super::decider::{Answer, Decider, DeciderSettings, GoalValue, Inputs};
 use super::node::{
-    Delivery, Node, NodeError, Received, RosPublisher, RosSubscription, system_time_ns,
+    Delivery, InputError, Node, NodeError, Received, RosPublisher, RosSubscription, system_time_ns,
 };
 use formation_runtime::agent::{AgentError, AgentExit, AgentLoop, PilotMaker};
 use formation_runtime::link::{AgentLink, AgentLinkError, TransportCrateError, Wake};
@@ -221,116 +222,114 @@ fn subscribe_inputs(
     inbox: &Arc<Mutex<Inbox>>,
     bell: &Arc<Bell>,
 ) -> Result<Vec<RosSubscription>, Ros2AgentError> {
+    let feed = InputFeed { node, inbox, bell };
     let mut subscriptions: Vec<RosSubscription> = Vec::new();
-    subscriptions.push(subscribe_scan(node, settings, inbox, bell)?);
-    subscriptions.push(subscribe_orientation(node, settings, inbox, bell)?);
+    subscriptions.push(feed.scan(settings)?);
+    subscriptions.push(feed.orientation(settings)?);
     for (index, source) in settings.decider.goal.iter().enumerate() {
         let GoalValue::Topic(topic) = source else {
             continue;
         };
-        subscriptions.push(subscribe_goal(node, topic, index, inbox, bell)?);
+        subscriptions.push(feed.goal(topic, index)?);
     }
     Ok(subscriptions)
 }
 
-/// Subscribes to the scan topic: the newest scan waits in `inbox` (counting the ones it
-/// replaced); an unusable sample is noted as the scan's problem and as an input problem.
-fn subscribe_scan(
-    node: &Node,
-    settings: &Ros2AgentSettings,
-    inbox: &Arc<Mutex<Inbox>>,
-    bell: &Arc<Bell>,
-) -> Result<RosSubscription, Ros2AgentError> {
-    let (inbox, bell) = (Arc::clone(inbox), Arc::clone(bell));
-    Ok(
-        node.subscription::<LaserScan>(&settings.scan, Qos::SENSOR_DATA, move |sample| {
-            match sample {
-                Ok(scan) => {
-                    let mut inbox = lock(&inbox);
-                    if inbox.scan.replace((scan, Instant::now())).is_some() {
-                        inbox.superseded += 1;
+/// What the decision's subscriptions feed: `node` subscribes, and each sample fills `inbox` and
+/// rings `bell`.
+struct InputFeed<'a> {
+    node: &'a Node,
+    inbox: &'a Arc<Mutex<Inbox>>,
+    bell: &'a Arc<Bell>,
+}
+
+impl InputFeed<'_> {
+    /// A callback's own handles on the inbox and the bell.
+    fn handles(&self) -> (Arc<Mutex<Inbox>>, Arc<Bell>) {
+        (Arc::clone(self.inbox), Arc::clone(self.bell))
+    }
+
+    /// Subscribes to the scan topic: the newest scan waits in `inbox` (counting the ones it
+    /// replaced); an unusable sample is noted as the scan's problem and as an input problem.
+    fn scan(&self, settings: &Ros2AgentSettings) -> Result<RosSubscription, Ros2AgentError> {
+        let (inbox, bell) = self.handles();
+        Ok(self.node.subscription::<LaserScan>(
+            &settings.scan,
+            Qos::SENSOR_DATA,
+            move |sample| {
+                match sample {
+                    Ok(scan) => {
+                        let mut inbox = lock(&inbox);
+                        if inbox.scan.replace((scan, Instant::now())).is_some() {
+                            inbox.superseded += 1;
+                        }
+                    }
+                    Err(e) => {
+                        let problem = formation_runtime::agent::error_chain(&e);
+                        lock(&inbox).scan_problem = Some(problem.clone());
+                        note_problem(&inbox, problem);
                     }
                 }
-                Err(e) => {
-                    let problem = formation_runtime::agent::error_chain(&e);
-                    lock(&inbox).scan_problem = Some(problem.clone());
-                    note_problem(&inbox, problem);
-                }
-            }
-            bell.ring();
-        })?,
-    )
-}
-
-/// Subscribes to the orientation topic as `settings.orientation_kind` says (Imu or Odometry):
-/// the yaw (or why there is none) goes to `inbox`'s inputs; unusable samples are noted.
-fn subscribe_orientation(
-    node: &Node,
-    settings: &Ros2AgentSettings,
-    inbox: &Arc<Mutex<Inbox>>,
-    bell: &Arc<Bell>,
-) -> Result<RosSubscription, Ros2AgentError> {
-    let deliver = {
-        let (inbox, bell) = (Arc::clone(inbox), Arc::clone(bell));
-        move |yaw: Result<f64, String>| {
-            lock(&inbox).inputs.orientation = Some((yaw, Instant::now()));
-            bell.ring();
-        }
-    };
-    let problem = {
-        let (inbox, bell) = (Arc::clone(inbox), Arc::clone(bell));
-        move |e: super::node::InputError| {
-            note_problem(&inbox, formation_runtime::agent::error_chain(&e));
-            bell.ring();
-        }
-    };
-    Ok(match settings.orientation_kind {
-        OrientationKind::Imu => {
-            node.subscription::<Imu>(&settings.orientation, Qos::SENSOR_DATA, move |s| match s {
-                Ok(imu) => deliver(imu.message.yaw().map_err(|e| e.to_string())),
-                Err(e) => problem(e),
-            })?
-        }
-        OrientationKind::Odometry => node.subscription::<Odometry>(
-            &settings.orientation,
-            Qos::ROS_DEFAULT,
-            move |s| match s {
-                Ok(odom) => deliver(odom.message.yaw().map_err(|e| e.to_string())),
-                Err(e) => problem(e),
+                bell.ring();
             },
-        )?,
-    })
-}
+        )?)
+    }
 
-/// Subscribes to goal value `index`'s `topic`: a finite value goes to `inbox`'s inputs; a
-/// non-finite one or an unusable sample is noted and the previous value kept.
-fn subscribe_goal(
-    node: &Node,
-    topic: &TopicName,
-    index: usize,
-    inbox: &Arc<Mutex<Inbox>>,
-    bell: &Arc<Bell>,
-) -> Result<RosSubscription, Ros2AgentError> {
-    let (inbox, bell) = (Arc::clone(inbox), Arc::clone(bell));
-    Ok(
-        node.subscription::<Float64>(topic, Qos::ROS_DEFAULT, move |sample| {
-            match sample {
-                Ok(value) if value.message.data.is_finite() => {
-                    lock(&inbox).inputs.goal[index] = Some(value.message.data);
+    /// Subscribes to the orientation topic as `settings.orientation_kind` says (Imu or Odometry):
+    /// the yaw (or why there is none) goes to `inbox`'s inputs; unusable samples are noted.
+    fn orientation(&self, settings: &Ros2AgentSettings) -> Result<RosSubscription, Ros2AgentError> {
+        let feed = {
+            let (inbox, bell) = self.handles();
+            move |sample: Result<Result<f64, OrientationError>, InputError>| {
+                match sample {
+                    Ok(yaw) => {
+                        let yaw = yaw.map_err(|e| e.to_string());
+                        lock(&inbox).inputs.orientation = Some((yaw, Instant::now()));
+                    }
+                    Err(e) => note_problem(&inbox, formation_runtime::agent::error_chain(&e)),
                 }
-                Ok(value) => note_problem(
-                    &inbox,
-                    format!(
-                        "{} is {} on its topic; keeping the previous value",
-                        super::decider::GOAL_NAMES[index],
-                        value.message.data
-                    ),
-                ),
-                Err(e) => note_problem(&inbox, formation_runtime::agent::error_chain(&e)),
+                bell.ring();
             }
-            bell.ring();
-        })?,
-    )
+        };
+        let (node, topic) = (self.node, &settings.orientation);
+        Ok(match settings.orientation_kind {
+            OrientationKind::Imu => {
+                node.subscription::<Imu>(topic, Qos::SENSOR_DATA, move |s| {
+                    feed(s.map(|imu| imu.message.yaw()))
+                })?
+            }
+            OrientationKind::Odometry => {
+                node.subscription::<Odometry>(topic, Qos::ROS_DEFAULT, move |s| {
+                    feed(s.map(|odom| odom.message.yaw()))
+                })?
+            }
+        })
+    }
+
+    /// Subscribes to goal value `index`'s `topic`: a finite value goes to `inbox`'s inputs; a
+    /// non-finite one or an unusable sample is noted and the previous value kept.
+    fn goal(&self, topic: &TopicName, index: usize) -> Result<RosSubscription, Ros2AgentError> {
+        let (inbox, bell) = self.handles();
+        Ok(self
+            .node
+            .subscription::<Float64>(topic, Qos::ROS_DEFAULT, move |sample| {
+                match sample {
+                    Ok(value) if value.message.data.is_finite() => {
+                        lock(&inbox).inputs.goal[index] = Some(value.message.data);
+                    }
+                    Ok(value) => note_problem(
+                        &inbox,
+                        format!(
+                            "{} is {} on its topic; keeping the previous value",
+                            super::decider::GOAL_NAMES[index],
+                            value.message.data
+                        ),
+                    ),
+                    Err(e) => note_problem(&inbox, formation_runtime::agent::error_chain(&e)),
+                }
+                bell.ring();
+            })?)
+    }
 }
 
 /// Publishes a zero Twist stamped `stamp` on `cmd_vel`; a failure is only logged.

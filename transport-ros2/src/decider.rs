@@ -369,6 +369,16 @@ mod tests {
         }
     }
 
+    /// A decider refusing partial scans, started at `start`, a fresh recording pilot, and a full
+    /// scan of 16 beams all at 3 m.
+    fn refusing_with_a_full_scan(start: Instant) -> (Decider, Recorder, LaserScan) {
+        (
+            Decider::new(settings(PartialScan::Refuse), start),
+            Recorder::default(),
+            scan(16, TAU, |_| 3.0),
+        )
+    }
+
     fn fresh(now: Instant) -> Inputs {
         Inputs {
             orientation: Some((Ok(0.25), now)),
@@ -397,9 +407,7 @@ mod tests {
     #[test]
     fn missing_stale_or_broken_inputs_brake_with_the_reason() {
         let now = Instant::now();
-        let mut decider = Decider::new(settings(PartialScan::Refuse), now);
-        let mut pilot = Recorder::default();
-        let full = scan(16, TAU, |_| 3.0);
+        let (mut decider, mut pilot, full) = refusing_with_a_full_scan(now);
         let brake = |answer: Answer| match answer {
             Answer::Brake(reason) => reason,
             other => panic!("expected a brake, got {other:?}"),
@@ -461,7 +469,7 @@ mod tests {
     #[test]
     fn a_stall_brakes_once_until_scans_come_again() {
         let start = Instant::now();
-        let mut decider = Decider::new(settings(PartialScan::Refuse), start);
+        let (mut decider, mut pilot, full) = refusing_with_a_full_scan(start);
         assert_eq!(
             decider.check_stale(start + Duration::from_millis(400)),
             None
@@ -473,9 +481,7 @@ mod tests {
         );
         assert_eq!(decider.check_stale(start + Duration::from_secs(2)), None);
 
-        let mut pilot = Recorder::default();
         let at = start + Duration::from_secs(3);
-        let full = scan(16, TAU, |_| 3.0);
         assert!(matches!(
             answer(&mut decider, &full, &fresh(at), at, &mut pilot),
             Answer::Drive(_)
@@ -494,9 +500,7 @@ mod tests {
     #[test]
     fn the_default_window_rides_out_late_scans_of_a_10_hz_lidar() {
         let start = Instant::now();
-        let mut decider = Decider::new(settings(PartialScan::Refuse), start);
-        let mut pilot = Recorder::default();
-        let full = scan(16, TAU, |_| 3.0);
+        let (mut decider, mut pilot, full) = refusing_with_a_full_scan(start);
         let mut at = start;
         let mut orientation_at = start;
         for gap_ms in [100, 100, 250, 100, 450, 100] {

@@ -438,11 +438,10 @@ fn watch_graph(
 ) -> Result<Subscriber<()>, WorldLinkError> {
     let graph = Arc::clone(graph);
     let bell = Arc::clone(bell);
-    session
-        .liveliness()
-        .declare_subscriber(domain_wildcard(domain_id))
-        .history(true)
-        .callback(move |sample| {
+    formation_transport_zenoh::watch_liveliness(
+        session,
+        domain_wildcard(domain_id),
+        move |sample| {
             let key = sample.key_expr().as_str();
             let Ok(token) = LivelinessToken::parse(key) else {
                 return;
@@ -456,15 +455,15 @@ fn watch_graph(
             }
             drop(graph);
             bell.ring();
-        })
-        .wait()
-        .map_err(|e| {
-            ZenohError::Refused {
-                action: "watch the ROS graph".into(),
-                detail: e.to_string(),
-            }
-            .into()
-        })
+        },
+    )
+    .map_err(|e| {
+        ZenohError::Refused {
+            action: "watch the ROS graph".into(),
+            detail: e.to_string(),
+        }
+        .into()
+    })
 }
 
 impl Ros2WorldLink {

@@ -35,7 +35,7 @@ use formation_proto::wire::{
 use formation_runtime::auth::{LaunchSecret, fresh_nonce};
 
 use super::model::split_model;
-use super::{Bell, Endpoint, Login, Queue, Ring, SignalWatch, keys, subscribe};
+use super::{Bell, Endpoint, Login, Queue, Ring, SignalWatch, keys, subscribe, watch_liveliness};
 use crate::ZenohError;
 use formation_runtime::link::{AgentLink, AgentLinkError, Wake};
 
@@ -397,16 +397,11 @@ fn watch_world(
 ) -> Result<Subscriber<()>, AgentLinkError> {
     let inbox = Arc::clone(inbox);
     let bell = Arc::clone(bell);
-    session
-        .liveliness()
-        .declare_subscriber(keys::world_token(run))
-        .history(true)
-        .callback(move |sample| {
-            inbox.world_seen(sample.kind() == SampleKind::Put, Instant::now());
-            bell.ring();
-        })
-        .wait()
-        .map_err(|e| zenoh_error("watch the world's liveliness")(e.to_string()))
+    watch_liveliness(session, keys::world_token(run), move |sample| {
+        inbox.world_seen(sample.kind() == SampleKind::Put, Instant::now());
+        bell.ring();
+    })
+    .map_err(|e| zenoh_error("watch the world's liveliness")(e.to_string()))
 }
 
 /// Subscribes to robot `robot`'s welcome channel of run `run`: each well-formed welcome (with
@@ -450,19 +445,15 @@ fn subscribe_scans(
 ) -> Result<Subscriber<()>, AgentLinkError> {
     let inbox = Arc::clone(inbox);
     let bell = Arc::clone(bell);
-    session
-        .declare_subscriber(key)
-        .callback(move |sample| {
-            match message_from_bytes::<ScanMsg>("scan", &sample.payload().to_bytes()) {
-                Ok(scan) => {
-                    *inbox.scan.lock().unwrap_or_else(|e| e.into_inner()) = Some(scan);
-                    bell.ring();
-                }
-                Err(e) => tracing::warn!("ignoring a malformed scan: {e}"),
+    declare_subscriber(session, key, "subscribe to the scans", move |sample| {
+        match message_from_bytes::<ScanMsg>("scan", &sample.payload().to_bytes()) {
+            Ok(scan) => {
+                *inbox.scan.lock().unwrap_or_else(|e| e.into_inner()) = Some(scan);
+                bell.ring();
             }
-        })
-        .wait()
-        .map_err(|e| zenoh_error("subscribe to the scans")(e.to_string()))
+            Err(e) => tracing::warn!("ignoring a malformed scan: {e}"),
+        }
+    })
 }
 
 /// Subscribes to the incarnation's control channel `key`: requests (a swap's model stored in
@@ -478,9 +469,11 @@ fn subscribe_control(
     let inbox = Arc::clone(inbox);
     let bell = Arc::clone(bell);
     let models = Arc::clone(models);
-    session
-        .declare_subscriber(key)
-        .callback(move |sample| {
+    declare_subscriber(
+        session,
+        key,
+        "subscribe to the control requests",
+        move |sample| {
             let payload = sample.payload().to_bytes();
             let head = payload
                 .get(..std::mem::size_of::<ControlMsg>())
@@ -517,9 +510,23 @@ fn subscribe_control(
                 }
             }
             bell.ring();
-        })
+        },
+    )
+}
+
+/// Declares a subscriber on `key` that hands each sample to `callback`; Zenoh's refusal is its
+/// failing to `action`.
+fn declare_subscriber(
+    session: &::zenoh::Session,
+    key: String,
+    action: &str,
+    callback: impl Fn(::zenoh::sample::Sample) + Send + Sync + 'static,
+) -> Result<Subscriber<()>, AgentLinkError> {
+    session
+        .declare_subscriber(key)
+        .callback(callback)
         .wait()
-        .map_err(|e| zenoh_error("subscribe to the control requests")(e.to_string()))
+        .map_err(|e| zenoh_error(action)(e.to_string()))
 }
 
 /// What an agent needs while it finds the world and greets it: the session, what the

@@ -732,6 +732,21 @@ pub(crate) fn subscribe(
         })
 }
 
+/// Declares a liveliness subscriber on `key` that hands each sample to `callback`, with history:
+/// the tokens declared before it come too, as puts.
+pub fn watch_liveliness(
+    session: &::zenoh::Session,
+    key: String,
+    callback: impl Fn(::zenoh::sample::Sample) + Send + Sync + 'static,
+) -> ::zenoh::Result<::zenoh::pubsub::Subscriber<()>> {
+    session
+        .liveliness()
+        .declare_subscriber(key)
+        .history(true)
+        .callback(callback)
+        .wait()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -28,7 +28,7 @@ use ::zenoh::sample::SampleKind;
 use formation_proto::exit::TerminationSignal;
 use formation_proto::wire::RunId;
 
-use super::{Bell, Endpoint, Login, Ring, SignalWatch, keys};
+use super::{Bell, Endpoint, Login, Ring, SignalWatch, keys, watch_liveliness};
 use crate::ZenohError;
 use formation_runtime::link::{RecordFeed, WorldLinkError, WorldResult};
 
@@ -381,19 +381,14 @@ fn watch_world(
     let present = Arc::new(Mutex::new(false));
     let seen = Arc::clone(&present);
     let bell = Arc::clone(bell);
-    let subscriber = session
-        .liveliness()
-        .declare_subscriber(keys::world_token(run))
-        .history(true)
-        .callback(move |sample| {
-            let put = sample.kind() == SampleKind::Put;
-            *seen.lock().unwrap_or_else(|e| e.into_inner()) = put;
-            if !put {
-                let _ = sender.send(RecorderEvent::WorldGone);
-            }
-            bell.ring();
-        })
-        .wait()
-        .map_err(|e| e.to_string())?;
+    let subscriber = watch_liveliness(session, keys::world_token(run), move |sample| {
+        let put = sample.kind() == SampleKind::Put;
+        *seen.lock().unwrap_or_else(|e| e.into_inner()) = put;
+        if !put {
+            let _ = sender.send(RecorderEvent::WorldGone);
+        }
+        bell.ring();
+    })
+    .map_err(|e| e.to_string())?;
     Ok((subscriber, present))
 }

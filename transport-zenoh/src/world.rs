@@ -33,7 +33,7 @@ use formation_proto::wire::{
 };
 
 use super::model::split_model;
-use super::{Bell, Endpoint, Queue, SignalWatch, WorldAccess, keys, subscribe};
+use super::{Bell, Endpoint, Queue, SignalWatch, WorldAccess, keys, subscribe, watch_liveliness};
 use crate::ZenohError;
 use formation_runtime::link::{
     ForwardsSwapModels, Hello, Incarnations, WorldLink, WorldLinkError, WorldResult,
@@ -361,24 +361,19 @@ fn watch_agents(
     let liveness = Arc::clone(liveness);
     let bell = Arc::clone(bell);
     let run = run.clone();
-    session
-        .liveliness()
-        .declare_subscriber(keys::agent_tokens(&run))
-        .history(true)
-        .callback(move |sample| {
-            let Some(key) = keys::parse_agent_token(&run, sample.key_expr().as_str()) else {
-                return;
-            };
-            let mut liveness = liveness.lock().unwrap_or_else(|e| e.into_inner());
-            match sample.kind() {
-                SampleKind::Put => liveness.came(key, Instant::now()),
-                SampleKind::Delete => liveness.went(key, Instant::now()),
-            }
-            drop(liveness);
-            bell.ring();
-        })
-        .wait()
-        .map_err(|e| zenoh_error("watch the agents' liveliness")(e.to_string()))
+    watch_liveliness(session, keys::agent_tokens(&run), move |sample| {
+        let Some(key) = keys::parse_agent_token(&run, sample.key_expr().as_str()) else {
+            return;
+        };
+        let mut liveness = liveness.lock().unwrap_or_else(|e| e.into_inner());
+        match sample.kind() {
+            SampleKind::Put => liveness.came(key, Instant::now()),
+            SampleKind::Delete => liveness.went(key, Instant::now()),
+        }
+        drop(liveness);
+        bell.ring();
+    })
+    .map_err(|e| zenoh_error("watch the agents' liveliness")(e.to_string()))
 }
 
 impl ZenohWorldLink {

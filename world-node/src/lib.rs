@@ -158,15 +158,9 @@ impl Args {
     }
 }
 
-/// The transports this binary links, one line each (`--transport` refuses the others, naming
-/// the build that has them): iceoryx2 always, Zenoh and ROS 2 with the `zenoh` feature.
-pub const TRANSPORTS: &[Transport] = &[
-    Transport::Iceoryx2,
-    #[cfg(feature = "zenoh")]
-    Transport::Zenoh,
-    #[cfg(feature = "zenoh")]
-    Transport::Ros2,
-];
+/// The transports this binary links (`--transport` refuses the others, naming the build that
+/// has them): iceoryx2 always, Zenoh and ROS 2 with the `zenoh` feature.
+pub const TRANSPORTS: &[Transport] = Transport::linked(cfg!(feature = "zenoh"));
 
 /// The transports registered beside the first-party ones, one line each; `--transport` takes
 /// their names, and [`run`] opens their links without knowing them.

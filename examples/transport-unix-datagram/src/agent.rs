@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use formation_proto::wire::{
     AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, ScanMsg, StatusMsg, Welcome,
-    WelcomeMsg,
+    WelcomeMsg, WireError,
 };
 use formation_runtime::auth::fresh_nonce;
 use formation_runtime::link::{AgentLink, AgentLinkError, Wake};
@@ -18,9 +18,9 @@ use formation_runtime::plugin::AgentSite;
 
 use crate::error::DatagramError;
 use crate::folder::RunFolder;
-use crate::frame::{Frame, Kind, MAX_DATAGRAM};
+use crate::frame::{Frame, Kind};
 use crate::signals;
-use crate::socket::{self, BoundSocket};
+use crate::socket::{self, BoundSocket, Inbox, Pump};
 use crate::world::SIGNAL_CHECK;
 
 /// How long a send waits for room in the world's queue before the datagram is dropped.
@@ -30,7 +30,7 @@ const RETRY_PERIOD: Duration = Duration::from_millis(20);
 
 /// One agent's end of its robot's incarnation.
 pub struct DatagramAgentLink {
-    inbox: BoundSocket,
+    inbox: Inbox,
     /// Connected to the world's socket.
     outbox: UnixDatagram,
     world: PathBuf,
@@ -40,7 +40,6 @@ pub struct DatagramAgentLink {
     control: VecDeque<ControlRequest>,
     welcome: Option<Welcome>,
     world_left: bool,
-    buffer: Vec<u8>,
 }
 
 impl DatagramAgentLink {
@@ -73,7 +72,7 @@ impl DatagramAgentLink {
             .and_then(|s| s.set_write_timeout(Some(SEND_PATIENCE)).map(|()| s))
             .map_err(DatagramError::io("connecting to", &world))?;
         let mut link = DatagramAgentLink {
-            inbox,
+            inbox: Inbox::new(inbox),
             outbox,
             world,
             robot: site.robot,
@@ -82,7 +81,6 @@ impl DatagramAgentLink {
             control: VecDeque::new(),
             welcome: None,
             world_left: false,
-            buffer: vec![0; MAX_DATAGRAM],
         };
         let hello = HelloMsg {
             pid: site.pid,
@@ -122,43 +120,6 @@ impl DatagramAgentLink {
         }
     }
 
-    /// Takes every datagram waiting, first waiting up to `wait` for one; whether any came.
-    fn pump(&mut self, wait: Option<Duration>) -> Result<bool, DatagramError> {
-        let mut buffer = std::mem::take(&mut self.buffer);
-        let mut wait = wait;
-        let mut any = false;
-        let result = loop {
-            match self.inbox.receive(&mut buffer, wait.take()) {
-                Ok(Some(len)) => {
-                    any = true;
-                    if let Err(e) = Frame::decode(&buffer[..len]).and_then(|f| self.file(f)) {
-                        tracing::warn!("robot {}: dropped a datagram: {e}", self.robot);
-                    }
-                }
-                Ok(None) => break Ok(any),
-                Err(e) => break Err(e),
-            }
-        };
-        self.buffer = buffer;
-        result
-    }
-
-    fn file(&mut self, frame: Frame<'_>) -> Result<(), formation_proto::wire::WireError> {
-        if frame.incarnation != self.nonce {
-            return Ok(());
-        }
-        match frame.kind {
-            Kind::Welcome => self.welcome = Some(frame.message::<WelcomeMsg>("welcome")?.decode()?),
-            Kind::Scan => self.scan = Some(frame.message("scan")?),
-            Kind::Control => self
-                .control
-                .push_back(frame.message::<ControlMsg>("control request")?.decode()?),
-            Kind::Goodbye => self.world_left = true,
-            _ => {}
-        }
-        Ok(())
-    }
-
     /// Sends one datagram to the world; one the world has no room for, or that finds it gone,
     /// is dropped (the world brakes the robot; the agent finds the world gone when it checks).
     fn send(&self, bytes: &[u8]) -> Result<(), DatagramError> {
@@ -174,6 +135,32 @@ impl DatagramAgentLink {
 
     fn has_mail(&self) -> bool {
         self.scan.is_some() || !self.control.is_empty()
+    }
+}
+
+impl Pump for DatagramAgentLink {
+    fn inbox(&mut self) -> &mut Inbox {
+        &mut self.inbox
+    }
+
+    fn who(&self) -> String {
+        format!("robot {}", self.robot)
+    }
+
+    fn file(&mut self, frame: Frame<'_>) -> Result<(), WireError> {
+        if frame.incarnation != self.nonce {
+            return Ok(());
+        }
+        match frame.kind {
+            Kind::Welcome => self.welcome = Some(frame.message::<WelcomeMsg>("welcome")?.decode()?),
+            Kind::Scan => self.scan = Some(frame.message("scan")?),
+            Kind::Control => self
+                .control
+                .push_back(frame.message::<ControlMsg>("control request")?.decode()?),
+            Kind::Goodbye => self.world_left = true,
+            _ => {}
+        }
+        Ok(())
     }
 }
 

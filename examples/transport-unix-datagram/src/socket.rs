@@ -1,6 +1,6 @@
 //! The sockets: a bound one that unlinks its path when dropped ([`BoundSocket`]), its receive
 //! that waits or not ([`BoundSocket::receive`]), a probe that tells whether anyone listens on a
-//! path ([`listening`]), and the errors of a send that mean "nobody there" ([`peer_gone`]) or
+//! path ([`listening`]), a link's inbox and the loop that takes every datagram waiting in it ([`Inbox`], [`Pump`]), and the errors of a send that mean "nobody there" ([`peer_gone`]) or
 //! "the receiver is full" ([`receiver_full`]).
 
 use std::io::ErrorKind;
@@ -8,7 +8,10 @@ use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use formation_proto::wire::WireError;
+
 use crate::error::DatagramError;
+use crate::frame::{Frame, MAX_DATAGRAM};
 
 /// The most bytes of a Unix socket path (`sun_path` less its terminating zero).
 const MAX_PATH: usize = 107;
@@ -61,6 +64,58 @@ impl BoundSocket {
             }
             Err(e) => Err(receiving(e)),
         }
+    }
+}
+
+/// A link's bound socket with the buffer its datagrams are received into.
+#[derive(Debug)]
+pub struct Inbox {
+    socket: BoundSocket,
+    buffer: Vec<u8>,
+}
+
+impl Inbox {
+    /// Receives on `socket` into a buffer of [`MAX_DATAGRAM`] bytes.
+    pub fn new(socket: BoundSocket) -> Inbox {
+        Inbox {
+            socket,
+            buffer: vec![0; MAX_DATAGRAM],
+        }
+    }
+}
+
+/// A link's side that takes its datagrams from its [`Inbox`] and files each one
+/// ([`Pump::pump`]).
+pub trait Pump {
+    /// The link's inbox.
+    fn inbox(&mut self) -> &mut Inbox;
+
+    /// Who drops a malformed datagram, as the warning names it.
+    fn who(&self) -> String;
+
+    /// Files one well-formed datagram.
+    fn file(&mut self, frame: Frame<'_>) -> Result<(), WireError>;
+
+    /// Takes every datagram waiting, first waiting up to `wait` for one; whether any came. A
+    /// malformed datagram is said and dropped.
+    fn pump(&mut self, wait: Option<Duration>) -> Result<bool, DatagramError> {
+        let mut buffer = std::mem::take(&mut self.inbox().buffer);
+        let mut wait = wait;
+        let mut any = false;
+        let result = loop {
+            match self.inbox().socket.receive(&mut buffer, wait.take()) {
+                Ok(Some(len)) => {
+                    any = true;
+                    if let Err(e) = Frame::decode(&buffer[..len]).and_then(|f| self.file(f)) {
+                        tracing::warn!("{}: dropped a datagram: {e}", self.who());
+                    }
+                }
+                Ok(None) => break Ok(any),
+                Err(e) => break Err(e),
+            }
+        };
+        self.inbox().buffer = buffer;
+        result
     }
 }
 

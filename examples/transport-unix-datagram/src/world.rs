@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use formation_proto::wire::{
     AgentStatus, CmdMsg, ControlMsg, ControlRequest, HelloMsg, ScanMsg, StatusMsg, SwapReply,
-    SwapReplyMsg, SwapRequest, SwapRequestMsg, Welcome, WelcomeMsg,
+    SwapReplyMsg, SwapRequest, SwapRequestMsg, Welcome, WelcomeMsg, WireError,
 };
 use formation_runtime::link::{
     Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index,
@@ -21,9 +21,9 @@ use formation_runtime::plugin::WorldSite;
 
 use crate::error::DatagramError;
 use crate::folder::RunFolder;
-use crate::frame::{Frame, Kind, MAX_DATAGRAM};
+use crate::frame::{Frame, Kind};
 use crate::signals;
-use crate::socket::{self, BoundSocket};
+use crate::socket::{self, BoundSocket, Inbox, Pump};
 
 /// How long a wait blocks before it looks for a termination signal again.
 pub(crate) const SIGNAL_CHECK: Duration = Duration::from_millis(100);
@@ -46,7 +46,7 @@ struct Peer {
 /// The world's side of a run over Unix datagram sockets.
 pub struct DatagramWorldLink {
     folder: RunFolder,
-    inbox: BoundSocket,
+    inbox: Inbox,
     robots: usize,
     hellos: Vec<VecDeque<Hello>>,
     /// Candidates that greeted and were not answered yet: pid by (robot, nonce).
@@ -57,7 +57,6 @@ pub struct DatagramWorldLink {
     swap_clients: HashMap<u64, u64>,
     /// Agents that said goodbye, not reported yet.
     goodbyes: Vec<(usize, u32)>,
-    buffer: Vec<u8>,
 }
 
 impl DatagramWorldLink {
@@ -75,7 +74,7 @@ impl DatagramWorldLink {
         };
         Ok(DatagramWorldLink {
             folder,
-            inbox,
+            inbox: Inbox::new(inbox),
             robots: site.robots,
             hellos: (0..site.robots).map(|_| VecDeque::new()).collect(),
             candidates: HashMap::new(),
@@ -83,32 +82,12 @@ impl DatagramWorldLink {
             swaps: VecDeque::new(),
             swap_clients: HashMap::new(),
             goodbyes: Vec::new(),
-            buffer: vec![0; MAX_DATAGRAM],
         })
     }
 
     /// The run's folder.
     pub fn folder(&self) -> &RunFolder {
         &self.folder
-    }
-
-    /// Takes every datagram waiting, first waiting up to `wait` for one; whether any came.
-    fn pump(&mut self, wait: Option<Duration>) -> WorldResult<bool> {
-        let mut buffer = std::mem::take(&mut self.buffer);
-        let mut wait = wait;
-        let mut any = false;
-        let result = loop {
-            match self.inbox.receive(&mut buffer, wait.take()) {
-                Ok(Some(len)) => {
-                    any = true;
-                    self.take(&buffer[..len]);
-                }
-                Ok(None) => break Ok(any),
-                Err(e) => break Err(e.into()),
-            }
-        };
-        self.buffer = buffer;
-        result
     }
 
     /// Hands `sink` what robot `robot`'s current incarnation has queued in `queue`, after taking
@@ -123,56 +102,6 @@ impl DatagramWorldLink {
         self.pump(None)?;
         if let Some(peer) = self.incarnations.get_mut(robot)? {
             queue(peer).drain(..).for_each(sink);
-        }
-        Ok(())
-    }
-
-    /// Files one datagram where the exchange drains it; a malformed one is said and dropped.
-    fn take(&mut self, bytes: &[u8]) {
-        if let Err(e) = Frame::decode(bytes).and_then(|frame| self.file(frame)) {
-            tracing::warn!("run {}: dropped a datagram: {e}", self.folder.run());
-        }
-    }
-
-    fn file(&mut self, frame: Frame<'_>) -> Result<(), formation_proto::wire::WireError> {
-        let robot = frame.robot;
-        match frame.kind {
-            Kind::Hello if robot < self.robots => {
-                let hello: HelloMsg = frame.message("hello")?;
-                if hello.nonce == frame.incarnation {
-                    self.candidates.insert((robot, hello.nonce), hello.pid);
-                    self.hellos[robot].push_back(Hello {
-                        pid: hello.pid,
-                        nonce: hello.nonce,
-                        proof: hello.proof,
-                    });
-                }
-            }
-            Kind::Command => {
-                let cmd: CmdMsg = frame.message("command")?;
-                if let Some(peer) = self.peer_of(&frame) {
-                    peer.cmds.push_back(cmd);
-                }
-            }
-            Kind::Status => {
-                let status = frame.message::<StatusMsg>("status")?.decode()?;
-                if let Some(peer) = self.peer_of(&frame) {
-                    peer.statuses.push_back(status);
-                }
-            }
-            Kind::SwapRequest => {
-                let request = frame.message::<SwapRequestMsg>("swap request")?.decode()?;
-                self.swap_clients
-                    .insert(request.request_id, frame.incarnation);
-                self.swaps.push_back(request);
-            }
-            Kind::Goodbye => {
-                if let Some(peer) = self.peer_of(&frame) {
-                    let pid = peer.pid;
-                    self.goodbyes.push((robot, pid));
-                }
-            }
-            _ => {}
         }
         Ok(())
     }
@@ -217,6 +146,60 @@ impl DatagramWorldLink {
                 Err(e) => return Err(DatagramError::io("sending to", &peer.path)(e).into()),
             }
         }
+    }
+}
+
+impl Pump for DatagramWorldLink {
+    fn inbox(&mut self) -> &mut Inbox {
+        &mut self.inbox
+    }
+
+    fn who(&self) -> String {
+        format!("run {}", self.folder.run())
+    }
+
+    /// Files one datagram where the exchange drains it.
+    fn file(&mut self, frame: Frame<'_>) -> Result<(), WireError> {
+        let robot = frame.robot;
+        match frame.kind {
+            Kind::Hello if robot < self.robots => {
+                let hello: HelloMsg = frame.message("hello")?;
+                if hello.nonce == frame.incarnation {
+                    self.candidates.insert((robot, hello.nonce), hello.pid);
+                    self.hellos[robot].push_back(Hello {
+                        pid: hello.pid,
+                        nonce: hello.nonce,
+                        proof: hello.proof,
+                    });
+                }
+            }
+            Kind::Command => {
+                let cmd: CmdMsg = frame.message("command")?;
+                if let Some(peer) = self.peer_of(&frame) {
+                    peer.cmds.push_back(cmd);
+                }
+            }
+            Kind::Status => {
+                let status = frame.message::<StatusMsg>("status")?.decode()?;
+                if let Some(peer) = self.peer_of(&frame) {
+                    peer.statuses.push_back(status);
+                }
+            }
+            Kind::SwapRequest => {
+                let request = frame.message::<SwapRequestMsg>("swap request")?.decode()?;
+                self.swap_clients
+                    .insert(request.request_id, frame.incarnation);
+                self.swaps.push_back(request);
+            }
+            Kind::Goodbye => {
+                if let Some(peer) = self.peer_of(&frame) {
+                    let pid = peer.pid;
+                    self.goodbyes.push((robot, pid));
+                }
+            }
+            _ => {}
+        }
+        Ok(())
     }
 }
 

@@ -195,31 +195,31 @@ impl TlsIdentity {
     /// Zenoh's `transport/link/tls` section for a router that listens with this identity and
     /// admits only clients with a certificate of the same authority.
     pub fn apply_listen(&self, config: &mut ::zenoh::Config) -> Result<(), String> {
-        let [ca, certificate, key] = self.paths()?;
-        let section = serde_json::json!({
-            "root_ca_certificate": ca,
-            "listen_certificate": certificate,
-            "listen_private_key": key,
-            "enable_mtls": true,
-            "close_link_on_expiration": true,
-        });
-        insert(config, &section)
+        let section = self.section("listen")?;
+        insert(config, &section.into())
     }
 
     /// Zenoh's `transport/link/tls` section for a client that connects with this identity. The
     /// world's name is checked by [`probe`] (against `ca.pem` alone), not by Zenoh (which would
     /// compare it with an IP address).
     pub fn apply_connect(&self, config: &mut ::zenoh::Config) -> Result<(), String> {
+        let mut section = self.section("connect")?;
+        section.insert("verify_name_on_connect".into(), false.into());
+        insert(config, &section.into())
+    }
+
+    /// The entries of Zenoh's `transport/link/tls` section that both sides write: the authority,
+    /// this identity's certificate and key for `side` (`listen` or `connect`), mutual TLS, and
+    /// links closed when a certificate expires.
+    fn section(&self, side: &str) -> Result<serde_json::Map<String, serde_json::Value>, String> {
         let [ca, certificate, key] = self.paths()?;
-        let section = serde_json::json!({
-            "root_ca_certificate": ca,
-            "connect_certificate": certificate,
-            "connect_private_key": key,
-            "enable_mtls": true,
-            "verify_name_on_connect": false,
-            "close_link_on_expiration": true,
-        });
-        insert(config, &section)
+        let mut section = serde_json::Map::new();
+        section.insert("root_ca_certificate".into(), ca.into());
+        section.insert(format!("{side}_certificate"), certificate.into());
+        section.insert(format!("{side}_private_key"), key.into());
+        section.insert("enable_mtls".into(), true.into());
+        section.insert("close_link_on_expiration".into(), true.into());
+        Ok(section)
     }
 }
 
