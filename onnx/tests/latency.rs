@@ -58,16 +58,17 @@ fn measure(label: &str, path: &Path) {
             .collect()
     });
     // A model that takes detected neighbours gets six, held at d* around the robot, in its
-    // first slots (per slot `x / d*, y / d*, held, present`); the other slots are empty.
+    // first slots (per slot `x / d*, y / d*, held, present`, and no hidden pair's step where
+    // the model declares `hidden=1`); the other slots are empty.
     let neighbours: Vec<f32> = policy.metadata().neighbours.map_or_else(Vec::new, |n| {
         (0..n.slots)
             .flat_map(|slot| {
                 let angle = slot as f32 * std::f32::consts::TAU / 6.0;
+                let mut values = vec![0.0; n.features()];
                 if slot < 6 {
-                    [angle.cos(), angle.sin(), 1.0, 1.0]
-                } else {
-                    [0.0; 4]
+                    values[..4].copy_from_slice(&[angle.cos(), angle.sin(), 1.0, 1.0]);
                 }
+                values
             })
             .collect()
     });
