@@ -491,7 +491,8 @@ def hidden_paired(tmp_path_factory):
 def test_the_hidden_pairs_step_is_learnt_as_one_gain_and_exported_with_six_numbers_a_slot(hidden_paired, tmp_path):
     model = train.model_from_checkpoint(train.load_checkpoint(hidden_paired["out"].with_suffix(".pt")))
     assert model.hidden_pairs and model.neighbour_features == 6
-    # Learnt from zero to the teacher's team gain.
+    # Started at the teacher's team gain, and held there by labels that step aside at it (a
+    # step of the input and of the labels that disagreed would pull it away).
     assert model.hidden_pair_gain.item() == pytest.approx(K_FORMATION_GRAPH, rel=0.1)
     assert multiply_adds(model) == multiply_adds(PairNet(SLOTS))
     meta = _meta(hidden_paired["out"])
