@@ -323,6 +323,39 @@ pub struct MergeArgs {
     pub json: Option<PathBuf>,
 }
 
+/// How the expert shapes its labels: `--label-wheel-accel`, `--unshaped-labels` and
+/// `--label-pair-band`, which `formation collect` and `formation dagger` share. The help texts are
+/// collect's; `formation dagger` says its own with clap's `mut_arg`.
+#[derive(Debug, Clone, Args)]
+pub struct LabelShapingArgs {
+    /// Label with the expert's formation velocity shaped for this wheel acceleration limit
+    /// \[m/s²\], whatever the scenario's own (see `formation dagger --label-wheel-accel`).
+    #[arg(long, value_name = "A", value_parser = wheel_accel)]
+    pub label_wheel_accel: Option<f64>,
+    /// Label with the unlimited law, shaped for no limit whatever the scenario's own: for a
+    /// policy that answers a formation velocity, which each agent shapes for its own wheels.
+    #[arg(long, conflicts_with = "label_wheel_accel")]
+    pub unshaped_labels: bool,
+    /// Label with smooth pair weights: a pair's weight rises from 0 to 1 over witness ratios
+    /// LOW..HIGH instead of the neighbour rule's step at its threshold, so that the labels are
+    /// one continuous function of what a robot senses (issue 34 item 3; default: the rule's
+    /// pairs exactly, as the scored expert holds them).
+    #[arg(long, value_name = "LOW,HIGH", value_parser = pair_weight_band)]
+    pub label_pair_band: Option<[f64; 2]>,
+}
+
+impl LabelShapingArgs {
+    /// `gains` with the labels shaped as the flags say.
+    pub fn shape(&self, gains: ExpertGains) -> ExpertGains {
+        ExpertGains {
+            shaping_wheel_accel: self.label_wheel_accel,
+            unshaped: self.unshaped_labels,
+            pair_weight_band: self.label_pair_band,
+            ..gains
+        }
+    }
+}
+
 /// `formation collect`.
 #[derive(Debug, Args)]
 pub struct CollectArgs {
@@ -352,20 +385,9 @@ pub struct CollectArgs {
     /// of cells away at every spacing (default: a fixed window, as in the paper).
     #[arg(long, value_name = "D_STAR_REF_M")]
     pub scale_d_star: Option<f64>,
-    /// Label with the expert's formation velocity shaped for this wheel acceleration limit
-    /// \[m/s²\], whatever the scenario's own (see `formation dagger --label-wheel-accel`).
-    #[arg(long, value_name = "A", value_parser = wheel_accel)]
-    pub label_wheel_accel: Option<f64>,
-    /// Label with the unlimited law, shaped for no limit whatever the scenario's own: for a
-    /// policy that answers a formation velocity, which each agent shapes for its own wheels.
-    #[arg(long, conflicts_with = "label_wheel_accel")]
-    pub unshaped_labels: bool,
-    /// Label with smooth pair weights: a pair's weight rises from 0 to 1 over witness ratios
-    /// LOW..HIGH instead of the neighbour rule's step at its threshold, so that the labels are
-    /// one continuous function of what a robot senses (issue 34 item 3; default: the rule's
-    /// pairs exactly, as the scored expert holds them).
-    #[arg(long, value_name = "LOW,HIGH", value_parser = pair_weight_band)]
-    pub label_pair_band: Option<[f64; 2]>,
+    /// How the expert's labels are shaped.
+    #[command(flatten)]
+    pub labels: LabelShapingArgs,
     /// Also record each robot's scan ranges beside its image, `sectors=K,clip=C`: K sectors
     /// (centred on bearings 2 pi s / K), each the mean range of its returning beams over d*, at
     /// most C. A network trained on the dataset takes them as its `ranges` input (for example
@@ -520,6 +542,18 @@ pub fn team_duration(text: &str) -> Result<(usize, f64), String> {
 
 /// `formation dagger`.
 #[derive(Debug, Args)]
+#[command(
+    mut_arg("label_wheel_accel", |a| a.help(
+        "Label with the expert's formation velocity shaped for this wheel acceleration limit \
+         \\[m/s²\\] in every run, whatever the run's own limit, so that the labels are one \
+         function of what a robot senses (default: each run's own limit)"
+    )),
+    mut_arg("unshaped_labels", |a| a.help(
+        "Label with the unlimited law in every run, whatever the run's own limit: for a policy \
+         that answers a formation velocity (`formation train --output formation_velocity`), \
+         which each agent shapes for its own wheels"
+    ))
+)]
 pub struct DaggerArgs {
     /// The dataset, the rollout scenario, beta, seed and team sizes.
     #[command(flatten)]
@@ -562,22 +596,9 @@ pub struct DaggerArgs {
     /// turn (e.g. `none,1.0,2.0`; `none`: no limit; default: the scenario's own).
     #[arg(long, value_delimiter = ',', value_parser = wheel_accel_or_none)]
     pub wheel_accels: Vec<Option<f64>>,
-    /// Label with the expert's formation velocity shaped for this wheel acceleration limit
-    /// \[m/s²\] in every run, whatever the run's own limit, so that the labels are one function of
-    /// what a robot senses (default: each run's own limit).
-    #[arg(long, value_name = "A", value_parser = wheel_accel)]
-    pub label_wheel_accel: Option<f64>,
-    /// Label with the unlimited law in every run, whatever the run's own limit: for a policy
-    /// that answers a formation velocity (`formation train --output formation_velocity`), which
-    /// each agent shapes for its own wheels.
-    #[arg(long, conflicts_with = "label_wheel_accel")]
-    pub unshaped_labels: bool,
-    /// Label with smooth pair weights: a pair's weight rises from 0 to 1 over witness ratios
-    /// LOW..HIGH instead of the neighbour rule's step at its threshold, so that the labels are
-    /// one continuous function of what a robot senses (issue 34 item 3; default: the rule's
-    /// pairs exactly, as the scored expert holds them).
-    #[arg(long, value_name = "LOW,HIGH", value_parser = pair_weight_band)]
-    pub label_pair_band: Option<[f64; 2]>,
+    /// How the expert's labels are shaped, in every run whatever the run's own limit.
+    #[command(flatten)]
+    pub labels: LabelShapingArgs,
     /// Label each robot with the expert's law on the neighbours it detects in its own scan
     /// instead of from every pose: give it when the dataset was collected with
     /// `formation collect --own-scan-labels` (DAgger refuses to mix two laws in one dataset).
@@ -842,15 +863,15 @@ mod tests {
             panic!("not dagger")
         };
         assert_eq!(args.wheel_accels, [None, Some(1.0)]);
-        assert_eq!(args.label_wheel_accel, Some(1.0));
-        assert!(!args.unshaped_labels);
+        assert_eq!(args.labels.label_wheel_accel, Some(1.0));
+        assert!(!args.labels.unshaped_labels);
         // Unshaped labels, for a formation-velocity policy; never beside a fixed limit.
         let base = ["formation", "collect", "--scenario", "s.toml", "--out", "D"];
         let cli = Cli::try_parse_from(base.iter().chain(&["--unshaped-labels"])).unwrap();
         let Command::Collect(args) = cli.command else {
             panic!("not collect")
         };
-        assert!(args.unshaped_labels && args.label_wheel_accel.is_none());
+        assert!(args.labels.unshaped_labels && args.labels.label_wheel_accel.is_none());
         let both = ["--unshaped-labels", "--label-wheel-accel", "1"];
         let error = Cli::try_parse_from(base.iter().chain(&both)).unwrap_err();
         assert!(error.to_string().contains("cannot be used with"), "{error}");
@@ -877,7 +898,7 @@ mod tests {
             args.neighbours.unwrap().to_string(),
             "slots=16,threshold=1.3,nearest=2"
         );
-        assert!(args.own_scan_labels && args.unshaped_labels && !args.unblock_hidden_pairs);
+        assert!(args.own_scan_labels && args.labels.unshaped_labels && !args.unblock_hidden_pairs);
         let cli = Cli::try_parse_from(
             base.iter()
                 .chain(&["--own-scan-labels", "--unblock-hidden-pairs"]),

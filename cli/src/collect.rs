@@ -58,9 +58,7 @@ pub fn collect_command(args: &CollectArgs) -> anyhow::Result<()> {
     )?;
     let mut opts = CollectOptions::for_scenario(&scenario);
     opts.occupancy = occupancy;
-    opts.gains.shaping_wheel_accel = args.label_wheel_accel;
-    opts.gains.unshaped = args.unshaped_labels;
-    opts.gains.pair_weight_band = args.label_pair_band;
+    opts.gains = args.labels.shape(opts.gains);
     opts.gains.unblock_hidden_pairs = args.unblock_hidden_pairs;
     opts.ranges = args.ranges;
     opts.neighbours = args.neighbours;

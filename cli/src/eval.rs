@@ -416,14 +416,18 @@ fn results_over_processes(
     bar: &indicatif::ProgressBar,
 ) -> anyhow::Result<Vec<RunResult>> {
     let default = models.first().cloned().context("no robots")?;
-    let evaluated = crate::launch::eval_over_processes_recorded(
-        plan.scenario,
-        plan.seed,
-        plan.runs,
-        &default,
-        crate::launch::ClockMode::Lockstep,
+    let evaluation = crate::launch::ProcessEvalRuns {
+        scenario: plan.scenario,
+        base_seed: plan.seed,
+        runs: plan.runs,
+        default_model: &default,
+        clock: crate::launch::ClockMode::Lockstep,
         network,
-        (plan.record.clone(), args.foxglove),
+    };
+    let evaluated = crate::launch::eval_over_processes_recorded(
+        &evaluation,
+        plan.record.clone(),
+        args.foxglove,
         &mut |n| bar.set_position(n as u64),
     )?;
     if let Some(dir) = &args.out {

@@ -15,14 +15,18 @@ use std::time::Instant;
 
 use anyhow::Context;
 use formation_expert::ExpertGains;
-use formation_learning::dagger::{DaggerEvent, DaggerOptions, RolloutLabels, run_dagger};
+use formation_learning::dagger::{
+    DaggerEvent, DaggerOptions, RolloutLabels, RolloutScenarios, run_dagger,
+};
 use formation_learning::dagger_share::{ShareOptions, label_share};
 use formation_learning::rollout::with_threads;
 use formation_trainer_bridge::dagger_part::append_parts;
 use formation_trainer_bridge::train::{Mirror, TrainOptions, TrainReport, train};
 use formation_world::Scenario;
 
-use crate::args::{DaggerAppendArgs, DaggerArgs, DaggerLabelArgs, NetworkArgs, TrainArgs};
+use crate::args::{
+    DaggerAppendArgs, DaggerArgs, DaggerLabelArgs, DaggerRolloutArgs, NetworkArgs, TrainArgs,
+};
 use crate::eval;
 
 /// The training options `formation train` and `formation dagger` share: the network, its
@@ -83,16 +87,11 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
     let opts = DaggerOptions {
         data: rollouts.data.clone(),
         runs: args.runs.unwrap_or_else(|| scenario.runs()),
-        scenario,
-        team_sizes: rollouts.team_sizes.clone(),
-        rollout_durations: rollouts.rollout_durations.clone(),
+        rollouts: rollout_scenarios(rollouts, scenario),
         labels: RolloutLabels {
             gains: ExpertGains {
-                shaping_wheel_accel: args.label_wheel_accel,
-                unshaped: args.unshaped_labels,
-                pair_weight_band: args.label_pair_band,
                 unblock_hidden_pairs: args.unblock_hidden_pairs,
-                ..ExpertGains::default()
+                ..args.labels.shape(ExpertGains::default())
             },
             own_scan: args.own_scan_labels,
             wheel_accels: args.wheel_accels.clone(),
@@ -173,6 +172,15 @@ pub fn dagger_command(args: &DaggerArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The rollouts `--team-sizes` and `--rollout-durations` draw from `scenario` (`--scenario`).
+fn rollout_scenarios(rollouts: &DaggerRolloutArgs, scenario: Scenario) -> RolloutScenarios {
+    RolloutScenarios {
+        scenario,
+        team_sizes: rollouts.team_sizes.clone(),
+        durations: rollouts.rollout_durations.clone(),
+    }
+}
+
 /// `formation dagger-label`: runs `A .. A + R` of iteration K, labelled into a part.
 pub fn dagger_label_command(args: &DaggerLabelArgs) -> anyhow::Result<()> {
     formation_proto::files::check_output_file(&args.part)?;
@@ -181,9 +189,7 @@ pub fn dagger_label_command(args: &DaggerLabelArgs) -> anyhow::Result<()> {
     let share = eval::run_share(&scenario, args.first_run, args.runs, "label", "R")?;
     let opts = ShareOptions {
         data: rollouts.data.clone(),
-        scenario,
-        team_sizes: rollouts.team_sizes.clone(),
-        rollout_durations: rollouts.rollout_durations.clone(),
+        rollouts: rollout_scenarios(rollouts, scenario),
         model: args.model.clone(),
         iteration: args.iteration,
         beta: rollouts.beta,

@@ -32,13 +32,8 @@ use crate::rollout::{Driver, eval_output, evaluate_runs};
 pub struct DaggerOptions {
     /// The dataset DAgger appends to (it must exist: the expert demonstrations).
     pub data: PathBuf,
-    /// The scenario the rollouts are drawn from.
-    pub scenario: Scenario,
-    /// Team sizes of the rollouts, used in turn (empty: the scenario's own size).
-    pub team_sizes: Vec<usize>,
-    /// Run lengths \[s\] of some team sizes, `(size, seconds)`, instead of the scenario's: long
-    /// rollouts where large teams stall ([`team_scenarios`]).
-    pub rollout_durations: Vec<(usize, f64)>,
+    /// What the rollouts are drawn from.
+    pub rollouts: RolloutScenarios,
     /// Who labels the rollouts, and the wheel acceleration limits they are run under.
     pub labels: RolloutLabels,
     /// DAgger iterations.
@@ -93,6 +88,25 @@ pub enum DaggerEvent {
     },
 }
 
+/// What DAgger's rollouts are drawn from: a scenario, resized to each team size in turn.
+#[derive(Debug, Clone)]
+pub struct RolloutScenarios {
+    /// The scenario the rollouts are drawn from.
+    pub scenario: Scenario,
+    /// Team sizes of the rollouts, used in turn (empty: the scenario's own size).
+    pub team_sizes: Vec<usize>,
+    /// Run lengths \[s\] of some team sizes, `(size, seconds)`, instead of the scenario's: long
+    /// rollouts where large teams stall ([`team_scenarios`]).
+    pub durations: Vec<(usize, f64)>,
+}
+
+impl RolloutScenarios {
+    /// The scenario of each team size, run `i` playing the `i % len`-th ([`team_scenarios`]).
+    pub fn per_team_size(&self) -> Result<Vec<Scenario>, LearningError> {
+        team_scenarios(&self.scenario, &self.team_sizes, &self.durations)
+    }
+}
+
 /// Runs DAgger; returns the DAgger curve (the closed-loop figures of iteration 0, 1, ...), which is
 /// also written as `<stem>-dagger-curve.json` beside `out`, rewritten after every evaluation so
 /// that an interrupted run keeps the curve of the iterations it finished.
@@ -101,7 +115,7 @@ pub fn run_dagger(
     on_event: &(dyn Fn(DaggerEvent) + Sync),
 ) -> Result<Vec<EvalOutput>, LearningError> {
     check_beta(opts.beta)?;
-    let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes, &opts.rollout_durations)?;
+    let scenarios = opts.rollouts.per_team_size()?;
     let out_dir = opts
         .out
         .parent()
@@ -610,9 +624,11 @@ pub(crate) mod tests {
     pub(crate) fn options(data: PathBuf, base: &Scenario) -> DaggerOptions {
         DaggerOptions {
             data,
-            scenario: base.clone(),
-            team_sizes: vec![3, 5],
-            rollout_durations: Vec::new(),
+            rollouts: RolloutScenarios {
+                scenario: base.clone(),
+                team_sizes: vec![3, 5],
+                durations: Vec::new(),
+            },
             labels: RolloutLabels::default(),
             iterations: 1,
             out: PathBuf::from("unused.onnx"),

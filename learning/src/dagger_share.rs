@@ -18,7 +18,7 @@ use formation_world::Scenario;
 
 use crate::LearningError;
 use crate::dagger::{
-    IterationRollouts, RolloutLabels, check_beta, recorded_durations, team_scenarios,
+    IterationRollouts, RolloutLabels, RolloutScenarios, check_beta, recorded_durations,
 };
 
 /// What one share labels and where its part goes.
@@ -26,13 +26,8 @@ use crate::dagger::{
 pub struct ShareOptions {
     /// The dataset the samples are for (only its manifest is read: the image settings).
     pub data: PathBuf,
-    /// The rollout scenario.
-    pub scenario: Scenario,
-    /// Team sizes of the rollouts, used in turn (empty: the scenario's own size).
-    pub team_sizes: Vec<usize>,
-    /// Run lengths of some team sizes instead of the scenario's (see
-    /// [`DaggerOptions::rollout_durations`](crate::dagger::DaggerOptions::rollout_durations)).
-    pub rollout_durations: Vec<(usize, f64)>,
+    /// What the rollouts are drawn from, as in the DAgger session.
+    pub rollouts: RolloutScenarios,
     /// The policy that drives this iteration (the previous iteration's model).
     pub model: PathBuf,
     /// The DAgger iteration, at least 1 (iteration 0 is the expert demonstrations).
@@ -74,7 +69,7 @@ pub fn label_share(
         source: Box::new(source),
     };
     let expert_share = opts.beta.powi(opts.iteration as i32);
-    let scenarios = team_scenarios(&opts.scenario, &opts.team_sizes, &opts.rollout_durations)?;
+    let scenarios = opts.rollouts.per_team_size()?;
     // A share labels with the law the dataset was collected with.
     let labels = RolloutLabels::for_law(dataset.labels);
     crate::dagger::check_rollouts_match(&opts.data, &dataset, &scenarios, &dataset.labels)?;
@@ -82,9 +77,9 @@ pub fn label_share(
         dataset,
         iteration,
         rollouts: RolloutSettings {
-            scenario: opts.scenario.name().to_owned(),
+            scenario: opts.rollouts.scenario.name().to_owned(),
             team_sizes: scenarios.iter().map(Scenario::n_robots).collect(),
-            durations_s: recorded_durations(&opts.scenario, &scenarios),
+            durations_s: recorded_durations(&opts.rollouts.scenario, &scenarios),
             seed: opts.seed,
             expert_share,
             model_fnv1a64: file_fnv1a64(&opts.model).map_err(part_error)?,
@@ -146,16 +141,14 @@ mod tests {
             labels,
             ..options(whole.clone(), &base)
         };
-        let scenarios = team_scenarios(&base, &opts.team_sizes, &[]).unwrap();
+        let scenarios = opts.rollouts.per_team_size().unwrap();
         let added = rollout_and_label(&opts, &scenarios, 1, opts.beta, &model, &|_| {}).unwrap();
 
         let shared = dataset_with(&dir.join("shared"), &base, with);
         let share = |runs: Range<usize>, name: &str| {
             let share = ShareOptions {
                 data: shared.clone(),
-                scenario: base.clone(),
-                team_sizes: opts.team_sizes.clone(),
-                rollout_durations: Vec::new(),
+                rollouts: opts.rollouts.clone(),
                 model: model.clone(),
                 iteration: 1,
                 beta: opts.beta,
@@ -237,9 +230,11 @@ mod tests {
         let base = scenario(3);
         let mut opts = ShareOptions {
             data: PathBuf::from("/nonexistent"),
-            scenario: base,
-            team_sizes: Vec::new(),
-            rollout_durations: Vec::new(),
+            rollouts: RolloutScenarios {
+                scenario: base,
+                team_sizes: Vec::new(),
+                durations: Vec::new(),
+            },
             model: PathBuf::from("/nonexistent.onnx"),
             iteration: 0,
             beta: 0.0,

@@ -21,6 +21,7 @@ use crate::runtime::environment;
 ///
 /// Each instance owns its own single-threaded session (intra- and inter-op threads 1), so one
 /// instance per robot runs independently; the instance is `Send` but inference takes `&mut self`.
+#[derive(Debug)]
 pub struct OnnxPolicy {
     session: Session,
     metadata: ModelMetadata,
@@ -31,15 +32,6 @@ pub struct OnnxPolicy {
     /// Which of `inputs` is the image, the scalars, the ranges and the neighbours.
     slots: InputSlots,
     cells: usize,
-}
-
-impl std::fmt::Debug for OnnxPolicy {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("OnnxPolicy")
-            .field("model_id", &self.model_id)
-            .field("metadata", &self.metadata)
-            .finish()
-    }
 }
 
 impl OnnxPolicy {

@@ -461,9 +461,14 @@ pub fn explain_as(
 mod tests {
     use super::*;
 
+    /// A folder of this test process in the temporary folder, named after `tag`; not made here.
+    pub(super) fn scratch(tag: &str) -> PathBuf {
+        std::env::temp_dir().join(format!("formation-{tag}-{}", std::process::id()))
+    }
+
     #[test]
     fn only_small_regular_files_are_read() {
-        let dir = std::env::temp_dir().join(format!("formation-files-{}", std::process::id()));
+        let dir = scratch("files");
         std::fs::create_dir_all(&dir).unwrap();
         let small = dir.join("small");
         std::fs::write(&small, b"hello").unwrap();
@@ -493,7 +498,7 @@ mod tests {
 
     #[test]
     fn an_atomic_write_replaces_the_whole_file_or_leaves_it_and_no_temporary_behind() {
-        let dir = std::env::temp_dir().join(format!("formation-write-{}", std::process::id()));
+        let dir = scratch("write");
         let path = dir.join("nested").join("out.json");
         write_atomic(&path, b"first").unwrap();
         write_atomic(&path, b"second").unwrap();
@@ -517,7 +522,7 @@ mod tests {
     fn created_files_and_folders_are_private_whatever_was_there() {
         use std::os::unix::fs::PermissionsExt as _;
         let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
-        let dir = std::env::temp_dir().join(format!("formation-private-{}", std::process::id()));
+        let dir = scratch("private");
         let nested = dir.join("a").join("b");
         let path = nested.join("out.json");
         write_atomic(&path, b"x").unwrap();
@@ -667,7 +672,7 @@ mod write_error_tests {
 
     #[test]
     fn output_paths_are_checked_before_anything_is_written() {
-        let dir = std::env::temp_dir().join(format!("formation-check-{}", std::process::id()));
+        let dir = super::tests::scratch("check");
         std::fs::create_dir_all(&dir).unwrap();
         let file = dir.join("a-file");
         std::fs::write(&file, b"x").unwrap();

@@ -34,6 +34,7 @@ pub mod neighbours;
 pub mod policy_io;
 pub mod policy_output;
 pub mod robot;
+pub mod swap_done;
 pub mod team_size;
 pub mod types;
 pub mod wire;
@@ -46,5 +47,6 @@ pub use policy_io::{
     RangeInput, RangeInputError,
 };
 pub use policy_output::PolicyOutput;
+pub use swap_done::SwapDone;
 pub use team_size::TeamSizeFit;
 pub use types::*;

@@ -198,18 +198,18 @@ impl Batch {
             .collect())
     }
 
-    /// Fills `out` (`width` values a robot) robot by robot from each robot's own scan and its
+    /// A `(B, N) + per_robot` array filled robot by robot from each robot's own scan and its
     /// world's d*, with `robot(its world's neighbour input builder, scan, d*, its values)`; a
     /// world whose d* cannot scale the input (`what`) is an error.
-    fn fill_from_scans(
+    fn array_from_scans<'py>(
         &mut self,
-        out: &mut [f32],
-        width: usize,
+        py: Python<'py>,
+        per_robot: &[usize],
         what: &str,
         robot: impl Fn(&mut NeighbourInputBuilder, &[f32], f64, &mut [f32]) + Sync,
-    ) -> PyResult<()> {
-        let n = self.robots();
-        self.fill(out, n * width, |b, slot, chunk| {
+    ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let width: usize = per_robot.iter().product();
+        self.per_robot_array(py, per_robot, |b, slot, chunk| {
             let observation = slot.episode.observe();
             let d_star = observation.goal.d_star;
             if !(d_star.is_finite() && d_star > 0.0) {
@@ -220,6 +220,22 @@ impl Batch {
             }
             Ok(())
         })
+    }
+
+    /// A `(B, N) + per_robot` array filled world by world in parallel, with the GIL released:
+    /// `fill(b, slot, chunk)` writes world `b`'s values, robot after robot, into `chunk`.
+    fn per_robot_array<'py, T: numpy::Element + Default + Clone + Send>(
+        &mut self,
+        py: Python<'py>,
+        per_robot: &[usize],
+        fill: impl Fn(usize, &mut Slot, &mut [T]) -> Result<(), String> + Sync,
+    ) -> PyResult<Bound<'py, PyArrayDyn<T>>> {
+        let (worlds, n) = (self.slots.len(), self.robots());
+        let width: usize = per_robot.iter().product();
+        let mut out = vec![T::default(); worlds * n * width];
+        py.detach(|| self.fill(&mut out, n * width, &fill))?;
+        let shape: Vec<usize> = [worlds, n].iter().chain(per_robot).copied().collect();
+        out.into_pyarray(py).reshape(shape)
     }
 
     /// Fills `out` (`per_world` values per world) world by world in parallel.
@@ -340,30 +356,23 @@ impl Batch {
 
     /// Every robot's pose `(x, y, theta)`: `(B, N, 3)` float64.
     fn poses<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let n = self.robots();
-        let mut out = vec![0.0; self.slots.len() * n * 3];
-        py.detach(|| {
-            self.fill(&mut out, n * 3, |_, slot, chunk| {
-                for (pose, cell) in slot
-                    .episode
-                    .world()
-                    .poses()
-                    .iter()
-                    .zip(chunk.chunks_exact_mut(3))
-                {
-                    cell.copy_from_slice(&[pose.x, pose.y, pose.theta]);
-                }
-                Ok(())
-            })
-        })?;
-        out.into_pyarray(py).reshape(vec![self.slots.len(), n, 3])
+        self.per_robot_array(py, &[3], |_, slot, chunk| {
+            for (pose, cell) in slot
+                .episode
+                .world()
+                .poses()
+                .iter()
+                .zip(chunk.chunks_exact_mut(3))
+            {
+                cell.copy_from_slice(&[pose.x, pose.y, pose.theta]);
+            }
+            Ok(())
+        })
     }
 
     /// The wheel speeds each robot ran in the last step: `(B, N, 2)` float64.
     fn wheel_speeds<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let n = self.robots();
-        let mut out = vec![0.0; self.slots.len() * n * 2];
-        self.fill(&mut out, n * 2, |_, slot, chunk| {
+        self.per_robot_array(py, &[2], |_, slot, chunk| {
             for (w, cell) in slot
                 .episode
                 .world()
@@ -374,8 +383,7 @@ impl Batch {
                 cell.copy_from_slice(&[w.left, w.right]);
             }
             Ok(())
-        })?;
-        out.into_pyarray(py).reshape(vec![self.slots.len(), n, 2])
+        })
     }
 
     /// Each world's goal now, `(phi*, d*, v*)`: `(B, 3)` float64.
@@ -393,19 +401,14 @@ impl Batch {
 
     /// Every robot's LIDAR scan of this tick: `(B, N, beams)` float32 (taken once per tick).
     fn scans<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-        let (n, beams) = (self.robots(), self.scenario.world_config().lidar.beams);
-        let mut out = vec![0.0_f32; self.slots.len() * n * beams];
-        py.detach(|| {
-            self.fill(&mut out, n * beams, |_, slot, chunk| {
-                let observation = slot.episode.observe();
-                for (scan, cell) in observation.scans.iter().zip(chunk.chunks_exact_mut(beams)) {
-                    cell.copy_from_slice(scan);
-                }
-                Ok(())
-            })
-        })?;
-        out.into_pyarray(py)
-            .reshape(vec![self.slots.len(), n, beams])
+        let beams = self.scenario.world_config().lidar.beams;
+        self.per_robot_array(py, &[beams], |_, slot, chunk| {
+            let observation = slot.episode.observe();
+            for (scan, cell) in observation.scans.iter().zip(chunk.chunks_exact_mut(beams)) {
+                cell.copy_from_slice(scan);
+            }
+            Ok(())
+        })
     }
 
     /// Every robot's occupancy image of this tick's scan, rendered by `formation_perception`
@@ -421,26 +424,21 @@ impl Batch {
         d_star_ref_m: Option<f64>,
     ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
         let spec = occupancy_spec(size_px, resolution_m, beyond, d_star_ref_m)?;
-        let (n, cells) = (self.robots(), size_px * size_px);
+        let cells = size_px * size_px;
         let lidar = self.scenario.world_config().lidar;
-        let mut out = vec![0.0_f32; self.slots.len() * n * cells];
-        py.detach(|| {
-            self.fill(&mut out, n * cells, |b, slot, chunk| {
-                let observation = slot.episode.observe();
-                let d_star = observation.goal.d_star;
-                if spec.scales_with_d_star() && !(d_star.is_finite() && d_star > 0.0) {
-                    return Err(format!("world {b}: d* {d_star} cannot size the window"));
-                }
-                let mut image = vec![0_u8; cells];
-                for (scan, cell) in observation.scans.iter().zip(chunk.chunks_exact_mut(cells)) {
-                    occupancy::render_at(scan, &lidar, &spec, d_star, &mut image);
-                    occupancy::to_f32(&image, cell);
-                }
-                Ok(())
-            })
-        })?;
-        out.into_pyarray(py)
-            .reshape(vec![self.slots.len(), n, 1, size_px, size_px])
+        self.per_robot_array(py, &[1, size_px, size_px], |b, slot, chunk| {
+            let observation = slot.episode.observe();
+            let d_star = observation.goal.d_star;
+            if spec.scales_with_d_star() && !(d_star.is_finite() && d_star > 0.0) {
+                return Err(format!("world {b}: d* {d_star} cannot size the window"));
+            }
+            let mut image = vec![0_u8; cells];
+            for (scan, cell) in observation.scans.iter().zip(chunk.chunks_exact_mut(cells)) {
+                occupancy::render_at(scan, &lidar, &spec, d_star, &mut image);
+                occupancy::to_f32(&image, cell);
+            }
+            Ok(())
+        })
     }
 
     /// Every robot's scalars beside the image, the policy's `aux` input, as the model declares
@@ -453,9 +451,8 @@ impl Batch {
                 "aux layout {layout:?} (the model's formation.aux): {e}"
             ))
         })?;
-        let (n, width) = (self.robots(), layout.len());
-        let mut out = vec![0.0_f32; self.slots.len() * n * width];
-        self.fill(&mut out, n * width, |b, slot, chunk| {
+        let width = layout.len();
+        self.per_robot_array(py, &[width], |b, slot, chunk| {
             let world = slot.episode.world();
             let goal = slot.episode.spec().goal_at(world.time());
             policy_input::check_goal(&goal).map_err(|e| format!("world {b}: {e}"))?;
@@ -463,9 +460,7 @@ impl Batch {
                 cell.copy_from_slice(&layout.values(pose.theta, &goal));
             }
             Ok(())
-        })?;
-        out.into_pyarray(py)
-            .reshape(vec![self.slots.len(), n, width])
+        })
     }
 
     /// Every robot's scan ranges pooled into sectors, the `ranges` input of a model that
@@ -487,15 +482,9 @@ impl Batch {
                 "range input {ranges:?} for this scenario's LIDAR: {e}"
             ))
         })?;
-        let (n, width) = (self.robots(), spec.sectors);
-        let mut out = vec![0.0_f32; self.slots.len() * n * width];
-        py.detach(|| {
-            self.fill_from_scans(&mut out, width, "ranges", |_, scan, d_star, cell| {
-                pool(scan, &lidar, &spec, d_star, cell)
-            })
-        })?;
-        out.into_pyarray(py)
-            .reshape(vec![self.slots.len(), n, width])
+        self.array_from_scans(py, &[spec.sectors], "ranges", |_, scan, d_star, cell| {
+            pool(scan, &lidar, &spec, d_star, cell)
+        })
     }
 
     /// Every robot's detected neighbours, the `neighbours` input of a model that declares one
@@ -515,18 +504,12 @@ impl Batch {
             ))
         })?;
         let lidar = self.scenario.world_config().lidar;
-        let (n, width) = (self.robots(), spec.len());
-        let mut out = vec![0.0_f32; self.slots.len() * n * width];
-        py.detach(|| {
-            self.fill_from_scans(
-                &mut out,
-                width,
-                "neighbours",
-                |builder, scan, d_star, cell| builder.fill(scan, &lidar, &spec, d_star, cell),
-            )
-        })?;
-        out.into_pyarray(py)
-            .reshape(vec![self.slots.len(), n, spec.slots, spec.features()])
+        self.array_from_scans(
+            py,
+            &[spec.slots, spec.features()],
+            "neighbours",
+            |builder, scan, d_star, cell| builder.fill(scan, &lidar, &spec, d_star, cell),
+        )
     }
 
     /// A policy's outputs `(B, N, 2)` (float32) as wheel speeds for each world's goal, as the
@@ -595,18 +578,13 @@ impl Batch {
                 "this batch was made with expert=False; make it with expert=True for expert actions",
             ));
         }
-        let n = self.robots();
-        let mut out = vec![0.0; self.slots.len() * n * 2];
-        py.detach(|| {
-            self.fill(&mut out, n * 2, |b, slot, chunk| {
-                let commands = slot.expert_commands(b).map_err(|e| e.to_string())?;
-                for (cmd, cell) in commands.iter().zip(chunk.chunks_exact_mut(2)) {
-                    cell.copy_from_slice(&[cmd.left, cmd.right]);
-                }
-                Ok(())
-            })
-        })?;
-        out.into_pyarray(py).reshape(vec![self.slots.len(), n, 2])
+        self.per_robot_array(py, &[2], |b, slot, chunk| {
+            let commands = slot.expert_commands(b).map_err(|e| e.to_string())?;
+            for (cmd, cell) in commands.iter().zip(chunk.chunks_exact_mut(2)) {
+                cell.copy_from_slice(&[cmd.left, cmd.right]);
+            }
+            Ok(())
+        })
     }
 
     /// Steps every world with `actions[b, i] = (left, right)` wheel speeds \[m/s\] (saturated to

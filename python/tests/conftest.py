@@ -18,6 +18,9 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 MODEL = REPO / "onnx" / "models" / "policy.onnx"
+#: An image network that answers wheel speeds (the default until issue 34): what DAgger on an
+#: image-only expert dataset warm-starts from.
+IMAGE_MODEL = REPO / "onnx" / "models" / "wide-head" / "policy.onnx"
 RAY = Path(sys.executable).parent / "ray"
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import MODEL, WorkerKiller, cli, local_eval_json, team_scenario
+from conftest import IMAGE_MODEL, WorkerKiller, cli, local_eval_json, team_scenario
 from formation.dagger import dagger_iteration, label_iteration
 from formation.sweep import SweepError, run_cli
 
@@ -39,7 +39,7 @@ def label_locally(data: Path, scenario: Path, part: Path) -> None:
     """The iteration labelled in one share on this machine and appended, with the CLI."""
     binary = str(cli())
     run_cli(binary, "dagger-label", "--data", str(data), "--scenario", str(scenario),
-            "--model", str(MODEL), "--iteration", "1", "--beta", "0.5", "--seed", "11",
+            "--model", str(IMAGE_MODEL), "--iteration", "1", "--beta", "0.5", "--seed", "11",
             "--team-sizes", "3,4", "--runs", str(RUNS), "--part", str(part))
     run_cli(binary, "dagger-append", "--data", str(data), "--iteration", "1",
             "--runs", str(RUNS), str(part))
@@ -52,7 +52,7 @@ def test_a_dagger_iteration_on_two_nodes_survives_a_killed_worker_byte_for_byte(
     local = shutil.copytree(expert, tmp_path / "local")
 
     killer = WorkerKiller(b"--part")
-    parts = label_iteration(str(on_ray), str(MODEL), 1, RUNS, scenario=str(scenario),
+    parts = label_iteration(str(on_ray), str(IMAGE_MODEL), 1, RUNS, scenario=str(scenario),
                             runs_per_share=2, parts_dir=str(tmp_path / "parts"), address=cluster,
                             formation_bin=str(cli()), **SETTINGS)
     killer.assert_killed_one()
@@ -86,7 +86,7 @@ def test_a_whole_dagger_iteration_labels_on_ray_trains_on_the_driver_and_evaluat
     scenario = team_scenario(tmp_path, robots=3, duration_s=1.0)
     expert = expert_dataset(tmp_path, scenario)
     out = tmp_path / "models" / "m1.onnx"
-    point = dagger_iteration(str(expert), str(MODEL), 1, str(out), runs=4, scenario=str(scenario),
+    point = dagger_iteration(str(expert), str(IMAGE_MODEL), 1, str(out), runs=4, scenario=str(scenario),
                              train_args=("--epochs", "1", "--device", "cpu"),
                              eval_scenario=str(scenario), eval_runs=2, runs_per_share=2,
                              address=cluster, formation_bin=str(cli()))

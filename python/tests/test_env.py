@@ -75,6 +75,11 @@ def play_policy(env, session, observations, output: str, inputs=("occupancy", "a
     return trajectory_rows(env)
 
 
+def declared_inputs(spec) -> tuple:
+    """The inputs ``spec``'s model takes, by name, as the agent feeds them."""
+    return ("occupancy", "aux") + (("ranges",) if spec.ranges else ()) + (("neighbours",) if spec.neighbours else ())
+
+
 def tiny_model(tmp_path, name: str, seed: int, *flags: str):
     """Writes ``tests/fixtures/tiny_policy.py``'s formation_velocity model with ``seed`` and
     ``flags`` to ``tmp_path / name``; returns its path."""
@@ -108,7 +113,7 @@ def test_an_onnx_policy_episode_equals_formation_eval_bit_for_bit(tmp_path, robo
     env = parallel_env(scenario=str(scenario), **({"model": MODEL} if given else {}))
     session = policy_session()
     observations, _ = env.reset(seed=seed, run=run)
-    got = play_policy(env, session, observations, "wheels")
+    got = play_policy(env, session, observations, env.spec.output, declared_inputs(env.spec))
     assert len(got) == len(expected) == 61
     assert got == expected
 
@@ -208,10 +213,10 @@ def test_a_bad_neighbour_declaration_is_refused_naming_the_key():
     assert formation._native.neighbour_input("slots=4,threshold=1.3,nearest=2,hidden=1") == (4, 1.3, 2, 6)
 
 
-def test_the_pair_models_observations_hold_six_numbers_a_slot(tmp_path):
+def test_the_shipped_pair_models_observations_hold_six_numbers_a_slot(tmp_path):
     # The shipped pair network declares hidden=1: each slot also carries the step aside of its
     # hidden pairs, and the observation space says so.
-    model = REPO / "onnx" / "models" / "pair" / "policy.onnx"
+    model = MODEL
     assert ModelSpec.from_onnx(model).neighbours.endswith(",hidden=1")
     env = parallel_env(scenario=str(team_scenario(tmp_path, 5, 3.0)), model=model)
     space = env.observation_space("robot_0")["neighbours"]
@@ -250,8 +255,8 @@ def test_without_a_model_the_observation_is_the_shipped_models_declared_input(tm
     a, _ = default.reset(seed=3)
     b, _ = given.reset(seed=3)
     for agent in a:
-        assert np.array_equal(a[agent]["occupancy"], b[agent]["occupancy"]), agent
-        assert np.array_equal(a[agent]["aux"], b[agent]["aux"]), agent
+        for name in declared_inputs(default.spec):
+            assert np.array_equal(a[agent][name], b[agent][name]), (agent, name)
 
 
 def test_bad_actions_raise_clear_exceptions():

@@ -23,13 +23,14 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
+use formation_proto::SwapDone;
 use formation_proto::files::{FileRefusal, read_bounded};
 use mcap::records::{AttachmentHeader, MessageHeader, Metadata};
 
 use crate::error::RecordError;
 use crate::model_files::{open_model, read_model, sha256_hex};
 use crate::setup::{RecordingSetup, TeamSetup};
-use crate::swap::{SWAP_METADATA, SwapEvent, SwapStorage, SwappedModel, check_swapped_bytes};
+use crate::swap::{SWAP_METADATA, SwapStorage, SwappedModel, check_swapped_bytes};
 use crate::tick::{FinalSample, RUN_END_METADATA, RunEnd, TickRecord};
 use crate::topics::{MessageError, Replay, Slot, TickMessages, Topics, nanos};
 
@@ -246,13 +247,13 @@ impl RecordingFile {
     /// loaded, else recorded as not stored with the reason; then the record that maps the model
     /// id to it, and everything is handed to the operating system. Only a failed write is an
     /// error.
-    pub fn write_swap(&mut self, event: &SwapEvent) -> Result<SwappedModel, RecordError> {
+    pub fn write_swap(&mut self, event: &SwapDone) -> Result<SwappedModel, RecordError> {
         let ns = self.last_tick_ns;
         let (sha256, storage) = match self.read_swapped(event) {
             Err(why) => (String::new(), SwapStorage::NotStored(why)),
             Ok((path, bytes)) => {
                 let sha256 = sha256_hex(&bytes);
-                let local = event.bytes.is_none();
+                let local = event.model.is_none();
                 let shipped_models = self.shipped_models.as_deref();
                 let storage = if local && crate::setup::is_shipped_in(shipped_models, path) {
                     SwapStorage::Shipped
@@ -273,7 +274,7 @@ impl RecordingFile {
             }
         };
         let swapped = SwappedModel {
-            robot: event.robot,
+            robot: u32::try_from(event.robot).unwrap_or(u32::MAX),
             tick: event.tick,
             request_id: event.request_id,
             model_id: event.model_id.clone(),
@@ -296,10 +297,10 @@ impl RecordingFile {
     /// the file's.
     fn read_swapped<'e>(
         &self,
-        event: &'e SwapEvent,
+        event: &'e SwapDone,
     ) -> Result<(&'e Path, std::borrow::Cow<'e, [u8]>), String> {
         let path = event.path.as_deref().unwrap_or(Path::new(""));
-        if let Some(bytes) = &event.bytes {
+        if let Some(bytes) = &event.model {
             if bytes.len() as u64 > MAX_ATTACHED_MODEL_BYTES {
                 return Err(format!(
                     "the model sent with the request is larger than the \

@@ -44,6 +44,6 @@ pub use read::{ReadError, RecordingItem, RecordingReader, RunInfo};
 pub use recorder::{RecordedController, Recorder, final_sample};
 pub use replay::ReplayStep;
 pub use setup::{LaunchInfo, RecordingSetup, TeamSetup};
-pub use swap::{SwapEvent, SwapStorage, SwappedModel};
+pub use swap::{SwapStorage, SwappedModel};
 pub use target::{RecordSettings, RecordTarget};
 pub use tick::{FinalSample, RunEnd, SentCommand, TickRecord};

@@ -477,6 +477,7 @@ pub struct LiveRunDone {
 }
 
 /// The run being recorded.
+#[derive(Debug)]
 struct LiveRun {
     setup: LiveSetup,
     file: Option<RecordingFile>,
@@ -485,6 +486,7 @@ struct LiveRun {
 }
 
 /// A recorder's side: live messages in, recording files out (see the module docs).
+#[derive(Debug)]
 pub struct LiveRecording {
     target: RecordTarget,
     /// How the recorder is named in the metadata (`live.recorded_by`).
@@ -492,14 +494,6 @@ pub struct LiveRecording {
     run: Option<LiveRun>,
     /// Ticks that came before their run's setup.
     waiting: Vec<(u64, TickRecord)>,
-}
-
-impl std::fmt::Debug for LiveRecording {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("LiveRecording")
-            .field("target", &self.target)
-            .finish_non_exhaustive()
-    }
 }
 
 impl LiveRecording {

@@ -14,14 +14,13 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
-use formation_proto::WheelCmd;
 use formation_proto::control::{Controller, ControllerError, Observation};
+use formation_proto::{SwapDone, WheelCmd};
 use formation_world::Trajectory;
 
 use crate::error::RecordError;
 use crate::file::{RecordingFile, RecordingSummary};
 use crate::setup::RecordingSetup;
-use crate::swap::SwapEvent;
 use crate::tick::{FinalSample, TickRecord};
 
 /// Ticks the writer may fall behind before the tick loop waits for it (two simulated seconds
@@ -30,7 +29,7 @@ pub const QUEUE_TICKS: usize = 40;
 
 enum Job {
     Tick(Box<TickRecord>),
-    Swap(SwapEvent),
+    Swap(SwapDone),
     Finish(Option<FinalSample>),
     Stopped(String),
 }
@@ -78,7 +77,7 @@ impl Recorder {
 
     /// Queues a model swapped in during the run, to be stored before the ticks queued after it
     /// ([`RecordingFile::write_swap`]). Fails as [`Recorder::tick`] does.
-    pub fn swapped(&mut self, swap: SwapEvent) -> Result<(), RecordError> {
+    pub fn swapped(&mut self, swap: SwapDone) -> Result<(), RecordError> {
         self.send(Job::Swap(swap))
     }
 

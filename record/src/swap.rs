@@ -37,24 +37,6 @@ pub const SWAP_FORMAT: &str = "formation.swapped_model";
 /// The record format's version: a reader refuses another.
 pub const SWAP_FORMAT_VERSION: u32 = 1;
 
-/// A swap the world saw done, as it hands it to its recording.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct SwapEvent {
-    /// The robot.
-    pub robot: u32,
-    /// The first tick the new model decided.
-    pub tick: u64,
-    /// The swap request's id.
-    pub request_id: u64,
-    /// The id of the model the agent runs now.
-    pub model_id: String,
-    /// The model file the request named (`None` when the world does not know it).
-    pub path: Option<PathBuf>,
-    /// The model's bytes, when they came over the network with the request (then `path` is the
-    /// sender's, informative only).
-    pub bytes: Option<Vec<u8>>,
-}
-
 /// Where a swapped-in model's bytes are.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum SwapStorage {
@@ -194,6 +176,7 @@ pub fn check_swapped_bytes(model_id: &str, bytes: &[u8]) -> Result<(), String> {
 mod tests {
     use super::*;
     use crate::read::tests::read_items;
+    use formation_proto::SwapDone;
 
     fn swapped(storage: SwapStorage) -> SwappedModel {
         SwappedModel {
@@ -285,13 +268,13 @@ mod tests {
         let mut rec =
             crate::RecordingFile::create_with_metadata(&path, team, 1.0, BTreeMap::new()).unwrap();
         rec.write_tick(&tick(0, "first-00000000")).unwrap();
-        let event = |robot| SwapEvent {
+        let event = |robot: usize| SwapDone {
             robot,
             tick: 1,
-            request_id: u64::from(robot) + 5,
+            request_id: robot as u64 + 5,
             model_id: id.clone(),
             path: Some(model.clone()),
-            bytes: None,
+            model: None,
         };
         let name = format!("models/{}.onnx", crate::models::sha256_hex(b"second model"));
         let stored = rec.write_swap(&event(0)).unwrap();
@@ -308,18 +291,18 @@ mod tests {
         assert!(why.contains("changed since the agent loaded it"), "{why}");
         assert!(changed.sha256.is_empty());
         // Bytes that came over the network with the request, under the agent's own file name.
-        let sent = SwapEvent {
+        let sent = SwapDone {
             model_id: formation_proto::model_id::model_id(
                 Path::new("swap-7.onnx"),
                 b"second model",
             ),
             path: Some(PathBuf::from("sent-over-zenoh/second.onnx")),
-            bytes: Some(b"second model".to_vec()),
+            model: Some(b"second model".to_vec()),
             ..event(1)
         };
         assert_eq!(rec.write_swap(&sent).unwrap().storage, stored.storage);
-        let damaged = SwapEvent {
-            bytes: Some(b"damaged".to_vec()),
+        let damaged = SwapDone {
+            model: Some(b"damaged".to_vec()),
             ..sent
         };
         let refused = rec.write_swap(&damaged).unwrap();

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use formation_onnx::{PolicyError, SensorViolation};
 use formation_proto::LidarSpec;
 use formation_robot_agent::decision::{DecisionError, check_team_models};
+use formation_runtime::agent::error_chain;
 
 /// The shipped policy: 900 beams, 10 m.
 fn shipped() -> PathBuf {
@@ -41,7 +42,8 @@ fn a_range_mismatch_names_the_robot_the_models_range_and_the_scenarios() {
         ),
         "{err:?}"
     );
-    let chain = anyhow_like(&err);
+    // The error with its causes, as the command line prints it (`error: a: b: c`).
+    let chain = error_chain(&err);
     assert!(chain.contains("robot 0"), "{chain}");
     assert!(chain.contains("10 m") && chain.contains("5 m"), "{chain}");
 }
@@ -62,16 +64,4 @@ fn a_directory_as_a_model_is_not_a_regular_file_and_names_its_robot() {
         ),
         "{err:?}"
     );
-}
-
-/// The error with its causes, as the command line prints it (`error: a: b: c`).
-fn anyhow_like(err: &dyn std::error::Error) -> String {
-    let mut text = err.to_string();
-    let mut cause = err.source();
-    while let Some(c) = cause {
-        text.push_str(": ");
-        text.push_str(&c.to_string());
-        cause = c.source();
-    }
-    text
 }

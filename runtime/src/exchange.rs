@@ -209,25 +209,7 @@ pub struct AgentsController<'l> {
 /// The most swaps done that the exchange keeps until they are taken.
 pub const MAX_SWAPS_DONE: usize = 64;
 
-/// A swap an agent did: which robot, from which tick on, the model id the agent now reports, and
-/// the model file the request named (`None` when the request was not forwarded by this world) or
-/// the bytes that came with it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct SwapDone {
-    /// The robot.
-    pub robot: usize,
-    /// The request's id.
-    pub request_id: u64,
-    /// The first tick the new model decided.
-    pub tick: u64,
-    /// The id of the model the agent runs now.
-    pub model_id: String,
-    /// The model file the request named (on the world's host, unless the model came over the
-    /// network).
-    pub path: Option<PathBuf>,
-    /// The model's bytes, when they came over the network with the request (Zenoh).
-    pub model: Option<Vec<u8>>,
-}
+pub use formation_proto::SwapDone;
 
 /// A swap request forwarded to an agent and not answered yet.
 #[derive(Debug)]

@@ -119,16 +119,7 @@ mod tests {
 
     #[test]
     fn a_scaled_window_says_its_reference_and_its_cells_over_the_trained_range() {
-        let scaled = ModelInput {
-            occupancy: OccupancySpec {
-                beyond: BeyondWindow::Border,
-                d_star_ref_m: Some(1.5),
-                ..OccupancySpec::PAPER
-            },
-            lidar_noise_std_m: Some(0.01),
-            trained_d_star_m: Some([0.8, 2.5]),
-            ..paper()
-        };
+        let scaled = crate::tests::scaled_model_input();
         assert_eq!(
             scaled.describe(),
             "50 × 50 cells of 0.1 m at d* = 1.5 m (scales with d*: 0.053-0.167 m over the \

@@ -488,7 +488,9 @@ fn summaries_and_metrics_before_incomplete_runs_and_median_rules_still_read() {
     );
 }
 
-fn scaled_model_input() -> crate::ModelInput {
+/// A model's declared input with a window that scales with d* (reference 1.5 m, far hits on the
+/// border) over a trained d* range of 0.8-2.5 m, and LIDAR noise of 0.01 m.
+pub(crate) fn scaled_model_input() -> crate::ModelInput {
     crate::ModelInput {
         model: "policy-1".into(),
         occupancy: formation_proto::OccupancySpec {

@@ -21,9 +21,9 @@ use std::time::Duration;
 use formation_proto::wire::RunId;
 
 use crate::{
-    Binaries, Finished, LeakCheck, TempDir, Watchdog, assert_bit_identical, binaries,
-    case1_scenario, formation_run, free_tcp_port, in_process_run, one_at_a_time, run,
-    unique_run_id,
+    Binaries, Finished, LeakCheck, LiveProcess, TempDir, Watchdog, assert_bit_identical,
+    await_connected, await_line, binaries, case1_scenario, formation_run, free_tcp_port,
+    in_process_run, one_at_a_time, run, unique_run_id,
 };
 
 /// One multi-process test's lock, watchdog, scratch folder, run id and leak check.
@@ -89,6 +89,66 @@ impl ProcessTest {
     /// writing to [`ProcessTest::out`] ([`formation_run`]).
     pub fn formation_run(&self, scenario: &Path, extra: &[&str]) -> Command {
         formation_run(&self.run, scenario, &self.out(), extra)
+    }
+
+    /// [`ProcessTest::formation_run`] of case 1 of `duration_s` seconds with `extra` flags,
+    /// started now; returns once every agent has connected ([`await_connected`]).
+    pub fn connected_launch(&self, duration_s: f64, extra: &[&str]) -> LiveProcess {
+        let mut launch = LiveProcess::spawn(self.formation_run(&self.case1(duration_s), extra));
+        await_connected(&mut launch);
+        launch
+    }
+
+    /// [`ProcessTest::formation_run`] of `scenario` over Zenoh, listening on `listen`, with robot
+    /// `remote`'s agent left to be started by hand (`--remote`), the credentials folder `creds`
+    /// and `extra` flags, started now; returns once the launch says it waits for that agent.
+    pub fn launch_awaiting_remote(
+        &self,
+        scenario: &Path,
+        listen: &str,
+        remote: usize,
+        creds: &Path,
+        extra: &[&str],
+    ) -> LiveProcess {
+        let robot = remote.to_string();
+        let mut command = self.formation_run(
+            scenario,
+            &[
+                "--transport",
+                "zenoh",
+                "--listen",
+                listen,
+                "--remote",
+                &robot,
+            ],
+        );
+        command.args(extra).arg("--credentials").arg(creds);
+        let mut launch = LiveProcess::spawn(command);
+        await_line(
+            &mut launch,
+            &format!("waiting for the remote agents of robots [{robot}]"),
+        );
+        launch
+    }
+
+    /// `formation-world --run-id RUN --run-specs SPECS --out OUT`: a world started by hand, with
+    /// no launcher, for run 0 of case 1 of `duration_s` seconds (its run spec written into the
+    /// scratch folder), writing to `out`. The caller adds its other flags and hands the world
+    /// the launch secret.
+    pub fn world_by_hand(&self, duration_s: f64, out: &Path) -> Command {
+        let scenario =
+            formation_world::Scenario::from_path(&self.case1(duration_s)).expect("scenario");
+        let specs = self.dir.path().join("run-specs.json");
+        let spec = scenario.run_spec(scenario.seed(), 0);
+        std::fs::write(&specs, serde_json::to_vec(&[spec]).expect("specs JSON")).expect("specs");
+        let mut world = Command::new(&binaries().world);
+        world
+            .args(["--run-id", self.run.as_str()])
+            .arg("--run-specs")
+            .arg(&specs)
+            .arg("--out")
+            .arg(out);
+        world
     }
 
     /// The runtime executables ([`binaries`]; built on first use, outside the watchdog's time).

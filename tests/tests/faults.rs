@@ -7,23 +7,13 @@ use std::time::Duration;
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LiveProcess, ProcessTest, RobotLog, TempDir, agent_pids, await_connected, await_rejoin,
-    binaries, case1_scenario, formation_run, run, send_signal, test_model, the_agent, world_pid,
+    LiveProcess, ProcessTest, RobotLog, agent_pids, await_rejoin, binaries, run, send_signal,
+    test_model, the_agent, world_pid,
 };
 use rand::{Rng, SeedableRng};
 
 /// The watchdog limit of each test: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
-
-fn launch(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> LiveProcess {
-    let scenario = case1_scenario(dir.path(), duration_s);
-    LiveProcess::spawn(formation_run(
-        run_id,
-        &scenario,
-        &dir.path().join("out"),
-        extra,
-    ))
-}
 
 /// Sends SIGKILL to robot `robot`'s current agent and returns its pid.
 fn kill_agent(run_id: &RunId, robot: usize, launch: &mut LiveProcess) -> u32 {
@@ -40,9 +30,7 @@ fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
     let t = ProcessTest::start("twenty_kills_lockstep", LIMIT);
     let kills = 20;
     // 150 s at >= 20 ms per tick: at least 60 s of run, far more than 20 kill-restart cycles take.
-    let mut launch = launch(
-        &t.run,
-        &t.dir,
+    let mut launch = t.connected_launch(
         150.0,
         &[
             "--timeout-ms",
@@ -55,7 +43,6 @@ fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
             "3",
         ],
     );
-    await_connected(&mut launch);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(20);
     let mut rejoins: [Vec<usize>; 3] = Default::default();
     for _ in 0..kills {
@@ -102,9 +89,7 @@ fn twenty_random_sigkills_in_lockstep_each_end_in_a_rejoin() {
 #[test]
 fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
     let t = ProcessTest::start("kill_realtime", LIMIT);
-    let mut launch = launch(
-        &t.run,
-        &t.dir,
+    let mut launch = t.connected_launch(
         12.0,
         // The restart waits 600 ms (12 ticks), so the orphan is seen braking meanwhile.
         &[
@@ -116,7 +101,6 @@ fn a_sigkill_in_a_realtime_run_is_braked_and_rejoined() {
             "600",
         ],
     );
-    await_connected(&mut launch);
     std::thread::sleep(Duration::from_secs(3));
     let pid = kill_agent(&t.run, 1, &mut launch);
     await_rejoin(&mut launch, 1, pid);
@@ -194,19 +178,8 @@ fn hung_and_late_agents_are_braked() {
 fn agents_exit_cleanly_when_the_world_dies() {
     use std::time::Instant;
     let t = ProcessTest::start("world_dies", LIMIT);
-    let scenario_path = t.case1(600.0);
-    let scenario = formation_world::Scenario::from_path(&scenario_path).expect("scenario");
-    let specs = t.path().join("run-specs.json");
-    let spec = scenario.run_spec(scenario.seed(), 0);
-    std::fs::write(&specs, serde_json::to_vec(&[spec]).expect("specs JSON")).expect("specs");
-
-    let mut world = Command::new(&t.bins().world);
-    world
-        .args(["--run-id", t.run.as_str(), "--pace-ms", "20"])
-        .arg("--run-specs")
-        .arg(&specs)
-        .arg("--out")
-        .arg(t.out());
+    let mut world = t.world_by_hand(600.0, &t.out());
+    world.args(["--pace-ms", "20"]);
     let secret = formation_tests::launch_secret();
     let mut world = LiveProcess::spawn_with_secret(world, &secret);
     let mut agents: Vec<LiveProcess> = (0..3)
@@ -254,8 +227,7 @@ fn agents_exit_cleanly_when_the_world_dies() {
 #[test]
 fn a_killed_world_ends_the_launch_cleanly() {
     let t = ProcessTest::start("world_killed_launch", LIMIT);
-    let mut launch = launch(&t.run, &t.dir, 600.0, &["--pace-ms", "20"]);
-    await_connected(&mut launch);
+    let launch = t.connected_launch(600.0, &["--pace-ms", "20"]);
     std::thread::sleep(Duration::from_millis(300));
     let world = world_pid(&t.run).expect("the world process runs");
     let status = Command::new("kill")

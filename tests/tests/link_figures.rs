@@ -102,18 +102,7 @@ fn across_a_delaying_relay_the_round_trip_is_both_delays_and_the_degraded_link_i
         "26",
     ]);
     let mut relay = start_relay(relay);
-    let mut command = t.formation_run(
-        &scenario,
-        &["--transport", "zenoh", "--listen", &listen, "--remote", "1"],
-    );
-    command
-        .args(["--clock", "realtime", "--credentials"])
-        .arg(&creds);
-    let mut launch = LiveProcess::spawn(command);
-    let waiting = launch.wait_for_line(Duration::from_secs(60), |l| {
-        l.contains("waiting for the remote agents of robots [1]")
-    });
-    assert!(waiting.is_some(), "{}", launch.describe());
+    let launch = t.launch_awaiting_remote(&scenario, &listen, 1, &creds, &["--clock", "realtime"]);
     let mut agent = Command::new(&t.bins().agent);
     agent
         .args(["--transport", "zenoh", "--connect"])

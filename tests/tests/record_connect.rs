@@ -20,7 +20,7 @@ use std::time::Duration;
 use formation_proto::wire::RunId;
 use formation_tests::{
     AgentGate, LiveProcess, ProcessTest, assert_none_counted, assert_recorded_from_the_start,
-    await_connected, await_line, await_recorder_connected, binaries, case1_scenario, count_samples,
+    await_connected, await_recorder_connected, binaries, case1_scenario, count_samples,
     finish_with_remote_agent, formation_run, free_tcp_port, mcap_readers, raw_client, read_json,
     remote_zenoh_agent, run, send_signal, test_model, world_pid, zenoh_credentials,
 };
@@ -56,17 +56,14 @@ fn a_live_team_recorded_from_outside_equals_its_own_recording() {
     let listen = t.endpoint();
     let own = t.path().join("own.mcap");
     let outside = t.path().join("outside.mcap");
-    let mut command = t.formation_run(
+    let own_text = own.to_str().expect("a UTF-8 path");
+    let launch = t.launch_awaiting_remote(
         &scenario,
-        &["--transport", "zenoh", "--listen", &listen, "--remote", "2"],
+        &listen,
+        2,
+        &creds,
+        &["--clock", "lockstep", "--record", own_text],
     );
-    command
-        .args(["--clock", "lockstep", "--credentials"])
-        .arg(&creds)
-        .arg("--record")
-        .arg(&own);
-    let mut launch = LiveProcess::spawn(command);
-    await_line(&mut launch, "waiting for the remote agents of robots [2]");
 
     // Refused without the recorder login: none at all, or an agent's.
     let refused = run(

@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 
 use formation_proto::wire::RunId;
 use formation_tests::{
-    LaunchSecret, LiveProcess, ProcessTest, RobotLog, TempDir, agent_pids, await_connected,
-    await_rejoin, case1_scenario, formation_run, run, send_signal, the_agent, world_pid,
+    LaunchSecret, LiveProcess, ProcessTest, RobotLog, TempDir, agent_pids, await_rejoin,
+    case1_scenario, formation_run, run, send_signal, the_agent, world_pid,
 };
 use formation_transport_iceoryx2::naming::RunNamespace;
 use rand::{Rng, SeedableRng};
@@ -23,10 +23,6 @@ fn run_command(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -
     formation_run(run_id, &scenario, &dir.path().join("out"), extra)
 }
 
-fn launch(run_id: &RunId, dir: &TempDir, duration_s: f64, extra: &[&str]) -> LiveProcess {
-    LiveProcess::spawn(run_command(run_id, dir, duration_s, extra))
-}
-
 fn alive(pid: u32) -> bool {
     std::path::Path::new(&format!("/proc/{pid}")).exists()
 }
@@ -36,8 +32,7 @@ fn alive(pid: u32) -> bool {
 #[test]
 fn harmless_signals_to_an_agent_do_not_end_it() {
     let t = ProcessTest::start("harmless_signals", LIMIT);
-    let mut launch = launch(&t.run, &t.dir, 8.0, &["--clock", "realtime"]);
-    await_connected(&mut launch);
+    let mut launch = t.connected_launch(8.0, &["--clock", "realtime"]);
     std::thread::sleep(Duration::from_millis(1500));
     let agent = the_agent(&t.run, 1, &mut launch);
     for name in ["CONT", "USR1", "URG", "CONT", "USR1"] {
@@ -65,8 +60,7 @@ fn harmless_signals_to_an_agent_do_not_end_it() {
 #[test]
 fn stopped_and_continued_processes_are_survived() {
     let t = ProcessTest::start("stop_continue", LIMIT);
-    let mut launch = launch(&t.run, &t.dir, 14.0, &["--clock", "realtime"]);
-    await_connected(&mut launch);
+    let mut launch = t.connected_launch(14.0, &["--clock", "realtime"]);
     std::thread::sleep(Duration::from_millis(1000));
     let world = world_pid(&t.run).expect("the world's pid");
     send_signal(world, "STOP");
@@ -117,8 +111,7 @@ fn stopped_and_continued_processes_are_survived() {
 #[test]
 fn an_agent_that_exits_mid_run_is_restarted() {
     let t = ProcessTest::start("exit_restart", LIMIT);
-    let mut launch = launch(&t.run, &t.dir, 8.0, &["--clock", "realtime"]);
-    await_connected(&mut launch);
+    let mut launch = t.connected_launch(8.0, &["--clock", "realtime"]);
     std::thread::sleep(Duration::from_millis(1000));
     let old = the_agent(&t.run, 0, &mut launch);
     send_signal(old, "TERM");
@@ -218,8 +211,7 @@ fn two_launches_with_one_run_id_exactly_one_wins() {
 fn the_runs_shared_memory_is_private_to_its_user() {
     use std::os::unix::fs::PermissionsExt;
     let t = ProcessTest::start("file_modes", LIMIT);
-    let mut launch = launch(&t.run, &t.dir, 10.0, &["--pace-ms", "20"]);
-    await_connected(&mut launch);
+    let launch = t.connected_launch(10.0, &["--pace-ms", "20"]);
     std::thread::sleep(Duration::from_millis(300));
     let namespace = RunNamespace::new(&t.run);
     let files = namespace.leftovers();
@@ -249,8 +241,7 @@ fn the_runs_shared_memory_is_private_to_its_user() {
 #[test]
 fn a_dead_launchs_leftovers_are_removed_by_the_next_launch() {
     let t = ProcessTest::start("leftovers", LIMIT);
-    let mut first = launch(&t.run, &t.dir, 60.0, &["--pace-ms", "20"]);
-    await_connected(&mut first);
+    let first = t.connected_launch(60.0, &["--pace-ms", "20"]);
     let world = world_pid(&t.run).expect("the world's pid");
     send_signal(first.id(), "KILL");
     let _ = first.finish(LIMIT);
@@ -276,21 +267,10 @@ fn a_dead_launchs_leftovers_are_removed_by_the_next_launch() {
 #[test]
 fn leftovers_with_live_processes_are_not_touched() {
     let t = ProcessTest::start("live_leftovers", LIMIT);
-    let scenario = formation_world::Scenario::from_path(&t.case1(5.0)).expect("scenario");
-    let specs = t.path().join("run-specs.json");
-    std::fs::write(
-        &specs,
-        serde_json::to_vec(&[scenario.run_spec(1, 0)]).expect("specs JSON"),
-    )
-    .expect("specs");
-    let mut world = Command::new(&t.bins().world);
+    let mut world = t.world_by_hand(5.0, &t.path().join("world-out"));
     world
-        .args(["--run-id", t.run.as_str(), "--exit-on-stdin-close"])
-        .args(["--startup-timeout-ms", "600000"])
-        .arg("--run-specs")
-        .arg(&specs)
-        .arg("--out")
-        .arg(t.path().join("world-out"));
+        .arg("--exit-on-stdin-close")
+        .args(["--startup-timeout-ms", "600000"]);
     let mut world = LiveProcess::spawn_with_secret(world, &LaunchSecret::generate().unwrap());
     let listening = world.wait_for_line(Duration::from_secs(60), |l| l.contains("listening"));
     assert!(listening.is_some(), "{}", world.describe());
@@ -317,9 +297,7 @@ fn a_hundred_sigkills_in_realtime_each_end_in_a_rejoin() {
     const KILLS: usize = 100;
     const STALE_MS: u64 = 150;
     let stale = STALE_MS.to_string();
-    let mut launch = launch(
-        &t.run,
-        &t.dir,
+    let mut launch = t.connected_launch(
         // 100 kills took 39 s on a 2-core machine; the run lasts long enough for them.
         100.0,
         &[
@@ -335,7 +313,6 @@ fn a_hundred_sigkills_in_realtime_each_end_in_a_rejoin() {
             "20",
         ],
     );
-    await_connected(&mut launch);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(100);
     let started = Instant::now();
     for _ in 0..KILLS {

@@ -389,9 +389,10 @@ fn assert_every_step_identical(report: &Value) {
 /// with formation-record's own writer in that order; real ONNX Runtime decides.
 #[test]
 fn a_step_that_precedes_its_swap_record_waits_for_it() {
+    use formation_proto::SwapDone;
     use formation_proto::model_id::model_id;
     use formation_proto::{Goal, NeighbourRule, Pose, WheelCmd};
-    use formation_record::{RecordingFile, SentCommand, SwapEvent, TeamSetup, TickRecord};
+    use formation_record::{RecordingFile, SentCommand, TeamSetup, TickRecord};
 
     let t = ProcessTest::start("replay_held", LIMIT);
     let first = t.path().join("first.onnx");
@@ -439,13 +440,13 @@ fn a_step_that_precedes_its_swap_record_waits_for_it() {
         recording.write_tick(&tick(k, id(&first))).unwrap();
     }
     recording.write_tick(&tick(3, id(&second))).unwrap();
-    let swap = SwapEvent {
+    let swap = SwapDone {
         robot: 0,
         tick: 3,
         request_id: 1,
         model_id: id(&second),
         path: Some(second.clone()),
-        bytes: None,
+        model: None,
     };
     recording.write_swap(&swap).unwrap();
     recording.write_tick(&tick(4, id(&second))).unwrap();

@@ -55,14 +55,15 @@ fn assert_json_close(over: &serde_json::Value, reference: &serde_json::Value, at
     }
 }
 
-/// The shipped model, which makes case 1 converge.
+/// The shipped model, which makes case 1 converge: the pair network (issue 34), detected
+/// neighbours in, a formation velocity out.
 fn shipped_model() -> std::path::PathBuf {
     repo_root().join("onnx/models/policy.onnx")
 }
 
-/// The pair network (issue 34): detected neighbours in, a formation velocity out.
-fn pair_model() -> std::path::PathBuf {
-    repo_root().join("onnx/models/pair/policy.onnx")
+/// The previous default (issue 22): an image network that answers wheel speeds.
+fn image_model() -> std::path::PathBuf {
+    repo_root().join("onnx/models/wide-head/policy.onnx")
 }
 
 /// `formation eval` in-process of `scenario`'s first run with `model`, its summary JSON.
@@ -119,12 +120,12 @@ fn lockstep_case1_through_ros2_gives_the_in_process_table() {
     assert_lockstep_case1_gives_the_in_process_table(&t, &shipped_model());
 }
 
-/// Issue 34: a model that takes detected neighbours and answers a formation velocity drives a
-/// ROS 2 team as the shipped model does, to in-process evaluation's Table I JSON.
+/// A model that takes the image alone and answers wheel speeds (the default until issue 34)
+/// drives a ROS 2 team as the shipped pair network does, to in-process evaluation's Table I JSON.
 #[test]
-fn the_pair_network_drives_a_ros2_team_to_the_in_process_table() {
-    let t = ProcessTest::start("ros2_team_pair", LIMIT);
-    assert_lockstep_case1_gives_the_in_process_table(&t, &pair_model());
+fn an_image_network_drives_a_ros2_team_to_the_in_process_table() {
+    let t = ProcessTest::start("ros2_team_image", LIMIT);
+    assert_lockstep_case1_gives_the_in_process_table(&t, &image_model());
 }
 
 /// Lockstep case 1 with `model` through the ROS 2 path converges, gives in-process evaluation's

@@ -3,6 +3,7 @@
 //! ends in a clear error and a clean shutdown.
 
 use std::io::{BufRead, BufReader};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -10,8 +11,9 @@ use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
 use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, robot_service_name};
 use formation_robot_agent::decision::PolicyController;
 use formation_tests::{
-    ProcessTest, RobotLog, assert_bit_identical, incarnations, launch_secret,
-    lockstep_over_processes, repo_root, report_command, run, run_with_input, test_model,
+    ProcessTest, RobotLog, assert_bit_identical, formation_run_with_model, incarnations,
+    launch_secret, lockstep_over_processes, repo_root, report_command, run, run_with_input,
+    test_model,
 };
 use formation_transport_iceoryx2::naming::ServiceLimits;
 use formation_world::{Scenario, run_episode};
@@ -99,26 +101,9 @@ fn a_sixteen_robot_team_of_the_shipped_policy_in_lockstep_is_bit_identical_to_in
 )]
 fn a_second_scan_reader_or_command_writer_is_refused() {
     let t = ProcessTest::start("decentralisation", LIMIT);
-    let scenario = Scenario::from_path(&t.case1(5.0)).expect("scenario");
-    let specs = t.path().join("specs.json");
-    std::fs::write(
-        &specs,
-        serde_json::to_vec(&[scenario.run_spec(1, 0)]).unwrap(),
-    )
-    .unwrap();
-
-    let mut world = Command::new(&t.bins().world)
-        .args([
-            "--run-id",
-            t.run.as_str(),
-            "--exit-on-stdin-close",
-            "--startup-timeout-ms",
-            "60000",
-        ])
-        .arg("--run-specs")
-        .arg(&specs)
-        .arg("--out")
-        .arg(t.out())
+    let mut world = t
+        .world_by_hand(5.0, &t.out())
+        .args(["--exit-on-stdin-close", "--startup-timeout-ms", "60000"])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .spawn()
@@ -271,19 +256,8 @@ fn formation_run_leaves_no_shared_memory_behind() {
 #[test]
 fn a_missing_model_is_a_clear_error() {
     let t = ProcessTest::start("missing_model", LIMIT);
-    let mut command = Command::new(&t.bins().cli);
-    command
-        .args([
-            "run",
-            "--run-id",
-            t.run.as_str(),
-            "--model",
-            "/nonexistent/policy.onnx",
-        ])
-        .arg("--scenario")
-        .arg(t.case1(1.0))
-        .arg("--out")
-        .arg(t.out());
+    let missing = Path::new("/nonexistent/policy.onnx");
+    let command = formation_run_with_model(&t.run, &t.case1(1.0), missing, &t.out(), &[]);
     run(command, LIMIT).assert_failure_mentioning("/nonexistent/policy.onnx");
     t.assert_clean();
 }

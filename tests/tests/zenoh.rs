@@ -13,9 +13,9 @@ use std::process::Command;
 use std::time::Duration;
 
 use formation_tests::{
-    LiveProcess, ProcessTest, assert_none_counted, await_connected, await_line, binaries,
-    count_samples, finish_with_remote_agent, formation_run, launch_secret, policy_eval, raw_client,
-    read_json, remote_zenoh_agent, run, run_with_input, test_model, zenoh_credentials,
+    LiveProcess, ProcessTest, assert_none_counted, await_connected, binaries, count_samples,
+    finish_with_remote_agent, formation_run, launch_secret, policy_eval, raw_client, read_json,
+    remote_zenoh_agent, run, run_with_input, test_model, zenoh_credentials,
 };
 
 const LIMIT: Duration = Duration::from_secs(180);
@@ -122,12 +122,8 @@ fn eval_over_zenoh_writes_the_same_json_as_in_process() {
 fn an_agent_with_an_unreachable_endpoint_names_it() {
     let t = ProcessTest::start("zenoh_unreachable", LIMIT);
     let nowhere = t.endpoint();
-    let mut agent = Command::new(&binaries().agent);
-    agent
-        .args(["--transport", "zenoh", "--connect", &nowhere])
-        .args(["--run-id", t.run.as_str(), "--robot", "0"])
-        .args(["--connect-timeout-ms", "1500", "--model"])
-        .arg(test_model());
+    let mut agent = remote_zenoh_agent(&nowhere, &t.run, 0);
+    agent.args(["--connect-timeout-ms", "1500"]);
     run_with_input(agent, Some(&launch_secret().to_line()), LIMIT)
         .assert_failure_mentioning(&format!("cannot reach the world at {nowhere}"));
 }
@@ -227,15 +223,7 @@ fn a_remote_agent_joins_with_its_credentials_and_an_impostor_gets_nothing() {
     let scenario = t.case1(4.0);
     let creds = zenoh_credentials(t.path(), 3);
     let listen = t.endpoint();
-    let mut command = t.formation_run(
-        &scenario,
-        &["--transport", "zenoh", "--listen", &listen, "--remote", "2"],
-    );
-    command
-        .args(["--clock", "realtime", "--credentials"])
-        .arg(&creds);
-    let mut launch = LiveProcess::spawn(command);
-    await_line(&mut launch, "waiting for the remote agents of robots [2]");
+    let launch = t.launch_awaiting_remote(&scenario, &listen, 2, &creds, &["--clock", "realtime"]);
     // Robots 0 and 1 are local and connect; give them time to be admitted.
     std::thread::sleep(Duration::from_secs(3));
 
@@ -296,16 +284,13 @@ fn an_agent_with_wrong_or_missing_credentials_is_refused_with_the_reason() {
     let other_run = t.path().join("other-run");
     let others = zenoh_credentials(&other_run, 3);
     let listen = t.endpoint();
-    let mut command = t.formation_run(
+    let launch = t.launch_awaiting_remote(
         &scenario,
-        &["--transport", "zenoh", "--listen", &listen, "--remote", "2"],
+        &listen,
+        2,
+        &creds,
+        &["--clock", "lockstep", "--remote-timeout-s", "120"],
     );
-    command
-        .args(["--clock", "lockstep", "--remote-timeout-s", "120"])
-        .arg("--credentials")
-        .arg(&creds);
-    let mut launch = LiveProcess::spawn(command);
-    await_line(&mut launch, "waiting for the remote agents of robots [2]");
     let agent = |credentials: Option<&Path>| {
         let mut agent = remote_zenoh_agent(&listen, &t.run, 2);
         agent.args(["--connect-timeout-ms", "5000"]);

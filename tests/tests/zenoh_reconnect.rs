@@ -40,21 +40,8 @@ fn launch(
     extra: &[&str],
 ) -> (LiveProcess, String) {
     let listen = format!("tcp/127.0.0.1:{}", free_tcp_port());
-    let creds = creds.to_string_lossy();
-    let flags = [
-        ["--transport", "zenoh", "--listen", &listen, "--remote", "1"].as_slice(),
-        &["--clock", clock, "--remote-timeout-s", "60"],
-        &["--credentials", &creds],
-        extra,
-    ]
-    .concat();
-    let mut launch = LiveProcess::spawn(formation_tests::formation_run(
-        &t.run,
-        scenario,
-        &t.out(),
-        &flags,
-    ));
-    await_line(&mut launch, "waiting for the remote agents of robots [1]");
+    let flags = [&["--clock", clock, "--remote-timeout-s", "60"], extra].concat();
+    let launch = t.launch_awaiting_remote(scenario, &listen, 1, creds, &flags);
     (launch, listen)
 }
 

@@ -114,23 +114,15 @@ fn refusals_name_their_cause_within_seconds_and_deliver_nothing() {
     let creds = tls_credentials(dir.path(), "creds", 3);
     let other = tls_credentials(dir.path(), "other", 3);
     let listen = endpoint(free_tcp_port());
-    let mut command = t.formation_run(
-        &scenario,
-        &["--transport", "zenoh", "--listen", &listen, "--remote", "1"],
-    );
     // A robot whose agent never gets through (or is lost) fails the run within the watchdog,
     // with every process's output, rather than leaving the world waiting.
-    command
-        .args([
-            "--clock",
-            "realtime",
-            "--remote-timeout-s",
-            "60",
-            "--credentials",
-        ])
-        .arg(&creds);
-    let mut launch = LiveProcess::spawn(command);
-    await_line(&mut launch, "waiting for the remote agents of robots [1]");
+    let launch = t.launch_awaiting_remote(
+        &scenario,
+        &listen,
+        1,
+        &creds,
+        &["--clock", "realtime", "--remote-timeout-s", "60"],
+    );
 
     // An expired certificate of the team's own authority.
     let now = SystemTime::now();

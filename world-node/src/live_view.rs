@@ -238,6 +238,7 @@ mod server {
     }
 
     /// A live view being served.
+    #[derive(Debug)]
     pub struct LiveView {
         address: SocketAddr,
         /// Holds the channels (they close with it).
@@ -248,14 +249,6 @@ mod server {
         dropped: Arc<AtomicU64>,
         runs: u64,
         d_star: f64,
-    }
-
-    impl std::fmt::Debug for LiveView {
-        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-            f.debug_struct("LiveView")
-                .field("address", &self.address)
-                .finish_non_exhaustive()
-        }
     }
 
     impl LiveView {

@@ -344,15 +344,7 @@ impl RecordingAgents<'_, '_, '_> {
             return;
         };
         for swap in swaps {
-            let event = formation_record::SwapEvent {
-                robot: u32::try_from(swap.robot).unwrap_or(u32::MAX),
-                tick: swap.tick,
-                request_id: swap.request_id,
-                model_id: swap.model_id,
-                path: swap.path,
-                bytes: swap.model,
-            };
-            if let Err(e) = recorder.swapped(event) {
+            if let Err(e) = recorder.swapped(swap) {
                 report_recording_failure(&e);
                 self.recorder = None;
                 return;

@@ -23,20 +23,57 @@ use parry2d::shape::Ball;
 use crate::grid::{SpatialGrid, floor_to_i64};
 use crate::robot::RobotParams;
 
-/// Checks that `out` holds one range per beam of `lidar` (else panics: `buffer` holds ... ranges
-/// but the LIDAR has ... beams) and fills it with the LIDAR's max range, what a beam that hits
-/// nothing reads. Returns the max range.
-#[track_caller]
-fn start_scan(out: &mut [f32], lidar: &LidarSpec, buffer: &str) -> f64 {
-    assert_eq!(
-        out.len(),
-        lidar.beams,
-        "{buffer} holds {} ranges but the LIDAR has {} beams",
-        out.len(),
-        lidar.beams
-    );
-    out.fill(lidar.max_range as f32);
-    lidar.max_range
+/// What a scan of one robot's ring starts from, whichever way it finds the bodies.
+#[derive(Debug, Clone, Copy)]
+struct ScanStart {
+    /// The scanning robot's pose.
+    sensor: Pose,
+    /// `sensor.theta.sin_cos()`.
+    sin_heading: f64,
+    cos_heading: f64,
+    /// The LIDAR's max range \[m\] and beam count.
+    max_range: f64,
+    beams: usize,
+    /// Every body's radius \[m\].
+    radius: f64,
+}
+
+impl ScanStart {
+    /// Checks that `out` holds one range per beam of `lidar` (else panics: `buffer` holds ...
+    /// ranges but the LIDAR has ... beams) and fills it with the LIDAR's max range, what a beam
+    /// that hits nothing reads. Returns what robot `own`'s scan starts from, or `None` for a
+    /// LIDAR without beams, whose scan is then complete.
+    #[track_caller]
+    fn new(
+        poses: &[Pose],
+        own: usize,
+        params: &RobotParams,
+        lidar: &LidarSpec,
+        out: &mut [f32],
+        buffer: &str,
+    ) -> Option<ScanStart> {
+        assert_eq!(
+            out.len(),
+            lidar.beams,
+            "{buffer} holds {} ranges but the LIDAR has {} beams",
+            out.len(),
+            lidar.beams
+        );
+        out.fill(lidar.max_range as f32);
+        let sensor = poses[own];
+        if lidar.beams == 0 {
+            return None;
+        }
+        let (sin_heading, cos_heading) = sensor.theta.sin_cos();
+        Some(ScanStart {
+            sensor,
+            sin_heading,
+            cos_heading,
+            max_range: lidar.max_range,
+            beams: lidar.beams,
+            radius: params.body_radius,
+        })
+    }
 }
 
 /// Writes the noiseless ranges \[m\] of robot `own`'s LIDAR ring into `out`, given every robot's
@@ -56,16 +93,26 @@ pub fn cast_scan(
     lidar: &LidarSpec,
     out: &mut [f32],
 ) {
-    let max_range = start_scan(out, lidar, "cast_scan: the output buffer");
-    let sensor = poses[own];
-    let beams = lidar.beams;
-    if beams == 0 {
+    let Some(ScanStart {
+        sensor,
+        sin_heading,
+        cos_heading,
+        max_range,
+        beams,
+        radius,
+    }) = ScanStart::new(
+        poses,
+        own,
+        params,
+        lidar,
+        out,
+        "cast_scan: the output buffer",
+    )
+    else {
         return;
-    }
+    };
     let beam_step = TAU / beams as f64;
-    let radius = params.body_radius;
     let body = Ball::new(radius as f32);
-    let (sin_heading, cos_heading) = sensor.theta.sin_cos();
 
     for (index, other) in poses.iter().enumerate() {
         if index == own {
@@ -136,21 +183,13 @@ struct NearbyBody {
 /// * each beam is cast with the very ray cast_scan builds, by the same arithmetic;
 /// * each beam's range is the `min` of its casts, and parry's ranges are never NaN nor `-0.0`, so
 ///   the order in which the grid hands out the bodies does not matter.
-#[derive(Clone, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct TeamScanner {
     grid: SpatialGrid,
     /// The bodies that may be within reach of the sensor being scanned.
     nearby: Vec<NearbyBody>,
     start_directions: StartDirections,
     window_rays: WindowRays,
-}
-
-impl std::fmt::Debug for TeamScanner {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("TeamScanner")
-            .field("grid", &self.grid)
-            .finish_non_exhaustive()
-    }
 }
 
 impl TeamScanner {
@@ -200,27 +239,23 @@ impl TeamScanner {
         self.grid.rebuild(poses, max_range + radius);
         self.start_directions.prepare(lidar.beams);
         for (own, ranges) in out.iter_mut().enumerate() {
-            self.scan_one(poses, own, params, lidar, ranges);
+            let buffer = "TeamScanner::scan_all: a buffer";
+            if let Some(start) = ScanStart::new(poses, own, params, lidar, ranges, buffer) {
+                self.scan_one(start, own, ranges);
+            }
         }
     }
 
-    /// Robot `own`'s noiseless scan, with the grid built from `poses` and the table prepared.
-    fn scan_one(
-        &mut self,
-        poses: &[Pose],
-        own: usize,
-        params: &RobotParams,
-        lidar: &LidarSpec,
-        out: &mut [f32],
-    ) {
-        let max_range = start_scan(out, lidar, "TeamScanner::scan_all: a buffer");
-        let beams = lidar.beams;
-        if beams == 0 {
-            return;
-        }
-        let sensor = poses[own];
-        let radius = params.body_radius;
-        let (sin_heading, cos_heading) = sensor.theta.sin_cos();
+    /// Robot `own`'s noiseless scan from `start`, with the grid built from the poses and the table
+    /// prepared.
+    fn scan_one(&mut self, start: ScanStart, own: usize, out: &mut [f32]) {
+        let ScanStart {
+            sensor,
+            max_range,
+            radius,
+            ..
+        } = start;
+        let (sin_heading, cos_heading) = (start.sin_heading, start.cos_heading);
 
         // The bodies in the grid cells around the sensor, then only those that may be within reach
         // (kept without a branch: a third of them are, at random). The loose bound exceeds the
@@ -261,7 +296,7 @@ impl TeamScanner {
             return;
         }
 
-        let beam_step = TAU / beams as f64;
+        let beam_step = TAU / start.beams as f64;
         let (sin_step, cos_step) = beam_step.sin_cos();
         let window_rays = &mut self.window_rays;
         for &NearbyBody {

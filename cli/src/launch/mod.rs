@@ -969,37 +969,50 @@ pub fn eval_over_processes(
     network: &NetworkFlags,
     on_run_done: &mut dyn FnMut(usize),
 ) -> anyhow::Result<ProcessEval> {
-    eval_over_processes_recorded(
+    let evaluation = ProcessEvalRuns {
         scenario,
         base_seed,
         runs,
         default_model,
         clock,
         network,
-        (None, None),
-        on_run_done,
-    )
+    };
+    eval_over_processes_recorded(&evaluation, None, None, on_run_done)
+}
+
+/// The arguments of [`eval_over_processes`] but its progress callback: what an evaluation over
+/// processes runs, and how.
+#[derive(Debug, Clone, Copy)]
+pub struct ProcessEvalRuns<'a> {
+    /// The scenario whose runs are played.
+    pub scenario: &'a Scenario,
+    /// The base seed of the runs.
+    pub base_seed: u64,
+    /// How many runs.
+    pub runs: usize,
+    /// The model of the robots the scenario assigns none.
+    pub default_model: &'a Path,
+    /// How the world paces ticks.
+    pub clock: ClockMode,
+    /// How the agents reach the world.
+    pub network: &'a NetworkFlags,
 }
 
 /// [`eval_over_processes`], with the world recording the runs `record` asks for and serving
 /// them live on `foxglove` (`formation demo --foxglove`).
-#[expect(
-    clippy::too_many_arguments,
-    reason = "eval_over_processes' arguments and the recording's settings"
-)]
 pub fn eval_over_processes_recorded(
-    scenario: &Scenario,
-    base_seed: u64,
-    runs: usize,
-    default_model: &Path,
-    clock: ClockMode,
-    network: &NetworkFlags,
-    (record, foxglove): (
-        Option<formation_record::RecordSettings>,
-        Option<std::net::SocketAddr>,
-    ),
+    evaluation: &ProcessEvalRuns<'_>,
+    record: Option<formation_record::RecordSettings>,
+    foxglove: Option<std::net::SocketAddr>,
     on_run_done: &mut dyn FnMut(usize),
 ) -> anyhow::Result<ProcessEval> {
+    let &ProcessEvalRuns {
+        scenario,
+        base_seed,
+        clock,
+        network,
+        ..
+    } = evaluation;
     if !network.remote.is_empty() || network.credentials.is_some() {
         anyhow::bail!(
             "an evaluation over processes starts every agent itself, with fresh credentials: \
@@ -1007,14 +1020,14 @@ pub fn eval_over_processes_recorded(
         );
     }
     network.refuse_misplaced()?;
-    let models = models_per_robot(scenario, default_model)?;
+    let models = models_per_robot(scenario, evaluation.default_model)?;
     let run_id = RunId::generate();
     let work = std::env::temp_dir().join(format!("formation-eval-{run_id}"));
     let result = (|| {
         let wheels = scenario.world_config().robot.wheel_limits();
         let network = network.network(models.len(), wheels, &work.join("credentials"))?;
         let run_specs = work.join("run-specs.json");
-        write_run_specs(scenario, base_seed, 0, runs, &run_specs)?;
+        write_run_specs(scenario, base_seed, 0, evaluation.runs, &run_specs)?;
         let launch_info =
             crate::record::launch_info(scenario, base_seed, clock.as_str(), "policy", &models);
         let plan = LaunchPlan {

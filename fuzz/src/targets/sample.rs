@@ -3,9 +3,10 @@
 
 use std::path::PathBuf;
 
+use formation_proto::SwapDone;
 use formation_proto::wire::TickOutcome;
 use formation_proto::{Goal, Pose, WheelCmd};
-use formation_record::{LaunchInfo, RecordingSetup, SentCommand, SwapEvent, TickRecord};
+use formation_record::{LaunchInfo, RecordingSetup, SentCommand, TickRecord};
 use formation_world::{RunSpec, Scenario};
 
 use super::seed_error;
@@ -113,13 +114,13 @@ pub fn tick(k: u64) -> TickRecord {
 }
 
 /// A model swapped in at tick 3 on robot 1, its bytes sent over the network.
-pub fn swap() -> SwapEvent {
-    SwapEvent {
+pub fn swap() -> SwapDone {
+    SwapDone {
         robot: 1,
         tick: 3,
         request_id: 9,
         model_id: "policy-77c1".into(),
         path: Some(PathBuf::from("/elsewhere/policy.onnx")),
-        bytes: Some(b"not really onnx, but bytes the recording stores".to_vec()),
+        model: Some(b"not really onnx, but bytes the recording stores".to_vec()),
     }
 }
