@@ -73,11 +73,14 @@ impl Driver {
             Driver::Policy { models } => {
                 let refs: Vec<&Path> = models.iter().map(PathBuf::as_path).collect();
                 let world = scenario.world_config();
-                let mut policy = PolicyController::from_model_paths(&refs, world.lidar)
-                    .map_err(|source| LearningError::Policy { source })?;
                 // Each robot knows its own wheels, as a real one does: a policy that answers a
                 // formation velocity has it shaped and bounded for them.
-                policy.set_wheel_limits(world.robot.wheel_limits());
+                let policy = PolicyController::from_model_paths(
+                    &refs,
+                    world.lidar,
+                    world.robot.wheel_limits(),
+                )
+                .map_err(|source| LearningError::Policy { source })?;
                 Ok(Box::new(policy))
             }
         }

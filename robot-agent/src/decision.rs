@@ -653,23 +653,21 @@ impl PolicyController {
         }
     }
 
-    /// Loads `models[i]` for robot `i`.
+    /// Loads `models[i]` for robot `i`, each driving wheels with `wheels`' limits (what a
+    /// formation-velocity model's command is saturated into, as the agent process does).
     pub fn from_model_paths(
         models: &[&Path],
         lidar: LidarSpec,
+        wheels: WheelLimits,
     ) -> Result<PolicyController, DecisionError> {
-        let agents = models
+        let mut agents = models
             .iter()
             .map(|m| Agent::from_model_path(m, lidar))
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(PolicyController::new(agents))
-    }
-
-    /// Sets every robot's wheel limits ([`Agent::set_wheel_limits`]).
-    pub fn set_wheel_limits(&mut self, wheels: WheelLimits) {
-        for agent in self.team.pilots_mut() {
+        for agent in &mut agents {
             agent.set_wheel_limits(wheels);
         }
+        Ok(PolicyController::new(agents))
     }
 
     /// The agents, in robot order.

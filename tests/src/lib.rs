@@ -1084,9 +1084,12 @@ pub fn in_process_run(scenario: &formation_world::Scenario, index: usize) -> Tra
     use formation_robot_agent::decision::PolicyController;
     let spec = scenario.run_spec(scenario.seed(), index);
     let model = test_model();
-    let mut controller =
-        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
-            .expect("in-process agents");
+    let mut controller = PolicyController::from_model_paths(
+        &[model, model, model],
+        spec.world.lidar,
+        spec.world.robot.wheel_limits(),
+    )
+    .expect("in-process agents");
     formation_world::run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run")
 }
 
@@ -1103,9 +1106,12 @@ pub fn assert_lockstep_equals_in_process(
     let over_processes = lockstep_over_processes(scenario, 1, model);
     let spec = scenario.run_spec(scenario.seed(), 0);
     let models = vec![model; scenario.n_robots()];
-    let mut controller =
-        PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
-    controller.set_wheel_limits(spec.world.robot.wheel_limits());
+    let mut controller = PolicyController::from_model_paths(
+        &models,
+        spec.world.lidar,
+        spec.world.robot.wheel_limits(),
+    )
+    .expect("in-process agents");
     let in_process = formation_world::run_episode(&spec, &mut controller, &mut |_, _| {})
         .expect("in-process run");
     assert_eq!(

@@ -101,8 +101,12 @@ fn a_formation_velocity_team_in_lockstep_over_processes_is_bit_identical_to_in_p
     // Unshaped agents drive another run: the limit did reach the agents over processes.
     let spec = scenario.run_spec(scenario.seed(), 0);
     let models = [model.as_path(); 3];
-    let mut unshaped =
-        PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
+    let mut unshaped = PolicyController::from_model_paths(
+        &models,
+        spec.world.lidar,
+        formation_proto::WheelLimits::default(),
+    )
+    .expect("in-process agents");
     let unaware = run_episode(&spec, &mut unshaped, &mut |_, _| {}).expect("in-process run");
     assert_ne!(
         unaware.poses, in_process.poses,

@@ -43,7 +43,8 @@ fn every_reality_model_on_in_lockstep_is_bit_identical_to_in_process() {
     for (index, from_processes) in over_processes.iter().enumerate() {
         let spec = scenario.run_spec(scenario.seed(), index);
         let models = vec![model.as_path(); 5];
-        let mut controller = PolicyController::from_model_paths(&models, spec.world.lidar)
+        let wheels = spec.world.robot.wheel_limits();
+        let mut controller = PolicyController::from_model_paths(&models, spec.world.lidar, wheels)
             .expect("in-process agents");
         let in_process =
             run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");

@@ -27,11 +27,21 @@ const LIMIT: Duration = Duration::from_secs(300);
 
 /// Case 1 for 10 s with the shipped model, recorded in-process; returns the recording.
 fn record_case1(dir: &Path) -> PathBuf {
+    record_case1_with(dir, &repo_root().join("onnx/models/policy.onnx"))
+}
+
+/// [`record_case1`] with `model` on every robot.
+fn record_case1_with(dir: &Path, model: &Path) -> PathBuf {
     let scenario = case1_scenario(dir, 10.0);
     let record = dir.join("rec");
     std::fs::create_dir(&record).unwrap();
     eval_recorded(
-        &["--scenario", scenario.to_str().unwrap()],
+        &[
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--model",
+            model.to_str().unwrap(),
+        ],
         &record,
         &dir.join("out"),
     )
@@ -175,11 +185,12 @@ impl PilotMaker for FlippedPilots {
 }
 
 /// The replay library with a renderer changed by one pixel finds differing commands; with the
-/// agent's own pilots it finds none (the control).
+/// agent's own pilots it finds none (the control). The run is an image network's (the shipped
+/// pair network leaves the image unused).
 #[test]
 fn a_renderer_changed_by_one_pixel_is_caught() {
     let t = ProcessTest::start("replay_pixel", LIMIT);
-    let file = record_case1(t.path());
+    let file = record_case1_with(t.path(), &repo_root().join("onnx/models/wide-head/policy.onnx"));
     let scratch = t.path().join("scratch");
     std::fs::create_dir(&scratch).unwrap();
     let options = ReplayOptions::default();

@@ -54,8 +54,10 @@ fn lockstep_over_processes_is_bit_identical_to_in_process() {
     for (index, from_processes) in over_processes.iter().enumerate() {
         let spec = scenario.run_spec(scenario.seed(), index);
         let lidar = spec.world.lidar;
-        let mut controller = PolicyController::from_model_paths(&[model, model, model], lidar)
-            .expect("in-process agents");
+        let wheels = spec.world.robot.wheel_limits();
+        let mut controller =
+            PolicyController::from_model_paths(&[model, model, model], lidar, wheels)
+                .expect("in-process agents");
         let in_process =
             run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
         assert_eq!(in_process.poses.len(), 201, "10 s at 20 Hz");
@@ -84,8 +86,12 @@ fn a_sixteen_robot_team_of_the_shipped_policy_in_lockstep_is_bit_identical_to_in
     let spec = scenario.run_spec(scenario.seed(), 0);
     assert!(spec.world.lidar_noise.noise_std > 0.0, "a noisy LIDAR");
     let models = vec![model.as_path(); 16];
-    let mut controller =
-        PolicyController::from_model_paths(&models, spec.world.lidar).expect("in-process agents");
+    let mut controller = PolicyController::from_model_paths(
+        &models,
+        spec.world.lidar,
+        spec.world.robot.wheel_limits(),
+    )
+    .expect("in-process agents");
     let in_process = run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process run");
     assert_eq!(in_process.poses.len(), 81, "4 s at 20 Hz");
     assert_eq!(in_process.poses[0].len(), 16);

@@ -117,11 +117,17 @@ fn a_lockstep_swap_matches_the_new_model_in_process_and_bad_swaps_are_refused() 
     let scenario = Scenario::from_path(&scenario_path).expect("scenario");
     let spec = scenario.run_spec(scenario.seed(), 0);
     let lidar = spec.world.lidar;
+    let wheels = spec.world.robot.wheel_limits();
     let mut reference = SwapAt {
-        inner: PolicyController::from_model_paths(&[first, first, first], lidar).expect("agents"),
+        inner: PolicyController::from_model_paths(&[first, first, first], lidar, wheels)
+            .expect("agents"),
         robot: SWAPPED_ROBOT,
         at: SWAP_TICK,
-        second: Some(Agent::from_model_path(&second, lidar).expect("second model")),
+        second: Some({
+            let mut agent = Agent::from_model_path(&second, lidar).expect("second model");
+            agent.set_wheel_limits(wheels);
+            agent
+        }),
     };
     let in_process = run_episode(&spec, &mut reference, &mut |_, _| {}).expect("in-process run");
     let over_processes = read_trajectory(&out.join("runs/run-0000.json")).expect("run log");
@@ -129,7 +135,7 @@ fn a_lockstep_swap_matches_the_new_model_in_process_and_bad_swaps_are_refused() 
 
     // And the swap mattered: without it robot 1's later commands differ.
     let mut unswapped =
-        PolicyController::from_model_paths(&[first, first, first], lidar).expect("agents");
+        PolicyController::from_model_paths(&[first, first, first], lidar, wheels).expect("agents");
     let without = run_episode(&spec, &mut unswapped, &mut |_, _| {}).expect("in-process run");
     assert_eq!(
         without.commands[..swap_tick],

@@ -139,6 +139,19 @@ impl Rig {
             .map(|robot| self.agent(robot, connect, model))
             .collect()
     }
+
+    /// A realtime launch of case 1 for `duration_s` and its agents across the pair, the test
+    /// model on every robot, once every agent has connected and the team has driven for
+    /// `settle`.
+    fn realtime_case1(&self, duration_s: f64, settle: Duration) -> (LiveProcess, Vec<LiveProcess>) {
+        let model = test_model();
+        let scenario = self.t.case1(duration_s);
+        let mut launch = self.launch(&scenario, model, &["--clock", "realtime"]);
+        let agents = self.agents(&self.listen, model);
+        await_connected(&mut launch);
+        std::thread::sleep(settle);
+        (launch, agents)
+    }
 }
 
 fn finish_agents(agents: Vec<LiveProcess>) {
@@ -152,9 +165,12 @@ fn finish_agents(agents: Vec<LiveProcess>) {
 fn in_process(scenario: &Path, model: &Path) -> formation_world::Trajectory {
     let scenario = Scenario::from_path(scenario).expect("scenario");
     let spec = scenario.run_spec(scenario.seed(), 0);
-    let mut controller =
-        PolicyController::from_model_paths(&[model, model, model], spec.world.lidar)
-            .expect("in-process agents");
+    let mut controller = PolicyController::from_model_paths(
+        &[model, model, model],
+        spec.world.lidar,
+        spec.world.robot.wheel_limits(),
+    )
+    .expect("in-process agents");
     run_episode(&spec, &mut controller, &mut |_, _| {}).expect("in-process")
 }
 
@@ -261,12 +277,7 @@ fn realtime_case1_converges_with_delay_and_loss() {
 #[test]
 fn a_killed_remote_agent_brakes_its_robot_and_a_restarted_one_rejoins() {
     let rig = Rig::new(ProcessTest::start("netns_kill", LIMIT));
-    let model = test_model();
-    let scenario = rig.t.case1(16.0);
-    let mut launch = rig.launch(&scenario, model, &["--clock", "realtime"]);
-    let mut agents = rig.agents(&rig.listen, model);
-    await_connected(&mut launch);
-    std::thread::sleep(Duration::from_secs(3));
+    let (mut launch, mut agents) = rig.realtime_case1(16.0, Duration::from_secs(3));
     let victim = agents.remove(1);
     let killed_at = Instant::now();
     send_signal(victim.id(), "KILL");
@@ -280,7 +291,7 @@ fn a_killed_remote_agent_brakes_its_robot_and_a_restarted_one_rejoins() {
     );
     drop(victim);
     std::thread::sleep(Duration::from_millis(600));
-    let restarted = rig.agent(1, &rig.listen, model);
+    let restarted = rig.agent(1, &rig.listen, test_model());
     let rejoined = launch.wait_for_line(Duration::from_secs(60), |l| {
         l.starts_with("robot 1: agent pid") && l.contains("rejoined")
     });
@@ -309,12 +320,7 @@ fn a_killed_remote_agent_brakes_its_robot_and_a_restarted_one_rejoins() {
 #[test]
 fn a_cut_link_brakes_every_robot_and_they_drive_again_when_it_is_back() {
     let rig = Rig::new(ProcessTest::start("netns_cut", LIMIT));
-    let model = test_model();
-    let scenario = rig.t.case1(14.0);
-    let mut launch = rig.launch(&scenario, model, &["--clock", "realtime"]);
-    let agents = rig.agents(&rig.listen, model);
-    await_connected(&mut launch);
-    std::thread::sleep(Duration::from_secs(3));
+    let (launch, agents) = rig.realtime_case1(14.0, Duration::from_secs(3));
     rig.pair.set_link(false);
     std::thread::sleep(Duration::from_secs(2));
     rig.pair.set_link(true);
@@ -449,12 +455,7 @@ fn world_gone_message(robot: usize, run: &str) -> String {
 #[test]
 fn remote_agents_exit_with_a_message_when_the_world_is_killed() {
     let rig = Rig::new(ProcessTest::start("netns_world_killed", LIMIT));
-    let model = test_model();
-    let scenario = rig.t.case1(300.0);
-    let mut launch = rig.launch(&scenario, model, &["--clock", "realtime"]);
-    let agents = rig.agents(&rig.listen, model);
-    await_connected(&mut launch);
-    std::thread::sleep(Duration::from_secs(2));
+    let (launch, agents) = rig.realtime_case1(300.0, Duration::from_secs(2));
     let world = world_pid(&rig.t.run).expect("the world process runs");
     // `ip netns exec` execs the launcher in its own process.
     let launcher = launch.id();
