@@ -190,7 +190,10 @@ impl PilotMaker for FlippedPilots {
 #[test]
 fn a_renderer_changed_by_one_pixel_is_caught() {
     let t = ProcessTest::start("replay_pixel", LIMIT);
-    let file = record_case1_with(t.path(), &repo_root().join("onnx/models/wide-head/policy.onnx"));
+    let file = record_case1_with(
+        t.path(),
+        &repo_root().join("onnx/models/wide-head/policy.onnx"),
+    );
     let scratch = t.path().join("scratch");
     std::fs::create_dir(&scratch).unwrap();
     let options = ReplayOptions::default();
