@@ -280,7 +280,7 @@ fn check_writer(
     spec: &RunSpec,
     opts: &CollectOptions<'_>,
 ) -> Result<(), CollectError> {
-    let header = writer.header();
+    let settings = &writer.header().settings;
     let (occupancy, ranges, neighbours) = (&opts.occupancy, opts.ranges, opts.neighbours);
     let labels = opts.label_law();
     let mismatch = |what, dataset: &dyn std::fmt::Debug, collection: &dyn std::fmt::Debug| {
@@ -290,23 +290,23 @@ fn check_writer(
             collection: format!("{collection:?}"),
         })
     };
-    if header.occupancy != *occupancy {
-        return mismatch("occupancy settings", &header.occupancy, occupancy);
+    if settings.occupancy != *occupancy {
+        return mismatch("occupancy settings", &settings.occupancy, occupancy);
     }
-    if header.lidar != spec.world.simulated_lidar() {
-        return mismatch("LIDAR", &header.lidar, &spec.world.simulated_lidar());
+    if settings.lidar != spec.world.simulated_lidar() {
+        return mismatch("LIDAR", &settings.lidar, &spec.world.simulated_lidar());
     }
-    if header.v_train != spec.v_star {
-        return mismatch("v_train", &header.v_train, &spec.v_star);
+    if settings.v_train != spec.v_star {
+        return mismatch("v_train", &settings.v_train, &spec.v_star);
     }
-    if header.ranges != ranges {
-        return mismatch("range input", &header.ranges, &ranges);
+    if settings.ranges != ranges {
+        return mismatch("range input", &settings.ranges, &ranges);
     }
-    if header.neighbours != neighbours {
-        return mismatch("neighbour input", &header.neighbours, &neighbours);
+    if settings.neighbours != neighbours {
+        return mismatch("neighbour input", &settings.neighbours, &neighbours);
     }
-    if header.labels != labels {
-        return mismatch("label law", &header.labels, &labels);
+    if settings.labels != labels {
+        return mismatch("label law", &settings.labels, &labels);
     }
     Ok(())
 }
@@ -902,7 +902,7 @@ mod tests {
             .clone()
             .with_neighbours(opts.neighbours)
             .with_labels(opts.label_law());
-        assert!(header.labels.own_scan);
+        assert!(header.settings.labels.own_scan);
         let dir = tempfile::tempdir().expect("tempdir");
         let mut writer = DatasetWriter::create(dir.path(), header.clone()).expect("create");
         collect(&opts, &mut writer, &mut |_, _| {}).expect("collects");

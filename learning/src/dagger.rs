@@ -272,9 +272,9 @@ pub(crate) fn rollout_and_label(
         iteration: k,
         expert_share: beta,
         seed: opts.seed,
-        occupancy: writer.header().occupancy,
-        ranges: writer.header().ranges,
-        neighbours: writer.header().neighbours,
+        occupancy: writer.header().settings.occupancy,
+        ranges: writer.header().settings.ranges,
+        neighbours: writer.header().settings.neighbours,
         model,
         labels: &opts.labels,
     };
@@ -301,6 +301,7 @@ pub(crate) fn check_rollouts_match(
     scenarios: &[Scenario],
     labels: &LabelLaw,
 ) -> Result<(), LearningError> {
+    let settings = &header.settings;
     let mismatch = |what, dataset: String, rollout: String, fix| LearningError::RolloutMismatch {
         path: path.to_path_buf(),
         what,
@@ -308,10 +309,10 @@ pub(crate) fn check_rollouts_match(
         rollout,
         fix,
     };
-    if *labels != header.labels {
+    if *labels != settings.labels {
         return Err(mismatch(
             "label law",
-            header.labels.to_string(),
+            settings.labels.to_string(),
             labels.to_string(),
             "label with the law the dataset was collected with (the same --label-wheel-accel, --unshaped-labels, --label-pair-band and --own-scan-labels as its `formation collect`), or collect a new dataset",
         ));
@@ -320,24 +321,25 @@ pub(crate) fn check_rollouts_match(
         // The sensor's contract; its range noise may differ (rollouts noisier than the
         // demonstrations are a choice).
         let lidar = scenario.world_config().lidar;
-        if (lidar.beams, lidar.max_range) != (header.lidar.spec.beams, header.lidar.spec.max_range)
+        if (lidar.beams, lidar.max_range)
+            != (settings.lidar.spec.beams, settings.lidar.spec.max_range)
         {
             return Err(mismatch(
                 "LIDAR",
                 format!(
                     "{} beams of {} m",
-                    header.lidar.spec.beams, header.lidar.spec.max_range
+                    settings.lidar.spec.beams, settings.lidar.spec.max_range
                 ),
                 format!("{} beams of {} m", lidar.beams, lidar.max_range),
                 "roll out the scenario the dataset was collected with, or collect a new dataset",
             ));
         }
         match scenario.v_star().fixed() {
-            Some(v_star) if v_star == header.v_train => {}
+            Some(v_star) if v_star == settings.v_train => {}
             _ => {
                 return Err(mismatch(
                     "v*",
-                    format!("v_train {} m/s", header.v_train),
+                    format!("v_train {} m/s", settings.v_train),
                     format!("{:?}", scenario.v_star()),
                     "give the rollout scenario goal.v_star equal to the dataset's v_train",
                 ));

@@ -71,8 +71,13 @@ pub fn label_share(
     let expert_share = opts.beta.powi(opts.iteration as i32);
     let scenarios = opts.rollouts.per_team_size()?;
     // A share labels with the law the dataset was collected with.
-    let labels = RolloutLabels::for_law(dataset.labels);
-    crate::dagger::check_rollouts_match(&opts.data, &dataset, &scenarios, &dataset.labels)?;
+    let labels = RolloutLabels::for_law(dataset.settings.labels);
+    crate::dagger::check_rollouts_match(
+        &opts.data,
+        &dataset,
+        &scenarios,
+        &dataset.settings.labels,
+    )?;
     let header = PartHeader {
         dataset,
         iteration,
@@ -92,9 +97,9 @@ pub fn label_share(
         iteration: opts.iteration,
         expert_share,
         seed: opts.seed,
-        occupancy: header.dataset.occupancy,
-        ranges: header.dataset.ranges,
-        neighbours: header.dataset.neighbours,
+        occupancy: header.dataset.settings.occupancy,
+        ranges: header.dataset.settings.ranges,
+        neighbours: header.dataset.settings.neighbours,
         model: &opts.model,
         labels: &labels,
     };
@@ -202,8 +207,8 @@ mod tests {
         };
         let whole = shares_write_the_dataset_of_one_labelling(dir.path(), &with, labels);
         let reader = DatasetReader::open(&whole).unwrap();
-        assert_eq!(reader.header().neighbours, Some(input));
-        assert!(reader.header().labels.own_scan);
+        assert_eq!(reader.header().settings.neighbours, Some(input));
+        assert!(reader.header().settings.labels.own_scan);
         let samples = reader.load_all().unwrap();
         assert!(!samples.is_empty());
         assert!(samples.iter().all(|s| s.neighbours.len() == 16));

@@ -16,6 +16,7 @@
 
 pub mod contract;
 mod error;
+mod graph;
 mod model_file;
 mod policy;
 mod runtime;

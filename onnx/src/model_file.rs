@@ -68,11 +68,7 @@ mod tests {
     fn directories_fifos_and_devices_are_not_regular_files() {
         let dir = tempfile::tempdir().expect("tempdir");
         let fifo = dir.path().join("pipe.onnx");
-        let made = std::process::Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .expect("running mkfifo");
-        assert!(made.success(), "mkfifo failed");
+        formation_test_kit::make_fifo(&fifo);
         for (path, kind) in [
             (dir.path(), "a directory"),
             (fifo.as_path(), "a FIFO (named pipe)"),

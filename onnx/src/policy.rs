@@ -32,6 +32,8 @@ pub struct OnnxPolicy {
     /// Which of `inputs` is the image, the scalars, the ranges and the neighbours.
     slots: InputSlots,
     cells: usize,
+    /// Whether any node of the graph reads the occupancy image ([`OnnxPolicy::reads_image`]).
+    reads_image: bool,
 }
 
 impl OnnxPolicy {
@@ -110,12 +112,21 @@ impl OnnxPolicy {
             inputs: tensors,
             slots,
             cells,
+            reads_image: crate::graph::reads_input(&bytes, OCCUPANCY_INPUT),
         })
     }
 
     /// What the model's metadata says about its training.
     pub fn metadata(&self) -> &ModelMetadata {
         &self.metadata
+    }
+
+    /// Whether the network reads the occupancy image it declares. One that does not (the
+    /// pair-potential network reads only its neighbours and scalars) still takes an image of the
+    /// declared shape, but its output is the same whatever the image holds, so a caller may skip
+    /// rendering it; [`OnnxPolicy::infer`] then leaves the image tensor as it is.
+    pub fn reads_image(&self) -> bool {
+        self.reads_image
     }
 
     /// A short id for logs: the file stem and 8 hex digits of a hash of the file's bytes.
@@ -191,7 +202,9 @@ impl OnnxPolicy {
             cells.copy_from_slice(values);
             Ok(())
         };
-        fill(self.slots.image, occupancy)?;
+        if self.reads_image {
+            fill(self.slots.image, occupancy)?;
+        }
         fill(self.slots.aux, aux)?;
         if let Some(slot) = self.slots.ranges {
             fill(slot, ranges)?;

@@ -4,7 +4,8 @@
 //! but that robot's own LIDAR scan, its own compass heading and the goal every robot is given:
 //!
 //! 1. render the occupancy image from the scan ([`formation_perception::occupancy::render`], the same function the
-//!    demonstration collector uses);
+//!    demonstration collector uses), for a model whose graph reads it
+//!    ([`PolicyBackend::reads_image`]; the pair network reads none, and gets a blank image);
 //! 2. the scalars the model declares beside the image, `aux` (the paper's
 //!    `(wrap(phi* - theta), d*)`: see [`PolicyIo`]), the scan's ranges pooled into sectors
 //!    where the model declares them ([`formation_perception::ranges::pool`], as collected), and
@@ -144,19 +145,22 @@ impl ScanTensors {
     }
 }
 
-/// Renders `scan` into the occupancy image `io` declares, pools its ranges and fills the
-/// neighbours it detects (with `builder`) where `io` takes them, under d*: one observation as a
-/// policy of `io` sees it.
+/// Renders `scan` into the occupancy image `io` declares (`image`: `None` for a policy that does
+/// not read it, [`PolicyBackend::reads_image`]), pools its ranges and fills the neighbours it
+/// detects (with `builder`) where `io` takes them, under d*: one observation as a policy of `io`
+/// sees it.
 fn render_observation(
     scan: &[f32],
     lidar: &LidarSpec,
     io: &PolicyIo,
     d_star: f64,
-    image: &mut [u8],
+    image: Option<&mut [u8]>,
     tensors: &mut ScanTensors,
     builder: &mut NeighbourInputBuilder,
 ) {
-    occupancy::render_at(scan, lidar, &io.image, d_star, image);
+    if let Some(image) = image {
+        occupancy::render_at(scan, lidar, &io.image, d_star, image);
+    }
     if let Some(spec) = &io.ranges {
         ranges::pool(scan, lidar, spec, d_star, &mut tensors.ranges);
     }
@@ -210,6 +214,11 @@ pub trait PolicyBackend: Send {
     fn envelope(&self) -> formation_onnx::ModelEnvelope {
         formation_onnx::ModelEnvelope::default()
     }
+    /// Whether its output depends on the image at all. One that does not still takes an image
+    /// of the declared shape, but the agent leaves it blank instead of rendering it every tick.
+    fn reads_image(&self) -> bool {
+        true
+    }
 }
 
 /// Refuses a goal d* outside `policy`'s trained d* range.
@@ -244,6 +253,9 @@ impl PolicyBackend for OnnxPolicy {
     fn model_id(&self) -> &str {
         OnnxPolicy::model_id(self)
     }
+    fn reads_image(&self) -> bool {
+        OnnxPolicy::reads_image(self)
+    }
 }
 
 /// One robot's decision maker: its policy, its sensor settings, reusable image buffers, the goal
@@ -252,6 +264,9 @@ pub struct Agent {
     policy: Box<dyn PolicyBackend>,
     /// The policy's declared input and output, read once from it.
     io: PolicyIo,
+    /// Whether the policy reads its image ([`PolicyBackend::reads_image`]): the image is
+    /// rendered only then, and otherwise stays blank.
+    reads_image: bool,
     lidar: LidarSpec,
     image: Vec<u8>,
     image_f32: Vec<f32>,
@@ -280,6 +295,7 @@ impl Agent {
         let io = policy.io();
         let cells = cells(&io.image);
         Ok(Agent {
+            reads_image: policy.reads_image(),
             policy,
             io,
             lidar,
@@ -358,12 +374,14 @@ impl Agent {
             &self.lidar,
             &self.io,
             d_star,
-            &mut self.image,
+            self.reads_image.then_some(&mut self.image[..]),
             &mut self.tensors,
             &mut self.neighbour_builder,
         );
-        for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
-            *dst = f32::from(src);
+        if self.reads_image {
+            for (dst, &src) in self.image_f32.iter_mut().zip(&self.image) {
+                *dst = f32::from(src);
+            }
         }
     }
 
@@ -435,7 +453,8 @@ impl Agent {
         self.decide(heading)
     }
 
-    /// The occupancy image of the last [`Agent::perceive`] (u8 cells, row-major).
+    /// The occupancy image of the last [`Agent::perceive`] (u8 cells, row-major); blank for a
+    /// policy that does not read it ([`PolicyBackend::reads_image`]).
     pub fn image(&self) -> &[u8] {
         &self.image
     }
@@ -469,6 +488,7 @@ impl Agent {
             check_goal_envelope(policy.as_ref(), goal.d_star)?;
         }
         let io = policy.io();
+        let reads_image = policy.reads_image();
         let n = cells(&io.image);
         let mut image = vec![0u8; n];
         let mut trial_tensors = ScanTensors::empty(&io);
@@ -479,7 +499,7 @@ impl Agent {
                     &self.lidar,
                     &io,
                     goal.d_star,
-                    &mut image,
+                    reads_image.then_some(&mut image[..]),
                     &mut trial_tensors,
                     &mut self.neighbour_builder,
                 );
@@ -497,6 +517,10 @@ impl Agent {
         trial_run(policy.as_mut(), &trial, observation)?;
         self.image.resize(n, 0);
         self.image_f32.resize(n, 0.0);
+        if !reads_image {
+            self.image.fill(0);
+            self.image_f32.fill(0.0);
+        }
         self.tensors = trial_tensors;
         if let Some((heading, _)) = self.last_decision {
             let goal = self.held_goal().unwrap_or(TRIAL_GOAL);
@@ -504,6 +528,7 @@ impl Agent {
         }
         self.policy = policy;
         self.io = io;
+        self.reads_image = reads_image;
         Ok(())
     }
 }
@@ -700,6 +725,8 @@ mod tests {
         d_star: Option<(f64, f64)>,
         /// How often its envelope was read: the goal checks.
         envelope_reads: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+        /// Says it does not read its image ([`PolicyBackend::reads_image`]).
+        blind: bool,
     }
 
     impl PolicyBackend for Probe {
@@ -738,6 +765,9 @@ mod tests {
                 ..formation_onnx::ModelEnvelope::default()
             }
         }
+        fn reads_image(&self) -> bool {
+            !self.blind
+        }
     }
 
     fn probe() -> Box<Probe> {
@@ -751,7 +781,40 @@ mod tests {
             seen: None,
             d_star: None,
             envelope_reads: Default::default(),
+            blind: false,
         })
+    }
+
+    /// A policy that does not read its image is handed a blank one: nothing is rendered for it,
+    /// and a swap to it from one that reads clears what the last one saw.
+    #[test]
+    fn a_policy_that_reads_no_image_is_handed_a_blank_one() {
+        let lidar = LidarSpec::default();
+        let mut scan = vec![lidar.max_range as f32; lidar.beams];
+        scan[..20].fill(1.0); // a neighbour ahead, 1 m away
+        let goal = Goal {
+            phi_star: 0.0,
+            d_star: 1.5,
+            v_star: 0.5,
+        };
+        let occupied = |agent: &Agent| agent.image().iter().filter(|&&c| c != 0).count();
+        let mut agent = Agent::new(probe(), lidar).expect("probe matches the sensor");
+        let seeing = agent.act(&scan, 0.0, &goal).expect("decides").right;
+        assert!(
+            occupied(&agent) > 0 && seeing > 0.0,
+            "the seeing probe sees"
+        );
+        let mut blind = probe();
+        blind.blind = true;
+        agent.swap_policy(blind).expect("the blind probe swaps in");
+        assert_eq!(occupied(&agent), 0, "the swap clears the image");
+        let cells = agent.act(&scan, 0.0, &goal).expect("decides").right;
+        assert_eq!((occupied(&agent), cells), (0, 0.0), "nothing rendered");
+        let mut blind = probe();
+        blind.blind = true;
+        let mut agent = Agent::new(blind, lidar).expect("probe matches the sensor");
+        agent.act(&scan, 0.0, &goal).expect("decides");
+        assert_eq!(occupied(&agent), 0, "nothing rendered from the start");
     }
 
     /// Issue 35: d* is checked once, where the goal enters, not on every tick; a refused goal

@@ -1,7 +1,7 @@
 //! What every test of the workspace needs, whatever it tests: a run id of its own
-//! ([`unique_run_id`]), a scratch folder ([`TempDir`]), a watchdog that aborts a hung test
-//! ([`Watchdog`]), the one-at-a-time guard for wall-clock tests ([`one_at_a_time`]) and free
-//! loopback ports ([`free_tcp_port`], [`assert_port_free`]).
+//! ([`unique_run_id`]), a scratch folder ([`TempDir`]), a FIFO to refuse ([`make_fifo`]), a
+//! watchdog that aborts a hung test ([`Watchdog`]), the one-at-a-time guard for wall-clock tests
+//! ([`one_at_a_time`]) and free loopback ports ([`free_tcp_port`], [`assert_port_free`]).
 //!
 //! Light on purpose (it builds only `formation-proto`), so that the transport conformance suite
 //! and each transport crate's tests use it without building the rest of the workspace;
@@ -49,6 +49,21 @@ impl Drop for TempDir {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
     }
+}
+
+/// Makes a FIFO (named pipe) at `path` with `mkfifo`, for the tests that a file reader refuses
+/// one from its metadata (opening a FIFO that has no writer blocks for ever). Panics, naming
+/// `path`, when `mkfifo` cannot be run or fails.
+pub fn make_fifo(path: &Path) {
+    let status = std::process::Command::new("mkfifo")
+        .arg(path)
+        .status()
+        .unwrap_or_else(|e| panic!("running mkfifo {}: {e}", path.display()));
+    assert!(
+        status.success(),
+        "mkfifo {} failed ({status})",
+        path.display()
+    );
 }
 
 /// Aborts the whole test process if the guarded test is still running after `limit`: a hung
@@ -193,6 +208,21 @@ mod tests {
         let b = unique_run_id("same");
         assert_ne!(a, b);
         assert!(RunId::new(a.as_str()).is_ok());
+    }
+
+    #[test]
+    fn a_fifo_is_made_where_asked_and_a_failure_names_the_path() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = TempDir::new("fifo");
+        let fifo = dir.path().join("pipe");
+        make_fifo(&fifo);
+        let kind = std::fs::symlink_metadata(&fifo)
+            .expect("the FIFO")
+            .file_type();
+        assert!(kind.is_fifo(), "{kind:?}");
+        let taken = std::panic::catch_unwind(|| make_fifo(&fifo)).expect_err("the path is taken");
+        let message = taken.downcast_ref::<String>().expect("a formatted message");
+        assert!(message.contains(&fifo.display().to_string()), "{message}");
     }
 
     #[test]

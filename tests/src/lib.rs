@@ -56,7 +56,8 @@ use std::time::{Duration, Instant};
 use formation_proto::wire::RunId;
 pub use formation_runtime::auth::LaunchSecret;
 pub use formation_test_kit::{
-    SharedSetup, TempDir, Watchdog, assert_port_free, free_tcp_port, one_at_a_time, unique_run_id,
+    SharedSetup, TempDir, Watchdog, assert_port_free, free_tcp_port, make_fifo, one_at_a_time,
+    unique_run_id,
 };
 use formation_transport_iceoryx2::naming::RunNamespace;
 use formation_world::Trajectory;
@@ -67,6 +68,18 @@ pub fn repo_root() -> PathBuf {
         .parent()
         .map(Path::to_path_buf)
         .unwrap_or_default()
+}
+
+/// The shipped default model (`onnx/models/policy.onnx`): the pair network of issue 34,
+/// detected neighbours in, a formation velocity out; it reads no image.
+pub fn shipped_model() -> PathBuf {
+    repo_root().join("onnx/models/policy.onnx")
+}
+
+/// The previous default (issue 22), kept for what only an image network covers: an image
+/// network that answers wheel speeds (`onnx/models/wide-head/policy.onnx`).
+pub fn image_model() -> PathBuf {
+    repo_root().join("onnx/models/wide-head/policy.onnx")
 }
 
 /// Checks that a run leaves no iceoryx2 files behind: asserts nothing of the run exists when
@@ -1064,18 +1077,18 @@ pub fn lockstep_over_processes(
     runs: usize,
     model: &Path,
 ) -> Vec<Trajectory> {
-    use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
-    eval_over_processes(
+    use formation_cli::launch::{ClockMode, NetworkFlags, ProcessEvalRuns, eval_over_processes};
+    let evaluation = ProcessEvalRuns {
         scenario,
-        scenario.seed(),
+        base_seed: scenario.seed(),
         runs,
-        model,
-        ClockMode::Lockstep,
-        &NetworkFlags::default(),
-        &mut |_| {},
-    )
-    .expect("runs over processes")
-    .trajectories
+        default_model: model,
+        clock: ClockMode::Lockstep,
+        network: &NetworkFlags::default(),
+    };
+    eval_over_processes(&evaluation, &mut |_| {})
+        .expect("runs over processes")
+        .trajectories
 }
 
 /// Run `index` of `scenario` (from its seed) in-process, the test model on each of its three

@@ -5,7 +5,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{Finished, ProcessTest, binaries, repo_root, run, test_model};
+use formation_tests::{Finished, ProcessTest, binaries, make_fifo, repo_root, run, test_model};
 
 const LIMIT: Duration = Duration::from_secs(240);
 
@@ -315,11 +315,7 @@ fn a_model_that_is_not_a_small_regular_file_is_named_for_what_it_is() {
     let case1 = shipped_scenario("case1");
     let directory = t.path().display().to_string();
     let fifo = t.path().join("model.fifo");
-    let made = std::process::Command::new("mkfifo")
-        .arg(&fifo)
-        .status()
-        .expect("running mkfifo");
-    assert!(made.success(), "mkfifo {}", fifo.display());
+    make_fifo(&fifo);
     // A FIFO with no writer blocks a reader for ever: it must be refused from its metadata.
     let fifo = fifo.display().to_string();
     for model in [directory.as_str(), "/dev/zero", fifo.as_str()] {

@@ -4,7 +4,9 @@
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{ProcessTest, TempDir, binaries, case1_scenario, read_json, repo_root, run};
+use formation_tests::{
+    ProcessTest, TempDir, binaries, case1_scenario, read_json, run, shipped_model,
+};
 use formation_world::scenario::RobotProfile;
 
 const LIMIT: Duration = Duration::from_secs(600);
@@ -28,7 +30,7 @@ fn a_ladder_writes_every_rung_with_the_expert_and_the_policy() {
         .arg("--scenario")
         .arg(&scenario)
         .arg("--model")
-        .arg(repo_root().join("onnx/models/policy.onnx"))
+        .arg(shipped_model())
         .arg("--json")
         .arg(&json);
     let finished = run(command, LIMIT);

@@ -5,13 +5,12 @@
 use std::time::Duration;
 
 use formation_robot_agent::decision::PolicyController;
-use formation_tests::{ProcessTest, assert_bit_identical, lockstep_over_processes, repo_root};
+use formation_tests::{
+    ProcessTest, assert_bit_identical, lockstep_over_processes, repo_root, shipped_model,
+};
 use formation_world::{Scenario, run_episode};
 
 const LIMIT: Duration = Duration::from_secs(360);
-
-/// The shipped default: one policy for teams of any size (issue 10).
-const SHIPPED_MODEL: &str = "onnx/models/policy.onnx";
 
 #[test]
 fn every_reality_model_on_in_lockstep_is_bit_identical_to_in_process() {
@@ -37,7 +36,7 @@ fn every_reality_model_on_in_lockstep_is_bit_identical_to_in_process() {
     assert!(reality.compass.noise_std_deg > 0.0 && reality.compass.bias_deg != 0.0);
     assert!(reality.command_latency_ticks > 0);
 
-    let model = repo_root().join(SHIPPED_MODEL);
+    let model = shipped_model();
     let over_processes = lockstep_over_processes(&scenario, 2, &model);
     assert_eq!(over_processes.len(), 2);
     for (index, from_processes) in over_processes.iter().enumerate() {

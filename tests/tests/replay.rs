@@ -18,8 +18,8 @@ use formation_robot_agent::pilot::{OnnxPilot, OnnxPilots};
 use formation_runtime::agent::{BoxError, PilotMaker};
 use formation_tests::{
     LiveProcess, ProcessTest, await_connected, binaries, case1_scenario, eval_recorded,
-    mcap_readers, read_json, record_case1_over_processes, replay, repo_root, run, test_model,
-    write_tiny_model,
+    image_model, mcap_readers, read_json, record_case1_over_processes, replay, repo_root, run,
+    shipped_model, test_model, write_tiny_model,
 };
 use serde_json::Value;
 
@@ -27,7 +27,7 @@ const LIMIT: Duration = Duration::from_secs(300);
 
 /// Case 1 for 10 s with the shipped model, recorded in-process; returns the recording.
 fn record_case1(dir: &Path) -> PathBuf {
-    record_case1_with(dir, &repo_root().join("onnx/models/policy.onnx"))
+    record_case1_with(dir, &shipped_model())
 }
 
 /// [`record_case1`] with `model` on every robot.
@@ -190,10 +190,7 @@ impl PilotMaker for FlippedPilots {
 #[test]
 fn a_renderer_changed_by_one_pixel_is_caught() {
     let t = ProcessTest::start("replay_pixel", LIMIT);
-    let file = record_case1_with(
-        t.path(),
-        &repo_root().join("onnx/models/wide-head/policy.onnx"),
-    );
+    let file = record_case1_with(t.path(), &image_model());
     let scratch = t.path().join("scratch");
     std::fs::create_dir(&scratch).unwrap();
     let options = ReplayOptions::default();

@@ -14,7 +14,7 @@ use formation_cli::launch::read_trajectory;
 use formation_tests::relay::ResettingRelay;
 use formation_tests::{
     LeakCheck, LiveProcess, ProcessTest, assert_bit_identical, binaries, formation_run_with_model,
-    free_tcp_port, repo_root,
+    free_tcp_port, shipped_model,
 };
 
 const LIMIT: Duration = Duration::from_secs(240);
@@ -53,7 +53,7 @@ fn ros2_team(
     let mut command = formation_run_with_model(
         &run_id,
         scenario,
-        &repo_root().join("onnx/models/policy.onnx"),
+        &shipped_model(),
         out,
         &[
             "--transport",

@@ -16,8 +16,8 @@ use std::time::Duration;
 
 use formation_cli::launch::read_trajectory;
 use formation_tests::{
-    ProcessTest, binaries, formation_run_with_model, free_tcp_port, policy_eval, python, read_json,
-    repo_root, run, test_model,
+    ProcessTest, binaries, formation_run_with_model, free_tcp_port, image_model, policy_eval,
+    python, read_json, repo_root, run, shipped_model, test_model,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -53,17 +53,6 @@ fn assert_json_close(over: &serde_json::Value, reference: &serde_json::Value, at
         }
         _ => assert_eq!(over, reference, "{at}"),
     }
-}
-
-/// The shipped model, which makes case 1 converge: the pair network (issue 34), detected
-/// neighbours in, a formation velocity out.
-fn shipped_model() -> std::path::PathBuf {
-    repo_root().join("onnx/models/policy.onnx")
-}
-
-/// The previous default (issue 22): an image network that answers wheel speeds.
-fn image_model() -> std::path::PathBuf {
-    repo_root().join("onnx/models/wide-head/policy.onnx")
 }
 
 /// `formation eval` in-process of `scenario`'s first run with `model`, its summary JSON.

@@ -25,7 +25,7 @@ use std::time::Duration;
 
 use formation_tests::{
     LiveProcess, ProcessTest, binaries, formation_run_with_model, free_tcp_port, python, repo_root,
-    run, tls_credentials,
+    run, shipped_model, tls_credentials,
 };
 use serde_json::Value;
 
@@ -52,13 +52,7 @@ fn ros2_tls_team(
         extra,
     ]
     .concat();
-    formation_run_with_model(
-        &t.run,
-        scenario,
-        &repo_root().join("onnx/models/policy.onnx"),
-        &t.out(),
-        &flags,
-    )
+    formation_run_with_model(&t.run, scenario, &shipped_model(), &t.out(), &flags)
 }
 
 /// A count of the reader's report (0 when absent).

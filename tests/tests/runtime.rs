@@ -7,22 +7,19 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use formation_cli::launch::{ClockMode, NetworkFlags, eval_over_processes};
+use formation_cli::launch::{ClockMode, NetworkFlags, ProcessEvalRuns, eval_over_processes};
 use formation_proto::wire::{CmdMsg, RobotChannel, ScanMsg, robot_service_name};
 use formation_robot_agent::decision::PolicyController;
 use formation_tests::{
     ProcessTest, RobotLog, assert_bit_identical, formation_run_with_model, incarnations,
     launch_secret, lockstep_over_processes, repo_root, report_command, run, run_with_input,
-    test_model,
+    shipped_model, test_model,
 };
 use formation_transport_iceoryx2::naming::ServiceLimits;
 use formation_world::{Scenario, run_episode};
 use iceoryx2::prelude::*;
 
 const LIMIT: Duration = Duration::from_secs(120);
-
-/// The shipped default: one policy for teams of any size (issue 10).
-const SHIPPED_MODEL: &str = "onnx/models/policy.onnx";
 
 /// Issue 4 (a): world + 3 agents in lockstep on case 1 with a real ONNX model reproduce the
 /// in-process run bit for bit (and the run id's files are gone afterwards).
@@ -37,17 +34,17 @@ fn lockstep_over_processes_is_bit_identical_to_in_process() {
     // in target/<profile>/deps, and the launcher also searches the directory above it.
     assert!(t.bins().world.is_file() && t.bins().agent.is_file());
     let mut progress = Vec::new();
-    let over_processes = eval_over_processes(
-        &scenario,
-        scenario.seed(),
-        2,
-        model,
-        ClockMode::Lockstep,
-        &NetworkFlags::default(),
-        &mut |n| progress.push(n),
-    )
-    .expect("runs over processes")
-    .trajectories;
+    let evaluation = ProcessEvalRuns {
+        scenario: &scenario,
+        base_seed: scenario.seed(),
+        runs: 2,
+        default_model: model,
+        clock: ClockMode::Lockstep,
+        network: &NetworkFlags::default(),
+    };
+    let over_processes = eval_over_processes(&evaluation, &mut |n| progress.push(n))
+        .expect("runs over processes")
+        .trajectories;
     assert_eq!(progress, vec![1, 2]);
     assert_eq!(over_processes.len(), 2);
 
@@ -81,7 +78,7 @@ fn a_sixteen_robot_team_of_the_shipped_policy_in_lockstep_is_bit_identical_to_in
     std::fs::write(&scenario_path, text).expect("writing the scenario");
     let scenario = Scenario::from_path(&scenario_path).expect("scenario");
     assert_eq!(scenario.n_robots(), 16);
-    let model = repo_root().join(SHIPPED_MODEL);
+    let model = shipped_model();
     let over_processes = lockstep_over_processes(&scenario, 1, &model);
     let spec = scenario.run_spec(scenario.seed(), 0);
     assert!(spec.world.lidar_noise.noise_std > 0.0, "a noisy LIDAR");

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use formation_tests::{ProcessTest, binaries, case1_scenario, repo_root, run};
+use formation_tests::{ProcessTest, binaries, case1_scenario, repo_root, run, shipped_model};
 
 /// The watchdog limit: generous, it only stops a hung test.
 const LIMIT: Duration = Duration::from_secs(300);
@@ -59,7 +59,7 @@ fn eval_drives_the_scenarios_model_unless_the_command_line_names_one() {
         named, given,
         "without --model, eval drives the scenario's model (the scaled one)"
     );
-    let shipped = repo_root().join("onnx/models/policy.onnx");
+    let shipped = shipped_model();
     let overridden = models_driven(&scenario, Some(&shipped), &t.path().join("overridden"));
     assert_ne!(
         overridden, named,

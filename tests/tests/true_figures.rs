@@ -9,7 +9,8 @@ use std::time::{Duration, Instant};
 
 use formation_tests::{
     LiveProcess, ProcessTest, Tmpfs, await_connected, binaries, expert_eval_once, files_under,
-    formation_run, formation_run_args, read_json, repo_root, report_command, run, signal_world,
+    formation_run, formation_run_args, read_json, repo_root, report_command, run, shipped_model,
+    signal_world,
 };
 use formation_world::metrics::{MetricsConfig, run_metrics};
 
@@ -28,7 +29,7 @@ fn a_run_cut_by_sighup_to_the_world_is_incomplete_and_no_success() {
     let t = ProcessTest::start("sighup_incomplete", LIMIT);
     let out = t.out();
     let scenario = repo_root().join("scenarios/case1.toml");
-    let model = repo_root().join("onnx/models/policy.onnx");
+    let model = shipped_model();
     let mut hangup_by_default = Command::new("env");
     hangup_by_default
         .arg("--default-signal=HUP")

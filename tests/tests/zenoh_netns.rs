@@ -21,7 +21,7 @@ use formation_tests::netns::{NetPair, WORLD_IP};
 use formation_tests::{
     LiveProcess, ProcessTest, RobotLog, agent_pids, assert_bit_identical, await_connected,
     binaries, formation_run_args, free_tcp_port, read_json, repo_root, run, send_signal,
-    start_relay, test_model, world_pid, zenoh_credentials,
+    shipped_model, start_relay, test_model, world_pid, zenoh_credentials,
 };
 use formation_world::{Scenario, run_episode};
 
@@ -203,7 +203,7 @@ fn lockstep_case1_across_namespaces_equals_in_process() {
 fn ten_table1_runs_across_namespaces_give_the_in_process_table() {
     let rig = Rig::new(ProcessTest::start("netns_table1", LIMIT));
     let scenario = repo_root().join("scenarios/table1.toml");
-    let model = repo_root().join("onnx/models/policy.onnx");
+    let model = shipped_model();
     let launch = rig.launch(
         &scenario,
         &model,
@@ -246,7 +246,7 @@ fn realtime_case1_converges_with_delay_and_loss() {
         "7",
     ]);
     let mut relay = start_relay(relay);
-    let model = repo_root().join("onnx/models/policy.onnx");
+    let model = shipped_model();
     // Success is judged on the final 20 s (the paper's window), so the run is longer than that.
     let scenario = rig.t.case1(30.0);
     let launch = rig.launch(&scenario, &model, &["--clock", "realtime"]);

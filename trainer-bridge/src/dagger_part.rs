@@ -311,7 +311,7 @@ pub fn write_part(path: &Path, header: &PartHeader, samples: &[Sample]) -> Resul
         ("samples".to_owned(), columns.samples().to_string()),
         ("columns_fnv1a64".to_owned(), columns.columns_fnv1a64()),
     ]);
-    let bytes = columns.encode_with(header.dataset.occupancy.size_px, metadata, path)?;
+    let bytes = columns.encode_with(header.dataset.settings.occupancy.size_px, metadata, path)?;
     formation_proto::files::write_atomic(path, &bytes)
         .map_err(io_error("writing", path))
         .map_err(PartError::from)

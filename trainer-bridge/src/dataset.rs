@@ -3,7 +3,8 @@
 //! A dataset is a directory holding `manifest.json` and shards `shard-NNNNNN.safetensors`:
 //!
 //! - The manifest carries [`DATASET_FORMAT`], the format version [`DATASET_VERSION`], the
-//!   [`DatasetHeader`] (occupancy settings, LIDAR, `v_train`, seed, scenario, `dataset_id`), one
+//!   [`DatasetHeader`] (`dataset_id` and the [`CollectionSettings`]: occupancy settings, LIDAR,
+//!   `v_train`, seed, scenario, and the ranges, neighbours and label law if any), one
 //!   [`ShardEntry`] per shard (file, samples, DAgger iteration, byte size, FNV-1a checksum) and the
 //!   total sample count.
 //! - A shard holds `occupancy` U8 `[N, S, S]`, `aux` F32 `[N, 2]` (delta_phi, d*), `wheels` F32
@@ -79,6 +80,19 @@ pub struct DatasetHeader {
     /// Layout version ([`dataset_version`] of `ranges` and `neighbours`); `version` in the
     /// manifest.
     pub format_version: u32,
+    /// The collection settings, written in place as the header's own keys.
+    #[serde(flatten)]
+    pub settings: CollectionSettings,
+    /// Deterministic id of the settings above (16 hex digits); see [`DatasetHeader::new`].
+    pub dataset_id: String,
+}
+
+/// How a dataset's samples were collected: the settings its [`DatasetHeader`] and its
+/// [`Manifest`] both hold, serialized flat (`#[serde(flatten)]`) as keys of theirs, in this
+/// order, so `manifest.json` and a part's header keep the keys and bytes they had before these
+/// fields were gathered here. Every one of them is folded into `dataset_id`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CollectionSettings {
     /// How the occupancy images were rendered.
     pub occupancy: OccupancySpec,
     /// The LIDAR the scans came from.
@@ -106,12 +120,10 @@ pub struct DatasetHeader {
         with = "declared_text"
     )]
     pub neighbours: Option<NeighbourInput>,
-    /// The law that labelled the samples ([`DatasetHeader::with_labels`]); absent for the
-    /// expert's default.
+    /// The law that labelled the samples ([`DatasetHeader::with_labels`]): `"labels": {...}`,
+    /// absent for the expert's default.
     #[serde(default, skip_serializing_if = "LabelLaw::is_default")]
     pub labels: LabelLaw,
-    /// Deterministic id of the settings above (16 hex digits); see [`DatasetHeader::new`].
-    pub dataset_id: String,
 }
 
 /// An optional model input declaration (`Option<RangeInput>`, `Option<NeighbourInput>`) as its
@@ -158,14 +170,16 @@ impl DatasetHeader {
     ) -> DatasetHeader {
         let mut header = DatasetHeader {
             format_version: DATASET_VERSION_WITHOUT_RANGES,
-            occupancy,
-            lidar,
-            v_train,
-            seed,
-            scenario: scenario.into(),
-            ranges: None,
-            neighbours: None,
-            labels: LabelLaw::default(),
+            settings: CollectionSettings {
+                occupancy,
+                lidar,
+                v_train,
+                seed,
+                scenario: scenario.into(),
+                ranges: None,
+                neighbours: None,
+                labels: LabelLaw::default(),
+            },
             dataset_id: String::new(),
         };
         header.dataset_id = header.settings_hash();
@@ -175,7 +189,7 @@ impl DatasetHeader {
     /// The same settings with samples labelled by `labels`; recomputes `dataset_id`.
     /// `with_labels(LabelLaw::default())` changes nothing.
     pub fn with_labels(mut self, labels: LabelLaw) -> DatasetHeader {
-        self.labels = labels;
+        self.settings.labels = labels;
         self.dataset_id = self.settings_hash();
         self
     }
@@ -184,8 +198,8 @@ impl DatasetHeader {
     /// ranges: sets the format version to match ([`dataset_version`]) and recomputes
     /// `dataset_id`. `with_ranges(None)` gives back exactly [`DatasetHeader::new`]'s header.
     pub fn with_ranges(mut self, ranges: Option<RangeInput>) -> DatasetHeader {
-        self.ranges = ranges;
-        self.format_version = dataset_version(ranges, self.neighbours);
+        self.settings.ranges = ranges;
+        self.format_version = dataset_version(ranges, self.settings.neighbours);
         self.dataset_id = self.settings_hash();
         self
     }
@@ -195,8 +209,8 @@ impl DatasetHeader {
     /// ([`dataset_version`]: 3 with neighbours) and recomputes `dataset_id`.
     /// `with_neighbours(None)` on a header without neighbours changes nothing.
     pub fn with_neighbours(mut self, neighbours: Option<NeighbourInput>) -> DatasetHeader {
-        self.neighbours = neighbours;
-        self.format_version = dataset_version(self.ranges, neighbours);
+        self.settings.neighbours = neighbours;
+        self.format_version = dataset_version(self.settings.ranges, neighbours);
         self.dataset_id = self.settings_hash();
         self
     }
@@ -204,11 +218,11 @@ impl DatasetHeader {
     /// Checks that the format version is the one of the header's ranges and neighbours
     /// ([`dataset_version`]).
     pub fn check(&self) -> Result<(), DatasetError> {
-        if self.format_version != dataset_version(self.ranges, self.neighbours) {
+        if self.format_version != dataset_version(self.settings.ranges, self.settings.neighbours) {
             return Err(DatasetError::InconsistentHeader {
                 version: self.format_version,
-                ranges: self.ranges,
-                neighbours: self.neighbours,
+                ranges: self.settings.ranges,
+                neighbours: self.settings.neighbours,
             });
         }
         Ok(())
@@ -216,53 +230,56 @@ impl DatasetHeader {
 
     /// Sectors of each sample's ranges: `K`, or 0 for a dataset without ranges.
     pub fn range_sectors(&self) -> usize {
-        self.ranges.map_or(0, |r| r.sectors)
+        self.settings.ranges.map_or(0, |r| r.sectors)
     }
 
     /// Slots of each sample's neighbours: `K`, or 0 for a dataset without neighbours.
     pub fn neighbour_slots(&self) -> usize {
-        self.neighbours.map_or(0, |n| n.slots)
+        self.settings.neighbours.map_or(0, |n| n.slots)
     }
 
     /// Values of each sample's neighbours: `K * features`, or 0 for a dataset without neighbours.
     pub fn neighbour_values(&self) -> usize {
-        self.neighbours.map_or(0, |n| n.len())
+        self.settings.neighbours.map_or(0, |n| n.len())
     }
 
     /// Cells in one occupancy image (`size_px^2`).
     pub fn cells(&self) -> usize {
-        self.occupancy.size_px * self.occupancy.size_px
+        self.settings.occupancy.size_px * self.settings.occupancy.size_px
     }
 
     fn settings_hash(&self) -> String {
+        let settings = &self.settings;
         let mut hash = Fnv1a64::new();
         hash.update_field(DATASET_FORMAT.as_bytes());
         hash.update_field(&self.format_version.to_le_bytes());
-        hash.update_field(&(self.occupancy.size_px as u64).to_le_bytes());
-        hash.update_field(&self.occupancy.resolution_m.to_le_bytes());
-        hash.update_field(self.occupancy.beyond.as_str().as_bytes());
+        hash.update_field(&(settings.occupancy.size_px as u64).to_le_bytes());
+        hash.update_field(&settings.occupancy.resolution_m.to_le_bytes());
+        hash.update_field(settings.occupancy.beyond.as_str().as_bytes());
         // Only a scaled window adds a field, so a fixed window's dataset id is unchanged.
-        if let Some(reference) = self.occupancy.d_star_ref_m {
+        if let Some(reference) = settings.occupancy.d_star_ref_m {
             hash.update_field(&reference.to_le_bytes());
         }
-        hash.update_field(&(self.lidar.spec.beams as u64).to_le_bytes());
-        hash.update_field(&self.lidar.spec.max_range.to_le_bytes());
-        self.lidar
+        hash.update_field(&(settings.lidar.spec.beams as u64).to_le_bytes());
+        hash.update_field(&settings.lidar.spec.max_range.to_le_bytes());
+        settings
+            .lidar
             .noise
             .hash_fields(&mut |bytes| hash.update_field(bytes));
-        hash.update_field(&self.v_train.to_le_bytes());
-        hash.update_field(&self.seed.to_le_bytes());
-        hash.update_field(self.scenario.as_bytes());
+        hash.update_field(&settings.v_train.to_le_bytes());
+        hash.update_field(&settings.seed.to_le_bytes());
+        hash.update_field(settings.scenario.as_bytes());
         // Only a dataset with ranges adds a field, so one without keeps its id.
-        if let Some(ranges) = self.ranges {
+        if let Some(ranges) = settings.ranges {
             hash.update_field(ranges.to_string().as_bytes());
         }
         // Only a dataset with neighbours adds a field, so one without keeps its id.
-        if let Some(neighbours) = self.neighbours {
+        if let Some(neighbours) = settings.neighbours {
             hash.update_field(neighbours.to_string().as_bytes());
         }
         // Only a law other than the default adds fields, so a default-labelled id is unchanged.
-        self.labels
+        settings
+            .labels
             .hash_fields(&mut |bytes| hash.update_field(bytes));
         hash.hex()
     }
@@ -270,23 +287,25 @@ impl DatasetHeader {
     /// The first field in which `self` and `other` differ, with both values, if any.
     pub(crate) fn first_difference(&self, other: &DatasetHeader) -> Option<Difference> {
         let ranges = |h: &DatasetHeader| {
-            h.ranges
+            h.settings
+                .ranges
                 .map_or_else(|| "none".to_owned(), |r| r.to_string())
         };
         let neighbours = |h: &DatasetHeader| {
-            h.neighbours
+            h.settings
+                .neighbours
                 .map_or_else(|| "none".to_owned(), |n| n.to_string())
         };
         FirstDifference::of(self, other)
             .display("range input", ranges)
             .display("neighbour input", neighbours)
-            .display("label law", |h| h.labels)
+            .display("label law", |h| h.settings.labels)
             .display("format version", |h| h.format_version)
-            .debug("occupancy settings", |h| h.occupancy)
-            .debug("LIDAR", |h| h.lidar)
-            .display("v_train", |h| h.v_train)
-            .display("seed", |h| h.seed)
-            .display("scenario", |h| &h.scenario)
+            .debug("occupancy settings", |h| h.settings.occupancy)
+            .debug("LIDAR", |h| h.settings.lidar)
+            .display("v_train", |h| h.settings.v_train)
+            .display("seed", |h| h.settings.seed)
+            .display("scenario", |h| &h.settings.scenario)
             .display("dataset_id", |h| &h.dataset_id)
             .found()
     }
@@ -342,34 +361,9 @@ pub struct Manifest {
     pub version: u32,
     /// See [`DatasetHeader::dataset_id`].
     pub dataset_id: String,
-    /// See [`DatasetHeader::occupancy`].
-    pub occupancy: OccupancySpec,
-    /// See [`DatasetHeader::lidar`].
-    pub lidar: SimulatedLidar,
-    /// See [`DatasetHeader::v_train`].
-    pub v_train: f64,
-    /// See [`DatasetHeader::seed`].
-    pub seed: u64,
-    /// See [`DatasetHeader::scenario`].
-    pub scenario: String,
-    /// See [`DatasetHeader::ranges`]: `"ranges": "sectors=K,clip=C"`, absent when none.
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        with = "declared_text"
-    )]
-    pub ranges: Option<RangeInput>,
-    /// See [`DatasetHeader::neighbours`]: `"neighbours": "slots=K,threshold=T,nearest=M"`,
-    /// absent when none.
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        with = "declared_text"
-    )]
-    pub neighbours: Option<NeighbourInput>,
-    /// See [`DatasetHeader::labels`]: `"labels": {...}`, absent for the expert's default.
-    #[serde(default, skip_serializing_if = "LabelLaw::is_default")]
-    pub labels: LabelLaw,
+    /// See [`DatasetHeader::settings`]: written in place as the manifest's own keys.
+    #[serde(flatten)]
+    pub settings: CollectionSettings,
     /// Shards in the order they were written.
     pub shards: Vec<ShardEntry>,
     /// Total samples over all shards.
@@ -382,14 +376,7 @@ impl Manifest {
             format: DATASET_FORMAT.to_owned(),
             version: header.format_version,
             dataset_id: header.dataset_id.clone(),
-            occupancy: header.occupancy,
-            lidar: header.lidar,
-            v_train: header.v_train,
-            seed: header.seed,
-            scenario: header.scenario.clone(),
-            ranges: header.ranges,
-            neighbours: header.neighbours,
-            labels: header.labels,
+            settings: header.settings.clone(),
             shards: Vec::new(),
             samples: 0,
         }
@@ -405,14 +392,7 @@ impl Manifest {
     pub fn header(&self) -> DatasetHeader {
         DatasetHeader {
             format_version: self.version,
-            occupancy: self.occupancy,
-            lidar: self.lidar,
-            v_train: self.v_train,
-            seed: self.seed,
-            scenario: self.scenario.clone(),
-            ranges: self.ranges,
-            neighbours: self.neighbours,
-            labels: self.labels,
+            settings: self.settings.clone(),
             dataset_id: self.dataset_id.clone(),
         }
     }
@@ -763,23 +743,23 @@ fn read_manifest(dir: &Path) -> Result<Manifest, DatasetError> {
         });
     }
     let manifest: Manifest = serde_json::from_value(value).map_err(|e| bad(e.to_string()))?;
-    if manifest.neighbours.is_some() != (manifest.version == DATASET_VERSION) {
+    if manifest.settings.neighbours.is_some() != (manifest.version == DATASET_VERSION) {
         return Err(DatasetError::NeighboursVersion {
             path,
             version: manifest.version,
-            neighbours: manifest.neighbours,
+            neighbours: manifest.settings.neighbours,
         });
     }
-    if manifest.version != dataset_version(manifest.ranges, manifest.neighbours) {
+    if manifest.version != dataset_version(manifest.settings.ranges, manifest.settings.neighbours) {
         return Err(DatasetError::RangesVersion {
             path,
             version: manifest.version,
-            ranges: manifest.ranges,
+            ranges: manifest.settings.ranges,
         });
     }
-    if let Some(ranges) = manifest.ranges {
+    if let Some(ranges) = manifest.settings.ranges {
         ranges
-            .check_beams(manifest.lidar.spec.beams)
+            .check_beams(manifest.settings.lidar.spec.beams)
             .map_err(|e| bad(e.to_string()))?;
     }
     let listed: usize = manifest.shards.iter().map(|s| s.samples).sum();
@@ -829,8 +809,9 @@ impl PendingShard {
             iteration: Vec::new(),
             run: Vec::new(),
             robot: Vec::new(),
-            ranges: header.ranges.map(|r| (r.sectors, Vec::new())),
+            ranges: header.settings.ranges.map(|r| (r.sectors, Vec::new())),
             neighbours: header
+                .settings
                 .neighbours
                 .map(|n| ([n.slots, n.features()], Vec::new())),
             samples: 0,
@@ -904,7 +885,7 @@ impl PendingShard {
             ("dataset_id".to_owned(), header.dataset_id.clone()),
             ("iteration".to_owned(), iteration.to_string()),
         ]);
-        self.encode_with(header.occupancy.size_px, metadata, path)
+        self.encode_with(header.settings.occupancy.size_px, metadata, path)
     }
 
     /// The safetensors file holding these samples' columns, with `metadata` as its
@@ -995,7 +976,7 @@ pub(crate) fn check_sample(
     let expected = header.cells();
     if sample.occupancy.len() != expected {
         return Err(DatasetError::SampleImageSize {
-            size_px: header.occupancy.size_px,
+            size_px: header.settings.occupancy.size_px,
             expected,
             actual: sample.occupancy.len(),
         });
@@ -1019,7 +1000,7 @@ pub(crate) fn check_sample(
     }
     if sample.ranges.len() != header.range_sectors() {
         return Err(DatasetError::SampleRanges {
-            declared: header.ranges,
+            declared: header.settings.ranges,
             actual: sample.ranges.len(),
         });
     }
@@ -1028,7 +1009,7 @@ pub(crate) fn check_sample(
     }
     if sample.neighbours.len() != header.neighbour_values() {
         return Err(DatasetError::SampleNeighbours {
-            declared: header.neighbours,
+            declared: header.settings.neighbours,
             actual: sample.neighbours.len(),
         });
     }
@@ -1058,9 +1039,9 @@ impl DatasetWriter {
     /// manifest, and a writer of iteration 0.
     pub fn create(dir: &Path, header: DatasetHeader) -> Result<DatasetWriter, DatasetError> {
         header.check()?;
-        if let Some(ranges) = header.ranges {
+        if let Some(ranges) = header.settings.ranges {
             ranges
-                .check_beams(header.lidar.spec.beams)
+                .check_beams(header.settings.lidar.spec.beams)
                 .map_err(|source| DatasetError::RangeBeams { ranges, source })?;
         }
         if dir.join(MANIFEST_FILE).exists() {
@@ -1328,7 +1309,7 @@ pub(crate) fn decode_columns(
     n: usize,
     header: &DatasetHeader,
 ) -> Result<Vec<Sample>, String> {
-    let size = header.occupancy.size_px;
+    let size = header.settings.occupancy.size_px;
     let column = |name: &str, dtype: Dtype, shape: &[usize]| -> Result<&[u8], String> {
         let view = tensors
             .tensor(name)
@@ -1349,7 +1330,7 @@ pub(crate) fn decode_columns(
     let run = column("run", Dtype::U32, &[n])?;
     let robot = column("robot", Dtype::U8, &[n])?;
     let sectors = header.range_sectors();
-    let ranges = match header.ranges {
+    let ranges = match header.settings.ranges {
         Some(_) => column("ranges", Dtype::F32, &[n, sectors])?,
         None if tensors.tensor("ranges").is_ok() => {
             return Err("a `ranges` tensor, but the manifest declares no ranges".to_owned());
@@ -1358,11 +1339,15 @@ pub(crate) fn decode_columns(
     };
     let slots = header.neighbour_slots();
     let neighbour_values = header.neighbour_values();
-    let neighbours = match header.neighbours {
+    let neighbours = match header.settings.neighbours {
         Some(_) => column(
             "neighbours",
             Dtype::F32,
-            &[n, slots, header.neighbours.map_or(0, |n| n.features())],
+            &[
+                n,
+                slots,
+                header.settings.neighbours.map_or(0, |n| n.features()),
+            ],
         )?,
         None if tensors.tensor("neighbours").is_ok() => {
             return Err(
@@ -1571,8 +1556,14 @@ pub(crate) mod tests {
         assert_eq!(header(7).dataset_id.len(), 16);
         assert_ne!(header(7).dataset_id, header(8).dataset_id);
         let mut border = header(7);
-        border.occupancy.beyond = BeyondWindow::Border;
-        let border = DatasetHeader::new(border.occupancy, border.lidar, 0.7, 7, "unit");
+        border.settings.occupancy.beyond = BeyondWindow::Border;
+        let border = DatasetHeader::new(
+            border.settings.occupancy,
+            border.settings.lidar,
+            0.7,
+            7,
+            "unit",
+        );
         assert_ne!(header(7).dataset_id, border.dataset_id);
     }
 
@@ -1637,6 +1628,44 @@ pub(crate) mod tests {
         assert_eq!(value["samples"], 3);
         assert_eq!(value["shards"][0]["file"], "shard-000000.safetensors");
         assert_eq!(value["shards"][0]["iteration"], 0);
+    }
+
+    #[test]
+    fn the_settings_keys_stand_where_they_stood_before_they_were_gathered() {
+        // `CollectionSettings` is flattened in place: the header's and the manifest's keys keep
+        // the order (and so the bytes) of when each struct held the settings itself.
+        let labels = crate::label_law::LabelLaw {
+            unshaped: true,
+            ..Default::default()
+        };
+        let header = header_with_ranges(7)
+            .with_neighbours(Some(neighbours()))
+            .with_labels(labels);
+        let settings = [
+            "occupancy",
+            "lidar",
+            "v_train",
+            "seed",
+            "scenario",
+            "ranges",
+            "neighbours",
+            "labels",
+        ];
+        let in_order = |text: &str, keys: &[&str]| {
+            let at = |key: &str| text.find(&format!("\"{key}\":"));
+            keys.windows(2).all(|pair| at(pair[0]) < at(pair[1])) && at(keys[0]).is_some()
+        };
+        let header_text = serde_json::to_string(&header).expect("json");
+        let header_keys = [&["format_version"], &settings[..], &["dataset_id"]].concat();
+        assert!(in_order(&header_text, &header_keys), "{header_text}");
+        let manifest_text = serde_json::to_string(&Manifest::empty(&header)).expect("json");
+        let manifest_keys = [
+            &["format", "version", "dataset_id"],
+            &settings[..],
+            &["shards", "samples"],
+        ]
+        .concat();
+        assert!(in_order(&manifest_text, &manifest_keys), "{manifest_text}");
     }
 
     #[test]
@@ -1853,7 +1882,7 @@ pub(crate) mod tests {
         assert_eq!(header(7).dataset_id, "6e5ecb97c951d8be");
         assert_eq!(header(7).with_ranges(None), header(7));
         assert_eq!(header(7).format_version, 1);
-        assert!(header(7).ranges.is_none());
+        assert!(header(7).settings.ranges.is_none());
         let json = serde_json::to_value(header(7)).expect("json");
         assert!(json.get("ranges").is_none(), "{json}");
         let dir = tempfile::tempdir().expect("tempdir");
@@ -2115,8 +2144,8 @@ pub(crate) mod tests {
         let too_many =
             header_with_ranges(7).with_ranges(Some(RangeInput::new(360, 3.0).expect("ranges")));
         let mut few_beams = too_many.clone();
-        few_beams.lidar.spec.beams = 100;
-        let ranges = few_beams.ranges;
+        few_beams.settings.lidar.spec.beams = 100;
+        let ranges = few_beams.settings.ranges;
         let few_beams = few_beams.with_ranges(ranges);
         assert!(matches!(
             DatasetWriter::create(dir.path(), few_beams),

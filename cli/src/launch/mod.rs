@@ -952,8 +952,8 @@ pub struct ProcessEval {
 /// because one inference was slow on a loaded machine, which would change its trajectory.
 const EVAL_COMMAND_TIMEOUT_MS: u64 = 5000;
 
-/// Evaluates `runs` runs of `scenario` (base seed `base_seed`) with every robot's policy in its
-/// own process. Robots the scenario assigns a model to run that model, the others
+/// Evaluates `evaluation.runs` runs of its scenario (from `base_seed`) with every robot's policy
+/// in its own process. Robots the scenario assigns a model to run that model, the others
 /// `default_model`. The agents reach the world as `network` says ([`NetworkFlags::network`]):
 /// over iceoryx2, or over Zenoh on the `listen` endpoint with fresh credentials made in the
 /// evaluation's temporary folder (every agent is local; `remote` and `credentials` must be
@@ -961,27 +961,13 @@ const EVAL_COMMAND_TIMEOUT_MS: u64 = 5000;
 /// In lockstep the trajectories are bit-identical to in-process evaluation, whatever the
 /// transport.
 pub fn eval_over_processes(
-    scenario: &Scenario,
-    base_seed: u64,
-    runs: usize,
-    default_model: &Path,
-    clock: ClockMode,
-    network: &NetworkFlags,
+    evaluation: &ProcessEvalRuns<'_>,
     on_run_done: &mut dyn FnMut(usize),
 ) -> anyhow::Result<ProcessEval> {
-    let evaluation = ProcessEvalRuns {
-        scenario,
-        base_seed,
-        runs,
-        default_model,
-        clock,
-        network,
-    };
-    eval_over_processes_recorded(&evaluation, None, None, on_run_done)
+    eval_over_processes_recorded(evaluation, None, None, on_run_done)
 }
 
-/// The arguments of [`eval_over_processes`] but its progress callback: what an evaluation over
-/// processes runs, and how.
+/// What an evaluation over processes runs, and how ([`eval_over_processes`]).
 #[derive(Debug, Clone, Copy)]
 pub struct ProcessEvalRuns<'a> {
     /// The scenario whose runs are played.

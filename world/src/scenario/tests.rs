@@ -747,11 +747,7 @@ fn an_oversized_file_is_refused_by_its_size() {
 fn devices_directories_and_fifos_are_refused_before_reading() {
     let dir = Scratch::new("kinds");
     let fifo = dir.path().join("pipe.toml");
-    let made = std::process::Command::new("mkfifo")
-        .arg(&fifo)
-        .status()
-        .expect("running mkfifo");
-    assert!(made.success(), "mkfifo failed");
+    formation_test_kit::make_fifo(&fifo);
     for (path, kind) in [
         (Path::new("/dev/zero"), "a character device"),
         (dir.path(), "a directory"),
