@@ -696,11 +696,7 @@ mod tests {
         TickRecord {
             tick: k,
             time: k as f64 * 0.05,
-            goal: Goal {
-                phi_star: 0.1,
-                d_star: 1.5,
-                v_star: 0.2,
-            },
+            goal: Goal::new(0.1, 1.5, 0.2),
             poses: vec![Pose::new(1.0, -2.0, 0.3); 2],
             wheel_speeds: vec![WheelCmd::default(); 2],
             scans: vec![vec![1.0, f32::INFINITY, 3.5], vec![2.0; 3]],

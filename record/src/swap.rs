@@ -237,11 +237,7 @@ mod tests {
         crate::TickRecord {
             tick: k,
             time: k as f64 * 0.05,
-            goal: Goal {
-                phi_star: 0.0,
-                d_star: 1.0,
-                v_star: 0.2,
-            },
+            goal: Goal::new(0.0, 1.0, 0.2),
             poses: vec![Pose::new(0.0, 0.0, 0.0); 2],
             wheel_speeds: vec![WheelCmd::default(); 2],
             scans: vec![vec![1.0; 4]; 2],

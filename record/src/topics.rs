@@ -371,11 +371,7 @@ mod tests {
         TickRecord {
             tick: 3,
             time: 0.15,
-            goal: Goal {
-                phi_star: 0.5,
-                d_star: 1.0,
-                v_star: 0.7,
-            },
+            goal: Goal::new(0.5, 1.0, 0.7),
             poses: (0..n)
                 .map(|i| Pose {
                     x: i as f64,

@@ -436,11 +436,7 @@ fn a_step_that_precedes_its_swap_record_waits_for_it() {
     let tick = |k: u64, model: String| TickRecord {
         tick: k,
         time: k as f64 * 0.05,
-        goal: Goal {
-            phi_star: 0.0,
-            d_star: 1.0,
-            v_star: 0.2,
-        },
+        goal: Goal::new(0.0, 1.0, 0.2),
         poses: vec![Pose::new(0.0, 0.0, 0.1)],
         wheel_speeds: vec![WheelCmd::default()],
         scans: vec![vec![2.0; 900]],

@@ -998,23 +998,39 @@ pub(crate) fn check_sample(
     if !sample.wheels.iter().all(|w| w.is_finite()) {
         return Err(non_finite("wheels label"));
     }
-    if sample.ranges.len() != header.range_sectors() {
-        return Err(DatasetError::SampleRanges {
-            declared: header.settings.ranges,
-            actual: sample.ranges.len(),
-        });
+    let wrong_ranges = |actual| DatasetError::SampleRanges {
+        declared: header.settings.ranges,
+        actual,
+    };
+    let wrong_neighbours = |actual| DatasetError::SampleNeighbours {
+        declared: header.settings.neighbours,
+        actual,
+    };
+    check_optional_input(&sample.ranges, header.range_sectors(), wrong_ranges, || {
+        non_finite("ranges")
+    })?;
+    check_optional_input(
+        &sample.neighbours,
+        header.neighbour_values(),
+        wrong_neighbours,
+        || non_finite("neighbours"),
+    )
+}
+
+/// Refuses the `values` of a sample's optional input (its ranges or its neighbours) unless there
+/// are `expected` of them, all finite: `wrong_count` is the error for the count found, and
+/// `non_finite` the error for a NaN or an infinity.
+fn check_optional_input(
+    values: &[f32],
+    expected: usize,
+    wrong_count: impl FnOnce(usize) -> DatasetError,
+    non_finite: impl FnOnce() -> DatasetError,
+) -> Result<(), DatasetError> {
+    if values.len() != expected {
+        return Err(wrong_count(values.len()));
     }
-    if !sample.ranges.iter().all(|r| r.is_finite()) {
-        return Err(non_finite("ranges"));
-    }
-    if sample.neighbours.len() != header.neighbour_values() {
-        return Err(DatasetError::SampleNeighbours {
-            declared: header.settings.neighbours,
-            actual: sample.neighbours.len(),
-        });
-    }
-    if !sample.neighbours.iter().all(|v| v.is_finite()) {
-        return Err(non_finite("neighbours"));
+    if !values.iter().all(|v| v.is_finite()) {
+        return Err(non_finite());
     }
     Ok(())
 }
@@ -1810,11 +1826,13 @@ pub(crate) mod tests {
     fn a_missing_shard_is_reported() {
         let dir = tempfile::tempdir().expect("tempdir");
         write(dir.path(), 3, 4);
-        fs::remove_file(dir.path().join("shard-000000.safetensors")).expect("remove");
-        assert!(matches!(
-            DatasetReader::open(dir.path()),
-            Err(DatasetError::MissingShard { .. })
-        ));
+        let missing = dir.path().join("shard-000000.safetensors");
+        fs::remove_file(&missing).expect("remove");
+        let err = DatasetReader::open(dir.path()).expect_err("a missing shard");
+        assert!(
+            matches!(&err, DatasetError::MissingShard { path } if *path == missing),
+            "{err:?}"
+        );
     }
 
     #[test]
@@ -1930,56 +1948,6 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn ranges_of_the_wrong_length_or_not_finite_are_refused() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let mut writer = DatasetWriter::create(dir.path(), header_with_ranges(7)).expect("create");
-        let err = writer.push(sample(0, 0)).expect_err("no ranges");
-        assert!(
-            matches!(err, DatasetError::SampleRanges { actual: 0, .. }),
-            "{err:?}"
-        );
-        assert!(
-            err.to_string().contains(
-                "has 0 range values but the dataset declares 6 sectors (sectors=6,clip=3)"
-            ),
-            "{err}"
-        );
-        let mut short = sample_with_ranges(0, 0);
-        short.ranges.pop();
-        assert!(matches!(
-            writer.push(short),
-            Err(DatasetError::SampleRanges { actual: 5, .. })
-        ));
-        for bad in [f32::NAN, f32::INFINITY] {
-            let mut nan = sample_with_ranges(0, 0);
-            nan.ranges[3] = bad;
-            assert!(matches!(
-                writer.push(nan),
-                Err(DatasetError::NonFiniteSample {
-                    field: "ranges",
-                    ..
-                })
-            ));
-        }
-        assert_eq!(writer.finish().expect("finish").samples, 0);
-
-        let other = tempfile::tempdir().expect("tempdir");
-        let mut writer = DatasetWriter::create(other.path(), header(7)).expect("create");
-        let err = writer.push(sample_with_ranges(0, 0)).expect_err("ranges");
-        assert!(
-            matches!(
-                err,
-                DatasetError::SampleRanges {
-                    declared: None,
-                    actual: 6
-                }
-            ),
-            "{err:?}"
-        );
-        assert!(err.to_string().contains("declares no ranges"), "{err}");
-    }
-
-    #[test]
     fn appending_with_other_ranges_or_neighbours_is_refused_naming_them() {
         let other_ranges = header(7).with_ranges(Some(RangeInput::new(6, 2.5).expect("ranges")));
         for (ranged, appended, field, existing_text, requested_text) in [
@@ -2058,100 +2026,6 @@ pub(crate) mod tests {
                 if existing.contains("--unshaped-labels")),
             "{err:?}"
         );
-    }
-
-    #[test]
-    fn a_version_that_disagrees_with_the_ranges_is_refused_naming_the_file() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        write_with_ranges(dir.path(), 2, 4);
-        edit_manifest(dir.path(), |value| value["version"] = 1.into());
-        let err = DatasetReader::open(dir.path()).expect_err("v1 with ranges");
-        assert!(
-            matches!(
-                err,
-                DatasetError::RangesVersion {
-                    version: 1,
-                    ranges: Some(_),
-                    ..
-                }
-            ),
-            "{err:?}"
-        );
-        let message = err.to_string();
-        assert!(
-            message.contains(
-                "manifest.json is dataset format version 1 but declares ranges \"sectors=6,clip=3\""
-            ),
-            "{message}"
-        );
-        assert!(message.contains("re-run `formation collect`"), "{message}");
-
-        let other = tempfile::tempdir().expect("tempdir");
-        write(other.path(), 2, 4);
-        edit_manifest(other.path(), |value| value["version"] = 2.into());
-        let err = DatasetReader::open(other.path()).expect_err("v2 without ranges");
-        assert!(
-            matches!(
-                err,
-                DatasetError::RangesVersion {
-                    version: 2,
-                    ranges: None,
-                    ..
-                }
-            ),
-            "{err:?}"
-        );
-        assert!(err.to_string().contains("declares no `ranges`"), "{err}");
-
-        assert_bad_declaration(other.path(), 2, "ranges", "sectors=2,clip=3", "sectors");
-    }
-
-    #[test]
-    fn a_shard_whose_ranges_disagree_with_the_manifest_is_corrupt() {
-        // A shard of a dataset with ranges, listed in a manifest without them: the shard has a
-        // `ranges` tensor the manifest does not declare. And the other way round: no tensor.
-        let with = tempfile::tempdir().expect("tempdir");
-        write_with_ranges(with.path(), 3, 8);
-        let without = tempfile::tempdir().expect("tempdir");
-        write(without.path(), 3, 8);
-        let with_manifest = manifest_json(with.path());
-        let without_manifest = manifest_json(without.path());
-        for (dir, manifest, reason) in [
-            (
-                with.path(),
-                &without_manifest,
-                "a `ranges` tensor, but the manifest declares no ranges",
-            ),
-            (without.path(), &with_manifest, "no `ranges` tensor"),
-        ] {
-            let err = load_error_under(dir, manifest, 3);
-            assert!(
-                matches!(&err, DatasetError::CorruptShard { reason: r, .. } if r == reason),
-                "{err:?}"
-            );
-        }
-    }
-
-    #[test]
-    fn a_header_built_field_by_field_with_the_wrong_version_is_refused() {
-        let mut header = header_with_ranges(7);
-        header.format_version = 1;
-        let dir = tempfile::tempdir().expect("tempdir");
-        assert!(matches!(
-            DatasetWriter::create(dir.path(), header),
-            Err(DatasetError::InconsistentHeader { version: 1, .. })
-        ));
-        let too_many =
-            header_with_ranges(7).with_ranges(Some(RangeInput::new(360, 3.0).expect("ranges")));
-        let mut few_beams = too_many.clone();
-        few_beams.settings.lidar.spec.beams = 100;
-        let ranges = few_beams.settings.ranges;
-        let few_beams = few_beams.with_ranges(ranges);
-        assert!(matches!(
-            DatasetWriter::create(dir.path(), few_beams),
-            Err(DatasetError::RangeBeams { .. })
-        ));
-        DatasetWriter::create(dir.path(), too_many).expect("900 beams fill 360 sectors");
     }
 
     fn write_with_neighbours(dir: &Path, header: DatasetHeader, samples: &[Sample]) -> Manifest {
@@ -2239,186 +2113,267 @@ pub(crate) mod tests {
         assert_eq!(reader.load_all().expect("load"), samples);
     }
 
-    #[test]
-    fn neighbours_of_the_wrong_length_or_not_finite_are_refused() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let mut writer =
-            DatasetWriter::create(dir.path(), header_with_neighbours(7)).expect("create");
-        let err = writer.push(sample(0, 0)).expect_err("no neighbours");
-        assert!(
-            matches!(err, DatasetError::SampleNeighbours { actual: 0, .. }),
-            "{err:?}"
-        );
-        assert!(
-            err.to_string().contains(
-                "has 0 neighbour values but the dataset declares 3 slots of 4 values \
-                 (slots=3,threshold=1.3,nearest=2), 12 in all"
-            ),
-            "{err}"
-        );
-        let mut short = sample_with_neighbours(0, 0);
-        short.neighbours.pop();
-        assert!(matches!(
-            writer.push(short),
-            Err(DatasetError::SampleNeighbours { actual: 11, .. })
-        ));
-        let mut nan = sample_with_neighbours(0, 0);
-        nan.neighbours[5] = f32::NAN;
-        assert!(matches!(
-            writer.push(nan),
-            Err(DatasetError::NonFiniteSample {
-                field: "neighbours",
-                ..
-            })
-        ));
-        assert_eq!(writer.finish().expect("finish").samples, 0);
+    /// One of the two optional per-sample inputs, ranges or neighbours, as the tests that hold
+    /// for both drive it: how to build settings and samples with it, and what its errors say.
+    struct OptionalInput {
+        /// Its name in the manifest, the shards and the errors: `ranges` or `neighbours`.
+        name: &'static str,
+        /// The test datasets' declaration of it, as the manifest writes it.
+        declared: &'static str,
+        /// The format version of a dataset that declares this input alone.
+        version: u32,
+        /// The test settings with this input alone, with `seed`.
+        header: fn(u64) -> DatasetHeader,
+        /// A test sample holding this input (`k`, `iteration`).
+        sample: fn(u32, u32) -> Sample,
+        /// How many values of this input a test sample holds.
+        count: usize,
+        /// This input's values in a sample.
+        values: fn(&mut Sample) -> &mut Vec<f32>,
+        /// What the error for a sample without this input's values says under the test settings.
+        missing_values: &'static str,
+        /// `(declared, values)` if the error is this input's wrong count: whether the dataset
+        /// declares the input, and how many values the sample holds.
+        wrong_count: fn(&DatasetError) -> Option<(bool, usize)>,
+        /// `(version, declared)` if the error is a manifest whose version disagrees with this
+        /// input.
+        version_mismatch: fn(&DatasetError) -> Option<(u32, bool)>,
+        /// A declaration out of this input's bounds, and a word of the error it gets.
+        out_of_bounds: (&'static str, &'static str),
+        /// The test settings with another size of this input, and how many values a sample of
+        /// them holds.
+        resized: fn() -> (DatasetHeader, usize),
+        /// Why a shard of `resized` is corrupt under the test settings.
+        resized_reason: &'static str,
+    }
 
-        let other = tempfile::tempdir().expect("tempdir");
-        let mut writer = DatasetWriter::create(other.path(), header(7)).expect("create");
-        let err = writer
-            .push(sample_with_neighbours(0, 0))
-            .expect_err("neighbours");
-        assert!(
-            matches!(
-                err,
-                DatasetError::SampleNeighbours {
-                    declared: None,
-                    actual: 12
-                }
-            ),
-            "{err:?}"
-        );
-        assert!(err.to_string().contains("declares no neighbours"), "{err}");
+    /// The range input of [`header_with_ranges`].
+    const RANGES: OptionalInput = OptionalInput {
+        name: "ranges",
+        declared: "sectors=6,clip=3",
+        version: DATASET_VERSION_WITH_RANGES,
+        header: header_with_ranges,
+        sample: sample_with_ranges,
+        count: 6,
+        values: |sample| &mut sample.ranges,
+        missing_values: "has 0 range values but the dataset declares 6 sectors (sectors=6,clip=3)",
+        wrong_count: |err| match err {
+            DatasetError::SampleRanges { declared, actual } => Some((declared.is_some(), *actual)),
+            _ => None,
+        },
+        version_mismatch: |err| match err {
+            DatasetError::RangesVersion {
+                version, ranges, ..
+            } => Some((*version, ranges.is_some())),
+            _ => None,
+        },
+        out_of_bounds: ("sectors=2,clip=3", "sectors"),
+        resized: || {
+            let four = RangeInput::new(4, 3.0).expect("4 sectors");
+            (header(7).with_ranges(Some(four)), 4)
+        },
+        resized_reason: "`ranges` is F32 [2, 4], expected F32 [2, 6]",
+    };
+
+    /// The neighbour input of [`header_with_neighbours`].
+    const NEIGHBOURS: OptionalInput = OptionalInput {
+        name: "neighbours",
+        declared: "slots=3,threshold=1.3,nearest=2",
+        version: DATASET_VERSION,
+        header: header_with_neighbours,
+        sample: sample_with_neighbours,
+        count: 12,
+        values: |sample| &mut sample.neighbours,
+        missing_values: "has 0 neighbour values but the dataset declares 3 slots of 4 values \
+                         (slots=3,threshold=1.3,nearest=2), 12 in all",
+        wrong_count: |err| match err {
+            DatasetError::SampleNeighbours { declared, actual } => {
+                Some((declared.is_some(), *actual))
+            }
+            _ => None,
+        },
+        version_mismatch: |err| match err {
+            DatasetError::NeighboursVersion {
+                version,
+                neighbours,
+                ..
+            } => Some((*version, neighbours.is_some())),
+            _ => None,
+        },
+        out_of_bounds: ("slots=65,threshold=1.3,nearest=2", "slots"),
+        resized: || {
+            let four = NeighbourInput::with_default_rule(4).expect("4 slots");
+            (header(7).with_neighbours(Some(four)), 16)
+        },
+        resized_reason: "`neighbours` is F32 [2, 4, 4], expected F32 [2, 3, 4]",
+    };
+
+    /// A new dataset of `input`'s test settings in `dir`, in one shard, holding `count` of its
+    /// test samples.
+    fn write_with(dir: &Path, input: &OptionalInput, count: u32) -> Manifest {
+        let samples = (0..count).map(|k| (input.sample)(k, 0));
+        write_samples(dir, (input.header)(7), 8, samples)
     }
 
     #[test]
-    fn a_version_that_disagrees_with_the_neighbours_is_refused_naming_the_file() {
-        // Version 3 without neighbours.
-        let dir = tempfile::tempdir().expect("tempdir");
-        write(dir.path(), 2, 4);
-        edit_manifest(dir.path(), |value| value["version"] = 3.into());
-        let err = DatasetReader::open(dir.path()).expect_err("v3 without neighbours");
-        assert!(
-            matches!(
-                err,
-                DatasetError::NeighboursVersion {
-                    version: 3,
-                    neighbours: None,
-                    ..
-                }
-            ),
-            "{err:?}"
-        );
-        let message = err.to_string();
-        assert!(
-            message
-                .contains("manifest.json is dataset format version 3 but declares no `neighbours`"),
-            "{message}"
-        );
-        assert!(message.contains("re-run `formation collect`"), "{message}");
+    fn ranges_or_neighbours_of_the_wrong_length_or_not_finite_are_refused() {
+        for input in [RANGES, NEIGHBOURS] {
+            let name = input.name;
+            let dir = tempfile::tempdir().expect("tempdir");
+            let mut writer = DatasetWriter::create(dir.path(), (input.header)(7)).expect("create");
+            let err = writer.push(sample(0, 0)).expect_err("no values");
+            assert_eq!((input.wrong_count)(&err), Some((true, 0)), "{err:?}");
+            assert!(err.to_string().contains(input.missing_values), "{err}");
+            let mut short = (input.sample)(0, 0);
+            assert_eq!((input.values)(&mut short).len(), input.count);
+            (input.values)(&mut short).pop();
+            let err = writer.push(short).expect_err("one value short");
+            let one_short = Some((true, input.count - 1));
+            assert_eq!((input.wrong_count)(&err), one_short, "{err:?}");
+            for (index, bad) in [(3, f32::NAN), (3, f32::INFINITY), (5, f32::NAN)] {
+                let mut not_finite = (input.sample)(0, 0);
+                (input.values)(&mut not_finite)[index] = bad;
+                let err = writer.push(not_finite).expect_err("not finite");
+                assert!(
+                    matches!(err, DatasetError::NonFiniteSample { field, .. } if field == name),
+                    "{err:?}"
+                );
+            }
+            assert_eq!(writer.finish().expect("finish").samples, 0);
 
-        // Versions 1 and 2 with neighbours.
-        let with = tempfile::tempdir().expect("tempdir");
-        write_with_neighbours(
-            with.path(),
-            header_with_neighbours(7),
-            &[sample_with_neighbours(0, 0)],
-        );
-        for (version, ranges) in [(1, None), (2, Some("sectors=6,clip=3"))] {
-            edit_manifest(with.path(), |value| {
+            let other = tempfile::tempdir().expect("tempdir");
+            let mut writer = DatasetWriter::create(other.path(), header(7)).expect("create");
+            let err = writer.push((input.sample)(0, 0)).expect_err("undeclared");
+            assert_eq!(
+                (input.wrong_count)(&err),
+                Some((false, input.count)),
+                "{err:?}"
+            );
+            let undeclared = format!("declares no {name}");
+            assert!(err.to_string().contains(&undeclared), "{err}");
+        }
+    }
+
+    #[test]
+    fn a_version_that_disagrees_with_the_ranges_or_neighbours_is_refused_naming_the_file() {
+        // The input, whether the dataset holds it, the version its manifest is then edited to,
+        // and another declaration the edit adds.
+        for (input, held, version, also) in [
+            (RANGES, true, 1, None),
+            (RANGES, false, 2, None),
+            (NEIGHBOURS, false, 3, None),
+            (NEIGHBOURS, true, 1, None),
+            (NEIGHBOURS, true, 2, Some(("ranges", RANGES.declared))),
+        ] {
+            let dir = tempfile::tempdir().expect("tempdir");
+            if held {
+                write_with(dir.path(), &input, 2);
+            } else {
+                write(dir.path(), 2, 4);
+            }
+            edit_manifest(dir.path(), |value| {
                 value["version"] = version.into();
-                if let Some(ranges) = ranges {
-                    value["ranges"] = ranges.into();
+                if let Some((key, declared)) = also {
+                    value[key] = declared.into();
                 }
             });
-            let err = DatasetReader::open(with.path()).expect_err("v1/v2 with neighbours");
-            assert!(
-                matches!(
-                    &err,
-                    DatasetError::NeighboursVersion { version: v, neighbours: Some(_), .. } if *v == version
+            let err = DatasetReader::open(dir.path()).expect_err("a version that disagrees");
+            let found = (input.version_mismatch)(&err);
+            assert_eq!(found, Some((version, held)), "{err:?}");
+            let declares = match held {
+                true => format!("declares {} \"{}\"", input.name, input.declared),
+                false => format!("declares no `{}`", input.name),
+            };
+            let message = err.to_string();
+            let says = format!("manifest.json is dataset format version {version} but {declares}");
+            assert!(message.contains(&says), "{message}");
+            assert!(message.contains("re-run `formation collect`"), "{message}");
+        }
+
+        // A declaration out of its bounds.
+        for input in [RANGES, NEIGHBOURS] {
+            let dir = tempfile::tempdir().expect("tempdir");
+            write_with(dir.path(), &input, 1);
+            let (value, says) = input.out_of_bounds;
+            assert_bad_declaration(dir.path(), input.version, input.name, value, says);
+        }
+    }
+
+    #[test]
+    fn a_shard_whose_ranges_or_neighbours_disagree_with_the_manifest_is_corrupt() {
+        // A shard of a dataset with the input, listed in a manifest without it: the shard has a
+        // tensor the manifest does not declare. The other way round: no tensor. And a shard of
+        // another size of the input: a tensor of another shape.
+        for input in [RANGES, NEIGHBOURS] {
+            let with = tempfile::tempdir().expect("tempdir");
+            write_with(with.path(), &input, 2);
+            let without = tempfile::tempdir().expect("tempdir");
+            write(without.path(), 2, 8);
+            let resized = tempfile::tempdir().expect("tempdir");
+            let (resized_header, count) = (input.resized)();
+            let resized_samples = (0..2).map(|k| {
+                let mut sample = sample(k, 0);
+                *(input.values)(&mut sample) = vec![0.5; count];
+                sample
+            });
+            write_samples(resized.path(), resized_header, 8, resized_samples);
+            let with_manifest = manifest_json(with.path());
+            let without_manifest = manifest_json(without.path());
+            let name = input.name;
+            for (dir, manifest, reason) in [
+                (
+                    with.path(),
+                    &without_manifest,
+                    format!("a `{name}` tensor, but the manifest declares no {name}"),
                 ),
-                "{err:?}"
-            );
-            assert!(
-                err.to_string().contains(&format!(
-                    "version {version} but declares neighbours \"slots=3,threshold=1.3,nearest=2\""
-                )),
-                "{err}"
-            );
-        }
-
-        // A neighbour input out of its bounds.
-        assert_bad_declaration(
-            with.path(),
-            3,
-            "neighbours",
-            "slots=65,threshold=1.3,nearest=2",
-            "slots",
-        );
-    }
-
-    #[test]
-    fn a_shard_whose_neighbours_disagree_with_the_manifest_is_corrupt() {
-        let with = tempfile::tempdir().expect("tempdir");
-        write_with_neighbours(
-            with.path(),
-            header_with_neighbours(7),
-            &[sample_with_neighbours(0, 0), sample_with_neighbours(1, 0)],
-        );
-        let without = tempfile::tempdir().expect("tempdir");
-        write(without.path(), 2, 8);
-        let other_slots = tempfile::tempdir().expect("tempdir");
-        let four =
-            header(7).with_neighbours(Some(NeighbourInput::with_default_rule(4).expect("4")));
-        let four_samples: Vec<Sample> = (0..2)
-            .map(|k| Sample {
-                neighbours: vec![0.5; 16],
-                ..sample(k, 0)
-            })
-            .collect();
-        write_with_neighbours(other_slots.path(), four, &four_samples);
-        let with_manifest = manifest_json(with.path());
-        let without_manifest = manifest_json(without.path());
-        for (dir, manifest, reason) in [
-            (
-                with.path(),
-                &without_manifest,
-                "a `neighbours` tensor, but the manifest declares no neighbours",
-            ),
-            (without.path(), &with_manifest, "no `neighbours` tensor"),
-            (
-                other_slots.path(),
-                &with_manifest,
-                "`neighbours` is F32 [2, 4, 4], expected F32 [2, 3, 4]",
-            ),
-        ] {
-            let err = load_error_under(dir, manifest, 2);
-            assert!(
-                matches!(&err, DatasetError::CorruptShard { reason: r, .. } if r == reason),
-                "{err:?}"
-            );
+                (
+                    without.path(),
+                    &with_manifest,
+                    format!("no `{name}` tensor"),
+                ),
+                (resized.path(), &with_manifest, input.resized_reason.into()),
+            ] {
+                let err = load_error_under(dir, manifest, 2);
+                assert!(
+                    matches!(&err, DatasetError::CorruptShard { reason: r, .. } if *r == reason),
+                    "{err:?}"
+                );
+            }
         }
     }
 
     #[test]
-    fn a_header_with_neighbours_and_the_wrong_version_is_refused() {
-        for version in [1, 2] {
-            let mut header = header_with_neighbours(7);
+    fn a_header_built_field_by_field_with_the_wrong_version_is_refused() {
+        for (input, version) in [(RANGES, 1), (RANGES, 3), (NEIGHBOURS, 1), (NEIGHBOURS, 2)] {
+            let mut header = (input.header)(7);
             header.format_version = version;
             let dir = tempfile::tempdir().expect("tempdir");
             let err = DatasetWriter::create(dir.path(), header).expect_err("inconsistent");
             assert!(
-                matches!(
-                    err,
-                    DatasetError::InconsistentHeader {
-                        neighbours: Some(_),
-                        ..
-                    }
-                ),
+                matches!(err, DatasetError::InconsistentHeader { version: v, .. } if v == version),
                 "{err:?}"
             );
-            assert!(err.to_string().contains("with_neighbours"), "{err}");
+            let message = err.to_string();
+            let holds = format!("{} {}", input.name, input.declared);
+            assert!(message.contains(&holds), "{message}");
+            assert!(
+                message.contains(&format!("with_{}", input.name)),
+                "{message}"
+            );
         }
+
+        let dir = tempfile::tempdir().expect("tempdir");
+        let too_many =
+            header_with_ranges(7).with_ranges(Some(RangeInput::new(360, 3.0).expect("ranges")));
+        let mut few_beams = too_many.clone();
+        few_beams.settings.lidar.spec.beams = 100;
+        let ranges = few_beams.settings.ranges;
+        let few_beams = few_beams.with_ranges(ranges);
+        assert!(matches!(
+            DatasetWriter::create(dir.path(), few_beams),
+            Err(DatasetError::RangeBeams { .. })
+        ));
+        DatasetWriter::create(dir.path(), too_many).expect("900 beams fill 360 sectors");
     }
 
     #[test]

@@ -514,11 +514,7 @@ mod tests {
             TickRecord {
                 tick: k,
                 time: k as f64 * 0.05,
-                goal: Goal {
-                    phi_star: 0.0,
-                    d_star: 1.0,
-                    v_star: 0.7,
-                },
+                goal: Goal::new(0.0, 1.0, 0.7),
                 poses: (0..3)
                     .map(|i| Pose {
                         x: f64::from(i),

@@ -94,11 +94,7 @@ pub fn tick(k: u64) -> TickRecord {
     TickRecord {
         tick: k,
         time,
-        goal: Goal {
-            phi_star: 0.3 * time,
-            d_star: 1.5,
-            v_star: 0.3,
-        },
+        goal: Goal::new(0.3 * time, 1.5, 0.3),
         poses,
         wheel_speeds: vec![
             WheelCmd {
