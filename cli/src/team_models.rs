@@ -83,7 +83,7 @@ pub fn goal_speeds_of(
     distinct(models)
         .filter_map(|(id, metadata)| {
             let v_star = v_star.farthest_from(metadata.v_train);
-            formation_schema::ModelGoalSpeed::new(id, metadata.v_train, v_star)
+            formation_schema::ModelGoalSpeed::new(id, metadata.v_train, v_star, metadata.output)
         })
         .filter(formation_schema::ModelGoalSpeed::is_outside)
         .collect()
@@ -211,6 +211,7 @@ pub fn policy_driver(
         input: Some(model_input(&id, &metadata)),
         trained_team_sizes: metadata.envelope().team_sizes,
         v_train: metadata.v_train,
+        output: metadata.output,
         id,
     })
 }

@@ -34,6 +34,8 @@ pub enum ScalingDriver {
         /// The v* \[m/s\] it was trained at (`formation.v_train`), so that a row at another v*
         /// is marked.
         v_train: f64,
+        /// What its output is (`formation.output`), for the note on a row at another v*.
+        output: formation_proto::PolicyOutput,
         /// The input it declares (its occupancy window and LIDAR), for its rows.
         input: Option<formation_schema::ModelInput>,
     },
@@ -67,13 +69,19 @@ pub fn evaluate_scaling(
                     id,
                     trained_team_sizes,
                     v_train,
+                    output,
                     input,
                 } => (
                     Driver::policy_for(&scenario, model)?,
                     Some(id.clone()),
                     ModelTeamSize::new(id, trained_team_sizes, robots),
-                    ModelGoalSpeed::new(id, *v_train, scenario.v_star().farthest_from(*v_train))
-                        .filter(ModelGoalSpeed::is_outside),
+                    ModelGoalSpeed::new(
+                        id,
+                        *v_train,
+                        scenario.v_star().farthest_from(*v_train),
+                        *output,
+                    )
+                    .filter(ModelGoalSpeed::is_outside),
                     input.clone(),
                 ),
             };
@@ -287,7 +295,13 @@ mod tests {
     fn a_policy_row_at_a_v_star_the_model_was_not_trained_at_is_marked() {
         let runs = [run(true, true, 0.01, 0)];
         let row = |v_star| ScalingRow {
-            goal_speed: ModelGoalSpeed::new("m", 0.7, v_star).filter(ModelGoalSpeed::is_outside),
+            goal_speed: ModelGoalSpeed::new(
+                "m",
+                0.7,
+                v_star,
+                formation_proto::PolicyOutput::Wheels,
+            )
+            .filter(ModelGoalSpeed::is_outside),
             ..scaling_row("policy", Some("m".into()), 3, "all_pairs", &runs)
         };
         let (trained, slower) = (row(0.7), row(0.4));

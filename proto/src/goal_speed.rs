@@ -1,7 +1,9 @@
 //! How a run's goal speed v* relates to the v* a model was trained at: a model records one
-//! (`formation.v_train`; every run of its training data used it), its wheel commands are scaled
-//! by v*/v_train, and a run at another v* is not refused (the scaling may well carry) but marked,
-//! so that no figure passes as in-distribution when it is not. The classification is here,
+//! (`formation.v_train`; every run of its training data used it). A `wheels` output is scaled
+//! by v*/v_train; a `formation_velocity` output gets the reference term at the run's own v*
+//! and keeps its corrections as trained ([`PolicyOutput`]). A run at another v* is not refused
+//! (either may well carry) but marked, so that no figure passes as in-distribution when it is
+//! not. The classification is here,
 //! beside the team-size one ([`crate::TeamSizeFit`]), and says it in the same wording, scaled by
 //! how far from v_train the run is ([`GoalSpeedFit::distance`], v*/v_train or its inverse):
 //!
@@ -11,13 +13,13 @@
 //! - from [`GoalSpeedFit::FAR`] (1.5x, the team sizes' threshold) either way: the same warning,
 //!   said to be far outside, with a model trained near this v* as the fix if they fall short.
 //!
-//! Unlike a team size, a v* off the trained one is not said to fail: the commands scale with
-//! v*/v_train, and the shipped model (trained at 0.7 m/s) succeeds at 10 % in 100 % of 100 runs
-//! of case 1 and of table 1 at every v* from 0.2 to 0.9 m/s, as the expert does, and in 98 % and
-//! 94 % of them at 0.1 m/s (7x slower; the expert: 100 %). The mark says the figure is zero-shot,
-//! not that it is poor.
+//! Unlike a team size, a v* off the trained one is not said to fail: the commands follow v*,
+//! and each model's card gives its figures at other speeds. The mark says the figure is
+//! zero-shot, not that it is poor.
 
 use serde::{Deserialize, Serialize};
+
+use crate::PolicyOutput;
 
 /// Where a run's v* lies against the v* a model was trained at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -75,9 +77,15 @@ impl GoalSpeedFit {
     }
 
     /// One line for the terminal (and under the printed Table I) about a run at `v_star` driven
-    /// by `model`, trained at `v_train`, or `None` at the trained v*. One wording, scaled by
-    /// [`GoalSpeedFit::distance`] (see the module's thresholds).
-    pub fn describe(self, model: &str, v_train: f64, v_star: f64) -> Option<String> {
+    /// by `model`, trained at `v_train`, whose output is `output`, or `None` at the trained v*.
+    /// One wording, scaled by [`GoalSpeedFit::distance`] (see the module's thresholds).
+    pub fn describe(
+        self,
+        model: &str,
+        v_train: f64,
+        v_star: f64,
+        output: PolicyOutput,
+    ) -> Option<String> {
         let side = match self {
             GoalSpeedFit::Trained => return None,
             GoalSpeedFit::Faster => "faster",
@@ -95,9 +103,13 @@ impl GoalSpeedFit {
             "standing still".to_owned()
         };
         if distance < Self::NEAR {
-            return Some(format!(
-                "note: {speeds} ({how_far}); its commands are scaled by v*/v_train"
-            ));
+            let follows = match output {
+                PolicyOutput::Wheels => "its commands are scaled by v*/v_train",
+                PolicyOutput::FormationVelocity => {
+                    "its reference term follows v*, its corrections are as trained"
+                }
+            };
+            return Some(format!("note: {speeds} ({how_far}); {follows}"));
         }
         let (outside, expect) = if distance >= Self::FAR {
             (
@@ -148,7 +160,7 @@ mod tests {
         let line = |v_star: f64| {
             GoalSpeedFit::of(0.7, v_star)
                 .unwrap()
-                .describe("m", 0.7, v_star)
+                .describe("m", 0.7, v_star, PolicyOutput::Wheels)
         };
         assert_eq!(line(0.7), None);
         let near = line(0.75).unwrap();

@@ -5,7 +5,8 @@
 use std::fmt;
 
 /// What a model's one output means, as its `formation.output` metadata declares it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum PolicyOutput {
     /// `wheels`: (left, right) wheel speeds \[m/s\] at the training speed `v_train`, which the
     /// agent scales by `v* / v_train` (the paper's output, and that of models that declare none).
@@ -25,6 +26,11 @@ impl PolicyOutput {
             PolicyOutput::Wheels => "wheels",
             PolicyOutput::FormationVelocity => "formation_velocity",
         }
+    }
+
+    /// Whether it is the paper's `wheels` output.
+    pub fn is_wheels(&self) -> bool {
+        *self == PolicyOutput::Wheels
     }
 
     /// The output a `formation.output` value names, if this build knows it.

@@ -2,7 +2,7 @@
 //! `eval --json` and the scaling table record it: a figure at a v* the model was not trained at
 //! is marked, in the team sizes' wording ([`formation_proto::GoalSpeedFit`]).
 
-use formation_proto::GoalSpeedFit;
+use formation_proto::{GoalSpeedFit, PolicyOutput};
 use serde::{Deserialize, Serialize};
 
 /// One model of a team, against the runs' v*.
@@ -14,16 +14,25 @@ pub struct ModelGoalSpeed {
     pub trained_v_star: f64,
     /// The runs' v* \[m/s\].
     pub v_star: f64,
-    /// `v_star / trained_v_star`: the scale applied to its wheel commands.
+    /// `v_star / trained_v_star`: the scale applied to a `wheels` output.
     pub factor: f64,
     /// Where the runs' v* lies against the trained one.
     pub fit: GoalSpeedFit,
+    /// What its output is (`formation.output`): a `formation_velocity` output is not scaled
+    /// but gets its reference term at the runs' v*. Absent for `wheels`.
+    #[serde(default, skip_serializing_if = "PolicyOutput::is_wheels")]
+    pub output: PolicyOutput,
 }
 
 impl ModelGoalSpeed {
-    /// The record for a model trained at `v_train` driving runs at `v_star`, or `None` when
-    /// `v_train` is not a positive speed.
-    pub fn new(model: &str, v_train: f64, v_star: f64) -> Option<ModelGoalSpeed> {
+    /// The record for a model trained at `v_train`, answering `output`, driving runs at
+    /// `v_star`, or `None` when `v_train` is not a positive speed.
+    pub fn new(
+        model: &str,
+        v_train: f64,
+        v_star: f64,
+        output: PolicyOutput,
+    ) -> Option<ModelGoalSpeed> {
         let fit = GoalSpeedFit::of(v_train, v_star)?;
         Some(ModelGoalSpeed {
             model: model.to_owned(),
@@ -31,6 +40,7 @@ impl ModelGoalSpeed {
             v_star,
             factor: v_star / v_train,
             fit,
+            output,
         })
     }
 
@@ -42,6 +52,6 @@ impl ModelGoalSpeed {
     /// The terminal line for it ([`GoalSpeedFit::describe`]); `None` at the trained v*.
     pub fn describe(&self) -> Option<String> {
         self.fit
-            .describe(&self.model, self.trained_v_star, self.v_star)
+            .describe(&self.model, self.trained_v_star, self.v_star, self.output)
     }
 }

@@ -139,9 +139,14 @@ fn summary() -> EvalOutput {
         team_size: crate::ModelTeamSize::new("policy-1", &[3, 5], 2)
             .into_iter()
             .collect(),
-        goal_speed: crate::ModelGoalSpeed::new("policy-1", 0.7, 0.4)
-            .into_iter()
-            .collect(),
+        goal_speed: crate::ModelGoalSpeed::new(
+            "policy-1",
+            0.7,
+            0.4,
+            formation_proto::PolicyOutput::Wheels,
+        )
+        .into_iter()
+        .collect(),
         model_inputs: vec![scaled_model_input()],
         run_logs: vec![0, 1],
         complete: false,
@@ -577,7 +582,41 @@ fn a_goal_speed_off_the_trained_one_is_written_beside_the_team_size() {
         ),
         "{text}"
     );
-    assert_eq!(crate::ModelGoalSpeed::new("m", 0.0, 0.4), None);
-    let trained = crate::ModelGoalSpeed::new("m", 0.7, 0.7).unwrap();
+    assert_eq!(
+        crate::ModelGoalSpeed::new("m", 0.0, 0.4, formation_proto::PolicyOutput::Wheels),
+        None
+    );
+    let trained =
+        crate::ModelGoalSpeed::new("m", 0.7, 0.7, formation_proto::PolicyOutput::Wheels).unwrap();
     assert!(!trained.is_outside() && trained.describe().is_none());
+}
+
+/// A formation-velocity model is not scaled by v*/v_train: its record says which output it
+/// has, and its note says the reference term follows v*, not that its commands are scaled.
+#[test]
+fn a_formation_velocity_model_off_its_trained_speed_is_not_said_to_be_scaled() {
+    let output = formation_proto::PolicyOutput::FormationVelocity;
+    let off = crate::ModelGoalSpeed::new("pair", 0.7, 0.75, output).unwrap();
+    let text = serde_json::to_string(&off).unwrap();
+    assert!(
+        text.ends_with(r#""fit":"faster","output":"formation_velocity"}"#),
+        "{text}"
+    );
+    let back: crate::ModelGoalSpeed = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, off);
+    let note = off.describe().unwrap();
+    assert!(
+        note.ends_with("its reference term follows v*, its corrections are as trained")
+            && !note.contains("scaled"),
+        "{note}"
+    );
+    let wheels =
+        crate::ModelGoalSpeed::new("paper", 0.7, 0.75, formation_proto::PolicyOutput::Wheels)
+            .unwrap();
+    assert!(
+        wheels
+            .describe()
+            .unwrap()
+            .ends_with("its commands are scaled by v*/v_train")
+    );
 }
