@@ -168,7 +168,7 @@ impl Default for ExpertGains {
             k_formation: 0.15,
             k_formation_graph: 1.0,
             point_offset: 0.331 / 2.0,
-            max_reference_speed: 0.7,
+            max_reference_speed: formation_perception::policy_input::MAX_REFERENCE_SPEED,
             graph_pair_points: PairPoints::Centres,
             braking_share: 0.25,
             shaping_wheel_accel: None,
@@ -1166,6 +1166,33 @@ mod tests {
         assert!((full.left - none.left).abs() > 1e-3, "{full:?} {none:?}");
         assert!((part.left - none.left - weight * (full.left - none.left)).abs() < 1e-12);
         assert!((part.right - none.right - weight * (full.right - none.right)).abs() < 1e-12);
+    }
+
+    /// Above the reference cap, an agent adding its reference term to a formation velocity
+    /// drives as the expert does: a robot alone (no correction) gets the expert's command from
+    /// `formation_velocity_to_wheels`, at goal speeds below, at and above the cap.
+    #[test]
+    fn the_agents_reference_term_is_the_experts_at_every_goal_speed() {
+        use formation_perception::policy_input::{
+            MAX_REFERENCE_SPEED, formation_velocity_to_wheels,
+        };
+        let (gains, robot) = (ExpertGains::default(), RobotParams::default());
+        assert_eq!(gains.max_reference_speed, MAX_REFERENCE_SPEED);
+        let pose = Pose::new(1.0, -2.0, 0.3);
+        for v_star in [0.3, MAX_REFERENCE_SPEED, 0.8, 1.2] {
+            let goal = Goal::new(0.5, 1.5, v_star);
+            let mut out = [WheelCmd::default()];
+            expert_commands_weighted(&[pose], &goal, &gains, &robot, &[Vec::new()], &mut out);
+            let delta_phi = formation_proto::wrap_angle(goal.phi_star - pose.theta);
+            let agent =
+                formation_velocity_to_wheels([0.0, 0.0], delta_phi, v_star, robot.wheel_limits());
+            assert!(
+                (agent.left - out[0].left).abs() < 1e-12
+                    && (agent.right - out[0].right).abs() < 1e-12,
+                "v* = {v_star}: agent {agent:?}, expert {:?}",
+                out[0]
+            );
+        }
     }
 
     fn teams_of_five_and_eight_form_with(gains: ExpertGains) {

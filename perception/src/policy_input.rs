@@ -110,14 +110,23 @@ pub fn shape_for_wheels(f: (f64, f64), max_wheel_accel: Option<f64>) -> (f64, f6
     (f.0 * scale, f.1 * scale)
 }
 
+/// The fastest reference term the expert's law adds \[m/s\] (the default of its
+/// `max_reference_speed` gain, which is this constant): a goal faster than this is driven at this
+/// speed, which keeps the rest of a wheel's speed for corrections (a P3-DX's wheels top out at
+/// 0.9 m/s). An agent caps the reference term it adds to a formation-velocity output alike
+/// ([`formation_velocity_to_wheels`]), so that above it the policy keeps the correction authority
+/// its teacher had.
+pub const MAX_REFERENCE_SPEED: f64 = 0.7;
+
 /// The wheel command of a formation-velocity output `f = (f_x, f_y)` \[m/s\] in the robot's frame,
 /// for a robot `delta_phi` off the goal's heading at goal speed `v_star`, within its `wheels`.
 ///
 /// `f` is shaped for the acceleration limit first ([`shape_for_wheels`]). The controlled point
 /// lies half a wheel track ahead of the axle (the expert's `c = l/2`), so its velocity `u` in
 /// the robot's frame sets `v = u_x`, `ω = u_y / c` and the wheels `v ∓ (l/2) ω = u_x ∓ u_y`
-/// whatever the track `l`. `u = f + v* (cos Δφ, sin Δφ)`: the reference term `v* (cos φ*, sin
-/// φ*)` seen from the robot. Where a wheel would exceed the speed limit, both are scaled by one
+/// whatever the track `l`. `u = f + v (cos Δφ, sin Δφ)`: the reference term `v (cos φ*, sin φ*)`
+/// seen from the robot, at `v` = v* capped to ±[`MAX_REFERENCE_SPEED`] as the expert caps it.
+/// Where a wheel would exceed the speed limit, both are scaled by one
 /// factor into it, as the expert saturates its own command: the point keeps its direction (the
 /// world's own limit clips each wheel apart, which turns the robot off it).
 pub fn formation_velocity_to_wheels(
@@ -128,8 +137,9 @@ pub fn formation_velocity_to_wheels(
 ) -> WheelCmd {
     let f = shape_for_wheels((f64::from(f[0]), f64::from(f[1])), wheels.max_accel);
     let (sin, cos) = delta_phi.sin_cos();
-    let u_x = f.0 + v_star * cos;
-    let u_y = f.1 + v_star * sin;
+    let reference_speed = v_star.clamp(-MAX_REFERENCE_SPEED, MAX_REFERENCE_SPEED);
+    let u_x = f.0 + reference_speed * cos;
+    let u_y = f.1 + reference_speed * sin;
     let cmd = WheelCmd {
         left: u_x - u_y,
         right: u_x + u_y,
@@ -235,8 +245,15 @@ mod tests {
         assert!((cmd.left + 0.4).abs() < 1e-12 && (cmd.right - 0.4).abs() < 1e-12);
         // The correction adds to the reference term and does not scale with v*.
         let slow = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.3, NONE);
-        let fast = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.8, NONE);
-        assert!((slow.left - 0.4).abs() < 1e-6 && (fast.left - 0.9).abs() < 1e-6);
+        let fast = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.6, NONE);
+        assert!((slow.left - 0.4).abs() < 1e-6 && (fast.left - 0.7).abs() < 1e-6);
+        // Above the expert's cap the reference term is the cap's, as the expert's is, so the
+        // correction keeps the wheel speed it had below it.
+        let capped = formation_velocity_to_wheels([0.1, 0.0], 0.0, 0.8, NONE);
+        assert!(
+            (capped.left - (0.1 + MAX_REFERENCE_SPEED)).abs() < 1e-6,
+            "{capped:?}"
+        );
         // The point's velocity from these wheels, with l = 0.331 and c = l/2, is f + reference.
         let (l, c) = (0.331, 0.331 / 2.0);
         let f = [0.05_f32, -0.12_f32];

@@ -106,7 +106,7 @@ impl GoalSpeedFit {
             let follows = match output {
                 PolicyOutput::Wheels => "its commands are scaled by v*/v_train",
                 PolicyOutput::FormationVelocity => {
-                    "its reference term follows v*, its corrections are as trained"
+                    "its reference term follows v* as the expert's does, its corrections are as trained"
                 }
             };
             return Some(format!("note: {speeds} ({how_far}); {follows}"));

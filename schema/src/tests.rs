@@ -606,8 +606,9 @@ fn a_formation_velocity_model_off_its_trained_speed_is_not_said_to_be_scaled() {
     assert_eq!(back, off);
     let note = off.describe().unwrap();
     assert!(
-        note.ends_with("its reference term follows v*, its corrections are as trained")
-            && !note.contains("scaled"),
+        note.ends_with(
+            "its reference term follows v* as the expert's does, its corrections are as trained"
+        ) && !note.contains("scaled"),
         "{note}"
     );
     let wheels =
