@@ -110,13 +110,7 @@ pub fn shape_for_wheels(f: (f64, f64), max_wheel_accel: Option<f64>) -> (f64, f6
     (f.0 * scale, f.1 * scale)
 }
 
-/// The fastest reference term the expert's law adds \[m/s\] (the default of its
-/// `max_reference_speed` gain, which is this constant): a goal faster than this is driven at this
-/// speed, which keeps the rest of a wheel's speed for corrections (a P3-DX's wheels top out at
-/// 0.9 m/s). An agent caps the reference term it adds to a formation-velocity output alike
-/// ([`formation_velocity_to_wheels`]), so that above it the policy keeps the correction authority
-/// its teacher had.
-pub const MAX_REFERENCE_SPEED: f64 = 0.7;
+pub use formation_proto::MAX_REFERENCE_SPEED;
 
 /// The wheel command of a formation-velocity output `f = (f_x, f_y)` \[m/s\] in the robot's frame,
 /// for a robot `delta_phi` off the goal's heading at goal speed `v_star`, within its `wheels`.

@@ -19,7 +19,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::PolicyOutput;
+use crate::{MAX_REFERENCE_SPEED, PolicyOutput};
 
 /// Where a run's v* lies against the v* a model was trained at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -104,10 +104,15 @@ impl GoalSpeedFit {
         };
         if distance < Self::NEAR {
             let follows = match output {
-                PolicyOutput::Wheels => "its commands are scaled by v*/v_train",
-                PolicyOutput::FormationVelocity => {
-                    "its reference term follows v* as the expert's does, its corrections are as trained"
-                }
+                PolicyOutput::Wheels => "its commands are scaled by v*/v_train".to_owned(),
+                PolicyOutput::FormationVelocity if v_star.abs() > MAX_REFERENCE_SPEED => format!(
+                    "its reference term is capped at {} m/s as the expert's is, so the team \
+                     moves at that speed; its corrections are as trained",
+                    trim(MAX_REFERENCE_SPEED)
+                ),
+                PolicyOutput::FormationVelocity => "its reference term follows v* as the \
+                                                    expert's does, its corrections are as trained"
+                    .to_owned(),
             };
             return Some(format!("note: {speeds} ({how_far}); {follows}"));
         }

@@ -46,7 +46,7 @@ pub use policy_io::{
     AuxInput, AuxLayout, AuxValues, NeighbourInput, NeighbourInputError, PolicyInput, PolicyIo,
     RangeInput, RangeInputError,
 };
-pub use policy_output::PolicyOutput;
+pub use policy_output::{MAX_REFERENCE_SPEED, PolicyOutput};
 pub use swap_done::SwapDone;
 pub use team_size::TeamSizeFit;
 pub use types::*;

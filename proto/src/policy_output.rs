@@ -4,6 +4,14 @@
 
 use std::fmt;
 
+/// The fastest reference term the expert's law adds \[m/s\] (the default of its
+/// `max_reference_speed` gain, which is this constant): a goal faster than this is driven at this
+/// speed, which keeps the rest of a wheel's speed for corrections (a P3-DX's wheels top out at
+/// 0.9 m/s). An agent caps the reference term it adds to a formation-velocity output alike
+/// (`formation_perception::policy_input::formation_velocity_to_wheels`), so that above it the
+/// policy keeps the correction authority its teacher had.
+pub const MAX_REFERENCE_SPEED: f64 = 0.7;
+
 /// What a model's one output means, as its `formation.output` metadata declares it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]

@@ -592,7 +592,8 @@ fn a_goal_speed_off_the_trained_one_is_written_beside_the_team_size() {
 }
 
 /// A formation-velocity model is not scaled by v*/v_train: its record says which output it
-/// has, and its note says the reference term follows v*, not that its commands are scaled.
+/// has, and its note says the reference term follows v* (up to the expert's cap), not that its
+/// commands are scaled.
 #[test]
 fn a_formation_velocity_model_off_its_trained_speed_is_not_said_to_be_scaled() {
     let output = formation_proto::PolicyOutput::FormationVelocity;
@@ -604,20 +605,27 @@ fn a_formation_velocity_model_off_its_trained_speed_is_not_said_to_be_scaled() {
     );
     let back: crate::ModelGoalSpeed = serde_json::from_str(&text).unwrap();
     assert_eq!(back, off);
+    // Above the expert's reference cap the note says the team moves at the cap.
     let note = off.describe().unwrap();
+    assert!(
+        note.contains("its reference term is capped at 0.7 m/s as the expert's is")
+            && !note.contains("scaled"),
+        "{note}"
+    );
+    let slower = crate::ModelGoalSpeed::new("pair", 0.7, 0.65, output).unwrap();
+    let note = slower.describe().unwrap();
     assert!(
         note.ends_with(
             "its reference term follows v* as the expert's does, its corrections are as trained"
-        ) && !note.contains("scaled"),
+        ),
         "{note}"
     );
     let wheels =
         crate::ModelGoalSpeed::new("paper", 0.7, 0.75, formation_proto::PolicyOutput::Wheels)
             .unwrap();
+    let note = wheels.describe().unwrap();
     assert!(
-        wheels
-            .describe()
-            .unwrap()
-            .ends_with("its commands are scaled by v*/v_train")
+        note.ends_with("its commands are scaled by v*/v_train"),
+        "{note}"
     );
 }
