@@ -562,6 +562,21 @@ fn choose_python(
 mod tests {
     use super::*;
 
+    /// The Python trainer turns wheel labels into formation-velocity targets with the expert's
+    /// reference cap: its constant is the Rust one.
+    #[test]
+    fn the_trainers_reference_cap_is_the_experts() {
+        let source = include_str!("../python/formation_trainer/train.py");
+        let value = source
+            .lines()
+            .find_map(|line| line.strip_prefix("MAX_REFERENCE_SPEED = "))
+            .expect("train.py defines MAX_REFERENCE_SPEED");
+        assert_eq!(
+            value.trim().parse::<f64>(),
+            Ok(formation_proto::MAX_REFERENCE_SPEED)
+        );
+    }
+
     fn opts() -> TrainOptions {
         TrainOptions {
             data: vec!["data/expert".into()],

@@ -77,6 +77,9 @@ PARITY_FILE_SAMPLES = 8
 EVAL_BATCH = 1024
 #: A wheel label within this much [m/s] of the data's largest |wheel label| counts as saturated.
 SATURATION_MARGIN = 1e-3
+#: The fastest reference term the expert adds [m/s]: ``formation_proto::MAX_REFERENCE_SPEED``, which
+#: a test of formation-trainer-bridge holds this line to. Labels collected above it carry this speed.
+MAX_REFERENCE_SPEED = 0.7
 
 
 class TrainError(Exception):
@@ -369,13 +372,15 @@ def formation_velocity_targets(wheels: np.ndarray, aux: np.ndarray, v_train: flo
 
     With the controlled point half a track ahead of the axle (``c = l/2``), wheels ``(L, R)`` move it
     at ``u = ((L + R) / 2, (R - L) / 2)`` in the robot's frame, whatever the track; the reference term
-    seen from the robot is ``v_train (cos Δφ, sin Δφ)``. Where the expert's wheels saturated, ``u`` is
-    the saturated point velocity, which is what the robot could do."""
+    seen from the robot is ``v (cos Δφ, sin Δφ)``, at ``v = v_train`` capped to the expert's
+    ``MAX_REFERENCE_SPEED`` as it caps it. Where the expert's wheels saturated, ``u`` is the
+    saturated point velocity, which is what the robot could do."""
     wheels = np.asarray(wheels, dtype=np.float64)
     delta_phi = np.asarray(aux, dtype=np.float64)[:, 0]
     u_x = (wheels[:, 0] + wheels[:, 1]) / 2
     u_y = (wheels[:, 1] - wheels[:, 0]) / 2
-    f = np.stack([u_x - v_train * np.cos(delta_phi), u_y - v_train * np.sin(delta_phi)], axis=1)
+    reference = min(max(v_train, -MAX_REFERENCE_SPEED), MAX_REFERENCE_SPEED)
+    f = np.stack([u_x - reference * np.cos(delta_phi), u_y - reference * np.sin(delta_phi)], axis=1)
     return f.astype(np.float32)
 
 

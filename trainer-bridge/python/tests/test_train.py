@@ -446,6 +446,10 @@ def test_formation_velocity_targets_invert_the_point_kinematics():
     # Standing still while the goal heading is 90° to the left: the reference term is all
     # correction, -v_train along y.
     assert f[2] == pytest.approx([0.0, -0.7], abs=1e-6)
+    # Collected above the expert's reference cap, the labels carry the cap's reference term.
+    fast = train.formation_velocity_targets(wheels, aux, 0.8)
+    assert fast == pytest.approx(f, abs=1e-6)
+    assert train.MAX_REFERENCE_SPEED == 0.7
 
 
 def test_response_weights_favour_small_corrections_and_average_one_over_training():
