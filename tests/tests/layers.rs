@@ -10,7 +10,7 @@
 //!   the only binary of a package of their own; the agent's demo build holds none of tokio,
 //!   plotters or rayon, and with Zenoh on, tokio only under Zenoh.
 //! * **No module cycle.** Within each crate, the top-level modules' `crate::` (and `super::`)
-//!   references form no cycle, but for the ones listed in [`KNOWN_CYCLES`] with what removes them.
+//!   references form no cycle.
 //!
 //! They run cargo itself (`cargo tree`, `cargo metadata`), offline against the lock file, and read
 //! the sources.
@@ -367,14 +367,6 @@ fn with_zenoh_the_agent_builds_tokio_only_under_zenoh() {
     );
 }
 
-/// Module cycles that exist today, each with what removes it. The check fails when one of them is
-/// gone, so that the list only shrinks.
-const KNOWN_CYCLES: [(&str, &[&str], &str); 1] = [(
-    "world",
-    &["reality", "scenario"],
-    "reality borrows scenario's splitmix64 while scenario names the reality models",
-)];
-
 /// Rust source without comment lines and without its trailing `#[cfg(test)] mod tests`.
 fn code_of(path: &Path) -> String {
     let text = std::fs::read_to_string(path).unwrap_or_default();
@@ -546,7 +538,7 @@ fn a_module_cycle_is_found_and_a_layered_crate_has_none() {
 }
 
 #[test]
-fn no_crate_has_a_module_cycle_but_the_known_ones() {
+fn no_crate_has_a_module_cycle() {
     let metadata = workspace_metadata();
     let mut found: BTreeSet<(String, Vec<String>)> = BTreeSet::new();
     let mut crates = 0;
@@ -574,25 +566,10 @@ fn no_crate_has_a_module_cycle_but_the_known_ones() {
         }
     }
     assert!(crates >= 10, "only {crates} crates read");
-    let known: BTreeSet<(String, Vec<String>)> = KNOWN_CYCLES
-        .iter()
-        .map(|(krate, cycle, _)| {
-            (
-                (*krate).to_owned(),
-                cycle.iter().map(|m| (*m).to_owned()).collect(),
-            )
-        })
-        .collect();
-    let new: Vec<_> = found.difference(&known).collect();
     assert!(
-        new.is_empty(),
+        found.is_empty(),
         "module cycles (crate, modules that reach each other through `crate::`/`super::`): \
-         {new:?}; break them (a module below both sides), don't list them"
-    );
-    let gone: Vec<_> = known.difference(&found).collect();
-    assert!(
-        gone.is_empty(),
-        "these known cycles are gone: remove them from KNOWN_CYCLES: {gone:?}"
+         {found:?}; break them (a module below both sides)"
     );
 }
 

@@ -29,6 +29,7 @@ pub mod reality;
 pub mod robot;
 pub mod runlog;
 pub mod scenario;
+mod seed_mix;
 #[cfg(test)]
 mod test_layouts;
 #[cfg(test)]

@@ -37,7 +37,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::robot::RobotParams;
-use crate::scenario::splitmix64;
+use crate::seed_mix::splitmix64;
 
 /// The wheels' imperfections.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -139,13 +139,13 @@ pub use self::parse::read_scenario_text;
 use self::parse::*;
 use self::placement::*;
 pub use self::plan::RunSpec;
-pub(crate) use self::plan::splitmix64;
 pub use self::profile::{ProfileSettings, RobotProfile, UnknownProfile};
 use self::validate::*;
 pub use crate::neighbours::all_pairs;
 use crate::neighbours::{GabrielRule, NeighbourRule, connected_within};
 use crate::reality::{CompassModel, LidarModel, MotorModel, RealityModels};
 use crate::robot::RobotParams;
+use crate::seed_mix::splitmix64;
 use crate::world::{World, WorldConfig};
 
 /// Default simulation step \[s\]: the LIDAR's 20 Hz.

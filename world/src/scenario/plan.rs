@@ -106,12 +106,3 @@ pub(super) const V_STAR_DOMAIN: u64 = 0x7E57_AB1E_0B57_A12D;
 pub(super) fn run_seed(base_seed: u64, run_index: usize) -> u64 {
     splitmix64(splitmix64(base_seed ^ RUN_DOMAIN) ^ splitmix64(run_index as u64))
 }
-
-/// SplitMix64's output function (Steele, Lea & Flood 2014) applied to `x + golden gamma`: a bijective,
-/// well-avalanched mix of 64 bits.
-pub(crate) fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
