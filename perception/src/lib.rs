@@ -14,6 +14,8 @@
 //!   Gabriel rule's verdict on each (`formation_proto::NeighbourInput`).
 //! * [`policy_input`]: a goal checked where it enters a robot, and the policy's declared output
 //!   turned into wheel speeds (the scalars beside the image are `formation_proto::PolicyIo`'s).
+//! * [`stopping`]: the agent's stopping governor, a command slowed under a wheel acceleration
+//!   limit to one the robot can stop from before it touches what its scan shows in its path.
 //!
 //! Pure functions of one robot's own scan and the model's declared settings: no I/O, no ONNX, no
 //! transport, so the expert, the agent and the Python bindings share them without building any of
@@ -25,3 +27,4 @@ pub mod neighbours;
 pub mod occupancy;
 pub mod policy_input;
 pub mod ranges;
+pub mod stopping;

@@ -303,7 +303,9 @@ class FormationParallelEnv(ParallelEnv):
     def policy_actions(self, outputs: Mapping[str, Any]) -> Dict[str, np.ndarray]:
         """A policy's raw outputs per agent as wheel speeds for the goal, turned into wheels as
         the Rust agent does for the output the model declares (``spec.output``: ``wheels`` at
-        ``v_train``, scaled to v*, or ``formation_velocity`` with the reference term added)."""
+        ``v_train``, scaled to v*, or ``formation_velocity`` with the reference term added), and
+        under a wheel acceleration limit slowed by the agent's stopping governor on the robot's
+        own scan."""
         raw = np.zeros((1, len(self.possible_agents), 2), dtype=np.float32)
         for agent, out in outputs.items():
             raw[0, self._index[agent]] = np.asarray(out, dtype=np.float32).reshape(2)

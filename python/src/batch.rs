@@ -10,6 +10,7 @@
 use formation_expert::{ExpertController, ExpertGains};
 use formation_perception::neighbour_input::NeighbourInputBuilder;
 use formation_perception::ranges::pool;
+use formation_perception::stopping::{self, BeamDirections};
 use formation_perception::{occupancy, policy_input};
 use formation_proto::control::Controller;
 use formation_proto::{
@@ -515,10 +516,13 @@ impl Batch {
     /// A policy's outputs `(B, N, 2)` (float32) as wheel speeds for each world's goal, as the
     /// agent turns them into wheels: `(B, N, 2)` float64. `output` is what the model declares
     /// (`wheels`, at its training speed `v_train`, or `formation_velocity`, which is shaped for
-    /// the world's wheel acceleration limit and to which each robot's reference term is added).
+    /// the world's wheel acceleration limit and to which each robot's reference term is added),
+    /// then, under that limit, slowed by the agent's stopping governor on each robot's own scan
+    /// (`formation_perception::stopping`). Each robot's heading is its compass's, as its agent
+    /// is handed it.
     #[pyo3(signature = (outputs, v_train, output = "wheels"))]
     fn policy_actions<'py>(
-        &self,
+        &mut self,
         py: Python<'py>,
         outputs: PyReadonlyArrayDyn<'py, f32>,
         v_train: f64,
@@ -546,15 +550,18 @@ impl Batch {
             .as_slice()
             .map_err(|_| PyValueError::new_err("policy outputs must be C-contiguous float32"))?;
         let mut out = Vec::with_capacity(raw.len());
-        for (b, slot) in self.slots.iter().enumerate() {
-            let world = slot.episode.world();
-            let goal = slot.episode.spec().goal_at(world.time());
+        let beams = BeamDirections::new(&self.scenario.world_config().lidar);
+        for (b, slot) in self.slots.iter_mut().enumerate() {
+            let wheels = slot.episode.spec().world.robot.wheel_limits();
+            let observation = slot.episode.observe();
+            let goal = observation.goal;
             policy_input::check_goal(&goal)
                 .map_err(|e| PyValueError::new_err(format!("world {b}: {e}")))?;
-            let wheels = slot.episode.spec().world.robot.wheel_limits();
-            for (w, pose) in raw[b * n * 2..(b + 1) * n * 2]
+            // The heading as each robot's compass reads it, as its agent is handed it.
+            for ((w, pose), scan) in raw[b * n * 2..(b + 1) * n * 2]
                 .chunks_exact(2)
-                .zip(world.poses())
+                .zip(observation.poses.iter())
+                .zip(observation.scans.iter())
             {
                 let cmd = policy_input::command_of_output(
                     output,
@@ -563,6 +570,15 @@ impl Batch {
                     pose.theta,
                     &goal,
                     wheels,
+                );
+                // The agent's stopping governor, on the robot's own scan.
+                let cmd = stopping::keep_stopping_distance(
+                    cmd,
+                    scan,
+                    &beams,
+                    formation_proto::DEFAULT_BODY_RADIUS_M,
+                    goal.d_star,
+                    wheels.max_accel,
                 );
                 out.extend([cmd.left, cmd.right]);
             }

@@ -37,12 +37,12 @@ def cli() -> Path:
     return path
 
 
-def team_scenario(tmp_path: Path, robots: int, duration_s: float) -> Path:
-    """scenarios/teams.toml for `robots` robots and `duration_s` seconds, as a file both the CLI
-    and the package read."""
-    text = (REPO / "scenarios" / "teams.toml").read_text()
+def team_scenario(tmp_path: Path, robots: int, duration_s: float, base: str = "teams.toml") -> Path:
+    """scenarios/`base` (teams.toml by default) for `robots` robots and `duration_s` seconds, as a
+    file both the CLI and the package read."""
+    text = (REPO / "scenarios" / base).read_text()
     text = text.replace("robots = 8", f"robots = {robots}").replace("duration_s = 60.0", f"duration_s = {duration_s}")
-    path = tmp_path / f"teams-{robots}.toml"
+    path = tmp_path / f"{Path(base).stem}-{robots}.toml"
     path.write_text(text)
     return path
 

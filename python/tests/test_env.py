@@ -131,6 +131,26 @@ def test_a_formation_velocity_policy_episode_equals_formation_eval_bit_for_bit(t
     assert got == expected
 
 
+def test_under_a_wheel_limit_the_agents_stopping_governor_keeps_the_robots_apart(tmp_path):
+    # Run 13 of teams-generalist-accel at 3 robots, seed 7: two robots start 0.95 m apart at
+    # d* = 1.23 m and one backs into the other while it turns; the shipped policy touched it at
+    # 1.7 s before the agent's stopping governor (issue 34). The environment turns the policy's
+    # outputs into wheels as the agent does, governor included: the same episode, no contact.
+    scenario = team_scenario(tmp_path, 3, 3.0, base="teams-generalist-accel.toml")
+    seed, run = 7, 13
+    expected = pose_rows(cli_run_poses(scenario, tmp_path / "out", seed, run, "policy"))
+    env = parallel_env(scenario=str(scenario), model=MODEL)
+    session = policy_session()
+    observations, _ = env.reset(seed=seed, run=run)
+    got = play_policy(env, session, observations, env.spec.output, declared_inputs(env.spec))
+    assert len(got) == len(expected) == 61
+    assert got == expected
+    closest = min(
+        math.dist(a[:2], b[:2]) for row in got for i, a in enumerate(row) for b in row[i + 1:]
+    )
+    assert 0.5 < closest < 0.6, f"the bodies (0.25 m each) came to {closest:.3f} m between centres"
+
+
 def test_the_range_input_is_read_by_the_agents_own_parser():
     # formation.ranges as the agent reads it (RangeInput::parse): keys in either order, spaces
     # allowed, values checked; what the environment's ranges space is sized by.

@@ -17,7 +17,10 @@
 //!    `K = v* / v_train` (the paper's speed scaling); for `formation_velocity`, the formation
 //!    velocity in the robot's frame: the reference term `v* (cos Δφ, sin Δφ)` is added and the
 //!    point velocity turned into wheel speeds
-//!    ([`policy_input::command_of_output`], shared with the Python bindings).
+//!    ([`policy_input::command_of_output`], shared with the Python bindings);
+//! 5. under a wheel acceleration limit, the command slowed to one the robot can stop from before
+//!    its body touches what the scan shows in its path, once a body there is closer than 90 %
+//!    of d\* ([`stopping::keep_stopping_distance`]); without a limit, the command unchanged.
 //!
 //! The steps are exposed separately ([`Agent::perceive`], [`Agent::decide`]) so the agent process
 //! can time them, and together as [`Agent::act`]. [`PolicyController`] runs one independent `Agent`
@@ -49,6 +52,7 @@ use formation_proto::{
 };
 
 use formation_perception::neighbour_input::NeighbourInputBuilder;
+use formation_perception::stopping::{self, BeamDirections};
 use formation_perception::{occupancy, policy_input, ranges};
 
 /// Why an agent could not decide, or could not take a policy.
@@ -285,6 +289,9 @@ pub struct Agent {
     /// The robot's wheels, within which a formation-velocity output is turned into wheel speeds
     /// ([`policy_input::formation_velocity_to_wheels`]); by default none told.
     wheels: WheelLimits,
+    /// The direction of each beam of the LIDAR, for the stopping governor
+    /// ([`stopping::keep_stopping_distance`]).
+    beams: BeamDirections,
 }
 
 impl Agent {
@@ -307,6 +314,7 @@ impl Agent {
             last_scan: Vec::with_capacity(lidar.beams),
             last_decision: None,
             wheels: WheelLimits::default(),
+            beams: BeamDirections::new(&lidar),
         })
     }
 
@@ -387,7 +395,9 @@ impl Agent {
 
     /// Runs the policy on the last perceived image under the goal [`Agent::perceive`] held, and
     /// turns its output into the wheel command, as the model declares it
-    /// ([`policy_input::command_of_output`]). The goal is checked once a tick, where it entered.
+    /// ([`policy_input::command_of_output`]), slowed under a wheel acceleration limit to one the
+    /// robot can stop from before it touches what its scan shows in its path
+    /// ([`stopping::keep_stopping_distance`]). The goal is checked once a tick, where it entered.
     pub fn decide(&mut self, heading: f64) -> Result<WheelCmd, DecisionError> {
         let Some(goal) = self.goal else {
             return Err(DecisionError::Goal {
@@ -413,13 +423,21 @@ impl Agent {
                 right,
             });
         }
-        Ok(policy_input::command_of_output(
+        let command = policy_input::command_of_output(
             self.io.output,
             self.io.v_train,
             [left, right],
             heading,
             goal,
             self.wheels,
+        );
+        Ok(stopping::keep_stopping_distance(
+            command,
+            &self.last_scan,
+            &self.beams,
+            formation_proto::DEFAULT_BODY_RADIUS_M,
+            goal.d_star,
+            self.wheels.max_accel,
         ))
     }
 
@@ -954,6 +972,48 @@ mod tests {
             .err()
             .expect("refused");
         assert!(err.to_string().contains("100 sectors"), "{err}");
+    }
+
+    /// Under a wheel acceleration limit the agent slows a command that would carry its body into
+    /// one closer than 90 % of d* in its path, keeping the turn; without a limit, or with the
+    /// body at d*, the policy's command goes out as it is.
+    #[test]
+    fn under_an_acceleration_limit_the_agent_keeps_its_stopping_distance() {
+        let lidar = LidarSpec::default();
+        // The blind probe answers (Δφ, 0): at Δφ = 0.8 and v* = v_train, wheels (0.8, 0).
+        let goal = Goal::new(0.8, 1.0, 0.5);
+        let command = |bodies: &[(f64, f64)], max_accel: Option<f64>| {
+            let mut blind = probe();
+            blind.blind = true;
+            let mut agent = Agent::new(blind, lidar).expect("probe matches the sensor");
+            agent.set_wheel_limits(WheelLimits {
+                max_speed: None,
+                max_accel,
+            });
+            agent
+                .act(&scan_among(&lidar, bodies), 0.0, &goal)
+                .expect("decides")
+        };
+        let free = WheelCmd {
+            left: f64::from(0.8f32),
+            right: 0.0,
+        };
+        let close = [(0.65, 0.0)];
+        assert_eq!(command(&close, None), free, "no limit, no governor");
+        assert_eq!(command(&[(1.0, 0.0)], Some(1.0)), free, "a body at d*");
+        assert_eq!(command(&[(-0.65, 0.0)], Some(1.0)), free, "a body behind");
+        // Centres 0.65 apart: 0.15 m to go, the margin kept, half of 1 m/s² to brake with.
+        let governed = command(&close, Some(1.0));
+        let speed = 0.5 * (governed.left + governed.right);
+        let allowed = (2.0 * stopping::BRAKING_SHARE * (0.15 - stopping::STOPPING_MARGIN_M)).sqrt();
+        assert!(
+            (speed - allowed).abs() < 0.01,
+            "{governed:?}: {speed} against {allowed}"
+        );
+        assert!(
+            (governed.right - governed.left + free.left).abs() < 1e-12,
+            "the turn is kept"
+        );
     }
 
     /// The exact scan of a robot at the origin, heading +x, among bodies of the default radius
