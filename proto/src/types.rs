@@ -73,6 +73,11 @@ impl Goal {
 /// the bodies it sees unless told otherwise.
 pub const DEFAULT_BODY_RADIUS_M: f64 = 0.25;
 
+/// Distance \[m\] between a robot's wheels: a Pioneer P3-DX's, the world's default
+/// (`formation_world::RobotParams::wheel_separation`), and what an agent's stopping governor
+/// (`formation_perception::stopping`) assumes to turn a wheel command into the arc it drives.
+pub const DEFAULT_WHEEL_SEPARATION_M: f64 = 0.331;
+
 /// The planar LIDAR ring as a robot's agent and its model must agree on it: the sensor contract.
 /// What a simulated world adds to the ranges is its own ([`crate::LidarNoise`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

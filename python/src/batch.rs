@@ -577,6 +577,7 @@ impl Batch {
                     scan,
                     &beams,
                     formation_proto::DEFAULT_BODY_RADIUS_M,
+                    formation_proto::DEFAULT_WHEEL_SEPARATION_M,
                     goal.d_star,
                     wheels.max_accel,
                 );

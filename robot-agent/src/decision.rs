@@ -436,6 +436,7 @@ impl Agent {
             &self.last_scan,
             &self.beams,
             formation_proto::DEFAULT_BODY_RADIUS_M,
+            formation_proto::DEFAULT_WHEEL_SEPARATION_M,
             goal.d_star,
             self.wheels.max_accel,
         ))
@@ -1002,12 +1003,23 @@ mod tests {
         assert_eq!(command(&close, None), free, "no limit, no governor");
         assert_eq!(command(&[(1.0, 0.0)], Some(1.0)), free, "a body at d*");
         assert_eq!(command(&[(-0.65, 0.0)], Some(1.0)), free, "a body behind");
-        // Centres 0.65 apart: 0.15 m to go, the margin kept, half of 1 m/s² to brake with.
+        // Centres 0.65 apart: the probe's tight right turn (wheels 0.8 and 0) carries the body,
+        // grown by the margin, into it; the speed is what it can stop from on that arc.
         let governed = command(&close, Some(1.0));
         let speed = 0.5 * (governed.left + governed.right);
-        let allowed = (2.0 * stopping::BRAKING_SHARE * (0.15 - stopping::STOPPING_MARGIN_M)).sqrt();
+        let path = stopping::Path::of_command(free, formation_proto::DEFAULT_WHEEL_SEPARATION_M)
+            .expect("the probe's command moves");
+        let travel = stopping::clearance(
+            &scan_among(&lidar, &close),
+            &BeamDirections::new(&lidar),
+            formation_proto::DEFAULT_BODY_RADIUS_M + stopping::SAFETY_MARGIN_M,
+            path,
+            f64::INFINITY,
+        );
+        let allowed = (2.0 * stopping::BRAKING_SHARE * travel).sqrt();
+        assert!(speed < 0.5 * free.left, "{governed:?}");
         assert!(
-            (speed - allowed).abs() < 0.01,
+            (speed - allowed).abs() < 1e-12,
             "{governed:?}: {speed} against {allowed}"
         );
         assert!(

@@ -31,7 +31,7 @@ impl Default for RobotParams {
     /// 0.9 m/s (enough to still turn while cruising at the paper's 0.7 m/s), no acceleration limit.
     fn default() -> Self {
         RobotParams {
-            wheel_separation: 0.331,
+            wheel_separation: formation_proto::DEFAULT_WHEEL_SEPARATION_M,
             wheel_radius: 0.0975,
             body_radius: formation_proto::DEFAULT_BODY_RADIUS_M,
             max_wheel_speed: 0.9,
