@@ -15,10 +15,11 @@
 //! the body can travel along that path, ahead or back, before its disc, of radius `R` grown by
 //! [`SAFETY_MARGIN_M`] all round, touches a scan return ([`clearance`]; the agent takes the
 //! wheels to be [`formation_proto::DEFAULT_WHEEL_SEPARATION_M`] apart, as it takes bodies to be
-//! [`formation_proto::DEFAULT_BODY_RADIUS_M`] across). When a body in that path is closer than [`ENGAGE_FRACTION_OF_D_STAR`] of d\*
-//! centre to centre (it is then already outside the strict check's 10 % band), the forward
-//! speed is limited to `sqrt(2 β a s)`, with `β` = [`BRAKING_SHARE`] (two robots closing on each
-//! other each stop within half the clearance); the wheel difference, and so the turn, is kept.
+//! [`formation_proto::DEFAULT_BODY_RADIUS_M`] across). When a body in that path is closer than
+//! [`ENGAGE_FRACTION_OF_D_STAR`] of d\* centre to centre (it is then already outside the strict
+//! check's 10 % band), the forward speed is limited to `sqrt(2 β a s)`, with `β` =
+//! [`BRAKING_SHARE`] (two robots closing on each other each stop within half the clearance); the
+//! wheel difference, and so the turn, is kept.
 //! Without an acceleration limit, or with the path clear, the command is returned unchanged, bit
 //! for bit, so nothing changes for a robot whose wheels have no limit and for a team in
 //! formation.
@@ -71,31 +72,31 @@ impl BeamDirections {
     }
 }
 
-/// The path a wheel command drives while it is held: the centre's signed speed along the
+/// The course a wheel command drives while it is held: the centre's signed speed along the
 /// heading and its curvature (turn per metre travelled; 0 for a straight line).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Path {
+pub struct Course {
     /// Forward (> 0) or backward (< 0).
     pub forward: bool,
     /// `ω / |v|` \[1/m\], positive turning left (counter-clockwise).
     pub curvature: f64,
 }
 
-impl Path {
+impl Course {
     /// The path of `command` on wheels `wheel_separation` apart; `None` for a command that does
     /// not move the centre (turning on the spot, or not finite).
-    pub fn of_command(command: WheelCmd, wheel_separation: f64) -> Option<Path> {
+    pub fn of_command(command: WheelCmd, wheel_separation: f64) -> Option<Course> {
         let speed = 0.5 * (command.left + command.right);
         let turn = (command.right - command.left) / wheel_separation;
         let curvature = turn / speed.abs();
-        (speed.is_finite() && speed != 0.0 && curvature.is_finite()).then_some(Path {
+        (speed.is_finite() && speed != 0.0 && curvature.is_finite()).then_some(Course {
             forward: speed > 0.0,
             curvature,
         })
     }
 }
 
-/// Paths that bend less than this \[1/m\] are taken as straight.
+/// Courses that bend less than this \[1/m\] are taken as straight.
 const STRAIGHT_CURVATURE: f64 = 1e-6;
 
 /// The distance \[m\] the centre of a disc of `radius` on the LIDAR travels along `path` before
@@ -103,7 +104,13 @@ const STRAIGHT_CURVATURE: f64 = 1e-6;
 /// it, or with no return on the path, `f64::INFINITY`). Ranges that are not finite, or at or
 /// beyond the LIDAR's range, hit nothing; a return the disc already touches ahead of it gives 0,
 /// and one behind it on a straight path none.
-pub fn clearance(scan: &[f32], beams: &BeamDirections, radius: f64, path: Path, reach: f64) -> f64 {
+pub fn clearance(
+    scan: &[f32],
+    beams: &BeamDirections,
+    radius: f64,
+    path: Course,
+    reach: f64,
+) -> f64 {
     let sign = if path.forward { 1.0 } else { -1.0 };
     let straight = path.curvature.abs() < STRAIGHT_CURVATURE;
     let mut nearest = f64::INFINITY;
@@ -177,7 +184,7 @@ pub fn keep_stopping_distance(
     let Some(accel) = max_accel.filter(|a| a.is_finite() && *a > 0.0) else {
         return command;
     };
-    let Some(path) = Path::of_command(command, wheel_separation) else {
+    let Some(path) = Course::of_command(command, wheel_separation) else {
         return command;
     };
     let grown = body_radius + SAFETY_MARGIN_M;
@@ -212,11 +219,11 @@ mod tests {
 
     const R: f64 = formation_proto::DEFAULT_BODY_RADIUS_M;
     const W: f64 = formation_proto::DEFAULT_WHEEL_SEPARATION_M;
-    const AHEAD: Path = Path {
+    const AHEAD: Course = Course {
         forward: true,
         curvature: 0.0,
     };
-    const BACK: Path = Path {
+    const BACK: Course = Course {
         forward: false,
         curvature: 0.0,
     };
@@ -345,7 +352,7 @@ mod tests {
         // A body beside the robot that a straight path misses is in a turning one's way.
         let (scan, beams) = scan_of(&[(0.4, -0.7)]);
         assert_eq!(clearance(&scan, &beams, R, AHEAD, 10.0), f64::INFINITY);
-        let right = Path {
+        let right = Course {
             forward: true,
             curvature: -2.5,
         };
@@ -367,7 +374,7 @@ mod tests {
         // Turning, the limit is that of the arc it drives, and the turn is kept.
         let wanted = command(0.8, 0.6);
         let limited = keep_stopping_distance(wanted, &scan, &beams, R, W, 1.0, Some(1.0));
-        let path = Path::of_command(wanted, W).expect("it moves");
+        let path = Course::of_command(wanted, W).expect("it moves");
         let travel = clearance(&scan, &beams, R + SAFETY_MARGIN_M, path, 10.0);
         let speed = 0.5 * (limited.left + limited.right);
         assert!(travel > 0.1 && (speed - (2.0 * BRAKING_SHARE * travel).sqrt()).abs() < 1e-12);

@@ -1007,7 +1007,7 @@ mod tests {
         // grown by the margin, into it; the speed is what it can stop from on that arc.
         let governed = command(&close, Some(1.0));
         let speed = 0.5 * (governed.left + governed.right);
-        let path = stopping::Path::of_command(free, formation_proto::DEFAULT_WHEEL_SEPARATION_M)
+        let path = stopping::Course::of_command(free, formation_proto::DEFAULT_WHEEL_SEPARATION_M)
             .expect("the probe's command moves");
         let travel = stopping::clearance(
             &scan_among(&lidar, &close),
