@@ -148,7 +148,7 @@ def test_under_a_wheel_limit_the_agents_stopping_governor_keeps_the_robots_apart
     closest = min(
         math.dist(a[:2], b[:2]) for row in got for i, a in enumerate(row) for b in row[i + 1:]
     )
-    assert 0.5 < closest < 0.6, f"the bodies (0.25 m each) came to {closest:.3f} m between centres"
+    assert 0.5 < closest < 0.7, f"the bodies (0.25 m each) came to {closest:.3f} m between centres"
 
 
 def test_the_range_input_is_read_by_the_agents_own_parser():
