@@ -6,6 +6,7 @@
 //!   trained on.
 //! * [`ranges`]: the scan's ranges pooled into sectors, the float input beside the image of a
 //!   model that declares one (`formation_proto::RangeInput`).
+//! * [`beams`]: the direction of each beam of the LIDAR ring, computed once.
 //! * [`neighbours`]: the neighbours a robot detects in its own scan, each one's centre in its body
 //!   frame, fitted with a circle of the known body radius.
 //! * [`hidden_pairs`]: the pairs of those detections the robot hides from each other with its
@@ -21,6 +22,7 @@
 //! transport, so the expert, the agent and the Python bindings share them without building any of
 //! those.
 
+pub mod beams;
 pub mod hidden_pairs;
 pub mod neighbour_input;
 pub mod neighbours;

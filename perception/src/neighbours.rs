@@ -48,6 +48,8 @@
 
 use formation_proto::{DEFAULT_BODY_RADIUS_M, LidarSpec};
 
+use crate::beams::BeamDirections;
+
 /// How the detector reads a scan. [`DetectorSettings::DEFAULT`] suits the shipped robots and
 /// LIDAR (900 beams, 10 m, σ up to a few centimetres).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -207,8 +209,8 @@ struct Piece {
 #[derive(Debug, Clone)]
 pub struct NeighbourDetector {
     settings: DetectorSettings,
-    /// `(cos, sin)` of each beam's bearing, for the beam count of the last scan.
-    directions: Vec<(f64, f64)>,
+    /// Each beam's direction, for the beam count of the last scan.
+    directions: BeamDirections,
     /// The returns in body-frame metres, cluster after cluster.
     points: Vec<[f64; 2]>,
     clusters: Vec<Span>,
@@ -248,7 +250,7 @@ impl NeighbourDetector {
     fn with_checked_settings(settings: DetectorSettings) -> NeighbourDetector {
         NeighbourDetector {
             settings,
-            directions: Vec::new(),
+            directions: BeamDirections::default(),
             points: Vec::new(),
             clusters: Vec::new(),
             pending: Vec::new(),
@@ -303,14 +305,7 @@ impl NeighbourDetector {
     /// Fills `points` with the returns and `clusters` with their runs (step 2).
     fn cluster(&mut self, scan: &[f32], lidar: &LidarSpec) {
         let beams = scan.len();
-        if self.directions.len() != beams {
-            let step = std::f64::consts::TAU / beams as f64;
-            self.directions.clear();
-            self.directions.extend((0..beams).map(|k| {
-                let (sin, cos) = (k as f64 * step).sin_cos();
-                (cos, sin)
-            }));
-        }
+        self.directions.fit(beams);
         let returns = |range: f32| {
             let range = f64::from(range);
             // Written so that NaN fails the test too.
@@ -338,7 +333,7 @@ impl NeighbourDetector {
             }
             if returns(scan[k]) {
                 let range = f64::from(scan[k]);
-                let (cos, sin) = self.directions[k];
+                let (cos, sin) = self.directions.as_slice()[k];
                 self.points.push([range * cos, range * sin]);
             }
         }
@@ -899,7 +894,7 @@ mod tests {
         detector.detect(&scan, &lidar, &mut found);
         let buffers = |d: &NeighbourDetector, f: &Vec<DetectedNeighbour>| {
             (
-                d.directions.as_ptr() as usize,
+                d.directions.as_slice().as_ptr() as usize,
                 d.points.as_ptr() as usize,
                 d.points.capacity(),
                 d.clusters.capacity(),

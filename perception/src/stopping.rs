@@ -33,7 +33,9 @@
 //! team, and a stationary-obstacle rule would hold the follower of a small-d\* formation below
 //! v\* (at d\* = 0.8 m and 1.0 m/s², to about 0.5 m/s).
 
-use formation_proto::{LidarSpec, WheelCmd};
+use formation_proto::WheelCmd;
+
+use crate::beams::BeamDirections;
 
 /// The fraction of d\* (centre to centre) below which a body in the robot's path engages the
 /// governor: the strict check's 10 % band, outside which a neighbour this close already fails it.
@@ -49,28 +51,6 @@ pub const BRAKING_SHARE: f64 = 0.5;
 /// that had touched (3 robots, run 13 of `teams-generalist-accel`) pass with 5 mm between the
 /// bodies, and 0.1 m with 2.5 cm.
 pub const SAFETY_MARGIN_M: f64 = 0.1;
-
-/// The unit direction of each beam of a LIDAR, computed once per robot (beam 0 along the
-/// robot's +x axis, counter-clockwise, as [`LidarSpec`] defines them).
-#[derive(Debug, Clone, PartialEq)]
-pub struct BeamDirections {
-    cos_sin: Vec<(f64, f64)>,
-}
-
-impl BeamDirections {
-    /// The directions of `lidar`'s beams.
-    pub fn new(lidar: &LidarSpec) -> BeamDirections {
-        let step = std::f64::consts::TAU / lidar.beams.max(1) as f64;
-        BeamDirections {
-            cos_sin: (0..lidar.beams)
-                .map(|beam| {
-                    let (sin, cos) = (beam as f64 * step).sin_cos();
-                    (cos, sin)
-                })
-                .collect(),
-        }
-    }
-}
 
 /// The course a wheel command drives while it is held: the centre's signed speed along the
 /// heading and its curvature (turn per metre travelled; 0 for a straight line).
@@ -114,7 +94,7 @@ pub fn clearance(
     let sign = if path.forward { 1.0 } else { -1.0 };
     let straight = path.curvature.abs() < STRAIGHT_CURVATURE;
     let mut nearest = f64::INFINITY;
-    for (&range, &(cos, sin)) in scan.iter().zip(&beams.cos_sin) {
+    for (&range, &(cos, sin)) in scan.iter().zip(beams.as_slice()) {
         let range = f64::from(range);
         if range.is_nan() || range >= reach {
             continue;
@@ -211,7 +191,7 @@ pub fn keep_stopping_distance(
 
 #[cfg(test)]
 mod tests {
-    use formation_proto::Pose;
+    use formation_proto::{LidarSpec, Pose};
     use formation_world::RobotParams;
     use formation_world::lidar::cast_scan;
 
@@ -238,7 +218,7 @@ mod tests {
             .collect();
         let mut scan = vec![0.0; lidar.beams];
         cast_scan(&poses, 0, &RobotParams::default(), &lidar, &mut scan);
-        (scan, BeamDirections::new(&lidar))
+        (scan, BeamDirections::new(lidar.beams))
     }
 
     fn command(left: f64, right: f64) -> WheelCmd {

@@ -8,9 +8,10 @@
 //! `(B, N, 2)` array.
 
 use formation_expert::{ExpertController, ExpertGains};
+use formation_perception::beams::BeamDirections;
 use formation_perception::neighbour_input::NeighbourInputBuilder;
 use formation_perception::ranges::pool;
-use formation_perception::stopping::{self, BeamDirections};
+use formation_perception::stopping;
 use formation_perception::{occupancy, policy_input};
 use formation_proto::control::Controller;
 use formation_proto::{
@@ -148,6 +149,9 @@ impl Slot {
 #[pyclass(name = "Batch", module = "formation._native")]
 pub struct Batch {
     scenario: Scenario,
+    /// The direction of each beam of the scenario's LIDAR, for the agent's stopping governor in
+    /// `policy_actions`.
+    beams: BeamDirections,
     expert: bool,
     slots: Vec<Slot>,
 }
@@ -297,6 +301,7 @@ impl Batch {
     ) -> PyResult<Batch> {
         let mut batch = Batch {
             scenario: scenario.scenario.clone(),
+            beams: BeamDirections::new(scenario.scenario.world_config().lidar.beams),
             expert,
             slots: Vec::new(),
         };
@@ -550,7 +555,6 @@ impl Batch {
             .as_slice()
             .map_err(|_| PyValueError::new_err("policy outputs must be C-contiguous float32"))?;
         let mut out = Vec::with_capacity(raw.len());
-        let beams = BeamDirections::new(&self.scenario.world_config().lidar);
         for (b, slot) in self.slots.iter_mut().enumerate() {
             let wheels = slot.episode.spec().world.robot.wheel_limits();
             let observation = slot.episode.observe();
@@ -575,7 +579,7 @@ impl Batch {
                 let cmd = stopping::keep_stopping_distance(
                     cmd,
                     scan,
-                    &beams,
+                    &self.beams,
                     formation_proto::DEFAULT_BODY_RADIUS_M,
                     formation_proto::DEFAULT_WHEEL_SEPARATION_M,
                     goal.d_star,

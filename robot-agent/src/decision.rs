@@ -51,8 +51,9 @@ use formation_proto::{
     AuxValues, Goal, LidarSpec, OccupancySpec, PolicyInput, PolicyIo, WheelCmd, WheelLimits,
 };
 
+use formation_perception::beams::BeamDirections;
 use formation_perception::neighbour_input::NeighbourInputBuilder;
-use formation_perception::stopping::{self, BeamDirections};
+use formation_perception::stopping;
 use formation_perception::{occupancy, policy_input, ranges};
 
 /// Why an agent could not decide, or could not take a policy.
@@ -314,7 +315,7 @@ impl Agent {
             last_scan: Vec::with_capacity(lidar.beams),
             last_decision: None,
             wheels: WheelLimits::default(),
-            beams: BeamDirections::new(&lidar),
+            beams: BeamDirections::new(lidar.beams),
         })
     }
 
@@ -1011,7 +1012,7 @@ mod tests {
             .expect("the probe's command moves");
         let travel = stopping::clearance(
             &scan_among(&lidar, &close),
-            &BeamDirections::new(&lidar),
+            &BeamDirections::new(lidar.beams),
             formation_proto::DEFAULT_BODY_RADIUS_M + stopping::SAFETY_MARGIN_M,
             path,
             f64::INFINITY,
