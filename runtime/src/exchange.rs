@@ -42,6 +42,7 @@ use formation_proto::{LidarSpec, WheelCmd, WheelLimits};
 use crate::clock::Clock;
 use crate::link::{Hello, WorldLink, WorldLinkError, WorldResult};
 use crate::link_health::LinkMonitor;
+use crate::liveness::LivenessGate;
 use crate::settings::{ClockMode, RuntimeSettings};
 use crate::stamps::{ScanStamp, ScanStamps};
 
@@ -173,6 +174,9 @@ pub struct AgentsController<'l> {
     model_ids: Vec<String>,
     schedule_start: Option<Instant>,
     last_liveness_check: Instant,
+    /// When each agent was last heard from: only one quiet for a liveness period makes the
+    /// world ask its transport which agents died.
+    liveness: LivenessGate,
     dt: Duration,
     stopped: Option<StopReason>,
     /// Swap requests forwarded to an agent and not answered yet.
@@ -261,6 +265,7 @@ impl<'l> AgentsController<'l> {
             model_ids: vec![String::new(); n],
             schedule_start: None,
             last_liveness_check: now,
+            liveness: LivenessGate::new(n),
             dt: DEFAULT_DT,
             stopped: None,
             pending_swaps: Vec::new(),
@@ -446,15 +451,17 @@ impl<'l> AgentsController<'l> {
                 self.on_hello(robot, hello)?;
             }
             for status in drained(|sink| self.link.drain_statuses(robot, sink))? {
+                self.liveness.heard(robot, self.clock.now());
                 self.on_status(robot, status)?;
             }
             let newest = &mut self.newest[robot];
             let generation = self.generation;
             let clock = &self.clock;
-            let mut answered = false;
+            let (mut answered, mut sent) = (false, false);
             self.link
                 .drain_commands(robot, &mut |msg| {
                     let at = clock.now();
+                    sent = true;
                     answered |= msg.generation == generation;
                     if newest.is_none_or(|n| {
                         (msg.generation, msg.tick) >= (n.msg.generation, n.msg.tick)
@@ -467,6 +474,9 @@ impl<'l> AgentsController<'l> {
                     }
                 })
                 .map_err(transport_error)?;
+            if sent {
+                self.liveness.heard(robot, self.clock.now());
+            }
             if answered && self.states[robot] == AgentState::Lagging {
                 // It answers again (late, or a slow first inference after a restart): wait for
                 // it from the next tick on, so it can catch up instead of lagging behind forever.
@@ -487,9 +497,20 @@ impl<'l> AgentsController<'l> {
         Ok(())
     }
 
-    /// Asks the transport which agents died, and lets their robots go.
+    /// A liveness period ended: asks the transport which agents died, where an agent went quiet
+    /// or the gate says it is time ([`LivenessGate`]), and lets their robots go.
     fn check_liveness(&mut self) -> Result<(), ControllerError> {
         self.last_liveness_check = self.clock.now();
+        let states = &self.states;
+        let ask = self.liveness.period_ended(
+            self.last_liveness_check,
+            self.settings.runtime.liveness_period(),
+            |robot| states[robot] != AgentState::Absent,
+            self.admitted.iter().any(Option::is_some),
+        );
+        if !ask {
+            return Ok(());
+        }
         for (robot, pid) in self.link.dead_agents().map_err(transport_error)? {
             self.agent_gone(robot, pid)?;
         }

@@ -11,6 +11,8 @@
 //!   scan it answered.
 //! * [`link_health`]: the degraded-link detector, whose reports the world sends while a run goes
 //!   on.
+//! * [`liveness`]: when the world asks its transport which agents died (only when one went
+//!   quiet, or every 100 periods).
 //! * [`reconnect`]: the peers of a network transport that are unreachable but may come back
 //!   within a grace.
 //! * [`auth`]: the launch secret, with which an agent proves that its own launch started it.
@@ -38,6 +40,7 @@ pub mod exchange;
 pub mod faults;
 pub mod link;
 pub mod link_health;
+pub mod liveness;
 pub mod memory;
 pub mod plugin;
 pub mod process;

@@ -59,6 +59,8 @@ struct BusState {
     unreported_dead: Vec<(usize, u32)>,
     /// Every agent process that died.
     dead: HashSet<(usize, u32)>,
+    /// How many times the world asked which agents died.
+    liveness_asks: usize,
     world_alive: bool,
     terminate_world: Option<TerminationSignal>,
     next_nonce: u64,
@@ -109,6 +111,7 @@ impl MemoryBus {
             swap_replies: Vec::new(),
             unreported_dead: Vec::new(),
             dead: HashSet::new(),
+            liveness_asks: 0,
             world_alive: true,
             terminate_world: None,
             next_nonce: 1,
@@ -257,6 +260,11 @@ impl MemoryBus {
                 state.unreported_dead.push((robot, pid));
             }
         });
+    }
+
+    /// How many times the world asked which agents died ([`WorldLink::dead_agents`]).
+    pub fn liveness_asks(&self) -> usize {
+        self.lock().liveness_asks
     }
 
     /// The world receives a termination signal: its next wait ends with
@@ -455,7 +463,10 @@ impl WorldLink for MemoryWorldLink {
     }
 
     fn dead_agents(&mut self) -> Result<Vec<(usize, u32)>, WorldLinkError> {
-        let mut dead = std::mem::take(&mut self.bus.lock().unreported_dead);
+        let mut state = self.bus.lock();
+        state.liveness_asks += 1;
+        let mut dead = std::mem::take(&mut state.unreported_dead);
+        drop(state);
         dead.sort_unstable();
         dead.dedup();
         Ok(dead)

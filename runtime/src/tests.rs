@@ -619,6 +619,35 @@ fn an_agent_lost_for_good_is_reported_and_its_robot_brakes() {
 }
 
 #[test]
+fn the_world_asks_which_agents_died_only_when_one_went_quiet() {
+    let (sim, mut world) = Sim::connected(3, ClockMode::Realtime);
+    sim.tick(&mut world, 0);
+    let asked = sim.bus.liveness_asks();
+    // 2 s of realtime ticks (20 liveness periods) with every agent answering each one.
+    for tick in 1..41 {
+        sim.tick(&mut world, tick);
+    }
+    assert_eq!(
+        sim.bus.liveness_asks(),
+        asked,
+        "agents that answer are not listed"
+    );
+    sim.kill(1, 11);
+    // Noticed within two periods (200 ms, four ticks).
+    for tick in 41..45 {
+        sim.tick(&mut world, tick);
+    }
+    assert!(sim.bus.liveness_asks() > asked);
+    assert!(
+        sim.events()
+            .iter()
+            .any(|e| matches!(e, WorldEvent::AgentLost { robot: 1, .. })),
+        "{:?}",
+        sim.events()
+    );
+}
+
+#[test]
 fn a_command_that_answers_an_older_scan_is_timed_from_that_scan() {
     let (sim, mut world) = Sim::connected(1, ClockMode::Realtime);
     // Tick 0's scan goes out; the agent takes it only 30 ms after tick 0 ended, so its answer

@@ -6,6 +6,7 @@
 //! room for one subscriber on the scan and one publisher on the command, so while this agent runs
 //! no other process can read its scan or command its robot.
 
+use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 use crate::naming::{RunNamespace, ServiceLimits, WORLD_NODE_NAME, agent_node_name};
@@ -28,20 +29,23 @@ use super::services::{
 use super::watch_termination_signals;
 use crate::error::{IceoryxCause, IceoryxError, iox};
 use crate::signals;
+use crate::wakes::{AttachedListeners, Fired, wait_collecting};
 use formation_runtime::link::{AgentLink, AgentLinkError, Wake};
 
 /// The agent's iceoryx2 ports on its own robot's services.
 pub struct IceoryxAgentLink {
     node: Node<ipc::Service>,
     scan: Subscriber<ipc::Service, ScanMsg, ()>,
-    scan_wake: Listener<ipc::Service>,
     control: Subscriber<ipc::Service, ControlMsg, ()>,
-    control_wake: Listener<ipc::Service>,
     cmd: Publisher<ipc::Service, CmdMsg, ()>,
     cmd_wake: Notifier<ipc::Service>,
     status: Publisher<ipc::Service, StatusMsg, ()>,
     status_wake: Notifier<ipc::Service>,
-    waitset: WaitSet<ipc::Service>,
+    waitset: Rc<WaitSet<ipc::Service>>,
+    /// The scan and control wake-ups, attached to `waitset` for the link's life.
+    wakes: AttachedListeners,
+    /// The attachments the last wait woke on (kept to reuse its allocation).
+    fired: Fired,
     /// The world's process, once found: watched through /proc, so that checking it costs the
     /// same whatever the team size (listing every node of a 256-robot run from every idle agent
     /// four times a second would keep two cores busy).
@@ -184,22 +188,25 @@ impl IceoryxAgentLink {
     }
 
     fn from_ports(node: Node<ipc::Service>, ports: Ports) -> Result<Self, AgentLinkError> {
-        let waitset = WaitSetBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<ipc::Service>()
-            .map_err(iox("create the agent's wait set"))?;
+        let waitset = Rc::new(
+            WaitSetBuilder::new()
+                .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+                .create::<ipc::Service>()
+                .map_err(iox("create the agent's wait set"))?,
+        );
         let (scan, scan_wake, control, control_wake, cmd, cmd_wake, status, status_wake) = ports;
+        let wakes = AttachedListeners::attach(&waitset, vec![scan_wake, control_wake])?;
         Ok(IceoryxAgentLink {
             node,
             scan,
-            scan_wake,
             control,
-            control_wake,
             cmd,
             cmd_wake,
             status,
             status_wake,
             waitset,
+            wakes,
+            fired: Fired::new(),
             world: None,
         })
     }
@@ -387,28 +394,10 @@ fn try_open(
 
 impl AgentLink for IceoryxAgentLink {
     fn wait(&mut self, timeout: Duration) -> Result<Wake, AgentLinkError> {
-        let scan_guard = self
-            .waitset
-            .attach_notification(&self.scan_wake)
-            .map_err(iox("attach the scan wake-up"))?;
-        let control_guard = self
-            .waitset
-            .attach_notification(&self.control_wake)
-            .map_err(iox("attach the control wake-up"))?;
-        let mut activity = false;
-        let result = self
-            .waitset
-            .wait_and_process_once_with_timeout(
-                |_| {
-                    activity = true;
-                    CallbackProgression::Continue
-                },
-                timeout,
-            )
+        let result = wait_collecting(&self.waitset, timeout, &mut self.fired)
             .map_err(iox("wait for the world"))?;
-        drop((scan_guard, control_guard));
-        let _ = self.scan_wake.try_wait(|_| {});
-        let _ = self.control_wake.try_wait(|_| {});
+        self.wakes.consume(&self.fired);
+        let activity = !self.fired.is_empty();
         if let Some(signal) = signals::received() {
             return Ok(Wake::Terminated(signal));
         }
@@ -431,7 +420,7 @@ impl AgentLink for IceoryxAgentLink {
         let decode = ControlMsg::decode;
         Ok(drain_decoded(
             &self.control,
-            "control request",
+            &"control request",
             decode,
             sink,
         )?)

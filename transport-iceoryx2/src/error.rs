@@ -66,9 +66,21 @@ pub(crate) fn iox<E>(action: impl Into<String>) -> impl FnOnce(E) -> IceoryxErro
 where
     E: Error + Send + Sync + 'static,
 {
-    let action = action.into();
+    // Converted only on failure: a `&'static str` costs no allocation on the paths taken every
+    // tick.
     move |e| IceoryxError::Refused {
-        action,
+        action: action.into(),
+        source: Box::new(e),
+    }
+}
+
+/// [`iox`] for the paths taken every tick: the action is written only when the call failed.
+pub(crate) fn iox_lazy<E>(action: impl FnOnce() -> String) -> impl FnOnce(E) -> IceoryxError
+where
+    E: Error + Send + Sync + 'static,
+{
+    move |e| IceoryxError::Refused {
+        action: action(),
         source: Box::new(e),
     }
 }

@@ -15,6 +15,7 @@ pub mod naming;
 mod services;
 pub mod signals;
 pub mod swap;
+mod wakes;
 mod world;
 
 /// Starts recording which termination signal arrives ([`crate::signals`]); when that fails, a

@@ -152,7 +152,7 @@ pub(crate) fn event_service(
 /// iceoryx2's, when receiving failed.
 pub(crate) fn drain_decoded<T, U, E: std::fmt::Display>(
     subscriber: &Subscriber<ipc::Service, T, ()>,
-    what: &str,
+    what: &dyn std::fmt::Display,
     decode: impl Fn(&T) -> Result<U, E>,
     sink: &mut dyn FnMut(U),
 ) -> Result<(), IceoryxError>

@@ -26,14 +26,15 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::{WaitSetGuard, WaitSetRunResult};
+use iceoryx2::waitset::WaitSetRunResult;
 
 use super::services::{
     self, Access, EventService, PubSubService, ServiceError, drain_decoded, run_node, subscriber,
 };
 use super::watch_termination_signals;
-use crate::error::iox;
+use crate::error::{iox, iox_lazy};
 use crate::signals;
+use crate::wakes::{AttachedListeners, Fired, wait_collecting};
 use formation_runtime::link::{
     Hello, Incarnations, WorldLink, WorldLinkError, WorldResult, check_robot_index,
 };
@@ -75,57 +76,8 @@ pub struct IceoryxWorldLink {
     waitset: Rc<WaitSet<ipc::Service>>,
     /// The swap channel's request listener and every lobby's hello listener.
     run_wakes: AttachedListeners,
-}
-
-/// Listeners with the wait set they are attached to.
-struct Listeners {
-    waitset: Rc<WaitSet<ipc::Service>>,
-    listeners: Vec<Listener<ipc::Service>>,
-}
-
-type Attachments<'a> = Vec<WaitSetGuard<'a, 'a, ipc::Service>>;
-
-self_cell::self_cell!(
-    /// Listeners that stay attached to a wait set until they are dropped: the attachment guards
-    /// borrow the listeners and the wait set they are kept beside.
-    struct AttachedListeners {
-        owner: Listeners,
-        #[not_covariant]
-        dependent: Attachments,
-    }
-);
-
-impl AttachedListeners {
-    /// Attaches every one of `listeners` to `waitset`.
-    fn attach(
-        waitset: &Rc<WaitSet<ipc::Service>>,
-        listeners: Vec<Listener<ipc::Service>>,
-    ) -> WorldResult<Self> {
-        let owner = Listeners {
-            waitset: Rc::clone(waitset),
-            listeners,
-        };
-        AttachedListeners::try_new(owner, |owner| {
-            owner
-                .listeners
-                .iter()
-                .map(|listener| {
-                    owner
-                        .waitset
-                        .attach_notification(listener)
-                        .map_err(iox("attach a wake-up to the world's wait set"))
-                })
-                .collect()
-        })
-        .map_err(WorldLinkError::from)
-    }
-
-    /// Consumes every pending wake-up (the samples themselves are drained by the caller).
-    fn consume(&self) {
-        for listener in &self.borrow_owner().listeners {
-            let _ = listener.try_wait(|_| {});
-        }
-    }
+    /// The attachments the last wait woke on (kept to reuse its allocation).
+    fired: Fired,
 }
 
 impl IceoryxWorldLink {
@@ -162,6 +114,7 @@ impl IceoryxWorldLink {
             swap,
             waitset,
             run_wakes,
+            fired: Fired::new(),
         })
     }
 
@@ -319,7 +272,7 @@ impl WorldLink for IceoryxWorldLink {
         while let Some(sample) = self.lobbies[robot]
             .hellos
             .receive()
-            .map_err(iox(format!("receive a hello for robot {robot}")))?
+            .map_err(iox_lazy(|| format!("receive a hello for robot {robot}")))?
         {
             let msg = sample.payload();
             sink(Hello {
@@ -358,7 +311,7 @@ impl WorldLink for IceoryxWorldLink {
         ports
             .scan
             .send_copy(*msg)
-            .map_err(iox(format!("send robot {robot}'s scan")))?;
+            .map_err(iox_lazy(|| format!("send robot {robot}'s scan")))?;
         // A wake-up nobody listens to (agent restarting) is not an error.
         let _ = ports.scan_wake.notify();
         Ok(())
@@ -380,13 +333,11 @@ impl WorldLink for IceoryxWorldLink {
     fn wait(&mut self, timeout: Duration) -> WorldResult {
         // Every listener is already attached: the lobbies' and the swap channel's since the run
         // began, each incarnation's since it opened.
-        let result = self
-            .waitset
-            .wait_and_process_once_with_timeout(|_| CallbackProgression::Stop, timeout)
+        let result = wait_collecting(&self.waitset, timeout, &mut self.fired)
             .map_err(iox("wait for the agents"))?;
-        self.run_wakes.consume();
+        self.run_wakes.consume(&self.fired);
         for ports in self.robots.open_ones() {
-            ports.wakes.consume();
+            ports.wakes.consume(&self.fired);
         }
         if let Some(signal) = signals::received() {
             return Err(WorldLinkError::Terminated(signal));
@@ -408,7 +359,7 @@ impl WorldLink for IceoryxWorldLink {
         while let Some(sample) = ports
             .cmd
             .receive()
-            .map_err(iox(format!("receive robot {robot}'s command")))?
+            .map_err(iox_lazy(|| format!("receive robot {robot}'s command")))?
         {
             sink(*sample.payload());
         }
@@ -419,10 +370,9 @@ impl WorldLink for IceoryxWorldLink {
         let Some(ports) = self.robots.get(robot)? else {
             return Ok(());
         };
-        let what = format!("status of robot {robot}");
         Ok(drain_decoded(
             &ports.status,
-            &what,
+            &format_args!("status of robot {robot}"),
             StatusMsg::decode,
             sink,
         )?)
@@ -469,7 +419,7 @@ impl WorldLink for IceoryxWorldLink {
         let decode = SwapRequestMsg::decode;
         Ok(drain_decoded(
             &self.swap.requests,
-            "swap request",
+            &"swap request",
             decode,
             sink,
         )?)
