@@ -90,6 +90,13 @@ pub struct Args {
     /// `FORMATION_AGENT_REHEARSE_US` is set.
     #[arg(long, env = "FORMATION_AGENT_REHEARSE_US", default_value_t = 2_000)]
     pub rehearse_us: u64,
+    /// Poll for the next scan this long after each command before blocking \[µs\] (0: never),
+    /// yielding the core between polls, while scans have come that soon (an unpaced lockstep run
+    /// of a few agents; never in realtime), so that the agent takes its scan without a
+    /// wake-up. The launcher turns it off (`--spin-us 0`) for the agents it starts when more
+    /// than 2 share a core of this host, unless `FORMATION_AGENT_SPIN_US` is set.
+    #[arg(long, env = "FORMATION_AGENT_SPIN_US", default_value_t = 300)]
+    pub spin_us: u64,
     /// ROS 2 mode's flags.
     #[command(flatten)]
     pub ros2: ros2::Ros2Args,
@@ -191,7 +198,8 @@ pub fn run(args: &Args) -> anyhow::Result<AgentExit> {
         args.fault,
         Arc::new(SystemClock),
     )
-    .with_rehearsal(Duration::from_micros(args.rehearse_us));
+    .with_rehearsal(Duration::from_micros(args.rehearse_us))
+    .with_spin(Duration::from_micros(args.spin_us));
     agent.greet(link.as_mut(), std::process::id())?;
     Ok(agent.run(link.as_mut(), &stop, run_id.as_str())?)
 }

@@ -96,13 +96,16 @@ pub fn loop_agent<L: AgentLink>(
     let mut link = connect().map_err(|e| error_chain(&e))?;
     let pilots = Arc::new(SuitePilots { gate });
     let loaded = pilots.load(model).map_err(|e| error_chain(e.as_ref()))?;
+    // Polling for scans after each command, as the launcher's agents of a small team do, so
+    // that every behaviour is checked with it.
     let mut agent = AgentLoop::new(
         pilots,
         model.to_path_buf(),
         loaded,
         None,
         Arc::new(SystemClock),
-    );
+    )
+    .with_spin(std::time::Duration::from_micros(300));
     agent.greet(&mut link, pid).map_err(|e| error_chain(&e))?;
     agent.run(&mut link, stop, run).map_err(|e| error_chain(&e))
 }

@@ -1043,6 +1043,12 @@ async fn spawn_agent(
     {
         command.arg("--rehearse-us").arg("0");
     }
+    // So does polling for scans; an explicit FORMATION_AGENT_SPIN_US wins.
+    if std::env::var_os("FORMATION_AGENT_SPIN_US").is_none()
+        && !super::capacity::agents_should_spin(plan.local_agent_count(), cores)
+    {
+        command.arg("--spin-us").arg("0");
+    }
     let mut child = command.spawn().map_err(|source| LaunchError::Spawn {
         what: format!("the agent of robot {robot}"),
         path: binaries.agent.clone(),
