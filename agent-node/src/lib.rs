@@ -90,7 +90,8 @@ pub struct Args {
     /// `FORMATION_AGENT_REHEARSE_US` is set.
     #[arg(long, env = "FORMATION_AGENT_REHEARSE_US", default_value_t = 2_000)]
     pub rehearse_us: u64,
-    /// Poll for the next scan this long after each command before blocking \[µs\] (0: never),
+    /// Poll for the next scan this long (at most 10 ms) after each command before blocking
+    /// \[µs\] (0: never),
     /// yielding the core between polls, while scans have come that soon (an unpaced lockstep run
     /// of a few agents; never in realtime), so that the agent takes its scan without a
     /// wake-up. The launcher turns it off (`--spin-us 0`) for the agents it starts when more

@@ -181,6 +181,9 @@ pub struct AgentLoop<M: PilotMaker> {
     recent_gap: Option<Duration>,
 }
 
+/// The longest poll for the next scan [`AgentLoop::with_spin`] accepts.
+pub const MAX_SPIN: Duration = Duration::from_millis(10);
+
 /// Why an agent's loop ends when its `stop` flag is set, unless told otherwise: the launcher that
 /// started it closed its standard input.
 pub const LAUNCHER_CLOSED_INPUT: &str = "the launcher closed our input";
@@ -240,8 +243,9 @@ impl<M: PilotMaker> AgentLoop<M> {
     /// its cores never spins. A poll sees the scan in about a microsecond where a blocking
     /// wake-up costs tens, and the decision runs on a core that is already awake. It changes
     /// no command.
+    /// At most [`MAX_SPIN`]: a poll never keeps the agent from its idle checks for long.
     pub fn with_spin(mut self, spin: Duration) -> Self {
-        self.spin = spin;
+        self.spin = spin.min(MAX_SPIN);
         self
     }
 
@@ -300,8 +304,10 @@ impl<M: PilotMaker> AgentLoop<M> {
     }
 
     /// Polls for the next scan while [`AgentLoop::with_spin`] says to, handling what arrives;
-    /// returns when the spin ran out, the stop flag is set, or the agent should exit.
-    fn spin_for_next_scan(
+    /// returns when the spin ran out, the stop flag is set, or the agent should exit. Each round
+    /// starts with a wait that does not block, so that a termination signal ends the agent even
+    /// while scans keep coming within the spin and it never blocks.
+    pub(crate) fn spin_for_next_scan(
         &mut self,
         link: &mut dyn AgentLink,
         stop: &AtomicBool,
@@ -312,6 +318,9 @@ impl<M: PilotMaker> AgentLoop<M> {
             };
             if self.spin.is_zero() || gap > self.spin {
                 return Ok(None);
+            }
+            if let Wake::Terminated(signal) = link.wait(Duration::ZERO)? {
+                return Ok(Some(AgentExit::Signal(signal)));
             }
             // Bounded on the machine's own clock: it is about this core's time.
             let until = answered_at.checked_add(self.spin).unwrap_or(answered_at);

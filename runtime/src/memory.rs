@@ -63,6 +63,8 @@ struct BusState {
     liveness_asks: usize,
     world_alive: bool,
     terminate_world: Option<TerminationSignal>,
+    /// Per robot: a termination signal its agent received, seen at its next wait.
+    terminate_agents: Vec<Option<TerminationSignal>>,
     next_nonce: u64,
 }
 
@@ -114,6 +116,7 @@ impl MemoryBus {
             liveness_asks: 0,
             world_alive: true,
             terminate_world: None,
+            terminate_agents: vec![None; n_robots],
             next_nonce: 1,
         };
         MemoryBus {
@@ -271,6 +274,16 @@ impl MemoryBus {
     /// [`WorldLinkError::Terminated`].
     pub fn terminate_world(&self, signal: TerminationSignal) {
         self.update(|state| state.terminate_world = Some(signal));
+    }
+
+    /// Robot `robot`'s agent receives a termination signal: its next wait ends with
+    /// [`Wake::Terminated`].
+    pub fn terminate_agent(&self, robot: usize, signal: TerminationSignal) {
+        self.update(|state| {
+            if let Some(slot) = state.terminate_agents.get_mut(robot) {
+                *slot = Some(signal);
+            }
+        });
     }
 
     /// The world process is gone: agents see it in [`AgentLink::world_alive`].
@@ -503,6 +516,16 @@ impl MemoryAgentLink {
 
 impl AgentLink for MemoryAgentLink {
     fn wait(&mut self, timeout: Duration) -> Result<Wake, AgentLinkError> {
+        let signal = self
+            .bus
+            .lock()
+            .terminate_agents
+            .get(self.robot)
+            .copied()
+            .flatten();
+        if let Some(signal) = signal {
+            return Ok(Wake::Terminated(signal));
+        }
         if self.has_mail() {
             return Ok(Wake::Activity);
         }

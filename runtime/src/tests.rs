@@ -162,7 +162,8 @@ fn run_agents(agents: &RefCell<Agents>, bus: &MemoryBus, clock: &Arc<FakeClock>)
                 let pilots = Arc::new(TestPilots);
                 let model = pilots.load(&path).expect("test model");
                 let clock: Arc<dyn Clock> = clock.clone();
-                let mut agent = AgentLoop::new(pilots, path, model, fault, clock);
+                let mut agent = AgentLoop::new(pilots, path, model, fault, clock)
+                    .with_spin(Duration::from_millis(5));
                 let mut link = bus.agent_link(robot, nonce);
                 agent.greet(&mut link, pid).expect("hello");
                 agents.running.push(SimAgent {
@@ -615,6 +616,23 @@ fn an_agent_lost_for_good_is_reported_and_its_robot_brakes() {
             TickOutcome::AgentDown
         ],
         "ticks braked for a dead agent have a reason of their own"
+    );
+}
+
+#[test]
+fn a_signal_ends_an_agent_that_polls_for_its_scans() {
+    let (sim, mut world) = Sim::connected(1, ClockMode::Lockstep);
+    // Two scans answered at once: the next one is expected within the spin.
+    sim.tick(&mut world, 0);
+    sim.tick(&mut world, 1);
+    sim.bus.terminate_agent(0, TerminationSignal::Terminate);
+    let mut agents = sim.agents.borrow_mut();
+    let SimAgent { agent, link, .. } = &mut agents.running[0];
+    let stop = AtomicBool::new(false);
+    assert_eq!(
+        agent.spin_for_next_scan(link, &stop).expect("a spin"),
+        Some(AgentExit::Signal(TerminationSignal::Terminate)),
+        "seen before the spin runs out, not only at the next blocking wait"
     );
 }
 
